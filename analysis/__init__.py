@@ -1,0 +1,1 @@
+"""Trial analysis: Vicon CSV import, CoM height and step periods, comparison with the simulator."""

@@ -1,0 +1,21 @@
+"""The root of every exception rimless raises on purpose.
+
+A `UserError` is a mistake in what the user gave (a parameter, a file, a command): the CLI prints its
+one-line message and exits with code 2, never with a traceback.
+"""
+
+
+class RimlessError(Exception):
+    """Base class of every rimless exception."""
+
+
+class UserError(RimlessError, ValueError):
+    """Bad input from the user: a parameter, a file, a field, a network command."""
+
+
+class ParameterError(UserError):
+    """A model or configuration parameter is invalid; the message names it."""
+
+
+class InputFileError(UserError):
+    """A file cannot be read or parsed; the message names the file, line and column."""
