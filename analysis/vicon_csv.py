@@ -1,0 +1,622 @@
+"""Read and write Vicon CSV exports (Tracker 3.x and Nexus 2.x).
+
+The reader is strict about structure and tolerant of the layout quirks real exports have:
+
+- several sections per file (``Objects``, ``Trajectories``, ``Devices``, ``Joints``, ``Model Outputs``,
+  ``Segments`` or any other title), each made of a title row, a rate row, a name row, a column-header row
+  (``Frame``, ``Sub Frame``, components) and a units row, then data rows until a blank row;
+- Tracker's ``Global Angle`` / ``Local Angle`` name prefix and repeated ``Obj:Obj`` names;
+- units converted by what the units row says: mm / cm / m to m, deg / rad to rad (other units are kept);
+- occlusions as empty cells or short rows (NaN), rows padded with delimiters, leading/trailing blank rows,
+  CRLF / LF / CR, a UTF-8 BOM, ``,`` ``;`` or tab delimiters (``;`` with decimal commas too),
+  3-digit exponents (``7.2e-006``), a first frame other than 1.
+
+Every malformed input raises `ViconCsvError` naming the file, line and column (1-based) with a distinct
+``cause``; nothing is returned half-parsed. Values are SI inside (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rimless.errors import InputFileError
+
+__all__ = [
+    "Column",
+    "Section",
+    "ViconCsvError",
+    "ViconFile",
+    "read_vicon_csv",
+    "parse_vicon_text",
+    "write_tracker_csv",
+    "LENGTH_UNITS_M",
+    "ANGLE_UNITS_RAD",
+]
+
+#: Length units we convert, and their size in metres.
+LENGTH_UNITS_M: Mapping[str, float] = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+#: Angle units we convert, and their size in radians.
+ANGLE_UNITS_RAD: Mapping[str, float] = {"rad": 1.0, "deg": math.pi / 180.0, "°": math.pi / 180.0}
+
+#: Components that must carry a length unit / an angle unit in pose and marker sections.
+_LENGTH_COMPONENTS = frozenset({"X", "Y", "Z", "TX", "TY", "TZ"})
+_ANGLE_COMPONENTS = frozenset({"RX", "RY", "RZ"})
+#: Sections whose coordinate columns are checked against the unit tables.
+_POSE_SECTIONS = frozenset({"Objects", "Trajectories", "Segments"})
+_NAME_PREFIXES = ("Global Angle ", "Local Angle ")
+
+# A line that cannot be a data row: anything not starting like a number (titles, header and blank rows).
+_STRUCTURAL = re.compile(r"\n(?![0-9+\-.])")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+
+
+class ViconCsvError(InputFileError):
+    """A Vicon CSV file cannot be parsed; the message names the file, line and column (1-based).
+
+    Attributes
+    ----------
+    path, line, column : where the problem is (``line``/``column`` may be None for whole-file causes).
+    cause : short stable code, one per kind of problem (e.g. ``"non-numeric"``, ``"duplicate-frame"``).
+    """
+
+    def __init__(self, path: str, line: int | None, column: int | None, cause: str, message: str):
+        self.path, self.line, self.column, self.cause = path, line, column, cause
+        where = path
+        if line is not None:
+            where += f", line {line}"
+        if column is not None:
+            where += f", column {column}"
+        super().__init__(f"{where}: {message} [{cause}]")
+
+
+@dataclass(frozen=True)
+class Column:
+    """One data column of a section.
+
+    ``group`` is the object/marker/device name (prefix and repeated ``Obj:Obj`` removed), ``component``
+    the header cell (``TX``, ``X``, ``Fz``...), ``unit`` the unit of `Section.values` (SI when converted),
+    ``file_unit`` what the file said, ``column`` the 1-based column in the file.
+    """
+
+    group: str
+    component: str
+    unit: str
+    file_unit: str
+    column: int
+
+
+@dataclass(frozen=True, eq=False)
+class Section:
+    """One section of a Vicon CSV file, values in SI where the unit is a length or an angle.
+
+    Attributes
+    ----------
+    kind : the title row (``"Objects"``, ``"Trajectories"``, ``"Devices"``...).
+    rate_hz : the rate row, Hz.
+    line : 1-based line of the title row.
+    frame, sub_frame : int64 arrays, shape (n,).
+    columns : one `Column` per column of ``values``.
+    values : float64 array, shape (n, len(columns)); NaN where the file had no value.
+    name_prefix : ``"Global Angle"``/``"Local Angle"`` when Tracker wrote one, else ``""``.
+    """
+
+    kind: str
+    rate_hz: float
+    line: int
+    frame: np.ndarray
+    sub_frame: np.ndarray
+    columns: tuple[Column, ...]
+    values: np.ndarray
+    name_prefix: str = ""
+
+    @property
+    def n_rows(self) -> int:
+        """Number of data rows."""
+        return int(self.values.shape[0])
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Time of each row from the first row, s (frames, and sub-frames when there are several)."""
+        n_sub = int(self.sub_frame.max()) + 1 if self.n_rows else 1
+        if self.n_rows == 0:
+            return np.zeros(0)
+        tick = (self.frame - self.frame[0]) * n_sub + self.sub_frame - self.sub_frame[0]
+        return tick / self.rate_hz
+
+    def groups(self) -> list[str]:
+        """Group names (objects, markers, devices) in file order, without repeats."""
+        return list(dict.fromkeys(c.group for c in self.columns))
+
+    def get(self, group: str, components: tuple[str, ...] | None = None) -> np.ndarray:
+        """Values of one group, shape (n, k), in the order of ``components`` (default: file order).
+
+        Raises KeyError naming what is missing.
+        """
+        cols = {c.component: i for i, c in enumerate(self.columns) if c.group == group}
+        if not cols:
+            raise KeyError(f"no group {group!r} in section {self.kind!r} (line {self.line})")
+        if components is None:
+            idx = list(cols.values())
+        else:
+            missing = [c for c in components if c not in cols]
+            if missing:
+                raise KeyError(f"group {group!r} of section {self.kind!r} has no column(s) {missing}")
+            idx = [cols[c] for c in components]
+        return self.values[:, idx]
+
+    def components(self, group: str) -> tuple[str, ...]:
+        """Component names of one group in file order."""
+        return tuple(c.component for c in self.columns if c.group == group)
+
+
+@dataclass(frozen=True, eq=False)
+class ViconFile:
+    """A parsed Vicon CSV file: its sections and how it was written."""
+
+    path: str
+    sections: tuple[Section, ...]
+    delimiter: str = ","
+    decimal: str = "."
+    encoding: str = "utf-8"
+    line_ending: str = "\n"
+    notes: tuple[str, ...] = field(default=())
+
+    def section(self, kind: str) -> Section | None:
+        """The first section titled ``kind``, or None."""
+        return next((s for s in self.sections if s.kind == kind), None)
+
+    def kinds(self) -> list[str]:
+        """Section titles in file order."""
+        return [s.kind for s in self.sections]
+
+
+# ----------------------------------------------------------------------------------------------- reading
+
+
+def read_vicon_csv(path: str | Path) -> ViconFile:
+    """Read a Vicon CSV export.
+
+    Parameters
+    ----------
+    path : the file.
+
+    Returns
+    -------
+    ViconFile with every section, lengths in m and angles in rad.
+
+    Raises
+    ------
+    ViconCsvError
+        On any malformed content, naming file, line, column and cause.
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as err:
+        raise ViconCsvError(str(p), None, None, "unreadable", f"cannot read the file ({err.strerror})") from None
+    return parse_vicon_bytes(raw, str(p))
+
+
+def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
+    """Parse the bytes of a Vicon CSV export (see `read_vicon_csv`)."""
+    encoding = "utf-8"
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("cp1252", errors="replace")
+        encoding = "cp1252"
+    return parse_vicon_text(text, name, encoding=encoding)
+
+
+def parse_vicon_text(text: str, name: str = "<text>", *, encoding: str = "utf-8") -> ViconFile:
+    """Parse the text of a Vicon CSV export (see `read_vicon_csv`); ``name`` is used in messages."""
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    line_ending = "\r\n" if "\r\n" in text else ("\r" if "\r" in text else "\n")
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    if "\x00" in text:
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise ViconCsvError(name, line, None, "binary", "the file holds NUL bytes: it is not a CSV text file")
+    if not text.strip(" \t\n,;"):
+        raise ViconCsvError(name, None, None, "empty", "the file holds no content")
+    parser = _Parser(text, name)
+    sections = parser.parse()
+    return ViconFile(
+        path=name,
+        sections=tuple(sections),
+        delimiter=parser.delim,
+        decimal=parser.decimal,
+        encoding=encoding,
+        line_ending=line_ending,
+    )
+
+
+def _detect_delimiter(text: str) -> str:
+    head = text[:20000]
+    counts = {d: head.count(d) for d in (",", ";", "\t")}
+    best = max(counts, key=lambda d: counts[d])
+    return best if counts[best] else ","
+
+
+class _Parser:
+    """Walks the structural lines of a file; data blocks are parsed in bulk."""
+
+    def __init__(self, text: str, name: str) -> None:
+        self.text = text
+        self.name = name
+        self.delim = _detect_delimiter(text)
+        self.decimal = "."
+        if self.delim == ";":
+            # Decimal commas: a data row (starts with a digit) that holds a comma.
+            m = re.search(r"(?m)^\d[^\n]*,", text[:200000])
+            if m:
+                self.decimal = ","
+        # Line starts of lines that cannot be data rows.
+        starts = [0] if text and text[0] not in "0123456789+-." else []
+        starts += [m.start() + 1 for m in _STRUCTURAL.finditer(text)]
+        self.struct = [s for s in starts if s < len(text)]
+        self.ends_with_newline = text.endswith("\n")
+
+    # -- helpers
+    def err(self, line: int | None, column: int | None, cause: str, message: str) -> ViconCsvError:
+        return ViconCsvError(self.name, line, column, cause, message)
+
+    def line_at(self, pos: int) -> str:
+        end = self.text.find("\n", pos)
+        return self.text[pos:] if end < 0 else self.text[pos:end]
+
+    def next_line_pos(self, pos: int) -> int:
+        end = self.text.find("\n", pos)
+        return len(self.text) if end < 0 else end + 1
+
+    def cells(self, line: str) -> list[str]:
+        return [c.strip() for c in line.split(self.delim)]
+
+    @staticmethod
+    def is_blank(cells: list[str]) -> bool:
+        return not any(cells)
+
+    # -- structure
+    def parse(self) -> list[Section]:
+        text = self.text
+        sections: list[Section] = []
+        line_no = 1
+        last_pos = 0
+        k = 0
+        struct = self.struct
+        while k < len(struct):
+            pos = struct[k]
+            line_no += text.count("\n", last_pos, pos)
+            last_pos = pos
+            cells = self.cells(self.line_at(pos))
+            if self.is_blank(cells):
+                k += 1
+                continue
+            if cells[0] and not any(cells[1:]) and not _NUMBER.fullmatch(cells[0]):
+                section, data_end = self.parse_section(cells[0], pos, line_no)
+                sections.append(section)
+                # Skip structural lines inside the section's header and data.
+                while k < len(struct) and struct[k] < data_end:
+                    k += 1
+                continue
+            if cells[0] == "Frame":
+                raise self.err(line_no, 1, "missing-title",
+                               "column header row without a section title row (e.g. 'Trajectories') above it")
+            raise self.err(line_no, 1, "unexpected-row",
+                           f"expected a section title such as 'Objects' or 'Trajectories', found {_show(cells)}")
+        if not sections:
+            # Data rows but no structural line: the file starts with numbers.
+            raise self.err(1, 1, "missing-title", "no section title row (e.g. 'Objects' or 'Trajectories') found")
+        return sections
+
+    def header_line(self, pos: int, line_no: int, what: str, kind: str) -> tuple[list[str], int]:
+        if pos >= len(self.text):
+            raise self.err(line_no, None, "truncated-header",
+                           f"the file ends before the {what} row of section {kind!r} (truncated?)")
+        return self.cells(self.line_at(pos)), self.next_line_pos(pos)
+
+    def parse_section(self, kind: str, pos: int, line_no: int) -> tuple[Section, int]:
+        title_line = line_no
+        pos = self.next_line_pos(pos)
+        rate_cells, pos = self.header_line(pos, line_no + 1, "rate", kind)
+        rate = _to_float(rate_cells[0]) if rate_cells and rate_cells[0] else None
+        if rate is None or not math.isfinite(rate) or rate <= 0:
+            shown = rate_cells[0] if rate_cells and rate_cells[0] else "(empty)"
+            raise self.err(line_no + 1, 1, "bad-rate",
+                           f"the rate row of section {kind!r} must hold a positive number of Hz, found {shown!r}")
+        names, pos = self.header_line(pos, line_no + 2, "name", kind)
+        comps, pos = self.header_line(pos, line_no + 3, "column header", kind)
+        if not comps or comps[0] != "Frame":
+            raise self.err(line_no + 3, 1, "bad-header",
+                           f"section {kind!r}: the column header row must start with 'Frame', found {_show(comps)}")
+        first_data = 2 if len(comps) > 1 and comps[1] == "Sub Frame" else 1
+        units_line = line_no + 4
+        units, pos = self.header_line(pos, units_line, "units", kind)
+        if units and _NUMBER.fullmatch(units[0]):
+            raise self.err(units_line, 1, "missing-units",
+                           f"section {kind!r}: expected the units row under the column header, found a data row")
+        last = max((i for i, c in enumerate(comps) if c), default=0)
+        n_cols = last + 1 - first_data
+        if n_cols <= 0:
+            raise self.err(line_no + 3, None, "bad-header", f"section {kind!r} has no data columns")
+        columns, prefix = self.build_columns(kind, names, comps, units, first_data, last, line_no)
+
+        # The data block runs to the next structural line.
+        data_start = pos
+        data_line = line_no + 5
+        nxt = next((s for s in self.struct if s >= data_start), len(self.text))
+        if nxt < len(self.text):
+            cells = self.cells(self.line_at(nxt))
+            is_title = cells[0] and not any(cells[1:]) and not _NUMBER.fullmatch(cells[0])
+            if not self.is_blank(cells) and not is_title:
+                bad_line = data_line + self.text.count("\n", data_start, nxt)
+                cell = cells[0] if cells[0] else "(empty)"
+                raise self.err(bad_line, 1, "bad-frame",
+                               f"section {kind!r}: frame number {cell!r} is not a number")
+        block = self.text[data_start:nxt]
+        width = max(len(comps), len(units), first_data + n_cols)
+        values = self.parse_block(block, data_line, width, kind, at_eof=nxt >= len(self.text))
+        frame, sub = self.check_frames(values, data_line, first_data, kind)
+        data = values[:, first_data:first_data + n_cols]
+        extra = values[:, first_data + n_cols:]
+        if extra.size and not np.isnan(extra).all():
+            r, c = np.argwhere(~np.isnan(extra))[0]
+            raise self.err(data_line + int(r), int(first_data + n_cols + c + 1), "extra-cell",
+                           f"section {kind!r}: a value lies beyond the last column of the header")
+        bad = np.isinf(data)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise self.err(data_line + int(r), int(first_data + c + 1), "non-finite",
+                           f"section {kind!r}: value is infinite")
+        # Convert to SI by what the units row says.
+        scale = np.array([_unit_scale(c.file_unit) for c in columns])
+        if np.any(scale != 1.0):
+            data = data * scale
+        section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
+                          columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix)
+        return section, nxt
+
+    def build_columns(self, kind: str, names: list[str], comps: list[str], units: list[str],
+                      first_data: int, last: int, line_no: int) -> tuple[list[Column], str]:
+        columns: list[Column] = []
+        group = ""
+        prefix = ""
+        for i in range(first_data, last + 1):
+            if i < len(names) and names[i]:
+                group, p = _clean_name(names[i])
+                prefix = prefix or p
+            comp = comps[i]
+            file_unit = units[i] if i < len(units) else ""
+            if kind in _POSE_SECTIONS:
+                if comp in _LENGTH_COMPONENTS and file_unit not in LENGTH_UNITS_M:
+                    raise self.err(line_no + 4, i + 1, "bad-unit",
+                                   f"section {kind!r}: unit {file_unit or '(empty)'!r} of {comp} ({group}) is not "
+                                   f"a length unit ({', '.join(LENGTH_UNITS_M)})")
+                if comp in _ANGLE_COMPONENTS and file_unit not in ANGLE_UNITS_RAD:
+                    raise self.err(line_no + 4, i + 1, "bad-unit",
+                                   f"section {kind!r}: unit {file_unit or '(empty)'!r} of {comp} ({group}) is not "
+                                   f"an angle unit (rad, deg)")
+            unit = "m" if file_unit in LENGTH_UNITS_M else ("rad" if file_unit in ANGLE_UNITS_RAD else file_unit)
+            columns.append(Column(group=group, component=comp, unit=unit, file_unit=file_unit, column=i + 1))
+        return columns, prefix
+
+    # -- data
+    def parse_block(self, block: str, data_line: int, width: int, kind: str, at_eof: bool) -> np.ndarray:
+        if not block.strip():
+            return np.zeros((0, width))
+        if at_eof and not self.ends_with_newline:
+            last_line = block.rsplit("\n", 1)[-1]
+            n_cells = last_line.count(self.delim) + 1
+            if n_cells < width:
+                line = data_line + block.count("\n")
+                raise self.err(line, n_cells, "truncated",
+                               f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
+                               "cells and no line end): truncated file?")
+        values = self.fast_block(block, width)
+        if values is None:
+            values = self.slow_block(block, data_line, width, kind)
+        return values
+
+    def fast_block(self, block: str, width: int) -> np.ndarray | None:
+        allowed = "0-9eE+\\-.\\n " + re.escape(self.delim) + re.escape(self.decimal)
+        if re.search(f"[^{allowed}]", block):
+            return None
+        import pandas as pd
+
+        try:
+            df = pd.read_csv(io.StringIO(block), sep=self.delim, header=None, names=range(width),
+                             dtype=np.float64, na_values=[""], keep_default_na=False, decimal=self.decimal,
+                             engine="c", skip_blank_lines=False, index_col=False)
+        except (ValueError, pd.errors.ParserError):
+            return None
+        values = df.to_numpy(dtype=np.float64)
+        if values.shape[0] != block.count("\n") + (0 if block.endswith("\n") else 1):
+            return None
+        return values
+
+    def slow_block(self, block: str, data_line: int, width: int, kind: str) -> np.ndarray:
+        lines = block.split("\n")
+        if lines and lines[-1] == "":
+            lines.pop()
+        out = np.full((len(lines), width), np.nan)
+        for r, line in enumerate(lines):
+            cells = line.split(self.delim)
+            if len(cells) > width:
+                for c in range(width, len(cells)):
+                    if cells[c].strip():
+                        raise self.err(data_line + r, c + 1, "extra-cell",
+                                       f"section {kind!r}: a value lies beyond the last column of the header")
+                cells = cells[:width]
+            for c, cell in enumerate(cells):
+                s = cell.strip()
+                if not s:
+                    continue
+                if self.decimal == ",":
+                    s = s.replace(",", ".")
+                if not _NUMBER.fullmatch(s):
+                    raise self.err(data_line + r, c + 1, "non-numeric",
+                                   f"section {kind!r}: cell {cell.strip()[:40]!r} is not a number")
+                out[r, c] = float(s)
+        return out
+
+    def check_frames(self, values: np.ndarray, data_line: int, first_data: int,
+                     kind: str) -> tuple[np.ndarray, np.ndarray]:
+        if values.shape[0] == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        f = values[:, 0]
+        bad = np.isnan(f) | (f != np.round(f)) | (f < 0)
+        if bad.any():
+            r = int(np.argmax(bad))
+            raise self.err(data_line + r, 1, "bad-frame",
+                           f"section {kind!r}: frame number must be a non-negative integer")
+        frame = f.astype(np.int64)
+        if first_data == 2:
+            s = values[:, 1]
+            s = np.where(np.isnan(s), 0.0, s)  # Nexus writes an empty Sub Frame where nothing was computed
+            bad = (s != np.round(s)) | (s < 0)
+            if bad.any():
+                r = int(np.argmax(bad))
+                raise self.err(data_line + r, 2, "bad-frame",
+                               f"section {kind!r}: sub frame must be a non-negative integer")
+            sub = s.astype(np.int64)
+        else:
+            sub = np.zeros_like(frame)
+        key = frame * (int(sub.max()) + 1) + sub
+        d = np.diff(key)
+        if (d <= 0).any():
+            r = int(np.argmax(d <= 0)) + 1
+            if d[r - 1] == 0:
+                raise self.err(data_line + r, 1, "duplicate-frame",
+                               f"section {kind!r}: frame {frame[r]} (sub frame {sub[r]}) appears twice "
+                               f"(first at line {data_line + r - 1})")
+            raise self.err(data_line + r, 1, "frame-order",
+                           f"section {kind!r}: frame {frame[r]} comes after frame {frame[r - 1]}: frames must increase")
+        return frame, sub
+
+
+def _to_float(s: str) -> float | None:
+    if not _NUMBER.fullmatch(s):
+        return None
+    return float(s)
+
+
+def _unit_scale(unit: str) -> float:
+    if unit in LENGTH_UNITS_M:
+        return LENGTH_UNITS_M[unit]
+    if unit in ANGLE_UNITS_RAD:
+        return ANGLE_UNITS_RAD[unit]
+    return 1.0
+
+
+def _clean_name(name: str) -> tuple[str, str]:
+    prefix = ""
+    for p in _NAME_PREFIXES:
+        if name.startswith(p):
+            prefix, name = p.strip(), name[len(p):]
+            break
+    if ":" in name:
+        a, b = name.split(":", 1)
+        if a == b:
+            name = a
+    return name, prefix
+
+
+def _show(cells: list[str]) -> str:
+    while cells and not cells[-1]:
+        cells = cells[:-1]
+    s = ",".join(cells)
+    return repr(s[:60] + ("..." if len(s) > 60 else ""))
+
+
+# ----------------------------------------------------------------------------------------------- writing
+
+
+def write_tracker_csv(
+    path: str | Path,
+    *,
+    rate_hz: float,
+    objects: Mapping[str, np.ndarray] | None = None,
+    markers: Mapping[str, np.ndarray] | None = None,
+    first_frame: int = 1,
+    length_unit: str = "mm",
+    angle_unit: str = "rad",
+    delimiter: str = ",",
+    newline: str = "\n",
+) -> Path:
+    """Write trajectories in Vicon Tracker CSV layout (an ``Objects`` and/or a ``Trajectories`` section).
+
+    Parameters
+    ----------
+    path : output file.
+    rate_hz : frame rate, Hz.
+    objects : name -> array (n, 6): RX, RY, RZ in rad (helical vector, as Tracker's ``Global Angle``),
+        TX, TY, TZ in m. Written with the ``Global Angle Name:Name`` header Tracker uses.
+    markers : name -> array (n, 3): X, Y, Z in m.
+    first_frame : number of the first frame.
+    length_unit, angle_unit : units to write (``mm``/``cm``/``m``, ``rad``/``deg``); values are converted.
+    delimiter, newline : ``","`` or ``";"``, ``"\\n"`` or ``"\\r\\n"``.
+
+    NaN is written as an empty cell (an occlusion). Numbers use the shortest repr that reads back exactly.
+    """
+    if length_unit not in LENGTH_UNITS_M or angle_unit not in ANGLE_UNITS_RAD:
+        raise ValueError(f"unknown unit {length_unit!r}/{angle_unit!r}")
+    if not objects and not markers:
+        raise ValueError("nothing to write: give objects and/or markers")
+    lscale, ascale = LENGTH_UNITS_M[length_unit], ANGLE_UNITS_RAD[angle_unit]
+    blocks: list[str] = []
+    for kind, groups, comps in (("Objects", objects, ("RX", "RY", "RZ", "TX", "TY", "TZ")),
+                                ("Trajectories", markers, ("X", "Y", "Z"))):
+        if not groups:
+            continue
+        arrays = []
+        names_row = ["", ""]
+        comp_row = ["Frame", "Sub Frame"]
+        unit_row = ["", ""]
+        n = None
+        for name, arr in groups.items():
+            a = np.asarray(arr, dtype=np.float64)
+            if a.ndim != 2 or a.shape[1] != len(comps):
+                raise ValueError(f"{kind} {name!r}: expected shape (n, {len(comps)}), got {a.shape}")
+            n = a.shape[0] if n is None else n
+            if a.shape[0] != n:
+                raise ValueError(f"{kind} {name!r}: {a.shape[0]} rows, others have {n}")
+            if kind == "Objects":
+                a = np.concatenate([a[:, :3] / ascale, a[:, 3:] / lscale], axis=1)
+                names_row += [f"Global Angle {name}:{name}"] + [""] * 5
+                unit_row += [angle_unit] * 3 + [length_unit] * 3
+            else:
+                a = a / lscale
+                names_row += [name, "", ""]
+                unit_row += [length_unit] * 3
+            comp_row += list(comps)
+            arrays.append(a)
+        assert n is not None
+        data = np.concatenate(arrays, axis=1)
+        lines = [kind, _fmt_number(float(rate_hz)), delimiter.join(names_row), delimiter.join(comp_row),
+                 delimiter.join(unit_row)]
+        text_cells = np.where(np.isnan(data), "", np.vectorize(_fmt_number, otypes=[object])(data)) \
+            if data.size else np.zeros((n, 0), dtype=object)
+        frames = np.arange(first_frame, first_frame + n)
+        for i in range(n):
+            lines.append(delimiter.join([str(frames[i]), "0", *text_cells[i]]))
+        blocks.append(newline.join(lines) + newline)
+    out = Path(path)
+    out.write_text(newline.join(blocks) if len(blocks) == 1 else blocks[0] + newline + blocks[1],
+                   encoding="utf-8", newline="")
+    return out
+
+
+def _fmt_number(v: float) -> str:
+    if math.isnan(v):
+        return ""
+    if v == int(v) and abs(v) < 1e15:
+        return str(int(v))
+    return repr(v)
