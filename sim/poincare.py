@@ -1,0 +1,175 @@
+"""The Poincaré map on the post-impact section z = (theta+, theta'+), its fixed points and stability.
+
+The map needs only the end state of a step: no trajectory, forces or energies are recorded on this path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rimless.sim.failures import FailureReason, StepFailure
+from rimless.sim.hybrid import ClutchPolicy, StepResult, simulate_step
+from rimless.sim.integrators import Integrator, ScipyIntegrator
+from rimless.sim.model import ALPHA, Mechanics
+from rimless.sim.params import WheelParams
+from rimless.sim.section import section_from_state, state_from_section
+
+FIXED_POINT_TOL = 1e-10  # residual |P(z) - z|, rad and rad/s
+JACOBIAN_FD_STEP = 1e-4
+
+
+@dataclass
+class PoincareMap:
+    """P: z -> z' for one wheel (model 'er' or 've') and parameter set."""
+
+    params: WheelParams
+    model: str
+    integrator: Integrator = field(default_factory=ScipyIntegrator)
+    clutch: ClutchPolicy | None = None
+    evaluations: int = 0
+
+    def __post_init__(self) -> None:
+        self.mech = Mechanics.of(self.params)
+
+    def step(self, z: np.ndarray, **options: object) -> StepResult:
+        """The full step from section point z (options as for simulate_step)."""
+        self.evaluations += 1
+        return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
+                             self.integrator, clutch=self.clutch, **options)  # type: ignore[arg-type]
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        return section_from_state(self.step(z).y_plus)
+
+    def with_params(self, params: WheelParams) -> PoincareMap:
+        return PoincareMap(params, self.model, self.integrator, self.clutch)
+
+    def jacobian(self, z: np.ndarray, h: float = JACOBIAN_FD_STEP) -> np.ndarray:
+        """dP/dz by central differences with step h (rad, rad/s)."""
+        z = np.asarray(z, dtype=float)
+        J = np.empty((2, 2))
+        for i in range(2):
+            dz = np.zeros(2)
+            dz[i] = h
+            J[:, i] = (self(z + dz) - self(z - dz)) / (2 * h)
+        return J
+
+
+def default_guess(params: WheelParams, model: str) -> np.ndarray:
+    """A post-impact guess near the usual gait: theta+ a little below -alpha/2, theta'+ from the rigid wheel."""
+    from rimless.sim.rigid import rigid_fixed_point_omega
+
+    omega = rigid_fixed_point_omega(params, consistent=True)
+    if not math.isfinite(omega) or omega <= 0:
+        omega = 2.5
+    return np.array([-ALPHA / 2 - 0.07, max(omega, 1.0) * (1.3 if model == "er" else 1.2)])
+
+
+@dataclass
+class FixedPoint:
+    """A period-1 gait: z* with |P(z*) - z*| <= tolerance, and its linear stability."""
+
+    z: np.ndarray
+    residual: float
+    iterations: int
+    jacobian: np.ndarray
+    eigenvalues: np.ndarray
+    step: StepResult
+    jacobian_method: str
+
+    @property
+    def max_abs_eigenvalue(self) -> float:
+        return float(np.max(np.abs(self.eigenvalues)))
+
+    @property
+    def stable(self) -> bool:
+        return self.max_abs_eigenvalue < 1.0
+
+
+class NoFixedPoint(StepFailure):
+    """Newton did not converge; `last_failure` holds the map's failure when that was the cause."""
+
+    def __init__(self, message: str, last_failure: StepFailure | None = None) -> None:
+        self.last_failure = last_failure
+        super().__init__(FailureReason.NO_CONVERGENCE, message)
+
+
+def solve_fixed_point(
+    pmap: PoincareMap,
+    z_guess: np.ndarray,
+    *,
+    tol: float = FIXED_POINT_TOL,
+    max_iter: int = 30,
+    jacobian: Callable[[np.ndarray], np.ndarray] | None = None,
+    diagnostics: bool = False,
+    strict_contact: bool = False,
+) -> FixedPoint:
+    """Newton's method on F(z) = P(z) - z with step halving when the map fails or the residual grows."""
+    jac = jacobian or pmap.jacobian
+    z = np.asarray(z_guess, dtype=float).copy()
+    last_failure: StepFailure | None = None
+    try:
+        fz = pmap(z) - z
+    except StepFailure as err:
+        raise NoFixedPoint(f"the map fails at the initial guess {z.tolist()}: {err}", err) from None
+    res = float(np.max(np.abs(fz)))
+    it = 0
+    while res > tol:
+        if it >= max_iter:
+            raise NoFixedPoint(f"Newton did not converge in {max_iter} iterations (residual {res:.3g})", last_failure)
+        it += 1
+        try:
+            J = jac(z) - np.eye(2)
+            dz = -np.linalg.solve(J, fz)
+        except (StepFailure, np.linalg.LinAlgError) as err:
+            if isinstance(err, StepFailure):
+                last_failure = err
+            raise NoFixedPoint(f"cannot form the Newton step at z = {z.tolist()}: {err}", last_failure) from None
+        lam = 1.0
+        while True:
+            z_new = z + lam * dz
+            try:
+                f_new = pmap(z_new) - z_new
+                res_new = float(np.max(np.abs(f_new)))
+                if res_new < res or res_new <= tol:
+                    break
+            except StepFailure as err:
+                last_failure = err
+            lam *= 0.5
+            if lam < 1e-4:
+                msg = f"no Newton step from z = {z.tolist()} reduces the residual {res:.3g}"
+                if last_failure is not None:
+                    msg += f"; the map fails: {last_failure}"
+                raise NoFixedPoint(msg, last_failure)
+        z, fz, res = z_new, f_new, res_new
+    J = jac(z)
+    step = pmap.step(z, diagnostics=diagnostics, strict_contact=strict_contact)
+    return FixedPoint(z=z, residual=res, iterations=it, jacobian=J, eigenvalues=np.linalg.eigvals(J), step=step,
+                      jacobian_method=getattr(jac, "method_name", "central-difference"))
+
+
+def find_gaits(
+    pmap: PoincareMap,
+    *,
+    theta_dot_range: tuple[float, float] = (0.8, 6.0),
+    n_guesses: int = 14,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[FixedPoint]:
+    """Every period-1 gait reachable by Newton from a scan of initial theta'+ (de-duplicated, by period)."""
+    found: list[FixedPoint] = []
+    guesses = np.linspace(*theta_dot_range, n_guesses)
+    for i, w in enumerate(guesses):
+        for th in (-ALPHA / 2 - 0.07, -ALPHA / 2 - 0.02):
+            try:
+                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15)
+            except StepFailure:
+                continue
+            if all(np.max(np.abs(fp.z - other.z)) > 1e-6 for other in found):
+                found.append(fp)
+        if progress:
+            progress(i + 1, len(guesses))
+    found.sort(key=lambda fp: fp.step.period_s)
+    return found
