@@ -1,0 +1,215 @@
+"""The wheel hub and the wheel angle, from four markers or from a tracked object's pose.
+
+All positions in m, angles in rad, arrays with time on the first axis; NaN marks a missing frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "HubEstimate",
+    "hub_from_markers",
+    "hub_from_object",
+    "rotations_from_angles",
+    "wheel_angle_from_rotations",
+    "estimate_hub_offset",
+]
+
+#: Least total rotation (rad) for a hub offset in the object frame to be observable.
+MIN_ROTATION_FOR_OFFSET_RAD = np.pi
+
+
+@dataclass(frozen=True, eq=False)
+class HubEstimate:
+    """Hub path and wheel rotation.
+
+    Attributes
+    ----------
+    hub_m : (n, 3) world hub position, m; NaN where unknown.
+    wheel_angle_rad : (n,) unwrapped wheel angle, increasing over the trial, or None when orientation
+        is unknown.
+    axis : (3,) world wheel axis (unit) or None.
+    source : how the hub was obtained, in words.
+    offset_m : (3,) hub offset in the object / marker frame, m, or None.
+    offset_residual_m : RMS of the smoothness residual of the offset fit, m, or None.
+    """
+
+    hub_m: np.ndarray
+    wheel_angle_rad: np.ndarray | None
+    axis: np.ndarray | None
+    source: str
+    offset_m: np.ndarray | None = None
+    offset_residual_m: float | None = None
+
+
+def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -> np.ndarray:
+    """Rotation matrices (n, 3, 3) from Vicon RX, RY, RZ (n, 3), rad; NaN rows give NaN matrices.
+
+    ``convention``: ``"helical"`` (rotation vector, Tracker's default) or an Euler sequence understood by
+    scipy such as ``"xyz"`` (extrinsic) / ``"XYZ"`` (intrinsic).
+    """
+    from scipy.spatial.transform import Rotation
+
+    a = np.asarray(angles_rad, dtype=np.float64)
+    ok = ~np.isnan(a).any(axis=1)
+    out = np.full((a.shape[0], 3, 3), np.nan)
+    if ok.any():
+        rot = Rotation.from_rotvec(a[ok]) if convention == "helical" else Rotation.from_euler(convention, a[ok])
+        out[ok] = rot.as_matrix()
+    return out
+
+
+def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unwrapped rotation angle about the dominant world axis.
+
+    Parameters
+    ----------
+    rot : (n, 3, 3) world-from-body rotations; NaN rows are gaps.
+
+    Returns
+    -------
+    angle_rad : (n,), 0 at the first valid frame, increasing over the trial (axis sign chosen so);
+        NaN at gaps. Increments between consecutive valid frames are assumed below 180 deg.
+    axis : (3,) unit world axis.
+    """
+    from scipy.spatial.transform import Rotation
+
+    n = rot.shape[0]
+    ok = np.flatnonzero(~np.isnan(rot).any(axis=(1, 2)))
+    angle = np.full(n, np.nan)
+    if ok.size < 2:
+        return angle, np.array([0.0, 0.0, 1.0])
+    r = rot[ok]
+    inc = Rotation.from_matrix(r[1:] @ np.transpose(r[:-1], (0, 2, 1))).as_rotvec()  # world-frame increments
+    w, v = np.linalg.eigh(inc.T @ inc)
+    axis = v[:, -1]
+    steps = inc @ axis
+    if steps.sum() < 0:
+        axis, steps = -axis, -steps
+    angle[ok] = np.concatenate([[0.0], np.cumsum(steps)])
+    return angle, axis
+
+
+def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
+    """Hub and wheel angle from markers fixed on the wheel (e.g. four in one plane around the hub).
+
+    The hub is the markers' centroid in the reference frame (the first frame where all are seen), carried
+    through each frame by the rigid motion fitted (weighted Kabsch) to the visible markers, so it equals
+    the centroid when all are seen and stays unbiased when one is occluded.
+
+    Parameters
+    ----------
+    points_m : (n, k, 3) marker positions, m; NaN where occluded.
+    min_markers : least number of visible markers for a frame to count (3 fixes a rigid pose).
+    """
+    p = np.asarray(points_m, dtype=np.float64)
+    n, k, _ = p.shape
+    if k == 1:
+        return HubEstimate(p[:, 0].copy(), None, None, "single marker taken as the hub")
+    vis = ~np.isnan(p).any(axis=2)  # (n, k)
+    full = np.flatnonzero(vis.all(axis=1))
+    if full.size == 0:
+        raise ValueError("no frame shows all markers: no reference shape")
+    ref = p[full[0]]
+    c_ref = ref.mean(axis=0)
+    w = vis.astype(np.float64)
+    good = vis.sum(axis=1) >= min(min_markers, k)
+    q = np.where(vis[..., None], p, 0.0)
+    wsum = np.maximum(w.sum(axis=1, keepdims=True), 1.0)
+    cq = (w[..., None] * q).sum(axis=1) / wsum  # (n, 3)
+    cr = (w[..., None] * ref[None]).sum(axis=1) / wsum
+    a = (ref[None] - cr[:, None]) * w[..., None]
+    b = q - cq[:, None]
+    h = np.einsum("nki,nkj->nij", a, b)  # (n, 3, 3)
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(np.transpose(vt, (0, 2, 1)) @ np.transpose(u, (0, 2, 1))))
+    dm = np.zeros((n, 3, 3))
+    dm[:, 0, 0] = 1
+    dm[:, 1, 1] = 1
+    dm[:, 2, 2] = d
+    rot = np.transpose(vt, (0, 2, 1)) @ dm @ np.transpose(u, (0, 2, 1))  # current = R @ ref
+    hub = np.einsum("nij,nj->ni", rot, c_ref - cr) + cq
+    hub[~good] = np.nan
+    rot[~good] = np.nan
+    angle = axis = None
+    if k >= 3:
+        angle, axis = wheel_angle_from_rotations(rot)
+    return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)")
+
+
+def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Hub offset in the object frame of a wheel rolling down a plane.
+
+    A body point off the hub by e rises and falls by e once per turn, the hub only by the small per-step
+    bumps (period alpha), so the hub is the body point whose world height is best explained by a straight
+    line in the distance travelled: minimise sum_t (T_z + (R d)_z - a - b s)^2 over d, a, b (linear least
+    squares, two passes so that s is measured along the hub path). The component along the wheel axis is
+    not observable and comes out 0 (minimum norm). Needs about a full turn to be well conditioned.
+
+    Returns
+    -------
+    offset_m : (3,) in the object frame, m.
+    residual_m : RMS residual of the height fit, m.
+    rotation_rad : total rotation seen.
+    """
+    ok = ~(np.isnan(rot).any(axis=(1, 2)) | np.isnan(trans_m).any(axis=1))
+    angle, _ = wheel_angle_from_rotations(rot)
+    total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
+    if ok.sum() < 10:
+        return np.zeros(3), float("nan"), total
+    r, t = rot[ok], trans_m[ok]
+    d = np.zeros(3)
+    res = np.zeros(1)
+    for _ in range(2):
+        path = t + r @ d
+        xy = path[:, :2] - path[0, :2]
+        _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
+        s = xy @ vt[0]
+        a = np.column_stack([r[:, 2, :], -np.ones(len(s)), -s])
+        scale = np.maximum(np.abs(a).max(axis=0), 1e-3)
+        sol, *_ = np.linalg.lstsq(a / scale, -t[:, 2], rcond=1e-6)
+        sol = sol / scale
+        d = sol[:3]
+        res = a @ sol + t[:, 2]
+    return d, float(np.sqrt(np.mean(res**2))), total
+
+
+def hub_from_object(
+    angles_rad: np.ndarray,
+    trans_m: np.ndarray,
+    *,
+    hub_offset_m: np.ndarray | None = None,
+    convention: str = "helical",
+) -> HubEstimate:
+    """Hub and wheel angle from a tracked object's pose (Vicon RX..RZ in rad, TX..TZ in m).
+
+    Parameters
+    ----------
+    angles_rad, trans_m : (n, 3) each.
+    hub_offset_m : (3,) hub position in the object frame, m. None: estimate it by `estimate_hub_offset`
+        when the object turns more than 180 deg, else take the object origin as the hub. Give ``(0, 0, 0)``
+        when the object's origin is the hub.
+    convention : see `rotations_from_angles`.
+    """
+    rot = rotations_from_angles(angles_rad, convention)
+    trans = np.asarray(trans_m, dtype=np.float64)
+    angle, axis = wheel_angle_from_rotations(rot)
+    total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
+    residual = None
+    if hub_offset_m is not None:
+        d = np.asarray(hub_offset_m, dtype=np.float64).reshape(3)
+        source = ("object origin (given offset 0)" if not d.any()
+                  else "object origin + given offset [{:.1f}, {:.1f}, {:.1f}] mm".format(*(d * 1e3)))
+    elif total < MIN_ROTATION_FOR_OFFSET_RAD:
+        d = np.zeros(3)
+        source = (f"object origin (it turns only {np.degrees(total):.1f} deg: a hub offset is not observable, "
+                  "none applied)")
+    else:
+        d, residual, _ = estimate_hub_offset(rot, trans)
+        source = ("object origin + estimated offset [{:.1f}, {:.1f}, {:.1f}] mm (hub height fit, residual {:.2f} mm)"
+                  .format(*(d * 1e3), residual * 1e3))
+    hub = trans + np.einsum("nij,j->ni", rot, d)
+    return HubEstimate(hub, angle, axis, source, d, residual)
