@@ -1,0 +1,236 @@
+"""The control path: read each sensor, check its health, run its detector, switch the clutches.
+
+Synchronous and allocation-light: it runs in the sampler thread, never touches the network or the
+disk, and hands its records to the asyncio side through a bounded deque (oldest dropped when full).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Protocol
+
+from rimless.firmware.adns3080 import MotionSample
+from rimless.firmware.clutch import ClutchBank
+from rimless.firmware.detector import DetectorParams, LegDetector
+from rimless.firmware.errors import SensorError, SensorNotFound
+from rimless.firmware.faults import Fault, HealthLimits, HealthMonitor
+
+
+class MotionSensor(Protocol):
+    """What the controller needs from a sensor driver (`Adns3080`)."""
+
+    def read_motion(self) -> MotionSample:
+        """One timestamped motion read."""
+        ...
+
+    def verify_id(self) -> int:
+        """Check the chip's identity; raise SensorNotFound on mismatch."""
+        ...
+
+
+class SampleRecord(NamedTuple):
+    """One sample of one channel, as logged and sent (SI; times in monotonic ns)."""
+
+    t_ns: int
+    seq: int
+    channel: int
+    position_m: float  # integrated displacement since start
+    velocity_m_s: float  # estimated compression velocity
+    compression_m: float  # since the last touchdown
+    squal: int
+    shutter: int
+    max_pixel: int
+    phase: int  # Phase.code
+    stance_leg: int
+    clutch_mask: int  # bit i = clutch i engaged
+    armed: bool
+    latency_ns: int  # sample timestamp to clutch command (or decision when none)
+
+
+class EventRecord(NamedTuple):
+    """A named event: touchdown, lock, release, arm, disarm, fault, param, trial..."""
+
+    t_ns: int
+    name: str
+    fields: dict[str, Any]
+
+
+Record = SampleRecord | EventRecord
+
+
+@dataclass
+class Channel:
+    """One sensor and the detector of the legs it watches."""
+
+    sensor: MotionSensor
+    detector: LegDetector
+    health: HealthMonitor
+
+
+class Controller:
+    """Owns the clutches and the detectors; applies decisions only while armed.
+
+    :param max_hold_s: a clutch engaged longer than this trips `Fault.CLUTCH_TIMEOUT`.
+    :param id_check_interval_s: how often to re-read Product_ID (0 = never).
+    """
+
+    def __init__(
+        self,
+        channels: Sequence[Channel],
+        clutches: ClutchBank,
+        *,
+        max_hold_s: float = 1.0,
+        id_check_interval_s: float = 1.0,
+        outbox_len: int = 20000,
+        clock_ns: Callable[[], int] = time.monotonic_ns,
+    ) -> None:
+        self.channels = list(channels)
+        self.clutches = clutches
+        self.max_hold_s = max_hold_s
+        self.id_check_interval_s = id_check_interval_s
+        self.clock_ns = clock_ns
+        self.outbox: deque[Record] = deque(maxlen=outbox_len)
+        self.armed = False
+        self.active_faults: dict[Fault, str] = {}
+        self.seq = 0
+        self.samples = 0
+        self.clutch_commands = 0
+        self._next_id_check_ns = 0
+        self._mask = 0
+        self.last_latency_ns = 0
+        self.last_had_command = False
+
+    # --- commands (called in the sampler thread) ------------------------------------------------
+    def arm(self) -> dict[str, Any]:
+        """Clear latched faults, reset the detectors, and let decisions reach the clutches."""
+        self.active_faults.clear()
+        for ch in self.channels:
+            ch.detector.reset()
+            ch.health.reset()
+        self.armed = True
+        self._event("arm")
+        return self.status()
+
+    def disarm(self, reason: str = "command") -> dict[str, Any]:
+        """All clutches off; decisions no longer reach them."""
+        self.armed = False
+        self._all_off()
+        self._event("disarm", reason=reason)
+        return self.status()
+
+    def set_param(self, name: str, value: Any) -> dict[str, Any]:
+        """Set a detector parameter on every channel (ValueError names a bad one)."""
+        params = self.channels[0].detector.params.with_value(name, value)
+        for ch in self.channels:
+            ch.detector.set_params(params)
+        self._event("param", name=name, value=getattr(params, name))
+        return {"name": name, "value": getattr(params, name)}
+
+    def set_stance_leg(self, channel: int, index: int) -> None:
+        """Tell a channel which of its legs is on the ground (index into its `legs`)."""
+        self.channels[channel].detector.reset(index)
+
+    def params(self) -> DetectorParams:
+        """The detector parameters in force."""
+        return self.channels[0].detector.params
+
+    def status(self) -> dict[str, Any]:
+        """A JSON-able snapshot."""
+        return {
+            "armed": self.armed,
+            "faults": {f.value: d for f, d in self.active_faults.items()},
+            "engaged": self.clutches.engaged(),
+            "samples": self.samples,
+            "clutch_commands": self.clutch_commands,
+            "channels": [
+                {
+                    "phase": ch.detector.phase.value,
+                    "stance_leg": ch.detector.stance_leg,
+                    "velocity_m_s": ch.detector.velocity_m_s,
+                    "compression_m": ch.detector.compression_m,
+                }
+                for ch in self.channels
+            ],
+        }
+
+    # --- fail-safe ------------------------------------------------------------------------------
+    def fault(self, fault: Fault, detail: str, t_ns: int | None = None) -> None:
+        """All clutches off, disarm, and report `fault` once while it stays active."""
+        self._all_off()
+        self.armed = False
+        if fault not in self.active_faults:
+            self.active_faults[fault] = detail
+            self.outbox.append(
+                EventRecord(self.clock_ns() if t_ns is None else t_ns, "fault", {"fault": fault.value, "code": fault.code, "detail": detail})
+            )
+
+    def safe_stop(self, reason: str) -> None:
+        """Called on shutdown: clutches off, disarmed."""
+        self.armed = False
+        self._all_off()
+        self._event("stop", reason=reason)
+
+    def _all_off(self) -> None:
+        self.clutches.all_off()
+        self._mask = 0
+
+    def _event(self, name: str, **fields: Any) -> None:
+        self.outbox.append(EventRecord(self.clock_ns(), name, fields))
+
+    # --- the sample -----------------------------------------------------------------------------
+    def step(self) -> None:
+        """Read every channel once and act on it."""
+        for i, ch in enumerate(self.channels):
+            self._step_channel(i, ch)
+        now = self.clock_ns()
+        if self._mask and self.clutches.longest_hold_s(now) > self.max_hold_s:
+            self.fault(Fault.CLUTCH_TIMEOUT, f"clutch held longer than max_hold_s={self.max_hold_s}", now)
+        if self.id_check_interval_s > 0 and now >= self._next_id_check_ns:
+            self._next_id_check_ns = now + int(self.id_check_interval_s * 1e9)
+            for ch in self.channels:
+                try:
+                    ch.sensor.verify_id()
+                except SensorNotFound as err:
+                    self.fault(Fault.ID_MISMATCH, str(err), now)
+                except SensorError as err:
+                    self.fault(Fault.SPI_ERROR, str(err), now)
+
+    def _step_channel(self, i: int, ch: Channel) -> None:
+        try:
+            s = ch.sensor.read_motion()
+        except SensorError as err:
+            self.fault(Fault.SPI_ERROR, str(err))
+            return
+        self.samples += 1
+        bad = ch.health.check(s.t_ns, s.squal, s.saturated or s.overflow, s.reserved_bits)
+        if bad is not None:
+            self.fault(bad[0], bad[1], s.t_ns)
+        det = ch.detector
+        decision = det.update(s.t_ns, s.displacement_m)
+        if decision.release is not None:
+            self.clutches.release(decision.release)
+            self._mask &= ~(1 << decision.release)
+            if self.armed:
+                self.clutch_commands += 1
+        if decision.engage is not None and self.armed:
+            self.clutches.engage(decision.engage, s.t_ns)
+            self._mask |= 1 << decision.engage
+            self.clutch_commands += 1
+        t_done = self.clock_ns()
+        for name in decision.events:
+            fields = {"channel": i, "leg": det.stance_leg, "armed": self.armed, "compression_m": det.compression_m}
+            if decision.release is not None:
+                fields["released_leg"] = decision.release
+            self.outbox.append(EventRecord(s.t_ns, name, fields))
+        self.seq += 1
+        self.outbox.append(
+            SampleRecord(
+                s.t_ns, self.seq, i, det.position_m, det.velocity_m_s, det.compression_m, s.squal, s.shutter,
+                s.max_pixel, det.phase.code, det.stance_leg, self._mask, self.armed, t_done - s.t_ns,
+            )
+        )
+        self.last_latency_ns = t_done - s.t_ns
+        self.last_had_command = decision.engage is not None or decision.release is not None

@@ -1,0 +1,270 @@
+"""Zero-velocity detection and the stance-leg state machine.
+
+Phases follow the paper's model: after a touchdown the wheel is in double support for
+`double_support_s`, then in single support with the stance spring compressing freely; at the
+compression velocity's zero crossing (maximum compression) the stance clutch locks (clutched);
+the next touchdown releases it and the next leg becomes the stance leg.
+
+Velocity comes from a local quadratic least-squares fit of the integrated displacement over the last
+`velocity_window_s` of timestamped samples, evaluated at the newest sample and extrapolated by half a
+sample period plus `lock_lead_s`. The fit averages count quantisation and noise, has no lag on a
+parabola (the shape of the motion near maximum compression) and uses the measured timestamps, so
+late or bunched samples do not bias it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, fields, replace
+from enum import Enum
+from typing import Any
+
+
+class Phase(str, Enum):
+    """Stance phases; `code` is the number plotted in telemetry."""
+
+    WAIT = "wait"  # no stance tracked yet (start, disarm, lost gait)
+    DOUBLE_SUPPORT = "double_support"
+    FREE_COMPRESSION = "free_compression"
+    CLUTCHED = "clutched"
+
+    @property
+    def code(self) -> int:
+        """0 wait, 1 double support, 2 free compression, 3 clutched."""
+        return _PHASE_CODES[self]
+
+
+_PHASE_CODES = {Phase.WAIT: 0, Phase.DOUBLE_SUPPORT: 1, Phase.FREE_COMPRESSION: 2, Phase.CLUTCHED: 3}
+
+
+@dataclass(frozen=True, slots=True)
+class DetectorParams:
+    """Detector parameters (SI, unit-suffixed). All may be changed at run time with `set`."""
+
+    velocity_window_s: float = 0.02  # span of the quadratic velocity fit
+    touch_velocity_m_s: float = 0.05  # compression velocity that means a leg touched down
+    touch_debounce_samples: int = 2  # consecutive samples above it
+    touch_compression_m: float = 0.0005  # and the leg must really have moved this much since onset
+    lock_velocity_m_s: float = 0.0  # lock when the predicted compression velocity is <= this
+    lock_debounce_samples: int = 1  # consecutive samples at or below it
+    lock_lead_s: float = 0.0  # extra prediction (e.g. the clutch's engage delay)
+    min_compression_m: float = 0.001  # compression needed before a lock may happen (hysteresis)
+    double_support_s: float = 0.02  # how long after touchdown the phase reads double support
+    min_step_s: float = 0.08  # refractory time between touchdowns (debounce)
+    max_compression_s: float = 0.5  # no zero crossing this long after touchdown: back to wait
+
+    def validated(self) -> DetectorParams:
+        """Return self, or raise ValueError naming the bad field."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"{f.name} must be a finite number, got {value!r}")
+            if f.name.endswith("_samples"):
+                if not isinstance(value, int) or not 1 <= value <= 1000:
+                    raise ValueError(f"{f.name} must be an integer in 1..1000, got {value!r}")
+            elif f.name in ("lock_velocity_m_s",):
+                if not -1.0 <= value < self.touch_velocity_m_s:
+                    raise ValueError(f"{f.name} must be in [-1, touch_velocity_m_s), got {value!r}")
+            elif f.name in ("lock_lead_s", "double_support_s"):
+                if not 0.0 <= value <= 1.0:
+                    raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
+            elif not 0.0 < value <= 10.0:
+                raise ValueError(f"{f.name} must be in (0, 10], got {value!r}")
+        return self
+
+    def with_value(self, name: str, value: Any) -> DetectorParams:
+        """A copy with `name` set to `value` (validated); raises ValueError naming the parameter."""
+        names = {f.name: f for f in fields(self)}
+        if name not in names:
+            raise ValueError(f"unknown detector parameter {name!r}; known: {', '.join(sorted(names))}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        if name.endswith("_samples"):
+            if float(value) != int(value):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            value = int(value)
+        else:
+            value = float(value)
+        return replace(self, **{name: value}).validated()
+
+
+class VelocityEstimator:
+    """Local quadratic least-squares velocity of timestamped positions (m, s)."""
+
+    MIN_SAMPLES = 4
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self._t: deque[float] = deque()
+        self._x: deque[float] = deque()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self._t.clear()
+        self._x.clear()
+
+    def add(self, t_s: float, x_m: float) -> None:
+        """Add a sample; samples older than the window are dropped (keeping at least MIN_SAMPLES)."""
+        self._t.append(t_s)
+        self._x.append(x_m)
+        while len(self._t) > self.MIN_SAMPLES and t_s - self._t[0] > self.window_s:
+            self._t.popleft()
+            self._x.popleft()
+
+    def estimate(self, lead_s: float = 0.0) -> float | None:
+        """Velocity (m/s) at the newest sample + `lead_s`, or None with too few samples."""
+        n = len(self._t)
+        if n < self.MIN_SAMPLES:
+            return None
+        t_last = self._t[-1]
+        x_last = self._x[-1]
+        scale = max(t_last - self._t[0], 1e-6)
+        s1 = s2 = s3 = s4 = y0 = y1 = y2 = 0.0
+        for t, x in zip(self._t, self._x):
+            u = (t - t_last) / scale
+            u2 = u * u
+            y = x - x_last
+            s1 += u
+            s2 += u2
+            s3 += u2 * u
+            s4 += u2 * u2
+            y0 += y
+            y1 += y * u
+            y2 += y * u2
+        s0 = float(n)
+        # Cramer's rule on the 3x3 normal equations for (a, b, c) in y = a + b u + c u^2.
+        det = s0 * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s3 * s2) + s2 * (s1 * s3 - s2 * s2)
+        if abs(det) < 1e-12:
+            return None
+        det_b = s0 * (y1 * s4 - s3 * y2) - y0 * (s1 * s4 - s3 * s2) + s2 * (s1 * y2 - y1 * s2)
+        det_c = s0 * (s2 * y2 - y1 * s3) - s1 * (s1 * y2 - y1 * s2) + y0 * (s1 * s3 - s2 * s2)
+        b = det_b / det
+        c = det_c / det
+        return (b + 2.0 * c * (lead_s / scale)) / scale
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """What the detector wants after one sample: clutch commands and named events."""
+
+    engage: int | None = None
+    release: int | None = None
+    events: tuple[str, ...] = ()
+
+
+NOTHING = Decision()
+
+
+class LegDetector:
+    """The state machine for one sensor watching the stance-leg mechanism of `legs` (clutch indices).
+
+    The stance leg advances through `legs` in order at every touchdown after the first.
+    """
+
+    def __init__(self, params: DetectorParams, legs: list[int] | tuple[int, ...], *, start_index: int = 0) -> None:
+        if not legs:
+            raise ValueError("a detector needs at least one leg")
+        self.params = params.validated()
+        self.legs = list(legs)
+        self._start_index = start_index % len(self.legs)
+        self._est = VelocityEstimator(params.velocity_window_s)
+        self.reset()
+
+    def reset(self, start_index: int | None = None) -> None:
+        """Back to WAIT, stance leg = legs[start_index]."""
+        if start_index is not None:
+            self._start_index = start_index % len(self.legs)
+        self.phase = Phase.WAIT
+        self.leg_index = self._start_index
+        self._started = False
+        self._est.reset()
+        self.position_m = 0.0
+        self.velocity_m_s = 0.0
+        self._t0_ns: int | None = None
+        self._t_last_s = 0.0
+        self._dt_s = 0.0
+        self._touch_count = 0
+        self._lock_count = 0
+        self._onset_x_m = 0.0
+        self._touchdown_s = -math.inf
+        self._touchdown_x_m = 0.0
+        self._peak_v = 0.0
+        self.lock_time_s: float | None = None
+
+    def set_params(self, params: DetectorParams) -> None:
+        """Apply new parameters (validated) without losing the phase."""
+        self.params = params.validated()
+        self._est.window_s = params.velocity_window_s
+
+    @property
+    def stance_leg(self) -> int:
+        """Clutch index of the current (or next expected) stance leg."""
+        return self.legs[self.leg_index]
+
+    @property
+    def compression_m(self) -> float:
+        """Compression since the last touchdown (m), 0 in WAIT."""
+        return 0.0 if self.phase is Phase.WAIT else self.position_m - self._touchdown_x_m
+
+    def update(self, t_ns: int, displacement_m: float) -> Decision:
+        """Feed one sample (`monotonic_ns` timestamp, displacement since the previous sample)."""
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+        t = (t_ns - self._t0_ns) * 1e-9
+        self._dt_s = t - self._t_last_s if self._est._t else 0.0
+        self._t_last_s = t
+        prev_x = self.position_m
+        self.position_m += displacement_m
+        self._est.add(t, self.position_m)
+        p = self.params
+        v = self._est.estimate(lead_s=0.5 * self._dt_s + p.lock_lead_s)
+        if v is None:
+            return NOTHING
+        self.velocity_m_s = v
+
+        # Touchdown detection (WAIT and CLUTCHED), debounced, with a refractory time.
+        if self.phase in (Phase.WAIT, Phase.CLUTCHED):
+            if v > p.touch_velocity_m_s and t - self._touchdown_s >= p.min_step_s:
+                if self._touch_count == 0:
+                    self._onset_x_m = prev_x
+                self._touch_count += 1
+            else:
+                self._touch_count = 0
+            moved = self.position_m - self._onset_x_m >= p.touch_compression_m
+            if self._touch_count >= p.touch_debounce_samples and moved:
+                return self._touchdown(t)
+            return NOTHING
+
+        # Double support / free compression: wait for the zero crossing.
+        if self.phase is Phase.DOUBLE_SUPPORT and t - self._touchdown_s >= p.double_support_s:
+            self.phase = Phase.FREE_COMPRESSION
+        self._peak_v = max(self._peak_v, v)
+        armed = self._peak_v > p.touch_velocity_m_s and self.compression_m >= p.min_compression_m
+        if armed and v <= p.lock_velocity_m_s:
+            self._lock_count += 1
+        else:
+            self._lock_count = 0
+        if self._lock_count >= p.lock_debounce_samples:
+            self.phase = Phase.CLUTCHED
+            self._lock_count = 0
+            self.lock_time_s = t
+            return Decision(engage=self.stance_leg, events=("lock",))
+        if t - self._touchdown_s > p.max_compression_s:
+            self.phase = Phase.WAIT
+            self._touch_count = 0
+            return Decision(events=("no_zero_crossing",))
+        return NOTHING
+
+    def _touchdown(self, t: float) -> Decision:
+        release = self.stance_leg if self.phase is Phase.CLUTCHED else None
+        if self._started:
+            self.leg_index = (self.leg_index + 1) % len(self.legs)
+        self._started = True
+        self.phase = Phase.DOUBLE_SUPPORT
+        self._touch_count = 0
+        self._lock_count = 0
+        self._touchdown_s = t
+        self._touchdown_x_m = self._onset_x_m
+        self._peak_v = 0.0
+        return Decision(release=release, events=("touchdown",))
