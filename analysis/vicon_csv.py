@@ -292,6 +292,11 @@ class _Parser:
         last_pos = 0
         k = 0
         struct = self.struct
+        lead = re.match(r"(?:[ ,;\t]*\n)*", text)
+        first = lead.end() if lead else 0
+        if first < len(text) and text[first] in "0123456789+-.":
+            raise self.err(text.count("\n", 0, first) + 1, 1, "missing-title",
+                           "the file starts with a number: no section title row (e.g. 'Trajectories') above it")
         while k < len(struct):
             pos = struct[k]
             line_no += text.count("\n", last_pos, pos)
@@ -377,9 +382,7 @@ class _Parser:
             raise self.err(data_line + int(r), int(first_data + c + 1), "non-finite",
                            f"section {kind!r}: value is infinite")
         # Convert to SI by what the units row says.
-        scale = np.array([_unit_scale(c.file_unit) for c in columns])
-        if np.any(scale != 1.0):
-            data = data * scale
+        data = _to_si(data, [c.file_unit for c in columns])
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
                           columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix)
         return section, nxt
@@ -508,12 +511,21 @@ def _to_float(s: str) -> float | None:
     return float(s)
 
 
-def _unit_scale(unit: str) -> float:
-    if unit in LENGTH_UNITS_M:
-        return LENGTH_UNITS_M[unit]
-    if unit in ANGLE_UNITS_RAD:
-        return ANGLE_UNITS_RAD[unit]
-    return 1.0
+_DIVISORS = {"mm": 1000.0, "cm": 100.0}
+
+
+def _to_si(data: np.ndarray, units: list[str]) -> np.ndarray:
+    """Convert columns to m / rad (mm and cm by exact division, so 409.832 mm is 0.409832 m)."""
+    out = data
+    for unit in set(units):
+        cols = [j for j, u in enumerate(units) if u == unit]
+        if unit in _DIVISORS:
+            out = out if out is not data else data.copy()
+            out[:, cols] = data[:, cols] / _DIVISORS[unit]
+        elif unit in ANGLE_UNITS_RAD and ANGLE_UNITS_RAD[unit] != 1.0:
+            out = out if out is not data else data.copy()
+            out[:, cols] = data[:, cols] * ANGLE_UNITS_RAD[unit]
+    return out
 
 
 def _clean_name(name: str) -> tuple[str, str]:
