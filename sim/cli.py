@@ -1,7 +1,426 @@
-"""`rimless sim ...`: thin commands over the simulator library."""
+"""`rimless sim ...`: thin commands over the simulator library.
 
-from __future__ import annotations
+Every command takes the wheel parameters as options (defaults: the paper's Table 1) or from a TOML file
+(`--params FILE`, options given on the command line win). Heavy imports happen inside the commands.
+"""
+
+import functools
+import inspect
+import math
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any, Optional
 
 import typer
 
+from rimless.cli import print_json, user_facing
+from rimless.errors import ParameterError, UserError
+
 app = typer.Typer(no_args_is_help=True)
+
+
+class Model(str, Enum):
+    er = "er"
+    ve = "ve"
+
+
+class ModelOrRigid(str, Enum):
+    er = "er"
+    ve = "ve"
+    rigid = "rigid"
+
+
+class MassModel(str, Enum):
+    eight_leg = "eight-leg"
+    sliding_leg = "sliding-leg"
+    active_feet = "active-feet"
+
+
+class Backend(str, Enum):
+    auto = "auto"
+    fast = "fast"
+    reference = "reference"
+
+
+_PARAM_OPTIONS: list[tuple[str, Any, str]] = [
+    ("k", Optional[float], "Leg spring stiffness k, N/m [Table 1: 2700]."),
+    ("c", Optional[float], "Leg damping c, N s/m [Table 1: 8]."),
+    ("slope_deg", Optional[float], "Slope, degrees [Table 1: 0.05 rad = 2.865 deg]."),
+    ("slope_rad", Optional[float], "Slope, rad [Table 1: 0.05]."),
+    ("hub_mass_kg", Optional[float], "Hub (main body) mass m_H, kg [1.892]."),
+    ("leg_mass_kg", Optional[float], "Mass of one leg m, kg [0.0378]."),
+    ("inertia_kg_m2", Optional[float], "Hub inertia I_c, kg m^2 [0.036]."),
+    ("leg_length_m", Optional[float], "Free leg length L0, m [0.237]."),
+    ("g", Optional[float], "Gravity, m/s^2 [9.81]."),
+    ("mass_model", Optional[MassModel], "How the legs' mass enters the model (model.md section 8) [eight-leg]."),
+    ("params_file", Optional[Path], "TOML file of parameters (keys: k, c, slope_deg or slope_rad, m_H, m, I_c, L0, g, "
+                                    "mass_model); command-line options win."),
+]
+_OPTION_NAMES = {"params_file": "--params", "g": "--g"}
+
+
+def build_params(values: dict[str, Any]) -> Any:
+    """WheelParams from the parameter options (validated; errors name the parameter)."""
+    from rimless.sim.params import WheelParams, load_params, params_from_mapping
+
+    base = WheelParams()
+    if values.get("params_file") is not None:
+        base = load_params(values["params_file"], base=base)
+    if values.get("slope_deg") is not None and values.get("slope_rad") is not None:
+        raise ParameterError("give the slope once: --slope-deg or --slope-rad, not both")
+    mapping: dict[str, Any] = {}
+    for key in ("k", "c", "slope_deg", "slope_rad", "hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "g"):
+        if values.get(key) is not None:
+            mapping[key] = values[key]
+    if values.get("mass_model") is not None:
+        mapping["mass_model"] = values["mass_model"].value
+    return params_from_mapping(mapping, base=base, source="the command-line options")
+
+
+def wheel_params(func: Any) -> Any:
+    """Add the parameter options to a command; the command receives `params: WheelParams`."""
+    sig = inspect.signature(func)
+    own = [p for p in sig.parameters.values() if p.name != "params"]
+    extra = []
+    for name, annotation, help_text in _PARAM_OPTIONS:
+        flag = _OPTION_NAMES.get(name, "--" + name.replace("_", "-"))
+        opt = typer.Option(flag, help=help_text, rich_help_panel="Wheel parameters")
+        extra.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None,
+                                       annotation=Annotated[annotation, opt]))
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        values = {name: kwargs.pop(name, None) for name, _, _ in _PARAM_OPTIONS}
+        kwargs["params"] = build_params(values)
+        return func(*args, **kwargs)
+
+    params = own + extra
+    wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+    wrapper.__annotations__ = {p.name: p.annotation for p in params}
+    del wrapper.__wrapped__  # typer must read the new signature, not the wrapped one
+    return wrapper
+
+
+ModelOpt = Annotated[Model, typer.Option("--model", help="er: energy-recycling (spring-clutch legs); ve: viscoelastic.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")]
+BackendOpt = Annotated[Backend, typer.Option("--backend", help="fast (compiled), reference (scipy solve_ivp) or auto.")]
+RtolOpt = Annotated[float, typer.Option("--rtol", min=1e-13, max=1e-3, help="Integrator relative tolerance.")]
+GuessOpt = Annotated[Optional[float], typer.Option("--theta-dot-guess", help="Initial guess of theta'+ (rad/s): picks the branch.")]
+StrictOpt = Annotated[bool, typer.Option("--strict-contact", help="Reject gaits whose leading foot pulls on the ground in "
+                                                                   "double support or whose lifted foot dips below the slope.")]
+
+
+def _console():  # noqa: ANN202
+    from rich.console import Console
+
+    return Console()
+
+
+def _guess(params: Any, model: str, theta_dot_guess: Optional[float]) -> Any:
+    from rimless.sim.poincare import default_guess
+
+    z = default_guess(params, model)
+    if theta_dot_guess is not None:
+        if not (math.isfinite(theta_dot_guess) and theta_dot_guess > 0):
+            raise ParameterError(f"--theta-dot-guess must be a positive angular velocity in rad/s, got {theta_dot_guess}")
+        z[1] = theta_dot_guess
+    return z
+
+
+def _table(title: str, rows: list[tuple[str, Any]]) -> Any:
+    from rich.table import Table
+
+    table = Table(title=title, show_header=True)
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for key, value in rows:
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        table.add_row(key, str(value))
+    return table
+
+
+@app.command("fixed-point")
+@user_facing
+@wheel_params
+def fixed_point_cmd(
+    params: Any,
+    model: ModelOpt = Model.er,
+    theta_dot_guess: GuessOpt = None,
+    strict_contact: StrictOpt = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Period-1 gait: the fixed point of the Poincaré map, its eigenvalues, period and contact diagnostics."""
+    from rimless.sim.backend import jacobian_factory, make_map
+    from rimless.sim.failures import StepFailure
+    from rimless.sim.poincare import solve_fixed_point
+    from rimless.sim.summary import fixed_point_summary
+
+    pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
+    guess = _guess(params, model.value, theta_dot_guess)
+    jf = jacobian_factory(backend.value)
+    try:
+        fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None, diagnostics=True,
+                               strict_contact=strict_contact)
+    except StepFailure as err:
+        raise UserError(f"no period-1 gait found for the {model.value} wheel from the guess "
+                        f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
+    out = fixed_point_summary(fp, params, model.value, guess=guess)
+    if json_out:
+        print_json(out)
+        return
+    mf = out["min_normal_force_N"]
+    rows = [
+        ("model / mass model", f"{model.value} / {params.mass_model}"),
+        ("slope (deg)", params.slope_deg),
+        ("k (N/m), c (N s/m)", f"{params.k:g}, {params.c:g}"),
+        ("theta+ (rad)", out["theta_plus_rad"]),
+        ("theta'+ (rad/s)", out["theta_dot_plus_rad_s"]),
+        ("step period (s)", out["step_period_s"]),
+        ("eigenvalues", ", ".join(f"{re:.5f}{im:+.5f}j" for re, im in out["eigenvalues"])),
+        ("max |eigenvalue|", out["max_abs_eigenvalue"]),
+        ("stable", out["stable"]),
+        ("energy ratio E+/E-", out["energy_ratio"]),
+        ("phase durations (s)", ", ".join(f"{k} {v:.4f}" for k, v in out["phase_durations_s"].items())),
+        ("min normal force b in DLSP (N)", mf["dlsp_leading_b"]),
+        ("min normal force b in SLSP (N)", min(v for v in (mf["slsp_free"], mf["slsp_clutched"]) if v == v)),
+        ("trailing foot lowest point (mm)", out["trailing_foot_min_height_m"] * 1e3),
+        ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
+        ("residual |P(z)-z|", out["residual"]),
+    ]
+    _console().print(_table("period-1 gait", rows))
+
+
+@app.command("gaits")
+@user_facing
+@wheel_params
+def gaits_cmd(
+    params: Any,
+    model: ModelOpt = Model.ve,
+    theta_dot_min: Annotated[float, typer.Option(help="Smallest theta'+ guess scanned, rad/s.")] = 0.8,
+    theta_dot_max: Annotated[float, typer.Option(help="Largest theta'+ guess scanned, rad/s.")] = 6.0,
+    guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses.")] = 14,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Every period-1 gait at one slope: scan initial conditions, solve, de-duplicate."""
+    from rimless.sim.backend import make_map
+    from rimless.sim.poincare import find_gaits
+
+    if not 0 < theta_dot_min < theta_dot_max:
+        raise ParameterError("need 0 < --theta-dot-min < --theta-dot-max (rad/s)")
+    pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
+    from rich.progress import Progress
+
+    with Progress(transient=True, disable=json_out) as prog:
+        task = prog.add_task("scanning guesses", total=guesses)
+        found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
+                           progress=lambda i, n: prog.update(task, completed=i))
+    items = [
+        {
+            "theta_plus_rad": float(fp.z[0]),
+            "theta_dot_plus_rad_s": float(fp.z[1]),
+            "step_period_s": fp.step.period_s,
+            "eigenvalues": [[float(e.real), float(e.imag)] for e in fp.eigenvalues],
+            "max_abs_eigenvalue": fp.max_abs_eigenvalue,
+            "stable": fp.stable,
+            "energy_ratio": fp.step.impact.energy_ratio,
+        }
+        for fp in found
+    ]
+    if json_out:
+        print_json({"model": model.value, "slope_rad": params.slope_rad, "k": params.k, "c": params.c, "gaits": items})
+        return
+    from rich.table import Table
+
+    table = Table(title=f"period-1 gaits of the {model.value} wheel at {params.slope_deg:.4f} deg")
+    for col in ("#", "theta+ (rad)", "theta'+ (rad/s)", "period (s)", "max |eig|", "stable", "E+/E-"):
+        table.add_column(col, justify="right")
+    for i, it in enumerate(items):
+        table.add_row(str(i + 1), f"{it['theta_plus_rad']:.6f}", f"{it['theta_dot_plus_rad_s']:.6f}",
+                      f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", str(it["stable"]),
+                      f"{it['energy_ratio']:.4f}")
+    _console().print(table)
+    if not items:
+        _console().print("no period-1 gait found in the scanned range")
+
+
+@app.command("critical-slope")
+@user_facing
+@wheel_params
+def critical_slope_cmd(
+    params: Any,
+    model: Annotated[ModelOrRigid, typer.Option("--model", help="er, ve or rigid (closed form).")] = ModelOrRigid.er,
+    theta_dot_guess: GuessOpt = None,
+    step_rad: Annotated[float, typer.Option(min=1e-5, max=0.01, help="Algorithm 1 slope step, rad.")] = 0.001,
+    start_slope_rad: Annotated[float, typer.Option(help="Slope where the continuation starts, rad.")] = 0.05,
+    strict_contact: StrictOpt = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Critical slope and minimum cost of transport: Algorithm 1 and the refined end of the branch."""
+    from rimless.sim.summary import critical_slope_summary, rigid_summary
+
+    if model == ModelOrRigid.rigid:
+        out = rigid_summary(params)
+        if json_out:
+            print_json(out)
+            return
+        e8 = out["eight_leg_consistent"]
+        _console().print(_table("rigid rimless wheel (Coleman)", [
+            ("critical slope (deg), paper convention M = m_H", f"{out['critical_slope_deg']:.3f}"),
+            ("critical slope (rad)", out["critical_slope_rad"]),
+            ("CoT = tan(phi_c)", out["cot"]),
+            ("beta, eigenvalue beta^2", f"{out['beta']:.5f}, {out['eigenvalue']:.5f}"),
+            ("eight-leg-consistent critical slope (deg)", f"{e8['critical_slope_deg']:.3f}"),
+            ("eight-leg-consistent critical slope (rad)", e8["critical_slope_rad"]),
+        ]))
+        return
+    from rimless.sim.backend import jacobian_factory, make_map
+    from rimless.sim.continuation import critical_slope
+    from rimless.sim.failures import StepFailure
+
+    from rimless.sim.params import SPOKE_ANGLE_RAD
+
+    if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
+        raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
+    start_params = params.replace(slope_rad=start_slope_rad)
+    pmap = make_map(start_params, model.value, backend=backend.value, rtol=rtol)
+    guess = _guess(start_params, model.value, theta_dot_guess)
+    from rich.progress import Progress
+
+    with Progress(transient=True, disable=json_out) as prog:
+        task = prog.add_task("continuation in slope", total=None)
+        try:
+            cs = critical_slope(pmap, guess, start_slope_rad=start_slope_rad, step_rad=step_rad,
+                                strict_contact=strict_contact, jacobian_factory=jacobian_factory(backend.value),
+                                progress=lambda s: prog.update(task, description=f"slope {math.degrees(s):.4f} deg"))
+        except StepFailure as err:
+            raise UserError(f"critical slope of the {model.value} wheel: {err}") from None
+    out = critical_slope_summary(cs, params)
+    if json_out:
+        print_json(out)
+        return
+    at = out["at_critical"]
+    _console().print(_table(f"critical slope, {model.value} wheel", [
+        ("critical slope (deg)", out["critical_slope_deg"]),
+        ("critical slope (rad)", out["critical_slope_rad"]),
+        ("CoT = tan(phi_c)", out["cot"]),
+        ("branch ends by", out["reason"]),
+        ("detail", out["detail"]),
+        ("Algorithm 1 slope (rad), step", f"{out['algorithm1_slope_rad']:.6f}, {out['algorithm1_step_rad']:g}"),
+        ("branch followed from", f"theta'+ = {out['branch']['start_theta_dot_plus_rad_s']:.4f} rad/s, period "
+                                 f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad"),
+        ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
+    ]))
+
+
+@app.command("gait")
+@user_facing
+@wheel_params
+def gait_cmd(
+    params: Any,
+    model: ModelOpt = Model.er,
+    steps: Annotated[int, typer.Option("--steps", min=1, max=10000, help="Number of steps to simulate.")] = 6,
+    theta_dot: Annotated[Optional[float], typer.Option("--theta-dot", help="Start from this theta'+ (rad/s) just "
+                                                       "after an impact instead of the fixed point.")] = None,
+    theta_plus_rad: Annotated[Optional[float], typer.Option(help="With --theta-dot: post-impact stance angle, rad "
+                                                            "[-alpha/2: both legs at rest length].")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Write the trajectory (.parquet or .csv).")] = None,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the gait figure (.png, .pdf, .svg).")] = None,
+    forces: Annotated[bool, typer.Option("--forces", help="Also record the constraint forces (lambda, N).")] = False,
+    sample_dt_s: Annotated[float, typer.Option(min=1e-5, max=0.05, help="Sampling interval of the trajectory, s.")] = 1e-3,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Simulate N steps from the fixed point (or from --theta-dot) and export or plot them."""
+    import numpy as np
+
+    from rimless.sim.backend import jacobian_factory, make_integrator, make_map
+    from rimless.sim.failures import StepFailure
+    from rimless.sim.gait import simulate_steps
+    from rimless.sim.model import ALPHA
+    from rimless.sim.poincare import solve_fixed_point
+
+    for path, exts in ((out, (".parquet", ".csv")), (plot, (".png", ".pdf", ".svg"))):
+        if path is not None and path.suffix.lower() not in exts:
+            raise ParameterError(f"{path}: the file must end in {' or '.join(exts)}")
+    if theta_dot is not None:
+        if not (math.isfinite(theta_dot) and theta_dot > 0):
+            raise ParameterError(f"--theta-dot must be a positive angular velocity in rad/s, got {theta_dot}")
+        z0 = np.array([-ALPHA / 2 if theta_plus_rad is None else theta_plus_rad, theta_dot])
+        start = "given"
+    else:
+        pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
+        jf = jacobian_factory(backend.value)
+        try:
+            fp = solve_fixed_point(pmap, _guess(params, model.value, None), jacobian=jf(pmap) if jf else None)
+        except StepFailure as err:
+            raise UserError(f"no fixed point to start from ({err}); give --theta-dot") from None
+        z0 = fp.z
+        start = "fixed point"
+    from rich.progress import Progress
+
+    with Progress(transient=True, disable=json_out) as prog:
+        task = prog.add_task("simulating steps", total=steps)
+        traj = simulate_steps(params, model.value, z0, steps, make_integrator(backend.value, rtol), record_dt=sample_dt_s,
+                              forces=forces, progress=lambda k: prog.update(task, completed=k))
+    if out is not None:
+        frame = traj.to_frame()
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if out.suffix.lower() == ".parquet":
+            frame.to_parquet(out, index=False)
+        else:
+            frame.to_csv(out, index=False)
+    if plot is not None and traj.steps:
+        from rimless.sim.plotting import plot_gait
+
+        plot.parent.mkdir(parents=True, exist_ok=True)
+        plot_gait(traj, plot)
+    summary = {
+        "model": model.value,
+        "slope_rad": params.slope_rad,
+        "k": params.k,
+        "c": params.c,
+        "start": start,
+        "theta_plus_rad": float(z0[0]),
+        "theta_dot_plus_rad_s": float(z0[1]),
+        "steps_done": len(traj.steps),
+        "steps_requested": steps,
+        "step_periods_s": [s.period_s for s in traj.steps],
+        "energy_ratios": [s.impact.energy_ratio for s in traj.steps],
+        "failure": None if traj.failure is None else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
+        "out": str(out) if out else None,
+        "plot": str(plot) if plot and traj.steps else None,
+    }
+    if json_out:
+        print_json(summary)
+    else:
+        con = _console()
+        con.print(_table(f"{model.value} gait from the {start}", [
+            ("steps", f"{len(traj.steps)} of {steps}"),
+            ("step periods (s)", ", ".join(f"{p:.4f}" for p in summary["step_periods_s"][:8])
+             + (" ..." if len(traj.steps) > 8 else "")),
+            ("energy ratios", ", ".join(f"{p:.4f}" for p in summary["energy_ratios"][:8])
+             + (" ..." if len(traj.steps) > 8 else "")),
+            ("trajectory", summary["out"] or "-"),
+            ("figure", summary["plot"] or "-"),
+        ]))
+        if traj.failure is not None:
+            con.print(f"[yellow]the walk ended early: {traj.failure}[/yellow]")
+    if traj.failure is not None and not traj.steps:
+        raise typer.Exit(1)
+
+
+def register_top_level(root: typer.Typer) -> None:
+    """Commands that live at the top level (`rimless bench`)."""
+    try:
+        from rimless.sim import bench_cli
+    except ImportError:
+        return
+    bench_cli.register(root)

@@ -95,6 +95,24 @@ class WheelParams:
 _POSITIVE = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "stiffness_n_per_m", "gravity_m_s2")
 
 
+# How each field is called on the command line (and in the paper), for error messages.
+OPTION_OF_FIELD = {
+    "hub_mass_kg": "--hub-mass-kg (m_H)",
+    "leg_mass_kg": "--leg-mass-kg (m)",
+    "inertia_kg_m2": "--inertia-kg-m2 (I_c)",
+    "leg_length_m": "--leg-length-m (L0)",
+    "stiffness_n_per_m": "--k",
+    "damping_ns_per_m": "--c",
+    "slope_rad": "--slope-rad/--slope-deg (phi)",
+    "gravity_m_s2": "--g",
+    "mass_model": "--mass-model",
+}
+
+
+def _name(field: str) -> str:
+    return f"{field} [{OPTION_OF_FIELD[field]}]"
+
+
 def validate(p: WheelParams) -> None:
     """Raise ParameterError naming the first invalid parameter."""
     for f in dataclasses.fields(p):
@@ -102,21 +120,21 @@ def validate(p: WheelParams) -> None:
             continue
         value = getattr(p, f.name)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParameterError(f"parameter {f.name} must be a number, got {value!r}")
+            raise ParameterError(f"parameter {_name(f.name)} must be a number, got {value!r}")
         if not math.isfinite(value):
-            raise ParameterError(f"parameter {f.name} must be finite, got {value}")
+            raise ParameterError(f"parameter {_name(f.name)} must be finite, got {value}")
     for name in _POSITIVE:
         if getattr(p, name) <= 0.0:
-            raise ParameterError(f"parameter {name} must be > 0, got {getattr(p, name)}")
+            raise ParameterError(f"parameter {_name(name)} must be > 0, got {getattr(p, name)}")
     if p.damping_ns_per_m < 0.0:
-        raise ParameterError(f"parameter damping_ns_per_m (c) must be >= 0, got {p.damping_ns_per_m}")
+        raise ParameterError(f"parameter {_name('damping_ns_per_m')} must be >= 0, got {p.damping_ns_per_m}")
     if not 0.0 <= p.slope_rad < SPOKE_ANGLE_RAD / 2.0:
         raise ParameterError(
-            f"parameter slope_rad must satisfy 0 <= slope < alpha/2 = {SPOKE_ANGLE_RAD / 2:.6f} rad "
+            f"parameter {_name('slope_rad')} must satisfy 0 <= slope < alpha/2 = {SPOKE_ANGLE_RAD / 2:.6f} rad "
             f"({math.degrees(SPOKE_ANGLE_RAD / 2):.1f} deg), got {p.slope_rad} rad"
         )
     if p.mass_model not in MASS_MODELS:
-        raise ParameterError(f"parameter mass_model must be one of {', '.join(MASS_MODELS)}, got {p.mass_model!r}")
+        raise ParameterError(f"parameter {_name('mass_model')} must be one of {', '.join(MASS_MODELS)}, got {p.mass_model!r}")
 
 
 # Names accepted in a TOML parameter file, mapped to fields. Paper symbols are accepted as aliases.

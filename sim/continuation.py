@@ -1,0 +1,173 @@
+"""Critical slope of the compliant wheels: the paper's Algorithm 1 plus a refined branch end.
+
+Algorithm 1: continue the fixed point downward in slope from 0.05 rad with step `step_rad`, the previous
+fixed point as the guess, and report the last slope where Newton converged.
+Refinement: bisect between the last good slope and the first bad one until the bracket is below
+`refine_tol_rad`, then classify why the branch ends (model.md section 7):
+- `fold`: Newton stops converging while an eigenvalue approaches +1 (the fixed point vanishes);
+- `stall`: the map fails because the wheel stops (the period grows without bound);
+- `loss-of-stability`: a period-1 gait still exists but an eigenvalue leaves the unit circle;
+- `infeasible`: a force or impulse condition fails (e.g. stance lift-off, negative impulse).
+The critical slope is the smallest slope of the branch with a stable, valid period-1 gait.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rimless.sim.failures import FailureReason, StepFailure
+from rimless.sim.poincare import FixedPoint, NoFixedPoint, PoincareMap, solve_fixed_point
+
+START_SLOPE_RAD = 0.05
+DEFAULT_STEP_RAD = 0.001
+REFINE_TOL_RAD = 1e-6
+
+
+@dataclass
+class BranchPoint:
+    """One converged point of the branch."""
+
+    slope_rad: float
+    z: np.ndarray
+    period_s: float
+    max_abs_eigenvalue: float
+    eigenvalues: np.ndarray
+
+
+@dataclass
+class CriticalSlope:
+    """Result of the continuation; every slope in rad."""
+
+    model: str
+    algorithm1_slope_rad: float  # last converged slope of the fixed-step continuation
+    algorithm1_step_rad: float
+    critical_slope_rad: float  # smallest slope with a stable, valid gait, to refine_tol_rad
+    refine_tol_rad: float
+    reason: str  # fold | stall | loss-of-stability | infeasible | solver
+    detail: str
+    fixed_point: FixedPoint  # at critical_slope_rad
+    branch: list[BranchPoint] = field(default_factory=list)
+    start_guess: np.ndarray | None = None
+
+    @property
+    def critical_slope_deg(self) -> float:
+        return math.degrees(self.critical_slope_rad)
+
+    @property
+    def cot(self) -> float:
+        """Cost of transport tan(phi_c) (model.md section 7)."""
+        return math.tan(self.critical_slope_rad)
+
+
+class _Failure(Exception):
+    def __init__(self, kind: str, detail: str) -> None:
+        self.kind = kind
+        self.detail = detail
+
+
+def _classify(err: StepFailure, last_good: FixedPoint | None) -> tuple[str, str]:
+    """Why the fixed point is lost at a slope: from the map's failure and the last eigenvalues."""
+    cause = err.last_failure if isinstance(err, NoFixedPoint) else err
+    if cause is not None and cause.reason in (FailureReason.STALL,):
+        return "stall", str(cause)
+    if cause is not None and cause.reason not in (FailureReason.NO_CONVERGENCE, FailureReason.INTEGRATION):
+        return "infeasible", str(cause)
+    if last_good is not None:
+        real_max = float(np.max(last_good.eigenvalues.real))
+        if real_max > 0.9 and np.max(np.abs(last_good.eigenvalues.imag)) < 1e-9:
+            return "fold", f"an eigenvalue approaches +1 ({real_max:.4f}) and the fixed point vanishes"
+        if last_good.step.period_s > 0.6:
+            return "stall", f"the period grows ({last_good.step.period_s:.3f} s) as the wheel nearly stops"
+    return "solver", str(err)
+
+
+def critical_slope(
+    pmap: PoincareMap,
+    z_guess: np.ndarray,
+    *,
+    start_slope_rad: float = START_SLOPE_RAD,
+    step_rad: float = DEFAULT_STEP_RAD,
+    min_slope_rad: float = 1e-4,
+    refine_tol_rad: float = REFINE_TOL_RAD,
+    strict_contact: bool = False,
+    jacobian_factory: Callable[[PoincareMap], Callable[[np.ndarray], np.ndarray]] | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> CriticalSlope:
+    """Continue the branch through z_guess at start_slope_rad downward in slope (see module docstring)."""
+    base = pmap.params
+
+    def solve(slope: float, guess: np.ndarray) -> FixedPoint:
+        m = pmap.with_params(base.replace(slope_rad=slope))
+        jac = jacobian_factory(m) if jacobian_factory else None
+        fp = solve_fixed_point(m, guess, jacobian=jac, strict_contact=strict_contact, max_iter=20)
+        return fp
+
+    def good(fp: FixedPoint) -> bool:
+        return fp.stable
+
+    try:
+        first = solve(start_slope_rad, z_guess)
+    except StepFailure as err:
+        raise NoFixedPoint(f"no fixed point at the start slope {start_slope_rad} rad from the guess "
+                           f"{np.asarray(z_guess).tolist()}: {err}", getattr(err, "last_failure", None)) from None
+    branch = [BranchPoint(start_slope_rad, first.z, first.step.period_s, first.max_abs_eigenvalue, first.eigenvalues)]
+    # Algorithm 1: fixed steps down while Newton converges.
+    last_conv, last_conv_fp = start_slope_rad, first
+    last_stable = start_slope_rad if good(first) else None
+    last_stable_fp = first if good(first) else None
+    failure_slope: float | None = None
+    failure: tuple[str, str] | None = None
+    slope = start_slope_rad
+    while True:
+        slope = round(slope - step_rad, 12)
+        if slope < min_slope_rad:
+            break
+        try:
+            fp = solve(slope, last_conv_fp.z)
+        except StepFailure as err:
+            failure_slope = slope
+            failure = _classify(err, last_conv_fp)
+            break
+        if progress:
+            progress(slope)
+        branch.append(BranchPoint(slope, fp.z, fp.step.period_s, fp.max_abs_eigenvalue, fp.eigenvalues))
+        last_conv, last_conv_fp = slope, fp
+        if good(fp) and last_stable is not None and last_stable_fp is not None and last_stable - slope <= step_rad * 1.5:
+            last_stable, last_stable_fp = slope, fp
+        elif not good(fp) and last_stable is not None and failure is None:
+            # loss of stability below last_stable: remember where, keep Algorithm 1 running
+            failure = ("loss-of-stability", f"max |eigenvalue| = {fp.max_abs_eigenvalue:.4f} >= 1 at {slope:.6f} rad")
+            failure_slope = slope
+    algorithm1 = last_conv
+    if last_stable is None or last_stable_fp is None:
+        raise NoFixedPoint(f"the gait at the start slope {start_slope_rad} rad is not stable "
+                           f"(max |eigenvalue| {first.max_abs_eigenvalue:.4f})")
+    if failure is None or failure_slope is None:
+        return CriticalSlope(pmap.model, algorithm1, step_rad, last_stable, refine_tol_rad, "min-slope",
+                             f"the branch reaches the smallest slope tried ({min_slope_rad} rad)", last_stable_fp,
+                             branch, np.asarray(z_guess))
+    # Refinement: bisect [bad, good] keeping the stable side's fixed point as the guess.
+    lo, hi, hi_fp = failure_slope, last_stable, last_stable_fp
+    reason, detail = failure
+    if reason == "loss-of-stability":
+        lo = max(lo, failure_slope)
+    while hi - lo > refine_tol_rad:
+        mid = 0.5 * (lo + hi)
+        try:
+            fp = solve(mid, hi_fp.z)
+        except StepFailure as err:
+            lo = mid
+            if reason != "loss-of-stability":
+                reason, detail = _classify(err, hi_fp)
+            continue
+        if good(fp):
+            hi, hi_fp = mid, fp
+        else:
+            lo = mid
+            reason, detail = "loss-of-stability", f"max |eigenvalue| = {fp.max_abs_eigenvalue:.4f} >= 1 at {mid:.7f} rad"
+    return CriticalSlope(pmap.model, algorithm1, step_rad, hi, refine_tol_rad, reason, detail, hi_fp, branch,
+                         np.asarray(z_guess))

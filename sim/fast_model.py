@@ -1,0 +1,551 @@
+"""Compiled (numba) mechanics of the three mass models: the KKT phase dynamics and their exact derivatives,
+the guards, the impact (relabel + inelastic projection) with its exact Jacobian, and the section map.
+
+Same equations and conventions as rimless.sim.dynamics / events / impact / section (model.md sections 2-6):
+slope frame (x down the slope, y the outward normal), q = [x_b, y_b, theta, L1, L2] (m, m, rad, m, m),
+y = [q, q'] (10,), parameter vector p = WheelParams.as_vector() = (m_H, m, I_c, L0, k, c, g, phi), SI units.
+
+The generated functions (rimless.sim.generated.*) are compiled as they are; a mass model is selected at run
+time by an integer index (MASS_MODEL_INDEX), so one compiled kernel serves all three models and the
+on-disk cache (cache=True) holds it once.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from rimless.sim.generated import active_feet as _af
+from rimless.sim.generated import eight_leg as _el
+from rimless.sim.generated import sliding_leg as _sl
+from rimless.sim.params import SPOKE_ANGLE_RAD
+
+ALPHA = SPOKE_ANGLE_RAD
+MASS_MODEL_INDEX = {"eight-leg": 0, "sliding-leg": 1, "active-feet": 2}
+
+# Phase codes (as rimless.sim.dynamics) and guard codes (as rimless.sim.events).
+DLSP = 0
+SLSP_FREE = 1
+SLSP_CLUTCHED = 2
+LIFTOFF_A = 0
+STALL = 1
+CLUTCH_LOCK = 2
+TOUCHDOWN = 3
+LIFTOFF_B = 4
+
+_jit = numba.njit(cache=True)
+
+
+def _compile(name: str) -> tuple:
+    return tuple(_jit(getattr(mod, name)) for mod in (_el, _sl, _af))
+
+
+_M = _compile("mass_matrix")
+_H = _compile("bias")
+_JA = _compile("jac_a")
+_JDOT = _compile("jdot_qd_a")
+_DM = _compile("dmass_dq")
+_DH_DQ = _compile("dbias_dq")
+_DH_DQD = _compile("dbias_dqd")
+_DJA = _compile("djac_a_dq")
+_DJDOT_DQ = _compile("djdot_qd_a_dq")
+_DJDOT_DQD = _compile("djdot_qd_a_dqd")
+
+_M0, _M1, _M2 = _M
+_H0, _H1, _H2 = _H
+_JA0, _JA1, _JA2 = _JA
+_JDOT0, _JDOT1, _JDOT2 = _JDOT
+_DM0, _DM1, _DM2 = _DM
+_DHQ0, _DHQ1, _DHQ2 = _DH_DQ
+_DHD0, _DHD1, _DHD2 = _DH_DQD
+_DJA0, _DJA1, _DJA2 = _DJA
+_DJQ0, _DJQ1, _DJQ2 = _DJDOT_DQ
+_DJD0, _DJD1, _DJD2 = _DJDOT_DQD
+
+
+@_jit
+def mass_matrix(mi, q, p):
+    """M(q) (5x5) of mass model index mi, kg and kg m."""
+    if mi == 0:
+        return _M0(q, p)
+    if mi == 1:
+        return _M1(q, p)
+    return _M2(q, p)
+
+
+@_jit
+def bias(mi, q, qd, p):
+    """h(q, q') (5,): Coriolis + dV/dq + damping, generalized forces."""
+    if mi == 0:
+        return _H0(q, qd, p)
+    if mi == 1:
+        return _H1(q, qd, p)
+    return _H2(q, qd, p)
+
+
+@_jit
+def jac_a(mi, q, p):
+    """J_a(q) (2x5), foot a's position Jacobian."""
+    if mi == 0:
+        return _JA0(q, p)
+    if mi == 1:
+        return _JA1(q, p)
+    return _JA2(q, p)
+
+
+@_jit
+def jdot_qd_a(mi, q, qd, p):
+    """J_a'(q, q') q' (2,), m/s^2."""
+    if mi == 0:
+        return _JDOT0(q, qd, p)
+    if mi == 1:
+        return _JDOT1(q, qd, p)
+    return _JDOT2(q, qd, p)
+
+
+@_jit
+def _derivs(mi, q, qd, p):
+    """(dM/dq [k,i,j], dh/dq [i,k], dh/dqd [i,k], dJ_a/dq [k,r,j], d(J_a'q')/dq [r,k], d(J_a'q')/dqd [r,k])."""
+    if mi == 0:
+        return _DM0(q, p), _DHQ0(q, qd, p), _DHD0(q, qd, p), _DJA0(q, p), _DJQ0(q, qd, p), _DJD0(q, qd, p)
+    if mi == 1:
+        return _DM1(q, p), _DHQ1(q, qd, p), _DHD1(q, qd, p), _DJA1(q, p), _DJQ1(q, qd, p), _DJD1(q, qd, p)
+    return _DM2(q, p), _DHQ2(q, qd, p), _DHD2(q, qd, p), _DJA2(q, p), _DJQ2(q, qd, p), _DJD2(q, qd, p)
+
+
+# ------------------------------------------------------------------------------------------------
+# Small dense LU with partial pivoting (the KKT systems are at most 9x9).
+
+
+@_jit
+def lu_factor(K, n, piv):
+    """In-place LU of K[:n, :n] with row pivots; False if singular or not finite."""
+    for j in range(n):
+        best = j
+        vmax = abs(K[j, j])
+        for i in range(j + 1, n):
+            v = abs(K[i, j])
+            if v > vmax:
+                vmax = v
+                best = i
+        if not (vmax > 0.0) or not math.isfinite(vmax):
+            return False
+        piv[j] = best
+        if best != j:
+            for c in range(n):
+                tmp = K[j, c]
+                K[j, c] = K[best, c]
+                K[best, c] = tmp
+        inv = 1.0 / K[j, j]
+        for i in range(j + 1, n):
+            K[i, j] *= inv
+            f = K[i, j]
+            if f != 0.0:
+                for c in range(j + 1, n):
+                    K[i, c] -= f * K[j, c]
+    return True
+
+
+@_jit
+def lu_solve(K, n, piv, b):
+    """Solve with the factors of lu_factor, b (n,) overwritten with the solution."""
+    for j in range(n):
+        pj = piv[j]
+        if pj != j:
+            tmp = b[j]
+            b[j] = b[pj]
+            b[pj] = tmp
+    for i in range(n):
+        s = b[i]
+        for c in range(i):
+            s -= K[i, c] * b[c]
+        b[i] = s
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for c in range(i + 1, n):
+            s -= K[i, c] * b[c]
+        b[i] = s / K[i, i]
+
+
+# ------------------------------------------------------------------------------------------------
+# Phase dynamics: [[M, -A^T], [A, 0]] [q''; lambda] = [-h; -A' q'] (rimless.sim.dynamics.accel).
+
+
+@_jit
+def n_constraints(phase):
+    if phase == DLSP:
+        return 4
+    if phase == SLSP_CLUTCHED:
+        return 3
+    return 2
+
+
+@_jit
+def constraint_rows(mi, phase, q, qd, p):
+    """(A (n x 5), A' q' (n,)) of a phase."""
+    n = n_constraints(phase)
+    A = np.zeros((n, 5))
+    adot = np.zeros(n)
+    A[0, 0] = 1.0
+    A[1, 1] = 1.0
+    if phase == DLSP:
+        Ja = jac_a(mi, q, p)
+        jd = jdot_qd_a(mi, q, qd, p)
+        for r in range(2):
+            adot[2 + r] = jd[r]
+            for c in range(5):
+                A[2 + r, c] = Ja[r, c]
+    elif phase == SLSP_CLUTCHED:
+        A[2, 3] = 1.0
+    return A, adot
+
+
+@_jit
+def kkt_factor(mi, phase, q, qd, p, K, piv):
+    """Assemble and factor the KKT matrix into K (9x9 workspace); returns (ok, n, M, h, A, A'q')."""
+    M = mass_matrix(mi, q, p)
+    h = bias(mi, q, qd, p)
+    A, adot = constraint_rows(mi, phase, q, qd, p)
+    nc = A.shape[0]
+    n = 5 + nc
+    for i in range(n):
+        for j in range(n):
+            K[i, j] = 0.0
+    for i in range(5):
+        for j in range(5):
+            K[i, j] = M[i, j]
+    for r in range(nc):
+        for c in range(5):
+            K[c, 5 + r] = -A[r, c]
+            K[5 + r, c] = A[r, c]
+    ok = lu_factor(K, n, piv)
+    return ok, n, M, h, A, adot
+
+
+@_jit
+def accel(mi, phase, q, qd, p, qdd, lam):
+    """q'' (5,) and lambda (n,) of a phase written into qdd and lam; False if the KKT matrix is singular."""
+    K = np.empty((9, 9))
+    piv = np.empty(9, dtype=np.int64)
+    ok, n, M, h, A, adot = kkt_factor(mi, phase, q, qd, p, K, piv)
+    if not ok:
+        return False
+    b = np.empty(n)
+    for i in range(5):
+        b[i] = -h[i]
+    for r in range(n - 5):
+        b[5 + r] = -adot[r]
+    lu_solve(K, n, piv, b)
+    for i in range(5):
+        qdd[i] = b[i]
+    for r in range(n - 5):
+        lam[r] = b[5 + r]
+    return True
+
+
+@_jit
+def accel_jacobian(mi, phase, q, qd, p, qdd, lam, Dqdd, Dlam):
+    """q'', lambda and their exact derivatives with respect to y = [q, q'].
+
+    Differentiating M q'' + h = A^T lambda and A q'' + A' q' = 0 gives, for each of the 10 state directions,
+    the same KKT matrix with the right-hand side
+    [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q''].  Dqdd (5x10) and Dlam (n x 10) are filled.
+    """
+    K = np.empty((9, 9))
+    piv = np.empty(9, dtype=np.int64)
+    ok, n, M, h, A, adot = kkt_factor(mi, phase, q, qd, p, K, piv)
+    if not ok:
+        return False
+    nc = n - 5
+    b = np.empty(n)
+    for i in range(5):
+        b[i] = -h[i]
+    for r in range(nc):
+        b[5 + r] = -adot[r]
+    lu_solve(K, n, piv, b)
+    for i in range(5):
+        qdd[i] = b[i]
+    for r in range(nc):
+        lam[r] = b[5 + r]
+    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = _derivs(mi, q, qd, p)
+    for col in range(10):
+        rhs = np.zeros(n)
+        if col < 5:
+            k = col
+            for i in range(5):
+                s = -dh_dq[i, k]
+                for j in range(5):
+                    s -= dM[k, i, j] * qdd[j]
+                rhs[i] = s
+            if phase == DLSP:
+                # dA/dq_k: rows 2..3 are dJ_a/dq_k
+                for r in range(2):
+                    for i in range(5):
+                        rhs[i] += dJa[k, r, i] * lam[2 + r]
+                    s = -djd_dq[r, k]
+                    for j in range(5):
+                        s -= dJa[k, r, j] * qdd[j]
+                    rhs[5 + 2 + r] = s
+        else:
+            k = col - 5
+            for i in range(5):
+                rhs[i] = -dh_dqd[i, k]
+            if phase == DLSP:
+                for r in range(2):
+                    rhs[5 + 2 + r] = -djd_dqd[r, k]
+        lu_solve(K, n, piv, rhs)
+        for i in range(5):
+            Dqdd[i, col] = rhs[i]
+        for r in range(nc):
+            Dlam[r, col] = rhs[5 + r]
+    return True
+
+
+@_jit
+def damping_power(phase, qd, p):
+    """Power dissipated by the leg dampers, W."""
+    l1 = 0.0 if phase == SLSP_CLUTCHED else qd[3]
+    return p[5] * (l1 * l1 + qd[4] * qd[4])
+
+
+# ------------------------------------------------------------------------------------------------
+# Guards (rimless.sim.events): value, and gradient with respect to y for the saltation matrices.
+
+
+@_jit
+def swing_height(q, L0):
+    """Height of the next swing foot above the slope, m."""
+    return q[1] + q[3] * math.cos(q[2]) - L0 * math.cos(ALPHA - q[2])
+
+
+@_jit
+def swing_height_rate(y, L0):
+    """d/dt of the swing height along y = [q, q'], m/s."""
+    th = y[2]
+    return y[6] + y[8] * math.cos(th) - (y[3] * math.sin(th) + L0 * math.sin(ALPHA - th)) * y[7]
+
+
+@_jit
+def guard_value_from(code, y, lam, L0):
+    """Guard value given the state and the phase's lambda at that state."""
+    if code == STALL:
+        return y[7]
+    if code == CLUTCH_LOCK:
+        return y[8]
+    if code == TOUCHDOWN:
+        return swing_height(y, L0)
+    if code == LIFTOFF_A:
+        return lam[3]
+    return lam[1]  # LIFTOFF_B
+
+
+@_jit
+def guard_needs_lambda(code):
+    return code == LIFTOFF_A or code == LIFTOFF_B
+
+
+@_jit
+def guard_gradient(mi, phase, code, y, p):
+    """dg/dy (10,) of a guard during a phase."""
+    g = np.zeros(10)
+    if code == STALL:
+        g[7] = 1.0
+    elif code == CLUTCH_LOCK:
+        g[8] = 1.0
+    elif code == TOUCHDOWN:
+        th = y[2]
+        g[1] = 1.0
+        g[2] = -y[3] * math.sin(th) - p[3] * math.sin(ALPHA - th)
+        g[3] = math.cos(th)
+    else:
+        qdd = np.empty(5)
+        lam = np.empty(4)
+        Dqdd = np.empty((5, 10))
+        Dlam = np.empty((4, 10))
+        accel_jacobian(mi, phase, y[:5], y[5:10], p, qdd, lam, Dqdd, Dlam)
+        row = 3 if code == LIFTOFF_A else 1
+        for j in range(10):
+            g[j] = Dlam[row, j]
+    return g
+
+
+@_jit
+def phase_field(mi, phase, y, p):
+    """f(y) = [q', q''] (10,) of a phase (nan-filled if the KKT matrix is singular)."""
+    f = np.empty(10)
+    qdd = np.empty(5)
+    lam = np.empty(4)
+    if not accel(mi, phase, y[:5], y[5:10], p, qdd, lam):
+        f[:] = np.nan
+        return f
+    for i in range(5):
+        f[i] = y[5 + i]
+        f[5 + i] = qdd[i]
+    return f
+
+
+# ------------------------------------------------------------------------------------------------
+# Impact (rimless.sim.impact): relabel, then q'+ = q'~ + M^-1 Jc^T Lambda with Jc q'+ = 0.
+
+
+@_jit
+def relabel_with_jacobian(y, L0):
+    """(y~ (10,), dy~/dy (10x10)) of the leg exchange."""
+    x, yb, th, L1 = y[0], y[1], y[2], y[3]
+    dx, dy, dth, dL1 = y[5], y[6], y[7], y[8]
+    s, c = math.sin(th), math.cos(th)
+    sa, ca = math.sin(ALPHA - th), math.cos(ALPHA - th)
+    yt = np.empty(10)
+    yt[0] = x + L1 * s + L0 * sa
+    yt[1] = yb + L1 * c - L0 * ca
+    yt[2] = th - ALPHA
+    yt[3] = L0
+    yt[4] = L1
+    yt[5] = dx + (L1 * c - L0 * ca) * dth + dL1 * s
+    yt[6] = dy - (L1 * s + L0 * sa) * dth + dL1 * c
+    yt[7] = dth
+    yt[8] = 0.0
+    yt[9] = dL1
+    D = np.zeros((10, 10))
+    D[0, 0] = 1.0
+    D[0, 2] = L1 * c - L0 * ca
+    D[0, 3] = s
+    D[1, 1] = 1.0
+    D[1, 2] = -L1 * s - L0 * sa
+    D[1, 3] = c
+    D[2, 2] = 1.0
+    D[4, 3] = 1.0
+    D[5, 2] = (-L1 * s - L0 * sa) * dth + dL1 * c
+    D[5, 3] = c * dth
+    D[5, 5] = 1.0
+    D[5, 7] = L1 * c - L0 * ca
+    D[5, 8] = s
+    D[6, 2] = -(L1 * c - L0 * ca) * dth - dL1 * s
+    D[6, 3] = -s * dth
+    D[6, 6] = 1.0
+    D[6, 7] = -(L1 * s + L0 * sa)
+    D[6, 8] = c
+    D[7, 7] = 1.0
+    D[9, 8] = 1.0
+    return yt, D
+
+
+@_jit
+def impact(mi, y_minus, p, V, want_jac):
+    """Relabel and inelastic impact: returns (ok, y+ (10,), impulse (4,), dy+/dy- V (10 x ncol)).
+
+    V (10 x ncol) are tangent directions at y-; with want_jac the exact derivative of the reset is applied
+    to them (differentiating the KKT form [[M, -Jc^T], [Jc, 0]] [q'+; Lambda] = [M q'~; 0]).
+    """
+    L0 = p[3]
+    yt, D = relabel_with_jacobian(y_minus, L0)
+    q = yt[:5].copy()
+    qdt = yt[5:10].copy()
+    K = np.empty((9, 9))
+    piv = np.empty(9, dtype=np.int64)
+    ok, n, M, h, A, adot = kkt_factor(mi, DLSP, q, qdt, p, K, piv)
+    ncol = V.shape[1]
+    Vout = np.zeros((10, ncol))
+    yp = np.empty(10)
+    impulse = np.zeros(4)
+    if not ok:
+        return False, yp, impulse, Vout
+    b = np.zeros(9)
+    for i in range(5):
+        s = 0.0
+        for j in range(5):
+            s += M[i, j] * qdt[j]
+        b[i] = s
+    lu_solve(K, n, piv, b)
+    for i in range(5):
+        yp[i] = q[i]
+        yp[5 + i] = b[i]
+    for r in range(4):
+        impulse[r] = b[5 + r]
+    if want_jac:
+        qdp = yp[5:10]
+        Vt = D @ V
+        dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = _derivs(mi, q, qdt, p)
+        for col in range(ncol):
+            rhs = np.zeros(9)
+            for i in range(5):
+                s = 0.0
+                for j in range(5):
+                    s += M[i, j] * Vt[5 + j, col]
+                rhs[i] = s
+            for k in range(5):
+                vk = Vt[k, col]
+                if vk == 0.0:
+                    continue
+                for i in range(5):
+                    s = 0.0
+                    for j in range(5):
+                        s += dM[k, i, j] * (qdt[j] - qdp[j])
+                    for r in range(2):
+                        s += dJa[k, r, i] * impulse[2 + r]
+                    rhs[i] += vk * s
+                for r in range(2):
+                    s = 0.0
+                    for j in range(5):
+                        s += dJa[k, r, j] * qdp[j]
+                    rhs[5 + 2 + r] -= vk * s
+            lu_solve(K, n, piv, rhs)
+            for i in range(5):
+                Vout[i, col] = Vt[i, col]
+                Vout[5 + i, col] = rhs[i]
+    return True, yp, impulse, Vout
+
+
+# ------------------------------------------------------------------------------------------------
+# The Poincaré section (rimless.sim.section): z = (theta+, theta'+) -> y and dy/dz.
+
+
+@_jit
+def state_from_section(mi, z, p):
+    """(y (10,), dy/dz (10x2)) of the post-impact state: foot b at the origin, L1 = L0, foot a on the slope,
+    q' = theta' times the null vector of J_c."""
+    th, thd = z[0], z[1]
+    L0 = p[3]
+    cta = math.cos(th + ALPHA)
+    L2 = L0 * math.cos(th) / cta
+    dL2 = L0 * math.sin(ALPHA) / (cta * cta)  # dL2/dtheta
+    q = np.array([0.0, 0.0, th, L0, L2])
+    Ja = jac_a(mi, q, p)
+    # rates r = solve(Ja[:, 3:5], -Ja[:, 2]) by Cramer's rule (2x2)
+    a11, a12, a21, a22 = Ja[0, 3], Ja[0, 4], Ja[1, 3], Ja[1, 4]
+    det = a11 * a22 - a12 * a21
+    b1, b2 = -Ja[0, 2], -Ja[1, 2]
+    r1 = (b1 * a22 - a12 * b2) / det
+    r2 = (a11 * b2 - a21 * b1) / det
+    v = np.array([0.0, 0.0, 1.0, r1, r2])
+    # dv/dtheta: Ja v = 0 with q depending on theta through q[2] and q[4]
+    dJa = _derivs_ja(mi, q, p)
+    c1 = 0.0
+    c2 = 0.0
+    for j in range(5):
+        c1 += (dJa[2, 0, j] + dJa[4, 0, j] * dL2) * v[j]
+        c2 += (dJa[2, 1, j] + dJa[4, 1, j] * dL2) * v[j]
+    dr1 = (-c1 * a22 + a12 * c2) / det
+    dr2 = (-a11 * c2 + a21 * c1) / det
+    y = np.zeros(10)
+    T = np.zeros((10, 2))
+    for i in range(5):
+        y[i] = q[i]
+        y[5 + i] = thd * v[i]
+        T[5 + i, 1] = v[i]
+    T[2, 0] = 1.0
+    T[4, 0] = dL2
+    T[8, 0] = thd * dr1
+    T[9, 0] = thd * dr2
+    return y, T
+
+
+@_jit
+def _derivs_ja(mi, q, p):
+    if mi == 0:
+        return _DJA0(q, p)
+    if mi == 1:
+        return _DJA1(q, p)
+    return _DJA2(q, p)

@@ -1,0 +1,120 @@
+"""Plain-dict summaries of simulator results: what the CLI prints and what --json emits."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rimless.sim.continuation import CriticalSlope
+from rimless.sim.params import WheelParams
+from rimless.sim.poincare import FixedPoint
+from rimless.sim.rigid import RigidWheel
+
+
+def params_summary(p: WheelParams) -> dict[str, Any]:
+    return {
+        "slope_rad": p.slope_rad,
+        "slope_deg": p.slope_deg,
+        "k": p.stiffness_n_per_m,
+        "c": p.damping_ns_per_m,
+        "mass_model": p.mass_model,
+    }
+
+
+def fixed_point_summary(fp: FixedPoint, p: WheelParams, model: str, *, guess: Any = None) -> dict[str, Any]:
+    """The `rimless sim fixed-point` JSON object (keys are a contract: add, never rename)."""
+    step = fp.step
+    imp = step.impact
+    d = step.diagnostics or {}
+    mu_b, mu_a = imp.friction_required
+    out: dict[str, Any] = {
+        "model": model,
+        **params_summary(p),
+        "theta_plus_rad": float(fp.z[0]),
+        "theta_dot_plus_rad_s": float(fp.z[1]),
+        "step_period_s": step.period_s,
+        "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues],
+        "max_abs_eigenvalue": fp.max_abs_eigenvalue,
+        "stable": fp.stable,
+        "energy_ratio": imp.energy_ratio,
+        "energy_ratio_relabelled": imp.energy_ratio_relabelled,
+        "relabel_loss_J": imp.relabel_loss,
+        "min_normal_force_N": {
+            "dlsp_leading_b": d.get("min_normal_force_b_dlsp_N"),
+            "dlsp_trailing_a": d.get("min_normal_force_a_dlsp_N"),
+            "slsp_free": d.get("min_normal_force_b_slsp_free_N"),
+            "slsp_clutched": d.get("min_normal_force_b_slsp_clutched_N"),
+        },
+        "leading_foot_tension_s": d.get("leading_foot_tension_s"),
+        "trailing_foot_min_height_m": d.get("trailing_foot_min_height_m"),
+        "impact_impulse_N_s": {"b_x": imp.impulse[0], "b_y": imp.impulse[1], "a_x": imp.impulse[2], "a_y": imp.impulse[3]},
+        "friction_required": {"b": mu_b, "a": mu_a},
+        "phase_durations_s": step.phase_durations_s,
+        "residual": fp.residual,
+        "newton_iterations": fp.iterations,
+        "jacobian_method": fp.jacobian_method,
+    }
+    if guess is not None:
+        out["guess"] = {"theta_plus_rad": float(guess[0]), "theta_dot_plus_rad_s": float(guess[1])}
+    return out
+
+
+def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
+    """The `rimless sim critical-slope` JSON object for a compliant model."""
+    fp = cs.fixed_point
+    return {
+        "model": cs.model,
+        "critical_slope_rad": cs.critical_slope_rad,
+        "critical_slope_deg": cs.critical_slope_deg,
+        "cot": cs.cot,
+        "reason": cs.reason,
+        "detail": cs.detail,
+        "definition": "smallest slope of the followed branch with a stable, valid period-1 gait, located to "
+        f"{cs.refine_tol_rad:g} rad",
+        "algorithm1_slope_rad": cs.algorithm1_slope_rad,
+        "algorithm1_step_rad": cs.algorithm1_step_rad,
+        "algorithm1_definition": "last slope where Newton converged, continuing down from the start slope in fixed steps",
+        "refine_tol_rad": cs.refine_tol_rad,
+        "branch": {
+            "start_slope_rad": cs.branch[0].slope_rad,
+            "start_theta_plus_rad": float(cs.branch[0].z[0]),
+            "start_theta_dot_plus_rad_s": float(cs.branch[0].z[1]),
+            "start_step_period_s": cs.branch[0].period_s,
+            "points": len(cs.branch),
+        },
+        "at_critical": {
+            "theta_plus_rad": float(fp.z[0]),
+            "theta_dot_plus_rad_s": float(fp.z[1]),
+            "step_period_s": fp.step.period_s,
+            "max_abs_eigenvalue": fp.max_abs_eigenvalue,
+            "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues],
+        },
+        "k": p.stiffness_n_per_m,
+        "c": p.damping_ns_per_m,
+        "mass_model": p.mass_model,
+    }
+
+
+def rigid_summary(p: WheelParams) -> dict[str, Any]:
+    """Rigid wheel: Coleman's critical slope with the paper's mass convention and the eight-leg one."""
+    paper = RigidWheel.from_params(p, "paper")
+    eight = RigidWheel.from_params(p, "eight-leg")
+    phi_p = paper.critical_slope_rad()
+    phi_e = eight.critical_slope_rad()
+    return {
+        "model": "rigid",
+        "critical_slope_rad": phi_p,
+        "critical_slope_deg": math.degrees(phi_p),
+        "cot": math.tan(phi_p),
+        "reason": "coleman-closed-form",
+        "mass_convention": "paper: M = m_H, inertia I_c (Coleman's formula as in the paper)",
+        "beta": paper.beta,
+        "eigenvalue": paper.eigenvalue(),
+        "eight_leg_consistent": {
+            "critical_slope_rad": phi_e,
+            "critical_slope_deg": math.degrees(phi_e),
+            "cot": math.tan(phi_e),
+            "mass_convention": "M = m_H + 8 m, inertia I_c + 8 m L0^2",
+            "beta": eight.beta,
+        },
+    }
