@@ -1,0 +1,470 @@
+"""Compiled DOP853 (Dormand-Prince 8(5,3), the same tableau, error norm, step-size control, initial step and
+7th-order dense output as scipy's solve_ivp 'DOP853') for one phase of the hybrid system, with terminal
+guard location on the dense output (Brent's method to 4 eps in t, the scipy semantics: a guard fires when
+it crosses 0 in its direction between two accepted steps; the earliest root wins).
+
+The integrated vector is y_aug = [y (10,), V (10x2, column-major, optional), E_diss (optional)]:
+- y = [q, q'] in SI units (slope frame);
+- V = dy/dz, the tangent of two section directions, integrated with the variational equations
+  V' = Df(y) V (Df exact: rimless.sim.fast_model.accel_jacobian); the step size is controlled on y only
+  (internal differentiation: V is the exact derivative of the discrete flow up to the step-size choice);
+- E_diss = integral of the damper power, J (then included in the error norm, as in the reference).
+
+Extra (beyond scipy): a touchdown that grazes the slope inside one step (swing height > 0 at both step
+ends with a minimum below 0 in between) is detected from the sign change of the height's rate and located
+on the dense output, so it is not missed. A stiffness indicator (Hairer's h |lambda| estimate from the last
+two stages, > 6.1 counts a "stiff step") is returned; a phase that needs more than `max_steps` steps ends
+with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _dop
+
+from rimless.sim import fast_model as fm
+
+_jit = numba.njit(cache=True)
+
+# Tableau (module-level arrays are frozen into the compiled code as constants).
+_A = np.ascontiguousarray(_dop.A, dtype=np.float64)
+_B = np.ascontiguousarray(_dop.B, dtype=np.float64)
+_C = np.ascontiguousarray(_dop.C, dtype=np.float64)
+_E3 = np.ascontiguousarray(_dop.E3, dtype=np.float64)
+_E5 = np.ascontiguousarray(_dop.E5, dtype=np.float64)
+_D = np.ascontiguousarray(_dop.D, dtype=np.float64)
+_NS = 12
+_NSE = 16
+_SAFETY = 0.9
+_MIN_FACTOR = 0.2
+_MAX_FACTOR = 10.0
+_ERR_EXP = -1.0 / 8.0
+_EPS = np.finfo(float).eps
+
+STATUS_OK = 0  # a guard fired or the time limit was reached (guard = -1)
+STATUS_STEP_TOO_SMALL = 1
+STATUS_NOT_FINITE = 2
+STATUS_TOO_MANY_STEPS = 3
+
+STATE_SIZE = 10
+VAR_OFFSET = 10
+VAR_SIZE = 20
+
+
+@_jit
+def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam):
+    """Right-hand side of the augmented vector; lambda at y into lam. False if the KKT matrix is singular."""
+    q = y[0:5]
+    qd = y[5:10]
+    qdd = np.empty(5)
+    if with_var:
+        Dqdd = np.empty((5, 10))
+        Dlam = np.empty((4, 10))
+        ok = fm.accel_jacobian(mi, phase, q, qd, p, qdd, lam, Dqdd, Dlam)
+        if not ok:
+            return False
+        for col in range(2):
+            o = VAR_OFFSET + 10 * col
+            for i in range(5):
+                f[o + i] = y[o + 5 + i]
+                s = 0.0
+                for j in range(10):
+                    s += Dqdd[i, j] * y[o + j]
+                f[o + 5 + i] = s
+    else:
+        ok = fm.accel(mi, phase, q, qd, p, qdd, lam)
+        if not ok:
+            return False
+    for i in range(5):
+        f[i] = qd[i]
+        f[5 + i] = qdd[i]
+    if with_diss:
+        f[y.shape[0] - 1] = fm.damping_power(phase, qd, p)
+    return True
+
+
+@_jit
+def _rms(x, n):
+    s = 0.0
+    for i in range(n):
+        s += x[i] * x[i]
+    return math.sqrt(s / n)
+
+
+@_jit
+def _initial_step(mi, phase, p, t0, y0, f0, t_bound, rtol, atol, n_err, with_var, with_diss):
+    """scipy.integrate._ivp.common.select_initial_step with order 7 (on the first n_err components)."""
+    interval = abs(t_bound - t0)
+    if interval == 0.0:
+        return 0.0, 0
+    N = y0.shape[0]
+    a = np.empty(n_err)
+    b = np.empty(n_err)
+    for i in range(n_err):
+        sc = atol + abs(y0[i]) * rtol
+        a[i] = y0[i] / sc
+        b[i] = f0[i] / sc
+    d0 = _rms(a, n_err)
+    d1 = _rms(b, n_err)
+    if d0 < 1e-5 or d1 < 1e-5:
+        h0 = 1e-6
+    else:
+        h0 = 0.01 * d0 / d1
+    h0 = min(h0, interval)
+    y1 = np.empty(N)
+    for i in range(N):
+        y1[i] = y0[i] + h0 * f0[i]
+    f1 = np.empty(N)
+    lam = np.zeros(4)
+    rhs_aug(mi, phase, p, y1, with_var, with_diss, f1, lam)
+    for i in range(n_err):
+        sc = atol + abs(y0[i]) * rtol
+        a[i] = (f1[i] - f0[i]) / sc
+    d2 = _rms(a, n_err) / h0
+    if not math.isfinite(d2):
+        d2 = 1e300
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    return min(100.0 * h0, h1, interval), 1
+
+
+@_jit
+def _dense_eval(F, y_old, x, nout, out):
+    """scipy's Dop853DenseOutput at the normalised time x in [0, 1], first nout components."""
+    for i in range(nout):
+        v = 0.0
+        for k in range(6, -1, -1):
+            v += F[k, i]
+            if (6 - k) % 2 == 0:
+                v *= x
+            else:
+                v *= 1.0 - x
+        out[i] = v + y_old[i]
+
+
+@_jit
+def _guard_on_dense(mi, phase, p, code, t, t_old, h, F, y_old, ybuf, qdd, lam, rate):
+    """Guard `code` (or, with rate=True, the swing height's rate) at time t on the dense output."""
+    x = (t - t_old) / h
+    _dense_eval(F, y_old, x, 10, ybuf)
+    if rate:
+        return fm.swing_height_rate(ybuf, p[3])
+    if fm.guard_needs_lambda(code):
+        fm.accel(mi, phase, ybuf[0:5], ybuf[5:10], p, qdd, lam)
+    return fm.guard_value_from(code, ybuf, lam, p[3])
+
+
+@_jit
+def _brent(mi, phase, p, code, rate, xa, xb, t_old, h, F, y_old):
+    """scipy.optimize.brentq (xtol = rtol = 4 eps) on a guard of the dense output; returns (root, nfev)."""
+    ybuf = np.empty(10)
+    qdd = np.empty(5)
+    lam = np.zeros(4)
+    xtol = 4.0 * _EPS
+    rtol = 4.0 * _EPS
+    xpre = xa
+    xcur = xb
+    xblk = 0.0
+    fblk = 0.0
+    spre = 0.0
+    scur = 0.0
+    fpre = _guard_on_dense(mi, phase, p, code, xpre, t_old, h, F, y_old, ybuf, qdd, lam, rate)
+    fcur = _guard_on_dense(mi, phase, p, code, xcur, t_old, h, F, y_old, ybuf, qdd, lam, rate)
+    nf = 2
+    if fpre == 0.0:
+        return xpre, nf
+    if fcur == 0.0:
+        return xcur, nf
+    for _ in range(200):
+        if fpre != 0.0 and fcur != 0.0 and ((fpre < 0.0) != (fcur < 0.0)):
+            xblk = xpre
+            fblk = fpre
+            spre = xcur - xpre
+            scur = spre
+        if abs(fblk) < abs(fcur):
+            xpre = xcur
+            xcur = xblk
+            xblk = xpre
+            fpre = fcur
+            fcur = fblk
+            fblk = fpre
+        delta = (xtol + rtol * abs(xcur)) / 2.0
+        sbis = (xblk - xcur) / 2.0
+        if fcur == 0.0 or abs(sbis) < delta:
+            return xcur, nf
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)
+            else:
+                dpre = (fpre - fcur) / (xpre - xcur)
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            if 2.0 * abs(stry) < min(abs(spre), 3.0 * abs(sbis) - delta):
+                spre = scur
+                scur = stry
+            else:
+                spre = sbis
+                scur = sbis
+        else:
+            spre = sbis
+            scur = sbis
+        xpre = xcur
+        fpre = fcur
+        if abs(scur) > delta:
+            xcur += scur
+        else:
+            xcur += delta if sbis > 0 else -delta
+        fcur = _guard_on_dense(mi, phase, p, code, xcur, t_old, h, F, y_old, ybuf, qdd, lam, rate)
+        nf += 1
+    return xcur, nf
+
+
+@_jit
+def _guards_at(codes, y, lam, L0, out):
+    for e in range(codes.shape[0]):
+        out[e] = fm.guard_value_from(codes[e], y, lam, L0)
+
+
+@_jit
+def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
+              record_dt, max_steps):
+    """Integrate one phase from (t0, y0) until a guard in `codes` fires or t0 + t_max is reached.
+
+    Returns (status, t_end, y_end, fired_index (-1: none), nfev, nsteps, nstiff, rec_t, rec_y).
+    With record_dt > 0 the states (first 10 components) at every accepted step and on the grid
+    t0 + k record_dt are returned in rec_t (n,) and rec_y (n, 10); otherwise they are empty.
+    """
+    N = y0.shape[0]
+    ng = codes.shape[0]
+    L0 = p[3]
+    t = t0
+    y = y0.copy()
+    t_bound = t0 + t_max
+    K = np.empty((_NSE, N))
+    f = np.empty(N)
+    lam = np.zeros(4)
+    lam_new = np.zeros(4)
+    nfev = 1
+    nsteps = 0
+    nstiff = 0
+    recording = record_dt > 0.0
+    cap = 256 if recording else 1
+    rec_t = np.empty(cap)
+    rec_y = np.empty((cap, 10))
+    nrec = 0
+    if recording:
+        rec_t[0] = t0
+        for i in range(10):
+            rec_y[0, i] = y0[i]
+        nrec = 1
+    next_grid = 1
+    if not rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam):
+        return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+    g = np.empty(ng)
+    g_new = np.empty(ng)
+    _guards_at(codes, y, lam, L0, g)
+    h_abs, nf0 = _initial_step(mi, phase, p, t0, y, f, t_bound, rtol, atol, n_err, with_var, with_diss)
+    nfev += nf0
+    y_new = np.empty(N)
+    ytmp = np.empty(N)
+    y_last_stage = np.empty(N)
+    F = np.empty((7, N))
+    scale = np.empty(n_err)
+    ybuf = np.empty(N)
+    while True:
+        if nsteps >= max_steps:
+            return STATUS_TOO_MANY_STEPS, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        rejected = False
+        h = 0.0
+        t_new = t
+        while True:
+            if h_abs < min_step:
+                return STATUS_STEP_TOO_SMALL, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+            h = h_abs
+            t_new = t + h
+            if t_new > t_bound:
+                t_new = t_bound
+            h = t_new - t
+            h_abs = abs(h)
+            for i in range(N):
+                K[0, i] = f[i]
+            ok = True
+            for s in range(1, _NS):
+                for i in range(N):
+                    acc = 0.0
+                    for j in range(s):
+                        acc += _A[s, j] * K[j, i]
+                    ytmp[i] = y[i] + h * acc
+                fs = K[s]
+                ok = rhs_aug(mi, phase, p, ytmp, with_var, with_diss, fs, lam_new) and ok
+            for i in range(N):
+                y_last_stage[i] = ytmp[i]
+                acc = 0.0
+                for j in range(_NS):
+                    acc += _B[j] * K[j, i]
+                y_new[i] = y[i] + h * acc
+            fnew = K[_NS]
+            ok = rhs_aug(mi, phase, p, y_new, with_var, with_diss, fnew, lam_new) and ok
+            nfev += _NS
+            err5 = 0.0
+            err3 = 0.0
+            finite = ok
+            for i in range(n_err):
+                sc = atol + max(abs(y[i]), abs(y_new[i])) * rtol
+                e5 = 0.0
+                e3 = 0.0
+                for j in range(_NS + 1):
+                    e5 += K[j, i] * _E5[j]
+                    e3 += K[j, i] * _E3[j]
+                e5 /= sc
+                e3 /= sc
+                err5 += e5 * e5
+                err3 += e3 * e3
+            if not (math.isfinite(err5) and math.isfinite(err3)):
+                finite = False
+            if finite:
+                for i in range(N):
+                    if not math.isfinite(y_new[i]):
+                        finite = False
+                        break
+            if not finite:
+                h_abs *= _MIN_FACTOR
+                rejected = True
+                continue
+            if err5 == 0.0 and err3 == 0.0:
+                error_norm = 0.0
+            else:
+                denom = err5 + 0.01 * err3
+                error_norm = h_abs * err5 / math.sqrt(denom * n_err)
+            if error_norm < 1.0:
+                if error_norm == 0.0:
+                    factor = _MAX_FACTOR
+                else:
+                    factor = min(_MAX_FACTOR, _SAFETY * error_norm ** _ERR_EXP)
+                if rejected:
+                    factor = min(1.0, factor)
+                h_abs *= factor
+                break
+            h_abs *= max(_MIN_FACTOR, _SAFETY * error_norm ** _ERR_EXP)
+            rejected = True
+        nsteps += 1
+        # stiffness indicator h |lambda| from the last stage (c = 1) and f(y_new)
+        stnum = 0.0
+        stden = 0.0
+        for i in range(n_err):
+            d1 = K[_NS, i] - K[_NS - 1, i]
+            d2 = y_new[i] - y_last_stage[i]
+            stnum += d1 * d1
+            stden += d2 * d2
+        if stden > 0.0 and h * math.sqrt(stnum / stden) > 6.1:
+            nstiff += 1
+        _guards_at(codes, y_new, lam_new, L0, g_new)
+        # which guards crossed in their direction (scipy's find_active_events), plus the graze check
+        t_hi_graze = -1.0
+        any_active = False
+        for e in range(ng):
+            up = g[e] <= 0.0 and g_new[e] >= 0.0
+            down = g[e] >= 0.0 and g_new[e] <= 0.0
+            if (up and directions[e] > 0) or (down and directions[e] < 0):
+                any_active = True
+            elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
+                if fm.swing_height_rate(y, L0) < 0.0 and fm.swing_height_rate(y_new, L0) > 0.0:
+                    t_hi_graze = 0.0  # decide after the dense output is built
+        need_dense = any_active or recording or t_hi_graze == 0.0
+        if need_dense:
+            for s in range(_NS + 1, _NSE):
+                for i in range(N):
+                    acc = 0.0
+                    for j in range(s):
+                        acc += _A[s, j] * K[j, i]
+                    ytmp[i] = y[i] + h * acc
+                rhs_aug(mi, phase, p, ytmp, with_var, with_diss, K[s], lam)
+            nfev += _NSE - _NS - 1
+            for i in range(N):
+                dy = y_new[i] - y[i]
+                F[0, i] = dy
+                F[1, i] = h * K[0, i] - dy
+                F[2, i] = 2.0 * dy - h * (K[_NS, i] + K[0, i])
+                for r in range(4):
+                    acc = 0.0
+                    for j in range(_NSE):
+                        acc += _D[r, j] * K[j, i]
+                    F[3 + r, i] = h * acc
+        best_t = np.inf
+        best_e = -1
+        if t_hi_graze == 0.0:
+            for e in range(ng):
+                if codes[e] == fm.TOUCHDOWN:
+                    tmin, nf = _brent(mi, phase, p, fm.TOUCHDOWN, True, t, t_new, t, h, F, y)
+                    gmin = _guard_on_dense(mi, phase, p, fm.TOUCHDOWN, tmin, t, h, F, y, ybuf, np.empty(5), lam, False)
+                    if gmin <= 0.0:
+                        root, nf = _brent(mi, phase, p, fm.TOUCHDOWN, False, t, tmin, t, h, F, y)
+                        if root < best_t:
+                            best_t = root
+                            best_e = e
+        if any_active:
+            for e in range(ng):
+                up = g[e] <= 0.0 and g_new[e] >= 0.0
+                down = g[e] >= 0.0 and g_new[e] <= 0.0
+                if (up and directions[e] > 0) or (down and directions[e] < 0):
+                    root, nf = _brent(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
+                    nfev += nf if fm.guard_needs_lambda(codes[e]) else 0
+                    if root < best_t:
+                        best_t = root
+                        best_e = e
+        t_stop = best_t if best_e >= 0 else t_new
+        if recording:
+            while True:
+                tg = t0 + next_grid * record_dt
+                if tg >= t_stop:
+                    break
+                if nrec >= cap:
+                    cap *= 2
+                    rt = np.empty(cap)
+                    ry = np.empty((cap, 10))
+                    rt[:nrec] = rec_t[:nrec]
+                    ry[:nrec] = rec_y[:nrec]
+                    rec_t = rt
+                    rec_y = ry
+                rec_t[nrec] = tg
+                _dense_eval(F, y, (tg - t) / h, 10, ybuf)
+                for i in range(10):
+                    rec_y[nrec, i] = ybuf[i]
+                nrec += 1
+                next_grid += 1
+            if nrec >= cap:
+                cap *= 2
+                rt = np.empty(cap)
+                ry = np.empty((cap, 10))
+                rt[:nrec] = rec_t[:nrec]
+                ry[:nrec] = rec_y[:nrec]
+                rec_t = rt
+                rec_y = ry
+        if best_e >= 0:
+            y_end = np.empty(N)
+            _dense_eval(F, y, (best_t - t) / h, N, y_end)
+            if recording:
+                rec_t[nrec] = best_t
+                for i in range(10):
+                    rec_y[nrec, i] = y_end[i]
+                nrec += 1
+            return STATUS_OK, best_t, y_end, best_e, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+        if recording:
+            rec_t[nrec] = t_new
+            for i in range(10):
+                rec_y[nrec, i] = y_new[i]
+            nrec += 1
+        t = t_new
+        for i in range(N):
+            y[i] = y_new[i]
+            f[i] = K[_NS, i]
+        for e in range(ng):
+            g[e] = g_new[e]
+        if t == t_bound:
+            return STATUS_OK, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]

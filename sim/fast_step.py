@@ -1,0 +1,233 @@
+"""The compiled step map: one step of the hybrid system from the section point z to the next post-impact
+state, with the same phase sequence, pre-checks and failure classes as rimless.sim.hybrid.simulate_step
+for the ideal clutch, and optionally the exact map Jacobian dP/dz.
+
+Jacobian: the section tangent dy0/dz (10x2) is carried through each phase by the variational equations,
+through each intermediate guard by the saltation matrix
+    S = dR/dy + (f+ - dR/dy f-) (dg/dy) / (dg/dy f-)
+(lift-off: R = identity; clutch lock: R sets L1' = 0, dR/dy = identity with row L1' zeroed), and through
+touchdown by dR/dy (I - f- (dg/dy) / (dg/dy f-)) with R the exact relabel + impact reset: the map's
+output is taken at the event, so no f+ term appears there. Then dz'/dz = rows (theta, theta') of the result.
+
+Status codes are mapped to FailureReason by rimless.sim.fast.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from rimless.sim import fast_model as fm
+from rimless.sim import fast_rk as rk
+
+_jit = numba.njit(cache=True)
+
+OK = 0
+STALL = 1
+STANCE_LIFT_OFF = 2
+TOUCHDOWN_BEFORE_CLUTCH = 3
+CLUTCH_MISSED = 4
+DLSP_NEVER_ENDS = 5
+NEGATIVE_IMPULSE = 6
+INTEGRATION = 7
+TOO_MANY_STEPS = 8
+# detail codes (which check failed), for the messages
+D_NONE = 0
+D_PRECHECK = 1  # failed a check at the start of a phase
+D_GUARD = 2  # a guard fired
+D_TIME_LIMIT = 3  # the phase time limit was reached
+D_SOLVER = 4  # the integrator failed (step too small / not finite)
+
+PHASE_TIME_LIMIT_S = 5.0
+IMPACT_PHASE = 3
+
+_DLSP_CODES = np.array([fm.LIFTOFF_A, fm.STALL, fm.TOUCHDOWN], dtype=np.int64)
+_DLSP_DIRS = np.array([-1, -1, -1], dtype=np.int64)
+_FREE_ER_CODES = np.array([fm.CLUTCH_LOCK, fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
+_FREE_ER_DIRS = np.array([1, -1, -1, -1], dtype=np.int64)
+_SS_CODES = np.array([fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
+_SS_DIRS = np.array([-1, -1, -1], dtype=np.int64)
+
+
+@_jit
+def _get_V(ya):
+    V = np.empty((10, 2))
+    for c in range(2):
+        for i in range(10):
+            V[i, c] = ya[rk.VAR_OFFSET + 10 * c + i]
+    return V
+
+
+@_jit
+def _set_V(ya, V):
+    for c in range(2):
+        for i in range(10):
+            ya[rk.VAR_OFFSET + 10 * c + i] = V[i, c]
+
+
+@_jit
+def _saltation(V, f_minus, f_plus, dg, reset_index):
+    """S V with S = dR + (f+ - dR f-) dg^T / (dg . f-); dR = identity, with row reset_index zeroed if >= 0."""
+    den = 0.0
+    for i in range(10):
+        den += dg[i] * f_minus[i]
+    out = np.empty((10, 2))
+    for c in range(2):
+        gv = 0.0
+        for i in range(10):
+            gv += dg[i] * V[i, c]
+        for i in range(10):
+            rv = V[i, c]
+            rf = f_minus[i]
+            if i == reset_index:
+                rv = 0.0
+                rf = 0.0
+            out[i, c] = rv + (f_plus[i] - rf) * gv / den
+    return out
+
+
+@_jit
+def _map_status(st, fired_ok):
+    if st == rk.STATUS_TOO_MANY_STEPS:
+        return TOO_MANY_STEPS
+    return INTEGRATION
+
+
+@_jit
+def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
+    """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
+
+    Returns (status, detail, phase, t_s, y_plus (10,), J (2x2), times (3,), nfev, nsteps, nstiff):
+    status OK or a failure code; phase 0/1/2 (dlsp/slsp_free/slsp_clutched) or 3 (impact) where it ended;
+    t_s the step period (or the failure time), s; times = end of dlsp, end of free compression (ER; else
+    the touchdown time), touchdown, s; J = dz'/dz when want_jac (else zeros).
+    """
+    y0, T = fm.state_from_section(mi, z, p)
+    N = 30 if want_jac else 10
+    n_err = 10
+    ya = np.zeros(N)
+    ya[:10] = y0
+    if want_jac:
+        _set_V(ya, T)
+    J = np.zeros((2, 2))
+    times = np.zeros(3)
+    yp = np.zeros(10)
+    nfev = 0
+    nsteps = 0
+    nstiff = 0
+    t = 0.0
+    qdd = np.empty(5)
+    lam = np.zeros(4)
+    for i in range(10):
+        if not np.isfinite(y0[i]):
+            return INTEGRATION, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff
+    # 1. double support
+    if y0[7] <= 0.0:
+        return STALL, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff
+    if not fm.accel(mi, fm.DLSP, y0[:5], y0[5:10], p, qdd, lam):
+        return INTEGRATION, D_SOLVER, 0, t, yp, J, times, nfev, nsteps, nstiff
+    if lam[3] > 0.0:
+        st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
+            mi, fm.DLSP, p, ya, t, _DLSP_CODES, _DLSP_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac,
+            False, -1.0, max_steps)
+        nfev += nf
+        nsteps += ns
+        nstiff += nst
+        if st != rk.STATUS_OK:
+            return _map_status(st, fired), D_SOLVER, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+        if fired < 0:
+            return DLSP_NEVER_ENDS, D_TIME_LIMIT, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+        code = _DLSP_CODES[fired]
+        if code == fm.STALL:
+            return STALL, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+        if code == fm.TOUCHDOWN:
+            return DLSP_NEVER_ENDS, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+        ya = y_end
+        t = t_end
+        if want_jac:
+            ys = ya[:10].copy()
+            fmin = fm.phase_field(mi, fm.DLSP, ys, p)
+            fplus = fm.phase_field(mi, fm.SLSP_FREE, ys, p)
+            dg = fm.guard_gradient(mi, fm.DLSP, fm.LIFTOFF_A, ys, p)
+            _set_V(ya, _saltation(_get_V(ya), fmin, fplus, dg, -1))
+    times[0] = t
+    # 2. single support
+    ys = ya[:10].copy()
+    if not fm.accel(mi, fm.SLSP_FREE, ys[:5], ys[5:10], p, qdd, lam):
+        return INTEGRATION, D_SOLVER, 1, t, yp, J, times, nfev, nsteps, nstiff
+    if lam[1] <= 0.0:
+        return STANCE_LIFT_OFF, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff
+    if er:
+        if ys[8] >= 0.0:
+            return CLUTCH_MISSED, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff
+        st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
+            mi, fm.SLSP_FREE, p, ya, t, _FREE_ER_CODES, _FREE_ER_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err,
+            want_jac, False, -1.0, max_steps)
+        nfev += nf
+        nsteps += ns
+        nstiff += nst
+        if st != rk.STATUS_OK:
+            return _map_status(st, fired), D_SOLVER, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+        if fired < 0:
+            return INTEGRATION, D_TIME_LIMIT, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+        code = _FREE_ER_CODES[fired]
+        if code == fm.TOUCHDOWN:
+            return TOUCHDOWN_BEFORE_CLUTCH, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+        if code == fm.STALL:
+            return STALL, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+        if code == fm.LIFTOFF_B:
+            return STANCE_LIFT_OFF, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+        ya = y_end
+        t = t_end
+        if want_jac:
+            ys = ya[:10].copy()
+            fmin = fm.phase_field(mi, fm.SLSP_FREE, ys, p)
+            ys[8] = 0.0
+            fplus = fm.phase_field(mi, fm.SLSP_CLUTCHED, ys, p)
+            dg = fm.guard_gradient(mi, fm.SLSP_FREE, fm.CLUTCH_LOCK, ys, p)
+            _set_V(ya, _saltation(_get_V(ya), fmin, fplus, dg, 8))
+        ya[8] = 0.0  # the ideal clutch makes L1' = 0 exact
+        final = fm.SLSP_CLUTCHED
+    else:
+        final = fm.SLSP_FREE
+    times[1] = t
+    st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
+        mi, final, p, ya, t, _SS_CODES, _SS_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac, False, -1.0,
+        max_steps)
+    nfev += nf
+    nsteps += ns
+    nstiff += nst
+    if st != rk.STATUS_OK:
+        return _map_status(st, fired), D_SOLVER, final, t_end, yp, J, times, nfev, nsteps, nstiff
+    if fired < 0:
+        return STALL, D_TIME_LIMIT, final, t_end, yp, J, times, nfev, nsteps, nstiff
+    code = _SS_CODES[fired]
+    if code == fm.STALL:
+        return STALL, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff
+    if code == fm.LIFTOFF_B:
+        return STANCE_LIFT_OFF, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff
+    ya = y_end
+    t = t_end
+    times[2] = t
+    # 3. impact
+    ym = ya[:10].copy()
+    if want_jac:
+        V = _get_V(ya)
+        fmin = fm.phase_field(mi, final, ym, p)
+        dg = fm.guard_gradient(mi, final, fm.TOUCHDOWN, ym, p)
+        # project out the touchdown-time variation: (I - f- dg^T / (dg . f-)) V
+        # _saltation with f+ = 0 and dR = I gives V - f- (dg V)/(dg f-): exactly this projection
+        V = _saltation(V, fmin, np.zeros(10), dg, -1)
+    else:
+        V = np.zeros((10, 2))
+    ok, yp, impulse, Vp = fm.impact(mi, ym, p, V, want_jac)
+    if not ok:
+        return INTEGRATION, D_SOLVER, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff
+    if not (impulse[1] > 0.0 and impulse[3] > 0.0):
+        return NEGATIVE_IMPULSE, D_GUARD, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff
+    if want_jac:
+        J[0, 0] = Vp[2, 0]
+        J[0, 1] = Vp[2, 1]
+        J[1, 0] = Vp[7, 0]
+        J[1, 1] = Vp[7, 1]
+    return OK, D_NONE, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff

@@ -1,0 +1,60 @@
+"""Fixed points of the ER and VE wheels at Table 1: residual, stability, and model.md's expectations."""
+
+import numpy as np
+import pytest
+
+from rimless.sim.poincare import PoincareMap
+
+
+def _regression_jacobian(pmap: PoincareMap, z: np.ndarray, radius: float = 2e-5, n: int = 8) -> np.ndarray:
+    """An independent estimate: least-squares fit of P(z + d) - P(z) = J d over a ring of perturbations."""
+    base = pmap(z)
+    angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    D = radius * np.column_stack((np.cos(angles), np.sin(angles)))
+    Y = np.array([pmap(z + d) - base for d in D])
+    # second-order terms cancel pairwise on a symmetric ring: fit with the opposite points averaged
+    sol, *_ = np.linalg.lstsq(D, Y, rcond=None)
+    return sol.T
+
+
+@pytest.mark.parametrize("which", ["er_fixed_point", "ve_fixed_point"])
+def test_fixed_point_residual_and_two_jacobian_estimates_agree(which, request):
+    pmap, fp = request.getfixturevalue(which)
+    assert fp.residual <= 1e-10
+    assert np.max(np.abs(pmap(fp.z) - fp.z)) <= 1e-10
+    J2 = _regression_jacobian(pmap, fp.z)
+    ev1 = np.sort_complex(np.linalg.eigvals(fp.jacobian))
+    ev2 = np.sort_complex(np.linalg.eigvals(J2))
+    assert np.max(np.abs(ev1 - ev2)) <= 1e-6
+
+
+def test_er_gait_matches_model_md_orders_of_magnitude(er_fixed_point):
+    _, fp = er_fixed_point
+    assert fp.step.period_s == pytest.approx(0.31, abs=0.01)
+    assert fp.z[1] == pytest.approx(2.6, abs=0.05)
+    assert fp.max_abs_eigenvalue == pytest.approx(0.79, abs=0.01)
+    assert fp.step.impact.energy_ratio == pytest.approx(0.85, abs=0.01)
+    assert fp.stable
+    assert [p.name for p in fp.step.phases] == ["dlsp", "slsp_free", "slsp_clutched"]
+    d = fp.step.diagnostics
+    # model.md section 9: brief leading-foot tension at the start of DLSP (a few newtons, ~1/3 of the phase)
+    assert -20 < d["min_normal_force_b_dlsp_N"] < 0
+    assert 0 < d["leading_foot_tension_s"] < 0.6 * fp.step.phase_durations_s["dlsp"]
+    # the lifted trailing foot dips a few millimetres below the slope
+    assert -0.006 < d["trailing_foot_min_height_m"] < 0
+
+
+def test_ve_medium_gait_matches_model_md(ve_fixed_point):
+    _, fp = ve_fixed_point
+    assert fp.step.period_s == pytest.approx(0.40, abs=0.01)
+    assert fp.step.impact.energy_ratio == pytest.approx(0.81, abs=0.01)
+    assert [p.name for p in fp.step.phases] == ["dlsp", "slsp_free"]
+
+
+def test_period_one_gait_repeats_itself(er_fixed_point):
+    """Iterating the map from the fixed point stays there (a closed-form-free consistency check)."""
+    pmap, fp = er_fixed_point
+    z = fp.z
+    for _ in range(3):
+        z = pmap(z)
+    assert np.max(np.abs(z - fp.z)) < 1e-9

@@ -1,0 +1,74 @@
+"""The `rimless` command line: fast help, thin commands, user errors as one line with exit code 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+from typer.testing import CliRunner
+
+from rimless.cli import app
+
+runner = CliRunner()
+HEAVY = ("scipy", "numpy", "pandas", "matplotlib", "sympy", "numba")
+
+
+def test_help_imports_no_heavy_library():
+    code = (
+        "import sys\nsys.argv = ['rimless', '--help']\nfrom rimless.cli import main\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        f"print('HEAVY', [m for m in {HEAVY!r} if m in sys.modules])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "HEAVY []" in out
+    assert "sim" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["sim", "fixed-point", "--hub-mass-kg", "-1"], "hub_mass_kg"),
+        (["sim", "fixed-point", "--k", "0"], "--k"),
+        (["sim", "fixed-point", "--slope-deg", "22.5"], "slope"),
+        (["sim", "critical-slope", "--model", "rigid", "--c", "nan"], "--c"),
+        (["sim", "fixed-point", "--slope-deg", "1", "--slope-rad", "0.02"], "slope"),
+        (["sim", "gait", "--out", "traj.txt"], "traj.txt"),
+    ],
+)
+def test_bad_parameters_exit_2_with_one_line(args, named):
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2, res.output
+    assert named in res.output
+    assert "Traceback" not in res.output
+
+
+def test_params_file_errors_name_the_file(tmp_path):
+    f = tmp_path / "wheel.toml"
+    f.write_text("k = -5\n")
+    res = runner.invoke(app, ["sim", "critical-slope", "--model", "rigid", "--params", str(f)])
+    assert res.exit_code == 2
+    assert "wheel.toml" in res.output and "--k" in res.output
+
+
+def test_rigid_critical_slope_json_is_the_papers_2_80_deg():
+    res = runner.invoke(app, ["sim", "critical-slope", "--model", "rigid", "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert round(out["critical_slope_deg"], 2) == 2.80
+    assert out["cot"] == pytest.approx(0.0489, abs=1e-4)
+    assert "m_H" in out["mass_convention"]
+    assert out["eight_leg_consistent"]["critical_slope_deg"] == pytest.approx(2.600, abs=1e-3)
+
+
+def test_fixed_point_json_has_the_contract_keys():
+    res = runner.invoke(app, ["sim", "fixed-point", "--model", "er", "--json", "--rtol", "1e-9"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    for key in ("model", "slope_rad", "k", "c", "theta_plus_rad", "theta_dot_plus_rad_s", "step_period_s",
+                "eigenvalues", "max_abs_eigenvalue", "stable", "energy_ratio", "min_normal_force_N",
+                "phase_durations_s"):
+        assert key in out
+    assert out["model"] == "er" and out["k"] == 2700 and out["c"] == 8 and out["slope_rad"] == 0.05
+    assert len(out["eigenvalues"]) == 2 and all(len(e) == 2 for e in out["eigenvalues"])
+    assert out["stable"] is True
+    assert set(out["phase_durations_s"]) == {"dlsp", "slsp_free", "slsp_clutched"}
