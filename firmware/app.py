@@ -221,7 +221,11 @@ class RobotApp:
     # --- tasks ----------------------------------------------------------------------------------
     async def _sampler_task(self) -> None:
         assert self.sampler is not None
-        await asyncio.wrap_future(self.sampler.done)
+        done = self.sampler.done
+        # Poll rather than wrap_future: cancelling a wrapper would cancel the thread's future.
+        while not done.done():
+            await asyncio.sleep(ROUTE_PERIOD_S)
+        done.result()
 
     def _route(self) -> None:
         """Move records from the control thread's deque to the telemetry and trial-log buffers."""
@@ -333,7 +337,7 @@ class RobotApp:
             trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header)
             self._route()  # records from before the start do not belong to the trial
             self.trial = trial
-            self._log_pending = [EventRecord(time.monotonic_ns(), "trial_start", {"name": name})]
+            self._log_pending = [EventRecord(time.monotonic_ns(), "trial_start", {"trial": name})]
             self.summary.trials.append(str(trial.path))
             return {"path": str(trial.path)}
 

@@ -194,6 +194,9 @@ class CommandServer:
         except (ValueError, RuntimeError, TimeoutError) as err:
             self.rejected += 1
             return {"ok": False, "seq": cmd.seq, "error": f"{cmd.cmd}: {err}"}, cmd.seq
+        except Exception as err:  # a bug must still get a reply, and must not kill the server
+            self.rejected += 1
+            return {"ok": False, "seq": cmd.seq, "error": f"{cmd.cmd}: internal error {type(err).__name__}: {err}"}, cmd.seq
         self.accepted += 1
         return {"ok": True, "seq": cmd.seq, "result": result}, cmd.seq
 

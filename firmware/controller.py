@@ -126,7 +126,7 @@ class Controller:
         params = self.channels[0].detector.params.with_value(name, value)
         for ch in self.channels:
             ch.detector.set_params(params)
-        self._event("param", name=name, value=getattr(params, name))
+        self._event("param", param=name, value=getattr(params, name))
         return {"name": name, "value": getattr(params, name)}
 
     def set_stance_leg(self, channel: int, index: int) -> None:
@@ -177,8 +177,8 @@ class Controller:
         self.clutches.all_off()
         self._mask = 0
 
-    def _event(self, name: str, **fields: Any) -> None:
-        self.outbox.append(EventRecord(self.clock_ns(), name, fields))
+    def _event(self, event: str, **fields: Any) -> None:
+        self.outbox.append(EventRecord(self.clock_ns(), event, fields))
 
     # --- the sample -----------------------------------------------------------------------------
     def step(self) -> None:

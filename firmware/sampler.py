@@ -158,11 +158,13 @@ class Sampler:
                 ctl.fault(Fault.EXCEPTION, f"{type(err).__name__}: {err}")
             finally:
                 self._finish(cpu0)
-                self.done.set_exception(err)
+                if not self.done.done():
+                    self.done.set_exception(err)
             return
         self._drain_inbox()
         self._finish(cpu0)
-        self.done.set_result(stats)
+        if not self.done.done():
+            self.done.set_result(stats)
 
     def _finish(self, cpu0: float) -> None:
         self.stats.stopped_ns = time.monotonic_ns()

@@ -56,9 +56,9 @@ def record_to_json(rec: Record, clock: WallClock) -> dict[str, Any]:
             "loop": {"armed": int(rec.armed), "latency_ms": round(rec.latency_ns * 1e-6, 4)},
         }
     assert isinstance(rec, EventRecord)
-    body: dict[str, Any] = {"name": rec.name, "code": EVENT_CODES.get(rec.name, 0)}
-    for k, v in rec.fields.items():
-        body[k] = v
+    body: dict[str, Any] = dict(rec.fields)
+    body["name"] = rec.name  # never overridden by a field
+    body["code"] = EVENT_CODES.get(rec.name, 0)
     if rec.name == "fault":
         body["fault_code"] = Fault(rec.fields["fault"]).code
     return {"timestamp": clock.epoch_s(rec.t_ns), "t_mono_s": round(rec.t_ns * 1e-9, 6), "event": body}
@@ -114,6 +114,9 @@ class TelemetrySender:
         self.address = info[4]
         self.sock = socket.socket(info[0], socket.SOCK_DGRAM)
         self.sock.setblocking(False)
+        # Connected: the kernel reports an ICMP "port unreachable" as ECONNREFUSED on a later send,
+        # so a dead receiver shows up in dropped_datagrams instead of vanishing silently.
+        self.sock.connect(self.address)
 
     def send(self, records: Iterable[Record]) -> None:
         """Encode and send; never blocks, never raises on a network error."""
@@ -126,7 +129,7 @@ class TelemetrySender:
             objs.append(record_to_json(rec, self.clock))
         for data in pack_datagrams(objs, self.max_datagram_bytes, batch=self.batch):
             try:
-                self.sock.sendto(data, self.address)
+                self.sock.send(data)
             except OSError:  # nobody listening (ICMP refused), buffer full, network down: drop it
                 self.dropped_datagrams += 1
             else:

@@ -1,0 +1,293 @@
+"""The asyncio app over real loopback sockets: commands, telemetry, trial log, watchdogs."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+from rimless.firmware.app import RobotApp
+from rimless.firmware.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig, TelemetryConfig
+from rimless.firmware.fake_adns3080 import GaitTrajectory
+from rimless.firmware.hardware import build_fake
+from rimless.firmware.triallog import read_trial_log
+
+TOKEN = "s3cret"
+
+
+def config(tmp_path: Path, **kw) -> RobotConfig:
+    base = dict(
+        commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN),
+        log=LogConfig(dir=str(tmp_path / "trials"), flush_interval_s=0.05),
+    )
+    base.update(kw)
+    return RobotConfig(**base)
+
+
+def gait(step_period_s: float = 0.4, steps: int | None = None) -> GaitTrajectory:
+    return GaitTrajectory(start_s=time.monotonic() + 0.1, step_period_s=step_period_s, steps=steps)
+
+
+def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=15.0, hw_hook=None):
+    """Run the app with fake hardware; `script(app, hw)` runs once it is ready, then the app stops."""
+    hw = build_fake(cfg, trajectory=trajectory or gait())
+    if hw_hook is not None:
+        hw_hook(hw)
+
+    async def main():
+        ready = asyncio.Event()
+        app = RobotApp(cfg, hw, on_ready=lambda a: ready.set())
+        run = asyncio.create_task(app.run(duration_s=timeout_s, arm=arm, handle_signals=False))
+        await ready.wait()
+        try:
+            result = await script(app, hw)
+        finally:
+            app.request_stop("test done")
+            summary = await run
+        return app, summary, result
+
+    return (*asyncio.run(main()), hw)
+
+
+class Client:
+    def __init__(self, reader, writer) -> None:
+        self.reader, self.writer = reader, writer
+
+    @classmethod
+    async def connect(cls, port: int) -> Client:
+        return cls(*await asyncio.open_connection("127.0.0.1", port))
+
+    async def raw(self, data: bytes) -> dict:
+        self.writer.write(data)
+        await self.writer.drain()
+        return json.loads(await asyncio.wait_for(self.reader.readline(), 5))
+
+    async def cmd(self, cmd: str, seq: int, token: str = TOKEN, **args) -> dict:
+        return await self.raw(json.dumps({"token": token, "seq": seq, "cmd": cmd, "args": args}).encode() + b"\n")
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def all_off(hw) -> bool:
+    return all(hw.pin_factory.pin(p).state is False for p in hw.clutches.pins) if hw.clutches.pins else True
+
+
+def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        before = await c.cmd("status", 1)
+        assert before["ok"] and before["result"]["armed"] is False
+        replies = [
+            await c.raw(b"{not json\n"),
+            await c.raw(b"[1, 2]\n"),
+            await c.raw(b"\xff\xfe\n"),
+            await c.raw(b"x" * 5000 + b"\n"),  # oversized
+            await c.cmd("arm", 2, token="wrong"),
+            await c.raw(json.dumps({"seq": 3, "cmd": "arm"}).encode() + b"\n"),  # no token
+            await c.cmd("arm", 1),  # replayed seq: out of order
+            await c.cmd("arm", 4, extra=1),  # unknown argument
+            await c.raw(json.dumps({"token": TOKEN, "seq": 5, "cmd": "arm", "x": 1}).encode() + b"\n"),
+            await c.cmd("fly", 6),
+            await c.cmd("set", 7, name="touch_velocity_m_s", value=-3),
+            await c.cmd("set", 8, name="no_such_param", value=1),
+            await c.cmd("set", 9, name="touch_velocity_m_s"),
+            await c.cmd("trial_stop", 10),  # out of order: no trial running
+            await c.cmd("trial_start", 11, name="../escape"),
+            await c.raw(json.dumps({"token": TOKEN, "seq": True, "cmd": "arm"}).encode() + b"\n"),
+        ]
+        after = await c.cmd("status", 12)
+        c.close()
+        return before["result"], replies, after["result"]
+
+    app, summary, (before, replies, after), hw = scenario(config(tmp_path), script)
+    assert len(replies) == 16
+    for r in replies:
+        assert r["ok"] is False and r["error"], r
+    assert "garbled" in replies[0]["error"] and "longer than 4096" in replies[3]["error"]
+    assert "unauthenticated" in replies[4]["error"] and "unauthenticated" in replies[5]["error"]
+    assert "out of order" in replies[6]["error"] and replies[6]["seq"] == 1
+    assert "no trial is running" in replies[13]["error"]
+    assert after["armed"] is False and after["params"] == before["params"] and after["trial"] is None
+    assert after["engaged"] == [] and all_off(hw)
+    assert not list((tmp_path / "trials").glob("*.jsonl")) if (tmp_path / "trials").exists() else True
+    assert summary.error is None
+
+
+def test_arm_set_trial_disarm_over_tcp(tmp_path) -> None:
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        r_arm = await c.cmd("arm", 1)
+        r_set = await c.cmd("set", 2, name="touch_velocity_m_s", value=0.06)
+        r_start = await c.cmd("trial_start", 3, name="slope1")
+        r_again = await c.cmd("trial_start", 4, name="slope2")
+        await asyncio.sleep(1.0)
+        r_status = await c.cmd("status", 5)
+        r_stop = await c.cmd("trial_stop", 6)
+        r_disarm = await c.cmd("disarm", 7)
+        c.close()
+        return r_arm, r_set, r_start, r_again, r_status, r_stop, r_disarm
+
+    app, summary, rs, hw = scenario(config(tmp_path), script)
+    r_arm, r_set, r_start, r_again, r_status, r_stop, r_disarm = rs
+    assert r_arm["ok"] and r_arm["result"]["armed"] is True
+    assert r_set["result"] == {"name": "touch_velocity_m_s", "value": 0.06}
+    assert r_start["ok"] and "slope1" in r_start["result"]["path"]
+    assert not r_again["ok"] and "already running" in r_again["error"]
+    assert r_status["result"]["params"]["touch_velocity_m_s"] == 0.06
+    assert r_disarm["ok"] and r_disarm["result"]["armed"] is False
+    assert all_off(hw)
+    # The trial log: every sample in order, events included, header first.
+    log = read_trial_log(r_stop["result"]["path"])
+    assert log.header["trial"] == "slope1" and not log.torn_tail
+    seqs = [s["seq"] for s in log.samples]
+    assert len(seqs) > 200 and seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+    names = [e["event"]["name"] for e in log.events]
+    assert names[0] == "trial_start" and names[-1] == "trial_stop"
+    assert "lock" in names and "touchdown" in names
+    assert r_stop["result"]["lines"] == 1 + len(log.samples) + len(log.events)
+
+
+def test_telemetry_reaches_a_udp_receiver_in_plotjuggler_shape(tmp_path) -> None:
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(0.05)
+    port = rx.getsockname()[1]
+    cfg = config(tmp_path, telemetry=TelemetryConfig(host="127.0.0.1", port=port, max_datagram_bytes=1000))
+
+    datagrams = []
+
+    async def script(app, hw):
+        rx.setblocking(False)
+        for _ in range(100):  # read while the app runs, so the socket buffer never overflows
+            await asyncio.sleep(0.01)
+            while True:
+                try:
+                    datagrams.append(rx.recv(65536))
+                except BlockingIOError:
+                    break
+        rx.settimeout(0.05)
+
+    app, summary, _, hw = scenario(cfg, script, arm=True)
+    while True:
+        try:
+            datagrams.append(rx.recv(65536))
+        except TimeoutError:
+            break
+    rx.close()
+    assert datagrams and all(len(d) <= 1000 for d in datagrams)
+    objs = [o for d in datagrams for o in json.loads(d)]
+    samples = [o for o in objs if "leg" in o]
+    events = [o for o in objs if "event" in o]
+    assert len(samples) == summary.samples  # nothing lost on loopback, decimate = 1
+    now = time.time()
+    for o in samples:
+        assert isinstance(o["timestamp"], float) and abs(o["timestamp"] - now) < 60
+        assert isinstance(o["leg"]["velocity_m_s"], float) and isinstance(o["sensor"]["squal"], int)
+    assert all(isinstance(e["event"]["code"], int) for e in events)
+    assert any(e["event"]["name"] == "lock" for e in events)
+
+
+def test_dead_telemetry_receiver_costs_the_loop_nothing(tmp_path) -> None:
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    dead_port = probe.getsockname()[1]
+    probe.close()  # nobody listens there: every send gets ICMP port-unreachable
+    cfg = config(tmp_path, telemetry=TelemetryConfig(host="127.0.0.1", port=dead_port, period_s=0.005),
+                 sampling=SamplingConfig(rate_hz=500.0))
+
+    async def script(app, hw):
+        await asyncio.sleep(1.0)
+
+    app, summary, _, hw = scenario(cfg, script, arm=True)
+    assert app.telemetry is not None
+    assert app.telemetry.dropped_datagrams > 0  # the errors happened...
+    assert summary.error is None and summary.faults == []  # ...and were absorbed
+    assert summary.clutch_commands >= 2  # the control loop kept working meanwhile
+    assert all_off(hw)
+
+
+def test_link_loss_disarms(tmp_path) -> None:
+    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=0.3))
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        assert (await c.cmd("arm", 1))["ok"]
+        for seq in range(2, 8):  # heartbeats keep it armed
+            await asyncio.sleep(0.1)
+            assert (await c.cmd("ping", seq))["ok"]
+        armed_while_pinging = app.controller.armed
+        engaged_seen = False
+        for _ in range(60):  # then silence
+            await asyncio.sleep(0.02)
+            engaged_seen |= bool(hw.clutches.engaged())
+            if not app.controller.armed:
+                break
+        c.close()
+        return armed_while_pinging
+
+    app, summary, armed_while_pinging, hw = scenario(cfg, script)
+    assert armed_while_pinging is True
+    assert "link_lost" in summary.faults
+    assert all_off(hw)
+
+
+class StallingSensor:
+    """Wraps a sensor; blocks one read for `stall_s` once a clutch is engaged."""
+
+    def __init__(self, inner, clutches, stall_s: float, exc: Exception | None = None) -> None:
+        self.inner, self.clutches, self.stall_s, self.exc = inner, clutches, stall_s, exc
+        self.fired = False
+
+    def read_motion(self):
+        if not self.fired and self.clutches.engaged():
+            self.fired = True
+            if self.exc is not None:
+                raise self.exc
+            time.sleep(self.stall_s)
+        return self.inner.read_motion()
+
+    def verify_id(self):
+        return self.inner.verify_id()
+
+
+def test_stalled_sampler_trips_the_watchdog(tmp_path) -> None:
+    wrappers = []
+
+    def hook(hw):
+        for ch in hw.channels:
+            ch.sensor = StallingSensor(ch.sensor, hw.clutches, stall_s=0.5)
+            wrappers.append(ch.sensor)
+
+    async def script(app, hw):
+        for _ in range(200):
+            await asyncio.sleep(0.01)
+            if "sensor_stalled" in app.summary.faults:
+                return [hw.pin_factory.pin(p).state for p in hw.clutches.pins]
+        return None
+
+    app, summary, states_during_stall, hw = scenario(config(tmp_path), script, arm=True, hw_hook=hook)
+    assert wrappers[0].fired
+    assert states_during_stall == [False] * 8  # off while the sampler was still stuck
+    assert all_off(hw)
+
+
+def test_exception_in_the_control_path_stops_the_app_safely(tmp_path) -> None:
+    def hook(hw):
+        for ch in hw.channels:
+            ch.sensor = StallingSensor(ch.sensor, hw.clutches, 0, exc=RuntimeError("driver bug"))
+
+    async def script(app, hw):
+        await asyncio.sleep(5)
+
+    app, summary, _, hw = scenario(config(tmp_path), script, arm=True, hw_hook=hook)
+    assert summary.error is not None and "driver bug" in summary.error
+    assert "exception" in summary.faults
+    assert summary.stop_reason == "error"
+    engaged_once = [p for p in hw.clutches.pins if any(s.state for s in hw.pin_factory.pin(p).states)]
+    assert engaged_once  # it really was on when the error struck...
+    assert all_off(hw)  # ...and is off now
