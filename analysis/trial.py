@@ -199,6 +199,8 @@ def read_trial(path: str | Path) -> Trial:
     import pyarrow.parquet as pq
 
     p = Path(path)
+    if not p.is_file():
+        raise InputFileError(f"{p}: no such trial file")
     try:
         table = pq.read_table(p)
     except (OSError, ValueError) as err:
@@ -298,7 +300,7 @@ def _pick_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None) 
         raise TrialRefused(
             f"{vf.path}: no Objects section, and the Trajectories section (line {sec.line}) has {len(groups)} "
             f"markers ({detail}); a wheel trial needs the 4 wheel markers (or 1 hub marker): choose them "
-            "with markers=")
+            "with markers= (CLI: --markers A,B,C,D)")
     others = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
     raise TrialRefused(f"{vf.path}: no usable trajectory: no Objects or Trajectories section, only {others}")
 
@@ -452,12 +454,13 @@ def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.nd
     """Hub at each CoM-height cusp: height from the V fit of Z, horizontal position interpolated."""
     half = max(3, int(0.25 * np.median(np.diff(idx)))) if idx.size > 1 else 5
     ok = ~np.isnan(hub).any(axis=1)
+    tv, hv = time_s[ok], hub[ok]
     out = np.empty((idx.size, 3))
     for k, i in enumerate(idx):
-        tc, zc = refine_cusp(time_s, hub[:, 2], int(i), half)
-        out[k, 0] = np.interp(tc, time_s[ok], hub[ok, 0])
-        out[k, 1] = np.interp(tc, time_s[ok], hub[ok, 1])
-        out[k, 2] = zc
+        out[k, 0], out[k, 2] = refine_cusp(time_s, hub[:, 2], int(i), half)
+    tc = out[:, 0].copy()
+    out[:, 0] = np.interp(tc, tv, hv[:, 0])
+    out[:, 1] = np.interp(tc, tv, hv[:, 1])
     return out
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import io
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -429,16 +430,17 @@ class _Parser:
         return values
 
     def fast_block(self, block: str, width: int) -> np.ndarray | None:
-        allowed = "0-9eE+\\-.\\n " + re.escape(self.delim) + re.escape(self.decimal)
-        if re.search(f"[^{allowed}]", block):
-            return None
+        """Bulk parse with pandas' C reader; None sends the block to `slow_block` (which locates errors)."""
         import pandas as pd
 
         try:
-            df = pd.read_csv(io.StringIO(block), sep=self.delim, header=None, names=range(width),
-                             dtype=np.float64, na_values=[""], keep_default_na=False, decimal=self.decimal,
-                             engine="c", skip_blank_lines=False, index_col=False)
-        except (ValueError, pd.errors.ParserError):
+            with warnings.catch_warnings():
+                # A row wider than the header makes pandas drop cells with a warning: take the slow path.
+                warnings.simplefilter("error", pd.errors.ParserWarning)
+                df = pd.read_csv(io.StringIO(block), sep=self.delim, header=None, names=range(width),
+                                 dtype=np.float64, na_values=[""], keep_default_na=False, decimal=self.decimal,
+                                 engine="c", skip_blank_lines=False, index_col=False)
+        except (ValueError, pd.errors.ParserError, pd.errors.ParserWarning):
             return None
         values = df.to_numpy(dtype=np.float64)
         if values.shape[0] != block.count("\n") + (0 if block.endswith("\n") else 1):

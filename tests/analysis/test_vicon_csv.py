@@ -158,6 +158,14 @@ def test_semicolon_delimiter_with_decimal_commas_and_deg_m_units():
     np.testing.assert_allclose(sec.values[0], [math.pi, math.pi / 2, 0, 1, 2, 3])
 
 
+def test_first_row_wider_than_header_is_not_silently_cut():
+    text = "Trajectories\n100\n,,A\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n1,0,1,2,3,,9\n2,0,1,2,3\n"
+    e = err_of(text)
+    assert (e.cause, e.line, e.column) == ("extra-cell", 6, 7)
+    ok = parse_vicon_text(text.replace(",,9", ",,"), "padded.csv").section("Trajectories")
+    np.testing.assert_allclose(ok.values, [[0.001, 0.002, 0.003]] * 2)
+
+
 def test_short_rows_and_empty_cells_are_occlusions():
     text = "Trajectories\n100\n,,A,,,B\nFrame,Sub Frame,X,Y,Z,X,Y,Z\n,,mm,mm,mm,mm,mm,mm\n1,0,1,2,3\n2,0,,,,4,5,6\n"
     sec = parse_vicon_text(text).section("Trajectories")

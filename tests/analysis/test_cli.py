@@ -1,0 +1,87 @@
+"""`rimless trials import|show` through typer's CliRunner."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from rimless.analysis.cli import app
+from rimless.analysis.synthetic import rolling_wheel
+from rimless.analysis.trial import read_trial
+from rimless.analysis.vicon_csv import write_tracker_csv
+
+PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
+runner = CliRunner()
+
+
+@pytest.fixture()
+def wheel_csv(tmp_path):
+    w = rolling_wheel(seed=21)
+    p = write_tracker_csv(tmp_path / "wheel.csv", rate_hz=w.rate_hz,
+                          markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)})
+    return w, p
+
+
+def test_import_json_mixed_good_and_bad(tmp_path, wheel_csv):
+    w, good = wheel_csv
+    bad = tmp_path / "bad.csv"
+    bad.write_text("Trajectories\n100\n,,A\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n1,0,1,2,x\n")
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["import", str(bad), str(good), "--slope-deg", "2", "--out", str(out), "--json"])
+    assert res.exit_code != 0  # one was refused
+    rows = json.loads(res.stdout)
+    assert [set(r) for r in rows] == [{"file", "status", "reason", "frames", "rate_hz", "steps"}] * 2
+    assert rows[0]["status"] == "refused" and "line 6, column 5" in rows[0]["reason"]
+    assert rows[1]["status"] == "imported" and rows[1]["reason"] is None
+    assert rows[1]["frames"] == len(w.time_s) and rows[1]["rate_hz"] == 100.0
+    assert len(w.impact_time_s) - 3 <= rows[1]["steps"] <= len(w.impact_time_s) - 1
+    assert sorted(p.name for p in out.iterdir()) == ["wheel.trial.parquet"]  # nothing half-imported
+    trial = read_trial(out / "wheel.trial.parquet")
+    assert trial.step_period_s.size == rows[1]["steps"]
+    assert trial.meta.slope_deg == pytest.approx(2.0) and trial.meta.slope_source == "given"
+
+
+def test_import_all_good_exits_zero_and_show(tmp_path, wheel_csv):
+    _, good = wheel_csv
+    res = runner.invoke(app, ["import", str(good), "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert "imported" in res.stdout
+    trial_path = tmp_path / "wheel.trial.parquet"
+    res = runner.invoke(app, ["show", str(trial_path), "--json"])
+    assert res.exit_code == 0
+    s = json.loads(res.stdout)
+    expected = read_trial(trial_path)
+    assert s["steps"] == expected.step_period_s.size > 5
+    np.testing.assert_allclose(s["step_period_s"], expected.step_period_s)
+    assert abs(s["slope_deg"] - 2.0) < 0.05
+    res = runner.invoke(app, ["show", str(trial_path)])
+    assert res.exit_code == 0 and "slope_deg" in res.stdout and "period s" in res.stdout
+
+
+def test_show_missing_file_is_user_error(tmp_path):
+    res = runner.invoke(app, ["show", str(tmp_path / "none.parquet")])
+    assert res.exit_code == 2 and "no such trial file" in res.output
+
+
+def test_bad_hub_offset_option(tmp_path, wheel_csv):
+    _, good = wheel_csv
+    res = runner.invoke(app, ["import", str(good), "--hub-offset-mm", "1,2", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "--hub-offset-mm" in res.output
+
+
+def test_public_files_through_cli(tmp_path):
+    if not PUBLIC.exists():
+        pytest.skip(f"public Vicon exports not found at {PUBLIC}")
+    files = sorted(PUBLIC.glob("*.csv"))
+    res = runner.invoke(app, ["import", *map(str, files), "--out", str(tmp_path), "--json"])
+    rows = {Path(r["file"]).name: r for r in json.loads(res.stdout)}
+    assert res.exit_code == 2
+    assert rows["tracker_objects_vantage_tube8.csv"]["status"] == "imported"
+    assert rows["tracker_objects_vantage_tube8.csv"]["frames"] == 547
+    for name in ("nexus_devices_pyomeca_analogs.csv", "nexus_trajectories_pyomeca.csv",
+                 "nexus_multisection_wpi_walk.csv"):
+        assert rows[name]["status"] == "refused" and rows[name]["reason"]
