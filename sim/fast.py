@@ -1,0 +1,350 @@
+"""The compiled fast path (issue 3): a numba DOP853 backend for the hybrid simulation, a lean compiled
+Poincaré map with the exact (variational) map Jacobian, and their Python faces.
+
+- `FastIntegrator(rtol, atol)`: implements rimless.sim.integrators.Integrator (`run_phase`), so
+  rimless.sim.hybrid.simulate_step can use it when trajectories, forces or energies are recorded.
+- `fast_step(params, model, z, ...)` / `fast_map(params, model, z, rtol)`: one whole step compiled
+  (phases, guards, pre-checks, failure classes and impact identical to hybrid.simulate_step with the ideal
+  clutch); nothing is recorded. Failures raise StepFailure with the same FailureReason as the reference.
+- `FastPoincareMap`: same interface as rimless.sim.poincare.PoincareMap (`__call__`, `step`, `jacobian`,
+  `with_params`, attributes params/model/integrator/clutch/evaluations), usable unchanged by
+  solve_fixed_point and the continuation code; its `jacobian` is the exact variational Jacobian.
+- `exact_jacobian(pmap_or_params, model, z)`: dP/dz (2x2) from the variational equations, saltation
+  matrices at lift-off and clutch lock, and the exact derivative of the relabel + impact reset.
+
+Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.section).
+
+Stiff legs: DOP853 is explicit. A phase needing more than `max_steps` steps is reported as such
+(StepFailure INTEGRATION with "too many steps"); FastPoincareMap(stiff_fallback=True) then recomputes that
+map with scipy's implicit Radau and records it in `last_method` / `method_counts`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rimless.sim import fast_model as fm
+from rimless.sim import fast_rk as rk
+from rimless.sim import fast_step as fs
+from rimless.sim.events import DIRECTION
+from rimless.sim.failures import FailureReason, StepFailure
+from rimless.sim.integrators import PhaseRun
+from rimless.sim.model import Mechanics
+from rimless.sim.params import WheelParams
+
+MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
+MODELS = ("er", "ve")
+
+_REASON = {
+    fs.STALL: FailureReason.STALL,
+    fs.STANCE_LIFT_OFF: FailureReason.STANCE_LIFT_OFF,
+    fs.TOUCHDOWN_BEFORE_CLUTCH: FailureReason.TOUCHDOWN_BEFORE_CLUTCH,
+    fs.CLUTCH_MISSED: FailureReason.CLUTCH_MISSED,
+    fs.DLSP_NEVER_ENDS: FailureReason.DLSP_NEVER_ENDS,
+    fs.NEGATIVE_IMPULSE: FailureReason.NEGATIVE_IMPULSE,
+    fs.INTEGRATION: FailureReason.INTEGRATION,
+    fs.TOO_MANY_STEPS: FailureReason.INTEGRATION,
+}
+_PHASE = {0: "dlsp", 1: "slsp_free", 2: "slsp_clutched", 3: "impact"}
+_DETAIL = {
+    fs.D_PRECHECK: "failed the check at the start of the phase",
+    fs.D_GUARD: "the guard fired",
+    fs.D_TIME_LIMIT: f"no event within {fs.PHASE_TIME_LIMIT_S} s",
+    fs.D_SOLVER: "the compiled integrator failed (step size too small or non-finite state)",
+}
+
+
+class StiffnessLimit(StepFailure):
+    """The explicit method needed more than `max_steps` steps in one phase (stiff or very oscillatory legs)."""
+
+
+def mass_model_index(params: WheelParams) -> int:
+    return fm.MASS_MODEL_INDEX[params.mass_model]
+
+
+def param_vector(params: WheelParams) -> np.ndarray:
+    """(m_H, m, I_c, L0, k, c, g, phi) as float64, SI."""
+    return np.array(params.as_vector(), dtype=np.float64)
+
+
+def _check_model(model: str) -> bool:
+    if model not in MODELS:
+        raise ValueError(f"unknown model {model!r}")
+    return model == "er"
+
+
+@dataclass(frozen=True)
+class FastStep:
+    """Result of one compiled step: next section point, period (s), post-impact state (new labels, foot b
+    not moved to the origin), dz'/dz (if asked), phase end times (s), counters."""
+
+    z_next: np.ndarray
+    period_s: float
+    y_plus: np.ndarray
+    jacobian: np.ndarray | None
+    phase_end_s: np.ndarray  # end of dlsp, end of free compression (VE: = touchdown), touchdown
+    nfev: int
+    nsteps: int
+    nstiff: int  # accepted steps flagged stiff by the h |lambda| > 6.1 test
+    method: str = "fast-dop853"
+
+
+def _raise(status: int, detail: int, phase: int, t: float, nsteps: int) -> None:
+    reason = _REASON[status]
+    msg = _DETAIL.get(detail, "")
+    if status == fs.TOO_MANY_STEPS:
+        raise StiffnessLimit(reason, f"the explicit DOP853 needed more than the step limit in one phase "
+                                     f"({nsteps} steps in the step): stiff legs, use an implicit method",
+                             time_s=t, phase=_PHASE[phase])
+    if status == fs.STALL and detail == fs.D_PRECHECK:
+        msg = "theta' <= 0 at the start of the step"
+    elif status == fs.CLUTCH_MISSED:
+        msg = "L1' >= 0 at lift-off: the stance leg's maximum compression happened in double support"
+    elif status == fs.STANCE_LIFT_OFF and detail == fs.D_PRECHECK:
+        msg = "the stance foot is unloaded at the start of single support"
+    elif status == fs.NEGATIVE_IMPULSE:
+        msg = "a normal impact impulse is <= 0"
+    raise StepFailure(reason, f"{msg} (compiled map)", time_s=t, phase=_PHASE[phase])
+
+
+def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10, atol: float | None = None,
+              jacobian: bool = False, max_steps: int = MAX_STEPS) -> FastStep:
+    """One compiled step from z = (theta+, theta'+); raises StepFailure with the reference's reason.
+
+    atol defaults to rtol / 100 (the reference ScipyIntegrator pairs rtol 1e-10 with atol 1e-12).
+    """
+    er = _check_model(model)
+    atol = rtol * 1e-2 if atol is None else atol
+    zz = np.asarray(z, dtype=np.float64).reshape(2)
+    st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff = fs.step_map(
+        mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
+        int(max_steps))
+    if st != fs.OK:
+        _raise(st, detail, phase, t, nsteps)
+    return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
+                    jacobian=J if jacobian else None, phase_end_s=times, nfev=int(nfev), nsteps=int(nsteps),
+                    nstiff=int(nstiff))
+
+
+def fast_map(params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10,
+             atol: float | None = None) -> tuple[np.ndarray, float]:
+    """(z_next, period_s) of the compiled Poincaré map; raises StepFailure."""
+    r = fast_step(params, model, z, rtol=rtol, atol=atol)
+    return r.z_next, r.period_s
+
+
+def exact_jacobian(pmap_or_params: Any, model: str | None = None, z: np.ndarray | None = None, *,
+                   rtol: float = 1e-10, atol: float | None = None) -> np.ndarray:
+    """dP/dz (2x2) by the variational equations with saltation and the exact impact reset Jacobian.
+
+    Call as exact_jacobian(params, model, z) or exact_jacobian(pmap, z=z) / exact_jacobian(pmap, z)
+    where pmap is a (Fast)PoincareMap (its params and model are used, and its integrator's tolerances
+    if it has them).
+    """
+    if isinstance(pmap_or_params, WheelParams):
+        if model is None or z is None:
+            raise TypeError("exact_jacobian(params, model, z)")
+        params = pmap_or_params
+    else:
+        pm = pmap_or_params
+        if z is None and model is not None and not isinstance(model, str):
+            z, model = model, None
+        params, model = pm.params, pm.model
+        integ = getattr(pm, "integrator", None)
+        if isinstance(integ, FastIntegrator):
+            rtol, atol = integ.rtol, integ.atol
+    assert z is not None and model is not None
+    r = fast_step(params, model, z, rtol=rtol, atol=atol, jacobian=True)
+    assert r.jacobian is not None
+    return r.jacobian
+
+
+@dataclass
+class FastIntegrator:
+    """Compiled DOP853 backend for rimless.sim.hybrid (Integrator protocol); same defaults as the reference."""
+
+    rtol: float = 1e-10
+    atol: float = 1e-12
+    max_steps: int = MAX_STEPS
+    name: str = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.name = "fast-dop853"
+
+    def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
+                  t_max: float, *, record_dt: float | None = None, track_dissipation: bool = False) -> PhaseRun:
+        codes = np.array(guards, dtype=np.int64)
+        dirs = np.array([DIRECTION[g] for g in guards], dtype=np.int64)
+        y = np.asarray(y0, dtype=np.float64)
+        if track_dissipation:
+            y = np.concatenate((y, [0.0]))
+        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = rk.run_phase(
+            fm.MASS_MODEL_INDEX[mech.params.mass_model], int(phase), np.asarray(mech.p, dtype=np.float64), y,
+            float(t0), codes, dirs, float(t_max), float(self.rtol), float(self.atol), 11 if track_dissipation else 10,
+            False, bool(track_dissipation), float(record_dt) if record_dt else -1.0, int(self.max_steps))
+        run = PhaseRun(t_end=float(t_end), y_end=np.array(y_end[:10]), guard=(guards[fired] if fired >= 0 else None),
+                       nfev=int(nfev), dissipated_J=float(y_end[10]) if track_dissipation else 0.0)
+        if st != rk.STATUS_OK:
+            run.failed = True
+            run.message = {rk.STATUS_STEP_TOO_SMALL: "required step size is less than spacing between numbers",
+                           rk.STATUS_NOT_FINITE: "non-finite state or singular KKT matrix",
+                           rk.STATUS_TOO_MANY_STEPS: f"more than {self.max_steps} steps (stiff legs?)"}[st]
+        if record_dt:
+            run.t = np.array(rec_t)
+            run.y = np.array(rec_y)
+        return run
+
+
+class _VariationalJacobian:
+    """Callable z -> dP/dz (exact, variational) for solve_fixed_point(..., jacobian=...)."""
+
+    method_name = "variational"
+
+    def __init__(self, pmap: FastPoincareMap) -> None:
+        self.pmap = pmap
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        return self.pmap.jacobian(z)
+
+
+@dataclass
+class FastPoincareMap:
+    """P: z -> z' on the compiled path; interface of rimless.sim.poincare.PoincareMap.
+
+    integrator: a FastIntegrator whose rtol/atol the compiled map uses, and which `step` passes to
+    hybrid.simulate_step. A non-ideal clutch policy makes every call go through the reference hybrid code
+    (with the FastIntegrator) and the Jacobian fall back to central differences.
+    """
+
+    params: WheelParams
+    model: str
+    integrator: FastIntegrator = field(default_factory=FastIntegrator)
+    clutch: Any = None
+    evaluations: int = 0
+    stiff_fallback: bool = True
+    last_method: str = ""
+    method_counts: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _check_model(self.model)
+        self.mech = Mechanics.of(self.params)
+        self._p = param_vector(self.params)
+        self._mi = mass_model_index(self.params)
+        self._cache: tuple[tuple[float, float], np.ndarray, float, np.ndarray | None] | None = None
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _compiled_ok(self) -> bool:
+        from rimless.sim.hybrid import IdealClutch
+
+        return self.clutch is None or isinstance(self.clutch, IdealClutch) or (
+            getattr(self.clutch, "delay_s", 0.0) <= 0.0 and getattr(self.clutch, "name", "") in ("ideal", "delayed"))
+
+    def _count(self, method: str) -> None:
+        self.last_method = method
+        self.method_counts[method] = self.method_counts.get(method, 0) + 1
+
+    def _reference_step(self, z: np.ndarray, integrator: Any) -> np.ndarray:
+        from rimless.sim.hybrid import simulate_step
+        from rimless.sim.section import section_from_state, state_from_section
+
+        res = simulate_step(self.mech, self.model, state_from_section(self.mech, z), integrator, clutch=self.clutch)
+        return section_from_state(res.y_plus)
+
+    def evaluate(self, z: np.ndarray, *, jacobian: bool = False) -> tuple[np.ndarray, float, np.ndarray | None]:
+        """(z_next, period_s, J or None) in one compiled call; raises StepFailure."""
+        z = np.asarray(z, dtype=np.float64).reshape(2)
+        key = (float(z[0]), float(z[1]))
+        if self._cache is not None and self._cache[0] == key and (self._cache[3] is not None or not jacobian):
+            return self._cache[1].copy(), self._cache[2], (None if self._cache[3] is None else self._cache[3].copy())
+        st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff = fs.step_map(
+            self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
+            jacobian, int(self.integrator.max_steps))
+        if st == fs.TOO_MANY_STEPS and self.stiff_fallback:
+            from rimless.sim.integrators import ScipyIntegrator
+
+            radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10), atol=max(self.integrator.atol, 1e-12))
+            zn = self._reference_step(z, radau)
+            Jfd = None
+            if jacobian:
+                h = 1e-5
+                Jfd = np.empty((2, 2))
+                for i in range(2):
+                    dz = np.zeros(2)
+                    dz[i] = h
+                    Jfd[:, i] = (self._reference_step(z + dz, radau) - self._reference_step(z - dz, radau)) / (2 * h)
+            self._count("scipy-Radau")
+            return zn, float("nan"), Jfd
+        if st != fs.OK:
+            _raise(st, detail, phase, t, nsteps)
+        zn = np.array([yp[2], yp[7]])
+        Jout = J.copy() if jacobian else None
+        self._cache = (key, zn, float(t), Jout)
+        self._count("fast-dop853")
+        return zn.copy(), float(t), (None if Jout is None else Jout.copy())
+
+    # -- PoincareMap interface -----------------------------------------------------------------
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        self.evaluations += 1
+        z = np.asarray(z, dtype=np.float64)
+        if not self._compiled_ok():
+            self._count("hybrid+fast-dop853")
+            return self._reference_step(z, self.integrator)
+        return self.evaluate(z)[0]
+
+    def step(self, z: np.ndarray, **options: object) -> Any:
+        """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
+        from rimless.sim.hybrid import simulate_step
+        from rimless.sim.section import state_from_section
+
+        self.evaluations += 1
+        return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
+                             self.integrator, clutch=self.clutch, **options)  # type: ignore[arg-type]
+
+    def with_params(self, params: WheelParams) -> FastPoincareMap:
+        return FastPoincareMap(params, self.model, self.integrator, self.clutch, stiff_fallback=self.stiff_fallback)
+
+    def jacobian(self, z: np.ndarray, h: float | None = None) -> np.ndarray:
+        """dP/dz: exact (variational) by default; central differences with step h if h is given."""
+        z = np.asarray(z, dtype=np.float64)
+        if h is None and self._compiled_ok():
+            J = self.evaluate(z, jacobian=True)[2]
+            if J is not None:
+                return J
+            h = 1e-5
+        h = 1e-5 if h is None else h
+        J = np.empty((2, 2))
+        for i in range(2):
+            dz = np.zeros(2)
+            dz[i] = h
+            J[:, i] = (self(z + dz) - self(z - dz)) / (2 * h)
+        return J
+
+    jacobian.method_name = "variational"  # type: ignore[attr-defined]
+
+    @property
+    def variational_jacobian(self) -> Callable[[np.ndarray], np.ndarray]:
+        """A jacobian callable for solve_fixed_point (carries method_name = 'variational')."""
+        return _VariationalJacobian(self)
+
+
+def warm_up(models: tuple[str, ...] = MODELS) -> float:
+    """Compile (or load from the on-disk cache) every kernel; returns the seconds it took."""
+    import time
+
+    t0 = time.perf_counter()
+    p = WheelParams()
+    z = np.array([-0.465155, 2.604441])
+    for model in models:
+        fast_step(p, model, z, jacobian=False)
+        fast_step(p, model, z, jacobian=True)
+    from rimless.sim.dynamics import DLSP
+    from rimless.sim.section import state_from_section
+
+    mech = Mechanics.of(p)
+    FastIntegrator().run_phase(mech, DLSP, state_from_section(mech, z), 0.0, (1,), 1e-3, record_dt=1e-3,
+                               track_dissipation=True)
+    return time.perf_counter() - t0
