@@ -36,6 +36,40 @@ from rimless.sim.integrators import PhaseRun
 from rimless.sim.model import Mechanics
 from rimless.sim.params import WheelParams
 
+def _invalidate_stale_cache() -> None:
+    """numba's on-disk cache (cache=True) is keyed on each function's own source file only: a kernel that
+    inlines code from another module (the generated mechanics, fast_model, fast_rk) would be loaded stale
+    after that module changed (e.g. a re-derivation). Stamp the cache with a hash of every source the
+    kernels depend on and drop our cached kernels when it differs."""
+    import hashlib
+    from pathlib import Path
+
+    from rimless.sim.generated import active_feet, eight_leg, sliding_leg
+
+    digest = hashlib.sha256()
+    for mod in (fm, rk, fs, eight_leg, sliding_leg, active_feet):
+        digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
+    stamp_value = digest.hexdigest()
+    try:
+        cache_dir = Path(fs.step_map._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
+        stamp = cache_dir / "rimless_fast_kernels.stamp"
+        if stamp.exists() and stamp.read_text() == stamp_value:
+            return
+        for pattern in ("fast_model.*.nb[ic]", "fast_rk.*.nb[ic]", "fast_step.*.nb[ic]"):
+            for f in cache_dir.glob(pattern):
+                f.unlink(missing_ok=True)
+        gen_dir = Path(fm._M0._cache._cache_path)  # noqa: SLF001
+        if gen_dir != cache_dir:
+            for f in gen_dir.glob("*.nb[ic]"):
+                f.unlink(missing_ok=True)
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(stamp_value)
+    except (OSError, AttributeError):  # read-only install or another numba: the cache is merely not reused
+        pass
+
+
+_invalidate_stale_cache()
+
 MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
 MODELS = ("er", "ve")
 

@@ -224,9 +224,121 @@ def kkt_factor(mi, phase, q, qd, p, K, piv):
     return ok, n, M, h, A, adot
 
 
+WORKSPACE_SIZE = 40
+
+
+@_jit
+def accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
+    """q'' and lambda of a phase (as accel) by eliminating the pinned coordinates, with no allocation
+    beyond the generated functions' outputs. ws: float64 workspace of WORKSPACE_SIZE.
+
+    Foot b is pinned in every phase (q''_xb = q''_yb = 0), and L1 too when clutched. With the free
+    coordinates f (theta, L1, L2) or (theta, L2): q''_f = u + W lambda_a, u = M_ff^-1 (-h_f),
+    W = M_ff^-1 J_f^T (Cholesky of M_ff), S lambda_a = -J_a' q' - J_f u with S = J_f W (DLSP only);
+    the pinned rows' multipliers follow from the first KKT block row. Same solution as the full KKT solve.
+    """
+    M = mass_matrix(mi, q, p)
+    h = bias(mi, q, qd, p)
+    nf = 2 if phase == SLSP_CLUTCHED else 3
+    fi0 = 2
+    fi1 = 4 if phase == SLSP_CLUTCHED else 3
+    fi2 = 4
+    L = ws[0:9]
+    # Cholesky of M_ff (row-major 3x3 in L)
+    for i in range(nf):
+        ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+        for j in range(i + 1):
+            jj = fi0 if j == 0 else (fi1 if j == 1 else fi2)
+            s = M[ii, jj]
+            for k in range(j):
+                s -= L[3 * i + k] * L[3 * j + k]
+            if i == j:
+                if not (s > 0.0) or not math.isfinite(s):
+                    return False
+                L[3 * i + i] = math.sqrt(s)
+            else:
+                L[3 * i + j] = s / L[3 * j + j]
+    ncol = 3 if phase == DLSP else 1
+    X = ws[9:18]  # column-major: X[3*c + i], c = 0: -h_f, c = 1, 2: J_f^T rows
+    Ja = np.empty((0, 0))
+    jd = np.empty(0)
+    if phase == DLSP:
+        Ja = jac_a(mi, q, p)
+        jd = jdot_qd_a(mi, q, qd, p)
+    for i in range(nf):
+        ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+        X[i] = -h[ii]
+        if phase == DLSP:
+            X[3 + i] = Ja[0, ii]
+            X[6 + i] = Ja[1, ii]
+    for c in range(ncol):
+        o = 3 * c
+        for i in range(nf):  # forward
+            s = X[o + i]
+            for k in range(i):
+                s -= L[3 * i + k] * X[o + k]
+            X[o + i] = s / L[3 * i + i]
+        for i in range(nf - 1, -1, -1):  # backward with L^T
+            s = X[o + i]
+            for k in range(i + 1, nf):
+                s -= L[3 * k + i] * X[o + k]
+            X[o + i] = s / L[3 * i + i]
+    la0 = 0.0
+    la1 = 0.0
+    if phase == DLSP:
+        s00 = 0.0
+        s01 = 0.0
+        s10 = 0.0
+        s11 = 0.0
+        r0 = -jd[0]
+        r1 = -jd[1]
+        for i in range(3):
+            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+            s00 += Ja[0, ii] * X[3 + i]
+            s01 += Ja[0, ii] * X[6 + i]
+            s10 += Ja[1, ii] * X[3 + i]
+            s11 += Ja[1, ii] * X[6 + i]
+            r0 -= Ja[0, ii] * X[i]
+            r1 -= Ja[1, ii] * X[i]
+        det = s00 * s11 - s01 * s10
+        if not (det != 0.0) or not math.isfinite(det):
+            return False
+        la0 = (r0 * s11 - s01 * r1) / det
+        la1 = (s00 * r1 - s10 * r0) / det
+    for i in range(5):
+        qdd[i] = 0.0
+    for i in range(nf):
+        ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+        qdd[ii] = X[i] + X[3 + i] * la0 + X[6 + i] * la1 if phase == DLSP else X[i]
+    # multipliers of the pinned rows: (M q'' + h)_i - sum_r J_a[r, i] lambda_a,r
+    for i in range(2):
+        s = h[i]
+        for j in range(5):
+            s += M[i, j] * qdd[j]
+        if phase == DLSP:
+            s -= Ja[0, i] * la0 + Ja[1, i] * la1
+        lam[i] = s
+    if phase == DLSP:
+        lam[2] = la0
+        lam[3] = la1
+    elif phase == SLSP_CLUTCHED:
+        s = h[3]
+        for j in range(5):
+            s += M[3, j] * qdd[j]
+        lam[2] = s
+    return True
+
+
 @_jit
 def accel(mi, phase, q, qd, p, qdd, lam):
-    """q'' (5,) and lambda (n,) of a phase written into qdd and lam; False if the KKT matrix is singular."""
+    """q'' (5,) and lambda (n,) of a phase written into qdd and lam; False if singular."""
+    ws = np.empty(WORKSPACE_SIZE)
+    return accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
+
+
+@_jit
+def accel_kkt(mi, phase, q, qd, p, qdd, lam):
+    """q'' (5,) and lambda (n,) by the full KKT solve (the reference formulation; used to check accel)."""
     K = np.empty((9, 9))
     piv = np.empty(9, dtype=np.int64)
     ok, n, M, h, A, adot = kkt_factor(mi, phase, q, qd, p, K, piv)

@@ -55,11 +55,12 @@ VAR_SIZE = 20
 
 
 @_jit
-def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam):
-    """Right-hand side of the augmented vector; lambda at y into lam. False if the KKT matrix is singular."""
+def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
+    """Right-hand side of the augmented vector; lambda at y into lam. False if the KKT matrix is singular.
+    ws: float64 workspace of fast_model.WORKSPACE_SIZE + 5."""
     q = y[0:5]
     qd = y[5:10]
-    qdd = np.empty(5)
+    qdd = ws[fm.WORKSPACE_SIZE:fm.WORKSPACE_SIZE + 5]
     if with_var:
         Dqdd = np.empty((5, 10))
         Dlam = np.empty((4, 10))
@@ -75,7 +76,7 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam):
                     s += Dqdd[i, j] * y[o + j]
                 f[o + 5 + i] = s
     else:
-        ok = fm.accel(mi, phase, q, qd, p, qdd, lam)
+        ok = fm.accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
         if not ok:
             return False
     for i in range(5):
@@ -119,7 +120,7 @@ def _initial_step(mi, phase, p, t0, y0, f0, t_bound, rtol, atol, n_err, with_var
         y1[i] = y0[i] + h0 * f0[i]
     f1 = np.empty(N)
     lam = np.zeros(4)
-    rhs_aug(mi, phase, p, y1, with_var, with_diss, f1, lam)
+    rhs_aug(mi, phase, p, y1, with_var, with_diss, f1, lam, np.empty(fm.WORKSPACE_SIZE + 5))
     for i in range(n_err):
         sc = atol + abs(y0[i]) * rtol
         a[i] = (f1[i] - f0[i]) / sc
@@ -263,7 +264,8 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             rec_y[0, i] = y0[i]
         nrec = 1
     next_grid = 1
-    if not rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam):
+    ws = np.empty(fm.WORKSPACE_SIZE + 5)
+    if not rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
         return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
     g = np.empty(ng)
     g_new = np.empty(ng)
@@ -302,7 +304,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                         acc += _A[s, j] * K[j, i]
                     ytmp[i] = y[i] + h * acc
                 fs = K[s]
-                ok = rhs_aug(mi, phase, p, ytmp, with_var, with_diss, fs, lam_new) and ok
+                ok = rhs_aug(mi, phase, p, ytmp, with_var, with_diss, fs, lam_new, ws) and ok
             for i in range(N):
                 y_last_stage[i] = ytmp[i]
                 acc = 0.0
@@ -310,7 +312,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                     acc += _B[j] * K[j, i]
                 y_new[i] = y[i] + h * acc
             fnew = K[_NS]
-            ok = rhs_aug(mi, phase, p, y_new, with_var, with_diss, fnew, lam_new) and ok
+            ok = rhs_aug(mi, phase, p, y_new, with_var, with_diss, fnew, lam_new, ws) and ok
             nfev += _NS
             err5 = 0.0
             err3 = 0.0
@@ -384,7 +386,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                     for j in range(s):
                         acc += _A[s, j] * K[j, i]
                     ytmp[i] = y[i] + h * acc
-                rhs_aug(mi, phase, p, ytmp, with_var, with_diss, K[s], lam)
+                rhs_aug(mi, phase, p, ytmp, with_var, with_diss, K[s], lam, ws)
             nfev += _NSE - _NS - 1
             for i in range(N):
                 dy = y_new[i] - y[i]
