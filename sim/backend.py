@@ -47,13 +47,14 @@ def make_integrator(backend: str = "auto", rtol: float = DEFAULT_RTOL) -> Integr
 def make_map(params: WheelParams, model: str, *, backend: str = "auto", rtol: float = DEFAULT_RTOL) -> PoincareMap:
     """The Poincaré map of `model` on the chosen path."""
     if resolve(backend) == "fast":
-        return _fast_module().FastPoincareMap(params, model, rtol=rtol)  # type: ignore[union-attr]
+        fast = _fast_module()
+        integrator = fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2)  # type: ignore[union-attr]
+        return fast.FastPoincareMap(params, model, integrator=integrator)  # type: ignore[union-attr]
     return PoincareMap(params, model, ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2))
 
 
 def jacobian_factory(backend: str = "auto") -> Callable[[PoincareMap], Callable[[np.ndarray], np.ndarray]] | None:
     """The map-Jacobian method for a path: exact (variational) on the fast path, else central differences."""
-    fast = _fast_module()
-    if resolve(backend) == "fast" and fast is not None and hasattr(fast, "variational_jacobian"):
-        return fast.variational_jacobian
+    if resolve(backend) == "fast":
+        return lambda pmap: pmap.jacobian  # exact: variational equations with saltation
     return None

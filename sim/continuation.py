@@ -155,16 +155,27 @@ def critical_slope(
     reason, detail = failure
     if reason == "loss-of-stability":
         lo = max(lo, failure_slope)
+    # secant predictor along the branch: (slope, z) of the last two good points
+    prev_slope, prev_z = (branch[-2].slope_rad, branch[-2].z) if len(branch) > 1 else (hi, hi_fp.z)
     while hi - lo > refine_tol_rad:
         mid = 0.5 * (lo + hi)
-        try:
-            fp = solve(mid, hi_fp.z)
-        except StepFailure as err:
+        guesses = [hi_fp.z]
+        if prev_slope != hi:
+            guesses.insert(0, hi_fp.z + (mid - hi) * (hi_fp.z - prev_z) / (hi - prev_slope))
+        fp = None
+        for guess in guesses:
+            try:
+                fp = solve(mid, guess)
+                break
+            except StepFailure as err:
+                last_err = err
+        if fp is None:
             lo = mid
             if reason != "loss-of-stability":
-                reason, detail = _classify(err, hi_fp)
+                reason, detail = _classify(last_err, hi_fp)
             continue
         if good(fp):
+            prev_slope, prev_z = hi, hi_fp.z
             hi, hi_fp = mid, fp
         else:
             lo = mid

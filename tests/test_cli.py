@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -106,3 +107,18 @@ def test_firmware_imports_and_runs_without_numeric_libraries(tmp_path):
     )
     res = subprocess.run([sys.executable, "-c", run], capture_output=True, text=True, cwd=tmp_path, timeout=60)
     assert res.returncode == 0, res.stderr[-2000:]
+
+
+@pytest.mark.parametrize(("model", "reason"), [("er", "stall"), ("ve", "fold")])
+def test_critical_slope_of_the_compliant_wheels(model, reason):
+    """model.md section 9: both near 1.26 deg; ER ends in a stall, the VE medium branch in a fold."""
+    res = runner.invoke(app, ["sim", "critical-slope", "--model", model, "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert 1.2 < out["critical_slope_deg"] < 1.32
+    assert out["reason"] == reason
+    assert out["cot"] == pytest.approx(np.tan(out["critical_slope_rad"]), rel=1e-12)
+    # Algorithm 1 stops at the last converged multiple of its step, at or above the refined boundary
+    assert out["critical_slope_rad"] <= out["algorithm1_slope_rad"] < out["critical_slope_rad"] + out["algorithm1_step_rad"] + 1e-12
+    assert out["refine_tol_rad"] == 1e-6
+    assert out["at_critical"]["max_abs_eigenvalue"] < 1
