@@ -1,0 +1,264 @@
+"""Work-precision benchmark of the Poincaré map (issue 3): the compiled fast path against scipy's solve_ivp
+(RK45 and DOP853, Python right-hand side), in one run, side by side.
+
+For the ER and VE wheels at Table 1 (eight-leg), at the fixed points z*, and each tolerance rtol
+(atol = rtol / 100), every backend gives P(z*), the step period and max |eigenvalue| of dP/dz
+(fast path: exact variational Jacobian; scipy backends: PoincareMap.jacobian, central differences with
+its default step). Errors are against a tight reference: scipy DOP853 at rtol 1e-13 (atol 1e-15), its
+eigenvalues from central differences with h = 1e-5 (accurate to about 1e-8). Time per map is the wall
+time of P alone (no Jacobian), median over repetitions. Units: errors in rad, rad/s (inf-norm over z),
+s (period); times in s.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from rimless.sim.params import WheelParams
+
+Z_STAR = {"er": np.array([-0.465155, 2.604441]), "ve": np.array([-0.434780, 2.289290])}
+REFERENCE_RTOL = 1e-13
+TARGET_ERROR = 1e-9
+
+
+def _time_per_call(fn: Callable[[], Any], budget_s: float, max_reps: int) -> float:
+    """Median wall time of fn() over repetitions filling about budget_s (at least 1, at most max_reps)."""
+    times: list[float] = []
+    t_total = time.perf_counter()
+    while len(times) < max_reps:
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+        if time.perf_counter() - t_total > budget_s:
+            break
+    return float(np.median(times))
+
+
+def _compile_cost(quick: bool) -> dict[str, Any]:
+    """First-call cost of the compiled kernels in a fresh process: cold (empty numba cache) and warm."""
+    code = ("import time; t=time.perf_counter(); from rimless.sim import fast; t1=time.perf_counter(); "
+            "fast.warm_up(); t2=time.perf_counter(); print(t1-t, t2-t1)")
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as cache_dir:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
+        runs = ["warm"] if quick else ["cold", "warm"]
+        if quick:
+            env = dict(os.environ)  # the project's own cache, as a user would have it after a first run
+        for label in runs:
+            try:
+                res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                                     timeout=600, check=True)
+                imp, first = (float(v) for v in res.stdout.split())
+                out[label] = {"import_s": imp, "first_calls_s": first}
+            except (subprocess.SubprocessError, ValueError) as err:
+                out[label] = {"error": str(err)}
+    if quick:
+        out["note"] = "quick: warm cache only (a cold compile takes tens of seconds; run without --quick)"
+    return out
+
+
+def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Run the benchmark; returns the JSON-ready result (see the module docstring).
+
+    quick: fewer tolerances, fewer repetitions, no cold-compile measurement (well under a minute with a
+    warm numba cache).
+    """
+    from rimless.sim import fast
+    from rimless.sim.integrators import ScipyIntegrator
+    from rimless.sim.poincare import PoincareMap, solve_fixed_point
+
+    say = progress or (lambda _msg: None)
+    params = WheelParams()
+    t0 = time.perf_counter()
+    say("compiling / loading the fast kernels")
+    warm_s = fast.warm_up()
+    if quick:
+        tols = {"fast": [1e-5, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11], "DOP853": [1e-6, 1e-8, 1e-9, 1e-10],
+                "RK45": [1e-4, 1e-6]}
+        budget, fast_budget = 0.05, 0.1
+    else:
+        full = [10.0 ** -e for e in range(4, 13)]
+        tols = {"fast": full, "DOP853": full, "RK45": [10.0 ** -e for e in range(4, 10)]}
+        budget, fast_budget = 0.5, 0.5
+
+    rows: list[dict[str, Any]] = []
+    reference: dict[str, dict[str, Any]] = {}
+    for model in ("er", "ve"):
+        z = Z_STAR[model]
+        say(f"{model}: tight reference (scipy DOP853, rtol {REFERENCE_RTOL:g})")
+        ref_map = PoincareMap(params, model, ScipyIntegrator("DOP853", rtol=REFERENCE_RTOL, atol=REFERENCE_RTOL * 1e-2))
+        ref_step = ref_map.step(z)
+        z_ref = np.array([ref_step.y_plus[2], ref_step.y_plus[7]])
+        eig_ref = float(np.max(np.abs(np.linalg.eigvals(ref_map.jacobian(z, h=1e-5)))))
+        reference[model] = {"z": z_ref.tolist(), "period_s": ref_step.period_s, "max_abs_eigenvalue": eig_ref}
+        for backend, tol_list in tols.items():
+            for rtol in tol_list:
+                atol = rtol * 1e-2
+                say(f"{model}: {backend} rtol {rtol:g}")
+                if backend == "fast":
+                    pm: Any = fast.FastPoincareMap(params, model, fast.FastIntegrator(rtol=rtol, atol=atol))
+                    r = fast.fast_step(params, model, z, rtol=rtol, atol=atol, jacobian=True)
+                    z_new, period, J = r.z_next, r.period_s, r.jacobian
+                    spm = _time_per_call(lambda pm=pm: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
+                                         fast_budget, 2000)
+                    spj = _time_per_call(lambda: fast.fast_step(params, model, z, rtol=rtol, atol=atol,
+                                                                jacobian=True), fast_budget / 2, 500)
+                    nfev = r.nfev
+                else:
+                    pm = PoincareMap(params, model, ScipyIntegrator(backend, rtol=rtol, atol=atol))
+                    st = pm.step(z)
+                    z_new, period = np.array([st.y_plus[2], st.y_plus[7]]), st.period_s
+                    nfev = st.nfev
+                    spm = _time_per_call(lambda pm=pm: pm(z), budget, 20)
+                    t_j = time.perf_counter()
+                    J = pm.jacobian(z)
+                    spj = time.perf_counter() - t_j + spm
+                rows.append({
+                    "model": model,
+                    "backend": "fast-dop853" if backend == "fast" else f"scipy-{backend}",
+                    "rtol": rtol,
+                    "atol": atol,
+                    "error": float(np.max(np.abs(z_new - z_ref))),
+                    "period_error_s": abs(period - ref_step.period_s),
+                    "eigenvalue_error": abs(float(np.max(np.abs(np.linalg.eigvals(J)))) - eig_ref),
+                    "jacobian_method": "variational" if backend == "fast" else "central-difference h=1e-4",
+                    "seconds_per_map": spm,
+                    "seconds_per_map_and_jacobian": spj,
+                    "nfev": int(nfev),
+                })
+
+    def loosest(model: str, backend: str) -> dict[str, Any] | None:
+        ok = [r for r in rows if r["model"] == model and r["backend"] == backend and r["error"] <= TARGET_ERROR]
+        return max(ok, key=lambda r: r["rtol"]) if ok else None
+
+    speedups: dict[str, Any] = {}
+    for model in ("er", "ve"):
+        f, d = loosest(model, "fast-dop853"), loosest(model, "scipy-DOP853")
+        speedups[model] = {
+            "fast_rtol": f and f["rtol"], "fast_seconds_per_map": f and f["seconds_per_map"],
+            "dop853_rtol": d and d["rtol"], "dop853_seconds_per_map": d and d["seconds_per_map"],
+            "speedup": (d["seconds_per_map"] / f["seconds_per_map"]) if (f and d) else None,
+        }
+    valid = [s["speedup"] for s in speedups.values() if s["speedup"] is not None]
+
+    # fixed point with eigenvalues on both paths (after warm-up)
+    fixed: dict[str, Any] = {}
+    for model in ("er", "ve"):
+        guess = Z_STAR[model] + np.array([0.01, -0.05])
+        say(f"{model}: fixed point, fast path")
+        pm_fast = fast.FastPoincareMap(params, model)
+        solve_fixed_point(pm_fast, guess)  # warm
+        reps = []
+        fp = None
+        for _ in range(3 if quick else 10):
+            t_s = time.perf_counter()
+            fp = solve_fixed_point(pm_fast, guess, jacobian=pm_fast.variational_jacobian)
+            reps.append(time.perf_counter() - t_s)
+        assert fp is not None
+        say(f"{model}: fixed point, reference path")
+        pm_ref = PoincareMap(params, model)
+        t_s = time.perf_counter()
+        fp_ref = solve_fixed_point(pm_ref, guess)
+        t_ref = time.perf_counter() - t_s
+        fixed[model] = {
+            "fast_seconds": float(np.median(reps)),
+            "fast_iterations": fp.iterations,
+            "fast_z": fp.z.tolist(),
+            "fast_eigenvalues": [complex(e).real if abs(complex(e).imag) < 1e-15 else str(complex(e))
+                                 for e in fp.eigenvalues],
+            "fast_jacobian_method": fp.jacobian_method,
+            "reference_seconds": t_ref,
+            "reference_iterations": fp_ref.iterations,
+            "reference_z": fp_ref.z.tolist(),
+            "reference_jacobian_method": fp_ref.jacobian_method,
+            "z_difference": float(np.max(np.abs(fp.z - fp_ref.z))),
+            "max_abs_eigenvalue_difference": abs(fp.max_abs_eigenvalue - fp_ref.max_abs_eigenvalue),
+        }
+    say("compile cost (fresh processes)")
+    compile_cost = _compile_cost(quick)
+    compile_cost["in_process_warm_up_s"] = warm_s
+    return {
+        "quick": quick,
+        "settings": {"params": params.to_dict(), "z": {m: v.tolist() for m, v in Z_STAR.items()},
+                     "reference": f"scipy DOP853 rtol {REFERENCE_RTOL:g} atol {REFERENCE_RTOL * 1e-2:g}",
+                     "atol": "rtol / 100 for every backend", "target_error": TARGET_ERROR},
+        "reference": reference,
+        "rows": rows,
+        "speedup_at_1e-9": min(valid) if valid else None,
+        "speedup_at_1e-9_by_model": speedups,
+        "fixed_point": fixed,
+        "compile": compile_cost,
+        "total_seconds": time.perf_counter() - t0,
+    }
+
+
+def plot_work_precision(result: dict[str, Any], path: str) -> None:
+    """Error (x, log) against time per map (y, log), one line per backend and model; saved to path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    styles = {"er": "-", "ve": "--"}
+    keys = sorted({(r["backend"], r["model"]) for r in result["rows"]})
+    for backend, model in keys:
+        rs = sorted((r for r in result["rows"] if r["backend"] == backend and r["model"] == model),
+                    key=lambda r: r["rtol"])
+        err = [max(r["error"], 1e-17) for r in rs]
+        ax.loglog(err, [r["seconds_per_map"] for r in rs], styles.get(model, "-"), marker="o",
+                  label=f"{backend} ({model.upper()})")
+    ax.axvline(TARGET_ERROR, color="grey", lw=0.8, ls=":")
+    ax.set_xlabel("error of the post-impact state z (inf-norm; rad, rad/s)")
+    ax.set_ylabel("wall time per map (s)")
+    sp = result.get("speedup_at_1e-9")
+    title = "Poincaré map work-precision"
+    if sp:
+        title += f" (speed-up at 1e-9: {sp:.0f}x)"
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """A plain-text summary of a run_bench result."""
+    lines = [f"{'model':5} {'backend':14} {'rtol':>8} {'error':>9} {'T err':>9} {'eig err':>9} {'s/map':>10} {'nfev':>7}"]
+    for r in result["rows"]:
+        lines.append(f"{r['model']:5} {r['backend']:14} {r['rtol']:8.0e} {r['error']:9.2e} {r['period_error_s']:9.2e} "
+                     f"{r['eigenvalue_error']:9.2e} {r['seconds_per_map']:10.3e} {r['nfev']:7d}")
+    sp = result["speedup_at_1e-9"]
+    lines.append(f"speed-up at error <= 1e-9 (DOP853 / fast, worst model): "
+                 f"{'n/a' if sp is None else f'{sp:.0f}x'}")
+    for model, s in result["speedup_at_1e-9_by_model"].items():
+        if s["speedup"] is not None:
+            lines.append(f"  {model}: fast rtol {s['fast_rtol']:.0e} {s['fast_seconds_per_map'] * 1e3:.3f} ms, "
+                         f"DOP853 rtol {s['dop853_rtol']:.0e} {s['dop853_seconds_per_map'] * 1e3:.1f} ms: "
+                         f"{s['speedup']:.0f}x")
+    for model, f in result["fixed_point"].items():
+        lines.append(f"fixed point {model}: fast {f['fast_seconds'] * 1e3:.1f} ms ({f['fast_iterations']} it, "
+                     f"{f['fast_jacobian_method']}), reference {f['reference_seconds']:.2f} s; "
+                     f"|dz| {f['z_difference']:.1e}, |d max|eig|| {f['max_abs_eigenvalue_difference']:.1e}")
+    c = result["compile"]
+    for label in ("cold", "warm"):
+        if label in c and "first_calls_s" in c[label]:
+            lines.append(f"compile {label}: import {c[label]['import_s']:.2f} s + first calls "
+                         f"{c[label]['first_calls_s']:.2f} s")
+    lines.append(f"total {result['total_seconds']:.1f} s")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # python -m rimless.sim.bench [--quick] [--json]
+    res = run_bench("--quick" in sys.argv, progress=lambda m: print(m, file=sys.stderr))
+    print(json.dumps(res, indent=1, default=str) if "--json" in sys.argv else format_table(res))
