@@ -140,14 +140,17 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
     return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)")
 
 
-def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray) -> tuple[np.ndarray, float, float]:
+def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: float = np.pi / 4,
+                        harmonics: int = 3) -> tuple[np.ndarray, float, float]:
     """Hub offset in the object frame of a wheel rolling down a plane.
 
-    A body point off the hub by e rises and falls by e once per turn, the hub only by the small per-step
-    bumps (period alpha), so the hub is the body point whose world height is best explained by a straight
-    line in the distance travelled: minimise sum_t (T_z + (R d)_z - a - b s)^2 over d, a, b (linear least
-    squares, two passes so that s is measured along the hub path). The component along the wheel axis is
-    not observable and comes out 0 (minimum norm). Needs about a full turn to be well conditioned.
+    A body point off the hub by e rises and falls by e once per turn, the hub only by the per-step bumps
+    (period alpha in the wheel angle), so the hub is the body point whose world height is best explained by
+    a straight line in the distance travelled plus a periodic function of period alpha in the wheel angle
+    (``harmonics`` Fourier terms, which keep the per-step bumps from leaking into the offset): minimise
+    sum_t (T_z + (R d)_z - a - b s - bumps)^2 over d, a, b and the bumps (linear least squares, two passes so
+    that s is measured along the hub path). d is sought in the wheel plane only: the component along the
+    wheel axis is not observable (the axis is horizontal) and is set to 0. Needs about a full turn.
 
     Returns
     -------
@@ -156,11 +159,20 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray) -> tuple[np.ndarra
     rotation_rad : total rotation seen.
     """
     ok = ~(np.isnan(rot).any(axis=(1, 2)) | np.isnan(trans_m).any(axis=1))
-    angle, _ = wheel_angle_from_rotations(rot)
+    angle, axis = wheel_angle_from_rotations(rot)
     total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
     if ok.sum() < 10:
         return np.zeros(3), float("nan"), total
-    r, t = rot[ok], trans_m[ok]
+    r, t, ang = rot[ok], trans_m[ok], angle[ok]
+    # The wheel axis in the object frame and two unit vectors spanning the wheel plane.
+    a_body = np.einsum("nji,j->ni", r, axis).mean(axis=0)
+    a_body /= np.linalg.norm(a_body)
+    e1 = np.cross(a_body, [1.0, 0.0, 0.0] if abs(a_body[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(a_body, e1)
+    plane = np.column_stack([e1, e2])  # (3, 2)
+    k = np.arange(1, harmonics + 1) * (2 * np.pi / alpha_rad)
+    bumps = np.column_stack([np.cos(np.outer(ang, k)), np.sin(np.outer(ang, k))]) if harmonics else np.zeros((ang.size, 0))
     d = np.zeros(3)
     res = np.zeros(1)
     for _ in range(2):
@@ -168,11 +180,11 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray) -> tuple[np.ndarra
         xy = path[:, :2] - path[0, :2]
         _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
         s = xy @ vt[0]
-        a = np.column_stack([r[:, 2, :], -np.ones(len(s)), -s])
+        a = np.column_stack([r[:, 2, :] @ plane, -np.ones(len(s)), -s, bumps])
         scale = np.maximum(np.abs(a).max(axis=0), 1e-3)
         sol, *_ = np.linalg.lstsq(a / scale, -t[:, 2], rcond=1e-6)
         sol = sol / scale
-        d = sol[:3]
+        d = plane @ sol[:2]
         res = a @ sol + t[:, 2]
     return d, float(np.sqrt(np.mean(res**2))), total
 
