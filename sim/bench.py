@@ -155,7 +155,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     for model in ("er", "ve"):
         guess = Z_STAR[model] + np.array([0.01, -0.05])
         say(f"{model}: fixed point, fast path")
-        pm_fast = fast.FastPoincareMap(params, model)
+        pm_fast = fast.FastPoincareMap(params, model, jacobian_with_map=True)
         solve_fixed_point(pm_fast, guess)  # warm
         reps = []
         fp = None

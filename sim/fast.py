@@ -260,6 +260,7 @@ class FastPoincareMap:
     clutch: Any = None
     evaluations: int = 0
     stiff_fallback: bool = True
+    jacobian_with_map: bool = False  # compute dP/dz with every map call (cached): cheapest for Newton
     last_method: str = ""
     method_counts: dict[str, int] = field(default_factory=dict)
 
@@ -327,7 +328,7 @@ class FastPoincareMap:
         if not self._compiled_ok():
             self._count("hybrid+fast-dop853")
             return self._reference_step(z, self.integrator)
-        return self.evaluate(z)[0]
+        return self.evaluate(z, jacobian=self.jacobian_with_map)[0]
 
     def step(self, z: np.ndarray, **options: object) -> Any:
         """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
@@ -339,7 +340,8 @@ class FastPoincareMap:
                              self.integrator, clutch=self.clutch, **options)  # type: ignore[arg-type]
 
     def with_params(self, params: WheelParams) -> FastPoincareMap:
-        return FastPoincareMap(params, self.model, self.integrator, self.clutch, stiff_fallback=self.stiff_fallback)
+        return FastPoincareMap(params, self.model, self.integrator, self.clutch, stiff_fallback=self.stiff_fallback,
+                               jacobian_with_map=self.jacobian_with_map)
 
     def jacobian(self, z: np.ndarray, h: float | None = None) -> np.ndarray:
         """dP/dz: exact (variational) by default; central differences with step h if h is given."""

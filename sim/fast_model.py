@@ -303,6 +303,14 @@ def accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
         det = s00 * s11 - s01 * s10
         if not (det != 0.0) or not math.isfinite(det):
             return False
+        ws[18] = s00
+        ws[19] = s01
+        ws[20] = s10
+        ws[21] = s11
+        for i in range(3):
+            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+            ws[22 + i] = Ja[0, ii]
+            ws[25 + i] = Ja[1, ii]
         la0 = (r0 * s11 - s01 * r1) / det
         la1 = (s00 * r1 - s10 * r0) / det
     for i in range(5):
@@ -326,6 +334,77 @@ def accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
         for j in range(5):
             s += M[3, j] * qdd[j]
         lam[2] = s
+    return True
+
+
+@_jit
+def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
+    """q'', lambda (as accel_ws) and the directional derivatives dqdd[:, c] = (dq''/dy) V[:, c] for the
+    columns of V (10 x ncol), exactly: the differentiated KKT system
+    [[M, -A^T], [A, 0]] [dq''; dlambda] = [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q'']
+    solved with the factors of accel_ws (pinned coordinates eliminated)."""
+    if not accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
+        return False
+    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = _derivs(mi, q, qd, p)
+    nf = 2 if phase == SLSP_CLUTCHED else 3
+    fi0 = 2
+    fi1 = 4 if phase == SLSP_CLUTCHED else 3
+    fi2 = 4
+    L = ws[0:9]
+    u = ws[28:31]
+    for c in range(V.shape[1]):
+        for i in range(nf):
+            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+            s = 0.0
+            for k in range(5):
+                vk = V[k, c]
+                if vk != 0.0:
+                    t = dh_dq[ii, k]
+                    for j in range(5):
+                        t += dM[k, ii, j] * qdd[j]
+                    if phase == DLSP:
+                        t -= dJa[k, 0, ii] * lam[2] + dJa[k, 1, ii] * lam[3]
+                    s -= vk * t
+                s -= dh_dqd[ii, k] * V[5 + k, c]
+            u[i] = s
+        for i in range(nf):  # u = M_ff^-1 r_f
+            s = u[i]
+            for k in range(i):
+                s -= L[3 * i + k] * u[k]
+            u[i] = s / L[3 * i + i]
+        for i in range(nf - 1, -1, -1):
+            s = u[i]
+            for k in range(i + 1, nf):
+                s -= L[3 * k + i] * u[k]
+            u[i] = s / L[3 * i + i]
+        m0 = 0.0
+        m1 = 0.0
+        if phase == DLSP:
+            c0 = 0.0
+            c1 = 0.0
+            for k in range(5):
+                vk = V[k, c]
+                if vk != 0.0:
+                    t0 = djd_dq[0, k]
+                    t1 = djd_dq[1, k]
+                    for j in range(5):
+                        t0 += dJa[k, 0, j] * qdd[j]
+                        t1 += dJa[k, 1, j] * qdd[j]
+                    c0 -= vk * t0
+                    c1 -= vk * t1
+                c0 -= djd_dqd[0, k] * V[5 + k, c]
+                c1 -= djd_dqd[1, k] * V[5 + k, c]
+            for i in range(3):
+                c0 -= ws[22 + i] * u[i]
+                c1 -= ws[25 + i] * u[i]
+            det = ws[18] * ws[21] - ws[19] * ws[20]
+            m0 = (c0 * ws[21] - ws[19] * c1) / det
+            m1 = (ws[18] * c1 - ws[20] * c0) / det
+        for i in range(5):
+            dqdd[i, c] = 0.0
+        for i in range(nf):
+            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
+            dqdd[ii, c] = u[i] + ws[12 + i] * m0 + ws[15 + i] * m1 if phase == DLSP else u[i]
     return True
 
 

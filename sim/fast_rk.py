@@ -62,19 +62,16 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     qd = y[5:10]
     qdd = ws[fm.WORKSPACE_SIZE:fm.WORKSPACE_SIZE + 5]
     if with_var:
-        Dqdd = np.empty((5, 10))
-        Dlam = np.empty((4, 10))
-        ok = fm.accel_jacobian(mi, phase, q, qd, p, qdd, lam, Dqdd, Dlam)
+        V = y[VAR_OFFSET:VAR_OFFSET + VAR_SIZE].reshape((2, 10)).T
+        dqdd = np.empty((5, 2))
+        ok = fm.accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws)
         if not ok:
             return False
         for col in range(2):
             o = VAR_OFFSET + 10 * col
             for i in range(5):
                 f[o + i] = y[o + 5 + i]
-                s = 0.0
-                for j in range(10):
-                    s += Dqdd[i, j] * y[o + j]
-                f[o + 5 + i] = s
+                f[o + 5 + i] = dqdd[i, col]
     else:
         ok = fm.accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
         if not ok:
