@@ -155,3 +155,106 @@ def bench_cmd(
     from .bench_import import main
 
     main([str(rows)])
+
+
+# ------------------------------------------------------------------------------------- report and demo
+
+DEMO_NOTE = ("SYNTHETIC DATA: the bundled example trials are simulated (ER wheel, Table 1 parameters, slopes "
+             "1.5/2/2.5 deg, 0.3 mm noise), not measured; see rimless/analysis/data/README.md.")
+
+
+def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: dict[str, Any], model: str,
+                slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation") -> Any:
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from .compare import Simulator
+    from .report import build_report
+
+    err = Console(stderr=True)
+    with Progress(console=err, transient=True, disable=json_out) as progress:
+        task = progress.add_task("simulator", total=len(files))
+        sim = Simulator(model=model)
+        progress.update(task, description="comparing")
+
+        def step(name: str) -> None:
+            progress.update(task, description=f"compared {name}")
+            progress.advance(task)
+
+        res = build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
+                           note=note, title=title, progress=step)
+    if json_out:
+        print_json(res.summary())
+    else:
+        from rich.table import Table
+
+        table = Table(title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation")
+        for col in ("trial", "status", "slope deg", "steps", "RMS CoM mm", "mean |dT| ms", "theta'+ rad/s"):
+            table.add_column(col, no_wrap=col == "trial", justify="left" if col in ("trial", "status") else "right")
+
+        def f(v: Any, fmt: str) -> str:
+            return "" if v is None or (isinstance(v, float) and v != v) else format(v, fmt)
+
+        for r in res.metrics():
+            table.add_row(Path(str(r["trial"])).stem, "[green]ok[/]" if r["status"] == "ok" else f"[red]{r['status']}[/]",
+                          f(r["slope_deg"], ".3f"), f(r["steps"], "d"), f(r["rms_com_error_mm"], ".2f"),
+                          f(r["mean_abs_period_error_ms"], ".1f"), f(r["theta_dot_plus_rad_s"], ".3f"))
+        Console().print(table)
+        for r in res.refused:
+            typer.echo(f"refused: {r.reason}", err=True)
+        for c in res.comparisons:
+            if c.status != "ok":
+                typer.echo(f"not compared: {c.file}: {c.message}", err=True)
+        typer.echo(f"report: {res.report_html}")
+    return res
+
+
+_MODELS = ("er", "ve")
+
+
+@app.command("report")
+@user_facing
+def report_cmd(
+    trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon CSVs.")],
+    out: Annotated[Path, typer.Option("--out", help="Folder for report.html, the PNG figures and metrics.csv.")],
+    json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary (report path, metrics).")] = False,
+    slope_deg: Annotated[Optional[float], typer.Option(
+        "--slope-deg", min=-45, max=45, help="Known slope for CSV inputs, deg (default: estimated).")] = None,
+    max_gap_ms: Annotated[float, typer.Option(
+        "--max-gap-ms", min=0.0, help="CSV inputs: interpolate gaps up to this long, ms.")] = 50.0,
+    leg_length_m: Annotated[Optional[float], typer.Option(
+        "--leg-length-m", min=0.0, help="CSV inputs: CoM height from the slope plane (else from the impact line).")] = None,
+    model: Annotated[str, typer.Option("--model", help="Simulated model: er or ve.")] = "er",
+    slope_bin_deg: Annotated[float, typer.Option(
+        "--slope-bin-deg", min=0.01, help="Group trials by slope rounded to this, deg.")] = 0.5,
+) -> None:
+    """Compare trials with the simulation and write an HTML report (exit 2 if an input was refused)."""
+    if model not in _MODELS:
+        raise ParameterError(f"--model must be one of {', '.join(_MODELS)}, got {model!r}")
+    kwargs: dict[str, Any] = {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "leg_length_m": leg_length_m}
+    res = _run_report(trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg)
+    if res.refused:
+        raise typer.Exit(EXIT_REFUSED)
+
+
+def demo_cmd(
+    out: Annotated[Path, typer.Option("--out", help="Folder for the demo report.")] = Path("rimless-demo"),
+    json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary instead of the table.")] = False,
+) -> None:
+    """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
+    from .example import data_files
+
+    files = data_files()
+    if not files:
+        raise UserError("the bundled example dataset is missing from this install (rimless/analysis/data)")
+    if not json_out:
+        typer.echo(f"{len(files)} bundled SYNTHETIC trials -> {out}/ (first run compiles the simulator)", err=True)
+    res = _run_report(files, out, json_out=json_out, import_kwargs={"max_gap_s": 0.05}, model="er",
+                      slope_bin_deg=0.5, note=DEMO_NOTE, title="rimless demo: SYNTHETIC trials vs simulation")
+    if not json_out:
+        typer.echo(f"open file://{res.report_html.resolve()}")
+
+
+def register_top_level(root_app: typer.Typer) -> None:
+    """Add the top-level ``rimless demo`` command to the root app."""
+    root_app.command("demo")(user_facing(demo_cmd))
