@@ -5,13 +5,37 @@ Only typer and the standard library at module level (``rimless --help`` stays fa
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any, Optional, TypeVar
 
 import typer
 
-from rimless.cli import print_json, user_facing
 from rimless.errors import ParameterError, UserError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+# rimless.cli is imported only when a command runs: importing it registers the sub-apps, which imports this
+# module; doing it here would make that registration fail when this module is imported first.
+def user_facing(func: F) -> F:
+    """`rimless.cli.user_facing`, looked up when the command runs."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from rimless.cli import user_facing as real
+
+        return real(func)(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+def print_json(obj: Any) -> None:
+    """`rimless.cli.print_json`."""
+    from rimless.cli import print_json as real
+
+    real(obj)
 
 app = typer.Typer(no_args_is_help=True, help="Vicon trials: import, show, benchmark.")
 

@@ -1,0 +1,259 @@
+"""Bundled SYNTHETIC dataset, comparison with the simulator, HTML report, `rimless trials report`, `rimless demo`."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import tempfile
+from dataclasses import replace
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from rimless.analysis.compare import Simulator, compare_trial, step_period_trends
+from rimless.analysis.example import DATA_DIR, TRIALS, data_files, load_truth, simulate_trial, write_trial_csv
+from rimless.analysis.report import build_report
+from rimless.analysis.timeseries import Event, TimeSeries
+from rimless.analysis.trial import Trial, import_trial
+from rimless.cli import app as root_app
+
+runner = CliRunner()
+FRAME_S = 0.01
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return Simulator()
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return load_truth()
+
+
+# ------------------------------------------------------------------------------------------ bundled data
+
+
+def test_bundled_dataset_files_and_labels(truth):
+    files = data_files()
+    assert len(files) == len(TRIALS) == 6
+    assert all("SYNTHETIC" in f.name for f in files)
+    assert sum(p.stat().st_size for p in DATA_DIR.iterdir()) < 1_000_000
+    assert (DATA_DIR / "README.md").read_text().count("SYNTHETIC") >= 1
+    assert {f.stem for f in files} == set(truth["trials"])
+    assert truth["params"]["stiffness_n_per_m"] == 2700.0 and truth["params"]["leg_length_m"] == 0.237
+    raw = files[0].read_bytes()
+    head = raw.split(b"\r\n")[:5]  # Windows line ends
+    assert head[0] == b"Objects" and head[1] == b"100"
+    assert head[2].startswith(b",,Global Angle Wheel:Wheel")
+    assert head[4] == b",,rad,rad,rad,mm,mm,mm"
+    text = b"".join(f.read_bytes() for f in files)
+    assert b"\r\n,,," in text or b",,,,,,\r\n" in text  # occlusions as empty cells
+    assert any(line.count(b",") == 1 for line in text.split(b"\r\n")[5:] if line[:1].isdigit())  # short rows
+
+
+@pytest.mark.parametrize("path", data_files(), ids=lambda p: p.stem)
+def test_bundled_trial_imports_with_true_slope_and_periods(path, truth):
+    tr = truth["trials"][path.stem]
+    trial = import_trial(path, max_gap_s=0.05)
+    assert abs(trial.meta.slope_deg - tr["slope_deg"]) < 0.05
+    assert trial.meta.step_refused is None
+    assert trial.step_period_s.size >= 6
+    true_imp = np.asarray(tr["impact_time_s"]) - tr["first_frame_time_s"]  # same clock as the trial
+    true_per = np.asarray(tr["step_period_s"])  # step j+1 of the simulation ends at impact j
+    j = np.array([int(np.argmin(np.abs(true_imp - t))) for t in trial.impact_time_s])
+    assert np.all(np.diff(j) == 1)  # one measured impact per simulated one, none missed
+    assert np.all(np.abs(trial.impact_time_s - true_imp[j]) < 0.03)
+    measured = trial.step_period_s
+    assert np.all(np.abs(measured - true_per[j[1:]]) < FRAME_S)
+
+
+def test_number_format_is_printf_with_3_digit_exponents():
+    from rimless.analysis.example import _fmt
+
+    assert [_fmt(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
+        "7.2e-006", "-1.5e-012", "123.4568", "0.5", ""]
+
+
+def test_generator_is_deterministic_per_seed():
+    a = simulate_trial(2.0, 1.9, np.random.default_rng(3))
+    b = simulate_trial(2.0, 1.9, np.random.default_rng(3))
+    c = simulate_trial(2.0, 1.9, np.random.default_rng(4))
+    np.testing.assert_array_equal(a.pose, b.pose)
+    assert a.heading_deg != c.heading_deg
+
+
+# ---------------------------------------------------------------------------------------------- compare
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 0.3e-3])
+def test_compare_recovers_the_release_speed_and_noise_level(tmp_path, sim, noise_m):
+    ex = simulate_trial(2.0, 1.92, np.random.default_rng(11), noise_m=noise_m, angle_noise_rad=3 * noise_m)
+    trial = import_trial(write_trial_csv(ex, tmp_path / "t.csv"), slope_deg=2.0, max_gap_s=0.05)
+    c = compare_trial(trial, sim)
+    assert c.status == "ok", c.message
+    assert abs(c.release_theta_dot_rad_s - 1.92) < 0.01
+    assert abs(c.theta_dot_plus_rad_s - ex.post_impact_theta_dot_rad_s[0]) < 0.01
+    assert c.n_steps >= 6 and np.all(np.abs(c.period_error_s) < 3e-3)
+    assert abs(c.period_error_s[0]) < 1e-5  # what was fitted
+    if noise_m == 0:
+        assert c.rms_com_error_m < 0.2e-3
+    else:
+        assert 0.6 * noise_m < c.rms_com_error_m < 1.7 * noise_m
+    m = c.metrics()
+    assert m["rms_com_error_mm"] == pytest.approx(c.rms_com_error_m * 1e3)
+    assert np.isfinite(c.sim_com_m[(c.time_s >= 0) & (c.time_s <= c.measured_impact_time_s[-1])]).mean() > 0.9
+
+
+def test_compare_failures_are_messages(tmp_path, sim):
+    ex = simulate_trial(2.0, 1.92, np.random.default_rng(2))
+    trial = import_trial(write_trial_csv(ex, tmp_path / "t.csv"), max_gap_s=0.05)
+    steep = Trial(trial.series, replace(trial.meta, slope_deg=40.0))
+    c = compare_trial(steep, sim)
+    assert c.status == "failed" and "40.000 deg cannot be simulated" in c.message
+    none = Trial(TimeSeries(trial.time_s, trial.series.data, ()), replace(trial.meta, step_refused="too noisy"))
+    c = compare_trial(none, sim)
+    assert c.status == "failed" and "no steps detected (too noisy)" in c.message
+    slow = Trial(TimeSeries(trial.time_s, trial.series.data, (Event(0.1, "impact"), Event(3.1, "impact"))), trial.meta)
+    c = compare_trial(slow, sim)
+    assert c.status == "failed" and "longer than any" in c.message
+    groups = step_period_trends([c], sim)  # a failed fit still groups, without a simulation
+    assert len(groups) == 1 and np.isnan(groups[0].sim_period_s).all() and groups[0].message
+
+
+def test_step_period_trends_group_by_slope(sim):
+    from rimless.analysis.compare import TrialComparison
+
+    def tc(name, slope, periods):
+        return TrialComparison(name, name, slope, "given", "er", "ok", measured_period_s=np.asarray(periods),
+                               release_theta_dot_rad_s=1.95)
+
+    groups = step_period_trends([tc("a", 1.9, [0.5, 0.4]), tc("b", 2.1, [0.7, 0.6, 0.5]), tc("c", 2.6, [0.3])], sim)
+    assert [g.slope_deg for g in groups] == [2.0, 2.5]
+    g = groups[0]
+    np.testing.assert_allclose(g.mean_period_s, [0.6, 0.5, 0.5])
+    np.testing.assert_allclose(g.std_period_s[:2], [np.std([0.5, 0.7], ddof=1)] * 2)
+    assert np.isnan(g.std_period_s[2]) and list(g.count) == [2, 2, 1]
+    assert np.all(np.isfinite(g.sim_period_s)) and np.all(np.diff(g.sim_period_s) < 0)  # it speeds up at 2 deg
+
+
+# ----------------------------------------------------------------------------------------------- report
+
+
+class _Refs(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.imgs: list[str] = []
+        self.links: list[str] = []
+        self.metric_rows = 0
+        self._in_metrics = False
+
+    def handle_starttag(self, tag, attrs):  # noqa: ANN001
+        a = dict(attrs)
+        if tag == "img":
+            self.imgs.append(a["src"])
+        if tag == "a":
+            self.links.append(a["href"])
+        if tag == "table":
+            self._in_metrics = a.get("id") == "metrics"
+        if tag == "tr" and self._in_metrics and a.get("class") == "trial":
+            self.metric_rows += 1
+
+
+def test_report_files_and_structure(tmp_path, sim):
+    files = data_files()[:3]
+    pq = import_trial(files[2], max_gap_s=0.05).to_parquet(tmp_path / "third.trial.parquet")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("Objects\n100\n,,Global Angle W:W\nFrame,Sub Frame,RX\n,,rad\n1,0,abc\n")
+    res = build_report([files[0], files[1], pq, bad], tmp_path / "rep", sim=sim, import_kwargs={"max_gap_s": 0.05})
+    page = res.report_html.read_text()
+    refs = _Refs()
+    refs.feed(page)
+    assert sorted(refs.imgs) == ["com_height.png", "step_period.png"]
+    for ref in refs.imgs + refs.links:
+        assert not ref.startswith(("/", "http")) and (res.out_dir / ref).stat().st_size > 1000
+    assert refs.metric_rows == 4
+    assert [r.status for r in res.inputs] == ["imported", "imported", "read", "refused"]
+    assert str(bad) in res.inputs[3].reason and "line 6" in res.inputs[3].reason
+    assert str(bad) in page
+    with open(res.metrics_csv, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["status"] for r in rows] == ["ok", "ok", "ok", "refused"]
+    assert all(float(r["rms_com_error_mm"]) < 1.5 for r in rows[:3])
+    assert "<script" not in page and "http" not in page
+
+
+def test_report_missing_file_is_named_before_any_work(tmp_path, sim):
+    from rimless.errors import InputFileError
+
+    with pytest.raises(InputFileError, match="nope.csv: no such file"):
+        build_report([data_files()[0], tmp_path / "nope.csv"], tmp_path / "rep", sim=sim)
+    assert not (tmp_path / "rep").exists()
+
+
+# -------------------------------------------------------------------------------------------------- CLI
+
+
+def test_cli_report_json_with_a_refused_file(tmp_path):
+    bad = tmp_path / "empty.csv"
+    bad.write_text("")
+    res = runner.invoke(root_app, ["trials", "report", str(data_files()[0]), str(bad), "--out", str(tmp_path / "o"),
+                                   "--json"])
+    assert res.exit_code == 2
+    out = json.loads(res.stdout)
+    assert out["report"].endswith("report.html") and Path(out["report"]).is_file()
+    assert out["refused"] == [str(bad)]
+    assert [t["status"] for t in out["trials"]] == ["ok", "refused"]
+    assert str(bad) in out["trials"][1]["message"]
+
+
+def test_cli_report_missing_file(tmp_path):
+    res = runner.invoke(root_app, ["trials", "report", str(tmp_path / "gone.parquet"), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "error:" in res.output and "gone.parquet: no such file" in res.output
+
+
+def test_cli_report_bad_model(tmp_path):
+    res = runner.invoke(root_app, ["trials", "report", str(data_files()[0]), "--out", str(tmp_path), "--model", "x"])
+    assert res.exit_code == 2 and "--model must be one of er, ve" in res.output
+
+
+def test_demo(tmp_path):
+    out = tmp_path / "demo"
+    res = runner.invoke(root_app, ["demo", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert (out / "report.html").is_file() and (out / "metrics.csv").is_file()
+    assert f"report: {out / 'report.html'}" in res.stdout
+    page = (out / "report.html").read_text()
+    assert "SYNTHETIC DATA" in page and page.count('<tr class="trial">') == 6
+    with open(out / "metrics.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6 and all(r["status"] == "ok" for r in rows)
+    if shutil.which("chromium") or shutil.which("chromium-browser"):
+        _screenshot_has_content(out / "report.html", tmp_path / "shot.png")
+
+
+def _screenshot_has_content(page: Path, shot: Path) -> None:
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    with tempfile.TemporaryDirectory() as profile:
+        subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                        f"--user-data-dir={profile}", f"--screenshot={shot}", "--window-size=1200,2000",
+                        page.resolve().as_uri()], check=True, capture_output=True, timeout=120)
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(shot)
+    assert img.shape[0] >= 1000 and img.shape[1] >= 1000
+    rows_with_ink = (img[..., :3].std(axis=(1, 2)) > 0.02).mean()
+    assert rows_with_ink > 0.3  # text and figures, not a blank page
+
+
+@pytest.mark.skipif(not (shutil.which("chromium") or shutil.which("chromium-browser")), reason="chromium not installed")
+def test_report_renders_in_chromium(tmp_path, sim):
+    res = build_report(data_files()[:2], tmp_path / "rep", sim=sim, import_kwargs={"max_gap_s": 0.05})
+    _screenshot_has_content(res.report_html, tmp_path / "shot.png")
