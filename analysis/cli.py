@@ -212,8 +212,8 @@ def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: 
     else:
         from rich.table import Table
 
-        table = Table(title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation")
-        for col in ("trial", "status", "slope deg", "steps", "RMS CoM mm", "mean |dT| ms", "theta'+ rad/s"):
+        table = Table(title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation", show_edge=False)
+        for col in ("trial", "status", "slope deg", "steps", "RMS mm", "|dT| ms", "θ'+ rad/s"):
             table.add_column(col, no_wrap=col == "trial", justify="left" if col in ("trial", "status") else "right")
 
         def f(v: Any, fmt: str) -> str:
@@ -272,7 +272,7 @@ def demo_cmd(
     if not files:
         raise UserError("the bundled example dataset is missing from this install (rimless/analysis/data)")
     if not json_out:
-        typer.echo(f"{len(files)} bundled SYNTHETIC trials -> {out}/ (first run compiles the simulator)", err=True)
+        typer.echo(f"{len(files)} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
     res = _run_report(files, out, json_out=json_out, import_kwargs={"max_gap_s": 0.05}, model="er",
                       slope_bin_deg=0.5, note=DEMO_NOTE, title="rimless demo: SYNTHETIC trials vs simulation")
     if not json_out:

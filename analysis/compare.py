@@ -229,7 +229,7 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
         off = 0.0 if from_plane else float(np.mean(s - y[win]))
         return float(np.sqrt(np.mean((y[win] + off - s) ** 2))), off
 
-    shifts = np.arange(-MAX_SHIFT_S, MAX_SHIFT_S + 1e-12, 5e-4)
+    shifts = np.round(np.arange(-MAX_SHIFT_S, MAX_SHIFT_S + 1e-12, 5e-4), 9)
     rms = np.array([fit(s)[0] for s in shifts])
     best = float(shifts[int(np.argmin(rms))])
     if abs(best) >= MAX_SHIFT_S - 1e-9:
