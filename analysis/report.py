@@ -166,7 +166,7 @@ def build_report(
             progress(p.name)
     groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
     com_png = _com_figure(comps, out / REPORT_FILES["com"])
-    per_png = _period_figure(groups, out / REPORT_FILES["period"])
+    per_png = _period_figure(groups, out / REPORT_FILES["period"], sim.model)
     res = ReportResult(out, out / REPORT_FILES["html"], out / REPORT_FILES["csv"], [com_png, per_png], inputs, comps,
                        groups)
     _write_csv(res.metrics(), res.metrics_csv)
@@ -223,7 +223,7 @@ def _com_figure(comps: Sequence[TrialComparison], path: Path) -> Path:
     return path
 
 
-def _period_figure(groups: Sequence[SlopeGroup], path: Path) -> Path:
+def _period_figure(groups: Sequence[SlopeGroup], path: Path, model: str = "er") -> Path:
     fig = _figure(7.0, 4.2)
     ax = fig.add_subplot(1, 1, 1)
     if not groups:
@@ -239,7 +239,7 @@ def _period_figure(groups: Sequence[SlopeGroup], path: Path) -> Path:
             ax.plot(g.step_number, g.sim_period_s * 1e3, "--", color=col, lw=1.2, label=f"simulated {g.slope_deg:g} deg")
     ax.set_xlabel("step number (1 = first measured step)")
     ax.set_ylabel("step period, ms")
-    ax.set_title("Step period vs step number: mean ± std over trials, and the ER simulation")
+    ax.set_title(f"Step period vs step number: mean ± std over trials, and the {model.upper()} simulation")
     if groups:
         ax.legend(fontsize=8, ncol=2)
         ax.xaxis.get_major_locator().set_params(integer=True)
