@@ -60,33 +60,17 @@ app = typer.Typer(
 
 
 def _register_subapps() -> None:
+    from rimless.analysis.cli import app as trials_app
+    from rimless.analysis.cli import register_top_level as register_analysis_top
+    from rimless.firmware.cli import app as robot_app
     from rimless.sim.cli import app as sim_app
+    from rimless.sim.cli import register_top_level as register_sim_top
 
     app.add_typer(sim_app, name="sim", help="Hybrid simulator: gaits, fixed points, critical slope.")
-    try:
-        from rimless.firmware.cli import app as robot_app
-    except ImportError:  # pragma: no cover - the firmware part is being built
-        robot_app = None
-    if robot_app is not None:
-        app.add_typer(robot_app, name="robot", help="The robot: run the firmware, talk to it over the LAN.")
-    try:
-        from rimless.analysis.cli import app as trials_app
-    except ImportError:  # pragma: no cover - the analysis part is being built
-        trials_app = None
-    if trials_app is not None:
-        app.add_typer(trials_app, name="trials", help="Vicon trials: import, compare with the model, report.")
-    try:
-        from rimless.analysis.cli import register_top_level
-    except ImportError:  # pragma: no cover
-        register_top_level = None
-    if register_top_level is not None:
-        register_top_level(app)
-    try:
-        from rimless.sim.cli import register_top_level as register_sim_top
-    except ImportError:  # pragma: no cover
-        register_sim_top = None
-    if register_sim_top is not None:
-        register_sim_top(app)
+    app.add_typer(robot_app, name="robot", help="The robot: run the firmware, talk to it over the LAN.")
+    app.add_typer(trials_app, name="trials", help="Vicon trials: import, compare with the model, report.")
+    register_sim_top(app)
+    register_analysis_top(app)
 
 
 _register_subapps()
