@@ -49,7 +49,7 @@ def make_map(params: WheelParams, model: str, *, backend: str = "auto", rtol: fl
     if resolve(backend) == "fast":
         fast = _fast_module()
         integrator = fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2)  # type: ignore[union-attr]
-        return fast.FastPoincareMap(params, model, integrator=integrator)  # type: ignore[union-attr]
+        return fast.FastPoincareMap(params, model, integrator=integrator, jacobian_with_map=True)  # type: ignore[union-attr]
     return PoincareMap(params, model, ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2))
 
 
