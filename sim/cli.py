@@ -417,6 +417,64 @@ def gait_cmd(
         raise typer.Exit(1)
 
 
+def _floats(text: str, name: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ParameterError(f"{name} must be comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise ParameterError(f"{name} must be finite numbers, got {text!r}")
+    return values
+
+
+@app.command("stress")
+@user_facing
+@wheel_params
+def stress_cmd(
+    params: Any,
+    k_values: Annotated[str, typer.Option("--k-values", help="Stiffnesses to sweep, N/m, comma-separated.")] =
+        "300,1000,2700,1e4,1e5,1e6",
+    c_values: Annotated[str, typer.Option("--c-values", help="Dampings, N s/m.")] = "0,2,8,100",
+    slopes_deg: Annotated[str, typer.Option("--slopes-deg", help="Slopes, deg (each < 22.5).")] = "0.06,1.15,2.86,8.6,22.2",
+    mass_ratios: Annotated[str, typer.Option("--mass-ratios", help="Leg-to-hub mass ratios m/m_H.")] = "0.002,0.02,0.2",
+    rtol: RtolOpt = 1e-8,
+    json_out: JsonOpt = False,
+) -> None:
+    """Stress the compiled step map over a parameter grid: every point valid or a classified failure."""
+    from rich.progress import Progress
+
+    from rimless.sim.params import SPOKE_ANGLE_RAD
+    from rimless.sim.stress import stress_sweep
+
+    slopes = [math.radians(v) for v in _floats(slopes_deg, "--slopes-deg")]
+    if not all(0 <= s < SPOKE_ANGLE_RAD / 2 for s in slopes):
+        raise ParameterError("--slopes-deg: every slope must be in [0, 22.5) deg")
+    ks, cs, ratios = _floats(k_values, "--k-values"), _floats(c_values, "--c-values"), _floats(mass_ratios, "--mass-ratios")
+    if min(ks) <= 0 or min(cs) < 0 or min(ratios) <= 0:
+        raise ParameterError("need k > 0, c >= 0 and mass ratios > 0")
+    with Progress(transient=True, disable=json_out) as prog:
+        task = prog.add_task("stress sweep", total=None)
+        out = stress_sweep(params, k_values=ks, c_values=cs, slopes_rad=slopes, mass_ratios=ratios, rtol=rtol,
+                           progress=lambda i, n: prog.update(task, completed=i, total=n))
+    if json_out:
+        print_json(out)
+    else:
+        from rich.table import Table
+
+        reasons = sorted({r for m in out["counts"].values() for r in m})
+        table = Table(title=f"stress sweep: {out['points']} steps in {out['seconds']:.1f} s (rtol {rtol:g})")
+        table.add_column("outcome")
+        for model in out["counts"]:
+            table.add_column(model, justify="right")
+        for r in reasons:
+            table.add_row(r, *[str(out["counts"][m].get(r, 0)) for m in out["counts"]])
+        _console().print(table)
+        _console().print(f"max integrator steps in one step: {out['max_integrator_steps']}, slowest step "
+                         f"{out['slowest_step_s'] * 1e3:.1f} ms, unclassified: {len(out['unclassified'])}")
+    if out["unclassified"]:
+        raise typer.Exit(1)
+
+
 @user_facing
 def bench_cmd(
     quick: Annotated[bool, typer.Option("--quick", help="Fewer tolerances and repetitions (under a minute).")] = False,

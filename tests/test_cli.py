@@ -122,3 +122,16 @@ def test_critical_slope_of_the_compliant_wheels(model, reason):
     assert out["critical_slope_rad"] <= out["algorithm1_slope_rad"] < out["critical_slope_rad"] + out["algorithm1_step_rad"] + 1e-12
     assert out["refine_tol_rad"] == 1e-6
     assert out["at_critical"]["max_abs_eigenvalue"] < 1
+
+
+def test_stress_sweep_classifies_every_point():
+    res = runner.invoke(app, ["sim", "stress", "--k-values", "300,2700,1e6", "--c-values", "0,8",
+                              "--slopes-deg", "0.1,2.9,22", "--mass-ratios", "0.02", "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert out["points"] == 3 * 2 * 3 * 1 * 2 * 3
+    assert sum(sum(c.values()) for c in out["counts"].values()) == out["points"]
+    assert out["unclassified"] == []
+    assert out["counts"]["er"].get("valid", 0) > 0 and len(out["counts"]["er"]) >= 3
+    bad = runner.invoke(app, ["sim", "stress", "--slopes-deg", "30"])
+    assert bad.exit_code == 2 and "--slopes-deg" in bad.output
