@@ -183,6 +183,26 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
             "z_difference": float(np.max(np.abs(fp.z - fp_ref.z))),
             "max_abs_eigenvalue_difference": abs(fp.max_abs_eigenvalue - fp_ref.max_abs_eigenvalue),
         }
+    # one critical-slope continuation (Algorithm 1 from 0.05 rad, refined to 1e-6 rad) on both paths;
+    # the reference path takes about a minute per model, so --quick times the fast path only
+    from rimless.sim.continuation import critical_slope
+
+    continuation: dict[str, Any] = {}
+    for model in ("er", "ve"):
+        say(f"{model}: critical-slope continuation, fast path")
+        pm_fast = fast.FastPoincareMap(params, model, jacobian_with_map=True)
+        t_s = time.perf_counter()
+        cs = critical_slope(pm_fast, Z_STAR[model], jacobian_factory=lambda m: m.variational_jacobian)
+        entry: dict[str, Any] = {"fast_seconds": time.perf_counter() - t_s, "fast_critical_slope_rad": cs.critical_slope_rad,
+                                 "fast_reason": cs.reason, "branch_points": len(cs.branch),
+                                 "reference_seconds": None, "reference_critical_slope_rad": None}
+        if not quick:
+            say(f"{model}: critical-slope continuation, reference path (about a minute)")
+            t_s = time.perf_counter()
+            cs_ref = critical_slope(PoincareMap(params, model), Z_STAR[model])
+            entry.update(reference_seconds=time.perf_counter() - t_s, reference_critical_slope_rad=cs_ref.critical_slope_rad,
+                         reference_reason=cs_ref.reason)
+        continuation[model] = entry
     say("compile cost (fresh processes)")
     compile_cost = _compile_cost(quick)
     compile_cost["in_process_warm_up_s"] = warm_s
@@ -196,6 +216,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         "speedup_at_1e-9": min(valid) if valid else None,
         "speedup_at_1e-9_by_model": speedups,
         "fixed_point": fixed,
+        "critical_slope_continuation": continuation,
         "compile": compile_cost,
         "total_seconds": time.perf_counter() - t0,
     }
@@ -250,6 +271,11 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"fixed point {model}: fast {f['fast_seconds'] * 1e3:.1f} ms ({f['fast_iterations']} it, "
                      f"{f['fast_jacobian_method']}), reference {f['reference_seconds']:.2f} s; "
                      f"|dz| {f['z_difference']:.1e}, |d max|eig|| {f['max_abs_eigenvalue_difference']:.1e}")
+    for model, cont in result.get("critical_slope_continuation", {}).items():
+        ref = ("reference not timed (--quick)" if cont["reference_seconds"] is None else
+               f"reference {cont['reference_seconds']:.1f} s -> {cont['reference_critical_slope_rad']:.7f} rad")
+        lines.append(f"critical slope {model}: fast {cont['fast_seconds']:.2f} s -> {cont['fast_critical_slope_rad']:.7f} rad "
+                     f"({cont['fast_reason']}, {cont['branch_points']} branch points); {ref}")
     c = result["compile"]
     for label in ("cold", "warm"):
         if label in c and "first_calls_s" in c[label]:
