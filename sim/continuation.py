@@ -63,12 +63,6 @@ class CriticalSlope:
         return math.tan(self.critical_slope_rad)
 
 
-class _Failure(Exception):
-    def __init__(self, kind: str, detail: str) -> None:
-        self.kind = kind
-        self.detail = detail
-
-
 def _classify(err: StepFailure, last_good: FixedPoint | None) -> tuple[str, str]:
     """Why the fixed point is lost at a slope: from the map's failure and the last eigenvalues."""
     cause = err.last_failure if isinstance(err, NoFixedPoint) else err

@@ -57,11 +57,6 @@ def rhs(mech: Mechanics, phase: int, y: np.ndarray) -> np.ndarray:
     return np.concatenate((y[5:], qdd))
 
 
-def normal_forces(lam: np.ndarray, phase: int) -> tuple[float, float]:
-    """(lambda_b,y, lambda_a,y) in N; lambda_a,y is nan outside double support."""
-    return float(lam[1]), (float(lam[3]) if phase == DLSP else float("nan"))
-
-
 def damping_power(mech: Mechanics, phase: int, qd: np.ndarray) -> float:
     """Power dissipated by the leg dampers, W (>= 0)."""
     c = mech.params.damping_ns_per_m

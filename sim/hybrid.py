@@ -215,7 +215,6 @@ def simulate_step(
         if r.guard is None:
             raise StepFailure(FailureReason.INTEGRATION, f"free compression lasted over {PHASE_TIME_LIMIT_S} s",
                               time_s=r.t_end, phase="slsp_free")
-        e_before = mech.energy(r.y_end[:5], r.y_end[5:])
         y, t, extra = clutch.lock(mech, integrator, r.y_end, r.t_end, record_dt=record_dt,
                                   track_dissipation=track_dissipation)
         for er in extra:
@@ -225,7 +224,6 @@ def simulate_step(
             phases.append(PhaseRecord("slsp_free", phases[-1].t_end_s, er.t_end))
         if extra:
             clutch_loss = mech.energy(extra[-1].y_end[:5], extra[-1].y_end[5:]) - mech.energy(y[:5], y[5:])
-        del e_before
         final_phase = SLSP_CLUTCHED
     else:
         final_phase = SLSP_FREE

@@ -95,10 +95,8 @@ class ScipyIntegrator:
             ev.direction = DIRECTION[code]  # type: ignore[attr-defined]
             events.append(ev)
         y_init = np.concatenate((y0, [0.0])) if track_dissipation else np.asarray(y0, dtype=float)
-        # Tolerances: the dissipation integral gets an absolute tolerance in joules.
-        atol = self.atol
         sol = solve_ivp(
-            fun, (t0, t0 + t_max), y_init, method=self.method, rtol=self.rtol, atol=atol,
+            fun, (t0, t0 + t_max), y_init, method=self.method, rtol=self.rtol, atol=self.atol,
             events=events, dense_output=record_dt is not None,
         )
         if sol.status == -1:

@@ -10,7 +10,6 @@ import importlib
 import math
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any
 
 import numpy as np
 
@@ -70,13 +69,6 @@ def hub_position(q: np.ndarray) -> np.ndarray:
     return np.array([q[0] + q[3] * math.sin(q[2]), q[1] + q[3] * math.cos(q[2])])
 
 
-def hub_velocity(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    th, L1 = q[2], q[3]
-    return np.array(
-        [qd[0] + qd[3] * math.sin(th) + L1 * math.cos(th) * qd[2], qd[1] + qd[3] * math.cos(th) - L1 * math.sin(th) * qd[2]]
-    )
-
-
 def foot_a(q: np.ndarray) -> np.ndarray:
     """Trailing foot a position in the slope frame, m."""
     hub = hub_position(q)
@@ -88,21 +80,6 @@ def swing_height(q: np.ndarray, leg_length_m: float) -> float:
     return q[1] + q[3] * math.cos(q[2]) - leg_length_m * math.cos(ALPHA - q[2])
 
 
-def swing_height_grad(q: np.ndarray, leg_length_m: float) -> np.ndarray:
-    """Gradient of swing_height with respect to q."""
-    th = q[2]
-    return np.array([0.0, 1.0, -q[3] * math.sin(th) - leg_length_m * math.sin(ALPHA - th), math.cos(th), 0.0])
-
-
 def world_height(point: np.ndarray, slope_rad: float) -> float:
     """World (gravity-vertical) height of a slope-frame point, m."""
     return -point[0] * math.sin(slope_rad) + point[1] * math.cos(slope_rad)
-
-
-def com_height_normal(q: np.ndarray) -> float:
-    """Hub height normal to the slope above the stance foot's contact line (y = 0), m."""
-    return float(hub_position(q)[1])
-
-
-def describe(params: WheelParams) -> dict[str, Any]:
-    return {"mass_model": params.mass_model, "alpha_rad": ALPHA}
