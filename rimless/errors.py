@@ -1,7 +1,9 @@
 """The root of every exception rimless raises on purpose.
 
 A `UserError` is a mistake in what the user gave (a parameter, a file, a command): the CLI prints its
-one-line message and exits with code 2, never with a traceback.
+one-line message and exits with code 2, never with a traceback. A `RunFailure` is a run that could not
+produce its result although the input was valid (no gait exists, every trial failed): exit code 1, one
+line on stderr.
 """
 
 
@@ -19,3 +21,11 @@ class ParameterError(UserError):
 
 class InputFileError(UserError):
     """A file cannot be read or parsed; the message names the file, line and column."""
+
+
+class OutputFileError(UserError):
+    """An output cannot be written where the user asked (no permission, not a folder); names the path."""
+
+
+class RunFailure(RimlessError, RuntimeError):
+    """Valid input, no result: the message says why in a researcher's words (a reason code may follow)."""

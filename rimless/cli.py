@@ -1,0 +1,355 @@
+"""The `rimless` command line: one typer app, a sub-app per part, one behaviour for every command.
+
+The root group (`RimlessGroup`) applies the rules to every command of the tree, including commands the
+parts add later:
+
+- a usage mistake (bad choice, non-number, missing or unknown option) prints one line `error: ...` naming
+  the option and exits 2; so does a `UserError` raised by a command, or an `OSError` naming a file;
+- a `RunFailure` (valid input, no result) prints one line and exits 1;
+- Ctrl-C (KeyboardInterrupt, also when numba wraps it in a SystemError) prints `interrupted` and exits 130;
+- a negative number is read as a value, not as an option (`robot set touch_velocity_m_s -3`);
+- `--help` shows upper-case metavars (`FLOAT`, `PATH`, `[er|ve]`), none on flags, and prints help text
+  literally (square brackets are not rich markup).
+
+Heavy libraries are imported inside the commands, so `rimless --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import re
+import sys
+from collections.abc import Callable, Iterator
+from typing import Annotated, Any, NoReturn, Optional, TypeVar
+
+import typer
+from typer import _click
+from typer.core import TyperGroup
+
+from rimless import __version__
+from rimless.errors import RunFailure, UserError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
+
+# A token that is a number, not an option: -3, -0.5, -.5, -1e-3, -inf is not a number here.
+_NEGATIVE_NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+
+
+def user_facing(func: F) -> F:
+    """Turn a `UserError` raised by a command into one line and exit 2, a `RunFailure` into exit 1.
+
+    The root group does the same for every command; the decorator keeps a command correct when it is
+    invoked on its own (a sub-app in a test).
+    """
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with _rules(None):
+            return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+def fail(message: str) -> NoReturn:
+    """Stop a command whose input was valid but which has no result: one line on stderr, exit 1."""
+    raise RunFailure(message)
+
+
+def print_json(obj: Any) -> None:
+    """Print one JSON object on stdout (NaN/inf become null, numpy scalars become numbers)."""
+    typer.echo(json.dumps(_jsonable(obj), indent=2, allow_nan=False))
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars
+        return _jsonable(obj.tolist())
+    if isinstance(obj, float) and (obj != obj or obj in (float("inf"), float("-inf"))):
+        return None
+    return obj
+
+
+# ------------------------------------------------------------------------------------------ the rules
+
+
+def _error(message: str, code: int) -> NoReturn:
+    typer.echo(f"error: {_one_line(message)}", err=True)
+    raise typer.Exit(code)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _interrupted_by_user(err: BaseException) -> bool:
+    """True if `err` is, or was caused by, a KeyboardInterrupt (numba re-raises it as SystemError)."""
+    seen: set[int] = set()
+    cur: BaseException | None = err
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt):
+            return True
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return False
+
+
+@contextlib.contextmanager
+def _rules(ctx: Optional[_click.Context]) -> Iterator[None]:
+    """Map what a command raises onto the CLI's exit codes and one-line messages."""
+    try:
+        yield
+    except (typer.Exit, _click.exceptions.NoArgsIsHelpError):
+        raise
+    except _click.exceptions.ClickException as err:
+        _error(usage_message(err), EXIT_USER_ERROR)
+    except typer.Abort:
+        typer.echo("interrupted", err=True)
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    except UserError as err:
+        _error(str(err), EXIT_USER_ERROR)
+    except RunFailure as err:
+        _error(str(err), EXIT_FAILURE)
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    except SystemError as err:
+        if _interrupted_by_user(err):
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        raise
+    except OSError as err:
+        if err.filename is None:
+            raise
+        where = err.filename if err.filename2 is None else f"{err.filename} -> {err.filename2}"
+        _error(f"{where}: {err.strerror or err}", EXIT_USER_ERROR)
+
+
+def _param_name(err: _click.exceptions.ClickException) -> str | None:
+    param = getattr(err, "param", None)
+    if param is None:
+        return None
+    if getattr(param, "param_type_name", "") == "argument":
+        return (param.metavar or param.name or "").upper() or None
+    longs = [o for o in param.opts if o.startswith("--")]
+    return (longs or param.opts or [param.name])[0]
+
+
+def _pydantic_detail(err: BaseException) -> str | None:
+    """The offending value and the rule it broke, from the validation error typer wraps (if any)."""
+    cause = err.__cause__
+    errors = getattr(cause, "errors", None)
+    if not callable(errors):
+        return None
+    try:
+        first = errors()[0]
+    except Exception:  # noqa: BLE001 - any shape we do not know falls back to click's text
+        return None
+    kind, value, bounds = first.get("type", ""), first.get("input"), first.get("ctx") or {}
+    got = f"got {value!r}"
+    if kind in ("float_parsing", "float_type"):
+        return f"must be a number, {got}"
+    if kind in ("int_parsing", "int_type", "int_from_float"):
+        return f"must be a whole number, {got}"
+    for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+        if key in bounds and kind.startswith(("greater", "less")):
+            return f"must be {word} {bounds[key]}, {got}"
+    if kind == "enum" and "expected" in bounds:
+        choices = str(bounds["expected"]).replace("'", "").replace(" or ", ", ")
+        return f"must be one of {choices}, {got}"
+    return None
+
+
+def usage_message(err: _click.exceptions.ClickException) -> str:
+    """One line for a usage error, naming the option or argument; no box, no `Usage:` block."""
+    name = _param_name(err)
+    ctx = getattr(err, "ctx", None)
+    see = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+    if isinstance(err, _click.exceptions.MissingParameter):
+        kind = "argument" if getattr(err.param, "param_type_name", "") == "argument" else "option"
+        return f"missing {kind} {name}{see}"
+    if isinstance(err, _click.exceptions.BadParameter) and name:
+        detail = _pydantic_detail(err)
+        if detail is None:
+            detail = err.message.replace("Value error, ", "").strip().rstrip(".")
+            choice = re.fullmatch(r"(.+) is not one of (.+)", detail)
+            if choice:
+                detail = f"must be one of {choice.group(2).replace(chr(39), '')}, got {choice.group(1)}"
+            detail = detail[:1].lower() + detail[1:]
+        return f"{name} {detail}" if detail.startswith("must ") else f"{name}: {detail}"
+    text = err.format_message().strip().rstrip(".")
+    text = text[:1].lower() + text[1:]
+    return f"{text}{see}"
+
+
+# ------------------------------------------------------------------------------- the root group
+
+
+class RimlessGroup(TyperGroup):
+    """The root command group: applies the rules above to every command below it."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        for command in walk_commands(self):
+            _adapt_command(command)
+
+    def make_context(self, info_name: Optional[str], args: list[str], parent: Any = None, **extra: Any) -> Any:
+        with _rules(None):
+            return super().make_context(info_name, args, parent=parent, **extra)
+
+    def invoke(self, ctx: _click.Context) -> Any:
+        with _rules(ctx):
+            return super().invoke(ctx)
+
+
+def walk_commands(root: _click.Command, path: tuple[str, ...] = ()) -> Iterator[_click.Command]:
+    """Every command of the tree under `root`, `root` included (depth first, sorted by name)."""
+    yield root
+    for name in sorted(getattr(root, "commands", {}) or {}):
+        yield from walk_commands(root.commands[name], (*path, name))  # type: ignore[attr-defined]
+
+
+def _adapt_command(command: _click.Command) -> None:
+    from rich.markup import escape
+
+    if command.help:
+        command.help = escape(command.help)
+    if command.short_help:
+        command.short_help = escape(command.short_help)
+    for param in command.params:
+        if getattr(param, "help", None):
+            param.help = escape(param.help)  # type: ignore[attr-defined]
+        _adapt_metavar(param)
+    command.get_help_option = functools.partial(_help_option_without_metavar, command.get_help_option)  # type: ignore[method-assign]
+    if not hasattr(command, "commands"):
+        original = command.make_parser
+        command.make_parser = functools.partial(_parser_reading_negative_numbers, original)  # type: ignore[method-assign]
+
+
+def _help_option_without_metavar(get_help_option: Callable[[Any], Any], ctx: _click.Context) -> Any:
+    option = get_help_option(ctx)
+    if option is not None:
+        _adapt_metavar(option)
+    return option
+
+
+def _parser_reading_negative_numbers(make_parser: Callable[[Any], Any], ctx: _click.Context) -> Any:
+    """The command's parser, with `-3` or `-0.5` read as a value where no option has that name."""
+    parser = make_parser(ctx)
+    process_opts = parser._process_opts
+
+    def _process_opts(arg: str, state: Any) -> None:
+        if _NEGATIVE_NUMBER.fullmatch(arg) and arg not in parser._short_opt and arg not in parser._long_opt:
+            state.largs.append(arg)
+            return
+        process_opts(arg, state)
+
+    parser._process_opts = _process_opts
+    return parser
+
+
+_TYPE_METAVARS = {"float": "FLOAT", "int": "INTEGER", "str": "TEXT", "bool": "BOOLEAN", "path": "PATH",
+                  "file": "FILE", "directory": "DIRECTORY", "float range": "FLOAT", "int range": "INTEGER"}
+
+
+def _adapt_metavar(param: _click.Parameter) -> None:
+    """Upper-case metavars in help: FLOAT, PATH, [er|ve], NAME; nothing after a flag."""
+    if param.metavar is not None:
+        return
+    if getattr(param, "is_flag", False) or getattr(param, "count", False):
+        param.display_type_rich = lambda ctx: None  # type: ignore[attr-defined]
+        return
+    original = getattr(param, "display_type_rich", None)
+    if original is not None:
+        param.display_type_rich = functools.partial(_metavar_of, original)  # type: ignore[attr-defined]
+    if getattr(param, "param_type_name", "") == "argument":
+        name = (param.name or "value").upper()
+        param.metavar = name
+
+        def usage_name() -> str:
+            text = name + ("..." if param.nargs != 1 else "")
+            return text if param.required else f"[{text}]"
+
+        param._usage_display_name = usage_name  # type: ignore[attr-defined]
+
+
+def _metavar_of(original: Callable[..., Optional[str]], ctx: _click.Context) -> Optional[str]:
+    shown = original(ctx=ctx)
+    if shown is None:
+        return None
+    dots = shown.endswith("...")
+    label = shown.removesuffix("...").strip("<>")
+    if label.startswith("list[") and label.endswith("]"):
+        label, dots = label[5:-1], True
+    if "|" in label:
+        label = f"[{label}]"
+    else:
+        label = _TYPE_METAVARS.get(label, label.upper())
+    return label + ("..." if dots else "")
+
+
+# ------------------------------------------------------------------------------------------ the app
+
+
+app = typer.Typer(
+    name="rimless",
+    cls=RimlessGroup,
+    help="Energy-recycling rimless wheel: simulate it, run the robot, analyse Vicon trials.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"rimless {__version__}")
+        raise typer.Exit(EXIT_OK)
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version,
+                                          help="Print the version and exit.")] = False,
+) -> None:
+    """Energy-recycling rimless wheel: simulate it, run the robot, analyse Vicon trials."""
+
+
+def _register_subapps() -> None:
+    from rimless.analysis.cli import app as trials_app
+    from rimless.analysis.cli import register_top_level as register_analysis_top
+    from rimless.firmware.cli import app as robot_app
+    from rimless.sim.cli import app as sim_app
+    from rimless.sim.cli import register_top_level as register_sim_top
+
+    app.add_typer(sim_app, name="sim", help="Hybrid simulator: gaits, fixed points, critical slope.")
+    app.add_typer(robot_app, name="robot", help="The robot: run the firmware, talk to it over the LAN.")
+    app.add_typer(trials_app, name="trials", help="Vicon trials: import, compare with the model, report.")
+    register_sim_top(app)
+    register_analysis_top(app)
+
+
+_register_subapps()
+
+
+def command_tree() -> _click.Command:
+    """The click command of the whole `rimless` app (as the console script builds it)."""
+    return typer.main.get_command(app)
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    """Entry point of the `rimless` console script."""
+    try:
+        app(args=argv, prog_name="rimless")
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        sys.exit(EXIT_INTERRUPTED)
