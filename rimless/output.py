@@ -1,0 +1,91 @@
+"""Outputs written whole or not at all: write to a temporary name beside the target, rename when done.
+
+An interrupted or failed command leaves neither a half-written file nor an empty folder at the path the
+user asked for (the temporary is removed); an earlier complete output there stays until the new one is
+complete. A path that cannot be written is a `OutputFileError` naming the path (and the option).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Optional
+
+from rimless.errors import OutputFileError
+
+
+def _where(target: Path, option: Optional[str]) -> str:
+    return f"{option} {target}" if option else str(target)
+
+
+def _prepare_parent(target: Path, option: Optional[str]) -> Path:
+    parent = target.parent if str(target.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputFileError(f"{_where(target, option)}: cannot create the folder {parent} "
+                              f"({err.strerror or err})") from None
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputFileError(f"{_where(target, option)}: the folder {parent} is not writable")
+    return parent
+
+
+@contextlib.contextmanager
+def atomic_file(target: os.PathLike[str] | str, *, option: Optional[str] = None) -> Iterator[Path]:
+    """Yield a temporary path (same folder and suffix as `target`); rename it onto `target` when the block ends.
+
+    The suffix is kept so writers that choose the format by extension (matplotlib, pandas) still work.
+    """
+    target = Path(target)
+    if target.is_dir():
+        raise OutputFileError(f"{_where(target, option)}: is a folder, expected a file name")
+    parent = _prepare_parent(target, option)
+    fd, name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{target.suffix}", dir=parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise OutputFileError(f"{_where(target, option)}: nothing was written")
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+@contextlib.contextmanager
+def atomic_dir(target: os.PathLike[str] | str, *, option: Optional[str] = None) -> Iterator[Path]:
+    """Yield a temporary folder beside `target`; when the block ends it replaces `target` as a whole.
+
+    An existing `target` folder is replaced only after the new one is complete; an existing file there
+    is an `OutputFileError`.
+    """
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise OutputFileError(f"{_where(target, option)}: exists and is not a folder")
+    parent = _prepare_parent(target, option)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=parent))
+    try:
+        yield tmp
+        os.chmod(tmp, 0o777 & ~_umask())
+        if target.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=parent))
+            os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

@@ -1,0 +1,61 @@
+"""A progress bar on stderr for work longer than about two seconds.
+
+Quiet when stderr is not a terminal (pipes, CI, tests) or when the command prints `--json`, so stdout
+stays clean and logs stay readable.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Iterator
+from typing import Any, Optional
+
+
+class ProgressBar:
+    """One task on a rich progress display; every method is a no-op when the bar is quiet."""
+
+    def __init__(self, progress: Any, task: Any) -> None:
+        self._progress = progress
+        self._task = task
+
+    def update(self, completed: Optional[float] = None, total: Optional[float] = None,
+               description: Optional[str] = None) -> None:
+        """Set how much is done (in the bar's own units), the total, or the text beside the bar."""
+        if self._progress is None:
+            return
+        kwargs: dict[str, Any] = {}
+        if completed is not None:
+            kwargs["completed"] = completed
+        if total is not None:
+            kwargs["total"] = total
+        if description is not None:
+            kwargs["description"] = description
+        self._progress.update(self._task, **kwargs)
+
+    def advance(self, amount: float = 1.0) -> None:
+        """Count `amount` more units done."""
+        if self._progress is not None:
+            self._progress.advance(self._task, amount)
+
+
+def progress_is_shown(json_out: bool = False) -> bool:
+    """Whether a progress bar would be drawn: stderr is a terminal and the output is not JSON."""
+    isatty = getattr(sys.stderr, "isatty", None)
+    return not json_out and bool(isatty and isatty())
+
+
+@contextlib.contextmanager
+def progress_bar(description: str, total: Optional[float] = None, *, json_out: bool = False) -> Iterator[ProgressBar]:
+    """A transient progress bar on stderr for the block; `total=None` shows a spinner and elapsed time."""
+    if not progress_is_shown(json_out):
+        yield ProgressBar(None, None)
+        return
+    from rich.console import Console
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn,
+                               TimeElapsedColumn)
+
+    columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn()]
+    with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
+        yield ProgressBar(progress, progress.add_task(description, total=total))

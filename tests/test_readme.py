@@ -1,0 +1,134 @@
+"""Every command in the README's ```bash blocks runs as written, after the two set-up lines.
+
+The commands run in README order (later ones read what earlier ones wrote, e.g. `trials show` reads what
+`trials import` wrote) in a scratch folder that mirrors the repository's root through symbolic links, so
+relative paths such as `analysis/data/...` resolve as in a clone while outputs land in the scratch folder.
+`.venv` there points at the environment running the tests, and its `bin` folder comes first on PATH (what
+`source .venv/bin/activate` does). Whatever bash blocks the README gains later are parsed the same way.
+
+Each command must exit 0 without a traceback, and every file or folder it names with `--out` or `--plot`
+must exist afterwards.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+BLOCK = re.compile(r"^```bash[^\n]*\n(.*?)^```", re.M | re.S)
+
+# Commands the test does not run, each with its reason. Keep this list short and explicit.
+NOT_RUN: list[tuple[str, str]] = [
+    (r"^python3 -m venv\b", "creates the environment the test is already running in (.ci/run does it on a clean clone)"),
+    (r"/pip install\b|^pip install\b", "installs the project; the test runs inside that installation"),
+    (r"-m pytest\b|^pytest\b", "runs the test suite, which includes this test"),
+    (r"^rimless robot check\b(?!.*--fake)", "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch GPIO pins"),
+    (r"--host\s+(H|raspberrypi\.local)\b", "needs a running robot on the LAN"),
+]
+
+# Long-running commands get their quick options (appended when the README's line lacks them).
+QUICK: list[tuple[str, list[str]]] = [
+    (r"^rimless robot listen\b(?!.*--duration-s)", ["--duration-s", "1"]),
+    (r"^rimless robot run\b(?!.*--duration-s)", ["--duration-s", "2"]),
+    (r"^rimless bench\b(?!.*--quick)", ["--quick"]),
+]
+
+TIMEOUT_S = 900  # the first simulator command compiles the fast path (about a minute on the CI machine)
+
+
+def readme_commands(text: str) -> list[str]:
+    """The shell commands of every ```bash block: one per line, `&&` chains split, comments removed."""
+    commands: list[str] = []
+    for block in BLOCK.findall(text):
+        for line in block.splitlines():
+            line = re.sub(r"(^|\s)#.*$", "", line).strip()
+            if not line:
+                continue
+            commands.extend(part.strip() for part in line.split("&&") if part.strip())
+    return commands
+
+
+def _normalised(command: str) -> str:
+    """The command as the patterns see it: `.venv/bin/rimless` reads as `rimless`."""
+    return re.sub(r"^(\./)?\.venv/bin/", "", command)
+
+
+def not_run_reason(command: str) -> str | None:
+    for pattern, reason in NOT_RUN:
+        if re.search(pattern, _normalised(command)):
+            return reason
+    return None
+
+
+def with_quick_options(command: str) -> str:
+    for pattern, extra in QUICK:
+        if re.search(pattern, _normalised(command)):
+            return command + " " + shlex.join(extra)
+    return command
+
+
+def named_outputs(command: str) -> list[str]:
+    """Paths given to --out or --plot."""
+    words = shlex.split(command)
+    return [words[i + 1] for i, w in enumerate(words[:-1]) if w in ("--out", "--plot")]
+
+
+COMMANDS = readme_commands(README.read_text(encoding="utf-8"))
+
+
+def test_the_readme_has_runnable_commands():
+    """The parser finds the README's commands (a README without any would make every test below vanish)."""
+    runnable = [c for c in COMMANDS if not_run_reason(c) is None]
+    assert any(_normalised(c).startswith("rimless demo") for c in runnable)
+    assert any(_normalised(c).startswith("rimless sim ") for c in runnable)
+    assert len(runnable) >= 10, runnable
+
+
+def test_parser_handles_chains_comments_and_the_setup_line():
+    text = "x\n```bash\npython3 -m venv .venv && .venv/bin/pip install -e \".[pc]\" && .venv/bin/rimless demo\n" \
+           "rimless sim gaits --model ve   # every gait\n\n# a comment line\n```\n```text\nnot a command\n```\n"
+    cmds = readme_commands(text)
+    assert cmds == ["python3 -m venv .venv", ".venv/bin/pip install -e \".[pc]\"", ".venv/bin/rimless demo",
+                    "rimless sim gaits --model ve"]
+    assert [not_run_reason(c) is None for c in cmds] == [False, False, True, True]
+    assert with_quick_options("rimless bench --plot wp.png") == "rimless bench --plot wp.png --quick"
+    assert with_quick_options("rimless bench --quick") == "rimless bench --quick"
+    assert named_outputs("rimless trials report a b --out report/ --json") == ["report/"]
+
+
+@pytest.fixture(scope="module")
+def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A scratch folder that looks like the repository's root; outputs land in it, not in the repository."""
+    where = tmp_path_factory.mktemp("readme")
+    for entry in ROOT.iterdir():
+        if entry.name in (".git", ".venv") or entry.name.startswith("."):
+            continue
+        (where / entry.name).symlink_to(entry)
+    (where / ".venv").symlink_to(Path(sys.prefix))
+    return where
+
+
+@pytest.mark.parametrize("command", COMMANDS, ids=[f"{i:02d} {c[:60]}" for i, c in enumerate(COMMANDS)])
+def test_readme_command_runs_as_written(command: str, mirror: Path) -> None:
+    reason = not_run_reason(command)
+    if reason is not None:
+        pytest.skip(f"not run: {reason}")
+    bin_dir = Path(sys.prefix) / "bin"
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", "VIRTUAL_ENV": sys.prefix,
+           "COLUMNS": "80"}
+    run = with_quick_options(command)
+    res = subprocess.run(["bash", "-c", run], cwd=mirror, env=env, capture_output=True, text=True,
+                         timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, f"`{run}` exited {res.returncode}:\n{out[-3000:]}"
+    assert "Traceback" not in out, out[-3000:]
+    for path in named_outputs(run):
+        assert (mirror / path).exists(), f"`{run}` did not write {path}"
