@@ -43,6 +43,28 @@ def _time_per_call(fn: Callable[[], Any], budget_s: float, max_reps: int) -> flo
     return float(np.median(times))
 
 
+def load_average() -> list[float] | None:
+    """The 1, 5 and 15 minute load averages (None where the platform has none)."""
+    try:
+        return [round(v, 2) for v in os.getloadavg()]
+    except (OSError, AttributeError):
+        return None
+
+
+def machine_load(before: list[float] | None, after: list[float] | None) -> dict[str, Any]:
+    """Load averages around a run and whether the machine was busy with other work.
+
+    Busy: the 1-minute load before the run, or after it less the benchmark's own process, exceeds a quarter
+    of the cores: then timings (and more so ratios between a compiled and a Python path, which load slows
+    differently) are not representative."""
+    cpus = os.cpu_count() or 1
+    busy = None
+    if before is not None and after is not None:
+        others = max(before[0], after[0] - 1.0)
+        busy = bool(others > 0.25 * cpus)
+    return {"before": before, "after": after, "cpus": cpus, "busy": busy}
+
+
 def _compile_cost(quick: bool) -> dict[str, Any]:
     """First-call cost of the compiled kernels in a fresh process: cold (empty numba cache) and warm."""
     code = ("import time; t=time.perf_counter(); from rimless.sim import fast; t1=time.perf_counter(); "
@@ -78,6 +100,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
 
     say = progress or (lambda _msg: None)
     params = WheelParams()
+    load_before = load_average()
     t0 = time.perf_counter()
     say("compiling / loading the fast kernels")
     warm_s = fast.warm_up()
@@ -112,12 +135,12 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                                          fast_budget, 2000)
                     spj = _time_per_call(lambda: fast.fast_step(params, model, z, rtol=rtol, atol=atol,
                                                                 jacobian=True), fast_budget / 2, 500)
-                    nfev = r.nfev
+                    nfev, nsteps = r.nfev, r.nsteps
                 else:
                     pm = PoincareMap(params, model, ScipyIntegrator(backend, rtol=rtol, atol=atol))
                     st = pm.step(z)
                     z_new, period = np.array([st.y_plus[2], st.y_plus[7]]), st.period_s
-                    nfev = st.nfev
+                    nfev, nsteps = st.nfev, -1
                     spm = _time_per_call(lambda pm=pm: pm(z), budget, 20)
                     t_j = time.perf_counter()
                     J = pm.jacobian(z)
@@ -134,6 +157,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     "seconds_per_map": spm,
                     "seconds_per_map_and_jacobian": spj,
                     "nfev": int(nfev),
+                    "nsteps": int(nsteps),
                 })
 
     def loosest(model: str, backend: str) -> dict[str, Any] | None:
@@ -206,8 +230,10 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     say("compile cost (fresh processes)")
     compile_cost = _compile_cost(quick)
     compile_cost["in_process_warm_up_s"] = warm_s
+    load = machine_load(load_before, load_average())
     return {
         "quick": quick,
+        "load_average": load,
         "settings": {"params": params.to_dict(), "z": {m: v.tolist() for m, v in Z_STAR.items()},
                      "reference": f"scipy DOP853 rtol {REFERENCE_RTOL:g} atol {REFERENCE_RTOL * 1e-2:g}",
                      "atol": "rtol / 100 for every backend", "target_error": TARGET_ERROR},
@@ -244,7 +270,8 @@ def plot_work_precision(result: dict[str, Any], path: str) -> None:
     sp = result.get("speedup_at_1e-9")
     title = "Poincaré map work-precision"
     if sp:
-        title += f" (speed-up at 1e-9: {sp:.0f}x)"
+        busy = (result.get("load_average") or {}).get("busy")
+        title += f" (speed-up at 1e-9: {sp:.0f}x{', busy machine' if busy else ''})"
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
@@ -255,13 +282,26 @@ def plot_work_precision(result: dict[str, Any], path: str) -> None:
 
 def format_table(result: dict[str, Any]) -> str:
     """A plain-text summary of a run_bench result."""
-    lines = [f"{'model':5} {'backend':14} {'rtol':>8} {'error':>9} {'T err':>9} {'eig err':>9} {'s/map':>10} {'nfev':>7}"]
+    lines = [f"{'model':5} {'backend':14} {'rtol':>6} {'error':>8} {'T err':>8} {'eig err':>8} {'s/map':>9} "
+             f"{'nfev':>6} {'steps':>5}"]
     for r in result["rows"]:
-        lines.append(f"{r['model']:5} {r['backend']:14} {r['rtol']:8.0e} {r['error']:9.2e} {r['period_error_s']:9.2e} "
-                     f"{r['eigenvalue_error']:9.2e} {r['seconds_per_map']:10.3e} {r['nfev']:7d}")
+        steps = r.get("nsteps", -1)
+        lines.append(f"{r['model']:5} {r['backend']:14} {r['rtol']:6.0e} {r['error']:8.1e} {r['period_error_s']:8.1e} "
+                     f"{r['eigenvalue_error']:8.1e} {r['seconds_per_map']:9.2e} {r['nfev']:6d} "
+                     f"{steps if steps >= 0 else '-':>5}")
+    load = result.get("load_average") or {}
+    busy = load.get("busy")
+    if load.get("before") is not None:
+        lines.append(f"load average 1/5/15 min: before {' '.join(f'{v:.2f}' for v in load['before'])}, "
+                     f"after {' '.join(f'{v:.2f}' for v in load['after'])} ({load['cpus']} cores)")
     sp = result["speedup_at_1e-9"]
-    lines.append(f"speed-up at error <= 1e-9 (DOP853 / fast, worst model): "
-                 f"{'n/a' if sp is None else f'{sp:.0f}x'}")
+    ratio = "n/a" if sp is None else f"{sp:.0f}x"
+    if busy and sp is not None:
+        ratio += " (busy machine)"
+    lines.append(f"speed-up at error <= 1e-9 (DOP853 / fast, worst model): {ratio}")
+    if busy:
+        lines.append("WARNING: other processes loaded the machine during the run (load average above);")
+        lines.append("the timings and ratios are not representative. Rerun when the machine is quiet.")
     for model, s in result["speedup_at_1e-9_by_model"].items():
         if s["speedup"] is not None:
             lines.append(f"  {model}: fast rtol {s['fast_rtol']:.0e} {s['fast_seconds_per_map'] * 1e3:.3f} ms, "

@@ -18,6 +18,7 @@ TOUCHDOWN = 3  # swing-foot height falls through 0 (ends single support)
 LIFTOFF_B = 4  # lambda_b,y falls through 0 in single support (failure)
 
 GUARD_NAMES = {LIFTOFF_A: "lift-off-a", STALL: "stall", CLUTCH_LOCK: "clutch-lock", TOUCHDOWN: "touchdown", LIFTOFF_B: "lift-off-b"}
+FORCE_GUARDS = (LIFTOFF_A, LIFTOFF_B)  # normal-force guards: located also when they dip between solver steps
 DIRECTION = {LIFTOFF_A: -1, STALL: -1, CLUTCH_LOCK: +1, TOUCHDOWN: -1, LIFTOFF_B: -1}
 
 

@@ -50,7 +50,13 @@ class ImpactResult:
     kinetic_minus: float  # T(q-, q'-) in the pre-impact labels
     kinetic_relabelled: float  # T(q~, q~') after relabelling, before the impulse
     kinetic_plus: float  # T(q~, q'+)
-    relabel_loss: float  # total energy removed by snapping the old trailing leg to L0, J
+    relabel_loss: float  # E(q-, q'-) - E(q~, q~'): energy removed by snapping the old trailing leg to L0, J
+
+    @property
+    def relabel_snap_J(self) -> float:
+        """Energy the relabelling adds by snapping the old trailing leg to L0 with zero rate, J (= -relabel_loss;
+        > 0 adds energy, < 0 removes it)."""
+        return -self.relabel_loss
 
     @property
     def energy_ratio(self) -> float:

@@ -1,4 +1,4 @@
-"""The compiled fast path (rimless.sim.fast*) against the reference Python/scipy implementation.
+"""The compiled fast path (rimless.sim.fast) against the reference Python/scipy implementation.
 
 Independent expectations: the reference dynamics/impact/section code, the reference hybrid step with
 scipy's DOP853, and central finite differences of the reference map. No timing is asserted.
@@ -11,7 +11,7 @@ import pytest
 
 from rimless.sim import dynamics, events
 from rimless.sim import fast
-from rimless.sim import fast_model as fm
+from rimless.sim.fast import model as fm
 from rimless.sim import impact as ref_impact
 from rimless.sim import section
 from rimless.sim.failures import FailureReason, StepFailure

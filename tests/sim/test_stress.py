@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rimless.sim import fast
-from rimless.sim import fast_rk as rk
+from rimless.sim.fast import rk
 from rimless.sim.events import TOUCHDOWN
 from rimless.sim.failures import FailureReason, StepFailure
 from rimless.sim.integrators import ScipyIntegrator

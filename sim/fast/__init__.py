@@ -1,5 +1,13 @@
-"""The compiled fast path (issue 3): a numba DOP853 backend for the hybrid simulation, a lean compiled
-Poincaré map with the exact (variational) map Jacobian, and their Python faces.
+"""The compiled fast path: a numba DOP853 backend for the hybrid simulation, a lean compiled Poincaré map
+with the exact (variational) map Jacobian, and their Python faces.
+
+It is the second implementation of the model whose reference implementation is rimless.sim.hybrid,
+integrators, dynamics and model (scipy, Python right-hand side); both give the same steps, failure classes
+and guards. Modules:
+- rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
+- rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output;
+- rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
+- rimless.sim.fast (this file): the Python face below. Import fast-path names from here.
 
 - `FastIntegrator(rtol, atol)`: implements rimless.sim.integrators.Integrator (`run_phase`), so
   rimless.sim.hybrid.simulate_step can use it when trajectories, forces or energies are recorded.
@@ -27,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from rimless.sim import fast_model as fm
-from rimless.sim import fast_rk as rk
-from rimless.sim import fast_step as fs
+from rimless.sim.fast import model as fm
+from rimless.sim.fast import rk
+from rimless.sim.fast import step as fs
 from rimless.sim.events import DIRECTION
 from rimless.sim.failures import FailureReason, StepFailure
 from rimless.sim.integrators import PhaseRun
@@ -38,7 +46,7 @@ from rimless.sim.params import WheelParams
 
 def _invalidate_stale_cache() -> None:
     """numba's on-disk cache (cache=True) is keyed on each function's own source file only: a kernel that
-    inlines code from another module (the generated mechanics, fast_model, fast_rk) would be loaded stale
+    inlines code from another module (the generated mechanics, model.py, rk.py) would be loaded stale
     after that module changed (e.g. a re-derivation). Stamp the cache with a hash of every source the
     kernels depend on and drop our cached kernels when it differs."""
     import hashlib
@@ -55,7 +63,7 @@ def _invalidate_stale_cache() -> None:
         stamp = cache_dir / "rimless_fast_kernels.stamp"
         if stamp.exists() and stamp.read_text() == stamp_value:
             return
-        for pattern in ("fast_model.*.nb[ic]", "fast_rk.*.nb[ic]", "fast_step.*.nb[ic]"):
+        for pattern in ("model.*.nb[ic]", "rk.*.nb[ic]", "step.*.nb[ic]"):
             for f in cache_dir.glob(pattern):
                 f.unlink(missing_ok=True)
         gen_dir = Path(fm._M0._cache._cache_path)  # noqa: SLF001
@@ -71,6 +79,9 @@ def _invalidate_stale_cache() -> None:
 _invalidate_stale_cache()
 
 MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
+# right-hand-side evaluations per phase of the implicit fallback (scipy Radau, Python right-hand side):
+# some 10-20 s per phase on a busy 2-core machine; beyond it the step fails as an integration failure
+RADAU_MAX_NFEV = 50_000
 MODELS = ("er", "ve")
 
 _REASON = {
@@ -82,6 +93,7 @@ _REASON = {
     fs.NEGATIVE_IMPULSE: FailureReason.NEGATIVE_IMPULSE,
     fs.INTEGRATION: FailureReason.INTEGRATION,
     fs.TOO_MANY_STEPS: FailureReason.INTEGRATION,
+    fs.NOT_FINITE: FailureReason.INTEGRATION,
 }
 _PHASE = {0: "dlsp", 1: "slsp_free", 2: "slsp_clutched", 3: "impact"}
 _DETAIL = {
@@ -89,6 +101,7 @@ _DETAIL = {
     fs.D_GUARD: "the guard fired",
     fs.D_TIME_LIMIT: f"no event within {fs.PHASE_TIME_LIMIT_S} s",
     fs.D_SOLVER: "the compiled integrator failed (step size too small or non-finite state)",
+    fs.D_NOT_FINITE: "non-finite forces or state (speeds or parameters too large to represent)",
 }
 
 
@@ -124,6 +137,7 @@ class FastStep:
     nfev: int
     nsteps: int
     nstiff: int  # accepted steps flagged stiff by the h |lambda| > 6.1 test
+    relabel_snap_J: float = 0.0  # energy the relabelling snap of the old trailing leg adds (J; < 0 removes)
     method: str = "fast-dop853"
 
 
@@ -142,6 +156,8 @@ def _raise(status: int, detail: int, phase: int, t: float, nsteps: int) -> None:
         msg = "the stance foot is unloaded at the start of single support"
     elif status == fs.NEGATIVE_IMPULSE:
         msg = "a normal impact impulse is <= 0"
+    elif status == fs.NOT_FINITE:
+        msg = "non-finite state or forces during integration (speeds too large to represent)"
     raise StepFailure(reason, f"{msg} (compiled map)", time_s=t, phase=_PHASE[phase])
 
 
@@ -154,14 +170,14 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     er = _check_model(model)
     atol = rtol * 1e-2 if atol is None else atol
     zz = np.asarray(z, dtype=np.float64).reshape(2)
-    st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff = fs.step_map(
+    st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map(
         mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
         int(max_steps))
     if st != fs.OK:
         _raise(st, detail, phase, t, nsteps)
     return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
                     jacobian=J if jacobian else None, phase_end_s=times, nfev=int(nfev), nsteps=int(nsteps),
-                    nstiff=int(nstiff))
+                    nstiff=int(nstiff), relabel_snap_J=float(snap))
 
 
 def fast_map(params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10,
@@ -283,11 +299,14 @@ class FastPoincareMap:
         self.method_counts[method] = self.method_counts.get(method, 0) + 1
 
     def _reference_step(self, z: np.ndarray, integrator: Any) -> np.ndarray:
+        return self._reference_result(z, integrator)[0]
+
+    def _reference_result(self, z: np.ndarray, integrator: Any) -> tuple[np.ndarray, float]:
         from rimless.sim.hybrid import simulate_step
         from rimless.sim.section import section_from_state, state_from_section
 
         res = simulate_step(self.mech, self.model, state_from_section(self.mech, z), integrator, clutch=self.clutch)
-        return section_from_state(res.y_plus)
+        return section_from_state(res.y_plus), res.period_s
 
     def evaluate(self, z: np.ndarray, *, jacobian: bool = False) -> tuple[np.ndarray, float, np.ndarray | None]:
         """(z_next, period_s, J or None) in one compiled call; raises StepFailure."""
@@ -295,14 +314,15 @@ class FastPoincareMap:
         key = (float(z[0]), float(z[1]))
         if self._cache is not None and self._cache[0] == key and (self._cache[3] is not None or not jacobian):
             return self._cache[1].copy(), self._cache[2], (None if self._cache[3] is None else self._cache[3].copy())
-        st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff = fs.step_map(
+        st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map(
             self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
             jacobian, int(self.integrator.max_steps))
         if st == fs.TOO_MANY_STEPS and self.stiff_fallback:
             from rimless.sim.integrators import ScipyIntegrator
 
-            radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10), atol=max(self.integrator.atol, 1e-12))
-            zn = self._reference_step(z, radau)
+            radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10),
+                                    atol=max(self.integrator.atol, 1e-12), max_nfev=RADAU_MAX_NFEV)
+            zn, period = self._reference_result(z, radau)
             Jfd = None
             if jacobian:
                 h = 1e-5
@@ -312,7 +332,7 @@ class FastPoincareMap:
                     dz[i] = h
                     Jfd[:, i] = (self._reference_step(z + dz, radau) - self._reference_step(z - dz, radau)) / (2 * h)
             self._count("scipy-Radau")
-            return zn, float("nan"), Jfd
+            return zn, period, Jfd
         if st != fs.OK:
             _raise(st, detail, phase, t, nsteps)
         zn = np.array([yp[2], yp[7]])

@@ -14,11 +14,13 @@ Status codes are mapped to FailureReason by rimless.sim.fast.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
-from rimless.sim import fast_model as fm
-from rimless.sim import fast_rk as rk
+from rimless.sim.fast import model as fm
+from rimless.sim.fast import rk
 
 _jit = numba.njit(cache=True)
 
@@ -31,12 +33,14 @@ DLSP_NEVER_ENDS = 5
 NEGATIVE_IMPULSE = 6
 INTEGRATION = 7
 TOO_MANY_STEPS = 8
+NOT_FINITE = 9  # reported as an integration failure with its own message
 # detail codes (which check failed), for the messages
 D_NONE = 0
 D_PRECHECK = 1  # failed a check at the start of a phase
 D_GUARD = 2  # a guard fired
 D_TIME_LIMIT = 3  # the phase time limit was reached
 D_SOLVER = 4  # the integrator failed (step too small / not finite)
+D_NOT_FINITE = 5  # non-finite forces or state (e.g. an overflowing speed)
 
 PHASE_TIME_LIMIT_S = 5.0
 IMPACT_PHASE = 3
@@ -87,7 +91,20 @@ def _saltation(V, f_minus, f_plus, dg, reset_index):
 
 
 @_jit
+def _finite(a, b):
+    for i in range(a.shape[0]):
+        if not math.isfinite(a[i]):
+            return False
+    for i in range(b.shape[0]):
+        if not math.isfinite(b[i]):
+            return False
+    return True
+
+
+@_jit
 def _map_status(st, fired_ok):
+    if st == rk.STATUS_NOT_FINITE:
+        return NOT_FINITE
     if st == rk.STATUS_TOO_MANY_STEPS:
         return TOO_MANY_STEPS
     return INTEGRATION
@@ -97,10 +114,12 @@ def _map_status(st, fired_ok):
 def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
 
-    Returns (status, detail, phase, t_s, y_plus (10,), J (2x2), times (3,), nfev, nsteps, nstiff):
+    Returns (status, detail, phase, t_s, y_plus (10,), J (2x2), times (3,), nfev, nsteps, nstiff, snap_J):
     status OK or a failure code; phase 0/1/2 (dlsp/slsp_free/slsp_clutched) or 3 (impact) where it ended;
     t_s the step period (or the failure time), s; times = end of dlsp, end of free compression (ER; else
-    the touchdown time), touchdown, s; J = dz'/dz when want_jac (else zeros).
+    the touchdown time), touchdown, s; J = dz'/dz when want_jac (else zeros); snap_J the mechanical
+    energy the relabelling adds by snapping the old trailing leg to L0 with zero rate (J, signed: > 0 adds
+    energy, < 0 removes it; 0 unless the step ends in a valid impact).
     """
     y0, T = fm.state_from_section(mi, z, p)
     N = 30 if want_jac else 10
@@ -115,17 +134,20 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     nfev = 0
     nsteps = 0
     nstiff = 0
+    snap = 0.0
     t = 0.0
     qdd = np.empty(5)
     lam = np.zeros(4)
     for i in range(10):
         if not np.isfinite(y0[i]):
-            return INTEGRATION, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff
+            return INTEGRATION, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
     # 1. double support
     if y0[7] <= 0.0:
-        return STALL, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff
+        return STALL, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
     if not fm.accel(mi, fm.DLSP, y0[:5], y0[5:10], p, qdd, lam):
-        return INTEGRATION, D_SOLVER, 0, t, yp, J, times, nfev, nsteps, nstiff
+        return INTEGRATION, D_SOLVER, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
+    if not _finite(qdd, lam):
+        return INTEGRATION, D_NOT_FINITE, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
     if lam[3] > 0.0:
         st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
             mi, fm.DLSP, p, ya, t, _DLSP_CODES, _DLSP_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac,
@@ -134,14 +156,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         nsteps += ns
         nstiff += nst
         if st != rk.STATUS_OK:
-            return _map_status(st, fired), D_SOLVER, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+            return _map_status(st, fired), D_SOLVER, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if fired < 0:
-            return DLSP_NEVER_ENDS, D_TIME_LIMIT, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+            return DLSP_NEVER_ENDS, D_TIME_LIMIT, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         code = _DLSP_CODES[fired]
         if code == fm.STALL:
-            return STALL, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+            return STALL, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if code == fm.TOUCHDOWN:
-            return DLSP_NEVER_ENDS, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff
+            return DLSP_NEVER_ENDS, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         ya = y_end
         t = t_end
         if want_jac:
@@ -154,12 +176,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     # 2. single support
     ys = ya[:10].copy()
     if not fm.accel(mi, fm.SLSP_FREE, ys[:5], ys[5:10], p, qdd, lam):
-        return INTEGRATION, D_SOLVER, 1, t, yp, J, times, nfev, nsteps, nstiff
-    if lam[1] <= 0.0:
-        return STANCE_LIFT_OFF, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff
+        return INTEGRATION, D_SOLVER, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
+    if not _finite(qdd, lam):
+        return INTEGRATION, D_NOT_FINITE, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
+    if not (lam[1] > 0.0):
+        return STANCE_LIFT_OFF, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
     if er:
         if ys[8] >= 0.0:
-            return CLUTCH_MISSED, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff
+            return CLUTCH_MISSED, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
         st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
             mi, fm.SLSP_FREE, p, ya, t, _FREE_ER_CODES, _FREE_ER_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err,
             want_jac, False, -1.0, max_steps)
@@ -167,16 +191,16 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         nsteps += ns
         nstiff += nst
         if st != rk.STATUS_OK:
-            return _map_status(st, fired), D_SOLVER, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+            return _map_status(st, fired), D_SOLVER, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if fired < 0:
-            return INTEGRATION, D_TIME_LIMIT, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+            return INTEGRATION, D_TIME_LIMIT, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         code = _FREE_ER_CODES[fired]
         if code == fm.TOUCHDOWN:
-            return TOUCHDOWN_BEFORE_CLUTCH, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+            return TOUCHDOWN_BEFORE_CLUTCH, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if code == fm.STALL:
-            return STALL, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+            return STALL, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if code == fm.LIFTOFF_B:
-            return STANCE_LIFT_OFF, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff
+            return STANCE_LIFT_OFF, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         ya = y_end
         t = t_end
         if want_jac:
@@ -198,14 +222,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     nsteps += ns
     nstiff += nst
     if st != rk.STATUS_OK:
-        return _map_status(st, fired), D_SOLVER, final, t_end, yp, J, times, nfev, nsteps, nstiff
+        return _map_status(st, fired), D_SOLVER, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     if fired < 0:
-        return STALL, D_TIME_LIMIT, final, t_end, yp, J, times, nfev, nsteps, nstiff
+        return STALL, D_TIME_LIMIT, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     code = _SS_CODES[fired]
     if code == fm.STALL:
-        return STALL, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff
+        return STALL, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     if code == fm.LIFTOFF_B:
-        return STANCE_LIFT_OFF, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff
+        return STANCE_LIFT_OFF, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     ya = y_end
     t = t_end
     times[2] = t
@@ -222,12 +246,16 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         V = np.zeros((10, 2))
     ok, yp, impulse, Vp = fm.impact(mi, ym, p, V, want_jac)
     if not ok:
-        return INTEGRATION, D_SOLVER, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff
+        return INTEGRATION, D_SOLVER, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
+    if not (_finite(yp, impulse) and math.isfinite(t)):
+        return INTEGRATION, D_NOT_FINITE, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
     if not (impulse[1] > 0.0 and impulse[3] > 0.0):
-        return NEGATIVE_IMPULSE, D_GUARD, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff
+        return NEGATIVE_IMPULSE, D_GUARD, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
+    yt, _D = fm.relabel_with_jacobian(ym, p[3])
+    snap = fm.energy(mi, yt[:5], yt[5:10], p) - fm.energy(mi, ym[:5], ym[5:10], p)
     if want_jac:
         J[0, 0] = Vp[2, 0]
         J[0, 1] = Vp[2, 1]
         J[1, 0] = Vp[7, 0]
         J[1, 1] = Vp[7, 1]
-    return OK, D_NONE, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff
+    return OK, D_NONE, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap

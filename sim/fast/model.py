@@ -52,6 +52,10 @@ _DH_DQD = _compile("dbias_dqd")
 _DJA = _compile("djac_a_dq")
 _DJDOT_DQ = _compile("djdot_qd_a_dq")
 _DJDOT_DQD = _compile("djdot_qd_a_dqd")
+_T = _compile("kinetic")
+_V = _compile("potential")
+_T0, _T1, _T2 = _T
+_V0, _V1, _V2 = _V
 
 _M0, _M1, _M2 = _M
 _H0, _H1, _H2 = _H
@@ -73,6 +77,16 @@ def mass_matrix(mi, q, p):
     if mi == 1:
         return _M1(q, p)
     return _M2(q, p)
+
+
+@_jit
+def energy(mi, q, qd, p):
+    """Total mechanical energy T + V (J) of mass model index mi."""
+    if mi == 0:
+        return _T0(q, qd, p) + _V0(q, p)
+    if mi == 1:
+        return _T1(q, qd, p) + _V1(q, p)
+    return _T2(q, qd, p) + _V2(q, p)
 
 
 @_jit

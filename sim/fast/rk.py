@@ -6,7 +6,7 @@ it crosses 0 in its direction between two accepted steps; the earliest root wins
 The integrated vector is y_aug = [y (10,), V (10x2, column-major, optional), E_diss (optional)]:
 - y = [q, q'] in SI units (slope frame);
 - V = dy/dz, the tangent of two section directions, integrated with the variational equations
-  V' = Df(y) V (Df exact: rimless.sim.fast_model.accel_jacobian); the step size is controlled on y only
+  V' = Df(y) V (Df exact: rimless.sim.fast.model.accel_jacobian); the step size is controlled on y only
   (internal differentiation: V is the exact derivative of the discrete flow up to the step-size choice);
 - E_diss = integral of the damper power, J (then included in the error norm, as in the reference).
 
@@ -25,7 +25,7 @@ import numba
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop
 
-from rimless.sim import fast_model as fm
+from rimless.sim.fast import model as fm
 
 _jit = numba.njit(cache=True)
 
@@ -49,6 +49,7 @@ STATUS_STEP_TOO_SMALL = 1
 STATUS_NOT_FINITE = 2
 STATUS_TOO_MANY_STEPS = 3
 
+MAX_REJECTIONS = 100_000  # rejected step attempts per phase before giving up (bounded time)
 STATE_SIZE = 10
 VAR_OFFSET = 10
 VAR_SIZE = 20
@@ -57,7 +58,7 @@ VAR_SIZE = 20
 @_jit
 def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     """Right-hand side of the augmented vector; lambda at y into lam. False if the KKT matrix is singular.
-    ws: float64 workspace of fast_model.WORKSPACE_SIZE + 5."""
+    ws: float64 workspace of model.WORKSPACE_SIZE + 5."""
     q = y[0:5]
     qd = y[5:10]
     qdd = ws[fm.WORKSPACE_SIZE:fm.WORKSPACE_SIZE + 5]
@@ -223,6 +224,99 @@ def _brent(mi, phase, p, code, rate, xa, xb, t_old, h, F, y_old):
 
 
 @_jit
+def _build_dense(mi, phase, p, y_old, h, K, F, ytmp, lam, ws, with_var, with_diss):
+    """The extra stages 13..15 of an accepted step (K rows 0..12 given) and scipy's dense-output
+    coefficients F (7 x N) of that step."""
+    N = y_old.shape[0]
+    for s in range(_NS + 1, _NSE):
+        for i in range(N):
+            acc = 0.0
+            for j in range(s):
+                acc += _A[s, j] * K[j, i]
+            ytmp[i] = y_old[i] + h * acc
+        rhs_aug(mi, phase, p, ytmp, with_var, with_diss, K[s], lam, ws)
+    for i in range(N):
+        y_new_i = y_old[i]
+        acc = 0.0
+        for j in range(_NS):
+            acc += _B[j] * K[j, i]
+        y_new_i += h * acc
+        dy = y_new_i - y_old[i]
+        F[0, i] = dy
+        F[1, i] = h * K[0, i] - dy
+        F[2, i] = 2.0 * dy - h * (K[_NS, i] + K[0, i])
+        for r in range(4):
+            acc = 0.0
+            for j in range(_NSE):
+                acc += _D[r, j] * K[j, i]
+            F[3 + r, i] = h * acc
+    return _NSE - _NS - 1
+
+
+DIP_SAMPLES = 16  # dense-output samples of a normal force over a step when looking for a dip below zero
+_GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
+
+
+@_jit
+def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
+    """(t, nfev): the first downward zero of a normal-force guard on one step's dense output
+    [t_a, t_a + h] where it is positive at both ends, or (inf, nfev) if it stays positive.
+
+    The guard is sampled at DIP_SAMPLES interior points; without a non-positive sample the lowest one is
+    refined by golden-section search, then the first crossing is located by Brent's method."""
+    ybuf = np.empty(10)
+    qdd = np.empty(5)
+    lam = np.zeros(4)
+    n = DIP_SAMPLES + 1
+    first_neg = -1
+    k_low = 1
+    g_low = np.inf
+    nf = 0
+    for k in range(1, n):
+        gk = _guard_on_dense(mi, phase, p, code, t_a + h * k / n, t_a, h, F, y_a, ybuf, qdd, lam, False)
+        nf += 1
+        if gk <= 0.0 and first_neg < 0:
+            first_neg = k
+        if gk < g_low:
+            g_low = gk
+            k_low = k
+    if first_neg > 0:
+        t_low = t_a + h * first_neg / n
+    else:
+        a = t_a + h * (k_low - 1) / n
+        b = t_a + h * (k_low + 1) / n
+        c = a + _GOLDEN * (b - a)
+        d = b - _GOLDEN * (b - a)
+        gc = _guard_on_dense(mi, phase, p, code, c, t_a, h, F, y_a, ybuf, qdd, lam, False)
+        gd = _guard_on_dense(mi, phase, p, code, d, t_a, h, F, y_a, ybuf, qdd, lam, False)
+        nf += 2
+        for _ in range(60):
+            if gc <= 0.0 or gd <= 0.0 or b - a <= 4.0 * _EPS * abs(b):
+                break
+            if gc < gd:
+                b = d
+                d = c
+                gd = gc
+                c = a + _GOLDEN * (b - a)
+                gc = _guard_on_dense(mi, phase, p, code, c, t_a, h, F, y_a, ybuf, qdd, lam, False)
+            else:
+                a = c
+                c = d
+                gc = gd
+                d = b - _GOLDEN * (b - a)
+                gd = _guard_on_dense(mi, phase, p, code, d, t_a, h, F, y_a, ybuf, qdd, lam, False)
+            nf += 1
+        if gc <= 0.0:
+            t_low = c
+        elif gd <= 0.0:
+            t_low = d
+        else:
+            return np.inf, nf
+    root, nfb = _brent(mi, phase, p, code, False, t_a, t_low, t_a, h, F, y_a)
+    return root, nf + nfb
+
+
+@_jit
 def _guards_at(codes, y, lam, L0, out):
     for e in range(codes.shape[0]):
         out[e] = fm.guard_value_from(codes[e], y, lam, L0)
@@ -262,13 +356,31 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
         nrec = 1
     next_grid = 1
     ws = np.empty(fm.WORKSPACE_SIZE + 5)
-    if not rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
+    finite0 = rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws)
+    for i in range(N):
+        if not (math.isfinite(y[i]) and math.isfinite(f[i])):
+            finite0 = False
+    if not finite0:
         return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
     g = np.empty(ng)
     g_new = np.empty(ng)
     _guards_at(codes, y, lam, L0, g)
     h_abs, nf0 = _initial_step(mi, phase, p, t0, y, f, t_bound, rtol, atol, n_err, with_var, with_diss)
     nfev += nf0
+    for e in range(ng):
+        if not math.isfinite(g[e]):
+            return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+    if not (h_abs > 0.0 and math.isfinite(h_abs)):
+        return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+    # the previous accepted step (stages, start, size, guards) for the normal-force dip check
+    Kp = np.empty((_NSE, N))
+    Fp = np.empty((7, N))
+    yp_old = np.empty(N)
+    tp_old = t0
+    hp = 0.0
+    have_prev = False
+    g_pp = np.empty(ng)
+    nreject = 0
     y_new = np.empty(N)
     ytmp = np.empty(N)
     y_last_stage = np.empty(N)
@@ -283,7 +395,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
         h = 0.0
         t_new = t
         while True:
-            if h_abs < min_step:
+            if not (h_abs >= min_step) or nreject > MAX_REJECTIONS:
                 return STATUS_STEP_TOO_SMALL, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
             h = h_abs
             t_new = t + h
@@ -335,6 +447,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             if not finite:
                 h_abs *= _MIN_FACTOR
                 rejected = True
+                nreject += 1
                 continue
             if err5 == 0.0 and err3 == 0.0:
                 error_norm = 0.0
@@ -352,6 +465,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 break
             h_abs *= max(_MIN_FACTOR, _SAFETY * error_norm ** _ERR_EXP)
             rejected = True
+            nreject += 1
         nsteps += 1
         # stiffness indicator h |lambda| from the last stage (c = 1) and f(y_new)
         stnum = 0.0
@@ -364,6 +478,9 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
         if stden > 0.0 and h * math.sqrt(stnum / stden) > 6.1:
             nstiff += 1
         _guards_at(codes, y_new, lam_new, L0, g_new)
+        for e in range(ng):
+            if not math.isfinite(g_new[e]):
+                return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         # which guards crossed in their direction (scipy's find_active_events), plus the graze check
         t_hi_graze = -1.0
         any_active = False
@@ -375,26 +492,23 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
                 if fm.swing_height_rate(y, L0) < 0.0 and fm.swing_height_rate(y_new, L0) > 0.0:
                     t_hi_graze = 0.0  # decide after the dense output is built
-        need_dense = any_active or recording or t_hi_graze == 0.0
+        # normal-force guards positive at both step ends may still dip below zero in between: check the
+        # steps around every discrete minimum over the step ends (and the first and the last step)
+        dip_prev = False
+        dip_cur = False
+        for e in range(ng):
+            if not fm.guard_needs_lambda(codes[e]) or not (g[e] > 0.0 and g_new[e] > 0.0):
+                continue
+            if have_prev and g_pp[e] > g[e] and g[e] < g_new[e] and g_pp[e] > 0.0:
+                dip_prev = True
+                dip_cur = True
+            elif not have_prev and g[e] < g_new[e]:
+                dip_cur = True
+            elif g[e] > g_new[e] and (any_active or t_hi_graze == 0.0 or t_new == t_bound):
+                dip_cur = True
+        need_dense = any_active or recording or t_hi_graze == 0.0 or dip_cur
         if need_dense:
-            for s in range(_NS + 1, _NSE):
-                for i in range(N):
-                    acc = 0.0
-                    for j in range(s):
-                        acc += _A[s, j] * K[j, i]
-                    ytmp[i] = y[i] + h * acc
-                rhs_aug(mi, phase, p, ytmp, with_var, with_diss, K[s], lam, ws)
-            nfev += _NSE - _NS - 1
-            for i in range(N):
-                dy = y_new[i] - y[i]
-                F[0, i] = dy
-                F[1, i] = h * K[0, i] - dy
-                F[2, i] = 2.0 * dy - h * (K[_NS, i] + K[0, i])
-                for r in range(4):
-                    acc = 0.0
-                    for j in range(_NSE):
-                        acc += _D[r, j] * K[j, i]
-                    F[3 + r, i] = h * acc
+            nfev += _build_dense(mi, phase, p, y, h, K, F, ytmp, lam, ws, with_var, with_diss)
         best_t = np.inf
         best_e = -1
         if t_hi_graze == 0.0:
@@ -417,6 +531,26 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                     if root < best_t:
                         best_t = root
                         best_e = e
+        best_prev = False
+        if dip_cur or dip_prev:
+            if dip_prev:
+                nfev += _build_dense(mi, phase, p, yp_old, hp, Kp, Fp, ytmp, lam, ws, with_var, with_diss)
+            for e in range(ng):
+                if not fm.guard_needs_lambda(codes[e]) or not (g[e] > 0.0 and g_new[e] > 0.0):
+                    continue
+                if dip_prev and g_pp[e] > 0.0:
+                    root, nf = _first_dip(mi, phase, p, codes[e], tp_old, hp, Fp, yp_old)
+                    nfev += nf
+                    if root < best_t:
+                        best_t = root
+                        best_e = e
+                        best_prev = True
+                root, nf = _first_dip(mi, phase, p, codes[e], t, h, F, y)
+                nfev += nf
+                if root < best_t:
+                    best_t = root
+                    best_e = e
+                    best_prev = False
         t_stop = best_t if best_e >= 0 else t_new
         if recording:
             while True:
@@ -447,7 +581,12 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 rec_y = ry
         if best_e >= 0:
             y_end = np.empty(N)
-            _dense_eval(F, y, (best_t - t) / h, N, y_end)
+            if best_prev:
+                _dense_eval(Fp, yp_old, (best_t - tp_old) / hp, N, y_end)
+                while nrec > 0 and rec_t[nrec - 1] >= best_t:
+                    nrec -= 1
+            else:
+                _dense_eval(F, y, (best_t - t) / h, N, y_end)
             if recording:
                 rec_t[nrec] = best_t
                 for i in range(10):
@@ -459,6 +598,15 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             for i in range(10):
                 rec_y[nrec, i] = y_new[i]
             nrec += 1
+        for i in range(N):
+            yp_old[i] = y[i]
+            for j in range(_NS + 1):
+                Kp[j, i] = K[j, i]
+        for e in range(ng):
+            g_pp[e] = g[e]
+        tp_old = t
+        hp = h
+        have_prev = True
         t = t_new
         for i in range(N):
             y[i] = y_new[i]
