@@ -186,46 +186,71 @@ class Branch:
 
 
 class _Oracle:
-    """P(z; p), J_z and F_p = dP/dp for one base parameter set; counts map evaluations."""
+    """P(z; p), J_z and F_p = dP/dp for one base parameter set; counts map evaluations.
 
-    def __init__(self, map_factory: Callable[[WheelParams], Any], base: WheelParams, parameter: str) -> None:
+    `map_factory(params)` gives a Poincaré map (recorded steps for the contact facts, and the map itself on
+    the reference path). A map with `integrator.rtol` and a compiled `evaluate` is evaluated through
+    rimless.sim.fast.fast_step directly, without building a map object per parameter value.
+    """
+
+    def __init__(self, map_factory: Callable[[WheelParams], Any], base: WheelParams, parameter: str,
+                 model: str) -> None:
         if parameter not in PARAMETERS:
             raise ValueError(f"unknown continuation parameter {parameter!r}; known: {', '.join(PARAMETERS)}")
         self.field, self.scale, self.unit = PARAMETERS[parameter]
         self.map_factory = map_factory
         self.base = base
+        self.model = model
         self.evaluations = 0
         self._maps: dict[float, Any] = {}
+        self._params: dict[float, WheelParams] = {}
+        probe = map_factory(base)
+        self.compiled = hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None
+        self.rtol = float(getattr(getattr(probe, "integrator", None), "rtol", 1e-10))
+        self.atol = float(getattr(getattr(probe, "integrator", None), "atol", self.rtol * 1e-2))
 
     def pmap(self, p: float) -> Any:
         m = self._maps.get(p)
         if m is None:
-            if len(self._maps) > 64:
+            if len(self._maps) > 16:
                 self._maps.clear()
-            m = self.map_factory(self.base.replace(**{self.field: float(p)}))
+            m = self.map_factory(self.params(p))
             self._maps[p] = m
         return m
 
     def params(self, p: float) -> WheelParams:
-        return self.base.replace(**{self.field: float(p)})
+        q = self._params.get(p)
+        if q is None:
+            if len(self._params) > 256:
+                self._params.clear()
+            q = self.base.replace(**{self.field: float(p)})
+            self._params[p] = q
+        return q
 
     def evaluate(self, z: np.ndarray, p: float, *, jacobian: bool) -> tuple[np.ndarray, float, np.ndarray | None]:
         """(P(z), period_s, dP/dz or None); raises StepFailure (a parameter out of range is a StepFailure too)."""
         try:
-            m = self.pmap(p)
+            params = self.params(p)
         except ValueError as err:  # ParameterError: the continuation left the valid parameter range
             raise StepFailure(FailureReason.NO_CONVERGENCE, f"parameter out of range: {err}") from None
         self.evaluations += 1
-        if hasattr(m, "evaluate"):
-            zn, period, J = m.evaluate(z, jacobian=jacobian)
-            if not np.all(np.isfinite(zn)) or (J is not None and not np.all(np.isfinite(J))):
-                raise StepFailure(FailureReason.INTEGRATION, "the map returned a non-finite value")
-            return zn, period, J
-        step = m.step(z)
-        from rimless.sim.section import section_from_state
+        z = np.asarray(z, dtype=float)
+        if not np.all(np.isfinite(z)):
+            raise StepFailure(FailureReason.INTEGRATION, "non-finite section point")
+        if self.compiled:
+            from rimless.sim import fast
 
-        zn = section_from_state(step.y_plus)
-        return zn, step.period_s, (m.jacobian(z) if jacobian else None)
+            r = fast.fast_step(params, self.model, z, rtol=self.rtol, atol=self.atol, jacobian=jacobian)
+            zn, period, J = r.z_next, r.period_s, r.jacobian
+        else:
+            from rimless.sim.section import section_from_state
+
+            m = self.pmap(p)
+            step = m.step(z)
+            zn, period, J = section_from_state(step.y_plus), step.period_s, (m.jacobian(z) if jacobian else None)
+        if not np.all(np.isfinite(zn)) or not math.isfinite(period) or (J is not None and not np.all(np.isfinite(J))):
+            raise StepFailure(FailureReason.INTEGRATION, "the map returned a non-finite value")
+        return zn, period, J
 
 
 @dataclass
@@ -233,6 +258,7 @@ class _State:
     u: np.ndarray  # (theta+, theta'+, p / scale)
     J: np.ndarray
     period_s: float
+    f: np.ndarray  # P(z) - z at u
 
 
 class ArclengthContinuation:
@@ -249,19 +275,52 @@ class ArclengthContinuation:
         ds_min: float = 1e-6,
         ds_max: float = 0.08,
         tol: float = 1e-10,
-        locate_tol: float = 1e-9,
-        facts_every: int = 1,
-        facts_dt: float = 5e-4,
+        locate_tol: float = 1e-7,
+        facts_every: int = 10,
+        facts_dt: float = 1e-3,
         max_points: int = 400,
     ) -> None:
-        self.oracle = _Oracle(map_factory, base, parameter)
+        self.oracle = _Oracle(map_factory, base, parameter, model)
         self.parameter = parameter
         self.model = model
         self.ds, self.ds_min, self.ds_max = ds, ds_min, ds_max
         self.tol, self.locate_tol = tol, locate_tol
         self.facts_every = max(1, facts_every)
         self.facts_dt = facts_dt
+        self._period_hint = 0.0
+        self._Fp_here = np.zeros(2)
         self.max_points = max_points
+
+    def _newton(self, z0: np.ndarray, p: float, max_iter: int = 30) -> _State:
+        """The fixed point at a fixed parameter from z0 (Newton with step halving); raises NoFixedPoint."""
+        from rimless.sim.poincare import NoFixedPoint
+
+        z = z0.copy()
+        try:
+            zn, period, J = self.oracle.evaluate(z, p, jacobian=True)
+        except StepFailure as err:
+            raise NoFixedPoint(f"the map fails at the start guess {z.tolist()}: {err}", err) from None
+        f = zn - z
+        res = float(np.max(np.abs(f)))
+        for _ in range(max_iter):
+            if res <= self.tol:
+                return _State(np.array([z[0], z[1], p / self.oracle.scale]), J, period, f)  # type: ignore[arg-type]
+            dz = -np.linalg.solve(J - np.eye(2), f)  # type: ignore[operator]
+            lam = 1.0
+            while lam >= 1e-4:
+                try:
+                    zn2, period2, J2 = self.oracle.evaluate(z + lam * dz, p, jacobian=True)
+                    f2 = zn2 - (z + lam * dz)
+                    if float(np.max(np.abs(f2))) < res:
+                        break
+                except StepFailure:
+                    pass
+                lam *= 0.5
+            else:
+                break
+            z, f, J, period = z + lam * dz, f2, J2, period2
+            res = float(np.max(np.abs(f)))
+        raise NoFixedPoint(f"no fixed point at the start from {z0.tolist()} (residual {res:.3g})")
 
     # -- corrector -------------------------------------------------------------------------------------
     def _F(self, u: np.ndarray, *, jacobian: bool) -> tuple[np.ndarray, float, np.ndarray | None]:
@@ -277,8 +336,9 @@ class ArclengthContinuation:
         f1, _, _ = self._F(up, jacobian=False)
         return (f1 - f0) / h
 
-    def _correct(self, u_pred: np.ndarray, tangent: np.ndarray, max_iter: int = 8) -> _State:
-        """Newton on [F(u) = 0, tangent . (u - u_pred) = 0]; raises StepFailure when it does not converge."""
+    def _correct(self, u_pred: np.ndarray, tangent: np.ndarray, Fp: np.ndarray, max_iter: int = 8) -> _State:
+        """Newton on [F(u) = 0, tangent . (u - u_pred) = 0] with the exact dF/dz and the parameter column Fp
+        of the last accepted point (a chord in that one column); raises StepFailure when it does not converge."""
         u = u_pred.copy()
         res_prev = math.inf
         for _ in range(max_iter):
@@ -286,11 +346,10 @@ class ArclengthContinuation:
             assert J is not None
             res = float(np.max(np.abs(f)))
             if res <= self.tol:
-                return _State(u, J, period)
+                return _State(u, J, period, f)
             if res > 4 * res_prev and res_prev < 1e-3:
                 break  # diverging
             res_prev = res
-            Fp = self._Fp(u, f)
             A = np.zeros((3, 3))
             A[:2, :2] = J - np.eye(2)
             A[:2, 2] = Fp
@@ -301,29 +360,26 @@ class ArclengthContinuation:
             except np.linalg.LinAlgError:
                 break
             u = u + du
-            if float(np.max(np.abs(du))) < 1e-14:
-                f, period, J = self._F(u, jacobian=True)
-                if float(np.max(np.abs(f))) <= max(self.tol, 1e3 * np.finfo(float).eps):
-                    return _State(u, J, period)  # type: ignore[arg-type]
-                break
         raise StepFailure(FailureReason.NO_CONVERGENCE, f"the pseudo-arclength corrector did not converge "
                                                          f"(residual {res_prev:.3g})")
 
-    def _tangent(self, s: _State, previous: np.ndarray | None) -> np.ndarray:
-        """Unit null vector of [J - I, F_p] (the cross product of its two rows), oriented like `previous`."""
-        f, _, _ = self._F(s.u, jacobian=False)
+    def _tangent(self, s: _State, previous: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """(unit null vector of [J - I, F_p] (the cross product of its two rows), oriented like `previous`;
+        F_p)."""
         A = np.zeros((2, 3))
         A[:, :2] = s.J - np.eye(2)
-        A[:, 2] = self._Fp(s.u, f)
+        Fp = self._Fp(s.u, s.f)
+        A[:, 2] = Fp
         t = np.cross(A[0], A[1])
         t /= np.linalg.norm(t)
         if previous is not None and float(t @ previous) < 0:
             t = -t
-        return t
+        return t, Fp
 
     # -- points ---------------------------------------------------------------------------------------
     def _point(self, s: _State, arclength: float, with_facts: bool) -> BranchPoint:
         p = float(s.u[2] * self.oracle.scale)
+        self._period_hint = s.period_s
         facts = None
         tests = eigen_tests(s.J)
         if with_facts:
@@ -336,7 +392,10 @@ class ArclengthContinuation:
 
     def _facts(self, z: np.ndarray, p: float) -> ContactFacts | None:
         try:
-            return contact_facts(self.oracle.pmap(p), z, self.facts_dt)
+            pmap = self.oracle.pmap(p)
+            # about 400 samples per step whatever its period (the period grows without bound near a stall)
+            period = self._period_hint if self._period_hint > 0 else 0.4
+            return contact_facts(pmap, z, max(self.facts_dt, period / 400))
         except StepFailure:
             return None
 
@@ -355,18 +414,12 @@ class ArclengthContinuation:
         """Trace the branch through the fixed point near z0 at the base parameter, first moving p in
         `direction` (-1: decreasing). Stops at the branch end (map failure), at p_min/p_max, after
         max_points, at the first loss of stability or validity if asked, or when `stop(point)` is true."""
-        from rimless.sim.poincare import solve_fixed_point
-
         t_start = time.perf_counter()
         sc = self.oracle.scale
         p0 = float(getattr(self.oracle.base, self.oracle.field))
         branch = Branch(self.parameter, self.model, self.oracle.base)
-        pmap0 = self.oracle.pmap(p0)
-        fp = solve_fixed_point(pmap0, np.asarray(z0, dtype=float),
-                               jacobian=getattr(pmap0, "jacobian", None), tol=self.tol)
-        self.oracle.evaluations += getattr(pmap0, "evaluations", 0)
-        s = _State(np.array([fp.z[0], fp.z[1], p0 / sc]), np.asarray(fp.jacobian), fp.step.period_s)
-        t = self._tangent(s, np.array([0.0, 0.0, direction]))
+        s = self._newton(np.asarray(z0, dtype=float), p0)
+        t, Fp = self._tangent(s, np.array([0.0, 0.0, direction]))
         cur = self._point(s, 0.0, True)
         branch.points.append(cur)
         ds = self.ds
@@ -376,8 +429,8 @@ class ArclengthContinuation:
                 end_reason, end_detail = "max-points", f"stopped after {self.max_points} points"
                 break
             try:
-                nxt = self._correct(s.u + ds * t, t)
-                t_new = self._tangent(nxt, t)
+                nxt = self._correct(s.u + ds * t, t, Fp)
+                t_new, Fp_new = self._tangent(nxt, t)
                 # a step that turns the tangent too sharply is too long
                 if float(t_new @ t) < 0.9 and ds > self.ds_min * 4:
                     ds *= 0.5
@@ -386,18 +439,20 @@ class ArclengthContinuation:
                 if ds > self.ds_min * 1.01:
                     ds = max(ds * 0.5, self.ds_min)
                     continue
+                self._Fp_here = Fp
                 sp = self._locate_end(s, t, ds, cur, branch)
                 branch.special.append(sp)
                 end_reason, end_detail = sp.detail.split(":", 1)[0], sp.detail
                 break
             with_facts = (len(branch.points) % self.facts_every) == 0
             pt = self._point(nxt, cur.arclength + ds, with_facts)
+            self._Fp_here = Fp
             for sp in self._special_between(s, t, cur, pt, ds):
                 branch.special.append(sp)
             branch.points.append(pt)
             if progress:
                 progress(pt)
-            s, t, cur = nxt, t_new, pt
+            s, t, cur, Fp = nxt, t_new, pt, Fp_new
             ds = min(ds * 1.4, self.ds_max)
             if stop_at_first_loss and branch.first_loss() is not None:
                 end_reason, end_detail = "first-loss", "stopped at the first loss of stability or validity"
@@ -415,7 +470,7 @@ class ArclengthContinuation:
 
     # -- special points -------------------------------------------------------------------------------
     def _on_branch(self, s: _State, t: np.ndarray, sigma: float) -> _State:
-        return self._correct(s.u + sigma * t, t)
+        return self._correct(s.u + sigma * t, t, self._Fp_here)
 
     def _special_between(self, s: _State, t: np.ndarray, a: BranchPoint, b: BranchPoint, ds: float) -> list[SpecialPoint]:
         found = []

@@ -77,12 +77,17 @@ def build_params(values: dict[str, Any]) -> Any:
     return params_from_mapping(mapping, base=base, source="the command-line options")
 
 
-def wheel_params(func: Any) -> Any:
-    """Add the parameter options to a command; the command receives `params: WheelParams`."""
+def wheel_params(func: Any = None, *, exclude: tuple[str, ...] = ()) -> Any:
+    """Add the parameter options to a command; the command receives `params: WheelParams`.
+
+    exclude: parameter options the command defines itself (e.g. a sweep's `--k` grid)."""
+    if func is None:
+        return functools.partial(wheel_params, exclude=exclude)
     sig = inspect.signature(func)
     own = [p for p in sig.parameters.values() if p.name != "params"]
+    options = [o for o in _PARAM_OPTIONS if o[0] not in exclude]
     extra = []
-    for name, annotation, help_text in _PARAM_OPTIONS:
+    for name, annotation, help_text in options:
         flag = _OPTION_NAMES.get(name, "--" + name.replace("_", "-"))
         opt = typer.Option(flag, help=help_text, rich_help_panel="Wheel parameters")
         extra.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None,
@@ -90,7 +95,7 @@ def wheel_params(func: Any) -> Any:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        values = {name: kwargs.pop(name, None) for name, _, _ in _PARAM_OPTIONS}
+        values = {name: kwargs.pop(name, None) for name, _, _ in options}
         kwargs["params"] = build_params(values)
         return func(*args, **kwargs)
 
@@ -503,3 +508,135 @@ def bench_cmd(
 def register_top_level(root: typer.Typer) -> None:
     """Commands that live at the top level (`rimless bench`)."""
     root.command("bench")(bench_cmd)
+
+
+class Scheduler(str, Enum):
+    local = "local"
+    sync = "sync"
+
+
+_SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid", 5), ("phi_c deg", 9),
+                  ("ends by", 17), ("CoT", 6))
+
+
+@app.command("sweep")
+@user_facing
+@wheel_params(exclude=("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
+def sweep_cmd(
+    params: Any,
+    models: Annotated[str, typer.Option("--model", help="Models, comma-separated: er, ve.")] = "er,ve",
+    k_grid: Annotated[Optional[str], typer.Option("--k", help="Stiffness grid, N/m: START:STOP:STEP or a,b,c.")] = None,
+    c_grid: Annotated[Optional[str], typer.Option("--c", help="Damping grid, N s/m: START:STOP:STEP or a,b,c.")] = None,
+    leg_mass_grid: Annotated[Optional[str], typer.Option("--leg-mass-kg", help="Leg mass grid, kg.")] = None,
+    hub_mass_grid: Annotated[Optional[str], typer.Option("--hub-mass-kg", help="Hub mass grid, kg.")] = None,
+    mass_models: Annotated[Optional[str], typer.Option("--mass-model", help="Mass models, comma-separated "
+                                                      "(eight-leg, sliding-leg, active-feet).")] = None,
+    start_slope_rad: Annotated[float, typer.Option(help="Slope where the gaits are searched, rad.")] = 0.05,
+    guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses in the gait search.")] = 14,
+    out: Annotated[Path, typer.Option("--out", metavar="STEM", help="Output stem: writes STEM.parquet, STEM.csv "
+                                      "and STEM-points.parquet/.csv (branch points).")] = Path("rimless-sweep/sweep"),
+    scheduler: Annotated[str, typer.Option("--scheduler", metavar="local|sync|tcp://HOST:8786",
+                                           help="Where grid points run: a local Dask cluster, this process, or "
+                                                "a running Dask scheduler.")] = "local",
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
+                                                   "processes [one per core].")] = None,
+    cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
+                                                      "[~/.cache/rimless/sweep].")] = None,
+    no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Sweep a parameter grid: every period-1 gait at the start slope, each branch continued down to its end.
+
+    Table columns: stable = orbitally stable at the start slope (max |eig| < 1); valid = unilateral contact
+    (stance force >= 0 in single support, impulses > 0); phi_c = critical slope of the branch (end of its
+    stable, valid part); CoT = tan(phi_c)."""
+    from rich.progress import Progress
+
+    from rimless.sim.backend import resolve
+    from rimless.sim.params import MASS_MODELS, SPOKE_ANGLE_RAD
+    from rimless.sim.sweep import GRID_PARAMETERS, SweepOptions, grid_points, parse_range, run_sweep, write_table
+
+    model_list = [m.strip().lower() for m in models.split(",") if m.strip()]
+    if not model_list or any(m not in ("er", "ve") for m in model_list):
+        raise ParameterError(f"--model must be er, ve or er,ve, got {models!r}")
+    mm = [m.strip() for m in (mass_models or params.mass_model).split(",") if m.strip()]
+    if not mm or any(m not in MASS_MODELS for m in mm):
+        raise ParameterError(f"--mass-model must be among {', '.join(MASS_MODELS)}, got {mass_models!r}")
+    if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
+        raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
+    if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
+        raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    grid: dict[str, list[float]] = {}
+    for name, text, option in (("k", k_grid, "--k"), ("c", c_grid, "--c"), ("leg_mass_kg", leg_mass_grid, "--leg-mass-kg"),
+                               ("hub_mass_kg", hub_mass_grid, "--hub-mass-kg")):
+        if text is not None:
+            grid[name] = parse_range(text, option)
+            field_name = GRID_PARAMETERS[name][0]
+            for v in grid[name]:
+                try:
+                    params.replace(**{field_name: v})
+                except ParameterError as err:
+                    raise ParameterError(f"{option} {v:g}: {err}") from None
+    if not grid:
+        grid["k"] = [params.k]
+    options = SweepOptions(backend=resolve(backend.value), rtol=rtol, start_slope_rad=start_slope_rad,
+                           n_guesses=guesses)
+    points = grid_points(params, model_list, grid, mm)
+    cache = None if no_cache else (cache_dir or __import__("rimless.sim.sweep", fromlist=["x"]).default_cache_dir())
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task(f"sweep: {len(points)} grid points", total=len(points))
+        try:
+            res = run_sweep(points, options, scheduler=scheduler, workers=workers, cache_dir=cache,
+                            progress=lambda i, n: prog.update(task, completed=i, total=n))
+        except ConnectionError as err:
+            raise ParameterError(f"--scheduler: {err}") from None
+    meta = {"grid": grid, "models": model_list, "mass_models": mm, "options": options.__dict__,
+            "base_params": params.to_dict(), "scheduler": scheduler}
+    if not res.rows:
+        typer.echo("error: the sweep produced no rows", err=True)
+        raise typer.Exit(1)
+    paths = write_table(res.rows, out, meta)
+    if res.points:
+        paths += write_table(res.points, out.with_name(out.name + "-points"), meta)
+    summary = {"rows": res.rows, "files": [str(p) for p in paths], "seconds": res.seconds, "computed": res.computed,
+               "cached": res.cached, "scheduler": scheduler, "workers": res.workers, "grid": grid}
+    if json_out:
+        print_json(summary)
+        return
+    _print_sweep_table(res.rows)
+    con = _console()
+    for p in paths:
+        con.print(f"wrote {p}", soft_wrap=True)
+    con.print(f"{len(points)} grid points ({res.computed} computed, {res.cached} from the cache) in {res.seconds:.1f} s "
+              f"on {res.workers} worker(s), scheduler {scheduler}")
+
+
+def _err_console():  # noqa: ANN202
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def _print_sweep_table(rows: list[dict[str, Any]]) -> None:
+    """One line per (grid point, branch) in 80 columns; the reasons' details go under the table."""
+    from rich.table import Table
+
+    table = Table(show_header=True, header_style="bold", box=None, padding=(0, 1), pad_edge=False)
+    for name, width in _SWEEP_COLUMNS:
+        table.add_column(name, justify="right" if name not in ("model", "branch", "ends by") else "left",
+                         min_width=min(width, len(name)), no_wrap=True)
+    notes = []
+    for r in rows:
+        crit = r.get("critical_slope_deg")
+        crit_txt = f"{crit:.4f}" if isinstance(crit, float) and crit == crit else "-"
+        cot = r.get("cot")
+        table.add_row(r["model"], f"{r['k']:g}", str(r.get("branch", ""))[:13],
+                      "yes" if r.get("stable_at_start") else "no", "yes" if r.get("contact_valid_at_start") else "no",
+                      crit_txt, str(r.get("reason", ""))[:17], f"{cot:.4f}" if isinstance(cot, float) and cot == cot else "-")
+        if r.get("contact_reason"):
+            notes.append(f"{r['model']} k={r['k']:g} {r.get('branch')}: not contact-valid: {r['contact_reason']}")
+    _console().print(table)
+    for n in notes:
+        _console().print(n, soft_wrap=True)
