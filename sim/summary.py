@@ -59,9 +59,40 @@ def fixed_point_summary(fp: FixedPoint, p: WheelParams, model: str, *, guess: An
     return out
 
 
+def special_point_summary(sp: Any) -> dict[str, Any]:
+    """A located special point (rimless.sim.arclength.SpecialPoint) as plain data."""
+    pt = sp.point
+    out = {
+        "kind": sp.kind,
+        "parameter_value": sp.p,
+        "bracket": list(sp.bracket_p),
+        "test_function_at_bracket": list(sp.bracket_values),
+        "theta_plus_rad": float(pt.z[0]),
+        "theta_dot_plus_rad_s": float(pt.z[1]),
+        "step_period_s": pt.period_s,
+        "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in pt.eigenvalues],
+        "max_abs_eigenvalue": pt.max_abs_eigenvalue,
+        "detail": sp.detail,
+    }
+    if pt.facts is not None:
+        out["contact"] = pt.facts.as_dict()
+    return out
+
+
 def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
     """The `rimless sim critical-slope` JSON object for a compliant model."""
     fp = cs.fixed_point
+    if cs.end is not None:
+        pt = cs.end.point
+        at = {"theta_plus_rad": float(pt.z[0]), "theta_dot_plus_rad_s": float(pt.z[1]), "step_period_s": pt.period_s,
+              "max_abs_eigenvalue": pt.max_abs_eigenvalue,
+              "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in pt.eigenvalues]}
+        if pt.facts is not None:
+            at["contact"] = pt.facts.as_dict()
+    else:
+        at = {"theta_plus_rad": float(fp.z[0]), "theta_dot_plus_rad_s": float(fp.z[1]),
+              "step_period_s": fp.step.period_s, "max_abs_eigenvalue": fp.max_abs_eigenvalue,
+              "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues]}
     return {
         "model": cs.model,
         "critical_slope_rad": cs.critical_slope_rad,
@@ -70,11 +101,13 @@ def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
         "reason": cs.reason,
         "detail": cs.detail,
         "definition": "smallest slope of the followed branch with a stable, valid period-1 gait, located to "
-        f"{cs.refine_tol_rad:g} rad",
+        f"{cs.refine_tol_rad:.3g} rad",
+        "method": cs.method,
         "algorithm1_slope_rad": cs.algorithm1_slope_rad,
         "algorithm1_step_rad": cs.algorithm1_step_rad,
         "algorithm1_definition": "last slope where Newton converged, continuing down from the start slope in fixed steps",
         "refine_tol_rad": cs.refine_tol_rad,
+        "map_evaluations": cs.map_evaluations,
         "branch": {
             "start_slope_rad": cs.branch[0].slope_rad,
             "start_theta_plus_rad": float(cs.branch[0].z[0]),
@@ -82,13 +115,8 @@ def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
             "start_step_period_s": cs.branch[0].period_s,
             "points": len(cs.branch),
         },
-        "at_critical": {
-            "theta_plus_rad": float(fp.z[0]),
-            "theta_dot_plus_rad_s": float(fp.z[1]),
-            "step_period_s": fp.step.period_s,
-            "max_abs_eigenvalue": fp.max_abs_eigenvalue,
-            "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues],
-        },
+        "at_critical": at,
+        "special_points": [special_point_summary(sp) for sp in cs.special_points],
         "k": p.stiffness_n_per_m,
         "c": p.damping_ns_per_m,
         "mass_model": p.mass_model,
