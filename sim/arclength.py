@@ -273,7 +273,7 @@ class ArclengthContinuation:
         *,
         ds: float = 0.02,
         ds_min: float = 1e-6,
-        ds_max: float = 0.08,
+        ds_max: float = 0.2,
         tol: float = 1e-10,
         locate_tol: float = 1e-7,
         facts_every: int = 10,
