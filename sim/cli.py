@@ -111,6 +111,11 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object ins
 BackendOpt = Annotated[Backend, typer.Option("--backend", help="fast (compiled), reference (scipy solve_ivp) or auto.")]
 RtolOpt = Annotated[float, typer.Option("--rtol", min=1e-13, max=1e-3, help="Integrator relative tolerance.")]
 GuessOpt = Annotated[Optional[float], typer.Option("--theta-dot-guess", help="Initial guess of theta'+ (rad/s): picks the branch.")]
+ThetaGuessOpt = Annotated[Optional[float], typer.Option("--theta-plus-guess", help="Initial guess of theta+ (rad), "
+                                                        "the post-impact stance angle [-alpha/2 - 0.07].")]
+GaitOpt = Annotated[Optional[int], typer.Option("--gait", min=1, max=200, metavar="N",
+                                                help="Start from gait N of `rimless sim gaits` (same parameters, "
+                                                     "numbered by step period) instead of a guess.")]
 StrictOpt = Annotated[bool, typer.Option("--strict-contact", help="Reject gaits whose leading foot pulls on the ground in "
                                                                    "double support or whose lifted foot dips below the slope.")]
 
@@ -121,7 +126,8 @@ def _console():  # noqa: ANN202
     return Console()
 
 
-def _guess(params: Any, model: str, theta_dot_guess: Optional[float]) -> Any:
+def _guess(params: Any, model: str, theta_dot_guess: Optional[float], theta_plus_guess: Optional[float] = None) -> Any:
+    from rimless.sim.params import SPOKE_ANGLE_RAD
     from rimless.sim.poincare import default_guess
 
     z = default_guess(params, model)
@@ -129,7 +135,57 @@ def _guess(params: Any, model: str, theta_dot_guess: Optional[float]) -> Any:
         if not (math.isfinite(theta_dot_guess) and theta_dot_guess > 0):
             raise ParameterError(f"--theta-dot-guess must be a positive angular velocity in rad/s, got {theta_dot_guess}")
         z[1] = theta_dot_guess
+    if theta_plus_guess is not None:
+        if not (math.isfinite(theta_plus_guess) and -SPOKE_ANGLE_RAD < theta_plus_guess < 0):
+            raise ParameterError(f"--theta-plus-guess must be a stance angle in (-{SPOKE_ANGLE_RAD:.4f}, 0) rad, "
+                                 f"got {theta_plus_guess}")
+        z[0] = theta_plus_guess
     return z
+
+
+def _start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], theta_plus_guess: Optional[float],
+                 gait: Optional[int], backend: str, rtol: float) -> Any:
+    """The section point to start Newton from: gait N of the `gaits` scan, or the (overridden) default guess."""
+    if gait is None:
+        return _guess(params, model, theta_dot_guess, theta_plus_guess)
+    if theta_dot_guess is not None or theta_plus_guess is not None:
+        raise ParameterError("give either --gait or --theta-dot-guess/--theta-plus-guess, not both")
+    from rich.progress import Progress
+
+    from rimless.sim.backend import make_map
+    from rimless.sim.poincare import find_gaits
+
+    pmap = make_map(params, model, backend=backend, rtol=rtol)
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("finding the gaits", total=14)
+        found = find_gaits(pmap, progress=lambda i, n: prog.update(task, completed=i, total=n))
+    if not found:
+        raise SimFailure(f"--gait {gait}: no period-1 gait of the {model} wheel at {params.slope_deg:.4f} deg")
+    if gait > len(found):
+        raise ParameterError(f"--gait {gait}: only {len(found)} gait(s) of the {model} wheel at "
+                             f"{params.slope_deg:.4f} deg (see `rimless sim gaits`)")
+    return found[gait - 1].z.copy()
+
+
+class SimFailure(Exception):
+    """A failure that is not the user's mistake (no gait exists): one line on stderr, exit 1."""
+
+
+def sim_failures(func: Any) -> Any:
+    """Turn SimFailure into `error: ...` on stderr and exit code 1; Ctrl-C into exit 130 without a traceback."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except SimFailure as err:
+            typer.echo(f"error: {err}", err=True)
+            raise typer.Exit(1) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(130) from None
+
+    return wrapper
 
 
 def _table(title: str, rows: list[tuple[str, Any]]) -> Any:
@@ -147,11 +203,14 @@ def _table(title: str, rows: list[tuple[str, Any]]) -> Any:
 
 @app.command("fixed-point")
 @user_facing
+@sim_failures
 @wheel_params
 def fixed_point_cmd(
     params: Any,
     model: ModelOpt = Model.er,
     theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
     strict_contact: StrictOpt = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -163,15 +222,16 @@ def fixed_point_cmd(
     from rimless.sim.poincare import solve_fixed_point
     from rimless.sim.summary import fixed_point_summary
 
+    guess = _start_guess(params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                         gait=gait, backend=backend.value, rtol=rtol)
     pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
-    guess = _guess(params, model.value, theta_dot_guess)
     jf = jacobian_factory(backend.value)
     try:
         fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None, diagnostics=True,
                                strict_contact=strict_contact)
     except StepFailure as err:
-        raise UserError(f"no period-1 gait found for the {model.value} wheel from the guess "
-                        f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
+        raise SimFailure(f"no period-1 gait found for the {model.value} wheel from the guess "
+                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
     out = fixed_point_summary(fp, params, model.value, guess=guess)
     if json_out:
         print_json(out)
@@ -186,16 +246,21 @@ def fixed_point_cmd(
         ("step period (s)", out["step_period_s"]),
         ("eigenvalues", ", ".join(f"{re:.5f}{im:+.5f}j" for re, im in out["eigenvalues"])),
         ("max |eigenvalue|", out["max_abs_eigenvalue"]),
-        ("stable", out["stable"]),
+        ("orbitally stable (max |eig| < 1)", "yes" if out["stable"] else "no"),
+        ("contact valid (unilateral)", "yes" if out["contact_valid"] else "NO"),
         ("energy ratio E+/E-", out["energy_ratio"]),
         ("phase durations (s)", ", ".join(f"{k} {v:.4f}" for k, v in out["phase_durations_s"].items())),
         ("min normal force b in DLSP (N)", mf["dlsp_leading_b"]),
         ("min normal force b in SLSP (N)", min(v for v in (mf["slsp_free"], mf["slsp_clutched"]) if v == v)),
         ("trailing foot lowest point (mm)", out["trailing_foot_min_height_m"] * 1e3),
         ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
+        ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
         ("residual |P(z)-z|", out["residual"]),
     ]
-    _console().print(_table("period-1 gait", rows))
+    con = _console()
+    con.print(_table("period-1 gait", rows))
+    con.print(out["contact_note"], soft_wrap=True)
+    con.print(out["relabel_note"], soft_wrap=True)
 
 
 @app.command("gaits")
@@ -220,7 +285,7 @@ def gaits_cmd(
     pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
     from rich.progress import Progress
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("scanning guesses", total=guesses)
         found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
                            progress=lambda i, n: prog.update(task, completed=i))
@@ -255,11 +320,14 @@ def gaits_cmd(
 
 @app.command("critical-slope")
 @user_facing
+@sim_failures
 @wheel_params
 def critical_slope_cmd(
     params: Any,
     model: Annotated[ModelOrRigid, typer.Option("--model", help="er, ve or rigid (closed form).")] = ModelOrRigid.er,
     theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
     step_rad: Annotated[float, typer.Option(min=1e-5, max=0.01, help="Algorithm 1 slope step, rad.")] = 0.001,
     start_slope_rad: Annotated[float, typer.Option(help="Slope where the continuation starts, rad.")] = 0.05,
     strict_contact: StrictOpt = False,
@@ -295,17 +363,18 @@ def critical_slope_cmd(
         raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
     start_params = params.replace(slope_rad=start_slope_rad)
     pmap = make_map(start_params, model.value, backend=backend.value, rtol=rtol)
-    guess = _guess(start_params, model.value, theta_dot_guess)
+    guess = _start_guess(start_params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                         gait=gait, backend=backend.value, rtol=rtol)
     from rich.progress import Progress
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("continuation in slope", total=None)
         try:
             cs = critical_slope(pmap, guess, start_slope_rad=start_slope_rad, step_rad=step_rad,
                                 strict_contact=strict_contact, jacobian_factory=jacobian_factory(backend.value),
                                 progress=lambda s: prog.update(task, description=f"slope {math.degrees(s):.4f} deg"))
         except StepFailure as err:
-            raise UserError(f"critical slope of the {model.value} wheel: {err}") from None
+            raise SimFailure(f"critical slope of the {model.value} wheel: {err}") from None
     out = critical_slope_summary(cs, params)
     if json_out:
         print_json(out)
@@ -316,20 +385,26 @@ def critical_slope_cmd(
         ("critical slope (rad)", out["critical_slope_rad"]),
         ("CoT = tan(phi_c)", out["cot"]),
         ("branch ends by", out["reason"]),
-        ("detail", out["detail"]),
+        ("located by", f"{out['method']} ({out['map_evaluations']} map evaluations)"),
         ("Algorithm 1 slope (rad), step", f"{out['algorithm1_slope_rad']:.6f}, {out['algorithm1_step_rad']:g}"),
         ("branch followed from", f"theta'+ = {out['branch']['start_theta_dot_plus_rad_s']:.4f} rad/s, period "
                                  f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad"),
         ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
+        ("contact valid at critical", ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-"),
     ]))
+    _console().print(f"why: {out['detail']}", soft_wrap=True)
 
 
 @app.command("gait")
 @user_facing
+@sim_failures
 @wheel_params
 def gait_cmd(
     params: Any,
     model: ModelOpt = Model.er,
+    theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
     steps: Annotated[int, typer.Option("--steps", min=1, max=10000, help="Number of steps to simulate.")] = 6,
     theta_dot: Annotated[Optional[float], typer.Option("--theta-dot", help="Start from this theta'+ (rad/s) just "
                                                        "after an impact instead of the fixed point.")] = None,
@@ -337,7 +412,8 @@ def gait_cmd(
                                                             "[-alpha/2: both legs at rest length].")] = None,
     out: Annotated[Optional[Path], typer.Option("--out", help="Write the trajectory (.parquet or .csv).")] = None,
     plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the gait figure (.png, .pdf, .svg).")] = None,
-    forces: Annotated[bool, typer.Option("--forces", help="Also record the constraint forces (lambda, N).")] = False,
+    forces: Annotated[bool, typer.Option("--forces", help="Also record the constraint forces (lambda, N) and plot "
+                                         "the normal forces and a stick diagram.")] = False,
     sample_dt_s: Annotated[float, typer.Option(min=1e-5, max=0.05, help="Sampling interval of the trajectory, s.")] = 1e-3,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -363,30 +439,28 @@ def gait_cmd(
     else:
         pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
         jf = jacobian_factory(backend.value)
+        guess = _start_guess(params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                             gait=gait, backend=backend.value, rtol=rtol)
         try:
-            fp = solve_fixed_point(pmap, _guess(params, model.value, None), jacobian=jf(pmap) if jf else None)
+            fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None)
         except StepFailure as err:
-            raise UserError(f"no fixed point to start from ({err}); give --theta-dot") from None
+            raise SimFailure(f"no fixed point to start from ({err}); give --theta-dot") from None
         z0 = fp.z
         start = "fixed point"
     from rich.progress import Progress
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("simulating steps", total=steps)
         traj = simulate_steps(params, model.value, z0, steps, make_integrator(backend.value, rtol), record_dt=sample_dt_s,
                               forces=forces, progress=lambda k: prog.update(task, completed=k))
     if out is not None:
-        frame = traj.to_frame()
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if out.suffix.lower() == ".parquet":
-            frame.to_parquet(out, index=False)
-        else:
-            frame.to_csv(out, index=False)
-    if plot is not None and traj.steps:
-        from rimless.sim.plotting import plot_gait
+        from rimless.sim.gait import write_trajectory
 
-        plot.parent.mkdir(parents=True, exist_ok=True)
-        plot_gait(traj, plot)
+        write_trajectory(traj, out, {"start": start, "backend": backend.value, "rtol": rtol})
+    if plot is not None and traj.steps:
+        from rimless.sim.plotting import plot_gait, save_figure
+
+        save_figure(plot_gait(traj, None, forces=forces), plot)
     summary = {
         "model": model.value,
         "slope_rad": params.slope_rad,
@@ -457,7 +531,7 @@ def stress_cmd(
     ks, cs, ratios = _floats(k_values, "--k-values"), _floats(c_values, "--c-values"), _floats(mass_ratios, "--mass-ratios")
     if min(ks) <= 0 or min(cs) < 0 or min(ratios) <= 0:
         raise ParameterError("need k > 0, c >= 0 and mass ratios > 0")
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("stress sweep", total=None)
         out = stress_sweep(params, k_values=ks, c_values=cs, slopes_rad=slopes, mass_ratios=ratios, rtol=rtol,
                            progress=lambda i, n: prog.update(task, completed=i, total=n))
@@ -493,7 +567,7 @@ def bench_cmd(
 
     from rimless.sim.bench import format_table, plot_work_precision, run_bench
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("benchmark", total=None)
         result = run_bench(quick, progress=lambda msg: prog.update(task, description=str(msg)))
     if plot is not None:
