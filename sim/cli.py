@@ -579,9 +579,80 @@ def bench_cmd(
         typer.echo(format_table(result))
 
 
+@user_facing
+@sim_failures
+@wheel_params(exclude=("k",))
+def paper_cmd(
+    params: Any,
+    out: Annotated[Path, typer.Option("--out", metavar="DIR", help="Folder for the figures, CSVs and index.html.")] =
+        Path("rimless-paper"),
+    k_grid: Annotated[str, typer.Option("--k", metavar="START:STOP:STEP", help="Stiffness grid of the sweep, N/m.")] =
+        "1500:3500:250",
+    scheduler: Annotated[str, typer.Option("--scheduler", metavar="local|sync|tcp://HOST:8786",
+                                           help="Where the sweep's grid points run.")] = "local",
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
+                                                   "processes [one per core].")] = None,
+    cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Sweep result cache "
+                                                      "[~/.cache/rimless/sweep].")] = None,
+    no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every sweep point.")] = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Regenerate the paper's simulation figures (PNG, 150 dpi) with their CSVs, the headline table and an index."""
+    from rich.progress import Progress
+
+    from rimless.sim.paper import EIGEN_K, ENERGY_K, run_paper
+    from rimless.sim.sweep import default_cache_dir, parse_range
+
+    ks = tuple(parse_range(k_grid, "--k"))
+    for k in ks:
+        try:
+            params.replace(stiffness_n_per_m=k)
+        except ParameterError as err:
+            raise ParameterError(f"--k {k:g}: {err}") from None
+    if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
+        raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"--out {out}: exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ParameterError(f"--out {out}: cannot create the folder ({err.strerror})") from None
+    eigen_ks = tuple(k for k in EIGEN_K if k in ks) or ks[: min(3, len(ks))]
+    energy_ks = tuple(k for k in ENERGY_K if k in ks) or ks[: min(4, len(ks))]
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("paper", total=None)
+        try:
+            res = run_paper(out, params, ks=ks, backend=backend.value, rtol=rtol, scheduler=scheduler, workers=workers,
+                            cache_dir=None if no_cache else (cache_dir or default_cache_dir()), energy_ks=energy_ks,
+                            eigen_ks=eigen_ks, progress=lambda msg: prog.update(task, description=msg))
+        except ConnectionError as err:
+            raise ParameterError(f"--scheduler: {err}") from None
+    summary = {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "timings_s": res.timings_s,
+               "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers}}
+    if json_out:
+        print_json(summary)
+        return
+    from rich.table import Table
+
+    table = Table(title="the paper's headline numbers beside ours", show_lines=True)
+    for col in ("quantity", "paper", "ours"):
+        table.add_column(col, overflow="fold")
+    for r in res.table:
+        table.add_row(r["quantity"], r["paper"], r["ours"])
+    con = _console()
+    con.print(table)
+    for f in res.files:
+        con.print(f"wrote {f}", soft_wrap=True)
+    con.print(f"in {res.timings_s['total']:.1f} s (sweep {res.timings_s['sweep']:.1f} s: {res.sweep.computed} grid "
+              f"points computed, {res.sweep.cached} cached, {res.sweep.workers} worker(s))")
+
+
 def register_top_level(root: typer.Typer) -> None:
-    """Commands that live at the top level (`rimless bench`)."""
+    """Commands that live at the top level (`rimless bench`, `rimless paper`)."""
     root.command("bench")(bench_cmd)
+    root.command("paper")(paper_cmd)
 
 
 class Scheduler(str, Enum):
