@@ -77,12 +77,17 @@ def build_params(values: dict[str, Any]) -> Any:
     return params_from_mapping(mapping, base=base, source="the command-line options")
 
 
-def wheel_params(func: Any) -> Any:
-    """Add the parameter options to a command; the command receives `params: WheelParams`."""
+def wheel_params(func: Any = None, *, exclude: tuple[str, ...] = ()) -> Any:
+    """Add the parameter options to a command; the command receives `params: WheelParams`.
+
+    exclude: parameter options the command defines itself (e.g. a sweep's `--k` grid)."""
+    if func is None:
+        return functools.partial(wheel_params, exclude=exclude)
     sig = inspect.signature(func)
     own = [p for p in sig.parameters.values() if p.name != "params"]
+    options = [o for o in _PARAM_OPTIONS if o[0] not in exclude]
     extra = []
-    for name, annotation, help_text in _PARAM_OPTIONS:
+    for name, annotation, help_text in options:
         flag = _OPTION_NAMES.get(name, "--" + name.replace("_", "-"))
         opt = typer.Option(flag, help=help_text, rich_help_panel="Wheel parameters")
         extra.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None,
@@ -90,7 +95,7 @@ def wheel_params(func: Any) -> Any:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        values = {name: kwargs.pop(name, None) for name, _, _ in _PARAM_OPTIONS}
+        values = {name: kwargs.pop(name, None) for name, _, _ in options}
         kwargs["params"] = build_params(values)
         return func(*args, **kwargs)
 
@@ -106,6 +111,11 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object ins
 BackendOpt = Annotated[Backend, typer.Option("--backend", help="fast (compiled), reference (scipy solve_ivp) or auto.")]
 RtolOpt = Annotated[float, typer.Option("--rtol", min=1e-13, max=1e-3, help="Integrator relative tolerance.")]
 GuessOpt = Annotated[Optional[float], typer.Option("--theta-dot-guess", help="Initial guess of theta'+ (rad/s): picks the branch.")]
+ThetaGuessOpt = Annotated[Optional[float], typer.Option("--theta-plus-guess", help="Initial guess of theta+ (rad), "
+                                                        "the post-impact stance angle [-alpha/2 - 0.07].")]
+GaitOpt = Annotated[Optional[int], typer.Option("--gait", min=1, max=200, metavar="N",
+                                                help="Start from gait N of `rimless sim gaits` (same parameters, "
+                                                     "numbered by step period) instead of a guess.")]
 StrictOpt = Annotated[bool, typer.Option("--strict-contact", help="Reject gaits whose leading foot pulls on the ground in "
                                                                    "double support or whose lifted foot dips below the slope.")]
 
@@ -116,7 +126,8 @@ def _console():  # noqa: ANN202
     return Console()
 
 
-def _guess(params: Any, model: str, theta_dot_guess: Optional[float]) -> Any:
+def _guess(params: Any, model: str, theta_dot_guess: Optional[float], theta_plus_guess: Optional[float] = None) -> Any:
+    from rimless.sim.params import SPOKE_ANGLE_RAD
     from rimless.sim.poincare import default_guess
 
     z = default_guess(params, model)
@@ -124,7 +135,57 @@ def _guess(params: Any, model: str, theta_dot_guess: Optional[float]) -> Any:
         if not (math.isfinite(theta_dot_guess) and theta_dot_guess > 0):
             raise ParameterError(f"--theta-dot-guess must be a positive angular velocity in rad/s, got {theta_dot_guess}")
         z[1] = theta_dot_guess
+    if theta_plus_guess is not None:
+        if not (math.isfinite(theta_plus_guess) and -SPOKE_ANGLE_RAD < theta_plus_guess < 0):
+            raise ParameterError(f"--theta-plus-guess must be a stance angle in (-{SPOKE_ANGLE_RAD:.4f}, 0) rad, "
+                                 f"got {theta_plus_guess}")
+        z[0] = theta_plus_guess
     return z
+
+
+def _start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], theta_plus_guess: Optional[float],
+                 gait: Optional[int], backend: str, rtol: float) -> Any:
+    """The section point to start Newton from: gait N of the `gaits` scan, or the (overridden) default guess."""
+    if gait is None:
+        return _guess(params, model, theta_dot_guess, theta_plus_guess)
+    if theta_dot_guess is not None or theta_plus_guess is not None:
+        raise ParameterError("give either --gait or --theta-dot-guess/--theta-plus-guess, not both")
+    from rich.progress import Progress
+
+    from rimless.sim.backend import make_map
+    from rimless.sim.poincare import find_gaits
+
+    pmap = make_map(params, model, backend=backend, rtol=rtol)
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("finding the gaits", total=14)
+        found = find_gaits(pmap, progress=lambda i, n: prog.update(task, completed=i, total=n))
+    if not found:
+        raise SimFailure(f"--gait {gait}: no period-1 gait of the {model} wheel at {params.slope_deg:.4f} deg")
+    if gait > len(found):
+        raise ParameterError(f"--gait {gait}: only {len(found)} gait(s) of the {model} wheel at "
+                             f"{params.slope_deg:.4f} deg (see `rimless sim gaits`)")
+    return found[gait - 1].z.copy()
+
+
+class SimFailure(Exception):
+    """A failure that is not the user's mistake (no gait exists): one line on stderr, exit 1."""
+
+
+def sim_failures(func: Any) -> Any:
+    """Turn SimFailure into `error: ...` on stderr and exit code 1; Ctrl-C into exit 130 without a traceback."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except SimFailure as err:
+            typer.echo(f"error: {err}", err=True)
+            raise typer.Exit(1) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(130) from None
+
+    return wrapper
 
 
 def _table(title: str, rows: list[tuple[str, Any]]) -> Any:
@@ -142,11 +203,14 @@ def _table(title: str, rows: list[tuple[str, Any]]) -> Any:
 
 @app.command("fixed-point")
 @user_facing
+@sim_failures
 @wheel_params
 def fixed_point_cmd(
     params: Any,
     model: ModelOpt = Model.er,
     theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
     strict_contact: StrictOpt = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -158,15 +222,16 @@ def fixed_point_cmd(
     from rimless.sim.poincare import solve_fixed_point
     from rimless.sim.summary import fixed_point_summary
 
+    guess = _start_guess(params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                         gait=gait, backend=backend.value, rtol=rtol)
     pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
-    guess = _guess(params, model.value, theta_dot_guess)
     jf = jacobian_factory(backend.value)
     try:
         fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None, diagnostics=True,
                                strict_contact=strict_contact)
     except StepFailure as err:
-        raise UserError(f"no period-1 gait found for the {model.value} wheel from the guess "
-                        f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
+        raise SimFailure(f"no period-1 gait found for the {model.value} wheel from the guess "
+                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
     out = fixed_point_summary(fp, params, model.value, guess=guess)
     if json_out:
         print_json(out)
@@ -181,16 +246,21 @@ def fixed_point_cmd(
         ("step period (s)", out["step_period_s"]),
         ("eigenvalues", ", ".join(f"{re:.5f}{im:+.5f}j" for re, im in out["eigenvalues"])),
         ("max |eigenvalue|", out["max_abs_eigenvalue"]),
-        ("stable", out["stable"]),
+        ("orbitally stable (max |eig| < 1)", "yes" if out["stable"] else "no"),
+        ("contact valid (unilateral)", "yes" if out["contact_valid"] else "NO"),
         ("energy ratio E+/E-", out["energy_ratio"]),
         ("phase durations (s)", ", ".join(f"{k} {v:.4f}" for k, v in out["phase_durations_s"].items())),
         ("min normal force b in DLSP (N)", mf["dlsp_leading_b"]),
         ("min normal force b in SLSP (N)", min(v for v in (mf["slsp_free"], mf["slsp_clutched"]) if v == v)),
         ("trailing foot lowest point (mm)", out["trailing_foot_min_height_m"] * 1e3),
         ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
+        ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
         ("residual |P(z)-z|", out["residual"]),
     ]
-    _console().print(_table("period-1 gait", rows))
+    con = _console()
+    con.print(_table("period-1 gait", rows))
+    con.print(out["contact_note"], soft_wrap=True)
+    con.print(out["relabel_note"], soft_wrap=True)
 
 
 @app.command("gaits")
@@ -215,7 +285,7 @@ def gaits_cmd(
     pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
     from rich.progress import Progress
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("scanning guesses", total=guesses)
         found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
                            progress=lambda i, n: prog.update(task, completed=i))
@@ -250,11 +320,14 @@ def gaits_cmd(
 
 @app.command("critical-slope")
 @user_facing
+@sim_failures
 @wheel_params
 def critical_slope_cmd(
     params: Any,
     model: Annotated[ModelOrRigid, typer.Option("--model", help="er, ve or rigid (closed form).")] = ModelOrRigid.er,
     theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
     step_rad: Annotated[float, typer.Option(min=1e-5, max=0.01, help="Algorithm 1 slope step, rad.")] = 0.001,
     start_slope_rad: Annotated[float, typer.Option(help="Slope where the continuation starts, rad.")] = 0.05,
     strict_contact: StrictOpt = False,
@@ -290,17 +363,18 @@ def critical_slope_cmd(
         raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
     start_params = params.replace(slope_rad=start_slope_rad)
     pmap = make_map(start_params, model.value, backend=backend.value, rtol=rtol)
-    guess = _guess(start_params, model.value, theta_dot_guess)
+    guess = _start_guess(start_params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                         gait=gait, backend=backend.value, rtol=rtol)
     from rich.progress import Progress
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("continuation in slope", total=None)
         try:
             cs = critical_slope(pmap, guess, start_slope_rad=start_slope_rad, step_rad=step_rad,
                                 strict_contact=strict_contact, jacobian_factory=jacobian_factory(backend.value),
                                 progress=lambda s: prog.update(task, description=f"slope {math.degrees(s):.4f} deg"))
         except StepFailure as err:
-            raise UserError(f"critical slope of the {model.value} wheel: {err}") from None
+            raise SimFailure(f"critical slope of the {model.value} wheel: {err}") from None
     out = critical_slope_summary(cs, params)
     if json_out:
         print_json(out)
@@ -311,20 +385,26 @@ def critical_slope_cmd(
         ("critical slope (rad)", out["critical_slope_rad"]),
         ("CoT = tan(phi_c)", out["cot"]),
         ("branch ends by", out["reason"]),
-        ("detail", out["detail"]),
+        ("located by", f"{out['method']} ({out['map_evaluations']} map evaluations)"),
         ("Algorithm 1 slope (rad), step", f"{out['algorithm1_slope_rad']:.6f}, {out['algorithm1_step_rad']:g}"),
         ("branch followed from", f"theta'+ = {out['branch']['start_theta_dot_plus_rad_s']:.4f} rad/s, period "
                                  f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad"),
         ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
+        ("contact valid at critical", ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-"),
     ]))
+    _console().print(f"why: {out['detail']}", soft_wrap=True)
 
 
 @app.command("gait")
 @user_facing
+@sim_failures
 @wheel_params
 def gait_cmd(
     params: Any,
     model: ModelOpt = Model.er,
+    theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
     steps: Annotated[int, typer.Option("--steps", min=1, max=10000, help="Number of steps to simulate.")] = 6,
     theta_dot: Annotated[Optional[float], typer.Option("--theta-dot", help="Start from this theta'+ (rad/s) just "
                                                        "after an impact instead of the fixed point.")] = None,
@@ -332,7 +412,8 @@ def gait_cmd(
                                                             "[-alpha/2: both legs at rest length].")] = None,
     out: Annotated[Optional[Path], typer.Option("--out", help="Write the trajectory (.parquet or .csv).")] = None,
     plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the gait figure (.png, .pdf, .svg).")] = None,
-    forces: Annotated[bool, typer.Option("--forces", help="Also record the constraint forces (lambda, N).")] = False,
+    forces: Annotated[bool, typer.Option("--forces", help="Also record the constraint forces (lambda, N) and plot "
+                                         "the normal forces and a stick diagram.")] = False,
     sample_dt_s: Annotated[float, typer.Option(min=1e-5, max=0.05, help="Sampling interval of the trajectory, s.")] = 1e-3,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -358,30 +439,28 @@ def gait_cmd(
     else:
         pmap = make_map(params, model.value, backend=backend.value, rtol=rtol)
         jf = jacobian_factory(backend.value)
+        guess = _start_guess(params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                             gait=gait, backend=backend.value, rtol=rtol)
         try:
-            fp = solve_fixed_point(pmap, _guess(params, model.value, None), jacobian=jf(pmap) if jf else None)
+            fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None)
         except StepFailure as err:
-            raise UserError(f"no fixed point to start from ({err}); give --theta-dot") from None
+            raise SimFailure(f"no fixed point to start from ({err}); give --theta-dot") from None
         z0 = fp.z
         start = "fixed point"
     from rich.progress import Progress
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("simulating steps", total=steps)
         traj = simulate_steps(params, model.value, z0, steps, make_integrator(backend.value, rtol), record_dt=sample_dt_s,
                               forces=forces, progress=lambda k: prog.update(task, completed=k))
     if out is not None:
-        frame = traj.to_frame()
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if out.suffix.lower() == ".parquet":
-            frame.to_parquet(out, index=False)
-        else:
-            frame.to_csv(out, index=False)
-    if plot is not None and traj.steps:
-        from rimless.sim.plotting import plot_gait
+        from rimless.sim.gait import write_trajectory
 
-        plot.parent.mkdir(parents=True, exist_ok=True)
-        plot_gait(traj, plot)
+        write_trajectory(traj, out, {"start": start, "backend": backend.value, "rtol": rtol})
+    if plot is not None and traj.steps:
+        from rimless.sim.plotting import plot_gait, save_figure
+
+        save_figure(plot_gait(traj, None, forces=forces), plot)
     summary = {
         "model": model.value,
         "slope_rad": params.slope_rad,
@@ -452,7 +531,7 @@ def stress_cmd(
     ks, cs, ratios = _floats(k_values, "--k-values"), _floats(c_values, "--c-values"), _floats(mass_ratios, "--mass-ratios")
     if min(ks) <= 0 or min(cs) < 0 or min(ratios) <= 0:
         raise ParameterError("need k > 0, c >= 0 and mass ratios > 0")
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("stress sweep", total=None)
         out = stress_sweep(params, k_values=ks, c_values=cs, slopes_rad=slopes, mass_ratios=ratios, rtol=rtol,
                            progress=lambda i, n: prog.update(task, completed=i, total=n))
@@ -488,7 +567,7 @@ def bench_cmd(
 
     from rimless.sim.bench import format_table, plot_work_precision, run_bench
 
-    with Progress(transient=True, disable=json_out) as prog:
+    with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("benchmark", total=None)
         result = run_bench(quick, progress=lambda msg: prog.update(task, description=str(msg)))
     if plot is not None:
@@ -500,6 +579,209 @@ def bench_cmd(
         typer.echo(format_table(result))
 
 
+@user_facing
+@sim_failures
+@wheel_params(exclude=("k",))
+def paper_cmd(
+    params: Any,
+    out: Annotated[Path, typer.Option("--out", metavar="DIR", help="Folder for the figures, CSVs and index.html.")] =
+        Path("rimless-paper"),
+    k_grid: Annotated[str, typer.Option("--k", metavar="START:STOP:STEP", help="Stiffness grid of the sweep, N/m.")] =
+        "1500:3500:250",
+    scheduler: Annotated[str, typer.Option("--scheduler", metavar="local|sync|tcp://HOST:8786",
+                                           help="Where the sweep's grid points run.")] = "local",
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
+                                                   "processes [one per core].")] = None,
+    cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Sweep result cache "
+                                                      "[~/.cache/rimless/sweep].")] = None,
+    no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every sweep point.")] = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Regenerate the paper's simulation figures (PNG, 150 dpi) with their CSVs, the headline table and an index."""
+    from rich.progress import Progress
+
+    from rimless.sim.paper import EIGEN_K, ENERGY_K, run_paper
+    from rimless.sim.sweep import default_cache_dir, parse_range
+
+    ks = tuple(parse_range(k_grid, "--k"))
+    for k in ks:
+        try:
+            params.replace(stiffness_n_per_m=k)
+        except ParameterError as err:
+            raise ParameterError(f"--k {k:g}: {err}") from None
+    if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
+        raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"--out {out}: exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ParameterError(f"--out {out}: cannot create the folder ({err.strerror})") from None
+    eigen_ks = tuple(k for k in EIGEN_K if k in ks) or ks[: min(3, len(ks))]
+    energy_ks = tuple(k for k in ENERGY_K if k in ks) or ks[: min(4, len(ks))]
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("paper", total=None)
+        try:
+            res = run_paper(out, params, ks=ks, backend=backend.value, rtol=rtol, scheduler=scheduler, workers=workers,
+                            cache_dir=None if no_cache else (cache_dir or default_cache_dir()), energy_ks=energy_ks,
+                            eigen_ks=eigen_ks, progress=lambda msg: prog.update(task, description=msg))
+        except ConnectionError as err:
+            raise ParameterError(f"--scheduler: {err}") from None
+    summary = {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "timings_s": res.timings_s,
+               "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers}}
+    if json_out:
+        print_json(summary)
+        return
+    from rich.table import Table
+
+    table = Table(title="the paper's headline numbers beside ours", show_lines=True)
+    for col in ("quantity", "paper", "ours"):
+        table.add_column(col, overflow="fold")
+    for r in res.table:
+        table.add_row(r["quantity"], r["paper"], r["ours"])
+    con = _console()
+    con.print(table)
+    for f in res.files:
+        con.print(f"wrote {f}", soft_wrap=True)
+    con.print(f"in {res.timings_s['total']:.1f} s (sweep {res.timings_s['sweep']:.1f} s: {res.sweep.computed} grid "
+              f"points computed, {res.sweep.cached} cached, {res.sweep.workers} worker(s))")
+
+
 def register_top_level(root: typer.Typer) -> None:
-    """Commands that live at the top level (`rimless bench`)."""
+    """Commands that live at the top level (`rimless bench`, `rimless paper`)."""
     root.command("bench")(bench_cmd)
+    root.command("paper")(paper_cmd)
+
+
+class Scheduler(str, Enum):
+    local = "local"
+    sync = "sync"
+
+
+_SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid", 5), ("phi_c deg", 9),
+                  ("ends by", 17), ("CoT", 6))
+
+
+@app.command("sweep")
+@user_facing
+@wheel_params(exclude=("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
+def sweep_cmd(
+    params: Any,
+    models: Annotated[str, typer.Option("--model", help="Models, comma-separated: er, ve.")] = "er,ve",
+    k_grid: Annotated[Optional[str], typer.Option("--k", help="Stiffness grid, N/m: START:STOP:STEP or a,b,c.")] = None,
+    c_grid: Annotated[Optional[str], typer.Option("--c", help="Damping grid, N s/m: START:STOP:STEP or a,b,c.")] = None,
+    leg_mass_grid: Annotated[Optional[str], typer.Option("--leg-mass-kg", help="Leg mass grid, kg.")] = None,
+    hub_mass_grid: Annotated[Optional[str], typer.Option("--hub-mass-kg", help="Hub mass grid, kg.")] = None,
+    mass_models: Annotated[Optional[str], typer.Option("--mass-model", help="Mass models, comma-separated "
+                                                      "(eight-leg, sliding-leg, active-feet).")] = None,
+    start_slope_rad: Annotated[float, typer.Option(help="Slope where the gaits are searched, rad.")] = 0.05,
+    guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses in the gait search.")] = 14,
+    out: Annotated[Path, typer.Option("--out", metavar="STEM", help="Output stem: writes STEM.parquet, STEM.csv "
+                                      "and STEM-points.parquet/.csv (branch points).")] = Path("rimless-sweep/sweep"),
+    scheduler: Annotated[str, typer.Option("--scheduler", metavar="local|sync|tcp://HOST:8786",
+                                           help="Where grid points run: a local Dask cluster, this process, or "
+                                                "a running Dask scheduler.")] = "local",
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
+                                                   "processes [one per core].")] = None,
+    cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
+                                                      "[~/.cache/rimless/sweep].")] = None,
+    no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Sweep a parameter grid: every period-1 gait at the start slope, each branch continued down to its end.
+
+    Table columns: stable = orbitally stable at the start slope (max |eig| < 1); valid = unilateral contact
+    (stance force >= 0 in single support, impulses > 0); phi_c = critical slope of the branch (end of its
+    stable, valid part); CoT = tan(phi_c)."""
+    from rich.progress import Progress
+
+    from rimless.sim.backend import resolve
+    from rimless.sim.params import MASS_MODELS, SPOKE_ANGLE_RAD
+    from rimless.sim.sweep import GRID_PARAMETERS, SweepOptions, grid_points, parse_range, run_sweep, write_table
+
+    model_list = [m.strip().lower() for m in models.split(",") if m.strip()]
+    if not model_list or any(m not in ("er", "ve") for m in model_list):
+        raise ParameterError(f"--model must be er, ve or er,ve, got {models!r}")
+    mm = [m.strip() for m in (mass_models or params.mass_model).split(",") if m.strip()]
+    if not mm or any(m not in MASS_MODELS for m in mm):
+        raise ParameterError(f"--mass-model must be among {', '.join(MASS_MODELS)}, got {mass_models!r}")
+    if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
+        raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
+    if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
+        raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    grid: dict[str, list[float]] = {}
+    for name, text, option in (("k", k_grid, "--k"), ("c", c_grid, "--c"), ("leg_mass_kg", leg_mass_grid, "--leg-mass-kg"),
+                               ("hub_mass_kg", hub_mass_grid, "--hub-mass-kg")):
+        if text is not None:
+            grid[name] = parse_range(text, option)
+            field_name = GRID_PARAMETERS[name][0]
+            for v in grid[name]:
+                try:
+                    params.replace(**{field_name: v})
+                except ParameterError as err:
+                    raise ParameterError(f"{option} {v:g}: {err}") from None
+    if not grid:
+        grid["k"] = [params.k]
+    options = SweepOptions(backend=resolve(backend.value), rtol=rtol, start_slope_rad=start_slope_rad,
+                           n_guesses=guesses)
+    points = grid_points(params, model_list, grid, mm)
+    cache = None if no_cache else (cache_dir or __import__("rimless.sim.sweep", fromlist=["x"]).default_cache_dir())
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task(f"sweep: {len(points)} grid points", total=len(points))
+        try:
+            res = run_sweep(points, options, scheduler=scheduler, workers=workers, cache_dir=cache,
+                            progress=lambda i, n: prog.update(task, completed=i, total=n))
+        except ConnectionError as err:
+            raise ParameterError(f"--scheduler: {err}") from None
+    meta = {"grid": grid, "models": model_list, "mass_models": mm, "options": options.__dict__,
+            "base_params": params.to_dict(), "scheduler": scheduler}
+    if not res.rows:
+        typer.echo("error: the sweep produced no rows", err=True)
+        raise typer.Exit(1)
+    paths = write_table(res.rows, out, meta)
+    if res.points:
+        paths += write_table(res.points, out.with_name(out.name + "-points"), meta)
+    summary = {"rows": res.rows, "files": [str(p) for p in paths], "seconds": res.seconds, "computed": res.computed,
+               "cached": res.cached, "scheduler": scheduler, "workers": res.workers, "grid": grid}
+    if json_out:
+        print_json(summary)
+        return
+    _print_sweep_table(res.rows)
+    con = _console()
+    for p in paths:
+        con.print(f"wrote {p}", soft_wrap=True)
+    con.print(f"{len(points)} grid points ({res.computed} computed, {res.cached} from the cache) in {res.seconds:.1f} s "
+              f"on {res.workers} worker(s), scheduler {scheduler}")
+
+
+def _err_console():  # noqa: ANN202
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def _print_sweep_table(rows: list[dict[str, Any]]) -> None:
+    """One line per (grid point, branch) in 80 columns; the reasons' details go under the table."""
+    from rich.table import Table
+
+    table = Table(show_header=True, header_style="bold", box=None, padding=(0, 1), pad_edge=False)
+    for name, width in _SWEEP_COLUMNS:
+        table.add_column(name, justify="right" if name not in ("model", "branch", "ends by") else "left",
+                         min_width=min(width, len(name)), no_wrap=True)
+    notes = []
+    for r in rows:
+        crit = r.get("critical_slope_deg")
+        crit_txt = f"{crit:.4f}" if isinstance(crit, float) and crit == crit else "-"
+        cot = r.get("cot")
+        table.add_row(r["model"], f"{r['k']:g}", str(r.get("branch", ""))[:13],
+                      "yes" if r.get("stable_at_start") else "no", "yes" if r.get("contact_valid_at_start") else "no",
+                      crit_txt, str(r.get("reason", ""))[:17], f"{cot:.4f}" if isinstance(cot, float) and cot == cot else "-")
+        if r.get("contact_reason"):
+            notes.append(f"{r['model']} k={r['k']:g} {r.get('branch')}: not contact-valid: {r['contact_reason']}")
+    _console().print(table)
+    for n in notes:
+        _console().print(n, soft_wrap=True)

@@ -1,9 +1,13 @@
-"""Critical slope of the compliant wheels: the paper's Algorithm 1 plus a refined branch end.
+"""Critical slope of the compliant wheels: the paper's Algorithm 1 plus the located branch end.
 
 Algorithm 1: continue the fixed point downward in slope from 0.05 rad with step `step_rad`, the previous
 fixed point as the guess, and report the last slope where Newton converged.
-Refinement: bisect between the last good slope and the first bad one until the bracket is below
-`refine_tol_rad`, then classify why the branch ends (model.md section 7):
+Branch end, method "arclength" (default on the compiled path): pseudo-arclength continuation
+(rimless.sim.arclength) from the start gait down to its first special point, located by bisection on the
+test functions; the reason is read off the test functions at the located end.
+Branch end, method "bisection" (the reference path's default): bisect between the last good slope and the
+first bad one until the bracket is below `refine_tol_rad`; the reason again comes from the located end
+(an eigenvalue at +1: fold; else the map's failure class just past it). Reasons (model.md section 7):
 - `fold`: Newton stops converging while an eigenvalue approaches +1 (the fixed point vanishes);
 - `stall`: the map fails because the wheel stops (the period grows without bound);
 - `loss-of-stability`: a period-1 gait still exists but an eigenvalue leaves the unit circle;
@@ -16,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -52,6 +57,10 @@ class CriticalSlope:
     fixed_point: FixedPoint  # at critical_slope_rad
     branch: list[BranchPoint] = field(default_factory=list)
     start_guess: np.ndarray | None = None
+    method: str = "bisection"
+    end: Any = None  # rimless.sim.arclength.SpecialPoint at the located end (arclength method)
+    special_points: list[Any] = field(default_factory=list)
+    map_evaluations: int = 0
 
     @property
     def critical_slope_deg(self) -> float:
@@ -90,9 +99,17 @@ def critical_slope(
     strict_contact: bool = False,
     jacobian_factory: Callable[[PoincareMap], Callable[[np.ndarray], np.ndarray]] | None = None,
     progress: Callable[[float], None] | None = None,
+    method: str = "auto",
 ) -> CriticalSlope:
-    """Continue the branch through z_guess at start_slope_rad downward in slope (see module docstring)."""
+    """Continue the branch through z_guess at start_slope_rad downward in slope (see module docstring).
+
+    method: "arclength", "bisection" or "auto" (arclength when the map is compiled, else bisection)."""
     base = pmap.params
+    if method == "auto":
+        method = "arclength" if hasattr(pmap, "evaluate") else "bisection"
+    if method not in ("arclength", "bisection"):
+        raise ValueError(f"unknown method {method!r}")
+    evaluations0 = getattr(pmap, "evaluations", 0)
 
     def solve(slope: float, guess: np.ndarray) -> FixedPoint:
         m = pmap.with_params(base.replace(slope_rad=slope))
@@ -140,6 +157,9 @@ def critical_slope(
     if last_stable is None or last_stable_fp is None:
         raise NoFixedPoint(f"the gait at the start slope {start_slope_rad} rad is not stable "
                            f"(max |eigenvalue| {first.max_abs_eigenvalue:.4f})")
+    if method == "arclength":
+        return _by_arclength(pmap, first, start_slope_rad, step_rad, algorithm1, last_conv_fp, branch, min_slope_rad,
+                             refine_tol_rad, z_guess, progress)
     if failure is None or failure_slope is None:
         return CriticalSlope(pmap.model, algorithm1, step_rad, last_stable, refine_tol_rad, "min-slope",
                              f"the branch reaches the smallest slope tried ({min_slope_rad} rad)", last_stable_fp,
@@ -174,5 +194,53 @@ def critical_slope(
         else:
             lo = mid
             reason, detail = "loss-of-stability", f"max |eigenvalue| = {fp.max_abs_eigenvalue:.4f} >= 1 at {mid:.7f} rad"
+    if reason != "loss-of-stability":
+        reason, detail = _reason_at_end(pmap, hi_fp, lo, reason, detail)
     return CriticalSlope(pmap.model, algorithm1, step_rad, hi, refine_tol_rad, reason, detail, hi_fp, branch,
-                         np.asarray(z_guess))
+                         np.asarray(z_guess), "bisection",
+                         map_evaluations=getattr(pmap, "evaluations", 0) - evaluations0)
+
+
+FOLD_EIGENVALUE_TOL = 0.02  # |eigenvalue - 1| at a bisected end (bracket 1e-6 rad) that marks a fold
+
+
+def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str, detail: str) -> tuple[str, str]:
+    """The reason from the located end itself: an eigenvalue at +1 is a fold whatever failed at a trial
+    point; else the map's own failure just past the end (stall, lift-off, impulse)."""
+    ev = hi_fp.eigenvalues
+    evs = ", ".join(f"{e.real:.5f}{e.imag:+.5f}j" for e in ev)
+    near_one = [e for e in ev if abs(e.imag) < 1e-9 and abs(e.real - 1.0) < FOLD_EIGENVALUE_TOL]
+    if near_one:
+        return "fold", (f"an eigenvalue reaches +1 at the located end ({near_one[0].real:.5f}; eigenvalues {evs}) "
+                        "and the fixed point vanishes")
+    try:
+        pmap.with_params(pmap.params.replace(slope_rad=lo))(hi_fp.z)
+    except StepFailure as err:
+        if err.reason == FailureReason.STALL:
+            return "stall", f"{err} (eigenvalues at the end {evs})"
+        if err.reason in (FailureReason.STANCE_LIFT_OFF, FailureReason.NEGATIVE_IMPULSE):
+            return "infeasible", f"{err} (eigenvalues at the end {evs})"
+    return reason, f"{detail} (eigenvalues at the end {evs})"
+
+
+def _by_arclength(pmap: PoincareMap, first: FixedPoint, start_slope_rad: float, step_rad: float, algorithm1: float,
+                  algorithm1_fp: FixedPoint, branch: list[BranchPoint], min_slope_rad: float, refine_tol_rad: float,
+                  z_guess: np.ndarray, progress: Callable[[float], None] | None) -> CriticalSlope:
+    from rimless.sim.arclength import PARAMETERS, ArclengthContinuation
+
+    scale = PARAMETERS["slope"][1]
+    cont = ArclengthContinuation(lambda q: pmap.with_params(q), pmap.params.replace(slope_rad=start_slope_rad),
+                                 pmap.model, "slope", locate_tol=min(1e-7, refine_tol_rad / scale))
+    br = cont.trace(first.z, direction=-1.0, p_min=min_slope_rad, stop_at_first_loss=True,
+                    progress=(lambda pt: progress(pt.p)) if progress else None)
+    end = br.first_loss()
+    if end is None:
+        last = br.points[-1]
+        return CriticalSlope(pmap.model, algorithm1, step_rad, last.p, refine_tol_rad, "min-slope",
+                             f"the branch reaches the smallest slope tried ({min_slope_rad} rad)", algorithm1_fp, branch,
+                             np.asarray(z_guess), "arclength", None, br.special, br.map_evaluations)
+    reason = {"stance-force": "infeasible", "impulse": "infeasible", "period-doubling": "loss-of-stability",
+              "neimark-sacker": "loss-of-stability", "end": "solver"}.get(end.kind, end.kind)
+    return CriticalSlope(pmap.model, algorithm1, step_rad, end.p, abs(end.bracket_p[1] - end.bracket_p[0]), reason,
+                         end.detail, algorithm1_fp, branch, np.asarray(z_guess), "arclength", end, br.special,
+                         br.map_evaluations)

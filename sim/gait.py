@@ -106,3 +106,33 @@ def _append_segment(mech: Mechanics, rows: dict[str, list[np.ndarray]], t: np.nd
                 lam_all[i, 4] = lam[2]
         for j, name in enumerate(FORCE_COLUMNS):
             rows[name].append(lam_all[:, j])
+
+
+def trajectory_metadata(traj: GaitTrajectory, extra: dict | None = None) -> dict:
+    """What a trajectory file must say about itself: model, wheel parameters (SI), units, steps."""
+    return {"model": traj.model, "params": traj.params.to_dict(), "units": "SI (m, s, rad, N); slope in rad",
+            "steps": len(traj.steps), "failure": None if traj.failure is None else str(traj.failure),
+            **(extra or {})}
+
+
+def write_trajectory(traj: GaitTrajectory, path, extra: dict | None = None) -> None:  # noqa: ANN001
+    """Write the samples as Parquet (the model and wheel parameters in the schema metadata under b"rimless")
+    or CSV, to a temporary name renamed when complete."""
+    import json
+    from pathlib import Path
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    frame = traj.to_frame()
+    if path.suffix.lower() == ".parquet":
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        meta = dict(table.schema.metadata or {})
+        meta[b"rimless"] = json.dumps(trajectory_metadata(traj, extra)).encode()
+        pq.write_table(table.replace_schema_metadata(meta), tmp)
+    else:
+        frame.to_csv(tmp, index=False)
+    tmp.replace(path)

@@ -20,6 +20,8 @@ from rimless.sim.section import section_from_state, state_from_section
 
 FIXED_POINT_TOL = 1e-10  # residual |P(z) - z|, rad and rad/s
 JACOBIAN_FD_STEP = 1e-4
+JACOBIAN_MIN_STEP = 1e-7
+JACOBIAN_CURVATURE_TOL = 1e-3  # |forward - backward difference| / (1 + |central|) above which h shrinks
 
 
 @dataclass
@@ -48,13 +50,34 @@ class PoincareMap:
         return PoincareMap(params, self.model, self.integrator, self.clutch)
 
     def jacobian(self, z: np.ndarray, h: float = JACOBIAN_FD_STEP) -> np.ndarray:
-        """dP/dz by central differences with step h (rad, rad/s)."""
+        """dP/dz by central differences, the step scaled to the map's curvature (rad, rad/s).
+
+        Starting from h, each column's forward and backward differences are compared; where they disagree
+        by more than JACOBIAN_CURVATURE_TOL (relative) — the map bends sharply, as next to a stall where the
+        period grows without bound — or a perturbed step fails, h shrinks tenfold, down to JACOBIAN_MIN_STEP.
+        """
         z = np.asarray(z, dtype=float)
+        p0 = self(z)
         J = np.empty((2, 2))
         for i in range(2):
-            dz = np.zeros(2)
-            dz[i] = h
-            J[:, i] = (self(z + dz) - self(z - dz)) / (2 * h)
+            step = h
+            while True:
+                dz = np.zeros(2)
+                dz[i] = step
+                try:
+                    fwd = (self(z + dz) - p0) / step
+                    bwd = (p0 - self(z - dz)) / step
+                except StepFailure:
+                    if step / 10 < JACOBIAN_MIN_STEP:
+                        raise
+                    step /= 10
+                    continue
+                central = 0.5 * (fwd + bwd)
+                if (np.max(np.abs(fwd - bwd)) <= JACOBIAN_CURVATURE_TOL * (1.0 + np.max(np.abs(central)))
+                        or step / 10 < JACOBIAN_MIN_STEP):
+                    break
+                step /= 10
+            J[:, i] = central
         return J
 
 
@@ -97,6 +120,25 @@ class NoFixedPoint(StepFailure):
         super().__init__(FailureReason.NO_CONVERGENCE, message)
 
 
+NOISE_FACTOR = 10.0
+NOISE_ACCEPT_MAX = 1e-6  # never accept a residual above this as noise
+
+
+def map_noise(pmap: PoincareMap, z: np.ndarray, J: np.ndarray, delta: float = 1e-7) -> float:
+    """The map's numerical noise at z (rad, rad/s): how far P(z + d) - P(z) departs from J d for tiny
+    perturbations d of size delta along each axis and the diagonal (the curvature term, O(delta^2), is far
+    below it). Newton cannot push |P(z) - z| below this, whatever its tolerance."""
+    z = np.asarray(z, dtype=float)
+    try:
+        p0 = pmap(z)
+        dev = 0.0
+        for d in (np.array([delta, 0.0]), np.array([0.0, delta]), np.array([delta, -delta])):
+            dev = max(dev, float(np.max(np.abs(pmap(z + d) - p0 - J @ d))))
+    except StepFailure:
+        return 0.0
+    return dev
+
+
 def solve_fixed_point(
     pmap: PoincareMap,
     z_guess: np.ndarray,
@@ -107,7 +149,10 @@ def solve_fixed_point(
     diagnostics: bool = False,
     strict_contact: bool = False,
 ) -> FixedPoint:
-    """Newton's method on F(z) = P(z) - z with step halving when the map fails or the residual grows."""
+    """Newton's method on F(z) = P(z) - z with step halving when the map fails or the residual grows.
+
+    Converged when |P(z) - z| <= tol, or, when no step reduces the residual any more, when the residual is
+    within NOISE_FACTOR of the map's own noise (map_noise; e.g. very light legs at a loose rtol)."""
     jac = jacobian or pmap.jacobian
     z = np.asarray(z_guess, dtype=float).copy()
     last_failure: StepFailure | None = None
@@ -129,6 +174,7 @@ def solve_fixed_point(
                 last_failure = err
             raise NoFixedPoint(f"cannot form the Newton step at z = {z.tolist()}: {err}", last_failure) from None
         lam = 1.0
+        break_out = False
         while True:
             z_new = z + lam * dz
             try:
@@ -140,10 +186,16 @@ def solve_fixed_point(
                 last_failure = err
             lam *= 0.5
             if lam < 1e-4:
+                noise = map_noise(pmap, z, J + np.eye(2))
+                if res <= NOISE_FACTOR * noise and res <= NOISE_ACCEPT_MAX:
+                    break_out = True
+                    break
                 msg = f"no Newton step from z = {z.tolist()} reduces the residual {res:.3g}"
                 if last_failure is not None:
                     msg += f"; the map fails: {last_failure}"
                 raise NoFixedPoint(msg, last_failure)
+        if break_out:  # converged to the map's own numerical noise
+            break
         z, fz, res = z_new, f_new, res_new
     J = jac(z)
     step = pmap.step(z, diagnostics=diagnostics, strict_contact=strict_contact)

@@ -1,0 +1,240 @@
+"""Every period-1 gait at a start slope, each continued down in slope to the end of its stable, valid part.
+
+For one wheel (ER or VE, one parameter set): find the gaits at the start slope (rimless.sim.poincare.find_gaits),
+record each one's contact facts (rimless.sim.arclength.ContactFacts), and follow each by pseudo-arclength
+continuation in the slope, decreasing, until its first special point (fold, period doubling,
+Neimark-Sacker, loss of contact validity, stall or the end of the branch). For a gait stable and valid
+at the start, that point is the branch's critical slope (model.md section 7: the smallest slope of the
+followed branch with a stable, valid period-1 gait); for an unstable or invalid one it is where the branch
+first changes character. Slopes in rad; forces N; periods s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rimless.sim.arclength import (
+    EIGEN_TESTS,
+    ArclengthContinuation,
+    Branch,
+    BranchPoint,
+    ContactFacts,
+    SpecialPoint,
+    contact_facts,
+)
+from rimless.sim.failures import StepFailure
+from rimless.sim.params import WheelParams
+
+START_SLOPE_RAD = 0.05
+MIN_SLOPE_RAD = 1e-4
+
+
+def branch_label(model: str, period_s: float, stable: bool) -> str:
+    """A readable name of a gait: `er`; for VE `fast`/`medium`/`slow` by step period when stable
+    (model.md section 9: fast about 0.26 s, medium about 0.40 s), else `unstable`."""
+    if model == "er":
+        return "er" if stable else "er-unstable"
+    if not stable:
+        return "unstable"
+    return "fast" if period_s < 0.33 else ("medium" if period_s < 0.5 else "slow")
+
+
+def contact_reason(facts: ContactFacts | None) -> str:
+    """Why a gait is not contact-valid ('' when it is)."""
+    if facts is None:
+        return "the step could not be recorded"
+    reasons = []
+    if not facts.min_stance_force_single_support_N >= 0.0:
+        reasons.append(f"stance foot pulls in single support ({facts.min_stance_force_single_support_N:.3g} N)")
+    if not facts.min_impulse_N_s > 0.0:
+        reasons.append(f"a normal impact impulse <= 0 ({facts.min_impulse_N_s:.3g} N s)")
+    return "; ".join(reasons)
+
+
+@dataclass
+class GaitBranch:
+    """One gait at the start slope and its branch followed down in slope."""
+
+    id: str
+    label: str
+    model: str
+    params: WheelParams  # at the start slope
+    start: BranchPoint
+    branch: Branch | None
+    end: SpecialPoint | None
+    error: str = ""
+
+    @property
+    def stable_at_start(self) -> bool:
+        return self.start.stable
+
+    @property
+    def contact_valid_at_start(self) -> bool:
+        return self.start.facts is not None and self.start.facts.contact_valid
+
+    @property
+    def critical_slope_rad(self) -> float | None:
+        """The end of the stable, valid part (None when the gait is not stable and valid at the start)."""
+        if not (self.stable_at_start and self.contact_valid_at_start) or self.end is None:
+            return None
+        return self.end.p
+
+    @property
+    def reason(self) -> str:
+        if self.error:
+            return "solver"
+        if not self.stable_at_start:
+            return "unstable-at-start"
+        if not self.contact_valid_at_start:
+            return "contact-invalid-at-start"
+        return self.end.kind if self.end is not None else "min-slope"
+
+    def row(self) -> dict[str, Any]:
+        """One tidy row (keys are a contract: add, never rename)."""
+        p = self.params
+        f = self.start.facts
+        crit = self.critical_slope_rad
+        end_pt = self.end.point if self.end is not None else None
+        pts = self.branch.points if self.branch is not None else [self.start]
+        # along the part followed up to the first special point (the stable, valid part for a stable gait)
+        limit = end_pt.arclength if end_pt is not None else math.inf
+        along = [pt for pt in pts if pt.arclength <= limit] or [self.start]
+        end_facts = end_pt.facts if end_pt is not None else None
+        return {
+            "model": self.model.upper(),
+            "k": p.k,
+            "c": p.c,
+            "mass_model": p.mass_model,
+            "hub_mass_kg": p.hub_mass_kg,
+            "leg_mass_kg": p.leg_mass_kg,
+            "start_slope_rad": p.slope_rad,
+            "branch": self.id,
+            "branch_label": self.label,
+            "theta_plus_rad": float(self.start.z[0]),
+            "theta_dot_plus_rad_s": float(self.start.z[1]),
+            "step_period_s": self.start.period_s,
+            "stable_at_start": self.stable_at_start,
+            "max_abs_eigenvalue_at_start": self.start.max_abs_eigenvalue,
+            "contact_valid_at_start": self.contact_valid_at_start,
+            "contact_reason": contact_reason(f),
+            "min_stance_force_single_support_N": f.min_stance_force_single_support_N if f else math.nan,
+            "min_impulse_N_s": f.min_impulse_N_s if f else math.nan,
+            "leading_foot_tension_N": f.leading_foot_tension_N if f else math.nan,
+            "leading_foot_tension_s": f.leading_foot_tension_s if f else math.nan,
+            "trailing_foot_min_height_m": f.trailing_foot_min_height_m if f else math.nan,
+            "friction_required": f.friction_required if f else math.nan,
+            "energy_ratio": f.energy_ratio if f else math.nan,
+            "relabel_energy_J": f.relabel_energy_J if f else math.nan,
+            "critical_slope_rad": crit if crit is not None else math.nan,
+            "critical_slope_deg": math.degrees(crit) if crit is not None else math.nan,
+            "cot": math.tan(crit) if crit is not None else math.nan,
+            "reason": self.reason,
+            "detail": self.error or (self.end.detail if self.end is not None else ""),
+            "end_slope_rad": self.end.p if self.end is not None else math.nan,
+            "end_max_abs_eigenvalue": end_pt.max_abs_eigenvalue if end_pt is not None else math.nan,
+            "end_step_period_s": end_pt.period_s if end_pt is not None else math.nan,
+            "end_energy_ratio": end_facts.energy_ratio if end_facts is not None else math.nan,
+            "end_min_stance_force_N": end_facts.min_stance_force_single_support_N if end_facts is not None else math.nan,
+            "end_contact_valid": bool(end_facts.contact_valid) if end_facts is not None else None,
+            "max_abs_eigenvalue": max(pt.max_abs_eigenvalue for pt in along),
+            "period_min_s": min(pt.period_s for pt in along),
+            "period_max_s": max(pt.period_s for pt in along),
+            "energy_ratio_min": min((pt.facts.energy_ratio for pt in along if pt.facts), default=math.nan),
+            "energy_ratio_max": max((pt.facts.energy_ratio for pt in along if pt.facts), default=math.nan),
+            "branch_points": len(pts),
+            "map_evaluations": self.branch.map_evaluations if self.branch else 0,
+            "continuation_s": self.branch.seconds if self.branch else 0.0,
+        }
+
+    def point_rows(self) -> list[dict[str, Any]]:
+        """The traced branch point by point (slope, state, period, max |eig|, stability, validity)."""
+        if self.branch is None:
+            return []
+        out = []
+        for pt in self.branch.points:
+            out.append({
+                "model": self.model.upper(), "k": self.params.k, "c": self.params.c,
+                "mass_model": self.params.mass_model, "branch": self.id, "branch_label": self.label,
+                "slope_rad": pt.p, "slope_deg": math.degrees(pt.p), "theta_plus_rad": float(pt.z[0]),
+                "theta_dot_plus_rad_s": float(pt.z[1]), "step_period_s": pt.period_s,
+                "max_abs_eigenvalue": pt.max_abs_eigenvalue, "stable": pt.stable,
+                "energy_ratio": pt.facts.energy_ratio if pt.facts else math.nan,
+                "contact_valid": (pt.facts.contact_valid if pt.facts else None),
+                "min_stance_force_single_support_N": pt.facts.min_stance_force_single_support_N if pt.facts else math.nan,
+            })
+        return out
+
+
+def _start_point(pmap: Any, fp: Any, model: str) -> BranchPoint:
+    from rimless.sim.arclength import eigen_tests
+
+    facts = None
+    try:
+        facts = contact_facts(pmap, fp.z, 5e-4)
+    except StepFailure:
+        pass
+    return BranchPoint(pmap.params.slope_rad, np.asarray(fp.z), np.asarray(fp.jacobian), fp.step.period_s, 0.0,
+                       eigen_tests(np.asarray(fp.jacobian)), facts)
+
+
+def trace_gait_branches(
+    params: WheelParams,
+    model: str,
+    *,
+    backend: str = "auto",
+    rtol: float = 1e-10,
+    start_slope_rad: float = START_SLOPE_RAD,
+    n_guesses: int = 14,
+    gaits: list[Any] | None = None,
+    to_end: bool = False,
+    max_points: int = 200,
+    progress: Callable[[str], None] | None = None,
+) -> list[GaitBranch]:
+    """Every period-1 gait at start_slope_rad and its branch down in slope (see module docstring).
+
+    to_end: continue past the first special point to the end of the branch (or max_points) instead of
+    stopping there.
+    """
+    from rimless.sim.backend import make_map
+    from rimless.sim.poincare import find_gaits
+
+    start_params = params.replace(slope_rad=start_slope_rad)
+    pmap = make_map(start_params, model, backend=backend, rtol=rtol)
+    if gaits is None:
+        gaits = find_gaits(pmap, n_guesses=n_guesses)
+    out: list[GaitBranch] = []
+    for i, fp in enumerate(sorted(gaits, key=lambda g: g.step.period_s)):
+        start = _start_point(pmap, fp, model)
+        label = branch_label(model, start.period_s, start.stable)
+        gid = f"{model}-{i + 1}-{label}"
+        if progress:
+            progress(f"{model} k={params.k:g}: branch {gid}")
+        cont = ArclengthContinuation(lambda q: make_map(q, model, backend=backend, rtol=rtol), start_params, model,
+                                     "slope", max_points=max_points)
+        try:
+            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end)
+        except StepFailure as err:
+            out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
+            continue
+        end = next(iter(br.special), None)
+        if end is None and br.end_reason in ("parameter-range", "max-points"):
+            end = None
+        out.append(GaitBranch(gid, label, model, start_params, start, br, end))
+    return out
+
+
+def first_eigen_special(branch: Branch) -> SpecialPoint | None:
+    return next((sp for sp in branch.special if sp.kind in EIGEN_TESTS), None)
+
+
+@dataclass
+class GridPointResult:
+    """Everything computed at one grid point: tidy rows and branch points."""
+
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    points: list[dict[str, Any]] = field(default_factory=list)
