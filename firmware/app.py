@@ -73,6 +73,7 @@ class RobotApp:
         token: str | None = None,
         command_port: int | None = None,
         record_timing: bool = False,
+        event_sink: list[EventRecord] | None = None,
         on_ready: Callable[[RobotApp], None] | None = None,
     ) -> None:
         self.cfg = cfg
@@ -89,6 +90,7 @@ class RobotApp:
         self.signal_received: str | None = None
         self.sampler: Sampler | None = None
         self.record_timing = record_timing
+        self.event_sink = event_sink
         self.on_ready = on_ready
         self._command_port = cfg.commands.port if command_port is None else command_port
         self.command_port: int | None = None
@@ -279,6 +281,8 @@ class RobotApp:
                 self._tel_pending.append(rec)
             if self.trial is not None:
                 self._log_pending.append(rec)
+            if isinstance(rec, EventRecord) and self.event_sink is not None:
+                self.event_sink.append(rec)
             if isinstance(rec, EventRecord) and rec.name == "fault":
                 self.summary.faults.append(rec.fields["fault"])
                 log.warning("fault %s: %s", rec.fields["fault"], rec.fields.get("detail"))

@@ -175,23 +175,11 @@ def build_real(cfg: RobotConfig) -> Hardware:
     Raises `GpioUnavailable` (one line) when this machine has no usable GPIO, `SensorError` when a
     sensor cannot be opened or identified.
     """
-    import warnings
-
     from rimless.firmware.spi import SpidevBus
 
     closers: list[Callable[[], None]] = []
     sensors: list[Adns3080] = []
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
-            clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high)  # off first, before anything
-    except Exception as err:  # noqa: BLE001 - gpiozero raises BadPinFactory, PinUnsupported, OSError...
-        if type(err).__module__.startswith("gpiozero") or isinstance(err, (OSError, ImportError)):
-            raise GpioUnavailable(
-                f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
-                "the robot extra (lgpio)"
-            ) from None
-        raise
+    clutches = open_clutches(cfg.clutch.pins, active_high=cfg.clutch.active_high)  # off first, before anything
     try:
         lines: dict[int, Any] = {}
         buses: dict[tuple[int, int], Any] = {}
@@ -220,3 +208,35 @@ def build_real(cfg: RobotConfig) -> Hardware:
         Hardware([], clutches, [], closers=closers).close()
         raise
     return Hardware(_channels(cfg, sensors), clutches, sensors, None, [], closers)
+
+
+def open_clutches(pins: Any, *, active_high: bool, pin_factory: Any = None) -> ClutchBank:
+    """The clutch outputs, driven off; `GpioUnavailable` (one line) when this machine has no GPIO."""
+    import warnings
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
+            return ClutchBank(pins, active_high=active_high, pin_factory=pin_factory)
+    except Exception as err:  # noqa: BLE001 - gpiozero raises BadPinFactory, PinUnsupported, OSError...
+        if type(err).__module__.startswith("gpiozero") or isinstance(err, (OSError, ImportError)):
+            raise GpioUnavailable(
+                f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
+                "the robot extra (lgpio)"
+            ) from None
+        raise
+
+
+def release_pins(pins: Any, *, active_high: bool, pin_factory: Any = None) -> dict[str, str]:
+    """Drive every clutch pin to its off level, then release the lines (`rimless robot release`).
+
+    Returns each pin's level history ("0", "01"...), as read back from the pin factory.
+    """
+    bank = open_clutches(pins, active_high=active_high, pin_factory=pin_factory)
+    try:
+        bank.all_off()
+        levels = {f"GPIO{p}": "".join("1" if st.state else "0" for st in pin_factory.pin(p).states)
+                  for p in pins} if pin_factory is not None else {}
+    finally:
+        bank.close()
+    return levels

@@ -19,6 +19,7 @@ from rimless.cli import app
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 runner = CliRunner()
+STRONG = "cli-test-token-5e8d1f0a9b"
 
 
 def invoke(*args: str, env: dict | None = None):
@@ -62,7 +63,7 @@ def test_bad_host_and_no_robot(tmp_path) -> None:
 def test_bench_json_contract() -> None:
     r = invoke("bench", "--fake", "--rate-hz", "300", "--duration-s", "0.5", "--json")
     assert r.exit_code == 0, r.output
-    rows = json.loads(r.output)
+    rows = json.loads(r.stdout)
     assert len(rows) == 1
     keys = {"rate_hz", "achieved_rate_hz", "period_jitter_p99_ms", "latency_p50_ms", "latency_p99_ms",
             "latency_max_ms", "missed_deadlines"}
@@ -113,7 +114,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     port = free_port()
     cfg = tmp_path / "robot.toml"
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\n[log]\ndir = "{tmp_path}"\n')
-    env = {**os.environ, "RIMLESS_TOKEN": "tok"}
+    env = {**os.environ, "RIMLESS_TOKEN": STRONG}
     proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     try:
@@ -124,7 +125,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline and not engaged:
             try:
-                engaged = send_command("127.0.0.1", "status", token="tok", port=port, timeout_s=1)["engaged"]
+                engaged = send_command("127.0.0.1", "status", token=STRONG, port=port, timeout_s=1)["engaged"]
             except RobotUnreachable:
                 pass
             time.sleep(0.02)
