@@ -373,6 +373,7 @@ def check(
                 })
             if click:
                 for leg, pin in enumerate(hw.clutches.pins):
+                    typer.echo(f"clicking clutch {leg} (GPIO{pin}) ...", err=True)
                     hw.clutches.engage(leg)
                     try:
                         time.sleep(0.2)
