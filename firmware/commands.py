@@ -279,9 +279,14 @@ class CommandServer:
         return len(self._conns)
 
     async def start(self) -> int:
-        """Listen; returns the bound port (useful with port 0)."""
+        """Listen; returns the bound port (useful with port 0).
+
+        The backlog is small on purpose: asyncio accepts up to `backlog` connections per loop turn, so a
+        flood cannot exhaust the file descriptors (EMFILE pauses accepting for a second) nor queue
+        hundreds of connections ahead of an operator's `disarm`.
+        """
         self._server = await asyncio.start_server(self._client, self.host, self.port,
-                                                  limit=self.max_message_bytes * 2, backlog=512)
+                                                  limit=self.max_message_bytes * 2, backlog=64)
         return int(self._server.sockets[0].getsockname()[1])
 
     async def close(self) -> None:
