@@ -212,6 +212,7 @@ class LegDetector:
         self._last_touchdown_s: float | None = None
         self._period_s: float | None = None
         self._distrust_until_s = -math.inf
+        self._need_quiet = True  # a compression already under way at (re)sync is not a touchdown
         self._est.reset()
         self.position_m = 0.0
         self.velocity_m_s = 0.0
@@ -297,6 +298,9 @@ class LegDetector:
 
         # Touchdown detection (WAIT and CLUTCHED), debounced, with a refractory time.
         if self.phase in (Phase.WAIT, Phase.CLUTCHED):
+            if self._need_quiet:
+                self._need_quiet = v > p.touch_velocity_m_s
+                return NOTHING
             if v > p.touch_velocity_m_s and t - self._touchdown_s >= p.min_step_s:
                 if self._touch_count == 0:
                     self._onset_x_m = prev_x
