@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -39,6 +40,9 @@ def stop_on_signals(on_signal: Callable[[], None] | None = None) -> Iterator[lis
     signals received."""
     received: list[int] = []
     previous: dict[int, Any] = {}
+    if threading.current_thread() is not threading.main_thread():
+        yield received  # only the main thread receives signals (and may set handlers)
+        return
 
     def handler(signum: int, _frame: Any) -> None:
         if on_signal is not None:
