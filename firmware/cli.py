@@ -11,8 +11,26 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+from typer.core import TyperGroup
 
-app = typer.Typer(no_args_is_help=True)
+
+
+class _OneLineUsageErrors(TyperGroup):
+    """A bad option value, a missing option or an unknown one under `rimless robot ...`: one line
+    `error: ...` naming the option, exit 2 (instead of the framed usage box)."""
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except Exception as err:
+            if any(c.__name__ == "UsageError" for c in type(err).__mro__) and hasattr(err, "format_message"):
+                message = " ".join(str(err.format_message()).split())
+                typer.echo(f"error: {message}", err=True)
+                raise typer.Exit(2) from None
+            raise
+
+
+app = typer.Typer(no_args_is_help=True, cls=_OneLineUsageErrors)
 
 _HOST = Annotated[str, typer.Option("--host", help="Robot host name or IP address.")]
 _PORT = Annotated[int, typer.Option("--port", min=1, max=65535, help="Robot command port (TCP).")]
@@ -162,8 +180,11 @@ def heartbeat(
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
     ] = None,
 ) -> None:
-    """Keep the link alive while the robot is armed remotely (Ctrl-C to stop; the robot then disarms
-    after its link_timeout_s). Prints a line when the robot's state changes."""
+    """Keep the link alive while the robot is armed remotely.
+
+    Pings every --period-s on one connection and prints a line when the robot's state changes.
+    Ctrl-C stops it; the robot then disarms after its link_timeout_s.
+    """
     from rimless.cli import user_facing
     from rimless.firmware.heartbeat import Heartbeat
 
@@ -436,8 +457,11 @@ def listen(
     robot_port: Annotated[int, typer.Option("--robot-port", min=1, max=65535, help="Robot command port (TCP), with --host.")] = 9871,
     token: _TOKEN = None,
 ) -> None:
-    """Receive the robot's UDP telemetry: live view (velocity, compression, clutches), JSONL/CSV recording,
-    a notice when data stop, and with --host a heartbeat that keeps the robot's link-loss fail-safe quiet."""
+    """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
+
+    The live view (in a terminal) draws leg velocity, compression and one strip per clutch. With
+    --host it also keeps the robot's command link alive (a heartbeat), so a remote arm holds.
+    """
     import sys
 
     from rimless.cli import user_facing

@@ -218,13 +218,16 @@ def open_clutches(pins: Any, *, active_high: bool, pin_factory: Any = None) -> C
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
             return ClutchBank(pins, active_high=active_high, pin_factory=pin_factory)
-    except Exception as err:  # noqa: BLE001 - gpiozero raises BadPinFactory, PinUnsupported, OSError...
-        if type(err).__module__.startswith("gpiozero") or isinstance(err, (OSError, ImportError)):
+    except Exception as err:  # noqa: BLE001 - gpiozero, lgpio and the OS each raise their own
+        if type(err).__name__ in ("BadPinFactory", "PinFactoryFallback") or isinstance(err, ImportError):
             raise GpioUnavailable(
                 f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
                 "the robot extra (lgpio)"
             ) from None
-        raise
+        raise GpioUnavailable(
+            f"cannot drive the clutch pins {list(pins)} ({type(err).__name__}: {err}); is another process "
+            "(a running firmware) holding them?"
+        ) from None
 
 
 def release_pins(pins: Any, *, active_high: bool, pin_factory: Any = None) -> dict[str, str]:

@@ -260,3 +260,15 @@ def test_bench_reports_every_part_of_the_delay() -> None:
     # The lock follows the true peak by less than the velocity window; the touchdown is seen within 20 ms.
     assert -2.0 <= row["lock_after_peak_p50_ms"] <= 20.0
     assert 0.0 <= row["touchdown_detect_p50_ms"] <= 20.0
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [(("bench", "--fake", "--duration-s", "abc"), "--duration-s"), (("status",), "--host"),
+     (("arm", "--host"), "--host"), (("status", "--host", "x", "--bogus"), "--bogus"),
+     (("heartbeat", "--host", "h", "--period-s", "-1"), "--period-s")],
+)
+def test_usage_errors_are_one_line(args, option) -> None:
+    r = invoke(*args)
+    assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith("error: ") and option in r.output
