@@ -31,6 +31,7 @@ class Heartbeat:
         self._stop = threading.Event()
         self._link: RobotLink | None = None
         self._state = ""
+        self._last_error = ""
 
     def stop(self) -> None:
         """Ask `run` to return."""
@@ -40,6 +41,7 @@ class Heartbeat:
         if self._link is None:
             self._link = RobotLink(self.host, token=self.token, port=self.port, timeout_s=max(1.0, 2 * self.period_s))
             self.echo(f"heartbeat: connected to {self.host}:{self.port}")
+            self._last_error = ""
         if self.pings % self.status_every == 0:
             st = self._link.call("status")
             self.last_status = st
@@ -66,7 +68,9 @@ class Heartbeat:
                     if first:
                         raise
                     self.failures += 1
-                    self.echo(f"heartbeat: {err}; retrying")
+                    if str(err) != self._last_error:  # say it once, not every period
+                        self.echo(f"heartbeat: {err}; retrying every {self.period_s:g} s")
+                        self._last_error = str(err)
                     if self._link is not None:
                         self._link.close()
                         self._link = None
