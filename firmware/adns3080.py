@@ -32,6 +32,10 @@ _REG_FRAME_PERIOD_UPPER = 0x11
 _REG_MOTION_CLEAR = 0x12
 _REG_FRAME_PERIOD_MAX_BOUND_LOWER = 0x19
 _REG_FRAME_PERIOD_MAX_BOUND_UPPER = 0x1A
+_REG_FRAME_PERIOD_MIN_BOUND_LOWER = 0x1B
+_REG_FRAME_PERIOD_MIN_BOUND_UPPER = 0x1C
+_REG_SHUTTER_MAX_BOUND_LOWER = 0x1D
+_REG_SHUTTER_MAX_BOUND_UPPER = 0x1E
 _REG_SROM_ID = 0x1F
 _REG_INVERSE_PRODUCT_ID = 0x3F
 _REG_MOTION_BURST = 0x50
@@ -45,7 +49,7 @@ _ADDRESS_MASK = 0x7F
 _MOTION_MOT = 0x80  # motion since last report
 _MOTION_OVF = 0x10  # accumulator overflowed: the absolute path is lost
 _MOTION_RES = 0x01  # 1 = 1600 cpi
-_MOTION_RESERVED = 0x6E  # bits that read 0 on a healthy link; 0xFF means MISO stuck high
+_MOTION_RESERVED = 0x6E  # reserved bits: reported, never a fault (the datasheet does not define them)
 _CONFIG_RES_1600 = 0x10  # Configuration_bits bit 4 [DS p.29]
 _EXT_FIXED_FR = 0x01  # Extended_Config bit 0: fixed frame rate
 _EXT_BUSY = 0x80  # Extended_Config bit 7: a bound write is still being applied
@@ -59,6 +63,7 @@ T_SWR_US = 50  # write to next read
 T_PW_RESET_S = 10e-6  # minimum RESET pulse
 T_PU_RESET_S = 35e-3  # RESET falling edge until motion data is valid
 T_SERIAL_RESET_S = 1e-3  # NCS high this long resets the serial port
+T_PUPD_S = 75e-3  # NPD raised until the chip is up (t_PUPD)
 
 CLOCK_HZ = 24e6  # frame period registers count this clock
 FRAME_RATE_MIN_HZ = 2000.0
@@ -69,6 +74,7 @@ BURST_LEN = 7  # Motion, Delta_X, Delta_Y, SQUAL, Shutter_Upper, Shutter_Lower, 
 DELTA_MIN, DELTA_MAX = -128, 127
 MAX_PIXEL_MASK = 0x3F
 SQUAL_MAX = 169
+MIN_SHUTTER_MAX_BOUND = 0x0100  # the least shutter bound the driver accepts when it lowers it for a frame rate
 MAX_REREADS = 4  # extra bursts to drain a saturated accumulator before calling the sample saturated
 _BUSY_POLLS = 20
 
@@ -119,7 +125,9 @@ class MotionSample:
     overflow: bool
     saturated: bool
     counts: int
-    reserved_bits: bool = False
+    reserved_bits: bool = False  # informative only
+    stuck: bool = False  # every burst byte 0xFF, or SQUAL beyond 169: the link, not the chip
+    resolution_reset: bool = False  # RES reads 400 cpi while 1600 was configured: the chip reset itself
 
 
 class Adns3080:
@@ -128,7 +136,9 @@ class Adns3080:
     :param counts_per_m: calibrated counts per metre of leg travel at the configured resolution.
     :param axis: "x" or "y", the sensor axis along the leg guide.
     :param sign: +1 or -1 so that compression is positive.
-    :param reset: optional callable driving the RESET pin (True = high = reset asserted).
+    :param reset: callable driving the RESET pin (True = high = reset asserted); required by
+        `power_up`, since the chip has no power-on reset.
+    :param npd: optional callable driving NPD (True = high = running, False = powered down).
     """
 
     def __init__(
@@ -139,6 +149,7 @@ class Adns3080:
         axis: str = "y",
         sign: int = 1,
         reset: Callable[[bool], None] | None = None,
+        npd: Callable[[bool], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
         clock_ns: Callable[[], int] = time.monotonic_ns,
     ) -> None:
@@ -153,6 +164,8 @@ class Adns3080:
         self.axis = axis
         self.sign = sign
         self._reset = reset
+        self._npd = npd
+        self.expected_cpi: int | None = None  # set by set_resolution; checked on every motion read
         self._sleep = sleep
         self._clock_ns = clock_ns
 
@@ -168,13 +181,24 @@ class Adns3080:
         self.bus.message([SpiSegment(bytes([(register & _ADDRESS_MASK) | _WRITE_BIT, value & 0xFF]), T_SWW_US)])
 
     # --- power-up and identity ------------------------------------------------------------------
-    def power_up(self) -> None:
-        """Reset pulse (there is no internal power-on reset, DS p.22), serial-port reset, ID check."""
-        if self._reset is not None:
-            self._reset(True)
-            self._sleep(max(T_PW_RESET_S, 1e-3))  # t_PW-RESET >= 10 us; 1 ms as [RP]
-            self._reset(False)
-            self._sleep(T_PU_RESET_S)  # t_PU-RESET: motion data valid 35 ms after RESET falls
+    def reset_pulse(self) -> None:
+        """NPD high, then the RESET pulse the chip needs after every power-up (DS p.22)."""
+        if self._reset is None:
+            raise SensorError("the ADNS-3080 has no power-on reset: wire RESET to a GPIO and set reset_pin")
+        if self._npd is not None:
+            self._npd(True)
+            self._sleep(T_PUPD_S)  # t_PUPD: up 75 ms after NPD rises
+        self._reset(True)
+        self._sleep(max(T_PW_RESET_S, 1e-3))  # t_PW-RESET >= 10 us; 1 ms as [RP]
+        self._reset(False)
+        self._sleep(T_PU_RESET_S)  # t_PU-RESET: motion data valid 35 ms after RESET falls
+
+    def power_up(self, *, pulse_reset: bool = True) -> None:
+        """The mandatory reset pulse (there is no power-on reset, DS p.22; `pulse_reset=False` only when
+        the caller just pulsed a RESET line shared by several sensors), serial-port reset, ID check,
+        Motion_Clear. Raises SensorError if RESET is not wired, SensorNotFound on a wrong ID."""
+        if pulse_reset:
+            self.reset_pulse()
         self._sleep(T_SERIAL_RESET_S)  # NCS high >= 1 ms resets the serial port (DS p.21)
         self.verify_id()
         self.write_register(_REG_MOTION_CLEAR, _MOTION_CLEAR_ANY)
@@ -199,6 +223,7 @@ class Adns3080:
         cfg = self.read_register(_REG_CONFIGURATION_BITS)
         cfg = (cfg | _CONFIG_RES_1600) if res is Resolution.CPI_1600 else (cfg & ~_CONFIG_RES_1600)
         self.write_register(_REG_CONFIGURATION_BITS, cfg)
+        self.expected_cpi = int(res)
 
     def resolution(self) -> Resolution:
         """The resolution the chip reports in Configuration_bits."""
@@ -215,11 +240,33 @@ class Adns3080:
             raise ValueError(f"frame rate must be {FRAME_RATE_MIN_HZ:.0f}..{FRAME_RATE_MAX_HZ:.0f} Hz, got {rate_hz}")
         period = round(CLOCK_HZ / rate_hz)
         period = min(max(period, FRAME_PERIOD_MIN_COUNTS), FRAME_PERIOD_MAX_COUNTS)
+        shutter_max = self.shutter_bound_for(period)
         self.write_register(_REG_EXTENDED_CONFIG, (ext | _EXT_FIXED_FR) & ~_EXT_BUSY)
-        # Max_Bound: Lower first, then Upper (the Upper write applies the bounds) [DS p.34].
+        # Rule [DS p.34]: Max_Bound >= Min_Bound + Shutter_Max_Bound. Shutter_Max_Bound is written first
+        # (it is pending until the Max_Bound write applies it), then Max_Bound, Lower then Upper.
+        self.write_register(_REG_SHUTTER_MAX_BOUND_LOWER, shutter_max & 0xFF)
+        self.write_register(_REG_SHUTTER_MAX_BOUND_UPPER, shutter_max >> 8)
         self.write_register(_REG_FRAME_PERIOD_MAX_BOUND_LOWER, period & 0xFF)
         self.write_register(_REG_FRAME_PERIOD_MAX_BOUND_UPPER, period >> 8)
         self._wait_not_busy()
+
+    def shutter_bound_for(self, period: int) -> int:
+        """The Shutter_Max_Bound to pair with Frame_Period_Max_Bound `period` (counts): the current one,
+        lowered so that Max_Bound >= Min_Bound + Shutter_Max_Bound holds. Raises SensorError if even
+        `MIN_SHUTTER_MAX_BOUND` does not fit."""
+        min_bound = self._read16(_REG_FRAME_PERIOD_MIN_BOUND_UPPER, _REG_FRAME_PERIOD_MIN_BOUND_LOWER)
+        shutter = self._read16(_REG_SHUTTER_MAX_BOUND_UPPER, _REG_SHUTTER_MAX_BOUND_LOWER)
+        room = period - min_bound
+        if room < MIN_SHUTTER_MAX_BOUND:
+            raise SensorError(
+                f"frame rate {CLOCK_HZ / period:.0f} fps leaves no room for the shutter: Frame_Period_Max_Bound "
+                f"{period} < Frame_Period_Min_Bound {min_bound} + {MIN_SHUTTER_MAX_BOUND}"
+            )
+        return min(shutter, room)
+
+    def _read16(self, upper: int, lower: int) -> int:
+        hi = self.read_register(upper)
+        return (hi << 8) | self.read_register(lower)
 
     def _wait_not_busy(self) -> None:
         """Wait two frames at the slowest rate, then poll Busy, before the next bound write [DS p.34]."""
@@ -263,18 +310,23 @@ class Adns3080:
         t0 = self._clock_ns()
         raw = self.read_raw_motion()
         t1 = self._clock_ns()
-        dx, dy = raw.dx_counts, raw.dy_counts
+        stuck = (raw.motion == 0xFF and raw.dx_counts == -1 and raw.dy_counts == -1 and raw.squal == 0xFF) \
+            or raw.squal > SQUAL_MAX
+        # Delta_X/Y mean something only with MOT set [DS p.24].
+        dx, dy = (raw.dx_counts, raw.dy_counts) if raw.motion & _MOTION_MOT else (0, 0)
         overflow = bool(raw.motion & _MOTION_OVF)
         reserved = bool(raw.motion & _MOTION_RESERVED)
-        saturated = _full_scale(raw.dx_counts) or _full_scale(raw.dy_counts)
+        res_reset = (not stuck and self.expected_cpi == Resolution.CPI_1600 and not raw.motion & _MOTION_RES)
+        saturated = not stuck and (_full_scale(dx) or _full_scale(dy))
         rereads = 0
-        while saturated and rereads < MAX_REREADS and not reserved:
+        while saturated and rereads < MAX_REREADS:
             more = self.read_raw_motion()
             rereads += 1
-            dx += more.dx_counts
-            dy += more.dy_counts
+            mdx, mdy = (more.dx_counts, more.dy_counts) if more.motion & _MOTION_MOT else (0, 0)
+            dx += mdx
+            dy += mdy
             overflow = overflow or bool(more.motion & _MOTION_OVF)
-            saturated = _full_scale(more.dx_counts) or _full_scale(more.dy_counts)
+            saturated = _full_scale(mdx) or _full_scale(mdy)
         along, lateral = (dy, dx) if self.axis == "y" else (dx, dy)
         counts = self.sign * along
         return MotionSample(
@@ -288,6 +340,8 @@ class Adns3080:
             saturated=saturated,
             counts=counts,
             reserved_bits=reserved,
+            stuck=stuck,
+            resolution_reset=res_reset,
         )
 
 

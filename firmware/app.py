@@ -5,9 +5,10 @@ Tasks: `sampler` (awaits the control thread: sensor reads, detector, clutch comm
 through `asyncio.to_thread`) and `commands` (TCP). The control path lives in the sampler thread and
 never waits on the network or the disk; it hands records over through a bounded deque.
 
-Shutdown, on SIGINT/SIGTERM, `duration_s`, a fatal error or the sampler ending: clutches off first,
-then the sampler thread is stopped, the last records are flushed, the tasks are cancelled, and the
-hardware is closed (clutches driven off again, then released).
+Shutdown, on SIGINT/SIGTERM/SIGHUP/SIGQUIT, `duration_s`, a fatal error or the sampler ending:
+clutches off first, then the sampler thread is stopped, the last records are flushed, the tasks are
+cancelled, and the hardware is closed (clutches driven off again, then released). Every step of the
+shutdown runs whatever the previous one raised; the hardware is closed last, in a `finally`.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from rimless.firmware.commands import Command, CommandServer
+from rimless.firmware.commands import Command, CommandServer, check_token
 from rimless.firmware.config import RobotConfig
 from rimless.firmware.controller import Controller, EventRecord, Record
 from rimless.firmware.faults import Fault
@@ -37,6 +38,7 @@ log = logging.getLogger("rimless.robot")
 COMMAND_TIMEOUT_S = 1.0
 ROUTE_PERIOD_S = 0.01
 SWITCH_INTERVAL_S = 0.0005  # let the sampler thread get the GIL back quickly after its sleep
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT") if hasattr(signal, n))
 
 
 @dataclass
@@ -71,24 +73,31 @@ class RobotApp:
         token: str | None = None,
         command_port: int | None = None,
         record_timing: bool = False,
+        event_sink: list[EventRecord] | None = None,
         on_ready: Callable[[RobotApp], None] | None = None,
     ) -> None:
         self.cfg = cfg
         self.hw = hw
-        self.token = token or cfg.token() or secrets.token_urlsafe(12)
+        self.token = token or cfg.token() or secrets.token_urlsafe(24)
         self.token_generated = not (token or cfg.token())
+        if cfg.commands.enabled and not self.token_generated:
+            check_token(self.token)  # WeakToken (a ParameterError) names the problem
         self.controller = Controller(
             hw.channels, hw.clutches, max_hold_s=cfg.clutch.max_hold_s,
             id_check_interval_s=cfg.sampling.id_check_interval_s,
         )
+        self.armed_remotely = False
+        self.signal_received: str | None = None
         self.sampler: Sampler | None = None
         self.record_timing = record_timing
+        self.event_sink = event_sink
         self.on_ready = on_ready
         self._command_port = cfg.commands.port if command_port is None else command_port
         self.command_port: int | None = None
         self.summary = RunSummary()
         self.trial: TrialLog | None = None
         self.telemetry: TelemetrySender | None = None
+        self.server: CommandServer | None = None
         self._tel_pending: list[Record] = []
         self._log_pending: list[Record] = []
         self._stop: asyncio.Event | None = None
@@ -104,7 +113,11 @@ class RobotApp:
             self._stop.set()
 
     def _on_signal(self, name: str) -> None:
-        # Only flags: the shutdown path turns the clutches off first.
+        # Clutches off at once (a second signal may not wait), then the orderly shutdown.
+        with contextlib.suppress(Exception):
+            self.hw.clutches.all_off()
+        if self.signal_received is None:
+            self.signal_received = name
         self.controller.outbox.append(EventRecord(time.monotonic_ns(), "signal", {"signal": name}))
         self.request_stop(name)
 
@@ -118,23 +131,27 @@ class RobotApp:
         self._stop = asyncio.Event()
         self._trial_lock = asyncio.Lock()
         old_switch = sys.getswitchinterval()
-        signals: list[signal.Signals] = []
+        signals: list[tuple[signal.Signals, Any]] = []
         tasks: list[asyncio.Task[Any]] = []
         server: CommandServer | None = None
         try:
             if handle_signals:
-                for sig in (signal.SIGINT, signal.SIGTERM):
+                for sig in STOP_SIGNALS:
+                    previous = signal.getsignal(sig)
                     loop.add_signal_handler(sig, self._on_signal, sig.name)
-                    signals.append(sig)
+                    signals.append((sig, previous))
             sys.setswitchinterval(SWITCH_INTERVAL_S)
             tcfg = self.cfg.telemetry
-            if tcfg.host:
-                self.telemetry = TelemetrySender(tcfg.host, tcfg.port, max_datagram_bytes=tcfg.max_datagram_bytes,
+            if tcfg.destinations_list():
+                self.telemetry = TelemetrySender(tcfg.destinations_list(), max_datagram_bytes=tcfg.max_datagram_bytes,
                                                  batch=tcfg.batch, decimate=tcfg.decimate)
             if self.cfg.commands.enabled:
-                server = CommandServer(self._execute, self.token, host=self.cfg.commands.bind,
-                                       port=self._command_port, max_message_bytes=self.cfg.commands.max_message_bytes,
+                c = self.cfg.commands
+                server = CommandServer(self._execute, self.token, host=c.bind, port=self._command_port,
+                                       max_message_bytes=c.max_message_bytes, max_connections=c.max_connections,
+                                       auth_timeout_s=c.auth_timeout_s, idle_timeout_s=c.idle_timeout_s,
                                        on_valid=self._command_seen)
+                self.server = server
                 self.command_port = self.summary.command_port = await server.start()
             self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
                                    max_samples=max_samples, record_timing=self.record_timing)
@@ -167,56 +184,81 @@ class RobotApp:
             self.request_stop("error")
             raise
         finally:
-            await self._shutdown(tasks, server)
-            for sig in signals:
-                loop.remove_signal_handler(sig)
-            sys.setswitchinterval(old_switch)
+            try:
+                await self._shutdown(tasks, server)
+            finally:
+                for sig, previous in signals:
+                    loop.remove_signal_handler(sig)
+                    with contextlib.suppress(Exception):
+                        signal.signal(sig, previous)
+                sys.setswitchinterval(old_switch)
         return self.summary
+
+    def _shutdown_error(self, step: str, err: BaseException) -> None:
+        detail = f"shutdown ({step}): {type(err).__name__}: {err}"
+        log.error("%s", detail)
+        if not self.summary.error:
+            self.summary.error = detail
 
     async def _shutdown(self, tasks: list[asyncio.Task[Any]], server: CommandServer | None) -> None:
         ctl = self.controller
-        # 1. Outputs safe, whatever state the sampler is in.
-        with contextlib.suppress(Exception):
-            self.hw.clutches.all_off()
-        # 2. Stop the control thread.
-        if self.sampler is not None:
-            self.sampler.stop()
-            await asyncio.to_thread(self.sampler.join, 2.0)
-            st = self.sampler.stats
-            self.summary.samples = st.samples
-            self.summary.missed_deadlines = st.missed_deadlines
-            span = (st.stopped_ns - st.started_ns) * 1e-9
-            self.summary.achieved_rate_hz = st.samples / span if span > 0 else 0.0
-        with contextlib.suppress(Exception):
-            ctl.safe_stop(self.summary.stop_reason or "stop")
-        if self.summary.error:
-            ctl.fault(Fault.EXCEPTION, self.summary.error)
-        self.summary.clutch_commands = ctl.clutch_commands
-        # 3. Cancel the tasks, then flush what is left.
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(BaseException):
-                await t
-        if server is not None:
+        try:
+            # 1. Outputs safe, whatever state the sampler is in.
             with contextlib.suppress(Exception):
-                await server.close()
-        self._route()
-        if self.telemetry is not None:
-            self.telemetry.send(self._tel_pending)
-            self._tel_pending = []
-            self.summary.telemetry_sent = self.telemetry.sent_datagrams
-            self.summary.telemetry_dropped = self.telemetry.dropped_datagrams
-            self.telemetry.close()
-        if self.trial is not None:
-            self.trial.append(self._log_pending)
-            self._log_pending = []
-            self.trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {"reason": "shutdown"})])
-            with contextlib.suppress(OSError):
-                self.trial.close()
-            self.trial = None
-        # 4. Hardware: clutches off again and released, then buses.
-        self.hw.close()
+                self.hw.clutches.all_off()
+            # 2. Stop the control thread.
+            if self.sampler is not None:
+                self.sampler.stop()
+                await asyncio.to_thread(self.sampler.join, 2.0)
+                st = self.sampler.stats
+                self.summary.samples = st.samples
+                self.summary.missed_deadlines = st.missed_deadlines
+                span = (st.stopped_ns - st.started_ns) * 1e-9
+                self.summary.achieved_rate_hz = st.samples / span if span > 0 else 0.0
+            with contextlib.suppress(Exception):
+                ctl.safe_stop(self.summary.stop_reason or "stop")
+            if self.summary.error:
+                ctl.fault(Fault.EXCEPTION, self.summary.error)
+            self.summary.clutch_commands = ctl.clutch_commands
+            # 3. Cancel the tasks, then flush what is left; each step runs whatever the others raised.
+            for t in tasks:
+                t.cancel()
+            for t in tasks:
+                with contextlib.suppress(BaseException):
+                    await t
+            if server is not None:
+                try:
+                    await server.close()
+                except Exception as err:  # noqa: BLE001
+                    self._shutdown_error("commands", err)
+            try:
+                self._route()
+            except Exception as err:  # noqa: BLE001
+                self._shutdown_error("routing", err)
+            if self.telemetry is not None:
+                try:
+                    self.telemetry.send(self._tel_pending)
+                except Exception as err:  # noqa: BLE001
+                    self._shutdown_error("telemetry", err)
+                finally:
+                    self._tel_pending = []
+                    self.summary.telemetry_sent = self.telemetry.sent_datagrams
+                    self.summary.telemetry_dropped = self.telemetry.dropped_datagrams
+                    with contextlib.suppress(Exception):
+                        self.telemetry.close()
+            if self.trial is not None:
+                try:
+                    self.trial.append(self._log_pending)
+                    self.trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {"reason": "shutdown"})])
+                    self.trial.close()
+                except Exception as err:  # noqa: BLE001
+                    self._shutdown_error("trial log", err)
+                finally:
+                    self._log_pending = []
+                    self.trial = None
+        finally:
+            # 4. Hardware: clutches off again and released, then buses. Always.
+            self.hw.close()
 
     # --- tasks ----------------------------------------------------------------------------------
     async def _sampler_task(self) -> None:
@@ -239,6 +281,8 @@ class RobotApp:
                 self._tel_pending.append(rec)
             if self.trial is not None:
                 self._log_pending.append(rec)
+            if isinstance(rec, EventRecord) and self.event_sink is not None:
+                self.event_sink.append(rec)
             if isinstance(rec, EventRecord) and rec.name == "fault":
                 self.summary.faults.append(rec.fields["fault"])
                 log.warning("fault %s: %s", rec.fields["fault"], rec.fields.get("detail"))
@@ -257,9 +301,10 @@ class RobotApp:
             if now - last > stall_ns and now - started > stall_ns:
                 # The control thread is stuck (sensor call hung?): act from here.
                 ctl.fault(Fault.SENSOR_STALLED, f"no sample for {(now - last) * 1e-9:.3f} s")
-            if link_s > 0 and ctl.armed and time.monotonic() - self._last_command_s > link_s:
+            if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
                 self.hw.clutches.all_off()
-                self.sampler.submit(lambda c: c.fault(Fault.LINK_LOST, f"no command for {link_s} s"))
+                self.armed_remotely = False
+                self.sampler.submit(lambda c: c.fault(Fault.LINK_LOST, f"no command or heartbeat for {link_s} s"))
 
     async def _telemetry_task(self) -> None:
         period = self.cfg.telemetry.period_s
@@ -267,7 +312,11 @@ class RobotApp:
             await asyncio.sleep(period)
             if self.telemetry is not None and self._tel_pending:
                 pending, self._tel_pending = self._tel_pending, []
-                self.telemetry.send(pending)
+                try:
+                    self.telemetry.send(pending)
+                except Exception as err:  # noqa: BLE001 - telemetry must never stop the robot
+                    self.telemetry.dropped_datagrams += 1
+                    log.error("telemetry: %s: %s", type(err).__name__, err)
 
     async def _trial_log_task(self) -> None:
         period = self.cfg.log.flush_interval_s
@@ -305,15 +354,23 @@ class RobotApp:
                 missed_deadlines=self.sampler.stats.missed_deadlines,
                 trial=None if self.trial is None else str(self.trial.path),
                 params={k: getattr(self.controller.params(), k) for k in self.controller.params().__slots__},
+                link={"timeout_s": self.cfg.commands.link_timeout_s, "armed_remotely": self.armed_remotely,
+                      "connections": 0 if self.server is None else self.server.connections},
             )
             return status
         if cmd.cmd == "arm":
-            return await self._in_sampler(lambda c: c.arm())
+            leg = cmd.args.get("stance_leg")
+            if leg is not None and (isinstance(leg, bool) or not isinstance(leg, int)):
+                raise ValueError(f"stance_leg must be a clutch index (integer), got {leg!r}")
+            result = await self._in_sampler(lambda c: c.arm(stance_leg=leg))
+            self.armed_remotely = True
+            self._last_command_s = time.monotonic()
+            result["link_timeout_s"] = self.cfg.commands.link_timeout_s
+            return result
         if cmd.cmd == "disarm":
-            try:
-                return await self._in_sampler(lambda c: c.disarm())
-            finally:
-                self.hw.clutches.all_off()  # even if the control loop is not answering
+            self.armed_remotely = False
+            self.hw.clutches.all_off()  # at once, even if the control loop is not answering
+            return await self._in_sampler(lambda c: c.disarm())
         if cmd.cmd == "set":
             name, value = cmd.args["name"], cmd.args["value"]
             if not isinstance(name, str):

@@ -11,8 +11,26 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+from typer.core import TyperGroup
 
-app = typer.Typer(no_args_is_help=True)
+
+
+class _OneLineUsageErrors(TyperGroup):
+    """A bad option value, a missing option or an unknown one under `rimless robot ...`: one line
+    `error: ...` naming the option, exit 2 (instead of the framed usage box)."""
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except Exception as err:
+            if any(c.__name__ == "UsageError" for c in type(err).__mro__) and hasattr(err, "format_message"):
+                message = " ".join(str(err.format_message()).split())
+                typer.echo(f"error: {message}", err=True)
+                raise typer.Exit(2) from None
+            raise
+
+
+app = typer.Typer(no_args_is_help=True, cls=_OneLineUsageErrors)
 
 _HOST = Annotated[str, typer.Option("--host", help="Robot host name or IP address.")]
 _PORT = Annotated[int, typer.Option("--port", min=1, max=65535, help="Robot command port (TCP).")]
@@ -47,38 +65,91 @@ def _remote(host: str, port: int, token: str | None, cmd: str, args: dict[str, A
     def go() -> None:
         print_json(send_command(host, cmd, args, token=_token(token), port=port))
 
-    go()
+    _interruptible(go)
+
+
+def _interruptible(fn: Any) -> Any:
+    """Run `fn`; Ctrl-C (or SIGTERM/SIGHUP/SIGQUIT) ends it with one line and 128 + the signal number."""
+    from rimless.firmware.safety import Interrupted, stop_on_signals
+
+    try:
+        with stop_on_signals():
+            return fn()
+    except Interrupted as sig:
+        typer.echo(f"error: {sig}", err=True)
+        raise typer.Exit(sig.exit_code) from None
+    except KeyboardInterrupt:
+        typer.echo("error: interrupted by SIGINT", err=True)
+        raise typer.Exit(130) from None
+
+
+_JSON = Annotated[bool, typer.Option("--json", help="Print JSON (these commands always do; accepted for scripts).")]
 
 
 @app.command()
-def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None) -> None:
-    """Print the robot's state (armed, faults, phases, counters) as JSON."""
+def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+    """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON."""
     _remote(host, port, token, "status")
 
 
 @app.command()
-def arm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None) -> None:
-    """Arm: clear latched faults and let the detector switch the clutches."""
-    _remote(host, port, token, "arm")
+def ping(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+    """Check that the robot answers (and count as a heartbeat)."""
+    _remote(host, port, token, "ping")
 
 
 @app.command()
-def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None) -> None:
+def arm(
+    host: _HOST,
+    port: _PORT = 9871,
+    token: _TOKEN = None,
+    stance_leg: Annotated[
+        Optional[int],
+        typer.Option("--stance-leg", min=0, help="Clutch index of the leg on the ground now: re-synchronises "
+                     "the leg count (needed after a leg_sync_lost fault).", show_default=False),
+    ] = None,
+    as_json: _JSON = False,
+) -> None:
+    """Arm: clear latched faults and let the detector switch the clutches.
+
+    Armed from here, the robot disarms itself when no command or heartbeat arrives for its
+    link_timeout_s (2 s by default): keep `rimless robot listen --host ...` or
+    `rimless robot heartbeat` running.
+    """
+    _remote(host, port, token, "arm", {} if stance_leg is None else {"stance_leg": stance_leg})
+
+
+@app.command()
+def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
     """Disarm: every clutch off."""
     _remote(host, port, token, "disarm")
 
 
-@app.command("set")
+@app.command("set", context_settings={"ignore_unknown_options": True})
 def set_param(
     name: Annotated[str, typer.Argument(help="Detector parameter, e.g. touch_velocity_m_s.")],
-    value: Annotated[float, typer.Argument(help="New value (SI units, as the name says).")],
+    value: Annotated[str, typer.Argument(help="New value (SI units, as the name says; negative numbers "
+                                         "are values, not options).", metavar="VALUE")],
     host: _HOST,
     port: _PORT = 9871,
     token: _TOKEN = None,
+    as_json: _JSON = False,
 ) -> None:
     """Set a detector parameter on the running robot."""
-    v: float | int = int(value) if name.endswith("_samples") and value == int(value) else value
-    _remote(host, port, token, "set", {"name": name, "value": v})
+    from rimless.cli import user_facing
+    from rimless.errors import ParameterError
+
+    @user_facing
+    def parse() -> float | int:
+        try:
+            v = float(value)
+        except ValueError:
+            raise ParameterError(f"VALUE must be a number, got {value!r}") from None
+        if v != v or v in (float("inf"), float("-inf")):
+            raise ParameterError(f"VALUE must be a finite number, got {value!r}")
+        return int(v) if name.endswith("_samples") and v == int(v) else v
+
+    _remote(host, port, token, "set", {"name": name, "value": parse()})
 
 
 @app.command("trial-start")
@@ -87,15 +158,89 @@ def trial_start(
     name: Annotated[str, typer.Option("--name", help="Trial name (letters, digits, _.-).")] = "trial",
     port: _PORT = 9871,
     token: _TOKEN = None,
+    as_json: _JSON = False,
 ) -> None:
     """Start a trial log on the robot (every sample and event)."""
     _remote(host, port, token, "trial_start", {"name": name})
 
 
 @app.command("trial-stop")
-def trial_stop(host: _HOST, port: _PORT = 9871, token: _TOKEN = None) -> None:
+def trial_stop(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
     """Stop the running trial log; prints its path on the robot."""
     _remote(host, port, token, "trial_stop")
+
+
+@app.command()
+def heartbeat(
+    host: _HOST,
+    port: _PORT = 9871,
+    token: _TOKEN = None,
+    period_s: Annotated[float, typer.Option("--period-s", min=0.05, max=10.0, help="Seconds between pings.")] = 0.5,
+    duration_s: Annotated[
+        Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
+    ] = None,
+) -> None:
+    """Keep the link alive while the robot is armed remotely.
+
+    Pings every --period-s on one connection and prints a line when the robot's state changes.
+    Ctrl-C stops it; the robot then disarms after its link_timeout_s.
+    """
+    from rimless.cli import user_facing
+    from rimless.firmware.heartbeat import Heartbeat
+
+    @user_facing
+    def go() -> None:
+        hb = Heartbeat(host, port=port, token=_token(token), period_s=period_s,
+                       echo=lambda line: typer.echo(line, err=True))
+        hb.run(duration_s=duration_s)
+
+    _interruptible(go)
+
+
+@app.command()
+def release(
+    config: _CONFIG = None,
+    fake: Annotated[bool, typer.Option("--fake", help="Mock pins (to try it on a PC).")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Drive every clutch pin of the configuration to its off level, then release the lines.
+
+    The second line of defence when the firmware could not clean up (SIGKILL, a crash): run it from the
+    systemd unit's ExecStopPost= (and ExecStartPre=). It does not need the sensor.
+    """
+    from rimless.cli import print_json, user_facing
+
+    @user_facing
+    def go() -> None:
+        from rimless.firmware.hardware import release_pins
+        from rimless.firmware.config import load_config
+
+        cfg = load_config(config)
+        factory = None
+        if fake:
+            from gpiozero.pins.mock import MockFactory
+
+            from rimless.firmware.hardware import PI4_REVISION
+
+            factory = MockFactory(revision=PI4_REVISION)
+        levels = release_pins(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
+        if as_json:
+            print_json({"released_pins": list(cfg.clutch.pins), "level": "high" if not cfg.clutch.active_high else "low",
+                        **({"fake_levels": levels} if fake else {})})
+        else:
+            typer.echo(f"released: GPIO {', '.join(str(p) for p in cfg.clutch.pins)} driven to the clutch-off level "
+                       f"({'low' if cfg.clutch.active_high else 'high'}), then released to the pull-downs")
+
+    _interruptible(go)
+
+
+def _pin_history(hw: Any, pins: Any) -> str:
+    """The mock pins' level histories ("GPIO17=010 ..."), so a test (or a curious user) sees the clutches end off."""
+    out = []
+    for pin in pins:
+        levels = "".join("1" if st.state else "0" for st in hw.pin_factory.pin(pin).states)
+        out.append(f"GPIO{pin}={levels}")
+    return " ".join(out)
 
 
 @app.command()
@@ -106,61 +251,99 @@ def run(
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
     ] = None,
     arm_at_start: Annotated[bool, typer.Option("--arm", help="Arm at start (default: wait for `arm`).")] = False,
+    telemetry: Annotated[
+        Optional[list[str]],
+        typer.Option("--telemetry", metavar="HOST:PORT", help="Send telemetry here too (repeatable), on top of "
+                     "[telemetry] in the config.", show_default=False),
+    ] = None,
 ) -> None:
-    """Run the firmware until SIGINT/SIGTERM (or --duration-s); clutches off on every exit path."""
+    """Run the firmware until SIGINT/SIGTERM/SIGHUP/SIGQUIT (or --duration-s); clutches off on every exit path.
+
+    Exit code: 0 after --duration-s or SIGTERM (a service stop), 130 after Ctrl-C, 128 + n after
+    another signal n, 1 after a fault in the firmware itself, 2 for a user mistake.
+    """
     import asyncio
+    import dataclasses
     import logging
-    import sys
 
     from rimless.cli import user_facing
+    from rimless.firmware.logsetup import NonBlockingLog
+    from rimless.firmware.safety import Interrupted, stop_on_signals
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr)
+    state: dict[str, Any] = {}
+
+    def release_now() -> None:
+        hw = state.get("hw")
+        if hw is not None:
+            hw.clutches.all_off()
 
     @user_facing
     def go() -> int:
+        from rimless.errors import ParameterError
         from rimless.firmware.app import RobotApp
-        from rimless.firmware.config import load_config
-        from rimless.firmware.errors import SensorError
+        from rimless.firmware.config import load_config, parse_host_port
+        from rimless.firmware.errors import CommandError, SensorError
         from rimless.firmware.hardware import build_fake, build_real
 
         cfg = load_config(config)
+        if telemetry:
+            extra = []
+            for d in telemetry:
+                try:
+                    parse_host_port(d)
+                except ValueError as err:
+                    raise ParameterError(f"--telemetry: {err}") from None
+                extra.append(d)
+            cfg = dataclasses.replace(cfg, telemetry=dataclasses.replace(
+                cfg.telemetry, destinations=cfg.telemetry.destinations + tuple(extra)))
         try:
             hw = build_fake(cfg) if fake else build_real(cfg)
         except SensorError as err:
-            from rimless.firmware.errors import CommandError
-
             raise CommandError(f"sensor: {err}") from None
-        robot = RobotApp(cfg, hw)
+        state["hw"] = hw
+        try:
+            robot = RobotApp(cfg, hw)
+        except BaseException:
+            hw.close()
+            raise
         if robot.token_generated:
             typer.echo(f"command token (generated): {robot.token}", err=True)
         mode = "fake" if fake else "hardware"
         typer.echo(f"rimless robot: running ({mode}) at {cfg.sampling.rate_hz:g} Hz", err=True)
         try:
-            summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm_at_start))
+            with NonBlockingLog(level=logging.INFO):
+                summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm_at_start))
         except OSError as err:
-            from rimless.firmware.errors import CommandError
-
             raise CommandError(f"cannot start: {err}") from None
+        except ValueError as err:  # a telemetry host that cannot be resolved
+            raise ParameterError(f"cannot start: {err}") from None
         typer.echo(
             f"stopped ({summary.stop_reason}): {summary.samples} samples at {summary.achieved_rate_hz:.1f} Hz, "
             f"{summary.missed_deadlines} missed deadlines, {summary.clutch_commands} clutch commands, "
-            f"faults: {', '.join(summary.faults) or 'none'}",
+            f"faults: {', '.join(summary.faults) or 'none'}; every clutch released",
             err=True,
         )
         if fake and hw.pin_factory is not None:
-            # The mock pins' histories, so a test (or a curious user) can see the clutches ended off.
-            hist = []
-            for pin in cfg.clutch.pins:
-                states = hw.pin_factory.pin(pin).states
-                levels = "".join("1" if st.state else "0" for st in states)
-                hist.append(f"GPIO{pin}={levels}")
-            typer.echo("fake clutch pin levels (history): " + " ".join(hist), err=True)
+            typer.echo("fake clutch pin levels (history): " + _pin_history(hw, cfg.clutch.pins), err=True)
         if summary.error:
             typer.echo(f"error: {summary.error}", err=True)
             return 1
+        sig = robot.signal_received
+        if sig is not None and sig != "SIGTERM":
+            import signal
+
+            return 128 + int(getattr(signal, sig))
         return 0
 
-    code = go()
+    try:
+        with stop_on_signals(release_now):
+            code = go()
+    except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
+        hw = state.get("hw")
+        if hw is not None:
+            hw.close()
+        typer.echo(f"stopped ({sig.name}) before the firmware ran; every clutch released", err=True)
+        raise typer.Exit(0 if sig.name == "SIGTERM" else sig.exit_code) from None
     if code:
         raise typer.Exit(code)
 
@@ -172,10 +355,21 @@ def check(
     click: Annotated[bool, typer.Option("--click/--no-click", help="Click each clutch on for 0.2 s.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Check the hardware: sensor IDs, SQUAL, frame rate, and a clutch click test."""
+    """Check the hardware: sensor IDs, SQUAL, frame rate, and a clutch click test.
+
+    Any signal (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT) releases every clutch and exits with 128 + its number.
+    """
     import time
 
     from rimless.cli import print_json, user_facing
+    from rimless.firmware.safety import Interrupted, stop_on_signals
+
+    state: dict[str, Any] = {}
+
+    def release_now() -> None:
+        hw = state.get("hw")
+        if hw is not None:
+            hw.clutches.all_off()
 
     @user_facing
     def go() -> None:
@@ -188,6 +382,7 @@ def check(
             hw = build_fake(cfg) if fake else build_real(cfg)
         except SensorError as err:
             raise CommandError(f"sensor check failed: {err}") from None
+        state["hw"] = hw
         report: dict[str, Any] = {"sensors": [], "clutches": []}
         try:
             for i, sensor in enumerate(hw.sensors):
@@ -199,9 +394,12 @@ def check(
                 })
             if click:
                 for leg, pin in enumerate(hw.clutches.pins):
+                    typer.echo(f"clicking clutch {leg} (GPIO{pin}) ...", err=True)
                     hw.clutches.engage(leg)
-                    time.sleep(0.2)
-                    hw.clutches.release(leg)
+                    try:
+                        time.sleep(0.2)
+                    finally:
+                        hw.clutches.release(leg)
                     time.sleep(0.1)
                     report["clutches"].append({"leg": leg, "pin": pin, "clicked": True})
         except SensorError as err:
@@ -219,7 +417,18 @@ def check(
         for c in report["clutches"]:
             typer.echo(f"clutch {c['leg']} (GPIO{c['pin']}): clicked on for 0.2 s, off")
 
-    go()
+    try:
+        with stop_on_signals(release_now):
+            go()
+    except Interrupted as sig:
+        hw = state.get("hw")
+        pins = ""
+        if hw is not None:
+            hw.close()  # idempotent: the finally above already ran
+            if fake and hw.pin_factory is not None:
+                pins = f" (fake pins: {_pin_history(hw, hw.clutches.pins)})"
+        typer.echo(f"error: check interrupted by {sig.name}; every clutch released{pins}", err=True)
+        raise typer.Exit(sig.exit_code) from None
 
 
 @app.command()
@@ -229,38 +438,72 @@ def listen(
     out: Annotated[
         Optional[Path], typer.Option("--out", help="Record every telemetry object to this JSON Lines file.", show_default=False)
     ] = None,
+    csv_out: Annotated[
+        Optional[Path], typer.Option("--csv", help="Record samples and events to this CSV file.", show_default=False)
+    ] = None,
     duration_s: Annotated[
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
     ] = None,
-    summary_every_s: Annotated[float, typer.Option("--summary-every-s", min=0.05, help="Live summary period.")] = 1.0,
+    summary_every_s: Annotated[float, typer.Option("--summary-every-s", min=0.05, help="Live view refresh period (s).")] = 1.0,
+    stale_s: Annotated[float, typer.Option("--stale-s", min=0.05, help="Say \"data stopped\" after this long without data (s).")] = 1.0,
+    live: Annotated[
+        Optional[bool], typer.Option("--live/--no-live", help="Redraw plots in the terminal (default: when stderr is a terminal).",
+                                     show_default=False)
+    ] = None,
+    host: Annotated[
+        Optional[str], typer.Option("--host", help="Also keep the command link to this robot alive (heartbeat).",
+                                    show_default=False)
+    ] = None,
+    robot_port: Annotated[int, typer.Option("--robot-port", min=1, max=65535, help="Robot command port (TCP), with --host.")] = 9871,
+    token: _TOKEN = None,
 ) -> None:
-    """Receive the robot's UDP telemetry: record it to a file and show a live summary."""
+    """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
+
+    The live view (in a terminal) draws leg velocity, compression and one strip per clutch. With
+    --host it also keeps the robot's command link alive (a heartbeat), so a remote arm holds.
+    """
+    import sys
+
     from rimless.cli import user_facing
 
     @user_facing
     def go() -> None:
         from rimless.firmware.listen import listen as do_listen
 
-        do_listen(bind=bind, port=port, out=out, duration_s=duration_s, summary_every_s=summary_every_s,
-                  echo=lambda line: typer.echo(line, err=True))
+        hb = None
+        if host is not None:
+            from rimless.firmware.heartbeat import Heartbeat
 
-    go()
+            hb = Heartbeat(host, port=robot_port, token=_token(token), echo=lambda line: typer.echo(line, err=True))
+        use_live = sys.stderr.isatty() if live is None else live
+        do_listen(bind=bind, port=port, out=out, csv_out=csv_out, duration_s=duration_s,
+                  summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,
+                  write_screen=lambda text: (sys.stderr.write(text), sys.stderr.flush()),
+                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb)
+
+    _interruptible(go)
 
 
 @app.command()
 def bench(
     fake: Annotated[bool, typer.Option("--fake", help="Run on the fake sensor and mock pins (required).")] = False,
-    rate_hz: Annotated[str, typer.Option("--rate-hz", help="Comma-separated sampling rates.")] = "300,1000,2000",
+    rate_hz: Annotated[str, typer.Option("--rate-hz", help="Comma-separated sampling rates (Hz).")] = "300,1000,2000",
     duration_s: Annotated[float, typer.Option("--duration-s", min=0.5, help="Seconds per rate.")] = 3.0,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object per rate (a JSON list).")] = False,
 ) -> None:
-    """Benchmark the control loop: rate, period jitter, sample-to-command latency, missed deadlines, CPU."""
+    """Benchmark the control loop on the fake: rate, jitter, wake-up lateness, control latency, SPI wire
+    time at the configured clock, and the detector's delay after the true compression peak and touchdown.
+
+    Times are in ms; p50/p99 are percentiles. The SPI wire time is what a real bus adds per sample
+    (the fake answers at once). Ctrl-C stops it (exit 130).
+    """
     from rimless.cli import print_json, user_facing
 
     @user_facing
     def go() -> None:
         from rimless.errors import ParameterError
         from rimless.firmware.bench import bench_rate
+        from rimless.firmware.safety import Interrupted
 
         if not fake:
             raise ParameterError("--fake is required: the bench runs on the fake sensor (use `run` on the robot)")
@@ -272,17 +515,30 @@ def bench(
             raise ParameterError(f"--rate-hz values must be in 10..5000, got {rate_hz!r}")
         results = []
         for r in rates:
-            res = bench_rate(r, duration_s)
+            typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True)
+            res = bench_rate(r, duration_s, handle_signals=True)
+            if res["stopped_by"]:
+                import signal
+
+                raise Interrupted(int(getattr(signal, res["stopped_by"])))
             results.append(res)
             if not as_json:
                 typer.echo(
-                    f"{r:7.0f} Hz: achieved {res['achieved_rate_hz']:.1f} Hz, period jitter p50/p99 "
-                    f"{res['period_jitter_p50_ms']:.3f}/{res['period_jitter_p99_ms']:.3f} ms, latency p50/p99/max "
-                    f"{res['latency_p50_ms']:.3f}/{res['latency_p99_ms']:.3f}/{res['latency_max_ms']:.3f} ms, "
-                    f"missed {res['missed_deadlines']}, CPU {100 * res['cpu_share']:.0f} %, "
-                    f"{res['clutch_commands']} clutch commands"
+                    f"{r:7.0f} Hz: achieved {res['achieved_rate_hz']:.1f} Hz, missed {res['missed_deadlines']}, "
+                    f"CPU {100 * res['cpu_share']:.0f} %\n"
+                    f"  period jitter p50/p99     {res['period_jitter_p50_ms']:.3f}/{res['period_jitter_p99_ms']:.3f} ms\n"
+                    f"  wake-up late p50/p99/max  {res['wake_late_p50_ms']:.3f}/{res['wake_late_p99_ms']:.3f}/"
+                    f"{res['wake_late_max_ms']:.3f} ms\n"
+                    f"  control p50/p99/max       {res['latency_p50_ms']:.3f}/{res['latency_p99_ms']:.3f}/"
+                    f"{res['latency_max_ms']:.3f} ms (sample to clutch write)\n"
+                    f"  SPI wire per sample       {res['spi_wire_per_sample_ms']:.3f} ms at "
+                    f"{res['spi_clock_hz'] / 1e6:g} MHz ({100 * res['spi_wire_share']:.0f} % of the period)\n"
+                    f"  lock after true peak      p50 {res['lock_after_peak_p50_ms']:.2f}, max "
+                    f"{res['lock_after_peak_max_ms']:.2f} ms ({res['locks']} locks)\n"
+                    f"  touchdown detected after  p50 {res['touchdown_detect_p50_ms']:.2f}, max "
+                    f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
                 )
         if as_json:
             print_json(results)
 
-    go()
+    _interruptible(go)

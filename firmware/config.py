@@ -19,6 +19,10 @@ from rimless.firmware.faults import HealthLimits
 
 DEFAULT_CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)  # BCM; all >= 9, so pulled down at power-on
 TOKEN_ENV = "RIMLESS_TOKEN"
+TOKEN_FILE_ENV = "RIMLESS_TOKEN_FILE"
+CREDENTIAL_NAME = "rimless-token"  # systemd LoadCredential= name, read from $CREDENTIALS_DIRECTORY
+SPI_PINS = {0: frozenset({7, 8, 9, 10, 11}), 1: frozenset({16, 17, 18, 19, 20, 21})}  # CE*, MISO, MOSI, SCLK
+BOOT_PULLED_UP_PINS = frozenset(range(2, 9))  # GPIO 0-8 have pull-ups at power-on; 0-1 are the HAT EEPROM
 
 
 @dataclass(frozen=True)
@@ -28,7 +32,9 @@ class SensorConfig:
     spi_bus: int = 0
     spi_device: int = 0
     spi_speed_hz: int = 2_000_000
-    reset_pin: int | None = None
+    reset_pin: int = 25  # BCM pin wired to RESET (active high); the chip has no power-on reset
+    npd_pin: int | None = None  # BCM pin wired to NPD (active-low power-down), if not tied high
+    cs_pin: int | None = None  # BCM pin used as this sensor's chip select (active low) instead of the CE line
     resolution_cpi: int = 1600
     frame_rate_hz: float | None = None  # None = automatic (SmartSpeed)
     axis: str = "y"
@@ -51,7 +57,8 @@ class ClutchConfig:
     pins: tuple[int, ...] = DEFAULT_CLUTCH_PINS
     active_high: bool = True
     max_hold_s: float = 1.0
-    start_leg_index: int = 0  # index into each sensor's `legs` of the first stance leg
+    start_leg_index: int = 0  # index into each sensor's `legs` of the leg standing on the ground at start
+    boot_pull_up_reason: str = ""  # why clutch pins on GPIO 2-8 (pulled up at power-on) are safe here
 
 
 @dataclass(frozen=True)
@@ -74,6 +81,14 @@ class TelemetryConfig:
     max_datagram_bytes: int = 1200
     batch: bool = True
     decimate: int = 1
+    destinations: tuple[str, ...] = ()  # more receivers, "host:port" each
+
+    def destinations_list(self) -> list[tuple[str, int]]:
+        """Every receiver: `host`:`port` first (if host is set), then `destinations`."""
+        out = [(self.host, self.port)] if self.host else []
+        for d in self.destinations:
+            out.append(parse_host_port(d))
+        return out
 
 
 @dataclass(frozen=True)
@@ -83,8 +98,12 @@ class CommandsConfig:
     bind: str = "0.0.0.0"
     port: int = 9871
     token: str = ""
-    link_timeout_s: float = 0.0  # 0 = no link-loss fail-safe
+    token_file: str = ""  # a file holding the token (mode 0600); $RIMLESS_TOKEN_FILE wins
+    link_timeout_s: float = 2.0  # armed remotely: disarm when no command or heartbeat for this long (0 = off)
     max_message_bytes: int = 4096
+    max_connections: int = 16
+    auth_timeout_s: float = 5.0  # a connection must send a valid command within this time
+    idle_timeout_s: float = 60.0  # an authenticated connection silent this long is closed
     enabled: bool = True
 
 
@@ -109,8 +128,24 @@ class RobotConfig:
     log: LogConfig = field(default_factory=LogConfig)
 
     def token(self) -> str:
-        """The command token in force ($RIMLESS_TOKEN wins)."""
-        return os.environ.get(TOKEN_ENV) or self.commands.token
+        """The command token in force: $RIMLESS_TOKEN, $RIMLESS_TOKEN_FILE, the systemd credential
+        `rimless-token`, `[commands] token_file`, then `[commands] token`. Raises ConfigError if a named
+        file cannot be read."""
+        if os.environ.get(TOKEN_ENV):
+            return os.environ[TOKEN_ENV]
+        candidates = [(os.environ.get(TOKEN_FILE_ENV, ""), f"${TOKEN_FILE_ENV}")]
+        if os.environ.get("CREDENTIALS_DIRECTORY"):
+            cred = Path(os.environ["CREDENTIALS_DIRECTORY"]) / CREDENTIAL_NAME
+            if cred.exists():
+                candidates.append((str(cred), "systemd credential"))
+        candidates.append((self.commands.token_file, "[commands] token_file"))
+        for path, what in candidates:
+            if path:
+                try:
+                    return Path(path).read_text(encoding="utf-8").strip()
+                except (OSError, UnicodeDecodeError) as err:
+                    raise ConfigError(f"{what} {path}: cannot read the token ({err})") from None
+        return self.commands.token
 
 
 _RANGES: dict[str, tuple[float, float]] = {
@@ -120,8 +155,18 @@ _RANGES: dict[str, tuple[float, float]] = {
     "rate_hz": (10.0, 5000.0), "spin_s": (0.0, 0.005), "stall_timeout_s": (0.005, 10.0),
     "id_check_interval_s": (0.0, 3600.0), "port": (0, 65535), "period_s": (0.001, 1.0),
     "max_datagram_bytes": (256, 65000), "decimate": (1, 1000), "link_timeout_s": (0.0, 3600.0),
-    "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0),
+    "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0), "npd_pin": (2, 27), "cs_pin": (2, 27),
+    "max_connections": (2, 256), "auth_timeout_s": (0.1, 60.0), "idle_timeout_s": (1.0, 86400.0),
 }
+
+
+def parse_host_port(text: str) -> tuple[str, int]:
+    """'host:port' or '[v6]:port' to (host, port); ValueError names the text."""
+    host, sep, port = text.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"{text!r} is not host:port")
+    return host, int(port)
 
 
 def _check_value(where: str, name: str, value: Any, default: Any, hint: str) -> Any:
@@ -158,7 +203,16 @@ def _build(cls: type, table: Any, where: str) -> Any:
     for name, value in table.items():
         default = getattr(defaults, name)
         hint = str(known[name].type)
-        if name in ("legs", "pins"):
+        if name == "destinations":
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ConfigError(f"{where}.{name} must be a list of \"host:port\" strings, got {value!r}")
+            for v in value:
+                try:
+                    parse_host_port(v)
+                except ValueError as err:
+                    raise ConfigError(f"{where}.{name}: {err}") from None
+            value = tuple(value)
+        elif name in ("legs", "pins"):
             if not isinstance(value, list) or not value or not all(
                 isinstance(v, int) and not isinstance(v, bool) for v in value
             ):
@@ -166,9 +220,8 @@ def _build(cls: type, table: Any, where: str) -> Any:
             if len(set(value)) != len(value):
                 raise ConfigError(f"{where}.{name} has duplicates: {value!r}")
             value = tuple(value)
-        elif name == "reset_pin" or name == "frame_rate_hz":
-            if value is not None:
-                value = _check_value(where, name, value, 0 if name == "reset_pin" else 0.0, hint)
+        elif name in ("npd_pin", "cs_pin", "frame_rate_hz"):
+            value = _check_value(where, name, value, 0.0 if name == "frame_rate_hz" else 0, hint)
         elif name == "axis":
             if value not in ("x", "y"):
                 raise ConfigError(f"{where}.axis must be \"x\" or \"y\", got {value!r}")
@@ -219,12 +272,45 @@ def config_from_dict(data: dict[str, Any], source: str = "robot.toml") -> RobotC
             if leg in seen:
                 raise ConfigError(f"{source}: [[sensor]] #{i + 1}.legs: leg {leg} is watched by two sensors")
             seen.add(leg)
-        if s.reset_pin is not None and s.reset_pin in cfg.clutch.pins:
-            raise ConfigError(f"{source}: [[sensor]] #{i + 1}.reset_pin {s.reset_pin} is also a clutch pin")
-    buses = [(s.spi_bus, s.spi_device) for s in cfg.sensors]
-    if len(set(buses)) != len(buses):
-        raise ConfigError(f"{source}: two sensors share an SPI bus/device")
+    _check_pins(cfg, source)
     return cfg
+
+
+def _check_pins(cfg: RobotConfig, source: str) -> None:
+    """Clutch pins off the SPI lines in use and the HAT EEPROM lines, on boot pulled-up lines only with
+    a stated reason; no pin used twice; every sensor selected by exactly one CE line or GPIO."""
+    where = f"{source}: [clutch] pins"
+    spi_lines: set[int] = set()
+    for s in cfg.sensors:
+        spi_lines |= SPI_PINS.get(s.spi_bus, frozenset())
+    for pin in cfg.clutch.pins:
+        if not 0 <= pin <= 27:
+            raise ConfigError(f"{where}: GPIO{pin} is not a Pi GPIO (0-27)")
+        if pin in (0, 1):
+            raise ConfigError(f"{where}: GPIO{pin} is reserved for the HAT ID EEPROM")
+        if pin in spi_lines:
+            raise ConfigError(f"{where}: GPIO{pin} is an SPI line in use by a sensor (SPI0 uses GPIO 7-11)")
+        if pin in BOOT_PULLED_UP_PINS and not cfg.clutch.boot_pull_up_reason.strip():
+            raise ConfigError(
+                f"{where}: GPIO{pin} is pulled up at power-on, which engages the clutch while the Pi boots; "
+                "use GPIO 12-27, or set [clutch] boot_pull_up_reason to say why it is safe here"
+            )
+    used = {pin: "a clutch pin" for pin in cfg.clutch.pins}
+    for i, s in enumerate(cfg.sensors):
+        for name in ("reset_pin", "npd_pin", "cs_pin"):
+            pin = getattr(s, name)
+            if pin is None:
+                continue
+            if name == "reset_pin" and pin in [x.reset_pin for x in cfg.sensors[:i]]:
+                continue  # sensors may share one RESET line
+            if pin in used:
+                raise ConfigError(f"{source}: [[sensor]] #{i + 1}.{name} GPIO{pin} is also {used[pin]}")
+            if pin in spi_lines and name != "cs_pin":
+                raise ConfigError(f"{source}: [[sensor]] #{i + 1}.{name} GPIO{pin} is an SPI line in use")
+            used[pin] = f"[[sensor]] #{i + 1}.{name}"
+    selects = [(s.spi_bus, s.spi_device if s.cs_pin is None else f"GPIO{s.cs_pin}") for s in cfg.sensors]
+    if len(set(selects)) != len(selects):
+        raise ConfigError(f"{source}: two sensors share a chip select (spi_bus/spi_device or cs_pin)")
 
 
 def load_config(path: str | Path | None) -> RobotConfig:

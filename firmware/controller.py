@@ -14,7 +14,7 @@ from typing import Any, NamedTuple, Protocol
 
 from rimless.firmware.adns3080 import MotionSample
 from rimless.firmware.clutch import ClutchBank
-from rimless.firmware.detector import DetectorParams, LegDetector
+from rimless.firmware.detector import DetectorParams, LegDetector, Phase
 from rimless.firmware.errors import SensorError, SensorNotFound
 from rimless.firmware.faults import Fault, HealthLimits, HealthMonitor
 
@@ -104,14 +104,38 @@ class Controller:
         self.last_had_command = False
 
     # --- commands (called in the sampler thread) ------------------------------------------------
-    def arm(self) -> dict[str, Any]:
-        """Clear latched faults, reset the detectors, and let decisions reach the clutches."""
-        self.active_faults.clear()
+    def arm(self, stance_leg: int | None = None) -> dict[str, Any]:
+        """Clear latched faults and let decisions reach the clutches.
+
+        `stance_leg` (a clutch index) names the leg on the ground now and re-synchronises the count of
+        the sensor watching it; without it the count carries on, which is refused (ValueError) when a
+        counting sensor has lost it. Each sensor's motion accumulators are cleared (Motion_Clear also
+        clears a latched overflow).
+        """
+        if stance_leg is not None:
+            owners = [ch for ch in self.channels if stance_leg in ch.detector.legs]
+            if not owners:
+                raise ValueError(f"stance_leg {stance_leg} is not a leg any sensor watches")
+        lost = [ch.detector for ch in self.channels if not ch.detector.synced and stance_leg not in ch.detector.legs]
+        if lost:
+            raise ValueError(
+                f"the stance leg is not known ({lost[0].sync_detail}); arm with stance_leg = the clutch index "
+                "of the leg on the ground now"
+            )
         for ch in self.channels:
-            ch.detector.reset()
+            if stance_leg is not None and stance_leg in ch.detector.legs:
+                ch.detector.resync(stance_leg)
+            clear = getattr(ch.sensor, "clear_motion", None)
+            if clear is not None:
+                try:
+                    clear()
+                except SensorError as err:
+                    self.fault(Fault.SPI_ERROR, str(err))
+                    raise RuntimeError(f"cannot arm: {err}") from None
             ch.health.reset()
+        self.active_faults.clear()
         self.armed = True
-        self._event("arm")
+        self._event("arm", stance_leg=stance_leg)
         return self.status()
 
     def disarm(self, reason: str = "command") -> dict[str, Any]:
@@ -133,6 +157,10 @@ class Controller:
         """Tell a channel which of its legs is on the ground (index into its `legs`)."""
         self.channels[channel].detector.reset(index)
 
+    def synchronised(self) -> bool:
+        """True when every sensor knows its stance leg."""
+        return all(ch.detector.synced for ch in self.channels)
+
     def params(self) -> DetectorParams:
         """The detector parameters in force."""
         return self.channels[0].detector.params
@@ -151,6 +179,8 @@ class Controller:
                     "stance_leg": ch.detector.stance_leg,
                     "velocity_m_s": ch.detector.velocity_m_s,
                     "compression_m": ch.detector.compression_m,
+                    "synchronised": ch.detector.synced,
+                    "sync_detail": ch.detector.sync_detail,
                 }
                 for ch in self.channels
             ],
@@ -205,16 +235,30 @@ class Controller:
             self.fault(Fault.SPI_ERROR, str(err))
             return
         self.samples += 1
-        bad = ch.health.check(s.t_ns, s.squal, s.saturated or s.overflow, s.reserved_bits)
+        bad = ch.health.check(s.t_ns, s.squal, s.saturated or s.overflow, s.stuck)
+        if bad is None and s.resolution_reset:
+            bad = (Fault.SENSOR_RESET, "the sensor reports 400 cpi: it reset itself (brown-out?); "
+                                       "restart the firmware to configure it again")
         if bad is not None:
             self.fault(bad[0], bad[1], s.t_ns)
         det = ch.detector
-        decision = det.update(s.t_ns, s.displacement_m)
+        trusted = bad is None and s.squal >= ch.health.limits.squal_min and not (s.saturated or s.overflow)
+        decision = det.update(s.t_ns, s.displacement_m, trusted=trusted)
         if decision.release is not None:
             self.clutches.release(decision.release)
             self._mask &= ~(1 << decision.release)
             if self.armed:
                 self.clutch_commands += 1
+        if "touchdown" in decision.events and len(self.channels) > 1:
+            # The next leg is down: no other leg may stay clutched (one sensor per leg).
+            for other in self.channels:
+                if other is not ch and other.detector.phase is Phase.CLUTCHED:
+                    leg = other.detector.stance_leg
+                    other.detector.released_elsewhere()
+                    self.clutches.release(leg)
+                    self._mask &= ~(1 << leg)
+        if "sync_lost" in decision.events:
+            self.fault(Fault.LEG_SYNC_LOST, f"sensor {i}: {det.sync_detail}", s.t_ns)
         if decision.engage is not None and self.armed:
             self.clutches.engage(decision.engage, s.t_ns)
             self._mask |= 1 << decision.engage

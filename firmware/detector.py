@@ -5,6 +5,16 @@ Phases follow the paper's model: after a touchdown the wheel is in double suppor
 compression velocity's zero crossing (maximum compression) the stance clutch locks (clutched);
 the next touchdown releases it and the next leg becomes the stance leg.
 
+The stance leg of a sensor that watches several legs is counted, so the count is checked: `legs[i]`
+is the leg on the ground when the detector is (re)synchronised, every touchdown advances `i`, and a
+touchdown that comes too early or too late for the step period (an extra or a missed one), or no
+touchdown at all within the longest plausible step, loses synchronisation: the detector reports
+`sync_lost`, stops locking, and stays so until `resync` names the leg on the ground. A sensor that
+watches one leg measures it and needs no count.
+
+Samples the caller does not trust (low SQUAL: the chip may report frozen motion) make no decision:
+no touchdown and no lock while any untrusted sample is inside the velocity window.
+
 Velocity comes from a local quadratic least-squares fit of the integrated displacement over the last
 `velocity_window_s` of timestamped samples, evaluated at the newest sample and extrapolated by half a
 sample period plus `lock_lead_s`. The fit averages count quantisation and noise, has no lag on a
@@ -53,6 +63,8 @@ class DetectorParams:
     double_support_s: float = 0.02  # how long after touchdown the phase reads double support
     min_step_s: float = 0.08  # refractory time between touchdowns (debounce)
     max_compression_s: float = 0.5  # no zero crossing this long after touchdown: back to wait
+    max_step_s: float = 1.0  # no touchdown this long after the previous one: the count is lost
+    step_period_tolerance: float = 0.4  # a step outside (1 -/+ this) x the running period loses the count
 
     def validated(self) -> DetectorParams:
         """Return self, or raise ValueError naming the bad field."""
@@ -69,6 +81,12 @@ class DetectorParams:
             elif f.name in ("lock_lead_s", "double_support_s"):
                 if not 0.0 <= value <= 1.0:
                     raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
+            elif f.name == "step_period_tolerance":
+                if not 0.05 <= value <= 0.9:
+                    raise ValueError(f"{f.name} must be in [0.05, 0.9], got {value!r}")
+            elif f.name == "max_step_s":
+                if not self.min_step_s < value <= 10.0:
+                    raise ValueError(f"{f.name} must be in (min_step_s, 10], got {value!r}")
             elif not 0.0 < value <= 10.0:
                 raise ValueError(f"{f.name} must be in (0, 10], got {value!r}")
         return self
@@ -159,7 +177,8 @@ NOTHING = Decision()
 class LegDetector:
     """The state machine for one sensor watching the stance-leg mechanism of `legs` (clutch indices).
 
-    The stance leg advances through `legs` in order at every touchdown after the first.
+    `start_index` names the leg on the ground now (`legs[start_index]`); every touchdown advances the
+    stance leg to the next one in `legs`, so the first touchdown is that of `legs[start_index + 1]`.
     """
 
     def __init__(self, params: DetectorParams, legs: list[int] | tuple[int, ...], *, start_index: int = 0) -> None:
@@ -171,13 +190,29 @@ class LegDetector:
         self._est = VelocityEstimator(params.velocity_window_s)
         self.reset()
 
+    @property
+    def counted(self) -> bool:
+        """True when the stance leg is counted (several legs), False when it is measured (one leg)."""
+        return len(self.legs) > 1
+
+    def resync(self, leg: int) -> None:
+        """The leg on the ground now is clutch `leg` (one of `legs`): back to WAIT, counting from it."""
+        if leg not in self.legs:
+            raise ValueError(f"leg {leg} is not watched by this sensor (legs {self.legs})")
+        self.reset(self.legs.index(leg))
+
     def reset(self, start_index: int | None = None) -> None:
-        """Back to WAIT, stance leg = legs[start_index]."""
+        """Back to WAIT and synchronised, with legs[start_index] on the ground."""
         if start_index is not None:
             self._start_index = start_index % len(self.legs)
         self.phase = Phase.WAIT
         self.leg_index = self._start_index
-        self._started = False
+        self.synced = True
+        self.sync_detail = ""
+        self._last_touchdown_s: float | None = None
+        self._period_s: float | None = None
+        self._distrust_until_s = -math.inf
+        self._need_quiet = True  # a compression already under way at (re)sync is not a touchdown
         self._est.reset()
         self.position_m = 0.0
         self.velocity_m_s = 0.0
@@ -207,8 +242,34 @@ class LegDetector:
         """Compression since the last touchdown (m), 0 in WAIT."""
         return 0.0 if self.phase is Phase.WAIT else self.position_m - self._touchdown_x_m
 
-    def update(self, t_ns: int, displacement_m: float) -> Decision:
-        """Feed one sample (`monotonic_ns` timestamp, displacement since the previous sample)."""
+    def released_elsewhere(self) -> None:
+        """Another sensor saw the next touchdown and released this one's clutch: back to WAIT."""
+        if self.phase is Phase.CLUTCHED:
+            self.phase = Phase.WAIT
+            self._touch_count = 0
+
+    def _step_window_s(self) -> float:
+        """The longest plausible time from one touchdown to the next (s)."""
+        p = self.params
+        if self._period_s is None:
+            return p.max_step_s
+        return min(p.max_step_s, self._period_s * (1.0 + p.step_period_tolerance))
+
+    def _lose_sync(self, detail: str) -> Decision:
+        self.synced = False
+        self.sync_detail = detail
+        release = self.stance_leg if self.phase is Phase.CLUTCHED else None
+        self.phase = Phase.WAIT
+        self._touch_count = 0
+        self._lock_count = 0
+        return Decision(release=release, events=("sync_lost",))
+
+    def update(self, t_ns: int, displacement_m: float, trusted: bool = True) -> Decision:
+        """Feed one sample (`monotonic_ns` timestamp, displacement since the previous sample).
+
+        `trusted=False` (e.g. SQUAL too low) keeps the sample out of every decision for one velocity
+        window.
+        """
         if self._t0_ns is None:
             self._t0_ns = t_ns
         t = (t_ns - self._t0_ns) * 1e-9
@@ -218,13 +279,28 @@ class LegDetector:
         self.position_m += displacement_m
         self._est.add(t, self.position_m)
         p = self.params
+        if not trusted:
+            self._distrust_until_s = t + p.velocity_window_s
+        if (self.counted and self.synced and self._last_touchdown_s is not None
+                and t - self._last_touchdown_s > self._step_window_s()):
+            return self._lose_sync(
+                f"missed touchdown: none for {t - self._last_touchdown_s:.3f} s after leg {self.stance_leg}'s "
+                f"(longest plausible step {self._step_window_s():.3f} s)"
+            )
         v = self._est.estimate(lead_s=0.5 * self._dt_s + p.lock_lead_s)
         if v is None:
             return NOTHING
         self.velocity_m_s = v
+        if t < self._distrust_until_s:
+            self._touch_count = 0
+            self._lock_count = 0
+            return NOTHING
 
         # Touchdown detection (WAIT and CLUTCHED), debounced, with a refractory time.
         if self.phase in (Phase.WAIT, Phase.CLUTCHED):
+            if self._need_quiet:
+                self._need_quiet = v > p.touch_velocity_m_s
+                return NOTHING
             if v > p.touch_velocity_m_s and t - self._touchdown_s >= p.min_step_s:
                 if self._touch_count == 0:
                     self._onset_x_m = prev_x
@@ -249,6 +325,8 @@ class LegDetector:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
             self.lock_time_s = t
+            if not self.synced:
+                return Decision(events=("lock_unsynced",))  # detected, but the leg is not known
             return Decision(engage=self.stance_leg, events=("lock",))
         if t - self._touchdown_s > p.max_compression_s:
             self.phase = Phase.WAIT
@@ -258,13 +336,28 @@ class LegDetector:
 
     def _touchdown(self, t: float) -> Decision:
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
-        if self._started:
-            self.leg_index = (self.leg_index + 1) % len(self.legs)
-        self._started = True
+        self.leg_index = (self.leg_index + 1) % len(self.legs)
+        last = self._last_touchdown_s
+        self._last_touchdown_s = t
+        lost = ""
+        if self.counted and self.synced and last is not None:
+            step = t - last
+            tol = self.params.step_period_tolerance
+            if self._period_s is not None and step < self._period_s * (1.0 - tol):
+                lost = (f"extra touchdown: {step:.3f} s after the previous one, expected "
+                        f"{self._period_s:.3f} s +/- {100 * tol:.0f} %")
+            elif step > self._step_window_s():
+                lost = f"missed touchdown: step of {step:.3f} s (longest plausible {self._step_window_s():.3f} s)"
+            else:
+                self._period_s = step if self._period_s is None else 0.5 * (self._period_s + step)
         self.phase = Phase.DOUBLE_SUPPORT
         self._touch_count = 0
         self._lock_count = 0
         self._touchdown_s = t
         self._touchdown_x_m = self._onset_x_m
         self._peak_v = 0.0
+        if lost:
+            self.synced = False
+            self.sync_detail = lost
+            return Decision(release=release, events=("touchdown", "sync_lost"))
         return Decision(release=release, events=("touchdown",))

@@ -5,6 +5,13 @@ at least t_SRAD (75 us for Motion/Motion_Burst) followed by its data in the *sam
 is address|0x80 plus one byte with t_SWW after it. A violation raises `SpiProtocolError`, which the
 real chip would show as garbage. Counts are quantised (floor) with Gaussian noise, motion latches on a
 read of Motion, and the accumulator saturates and overflows as the datasheet describes.
+
+It also models what the datasheet asks of the host: the chip answers nothing (every byte 0x00) until a
+RESET pulse (`set_reset(True)` then `set_reset(False)`; there is no power-on reset) and while NPD is
+low; OVF stays set until Motion_Clear; a Frame_Period_Max_Bound write that breaks Max_Bound >=
+Min_Bound + Shutter_Max_Bound, or any bound write while Busy (two frames after the last one), is a
+protocol violation; `brownout()` resets the registers (400 cpi) as a supply dip would. `wire_time_s`
+adds up the SPI time of every message at `speed_hz` (bytes plus the in-window delays).
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ class FakeFault(str, Enum):
     STUCK_BUS = "stuck_bus"  # MISO stuck high: every byte reads 0xFF
     SQUAL_DROP = "squal_drop"  # surface lost: SQUAL reads 2
     SATURATE = "saturate"  # motion far beyond the 8-bit range: full-scale deltas, then OVF
+    TRACKING_LOST = "tracking_lost"  # surface lost mid-motion: SQUAL reads 2 and the deltas freeze at 0
 
 
 @dataclass(frozen=True)
@@ -97,6 +105,8 @@ class FakeAdns3080:
         seed: int = 0,
         clock: Callable[[], float] = time.monotonic,
         history: int = 1000,
+        speed_hz: int = 2_000_000,
+        needs_reset: bool = True,
     ) -> None:
         self.trajectory = trajectory
         self.counts_per_m = counts_per_m
@@ -107,8 +117,21 @@ class FakeAdns3080:
         self.clock = clock
         self.fault: FakeFault | None = None
         self.closed = False
+        self._history = history
         self._rng = random.Random(seed)
-        self.regs: dict[int, int] = {
+        self.speed_hz = speed_hz
+        self.wire_time_s = 0.0
+        self.messages = 0
+        self.reserved_motion_bits = 0  # OR'ed into Motion: undocumented bits a real chip may set
+        self.reset_high = False
+        self.powered = True  # NPD high
+        self.serial_up = not needs_reset  # no power-on reset: nothing answers until a RESET pulse
+        self.resets = 0
+        self._busy_until_s = -math.inf
+        self._power_on_registers()
+
+    def _power_on_registers(self) -> None:
+        self.regs = {
             reg._REG_PRODUCT_ID: reg.PRODUCT_ID,
             reg._REG_REVISION_ID: 0x01,
             reg._REG_CONFIGURATION_BITS: 0x09,
@@ -117,18 +140,43 @@ class FakeAdns3080:
             reg._REG_SHUTTER_UPPER: 0x00,
             reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER: 0xE0,
             reg._REG_FRAME_PERIOD_MAX_BOUND_UPPER: 0x2E,
+            # Table values [DS p.23]: Min_Bound 0x0E7E (6469 fps), Shutter_Max_Bound 0x2000, so that the
+            # reset state keeps Max_Bound 12000 >= 3710 + 8192.
+            reg._REG_FRAME_PERIOD_MIN_BOUND_LOWER: 0x7E,
+            reg._REG_FRAME_PERIOD_MIN_BOUND_UPPER: 0x0E,
+            reg._REG_SHUTTER_MAX_BOUND_LOWER: 0x00,
+            reg._REG_SHUTTER_MAX_BOUND_UPPER: 0x20,
             reg._REG_SROM_ID: 0x00,
             reg._REG_INVERSE_PRODUCT_ID: reg.INVERSE_PRODUCT_ID,
         }
+        self._pending: dict[int, int] = {}
         self._pending_max_lower: int | None = None
         self._frame_period = 0x2EE0  # automatic rate starts at 2000 fps
         self._reported_counts = self._true_counts()  # the chip starts with a clear accumulator
         self._extra_counts = 0
         self._overflow = False
         self._latched = (0, 0, 0)  # motion, dx, dy frozen by a Motion read
-        self.transactions: deque[tuple[str, int]] = deque(maxlen=history)
-        self.violations = 0
-        self.motion_reads = 0
+        if not hasattr(self, "transactions"):
+            self.transactions: deque[tuple[str, int]] = deque(maxlen=self._history)
+            self.violations = 0
+            self.motion_reads = 0
+
+    # --- pins -----------------------------------------------------------------------------------
+    def set_reset(self, high: bool) -> None:
+        """Drive the RESET pin (active high); the falling edge after a high level resets the chip."""
+        if self.reset_high and not high:
+            self._power_on_registers()
+            self.serial_up = True
+            self.resets += 1
+        self.reset_high = high
+
+    def set_npd(self, high: bool) -> None:
+        """Drive NPD (low = power-down: the chip answers nothing)."""
+        self.powered = high
+
+    def brownout(self) -> None:
+        """A supply dip: the chip resets itself to its power-on registers (400 cpi, automatic frame rate)."""
+        self._power_on_registers()
 
     # --- the bus --------------------------------------------------------------------------------
     def message(self, segments: Sequence[SpiSegment]) -> list[bytes]:
@@ -139,6 +187,10 @@ class FakeAdns3080:
             raise SensorError(errno.EIO, "SPI transfer failed (injected)")
         if not segments:
             raise SpiProtocolError("empty SPI message")
+        self.messages += 1
+        self.wire_time_s += sum(len(sg.tx) * 8 / self.speed_hz + sg.delay_after_us * 1e-6 for sg in segments)
+        if not self.serial_up or not self.powered or self.reset_high:
+            return [bytes(len(sg.tx)) for sg in segments]  # nothing drives MISO
         first = segments[0]
         addr = first.tx[0]
         if addr & reg._WRITE_BIT:
@@ -165,16 +217,33 @@ class FakeAdns3080:
             self._reported_counts = self._true_counts()
             self._extra_counts = 0
             self._overflow = False
+        elif reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER <= addr <= reg._REG_SHUTTER_MAX_BOUND_UPPER and \
+                self.clock() < self._busy_until_s:
+            raise self._violation("bound register written while Busy (wait two frames): the chip's state is undefined")
         elif addr == reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER:
             self._pending_max_lower = value
-            self.regs[addr] = value
         elif addr == reg._REG_FRAME_PERIOD_MAX_BOUND_UPPER:
             if self._pending_max_lower is None:
                 raise self._violation("Frame_Period_Max_Bound: write Lower before Upper")
-            self.regs[addr] = value
-            if self.regs[reg._REG_EXTENDED_CONFIG] & reg._EXT_FIXED_FR:
-                self._frame_period = (value << 8) | self._pending_max_lower
+            new = dict(self.regs)
+            new.update(self._pending)
+            new[reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER] = self._pending_max_lower
+            new[addr] = value
+            max_b = (value << 8) | self._pending_max_lower
+            min_b = (new[reg._REG_FRAME_PERIOD_MIN_BOUND_UPPER] << 8) | new[reg._REG_FRAME_PERIOD_MIN_BOUND_LOWER]
+            sh_b = (new[reg._REG_SHUTTER_MAX_BOUND_UPPER] << 8) | new[reg._REG_SHUTTER_MAX_BOUND_LOWER]
             self._pending_max_lower = None
+            self._pending = {}
+            if max_b < min_b + sh_b:
+                raise self._violation(
+                    f"Frame_Period_Max_Bound {max_b} < Frame_Period_Min_Bound {min_b} + Shutter_Max_Bound {sh_b}"
+                )
+            self.regs = new
+            if self.regs[reg._REG_EXTENDED_CONFIG] & reg._EXT_FIXED_FR:
+                self._frame_period = max_b
+            self._busy_until_s = self.clock() + 2 * self._frame_period / reg.CLOCK_HZ
+        elif reg._REG_FRAME_PERIOD_MIN_BOUND_LOWER <= addr <= reg._REG_SHUTTER_MAX_BOUND_UPPER:
+            self._pending[addr] = value  # applied by the next Frame_Period_Max_Bound write
         elif addr in (reg._REG_CONFIGURATION_BITS, reg._REG_EXTENDED_CONFIG):
             self.regs[addr] = value & ~reg._EXT_BUSY if addr == reg._REG_EXTENDED_CONFIG else value
             if addr == reg._REG_EXTENDED_CONFIG and not value & reg._EXT_FIXED_FR:
@@ -234,10 +303,13 @@ class FakeAdns3080:
             return self._frame_period & 0xFF
         if addr == reg._REG_FRAME_PERIOD_UPPER:
             return self._frame_period >> 8
+        if addr == reg._REG_EXTENDED_CONFIG:
+            busy = reg._EXT_BUSY if self.clock() < self._busy_until_s else 0
+            return self.regs[addr] | busy
         return self.regs.get(addr, 0x00)  # reads of invalid addresses return 0 [DS p.21]
 
     def _squal(self) -> int:
-        return 2 if self.fault is FakeFault.SQUAL_DROP else self.squal_value
+        return 2 if self.fault in (FakeFault.SQUAL_DROP, FakeFault.TRACKING_LOST) else self.squal_value
 
     def _cpm(self) -> float:
         res_1600 = self.regs[reg._REG_CONFIGURATION_BITS] & reg._CONFIG_RES_1600
@@ -251,6 +323,10 @@ class FakeAdns3080:
         """A Motion read freezes the deltas: take what accumulated since the last report."""
         self.motion_reads += 1
         now = self._true_counts()
+        if self.fault is FakeFault.TRACKING_LOST:
+            self._reported_counts = now  # the motion is not seen, and lost
+            self._latched = (self.reserved_motion_bits | self._res_bit(), 0, 0)
+            return
         if self.fault is FakeFault.SATURATE:
             self._extra_counts += 400
         acc = now - self._reported_counts + self._extra_counts
@@ -262,12 +338,14 @@ class FakeAdns3080:
         motion = reg._MOTION_MOT if (along or self._extra_counts) else 0
         if self._overflow:
             motion |= reg._MOTION_OVF
-        if self.regs[reg._REG_CONFIGURATION_BITS] & reg._CONFIG_RES_1600:
-            motion |= reg._MOTION_RES
+        motion |= self._res_bit() | self.reserved_motion_bits
         if self.axis == "y":
             self._latched = (motion, 0, along)
         else:
             self._latched = (motion, along, 0)
+
+    def _res_bit(self) -> int:
+        return reg._MOTION_RES if self.regs[reg._REG_CONFIGURATION_BITS] & reg._CONFIG_RES_1600 else 0
 
     def _burst(self) -> bytes:
         self._latch()

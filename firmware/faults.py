@@ -23,6 +23,8 @@ class Fault(str, Enum):
     LINK_LOST = "link_lost"  # no command for link_timeout_s while armed
     EXCEPTION = "exception"  # a bug: the app stops
     SIGNAL = "signal"  # SIGINT/SIGTERM
+    LEG_SYNC_LOST = "leg_sync_lost"  # a missed or extra touchdown: the stance leg is not known
+    SENSOR_RESET = "sensor_reset"  # the sensor reset itself (Motion RES bit back to 400 cpi)
 
     @property
     def code(self) -> int:
@@ -52,10 +54,10 @@ class HealthMonitor:
         self._squal_low_since_ns = None
         self._saturated = 0
 
-    def check(self, t_ns: int, squal: int, saturated: bool, reserved_bits: bool) -> tuple[Fault, str] | None:
+    def check(self, t_ns: int, squal: int, saturated: bool, stuck: bool) -> tuple[Fault, str] | None:
         """Return (fault, detail) if this sample makes a fault active, else None."""
-        if reserved_bits:
-            return Fault.SENSOR_STUCK, "reserved Motion bits set (MISO stuck high or link out of sync)"
+        if stuck:
+            return Fault.SENSOR_STUCK, "every byte of the motion burst reads 0xFF or SQUAL > 169 (MISO stuck or link out of sync)"
         if saturated:
             self._saturated += 1
             if self._saturated >= self.limits.saturated_samples_max:

@@ -8,6 +8,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from rimless.errors import UserError
 from rimless.firmware.adns3080 import Adns3080
 from rimless.firmware.clutch import ClutchBank
 from rimless.firmware.config import RobotConfig, SensorConfig
@@ -43,10 +44,19 @@ class Hardware:
 
 
 def _configure(sensor: Adns3080, cfg: SensorConfig) -> None:
-    sensor.power_up()
+    sensor.power_up(pulse_reset=False)  # the RESET lines were pulsed by `_reset_all`
     sensor.set_resolution(cfg.resolution_cpi)
     sensor.set_frame_rate(cfg.frame_rate_hz)
     sensor.clear_motion()
+
+
+def _reset_all(sensors: list[Adns3080], cfg: RobotConfig) -> None:
+    """Pulse each RESET line once (sensors may share one), before any sensor is configured."""
+    done: set[int] = set()
+    for sensor, s in zip(sensors, cfg.sensors, strict=True):
+        if s.reset_pin not in done:
+            sensor.reset_pulse()
+            done.add(s.reset_pin)
 
 
 def _channels(cfg: RobotConfig, sensors: list[Adns3080]) -> list[Channel]:
@@ -54,6 +64,37 @@ def _channels(cfg: RobotConfig, sensors: list[Adns3080]) -> list[Channel]:
         Channel(sensor, LegDetector(cfg.detector, s.legs, start_index=cfg.clutch.start_leg_index), HealthMonitor(s.health()))
         for sensor, s in zip(sensors, cfg.sensors, strict=True)
     ]
+
+
+class GpioChipSelectBus:
+    """An `SpiBus` whose chip select is a GPIO (active low) around each message of a shared bus
+    opened without its own CS (`dtoverlay=spi0-0cs`): one sensor per leg on one SPI bus."""
+
+    def __init__(self, bus: Any, cs: Any) -> None:
+        self.bus = bus
+        self.cs = cs  # a gpiozero DigitalOutputDevice with active_high=False: on() = CS low
+
+    def message(self, segments: Any) -> list[bytes]:
+        """CS low, the message, CS high (also when the transfer fails)."""
+        self.cs.on()
+        try:
+            return self.bus.message(segments)
+        finally:
+            self.cs.off()
+
+    def close(self) -> None:
+        """Deselect; the shared bus is closed by its owner."""
+        self.cs.off()
+
+
+class GpioUnavailable(UserError):
+    """No GPIO on this machine (not a Pi, or no GPIO library)."""
+
+
+def _output(pin: int, *, active_high: bool, pin_factory: Any = None) -> Any:
+    from gpiozero import DigitalOutputDevice
+
+    return DigitalOutputDevice(pin, active_high=active_high, initial_value=False, pin_factory=pin_factory)
 
 
 def default_fake_trajectory() -> GaitTrajectory:
@@ -65,50 +106,140 @@ def build_fake(
     cfg: RobotConfig,
     *,
     trajectory: Callable[[float], float] | None = None,
+    trajectories: list[Callable[[float], float]] | None = None,
     pin_factory: Any = None,
     noise_counts: float = 0.3,
     seed: int = 0,
 ) -> Hardware:
-    """Fake sensors replaying `trajectory` on the monotonic clock, clutches on a MockFactory."""
+    """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on the monotonic clock;
+    clutches, RESET, NPD and GPIO chip selects on a MockFactory."""
     from gpiozero.pins.mock import MockFactory
 
     factory = pin_factory if pin_factory is not None else MockFactory(revision=PI4_REVISION)
     traj = trajectory if trajectory is not None else default_fake_trajectory()
-    fakes, sensors = [], []
-    for i, s in enumerate(cfg.sensors):
-        # counts_per_m is calibrated at the configured resolution; the fake takes it at 1600 cpi.
-        fake = FakeAdns3080(traj, counts_per_m=s.counts_per_m * 1600 / s.resolution_cpi, axis=s.axis,
-                            sign=s.sign, noise_counts=noise_counts, seed=seed + i)
-        sensor = Adns3080(fake, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign)
-        _configure(sensor, s)
-        fakes.append(fake)
-        sensors.append(sensor)
     clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
-    return Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, [f.close for f in fakes])
+    fakes: list[FakeAdns3080] = []
+    sensors: list[Adns3080] = []
+    closers: list[Callable[[], None]] = []
+    lines: dict[int, Any] = {}
+    on_line: dict[int, list[FakeAdns3080]] = {}  # the fakes whose RESET is wired to each GPIO
+    try:
+        for i, s in enumerate(cfg.sensors):
+            # counts_per_m is calibrated at the configured resolution; the fake takes it at 1600 cpi.
+            fake = FakeAdns3080(trajectories[i] if trajectories else traj,
+                                counts_per_m=s.counts_per_m * 1600 / s.resolution_cpi, axis=s.axis,
+                                sign=s.sign, noise_counts=noise_counts, seed=seed + i, speed_hz=s.spi_speed_hz)
+            closers.append(fake.close)
+            fakes.append(fake)
+            reset = _shared_line(lines, s.reset_pin, factory, closers)
+            npd = None if s.npd_pin is None else _shared_line(lines, s.npd_pin, factory, closers)
+            bus: Any = fake
+            if s.cs_pin is not None:
+                cs = _output(s.cs_pin, active_high=False, pin_factory=factory)
+                closers.append(cs.close)
+                bus = GpioChipSelectBus(fake, cs)
+
+            def drive_reset(on: bool, dev: Any = reset, pin: int = s.reset_pin) -> None:
+                dev.on() if on else dev.off()
+                for f in on_line[pin]:
+                    f.set_reset(on)
+
+            def drive_npd(on: bool, dev: Any = npd, fake: FakeAdns3080 = fake) -> None:
+                dev.on() if on else dev.off()
+                fake.set_npd(on)
+
+            on_line.setdefault(s.reset_pin, []).append(fake)
+            sensor = Adns3080(bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign, reset=drive_reset,
+                              npd=None if npd is None else drive_npd)
+            sensors.append(sensor)
+        _reset_all(sensors, cfg)
+        for sensor, s in zip(sensors, cfg.sensors, strict=True):
+            _configure(sensor, s)
+    except BaseException:
+        Hardware([], clutches, [], closers=closers).close()
+        raise
+    return Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, closers)
+
+
+def _shared_line(lines: dict[int, Any], pin: int, factory: Any, closers: list[Callable[[], None]]) -> Any:
+    """One output device per GPIO (RESET lines may be shared); active high, starting low."""
+    if pin not in lines:
+        lines[pin] = _output(pin, active_high=True, pin_factory=factory)
+        closers.append(lines[pin].close)
+    return lines[pin]
 
 
 def build_real(cfg: RobotConfig) -> Hardware:
-    """Open the SPI buses and GPIO on the Pi, power up and check every sensor (raises on failure)."""
-    from gpiozero import DigitalOutputDevice
+    """Open the SPI buses and GPIO on the Pi, pulse RESET, power up and check every sensor.
 
+    Raises `GpioUnavailable` (one line) when this machine has no usable GPIO, `SensorError` when a
+    sensor cannot be opened or identified.
+    """
     from rimless.firmware.spi import SpidevBus
 
     closers: list[Callable[[], None]] = []
     sensors: list[Adns3080] = []
-    clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high)  # off first, before anything
+    clutches = open_clutches(cfg.clutch.pins, active_high=cfg.clutch.active_high)  # off first, before anything
     try:
+        lines: dict[int, Any] = {}
+        buses: dict[tuple[int, int], Any] = {}
         for s in cfg.sensors:
-            bus = SpidevBus(s.spi_bus, s.spi_device, speed_hz=s.spi_speed_hz)
-            closers.append(bus.close)
-            reset_cb = None
-            if s.reset_pin is not None:
-                reset_dev = DigitalOutputDevice(s.reset_pin, active_high=True, initial_value=False)
-                closers.append(reset_dev.close)
-                reset_cb = lambda on, d=reset_dev: d.on() if on else d.off()
-            sensor = Adns3080(bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign, reset=reset_cb)
-            _configure(sensor, s)
+            key = (s.spi_bus, s.spi_device)
+            if key not in buses:
+                buses[key] = SpidevBus(s.spi_bus, s.spi_device, speed_hz=s.spi_speed_hz, no_cs=s.cs_pin is not None)
+                closers.append(buses[key].close)
+            bus: Any = buses[key]
+            if s.cs_pin is not None:
+                cs = _output(s.cs_pin, active_high=False)
+                closers.append(cs.close)
+                bus = GpioChipSelectBus(bus, cs)
+            reset_dev = _shared_line(lines, s.reset_pin, None, closers)
+            npd_dev = None if s.npd_pin is None else _shared_line(lines, s.npd_pin, None, closers)
+            sensor = Adns3080(
+                bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign,
+                reset=lambda on, d=reset_dev: d.on() if on else d.off(),
+                npd=None if npd_dev is None else (lambda on, d=npd_dev: d.on() if on else d.off()),
+            )
             sensors.append(sensor)
+        _reset_all(sensors, cfg)
+        for sensor, s in zip(sensors, cfg.sensors, strict=True):
+            _configure(sensor, s)
     except BaseException:
         Hardware([], clutches, [], closers=closers).close()
         raise
     return Hardware(_channels(cfg, sensors), clutches, sensors, None, [], closers)
+
+
+def open_clutches(pins: Any, *, active_high: bool, pin_factory: Any = None) -> ClutchBank:
+    """The clutch outputs, driven off; `GpioUnavailable` (one line) when this machine has no GPIO."""
+    import warnings
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
+            return ClutchBank(pins, active_high=active_high, pin_factory=pin_factory)
+    except Exception as err:  # noqa: BLE001 - gpiozero, lgpio and the OS each raise their own
+        if type(err).__name__ in ("BadPinFactory", "PinFactoryFallback") or isinstance(err, ImportError):
+            raise GpioUnavailable(
+                f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
+                "the robot extra (lgpio)"
+            ) from None
+        raise GpioUnavailable(
+            f"cannot drive the clutch pins {list(pins)} ({type(err).__name__}: {err}); is another process "
+            "(a running firmware) holding them?"
+        ) from None
+
+
+def release_pins(pins: Any, *, active_high: bool, pin_factory: Any = None) -> dict[str, str]:
+    """Drive every clutch pin to its off level, then release the lines (`rimless robot release`).
+
+    Returns each pin's level history ("0", "01"...), as read back from the pin factory.
+    """
+    bank = open_clutches(pins, active_high=active_high, pin_factory=pin_factory)
+    try:
+        bank.all_off()
+        levels = {f"GPIO{p}": "".join("1" if st.state else "0" for st in pin_factory.pin(p).states)
+                  for p in pins} if pin_factory is not None else {}
+    finally:
+        bank.close()
+    return levels

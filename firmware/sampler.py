@@ -74,6 +74,7 @@ class Sampler:
         self.sample_times_ns = array("q")
         self.latencies_ns = array("q")
         self.command_latencies_ns = array("q")
+        self.wake_late_ns = array("q")  # sample time minus its deadline
 
     # --- control from other threads -------------------------------------------------------------
     def start(self) -> None:
@@ -141,6 +142,7 @@ class Sampler:
                 stats.samples += 1
                 if self.record_timing and len(self.sample_times_ns) < self._cap:
                     self.sample_times_ns.append(t)
+                    self.wake_late_ns.append(t - deadline)
                     self.latencies_ns.append(ctl.last_latency_ns)
                     if ctl.last_had_command:
                         self.command_latencies_ns.append(ctl.last_latency_ns)

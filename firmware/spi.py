@@ -33,6 +33,7 @@ SPI_IOC_TRANSFER = struct.Struct("<QQIIHBBBBBB")
 assert SPI_IOC_TRANSFER.size == 32
 
 SPI_MODE_3 = 3  # CPOL=1, CPHA=1: SCLK idles high, sampled on the rising edge (ADNS-3080 p.15)
+SPI_NO_CS = 0x40  # mode flag: the driver leaves chip select alone (a GPIO selects the device)
 MAX_DELAY_US = 0xFFFF  # delay_usecs is a u16
 
 
@@ -94,7 +95,7 @@ class SpidevBus:
     without it the node is opened and configured with the same ioctls directly.
     """
 
-    def __init__(self, bus: int = 0, device: int = 0, *, speed_hz: int = 2_000_000) -> None:
+    def __init__(self, bus: int = 0, device: int = 0, *, speed_hz: int = 2_000_000, no_cs: bool = False) -> None:
         self.path = f"/dev/spidev{bus}.{device}"
         self.speed_hz = int(speed_hz)
         self._spidev = None
@@ -107,6 +108,7 @@ class SpidevBus:
                 dev = spidev.SpiDev()
                 dev.open(bus, device)
                 dev.mode = SPI_MODE_3
+                dev.no_cs = no_cs
                 dev.max_speed_hz = self.speed_hz
                 dev.bits_per_word = 8
                 self._spidev = dev
@@ -115,7 +117,7 @@ class SpidevBus:
                 self._fd = os.open(self.path, os.O_RDWR)
                 import fcntl
 
-                fcntl.ioctl(self._fd, SPI_IOC_WR_MODE, struct.pack("<B", SPI_MODE_3))
+                fcntl.ioctl(self._fd, SPI_IOC_WR_MODE, struct.pack("<B", SPI_MODE_3 | (SPI_NO_CS if no_cs else 0)))
                 fcntl.ioctl(self._fd, SPI_IOC_WR_BITS_PER_WORD, struct.pack("<B", 8))
                 fcntl.ioctl(self._fd, SPI_IOC_WR_MAX_SPEED_HZ, struct.pack("<I", self.speed_hz))
         except FileNotFoundError as err:

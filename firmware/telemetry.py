@@ -21,7 +21,7 @@ from rimless.firmware.faults import Fault
 
 EVENT_CODES = {
     "touchdown": 1, "lock": 2, "release": 3, "no_zero_crossing": 4, "arm": 5, "disarm": 6, "param": 7,
-    "trial_start": 8, "trial_stop": 9, "stop": 10, "fault": 11,
+    "trial_start": 8, "trial_stop": 9, "stop": 10, "fault": 11, "sync_lost": 12, "lock_unsynced": 13, "signal": 14,
 }
 
 
@@ -92,12 +92,18 @@ def pack_datagrams(objs: Iterable[dict[str, Any]], max_bytes: int, *, batch: boo
 
 
 class TelemetrySender:
-    """Non-blocking UDP sender; counts what it sends and what it drops."""
+    """Non-blocking UDP sender to one or more destinations (e.g. `rimless robot listen` and PlotJuggler
+    at once); counts what it sends and what it drops, over all destinations.
+
+    :param destinations: (host, port) pairs; each is resolved once, here.
+    """
 
     def __init__(
-        self, host: str, port: int, *, max_datagram_bytes: int = 1200, batch: bool = True, decimate: int = 1
+        self, destinations: list[tuple[str, int]] | str, port: int | None = None, *, max_datagram_bytes: int = 1200,
+        batch: bool = True, decimate: int = 1,
     ) -> None:
-        self.address = (host, port)
+        if isinstance(destinations, str):  # the one-destination form: TelemetrySender(host, port)
+            destinations = [(destinations, int(port or 9870))]
         self.max_datagram_bytes = max_datagram_bytes
         self.batch = batch
         self.decimate = max(1, decimate)
@@ -106,20 +112,29 @@ class TelemetrySender:
         self.sent_bytes = 0
         self.dropped_datagrams = 0
         self._n = 0
-        # Resolve once: sendto() with a host name would do a (blocking) DNS lookup every time.
+        self.socks: list[socket.socket] = []
+        self.addresses: list[tuple[Any, ...]] = []
         try:
-            info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
-        except (socket.gaierror, UnicodeError) as err:
-            raise ValueError(f"telemetry host {host!r} cannot be resolved: {err}") from err
-        self.address = info[4]
-        self.sock = socket.socket(info[0], socket.SOCK_DGRAM)
-        self.sock.setblocking(False)
-        # Connected: the kernel reports an ICMP "port unreachable" as ECONNREFUSED on a later send,
-        # so a dead receiver shows up in dropped_datagrams instead of vanishing silently.
-        self.sock.connect(self.address)
+            for host, dport in destinations:
+                # Resolve once: sendto() with a host name would do a (blocking) DNS lookup every time.
+                try:
+                    info = socket.getaddrinfo(host, dport, type=socket.SOCK_DGRAM)[0]
+                except (socket.gaierror, UnicodeError) as err:
+                    raise ValueError(f"telemetry host {host!r} cannot be resolved: {err}") from err
+                sock = socket.socket(info[0], socket.SOCK_DGRAM)
+                self.socks.append(sock)
+                sock.setblocking(False)
+                # Connected: the kernel reports an ICMP "port unreachable" as ECONNREFUSED on a later send,
+                # so a dead receiver shows up in dropped_datagrams instead of vanishing silently.
+                sock.connect(info[4])
+                self.addresses.append(info[4])
+        except BaseException:
+            self.close()
+            raise
+        self.address = self.addresses[0] if self.addresses else None
 
     def send(self, records: Iterable[Record]) -> None:
-        """Encode and send; never blocks, never raises on a network error."""
+        """Encode and send to every destination; never blocks, never raises on a network error."""
         objs = []
         for rec in records:
             if isinstance(rec, SampleRecord):
@@ -128,17 +143,19 @@ class TelemetrySender:
                     continue
             objs.append(record_to_json(rec, self.clock))
         for data in pack_datagrams(objs, self.max_datagram_bytes, batch=self.batch):
-            try:
-                self.sock.send(data)
-            except OSError:  # nobody listening (ICMP refused), buffer full, network down: drop it
-                self.dropped_datagrams += 1
-            else:
-                self.sent_datagrams += 1
-                self.sent_bytes += len(data)
+            for sock in self.socks:
+                try:
+                    sock.send(data)
+                except OSError:  # nobody listening (ICMP refused), buffer full, network down: drop it
+                    self.dropped_datagrams += 1
+                else:
+                    self.sent_datagrams += 1
+                    self.sent_bytes += len(data)
 
     def close(self) -> None:
-        """Close the socket."""
-        self.sock.close()
+        """Close the sockets."""
+        for sock in self.socks:
+            sock.close()
 
 
 def parse_datagram(data: bytes) -> list[dict[str, Any]]:

@@ -31,6 +31,9 @@ class VirtualClock:
     def ns(self) -> int:
         return round(self.t * 1e9)
 
+    def sleep(self, s: float) -> None:
+        self.t += s
+
 
 @dataclass
 class Rig:
@@ -85,17 +88,21 @@ def make_rig() -> Callable[..., Rig]:
         limits: HealthLimits | None = None,
         id_check_interval_s: float = 0.0,
         arm: bool = True,
+        start_index: int = -1,
     ) -> Rig:
+        # start_index -1: the last leg stands at arm time, so the first touchdown is legs[0].
         clock = VirtualClock()
         fake = FakeAdns3080(trajectory, clock=clock, noise_counts=noise_counts, seed=seed)
-        sensor = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, sleep=lambda _s: None, clock_ns=clock.ns)
+        sensor = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep,
+                          clock_ns=clock.ns)
         sensor.power_up()
         sensor.set_resolution(1600)
         factory = MockFactory(revision="c03111")
         factories.append(factory)
         bank = ClutchBank(PINS, pin_factory=factory)
         banks.append(bank)
-        det = LegDetector(params or DetectorParams(), legs)
+        clock.t = 0.0  # the gait's time axis starts after power-up
+        det = LegDetector(params or DetectorParams(), legs, start_index=start_index)
         ctl = Controller([Channel(sensor, det, HealthMonitor(limits or HealthLimits()))], bank,
                          max_hold_s=max_hold_s, id_check_interval_s=id_check_interval_s, clock_ns=clock.ns)
         if arm:

@@ -20,12 +20,17 @@ class Clock:
     def __call__(self) -> float:
         return self.t
 
+    def sleep(self, s: float) -> None:
+        self.t += s
+
 
 def make(trajectory=lambda t: 0.0, **kw):
     clock = Clock()
     fake = FakeAdns3080(trajectory, clock=clock, **kw)
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, sleep=lambda s: None,
+    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep,
                    clock_ns=lambda: round(clock.t * 1e9))
+    drv.reset_pulse()  # the chip has no power-on reset: nothing answers before this
+    clock.t = 0.0
     return clock, fake, drv
 
 
@@ -83,6 +88,8 @@ def test_displacement_matches_trajectory_within_a_count() -> None:
     clock, fake, drv = make(traj, noise_counts=0.0)
     drv.power_up()
     drv.set_resolution(1600)
+    clock.t = 0.0  # power-up advanced the clock: restart the trajectory from a clear accumulator
+    drv.clear_motion()
     total = 0.0
     for k in range(1, 301):
         clock.t = k / 300

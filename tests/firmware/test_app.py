@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import hmac
 import json
 import socket
 import time
@@ -16,7 +18,7 @@ from rimless.firmware.fake_adns3080 import GaitTrajectory
 from rimless.firmware.hardware import build_fake
 from rimless.firmware.triallog import read_trial_log
 
-TOKEN = "s3cret"
+TOKEN = "test-token-7f3a9c2e1b5d"
 
 
 def config(tmp_path: Path, **kw) -> RobotConfig:
@@ -54,12 +56,22 @@ def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=
 
 
 class Client:
-    def __init__(self, reader, writer) -> None:
-        self.reader, self.writer = reader, writer
+    """A loopback client of the signed protocol (written from the protocol's description)."""
+
+    def __init__(self, reader, writer, hello) -> None:
+        self.reader, self.writer, self.hello = reader, writer, hello
+        self.nonce = hello["nonce"]
 
     @classmethod
     async def connect(cls, port: int) -> Client:
-        return cls(*await asyncio.open_connection("127.0.0.1", port))
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        hello = json.loads(await asyncio.wait_for(reader.readline(), 5))
+        return cls(reader, writer, hello)
+
+    def sign(self, seq: int, cmd: str, args: dict, token: str = TOKEN) -> bytes:
+        body = json.dumps([seq, cmd, args], sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+        mac = hmac.new(token.encode(), f"{self.nonce}\n{body}".encode(), hashlib.sha256).hexdigest()
+        return json.dumps({"seq": seq, "cmd": cmd, "args": args, "mac": mac}).encode() + b"\n"
 
     async def raw(self, data: bytes) -> dict:
         self.writer.write(data)
@@ -67,7 +79,7 @@ class Client:
         return json.loads(await asyncio.wait_for(self.reader.readline(), 5))
 
     async def cmd(self, cmd: str, seq: int, token: str = TOKEN, **args) -> dict:
-        return await self.raw(json.dumps({"token": token, "seq": seq, "cmd": cmd, "args": args}).encode() + b"\n")
+        return await self.raw(self.sign(seq, cmd, args, token))
 
     def close(self) -> None:
         self.writer.close()
@@ -91,14 +103,14 @@ def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
             await c.raw(json.dumps({"seq": 3, "cmd": "arm"}).encode() + b"\n"),  # no token
             await c.cmd("arm", 1),  # replayed seq: out of order
             await c.cmd("arm", 4, extra=1),  # unknown argument
-            await c.raw(json.dumps({"token": TOKEN, "seq": 5, "cmd": "arm", "x": 1}).encode() + b"\n"),
+            await c.raw(json.dumps({"seq": 5, "cmd": "arm", "args": {}, "mac": "0" * 64, "x": 1}).encode() + b"\n"),
             await c.cmd("fly", 6),
             await c.cmd("set", 7, name="touch_velocity_m_s", value=-3),
             await c.cmd("set", 8, name="no_such_param", value=1),
             await c.cmd("set", 9, name="touch_velocity_m_s"),
             await c.cmd("trial_stop", 10),  # out of order: no trial running
             await c.cmd("trial_start", 11, name="../escape"),
-            await c.raw(json.dumps({"token": TOKEN, "seq": True, "cmd": "arm"}).encode() + b"\n"),
+            await c.raw(json.dumps({"token": TOKEN, "seq": 13, "cmd": "arm", "args": {}}).encode() + b"\n"),
         ]
         after = await c.cmd("status", 12)
         c.close()

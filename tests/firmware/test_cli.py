@@ -19,6 +19,7 @@ from rimless.cli import app
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 runner = CliRunner()
+STRONG = "cli-test-token-5e8d1f0a9b"
 
 
 def invoke(*args: str, env: dict | None = None):
@@ -62,7 +63,7 @@ def test_bad_host_and_no_robot(tmp_path) -> None:
 def test_bench_json_contract() -> None:
     r = invoke("bench", "--fake", "--rate-hz", "300", "--duration-s", "0.5", "--json")
     assert r.exit_code == 0, r.output
-    rows = json.loads(r.output)
+    rows = json.loads(r.stdout)
     assert len(rows) == 1
     keys = {"rate_hz", "achieved_rate_hz", "period_jitter_p99_ms", "latency_p50_ms", "latency_p99_ms",
             "latency_max_ms", "missed_deadlines"}
@@ -77,7 +78,7 @@ def test_bench_json_contract() -> None:
 def test_check_fake_reports_id_squal_and_clicks() -> None:
     r = invoke("check", "--fake", "--json")
     assert r.exit_code == 0, r.output
-    rep = json.loads(r.output)
+    rep = json.loads(r.stdout)
     assert rep["sensors"][0]["product_id_ok"] and rep["sensors"][0]["squal"] == 60
     assert rep["sensors"][0]["frame_rate_hz"] == 2000.0
     assert [c["pin"] for c in rep["clutches"]] == [17, 27, 22, 23, 24, 16, 20, 21]
@@ -113,7 +114,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     port = free_port()
     cfg = tmp_path / "robot.toml"
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\n[log]\ndir = "{tmp_path}"\n')
-    env = {**os.environ, "RIMLESS_TOKEN": "tok"}
+    env = {**os.environ, "RIMLESS_TOKEN": STRONG}
     proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     try:
@@ -124,7 +125,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline and not engaged:
             try:
-                engaged = send_command("127.0.0.1", "status", token="tok", port=port, timeout_s=1)["engaged"]
+                engaged = send_command("127.0.0.1", "status", token=STRONG, port=port, timeout_s=1)["engaged"]
             except RobotUnreachable:
                 pass
             time.sleep(0.02)
@@ -142,3 +143,132 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     assert len(levels) == 8
     assert all(h.endswith("0") for h in levels.values()), levels  # every pin ends off...
     assert any(h == "010" or h.endswith("10") for h in levels.values())  # ...including one that was on
+
+
+def test_set_reads_a_negative_number_as_a_value_and_status_takes_json() -> None:
+    port = free_port()
+    r = invoke("set", "touch_velocity_m_s", "-3", "--host", "127.0.0.1", "--port", str(port), "--token", STRONG)
+    assert r.exit_code == 2 and r.output.startswith("error: cannot reach the robot"), r.output
+    r = invoke("set", "touch_velocity_m_s", "abc", "--host", "127.0.0.1", "--token", STRONG)
+    assert r.exit_code == 2 and r.output.count("\n") == 1 and "VALUE must be a number" in r.output
+    r = invoke("status", "--json", "--host", "127.0.0.1", "--port", str(port), "--token", STRONG)
+    assert r.exit_code == 2 and r.output.startswith("error: cannot reach the robot"), r.output
+
+
+def test_set_minus_3_reaches_the_robot_and_its_refusal_is_one_line(tmp_path) -> None:
+    import asyncio
+
+    from tests.firmware.test_app import TOKEN, config, scenario
+
+    async def script(app, hw):
+        def cli():
+            return (invoke("set", "touch_velocity_m_s", "-3", "--host", "127.0.0.1", "--port", str(app.command_port),
+                           "--token", TOKEN),
+                    invoke("set", "lock_velocity_m_s", "-0.01", "--host", "127.0.0.1", "--port",
+                           str(app.command_port), "--token", TOKEN),
+                    invoke("status", "--json", "--host", "127.0.0.1", "--port", str(app.command_port),
+                           "--token", TOKEN))
+
+        return await asyncio.to_thread(cli)
+
+    _app, _summary, (bad, good, status), _hw = scenario(config(tmp_path), script)
+    assert bad.exit_code == 2 and bad.output.count("\n") == 1, bad.output
+    assert "touch_velocity_m_s" in bad.output and "-3" in bad.output
+    assert good.exit_code == 0 and json.loads(good.stdout) == {"name": "lock_velocity_m_s", "value": -0.01}
+    assert status.exit_code == 0 and json.loads(status.stdout)["params"]["lock_velocity_m_s"] == -0.01
+
+
+def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -> None:
+    port = free_port()
+    out, csv_out = tmp_path / "tel.jsonl", tmp_path / "tel.csv"
+
+    def send() -> None:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        time.sleep(0.3)
+        for k in range(10):
+            time.sleep(0.02)
+            batch = [{"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},
+                     {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}}]
+            s.sendto(json.dumps(batch).encode(), ("127.0.0.1", port))
+        time.sleep(0.8)  # a pause longer than --stale-s
+        s.sendto(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode(), ("127.0.0.1", port))
+        s.close()
+
+    t = threading.Thread(target=send)
+    t.start()
+    r = invoke("listen", "--bind", "127.0.0.1", "--port", str(port), "--out", str(out), "--csv", str(csv_out),
+               "--duration-s", "2.0", "--summary-every-s", "0.5", "--stale-s", "0.4", "--no-live")
+    t.join()
+    assert r.exit_code == 0, r.output
+    assert "data stopped: nothing for 0.4 s" in r.output and "data resumed after" in r.output
+    assert f"wrote {out}" in r.output and f"wrote {csv_out}" in r.output
+    assert not list(tmp_path.glob("*.part"))
+    assert len(out.read_text().splitlines()) == 21
+    import csv as csvmod
+
+    rows = list(csvmod.DictReader(csv_out.open()))
+    assert len(rows) == 21
+    assert rows[2]["leg/velocity_m_s"] == "0.1" and rows[1]["event/name"] == "lock"
+
+
+def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
+    rxs = []
+    for _ in range(2):
+        rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rx.bind(("127.0.0.1", 0))
+        rx.settimeout(0.2)
+        rxs.append(rx)
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(f'[commands]\nenabled = false\n[telemetry]\nhost = "127.0.0.1"\nport = {rxs[0].getsockname()[1]}\n'
+                   f'[log]\ndir = "{tmp_path}"\n')
+    counts = [0, 0]
+    stop = threading.Event()
+
+    def drain(i: int) -> None:
+        while not stop.is_set():
+            try:
+                counts[i] += sum(1 for o in json.loads(rxs[i].recv(65536)) if "leg" in o)
+            except TimeoutError:
+                pass
+
+    threads = [threading.Thread(target=drain, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    r = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1.0",
+                        "--telemetry", f"127.0.0.1:{rxs[1].getsockname()[1]}"], capture_output=True, text=True,
+                       timeout=60)
+    time.sleep(0.3)
+    stop.set()
+    for t in threads:
+        t.join()
+    for rx in rxs:
+        rx.close()
+    assert r.returncode == 0, r.stderr
+    assert counts[0] > 100 and counts[0] == counts[1]
+    r = invoke("run", "--fake", "--telemetry", "nohostport")
+    assert r.exit_code == 2 and "--telemetry" in r.output
+
+
+def test_bench_reports_every_part_of_the_delay() -> None:
+    r = invoke("bench", "--fake", "--rate-hz", "500", "--duration-s", "1.5", "--json")
+    assert r.exit_code == 0, r.output
+    row = json.loads(r.stdout)[0]
+    # Wire time at 2 MHz: 8 bytes + the 75 us t_SRAD-MOT gap per Motion_Burst (plus rare re-reads).
+    assert 0.107 <= row["spi_wire_per_sample_ms"] < 0.2 and row["spi_clock_hz"] == 2_000_000
+    assert row["wake_late_p50_ms"] <= row["wake_late_p99_ms"] <= row["wake_late_max_ms"]
+    assert row["locks"] >= 3 and row["touchdowns"] >= 3
+    # The lock follows the true peak by less than the velocity window; the touchdown is seen within 20 ms.
+    assert -2.0 <= row["lock_after_peak_p50_ms"] <= 20.0
+    assert 0.0 <= row["touchdown_detect_p50_ms"] <= 20.0
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [(("bench", "--fake", "--duration-s", "abc"), "--duration-s"), (("status",), "--host"),
+     (("arm", "--host"), "--host"), (("status", "--host", "x", "--bogus"), "--bogus"),
+     (("heartbeat", "--host", "h", "--period-s", "-1"), "--period-s")],
+)
+def test_usage_errors_are_one_line(args, option) -> None:
+    r = invoke(*args)
+    assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith("error: ") and option in r.output

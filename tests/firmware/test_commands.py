@@ -1,0 +1,273 @@
+"""The command channel under abuse, on the loopback only: idle-connection floods, replays, hostile
+JSON, log floods, weak tokens, and the heartbeat that keeps a remotely armed robot armed."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import resource
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from rimless.firmware.app import RobotApp
+from rimless.firmware.commands import (
+    RateLimitedLog,
+    RobotLink,
+    WeakToken,
+    check_token,
+    command_mac,
+    parse_command,
+    Rejected,
+    send_command,
+)
+from rimless.firmware.config import CommandsConfig, RobotConfig
+from rimless.firmware.errors import CommandError, RobotUnreachable
+from rimless.firmware.heartbeat import Heartbeat
+from tests.firmware.test_app import TOKEN, Client, all_off, config, scenario
+
+RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
+
+
+def test_mac_is_hmac_sha256_of_nonce_and_canonical_command() -> None:
+    import hashlib
+    import hmac
+
+    # Hand-built expectation: key = token, message = nonce, newline, canonical JSON of [seq, cmd, args].
+    want = hmac.new(b"k" * 20, b'abc\n[7,"set",{"name":"x","value":-3}]', hashlib.sha256).hexdigest()
+    assert command_mac("k" * 20, "abc", 7, "set", {"value": -3, "name": "x"}) == want
+
+
+def test_weak_tokens_are_refused() -> None:
+    for weak in ("change-me", "s3cret", "short-token", "aaaaaaaaaaaaaaaaaaaa", "abababababababababab"):
+        with pytest.raises(WeakToken):
+            check_token(weak)
+    assert check_token("x7Gq-2mPz_9LrT4vB1nK") == "x7Gq-2mPz_9LrT4vB1nK"
+    with pytest.raises(WeakToken):
+        RobotApp(RobotConfig(commands=CommandsConfig(token="change-me")), hw=None)  # type: ignore[arg-type]
+
+
+def test_replayed_arm_is_rejected_on_a_new_connection_and_on_the_same_one(tmp_path) -> None:
+    async def script(app, hw):
+        c1 = await Client.connect(app.command_port)
+        captured = c1.sign(1, "arm", {})
+        r1 = await c1.raw(captured)
+        await c1.cmd("disarm", 2)
+        replay_same = await c1.raw(captured)  # same connection: seq goes backwards
+        c2 = await Client.connect(app.command_port)
+        replay_new = await c2.raw(captured)  # new connection: another nonce, the mac fails
+        clear = await c2.raw(json.dumps({"token": TOKEN, "seq": 5, "cmd": "arm", "args": {}}).encode() + b"\n")
+        status = await c2.cmd("status", 6)
+        c1.close()
+        c2.close()
+        return r1, replay_same, replay_new, clear, status, c1.nonce != c2.nonce
+
+    app, summary, (r1, same, new, clear, status, fresh), hw = scenario(config(tmp_path), script)
+    assert r1["ok"] and fresh
+    assert not same["ok"] and "out of order" in same["error"]
+    assert not new["ok"] and "bad mac" in new["error"]
+    assert not clear["ok"] and "clear-text" in clear["error"]
+    assert status["result"]["armed"] is False and all_off(hw)
+
+
+def test_hostile_json_gets_one_line_refusals_without_tracebacks(tmp_path, caplog) -> None:
+    lines = [
+        b'{"seq": 1, "cmd": "arm", "args": {"x": "\\ud800"}, "mac": "00"}',  # lone surrogate
+        b"[" * 2000 + b"]" * 2000,  # deep nesting
+        b'{"seq": 2, "cmd": "set", "args": {"name": "' + b"[" * 1500 + b'"}, "mac": "\\udfff"}',
+        b'{"a":' * 1000 + b"1" + b"}" * 1000,
+        b'{"seq": 3, "cmd": "arm", "args": {}, "mac": "\\u00e9\\u00e9"}',  # non-ASCII mac
+    ]
+    caplog.set_level(logging.DEBUG)
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        replies = [await c.raw(line + b"\n") for line in lines]
+        ok = await c.cmd("status", 10)
+        c.close()
+        return replies, ok
+
+    app, summary, (replies, ok), hw = scenario(config(tmp_path, commands=CommandsConfig(
+        bind="127.0.0.1", port=0, token=TOKEN, max_message_bytes=8192)), script)
+    for r in replies:
+        assert r["ok"] is False and "\n" not in r["error"], r
+    assert "surrogate" in replies[0]["error"] and "nested" in replies[1]["error"] and "nested" in replies[3]["error"]
+    assert ok["ok"] and summary.error is None
+    assert not [rec for rec in caplog.records if rec.exc_info or "Traceback" in rec.getMessage()]
+
+
+def test_parse_refuses_surrogates_and_depth_directly() -> None:
+    with pytest.raises(Rejected, match="surrogate"):
+        parse_command(b'{"seq": 1, "cmd": "\\ud800", "args": {}, "mac": ""}', TOKEN, "n", None)
+    with pytest.raises(Rejected, match="nested"):
+        parse_command(b"[" * 2000, TOKEN, "n", None)
+
+
+def test_rejection_logs_are_rate_limited() -> None:
+    t = [0.0]
+    logger = logging.getLogger("test.ratelimit")
+    records: list[str] = []
+
+    class H(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            records.append(record.getMessage())
+
+    logger.addHandler(H())
+    logger.propagate = False
+    rl = RateLimitedLog(logger, per_s=5.0, clock=lambda: t[0])
+    for k in range(10_000):  # 10 000 bad lines in 10 s
+        t[0] = k * 1e-3
+        rl.warning("refused %d", k)
+    assert 50 <= len(records) <= 56  # 5 per second plus the initial burst
+    assert "similar lines suppressed" in records[-1]
+
+
+def test_flood_of_garbage_logs_a_bounded_number_of_lines(tmp_path, caplog) -> None:
+    caplog.set_level(logging.WARNING, logger="rimless.robot.commands")
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        c.writer.write(b"garbage\n" * 3000)
+        await c.writer.drain()
+        for _ in range(3000):
+            await asyncio.wait_for(c.reader.readline(), 5)
+        ok = await c.cmd("status", 1)
+        c.close()
+        return ok
+
+    app, summary, ok, hw = scenario(config(tmp_path), script)
+    assert ok["ok"]
+    logged = [r for r in caplog.records if r.name == "rimless.robot.commands"]
+    assert 1 <= len(logged) <= 40, len(logged)
+
+
+def test_unauthenticated_connections_time_out_and_the_cap_evicts_them(tmp_path) -> None:
+    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, max_connections=4,
+                                                   auth_timeout_s=0.3))
+
+    async def script(app, hw):
+        idle = [await asyncio.open_connection("127.0.0.1", app.command_port) for _ in range(10)]
+        await asyncio.sleep(0.05)
+        at_cap = app.server.connections
+        c = await Client.connect(app.command_port)  # gets in although the cap is reached
+        ok = await c.cmd("status", 1)
+        await asyncio.sleep(0.6)  # the idle ones never authenticated: closed by now
+        eof = [await asyncio.wait_for(r.read(), 2) for r, _ in idle]
+        still = await c.cmd("ping", 2)  # the authenticated one stays
+        for _, w in idle:
+            w.close()
+        c.close()
+        return at_cap, ok, eof, still, app.server.evicted
+
+    app, summary, (at_cap, ok, eof, still, evicted), hw = scenario(cfg, script)
+    assert at_cap <= 4 and ok["ok"] and still["ok"] and evicted >= 6
+    assert all(data.startswith(b'{"hello"') or data == b"" for data in eof)
+
+
+def _open_idle(port: int, n: int, out: list[socket.socket]) -> None:
+    for _ in range(n):
+        s = socket.socket()
+        s.settimeout(5)
+        s.connect(("127.0.0.1", port))
+        out.append(s)
+
+
+def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
+    """The robot runs as on a Pi (1024 open files at most) in its own process; 1100 idle loopback
+    connections are opened, then an operator connects and disarms."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard < 2400:
+        pytest.skip("needs 2400 open files in the test process")
+    resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, 2400), hard))
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n')
+    env = {**os.environ, "RIMLESS_TOKEN": TOKEN}
+
+    def pi_limits() -> None:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
+
+    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True, preexec_fn=pi_limits)
+    idle: list[socket.socket] = []
+    try:
+        deadline = time.monotonic() + 20
+        while True:
+            try:
+                assert send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=1)["armed"]
+                break
+            except RobotUnreachable:
+                assert time.monotonic() < deadline and proc.poll() is None
+                time.sleep(0.05)
+        opener = threading.Thread(target=_open_idle, args=(port, 1100, idle))
+        opener.start()
+        opener.join(60)
+        assert len(idle) == 1100
+        time.sleep(0.2)
+        t0 = time.perf_counter()
+        result = send_command("127.0.0.1", "disarm", token=TOKEN, port=port, timeout_s=5)
+        elapsed = time.perf_counter() - t0
+        status = send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=5)
+    finally:
+        for s in idle:
+            s.close()
+        proc.terminate()
+        _, err = proc.communicate(timeout=20)
+    assert result["armed"] is False and status["engaged"] == []
+    assert elapsed < 0.1, f"disarm took {elapsed * 1e3:.0f} ms"
+    assert status["link"]["connections"] <= 16
+    assert "Traceback" not in err
+
+
+def test_heartbeat_keeps_a_remote_arm_and_its_loss_disarms(tmp_path) -> None:
+    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=0.4))
+
+    async def script(app, hw):
+        def operator() -> tuple[bool, bool]:
+            lines: list[str] = []
+            with RobotLink("127.0.0.1", token=TOKEN, port=app.command_port) as link:
+                link.call("arm")
+            hb = Heartbeat("127.0.0.1", token=TOKEN, port=app.command_port, period_s=0.1, echo=lines.append)
+            hb.run(duration_s=1.2)  # three link timeouts, kept alive
+            armed_with_heartbeat = app.controller.armed
+            time.sleep(1.0)  # heartbeat stopped
+            return armed_with_heartbeat, app.controller.armed
+
+        return await asyncio.to_thread(operator)
+
+    app, summary, (with_hb, after), hw = scenario(cfg, script)
+    assert with_hb is True and after is False
+    assert "link_lost" in summary.faults and all_off(hw)
+
+
+def test_link_loss_fail_safe_is_on_by_default_for_a_remote_arm() -> None:
+    assert CommandsConfig().link_timeout_s > 0
+
+
+def test_robot_link_errors_are_one_line(tmp_path) -> None:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    port = s.getsockname()[1]
+
+    def not_a_robot() -> None:
+        conn, _ = s.accept()
+        conn.sendall(b'{"hello": "something else"}\n')
+        conn.close()
+
+    t = threading.Thread(target=not_a_robot)
+    t.start()
+    with pytest.raises(CommandError, match="not a rimless robot"):
+        RobotLink("127.0.0.1", token=TOKEN, port=port, timeout_s=2)
+    t.join()
+    s.close()

@@ -1,0 +1,164 @@
+"""Every signal a process can catch, and every way to start without hardware, ends with the clutches
+released: `robot run --fake` under SIGHUP/SIGQUIT, `robot check --fake` under SIGTERM, `robot release`,
+and `run`/`check` on a machine with no GPIO. Each outcome is checked on the mock pins' histories."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rimless.firmware.commands import send_command
+from rimless.firmware.errors import RobotUnreachable
+
+RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
+TOKEN = "signal-test-token-3c9e7a1f"
+PINS = ("17", "27", "22", "23", "24", "16", "20", "21")
+
+
+def free_port() -> int:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def pin_levels(line: str) -> dict[str, str]:
+    """'... GPIO17=010 GPIO27=0 ...' -> {'17': '010', ...}"""
+    items = [w for w in line.replace(")", " ").split() if w.startswith("GPIO") and "=" in w]
+    return {k[4:]: v for k, v in (w.split("=") for w in items)}
+
+
+def start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, int]:
+    port = free_port()
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n')
+    env = {**os.environ, "RIMLESS_TOKEN": TOKEN}
+    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    return proc, port
+
+
+def wait_engaged(proc: subprocess.Popen, port: int) -> None:
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        try:
+            if send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=1)["engaged"]:
+                return
+        except RobotUnreachable:
+            pass
+        time.sleep(0.02)
+    raise AssertionError("no clutch engaged in 20 s")
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGHUP, 129), (signal.SIGQUIT, 131), (signal.SIGINT, 130)])
+def test_run_fake_releases_every_clutch_on_a_signal(tmp_path, sig, code) -> None:
+    proc, port = start_run(tmp_path, "--arm")
+    try:
+        wait_engaged(proc, port)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == code, err
+    assert f"stopped ({sig.name})" in err and "every clutch released" in err
+    assert "Traceback" not in err and "CancelledError" not in err
+    line = next(ln for ln in err.splitlines() if ln.startswith("fake clutch pin levels"))
+    levels = pin_levels(line)
+    assert sorted(levels) == sorted(PINS)
+    assert all(h.endswith("0") for h in levels.values()), levels  # every pin ends off...
+    assert any("1" in h for h in levels.values()), levels  # ...including one that was on when the signal came
+
+
+def test_sigterm_during_check_fake_releases_the_clicked_clutch(tmp_path) -> None:
+    proc = subprocess.Popen([*RIMLESS, "robot", "check", "--fake"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    err_lines = []
+    try:
+        assert proc.stderr is not None
+        for line in proc.stderr:  # wait until a clutch is being clicked (on for 0.2 s)
+            err_lines.append(line)
+            if line.startswith("clicking clutch 2"):
+                break
+        time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        out, rest = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    err = "".join(err_lines) + rest
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    final = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(final) == 1 and "interrupted by SIGTERM" in final[0] and "every clutch released" in final[0]
+    assert "Traceback" not in err
+    levels = pin_levels(final[0])
+    assert sorted(levels) == sorted(PINS)
+    assert all(h.endswith("0") for h in levels.values()), levels
+    assert levels["22"] == "010", levels  # clutch 2 was on when the signal came, and is off now
+    assert levels["23"] == "0" and out == ""  # no click after the signal, no report
+
+
+def test_release_drives_every_clutch_pin_low(tmp_path) -> None:
+    r = subprocess.run([*RIMLESS, "robot", "release", "--fake", "--json"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    import json
+
+    rep = json.loads(r.stdout)
+    assert rep["released_pins"] == [int(p) for p in PINS] and rep["level"] == "low"
+    assert all(v == "0" for v in rep["fake_levels"].values()) and len(rep["fake_levels"]) == 8
+    unit = (Path(__file__).parents[2] / "firmware" / "rimless-robot.service").read_text()
+    assert "ExecStopPost=" in unit and "robot release" in unit
+
+
+@pytest.mark.skipif(Path("/dev/gpiochip0").exists(), reason="this machine has GPIO")
+@pytest.mark.parametrize("command", ["run", "check"])
+def test_no_gpio_is_one_line_and_exit_2(command) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "GPIOZERO_PIN_FACTORY"}
+    env["RIMLESS_TOKEN"] = TOKEN
+    r = subprocess.run([*RIMLESS, "robot", command], capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 2, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: no GPIO on this machine") and "--fake" in lines[0], r.stderr
+
+
+def test_weak_token_is_refused_at_start(tmp_path) -> None:
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\n')
+    for weak in ("change-me", "short"):
+        r = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1"],
+                           capture_output=True, text=True, env={**os.environ, "RIMLESS_TOKEN": weak}, timeout=60)
+        assert r.returncode == 2, r.stderr
+        err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+        assert len(err) == 1 and "token" in err[0], r.stderr
+    unit = (Path(__file__).parents[2] / "firmware" / "rimless-robot.service").read_text()
+    assert "RIMLESS_TOKEN=" not in unit and "LoadCredential=" in unit
+
+
+def test_ctrl_c_in_bench_exits_130_without_cancelled_error() -> None:
+    proc = subprocess.Popen([*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "10"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        first = proc.stderr.readline()
+        assert first.startswith("bench:"), first
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert "CancelledError" not in err and "Traceback" not in err
+    assert [ln for ln in err.splitlines() if ln.strip()] == ["error: interrupted by SIGINT"]
