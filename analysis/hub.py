@@ -16,6 +16,7 @@ __all__ = [
     "rotations_from_angles",
     "wheel_angle_from_rotations",
     "estimate_hub_offset",
+    "hub_from_pose",
 ]
 
 #: Least total rotation (rad) for a hub offset in the object frame to be observable.
@@ -43,6 +44,7 @@ class HubEstimate:
     source: str
     offset_m: np.ndarray | None = None
     offset_residual_m: float | None = None
+    rotation: np.ndarray | None = None  # (n, 3, 3) world-from-body (marker sets: from the reference frame)
 
 
 def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -> np.ndarray:
@@ -84,8 +86,15 @@ def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         return angle, np.array([0.0, 0.0, 1.0])
     r = rot[ok]
     inc = Rotation.from_matrix(r[1:] @ np.transpose(r[:-1], (0, 2, 1))).as_rotvec()  # world-frame increments
-    w, v = np.linalg.eigh(inc.T @ inc)
-    axis = v[:, -1]
+    use = np.ones(inc.shape[0], bool)
+    axis = np.array([0.0, 0.0, 1.0])
+    for _ in range(3):
+        # Rolling increments share one axis; a fall or a hand turning the wheel adds others: the axis is
+        # refitted on the increments within 30 deg of it.
+        w, v = np.linalg.eigh(inc[use].T @ inc[use]) if use.any() else np.linalg.eigh(inc.T @ inc)
+        axis = v[:, -1]
+        norm = np.linalg.norm(inc, axis=1)
+        use = np.abs(inc @ axis) >= np.cos(np.radians(30.0)) * norm
     steps = inc @ axis
     if steps.sum() < 0:
         axis, steps = -axis, -steps
@@ -137,17 +146,19 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
     angle = axis = None
     if k >= 3:
         angle, axis = wheel_angle_from_rotations(rot)
-    return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)")
+    return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)",
+                       rotation=rot)
 
 
 def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: float = np.pi / 4,
-                        harmonics: int = 3) -> tuple[np.ndarray, float, float]:
+                        harmonics: int = 3, mask: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
     """Hub offset in the object frame of a wheel rolling down a plane.
 
     A body point off the hub by e rises and falls by e once per turn, the hub only by the per-step bumps
     (period alpha in the wheel angle), so the hub is the body point whose world height is best explained by
     a straight line in the distance travelled plus a periodic function of period alpha in the wheel angle
-    (``harmonics`` Fourier terms, which keep the per-step bumps from leaking into the offset): minimise
+    (``harmonics`` Fourier terms, which keep the per-step bumps from leaking into the offset); only frames
+    where ``mask`` is True (the walking window) are used: minimise
     sum_t (T_z + (R d)_z - a - b s - bumps)^2 over d, a, b and the bumps (linear least squares, two passes so
     that s is measured along the hub path). d is sought in the wheel plane only: the component along the
     wheel axis is not observable (the axis is horizontal) and is set to 0. Needs about a full turn.
@@ -159,6 +170,9 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
     rotation_rad : total rotation seen.
     """
     ok = ~(np.isnan(rot).any(axis=(1, 2)) | np.isnan(trans_m).any(axis=1))
+    if mask is not None:
+        ok &= mask
+    rot = np.where(ok[:, None, None], rot, np.nan)
     angle, axis = wheel_angle_from_rotations(rot)
     total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
     if ok.sum() < 10:
@@ -187,6 +201,33 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
         d = plane @ sol[:2]
         res = a @ sol + t[:, 2]
     return d, float(np.sqrt(np.mean(res**2))), total
+
+
+def hub_from_pose(rot: np.ndarray, trans: np.ndarray, *, hub_offset_m: np.ndarray | None = None,
+                  mask: np.ndarray | None = None, what: str = "object origin") -> HubEstimate:
+    """Hub = ``trans + rot @ offset``: the offset given, or fitted as the centre of rotation in the wheel plane.
+
+    ``rot`` (n, 3, 3) world-from-body, ``trans`` (n, 3) m the path of the body point called ``what``; the fit
+    (`estimate_hub_offset`) uses the frames of ``mask`` and needs the body to turn more than 180 deg there.
+    """
+    angle, axis = wheel_angle_from_rotations(rot)
+    sel = angle if mask is None else np.where(mask, angle, np.nan)
+    total = float(np.nanmax(sel) - np.nanmin(sel)) if np.isfinite(sel).any() else 0.0
+    residual = None
+    if hub_offset_m is not None:
+        d = np.asarray(hub_offset_m, dtype=np.float64).reshape(3)
+        source = (f"{what} (given offset 0)" if not d.any()
+                  else f"{what} + given offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm")
+    elif total < MIN_ROTATION_FOR_OFFSET_RAD:
+        d = np.zeros(3)
+        source = (f"{what} (it turns only {np.degrees(total):.1f} deg: the centre of rotation is not observable, "
+                  "no offset applied)")
+    else:
+        d, residual, _ = estimate_hub_offset(rot, trans, mask=mask)
+        source = (f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
+                  f"(centre of rotation fitted on the walking window, residual {residual * 1e3:.2f} mm)")
+    hub = trans + np.einsum("nij,j->ni", rot, d)
+    return HubEstimate(hub, angle, axis, source, d, residual, rot)
 
 
 def hub_from_object(
@@ -224,4 +265,4 @@ def hub_from_object(
         source = ("object origin + estimated offset [{:.1f}, {:.1f}, {:.1f}] mm (hub height fit, residual {:.2f} mm)"
                   .format(*(d * 1e3), residual * 1e3))
     hub = trans + np.einsum("nij,j->ni", rot, d)
-    return HubEstimate(hub, angle, axis, source, d, residual)
+    return HubEstimate(hub, angle, axis, source, d, residual, rot)

@@ -3,7 +3,9 @@
 In the model the stance leg rotates by alpha between impacts, so the wheel angle at impacts is an
 arithmetic sequence ``phase + k * alpha``; the phase is taken from the CoM-height minima, which coincide
 with impacts (two legs touch, the hub is lowest). A trial too noisy or gappy to support a detection is
-refused (`StepResult.refused` holds the reason), never guessed.
+refused (`StepResult.refused` holds the reason), never guessed. Impacts are found per observed segment: one
+whose bracketing frames fall in a gap is not reported, and a period is reported only when both its impacts
+were observed with no unbridged gap between them.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ class StepResult:
     Attributes
     ----------
     impact_time_s : (m,) impact times, s (sub-frame, interpolated).
-    step_period_s : (m - 1,) time between consecutive impacts, s; step k (1-based) ends at impact k.
+    step_period_s : (p,) time between two consecutive observed impacts with no gap between them, s.
     method : ``"rotation"``, ``"com-minima"`` or ``"none"``.
     refused : None, or why no detection is given.
     phase_rad : wheel angle of the first impact (rotation method), rad, or None.
@@ -36,16 +38,20 @@ class StepResult:
     method: str
     refused: str | None = None
     phase_rad: float | None = None
+    impact_step: np.ndarray | None = None  # (m,) steps since the first observed impact (gaps skip numbers)
+    period_step: np.ndarray | None = None  # (p,) impact_step of the impact ending each period
 
     @property
     def step_number(self) -> np.ndarray:
-        """1-based number of each step in ``step_period_s``."""
+        """1-based number of each step in ``step_period_s`` (counted from the first observed impact)."""
+        if self.period_step is not None:
+            return np.asarray(self.period_step, np.int64)
         return np.arange(1, self.step_period_s.size + 1)
 
     @classmethod
     def refuse(cls, reason: str) -> StepResult:
         """A result carrying no steps and the reason."""
-        return cls(np.zeros(0), np.zeros(0), "none", reason)
+        return cls(np.zeros(0), np.zeros(0), "none", reason, None, np.zeros(0, np.int64), np.zeros(0, np.int64))
 
 
 def noise_sigma(y: np.ndarray) -> float:
@@ -109,9 +115,25 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
     return idx.astype(np.int64), times, sigma
 
 
-def _gap_between(gap: np.ndarray, time_s: np.ndarray, t0: float, t1: float) -> bool:
-    m = (time_s >= t0) & (time_s <= t1)
-    return bool(gap[m].any())
+def _observed_impacts(t: np.ndarray, observed: np.ndarray, times: np.ndarray, j: np.ndarray,
+                      ok_idx: np.ndarray) -> np.ndarray:
+    """An impact is observed when the two samples bracketing it are real, adjacent frames."""
+    i0, i1 = ok_idx[j - 1], ok_idx[j]
+    return (i1 - i0 == 1) & observed[i0] & observed[i1]
+
+
+def _periods(impact_k: np.ndarray, times: np.ndarray, t: np.ndarray, unbridged: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """(periods, step index of each) between consecutive observed impacts with no unbridged gap between."""
+    if times.size < 2:
+        return np.zeros(0), np.zeros(0, np.int64)
+    consecutive = np.diff(impact_k) == 1
+    gap_before = np.concatenate([[0], np.cumsum(unbridged)])  # gaps in t[:i]
+    i0 = np.searchsorted(t, times[:-1], side="left")
+    i1 = np.searchsorted(t, times[1:], side="right")
+    clean = (gap_before[i1] - gap_before[i0]) == 0
+    keep = consecutive & clean
+    return np.diff(times)[keep], impact_k[1:][keep]
 
 
 def detect_steps(
@@ -120,8 +142,10 @@ def detect_steps(
     wheel_angle_rad: np.ndarray | None = None,
     *,
     alpha_rad: float = ALPHA_RAD,
+    observed: np.ndarray | None = None,
+    window_s: tuple[float, float] | None = None,
 ) -> StepResult:
-    """Impacts and step periods of a trial.
+    """Impacts and step periods of a trial, per observed segment.
 
     Parameters
     ----------
@@ -129,35 +153,46 @@ def detect_steps(
     com_height_m : (n,) CoM height normal to the slope, m; NaN at gaps.
     wheel_angle_rad : (n,) unwrapped wheel angle, rad, or None when orientation is unknown.
     alpha_rad : rotation per step, rad (45 deg for the eight-legged wheel).
+    observed : (n,) True for frames measured (not gaps, not interpolated); default: finite samples.
+    window_s : (t0, t1) s: only impacts inside are sought (the walking window).
 
     Returns
     -------
-    StepResult; ``refused`` says why when the data cannot support a detection.
+    StepResult: every impact whose two bracketing frames were observed; ``step_period_s`` only between two
+    consecutive such impacts with no unbridged gap between them (``period_step`` numbers them); ``refused``
+    says why when the data cannot support a detection. Never a guess across a gap.
     """
     t = np.asarray(time_s, dtype=np.float64)
     y = np.asarray(com_height_m, dtype=np.float64)
     gap = np.isnan(y)
     if wheel_angle_rad is not None:
         gap = gap | np.isnan(wheel_angle_rad)
-    if (~gap).sum() < 10:
-        return StepResult.refuse("fewer than 10 valid samples")
+    obs = ~gap if observed is None else (np.asarray(observed, bool) & ~gap)
+    unbridged = gap  # NaN after the bounded interpolation: a gap no period may span
+    lo, hi = (t[0], t[-1]) if window_s is None else window_s
+    inwin = (t >= lo - 1e-9) & (t <= hi + 1e-9)
+    if (~gap & inwin).sum() < 10:
+        return StepResult.refuse("fewer than 10 valid samples in the walking window")
+    yw = np.where(inwin, y, np.nan)
 
     if wheel_angle_rad is not None:
         ang = np.asarray(wheel_angle_rad, dtype=np.float64)
-        total = float(np.nanmax(ang) - np.nanmin(ang))
+        aw = ang[inwin & ~gap]
+        total = float(aw.max() - aw.min())
         if total < 2 * alpha_rad:
             return StepResult.refuse(
                 f"the wheel turns only {np.degrees(total):.1f} deg: fewer than two steps of "
                 f"{np.degrees(alpha_rad):.0f} deg")
-        rate = total / (t[~gap][-1] - t[~gap][0])
+        tw = t[inwin & ~gap]
+        rate = total / max(tw[-1] - tw[0], 1e-9)
         period_guess = alpha_rad / rate
-        idx, tmin, sigma = find_com_minima(t, y, min_period_s=period_guess)
+        idx, tmin, sigma = find_com_minima(t, yw, min_period_s=period_guess)
         if idx.size < 2:
             return StepResult.refuse(
                 f"the CoM height shows {idx.size} clear minima (noise {sigma * 1e3:.2f} mm): cannot place the "
                 "impacts on the rotation")
-        ok = ~gap
-        a_min = np.interp(tmin, t[ok], ang[ok])
+        ok_idx = np.flatnonzero(~gap)
+        a_min = np.interp(tmin, t[ok_idx], ang[ok_idx])
         res = np.mod(a_min, alpha_rad) / alpha_rad * 2 * np.pi
         mean = np.angle(np.mean(np.exp(1j * res)))
         spread = np.abs(np.angle(np.exp(1j * (res - mean))))
@@ -166,10 +201,12 @@ def detect_steps(
                 f"CoM minima do not repeat every {np.degrees(alpha_rad):.0f} deg of rotation "
                 f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg)")
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
-        tv, av = t[ok], np.maximum.accumulate(ang[ok])
+        sel = ok_idx[inwin[ok_idx]]
+        tv, av = t[sel], np.maximum.accumulate(ang[sel])
         k0 = int(np.ceil((av[0] - phase) / alpha_rad))
         k1 = int(np.floor((av[-1] - phase) / alpha_rad))
-        targets = phase + alpha_rad * np.arange(k0, k1 + 1)
+        ks = np.arange(k0, k1 + 1)
+        targets = phase + alpha_rad * ks
         if targets.size < 2:
             return StepResult.refuse("fewer than two impacts inside the valid data")
         j = np.searchsorted(av, targets, side="left")
@@ -177,19 +214,28 @@ def detect_steps(
         a0, a1 = av[j - 1], av[j]
         frac = np.where(a1 > a0, (targets - a0) / np.where(a1 > a0, a1 - a0, 1.0), 0.0)
         times = tv[j - 1] + frac * (tv[j] - tv[j - 1])
-        if _gap_between(gap, t, times[0], times[-1]):
-            return StepResult.refuse("a gap lies between the first and last impact: periods across it would be guessed")
-        return StepResult(times, np.diff(times), "rotation", None, float(targets[0]))
+        seen = _observed_impacts(t, obs, times, j, sel)
+        times, ks = times[seen], ks[seen]
+        if times.size < 2:
+            return StepResult.refuse("fewer than two observed impacts (the others fall in gaps)")
+        periods, pk = _periods(ks, times, t, unbridged)
+        return StepResult(times, periods, "rotation", None, float(phase + alpha_rad * ks[0]),
+                          impact_step=ks - ks[0], period_step=pk - ks[0])
 
-    idx, tmin, sigma = find_com_minima(t, y)
+    idx, tmin, sigma = find_com_minima(t, yw)
     if idx.size < 2:
         return StepResult.refuse(f"the CoM height shows {idx.size} clear minima (noise {sigma * 1e3:.2f} mm)")
-    periods = np.diff(tmin)
-    med = float(np.median(periods))
-    if np.any(periods < 0.6 * med) or np.any(periods > 1.5 * med):
+    d = np.diff(tmin)
+    med = float(np.median(d))
+    if np.any(d < 0.6 * med):
         return StepResult.refuse(
-            f"CoM minima are irregular (periods {periods.min():.3f}-{periods.max():.3f} s around {med:.3f} s): "
-            "missed or spurious minima")
-    if _gap_between(gap, t, tmin[0], tmin[-1]):
-        return StepResult.refuse("a gap lies between the first and last CoM minimum")
-    return StepResult(tmin, periods, "com-minima", None, None)
+            f"CoM minima are irregular (periods {d.min():.3f}-{d.max():.3f} s around {med:.3f} s): "
+            "spurious minima")
+    # A minimum missed in a gap shows as a period of about twice the median: count the steps.
+    ks = np.concatenate([[0], np.cumsum(np.maximum(np.round(d / med), 1).astype(np.int64))])
+    seen = obs[idx] & obs[np.clip(idx - 1, 0, None)] & obs[np.clip(idx + 1, None, t.size - 1)]
+    times, ks = tmin[seen], ks[seen]
+    if times.size < 2:
+        return StepResult.refuse("fewer than two observed CoM minima")
+    periods, pk = _periods(ks, times, t, unbridged)
+    return StepResult(times, periods, "com-minima", None, None, impact_step=ks - ks[0], period_step=pk - ks[0])

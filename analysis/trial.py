@@ -32,13 +32,14 @@ import numpy as np
 
 from rimless.errors import InputFileError, UserError
 
-from .hub import HubEstimate, hub_from_markers, hub_from_object
+from .hub import HubEstimate
 from .slope import SlopeFrame, fit_slope
 from .steps import ALPHA_RAD, StepResult, detect_steps, find_com_minima, refine_cusp
 from .timeseries import Event, TimeSeries
 from .vicon_csv import Section, ViconFile, read_vicon_csv
 
-__all__ = ["Trial", "TrialMeta", "TrialRefused", "build_trial", "import_trial", "read_trial", "fill_short_gaps"]
+__all__ = ["Trial", "TrialMeta", "TrialRefused", "build_trial", "import_trial", "read_trial", "fill_short_gaps",
+           "DEFAULT_MAX_GAP_S"]
 
 PARQUET_META_KEY = b"rimless.trial"
 FORMAT_VERSION = 1
@@ -82,6 +83,16 @@ class TrialMeta:
     alpha_rad: float = ALPHA_RAD
     notes: tuple[str, ...] = field(default=())
     format_version: int = FORMAT_VERSION
+    source_reason: str = ""
+    ramp_slope_deg: float | None = None
+    ramp_source: str | None = None
+    outcome: str = "unknown"
+    outcome_reason: str = ""
+    window_s: tuple[float, float] | None = None
+    hub_offset_residual_m: float | None = None
+    impact_step: tuple[int, ...] = field(default=())
+    period_step: tuple[int, ...] = field(default=())
+    warnings: tuple[str, ...] = field(default=())
 
     def to_json(self) -> str:
         """JSON text of the metadata (NaN as null)."""
@@ -92,9 +103,9 @@ class TrialMeta:
     def from_json(cls, text: str) -> TrialMeta:
         """Inverse of `to_json`."""
         d = json.loads(text)
-        for k in ("markers", "notes"):
-            d[k] = tuple(d[k])
-        for k in ("hub_offset_m", "travel_direction", "slope_origin_m"):
+        for k in ("markers", "notes", "impact_step", "period_step", "warnings"):
+            d[k] = tuple(d.get(k) or ())
+        for k in ("hub_offset_m", "travel_direction", "slope_origin_m", "window_s"):
             if d.get(k) is not None:
                 d[k] = tuple(d[k])
         if d.get("slope_residual_m") is None:
@@ -121,15 +132,45 @@ class Trial:
         return self.series.get_event_times("impact")
 
     @property
+    def impact_step(self) -> np.ndarray:
+        """Step count of each impact from the first observed one (impacts lost in gaps skip numbers)."""
+        ks = self.meta.impact_step
+        return np.asarray(ks, np.int64) if len(ks) == self.impact_time_s.size else np.arange(self.impact_time_s.size)
+
+    @property
+    def period_step(self) -> np.ndarray:
+        """`impact_step` of the impact that ends each period in `step_period_s`."""
+        if self.meta.impact_step or self.meta.period_step:
+            return np.asarray(self.meta.period_step, np.int64)
+        return np.arange(1, max(self.impact_time_s.size, 1))
+
+    @property
     def step_period_s(self) -> np.ndarray:
-        """Time between consecutive impacts, s; entry k-1 is step k."""
-        return np.diff(self.impact_time_s)
+        """Step periods whose two impacts were both observed with no gap between them, s (see `period_step`)."""
+        t, ks = self.impact_time_s, self.impact_step
+        if t.size < 2:
+            return np.zeros(0)
+        pos = {int(k): i for i, k in enumerate(ks)}
+        return np.array([t[pos[int(k)]] - t[pos[int(k) - 1]] for k in self.period_step
+                         if int(k) in pos and int(k) - 1 in pos], dtype=np.float64)
+
+    @property
+    def consecutive_periods_s(self) -> np.ndarray:
+        """The longest run of consecutive valid periods (for comparisons that need consecutive steps), s."""
+        p, ks = self.step_period_s, self.period_step
+        if p.size == 0:
+            return p
+        breaks = np.flatnonzero(np.diff(ks) != 1) + 1
+        runs = np.split(np.arange(p.size), breaks)
+        best = max(runs, key=len)
+        return p[best]
 
     @property
     def steps(self) -> StepResult:
         """The step detection as a `StepResult`."""
         t = self.impact_time_s
-        return StepResult(t, np.diff(t), self.meta.step_method, self.meta.step_refused, self.meta.step_phase_rad)
+        return StepResult(t, self.step_period_s, self.meta.step_method, self.meta.step_refused,
+                          self.meta.step_phase_rad, self.impact_step, self.period_step)
 
     def summary(self) -> dict[str, Any]:
         """A JSON-ready summary: metadata, slope estimate, steps and periods."""
@@ -159,7 +200,17 @@ class Trial:
             "steps": int(self.step_period_s.size),
             "impact_time_s": self.impact_time_s.tolist(),
             "step_period_s": self.step_period_s.tolist(),
+            "period_step": self.period_step.tolist(),
             "notes": list(m.notes),
+            "source": m.source_reason,
+            "ramp_slope_deg": m.ramp_slope_deg,
+            "ramp_source": m.ramp_source,
+            "outcome": m.outcome,
+            "outcome_reason": m.outcome_reason,
+            "window_s": list(m.window_s) if m.window_s else None,
+            "hub_offset_mm": None if m.hub_offset_m is None else [v * 1e3 for v in m.hub_offset_m],
+            "hub_offset_residual_mm": None if m.hub_offset_residual_m is None else m.hub_offset_residual_m * 1e3,
+            "warnings": list(m.warnings),
         }
 
     # -- storage
@@ -257,52 +308,17 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
 
 # --------------------------------------------------------------------------------------------- building
 
-
-def _pick_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None) -> tuple[Section, str | None, list[str]]:
-    kinds = vf.kinds()
-    if markers:
-        sec = vf.section("Trajectories")
-        if sec is None:
-            raise TrialRefused(f"{vf.path}: markers were asked for but the file has no Trajectories section "
-                               f"(sections: {', '.join(kinds)})")
-        missing = [m for m in markers if m not in sec.groups()]
-        if missing:
-            raise TrialRefused(f"{vf.path}: marker(s) {missing} not in the Trajectories section (line {sec.line})")
-        return sec, None, list(markers)
-    sec = vf.section("Objects")
-    if sec is not None:
-        objs = [g for g in sec.groups() if set(_POSE) <= set(sec.components(g))]
-        if obj is not None:
-            if obj not in objs:
-                raise TrialRefused(f"{vf.path}: object {obj!r} not in the Objects section (line {sec.line}); "
-                                   f"objects: {', '.join(objs) or 'none'}")
-            return sec, obj, []
-        if len(objs) == 1:
-            return sec, objs[0], []
-        if len(objs) > 1:
-            raise TrialRefused(f"{vf.path}: the Objects section (line {sec.line}) holds {len(objs)} objects "
-                               f"({', '.join(objs)}): choose one with object=")
-    sec = vf.section("Trajectories")
-    if sec is not None:
-        groups = [g for g in sec.groups() if set(_XYZ) <= set(sec.components(g))]
-        if obj is not None:
-            groups = [g for g in groups if g.split(":")[0] == obj]
-        if len(groups) in (1, 4):
-            return sec, None, groups
-        subjects: dict[str, int] = {}
-        for g in groups:
-            subjects[g.split(":")[0] if ":" in g else "(unlabelled)"] = subjects.get(
-                g.split(":")[0] if ":" in g else "(unlabelled)", 0) + 1
-        four = [s for s, n in subjects.items() if n == 4]
-        if obj is None and len(four) == 1:
-            return sec, None, [g for g in groups if g.split(":")[0] == four[0]]
-        detail = ", ".join(f"{s}: {n}" for s, n in subjects.items())
-        raise TrialRefused(
-            f"{vf.path}: no Objects section, and the Trajectories section (line {sec.line}) has {len(groups)} "
-            f"markers ({detail}); a wheel trial needs the 4 wheel markers (or 1 hub marker): choose them "
-            "with markers= (CLI: --markers A,B,C,D)")
-    others = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
-    raise TrialRefused(f"{vf.path}: no usable trajectory: no Objects or Trajectories section, only {others}")
+#: The one gap rule of `trials import` and `trials report`: gaps up to this long (s) with data on both sides are
+#: bridged by linear interpolation (flagged ``interpolated``, never used as observations); longer gaps split
+#: the trial into observed segments and no step period spans them.
+DEFAULT_MAX_GAP_S = 0.05
+#: Table 1 leg length, m: the plausibility checks compare the recording with a wheel of this size.
+TABLE1_LEG_LENGTH_M = 0.237
+#: A hub jump larger than this (m) plus 5 m/s times the time between two valid frames is a seam.
+JUMP_M = 0.1
+#: Warn when the fitted centre of rotation lies this far (m) from the tracked point, or fits this badly (m).
+HUB_OFFSET_WARN_M = 0.01
+HUB_RESIDUAL_WARN_M = 0.002
 
 
 def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
@@ -322,6 +338,21 @@ def _on_grid(arr: np.ndarray, row: np.ndarray) -> np.ndarray:
     return out
 
 
+def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarray, row: np.ndarray) -> None:
+    """Refuse at the seam line when the tracked point jumps (a second take pasted after the first)."""
+    ok = np.flatnonzero(~np.isnan(p).any(axis=1))
+    if ok.size < 2:
+        return
+    d = np.linalg.norm(np.diff(p[ok], axis=0), axis=1)
+    dt = np.diff(time_s[ok])
+    bad = np.flatnonzero(d > JUMP_M + 5.0 * dt)
+    if bad.size:
+        i = ok[bad[0] + 1]
+        line = sec.data_line + int(row[i])
+        raise TrialRefused(f"{path}:{line}:1: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
+                           "here: a second take pasted after the first? split the file at this line")
+
+
 def build_trial(
     vf: ViconFile,
     *,
@@ -331,77 +362,131 @@ def build_trial(
     hub_offset_m: Sequence[float] | None = None,
     orientation: str = "helical",
     leg_length_m: float | None = None,
-    max_gap_s: float = 0.0,
+    max_gap_s: float = DEFAULT_MAX_GAP_S,
     alpha_rad: float = ALPHA_RAD,
+    wheel_leg_length_m: float = TABLE1_LEG_LENGTH_M,
 ) -> Trial:
     """Build a `Trial` from a parsed Vicon file.
 
     Parameters
     ----------
-    vf : from `read_vicon_csv`.
-    object : tracked object (Objects section) or subject prefix of the markers; default: the only one.
-    markers : names of the wheel markers (4 in one plane, or 1 at the hub) in the Trajectories section.
-    slope_deg : known slope, deg; default: estimated from the hub path (see `TrialMeta.slope_source`).
-    hub_offset_m : hub in the object frame, m; default: estimated when the object turns enough
-        (see `hub_from_object`).
+    vf : from `read_vicon_csv` (or `rimless.analysis.c3d.read_c3d`).
+    object : tracked object (Objects section) or subject prefix of the markers (CLI ``--object``);
+        default: the candidate that moves like the wheel (`rimless.analysis.source.choose_source`).
+    markers : names of the wheel markers (3 or more on the wheel, or 1 at the hub) (CLI ``--markers``).
+    slope_deg : known slope, deg; default: estimated from the hub path in the walking window.
+    hub_offset_m : hub in the object (or marker reference) frame, m (CLI ``--hub-offset-mm``); default: the
+        centre of rotation fitted on the walking window when the wheel turns more than 180 deg there.
     orientation : convention of RX, RY, RZ (``"helical"`` or a scipy Euler sequence such as ``"xyz"``).
     leg_length_m : leg length; when given, CoM height is measured from the slope plane
         (impact line - leg_length * cos(alpha / 2)); otherwise from the line through the impacts.
     max_gap_s : gaps up to this long are linearly interpolated (flagged ``interpolated``); longer stay NaN.
     alpha_rad : rotation per step, rad.
+    wheel_leg_length_m : the wheel's leg length for the plausibility checks (Table 1), m.
 
     Raises
     ------
     TrialRefused
-        When the file holds no usable wheel trajectory (message says why).
+        When the file holds no usable wheel trajectory or is implausible (message says why and where).
     """
-    sec, obj, mk = _pick_source(vf, object, markers)
+    from .hub import hub_from_markers, hub_from_pose, rotations_from_angles, wheel_angle_from_rotations
+    from .source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
+    from .walk import classify_ending, find_motion
+
+    if not (math.isfinite(max_gap_s) and max_gap_s >= 0):
+        raise UserError(f"--max-gap-ms must be a finite number >= 0, got {max_gap_s * 1e3!r}")
+    try:
+        choice = choose_source(vf, object, markers)
+    except SourceRefused as err:
+        raise TrialRefused(str(err)) from None
+    sec, obj, mk = choice.section, choice.object, list(choice.markers)
+    warnings: list[str] = list(choice.warnings)
     if sec.n_rows < 10:
         raise TrialRefused(f"{vf.path}: section {sec.kind!r} (line {sec.line}) has {sec.n_rows} rows: too short")
     frames, row = _full_grid(sec)
+    rate = sec.rate_hz
+    time_s = (frames - frames[0]) / rate
     notes: list[str] = []
+    rot = None
     if obj is not None:
-        pose = _on_grid(sec.get(obj, _POSE), row)
+        pose = zeros_to_nan(_on_grid(sec.get(obj, POSE), row), 6)
         if np.isnan(pose).all():
             raise TrialRefused(f"{vf.path}: object {obj!r} has no values (never tracked)")
-        est = hub_from_object(pose[:, :3], pose[:, 3:], hub_offset_m=hub_offset_m, convention=orientation)
+        rot = rotations_from_angles(pose[:, :3], orientation)
+        trans = pose[:, 3:]
+        what = "object origin"
         units = {c.component: c.file_unit for c in sec.columns if c.group == obj}
     else:
-        pts = np.stack([_on_grid(sec.get(m, _XYZ), row) for m in mk], axis=1)
+        pts = np.stack([zeros_to_nan(_on_grid(sec.get(m, XYZ), row), 3) for m in mk], axis=1)
         counts = (~np.isnan(pts).any(axis=2)).sum(axis=0)
         if (counts == 0).any():
             dead = [m for m, c in zip(mk, counts) if c == 0]
             raise TrialRefused(f"{vf.path}: marker(s) {dead} have no values in any frame")
+        if len(mk) == 2:
+            raise TrialRefused(f"{vf.path}: 2 wheel markers ({', '.join(mk)}) fix neither the hub nor the "
+                               "rotation: give 3 or more (or the hub marker) with --markers")
         try:
-            est = hub_from_markers(pts)
+            est0 = hub_from_markers(pts)
         except ValueError as err:
             raise TrialRefused(f"{vf.path}: {err}") from None
+        trans = est0.hub_m
+        rot = est0.rotation
+        what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
-    hub_raw = est.hub_m
-    angle = est.wheel_angle_rad
-    rate = sec.rate_hz
-    max_gap_frames = int(math.floor(max_gap_s * rate + 1e-9))
+    _check_jumps(vf.path, sec, time_s, trans, row)
+    angle = None
+    axis = None
+    if rot is not None:
+        angle, axis = wheel_angle_from_rotations(rot)
+        if not np.isfinite(angle).any():
+            angle = None
+    motion = find_motion(time_s, angle, trans, leg_length_m=wheel_leg_length_m)
+    rough = np.zeros(time_s.size, bool)
+    rough[motion.release_index:motion.end_index + 1] = True
+    if rot is not None and angle is not None:
+        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what)
+        hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
+        hub_source = est.source
+    else:
+        hub_raw, offset, residual = trans, None, None
+        hub_source = "single marker taken as the hub" if obj is None else "object origin"
+        if hub_offset_m is not None and obj is None:
+            warnings.append("--hub-offset-mm ignored: one marker has no orientation to carry an offset")
+    if offset is not None and hub_offset_m is None and residual is not None:
+        if np.linalg.norm(offset) > HUB_OFFSET_WARN_M:
+            warnings.append(f"the centre of rotation lies {np.linalg.norm(offset) * 1e3:.0f} mm from the {what} "
+                            "(markers not centred on the hub, or the object origin is off the hub): corrected")
+        if residual > HUB_RESIDUAL_WARN_M:
+            warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
+                            "rigid on the wheel, or the wheel does not roll in one plane")
+
+    max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
     hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
     if angle is not None:
         angle, _ = fill_short_gaps(angle, max_gap_frames)
     gap = np.isnan(hub).any(axis=1)
     if gap.all() or (~gap).sum() < 10:
         raise TrialRefused(f"{vf.path}: fewer than 10 frames with a known hub")
-    time_s = (frames - frames[0]) / rate
 
-    frame0 = fit_slope(hub, slope_deg=slope_deg)
+    fit_mask = rough & ~gap
+    if fit_mask.sum() < 10:
+        fit_mask = ~gap
+    hub_fit = np.where(fit_mask[:, None], hub, np.nan)
+    frame0 = fit_slope(hub_fit, slope_deg=slope_deg)
     travel = frame0.travel
-    y = frame0.to_slope(hub)[:, 1]
+    y = np.where(fit_mask, frame0.to_slope(hub)[:, 1], np.nan)
     period_guess = None
-    if angle is not None and np.isfinite(angle).any():
-        total = float(np.nanmax(angle) - np.nanmin(angle))
+    if angle is not None and np.isfinite(angle[fit_mask]).sum() > 2:
+        aw = angle[fit_mask]
+        total = float(np.nanmax(aw) - np.nanmin(aw))
+        tw = time_s[fit_mask]
         if total > 0:
-            period_guess = alpha_rad / (total / (time_s[~gap][-1] - time_s[~gap][0]))
+            period_guess = alpha_rad / (total / max(tw[-1] - tw[0], 1e-9))
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
     reference = "the robust line through the hub path"
     frame = frame0
     if idx.size >= 3:
-        frame = fit_slope(hub, slope_deg=slope_deg, points_m=_hub_at_cusps(time_s, hub, idx), travel=travel)
+        frame = fit_slope(hub_fit, slope_deg=slope_deg, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
         reference = f"the line through the hub at {idx.size} CoM-height minima (impacts)"
     elif slope_deg is None:
         notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
@@ -413,7 +498,41 @@ def build_trial(
         reference = f"slope plane = {reference} minus leg_length_m*cos(alpha/2) ({leg_length_m} m)"
     else:
         reference = f"height above {reference}"
-    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad)
+    observed = ~gap & ~filled
+    t_rel, t_end = float(time_s[motion.release_index]), float(time_s[motion.end_index])
+    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end))
+
+    # walking window and ending
+    if steps.impact_time_s.size:
+        i_last = int(np.searchsorted(time_s, steps.impact_time_s[-1]))
+        i_last = min(i_last, time_s.size - 1)
+    else:
+        i_last = motion.end_index
+    window_s = (t_rel, float(steps.impact_time_s[-1]) if steps.impact_time_s.size else t_end)
+    tilt = None
+    if rot is not None and axis is not None:
+        win = np.zeros(time_s.size, bool)
+        win[motion.release_index:i_last + 1] = True
+        win &= ~np.isnan(rot).any(axis=(1, 2))
+        if win.any():
+            a_body = np.einsum("nji,j->ni", rot[win], axis).mean(axis=0)
+            a_body /= np.linalg.norm(a_body)
+            cos_t = np.abs(np.einsum("nij,j->ni", rot, a_body) @ axis)
+            tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
+    progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
+    from .steps import noise_sigma
+
+    sig = noise_sigma(com[rough]) if rough.any() else float("nan")
+    ending = classify_ending(time_s, hub_slope, progress, (motion.release_index, i_last), axis_tilt_rad=tilt,
+                             noise_m=sig if math.isfinite(sig) else 0.0)
+
+    _plausibility(vf.path, sec, time_s, hub_slope, angle, steps, window_s, alpha_rad, wheel_leg_length_m, warnings)
+    n_unseen = _unseen_periods(steps)
+    if n_unseen:
+        warnings.append(f"{n_unseen} step period(s) dropped: an impact fell in a gap longer than "
+                        f"{max_gap_s * 1e3:g} ms (not guessed)")
+    if motion.held:
+        notes.append(f"held still for {t_rel:.2f} s before the release")
 
     ts = TimeSeries(time_s, {}, tuple(Event(t, "impact") for t in steps.impact_time_s))
     ts = ts.add_data("frame", frames)
@@ -428,11 +547,11 @@ def build_trial(
         first_frame=int(frames[0]),
         n_frames=int(frames.size),
         file_units=units,
-        hub_source=est.source,
-        hub_offset_m=None if est.offset_m is None else tuple(float(v) for v in est.offset_m),
+        hub_source=hub_source,
+        hub_offset_m=None if offset is None else tuple(float(v) for v in offset),
         orientation=(orientation if obj is not None else "markers") if angle is not None else None,
         slope_deg=frame.slope_deg,
-        slope_source=frame.source,
+        slope_source=frame.source + (" (walking window)" if frame.source != "given" else ""),
         slope_residual_m=frame.residual_m,
         slope_points=frame.n_points,
         travel_direction=tuple(float(v) for v in travel),
@@ -446,8 +565,61 @@ def build_trial(
         step_phase_rad=steps.phase_rad,
         alpha_rad=float(alpha_rad),
         notes=tuple(notes),
+        source_reason=choice.reason,
+        ramp_slope_deg=choice.ramp_slope_deg,
+        ramp_source=choice.ramp_source,
+        outcome=ending.outcome,
+        outcome_reason=ending.reason,
+        window_s=window_s,
+        hub_offset_residual_m=residual,
+        impact_step=tuple(int(k) for k in (steps.impact_step if steps.impact_step is not None else ())),
+        period_step=tuple(int(k) for k in (steps.period_step if steps.period_step is not None else ())),
+        warnings=tuple(warnings),
     )
     return Trial(ts, meta)
+
+
+def _unseen_periods(steps: StepResult) -> int:
+    ks = steps.impact_step
+    if ks is None or len(ks) < 2:
+        return 0
+    return int(ks[-1] - ks[0]) - int(len(steps.period_step if steps.period_step is not None else []))
+
+
+def _plausibility(path: str, sec: Section, time_s: np.ndarray, hub_slope: np.ndarray, angle: np.ndarray | None,
+                  steps: StepResult, window_s: tuple[float, float], alpha_rad: float, leg_m: float,
+                  warnings: list[str]) -> None:
+    """Compare the size and speed of the recorded motion with the wheel's (catches a mm/m mislabel)."""
+    expected = 2 * leg_m * math.sin(alpha_rad / 2)  # hub travel per step, m
+    m = (time_s >= window_s[0]) & (time_s <= window_s[1]) & ~np.isnan(hub_slope).any(axis=1)
+    if m.sum() < 3:
+        return
+    x = hub_slope[m, 0]
+    travel = float(np.max(x) - np.min(x))
+    unit = sorted({c.file_unit for c in sec.columns if c.component in ("X", "Y", "Z", "TX", "TY", "TZ")})
+    where = f"{path}:{sec.units_line}:1" if sec.units_line else path
+    if angle is not None and np.isfinite(angle[m]).sum() > 2:
+        turned = float(np.nanmax(angle[m]) - np.nanmin(angle[m]))
+        if turned < alpha_rad:
+            return
+        per_step = travel / (turned / alpha_rad)
+        ratio = per_step / expected
+        if ratio < 0.1 or ratio > 10:
+            raise TrialRefused(
+                f"{where}: the units row says {'/'.join(unit) or '(none)'}, but the wheel moves {per_step:.4g} m per "
+                f"{math.degrees(alpha_rad):.0f} deg of rotation where a wheel with {leg_m} m legs moves "
+                f"{expected:.3f} m: the numbers are likely in "
+                f"{'m (not mm)' if ratio < 0.1 else 'mm (not m)'}; fix the units row")
+        if not 0.5 <= ratio <= 2.0:
+            warnings.append(f"the wheel moves {per_step:.3f} m per step where {expected:.3f} m is expected "
+                            f"(legs of {leg_m} m): check the units row (line {sec.units_line}) and the leg length")
+    else:
+        dur = max(float(np.ptp(time_s[m])), 1e-9)
+        speed = travel / dur
+        if travel > 0 and (speed < 0.01 or speed > 20):
+            raise TrialRefused(
+                f"{where}: the units row says {'/'.join(unit) or '(none)'}, but the hub moves at {speed:.4g} m/s "
+                "while walking (a wheel walks at about 0.1-2 m/s): check the units row")
 
 
 def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.ndarray:

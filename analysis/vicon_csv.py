@@ -55,7 +55,12 @@ _NAME_PREFIXES = ("Global Angle ", "Local Angle ")
 
 # A line that cannot be a data row: anything not starting like a number (titles, header and blank rows).
 _STRUCTURAL = re.compile(r"\n(?![0-9+\-.])")
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+# ASCII digits only: Python's \d also matches other scripts' digits, which no exporter writes.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+#: Plausible frame rates, Hz; a rate row outside is an error at that row.
+RATE_RANGE_HZ = (1.0, 10000.0)
+#: At most this many errors are collected per file (the first, in file order, is the one raised).
+MAX_ERRORS = 20
 
 
 class ViconCsvError(InputFileError):
@@ -69,12 +74,24 @@ class ViconCsvError(InputFileError):
 
     def __init__(self, path: str, line: int | None, column: int | None, cause: str, message: str):
         self.path, self.line, self.column, self.cause = path, line, column, cause
+        self.detail = message
         where = path
         if line is not None:
             where += f", line {line}"
         if column is not None:
             where += f", column {column}"
         super().__init__(f"{where}: {message} [{cause}]")
+        #: Every error found in the file (this one first), at most `MAX_ERRORS`.
+        self.errors: list[ViconCsvError] = [self]
+
+    def location(self) -> str:
+        """``file:line:column: message [cause]`` (compiler style; line/column omitted when unknown)."""
+        where = self.path + "".join(f":{v}" for v in (self.line, self.column) if v is not None)
+        return f"{where}: {self.detail} [{self.cause}]"
+
+    def all_locations(self) -> list[str]:
+        """`location` of every collected error, in file order."""
+        return [e.location() for e in self.errors]
 
 
 @dataclass(frozen=True)
@@ -116,6 +133,10 @@ class Section:
     columns: tuple[Column, ...]
     values: np.ndarray
     name_prefix: str = ""
+    #: 1-based line of the first data row; data row r is on line ``data_line + r``.
+    data_line: int = 0
+    #: 1-based line of the units row.
+    units_line: int = 0
 
     @property
     def n_rows(self) -> int:
@@ -334,10 +355,12 @@ class _Parser:
         pos = self.next_line_pos(pos)
         rate_cells, pos = self.header_line(pos, line_no + 1, "rate", kind)
         rate = _to_float(rate_cells[0]) if rate_cells and rate_cells[0] else None
-        if rate is None or not math.isfinite(rate) or rate <= 0:
+        lo_hz, hi_hz = RATE_RANGE_HZ
+        if rate is None or not math.isfinite(rate) or not lo_hz <= rate <= hi_hz:
             shown = rate_cells[0] if rate_cells and rate_cells[0] else "(empty)"
             raise self.err(line_no + 1, 1, "bad-rate",
-                           f"the rate row of section {kind!r} must hold a positive number of Hz, found {shown!r}")
+                           f"the rate row of section {kind!r} must hold a frame rate of {lo_hz:g}-{hi_hz:g} Hz, "
+                           f"found {shown[:40]!r}")
         names, pos = self.header_line(pos, line_no + 2, "name", kind)
         comps, pos = self.header_line(pos, line_no + 3, "column header", kind)
         if not comps or comps[0] != "Frame":
@@ -369,7 +392,8 @@ class _Parser:
                                f"section {kind!r}: frame number {cell!r} is not a number")
         block = self.text[data_start:nxt]
         width = max(len(comps), len(units), first_data + n_cols)
-        values = self.parse_block(block, data_line, width, kind, at_eof=nxt >= len(self.text))
+        bounds = self.group_bounds(columns, first_data)
+        values = self.parse_block(block, data_line, width, kind, at_eof=nxt >= len(self.text), bounds=bounds)
         frame, sub = self.check_frames(values, data_line, first_data, kind)
         data = values[:, first_data:first_data + n_cols]
         extra = values[:, first_data + n_cols:]
@@ -385,7 +409,8 @@ class _Parser:
         # Convert to SI by what the units row says.
         data = _to_si(data, [c.file_unit for c in columns])
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
-                          columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix)
+                          columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix,
+                          data_line=data_line, units_line=units_line)
         return section, nxt
 
     def build_columns(self, kind: str, names: list[str], comps: list[str], units: list[str],
@@ -412,8 +437,48 @@ class _Parser:
             columns.append(Column(group=group, component=comp, unit=unit, file_unit=file_unit, column=i + 1))
         return columns, prefix
 
+    @staticmethod
+    def group_bounds(columns: list[Column], first_data: int) -> frozenset[int]:
+        """Cell counts a short row may have: the frame cells, or whole groups (an occluded tail)."""
+        ends = {first_data, 1}
+        for a, b in zip(columns, columns[1:]):
+            if a.group != b.group:
+                ends.add(a.column)
+        return frozenset(ends)
+
+    def check_cell_counts(self, block: str, data_line: int, width: int, kind: str,
+                          bounds: frozenset[int]) -> None:
+        """A row shorter than the header that does not end at a group boundary lost a cell: error."""
+        raw = np.frombuffer(block.encode("utf-8", "surrogatepass"), np.uint8)
+        nl = np.flatnonzero(raw == 10)
+        if raw.size and raw[-1] != 10:
+            nl = np.append(nl, raw.size)
+        dl = np.flatnonzero(raw == ord(self.delim))
+        per_line = np.bincount(np.searchsorted(nl, dl), minlength=nl.size)[:nl.size] + 1
+        bad = per_line < width
+        if not bad.any():
+            return
+        rows = np.flatnonzero(bad)
+        ok = np.isin(per_line[rows], np.fromiter(bounds, np.int64))
+        rows = rows[~ok]
+        errs = []
+        for r in rows[:MAX_ERRORS]:
+            errs.append(self.err(data_line + int(r), int(per_line[r]) + 1, "missing-cell",
+                                 f"section {kind!r}: the row has {int(per_line[r])} cells and ends inside a "
+                                 f"marker/object (the header has {width}): a cell is missing, values would be "
+                                 "shifted"))
+        if errs:
+            raise self._collect(errs)
+
+    @staticmethod
+    def _collect(errs: list[ViconCsvError]) -> ViconCsvError:
+        first = errs[0]
+        first.errors = errs[:MAX_ERRORS]
+        return first
+
     # -- data
-    def parse_block(self, block: str, data_line: int, width: int, kind: str, at_eof: bool) -> np.ndarray:
+    def parse_block(self, block: str, data_line: int, width: int, kind: str, at_eof: bool,
+                    bounds: frozenset[int] = frozenset()) -> np.ndarray:
         if not block.strip():
             return np.zeros((0, width))
         if at_eof and not self.ends_with_newline:
@@ -427,6 +492,8 @@ class _Parser:
         values = self.fast_block(block, width)
         if values is None:
             values = self.slow_block(block, data_line, width, kind)
+        if bounds:
+            self.check_cell_counts(block, data_line, width, kind, bounds)
         return values
 
     def fast_block(self, block: str, width: int) -> np.ndarray | None:
@@ -452,13 +519,15 @@ class _Parser:
         if lines and lines[-1] == "":
             lines.pop()
         out = np.full((len(lines), width), np.nan)
+        errs: list[ViconCsvError] = []
         for r, line in enumerate(lines):
             cells = line.split(self.delim)
             if len(cells) > width:
                 for c in range(width, len(cells)):
                     if cells[c].strip():
-                        raise self.err(data_line + r, c + 1, "extra-cell",
-                                       f"section {kind!r}: a value lies beyond the last column of the header")
+                        errs.append(self.err(data_line + r, c + 1, "extra-cell",
+                                             f"section {kind!r}: a value lies beyond the last column of the header"))
+                        break
                 cells = cells[:width]
             for c, cell in enumerate(cells):
                 s = cell.strip()
@@ -467,9 +536,15 @@ class _Parser:
                 if self.decimal == ",":
                     s = s.replace(",", ".")
                 if not _NUMBER.fullmatch(s):
-                    raise self.err(data_line + r, c + 1, "non-numeric",
-                                   f"section {kind!r}: cell {cell.strip()[:40]!r} is not a number")
+                    what = "is not a number (ASCII digits)" if any(ch.isdigit() for ch in s) else "is not a number"
+                    errs.append(self.err(data_line + r, c + 1, "non-numeric",
+                                         f"section {kind!r}: cell {cell.strip()[:40]!r} {what}"))
+                    continue
                 out[r, c] = float(s)
+            if len(errs) >= MAX_ERRORS:
+                break
+        if errs:
+            raise self._collect(errs)
         return out
 
     def check_frames(self, values: np.ndarray, data_line: int, first_data: int,
@@ -503,7 +578,8 @@ class _Parser:
                                f"section {kind!r}: frame {frame[r]} (sub frame {sub[r]}) appears twice "
                                f"(first at line {data_line + r - 1})")
             raise self.err(data_line + r, 1, "frame-order",
-                           f"section {kind!r}: frame {frame[r]} comes after frame {frame[r - 1]}: frames must increase")
+                           f"section {kind!r}: frame {frame[r]} comes after frame {frame[r - 1]}: frames must increase"
+                           " (a second take pasted after the first? split the file at this line)")
         return frame, sub
 
 
