@@ -269,7 +269,12 @@ def _adapt_metavar(param: _click.Parameter) -> None:
         param.display_type_rich = lambda ctx: None  # type: ignore[attr-defined]
         return
     original = getattr(param, "display_type_rich", None)
-    if original is not None:
+    choices = _choices(param)
+    if choices and len("|".join(choices)) + 2 > _MAX_CHOICE_METAVAR:
+        # a long list of choices would be folded mid-word in the metavar column: name them in the help
+        param.help = f"{param.help or ''} One of: {', '.join(choices)}.".strip()  # type: ignore[attr-defined]
+        param.display_type_rich = lambda ctx: "CHOICE"  # type: ignore[attr-defined]
+    elif original is not None:
         param.display_type_rich = functools.partial(_metavar_of, original)  # type: ignore[attr-defined]
     if getattr(param, "param_type_name", "") == "argument":
         name = (param.name or "value").upper()
@@ -280,6 +285,16 @@ def _adapt_metavar(param: _click.Parameter) -> None:
             return text if param.required else f"[{text}]"
 
         param._usage_display_name = usage_name  # type: ignore[attr-defined]
+
+
+_MAX_CHOICE_METAVAR = 24
+
+
+def _choices(param: _click.Parameter) -> list[str]:
+    desc = getattr(param, "type_descriptor", None)
+    if desc is None or not desc.is_choice or not desc.choices:
+        return []
+    return [str(getattr(c, "value", c)) for c in desc.choices]
 
 
 def _metavar_of(original: Callable[..., Optional[str]], ctx: _click.Context) -> Optional[str]:
