@@ -6,8 +6,8 @@ relative paths such as `analysis/data/...` resolve as in a clone while outputs l
 `.venv` there points at the environment running the tests, and its `bin` folder comes first on PATH (what
 `source .venv/bin/activate` does). Whatever bash blocks the README gains later are parsed the same way.
 
-Each command must exit 0 without a traceback, and every file or folder it names with `--out` or `--plot`
-must exist afterwards.
+Each command must exit 0 without a traceback, every file or folder it names with `--out` or `--plot` must
+exist afterwards, and every table it prints (lines drawn with box characters) fits 80 columns.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ QUICK: list[tuple[str, list[str]]] = [
     (r"^rimless bench\b(?!.*--quick)", ["--quick"]),
 ]
 
+TABLE_CHARS = re.compile("[\u2500-\u257f]")  # box drawing: the lines of a rich table
 TIMEOUT_S = 900  # the first simulator command compiles the fast path (about a minute on the CI machine)
 
 
@@ -132,3 +133,5 @@ def test_readme_command_runs_as_written(command: str, mirror: Path) -> None:
     assert "Traceback" not in out, out[-3000:]
     for path in named_outputs(run):
         assert (mirror / path).exists(), f"`{run}` did not write {path}"
+    wide = [line for line in out.splitlines() if TABLE_CHARS.search(line) and len(line) > 80]
+    assert not wide, f"`{run}` prints table lines wider than 80 columns:\n" + "\n".join(wide)
