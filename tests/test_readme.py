@@ -30,8 +30,9 @@ NOT_RUN: list[tuple[str, str]] = [
     (r"^python3 -m venv\b", "creates the environment the test is already running in (.ci/run does it on a clean clone)"),
     (r"/pip install\b|^pip install\b", "installs the project; the test runs inside that installation"),
     (r"-m pytest\b|^pytest\b", "runs the test suite, which includes this test"),
-    (r"^rimless robot check\b(?!.*--fake)", "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch GPIO pins"),
-    (r"--host\s+(H|raspberrypi\.local)\b", "needs a running robot on the LAN"),
+    (r"^rimless robot (check|run)\b(?!.*--fake)", "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch "
+                                                 "GPIO pins"),
+    (r"--host[\s=]+(?!127\.0\.0\.1\b|localhost\b)\S", "needs a running robot on the LAN"),
 ]
 
 # Long-running commands get their quick options (appended when the README's line lacks them).
@@ -58,8 +59,8 @@ def readme_commands(text: str) -> list[str]:
 
 
 def _normalised(command: str) -> str:
-    """The command as the patterns see it: `.venv/bin/rimless` reads as `rimless`."""
-    return re.sub(r"^(\./)?\.venv/bin/", "", command)
+    """The command as the patterns see it: `.venv/bin/rimless` reads as `rimless`, `VAR=x rimless` as `rimless`."""
+    return re.sub(r"^(\w+=\S*\s+)*(\./)?(\.venv/bin/)?", "", command)
 
 
 def not_run_reason(command: str) -> str | None:
@@ -103,6 +104,9 @@ def test_parser_handles_chains_comments_and_the_setup_line():
     assert with_quick_options("rimless bench --plot wp.png") == "rimless bench --plot wp.png --quick"
     assert with_quick_options("rimless bench --quick") == "rimless bench --quick"
     assert named_outputs("rimless trials report a b --out report/ --json") == ["report/"]
+    assert not_run_reason("RIMLESS_TOKEN=x .venv/bin/rimless robot run --config /etc/rimless/robot.toml")
+    assert not_run_reason("rimless robot arm --host=10.0.0.5") == "needs a running robot on the LAN"
+    assert not_run_reason("rimless robot run --fake --arm --duration-s 5") is None
 
 
 @pytest.fixture(scope="module")
