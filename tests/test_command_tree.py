@@ -101,6 +101,29 @@ def test_every_parameter_is_explained(path: tuple[str, ...]) -> None:
     assert not silent, f"{_name(path)}: parameters without help: {silent}"
 
 
+# Commands without --json, each with its reason.
+NO_JSON: dict[tuple[str, ...], str] = {
+    ("robot", "run"): "the firmware itself: it logs to stderr while it runs, its results are the telemetry",
+    ("robot", "listen"): "records telemetry to --out and shows a live summary; the records are JSON Lines",
+}
+# Known violations (strict=False xfails; the lead deletes an entry when it turns into XPASS).
+KNOWN_NO_JSON: dict[tuple[str, ...], str] = {
+    **{("robot", c): "always prints JSON but rejects --json" for c in
+       ("arm", "disarm", "set", "status", "trial-start", "trial-stop")},
+    ("trials", "bench-import"): "prints its timings as text only",
+}
+
+
+@pytest.mark.parametrize("path", [p for p, _ in LEAVES], ids=[_name(p) for p, _ in LEAVES])
+def test_every_command_that_prints_results_has_json(path: tuple[str, ...], request: pytest.FixtureRequest) -> None:
+    if path in NO_JSON:
+        pytest.skip(f"no --json: {NO_JSON[path]}")
+    if path in KNOWN_NO_JSON:
+        request.applymarker(pytest.mark.xfail(reason=f"known: {KNOWN_NO_JSON[path]}", strict=False))
+    cmd = dict(ALL)[path]
+    assert any("--json" in p.opts for p in cmd.params), f"`rimless {_name(path)}` has no --json"
+
+
 def test_flags_show_no_metavar_and_values_show_theirs() -> None:
     out = _invoke(["sim", "gait", "--help"]).output
     json_line = next(line for line in out.splitlines() if "--json " in line)

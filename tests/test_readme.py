@@ -7,7 +7,7 @@ relative paths such as `analysis/data/...` resolve as in a clone while outputs l
 `source .venv/bin/activate` does). Whatever bash blocks the README gains later are parsed the same way.
 
 Each command must exit 0 without a traceback, every file or folder it names with `--out` or `--plot` must
-exist afterwards, and every table it prints (lines drawn with box characters) fits 80 columns.
+exist afterwards and its path be printed, and every table it prints (lines drawn with box characters) fits 80 columns.
 """
 
 from __future__ import annotations
@@ -40,6 +40,14 @@ QUICK: list[tuple[str, list[str]]] = [
     (r"^rimless robot listen\b(?!.*--duration-s)", ["--duration-s", "1"]),
     (r"^rimless robot run\b(?!.*--duration-s)", ["--duration-s", "2"]),
     (r"^rimless bench\b(?!.*--quick)", ["--quick"]),
+]
+
+# Known violations in the parts' commands (regex on the command, reason): strict=False xfails, so the lead
+# sees an XPASS once a part fixes its command, and deletes the entry.
+KNOWN_VIOLATIONS: list[tuple[str, str]] = [
+    (r"^rimless bench\b.*--plot", "does not print the path of the figure it writes"),
+    (r"^rimless trials import\b.*--json", "the JSON rows do not give the path of the trial written"),
+    (r"^rimless robot listen\b", "does not print the path of the recording it writes"),
 ]
 
 TABLE_CHARS = re.compile("[\u2500-\u257f]")  # box drawing: the lines of a rich table
@@ -122,10 +130,13 @@ def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("command", COMMANDS, ids=[f"{i:02d} {c[:60]}" for i, c in enumerate(COMMANDS)])
-def test_readme_command_runs_as_written(command: str, mirror: Path) -> None:
+def test_readme_command_runs_as_written(command: str, mirror: Path, request: pytest.FixtureRequest) -> None:
     reason = not_run_reason(command)
     if reason is not None:
         pytest.skip(f"not run: {reason}")
+    for pattern, known in KNOWN_VIOLATIONS:
+        if re.search(pattern, _normalised(command)):
+            request.applymarker(pytest.mark.xfail(reason=f"known: {known}", strict=False))
     bin_dir = Path(sys.prefix) / "bin"
     env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", "VIRTUAL_ENV": sys.prefix,
            "COLUMNS": "80"}
@@ -137,5 +148,6 @@ def test_readme_command_runs_as_written(command: str, mirror: Path) -> None:
     assert "Traceback" not in out, out[-3000:]
     for path in named_outputs(run):
         assert (mirror / path).exists(), f"`{run}` did not write {path}"
+        assert path.rstrip("/") in out, f"`{run}` wrote {path} but does not say where"
     wide = [line for line in out.splitlines() if TABLE_CHARS.search(line) and len(line) > 80]
     assert not wide, f"`{run}` prints table lines wider than 80 columns:\n" + "\n".join(wide)
