@@ -144,7 +144,7 @@ def _param_name(err: _click.exceptions.ClickException) -> str | None:
     return (longs or param.opts or [param.name])[0]
 
 
-def _pydantic_detail(err: BaseException) -> str | None:
+def _pydantic_detail(err: _click.exceptions.BadParameter) -> str | None:
     """The offending value and the rule it broke, from the validation error typer wraps (if any)."""
     cause = err.__cause__
     errors = getattr(cause, "errors", None)
@@ -160,9 +160,13 @@ def _pydantic_detail(err: BaseException) -> str | None:
         return f"must be a number, {got}"
     if kind in ("int_parsing", "int_type", "int_from_float"):
         return f"must be a whole number, {got}"
-    for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
-        if key in bounds and kind.startswith(("greater", "less")):
-            return f"must be {word} {bounds[key]}, {got}"
+    if kind.startswith(("greater", "less")):
+        low, high = getattr(err.param, "min", None), getattr(err.param, "max", None)  # type: ignore[attr-defined]
+        if low is not None and high is not None:
+            return f"must be between {low:g} and {high:g}, {got}"
+        for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+            if key in bounds:
+                return f"must be {word} {bounds[key]}, {got}"
     if kind == "enum" and "expected" in bounds:
         choices = str(bounds["expected"]).replace("'", "").replace(" or ", ", ")
         return f"must be one of {choices}, {got}"
@@ -186,7 +190,8 @@ def usage_message(err: _click.exceptions.ClickException) -> str:
                 detail = f"must be one of {choice.group(2).replace(chr(39), '')}, got {choice.group(1)}"
             detail = detail[:1].lower() + detail[1:]
         return f"{name} {detail}" if detail.startswith("must ") else f"{name}: {detail}"
-    text = err.format_message().strip().rstrip(".")
+    text = err.format_message().strip().rstrip(".").replace("(Possible options:", "(did you mean")
+    text = re.sub(r"\(did you mean ([^)]*)\)", r"(did you mean \1?)", text)
     text = text[:1].lower() + text[1:]
     return f"{text}{see}"
 
