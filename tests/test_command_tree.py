@@ -280,7 +280,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("bench",): (["--plot", "wp.png"], 6.0),
     ("demo",): (["--out", "demo-out"], 6.0),
     ("sim", "critical-slope"): (["--model", "er", "--backend", "reference"], 4.0),
-    ("sim", "fixed-point"): (["--backend", "reference"], 3.0),
+    ("sim", "fixed-point"): (["--backend", "reference"], 2.0),
     ("sim", "gait"): (["--steps", "10000", "--out", "traj.parquet", "--plot", "gait.png"], 4.0),
     ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], 4.0),
     ("sim", "stress"): (["--k-values", ",".join(str(300 + 10 * i) for i in range(200))], 4.0),
