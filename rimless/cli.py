@@ -29,7 +29,7 @@ from typer import _click
 from typer.core import TyperGroup
 
 from rimless import __version__
-from rimless.errors import RunFailure, UserError
+from rimless.errors import RunFailure, UserError, interrupted_by_user
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -91,18 +91,6 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
-def _interrupted_by_user(err: BaseException) -> bool:
-    """True if `err` is, or was caused by, a KeyboardInterrupt (numba re-raises it as SystemError)."""
-    seen: set[int] = set()
-    cur: BaseException | None = err
-    while cur is not None and id(cur) not in seen:
-        if isinstance(cur, KeyboardInterrupt):
-            return True
-        seen.add(id(cur))
-        cur = cur.__cause__ or cur.__context__
-    return False
-
-
 @contextlib.contextmanager
 def _rules(ctx: Optional[_click.Context]) -> Iterator[None]:
     """Map what a command raises onto the CLI's exit codes and one-line messages."""
@@ -123,7 +111,7 @@ def _rules(ctx: Optional[_click.Context]) -> Iterator[None]:
         typer.echo("interrupted", err=True)
         raise typer.Exit(EXIT_INTERRUPTED) from None
     except SystemError as err:
-        if _interrupted_by_user(err):
+        if interrupted_by_user(err):
             typer.echo("interrupted", err=True)
             raise typer.Exit(EXIT_INTERRUPTED) from None
         raise

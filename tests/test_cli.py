@@ -312,3 +312,24 @@ def test_values_are_echoed_in_the_unit_of_the_option(option, si, text):
     from rimless.units import typed
 
     assert typed(option, float(si)) == text
+
+
+def test_ctrl_c_in_compiled_code_is_not_classified_as_a_failed_step(monkeypatch):
+    """numba turns a Ctrl-C inside compiled code into a SystemError; the stress sweep, which classifies
+    every exception of a step, must let it stop the command instead of counting it as 'unclassified'."""
+    from rimless.errors import interrupted_by_user
+    from rimless.sim import fast
+    from rimless.sim.params import WheelParams
+    from rimless.sim.stress import stress_sweep
+
+    def interrupted_step(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:
+            raise SystemError("<CPUDispatcher> returned a result with an exception set") from err
+
+    monkeypatch.setattr(fast, "fast_step", interrupted_step)
+    with pytest.raises(KeyboardInterrupt):
+        stress_sweep(WheelParams(), k_values=[2700.0], c_values=[8.0], slopes_rad=[0.05], mass_ratios=[0.02])
+    assert not interrupted_by_user(SystemError("a real numba failure"))
+    assert interrupted_by_user(KeyboardInterrupt())
