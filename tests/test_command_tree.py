@@ -373,8 +373,11 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...],
     args, delay_s = LONG_RUNS[path]
     before = {p.name for p in tmp_path.iterdir()}
     env = {**os.environ, "COLUMNS": str(WIDTH)}
+    # The child gets SIGINT's default disposition, as a command started in a terminal does: a test run started
+    # as a background job (SIGINT ignored, inherited across exec) would otherwise ignore the interrupt.
     proc = subprocess.Popen([sys.executable, "-m", "rimless", *path, *args], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(delay_s)
         finished_early = proc.poll() is not None
