@@ -29,7 +29,7 @@ from typer import _click
 from typer.core import TyperGroup
 
 from rimless import __version__
-from rimless.errors import RunFailure, UserError
+from rimless.errors import RunFailure, UserError, interrupted_by_user
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -91,18 +91,6 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
-def _interrupted_by_user(err: BaseException) -> bool:
-    """True if `err` is, or was caused by, a KeyboardInterrupt (numba re-raises it as SystemError)."""
-    seen: set[int] = set()
-    cur: BaseException | None = err
-    while cur is not None and id(cur) not in seen:
-        if isinstance(cur, KeyboardInterrupt):
-            return True
-        seen.add(id(cur))
-        cur = cur.__cause__ or cur.__context__
-    return False
-
-
 @contextlib.contextmanager
 def _rules(ctx: Optional[_click.Context]) -> Iterator[None]:
     """Map what a command raises onto the CLI's exit codes and one-line messages."""
@@ -123,7 +111,7 @@ def _rules(ctx: Optional[_click.Context]) -> Iterator[None]:
         typer.echo("interrupted", err=True)
         raise typer.Exit(EXIT_INTERRUPTED) from None
     except SystemError as err:
-        if _interrupted_by_user(err):
+        if interrupted_by_user(err):
             typer.echo("interrupted", err=True)
             raise typer.Exit(EXIT_INTERRUPTED) from None
         raise
@@ -144,7 +132,7 @@ def _param_name(err: _click.exceptions.ClickException) -> str | None:
     return (longs or param.opts or [param.name])[0]
 
 
-def _pydantic_detail(err: BaseException) -> str | None:
+def _pydantic_detail(err: _click.exceptions.BadParameter) -> str | None:
     """The offending value and the rule it broke, from the validation error typer wraps (if any)."""
     cause = err.__cause__
     errors = getattr(cause, "errors", None)
@@ -160,9 +148,13 @@ def _pydantic_detail(err: BaseException) -> str | None:
         return f"must be a number, {got}"
     if kind in ("int_parsing", "int_type", "int_from_float"):
         return f"must be a whole number, {got}"
-    for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
-        if key in bounds and kind.startswith(("greater", "less")):
-            return f"must be {word} {bounds[key]}, {got}"
+    if kind.startswith(("greater", "less")):
+        low, high = getattr(err.param, "min", None), getattr(err.param, "max", None)  # type: ignore[attr-defined]
+        if low is not None and high is not None:
+            return f"must be between {low:g} and {high:g}, {got}"
+        for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+            if key in bounds:
+                return f"must be {word} {bounds[key]}, {got}"
     if kind == "enum" and "expected" in bounds:
         choices = str(bounds["expected"]).replace("'", "").replace(" or ", ", ")
         return f"must be one of {choices}, {got}"
@@ -186,7 +178,8 @@ def usage_message(err: _click.exceptions.ClickException) -> str:
                 detail = f"must be one of {choice.group(2).replace(chr(39), '')}, got {choice.group(1)}"
             detail = detail[:1].lower() + detail[1:]
         return f"{name} {detail}" if detail.startswith("must ") else f"{name}: {detail}"
-    text = err.format_message().strip().rstrip(".")
+    text = err.format_message().strip().rstrip(".").replace("(Possible options:", "(did you mean")
+    text = re.sub(r"\(did you mean ([^)]*)\)", r"(did you mean \1?)", text)
     text = text[:1].lower() + text[1:]
     return f"{text}{see}"
 
@@ -269,7 +262,12 @@ def _adapt_metavar(param: _click.Parameter) -> None:
         param.display_type_rich = lambda ctx: None  # type: ignore[attr-defined]
         return
     original = getattr(param, "display_type_rich", None)
-    if original is not None:
+    choices = _choices(param)
+    if choices and len("|".join(choices)) + 2 > _MAX_CHOICE_METAVAR:
+        # a long list of choices would be folded mid-word in the metavar column: name them in the help
+        param.help = f"{param.help or ''} One of: {', '.join(choices)}.".strip()  # type: ignore[attr-defined]
+        param.display_type_rich = lambda ctx: "CHOICE"  # type: ignore[attr-defined]
+    elif original is not None:
         param.display_type_rich = functools.partial(_metavar_of, original)  # type: ignore[attr-defined]
     if getattr(param, "param_type_name", "") == "argument":
         name = (param.name or "value").upper()
@@ -280,6 +278,16 @@ def _adapt_metavar(param: _click.Parameter) -> None:
             return text if param.required else f"[{text}]"
 
         param._usage_display_name = usage_name  # type: ignore[attr-defined]
+
+
+_MAX_CHOICE_METAVAR = 24
+
+
+def _choices(param: _click.Parameter) -> list[str]:
+    desc = getattr(param, "type_descriptor", None)
+    if desc is None or not desc.is_choice or not desc.choices:
+        return []
+    return [str(getattr(c, "value", c)) for c in desc.choices]
 
 
 def _metavar_of(original: Callable[..., Optional[str]], ctx: _click.Context) -> Optional[str]:

@@ -29,3 +29,20 @@ class OutputFileError(UserError):
 
 class RunFailure(RimlessError, RuntimeError):
     """Valid input, no result: the message says why in a researcher's words (a reason code may follow)."""
+
+
+def interrupted_by_user(err: BaseException) -> bool:
+    """True if `err` is, or was caused by, a KeyboardInterrupt.
+
+    numba re-raises a Ctrl-C that lands in compiled code as a `SystemError` chained to the
+    KeyboardInterrupt; code that catches `Exception` to classify failures must re-raise such an error
+    (`raise KeyboardInterrupt from err`) so that Ctrl-C still stops the command.
+    """
+    seen: set[int] = set()
+    cur: BaseException | None = err
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt):
+            return True
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return False

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from rimless.errors import interrupted_by_user
 from rimless.sim.failures import StepFailure
 from rimless.sim.params import SPOKE_ANGLE_RAD, WheelParams
 
@@ -64,6 +65,8 @@ def stress_sweep(
             except StepFailure as err:
                 key = err.reason.value
             except Exception as err:  # noqa: BLE001 - the sweep's job is to catch and report these
+                if interrupted_by_user(err):  # Ctrl-C inside compiled code arrives as a SystemError
+                    raise KeyboardInterrupt from err
                 key = "unclassified"
                 unclassified.append({"k": k, "c": c, "slope_rad": phi, "mass_ratio": ratio, "model": model,
                                      "start": list(z), "error": f"{type(err).__name__}: {err}"})

@@ -135,3 +135,201 @@ def test_stress_sweep_classifies_every_point():
     assert out["counts"]["er"].get("valid", 0) > 0 and len(out["counts"]["er"]) >= 3
     bad = runner.invoke(app, ["sim", "stress", "--slopes-deg", "30"])
     assert bad.exit_code == 2 and "--slopes-deg" in bad.output
+
+
+# ------------------------------------------------------------------------ the root's shared mechanisms
+
+
+def _toy_app():
+    """A small app under the root group, with commands that fail in each way a real command can."""
+    import typer
+
+    from rimless.cli import RimlessGroup, fail
+    from rimless.errors import ParameterError
+
+    toy = typer.Typer(cls=RimlessGroup, add_completion=False)
+
+    @toy.command()
+    def user(x: float = 1.0) -> None:
+        raise ParameterError(f"--x must be positive, got {x}")
+
+    @toy.command()
+    def nogait() -> None:
+        fail("no period-1 gait exists at this slope (stall)")
+
+    @toy.command()
+    def ctrlc() -> None:
+        raise KeyboardInterrupt
+
+    @toy.command()
+    def numba_ctrlc() -> None:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:  # what numba does when Ctrl-C lands in a callback
+            raise SystemError("<numba> returned a result with an exception set") from err
+
+    @toy.command()
+    def missing(path: str = "nope.csv") -> None:
+        open(path)  # noqa: SIM115 - the OSError is the point
+
+    @toy.command()
+    def negative(value: float) -> None:
+        print(f"value={value}")
+
+    return toy
+
+
+@pytest.mark.parametrize(("args", "code", "line"), [
+    (["user", "--x", "-2"], 2, "error: --x must be positive, got -2.0"),
+    (["nogait"], 1, "error: no period-1 gait exists at this slope (stall)"),
+    (["ctrlc"], 130, "interrupted"),
+    (["numba-ctrlc"], 130, "interrupted"),
+    (["missing", "--path", "/no/such/file.csv"], 2, "error: /no/such/file.csv: No such file or directory"),
+    (["user", "--x", "abc"], 2, "error: --x must be a number, got 'abc'"),
+    (["negative"], 2, "error: missing argument VALUE (see 'rimless negative --help')"),
+])
+def test_root_group_maps_every_failure_to_one_line_and_its_exit_code(args, code, line):
+    res = CliRunner().invoke(_toy_app(), args, prog_name="rimless")
+    assert res.exit_code == code, res.output
+    assert res.stderr.strip().splitlines() == [line]
+    assert res.stdout == ""
+
+
+def test_negative_numbers_reach_the_command_as_values():
+    res = CliRunner().invoke(_toy_app(), ["negative", "-3.5e-2"])
+    assert res.exit_code == 0 and res.stdout.strip() == "value=-0.035"
+
+
+def test_a_real_bug_still_shows_its_traceback():
+    """Only deliberate failures are turned into one line: a programming error must stay visible."""
+    import typer
+
+    from rimless.cli import RimlessGroup
+
+    toy = typer.Typer(cls=RimlessGroup, add_completion=False)
+
+    @toy.command()
+    def bug() -> None:
+        raise ZeroDivisionError("bug")
+
+    @toy.command()
+    def other() -> None:
+        pass
+
+    res = CliRunner().invoke(toy, ["bug"])
+    assert res.exit_code == 1 and isinstance(res.exception, ZeroDivisionError)
+
+
+def test_console_script_version_and_a_usage_error():
+    res = subprocess.run([sys.executable, "-m", "rimless", "--version"], capture_output=True, text=True)
+    assert res.returncode == 0 and res.stdout.startswith("rimless ")
+    res = subprocess.run([sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "xx"],
+                         capture_output=True, text=True)
+    assert res.returncode == 2
+    assert res.stderr == "error: --model must be one of er, ve, got 'xx'\n"
+
+
+def test_atomic_file_appears_only_when_complete(tmp_path):
+    from rimless.output import atomic_file
+
+    target = tmp_path / "sub" / "traj.csv"
+    with atomic_file(target) as tmp:
+        assert tmp.parent == target.parent and tmp.suffix == ".csv" and tmp != target
+        tmp.write_text("a,b\n1,2\n")
+        assert not target.exists()
+    assert target.read_text() == "a,b\n1,2\n"
+    assert sorted(p.name for p in target.parent.iterdir()) == ["traj.csv"]
+    # an interrupted rewrite keeps the old complete file and leaves no temporary behind
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_file(target) as tmp:
+            tmp.write_text("half")
+            raise KeyboardInterrupt
+    assert target.read_text() == "a,b\n1,2\n"
+    assert sorted(p.name for p in target.parent.iterdir()) == ["traj.csv"]
+
+
+def test_atomic_dir_replaces_the_folder_whole(tmp_path):
+    from rimless.output import atomic_dir
+
+    out = tmp_path / "report"
+    with pytest.raises(RuntimeError):
+        with atomic_dir(out) as tmp:
+            (tmp / "report.html").write_text("<html>")
+            raise RuntimeError("every trial failed")
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+    with atomic_dir(out) as tmp:
+        (tmp / "report.html").write_text("v1")
+    with atomic_dir(out) as tmp:
+        (tmp / "report.html").write_text("v2")
+        assert (out / "report.html").read_text() == "v1"
+    assert (out / "report.html").read_text() == "v2"
+    assert [p.name for p in tmp_path.iterdir()] == ["report"]
+
+
+def test_unwritable_output_names_the_option_and_path(tmp_path):
+    from rimless.errors import OutputFileError, UserError
+    from rimless.output import atomic_dir, atomic_file
+
+    with pytest.raises(OutputFileError, match=r"^--plot /proc/rimless-nope/x.png: cannot create") as err:
+        with atomic_file("/proc/rimless-nope/x.png", option="--plot"):
+            pass
+    assert isinstance(err.value, UserError)
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(OutputFileError, match="--out .*afile: exists and is not a folder"):
+        with atomic_dir(tmp_path / "afile", option="--out"):
+            pass
+    with pytest.raises(OutputFileError, match="is a folder"):
+        with atomic_file(tmp_path, option="--out"):
+            pass
+
+
+def test_progress_bar_is_quiet_off_a_terminal_and_with_json(capsys, monkeypatch):
+    import io
+
+    from rimless.progress import progress_bar, progress_is_shown
+
+    with progress_bar("work", total=3) as bar:  # pytest's stderr is not a terminal
+        bar.advance()
+        bar.update(completed=3, description="done")
+    assert capsys.readouterr().err == ""
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Tty())
+    assert progress_is_shown(json_out=False) and not progress_is_shown(json_out=True)
+
+
+@pytest.mark.parametrize(("option", "si", "text"), [
+    ("--slope-deg", np.radians(30.0), "--slope-deg 30"),
+    ("--max-gap-ms", 0.05, "--max-gap-ms 50"),
+    ("--hub-offset-mm", 0.0125, "--hub-offset-mm 12.5"),
+    ("--slope-rad", 0.05, "--slope-rad 0.05"),
+    ("--k", 2700.0, "--k 2700"),
+])
+def test_values_are_echoed_in_the_unit_of_the_option(option, si, text):
+    from rimless.units import typed
+
+    assert typed(option, float(si)) == text
+
+
+def test_ctrl_c_in_compiled_code_is_not_classified_as_a_failed_step(monkeypatch):
+    """numba turns a Ctrl-C inside compiled code into a SystemError; the stress sweep, which classifies
+    every exception of a step, must let it stop the command instead of counting it as 'unclassified'."""
+    from rimless.errors import interrupted_by_user
+    from rimless.sim import fast
+    from rimless.sim.params import WheelParams
+    from rimless.sim.stress import stress_sweep
+
+    def interrupted_step(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:
+            raise SystemError("<CPUDispatcher> returned a result with an exception set") from err
+
+    monkeypatch.setattr(fast, "fast_step", interrupted_step)
+    with pytest.raises(KeyboardInterrupt):
+        stress_sweep(WheelParams(), k_values=[2700.0], c_values=[8.0], slopes_rad=[0.05], mass_ratios=[0.02])
+    assert not interrupted_by_user(SystemError("a real numba failure"))
+    assert interrupted_by_user(KeyboardInterrupt())

@@ -6,8 +6,8 @@ relative paths such as `analysis/data/...` resolve as in a clone while outputs l
 `.venv` there points at the environment running the tests, and its `bin` folder comes first on PATH (what
 `source .venv/bin/activate` does). Whatever bash blocks the README gains later are parsed the same way.
 
-Each command must exit 0 without a traceback, and every file or folder it names with `--out` or `--plot`
-must exist afterwards.
+Each command must exit 0 without a traceback, every file or folder it names with `--out` or `--plot` must
+exist afterwards and its path be printed, and every table it prints (lines drawn with box characters) fits 80 columns.
 """
 
 from __future__ import annotations
@@ -30,8 +30,9 @@ NOT_RUN: list[tuple[str, str]] = [
     (r"^python3 -m venv\b", "creates the environment the test is already running in (.ci/run does it on a clean clone)"),
     (r"/pip install\b|^pip install\b", "installs the project; the test runs inside that installation"),
     (r"-m pytest\b|^pytest\b", "runs the test suite, which includes this test"),
-    (r"^rimless robot check\b(?!.*--fake)", "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch GPIO pins"),
-    (r"--host\s+(H|raspberrypi\.local)\b", "needs a running robot on the LAN"),
+    (r"^rimless robot (check|run)\b(?!.*--fake)", "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch "
+                                                 "GPIO pins"),
+    (r"--host[\s=]+(?!127\.0\.0\.1\b|localhost\b)\S", "needs a running robot on the LAN"),
 ]
 
 # Long-running commands get their quick options (appended when the README's line lacks them).
@@ -41,6 +42,15 @@ QUICK: list[tuple[str, list[str]]] = [
     (r"^rimless bench\b(?!.*--quick)", ["--quick"]),
 ]
 
+# Known violations in the parts' commands (regex on the command, reason): strict=False xfails, so the lead
+# sees an XPASS once a part fixes its command, and deletes the entry.
+KNOWN_VIOLATIONS: list[tuple[str, str]] = [
+    (r"^rimless bench\b.*--plot", "does not print the path of the figure it writes"),
+    (r"^rimless trials import\b.*--json", "the JSON rows do not give the path of the trial written"),
+    (r"^rimless robot listen\b", "does not print the path of the recording it writes"),
+]
+
+TABLE_CHARS = re.compile("[\u2500-\u257f]")  # box drawing: the lines of a rich table
 TIMEOUT_S = 900  # the first simulator command compiles the fast path (about a minute on the CI machine)
 
 
@@ -57,8 +67,8 @@ def readme_commands(text: str) -> list[str]:
 
 
 def _normalised(command: str) -> str:
-    """The command as the patterns see it: `.venv/bin/rimless` reads as `rimless`."""
-    return re.sub(r"^(\./)?\.venv/bin/", "", command)
+    """The command as the patterns see it: `.venv/bin/rimless` reads as `rimless`, `VAR=x rimless` as `rimless`."""
+    return re.sub(r"^(\w+=\S*\s+)*(\./)?(\.venv/bin/)?", "", command)
 
 
 def not_run_reason(command: str) -> str | None:
@@ -102,6 +112,9 @@ def test_parser_handles_chains_comments_and_the_setup_line():
     assert with_quick_options("rimless bench --plot wp.png") == "rimless bench --plot wp.png --quick"
     assert with_quick_options("rimless bench --quick") == "rimless bench --quick"
     assert named_outputs("rimless trials report a b --out report/ --json") == ["report/"]
+    assert not_run_reason("RIMLESS_TOKEN=x .venv/bin/rimless robot run --config /etc/rimless/robot.toml")
+    assert not_run_reason("rimless robot arm --host=10.0.0.5") == "needs a running robot on the LAN"
+    assert not_run_reason("rimless robot run --fake --arm --duration-s 5") is None
 
 
 @pytest.fixture(scope="module")
@@ -117,10 +130,13 @@ def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("command", COMMANDS, ids=[f"{i:02d} {c[:60]}" for i, c in enumerate(COMMANDS)])
-def test_readme_command_runs_as_written(command: str, mirror: Path) -> None:
+def test_readme_command_runs_as_written(command: str, mirror: Path, request: pytest.FixtureRequest) -> None:
     reason = not_run_reason(command)
     if reason is not None:
         pytest.skip(f"not run: {reason}")
+    for pattern, known in KNOWN_VIOLATIONS:
+        if re.search(pattern, _normalised(command)):
+            request.applymarker(pytest.mark.xfail(reason=f"known: {known}", strict=False))
     bin_dir = Path(sys.prefix) / "bin"
     env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", "VIRTUAL_ENV": sys.prefix,
            "COLUMNS": "80"}
@@ -132,3 +148,6 @@ def test_readme_command_runs_as_written(command: str, mirror: Path) -> None:
     assert "Traceback" not in out, out[-3000:]
     for path in named_outputs(run):
         assert (mirror / path).exists(), f"`{run}` did not write {path}"
+        assert path.rstrip("/") in out, f"`{run}` wrote {path} but does not say where"
+    wide = [line for line in out.splitlines() if TABLE_CHARS.search(line) and len(line) > 80]
+    assert not wide, f"`{run}` prints table lines wider than 80 columns:\n" + "\n".join(wide)
