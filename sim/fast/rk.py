@@ -12,7 +12,11 @@ The integrated vector is y_aug = [y (10,), V (10x2, column-major, optional), E_d
 
 Extra (beyond scipy): a touchdown that grazes the slope inside one step (swing height > 0 at both step
 ends with a minimum below 0 in between) is detected from the sign change of the height's rate and located
-on the dense output, so it is not missed. A stiffness indicator (Hairer's h |lambda| estimate from the last
+on the dense output, so it is not missed. Likewise a normal-force guard (lift-off of foot a or b) that dips
+below zero and recovers between two step ends: around every discrete minimum of the force over the step
+ends (the previous step's stages are kept for this), the force is minimised on the dense output (samples,
+then Brent's minimiser) and its first zero located. Non-finite values, NaN step sizes and more than
+MAX_REJECTIONS rejected attempts end the phase with a failure status. A stiffness indicator (Hairer's h |lambda| estimate from the last
 two stages, > 6.1 counts a "stiff step") is returned; a phase that needs more than `max_steps` steps ends
 with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
 """
