@@ -16,9 +16,9 @@ on the dense output, so it is not missed. Likewise a normal-force guard (lift-of
 below zero and recovers between two step ends: around every discrete minimum of the force over the step
 ends (the previous step's stages are kept for this), the force is minimised on the dense output (samples,
 then Brent's minimiser) and its first zero located. Non-finite values, NaN step sizes and more than
-MAX_REJECTIONS rejected attempts end the phase with a failure status. A stiffness indicator (Hairer's h |lambda| estimate from the last
-two stages, > 6.1 counts a "stiff step") is returned; a phase that needs more than `max_steps` steps ends
-with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
+MAX_REJECTIONS rejected attempts end the phase with a failure status. A stiffness indicator (Hairer's
+h |lambda| estimate from the last two stages, > 6.1 counts a "stiff step") is returned; a phase that needs
+more than `max_steps` steps ends with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
 """
 
 from __future__ import annotations
