@@ -1,5 +1,5 @@
-"""Work-precision benchmark of the Poincaré map (issue 3): the compiled fast path against scipy's solve_ivp
-(RK45 and DOP853, Python right-hand side), in one run, side by side.
+"""Work-precision benchmark of the Poincaré map: the compiled fast path against scipy's RK45 and DOP853
+solvers (Python right-hand side, rimless.sim.integrators.ScipyIntegrator), in one run, side by side.
 
 For the ER and VE wheels at Table 1 (eight-leg), at the fixed points z*, and each tolerance rtol
 (atol = rtol / 100), every backend gives P(z*), the step period and max |eigenvalue| of dP/dz
@@ -7,7 +7,10 @@ For the ER and VE wheels at Table 1 (eight-leg), at the fixed points z*, and eac
 its default step). Errors are against a tight reference: scipy DOP853 at rtol 1e-13 (atol 1e-15), its
 eigenvalues from central differences with h = 1e-5 (accurate to about 1e-8). Time per map is the wall
 time of P alone (no Jacobian), median over repetitions. Units: errors in rad, rad/s (inf-norm over z),
-s (period); times in s.
+s (period); times in s. Steps per map are reported for the fast path.
+
+The load average is recorded before and after the run: a compiled and a Python path slow down differently
+under load, so on a busy machine the ratio is marked and followed by a warning instead of printed bare.
 """
 
 from __future__ import annotations

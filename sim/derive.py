@@ -14,6 +14,7 @@ Regenerate with `python -m rimless.sim.derive`; a test checks the files match a 
 from __future__ import annotations
 
 import sys
+from functools import lru_cache
 from pathlib import Path
 
 import sympy as sp
@@ -79,6 +80,7 @@ def energies(model: str) -> tuple[sp.Matrix, sp.Expr]:
     return M, V
 
 
+@lru_cache(maxsize=None)
 def equations(model: str) -> dict[str, sp.Matrix | sp.Expr]:
     """Every generated quantity of one mass model, as sympy expressions."""
     q = sp.Matrix(q_syms)
@@ -212,7 +214,113 @@ def generate_source(model: str) -> str:
                             for j in range(5)], (5, 2, 5), False))
     parts.append(_function("djdot_qd_a_dq", "d(J_a' qd)/dq (2x5).", _matrix_outputs(eq["djdot_dq"]), (2, 5), True))
     parts.append(_function("djdot_qd_a_dqd", "d(J_a' qd)/dqd (2x5).", _matrix_outputs(eq["djdot_dqd"]), (2, 5), True))
+    for name in REDUCED_PHASES:
+        parts.append(_reduced_function(model, name))
+        parts.append(_reduced_function(model, name.replace("_accel", "_dir"), directional=True))
     return "\n\n".join(parts)
+
+
+# Single-support phases reduced to their free coordinates (q indices). The pinned coordinates' accelerations
+# are zero in the KKT solution for any state (their constraint rows have no velocity term), so the reduced
+# equations equal the full KKT solve for every state, not only for pinned rates at zero.
+REDUCED_PHASES = {
+    "slsp_free_accel": {"free": (2, 3, 4), "rows": (0, 1)},
+    "slsp_clutched_accel": {"free": (2, 4), "rows": (0, 1, 3)},
+}
+
+
+def _reduced_function(model: str, name: str, directional: bool = False) -> str:
+    """q'' and the constraint forces of one single-support phase in its free coordinates f:
+    M_ff f'' = -h_f (Cholesky, written out), lambda_r = M_rf f'' + h_r for the pinned rows r. Only the
+    entries needed are generated, with common subexpressions shared. With directional=True also the
+    derivative of q'' along tangent columns V (the variational equations), from dM_ff/dq and dh_f/dy."""
+    eq = equations(model)
+    M, h = eq["M"], eq["h"]
+    spec = REDUCED_PHASES[name.replace("_dir", "_accel")]
+    free, rows = spec["free"], spec["rows"]
+    zero: dict[sp.Symbol, int] = {}
+    outs: list[tuple[str, sp.Expr]] = []
+    for a, i in enumerate(free):
+        for b, j in enumerate(free):
+            if b >= a:
+                outs.append((f"m{a}{b}", M[i, j]))
+    outs += [(f"r{a}", -h[i].subs(zero)) for a, i in enumerate(free)]
+    for c, r in enumerate(rows):
+        outs += [(f"b{c}{a}", M[r, j]) for a, j in enumerate(free)]
+        outs.append((f"hb{c}", h[r].subs(zero)))
+    nf = len(free)
+    positions = (2, 3, 4)  # x_b, y_b never enter M or h' derivatives (translation invariance)
+    if directional:
+        r_exprs = {a: -h[i].subs(zero) for a, i in enumerate(free)}
+        for k in positions:
+            for a, i in enumerate(free):
+                for b, j in enumerate(free):
+                    if b >= a:
+                        outs.append((f"dm{a}{b}_{k}", M[i, j].diff(q_syms[k])))
+            outs += [(f"dr{a}_q{k}", r_exprs[a].diff(q_syms[k])) for a in range(nf)]
+        for k in range(5):
+            outs += [(f"dr{a}_v{k}", r_exprs[a].diff(qd_syms[k])) for a in range(nf)]
+    exprs = [e for _, e in outs]
+    replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), optimizations="basic")
+    used = set().union(*(e.free_symbols for e in exprs))
+    phase_name = name.replace("_accel", "").replace("_dir", "")
+    if directional:
+        lines = [f"def {name}(q, qd, p, qdd, lam, V, dqdd):",
+                 f'    """As {phase_name}_accel, and dqdd[:, c] = (dq\'\'/dy) V[:, c] for the columns of V (10 x n):'
+                 '\n    exact for any state and tangent (x_b, y_b do not enter M or dh)."""']
+    else:
+        lines = [f"def {name}(q, qd, p, qdd, lam):",
+                 f'    """q\'\' (5,) and lambda ({len(rows)},) of {phase_name} written into qdd and lam, from the phase\'s '
+                 'free coordinates;\n    False if the free block of M is not positive definite."""']
+    lines += [ln for ln in _unpack(True, True) if ln.split("=")[0].strip() in {str(x) for x in used}]
+    for sym, e in replacements:
+        lines.append(f"    {sym} = {_fmt(e)}")
+    for (label, _), e in zip(outs, reduced, strict=True):
+        lines.append(f"    {label} = {_fmt(e)}")
+    # Cholesky M_ff = L L^T and the two triangular solves, written out
+    for a in range(nf):
+        for b in range(a + 1):
+            acc = f"m{b}{a}" + "".join(f" - l{a}{k}*l{b}{k}" for k in range(b))
+            if a == b:
+                lines.append(f"    d{a} = {acc}")
+                lines.append(f"    if not d{a} > 0.0:\n        return False")
+                lines.append(f"    l{a}{a} = math.sqrt(d{a})")
+            else:
+                lines.append(f"    l{a}{b} = ({acc}) / l{b}{b}")
+    for a in range(nf):
+        acc = f"r{a}" + "".join(f" - l{a}{k}*z{k}" for k in range(a))
+        lines.append(f"    z{a} = ({acc}) / l{a}{a}")
+    for a in reversed(range(nf)):
+        acc = f"z{a}" + "".join(f" - l{k}{a}*a{k}" for k in range(a + 1, nf))
+        lines.append(f"    a{a} = ({acc}) / l{a}{a}")
+    for i in range(5):
+        lines.append(f"    qdd[{i}] = {f'a{free.index(i)}' if i in free else '0.0'}")
+    for c in range(len(rows)):
+        lines.append(f"    lam[{c}] = " + " + ".join(f"b{c}{a}*a{a}" for a in range(nf)) + f" + hb{c}")
+    if directional:
+        # M_ff da = sum_k V_k (dr/dy_k - dM_ff/dq_k a), solved with the same factors, per column of V
+        lines.append("    for col in range(V.shape[1]):")
+        for k in positions:
+            lines.append(f"        v{k} = V[{k}, col]")
+        for k in range(5):
+            lines.append(f"        w{k} = V[{5 + k}, col]")
+        for a in range(nf):
+            terms = []
+            for k in positions:
+                inner = " - ".join([f"dr{a}_q{k}"] + [f"dm{min(a, b)}{max(a, b)}_{k}*a{b}" for b in range(nf)])
+                terms.append(f"v{k}*({inner})")
+            terms += [f"w{k}*dr{a}_v{k}" for k in range(5)]
+            lines.append(f"        s{a} = " + " + ".join(terms))
+        for a in range(nf):
+            acc = f"s{a}" + "".join(f" - l{a}{k}*y{k}" for k in range(a))
+            lines.append(f"        y{a} = ({acc}) / l{a}{a}")
+        for a in reversed(range(nf)):
+            acc = f"y{a}" + "".join(f" - l{k}{a}*e{k}" for k in range(a + 1, nf))
+            lines.append(f"        e{a} = ({acc}) / l{a}{a}")
+        for i in range(5):
+            lines.append(f"        dqdd[{i}, col] = {f'e{free.index(i)}' if i in free else '0.0'}")
+    lines.append("    return True")
+    return "\n".join(lines) + "\n"
 
 
 def write_all(directory: Path = GENERATED_DIR) -> list[Path]:

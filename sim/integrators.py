@@ -56,7 +56,7 @@ class _Abort(Exception):
 
 
 MAX_NFEV = 2_000_000  # right-hand-side evaluations per phase before the reference backend gives up
-MIN_SAMPLES = 16  # dense-output samples of a normal force when looking for a dip between two solver steps
+MIN_SAMPLES = 8  # dense-output samples of a normal force when looking for a dip between two solver steps
 
 
 @dataclass
@@ -242,7 +242,7 @@ def _first_dip(g_at, ta: float, tb: float) -> float | None:  # noqa: ANN001
     else:
         i = int(np.argmin(gs))
         lo, hi = ts[max(i - 1, 0)], ts[min(i + 1, len(ts) - 1)]
-        res = minimize_scalar(g_at, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12 * max(1.0, abs(tb))})
+        res = minimize_scalar(g_at, bounds=(lo, hi), method="bounded", options={"xatol": 1e-9 * (tb - ta)})
         if not (res.fun <= 0.0):
             return None
         t_low = float(res.x)

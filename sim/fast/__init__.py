@@ -322,15 +322,17 @@ class FastPoincareMap:
 
             radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10),
                                     atol=max(self.integrator.atol, 1e-12), max_nfev=RADAU_MAX_NFEV)
-            zn, period = self._reference_result(z, radau)
             Jfd = None
-            if jacobian:
-                h = 1e-5
-                Jfd = np.empty((2, 2))
-                for i in range(2):
-                    dz = np.zeros(2)
-                    dz[i] = h
-                    Jfd[:, i] = (self._reference_step(z + dz, radau) - self._reference_step(z - dz, radau)) / (2 * h)
+            with np.errstate(over="ignore"):  # scipy's numerical Jacobian grows its step factors
+                zn, period = self._reference_result(z, radau)
+                if jacobian:
+                    h = 1e-5
+                    Jfd = np.empty((2, 2))
+                    for i in range(2):
+                        dz = np.zeros(2)
+                        dz[i] = h
+                        Jfd[:, i] = (self._reference_step(z + dz, radau)
+                                     - self._reference_step(z - dz, radau)) / (2 * h)
             self._count("scipy-Radau")
             return zn, period, Jfd
         if st != fs.OK:

@@ -52,6 +52,14 @@ _DH_DQD = _compile("dbias_dqd")
 _DJA = _compile("djac_a_dq")
 _DJDOT_DQ = _compile("djdot_qd_a_dq")
 _DJDOT_DQD = _compile("djdot_qd_a_dqd")
+_SSF = _compile("slsp_free_accel")
+_SSC = _compile("slsp_clutched_accel")
+_SSFD = _compile("slsp_free_dir")
+_SSCD = _compile("slsp_clutched_dir")
+_SSFD0, _SSFD1, _SSFD2 = _SSFD
+_SSCD0, _SSCD1, _SSCD2 = _SSCD
+_SSF0, _SSF1, _SSF2 = _SSF
+_SSC0, _SSC1, _SSC2 = _SSC
 _T = _compile("kinetic")
 _V = _compile("potential")
 _T0, _T1, _T2 = _T
@@ -352,11 +360,45 @@ def accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
 
 
 @_jit
+def accel_reduced(mi, phase, q, qd, p, qdd, lam, ws):
+    """q'' and lambda of a phase, as accel_ws, from the generated reduced equations in single support
+    (rimless.sim.generated.*.slsp_free_accel / slsp_clutched_accel: only the free block of M, the pinned
+    rows and the bias, common subexpressions shared); DLSP uses accel_ws. Same solution as the full KKT
+    solve for any state."""
+    if phase == SLSP_FREE:
+        if mi == 0:
+            return _SSF0(q, qd, p, qdd, lam)
+        if mi == 1:
+            return _SSF1(q, qd, p, qdd, lam)
+        return _SSF2(q, qd, p, qdd, lam)
+    if phase == SLSP_CLUTCHED:
+        if mi == 0:
+            return _SSC0(q, qd, p, qdd, lam)
+        if mi == 1:
+            return _SSC1(q, qd, p, qdd, lam)
+        return _SSC2(q, qd, p, qdd, lam)
+    return accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
+
+
+@_jit
 def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
     """q'', lambda (as accel_ws) and the directional derivatives dqdd[:, c] = (dq''/dy) V[:, c] for the
     columns of V (10 x ncol), exactly: the differentiated KKT system
     [[M, -A^T], [A, 0]] [dq''; dlambda] = [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q'']
-    solved with the factors of accel_ws (pinned coordinates eliminated)."""
+    solved with the factors of accel_ws (pinned coordinates eliminated). In single support the generated
+    reduced equations (slsp_*_dir) give the same for any state and tangent."""
+    if phase == SLSP_FREE:
+        if mi == 0:
+            return _SSFD0(q, qd, p, qdd, lam, V, dqdd)
+        if mi == 1:
+            return _SSFD1(q, qd, p, qdd, lam, V, dqdd)
+        return _SSFD2(q, qd, p, qdd, lam, V, dqdd)
+    if phase == SLSP_CLUTCHED:
+        if mi == 0:
+            return _SSCD0(q, qd, p, qdd, lam, V, dqdd)
+        if mi == 1:
+            return _SSCD1(q, qd, p, qdd, lam, V, dqdd)
+        return _SSCD2(q, qd, p, qdd, lam, V, dqdd)
     if not accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
         return False
     dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = _derivs(mi, q, qd, p)
@@ -426,7 +468,7 @@ def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
 def accel(mi, phase, q, qd, p, qdd, lam):
     """q'' (5,) and lambda (n,) of a phase written into qdd and lam; False if singular."""
     ws = np.empty(WORKSPACE_SIZE)
-    return accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
+    return accel_reduced(mi, phase, q, qd, p, qdd, lam, ws)
 
 
 @_jit

@@ -12,9 +12,13 @@ The integrated vector is y_aug = [y (10,), V (10x2, column-major, optional), E_d
 
 Extra (beyond scipy): a touchdown that grazes the slope inside one step (swing height > 0 at both step
 ends with a minimum below 0 in between) is detected from the sign change of the height's rate and located
-on the dense output, so it is not missed. A stiffness indicator (Hairer's h |lambda| estimate from the last
-two stages, > 6.1 counts a "stiff step") is returned; a phase that needs more than `max_steps` steps ends
-with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
+on the dense output, so it is not missed. Likewise a normal-force guard (lift-off of foot a or b) that dips
+below zero and recovers between two step ends: around every discrete minimum of the force over the step
+ends (the previous step's stages are kept for this), the force is minimised on the dense output (samples,
+then Brent's minimiser) and its first zero located. Non-finite values, NaN step sizes and more than
+MAX_REJECTIONS rejected attempts end the phase with a failure status. A stiffness indicator (Hairer's
+h |lambda| estimate from the last two stages, > 6.1 counts a "stiff step") is returned; a phase that needs
+more than `max_steps` steps ends with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
 """
 
 from __future__ import annotations
@@ -74,7 +78,7 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
                 f[o + i] = y[o + 5 + i]
                 f[o + 5 + i] = dqdd[i, col]
     else:
-        ok = fm.accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
+        ok = fm.accel_reduced(mi, phase, q, qd, p, qdd, lam, ws)
         if not ok:
             return False
     for i in range(5):
@@ -253,8 +257,81 @@ def _build_dense(mi, phase, p, y_old, h, K, F, ytmp, lam, ws, with_var, with_dis
     return _NSE - _NS - 1
 
 
-DIP_SAMPLES = 16  # dense-output samples of a normal force over a step when looking for a dip below zero
+DIP_SAMPLES = 8  # dense-output samples of a normal force over a step when looking for a dip below zero
 _GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
+DIP_XTOL = 1e-9  # relative to the step: where the minimum of a force over a step is located
+
+
+@_jit
+def _min_on_dense(mi, phase, p, code, a, x, gx, b, t_a, h, F, y_a):
+    """Brent's minimisation (golden section + parabolic interpolation) of a guard on the dense output in the
+    bracket a < x < b with g(x) below both ends; returns (x_min, g_min, nfev). Stops early at g <= 0."""
+    ybuf = np.empty(10)
+    qdd = np.empty(5)
+    lam = np.zeros(4)
+    w = x
+    v = x
+    gw = gx
+    gv = gx
+    d = 0.0
+    e = 0.0
+    nf = 0
+    tol = DIP_XTOL * h
+    for _ in range(100):
+        if gx <= 0.0:
+            break
+        m = 0.5 * (a + b)
+        tol1 = tol + 4.0 * _EPS * abs(x)
+        tol2 = 2.0 * tol1
+        if abs(x - m) <= tol2 - 0.5 * (b - a):
+            break
+        golden = True
+        if abs(e) > tol1:
+            r = (x - w) * (gx - gv)
+            q = (x - v) * (gx - gw)
+            pp = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                pp = -pp
+            q = abs(q)
+            if abs(pp) < abs(0.5 * q * e) and pp > q * (a - x) and pp < q * (b - x):
+                e = d
+                d = pp / q
+                u = x + d
+                if u - a < tol2 or b - u < tol2:
+                    d = tol1 if x < m else -tol1
+                golden = False
+        if golden:
+            e = (b - x) if x < m else (a - x)
+            d = _GOLDEN * e
+        u = x + (d if abs(d) >= tol1 else (tol1 if d > 0 else -tol1))
+        gu = _guard_on_dense(mi, phase, p, code, u, t_a, h, F, y_a, ybuf, qdd, lam, False)
+        nf += 1
+        if gu <= gx:
+            if u < x:
+                b = x
+            else:
+                a = x
+            v = w
+            gv = gw
+            w = x
+            gw = gx
+            x = u
+            gx = gu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if gu <= gw or w == x:
+                v = w
+                gv = gw
+                w = u
+                gw = gu
+            elif gu <= gv or v == x or v == w:
+                v = u
+                gv = gu
+    return x, gx, nf
 
 
 @_jit
@@ -263,7 +340,7 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
     [t_a, t_a + h] where it is positive at both ends, or (inf, nfev) if it stays positive.
 
     The guard is sampled at DIP_SAMPLES interior points; without a non-positive sample the lowest one is
-    refined by golden-section search, then the first crossing is located by Brent's method."""
+    refined by Brent's minimisation, then the first crossing is located by Brent's root finder."""
     ybuf = np.empty(10)
     qdd = np.empty(5)
     lam = np.zeros(4)
@@ -275,43 +352,21 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
     for k in range(1, n):
         gk = _guard_on_dense(mi, phase, p, code, t_a + h * k / n, t_a, h, F, y_a, ybuf, qdd, lam, False)
         nf += 1
-        if gk <= 0.0 and first_neg < 0:
+        if gk <= 0.0:
             first_neg = k
+            break
         if gk < g_low:
             g_low = gk
             k_low = k
     if first_neg > 0:
         t_low = t_a + h * first_neg / n
     else:
-        a = t_a + h * (k_low - 1) / n
-        b = t_a + h * (k_low + 1) / n
-        c = a + _GOLDEN * (b - a)
-        d = b - _GOLDEN * (b - a)
-        gc = _guard_on_dense(mi, phase, p, code, c, t_a, h, F, y_a, ybuf, qdd, lam, False)
-        gd = _guard_on_dense(mi, phase, p, code, d, t_a, h, F, y_a, ybuf, qdd, lam, False)
-        nf += 2
-        for _ in range(60):
-            if gc <= 0.0 or gd <= 0.0 or b - a <= 4.0 * _EPS * abs(b):
-                break
-            if gc < gd:
-                b = d
-                d = c
-                gd = gc
-                c = a + _GOLDEN * (b - a)
-                gc = _guard_on_dense(mi, phase, p, code, c, t_a, h, F, y_a, ybuf, qdd, lam, False)
-            else:
-                a = c
-                c = d
-                gc = gd
-                d = b - _GOLDEN * (b - a)
-                gd = _guard_on_dense(mi, phase, p, code, d, t_a, h, F, y_a, ybuf, qdd, lam, False)
-            nf += 1
-        if gc <= 0.0:
-            t_low = c
-        elif gd <= 0.0:
-            t_low = d
-        else:
+        x, gx, nfm = _min_on_dense(mi, phase, p, code, t_a + h * (k_low - 1) / n, t_a + h * k_low / n, g_low,
+                                   t_a + h * (k_low + 1) / n, t_a, h, F, y_a)
+        nf += nfm
+        if gx > 0.0:
             return np.inf, nf
+        t_low = x
     root, nfb = _brent(mi, phase, p, code, False, t_a, t_low, t_a, h, F, y_a)
     return root, nf + nfb
 

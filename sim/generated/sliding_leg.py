@@ -302,3 +302,406 @@ def djdot_qd_a_dqd(q, qd, p):
     out[1, 3] = -t3*t5
     out[1, 4] = t4*t5
     return out
+
+
+def slsp_free_accel(q, qd, p, qdd, lam):
+    """q'' (5,) and lambda (2,) of slsp_free written into qdd and lam, from the phase's free coordinates;
+    False if the free block of M is not positive definite."""
+    theta = q[2]
+    L1 = q[3]
+    L2 = q[4]
+    dtheta = qd[2]
+    dL1 = qd[3]
+    dL2 = qd[4]
+    m_H = p[0]
+    m = p[1]
+    I_c = p[2]
+    L0 = p[3]
+    k = p[4]
+    c = p[5]
+    g = p[6]
+    phi = p[7]
+    t0 = 2*dL1*dtheta
+    t1 = math.cos(theta)
+    t2 = g*math.sin(phi)
+    t3 = math.sin(theta)
+    t4 = math.cos(phi)
+    t5 = g*t4
+    t6 = L1*m_H
+    t7 = dtheta**2
+    t8 = m_H*t3
+    t9 = m_H*t1
+    t10 = L1*t7
+    m00 = I_c + L1**2*m_H
+    m01 = 0
+    m02 = 0
+    m11 = m + m_H
+    m12 = 0
+    m22 = m
+    r0 = t6*(-t0 + t1*t2 + t3*t5)
+    r1 = L0*k - L1*k - c*dL1 + t2*t8 - t5*t9 + t6*t7
+    r2 = L0*k - L2*k - c*dL2
+    b00 = L1*t9
+    b01 = t8
+    b02 = 0
+    hb0 = m_H*(2*dL1*dtheta*t1 - t10*t3 - t2)
+    b10 = -L1*t8
+    b11 = t9
+    b12 = 0
+    hb1 = m_H*(g*t4 - t0*t3 - t1*t10)
+    d0 = m00
+    if not d0 > 0.0:
+        return False
+    l00 = math.sqrt(d0)
+    l10 = (m01) / l00
+    d1 = m11 - l10*l10
+    if not d1 > 0.0:
+        return False
+    l11 = math.sqrt(d1)
+    l20 = (m02) / l00
+    l21 = (m12 - l20*l10) / l11
+    d2 = m22 - l20*l20 - l21*l21
+    if not d2 > 0.0:
+        return False
+    l22 = math.sqrt(d2)
+    z0 = (r0) / l00
+    z1 = (r1 - l10*z0) / l11
+    z2 = (r2 - l20*z0 - l21*z1) / l22
+    a2 = (z2) / l22
+    a1 = (z1 - l21*a2) / l11
+    a0 = (z0 - l10*a1 - l20*a2) / l00
+    qdd[0] = 0.0
+    qdd[1] = 0.0
+    qdd[2] = a0
+    qdd[3] = a1
+    qdd[4] = a2
+    lam[0] = b00*a0 + b01*a1 + b02*a2 + hb0
+    lam[1] = b10*a0 + b11*a1 + b12*a2 + hb1
+    return True
+
+
+def slsp_free_dir(q, qd, p, qdd, lam, V, dqdd):
+    """As slsp_free_accel, and dqdd[:, c] = (dq''/dy) V[:, c] for the columns of V (10 x n):
+    exact for any state and tangent (x_b, y_b do not enter M or dh)."""
+    theta = q[2]
+    L1 = q[3]
+    L2 = q[4]
+    dtheta = qd[2]
+    dL1 = qd[3]
+    dL2 = qd[4]
+    m_H = p[0]
+    m = p[1]
+    I_c = p[2]
+    L0 = p[3]
+    k = p[4]
+    c = p[5]
+    g = p[6]
+    phi = p[7]
+    t0 = 2*dL1
+    t1 = dtheta*t0
+    t2 = math.cos(theta)
+    t3 = math.sin(phi)
+    t4 = g*t3
+    t5 = math.sin(theta)
+    t6 = math.cos(phi)
+    t7 = g*t6
+    t8 = m_H*(-t1 + t2*t4 + t5*t7)
+    t9 = dtheta**2
+    t10 = m_H*t9
+    t11 = m_H*t5
+    t12 = m_H*t2
+    t13 = L1*t9
+    t14 = g*m_H
+    t15 = L1*m_H
+    t16 = 2*t15
+    t17 = -k
+    t18 = dtheta*t16
+    t19 = -c
+    m00 = I_c + L1**2*m_H
+    m01 = 0
+    m02 = 0
+    m11 = m + m_H
+    m12 = 0
+    m22 = m
+    r0 = L1*t8
+    r1 = L0*k - L1*k + L1*t10 - c*dL1 + t11*t4 - t12*t7
+    r2 = L0*k - L2*k - c*dL2
+    b00 = L1*t12
+    b01 = t11
+    b02 = 0
+    hb0 = m_H*(2*dL1*dtheta*t2 - t13*t5 - t4)
+    b10 = -L1*t11
+    b11 = t12
+    b12 = 0
+    hb1 = m_H*(g*t6 - t1*t5 - t13*t2)
+    dm00_2 = 0
+    dm01_2 = 0
+    dm02_2 = 0
+    dm11_2 = 0
+    dm12_2 = 0
+    dm22_2 = 0
+    dr0_q2 = L1*t14*(t2*t6 - t3*t5)
+    dr1_q2 = t14*(t2*t3 + t5*t6)
+    dr2_q2 = 0
+    dm00_3 = t16
+    dm01_3 = 0
+    dm02_3 = 0
+    dm11_3 = 0
+    dm12_3 = 0
+    dm22_3 = 0
+    dr0_q3 = t8
+    dr1_q3 = t10 + t17
+    dr2_q3 = 0
+    dm00_4 = 0
+    dm01_4 = 0
+    dm02_4 = 0
+    dm11_4 = 0
+    dm12_4 = 0
+    dm22_4 = 0
+    dr0_q4 = 0
+    dr1_q4 = 0
+    dr2_q4 = t17
+    dr0_v0 = 0
+    dr1_v0 = 0
+    dr2_v0 = 0
+    dr0_v1 = 0
+    dr1_v1 = 0
+    dr2_v1 = 0
+    dr0_v2 = -t0*t15
+    dr1_v2 = t18
+    dr2_v2 = 0
+    dr0_v3 = -t18
+    dr1_v3 = t19
+    dr2_v3 = 0
+    dr0_v4 = 0
+    dr1_v4 = 0
+    dr2_v4 = t19
+    d0 = m00
+    if not d0 > 0.0:
+        return False
+    l00 = math.sqrt(d0)
+    l10 = (m01) / l00
+    d1 = m11 - l10*l10
+    if not d1 > 0.0:
+        return False
+    l11 = math.sqrt(d1)
+    l20 = (m02) / l00
+    l21 = (m12 - l20*l10) / l11
+    d2 = m22 - l20*l20 - l21*l21
+    if not d2 > 0.0:
+        return False
+    l22 = math.sqrt(d2)
+    z0 = (r0) / l00
+    z1 = (r1 - l10*z0) / l11
+    z2 = (r2 - l20*z0 - l21*z1) / l22
+    a2 = (z2) / l22
+    a1 = (z1 - l21*a2) / l11
+    a0 = (z0 - l10*a1 - l20*a2) / l00
+    qdd[0] = 0.0
+    qdd[1] = 0.0
+    qdd[2] = a0
+    qdd[3] = a1
+    qdd[4] = a2
+    lam[0] = b00*a0 + b01*a1 + b02*a2 + hb0
+    lam[1] = b10*a0 + b11*a1 + b12*a2 + hb1
+    for col in range(V.shape[1]):
+        v2 = V[2, col]
+        v3 = V[3, col]
+        v4 = V[4, col]
+        w0 = V[5, col]
+        w1 = V[6, col]
+        w2 = V[7, col]
+        w3 = V[8, col]
+        w4 = V[9, col]
+        s0 = v2*(dr0_q2 - dm00_2*a0 - dm01_2*a1 - dm02_2*a2) + v3*(dr0_q3 - dm00_3*a0 - dm01_3*a1 - dm02_3*a2) + v4*(dr0_q4 - dm00_4*a0 - dm01_4*a1 - dm02_4*a2) + w0*dr0_v0 + w1*dr0_v1 + w2*dr0_v2 + w3*dr0_v3 + w4*dr0_v4
+        s1 = v2*(dr1_q2 - dm01_2*a0 - dm11_2*a1 - dm12_2*a2) + v3*(dr1_q3 - dm01_3*a0 - dm11_3*a1 - dm12_3*a2) + v4*(dr1_q4 - dm01_4*a0 - dm11_4*a1 - dm12_4*a2) + w0*dr1_v0 + w1*dr1_v1 + w2*dr1_v2 + w3*dr1_v3 + w4*dr1_v4
+        s2 = v2*(dr2_q2 - dm02_2*a0 - dm12_2*a1 - dm22_2*a2) + v3*(dr2_q3 - dm02_3*a0 - dm12_3*a1 - dm22_3*a2) + v4*(dr2_q4 - dm02_4*a0 - dm12_4*a1 - dm22_4*a2) + w0*dr2_v0 + w1*dr2_v1 + w2*dr2_v2 + w3*dr2_v3 + w4*dr2_v4
+        y0 = (s0) / l00
+        y1 = (s1 - l10*y0) / l11
+        y2 = (s2 - l20*y0 - l21*y1) / l22
+        e2 = (y2) / l22
+        e1 = (y1 - l21*e2) / l11
+        e0 = (y0 - l10*e1 - l20*e2) / l00
+        dqdd[0, col] = 0.0
+        dqdd[1, col] = 0.0
+        dqdd[2, col] = e0
+        dqdd[3, col] = e1
+        dqdd[4, col] = e2
+    return True
+
+
+def slsp_clutched_accel(q, qd, p, qdd, lam):
+    """q'' (5,) and lambda (3,) of slsp_clutched written into qdd and lam, from the phase's free coordinates;
+    False if the free block of M is not positive definite."""
+    theta = q[2]
+    L1 = q[3]
+    L2 = q[4]
+    dtheta = qd[2]
+    dL1 = qd[3]
+    dL2 = qd[4]
+    m_H = p[0]
+    m = p[1]
+    I_c = p[2]
+    L0 = p[3]
+    k = p[4]
+    c = p[5]
+    g = p[6]
+    phi = p[7]
+    t0 = 2*dL1*dtheta
+    t1 = math.cos(theta)
+    t2 = g*math.sin(phi)
+    t3 = math.sin(theta)
+    t4 = math.cos(phi)
+    t5 = L1*m_H
+    t6 = L0*k
+    t7 = dtheta**2
+    t8 = L1*t7
+    m00 = I_c + L1**2*m_H
+    m01 = 0
+    m11 = m
+    r0 = t5*(g*t3*t4 - t0 + t1*t2)
+    r1 = -L2*k - c*dL2 + t6
+    b00 = t1*t5
+    b01 = 0
+    hb0 = m_H*(2*dL1*dtheta*t1 - t2 - t3*t8)
+    b10 = -t3*t5
+    b11 = 0
+    hb1 = m_H*(g*t4 - t0*t3 - t1*t8)
+    b20 = 0
+    b21 = 0
+    hb2 = L1*k + c*dL1 + g*m_H*t1*t4 - m_H*t2*t3 - t5*t7 - t6
+    d0 = m00
+    if not d0 > 0.0:
+        return False
+    l00 = math.sqrt(d0)
+    l10 = (m01) / l00
+    d1 = m11 - l10*l10
+    if not d1 > 0.0:
+        return False
+    l11 = math.sqrt(d1)
+    z0 = (r0) / l00
+    z1 = (r1 - l10*z0) / l11
+    a1 = (z1) / l11
+    a0 = (z0 - l10*a1) / l00
+    qdd[0] = 0.0
+    qdd[1] = 0.0
+    qdd[2] = a0
+    qdd[3] = 0.0
+    qdd[4] = a1
+    lam[0] = b00*a0 + b01*a1 + hb0
+    lam[1] = b10*a0 + b11*a1 + hb1
+    lam[2] = b20*a0 + b21*a1 + hb2
+    return True
+
+
+def slsp_clutched_dir(q, qd, p, qdd, lam, V, dqdd):
+    """As slsp_clutched_accel, and dqdd[:, c] = (dq''/dy) V[:, c] for the columns of V (10 x n):
+    exact for any state and tangent (x_b, y_b do not enter M or dh)."""
+    theta = q[2]
+    L1 = q[3]
+    L2 = q[4]
+    dtheta = qd[2]
+    dL1 = qd[3]
+    dL2 = qd[4]
+    m_H = p[0]
+    m = p[1]
+    I_c = p[2]
+    L0 = p[3]
+    k = p[4]
+    c = p[5]
+    g = p[6]
+    phi = p[7]
+    t0 = 2*dL1
+    t1 = dtheta*t0
+    t2 = math.cos(theta)
+    t3 = math.sin(phi)
+    t4 = g*t3
+    t5 = math.sin(theta)
+    t6 = math.cos(phi)
+    t7 = m_H*(g*t5*t6 - t1 + t2*t4)
+    t8 = L0*k
+    t9 = L1*m_H
+    t10 = dtheta**2
+    t11 = L1*t10
+    t12 = 2*t9
+    m00 = I_c + L1**2*m_H
+    m01 = 0
+    m11 = m
+    r0 = L1*t7
+    r1 = -L2*k - c*dL2 + t8
+    b00 = t2*t9
+    b01 = 0
+    hb0 = m_H*(2*dL1*dtheta*t2 - t11*t5 - t4)
+    b10 = -t5*t9
+    b11 = 0
+    hb1 = m_H*(g*t6 - t1*t5 - t11*t2)
+    b20 = 0
+    b21 = 0
+    hb2 = L1*k + c*dL1 + g*m_H*t2*t6 - m_H*t4*t5 - t10*t9 - t8
+    dm00_2 = 0
+    dm01_2 = 0
+    dm11_2 = 0
+    dr0_q2 = g*t9*(t2*t6 - t3*t5)
+    dr1_q2 = 0
+    dm00_3 = t12
+    dm01_3 = 0
+    dm11_3 = 0
+    dr0_q3 = t7
+    dr1_q3 = 0
+    dm00_4 = 0
+    dm01_4 = 0
+    dm11_4 = 0
+    dr0_q4 = 0
+    dr1_q4 = -k
+    dr0_v0 = 0
+    dr1_v0 = 0
+    dr0_v1 = 0
+    dr1_v1 = 0
+    dr0_v2 = -t0*t9
+    dr1_v2 = 0
+    dr0_v3 = -dtheta*t12
+    dr1_v3 = 0
+    dr0_v4 = 0
+    dr1_v4 = -c
+    d0 = m00
+    if not d0 > 0.0:
+        return False
+    l00 = math.sqrt(d0)
+    l10 = (m01) / l00
+    d1 = m11 - l10*l10
+    if not d1 > 0.0:
+        return False
+    l11 = math.sqrt(d1)
+    z0 = (r0) / l00
+    z1 = (r1 - l10*z0) / l11
+    a1 = (z1) / l11
+    a0 = (z0 - l10*a1) / l00
+    qdd[0] = 0.0
+    qdd[1] = 0.0
+    qdd[2] = a0
+    qdd[3] = 0.0
+    qdd[4] = a1
+    lam[0] = b00*a0 + b01*a1 + hb0
+    lam[1] = b10*a0 + b11*a1 + hb1
+    lam[2] = b20*a0 + b21*a1 + hb2
+    for col in range(V.shape[1]):
+        v2 = V[2, col]
+        v3 = V[3, col]
+        v4 = V[4, col]
+        w0 = V[5, col]
+        w1 = V[6, col]
+        w2 = V[7, col]
+        w3 = V[8, col]
+        w4 = V[9, col]
+        s0 = v2*(dr0_q2 - dm00_2*a0 - dm01_2*a1) + v3*(dr0_q3 - dm00_3*a0 - dm01_3*a1) + v4*(dr0_q4 - dm00_4*a0 - dm01_4*a1) + w0*dr0_v0 + w1*dr0_v1 + w2*dr0_v2 + w3*dr0_v3 + w4*dr0_v4
+        s1 = v2*(dr1_q2 - dm01_2*a0 - dm11_2*a1) + v3*(dr1_q3 - dm01_3*a0 - dm11_3*a1) + v4*(dr1_q4 - dm01_4*a0 - dm11_4*a1) + w0*dr1_v0 + w1*dr1_v1 + w2*dr1_v2 + w3*dr1_v3 + w4*dr1_v4
+        y0 = (s0) / l00
+        y1 = (s1 - l10*y0) / l11
+        e1 = (y1) / l11
+        e0 = (y0 - l10*e1) / l00
+        dqdd[0, col] = 0.0
+        dqdd[1, col] = 0.0
+        dqdd[2, col] = e0
+        dqdd[3, col] = 0.0
+        dqdd[4, col] = e1
+    return True

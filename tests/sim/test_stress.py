@@ -148,3 +148,13 @@ def test_stiffness_indicator_flags_stiff_legs_only() -> None:
                            "ve", np.array([-0.43, 3.0]), rtol=1e-8)
     assert soft.nstiff < 0.1 * soft.nsteps
     assert stiff.nstiff > 0.5 * stiff.nsteps
+
+
+def test_outcome_classes_agree_with_the_reference_on_a_small_stress_grid() -> None:
+    from rimless.sim.stress import compare_with_reference
+
+    res = compare_with_reference(WheelParams(), k_values=(1000.0,), c_values=(0.0, 8.0), slopes_rad=(0.05,),
+                                 mass_ratios=(0.02,), rtol=1e-10)
+    assert res["points"] == 2 * 2 * 3
+    assert res["agree"] == res["points"], res["disagreements"]
+    assert res["max_dz_valid"] < 1e-8
