@@ -688,6 +688,9 @@ def sweep_cmd(
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
                                                       "[~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
+    bench: Annotated[bool, typer.Option("--bench", help="Benchmark instead: the grid (no cache) in-process, on 1 and "
+                                        "on 2 workers, and the branch-end location by pseudo-arclength against "
+                                        "bisection (takes minutes).")] = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
@@ -729,6 +732,17 @@ def sweep_cmd(
     options = SweepOptions(backend=resolve(backend.value), rtol=rtol, start_slope_rad=start_slope_rad,
                            n_guesses=guesses)
     points = grid_points(params, model_list, grid, mm)
+    if bench:
+        from rimless.sim.sweepbench import branch_end_bench, format_bench, sweep_bench
+
+        with Progress(transient=True, console=_err_console()) as prog:
+            prog.add_task("benchmark (minutes): sweep on each scheduler, then branch ends", total=None)
+            result = {"sweep": sweep_bench(points, options), "branch_end": branch_end_bench(params)}
+        if json_out:
+            print_json(result)
+        else:
+            typer.echo(format_bench(result))
+        return
     cache = None if no_cache else (cache_dir or __import__("rimless.sim.sweep", fromlist=["x"]).default_cache_dir())
     with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task(f"sweep: {len(points)} grid points", total=len(points))
