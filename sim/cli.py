@@ -289,8 +289,17 @@ def gaits_cmd(
         task = prog.add_task("scanning guesses", total=guesses)
         found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
                            progress=lambda i, n: prog.update(task, completed=i))
-    items = [
-        {
+    from rimless.sim.arclength import contact_facts
+    from rimless.sim.branches import contact_reason
+    from rimless.sim.failures import StepFailure
+
+    items = []
+    for fp in found:
+        try:
+            facts = contact_facts(pmap, fp.z, 5e-4)
+        except StepFailure:
+            facts = None
+        items.append({
             "theta_plus_rad": float(fp.z[0]),
             "theta_dot_plus_rad_s": float(fp.z[1]),
             "step_period_s": fp.step.period_s,
@@ -298,22 +307,32 @@ def gaits_cmd(
             "max_abs_eigenvalue": fp.max_abs_eigenvalue,
             "stable": fp.stable,
             "energy_ratio": fp.step.impact.energy_ratio,
-        }
-        for fp in found
-    ]
+            "contact_valid": bool(facts is not None and facts.contact_valid),
+            "contact_reason": contact_reason(facts),
+            "contact": facts.as_dict() if facts is not None else None,
+        })
     if json_out:
         print_json({"model": model.value, "slope_rad": params.slope_rad, "k": params.k, "c": params.c, "gaits": items})
         return
     from rich.table import Table
 
     table = Table(title=f"period-1 gaits of the {model.value} wheel at {params.slope_deg:.4f} deg")
-    for col in ("#", "theta+ (rad)", "theta'+ (rad/s)", "period (s)", "max |eig|", "stable", "E+/E-"):
-        table.add_column(col, justify="right")
+    table.box = None
+    table.pad_edge = False
+    for col in ("#", "theta+ rad", "theta'+ rad/s", "period s", "max|eig|", "stable", "valid", "Fmin N", "E+/E-"):
+        table.add_column(col, justify="right", no_wrap=True)
     for i, it in enumerate(items):
-        table.add_row(str(i + 1), f"{it['theta_plus_rad']:.6f}", f"{it['theta_dot_plus_rad_s']:.6f}",
-                      f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", str(it["stable"]),
-                      f"{it['energy_ratio']:.4f}")
+        fmin = it["contact"]["min_stance_force_single_support_N"] if it["contact"] else float("nan")
+        table.add_row(str(i + 1), f"{it['theta_plus_rad']:.5f}", f"{it['theta_dot_plus_rad_s']:.5f}",
+                      f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", "yes" if it["stable"] else "no",
+                      "yes" if it["contact_valid"] else "NO", f"{fmin:.3g}", f"{it['energy_ratio']:.4f}")
     _console().print(table)
+    _console().print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
+                     "impulses > 0); Fmin: smallest stance force in single support; theta'+: post-impact angular "
+                     "velocity", soft_wrap=True)
+    for i, it in enumerate(items):
+        if it["contact_reason"]:
+            _console().print(f"gait {i + 1}: {it['contact_reason']}", soft_wrap=True)
     if not items:
         _console().print("no period-1 gait found in the scanned range")
 
