@@ -257,8 +257,51 @@ def cot_rows(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[str, 
     return out
 
 
-def figure_cot(crows: list[dict[str, Any]], out: Path) -> list[Path]:
-    """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not."""
+def boundary_curves(rows: list[dict[str, Any]], params: WheelParams, backend: str, rtol: float,
+                    k_range: tuple[float, float]) -> list[dict[str, Any]]:
+    """The critical slope as a curve over k per stable branch found at Table 1's k (or the nearest grid k),
+    traced by two-parameter continuation (rimless.sim.boundary): the fold curve of each VE branch, the
+    stall curve (1.6 s period level set) of the ER branch."""
+    from rimless.sim.backend import make_map
+    from rimless.sim.boundary import BoundaryContinuation, start_on_boundary
+    from rimless.sim.failures import StepFailure
+
+    out: list[dict[str, Any]] = []
+    done: set[tuple[str, str]] = set()
+    ordered = sorted(rows, key=lambda r: abs(r["k"] - params.k))
+    for r in ordered:
+        label = r.get("branch_label", "")
+        key = (r["model"], label)
+        crit = r.get("critical_slope_rad")
+        if key in done or not (isinstance(crit, float) and crit == crit):
+            continue
+        done.add(key)
+        model = r["model"].lower()
+        test = "stall" if r["reason"] == "stall" else "fold" if r["reason"] == "fold" else None
+        if test is None:
+            continue
+        base = params.replace(stiffness_n_per_m=float(r["k"]), slope_rad=r["start_slope_rad"])
+        factory = (lambda m: (lambda q: make_map(q, m, backend=backend, rtol=rtol)))(model)
+        try:
+            z, s0 = start_on_boundary(factory, base, model, np.array([r["theta_plus_rad"], r["theta_dot_plus_rad_s"]]),
+                                      test)
+            bc = BoundaryContinuation(factory, base.replace(slope_rad=s0), model, "k", test, max_points=60)
+            curve = bc.trace(z, s0, mu_min=k_range[0], mu_max=k_range[1])
+        except StepFailure:
+            continue
+        name = "ER stall (1.6 s period)" if model == "er" else f"VE {label} fold"
+        for pt in curve.points:
+            if k_range[0] - 1e-9 <= pt.mu <= k_range[1] + 1e-9:
+                out.append({"curve": name, "model": r["model"], "branch_label": label, "test": test, "k": pt.mu,
+                            "slope_rad": pt.slope_rad, "slope_deg": pt.slope_deg, "cot": math.tan(pt.slope_rad),
+                            "step_period_s": pt.period_s, "max_abs_eigenvalue": float(np.max(np.abs(pt.eigenvalues))),
+                            "curve_seconds": curve.seconds, "curve_map_evaluations": curve.map_evaluations})
+    return out
+
+
+def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, Any]] | None = None) -> list[Path]:
+    """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not; lines: the boundary
+    curves traced by two-parameter continuation."""
     import pandas as pd
 
     from rimless.sim.plotting import save_figure
@@ -266,12 +309,19 @@ def figure_cot(crows: list[dict[str, Any]], out: Path) -> list[Path]:
     plt = _plt()
     frame = pd.DataFrame(crows)
     fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
+    cframe = pd.DataFrame(curves or [])
+    colours0 = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4"}
+    if len(cframe):
+        for (name, label), g in cframe.groupby(["curve", "branch_label"]):
+            g = g.sort_values("k")
+            ax.plot(g["k"], g["cot"], "-", color=colours0.get(label, "C5"), lw=2, alpha=0.35,
+                    label=f"{name} curve (two-parameter continuation)")
     colours = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4", "rigid": "k"}
     for label, g in frame[frame.model != "rigid"].groupby("branch_label"):
         g = g.sort_values("k")
         name = "ER" if label == "er" else f"VE {label}"
         col = colours.get(label, "C5")
-        ax.plot(g["k"], g["cot"], "-", color=col, lw=1, label=name)
+        ax.plot(g["k"], g["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends)")
         v = g[g.contact_valid]
         nv = g[~g.contact_valid]
         ax.plot(v["k"], v["cot"], "o", color=col, ms=6)
@@ -285,7 +335,10 @@ def figure_cot(crows: list[dict[str, Any]], out: Path) -> list[Path]:
     ax.set_title("cost of transport per gait branch")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    return [save_figure(fig, out / "fig5_cot.png"), _write_csv(frame, out / "fig5_cot.csv")]
+    files = [save_figure(fig, out / "fig5_cot.png"), _write_csv(frame, out / "fig5_cot.csv")]
+    if len(cframe):
+        files.append(_write_csv(cframe, out / "fig5_boundary_curves.csv"))
+    return files
 
 
 def _fmt_range(v: Any) -> str:
@@ -453,7 +506,11 @@ def run_paper(
     t1 = time.perf_counter()
     say("eigenvalue map and cost of transport")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
-    res.files += figure_cot(cot_rows(sw.rows, params), out)
+    say("boundary curves over k (two-parameter continuation)")
+    t2 = time.perf_counter()
+    curves = boundary_curves(sw.rows, params, backend, rtol, (min(ks), max(ks)))
+    res.timings_s["boundary_curves"] = time.perf_counter() - t2
+    res.files += figure_cot(cot_rows(sw.rows, params), out, curves)
     res.table = headline_table(sw.rows, [], params)
     res.files += _write_table(res.table, out)
     res.timings_s["figures"] = time.perf_counter() - t1
