@@ -74,7 +74,15 @@ def build_params(values: dict[str, Any]) -> Any:
             mapping[key] = values[key]
     if values.get("mass_model") is not None:
         mapping["mass_model"] = values["mass_model"].value
-    return params_from_mapping(mapping, base=base, source="the command-line options")
+    try:
+        return params_from_mapping(mapping, base=base, source="the command-line options")
+    except ParameterError as err:
+        if values.get("slope_deg") is not None and "slope" in str(err):
+            from rimless.sim.params import SPOKE_ANGLE_RAD
+
+            raise ParameterError(f"--slope-deg must be a finite slope in [0, {math.degrees(SPOKE_ANGLE_RAD / 2):g}) deg, "
+                                 f"got {values['slope_deg']:g} deg") from None
+        raise
 
 
 def wheel_params(func: Any = None, *, exclude: tuple[str, ...] = ()) -> Any:
@@ -587,7 +595,7 @@ def bench_cmd(
     from rimless.sim.bench import format_table, plot_work_precision, run_bench
 
     with Progress(transient=True, console=_err_console()) as prog:
-        task = prog.add_task("benchmark", total=None)
+        task = prog.add_task("benchmark (the full run takes minutes; --quick under one)", total=None)
         result = run_bench(quick, progress=lambda msg: prog.update(task, description=str(msg)))
     if plot is not None:
         plot.parent.mkdir(parents=True, exist_ok=True)
