@@ -276,6 +276,7 @@ class ArclengthContinuation:
         ds_max: float = 0.2,
         tol: float = 1e-10,
         locate_tol: float = 1e-7,
+        end_p_tol: float = 1e-9,
         facts_every: int = 10,
         facts_dt: float = 1e-3,
         max_points: int = 400,
@@ -285,6 +286,7 @@ class ArclengthContinuation:
         self.model = model
         self.ds, self.ds_min, self.ds_max = ds, ds_min, ds_max
         self.tol, self.locate_tol = tol, locate_tol
+        self.end_p_tol = end_p_tol  # a branch end (map failure) is bisected until the bracket in p is below this
         self.facts_every = max(1, facts_every)
         self.facts_dt = facts_dt
         self._period_hint = 0.0
@@ -410,6 +412,7 @@ class ArclengthContinuation:
         stop_at_first_loss: bool = False,
         stop: Callable[[BranchPoint], bool] | None = None,
         progress: Callable[[BranchPoint], None] | None = None,
+        start_facts: ContactFacts | None = None,
     ) -> Branch:
         """Trace the branch through the fixed point near z0 at the base parameter, first moving p in
         `direction` (-1: decreasing). Stops at the branch end (map failure), at p_min/p_max, after
@@ -420,7 +423,11 @@ class ArclengthContinuation:
         branch = Branch(self.parameter, self.model, self.oracle.base)
         s = self._newton(np.asarray(z0, dtype=float), p0)
         t, Fp = self._tangent(s, np.array([0.0, 0.0, direction]))
-        cur = self._point(s, 0.0, True)
+        cur = self._point(s, 0.0, start_facts is None)
+        if start_facts is not None:
+            cur.facts = start_facts
+            cur.tests.update({STANCE_FORCE: start_facts.min_stance_force_single_support_N,
+                              IMPULSE: start_facts.min_impulse_N_s, STALL: start_facts.min_theta_dot_single_support_rad_s})
         branch.points.append(cur)
         ds = self.ds
         end_reason, end_detail = "", ""
@@ -523,7 +530,8 @@ class ArclengthContinuation:
         lo, hi = 0.0, ds
         good_state, good_pt = s, cur
         last_err: StepFailure | None = None
-        while hi - lo > self.locate_tol:
+        p_rate = abs(t[2]) * self.oracle.scale  # parameter change per unit arclength
+        while hi - lo > self.locate_tol and (hi - lo) * p_rate > self.end_p_tol:
             mid = 0.5 * (lo + hi)
             try:
                 st = self._on_branch(s, t, mid)

@@ -217,7 +217,8 @@ def trace_gait_branches(
         cont = ArclengthContinuation(lambda q: make_map(q, model, backend=backend, rtol=rtol), start_params, model,
                                      "slope", max_points=max_points)
         try:
-            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end)
+            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end,
+                            start_facts=start.facts)
         except StepFailure as err:
             out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
             continue
