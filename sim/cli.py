@@ -535,6 +535,7 @@ def _floats(text: str, name: str) -> list[float]:
 
 @app.command("stress")
 @user_facing
+@sim_failures
 @wheel_params
 def stress_cmd(
     params: Any,
@@ -672,6 +673,8 @@ def paper_cmd(
     con.print(table)
     for f in res.files:
         con.print(f"wrote {f}", soft_wrap=True)
+    con.print(f"load average {res.timings_s['load_average_before']:.1f} before, "
+              f"{res.timings_s['load_average_after']:.1f} after (other work on the machine slows every timing)")
     con.print(f"in {res.timings_s['total']:.1f} s (sweep {res.timings_s['sweep']:.1f} s: {res.sweep.computed} grid "
               f"points computed, {res.sweep.cached} cached, {res.sweep.workers} worker(s))")
 
@@ -693,6 +696,7 @@ _SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid
 
 @app.command("sweep")
 @user_facing
+@sim_failures
 @wheel_params(exclude=("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
 def sweep_cmd(
     params: Any,
@@ -781,8 +785,7 @@ def sweep_cmd(
     meta = {"grid": grid, "models": model_list, "mass_models": mm, "options": options.__dict__,
             "base_params": params.to_dict(), "scheduler": scheduler}
     if not res.rows:
-        typer.echo("error: the sweep produced no rows", err=True)
-        raise typer.Exit(1)
+        raise SimFailure("the sweep produced no rows")
     paths = write_table(res.rows, out, meta)
     if res.points:
         paths += write_table(res.points, out.with_name(out.name + "-points"), meta)

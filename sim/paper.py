@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import html
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -456,7 +457,8 @@ def _index(out: Path, table: list[dict[str, Any]], params: WheelParams, timings:
                      + "</tr>")
     parts.append("</table><p><a href='table6_headline.csv'>table6_headline.csv</a> · "
                  "<a href='sweep.csv'>sweep.csv</a> (every branch) · <a href='sweep-points.csv'>sweep-points.csv</a></p>")
-    parts.append("<p>" + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items()) + "</p></body></html>")
+    parts.append("<p>" + ", ".join(f"{k} {v:.1f}" + ("" if k.startswith("load") else " s") for k, v in timings.items())
+                 + f" on {os.cpu_count()} cores</p></body></html>")
     path = out / "index.html"
     tmp = path.with_name(".index.html.tmp")
     tmp.write_text("\n".join(parts))
@@ -482,9 +484,12 @@ def run_paper(
     from rimless.sim.backend import resolve
     from rimless.sim.sweep import SweepOptions, grid_points, run_sweep, write_table
 
+    import os
+
     say = progress or (lambda msg: None)
     out.mkdir(parents=True, exist_ok=True)
     res = PaperResult(out)
+    res.timings_s["load_average_before"] = os.getloadavg()[0]
     backend = resolve(backend)
     t0 = time.perf_counter()
     client = cluster = None
@@ -548,5 +553,6 @@ def run_paper(
     res.files += _write_table(res.table, out)
     res.timings_s["figures"] = time.perf_counter() - t3
     res.timings_s["total"] = time.perf_counter() - t0
+    res.timings_s["load_average_after"] = os.getloadavg()[0]
     res.files.append(_index(out, res.table, params, res.timings_s))
     return res

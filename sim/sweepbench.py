@@ -35,7 +35,9 @@ def _max_difference(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> float:
 def sweep_bench(points: list[dict[str, Any]], options: Any) -> dict[str, Any]:
     from rimless.sim.sweep import run_sweep
 
-    out: dict[str, Any] = {"grid_points": len(points)}
+    import os
+
+    out: dict[str, Any] = {"grid_points": len(points), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
     runs = {}
     for label, kwargs in (("sync", {"scheduler": "sync"}), ("1 worker", {"scheduler": "local", "workers": 1}),
                           ("2 workers", {"scheduler": "local", "workers": 2})):
@@ -43,6 +45,7 @@ def sweep_bench(points: list[dict[str, Any]], options: Any) -> dict[str, Any]:
         res = run_sweep(points, options, **kwargs)
         runs[label] = res
         out[label] = {"seconds": time.perf_counter() - t0, "setup_s": res.setup_s, "rows": len(res.rows)}
+    out["load_average_after"] = os.getloadavg()[0]
     out["speedup_1_to_2_workers"] = out["1 worker"]["seconds"] / out["2 workers"]["seconds"]
     out["max_difference_between_schedulers"] = max(_max_difference(runs["sync"].rows, runs[k].rows)
                                                    for k in ("1 worker", "2 workers"))
@@ -73,7 +76,9 @@ def format_bench(result: dict[str, Any]) -> str:
     lines = []
     s = result.get("sweep")
     if s:
-        lines.append(f"sweep of {s['grid_points']} grid points (no cache):")
+        lines.append(f"sweep of {s['grid_points']} grid points (no cache) on {s['cores']} cores, load average "
+                     f"{s['load_average_before']:.1f} before, {s['load_average_after']:.1f} after (a busy machine "
+                     "shrinks the speed-up):")
         for k in ("sync", "1 worker", "2 workers"):
             lines.append(f"  {k:10s} {s[k]['seconds']:7.1f} s (worker set-up {s[k]['setup_s']:.1f} s)")
         lines.append(f"  speed-up 1 -> 2 workers: {s['speedup_1_to_2_workers']:.2f}x; largest difference between "
