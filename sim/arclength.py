@@ -418,7 +418,6 @@ class ArclengthContinuation:
         `direction` (-1: decreasing). Stops at the branch end (map failure), at p_min/p_max, after
         max_points, at the first loss of stability or validity if asked, or when `stop(point)` is true."""
         t_start = time.perf_counter()
-        sc = self.oracle.scale
         p0 = float(getattr(self.oracle.base, self.oracle.field))
         branch = Branch(self.parameter, self.model, self.oracle.base)
         s = self._newton(np.asarray(z0, dtype=float), p0)
@@ -545,12 +544,8 @@ class ArclengthContinuation:
         cause = _map_failure(self.oracle, s.u[:2] + hi * t[:2], past)
         kind, detail = _end_reason(good_pt, cause, last_err, self.oracle.unit, self.parameter)
         bad_val = _failing_side_value(kind, cause)
-        return SpecialPoint(kind if kind != "end" else "end", good_pt, (good_pt.p, past_value(past, self.oracle.field)),
+        return SpecialPoint(kind, good_pt, (good_pt.p, float(getattr(past, self.oracle.field))),
                             (good_pt.tests.get(kind, math.nan), bad_val), detail)
-
-
-def past_value(params: WheelParams, field_name: str) -> float:
-    return float(getattr(params, field_name))
 
 
 def _map_failure(oracle: _Oracle, z: np.ndarray, params: WheelParams) -> StepFailure | None:
@@ -563,9 +558,10 @@ def _map_failure(oracle: _Oracle, z: np.ndarray, params: WheelParams) -> StepFai
 
 
 def _failing_side_value(kind: str, cause: StepFailure | None) -> float:
-    """The test function's value on the failing side: a failed stance/impulse/stall check means <= 0 there."""
+    """The test function's value on the failing side: the map's own stance, impulse or stall check failed
+    there, i.e. the quantity reached 0 (reported as 0.0); nan when the map did not fail."""
     if kind in VALIDITY_TESTS and cause is not None:
-        return 0.0 if kind == STALL else -0.0
+        return 0.0
     return math.nan
 
 

@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from rimless.sim.arclength import (
-    EIGEN_TESTS,
     ArclengthContinuation,
     Branch,
     BranchPoint,
@@ -223,19 +222,5 @@ def trace_gait_branches(
             out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
             continue
         end = next(iter(br.special), None)
-        if end is None and br.end_reason in ("parameter-range", "max-points"):
-            end = None
         out.append(GaitBranch(gid, label, model, start_params, start, br, end))
     return out
-
-
-def first_eigen_special(branch: Branch) -> SpecialPoint | None:
-    return next((sp for sp in branch.special if sp.kind in EIGEN_TESTS), None)
-
-
-@dataclass
-class GridPointResult:
-    """Everything computed at one grid point: tidy rows and branch points."""
-
-    rows: list[dict[str, Any]] = field(default_factory=list)
-    points: list[dict[str, Any]] = field(default_factory=list)

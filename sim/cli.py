@@ -14,7 +14,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from rimless.cli import print_json, user_facing
-from rimless.errors import ParameterError, UserError
+from rimless.errors import ParameterError
 
 app = typer.Typer(no_args_is_help=True)
 
