@@ -33,14 +33,18 @@ START_SLOPE_RAD = 0.05
 MIN_SLOPE_RAD = 1e-4
 
 
-def branch_label(model: str, period_s: float, stable: bool) -> str:
-    """A readable name of a gait: `er`; for VE `fast`/`medium`/`slow` by step period when stable
-    (model.md section 9: fast about 0.26 s, medium about 0.40 s), else `unstable`."""
+def branch_label(model: str, period_s: float, stable: bool, k: float = 2700.0) -> str:
+    """A readable name of a gait: `er`; for VE `fast`/`medium`/`slow` when stable, else `unstable`.
+
+    VE names go by the step period scaled to Table 1's stiffness, T sqrt(k / 2700 N/m): the fast gait's step
+    lasts about one leg oscillation, so its period scales like 1/sqrt(k) (about 0.25 s scaled over
+    k = 1500..3500), the medium gait's does not (about 0.39-0.41 s scaled); model.md section 9."""
     if model == "er":
         return "er" if stable else "er-unstable"
     if not stable:
         return "unstable"
-    return "fast" if period_s < 0.33 else ("medium" if period_s < 0.5 else "slow")
+    scaled = period_s * (k / 2700.0) ** 0.5
+    return "fast" if scaled < 0.33 else ("medium" if scaled < 0.5 else "slow")
 
 
 def contact_reason(facts: ContactFacts | None) -> str:
@@ -209,7 +213,7 @@ def trace_gait_branches(
     out: list[GaitBranch] = []
     for i, fp in enumerate(sorted(gaits, key=lambda g: g.step.period_s)):
         start = _start_point(pmap, fp, model)
-        label = branch_label(model, start.period_s, start.stable)
+        label = branch_label(model, start.period_s, start.stable, params.k)
         gid = f"{model}-{i + 1}-{label}"
         if progress:
             progress(f"{model} k={params.k:g}: branch {gid}")
