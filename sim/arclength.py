@@ -276,6 +276,7 @@ class ArclengthContinuation:
         ds_max: float = 0.2,
         tol: float = 1e-10,
         locate_tol: float = 1e-7,
+        end_p_tol: float = 1e-9,
         facts_every: int = 10,
         facts_dt: float = 1e-3,
         max_points: int = 400,
@@ -285,6 +286,7 @@ class ArclengthContinuation:
         self.model = model
         self.ds, self.ds_min, self.ds_max = ds, ds_min, ds_max
         self.tol, self.locate_tol = tol, locate_tol
+        self.end_p_tol = end_p_tol  # a branch end (map failure) is bisected until the bracket in p is below this
         self.facts_every = max(1, facts_every)
         self.facts_dt = facts_dt
         self._period_hint = 0.0
@@ -410,17 +412,21 @@ class ArclengthContinuation:
         stop_at_first_loss: bool = False,
         stop: Callable[[BranchPoint], bool] | None = None,
         progress: Callable[[BranchPoint], None] | None = None,
+        start_facts: ContactFacts | None = None,
     ) -> Branch:
         """Trace the branch through the fixed point near z0 at the base parameter, first moving p in
         `direction` (-1: decreasing). Stops at the branch end (map failure), at p_min/p_max, after
         max_points, at the first loss of stability or validity if asked, or when `stop(point)` is true."""
         t_start = time.perf_counter()
-        sc = self.oracle.scale
         p0 = float(getattr(self.oracle.base, self.oracle.field))
         branch = Branch(self.parameter, self.model, self.oracle.base)
         s = self._newton(np.asarray(z0, dtype=float), p0)
         t, Fp = self._tangent(s, np.array([0.0, 0.0, direction]))
-        cur = self._point(s, 0.0, True)
+        cur = self._point(s, 0.0, start_facts is None)
+        if start_facts is not None:
+            cur.facts = start_facts
+            cur.tests.update({STANCE_FORCE: start_facts.min_stance_force_single_support_N,
+                              IMPULSE: start_facts.min_impulse_N_s, STALL: start_facts.min_theta_dot_single_support_rad_s})
         branch.points.append(cur)
         ds = self.ds
         end_reason, end_detail = "", ""
@@ -523,7 +529,8 @@ class ArclengthContinuation:
         lo, hi = 0.0, ds
         good_state, good_pt = s, cur
         last_err: StepFailure | None = None
-        while hi - lo > self.locate_tol:
+        p_rate = abs(t[2]) * self.oracle.scale  # parameter change per unit arclength
+        while hi - lo > self.locate_tol and (hi - lo) * p_rate > self.end_p_tol:
             mid = 0.5 * (lo + hi)
             try:
                 st = self._on_branch(s, t, mid)
@@ -537,12 +544,8 @@ class ArclengthContinuation:
         cause = _map_failure(self.oracle, s.u[:2] + hi * t[:2], past)
         kind, detail = _end_reason(good_pt, cause, last_err, self.oracle.unit, self.parameter)
         bad_val = _failing_side_value(kind, cause)
-        return SpecialPoint(kind if kind != "end" else "end", good_pt, (good_pt.p, past_value(past, self.oracle.field)),
+        return SpecialPoint(kind, good_pt, (good_pt.p, float(getattr(past, self.oracle.field))),
                             (good_pt.tests.get(kind, math.nan), bad_val), detail)
-
-
-def past_value(params: WheelParams, field_name: str) -> float:
-    return float(getattr(params, field_name))
 
 
 def _map_failure(oracle: _Oracle, z: np.ndarray, params: WheelParams) -> StepFailure | None:
@@ -555,9 +558,10 @@ def _map_failure(oracle: _Oracle, z: np.ndarray, params: WheelParams) -> StepFai
 
 
 def _failing_side_value(kind: str, cause: StepFailure | None) -> float:
-    """The test function's value on the failing side: a failed stance/impulse/stall check means <= 0 there."""
+    """The test function's value on the failing side: the map's own stance, impulse or stall check failed
+    there, i.e. the quantity reached 0 (reported as 0.0); nan when the map did not fail."""
     if kind in VALIDITY_TESTS and cause is not None:
-        return 0.0 if kind == STALL else -0.0
+        return 0.0
     return math.nan
 
 

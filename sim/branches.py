@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from rimless.sim.arclength import (
-    EIGEN_TESTS,
     ArclengthContinuation,
     Branch,
     BranchPoint,
@@ -34,14 +33,18 @@ START_SLOPE_RAD = 0.05
 MIN_SLOPE_RAD = 1e-4
 
 
-def branch_label(model: str, period_s: float, stable: bool) -> str:
-    """A readable name of a gait: `er`; for VE `fast`/`medium`/`slow` by step period when stable
-    (model.md section 9: fast about 0.26 s, medium about 0.40 s), else `unstable`."""
+def branch_label(model: str, period_s: float, stable: bool, k: float = 2700.0) -> str:
+    """A readable name of a gait: `er`; for VE `fast`/`medium`/`slow` when stable, else `unstable`.
+
+    VE names go by the step period scaled to Table 1's stiffness, T sqrt(k / 2700 N/m): the fast gait's step
+    lasts about one leg oscillation, so its period scales like 1/sqrt(k) (about 0.25 s scaled over
+    k = 1500..3500), the medium gait's does not (about 0.39-0.41 s scaled); model.md section 9."""
     if model == "er":
         return "er" if stable else "er-unstable"
     if not stable:
         return "unstable"
-    return "fast" if period_s < 0.33 else ("medium" if period_s < 0.5 else "slow")
+    scaled = period_s * (k / 2700.0) ** 0.5
+    return "fast" if scaled < 0.33 else ("medium" if scaled < 0.5 else "slow")
 
 
 def contact_reason(facts: ContactFacts | None) -> str:
@@ -210,31 +213,18 @@ def trace_gait_branches(
     out: list[GaitBranch] = []
     for i, fp in enumerate(sorted(gaits, key=lambda g: g.step.period_s)):
         start = _start_point(pmap, fp, model)
-        label = branch_label(model, start.period_s, start.stable)
+        label = branch_label(model, start.period_s, start.stable, params.k)
         gid = f"{model}-{i + 1}-{label}"
         if progress:
             progress(f"{model} k={params.k:g}: branch {gid}")
         cont = ArclengthContinuation(lambda q: make_map(q, model, backend=backend, rtol=rtol), start_params, model,
                                      "slope", max_points=max_points)
         try:
-            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end)
+            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end,
+                            start_facts=start.facts)
         except StepFailure as err:
             out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
             continue
         end = next(iter(br.special), None)
-        if end is None and br.end_reason in ("parameter-range", "max-points"):
-            end = None
         out.append(GaitBranch(gid, label, model, start_params, start, br, end))
     return out
-
-
-def first_eigen_special(branch: Branch) -> SpecialPoint | None:
-    return next((sp for sp in branch.special if sp.kind in EIGEN_TESTS), None)
-
-
-@dataclass
-class GridPointResult:
-    """Everything computed at one grid point: tidy rows and branch points."""
-
-    rows: list[dict[str, Any]] = field(default_factory=list)
-    points: list[dict[str, Any]] = field(default_factory=list)

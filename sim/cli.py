@@ -14,7 +14,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from rimless.cli import print_json, user_facing
-from rimless.errors import ParameterError, UserError
+from rimless.errors import ParameterError
 
 app = typer.Typer(no_args_is_help=True)
 
@@ -74,7 +74,15 @@ def build_params(values: dict[str, Any]) -> Any:
             mapping[key] = values[key]
     if values.get("mass_model") is not None:
         mapping["mass_model"] = values["mass_model"].value
-    return params_from_mapping(mapping, base=base, source="the command-line options")
+    try:
+        return params_from_mapping(mapping, base=base, source="the command-line options")
+    except ParameterError as err:
+        if values.get("slope_deg") is not None and "slope" in str(err):
+            from rimless.sim.params import SPOKE_ANGLE_RAD
+
+            raise ParameterError(f"--slope-deg must be a finite slope in [0, {math.degrees(SPOKE_ANGLE_RAD / 2):g}) deg, "
+                                 f"got {values['slope_deg']:g} deg") from None
+        raise
 
 
 def wheel_params(func: Any = None, *, exclude: tuple[str, ...] = ()) -> Any:
@@ -289,8 +297,17 @@ def gaits_cmd(
         task = prog.add_task("scanning guesses", total=guesses)
         found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
                            progress=lambda i, n: prog.update(task, completed=i))
-    items = [
-        {
+    from rimless.sim.arclength import contact_facts
+    from rimless.sim.branches import contact_reason
+    from rimless.sim.failures import StepFailure
+
+    items = []
+    for fp in found:
+        try:
+            facts = contact_facts(pmap, fp.z, 5e-4)
+        except StepFailure:
+            facts = None
+        items.append({
             "theta_plus_rad": float(fp.z[0]),
             "theta_dot_plus_rad_s": float(fp.z[1]),
             "step_period_s": fp.step.period_s,
@@ -298,22 +315,32 @@ def gaits_cmd(
             "max_abs_eigenvalue": fp.max_abs_eigenvalue,
             "stable": fp.stable,
             "energy_ratio": fp.step.impact.energy_ratio,
-        }
-        for fp in found
-    ]
+            "contact_valid": bool(facts is not None and facts.contact_valid),
+            "contact_reason": contact_reason(facts),
+            "contact": facts.as_dict() if facts is not None else None,
+        })
     if json_out:
         print_json({"model": model.value, "slope_rad": params.slope_rad, "k": params.k, "c": params.c, "gaits": items})
         return
     from rich.table import Table
 
     table = Table(title=f"period-1 gaits of the {model.value} wheel at {params.slope_deg:.4f} deg")
-    for col in ("#", "theta+ (rad)", "theta'+ (rad/s)", "period (s)", "max |eig|", "stable", "E+/E-"):
-        table.add_column(col, justify="right")
+    table.box = None
+    table.pad_edge = False
+    for col in ("#", "theta+ rad", "theta'+ rad/s", "period s", "max|eig|", "stable", "valid", "Fmin N", "E+/E-"):
+        table.add_column(col, justify="right", no_wrap=True)
     for i, it in enumerate(items):
-        table.add_row(str(i + 1), f"{it['theta_plus_rad']:.6f}", f"{it['theta_dot_plus_rad_s']:.6f}",
-                      f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", str(it["stable"]),
-                      f"{it['energy_ratio']:.4f}")
+        fmin = it["contact"]["min_stance_force_single_support_N"] if it["contact"] else float("nan")
+        table.add_row(str(i + 1), f"{it['theta_plus_rad']:.5f}", f"{it['theta_dot_plus_rad_s']:.5f}",
+                      f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", "yes" if it["stable"] else "no",
+                      "yes" if it["contact_valid"] else "NO", f"{fmin:.3g}", f"{it['energy_ratio']:.4f}")
     _console().print(table)
+    _console().print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
+                     "impulses > 0); Fmin: smallest stance force in single support; theta'+: post-impact angular "
+                     "velocity", soft_wrap=True)
+    for i, it in enumerate(items):
+        if it["contact_reason"]:
+            _console().print(f"gait {i + 1}: {it['contact_reason']}", soft_wrap=True)
     if not items:
         _console().print("no period-1 gait found in the scanned range")
 
@@ -508,6 +535,7 @@ def _floats(text: str, name: str) -> list[float]:
 
 @app.command("stress")
 @user_facing
+@sim_failures
 @wheel_params
 def stress_cmd(
     params: Any,
@@ -568,7 +596,7 @@ def bench_cmd(
     from rimless.sim.bench import format_table, plot_work_precision, run_bench
 
     with Progress(transient=True, console=_err_console()) as prog:
-        task = prog.add_task("benchmark", total=None)
+        task = prog.add_task("benchmark (the full run takes minutes; --quick under one)", total=None)
         result = run_bench(quick, progress=lambda msg: prog.update(task, description=str(msg)))
     if plot is not None:
         plot.parent.mkdir(parents=True, exist_ok=True)
@@ -645,6 +673,8 @@ def paper_cmd(
     con.print(table)
     for f in res.files:
         con.print(f"wrote {f}", soft_wrap=True)
+    con.print(f"load average {res.timings_s['load_average_before']:.1f} before, "
+              f"{res.timings_s['load_average_after']:.1f} after (other work on the machine slows every timing)")
     con.print(f"in {res.timings_s['total']:.1f} s (sweep {res.timings_s['sweep']:.1f} s: {res.sweep.computed} grid "
               f"points computed, {res.sweep.cached} cached, {res.sweep.workers} worker(s))")
 
@@ -666,6 +696,7 @@ _SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid
 
 @app.command("sweep")
 @user_facing
+@sim_failures
 @wheel_params(exclude=("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
 def sweep_cmd(
     params: Any,
@@ -688,6 +719,9 @@ def sweep_cmd(
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
                                                       "[~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
+    bench: Annotated[bool, typer.Option("--bench", help="Benchmark instead: the grid (no cache) in-process, on 1 and "
+                                        "on 2 workers, and the branch-end location by pseudo-arclength against "
+                                        "bisection (takes minutes).")] = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
@@ -729,6 +763,17 @@ def sweep_cmd(
     options = SweepOptions(backend=resolve(backend.value), rtol=rtol, start_slope_rad=start_slope_rad,
                            n_guesses=guesses)
     points = grid_points(params, model_list, grid, mm)
+    if bench:
+        from rimless.sim.sweepbench import branch_end_bench, format_bench, sweep_bench
+
+        with Progress(transient=True, console=_err_console()) as prog:
+            prog.add_task("benchmark (minutes): sweep on each scheduler, then branch ends", total=None)
+            result = {"sweep": sweep_bench(points, options), "branch_end": branch_end_bench(params)}
+        if json_out:
+            print_json(result)
+        else:
+            typer.echo(format_bench(result))
+        return
     cache = None if no_cache else (cache_dir or __import__("rimless.sim.sweep", fromlist=["x"]).default_cache_dir())
     with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task(f"sweep: {len(points)} grid points", total=len(points))
@@ -740,8 +785,7 @@ def sweep_cmd(
     meta = {"grid": grid, "models": model_list, "mass_models": mm, "options": options.__dict__,
             "base_params": params.to_dict(), "scheduler": scheduler}
     if not res.rows:
-        typer.echo("error: the sweep produced no rows", err=True)
-        raise typer.Exit(1)
+        raise SimFailure("the sweep produced no rows")
     paths = write_table(res.rows, out, meta)
     if res.points:
         paths += write_table(res.points, out.with_name(out.name + "-points"), meta)

@@ -109,13 +109,16 @@ def critical_slope(
         method = "arclength" if hasattr(pmap, "evaluate") else "bisection"
     if method not in ("arclength", "bisection"):
         raise ValueError(f"unknown method {method!r}")
-    evaluations0 = getattr(pmap, "evaluations", 0)
+
+    counted = [0]  # map evaluations of every map made here (Algorithm 1 and the bisection)
 
     def solve(slope: float, guess: np.ndarray) -> FixedPoint:
         m = pmap.with_params(base.replace(slope_rad=slope))
         jac = jacobian_factory(m) if jacobian_factory else None
-        fp = solve_fixed_point(m, guess, jacobian=jac, strict_contact=strict_contact, max_iter=20)
-        return fp
+        try:
+            return solve_fixed_point(m, guess, jacobian=jac, strict_contact=strict_contact, max_iter=20)
+        finally:
+            counted[0] += getattr(m, "evaluations", 0)
 
     def good(fp: FixedPoint) -> bool:
         return fp.stable
@@ -158,8 +161,10 @@ def critical_slope(
         raise NoFixedPoint(f"the gait at the start slope {start_slope_rad} rad is not stable "
                            f"(max |eigenvalue| {first.max_abs_eigenvalue:.4f})")
     if method == "arclength":
-        return _by_arclength(pmap, first, start_slope_rad, step_rad, algorithm1, last_conv_fp, branch, min_slope_rad,
-                             refine_tol_rad, z_guess, progress)
+        cs = _by_arclength(pmap, first, start_slope_rad, step_rad, algorithm1, last_conv_fp, branch, min_slope_rad,
+                           refine_tol_rad, z_guess, progress)
+        cs.map_evaluations += counted[0]
+        return cs
     if failure is None or failure_slope is None:
         return CriticalSlope(pmap.model, algorithm1, step_rad, last_stable, refine_tol_rad, "min-slope",
                              f"the branch reaches the smallest slope tried ({min_slope_rad} rad)", last_stable_fp,
@@ -197,8 +202,7 @@ def critical_slope(
     if reason != "loss-of-stability":
         reason, detail = _reason_at_end(pmap, hi_fp, lo, reason, detail)
     return CriticalSlope(pmap.model, algorithm1, step_rad, hi, refine_tol_rad, reason, detail, hi_fp, branch,
-                         np.asarray(z_guess), "bisection",
-                         map_evaluations=getattr(pmap, "evaluations", 0) - evaluations0)
+                         np.asarray(z_guess), "bisection", map_evaluations=counted[0])
 
 
 FOLD_EIGENVALUE_TOL = 0.02  # |eigenvalue - 1| at a bisected end (bracket 1e-6 rad) that marks a fold

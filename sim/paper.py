@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import html
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -78,14 +79,14 @@ def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, the
     return pmap, solve_fixed_point(pmap, z, jacobian=getattr(pmap, "jacobian", None))
 
 
-def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 3) -> dict[str, Any]:
+def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 2) -> dict[str, Any]:
     from rimless.sim.backend import make_integrator
     from rimless.sim.gait import simulate_steps
 
     out = {}
     for model in ("er", "ve"):
         _, fp = _fixed_point(params, model, backend, rtol)
-        out[model] = simulate_steps(params, model, fp.z, steps, make_integrator(backend, rtol), record_dt=5e-4,
+        out[model] = simulate_steps(params, model, fp.z, steps, make_integrator(backend, rtol), record_dt=1e-3,
                                     forces=True)
     return out
 
@@ -257,8 +258,55 @@ def cot_rows(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[str, 
     return out
 
 
-def figure_cot(crows: list[dict[str, Any]], out: Path) -> list[Path]:
-    """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not."""
+def curve_starts(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[str, Any]]:
+    """One start per stable branch label (ER; VE fast, medium, ...): its row at the grid k nearest Table 1's."""
+    done: set[tuple[str, str]] = set()
+    out = []
+    for r in sorted(rows, key=lambda r: abs(r["k"] - params.k)):
+        key = (r["model"], r.get("branch_label", ""))
+        crit = r.get("critical_slope_rad")
+        if key in done or not (isinstance(crit, float) and crit == crit) or r["reason"] not in ("stall", "fold"):
+            continue
+        done.add(key)
+        out.append(r)
+    return out
+
+
+def boundary_curve(row: dict[str, Any], params: dict[str, Any], backend: str, rtol: float,
+                   k_range: tuple[float, float]) -> list[dict[str, Any]]:
+    """The critical slope of one branch as a curve over k, traced by two-parameter continuation
+    (rimless.sim.boundary): a VE branch's fold curve, the ER stall curve (1.6 s period level set).
+    Plain data in and out (runs as a Dask task)."""
+    from rimless.sim.backend import make_map
+    from rimless.sim.boundary import BoundaryContinuation, start_on_boundary
+    from rimless.sim.failures import StepFailure
+
+    model = row["model"].lower()
+    test = "stall" if row["reason"] == "stall" else "fold"
+    base = WheelParams(**params).replace(stiffness_n_per_m=float(row["k"]), slope_rad=row["start_slope_rad"])
+
+    def factory(q: WheelParams) -> Any:
+        return make_map(q, model, backend=backend, rtol=rtol)
+
+    try:
+        z, s0 = start_on_boundary(factory, base, model, np.array([row["theta_plus_rad"], row["theta_dot_plus_rad_s"]]),
+                                  test)
+        bc = BoundaryContinuation(factory, base.replace(slope_rad=s0), model, "k", test, max_points=60)
+        curve = bc.trace(z, s0, mu_min=k_range[0], mu_max=k_range[1])
+    except StepFailure:
+        return []
+    name = "ER stall (1.6 s period)" if model == "er" else f"VE {row['branch_label']} fold"
+    return [{"curve": name, "model": row["model"], "branch_label": row["branch_label"], "test": test, "k": pt.mu,
+             "slope_rad": pt.slope_rad, "slope_deg": pt.slope_deg, "cot": math.tan(pt.slope_rad),
+             "step_period_s": pt.period_s, "max_abs_eigenvalue": float(np.max(np.abs(pt.eigenvalues))),
+             "curve_end": curve.end_reason, "curve_seconds": curve.seconds,
+             "curve_map_evaluations": curve.map_evaluations}
+            for pt in curve.points if k_range[0] - 1e-9 <= pt.mu <= k_range[1] + 1e-9]
+
+
+def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, Any]] | None = None) -> list[Path]:
+    """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not; lines: the boundary
+    curves traced by two-parameter continuation."""
     import pandas as pd
 
     from rimless.sim.plotting import save_figure
@@ -266,12 +314,19 @@ def figure_cot(crows: list[dict[str, Any]], out: Path) -> list[Path]:
     plt = _plt()
     frame = pd.DataFrame(crows)
     fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
+    cframe = pd.DataFrame(curves or [])
+    colours0 = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4"}
+    if len(cframe):
+        for (name, label), g in cframe.groupby(["curve", "branch_label"]):
+            g = g.sort_values("k")
+            ax.plot(g["k"], g["cot"], "-", color=colours0.get(label, "C5"), lw=2, alpha=0.35,
+                    label=f"{name} curve (two-parameter continuation)")
     colours = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4", "rigid": "k"}
     for label, g in frame[frame.model != "rigid"].groupby("branch_label"):
         g = g.sort_values("k")
         name = "ER" if label == "er" else f"VE {label}"
         col = colours.get(label, "C5")
-        ax.plot(g["k"], g["cot"], "-", color=col, lw=1, label=name)
+        ax.plot(g["k"], g["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends)")
         v = g[g.contact_valid]
         nv = g[~g.contact_valid]
         ax.plot(v["k"], v["cot"], "o", color=col, ms=6)
@@ -285,7 +340,10 @@ def figure_cot(crows: list[dict[str, Any]], out: Path) -> list[Path]:
     ax.set_title("cost of transport per gait branch")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    return [save_figure(fig, out / "fig5_cot.png"), _write_csv(frame, out / "fig5_cot.csv")]
+    files = [save_figure(fig, out / "fig5_cot.png"), _write_csv(frame, out / "fig5_cot.csv")]
+    if len(cframe):
+        files.append(_write_csv(cframe, out / "fig5_boundary_curves.csv"))
+    return files
 
 
 def _fmt_range(v: Any) -> str:
@@ -305,12 +363,13 @@ def headline_table(rows: list[dict[str, Any]], er_series: list[dict[str, Any]], 
     table.append({"quantity": "rigid wheel critical slope (deg)", "paper": "2.80", "ours": f"{math.degrees(phi_r):.3f}",
                   "note": "Coleman's closed form with M = m_H, I_c (model.md section 7)"})
     table.append({"quantity": "rigid wheel CoT", "paper": "0.048", "ours": f"{math.tan(phi_r):.4f}", "note": "tan(2.799 deg)"})
-    k0 = params.k
+    ks_all = sorted({r["k"] for r in rows})
+    k0 = min(ks_all, key=lambda k: abs(k - params.k)) if ks_all else params.k
     ve0 = [r for r in pick("VE", k0) if r.get("critical_slope_rad") == r.get("critical_slope_rad")
            and isinstance(r.get("critical_slope_rad"), float)]
     ve_txt = "; ".join(f"{r['branch_label']} {r['critical_slope_deg']:.3f} ({'valid' if r['contact_valid_at_start'] else 'INVALID'}, "
                        f"{r['reason']})" for r in ve0) or "no stable VE branch"
-    table.append({"quantity": f"VE critical slope at k = {k0:g} (deg)", "paper": "1.27-1.30", "ours": ve_txt,
+    table.append({"quantity": f"VE critical slope at k = {k0:g} (deg)", "paper": "1.27-1.30 (k = 2700)", "ours": ve_txt,
                   "note": "one value per VE branch (model.md section 9); the paper follows one branch"})
     er0 = pick("ER", k0)
     if er0:
@@ -324,7 +383,7 @@ def headline_table(rows: list[dict[str, Any]], er_series: list[dict[str, Any]], 
                       "ours": f"{min(x['max_abs_eigenvalue'] for x in rows if x['model'] == 'ER' and x['max_abs_eigenvalue'] == x['max_abs_eigenvalue']):.3f}"
                               f"-{max(x['max_abs_eigenvalue'] for x in rows if x['model'] == 'ER' and x['max_abs_eigenvalue'] == x['max_abs_eigenvalue']):.3f}",
                       "note": "largest along each ER branch, over the k grid"})
-    ve_er = [r for r in pick("VE", k0) if r["energy_ratio"] == r["energy_ratio"]]
+    ve_er = [r for r in pick("VE", k0) if r["energy_ratio"] == r["energy_ratio"] and r["stable_at_start"]]
     table.append({"quantity": "VE energy ratio E+/E-", "paper": "0.79-0.81",
                   "ours": "; ".join(f"{r['branch_label']} {r['energy_ratio']:.3f}" for r in ve_er),
                   "note": f"per VE gait at the start slope, k = {k0:g}"})
@@ -398,7 +457,8 @@ def _index(out: Path, table: list[dict[str, Any]], params: WheelParams, timings:
                      + "</tr>")
     parts.append("</table><p><a href='table6_headline.csv'>table6_headline.csv</a> · "
                  "<a href='sweep.csv'>sweep.csv</a> (every branch) · <a href='sweep-points.csv'>sweep-points.csv</a></p>")
-    parts.append("<p>" + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items()) + "</p></body></html>")
+    parts.append("<p>" + ", ".join(f"{k} {v:.1f}" + ("" if k.startswith("load") else " s") for k, v in timings.items())
+                 + f" on {os.cpu_count()} cores</p></body></html>")
     path = out / "index.html"
     tmp = path.with_name(".index.html.tmp")
     tmp.write_text("\n".join(parts))
@@ -424,39 +484,75 @@ def run_paper(
     from rimless.sim.backend import resolve
     from rimless.sim.sweep import SweepOptions, grid_points, run_sweep, write_table
 
+    import os
+
     say = progress or (lambda msg: None)
     out.mkdir(parents=True, exist_ok=True)
     res = PaperResult(out)
+    res.timings_s["load_average_before"] = os.getloadavg()[0]
     backend = resolve(backend)
     t0 = time.perf_counter()
-    say("sweep over k: every branch of both wheels")
-    pts = grid_points(params, ("er", "ve"), {"k": list(ks)}, (params.mass_model,))
-    options = SweepOptions(backend=backend, rtol=rtol, start_slope_rad=params.slope_rad)
-    sw = run_sweep(pts, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir,
-                   progress=lambda i, n: say(f"sweep over k: {i}/{n} grid points"))
-    res.sweep = sw
-    res.timings_s["sweep"] = time.perf_counter() - t0
-    meta = {"params": params.to_dict(), "ks": list(ks), "backend": backend, "rtol": rtol}
-    res.files += write_table(sw.rows, out / "sweep", meta)
-    if sw.points:
-        res.files += write_table(sw.points, out / "sweep-points", meta)
-    t1 = time.perf_counter()
-    say("typical gaits and forces")
-    trajs = _typical(params, backend, rtol)
-    res.files += figure_typical_gaits(trajs, out)
-    res.files += figure_forces(trajs, out)
-    res.timings_s["gaits"] = time.perf_counter() - t1
-    t1 = time.perf_counter()
-    say("energy transition ratios")
-    res.files += figure_energy_ratio(energy_ratio_series(params, backend, rtol, energy_ks), out)
-    res.timings_s["energy"] = time.perf_counter() - t1
-    t1 = time.perf_counter()
-    say("eigenvalue map and cost of transport")
+    client = cluster = None
+    if scheduler != "sync":
+        from dask.distributed import Client, LocalCluster
+
+        if scheduler == "local":
+            import os
+
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=15)
+            except (OSError, TimeoutError) as err:
+                raise ConnectionError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
+    try:
+        say("sweep over k: every branch of both wheels")
+        pts = grid_points(params, ("er", "ve"), {"k": list(ks)}, (params.mass_model,))
+        options = SweepOptions(backend=backend, rtol=rtol, start_slope_rad=params.slope_rad)
+        sw = run_sweep(pts, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir, client=client,
+                       progress=lambda i, n: say(f"sweep over k: {i}/{n} grid points"))
+        res.sweep = sw
+        res.timings_s["sweep"] = time.perf_counter() - t0
+        meta = {"params": params.to_dict(), "ks": list(ks), "backend": backend, "rtol": rtol}
+        res.files += write_table(sw.rows, out / "sweep", meta)
+        if sw.points:
+            res.files += write_table(sw.points, out / "sweep-points", meta)
+        # the boundary curves run on the workers while this process draws figures 1-3
+        t1 = time.perf_counter()
+        starts = curve_starts(sw.rows, params)
+        k_range = (min(ks), max(ks))
+        futures = ([client.submit(boundary_curve, r, params.to_dict(), backend, rtol, k_range, pure=False)
+                    for r in starts] if client is not None else [])
+        say("typical gaits and forces")
+        trajs = _typical(params, backend, rtol)
+        res.files += figure_typical_gaits(trajs, out)
+        res.files += figure_forces(trajs, out)
+        res.timings_s["gaits"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        say("energy transition ratios")
+        res.files += figure_energy_ratio(energy_ratio_series(params, backend, rtol, energy_ks), out)
+        res.timings_s["energy"] = time.perf_counter() - t2
+        say("boundary curves over k (two-parameter continuation)")
+        if client is not None:
+            curves = [row for f in futures for row in f.result()]
+        else:
+            curves = [row for r in starts for row in boundary_curve(r, params.to_dict(), backend, rtol, k_range)]
+        res.timings_s["boundary_curves_wait"] = time.perf_counter() - t1 - res.timings_s["gaits"] - res.timings_s["energy"]
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    t3 = time.perf_counter()
+    say("eigenvalue map, cost of transport and the headline table")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
-    res.files += figure_cot(cot_rows(sw.rows, params), out)
+    res.files += figure_cot(cot_rows(sw.rows, params), out, curves)
     res.table = headline_table(sw.rows, [], params)
     res.files += _write_table(res.table, out)
-    res.timings_s["figures"] = time.perf_counter() - t1
+    res.timings_s["figures"] = time.perf_counter() - t3
     res.timings_s["total"] = time.perf_counter() - t0
+    res.timings_s["load_average_after"] = os.getloadavg()[0]
     res.files.append(_index(out, res.table, params, res.timings_s))
     return res

@@ -50,7 +50,7 @@ def stick_diagram(traj: GaitTrajectory, ax, *, every_s: float = 0.025, step: int
         if t[i] < next_t:
             continue
         next_t = t[i] + every_s
-        th, xb, yb, L1, L2 = tab["theta_rad"][i], tab["x_b_m"][i], tab["y_b_m"][i], tab["L1_m"][i], tab["L2_m"][i]
+        th, xb, yb, L2 = tab["theta_rad"][i], tab["x_b_m"][i], tab["y_b_m"][i], tab["L2_m"][i]
         hx, hy = tab["hub_x_m"][i], tab["hub_y_m"][i]
         col = colours.get(str(tab["phase"][i]), "k")
         for j in range(2, 8):

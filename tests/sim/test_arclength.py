@@ -121,3 +121,15 @@ def test_continuation_up_from_the_medium_gait_reaches_the_unstable_gait_gaits_fi
     cont = ArclengthContinuation(_factory("ve"), p, "ve", "slope", max_points=60)
     crossed = []
 
+    br = cont.trace(default_guess(p, "ve"), direction=+1.0, stop=lambda pt: crossed.append(pt) or (
+        len(crossed) > 2 and pt.p < p.slope_rad and crossed[-2].p >= p.slope_rad))
+    # it went up in slope, turned at a fold above the start slope, and came back down through it
+    assert any(sp.kind == FOLD and sp.p > p.slope_rad for sp in br.special)
+    a, b = br.points[-2], br.points[-1]
+    assert a.p >= p.slope_rad > b.p
+    assert b.max_abs_eigenvalue > 1.0
+    w = (a.p - p.slope_rad) / (a.p - b.p)
+    z_interp = a.z + w * (b.z - a.z)
+    fp = solve_fixed_point(pmap, z_interp, jacobian=pmap.jacobian)
+    assert not fp.stable
+    assert min(np.max(np.abs(fp.z - g.z)) for g in unstable) < 1e-7

@@ -58,3 +58,45 @@ def test_period_one_gait_repeats_itself(er_fixed_point):
     for _ in range(3):
         z = pmap(z)
     assert np.max(np.abs(z - fp.z)) < 1e-9
+
+
+def test_reference_jacobian_next_to_the_er_stall_matches_the_variational_one():
+    """Next to the stall, a fixed central-difference step of 1e-4 crosses the stall boundary (the perturbed
+    step rolls back); the curvature-scaled step must agree with the exact (variational) Jacobian."""
+    from rimless.sim.arclength import ArclengthContinuation
+    from rimless.sim.backend import make_map
+    from rimless.sim.failures import StepFailure
+    from rimless.sim.integrators import ScipyIntegrator
+    from rimless.sim.params import WheelParams
+    from rimless.sim.poincare import default_guess
+
+    base = WheelParams()
+    cont = ArclengthContinuation(lambda q: make_map(q, "er", backend="fast"), base, "er")
+    br = cont.trace(default_guess(base, "er"), stop_at_first_loss=True)
+    end = br.first_loss()
+    assert end.kind == "stall"
+    # a fixed point 1e-5 rad above the stall, reached along the branch
+    br2 = ArclengthContinuation(lambda q: make_map(q, "er", backend="fast"), base, "er").trace(
+        default_guess(base, "er"), stop=lambda pt: pt.p < end.p + 1e-5)
+    pt = br2.points[-1]
+    ref = PoincareMap(base.replace(slope_rad=pt.p), "er", ScipyIntegrator(rtol=1e-10, atol=1e-12))
+    with pytest.raises(StepFailure):
+        ref(pt.z + np.array([0.0, -1e-4]))  # what the old fixed step evaluated
+    J = ref.jacobian(pt.z)
+    assert np.max(np.abs(J - pt.jacobian)) <= 1e-5 * (1 + np.max(np.abs(pt.jacobian)))
+
+
+def test_newton_tolerance_follows_the_maps_own_noise():
+    """Very light legs (m = 1e-4 kg): the map's noise sits above the 1e-10 tolerance; Newton must accept its
+    own noise floor instead of reporting that no gait exists."""
+    from rimless.sim.backend import make_map
+    from rimless.sim.params import WheelParams
+    from rimless.sim.poincare import FIXED_POINT_TOL, default_guess, map_noise, solve_fixed_point
+
+    p = WheelParams(leg_mass_kg=1e-4)
+    pmap = make_map(p, "er", backend="fast")
+    fp = solve_fixed_point(pmap, default_guess(p, "er"), jacobian=pmap.jacobian)
+    assert fp.residual > FIXED_POINT_TOL  # the case that failed before
+    assert fp.residual <= 10 * map_noise(pmap, fp.z, fp.jacobian)
+    assert fp.residual < 1e-7
+    assert fp.stable
