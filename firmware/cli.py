@@ -228,8 +228,9 @@ def release(
             print_json({"released_pins": list(cfg.clutch.pins), "level": "high" if not cfg.clutch.active_high else "low",
                         **({"fake_levels": levels} if fake else {})})
         else:
-            typer.echo(f"released: GPIO {', '.join(str(p) for p in cfg.clutch.pins)} driven to the clutch-off level "
-                       f"({'low' if cfg.clutch.active_high else 'high'}), then released to the pull-downs")
+            level = "low" if cfg.clutch.active_high else "high"
+            typer.echo(f"released: GPIO {', '.join(str(p) for p in cfg.clutch.pins)} driven {level} (clutch off), "
+                       "then given back; the module inputs' pull-downs hold them off from here")
 
     _interruptible(go)
 
