@@ -121,8 +121,31 @@ def arm(
 
 @app.command()
 def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
-    """Disarm: every clutch off."""
-    _remote(host, port, token, "disarm")
+    """Disarm: every clutch off.
+
+    Sent first over the robot's reserved UDP path (no connection to wait for, so a flood of TCP
+    connections cannot delay it), then confirmed over TCP; prints the robot's state.
+    """
+    from rimless.cli import print_json, user_facing
+    from rimless.firmware.commands import send_command, send_disarm_datagram
+    from rimless.firmware.errors import RobotUnreachable
+
+    @user_facing
+    def go() -> None:
+        tok = _token(token)
+        try:
+            send_disarm_datagram(host, token=tok, port=port, timeout_s=0.5)
+            udp_ok = True
+        except RobotUnreachable:
+            udp_ok = False
+        try:
+            print_json(send_command(host, "disarm", token=tok, port=port))
+        except RobotUnreachable as err:
+            if not udp_ok:
+                raise
+            print_json({"armed": False, "disarmed_via": "udp", "tcp_error": str(err)})
+
+    _interruptible(go)
 
 
 @app.command("set", context_settings={"ignore_unknown_options": True})

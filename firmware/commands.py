@@ -23,6 +23,11 @@ reached, the oldest connection that never authenticated is dropped to make room,
 operator connection (for `disarm` or `status`) always gets in. Rejections are logged at most
 `LOG_LINES_PER_S` times per second.
 
+Reserved disarm path: the same port number on UDP takes one datagram,
+`{"disarm": n, "mac": HMAC-SHA256(token, "disarm\n" + str(n))}` (any integer n), and disarms at
+once, answering `{"ok": true, "disarmed": true, "n": n}`. It holds no state per sender, so no number
+of TCP connections can block it; a replay can only disarm, which is always safe.
+
 Commands: status, ping, arm {stance_leg?}, disarm, set {name, value}, trial_start {name?}, trial_stop.
 """
 
@@ -36,6 +41,7 @@ import json
 import logging
 import secrets
 import socket
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -81,6 +87,89 @@ def check_token(token: str) -> str:
     if len(set(token)) < 6:
         raise WeakToken("the command token repeats too few characters to be secret")
     return token
+
+
+def disarm_mac(token: str, n: int) -> str:
+    """HMAC-SHA256 (hex) of a reserved-path disarm datagram with number `n`."""
+    return hmac.new(token.encode("utf-8"), f"disarm\n{n}".encode("ascii"), hashlib.sha256).hexdigest()
+
+
+def parse_disarm_datagram(data: bytes, token: str) -> int:
+    """Validate a reserved-path disarm datagram; return its number or raise `Rejected`."""
+    if len(data) > 512 or _max_depth(data) > 1:
+        raise Rejected("disarm datagram: too long or nested")
+    try:
+        obj = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        raise Rejected("disarm datagram: not UTF-8 JSON") from None
+    if not isinstance(obj, dict) or set(obj) != {"disarm", "mac"}:
+        raise Rejected("disarm datagram: expected exactly the fields disarm and mac")
+    n, mac = obj["disarm"], obj["mac"]
+    if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
+        raise Rejected("disarm datagram: disarm must be a non-negative integer and mac a string")
+    if not hmac.compare_digest(mac.encode("ascii", "replace"), disarm_mac(token, n).encode("ascii")):
+        raise Rejected("disarm datagram: bad mac")
+    return n
+
+
+class DisarmListener:
+    """The reserved disarm path: a thread of its own on a UDP socket, so neither TCP connections nor a
+    busy event loop can delay it. `on_disarm` runs in this thread (it must be thread-safe)."""
+
+    def __init__(self, sock: socket.socket, token: str, on_disarm: Callable[[], None],
+                 on_rejected: Callable[[str, str], None]) -> None:
+        self.sock = sock
+        self.token = token
+        self.on_disarm = on_disarm
+        self.on_rejected = on_rejected
+        self.disarms = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="rimless-disarm", daemon=True)
+
+    @classmethod
+    def bind(cls, host: str, port: int, token: str, on_disarm: Callable[[], None],
+             on_rejected: Callable[[str, str], None]) -> DisarmListener:
+        """Bind the UDP socket (raises OSError) and start the thread."""
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.bind((host, port))
+            sock.settimeout(0.2)
+        except OSError:
+            sock.close()
+            raise
+        listener = cls(sock, token, on_disarm, on_rejected)
+        listener._thread.start()
+        return listener
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, addr = self.sock.recvfrom(4096)
+            except (TimeoutError, socket.timeout):
+                continue
+            except OSError:
+                return  # closed
+            try:
+                n = parse_disarm_datagram(data, self.token)
+            except Rejected as err:
+                self.on_rejected(str(addr), str(err))
+                continue
+            except Exception as err:  # noqa: BLE001 - any datagram gets a log line, never a traceback
+                self.on_rejected(str(addr), f"unreadable disarm datagram ({type(err).__name__})")
+                continue
+            try:
+                self.on_disarm()
+            finally:
+                self.disarms += 1
+                with contextlib.suppress(OSError):
+                    self.sock.sendto(json.dumps({"ok": True, "disarmed": True, "n": n}).encode(), addr)
+
+    def close(self) -> None:
+        """Stop the thread and close the socket."""
+        self._stop.set()
+        self._thread.join(1.0)
+        self.sock.close()
 
 
 def command_mac(token: str, nonce: str, seq: int, cmd: str, args: dict[str, Any]) -> str:
@@ -202,9 +291,14 @@ class RateLimitedLog:
         self._last = clock()
         self.suppressed = 0
         self.logged = 0
+        self._lock = threading.Lock()  # the event loop and the disarm thread both log
 
     def warning(self, msg: str, *args: Any) -> None:
         """Log `msg % args` as a warning if the budget allows."""
+        with self._lock:
+            self._warning(msg, *args)
+
+    def _warning(self, msg: str, *args: Any) -> None:
         now = self.clock()
         self._allowance = min(self.per_s, self._allowance + (now - self._last) * self.per_s)
         self._last = now
@@ -253,6 +347,7 @@ class CommandServer:
         auth_timeout_s: float = 5.0,
         idle_timeout_s: float = 60.0,
         on_valid: Callable[[], None] | None = None,
+        on_disarm: Callable[[], None] | None = None,
     ) -> None:
         if not token:
             raise ValueError("the command server needs a non-empty token")
@@ -265,6 +360,8 @@ class CommandServer:
         self.auth_timeout_s = auth_timeout_s
         self.idle_timeout_s = idle_timeout_s
         self.on_valid = on_valid
+        self.on_disarm = on_disarm
+        self._udp: DisarmListener | None = None
         self.rejected = 0
         self.accepted = 0
         self.evicted = 0
@@ -287,10 +384,24 @@ class CommandServer:
         """
         self._server = await asyncio.start_server(self._client, self.host, self.port,
                                                   limit=self.max_message_bytes * 2, backlog=64)
-        return int(self._server.sockets[0].getsockname()[1])
+        port = int(self._server.sockets[0].getsockname()[1])
+        if self.on_disarm is not None:
+            try:
+                self._udp = DisarmListener.bind(self.host, port, self.token, self.on_disarm, self._rejected)
+            except OSError as err:
+                log.warning("reserved UDP disarm path unavailable on port %d: %s", port, err)
+        return port
+
+    @property
+    def udp_disarms(self) -> int:
+        """Disarms received over the reserved UDP path."""
+        return 0 if self._udp is None else self._udp.disarms
 
     async def close(self) -> None:
         """Stop listening and drop the connections (quietly: no CancelledError escapes or is logged)."""
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
         if self._server is None:
             return
         self._server.close()
@@ -485,6 +596,38 @@ class RobotLink:
 
     def __exit__(self, *_exc: object) -> None:
         self.close()
+
+
+def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
+                         copies: int = 3) -> dict[str, Any]:
+    """PC side: disarm over the reserved UDP path; returns the robot's answer.
+
+    Sends `copies` datagrams (UDP may drop one) and waits up to `timeout_s` for an answer. Raises
+    `RobotUnreachable` when none comes.
+    """
+    n = secrets.randbits(62)
+    data = json.dumps({"disarm": n, "mac": disarm_mac(token, n)}).encode()
+    try:
+        info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
+    except socket.gaierror as err:
+        raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
+    with socket.socket(info[0], socket.SOCK_DGRAM) as sock:
+        sock.settimeout(timeout_s / copies)
+        for _ in range(copies):
+            try:
+                sock.sendto(data, info[4])
+                reply, _ = sock.recvfrom(4096)
+            except (TimeoutError, socket.timeout, ConnectionRefusedError):
+                continue
+            except OSError as err:
+                raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
+            try:
+                obj = json.loads(reply)
+            except ValueError:
+                continue
+            if isinstance(obj, dict) and obj.get("ok") and obj.get("n") == n:
+                return obj
+    raise RobotUnreachable(f"no answer to the UDP disarm from {host}:{port} within {timeout_s} s")
 
 
 def send_command(
