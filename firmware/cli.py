@@ -526,7 +526,10 @@ def bench(
     @user_facing
     def go() -> None:
         from rimless.errors import ParameterError
+        import logging
+
         from rimless.firmware.bench import bench_rate
+        from rimless.firmware.logsetup import NonBlockingLog
         from rimless.firmware.safety import Interrupted
 
         if not fake:
@@ -540,7 +543,8 @@ def bench(
         results = []
         for r in rates:
             typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True)
-            res = bench_rate(r, duration_s, handle_signals=True)
+            with NonBlockingLog(level=logging.WARNING):
+                res = bench_rate(r, duration_s, handle_signals=True)
             if res["stopped_by"]:
                 import signal
 
