@@ -17,7 +17,7 @@ from rimless.firmware.config import ConfigError, RobotConfig, SensorConfig, Tele
 from rimless.firmware.fake_adns3080 import GaitTrajectory
 from rimless.firmware.logsetup import NonBlockingLog
 from rimless.firmware.telemetry import TelemetrySender
-from tests.firmware.test_app import Client, all_off, config, gait, scenario
+from tests.firmware.test_app import Client, all_off, config, scenario
 
 
 def released(hw) -> bool:
