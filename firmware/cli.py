@@ -88,8 +88,28 @@ _JSON = Annotated[bool, typer.Option("--json", help="Print JSON (these commands 
 
 @app.command()
 def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
-    """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON."""
-    _remote(host, port, token, "status")
+    """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON.
+
+    When the TCP channel does not answer, the short status of the reserved UDP path is printed
+    instead (armed, faults, engaged clutches), with "via": "udp".
+    """
+    from rimless.cli import print_json, user_facing
+    from rimless.firmware.commands import send_command, send_reserved_datagram
+    from rimless.firmware.errors import RobotUnreachable
+
+    @user_facing
+    def go() -> None:
+        tok = _token(token)
+        try:
+            print_json(send_command(host, "status", token=tok, port=port))
+        except RobotUnreachable as err:
+            try:
+                reply = send_reserved_datagram(host, "status", token=tok, port=port, timeout_s=0.5)
+            except RobotUnreachable:
+                raise err from None
+            print_json({**reply.get("status", {}), "via": "udp", "tcp_error": str(err)})
+
+    _interruptible(go)
 
 
 @app.command()

@@ -23,10 +23,11 @@ reached, the oldest connection that never authenticated is dropped to make room,
 operator connection (for `disarm` or `status`) always gets in. Rejections are logged at most
 `LOG_LINES_PER_S` times per second.
 
-Reserved disarm path: the same port number on UDP takes one datagram,
-`{"disarm": n, "mac": HMAC-SHA256(token, "disarm\n" + str(n))}` (any integer n), and disarms at
-once, answering `{"ok": true, "disarmed": true, "n": n}`. It holds no state per sender, so no number
-of TCP connections can block it; a replay can only disarm, which is always safe.
+Reserved path for `disarm` and `status`: the same port number on UDP takes one datagram,
+`{"disarm": n, "mac": HMAC-SHA256(token, "disarm\\n" + str(n))}` (any integer n; "status" likewise),
+served by a thread of its own, and answers `{"ok": true, "n": n, "disarmed": true, "status": {...}}`.
+It holds no state per sender, so no number of TCP connections can block it; a replayed disarm can
+only disarm, which is always safe, and a replayed status only reads.
 
 Commands: status, ping, arm {stance_leg?}, disarm, set {name, value}, trial_start {name?}, trial_stop.
 """
@@ -89,46 +90,67 @@ def check_token(token: str) -> str:
     return token
 
 
+RESERVED_KINDS = ("disarm", "status")
+
+
+def reserved_mac(token: str, kind: str, n: int) -> str:
+    """HMAC-SHA256 (hex) of a reserved-path datagram: `kind` ("disarm" or "status") and number `n`."""
+    return hmac.new(token.encode("utf-8"), f"{kind}\n{n}".encode("ascii"), hashlib.sha256).hexdigest()
+
+
 def disarm_mac(token: str, n: int) -> str:
     """HMAC-SHA256 (hex) of a reserved-path disarm datagram with number `n`."""
-    return hmac.new(token.encode("utf-8"), f"disarm\n{n}".encode("ascii"), hashlib.sha256).hexdigest()
+    return reserved_mac(token, "disarm", n)
+
+
+def parse_reserved_datagram(data: bytes, token: str) -> tuple[str, int]:
+    """Validate a reserved-path datagram; return (kind, number) or raise `Rejected`."""
+    if len(data) > 512 or _max_depth(data) > 1:
+        raise Rejected("reserved datagram: too long or nested")
+    try:
+        obj = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        raise Rejected("reserved datagram: not UTF-8 JSON") from None
+    kinds = [k for k in RESERVED_KINDS if isinstance(obj, dict) and k in obj]
+    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) != {kinds[0], "mac"}:
+        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status")
+    kind = kinds[0]
+    n, mac = obj[kind], obj["mac"]
+    if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
+        raise Rejected(f"reserved datagram: {kind} must be a non-negative integer and mac a string")
+    if not hmac.compare_digest(mac.encode("ascii", "replace"), reserved_mac(token, kind, n).encode("ascii")):
+        raise Rejected("reserved datagram: bad mac")
+    return kind, n
 
 
 def parse_disarm_datagram(data: bytes, token: str) -> int:
     """Validate a reserved-path disarm datagram; return its number or raise `Rejected`."""
-    if len(data) > 512 or _max_depth(data) > 1:
-        raise Rejected("disarm datagram: too long or nested")
-    try:
-        obj = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError):
-        raise Rejected("disarm datagram: not UTF-8 JSON") from None
-    if not isinstance(obj, dict) or set(obj) != {"disarm", "mac"}:
-        raise Rejected("disarm datagram: expected exactly the fields disarm and mac")
-    n, mac = obj["disarm"], obj["mac"]
-    if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
-        raise Rejected("disarm datagram: disarm must be a non-negative integer and mac a string")
-    if not hmac.compare_digest(mac.encode("ascii", "replace"), disarm_mac(token, n).encode("ascii")):
-        raise Rejected("disarm datagram: bad mac")
+    kind, n = parse_reserved_datagram(data, token)
+    if kind != "disarm":
+        raise Rejected("reserved datagram: not a disarm")
     return n
 
 
-class DisarmListener:
-    """The reserved disarm path: a thread of its own on a UDP socket, so neither TCP connections nor a
-    busy event loop can delay it. `on_disarm` runs in this thread (it must be thread-safe)."""
+class ReservedListener:
+    """The reserved path for `disarm` and `status`: a thread of its own on a UDP socket, so neither
+    TCP connections nor a busy event loop can delay it. The callbacks run in this thread (they must
+    be thread-safe); `on_status` returns a small JSON-able dict."""
 
     def __init__(self, sock: socket.socket, token: str, on_disarm: Callable[[], None],
-                 on_rejected: Callable[[str, str], None]) -> None:
+                 on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> None:
         self.sock = sock
         self.token = token
         self.on_disarm = on_disarm
+        self.on_status = on_status
         self.on_rejected = on_rejected
         self.disarms = 0
+        self.statuses = 0
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="rimless-disarm", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="rimless-reserved", daemon=True)
 
     @classmethod
     def bind(cls, host: str, port: int, token: str, on_disarm: Callable[[], None],
-             on_rejected: Callable[[str, str], None]) -> DisarmListener:
+             on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> ReservedListener:
         """Bind the UDP socket (raises OSError) and start the thread."""
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -138,9 +160,15 @@ class DisarmListener:
         except OSError:
             sock.close()
             raise
-        listener = cls(sock, token, on_disarm, on_rejected)
+        listener = cls(sock, token, on_disarm, on_status, on_rejected)
         listener._thread.start()
         return listener
+
+    def _status(self) -> dict[str, Any]:
+        try:
+            return self.on_status()
+        except Exception as err:  # noqa: BLE001 - a racing read must not kill the reserved path
+            return {"error": f"{type(err).__name__}: {err}"}
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -151,19 +179,25 @@ class DisarmListener:
             except OSError:
                 return  # closed
             try:
-                n = parse_disarm_datagram(data, self.token)
+                kind, n = parse_reserved_datagram(data, self.token)
             except Rejected as err:
                 self.on_rejected(str(addr), str(err))
                 continue
             except Exception as err:  # noqa: BLE001 - any datagram gets a log line, never a traceback
-                self.on_rejected(str(addr), f"unreadable disarm datagram ({type(err).__name__})")
+                self.on_rejected(str(addr), f"unreadable reserved datagram ({type(err).__name__})")
                 continue
+            reply: dict[str, Any] = {"ok": True, "n": n}
             try:
-                self.on_disarm()
+                if kind == "disarm":
+                    self.on_disarm()
+                    self.disarms += 1
+                    reply["disarmed"] = True
+                else:
+                    self.statuses += 1
             finally:
-                self.disarms += 1
-                with contextlib.suppress(OSError):
-                    self.sock.sendto(json.dumps({"ok": True, "disarmed": True, "n": n}).encode(), addr)
+                reply["status"] = self._status()
+                with contextlib.suppress(OSError, TypeError, ValueError):
+                    self.sock.sendto(json.dumps(reply, default=str).encode(), addr)
 
     def close(self) -> None:
         """Stop the thread and close the socket."""
@@ -348,6 +382,7 @@ class CommandServer:
         idle_timeout_s: float = 60.0,
         on_valid: Callable[[], None] | None = None,
         on_disarm: Callable[[], None] | None = None,
+        on_status: Callable[[], dict[str, Any]] | None = None,
     ) -> None:
         if not token:
             raise ValueError("the command server needs a non-empty token")
@@ -361,7 +396,8 @@ class CommandServer:
         self.idle_timeout_s = idle_timeout_s
         self.on_valid = on_valid
         self.on_disarm = on_disarm
-        self._udp: DisarmListener | None = None
+        self.on_status = on_status
+        self._udp: ReservedListener | None = None
         self.rejected = 0
         self.accepted = 0
         self.evicted = 0
@@ -387,9 +423,10 @@ class CommandServer:
         port = int(self._server.sockets[0].getsockname()[1])
         if self.on_disarm is not None:
             try:
-                self._udp = DisarmListener.bind(self.host, port, self.token, self.on_disarm, self._rejected)
+                self._udp = ReservedListener.bind(self.host, port, self.token, self.on_disarm,
+                                                  self.on_status or (lambda: {}), self._rejected)
             except OSError as err:
-                log.warning("reserved UDP disarm path unavailable on port %d: %s", port, err)
+                log.warning("reserved UDP path unavailable on port %d: %s", port, err)
         return port
 
     @property
@@ -598,15 +635,15 @@ class RobotLink:
         self.close()
 
 
-def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                         copies: int = 3) -> dict[str, Any]:
-    """PC side: disarm over the reserved UDP path; returns the robot's answer.
+def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
+                           copies: int = 3) -> dict[str, Any]:
+    """PC side: `disarm` or `status` over the reserved UDP path; returns the robot's answer.
 
-    Sends `copies` datagrams (UDP may drop one) and waits up to `timeout_s` for an answer. Raises
-    `RobotUnreachable` when none comes.
+    Sends up to `copies` datagrams (UDP may drop one), waiting `timeout_s / copies` for an answer
+    after each. Raises `RobotUnreachable` when none comes.
     """
     n = secrets.randbits(62)
-    data = json.dumps({"disarm": n, "mac": disarm_mac(token, n)}).encode()
+    data = json.dumps({kind: n, "mac": reserved_mac(token, kind, n)}).encode()
     try:
         info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
     except socket.gaierror as err:
@@ -616,7 +653,7 @@ def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, tim
         for _ in range(copies):
             try:
                 sock.sendto(data, info[4])
-                reply, _ = sock.recvfrom(4096)
+                reply, _ = sock.recvfrom(65536)
             except (TimeoutError, socket.timeout, ConnectionRefusedError):
                 continue
             except OSError as err:
@@ -627,7 +664,13 @@ def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, tim
                 continue
             if isinstance(obj, dict) and obj.get("ok") and obj.get("n") == n:
                 return obj
-    raise RobotUnreachable(f"no answer to the UDP disarm from {host}:{port} within {timeout_s} s")
+    raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
+
+
+def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
+                         copies: int = 3) -> dict[str, Any]:
+    """PC side: disarm over the reserved UDP path (see `send_reserved_datagram`)."""
+    return send_reserved_datagram(host, "disarm", token=token, port=port, timeout_s=timeout_s, copies=copies)
 
 
 def send_command(

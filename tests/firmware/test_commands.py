@@ -317,6 +317,7 @@ def test_reserved_udp_path_disarms_during_a_live_connection_flood(tmp_path) -> N
 
     app, summary, (reply, elapsed, armed_after, bad, flooded), hw = scenario(config(tmp_path), script)
     assert reply["ok"] and reply["disarmed"] and armed_after is False and all_off(hw)
+    assert reply["status"]["engaged"] == [] and isinstance(reply["status"]["faults"], list)
     assert elapsed < 0.1, f"UDP disarm took {elapsed * 1e3:.0f} ms under a flood of {flooded} connections"
     assert bad is None  # a datagram with a wrong mac gets no answer and changes nothing
 
@@ -331,3 +332,33 @@ def _bad_datagram(port: int):
         return None
     finally:
         s.close()
+
+
+def test_reserved_udp_status_answers_and_replays_only_read(tmp_path) -> None:
+    from rimless.firmware.commands import reserved_mac, send_reserved_datagram
+
+    async def script(app, hw):
+        app.controller.arm()
+        st = await asyncio.to_thread(send_reserved_datagram, "127.0.0.1", "status", token=TOKEN,
+                                     port=app.command_port)
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.settimeout(1.0)
+        datagram = json.dumps({"status": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
+        replies = []
+        for _ in range(2):  # a replayed status only reads
+            s.sendto(datagram, ("127.0.0.1", app.command_port))
+            replies.append(json.loads(s.recv(65536)))
+        wrong_kind = json.dumps({"disarm": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
+        s.sendto(wrong_kind, ("127.0.0.1", app.command_port))
+        try:
+            s.recv(65536)
+            answered = True
+        except TimeoutError:
+            answered = False
+        s.close()
+        return st, replies, answered, app.controller.armed
+
+    app, summary, (st, replies, answered, armed), hw = scenario(config(tmp_path), script)
+    assert st["ok"] and st["status"]["armed"] is True and "disarmed" not in st
+    assert all(r["n"] == 7 and r["status"]["armed"] is True for r in replies)
+    assert answered is False and armed is True  # a status mac does not disarm
