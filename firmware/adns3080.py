@@ -181,13 +181,18 @@ class Adns3080:
         self.bus.message([SpiSegment(bytes([(register & _ADDRESS_MASK) | _WRITE_BIT, value & 0xFF]), T_SWW_US)])
 
     # --- power-up and identity ------------------------------------------------------------------
-    def reset_pulse(self) -> None:
-        """NPD high, then the RESET pulse the chip needs after every power-up (DS p.22)."""
-        if self._reset is None:
-            raise SensorError("the ADNS-3080 has no power-on reset: wire RESET to a GPIO and set reset_pin")
+    def wake(self) -> None:
+        """NPD high (if wired), then t_PUPD = 75 ms."""
         if self._npd is not None:
             self._npd(True)
-            self._sleep(T_PUPD_S)  # t_PUPD: up 75 ms after NPD rises
+            self._sleep(T_PUPD_S)
+
+    def reset_pulse(self, *, wake: bool = True) -> None:
+        """NPD high (`wake`), then the RESET pulse the chip needs after every power-up (DS p.22)."""
+        if self._reset is None:
+            raise SensorError("the ADNS-3080 has no power-on reset: wire RESET to a GPIO and set reset_pin")
+        if wake:
+            self.wake()
         self._reset(True)
         self._sleep(max(T_PW_RESET_S, 1e-3))  # t_PW-RESET >= 10 us; 1 ms as [RP]
         self._reset(False)

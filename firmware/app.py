@@ -150,7 +150,8 @@ class RobotApp:
                 server = CommandServer(self._execute, self.token, host=c.bind, port=self._command_port,
                                        max_message_bytes=c.max_message_bytes, max_connections=c.max_connections,
                                        auth_timeout_s=c.auth_timeout_s, idle_timeout_s=c.idle_timeout_s,
-                                       on_valid=self._command_seen)
+                                       on_valid=self._command_seen, on_disarm=self._reserved_disarm,
+                                       on_status=self._reserved_status)
                 self.server = server
                 self.command_port = self.summary.command_port = await server.start()
             self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
@@ -333,6 +334,21 @@ class RobotApp:
         await asyncio.Event().wait()  # the server runs on its own; this task marks its lifetime
 
     # --- commands -------------------------------------------------------------------------------
+    def _reserved_disarm(self) -> None:
+        """A disarm over the reserved UDP path: clutches off at once, then the control thread."""
+        self.armed_remotely = False
+        self.controller.armed = False  # no new engage from here on (a bool store is atomic)
+        with contextlib.suppress(Exception):
+            self.hw.clutches.all_off()
+        if self.sampler is not None and self.sampler.running:
+            self.sampler.submit(lambda c: c.disarm("reserved path"))  # the event, and off once more
+
+    def _reserved_status(self) -> dict[str, Any]:
+        """A small status for the reserved UDP path (read from its thread: copies only)."""
+        ctl = self.controller
+        return {"armed": ctl.armed, "faults": sorted(f.value for f in list(ctl.active_faults)),
+                "engaged": self.hw.clutches.engaged(), "samples": ctl.samples}
+
     def _command_seen(self) -> None:
         self._last_command_s = time.monotonic()
 

@@ -88,8 +88,28 @@ _JSON = Annotated[bool, typer.Option("--json", help="Print JSON (these commands 
 
 @app.command()
 def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
-    """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON."""
-    _remote(host, port, token, "status")
+    """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON.
+
+    When the TCP channel does not answer, the short status of the reserved UDP path is printed
+    instead (armed, faults, engaged clutches), with "via": "udp".
+    """
+    from rimless.cli import print_json, user_facing
+    from rimless.firmware.commands import send_command, send_reserved_datagram
+    from rimless.firmware.errors import RobotUnreachable
+
+    @user_facing
+    def go() -> None:
+        tok = _token(token)
+        try:
+            print_json(send_command(host, "status", token=tok, port=port))
+        except RobotUnreachable as err:
+            try:
+                reply = send_reserved_datagram(host, "status", token=tok, port=port, timeout_s=0.5)
+            except RobotUnreachable:
+                raise err from None
+            print_json({**reply.get("status", {}), "via": "udp", "tcp_error": str(err)})
+
+    _interruptible(go)
 
 
 @app.command()
@@ -121,8 +141,31 @@ def arm(
 
 @app.command()
 def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
-    """Disarm: every clutch off."""
-    _remote(host, port, token, "disarm")
+    """Disarm: every clutch off.
+
+    Sent first over the robot's reserved UDP path (no connection to wait for, so a flood of TCP
+    connections cannot delay it), then confirmed over TCP; prints the robot's state.
+    """
+    from rimless.cli import print_json, user_facing
+    from rimless.firmware.commands import send_command, send_disarm_datagram
+    from rimless.firmware.errors import RobotUnreachable
+
+    @user_facing
+    def go() -> None:
+        tok = _token(token)
+        try:
+            send_disarm_datagram(host, token=tok, port=port, timeout_s=0.5)
+            udp_ok = True
+        except RobotUnreachable:
+            udp_ok = False
+        try:
+            print_json(send_command(host, "disarm", token=tok, port=port))
+        except RobotUnreachable as err:
+            if not udp_ok:
+                raise
+            print_json({"armed": False, "disarmed_via": "udp", "tcp_error": str(err)})
+
+    _interruptible(go)
 
 
 @app.command("set", context_settings={"ignore_unknown_options": True})
@@ -228,8 +271,9 @@ def release(
             print_json({"released_pins": list(cfg.clutch.pins), "level": "high" if not cfg.clutch.active_high else "low",
                         **({"fake_levels": levels} if fake else {})})
         else:
-            typer.echo(f"released: GPIO {', '.join(str(p) for p in cfg.clutch.pins)} driven to the clutch-off level "
-                       f"({'low' if cfg.clutch.active_high else 'high'}), then released to the pull-downs")
+            level = "low" if cfg.clutch.active_high else "high"
+            typer.echo(f"released: GPIO {', '.join(str(p) for p in cfg.clutch.pins)} driven {level} (clutch off), "
+                       "then given back; the module inputs' pull-downs hold them off from here")
 
     _interruptible(go)
 
@@ -502,7 +546,10 @@ def bench(
     @user_facing
     def go() -> None:
         from rimless.errors import ParameterError
+        import logging
+
         from rimless.firmware.bench import bench_rate
+        from rimless.firmware.logsetup import NonBlockingLog
         from rimless.firmware.safety import Interrupted
 
         if not fake:
@@ -516,7 +563,8 @@ def bench(
         results = []
         for r in rates:
             typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True)
-            res = bench_rate(r, duration_s, handle_signals=True)
+            with NonBlockingLog(level=logging.WARNING):
+                res = bench_rate(r, duration_s, handle_signals=True)
             if res["stopped_by"]:
                 import signal
 

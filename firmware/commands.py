@@ -23,6 +23,12 @@ reached, the oldest connection that never authenticated is dropped to make room,
 operator connection (for `disarm` or `status`) always gets in. Rejections are logged at most
 `LOG_LINES_PER_S` times per second.
 
+Reserved path for `disarm` and `status`: the same port number on UDP takes one datagram,
+`{"disarm": n, "mac": HMAC-SHA256(token, "disarm\\n" + str(n))}` (any integer n; "status" likewise),
+served by a thread of its own, and answers `{"ok": true, "n": n, "disarmed": true, "status": {...}}`.
+It holds no state per sender, so no number of TCP connections can block it; a replayed disarm can
+only disarm, which is always safe, and a replayed status only reads.
+
 Commands: status, ping, arm {stance_leg?}, disarm, set {name, value}, trial_start {name?}, trial_stop.
 """
 
@@ -36,6 +42,7 @@ import json
 import logging
 import secrets
 import socket
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -81,6 +88,122 @@ def check_token(token: str) -> str:
     if len(set(token)) < 6:
         raise WeakToken("the command token repeats too few characters to be secret")
     return token
+
+
+RESERVED_KINDS = ("disarm", "status")
+
+
+def reserved_mac(token: str, kind: str, n: int) -> str:
+    """HMAC-SHA256 (hex) of a reserved-path datagram: `kind` ("disarm" or "status") and number `n`."""
+    return hmac.new(token.encode("utf-8"), f"{kind}\n{n}".encode("ascii"), hashlib.sha256).hexdigest()
+
+
+def disarm_mac(token: str, n: int) -> str:
+    """HMAC-SHA256 (hex) of a reserved-path disarm datagram with number `n`."""
+    return reserved_mac(token, "disarm", n)
+
+
+def parse_reserved_datagram(data: bytes, token: str) -> tuple[str, int]:
+    """Validate a reserved-path datagram; return (kind, number) or raise `Rejected`."""
+    if len(data) > 512 or _max_depth(data) > 1:
+        raise Rejected("reserved datagram: too long or nested")
+    try:
+        obj = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        raise Rejected("reserved datagram: not UTF-8 JSON") from None
+    kinds = [k for k in RESERVED_KINDS if isinstance(obj, dict) and k in obj]
+    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) != {kinds[0], "mac"}:
+        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status")
+    kind = kinds[0]
+    n, mac = obj[kind], obj["mac"]
+    if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
+        raise Rejected(f"reserved datagram: {kind} must be a non-negative integer and mac a string")
+    if not hmac.compare_digest(mac.encode("ascii", "replace"), reserved_mac(token, kind, n).encode("ascii")):
+        raise Rejected("reserved datagram: bad mac")
+    return kind, n
+
+
+def parse_disarm_datagram(data: bytes, token: str) -> int:
+    """Validate a reserved-path disarm datagram; return its number or raise `Rejected`."""
+    kind, n = parse_reserved_datagram(data, token)
+    if kind != "disarm":
+        raise Rejected("reserved datagram: not a disarm")
+    return n
+
+
+class ReservedListener:
+    """The reserved path for `disarm` and `status`: a thread of its own on a UDP socket, so neither
+    TCP connections nor a busy event loop can delay it. The callbacks run in this thread (they must
+    be thread-safe); `on_status` returns a small JSON-able dict."""
+
+    def __init__(self, sock: socket.socket, token: str, on_disarm: Callable[[], None],
+                 on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> None:
+        self.sock = sock
+        self.token = token
+        self.on_disarm = on_disarm
+        self.on_status = on_status
+        self.on_rejected = on_rejected
+        self.disarms = 0
+        self.statuses = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="rimless-reserved", daemon=True)
+
+    @classmethod
+    def bind(cls, host: str, port: int, token: str, on_disarm: Callable[[], None],
+             on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> ReservedListener:
+        """Bind the UDP socket (raises OSError) and start the thread."""
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.bind((host, port))
+            sock.settimeout(0.2)
+        except OSError:
+            sock.close()
+            raise
+        listener = cls(sock, token, on_disarm, on_status, on_rejected)
+        listener._thread.start()
+        return listener
+
+    def _status(self) -> dict[str, Any]:
+        try:
+            return self.on_status()
+        except Exception as err:  # noqa: BLE001 - a racing read must not kill the reserved path
+            return {"error": f"{type(err).__name__}: {err}"}
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, addr = self.sock.recvfrom(4096)
+            except (TimeoutError, socket.timeout):
+                continue
+            except OSError:
+                return  # closed
+            try:
+                kind, n = parse_reserved_datagram(data, self.token)
+            except Rejected as err:
+                self.on_rejected(str(addr), str(err))
+                continue
+            except Exception as err:  # noqa: BLE001 - any datagram gets a log line, never a traceback
+                self.on_rejected(str(addr), f"unreadable reserved datagram ({type(err).__name__})")
+                continue
+            reply: dict[str, Any] = {"ok": True, "n": n}
+            try:
+                if kind == "disarm":
+                    self.on_disarm()
+                    self.disarms += 1
+                    reply["disarmed"] = True
+                else:
+                    self.statuses += 1
+            finally:
+                reply["status"] = self._status()
+                with contextlib.suppress(OSError, TypeError, ValueError):
+                    self.sock.sendto(json.dumps(reply, default=str).encode(), addr)
+
+    def close(self) -> None:
+        """Stop the thread and close the socket."""
+        self._stop.set()
+        self._thread.join(1.0)
+        self.sock.close()
 
 
 def command_mac(token: str, nonce: str, seq: int, cmd: str, args: dict[str, Any]) -> str:
@@ -202,9 +325,14 @@ class RateLimitedLog:
         self._last = clock()
         self.suppressed = 0
         self.logged = 0
+        self._lock = threading.Lock()  # the event loop and the disarm thread both log
 
     def warning(self, msg: str, *args: Any) -> None:
         """Log `msg % args` as a warning if the budget allows."""
+        with self._lock:
+            self._warning(msg, *args)
+
+    def _warning(self, msg: str, *args: Any) -> None:
         now = self.clock()
         self._allowance = min(self.per_s, self._allowance + (now - self._last) * self.per_s)
         self._last = now
@@ -253,6 +381,8 @@ class CommandServer:
         auth_timeout_s: float = 5.0,
         idle_timeout_s: float = 60.0,
         on_valid: Callable[[], None] | None = None,
+        on_disarm: Callable[[], None] | None = None,
+        on_status: Callable[[], dict[str, Any]] | None = None,
     ) -> None:
         if not token:
             raise ValueError("the command server needs a non-empty token")
@@ -265,6 +395,9 @@ class CommandServer:
         self.auth_timeout_s = auth_timeout_s
         self.idle_timeout_s = idle_timeout_s
         self.on_valid = on_valid
+        self.on_disarm = on_disarm
+        self.on_status = on_status
+        self._udp: ReservedListener | None = None
         self.rejected = 0
         self.accepted = 0
         self.evicted = 0
@@ -287,10 +420,25 @@ class CommandServer:
         """
         self._server = await asyncio.start_server(self._client, self.host, self.port,
                                                   limit=self.max_message_bytes * 2, backlog=64)
-        return int(self._server.sockets[0].getsockname()[1])
+        port = int(self._server.sockets[0].getsockname()[1])
+        if self.on_disarm is not None:
+            try:
+                self._udp = ReservedListener.bind(self.host, port, self.token, self.on_disarm,
+                                                  self.on_status or (lambda: {}), self._rejected)
+            except OSError as err:
+                log.warning("reserved UDP path unavailable on port %d: %s", port, err)
+        return port
+
+    @property
+    def udp_disarms(self) -> int:
+        """Disarms received over the reserved UDP path."""
+        return 0 if self._udp is None else self._udp.disarms
 
     async def close(self) -> None:
         """Stop listening and drop the connections (quietly: no CancelledError escapes or is logged)."""
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
         if self._server is None:
             return
         self._server.close()
@@ -485,6 +633,44 @@ class RobotLink:
 
     def __exit__(self, *_exc: object) -> None:
         self.close()
+
+
+def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
+                           copies: int = 3) -> dict[str, Any]:
+    """PC side: `disarm` or `status` over the reserved UDP path; returns the robot's answer.
+
+    Sends up to `copies` datagrams (UDP may drop one), waiting `timeout_s / copies` for an answer
+    after each. Raises `RobotUnreachable` when none comes.
+    """
+    n = secrets.randbits(62)
+    data = json.dumps({kind: n, "mac": reserved_mac(token, kind, n)}).encode()
+    try:
+        info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
+    except socket.gaierror as err:
+        raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
+    with socket.socket(info[0], socket.SOCK_DGRAM) as sock:
+        sock.settimeout(timeout_s / copies)
+        for _ in range(copies):
+            try:
+                sock.sendto(data, info[4])
+                reply, _ = sock.recvfrom(65536)
+            except (TimeoutError, socket.timeout, ConnectionRefusedError):
+                continue
+            except OSError as err:
+                raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
+            try:
+                obj = json.loads(reply)
+            except ValueError:
+                continue
+            if isinstance(obj, dict) and obj.get("ok") and obj.get("n") == n:
+                return obj
+    raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
+
+
+def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
+                         copies: int = 3) -> dict[str, Any]:
+    """PC side: disarm over the reserved UDP path (see `send_reserved_datagram`)."""
+    return send_reserved_datagram(host, "disarm", token=token, port=port, timeout_s=timeout_s, copies=copies)
 
 
 def send_command(

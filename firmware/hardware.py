@@ -51,11 +51,14 @@ def _configure(sensor: Adns3080, cfg: SensorConfig) -> None:
 
 
 def _reset_all(sensors: list[Adns3080], cfg: RobotConfig) -> None:
-    """Pulse each RESET line once (sensors may share one), before any sensor is configured."""
+    """Wake every sensor (NPD), then pulse each RESET line once (sensors may share one), before any
+    sensor is configured."""
+    for sensor in sensors:
+        sensor.wake()
     done: set[int] = set()
     for sensor, s in zip(sensors, cfg.sensors, strict=True):
         if s.reset_pin not in done:
-            sensor.reset_pulse()
+            sensor.reset_pulse(wake=False)
             done.add(s.reset_pin)
 
 

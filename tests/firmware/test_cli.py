@@ -272,3 +272,23 @@ def test_usage_errors_are_one_line(args, option) -> None:
     r = invoke(*args)
     assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
     assert r.output.startswith("error: ") and option in r.output
+
+
+def test_disarm_with_no_robot_is_one_line() -> None:
+    r = invoke("disarm", "--host", "127.0.0.1", "--port", str(free_port()), "--token", STRONG)
+    assert r.exit_code == 2 and r.output.count("\n") == 1 and "cannot reach the robot" in r.output, r.output
+
+
+def test_disarm_cli_uses_both_paths(tmp_path) -> None:
+    import asyncio
+
+    from tests.firmware.test_app import TOKEN, config, scenario
+
+    async def script(app, hw):
+        app.controller.arm()
+        r = await asyncio.to_thread(invoke, "disarm", "--host", "127.0.0.1", "--port", str(app.command_port),
+                                    "--token", TOKEN)
+        return r, app.server.udp_disarms
+
+    _app, _s, (r, udp), hw = scenario(config(tmp_path), script)
+    assert r.exit_code == 0 and json.loads(r.stdout)["armed"] is False and udp == 1

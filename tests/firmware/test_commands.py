@@ -271,3 +271,94 @@ def test_robot_link_errors_are_one_line(tmp_path) -> None:
         RobotLink("127.0.0.1", token=TOKEN, port=port, timeout_s=2)
     t.join()
     s.close()
+
+
+def _flood(port: int, stop: threading.Event, counter: list[int]) -> None:
+    """Open connections as fast as possible and hold them (a live flood, not idle sockets)."""
+    held: list[socket.socket] = []
+    try:
+        while not stop.is_set():
+            try:
+                s = socket.create_connection(("127.0.0.1", port), timeout=0.5)
+            except OSError:
+                continue
+            held.append(s)
+            counter[0] += 1
+            if len(held) > 1500:
+                held.pop(0).close()
+    finally:
+        for s in held:
+            s.close()
+
+
+def test_reserved_udp_path_disarms_during_a_live_connection_flood(tmp_path) -> None:
+    from rimless.firmware.commands import send_disarm_datagram
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        assert (await c.cmd("arm", 1))["ok"]
+        stop = threading.Event()
+        counter = [0]
+        flooder = threading.Thread(target=_flood, args=(app.command_port, stop, counter))
+        flooder.start()
+        try:
+            while counter[0] < 300:
+                await asyncio.sleep(0.01)
+            t0 = time.perf_counter()
+            reply = await asyncio.to_thread(send_disarm_datagram, "127.0.0.1", token=TOKEN, port=app.command_port)
+            elapsed = time.perf_counter() - t0
+            armed_after = app.controller.armed
+            bad = await asyncio.to_thread(_bad_datagram, app.command_port)
+        finally:
+            stop.set()
+            await asyncio.to_thread(flooder.join, 30)
+        c.close()
+        return reply, elapsed, armed_after, bad, counter[0]
+
+    app, summary, (reply, elapsed, armed_after, bad, flooded), hw = scenario(config(tmp_path), script)
+    assert reply["ok"] and reply["disarmed"] and armed_after is False and all_off(hw)
+    assert reply["status"]["engaged"] == [] and isinstance(reply["status"]["faults"], list)
+    assert elapsed < 0.1, f"UDP disarm took {elapsed * 1e3:.0f} ms under a flood of {flooded} connections"
+    assert bad is None  # a datagram with a wrong mac gets no answer and changes nothing
+
+
+def _bad_datagram(port: int):
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.settimeout(0.3)
+    s.sendto(json.dumps({"disarm": 1, "mac": "0" * 64}).encode(), ("127.0.0.1", port))
+    try:
+        return s.recv(4096)
+    except TimeoutError:
+        return None
+    finally:
+        s.close()
+
+
+def test_reserved_udp_status_answers_and_replays_only_read(tmp_path) -> None:
+    from rimless.firmware.commands import reserved_mac, send_reserved_datagram
+
+    async def script(app, hw):
+        app.controller.arm()
+        st = await asyncio.to_thread(send_reserved_datagram, "127.0.0.1", "status", token=TOKEN,
+                                     port=app.command_port)
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.settimeout(1.0)
+        datagram = json.dumps({"status": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
+        replies = []
+        for _ in range(2):  # a replayed status only reads
+            s.sendto(datagram, ("127.0.0.1", app.command_port))
+            replies.append(json.loads(s.recv(65536)))
+        wrong_kind = json.dumps({"disarm": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
+        s.sendto(wrong_kind, ("127.0.0.1", app.command_port))
+        try:
+            s.recv(65536)
+            answered = True
+        except TimeoutError:
+            answered = False
+        s.close()
+        return st, replies, answered, app.controller.armed
+
+    app, summary, (st, replies, answered, armed), hw = scenario(config(tmp_path), script)
+    assert st["ok"] and st["status"]["armed"] is True and "disarmed" not in st
+    assert all(r["n"] == 7 and r["status"]["armed"] is True for r in replies)
+    assert answered is False and armed is True  # a status mac does not disarm

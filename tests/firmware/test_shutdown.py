@@ -17,7 +17,7 @@ from rimless.firmware.config import ConfigError, RobotConfig, SensorConfig, Tele
 from rimless.firmware.fake_adns3080 import GaitTrajectory
 from rimless.firmware.logsetup import NonBlockingLog
 from rimless.firmware.telemetry import TelemetrySender
-from tests.firmware.test_app import Client, all_off, config, gait, scenario
+from tests.firmware.test_app import Client, all_off, config, scenario
 
 
 def released(hw) -> bool:
@@ -171,3 +171,20 @@ def test_clutch_pins_off_spi_lines_and_off_boot_pull_ups_without_a_reason() -> N
         config_from_dict({"sensor": {"reset_pin": 17}})
     with pytest.raises(ConfigError, match="cs_pin GPIO5 is also"):
         config_from_dict({"sensor": [{"legs": [0], "cs_pin": 5}, {"legs": [1], "cs_pin": 5}]})
+
+
+def test_sensors_sharing_a_reset_line_each_get_npd_and_one_pulse(tmp_path) -> None:
+    from rimless.firmware.hardware import build_fake
+
+    base = config(tmp_path)
+    sensors = (SensorConfig(spi_device=0, legs=(0, 1, 2, 3), npd_pin=5),
+               SensorConfig(spi_device=1, legs=(4, 5, 6, 7), npd_pin=6))
+    hw = build_fake(dataclasses.replace(base, sensors=sensors))
+    try:
+        assert [f.resets for f in hw.fakes] == [1, 1] and all(f.powered for f in hw.fakes)
+        reset = [s.state for s in hw.pin_factory.pin(25).states]
+        assert reset == [False, True, False]  # one pulse on the shared line
+        assert all(hw.pin_factory.pin(p).state is True for p in (5, 6))
+        assert [s.verify_id() for s in hw.sensors] == [1, 1]
+    finally:
+        hw.close()

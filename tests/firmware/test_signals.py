@@ -162,3 +162,29 @@ def test_ctrl_c_in_bench_exits_130_without_cancelled_error() -> None:
     assert proc.returncode == 130, err
     assert "CancelledError" not in err and "Traceback" not in err
     assert [ln for ln in err.splitlines() if ln.strip()] == ["error: interrupted by SIGINT"]
+
+
+def test_ctrl_c_in_listen_completes_the_recording_and_exits_130(tmp_path) -> None:
+    out = tmp_path / "tel.jsonl"
+    port = free_port()
+    proc = subprocess.Popen([*RIMLESS, "robot", "listen", "--bind", "127.0.0.1", "--port", str(port), "--out",
+                             str(out), "--no-live", "--summary-every-s", "0.2"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        proc.stderr.readline()  # the first summary line: it is listening
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for k in range(5):
+            s.sendto(b'[{"timestamp": %d, "leg": {"stance": 1}}]' % k, ("127.0.0.1", port))
+        s.close()
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert err.rstrip().splitlines()[-1] == "error: interrupted by SIGINT"
+    assert f"wrote {out}" in err and len(out.read_text().splitlines()) == 5
+    assert not list(tmp_path.glob("*.part")) and "Traceback" not in err
