@@ -144,6 +144,7 @@ def detect_steps(
     alpha_rad: float = ALPHA_RAD,
     observed: np.ndarray | None = None,
     window_s: tuple[float, float] | None = None,
+    min_advance_rad: float = 0.0,
 ) -> StepResult:
     """Impacts and step periods of a trial, per observed segment.
 
@@ -155,6 +156,8 @@ def detect_steps(
     alpha_rad : rotation per step, rad (45 deg for the eight-legged wheel).
     observed : (n,) True for frames measured (not gaps, not interpolated); default: finite samples.
     window_s : (t0, t1) s: only impacts inside are sought (the walking window).
+    min_advance_rad : an impact needs the wheel to have turned this much since t0 (a release from rest on two
+        feet is not an impact), rad.
 
     Returns
     -------
@@ -203,7 +206,7 @@ def detect_steps(
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]
         tv, av = t[sel], np.maximum.accumulate(ang[sel])
-        k0 = int(np.ceil((av[0] - phase) / alpha_rad))
+        k0 = int(np.ceil((av[0] + min_advance_rad - phase) / alpha_rad))
         k1 = int(np.floor((av[-1] - phase) / alpha_rad))
         ks = np.arange(k0, k1 + 1)
         targets = phase + alpha_rad * ks

@@ -325,6 +325,12 @@ def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
     """(all frames from first to last, row index of each in the section or -1)."""
     if sec.n_rows and sec.sub_frame.max() > 0:
         raise TrialRefused(f"section {sec.kind!r} (line {sec.line}) has sub frames: not a trajectory")
+    missing = int(sec.frame[-1] - sec.frame[0] + 1 - sec.n_rows) if sec.n_rows else 0
+    if missing > max(sec.n_rows, 10_000):
+        r = int(np.argmax(np.diff(sec.frame))) + 1
+        raise TrialRefused(f"{sec.data_line + r}:1: section {sec.kind!r}: the frame number jumps from "
+                           f"{sec.frame[r - 1]} to {sec.frame[r]}: {missing} frames would be missing (a second take "
+                           "or a wrong frame number?)")
     frames = np.arange(sec.frame[0], sec.frame[-1] + 1)
     row = np.full(frames.size, -1, np.int64)
     row[sec.frame - sec.frame[0]] = np.arange(sec.n_rows)
@@ -403,7 +409,10 @@ def build_trial(
     warnings: list[str] = list(choice.warnings)
     if sec.n_rows < 10:
         raise TrialRefused(f"{vf.path}: section {sec.kind!r} (line {sec.line}) has {sec.n_rows} rows: too short")
-    frames, row = _full_grid(sec)
+    try:
+        frames, row = _full_grid(sec)
+    except TrialRefused as err:
+        raise TrialRefused(f"{vf.path}:{err}" if str(err)[:1].isdigit() else f"{vf.path}: {err}") from None
     rate = sec.rate_hz
     time_s = (frames - frames[0]) / rate
     notes: list[str] = []
@@ -500,7 +509,8 @@ def build_trial(
         reference = f"height above {reference}"
     observed = ~gap & ~filled
     t_rel, t_end = float(time_s[motion.release_index]), float(time_s[motion.end_index])
-    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end))
+    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end),
+                         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0)
 
     # walking window and ending
     if steps.impact_time_s.size:

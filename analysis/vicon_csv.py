@@ -61,6 +61,10 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 RATE_RANGE_HZ = (1.0, 10000.0)
 #: At most this many errors are collected per file (the first, in file order, is the one raised).
 MAX_ERRORS = 20
+#: Largest frame number accepted (a day at 10 kHz is 8.6e8).
+MAX_FRAME = 1e10
+#: Largest coordinate accepted, m (beyond it the number is not a position in a capture volume).
+MAX_COORDINATE_M = 1e7
 
 
 class ViconCsvError(InputFileError):
@@ -408,6 +412,13 @@ class _Parser:
                            f"section {kind!r}: value is infinite")
         # Convert to SI by what the units row says.
         data = _to_si(data, [c.file_unit for c in columns])
+        if kind in _POSE_SECTIONS:
+            big = np.abs(data) > MAX_COORDINATE_M
+            if big.any():
+                r, c = np.argwhere(big)[0]
+                raise self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
+                               f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): not a "
+                               "position in a capture volume")
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
                           columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix,
                           data_line=data_line, units_line=units_line)
@@ -536,7 +547,8 @@ class _Parser:
                 if self.decimal == ",":
                     s = s.replace(",", ".")
                 if not _NUMBER.fullmatch(s):
-                    what = "is not a number (ASCII digits)" if any(ch.isdigit() for ch in s) else "is not a number"
+                    what = ("is not a number (digits must be ASCII 0-9)"
+                            if any(ch.isdigit() and not ch.isascii() for ch in s) else "is not a number")
                     errs.append(self.err(data_line + r, c + 1, "non-numeric",
                                          f"section {kind!r}: cell {cell.strip()[:40]!r} {what}"))
                     continue
@@ -552,16 +564,16 @@ class _Parser:
         if values.shape[0] == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         f = values[:, 0]
-        bad = np.isnan(f) | (f != np.round(f)) | (f < 0)
+        bad = np.isnan(f) | (f != np.round(f)) | (f < 0) | (f > MAX_FRAME)
         if bad.any():
             r = int(np.argmax(bad))
             raise self.err(data_line + r, 1, "bad-frame",
-                           f"section {kind!r}: frame number must be a non-negative integer")
+                           f"section {kind!r}: frame number must be an integer from 0 to {MAX_FRAME:.0e}")
         frame = f.astype(np.int64)
         if first_data == 2:
             s = values[:, 1]
             s = np.where(np.isnan(s), 0.0, s)  # Nexus writes an empty Sub Frame where nothing was computed
-            bad = (s != np.round(s)) | (s < 0)
+            bad = (s != np.round(s)) | (s < 0) | (s > MAX_FRAME)
             if bad.any():
                 r = int(np.argmax(bad))
                 raise self.err(data_line + r, 2, "bad-frame",
