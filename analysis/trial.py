@@ -201,6 +201,7 @@ class Trial:
             "impact_time_s": self.impact_time_s.tolist(),
             "step_period_s": self.step_period_s.tolist(),
             "period_step": self.period_step.tolist(),
+            "impact_step": self.impact_step.tolist(),
             "notes": list(m.notes),
             "source": m.source_reason,
             "ramp_slope_deg": m.ramp_slope_deg,
