@@ -201,12 +201,11 @@ def import_cmd(
         from rich.table import Table
 
         table = Table(title="Vicon import", show_edge=False)
-        for col in ("file", "status", "frames", "Hz", "slope deg", "outcome", "steps"):
+        for col in ("file", "status", "slope°", "outcome", "steps"):
             table.add_column(col, no_wrap=True, justify="left" if col in ("file", "status", "outcome") else "right")
         for r in rows:
             ok = r["status"] == "imported"
             table.add_row(Path(r["file"]).name, "[green]imported[/]" if ok else "[red]refused[/]",
-                          str(r["frames"] or ""), f"{r['rate_hz']:g}" if r["rate_hz"] else "",
                           f"{r['slope_deg']:.3f}" if ok else "", str(r["outcome"] or ""),
                           str(r["steps"] if ok else ""))
         console = Console()
@@ -245,7 +244,8 @@ def show_cmd(
     from rich.console import Console
     from rich.table import Table
 
-    meta = Table(title=shown_path(trial), show_header=False, show_edge=False)
+    typer.echo(shown_path(trial))
+    meta = Table(show_header=False, show_edge=False)
     meta.add_column("key", style="bold", no_wrap=True)
     meta.add_column("value", overflow="fold", max_width=56)
     for k in ("object", "markers", "frames", "rate_hz", "duration_s", "outcome", "window_s", "slope_deg",
@@ -319,18 +319,20 @@ def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: 
         from rich.table import Table
 
         table = Table(title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation", show_edge=False,
-                      caption="RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
-        for col in ("trial", "status", "slope deg", "steps", "RMS mm", "|dT| ms", "θ'+ rad/s"):
-            table.add_column(col, no_wrap=col == "trial", justify="left" if col in ("trial", "status") else "right")
+                      collapse_padding=True, pad_edge=False)
+        for col in ("trial", "status", "slope\ndeg", "steps", "RMS\nmm", "|dT|\nms", "θ'+\nrad/s"):
+            table.add_column(col, no_wrap=True, justify="left" if col in ("trial", "status") else "right")
 
         def f(v: Any, fmt: str) -> str:
             return "" if v is None or (isinstance(v, float) and v != v) else format(v, fmt)
 
         for r in res.metrics():
-            table.add_row(Path(str(r["trial"])).stem, "[green]ok[/]" if r["status"] == "ok" else f"[red]{r['status']}[/]",
+            table.add_row(Path(str(r["trial"])).name.removesuffix(".parquet").removesuffix(".trial")
+                          .removesuffix(".csv").removesuffix(".c3d"), "[green]ok[/]" if r["status"] == "ok" else f"[red]{r['status']}[/]",
                           f(r["slope_deg"], ".3f"), f(r["steps"], "d"), f(r["rms_com_error_mm"], ".2f"),
                           f(r["mean_abs_period_error_ms"], ".1f"), f(r["theta_dot_plus_rad_s"], ".3f"))
         Console().print(table)
+        typer.echo("RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
         for r in res.refused:
             typer.echo(f"refused: {r.reason}", err=True)
         for c in res.comparisons:

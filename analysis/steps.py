@@ -111,6 +111,12 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
         half = max(3, int(0.25 * np.median(np.diff(idx))))
     else:
         half = 5
+    # A minimum beside a gap or the edge of the data (the release from a hold, a catch) is not a cusp seen on
+    # both sides: drop it.
+    nan_before = np.concatenate([[0], np.cumsum(~ok)])
+    lo, hi = np.clip(idx - half, 0, y.size), np.clip(idx + half + 1, 0, y.size)
+    whole = (idx - half >= 0) & (idx + half < y.size) & (nan_before[hi] - nan_before[lo] == 0)
+    idx = idx[whole]
     times = np.array([refine_cusp(time_s, yf, int(i), half)[0] for i in idx])
     return idx.astype(np.int64), times, sigma
 
