@@ -246,6 +246,10 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
         found = [f"{'object ' + str(o) if k == 'object' else (o or '(no subject)') + ': ' + str(len(mk))} "
                  f"(moves {e * 1e3:.0f} mm, turns {np.degrees(tn):.0f} deg)" for k, _, o, mk, e, tn in scored]
         found += [f"{t} markers (too many for a wheel)" for t in too_many]
+        if not found and static_markers:
+            names = ", ".join(m for _, m in static_markers[:6]) + (", ..." if len(static_markers) > 6 else "")
+            raise SourceRefused(f"{vf.path}: nothing moves like the wheel: only static markers ({names}: each moves "
+                                f"less than {STATIC_EXTENT_M * 1e3:.0f} mm); choose with --markers A,B,C,D")
         if not found:
             others = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
             raise SourceRefused(f"{vf.path}: no usable trajectory: no Objects or Trajectories section with a "

@@ -355,9 +355,10 @@ def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarr
     bad = np.flatnonzero(d > JUMP_M + 5.0 * dt)
     if bad.size:
         i = ok[bad[0] + 1]
-        line = sec.data_line + int(row[i])
-        raise TrialRefused(f"{path}:{line}:1: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
-                           "here: a second take pasted after the first? split the file at this line")
+        where = (f"{path}:{sec.data_line + int(row[i])}:1" if sec.data_line
+                 else f"{path}: frame {int(sec.frame[row[i]])}")
+        raise TrialRefused(f"{where}: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
+                           "here: a second take pasted after the first? split the file here")
 
 
 def build_trial(
@@ -647,9 +648,18 @@ def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.nd
     return out
 
 
+def read_recording(path: str | Path) -> ViconFile:
+    """A Vicon export: ``.c3d`` by `rimless.analysis.c3d.read_c3d`, anything else as Vicon CSV."""
+    if str(path).lower().endswith(".c3d"):
+        from .c3d import read_c3d
+
+        return read_c3d(path)
+    return read_vicon_csv(path)
+
+
 def import_trial(path: str | Path, **kwargs: Any) -> Trial:
-    """`read_vicon_csv` then `build_trial` (keyword arguments as there)."""
-    return build_trial(read_vicon_csv(path), **kwargs)
+    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there)."""
+    return build_trial(read_recording(path), **kwargs)
 
 
 def _nan_to_none(obj: Any) -> Any:
