@@ -34,7 +34,7 @@ from rimless.errors import InputFileError, UserError
 
 from .hub import HubEstimate
 from .slope import SlopeFrame, fit_slope
-from .steps import ALPHA_RAD, StepResult, detect_steps, find_com_minima, refine_cusp
+from .steps import ALPHA_RAD, StepResult, detect_steps, find_com_minima, refine_cusps
 from .timeseries import Event, TimeSeries
 from .vicon_csv import Section, ViconFile, read_vicon_csv
 
@@ -263,15 +263,11 @@ def read_trial(path: str | Path) -> Trial:
     extra = json.loads(md[PARQUET_META_KEY])
     meta = TrialMeta.from_json(json.dumps(extra["meta"]))
     c = {name: table.column(name).to_numpy() for name in table.column_names}
-    ts = TimeSeries(
-        c["time_s"],
-        {},
-        tuple(Event(t, "impact") for t in extra["impact_time_s"]),
-    )
-    ts = ts.add_data("frame", c["frame"].astype(np.int64))
+    ts = TimeSeries(c["time_s"]).add_data("frame", c["frame"].astype(np.int64))
     ts = _add_standard(ts, np.column_stack([c["hub_x_m"], c["hub_y_m"], c["hub_z_m"]]),
                        np.column_stack([c["slope_x_m"], c["slope_y_m"], c["slope_z_m"]]), c["com_height_m"],
                        c.get("wheel_angle_rad"), c["gap"].astype(bool), c["interpolated"].astype(bool))
+    ts = replace(ts, events=tuple(Event(float(t), "impact") for t in extra["impact_time_s"]))
     return Trial(ts, meta)
 
 
@@ -455,7 +451,7 @@ def build_trial(
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index:motion.end_index + 1] = True
     if rot is not None and angle is not None:
-        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what)
+        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
     else:
@@ -546,9 +542,9 @@ def build_trial(
     if motion.held:
         notes.append(f"held still for {t_rel:.2f} s before the release")
 
-    ts = TimeSeries(time_s, {}, tuple(Event(t, "impact") for t in steps.impact_time_s))
-    ts = ts.add_data("frame", frames)
+    ts = TimeSeries(time_s).add_data("frame", frames)
     ts = _add_standard(ts, hub, hub_slope, com, angle, gap, filled)
+    ts = replace(ts, events=tuple(Event(t, "impact") for t in steps.impact_time_s.tolist()))  # sorted once
     meta = TrialMeta(
         source_file=str(vf.path),
         section=sec.kind,
@@ -640,8 +636,7 @@ def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.nd
     ok = ~np.isnan(hub).any(axis=1)
     tv, hv = time_s[ok], hub[ok]
     out = np.empty((idx.size, 3))
-    for k, i in enumerate(idx):
-        out[k, 0], out[k, 2] = refine_cusp(time_s, hub[:, 2], int(i), half)
+    out[:, 0], out[:, 2] = refine_cusps(time_s, hub[:, 2], idx, half)
     tc = out[:, 0].copy()
     out[:, 0] = np.interp(tc, tv, hv[:, 0])
     out[:, 1] = np.interp(tc, tv, hv[:, 1])
@@ -673,4 +668,4 @@ def _nan_to_none(obj: Any) -> Any:
 
 
 # Keep names used only in annotations importable for users of this module.
-_ = (HubEstimate, SlopeFrame, replace)
+_ = (HubEstimate, SlopeFrame)

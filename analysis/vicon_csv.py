@@ -458,26 +458,31 @@ class _Parser:
         return frozenset(ends)
 
     def check_cell_counts(self, block: str, data_line: int, width: int, kind: str,
-                          bounds: frozenset[int]) -> None:
-        """A row shorter than the header that does not end at a group boundary lost a cell: error."""
-        raw = np.frombuffer(block.encode("utf-8", "surrogatepass"), np.uint8)
-        nl = np.flatnonzero(raw == 10)
-        if raw.size and raw[-1] != 10:
-            nl = np.append(nl, raw.size)
-        dl = np.flatnonzero(raw == ord(self.delim))
-        per_line = np.bincount(np.searchsorted(nl, dl), minlength=nl.size)[:nl.size] + 1
-        bad = per_line < width
-        if not bad.any():
+                          bounds: frozenset[int], values: np.ndarray) -> None:
+        """A row shorter than the header that does not end at a group boundary lost a cell: error.
+
+        Only rows with a missing value can be short, so only their cells are counted.
+        """
+        if not values.size:
             return
-        rows = np.flatnonzero(bad)
-        ok = np.isin(per_line[rows], np.fromiter(bounds, np.int64))
-        rows = rows[~ok]
+        rows = np.flatnonzero(np.isnan(values[:, -1]))
+        if rows.size == 0:
+            return
+        data = block.encode("utf-8", "surrogatepass")
+        nl = np.flatnonzero(np.frombuffer(data, np.uint8) == 10)
+        starts = np.concatenate([[0], nl + 1])
+        delim = self.delim.encode()
         errs = []
-        for r in rows[:MAX_ERRORS]:
-            errs.append(self.err(data_line + int(r), int(per_line[r]) + 1, "missing-cell",
-                                 f"section {kind!r}: the row has {int(per_line[r])} cells and ends inside a "
-                                 f"marker/object (the header has {width}): a cell is missing, values would be "
-                                 "shifted"))
+        for r in rows:
+            a, b = int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size else len(data)
+            n_cells = data.count(delim, a, b) + 1
+            if n_cells < width and n_cells not in bounds:
+                errs.append(self.err(data_line + int(r), n_cells + 1, "missing-cell",
+                                     f"section {kind!r}: the row has {n_cells} cells and ends inside a "
+                                     f"marker/object (the header has {width}): a cell is missing, values would be "
+                                     "shifted"))
+                if len(errs) >= MAX_ERRORS:
+                    break
         if errs:
             raise self._collect(errs)
 
@@ -504,7 +509,7 @@ class _Parser:
         if values is None:
             values = self.slow_block(block, data_line, width, kind)
         if bounds:
-            self.check_cell_counts(block, data_line, width, kind, bounds)
+            self.check_cell_counts(block, data_line, width, kind, bounds, values)
         return values
 
     def fast_block(self, block: str, width: int) -> np.ndarray | None:
