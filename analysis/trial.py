@@ -294,12 +294,18 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
         return v, filled
     edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    for a, b in zip(starts, stops):
-        if a == 0 or b == v.shape[0] or b - a > max_gap_frames:
-            continue
-        w = (np.arange(a, b) - (a - 1)) / (b - (a - 1))
-        v[a:b] = v[a - 1] + np.multiply.outer(w, v[b] - v[a - 1]) if v.ndim > 1 else v[a - 1] + w * (v[b] - v[a - 1])
-        filled[a:b] = True
+    short = (starts > 0) & (stops < v.shape[0]) & (stops - starts <= max_gap_frames)
+    if not short.any():
+        return v, filled
+    run_id = np.cumsum(edges[:-1] == 1)  # 1-based run number at each row (meaningful where bad)
+    fill = bad & short[np.clip(run_id - 1, 0, starts.size - 1)]
+    rows = np.flatnonzero(fill)
+    good = np.flatnonzero(~bad)
+    # linear interpolation between the valid rows on each side (np.interp picks exactly those two)
+    flat = v.reshape(v.shape[0], -1)
+    for c in range(flat.shape[1]):
+        flat[rows, c] = np.interp(rows, good, flat[good, c])
+    filled[rows] = True
     return v, filled
 
 
