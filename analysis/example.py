@@ -6,10 +6,11 @@ Each trial: the ER wheel with paper Table 1 parameters on a slope of 1.5, 2 or 2
 rigid-touchdown state theta = -alpha/2 with a chosen theta' (rad/s) and simulated for `N_STEPS` steps
 (`rimless.sim.gait.simulate_steps`). The slope-frame hub path (x down the slope, y normal) is rotated into a
 world frame with Z up and the travel direction at a random heading; the wheel turns by theta + alpha * step.
-What Vicon Tracker would export is written: one tracked object ``Wheel`` (helical angles in rad, origin in
-mm) whose origin sits a few cm off the hub in the wheel plane, 100 Hz, Gaussian noise (0.3 mm on the origin,
-1 mrad on the orientation), a few occlusions (empty cells and short rows), CRLF line ends and printf-style
-numbers with 3-digit exponents (``7.2e-006``). The truth (slope, parameters, release state, impact times,
+What Vicon Tracker would export is written: a static object ``Ramp`` and the tracked object ``Wheel`` (helical
+angles in rad, origin in mm) whose origin sits a few cm off the hub in the wheel plane, 100 Hz, Gaussian noise
+(0.3 mm on the origin, 1 mrad on the orientation), the wheel held still before the release and caught and lifted
+at the end, a few occlusions (empty cells, one long gap in one trial), CRLF line ends and printf-style numbers
+with 3-digit exponents (``7.2e-006``). The truth (slope, parameters, release state, impact times,
 hub offset, heading) goes to ``SYNTHETIC_truth.toml``.
 """
 
@@ -30,7 +31,13 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 TRUTH_FILE = "SYNTHETIC_truth.toml"
 SEED = 20260501
 RATE_HZ = 100.0
-N_STEPS = 9  # simulated; the recording stops inside step 9, so 8 impacts (7 periods) are inside the data
+N_STEPS = 9  # simulated; the wheel is caught inside step 9, so 8 impacts (7 periods) are inside the data
+HOLD_S = (0.3, 0.6)  # held still before the release, s (uniform)
+LIFT_M = 0.08  # the catch lifts the wheel this much, m
+CATCH_HOLD_S = 0.8  # recording time after the catch, s
+LONG_GAP_S = 0.45  # one trial has a long occlusion mid-walk, s
+LONG_GAP_TRIAL = 3  # index in TRIALS
+RAMP_TRIAL = 4  # index in TRIALS: this recording also tracks the static Ramp object
 NOISE_M = 0.3e-3
 ANGLE_NOISE_RAD = 1e-3
 ALPHA_RAD = math.pi / 4
@@ -59,6 +66,10 @@ class ExampleTrial:
     heading_deg: float  # travel direction in the world XY plane, deg from +X
     origin_m: np.ndarray  # (3,) world position of the first stance foot, m
     first_frame_time_s: float
+    hold_s: float = 0.0  # held still before the release, s
+    catch_time_s: float = 0.0  # caught (stops turning, then lifted LIFT_M), s from the release
+    long_gap_s: tuple[float, float] | None = None  # a long occlusion mid-walk, s from the release
+    ramp_pose: np.ndarray | None = None  # (n, 6) static Ramp object, helical rad + m
 
 
 def _trial_name(slope_deg: float, index: int) -> str:
@@ -67,8 +78,14 @@ def _trial_name(slope_deg: float, index: int) -> str:
 
 def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.random.Generator, *, name: str = "trial",
                    noise_m: float = NOISE_M, angle_noise_rad: float = ANGLE_NOISE_RAD, occlusions: bool = True,
-                   n_steps: int = N_STEPS) -> ExampleTrial:
-    """Simulate one ER trial from the rigid-touchdown release and sample it as a Tracker object at 100 Hz."""
+                   n_steps: int = N_STEPS, long_gap: bool = False, ramp: bool = False) -> ExampleTrial:
+    """Simulate one ER trial from the rigid-touchdown release and sample it as a Tracker recording at 100 Hz.
+
+    The recording: the wheel held still (`HOLD_S`) at the release pose, the simulated walk, then caught inside
+    step ``n_steps``: it stops turning and is lifted `LIFT_M` along world Z over 0.3 s and held (`CATCH_HOLD_S`).
+    ``long_gap``: a 0.45 s occlusion in the middle of the walk. ``ramp``: a static ``Ramp`` object (z axis
+    along the slope normal) is tracked beside the wheel.
+    """
     from scipy.spatial.transform import Rotation
 
     from rimless.sim.backend import make_integrator
@@ -93,10 +110,14 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
     periods = np.array([s.period_s for s in gait.steps])
     starts = np.array([s.t_start_s for s in gait.steps])
     impacts = starts + periods
-    t_end = starts[-1] + 0.4 * periods[-1]
-    t_first = float(rng.uniform(0.15, 0.25))  # the recording starts inside the first step (after the release)
-    t = np.arange(t_first, t_end, 1.0 / RATE_HZ)
-    x, y, h, b = (np.interp(t, ts, v) for v in (hx, hy, com, beta))
+    t_catch = starts[-1] + 0.4 * periods[-1]
+    hold = float(rng.uniform(*HOLD_S))
+    t_first = -hold  # the recording starts while the wheel is held at the release pose
+    t = np.arange(t_first, t_catch + CATCH_HOLD_S, 1.0 / RATE_HZ)
+    tc = np.clip(t, 0.0, t_catch)  # held before the release, frozen from the catch on
+    x, y, h, b = (np.interp(tc, ts, v) for v in (hx, hy, com, beta))
+    tau = np.clip((t - t_catch) / 0.3, 0.0, 1.0)
+    lift = LIFT_M * tau * tau * (3 - 2 * tau)
 
     phi = math.radians(slope_deg)
     heading = float(rng.uniform(0.0, 360.0))
@@ -107,7 +128,7 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
     nrm = math.sin(phi) * travel + math.cos(phi) * up  # slope normal
     w = np.cross(d, nrm)  # lateral = wheel axis
     origin = np.array([rng.uniform(-1.5, 0.5), rng.uniform(-1.5, 0.5), 0.40 + 1.3 * math.tan(phi)])
-    hub = origin + np.outer(x, d) + np.outer(y, nrm)
+    hub = origin + np.outer(x, d) + np.outer(y, nrm) + np.outer(lift, up)
 
     # Object frame: the wheel-plane frame (d, nrm, w) turned by a fixed angle about the axis, then rolling.
     base = Rotation.from_rotvec(rng.uniform(0, 2 * np.pi) * w) * Rotation.from_matrix(np.column_stack([d, nrm, w]))
@@ -131,9 +152,20 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
                 short[i:i + n] = True
         i = int(np.searchsorted(t, impacts[-2] + 0.15 * periods[-1]))
         pose[i:i + 12] = np.nan
+    gap_s = None
+    if long_gap:
+        t0 = float(impacts[2] + 0.1 * periods[3])
+        gap_s = (t0, t0 + LONG_GAP_S)
+        pose[(t >= gap_s[0]) & (t < gap_s[1])] = np.nan
+    # the static ramp: an object whose z axis is the slope normal, 30 cm beside the path
+    ramp_rot = Rotation.from_matrix(np.column_stack([d, np.cross(nrm, d), nrm]))
+    ramp_pos = origin - 0.3 * w - 0.4 * d
+    ramp_noisy = Rotation.from_rotvec(rng.normal(0.0, angle_noise_rad, (t.size, 3))) * ramp_rot
+    ramp_pose = np.column_stack([ramp_noisy.as_rotvec(), ramp_pos + rng.normal(0.0, noise_m, (t.size, 3))])
     post = np.array([s.y_plus[7] for s in gait.steps])
     return ExampleTrial(name, slope_deg, -ALPHA_RAD / 2, release_theta_dot_rad_s, t, pose, short, h,
-                        impacts, periods, post, -origin_in_body, heading, origin, t_first)
+                        impacts, periods, post, -origin_in_body, heading, origin, t_first, hold, float(t_catch),
+                        gap_s, ramp_pose if ramp else None)
 
 
 _EXP = re.compile(r"e([+-])(\d{1,2})$")
@@ -151,8 +183,8 @@ def write_trial_csv(trial: ExampleTrial, path: Path) -> Path:
     """Write the trial in Tracker CSV layout (via `write_tracker_csv`), then reformat numbers and short rows."""
     from .vicon_csv import write_tracker_csv
 
-    write_tracker_csv(path, rate_hz=RATE_HZ, objects={"Wheel": trial.pose}, length_unit="mm", angle_unit="rad",
-                      newline="\r\n")
+    objects = {"Wheel": trial.pose} if trial.ramp_pose is None else {"Ramp": trial.ramp_pose, "Wheel": trial.pose}
+    write_tracker_csv(path, rate_hz=RATE_HZ, objects=objects, length_unit="mm", angle_unit="rad", newline="\r\n")
     lines = path.read_bytes().decode("utf-8").split("\r\n")
     out = lines[:5]
     for i, line in enumerate(lines[5:]):
@@ -161,7 +193,9 @@ def write_trial_csv(trial: ExampleTrial, path: Path) -> Path:
             continue
         cells = line.split(",")
         if trial.short_rows[i]:
-            out.append(",".join(cells[:2]))
+            # the wheel's cells are written empty (the ramp is still seen); without a ramp, a short row
+            # the wheel's cells are empty; with the ramp (first) still seen, the row ends after it
+            out.append(",".join(cells[:8]) if trial.ramp_pose is not None else ",".join(cells[:2]))
             continue
         out.append(",".join(cells[:2] + [_fmt(float(c)) if c else "" for c in cells[2:]]))
     path.write_bytes("\r\n".join(out).encode("utf-8"))
@@ -209,10 +243,11 @@ def generate(out_dir: str | Path = DATA_DIR, *, seed: int = SEED) -> list[Path]:
     for k, v in WheelParams().to_dict().items():
         if k != "slope_rad":
             toml.append(f"{k} = {_toml_value(v)}")
-    for slope, wdot in TRIALS:
+    for index, (slope, wdot) in enumerate(TRIALS):
         count[slope] = count.get(slope, 0) + 1
         name = _trial_name(slope, count[slope])
-        tr = simulate_trial(slope, wdot, rng, name=name)
+        tr = simulate_trial(slope, wdot, rng, name=name, long_gap=index == LONG_GAP_TRIAL,
+                            ramp=index == RAMP_TRIAL)
         paths.append(write_trial_csv(tr, out / f"{name}.csv"))
         toml += [
             "",
@@ -229,7 +264,14 @@ def generate(out_dir: str | Path = DATA_DIR, *, seed: int = SEED) -> list[Path]:
             f"heading_deg = {_toml_value(tr.heading_deg)}",
             f"first_foot_world_m = {_toml_value(tr.origin_m)}",
             f"occluded_frames = {int(np.isnan(tr.pose[:, 0]).sum())}",
+            f"hold_s = {_toml_value(tr.hold_s)}",
+            f"catch_time_s = {_toml_value(tr.catch_time_s)}",
+            f"lift_m = {LIFT_M!r}",
+            'outcome = "caught"',
+            f"long_gap_s = {_toml_value(list(tr.long_gap_s)) if tr.long_gap_s else '[]'}",
         ]
+        if tr.ramp_pose is not None:
+            toml.append(f"ramp_slope_deg = {slope!r}")
     (out / TRUTH_FILE).write_text("\n".join(toml) + "\n", encoding="utf-8")
     return paths
 

@@ -12,6 +12,9 @@ import numpy as np
 
 __all__ = ["SlopeFrame", "travel_direction", "robust_line", "fit_slope"]
 
+#: Points used by the whole-path slope fit (evenly subsampled beyond).
+MAX_PATH_POINTS = 20_000
+
 
 @dataclass(frozen=True, eq=False)
 class SlopeFrame:
@@ -49,12 +52,15 @@ class SlopeFrame:
 
     def to_slope(self, points_m: np.ndarray) -> np.ndarray:
         """World points (n, 3) -> slope-frame coordinates (n, 3), m, relative to ``origin_m``."""
-        return (np.asarray(points_m) - self.origin_m) @ self.axes().T
+        # einsum, not BLAS: for (n, 3) x (3, 3) it is as fast and does not spin threads on a busy machine
+        return np.einsum("ni,ji->nj", np.asarray(points_m) - self.origin_m, self.axes())
 
 
 def travel_direction(hub_m: np.ndarray) -> np.ndarray:
     """Unit horizontal direction of travel: main axis of the horizontal hub path, signed by the net motion."""
     xy = hub_m[~np.isnan(hub_m).any(axis=1), :2]
+    if xy.shape[0] > MAX_PATH_POINTS:
+        xy = np.concatenate([xy[:: int(np.ceil(xy.shape[0] / MAX_PATH_POINTS))], xy[-1:]])
     if xy.shape[0] < 2:
         raise ValueError("fewer than 2 hub samples: no direction of travel")
     c = xy - xy.mean(axis=0)
@@ -101,7 +107,9 @@ def fit_slope(hub_m: np.ndarray, *, slope_deg: float | None = None, points_m: np
     """
     u = travel_direction(hub_m) if travel is None else travel
     ok = np.flatnonzero(~np.isnan(hub_m).any(axis=1))
-    pts = hub_m[ok] if points_m is None else np.asarray(points_m, dtype=np.float64)
+    # The whole-path fit is a first guess: an even subsample of at most MAX_PATH_POINTS points is enough.
+    pts = (hub_m[ok[:: max(1, int(np.ceil(ok.size / MAX_PATH_POINTS)))]] if points_m is None
+           else np.asarray(points_m, dtype=np.float64))
     if pts.shape[0] < 2:
         raise ValueError("fewer than 2 hub samples: cannot fit the slope")
     p0 = hub_m[ok[0]]

@@ -66,6 +66,9 @@ def zeros_to_nan(values: np.ndarray, width: int) -> np.ndarray:
 
 
 def _extent(p: np.ndarray) -> float:
+    """Largest coordinate range of a path (n, 3), m (an even subsample of at most 100,000 frames)."""
+    if p.shape[0] > 100_000:
+        p = p[:: int(np.ceil(p.shape[0] / 100_000))]
     ok = ~np.isnan(p).any(axis=1)
     if ok.sum() < 2:
         return 0.0
@@ -118,6 +121,33 @@ def _ramp_from_markers(pts: np.ndarray) -> float | None:
     return float(np.degrees(np.arccos(min(abs(n[2]), 1.0))))
 
 
+#: Markers of one set closer together than this, m, mean the numbers are not in the unit the file says.
+MIN_SPAN_M = 0.005
+
+
+def _check_span(vf: ViconFile, sec: Section, subj: str, names: list[str]) -> None:
+    """Refuse, naming the units row, when a marker set is far too small to be on a wheel or a ramp."""
+    if len(names) < 3:
+        return
+    pts = np.stack([zeros_to_nan(sec.get(m, XYZ), 3) for m in names], axis=1)
+    seen = pts[: min(pts.shape[0], 2000)]
+    med = np.full(pts.shape[1:], np.nan)
+    have = ~np.isnan(seen).all(axis=0).any(axis=1)
+    if have.sum() < 3:
+        return
+    med[have] = np.nanmedian(seen[:, have], axis=0)
+    med = med[have]
+    if med.shape[0] < 3:
+        return
+    span = float(np.max(np.ptp(med, axis=0)))
+    if 0 < span < MIN_SPAN_M:
+        unit = sorted({c.file_unit for c in sec.columns if c.group in names})
+        raise SourceRefused(
+            f"{vf.path}:{sec.units_line}:1: the units row says {'/'.join(unit)}, but the markers of "
+            f"{subj or 'the file'} lie within {span * 1e3:.2g} mm of each other (a wheel is about 0.2-0.5 m across):"
+            " the numbers are likely in m; fix the units row")
+
+
 def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None, *, label: str = "--object"
                   ) -> SourceChoice:
     """Pick the wheel among the file's objects and marker sets (see the module doc).
@@ -156,6 +186,7 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
                     static_markers.append((sec, m))
                 else:
                     moving.append(m)
+            _check_span(vf, sec, subj, names)
             if len(moving) > MAX_WHEEL_MARKERS:
                 too_many.append(f"{subj or '(no subject)'}: {len(names)}")
             elif moving:
@@ -218,6 +249,10 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
         found = [f"{'object ' + str(o) if k == 'object' else (o or '(no subject)') + ': ' + str(len(mk))} "
                  f"(moves {e * 1e3:.0f} mm, turns {np.degrees(tn):.0f} deg)" for k, _, o, mk, e, tn in scored]
         found += [f"{t} markers (too many for a wheel)" for t in too_many]
+        if not found and static_markers:
+            names = ", ".join(m for _, m in static_markers[:6]) + (", ..." if len(static_markers) > 6 else "")
+            raise SourceRefused(f"{vf.path}: nothing moves like the wheel: only static markers ({names}: each moves "
+                                f"less than {STATIC_EXTENT_M * 1e3:.0f} mm); choose with --markers A,B,C,D")
         if not found:
             others = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
             raise SourceRefused(f"{vf.path}: no usable trajectory: no Objects or Trajectories section with a "

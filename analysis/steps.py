@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["StepResult", "noise_sigma", "find_com_minima", "refine_cusp", "detect_steps", "ALPHA_RAD"]
+__all__ = ["StepResult", "noise_sigma", "find_com_minima", "refine_cusp", "refine_cusps", "detect_steps",
+           "ALPHA_RAD"]
 
 #: Inter-leg angle of the eight-legged wheel, rad.
 ALPHA_RAD = np.pi / 4
@@ -86,6 +87,63 @@ def refine_cusp(t: np.ndarray, y: np.ndarray, i: int, half: int) -> tuple[float,
     return float(t[i] + tc), float(np.polyval(pl, tc))
 
 
+def refine_cusps(t: np.ndarray, y: np.ndarray, idx: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """`refine_cusp` for many minima at once (same result): (times, values).
+
+    On a uniform time grid every full window shares one Vandermonde matrix, so the parabola fits are one
+    matrix product; windows at the edges, over NaN or on a non-uniform grid go through `refine_cusp`.
+    """
+    idx = np.asarray(idx, np.int64)
+    tc = t[idx].astype(np.float64).copy()
+    yc = y[idx].astype(np.float64).copy()
+    if idx.size == 0:
+        return tc, yc
+    dt = np.diff(t)
+    uniform = dt.size > 0 and np.allclose(dt, dt[0], rtol=1e-9, atol=0.0)
+    full = (idx - half >= 1) & (idx + half <= y.size - 2) & (half >= 3)
+    if uniform and full.any():
+        sel = idx[full]
+        off = np.arange(-half, 1)
+        yl = y[sel[:, None] + off]
+        yr = y[sel[:, None] + np.arange(0, half + 1)]
+        ok = ~(np.isnan(yl).any(axis=1) | np.isnan(yr).any(axis=1))
+        h = float(dt[0])
+        xl, xr = off * h, np.arange(0, half + 1) * h
+        pl = yl @ np.linalg.pinv(np.vander(xl, 3)).T  # (m, 3): a, b, c of a x^2 + b x + c
+        pr = yr @ np.linalg.pinv(np.vander(xr, 3)).T
+        d = pl - pr
+        a, b, c = d[:, 0], d[:, 1], d[:, 2]
+        quad = np.abs(a) > 1e-300
+        disc = b * b - 4 * a * c
+        sq = np.sqrt(np.where(disc >= 0, disc, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r1 = np.where(quad, (-b + sq) / (2 * a), np.where(b != 0, -c / b, np.nan))
+            r2 = np.where(quad, (-b - sq) / (2 * a), np.nan)
+        r1 = np.where(quad & (disc < 0), np.nan, r1)
+        r2 = np.where(quad & (disc < 0), np.nan, r2)
+        lo, hi = -h, h
+        r1 = np.where((r1 >= lo) & (r1 <= hi), r1, np.nan)
+        r2 = np.where((r2 >= lo) & (r2 <= hi), r2, np.nan)
+        both = np.stack([r1, r2], axis=1)
+        pick = np.nanargmin(np.where(np.isnan(both), np.inf, np.abs(both)), axis=1)
+        root = both[np.arange(both.shape[0]), pick]
+        slope_l = 2 * pl[:, 0] * root + pl[:, 1]
+        slope_r = 2 * pr[:, 0] * root + pr[:, 1]
+        good = ok & np.isfinite(root) & ~(slope_l > 0) & ~(slope_r < 0)
+        rows = np.flatnonzero(full)
+        tc[rows[good]] = t[sel[good]] + root[good]
+        yc[rows[good]] = pl[good, 0] * root[good] ** 2 + pl[good, 1] * root[good] + pl[good, 2]
+        done = np.zeros(idx.size, bool)
+        done[rows] = True
+        # windows with NaN go to the scalar version (it falls back to the sample), as do edge windows
+        rest = np.flatnonzero(~done | np.isin(np.arange(idx.size), rows[~ok]))
+    else:
+        rest = np.arange(idx.size)
+    for k in rest:
+        tc[k], yc[k] = refine_cusp(t, y, int(idx[k]), half)
+    return tc, yc
+
+
 def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: float | None = None,
                     ) -> tuple[np.ndarray, np.ndarray, float]:
     """Prominent minima of the CoM height (candidate impacts).
@@ -111,7 +169,13 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
         half = max(3, int(0.25 * np.median(np.diff(idx))))
     else:
         half = 5
-    times = np.array([refine_cusp(time_s, yf, int(i), half)[0] for i in idx])
+    # A minimum beside a gap or the edge of the data (the release from a hold, a catch) is not a cusp seen on
+    # both sides: drop it.
+    nan_before = np.concatenate([[0], np.cumsum(~ok)])
+    lo, hi = np.clip(idx - half, 0, y.size), np.clip(idx + half + 1, 0, y.size)
+    whole = (idx - half >= 0) & (idx + half < y.size) & (nan_before[hi] - nan_before[lo] == 0)
+    idx = idx[whole]
+    times = refine_cusps(np.asarray(time_s, dtype=np.float64), yf, idx, half)[0]
     return idx.astype(np.int64), times, sigma
 
 
@@ -144,6 +208,7 @@ def detect_steps(
     alpha_rad: float = ALPHA_RAD,
     observed: np.ndarray | None = None,
     window_s: tuple[float, float] | None = None,
+    min_advance_rad: float = 0.0,
 ) -> StepResult:
     """Impacts and step periods of a trial, per observed segment.
 
@@ -155,6 +220,8 @@ def detect_steps(
     alpha_rad : rotation per step, rad (45 deg for the eight-legged wheel).
     observed : (n,) True for frames measured (not gaps, not interpolated); default: finite samples.
     window_s : (t0, t1) s: only impacts inside are sought (the walking window).
+    min_advance_rad : an impact needs the wheel to have turned this much since t0 (a release from rest on two
+        feet is not an impact), rad.
 
     Returns
     -------
@@ -203,7 +270,7 @@ def detect_steps(
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]
         tv, av = t[sel], np.maximum.accumulate(ang[sel])
-        k0 = int(np.ceil((av[0] - phase) / alpha_rad))
+        k0 = int(np.ceil((av[0] + min_advance_rad - phase) / alpha_rad))
         k1 = int(np.floor((av[-1] - phase) / alpha_rad))
         ks = np.arange(k0, k1 + 1)
         targets = phase + alpha_rad * ks

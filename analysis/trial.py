@@ -34,7 +34,7 @@ from rimless.errors import InputFileError, UserError
 
 from .hub import HubEstimate
 from .slope import SlopeFrame, fit_slope
-from .steps import ALPHA_RAD, StepResult, detect_steps, find_com_minima, refine_cusp
+from .steps import ALPHA_RAD, StepResult, detect_steps, find_com_minima, refine_cusps
 from .timeseries import Event, TimeSeries
 from .vicon_csv import Section, ViconFile, read_vicon_csv
 
@@ -201,6 +201,7 @@ class Trial:
             "impact_time_s": self.impact_time_s.tolist(),
             "step_period_s": self.step_period_s.tolist(),
             "period_step": self.period_step.tolist(),
+            "impact_step": self.impact_step.tolist(),
             "notes": list(m.notes),
             "source": m.source_reason,
             "ramp_slope_deg": m.ramp_slope_deg,
@@ -262,15 +263,11 @@ def read_trial(path: str | Path) -> Trial:
     extra = json.loads(md[PARQUET_META_KEY])
     meta = TrialMeta.from_json(json.dumps(extra["meta"]))
     c = {name: table.column(name).to_numpy() for name in table.column_names}
-    ts = TimeSeries(
-        c["time_s"],
-        {},
-        tuple(Event(t, "impact") for t in extra["impact_time_s"]),
-    )
-    ts = ts.add_data("frame", c["frame"].astype(np.int64))
+    ts = TimeSeries(c["time_s"]).add_data("frame", c["frame"].astype(np.int64))
     ts = _add_standard(ts, np.column_stack([c["hub_x_m"], c["hub_y_m"], c["hub_z_m"]]),
                        np.column_stack([c["slope_x_m"], c["slope_y_m"], c["slope_z_m"]]), c["com_height_m"],
                        c.get("wheel_angle_rad"), c["gap"].astype(bool), c["interpolated"].astype(bool))
+    ts = replace(ts, events=tuple(Event(float(t), "impact") for t in extra["impact_time_s"]))
     return Trial(ts, meta)
 
 
@@ -297,12 +294,18 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
         return v, filled
     edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    for a, b in zip(starts, stops):
-        if a == 0 or b == v.shape[0] or b - a > max_gap_frames:
-            continue
-        w = (np.arange(a, b) - (a - 1)) / (b - (a - 1))
-        v[a:b] = v[a - 1] + np.multiply.outer(w, v[b] - v[a - 1]) if v.ndim > 1 else v[a - 1] + w * (v[b] - v[a - 1])
-        filled[a:b] = True
+    short = (starts > 0) & (stops < v.shape[0]) & (stops - starts <= max_gap_frames)
+    if not short.any():
+        return v, filled
+    run_id = np.cumsum(edges[:-1] == 1)  # 1-based run number at each row (meaningful where bad)
+    fill = bad & short[np.clip(run_id - 1, 0, starts.size - 1)]
+    rows = np.flatnonzero(fill)
+    good = np.flatnonzero(~bad)
+    # linear interpolation between the valid rows on each side (np.interp picks exactly those two)
+    flat = v.reshape(v.shape[0], -1)
+    for c in range(flat.shape[1]):
+        flat[rows, c] = np.interp(rows, good, flat[good, c])
+    filled[rows] = True
     return v, filled
 
 
@@ -325,6 +328,12 @@ def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
     """(all frames from first to last, row index of each in the section or -1)."""
     if sec.n_rows and sec.sub_frame.max() > 0:
         raise TrialRefused(f"section {sec.kind!r} (line {sec.line}) has sub frames: not a trajectory")
+    missing = int(sec.frame[-1] - sec.frame[0] + 1 - sec.n_rows) if sec.n_rows else 0
+    if missing > max(sec.n_rows, 10_000):
+        r = int(np.argmax(np.diff(sec.frame))) + 1
+        raise TrialRefused(f"{sec.data_line + r}:1: section {sec.kind!r}: the frame number jumps from "
+                           f"{sec.frame[r - 1]} to {sec.frame[r]}: {missing} frames would be missing (a second take "
+                           "or a wrong frame number?)")
     frames = np.arange(sec.frame[0], sec.frame[-1] + 1)
     row = np.full(frames.size, -1, np.int64)
     row[sec.frame - sec.frame[0]] = np.arange(sec.n_rows)
@@ -348,9 +357,10 @@ def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarr
     bad = np.flatnonzero(d > JUMP_M + 5.0 * dt)
     if bad.size:
         i = ok[bad[0] + 1]
-        line = sec.data_line + int(row[i])
-        raise TrialRefused(f"{path}:{line}:1: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
-                           "here: a second take pasted after the first? split the file at this line")
+        where = (f"{path}:{sec.data_line + int(row[i])}:1" if sec.data_line
+                 else f"{path}: frame {int(sec.frame[row[i]])}")
+        raise TrialRefused(f"{where}: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
+                           "here: a second take pasted after the first? split the file here")
 
 
 def build_trial(
@@ -403,7 +413,10 @@ def build_trial(
     warnings: list[str] = list(choice.warnings)
     if sec.n_rows < 10:
         raise TrialRefused(f"{vf.path}: section {sec.kind!r} (line {sec.line}) has {sec.n_rows} rows: too short")
-    frames, row = _full_grid(sec)
+    try:
+        frames, row = _full_grid(sec)
+    except TrialRefused as err:
+        raise TrialRefused(f"{vf.path}:{err}" if str(err)[:1].isdigit() else f"{vf.path}: {err}") from None
     rate = sec.rate_hz
     time_s = (frames - frames[0]) / rate
     notes: list[str] = []
@@ -444,7 +457,7 @@ def build_trial(
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index:motion.end_index + 1] = True
     if rot is not None and angle is not None:
-        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what)
+        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
     else:
@@ -500,7 +513,8 @@ def build_trial(
         reference = f"height above {reference}"
     observed = ~gap & ~filled
     t_rel, t_end = float(time_s[motion.release_index]), float(time_s[motion.end_index])
-    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end))
+    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end),
+                         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0)
 
     # walking window and ending
     if steps.impact_time_s.size:
@@ -534,9 +548,9 @@ def build_trial(
     if motion.held:
         notes.append(f"held still for {t_rel:.2f} s before the release")
 
-    ts = TimeSeries(time_s, {}, tuple(Event(t, "impact") for t in steps.impact_time_s))
-    ts = ts.add_data("frame", frames)
+    ts = TimeSeries(time_s).add_data("frame", frames)
     ts = _add_standard(ts, hub, hub_slope, com, angle, gap, filled)
+    ts = replace(ts, events=tuple(Event(t, "impact") for t in steps.impact_time_s.tolist()))  # sorted once
     meta = TrialMeta(
         source_file=str(vf.path),
         section=sec.kind,
@@ -628,17 +642,25 @@ def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.nd
     ok = ~np.isnan(hub).any(axis=1)
     tv, hv = time_s[ok], hub[ok]
     out = np.empty((idx.size, 3))
-    for k, i in enumerate(idx):
-        out[k, 0], out[k, 2] = refine_cusp(time_s, hub[:, 2], int(i), half)
+    out[:, 0], out[:, 2] = refine_cusps(time_s, hub[:, 2], idx, half)
     tc = out[:, 0].copy()
     out[:, 0] = np.interp(tc, tv, hv[:, 0])
     out[:, 1] = np.interp(tc, tv, hv[:, 1])
     return out
 
 
+def read_recording(path: str | Path) -> ViconFile:
+    """A Vicon export: ``.c3d`` by `rimless.analysis.c3d.read_c3d`, anything else as Vicon CSV."""
+    if str(path).lower().endswith(".c3d"):
+        from .c3d import read_c3d
+
+        return read_c3d(path)
+    return read_vicon_csv(path)
+
+
 def import_trial(path: str | Path, **kwargs: Any) -> Trial:
-    """`read_vicon_csv` then `build_trial` (keyword arguments as there)."""
-    return build_trial(read_vicon_csv(path), **kwargs)
+    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there)."""
+    return build_trial(read_recording(path), **kwargs)
 
 
 def _nan_to_none(obj: Any) -> Any:
@@ -652,4 +674,4 @@ def _nan_to_none(obj: Any) -> Any:
 
 
 # Keep names used only in annotations importable for users of this module.
-_ = (HubEstimate, SlopeFrame, replace)
+_ = (HubEstimate, SlopeFrame)

@@ -61,6 +61,10 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 RATE_RANGE_HZ = (1.0, 10000.0)
 #: At most this many errors are collected per file (the first, in file order, is the one raised).
 MAX_ERRORS = 20
+#: Largest frame number accepted (a day at 10 kHz is 8.6e8).
+MAX_FRAME = 1e10
+#: Largest coordinate accepted, m (beyond it the number is not a position in a capture volume).
+MAX_COORDINATE_M = 1e7
 
 
 class ViconCsvError(InputFileError):
@@ -247,7 +251,7 @@ def parse_vicon_text(text: str, name: str = "<text>", *, encoding: str = "utf-8"
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
         raise ViconCsvError(name, line, None, "binary", "the file holds NUL bytes: it is not a CSV text file")
-    if not text.strip(" \t\n,;"):
+    if not re.search(r"[^ \t\n,;]", text):  # no copy of a large file, unlike strip()
         raise ViconCsvError(name, None, None, "empty", "the file holds no content")
     parser = _Parser(text, name)
     sections = parser.parse()
@@ -408,6 +412,13 @@ class _Parser:
                            f"section {kind!r}: value is infinite")
         # Convert to SI by what the units row says.
         data = _to_si(data, [c.file_unit for c in columns])
+        if kind in _POSE_SECTIONS:
+            big = np.abs(data) > MAX_COORDINATE_M
+            if big.any():
+                r, c = np.argwhere(big)[0]
+                raise self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
+                               f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): not a "
+                               "position in a capture volume")
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
                           columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix,
                           data_line=data_line, units_line=units_line)
@@ -447,26 +458,31 @@ class _Parser:
         return frozenset(ends)
 
     def check_cell_counts(self, block: str, data_line: int, width: int, kind: str,
-                          bounds: frozenset[int]) -> None:
-        """A row shorter than the header that does not end at a group boundary lost a cell: error."""
-        raw = np.frombuffer(block.encode("utf-8", "surrogatepass"), np.uint8)
-        nl = np.flatnonzero(raw == 10)
-        if raw.size and raw[-1] != 10:
-            nl = np.append(nl, raw.size)
-        dl = np.flatnonzero(raw == ord(self.delim))
-        per_line = np.bincount(np.searchsorted(nl, dl), minlength=nl.size)[:nl.size] + 1
-        bad = per_line < width
-        if not bad.any():
+                          bounds: frozenset[int], values: np.ndarray) -> None:
+        """A row shorter than the header that does not end at a group boundary lost a cell: error.
+
+        Only rows with a missing value can be short, so only their cells are counted.
+        """
+        if not values.size:
             return
-        rows = np.flatnonzero(bad)
-        ok = np.isin(per_line[rows], np.fromiter(bounds, np.int64))
-        rows = rows[~ok]
+        rows = np.flatnonzero(np.isnan(values[:, -1]))
+        if rows.size == 0:
+            return
+        data = block.encode("utf-8", "surrogatepass")
+        nl = np.flatnonzero(np.frombuffer(data, np.uint8) == 10)
+        starts = np.concatenate([[0], nl + 1])
+        delim = self.delim.encode()
         errs = []
-        for r in rows[:MAX_ERRORS]:
-            errs.append(self.err(data_line + int(r), int(per_line[r]) + 1, "missing-cell",
-                                 f"section {kind!r}: the row has {int(per_line[r])} cells and ends inside a "
-                                 f"marker/object (the header has {width}): a cell is missing, values would be "
-                                 "shifted"))
+        for r in rows:
+            a, b = int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size else len(data)
+            n_cells = data.count(delim, a, b) + 1
+            if n_cells < width and n_cells not in bounds:
+                errs.append(self.err(data_line + int(r), n_cells + 1, "missing-cell",
+                                     f"section {kind!r}: the row has {n_cells} cells and ends inside a "
+                                     f"marker/object (the header has {width}): a cell is missing, values would be "
+                                     "shifted"))
+                if len(errs) >= MAX_ERRORS:
+                    break
         if errs:
             raise self._collect(errs)
 
@@ -493,7 +509,7 @@ class _Parser:
         if values is None:
             values = self.slow_block(block, data_line, width, kind)
         if bounds:
-            self.check_cell_counts(block, data_line, width, kind, bounds)
+            self.check_cell_counts(block, data_line, width, kind, bounds, values)
         return values
 
     def fast_block(self, block: str, width: int) -> np.ndarray | None:
@@ -504,8 +520,9 @@ class _Parser:
             with warnings.catch_warnings():
                 # A row wider than the header makes pandas drop cells with a warning: take the slow path.
                 warnings.simplefilter("error", pd.errors.ParserWarning)
-                df = pd.read_csv(io.StringIO(block), sep=self.delim, header=None, names=range(width),
-                                 dtype=np.float64, na_values=[""], keep_default_na=False, decimal=self.decimal,
+                # bytes, not a StringIO: pandas' C reader tokenises bytes directly (about 1.6x faster)
+                df = pd.read_csv(io.BytesIO(block.encode("utf-8", "surrogatepass")), sep=self.delim, header=None,
+                                 names=range(width), dtype=np.float64, na_values=[""], keep_default_na=False, decimal=self.decimal,
                                  engine="c", skip_blank_lines=False, index_col=False)
         except (ValueError, pd.errors.ParserError, pd.errors.ParserWarning):
             return None
@@ -536,7 +553,8 @@ class _Parser:
                 if self.decimal == ",":
                     s = s.replace(",", ".")
                 if not _NUMBER.fullmatch(s):
-                    what = "is not a number (ASCII digits)" if any(ch.isdigit() for ch in s) else "is not a number"
+                    what = ("is not a number (digits must be ASCII 0-9)"
+                            if any(ch.isdigit() and not ch.isascii() for ch in s) else "is not a number")
                     errs.append(self.err(data_line + r, c + 1, "non-numeric",
                                          f"section {kind!r}: cell {cell.strip()[:40]!r} {what}"))
                     continue
@@ -552,16 +570,16 @@ class _Parser:
         if values.shape[0] == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         f = values[:, 0]
-        bad = np.isnan(f) | (f != np.round(f)) | (f < 0)
+        bad = np.isnan(f) | (f != np.round(f)) | (f < 0) | (f > MAX_FRAME)
         if bad.any():
             r = int(np.argmax(bad))
             raise self.err(data_line + r, 1, "bad-frame",
-                           f"section {kind!r}: frame number must be a non-negative integer")
+                           f"section {kind!r}: frame number must be an integer from 0 to {MAX_FRAME:.0e}")
         frame = f.astype(np.int64)
         if first_data == 2:
             s = values[:, 1]
             s = np.where(np.isnan(s), 0.0, s)  # Nexus writes an empty Sub Frame where nothing was computed
-            bad = (s != np.round(s)) | (s < 0)
+            bad = (s != np.round(s)) | (s < 0) | (s > MAX_FRAME)
             if bad.any():
                 r = int(np.argmax(bad))
                 raise self.err(data_line + r, 2, "bad-frame",

@@ -16,6 +16,9 @@ from rimless.analysis.vicon_csv import write_tracker_csv
 
 PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
 runner = CliRunner()
+#: The keys of `trials import --json` (issue contract: the old six plus the walk's).
+CONTRACT = {"file", "status", "reason", "frames", "rate_hz", "steps", "source", "slope_deg", "ramp_slope_deg",
+            "outcome", "window_s", "impact_times_s", "step_periods_s", "hub_offset_mm", "warnings", "errors"}
 
 
 @pytest.fixture()
@@ -34,8 +37,10 @@ def test_import_json_mixed_good_and_bad(tmp_path, wheel_csv):
     res = runner.invoke(app, ["import", str(bad), str(good), "--slope-deg", "2", "--out", str(out), "--json"])
     assert res.exit_code != 0  # one was refused
     rows = json.loads(res.stdout)
-    assert [set(r) for r in rows] == [{"file", "status", "reason", "frames", "rate_hz", "steps"}] * 2
+    assert [set(r) for r in rows] == [CONTRACT] * 2
     assert rows[0]["status"] == "refused" and "line 6, column 5" in rows[0]["reason"]
+    assert rows[0]["errors"] == [f"{rows[0]['file']}:6:5: section 'Trajectories': cell 'x' is not a number "
+                                 "[non-numeric]"]
     assert rows[1]["status"] == "imported" and rows[1]["reason"] is None
     assert rows[1]["frames"] == len(w.time_s) and rows[1]["rate_hz"] == 100.0
     assert len(w.impact_time_s) - 3 <= rows[1]["steps"] <= len(w.impact_time_s) - 1
@@ -85,3 +90,45 @@ def test_public_files_through_cli(tmp_path):
     for name in ("nexus_devices_pyomeca_analogs.csv", "nexus_trajectories_pyomeca.csv",
                  "nexus_multisection_wpi_walk.csv"):
         assert rows[name]["status"] == "refused" and rows[name]["reason"]
+
+
+def test_import_json_reports_the_walk(tmp_path, wheel_csv):
+    w, good = wheel_csv
+    res = runner.invoke(app, ["import", str(good), "--out", str(tmp_path), "--json"])
+    assert res.exit_code == 0, res.output
+    (row,) = json.loads(res.stdout)
+    assert row["status"] == "imported" and row["errors"] == []
+    assert row["source"]["markers"] == [f"wheel:M{i}" for i in range(4)] and row["source"]["why"]
+    assert abs(row["slope_deg"] - w.slope_deg) < 0.05 and row["ramp_slope_deg"] is None
+    assert row["outcome"] == "walked"
+    assert len(row["step_periods_s"]) == row["steps"] == len(row["impact_times_s"]) - 1
+    assert row["window_s"][1] == row["impact_times_s"][-1]
+    assert len(row["hub_offset_mm"]) == 3
+
+
+@pytest.mark.parametrize("command", ["import", "report"])
+def test_object_option_named_in_messages_on_import_and_report(tmp_path, wheel_csv, command):
+    _, good = wheel_csv
+    args = [command, str(good), "--object", "Nope", "--out", str(tmp_path / "o")]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2
+    assert "--object Nope" in res.output and "object=" not in res.output
+    res = runner.invoke(app, [command, str(good), "--hub-offset-mm", "1,x,3", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "error: --hub-offset-mm" in res.output
+    res = runner.invoke(app, [command, str(good), "--markers", "wheel:M0,,", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "error: --markers" in res.output
+
+
+def test_report_exits_nonzero_when_no_trial_can_be_compared(tmp_path):
+    # a wheel that turns less than two steps: imported, but no steps to compare
+    w = rolling_wheel(seed=3, periods_s=(0.4, 0.4))
+    p = write_tracker_csv(tmp_path / "short.csv", rate_hz=w.rate_hz,
+                          markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)})
+    res = runner.invoke(app, ["report", str(p), "--out", str(tmp_path / "rep")])
+    assert res.exit_code == 1
+    assert "no trial could be compared" in res.output
+
+
+def test_show_on_a_folder_is_a_user_error(tmp_path):
+    res = runner.invoke(app, ["show", str(tmp_path)])
+    assert res.exit_code == 2 and "is a folder" in res.output

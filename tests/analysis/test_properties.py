@@ -67,3 +67,86 @@ def test_round_trip_in_metres_is_exact(tmp_path, data, delimiter, newline, first
     sec = parse_vicon_bytes(p.read_bytes(), "p.csv").section("Trajectories")
     np.testing.assert_array_equal(sec.values, data)
     assert sec.frame[0] == first_frame and sec.frame.size == data.shape[0]
+
+
+# ------------------------------------------------------------------ whole import (header rows and data block)
+
+def _wheel_lines():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import truth_wheel as tw
+
+    truth = tw.make_truth(periods_s=(0.42, 0.40, 0.39), hold_s=0.2, ending="caught", after_s=0.3)
+    pts = tw.noisy(tw.body_points(truth, tw.EVEN_MARKERS), 0.3e-3, 1)
+    return tw.markers_section({f"w:M{i}": pts[:, i] for i in range(4)})
+
+
+WHEEL_LINES = _wheel_lines()
+
+
+def _warm_up() -> None:
+    """Import once so that module imports (scipy, pandas) do not count against the time limit below."""
+    import tempfile
+    from pathlib import Path
+
+    from rimless.analysis.trial import import_trial
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "w.csv"
+        p.write_text("\n".join(WHEEL_LINES) + "\n")
+        import_trial(p)
+
+
+_warm_up()
+HEADER_TOKENS = st.one_of(
+    st.sampled_from(["100", "5e-154", "1e308", "5e-324", "0", "-1", "nan", "inf", "1e999", "12,5", "١٠٠", "",
+                     "mm", "m", "cm", "rad", "deg", "V", "X", "Y", "Z", "Frame", "Sub Frame", "w:M0", "2 1937",
+                     "*3", "Ramp:R1", ",", ",,", "\t"]),
+    st.text(max_size=8))
+
+
+def import_ok_or_refused(text: str, tmp_path) -> None:
+    import time
+
+    from rimless.analysis.trial import import_trial
+    from rimless.errors import UserError
+
+    p = tmp_path / "fuzz.csv"
+    p.write_text(text, encoding="utf-8", errors="surrogatepass")
+    t0 = time.perf_counter()
+    try:
+        trial = import_trial(p)
+    except UserError as e:
+        assert str(e)
+    else:
+        assert np.isfinite(trial.meta.slope_deg) or trial.meta.slope_deg != trial.meta.slope_deg
+        assert np.all(np.isfinite(trial.step_period_s)) and np.all(trial.step_period_s > 0)
+        assert trial.meta.outcome in ("walked", "stalled", "fell", "caught", "unknown")
+    assert time.perf_counter() - t0 < 3.0  # no hang (a normal import of this file takes ~0.1 s)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                                 HealthCheck.too_slow])
+@given(st.integers(1, 4), st.lists(HEADER_TOKENS, min_size=1, max_size=6))
+def test_fuzzed_header_rows_never_crash_or_hang(tmp_path, row, cells):
+    lines = list(WHEEL_LINES)
+    lines[row] = ",".join(cells) if row != 1 else cells[0]
+    import_ok_or_refused("\n".join(lines) + "\n", tmp_path)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                                 HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.integers(5, len(WHEEL_LINES) - 1), st.integers(0, 13),
+                          st.one_of(st.sampled_from(["", "0", "nan", "inf", "1e308", "-1e308", "x", "٣", "0,0"]),
+                                    st.floats(allow_nan=False, allow_infinity=False).map(repr))),
+                min_size=1, max_size=30))
+def test_fuzzed_data_block_never_crashes_or_hangs(tmp_path, edits):
+    lines = list(WHEEL_LINES)
+    for r, c, v in edits:
+        cells = lines[r].split(",")
+        if c < len(cells):
+            cells[c] = v
+        lines[r] = ",".join(cells)
+    import_ok_or_refused("\n".join(lines) + "\n", tmp_path)
