@@ -282,3 +282,8 @@ def demo_cmd(
 def register_top_level(root_app: typer.Typer) -> None:
     """Add the top-level ``rimless demo`` command to the root app."""
     root_app.command("demo")(user_facing(demo_cmd))
+
+
+from .cli_critical import register as _register_critical  # noqa: E402  (critical-slope, calibrate)
+
+_register_critical(app)
