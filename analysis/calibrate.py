@@ -10,8 +10,8 @@ the first measured impact (as in `rimless.analysis.compare`). Residuals, per tri
   and its time shift (the lag of the CoM-height minima behind the touchdown, taken from the Table 1
   comparison and kept fixed), divided by sigma_h.
 
-sigma_T and sigma_h are the RMS residuals of each block at the previous solution (so each block has a reduced
-chi^2 of 1 and neither swamps the other); the fit is run twice. Uncertainties are from the Jacobian
+sigma_T and sigma_h are the RMS residuals of each block at the start and, for the uncertainties, at the
+solution (so each block has a reduced chi^2 of 1 and neither swamps the other). Uncertainties are from the Jacobian
 (cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters.
 A parameter is **not identifiable** when its relative standard error exceeds `NOT_IDENTIFIABLE_REL_SE` or the
 Jacobian has a (near) null direction involving it (flat cost); it is then reported as such, not as a value.
@@ -40,6 +40,7 @@ NOT_IDENTIFIABLE_REL_SE = 0.5
 NULL_SINGULAR_RATIO = 1e-6
 ALPHA_RAD = math.pi / 4
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
+MAX_NFEV = 20  # residual evaluations of the full least squares
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
 
 
@@ -74,6 +75,9 @@ def _trial_data(trial: Any, name: str) -> _TrialData | str:
     chains = consecutive_periods(trial)
     if not chains or chains[0].size < 2:
         return f"{name}: fewer than two consecutive step periods"
+    slope = float(trial.meta.slope_deg)
+    if not 0.0 <= slope < math.degrees(ALPHA_RAD / 2):
+        return f"{name}: its slope {slope:.3f} deg cannot be simulated (0 <= slope < 22.5 deg)"
     periods = chains[0]
     imp = np.asarray(trial.impact_time_s, float)
     t = np.asarray(trial.time_s, float) - imp[0]
@@ -310,12 +314,31 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     def fit_release(p: Any, d: _TrialData, w0: float | None) -> tuple[float, float]:
         """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then Brent-like LS."""
         if w0 is None or not math.isfinite(w0):
-            grid = np.linspace(0.5, 6.0, 23)
-            costs = [float(np.sum(freq_res(p, d, w) ** 2)) for w in grid]
-            w0 = float(grid[int(np.argmin(costs))])
+            w0 = first_period_release(p, d)
         r = least_squares(lambda q: freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
                           diff_step=[1e-5], xtol=1e-10, ftol=1e-12, max_nfev=30)
         return float(r.x[0]), float(2 * r.cost)
+
+    def first_period_release(p: Any, d: _TrialData) -> float:
+        """The release whose first simulated step after the release step lasts the first measured period
+        (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
+        grid = np.linspace(0.4, 6.0, 29)
+        f1 = np.array([sim.frequencies(p, d.slope_deg, w, 1)[0] for w in grid])
+        tick()
+        target = 1.0 / d.periods_s[0]
+        diff = f1 - target
+        for i in range(grid.size - 1):
+            if f1[i] > 0 and diff[i] <= 0 < diff[i + 1]:
+                a, b = grid[i], grid[i + 1]
+                for _ in range(40):
+                    m = 0.5 * (a + b)
+                    if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0:
+                        a = m
+                    else:
+                        b = m
+                return 0.5 * (a + b)
+        costs = [float(np.sum(freq_res(p, d, w) ** 2)) for w in grid]
+        return float(grid[int(np.argmin(costs))])
 
     # stage 1: Table 1, then the coarse profile of each global, on the periods alone
     p0 = params_of(x_global0)
@@ -335,7 +358,7 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
             p = params_of(x_global0 + ug * gscale)
             if p is None:
                 continue
-            fits = [fit_release(p, d, d.release_rad_s) for d in data]
+            fits = [fit_release(p, d, None) for d in data]
             cost = sum(c for _, c in fits)
             if cost < best:
                 best, ug_best = cost, ug
@@ -344,7 +367,7 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     if ug_best.any():  # releases at the chosen start
         pb = params_of(x_global0 + ug_best * gscale)
         for d in data:
-            d.release_rad_s = fit_release(pb, d, d.release_rad_s)[0]
+            d.release_rad_s = fit_release(pb, d, None)[0]
 
     # stage 2: full least squares on periods and CoM height
     n_t = len(data)
@@ -411,9 +434,12 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     u = np.concatenate([ug_best, ws_start, best_shifts(ug_best, ws_start)])
     _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
     cost_t1 = float(np.sum(fun(u_t1) ** 2))
-    for _ in range(2):  # second pass with the block sigmas of the first
-        u = least_squares(fun, u, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-8, ftol=1e-10, max_nfev=25).x
-        _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
+    # releases stay near their start (the walking branch), shifts within the search
+    lo[n_g:n_g + n_t] = np.maximum(lo[n_g:n_g + n_t], 0.8 * ws_start)
+    hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
+    u = np.clip(u, lo, hi)
+    u = least_squares(fun, u, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-8, ftol=1e-10, max_nfev=MAX_NFEV).x
+    _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
     J = jac(u)
     cost_cal = float(np.sum(fun(u) ** 2))
     se, corr, ok, notes = least_squares_report(J, n_g, np.concatenate([gscale, np.ones(2 * n_t)]))

@@ -274,15 +274,17 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print("correlation: " + "; ".join(
             f"{names[i]}-{names[j]} {_fmt(out['correlation']['matrix'][i][j], '+.2f')}"
             for i in range(len(names)) for j in range(i + 1, len(names))), markup=False, highlight=False)
-    r = Table(title="residuals: Table 1 model vs calibrated (release speed and shift fitted per trial)",
-              show_edge=False)
-    for col in ("trial", "slope deg", "RMS dT ms T1", "cal", "RMS CoM mm T1", "cal"):
-        r.add_column(col, justify="left" if col == "trial" else "right", no_wrap=True)
+    r = Table(title="RMS residuals, Table 1 model -> calibrated", show_edge=False)
+    for col, width in (("trial", 30), ("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
+        r.add_column(col, justify="left" if col == "trial" else "right", no_wrap=True, min_width=width,
+                     max_width=width, overflow="ellipsis")
     for row in out["residuals"]:
-        r.add_row(Path(row["trial"]).name[:30], f"{row['slope_deg']:.2f}", _fmt(row["table1_rms_period_ms"], ".1f"),
+        r.add_row(Path(row["trial"]).stem, f"{row['slope_deg']:.2f}", _fmt(row["table1_rms_period_ms"], ".1f"),
                   _fmt(row["calibrated_rms_period_ms"], ".1f"), _fmt(row["table1_rms_com_mm"], ".2f"),
                   _fmt(row["calibrated_rms_com_mm"], ".2f"))
     con.print(r)
+    con.print("dT: step period error over the steps the simulation reached; CoM: CoM height error; a release "
+              "speed and a time shift are fitted per trial in both.", markup=False, highlight=False)
     con.print(f"all trials: RMS period error {_fmt(out['rms_period_ms']['table1'], '.1f')} -> "
               f"{_fmt(out['rms_period_ms']['calibrated'], '.1f')} ms, RMS CoM error "
               f"{_fmt(out['rms_com_mm']['table1'], '.2f')} -> {_fmt(out['rms_com_mm']['calibrated'], '.2f')} mm "
@@ -295,3 +297,25 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print("critical slope: " + ", ".join(parts), markup=False, highlight=False)
     for name, why in out["failed"].items():
         con.print(f"not calibrated: {why}", markup=False, highlight=False)
+
+
+def critical_lines(res: Any) -> str:
+    """What `rimless demo` prints about the critical slope and the calibration of a report result."""
+    cr, cal = res.critical, res.calibration
+    if cr is None:
+        return "critical slope: no trial with steps"
+    lines = []
+    if cr.chosen is not None:
+        lines.append(f"critical slope from the trials: {cr.chosen.value_deg:.3f} deg ({cr.chosen.method}, 95 % "
+                     f"interval {cr.chosen.ci_deg[0]:.3f}-{cr.chosen.ci_deg[1]:.3f} deg"
+                     + (f"; bracket {cr.bracket_deg[0]:.3f}-{cr.bracket_deg[1]:.3f} deg)" if cr.bracket_deg else ")"))
+    else:
+        lines.append(f"critical slope from the trials: none ({cr.why})")
+    for m, v in cr.model.get("critical_slope_deg", {}).items():
+        label = m.upper().replace("_CALIBRATED", " with calibrated c")
+        lines.append(f"model critical slope, {label}: {_fmt(v, '.3f')} deg")
+    if cal is not None:
+        for p in cal.params:
+            lines.append(f"calibrated {p.name}: {p.value:.3f} ± {p.se:.3f} {p.unit} (Table 1: {p.table1:g})"
+                         + ("" if p.identifiable else f" NOT identifiable: {p.note}"))
+    return "\n".join(lines)

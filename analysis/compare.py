@@ -119,6 +119,8 @@ class TrialComparison:
     @property
     def period_error_s(self) -> np.ndarray:
         """Simulated minus measured period per measured step, s."""
+        if self.sim_period_s.size != self.measured_period_s.size:  # nothing simulated (failed)
+            return np.full(self.measured_period_s.size, np.nan)
         return self.sim_period_s - self.measured_period_s
 
     @property

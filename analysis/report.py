@@ -254,12 +254,12 @@ def _com_figure(comps: Sequence[TrialComparison], path: Path) -> Path:
     n = max(len(comps), 1)
     ncol = 2 if n > 1 else 1
     nrow = math.ceil(n / ncol)
-    fig = _figure(6.0 * ncol, 2.6 * nrow + 0.7)
+    fig = _figure(6.0 * ncol, 2.8 * nrow + 0.8)
     fig.suptitle("CoM height: measured (dots) vs simulated (line); t = 0 at the first measured impact", fontsize=10)
     handles = [Line2D([], [], ls="", marker=".", color="tab:blue", label="measured (+ fitted height offset)"),
                Line2D([], [], color="tab:orange", label="simulated (fitted release, time-shifted)"),
                Line2D([], [], color="0.8", lw=0.8, label="measured impacts")]
-    fig.legend(handles=handles, loc="outside upper center", ncol=3, fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
     axes = []
     for i in range(nrow * ncol):
         ax = fig.add_subplot(nrow, ncol, i + 1)
@@ -283,8 +283,8 @@ def _com_figure(comps: Sequence[TrialComparison], path: Path) -> Path:
         for ti in c.measured_impact_time_s:
             ax.axvline(ti, color="0.85", lw=0.6, zorder=0)
         flag = "SUSPECT  " if c.status == "suspect" else ""
-        ax.set_title(f"{flag}{c.name} | {c.slope_deg:.2f} deg | RMS {c.rms_com_error_m * 1e3:.2f} mm, "
-                     f"r {c.com_correlation:.2f} | shift {c.time_shift_s * 1e3:+.1f} ms, "
+        ax.set_title(f"{flag}{c.name}, {c.slope_deg:.2f} deg\nRMS {c.rms_com_error_m * 1e3:.2f} mm, "
+                     f"r {c.com_correlation:.2f}; fitted: shift {c.time_shift_s * 1e3:+.1f} ms, "
                      f"offset {c.height_offset_m * 1e3:+.1f} mm", fontsize=7,
                      color="firebrick" if c.status == "suspect" else "black")
         ax.set_xlabel("time from first impact, s", fontsize=8)
@@ -328,23 +328,28 @@ def _period_figure(groups: Sequence[SlopeGroup], path: Path, model: str = "er") 
 
 def _critical_figure(cr: Any, path: Path) -> Path:
     """Verdicts against slope, the logistic P(sustained), the bracket, the estimates and the model's values."""
-    fig = _figure(7.5, 4.4)
+    fig = _figure(9.0, 4.4)
     ax = fig.add_subplot(1, 1, 1)
+    decided = [r["slope_deg"] for r in cr.per_trial if r["verdict"] != "undetermined"]
+    ref = decided + [e.value_deg for e in cr.estimates]
+    x_lo, x_hi = (min(ref) - 0.15, max(ref) + 0.15) if ref else (0.0, 3.0)
     levels = {"sustained": 1.0, "undetermined": 0.5, "decaying": 0.0}
     colors = {"sustained": "tab:green", "undetermined": "goldenrod", "decaying": "tab:red"}
     slopes = [r["slope_deg"] for r in cr.per_trial]
     rng = np.random.default_rng(0)
     for verdict, y in levels.items():
         xs = [r["slope_deg"] for r in cr.per_trial if r["verdict"] == verdict]
+        inside = [x for x in xs if x_lo <= x <= x_hi]
         if xs:
-            ax.plot(xs, y + rng.uniform(-0.025, 0.025, len(xs)), "o", ms=6, mfc="none", mew=1.5,
-                    color=colors[verdict], label=f"{verdict} ({len(xs)})")
-    x_all = list(slopes)
+            more = f", {len(xs) - len(inside)} outside the plotted slopes" if len(inside) < len(xs) else ""
+            ax.plot(inside, y + rng.uniform(-0.025, 0.025, len(inside)), "o", ms=6, mfc="none", mew=1.5,
+                    color=colors[verdict], label=f"{verdict} ({len(xs)}{more})")
+    x_all = [x_lo, x_hi]
     if cr.bracket_deg:
         ax.axvspan(*cr.bracket_deg, color="0.9", zorder=0, label=f"bracket {cr.bracket_deg[0]:.2f}-{cr.bracket_deg[1]:.2f} deg")
     if cr.logistic is not None and slopes:
         b0, b1 = cr.logistic
-        xx = np.linspace(min(slopes) - 0.1, max(slopes) + 0.1, 300)
+        xx = np.linspace(x_lo - 0.2, x_hi + 0.2, 300)
         ax.plot(xx, 1.0 / (1.0 + np.exp(-(b0 + b1 * xx))), "-", color="tab:blue", lw=1.2,
                 label="logistic P(sustained)")
     styles = {"bracket": ":", "logistic": "-.", "fixed-point-extrapolation": "--"}
@@ -359,8 +364,7 @@ def _critical_figure(cr: Any, path: Path) -> Path:
             ax.axvline(v, color=model_cols[j % 4], lw=1.5,
                        label=f"model {m.upper().replace('_CALIBRATED', ' calibrated')}: {v:.3f} deg")
             x_all.append(v)
-    if x_all:
-        ax.set_xlim(min(x_all) - 0.15, max(x_all) + 0.15)
+    ax.set_xlim(min(x_all) - 0.05, max(x_all) + 0.05)
     ax.set_ylim(-0.1, 1.1)
     ax.set_yticks([0, 0.5, 1], ["decaying", "undetermined", "sustained"])
     ax.set_xlabel("slope, deg")

@@ -289,6 +289,10 @@ def trial_verdict(trial: Any, params: Any = None) -> Verdict:
     rate = float(getattr(meta, "rate_hz", 0.0) or 0.0)
     # impact times come from sub-frame fits: about a tenth of a frame each, two per period
     sig_t = max(TIMING_SIGMA_FLOOR_S, 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
-    pend = StancePendulum.from_params(params, math.radians(max(slope_deg, 0.0)))
+    if not (math.isfinite(slope_deg) and 0.0 < slope_deg < math.degrees(params.alpha / 2)):
+        n = int(sum(c.size for c in chains))
+        return Verdict("undetermined", f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
+                       "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
+    pend = StancePendulum.from_params(params, math.radians(slope_deg))
     return verdict_from_periods(chains, pend, slope_deg=slope_deg, stalled=_trial_stalled(trial),
                                 timing_sigma_s=sig_t)
