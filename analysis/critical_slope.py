@@ -242,14 +242,12 @@ def run_critical_slope(trials: Sequence[Any], files: Sequence[str], params: Any 
     ``calibrated`` parameters when given)."""
     from rimless.sim.params import WheelParams
 
-    from .sustained import trial_verdict
+    from .sustained import trial_verdicts
 
     params = params or WheelParams()
-    verdicts = []
-    for t, f in zip(trials, files):
-        verdicts.append(trial_verdict(t, params))
-        if progress:
-            progress(f"verdict {f}")
+    verdicts = trial_verdicts(list(trials), params)
+    if progress:
+        progress("verdicts")
     res = estimate_critical_slope(verdicts, files, group_tol_deg=group_tol_deg)
     res.model = {"critical_slope_deg": {}, "detail": {}}
     for m in models:

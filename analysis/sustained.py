@@ -9,7 +9,8 @@ whole ramp while slowing every step), so the verdict comes from the step periods
    cos(theta + phi)))``. e -> 0 is the stall (the period grows without bound); e is the natural variable of
    the step-to-step map, which for a rigid wheel is exactly affine in it (Coleman).
 2. The return map ``e_{k+1} = a e_k + b`` is fitted by least squares over consecutive steps (a period that
-   spans a gap breaks the chain), with a in [0, A_MAX] (a dissipative walker contracts).
+   spans a gap breaks the chain), with a in [0, A_MAX] (a dissipative walker contracts). Over several
+   trials (`trial_verdicts`) the slope a, the wheel's step-to-step factor, is pooled and shared.
 3. Its fixed point ``e* = b / (1 - a)`` and the standard error from the fit decide:
    ``sustained`` when e* > 0 by more than `Z_SIGMA` standard errors (a gait with a finite period exists and
    the steps converge to it), ``decaying`` when e* < 0 by as much (every step loses speed until a stall) or
@@ -111,10 +112,12 @@ class Verdict:
     energies: np.ndarray = field(default_factory=lambda: np.zeros(0))
     periods_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stalled: bool = False
+    a_free: float = math.nan  # the slope this trial alone gives, and its standard error
+    a_free_se: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "reason": self.reason, "steps": self.steps, "slope_deg": self.slope_deg,
-                "return_map_slope": self.a, "fixed_point_e_rad2_s2": self.fixed_point,
+                "return_map_slope": self.a, "return_map_slope_alone": self.a_free, "fixed_point_e_rad2_s2": self.fixed_point,
                 "fixed_point_e_se_rad2_s2": self.fixed_point_se, "fixed_point_period_s": self.fixed_point_period_s,
                 "stalled": self.stalled}
 
@@ -180,8 +183,12 @@ def _trial_stalled(trial: Any) -> bool:
 
 
 def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, slope_deg: float,
-                         stalled: bool = False, timing_sigma_s: float | None = None) -> Verdict:
-    """Fit the return map over the chains of consecutive periods and decide (see the module doc)."""
+                         stalled: bool = False, timing_sigma_s: float | None = None,
+                         shared_slope: tuple[float, float] | None = None) -> Verdict:
+    """Fit the return map over the chains of consecutive periods and decide (see the module doc).
+
+    ``shared_slope`` = (a, standard error): use this return-map slope (the wheel's step-to-step factor,
+    pooled over trials) instead of fitting it, and propagate its uncertainty."""
     n = int(sum(c.size for c in chains))
     longest = max((c.size for c in chains), default=0)
     es = [np.array([pendulum.energy(float(T)) for T in c]) for c in chains]
@@ -211,6 +218,14 @@ def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, 
     sig_t = timing_sigma_s if timing_sigma_s is not None else TIMING_SIGMA_FLOOR_S
     w_sig = np.array([abs(pendulum.energy_slope(max(e, 1e-9))) * sig_t for e in x_arr])
     a, b, cov, rms = _fit_affine(x_arr, y_arr, w_sig)
+    v.a_free, v.a_free_se = a, (math.sqrt(cov[0, 0]) if cov[0, 0] > 0 else math.inf)
+    if shared_slope is not None:
+        a, a_se = shared_slope
+        b = float(np.mean(y_arr - a * x_arr))
+        r = y_arr - (a * x_arr + b)
+        s2 = max(float(r @ r) / max(x_arr.size - 1, 1), float(np.mean(w_sig**2)) * (1.0 + a * a))
+        cov = np.array([[a_se**2, -float(np.mean(x_arr)) * a_se**2],
+                        [-float(np.mean(x_arr)) * a_se**2, s2 / x_arr.size + float(np.mean(x_arr)) ** 2 * a_se**2]])
     v.a, v.b = a, b
     e_star = b / (1.0 - a)
     g = np.array([b / (1.0 - a) ** 2, 1.0 / (1.0 - a)])  # d e*/d(a, b)
@@ -277,7 +292,30 @@ def _fit_affine(x: np.ndarray, y: np.ndarray, sig_pt: np.ndarray) -> tuple[float
     return a, b, cov, math.sqrt(float(r @ r) / max(x.size, 1))
 
 
-def trial_verdict(trial: Any, params: Any = None) -> Verdict:
+def trial_verdicts(trials: list[Any], params: Any = None) -> list[Verdict]:
+    """Verdicts of several trials of one wheel: each trial's return map is fitted alone, the slopes a of the
+    trials that determine it are pooled (inverse-variance mean, scatter-inflated: a is the wheel's
+    step-to-step factor, the same on every slope), and every trial is then decided with the pooled a. A
+    trial released far from its gait extrapolates a long way to e*: the pooled a makes that extrapolation
+    sharp. With fewer than two trials determining a, the single fits stand."""
+    first = [trial_verdict(t, params) for t in trials]
+    ok = [(v.a_free, v.a_free_se) for v in first
+          if math.isfinite(v.a_free) and 0.0 < v.a_free < A_MAX and 0 < v.a_free_se < 0.5 and not v.stalled]
+    if len(ok) < 2:
+        return first
+    a = np.array([x for x, _ in ok])
+    w = 1.0 / np.array([s for _, s in ok]) ** 2
+    mean = float(np.sum(w * a) / np.sum(w))
+    chi2 = float(np.sum(w * (a - mean) ** 2)) / (a.size - 1)
+    se = math.sqrt(max(chi2, 1.0) / float(np.sum(w)))
+    out = [trial_verdict(t, params, shared_slope=(mean, se)) for t in trials]
+    for i, (v, f) in enumerate(zip(out, first)):
+        if v.verdict == "undetermined" and f.verdict != "undetermined":
+            out[i] = f  # never lose a verdict the trial gives on its own
+    return out
+
+
+def trial_verdict(trial: Any, params: Any = None, *, shared_slope: tuple[float, float] | None = None) -> Verdict:
     """The verdict of one imported trial (`rimless.analysis.trial.Trial` or anything with its public fields:
     ``step_period_s``, ``impact_time_s``, ``meta.slope_deg``, ``meta.rate_hz``, ``time_s``)."""
     from rimless.sim.params import WheelParams
@@ -295,4 +333,4 @@ def trial_verdict(trial: Any, params: Any = None) -> Verdict:
                        "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
     pend = StancePendulum.from_params(params, math.radians(slope_deg))
     return verdict_from_periods(chains, pend, slope_deg=slope_deg, stalled=_trial_stalled(trial),
-                                timing_sigma_s=sig_t)
+                                timing_sigma_s=sig_t, shared_slope=shared_slope)
