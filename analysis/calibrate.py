@@ -11,7 +11,9 @@ the first measured impact (as in `rimless.analysis.compare`). Residuals, per tri
   comparison and kept fixed), divided by sigma_h.
 
 sigma_T and sigma_h are the RMS residuals of each block at the start and, for the uncertainties, at the
-solution (so each block has a reduced chi^2 of 1 and neither swamps the other). Uncertainties are from the Jacobian
+solution (so each block has a reduced chi^2 of 1 and neither swamps the other); for the uncertainties the
+CoM block's sigma is further inflated by sqrt((1 + rho) / (1 - rho)), rho the lag-1 autocorrelation of its
+residuals (correlated samples carry less information than their number suggests). Uncertainties are from the Jacobian
 (cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters.
 A parameter is **not identifiable** when its relative standard error exceeds `NOT_IDENTIFIABLE_REL_SE` or the
 Jacobian has a (near) null direction involving it (flat cost); it is then reported as such, not as a value.
@@ -440,6 +442,17 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     u = np.clip(u, lo, hi)
     u = least_squares(fun, u, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-8, ftol=1e-10, max_nfev=MAX_NFEV).x
     _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
+    # CoM samples 10 ms apart are not independent when the model misses a systematic shape (their residuals
+    # are correlated): count them by their effective number, (1 - rho) / (1 + rho) of the samples, rho the
+    # lag-1 autocorrelation of the residuals, by inflating the block's sigma
+    xg_, ws_, sh_ = unpack(u)
+    rhos = []
+    for i, d in enumerate(data):
+        rh = _residuals(sim, params_of(xg_), d, float(ws_[i]), float(sh_[i]))[1]
+        if rh.size > 10 and np.std(rh) > 0:
+            rhos.append(float(np.corrcoef(rh[:-1], rh[1:])[0, 1]))
+    rho = float(np.clip(np.mean(rhos), 0.0, 0.95)) if rhos else 0.0
+    sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
     J = jac(u)
     cost_cal = float(np.sum(fun(u) ** 2))
     se, corr, ok, notes = least_squares_report(J, n_g, np.concatenate([gscale, np.ones(2 * n_t)]))

@@ -1,4 +1,4 @@
-"""The bundled SYNTHETIC slope series around the critical slope (``SYNTHETIC_crit_*.csv``).
+"""The bundled SYNTHETIC slope series around the critical slope (``data/critical/SYNTHETIC_crit_*.csv``).
 
 ``python -m rimless.analysis.example_critical [OUT_DIR]`` regenerates them from a fixed seed.
 
@@ -27,7 +27,7 @@ import numpy as np
 
 __all__ = ["SERIES", "TRUTH_FILE", "generate", "data_files", "truth_step", "truth_walk", "truth_critical_slope_deg"]
 
-DATA_DIR = Path(__file__).resolve().parent / "data"
+DATA_DIR = Path(__file__).resolve().parent / "data" / "critical"
 TRUTH_FILE = "SYNTHETIC_crit_truth.toml"
 PREFIX = "SYNTHETIC_crit_"
 SEED = 20261123
