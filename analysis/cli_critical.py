@@ -6,6 +6,7 @@ Only typer and the standard library at module level (``rimless --help`` stays fa
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -169,8 +170,12 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
                              ("verdict", "left", 12), ("e* ± se", "right", 14)):
         t.add_column(col, justify=just, no_wrap=True, min_width=width, max_width=width, overflow="ellipsis")
     color = {"sustained": "green", "decaying": "red", "undetermined": "yellow"}
-    for r in out["per_trial"]:
-        t.add_row(Path(r["file"]).stem, f"{r['slope_deg']:.3f}", str(r["steps"]),
+    stems = [Path(r["file"]).stem for r in out["per_trial"]]
+    common = os.path.commonprefix(stems) if len(stems) > 1 else ""
+    if len(common) >= 6:
+        t.caption = f"trial: the file name after {common!r}"
+    for r, stem in zip(out["per_trial"], stems):
+        t.add_row(stem[len(common):] if len(common) >= 6 else stem, f"{r['slope_deg']:.3f}", str(r["steps"]),
                   f"[{color[r['verdict']]}]{r['verdict']}[/]",
                   f"{_fmt(r['fixed_point_e_rad2_s2'], '.3f')}±{_fmt(r['fixed_point_e_se_rad2_s2'], '.3f')}")
     con.print(t)
