@@ -290,11 +290,14 @@ def bench_cmd(
 # ------------------------------------------------------------------------------------- report and demo
 
 DEMO_NOTE = ("SYNTHETIC DATA: the bundled example trials are simulated (ER wheel, Table 1 parameters, slopes "
-             "1.5/2/2.5 deg, 0.3 mm noise), not measured; see rimless/analysis/data/README.md.")
+             "1.5/2/2.5 deg, 0.3 mm noise), not measured; see rimless/analysis/data/README.md. The SYNTHETIC_crit "
+             "series (1.3-2.05 deg, two release speeds, an 11-step ramp) comes from another truth model (c = 10 N s/m "
+             "and guide friction) for the critical slope and the calibration.")
 
 
 def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: dict[str, Any], model: str,
-                slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation") -> Any:
+                slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation",
+                **report_kwargs: Any) -> Any:
     from rich.console import Console
     from rich.progress import Progress
 
@@ -312,7 +315,7 @@ def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: 
             progress.advance(task)
 
         res = build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
-                           note=note, title=title, progress=step)
+                           note=note, title=title, progress=step, **report_kwargs)
     if json_out:
         print_json(res.summary())
     else:
@@ -391,19 +394,29 @@ def demo_cmd(
 ) -> None:
     """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
     from .example import data_files
+    from .example_critical import data_files as critical_files
 
-    files = data_files()
+    files = sorted(set(data_files()) | set(critical_files()))
     if not files:
         raise UserError("the bundled example dataset is missing from this install (rimless/analysis/data)")
     if not json_out:
         typer.echo(f"{len(files)} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
     res = _run_report(files, out, json_out=json_out, import_kwargs={"max_gap_s": DEFAULT_MAX_GAP_MS / 1000.0},
-                      model="er",
-                      slope_bin_deg=0.5, note=DEMO_NOTE, title="rimless demo: SYNTHETIC trials vs simulation")
+                      model="er", slope_bin_deg=0.5, note=DEMO_NOTE,
+                      title="rimless demo: SYNTHETIC trials vs simulation",
+                      critical_files=critical_files(), calibrate_c=True)
     if not json_out:
+        from .cli_critical import critical_lines
+
+        typer.echo(critical_lines(res))
         typer.echo(f"open file://{res.report_html.resolve()}")
 
 
 def register_top_level(root_app: typer.Typer) -> None:
     """Add the top-level ``rimless demo`` command to the root app."""
     root_app.command("demo")(user_facing(demo_cmd))
+
+
+from .cli_critical import register as _register_critical  # noqa: E402  (critical-slope, calibrate)
+
+_register_critical(app)

@@ -15,8 +15,15 @@ reported as ``time_shift_s``). Heights: when the trial's CoM height is measured 
 impacts (no leg length given at import), it is offset by the constant that best matches the simulation
 (``height_offset_m``, reported); when it is measured from the slope plane it is compared as it is.
 
-Failures (no steps, slope outside the model's range, a period the model cannot produce, a stalled walk)
-are returned as ``status = "failed"`` / warnings with a message, never raised.
+Metrics: the first measured period is matched by construction (it fixes the release speed), so the period
+error metrics use steps 2..N only (``mean_abs_period_error_s``). The CoM-height RMS is also given relative to
+the measured peak-to-peak CoM amplitude (``rms_com_relative``) with the correlation between measured and
+simulated curves (``com_correlation``): a flat simulated line cannot score well on both.
+
+Status: ``ok`` only when the comparison passes the plausibility checks (`PLAUSIBILITY`); otherwise
+``suspect`` with the reasons in the warnings; ``failed`` when nothing could be compared (no steps, slope
+outside the model's range, a period the model cannot produce, a stalled walk), returned with a message,
+never raised.
 """
 
 from __future__ import annotations
@@ -34,6 +41,9 @@ __all__ = ["TrialComparison", "SlopeGroup", "Simulator", "compare_trial", "step_
 ALPHA_RAD = math.pi / 4
 MAX_SHIFT_S = 0.05
 RELEASE_GRID_RAD_S = (0.3, 8.0, 78)  # scan of the release speed: lo, hi, points
+#: a comparison is "suspect" unless: correlation >= min_correlation, RMS / amplitude <= max_relative_rms,
+#: the measured CoM swings by >= min_amplitude_m, and the time shift is inside the search
+PLAUSIBILITY = {"min_correlation": 0.8, "max_relative_rms": 0.35, "min_amplitude_m": 1e-3}
 
 
 @dataclass
@@ -77,7 +87,7 @@ class TrialComparison:
     slope_deg: float
     slope_source: str
     model: str
-    status: str  # "ok" or "failed"
+    status: str  # "ok", "suspect" (failed a plausibility check, see warnings) or "failed"
     message: str | None = None
     warnings: list[str] = field(default_factory=list)
     release_theta_dot_rad_s: float = float("nan")
@@ -93,6 +103,14 @@ class TrialComparison:
     sim_curve_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     measured_impact_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # from the first impact
     rms_com_error_m: float = float("nan")
+    com_amplitude_m: float = float("nan")  # measured peak-to-peak (1st-99th percentile) in the RMS window
+    com_correlation: float = float("nan")  # Pearson r, measured vs simulated, in the RMS window
+
+    @property
+    def rms_com_relative(self) -> float:
+        """RMS CoM error / measured CoM amplitude (a flat line scores about 0.3-0.4)."""
+        a = self.com_amplitude_m
+        return self.rms_com_error_m / a if a > 0 else float("nan")
 
     @property
     def n_steps(self) -> int:
@@ -101,11 +119,14 @@ class TrialComparison:
     @property
     def period_error_s(self) -> np.ndarray:
         """Simulated minus measured period per measured step, s."""
+        if self.sim_period_s.size != self.measured_period_s.size:  # nothing simulated (failed)
+            return np.full(self.measured_period_s.size, np.nan)
         return self.sim_period_s - self.measured_period_s
 
     @property
     def mean_abs_period_error_s(self) -> float:
-        e = self.period_error_s
+        """Mean |simulated - measured| over steps 2..N (step 1 is fitted: its error is 0 by construction), s."""
+        e = self.period_error_s[1:]
         e = e[np.isfinite(e)]
         return float(np.mean(np.abs(e))) if e.size else float("nan")
 
@@ -121,6 +142,8 @@ class TrialComparison:
             "steps": self.n_steps,
             "rms_com_error_mm": self.rms_com_error_m * 1e3,
             "mean_abs_period_error_ms": self.mean_abs_period_error_s * 1e3,
+            "rms_com_relative": self.rms_com_relative,
+            "com_correlation": self.com_correlation,
             "theta_dot_plus_rad_s": self.theta_dot_plus_rad_s,
             "release_theta_dot_rad_s": self.release_theta_dot_rad_s,
             "time_shift_ms": self.time_shift_s * 1e3,
@@ -242,8 +265,34 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
     res.sim_com_m = np.where(inside, np.interp(t - best, st, sy), np.nan)
     res.sim_time_s, res.sim_curve_m = st + best, sy
     res.measured_impact_time_s = imp - imp[0]
+    ym = y[win] + res.height_offset_m
+    ys = np.interp(t[win] - best, st, sy)
+    lo_q, hi_q = np.percentile(ym, [1, 99])
+    res.com_amplitude_m = float(hi_q - lo_q)
+    if np.std(ys) > 0 and np.std(ym) > 0:
+        res.com_correlation = float(np.corrcoef(ym, ys)[0, 1])
     res.status = "ok"
+    _plausibility(res)
     return res
+
+
+def _plausibility(res: TrialComparison) -> None:
+    """Mark a compared trial ``suspect`` (with the reasons in ``warnings``) when a check fails."""
+    lim = PLAUSIBILITY
+    why = []
+    if not res.com_amplitude_m >= lim["min_amplitude_m"]:
+        why.append(f"measured CoM height swings by only {res.com_amplitude_m * 1e3:.2f} mm (no steps visible?)")
+    if not res.com_correlation >= lim["min_correlation"]:
+        why.append(f"measured and simulated CoM heights correlate poorly (r = {res.com_correlation:.2f} < "
+                   f"{lim['min_correlation']})")
+    if not res.rms_com_relative <= lim["max_relative_rms"]:
+        why.append(f"RMS CoM error is {res.rms_com_relative:.0%} of the measured amplitude (> "
+                   f"{lim['max_relative_rms']:.0%})")
+    if any(w.startswith("best time shift at the limit") or w.startswith("simulation ended") for w in res.warnings):
+        why.append("the simulation does not follow the whole trial (see above)")
+    if why:
+        res.status = "suspect"
+        res.message = "suspect: " + "; ".join(why)
 
 
 @dataclass
@@ -256,7 +305,7 @@ class SlopeGroup:
     mean_period_s: np.ndarray
     std_period_s: np.ndarray  # sample std (ddof=1); NaN with one trial
     count: np.ndarray
-    sim_period_s: np.ndarray  # simulated at the bin's slope from the mean fitted release speed (NaN if none)
+    sim_period_s: np.ndarray  # mean over the bin's trials of each one simulated at its own slope and release
     release_theta_dot_rad_s: float
     message: str | None = None
 
@@ -287,20 +336,23 @@ def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | 
         count = np.isfinite(mat).sum(axis=0)
         mean = np.nanmean(mat, axis=0)
         std = np.array([np.std(col[np.isfinite(col)], ddof=1) if k > 1 else np.nan for col, k in zip(mat.T, count)])
+        simmat = np.full((len(cs), n), np.nan)
+        msgs = []
+        for i, c in enumerate(cs):  # each trial simulated at its own slope from its own fitted release
+            if c.sim_period_s.size:
+                simmat[i, :c.sim_period_s.size] = c.sim_period_s
+            elif math.isfinite(c.release_theta_dot_rad_s):
+                try:
+                    g = sim.walk(c.slope_deg, c.release_theta_dot_rad_s, c.n_steps + 1, record=False)
+                    got = [s.period_s for s in g.steps[1:1 + c.n_steps]]
+                    simmat[i, :len(got)] = got
+                except Exception as err:  # noqa: BLE001 - a slope the model cannot take
+                    msgs.append(f"{c.name}: simulation failed: {err}")
         ws = [c.release_theta_dot_rad_s for c in cs if math.isfinite(c.release_theta_dot_rad_s)]
-        simp = np.full(n, np.nan)
-        msg = None
         w = float(np.mean(ws)) if ws else float("nan")
-        if not ws:
-            msg = "no trial in this group has a fitted release speed: no simulation"
-        else:
-            try:
-                g = sim.walk(key, w, n + 1, record=False)
-                got = [s.period_s for s in g.steps[1:1 + n]]
-                simp[:len(got)] = got
-                if len(got) < n:
-                    msg = f"simulation ended ({g.failure.reason.value if g.failure else 'stopped'}) after {len(got)} steps"
-            except Exception as err:  # a slope the model cannot take
-                msg = f"simulation at {key} deg failed: {err}"
+        have = np.isfinite(simmat).any(axis=0)
+        simp = np.full(n, np.nan)
+        simp[have] = np.nanmean(simmat[:, have], axis=0)
+        msg = "; ".join(msgs) or (None if ws else "no trial in this group has a fitted release speed: no simulation")
         groups.append(SlopeGroup(key, [c.name for c in cs], np.arange(1, n + 1), mean, std, count, simp, w, msg))
     return groups

@@ -8,7 +8,9 @@
   simulated vertical CoM trajectories");
 - ``step_period.png`` — step period vs step number, mean +- std over the trials of each slope bin, with the
   simulation (paper: "step-period trends");
-- ``metrics.csv`` — one row per input (slope, steps, RMS CoM error, mean |period error|, fitted theta'+ ...).
+- ``metrics.csv`` — one row per input (slope, steps, RMS CoM error, mean |period error|, fitted theta'+ ...);
+- ``critical_slope.png`` (when asked, default on) — verdicts (sustained / decaying / undetermined) against
+  slope, the fitted probability of sustained walking, the bracket and the model's critical slopes.
 """
 
 from __future__ import annotations
@@ -30,9 +32,11 @@ from .compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step
 
 __all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES"]
 
-REPORT_FILES = {"html": "report.html", "com": "com_height.png", "period": "step_period.png", "csv": "metrics.csv"}
+REPORT_FILES = {"html": "report.html", "com": "com_height.png", "period": "step_period.png", "csv": "metrics.csv",
+                "critical": "critical_slope.png"}
+DPI = 150
 METRIC_COLUMNS = ["trial", "file", "status", "slope_deg", "slope_source", "model", "steps", "rms_com_error_mm",
-                  "mean_abs_period_error_ms", "theta_dot_plus_rad_s", "release_theta_dot_rad_s", "time_shift_ms",
+                  "mean_abs_period_error_ms", "rms_com_relative", "com_correlation", "theta_dot_plus_rad_s", "release_theta_dot_rad_s", "time_shift_ms",
                   "height_offset_mm", "message"]
 
 
@@ -70,6 +74,8 @@ class ReportResult:
     comparisons: list[TrialComparison]
     groups: list[SlopeGroup]
     seconds: float = 0.0
+    critical: Any = None  # rimless.analysis.critical_slope.CriticalSlopeResult, when computed
+    calibration: Any = None  # rimless.analysis.calibrate.CalibrationResult, when computed
 
     @property
     def refused(self) -> list[InputRow]:
@@ -94,7 +100,9 @@ class ReportResult:
                 "figures": [str(p) for p in self.figures], "trials": self.metrics(),
                 "inputs": [r.summary() for r in self.inputs],
                 "step_period_by_slope": [row for g in self.groups for row in g.rows()],
-                "refused": [r.file for r in self.refused]}
+                "refused": [r.file for r in self.refused],
+                "critical_slope": self.critical.summary() if self.critical is not None else None,
+                "calibration": self.calibration.summary() if self.calibration is not None else None}
 
 
 def _trial_warnings(trial: Any) -> list[str]:
@@ -135,12 +143,18 @@ def build_report(
     title: str = "Vicon trials vs simulation",
     note: str | None = None,
     progress: Callable[[str], None] | None = None,
+    critical: bool = True,
+    calibrate_c: bool = False,
+    critical_files: Sequence[str | Path] | None = None,
 ) -> ReportResult:
     """Import/read every input, compare with the simulation and write the report files (see the module doc).
 
     Raises `InputFileError` before doing anything if an input does not exist; a file that exists but is
     refused by the importer is listed in the report (status ``refused``) and does not stop the others.
-    ``progress`` is called once per input (with its name) after it is done.
+    ``progress`` is called once per input (with its name) after it is done, and once per later stage.
+    ``critical``: add the critical slope from the trials (verdicts, estimates, the model's value);
+    ``calibrate_c`` also calibrates c on them and gives the calibrated model's critical slope;
+    ``critical_files``: only these inputs enter the critical slope (default: every input with steps).
     """
     t_start = time.perf_counter()
     files = [Path(p) for p in paths]
@@ -169,10 +183,50 @@ def build_report(
     per_png = _period_figure(groups, out / REPORT_FILES["period"], sim.model)
     res = ReportResult(out, out / REPORT_FILES["html"], out / REPORT_FILES["csv"], [com_png, per_png], inputs, comps,
                        groups)
+    if critical:
+        _add_critical(res, sim, files, critical_files, calibrate_c, progress)
     _write_csv(res.metrics(), res.metrics_csv)
     res.seconds = time.perf_counter() - t_start
-    res.report_html.write_text(_html(res, sim, title, note, slope_bin_deg), encoding="utf-8")
+    _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
     return res
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
+def _add_critical(res: ReportResult, sim: Simulator, files: Sequence[Path], only: Sequence[str | Path] | None,
+                  calibrate_c: bool, progress: Callable[[str], None] | None) -> None:
+    from .critical_slope import run_critical_slope
+
+    keep = {Path(p).resolve() for p in only} if only is not None else None
+    trials, names = [], []
+    for p, row in zip(files, res.inputs):
+        if row.trial is None or row.trial.step_period_s.size == 0:
+            continue
+        if keep is not None and p.resolve() not in keep:
+            continue
+        trials.append(row.trial)
+        names.append(row.file)
+    if not trials:
+        return
+    calibrated = None
+    if calibrate_c:
+        from .calibrate import NoTrialCalibrated, calibrate
+
+        try:
+            res.calibration = calibrate(trials, names, ["c"], params=sim.params, model=sim.model)
+            calibrated = res.calibration.calibrated_params
+        except NoTrialCalibrated:
+            res.calibration = None
+        if progress:
+            progress("calibration of c")
+    res.critical = run_critical_slope(trials, names, sim.params, models=(sim.model,), calibrated=calibrated)
+    if progress:
+        progress("critical slope")
+    res.figures.append(_critical_figure(res.critical, res.out_dir / REPORT_FILES["critical"]))
 
 
 # ------------------------------------------------------------------------------------------------ figures
@@ -182,44 +236,69 @@ def _figure(w_in: float, h_in: float):  # noqa: ANN202
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(w_in, h_in), dpi=100, layout="constrained")
+    fig = Figure(figsize=(w_in, h_in), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
+def _save(fig: Any, path: Path) -> None:
+    """Write the PNG at DPI through a temporary name (a half-written figure never has the final name)."""
+    tmp = path.with_name(path.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=DPI)
+    tmp.replace(path)
+
+
 def _com_figure(comps: Sequence[TrialComparison], path: Path) -> Path:
+    from matplotlib.lines import Line2D
+
     n = max(len(comps), 1)
     ncol = 2 if n > 1 else 1
     nrow = math.ceil(n / ncol)
-    fig = _figure(6.0 * ncol, 2.6 * nrow + 0.4)
-    fig.suptitle("CoM height: measured (dots) vs simulated (line); t = 0 at the first measured impact")
+    fig = _figure(6.0 * ncol, 2.8 * nrow + 0.8)
+    fig.suptitle("CoM height: measured (dots) vs simulated (line); t = 0 at the first measured impact", fontsize=10)
+    handles = [Line2D([], [], ls="", marker=".", color="tab:blue", label="measured (+ fitted height offset)"),
+               Line2D([], [], color="tab:orange", label="simulated (fitted release, time-shifted)"),
+               Line2D([], [], color="0.8", lw=0.8, label="measured impacts")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
+    axes = []
     for i in range(nrow * ncol):
         ax = fig.add_subplot(nrow, ncol, i + 1)
+        axes.append(ax)
         if i >= len(comps):
             ax.axis("off")
             if not comps:
                 ax.text(0.5, 0.5, "no trial to compare", ha="center", va="center", transform=ax.transAxes)
             continue
         c = comps[i]
-        if c.status != "ok":
+        if c.status == "failed":
             ax.text(0.5, 0.5, _wrap(f"{c.name}\n{c.message}", 70), ha="center", va="center", fontsize=8,
                     transform=ax.transAxes, color="firebrick")
             ax.set_xticks([])
             ax.set_yticks([])
             continue
-        ax.plot(c.time_s, c.measured_com_m * 1e3, ".", ms=2.5, color="tab:blue", label="measured")
+        ax.plot(c.time_s, c.measured_com_m * 1e3, ".", ms=2.5, color="tab:blue")
         lo, hi = np.nanmin(c.time_s), np.nanmax(c.time_s)
         m = (c.sim_time_s >= lo) & (c.sim_time_s <= hi)
-        ax.plot(c.sim_time_s[m], c.sim_curve_m[m] * 1e3, "-", lw=1.2, color="tab:orange", label=f"simulated ({c.model.upper()})")
+        ax.plot(c.sim_time_s[m], c.sim_curve_m[m] * 1e3, "-", lw=1.2, color="tab:orange")
         for ti in c.measured_impact_time_s:
             ax.axvline(ti, color="0.85", lw=0.6, zorder=0)
-        ax.set_title(f"{c.name}  |  {c.slope_deg:.2f} deg, RMS {c.rms_com_error_m * 1e3:.2f} mm", fontsize=8)
+        flag = "SUSPECT  " if c.status == "suspect" else ""
+        ax.set_title(f"{flag}{c.name}, {c.slope_deg:.2f} deg\nRMS {c.rms_com_error_m * 1e3:.2f} mm, "
+                     f"r {c.com_correlation:.2f}; fitted: shift {c.time_shift_s * 1e3:+.1f} ms, "
+                     f"offset {c.height_offset_m * 1e3:+.1f} mm", fontsize=7,
+                     color="firebrick" if c.status == "suspect" else "black")
         ax.set_xlabel("time from first impact, s", fontsize=8)
         ax.set_ylabel("CoM height, mm", fontsize=8)
         ax.tick_params(labelsize=7)
-        if i == 0:
-            ax.legend(fontsize=7, loc="lower right")
-    fig.savefig(path)
+    for r in range(nrow):  # one x-range per figure row
+        row = [(axes[r * ncol + j], comps[r * ncol + j]) for j in range(ncol)
+               if r * ncol + j < len(comps) and comps[r * ncol + j].status != "failed"]
+        if row:
+            hi = max(float(np.nanmax(c.time_s)) for _, c in row)
+            lo = min(float(np.nanmin(c.time_s)) for _, c in row)
+            for ax, _ in row:
+                ax.set_xlim(lo, hi)
+    _save(fig, path)
     return path
 
 
@@ -243,7 +322,55 @@ def _period_figure(groups: Sequence[SlopeGroup], path: Path, model: str = "er") 
     if groups:
         ax.legend(fontsize=8, ncol=2)
         ax.xaxis.get_major_locator().set_params(integer=True)
-    fig.savefig(path)
+    _save(fig, path)
+    return path
+
+
+def _critical_figure(cr: Any, path: Path) -> Path:
+    """Verdicts against slope, the logistic P(sustained), the bracket, the estimates and the model's values."""
+    fig = _figure(9.0, 4.4)
+    ax = fig.add_subplot(1, 1, 1)
+    decided = [r["slope_deg"] for r in cr.per_trial if r["verdict"] != "undetermined"]
+    ref = decided + [e.value_deg for e in cr.estimates]
+    x_lo, x_hi = (min(ref) - 0.15, max(ref) + 0.15) if ref else (0.0, 3.0)
+    levels = {"sustained": 1.0, "undetermined": 0.5, "decaying": 0.0}
+    colors = {"sustained": "tab:green", "undetermined": "goldenrod", "decaying": "tab:red"}
+    slopes = [r["slope_deg"] for r in cr.per_trial]
+    rng = np.random.default_rng(0)
+    for verdict, y in levels.items():
+        xs = [r["slope_deg"] for r in cr.per_trial if r["verdict"] == verdict]
+        inside = [x for x in xs if x_lo <= x <= x_hi]
+        if xs:
+            more = f", {len(xs) - len(inside)} outside the plotted slopes" if len(inside) < len(xs) else ""
+            ax.plot(inside, y + rng.uniform(-0.025, 0.025, len(inside)), "o", ms=6, mfc="none", mew=1.5,
+                    color=colors[verdict], label=f"{verdict} ({len(xs)}{more})")
+    x_all = [x_lo, x_hi]
+    if cr.bracket_deg:
+        ax.axvspan(*cr.bracket_deg, color="0.9", zorder=0, label=f"bracket {cr.bracket_deg[0]:.2f}-{cr.bracket_deg[1]:.2f} deg")
+    if cr.logistic is not None and slopes:
+        b0, b1 = cr.logistic
+        xx = np.linspace(x_lo - 0.2, x_hi + 0.2, 300)
+        ax.plot(xx, 1.0 / (1.0 + np.exp(-(b0 + b1 * xx))), "-", color="tab:blue", lw=1.2,
+                label="logistic P(sustained)")
+    styles = {"bracket": ":", "logistic": "-.", "fixed-point-extrapolation": "--"}
+    for e in cr.estimates:
+        lw = 2.0 if e is cr.chosen else 1.0
+        ax.axvline(e.value_deg, ls=styles.get(e.method, "-"), color="black", lw=lw,
+                   label=f"{e.method}: {e.value_deg:.3f} deg" + (" (reported)" if e is cr.chosen else ""))
+        x_all.append(e.value_deg)
+    model_cols = ["tab:purple", "tab:brown", "tab:pink", "tab:cyan"]
+    for j, (m, v) in enumerate(cr.model.get("critical_slope_deg", {}).items()):
+        if v is not None and math.isfinite(v):
+            ax.axvline(v, color=model_cols[j % 4], lw=1.5,
+                       label=f"model {m.upper().replace('_CALIBRATED', ' calibrated')}: {v:.3f} deg")
+            x_all.append(v)
+    ax.set_xlim(min(x_all) - 0.05, max(x_all) + 0.05)
+    ax.set_ylim(-0.1, 1.1)
+    ax.set_yticks([0, 0.5, 1], ["decaying", "undetermined", "sustained"])
+    ax.set_xlabel("slope, deg")
+    ax.set_title("Critical slope: verdict of each trial from its step-to-step return map", fontsize=10)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+    _save(fig, path)
     return path
 
 
@@ -276,7 +403,7 @@ body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2em
 h1{font-size:1.5em;margin-bottom:.2em} h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ddd}
 table{border-collapse:collapse;font-size:.85em;margin:.5em 0} th,td{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}
 th{background:#f3f3f3} td.n{text-align:right;font-variant-numeric:tabular-nums}
-.ok{color:#1a7f37} .bad{color:#b42318} .note{background:#fff8e1;border-left:4px solid #f0b400;padding:.5em .8em}
+.ok{color:#1a7f37} .bad{color:#b42318} .suspect{color:#b54708;font-weight:bold} .note{background:#fff8e1;border-left:4px solid #f0b400;padding:.5em .8em}
 figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee} figcaption{font-size:.85em;color:#555}
 .small{font-size:.85em;color:#555}
 """
@@ -286,11 +413,12 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
     e = html.escape
     p = sim.params
     rows = res.metrics()
-    ok = [c for c in res.comparisons if c.status == "ok"]
+    ok = [c for c in res.comparisons if c.status in ("ok", "suspect")]
+    n_suspect = sum(c.status == "suspect" for c in res.comparisons)
     parts = [f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{e(title)}</title>",
              f"<style>{_CSS}</style></head><body>", f"<h1>{e(title)}</h1>",
              f"<p class=\"small\">rimless trials report, {time.strftime('%Y-%m-%d %H:%M')}; {len(res.inputs)} input(s), "
-             f"{len(ok)} compared, {len(res.refused)} refused; built in {res.seconds:.1f} s.</p>"]
+             f"{len(ok)} compared ({n_suspect} suspect), {len(res.refused)} refused; built in {res.seconds:.1f} s.</p>"]
     if note:
         parts.append(f"<p class=\"note\">{e(note)}</p>")
     parts.append(
@@ -305,26 +433,38 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
     parts.append("<h2>CoM height</h2><figure>"
                  f"<img src=\"{REPORT_FILES['com']}\" alt=\"CoM height, measured vs simulated\">"
                  "<figcaption>Figure 1. Comparison of measured and simulated vertical CoM trajectories (hub height "
-                 "normal to the slope); grey lines: measured impacts.</figcaption></figure>")
+                 "normal to the slope); grey lines: measured impacts. <b>Fitted per trial</b> (values in each panel's "
+                 "title and in the table): the release speed θ' (so that the first simulated period equals the "
+                 "first measured one), a time shift of the simulated curve (≤ 50 ms) and a constant height offset of "
+                 "the measured curve (heights measured from the impact line). Each trial is simulated at its own "
+                 "slope. r: correlation of the two curves; a trial failing a plausibility check is marked SUSPECT."
+                 + _fitted_list(res.comparisons) + "</figcaption></figure>")
     parts.append("<h2>Step period</h2><figure>"
                  f"<img src=\"{REPORT_FILES['period']}\" alt=\"step period vs step number\">"
                  f"<figcaption>Figure 2. Step period vs step number, mean ± std over the trials of each slope bin "
-                 f"(slopes rounded to {slope_bin_deg:g} deg), with the simulation at the bin's slope from the bin's "
-                 "mean fitted release speed (dashed).</figcaption></figure>")
+                 f"(slopes rounded to {slope_bin_deg:g} deg), with the simulation (dashed): each trial simulated at "
+                 "its own slope from its own fitted release speed, averaged over the bin. Step 1 is fitted (the "
+                 "release speed is chosen to match it), so it agrees by construction and is left out of the period "
+                 "errors.</figcaption></figure>")
 
     parts.append("<h2>Metrics</h2><table id=\"metrics\"><thead><tr><th>trial</th><th>status</th><th>slope, deg</th>"
-                 "<th>steps</th><th>RMS CoM error, mm</th><th>mean |period error|, ms</th><th>fitted θ'+, rad/s</th>"
-                 "<th>release θ', rad/s</th><th>time shift, ms</th><th>message</th></tr></thead><tbody>")
+                 "<th>steps</th><th>RMS CoM error, mm</th><th>RMS / amplitude</th><th>r</th>"
+                 "<th>mean |period error|, steps 2..N, ms</th><th>fitted θ'+, rad/s</th>"
+                 "<th>fitted release θ', rad/s</th><th>fitted time shift, ms</th><th>fitted height offset, mm</th>"
+                 "<th>message</th></tr></thead><tbody>")
     for r in rows:
-        cls = "ok" if r["status"] == "ok" else "bad"
+        cls = "ok" if r["status"] == "ok" else ("suspect" if r["status"] == "suspect" else "bad")
         parts.append(
             f"<tr class=\"trial\"><td>{e(str(r['trial']))}</td><td class=\"{cls}\">{e(str(r['status']))}</td>"
             f"<td class=\"n\">{_num(r['slope_deg'], '.3f')}</td><td class=\"n\">{_num(r['steps'], 'd')}</td>"
             f"<td class=\"n\">{_num(r['rms_com_error_mm'], '.2f')}</td>"
+            f"<td class=\"n\">{_num(r.get('rms_com_relative'), '.2f')}</td>"
+            f"<td class=\"n\">{_num(r.get('com_correlation'), '.3f')}</td>"
             f"<td class=\"n\">{_num(r['mean_abs_period_error_ms'], '.1f')}</td>"
             f"<td class=\"n\">{_num(r['theta_dot_plus_rad_s'], '.3f')}</td>"
             f"<td class=\"n\">{_num(r['release_theta_dot_rad_s'], '.3f')}</td>"
-            f"<td class=\"n\">{_num(r['time_shift_ms'], '+.1f')}</td><td>{e(r['message'] or '')}</td></tr>")
+            f"<td class=\"n\">{_num(r['time_shift_ms'], '+.1f')}</td>"
+            f"<td class=\"n\">{_num(r['height_offset_mm'], '+.1f')}</td><td>{e(r['message'] or '')}</td></tr>")
     parts.append(f"</tbody></table><p class=\"small\">Also in <a href=\"{REPORT_FILES['csv']}\">{REPORT_FILES['csv']}</a>.</p>")
 
     if res.groups:
@@ -341,6 +481,9 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
             if g.message:
                 parts.append(f"<p class=\"bad\">{g.slope_deg:g} deg: {e(g.message)}</p>")
 
+    if res.critical is not None:
+        parts.append(_critical_html(res))
+
     parts.append("<h2>Imported files</h2><table id=\"imports\"><thead><tr><th>file</th><th>status</th><th>frames</th>"
                  "<th>slope (source)</th><th>hub</th><th>steps</th><th>warnings / reason</th></tr></thead><tbody>")
     for r in res.inputs:
@@ -355,3 +498,67 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
         parts.append(f"<tr><td>{e(r.file)}</td><td class=\"{cls}\">{e(r.status)}</td>{cells}</tr>")
     parts.append("</tbody></table></body></html>\n")
     return "\n".join(parts)
+
+
+def _fitted_list(comps: Sequence[TrialComparison]) -> str:
+    items = [f"{html.escape(c.name)}: θ' = {c.release_theta_dot_rad_s:.3f} rad/s, shift {c.time_shift_s * 1e3:+.1f} ms, "
+             f"offset {c.height_offset_m * 1e3:+.1f} mm" for c in comps if c.status != "failed"]
+    return (" Fitted values: " + "; ".join(items) + ".") if items else ""
+
+
+def _critical_html(res: ReportResult) -> str:
+    e = html.escape
+    cr = res.critical
+    out = ["<h2 id=\"critical-slope\">Critical slope</h2>"]
+    model = cr.model.get("critical_slope_deg", {})
+    if cr.chosen is not None:
+        out.append(f"<p class=\"note\" id=\"critical-values\">From the trials: <b>{cr.chosen.value_deg:.3f} deg</b> "
+                   f"({e(cr.chosen.method)}, 95 % interval {cr.chosen.ci_deg[0]:.3f}-{cr.chosen.ci_deg[1]:.3f} deg); "
+                   + "; ".join(f"model {e(m.upper().replace('_CALIBRATED', ' with calibrated c'))}: "
+                               f"<b>{_num(v, '.3f')} deg</b>" for m, v in model.items()) + ".</p>")
+        out.append(f"<p class=\"small\">Why this estimate: {e(cr.why)}.</p>")
+    else:
+        out.append(f"<p class=\"bad\" id=\"critical-values\">No critical slope from the trials: {e(cr.why)}. "
+                   + "; ".join(f"Model {e(m.upper())}: {_num(v, '.3f')} deg" for m, v in model.items()) + ".</p>")
+    out.append(f"<figure><img src=\"{REPORT_FILES['critical']}\" alt=\"critical slope: verdicts against slope\">"
+               "<figcaption>Figure 3. Each trial's verdict from its step-to-step return map (not whether it reached "
+               "the end of the ramp): the measured step periods are turned into the squared speed over the stance "
+               "foot e (rigid stance pendulum of the wheel), the map e<sub>k+1</sub> = a e<sub>k</sub> + b is fitted, "
+               "and its fixed point e* decides: sustained (e* &gt; 0 by 2 standard errors), decaying (e* &lt; 0, or "
+               "stalled on the ramp), undetermined. Grey band: the bracket between the highest slope without a "
+               "sustained trial and the lowest with one; blue: the logistic P(sustained) (when several trials share "
+               "a slope); dashed: the slope where the fitted fixed points reach the stall (e* = 0); coloured lines: "
+               "the model's critical slope (smallest slope with a stable period-1 gait).</figcaption></figure>")
+    out.append("<table id=\"critical\"><thead><tr><th>estimate</th><th>deg</th><th>95 % interval / bracket</th>"
+               "<th>how</th></tr></thead><tbody>")
+    for est in cr.estimates:
+        out.append(f"<tr><td>{e(est.method)}{' (reported)' if est is cr.chosen else ''}</td>"
+                   f"<td class=\"n\">{est.value_deg:.3f}</td>"
+                   f"<td class=\"n\">{est.ci_deg[0]:.3f}-{est.ci_deg[1]:.3f}</td><td>{e(est.detail)}</td></tr>")
+    for m, v in model.items():
+        d = cr.model.get("detail", {}).get(m, {})
+        out.append(f"<tr><td>model {e(m.upper())}</td><td class=\"n\">{_num(v, '.3f')}</td><td></td>"
+                   f"<td>branch ends by {e(str(d.get('reason', '')))}: {e(str(d.get('detail', '')))}</td></tr>")
+    out.append("</tbody></table>")
+    out.append("<table id=\"verdicts\"><thead><tr><th>trial</th><th>slope, deg</th><th>steps</th><th>verdict</th>"
+               "<th>reason</th></tr></thead><tbody>")
+    for r in cr.per_trial:
+        cls = {"sustained": "ok", "decaying": "bad"}.get(r["verdict"], "suspect")
+        out.append(f"<tr><td>{e(Path(r['file']).name)}</td><td class=\"n\">{r['slope_deg']:.3f}</td>"
+                   f"<td class=\"n\">{r['steps']}</td><td class=\"{cls}\">{e(r['verdict'])}</td>"
+                   f"<td>{e(r['reason'])}</td></tr>")
+    out.append("</tbody></table>")
+    cal = res.calibration
+    if cal is not None:
+        rows = "".join(f"<tr><td>{e(p.name)} ({e(p.unit)})</td><td class=\"n\">{p.table1:g}</td>"
+                       f"<td class=\"n\">{p.value:.4g} ± {p.se:.2g}</td>"
+                       f"<td>{'yes' if p.identifiable else 'NO: ' + e(p.note)}</td></tr>" for p in cal.params)
+        sm = cal.summary()
+        out.append("<h3>Calibration</h3><table id=\"calibration\"><thead><tr><th>parameter</th><th>Table 1</th>"
+                   f"<th>fitted ± 1 sigma</th><th>identifiable</th></tr></thead><tbody>{rows}</tbody></table>"
+                   f"<p class=\"small\">Least squares on the step periods and CoM heights of {len(cal.residuals)} "
+                   "trials (a release speed and a time shift fitted per trial). RMS period error "
+                   f"{_num(sm['rms_period_ms']['table1'], '.1f')} ms (Table 1) → "
+                   f"{_num(sm['rms_period_ms']['calibrated'], '.1f')} ms; RMS CoM error "
+                   f"{_num(sm['rms_com_mm']['table1'], '.2f')} → {_num(sm['rms_com_mm']['calibrated'], '.2f')} mm.</p>")
+    return "\n".join(out)

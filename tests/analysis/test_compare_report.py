@@ -174,7 +174,13 @@ def test_report_files_and_structure(tmp_path, sim):
     page = res.report_html.read_text()
     refs = _Refs()
     refs.feed(page)
-    assert sorted(refs.imgs) == ["com_height.png", "step_period.png"]
+    assert sorted(refs.imgs) == ["com_height.png", "critical_slope.png", "step_period.png"]
+    for img in refs.imgs:  # print resolution
+        from PIL import Image
+
+        with Image.open(res.out_dir / img) as im:
+            assert im.info["dpi"][0] >= 149.5
+    assert "steps 2..N" in page and "Fitted per trial" in page and "time shift" in page
     for ref in refs.imgs + refs.links:
         assert not ref.startswith(("/", "http")) and (res.out_dir / ref).stat().st_size > 1000
     assert refs.metric_rows == 4
@@ -224,16 +230,28 @@ def test_cli_report_bad_model(tmp_path):
 
 
 def test_demo(tmp_path):
+    from rimless.analysis.example_critical import data_files as critical_files
+    from rimless.analysis.example_critical import load_truth as critical_truth
+
     out = tmp_path / "demo"
     res = runner.invoke(root_app, ["demo", "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert (out / "report.html").is_file() and (out / "metrics.csv").is_file()
     assert f"report: {out / 'report.html'}" in res.stdout
     page = (out / "report.html").read_text()
-    assert "SYNTHETIC DATA" in page and page.count('<tr class="trial">') == 6
+    n_all = len(set(data_files()) | set(critical_files()))
+    assert "SYNTHETIC DATA" in page and page.count('<tr class="trial">') == n_all
     with open(out / "metrics.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == 6 and all(r["status"] == "ok" for r in rows)
+    assert len(rows) == n_all
+    assert all(r["status"] == "ok" for r in rows if "_er_" in r["trial"])
+    # the critical slope: printed, on the page, and near the truth model's
+    crit = critical_truth()["dataset"]["critical_slope_deg"]
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("critical slope from the trials:"))
+    value = float(line.split(":")[1].split("deg")[0])
+    assert abs(value - crit) < 0.1, line
+    assert "model critical slope, ER:" in res.stdout and "calibrated c:" in res.stdout
+    assert 'id="critical-values"' in page and "critical_slope.png" in page and "Calibration" in page
     if shutil.which("chromium") or shutil.which("chromium-browser"):
         _screenshot_has_content(out / "report.html", tmp_path / "shot.png")
 
@@ -257,3 +275,22 @@ def _screenshot_has_content(page: Path, shot: Path) -> None:
 def test_report_renders_in_chromium(tmp_path, sim):
     res = build_report(data_files()[:2], tmp_path / "rep", sim=sim, import_kwargs={"max_gap_s": 0.05})
     _screenshot_has_content(res.report_html, tmp_path / "shot.png")
+
+
+def test_flat_line_cannot_pass_and_first_step_is_left_out(tmp_path, sim):
+    """A measured CoM that does not move like a wheel (a flat line + noise) is suspect, never ok; the first
+    period (fitted) does not enter the period error."""
+    ex = simulate_trial(2.0, 1.92, np.random.default_rng(5))
+    trial = import_trial(write_trial_csv(ex, tmp_path / "t.csv"), slope_deg=2.0, max_gap_s=0.05)
+    good = compare_trial(trial, sim)
+    assert good.status == "ok" and good.com_correlation > 0.95 and good.rms_com_relative < 0.1
+    np.testing.assert_allclose(good.mean_abs_period_error_s, np.mean(np.abs(good.period_error_s[1:])))
+    y = np.asarray(trial.series["com_height"], float)
+    flat = np.where(np.isfinite(y), np.nanmean(y) + np.random.default_rng(1).normal(0, 0.3e-3, y.size), np.nan)
+    data = dict(trial.series.data)
+    data["com_height"] = flat
+    bad = Trial(TimeSeries(trial.time_s, data, trial.series.events), trial.meta)
+    c = compare_trial(bad, sim)
+    assert c.status == "suspect", (c.com_correlation, c.rms_com_relative)
+    assert "correlate" in c.message or "amplitude" in c.message
+    assert c.metrics()["status"] == "suspect"
