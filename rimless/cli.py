@@ -51,7 +51,7 @@ def user_facing(func: F) -> F:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with _rules(None):
+        with _rules():
             return func(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
@@ -92,7 +92,7 @@ def _one_line(text: str) -> str:
 
 
 @contextlib.contextmanager
-def _rules(ctx: Optional[_click.Context]) -> Iterator[None]:
+def _rules() -> Iterator[None]:
     """Map what a command raises onto the CLI's exit codes and one-line messages."""
     try:
         yield
@@ -196,19 +196,19 @@ class RimlessGroup(TyperGroup):
             _adapt_command(command)
 
     def make_context(self, info_name: Optional[str], args: list[str], parent: Any = None, **extra: Any) -> Any:
-        with _rules(None):
+        with _rules():
             return super().make_context(info_name, args, parent=parent, **extra)
 
     def invoke(self, ctx: _click.Context) -> Any:
-        with _rules(ctx):
+        with _rules():
             return super().invoke(ctx)
 
 
-def walk_commands(root: _click.Command, path: tuple[str, ...] = ()) -> Iterator[_click.Command]:
+def walk_commands(root: _click.Command) -> Iterator[_click.Command]:
     """Every command of the tree under `root`, `root` included (depth first, sorted by name)."""
     yield root
     for name in sorted(getattr(root, "commands", {}) or {}):
-        yield from walk_commands(root.commands[name], (*path, name))  # type: ignore[attr-defined]
+        yield from walk_commands(root.commands[name])  # type: ignore[attr-defined]
 
 
 def _adapt_command(command: _click.Command) -> None:
