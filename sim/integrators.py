@@ -195,7 +195,8 @@ class ScipyIntegrator:
         return run
 
     def _force_dip(self, mech: Mechanics, phase: int, guards: tuple[int, ...], force_guards: list[int],
-                   hist: list, active: np.ndarray, last_step: bool, other_fired: bool, fun, solve_ivp):  # noqa: ANN001, ANN202
+                   hist: list, active: np.ndarray, last_step: bool, other_fired: bool,
+                   fun, solve_ivp):  # noqa: ANN001, ANN202
         """The earliest time at which a normal-force guard dips through zero between step ends where it is
         positive, as (t, guard index, state), or None. Checked around every discrete minimum of the force
         over the step ends (and at the phase's first and last step)."""
