@@ -56,6 +56,7 @@ class _Abort(Exception):
 
 
 MAX_NFEV = 2_000_000  # right-hand-side evaluations per phase before the reference backend gives up
+DIP_MARGIN = 0.5  # as rimless.sim.fast.rk.DIP_MARGIN: skip a force minimum the steps resolve well
 MIN_SAMPLES = 8  # dense-output samples of a normal force when looking for a dip between two solver steps
 
 
@@ -208,6 +209,9 @@ class ScipyIntegrator:
             if min(gs) <= 0.0:
                 continue
             if len(gs) == 3 and gs[0] > gs[1] < gs[2]:
+                ts = [h[0] for h in hist]
+                if _parabola_min(ts, gs) > DIP_MARGIN * gs[1]:
+                    continue  # resolved by the steps: the force stays well above zero between them
                 span = (hist[0], hist[2])
             elif len(gs) == 2 and gs[0] < gs[1]:
                 span = (hist[0], hist[1])
@@ -228,6 +232,17 @@ class ScipyIntegrator:
             if found is not None and (best is None or found < best[0]):
                 best = (found, e, sub.sol(found))
         return best
+
+
+def _parabola_min(ts: list[float], gs: list[float]) -> float:
+    """Minimum of the parabola through three (t, g) points whose middle g is below both neighbours."""
+    d1 = (gs[1] - gs[0]) / (ts[1] - ts[0])
+    d2 = (gs[2] - gs[1]) / (ts[2] - ts[1])
+    a = (d2 - d1) / (ts[2] - ts[0])
+    if not a > 0.0:
+        return -np.inf
+    t_min = 0.5 * (ts[0] + ts[1]) - d1 / (2.0 * a)
+    return gs[1] + d1 * (t_min - ts[1]) + a * (t_min - ts[0]) * (t_min - ts[1])
 
 
 def _first_dip(g_at, ta: float, tb: float) -> float | None:  # noqa: ANN001
