@@ -6,6 +6,7 @@ A backend implements `run_phase`; the hybrid logic (rimless.sim.hybrid) never de
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -94,6 +95,11 @@ class ScipyIntegrator:
         record_dt: float | None = None,
         track_dissipation: bool = False,
     ) -> PhaseRun:
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported as a failure, not a warning
+            return self._run_phase(mech, phase, y0, t0, guards, t_max, record_dt, track_dissipation)
+
+    def _run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
+                   t_max: float, record_dt: float | None, track_dissipation: bool) -> PhaseRun:
         from scipy.integrate import OdeSolution, solve_ivp
         from scipy.integrate._ivp.ivp import METHODS, find_active_events, solve_event_equation
 
@@ -106,17 +112,15 @@ class ScipyIntegrator:
             nfev += 1
             if nfev > budget:
                 raise _Abort(f"more than {budget} right-hand-side evaluations in one phase (stiff legs?)")
-            with np.errstate(over="ignore", invalid="ignore"):
-                qdd, _ = accel(mech, phase, y[:5], y[5:n])
+            qdd, _ = accel(mech, phase, y[:5], y[5:n])
             out = np.concatenate((y[5:n], qdd, [damping_power(mech, phase, y[5:n])])) if track_dissipation \
                 else np.concatenate((y[5:n], qdd))
-            if not np.all(np.isfinite(out)):
+            if not math.isfinite(float(np.sum(out))):
                 raise _Abort("non-finite state or forces (the state is too large or the dynamics singular)")
             return out
 
         def gval(code: int, y: np.ndarray) -> float:
-            with np.errstate(over="ignore", invalid="ignore"):
-                return guard_value(mech, phase, code, y[:n])
+            return guard_value(mech, phase, code, y[:n])
 
         events = [lambda _t, y, code=code: gval(code, y) for code in guards]
         dirs = np.array([DIRECTION[c] for c in guards], dtype=float)
