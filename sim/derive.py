@@ -270,8 +270,9 @@ def _reduced_function(model: str, name: str, directional: bool = False) -> str:
                  '\n    exact for any state and tangent (x_b, y_b do not enter M or dh)."""']
     else:
         lines = [f"def {name}(q, qd, p, qdd, lam):",
-                 f'    """q\'\' (5,) and lambda ({len(rows)},) of {phase_name} written into qdd and lam, from the phase\'s '
-                 'free coordinates;\n    False if the free block of M is not positive definite."""']
+                 f'    """q\'\' (5,) and lambda ({len(rows)},) of {phase_name} written into qdd and lam, '
+                 "from the phase's free coordinates;\n    False if the free block of M is not positive "
+                 'definite."""']
     lines += [ln for ln in _unpack(True, True) if ln.split("=")[0].strip() in {str(x) for x in used}]
     for sym, e in replacements:
         lines.append(f"    {sym} = {_fmt(e)}")

@@ -6,6 +6,7 @@ A backend implements `run_phase`; the hybrid logic (rimless.sim.hybrid) never de
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -56,6 +57,7 @@ class _Abort(Exception):
 
 
 MAX_NFEV = 2_000_000  # right-hand-side evaluations per phase before the reference backend gives up
+DIP_MARGIN = 0.5  # as rimless.sim.fast.rk.DIP_MARGIN: skip a force minimum the steps resolve well
 MIN_SAMPLES = 8  # dense-output samples of a normal force when looking for a dip between two solver steps
 
 
@@ -93,6 +95,11 @@ class ScipyIntegrator:
         record_dt: float | None = None,
         track_dissipation: bool = False,
     ) -> PhaseRun:
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported as a failure, not a warning
+            return self._run_phase(mech, phase, y0, t0, guards, t_max, record_dt, track_dissipation)
+
+    def _run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
+                   t_max: float, record_dt: float | None, track_dissipation: bool) -> PhaseRun:
         from scipy.integrate import OdeSolution, solve_ivp
         from scipy.integrate._ivp.ivp import METHODS, find_active_events, solve_event_equation
 
@@ -105,17 +112,15 @@ class ScipyIntegrator:
             nfev += 1
             if nfev > budget:
                 raise _Abort(f"more than {budget} right-hand-side evaluations in one phase (stiff legs?)")
-            with np.errstate(over="ignore", invalid="ignore"):
-                qdd, _ = accel(mech, phase, y[:5], y[5:n])
+            qdd, _ = accel(mech, phase, y[:5], y[5:n])
             out = np.concatenate((y[5:n], qdd, [damping_power(mech, phase, y[5:n])])) if track_dissipation \
                 else np.concatenate((y[5:n], qdd))
-            if not np.all(np.isfinite(out)):
+            if not math.isfinite(float(np.sum(out))):
                 raise _Abort("non-finite state or forces (the state is too large or the dynamics singular)")
             return out
 
         def gval(code: int, y: np.ndarray) -> float:
-            with np.errstate(over="ignore", invalid="ignore"):
-                return guard_value(mech, phase, code, y[:n])
+            return guard_value(mech, phase, code, y[:n])
 
         events = [lambda _t, y, code=code: gval(code, y) for code in guards]
         dirs = np.array([DIRECTION[c] for c in guards], dtype=float)
@@ -195,7 +200,8 @@ class ScipyIntegrator:
         return run
 
     def _force_dip(self, mech: Mechanics, phase: int, guards: tuple[int, ...], force_guards: list[int],
-                   hist: list, active: np.ndarray, last_step: bool, other_fired: bool, fun, solve_ivp):  # noqa: ANN001, ANN202
+                   hist: list, active: np.ndarray, last_step: bool, other_fired: bool,
+                   fun, solve_ivp):  # noqa: ANN001, ANN202
         """The earliest time at which a normal-force guard dips through zero between step ends where it is
         positive, as (t, guard index, state), or None. Checked around every discrete minimum of the force
         over the step ends (and at the phase's first and last step)."""
@@ -207,6 +213,9 @@ class ScipyIntegrator:
             if min(gs) <= 0.0:
                 continue
             if len(gs) == 3 and gs[0] > gs[1] < gs[2]:
+                ts = [h[0] for h in hist]
+                if _parabola_min(ts, gs) > DIP_MARGIN * gs[1]:
+                    continue  # resolved by the steps: the force stays well above zero between them
                 span = (hist[0], hist[2])
             elif len(gs) == 2 and gs[0] < gs[1]:
                 span = (hist[0], hist[1])
@@ -227,6 +236,17 @@ class ScipyIntegrator:
             if found is not None and (best is None or found < best[0]):
                 best = (found, e, sub.sol(found))
         return best
+
+
+def _parabola_min(ts: list[float], gs: list[float]) -> float:
+    """Minimum of the parabola through three (t, g) points whose middle g is below both neighbours."""
+    d1 = (gs[1] - gs[0]) / (ts[1] - ts[0])
+    d2 = (gs[2] - gs[1]) / (ts[2] - ts[1])
+    a = (d2 - d1) / (ts[2] - ts[0])
+    if not a > 0.0:
+        return -np.inf
+    t_min = 0.5 * (ts[0] + ts[1]) - d1 / (2.0 * a)
+    return gs[1] + d1 * (t_min - ts[1]) + a * (t_min - ts[0]) * (t_min - ts[1])
 
 
 def _first_dip(g_at, ta: float, tb: float) -> float | None:  # noqa: ANN001

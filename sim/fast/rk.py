@@ -262,6 +262,24 @@ _GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
 DIP_XTOL = 1e-9  # relative to the step: where the minimum of a force over a step is located
 
 
+# A discrete minimum of a force over three step ends is checked on the dense output unless the parabola
+# through the three values stays above DIP_MARGIN times the lowest of them (the force is resolved by the
+# steps, which control the error of y, so the parabola's undershoot is a safe estimate with this margin).
+DIP_MARGIN = 0.5
+
+
+@_jit
+def _parabola_min(t0, g0, t1, g1, t2, g2):
+    """Minimum of the parabola through (t0, g0), (t1, g1), (t2, g2) with g1 below both neighbours."""
+    d1 = (g1 - g0) / (t1 - t0)
+    d2 = (g2 - g1) / (t2 - t1)
+    a = (d2 - d1) / (t2 - t0)
+    if not a > 0.0:
+        return -np.inf
+    ts = 0.5 * (t0 + t1) - d1 / (2.0 * a)
+    return g1 + d1 * (ts - t1) + a * (ts - t0) * (ts - t1)
+
+
 @_jit
 def _min_on_dense(mi, phase, p, code, a, x, gx, b, t_a, h, F, y_a):
     """Brent's minimisation (golden section + parabolic interpolation) of a guard on the dense output in the
@@ -555,8 +573,9 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             if not fm.guard_needs_lambda(codes[e]) or not (g[e] > 0.0 and g_new[e] > 0.0):
                 continue
             if have_prev and g_pp[e] > g[e] and g[e] < g_new[e] and g_pp[e] > 0.0:
-                dip_prev = True
-                dip_cur = True
+                if _parabola_min(tp_old, g_pp[e], t, g[e], t_new, g_new[e]) <= DIP_MARGIN * g[e]:
+                    dip_prev = True
+                    dip_cur = True
             elif not have_prev and g[e] < g_new[e]:
                 dip_cur = True
             elif g[e] > g_new[e] and (any_active or t_hi_graze == 0.0 or t_new == t_bound):
