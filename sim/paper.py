@@ -422,7 +422,8 @@ def _write_table(table: list[dict[str, Any]], out: Path) -> list[Path]:
 
     csv = _write_csv(pd.DataFrame(table), out / "table6_headline.csv")
     md = ["| quantity | paper | ours | note |", "|---|---|---|---|"]
-    md += [f"| {r['quantity']} | {r['paper']} | {r['ours']} | {r['note']} |" for r in table]
+    cell = lambda v: str(v).replace("|", "\\|")  # noqa: E731
+    md += [f"| {cell(r['quantity'])} | {cell(r['paper'])} | {cell(r['ours'])} | {cell(r['note'])} |" for r in table]
     path = out / "table6_headline.md"
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text("\n".join(md) + "\n")
