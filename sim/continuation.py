@@ -104,10 +104,11 @@ def critical_slope(
 ) -> CriticalSlope:
     """Continue the branch through z_guess at start_slope_rad downward in slope (see module docstring).
 
-    method: "arclength", "bisection" or "auto" (arclength when the map is compiled, else bisection)."""
+    method: "arclength", "bisection" or "auto" (arclength when the map is compiled and strict_contact is off,
+    else bisection)."""
     base = pmap.params
-    if method == "auto":
-        method = "arclength" if hasattr(pmap, "evaluate") else "bisection"
+    if method == "auto":  # the arclength test functions do not include the strict-contact conditions
+        method = "arclength" if hasattr(pmap, "evaluate") and not strict_contact else "bisection"
     if method not in ("arclength", "bisection"):
         raise ValueError(f"unknown method {method!r}")
 
