@@ -150,7 +150,7 @@ class SpecialPoint:
     """A located special point: kind, where, and the test function's values on both sides of the bracket."""
 
     kind: str  # fold | period-doubling | neimark-sacker | stance-force | impulse | stall | end
-    point: BranchPoint
+    point: BranchPoint  # the bracket's end on the side the branch came from
     bracket_p: tuple[float, float]
     bracket_values: tuple[float, float]  # the test function at both ends of the final bracket
     detail: str
@@ -503,7 +503,7 @@ class ArclengthContinuation:
         lo, hi = 0.0, ds
         vlo, vhi = a.tests[kind], b.tests[kind]
         plo, phi = a.p, b.p
-        best = b
+        best = a  # the located point: the last one on the side the branch came from (e.g. still stable)
         while hi - lo > self.locate_tol:
             mid = 0.5 * (lo + hi)
             try:
@@ -516,9 +516,9 @@ class ArclengthContinuation:
             pt.arclength = a.arclength + mid
             if (v > 0) == (vlo > 0):
                 lo, vlo, plo = mid, v, pt.p
+                best = pt
             else:
                 hi, vhi, phi = mid, v, pt.p
-                best = pt
         if kind in VALIDITY_TESTS and best.facts is None:
             best.facts = self._facts(best.z, best.p)
         detail = _describe(kind, best, self.oracle.unit, self.parameter)

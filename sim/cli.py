@@ -619,7 +619,7 @@ def paper_cmd(
     scheduler: Annotated[str, typer.Option("--scheduler", metavar="local|sync|tcp://HOST:8786",
                                            help="Where the sweep's grid points run.")] = "local",
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
-                                                   "processes [one per core].")] = None,
+                                                   "processes \\[default: one per core].")] = None,
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Sweep result cache "
                                                       "[~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every sweep point.")] = False,
@@ -700,12 +700,12 @@ _SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid
 @wheel_params(exclude=("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
 def sweep_cmd(
     params: Any,
-    models: Annotated[str, typer.Option("--model", help="Models, comma-separated: er, ve.")] = "er,ve",
-    k_grid: Annotated[Optional[str], typer.Option("--k", help="Stiffness grid, N/m: START:STOP:STEP or a,b,c.")] = None,
-    c_grid: Annotated[Optional[str], typer.Option("--c", help="Damping grid, N s/m: START:STOP:STEP or a,b,c.")] = None,
-    leg_mass_grid: Annotated[Optional[str], typer.Option("--leg-mass-kg", help="Leg mass grid, kg.")] = None,
-    hub_mass_grid: Annotated[Optional[str], typer.Option("--hub-mass-kg", help="Hub mass grid, kg.")] = None,
-    mass_models: Annotated[Optional[str], typer.Option("--mass-model", help="Mass models, comma-separated "
+    models: Annotated[str, typer.Option("--model", metavar="er,ve", help="Models, comma-separated: er, ve.")] = "er,ve",
+    k_grid: Annotated[Optional[str], typer.Option("--k", metavar="START:STOP:STEP|a,b", help="Stiffness grid, N/m: START:STOP:STEP or a,b,c.")] = None,
+    c_grid: Annotated[Optional[str], typer.Option("--c", metavar="START:STOP:STEP|a,b", help="Damping grid, N s/m: START:STOP:STEP or a,b,c.")] = None,
+    leg_mass_grid: Annotated[Optional[str], typer.Option("--leg-mass-kg", metavar="START:STOP:STEP|a,b", help="Leg mass grid, kg.")] = None,
+    hub_mass_grid: Annotated[Optional[str], typer.Option("--hub-mass-kg", metavar="START:STOP:STEP|a,b", help="Hub mass grid, kg.")] = None,
+    mass_models: Annotated[Optional[str], typer.Option("--mass-model", metavar="NAME[,NAME]", help="Mass models, comma-separated "
                                                       "(eight-leg, sliding-leg, active-feet).")] = None,
     start_slope_rad: Annotated[float, typer.Option(help="Slope where the gaits are searched, rad.")] = 0.05,
     guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses in the gait search.")] = 14,
@@ -715,7 +715,7 @@ def sweep_cmd(
                                            help="Where grid points run: a local Dask cluster, this process, or "
                                                 "a running Dask scheduler.")] = "local",
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
-                                                   "processes [one per core].")] = None,
+                                                   "processes \\[default: one per core].")] = None,
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
                                                       "[~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
@@ -728,9 +728,7 @@ def sweep_cmd(
 ) -> None:
     """Sweep a parameter grid: every period-1 gait at the start slope, each branch continued down to its end.
 
-    Table columns: stable = orbitally stable at the start slope (max |eig| < 1); valid = unilateral contact
-    (stance force >= 0 in single support, impulses > 0); phi_c = critical slope of the branch (end of its
-    stable, valid part); CoT = tan(phi_c)."""
+    Table columns: stable = orbitally stable at the start slope (max |eig| < 1); valid = unilateral contact (stance force >= 0 in single support, impulses > 0); phi_c = critical slope of the branch (end of its stable, valid part); CoT = tan(phi_c)."""
     from rich.progress import Progress
 
     from rimless.sim.backend import resolve

@@ -61,6 +61,7 @@ class CriticalSlope:
     end: Any = None  # rimless.sim.arclength.SpecialPoint at the located end (arclength method)
     special_points: list[Any] = field(default_factory=list)
     map_evaluations: int = 0
+    located_to_rad: float | None = None  # width of the final bracket in slope (arclength method)
 
     @property
     def critical_slope_deg(self) -> float:
@@ -103,10 +104,11 @@ def critical_slope(
 ) -> CriticalSlope:
     """Continue the branch through z_guess at start_slope_rad downward in slope (see module docstring).
 
-    method: "arclength", "bisection" or "auto" (arclength when the map is compiled, else bisection)."""
+    method: "arclength", "bisection" or "auto" (arclength when the map is compiled and strict_contact is off,
+    else bisection)."""
     base = pmap.params
-    if method == "auto":
-        method = "arclength" if hasattr(pmap, "evaluate") else "bisection"
+    if method == "auto":  # the arclength test functions do not include the strict-contact conditions
+        method = "arclength" if hasattr(pmap, "evaluate") and not strict_contact else "bisection"
     if method not in ("arclength", "bisection"):
         raise ValueError(f"unknown method {method!r}")
 
@@ -245,6 +247,6 @@ def _by_arclength(pmap: PoincareMap, first: FixedPoint, start_slope_rad: float, 
                              np.asarray(z_guess), "arclength", None, br.special, br.map_evaluations)
     reason = {"stance-force": "infeasible", "impulse": "infeasible", "period-doubling": "loss-of-stability",
               "neimark-sacker": "loss-of-stability", "end": "solver"}.get(end.kind, end.kind)
-    return CriticalSlope(pmap.model, algorithm1, step_rad, end.p, abs(end.bracket_p[1] - end.bracket_p[0]), reason,
+    return CriticalSlope(pmap.model, algorithm1, step_rad, end.p, refine_tol_rad, reason,
                          end.detail, algorithm1_fp, branch, np.asarray(z_guess), "arclength", end, br.special,
-                         br.map_evaluations)
+                         br.map_evaluations, abs(end.bracket_p[1] - end.bracket_p[0]))

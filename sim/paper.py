@@ -304,7 +304,38 @@ def boundary_curve(row: dict[str, Any], params: dict[str, Any], backend: str, rt
             for pt in curve.points if k_range[0] - 1e-9 <= pt.mu <= k_range[1] + 1e-9]
 
 
-def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, Any]] | None = None) -> list[Path]:
+def validity_range(row: dict[str, Any], params: dict[str, Any], backend: str, rtol: float,
+                   k_range: tuple[float, float]) -> dict[str, Any]:
+    """How far in k the gait of `row` stays stable and contact-valid at its start slope: pseudo-arclength
+    continuation in k both ways with the contact facts at every point, to the first special point (a
+    stance force or impulse through 0, a fold, ...) or the end of k_range. Plain data (runs as a Dask task)."""
+    from rimless.sim.arclength import ArclengthContinuation
+    from rimless.sim.backend import make_map
+    from rimless.sim.failures import StepFailure
+
+    model = row["model"].lower()
+    base = WheelParams(**params).replace(stiffness_n_per_m=float(row["k"]), slope_rad=row["start_slope_rad"])
+    z0 = np.array([row["theta_plus_rad"], row["theta_dot_plus_rad_s"]])
+    out: dict[str, Any] = {"model": row["model"], "branch_label": row["branch_label"], "from_k": row["k"],
+                           "slope_rad": row["start_slope_rad"]}
+    for side, direction, limit in (("low", -1.0, k_range[0]), ("high", 1.0, k_range[1])):
+        cont = ArclengthContinuation(lambda q: make_map(q, model, backend=backend, rtol=rtol), base, model, "k",
+                                     facts_every=1, max_points=60)
+        try:
+            br = cont.trace(z0, direction=direction, p_min=k_range[0], p_max=k_range[1], stop_at_first_loss=True)
+        except StepFailure as err:
+            out[f"k_{side}"], out[f"k_{side}_reason"], out[f"k_{side}_detail"] = math.nan, "solver", str(err)
+            continue
+        sp = br.first_loss()
+        if sp is None:
+            out[f"k_{side}"], out[f"k_{side}_reason"], out[f"k_{side}_detail"] = limit, "grid-end", br.end_detail
+        else:
+            out[f"k_{side}"], out[f"k_{side}_reason"], out[f"k_{side}_detail"] = sp.p, sp.kind, sp.detail
+    return out
+
+
+def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, Any]] | None = None,
+               ranges: list[dict[str, Any]] | None = None) -> list[Path]:
     """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not; lines: the boundary
     curves traced by two-parameter continuation."""
     import pandas as pd
@@ -333,6 +364,13 @@ def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, An
         ax.plot(nv["k"], nv["cot"], "o", mfc="white", color=col, ms=6)
     rg = frame[frame.model == "rigid"].sort_values("k")
     ax.plot(rg["k"], rg["cot"], "k--", label=f"rigid ({rg['critical_slope_deg'].iloc[0]:.3f} deg)" if len(rg) else "rigid")
+    for v in ranges or []:
+        for side in ("low", "high"):
+            if v.get(f"k_{side}_reason") in ("stance-force", "impulse"):
+                col = colours.get(v["branch_label"], "C5")
+                ax.axvline(v[f"k_{side}"], color=col, ls="-.", lw=1,
+                           label=f"{'ER' if v['model'] == 'ER' else 'VE ' + v['branch_label']} gait loses contact validity "
+                                 f"at k = {v[f'k_{side}']:.0f} ({v[f'k_{side}_reason']})")
     ax.plot([], [], "o", color="0.4", label="contact-valid")
     ax.plot([], [], "o", mfc="white", color="0.4", label="violates unilateral contact")
     ax.set_xlabel("leg stiffness k (N/m)")
@@ -422,7 +460,8 @@ def _write_table(table: list[dict[str, Any]], out: Path) -> list[Path]:
 
     csv = _write_csv(pd.DataFrame(table), out / "table6_headline.csv")
     md = ["| quantity | paper | ours | note |", "|---|---|---|---|"]
-    md += [f"| {r['quantity']} | {r['paper']} | {r['ours']} | {r['note']} |" for r in table]
+    cell = lambda v: str(v).replace("|", "\\|")  # noqa: E731
+    md += [f"| {cell(r['quantity'])} | {cell(r['paper'])} | {cell(r['ours'])} | {cell(r['note'])} |" for r in table]
     path = out / "table6_headline.md"
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text("\n".join(md) + "\n")
@@ -456,7 +495,7 @@ def _index(out: Path, table: list[dict[str, Any]], params: WheelParams, timings:
         parts.append("<tr>" + "".join(f"<td>{html.escape(str(r[c]))}</td>" for c in ("quantity", "paper", "ours", "note"))
                      + "</tr>")
     parts.append("</table><p><a href='table6_headline.csv'>table6_headline.csv</a> · "
-                 "<a href='sweep.csv'>sweep.csv</a> (every branch) · <a href='sweep-points.csv'>sweep-points.csv</a></p>")
+                 "<a href='table6_valid_k_ranges.csv'>table6_valid_k_ranges.csv</a> · <a href='sweep.csv'>sweep.csv</a> (every branch) · <a href='sweep-points.csv'>sweep-points.csv</a></p>")
     parts.append("<p>" + ", ".join(f"{k} {v:.1f}" + ("" if k.startswith("load") else " s") for k, v in timings.items())
                  + f" on {os.cpu_count()} cores</p></body></html>")
     path = out / "index.html"
@@ -500,7 +539,7 @@ def run_paper(
             import os
 
             cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
+                                   dashboard_address=":0", silence_logs=40)
             client = Client(cluster)
         else:
             try:
@@ -525,6 +564,8 @@ def run_paper(
         k_range = (min(ks), max(ks))
         futures = ([client.submit(boundary_curve, r, params.to_dict(), backend, rtol, k_range, pure=False)
                     for r in starts] if client is not None else [])
+        vfutures = ([client.submit(validity_range, r, params.to_dict(), backend, rtol, k_range, pure=False)
+                     for r in starts] if client is not None else [])
         say("typical gaits and forces")
         trajs = _typical(params, backend, rtol)
         res.files += figure_typical_gaits(trajs, out)
@@ -537,8 +578,10 @@ def run_paper(
         say("boundary curves over k (two-parameter continuation)")
         if client is not None:
             curves = [row for f in futures for row in f.result()]
+            ranges = [f.result() for f in vfutures]
         else:
             curves = [row for r in starts for row in boundary_curve(r, params.to_dict(), backend, rtol, k_range)]
+            ranges = [validity_range(r, params.to_dict(), backend, rtol, k_range) for r in starts]
         res.timings_s["boundary_curves_wait"] = time.perf_counter() - t1 - res.timings_s["gaits"] - res.timings_s["energy"]
     finally:
         if client is not None:
@@ -548,8 +591,19 @@ def run_paper(
     t3 = time.perf_counter()
     say("eigenvalue map, cost of transport and the headline table")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
-    res.files += figure_cot(cot_rows(sw.rows, params), out, curves)
+    res.files += figure_cot(cot_rows(sw.rows, params), out, curves, ranges)
     res.table = headline_table(sw.rows, [], params)
+    for v in ranges:
+        name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
+        res.table.append({"quantity": f"{name} gait stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg "
+                                      f"for k (N/m)", "paper": "-",
+                          "ours": f"{v['k_low']:.1f} ({v['k_low_reason']}) to {v['k_high']:.1f} ({v['k_high_reason']})",
+                          "note": "continuation in k from the gait at k = "
+                                  f"{v['from_k']:g}; stance-force = its single-support stance force falls through 0"})
+    if ranges:
+        import pandas as pd
+
+        res.files.append(_write_csv(pd.DataFrame(ranges), out / "table6_valid_k_ranges.csv"))
     res.files += _write_table(res.table, out)
     res.timings_s["figures"] = time.perf_counter() - t3
     res.timings_s["total"] = time.perf_counter() - t0

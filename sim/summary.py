@@ -131,12 +131,14 @@ def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
         "reason": cs.reason,
         "detail": cs.detail,
         "definition": "smallest slope of the followed branch with a stable, valid period-1 gait, located to "
-        f"{cs.refine_tol_rad:.3g} rad",
+        f"{cs.located_to_rad if cs.located_to_rad is not None else cs.refine_tol_rad:.3g} rad "
+        f"(asked: {cs.refine_tol_rad:g} rad)",
         "method": cs.method,
         "algorithm1_slope_rad": cs.algorithm1_slope_rad,
         "algorithm1_step_rad": cs.algorithm1_step_rad,
         "algorithm1_definition": "last slope where Newton converged, continuing down from the start slope in fixed steps",
         "refine_tol_rad": cs.refine_tol_rad,
+        "located_to_rad": cs.located_to_rad if cs.located_to_rad is not None else cs.refine_tol_rad,
         "map_evaluations": cs.map_evaluations,
         "branch": {
             "start_slope_rad": cs.branch[0].slope_rad,

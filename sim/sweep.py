@@ -220,7 +220,7 @@ def run_sweep(
         if client is None:
             if scheduler == "local":
                 n = workers or os.cpu_count() or 1
-                own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                            silence_logs=40)
                 client = Client(own_cluster)
             elif scheduler.startswith("tcp://") or scheduler.startswith("tls://"):

@@ -74,3 +74,9 @@ def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
     reduction = next(r for r in data["table"] if r["quantity"].startswith("ER CoT reduction vs VE at k = 2500"))
     assert "fast" in reduction["ours"] and "medium" in reduction["ours"]  # which branch reproduces 16.13 %
     assert "valid" in reduction["ours"]
+    # the VE fast gait's valid range in k ends where its single-support stance force falls through 0
+    fast = next(r for r in data["table"] if r["quantity"].startswith("VE fast gait stable and contact-valid"))
+    assert "(stance-force)" in fast["ours"]
+    k_end = float(fast["ours"].split(" to ")[1].split(" ")[0])
+    assert k_end == pytest.approx(2551, abs=2)
+    assert (out / "table6_valid_k_ranges.csv").exists()

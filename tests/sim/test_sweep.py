@@ -30,7 +30,7 @@ def cluster_client(request):
     """A real dask.distributed LocalCluster of worker processes, closed after the tests."""
     from dask.distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=request.param, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=request.param, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=40)
     client = Client(cluster)
     yield client
