@@ -231,7 +231,7 @@ def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: 
             typer.echo(f"refused: {r.reason}", err=True)
         for c in res.comparisons:
             if c.status != "ok":
-                typer.echo(f"not compared: {c.file}: {c.message}", err=True)
+                typer.echo(f"{'' if c.status == 'suspect' else 'not compared: '}{c.file}: {c.message}", err=True)
         typer.echo(f"report: {res.report_html}")
     return res
 
