@@ -5,7 +5,8 @@ L0``) and, per trial, the release speed theta' at the rigid-touchdown state thet
 the first measured impact (as in `rimless.analysis.compare`). Residuals, per trial:
 
 - step periods: simulated minus measured, for every consecutive measured period, divided by sigma_T;
-- CoM height: simulated minus measured at every valid frame between the first and last measured impact,
+- CoM height: simulated minus measured at every valid frame between the first and last measured impact
+  (except within `CUSP_GUARD_S` of an impact, where the curve has a cusp),
   after the trial's constant height offset (profiled out when the heights are measured from the impact line)
   and its time shift (the lag of the CoM-height minima behind the touchdown, taken from the Table 1
   comparison and kept fixed), divided by sigma_h.
@@ -39,9 +40,10 @@ __all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_s
 FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/m"), "m_H": ("hub_mass_kg", "kg"),
               "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
-NULL_SINGULAR_RATIO = 1e-6
+NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
 ALPHA_RAD = math.pi / 4
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
+CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of the full least squares
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
 
@@ -92,6 +94,11 @@ def _trial_data(trial: Any, name: str) -> _TrialData | str:
             pass
     t_last = float(np.sum(periods))
     win = valid & (t >= 0) & (t <= t_last)
+    # leave out the samples next to an impact: the CoM height has a cusp there, and a sample whose side of the
+    # simulated cusp flips with a parameter makes the cost non-smooth (the periods carry that timing)
+    impacts_rel = np.concatenate([[0.0], np.cumsum(periods)])
+    near = np.min(np.abs(t[:, None] - impacts_rel[None, :]), axis=1) < CUSP_GUARD_S
+    win &= ~near
     ref = str(getattr(trial.meta, "com_height_reference", ""))
     return _TrialData(name, float(trial.meta.slope_deg), periods, t[win], y[win], ref.startswith("slope plane"))
 
@@ -149,8 +156,6 @@ def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
 
     Frequencies, not periods: a step the simulation does not reach (it stalled) has frequency 0, the limit of
     a period that grows without bound, so the cost stays continuous across the stall boundary."""
-    from .compare import _clean_curve
-
     n = d.periods_s.size
     g = sim.walk(params, d.slope_deg, w, n + 2, with_com)
     if with_com and g.failure is None and len(g.steps) > 1 and d.t_s.size:
@@ -167,11 +172,34 @@ def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
     if len(g.steps) < 2:
         return rp, np.full(d.t_s.size, float(np.mean(d.com_m)) if d.from_plane else 0.0)
     t0 = g.steps[1].t_start_s
-    st, sy = _clean_curve(np.asarray(g.table["t_s"], float) - t0, np.asarray(g.table["com_height_normal_m"], float))
     tt = d.t_s - shift_s
-    s = np.interp(tt, st, sy)  # held at the end values outside the simulated walk (a stall)
+    s = _smooth_curve(g, t0, tt)
     off = 0.0 if d.from_plane else float(np.mean(s - d.com_m))
     return rp, s - (d.com_m + off)
+
+
+def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
+    """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
+    impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
+    interpolation on the record grid puts kinks into the cost that finite differences mistake for
+    information). Held at the end values outside the simulated walk (a stall)."""
+    from scipy.interpolate import CubicSpline
+
+    from .compare import _clean_curve
+
+    t_all = np.asarray(g.table["t_s"], float) - t0
+    y_all = np.asarray(g.table["com_height_normal_m"], float)
+    step = np.asarray(g.table["step"])
+    st, sy = _clean_curve(t_all, y_all)
+    out = np.interp(tt, st, sy)
+    for k in np.unique(step):
+        ts, ys = _clean_curve(t_all[step == k], y_all[step == k])
+        if ts.size < 4:
+            continue
+        m = (tt >= ts[0]) & (tt <= ts[-1])
+        if m.any():
+            out[m] = CubicSpline(ts, ys)(tt[m])
+    return out
 
 
 @dataclass
@@ -229,39 +257,49 @@ def _total(rows: list[dict[str, Any]], key: str) -> float:
 
 
 def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
-    """From the Jacobian of the scaled residuals (columns in scaled units): standard errors of the first
-    n_global parameters (in their units, ``scale`` per column), their correlation, and identifiability.
+    """From the Jacobian of the scaled residuals (the first n_global columns are the globals, in units of
+    ``scale``): their standard errors (in their units), correlation and identifiability.
 
-    A null direction of J (singular value below NULL_SINGULAR_RATIO of the largest, or an all-zero column)
-    marks the globals that take part in it as not identifiable."""
-    ncol = J.shape[1]
-    u, s, vt = np.linalg.svd(J, full_matrices=False)
-    smax = float(s[0]) if s.size else 0.0
-    tiny = s <= NULL_SINGULAR_RATIO * max(smax, 1e-300)
-    inv_s2 = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, s) ** 2)
-    cov = (vt.T * inv_s2) @ vt  # pseudo-inverse of J^T J
-    flat = np.zeros(ncol, bool)
+    The information about the globals is the Schur complement S = F_gg - F_gl F_ll^-1 F_lg of F = J^T J (the
+    per-trial unknowns profiled out). Normalised to unit diagonal, an eigenvalue below `NULL_EIGEN` is a flat
+    direction of the cost (a parameter, or a combination, the data do not see: finite differences leave it
+    slightly above zero); every global taking part in it, and every global whose column is zero, is not
+    identifiable and gets an infinite standard error."""
+    F = J.T @ J
+    g, l_ = slice(0, n_global), slice(n_global, F.shape[0])
+    S = F[g, g].copy()
+    if F.shape[0] > n_global:
+        S -= F[g, l_] @ np.linalg.pinv(F[l_, l_]) @ F[l_, g]
+    dS = np.clip(np.diag(S), 0.0, None)
+    col = np.linalg.norm(J[:, :n_global], axis=0)
+    zero = (dS <= 1e-12 * max(float(np.max(np.diag(F))), 1e-300)) | (col == 0)
+    flat = zero.copy()
+    ok_idx = np.nonzero(~zero)[0]
     notes = [""] * n_global
-    for k in np.nonzero(tiny)[0]:
-        part = np.abs(vt[k]) > 0.1
-        flat |= part
-    col_norm = np.linalg.norm(J, axis=0)
-    flat |= col_norm <= NULL_SINGULAR_RATIO * max(col_norm.max(initial=0.0), 1e-300)
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale
+    if ok_idx.size:
+        d = np.sqrt(dS[ok_idx])
+        R = S[np.ix_(ok_idx, ok_idx)] / np.outer(d, d)
+        w, V = np.linalg.eigh(R)
+        for k in np.nonzero(w < NULL_EIGEN)[0]:
+            vu = V[:, k] / d  # the flat direction in the parameters' own (relative) units
+            vu /= np.max(np.abs(vu))
+            flat[ok_idx[np.abs(vu) > 0.05]] = True
+    cov = np.full((n_global, n_global), np.nan)
+    if ok_idx.size:
+        good = np.nonzero(~flat)[0]
+        if good.size:
+            cov[np.ix_(good, good)] = np.linalg.inv(S[np.ix_(good, good)])
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale[:n_global]
     se = np.where(flat, np.inf, se)
-    g = slice(0, n_global)
-    cg = cov[g, g]
-    d = np.sqrt(np.clip(np.diag(cg), 1e-300, None))
-    corr = cg / np.outer(d, d)
-    corr[flat[:n_global], :] = np.nan
-    corr[:, flat[:n_global]] = np.nan
+    dd = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(dd, dd)
     ok = []
     for i in range(n_global):
-        if flat[i]:
-            notes[i] = "flat cost: the data do not change when it changes (alone or with the others)"
-            ok.append(False)
-        else:
-            ok.append(True)
+        if zero[i]:
+            notes[i] = "flat cost: the data do not change when it changes"
+        elif flat[i]:
+            notes[i] = "flat cost along a combination with other parameters: only the combination is seen"
+        ok.append(not flat[i])
     return se, corr, ok, notes
 
 
@@ -395,7 +433,7 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
         p = params_of(xg)
         return np.concatenate([trial_res(p, i, ws[i], sh[i]) for i in range(n_t)])
 
-    def jac(u: np.ndarray) -> np.ndarray:
+    def jac(u: np.ndarray, central: bool = False) -> np.ndarray:
         """Forward differences: a global column needs every trial, a trial's release and shift only that trial
         (the shift costs no simulation: the walk is cached and only the interpolation moves)."""
         xg, ws, sh = unpack(u)
@@ -407,8 +445,14 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
             xg2 = xg.copy()
             xg2[j] += h * gscale[j]
             p2 = params_of(xg2)
+            xg3 = xg.copy()
+            xg3[j] -= h * gscale[j]
+            p3 = params_of(xg3) if central else None
             for i in range(n_t):
-                J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - r0[i]) / h
+                if p3 is not None:
+                    J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - trial_res(p3, i, ws[i], sh[i])) / (2 * h)
+                else:
+                    J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - r0[i]) / h
         for i in range(n_t):
             h = 1e-5
             J[offs[i]:offs[i + 1], n_g + i] = (trial_res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
@@ -453,7 +497,7 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
             rhos.append(float(np.corrcoef(rh[:-1], rh[1:])[0, 1]))
     rho = float(np.clip(np.mean(rhos), 0.0, 0.95)) if rhos else 0.0
     sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
-    J = jac(u)
+    J = jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
     cost_cal = float(np.sum(fun(u) ** 2))
     se, corr, ok, notes = least_squares_report(J, n_g, np.concatenate([gscale, np.ones(2 * n_t)]))
     xg, ws, sh = unpack(u)

@@ -340,7 +340,8 @@ def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: 
             typer.echo(f"refused: {r.reason}", err=True)
         for c in res.comparisons:
             if c.status != "ok":
-                typer.echo(f"not compared: {shown_path(c.file)}: {c.message}", err=True)
+                typer.echo(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}",
+                           err=True)
         typer.echo(f"report: {shown_path(res.report_html)}")
     return res
 

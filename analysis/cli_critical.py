@@ -108,12 +108,12 @@ def critical_slope_cmd(
 ) -> None:
     """Critical slope from trials (verdict per trial from its return map) beside the model's.
 
-    Per trial, the step-to-step return map of the step periods decides; across trials: the bracket, a
-    logistic fit of P(sustained) against slope, and the slope where the fitted fixed point disappears.
+    Verdicts from the step-to-step return map of the step periods: sustained, decaying or undetermined.
 
-    Verdicts: sustained (the return map converges to a gait), decaying (it loses speed every step towards a
-    stall, or stalled), undetermined (too few steps, or the fixed point cannot be told from the stall).
-    e* is the fitted gait's squared angular speed over the stance foot, rad²/s² (0 = stall)."""
+    Estimates: the bracket, a logistic P(sustained), the slope where the fitted gaits reach the stall.
+
+    e* is the fitted gait's squared angular speed over the stance foot, rad²/s² (0 = stall).
+    """
     from rich.console import Console
     from rich.progress import Progress
 
@@ -210,9 +210,10 @@ def calibrate_cmd(
 ) -> None:
     """Calibrate the model (c, optionally k ...) on the trials' step periods and CoM height.
 
-    Least squares over all trials together (one release speed and time shift per trial), with 1-sigma
-    uncertainties from the Jacobian, correlations, identifiability, residuals against the Table 1 model and
-    the calibrated model's critical slope. Uses the compiled fast path; a progress bar runs on stderr."""
+    Least squares over all trials (a release speed and a time shift per trial), 1-sigma uncertainties.
+
+    Also: correlations, identifiability, residuals against Table 1, the calibrated critical slope.
+    """
     from rich.console import Console
     from rich.progress import Progress
 

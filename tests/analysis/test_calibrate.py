@@ -32,9 +32,7 @@ def test_recovers_damping_within_its_uncertainty(noisy_trials):
     res = calibrate(noisy_trials, [t.meta.source_file for t in noisy_trials], ["c"], progress=calls.append)
     (c,) = res.params
     assert c.identifiable
-    # within 3 standard errors: the CoM block alone lands about 2 se high with marker noise (periods alone do
-    # not; noise-free trials give c to 4e-5), a small estimator bias that is reported, not hidden
-    assert abs(c.value - C_TRUE) <= 3.0 * c.se, (c.value, c.se)
+    assert abs(c.value - C_TRUE) <= 1.96 * c.se, (c.value, c.se)  # inside the reported 95 % interval
     assert c.se < 0.05  # and the interval is informative (Table 1's 8 is far outside)
     s = res.summary()
     # the calibrated model explains the data to the noise (0.3 mm, 0.5 ms per impact); Table 1 does not
@@ -49,7 +47,7 @@ def test_parameter_without_effect_is_not_identifiable():
     J = rng.normal(size=(50, 3))
     J[:, 1] = 0.0  # no effect at all
     se, corr, ok, notes = least_squares_report(J, 2, np.ones(3))
-    assert ok == [True, False] and np.isinf(se[1]) and "flat" in notes[1]
+    assert ok == [True, False] and np.isinf(se[1]) and "flat" in notes[1] and np.isfinite(se[0])
     J2 = rng.normal(size=(50, 3))
     J2[:, 1] = 2.0 * J2[:, 0]  # only their combination matters
     se2, _, ok2, _ = least_squares_report(J2, 2, np.ones(3))

@@ -252,6 +252,15 @@ def test_demo(tmp_path):
     assert abs(value - crit) < 0.1, line
     assert "model critical slope, ER:" in res.stdout and "calibrated c:" in res.stdout
     assert 'id="critical-values"' in page and "critical_slope.png" in page and "Calibration" in page
+    refs = _Refs()
+    refs.feed(page)
+    assert "critical_slope.png" in refs.imgs
+    for img in refs.imgs:  # every figure the page shows exists, decodes, at print resolution
+        from PIL import Image
+
+        with Image.open(out / img) as im:
+            im.load()
+            assert im.info["dpi"][0] >= 149.5 and im.size[0] > 800
     if shutil.which("chromium") or shutil.which("chromium-browser"):
         _screenshot_has_content(out / "report.html", tmp_path / "shot.png")
 
