@@ -341,6 +341,9 @@ def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _on_grid(arr: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """``arr`` rows on the full frame grid (NaN at missing frames); ``arr`` itself when no frame is missing."""
+    if row.size == arr.shape[0] and (row.size == 0 or (row[0] == 0 and row[-1] == row.size - 1)):
+        return arr  # rows are 0..n-1 in order (frames strictly increase), nothing to place
     out = np.full((row.size,) + arr.shape[1:], np.nan)
     ok = row >= 0
     out[ok] = arr[row[ok]]
@@ -527,11 +530,12 @@ def build_trial(
     if rot is not None and axis is not None:
         win = np.zeros(time_s.size, bool)
         win[motion.release_index:i_last + 1] = True
-        win &= ~np.isnan(rot).any(axis=(1, 2))
+        u = axis @ rot  # (n, 3): the world wheel axis in the body frame, R^T axis
+        win &= ~np.isnan(u).any(axis=1)
         if win.any():
-            a_body = np.einsum("nji,j->ni", rot[win], axis).mean(axis=0)
+            a_body = u[win].mean(axis=0)
             a_body /= np.linalg.norm(a_body)
-            cos_t = np.abs(np.einsum("nij,j->ni", rot, a_body) @ axis)
+            cos_t = np.abs(u @ a_body)  # = |axis . (R a_body)|
             tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
     progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
     from .steps import noise_sigma
