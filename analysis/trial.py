@@ -429,7 +429,8 @@ def build_trial(
         if np.isnan(pose).all():
             raise TrialRefused(f"{vf.path}: object {obj!r} has no values (never tracked)")
         rot = rotations_from_angles(pose[:, :3], orientation)
-        trans = pose[:, 3:]
+        trans = pose[:, 3:].copy()
+        del pose  # the angles are in ``rot`` now
         what = "object origin"
         units = {c.component: c.file_unit for c in sec.columns if c.group == obj}
     else:
@@ -447,6 +448,7 @@ def build_trial(
             raise TrialRefused(f"{vf.path}: {err}") from None
         trans = est0.hub_m
         rot = est0.rotation
+        del est0, pts
         what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
     _check_jumps(vf.path, sec, time_s, trans, row)
@@ -463,6 +465,7 @@ def build_trial(
         est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
+        del est
     else:
         hub_raw, offset, residual = trans, None, None
         hub_source = "single marker taken as the hub" if obj is None else "object origin"
@@ -476,8 +479,12 @@ def build_trial(
             warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
                             "rigid on the wheel, or the wheel does not roll in one plane")
 
+    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end; the rotations are freed.
+    u = axis @ rot if rot is not None and axis is not None else None
+    del rot
     max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
     hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
+    del hub_raw, trans
     if angle is not None:
         angle, _ = fill_short_gaps(angle, max_gap_frames)
     gap = np.isnan(hub).any(axis=1)
@@ -507,6 +514,7 @@ def build_trial(
     elif slope_deg is None:
         notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
                      "impact line)")
+    del hub_fit, y, idx
     hub_slope = frame.to_slope(hub)
     com = hub_slope[:, 1].copy()
     if leg_length_m is not None:
@@ -527,10 +535,9 @@ def build_trial(
         i_last = motion.end_index
     window_s = (t_rel, float(steps.impact_time_s[-1]) if steps.impact_time_s.size else t_end)
     tilt = None
-    if rot is not None and axis is not None:
+    if u is not None:
         win = np.zeros(time_s.size, bool)
         win[motion.release_index:i_last + 1] = True
-        u = axis @ rot  # (n, 3): the world wheel axis in the body frame, R^T axis
         win &= ~np.isnan(u).any(axis=1)
         if win.any():
             a_body = u[win].mean(axis=0)

@@ -232,15 +232,14 @@ def read_vicon_csv(path: str | Path) -> ViconFile:
         raw = p.read_bytes()
     except OSError as err:
         raise ViconCsvError(str(p), None, None, "unreadable", f"cannot read the file ({err.strerror})") from None
-    return parse_vicon_bytes(raw, str(p))
+    text, encoding, line_ending = _decode(raw)
+    source = _ByteSource.of(raw, p)  # newline offsets; the data blocks are read back from the file
+    del raw  # only the text stays in memory while the blocks are parsed
+    return _parse(text, str(p), encoding, line_ending, source)
 
 
-def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
-    """Parse the bytes of a Vicon CSV export (see `read_vicon_csv`).
-
-    The header rows are read from the decoded text; the numeric data blocks are read by pandas' C parser
-    straight from ``raw`` (in chunks, into preallocated arrays), so no second copy of the file is made.
-    """
+def _decode(raw: bytes) -> tuple[str, str, str]:
+    """(text with LF line ends, encoding, line ending of the file)."""
     encoding = "utf-8"
     try:
         text = raw.decode("utf-8-sig")
@@ -250,9 +249,63 @@ def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
     line_ending = _line_ending(text)
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
-    # Data rows are located in ``raw`` by line number: possible when every CR is part of a CRLF.
-    lines_match = b"\r" not in raw or raw.count(b"\r") == raw.count(b"\r\n")
-    return _parse(text, name, encoding, line_ending, raw if lines_match else None)
+    return text, encoding, line_ending
+
+
+class _ByteSource:
+    """The bytes of a file whose lines are the lines of its decoded text (every CR is part of a CRLF):
+    newline offsets, and byte ranges read from memory or from the file."""
+
+    def __init__(self, newlines: np.ndarray, size: int, raw: bytes | None, path: Path | None) -> None:
+        self.newlines, self.size, self.raw, self.path = newlines, size, raw, path
+
+    @classmethod
+    def of(cls, raw: bytes, path: Path | None = None) -> _ByteSource | None:
+        """Newline offsets of ``raw`` (found in slices: no file-sized temporary); keeps ``raw`` when no path
+        is given. None when line numbers in ``raw`` differ from the text's (a lone CR)."""
+        if b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n"):
+            return None
+        parts = []
+        step = 1 << 24
+        for off in range(0, len(raw), step):
+            chunk = np.frombuffer(raw, np.uint8, count=min(step, len(raw) - off), offset=off)
+            parts.append(np.flatnonzero(chunk == 10) + off)
+        nl = np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        return cls(nl, len(raw), raw if path is None else None, path)
+
+    def line_start(self, line0: int) -> int:
+        """Byte offset of the start of 0-based line ``line0`` (the size past the last line)."""
+        if line0 <= 0:
+            return 0
+        return int(self.newlines[line0 - 1]) + 1 if line0 - 1 < self.newlines.size else self.size
+
+    def stream(self, a: int, b: int) -> io.RawIOBase:
+        """Bytes ``a:b`` as a binary stream (no copy of the range)."""
+        if self.raw is not None:
+            return _ViewReader(memoryview(self.raw)[a:b])
+        f = open(self.path, "rb")  # noqa: SIM115 - closed by _FileRange
+        return _FileRange(f, a, b)
+
+    def counts(self, sub: bytes, spans: list[tuple[int, int]]) -> list[int]:
+        """``sub`` occurrences in each byte span."""
+        if self.raw is not None:
+            return [self.raw.count(sub, a, b) for a, b in spans]
+        out = []
+        with open(self.path, "rb") as f:
+            for a, b in spans:
+                f.seek(a)
+                out.append(f.read(b - a).count(sub))
+        return out
+
+
+def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
+    """Parse the bytes of a Vicon CSV export (see `read_vicon_csv`).
+
+    The header rows are read from the decoded text; the numeric data blocks are read by pandas' C parser
+    straight from ``raw`` (in chunks, into preallocated arrays), so no second copy of the file is made.
+    """
+    text, encoding, line_ending = _decode(raw)
+    return _parse(text, name, encoding, line_ending, _ByteSource.of(raw))
 
 
 def parse_vicon_text(text: str, name: str = "<text>", *, encoding: str = "utf-8") -> ViconFile:
@@ -269,7 +322,7 @@ def _line_ending(text: str) -> str:
     return "\r\n" if "\r\n" in text else ("\r" if "\r" in text else "\n")
 
 
-def _parse(text: str, name: str, encoding: str, line_ending: str, raw: bytes | None) -> ViconFile:
+def _parse(text: str, name: str, encoding: str, line_ending: str, raw: _ByteSource | None) -> ViconFile:
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
         raise ViconCsvError(name, line, None, "binary", "the file holds NUL bytes: it is not a CSV text file")
@@ -297,12 +350,11 @@ def _detect_delimiter(text: str) -> str:
 class _Parser:
     """Walks the structural lines of a file; data blocks are parsed in bulk."""
 
-    def __init__(self, text: str, name: str, raw: bytes | None = None) -> None:
+    def __init__(self, text: str, name: str, raw: _ByteSource | None = None) -> None:
         self.text = text
         self.name = name
         #: The file's bytes, whose lines are the lines of ``text`` (or None: blocks are encoded from ``text``).
         self.raw = raw
-        self._newlines: np.ndarray | None = None
         self.delim = _detect_delimiter(text)
         self.decimal = "."
         if self.delim == ";":
@@ -491,24 +543,20 @@ class _Parser:
         if rows.size == 0:
             return
         delim = self.delim.encode()
-        line_start = self.line_starts
-        if line_start is not None:
-            data = self.raw
+        rows_l = rows.tolist()
+        if self.raw is not None:
             base = data_line - 1  # 0-based line of block row 0
-            def span(r: int) -> tuple[int, int]:
-                a = line_start(base + r)
-                b = line_start(base + r + 1) - 1
-                return a, b
+            ls = self.raw.line_start
+            n_delims = self.raw.counts(delim, [(ls(base + r), ls(base + r + 1) - 1) for r in rows_l])
         else:
             data = self.text[start:end].encode("utf-8", "surrogatepass")
             nl = np.flatnonzero(np.frombuffer(data, np.uint8) == 10)
             starts = np.concatenate([[0], nl + 1])
-            def span(r: int) -> tuple[int, int]:
-                return int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size else len(data)
+            n_delims = [data.count(delim, int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size
+                                   else len(data)) for r in rows_l]
         errs = []
-        for r in rows.tolist():
-            a, b = span(r)
-            n_cells = data.count(delim, a, b) + 1
+        for r, n_delim in zip(rows_l, n_delims):
+            n_cells = n_delim + 1
             if n_cells < width and n_cells not in bounds:
                 errs.append(self.err(data_line + int(r), n_cells + 1, "missing-cell",
                                      f"section {kind!r}: the row has {n_cells} cells and ends inside a "
@@ -518,29 +566,6 @@ class _Parser:
                     break
         if errs:
             raise self._collect(errs)
-
-    @property
-    def line_starts(self):
-        """A function: 0-based line number -> byte offset of its start in ``raw`` (len(raw) past the end);
-        None without ``raw``. Newline offsets are found once, in slices, so no file-sized temporary is made."""
-        if self.raw is None:
-            return None
-        if self._newlines is None:
-            raw = self.raw
-            parts = []
-            step = 1 << 24
-            for off in range(0, len(raw), step):
-                chunk = np.frombuffer(raw, np.uint8, count=min(step, len(raw) - off), offset=off)
-                parts.append(np.flatnonzero(chunk == 10) + off)
-            self._newlines = np.concatenate(parts) if parts else np.zeros(0, np.int64)
-        nl, size = self._newlines, len(self.raw)
-
-        def start(line0: int) -> int:
-            if line0 <= 0:
-                return 0
-            return int(nl[line0 - 1]) + 1 if line0 - 1 < nl.size else size
-
-        return start
 
     @staticmethod
     def _collect(errs: list[ViconCsvError]) -> ViconCsvError:
@@ -599,10 +624,9 @@ class _Parser:
         """
         import pandas as pd
 
-        line_start = self.line_starts
-        if line_start is not None:
-            a, b = line_start(data_line - 1), line_start(data_line - 1 + n_rows)
-            source: io.RawIOBase = _ViewReader(memoryview(self.raw)[a:b])
+        if self.raw is not None:
+            a, b = self.raw.line_start(data_line - 1), self.raw.line_start(data_line - 1 + n_rows)
+            source: io.RawIOBase = self.raw.stream(a, b)
         else:
             source = io.BytesIO(self.text[start:end].encode("utf-8", "surrogatepass"))
         lead = np.empty((n_rows, first_data))
@@ -635,6 +659,8 @@ class _Parser:
                         k += m
         except (ValueError, pd.errors.ParserError, pd.errors.ParserWarning):
             return None
+        finally:
+            source.close()
         if k != n_rows:
             return None
         return lead, data, extra_at, np.concatenate(short) if short else np.zeros(0, np.int64)
@@ -742,6 +768,27 @@ class _ViewReader(io.RawIOBase):
         buffer[:n] = self._view[self._pos:self._pos + n]
         self._pos += n
         return n
+
+
+class _FileRange(io.RawIOBase):
+    """Bytes ``a:b`` of an open binary file, as a stream (closes the file when closed)."""
+
+    def __init__(self, f: io.BufferedReader, a: int, b: int) -> None:
+        super().__init__()
+        self._f, self._left = f, b - a
+        f.seek(a)
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer) -> int:  # type: ignore[override]
+        n = self._f.readinto(memoryview(buffer)[:min(len(buffer), self._left)])
+        self._left -= n
+        return n
+
+    def close(self) -> None:
+        self._f.close()
+        super().close()
 
 
 def _clean_name(name: str) -> tuple[str, str]:
