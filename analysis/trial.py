@@ -288,23 +288,26 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
     Returns (filled copy, bool mask of filled rows). Longer runs and runs at the ends stay NaN.
     """
     v = np.array(values, dtype=np.float64, copy=True)
-    bad = np.isnan(v.reshape(v.shape[0], -1)).any(axis=1)
-    filled = np.zeros(v.shape[0], bool)
+    n = v.shape[0]
+    bad = np.isnan(v.reshape(n, -1)).any(axis=1)
+    filled = np.zeros(n, bool)
     if max_gap_frames <= 0 or not bad.any() or bad.all():
         return v, filled
-    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    edges = np.diff(bad.view(np.int8), prepend=np.int8(0), append=np.int8(0))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    short = (starts > 0) & (stops < v.shape[0]) & (stops - starts <= max_gap_frames)
+    del edges
+    short = (starts > 0) & (stops < n) & (stops - starts <= max_gap_frames)
     if not short.any():
         return v, filled
-    run_id = np.cumsum(edges[:-1] == 1)  # 1-based run number at each row (meaningful where bad)
-    fill = bad & short[np.clip(run_id - 1, 0, starts.size - 1)]
-    rows = np.flatnonzero(fill)
-    good = np.flatnonzero(~bad)
-    # linear interpolation between the valid rows on each side (np.interp picks exactly those two)
-    flat = v.reshape(v.shape[0], -1)
-    for c in range(flat.shape[1]):
-        flat[rows, c] = np.interp(rows, good, flat[good, c])
+    # every row of every short run, with the valid rows on each side (only those rows are touched)
+    left, right = starts[short] - 1, stops[short]
+    lens = right - left - 1
+    rows = np.arange(int(lens.sum())) + np.repeat(left + 1 - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
+    left, right = np.repeat(left, lens), np.repeat(right, lens)
+    flat = v.reshape(n, -1)
+    for c in range(flat.shape[1]):  # np.interp's formula between the two valid rows: slope * (x - x0) + f0
+        f0, f1 = flat[left, c], flat[right, c]
+        flat[rows, c] = (f1 - f0) / (right - left) * (rows - left) + f0
     filled[rows] = True
     return v, filled
 
@@ -452,6 +455,7 @@ def build_trial(
         what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
     _check_jumps(vf.path, sec, time_s, trans, row)
+    del row
     angle = None
     axis = None
     if rot is not None:
@@ -480,7 +484,8 @@ def build_trial(
                             "rigid on the wheel, or the wheel does not roll in one plane")
 
     # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end; the rotations are freed.
-    u = axis @ rot if rot is not None and axis is not None else None
+    # float32: the tilt is compared with 20 deg; the rounding (1e-7 rad) does not matter there.
+    u = (axis @ rot).astype(np.float32) if rot is not None and axis is not None else None
     del rot
     max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
     hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
@@ -505,6 +510,7 @@ def build_trial(
         tw = time_s[fit_mask]
         if total > 0:
             period_guess = alpha_rad / (total / max(tw[-1] - tw[0], 1e-9))
+        del aw, tw
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
     reference = "the robust line through the hub path"
     frame = frame0
@@ -540,9 +546,9 @@ def build_trial(
         win[motion.release_index:i_last + 1] = True
         win &= ~np.isnan(u).any(axis=1)
         if win.any():
-            a_body = u[win].mean(axis=0)
+            a_body = u[win].mean(axis=0, dtype=np.float64)
             a_body /= np.linalg.norm(a_body)
-            cos_t = np.abs(u @ a_body)  # = |axis . (R a_body)|
+            cos_t = np.abs(u @ a_body.astype(np.float32)).astype(np.float64)  # = |axis . (R a_body)|
             tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
     progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
     from .steps import noise_sigma

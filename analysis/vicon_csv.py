@@ -319,7 +319,9 @@ def parse_vicon_text(text: str, name: str = "<text>", *, encoding: str = "utf-8"
 
 
 def _line_ending(text: str) -> str:
-    return "\r\n" if "\r\n" in text else ("\r" if "\r" in text else "\n")
+    if "\r" not in text:  # one scan of the text in the common case
+        return "\n"
+    return "\r\n" if "\r\n" in text else "\r"
 
 
 def _parse(text: str, name: str, encoding: str, line_ending: str, raw: _ByteSource | None) -> ViconFile:
