@@ -62,7 +62,7 @@ def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -
         return np.zeros((0, 3, 3))
     ok = ~np.isnan(a).any(axis=1)
     # NaN rows are computed as zero rotations and set to NaN after: no masked copies of the matrices
-    filled = a if ok.all() else np.where(ok[:, None], a, 0.0)
+    filled = np.where(ok[:, None], a, 0.0)  # also a writable copy of a read-only view (scipy needs one)
     rot = Rotation.from_rotvec(filled) if convention == "helical" else Rotation.from_euler(convention, filled)
     out = rot.as_matrix()
     out[~ok] = np.nan
@@ -125,12 +125,18 @@ def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         return angle, np.array([0.0, 0.0, 1.0])
     # Increments between consecutive valid frames (world frame): adjacent frames in one pass over ``rot``
     # (no copy of it), the few pairs across a gap separately.
-    adjacent = np.diff(ok) == 1
     inc = np.empty((ok.size - 1, 3))
-    inc[adjacent] = _increment_rotvec(rot[1:], rot[:-1])[ok[:-1][adjacent]]
-    jump = np.flatnonzero(~adjacent)
-    if jump.size:
-        inc[jump] = _increment_rotvec(rot[ok[jump + 1]], rot[ok[jump]])
+    step = 1 << 18  # pairs per slice: bounds the temporaries
+    for a in range(0, ok.size - 1, step):
+        b = min(a + step, ok.size - 1)
+        i0, i1 = ok[a:b], ok[a + 1:b + 1]
+        adjacent = i1 - i0 == 1
+        lo, hi = int(i0[0]), int(i0[-1])
+        part = _increment_rotvec(rot[lo + 1:hi + 2], rot[lo:hi + 1])
+        inc[a:a + i0.size][adjacent] = part[i0[adjacent] - lo]
+        jump = np.flatnonzero(~adjacent)
+        if jump.size:
+            inc[a + jump] = _increment_rotvec(rot[i1[jump]], rot[i0[jump]])
     use = np.ones(inc.shape[0], bool)
     axis = np.array([0.0, 0.0, 1.0])
     norm = np.sqrt(np.einsum("ni,ni->n", inc, inc))

@@ -428,12 +428,15 @@ def build_trial(
     notes: list[str] = []
     rot = None
     if obj is not None:
-        pose = zeros_to_nan(_on_grid(sec.get(obj, POSE), row), 6)
-        if np.isnan(pose).all():
+        pose = _on_grid(sec.get(obj, POSE), row)  # a view of the section when no frame is missing
+        zero = ~(pose != 0).any(axis=1)  # six exact zeros: an occlusion (as `zeros_to_nan`, without a copy)
+        if (zero | np.isnan(pose).all(axis=1)).all():
             raise TrialRefused(f"{vf.path}: object {obj!r} has no values (never tracked)")
         rot = rotations_from_angles(pose[:, :3], orientation)
+        rot[zero] = np.nan
         trans = pose[:, 3:].copy()
-        del pose  # the angles are in ``rot`` now
+        trans[zero] = np.nan
+        del pose, zero
         what = "object origin"
         units = {c.component: c.file_unit for c in sec.columns if c.group == obj}
     else:
