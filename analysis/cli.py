@@ -280,11 +280,13 @@ def show_cmd(
 @app.command("bench-import")
 def bench_cmd(
     rows: Annotated[int, typer.Option("--rows", min=100, help="Rows in the synthetic Tracker file.")] = 1_000_000,
+    mb: Annotated[Optional[float], typer.Option("--mb", min=0.01, help="Size of the synthetic file, MB "
+                                                "(instead of --rows).")] = None,
 ) -> None:
     """Time the import of a synthetic Tracker export against plain pandas.read_csv (prints, asserts nothing)."""
     from .bench_import import main
 
-    main([str(rows)])
+    main(["--mb", str(mb)] if mb is not None else [str(rows)])
 
 
 # ------------------------------------------------------------------------------------- report and demo

@@ -58,11 +58,14 @@ def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -
     from scipy.spatial.transform import Rotation
 
     a = np.asarray(angles_rad, dtype=np.float64)
+    if a.shape[0] == 0:
+        return np.zeros((0, 3, 3))
     ok = ~np.isnan(a).any(axis=1)
-    out = np.full((a.shape[0], 3, 3), np.nan)
-    if ok.any():
-        rot = Rotation.from_rotvec(a[ok]) if convention == "helical" else Rotation.from_euler(convention, a[ok])
-        out[ok] = rot.as_matrix()
+    # NaN rows are computed as zero rotations and set to NaN after: no masked copies of the matrices
+    filled = np.where(ok[:, None], a, 0.0)  # also a writable copy of a read-only view (scipy needs one)
+    rot = Rotation.from_rotvec(filled) if convention == "helical" else Rotation.from_euler(convention, filled)
+    out = rot.as_matrix()
+    out[~ok] = np.nan
     return out
 
 
@@ -85,12 +88,21 @@ def _increment_rotvec(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     def dot(i: int, j: int) -> np.ndarray:  # (a @ b.T)[i, j] = row i of a . row j of b
         return np.einsum("nk,nk->n", a[:, i, :], b[:, j, :])
 
-    v = 0.5 * np.stack([dot(2, 1) - dot(1, 2), dot(0, 2) - dot(2, 0), dot(1, 0) - dot(0, 1)], axis=1)
-    c = 0.5 * (dot(0, 0) + dot(1, 1) + dot(2, 2) - 1.0)
-    s = np.linalg.norm(v, axis=1)
+    v = np.empty((a.shape[0], 3))
+    for col, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):
+        v[:, col] = dot(i, j)
+        v[:, col] -= dot(j, i)
+    v *= 0.5
+    c = dot(0, 0)
+    c += dot(1, 1)
+    c += dot(2, 2)
+    c -= 1.0
+    c *= 0.5
+    s = np.sqrt(np.einsum("ni,ni->n", v, v))
     ang = np.arctan2(s, c)
     scale = np.where(s > 1e-12, ang / np.where(s > 1e-12, s, 1.0), 1.0)
-    return v * scale[:, None]
+    v *= scale[:, None]
+    return v
 
 
 def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,29 +118,41 @@ def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         NaN at gaps. Increments between consecutive valid frames are assumed below 180 deg.
     axis : (3,) unit world axis.
     """
-    from scipy.spatial.transform import Rotation
-
     n = rot.shape[0]
-    ok = np.flatnonzero(~np.isnan(rot).any(axis=(1, 2)))
+    ok = np.flatnonzero(~np.isnan(rot.reshape(n, 9)).any(axis=1))
     angle = np.full(n, np.nan)
     if ok.size < 2:
         return angle, np.array([0.0, 0.0, 1.0])
-    r = rot[ok]
-    inc = _increment_rotvec(r[1:], r[:-1])  # world-frame increments
+    # Increments between consecutive valid frames (world frame): adjacent frames in one pass over ``rot``
+    # (no copy of it), the few pairs across a gap separately.
+    inc = np.empty((ok.size - 1, 3))
+    step = 1 << 18  # pairs per slice: bounds the temporaries
+    for a in range(0, ok.size - 1, step):
+        b = min(a + step, ok.size - 1)
+        i0, i1 = ok[a:b], ok[a + 1:b + 1]
+        adjacent = i1 - i0 == 1
+        lo, hi = int(i0[0]), int(i0[-1])
+        part = _increment_rotvec(rot[lo + 1:hi + 2], rot[lo:hi + 1])
+        inc[a:a + i0.size][adjacent] = part[i0[adjacent] - lo]
+        jump = np.flatnonzero(~adjacent)
+        if jump.size:
+            inc[a + jump] = _increment_rotvec(rot[i1[jump]], rot[i0[jump]])
     use = np.ones(inc.shape[0], bool)
     axis = np.array([0.0, 0.0, 1.0])
-    norm = np.linalg.norm(inc, axis=1)
+    norm = np.sqrt(np.einsum("ni,ni->n", inc, inc))
     for _ in range(3):
         # Rolling increments share one axis; a fall or a hand turning the wheel adds others: the axis is
         # refitted on the increments within 30 deg of it.
         sel = inc[use] if use.any() else inc
-        w, v = np.linalg.eigh(np.einsum("ni,nj->ij", sel, sel))
+        w, v = np.linalg.eigh(sel.T @ sel)
+        del sel
         axis = v[:, -1]
-        use = np.abs(np.einsum("ni,i->n", inc, axis)) >= np.cos(np.radians(30.0)) * norm
-    steps = np.einsum("ni,i->n", inc, axis)
+        use = np.abs(inc @ axis) >= np.cos(np.radians(30.0)) * norm
+    steps = inc @ axis
     if steps.sum() < 0:
         axis, steps = -axis, -steps
-    angle[ok] = np.concatenate([[0.0], np.cumsum(steps)])
+    angle[ok[0]] = 0.0
+    angle[ok[1:]] = np.cumsum(steps)
     return angle, axis
 
 

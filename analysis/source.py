@@ -65,10 +65,14 @@ def zeros_to_nan(values: np.ndarray, width: int) -> np.ndarray:
     return v
 
 
+def _subsample(p: np.ndarray) -> np.ndarray:
+    """The even subsample of at most 100,000 rows that `_extent` measures (a view)."""
+    return p[:: int(np.ceil(p.shape[0] / 100_000))] if p.shape[0] > 100_000 else p
+
+
 def _extent(p: np.ndarray) -> float:
     """Largest coordinate range of a path (n, 3), m (an even subsample of at most 100,000 frames)."""
-    if p.shape[0] > 100_000:
-        p = p[:: int(np.ceil(p.shape[0] / 100_000))]
+    p = _subsample(p)
     ok = ~np.isnan(p).any(axis=1)
     if ok.sum() < 2:
         return 0.0
@@ -223,8 +227,9 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
     if len(cands) == 1 and not too_many:
         # One candidate: take it unless it is static (its rotation is checked by the step detection).
         kind, sec, o, mk = cands[0]
-        ext = (_extent(zeros_to_nan(sec.get(o, POSE), 6)[:, 3:]) if kind == "object"
-               else max(_extent(zeros_to_nan(sec.get(m, XYZ), 3)) for m in mk))
+        # zeros_to_nan is row by row: applied to the rows `_extent` measures only
+        ext = (_extent(zeros_to_nan(_subsample(sec.get(o, POSE)), 6)[:, 3:]) if kind == "object"
+               else max(_extent(zeros_to_nan(_subsample(sec.get(m, XYZ)), 3)) for m in mk))
         if ext >= STATIC_EXTENT_M:
             what = f"object {o}" if kind == "object" else f"markers {','.join(mk)}"
             chosen = SourceChoice(sec, o if kind == "object" else None, mk if kind == "markers" else (),

@@ -60,7 +60,8 @@ def noise_sigma(y: np.ndarray) -> float:
     d = np.diff(y[~np.isnan(y)], 3)
     if d.size < 5:
         return float("nan")
-    return float(1.4826 * np.median(np.abs(d)) / np.sqrt(20.0))
+    np.abs(d, out=d)
+    return float(1.4826 * np.median(d, overwrite_input=True) / np.sqrt(20.0))
 
 
 def refine_cusp(t: np.ndarray, y: np.ndarray, i: int, half: int) -> tuple[float, float]:
@@ -158,7 +159,7 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
     if ok.sum() < 10:
         return np.zeros(0, np.int64), np.zeros(0), float("nan")
     sigma = noise_sigma(y)
-    lo, hi = np.percentile(y[ok], [2, 98])
+    lo, hi = np.percentile(y[ok], [2, 98], overwrite_input=True)  # y[ok] is a copy
     prom = max(8 * sigma, 0.25 * (hi - lo), 1e-9)
     yf = np.where(ok, y, np.nanmax(y))
     dt = float(np.median(np.diff(time_s)))
@@ -253,7 +254,9 @@ def detect_steps(
         tw = t[inwin & ~gap]
         rate = total / max(tw[-1] - tw[0], 1e-9)
         period_guess = alpha_rad / rate
+        del aw, tw
         idx, tmin, sigma = find_com_minima(t, yw, min_period_s=period_guess)
+        del yw
         if idx.size < 2:
             return StepResult.refuse(
                 f"the CoM height shows {idx.size} clear minima (noise {sigma * 1e3:.2f} mm): cannot place the "

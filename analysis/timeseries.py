@@ -51,7 +51,11 @@ class TimeSeries:
             if np.shape(v)[:1] != t.shape:
                 raise ValueError(f"data[{k!r}] has first axis {np.shape(v)[:1]}, time has {t.shape}")
         object.__setattr__(self, "data", dict(self.data))
-        object.__setattr__(self, "events", tuple(sorted(Event(float(a), str(b)) for a, b in self.events)))
+        ev = self.events
+        if not (isinstance(ev, tuple) and all(type(e) is Event for e in ev)
+                and all(a <= b for a, b in zip(ev, ev[1:]))):  # already sorted Events: kept as they are
+            ev = tuple(sorted(Event(float(a), str(b)) for a, b in ev))
+        object.__setattr__(self, "events", ev)
         object.__setattr__(self, "info", {k: dict(v) for k, v in self.info.items()})
 
     def __len__(self) -> int:

@@ -288,23 +288,26 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
     Returns (filled copy, bool mask of filled rows). Longer runs and runs at the ends stay NaN.
     """
     v = np.array(values, dtype=np.float64, copy=True)
-    bad = np.isnan(v.reshape(v.shape[0], -1)).any(axis=1)
-    filled = np.zeros(v.shape[0], bool)
+    n = v.shape[0]
+    bad = np.isnan(v.reshape(n, -1)).any(axis=1)
+    filled = np.zeros(n, bool)
     if max_gap_frames <= 0 or not bad.any() or bad.all():
         return v, filled
-    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    edges = np.diff(bad.view(np.int8), prepend=np.int8(0), append=np.int8(0))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    short = (starts > 0) & (stops < v.shape[0]) & (stops - starts <= max_gap_frames)
+    del edges
+    short = (starts > 0) & (stops < n) & (stops - starts <= max_gap_frames)
     if not short.any():
         return v, filled
-    run_id = np.cumsum(edges[:-1] == 1)  # 1-based run number at each row (meaningful where bad)
-    fill = bad & short[np.clip(run_id - 1, 0, starts.size - 1)]
-    rows = np.flatnonzero(fill)
-    good = np.flatnonzero(~bad)
-    # linear interpolation between the valid rows on each side (np.interp picks exactly those two)
-    flat = v.reshape(v.shape[0], -1)
-    for c in range(flat.shape[1]):
-        flat[rows, c] = np.interp(rows, good, flat[good, c])
+    # every row of every short run, with the valid rows on each side (only those rows are touched)
+    left, right = starts[short] - 1, stops[short]
+    lens = right - left - 1
+    rows = np.arange(int(lens.sum())) + np.repeat(left + 1 - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
+    left, right = np.repeat(left, lens), np.repeat(right, lens)
+    flat = v.reshape(n, -1)
+    for c in range(flat.shape[1]):  # np.interp's formula between the two valid rows: slope * (x - x0) + f0
+        f0, f1 = flat[left, c], flat[right, c]
+        flat[rows, c] = (f1 - f0) / (right - left) * (rows - left) + f0
     filled[rows] = True
     return v, filled
 
@@ -341,6 +344,9 @@ def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _on_grid(arr: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """``arr`` rows on the full frame grid (NaN at missing frames); ``arr`` itself when no frame is missing."""
+    if row.size == arr.shape[0] and (row.size == 0 or (row[0] == 0 and row[-1] == row.size - 1)):
+        return arr  # rows are 0..n-1 in order (frames strictly increase), nothing to place
     out = np.full((row.size,) + arr.shape[1:], np.nan)
     ok = row >= 0
     out[ok] = arr[row[ok]]
@@ -422,11 +428,15 @@ def build_trial(
     notes: list[str] = []
     rot = None
     if obj is not None:
-        pose = zeros_to_nan(_on_grid(sec.get(obj, POSE), row), 6)
-        if np.isnan(pose).all():
+        pose = _on_grid(sec.get(obj, POSE), row)  # a view of the section when no frame is missing
+        zero = ~(pose != 0).any(axis=1)  # six exact zeros: an occlusion (as `zeros_to_nan`, without a copy)
+        if (zero | np.isnan(pose).all(axis=1)).all():
             raise TrialRefused(f"{vf.path}: object {obj!r} has no values (never tracked)")
         rot = rotations_from_angles(pose[:, :3], orientation)
-        trans = pose[:, 3:]
+        rot[zero] = np.nan
+        trans = pose[:, 3:].copy()
+        trans[zero] = np.nan
+        del pose, zero
         what = "object origin"
         units = {c.component: c.file_unit for c in sec.columns if c.group == obj}
     else:
@@ -444,9 +454,11 @@ def build_trial(
             raise TrialRefused(f"{vf.path}: {err}") from None
         trans = est0.hub_m
         rot = est0.rotation
+        del est0, pts
         what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
     _check_jumps(vf.path, sec, time_s, trans, row)
+    del row
     angle = None
     axis = None
     if rot is not None:
@@ -460,6 +472,7 @@ def build_trial(
         est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
+        del est
     else:
         hub_raw, offset, residual = trans, None, None
         hub_source = "single marker taken as the hub" if obj is None else "object origin"
@@ -473,8 +486,13 @@ def build_trial(
             warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
                             "rigid on the wheel, or the wheel does not roll in one plane")
 
+    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end; the rotations are freed.
+    # float32: the tilt is compared with 20 deg; the rounding (1e-7 rad) does not matter there.
+    u = (axis @ rot).astype(np.float32) if rot is not None and axis is not None else None
+    del rot
     max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
     hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
+    del hub_raw, trans
     if angle is not None:
         angle, _ = fill_short_gaps(angle, max_gap_frames)
     gap = np.isnan(hub).any(axis=1)
@@ -495,6 +513,7 @@ def build_trial(
         tw = time_s[fit_mask]
         if total > 0:
             period_guess = alpha_rad / (total / max(tw[-1] - tw[0], 1e-9))
+        del aw, tw
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
     reference = "the robust line through the hub path"
     frame = frame0
@@ -504,6 +523,7 @@ def build_trial(
     elif slope_deg is None:
         notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
                      "impact line)")
+    del hub_fit, y, idx
     hub_slope = frame.to_slope(hub)
     com = hub_slope[:, 1].copy()
     if leg_length_m is not None:
@@ -524,14 +544,14 @@ def build_trial(
         i_last = motion.end_index
     window_s = (t_rel, float(steps.impact_time_s[-1]) if steps.impact_time_s.size else t_end)
     tilt = None
-    if rot is not None and axis is not None:
+    if u is not None:
         win = np.zeros(time_s.size, bool)
         win[motion.release_index:i_last + 1] = True
-        win &= ~np.isnan(rot).any(axis=(1, 2))
+        win &= ~np.isnan(u).any(axis=1)
         if win.any():
-            a_body = np.einsum("nji,j->ni", rot[win], axis).mean(axis=0)
+            a_body = u[win].mean(axis=0, dtype=np.float64)
             a_body /= np.linalg.norm(a_body)
-            cos_t = np.abs(np.einsum("nij,j->ni", rot, a_body) @ axis)
+            cos_t = np.abs(u @ a_body.astype(np.float32)).astype(np.float64)  # = |axis . (R a_body)|
             tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
     progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
     from .steps import noise_sigma

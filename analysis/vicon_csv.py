@@ -161,7 +161,8 @@ class Section:
         return list(dict.fromkeys(c.group for c in self.columns))
 
     def get(self, group: str, components: tuple[str, ...] | None = None) -> np.ndarray:
-        """Values of one group, shape (n, k), in the order of ``components`` (default: file order).
+        """Values of one group, shape (n, k), in the order of ``components`` (default: file order); a read-only
+        view when the columns are adjacent in that order, else a copy.
 
         Raises KeyError naming what is missing.
         """
@@ -175,6 +176,10 @@ class Section:
             if missing:
                 raise KeyError(f"group {group!r} of section {self.kind!r} has no column(s) {missing}")
             idx = [cols[c] for c in components]
+        if idx and idx == list(range(idx[0], idx[0] + len(idx))):
+            view = self.values[:, idx[0]:idx[0] + len(idx)]  # no copy; read-only so the section stays intact
+            view.flags.writeable = False
+            return view
         return self.values[:, idx]
 
     def components(self, group: str) -> tuple[str, ...]:
@@ -227,33 +232,105 @@ def read_vicon_csv(path: str | Path) -> ViconFile:
         raw = p.read_bytes()
     except OSError as err:
         raise ViconCsvError(str(p), None, None, "unreadable", f"cannot read the file ({err.strerror})") from None
-    return parse_vicon_bytes(raw, str(p))
+    text, encoding, line_ending = _decode(raw)
+    source = _ByteSource.of(raw, p)  # newline offsets; the data blocks are read back from the file
+    del raw  # only the text stays in memory while the blocks are parsed
+    return _parse(text, str(p), encoding, line_ending, source)
 
 
-def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
-    """Parse the bytes of a Vicon CSV export (see `read_vicon_csv`)."""
+def _decode(raw: bytes) -> tuple[str, str, str]:
+    """(text with LF line ends, encoding, line ending of the file)."""
     encoding = "utf-8"
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("cp1252", errors="replace")
         encoding = "cp1252"
-    return parse_vicon_text(text, name, encoding=encoding)
+    line_ending = _line_ending(text)
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text, encoding, line_ending
+
+
+class _ByteSource:
+    """The bytes of a file whose lines are the lines of its decoded text (every CR is part of a CRLF):
+    newline offsets, and byte ranges read from memory or from the file."""
+
+    def __init__(self, newlines: np.ndarray, size: int, raw: bytes | None, path: Path | None) -> None:
+        self.newlines, self.size, self.raw, self.path = newlines, size, raw, path
+
+    @classmethod
+    def of(cls, raw: bytes, path: Path | None = None) -> _ByteSource | None:
+        """Newline offsets of ``raw`` (found in slices: no file-sized temporary); keeps ``raw`` when no path
+        is given. None when line numbers in ``raw`` differ from the text's (a lone CR)."""
+        if b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n"):
+            return None
+        parts = []
+        step = 1 << 24
+        for off in range(0, len(raw), step):
+            chunk = np.frombuffer(raw, np.uint8, count=min(step, len(raw) - off), offset=off)
+            parts.append(np.flatnonzero(chunk == 10) + off)
+        nl = np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        return cls(nl, len(raw), raw if path is None else None, path)
+
+    def line_start(self, line0: int) -> int:
+        """Byte offset of the start of 0-based line ``line0`` (the size past the last line)."""
+        if line0 <= 0:
+            return 0
+        return int(self.newlines[line0 - 1]) + 1 if line0 - 1 < self.newlines.size else self.size
+
+    def stream(self, a: int, b: int) -> io.RawIOBase:
+        """Bytes ``a:b`` as a binary stream (no copy of the range)."""
+        if self.raw is not None:
+            return _ViewReader(memoryview(self.raw)[a:b])
+        f = open(self.path, "rb")  # noqa: SIM115 - closed by _FileRange
+        return _FileRange(f, a, b)
+
+    def counts(self, sub: bytes, spans: list[tuple[int, int]]) -> list[int]:
+        """``sub`` occurrences in each byte span."""
+        if self.raw is not None:
+            return [self.raw.count(sub, a, b) for a, b in spans]
+        out = []
+        with open(self.path, "rb") as f:
+            for a, b in spans:
+                f.seek(a)
+                out.append(f.read(b - a).count(sub))
+        return out
+
+
+def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
+    """Parse the bytes of a Vicon CSV export (see `read_vicon_csv`).
+
+    The header rows are read from the decoded text; the numeric data blocks are read by pandas' C parser
+    straight from ``raw`` (in chunks, into preallocated arrays), so no second copy of the file is made.
+    """
+    text, encoding, line_ending = _decode(raw)
+    return _parse(text, name, encoding, line_ending, _ByteSource.of(raw))
 
 
 def parse_vicon_text(text: str, name: str = "<text>", *, encoding: str = "utf-8") -> ViconFile:
     """Parse the text of a Vicon CSV export (see `read_vicon_csv`); ``name`` is used in messages."""
     if text.startswith("\ufeff"):
         text = text[1:]
-    line_ending = "\r\n" if "\r\n" in text else ("\r" if "\r" in text else "\n")
+    line_ending = _line_ending(text)
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return _parse(text, name, encoding, line_ending, None)
+
+
+def _line_ending(text: str) -> str:
+    if "\r" not in text:  # one scan of the text in the common case
+        return "\n"
+    return "\r\n" if "\r\n" in text else "\r"
+
+
+def _parse(text: str, name: str, encoding: str, line_ending: str, raw: _ByteSource | None) -> ViconFile:
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
         raise ViconCsvError(name, line, None, "binary", "the file holds NUL bytes: it is not a CSV text file")
     if not re.search(r"[^ \t\n,;]", text):  # no copy of a large file, unlike strip()
         raise ViconCsvError(name, None, None, "empty", "the file holds no content")
-    parser = _Parser(text, name)
+    parser = _Parser(text, name, raw)
     sections = parser.parse()
     return ViconFile(
         path=name,
@@ -275,9 +352,11 @@ def _detect_delimiter(text: str) -> str:
 class _Parser:
     """Walks the structural lines of a file; data blocks are parsed in bulk."""
 
-    def __init__(self, text: str, name: str) -> None:
+    def __init__(self, text: str, name: str, raw: _ByteSource | None = None) -> None:
         self.text = text
         self.name = name
+        #: The file's bytes, whose lines are the lines of ``text`` (or None: blocks are encoded from ``text``).
+        self.raw = raw
         self.delim = _detect_delimiter(text)
         self.decimal = "."
         if self.delim == ";":
@@ -394,15 +473,13 @@ class _Parser:
                 cell = cells[0] if cells[0] else "(empty)"
                 raise self.err(bad_line, 1, "bad-frame",
                                f"section {kind!r}: frame number {cell!r} is not a number")
-        block = self.text[data_start:nxt]
         width = max(len(comps), len(units), first_data + n_cols)
         bounds = self.group_bounds(columns, first_data)
-        values = self.parse_block(block, data_line, width, kind, at_eof=nxt >= len(self.text), bounds=bounds)
-        frame, sub = self.check_frames(values, data_line, first_data, kind)
-        data = values[:, first_data:first_data + n_cols]
-        extra = values[:, first_data + n_cols:]
-        if extra.size and not np.isnan(extra).all():
-            r, c = np.argwhere(~np.isnan(extra))[0]
+        lead, data, extra_at = self.parse_block(data_start, nxt, data_line, width, kind, first_data, n_cols,
+                                                bounds=bounds)
+        frame, sub = self.check_frames(lead, data_line, first_data, kind)
+        if extra_at is not None:
+            r, c = extra_at
             raise self.err(data_line + int(r), int(first_data + n_cols + c + 1), "extra-cell",
                            f"section {kind!r}: a value lies beyond the last column of the header")
         bad = np.isinf(data)
@@ -410,17 +487,18 @@ class _Parser:
             r, c = np.argwhere(bad)[0]
             raise self.err(data_line + int(r), int(first_data + c + 1), "non-finite",
                            f"section {kind!r}: value is infinite")
-        # Convert to SI by what the units row says.
-        data = _to_si(data, [c.file_unit for c in columns])
+        del bad
+        # Convert to SI by what the units row says (in place: ``data`` is ours).
+        _to_si_inplace(data, [c.file_unit for c in columns])
         if kind in _POSE_SECTIONS:
-            big = np.abs(data) > MAX_COORDINATE_M
+            big = (data > MAX_COORDINATE_M) | (data < -MAX_COORDINATE_M)
             if big.any():
                 r, c = np.argwhere(big)[0]
                 raise self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
                                f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): not a "
                                "position in a capture volume")
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
-                          columns=tuple(columns), values=np.ascontiguousarray(data), name_prefix=prefix,
+                          columns=tuple(columns), values=data, name_prefix=prefix,
                           data_line=data_line, units_line=units_line)
         return section, nxt
 
@@ -457,25 +535,30 @@ class _Parser:
                 ends.add(a.column)
         return frozenset(ends)
 
-    def check_cell_counts(self, block: str, data_line: int, width: int, kind: str,
-                          bounds: frozenset[int], values: np.ndarray) -> None:
+    def check_cell_counts(self, start: int, end: int, data_line: int, width: int, kind: str,
+                          bounds: frozenset[int], rows: np.ndarray) -> None:
         """A row shorter than the header that does not end at a group boundary lost a cell: error.
 
-        Only rows with a missing value can be short, so only their cells are counted.
+        Only rows with a missing value can be short, so only ``rows`` (block row indices whose last cell is
+        empty) are counted.
         """
-        if not values.size:
-            return
-        rows = np.flatnonzero(np.isnan(values[:, -1]))
         if rows.size == 0:
             return
-        data = block.encode("utf-8", "surrogatepass")
-        nl = np.flatnonzero(np.frombuffer(data, np.uint8) == 10)
-        starts = np.concatenate([[0], nl + 1])
         delim = self.delim.encode()
+        rows_l = rows.tolist()
+        if self.raw is not None:
+            base = data_line - 1  # 0-based line of block row 0
+            ls = self.raw.line_start
+            n_delims = self.raw.counts(delim, [(ls(base + r), ls(base + r + 1) - 1) for r in rows_l])
+        else:
+            data = self.text[start:end].encode("utf-8", "surrogatepass")
+            nl = np.flatnonzero(np.frombuffer(data, np.uint8) == 10)
+            starts = np.concatenate([[0], nl + 1])
+            n_delims = [data.count(delim, int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size
+                                   else len(data)) for r in rows_l]
         errs = []
-        for r in rows:
-            a, b = int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size else len(data)
-            n_cells = data.count(delim, a, b) + 1
+        for r, n_delim in zip(rows_l, n_delims):
+            n_cells = n_delim + 1
             if n_cells < width and n_cells not in bounds:
                 errs.append(self.err(data_line + int(r), n_cells + 1, "missing-cell",
                                      f"section {kind!r}: the row has {n_cells} cells and ends inside a "
@@ -493,43 +576,96 @@ class _Parser:
         return first
 
     # -- data
-    def parse_block(self, block: str, data_line: int, width: int, kind: str, at_eof: bool,
-                    bounds: frozenset[int] = frozenset()) -> np.ndarray:
-        if not block.strip():
-            return np.zeros((0, width))
-        if at_eof and not self.ends_with_newline:
-            last_line = block.rsplit("\n", 1)[-1]
-            n_cells = last_line.count(self.delim) + 1
+    def parse_block(self, start: int, end: int, data_line: int, width: int, kind: str, first_data: int,
+                    n_cols: int, bounds: frozenset[int] = frozenset()
+                    ) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None]:
+        """Read the data rows in ``text[start:end]``.
+
+        Returns (frame cells (n, first_data), data (n, n_cols) C-contiguous and owned, (row, column) of the
+        first value beyond the data columns or None).
+        """
+        text = self.text
+        if not re.compile(r"\S").search(text, start, end):
+            return np.zeros((0, first_data)), np.zeros((0, n_cols)), None
+        n_rows = text.count("\n", start, end) + (0 if text.endswith("\n", start, end) else 1)
+        if end >= len(text) and not self.ends_with_newline:
+            last = text.rfind("\n", start, end) + 1
+            n_cells = text.count(self.delim, last, end) + 1
             if n_cells < width:
-                line = data_line + block.count("\n")
+                line = data_line + n_rows - 1
                 raise self.err(line, n_cells, "truncated",
                                f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
                                "cells and no line end): truncated file?")
-        values = self.fast_block(block, width)
-        if values is None:
-            values = self.slow_block(block, data_line, width, kind)
+        out = self.fast_block(start, end, data_line, n_rows, width, first_data, n_cols)
+        if out is None:
+            values = self.slow_block(text[start:end], data_line, width, kind)
+            lead = values[:, :first_data]
+            data = np.ascontiguousarray(values[:, first_data:first_data + n_cols])
+            extra = values[:, first_data + n_cols:]
+            extra_at = None
+            if extra.size and not np.isnan(extra).all():
+                r, c = np.argwhere(~np.isnan(extra))[0]
+                extra_at = (int(r), int(c))
+            short = np.flatnonzero(np.isnan(values[:, -1]))
+        else:
+            lead, data, extra_at, short = out
         if bounds:
-            self.check_cell_counts(block, data_line, width, kind, bounds, values)
-        return values
+            self.check_cell_counts(start, end, data_line, width, kind, bounds, short)
+        return lead, data, extra_at
 
-    def fast_block(self, block: str, width: int) -> np.ndarray | None:
-        """Bulk parse with pandas' C reader; None sends the block to `slow_block` (which locates errors)."""
+    #: Rows per pandas chunk: bounds the parser's temporary memory.
+    CHUNK_ROWS = 200_000
+
+    def fast_block(self, start: int, end: int, data_line: int, n_rows: int, width: int, first_data: int,
+                   n_cols: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None, np.ndarray] | None:
+        """Bulk parse with pandas' C reader, in chunks, into preallocated arrays.
+
+        Reads the bytes of the block from ``raw`` when the file's bytes are at hand (no copy), else an encoded
+        copy of the text. Returns (lead, data, first extra (row, column) or None, rows whose last cell is
+        empty), or None to send the block to `slow_block` (which locates errors).
+        """
         import pandas as pd
 
+        if self.raw is not None:
+            a, b = self.raw.line_start(data_line - 1), self.raw.line_start(data_line - 1 + n_rows)
+            source: io.RawIOBase = self.raw.stream(a, b)
+        else:
+            source = io.BytesIO(self.text[start:end].encode("utf-8", "surrogatepass"))
+        lead = np.empty((n_rows, first_data))
+        data = np.empty((n_rows, n_cols))
+        extra_at: tuple[int, int] | None = None
+        short: list[np.ndarray] = []
+        k = 0
+        stop = first_data + n_cols
         try:
             with warnings.catch_warnings():
                 # A row wider than the header makes pandas drop cells with a warning: take the slow path.
                 warnings.simplefilter("error", pd.errors.ParserWarning)
-                # bytes, not a StringIO: pandas' C reader tokenises bytes directly (about 1.6x faster)
-                df = pd.read_csv(io.BytesIO(block.encode("utf-8", "surrogatepass")), sep=self.delim, header=None,
-                                 names=range(width), dtype=np.float64, na_values=[""], keep_default_na=False, decimal=self.decimal,
-                                 engine="c", skip_blank_lines=False, index_col=False)
+                reader = pd.read_csv(source, sep=self.delim, header=None, names=range(width), dtype=np.float64,
+                                     na_values=[""], keep_default_na=False, decimal=self.decimal, engine="c",
+                                     skip_blank_lines=False, index_col=False, chunksize=self.CHUNK_ROWS)
+                with reader:
+                    for chunk in reader:
+                        v = chunk.to_numpy(dtype=np.float64)
+                        m = v.shape[0]
+                        if k + m > n_rows:
+                            return None
+                        lead[k:k + m] = v[:, :first_data]
+                        data[k:k + m] = v[:, first_data:stop]
+                        if extra_at is None and v.shape[1] > stop:
+                            seen = ~np.isnan(v[:, stop:])
+                            if seen.any():
+                                r, c = np.argwhere(seen)[0]
+                                extra_at = (k + int(r), int(c))
+                        short.append(np.flatnonzero(np.isnan(v[:, -1])) + k)
+                        k += m
         except (ValueError, pd.errors.ParserError, pd.errors.ParserWarning):
             return None
-        values = df.to_numpy(dtype=np.float64)
-        if values.shape[0] != block.count("\n") + (0 if block.endswith("\n") else 1):
+        finally:
+            source.close()
+        if k != n_rows:
             return None
-        return values
+        return lead, data, extra_at, np.concatenate(short) if short else np.zeros(0, np.int64)
 
     def slow_block(self, block: str, data_line: int, width: int, kind: str) -> np.ndarray:
         lines = block.split("\n")
@@ -610,18 +746,51 @@ def _to_float(s: str) -> float | None:
 _DIVISORS = {"mm": 1000.0, "cm": 100.0}
 
 
-def _to_si(data: np.ndarray, units: list[str]) -> np.ndarray:
-    """Convert columns to m / rad (mm and cm by exact division, so 409.832 mm is 0.409832 m)."""
-    out = data
-    for unit in set(units):
-        cols = [j for j, u in enumerate(units) if u == unit]
+def _to_si_inplace(data: np.ndarray, units: list[str]) -> None:
+    """Convert columns to m / rad in place (mm and cm by exact division, so 409.832 mm is 0.409832 m)."""
+    for j, unit in enumerate(units):
         if unit in _DIVISORS:
-            out = out if out is not data else data.copy()
-            out[:, cols] = data[:, cols] / _DIVISORS[unit]
+            data[:, j] /= _DIVISORS[unit]
         elif unit in ANGLE_UNITS_RAD and ANGLE_UNITS_RAD[unit] != 1.0:
-            out = out if out is not data else data.copy()
-            out[:, cols] = data[:, cols] * ANGLE_UNITS_RAD[unit]
-    return out
+            data[:, j] *= ANGLE_UNITS_RAD[unit]
+
+
+class _ViewReader(io.RawIOBase):
+    """A read-only binary stream over a memoryview (pandas reads it without a copy of the whole)."""
+
+    def __init__(self, view: memoryview) -> None:
+        super().__init__()
+        self._view, self._pos = view, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer) -> int:  # type: ignore[override]
+        n = min(len(buffer), len(self._view) - self._pos)
+        buffer[:n] = self._view[self._pos:self._pos + n]
+        self._pos += n
+        return n
+
+
+class _FileRange(io.RawIOBase):
+    """Bytes ``a:b`` of an open binary file, as a stream (closes the file when closed)."""
+
+    def __init__(self, f: io.BufferedReader, a: int, b: int) -> None:
+        super().__init__()
+        self._f, self._left = f, b - a
+        f.seek(a)
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer) -> int:  # type: ignore[override]
+        n = self._f.readinto(memoryview(buffer)[:min(len(buffer), self._left)])
+        self._left -= n
+        return n
+
+    def close(self) -> None:
+        self._f.close()
+        super().close()
 
 
 def _clean_name(name: str) -> tuple[str, str]:
