@@ -184,6 +184,9 @@ def simulate_crit_trial(slope_deg: float, release: float, rng: np.random.Generat
     hx, hy, ang = (np.concatenate(v)[order][keep] for v in (hx, hy, ang))
     if not stalled:  # after the last impact: the next step's start, as a rigid stance (the ramp ends)
         tb, xb, yb, thb = _rollback(p, y_last, t_end_walk, RECORD_DT_S)
+        # the wheel leaves the ramp still rolling forward: the recording ends before the rigid stance
+        # would turn back (or half a step after the impact, whichever comes first)
+        t_stop = min(t_stop, float(tb[int(np.argmax(thb))]))
         m = tb <= t_stop
         tt = np.concatenate([tt, tb[m][1:]])
         hx = np.concatenate([hx, xb[m][1:]])

@@ -28,6 +28,8 @@ FALL_TILT_RAD = np.radians(20.0)
 #: Rise above the walking band, m, and how long it lasts, s, that mean the wheel was lifted.
 LIFT_M = 0.005
 LIFT_DURATION_S = 0.1
+#: How long the wheel must stay put after its last impact to count as stalled, s.
+REST_S = 0.3
 
 
 @dataclass(frozen=True)
@@ -148,9 +150,20 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
             where = ("the wheel leaves the capture volume" if trailing_gap_s > 0.05
                      else "the recording ends")
             return Ending("walked", f"{where} while it still rolls ({speed_end:.2f} rad/s)")
-        if back > MOVE_TOL_RAD or (np.isfinite(speed_end) and abs(speed_end) < 0.1 * speed_walk):
-            what = f"rocks back {np.degrees(back):.1f} deg" if back > MOVE_TOL_RAD else "slows"
-            return Ending("stalled", f"after the last impact the wheel {what} and comes to rest")
+        if back > MOVE_TOL_RAD:
+            return Ending("stalled", f"after the last impact the wheel rocks back {np.degrees(back):.1f} deg "
+                                     "and comes to rest")
+        # Near the critical slope the wheel is slowest over the foot: slow is not at rest. A stall needs the
+        # wheel to stay put for REST_S; a recording that ends sooner while it slows cannot tell.
+        rest = post & (t >= t[last_valid] - REST_S)
+        if t[last_valid] - t[np.flatnonzero(post)[0]] >= REST_S:
+            spread = float(np.nanmax(progress_rad[rest]) - np.nanmin(progress_rad[rest]))
+            if spread < MOVE_TOL_RAD:
+                return Ending("stalled", f"after the last impact the wheel slows and stays at rest for "
+                                         f"{REST_S:.1f} s")
+        if np.isfinite(speed_end) and abs(speed_end) < 0.1 * speed_walk:
+            return Ending("unknown", "the recording ends while the wheel slows over its foot, too soon to tell "
+                                     "a stall from a slow step")
     return Ending("unknown", "the end of the recording matches no known ending")
 
 
