@@ -11,26 +11,9 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
-from typer.core import TyperGroup
 
-
-
-class _OneLineUsageErrors(TyperGroup):
-    """A bad option value, a missing option or an unknown one under `rimless robot ...`: one line
-    `error: ...` naming the option, exit 2 (instead of the framed usage box)."""
-
-    def invoke(self, ctx: Any) -> Any:
-        try:
-            return super().invoke(ctx)
-        except Exception as err:
-            if any(c.__name__ == "UsageError" for c in type(err).__mro__) and hasattr(err, "format_message"):
-                message = " ".join(str(err.format_message()).split())
-                typer.echo(f"error: {message}", err=True)
-                raise typer.Exit(2) from None
-            raise
-
-
-app = typer.Typer(no_args_is_help=True, cls=_OneLineUsageErrors)
+# Usage errors (one line, exit 2) and negative numbers as values come from the root group (rimless.cli).
+app = typer.Typer(no_args_is_help=True)
 
 _HOST = Annotated[str, typer.Option("--host", help="Robot host name or IP address.")]
 _PORT = Annotated[int, typer.Option("--port", min=1, max=65535, help="Robot command port (TCP).")]
@@ -168,11 +151,11 @@ def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
     _interruptible(go)
 
 
-@app.command("set", context_settings={"ignore_unknown_options": True})
+@app.command("set")
 def set_param(
     name: Annotated[str, typer.Argument(help="Detector parameter, e.g. touch_velocity_m_s.")],
     value: Annotated[str, typer.Argument(help="New value (SI units, as the name says; negative numbers "
-                                         "are values, not options).", metavar="VALUE")],
+                                         "are values, not options).")],
     host: _HOST,
     port: _PORT = 9871,
     token: _TOKEN = None,

@@ -34,6 +34,18 @@ def _prepare_parent(target: Path, option: Optional[str]) -> Path:
     return parent
 
 
+def writable_dir(folder: os.PathLike[str] | str, *, option: Optional[str] = None) -> Path:
+    """Create `folder` if needed and check that it is writable; `OutputFileError` naming `option` otherwise."""
+    target = Path(folder)
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputFileError(f"{_where(target, option)}: cannot create the folder ({err.strerror or err})") from None
+    if not os.access(target, os.W_OK | os.X_OK):
+        raise OutputFileError(f"{_where(target, option)}: the folder is not writable")
+    return target
+
+
 @contextlib.contextmanager
 def atomic_file(target: os.PathLike[str] | str, *, option: Optional[str] = None) -> Iterator[Path]:
     """Yield a temporary path (same folder and suffix as `target`); rename it onto `target` when the block ends.

@@ -647,6 +647,10 @@ def paper_cmd(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ParameterError(f"--out {out}: cannot create the folder ({err.strerror})") from None
+    if not no_cache and cache_dir is not None:
+        from rimless.output import writable_dir
+
+        writable_dir(cache_dir, option="--cache-dir")
     eigen_ks = tuple(k for k in EIGEN_K if k in ks) or ks[: min(3, len(ks))]
     energy_ks = tuple(k for k in ENERGY_K if k in ks) or ks[: min(4, len(ks))]
     with Progress(transient=True, console=_err_console()) as prog:
@@ -773,6 +777,10 @@ def sweep_cmd(
             typer.echo(format_bench(result))
         return
     cache = None if no_cache else (cache_dir or __import__("rimless.sim.sweep", fromlist=["x"]).default_cache_dir())
+    if cache is not None:
+        from rimless.output import writable_dir
+
+        writable_dir(cache, option="--cache-dir")
     with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task(f"sweep: {len(points)} grid points", total=len(points))
         try:

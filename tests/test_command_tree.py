@@ -31,6 +31,7 @@ from rimless.cli import app, command_tree
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "analysis" / "data"
 BUNDLED_CSVS = sorted(str(p) for p in DATA.glob("SYNTHETIC_*.csv"))
+CRITICAL_CSVS = sorted(str(p) for p in (DATA / "critical").glob("SYNTHETIC_*.csv"))
 WIDTH = 80
 
 TREE = command_tree()
@@ -105,6 +106,7 @@ def test_every_parameter_is_explained(path: tuple[str, ...]) -> None:
 NO_JSON: dict[tuple[str, ...], str] = {
     ("robot", "run"): "the firmware itself: it logs to stderr while it runs, its results are the telemetry",
     ("robot", "listen"): "records telemetry to --out and shows a live summary; the records are JSON Lines",
+    ("robot", "heartbeat"): "keeps the link alive; it prints a line only when the robot's state changes",
 }
 # Known violations (strict=False xfails; the lead deletes an entry when it turns into XPASS).
 KNOWN_NO_JSON: dict[tuple[str, ...], str] = {
@@ -289,6 +291,11 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("robot", "run"): (["--fake", "--arm"], 3.0),
     ("robot", "listen"): (["--port", str(_free_udp_port()), "--out", "tel.jsonl"], 2.0),
     ("robot", "bench"): (["--fake", "--duration-s", "20"], 3.0),
+    ("paper",): (["--out", "paper-out", "--scheduler", "sync", "--no-cache"], 6.0),
+    ("sim", "sweep"): (["--k", "1500:3500:50", "--model", "er,ve", "--scheduler", "sync", "--no-cache",
+                        "--out", "sweep-out/k"], 5.0),
+    ("trials", "calibrate"): ([*CRITICAL_CSVS], 5.0),
+    ("trials", "critical-slope"): ([*CRITICAL_CSVS], 2.5),
 }
 
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.
@@ -303,6 +310,10 @@ QUICK: dict[tuple[str, ...], str] = {
                         "aim a signal at reliably",
     ("trials", "show"): "reads one Parquet file (well under a second)",
     ("trials", "import"): "parses a few files in about a second; the long import is `trials bench-import`",
+    ("robot", "ping"): "one request to the robot, bounded by the command timeout",
+    ("robot", "release"): "drives the clutch pins low once and exits",
+    ("robot", "heartbeat"): "without a robot on the loopback it stops at once with one line; its Ctrl-C path "
+                            "needs a running robot",
 }
 
 def _free_tcp_port() -> int:
