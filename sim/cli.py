@@ -36,6 +36,11 @@ class MassModel(str, Enum):
     active_feet = "active-feet"
 
 
+class ClutchKind(str, Enum):
+    ideal = "ideal"
+    firmware = "firmware"
+
+
 class Backend(str, Enum):
     auto = "auto"
     fast = "fast"
@@ -445,8 +450,49 @@ def gait_cmd(
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
+    clutch: Annotated[ClutchKind, typer.Option("--clutch", help="ideal: lock at maximum compression, release at "
+                                               "touchdown; firmware: the robot's controller in the loop (ER).",
+                                               rich_help_panel="Firmware in the loop")] = None,  # type: ignore[assignment]
+    rate_hz: Annotated[float, typer.Option("--rate-hz", help="Sensor sampling rate, Hz.",
+                                           rich_help_panel="Firmware in the loop")] = 300.0,
+    clutch_delay_ms: Annotated[float, typer.Option("--clutch-delay-ms", help="Clutch engage delay (pin on -> leg "
+                                                   "locked), ms; also the release delay unless --release-delay-ms.",
+                                                   rich_help_panel="Firmware in the loop")] = 5.0,
+    release_delay_ms: Annotated[Optional[float], typer.Option("--release-delay-ms", help="Clutch release delay, ms.",
+                                                              rich_help_panel="Firmware in the loop")] = None,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", help="ADNS-3080 position noise (sd), counts.",
+                                                rich_help_panel="Firmware in the loop")] = 1.0,
+    jitter_ms: Annotated[float, typer.Option("--jitter-ms", help="Sampling lateness (sd), ms.",
+                                             rich_help_panel="Firmware in the loop")] = 0.05,
+    holding_force_n: Annotated[float, typer.Option("--holding-force-n", help="Clutch holding force along the leg, N "
+                                                   "(it slips beyond; inf: rigid).",
+                                                   rich_help_panel="Firmware in the loop")] = 100.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the sensor noise and sampling jitter.",
+                                      rich_help_panel="Firmware in the loop")] = 0,
+    bench: Annotated[bool, typer.Option("--bench", help="With --clutch firmware: print simulated steps per second "
+                                        "at 300 Hz and 1 kHz beside the ideal clutch, and exit.",
+                                        rich_help_panel="Firmware in the loop")] = False,
 ) -> None:
     """Simulate N steps from the fixed point (or from --theta-dot) and export or plot them."""
+    if clutch is ClutchKind.firmware:
+        from rimless.sim import firmware_cli
+
+        if model is not Model.er:
+            raise ParameterError("--clutch firmware needs --model er (the viscoelastic wheel has no clutch)")
+        if theta_dot is not None or gait is not None or out is not None or plot is not None:
+            raise ParameterError("--clutch firmware starts from the ideal fixed point and writes no trajectory: "
+                                 "drop --theta-dot, --gait, --out and --plot")
+        if bench:
+            firmware_cli.run_bench(params, json_out=json_out)
+            return
+        config = firmware_cli.build_config(rate_hz=rate_hz, clutch_delay_ms=clutch_delay_ms,
+                                           release_delay_ms=release_delay_ms, noise_counts=noise_counts,
+                                           jitter_ms=jitter_ms, holding_force_n=holding_force_n, seed=seed)
+        code = firmware_cli.run_gait(params, config, steps=max(steps, 6), backend=backend.value, rtol=rtol,
+                                     json_out=json_out)
+        if code:
+            raise typer.Exit(code)
+        return
     import numpy as np
 
     from rimless.sim.backend import jacobian_factory, make_integrator, make_map
