@@ -120,7 +120,9 @@ class FirmwareStep:
     modes: list[tuple[str, float, float]]  # (mode name, start, end), s
     lock_time_s: float | None  # stance clutch physically engaged (None: never in this step)
     lock_rate_m_s: float | None  # L1' just before the lock: < 0 still compressing, > 0 rebounding
-    lock_class: str  # "compression", "peak", "rebound", "after-rebound" or "none"
+    # "compression" (before the step's first compression peak), "peak" (|L1'| < PEAK_RATE_M_S), "rebound" (after
+    # the peak, leg extending), "after-rebound" (after the peak, the leg compressing again or at rest), "none"
+    lock_class: str
     peak_time_s: float | None  # L1' crossing 0 upwards (maximum compression) before the lock, if any
     stored_energy_J: float  # 1/2 k (L0 - L1)^2 at the lock (0 when nothing locked)
     release_lateness_s: float | None  # trailing clutch released this long after touchdown (None: was free)
@@ -458,12 +460,12 @@ class FirmwareLoop:
             lock_class = "none"
         elif lock_rate is not None and abs(lock_rate) < PEAK_RATE_M_S:
             lock_class = "peak"
-        elif lock_rate is not None and lock_rate < 0.0:
-            lock_class = "compression"
-        elif y[3] >= self.L0:
-            lock_class = "after-rebound"
-        else:
+        elif peak_time is None:
+            lock_class = "compression"  # before the first compression peak of the step
+        elif lock_rate is not None and lock_rate > 0.0:
             lock_class = "rebound"
+        else:
+            lock_class = "after-rebound"  # the leg has rebounded and oscillates (or rests) again
         step = FirmwareStep(
             z_start=z_start, z_end=np.array([y_plus[2], y_plus[7]]), t_start_s=t0, period_s=t - t0, modes=modes,
             lock_time_s=None if lock_time is None else lock_time - t0, lock_rate_m_s=lock_rate, lock_class=lock_class,
