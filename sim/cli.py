@@ -472,6 +472,13 @@ def gait_cmd(
     bench: Annotated[bool, typer.Option("--bench", help="With --clutch firmware: print simulated steps per second "
                                         "at 300 Hz and 1 kHz beside the ideal clutch, and exit.",
                                         rich_help_panel="Firmware in the loop")] = False,
+    critical_slope: Annotated[bool, typer.Option("--critical-slope", help="With --clutch firmware: bisect the lowest "
+                                                 "slope that still walks (a walk of --steps per slope).",
+                                                 rich_help_panel="Firmware in the loop")] = False,
+    critical_low_deg: Annotated[float, typer.Option("--critical-low-deg", help="Low end of the bisection, deg.",
+                                                    rich_help_panel="Firmware in the loop")] = 0.5,
+    critical_tol_deg: Annotated[float, typer.Option("--critical-tol-deg", min=1e-4, max=1.0, help="Bisection "
+                                                    "tolerance, deg.", rich_help_panel="Firmware in the loop")] = 0.05,
 ) -> None:
     """Simulate N steps from the fixed point (or from --theta-dot) and export or plot them."""
     if clutch is ClutchKind.firmware:
@@ -488,8 +495,12 @@ def gait_cmd(
         config = firmware_cli.build_config(rate_hz=rate_hz, clutch_delay_ms=clutch_delay_ms,
                                            release_delay_ms=release_delay_ms, noise_counts=noise_counts,
                                            jitter_ms=jitter_ms, holding_force_n=holding_force_n, seed=seed)
-        code = firmware_cli.run_gait(params, config, steps=max(steps, 6), backend=backend.value, rtol=rtol,
-                                     json_out=json_out)
+        if critical_slope:
+            code = firmware_cli.run_critical(params, config, steps=max(steps, 6), low_deg=critical_low_deg,
+                                             tol_deg=critical_tol_deg, json_out=json_out)
+        else:
+            code = firmware_cli.run_gait(params, config, steps=max(steps, 6), backend=backend.value, rtol=rtol,
+                                         json_out=json_out)
         if code:
             raise typer.Exit(code)
         return

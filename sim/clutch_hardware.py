@@ -186,7 +186,8 @@ def _exact(qd: np.ndarray, mode: Mode) -> np.ndarray:
 
 
 def touchdown_with_locks(mech: Mechanics, q_minus: np.ndarray, qd_minus: np.ndarray, *,
-                         trailing_locked: bool) -> tuple[ImpactResult | None, np.ndarray, np.ndarray, Transition | None]:
+                         trailing_locked: bool
+                         ) -> tuple[ImpactResult | None, np.ndarray, np.ndarray, Transition | None]:
     """Touchdown impact: (reference impact or None, q+, q'+, locked transition or None).
 
     Without a locked trailing leg it is the reference impact (rimless.sim.impact), both legs free.

@@ -100,7 +100,8 @@ def firmware_summary(params: Any, config: Any, ideal: Any, fp: Any) -> dict[str,
         },
         "energy_residual_max_J": max((abs(s.energy_residual_J) for s in steps), default=None),
         "firmware_faults": faults,
-        "failure": None if walk.failure is None else {"reason": walk.failure.reason.value, "message": str(walk.failure)},
+        "failure": None if walk.failure is None else {"reason": walk.failure.reason.value,
+                                                      "message": str(walk.failure)},
         "steps": [s.to_dict() for s in steps],
     }
 
@@ -219,3 +220,51 @@ def run_bench(params: Any, *, rates_hz: tuple[float, ...] = (300.0, 1000.0), ste
         print("firmware: Controller + LegDetector + Adns3080 driver over the FakeAdns3080 bus, defaults "
               "(5 ms delays, 1 count noise); ideal: reference path (scipy DOP853, rtol 1e-9), same start.")
     return out
+
+
+def run_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_deg: float, json_out: bool) -> int:
+    """`--critical-slope`: the lowest slope at which the firmware keeps the wheel walking; returns the exit code."""
+    import typer
+    from rich.progress import Progress
+
+    from rimless.cli import print_json
+    from rimless.sim.cli import _console, _err_console, _table
+    from rimless.sim.firmware_loop import firmware_critical_slope
+
+    if not (math.isfinite(low_deg) and 0.0 <= low_deg < params.slope_deg):
+        raise ParameterError(f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), got {low_deg}")
+    n_max = 2 + max(1, math.ceil(math.log2(max((params.slope_deg - low_deg) / tol_deg, 1.0))))
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("bisecting the slope (a walk per slope)", total=n_max)
+        try:
+            res = firmware_critical_slope(params, config, low_rad=math.radians(low_deg), steps=steps,
+                                          tol_rad=math.radians(tol_deg),
+                                          progress=lambda k: prog.update(task, completed=k))
+        except ValueError as err:
+            typer.echo(f"error: {err}", err=True)
+            return 1
+    out = {
+        "clutch": "firmware", "rate_hz": config.rate_hz, "engage_delay_ms": config.engage_delay_s * 1e3,
+        "release_delay_ms": config.release_delay_s * 1e3, "noise_counts": config.noise_counts,
+        "definition": f"lowest slope at which a walk of {steps} steps from the ideal-clutch gait completes with no "
+                      "failed step and no firmware fault (bisection; one boundary assumed)",
+        "critical_slope_deg": math.degrees(res.critical_slope_rad),
+        "failing_slope_deg": math.degrees(res.failing_slope_rad),
+        "tolerance_deg": tol_deg,
+        "reason_below": res.reason_below,
+        "evaluations": [{"slope_deg": math.degrees(s), "walks": ok, "reason": why} for s, ok, why in res.evaluations],
+    }
+    if json_out:
+        print_json(out)
+        return 0
+    con = _console()
+    con.print(_table("critical slope, firmware in the loop", [
+        ("sampling / delays", f"{config.rate_hz:g} Hz, engage {out['engage_delay_ms']:g} ms, release "
+                              f"{out['release_delay_ms']:g} ms"),
+        ("critical slope (deg)", f"{out['critical_slope_deg']:.3f}"),
+        ("fails at (deg)", f"{out['failing_slope_deg']:.3f}"),
+        ("walk length (steps)", str(steps)),
+    ]))
+    con.print(f"definition: {out['definition']}", soft_wrap=True)
+    con.print(f"why it fails below: {out['reason_below']}", soft_wrap=True)
+    return 0

@@ -187,8 +187,8 @@ class FirmwareLoop:
         self.fake = FakeAdns3080(lambda _t: self._sensed_m, counts_per_m=cfg.counts_per_m_1600,
                                  noise_counts=cfg.noise_counts, squal=cfg.squal, seed=cfg.seed,
                                  clock=self.clock.seconds, needs_reset=False)
-        self.sensor = Adns3080(self.fake, counts_per_m=cfg.counts_per_m, sleep=lambda _s: None,  # type: ignore[arg-type]
-                               clock_ns=self.clock.ns)
+        self.sensor = Adns3080(self.fake, counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
+                               sleep=lambda _s: None, clock_ns=self.clock.ns)
         self.sensor.set_resolution(cfg.cpi)
         self.detector = LegDetector(cfg.detector, list(range(N_LEGS)))
         self.clutches = ClutchBank(CLUTCH_PINS, pin_factory=MockFactory())
@@ -204,7 +204,8 @@ class FirmwareLoop:
         self._next_sample = 0.0
         self.samples = 0
         self.events: list[tuple[float, str, dict[str, Any]]] = []
-        self.sample_log: list[tuple[float, float, float, int, int]] | None = None  # (t, position, velocity, phase, mask)
+        # (t, position, velocity, phase, clutch mask) of every sample, when a walk records them
+        self.sample_log: list[tuple[float, float, float, int, int]] | None = None
 
     def close(self) -> None:
         """Release the mock pins."""
@@ -641,3 +642,69 @@ def firmware_fixed_point(params: WheelParams, config: FirmwareLoopConfig, z_idea
                               fit_residual=misfit, period_s=float(periods.mean()), period_std_s=float(periods.std()),
                               stored_energy_J=float(np.mean([s.stored_energy_J for s in tail])), walk=walk,
                               n_average=len(tail))
+
+
+@dataclass
+class FirmwareCriticalSlope:
+    """The smallest slope at which the firmware keeps the wheel walking (see `firmware_critical_slope`)."""
+
+    critical_slope_rad: float  # lowest slope found that walks
+    failing_slope_rad: float  # highest slope found that does not (the boundary lies between)
+    reason_below: str  # why the walk fails just below
+    evaluations: list[tuple[float, bool, str]]  # (slope rad, walks, reason)
+
+
+def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps: int) -> tuple[bool, str]:
+    """(True, "") if a walk of `steps` steps from the ideal fixed point at these parameters completes
+    without a failed step and without a firmware fault; else (False, the reason)."""
+    from rimless.sim.poincare import NoFixedPoint, default_guess, solve_fixed_point, PoincareMap
+
+    try:
+        ideal = solve_fixed_point(PoincareMap(params, "er", ScipyIntegrator(rtol=1e-9, atol=1e-11)),
+                                  default_guess(params, "er"))
+    except (StepFailure, NoFixedPoint) as err:
+        return False, f"no ideal-clutch gait to start from ({err})"
+    loop = FirmwareLoop(params, config)
+    try:
+        walk = loop.walk(ideal.z, steps)
+    finally:
+        loop.close()
+    if walk.failure is not None:
+        return False, f"step {len(walk.steps) + 1}: {walk.failure}"
+    faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
+    if faults:
+        return False, f"the firmware faulted ({', '.join(faults)}): it no longer clutches"
+    return True, ""
+
+
+def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
+                            tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None
+                            ) -> FirmwareCriticalSlope:
+    """Bisection on the slope between `low_rad` (must fail) and params.slope_rad (must walk) for the lowest
+    slope at which `walks_under_firmware` holds, to `tol_rad`. It assumes one boundary (walking at a slope
+    implies walking at steeper ones), which the returned evaluations let the caller check.
+    Raises ValueError if the bracket does not straddle the boundary."""
+    evals: list[tuple[float, bool, str]] = []
+
+    def test(slope: float) -> tuple[bool, str]:
+        ok, why = walks_under_firmware(params.replace(slope_rad=slope), config, steps)
+        evals.append((slope, ok, why))
+        if progress:
+            progress(len(evals))
+        return ok, why
+
+    hi, lo = params.slope_rad, low_rad
+    ok_hi, why_hi = test(hi)
+    if not ok_hi:
+        raise ValueError(f"the wheel does not walk under the firmware at the start slope {hi:.5f} rad: {why_hi}")
+    ok_lo, why_lo = test(lo)
+    if ok_lo:
+        raise ValueError(f"the wheel still walks under the firmware at the low end {lo:.5f} rad; lower it")
+    while hi - lo > tol_rad:
+        mid = 0.5 * (hi + lo)
+        ok, why = test(mid)
+        if ok:
+            hi = mid
+        else:
+            lo, why_lo = mid, why
+    return FirmwareCriticalSlope(critical_slope_rad=hi, failing_slope_rad=lo, reason_below=why_lo, evaluations=evals)
