@@ -751,6 +751,59 @@ _SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid
                   ("ends by", 17), ("CoT", 6))
 
 
+@app.command("firmware-sweep")
+@user_facing
+@sim_failures
+@wheel_params
+def firmware_sweep_cmd(
+    params: Any,
+    rates_hz: Annotated[str, typer.Option("--rates-hz", help="Sensor rates, Hz (comma-separated or START:STOP:STEP).")]
+    = "300,1000",
+    delays_ms: Annotated[str, typer.Option("--delays-ms", help="Clutch engage = release delays, ms.")] = "0,5,10",
+    steps: Annotated[int, typer.Option("--steps", min=6, max=200, help="Walk length per point.")] = 8,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", min=0.0, max=1000.0, help="Sensor noise, counts.")]
+    = 1.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the sensor noise and sampling jitter.")] = 0,
+    scheduler: Annotated[str, typer.Option("--scheduler", help="sync, local (Dask LocalCluster) or tcp://HOST:PORT.")]
+    = "local",
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local Dask workers [cores].")]
+    = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Firmware in the loop over sensor rate and clutch delay: gait, speed and stored energy against the ideal clutch."""
+    from rich.progress import Progress
+
+    from rimless.sim.firmware_sweep import run_firmware_sweep
+    from rimless.sim.sweep import parse_range
+
+    rates = parse_range(rates_hz, "--rates-hz")
+    delays = parse_range(delays_ms, "--delays-ms")
+    if any(not 1.0 <= r <= 1e6 for r in rates):
+        raise ParameterError(f"--rates-hz must be rates in [1, 1e6] Hz, got {rates_hz!r}")
+    if any(not 0.0 <= d <= 1000.0 for d in delays):
+        raise ParameterError(f"--delays-ms must be delays in [0, 1000] ms, got {delays_ms!r}")
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("firmware sweep", total=len(rates) * len(delays))
+        out = run_firmware_sweep(params, rates, [d * 1e-3 for d in delays], steps=steps, noise_counts=noise_counts,
+                                 seed=seed, scheduler=scheduler, workers=workers,
+                                 progress=lambda n, total: prog.update(task, completed=n, total=total))
+    if json_out:
+        print_json(out)
+        return
+    print(f"ideal clutch: theta'+ {out['ideal']['theta_dot_plus_rad_s']:.4f} rad/s, period "
+          f"{out['ideal']['step_period_s']:.4f} s, stored {out['ideal']['stored_energy_J']:.4f} J")
+    print(f"{'rate_hz':>8} {'delay_ms':>8} {'walks':>5} {'period_s':>8} {'speed/ideal':>11} {'stored/ideal':>12} "
+          f"{'|eig|':>6}")
+    for r in out["rows"]:
+        if not r.get("steps_done"):
+            print(f"{r['rate_hz']:>8g} {r['delay_ms']:>8g} {'no':>5}  {r.get('failure')}")
+            continue
+        eig = r["max_abs_eigenvalue_fitted"]
+        print(f"{r['rate_hz']:>8g} {r['delay_ms']:>8g} {'yes' if r['walks'] else 'no':>5} {r['step_period_s']:>8.4f} "
+              f"{r['speed_ratio']:>11.3f} {r['stored_energy_ratio']:>12.3f} {'-' if eig is None else f'{eig:.3f}':>6}")
+    print("speed: step length / period; stored: the stance spring's energy at touchdown; |eig|: fitted to the walk.")
+
+
 @app.command("sweep")
 @user_facing
 @sim_failures

@@ -232,3 +232,19 @@ def test_cli_firmware_bad_options_are_one_line_errors(args, flag):
     res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", *args])
     assert res.exit_code == 2
     assert flag in res.output and "Traceback" not in res.output
+
+
+def test_firmware_sweep_orders_the_cost_of_delay(table1):
+    """Over delays at one rate, speed and stored energy fall as the clutch gets slower (sync scheduler)."""
+    from rimless.sim.firmware_sweep import run_firmware_sweep
+
+    out = run_firmware_sweep(table1, [300.0], [0.0, 0.010], steps=6, scheduler="sync")
+    fast, slow = out["rows"]
+    assert fast["walks"] and slow["walks"]
+    assert 0 < slow["speed_ratio"] < fast["speed_ratio"] < 1.0
+    assert 0 < slow["stored_energy_ratio"] < fast["stored_energy_ratio"] < 1.0
+
+
+def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():
+    res = RUN.invoke(app, ["sim", "firmware-sweep", "--rates-hz", "0"])
+    assert res.exit_code == 2 and "--rates-hz" in res.output
