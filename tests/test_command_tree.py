@@ -283,6 +283,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("sim", "fixed-point"): (["--backend", "reference"], 2.0),
     ("sim", "gait"): (["--steps", "10000", "--out", "traj.parquet", "--plot", "gait.png"], 4.0),
     ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], 4.0),
+    ("sim", "firmware-sweep"): (["--rates-hz", "300,1000", "--delays-ms", "0,5,10", "--scheduler", "sync"], 4.0),
     ("sim", "stress"): (["--k-values", ",".join(str(300 + 10 * i) for i in range(200))], 4.0),
     ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], 5.0),
     ("trials", "bench-import"): (["--rows", "5000000"], 4.0),
