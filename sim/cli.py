@@ -804,6 +804,54 @@ def firmware_sweep_cmd(
     print("speed: step length / period; stored: the stance spring's energy at touchdown; |eig|: fitted to the walk.")
 
 
+@app.command("replay")
+@user_facing
+@sim_failures
+@wheel_params
+def replay_cmd(
+    params: Any,
+    log: Annotated[Path, typer.Argument(help="Trial log of `rimless robot run` (JSON Lines).")],
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the overlay figure (.png, .pdf, .svg).")] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Replay a robot trial log against the simulator: recorded steps beside the simulated ER step."""
+    from rimless.firmware.triallog import TrialLogError
+    from rimless.sim.firmware_replay import plot_replay, replay_trial
+
+    if not log.is_file():
+        raise ParameterError(f"{log}: no such trial log")
+    if plot is not None and plot.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
+    try:
+        rep = replay_trial(log, params)
+    except TrialLogError as err:
+        raise ParameterError(str(err)) from None
+    except ValueError as err:
+        raise SimFailure(str(err)) from None
+    out = rep.summary()
+    out["plot"] = str(plot_replay(rep, plot)) if plot is not None else None
+    if json_out:
+        print_json(out)
+        return
+
+    def f(v: Any, scale: float = 1.0) -> str:
+        return "-" if v is None else f"{v * scale:.4g}"
+
+    _console().print(_table(f"replay of {log.name}", [
+        ("recorded steps", str(out["steps"])),
+        ("step period recorded mean / simulated (s)", f"{f(out['recorded_period_s']['mean'])} / "
+                                                      f"{f(out['simulated_period_s'])}"),
+        ("lock after touchdown recorded / peak simulated (ms)",
+         f"{f(out['recorded_lock_after_touchdown_s']['mean'], 1e3)} / {f(out['simulated_peak_after_impact_s'], 1e3)}"),
+        ("max compression recorded / simulated (mm)", f"{f(out['recorded_max_compression_m'], 1e3)} / "
+                                                      f"{f(out['simulated_max_compression_m'], 1e3)}"),
+        ("faults in the log", ", ".join(out["faults"]) or "none"),
+        ("figure", out["plot"] or "-"),
+    ]))
+    if out["plot"]:
+        print(out["plot"])
+
+
 @app.command("sweep")
 @user_facing
 @sim_failures

@@ -206,6 +206,7 @@ class FirmwareLoop:
         self.events: list[tuple[float, str, dict[str, Any]]] = []
         # (t, position, velocity, phase, clutch mask) of every sample, when a walk records them
         self.sample_log: list[tuple[float, float, float, int, int]] | None = None
+        self.records: list[Any] | None = None  # the controller's raw records (for a trial log), when kept
 
     def close(self) -> None:
         """Release the mock pins."""
@@ -225,6 +226,8 @@ class FirmwareLoop:
         self.samples += 1
         while self.controller.outbox:
             rec = self.controller.outbox.popleft()
+            if self.records is not None:
+                self.records.append(rec)
             if isinstance(rec, EventRecord):
                 self.events.append((t, rec.name, rec.fields))
             elif self.sample_log is not None:

@@ -303,6 +303,7 @@ QUICK: dict[tuple[str, ...], str] = {
     ("robot", "check"): "needs the hardware; with --fake it clicks 8 clutches in about 2.4 s, too short to "
                         "aim a signal at reliably",
     ("trials", "show"): "reads one Parquet file (well under a second)",
+    ("sim", "replay"): "reads one trial log and simulates one step (about a second)",
     ("trials", "import"): "parses a few files in about a second; the long import is `trials bench-import`",
 }
 

@@ -248,3 +248,50 @@ def test_firmware_sweep_orders_the_cost_of_delay(table1):
 def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():
     res = RUN.invoke(app, ["sim", "firmware-sweep", "--rates-hz", "0"])
     assert res.exit_code == 2 and "--rates-hz" in res.output
+
+
+# --- replay of a trial log --------------------------------------------------------------------------
+
+def test_replay_of_a_trial_log_written_by_the_firmware_logger(table1, er_fixed_point, tmp_path):
+    """A walk's controller records go through the firmware's own TrialLog writer; the replay finds the same
+    steps: recorded periods (touchdown event to touchdown event) equal the simulated periods to a few
+    sample periods, and the recorded compression is the simulated one to a few counts."""
+    from rimless.firmware.triallog import TrialLog
+    from rimless.sim.firmware_replay import replay_trial
+
+    loop = FirmwareLoop(table1, FirmwareLoopConfig(rate_hz=1000.0, engage_delay_s=0.0, release_delay_s=0.0, **QUIET))
+    loop.records = []
+    walk = loop.walk(er_fixed_point[1].z, 4)
+    loop.close()
+    log = TrialLog(tmp_path, "sim-walk")
+    log.append(loop.records)
+    log.close()
+    rep = replay_trial(log.path, table1)
+    # touchdown events: the priming step's impact and each step's but the last (detected after the walk ends)
+    assert len(rep.steps) == 3
+    for rec, sim in zip(rep.steps, walk.steps):
+        assert rec.recorded_period_s == pytest.approx(sim.period_s, abs=3e-3)
+    ideal_max = rep.sim_max_compression_m
+    assert rep.steps[1].recorded_max_compression_m == pytest.approx(ideal_max, rel=0.1)
+    assert all(s.recorded_lock_s is not None for s in rep.steps)
+
+
+def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed_point, tmp_path):
+    from rimless.firmware.triallog import TrialLog
+
+    loop = FirmwareLoop(table1, FirmwareLoopConfig(rate_hz=300.0, **QUIET))
+    loop.records = []
+    loop.walk(er_fixed_point[1].z, 3)
+    loop.close()
+    log = TrialLog(tmp_path, "t")
+    log.append(loop.records)
+    log.close()
+    fig = tmp_path / "replay.png"
+    res = RUN.invoke(app, ["sim", "replay", str(log.path), "--plot", str(fig), "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert out["steps"] == 2 and fig.stat().st_size > 1000 and out["plot"] == str(fig)
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text(log.path.read_text().replace('"seq"', '"seq', 1))
+    res = RUN.invoke(app, ["sim", "replay", str(bad)])
+    assert res.exit_code == 2 and "bad.jsonl" in res.output and "corrupt" in res.output
