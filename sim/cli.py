@@ -820,8 +820,16 @@ def replay_cmd(
 
     if not log.is_file():
         raise ParameterError(f"{log}: no such trial log")
-    if plot is not None and plot.suffix.lower() not in (".png", ".pdf", ".svg"):
-        raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
+    if plot is not None:
+        if plot.suffix.lower() not in (".png", ".pdf", ".svg"):
+            raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
+        import os
+
+        from rimless.errors import OutputFileError
+
+        parent = plot.parent if str(plot.parent) else Path(".")
+        if not (parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
+            raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
     try:
         rep = replay_trial(log, params)
     except TrialLogError as err:

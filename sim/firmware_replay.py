@@ -141,9 +141,12 @@ def plot_replay(replay: Replay, path: str | Path) -> Path:
     ax.set_ylabel("leg compression (mm)")
     ax.set_title(f"{replay.path.name}: {len(replay.steps)} steps")
     ax.legend(loc="upper right", fontsize=8)
+    from rimless.output import atomic_file
+
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.part{path.suffix}")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    tmp.replace(path)
+    try:
+        with atomic_file(path, option="--plot") as tmp:
+            fig.savefig(tmp, dpi=120)
+    finally:
+        plt.close(fig)
     return path
