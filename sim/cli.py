@@ -453,8 +453,12 @@ def gait_cmd(
     clutch: Annotated[ClutchKind, typer.Option("--clutch", help="ideal: lock at maximum compression, release at "
                                                "touchdown; firmware: the robot's controller in the loop (ER).",
                                                rich_help_panel="Firmware in the loop")] = None,  # type: ignore[assignment]
-    rate_hz: Annotated[float, typer.Option("--rate-hz", help="Sensor sampling rate, Hz.",
-                                           rich_help_panel="Firmware in the loop")] = 300.0,
+    rate_hz: Annotated[Optional[float], typer.Option("--rate-hz", help="Sensor sampling rate, Hz [300, or the "
+                                                     "--robot-config's].", rich_help_panel="Firmware in the loop")]
+    = None,
+    robot_config: Annotated[Optional[Path], typer.Option("--robot-config", help="robot.toml whose detector, sensor "
+                                                         "and rate settings the firmware runs with.",
+                                                         rich_help_panel="Firmware in the loop")] = None,
     clutch_delay_ms: Annotated[float, typer.Option("--clutch-delay-ms", help="Clutch engage delay (pin on -> leg "
                                                    "locked), ms; also the release delay unless --release-delay-ms.",
                                                    rich_help_panel="Firmware in the loop")] = 5.0,
@@ -494,7 +498,8 @@ def gait_cmd(
             return
         config = firmware_cli.build_config(rate_hz=rate_hz, clutch_delay_ms=clutch_delay_ms,
                                            release_delay_ms=release_delay_ms, noise_counts=noise_counts,
-                                           jitter_ms=jitter_ms, holding_force_n=holding_force_n, seed=seed)
+                                           jitter_ms=jitter_ms, holding_force_n=holding_force_n, seed=seed,
+                                           robot_config=robot_config)
         if critical_slope:
             code = firmware_cli.run_critical(params, config, steps=max(steps, 6), low_deg=critical_low_deg,
                                              tol_deg=critical_tol_deg, json_out=json_out)

@@ -13,10 +13,29 @@ import numpy as np
 from rimless.errors import ParameterError
 
 
-def build_config(*, rate_hz: float, clutch_delay_ms: float, release_delay_ms: float | None, noise_counts: float,
-                 jitter_ms: float, holding_force_n: float, seed: int) -> Any:
-    """FirmwareLoopConfig from the CLI options; errors name the option."""
+def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay_ms: float | None,
+                 noise_counts: float, jitter_ms: float, holding_force_n: float, seed: int,
+                 robot_config: Any = None) -> Any:
+    """FirmwareLoopConfig from the CLI options; errors name the option.
+
+    robot_config: a robot.toml (read by the firmware's own loader) supplying the detector parameters, the
+    first sensor's resolution, calibration and health limits, and the sampling rate unless --rate-hz is given."""
+    from rimless.firmware.faults import HealthLimits
     from rimless.sim.firmware_loop import FirmwareLoopConfig
+
+    extra: dict[str, Any] = {}
+    if robot_config is not None:
+        from rimless.firmware.config import load_config
+
+        robot = load_config(robot_config)
+        sensor = robot.sensors[0]
+        cpm_1600 = sensor.counts_per_m * (1.0 if sensor.resolution_cpi == 1600 else 4.0)
+        extra = {"detector": robot.detector, "cpi": sensor.resolution_cpi, "counts_per_m_1600": cpm_1600,
+                 "health": HealthLimits(sensor.squal_min, sensor.squal_low_s, sensor.saturated_samples_max)}
+        if rate_hz is None:
+            rate_hz = robot.sampling.rate_hz
+    if rate_hz is None:
+        rate_hz = 300.0
 
     checks = [
         ("--rate-hz", rate_hz, 1.0 <= rate_hz <= 1e6, "a sampling rate in [1, 1e6] Hz"),
@@ -34,7 +53,7 @@ def build_config(*, rate_hz: float, clutch_delay_ms: float, release_delay_ms: fl
     release = clutch_delay_ms if release_delay_ms is None else release_delay_ms
     return FirmwareLoopConfig(rate_hz=rate_hz, jitter_s=jitter_ms * 1e-3, noise_counts=noise_counts,
                               engage_delay_s=clutch_delay_ms * 1e-3, release_delay_s=release * 1e-3,
-                              holding_force_N=holding_force_n, seed=seed).validated()
+                              holding_force_N=holding_force_n, seed=seed, **extra).validated()
 
 
 def ideal_fixed_point(params: Any, *, backend: str, rtol: float) -> Any:

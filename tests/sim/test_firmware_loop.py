@@ -295,3 +295,22 @@ def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed
     bad.write_text(log.path.read_text().replace('"seq"', '"seq', 1))
     res = RUN.invoke(app, ["sim", "replay", str(bad)])
     assert res.exit_code == 2 and "bad.jsonl" in res.output and "corrupt" in res.output
+
+
+def test_robot_config_supplies_the_firmware_settings(tmp_path):
+    """--robot-config is read by the firmware's loader: its detector and rate reach the loop, and a bad
+    field is a one-line error naming the file and the field."""
+    from rimless.firmware.config import example_config_path
+    from rimless.sim.firmware_cli import build_config
+
+    text = example_config_path().read_text().replace("rate_hz = 300.0", "rate_hz = 500.0")
+    text = text.replace("touch_debounce_samples = 2", "touch_debounce_samples = 3")
+    good = tmp_path / "robot.toml"
+    good.write_text(text)
+    cfg = build_config(rate_hz=None, clutch_delay_ms=5, release_delay_ms=None, noise_counts=1, jitter_ms=0.05,
+                       holding_force_n=100, seed=0, robot_config=good)
+    assert cfg.rate_hz == 500.0 and cfg.detector.touch_debounce_samples == 3 and cfg.cpi == 1600
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("touch_debounce_samples = 3", "touch_debounce_samples = -3"))
+    res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--robot-config", str(bad)])
+    assert res.exit_code == 2 and "touch_debounce_samples" in res.output and "bad.toml" in res.output
