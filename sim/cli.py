@@ -485,6 +485,11 @@ def gait_cmd(
                                                     "tolerance, deg.", rich_help_panel="Firmware in the loop")] = 0.05,
 ) -> None:
     """Simulate N steps from the fixed point (or from --theta-dot) and export or plot them."""
+    if robot_config is not None:
+        if not robot_config.is_file():
+            raise ParameterError(f"--robot-config {robot_config}: no such file")
+        if clutch is not ClutchKind.firmware:
+            raise ParameterError("--robot-config needs --clutch firmware")
     if clutch is ClutchKind.firmware:
         from rimless.sim import firmware_cli
 
