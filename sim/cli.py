@@ -778,13 +778,18 @@ def firmware_sweep_cmd(
     = "local",
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local Dask workers [cores].")]
     = None,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the figure: speed and stored energy against "
+                                                 "delay, per rate (.png, .pdf, .svg).")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Firmware in the loop over sensor rate and clutch delay: gait, speed and stored energy against the ideal clutch."""
     from rich.progress import Progress
 
-    from rimless.sim.firmware_sweep import run_firmware_sweep
+    from rimless.sim.firmware_sweep import plot_firmware_sweep, run_firmware_sweep
     from rimless.sim.sweep import parse_range
+
+    if plot is not None:
+        _check_plot_path(plot)
 
     rates = parse_range(rates_hz, "--rates-hz")
     delays = parse_range(delays_ms, "--delays-ms")
@@ -797,9 +802,12 @@ def firmware_sweep_cmd(
         out = run_firmware_sweep(params, rates, [d * 1e-3 for d in delays], steps=steps, noise_counts=noise_counts,
                                  seed=seed, scheduler=scheduler, workers=workers,
                                  progress=lambda n, total: prog.update(task, completed=n, total=total))
+    out["plot"] = str(plot_firmware_sweep(out, plot)) if plot is not None else None
     if json_out:
         print_json(out)
         return
+    if out["plot"]:
+        print(f"wrote {out['plot']}")
     print(f"ideal clutch: theta'+ {out['ideal']['theta_dot_plus_rad_s']:.4f} rad/s, period "
           f"{out['ideal']['step_period_s']:.4f} s, stored {out['ideal']['stored_energy_J']:.4f} J")
     print(f"{'rate_hz':>8} {'delay_ms':>8} {'walks':>5} {'period_s':>8} {'speed/ideal':>11} {'stored/ideal':>12} "
@@ -812,6 +820,19 @@ def firmware_sweep_cmd(
         print(f"{r['rate_hz']:>8g} {r['delay_ms']:>8g} {'yes' if r['walks'] else 'no':>5} {r['step_period_s']:>8.4f} "
               f"{r['speed_ratio']:>11.3f} {r['stored_energy_ratio']:>12.3f} {'-' if eig is None else f'{eig:.3f}':>6}")
     print("speed: step length / period; stored: the stance spring's energy at touchdown; |eig|: fitted to the walk.")
+
+
+def _check_plot_path(plot: Path) -> None:
+    """Refuse a --plot path that cannot be written before any work is done."""
+    import os
+
+    from rimless.errors import OutputFileError
+
+    if plot.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
+    parent = plot.parent if str(plot.parent) else Path(".")
+    if not (parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
+        raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
 
 
 @app.command("replay")
@@ -831,15 +852,7 @@ def replay_cmd(
     if not log.is_file():
         raise ParameterError(f"{log}: no such trial log")
     if plot is not None:
-        if plot.suffix.lower() not in (".png", ".pdf", ".svg"):
-            raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
-        import os
-
-        from rimless.errors import OutputFileError
-
-        parent = plot.parent if str(plot.parent) else Path(".")
-        if not (parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
-            raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
+        _check_plot_path(plot)
     try:
         rep = replay_trial(log, params)
     except TrialLogError as err:

@@ -100,3 +100,41 @@ def run_firmware_sweep(params: Any, rates_hz: list[float], delays_s: list[float]
                 cluster.close()
     return {"ideal": ideal, "rows": rows, "steps": steps, "noise_counts": noise_counts}
 
+
+
+def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
+    """Speed and stored energy as fractions of the ideal clutch's, against the clutch delay, one line per rate."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rimless.output import atomic_file
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharex=True)
+    rates = sorted({r["rate_hz"] for r in out["rows"]})
+    for rate in rates:
+        rows = sorted((r for r in out["rows"] if r["rate_hz"] == rate and r.get("steps_done")),
+                      key=lambda r: r["delay_ms"])
+        d = [r["delay_ms"] for r in rows]
+        axes[0].plot(d, [r["speed_ratio"] for r in rows], "o-", label=f"{rate:g} Hz")
+        axes[1].plot(d, [r["stored_energy_ratio"] for r in rows], "o-", label=f"{rate:g} Hz")
+        failed = [r["delay_ms"] for r in out["rows"] if r["rate_hz"] == rate and not r.get("walks")]
+        for ax in axes:
+            for x in failed:
+                ax.axvline(x, color="tab:red", lw=0.8, ls=":")
+    axes[0].set_ylabel("walking speed / ideal clutch")
+    axes[1].set_ylabel("stored energy / ideal clutch")
+    for ax in axes:
+        ax.set_xlabel("clutch delay, engage = release (ms)")
+        ax.axhline(1.0, color="0.5", lw=0.8)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("ER wheel with the firmware in the loop (dotted red: the walk failed)", fontsize=10)
+    fig.tight_layout()
+    try:
+        with atomic_file(path, option="--plot") as tmp:
+            fig.savefig(tmp, dpi=120)
+    finally:
+        plt.close(fig)
+    return path
