@@ -4,9 +4,10 @@ The log is read with the firmware's own reader (rimless.firmware.triallog). Its 
 between the firmware's `touchdown` events; each is set beside one simulated ER step (the ideal-clutch
 fixed point at the given parameters): recorded compression (sensor position since the step's touchdown
 event) over the simulated stance-leg compression L0 - L1, both from their own touchdown. The firmware
-detects a touchdown after it happened, so the recorded curve starts a few milliseconds into the step;
-`detect_lag_s` aligns the two by the onset of compression (the first recorded sample beyond
-`touch_compression_m` is matched to the simulated curve).
+detects a touchdown after it happened, so each recorded curve starts a few milliseconds later than the
+simulated one (from the impact); the lag is not corrected here, and the summary compares step periods
+(touchdown event to touchdown event, where the lag cancels), the lock time after the touchdown event and
+the maximum compression.
 """
 
 from __future__ import annotations
