@@ -36,6 +36,11 @@ class MassModel(str, Enum):
     active_feet = "active-feet"
 
 
+class ClutchKind(str, Enum):
+    ideal = "ideal"
+    firmware = "firmware"
+
+
 class Backend(str, Enum):
     auto = "auto"
     fast = "fast"
@@ -445,8 +450,70 @@ def gait_cmd(
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
+    clutch: Annotated[ClutchKind, typer.Option("--clutch", help="ideal: lock at maximum compression, release at "
+                                               "touchdown; firmware: the robot's controller in the loop (ER).",
+                                               rich_help_panel="Firmware in the loop")] = None,  # type: ignore[assignment]
+    rate_hz: Annotated[Optional[float], typer.Option("--rate-hz", help="Sensor sampling rate, Hz [300, or the "
+                                                     "--robot-config's].", rich_help_panel="Firmware in the loop")]
+    = None,
+    robot_config: Annotated[Optional[Path], typer.Option("--robot-config", help="robot.toml whose detector, sensor "
+                                                         "and rate settings the firmware runs with.",
+                                                         rich_help_panel="Firmware in the loop")] = None,
+    clutch_delay_ms: Annotated[float, typer.Option("--clutch-delay-ms", help="Clutch engage delay (pin on -> leg "
+                                                   "locked), ms; also the release delay unless --release-delay-ms.",
+                                                   rich_help_panel="Firmware in the loop")] = 5.0,
+    release_delay_ms: Annotated[Optional[float], typer.Option("--release-delay-ms", help="Clutch release delay, ms.",
+                                                              rich_help_panel="Firmware in the loop")] = None,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", help="ADNS-3080 position noise (sd), counts.",
+                                                rich_help_panel="Firmware in the loop")] = 1.0,
+    jitter_ms: Annotated[float, typer.Option("--jitter-ms", help="Sampling lateness (sd), ms.",
+                                             rich_help_panel="Firmware in the loop")] = 0.05,
+    holding_force_n: Annotated[float, typer.Option("--holding-force-n", help="Clutch holding force along the leg, N "
+                                                   "(it slips beyond; inf: rigid).",
+                                                   rich_help_panel="Firmware in the loop")] = 100.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the sensor noise and sampling jitter.",
+                                      rich_help_panel="Firmware in the loop")] = 0,
+    bench: Annotated[bool, typer.Option("--bench", help="With --clutch firmware: print simulated steps per second "
+                                        "at 300 Hz and 1 kHz beside the ideal clutch, and exit.",
+                                        rich_help_panel="Firmware in the loop")] = False,
+    critical_slope: Annotated[bool, typer.Option("--critical-slope", help="With --clutch firmware: bisect the lowest "
+                                                 "slope that still walks (a walk of --steps per slope).",
+                                                 rich_help_panel="Firmware in the loop")] = False,
+    critical_low_deg: Annotated[float, typer.Option("--critical-low-deg", help="Low end of the bisection, deg.",
+                                                    rich_help_panel="Firmware in the loop")] = 0.5,
+    critical_tol_deg: Annotated[float, typer.Option("--critical-tol-deg", min=1e-4, max=1.0, help="Bisection "
+                                                    "tolerance, deg.", rich_help_panel="Firmware in the loop")] = 0.05,
 ) -> None:
     """Simulate N steps from the fixed point (or from --theta-dot) and export or plot them."""
+    if robot_config is not None:
+        if not robot_config.is_file():
+            raise ParameterError(f"--robot-config {robot_config}: no such file")
+        if clutch is not ClutchKind.firmware:
+            raise ParameterError("--robot-config needs --clutch firmware")
+    if clutch is ClutchKind.firmware:
+        from rimless.sim import firmware_cli
+
+        if model is not Model.er:
+            raise ParameterError("--clutch firmware needs --model er (the viscoelastic wheel has no clutch)")
+        if theta_dot is not None or gait is not None or out is not None or plot is not None:
+            raise ParameterError("--clutch firmware starts from the ideal fixed point and writes no trajectory: "
+                                 "drop --theta-dot, --gait, --out and --plot")
+        if bench:
+            firmware_cli.run_bench(params, json_out=json_out)
+            return
+        config = firmware_cli.build_config(rate_hz=rate_hz, clutch_delay_ms=clutch_delay_ms,
+                                           release_delay_ms=release_delay_ms, noise_counts=noise_counts,
+                                           jitter_ms=jitter_ms, holding_force_n=holding_force_n, seed=seed,
+                                           robot_config=robot_config)
+        if critical_slope:
+            code = firmware_cli.run_critical(params, config, steps=max(steps, 6), low_deg=critical_low_deg,
+                                             tol_deg=critical_tol_deg, json_out=json_out)
+        else:
+            code = firmware_cli.run_gait(params, config, steps=max(steps, 6), backend=backend.value, rtol=rtol,
+                                         json_out=json_out)
+        if code:
+            raise typer.Exit(code)
+        return
     import numpy as np
 
     from rimless.sim.backend import jacobian_factory, make_integrator, make_map
@@ -696,6 +763,128 @@ class Scheduler(str, Enum):
 
 _SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid", 5), ("phi_c deg", 9),
                   ("ends by", 17), ("CoT", 6))
+
+
+@app.command("firmware-sweep")
+@user_facing
+@sim_failures
+@wheel_params
+def firmware_sweep_cmd(
+    params: Any,
+    rates_hz: Annotated[str, typer.Option("--rates-hz", help="Sensor rates, Hz (comma-separated or START:STOP:STEP).")]
+    = "300,1000",
+    delays_ms: Annotated[str, typer.Option("--delays-ms", help="Clutch engage = release delays, ms.")] = "0,5,10",
+    steps: Annotated[int, typer.Option("--steps", min=6, max=200, help="Walk length per point.")] = 8,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", min=0.0, max=1000.0, help="Sensor noise, counts.")]
+    = 1.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the sensor noise and sampling jitter.")] = 0,
+    scheduler: Annotated[str, typer.Option("--scheduler", help="sync, local (Dask LocalCluster) or tcp://HOST:PORT.")]
+    = "local",
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local Dask workers [cores].")]
+    = None,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the figure: speed and stored energy against "
+                                                 "delay, per rate (.png, .pdf, .svg).")] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Firmware in the loop over sensor rate and clutch delay: gait, speed and stored energy against the ideal clutch."""
+    from rich.progress import Progress
+
+    from rimless.sim.firmware_sweep import plot_firmware_sweep, run_firmware_sweep
+    from rimless.sim.sweep import parse_range
+
+    if plot is not None:
+        _check_plot_path(plot)
+
+    rates = parse_range(rates_hz, "--rates-hz")
+    delays = parse_range(delays_ms, "--delays-ms")
+    if any(not 1.0 <= r <= 1e6 for r in rates):
+        raise ParameterError(f"--rates-hz must be rates in [1, 1e6] Hz, got {rates_hz!r}")
+    if any(not 0.0 <= d <= 1000.0 for d in delays):
+        raise ParameterError(f"--delays-ms must be delays in [0, 1000] ms, got {delays_ms!r}")
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("firmware sweep", total=len(rates) * len(delays))
+        out = run_firmware_sweep(params, rates, [d * 1e-3 for d in delays], steps=steps, noise_counts=noise_counts,
+                                 seed=seed, scheduler=scheduler, workers=workers,
+                                 progress=lambda n, total: prog.update(task, completed=n, total=total))
+    out["plot"] = str(plot_firmware_sweep(out, plot)) if plot is not None else None
+    if json_out:
+        print_json(out)
+        return
+    if out["plot"]:
+        print(f"wrote {out['plot']}")
+    print(f"ideal clutch: theta'+ {out['ideal']['theta_dot_plus_rad_s']:.4f} rad/s, period "
+          f"{out['ideal']['step_period_s']:.4f} s, stored {out['ideal']['stored_energy_J']:.4f} J")
+    print(f"{'rate_hz':>8} {'delay_ms':>8} {'walks':>5} {'period_s':>8} {'speed/ideal':>11} {'stored/ideal':>12} "
+          f"{'|eig|':>6}")
+    for r in out["rows"]:
+        if not r.get("steps_done"):
+            print(f"{r['rate_hz']:>8g} {r['delay_ms']:>8g} {'no':>5}  {r.get('failure')}")
+            continue
+        eig = r["max_abs_eigenvalue_fitted"]
+        print(f"{r['rate_hz']:>8g} {r['delay_ms']:>8g} {'yes' if r['walks'] else 'no':>5} {r['step_period_s']:>8.4f} "
+              f"{r['speed_ratio']:>11.3f} {r['stored_energy_ratio']:>12.3f} {'-' if eig is None else f'{eig:.3f}':>6}")
+    print("speed: step length / period; stored: the stance spring's energy at touchdown; |eig|: fitted to the walk.")
+
+
+def _check_plot_path(plot: Path) -> None:
+    """Refuse a --plot path that cannot be written before any work is done."""
+    import os
+
+    from rimless.errors import OutputFileError
+
+    if plot.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
+    parent = plot.parent if str(plot.parent) else Path(".")
+    if not (parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
+        raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
+
+
+@app.command("replay")
+@user_facing
+@sim_failures
+@wheel_params
+def replay_cmd(
+    params: Any,
+    log: Annotated[Path, typer.Argument(help="Trial log of `rimless robot run` (JSON Lines).")],
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the overlay figure (.png, .pdf, .svg).")] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Replay a robot trial log against the simulator: recorded steps beside the simulated ER step."""
+    from rimless.firmware.triallog import TrialLogError
+    from rimless.sim.firmware_replay import plot_replay, replay_trial
+
+    if not log.is_file():
+        raise ParameterError(f"{log}: no such trial log")
+    if plot is not None:
+        _check_plot_path(plot)
+    try:
+        rep = replay_trial(log, params)
+    except TrialLogError as err:
+        raise ParameterError(str(err)) from None
+    except ValueError as err:
+        raise SimFailure(str(err)) from None
+    out = rep.summary()
+    out["plot"] = str(plot_replay(rep, plot)) if plot is not None else None
+    if json_out:
+        print_json(out)
+        return
+
+    def f(v: Any, scale: float = 1.0) -> str:
+        return "-" if v is None else f"{v * scale:.4g}"
+
+    _console().print(_table(f"replay of {log.name}", [
+        ("recorded steps", str(out["steps"])),
+        ("step period recorded mean / simulated (s)", f"{f(out['recorded_period_s']['mean'])} / "
+                                                      f"{f(out['simulated_period_s'])}"),
+        ("lock after touchdown recorded / peak simulated (ms)",
+         f"{f(out['recorded_lock_after_touchdown_s']['mean'], 1e3)} / {f(out['simulated_peak_after_impact_s'], 1e3)}"),
+        ("max compression recorded / simulated (mm)", f"{f(out['recorded_max_compression_m'], 1e3)} / "
+                                                      f"{f(out['simulated_max_compression_m'], 1e3)}"),
+        ("faults in the log", ", ".join(out["faults"]) or "none"),
+        ("figure", out["plot"] or "-"),
+    ]))
+    if out["plot"]:
+        print(out["plot"])
 
 
 @app.command("sweep")

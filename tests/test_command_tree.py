@@ -285,6 +285,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("sim", "fixed-point"): (["--backend", "reference"], 2.0),
     ("sim", "gait"): (["--steps", "10000", "--out", "traj.parquet", "--plot", "gait.png"], 4.0),
     ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], 4.0),
+    ("sim", "firmware-sweep"): (["--rates-hz", "300,1000", "--delays-ms", "0,5,10", "--scheduler", "sync"], 4.0),
     ("sim", "stress"): (["--k-values", ",".join(str(300 + 10 * i) for i in range(200))], 4.0),
     ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], 5.0),
     ("trials", "bench-import"): (["--rows", "5000000"], 4.0),
@@ -309,6 +310,7 @@ QUICK: dict[tuple[str, ...], str] = {
     ("robot", "check"): "needs the hardware; with --fake it clicks 8 clutches in about 2.4 s, too short to "
                         "aim a signal at reliably",
     ("trials", "show"): "reads one Parquet file (well under a second)",
+    ("sim", "replay"): "reads one trial log and simulates one step (about a second)",
     ("trials", "import"): "parses a few files in about a second; the long import is `trials bench-import`",
     ("robot", "ping"): "one request to the robot, bounded by the command timeout",
     ("robot", "release"): "drives the clutch pins low once and exits",

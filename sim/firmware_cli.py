@@ -1,0 +1,289 @@
+"""`rimless sim gait --clutch firmware`: the gait, fixed point and energy under the robot's own controller,
+and its benchmark (`--bench`). Called from rimless.sim.cli; the work is in rimless.sim.firmware_loop."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from rimless.errors import ParameterError
+
+
+def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay_ms: float | None,
+                 noise_counts: float, jitter_ms: float, holding_force_n: float, seed: int,
+                 robot_config: Any = None) -> Any:
+    """FirmwareLoopConfig from the CLI options; errors name the option.
+
+    robot_config: a robot.toml (read by the firmware's own loader) supplying the detector parameters, the
+    first sensor's resolution, calibration and health limits, and the sampling rate unless --rate-hz is given."""
+    from rimless.firmware.faults import HealthLimits
+    from rimless.sim.firmware_loop import FirmwareLoopConfig
+
+    extra: dict[str, Any] = {}
+    if robot_config is not None:
+        from rimless.firmware.config import load_config
+
+        robot = load_config(robot_config)
+        sensor = robot.sensors[0]
+        cpm_1600 = sensor.counts_per_m * (1.0 if sensor.resolution_cpi == 1600 else 4.0)
+        extra = {"detector": robot.detector, "cpi": sensor.resolution_cpi, "counts_per_m_1600": cpm_1600,
+                 "health": HealthLimits(sensor.squal_min, sensor.squal_low_s, sensor.saturated_samples_max)}
+        if rate_hz is None:
+            rate_hz = robot.sampling.rate_hz
+    if rate_hz is None:
+        rate_hz = 300.0
+
+    checks = [
+        ("--rate-hz", rate_hz, 1.0 <= rate_hz <= 1e6, "a sampling rate in [1, 1e6] Hz"),
+        ("--clutch-delay-ms", clutch_delay_ms, 0.0 <= clutch_delay_ms <= 1000.0, "a delay in [0, 1000] ms"),
+        ("--noise-counts", noise_counts, 0.0 <= noise_counts <= 1000.0, "a noise level in [0, 1000] counts"),
+        ("--jitter-ms", jitter_ms, 0.0 <= jitter_ms <= 100.0, "a jitter in [0, 100] ms"),
+        ("--holding-force-n", holding_force_n, holding_force_n > 0.0, "a force > 0 N (inf: a rigid clutch)"),
+    ]
+    if release_delay_ms is not None:
+        checks.append(("--release-delay-ms", release_delay_ms, 0.0 <= release_delay_ms <= 1000.0,
+                       "a delay in [0, 1000] ms"))
+    for flag, value, ok, what in checks:
+        if value != value or not ok:
+            raise ParameterError(f"{flag} must be {what}, got {value}")
+    release = clutch_delay_ms if release_delay_ms is None else release_delay_ms
+    return FirmwareLoopConfig(rate_hz=rate_hz, jitter_s=jitter_ms * 1e-3, noise_counts=noise_counts,
+                              engage_delay_s=clutch_delay_ms * 1e-3, release_delay_s=release * 1e-3,
+                              holding_force_N=holding_force_n, seed=seed, **extra).validated()
+
+
+def ideal_fixed_point(params: Any, *, backend: str, rtol: float) -> Any:
+    """The ideal-clutch ER fixed point (the start of every firmware walk)."""
+    from rimless.sim.backend import jacobian_factory, make_map
+    from rimless.sim.poincare import default_guess, solve_fixed_point
+
+    pmap = make_map(params, "er", backend=backend, rtol=rtol)
+    jf = jacobian_factory(backend)
+    return solve_fixed_point(pmap, default_guess(params, "er"), jacobian=jf(pmap) if jf else None)
+
+
+def _f(x: Any) -> Any:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def firmware_summary(params: Any, config: Any, ideal: Any, fp: Any) -> dict[str, Any]:
+    """JSON-able summary of a firmware walk and its fixed point against the ideal clutch."""
+    walk = fp.walk
+    ideal_stored = 0.5 * params.k * (params.leg_length_m - float(ideal.step.y_minus[3])) ** 2
+    steps = walk.steps
+    classes = Counter(s.lock_class for s in steps)
+    late = [s.release_lateness_s for s in steps if s.release_lateness_s is not None]
+    faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
+    return {
+        "clutch": "firmware",
+        "model": "er",
+        "slope_rad": params.slope_rad,
+        "rate_hz": config.rate_hz,
+        "engage_delay_ms": config.engage_delay_s * 1e3,
+        "release_delay_ms": config.release_delay_s * 1e3,
+        "noise_counts": config.noise_counts,
+        "jitter_ms": config.jitter_s * 1e3,
+        "holding_force_N": config.holding_force_N if math.isfinite(config.holding_force_N) else None,
+        "cpi": config.cpi,
+        "seed": config.seed,
+        "steps_done": len(steps),
+        "ideal": {
+            "theta_plus_rad": float(ideal.z[0]), "theta_dot_plus_rad_s": float(ideal.z[1]),
+            "step_period_s": float(ideal.step.period_s), "stored_energy_J": ideal_stored,
+            "max_abs_eigenvalue": float(np.max(np.abs(ideal.eigenvalues))),
+        },
+        "fixed_point": {
+            "method": "linear fit z_{k+1} = A z_k + c to the walk's section points, z* = (I - A)^-1 c",
+            "theta_plus_rad": _f(fp.z[0]), "theta_dot_plus_rad_s": _f(fp.z[1]),
+            "mean_last_rad_rad_s": [_f(v) for v in fp.z_mean], "std_last_rad_rad_s": [_f(v) for v in fp.z_std],
+            "n_average": fp.n_average,
+            "eigenvalues_fitted": [[_f(e.real), _f(e.imag)] for e in fp.eigenvalues],
+            "stable_fitted": fp.stable,
+            "fit_residual": _f(fp.fit_residual),
+            "step_period_s": fp.period_s, "step_period_std_s": fp.period_std_s,
+            "stored_energy_J": fp.stored_energy_J,
+            "stored_energy_ratio_to_ideal": fp.stored_energy_J / ideal_stored if ideal_stored > 0 else None,
+        },
+        "lock_classes": dict(classes),
+        "release_lateness_mean_ms": float(np.mean(late)) * 1e3 if late else None,
+        "energy_per_step_mean_J": {
+            key: float(np.mean([getattr(s, key) for s in steps])) if steps else None
+            for key in ("stored_energy_J", "damper_J", "clutch_loss_J", "recontact_loss_J", "impact_loss_J")
+        },
+        "energy_residual_max_J": max((abs(s.energy_residual_J) for s in steps), default=None),
+        "firmware_faults": faults,
+        "failure": None if walk.failure is None else {"reason": walk.failure.reason.value,
+                                                      "message": str(walk.failure)},
+        "steps": [s.to_dict() for s in steps],
+    }
+
+
+def run_gait(params: Any, config: Any, *, steps: int, backend: str, rtol: float, json_out: bool,
+             out_json: Any = None) -> int:
+    """The `--clutch firmware` gait command; returns the exit code."""
+    from rich.progress import Progress
+
+    from rimless.cli import print_json
+    from rimless.sim.cli import _console, _err_console, _table
+    from rimless.sim.failures import StepFailure
+    from rimless.sim.firmware_loop import firmware_fixed_point
+    from rimless.sim.poincare import NoFixedPoint
+
+    try:
+        ideal = ideal_fixed_point(params, backend=backend, rtol=rtol)
+    except (StepFailure, NoFixedPoint) as err:
+        import typer
+
+        typer.echo(f"error: no ideal-clutch ER gait to start the firmware walk from at {params.slope_deg:.4f} deg: "
+                   f"{err}", err=True)
+        return 1
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task(f"firmware in the loop at {config.rate_hz:g} Hz", total=steps)
+        try:
+            fp = firmware_fixed_point(params, config, ideal.z, steps=steps, n_average=min(4, steps),
+                                      progress=lambda k: prog.update(task, completed=k))
+        except StepFailure as err:
+            import typer
+
+            typer.echo(f"error: the walk under the firmware failed within its first steps: {err}", err=True)
+            return 1
+    out = firmware_summary(params, config, ideal, fp)
+    if json_out:
+        print_json(out)
+        return 0
+    i, f = out["ideal"], out["fixed_point"]
+    eig = ", ".join(f"{abs(complex(re, im)):.3f}" for re, im in f["eigenvalues_fitted"] if re is not None) or "-"
+    e = out["energy_per_step_mean_J"]
+
+    def num(v: Any, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    rows = [
+        ("sampling / delays", f"{config.rate_hz:g} Hz, engage {out['engage_delay_ms']:g} ms, release "
+                              f"{out['release_delay_ms']:g} ms"),
+        ("sensor noise / jitter", f"{config.noise_counts:g} counts, {out['jitter_ms']:g} ms"),
+        ("clutch holding force (N)", num(out["holding_force_N"], "g") if out["holding_force_N"] else "rigid"),
+        ("steps", f"{len(fp.walk.steps)} of {steps}"),
+        ("theta+ ideal / firmware (rad)", f"{i['theta_plus_rad']:.5f} / {num(f['theta_plus_rad'], '.5f')}"),
+        ("theta'+ ideal / firmware (rad/s)", f"{i['theta_dot_plus_rad_s']:.4f} / "
+                                             f"{num(f['theta_dot_plus_rad_s'], '.4f')}"),
+        ("step period ideal / firmware (s)", f"{i['step_period_s']:.4f} / {f['step_period_s']:.4f} "
+                                             f"(sd {f['step_period_std_s']:.1e})"),
+        ("|eigenvalues| ideal / fitted", f"{i['max_abs_eigenvalue']:.3f} / {eig}"),
+        ("stored energy ideal / firmware (J)", f"{i['stored_energy_J']:.4f} / {f['stored_energy_J']:.4f}"),
+        ("locks (class: steps)", ", ".join(f"{k}: {v}" for k, v in out["lock_classes"].items()) or "-"),
+        ("release after touchdown (ms)", num(out["release_lateness_mean_ms"], ".3f")),
+        ("losses/step damper, clutch, foot-a, impact (J)",
+         ", ".join(num(e[k], ".4f") for k in ("damper_J", "clutch_loss_J", "recontact_loss_J", "impact_loss_J"))),
+        ("energy budget residual max (J)", num(out["energy_residual_max_J"], ".1e")),
+        ("firmware faults", ", ".join(out["firmware_faults"]) or "none"),
+    ]
+    con = _console()
+    con.print(_table("ER gait, firmware in the loop", rows))
+    con.print("fixed point: fitted to the walk (z_{k+1} = A z_k + c, z* = (I - A)^-1 c); eigenvalues are those "
+              "of A. Stored energy: the stance spring's energy held at touchdown.", soft_wrap=True)
+    if fp.walk.failure is not None:
+        con.print(f"[yellow]the walk ended early: {fp.walk.failure}[/yellow]")
+    return 0
+
+
+def run_bench(params: Any, *, rates_hz: tuple[float, ...] = (300.0, 1000.0), steps: int = 3, json_out: bool = False
+              ) -> dict[str, Any]:
+    """Simulated steps per second with the firmware in the loop, beside the ideal clutch on the reference
+    path (same start, same integrator family), and the difference of their section points."""
+    from rimless.cli import print_json
+    from rimless.sim.firmware_loop import FirmwareLoop, FirmwareLoopConfig
+    from rimless.sim.hybrid import simulate_step
+    from rimless.sim.integrators import ScipyIntegrator
+    from rimless.sim.model import Mechanics
+    from rimless.sim.section import state_from_section
+
+    ideal = ideal_fixed_point(params, backend="reference", rtol=1e-9)
+    mech = Mechanics.of(params)
+    t = time.perf_counter()
+    y = state_from_section(mech, ideal.z)
+    for _ in range(steps):
+        y = simulate_step(mech, "er", y, ScipyIntegrator(rtol=1e-9, atol=1e-11)).y_plus
+    ref_s = (time.perf_counter() - t) / steps
+    rows = []
+    for rate in rates_hz:
+        loop = FirmwareLoop(params, FirmwareLoopConfig(rate_hz=rate))
+        t = time.perf_counter()
+        walk = loop.walk(ideal.z, steps)
+        el = time.perf_counter() - t
+        loop.close()
+        done = max(len(walk.steps), 1)
+        per_step = el / (done + 1)  # the priming step is simulated and sampled as well
+        z_err = float(np.max(np.abs(walk.steps[0].z_end - ideal.z))) if walk.steps else float("nan")
+        rows.append({"rate_hz": rate, "steps": len(walk.steps), "steps_per_s": 1.0 / per_step,
+                     "samples_per_step": walk.samples / (done + 1),
+                     "reference_ideal_steps_per_s": 1.0 / ref_s, "slowdown_vs_ideal": per_step / ref_s,
+                     "first_step_section_difference": z_err})
+    out = {"benchmark": "firmware-in-the-loop", "steps": steps, "rows": rows}
+    if json_out:
+        print_json(out)
+    else:
+        print(f"{'rate_hz':>8} {'steps/s':>8} {'samples/step':>12} {'ideal steps/s':>13} {'slowdown':>8} "
+              f"{'|dz| step 1':>11}")
+        for r in rows:
+            print(f"{r['rate_hz']:>8g} {r['steps_per_s']:>8.2f} {r['samples_per_step']:>12.0f} "
+                  f"{r['reference_ideal_steps_per_s']:>13.2f} {r['slowdown_vs_ideal']:>8.1f} "
+                  f"{r['first_step_section_difference']:>11.2e}")
+        print("firmware: Controller + LegDetector + Adns3080 driver over the FakeAdns3080 bus, defaults "
+              "(5 ms delays, 1 count noise); ideal: reference path (scipy DOP853, rtol 1e-9), same start.")
+    return out
+
+
+def run_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_deg: float, json_out: bool) -> int:
+    """`--critical-slope`: the lowest slope at which the firmware keeps the wheel walking; returns the exit code."""
+    import typer
+    from rich.progress import Progress
+
+    from rimless.cli import print_json
+    from rimless.sim.cli import _console, _err_console, _table
+    from rimless.sim.firmware_loop import firmware_critical_slope
+
+    if not (math.isfinite(low_deg) and 0.0 <= low_deg < params.slope_deg):
+        raise ParameterError(f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), got {low_deg}")
+    n_max = 2 + max(1, math.ceil(math.log2(max((params.slope_deg - low_deg) / tol_deg, 1.0))))
+    with Progress(transient=True, console=_err_console()) as prog:
+        task = prog.add_task("bisecting the slope (a walk per slope)", total=n_max)
+        try:
+            res = firmware_critical_slope(params, config, low_rad=math.radians(low_deg), steps=steps,
+                                          tol_rad=math.radians(tol_deg),
+                                          progress=lambda k: prog.update(task, completed=k))
+        except ValueError as err:
+            typer.echo(f"error: {err}", err=True)
+            return 1
+    out = {
+        "clutch": "firmware", "rate_hz": config.rate_hz, "engage_delay_ms": config.engage_delay_s * 1e3,
+        "release_delay_ms": config.release_delay_s * 1e3, "noise_counts": config.noise_counts,
+        "definition": f"lowest slope at which a walk of {steps} steps from the ideal-clutch gait completes with no "
+                      "failed step and no firmware fault (bisection; one boundary assumed)",
+        "critical_slope_deg": math.degrees(res.critical_slope_rad),
+        "failing_slope_deg": math.degrees(res.failing_slope_rad),
+        "tolerance_deg": tol_deg,
+        "reason_below": res.reason_below,
+        "evaluations": [{"slope_deg": math.degrees(s), "walks": ok, "reason": why} for s, ok, why in res.evaluations],
+    }
+    if json_out:
+        print_json(out)
+        return 0
+    con = _console()
+    con.print(_table("critical slope, firmware in the loop", [
+        ("sampling / delays", f"{config.rate_hz:g} Hz, engage {out['engage_delay_ms']:g} ms, release "
+                              f"{out['release_delay_ms']:g} ms"),
+        ("critical slope (deg)", f"{out['critical_slope_deg']:.3f}"),
+        ("fails at (deg)", f"{out['failing_slope_deg']:.3f}"),
+        ("walk length (steps)", str(steps)),
+    ]))
+    con.print(f"definition: {out['definition']}", soft_wrap=True)
+    con.print(f"why it fails below: {out['reason_below']}", soft_wrap=True)
+    return 0

@@ -1,0 +1,153 @@
+"""Replay a robot trial log (JSON Lines from `rimless robot run`) against the simulator.
+
+The log is read with the firmware's own reader (rimless.firmware.triallog). Its steps are the intervals
+between the firmware's `touchdown` events; each is set beside one simulated ER step (the ideal-clutch
+fixed point at the given parameters): recorded compression (sensor position since the step's touchdown
+event) over the simulated stance-leg compression L0 - L1, both from their own touchdown. The firmware
+detects a touchdown after it happened, so each recorded curve starts a few milliseconds later than the
+simulated one (from the impact); the lag is not corrected here, and the summary compares step periods
+(touchdown event to touchdown event, where the lag cancels), the lock time after the touchdown event and
+the maximum compression.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class ReplayStep:
+    """One recorded step beside the simulated one (SI; times from the step's touchdown event, s)."""
+
+    index: int
+    t_touchdown_s: float  # monotonic time of the touchdown event in the log
+    recorded_period_s: float
+    recorded_lock_s: float | None  # lock event after the touchdown event
+    recorded_max_compression_m: float
+    t: np.ndarray  # recorded sample times from the touchdown event
+    compression_m: np.ndarray  # recorded compression
+    clutch_mask: np.ndarray
+
+
+@dataclass
+class Replay:
+    """A trial log's steps beside the simulated step."""
+
+    path: Path
+    steps: list[ReplayStep]
+    sim_t: np.ndarray  # from the simulated impact, s
+    sim_compression_m: np.ndarray  # L0 - L1
+    sim_period_s: float
+    sim_peak_s: float  # maximum compression after the impact
+    sim_max_compression_m: float
+    faults: list[str]
+    torn_tail: bool
+
+    def summary(self) -> dict[str, Any]:
+        rec_periods = [s.recorded_period_s for s in self.steps]
+        locks = [s.recorded_lock_s for s in self.steps if s.recorded_lock_s is not None]
+        return {
+            "log": str(self.path),
+            "steps": len(self.steps),
+            "torn_tail": self.torn_tail,
+            "faults": self.faults,
+            "recorded_period_s": {"mean": _mean(rec_periods), "min": _min(rec_periods), "max": _max(rec_periods)},
+            "simulated_period_s": self.sim_period_s,
+            "recorded_lock_after_touchdown_s": {"mean": _mean(locks), "min": _min(locks), "max": _max(locks)},
+            "simulated_peak_after_impact_s": self.sim_peak_s,
+            "recorded_max_compression_m": _mean([s.recorded_max_compression_m for s in self.steps]),
+            "simulated_max_compression_m": self.sim_max_compression_m,
+            "per_step": [{"index": s.index, "period_s": s.recorded_period_s, "lock_after_touchdown_s": s.recorded_lock_s,
+                          "max_compression_m": s.recorded_max_compression_m} for s in self.steps],
+        }
+
+
+def _mean(v: list[float]) -> float | None:
+    return float(np.mean(v)) if v else None
+
+
+def _min(v: list[float]) -> float | None:
+    return float(np.min(v)) if v else None
+
+
+def _max(v: list[float]) -> float | None:
+    return float(np.max(v)) if v else None
+
+
+def replay_trial(path: str | Path, params: Any, *, channel: int = 0) -> Replay:
+    """Read a trial log and pair its steps with the simulated ideal-clutch step.
+    Raises rimless.firmware.triallog.TrialLogError on a corrupt log and ValueError when it has no step."""
+    from rimless.firmware.triallog import read_trial_log
+    from rimless.sim.firmware_cli import ideal_fixed_point
+    from rimless.sim.hybrid import simulate_step
+    from rimless.sim.integrators import ScipyIntegrator
+    from rimless.sim.model import Mechanics
+    from rimless.sim.section import state_from_section
+
+    path = Path(path)
+    log = read_trial_log(path)
+    samples = [s for s in log.samples if s.get("ch", 0) == channel and "leg" in s]
+    t = np.array([s["t_mono_s"] for s in samples], dtype=float)
+    pos = np.array([s["leg"]["position_m"] for s in samples], dtype=float)
+    mask = np.array([s["leg"].get("clutch_mask", 0) for s in samples], dtype=int)
+    events = [(e["t_mono_s"], e["event"]) for e in log.events]
+    touch = [te for te, ev in events if ev.get("name") == "touchdown" and ev.get("channel", 0) == channel]
+    locks = [te for te, ev in events if ev.get("name") == "lock" and ev.get("channel", 0) == channel]
+    faults = [str(ev.get("fault")) for _, ev in events if ev.get("name") == "fault"]
+    if len(touch) < 2 or len(t) == 0:
+        raise ValueError(f"{path}: fewer than two touchdown events on channel {channel}: no complete step to replay")
+    steps = []
+    for k, (t0, t1) in enumerate(zip(touch[:-1], touch[1:])):
+        sel = (t >= t0) & (t < t1)
+        if not sel.any():
+            continue
+        p0 = float(np.interp(t0, t, pos))
+        comp = pos[sel] - p0
+        lock = next((tl - t0 for tl in locks if t0 <= tl < t1), None)
+        steps.append(ReplayStep(k, t0, t1 - t0, lock, float(comp.max()), t[sel] - t0, comp, mask[sel]))
+    fp = ideal_fixed_point(params, backend="reference", rtol=1e-9)
+    mech = Mechanics.of(params)
+    res = simulate_step(mech, "er", state_from_section(mech, fp.z), ScipyIntegrator(rtol=1e-9, atol=1e-11),
+                        record_dt=5e-4)
+    st = np.concatenate([s.t for s in res.segments or []])
+    sl = np.concatenate([s.y[:, 3] for s in res.segments or []])
+    order = np.argsort(st, kind="stable")
+    sim_t, sim_c = st[order], params.leg_length_m - sl[order]
+    i_peak = int(np.argmax(sim_c))
+    return Replay(path, steps, sim_t, sim_c, float(res.period_s), float(sim_t[i_peak]), float(sim_c[i_peak]), faults,
+                  log.torn_tail)
+
+
+def plot_replay(replay: Replay, path: str | Path) -> Path:
+    """Recorded compression of every step (grey, clutch-engaged samples marked) over the simulated step."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for s in replay.steps:
+        ax.plot(s.t * 1e3, s.compression_m * 1e3, color="0.6", lw=0.8)
+        on = s.clutch_mask != 0
+        ax.plot(s.t[on] * 1e3, s.compression_m[on] * 1e3, ".", color="tab:red", ms=2)
+    ax.plot(replay.sim_t * 1e3, replay.sim_compression_m * 1e3, color="tab:blue", lw=2, label="simulated (ideal clutch)")
+    ax.axvline(replay.sim_peak_s * 1e3, color="tab:blue", ls=":", lw=1)
+    ax.plot([], [], color="0.6", label="recorded steps")
+    ax.plot([], [], ".", color="tab:red", label="clutch engaged (recorded)")
+    ax.set_xlabel("time since touchdown (ms)")
+    ax.set_ylabel("leg compression (mm)")
+    ax.set_title(f"{replay.path.name}: {len(replay.steps)} steps")
+    ax.legend(loc="upper right", fontsize=8)
+    from rimless.output import atomic_file
+
+    path = Path(path)
+    try:
+        with atomic_file(path, option="--plot") as tmp:
+            fig.savefig(tmp, dpi=120)
+    finally:
+        plt.close(fig)
+    return path

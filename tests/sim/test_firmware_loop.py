@@ -1,0 +1,316 @@
+"""Firmware in the loop: the robot's own detector and controller drive the simulated ER wheel.
+
+Independent expectations: the ideal-clutch fixed point of the reference path (conftest), energy
+conservation (start energy = end energy + every loss the simulation books), the physics of a late
+lock (a lock after the compression peak stores less), and the firmware's source files on disk.
+"""
+
+import inspect
+import json
+import math
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import rimless.firmware.adns3080
+import rimless.firmware.clutch
+import rimless.firmware.controller
+import rimless.firmware.detector
+import rimless.firmware.fake_adns3080
+import rimless.firmware.faults
+from rimless.cli import app
+from rimless.firmware.detector import DetectorParams
+from rimless.sim.failures import StepFailure
+from rimless.sim.firmware_loop import FirmwareLoop, FirmwareLoopConfig, firmware_fixed_point
+
+REPO = Path(__file__).resolve().parents[2]
+FIRMWARE_MODULES = [rimless.firmware.adns3080, rimless.firmware.clutch, rimless.firmware.controller,
+                    rimless.firmware.detector, rimless.firmware.fake_adns3080, rimless.firmware.faults]
+QUIET = dict(jitter_s=0.0, noise_counts=0.0)
+
+
+def _walk(params, z, steps, **cfg):
+    loop = FirmwareLoop(params, FirmwareLoopConfig(**cfg))
+    try:
+        return loop, loop.walk(z, steps)
+    finally:
+        loop.close()
+
+
+# --- the same firmware code runs on the robot and in the loop --------------------------------------
+
+def _code_objects(path: Path) -> dict[str, bytes]:
+    """qualname -> bytecode of every function compiled from the file on disk."""
+    out: dict[str, bytes] = {}
+
+    def walk(code: types.CodeType) -> None:
+        for const in code.co_consts:
+            if isinstance(const, types.CodeType):
+                out[const.co_qualname] = const.co_code
+                walk(const)
+
+    walk(compile(path.read_text(), str(path), "exec"))
+    return out
+
+
+def test_the_loop_runs_the_firmware_files_unpatched(table1, er_fixed_point):
+    """Every function of the firmware modules the loop uses is the one compiled from firmware/*.py,
+    the loop's objects are instances of those classes, and no instance overrides a method."""
+    loop, walk = _walk(table1, er_fixed_point[1].z, 1)
+    for module in FIRMWARE_MODULES:
+        path = Path(inspect.getsourcefile(module))
+        assert path == REPO / "firmware" / path.name
+        compiled = _code_objects(path)
+        checked = 0
+        for qualname, code in compiled.items():
+            if "<" in qualname:
+                continue  # nested functions and comprehensions live inside the checked ones
+            obj = module
+            for part in qualname.split("."):
+                obj = inspect.getattr_static(obj, part)
+            if inspect.isclass(obj):
+                continue  # a class body
+            fn = getattr(obj, "__func__", getattr(obj, "fget", obj))
+            assert fn.__code__.co_code == code, f"{module.__name__}.{qualname} is not the code in {path}"
+            checked += 1
+        assert checked >= 3
+    expected = {"controller": rimless.firmware.controller.Controller, "detector": rimless.firmware.detector.LegDetector,
+                "sensor": rimless.firmware.adns3080.Adns3080, "fake": rimless.firmware.fake_adns3080.FakeAdns3080,
+                "clutches": rimless.firmware.clutch.ClutchBank}
+    for attr, cls in expected.items():
+        obj = getattr(loop, attr)
+        assert type(obj) is cls, attr
+        shadowed = [k for k in vars(obj) if inspect.isfunction(inspect.getattr_static(type(obj), k, None))]
+        assert not shadowed, f"{attr}: instance attributes replace methods {shadowed}"
+    assert loop.controller.channels[0].detector is loop.detector and loop.controller.channels[0].sensor is loop.sensor
+    names = [name for _, name, _ in walk.events]
+    assert "touchdown" in names and "lock" in names and loop.fake.motion_reads == loop.samples > 0
+
+
+def test_a_patched_firmware_function_is_detected(monkeypatch):
+    """The check above fails when a firmware method is replaced (guards the guard)."""
+    compiled = _code_objects(REPO / "firmware" / "detector.py")
+    LegDetector = rimless.firmware.detector.LegDetector
+
+    def update(self, t_ns, displacement_m, trusted=True):  # noqa: ANN001, ANN202
+        return rimless.firmware.detector.NOTHING
+
+    monkeypatch.setattr(LegDetector, "update", update)
+    assert inspect.getattr_static(LegDetector, "update").__code__.co_code != compiled["LegDetector.update"]
+
+
+def test_no_simulator_module_copies_firmware_code():
+    """Distinctive lines of the firmware's decision code appear only in firmware/."""
+    markers = [line.strip() for line in (REPO / "firmware" / "detector.py").read_text().splitlines()
+               if line.strip().startswith(("det = s0 *", "det_b = s0 *", "det_c = s0 *", "armed = self._peak_v"))]
+    markers += ["def _step_channel(", "class VelocityEstimator", "class LegDetector", "def _latch(self)"]
+    assert len(markers) >= 8
+    for path in (REPO / "sim").rglob("*.py"):
+        text = path.read_text()
+        for marker in markers:
+            assert marker not in text, f"{path} contains firmware code: {marker!r}"
+
+
+# --- physics ----------------------------------------------------------------------------------------
+
+def test_energy_budget_closes_with_delays_noise_and_slip(table1, er_fixed_point):
+    """E(start) - damper - clutch slip/lock - foot-a re-contact - impact = E(end), step by step."""
+    _, walk = _walk(table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=0.005, release_delay_s=0.005,
+                    noise_counts=1.0)
+    assert walk.failure is None and len(walk.steps) == 3
+    for s in walk.steps:
+        assert abs(s.energy_residual_J) < 1e-7, s.energy_residual_J
+        assert s.damper_J > 0 and s.impact_loss_J > 0 and s.clutch_loss_J >= 0 and s.recontact_loss_J >= 0
+        assert s.lock_class in ("compression", "peak", "rebound")
+        # a 5 ms engage delay at 300 Hz locks after the peak: L1' > 0 (extending) at the lock
+        assert s.lock_rate_m_s > 0 and s.lock_time_s > s.peak_time_s
+    # the trailing clutch lets go only after the firmware has seen the touchdown and 5 ms have passed
+    assert all(s.release_lateness_s > 0.005 for s in walk.steps[1:])
+
+
+def test_added_delay_lowers_the_stored_energy_monotonically(table1, er_fixed_point):
+    stored = []
+    for delay in (0.0, 0.005, 0.010, 0.020):
+        _, walk = _walk(table1, er_fixed_point[1].z, 1, rate_hz=1000.0, engage_delay_s=delay, release_delay_s=0.0,
+                        **QUIET)
+        assert walk.failure is None
+        stored.append(walk.steps[0].stored_energy_J)
+    ideal = 0.5 * table1.k * (table1.leg_length_m - er_fixed_point[1].step.y_minus[3]) ** 2
+    assert stored[0] == pytest.approx(ideal, rel=0.02)
+    assert all(a > b for a, b in zip(stored, stored[1:])), stored
+    assert stored[-1] < 0.9 * ideal
+
+
+@pytest.mark.parametrize("delay_s", [0.1, 0.4])
+def test_a_delay_longer_than_the_compression_phase_is_classified(table1, er_fixed_point, delay_s):
+    """Compression lasts about 70 ms here; a 100 ms clutch locks in the rebound (or not at all before
+    touchdown), a 400 ms clutch acts a step late. Either way: classified steps or a classified failure."""
+    _, walk = _walk(table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=delay_s, release_delay_s=delay_s,
+                    **QUIET)
+    assert walk.steps or walk.failure is not None
+    for s in walk.steps:
+        assert s.lock_class in ("rebound", "after-rebound", "none")
+        assert math.isfinite(s.period_s) and abs(s.energy_residual_J) < 1e-7
+        assert s.stored_energy_J < 0.8 * 0.2584
+    if walk.failure is not None:
+        assert isinstance(walk.failure, StepFailure) and walk.failure.reason.value
+
+
+HIGH_RATE = dict(jitter_s=0.0, noise_counts=0.0, engage_delay_s=0.0, release_delay_s=0.0,
+                 counts_per_m_1600=6.3e6)  # a 100x finer sensor: quantisation out of the way
+
+
+def _high_rate(rate_hz, window_s):
+    det = DetectorParams(velocity_window_s=window_s, touch_compression_m=1e-5, touch_debounce_samples=1)
+    return dict(HIGH_RATE, rate_hz=rate_hz, detector=det)
+
+
+@pytest.mark.slow
+def test_high_rate_no_noise_no_delay_converges_to_the_ideal_fixed_point(table1, er_fixed_point):
+    """The firmware can only release the trailing clutch after it has seen the touchdown; the trailing leg
+    slips against the holding force meanwhile, which is the remaining difference. Its one-step deficit
+    shrinks as the rate rises (and the velocity window with it), and at 20 kHz the fixed point is within
+    2 % (theta'+) and 3 % (period) of the ideal one: the one-step deficit there is ~0.009 rad/s, and the
+    fixed point moves by about 1 / (1 - 0.79) of it (the map's dominant eigenvalue is 0.79)."""
+    ideal = er_fixed_point[1]
+    deficits = []
+    for rate, window in ((5000.0, 0.008), (20000.0, 0.002)):
+        _, walk = _walk(table1, ideal.z, 2, **_high_rate(rate, window))
+        assert walk.failure is None
+        deficits.append(ideal.z[1] - walk.steps[1].z_end[1])
+    assert 0 < deficits[1] < deficits[0] / 1.6, deficits
+    fp = firmware_fixed_point(table1, FirmwareLoopConfig(**_high_rate(20000.0, 0.002)), ideal.z, steps=9)
+    assert fp.walk.failure is None
+    assert fp.z[1] == pytest.approx(ideal.z[1], rel=0.02)
+    assert fp.z[0] == pytest.approx(ideal.z[0], abs=0.002)
+    assert fp.period_s == pytest.approx(ideal.step.period_s, rel=0.03)
+    assert np.max(np.abs(fp.eigenvalues)) == pytest.approx(np.max(np.abs(ideal.eigenvalues)), abs=0.05)
+    assert fp.stored_energy_J == pytest.approx(0.5 * table1.k * (table1.leg_length_m - ideal.step.y_minus[3]) ** 2,
+                                               rel=0.02)
+    assert all(s.lock_class == "peak" for s in fp.walk.steps)
+    assert max(abs(s.energy_residual_J) for s in fp.walk.steps) < 1e-7
+
+
+def test_a_rigid_clutch_late_release_is_classified_not_a_crash(table1, er_fixed_point):
+    _, walk = _walk(table1, er_fixed_point[1].z, 3, holding_force_N=math.inf, **QUIET)
+    assert walk.steps or walk.failure is not None
+    if walk.failure is not None:
+        assert walk.failure.reason.value in ("negative-impulse", "stall", "stance-lift-off")
+
+
+def test_bad_configuration_names_the_field(table1):
+    with pytest.raises(ValueError, match="rate_hz"):
+        FirmwareLoopConfig(rate_hz=0.0).validated()
+    with pytest.raises(ValueError, match="engage_delay_s"):
+        FirmwareLoopConfig(engage_delay_s=float("nan")).validated()
+
+
+# --- CLI --------------------------------------------------------------------------------------------
+
+RUN = CliRunner()
+
+
+def test_cli_gait_with_the_firmware_clutch_reports_fixed_point_and_energy():
+    res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--rate-hz", "300", "--clutch-delay-ms", "5",
+                           "--noise-counts", "1", "--steps", "6", "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert out["steps_done"] == 6 and out["failure"] is None
+    fp = out["fixed_point"]
+    assert fp["theta_dot_plus_rad_s"] < out["ideal"]["theta_dot_plus_rad_s"]
+    assert 0 < fp["stored_energy_J"] < out["ideal"]["stored_energy_J"]
+    assert out["energy_residual_max_J"] < 1e-7
+    assert set(out["lock_classes"]) <= {"compression", "peak", "rebound", "after-rebound", "none"}
+
+
+@pytest.mark.parametrize("args, flag", [(["--rate-hz", "0"], "--rate-hz"), (["--clutch-delay-ms", "-1"],
+                                        "--clutch-delay-ms"), (["--model", "ve"], "--model er")])
+def test_cli_firmware_bad_options_are_one_line_errors(args, flag):
+    res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", *args])
+    assert res.exit_code == 2
+    assert flag in res.output and "Traceback" not in res.output
+
+
+def test_firmware_sweep_orders_the_cost_of_delay(table1):
+    """Over delays at one rate, speed and stored energy fall as the clutch gets slower (sync scheduler)."""
+    from rimless.sim.firmware_sweep import run_firmware_sweep
+
+    out = run_firmware_sweep(table1, [300.0], [0.0, 0.010], steps=6, scheduler="sync")
+    fast, slow = out["rows"]
+    assert fast["walks"] and slow["walks"]
+    assert 0 < slow["speed_ratio"] < fast["speed_ratio"] < 1.0
+    assert 0 < slow["stored_energy_ratio"] < fast["stored_energy_ratio"] < 1.0
+
+
+def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():
+    res = RUN.invoke(app, ["sim", "firmware-sweep", "--rates-hz", "0"])
+    assert res.exit_code == 2 and "--rates-hz" in res.output
+
+
+# --- replay of a trial log --------------------------------------------------------------------------
+
+def test_replay_of_a_trial_log_written_by_the_firmware_logger(table1, er_fixed_point, tmp_path):
+    """A walk's controller records go through the firmware's own TrialLog writer; the replay finds the same
+    steps: recorded periods (touchdown event to touchdown event) equal the simulated periods to a few
+    sample periods, and the recorded compression is the simulated one to a few counts."""
+    from rimless.firmware.triallog import TrialLog
+    from rimless.sim.firmware_replay import replay_trial
+
+    loop = FirmwareLoop(table1, FirmwareLoopConfig(rate_hz=1000.0, engage_delay_s=0.0, release_delay_s=0.0, **QUIET))
+    loop.records = []
+    walk = loop.walk(er_fixed_point[1].z, 4)
+    loop.close()
+    log = TrialLog(tmp_path, "sim-walk")
+    log.append(loop.records)
+    log.close()
+    rep = replay_trial(log.path, table1)
+    # touchdown events: the priming step's impact and each step's but the last (detected after the walk ends)
+    assert len(rep.steps) == 3
+    for rec, sim in zip(rep.steps, walk.steps):
+        assert rec.recorded_period_s == pytest.approx(sim.period_s, abs=3e-3)
+    ideal_max = rep.sim_max_compression_m
+    assert rep.steps[1].recorded_max_compression_m == pytest.approx(ideal_max, rel=0.1)
+    assert all(s.recorded_lock_s is not None for s in rep.steps)
+
+
+def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed_point, tmp_path):
+    from rimless.firmware.triallog import TrialLog
+
+    loop = FirmwareLoop(table1, FirmwareLoopConfig(rate_hz=300.0, **QUIET))
+    loop.records = []
+    loop.walk(er_fixed_point[1].z, 3)
+    loop.close()
+    log = TrialLog(tmp_path, "t")
+    log.append(loop.records)
+    log.close()
+    fig = tmp_path / "replay.png"
+    res = RUN.invoke(app, ["sim", "replay", str(log.path), "--plot", str(fig), "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert out["steps"] == 2 and fig.stat().st_size > 1000 and out["plot"] == str(fig)
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text(log.path.read_text().replace('"seq"', '"seq', 1))
+    res = RUN.invoke(app, ["sim", "replay", str(bad)])
+    assert res.exit_code == 2 and "bad.jsonl" in res.output and "corrupt" in res.output
+
+
+def test_robot_config_supplies_the_firmware_settings(tmp_path):
+    """--robot-config is read by the firmware's loader: its detector and rate reach the loop, and a bad
+    field is a one-line error naming the file and the field."""
+    from rimless.firmware.config import example_config_path
+    from rimless.sim.firmware_cli import build_config
+
+    text = example_config_path().read_text().replace("rate_hz = 300.0", "rate_hz = 500.0")
+    text = text.replace("touch_debounce_samples = 2", "touch_debounce_samples = 3")
+    good = tmp_path / "robot.toml"
+    good.write_text(text)
+    cfg = build_config(rate_hz=None, clutch_delay_ms=5, release_delay_ms=None, noise_counts=1, jitter_ms=0.05,
+                       holding_force_n=100, seed=0, robot_config=good)
+    assert cfg.rate_hz == 500.0 and cfg.detector.touch_debounce_samples == 3 and cfg.cpi == 1600
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("touch_debounce_samples = 3", "touch_debounce_samples = -3"))
+    res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--robot-config", str(bad)])
+    assert res.exit_code == 2 and "touch_debounce_samples" in res.output and "bad.toml" in res.output
