@@ -710,6 +710,7 @@ def paper_cmd(
         raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out {out}: exists and is not a folder")
+    out_is_new = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -728,6 +729,12 @@ def paper_cmd(
                             eigen_ks=eigen_ks, progress=lambda msg: prog.update(task, description=msg))
         except ConnectionError as err:
             raise ParameterError(f"--scheduler: {err}") from None
+        except BaseException:
+            if out_is_new:  # an interrupted or failed run leaves no half-filled folder behind
+                import shutil
+
+                shutil.rmtree(out, ignore_errors=True)
+            raise
     summary = {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "timings_s": res.timings_s,
                "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers}}
     if json_out:

@@ -73,7 +73,7 @@ def flag(param: Any) -> str:
 
 
 # Outputs (files or folders the command writes) are recognised by name.
-OUTPUT_PARAMS = {"out", "plot"}
+OUTPUT_PARAMS = {"out", "plot", "cache_dir", "csv"}
 
 # ------------------------------------------------------------------------------------------ help
 
