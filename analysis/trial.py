@@ -486,10 +486,13 @@ def build_trial(
             warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
                             "rigid on the wheel, or the wheel does not roll in one plane")
 
-    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end; the rotations are freed.
-    # float32: the tilt is compared with 20 deg; the rounding (1e-7 rad) does not matter there.
-    u = axis_in_body(rot, axis, np.float32) if rot is not None and axis is not None else None
-    del rot
+    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end. A `RotationStack` costs no
+    # memory and makes it then; a matrix array (markers) is replaced by it now. float32: the tilt is compared
+    # with 20 deg; the rounding (1e-7 rad) does not matter there.
+    u = None
+    if rot is not None and axis is not None and not isinstance(rot, RotationStack):
+        u = axis_in_body(rot, axis, np.float32)
+        rot = None
     max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
     hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
     del hub_raw, trans
@@ -544,6 +547,9 @@ def build_trial(
         i_last = motion.end_index
     window_s = (t_rel, float(steps.impact_time_s[-1]) if steps.impact_time_s.size else t_end)
     tilt = None
+    if rot is not None and axis is not None:
+        u = axis_in_body(rot, axis, np.float32)
+    del rot
     if u is not None:
         win = np.zeros(time_s.size, bool)
         win[motion.release_index:i_last + 1] = True
@@ -553,6 +559,8 @@ def build_trial(
             a_body /= np.linalg.norm(a_body)
             cos_t = np.abs(u @ a_body.astype(np.float32)).astype(np.float64)  # = |axis . (R a_body)|
             tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
+            del cos_t
+        del u, win
     progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
     from .steps import noise_sigma
 
