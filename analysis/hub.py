@@ -11,6 +11,9 @@ import numpy as np
 
 __all__ = [
     "HubEstimate",
+    "RotationStack",
+    "apply_rotations",
+    "axis_in_body",
     "hub_from_markers",
     "hub_from_object",
     "rotations_from_angles",
@@ -69,6 +72,73 @@ def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -
     return out
 
 
+class RotationStack:
+    """World-from-body rotations of n frames (a stand-in for an (n, 3, 3) array), computed from the Vicon angles
+    slice by slice when indexed: n x 3 angles are kept instead of n x 3 x 3 matrices.
+
+    ``angles_rad`` (n, 3) as for `rotations_from_angles`; rows where ``invalid`` is True (e.g. six-zero
+    occlusions) and NaN rows give NaN matrices. Indexing (a slice, integer or boolean rows) returns an array.
+    """
+
+    #: Frames per slice in whole-stack products.
+    SLICE = 1 << 18
+
+    def __init__(self, angles_rad: np.ndarray, convention: str = "helical", invalid: np.ndarray | None = None):
+        self.angles, self.convention, self.invalid = angles_rad, convention, invalid
+        self.shape = (angles_rad.shape[0], 3, 3)
+        self[0:1]  # an unknown convention fails here, as `rotations_from_angles` would
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, key) -> np.ndarray:  # noqa: ANN001 - anything numpy takes as rows
+        a = self.angles[key]
+        m = rotations_from_angles(a.reshape(-1, 3), self.convention)
+        if self.invalid is not None:
+            m[np.asarray(self.invalid[key]).reshape(-1)] = np.nan
+        return m[0] if a.ndim == 1 else m
+
+    def valid(self) -> np.ndarray:
+        """(n,) True where the rotation is known."""
+        ok = ~np.isnan(self.angles).any(axis=1)
+        return ok if self.invalid is None else ok & ~self.invalid
+
+    def masked(self, keep: np.ndarray) -> RotationStack:
+        """The same stack with the rows where ``keep`` is False invalid."""
+        bad = ~keep if self.invalid is None else self.invalid | ~keep
+        return RotationStack(self.angles, self.convention, bad)
+
+    def slices(self):  # noqa: ANN201
+        for a in range(0, self.shape[0], self.SLICE):
+            yield a, self[a:a + self.SLICE]
+
+
+def _valid_rows(rot: np.ndarray | RotationStack) -> np.ndarray:
+    if isinstance(rot, RotationStack):
+        return rot.valid()
+    return ~np.isnan(rot.reshape(rot.shape[0], 9)).any(axis=1)
+
+
+def apply_rotations(rot: np.ndarray | RotationStack, d: np.ndarray) -> np.ndarray:
+    """``rot @ d`` for every frame, (n, 3)."""
+    if not isinstance(rot, RotationStack):
+        return np.einsum("nij,j->ni", rot, d)
+    out = np.empty((rot.shape[0], 3))
+    for a, m in rot.slices():
+        out[a:a + m.shape[0]] = np.einsum("nij,j->ni", m, d)
+    return out
+
+
+def axis_in_body(rot: np.ndarray | RotationStack, axis: np.ndarray, dtype: type = np.float64) -> np.ndarray:
+    """``rot.T @ axis`` for every frame (a world axis in the body frame), (n, 3)."""
+    if not isinstance(rot, RotationStack):
+        return (axis @ rot).astype(dtype, copy=False)
+    out = np.empty((rot.shape[0], 3), dtype)
+    for a, m in rot.slices():
+        out[a:a + m.shape[0]] = axis @ m
+    return out
+
+
 def _rotvec(m: np.ndarray) -> np.ndarray:
     """Rotation vectors of rotation matrices (k, 3, 3) turning less than 180 deg (the log map), rad.
 
@@ -105,12 +175,12 @@ def _increment_rotvec(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return v
 
 
-def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def wheel_angle_from_rotations(rot: np.ndarray | RotationStack) -> tuple[np.ndarray, np.ndarray]:
     """Unwrapped rotation angle about the dominant world axis.
 
     Parameters
     ----------
-    rot : (n, 3, 3) world-from-body rotations; NaN rows are gaps.
+    rot : (n, 3, 3) world-from-body rotations (or a `RotationStack`); NaN rows are gaps.
 
     Returns
     -------
@@ -119,7 +189,7 @@ def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     axis : (3,) unit world axis.
     """
     n = rot.shape[0]
-    ok = np.flatnonzero(~np.isnan(rot.reshape(n, 9)).any(axis=1))
+    ok = np.flatnonzero(_valid_rows(rot))
     angle = np.full(n, np.nan)
     if ok.size < 2:
         return angle, np.array([0.0, 0.0, 1.0])
@@ -132,7 +202,9 @@ def wheel_angle_from_rotations(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         i0, i1 = ok[a:b], ok[a + 1:b + 1]
         adjacent = i1 - i0 == 1
         lo, hi = int(i0[0]), int(i0[-1])
-        part = _increment_rotvec(rot[lo + 1:hi + 2], rot[lo:hi + 1])
+        m = rot[lo:hi + 2]
+        part = _increment_rotvec(m[1:], m[:-1])
+        del m
         inc[a:a + i0.size][adjacent] = part[i0[adjacent] - lo]
         jump = np.flatnonzero(~adjacent)
         if jump.size:
@@ -224,11 +296,12 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
     residual_m : RMS residual of the height fit, m.
     rotation_rad : total rotation seen.
     """
-    ok = ~(np.isnan(rot).any(axis=(1, 2)) | np.isnan(trans_m).any(axis=1))
+    ok = _valid_rows(rot) & ~np.isnan(trans_m).any(axis=1)
     if mask is not None:
         ok &= mask
     if angle_axis is None:
-        angle, axis = wheel_angle_from_rotations(np.where(ok[:, None, None], rot, np.nan))
+        angle, axis = wheel_angle_from_rotations(rot.masked(ok) if isinstance(rot, RotationStack)
+                                                 else np.where(ok[:, None, None], rot, np.nan))
     else:
         angle, axis = angle_axis
         angle = np.where(ok, angle, np.nan)
@@ -290,7 +363,7 @@ def hub_from_pose(rot: np.ndarray, trans: np.ndarray, *, hub_offset_m: np.ndarra
         d, residual, _ = estimate_hub_offset(rot, trans, mask=mask, angle_axis=(angle, axis))
         source = (f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
                   f"(centre of rotation fitted on the walking window, residual {residual * 1e3:.2f} mm)")
-    hub = trans + np.einsum("nij,j->ni", rot, d)
+    hub = trans + apply_rotations(rot, d)
     return HubEstimate(hub, angle, axis, source, d, residual, rot)
 
 

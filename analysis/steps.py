@@ -172,9 +172,14 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
         half = 5
     # A minimum beside a gap or the edge of the data (the release from a hold, a catch) is not a cusp seen on
     # both sides: drop it.
-    nan_before = np.concatenate([[0], np.cumsum(~ok)])
+    nan_upto = np.cumsum(~ok, dtype=np.int32 if y.size < 2**31 else np.int64)  # NaN samples in y[:k + 1]
+
+    def nan_before(k: np.ndarray) -> np.ndarray:  # NaN samples in y[:k]
+        return np.where(k > 0, nan_upto[np.maximum(k - 1, 0)], 0)
+
     lo, hi = np.clip(idx - half, 0, y.size), np.clip(idx + half + 1, 0, y.size)
-    whole = (idx - half >= 0) & (idx + half < y.size) & (nan_before[hi] - nan_before[lo] == 0)
+    whole = (idx - half >= 0) & (idx + half < y.size) & (nan_before(hi) - nan_before(lo) == 0)
+    del nan_upto
     idx = idx[whole]
     times = refine_cusps(np.asarray(time_s, dtype=np.float64), yf, idx, half)[0]
     return idx.astype(np.int64), times, sigma
@@ -272,6 +277,7 @@ def detect_steps(
                 f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg)")
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]
+        del ok_idx
         tv, av = t[sel], np.maximum.accumulate(ang[sel])
         k0 = int(np.ceil((av[0] + min_advance_rad - phase) / alpha_rad))
         k1 = int(np.floor((av[-1] - phase) / alpha_rad))

@@ -405,7 +405,7 @@ def build_trial(
     TrialRefused
         When the file holds no usable wheel trajectory or is implausible (message says why and where).
     """
-    from .hub import hub_from_markers, hub_from_pose, rotations_from_angles, wheel_angle_from_rotations
+    from .hub import RotationStack, axis_in_body, hub_from_markers, hub_from_pose, wheel_angle_from_rotations
     from .source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
     from .walk import classify_ending, find_motion
 
@@ -432,8 +432,8 @@ def build_trial(
         zero = ~(pose != 0).any(axis=1)  # six exact zeros: an occlusion (as `zeros_to_nan`, without a copy)
         if (zero | np.isnan(pose).all(axis=1)).all():
             raise TrialRefused(f"{vf.path}: object {obj!r} has no values (never tracked)")
-        rot = rotations_from_angles(pose[:, :3], orientation)
-        rot[zero] = np.nan
+        # matrices made slice by slice from the angles when used (n x 3 x 3 floats are never held at once)
+        rot = RotationStack(pose[:, :3], orientation, invalid=zero)
         trans = pose[:, 3:].copy()
         trans[zero] = np.nan
         del pose, zero
@@ -486,10 +486,13 @@ def build_trial(
             warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
                             "rigid on the wheel, or the wheel does not roll in one plane")
 
-    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end; the rotations are freed.
-    # float32: the tilt is compared with 20 deg; the rounding (1e-7 rad) does not matter there.
-    u = (axis @ rot).astype(np.float32) if rot is not None and axis is not None else None
-    del rot
+    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end. A `RotationStack` costs no
+    # memory and makes it then; a matrix array (markers) is replaced by it now. float32: the tilt is compared
+    # with 20 deg; the rounding (1e-7 rad) does not matter there.
+    u = None
+    if rot is not None and axis is not None and not isinstance(rot, RotationStack):
+        u = axis_in_body(rot, axis, np.float32)
+        rot = None
     max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
     hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
     del hub_raw, trans
@@ -544,6 +547,9 @@ def build_trial(
         i_last = motion.end_index
     window_s = (t_rel, float(steps.impact_time_s[-1]) if steps.impact_time_s.size else t_end)
     tilt = None
+    if rot is not None and axis is not None:
+        u = axis_in_body(rot, axis, np.float32)
+    del rot
     if u is not None:
         win = np.zeros(time_s.size, bool)
         win[motion.release_index:i_last + 1] = True
@@ -553,6 +559,8 @@ def build_trial(
             a_body /= np.linalg.norm(a_body)
             cos_t = np.abs(u @ a_body.astype(np.float32)).astype(np.float64)  # = |axis . (R a_body)|
             tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
+            del cos_t
+        del u, win
     progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
     from .steps import noise_sigma
 

@@ -249,3 +249,49 @@ def test_writer_round_trip(tmp_path, length_unit, newline, delimiter):
         np.testing.assert_allclose(o.values, obj, rtol=1e-15, atol=0)
         np.testing.assert_allclose(t.values, mk, rtol=1e-15, atol=0)
         np.testing.assert_array_equal(np.isnan(o.values), np.isnan(obj))
+
+
+# --------------------------------------------------------------------------------- the three entry points agree
+
+
+def _outcome(read):
+    """(sections as plain data) or (error cause, line, column, message, all locations)."""
+    try:
+        vf = read()
+    except ViconCsvError as e:
+        return ("error", e.cause, e.line, e.column, e.detail, e.all_locations())
+    return [(s.kind, s.line, s.frame.tolist(), s.sub_frame.tolist(), [c.column for c in s.columns],
+             np.where(np.isnan(s.values), -1e300, s.values).tolist()) for s in vf.sections]
+
+
+MIXED = ("Objects\n100\n,,W,,,,,\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,rad,rad,rad,mm,mm,mm\n"
+         + "".join(f"{k},0,0.1,0.2,{0.01 * k},{1000 + k},2000,3000\n" for k in range(1, 8))
+         + "8,0,,,,,,\n9,0\n10,0,0.1,0.2,0.3,1010,2000,3000\n\n"
+         "Trajectories\n100\n,,A,,,B\nFrame,Sub Frame,X,Y,Z,X,Y,Z\n,,mm,mm,mm,mm,mm,mm\n"
+         "1,0,1,2,3\n2,0,,,,4,5,6\n3,0,1,2,3,4,5,6\n4,0,1,2,3,4,5,6\n5,0,1,2,3,4,5,6\n")
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
+@pytest.mark.parametrize("text", [
+    MIXED,
+    MIXED.replace("3,0,1,2,3,4,5,6", "3,0,1,2,3,4"),  # a lost cell in a later chunk of the second section
+    MIXED.replace("3,0,1,2,3,4,5,6", "3,0,1,2,3,4").replace("5,0,1,2,3,4,5,6", "5,0,1,2"),
+    MIXED.replace("4,0,1,2,3,4,5,6", "4,0,1,2,3,4,5,6,,9"),  # a value beyond the header in a later chunk
+    MIXED.replace("6,0,0.1,0.2", "6,0,0.1,x"),
+    MIXED.replace("1005,2000", "1e999,2000"),
+    MIXED.replace("2,0,,,,4,5,6", "2,0,,,,4,5,٦"),  # non-ASCII digit
+    TRACKER, "\ufeff" + TRACKER, TRACKER[:-12], TRACKER.replace("9,0,", "6,0,"),
+])
+def test_file_bytes_and_text_paths_agree_in_small_chunks(tmp_path, monkeypatch, text, newline):
+    """read_vicon_csv (data blocks streamed back from the file), parse_vicon_bytes (from memory) and
+    parse_vicon_text (encoded copy) give the same sections or the same errors, also when blocks span chunks."""
+    from rimless.analysis import vicon_csv
+
+    monkeypatch.setattr(vicon_csv._Parser, "CHUNK_ROWS", 2)
+    text = text.replace("\n", newline)
+    p = tmp_path / "f.csv"
+    p.write_bytes(text.encode("utf-8"))
+    a = _outcome(lambda: read_vicon_csv(p))
+    b = _outcome(lambda: vicon_csv.parse_vicon_bytes(text.encode("utf-8"), str(p)))
+    c = _outcome(lambda: parse_vicon_text(text, str(p)))
+    assert a == b == c
