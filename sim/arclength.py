@@ -43,6 +43,9 @@ PARAMETERS: dict[str, tuple[str, float, str]] = {
 
 FOLD, PERIOD_DOUBLING, NEIMARK_SACKER = "fold", "period-doubling", "neimark-sacker"
 STANCE_FORCE, IMPULSE, STALL = "stance-force", "impulse", "stall"
+#: Where Newton fails at a branch end whose last valid point has a single-support stance force this close to
+#: zero (N), the end is the stance foot's lift-off: past it the map's located lift-off guard rejects the step.
+STANCE_FORCE_END_TOL_N = 0.05
 EIGEN_TESTS = (FOLD, PERIOD_DOUBLING, NEIMARK_SACKER)
 VALIDITY_TESTS = (STANCE_FORCE, IMPULSE, STALL)
 
@@ -577,7 +580,9 @@ def _end_reason(pt: BranchPoint, cause: StepFailure | None, newton_err: StepFail
         th = f.min_theta_dot_single_support_rad_s if f is not None else math.nan
         return STALL, (f"stall: the wheel no longer clears mid-stance (smallest theta' in single support "
                        f"{th:.4g} rad/s, period {pt.period_s:.4f} s) {where}")
-    if reason == FailureReason.STANCE_LIFT_OFF:
+    near_lift_off = (reason is None and f is not None
+                     and abs(f.min_stance_force_single_support_N) < STANCE_FORCE_END_TOL_N)
+    if reason == FailureReason.STANCE_LIFT_OFF or near_lift_off:
         fs = f.min_stance_force_single_support_N if f is not None else math.nan
         return STANCE_FORCE, (f"stance-force: the stance foot's normal force in single support falls through 0 "
                               f"(last valid minimum {fs:.4g} N) {where}")
