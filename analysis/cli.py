@@ -297,16 +297,13 @@ DEMO_NOTE = ("SYNTHETIC DATA: the bundled example trials are simulated (ER wheel
              "and guide friction) for the critical slope and the calibration.")
 
 
-def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: dict[str, Any], model: str,
-                slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation",
-                **report_kwargs: Any) -> Any:
-    from rich.console import Console
+def _report_with_progress(files: list[Path], out: Path, err: Any, *, json_out: bool, import_kwargs: dict[str, Any],
+                          model: str, slope_bin_deg: float, note: str | None, title: str, **report_kwargs: Any) -> Any:
     from rich.progress import Progress
 
     from .compare import Simulator
     from .report import build_report
 
-    err = Console(stderr=True)
     with Progress(console=err, transient=True, disable=json_out) as progress:
         task = progress.add_task("simulator", total=len(files))
         sim = Simulator(model=model)
@@ -316,8 +313,28 @@ def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: 
             progress.update(task, description=f"compared {name}")
             progress.advance(task)
 
-        res = build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
-                           note=note, title=title, progress=step, **report_kwargs)
+        return build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
+                            note=note, title=title, progress=step, **report_kwargs)
+
+
+def _run_report(files: list[Path], out: Path, *, json_out: bool, import_kwargs: dict[str, Any], model: str,
+                slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation",
+                **report_kwargs: Any) -> Any:
+    from rich.console import Console
+
+    err = Console(stderr=True)
+    out_is_new = not Path(out).exists()
+    try:
+        res = _report_with_progress(files, out, err, json_out=json_out, import_kwargs=import_kwargs, model=model,
+                                    slope_bin_deg=slope_bin_deg, note=note, title=title, **report_kwargs)
+    except BaseException as err:
+        from rimless.errors import interrupted_by_user
+
+        if out_is_new and interrupted_by_user(err):  # an interrupted report leaves no half-filled folder behind
+            import shutil
+
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     if json_out:
         print_json(res.summary())
     else:

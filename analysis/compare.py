@@ -96,6 +96,8 @@ class TrialComparison:
     height_offset_m: float = float("nan")
     measured_period_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sim_period_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where the simulation stopped
+    measured_step: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # step number of each period,
+    # 1 = the first measured period; a period lost in a gap keeps its number (empty: 1..n)
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # measured, from the first impact
     measured_com_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # after the height offset
     sim_com_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # simulated at time_s (NaN outside)
@@ -222,16 +224,23 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
         res.message = f"no initial condition matches: {why}"
         return res
     res.release_theta_dot_rad_s = w0
-    gait = sim.walk(res.slope_deg, w0, periods.size + 2, record=True)
+    # Measured period i is simulated step 1 + (its step count - the first period's): a period lost in a gap
+    # keeps the count, so the periods after a gap meet the simulated steps they belong to.
+    ends = np.asarray(getattr(trial, "period_step", np.zeros(0)), np.int64)
+    offset = ends - ends[0] if ends.size == periods.size else np.arange(periods.size)
+    n_sim = int(offset[-1]) + 1
+    gait = sim.walk(res.slope_deg, w0, n_sim + 2, record=True)
     steps = gait.steps
     res.theta_dot_plus_rad_s = float(steps[0].y_plus[7])
     sim_p = np.full(periods.size, np.nan)
-    got = [s.period_s for s in steps[1:1 + periods.size]]
-    sim_p[:len(got)] = got
+    for i, d in enumerate(offset):
+        if 1 + d < len(steps):
+            sim_p[i] = steps[1 + d].period_s
     res.sim_period_s = sim_p
-    if len(steps) < periods.size + 1:
+    res.measured_step = offset + 1
+    if len(steps) < n_sim + 1:
         reason = gait.failure.reason.value if gait.failure is not None else "stopped"
-        res.warnings.append(f"simulation ended ({reason}) after {max(len(steps) - 1, 0)} of {periods.size} measured steps")
+        res.warnings.append(f"simulation ended ({reason}) after {max(len(steps) - 1, 0)} of {n_sim} measured steps")
 
     t0_sim = steps[1].t_start_s if len(steps) > 1 else steps[0].t_start_s + steps[0].period_s
     st, sy = _clean_curve(np.asarray(gait.table["t_s"], float) - t0_sim,
@@ -329,10 +338,12 @@ def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | 
     groups = []
     for key in sorted(bins):
         cs = bins[key]
-        n = max(c.n_steps for c in cs)
+        numbers = [c.measured_step if c.measured_step.size == c.n_steps else np.arange(1, c.n_steps + 1)
+                   for c in cs]
+        n = max(int(k[-1]) for k in numbers)
         mat = np.full((len(cs), n), np.nan)
         for i, c in enumerate(cs):
-            mat[i, :c.n_steps] = c.measured_period_s
+            mat[i, numbers[i] - 1] = c.measured_period_s
         count = np.isfinite(mat).sum(axis=0)
         mean = np.nanmean(mat, axis=0)
         std = np.array([np.std(col[np.isfinite(col)], ddof=1) if k > 1 else np.nan for col, k in zip(mat.T, count)])
@@ -340,7 +351,7 @@ def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | 
         msgs = []
         for i, c in enumerate(cs):  # each trial simulated at its own slope from its own fitted release
             if c.sim_period_s.size:
-                simmat[i, :c.sim_period_s.size] = c.sim_period_s
+                simmat[i, numbers[i] - 1] = c.sim_period_s
             elif math.isfinite(c.release_theta_dot_rad_s):
                 try:
                     g = sim.walk(c.slope_deg, c.release_theta_dot_rad_s, c.n_steps + 1, record=False)

@@ -729,8 +729,10 @@ def paper_cmd(
                             eigen_ks=eigen_ks, progress=lambda msg: prog.update(task, description=msg))
         except ConnectionError as err:
             raise ParameterError(f"--scheduler: {err}") from None
-        except BaseException:
-            if out_is_new:  # an interrupted or failed run leaves no half-filled folder behind
+        except BaseException as err:
+            from rimless.errors import interrupted_by_user
+
+            if out_is_new and interrupted_by_user(err):  # an interrupted run leaves no half-filled folder behind
                 import shutil
 
                 shutil.rmtree(out, ignore_errors=True)

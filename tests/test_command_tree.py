@@ -110,8 +110,6 @@ NO_JSON: dict[tuple[str, ...], str] = {
 }
 # Known violations (strict=False xfails; the lead deletes an entry when it turns into XPASS).
 KNOWN_NO_JSON: dict[tuple[str, ...], str] = {
-    **{("robot", c): "always prints JSON but rejects --json" for c in
-       ("arm", "disarm", "set", "status", "trial-start", "trial-stop")},
     ("trials", "bench-import"): "prints its timings as text only",
 }
 
@@ -328,9 +326,7 @@ def _free_tcp_port() -> int:
         return int(sock.getsockname()[1])
 
 
-KNOWN_QUICK_RUN_VIOLATIONS: dict[tuple[str, ...], str] = {
-    ("robot", "check"): "without the robot's GPIO (on a PC) it ends in gpiozero's BadPinFactory traceback",
-}
+KNOWN_QUICK_RUN_VIOLATIONS: dict[tuple[str, ...], str] = {}
 
 
 @pytest.mark.parametrize("path", sorted(QUICK), ids=[_name(p) for p in sorted(QUICK)])
@@ -357,8 +353,6 @@ def test_quick_command_run_as_is_ends_cleanly(path: tuple[str, ...], tmp_path: P
 # Known violations of the Ctrl-C rule in commands owned by the parts: strict=False so the lead sees them
 # turn into XPASS once fixed, and then deletes the entry.
 KNOWN_INTERRUPT_VIOLATIONS: dict[tuple[str, ...], str] = {
-    ("demo",): "leaves its output folder (empty or half-filled) behind",
-    ("trials", "report"): "leaves its output folder (empty or half-filled) behind",
     ("robot", "bench"): "prints 'fault exception: CancelledError' before exiting",
     ("robot", "run"): "treats SIGINT as its normal stop and exits 0",
     ("robot", "listen"): "treats SIGINT as its normal stop and exits 0",
