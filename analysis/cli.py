@@ -101,7 +101,7 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
     row: dict[str, Any] = {"file": shown_path(path), "status": "refused", "reason": None, "frames": None,
                            "rate_hz": None, "steps": None, "source": None, "slope_deg": None, "ramp_slope_deg": None,
                            "outcome": None, "window_s": None, "impact_times_s": [], "step_periods_s": [],
-                           "hub_offset_mm": None, "warnings": [], "errors": []}
+                           "hub_offset_mm": None, "warnings": [], "errors": [], "trial": None}
     if error is not None or trial is None:
         row["reason"] = _clean_reason(error) if error is not None else "not imported"
         if isinstance(error, ViconCsvError):
@@ -135,7 +135,7 @@ def _import_one(path: Path, out: Path, kwargs: dict[str, Any]) -> dict[str, Any]
     except OSError as err:
         return import_row(path, None, UserError(f"{shown_path(path)}: {err.strerror or err}"))
     row = import_row(path, trial, None)
-    row["_trial"] = shown_path(target)
+    row["trial"] = row["_trial"] = shown_path(target)
     row["_outcome_reason"] = trial.meta.outcome_reason
     return row
 
@@ -183,8 +183,11 @@ def import_cmd(
     max_gap_ms: Annotated[float, typer.Option("--max-gap-ms", min=0.0, help=GAP_HELP)] = DEFAULT_MAX_GAP_MS,
 ) -> None:
     """Import Vicon exports as Parquet trials; a refused file does not stop the others (exit 2 if any)."""
+    from rimless.output import writable_dir
+
     kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms)
     _check_inputs(files)
+    writable_dir(out, option="--out")
     rows: list[dict[str, Any]] = []
     from rich.console import Console
     from rich.progress import Progress
@@ -221,7 +224,7 @@ def import_cmd(
                     typer.echo(f"{name}: warning: {w}")
             else:
                 for e in r["errors"][:20]:
-                    typer.echo(f"refused: {e}", err=True)
+                    typer.echo(f"error: {e}", err=True)
     if any(r["status"] == "refused" for r in rows):
         raise typer.Exit(EXIT_REFUSED)
 

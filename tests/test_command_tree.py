@@ -235,10 +235,6 @@ SUFFIX = {"params_file": ".toml", "config": ".toml", "trial": ".parquet", "plot"
 KNOWN_FILE_VIOLATIONS: dict[tuple[tuple[str, ...], str], tuple[str, bool]] = {
     (("bench",), "plot"): ("runs the whole benchmark (minutes) before it finds --plot unwritable", False),
     (("demo",), "out"): ("prints '6 bundled SYNTHETIC trials -> DIR/' on stderr before the error line", True),
-    (("trials", "import"), "files"): ("a refused file's reason is only in the stdout table, no error line "
-                                      "on stderr", True),
-    (("trials", "import"), "out"): ("an unwritable --out is reported per file in the stdout table, no error "
-                                    "line on stderr", True),
 }
 
 

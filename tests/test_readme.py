@@ -46,7 +46,6 @@ QUICK: list[tuple[str, list[str]]] = [
 # sees an XPASS once a part fixes its command, and deletes the entry.
 KNOWN_VIOLATIONS: list[tuple[str, str]] = [
     (r"^rimless bench\b.*--plot", "does not print the path of the figure it writes"),
-    (r"^rimless trials import\b.*--json", "the JSON rows do not give the path of the trial written"),
 ]
 
 TABLE_CHARS = re.compile("[\u2500-\u257f]")  # box drawing: the lines of a rich table

@@ -18,7 +18,8 @@ PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon
 runner = CliRunner()
 #: The keys of `trials import --json` (issue contract: the old six plus the walk's).
 CONTRACT = {"file", "status", "reason", "frames", "rate_hz", "steps", "source", "slope_deg", "ramp_slope_deg",
-            "outcome", "window_s", "impact_times_s", "step_periods_s", "hub_offset_mm", "warnings", "errors"}
+            "outcome", "window_s", "impact_times_s", "step_periods_s", "hub_offset_mm", "warnings", "errors",
+            "trial"}  # the issue's keys, plus the path of the trial written (None when refused)
 
 
 @pytest.fixture()
