@@ -59,10 +59,10 @@ def _interruptible(fn: Any) -> Any:
         with stop_on_signals():
             return fn()
     except Interrupted as sig:
-        typer.echo(f"error: {sig}", err=True)
+        typer.echo("interrupted" if sig.name == "SIGINT" else f"error: {sig}", err=True)
         raise typer.Exit(sig.exit_code) from None
     except KeyboardInterrupt:
-        typer.echo("error: interrupted by SIGINT", err=True)
+        typer.echo("interrupted", err=True)
         raise typer.Exit(130) from None
 
 
@@ -359,6 +359,8 @@ def run(
         if sig is not None and sig != "SIGTERM":
             import signal
 
+            if sig == "SIGINT":
+                typer.echo("interrupted", err=True)  # the last line of every command stopped by Ctrl-C
             return 128 + int(getattr(signal, sig))
         return 0
 

@@ -349,9 +349,6 @@ def test_quick_command_run_as_is_ends_cleanly(path: tuple[str, ...], tmp_path: P
 # Known violations of the Ctrl-C rule in commands owned by the parts: strict=False so the lead sees them
 # turn into XPASS once fixed, and then deletes the entry.
 KNOWN_INTERRUPT_VIOLATIONS: dict[tuple[str, ...], str] = {
-    ("robot", "bench"): "prints 'fault exception: CancelledError' before exiting",
-    ("robot", "run"): "treats SIGINT as its normal stop and exits 0",
-    ("robot", "listen"): "treats SIGINT as its normal stop and exits 0",
 }
 
 
