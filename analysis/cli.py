@@ -285,11 +285,22 @@ def bench_cmd(
     rows: Annotated[int, typer.Option("--rows", min=100, help="Rows in the synthetic Tracker file.")] = 1_000_000,
     mb: Annotated[Optional[float], typer.Option("--mb", min=0.01, help="Size of the synthetic file, MB "
                                                 "(instead of --rows).")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the figures as one JSON object (times in s, "
+                                                          "memory in MB, load average before and after).")] = False,
 ) -> None:
     """Time the import of a synthetic Tracker export against plain pandas.read_csv (prints, asserts nothing)."""
-    from .bench_import import main
+    from .bench_import import BYTES_PER_ROW, main, run_benchmark
 
-    main(["--mb", str(mb)] if mb is not None else [str(rows)])
+    if not json_out:
+        main(["--mb", str(mb)] if mb is not None else [str(rows)])
+        return
+    import os
+
+    n = max(100, int(mb * 1e6 / BYTES_PER_ROW)) if mb is not None else rows
+    load_before = os.getloadavg()[0]
+    res = run_benchmark(n)
+    print_json({**res, "load_average_before": load_before, "load_average_after": os.getloadavg()[0],
+                "cpus": os.cpu_count()})
 
 
 # ------------------------------------------------------------------------------------- report and demo

@@ -109,9 +109,7 @@ NO_JSON: dict[tuple[str, ...], str] = {
     ("robot", "heartbeat"): "keeps the link alive; it prints a line only when the robot's state changes",
 }
 # Known violations (strict=False xfails; the lead deletes an entry when it turns into XPASS).
-KNOWN_NO_JSON: dict[tuple[str, ...], str] = {
-    ("trials", "bench-import"): "prints its timings as text only",
-}
+KNOWN_NO_JSON: dict[tuple[str, ...], str] = {}
 
 
 @pytest.mark.parametrize("path", [p for p, _ in LEAVES], ids=[_name(p) for p, _ in LEAVES])
