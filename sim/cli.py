@@ -658,6 +658,10 @@ def bench_cmd(
     """Work-precision benchmark: the compiled map against solve_ivp RK45/DOP853, side by side in one run."""
     if plot is not None and plot.suffix.lower() not in (".png", ".pdf", ".svg"):
         raise ParameterError(f"{plot}: the figure must end in .png, .pdf or .svg")
+    if plot is not None:  # before minutes of work, not after
+        from rimless.output import writable_dir
+
+        writable_dir(plot.parent if str(plot.parent) else Path("."), option="--plot")
     from rich.progress import Progress
 
     from rimless.sim.bench import format_table, plot_work_precision, run_bench
@@ -666,12 +670,16 @@ def bench_cmd(
         task = prog.add_task("benchmark (the full run takes minutes; --quick under one)", total=None)
         result = run_bench(quick, progress=lambda msg: prog.update(task, description=str(msg)))
     if plot is not None:
-        plot.parent.mkdir(parents=True, exist_ok=True)
-        plot_work_precision(result, str(plot))
+        from rimless.output import atomic_file
+
+        with atomic_file(plot, option="--plot") as tmp:
+            plot_work_precision(result, str(tmp))
     if json_out:
         print_json(result)
     else:
         typer.echo(format_table(result))
+    if plot is not None:
+        typer.echo(f"wrote {plot}", err=json_out)
 
 
 @user_facing

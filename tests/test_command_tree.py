@@ -231,8 +231,6 @@ SUFFIX = {"params_file": ".toml", "config": ".toml", "trial": ".parquet", "plot"
 # Known violations in commands owned by the parts, as (reason, run): strict=False, so the lead sees an
 # XPASS once a part fixes its command, and deletes the entry. `run=False` where the violation costs minutes.
 KNOWN_FILE_VIOLATIONS: dict[tuple[tuple[str, ...], str], tuple[str, bool]] = {
-    (("bench",), "plot"): ("runs the whole benchmark (minutes) before it finds --plot unwritable", False),
-    (("demo",), "out"): ("prints '6 bundled SYNTHETIC trials -> DIR/' on stderr before the error line", True),
 }
 
 

@@ -45,7 +45,6 @@ QUICK: list[tuple[str, list[str]]] = [
 # Known violations in the parts' commands (regex on the command, reason): strict=False xfails, so the lead
 # sees an XPASS once a part fixes its command, and deletes the entry.
 KNOWN_VIOLATIONS: list[tuple[str, str]] = [
-    (r"^rimless bench\b.*--plot", "does not print the path of the figure it writes"),
 ]
 
 TABLE_CHARS = re.compile("[\u2500-\u257f]")  # box drawing: the lines of a rich table
