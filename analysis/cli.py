@@ -163,8 +163,7 @@ GAP_HELP = ("Bridge gaps up to this long by interpolation, ms (the same rule for
 @app.command("import")
 @user_facing
 def import_cmd(
-    files: Annotated[list[Path], typer.Argument(help="Vicon exports: Tracker or Nexus CSV, or C3D.",
-                                                 metavar="FILES...")],
+    files: Annotated[list[Path], typer.Argument(help="Vicon exports: Tracker or Nexus CSV, or C3D.")],
     slope_deg: Annotated[Optional[float], typer.Option("--slope-deg", min=-45, max=45,
                                                        help="Known slope, deg (default: estimated).")] = None,
     out: Annotated[Path, typer.Option("--out", help="Folder for the <name>.trial.parquet files.",
@@ -385,8 +384,7 @@ _MODELS = ("er", "ve")
 @app.command("report")
 @user_facing
 def report_cmd(
-    trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon exports.",
-                                                  metavar="TRIALS...")],
+    trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon exports.")],
     out: Annotated[Path, typer.Option("--out", help="Folder for report.html, the PNG figures and metrics.csv.",
                                       metavar="DIR")],
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary (report path, metrics).")] = False,
