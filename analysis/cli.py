@@ -420,30 +420,6 @@ def report_cmd(
         raise typer.Exit(EXIT_NOTHING_COMPARED)
 
 
-def _check_output_folder(out: Path, option: str) -> None:
-    """Refuse an output folder that cannot be written, before any work (creates nothing)."""
-    import os
-
-    from rimless.errors import OutputFileError
-
-    if out.exists() and not out.is_dir():
-        raise OutputFileError(f"{option} {out}: exists and is not a folder")
-    first_new = None
-    probe = out
-    while not probe.exists() and probe != probe.parent:
-        first_new, probe = probe, probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
-        raise OutputFileError(f"{option} {out}: cannot write in {probe}")
-    if first_new is not None:  # try for real (access() says yes to root everywhere), then leave no trace
-        try:
-            out.mkdir(parents=True)
-        except OSError as err:
-            raise OutputFileError(f"{option} {out}: cannot create the folder ({err.strerror or err})") from None
-        import shutil
-
-        shutil.rmtree(first_new, ignore_errors=True)
-
-
 def demo_cmd(
     out: Annotated[Path, typer.Option("--out", help="Folder for the demo report.")] = Path("rimless-demo"),
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary instead of the table.")] = False,
@@ -455,7 +431,9 @@ def demo_cmd(
     files = sorted(set(data_files()) | set(critical_files()))
     if not files:
         raise UserError("the bundled example dataset is missing from this install (rimless/analysis/data)")
-    _check_output_folder(out, "--out")
+    from rimless.output import check_output_folder
+
+    check_output_folder(out, option="--out")
     if not json_out:
         typer.echo(f"{len(files)} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
     res = _run_report(files, out, json_out=json_out, import_kwargs={"max_gap_s": DEFAULT_MAX_GAP_MS / 1000.0},

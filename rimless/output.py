@@ -46,6 +46,30 @@ def writable_dir(folder: os.PathLike[str] | str, *, option: Optional[str] = None
     return target
 
 
+def check_output_folder(out: os.PathLike[str] | str, *, option: Optional[str] = None) -> None:
+    """Refuse an output folder that cannot be written, before any work; `OutputFileError` naming `option`.
+
+    Unlike `writable_dir` it leaves nothing behind: a folder it had to create to try is removed again.
+    """
+    import shutil
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputFileError(f"{_where(out, option)}: exists and is not a folder")
+    first_new = None
+    probe = out
+    while not probe.exists() and probe != probe.parent:
+        first_new, probe = probe, probe.parent
+    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
+        raise OutputFileError(f"{_where(out, option)}: cannot write in {probe}")
+    if first_new is not None:  # try for real (access() says yes to root everywhere), then leave no trace
+        try:
+            out.mkdir(parents=True)
+        except OSError as err:
+            raise OutputFileError(f"{_where(out, option)}: cannot create the folder ({err.strerror or err})") from None
+        shutil.rmtree(first_new, ignore_errors=True)
+
+
 @contextlib.contextmanager
 def atomic_file(target: os.PathLike[str] | str, *, option: Optional[str] = None) -> Iterator[Path]:
     """Yield a temporary path (same folder and suffix as `target`); rename it onto `target` when the block ends.

@@ -137,16 +137,25 @@ def _worker_setup() -> float:
     return float(fast.warm_up())
 
 
+def _read_cached(cache_dir: str | None, point: dict[str, Any], options: SweepOptions) -> dict[str, Any] | None:
+    """The cached result of `point` (marked ``cached``), or None when there is none or it cannot be read."""
+    if not cache_dir:
+        return None
+    path = Path(cache_dir) / f"{point_key(point, options)}.json"
+    if not path.exists():
+        return None
+    try:
+        out = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    out["cached"] = True
+    return out
+
+
 def _cached_compute(point: dict[str, Any], options: SweepOptions, cache_dir: str | None) -> dict[str, Any]:
-    if cache_dir:
-        path = Path(cache_dir) / f"{point_key(point, options)}.json"
-        if path.exists():
-            try:
-                out = json.loads(path.read_text())
-                out["cached"] = True
-                return out
-            except (OSError, ValueError):
-                pass
+    hit = _read_cached(cache_dir, point, options)
+    if hit is not None:
+        return hit
     out = compute_point(point, options)
     if cache_dir:
         _write_json_atomic(Path(cache_dir) / f"{point_key(point, options)}.json", out)
@@ -189,17 +198,9 @@ def run_sweep(
     results: list[dict[str, Any] | None] = [None] * len(points)
     todo = []
     for i, pt in enumerate(points):  # cache hits never reach a worker
-        if cache:
-            path = Path(cache) / f"{point_key(pt, options)}.json"
-            if path.exists():
-                try:
-                    out = json.loads(path.read_text())
-                    out["cached"] = True
-                    results[i] = out
-                    continue
-                except (OSError, ValueError):
-                    pass
-        todo.append(i)
+        results[i] = _read_cached(cache, pt, options)
+        if results[i] is None:
+            todo.append(i)
     done = len(points) - len(todo)
     if progress:
         progress(done, len(points))
