@@ -76,12 +76,31 @@ class ContactFacts:
     period_s: float
     energy_ratio: float
     relabel_energy_J: float  # energy added by the relabelling snap of the old trailing leg (+ adds)
+    # under bilateral contact (the stance foot held; a gait that unilateral contact forbids):
+    bilateral: bool = False
+    min_stance_force_time_s: float = math.nan  # when the smallest single-support stance force occurs, s
+    negative_stance_force_s: float = 0.0  # how long that force is below 0, s
+    unilateral_failure: str = ""  # the unilateral map's failure at this point ('' when it accepts the step)
 
     @property
     def contact_valid(self) -> bool:
         """Unilateral contact in single support and at the impact (the double-support transient is reported,
         not rejected: it is the rigid-contact artefact the paper discusses)."""
-        return self.min_stance_force_single_support_N >= 0.0 and self.min_impulse_N_s > 0.0
+        return (self.min_stance_force_single_support_N >= 0.0 and self.min_impulse_N_s > 0.0
+                and not self.unilateral_failure)
+
+    @property
+    def violation(self) -> str:
+        """What unilateral contact forbids here: 'stance-lift-off', 'negative-impulse' (both: joined by ', '),
+        or '' when the gait is contact-valid."""
+        kinds = []
+        if not self.min_stance_force_single_support_N >= 0.0 or "stance-lift-off" in self.unilateral_failure:
+            kinds.append("stance-lift-off")
+        if not self.min_impulse_N_s > 0.0 or "negative-impulse" in self.unilateral_failure:
+            kinds.append("negative-impulse")
+        if not kinds and self.unilateral_failure:
+            kinds.append("unilateral-map-fails")
+        return ", ".join(kinds)
 
     @property
     def strict_contact_valid(self) -> bool:
@@ -91,15 +110,55 @@ class ContactFacts:
         d: dict[str, float | bool] = dict(self.__dict__)
         d["contact_valid"] = self.contact_valid
         d["strict_contact_valid"] = self.strict_contact_valid
+        d["violation"] = self.violation
         return d
 
 
 def contact_facts(pmap: Any, z: np.ndarray, record_dt: float = 2e-4) -> ContactFacts:
     """Record the step from z (samples every record_dt s plus every solver step) and measure its contact
-    and stall facts."""
+    and stall facts.
+
+    A bilateral map (`bilateral` true: the stance foot held) records the step under bilateral contact and adds
+    the compiled map's own record of the stance force (rimless.sim.fast.BilateralContact: its minimum, when, how
+    long it is negative) and the unilateral map's failure at z, if any."""
     from rimless.sim.dynamics import DLSP
 
-    step = pmap.step(np.asarray(z, dtype=float), diagnostics=True, record_dt=record_dt)
+    z = np.asarray(z, dtype=float)
+    if getattr(pmap, "bilateral", False):
+        return _bilateral_facts(pmap, z, record_dt)
+    step = pmap.step(z, diagnostics=True, record_dt=record_dt)
+    return _facts_of_step(step, DLSP)
+
+
+def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts:
+    from dataclasses import replace
+
+    from rimless.sim import fast
+    from rimless.sim.dynamics import DLSP
+
+    integ = pmap.integrator
+    rec = fast.fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol, bilateral=True)
+    c = rec.contact
+    try:
+        fast.fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol)
+        uni = ""
+    except StepFailure as err:
+        uni = f"{err.reason.value}: {err}"
+    try:
+        facts = _facts_of_step(pmap.step(z, diagnostics=True, record_dt=record_dt), DLSP)
+    except StepFailure:  # the recorded step's own checks (stance force or impulses at a phase start): the
+        # compiled record alone
+        facts = ContactFacts(c.min_stance_force_N, c.min_impulse_N_s, math.nan, math.nan, math.nan, math.nan,
+                             math.nan, rec.period_s, math.nan, rec.relabel_snap_J)
+    fmin = facts.min_stance_force_single_support_N
+    if not fmin <= c.min_stance_force_N:  # the compiled record (parabola through finer samples) is lower
+        fmin = c.min_stance_force_N
+    return replace(facts, bilateral=True, min_stance_force_single_support_N=fmin,
+                   min_stance_force_time_s=c.min_stance_force_time_s, negative_stance_force_s=c.negative_force_s,
+                   unilateral_failure=uni)
+
+
+def _facts_of_step(step: Any, DLSP: int) -> ContactFacts:
     d = step.diagnostics or {}
     single = [d.get("min_normal_force_b_slsp_free_N", math.nan), d.get("min_normal_force_b_slsp_clutched_N", math.nan)]
     single = [v for v in single if v == v]
@@ -211,6 +270,7 @@ class _Oracle:
         self.compiled = hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None
         self.rtol = float(getattr(getattr(probe, "integrator", None), "rtol", 1e-10))
         self.atol = float(getattr(getattr(probe, "integrator", None), "atol", self.rtol * 1e-2))
+        self.bilateral = bool(getattr(probe, "bilateral", False))
 
     def pmap(self, p: float) -> Any:
         m = self._maps.get(p)
@@ -243,7 +303,8 @@ class _Oracle:
         if self.compiled:
             from rimless.sim import fast
 
-            r = fast.fast_step(params, self.model, z, rtol=self.rtol, atol=self.atol, jacobian=jacobian)
+            r = fast.fast_step(params, self.model, z, rtol=self.rtol, atol=self.atol, jacobian=jacobian,
+                               bilateral=self.bilateral, record_contact=False)
             zn, period, J = r.z_next, r.period_s, r.jacobian
         else:
             from rimless.sim.section import section_from_state

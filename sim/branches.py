@@ -48,14 +48,23 @@ def branch_label(model: str, period_s: float, stable: bool, k: float = 2700.0) -
 
 
 def contact_reason(facts: ContactFacts | None) -> str:
-    """Why a gait is not contact-valid ('' when it is)."""
+    """Why a gait is not contact-valid, with the size of the violation ('' when it is valid)."""
     if facts is None:
         return "the step could not be recorded"
     reasons = []
     if not facts.min_stance_force_single_support_N >= 0.0:
-        reasons.append(f"stance foot pulls in single support ({facts.min_stance_force_single_support_N:.3g} N)")
+        txt = f"stance-lift-off: the stance foot pulls in single support (min {facts.min_stance_force_single_support_N:.3g} N"
+        if facts.min_stance_force_time_s == facts.min_stance_force_time_s:
+            txt += f" at t = {facts.min_stance_force_time_s:.4f} s"
+        if facts.negative_stance_force_s > 0.0:
+            txt += f", below 0 for {facts.negative_stance_force_s * 1e3:.1f} ms"
+        reasons.append(txt + ")")
     if not facts.min_impulse_N_s > 0.0:
-        reasons.append(f"a normal impact impulse <= 0 ({facts.min_impulse_N_s:.3g} N s)")
+        reasons.append(f"negative-impulse: a normal impact impulse <= 0 ({facts.min_impulse_N_s:.3g} N s)")
+    if not reasons and facts.unilateral_failure:
+        reasons.append(f"the unilateral map fails at this gait ({facts.unilateral_failure})")
+    if reasons and facts.bilateral:
+        reasons.append("found with the stance foot held (bilateral contact)")
     return "; ".join(reasons)
 
 
@@ -125,6 +134,10 @@ class GaitBranch:
             "max_abs_eigenvalue_at_start": self.start.max_abs_eigenvalue,
             "contact_valid_at_start": self.contact_valid_at_start,
             "contact_reason": contact_reason(f),
+            "contact_violation": f.violation if f else "unknown",
+            "contact_model": "bilateral" if f is not None and f.bilateral else "unilateral",
+            "min_stance_force_time_s": f.min_stance_force_time_s if f else math.nan,
+            "negative_stance_force_s": f.negative_stance_force_s if f else math.nan,
             "min_stance_force_single_support_N": f.min_stance_force_single_support_N if f else math.nan,
             "min_impulse_N_s": f.min_impulse_N_s if f else math.nan,
             "leading_foot_tension_N": f.leading_foot_tension_N if f else math.nan,
@@ -204,21 +217,26 @@ def trace_gait_branches(
     stopping there.
     """
     from rimless.sim.backend import make_map
-    from rimless.sim.poincare import find_gaits
+    from rimless.sim.poincare import bilateral_map, find_gaits
 
     start_params = params.replace(slope_rad=start_slope_rad)
     pmap = make_map(start_params, model, backend=backend, rtol=rtol)
     if gaits is None:
-        gaits = find_gaits(pmap, n_guesses=n_guesses)
+        gaits = find_gaits(pmap, n_guesses=n_guesses, include_invalid=True)
     out: list[GaitBranch] = []
     for i, fp in enumerate(sorted(gaits, key=lambda g: g.step.period_s)):
-        start = _start_point(pmap, fp, model)
+        held = getattr(fp, "bilateral", False)  # violates unilateral contact: followed with the foot held
+        start = _start_point(bilateral_map(pmap) if held else pmap, fp, model)
         label = branch_label(model, start.period_s, start.stable, params.k)
         gid = f"{model}-{i + 1}-{label}"
         if progress:
             progress(f"{model} k={params.k:g}: branch {gid}")
-        cont = ArclengthContinuation(lambda q: make_map(q, model, backend=backend, rtol=rtol), start_params, model,
-                                     "slope", max_points=max_points)
+
+        def factory(q: WheelParams, held: bool = held) -> Any:
+            m = make_map(q, model, backend=backend, rtol=rtol)
+            return bilateral_map(m) if held else m
+
+        cont = ArclengthContinuation(factory, start_params, model, "slope", max_points=max_points)
         try:
             br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end,
                             start_facts=start.facts)

@@ -171,13 +171,22 @@ def _start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], t
     pmap = make_map(params, model, backend=backend, rtol=rtol)
     with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("finding the gaits", total=14)
-        found = find_gaits(pmap, progress=lambda i, n: prog.update(task, completed=i, total=n))
+        found = find_gaits(pmap, progress=lambda i, n: prog.update(task, completed=i, total=n), include_invalid=True)
     if not found:
         raise SimFailure(f"--gait {gait}: no period-1 gait of the {model} wheel at {params.slope_deg:.4f} deg")
     if gait > len(found):
         raise ParameterError(f"--gait {gait}: only {len(found)} gait(s) of the {model} wheel at "
                              f"{params.slope_deg:.4f} deg (see `rimless sim gaits`)")
-    return found[gait - 1].z.copy()
+    fp = found[gait - 1]
+    if fp.bilateral:
+        from rimless.sim.arclength import contact_facts
+        from rimless.sim.branches import contact_reason
+        from rimless.sim.poincare import bilateral_map
+
+        raise SimFailure(f"--gait {gait}: that gait of the {model} wheel violates unilateral contact "
+                         f"({contact_reason(contact_facts(bilateral_map(pmap), fp.z, 5e-4))}); it exists only "
+                         "with the stance foot held")
+    return fp.z.copy()
 
 
 class SimFailure(Exception):
@@ -301,15 +310,16 @@ def gaits_cmd(
     with Progress(transient=True, console=_err_console()) as prog:
         task = prog.add_task("scanning guesses", total=guesses)
         found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
-                           progress=lambda i, n: prog.update(task, completed=i))
+                           progress=lambda i, n: prog.update(task, completed=i), include_invalid=True)
     from rimless.sim.arclength import contact_facts
     from rimless.sim.branches import contact_reason
     from rimless.sim.failures import StepFailure
+    from rimless.sim.poincare import bilateral_map
 
     items = []
     for fp in found:
-        try:
-            facts = contact_facts(pmap, fp.z, 5e-4)
+        try:  # a gait found with the stance foot held is recorded that way too
+            facts = contact_facts(bilateral_map(pmap) if fp.bilateral else pmap, fp.z, 5e-4)
         except StepFailure:
             facts = None
         items.append({
@@ -322,6 +332,8 @@ def gaits_cmd(
             "energy_ratio": fp.step.impact.energy_ratio,
             "contact_valid": bool(facts is not None and facts.contact_valid),
             "contact_reason": contact_reason(facts),
+            "contact_violation": facts.violation if facts is not None else "unknown",
+            "contact_model": "bilateral" if fp.bilateral else "unilateral",
             "contact": facts.as_dict() if facts is not None else None,
         })
     if json_out:
@@ -341,8 +353,8 @@ def gaits_cmd(
                       "yes" if it["contact_valid"] else "NO", f"{fmin:.3g}", f"{it['energy_ratio']:.4f}")
     _console().print(table)
     _console().print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
-                     "impulses > 0); Fmin: smallest stance force in single support; theta'+: post-impact angular "
-                     "velocity", soft_wrap=True)
+                     "impulses > 0; a gait that is not was found with the stance foot held); Fmin: smallest stance "
+                     "force in single support; theta'+: post-impact angular velocity", soft_wrap=True)
     for i, it in enumerate(items):
         if it["contact_reason"]:
             _console().print(f"gait {i + 1}: {it['contact_reason']}", soft_wrap=True)

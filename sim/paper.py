@@ -308,19 +308,25 @@ def validity_range(row: dict[str, Any], params: dict[str, Any], backend: str, rt
                    k_range: tuple[float, float]) -> dict[str, Any]:
     """How far in k the gait of `row` stays stable and contact-valid at its start slope: pseudo-arclength
     continuation in k both ways with the contact facts at every point, to the first special point (a
-    stance force or impulse through 0, a fold, ...) or the end of k_range. Plain data (runs as a Dask task)."""
+    stance force or impulse through 0, a fold, ...) or the end of k_range. The map holds the stance foot
+    (bilateral contact, where the backend has it), so a stance force through 0 is a located sign change of
+    its test function rather than the end of the branch. Plain data (runs as a Dask task)."""
     from rimless.sim.arclength import ArclengthContinuation
     from rimless.sim.backend import make_map
     from rimless.sim.failures import StepFailure
+    from rimless.sim.poincare import bilateral_map
 
     model = row["model"].lower()
     base = WheelParams(**params).replace(stiffness_n_per_m=float(row["k"]), slope_rad=row["start_slope_rad"])
     z0 = np.array([row["theta_plus_rad"], row["theta_dot_plus_rad_s"]])
     out: dict[str, Any] = {"model": row["model"], "branch_label": row["branch_label"], "from_k": row["k"],
                            "slope_rad": row["start_slope_rad"]}
+    def factory(q: WheelParams) -> Any:  # the stance foot held, so the stance force's sign change is bracketed
+        m = make_map(q, model, backend=backend, rtol=rtol)
+        return bilateral_map(m) or m
+
     for side, direction, limit in (("low", -1.0, k_range[0]), ("high", 1.0, k_range[1])):
-        cont = ArclengthContinuation(lambda q: make_map(q, model, backend=backend, rtol=rtol), base, model, "k",
-                                     facts_every=1, max_points=60)
+        cont = ArclengthContinuation(factory, base, model, "k", facts_every=1, max_points=60)
         try:
             br = cont.trace(z0, direction=direction, p_min=k_range[0], p_max=k_range[1], stop_at_first_loss=True)
         except StepFailure as err:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -102,6 +103,13 @@ class FixedPoint:
     eigenvalues: np.ndarray
     step: StepResult
     jacobian_method: str
+    # found under bilateral contact (the stance foot held): it violates unilateral contact; what it violates,
+    # rimless.sim.fast.BilateralContact (None for a gait of the unilateral map)
+    contact: Any = None
+
+    @property
+    def bilateral(self) -> bool:
+        return self.contact is not None
 
     @property
     def max_abs_eigenvalue(self) -> float:
@@ -203,25 +211,85 @@ def solve_fixed_point(
                       jacobian_method=getattr(jac, "method_name", "central-difference"))
 
 
+_CONTACT_FAILURES = (FailureReason.STANCE_LIFT_OFF, FailureReason.NEGATIVE_IMPULSE)
+
+
+def _contact_failure(err: StepFailure) -> bool:
+    """Did Newton fail because the map met a stance lift-off or a non-positive impulse?"""
+    last = getattr(err, "last_failure", None)
+    return err.reason in _CONTACT_FAILURES or (last is not None and last.reason in _CONTACT_FAILURES)
+
+
+def bilateral_map(pmap: Any) -> Any:
+    """The same map with the stance foot held (bilateral contact), or None when the map has no such mode
+    (the reference PoincareMap, a non-ideal clutch)."""
+    if not hasattr(pmap, "bilateral") or not getattr(pmap, "_compiled_ok", lambda: False)():
+        return None
+    bmap = pmap.with_params(pmap.params)
+    bmap.bilateral = True
+    return bmap
+
+
+def bilateral_contact(pmap: Any, z: np.ndarray) -> Any:
+    """What the step from z under bilateral contact does that unilateral contact forbids
+    (rimless.sim.fast.BilateralContact); raises StepFailure."""
+    from rimless.sim.fast import fast_step
+
+    integ = pmap.integrator
+    return fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol, bilateral=True).contact
+
+
 def find_gaits(
     pmap: PoincareMap,
     *,
     theta_dot_range: tuple[float, float] = (0.8, 6.0),
     n_guesses: int = 14,
     progress: Callable[[int, int], None] | None = None,
+    include_invalid: bool = False,
 ) -> list[FixedPoint]:
-    """Every period-1 gait reachable by Newton from a scan of initial theta'+ (de-duplicated, by period)."""
+    """Every period-1 gait reachable by Newton from a scan of initial theta'+ (de-duplicated, by period).
+
+    include_invalid (compiled maps): every guess whose Newton run met a stance lift-off or a non-positive
+    impulse is solved again with the stance foot held (bilateral contact, `bilateral_map`); a gait found
+    so that violates unilateral contact is listed with `contact` set (its violation), one that respects it
+    is solved again on the unilateral map and listed as an ordinary gait.
+    """
     found: list[FixedPoint] = []
+    retry: list[np.ndarray] = []
+    bmap = bilateral_map(pmap) if include_invalid else None
     guesses = np.linspace(*theta_dot_range, n_guesses)
+
+    def new(fp: FixedPoint) -> bool:
+        return all(np.max(np.abs(fp.z - other.z)) > 1e-6 for other in found)
+
     for i, w in enumerate(guesses):
         for th in (-ALPHA / 2 - 0.07, -ALPHA / 2 - 0.02):
             try:
                 fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15)
-            except StepFailure:
+            except StepFailure as err:
+                if bmap is not None and _contact_failure(err):
+                    retry.append(np.array([th, w]))
                 continue
-            if all(np.max(np.abs(fp.z - other.z)) > 1e-6 for other in found):
+            if new(fp):
                 found.append(fp)
         if progress:
             progress(i + 1, len(guesses))
+    for z0 in retry:
+        try:
+            fp = solve_fixed_point(bmap, z0, max_iter=15)
+            if not new(fp):
+                continue
+            contact = bilateral_contact(bmap, fp.z)
+        except StepFailure:
+            continue
+        if contact.unilateral_valid:
+            try:  # valid after all (Newton's path crossed a lift-off): the unilateral map's gait
+                fp = solve_fixed_point(pmap, fp.z, max_iter=15)
+                contact = None
+            except StepFailure:
+                pass  # e.g. a dip between the force samples that the located guard catches
+        fp.contact = contact
+        if new(fp):
+            found.append(fp)
     found.sort(key=lambda fp: fp.step.period_s)
     return found

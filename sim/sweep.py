@@ -26,7 +26,7 @@ from typing import Any
 
 from rimless.errors import ParameterError
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 # sweepable parameters: option name -> (WheelParams field, unit)
 GRID_PARAMETERS: dict[str, tuple[str, str]] = {
     "k": ("stiffness_n_per_m", "N/m"),

@@ -139,6 +139,28 @@ class FastStep:
     nstiff: int  # accepted steps flagged stiff by the h |lambda| > 6.1 test
     relabel_snap_J: float = 0.0  # energy the relabelling snap of the old trailing leg adds (J; < 0 removes)
     method: str = "fast-dop853"
+    contact: BilateralContact | None = None  # with bilateral=True only
+
+
+@dataclass(frozen=True)
+class BilateralContact:
+    """What a step under bilateral contact (the stance foot held, impulses of either sign) did that unilateral
+    contact forbids: the smallest single-support stance normal force (N) and its time from the step's start
+    (s), how long that force is negative (s), and the smallest normal impact impulse (N s)."""
+
+    min_stance_force_N: float
+    min_stance_force_time_s: float
+    negative_force_s: float
+    min_impulse_N_s: float
+
+    @classmethod
+    def of(cls, c: np.ndarray) -> BilateralContact:
+        return cls(float(c[fs.C_MIN_FORCE]), float(c[fs.C_MIN_FORCE_T]), float(c[fs.C_NEGATIVE_S]),
+                   float(c[fs.C_MIN_IMPULSE]))
+
+    @property
+    def unilateral_valid(self) -> bool:
+        return self.min_stance_force_N >= 0.0 and self.min_impulse_N_s > 0.0
 
 
 def _raise(status: int, detail: int, phase: int, t: float, nsteps: int) -> None:
@@ -162,22 +184,34 @@ def _raise(status: int, detail: int, phase: int, t: float, nsteps: int) -> None:
 
 
 def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10, atol: float | None = None,
-              jacobian: bool = False, max_steps: int = MAX_STEPS) -> FastStep:
+              jacobian: bool = False, max_steps: int = MAX_STEPS, bilateral: bool = False,
+              record_contact: bool = True) -> FastStep:
     """One compiled step from z = (theta+, theta'+); raises StepFailure with the reference's reason.
 
     atol defaults to rtol / 100 (the reference ScipyIntegrator pairs rtol 1e-10 with atol 1e-12).
+    bilateral: hold the stance foot (no stance lift-off, impulses of either sign accepted) and report what
+    unilateral contact would forbid in `contact` (BilateralContact; record_contact=False skips that record,
+    which costs about as much as the step): for finding and characterising gaits that are not contact-valid.
     """
     er = _check_model(model)
     atol = rtol * 1e-2 if atol is None else atol
     zz = np.asarray(z, dtype=np.float64).reshape(2)
-    st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map(
-        mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
-        int(max_steps))
+    c = None
+    if bilateral:
+        c = np.empty(fs.CONTACT_SIZE if record_contact else 0)
+        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map_contact(
+            mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
+            int(max_steps), True, c)
+    else:
+        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map(
+            mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
+            int(max_steps))
     if st != fs.OK:
         _raise(st, detail, phase, t, nsteps)
     return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
                     jacobian=J if jacobian else None, phase_end_s=times, nfev=int(nfev), nsteps=int(nsteps),
-                    nstiff=int(nstiff), relabel_snap_J=float(snap))
+                    nstiff=int(nstiff), relabel_snap_J=float(snap),
+                    contact=BilateralContact.of(c) if c is not None and len(c) else None)
 
 
 def fast_map(params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10,
@@ -249,6 +283,20 @@ class FastIntegrator:
         return run
 
 
+class _HeldStance:
+    """An Integrator without the stance foot's lift-off guard (bilateral contact) for hybrid.simulate_step; its
+    checks at the start of single support and of the impulses' signs still apply."""
+
+    def __init__(self, inner: FastIntegrator) -> None:
+        self.inner = inner
+        self.name = f"{inner.name}+bilateral"
+
+    def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
+                  t_max: float, **options: Any) -> PhaseRun:
+        return self.inner.run_phase(mech, phase, y0, t0, tuple(g for g in guards if g != fm.LIFTOFF_B), t_max,
+                                    **options)
+
+
 class _VariationalJacobian:
     """Callable z -> dP/dz (exact, variational) for solve_fixed_point(..., jacobian=...)."""
 
@@ -279,6 +327,7 @@ class FastPoincareMap:
     jacobian_with_map: bool = False  # compute dP/dz with every map call (cached): cheapest for Newton
     last_method: str = ""
     method_counts: dict[str, int] = field(default_factory=dict)
+    bilateral: bool = False  # the stance foot held (fast_step(bilateral=True), and in `step`)
 
     def __post_init__(self) -> None:
         _check_model(self.model)
@@ -314,10 +363,15 @@ class FastPoincareMap:
         key = (float(z[0]), float(z[1]))
         if self._cache is not None and self._cache[0] == key and (self._cache[3] is not None or not jacobian):
             return self._cache[1].copy(), self._cache[2], (None if self._cache[3] is None else self._cache[3].copy())
-        st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map(
-            self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-            jacobian, int(self.integrator.max_steps))
-        if st == fs.TOO_MANY_STEPS and self.stiff_fallback:
+        if self.bilateral:
+            st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map_contact(
+                self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
+                jacobian, int(self.integrator.max_steps), True, np.empty(0))
+        else:
+            st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map(
+                self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
+                jacobian, int(self.integrator.max_steps))
+        if st == fs.TOO_MANY_STEPS and self.stiff_fallback and not self.bilateral:
             from rimless.sim.integrators import ScipyIntegrator
 
             radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10),
@@ -358,12 +412,13 @@ class FastPoincareMap:
         from rimless.sim.section import state_from_section
 
         self.evaluations += 1
+        integ = _HeldStance(self.integrator) if self.bilateral else self.integrator
         return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
-                             self.integrator, clutch=self.clutch, **options)  # type: ignore[arg-type]
+                             integ, clutch=self.clutch, **options)  # type: ignore[arg-type]
 
     def with_params(self, params: WheelParams) -> FastPoincareMap:
         return FastPoincareMap(params, self.model, self.integrator, self.clutch, stiff_fallback=self.stiff_fallback,
-                               jacobian_with_map=self.jacobian_with_map)
+                               jacobian_with_map=self.jacobian_with_map, bilateral=self.bilateral)
 
     def jacobian(self, z: np.ndarray, h: float | None = None) -> np.ndarray:
         """dP/dz: exact (variational) by default; central differences with step h if h is given."""

@@ -51,6 +51,18 @@ _FREE_ER_CODES = np.array([fm.CLUTCH_LOCK, fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B]
 _FREE_ER_DIRS = np.array([1, -1, -1, -1], dtype=np.int64)
 _SS_CODES = np.array([fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
 _SS_DIRS = np.array([-1, -1, -1], dtype=np.int64)
+# bilateral contact: the same guards without the stance foot's lift-off (LIFTOFF_B is last in both lists)
+_FREE_ER_CODES_BI = _FREE_ER_CODES[:-1].copy()
+_FREE_ER_DIRS_BI = _FREE_ER_DIRS[:-1].copy()
+_SS_CODES_BI = _SS_CODES[:-1].copy()
+_SS_DIRS_BI = _SS_DIRS[:-1].copy()
+# step_map_contact's `contact` record (bilateral contact)
+C_MIN_FORCE = 0  # smallest stance normal force lambda_b,y in single support, N
+C_MIN_FORCE_T = 1  # its time, s
+C_NEGATIVE_S = 2  # how long that force is < 0 in single support, s
+C_MIN_IMPULSE = 3  # smallest normal impact impulse, N s
+CONTACT_SIZE = 4
+BILATERAL_RECORD_DT = 2e-4  # s: force samples between the solver's steps (bilateral mode only)
 
 
 @_jit
@@ -111,8 +123,63 @@ def _map_status(st, fired_ok):
 
 
 @_jit
+def _single_support_force(mi, phase, rec_t, rec_y, p, contact):
+    """Fold the stance normal force at the recorded states of one single-support phase into `contact`: the
+    minimum (refined by a parabola through its neighbours), its time and the time spent below zero."""
+    n = rec_t.shape[0]
+    qdd = np.empty(5)
+    lam = np.zeros(4)
+    f = np.empty(n)
+    for i in range(n):
+        fm.accel(mi, phase, rec_y[i, :5], rec_y[i, 5:10], p, qdd, lam)
+        f[i] = lam[1]
+    for i in range(n - 1):  # time below zero, zero crossings interpolated linearly
+        a, b, dt = f[i], f[i + 1], rec_t[i + 1] - rec_t[i]
+        if a < 0.0 and b < 0.0:
+            contact[C_NEGATIVE_S] += dt
+        elif a < 0.0 <= b:
+            contact[C_NEGATIVE_S] += dt * a / (a - b)
+        elif b < 0.0 <= a:
+            contact[C_NEGATIVE_S] += dt * b / (b - a)
+    j = 0
+    for i in range(1, n):
+        if f[i] < f[j]:
+            j = i
+    fmin, tmin = f[j], rec_t[j]
+    if 0 < j < n - 1:
+        t0, t1, t2 = rec_t[j - 1], rec_t[j], rec_t[j + 1]
+        d1 = (f[j] - f[j - 1]) / (t1 - t0)
+        d2 = (f[j + 1] - f[j]) / (t2 - t1)
+        curv = (d2 - d1) / (t2 - t0)  # half the second derivative
+        if curv > 0.0:
+            tv = 0.5 * (t0 + t1) - d1 / (2.0 * curv)
+            if t0 <= tv <= t2:
+                fv = f[j] + (tv - t1) * (d1 + curv * (tv - t0))
+                if fv <= fmin:
+                    fmin, tmin = fv, tv
+    if fmin < contact[C_MIN_FORCE]:
+        contact[C_MIN_FORCE] = fmin
+        contact[C_MIN_FORCE_T] = tmin
+
+
+@_jit
 def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
+    """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin); unilateral contact (see
+    step_map_contact)."""
+    return step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, False, np.empty(0))
+
+
+@_jit
+def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, bilateral, contact):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
+
+    bilateral=False: unilateral contact, the step fails with STANCE_LIFT_OFF / NEGATIVE_IMPULSE. bilateral=True:
+    the stance foot is held (no lift-off guard, no pre-check) and a non-positive impulse is accepted, so a fixed
+    point that violates unilateral contact can be found and characterised. With bilateral=True and `contact`
+    of size CONTACT_SIZE, it receives the smallest single-support stance force (N, from the states every
+    BILATERAL_RECORD_DT s and every solver step, which about doubles the step's cost), its time (s), the time
+    that force is negative (s) and the smallest normal impulse (N s); with `contact` of size 0 nothing is
+    recorded.
 
     Returns (status, detail, phase, t_s, y_plus (10,), J (2x2), times (3,), nfev, nsteps, nstiff, snap_J):
     status OK or a failure code; phase 0/1/2 (dlsp/slsp_free/slsp_clutched) or 3 (impact) where it ended;
@@ -138,6 +205,13 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     t = 0.0
     qdd = np.empty(5)
     lam = np.zeros(4)
+    record = bilateral and contact.shape[0] >= CONTACT_SIZE
+    if record:
+        contact[C_MIN_FORCE] = np.inf
+        contact[C_MIN_FORCE_T] = -1.0
+        contact[C_NEGATIVE_S] = 0.0
+        contact[C_MIN_IMPULSE] = np.nan
+    rec_dt = BILATERAL_RECORD_DT if record else -1.0
     for i in range(10):
         if not np.isfinite(y0[i]):
             return INTEGRATION, D_PRECHECK, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
@@ -179,14 +253,18 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         return INTEGRATION, D_SOLVER, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
     if not _finite(qdd, lam):
         return INTEGRATION, D_NOT_FINITE, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
-    if not (lam[1] > 0.0):
+    if not (lam[1] > 0.0) and not bilateral:
         return STANCE_LIFT_OFF, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
     if er:
         if ys[8] >= 0.0:
             return CLUTCH_MISSED, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
-        st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
-            mi, fm.SLSP_FREE, p, ya, t, _FREE_ER_CODES, _FREE_ER_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err,
-            want_jac, False, -1.0, max_steps)
+        codes = _FREE_ER_CODES_BI if bilateral else _FREE_ER_CODES
+        dirs = _FREE_ER_DIRS_BI if bilateral else _FREE_ER_DIRS
+        st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = rk.run_phase(
+            mi, fm.SLSP_FREE, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, n_err,
+            want_jac, False, rec_dt, max_steps)
+        if record:
+            _single_support_force(mi, fm.SLSP_FREE, rec_t, rec_y, p, contact)
         nfev += nf
         nsteps += ns
         nstiff += nst
@@ -194,7 +272,7 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
             return _map_status(st, fired), D_SOLVER, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if fired < 0:
             return INTEGRATION, D_TIME_LIMIT, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        code = _FREE_ER_CODES[fired]
+        code = codes[fired]
         if code == fm.TOUCHDOWN:
             return TOUCHDOWN_BEFORE_CLUTCH, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         if code == fm.STALL:
@@ -215,9 +293,13 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     else:
         final = fm.SLSP_FREE
     times[1] = t
-    st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
-        mi, final, p, ya, t, _SS_CODES, _SS_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac, False, -1.0,
+    codes = _SS_CODES_BI if bilateral else _SS_CODES
+    dirs = _SS_DIRS_BI if bilateral else _SS_DIRS
+    st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = rk.run_phase(
+        mi, final, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac, False, rec_dt,
         max_steps)
+    if record:
+        _single_support_force(mi, final, rec_t, rec_y, p, contact)
     nfev += nf
     nsteps += ns
     nstiff += nst
@@ -225,7 +307,7 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         return _map_status(st, fired), D_SOLVER, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     if fired < 0:
         return STALL, D_TIME_LIMIT, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-    code = _SS_CODES[fired]
+    code = codes[fired]
     if code == fm.STALL:
         return STALL, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     if code == fm.LIFTOFF_B:
@@ -249,7 +331,9 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         return INTEGRATION, D_SOLVER, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
     if not (_finite(yp, impulse) and math.isfinite(t)):
         return INTEGRATION, D_NOT_FINITE, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
-    if not (impulse[1] > 0.0 and impulse[3] > 0.0):
+    if record:
+        contact[C_MIN_IMPULSE] = min(impulse[1], impulse[3])
+    if not (impulse[1] > 0.0 and impulse[3] > 0.0) and not bilateral:
         return NEGATIVE_IMPULSE, D_GUARD, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
     yt, _D = fm.relabel_with_jacobian(ym, p[3])
     snap = fm.energy(mi, yt[:5], yt[5:10], p) - fm.energy(mi, ym[:5], ym[5:10], p)
