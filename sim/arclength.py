@@ -193,6 +193,7 @@ class BranchPoint:
     arclength: float
     tests: dict[str, float]
     facts: ContactFacts | None = None
+    contact_valid: bool | None = None  # unilateral contact holds (None: not known at this point)
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -448,13 +449,28 @@ class ArclengthContinuation:
         self._period_hint = s.period_s
         facts = None
         tests = eigen_tests(s.J)
+        valid: bool | None = None if self.oracle.bilateral else True  # the unilateral map accepted the step
         if with_facts:
             facts = self._facts(s.u[:2], p)
             if facts is not None:
                 tests[STANCE_FORCE] = facts.min_stance_force_single_support_N
                 tests[IMPULSE] = facts.min_impulse_N_s
                 tests[STALL] = facts.min_theta_dot_single_support_rad_s
-        return BranchPoint(p, s.u[:2].copy(), s.J.copy(), s.period_s, arclength, tests, facts)
+                valid = facts.contact_valid
+        elif self.oracle.bilateral and self.oracle.compiled:
+            # the stance foot held: the compiled map's own record of the contact at every point (about one map
+            # evaluation), so the stance force's sign changes are bracketed point to point
+            from rimless.sim import fast
+
+            try:
+                c = fast.fast_step(self.oracle.params(p), self.model, s.u[:2], rtol=self.oracle.rtol,
+                                   atol=self.oracle.atol, bilateral=True).contact
+                tests[STANCE_FORCE] = c.min_stance_force_N
+                tests[IMPULSE] = c.min_impulse_N_s
+                valid = c.unilateral_valid
+            except StepFailure:
+                pass
+        return BranchPoint(p, s.u[:2].copy(), s.J.copy(), s.period_s, arclength, tests, facts, valid)
 
     def _facts(self, z: np.ndarray, p: float) -> ContactFacts | None:
         try:
@@ -489,6 +505,7 @@ class ArclengthContinuation:
         cur = self._point(s, 0.0, start_facts is None)
         if start_facts is not None:
             cur.facts = start_facts
+            cur.contact_valid = start_facts.contact_valid
             cur.tests.update({STANCE_FORCE: start_facts.min_stance_force_single_support_N,
                               IMPULSE: start_facts.min_impulse_N_s, STALL: start_facts.min_theta_dot_single_support_rad_s})
         branch.points.append(cur)

@@ -162,10 +162,27 @@ class GaitBranch:
             "period_max_s": max(pt.period_s for pt in along),
             "energy_ratio_min": min((pt.facts.energy_ratio for pt in along if pt.facts), default=math.nan),
             "energy_ratio_max": max((pt.facts.energy_ratio for pt in along if pt.facts), default=math.nan),
+            **self._valid_part(),
             "branch_points": len(pts),
             "map_evaluations": self.branch.map_evaluations if self.branch else 0,
             "continuation_s": self.branch.seconds if self.branch else 0.0,
         }
+
+    def _valid_part(self) -> dict[str, Any]:
+        """For a gait stable but not contact-valid at the start slope: the slope below which it is valid (its
+        stance force or impulse through 0 going down) and where that valid part ends (its next special point)."""
+        out = {"valid_from_slope_rad": math.nan, "valid_end_slope_rad": math.nan, "valid_end_reason": ""}
+        if self.branch is None or self.contact_valid_at_start or not self.stable_at_start:
+            return out
+        sps = self.branch.special
+        i = next((i for i, sp in enumerate(sps) if sp.kind in ("stance-force", "impulse")), None)
+        if i is None:
+            return out
+        out["valid_from_slope_rad"] = sps[i].p
+        nxt = next((sp for sp in sps[i + 1:]), None)
+        if nxt is not None:
+            out["valid_end_slope_rad"], out["valid_end_reason"] = nxt.p, nxt.kind
+        return out
 
     def point_rows(self) -> list[dict[str, Any]]:
         """The traced branch point by point (slope, state, period, max |eig|, stability, validity)."""
@@ -180,7 +197,7 @@ class GaitBranch:
                 "theta_dot_plus_rad_s": float(pt.z[1]), "step_period_s": pt.period_s,
                 "max_abs_eigenvalue": pt.max_abs_eigenvalue, "stable": pt.stable,
                 "energy_ratio": pt.facts.energy_ratio if pt.facts else math.nan,
-                "contact_valid": (pt.facts.contact_valid if pt.facts else None),
+                "contact_valid": pt.contact_valid,
                 "min_stance_force_single_support_N": pt.facts.min_stance_force_single_support_N if pt.facts else math.nan,
             })
         return out
@@ -195,7 +212,7 @@ def _start_point(pmap: Any, fp: Any, model: str) -> BranchPoint:
     except StepFailure:
         pass
     return BranchPoint(pmap.params.slope_rad, np.asarray(fp.z), np.asarray(fp.jacobian), fp.step.period_s, 0.0,
-                       eigen_tests(np.asarray(fp.jacobian)), facts)
+                       eigen_tests(np.asarray(fp.jacobian)), facts, facts.contact_valid if facts else None)
 
 
 def trace_gait_branches(
@@ -237,9 +254,12 @@ def trace_gait_branches(
             return bilateral_map(m) if held else m
 
         cont = ArclengthContinuation(factory, start_params, model, "slope", max_points=max_points)
+        # a gait invalid at the start may become valid lower down: followed (foot held) past that point until
+        # it stops being stable, so the row can say where its valid part lies
+        held_stable = held and start.stable and not to_end
         try:
-            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not to_end,
-                            start_facts=start.facts)
+            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not (to_end or held_stable),
+                            start_facts=start.facts, stop=(lambda pt: not pt.stable) if held_stable else None)
         except StepFailure as err:
             out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
             continue

@@ -204,33 +204,54 @@ def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
 
 def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]], out: Path,
                        ks: tuple[float, ...] = EIGEN_K) -> list[Path]:
-    """Figure 4: max |eig| against slope along every stable branch (start slope down to the critical slope)."""
+    """Figure 4: max |eig| against slope along every branch stable at the start slope, down to the end of its
+    stable, valid part (a branch invalid at the start: down to the end of the part that becomes valid, or its
+    end); solid with filled markers where the gait respects unilateral contact, dashed with open markers where
+    it does not (found with the stance foot held)."""
     import pandas as pd
 
     from rimless.sim.plotting import save_figure
 
     plt = _plt()
     frame = pd.DataFrame(points)
-    crit = {(r["model"], r["k"], r["branch"]): r.get("critical_slope_rad", math.nan) for r in rows}
+    info = {(r["model"], r["k"], r["branch"]): r for r in rows}
     keep = []
     for (model, k, branch), g in frame.groupby(["model", "k", "branch"]):
-        c = crit.get((model, k, branch), math.nan)
-        if k not in ks or not (c == c):
+        r = info.get((model, k, branch))
+        if k not in ks or r is None or not r.get("stable_at_start"):
             continue
-        keep.append(g[g.slope_rad >= c - 1e-12])
+        c = r.get("critical_slope_rad", math.nan)
+        if not c == c:
+            c = r.get("valid_end_slope_rad", math.nan)
+        if not c == c:
+            c = r.get("end_slope_rad", math.nan)
+        keep.append(g[g.slope_rad >= c - 1e-12] if c == c else g)
     data = pd.concat(keep, ignore_index=True) if keep else frame.iloc[:0]
+    if len(data):
+        data = data.assign(contact_valid=data["contact_valid"].map(lambda v: bool(v) if v is not None else True))
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), constrained_layout=True, sharey=True)
-    styles = ["-", "--", ":", "-."]
+    styles = ["-", "-.", ":", (0, (5, 1))]
     for ax, model in zip(axes, ("VE", "ER")):
-        sub = data[data.model == model]
+        sub = data[data.model == model] if len(data) else data
         for j, k in enumerate(ks):
-            for b_i, (branch, g) in enumerate(sub[sub.k == k].groupby("branch")):
-                ax.plot(g["slope_deg"], g["max_abs_eigenvalue"], styles[b_i % 4], color=f"C{j}",
-                        label=f"k = {k:g}, {g['branch_label'].iloc[0]}")
+            for b_i, (branch, g) in enumerate(sub[sub.k == k].groupby("branch") if len(sub) else []):
+                g = g.sort_values("slope_rad")
+                valid = g["contact_valid"].to_numpy(dtype=bool)
+                col = f"C{j}"
+                label = f"k = {k:g}, {g['branch_label'].iloc[0]}"
+                ax.plot(g["slope_deg"].where(valid), g["max_abs_eigenvalue"].where(valid), ls=styles[b_i % 4],
+                        color=col, label=label if valid.any() else None)
+                if (~valid).any():  # the invalid part, and its joint with the valid part, dashed
+                    inv = ~valid | np.r_[~valid[1:], False] | np.r_[False, ~valid[:-1]]
+                    ax.plot(g["slope_deg"].where(inv), g["max_abs_eigenvalue"].where(inv), "--", color=col, lw=1,
+                            label=None if valid.any() else label)
+                    ax.plot(g["slope_deg"][~valid], g["max_abs_eigenvalue"][~valid], "o", mfc="white", color=col,
+                            ms=3.5)
         ax.axhline(1.0, color="k", ls="--", lw=1)
         ax.set_xlabel("slope (deg)")
         ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
         ax.grid(alpha=0.3)
+        ax.plot([], [], "--o", mfc="white", color="0.4", lw=1, ms=3.5, label="violates unilateral contact")
         ax.legend(fontsize=7)
     axes[0].set_ylabel("max |eigenvalue| of the Poincare map")
     return [save_figure(fig, out / "fig4_eigenvalue_map.png"), _write_csv(data, out / "fig4_eigenvalue_map.csv")]
@@ -249,6 +270,15 @@ def cot_rows(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[str, 
                     "critical_slope_deg": r["critical_slope_deg"], "cot": r["cot"], "reason": r["reason"],
                     "contact_valid": bool(r.get("contact_valid_at_start")) and r.get("end_contact_valid") is not False,
                     "contact_valid_at_start": bool(r.get("contact_valid_at_start")),
+                    "min_stance_force_single_support_N": r.get("min_stance_force_single_support_N", math.nan)})
+    for r in rows:  # a gait invalid at the start slope whose valid part (lower down) ends at a stable end
+        c = r.get("valid_end_slope_rad", math.nan)
+        if not (isinstance(c, float) and c == c) or r.get("valid_end_reason") not in ("fold", "stall"):
+            continue
+        out.append({"model": r["model"], "k": r["k"], "branch": r["branch"], "branch_label": r["branch_label"],
+                    "critical_slope_deg": math.degrees(c), "cot": math.tan(c), "reason": r["valid_end_reason"],
+                    "contact_valid": True, "contact_valid_at_start": False, "valid_part_only": True,
+                    "valid_from_slope_deg": math.degrees(r["valid_from_slope_rad"]),
                     "min_stance_force_single_support_N": r.get("min_stance_force_single_support_N", math.nan)})
     phi_r = RigidWheel.from_params(params, "paper").critical_slope_rad()
     for k in sorted({r["k"] for r in rows}):
@@ -350,7 +380,9 @@ def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, An
 
     plt = _plt()
     frame = pd.DataFrame(crows)
-    fig, ax = plt.subplots(figsize=(9, 5.5), constrained_layout=True)
+    n_bars = len(ranges or [])
+    fig, (ax, strip) = plt.subplots(2, 1, figsize=(9, 6.2 + 0.15 * n_bars), constrained_layout=True, sharex=True,
+                                    gridspec_kw={"height_ratios": [5, 0.6 + 0.35 * max(n_bars, 1)]})
     cframe = pd.DataFrame(curves or [])
     colours0 = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4"}
     if len(cframe):
@@ -359,7 +391,8 @@ def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, An
             ax.plot(g["k"], g["cot"], "-", color=colours0.get(label, "C5"), lw=2, alpha=0.35,
                     label=f"{name} curve (two-parameter continuation)")
     colours = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4", "rigid": "k"}
-    for label, g in frame[frame.model != "rigid"].groupby("branch_label"):
+    main = frame[(frame.model != "rigid") & ~frame.get("valid_part_only", pd.Series(False, index=frame.index)).fillna(False).astype(bool)]
+    for label, g in main.groupby("branch_label"):
         g = g.sort_values("k")
         name = "ER" if label == "er" else f"VE {label}"
         col = colours.get(label, "C5")
@@ -370,16 +403,31 @@ def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, An
         ax.plot(nv["k"], nv["cot"], "o", mfc="white", color=col, ms=6)
     rg = frame[frame.model == "rigid"].sort_values("k")
     ax.plot(rg["k"], rg["cot"], "k--", label=f"rigid ({rg['critical_slope_deg'].iloc[0]:.3f} deg)" if len(rg) else "rigid")
-    for v in ranges or []:
+    for i, v in enumerate(ranges or []):
+        col = colours.get(v["branch_label"], "C5")
+        name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
         for side in ("low", "high"):
             if v.get(f"k_{side}_reason") in ("stance-force", "impulse"):
-                col = colours.get(v["branch_label"], "C5")
                 ax.axvline(v[f"k_{side}"], color=col, ls="-.", lw=1,
-                           label=f"{'ER' if v['model'] == 'ER' else 'VE ' + v['branch_label']} gait loses contact validity "
-                                 f"at k = {v[f'k_{side}']:.0f} ({v[f'k_{side}_reason']})")
+                           label=f"{name} gait loses contact validity at k = {v[f'k_{side}']:.0f} "
+                                 f"({v[f'k_{side}_reason']})")
+        lo, hi = v.get("k_low", math.nan), v.get("k_high", math.nan)
+        if lo == lo and hi == hi:  # the branch's valid range in k at the start slope, a bar in the strip below
+            strip.plot([lo, hi], [i, i], "-", color=col, lw=6, solid_capstyle="butt")
+            strip.text(lo, i + 0.38, f"{name}: stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg for "
+                       f"k = {lo:.0f} ({v['k_low_reason']}) to {hi:.0f} ({v['k_high_reason']})", color=col,
+                       fontsize=7, va="center")
+    late = (frame[frame["valid_part_only"].fillna(False).astype(bool)] if "valid_part_only" in frame else None)
+    if late is not None and len(late):
+        for label, g in late.groupby("branch_label"):
+            ax.plot(g["k"], g["cot"], "D", mfc="white", color=colours.get(label, "C5"), ms=6,
+                    label=f"VE {label}: invalid at the start slope, end of its valid part lower down")
     ax.plot([], [], "o", color="0.4", label="contact-valid")
     ax.plot([], [], "o", mfc="white", color="0.4", label="violates unilateral contact")
-    ax.set_xlabel("leg stiffness k (N/m)")
+    strip.set_ylim(-0.6, max(n_bars, 1) - 0.2)
+    strip.set_yticks([])
+    strip.set_xlabel("leg stiffness k (N/m)")
+    strip.set_title("valid range of each branch in k (continuation in k at the start slope)", fontsize=8)
     ax.set_ylabel("CoT = tan(critical slope)")
     ax.set_title("cost of transport per gait branch")
     ax.grid(alpha=0.3)
@@ -394,7 +442,8 @@ def _fmt_range(v: Any) -> str:
     return f"{v[0]}-{v[1]}" if isinstance(v, tuple) else f"{v}"
 
 
-def headline_table(rows: list[dict[str, Any]], er_series: list[dict[str, Any]], params: WheelParams) -> list[dict[str, Any]]:
+def headline_table(rows: list[dict[str, Any]], er_series: list[dict[str, Any]], params: WheelParams,
+                   ranges: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """Every headline number of the paper beside ours, with the difference explained."""
     from rimless.sim.rigid import RigidWheel
 
@@ -452,6 +501,24 @@ def headline_table(rows: list[dict[str, Any]], er_series: list[dict[str, Any]], 
             at_kp.append(f"vs VE {ve['branch_label']} {red:+.1f}% ({'valid' if ve['contact_valid_at_start'] else 'INVALID'})")
     table.append({"quantity": f"ER CoT reduction vs VE at k = {kp:g}", "paper": "16.13%", "ours": "; ".join(at_kp) or "-",
                   "note": "depends on which VE branch is followed; valid = unilateral contact at the start slope"})
+    reds = []
+    for ve in pick("VE", kp):
+        er = pick("ER", kp)
+        if er and ve["cot"] == ve["cot"] and er[0]["cot"] == er[0]["cot"]:
+            reds.append((100.0 * (1.0 - er[0]["cot"] / ve["cot"]), ve))
+    if reds:
+        red, ve = min(reds, key=lambda rv: abs(rv[0] - PAPER["max_cot_reduction_pct"]))
+        rng = next((v for v in ranges or [] if v["model"] == "VE" and v["branch_label"] == ve["branch_label"]), None)
+        valid_txt = ("contact-valid at the start slope" if ve["contact_valid_at_start"]
+                     else f"NOT contact-valid ({ve.get('contact_reason', '')})")
+        if rng is not None:
+            valid_txt += (f"; stable and contact-valid at {math.degrees(rng['slope_rad']):.3f} deg for k = "
+                          f"{rng['k_low']:.0f} ({rng['k_low_reason']}) to {rng['k_high']:.0f} ({rng['k_high_reason']})")
+        table.append({"quantity": f"VE branch that reproduces the paper's 16.13 % at k = {kp:g}", "paper": "16.13%",
+                      "ours": f"VE {ve['branch_label']}: {red:.2f}% ({valid_txt})",
+                      "note": "the VE branch whose CoT reduction is nearest the paper's; the others: "
+                              + ("; ".join(f"VE {o['branch_label']} {r2:+.2f}%" for r2, o in reds if o is not ve)
+                                 or "none")})
     if best is not None:
         red, k, ve = best
         table.append({"quantity": "maximum ER CoT reduction over the k grid", "paper": "16.13% at k = 2500",
@@ -481,9 +548,12 @@ CAPTIONS = {
     "fig2_ground_reaction_forces": "Vertical ground reaction forces; red: the leading foot's tensile transient at the "
                                    "start of double support (a rigid-contact artefact).",
     "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k.",
-    "fig4_eigenvalue_map": "Max |eigenvalue| against slope along every stable branch, several k; dashed: unit circle.",
-    "fig5_cot": "CoT = tan(critical slope) against k for ER, every VE branch and the rigid wheel; open markers violate "
-                "unilateral contact.",
+    "fig4_eigenvalue_map": "Max |eigenvalue| against slope along every branch stable at the start slope, several k, "
+                           "down to the end of its stable, valid part; dashed with open markers: the gait violates "
+                           "unilateral contact (found with the stance foot held); black dashed: unit circle.",
+    "fig5_cot": "CoT = tan(critical slope) against k for ER, every VE branch and the rigid wheel; open circles violate "
+                "unilateral contact; open diamonds: a gait invalid at the start slope, the end of its valid part "
+                "lower down; bars along the bottom: each branch's contact-valid range in k at the start slope.",
 }
 
 
@@ -598,7 +668,7 @@ def run_paper(
     say("eigenvalue map, cost of transport and the headline table")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
     res.files += figure_cot(cot_rows(sw.rows, params), out, curves, ranges)
-    res.table = headline_table(sw.rows, [], params)
+    res.table = headline_table(sw.rows, [], params, ranges)
     for v in ranges:
         name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
         res.table.append({"quantity": f"{name} gait stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg "

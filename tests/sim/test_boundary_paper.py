@@ -80,3 +80,26 @@ def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
     k_end = float(fast["ours"].split(" to ")[1].split(" ")[0])
     assert k_end == pytest.approx(2551, abs=2)
     assert (out / "table6_valid_k_ranges.csv").exists()
+    # which VE branch reproduces 16.13 %, with its validity and valid k range
+    rep = next(r for r in data["table"] if r["quantity"].startswith("VE branch that reproduces"))
+    assert rep["ours"].startswith("VE fast") and "contact-valid" in rep["ours"] and "(stance-force)" in rep["ours"]
+    # figure 5: the k = 2700 fast gait is invalid at the start slope; the end of its valid part lower down is
+    # drawn apart from the branches valid at the start
+    import pandas as pd
+
+    cot = pd.read_csv(out / "fig5_cot.csv")
+    late = cot[cot.get("valid_part_only", pd.Series(False, index=cot.index)).fillna(False).astype(bool)]
+    assert list(late.k) == [2700.0] and list(late.branch_label) == ["fast"] and list(late.reason) == ["fold"]
+    assert (late.valid_from_slope_deg > late.critical_slope_deg).all()
+    # figure 4 marks validity point by point: at k = 2700 the fast branch is invalid at the start slope
+    from rimless.sim.paper import figure_eigenvalues
+
+    rows = pd.read_csv(out / "sweep.csv").to_dict("records")
+    points = pd.read_csv(out / "sweep-points.csv").to_dict("records")
+    figure_eigenvalues(points, rows, tmp_path, ks=(2700.0,))
+    fig4 = pd.read_csv(tmp_path / "fig4_eigenvalue_map.csv")
+    fast = fig4[(fig4.model == "VE") & (fig4.branch_label == "fast")]
+    assert (~fast.contact_valid).any() and fast.contact_valid.any()  # invalid at 2.865 deg, valid lower down
+    top = fast.sort_values("slope_rad").iloc[-1]
+    assert not top.contact_valid
+    assert fig4[fig4.branch_label == "medium"].contact_valid.all()
