@@ -6,10 +6,13 @@ x = (theta+, theta'+, slope, mu), mu the second parameter:
     g(z; slope, mu) = 0              (it sits on the boundary)
 with g one of
 - `fold`: det(J - I), J = dP/dz (the VE branches end in folds: an eigenvalue at +1);
-- `stall`: T(z; slope, mu) - T_STALL, the step period at T_STALL = 2.5 s. The ER branch ends in a stall where
-  the period grows without bound (logarithmically, the wheel creeping over the top); the level set of a
-  2.5 s period is a smooth curve about 1e-7 rad above the stall boundary itself (tested against the
-  one-parameter end, located where the map starts to fail), far enough from it for finite differences.
+- `stall`: exp(-lambda (T - T_STALL)) - 1, T the step period, T_STALL = 1.6 s. The ER branch ends in a stall
+  where the period grows without bound (logarithmically, the wheel creeping over the top), so the stall itself
+  is no smooth zero of anything the map gives; the level set of a 1.6 s period is a smooth curve some 1e-5 rad
+  above it, traced first. Each of its points is then moved down in slope, at its own mu, to the stall itself:
+  the fixed point is followed down in slope (Newton from the last one) until it stops existing, and that end
+  is bisected to STALL_TOL_RAD (`locate_stall`). The curve's points are the located stalls; the level-set
+  points are kept in `BoundaryCurve.level_points`.
 Scaled coordinates u = (theta+, theta'+, slope / 0.01, mu / s_mu). dF/dz is the map's exact Jacobian; the
 other derivatives are forward differences. Units: rad, rad/s, SI for mu.
 """
@@ -28,7 +31,8 @@ from rimless.sim.arclength import PARAMETERS, _Oracle
 from rimless.sim.failures import FailureReason, StepFailure
 from rimless.sim.params import WheelParams
 
-T_STALL = 1.6  # s: the step period that marks the stall curve
+T_STALL = 1.6  # s: the step period of the level set traced before the stall is located
+STALL_TOL_RAD = 1e-9  # the located stall's bracket in slope
 TESTS = ("fold", "stall")
 
 
@@ -51,6 +55,7 @@ class BoundaryCurve:
     test: str
     parameter: str
     points: list[BoundaryPoint] = field(default_factory=list)
+    level_points: list[BoundaryPoint] = field(default_factory=list)  # stall: the T_STALL level set traced
     end_reason: str = ""
     map_evaluations: int = 0
     seconds: float = 0.0
@@ -169,6 +174,77 @@ class BoundaryContinuation:
             u = u + lam * du
         raise StepFailure(FailureReason.NO_CONVERGENCE, "the boundary corrector did not converge")
 
+    def fixed_point_at(self, z0: np.ndarray, slope: float, mu: float, max_iter: int = 15
+                       ) -> tuple[np.ndarray, float, np.ndarray]:
+        """(z, period_s, J) of the fixed point at (slope, mu) by damped Newton from z0; raises StepFailure."""
+        sc = PARAMETERS["slope"][1]
+        u = np.array([z0[0], z0[1], slope / sc, mu / self.mu_scale])
+        zn, T, J = self._eval(u)
+        assert J is not None
+        f = zn - u[:2]
+        res = float(np.max(np.abs(f)))
+        for _ in range(max_iter):
+            if res <= self.tol:
+                return u[:2].copy(), T, J
+            try:
+                dz = -np.linalg.solve(J - np.eye(2), f)
+            except np.linalg.LinAlgError:
+                break
+            lam = 1.0
+            while lam >= 1e-3:
+                trial = u.copy()
+                trial[:2] += lam * dz
+                try:
+                    zn2, T2, J2 = self._eval(trial)
+                    f2 = zn2 - trial[:2]
+                    if float(np.max(np.abs(f2))) < res:
+                        break
+                except StepFailure:
+                    pass
+                lam *= 0.5
+            else:
+                break
+            u, f, T, J = trial, f2, T2, J2
+            res = float(np.max(np.abs(f)))
+        raise StepFailure(FailureReason.NO_CONVERGENCE, f"no fixed point at slope {slope:.10g} rad (residual {res:.3g})")
+
+    def locate_stall(self, pt: BoundaryPoint, tol: float = STALL_TOL_RAD, offset_hint: float | None = None
+                     ) -> BoundaryPoint:
+        """The stall at pt.mu: follow the fixed point of pt down in slope (steps doubling from 2e-6 rad) until it
+        stops existing, then bisect that end to `tol` in slope; returns the last slope where it exists.
+        offset_hint: the expected distance of the stall below pt (rad; e.g. from the neighbouring point), tried
+        first as a bracket of +-5 %."""
+        z, T, J = self.fixed_point_at(pt.z, pt.slope_rad, pt.mu)
+        hi = pt.slope_rad
+        d = 2e-6
+        lo = None
+        if offset_hint is not None and offset_hint > 0:
+            try:
+                z2, T2, J2 = self.fixed_point_at(z, hi - 0.95 * offset_hint, pt.mu)
+                try:
+                    self.fixed_point_at(z2, hi - 1.05 * offset_hint, pt.mu)
+                except StepFailure:
+                    z, T, J, lo, hi = z2, T2, J2, hi - 1.05 * offset_hint, hi - 0.95 * offset_hint
+            except StepFailure:
+                pass
+        while lo is None:
+            try:
+                z, T, J = self.fixed_point_at(z, hi - d, pt.mu)
+                hi -= d
+                d *= 2.0
+            except StepFailure:
+                lo = hi - d
+            if d > 0.01:
+                raise StepFailure(FailureReason.NO_CONVERGENCE, f"no stall within 0.01 rad below {pt.slope_rad} rad")
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            try:
+                z, T, J = self.fixed_point_at(z, mid, pt.mu)
+                hi = mid
+            except StepFailure:
+                lo = mid
+        return BoundaryPoint(pt.mu, hi, z, T, np.linalg.eigvals(J))
+
     @staticmethod
     def _tangent(D: np.ndarray, previous: np.ndarray) -> np.ndarray:
         _, _, vt = np.linalg.svd(D)
@@ -218,6 +294,18 @@ class BoundaryContinuation:
         first = BoundaryPoint(mu0, float(u[2] * sc), u[:2].copy(), T, np.linalg.eigvals(J))
         curve.points = list(reversed(pieces[1][0])) + [first] + pieces[0][0]
         curve.end_reason = "; ".join(r for _, r in pieces if r)
+        if self.test == "stall":
+            curve.level_points = curve.points
+            located = []
+            hint = None
+            for pt in curve.points:
+                try:
+                    at = self.locate_stall(pt, offset_hint=hint)
+                except StepFailure:
+                    continue
+                hint = pt.slope_rad - at.slope_rad
+                located.append(at)
+            curve.points = located
         curve.map_evaluations = self.evaluations
         curve.seconds = time.perf_counter() - t0
         return curve
@@ -244,9 +332,11 @@ def start_on_boundary(map_factory: Callable[[WheelParams], Any], base: WheelPara
 
 
 def solve_at(bc: BoundaryContinuation, curve: BoundaryCurve, mu: float) -> BoundaryPoint:
-    """The boundary point at exactly mu, corrected from the nearest traced point."""
-    near = min(curve.points, key=lambda p: abs(p.mu - mu))
+    """The boundary point at exactly mu, corrected from the nearest traced point (a stall: the level set's
+    point, then the located stall)."""
+    near = min(curve.level_points or curve.points, key=lambda p: abs(p.mu - mu))
     sc = PARAMETERS["slope"][1]
     u0 = np.array([near.z[0], near.z[1], near.slope_rad / sc, mu / bc.mu_scale])
     u, T, J, _ = bc._correct(u0, None, fix=3)  # noqa: SLF001
-    return BoundaryPoint(mu, float(u[2] * sc), u[:2].copy(), T, np.linalg.eigvals(J))
+    pt = BoundaryPoint(mu, float(u[2] * sc), u[:2].copy(), T, np.linalg.eigvals(J))
+    return bc.locate_stall(pt) if bc.test == "stall" else pt

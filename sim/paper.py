@@ -305,7 +305,7 @@ def curve_starts(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[s
 def boundary_curve(row: dict[str, Any], params: dict[str, Any], backend: str, rtol: float,
                    k_range: tuple[float, float]) -> list[dict[str, Any]]:
     """The critical slope of one branch as a curve over k, traced by two-parameter continuation
-    (rimless.sim.boundary): a VE branch's fold curve, the ER stall curve (1.6 s period level set).
+    (rimless.sim.boundary): a VE branch's fold curve, the ER stall curve (each point the located stall).
     Plain data in and out (runs as a Dask task)."""
     from rimless.sim.backend import make_map
     from rimless.sim.boundary import BoundaryContinuation, start_on_boundary
@@ -325,7 +325,7 @@ def boundary_curve(row: dict[str, Any], params: dict[str, Any], backend: str, rt
         curve = bc.trace(z, s0, mu_min=k_range[0], mu_max=k_range[1])
     except StepFailure:
         return []
-    name = "ER stall (1.6 s period)" if model == "er" else f"VE {row['branch_label']} fold"
+    name = "ER stall" if model == "er" else f"VE {row['branch_label']} fold"
     return [{"curve": name, "model": row["model"], "branch_label": row["branch_label"], "test": test, "k": pt.mu,
              "slope_rad": pt.slope_rad, "slope_deg": pt.slope_deg, "cot": math.tan(pt.slope_rad),
              "step_period_s": pt.period_s, "max_abs_eigenvalue": float(np.max(np.abs(pt.eigenvalues))),

@@ -11,6 +11,7 @@ from rimless.cli import app
 from rimless.sim.backend import make_map
 from rimless.sim.boundary import BoundaryContinuation, solve_at, start_on_boundary
 from rimless.sim.continuation import critical_slope
+from rimless.sim.failures import StepFailure
 from rimless.sim.params import WheelParams
 from rimless.sim.poincare import default_guess
 
@@ -36,15 +37,25 @@ def test_fold_curve_passes_through_the_one_parameter_folds():
     assert on_curve.slope_rad == pytest.approx(one.critical_slope_rad, abs=1e-6)
 
 
-def test_er_stall_curve_lies_just_above_the_located_stalls():
+def test_er_stall_curve_is_the_stall_itself_point_by_point():
+    """Every point of the ER stall curve is the stall at its k: it agrees with the stall that Algorithm 1 with
+    bisection locates independently at that k (to 1e-6 rad), lies below its 1.6 s level-set point, and past
+    it (slightly lower slope) no gait exists."""
     p = WheelParams()
     z, s0 = start_on_boundary(_factory("er"), p, "er", default_guess(p, "er"), "stall")
-    bc = BoundaryContinuation(_factory("er"), p.replace(slope_rad=s0), "er", "k", "stall", max_points=8)
-    curve = bc.trace(z, s0, mu_min=2600, mu_max=2800)
-    at = solve_at(bc, curve, 2700.0)
-    one = critical_slope(make_map(p, "er", backend="fast"), default_guess(p, "er"))
+    bc = BoundaryContinuation(_factory("er"), p.replace(slope_rad=s0), "er", "k", "stall", max_points=3)
+    curve = bc.trace(z, s0, mu_min=2650, mu_max=2750)
+    assert len(curve.points) == len(curve.level_points) >= 3
+    for stall, level in zip(curve.points, curve.level_points):
+        assert stall.mu == level.mu and 0 < level.slope_rad - stall.slope_rad < math.radians(0.002)
+    pt = next(pt for pt in curve.points if pt.mu != 2700.0)  # a point the continuation put at its own k
+    q = WheelParams(stiffness_n_per_m=pt.mu)
+    one = critical_slope(make_map(q, "er", backend="fast"), default_guess(q, "er"), method="bisection",
+                         refine_tol_rad=1e-9)
     assert one.reason == "stall"
-    assert 0 < at.slope_rad - one.critical_slope_rad < math.radians(0.002)
+    assert pt.slope_rad == pytest.approx(one.critical_slope_rad, abs=1e-6)
+    with pytest.raises(StepFailure):
+        bc.fixed_point_at(pt.z, pt.slope_rad - 1e-7, pt.mu)
 
 
 def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
