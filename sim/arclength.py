@@ -150,10 +150,9 @@ def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts
         # compiled record alone
         facts = ContactFacts(c.min_stance_force_N, c.min_impulse_N_s, math.nan, math.nan, math.nan, math.nan,
                              math.nan, rec.period_s, math.nan, rec.relabel_snap_J)
-    fmin = facts.min_stance_force_single_support_N
-    if not fmin <= c.min_stance_force_N:  # the compiled record (parabola through finer samples) is lower
-        fmin = c.min_stance_force_N
-    return replace(facts, bilateral=True, min_stance_force_single_support_N=fmin,
+    # the stance force from the compiled record (finer samples, parabola at the minimum): the same number the
+    # continuation's test function uses between recorded points
+    return replace(facts, bilateral=True, min_stance_force_single_support_N=c.min_stance_force_N,
                    min_stance_force_time_s=c.min_stance_force_time_s, negative_stance_force_s=c.negative_force_s,
                    unilateral_failure=uni)
 
@@ -576,7 +575,9 @@ class ArclengthContinuation:
         return found
 
     def _test_value(self, kind: str, st: _State) -> tuple[float, BranchPoint]:
-        pt = self._point(st, 0.0, kind in VALIDITY_TESTS)
+        # with the stance foot held, the compiled map records the stance force and impulses at every point
+        cheap = self.oracle.bilateral and self.oracle.compiled and kind in (STANCE_FORCE, IMPULSE)
+        pt = self._point(st, 0.0, kind in VALIDITY_TESTS and not cheap)
         v = pt.tests.get(kind, math.nan)
         return v, pt
 

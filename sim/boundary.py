@@ -11,7 +11,7 @@ with g one of
   is no smooth zero of anything the map gives; the level set of a 1.6 s period is a smooth curve some 1e-5 rad
   above it, traced first. Each of its points is then moved down in slope, at its own mu, to the stall itself:
   the fixed point is followed down in slope (Newton from the last one) until it stops existing, and that end
-  is bisected to STALL_TOL_RAD (`locate_stall`). The curve's points are the located stalls; the level-set
+  is bisected to STALL_TOL_RAD = 1e-8 rad (`locate_stall`). The curve's points are the located stalls; the level-set
   points are kept in `BoundaryCurve.level_points`.
 Scaled coordinates u = (theta+, theta'+, slope / 0.01, mu / s_mu). dF/dz is the map's exact Jacobian; the
 other derivatives are forward differences. Units: rad, rad/s, SI for mu.
@@ -32,7 +32,7 @@ from rimless.sim.failures import FailureReason, StepFailure
 from rimless.sim.params import WheelParams
 
 T_STALL = 1.6  # s: the step period of the level set traced before the stall is located
-STALL_TOL_RAD = 1e-9  # the located stall's bracket in slope
+STALL_TOL_RAD = 1e-8  # the located stall's bracket in slope
 TESTS = ("fold", "stall")
 
 
@@ -174,9 +174,10 @@ class BoundaryContinuation:
             u = u + lam * du
         raise StepFailure(FailureReason.NO_CONVERGENCE, "the boundary corrector did not converge")
 
-    def fixed_point_at(self, z0: np.ndarray, slope: float, mu: float, max_iter: int = 15
+    def fixed_point_at(self, z0: np.ndarray, slope: float, mu: float, max_iter: int = 15, min_lam: float = 1e-3
                        ) -> tuple[np.ndarray, float, np.ndarray]:
-        """(z, period_s, J) of the fixed point at (slope, mu) by damped Newton from z0; raises StepFailure."""
+        """(z, period_s, J) of the fixed point at (slope, mu) by damped Newton from z0 (step factors down to
+        min_lam); raises StepFailure."""
         sc = PARAMETERS["slope"][1]
         u = np.array([z0[0], z0[1], slope / sc, mu / self.mu_scale])
         zn, T, J = self._eval(u)
@@ -191,7 +192,7 @@ class BoundaryContinuation:
             except np.linalg.LinAlgError:
                 break
             lam = 1.0
-            while lam >= 1e-3:
+            while lam >= min_lam:
                 trial = u.copy()
                 trial[:2] += lam * dz
                 try:
@@ -208,28 +209,35 @@ class BoundaryContinuation:
             res = float(np.max(np.abs(f)))
         raise StepFailure(FailureReason.NO_CONVERGENCE, f"no fixed point at slope {slope:.10g} rad (residual {res:.3g})")
 
-    def locate_stall(self, pt: BoundaryPoint, tol: float = STALL_TOL_RAD, offset_hint: float | None = None
-                     ) -> BoundaryPoint:
+    def locate_stall(self, pt: BoundaryPoint, tol: float = STALL_TOL_RAD, offset_hint: float | None = None,
+                     hint_width: float = 0.05) -> BoundaryPoint:
         """The stall at pt.mu: follow the fixed point of pt down in slope (steps doubling from 2e-6 rad) until it
         stops existing, then bisect that end to `tol` in slope; returns the last slope where it exists.
         offset_hint: the expected distance of the stall below pt (rad; e.g. from the neighbouring point), tried
-        first as a bracket of +-5 %."""
+        first as a bracket of +-hint_width (relative)."""
+
+        def solve(z0: np.ndarray, slope: float) -> tuple[np.ndarray, float, np.ndarray]:
+            # from a fixed point a few 1e-6 rad away Newton converges in 2-3 iterations where a gait exists;
+            # where none does it is cut short
+            return self.fixed_point_at(z0, slope, pt.mu, max_iter=8, min_lam=0.1)
+
         z, T, J = self.fixed_point_at(pt.z, pt.slope_rad, pt.mu)
         hi = pt.slope_rad
         d = 2e-6
         lo = None
         if offset_hint is not None and offset_hint > 0:
             try:
-                z2, T2, J2 = self.fixed_point_at(z, hi - 0.95 * offset_hint, pt.mu)
+                z2, T2, J2 = solve(z, hi - (1.0 - hint_width) * offset_hint)
                 try:
-                    self.fixed_point_at(z2, hi - 1.05 * offset_hint, pt.mu)
+                    solve(z2, hi - (1.0 + hint_width) * offset_hint)
                 except StepFailure:
-                    z, T, J, lo, hi = z2, T2, J2, hi - 1.05 * offset_hint, hi - 0.95 * offset_hint
+                    z, T, J = z2, T2, J2
+                    lo, hi = hi - (1.0 + hint_width) * offset_hint, hi - (1.0 - hint_width) * offset_hint
             except StepFailure:
                 pass
         while lo is None:
             try:
-                z, T, J = self.fixed_point_at(z, hi - d, pt.mu)
+                z, T, J = solve(z, hi - d)
                 hi -= d
                 d *= 2.0
             except StepFailure:
@@ -239,7 +247,7 @@ class BoundaryContinuation:
         while hi - lo > tol:
             mid = 0.5 * (lo + hi)
             try:
-                z, T, J = self.fixed_point_at(z, mid, pt.mu)
+                z, T, J = solve(z, mid)
                 hi = mid
             except StepFailure:
                 lo = mid
@@ -296,14 +304,23 @@ class BoundaryContinuation:
         curve.end_reason = "; ".join(r for _, r in pieces if r)
         if self.test == "stall":
             curve.level_points = curve.points
-            located = []
-            hint = None
+            # the stall's distance below the level set changes slowly along the curve (about 1 % per point):
+            # extrapolated from the previous two points it brackets the next one to +-0.5 %
+            located: list[BoundaryPoint] = []
+            offsets: list[tuple[float, float]] = []
             for pt in curve.points:
+                hint, width = None, 0.05
+                if len(offsets) >= 2:
+                    (m1, o1), (m2, o2) = offsets[-2], offsets[-1]
+                    hint = o2 + (o2 - o1) * (pt.mu - m2) / (m2 - m1) if m2 != m1 else o2
+                    width = 0.005
+                elif offsets:
+                    hint = offsets[-1][1]
                 try:
-                    at = self.locate_stall(pt, offset_hint=hint)
+                    at = self.locate_stall(pt, offset_hint=hint, hint_width=width)
                 except StepFailure:
                     continue
-                hint = pt.slope_rad - at.slope_rad
+                offsets.append((pt.mu, pt.slope_rad - at.slope_rad))
                 located.append(at)
             curve.points = located
         curve.map_evaluations = self.evaluations

@@ -356,7 +356,9 @@ def validity_range(row: dict[str, Any], params: dict[str, Any], backend: str, rt
         return bilateral_map(m) or m
 
     for side, direction, limit in (("low", -1.0, k_range[0]), ("high", 1.0, k_range[1])):
-        cont = ArclengthContinuation(factory, base, model, "k", facts_every=1, max_points=60)
+        # facts (the recorded step) every 5th point; the held map's stance force and impulses at every point
+        cont = ArclengthContinuation(factory, base, model, "k", facts_every=5 if bilateral_map(make_map(
+            base, model, backend=backend, rtol=rtol)) is not None else 1, max_points=60)
         try:
             br = cont.trace(z0, direction=direction, p_min=k_range[0], p_max=k_range[1], stop_at_first_loss=True)
         except StepFailure as err:

@@ -156,11 +156,13 @@ def solve_fixed_point(
     jacobian: Callable[[np.ndarray], np.ndarray] | None = None,
     diagnostics: bool = False,
     strict_contact: bool = False,
+    record: bool = True,
 ) -> FixedPoint:
     """Newton's method on F(z) = P(z) - z with step halving when the map fails or the residual grows.
 
     Converged when |P(z) - z| <= tol, or, when no step reduces the residual any more, when the residual is
-    within NOISE_FACTOR of the map's own noise (map_noise; e.g. very light legs at a loose rtol)."""
+    within NOISE_FACTOR of the map's own noise (map_noise; e.g. very light legs at a loose rtol).
+    record=False leaves `step` None (the full recorded step costs more than a Newton iteration)."""
     jac = jacobian or pmap.jacobian
     z = np.asarray(z_guess, dtype=float).copy()
     last_failure: StepFailure | None = None
@@ -206,7 +208,7 @@ def solve_fixed_point(
             break
         z, fz, res = z_new, f_new, res_new
     J = jac(z)
-    step = pmap.step(z, diagnostics=diagnostics, strict_contact=strict_contact)
+    step = pmap.step(z, diagnostics=diagnostics, strict_contact=strict_contact) if record else None
     return FixedPoint(z=z, residual=res, iterations=it, jacobian=J, eigenvalues=np.linalg.eigvals(J), step=step,
                       jacobian_method=getattr(jac, "method_name", "central-difference"))
 
@@ -265,7 +267,7 @@ def find_gaits(
     for i, w in enumerate(guesses):
         for th in (-ALPHA / 2 - 0.07, -ALPHA / 2 - 0.02):
             try:
-                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15)
+                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15, record=False)
             except StepFailure as err:
                 if bmap is not None and _contact_failure(err):
                     retry.append(np.array([th, w]))
@@ -276,7 +278,7 @@ def find_gaits(
             progress(i + 1, len(guesses))
     for z0 in retry:
         try:
-            fp = solve_fixed_point(bmap, z0, max_iter=15)
+            fp = solve_fixed_point(bmap, z0, max_iter=15, record=False)
             if not new(fp):
                 continue
             contact = bilateral_contact(bmap, fp.z)
@@ -284,12 +286,19 @@ def find_gaits(
             continue
         if contact.unilateral_valid:
             try:  # valid after all (Newton's path crossed a lift-off): the unilateral map's gait
-                fp = solve_fixed_point(pmap, fp.z, max_iter=15)
+                fp = solve_fixed_point(pmap, fp.z, max_iter=15, record=False)
                 contact = None
             except StepFailure:
                 pass  # e.g. a dip between the force samples that the located guard catches
         fp.contact = contact
         if new(fp):
             found.append(fp)
-    found.sort(key=lambda fp: fp.step.period_s)
-    return found
+    recorded = []
+    for fp in found:  # the full step of each distinct gait only
+        try:
+            fp.step = (bmap if fp.bilateral else pmap).step(fp.z)
+        except StepFailure:
+            continue
+        recorded.append(fp)
+    recorded.sort(key=lambda fp: fp.step.period_s)
+    return recorded
