@@ -586,8 +586,14 @@ class ArclengthContinuation:
         vlo, vhi = a.tests[kind], b.tests[kind]
         plo, phi = a.p, b.p
         best = a  # the located point: the last one on the side the branch came from (e.g. still stable)
-        while hi - lo > self.locate_tol:
-            mid = 0.5 * (lo + hi)
+        # the bracket shrinks by regula falsi with the Illinois modification (the test functions are smooth along
+        # the branch: a few corrector solves instead of some 20 halvings), each trial kept tol/2 inside the
+        # bracket so that a converged estimate closes the bracket to tol from both sides
+        fa, fb, side = vlo, vhi, 0
+        tol = self.locate_tol
+        while hi - lo > tol:
+            mid = lo + (hi - lo) * fa / (fa - fb) if fa != fb and fa == fa and fb == fb else 0.5 * (lo + hi)
+            mid = min(max(mid, lo + 0.5 * tol), hi - 0.5 * tol)
             try:
                 st = self._on_branch(s, t, mid)
             except StepFailure:
@@ -597,10 +603,16 @@ class ArclengthContinuation:
                 break
             pt.arclength = a.arclength + mid
             if (v > 0) == (vlo > 0):
-                lo, vlo, plo = mid, v, pt.p
+                lo, vlo, plo, fa = mid, v, pt.p, v
                 best = pt
+                if side == -1:
+                    fb *= 0.5
+                side = -1
             else:
-                hi, vhi, phi = mid, v, pt.p
+                hi, vhi, phi, fb = mid, v, pt.p, v
+                if side == 1:
+                    fa *= 0.5
+                side = 1
         if kind in VALIDITY_TESTS and best.facts is None:
             best.facts = self._facts(best.z, best.p)
         detail = _describe(kind, best, self.oracle.unit, self.parameter)

@@ -128,6 +128,11 @@ class NoFixedPoint(StepFailure):
         super().__init__(FailureReason.NO_CONVERGENCE, message)
 
 
+class KnownFixedPoint(NoFixedPoint):
+    """Newton came within KNOWN_RADIUS of a fixed point it was told is known (find_gaits' scan)."""
+
+
+KNOWN_RADIUS = 1e-5  # rad, rad/s: well inside Newton's quadratic basin, far below the distance between gaits
 NOISE_FACTOR = 10.0
 NOISE_ACCEPT_MAX = 1e-6  # never accept a residual above this as noise
 
@@ -157,12 +162,15 @@ def solve_fixed_point(
     diagnostics: bool = False,
     strict_contact: bool = False,
     record: bool = True,
+    known: list[np.ndarray] | None = None,
 ) -> FixedPoint:
     """Newton's method on F(z) = P(z) - z with step halving when the map fails or the residual grows.
 
     Converged when |P(z) - z| <= tol, or, when no step reduces the residual any more, when the residual is
     within NOISE_FACTOR of the map's own noise (map_noise; e.g. very light legs at a loose rtol).
-    record=False leaves `step` None (the full recorded step costs more than a Newton iteration)."""
+    record=False leaves `step` None (the full recorded step costs more than a Newton iteration).
+    known: fixed points already found; an iterate within KNOWN_RADIUS of one raises KnownFixedPoint (Newton
+    would converge there)."""
     jac = jacobian or pmap.jacobian
     z = np.asarray(z_guess, dtype=float).copy()
     last_failure: StepFailure | None = None
@@ -207,6 +215,8 @@ def solve_fixed_point(
         if break_out:  # converged to the map's own numerical noise
             break
         z, fz, res = z_new, f_new, res_new
+        if known and res > tol and any(float(np.max(np.abs(z - k))) < KNOWN_RADIUS for k in known):
+            raise KnownFixedPoint(f"Newton reached a known fixed point near {z.tolist()}")
     J = jac(z)
     step = pmap.step(z, diagnostics=diagnostics, strict_contact=strict_contact) if record else None
     return FixedPoint(z=z, residual=res, iterations=it, jacobian=J, eigenvalues=np.linalg.eigvals(J), step=step,
@@ -267,7 +277,10 @@ def find_gaits(
     for i, w in enumerate(guesses):
         for th in (-ALPHA / 2 - 0.07, -ALPHA / 2 - 0.02):
             try:
-                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15, record=False)
+                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15, record=False,
+                                       known=[f.z for f in found])
+            except KnownFixedPoint:
+                continue
             except StepFailure as err:
                 if bmap is not None and _contact_failure(err):
                     retry.append(np.array([th, w]))
