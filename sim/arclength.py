@@ -126,8 +126,46 @@ def contact_facts(pmap: Any, z: np.ndarray, record_dt: float = 2e-4) -> ContactF
     z = np.asarray(z, dtype=float)
     if getattr(pmap, "bilateral", False):
         return _bilateral_facts(pmap, z, record_dt)
-    step = pmap.step(z, diagnostics=True, record_dt=record_dt)
-    return _facts_of_step(step, DLSP)
+    return _facts_of_step(_recorded_step(pmap, z, record_dt), DLSP)
+
+
+def _recorded_step(pmap: Any, z: np.ndarray, record_dt: float) -> Any:
+    """The step from z with its samples and contact diagnostics (hybrid.contact_diagnostics' keys); the
+    normal forces' minima and the leading foot's tension time come from the compiled kernel
+    (rimless.sim.fast.step) on the same samples, the minimum refined by a parabola, the tension time with its
+    zero crossings interpolated."""
+    try:
+        from rimless.sim.fast import step as fs
+        from rimless.sim.fast import mass_model_index, param_vector
+    except ImportError:  # no compiled path: the reference diagnostics
+        return pmap.step(z, diagnostics=True, record_dt=record_dt)
+    from rimless.sim.dynamics import DLSP
+    from rimless.sim.hybrid import PHASE_NAMES
+    from rimless.sim.model import ALPHA
+
+    step = pmap.step(z, record_dt=record_dt)
+    mi, p = mass_model_index(pmap.params), param_vector(pmap.params)
+    inf = math.inf
+    d = {"min_normal_force_b_dlsp_N": inf, "min_normal_force_b_slsp_free_N": inf,
+         "min_normal_force_b_slsp_clutched_N": inf, "leading_foot_tension_s": 0.0, "trailing_foot_min_height_m": inf}
+    for seg in step.segments or []:
+        if not len(seg.t):
+            continue
+        y = np.ascontiguousarray(seg.y, dtype=np.float64)
+        c = np.array([inf, -1.0, 0.0, math.nan])
+        fs._single_support_force(mi, int(seg.phase), np.ascontiguousarray(seg.t, dtype=np.float64), y, p, c)  # noqa: SLF001
+        key = f"min_normal_force_b_{PHASE_NAMES[seg.phase]}_N"
+        d[key] = min(d[key], float(c[fs.C_MIN_FORCE]))
+        if seg.phase == DLSP:
+            d["leading_foot_tension_s"] += float(c[fs.C_NEGATIVE_S])
+        else:  # the lifted trailing foot's height above the slope; when the stance force is smallest
+            if c[fs.C_MIN_FORCE] <= min(d["min_normal_force_b_slsp_free_N"], d["min_normal_force_b_slsp_clutched_N"]):
+                d["min_normal_force_b_single_support_time_s"] = float(c[fs.C_MIN_FORCE_T]) - step.t_start_s
+            q2 = y[:, 2]
+            h = y[:, 1] + y[:, 3] * np.cos(q2) - y[:, 4] * np.cos(q2 + ALPHA)
+            d["trailing_foot_min_height_m"] = min(d["trailing_foot_min_height_m"], float(np.min(h)))
+    step.diagnostics = {k: (v if v != inf else math.nan) for k, v in d.items()}
+    return step
 
 
 def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts:
@@ -145,7 +183,7 @@ def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts
     except StepFailure as err:
         uni = f"{err.reason.value}: {err}"
     try:
-        facts = _facts_of_step(pmap.step(z, diagnostics=True, record_dt=record_dt), DLSP)
+        facts = _facts_of_step(_recorded_step(pmap, z, record_dt), DLSP)
     except StepFailure:  # the recorded step's own checks (stance force or impulses at a phase start): the
         # compiled record alone
         facts = ContactFacts(c.min_stance_force_N, c.min_impulse_N_s, math.nan, math.nan, math.nan, math.nan,
@@ -168,6 +206,7 @@ def _facts_of_step(step: Any, DLSP: int) -> ContactFacts:
     imp = step.impact
     lead = d.get("min_normal_force_b_dlsp_N", math.nan)
     return ContactFacts(
+        min_stance_force_time_s=float(d.get("min_normal_force_b_single_support_time_s", math.nan)),
         min_stance_force_single_support_N=min(single) if single else math.nan,
         min_impulse_N_s=float(min(imp.impulse[1], imp.impulse[3])),
         min_theta_dot_single_support_rad_s=th_min,
