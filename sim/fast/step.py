@@ -124,8 +124,10 @@ def _map_status(st, fired_ok):
 
 @_jit
 def _single_support_force(mi, phase, rec_t, rec_y, p, contact):
-    """Fold the stance normal force at the recorded states of one single-support phase into `contact`: the
-    minimum (refined by a parabola through its neighbours), its time and the time spent below zero."""
+    """Fold foot b's normal force lambda_b,y (N) at the recorded states (rec_t s, rec_y) of one phase into
+    `contact`: its minimum (refined by a parabola through its neighbours), the minimum's time and the time spent
+    below zero. In single support foot b is the stance foot; in double support (as rimless.sim.arclength also
+    uses it) the leading foot, whose time below zero is its tensile transient."""
     n = rec_t.shape[0]
     qdd = np.empty(5)
     lam = np.zeros(4)
