@@ -78,6 +78,7 @@ class FirmwareLoopConfig:
     engage_delay_s: float = 0.005  # pin on -> leg locked
     release_delay_s: float = 0.005  # pin off -> leg free
     holding_force_N: float = 100.0  # the clutch slips beyond this force along the leg (inf: rigid)
+    max_hold_s: float = 1.0  # the firmware's clutch timeout ([clutch] max_hold_s): a longer hold is a fault
     detector: DetectorParams = field(default_factory=DetectorParams)
     health: HealthLimits = field(default_factory=HealthLimits)
     seed: int = 0
@@ -94,6 +95,7 @@ class FirmwareLoopConfig:
             ("engage_delay_s", 0.0 <= self.engage_delay_s <= 1.0, "in [0, 1] s"),
             ("release_delay_s", 0.0 <= self.release_delay_s <= 1.0, "in [0, 1] s"),
             ("holding_force_N", self.holding_force_N > 0.0, "> 0 N (inf: a rigid clutch)"),
+            ("max_hold_s", 0.01 <= self.max_hold_s <= 60.0, "in [0.01, 60] s"),
         ]
         for name, ok, what in checks:
             value = getattr(self, name)
@@ -193,7 +195,7 @@ class FirmwareLoop:
         self.detector = LegDetector(cfg.detector, list(range(N_LEGS)))
         self.clutches = ClutchBank(CLUTCH_PINS, pin_factory=MockFactory())
         self.controller = Controller([Channel(self.sensor, self.detector, HealthMonitor(cfg.health))], self.clutches,
-                                     clock_ns=self.clock.ns)
+                                     max_hold_s=cfg.max_hold_s, clock_ns=self.clock.ns)
         self.stance_leg = 0  # physical leg b
         self._pins: set[int] = set()  # clutch pins on, as last read
         self._engaged: set[int] = set()  # clutches physically engaged
@@ -656,6 +658,46 @@ class FirmwareCriticalSlope:
     reason_below: str  # why the walk fails just below
     evaluations: list[tuple[float, bool, str]]  # (slope rad, walks, reason)
 
+    @property
+    def limited_by(self) -> str:
+        """"firmware" when a firmware fault (its leg count or clutch timeout) ends the walk just below,
+        "mechanics" when the wheel itself fails (stall, contact, ...)."""
+        return "firmware" if self.reason_below.startswith(FIRMWARE_FAULT_PREFIX) else "mechanics"
+
+
+FIRMWARE_FAULT_PREFIX = "the firmware faulted"
+# what the step-timing checks are relaxed to for the mechanical boundary: the longest step and hold the
+# detector's and controller's validation accept, and the widest period tolerance
+RELAXED_MAX_STEP_S = 10.0
+RELAXED_PERIOD_TOLERANCE = 0.9
+RELAXED_MAX_HOLD_S = 60.0
+
+
+def without_step_timing_checks(config: FirmwareLoopConfig) -> FirmwareLoopConfig:
+    """The same firmware with its step-timing fail-safes (leg count: `max_step_s`, `step_period_tolerance`;
+    clutch timeout: `max_hold_s`) relaxed to their widest valid values, so that a walk under it ends only
+    by the mechanics. Everything else (sensor, detector thresholds, delays) is unchanged."""
+    det = replace(config.detector, max_step_s=RELAXED_MAX_STEP_S, step_period_tolerance=RELAXED_PERIOD_TOLERANCE)
+    return replace(config, detector=det, max_hold_s=RELAXED_MAX_HOLD_S).validated()
+
+
+@dataclass
+class FirmwareBoundaries:
+    """The critical slope under the firmware as configured, and, when a firmware fault limits it, the
+    mechanical one (the same firmware with its step-timing checks relaxed: `without_step_timing_checks`)."""
+
+    firmware: FirmwareCriticalSlope
+    mechanical: FirmwareCriticalSlope | None  # None when the mechanics already limit the configured firmware
+
+    @property
+    def limited_by(self) -> str:
+        return self.firmware.limited_by
+
+    @property
+    def mechanical_slope_rad(self) -> float:
+        """The mechanical boundary: the relaxed search's, or the configured one when mechanics limit it."""
+        return (self.mechanical or self.firmware).critical_slope_rad
+
 
 def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps: int) -> tuple[bool, str]:
     """(True, "") if a walk of `steps` steps from the ideal fixed point at these parameters completes
@@ -676,7 +718,8 @@ def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps:
         return False, f"step {len(walk.steps) + 1}: {walk.failure}"
     faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
     if faults:
-        return False, f"the firmware faulted ({', '.join(faults)}): it no longer clutches"
+        details = "; ".join(f"{f.get('fault')}: {f.get('detail')}" for _, name, f in walk.events if name == "fault")
+        return False, f"{FIRMWARE_FAULT_PREFIX} ({', '.join(faults)}): it no longer clutches ({details})"
     return True, ""
 
 
@@ -711,3 +754,28 @@ def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, 
         else:
             lo, why_lo = mid, why
     return FirmwareCriticalSlope(critical_slope_rad=hi, failing_slope_rad=lo, reason_below=why_lo, evaluations=evals)
+
+
+def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
+                        tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None) -> FirmwareBoundaries:
+    """`firmware_critical_slope` under `config`; if a firmware fault is what fails just below it, the
+    bisection is repeated with the step-timing checks relaxed (between `low_rad` and the configured
+    boundary) to find the mechanical boundary of the same clutch timing. Raises ValueError as
+    `firmware_critical_slope` does."""
+    n = [0]
+
+    def count(_k: int) -> None:
+        n[0] += 1
+        if progress:
+            progress(n[0])
+
+    fw = firmware_critical_slope(params, config, low_rad=low_rad, steps=steps, tol_rad=tol_rad, progress=count)
+    if fw.limited_by != "firmware":
+        return FirmwareBoundaries(fw, None)
+    relaxed = without_step_timing_checks(config)
+    top = params.replace(slope_rad=fw.critical_slope_rad)
+    try:
+        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=steps, tol_rad=tol_rad, progress=count)
+    except ValueError as err:  # e.g. relaxed, the wheel still walks at low_rad: the boundary is below the bracket
+        mech = FirmwareCriticalSlope(math.nan, low_rad, f"not bracketed: {err}", [])
+    return FirmwareBoundaries(fw, mech)
