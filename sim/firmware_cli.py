@@ -277,10 +277,9 @@ def run_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_de
         ("walk length (steps)", str(steps)),
     ]))
     con.print(f"definition: {out['definition']}", soft_wrap=True)
-    con.print(f"why it fails below: {out['reason_below']}", soft_wrap=True)
+    con.print(f"what limits it: {out['limit_detail']}", soft_wrap=True)
     if out["mechanical"] is not None:
-        con.print(f"mechanical boundary: {out['mechanical']['definition']}; why it fails below: "
-                  f"{out['mechanical']['reason_below']}", soft_wrap=True)
+        con.print(f"mechanical boundary: {out['mechanical']['definition']}", soft_wrap=True)
     return 0
 
 
@@ -301,7 +300,9 @@ def critical_summary(res: Any, config: Any, *, steps: int, tol_deg: float) -> di
         "failing_slope_deg": math.degrees(fw.failing_slope_rad),
         "tolerance_deg": tol_deg,
         "reason_below": fw.reason_below,
-        "limited_by": fw.limited_by,
+        "limited_by": res.limited_by,
+        "limit_detail": res.detail,
+        "firmware_fault_below": fw.limited_by == "firmware",
         "mechanical_critical_slope_deg": mech_deg if math.isfinite(mech_deg) else None,
         "mechanical": None if mech is None else {
             "definition": "the same search with the firmware's step-timing fail-safes relaxed (max_step_s "

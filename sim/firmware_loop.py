@@ -208,6 +208,9 @@ class FirmwareLoop:
         self.events: list[tuple[float, str, dict[str, Any]]] = []
         # (t, position, velocity, phase, clutch mask) of every sample, when a walk records them
         self.sample_log: list[tuple[float, float, float, int, int]] | None = None
+        # (t, true accumulated compression the sensor saw, engaged clutches as a bit mask) at every sample,
+        # when a walk records them: the simulated leg motion at the firmware's sample instants
+        self.truth_log: list[tuple[float, float, int]] | None = None
         self.records: list[Any] | None = None  # the controller's raw records (for a trial log), when kept
 
     def close(self) -> None:
@@ -226,6 +229,8 @@ class FirmwareLoop:
         self._sensed_m = sensed_m
         self.controller.step()
         self.samples += 1
+        if self.truth_log is not None:
+            self.truth_log.append((t, sensed_m, sum(1 << leg for leg in self._engaged)))
         while self.controller.outbox:
             rec = self.controller.outbox.popleft()
             if self.records is not None:
@@ -252,6 +257,7 @@ class FirmwareLoop:
 
         A failing step ends the walk; it is returned in `failure` with the steps done so far."""
         self.sample_log = [] if record_samples else None
+        self.truth_log = [] if record_samples else None
         y, t, offset = self._prime(np.asarray(z0, dtype=float))
         steps: list[FirmwareStep] = []
         failure: StepFailure | None = None
@@ -691,7 +697,24 @@ class FirmwareBoundaries:
 
     @property
     def limited_by(self) -> str:
-        return self.firmware.limited_by
+        """"firmware" when the relaxed firmware walks at a slope where the configured one faults (the
+        fault stops a wheel that would walk), else "mechanics" (the fault, if any, only comes first)."""
+        if self.mechanical is None:
+            return "mechanics"
+        m = self.mechanical.critical_slope_rad
+        return "firmware" if math.isfinite(m) and m <= self.firmware.failing_slope_rad else "mechanics"
+
+    @property
+    def detail(self) -> str:
+        """Why the boundary is where it is, in a sentence."""
+        fw, mech = self.firmware, self.mechanical
+        if mech is None:
+            return f"the wheel fails mechanically below it: {fw.reason_below}"
+        if self.limited_by == "firmware":
+            return (f"a firmware fault stops a wheel that would walk: below it {fw.reason_below}; with the step-timing "
+                    f"checks relaxed it walks down to {math.degrees(mech.critical_slope_rad):.3f} deg")
+        return (f"the firmware's fault fires first ({fw.reason_below}), but with the step-timing checks relaxed the "
+                f"wheel fails mechanically at the same boundary: {mech.reason_below}")
 
     @property
     def mechanical_slope_rad(self) -> float:

@@ -161,7 +161,7 @@ def _firmware_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[
             phi = b.firmware.critical_slope_rad
             mech = b.mechanical_slope_rad
             row.update(critical_slope_deg=math.degrees(phi), cot=math.tan(phi), limited_by=b.limited_by,
-                       critical_detail=b.firmware.reason_below,
+                       firmware_fault_below=b.firmware.limited_by == "firmware", critical_detail=b.detail,
                        mechanical_critical_slope_deg=math.degrees(mech) if math.isfinite(mech) else None)
     return row
 

@@ -234,15 +234,113 @@ def test_cli_firmware_bad_options_are_one_line_errors(args, flag):
     assert flag in res.output and "Traceback" not in res.output
 
 
-def test_firmware_sweep_orders_the_cost_of_delay(table1):
-    """Over delays at one rate, speed and stored energy fall as the clutch gets slower (sync scheduler)."""
-    from rimless.sim.firmware_sweep import run_firmware_sweep
+def test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points(tmp_path):
+    """`sim sweep --clutch firmware` over delays at one rate: speed and stored energy fall as the clutch gets
+    slower; the table is written; a re-run on an extended grid computes only the new point, and its cached
+    rows are the first run's."""
+    import pandas as pd
 
-    out = run_firmware_sweep(table1, [300.0], [0.0, 0.010], steps=6, scheduler="sync")
-    fast, slow = out["rows"]
+    base = ["sim", "sweep", "--clutch", "firmware", "--rate-hz", "300", "--steps", "6", "--scheduler", "sync",
+            "--cache-dir", str(tmp_path / "cache"), "--out", str(tmp_path / "fw"), "--json"]
+    res = RUN.invoke(app, base + ["--clutch-delay-ms", "0,10"])
+    assert res.exit_code == 0, res.output
+    first = json.loads(res.stdout)
+    assert first["computed"] == 2 and first["cached"] == 0
+    fast, slow = first["rows"]
+    assert (fast["delay_ms"], slow["delay_ms"]) == (0.0, 10.0)
     assert fast["walks"] and slow["walks"]
     assert 0 < slow["speed_ratio"] < fast["speed_ratio"] < 1.0
     assert 0 < slow["stored_energy_ratio"] < fast["stored_energy_ratio"] < 1.0
+    table = pd.read_csv(tmp_path / "fw.csv")
+    assert list(table["delay_ms"]) == [0.0, 10.0] and (tmp_path / "fw.parquet").stat().st_size > 0
+    res = RUN.invoke(app, base + ["--clutch-delay-ms", "0:10:5"])
+    assert res.exit_code == 0, res.output
+    second = json.loads(res.stdout)
+    assert second["computed"] == 1 and second["cached"] == 2
+    assert [r["delay_ms"] for r in second["rows"]] == [0.0, 5.0, 10.0]
+    assert second["rows"][0] == fast and second["rows"][2] == slow
+    assert fast["stored_energy_ratio"] > second["rows"][1]["stored_energy_ratio"] > slow["stored_energy_ratio"]
+
+
+@pytest.mark.parametrize("args, flag", [(["--clutch", "firmware", "--k", "2500,2700"], "--k"),
+                                        (["--clutch", "firmware", "--rate-hz", "0"], "--rate-hz"),
+                                        (["--clutch", "firmware", "--clutch-delay-ms", "a"], "--clutch-delay-ms"),
+                                        (["--rate-hz", "300"], "--rate-hz"),
+                                        (["--clutch", "firmware", "--model", "ve"], "--model")])
+def test_sim_sweep_firmware_bad_options_are_one_line_errors(args, flag, tmp_path):
+    res = RUN.invoke(app, ["sim", "sweep", "--out", str(tmp_path / "x"), *args])
+    assert res.exit_code == 2 and flag in res.output and "Traceback" not in res.output, res.output
+
+
+def test_firmware_sweep_alias_still_answers(table1):
+    """The old command runs the same grid code: one point, the old JSON keys."""
+    res = RUN.invoke(app, ["sim", "firmware-sweep", "--rates-hz", "1000", "--delays-ms", "0", "--steps", "6",
+                           "--scheduler", "sync", "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert {"ideal", "rows", "steps", "noise_counts", "plot"} <= set(out)
+    (row,) = out["rows"]
+    assert row["rate_hz"] == 1000.0 and row["walks"] and 0.8 < row["stored_energy_ratio"] < 1.0
+
+
+def test_the_figure_of_a_sweep_with_critical_slopes_shows_the_advantage_kept(tmp_path):
+    """add_advantage: share of the ideal ER's CoT saving over VE that remains, from hand-made rows."""
+    from rimless.sim.firmware_sweep import add_advantage, plot_firmware_sweep
+
+    rows = [{"clutch": "ideal", "model": "er", "cot": 0.02}, {"clutch": "none (VE)", "model": "ve", "cot": 0.03}]
+    rows += [{"clutch": "firmware", "rate_hz": 300.0, "delay_ms": d, "walks": True, "cot": cot,
+              "stored_energy_ratio": 0.9, "max_abs_eigenvalue_fitted": 0.7, "limited_by": by}
+             for d, cot, by in ((0.0, 0.025, "mechanics"), (5.0, 0.03, "firmware"), (10.0, 0.035, "mechanics"))]
+    refs = add_advantage(rows)
+    assert refs["er_ideal"]["cot_saving_vs_ve"] == pytest.approx(1 / 3)
+    assert [r["er_advantage_remaining"] for r in rows[2:]] == pytest.approx([0.5, 0.0, -0.5])
+    fig = plot_firmware_sweep({"rows": rows, "ideal": {"max_abs_eigenvalue": 0.79}}, tmp_path / "f.png")
+    assert fig.stat().st_size > 1000
+
+
+def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(table1):
+    """At 1.9 deg with a 5 ms clutch at 300 Hz the gait slows step by step. The firmware's leg count
+    faults (leg_sync_lost: no touchdown within 1.4 x the running step period) and stops clutching; with
+    the step-timing checks relaxed the same walk stalls mechanically instead, classified."""
+    from rimless.sim.firmware_cli import ideal_fixed_point
+    from rimless.sim.firmware_loop import without_step_timing_checks
+
+    params = table1.replace(slope_rad=math.radians(1.9))
+    z = ideal_fixed_point(params, backend="reference", rtol=1e-9).z
+    cfg = FirmwareLoopConfig()
+    _, walk = _walk(params, z, 6, **cfg.__dict__)
+    faults = [f["fault"] for _, name, f in walk.events if name == "fault"]
+    assert faults == ["leg_sync_lost"]
+    relaxed = without_step_timing_checks(cfg)
+    assert relaxed.detector.max_step_s == 10.0 and relaxed.max_hold_s == 60.0
+    assert relaxed.detector.velocity_window_s == cfg.detector.velocity_window_s
+    loop = FirmwareLoop(params, relaxed)
+    try:
+        relaxed_walk = loop.walk(z, 6)
+    finally:
+        loop.close()
+    assert not [1 for _, name, _ in relaxed_walk.events if name == "fault"]
+    assert relaxed_walk.failure is not None and relaxed_walk.failure.reason.value == "stall"
+    # up to the fault both walks are the same walk (the relaxed checks change nothing else)
+    n = len(relaxed_walk.steps)
+    assert n >= 3
+    assert [s.period_s for s in walk.steps[:n - 1]] == [s.period_s for s in relaxed_walk.steps[:n - 1]]
+
+
+def test_boundaries_say_what_limits_the_critical_slope():
+    from rimless.sim.firmware_loop import FIRMWARE_FAULT_PREFIX, FirmwareBoundaries, FirmwareCriticalSlope
+
+    fault = f"{FIRMWARE_FAULT_PREFIX} (leg_sync_lost): it no longer clutches"
+    fw = FirmwareCriticalSlope(0.036, 0.035, fault, [])
+    stall = "step 6: stall"
+    # relaxed, the wheel walks well below where the firmware faulted: the firmware limits it
+    b = FirmwareBoundaries(fw, FirmwareCriticalSlope(0.030, 0.029, stall, []))
+    assert b.limited_by == "firmware" and b.mechanical_slope_rad == 0.030 and "would walk" in b.detail
+    # relaxed, it fails at the same boundary: the fault only came first
+    b = FirmwareBoundaries(fw, FirmwareCriticalSlope(0.036, 0.0352, stall, []))
+    assert b.limited_by == "mechanics" and "fires first" in b.detail
+    b = FirmwareBoundaries(FirmwareCriticalSlope(0.036, 0.035, stall, []), None)
+    assert b.limited_by == "mechanics" and b.mechanical_slope_rad == 0.036
 
 
 def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():
