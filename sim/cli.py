@@ -864,9 +864,20 @@ def replay_cmd(
     params: Any,
     log: Annotated[Path, typer.Argument(help="Trial log of `rimless robot run` (JSON Lines).")],
     plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the overlay figure (.png, .pdf, .svg).")] = None,
+    rate_hz: Annotated[Optional[float], typer.Option("--rate-hz", help="Firmware in the loop: sampling rate, Hz "
+                                                     "[300, or the --robot-config's].")] = None,
+    clutch_delay_ms: Annotated[float, typer.Option("--clutch-delay-ms", help="Firmware in the loop: clutch engage "
+                                                   "= release delay, ms.")] = 5.0,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", help="Firmware in the loop: sensor noise, "
+                                                "counts.")] = 1.0,
+    robot_config: Annotated[Optional[Path], typer.Option("--robot-config", help="The robot.toml the trial ran with "
+                                                         "(detector, sensor and rate settings).")] = None,
+    ideal_only: Annotated[bool, typer.Option("--ideal-only", help="Compare with the ideal clutch only (skip the "
+                                             "firmware-in-the-loop step).")] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Replay a robot trial log against the simulator: recorded steps beside the simulated ER step."""
+    """Replay a robot trial log against the simulator: recorded steps beside the simulated ER step, under the
+    ideal clutch and under the firmware in the loop."""
     from rimless.firmware.triallog import TrialLogError
     from rimless.sim.firmware_replay import plot_replay, replay_trial
 
@@ -874,8 +885,17 @@ def replay_cmd(
         raise ParameterError(f"{log}: no such trial log")
     if plot is not None:
         _check_plot_path(plot)
+    fw_config = None
+    if not ideal_only:
+        from rimless.sim import firmware_cli
+
+        if robot_config is not None and not robot_config.is_file():
+            raise ParameterError(f"--robot-config {robot_config}: no such file")
+        fw_config = firmware_cli.build_config(rate_hz=rate_hz, clutch_delay_ms=clutch_delay_ms, release_delay_ms=None,
+                                              noise_counts=noise_counts, jitter_ms=0.05, holding_force_n=100.0, seed=0,
+                                              robot_config=robot_config)
     try:
-        rep = replay_trial(log, params)
+        rep = replay_trial(log, params, firmware_config=fw_config)
     except TrialLogError as err:
         raise ParameterError(str(err)) from None
     except ValueError as err:
@@ -898,10 +918,25 @@ def replay_cmd(
         ("max compression recorded / simulated (mm)", f"{f(out['recorded_max_compression_m'], 1e3)} / "
                                                       f"{f(out['simulated_max_compression_m'], 1e3)}"),
         ("faults in the log", ", ".join(out["faults"]) or "none"),
+        *_replay_firmware_rows(out["firmware_in_the_loop"], f),
         ("figure", out["plot"] or "-"),
     ]))
     if out["plot"]:
         print(out["plot"])
+
+
+def _replay_firmware_rows(fw: Optional[dict[str, Any]], f: Any) -> list[tuple[str, str]]:
+    if fw is None:
+        return []
+    if fw["simulated_period_s"] is None:
+        return [("firmware in the loop", f"the walk failed: {fw['failure']}")]
+    return [
+        ("firmware in the loop: rate, delay", f"{fw['rate_hz']:g} Hz, {fw['engage_delay_ms']:g} ms"),
+        ("  step period (s)", f(fw["simulated_period_s"])),
+        ("  lock command / engaged after impact (ms)",
+         f"{f(fw['lock_command_after_impact_s'], 1e3)} / {f(fw['lock_after_impact_s'], 1e3)} ({fw['lock_class']})"),
+        ("  max compression (mm)", f(fw["max_compression_m"], 1e3)),
+    ]
 
 
 @app.command("sweep")

@@ -372,6 +372,42 @@ def test_replay_of_a_trial_log_written_by_the_firmware_logger(table1, er_fixed_p
     ideal_max = rep.sim_max_compression_m
     assert rep.steps[1].recorded_max_compression_m == pytest.approx(ideal_max, rel=0.1)
     assert all(s.recorded_lock_s is not None for s in rep.steps)
+    assert rep.firmware is None
+
+
+def test_replay_overlays_the_step_under_the_firmware_in_the_loop(table1, er_fixed_point, tmp_path):
+    """Replayed with the configuration the log was made with, the firmware-in-the-loop step is the recorded
+    gait: its period is the recorded one, its lock command comes after the impact by the recorded lock time
+    after the touchdown event plus the touchdown's detection lag (a few samples), its peak compression is
+    the recorded one, and the stance clutch is engaged from the lock on."""
+    from rimless.firmware.triallog import TrialLog
+    from rimless.sim.firmware_replay import FIRMWARE_STEPS, replay_trial
+
+    cfg = FirmwareLoopConfig(rate_hz=1000.0, engage_delay_s=0.002, release_delay_s=0.002, **QUIET)
+    loop = FirmwareLoop(table1, cfg)
+    loop.records = []
+    walk = loop.walk(er_fixed_point[1].z, FIRMWARE_STEPS + 1)
+    loop.close()
+    log = TrialLog(tmp_path, "fw-walk")
+    log.append(loop.records)
+    log.close()
+    rep = replay_trial(log.path, table1, firmware_config=cfg)
+    fw = rep.firmware
+    assert fw is not None and fw.failure is None
+    rec = rep.steps[FIRMWARE_STEPS - 1]  # the recorded step that is the replay's last firmware step
+    assert fw.period_s == pytest.approx(walk.steps[FIRMWARE_STEPS - 1].period_s, abs=1e-9)
+    assert fw.period_s == pytest.approx(rec.recorded_period_s, abs=3e-3)
+    lag = fw.lock_command_s - rec.recorded_lock_s
+    assert 0.0 < lag < 0.01, lag
+    assert fw.lock_s == pytest.approx(fw.lock_command_s + 0.002, abs=1.5e-3)
+    assert fw.compression_m.max() == pytest.approx(rec.recorded_max_compression_m, rel=0.05)
+    # what the firmware integrated is the true compression to a count or two (1 count = 1/62992 m)
+    n = min(len(fw.t), len(fw.sensed_compression_m))
+    assert np.max(np.abs(fw.sensed_compression_m[:n] - fw.compression_m[:n])) < 3 / 62992
+    on = fw.t[fw.stance_engaged]
+    assert on.size and on.min() >= fw.lock_s - 1e-9
+    summary = rep.summary()["firmware_in_the_loop"]
+    assert summary["simulated_period_s"] == fw.period_s and summary["lock_class"] == fw.lock_class
 
 
 def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed_point, tmp_path):
@@ -389,6 +425,11 @@ def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     assert out["steps"] == 2 and fig.stat().st_size > 1000 and out["plot"] == str(fig)
+    fw = out["firmware_in_the_loop"]
+    assert fw["rate_hz"] == 300.0 and fw["engage_delay_ms"] == 5.0 and fw["failure"] is None
+    assert fw["lock_class"] in ("peak", "rebound", "compression")
+    res = RUN.invoke(app, ["sim", "replay", str(log.path), "--ideal-only", "--json"])
+    assert res.exit_code == 0 and json.loads(res.stdout)["firmware_in_the_loop"] is None
     bad = tmp_path / "bad.jsonl"
     bad.write_text(log.path.read_text().replace('"seq"', '"seq', 1))
     res = RUN.invoke(app, ["sim", "replay", str(bad)])
