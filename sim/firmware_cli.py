@@ -19,7 +19,8 @@ def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay
     """FirmwareLoopConfig from the CLI options; errors name the option.
 
     robot_config: a robot.toml (read by the firmware's own loader) supplying the detector parameters, the
-    first sensor's resolution, calibration and health limits, and the sampling rate unless --rate-hz is given."""
+    first sensor's resolution, calibration and health limits, the clutch timeout, whether there is one sensor
+    or one per leg, and the sampling rate unless --rate-hz is given."""
     from rimless.firmware.faults import HealthLimits
     from rimless.sim.firmware_loop import FirmwareLoopConfig
 
@@ -29,9 +30,19 @@ def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay
 
         robot = load_config(robot_config)
         sensor = robot.sensors[0]
+        if len(robot.sensors) == 1:
+            sensors = "one"
+        elif len(robot.sensors) == 8 and sorted(leg for s in robot.sensors for leg in s.legs) == list(range(8)) \
+                and all(len(s.legs) == 1 for s in robot.sensors):
+            sensors = "per-leg"
+        else:
+            raise ParameterError(f"--robot-config {robot_config}: the loop models one sensor counting the legs or "
+                                 f"one sensor per leg (legs 0..7), not {len(robot.sensors)} sensors on "
+                                 f"{[list(s.legs) for s in robot.sensors]}")
         cpm_1600 = sensor.counts_per_m * (1.0 if sensor.resolution_cpi == 1600 else 4.0)
         extra = {"detector": robot.detector, "cpi": sensor.resolution_cpi, "counts_per_m_1600": cpm_1600,
-                 "health": HealthLimits(sensor.squal_min, sensor.squal_low_s, sensor.saturated_samples_max)}
+                 "health": HealthLimits(sensor.squal_min, sensor.squal_low_s, sensor.saturated_samples_max),
+                 "max_hold_s": robot.clutch.max_hold_s, "sensors": sensors}
         if rate_hz is None:
             rate_hz = robot.sampling.rate_hz
     if rate_hz is None:
@@ -92,6 +103,7 @@ def firmware_summary(params: Any, config: Any, ideal: Any, fp: Any) -> dict[str,
         "jitter_ms": config.jitter_s * 1e3,
         "holding_force_N": config.holding_force_N if math.isfinite(config.holding_force_N) else None,
         "cpi": config.cpi,
+        "sensors": config.sensors,
         "seed": config.seed,
         "steps_done": len(steps),
         "ideal": {

@@ -79,6 +79,9 @@ class FirmwareLoopConfig:
     release_delay_s: float = 0.005  # pin off -> leg free
     holding_force_N: float = 100.0  # the clutch slips beyond this force along the leg (inf: rigid)
     max_hold_s: float = 1.0  # the firmware's clutch timeout ([clutch] max_hold_s): a longer hold is a fault
+    # "one": the prototype's single sensor on the stance-leg mechanism, the stance leg counted;
+    # "per-leg": one sensor per leg (legs = [k]), each seeing its own leg's compression, the leg measured
+    sensors: str = "one"
     detector: DetectorParams = field(default_factory=DetectorParams)
     health: HealthLimits = field(default_factory=HealthLimits)
     seed: int = 0
@@ -102,6 +105,8 @@ class FirmwareLoopConfig:
             if isinstance(value, float) and math.isnan(value) or not ok or (name != "holding_force_N" and isinstance(
                     value, float) and not math.isfinite(value)):
                 raise ValueError(f"{name} must be {what}, got {value!r}")
+        if self.sensors not in ("one", "per-leg"):
+            raise ValueError(f"sensors must be 'one' or 'per-leg', got {self.sensors!r}")
         self.detector.validated()
         return self
 
@@ -186,16 +191,30 @@ class FirmwareLoop:
         self._rng = random.Random(self.config.seed)
         self._sensed_m = 0.0  # what the fake sensor's trajectory returns now
         cfg = self.config
-        self.fake = FakeAdns3080(lambda _t: self._sensed_m, counts_per_m=cfg.counts_per_m_1600,
-                                 noise_counts=cfg.noise_counts, squal=cfg.squal, seed=cfg.seed,
-                                 clock=self.clock.seconds, needs_reset=False)
-        self.sensor = Adns3080(self.fake, counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
-                               sleep=lambda _s: None, clock_ns=self.clock.ns)
-        self.sensor.set_resolution(cfg.cpi)
-        self.detector = LegDetector(cfg.detector, list(range(N_LEGS)))
+        self._leg_compression_m = [0.0] * N_LEGS  # what each per-leg sensor sees: L0 - L of its leg (m)
+
+        def sensor(trajectory: Callable[[float], float], seed: int) -> tuple[FakeAdns3080, Adns3080]:
+            fake = FakeAdns3080(trajectory, counts_per_m=cfg.counts_per_m_1600, noise_counts=cfg.noise_counts,
+                                squal=cfg.squal, seed=seed, clock=self.clock.seconds, needs_reset=False)
+            drv = Adns3080(fake, counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
+                           sleep=lambda _s: None, clock_ns=self.clock.ns)
+            drv.set_resolution(cfg.cpi)
+            return fake, drv
+
+        channels = []
+        if cfg.sensors == "per-leg":  # robot.toml with one [[sensor]] per leg, legs = [k]: the leg is measured
+            self.fakes = []
+            for k in range(N_LEGS):
+                fake, drv = sensor(lambda _t, k=k: self._leg_compression_m[k], cfg.seed * N_LEGS + k)
+                self.fakes.append(fake)
+                channels.append(Channel(drv, LegDetector(cfg.detector, [k]), HealthMonitor(cfg.health)))
+        else:  # the prototype: one sensor on the stance-leg mechanism, the stance leg counted
+            fake, drv = sensor(lambda _t: self._sensed_m, cfg.seed)
+            self.fakes = [fake]
+            channels.append(Channel(drv, LegDetector(cfg.detector, list(range(N_LEGS))), HealthMonitor(cfg.health)))
+        self.fake, self.sensor, self.detector = self.fakes[0], channels[0].sensor, channels[0].detector
         self.clutches = ClutchBank(CLUTCH_PINS, pin_factory=MockFactory())
-        self.controller = Controller([Channel(self.sensor, self.detector, HealthMonitor(cfg.health))], self.clutches,
-                                     max_hold_s=cfg.max_hold_s, clock_ns=self.clock.ns)
+        self.controller = Controller(channels, self.clutches, max_hold_s=cfg.max_hold_s, clock_ns=self.clock.ns)
         self.stance_leg = 0  # physical leg b
         self._pins: set[int] = set()  # clutch pins on, as last read
         self._engaged: set[int] = set()  # clutches physically engaged
@@ -223,10 +242,14 @@ class FirmwareLoop:
         late = abs(self._rng.gauss(0.0, self.config.jitter_s)) if self.config.jitter_s else 0.0
         self._next_sample = self._t_origin + self._deadline_k * self._period + min(late, 0.49 * self._period)
 
-    def _sample(self, t: float, sensed_m: float, *, apply: bool = True) -> None:
-        """One firmware control step at time t with the sensor seeing `sensed_m` of accumulated compression."""
+    def _sample(self, t: float, sensed_m: float, legs_m: tuple[float, float], *, apply: bool = True) -> None:
+        """One firmware control step at time t: the stance-leg sensor sees `sensed_m` of accumulated
+        compression; per-leg sensors see their own leg, `legs_m` = (L1, L2) the stance and trailing legs'
+        lengths (a leg in the air keeps its last length)."""
         self.clock.t_s = t
         self._sensed_m = sensed_m
+        self._leg_compression_m[self.stance_leg] = self.L0 - legs_m[0]
+        self._leg_compression_m[(self.stance_leg - 1) % N_LEGS] = self.L0 - legs_m[1]
         self.controller.step()
         self.samples += 1
         if self.truth_log is not None:
@@ -280,15 +303,17 @@ class FirmwareLoop:
                             atol=self.atol), record_dt=PRIMING_RECORD_DT_S)
         tt = np.concatenate([s.t for s in res.segments or []])
         l1 = np.concatenate([s.y[:, 3] for s in res.segments or []])
+        l2 = np.concatenate([s.y[:, 4] for s in res.segments or []])
         order = np.argsort(tt, kind="stable")
-        tt, l1 = tt[order], l1[order]
+        tt, l1, l2 = tt[order], l1[order], l2[order]
         self.controller.arm(stance_leg=self.stance_leg)
         self._t_origin = self._rng.random() * self._period  # sampling phase
         self._deadline_k = 0
         self._next_sample = self._t_origin
         while self._next_sample < res.period_s:
             ts = self._next_sample
-            self._sample(ts, self.L0 - float(np.interp(ts, tt, l1)), apply=False)
+            l1_s = float(np.interp(ts, tt, l1))
+            self._sample(ts, self.L0 - l1_s, (l1_s, float(np.interp(ts, tt, l2))), apply=False)
         self._pins = set(self.clutches.engaged())
         for leg in self._pins:  # a lock the firmware decided while watching acts from the take-over on
             self._pending.append((res.period_s + self.config.engage_delay_s, leg, True))
@@ -556,7 +581,7 @@ class FirmwareLoop:
                     return "action", None, float(t_act), ys[:10], float(ys[10]), float(ys[11]), peak
                 if ts <= t_lim:
                     ys = sol(ts)
-                    self._sample(ts, offset + self.L0 - float(ys[3]))
+                    self._sample(ts, offset + self.L0 - float(ys[3]), (float(ys[3]), float(ys[4])))
                     continue
                 break
             if code is not None:

@@ -453,3 +453,23 @@ def test_robot_config_supplies_the_firmware_settings(tmp_path):
     bad.write_text(text.replace("touch_debounce_samples = 3", "touch_debounce_samples = -3"))
     res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--robot-config", str(bad)])
     assert res.exit_code == 2 and "touch_debounce_samples" in res.output and "bad.toml" in res.output
+
+
+def test_one_sensor_per_leg_in_the_loop_clutches_each_step_once(table1, er_fixed_point):
+    """Per-leg sensors (robot.toml with one [[sensor]] per leg): every step has one touchdown and one lock
+    of its own stance leg; the trailing foot coming down again on its own sensor is dismissed by the
+    firmware, not taken for a step; the gait is the one-sensor gait to within the sensor noise."""
+    cfg = dict(rate_hz=300.0, engage_delay_s=0.005, release_delay_s=0.005, **QUIET)
+    _, one = _walk(table1, er_fixed_point[1].z, 3, **cfg)
+    loop, per_leg = _walk(table1, er_fixed_point[1].z, 3, sensors="per-leg", **cfg)
+    assert per_leg.failure is None and len(loop.controller.channels) == 8
+    assert all(f.motion_reads >= per_leg.samples > 0 for f in loop.fakes)  # every sensor read at every sample
+    for k, step in enumerate(per_leg.steps):
+        names = [n for _, n in step.firmware_events]
+        assert names.count("lock") == 1 and names.count("touchdown") <= 1, names
+        assert step.lock_class == one.steps[k].lock_class
+    locks = [f["leg"] for _, n, f in per_leg.events if n == "lock"]
+    assert locks == [1, 2, 3]  # the stance legs of the three steps (leg 0 stood through the priming step)
+    assert any(n == "touchdown_dismissed" for _, n, _ in per_leg.events)
+    assert per_leg.steps[-1].z_end == pytest.approx(one.steps[-1].z_end, rel=0.02)
+    assert per_leg.steps[-1].stored_energy_J == pytest.approx(one.steps[-1].stored_energy_J, rel=0.03)
