@@ -1003,13 +1003,15 @@ def sweep_cmd(
     from rimless.sim.params import MASS_MODELS, SPOKE_ANGLE_RAD
     from rimless.sim.sweep import GRID_PARAMETERS, SweepOptions, grid_points, parse_range, run_sweep, write_table
 
+    if fw_plot is not None:
+        _check_plot_path(fw_plot)
     if clutch is ClutchKind.firmware:
         _firmware_sweep_dispatch(params, locals())
         return
     for flag, given in (("--rate-hz", fw_rate_hz), ("--clutch-delay-ms", fw_delay_ms), ("--noise-counts", fw_noise),
                         ("--plot", fw_plot), ("--critical-slope", fw_critical or None)):
         if given is not None:
-            raise ParameterError(f"{flag} needs --clutch firmware")
+            raise ParameterError(f"{flag} {given}: needs --clutch firmware")
     model_list = [m.strip().lower() for m in models.split(",") if m.strip()]
     if not model_list or any(m not in ("er", "ve") for m in model_list):
         raise ParameterError(f"--model must be er, ve or er,ve, got {models!r}")
