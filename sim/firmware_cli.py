@@ -225,8 +225,8 @@ def run_bench(params: Any, *, rates_hz: tuple[float, ...] = (300.0, 1000.0), ste
         y = simulate_step(mech, "er", y, ScipyIntegrator(rtol=1e-9, atol=1e-11)).y_plus
     ref_s = (time.perf_counter() - t) / steps
     rows = []
-    for rate in rates_hz:
-        loop = FirmwareLoop(params, FirmwareLoopConfig(rate_hz=rate))
+    for rate, sensors in [(r, "one") for r in rates_hz] + [(rates_hz[0], "per-leg")]:
+        loop = FirmwareLoop(params, FirmwareLoopConfig(rate_hz=rate, sensors=sensors))
         t = time.perf_counter()
         walk = loop.walk(ideal.z, steps)
         el = time.perf_counter() - t
@@ -234,22 +234,28 @@ def run_bench(params: Any, *, rates_hz: tuple[float, ...] = (300.0, 1000.0), ste
         done = max(len(walk.steps), 1)
         per_step = el / (done + 1)  # the priming step is simulated and sampled as well
         z_err = float(np.max(np.abs(walk.steps[0].z_end - ideal.z))) if walk.steps else float("nan")
-        rows.append({"rate_hz": rate, "steps": len(walk.steps), "steps_per_s": 1.0 / per_step,
+        rows.append({"rate_hz": rate, "sensors": sensors, "steps": len(walk.steps), "steps_per_s": 1.0 / per_step,
                      "samples_per_step": walk.samples / (done + 1),
                      "reference_ideal_steps_per_s": 1.0 / ref_s, "slowdown_vs_ideal": per_step / ref_s,
                      "first_step_section_difference": z_err})
-    out = {"benchmark": "firmware-in-the-loop", "steps": steps, "rows": rows}
+    import os
+
+    out = {"benchmark": "firmware-in-the-loop", "steps": steps, "rows": rows, "load_average": list(os.getloadavg())}
     if json_out:
         print_json(out)
     else:
-        print(f"{'rate_hz':>8} {'steps/s':>8} {'samples/step':>12} {'ideal steps/s':>13} {'slowdown':>8} "
-              f"{'|dz| step 1':>11}")
+        print(f"{'rate_hz':>7} {'sensors':>7} {'steps/s':>7} {'samples/step':>12} {'ideal steps/s':>13} "
+              f"{'slowdown':>8} {'|dz| step 1':>11}")
         for r in rows:
-            print(f"{r['rate_hz']:>8g} {r['steps_per_s']:>8.2f} {r['samples_per_step']:>12.0f} "
+            print(f"{r['rate_hz']:>7g} {r['sensors']:>7} {r['steps_per_s']:>7.2f} {r['samples_per_step']:>12.0f} "
                   f"{r['reference_ideal_steps_per_s']:>13.2f} {r['slowdown_vs_ideal']:>8.1f} "
                   f"{r['first_step_section_difference']:>11.2e}")
         print("firmware: Controller + LegDetector + Adns3080 driver over the FakeAdns3080 bus, defaults "
-              "(5 ms delays, 1 count noise); ideal: reference path (scipy DOP853, rtol 1e-9), same start.")
+              "(5 ms delays, 1 count noise; sensors: one counting the legs, or one per leg); ideal: reference "
+              "path (scipy DOP853, rtol 1e-9), same start.")
+        import os
+
+        print(f"load average {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
     return out
 
 

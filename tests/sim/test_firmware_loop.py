@@ -473,3 +473,16 @@ def test_one_sensor_per_leg_in_the_loop_clutches_each_step_once(table1, er_fixed
     assert any(n == "touchdown_dismissed" for _, n, _ in per_leg.events)
     assert per_leg.steps[-1].z_end == pytest.approx(one.steps[-1].z_end, rel=0.02)
     assert per_leg.steps[-1].stored_energy_J == pytest.approx(one.steps[-1].stored_energy_J, rel=0.03)
+
+
+def test_bench_reports_steps_per_second_beside_the_reference_with_the_load(table1, capsys):
+    from rimless.sim.firmware_cli import run_bench
+
+    out = run_bench(table1, rates_hz=(1000.0,), steps=1)
+    assert [(r["rate_hz"], r["sensors"]) for r in out["rows"]] == [(1000.0, "one"), (1000.0, "per-leg")]
+    for r in out["rows"]:
+        assert r["steps"] == 1 and r["steps_per_s"] > 0 and r["reference_ideal_steps_per_s"] > 0
+        assert r["slowdown_vs_ideal"] == pytest.approx(r["reference_ideal_steps_per_s"] / r["steps_per_s"])
+        assert 300 < r["samples_per_step"] < 340  # 1 kHz over a ~0.31-0.37 s step
+        assert r["first_step_section_difference"] < 0.05  # the firmware's first step near the ideal one
+    assert len(out["load_average"]) == 3 and "load average" in capsys.readouterr().out
