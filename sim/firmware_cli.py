@@ -303,6 +303,8 @@ def run_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_de
 
 def critical_summary(res: Any, config: Any, *, steps: int, tol_deg: float) -> dict[str, Any]:
     """JSON-able summary of `firmware_boundaries`: both boundaries and which one limits the wheel."""
+    from rimless.sim.firmware_loop import MECHANICAL_WALK_FACTOR
+
     fw, mech = res.firmware, res.mechanical
 
     def evals(r: Any) -> list[dict[str, Any]]:
@@ -323,8 +325,10 @@ def critical_summary(res: Any, config: Any, *, steps: int, tol_deg: float) -> di
         "firmware_fault_below": fw.limited_by == "firmware",
         "mechanical_critical_slope_deg": mech_deg if math.isfinite(mech_deg) else None,
         "mechanical": None if mech is None else {
-            "definition": "the same search with the firmware's step-timing fail-safes relaxed (max_step_s "
-                          "10 s, step_period_tolerance 0.9, max_hold_s 60 s): the walk ends only by the mechanics",
+            "definition": f"the firmware's step-timing fail-safes relaxed (max_step_s 10 s, step_period_tolerance "
+                          f"0.9, max_hold_s 60 s) so that a walk ends only by the mechanics, walks "
+                          f"{MECHANICAL_WALK_FACTOR * steps} steps long: first at the failing slope, then bisected "
+                          "below it if the wheel walks there",
             "critical_slope_deg": mech_deg if math.isfinite(mech_deg) else None,
             "failing_slope_deg": math.degrees(mech.failing_slope_rad),
             "reason_below": mech.reason_below, "evaluations": evals(mech)},

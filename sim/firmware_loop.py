@@ -739,7 +739,7 @@ class FirmwareBoundaries:
             return (f"a firmware fault stops a wheel that would walk: below it {fw.reason_below}; with the step-timing "
                     f"checks relaxed it walks down to {math.degrees(mech.critical_slope_rad):.3f} deg")
         return (f"the firmware's fault fires first ({fw.reason_below}), but with the step-timing checks relaxed the "
-                f"wheel fails mechanically at the same boundary: {mech.reason_below}")
+                f"wheel fails there too, in a walk {MECHANICAL_WALK_FACTOR} times as long: {mech.reason_below}")
 
     @property
     def mechanical_slope_rad(self) -> float:
@@ -804,12 +804,18 @@ def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, 
     return FirmwareCriticalSlope(critical_slope_rad=hi, failing_slope_rad=lo, reason_below=why_lo, evaluations=evals)
 
 
+MECHANICAL_WALK_FACTOR = 3  # the relaxed walks are this many times longer (see firmware_boundaries)
+
+
 def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
                         tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None) -> FirmwareBoundaries:
-    """`firmware_critical_slope` under `config`; if a firmware fault is what fails just below it, the
-    bisection is repeated with the step-timing checks relaxed (between `low_rad` and the configured
-    boundary) to find the mechanical boundary of the same clutch timing. Raises ValueError as
-    `firmware_critical_slope` does."""
+    """`firmware_critical_slope` under `config`; if a firmware fault is what fails just below it, is that
+    fault what stops the wheel? The same firmware with its step-timing checks relaxed walks
+    MECHANICAL_WALK_FACTOR x `steps` steps at the failing slope: a wheel slowing towards a stall trips the
+    leg-count check (its steps outgrow the running period or `max_step_s`) a step or two before it stalls,
+    and a walk only as long as the configured one could miss that stall. If the long relaxed walk fails
+    too, the boundary is mechanical (the fault only came first); if it walks, the mechanical boundary is
+    bisected below with long relaxed walks. Raises ValueError as `firmware_critical_slope` does."""
     n = [0]
 
     def count(_k: int) -> None:
@@ -821,9 +827,16 @@ def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_
     if fw.limited_by != "firmware":
         return FirmwareBoundaries(fw, None)
     relaxed = without_step_timing_checks(config)
-    top = params.replace(slope_rad=fw.critical_slope_rad)
+    long_steps = MECHANICAL_WALK_FACTOR * steps
+    ok, why = walks_under_firmware(params.replace(slope_rad=fw.failing_slope_rad), relaxed, long_steps)
+    count(0)
+    if not ok:  # the wheel fails there anyway: the boundary is mechanical, the fault only came first
+        return FirmwareBoundaries(fw, FirmwareCriticalSlope(fw.critical_slope_rad, fw.failing_slope_rad, why,
+                                                            [(fw.failing_slope_rad, False, why)]))
+    top = params.replace(slope_rad=fw.failing_slope_rad)
     try:
-        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=steps, tol_rad=tol_rad, progress=count)
+        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=long_steps, tol_rad=tol_rad,
+                                       progress=count)
     except ValueError as err:  # e.g. relaxed, the wheel still walks at low_rad: the boundary is below the bracket
         mech = FirmwareCriticalSlope(math.nan, low_rad, f"not bracketed: {err}", [])
     return FirmwareBoundaries(fw, mech)

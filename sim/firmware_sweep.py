@@ -37,6 +37,7 @@ class FirmwareSweepOptions:
     """What every firmware grid point is computed with (part of the cache key with the point)."""
 
     kind: str = "firmware-clutch"  # keeps these cache entries apart from the branch sweep's
+    version: int = 1  # bump when what a point computes changes (the cache key holds it)
     steps: int = 8
     noise_counts: float = 1.0
     jitter_ms: float = 0.05
