@@ -400,8 +400,12 @@ def print_firmware_rows(out: dict[str, Any]) -> None:
           f"stored {i['stored_energy_J']:.4f} J, max |eig| {i.get('max_abs_eigenvalue', float('nan')):.3f}")
     for name, r in (out.get("references") or {}).items():
         crit = r.get("critical_slope_deg")
-        print(f"{'ideal ER' if name == 'er_ideal' else 'VE'}: critical slope "
+        print(f"{'ideal ER' if name == 'er_ideal' else 'VE, ' + str(r.get('branch_label')) + ' gait'}: critical slope "
               f"{'-' if crit is None else f'{crit:.3f}'} deg, CoT {r.get('cot') or float('nan'):.4f}")
+    refs = out.get("references") or {}
+    if refs and refs["er_ideal"].get("cot_saving_vs_ve") is not None and refs["er_ideal"]["cot_saving_vs_ve"] <= 1e-3:
+        print(f"the ideal ER wheel saves {100 * refs['er_ideal']['cot_saving_vs_ve']:.2f} % CoT over this VE gait: "
+              "no advantage to keep a share of (ER adv '-'); the paper's comparison is the VE fast gait (--k 2500)")
     crit_cols = any("critical_slope_deg" in r for r in out["rows"] if r.get("clutch") == "firmware")
     head = (f"{'rate_hz':>7} {'delay_ms':>8} {'walks':>5} {'period_s':>8} {'speed':>6} {'stored':>6} {'|eig|':>6}")
     print(head + (f" {'phi_c deg':>9} {'ER adv':>6} {'limit':>9}" if crit_cols else ""))
