@@ -288,10 +288,10 @@ def run_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_de
     con.print(_table("critical slope, firmware in the loop", [
         ("sampling / delays", f"{config.rate_hz:g} Hz, engage {out['engage_delay_ms']:g} ms, release "
                               f"{out['release_delay_ms']:g} ms"),
-        ("critical slope, firmware as configured (deg)", f"{out['critical_slope_deg']:.3f}"),
+        ("critical slope, as configured (deg)", f"{out['critical_slope_deg']:.3f}"),
         ("fails at (deg)", f"{out['failing_slope_deg']:.3f}"),
         ("limited by", out["limited_by"]),
-        ("mechanical boundary, step checks relaxed (deg)", "-" if mech is None else f"{mech:.3f}"),
+        ("mechanical boundary (deg)", "-" if mech is None else f"{mech:.3f}"),
         ("walk length (steps)", str(steps)),
     ]))
     con.print(f"definition: {out['definition']}", soft_wrap=True)
