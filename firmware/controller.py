@@ -14,7 +14,7 @@ from typing import Any, NamedTuple, Protocol
 
 from rimless.firmware.adns3080 import MotionSample
 from rimless.firmware.clutch import ClutchBank
-from rimless.firmware.detector import DetectorParams, LegDetector, Phase
+from rimless.firmware.detector import Decision, DetectorParams, LegDetector, Phase
 from rimless.firmware.errors import SensorError, SensorNotFound
 from rimless.firmware.faults import Fault, HealthLimits, HealthMonitor
 
@@ -102,6 +102,11 @@ class Controller:
         self._mask = 0
         self.last_latency_ns = 0
         self.last_had_command = False
+        # several sensors: which channel's leg is on the ground, which one was before it (the trailing leg),
+        # and when the last step was seen (arm counts as one)
+        self._stance_channel: int | None = None
+        self._trailing_channel: int | None = None
+        self._last_touchdown_ns: int | None = None
 
     # --- commands (called in the sampler thread) ------------------------------------------------
     def arm(self, stance_leg: int | None = None) -> dict[str, Any]:
@@ -135,6 +140,10 @@ class Controller:
             ch.health.reset()
         self.active_faults.clear()
         self.armed = True
+        owner = [i for i, ch in enumerate(self.channels) if stance_leg is not None and stance_leg in ch.detector.legs]
+        if owner:
+            self._stance_channel, self._trailing_channel = owner[0], None
+        self._last_touchdown_ns = self.clock_ns()
         self._event("arm", stance_leg=stance_leg)
         return self.status()
 
@@ -228,6 +237,23 @@ class Controller:
                 except SensorError as err:
                     self.fault(Fault.SPI_ERROR, str(err), now)
 
+    def _check_step(self, i: int, det: LegDetector, t_ns: int, decision: Decision) -> Decision:
+        """With several sensors, a touchdown is a step only on a leg that is neither on the ground nor the
+        one just before it (the trailing leg, whose foot may come down again after its clutch lets go),
+        and at least `min_step_s` after the last step (or the arm). Otherwise the detector is told to
+        dismiss it and nothing is switched (event `touchdown_dismissed`)."""
+        too_soon = self._last_touchdown_ns is not None and t_ns - self._last_touchdown_ns < det.params.min_step_s * 1e9
+        if i in (self._stance_channel, self._trailing_channel) or too_soon:
+            det.dismiss_touchdown()
+            why = "too soon after the last step" if too_soon else (
+                "the stance leg's" if i == self._stance_channel else "the trailing leg's")
+            self.outbox.append(EventRecord(t_ns, "touchdown_dismissed", {"channel": i, "leg": det.stance_leg,
+                                                                         "why": why}))
+            return Decision(release=decision.release)
+        self._trailing_channel, self._stance_channel = self._stance_channel, i
+        self._last_touchdown_ns = t_ns
+        return decision
+
     def _step_channel(self, i: int, ch: Channel) -> None:
         try:
             s = ch.sensor.read_motion()
@@ -244,6 +270,8 @@ class Controller:
         det = ch.detector
         trusted = bad is None and s.squal >= ch.health.limits.squal_min and not (s.saturated or s.overflow)
         decision = det.update(s.t_ns, s.displacement_m, trusted=trusted)
+        if "touchdown" in decision.events and len(self.channels) > 1:
+            decision = self._check_step(i, det, s.t_ns, decision)
         if decision.release is not None:
             self.clutches.release(decision.release)
             self._mask &= ~(1 << decision.release)

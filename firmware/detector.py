@@ -242,6 +242,19 @@ class LegDetector:
         """Compression since the last touchdown (m), 0 in WAIT."""
         return 0.0 if self.phase is Phase.WAIT else self.position_m - self._touchdown_x_m
 
+    def dismiss_touchdown(self) -> None:
+        """The touchdown just reported was not a step (the controller knows another leg is the stance leg,
+        e.g. the trailing foot coming down again): undo its count and timing, and wait, without locking,
+        until this leg is quiet before it may report a touchdown again."""
+        before = getattr(self, "_before_touchdown", None)
+        if before is not None:
+            self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s, self._touchdown_x_m = before
+            self._before_touchdown = None
+        self.phase = Phase.WAIT
+        self._touch_count = 0
+        self._lock_count = 0
+        self._need_quiet = True
+
     def released_elsewhere(self) -> None:
         """Another sensor saw the next touchdown and released this one's clutch: back to WAIT."""
         if self.phase is Phase.CLUTCHED:
@@ -335,6 +348,8 @@ class LegDetector:
         return NOTHING
 
     def _touchdown(self, t: float) -> Decision:
+        self._before_touchdown = (self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s,
+                                  self._touchdown_x_m)
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
         self.leg_index = (self.leg_index + 1) % len(self.legs)
         last = self._last_touchdown_s

@@ -876,9 +876,20 @@ def replay_cmd(
     params: Any,
     log: Annotated[Path, typer.Argument(help="Trial log of `rimless robot run` (JSON Lines).")],
     plot: Annotated[Optional[Path], typer.Option("--plot", help="Write the overlay figure (.png, .pdf, .svg).")] = None,
+    rate_hz: Annotated[Optional[float], typer.Option("--rate-hz", help="Firmware in the loop: sampling rate, Hz "
+                                                     "[300, or the --robot-config's].")] = None,
+    clutch_delay_ms: Annotated[float, typer.Option("--clutch-delay-ms", help="Firmware in the loop: clutch engage "
+                                                   "= release delay, ms.")] = 5.0,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", help="Firmware in the loop: sensor noise, "
+                                                "counts.")] = 1.0,
+    robot_config: Annotated[Optional[Path], typer.Option("--robot-config", help="The robot.toml the trial ran with "
+                                                         "(detector, sensor and rate settings).")] = None,
+    ideal_only: Annotated[bool, typer.Option("--ideal-only", help="Compare with the ideal clutch only (skip the "
+                                             "firmware-in-the-loop step).")] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Replay a robot trial log against the simulator: recorded steps beside the simulated ER step."""
+    """Replay a robot trial log against the simulator: recorded steps beside the simulated ER step, under the
+    ideal clutch and under the firmware in the loop."""
     from rimless.firmware.triallog import TrialLogError
     from rimless.sim.firmware_replay import plot_replay, replay_trial
 
@@ -886,8 +897,17 @@ def replay_cmd(
         raise ParameterError(f"{log}: no such trial log")
     if plot is not None:
         _check_plot_path(plot)
+    fw_config = None
+    if not ideal_only:
+        from rimless.sim import firmware_cli
+
+        if robot_config is not None and not robot_config.is_file():
+            raise ParameterError(f"--robot-config {robot_config}: no such file")
+        fw_config = firmware_cli.build_config(rate_hz=rate_hz, clutch_delay_ms=clutch_delay_ms, release_delay_ms=None,
+                                              noise_counts=noise_counts, jitter_ms=0.05, holding_force_n=100.0, seed=0,
+                                              robot_config=robot_config)
     try:
-        rep = replay_trial(log, params)
+        rep = replay_trial(log, params, firmware_config=fw_config)
     except TrialLogError as err:
         raise ParameterError(str(err)) from None
     except ValueError as err:
@@ -910,10 +930,25 @@ def replay_cmd(
         ("max compression recorded / simulated (mm)", f"{f(out['recorded_max_compression_m'], 1e3)} / "
                                                       f"{f(out['simulated_max_compression_m'], 1e3)}"),
         ("faults in the log", ", ".join(out["faults"]) or "none"),
+        *_replay_firmware_rows(out["firmware_in_the_loop"], f),
         ("figure", out["plot"] or "-"),
     ]))
     if out["plot"]:
         print(out["plot"])
+
+
+def _replay_firmware_rows(fw: Optional[dict[str, Any]], f: Any) -> list[tuple[str, str]]:
+    if fw is None:
+        return []
+    if fw["simulated_period_s"] is None:
+        return [("firmware in the loop", f"the walk failed: {fw['failure']}")]
+    return [
+        ("firmware in the loop: rate, delay", f"{fw['rate_hz']:g} Hz, {fw['engage_delay_ms']:g} ms"),
+        ("  step period (s)", f(fw["simulated_period_s"])),
+        ("  lock command / engaged after impact (ms)",
+         f"{f(fw['lock_command_after_impact_s'], 1e3)} / {f(fw['lock_after_impact_s'], 1e3)} ({fw['lock_class']})"),
+        ("  max compression (mm)", f(fw["max_compression_m"], 1e3)),
+    ]
 
 
 @app.command("sweep")
@@ -946,6 +981,29 @@ def sweep_cmd(
                                         "bisection (takes minutes).")] = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
+    clutch: Annotated[ClutchKind, typer.Option("--clutch", help="ideal: the branch sweep; firmware: the robot's "
+                                               "controller in the loop over --rate-hz x --clutch-delay-ms (ER, "
+                                               "at --slope-deg).")] = ClutchKind.ideal,
+    fw_rate_hz: Annotated[Optional[str], typer.Option("--rate-hz", metavar="START:STOP:STEP|a,b", help="With "
+                                                      "--clutch firmware: sensor rates, Hz [300,1000].")] = None,
+    fw_delay_ms: Annotated[Optional[str], typer.Option("--clutch-delay-ms", metavar="START:STOP:STEP|a,b",
+                                                       help="With --clutch firmware: clutch engage = release "
+                                                            "delays, ms [0:10:2.5].")] = None,
+    fw_noise: Annotated[Optional[float], typer.Option("--noise-counts", help="With --clutch firmware: sensor "
+                                                      "noise, counts [1].")] = None,
+    fw_steps: Annotated[int, typer.Option("--steps", min=6, max=200, help="With --clutch firmware: walk length "
+                                          "per point.")] = 8,
+    fw_seed: Annotated[int, typer.Option("--seed", help="With --clutch firmware: seed of the sensor noise and "
+                                         "sampling jitter.")] = 0,
+    fw_critical: Annotated[bool, typer.Option("--critical-slope/--no-critical-slope", help="With --clutch "
+                                              "firmware: bisect each point's critical slope (and the ideal ER and VE "
+                                              "references) for the CoT and the share of the ER advantage kept "
+                                              "(a few walks per point).")] = False,
+    fw_low_deg: Annotated[float, typer.Option("--critical-low-deg", help="With --critical-slope: low end of the "
+                                              "bisection, deg.")] = 0.5,
+    fw_plot: Annotated[Optional[Path], typer.Option("--plot", help="With --clutch firmware: write the figure "
+                                                    "(.png, .pdf, .svg): the ER advantage, stored energy and "
+                                                    "stability kept against delay, per rate.")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Sweep a parameter grid: every period-1 gait at the start slope, each branch continued down to its end.
@@ -957,6 +1015,15 @@ def sweep_cmd(
     from rimless.sim.params import MASS_MODELS, SPOKE_ANGLE_RAD
     from rimless.sim.sweep import GRID_PARAMETERS, SweepOptions, grid_points, parse_range, run_sweep, write_table
 
+    if fw_plot is not None:
+        _check_plot_path(fw_plot)
+    if clutch is ClutchKind.firmware:
+        _firmware_sweep_dispatch(params, locals())
+        return
+    for flag, given in (("--rate-hz", fw_rate_hz), ("--clutch-delay-ms", fw_delay_ms), ("--noise-counts", fw_noise),
+                        ("--plot", fw_plot), ("--critical-slope", fw_critical or None)):
+        if given is not None:
+            raise ParameterError(f"{flag} {given}: needs --clutch firmware")
     model_list = [m.strip().lower() for m in models.split(",") if m.strip()]
     if not model_list or any(m not in ("er", "ve") for m in model_list):
         raise ParameterError(f"--model must be er, ve or er,ve, got {models!r}")
@@ -1024,6 +1091,47 @@ def sweep_cmd(
         con.print(f"wrote {p}", soft_wrap=True)
     con.print(f"{len(points)} grid points ({res.computed} computed, {res.cached} from the cache) in {res.seconds:.1f} s "
               f"on {res.workers} worker(s), scheduler {scheduler}")
+
+
+def _firmware_sweep_dispatch(params: Any, opts: dict[str, Any]) -> None:
+    """`sweep --clutch firmware`: refuse the branch grid's options, then rimless.sim.firmware_cli."""
+    from rimless.sim import firmware_cli
+    from rimless.sim.sweep import GRID_PARAMETERS, default_cache_dir, parse_range
+
+    models = [m.strip().lower() for m in opts["models"].split(",") if m.strip()]
+    if "er" not in models:
+        raise ParameterError(f"--model: --clutch firmware drives the ER wheel's clutches, got {opts['models']!r}")
+    changes: dict[str, float] = {}
+    for name, key, option in (("k", "k_grid", "--k"), ("c", "c_grid", "--c"), ("leg_mass_kg", "leg_mass_grid",
+                              "--leg-mass-kg"), ("hub_mass_kg", "hub_mass_grid", "--hub-mass-kg")):
+        if opts[key] is not None:
+            values = parse_range(opts[key], option)
+            if len(values) != 1:
+                raise ParameterError(f"{option}: --clutch firmware sweeps --rate-hz x --clutch-delay-ms at one wheel; "
+                                     f"give one value, got {opts[key]!r}")
+            changes[GRID_PARAMETERS[name][0]] = values[0]
+    if opts["mass_models"] is not None:
+        if "," in opts["mass_models"]:
+            raise ParameterError(f"--mass-model: --clutch firmware takes one mass model, got {opts['mass_models']!r}")
+        changes["mass_model"] = opts["mass_models"].strip()
+    try:
+        params = params.replace(**changes)
+    except ParameterError as err:
+        raise ParameterError(f"{err}") from None
+    if opts["fw_plot"] is not None:
+        _check_plot_path(opts["fw_plot"])
+    if opts["bench"]:
+        firmware_cli.run_bench(params, json_out=opts["json_out"])
+        return
+    scheduler = opts["scheduler"]
+    if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
+        raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    cache = None if opts["no_cache"] else (opts["cache_dir"] or default_cache_dir())
+    firmware_cli.run_sweep_command(
+        params, rate_hz=opts["fw_rate_hz"], clutch_delay_ms=opts["fw_delay_ms"], noise_counts=opts["fw_noise"],
+        steps=opts["fw_steps"], seed=opts["fw_seed"], critical_slope=opts["fw_critical"],
+        critical_low_deg=opts["fw_low_deg"], out=opts["out"], scheduler=scheduler, workers=opts["workers"],
+        cache_dir=cache, plot=opts["fw_plot"], json_out=opts["json_out"])
 
 
 def _err_console():  # noqa: ANN202

@@ -78,6 +78,10 @@ class FirmwareLoopConfig:
     engage_delay_s: float = 0.005  # pin on -> leg locked
     release_delay_s: float = 0.005  # pin off -> leg free
     holding_force_N: float = 100.0  # the clutch slips beyond this force along the leg (inf: rigid)
+    max_hold_s: float = 1.0  # the firmware's clutch timeout ([clutch] max_hold_s): a longer hold is a fault
+    # "one": the prototype's single sensor on the stance-leg mechanism, the stance leg counted;
+    # "per-leg": one sensor per leg (legs = [k]), each seeing its own leg's compression, the leg measured
+    sensors: str = "one"
     detector: DetectorParams = field(default_factory=DetectorParams)
     health: HealthLimits = field(default_factory=HealthLimits)
     seed: int = 0
@@ -94,12 +98,15 @@ class FirmwareLoopConfig:
             ("engage_delay_s", 0.0 <= self.engage_delay_s <= 1.0, "in [0, 1] s"),
             ("release_delay_s", 0.0 <= self.release_delay_s <= 1.0, "in [0, 1] s"),
             ("holding_force_N", self.holding_force_N > 0.0, "> 0 N (inf: a rigid clutch)"),
+            ("max_hold_s", 0.01 <= self.max_hold_s <= 60.0, "in [0.01, 60] s"),
         ]
         for name, ok, what in checks:
             value = getattr(self, name)
             if isinstance(value, float) and math.isnan(value) or not ok or (name != "holding_force_N" and isinstance(
                     value, float) and not math.isfinite(value)):
                 raise ValueError(f"{name} must be {what}, got {value!r}")
+        if self.sensors not in ("one", "per-leg"):
+            raise ValueError(f"sensors must be 'one' or 'per-leg', got {self.sensors!r}")
         self.detector.validated()
         return self
 
@@ -184,16 +191,30 @@ class FirmwareLoop:
         self._rng = random.Random(self.config.seed)
         self._sensed_m = 0.0  # what the fake sensor's trajectory returns now
         cfg = self.config
-        self.fake = FakeAdns3080(lambda _t: self._sensed_m, counts_per_m=cfg.counts_per_m_1600,
-                                 noise_counts=cfg.noise_counts, squal=cfg.squal, seed=cfg.seed,
-                                 clock=self.clock.seconds, needs_reset=False)
-        self.sensor = Adns3080(self.fake, counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
-                               sleep=lambda _s: None, clock_ns=self.clock.ns)
-        self.sensor.set_resolution(cfg.cpi)
-        self.detector = LegDetector(cfg.detector, list(range(N_LEGS)))
+        self._leg_compression_m = [0.0] * N_LEGS  # what each per-leg sensor sees: L0 - L of its leg (m)
+
+        def sensor(trajectory: Callable[[float], float], seed: int) -> tuple[FakeAdns3080, Adns3080]:
+            fake = FakeAdns3080(trajectory, counts_per_m=cfg.counts_per_m_1600, noise_counts=cfg.noise_counts,
+                                squal=cfg.squal, seed=seed, clock=self.clock.seconds, needs_reset=False)
+            drv = Adns3080(fake, counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
+                           sleep=lambda _s: None, clock_ns=self.clock.ns)
+            drv.set_resolution(cfg.cpi)
+            return fake, drv
+
+        channels = []
+        if cfg.sensors == "per-leg":  # robot.toml with one [[sensor]] per leg, legs = [k]: the leg is measured
+            self.fakes = []
+            for k in range(N_LEGS):
+                fake, drv = sensor(lambda _t, k=k: self._leg_compression_m[k], cfg.seed * N_LEGS + k)
+                self.fakes.append(fake)
+                channels.append(Channel(drv, LegDetector(cfg.detector, [k]), HealthMonitor(cfg.health)))
+        else:  # the prototype: one sensor on the stance-leg mechanism, the stance leg counted
+            fake, drv = sensor(lambda _t: self._sensed_m, cfg.seed)
+            self.fakes = [fake]
+            channels.append(Channel(drv, LegDetector(cfg.detector, list(range(N_LEGS))), HealthMonitor(cfg.health)))
+        self.fake, self.sensor, self.detector = self.fakes[0], channels[0].sensor, channels[0].detector
         self.clutches = ClutchBank(CLUTCH_PINS, pin_factory=MockFactory())
-        self.controller = Controller([Channel(self.sensor, self.detector, HealthMonitor(cfg.health))], self.clutches,
-                                     clock_ns=self.clock.ns)
+        self.controller = Controller(channels, self.clutches, max_hold_s=cfg.max_hold_s, clock_ns=self.clock.ns)
         self.stance_leg = 0  # physical leg b
         self._pins: set[int] = set()  # clutch pins on, as last read
         self._engaged: set[int] = set()  # clutches physically engaged
@@ -206,6 +227,9 @@ class FirmwareLoop:
         self.events: list[tuple[float, str, dict[str, Any]]] = []
         # (t, position, velocity, phase, clutch mask) of every sample, when a walk records them
         self.sample_log: list[tuple[float, float, float, int, int]] | None = None
+        # (t, true accumulated compression the sensor saw, engaged clutches as a bit mask) at every sample,
+        # when a walk records them: the simulated leg motion at the firmware's sample instants
+        self.truth_log: list[tuple[float, float, int]] | None = None
         self.records: list[Any] | None = None  # the controller's raw records (for a trial log), when kept
 
     def close(self) -> None:
@@ -218,12 +242,18 @@ class FirmwareLoop:
         late = abs(self._rng.gauss(0.0, self.config.jitter_s)) if self.config.jitter_s else 0.0
         self._next_sample = self._t_origin + self._deadline_k * self._period + min(late, 0.49 * self._period)
 
-    def _sample(self, t: float, sensed_m: float, *, apply: bool = True) -> None:
-        """One firmware control step at time t with the sensor seeing `sensed_m` of accumulated compression."""
+    def _sample(self, t: float, sensed_m: float, legs_m: tuple[float, float], *, apply: bool = True) -> None:
+        """One firmware control step at time t: the stance-leg sensor sees `sensed_m` of accumulated
+        compression; per-leg sensors see their own leg, `legs_m` = (L1, L2) the stance and trailing legs'
+        lengths (a leg in the air keeps its last length)."""
         self.clock.t_s = t
         self._sensed_m = sensed_m
+        self._leg_compression_m[self.stance_leg] = self.L0 - legs_m[0]
+        self._leg_compression_m[(self.stance_leg - 1) % N_LEGS] = self.L0 - legs_m[1]
         self.controller.step()
         self.samples += 1
+        if self.truth_log is not None:
+            self.truth_log.append((t, sensed_m, sum(1 << leg for leg in self._engaged)))
         while self.controller.outbox:
             rec = self.controller.outbox.popleft()
             if self.records is not None:
@@ -250,6 +280,7 @@ class FirmwareLoop:
 
         A failing step ends the walk; it is returned in `failure` with the steps done so far."""
         self.sample_log = [] if record_samples else None
+        self.truth_log = [] if record_samples else None
         y, t, offset = self._prime(np.asarray(z0, dtype=float))
         steps: list[FirmwareStep] = []
         failure: StepFailure | None = None
@@ -272,15 +303,17 @@ class FirmwareLoop:
                             atol=self.atol), record_dt=PRIMING_RECORD_DT_S)
         tt = np.concatenate([s.t for s in res.segments or []])
         l1 = np.concatenate([s.y[:, 3] for s in res.segments or []])
+        l2 = np.concatenate([s.y[:, 4] for s in res.segments or []])
         order = np.argsort(tt, kind="stable")
-        tt, l1 = tt[order], l1[order]
+        tt, l1, l2 = tt[order], l1[order], l2[order]
         self.controller.arm(stance_leg=self.stance_leg)
         self._t_origin = self._rng.random() * self._period  # sampling phase
         self._deadline_k = 0
         self._next_sample = self._t_origin
         while self._next_sample < res.period_s:
             ts = self._next_sample
-            self._sample(ts, self.L0 - float(np.interp(ts, tt, l1)), apply=False)
+            l1_s = float(np.interp(ts, tt, l1))
+            self._sample(ts, self.L0 - l1_s, (l1_s, float(np.interp(ts, tt, l2))), apply=False)
         self._pins = set(self.clutches.engaged())
         for leg in self._pins:  # a lock the firmware decided while watching acts from the take-over on
             self._pending.append((res.period_s + self.config.engage_delay_s, leg, True))
@@ -548,7 +581,7 @@ class FirmwareLoop:
                     return "action", None, float(t_act), ys[:10], float(ys[10]), float(ys[11]), peak
                 if ts <= t_lim:
                     ys = sol(ts)
-                    self._sample(ts, offset + self.L0 - float(ys[3]))
+                    self._sample(ts, offset + self.L0 - float(ys[3]), (float(ys[3]), float(ys[4])))
                     continue
                 break
             if code is not None:
@@ -656,6 +689,63 @@ class FirmwareCriticalSlope:
     reason_below: str  # why the walk fails just below
     evaluations: list[tuple[float, bool, str]]  # (slope rad, walks, reason)
 
+    @property
+    def limited_by(self) -> str:
+        """"firmware" when a firmware fault (its leg count or clutch timeout) ends the walk just below,
+        "mechanics" when the wheel itself fails (stall, contact, ...)."""
+        return "firmware" if self.reason_below.startswith(FIRMWARE_FAULT_PREFIX) else "mechanics"
+
+
+FIRMWARE_FAULT_PREFIX = "the firmware faulted"
+# what the step-timing checks are relaxed to for the mechanical boundary: the longest step and hold the
+# detector's and controller's validation accept, and the widest period tolerance
+RELAXED_MAX_STEP_S = 10.0
+RELAXED_PERIOD_TOLERANCE = 0.9
+RELAXED_MAX_HOLD_S = 60.0
+
+
+def without_step_timing_checks(config: FirmwareLoopConfig) -> FirmwareLoopConfig:
+    """The same firmware with its step-timing fail-safes (leg count: `max_step_s`, `step_period_tolerance`;
+    clutch timeout: `max_hold_s`) relaxed to their widest valid values, so that a walk under it ends only
+    by the mechanics. Everything else (sensor, detector thresholds, delays) is unchanged."""
+    det = replace(config.detector, max_step_s=RELAXED_MAX_STEP_S, step_period_tolerance=RELAXED_PERIOD_TOLERANCE)
+    return replace(config, detector=det, max_hold_s=RELAXED_MAX_HOLD_S).validated()
+
+
+@dataclass
+class FirmwareBoundaries:
+    """The critical slope under the firmware as configured, and, when a firmware fault limits it, the
+    mechanical one (the same firmware with its step-timing checks relaxed: `without_step_timing_checks`)."""
+
+    firmware: FirmwareCriticalSlope
+    mechanical: FirmwareCriticalSlope | None  # None when the mechanics already limit the configured firmware
+
+    @property
+    def limited_by(self) -> str:
+        """"firmware" when the relaxed firmware walks at a slope where the configured one faults (the
+        fault stops a wheel that would walk), else "mechanics" (the fault, if any, only comes first)."""
+        if self.mechanical is None:
+            return "mechanics"
+        m = self.mechanical.critical_slope_rad
+        return "firmware" if math.isfinite(m) and m <= self.firmware.failing_slope_rad else "mechanics"
+
+    @property
+    def detail(self) -> str:
+        """Why the boundary is where it is, in a sentence."""
+        fw, mech = self.firmware, self.mechanical
+        if mech is None:
+            return f"the wheel fails mechanically below it: {fw.reason_below}"
+        if self.limited_by == "firmware":
+            return (f"a firmware fault stops a wheel that would walk: below it {fw.reason_below}; with the step-timing "
+                    f"checks relaxed it walks down to {math.degrees(mech.critical_slope_rad):.3f} deg")
+        return (f"the firmware's fault fires first ({fw.reason_below}), but with the step-timing checks relaxed the "
+                f"wheel fails there too, in a walk {MECHANICAL_WALK_FACTOR} times as long: {mech.reason_below}")
+
+    @property
+    def mechanical_slope_rad(self) -> float:
+        """The mechanical boundary: the relaxed search's, or the configured one when mechanics limit it."""
+        return (self.mechanical or self.firmware).critical_slope_rad
+
 
 def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps: int) -> tuple[bool, str]:
     """(True, "") if a walk of `steps` steps from the ideal fixed point at these parameters completes
@@ -676,7 +766,8 @@ def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps:
         return False, f"step {len(walk.steps) + 1}: {walk.failure}"
     faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
     if faults:
-        return False, f"the firmware faulted ({', '.join(faults)}): it no longer clutches"
+        details = "; ".join(f"{f.get('fault')}: {f.get('detail')}" for _, name, f in walk.events if name == "fault")
+        return False, f"{FIRMWARE_FAULT_PREFIX} ({', '.join(faults)}): it no longer clutches ({details})"
     return True, ""
 
 
@@ -711,3 +802,41 @@ def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, 
         else:
             lo, why_lo = mid, why
     return FirmwareCriticalSlope(critical_slope_rad=hi, failing_slope_rad=lo, reason_below=why_lo, evaluations=evals)
+
+
+MECHANICAL_WALK_FACTOR = 3  # the relaxed walks are this many times longer (see firmware_boundaries)
+
+
+def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
+                        tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None) -> FirmwareBoundaries:
+    """`firmware_critical_slope` under `config`; if a firmware fault is what fails just below it, is that
+    fault what stops the wheel? The same firmware with its step-timing checks relaxed walks
+    MECHANICAL_WALK_FACTOR x `steps` steps at the failing slope: a wheel slowing towards a stall trips the
+    leg-count check (its steps outgrow the running period or `max_step_s`) a step or two before it stalls,
+    and a walk only as long as the configured one could miss that stall. If the long relaxed walk fails
+    too, the boundary is mechanical (the fault only came first); if it walks, the mechanical boundary is
+    bisected below with long relaxed walks. Raises ValueError as `firmware_critical_slope` does."""
+    n = [0]
+
+    def count(_k: int) -> None:
+        n[0] += 1
+        if progress:
+            progress(n[0])
+
+    fw = firmware_critical_slope(params, config, low_rad=low_rad, steps=steps, tol_rad=tol_rad, progress=count)
+    if fw.limited_by != "firmware":
+        return FirmwareBoundaries(fw, None)
+    relaxed = without_step_timing_checks(config)
+    long_steps = MECHANICAL_WALK_FACTOR * steps
+    ok, why = walks_under_firmware(params.replace(slope_rad=fw.failing_slope_rad), relaxed, long_steps)
+    count(0)
+    if not ok:  # the wheel fails there anyway: the boundary is mechanical, the fault only came first
+        return FirmwareBoundaries(fw, FirmwareCriticalSlope(fw.critical_slope_rad, fw.failing_slope_rad, why,
+                                                            [(fw.failing_slope_rad, False, why)]))
+    top = params.replace(slope_rad=fw.failing_slope_rad)
+    try:
+        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=long_steps, tol_rad=tol_rad,
+                                       progress=count)
+    except ValueError as err:  # e.g. relaxed, the wheel still walks at low_rad: the boundary is below the bracket
+        mech = FirmwareCriticalSlope(math.nan, low_rad, f"not bracketed: {err}", [])
+    return FirmwareBoundaries(fw, mech)

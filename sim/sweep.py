@@ -152,11 +152,12 @@ def _read_cached(cache_dir: str | None, point: dict[str, Any], options: SweepOpt
     return out
 
 
-def _cached_compute(point: dict[str, Any], options: SweepOptions, cache_dir: str | None) -> dict[str, Any]:
+def _cached_compute(point: dict[str, Any], options: Any, cache_dir: str | None,
+                    compute: Callable[[dict[str, Any], Any], dict[str, Any]] | None = None) -> dict[str, Any]:
     hit = _read_cached(cache_dir, point, options)
     if hit is not None:
         return hit
-    out = compute_point(point, options)
+    out = (compute or compute_point)(point, options)
     if cache_dir:
         _write_json_atomic(Path(cache_dir) / f"{point_key(point, options)}.json", out)
     out["cached"] = False
@@ -191,8 +192,15 @@ def run_sweep(
     cache_dir: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
     client: Any = None,
+    compute: Callable[[dict[str, Any], Any], dict[str, Any]] | None = None,
+    setup: Callable[[], float] | None = None,
 ) -> SweepResult:
-    """Compute every grid point (see module docstring); rows come back in the order of `points`."""
+    """Compute every grid point (see module docstring); rows come back in the order of `points`.
+
+    `compute(point, options)` replaces `compute_point` for another kind of grid (a module-level function
+    returning {"rows", "points", "seconds"}; `options` a dataclass, part of the cache key with the point);
+    `setup()` replaces the per-worker kernel warm-up."""
+    setup = setup or _worker_setup
     t0 = time.perf_counter()
     cache = str(cache_dir) if cache_dir else None
     results: list[dict[str, Any] | None] = [None] * len(points)
@@ -207,9 +215,9 @@ def run_sweep(
     setup_s = 0.0
     n_workers = 1
     if todo and scheduler == "sync":
-        setup_s = _worker_setup()
+        setup_s = setup()
         for i in todo:
-            results[i] = _cached_compute(points[i], options, cache)
+            results[i] = _cached_compute(points[i], options, cache, compute)
             done += 1
             if progress:
                 progress(done, len(points))
@@ -233,10 +241,10 @@ def run_sweep(
                 raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
         try:
             t_setup = time.perf_counter()
-            client.run(_worker_setup)  # once per worker, before any task
+            client.run(setup)  # once per worker, before any task
             setup_s = time.perf_counter() - t_setup
             n_workers = len(client.scheduler_info().get("workers", {})) or 1
-            futures = {client.submit(_cached_compute, points[i], options, cache, pure=False): i for i in todo}
+            futures = {client.submit(_cached_compute, points[i], options, cache, compute, pure=False): i for i in todo}
             for fut in as_completed(futures):
                 results[futures[fut]] = fut.result()
                 done += 1

@@ -4,6 +4,8 @@ configured start leg is the one standing at arm time."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from rimless.firmware.detector import DetectorParams, LegDetector
@@ -111,3 +113,89 @@ def test_a_slowing_gait_within_tolerance_keeps_sync(make_rig) -> None:
     rig.run(starts[-1] + 0.2)
     assert rig.events("fault") == []
     assert engaged_legs(rig) == list(range(7))
+
+
+# --- one sensor per leg: the trailing foot coming down again is not a step -----------------------------
+
+def _per_leg_rig(trajectories, rate_hz: float = 300.0):
+    """Eight channels (one fake sensor per leg, legs = [k]) on one virtual clock, armed with leg 7 standing."""
+    from gpiozero.pins.mock import MockFactory
+
+    from rimless.firmware.adns3080 import Adns3080
+    from rimless.firmware.clutch import ClutchBank
+    from rimless.firmware.controller import Channel, Controller
+    from rimless.firmware.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
+    from rimless.firmware.faults import HealthLimits, HealthMonitor
+
+    from .conftest import PINS, Rig, VirtualClock
+
+    clock = VirtualClock()
+    channels, fakes = [], []
+    for k, traj in enumerate(trajectories):
+        fake = FakeAdns3080(traj, clock=clock, noise_counts=0.3, seed=k)
+        fakes.append(fake)
+        drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep,
+                       clock_ns=clock.ns)
+        drv.power_up()
+        drv.set_resolution(1600)
+        channels.append(Channel(drv, LegDetector(DetectorParams(), [k]), HealthMonitor(HealthLimits())))
+    factory = MockFactory(revision="c03111")
+    bank = ClutchBank(PINS, pin_factory=factory)
+    clock.t = 0.0
+    ctl = Controller(channels, bank, id_check_interval_s=0.0, clock_ns=clock.ns)
+    ctl.arm(stance_leg=7)
+    return Rig(clock, fakes[0], channels[0].sensor, ctl, factory, rate_hz), bank
+
+
+def _leg_view(traj: GaitTrajectory, leg: int, recontact_after_s: float | None):
+    """Leg `leg`'s sensor: its own stances (legs touch down in order 0, 1, ...), and, as trailing leg, its foot
+    coming down again `recontact_after_s` after the next leg's touchdown (a 3 mm, 30 ms compression)."""
+
+    def f(t: float) -> float:
+        if t < traj.start_s:
+            return 0.0
+        k = int((t - traj.start_s) // traj.step_period_s)
+        x = traj(t) if k % 8 == leg else 0.0
+        if recontact_after_s is not None and k % 8 == (leg + 1) % 8:
+            tau = t - traj.touchdown_s(k) - recontact_after_s
+            if 0.0 <= tau < 0.06:
+                x += 0.003 * math.sin(math.pi * tau / 0.06)
+        return x
+
+    return f
+
+
+@pytest.mark.parametrize("after_s", [0.05, 0.15])
+def test_per_leg_sensors_do_not_take_the_trailing_foot_for_a_step(after_s) -> None:
+    """Each leg clutched once, at its own stance, and released at the next touchdown; the trailing foot
+    coming down again (inside min_step_s of the step, or later) is dismissed, and clutches nothing."""
+    rig, bank = _per_leg_rig([_leg_view(TRAJ, k, after_s) for k in range(8)])
+    try:
+        rig.run(TRAJ.touchdown_s(4) + 0.05)
+        hist = {k: "".join("1" if s else "0" for s in rig.levels(k)) for k in range(8)}
+        assert [hist[k] for k in range(4)] == ["010"] * 4, hist  # legs 0..3 stanced and released
+        assert hist[4] == "0" and all(hist[k] == "0" for k in range(5, 8)), hist
+        touch = [e.fields["channel"] for e in rig.events("touchdown")]
+        assert touch == [0, 1, 2, 3, 4]
+        dismissed = rig.events("touchdown_dismissed")
+        # each trailing foot once (leg 7 stood at arm time; leg 3 comes down again after the run ends)
+        assert [e.fields["channel"] for e in dismissed] == [7, 0, 1, 2]
+        why = "too soon after the last step" if after_s < DetectorParams().min_step_s else "the trailing leg's"
+        assert all(e.fields["why"] == why for e in dismissed)
+        assert not rig.events("fault") and rig.controller.armed
+    finally:
+        bank.close()
+        rig.factory.close()
+
+
+def test_dismissing_a_touchdown_restores_the_count() -> None:
+    det = LegDetector(DetectorParams(), [0, 1, 2])
+    t_ns = 0
+    for k in range(40):  # quiet, then a compression that reads as a touchdown
+        t_ns = k * 3_333_333
+        dec = det.update(t_ns, 0.0 if k < 10 else 0.0004)
+        if "touchdown" in dec.events:
+            break
+    assert det.stance_leg == 1
+    det.dismiss_touchdown()
+    assert det.stance_leg == 0 and det.phase.value == "wait" and det.synced

@@ -234,15 +234,113 @@ def test_cli_firmware_bad_options_are_one_line_errors(args, flag):
     assert flag in res.output and "Traceback" not in res.output
 
 
-def test_firmware_sweep_orders_the_cost_of_delay(table1):
-    """Over delays at one rate, speed and stored energy fall as the clutch gets slower (sync scheduler)."""
-    from rimless.sim.firmware_sweep import run_firmware_sweep
+def test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points(tmp_path):
+    """`sim sweep --clutch firmware` over delays at one rate: speed and stored energy fall as the clutch gets
+    slower; the table is written; a re-run on an extended grid computes only the new point, and its cached
+    rows are the first run's."""
+    import pandas as pd
 
-    out = run_firmware_sweep(table1, [300.0], [0.0, 0.010], steps=6, scheduler="sync")
-    fast, slow = out["rows"]
+    base = ["sim", "sweep", "--clutch", "firmware", "--rate-hz", "300", "--steps", "6", "--scheduler", "sync",
+            "--cache-dir", str(tmp_path / "cache"), "--out", str(tmp_path / "fw"), "--json"]
+    res = RUN.invoke(app, base + ["--clutch-delay-ms", "0,10"])
+    assert res.exit_code == 0, res.output
+    first = json.loads(res.stdout)
+    assert first["computed"] == 2 and first["cached"] == 0
+    fast, slow = first["rows"]
+    assert (fast["delay_ms"], slow["delay_ms"]) == (0.0, 10.0)
     assert fast["walks"] and slow["walks"]
     assert 0 < slow["speed_ratio"] < fast["speed_ratio"] < 1.0
     assert 0 < slow["stored_energy_ratio"] < fast["stored_energy_ratio"] < 1.0
+    table = pd.read_csv(tmp_path / "fw.csv")
+    assert list(table["delay_ms"]) == [0.0, 10.0] and (tmp_path / "fw.parquet").stat().st_size > 0
+    res = RUN.invoke(app, base + ["--clutch-delay-ms", "0:10:5"])
+    assert res.exit_code == 0, res.output
+    second = json.loads(res.stdout)
+    assert second["computed"] == 1 and second["cached"] == 2
+    assert [r["delay_ms"] for r in second["rows"]] == [0.0, 5.0, 10.0]
+    assert second["rows"][0] == fast and second["rows"][2] == slow
+    assert fast["stored_energy_ratio"] > second["rows"][1]["stored_energy_ratio"] > slow["stored_energy_ratio"]
+
+
+@pytest.mark.parametrize("args, flag", [(["--clutch", "firmware", "--k", "2500,2700"], "--k"),
+                                        (["--clutch", "firmware", "--rate-hz", "0"], "--rate-hz"),
+                                        (["--clutch", "firmware", "--clutch-delay-ms", "a"], "--clutch-delay-ms"),
+                                        (["--rate-hz", "300"], "--rate-hz"),
+                                        (["--clutch", "firmware", "--model", "ve"], "--model")])
+def test_sim_sweep_firmware_bad_options_are_one_line_errors(args, flag, tmp_path):
+    res = RUN.invoke(app, ["sim", "sweep", "--out", str(tmp_path / "x"), *args])
+    assert res.exit_code == 2 and flag in res.output and "Traceback" not in res.output, res.output
+
+
+def test_firmware_sweep_alias_still_answers(table1):
+    """The old command runs the same grid code: one point, the old JSON keys."""
+    res = RUN.invoke(app, ["sim", "firmware-sweep", "--rates-hz", "1000", "--delays-ms", "0", "--steps", "6",
+                           "--scheduler", "sync", "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert {"ideal", "rows", "steps", "noise_counts", "plot"} <= set(out)
+    (row,) = out["rows"]
+    assert row["rate_hz"] == 1000.0 and row["walks"] and 0.8 < row["stored_energy_ratio"] < 1.0
+
+
+def test_the_figure_of_a_sweep_with_critical_slopes_shows_the_advantage_kept(tmp_path):
+    """add_advantage: share of the ideal ER's CoT saving over VE that remains, from hand-made rows."""
+    from rimless.sim.firmware_sweep import add_advantage, plot_firmware_sweep
+
+    rows = [{"clutch": "ideal", "model": "er", "cot": 0.02}, {"clutch": "none (VE)", "model": "ve", "cot": 0.03}]
+    rows += [{"clutch": "firmware", "rate_hz": 300.0, "delay_ms": d, "walks": True, "cot": cot,
+              "stored_energy_ratio": 0.9, "max_abs_eigenvalue_fitted": 0.7, "limited_by": by}
+             for d, cot, by in ((0.0, 0.025, "mechanics"), (5.0, 0.03, "firmware"), (10.0, 0.035, "mechanics"))]
+    refs = add_advantage(rows)
+    assert refs["er_ideal"]["cot_saving_vs_ve"] == pytest.approx(1 / 3)
+    assert [r["er_advantage_remaining"] for r in rows[2:]] == pytest.approx([0.5, 0.0, -0.5])
+    fig = plot_firmware_sweep({"rows": rows, "ideal": {"max_abs_eigenvalue": 0.79}}, tmp_path / "f.png")
+    assert fig.stat().st_size > 1000
+
+
+def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(table1):
+    """At 1.9 deg with a 5 ms clutch at 300 Hz the gait slows step by step. The firmware's leg count
+    faults (leg_sync_lost: no touchdown within 1.4 x the running step period) and stops clutching; with
+    the step-timing checks relaxed the same walk stalls mechanically instead, classified."""
+    from rimless.sim.firmware_cli import ideal_fixed_point
+    from rimless.sim.firmware_loop import without_step_timing_checks
+
+    params = table1.replace(slope_rad=math.radians(1.9))
+    z = ideal_fixed_point(params, backend="reference", rtol=1e-9).z
+    cfg = FirmwareLoopConfig()
+    _, walk = _walk(params, z, 6, **cfg.__dict__)
+    faults = [f["fault"] for _, name, f in walk.events if name == "fault"]
+    assert faults == ["leg_sync_lost"]
+    relaxed = without_step_timing_checks(cfg)
+    assert relaxed.detector.max_step_s == 10.0 and relaxed.max_hold_s == 60.0
+    assert relaxed.detector.velocity_window_s == cfg.detector.velocity_window_s
+    loop = FirmwareLoop(params, relaxed)
+    try:
+        relaxed_walk = loop.walk(z, 6)
+    finally:
+        loop.close()
+    assert not [1 for _, name, _ in relaxed_walk.events if name == "fault"]
+    assert relaxed_walk.failure is not None and relaxed_walk.failure.reason.value == "stall"
+    # up to the fault both walks are the same walk (the relaxed checks change nothing else)
+    n = len(relaxed_walk.steps)
+    assert n >= 3
+    assert [s.period_s for s in walk.steps[:n - 1]] == [s.period_s for s in relaxed_walk.steps[:n - 1]]
+
+
+def test_boundaries_say_what_limits_the_critical_slope():
+    from rimless.sim.firmware_loop import FIRMWARE_FAULT_PREFIX, FirmwareBoundaries, FirmwareCriticalSlope
+
+    fault = f"{FIRMWARE_FAULT_PREFIX} (leg_sync_lost): it no longer clutches"
+    fw = FirmwareCriticalSlope(0.036, 0.035, fault, [])
+    stall = "step 6: stall"
+    # relaxed, the wheel walks well below where the firmware faulted: the firmware limits it
+    b = FirmwareBoundaries(fw, FirmwareCriticalSlope(0.030, 0.029, stall, []))
+    assert b.limited_by == "firmware" and b.mechanical_slope_rad == 0.030 and "would walk" in b.detail
+    # relaxed, it fails at the same boundary: the fault only came first
+    b = FirmwareBoundaries(fw, FirmwareCriticalSlope(0.036, 0.0352, stall, []))
+    assert b.limited_by == "mechanics" and "fires first" in b.detail
+    b = FirmwareBoundaries(FirmwareCriticalSlope(0.036, 0.035, stall, []), None)
+    assert b.limited_by == "mechanics" and b.mechanical_slope_rad == 0.036
 
 
 def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():
@@ -274,6 +372,42 @@ def test_replay_of_a_trial_log_written_by_the_firmware_logger(table1, er_fixed_p
     ideal_max = rep.sim_max_compression_m
     assert rep.steps[1].recorded_max_compression_m == pytest.approx(ideal_max, rel=0.1)
     assert all(s.recorded_lock_s is not None for s in rep.steps)
+    assert rep.firmware is None
+
+
+def test_replay_overlays_the_step_under_the_firmware_in_the_loop(table1, er_fixed_point, tmp_path):
+    """Replayed with the configuration the log was made with, the firmware-in-the-loop step is the recorded
+    gait: its period is the recorded one, its lock command comes after the impact by the recorded lock time
+    after the touchdown event plus the touchdown's detection lag (a few samples), its peak compression is
+    the recorded one, and the stance clutch is engaged from the lock on."""
+    from rimless.firmware.triallog import TrialLog
+    from rimless.sim.firmware_replay import FIRMWARE_STEPS, replay_trial
+
+    cfg = FirmwareLoopConfig(rate_hz=1000.0, engage_delay_s=0.002, release_delay_s=0.002, **QUIET)
+    loop = FirmwareLoop(table1, cfg)
+    loop.records = []
+    walk = loop.walk(er_fixed_point[1].z, FIRMWARE_STEPS + 1)
+    loop.close()
+    log = TrialLog(tmp_path, "fw-walk")
+    log.append(loop.records)
+    log.close()
+    rep = replay_trial(log.path, table1, firmware_config=cfg)
+    fw = rep.firmware
+    assert fw is not None and fw.failure is None
+    rec = rep.steps[FIRMWARE_STEPS - 1]  # the recorded step that is the replay's last firmware step
+    assert fw.period_s == pytest.approx(walk.steps[FIRMWARE_STEPS - 1].period_s, abs=1e-9)
+    assert fw.period_s == pytest.approx(rec.recorded_period_s, abs=3e-3)
+    lag = fw.lock_command_s - rec.recorded_lock_s
+    assert 0.0 < lag < 0.01, lag
+    assert fw.lock_s == pytest.approx(fw.lock_command_s + 0.002, abs=1.5e-3)
+    assert fw.compression_m.max() == pytest.approx(rec.recorded_max_compression_m, rel=0.05)
+    # what the firmware integrated is the true compression to a count or two (1 count = 1/62992 m)
+    n = min(len(fw.t), len(fw.sensed_compression_m))
+    assert np.max(np.abs(fw.sensed_compression_m[:n] - fw.compression_m[:n])) < 3 / 62992
+    on = fw.t[fw.stance_engaged]
+    assert on.size and on.min() >= fw.lock_s - 1e-9
+    summary = rep.summary()["firmware_in_the_loop"]
+    assert summary["simulated_period_s"] == fw.period_s and summary["lock_class"] == fw.lock_class
 
 
 def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed_point, tmp_path):
@@ -291,6 +425,11 @@ def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     assert out["steps"] == 2 and fig.stat().st_size > 1000 and out["plot"] == str(fig)
+    fw = out["firmware_in_the_loop"]
+    assert fw["rate_hz"] == 300.0 and fw["engage_delay_ms"] == 5.0 and fw["failure"] is None
+    assert fw["lock_class"] in ("peak", "rebound", "compression")
+    res = RUN.invoke(app, ["sim", "replay", str(log.path), "--ideal-only", "--json"])
+    assert res.exit_code == 0 and json.loads(res.stdout)["firmware_in_the_loop"] is None
     bad = tmp_path / "bad.jsonl"
     bad.write_text(log.path.read_text().replace('"seq"', '"seq', 1))
     res = RUN.invoke(app, ["sim", "replay", str(bad)])
@@ -314,3 +453,36 @@ def test_robot_config_supplies_the_firmware_settings(tmp_path):
     bad.write_text(text.replace("touch_debounce_samples = 3", "touch_debounce_samples = -3"))
     res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--robot-config", str(bad)])
     assert res.exit_code == 2 and "touch_debounce_samples" in res.output and "bad.toml" in res.output
+
+
+def test_one_sensor_per_leg_in_the_loop_clutches_each_step_once(table1, er_fixed_point):
+    """Per-leg sensors (robot.toml with one [[sensor]] per leg): every step has one touchdown and one lock
+    of its own stance leg; the trailing foot coming down again on its own sensor is dismissed by the
+    firmware, not taken for a step; the gait is the one-sensor gait to within the sensor noise."""
+    cfg = dict(rate_hz=300.0, engage_delay_s=0.005, release_delay_s=0.005, **QUIET)
+    _, one = _walk(table1, er_fixed_point[1].z, 3, **cfg)
+    loop, per_leg = _walk(table1, er_fixed_point[1].z, 3, sensors="per-leg", **cfg)
+    assert per_leg.failure is None and len(loop.controller.channels) == 8
+    assert all(f.motion_reads >= per_leg.samples > 0 for f in loop.fakes)  # every sensor read at every sample
+    for k, step in enumerate(per_leg.steps):
+        names = [n for _, n in step.firmware_events]
+        assert names.count("lock") == 1 and names.count("touchdown") <= 1, names
+        assert step.lock_class == one.steps[k].lock_class
+    locks = [f["leg"] for _, n, f in per_leg.events if n == "lock"]
+    assert locks == [1, 2, 3]  # the stance legs of the three steps (leg 0 stood through the priming step)
+    assert any(n == "touchdown_dismissed" for _, n, _ in per_leg.events)
+    assert per_leg.steps[-1].z_end == pytest.approx(one.steps[-1].z_end, rel=0.02)
+    assert per_leg.steps[-1].stored_energy_J == pytest.approx(one.steps[-1].stored_energy_J, rel=0.03)
+
+
+def test_bench_reports_steps_per_second_beside_the_reference_with_the_load(table1, capsys):
+    from rimless.sim.firmware_cli import run_bench
+
+    out = run_bench(table1, rates_hz=(1000.0,), steps=1)
+    assert [(r["rate_hz"], r["sensors"]) for r in out["rows"]] == [(1000.0, "one"), (1000.0, "per-leg")]
+    for r in out["rows"]:
+        assert r["steps"] == 1 and r["steps_per_s"] > 0 and r["reference_ideal_steps_per_s"] > 0
+        assert r["slowdown_vs_ideal"] == pytest.approx(r["reference_ideal_steps_per_s"] / r["steps_per_s"])
+        assert 300 < r["samples_per_step"] < 340  # 1 kHz over a ~0.31-0.37 s step
+        assert r["first_step_section_difference"] < 0.05  # the firmware's first step near the ideal one
+    assert len(out["load_average"]) == 3 and "load average" in capsys.readouterr().out
