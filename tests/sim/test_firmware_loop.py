@@ -308,7 +308,7 @@ def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(t
     params = table1.replace(slope_rad=math.radians(1.9))
     z = ideal_fixed_point(params, backend="reference", rtol=1e-9).z
     cfg = FirmwareLoopConfig()
-    _, walk = _walk(params, z, 6, **cfg.__dict__)
+    _, walk = _walk(params, z, 5, **cfg.__dict__)
     faults = [f["fault"] for _, name, f in walk.events if name == "fault"]
     assert faults == ["leg_sync_lost"]
     relaxed = without_step_timing_checks(cfg)
@@ -428,8 +428,6 @@ def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed
     fw = out["firmware_in_the_loop"]
     assert fw["rate_hz"] == 300.0 and fw["engage_delay_ms"] == 5.0 and fw["failure"] is None
     assert fw["lock_class"] in ("peak", "rebound", "compression")
-    res = RUN.invoke(app, ["sim", "replay", str(log.path), "--ideal-only", "--json"])
-    assert res.exit_code == 0 and json.loads(res.stdout)["firmware_in_the_loop"] is None
     bad = tmp_path / "bad.jsonl"
     bad.write_text(log.path.read_text().replace('"seq"', '"seq', 1))
     res = RUN.invoke(app, ["sim", "replay", str(bad)])
