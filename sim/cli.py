@@ -13,7 +13,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from rimless.cli import print_json, user_facing
+from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 
 app = typer.Typer(no_args_is_help=True)
