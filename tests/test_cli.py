@@ -25,6 +25,14 @@ def test_help_imports_no_heavy_library():
     assert "sim" in out
 
 
+@pytest.mark.parametrize("module", ["rimless.sim.cli", "rimless.analysis.cli", "rimless.firmware.cli",
+                                    "rimless.sim.firmware_cli", "rimless.cli"])
+def test_each_command_module_imports_on_its_own(module):
+    """A part's command module imports first, before rimless.cli registers the parts (no circular import)."""
+    res = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-1500:]
+
+
 @pytest.mark.parametrize(
     ("args", "named"),
     [
