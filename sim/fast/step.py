@@ -126,7 +126,7 @@ def dlsp_tolerances(rtol, atol):
 
 
 @_jit
-def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
+def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
 
     Returns (status, detail, phase, t_s, y_plus (10,), J (2x2), times (3,), nfev, nsteps, nstiff, snap_J):
@@ -134,7 +134,8 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     t_s the step period (or the failure time), s; times = end of dlsp, end of free compression (ER; else
     the touchdown time), touchdown, s; J = dz'/dz when want_jac (else zeros); snap_J the mechanical
     energy the relabelling adds by snapping the old trailing leg to L0 with zero rate (J, signed: > 0 adds
-    energy, < 0 removes it; 0 unless the step ends in a valid impact).
+    energy, < 0 removes it; 0 unless the step ends in a valid impact). counts (3x2 int64, zeroed here)
+    receives each phase's right-hand-side evaluations and accepted steps (rows dlsp, slsp_free, slsp_clutched).
     """
     y0, T = fm.state_from_section(mi, z, p)
     N = 30 if want_jac else 10
@@ -151,6 +152,7 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     nstiff = 0
     snap = 0.0
     t = 0.0
+    counts[:, :] = 0
     qdd = np.empty(5)
     lam = np.zeros(4)
     for i in range(10):
@@ -168,6 +170,8 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
             mi, fm.DLSP, p, ya, t, _DLSP_CODES, _DLSP_DIRS, PHASE_TIME_LIMIT_S, rtol_d, atol_d, n_err, want_jac,
             False, -1.0, max_steps)
+        counts[fm.DLSP, 0] = nf
+        counts[fm.DLSP, 1] = ns
         nfev += nf
         nsteps += ns
         nstiff += nst
@@ -203,6 +207,8 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
         st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
             mi, fm.SLSP_FREE, p, ya, t, _FREE_ER_CODES, _FREE_ER_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err,
             want_jac, False, -1.0, max_steps)
+        counts[fm.SLSP_FREE, 0] = nf
+        counts[fm.SLSP_FREE, 1] = ns
         nfev += nf
         nsteps += ns
         nstiff += nst
@@ -234,6 +240,8 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps):
     st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
         mi, final, p, ya, t, _SS_CODES, _SS_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac, False, -1.0,
         max_steps)
+    counts[final, 0] = nf
+    counts[final, 1] = ns
     nfev += nf
     nsteps += ns
     nstiff += nst
