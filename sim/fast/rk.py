@@ -451,6 +451,19 @@ def _rk_stages(mi, phase, p, y, f0, h, K, ytmp, y_new, lam, ws, with_var, with_d
 
 
 @_jit
+def _room(rec_t, rec_y, nrec):
+    """The record buffers, doubled (contents kept) if the next record nrec would not fit."""
+    cap = rec_t.shape[0]
+    if nrec < cap:
+        return rec_t, rec_y
+    rt = np.empty(2 * cap)
+    ry = np.empty((2 * cap, 10))
+    rt[:nrec] = rec_t[:nrec]
+    ry[:nrec] = rec_y[:nrec]
+    return rt, ry
+
+
+@_jit
 def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
               record_dt, max_steps):
     """Integrate one phase from (t0, y0) until a guard in `codes` fires or t0 + t_max is reached.
@@ -672,31 +685,17 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 tg = t0 + next_grid * record_dt
                 if tg >= t_stop:
                     break
-                if nrec >= cap:
-                    cap *= 2
-                    rt = np.empty(cap)
-                    ry = np.empty((cap, 10))
-                    rt[:nrec] = rec_t[:nrec]
-                    ry[:nrec] = rec_y[:nrec]
-                    rec_t = rt
-                    rec_y = ry
+                rec_t, rec_y = _room(rec_t, rec_y, nrec)
                 rec_t[nrec] = tg
                 _dense_eval(F, y, (tg - t) / h, 10, ybuf)
                 for i in range(10):
                     rec_y[nrec, i] = ybuf[i]
                 nrec += 1
                 next_grid += 1
-            if nrec >= cap:
-                cap *= 2
-                rt = np.empty(cap)
-                ry = np.empty((cap, 10))
-                rt[:nrec] = rec_t[:nrec]
-                ry[:nrec] = rec_y[:nrec]
-                rec_t = rt
-                rec_y = ry
+            rec_t, rec_y = _room(rec_t, rec_y, nrec)
         if best_e >= 0:
             # the state at the event: one DOP853 step from the start of the step holding it to the event time
-            # located on the dense output (the interpolant is a order less accurate than the step)
+            # located on the dense output (the interpolant is an order less accurate than the step)
             y_end = np.empty(N)
             if best_prev:
                 ok = _rk_stages(mi, phase, p, yp_old, Kp[0], best_t - tp_old, K, ytmp, y_end, lam_new, ws,

@@ -126,6 +126,32 @@ def dlsp_tolerances(rtol, atol):
 
 
 @_jit
+def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps, ending, touchdown_status,
+               time_limit_status, counts):
+    """One phase of the map from (t, ya) until a guard of `codes` fires, counted into counts[phase].
+
+    Returns (status, detail, t_end, y_end, nfev, nsteps, nstiff): status OK when the phase ended at its guard
+    `ending`; else the failure: the integrator's (D_SOLVER), time_limit_status at the phase time limit,
+    STALL / STANCE_LIFT_OFF at the stall / stance lift-off guards, touchdown_status at an early touchdown."""
+    st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
+        mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, want_jac, False, -1.0, max_steps)
+    counts[phase, 0] = nf
+    counts[phase, 1] = ns
+    if st != rk.STATUS_OK:
+        return _map_status(st, fired), D_SOLVER, t_end, y_end, nf, ns, nst
+    if fired < 0:
+        return time_limit_status, D_TIME_LIMIT, t_end, y_end, nf, ns, nst
+    code = codes[fired]
+    if code == ending:
+        return OK, D_NONE, t_end, y_end, nf, ns, nst
+    if code == fm.STALL:
+        return STALL, D_GUARD, t_end, y_end, nf, ns, nst
+    if code == fm.TOUCHDOWN:
+        return touchdown_status, D_GUARD, t_end, y_end, nf, ns, nst
+    return STANCE_LIFT_OFF, D_GUARD, t_end, y_end, nf, ns, nst
+
+
+@_jit
 def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
 
@@ -139,7 +165,6 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """
     y0, T = fm.state_from_section(mi, z, p)
     N = 30 if want_jac else 10
-    n_err = 10
     ya = np.zeros(N)
     ya[:10] = y0
     if want_jac:
@@ -167,23 +192,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
         return INTEGRATION, D_NOT_FINITE, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
     if lam[3] > 0.0:
         rtol_d, atol_d = dlsp_tolerances(rtol, atol)
-        st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
-            mi, fm.DLSP, p, ya, t, _DLSP_CODES, _DLSP_DIRS, PHASE_TIME_LIMIT_S, rtol_d, atol_d, n_err, want_jac,
-            False, -1.0, max_steps)
-        counts[fm.DLSP, 0] = nf
-        counts[fm.DLSP, 1] = ns
+        st, detail, t_end, y_end, nf, ns, nst = _run_phase(
+            mi, fm.DLSP, p, ya, t, _DLSP_CODES, _DLSP_DIRS, rtol_d, atol_d, want_jac, max_steps, fm.LIFTOFF_A,
+            DLSP_NEVER_ENDS, DLSP_NEVER_ENDS, counts)
         nfev += nf
         nsteps += ns
         nstiff += nst
-        if st != rk.STATUS_OK:
-            return _map_status(st, fired), D_SOLVER, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        if fired < 0:
-            return DLSP_NEVER_ENDS, D_TIME_LIMIT, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        code = _DLSP_CODES[fired]
-        if code == fm.STALL:
-            return STALL, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        if code == fm.TOUCHDOWN:
-            return DLSP_NEVER_ENDS, D_GUARD, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
+        if st != OK:
+            return st, detail, 0, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         ya = y_end
         t = t_end
         if want_jac:
@@ -204,25 +220,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     if er:
         if ys[8] >= 0.0:
             return CLUTCH_MISSED, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
-        st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
-            mi, fm.SLSP_FREE, p, ya, t, _FREE_ER_CODES, _FREE_ER_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err,
-            want_jac, False, -1.0, max_steps)
-        counts[fm.SLSP_FREE, 0] = nf
-        counts[fm.SLSP_FREE, 1] = ns
+        st, detail, t_end, y_end, nf, ns, nst = _run_phase(
+            mi, fm.SLSP_FREE, p, ya, t, _FREE_ER_CODES, _FREE_ER_DIRS, rtol, atol, want_jac, max_steps,
+            fm.CLUTCH_LOCK, TOUCHDOWN_BEFORE_CLUTCH, INTEGRATION, counts)
         nfev += nf
         nsteps += ns
         nstiff += nst
-        if st != rk.STATUS_OK:
-            return _map_status(st, fired), D_SOLVER, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        if fired < 0:
-            return INTEGRATION, D_TIME_LIMIT, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        code = _FREE_ER_CODES[fired]
-        if code == fm.TOUCHDOWN:
-            return TOUCHDOWN_BEFORE_CLUTCH, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        if code == fm.STALL:
-            return STALL, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-        if code == fm.LIFTOFF_B:
-            return STANCE_LIFT_OFF, D_GUARD, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
+        if st != OK:
+            return st, detail, 1, t_end, yp, J, times, nfev, nsteps, nstiff, snap
         ya = y_end
         t = t_end
         if want_jac:
@@ -237,23 +242,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     else:
         final = fm.SLSP_FREE
     times[1] = t
-    st, t_end, y_end, fired, nf, ns, nst, _, _ = rk.run_phase(
-        mi, final, p, ya, t, _SS_CODES, _SS_DIRS, PHASE_TIME_LIMIT_S, rtol, atol, n_err, want_jac, False, -1.0,
-        max_steps)
-    counts[final, 0] = nf
-    counts[final, 1] = ns
+    st, detail, t_end, y_end, nf, ns, nst = _run_phase(
+        mi, final, p, ya, t, _SS_CODES, _SS_DIRS, rtol, atol, want_jac, max_steps, fm.TOUCHDOWN, STALL, STALL,
+        counts)
     nfev += nf
     nsteps += ns
     nstiff += nst
-    if st != rk.STATUS_OK:
-        return _map_status(st, fired), D_SOLVER, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-    if fired < 0:
-        return STALL, D_TIME_LIMIT, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-    code = _SS_CODES[fired]
-    if code == fm.STALL:
-        return STALL, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
-    if code == fm.LIFTOFF_B:
-        return STANCE_LIFT_OFF, D_GUARD, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
+    if st != OK:
+        return st, detail, final, t_end, yp, J, times, nfev, nsteps, nstiff, snap
     ya = y_end
     t = t_end
     times[2] = t
