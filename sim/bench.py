@@ -95,6 +95,19 @@ def _compile_cost(quick: bool) -> dict[str, Any]:
     return out
 
 
+def loosest_meeting(rows: list[dict[str, Any]], model: str, backend: str,
+                    target: float = TARGET_ERROR) -> dict[str, Any] | None:
+    """The row of the loosest rtol whose error, and that of every tighter rtol run, is <= target (a loose
+    rtol that meets it by chance, above a tighter one that does not, does not count); None if none."""
+    mine = sorted((r for r in rows if r["model"] == model and r["backend"] == backend), key=lambda r: r["rtol"])
+    best = None
+    for r in mine:
+        if r["error"] > target:
+            break
+        best = r
+    return best
+
+
 PEER_PHASE_S = 0.2  # the peer comparison integrates clutched single support for this long (s)
 
 
@@ -106,12 +119,12 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
     end state against scipy DOP853 at rtol 1e-13 on that right-hand side. Skipped with --quick: nbkode
     compiles its solver for minutes in every new process."""
     if quick:
-        return {"skipped": "--quick (nbkode compiles its solver for minutes in each new process)"}
+        return {"skipped": "--quick (nbkode compiles for minutes in each process)"}
     try:
         import nbkode  # type: ignore[import-not-found]
         import numba
     except ImportError:
-        return {"skipped": "numbakit-ode (nbkode) is not installed: pip install numbakit-ode"}
+        return {"skipped": "not installed (pip install numbakit-ode)"}
     from scipy.integrate import solve_ivp
 
     from rimless.sim.fast import model as fm
@@ -143,6 +156,10 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
     ys[8] = 0.0
     t0 = float(r1[1])
     ref = solve_ivp(rhs, (t0, t0 + PEER_PHASE_S), ys, method="DOP853", rtol=1e-13, atol=1e-15).y[:, -1]
+    import warnings
+
+    warnings.filterwarnings("ignore", module="nbkode")  # its numba performance / experimental-feature notes
+    warnings.filterwarnings("ignore", category=numba.NumbaWarning)
     try:
         t_c = time.perf_counter()
         nbkode.DOP853(rhs, t0, ys, rtol=1e-6, atol=1e-8, first_step=1e-3).run(t0 + PEER_PHASE_S)
@@ -164,7 +181,7 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
         for name, fn in (("fast-dop853", ours), ("nbkode-DOP853", peer)):
             rows.append({"backend": name, "rtol": rtol, "error": float(np.max(np.abs(fn() - ref))),
                          "seconds": _time_per_call(fn, 0.3, 200)})
-    return {"phase": "slsp_clutched (ER, from clutch lock)", "duration_s": PEER_PHASE_S,
+    return {"phase": "ER clutched single support", "duration_s": PEER_PHASE_S,
             "peer_first_call_s": compile_s, "rows": rows}
 
 
@@ -243,20 +260,9 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     **per_phase,
                 })
 
-    def loosest(model: str, backend: str) -> dict[str, Any] | None:
-        """The loosest rtol whose error, and that of every tighter rtol run, meets the target (a loose rtol
-        that meets it by chance does not count)."""
-        mine = sorted((r for r in rows if r["model"] == model and r["backend"] == backend), key=lambda r: r["rtol"])
-        best = None
-        for r in mine:
-            if r["error"] > TARGET_ERROR:
-                break
-            best = r
-        return best
-
     speedups: dict[str, Any] = {}
     for model in ("er", "ve"):
-        f, d = loosest(model, "fast-dop853"), loosest(model, "scipy-DOP853")
+        f, d = loosest_meeting(rows, model, "fast-dop853"), loosest_meeting(rows, model, "scipy-DOP853")
         speedups[model] = {
             "fast_rtol": f and f["rtol"], "fast_seconds_per_map": f and f["seconds_per_map"],
             "dop853_rtol": d and d["rtol"], "dop853_seconds_per_map": d and d["seconds_per_map"],
@@ -418,13 +424,14 @@ def format_table(result: dict[str, Any]) -> str:
                      f"({cont['fast_reason']}, {cont['branch_points']} branch points); {ref}")
     peer = result.get("peer") or {}
     if "rows" in peer:
-        lines.append(f"peer on one phase ({peer['phase']}, {peer['duration_s']:g} s; "
-                     f"nbkode first call {peer['peer_first_call_s']:.0f} s):")
+        lines.append(f"peer integrator, one phase: {peer['phase']}, {peer['duration_s']:g} s")
+        lines.append(f"  (nbkode's first call, compiling: {peer['peer_first_call_s']:.0f} s)")
         for r in peer["rows"]:
             lines.append(f"  {r['backend']:14} rtol {r['rtol']:6.0e} error {r['error']:8.1e} "
                          f"{r['seconds'] * 1e3:8.3f} ms")
     elif peer.get("skipped"):
-        lines.append(f"peer (nbkode) not run: {peer['skipped']}")
+        lines.append("peer integrator (nbkode) not run:")
+        lines.append(f"  {peer['skipped']}")
     c = result["compile"]
     for label in ("cold", "warm"):
         if label in c and "first_calls_s" in c[label]:

@@ -72,7 +72,7 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     qdd = ws[fm.WORKSPACE_SIZE:fm.WORKSPACE_SIZE + 5]
     if with_var:
         V = y[VAR_OFFSET:VAR_OFFSET + VAR_SIZE].reshape((2, 10)).T
-        dqdd = np.empty((5, 2))
+        dqdd = ws[0:10].reshape((5, 2))  # no allocation per evaluation
         ok = fm.accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws)
         if not ok:
             return False
