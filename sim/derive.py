@@ -220,65 +220,96 @@ def generate_source(model: str) -> str:
     return "\n\n".join(parts)
 
 
-# Single-support phases reduced to their free coordinates (q indices). The pinned coordinates' accelerations
-# are zero in the KKT solution for any state (their constraint rows have no velocity term), so the reduced
-# equations equal the full KKT solve for every state, not only for pinned rates at zero.
+# Phases reduced to their free coordinates (q indices). Foot b is pinned in every phase and L1 too when
+# clutched; the pinned coordinates' accelerations are zero in the KKT solution for any state (their constraint
+# rows have no velocity term), so the reduced equations equal the full KKT solve for every state, not only
+# for consistent rates. Double support is one closed chain: foot a's two constraint rows J_a are kept and
+# solved with the free block (Schur complement, 2x2), which again equals the KKT solve for any state.
 REDUCED_PHASES = {
-    "slsp_free_accel": {"free": (2, 3, 4), "rows": (0, 1)},
-    "slsp_clutched_accel": {"free": (2, 4), "rows": (0, 1, 3)},
+    "dlsp_accel": {"free": (2, 3, 4), "rows": (0, 1), "chain": True},
+    "slsp_free_accel": {"free": (2, 3, 4), "rows": (0, 1), "chain": False},
+    "slsp_clutched_accel": {"free": (2, 4), "rows": (0, 1, 3), "chain": False},
 }
 
 
+def _solve_lines(nf: int, rhs: str, out: str, tmp: str, indent: str) -> list[str]:
+    """M_ff x = rhs with the Cholesky factors l (written out): rhs{a} -> out{a}, through tmp{a}."""
+    lines = []
+    for a in range(nf):
+        acc = f"{rhs}{a}" + "".join(f" - l{a}{k}*{tmp}{k}" for k in range(a))
+        lines.append(f"{indent}{tmp}{a} = ({acc}) / l{a}{a}")
+    for a in reversed(range(nf)):
+        acc = f"{tmp}{a}" + "".join(f" - l{k}{a}*{out}{k}" for k in range(a + 1, nf))
+        lines.append(f"{indent}{out}{a} = ({acc}) / l{a}{a}")
+    return lines
+
+
 def _reduced_function(model: str, name: str, directional: bool = False) -> str:
-    """q'' and the constraint forces of one single-support phase in its free coordinates f:
-    M_ff f'' = -h_f (Cholesky, written out), lambda_r = M_rf f'' + h_r for the pinned rows r. Only the
-    entries needed are generated, with common subexpressions shared. With directional=True also the
-    derivative of q'' along tangent columns V (the variational equations), from dM_ff/dq and dh_f/dy."""
+    """q'' and the constraint forces of one phase in its free coordinates f:
+    M_ff f'' = -h_f + J_f^T lambda_a (Cholesky, written out; in double support with J_f f'' = -J_a' q',
+    lambda_a from the 2x2 Schur complement), lambda_r = (M f'' + h)_r - (J_a^T lambda_a)_r for the pinned rows
+    r. Only the entries needed are generated, with common subexpressions shared and the angles theta + j pi/4
+    expanded in sin(theta), cos(theta). With directional=True also the derivative of q'' along tangent
+    columns V (the variational equations): the same system differentiated, solved with the same factors."""
     eq = equations(model)
-    M, h = eq["M"], eq["h"]
+    M, h, Ja, jd = eq["M"], eq["h"], eq["Ja"], eq["jdot_qd_a"]
     spec = REDUCED_PHASES[name.replace("_dir", "_accel")]
-    free, rows = spec["free"], spec["rows"]
-    zero: dict[sp.Symbol, int] = {}
+    free, rows, chain = spec["free"], spec["rows"], spec["chain"]
+    nf = len(free)
     outs: list[tuple[str, sp.Expr]] = []
     for a, i in enumerate(free):
         for b, j in enumerate(free):
             if b >= a:
                 outs.append((f"m{a}{b}", M[i, j]))
-    outs += [(f"r{a}", -h[i].subs(zero)) for a, i in enumerate(free)]
+    outs += [(f"r{a}", -h[i]) for a, i in enumerate(free)]
     for c, r in enumerate(rows):
         outs += [(f"b{c}{a}", M[r, j]) for a, j in enumerate(free)]
-        outs.append((f"hb{c}", h[r].subs(zero)))
-    nf = len(free)
-    positions = (2, 3, 4)  # x_b, y_b never enter M or h' derivatives (translation invariance)
+        outs.append((f"hb{c}", h[r]))
+    if chain:
+        for r in range(2):
+            outs += [(f"j{r}{a}", Ja[r, i]) for a, i in enumerate(free)]
+            outs += [(f"jb{r}{c}", Ja[r, i]) for c, i in enumerate(rows)]
+            outs.append((f"jd{r}", jd[r]))
+    positions = (2, 3, 4)  # x_b, y_b never enter M, h, J_a or J_a' q' (translation invariance)
+    for k in (0, 1):
+        assert all(sp.diff(e, q_syms[k]) == 0 for _, e in outs), "x_b or y_b enters the reduced equations"
     if directional:
-        r_exprs = {a: -h[i].subs(zero) for a, i in enumerate(free)}
         for k in positions:
             for a, i in enumerate(free):
                 for b, j in enumerate(free):
                     if b >= a:
                         outs.append((f"dm{a}{b}_{k}", M[i, j].diff(q_syms[k])))
-            outs += [(f"dr{a}_q{k}", r_exprs[a].diff(q_syms[k])) for a in range(nf)]
+            outs += [(f"dr{a}_q{k}", -h[i].diff(q_syms[k])) for a, i in enumerate(free)]
+            if chain:
+                for r in range(2):
+                    outs += [(f"dj{r}{a}_{k}", Ja[r, i].diff(q_syms[k])) for a, i in enumerate(free)]
+                    outs.append((f"djd{r}_q{k}", jd[r].diff(q_syms[k])))
         for k in range(5):
-            outs += [(f"dr{a}_v{k}", r_exprs[a].diff(qd_syms[k])) for a in range(nf)]
+            outs += [(f"dr{a}_v{k}", -h[i].diff(qd_syms[k])) for a, i in enumerate(free)]
+            if chain:
+                outs += [(f"djd{r}_v{k}", jd[r].diff(qd_syms[k])) for r in range(2)]
+    th = q_syms[2]
+    outs = [(label, sp.expand_trig(e) if e.has(th) else e) for label, e in outs]
     exprs = [e for _, e in outs]
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), optimizations="basic")
     used = set().union(*(e.free_symbols for e in exprs))
     phase_name = name.replace("_accel", "").replace("_dir", "")
+    nl = len(rows) + (2 if chain else 0)
     if directional:
         lines = [f"def {name}(q, qd, p, qdd, lam, V, dqdd):",
                  f'    """As {phase_name}_accel, and dqdd[:, c] = (dq\'\'/dy) V[:, c] for the columns of V (10 x n):'
                  '\n    exact for any state and tangent (x_b, y_b do not enter M or dh)."""']
     else:
         lines = [f"def {name}(q, qd, p, qdd, lam):",
-                 f'    """q\'\' (5,) and lambda ({len(rows)},) of {phase_name} written into qdd and lam, '
+                 f'    """q\'\' (5,) and lambda ({nl},) of {phase_name} written into qdd and lam, '
                  "from the phase's free coordinates;\n    False if the free block of M is not positive "
-                 'definite."""']
+                 'definite' + (" or the chain's constraints are singular" if chain else "") + '."""']
     lines += [ln for ln in _unpack(True, True) if ln.split("=")[0].strip() in {str(x) for x in used}]
     for sym, e in replacements:
         lines.append(f"    {sym} = {_fmt(e)}")
     for (label, _), e in zip(outs, reduced, strict=True):
         lines.append(f"    {label} = {_fmt(e)}")
-    # Cholesky M_ff = L L^T and the two triangular solves, written out
+    # Cholesky M_ff = L L^T, written out
     for a in range(nf):
         for b in range(a + 1):
             acc = f"m{b}{a}" + "".join(f" - l{a}{k}*l{b}{k}" for k in range(b))
@@ -288,38 +319,71 @@ def _reduced_function(model: str, name: str, directional: bool = False) -> str:
                 lines.append(f"    l{a}{a} = math.sqrt(d{a})")
             else:
                 lines.append(f"    l{a}{b} = ({acc}) / l{b}{b}")
-    for a in range(nf):
-        acc = f"r{a}" + "".join(f" - l{a}{k}*z{k}" for k in range(a))
-        lines.append(f"    z{a} = ({acc}) / l{a}{a}")
-    for a in reversed(range(nf)):
-        acc = f"z{a}" + "".join(f" - l{k}{a}*a{k}" for k in range(a + 1, nf))
-        lines.append(f"    a{a} = ({acc}) / l{a}{a}")
+    lines += _solve_lines(nf, "r", "u", "z", "    ")
+    if chain:
+        # W = M_ff^-1 J_f^T, S = J_f W, lambda_a = S^-1 (-J_a' q' - J_f u), f'' = u + W lambda_a
+        for r in range(2):
+            lines += _solve_lines(nf, f"j{r}", f"w{r}", f"x{r}", "    ")
+        for r in range(2):
+            for c in range(2):
+                lines.append(f"    s{r}{c} = " + " + ".join(f"j{r}{a}*w{c}{a}" for a in range(nf)))
+        lines.append("    det = s00*s11 - s01*s10")
+        lines.append("    if not det != 0.0:\n        return False")
+        for r in range(2):
+            lines.append(f"    c{r} = -jd{r} - " + " - ".join(f"j{r}{a}*u{a}" for a in range(nf)))
+        lines.append("    la0 = (c0*s11 - s01*c1) / det")
+        lines.append("    la1 = (s00*c1 - s10*c0) / det")
+        for a in range(nf):
+            lines.append(f"    a{a} = u{a} + w0{a}*la0 + w1{a}*la1")
+    else:
+        for a in range(nf):
+            lines.append(f"    a{a} = u{a}")
     for i in range(5):
         lines.append(f"    qdd[{i}] = {f'a{free.index(i)}' if i in free else '0.0'}")
     for c in range(len(rows)):
-        lines.append(f"    lam[{c}] = " + " + ".join(f"b{c}{a}*a{a}" for a in range(nf)) + f" + hb{c}")
+        line = f"    lam[{c}] = " + " + ".join(f"b{c}{a}*a{a}" for a in range(nf)) + f" + hb{c}"
+        if chain:
+            line += f" - jb0{c}*la0 - jb1{c}*la1"
+        lines.append(line)
+    if chain:
+        lines.append(f"    lam[{len(rows)}] = la0")
+        lines.append(f"    lam[{len(rows) + 1}] = la1")
     if directional:
-        # M_ff da = sum_k V_k (dr/dy_k - dM_ff/dq_k a), solved with the same factors, per column of V
+        # M_ff da = sum_k V_k (dr/dy_k - dM_ff/dq_k a + dJ_f^T/dq_k lambda_a), and in double support
+        # J_f da = -sum_k V_k (d(J_a' q')/dy_k + dJ_f/dq_k a), solved with the same factors, per column of V
         lines.append("    for col in range(V.shape[1]):")
         for k in positions:
             lines.append(f"        v{k} = V[{k}, col]")
         for k in range(5):
-            lines.append(f"        w{k} = V[{5 + k}, col]")
+            lines.append(f"        vd{k} = V[{5 + k}, col]")
         for a in range(nf):
             terms = []
             for k in positions:
-                inner = " - ".join([f"dr{a}_q{k}"] + [f"dm{min(a, b)}{max(a, b)}_{k}*a{b}" for b in range(nf)])
+                parts = [f"dr{a}_q{k}"] + [f"dm{min(a, b)}{max(a, b)}_{k}*a{b}" for b in range(nf)]
+                inner = " - ".join(parts)
+                if chain:
+                    inner += f" + dj0{a}_{k}*la0 + dj1{a}_{k}*la1"
                 terms.append(f"v{k}*({inner})")
-            terms += [f"w{k}*dr{a}_v{k}" for k in range(5)]
+            terms += [f"vd{k}*dr{a}_v{k}" for k in range(5)]
             lines.append(f"        s{a} = " + " + ".join(terms))
-        for a in range(nf):
-            acc = f"s{a}" + "".join(f" - l{a}{k}*y{k}" for k in range(a))
-            lines.append(f"        y{a} = ({acc}) / l{a}{a}")
-        for a in reversed(range(nf)):
-            acc = f"y{a}" + "".join(f" - l{k}{a}*e{k}" for k in range(a + 1, nf))
-            lines.append(f"        e{a} = ({acc}) / l{a}{a}")
+        lines += _solve_lines(nf, "s", "du", "y", "        ")
+        if chain:
+            for r in range(2):
+                terms = []
+                for k in positions:
+                    terms.append(f"v{k}*(djd{r}_q{k} + " + " + ".join(f"dj{r}{b}_{k}*a{b}" for b in range(nf)) + ")")
+                terms += [f"vd{k}*djd{r}_v{k}" for k in range(5)]
+                lines.append(f"        e{r} = -(" + " + ".join(terms) + ") - "
+                             + " - ".join(f"j{r}{a}*du{a}" for a in range(nf)))
+            lines.append("        m0 = (e0*s11 - s01*e1) / det")
+            lines.append("        m1 = (s00*e1 - s10*e0) / det")
+            for a in range(nf):
+                lines.append(f"        da{a} = du{a} + w0{a}*m0 + w1{a}*m1")
+        else:
+            for a in range(nf):
+                lines.append(f"        da{a} = du{a}")
         for i in range(5):
-            lines.append(f"        dqdd[{i}, col] = {f'e{free.index(i)}' if i in free else '0.0'}")
+            lines.append(f"        dqdd[{i}, col] = {f'da{free.index(i)}' if i in free else '0.0'}")
     lines.append("    return True")
     return "\n".join(lines) + "\n"
 

@@ -140,6 +140,9 @@ class FastStep:
     relabel_snap_J: float = 0.0  # energy the relabelling snap of the old trailing leg adds (J; < 0 removes)
     method: str = "fast-dop853"
     contact: BilateralContact | None = None  # with bilateral=True only
+    # per phase (dlsp, slsp_free, slsp_clutched): right-hand-side evaluations and accepted steps
+    phase_nfev: tuple[int, int, int] = (0, 0, 0)
+    phase_steps: tuple[int, int, int] = (0, 0, 0)
 
 
 @dataclass(frozen=True)
@@ -196,22 +199,25 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     er = _check_model(model)
     atol = rtol * 1e-2 if atol is None else atol
     zz = np.asarray(z, dtype=np.float64).reshape(2)
+    counts = np.zeros((3, 2), dtype=np.int64)
     c = None
     if bilateral:
         c = np.empty(fs.CONTACT_SIZE if record_contact else 0)
         st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map_contact(
             mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
-            int(max_steps), True, c)
+            int(max_steps), counts, True, c)
     else:
         st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map(
             mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
-            int(max_steps))
+            int(max_steps), counts)
     if st != fs.OK:
         _raise(st, detail, phase, t, nsteps)
     return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
                     jacobian=J if jacobian else None, phase_end_s=times, nfev=int(nfev), nsteps=int(nsteps),
                     nstiff=int(nstiff), relabel_snap_J=float(snap),
-                    contact=BilateralContact.of(c) if c is not None and len(c) else None)
+                    contact=BilateralContact.of(c) if c is not None and len(c) else None,
+                    phase_nfev=tuple(int(v) for v in counts[:, 0]),  # type: ignore[arg-type]
+                    phase_steps=tuple(int(v) for v in counts[:, 1]))  # type: ignore[arg-type]
 
 
 def fast_map(params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10,
@@ -335,6 +341,7 @@ class FastPoincareMap:
         self._p = param_vector(self.params)
         self._mi = mass_model_index(self.params)
         self._cache: tuple[tuple[float, float], np.ndarray, float, np.ndarray | None] | None = None
+        self._counts = np.zeros((3, 2), dtype=np.int64)  # per-phase counters of the last compiled call
 
     # -- helpers -------------------------------------------------------------------------------
     def _compiled_ok(self) -> bool:
@@ -366,11 +373,11 @@ class FastPoincareMap:
         if self.bilateral:
             st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map_contact(
                 self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-                jacobian, int(self.integrator.max_steps), True, np.empty(0))
+                jacobian, int(self.integrator.max_steps), self._counts, True, np.empty(0))
         else:
             st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map(
                 self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-                jacobian, int(self.integrator.max_steps))
+                jacobian, int(self.integrator.max_steps), self._counts)
         if st == fs.TOO_MANY_STEPS and self.stiff_fallback and not self.bilateral:
             from rimless.sim.integrators import ScipyIntegrator
 

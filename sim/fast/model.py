@@ -42,49 +42,36 @@ def _compile(name: str) -> tuple:
     return tuple(_jit(getattr(mod, name)) for mod in (_el, _sl, _af))
 
 
-_M = _compile("mass_matrix")
-_H = _compile("bias")
-_JA = _compile("jac_a")
-_JDOT = _compile("jdot_qd_a")
-_DM = _compile("dmass_dq")
-_DH_DQ = _compile("dbias_dq")
-_DH_DQD = _compile("dbias_dqd")
-_DJA = _compile("djac_a_dq")
-_DJDOT_DQ = _compile("djdot_qd_a_dq")
-_DJDOT_DQD = _compile("djdot_qd_a_dqd")
-_SSF = _compile("slsp_free_accel")
-_SSC = _compile("slsp_clutched_accel")
-_SSFD = _compile("slsp_free_dir")
-_SSCD = _compile("slsp_clutched_dir")
-_SSFD0, _SSFD1, _SSFD2 = _SSFD
-_SSCD0, _SSCD1, _SSCD2 = _SSCD
-_SSF0, _SSF1, _SSF2 = _SSF
-_SSC0, _SSC1, _SSC2 = _SSC
-_T = _compile("kinetic")
-_V = _compile("potential")
-_T0, _T1, _T2 = _T
-_V0, _V1, _V2 = _V
-
-_M0, _M1, _M2 = _M
-_H0, _H1, _H2 = _H
-_JA0, _JA1, _JA2 = _JA
-_JDOT0, _JDOT1, _JDOT2 = _JDOT
-_DM0, _DM1, _DM2 = _DM
-_DHQ0, _DHQ1, _DHQ2 = _DH_DQ
-_DHD0, _DHD1, _DHD2 = _DH_DQD
-_DJA0, _DJA1, _DJA2 = _DJA
-_DJQ0, _DJQ1, _DJQ2 = _DJDOT_DQ
-_DJD0, _DJD1, _DJD2 = _DJDOT_DQD
+_M0, _M1, _M2 = _compile("mass_matrix")
+_H0, _H1, _H2 = _compile("bias")
+_JA0, _JA1, _JA2 = _compile("jac_a")
+_JDOT0, _JDOT1, _JDOT2 = _compile("jdot_qd_a")
+_DM0, _DM1, _DM2 = _compile("dmass_dq")
+_DHQ0, _DHQ1, _DHQ2 = _compile("dbias_dq")
+_DHD0, _DHD1, _DHD2 = _compile("dbias_dqd")
+_DJA0, _DJA1, _DJA2 = _compile("djac_a_dq")
+_DJQ0, _DJQ1, _DJQ2 = _compile("djdot_qd_a_dq")
+_DJD0, _DJD1, _DJD2 = _compile("djdot_qd_a_dqd")
+_T0, _T1, _T2 = _compile("kinetic")
+_V0, _V1, _V2 = _compile("potential")
+# the generated reduced phase equations (rimless.sim.derive.REDUCED_PHASES), [phase][mass model]
+_DL0, _DL1, _DL2 = _compile("dlsp_accel")
+_SSF0, _SSF1, _SSF2 = _compile("slsp_free_accel")
+_SSC0, _SSC1, _SSC2 = _compile("slsp_clutched_accel")
+_DLD0, _DLD1, _DLD2 = _compile("dlsp_dir")
+_SSFD0, _SSFD1, _SSFD2 = _compile("slsp_free_dir")
+_SSCD0, _SSCD1, _SSCD2 = _compile("slsp_clutched_dir")
 
 
 @_jit
-def mass_matrix(mi, q, p):
-    """M(q) (5x5) of mass model index mi, kg and kg m."""
+def terms(mi, q, qd, p):
+    """(M (5x5), h (5,), J_a (2x5), J_a' q' (2,)) of mass model index mi: the mass matrix (kg, kg m), the
+    bias (Coriolis + dV/dq + damping, generalized forces), foot a's position Jacobian and its rate term."""
     if mi == 0:
-        return _M0(q, p)
+        return _M0(q, p), _H0(q, qd, p), _JA0(q, p), _JDOT0(q, qd, p)
     if mi == 1:
-        return _M1(q, p)
-    return _M2(q, p)
+        return _M1(q, p), _H1(q, qd, p), _JA1(q, p), _JDOT1(q, qd, p)
+    return _M2(q, p), _H2(q, qd, p), _JA2(q, p), _JDOT2(q, qd, p)
 
 
 @_jit
@@ -95,36 +82,6 @@ def energy(mi, q, qd, p):
     if mi == 1:
         return _T1(q, qd, p) + _V1(q, p)
     return _T2(q, qd, p) + _V2(q, p)
-
-
-@_jit
-def bias(mi, q, qd, p):
-    """h(q, q') (5,): Coriolis + dV/dq + damping, generalized forces."""
-    if mi == 0:
-        return _H0(q, qd, p)
-    if mi == 1:
-        return _H1(q, qd, p)
-    return _H2(q, qd, p)
-
-
-@_jit
-def jac_a(mi, q, p):
-    """J_a(q) (2x5), foot a's position Jacobian."""
-    if mi == 0:
-        return _JA0(q, p)
-    if mi == 1:
-        return _JA1(q, p)
-    return _JA2(q, p)
-
-
-@_jit
-def jdot_qd_a(mi, q, qd, p):
-    """J_a'(q, q') q' (2,), m/s^2."""
-    if mi == 0:
-        return _JDOT0(q, qd, p)
-    if mi == 1:
-        return _JDOT1(q, qd, p)
-    return _JDOT2(q, qd, p)
 
 
 @_jit
@@ -205,16 +162,14 @@ def n_constraints(phase):
 
 
 @_jit
-def constraint_rows(mi, phase, q, qd, p):
-    """(A (n x 5), A' q' (n,)) of a phase."""
+def constraint_rows(phase, Ja, jd):
+    """(A (n x 5), A' q' (n,)) of a phase, given foot a's Jacobian J_a and J_a' q'."""
     n = n_constraints(phase)
     A = np.zeros((n, 5))
     adot = np.zeros(n)
     A[0, 0] = 1.0
     A[1, 1] = 1.0
     if phase == DLSP:
-        Ja = jac_a(mi, q, p)
-        jd = jdot_qd_a(mi, q, qd, p)
         for r in range(2):
             adot[2 + r] = jd[r]
             for c in range(5):
@@ -227,9 +182,8 @@ def constraint_rows(mi, phase, q, qd, p):
 @_jit
 def kkt_factor(mi, phase, q, qd, p, K, piv):
     """Assemble and factor the KKT matrix into K (9x9 workspace); returns (ok, n, M, h, A, A'q')."""
-    M = mass_matrix(mi, q, p)
-    h = bias(mi, q, qd, p)
-    A, adot = constraint_rows(mi, phase, q, qd, p)
+    M, h, Ja, jd = terms(mi, q, qd, p)
+    A, adot = constraint_rows(phase, Ja, jd)
     nc = A.shape[0]
     n = 5 + nc
     for i in range(n):
@@ -246,222 +200,57 @@ def kkt_factor(mi, phase, q, qd, p, K, piv):
     return ok, n, M, h, A, adot
 
 
-WORKSPACE_SIZE = 40
-
-
-@_jit
-def accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
-    """q'' and lambda of a phase (as accel) by eliminating the pinned coordinates, with no allocation
-    beyond the generated functions' outputs. ws: float64 workspace of WORKSPACE_SIZE.
-
-    Foot b is pinned in every phase (q''_xb = q''_yb = 0), and L1 too when clutched. With the free
-    coordinates f (theta, L1, L2) or (theta, L2): q''_f = u + W lambda_a, u = M_ff^-1 (-h_f),
-    W = M_ff^-1 J_f^T (Cholesky of M_ff), S lambda_a = -J_a' q' - J_f u with S = J_f W (DLSP only);
-    the pinned rows' multipliers follow from the first KKT block row. Same solution as the full KKT solve.
-    """
-    M = mass_matrix(mi, q, p)
-    h = bias(mi, q, qd, p)
-    nf = 2 if phase == SLSP_CLUTCHED else 3
-    fi0 = 2
-    fi1 = 4 if phase == SLSP_CLUTCHED else 3
-    fi2 = 4
-    L = ws[0:9]
-    # Cholesky of M_ff (row-major 3x3 in L)
-    for i in range(nf):
-        ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-        for j in range(i + 1):
-            jj = fi0 if j == 0 else (fi1 if j == 1 else fi2)
-            s = M[ii, jj]
-            for k in range(j):
-                s -= L[3 * i + k] * L[3 * j + k]
-            if i == j:
-                if not (s > 0.0) or not math.isfinite(s):
-                    return False
-                L[3 * i + i] = math.sqrt(s)
-            else:
-                L[3 * i + j] = s / L[3 * j + j]
-    ncol = 3 if phase == DLSP else 1
-    X = ws[9:18]  # column-major: X[3*c + i], c = 0: -h_f, c = 1, 2: J_f^T rows
-    Ja = np.empty((0, 0))
-    jd = np.empty(0)
-    if phase == DLSP:
-        Ja = jac_a(mi, q, p)
-        jd = jdot_qd_a(mi, q, qd, p)
-    for i in range(nf):
-        ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-        X[i] = -h[ii]
-        if phase == DLSP:
-            X[3 + i] = Ja[0, ii]
-            X[6 + i] = Ja[1, ii]
-    for c in range(ncol):
-        o = 3 * c
-        for i in range(nf):  # forward
-            s = X[o + i]
-            for k in range(i):
-                s -= L[3 * i + k] * X[o + k]
-            X[o + i] = s / L[3 * i + i]
-        for i in range(nf - 1, -1, -1):  # backward with L^T
-            s = X[o + i]
-            for k in range(i + 1, nf):
-                s -= L[3 * k + i] * X[o + k]
-            X[o + i] = s / L[3 * i + i]
-    la0 = 0.0
-    la1 = 0.0
-    if phase == DLSP:
-        s00 = 0.0
-        s01 = 0.0
-        s10 = 0.0
-        s11 = 0.0
-        r0 = -jd[0]
-        r1 = -jd[1]
-        for i in range(3):
-            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-            s00 += Ja[0, ii] * X[3 + i]
-            s01 += Ja[0, ii] * X[6 + i]
-            s10 += Ja[1, ii] * X[3 + i]
-            s11 += Ja[1, ii] * X[6 + i]
-            r0 -= Ja[0, ii] * X[i]
-            r1 -= Ja[1, ii] * X[i]
-        det = s00 * s11 - s01 * s10
-        if not (det != 0.0) or not math.isfinite(det):
-            return False
-        ws[18] = s00
-        ws[19] = s01
-        ws[20] = s10
-        ws[21] = s11
-        for i in range(3):
-            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-            ws[22 + i] = Ja[0, ii]
-            ws[25 + i] = Ja[1, ii]
-        la0 = (r0 * s11 - s01 * r1) / det
-        la1 = (s00 * r1 - s10 * r0) / det
-    for i in range(5):
-        qdd[i] = 0.0
-    for i in range(nf):
-        ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-        qdd[ii] = X[i] + X[3 + i] * la0 + X[6 + i] * la1 if phase == DLSP else X[i]
-    # multipliers of the pinned rows: (M q'' + h)_i - sum_r J_a[r, i] lambda_a,r
-    for i in range(2):
-        s = h[i]
-        for j in range(5):
-            s += M[i, j] * qdd[j]
-        if phase == DLSP:
-            s -= Ja[0, i] * la0 + Ja[1, i] * la1
-        lam[i] = s
-    if phase == DLSP:
-        lam[2] = la0
-        lam[3] = la1
-    elif phase == SLSP_CLUTCHED:
-        s = h[3]
-        for j in range(5):
-            s += M[3, j] * qdd[j]
-        lam[2] = s
-    return True
+WORKSPACE_SIZE = 40  # float64 workspace callers pass to accel_reduced / accel_directional (unused by them)
 
 
 @_jit
 def accel_reduced(mi, phase, q, qd, p, qdd, lam, ws):
-    """q'' and lambda of a phase, as accel_ws, from the generated reduced equations in single support
-    (rimless.sim.generated.*.slsp_free_accel / slsp_clutched_accel: only the free block of M, the pinned
-    rows and the bias, common subexpressions shared); DLSP uses accel_ws. Same solution as the full KKT
-    solve for any state."""
+    """q'' (5,) and lambda (n,) of a phase from the generated reduced equations (rimless.sim.generated.*
+    dlsp_accel / slsp_free_accel / slsp_clutched_accel: the free block of M, the pinned rows, the bias and in
+    double support foot a's constraint rows, common subexpressions shared). Same solution as the full KKT
+    solve (accel_kkt) for any state; False if singular. ws is not used (kept for the callers' signature)."""
+    if phase == DLSP:
+        if mi == 0:
+            return _DL0(q, qd, p, qdd, lam)
+        if mi == 1:
+            return _DL1(q, qd, p, qdd, lam)
+        return _DL2(q, qd, p, qdd, lam)
     if phase == SLSP_FREE:
         if mi == 0:
             return _SSF0(q, qd, p, qdd, lam)
         if mi == 1:
             return _SSF1(q, qd, p, qdd, lam)
         return _SSF2(q, qd, p, qdd, lam)
-    if phase == SLSP_CLUTCHED:
-        if mi == 0:
-            return _SSC0(q, qd, p, qdd, lam)
-        if mi == 1:
-            return _SSC1(q, qd, p, qdd, lam)
-        return _SSC2(q, qd, p, qdd, lam)
-    return accel_ws(mi, phase, q, qd, p, qdd, lam, ws)
+    if mi == 0:
+        return _SSC0(q, qd, p, qdd, lam)
+    if mi == 1:
+        return _SSC1(q, qd, p, qdd, lam)
+    return _SSC2(q, qd, p, qdd, lam)
 
 
 @_jit
 def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
-    """q'', lambda (as accel_ws) and the directional derivatives dqdd[:, c] = (dq''/dy) V[:, c] for the
-    columns of V (10 x ncol), exactly: the differentiated KKT system
-    [[M, -A^T], [A, 0]] [dq''; dlambda] = [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q'']
-    solved with the factors of accel_ws (pinned coordinates eliminated). In single support the generated
-    reduced equations (slsp_*_dir) give the same for any state and tangent."""
+    """q'', lambda (as accel_reduced) and the directional derivatives dqdd[:, c] = (dq''/dy) V[:, c] for the
+    columns of V (10 x ncol), exactly, from the generated reduced equations (*_dir): the differentiated KKT
+    system [[M, -A^T], [A, 0]] [dq''; dlambda] = [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q''] in the
+    phase's free coordinates, for any state and tangent (the full form is accel_jacobian)."""
+    if phase == DLSP:
+        if mi == 0:
+            return _DLD0(q, qd, p, qdd, lam, V, dqdd)
+        if mi == 1:
+            return _DLD1(q, qd, p, qdd, lam, V, dqdd)
+        return _DLD2(q, qd, p, qdd, lam, V, dqdd)
     if phase == SLSP_FREE:
         if mi == 0:
             return _SSFD0(q, qd, p, qdd, lam, V, dqdd)
         if mi == 1:
             return _SSFD1(q, qd, p, qdd, lam, V, dqdd)
         return _SSFD2(q, qd, p, qdd, lam, V, dqdd)
-    if phase == SLSP_CLUTCHED:
-        if mi == 0:
-            return _SSCD0(q, qd, p, qdd, lam, V, dqdd)
-        if mi == 1:
-            return _SSCD1(q, qd, p, qdd, lam, V, dqdd)
-        return _SSCD2(q, qd, p, qdd, lam, V, dqdd)
-    if not accel_ws(mi, phase, q, qd, p, qdd, lam, ws):
-        return False
-    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = _derivs(mi, q, qd, p)
-    nf = 2 if phase == SLSP_CLUTCHED else 3
-    fi0 = 2
-    fi1 = 4 if phase == SLSP_CLUTCHED else 3
-    fi2 = 4
-    L = ws[0:9]
-    u = ws[28:31]
-    for c in range(V.shape[1]):
-        for i in range(nf):
-            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-            s = 0.0
-            for k in range(5):
-                vk = V[k, c]
-                if vk != 0.0:
-                    t = dh_dq[ii, k]
-                    for j in range(5):
-                        t += dM[k, ii, j] * qdd[j]
-                    if phase == DLSP:
-                        t -= dJa[k, 0, ii] * lam[2] + dJa[k, 1, ii] * lam[3]
-                    s -= vk * t
-                s -= dh_dqd[ii, k] * V[5 + k, c]
-            u[i] = s
-        for i in range(nf):  # u = M_ff^-1 r_f
-            s = u[i]
-            for k in range(i):
-                s -= L[3 * i + k] * u[k]
-            u[i] = s / L[3 * i + i]
-        for i in range(nf - 1, -1, -1):
-            s = u[i]
-            for k in range(i + 1, nf):
-                s -= L[3 * k + i] * u[k]
-            u[i] = s / L[3 * i + i]
-        m0 = 0.0
-        m1 = 0.0
-        if phase == DLSP:
-            c0 = 0.0
-            c1 = 0.0
-            for k in range(5):
-                vk = V[k, c]
-                if vk != 0.0:
-                    t0 = djd_dq[0, k]
-                    t1 = djd_dq[1, k]
-                    for j in range(5):
-                        t0 += dJa[k, 0, j] * qdd[j]
-                        t1 += dJa[k, 1, j] * qdd[j]
-                    c0 -= vk * t0
-                    c1 -= vk * t1
-                c0 -= djd_dqd[0, k] * V[5 + k, c]
-                c1 -= djd_dqd[1, k] * V[5 + k, c]
-            for i in range(3):
-                c0 -= ws[22 + i] * u[i]
-                c1 -= ws[25 + i] * u[i]
-            det = ws[18] * ws[21] - ws[19] * ws[20]
-            m0 = (c0 * ws[21] - ws[19] * c1) / det
-            m1 = (ws[18] * c1 - ws[20] * c0) / det
-        for i in range(5):
-            dqdd[i, c] = 0.0
-        for i in range(nf):
-            ii = fi0 if i == 0 else (fi1 if i == 1 else fi2)
-            dqdd[ii, c] = u[i] + ws[12 + i] * m0 + ws[15 + i] * m1 if phase == DLSP else u[i]
-    return True
+    if mi == 0:
+        return _SSCD0(q, qd, p, qdd, lam, V, dqdd)
+    if mi == 1:
+        return _SSCD1(q, qd, p, qdd, lam, V, dqdd)
+    return _SSCD2(q, qd, p, qdd, lam, V, dqdd)
 
 
 @_jit
@@ -759,7 +548,7 @@ def state_from_section(mi, z, p):
     L2 = L0 * math.cos(th) / cta
     dL2 = L0 * math.sin(ALPHA) / (cta * cta)  # dL2/dtheta
     q = np.array([0.0, 0.0, th, L0, L2])
-    Ja = jac_a(mi, q, p)
+    Ja = terms(mi, q, np.zeros(5), p)[2]
     # rates r = solve(Ja[:, 3:5], -Ja[:, 2]) by Cramer's rule (2x2)
     a11, a12, a21, a22 = Ja[0, 3], Ja[0, 4], Ja[1, 3], Ja[1, 4]
     det = a11 * a22 - a12 * a21
@@ -768,7 +557,7 @@ def state_from_section(mi, z, p):
     r2 = (a11 * b2 - a21 * b1) / det
     v = np.array([0.0, 0.0, 1.0, r1, r2])
     # dv/dtheta: Ja v = 0 with q depending on theta through q[2] and q[4]
-    dJa = _derivs_ja(mi, q, p)
+    dJa = _derivs(mi, q, np.zeros(5), p)[3]
     c1 = 0.0
     c2 = 0.0
     for j in range(5):
@@ -787,12 +576,3 @@ def state_from_section(mi, z, p):
     T[8, 0] = thd * dr1
     T[9, 0] = thd * dr2
     return y, T
-
-
-@_jit
-def _derivs_ja(mi, q, p):
-    if mi == 0:
-        return _DJA0(q, p)
-    if mi == 1:
-        return _DJA1(q, p)
-    return _DJA2(q, p)

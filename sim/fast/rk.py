@@ -19,6 +19,10 @@ then Brent's minimiser) and its first zero located. Non-finite values, NaN step 
 MAX_REJECTIONS rejected attempts end the phase with a failure status. A stiffness indicator (Hairer's
 h |lambda| estimate from the last two stages, > 6.1 counts a "stiff step") is returned; a phase that needs
 more than `max_steps` steps ends with STATUS_TOO_MANY_STEPS so the caller can switch to an implicit method.
+
+The state at a guard is not read off the dense output: one DOP853 step from the start of the step holding
+the event to the event time (located on the dense output) gives it with the step's accuracy (the
+interpolant is an order less accurate, and its error dominated the map's error at loose tolerances).
 """
 
 from __future__ import annotations
@@ -68,7 +72,7 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     qdd = ws[fm.WORKSPACE_SIZE:fm.WORKSPACE_SIZE + 5]
     if with_var:
         V = y[VAR_OFFSET:VAR_OFFSET + VAR_SIZE].reshape((2, 10)).T
-        dqdd = np.empty((5, 2))
+        dqdd = ws[0:10].reshape((5, 2))  # no allocation per evaluation
         ok = fm.accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws)
         if not ok:
             return False
@@ -353,16 +357,36 @@ def _min_on_dense(mi, phase, p, code, a, x, gx, b, t_a, h, F, y_a):
 
 
 @_jit
-def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
-    """(t, nfev): the first downward zero of a normal-force guard on one step's dense output
-    [t_a, t_a + h] where it is positive at both ends, or (inf, nfev) if it stays positive.
+def _parabola_min_on(x0, g0, x1, g1, x2, g2):
+    """Minimum over [x0, x2] of the parabola through (x0, g0), (x1, g1), (x2, g2)."""
+    lo = min(g0, g1, g2)
+    d1 = (g1 - g0) / (x1 - x0)
+    d2 = (g2 - g1) / (x2 - x1)
+    a = (d2 - d1) / (x2 - x0)
+    if not a > 0.0:
+        return lo
+    xs = 0.5 * (x0 + x1) - d1 / (2.0 * a)
+    if xs <= x0 or xs >= x2:
+        return lo
+    return min(lo, g1 + d1 * (xs - x1) + a * (xs - x0) * (xs - x1))
 
-    The guard is sampled at DIP_SAMPLES interior points; without a non-positive sample the lowest one is
-    refined by Brent's minimisation, then the first crossing is located by Brent's root finder."""
+
+@_jit
+def _first_dip(mi, phase, p, code, t_a, h, F, y_a, g_a, g_b):
+    """(t, nfev): the first downward zero of a normal-force guard on one step's dense output
+    [t_a, t_a + h] where it is positive at both ends (values g_a, g_b), or (inf, nfev) if it stays positive.
+
+    The guard is sampled at DIP_SAMPLES interior points. Without a non-positive sample, the parabola through
+    the lowest sample (ends included) and its neighbours decides as the step-level check does: if it stays
+    above DIP_MARGIN times that sample over their span, the force is resolved and has no dip; otherwise the
+    lowest interior sample is refined by Brent's minimisation. A crossing is located by Brent's root finder."""
     ybuf = np.empty(10)
     qdd = np.empty(5)
     lam = np.zeros(4)
     n = DIP_SAMPLES + 1
+    gs = np.empty(n + 1)
+    gs[0] = g_a
+    gs[n] = g_b
     first_neg = -1
     k_low = 1
     g_low = np.inf
@@ -370,6 +394,7 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
     for k in range(1, n):
         gk = _guard_on_dense(mi, phase, p, code, t_a + h * k / n, t_a, h, F, y_a, ybuf, qdd, lam, False)
         nf += 1
+        gs[k] = gk
         if gk <= 0.0:
             first_neg = k
             break
@@ -379,6 +404,13 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
     if first_neg > 0:
         t_low = t_a + h * first_neg / n
     else:
+        k_min = 0
+        for k in range(1, n + 1):
+            if gs[k] < gs[k_min]:
+                k_min = k
+        k0 = min(max(k_min - 1, 0), n - 2)
+        if _parabola_min_on(k0, gs[k0], k0 + 1, gs[k0 + 1], k0 + 2, gs[k0 + 2]) > DIP_MARGIN * gs[k_min]:
+            return np.inf, nf
         x, gx, nfm = _min_on_dense(mi, phase, p, code, t_a + h * (k_low - 1) / n, t_a + h * k_low / n, g_low,
                                    t_a + h * (k_low + 1) / n, t_a, h, F, y_a)
         nf += nfm
@@ -393,6 +425,42 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a):
 def _guards_at(codes, y, lam, L0, out):
     for e in range(codes.shape[0]):
         out[e] = fm.guard_value_from(codes[e], y, lam, L0)
+
+
+@_jit
+def _rk_stages(mi, phase, p, y, f0, h, K, ytmp, y_new, lam, ws, with_var, with_diss):
+    """One DOP853 step of size h from y with f0 = f(y): stages K[0..11] (K[0] = f0), y_new = y + h sum B K;
+    ytmp is left holding the last stage's state. False if a right-hand side failed (singular or not finite)."""
+    N = y.shape[0]
+    for i in range(N):
+        K[0, i] = f0[i]
+    ok = True
+    for s in range(1, _NS):
+        for i in range(N):
+            acc = 0.0
+            for j in range(s):
+                acc += _A[s, j] * K[j, i]
+            ytmp[i] = y[i] + h * acc
+        ok = rhs_aug(mi, phase, p, ytmp, with_var, with_diss, K[s], lam, ws) and ok
+    for i in range(N):
+        acc = 0.0
+        for j in range(_NS):
+            acc += _B[j] * K[j, i]
+        y_new[i] = y[i] + h * acc
+    return ok
+
+
+@_jit
+def _room(rec_t, rec_y, nrec):
+    """The record buffers, doubled (contents kept) if the next record nrec would not fit."""
+    cap = rec_t.shape[0]
+    if nrec < cap:
+        return rec_t, rec_y
+    rt = np.empty(2 * cap)
+    ry = np.empty((2 * cap, 10))
+    rt[:nrec] = rec_t[:nrec]
+    ry[:nrec] = rec_y[:nrec]
+    return rt, ry
 
 
 @_jit
@@ -476,23 +544,9 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 t_new = t_bound
             h = t_new - t
             h_abs = abs(h)
-            for i in range(N):
-                K[0, i] = f[i]
-            ok = True
-            for s in range(1, _NS):
-                for i in range(N):
-                    acc = 0.0
-                    for j in range(s):
-                        acc += _A[s, j] * K[j, i]
-                    ytmp[i] = y[i] + h * acc
-                fs = K[s]
-                ok = rhs_aug(mi, phase, p, ytmp, with_var, with_diss, fs, lam_new, ws) and ok
+            ok = _rk_stages(mi, phase, p, y, f, h, K, ytmp, y_new, lam_new, ws, with_var, with_diss)
             for i in range(N):
                 y_last_stage[i] = ytmp[i]
-                acc = 0.0
-                for j in range(_NS):
-                    acc += _B[j] * K[j, i]
-                y_new[i] = y[i] + h * acc
             fnew = K[_NS]
             ok = rhs_aug(mi, phase, p, y_new, with_var, with_diss, fnew, lam_new, ws) and ok
             nfev += _NS
@@ -613,13 +667,13 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 if not fm.guard_needs_lambda(codes[e]) or not (g[e] > 0.0 and g_new[e] > 0.0):
                     continue
                 if dip_prev and g_pp[e] > 0.0:
-                    root, nf = _first_dip(mi, phase, p, codes[e], tp_old, hp, Fp, yp_old)
+                    root, nf = _first_dip(mi, phase, p, codes[e], tp_old, hp, Fp, yp_old, g_pp[e], g[e])
                     nfev += nf
                     if root < best_t:
                         best_t = root
                         best_e = e
                         best_prev = True
-                root, nf = _first_dip(mi, phase, p, codes[e], t, h, F, y)
+                root, nf = _first_dip(mi, phase, p, codes[e], t, h, F, y, g[e], g_new[e])
                 nfev += nf
                 if root < best_t:
                     best_t = root
@@ -631,36 +685,34 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 tg = t0 + next_grid * record_dt
                 if tg >= t_stop:
                     break
-                if nrec >= cap:
-                    cap *= 2
-                    rt = np.empty(cap)
-                    ry = np.empty((cap, 10))
-                    rt[:nrec] = rec_t[:nrec]
-                    ry[:nrec] = rec_y[:nrec]
-                    rec_t = rt
-                    rec_y = ry
+                rec_t, rec_y = _room(rec_t, rec_y, nrec)
                 rec_t[nrec] = tg
                 _dense_eval(F, y, (tg - t) / h, 10, ybuf)
                 for i in range(10):
                     rec_y[nrec, i] = ybuf[i]
                 nrec += 1
                 next_grid += 1
-            if nrec >= cap:
-                cap *= 2
-                rt = np.empty(cap)
-                ry = np.empty((cap, 10))
-                rt[:nrec] = rec_t[:nrec]
-                ry[:nrec] = rec_y[:nrec]
-                rec_t = rt
-                rec_y = ry
+            rec_t, rec_y = _room(rec_t, rec_y, nrec)
         if best_e >= 0:
+            # the state at the event: one DOP853 step from the start of the step holding it to the event time
+            # located on the dense output (the interpolant is an order less accurate than the step)
             y_end = np.empty(N)
             if best_prev:
-                _dense_eval(Fp, yp_old, (best_t - tp_old) / hp, N, y_end)
+                ok = _rk_stages(mi, phase, p, yp_old, Kp[0], best_t - tp_old, K, ytmp, y_end, lam_new, ws,
+                                with_var, with_diss)
                 while nrec > 0 and rec_t[nrec - 1] >= best_t:
                     nrec -= 1
             else:
-                _dense_eval(F, y, (best_t - t) / h, N, y_end)
+                ok = _rk_stages(mi, phase, p, y, f, best_t - t, K, ytmp, y_end, lam_new, ws, with_var, with_diss)
+            nfev += _NS - 1
+            for i in range(N):
+                if not math.isfinite(y_end[i]):
+                    ok = False
+            if not ok:  # keep the dense output's state
+                if best_prev:
+                    _dense_eval(Fp, yp_old, (best_t - tp_old) / hp, N, y_end)
+                else:
+                    _dense_eval(F, y, (best_t - t) / h, N, y_end)
             if recording:
                 rec_t[nrec] = best_t
                 for i in range(10):

@@ -38,3 +38,28 @@ def test_the_table_warns_instead_of_printing_a_bare_ratio_on_a_busy_machine() ->
     assert all(len(ln) <= 80 for ln in lines)
     line = next(ln for ln in quiet.splitlines() if ln.startswith("speed-up"))
     assert "70x" in line and "busy" not in line and "WARNING" not in quiet
+
+
+def test_the_loosest_tolerance_counts_only_if_every_tighter_one_meets_the_target() -> None:
+    rows = [{"model": "er", "backend": "b", "rtol": r, "error": e}
+            for r, e in [(1e-4, 5e-10), (1e-5, 2e-9), (1e-6, 4e-10), (1e-7, 1e-11)]]
+    rows.append({"model": "ve", "backend": "b", "rtol": 1e-3, "error": 1e-12})
+    # 1e-4 meets 1e-9 by chance above 1e-5, which does not
+    assert bench.loosest_meeting(rows, "er", "b")["rtol"] == 1e-6
+    assert bench.loosest_meeting(rows, "er", "b", target=1e-12) is None
+    assert bench.loosest_meeting(rows, "ve", "b")["rtol"] == 1e-3
+
+
+def test_per_phase_counts_and_the_peer_row_fit_the_table() -> None:
+    res = _result(False)
+    res["rows"][0].update(phase_nfev=[60, 155, 336], phase_steps=[2, 8, 24])
+    res["speedup_at_1e-9_by_model"] = {"er": {"fast_rtol": 1e-9, "fast_seconds_per_map": 4e-4, "dop853_rtol": 1e-8,
+                                              "dop853_seconds_per_map": 0.08, "speedup": 200.0}}
+    res["peer"] = {"phase": "ER clutched single support", "duration_s": 0.2, "peer_first_call_s": 65.0,
+                   "rows": [{"backend": "nbkode-DOP853", "rtol": 1e-8, "error": 5.6e-12, "seconds": 7e-4}]}
+    lines = bench.format_table(res).splitlines()
+    assert "    per phase (dlsp/free/clutched): nfev 60/155/336, steps 2/8/24" in lines
+    assert any(ln.startswith("  nbkode-DOP853") and "5.6e-12" in ln and "0.700 ms" in ln for ln in lines)
+    assert all(len(ln) <= 80 for ln in lines)
+    res["peer"] = {"skipped": "--quick (nbkode compiles for minutes in each process)"}
+    assert all(len(ln) <= 80 for ln in bench.format_table(res).splitlines())

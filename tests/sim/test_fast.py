@@ -240,3 +240,36 @@ def test_failure_reason_and_phase_are_reported() -> None:
     assert info.value.reason is FailureReason.STALL
     with pytest.raises(ValueError):
         fast.fast_map(WheelParams(), "rigid", Z_ER)
+
+
+PHASE_END_GUARD = {"dlsp": (dynamics.DLSP, events.LIFTOFF_A), "slsp_free": (dynamics.SLSP_FREE, events.CLUTCH_LOCK),
+                   "slsp_clutched": (dynamics.SLSP_CLUTCHED, events.TOUCHDOWN)}
+
+
+@pytest.mark.parametrize(("model", "z"), [("er", Z_ER), ("ve", Z_VE)])
+@pytest.mark.parametrize(("rtol", "bound"), [(1e-10, 1e-10), (1e-6, 1e-7)])
+def test_phase_ends_lie_on_their_guards_on_the_fast_backend(model: str, z: np.ndarray, rtol: float,
+                                                            bound: float) -> None:
+    """The state at a guard comes from a step to the time located on the dense output: on the guard to the
+    interpolant's error, at loose rtol too. Bounds in m, m/s, rad/s; a normal-force guard (N) to 100 x the
+    bound (1e-8 N is 4e-10 of the wheel's weight at rtol 1e-10)."""
+    mech = Mechanics.of(WheelParams())
+    res = simulate_step(mech, model, section.state_from_section(mech, z),
+                        fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2), record_dt=1e-2)
+    assert res.segments is not None
+    for seg, rec in zip(res.segments, res.phases, strict=True):
+        phase, guard = PHASE_END_GUARD[rec.name]
+        if model == "ve" and rec.name == "slsp_free":
+            guard = events.TOUCHDOWN
+        value = events.guard_value(mech, phase, guard, seg.y[-1])
+        scale = 100.0 if guard in (events.LIFTOFF_A, events.LIFTOFF_B) else 1.0
+        assert abs(value) <= bound * scale, f"{rec.name} ends {value:.2e} off its guard"
+
+
+@pytest.mark.parametrize(("model", "z"), [("er", Z_ER), ("ve", Z_VE)])
+def test_per_phase_counts_add_up_and_a_loose_map_stays_accurate(tight_reference, model: str, z: np.ndarray) -> None:
+    r = fast.fast_step(WheelParams(), model, z, rtol=1e-5)
+    assert sum(r.phase_nfev) == r.nfev and sum(r.phase_steps) == r.nsteps
+    assert all(n > 0 for n in r.phase_nfev[:2]) and (r.phase_nfev[2] > 0) == (model == "er")
+    # double support at rtol x 1e-4 and event states from a step: far below the rtol at the map's output
+    np.testing.assert_allclose(r.z_next, tight_reference[model](z), atol=1e-8)

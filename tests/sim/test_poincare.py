@@ -87,14 +87,15 @@ def test_reference_jacobian_next_to_the_er_stall_matches_the_variational_one():
 
 
 def test_newton_tolerance_follows_the_maps_own_noise():
-    """Very light legs (m = 1e-4 kg): the map's noise sits above the 1e-10 tolerance; Newton must accept its
-    own noise floor instead of reporting that no gait exists."""
+    """Very light legs (m = 1e-4 kg) at a loose rtol (1e-6): the map's noise sits above the 1e-10 tolerance;
+    Newton must accept its own noise floor instead of reporting that no gait exists. (At the default rtol the
+    compiled map is now accurate enough to meet 1e-10 there.)"""
     from rimless.sim.backend import make_map
     from rimless.sim.params import WheelParams
     from rimless.sim.poincare import FIXED_POINT_TOL, default_guess, map_noise, solve_fixed_point
 
     p = WheelParams(leg_mass_kg=1e-4)
-    pmap = make_map(p, "er", backend="fast")
+    pmap = make_map(p, "er", backend="fast", rtol=1e-6)
     fp = solve_fixed_point(pmap, default_guess(p, "er"), jacobian=pmap.jacobian)
     assert fp.residual > FIXED_POINT_TOL  # the case that failed before
     assert fp.residual <= 10 * map_noise(pmap, fp.z, fp.jacobian)
