@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -59,12 +57,9 @@ def browser_paths() -> tuple[str, str]:
 
 
 @pytest.fixture(scope="module")
-def demo_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("demo") / "report"
-    res = subprocess.run([sys.executable, "-m", "rimless", "demo", "--out", str(out), "--json"],
-                         capture_output=True, text=True, timeout=900, stdin=subprocess.DEVNULL)
-    assert res.returncode == 0, res.stderr[-3000:]
-    html = out / "report.html"
+def demo_report(demo_run) -> Path:  # noqa: ANN001 (tests/conftest.py's DemoRun)
+    assert demo_run.returncode == 0, demo_run.stderr[-3000:]
+    html = demo_run.out / "report.html"
     assert html.is_file(), f"the demo wrote no {html}"
     return html
 

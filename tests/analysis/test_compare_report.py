@@ -234,15 +234,14 @@ def test_cli_report_bad_model(tmp_path):
     assert res.exit_code == 2 and "--model must be one of er, ve" in res.output
 
 
-def test_demo(tmp_path):
+def test_demo(demo_run, tmp_path):
     from rimless.analysis.example_critical import data_files as critical_files
     from rimless.analysis.example_critical import load_truth as critical_truth
 
-    out = tmp_path / "demo"
-    res = runner.invoke(root_app, ["demo", "--out", str(out)])
-    assert res.exit_code == 0, res.output
+    out = demo_run.out
+    assert demo_run.returncode == 0, demo_run.stderr[-3000:]
     assert (out / "report.html").is_file() and (out / "metrics.csv").is_file()
-    assert f"report: {out / 'report.html'}" in res.stdout
+    assert f"report: {out / 'report.html'}" in demo_run.stdout
     page = (out / "report.html").read_text()
     n_all = len(set(data_files()) | set(critical_files()))
     assert "SYNTHETIC DATA" in page and page.count('<tr class="trial">') == n_all
@@ -252,10 +251,10 @@ def test_demo(tmp_path):
     assert all(r["status"] == "ok" for r in rows if "_er_" in r["trial"])
     # the critical slope: printed, on the page, and near the truth model's
     crit = critical_truth()["dataset"]["critical_slope_deg"]
-    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("critical slope from the trials:"))
+    line = next(ln for ln in demo_run.stdout.splitlines() if ln.startswith("critical slope from the trials:"))
     value = float(line.split(":")[1].split("deg")[0])
     assert abs(value - crit) < 0.1, line
-    assert "model critical slope, ER:" in res.stdout and "calibrated c:" in res.stdout
+    assert "model critical slope, ER:" in demo_run.stdout and "calibrated c:" in demo_run.stdout
     assert 'id="critical-values"' in page and "critical_slope.png" in page and "Calibration" in page
     refs = _Refs()
     refs.feed(page)
