@@ -1090,7 +1090,7 @@ def sweep_cmd(
     for p in paths:
         con.print(f"wrote {p}", soft_wrap=True)
     con.print(f"{len(points)} grid points ({res.computed} computed, {res.cached} from the cache) in {res.seconds:.1f} s "
-              f"on {res.workers} worker(s), scheduler {scheduler}")
+              f"on {res.workers} worker(s), scheduler {scheduler}", soft_wrap=True)
 
 
 def _firmware_sweep_dispatch(params: Any, opts: dict[str, Any]) -> None:

@@ -390,7 +390,7 @@ def run_sweep_command(params: Any, *, rate_hz: str | None, clutch_delay_ms: str 
     for p in paths + ([res["plot"]] if res["plot"] else []):
         con.print(f"wrote {p}", soft_wrap=True)
     con.print(f"{n} grid points ({res['computed']} computed, {res['cached']} from the cache) in "
-              f"{res['seconds']:.1f} s on {res['workers']} worker(s), scheduler {scheduler}")
+              f"{res['seconds']:.1f} s on {res['workers']} worker(s), scheduler {scheduler}", soft_wrap=True)
 
 
 def print_firmware_rows(out: dict[str, Any]) -> None:
