@@ -774,9 +774,9 @@ def paper_cmd(
     for f in res.files:
         con.print(f"wrote {f}", soft_wrap=True)
     con.print(f"load average {res.timings_s['load_average_before']:.1f} before, "
-              f"{res.timings_s['load_average_after']:.1f} after (other work on the machine slows every timing)")
+              f"{res.timings_s['load_average_after']:.1f} after (other work on the machine slows every timing)", soft_wrap=True)
     con.print(f"in {res.timings_s['total']:.1f} s (sweep {res.timings_s['sweep']:.1f} s: {res.sweep.computed} grid "
-              f"points computed, {res.sweep.cached} cached, {res.sweep.workers} worker(s))")
+              f"points computed, {res.sweep.cached} cached, {res.sweep.workers} worker(s))", soft_wrap=True)
 
 
 def register_top_level(root: typer.Typer) -> None:
