@@ -1,18 +1,10 @@
 """The `rimless` command line: one typer app, a sub-app per part, one behaviour for every command.
 
-The root group (`RimlessGroup`) applies the rules to every command of the tree, including commands the
-parts add later:
-
-- a usage mistake (bad choice, non-number, missing or unknown option) prints one line `error: ...` naming
-  the option and exits 2; so does a `UserError` raised by a command, or an `OSError` naming a file;
-- a `RunFailure` (valid input, no result) prints one line and exits 1;
-- Ctrl-C (KeyboardInterrupt, also when numba wraps it in a SystemError) prints `interrupted` and exits 130;
-- a negative number is read as a value, not as an option (`robot set touch_velocity_m_s -3`);
-- `--help` shows upper-case metavars (`FLOAT`, `PATH`, `[er|ve]`), none on flags, and prints help text
-  literally (square brackets are not rich markup).
-
-The rules live in rimless.cli_rules (re-exported here), so that a part's command module can import them on
-its own. Heavy libraries are imported inside the commands, so `rimless --help` stays fast.
+The root group (`RimlessGroup`, rimless.cli_rules) applies the rules to every command of the tree, including
+commands the parts add later: one-line errors with exit 2 for usage mistakes, exit 1 for a run without a
+result, `interrupted` and exit 130 on Ctrl-C. The rules live in rimless.cli_rules (re-exported here), so that
+a part's command module can import them on its own. Heavy libraries are imported inside the commands, so
+`rimless --help` stays fast.
 """
 
 from __future__ import annotations
