@@ -226,12 +226,6 @@ def plot_replay(replay: Replay, path: str | Path) -> Path:
     ax.set_ylabel("leg compression (mm)")
     ax.set_title(f"{replay.path.name}: {len(replay.steps)} steps")
     ax.legend(loc="lower right", fontsize=7)
-    from rimless.output import atomic_file
+    from rimless.sim.plotting import save_figure
 
-    path = Path(path)
-    try:
-        with atomic_file(path, option="--plot") as tmp:
-            fig.savefig(tmp, dpi=120)
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120, option="--plot")

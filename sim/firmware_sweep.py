@@ -238,7 +238,7 @@ def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from rimless.output import atomic_file
+    from rimless.sim.plotting import save_figure
 
     fw_rows = [r for r in out["rows"] if r.get("clutch", "firmware") == "firmware"]
     with_cot = any(r.get("er_advantage_remaining") is not None for r in fw_rows)
@@ -278,9 +278,4 @@ def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
     fig.suptitle("ER wheel with the firmware in the loop against the ideal clutch (open: firmware-limited "
                  "boundary; red dotted: the walk failed)", fontsize=10)
     fig.tight_layout()
-    try:
-        with atomic_file(path, option="--plot") as tmp:
-            fig.savefig(tmp, dpi=120)
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120, option="--plot")

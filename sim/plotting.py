@@ -19,16 +19,19 @@ def _shade_phases(ax, traj: GaitTrajectory) -> None:  # noqa: ANN001
                 ax.axvspan(rec.t_start_s, rec.t_end_s, color=PHASE_COLOURS[rec.name], lw=0, zorder=0)
 
 
-def save_figure(fig, path: str | Path, dpi: int = 150) -> Path:  # noqa: ANN001
-    """Save to a temporary name in the same folder, rename when complete, close the figure."""
+def save_figure(fig, path: str | Path, dpi: int = 150, *, option: str | None = None) -> Path:  # noqa: ANN001
+    """Write the figure atomically (rimless.output.atomic_file; `option` names the CLI option in errors) and
+    close it, also when writing fails."""
     import matplotlib.pyplot as plt
 
+    from rimless.output import atomic_file
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
-    tmp.replace(path)
+    try:
+        with atomic_file(path, option=option) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
     return path
 
 
