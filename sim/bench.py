@@ -185,6 +185,22 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
             "peer_first_call_s": compile_s, "rows": rows}
 
 
+def _timed_fixed_point(pmap: Any, guess: np.ndarray, reps: int, *, record: bool = True) -> tuple[Any, float]:
+    """The fixed point from `guess` with the exact Jacobian, and its median wall time (s) over `reps` runs
+    after one warm-up run."""
+    from rimless.sim.poincare import solve_fixed_point
+
+    solve_fixed_point(pmap, guess, record=record)  # warm
+    times = []
+    fp = None
+    for _ in range(reps):
+        t_s = time.perf_counter()
+        fp = solve_fixed_point(pmap, guess, jacobian=pmap.variational_jacobian, record=record)
+        times.append(time.perf_counter() - t_s)
+    assert fp is not None
+    return fp, float(np.median(times))
+
+
 def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run the benchmark; returns the JSON-ready result (see the module docstring).
 
@@ -275,15 +291,8 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     for model in ("er", "ve"):
         guess = Z_STAR[model] + np.array([0.01, -0.05])
         say(f"{model}: fixed point, fast path")
-        pm_fast = fast.FastPoincareMap(params, model, jacobian_with_map=True)
-        solve_fixed_point(pm_fast, guess)  # warm
-        reps = []
-        fp = None
-        for _ in range(3 if quick else 10):
-            t_s = time.perf_counter()
-            fp = solve_fixed_point(pm_fast, guess, jacobian=pm_fast.variational_jacobian)
-            reps.append(time.perf_counter() - t_s)
-        assert fp is not None
+        reps = 3 if quick else 10
+        fp, fast_s = _timed_fixed_point(fast.FastPoincareMap(params, model, jacobian_with_map=True), guess, reps)
         # the same fixed point at the loosest rtol whose map meets the target error (the table above), without
         # the recorded step (diagnostics the eigenvalues do not need)
         loose = speedups[model]["fast_rtol"]
@@ -291,24 +300,16 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         if loose is not None:
             pm_loose = fast.FastPoincareMap(params, model, fast.FastIntegrator(rtol=loose, atol=loose * 1e-2),
                                             jacobian_with_map=True)
-            solve_fixed_point(pm_loose, guess, record=False)  # warm
-            reps_loose = []
-            fp_loose = None
-            for _ in range(3 if quick else 10):
-                t_s = time.perf_counter()
-                fp_loose = solve_fixed_point(pm_loose, guess, jacobian=pm_loose.variational_jacobian, record=False)
-                reps_loose.append(time.perf_counter() - t_s)
-            assert fp_loose is not None
-            loose_entry = {"rtol": loose, "seconds": float(np.median(reps_loose)),
-                           "iterations": fp_loose.iterations, "z": fp_loose.z.tolist(),
-                           "max_abs_eigenvalue": fp_loose.max_abs_eigenvalue}
+            fp_loose, loose_s = _timed_fixed_point(pm_loose, guess, reps, record=False)
+            loose_entry = {"rtol": loose, "seconds": loose_s, "iterations": fp_loose.iterations,
+                           "z": fp_loose.z.tolist(), "max_abs_eigenvalue": fp_loose.max_abs_eigenvalue}
         say(f"{model}: fixed point, reference path")
         pm_ref = PoincareMap(params, model)
         t_s = time.perf_counter()
         fp_ref = solve_fixed_point(pm_ref, guess)
         t_ref = time.perf_counter() - t_s
         fixed[model] = {
-            "fast_seconds": float(np.median(reps)),
+            "fast_seconds": fast_s,
             "fast_iterations": fp.iterations,
             "fast_z": fp.z.tolist(),
             "fast_eigenvalues": [complex(e).real if abs(complex(e).imag) < 1e-15 else str(complex(e))
