@@ -42,7 +42,7 @@ def _token(token: str | None) -> str:
 
 def _remote(host: str, port: int, token: str | None, cmd: str, args: dict[str, Any] | None = None) -> None:
     from rimless.cli import print_json, user_facing
-    from rimless.firmware.commands import send_command
+    from rimless.firmware.link.commands import send_command
 
     @user_facing
     def go() -> None:
@@ -53,7 +53,7 @@ def _remote(host: str, port: int, token: str | None, cmd: str, args: dict[str, A
 
 def _interruptible(fn: Any) -> Any:
     """Run `fn`; Ctrl-C (or SIGTERM/SIGHUP/SIGQUIT) ends it with one line and 128 + the signal number."""
-    from rimless.firmware.safety import Interrupted, stop_on_signals
+    from rimless.firmware.service.safety import Interrupted, stop_on_signals
 
     try:
         with stop_on_signals():
@@ -77,7 +77,7 @@ def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
     instead (armed, faults, engaged clutches), with "via": "udp".
     """
     from rimless.cli import print_json, user_facing
-    from rimless.firmware.commands import send_command, send_reserved_datagram
+    from rimless.firmware.link.commands import send_command, send_reserved_datagram
     from rimless.firmware.errors import RobotUnreachable
 
     @user_facing
@@ -130,7 +130,7 @@ def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
     connections cannot delay it), then confirmed over TCP; prints the robot's state.
     """
     from rimless.cli import print_json, user_facing
-    from rimless.firmware.commands import send_command, send_disarm_datagram
+    from rimless.firmware.link.commands import send_command, send_disarm_datagram
     from rimless.firmware.errors import RobotUnreachable
 
     @user_facing
@@ -212,7 +212,7 @@ def heartbeat(
     Ctrl-C stops it; the robot then disarms after its link_timeout_s.
     """
     from rimless.cli import user_facing
-    from rimless.firmware.heartbeat import Heartbeat
+    from rimless.firmware.link.heartbeat import Heartbeat
 
     @user_facing
     def go() -> None:
@@ -238,15 +238,15 @@ def release(
 
     @user_facing
     def go() -> None:
-        from rimless.firmware.hardware import release_pins
-        from rimless.firmware.config import load_config
+        from rimless.firmware.drivers.hardware import release_pins
+        from rimless.firmware.service.config import load_config
 
         cfg = load_config(config)
         factory = None
         if fake:
             from gpiozero.pins.mock import MockFactory
 
-            from rimless.firmware.hardware import PI4_REVISION
+            from rimless.firmware.drivers.hardware import PI4_REVISION
 
             factory = MockFactory(revision=PI4_REVISION)
         levels = release_pins(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
@@ -294,8 +294,8 @@ def run(
     import logging
 
     from rimless.cli import user_facing
-    from rimless.firmware.logsetup import NonBlockingLog
-    from rimless.firmware.safety import Interrupted, stop_on_signals
+    from rimless.firmware.service.logsetup import NonBlockingLog
+    from rimless.firmware.service.safety import Interrupted, stop_on_signals
 
     state: dict[str, Any] = {}
 
@@ -307,10 +307,10 @@ def run(
     @user_facing
     def go() -> int:
         from rimless.errors import ParameterError
-        from rimless.firmware.app import RobotApp
-        from rimless.firmware.config import load_config, parse_host_port
+        from rimless.firmware.service.app import RobotApp
+        from rimless.firmware.service.config import load_config, parse_host_port
         from rimless.firmware.errors import CommandError, SensorError
-        from rimless.firmware.hardware import build_fake, build_real
+        from rimless.firmware.drivers.hardware import build_fake, build_real
 
         cfg = load_config(config)
         if telemetry:
@@ -391,7 +391,7 @@ def check(
     import time
 
     from rimless.cli import print_json, user_facing
-    from rimless.firmware.safety import Interrupted, stop_on_signals
+    from rimless.firmware.service.safety import Interrupted, stop_on_signals
 
     state: dict[str, Any] = {}
 
@@ -402,9 +402,9 @@ def check(
 
     @user_facing
     def go() -> None:
-        from rimless.firmware.config import load_config
+        from rimless.firmware.service.config import load_config
         from rimless.firmware.errors import CommandError, SensorError
-        from rimless.firmware.hardware import build_fake, build_real
+        from rimless.firmware.drivers.hardware import build_fake, build_real
 
         cfg = load_config(config)
         try:
@@ -497,11 +497,11 @@ def listen(
 
     @user_facing
     def go() -> None:
-        from rimless.firmware.listen import listen as do_listen
+        from rimless.firmware.link.listen import listen as do_listen
 
         hb = None
         if host is not None:
-            from rimless.firmware.heartbeat import Heartbeat
+            from rimless.firmware.link.heartbeat import Heartbeat
 
             hb = Heartbeat(host, port=robot_port, token=_token(token), echo=lambda line: typer.echo(line, err=True))
         use_live = sys.stderr.isatty() if live is None else live
@@ -533,9 +533,9 @@ def bench(
         from rimless.errors import ParameterError
         import logging
 
-        from rimless.firmware.bench import bench_rate
-        from rimless.firmware.logsetup import NonBlockingLog
-        from rimless.firmware.safety import Interrupted
+        from rimless.firmware.service.bench import bench_rate
+        from rimless.firmware.service.logsetup import NonBlockingLog
+        from rimless.firmware.service.safety import Interrupted
 
         if not fake:
             raise ParameterError("--fake is required: the bench runs on the fake sensor (use `run` on the robot)")

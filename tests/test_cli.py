@@ -26,7 +26,7 @@ def test_help_imports_no_heavy_library():
 
 
 @pytest.mark.parametrize("module", ["rimless.sim.cli", "rimless.analysis.cli", "rimless.firmware.cli",
-                                    "rimless.sim.firmware_cli", "rimless.cli"])
+                                    "rimless.sim.cli.firmware", "rimless.cli"])
 def test_each_command_module_imports_on_its_own(module):
     """A part's command module imports first, before rimless.cli registers the parts (no circular import)."""
     res = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True)
@@ -327,8 +327,8 @@ def test_ctrl_c_in_compiled_code_is_not_classified_as_a_failed_step(monkeypatch)
     every exception of a step, must let it stop the command instead of counting it as 'unclassified'."""
     from rimless.errors import interrupted_by_user
     from rimless.sim import fast
-    from rimless.sim.params import WheelParams
-    from rimless.sim.stress import stress_sweep
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.studies.stress import stress_sweep
 
     def interrupted_step(*args, **kwargs):
         try:

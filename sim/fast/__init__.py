@@ -1,26 +1,26 @@
 """The compiled fast path: a numba DOP853 backend for the hybrid simulation, a lean compiled Poincaré map
 with the exact (variational) map Jacobian, and their Python faces.
 
-It is the second implementation of the model whose reference implementation is rimless.sim.hybrid,
-integrators, dynamics and model (scipy, Python right-hand side); both give the same steps, failure classes
+It is the second implementation of the model whose reference implementation is rimless.sim.step.hybrid,
+integrate.reference, model.dynamics and model.mechanics (scipy, Python right-hand side); both give the same steps, failure classes
 and guards. Modules:
 - rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
 - rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output;
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
 - rimless.sim.fast (this file): the Python face below. Import fast-path names from here.
 
-- `FastIntegrator(rtol, atol)`: implements rimless.sim.integrators.Integrator (`run_phase`), so
-  rimless.sim.hybrid.simulate_step can use it when trajectories, forces or energies are recorded.
+- `FastIntegrator(rtol, atol)`: implements rimless.sim.integrate.reference.Integrator (`run_phase`), so
+  rimless.sim.step.hybrid.simulate_step can use it when trajectories, forces or energies are recorded.
 - `fast_step(params, model, z, ...)` / `fast_map(params, model, z, rtol)`: one whole step compiled
   (phases, guards, pre-checks, failure classes and impact identical to hybrid.simulate_step with the ideal
   clutch); nothing is recorded. Failures raise StepFailure with the same FailureReason as the reference.
-- `FastPoincareMap`: same interface as rimless.sim.poincare.PoincareMap (`__call__`, `step`, `jacobian`,
+- `FastPoincareMap`: same interface as rimless.sim.step.poincare.PoincareMap (`__call__`, `step`, `jacobian`,
   `with_params`, attributes params/model/integrator/clutch/evaluations), usable unchanged by
   solve_fixed_point and the continuation code; its `jacobian` is the exact variational Jacobian.
 - `exact_jacobian(pmap_or_params, model, z)`: dP/dz (2x2) from the variational equations, saltation
   matrices at lift-off and clutch lock, and the exact derivative of the relabel + impact reset.
 
-Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.section).
+Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.model.section).
 
 Stiff legs: DOP853 is explicit. A phase needing more than `max_steps` steps is reported as such
 (StepFailure INTEGRATION with "too many steps"); FastPoincareMap(stiff_fallback=True) then recomputes that
@@ -38,11 +38,11 @@ import numpy as np
 from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
 from rimless.sim.fast import step as fs
-from rimless.sim.events import DIRECTION
-from rimless.sim.failures import FailureReason, StepFailure
-from rimless.sim.integrators import PhaseRun
-from rimless.sim.model import Mechanics
-from rimless.sim.params import WheelParams
+from rimless.sim.model.guards import DIRECTION
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.integrate.reference import PhaseRun
+from rimless.sim.model.mechanics import Mechanics
+from rimless.sim.model.params import WheelParams
 
 def _invalidate_stale_cache() -> None:
     """numba's on-disk cache (cache=True) is keyed on each function's own source file only: a kernel that
@@ -52,7 +52,7 @@ def _invalidate_stale_cache() -> None:
     import hashlib
     from pathlib import Path
 
-    from rimless.sim.generated import active_feet, eight_leg, sliding_leg
+    from rimless.sim.model.generated import active_feet, eight_leg, sliding_leg
 
     digest = hashlib.sha256()
     for mod in (fm, rk, fs, eight_leg, sliding_leg, active_feet):
@@ -255,7 +255,7 @@ def exact_jacobian(pmap_or_params: Any, model: str | None = None, z: np.ndarray 
 
 @dataclass
 class FastIntegrator:
-    """Compiled DOP853 backend for rimless.sim.hybrid (Integrator protocol); same defaults as the reference."""
+    """Compiled DOP853 backend for rimless.sim.step.hybrid (Integrator protocol); same defaults as the reference."""
 
     rtol: float = 1e-10
     atol: float = 1e-12
@@ -317,7 +317,7 @@ class _VariationalJacobian:
 
 @dataclass
 class FastPoincareMap:
-    """P: z -> z' on the compiled path; interface of rimless.sim.poincare.PoincareMap.
+    """P: z -> z' on the compiled path; interface of rimless.sim.step.poincare.PoincareMap.
 
     integrator: a FastIntegrator whose rtol/atol the compiled map uses, and which `step` passes to
     hybrid.simulate_step. A non-ideal clutch policy makes every call go through the reference hybrid code
@@ -345,7 +345,7 @@ class FastPoincareMap:
 
     # -- helpers -------------------------------------------------------------------------------
     def _compiled_ok(self) -> bool:
-        from rimless.sim.hybrid import IdealClutch
+        from rimless.sim.step.hybrid import IdealClutch
 
         return self.clutch is None or isinstance(self.clutch, IdealClutch) or (
             getattr(self.clutch, "delay_s", 0.0) <= 0.0 and getattr(self.clutch, "name", "") in ("ideal", "delayed"))
@@ -358,8 +358,8 @@ class FastPoincareMap:
         return self._reference_result(z, integrator)[0]
 
     def _reference_result(self, z: np.ndarray, integrator: Any) -> tuple[np.ndarray, float]:
-        from rimless.sim.hybrid import simulate_step
-        from rimless.sim.section import section_from_state, state_from_section
+        from rimless.sim.step.hybrid import simulate_step
+        from rimless.sim.model.section import section_from_state, state_from_section
 
         res = simulate_step(self.mech, self.model, state_from_section(self.mech, z), integrator, clutch=self.clutch)
         return section_from_state(res.y_plus), res.period_s
@@ -379,7 +379,7 @@ class FastPoincareMap:
                 self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
                 jacobian, int(self.integrator.max_steps), self._counts)
         if st == fs.TOO_MANY_STEPS and self.stiff_fallback and not self.bilateral:
-            from rimless.sim.integrators import ScipyIntegrator
+            from rimless.sim.integrate.reference import ScipyIntegrator
 
             radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10),
                                     atol=max(self.integrator.atol, 1e-12), max_nfev=RADAU_MAX_NFEV)
@@ -415,8 +415,8 @@ class FastPoincareMap:
 
     def step(self, z: np.ndarray, **options: object) -> Any:
         """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
-        from rimless.sim.hybrid import simulate_step
-        from rimless.sim.section import state_from_section
+        from rimless.sim.step.hybrid import simulate_step
+        from rimless.sim.model.section import state_from_section
 
         self.evaluations += 1
         integ = _HeldStance(self.integrator) if self.bilateral else self.integrator
@@ -461,8 +461,8 @@ def warm_up(models: tuple[str, ...] = MODELS) -> float:
     for model in models:
         fast_step(p, model, z, jacobian=False)
         fast_step(p, model, z, jacobian=True)
-    from rimless.sim.dynamics import DLSP
-    from rimless.sim.section import state_from_section
+    from rimless.sim.model.dynamics import DLSP
+    from rimless.sim.model.section import state_from_section
 
     mech = Mechanics.of(p)
     FastIntegrator().run_phase(mech, DLSP, state_from_section(mech, z), 0.0, (1,), 1e-3, record_dt=1e-3,

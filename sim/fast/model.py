@@ -1,11 +1,11 @@
 """Compiled (numba) mechanics of the three mass models: the KKT phase dynamics and their exact derivatives,
 the guards, the impact (relabel + inelastic projection) with its exact Jacobian, and the section map.
 
-Same equations and conventions as rimless.sim.dynamics / events / impact / section (model.md sections 2-6):
+Same equations and conventions as rimless.sim.model.dynamics / events / impact / section (model.md sections 2-6):
 slope frame (x down the slope, y the outward normal), q = [x_b, y_b, theta, L1, L2] (m, m, rad, m, m),
 y = [q, q'] (10,), parameter vector p = WheelParams.as_vector() = (m_H, m, I_c, L0, k, c, g, phi), SI units.
 
-The generated functions (rimless.sim.generated.*) are compiled as they are; a mass model is selected at run
+The generated functions (rimless.sim.model.generated.*) are compiled as they are; a mass model is selected at run
 time by an integer index (MASS_MODEL_INDEX), so one compiled kernel serves all three models and the
 on-disk cache (cache=True) holds it once.
 """
@@ -17,15 +17,15 @@ import math
 import numba
 import numpy as np
 
-from rimless.sim.generated import active_feet as _af
-from rimless.sim.generated import eight_leg as _el
-from rimless.sim.generated import sliding_leg as _sl
-from rimless.sim.params import SPOKE_ANGLE_RAD
+from rimless.sim.model.generated import active_feet as _af
+from rimless.sim.model.generated import eight_leg as _el
+from rimless.sim.model.generated import sliding_leg as _sl
+from rimless.sim.model.params import SPOKE_ANGLE_RAD
 
 ALPHA = SPOKE_ANGLE_RAD
 MASS_MODEL_INDEX = {"eight-leg": 0, "sliding-leg": 1, "active-feet": 2}
 
-# Phase codes (as rimless.sim.dynamics) and guard codes (as rimless.sim.events).
+# Phase codes (as rimless.sim.model.dynamics) and guard codes (as rimless.sim.model.guards).
 DLSP = 0
 SLSP_FREE = 1
 SLSP_CLUTCHED = 2
@@ -54,7 +54,7 @@ _DJQ0, _DJQ1, _DJQ2 = _compile("djdot_qd_a_dq")
 _DJD0, _DJD1, _DJD2 = _compile("djdot_qd_a_dqd")
 _T0, _T1, _T2 = _compile("kinetic")
 _V0, _V1, _V2 = _compile("potential")
-# the generated reduced phase equations (rimless.sim.derive.REDUCED_PHASES), [phase][mass model]
+# the generated reduced phase equations (rimless.sim.model.derive.REDUCED_PHASES), [phase][mass model]
 _DL0, _DL1, _DL2 = _compile("dlsp_accel")
 _SSF0, _SSF1, _SSF2 = _compile("slsp_free_accel")
 _SSC0, _SSC1, _SSC2 = _compile("slsp_clutched_accel")
@@ -149,7 +149,7 @@ def lu_solve(K, n, piv, b):
 
 
 # ------------------------------------------------------------------------------------------------
-# Phase dynamics: [[M, -A^T], [A, 0]] [q''; lambda] = [-h; -A' q'] (rimless.sim.dynamics.accel).
+# Phase dynamics: [[M, -A^T], [A, 0]] [q''; lambda] = [-h; -A' q'] (rimless.sim.model.dynamics.accel).
 
 
 @_jit
@@ -205,7 +205,7 @@ WORKSPACE_SIZE = 40  # float64 workspace callers pass to accel_reduced / accel_d
 
 @_jit
 def accel_reduced(mi, phase, q, qd, p, qdd, lam, ws):
-    """q'' (5,) and lambda (n,) of a phase from the generated reduced equations (rimless.sim.generated.*
+    """q'' (5,) and lambda (n,) of a phase from the generated reduced equations (rimless.sim.model.generated.*
     dlsp_accel / slsp_free_accel / slsp_clutched_accel: the free block of M, the pinned rows, the bias and in
     double support foot a's constraint rows, common subexpressions shared). Same solution as the full KKT
     solve (accel_kkt) for any state; False if singular. ws is not used (kept for the callers' signature)."""
@@ -347,7 +347,7 @@ def damping_power(phase, qd, p):
 
 
 # ------------------------------------------------------------------------------------------------
-# Guards (rimless.sim.events): value, and gradient with respect to y for the saltation matrices.
+# Guards (rimless.sim.model.guards): value, and gradient with respect to y for the saltation matrices.
 
 
 @_jit
@@ -423,7 +423,7 @@ def phase_field(mi, phase, y, p):
 
 
 # ------------------------------------------------------------------------------------------------
-# Impact (rimless.sim.impact): relabel, then q'+ = q'~ + M^-1 Jc^T Lambda with Jc q'+ = 0.
+# Impact (rimless.sim.model.impact): relabel, then q'+ = q'~ + M^-1 Jc^T Lambda with Jc q'+ = 0.
 
 
 @_jit
@@ -535,7 +535,7 @@ def impact(mi, y_minus, p, V, want_jac):
 
 
 # ------------------------------------------------------------------------------------------------
-# The Poincaré section (rimless.sim.section): z = (theta+, theta'+) -> y and dy/dz.
+# The Poincaré section (rimless.sim.model.section): z = (theta+, theta'+) -> y and dy/dz.
 
 
 @_jit

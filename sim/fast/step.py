@@ -1,5 +1,5 @@
 """The compiled step map: one step of the hybrid system from the section point z to the next post-impact
-state, with the same phase sequence, pre-checks and failure classes as rimless.sim.hybrid.simulate_step
+state, with the same phase sequence, pre-checks and failure classes as rimless.sim.step.hybrid.simulate_step
 for the ideal clutch, and optionally the exact map Jacobian dP/dz.
 
 Jacobian: the section tangent dy0/dz (10x2) is carried through each phase by the variational equations,
@@ -135,7 +135,7 @@ def _map_status(st, fired_ok):
 def _single_support_force(mi, phase, rec_t, rec_y, p, contact):
     """Fold foot b's normal force lambda_b,y (N) at the recorded states (rec_t s, rec_y) of one phase into
     `contact`: its minimum (refined by a parabola through its neighbours), the minimum's time and the time spent
-    below zero. In single support foot b is the stance foot; in double support (as rimless.sim.arclength also
+    below zero. In single support foot b is the stance foot; in double support (as rimless.sim.continuation.arclength also
     uses it) the leading foot, whose time below zero is its tensile transient."""
     n = rec_t.shape[0]
     if n == 0:

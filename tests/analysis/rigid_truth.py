@@ -52,7 +52,7 @@ class RigidTruth:
 
     def wheel_params(self):  # noqa: ANN201
         """WheelParams describing this wheel for rimless (tiny legs: M = m_H + 8 m, I_hub = I_c + 8 m L^2)."""
-        from rimless.sim.params import WheelParams
+        from rimless.sim.model.params import WheelParams
 
         m = 1e-4
         return WheelParams(hub_mass_kg=self.mass_kg - 8 * m, leg_mass_kg=m,

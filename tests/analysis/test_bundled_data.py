@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimless.analysis.example import data_files, load_truth
-from rimless.analysis.trial import import_trial
+from rimless.analysis.examples.bundled import data_files, load_truth
+from rimless.analysis.io.trial import import_trial
 
 
 @pytest.mark.parametrize("path", data_files(), ids=lambda p: p.stem)

@@ -13,7 +13,7 @@ import truth_wheel as tw  # noqa: E402
 
 ezc3d = pytest.importorskip("ezc3d")
 
-from rimless.analysis.trial import TrialRefused, import_trial  # noqa: E402
+from rimless.analysis.io.trial import TrialRefused, import_trial  # noqa: E402
 from rimless.errors import InputFileError  # noqa: E402
 
 

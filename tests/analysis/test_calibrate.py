@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the truth models beside this file (importlib mode)
 from sim_truth import sim_trial  # noqa: E402
-from rimless.analysis.calibrate import calibrate, least_squares_report, parse_fit  # noqa: E402
+from rimless.analysis.inference.calibrate import calibrate, least_squares_report, parse_fit  # noqa: E402
 from rimless.errors import ParameterError  # noqa: E402
 
 C_TRUE = 11.0  # N s/m; Table 1 has 8
@@ -19,7 +19,7 @@ C_TRUE = 11.0  # N s/m; Table 1 has 8
 
 @pytest.fixture(scope="module")
 def noisy_trials():
-    from rimless.sim.params import WheelParams
+    from rimless.sim.model.params import WheelParams
 
     truth = WheelParams(damping_ns_per_m=C_TRUE)
     rng = np.random.default_rng(3)

@@ -10,9 +10,9 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.analysis.cli import app
-from rimless.analysis.synthetic import rolling_wheel
-from rimless.analysis.trial import read_trial
-from rimless.analysis.vicon_csv import write_tracker_csv
+from rimless.analysis.examples.synthetic import rolling_wheel
+from rimless.analysis.io.trial import read_trial
+from rimless.analysis.io.vicon_csv import write_tracker_csv
 
 PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
 runner = CliRunner()

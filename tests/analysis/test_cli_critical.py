@@ -7,7 +7,7 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from rimless.analysis.example_critical import data_files, load_truth
+from rimless.analysis.examples.critical_series import data_files, load_truth
 from rimless.cli import app as root_app
 
 runner = CliRunner()

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from rimless.analysis.compare import Simulator, compare_trial, step_period_trends
-from rimless.analysis.example import DATA_DIR, TRIALS, data_files, load_truth, simulate_trial, write_trial_csv
-from rimless.analysis.report import build_report
-from rimless.analysis.timeseries import Event, TimeSeries
-from rimless.analysis.trial import Trial, import_trial
+from rimless.analysis.inference.compare import Simulator, compare_trial, step_period_trends
+from rimless.analysis.examples.bundled import DATA_DIR, TRIALS, data_files, load_truth, simulate_trial, write_trial_csv
+from rimless.analysis.report.html import build_report
+from rimless.analysis.io.timeseries import Event, TimeSeries
+from rimless.analysis.io.trial import Trial, import_trial
 from rimless.cli import app as root_app
 
 runner = CliRunner()
@@ -79,7 +79,7 @@ def test_bundled_trial_imports_with_true_slope_and_periods(path, truth):
 
 
 def test_number_format_is_printf_with_3_digit_exponents():
-    from rimless.analysis.example import _fmt
+    from rimless.analysis.examples.bundled import _fmt
 
     assert [_fmt(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
         "7.2e-006", "-1.5e-012", "123.4568", "0.5", ""]
@@ -132,7 +132,7 @@ def test_compare_failures_are_messages(tmp_path, sim):
 
 
 def test_step_period_trends_group_by_slope(sim):
-    from rimless.analysis.compare import TrialComparison
+    from rimless.analysis.inference.compare import TrialComparison
 
     def tc(name, slope, periods):
         return TrialComparison(name, name, slope, "given", "er", "ok", measured_period_s=np.asarray(periods),
@@ -235,8 +235,8 @@ def test_cli_report_bad_model(tmp_path):
 
 
 def test_demo(demo_run, tmp_path):
-    from rimless.analysis.example_critical import data_files as critical_files
-    from rimless.analysis.example_critical import load_truth as critical_truth
+    from rimless.analysis.examples.critical_series import data_files as critical_files
+    from rimless.analysis.examples.critical_series import load_truth as critical_truth
 
     out = demo_run.out
     assert demo_run.returncode == 0, demo_run.stderr[-3000:]

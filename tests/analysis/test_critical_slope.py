@@ -12,8 +12,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the truth models beside this file (importlib mode)
 from rigid_truth import RigidTruth, duck_trial  # noqa: E402
-from rimless.analysis.critical_slope import estimate_critical_slope, firth_logistic, group_slopes  # noqa: E402
-from rimless.analysis.sustained import StancePendulum, consecutive_periods, trial_verdict, trial_verdicts  # noqa: E402
+from rimless.analysis.inference.critical_slope import estimate_critical_slope, firth_logistic, group_slopes  # noqa: E402
+from rimless.analysis.inference.sustained import StancePendulum, consecutive_periods, trial_verdict, trial_verdicts  # noqa: E402
 
 TRUTH = RigidTruth()
 SLOPES_DEG = (0.8, 1.0, 1.2, 1.4, 1.6, 1.8)  # straddle Coleman's 1.267 deg, not symmetric about it
@@ -93,7 +93,7 @@ def test_below_critical_trial_that_walks_the_ramp_is_decaying(series):
 
 def test_few_steps_are_undetermined_not_guessed():
     pend = StancePendulum.from_params(TRUTH.wheel_params(), math.radians(1.6))
-    from rimless.analysis.sustained import verdict_from_periods
+    from rimless.analysis.inference.sustained import verdict_from_periods
 
     v = verdict_from_periods([np.array([0.7, 0.72, 0.73])], pend, slope_deg=1.6)
     assert v.verdict == "undetermined" and "too few" in v.reason

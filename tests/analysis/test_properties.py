@@ -7,7 +7,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from rimless.analysis.vicon_csv import ViconCsvError, parse_vicon_bytes, parse_vicon_text, write_tracker_csv
+from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_bytes, parse_vicon_text, write_tracker_csv
 
 VALID = (
     "Objects\n100\n,,Global Angle W:W,,,,,,\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,rad,rad,rad,mm,mm,mm\n"
@@ -91,7 +91,7 @@ def _warm_up() -> None:
     import tempfile
     from pathlib import Path
 
-    from rimless.analysis.trial import import_trial
+    from rimless.analysis.io.trial import import_trial
 
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "w.csv"
@@ -110,7 +110,7 @@ HEADER_TOKENS = st.one_of(
 def import_ok_or_refused(text: str, tmp_path) -> None:
     import time
 
-    from rimless.analysis.trial import import_trial
+    from rimless.analysis.io.trial import import_trial
     from rimless.errors import UserError
 
     p = tmp_path / "fuzz.csv"

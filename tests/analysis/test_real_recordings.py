@@ -17,8 +17,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import truth_wheel as tw  # noqa: E402
 
-from rimless.analysis.trial import TrialRefused, import_trial  # noqa: E402
-from rimless.analysis.vicon_csv import ViconCsvError, parse_vicon_text  # noqa: E402
+from rimless.analysis.io.trial import TrialRefused, import_trial  # noqa: E402
+from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text  # noqa: E402
 
 NOISE = 0.3e-3
 FRAME = 0.01

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rimless.analysis.synthetic import rolling_wheel
-from rimless.analysis.trial import TrialRefused, build_trial, fill_short_gaps, import_trial, read_trial
-from rimless.analysis.vicon_csv import read_vicon_csv, write_tracker_csv
+from rimless.analysis.examples.synthetic import rolling_wheel
+from rimless.analysis.io.trial import TrialRefused, build_trial, fill_short_gaps, import_trial, read_trial
+from rimless.analysis.io.vicon_csv import read_vicon_csv, write_tracker_csv
 from rimless.errors import InputFileError
 
 PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
@@ -225,7 +225,7 @@ def test_public_markers_chosen_by_name_hub_is_centroid():
 
 def test_rotation_stack_matches_the_matrix_array():
     """An object's rotations kept as angles (matrices made slice by slice) give what the (n, 3, 3) array gives."""
-    from rimless.analysis import hub
+    from rimless.analysis.kinematics import hub
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(4)

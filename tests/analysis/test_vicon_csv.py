@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rimless.analysis.vicon_csv import ViconCsvError, parse_vicon_text, read_vicon_csv, write_tracker_csv
+from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text, read_vicon_csv, write_tracker_csv
 from rimless.errors import InputFileError
 
 PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
@@ -285,7 +285,7 @@ MIXED = ("Objects\n100\n,,W,,,,,\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,rad,rad,r
 def test_file_bytes_and_text_paths_agree_in_small_chunks(tmp_path, monkeypatch, text, newline):
     """read_vicon_csv (data blocks streamed back from the file), parse_vicon_bytes (from memory) and
     parse_vicon_text (encoded copy) give the same sections or the same errors, also when blocks span chunks."""
-    from rimless.analysis import vicon_csv
+    from rimless.analysis.io import vicon_csv
 
     monkeypatch.setattr(vicon_csv._Parser, "CHUNK_ROWS", 2)
     text = text.replace("\n", newline)

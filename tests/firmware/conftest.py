@@ -9,12 +9,12 @@ from dataclasses import dataclass, field
 import pytest
 from gpiozero.pins.mock import MockFactory
 
-from rimless.firmware.adns3080 import Adns3080
-from rimless.firmware.clutch import ClutchBank
-from rimless.firmware.controller import Channel, Controller, EventRecord, SampleRecord
-from rimless.firmware.detector import DetectorParams, LegDetector
-from rimless.firmware.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
-from rimless.firmware.faults import HealthLimits, HealthMonitor
+from rimless.firmware.drivers.adns3080 import Adns3080
+from rimless.firmware.drivers.clutch import ClutchBank
+from rimless.firmware.control.controller import Channel, Controller, EventRecord, SampleRecord
+from rimless.firmware.control.detector import DetectorParams, LegDetector
+from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
+from rimless.firmware.control.faults import HealthLimits, HealthMonitor
 
 PINS = (17, 27, 22, 23, 24, 16, 20, 21)
 

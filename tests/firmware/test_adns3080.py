@@ -6,11 +6,11 @@ import math
 
 import pytest
 
-from rimless.firmware import adns3080 as reg
-from rimless.firmware.adns3080 import Adns3080
+from rimless.firmware.drivers import adns3080 as reg
+from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.errors import SensorError, SensorNotFound, SpiProtocolError
-from rimless.firmware.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080, FakeFault
-from rimless.firmware.spi import SpiSegment
+from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080, FakeFault
+from rimless.firmware.drivers.spi import SpiSegment
 
 
 class Clock:

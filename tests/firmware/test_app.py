@@ -12,11 +12,11 @@ from pathlib import Path
 
 import pytest
 
-from rimless.firmware.app import RobotApp
-from rimless.firmware.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig, TelemetryConfig
-from rimless.firmware.fake_adns3080 import GaitTrajectory
-from rimless.firmware.hardware import build_fake
-from rimless.firmware.triallog import read_trial_log
+from rimless.firmware.service.app import RobotApp
+from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig, TelemetryConfig
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from rimless.firmware.drivers.hardware import build_fake
+from rimless.firmware.service.triallog import read_trial_log
 
 TOKEN = "test-token-7f3a9c2e1b5d"
 

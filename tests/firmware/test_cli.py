@@ -118,7 +118,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     try:
-        from rimless.firmware.commands import send_command
+        from rimless.firmware.link.commands import send_command
         from rimless.firmware.errors import RobotUnreachable
 
         engaged = []

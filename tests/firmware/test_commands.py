@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from rimless.firmware.app import RobotApp
-from rimless.firmware.commands import (
+from rimless.firmware.service.app import RobotApp
+from rimless.firmware.link.commands import (
     RateLimitedLog,
     RobotLink,
     WeakToken,
@@ -28,9 +28,9 @@ from rimless.firmware.commands import (
     Rejected,
     send_command,
 )
-from rimless.firmware.config import CommandsConfig, RobotConfig
+from rimless.firmware.service.config import CommandsConfig, RobotConfig
 from rimless.firmware.errors import CommandError, RobotUnreachable
-from rimless.firmware.heartbeat import Heartbeat
+from rimless.firmware.link.heartbeat import Heartbeat
 from tests.firmware.test_app import TOKEN, Client, all_off, config, scenario
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
@@ -292,7 +292,7 @@ def _flood(port: int, stop: threading.Event, counter: list[int]) -> None:
 
 
 def test_reserved_udp_path_disarms_during_a_live_connection_flood(tmp_path) -> None:
-    from rimless.firmware.commands import send_disarm_datagram
+    from rimless.firmware.link.commands import send_disarm_datagram
 
     async def script(app, hw):
         c = await Client.connect(app.command_port)
@@ -338,7 +338,7 @@ def _bad_datagram(port: int):
 
 
 def test_reserved_udp_status_answers_and_replays_only_read(tmp_path) -> None:
-    from rimless.firmware.commands import reserved_mac, send_reserved_datagram
+    from rimless.firmware.link.commands import reserved_mac, send_reserved_datagram
 
     async def script(app, hw):
         app.controller.arm()

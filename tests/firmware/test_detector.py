@@ -7,8 +7,8 @@ import random
 
 import pytest
 
-from rimless.firmware.detector import DetectorParams, LegDetector, Phase, VelocityEstimator
-from rimless.firmware.fake_adns3080 import GaitTrajectory, still
+from rimless.firmware.control.detector import DetectorParams, LegDetector, Phase, VelocityEstimator
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory, still
 
 
 def test_quadratic_velocity_is_exact_on_a_parabola_with_jittered_times() -> None:

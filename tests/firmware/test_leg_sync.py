@@ -8,9 +8,9 @@ import math
 
 import pytest
 
-from rimless.firmware.detector import DetectorParams, LegDetector
-from rimless.firmware.fake_adns3080 import GaitTrajectory
-from rimless.firmware.faults import Fault
+from rimless.firmware.control.detector import DetectorParams, LegDetector
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from rimless.firmware.control.faults import Fault
 
 TRAJ = GaitTrajectory(start_s=0.1, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 
@@ -121,11 +121,11 @@ def _per_leg_rig(trajectories, rate_hz: float = 300.0):
     """Eight channels (one fake sensor per leg, legs = [k]) on one virtual clock, armed with leg 7 standing."""
     from gpiozero.pins.mock import MockFactory
 
-    from rimless.firmware.adns3080 import Adns3080
-    from rimless.firmware.clutch import ClutchBank
-    from rimless.firmware.controller import Channel, Controller
-    from rimless.firmware.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
-    from rimless.firmware.faults import HealthLimits, HealthMonitor
+    from rimless.firmware.drivers.adns3080 import Adns3080
+    from rimless.firmware.drivers.clutch import ClutchBank
+    from rimless.firmware.control.controller import Channel, Controller
+    from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
+    from rimless.firmware.control.faults import HealthLimits, HealthMonitor
 
     from .conftest import PINS, Rig, VirtualClock
 

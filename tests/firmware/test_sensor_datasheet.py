@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
-from rimless.firmware import adns3080 as reg
-from rimless.firmware.adns3080 import Adns3080
+from rimless.firmware.drivers import adns3080 as reg
+from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.errors import SensorError, SensorNotFound, SpiProtocolError
-from rimless.firmware.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080, FakeFault, GaitTrajectory
-from rimless.firmware.faults import Fault
-from rimless.firmware.spi import SpiSegment
+from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080, FakeFault, GaitTrajectory
+from rimless.firmware.control.faults import Fault
+from rimless.firmware.drivers.spi import SpiSegment
 
 TRAJ = GaitTrajectory(start_s=0.1, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 

@@ -13,10 +13,10 @@ import time
 
 import pytest
 
-from rimless.firmware.config import ConfigError, RobotConfig, SensorConfig, TelemetryConfig, config_from_dict
-from rimless.firmware.fake_adns3080 import GaitTrajectory
-from rimless.firmware.logsetup import NonBlockingLog
-from rimless.firmware.telemetry import TelemetrySender
+from rimless.firmware.service.config import ConfigError, RobotConfig, SensorConfig, TelemetryConfig, config_from_dict
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from rimless.firmware.service.logsetup import NonBlockingLog
+from rimless.firmware.link.telemetry import TelemetrySender
 from tests.firmware.test_app import Client, all_off, config, scenario
 
 
@@ -129,12 +129,12 @@ def per_leg_config(tmp_path) -> RobotConfig:
 
 
 def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp_path) -> None:
-    from rimless.firmware.hardware import build_fake
+    from rimless.firmware.drivers.hardware import build_fake
 
     cfg = per_leg_config(tmp_path)
     traj = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3, compression_m=0.008, compression_s=0.06)
     hw = build_fake(cfg, trajectories=[leg_view(traj, k) for k in range(8)])
-    from rimless.firmware.app import RobotApp
+    from rimless.firmware.service.app import RobotApp
 
     async def main():
         app = RobotApp(cfg, hw)
@@ -174,7 +174,7 @@ def test_clutch_pins_off_spi_lines_and_off_boot_pull_ups_without_a_reason() -> N
 
 
 def test_sensors_sharing_a_reset_line_each_get_npd_and_one_pulse(tmp_path) -> None:
-    from rimless.firmware.hardware import build_fake
+    from rimless.firmware.drivers.hardware import build_fake
 
     base = config(tmp_path)
     sensors = (SensorConfig(spi_device=0, legs=(0, 1, 2, 3), npd_pin=5),

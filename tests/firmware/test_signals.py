@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from rimless.firmware.commands import send_command
+from rimless.firmware.link.commands import send_command
 from rimless.firmware.errors import RobotUnreachable
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
@@ -117,7 +117,7 @@ def test_release_drives_every_clutch_pin_low(tmp_path) -> None:
     rep = json.loads(r.stdout)
     assert rep["released_pins"] == [int(p) for p in PINS] and rep["level"] == "low"
     assert all(v == "0" for v in rep["fake_levels"].values()) and len(rep["fake_levels"]) == 8
-    unit = (Path(__file__).parents[2] / "firmware" / "rimless-robot.service").read_text()
+    unit = (Path(__file__).parents[2] / "firmware" / "service" / "rimless-robot.service").read_text()
     assert "ExecStopPost=" in unit and "robot release" in unit
 
 
@@ -141,7 +141,7 @@ def test_weak_token_is_refused_at_start(tmp_path) -> None:
         assert r.returncode == 2, r.stderr
         err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
         assert len(err) == 1 and "token" in err[0], r.stderr
-    unit = (Path(__file__).parents[2] / "firmware" / "rimless-robot.service").read_text()
+    unit = (Path(__file__).parents[2] / "firmware" / "service" / "rimless-robot.service").read_text()
     assert "RIMLESS_TOKEN=" not in unit and "LoadCredential=" in unit
 
 

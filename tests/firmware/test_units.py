@@ -9,11 +9,11 @@ import sys
 import pytest
 
 from rimless.errors import ParameterError, UserError
-from rimless.firmware.config import config_from_dict, example_config_path, load_config
-from rimless.firmware.controller import EventRecord, SampleRecord
+from rimless.firmware.service.config import config_from_dict, example_config_path, load_config
+from rimless.firmware.control.controller import EventRecord, SampleRecord
 from rimless.firmware.errors import ConfigError, ConfigFileError
-from rimless.firmware.telemetry import WallClock, pack_datagrams, parse_datagram, record_to_json
-from rimless.firmware.triallog import TrialLog, TrialLogError, read_trial_log
+from rimless.firmware.link.telemetry import WallClock, pack_datagrams, parse_datagram, record_to_json
+from rimless.firmware.service.triallog import TrialLog, TrialLogError, read_trial_log
 
 
 def test_example_config_loads_and_documents_every_section() -> None:
@@ -105,7 +105,7 @@ def test_firmware_imports_no_numeric_stack_and_cli_is_lean() -> None:
     code = (
         "import sys, pkgutil, importlib, rimless.firmware as f\n"
         "import rimless.firmware.cli\n"
-        "lean = not any(m in sys.modules for m in ('gpiozero', 'asyncio', 'rimless.firmware.app'))\n"
+        "lean = not any(m in sys.modules for m in ('gpiozero', 'asyncio', 'rimless.firmware.service.app'))\n"
         "for m in pkgutil.iter_modules(f.__path__):\n"
         "    importlib.import_module('rimless.firmware.' + m.name)\n"
         "bad = [m for m in ('numpy', 'scipy', 'pandas', 'matplotlib', 'dask', 'spidev') if m in sys.modules]\n"
@@ -116,7 +116,7 @@ def test_firmware_imports_no_numeric_stack_and_cli_is_lean() -> None:
 
 
 def test_live_view_draws_velocity_compression_and_one_strip_per_clutch() -> None:
-    from rimless.firmware.listen import Summary, sparkline
+    from rimless.firmware.link.listen import Summary, sparkline
 
     assert sparkline([0.0, 0.5, 1.0], 10) == "▁▅█"
     assert sparkline([2.0, 2.0], 10) == "▁▁"

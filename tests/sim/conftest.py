@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.params import WheelParams
-from rimless.sim.poincare import PoincareMap, default_guess, solve_fixed_point
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.poincare import PoincareMap, default_guess, solve_fixed_point
 
 TIGHT = ScipyIntegrator(rtol=1e-12, atol=1e-13)
 

@@ -11,11 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim.arclength import FOLD, PERIOD_DOUBLING, ArclengthContinuation, eigen_tests
-from rimless.sim.backend import make_map
-from rimless.sim.continuation import critical_slope
-from rimless.sim.params import WheelParams
-from rimless.sim.poincare import default_guess, find_gaits, solve_fixed_point
+from rimless.sim.continuation.arclength import FOLD, PERIOD_DOUBLING, ArclengthContinuation, eigen_tests
+from rimless.sim.integrate.backend import make_map
+from rimless.sim.continuation.algorithm1 import critical_slope
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.poincare import default_guess, find_gaits, solve_fixed_point
 
 K = 2700.0
 

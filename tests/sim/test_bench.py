@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from rimless.sim import bench
+from rimless.sim.studies import bench
 
 
 def _result(busy: bool | None) -> dict:

@@ -13,9 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from rimless.sim.failures import FailureReason, StepFailure
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.fast import FastPoincareMap, fast_step
-from rimless.sim.params import WheelParams
+from rimless.sim.model.params import WheelParams
 
 FAST_2500 = np.array([-0.45035523, 3.17963352])  # the VE fast gait at k = 2500 (what `gaits` lists)
 
@@ -64,7 +64,7 @@ def test_k2700_fast_gait_is_listed_invalid_with_its_lift_off_and_k2500_valid():
 
 
 def test_sweep_row_of_the_invalid_gait_says_why_and_gait_n_refuses_it():
-    from rimless.sim.sweep import SweepOptions, compute_point
+    from rimless.sim.studies.sweep import SweepOptions, compute_point
 
     point = {"model": "ve", "params": WheelParams().replace(stiffness_n_per_m=2700.0).to_dict()}
     rows = compute_point(point, SweepOptions(n_guesses=8))["rows"]
@@ -78,8 +78,8 @@ def test_sweep_row_of_the_invalid_gait_says_why_and_gait_n_refuses_it():
 
 
 def test_stance_force_test_function_brackets_k_2551():
-    from rimless.sim.arclength import STANCE_FORCE, ArclengthContinuation
-    from rimless.sim.poincare import bilateral_map
+    from rimless.sim.continuation.arclength import STANCE_FORCE, ArclengthContinuation
+    from rimless.sim.step.poincare import bilateral_map
 
     base = WheelParams().replace(stiffness_n_per_m=2500.0)
     cont = ArclengthContinuation(lambda q: bilateral_map(FastPoincareMap(q, "ve")), base, "ve", "k", facts_every=1,

@@ -8,12 +8,12 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from rimless.sim.backend import make_map
-from rimless.sim.boundary import BoundaryContinuation, solve_at, start_on_boundary
-from rimless.sim.continuation import critical_slope
-from rimless.sim.failures import StepFailure
-from rimless.sim.params import WheelParams
-from rimless.sim.poincare import default_guess
+from rimless.sim.integrate.backend import make_map
+from rimless.sim.continuation.boundary import BoundaryContinuation, solve_at, start_on_boundary
+from rimless.sim.continuation.algorithm1 import critical_slope
+from rimless.sim.model.failures import StepFailure
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.poincare import default_guess
 
 
 def _factory(model):
@@ -103,7 +103,7 @@ def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
     assert list(late.k) == [2700.0] and list(late.branch_label) == ["fast"] and list(late.reason) == ["fold"]
     assert (late.valid_from_slope_deg > late.critical_slope_deg).all()
     # figure 4 marks validity point by point: at k = 2700 the fast branch is invalid at the start slope
-    from rimless.sim.paper import figure_eigenvalues
+    from rimless.sim.studies.paper import figure_eigenvalues
 
     rows = pd.read_csv(out / "sweep.csv").to_dict("records")
     points = pd.read_csv(out / "sweep-points.csv").to_dict("records")

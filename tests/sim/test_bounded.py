@@ -9,10 +9,10 @@ import pytest
 
 from rimless.errors import ParameterError
 from rimless.sim import fast
-from rimless.sim.failures import FailureReason, StepFailure
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.params import WheelParams
-from rimless.sim.poincare import PoincareMap
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.poincare import PoincareMap
 
 Z_ER = np.array([-0.465155, 2.604441])
 

@@ -74,10 +74,10 @@ def test_gait_forces_draws_forces_and_a_stick_diagram_and_parquet_says_what_it_i
     matplotlib.use("Agg")
     import pyarrow.parquet as pq
 
-    from rimless.sim.backend import make_integrator
-    from rimless.sim.gait import simulate_steps
-    from rimless.sim.params import WheelParams
-    from rimless.sim.plotting import plot_gait
+    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.gait import simulate_steps
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.studies.figures import plot_gait
 
     p = WheelParams()
     traj = simulate_steps(p, "er", [-0.465155, 2.604441], 1, make_integrator("fast"), forces=True)

@@ -13,15 +13,15 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim import dynamics
-from rimless.sim import events as ev
+from rimless.sim.model import dynamics
+from rimless.sim.model import guards as ev
 from rimless.sim import fast
-from rimless.sim.failures import FailureReason, StepFailure
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.model import ALPHA, Mechanics, hub_position
-from rimless.sim.params import WheelParams
-from rimless.sim.poincare import PoincareMap
-from rimless.sim.section import state_from_section
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.mechanics import ALPHA, Mechanics, hub_position
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.poincare import PoincareMap
+from rimless.sim.model.section import state_from_section
 
 DIP_PARAMS = WheelParams(stiffness_n_per_m=2551.4)
 DIP_Z = np.array([-0.4493748982626989, 3.2115968976066744])  # the VE fast gait listed by `gaits` there

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim import derive
-from rimless.sim.model import ALPHA, Mechanics
-from rimless.sim.params import WheelParams
+from rimless.sim.model import derive
+from rimless.sim.model.mechanics import ALPHA, Mechanics
+from rimless.sim.model.params import WheelParams
 
 from .conftest import random_states
 
@@ -16,7 +16,7 @@ from .conftest import random_states
 def test_generated_code_matches_a_fresh_derivation(mass_model):
     path = derive.GENERATED_DIR / f"{derive.MODEL_NAMES[mass_model]}.py"
     assert path.read_text(encoding="utf-8") == derive.generate_source(mass_model), (
-        "generated code is stale: run `python -m rimless.sim.derive`")
+        "generated code is stale: run `python -m rimless.sim.model.derive`")
 
 
 @pytest.mark.parametrize("mass_model", ["eight-leg", "sliding-leg", "active-feet"])

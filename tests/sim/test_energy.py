@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim.hybrid import simulate_step
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.model import Mechanics
-from rimless.sim.params import WheelParams
-from rimless.sim.section import state_from_section
+from rimless.sim.step.hybrid import simulate_step
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.mechanics import Mechanics
+from rimless.sim.model.params import WheelParams
+from rimless.sim.model.section import state_from_section
 
 TIGHT = ScipyIntegrator(rtol=1e-12, atol=1e-14)
 

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from rimless.sim import events as ev
-from rimless.sim.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE
-from rimless.sim.hybrid import simulate_step
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.model import Mechanics
-from rimless.sim.params import WheelParams
-from rimless.sim.section import section_from_state, state_from_section
+from rimless.sim.model import guards as ev
+from rimless.sim.model.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE
+from rimless.sim.step.hybrid import simulate_step
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.mechanics import Mechanics
+from rimless.sim.model.params import WheelParams
+from rimless.sim.model.section import section_from_state, state_from_section
 
 PHASE_END_GUARD = {"dlsp": (DLSP, ev.LIFTOFF_A), "slsp_free": (SLSP_FREE, ev.CLUTCH_LOCK),
                    "slsp_clutched": (SLSP_CLUTCHED, ev.TOUCHDOWN)}

@@ -9,17 +9,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimless.sim import dynamics, events
+from rimless.sim.model import dynamics
+from rimless.sim.model import guards as events
 from rimless.sim import fast
 from rimless.sim.fast import model as fm
-from rimless.sim import impact as ref_impact
-from rimless.sim import section
-from rimless.sim.failures import FailureReason, StepFailure
-from rimless.sim.hybrid import simulate_step
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.model import Mechanics
-from rimless.sim.params import MASS_MODELS, WheelParams
-from rimless.sim.poincare import PoincareMap, solve_fixed_point
+from rimless.sim.model import impact as ref_impact
+from rimless.sim.model import section
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.step.hybrid import simulate_step
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.mechanics import Mechanics
+from rimless.sim.model.params import MASS_MODELS, WheelParams
+from rimless.sim.step.poincare import PoincareMap, solve_fixed_point
 
 Z_ER = np.array([-0.465155, 2.604441])
 Z_VE = np.array([-0.434780, 2.289290])

@@ -15,20 +15,20 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import rimless.firmware.adns3080
-import rimless.firmware.clutch
-import rimless.firmware.controller
-import rimless.firmware.detector
-import rimless.firmware.fake_adns3080
-import rimless.firmware.faults
+import rimless.firmware.drivers.adns3080
+import rimless.firmware.drivers.clutch
+import rimless.firmware.control.controller
+import rimless.firmware.control.detector
+import rimless.firmware.drivers.fake_adns3080
+import rimless.firmware.control.faults
 from rimless.cli import app
-from rimless.firmware.detector import DetectorParams
-from rimless.sim.failures import StepFailure
-from rimless.sim.firmware_loop import FirmwareLoop, FirmwareLoopConfig, firmware_fixed_point
+from rimless.firmware.control.detector import DetectorParams
+from rimless.sim.model.failures import StepFailure
+from rimless.sim.in_the_loop.loop import FirmwareLoop, FirmwareLoopConfig, firmware_fixed_point
 
 REPO = Path(__file__).resolve().parents[2]
-FIRMWARE_MODULES = [rimless.firmware.adns3080, rimless.firmware.clutch, rimless.firmware.controller,
-                    rimless.firmware.detector, rimless.firmware.fake_adns3080, rimless.firmware.faults]
+FIRMWARE_MODULES = [rimless.firmware.drivers.adns3080, rimless.firmware.drivers.clutch, rimless.firmware.control.controller,
+                    rimless.firmware.control.detector, rimless.firmware.drivers.fake_adns3080, rimless.firmware.control.faults]
 QUIET = dict(jitter_s=0.0, noise_counts=0.0)
 
 
@@ -77,9 +77,9 @@ def test_the_loop_runs_the_firmware_files_unpatched(table1, er_fixed_point):
             assert fn.__code__.co_code == code, f"{module.__name__}.{qualname} is not the code in {path}"
             checked += 1
         assert checked >= 3
-    expected = {"controller": rimless.firmware.controller.Controller, "detector": rimless.firmware.detector.LegDetector,
-                "sensor": rimless.firmware.adns3080.Adns3080, "fake": rimless.firmware.fake_adns3080.FakeAdns3080,
-                "clutches": rimless.firmware.clutch.ClutchBank}
+    expected = {"controller": rimless.firmware.control.controller.Controller, "detector": rimless.firmware.control.detector.LegDetector,
+                "sensor": rimless.firmware.drivers.adns3080.Adns3080, "fake": rimless.firmware.drivers.fake_adns3080.FakeAdns3080,
+                "clutches": rimless.firmware.drivers.clutch.ClutchBank}
     for attr, cls in expected.items():
         obj = getattr(loop, attr)
         assert type(obj) is cls, attr
@@ -93,10 +93,10 @@ def test_the_loop_runs_the_firmware_files_unpatched(table1, er_fixed_point):
 def test_a_patched_firmware_function_is_detected(monkeypatch):
     """The check above fails when a firmware method is replaced (guards the guard)."""
     compiled = _code_objects(REPO / "firmware" / "detector.py")
-    LegDetector = rimless.firmware.detector.LegDetector
+    LegDetector = rimless.firmware.control.detector.LegDetector
 
     def update(self, t_ns, displacement_m, trusted=True):  # noqa: ANN001, ANN202
-        return rimless.firmware.detector.NOTHING
+        return rimless.firmware.control.detector.NOTHING
 
     monkeypatch.setattr(LegDetector, "update", update)
     assert inspect.getattr_static(LegDetector, "update").__code__.co_code != compiled["LegDetector.update"]
@@ -285,7 +285,7 @@ def test_firmware_sweep_alias_still_answers(table1):
 
 def test_the_figure_of_a_sweep_with_critical_slopes_shows_the_advantage_kept(tmp_path):
     """add_advantage: share of the ideal ER's CoT saving over VE that remains, from hand-made rows."""
-    from rimless.sim.firmware_sweep import add_advantage, plot_firmware_sweep
+    from rimless.sim.in_the_loop.sweep import add_advantage, plot_firmware_sweep
 
     rows = [{"clutch": "ideal", "model": "er", "cot": 0.02}, {"clutch": "none (VE)", "model": "ve", "cot": 0.03}]
     rows += [{"clutch": "firmware", "rate_hz": 300.0, "delay_ms": d, "walks": True, "cot": cot,
@@ -302,8 +302,8 @@ def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(t
     """At 1.9 deg with a 5 ms clutch at 300 Hz the gait slows step by step. The firmware's leg count
     faults (leg_sync_lost: no touchdown within 1.4 x the running step period) and stops clutching; with
     the step-timing checks relaxed the same walk stalls mechanically instead, classified."""
-    from rimless.sim.firmware_cli import ideal_fixed_point
-    from rimless.sim.firmware_loop import without_step_timing_checks
+    from rimless.sim.cli.firmware import ideal_fixed_point
+    from rimless.sim.in_the_loop.loop import without_step_timing_checks
 
     params = table1.replace(slope_rad=math.radians(1.9))
     z = ideal_fixed_point(params, backend="reference", rtol=1e-9).z
@@ -328,7 +328,7 @@ def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(t
 
 
 def test_boundaries_say_what_limits_the_critical_slope():
-    from rimless.sim.firmware_loop import FIRMWARE_FAULT_PREFIX, FirmwareBoundaries, FirmwareCriticalSlope
+    from rimless.sim.in_the_loop.loop import FIRMWARE_FAULT_PREFIX, FirmwareBoundaries, FirmwareCriticalSlope
 
     fault = f"{FIRMWARE_FAULT_PREFIX} (leg_sync_lost): it no longer clutches"
     fw = FirmwareCriticalSlope(0.036, 0.035, fault, [])
@@ -354,8 +354,8 @@ def test_replay_of_a_trial_log_written_by_the_firmware_logger(table1, er_fixed_p
     """A walk's controller records go through the firmware's own TrialLog writer; the replay finds the same
     steps: recorded periods (touchdown event to touchdown event) equal the simulated periods to a few
     sample periods, and the recorded compression is the simulated one to a few counts."""
-    from rimless.firmware.triallog import TrialLog
-    from rimless.sim.firmware_replay import replay_trial
+    from rimless.firmware.service.triallog import TrialLog
+    from rimless.sim.in_the_loop.replay import replay_trial
 
     loop = FirmwareLoop(table1, FirmwareLoopConfig(rate_hz=1000.0, engage_delay_s=0.0, release_delay_s=0.0, **QUIET))
     loop.records = []
@@ -380,8 +380,8 @@ def test_replay_overlays_the_step_under_the_firmware_in_the_loop(table1, er_fixe
     gait: its period is the recorded one, its lock command comes after the impact by the recorded lock time
     after the touchdown event plus the touchdown's detection lag (a few samples), its peak compression is
     the recorded one, and the stance clutch is engaged from the lock on."""
-    from rimless.firmware.triallog import TrialLog
-    from rimless.sim.firmware_replay import FIRMWARE_STEPS, replay_trial
+    from rimless.firmware.service.triallog import TrialLog
+    from rimless.sim.in_the_loop.replay import FIRMWARE_STEPS, replay_trial
 
     cfg = FirmwareLoopConfig(rate_hz=1000.0, engage_delay_s=0.002, release_delay_s=0.002, **QUIET)
     loop = FirmwareLoop(table1, cfg)
@@ -411,7 +411,7 @@ def test_replay_overlays_the_step_under_the_firmware_in_the_loop(table1, er_fixe
 
 
 def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed_point, tmp_path):
-    from rimless.firmware.triallog import TrialLog
+    from rimless.firmware.service.triallog import TrialLog
 
     loop = FirmwareLoop(table1, FirmwareLoopConfig(rate_hz=300.0, **QUIET))
     loop.records = []
@@ -437,8 +437,8 @@ def test_cli_replay_reports_and_plots_and_rejects_a_corrupt_log(table1, er_fixed
 def test_robot_config_supplies_the_firmware_settings(tmp_path):
     """--robot-config is read by the firmware's loader: its detector and rate reach the loop, and a bad
     field is a one-line error naming the file and the field."""
-    from rimless.firmware.config import example_config_path
-    from rimless.sim.firmware_cli import build_config
+    from rimless.firmware.service.config import example_config_path
+    from rimless.sim.cli.firmware import build_config
 
     text = example_config_path().read_text().replace("rate_hz = 300.0", "rate_hz = 500.0")
     text = text.replace("touch_debounce_samples = 2", "touch_debounce_samples = 3")
@@ -474,7 +474,7 @@ def test_one_sensor_per_leg_in_the_loop_clutches_each_step_once(table1, er_fixed
 
 
 def test_bench_reports_steps_per_second_beside_the_reference_with_the_load(table1, capsys):
-    from rimless.sim.firmware_cli import run_bench
+    from rimless.sim.cli.firmware import run_bench
 
     out = run_bench(table1, rates_hz=(1000.0,), steps=1)
     assert [(r["rate_hz"], r["sensors"]) for r in out["rows"]] == [(1000.0, "one"), (1000.0, "per-leg")]

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim.impact import double_support_jacobian, impact, relabel
-from rimless.sim.model import ALPHA, Mechanics, swing_height
-from rimless.sim.params import WheelParams
+from rimless.sim.model.impact import double_support_jacobian, impact, relabel
+from rimless.sim.model.mechanics import ALPHA, Mechanics, swing_height
+from rimless.sim.model.params import WheelParams
 
 from .conftest import random_states
 

@@ -3,7 +3,7 @@ import math
 import pytest
 
 from rimless.errors import ParameterError
-from rimless.sim.params import WheelParams, load_params
+from rimless.sim.model.params import WheelParams, load_params
 
 
 def test_defaults_are_table_1():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rimless.sim.poincare import PoincareMap
+from rimless.sim.step.poincare import PoincareMap
 
 
 def _regression_jacobian(pmap: PoincareMap, z: np.ndarray, radius: float = 2e-5, n: int = 8) -> np.ndarray:
@@ -63,12 +63,12 @@ def test_period_one_gait_repeats_itself(er_fixed_point):
 def test_reference_jacobian_next_to_the_er_stall_matches_the_variational_one():
     """Next to the stall, a fixed central-difference step of 1e-4 crosses the stall boundary (the perturbed
     step rolls back); the curvature-scaled step must agree with the exact (variational) Jacobian."""
-    from rimless.sim.arclength import ArclengthContinuation
-    from rimless.sim.backend import make_map
-    from rimless.sim.failures import StepFailure
-    from rimless.sim.integrators import ScipyIntegrator
-    from rimless.sim.params import WheelParams
-    from rimless.sim.poincare import default_guess
+    from rimless.sim.continuation.arclength import ArclengthContinuation
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.integrate.reference import ScipyIntegrator
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.step.poincare import default_guess
 
     base = WheelParams()
     cont = ArclengthContinuation(lambda q: make_map(q, "er", backend="fast"), base, "er")
@@ -90,9 +90,9 @@ def test_newton_tolerance_follows_the_maps_own_noise():
     """Very light legs (m = 1e-4 kg) at a loose rtol (1e-6): the map's noise sits above the 1e-10 tolerance;
     Newton must accept its own noise floor instead of reporting that no gait exists. (At the default rtol the
     compiled map is now accurate enough to meet 1e-10 there.)"""
-    from rimless.sim.backend import make_map
-    from rimless.sim.params import WheelParams
-    from rimless.sim.poincare import FIXED_POINT_TOL, default_guess, map_noise, solve_fixed_point
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.step.poincare import FIXED_POINT_TOL, default_guess, map_noise, solve_fixed_point
 
     p = WheelParams(leg_mass_kg=1e-4)
     pmap = make_map(p, "er", backend="fast", rtol=1e-6)

@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimless.sim import dynamics
+from rimless.sim.model import dynamics
 from rimless.sim.fast import model as fm
-from rimless.sim.impact import double_support_jacobian
-from rimless.sim.model import Mechanics
-from rimless.sim.params import MASS_MODELS, WheelParams
+from rimless.sim.model.impact import double_support_jacobian
+from rimless.sim.model.mechanics import Mechanics
+from rimless.sim.model.params import MASS_MODELS, WheelParams
 
 from .conftest import random_states
 

@@ -3,8 +3,8 @@ import math
 import pytest
 from scipy.integrate import solve_ivp
 
-from rimless.sim.params import WheelParams
-from rimless.sim.rigid import ALPHA, RigidWheel
+from rimless.sim.model.params import WheelParams
+from rimless.sim.model.rigid import ALPHA, RigidWheel
 
 
 def test_coleman_critical_slope_of_table_1_is_2_799_deg():

@@ -11,12 +11,12 @@ import pytest
 
 from rimless.sim import fast
 from rimless.sim.fast import rk
-from rimless.sim.events import TOUCHDOWN
-from rimless.sim.failures import FailureReason, StepFailure
-from rimless.sim.integrators import ScipyIntegrator
-from rimless.sim.model import ALPHA, Mechanics
-from rimless.sim.params import WheelParams
-from rimless.sim.poincare import PoincareMap
+from rimless.sim.model.guards import TOUCHDOWN
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.mechanics import ALPHA, Mechanics
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.poincare import PoincareMap
 
 HUB = 1.892
 Z_GRID = (np.array([-0.44, 1.0]), np.array([-0.45, 2.0]), np.array([-0.43, 3.0]))
@@ -151,7 +151,7 @@ def test_stiffness_indicator_flags_stiff_legs_only() -> None:
 
 
 def test_outcome_classes_agree_with_the_reference_on_a_small_stress_grid() -> None:
-    from rimless.sim.stress import compare_with_reference
+    from rimless.sim.studies.stress import compare_with_reference
 
     res = compare_with_reference(WheelParams(), k_values=(1000.0,), c_values=(0.0, 8.0), slopes_rad=(0.05,),
                                  mass_ratios=(0.02,), rtol=1e-10)

@@ -8,8 +8,8 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from rimless.sim.params import WheelParams
-from rimless.sim.sweep import SweepOptions, grid_points, parse_range, point_key, run_sweep
+from rimless.sim.model.params import WheelParams
+from rimless.sim.studies.sweep import SweepOptions, grid_points, parse_range, point_key, run_sweep
 
 OPTIONS = SweepOptions(n_guesses=4)
 NUMBERS = ("critical_slope_rad", "max_abs_eigenvalue", "step_period_s", "energy_ratio", "theta_dot_plus_rad_s")

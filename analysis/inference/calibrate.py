@@ -1,0 +1,552 @@
+"""Calibrate the wheel model on trials: least squares on the step periods and the CoM height of all trials.
+
+Unknowns: the global model parameters asked for (default the leg damping c; any of ``c, k, m_H, m, I_c,
+L0``) and, per trial, the release speed theta' at the rigid-touchdown state theta = -alpha/2 one step before
+the first measured impact (as in `rimless.analysis.inference.compare`). Residuals, per trial:
+
+- step periods: simulated minus measured, for every consecutive measured period, divided by sigma_T;
+- CoM height: simulated minus measured at every valid frame between the first and last measured impact
+  (except within `CUSP_GUARD_S` of an impact, where the curve has a cusp),
+  after the trial's constant height offset (profiled out when the heights are measured from the impact line)
+  and its time shift (the lag of the CoM-height minima behind the touchdown, taken from the Table 1
+  comparison and kept fixed), divided by sigma_h.
+
+sigma_T and sigma_h are the RMS residuals of each block at the start and, for the uncertainties, at the
+solution (so each block has a reduced chi^2 of 1 and neither swamps the other); for the uncertainties the
+CoM block's sigma is further inflated by sqrt((1 + rho) / (1 - rho)), rho the lag-1 autocorrelation of its
+residuals (correlated samples carry less information than their number suggests). Uncertainties are from the Jacobian
+(cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters.
+A parameter is **not identifiable** when its relative standard error exceeds `NOT_IDENTIFIABLE_REL_SE` or the
+Jacobian has a (near) null direction involving it (flat cost); it is then reported as such, not as a value.
+
+Simulations use the compiled fast path (`rimless.sim.fast.FastIntegrator` under `simulate_steps`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rimless.errors import ParameterError, RimlessError
+
+__all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report",
+           "NOT_IDENTIFIABLE_REL_SE", "NoTrialCalibrated"]
+
+#: --fit names -> WheelParams fields, with the display unit
+FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/m"), "m_H": ("hub_mass_kg", "kg"),
+              "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
+NOT_IDENTIFIABLE_REL_SE = 0.5
+NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
+ALPHA_RAD = math.pi / 4
+PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
+CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
+MAX_NFEV = 20  # residual evaluations of the full least squares
+MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
+
+
+def parse_fit(text: str) -> list[str]:
+    """``"c,k"`` -> ["c", "k"]; raises ParameterError naming --fit."""
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise ParameterError("--fit needs at least one parameter name (e.g. c or c,k)")
+    bad = [n for n in names if n not in FIT_FIELDS]
+    if bad:
+        raise ParameterError(f"--fit: unknown parameter {bad[0]!r}; known: {', '.join(FIT_FIELDS)}")
+    if len(set(names)) != len(names):
+        raise ParameterError(f"--fit: a parameter is named twice in {text!r}")
+    return names
+
+
+@dataclass
+class _TrialData:
+    name: str
+    slope_deg: float
+    periods_s: np.ndarray  # consecutive periods from the first measured impact
+    t_s: np.ndarray  # valid frame times from the first impact, within [0, last impact]
+    com_m: np.ndarray
+    from_plane: bool
+    shift_s: float = 0.0
+    release_rad_s: float = math.nan
+
+
+def _trial_data(trial: Any, name: str) -> _TrialData | str:
+    from rimless.analysis.inference.sustained import consecutive_periods
+
+    chains = consecutive_periods(trial)
+    if not chains or chains[0].size < 2:
+        return f"{name}: fewer than two consecutive step periods"
+    slope = float(trial.meta.slope_deg)
+    if not 0.0 <= slope < math.degrees(ALPHA_RAD / 2):
+        return f"{name}: its slope {slope:.3f} deg cannot be simulated (0 <= slope < 22.5 deg)"
+    periods = chains[0]
+    imp = np.asarray(trial.impact_time_s, float)
+    t = np.asarray(trial.time_s, float) - imp[0]
+    y = np.asarray(trial.series["com_height"], float)
+    valid = np.isfinite(y)
+    for key in ("gap", "interpolated"):
+        try:
+            valid &= ~np.asarray(trial.series[key], bool)
+        except (KeyError, TypeError):
+            pass
+    t_last = float(np.sum(periods))
+    win = valid & (t >= 0) & (t <= t_last)
+    # leave out the samples next to an impact: the CoM height has a cusp there, and a sample whose side of the
+    # simulated cusp flips with a parameter makes the cost non-smooth (the periods carry that timing)
+    impacts_rel = np.concatenate([[0.0], np.cumsum(periods)])
+    near = np.min(np.abs(t[:, None] - impacts_rel[None, :]), axis=1) < CUSP_GUARD_S
+    win &= ~near
+    ref = str(getattr(trial.meta, "com_height_reference", ""))
+    return _TrialData(name, float(trial.meta.slope_deg), periods, t[win], y[win], ref.startswith("slope plane"))
+
+
+@dataclass
+class _Sim:
+    model: str
+    rtol: float
+    record_dt_s: float
+    calls: int = 0
+    cache: dict = field(default_factory=dict)
+
+    def frequencies(self, params: Any, slope_deg: float, w: float, n: int) -> np.ndarray:
+        """Step frequencies (1/s) of the n steps after the release step, on the compiled step map; 0 for steps
+        not reached (the wheel stalled or the step failed)."""
+        from rimless.sim.model.failures import StepFailure
+        from rimless.sim.fast import fast_step
+
+        self.calls += 1
+        p = params.replace(slope_rad=math.radians(slope_deg))
+        z = np.array([-ALPHA_RAD / 2, w])
+        out = np.zeros(n)
+        try:
+            for k in range(n + 1):
+                r = fast_step(p, self.model, z, rtol=self.rtol)
+                if k:
+                    out[k - 1] = 1.0 / r.period_s
+                z = r.z_next
+        except StepFailure:
+            pass
+        return out
+
+    def walk(self, params: Any, slope_deg: float, w: float, n: int, record: bool) -> Any:
+        """`simulate_steps` from the rigid-touchdown release; the last walks are cached (a change of the time
+        shift alone then costs no simulation)."""
+        from rimless.sim.integrate.backend import make_integrator
+        from rimless.sim.step.gait import simulate_steps
+
+        key = (params.as_vector(), params.mass_model, slope_deg, w, n, record)
+        if key in self.cache:
+            return self.cache[key]
+        self.calls += 1
+        p = params.replace(slope_rad=math.radians(slope_deg))
+        g = simulate_steps(p, self.model, np.array([-ALPHA_RAD / 2, w]), n, make_integrator("auto", rtol=self.rtol),
+                           record_dt=self.record_dt_s if record else 1.0)
+        if len(self.cache) > 256:
+            self.cache.pop(next(iter(self.cache)))
+        self.cache[key] = g
+        return g
+
+
+def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
+               with_com: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(step-frequency residuals 1/T_sim - 1/T_meas in Hz, CoM residuals in m), unscaled.
+
+    Frequencies, not periods: a step the simulation does not reach (it stalled) has frequency 0, the limit of
+    a period that grows without bound, so the cost stays continuous across the stall boundary."""
+    n = d.periods_s.size
+    g = sim.walk(params, d.slope_deg, w, n + 2, with_com)
+    if with_com and g.failure is None and len(g.steps) > 1 and d.t_s.size:
+        covered = g.steps[-1].t_start_s + g.steps[-1].period_s - g.steps[1].t_start_s
+        if covered < d.t_s[-1] + 0.06:  # the simulated walk is faster: simulate enough steps to cover the window
+            extra = int(math.ceil((d.t_s[-1] + 0.06 - covered) / max(g.steps[-1].period_s, 1e-3))) + 1
+            g = sim.walk(params, d.slope_deg, w, n + 2 + min(extra, 3 * n + 4), with_com)
+    got = np.array([s.period_s for s in g.steps[1:1 + n]])
+    f_sim = np.zeros(n)  # a step the simulation did not reach (stalled) has frequency 0: continuous at the stall
+    f_sim[:got.size] = 1.0 / got
+    rp = f_sim - 1.0 / d.periods_s
+    if not with_com or d.t_s.size == 0:
+        return rp, np.zeros(0)
+    if len(g.steps) < 2:
+        return rp, np.full(d.t_s.size, float(np.mean(d.com_m)) if d.from_plane else 0.0)
+    t0 = g.steps[1].t_start_s
+    tt = d.t_s - shift_s
+    s = _smooth_curve(g, t0, tt)
+    off = 0.0 if d.from_plane else float(np.mean(s - d.com_m))
+    return rp, s - (d.com_m + off)
+
+
+def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
+    """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
+    impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
+    interpolation on the record grid puts kinks into the cost that finite differences mistake for
+    information). Held at the end values outside the simulated walk (a stall)."""
+    from scipy.interpolate import CubicSpline
+
+    from rimless.analysis.inference.compare import _clean_curve
+
+    t_all = np.asarray(g.table["t_s"], float) - t0
+    y_all = np.asarray(g.table["com_height_normal_m"], float)
+    step = np.asarray(g.table["step"])
+    st, sy = _clean_curve(t_all, y_all)
+    out = np.interp(tt, st, sy)
+    for k in np.unique(step):
+        ts, ys = _clean_curve(t_all[step == k], y_all[step == k])
+        if ts.size < 4:
+            continue
+        m = (tt >= ts[0]) & (tt <= ts[-1])
+        if m.any():
+            out[m] = CubicSpline(ts, ys)(tt[m])
+    return out
+
+
+@dataclass
+class ParamEstimate:
+    name: str
+    field: str
+    unit: str
+    table1: float
+    value: float
+    se: float
+    identifiable: bool
+    note: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "field": self.field, "unit": self.unit, "table1": self.table1,
+                "value": self.value if self.identifiable else None, "estimate": self.value, "se": self.se,
+                "identifiable": self.identifiable, "note": self.note}
+
+
+@dataclass
+class CalibrationResult:
+    params: list[ParamEstimate]
+    correlation: np.ndarray
+    release_rad_s: dict[str, float]
+    residuals: list[dict[str, Any]]  # per trial: Table 1 vs calibrated RMS
+    sigma_period_s: float  # sigma of the step-frequency residuals, Hz
+    sigma_com_m: float
+    calibrated_params: Any
+    failed: dict[str, str] = field(default_factory=dict)
+    evaluations: int = 0
+    cost_table1: float = math.nan
+    cost_calibrated: float = math.nan
+    model: str = "er"
+
+    @property
+    def identifiable(self) -> bool:
+        return all(p.identifiable for p in self.params)
+
+    def summary(self) -> dict[str, Any]:
+        return {"model": self.model, "params": [p.as_dict() for p in self.params],
+                "correlation": {"names": [p.name for p in self.params], "matrix": self.correlation.tolist()},
+                "release_theta_dot_rad_s": self.release_rad_s, "residuals": self.residuals,
+                "sigma_step_frequency_hz": self.sigma_period_s, "sigma_com_mm": self.sigma_com_m * 1e3,
+                "rms_period_ms": {"table1": _total(self.residuals, "table1_rms_period_ms"),
+                                  "calibrated": _total(self.residuals, "calibrated_rms_period_ms")},
+                "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
+                               "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
+                "failed": self.failed, "simulations": self.evaluations}
+
+
+def _total(rows: list[dict[str, Any]], key: str) -> float:
+    vals = [(r[key], r["n_" + ("period" if "period" in key else "com")]) for r in rows if math.isfinite(r[key])]
+    n = sum(k for _, k in vals)
+    return math.sqrt(sum(v * v * k for v, k in vals) / n) if n else math.nan
+
+
+def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
+    """From the Jacobian of the scaled residuals (the first n_global columns are the globals, in units of
+    ``scale``): their standard errors (in their units), correlation and identifiability.
+
+    The information about the globals is the Schur complement S = F_gg - F_gl F_ll^-1 F_lg of F = J^T J (the
+    per-trial unknowns profiled out). Normalised to unit diagonal, an eigenvalue below `NULL_EIGEN` is a flat
+    direction of the cost (a parameter, or a combination, the data do not see: finite differences leave it
+    slightly above zero); every global taking part in it, and every global whose column is zero, is not
+    identifiable and gets an infinite standard error."""
+    F = J.T @ J
+    g, l_ = slice(0, n_global), slice(n_global, F.shape[0])
+    S = F[g, g].copy()
+    if F.shape[0] > n_global:
+        S -= F[g, l_] @ np.linalg.pinv(F[l_, l_]) @ F[l_, g]
+    dS = np.clip(np.diag(S), 0.0, None)
+    col = np.linalg.norm(J[:, :n_global], axis=0)
+    zero = (dS <= 1e-12 * max(float(np.max(np.diag(F))), 1e-300)) | (col == 0)
+    flat = zero.copy()
+    ok_idx = np.nonzero(~zero)[0]
+    notes = [""] * n_global
+    if ok_idx.size:
+        d = np.sqrt(dS[ok_idx])
+        R = S[np.ix_(ok_idx, ok_idx)] / np.outer(d, d)
+        w, V = np.linalg.eigh(R)
+        for k in np.nonzero(w < NULL_EIGEN)[0]:
+            vu = V[:, k] / d  # the flat direction in the parameters' own (relative) units
+            vu /= np.max(np.abs(vu))
+            flat[ok_idx[np.abs(vu) > 0.05]] = True
+    cov = np.full((n_global, n_global), np.nan)
+    if ok_idx.size:
+        good = np.nonzero(~flat)[0]
+        if good.size:
+            cov[np.ix_(good, good)] = np.linalg.inv(S[np.ix_(good, good)])
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale[:n_global]
+    se = np.where(flat, np.inf, se)
+    dd = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(dd, dd)
+    ok = []
+    for i in range(n_global):
+        if zero[i]:
+            notes[i] = "flat cost: the data do not change when it changes"
+        elif flat[i]:
+            notes[i] = "flat cost along a combination with other parameters: only the combination is seen"
+        ok.append(not flat[i])
+    return se, corr, ok, notes
+
+
+def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
+              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3,
+              progress: Callable[[int], None] | None = None) -> CalibrationResult:
+    """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
+
+    Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
+    (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
+    (`PROFILE_FACTORS`), which picks the start; (2) the full least squares on periods and CoM height (recorded
+    walks on the compiled integrator), twice, with the block sigmas of the previous pass.
+    ``progress(n)`` is called after simulations with the running count."""
+    from scipy.optimize import least_squares
+
+    from rimless.sim.model.params import WheelParams
+
+    base = params or WheelParams()
+    sim = _Sim(model, rtol, record_dt_s)
+    failed: dict[str, str] = {}
+    data: list[_TrialData] = []
+    for tr, nm in zip(trials, names):
+        d = _trial_data(tr, nm)
+        if isinstance(d, str):
+            failed[nm] = d
+        else:
+            data.append(d)
+    if not data:
+        raise NoTrialCalibrated("no trial could be calibrated: " + "; ".join(failed.values()))
+
+    fields = [FIT_FIELDS[n][0] for n in fit]
+    x_global0 = np.array([float(getattr(base, f)) for f in fields])
+    gscale = np.where(x_global0 != 0, np.abs(x_global0), 1.0)
+    n_g = len(fields)
+
+    def params_of(xg: np.ndarray) -> Any:
+        try:
+            return base.replace(**{f: float(v) for f, v in zip(fields, xg)})
+        except ParameterError:
+            return None
+
+    def tick() -> None:
+        if progress:
+            progress(sim.calls)
+
+    def freq_res(p: Any, d: _TrialData, w: float) -> np.ndarray:
+        """Step-frequency residuals (Hz) from the compiled map alone."""
+        f = sim.frequencies(p, d.slope_deg, w, d.periods_s.size)
+        tick()
+        return f - 1.0 / d.periods_s
+
+    def fit_release(p: Any, d: _TrialData, w0: float | None) -> tuple[float, float]:
+        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then Brent-like LS."""
+        if w0 is None or not math.isfinite(w0):
+            w0 = first_period_release(p, d)
+        r = least_squares(lambda q: freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
+                          diff_step=[1e-5], xtol=1e-10, ftol=1e-12, max_nfev=30)
+        return float(r.x[0]), float(2 * r.cost)
+
+    def first_period_release(p: Any, d: _TrialData) -> float:
+        """The release whose first simulated step after the release step lasts the first measured period
+        (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
+        grid = np.linspace(0.4, 6.0, 29)
+        f1 = np.array([sim.frequencies(p, d.slope_deg, w, 1)[0] for w in grid])
+        tick()
+        target = 1.0 / d.periods_s[0]
+        diff = f1 - target
+        for i in range(grid.size - 1):
+            if f1[i] > 0 and diff[i] <= 0 < diff[i + 1]:
+                a, b = grid[i], grid[i + 1]
+                for _ in range(40):
+                    m = 0.5 * (a + b)
+                    if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0:
+                        a = m
+                    else:
+                        b = m
+                return 0.5 * (a + b)
+        costs = [float(np.sum(freq_res(p, d, w) ** 2)) for w in grid]
+        return float(grid[int(np.argmin(costs))])
+
+    # stage 1: Table 1, then the coarse profile of each global, on the periods alone
+    p0 = params_of(x_global0)
+    releases = {}
+    for d in list(data):
+        w, _ = fit_release(p0, d, None)
+        if not math.isfinite(w) or np.any(sim.frequencies(p0, d.slope_deg, w, d.periods_s.size) == 0) and False:
+            pass
+        releases[d.name] = w
+        d.release_rad_s = w
+    ug_best = np.zeros(n_g)
+    best = sum(fit_release(p0, d, d.release_rad_s)[1] for d in data)
+    for j in range(n_g):
+        for factor in PROFILE_FACTORS:
+            ug = ug_best.copy()
+            ug[j] = factor - 1.0
+            p = params_of(x_global0 + ug * gscale)
+            if p is None:
+                continue
+            fits = [fit_release(p, d, None) for d in data]
+            cost = sum(c for _, c in fits)
+            if cost < best:
+                best, ug_best = cost, ug
+                for d, (w, _) in zip(data, fits):
+                    d.release_rad_s = w
+    if ug_best.any():  # releases at the chosen start
+        pb = params_of(x_global0 + ug_best * gscale)
+        for d in data:
+            d.release_rad_s = fit_release(pb, d, None)[0]
+
+    # stage 2: full least squares on periods and CoM height
+    n_t = len(data)
+    sig = {"t": 0.02, "h": 0.5e-3}  # step frequency (Hz), CoM height (m)
+
+    def trial_res(p: Any, i: int, w: float, shift: float) -> np.ndarray:
+        d = data[i]
+        if p is None:
+            return np.full(d.periods_s.size + d.t_s.size, 1e3)
+        rp, rh = _residuals(sim, p, d, w, shift)
+        tick()
+        return np.concatenate([rp / sig["t"], rh / sig["h"]])
+
+    sizes = [d.periods_s.size + d.t_s.size for d in data]
+    offs = np.concatenate([[0], np.cumsum(sizes)])
+
+    def unpack(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(globals, release speeds rad/s, time shifts s); u holds globals relative to Table 1, shifts in ms."""
+        return x_global0 + u[:n_g] * gscale, u[n_g:n_g + n_t], u[n_g + n_t:] * 1e-3
+
+    def fun(u: np.ndarray) -> np.ndarray:
+        xg, ws, sh = unpack(u)
+        p = params_of(xg)
+        return np.concatenate([trial_res(p, i, ws[i], sh[i]) for i in range(n_t)])
+
+    def jac(u: np.ndarray, central: bool = False) -> np.ndarray:
+        """Forward differences: a global column needs every trial, a trial's release and shift only that trial
+        (the shift costs no simulation: the walk is cached and only the interpolation moves)."""
+        xg, ws, sh = unpack(u)
+        p = params_of(xg)
+        r0 = [trial_res(p, i, ws[i], sh[i]) for i in range(n_t)]
+        J = np.zeros((offs[-1], n_g + 2 * n_t))
+        for j in range(n_g):
+            h = 1e-3
+            xg2 = xg.copy()
+            xg2[j] += h * gscale[j]
+            p2 = params_of(xg2)
+            xg3 = xg.copy()
+            xg3[j] -= h * gscale[j]
+            p3 = params_of(xg3) if central else None
+            for i in range(n_t):
+                if p3 is not None:
+                    J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - trial_res(p3, i, ws[i], sh[i])) / (2 * h)
+                else:
+                    J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - r0[i]) / h
+        for i in range(n_t):
+            h = 1e-5
+            J[offs[i]:offs[i + 1], n_g + i] = (trial_res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
+            hs = 0.2  # ms
+            J[offs[i]:offs[i + 1], n_g + n_t + i] = (trial_res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
+        return J
+
+    lo = np.concatenate([np.full(n_g, -np.inf), np.full(n_t, 0.05), np.full(n_t, -MAX_SHIFT_MS)])
+    hi = np.concatenate([np.full(n_g, np.inf), np.full(n_t, 20.0), np.full(n_t, MAX_SHIFT_MS)])
+
+    def best_shifts(ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
+        """Per trial the shift (ms) on a 0.5 ms grid that minimises the CoM residual (no new simulation)."""
+        p = params_of(x_global0 + ug * gscale)
+        grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
+        out = []
+        for i, d in enumerate(data):
+            costs = [float(np.sum(_residuals(sim, p, d, ws[i], g * 1e-3)[1] ** 2)) for g in grid]
+            out.append(float(grid[int(np.argmin(costs))]))
+        return np.array(out)
+
+    ws_t1 = np.array([releases[d.name] for d in data])
+    u_t1 = np.concatenate([np.zeros(n_g), ws_t1, best_shifts(np.zeros(n_g), ws_t1)])
+    rows_t1 = _rms_rows(sim, data, p0, *unpack(u_t1)[1:])
+    ws_start = np.array([d.release_rad_s for d in data])
+    u = np.concatenate([ug_best, ws_start, best_shifts(ug_best, ws_start)])
+    _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
+    cost_t1 = float(np.sum(fun(u_t1) ** 2))
+    # releases stay near their start (the walking branch), shifts within the search
+    lo[n_g:n_g + n_t] = np.maximum(lo[n_g:n_g + n_t], 0.8 * ws_start)
+    hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
+    u = np.clip(u, lo, hi)
+    u = least_squares(fun, u, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-8, ftol=1e-10, max_nfev=MAX_NFEV).x
+    _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
+    # CoM samples 10 ms apart are not independent when the model misses a systematic shape (their residuals
+    # are correlated): count them by their effective number, (1 - rho) / (1 + rho) of the samples, rho the
+    # lag-1 autocorrelation of the residuals, by inflating the block's sigma
+    xg_, ws_, sh_ = unpack(u)
+    rhos = []
+    for i, d in enumerate(data):
+        rh = _residuals(sim, params_of(xg_), d, float(ws_[i]), float(sh_[i]))[1]
+        if rh.size > 10 and np.std(rh) > 0:
+            rhos.append(float(np.corrcoef(rh[:-1], rh[1:])[0, 1]))
+    rho = float(np.clip(np.mean(rhos), 0.0, 0.95)) if rhos else 0.0
+    sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
+    J = jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
+    cost_cal = float(np.sum(fun(u) ** 2))
+    se, corr, ok, notes = least_squares_report(J, n_g, np.concatenate([gscale, np.ones(2 * n_t)]))
+    xg, ws, sh = unpack(u)
+    estimates = []
+    for j, n in enumerate(fit):
+        f, unit = FIT_FIELDS[n]
+        rel = se[j] / abs(xg[j]) if xg[j] != 0 else math.inf
+        ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE
+        note = notes[j]
+        if ok[j] and not ident:
+            note = (f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it")
+        estimates.append(ParamEstimate(n, f, unit, float(getattr(base, f)), float(xg[j]), float(se[j]), ident, note))
+    rows_cal = _rms_rows(sim, data, params_of(xg), ws, sh)
+    residuals = []
+    for d, a, b, w_t1, w, s_ in zip(data, rows_t1, rows_cal, unpack(u_t1)[1], ws, sh):
+        residuals.append({"trial": d.name, "slope_deg": d.slope_deg, "n_period": d.periods_s.size,
+                          "n_com": d.t_s.size, "table1_release_theta_dot_rad_s": float(w_t1),
+                          "calibrated_release_theta_dot_rad_s": float(w), "time_shift_ms": float(s_) * 1e3,
+                          "table1_rms_period_ms": a[2] * 1e3, "calibrated_rms_period_ms": b[2] * 1e3,
+                          "table1_steps_reached": a[3], "calibrated_steps_reached": b[3],
+                          "table1_rms_com_mm": a[1] * 1e3, "calibrated_rms_com_mm": b[1] * 1e3})
+    cal_params = params_of(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
+    return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, sig["t"],
+                             sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model)
+
+
+class NoTrialCalibrated(RimlessError):
+    """Every trial failed before the fit (not a user mistake: exit 1)."""
+
+
+def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray,
+              shifts: np.ndarray) -> list[tuple[float, float]]:
+    """Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s over the steps
+    the simulation reached, steps reached)."""
+    out = []
+    for d, w, sh in zip(data, ws, shifts):
+        rp, rh = _residuals(sim, p, d, float(w), float(sh))
+        f_sim = rp + 1.0 / d.periods_s
+        ok = f_sim > 0
+        dt = 1.0 / f_sim[ok] - d.periods_s[ok]
+        out.append((float(np.sqrt(np.mean(rp**2))), float(np.sqrt(np.mean(rh**2))) if rh.size else math.nan,
+                    float(np.sqrt(np.mean(dt**2))) if dt.size else math.nan, int(ok.sum())))
+    return out
+
+
+def _set_sigmas(sig: dict[str, float], rows: list[tuple[float, ...]]) -> None:
+    tp = [r[0] for r in rows if math.isfinite(r[0])]
+    th = [r[1] for r in rows if math.isfinite(r[1])]
+    if tp:
+        sig["t"] = max(float(np.sqrt(np.mean(np.square(tp)))), 1e-4)
+    if th:
+        sig["h"] = max(float(np.sqrt(np.mean(np.square(th)))), 5e-5)

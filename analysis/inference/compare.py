@@ -1,0 +1,369 @@
+"""Compare Vicon trials with the simulated wheel: CoM height over time and step period per step.
+
+What is fitted (one number per trial): the wheel is modelled as released at the rigid-touchdown state
+theta = -alpha/2 with angular velocity ``release_theta_dot`` one step before the first measured impact (a
+hand release, or any earlier step, ends in such a touchdown). That speed is found by a bracketed 1-D root
+find (grid scan, then Brent) so that the simulated step from the first to the second impact lasts exactly
+the measured first step period. The walk is then simulated on the trial's slope (given or estimated) for
+as many steps as were measured; ``theta_dot_plus_rad_s`` is the simulated post-impact theta' at the first
+measured impact (model.md section 6 section point).
+
+Alignment: time zero is the first measured impact (and the simulated first impact). The importer places
+impacts from the CoM-height minima, which in the compliant wheel lag the touchdown by a few ms; so the
+simulated curve is then shifted in time by at most ``MAX_SHIFT_S`` (the lag minimising the CoM-height RMS,
+reported as ``time_shift_s``). Heights: when the trial's CoM height is measured from the line through its
+impacts (no leg length given at import), it is offset by the constant that best matches the simulation
+(``height_offset_m``, reported); when it is measured from the slope plane it is compared as it is.
+
+Metrics: the first measured period is matched by construction (it fixes the release speed), so the period
+error metrics use steps 2..N only (``mean_abs_period_error_s``). The CoM-height RMS is also given relative to
+the measured peak-to-peak CoM amplitude (``rms_com_relative``) with the correlation between measured and
+simulated curves (``com_correlation``): a flat simulated line cannot score well on both.
+
+Status: ``ok`` only when the comparison passes the plausibility checks (`PLAUSIBILITY`); otherwise
+``suspect`` with the reasons in the warnings; ``failed`` when nothing could be compared (no steps, slope
+outside the model's range, a period the model cannot produce, a stalled walk), returned with a message,
+never raised.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["TrialComparison", "SlopeGroup", "Simulator", "compare_trial", "step_period_trends", "fit_release_speed"]
+
+ALPHA_RAD = math.pi / 4
+MAX_SHIFT_S = 0.05
+RELEASE_GRID_RAD_S = (0.3, 8.0, 78)  # scan of the release speed: lo, hi, points
+#: a comparison is "suspect" unless: correlation >= min_correlation, RMS / amplitude <= max_relative_rms,
+#: the measured CoM swings by >= min_amplitude_m, and the time shift is inside the search
+PLAUSIBILITY = {"min_correlation": 0.8, "max_relative_rms": 0.35, "min_amplitude_m": 1e-3}
+
+
+@dataclass
+class Simulator:
+    """The simulator pieces a comparison needs (built once, reused for every trial)."""
+
+    model: str = "er"
+    params: Any = None  # WheelParams; Table 1 when None (the slope is replaced per trial)
+    rtol: float = 1e-8
+    record_dt_s: float = 2e-3
+    integrator: Any = None
+
+    def __post_init__(self) -> None:
+        from rimless.sim.integrate.backend import make_integrator
+        from rimless.sim.model.params import WheelParams
+
+        if self.params is None:
+            self.params = WheelParams()
+        if self.integrator is None:
+            self.integrator = make_integrator("auto", rtol=self.rtol)
+
+    def on_slope(self, slope_deg: float) -> Any:
+        """Parameters with the slope replaced (raises `ParameterError` outside 0 <= phi < alpha/2)."""
+        return self.params.replace(slope_rad=math.radians(slope_deg))
+
+    def walk(self, slope_deg: float, release_theta_dot_rad_s: float, n_steps: int, *, record: bool) -> Any:
+        """`simulate_steps` from the rigid-touchdown release (theta = -alpha/2, theta' given)."""
+        from rimless.sim.step.gait import simulate_steps
+
+        z0 = np.array([-ALPHA_RAD / 2, release_theta_dot_rad_s])
+        return simulate_steps(self.on_slope(slope_deg), self.model, z0, n_steps, self.integrator,
+                              record_dt=self.record_dt_s if record else 1.0)
+
+
+@dataclass
+class TrialComparison:
+    """Measured vs simulated for one trial (SI inside; `metrics` gives the edge units)."""
+
+    name: str
+    file: str
+    slope_deg: float
+    slope_source: str
+    model: str
+    status: str  # "ok", "suspect" (failed a plausibility check, see warnings) or "failed"
+    message: str | None = None
+    warnings: list[str] = field(default_factory=list)
+    release_theta_dot_rad_s: float = float("nan")
+    theta_dot_plus_rad_s: float = float("nan")
+    time_shift_s: float = float("nan")
+    height_offset_m: float = float("nan")
+    measured_period_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    sim_period_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where the simulation stopped
+    measured_step: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # step number of each period,
+    # 1 = the first measured period; a period lost in a gap keeps its number (empty: 1..n)
+    time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # measured, from the first impact
+    measured_com_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # after the height offset
+    sim_com_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # simulated at time_s (NaN outside)
+    sim_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # dense simulated curve, aligned
+    sim_curve_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    measured_impact_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # from the first impact
+    rms_com_error_m: float = float("nan")
+    com_amplitude_m: float = float("nan")  # measured peak-to-peak (1st-99th percentile) in the RMS window
+    com_correlation: float = float("nan")  # Pearson r, measured vs simulated, in the RMS window
+
+    @property
+    def rms_com_relative(self) -> float:
+        """RMS CoM error / measured CoM amplitude (a flat line scores about 0.3-0.4)."""
+        a = self.com_amplitude_m
+        return self.rms_com_error_m / a if a > 0 else float("nan")
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.measured_period_s.size)
+
+    @property
+    def period_error_s(self) -> np.ndarray:
+        """Simulated minus measured period per measured step, s."""
+        if self.sim_period_s.size != self.measured_period_s.size:  # nothing simulated (failed)
+            return np.full(self.measured_period_s.size, np.nan)
+        return self.sim_period_s - self.measured_period_s
+
+    @property
+    def mean_abs_period_error_s(self) -> float:
+        """Mean |simulated - measured| over steps 2..N (step 1 is fitted: its error is 0 by construction), s."""
+        e = self.period_error_s[1:]
+        e = e[np.isfinite(e)]
+        return float(np.mean(np.abs(e))) if e.size else float("nan")
+
+    def metrics(self) -> dict[str, Any]:
+        """One flat row: the metrics table / metrics.csv (edge units in the names)."""
+        return {
+            "trial": self.name,
+            "file": self.file,
+            "status": self.status,
+            "slope_deg": self.slope_deg,
+            "slope_source": self.slope_source,
+            "model": self.model,
+            "steps": self.n_steps,
+            "rms_com_error_mm": self.rms_com_error_m * 1e3,
+            "mean_abs_period_error_ms": self.mean_abs_period_error_s * 1e3,
+            "rms_com_relative": self.rms_com_relative,
+            "com_correlation": self.com_correlation,
+            "theta_dot_plus_rad_s": self.theta_dot_plus_rad_s,
+            "release_theta_dot_rad_s": self.release_theta_dot_rad_s,
+            "time_shift_ms": self.time_shift_s * 1e3,
+            "height_offset_mm": self.height_offset_m * 1e3,
+            "message": "; ".join(([self.message] if self.message else []) + self.warnings),
+        }
+
+
+def fit_release_speed(sim: Simulator, slope_deg: float, first_period_s: float) -> tuple[float | None, str | None]:
+    """Release theta' (rad/s) whose simulated second step lasts ``first_period_s``; (None, why) if none does."""
+    from scipy.optimize import brentq
+
+    def period2(w: float) -> float:
+        g = sim.walk(slope_deg, w, 2, record=False)
+        if len(g.steps) >= 2:
+            return g.steps[1].period_s
+        if g.failure is not None and g.failure.reason.value == "stall":
+            return math.inf  # too slow: never gets there
+        return math.nan
+
+    lo, hi, n = RELEASE_GRID_RAD_S
+    grid = np.linspace(lo, hi, int(n))
+    vals = np.array([period2(w) for w in grid]) - first_period_s
+    for i in range(grid.size - 1):
+        a, b = vals[i], vals[i + 1]
+        if not (a > 0 and b <= 0) or math.isnan(a) or math.isnan(b):
+            continue
+        if b == 0:
+            return float(grid[i + 1]), None
+
+        def f(w: float) -> float:
+            v = period2(w) - first_period_s
+            return 1e3 if math.isinf(v) else (v if not math.isnan(v) else 1e3)
+
+        w = brentq(f, grid[i], grid[i + 1], xtol=1e-7)
+        if abs(f(w)) < 1e-4:
+            return float(w), None
+        fin = vals[np.isfinite(vals)]
+        return None, (f"the measured first period {first_period_s:.3f} s is longer than any the model gives after a "
+                      f"release one step earlier (at most {first_period_s + float(np.max(fin)):.3f} s)")
+    fin = vals[np.isfinite(vals)]
+    if fin.size == 0:
+        return None, "the simulated wheel does not complete two steps from any release speed in the scanned range"
+    if np.all(fin > 0):
+        return None, (f"the measured first period {first_period_s:.3f} s is longer than any the model gives "
+                      f"(at most {first_period_s + float(np.max(fin)):.3f} s)")
+    return None, (f"the measured first period {first_period_s:.3f} s is shorter than any the model gives for a release "
+                  f"up to {hi:g} rad/s (at least {first_period_s + float(np.min(fin)):.3f} s)")
+
+
+def _clean_curve(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    order = np.argsort(t, kind="stable")
+    t, y = t[order], y[order]
+    keep = np.concatenate([[True], np.diff(t) > 0]) if t.size else np.zeros(0, bool)
+    return t[keep], y[keep]
+
+
+def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None = None) -> TrialComparison:
+    """Fit the release speed to the first measured step, simulate, and align (see the module doc)."""
+    sim = sim or Simulator()
+    m = trial.meta
+    res = TrialComparison(name=name or Path(m.source_file).name, file=m.source_file, slope_deg=float(m.slope_deg),
+                          slope_source=m.slope_source, model=sim.model, status="failed")
+    periods = np.asarray(trial.step_period_s, float)
+    res.measured_period_s = periods
+    if periods.size == 0:
+        res.message = f"no steps detected ({m.step_refused or 'fewer than two impacts'}): nothing to compare"
+        return res
+    try:
+        sim.on_slope(res.slope_deg)
+    except Exception as err:  # ParameterError: slope outside 0 <= phi < alpha/2
+        res.message = f"slope {res.slope_deg:.3f} deg cannot be simulated: {err}"
+        return res
+    w0, why = fit_release_speed(sim, res.slope_deg, float(periods[0]))
+    if w0 is None:
+        res.message = f"no initial condition matches: {why}"
+        return res
+    res.release_theta_dot_rad_s = w0
+    # Measured period i is simulated step 1 + (its step count - the first period's): a period lost in a gap
+    # keeps the count, so the periods after a gap meet the simulated steps they belong to.
+    ends = np.asarray(getattr(trial, "period_step", np.zeros(0)), np.int64)
+    offset = ends - ends[0] if ends.size == periods.size else np.arange(periods.size)
+    n_sim = int(offset[-1]) + 1
+    gait = sim.walk(res.slope_deg, w0, n_sim + 2, record=True)
+    steps = gait.steps
+    res.theta_dot_plus_rad_s = float(steps[0].y_plus[7])
+    sim_p = np.full(periods.size, np.nan)
+    for i, d in enumerate(offset):
+        if 1 + d < len(steps):
+            sim_p[i] = steps[1 + d].period_s
+    res.sim_period_s = sim_p
+    res.measured_step = offset + 1
+    if len(steps) < n_sim + 1:
+        reason = gait.failure.reason.value if gait.failure is not None else "stopped"
+        res.warnings.append(f"simulation ended ({reason}) after {max(len(steps) - 1, 0)} of {n_sim} measured steps")
+
+    t0_sim = steps[1].t_start_s if len(steps) > 1 else steps[0].t_start_s + steps[0].period_s
+    st, sy = _clean_curve(np.asarray(gait.table["t_s"], float) - t0_sim,
+                          np.asarray(gait.table["com_height_normal_m"], float))
+    imp = trial.impact_time_s
+    t = trial.time_s - imp[0]
+    y = np.asarray(trial.series["com_height"], float)
+    valid = ~np.asarray(trial.series["gap"], bool) & ~np.asarray(trial.series["interpolated"], bool) & np.isfinite(y)
+    t_last = imp[-1] - imp[0]
+    win = valid & (t >= 0) & (t <= t_last) & (t <= st[-1])
+    from_plane = m.com_height_reference.startswith("slope plane")
+    if win.sum() < 5:
+        res.message = "fewer than 5 valid samples between the first and last impact"
+        return res
+
+    def fit(shift: float) -> tuple[float, float]:
+        s = np.interp(t[win] - shift, st, sy)
+        off = 0.0 if from_plane else float(np.mean(s - y[win]))
+        return float(np.sqrt(np.mean((y[win] + off - s) ** 2))), off
+
+    shifts = np.round(np.arange(-MAX_SHIFT_S, MAX_SHIFT_S + 1e-12, 5e-4), 9)
+    rms = np.array([fit(s)[0] for s in shifts])
+    best = float(shifts[int(np.argmin(rms))])
+    if abs(best) >= MAX_SHIFT_S - 1e-9:
+        res.warnings.append(f"best time shift at the limit ({best * 1e3:+.0f} ms): timing mismatch larger than the search")
+    res.time_shift_s = best
+    res.rms_com_error_m, res.height_offset_m = fit(best)
+    res.time_s = t
+    res.measured_com_m = np.where(valid, y + res.height_offset_m, np.nan)
+    inside = (t - best >= st[0]) & (t - best <= st[-1])
+    res.sim_com_m = np.where(inside, np.interp(t - best, st, sy), np.nan)
+    res.sim_time_s, res.sim_curve_m = st + best, sy
+    res.measured_impact_time_s = imp - imp[0]
+    ym = y[win] + res.height_offset_m
+    ys = np.interp(t[win] - best, st, sy)
+    lo_q, hi_q = np.percentile(ym, [1, 99])
+    res.com_amplitude_m = float(hi_q - lo_q)
+    if np.std(ys) > 0 and np.std(ym) > 0:
+        res.com_correlation = float(np.corrcoef(ym, ys)[0, 1])
+    res.status = "ok"
+    _plausibility(res)
+    return res
+
+
+def _plausibility(res: TrialComparison) -> None:
+    """Mark a compared trial ``suspect`` (with the reasons in ``warnings``) when a check fails."""
+    lim = PLAUSIBILITY
+    why = []
+    if not res.com_amplitude_m >= lim["min_amplitude_m"]:
+        why.append(f"measured CoM height swings by only {res.com_amplitude_m * 1e3:.2f} mm (no steps visible?)")
+    if not res.com_correlation >= lim["min_correlation"]:
+        why.append(f"measured and simulated CoM heights correlate poorly (r = {res.com_correlation:.2f} < "
+                   f"{lim['min_correlation']})")
+    if not res.rms_com_relative <= lim["max_relative_rms"]:
+        why.append(f"RMS CoM error is {res.rms_com_relative:.0%} of the measured amplitude (> "
+                   f"{lim['max_relative_rms']:.0%})")
+    if any(w.startswith("best time shift at the limit") or w.startswith("simulation ended") for w in res.warnings):
+        why.append("the simulation does not follow the whole trial (see above)")
+    if why:
+        res.status = "suspect"
+        res.message = "suspect: " + "; ".join(why)
+
+
+@dataclass
+class SlopeGroup:
+    """Step period against step number for the trials of one slope bin, with the simulation."""
+
+    slope_deg: float  # bin centre
+    trials: list[str]
+    step_number: np.ndarray  # 1..N
+    mean_period_s: np.ndarray
+    std_period_s: np.ndarray  # sample std (ddof=1); NaN with one trial
+    count: np.ndarray
+    sim_period_s: np.ndarray  # mean over the bin's trials of each one simulated at its own slope and release
+    release_theta_dot_rad_s: float
+    message: str | None = None
+
+    def rows(self) -> list[dict[str, Any]]:
+        """Flat rows (edge units) for tables and JSON."""
+        return [{"slope_deg": self.slope_deg, "step": int(k), "trials": int(c), "mean_period_ms": mu * 1e3,
+                 "std_period_ms": sd * 1e3, "sim_period_ms": sp * 1e3}
+                for k, c, mu, sd, sp in zip(self.step_number, self.count, self.mean_period_s, self.std_period_s,
+                                            self.sim_period_s)]
+
+
+def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | None = None, *,
+                       slope_bin_deg: float = 0.5) -> list[SlopeGroup]:
+    """Group trials with steps by slope (rounded to ``slope_bin_deg``): mean +- std period per step, and the model."""
+    sim = sim or Simulator()
+    bins: dict[float, list[TrialComparison]] = {}
+    for c in comparisons:
+        if c.n_steps and math.isfinite(c.slope_deg):
+            key = round(round(c.slope_deg / slope_bin_deg) * slope_bin_deg, 6)
+            bins.setdefault(key, []).append(c)
+    groups = []
+    for key in sorted(bins):
+        cs = bins[key]
+        numbers = [c.measured_step if c.measured_step.size == c.n_steps else np.arange(1, c.n_steps + 1)
+                   for c in cs]
+        n = max(int(k[-1]) for k in numbers)
+        mat = np.full((len(cs), n), np.nan)
+        for i, c in enumerate(cs):
+            mat[i, numbers[i] - 1] = c.measured_period_s
+        count = np.isfinite(mat).sum(axis=0)
+        mean = np.nanmean(mat, axis=0)
+        std = np.array([np.std(col[np.isfinite(col)], ddof=1) if k > 1 else np.nan for col, k in zip(mat.T, count)])
+        simmat = np.full((len(cs), n), np.nan)
+        msgs = []
+        for i, c in enumerate(cs):  # each trial simulated at its own slope from its own fitted release
+            if c.sim_period_s.size:
+                simmat[i, numbers[i] - 1] = c.sim_period_s
+            elif math.isfinite(c.release_theta_dot_rad_s):
+                try:
+                    g = sim.walk(c.slope_deg, c.release_theta_dot_rad_s, c.n_steps + 1, record=False)
+                    got = [s.period_s for s in g.steps[1:1 + c.n_steps]]
+                    simmat[i, :len(got)] = got
+                except Exception as err:  # noqa: BLE001 - a slope the model cannot take
+                    msgs.append(f"{c.name}: simulation failed: {err}")
+        ws = [c.release_theta_dot_rad_s for c in cs if math.isfinite(c.release_theta_dot_rad_s)]
+        w = float(np.mean(ws)) if ws else float("nan")
+        have = np.isfinite(simmat).any(axis=0)
+        simp = np.full(n, np.nan)
+        simp[have] = np.nanmean(simmat[:, have], axis=0)
+        msg = "; ".join(msgs) or (None if ws else "no trial in this group has a fitted release speed: no simulation")
+        groups.append(SlopeGroup(key, [c.name for c in cs], np.arange(1, n + 1), mean, std, count, simp, w, msg))
+    return groups

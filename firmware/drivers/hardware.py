@@ -1,0 +1,248 @@
+"""The one place that picks the hardware backend: the real Pi (spidev + gpiozero's default pin
+factory) or the fake (register-level ADNS-3080 fakes and gpiozero's MockFactory)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from rimless.errors import UserError
+from rimless.firmware.drivers.adns3080 import Adns3080
+from rimless.firmware.drivers.clutch import ClutchBank
+from rimless.firmware.service.config import RobotConfig, SensorConfig
+from rimless.firmware.control.controller import Channel
+from rimless.firmware.control.detector import LegDetector
+from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, GaitTrajectory
+from rimless.firmware.control.faults import HealthMonitor
+
+PI4_REVISION = "c03111"  # MockFactory reports a Pi 4B with this revision
+
+
+@dataclass
+class Hardware:
+    """Everything the app drives, plus how to close it (clutches last)."""
+
+    channels: list[Channel]
+    clutches: ClutchBank
+    sensors: list[Adns3080]
+    pin_factory: Any = None
+    fakes: list[FakeAdns3080] = field(default_factory=list)
+    closers: list[Callable[[], None]] = field(default_factory=list)
+
+    def close(self) -> None:
+        """Clutches off and released, then the buses and reset pins."""
+        try:
+            self.clutches.close()
+        finally:
+            for close in reversed(self.closers):
+                try:
+                    close()
+                except Exception:  # noqa: BLE001 - close everything we can
+                    pass
+
+
+def _configure(sensor: Adns3080, cfg: SensorConfig) -> None:
+    sensor.power_up(pulse_reset=False)  # the RESET lines were pulsed by `_reset_all`
+    sensor.set_resolution(cfg.resolution_cpi)
+    sensor.set_frame_rate(cfg.frame_rate_hz)
+    sensor.clear_motion()
+
+
+def _reset_all(sensors: list[Adns3080], cfg: RobotConfig) -> None:
+    """Wake every sensor (NPD), then pulse each RESET line once (sensors may share one), before any
+    sensor is configured."""
+    for sensor in sensors:
+        sensor.wake()
+    done: set[int] = set()
+    for sensor, s in zip(sensors, cfg.sensors, strict=True):
+        if s.reset_pin not in done:
+            sensor.reset_pulse(wake=False)
+            done.add(s.reset_pin)
+
+
+def _channels(cfg: RobotConfig, sensors: list[Adns3080]) -> list[Channel]:
+    return [
+        Channel(sensor, LegDetector(cfg.detector, s.legs, start_index=cfg.clutch.start_leg_index), HealthMonitor(s.health()))
+        for sensor, s in zip(sensors, cfg.sensors, strict=True)
+    ]
+
+
+class GpioChipSelectBus:
+    """An `SpiBus` whose chip select is a GPIO (active low) around each message of a shared bus
+    opened without its own CS (`dtoverlay=spi0-0cs`): one sensor per leg on one SPI bus."""
+
+    def __init__(self, bus: Any, cs: Any) -> None:
+        self.bus = bus
+        self.cs = cs  # a gpiozero DigitalOutputDevice with active_high=False: on() = CS low
+
+    def message(self, segments: Any) -> list[bytes]:
+        """CS low, the message, CS high (also when the transfer fails)."""
+        self.cs.on()
+        try:
+            return self.bus.message(segments)
+        finally:
+            self.cs.off()
+
+    def close(self) -> None:
+        """Deselect; the shared bus is closed by its owner."""
+        self.cs.off()
+
+
+class GpioUnavailable(UserError):
+    """No GPIO on this machine (not a Pi, or no GPIO library)."""
+
+
+def _output(pin: int, *, active_high: bool, pin_factory: Any = None) -> Any:
+    from gpiozero import DigitalOutputDevice
+
+    return DigitalOutputDevice(pin, active_high=active_high, initial_value=False, pin_factory=pin_factory)
+
+
+def default_fake_trajectory() -> GaitTrajectory:
+    """The synthetic gait of `--fake`: a touchdown every 0.4 s, 8 mm compression peaking 60 ms later."""
+    return GaitTrajectory(start_s=time.monotonic() + 0.3, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
+
+
+def build_fake(
+    cfg: RobotConfig,
+    *,
+    trajectory: Callable[[float], float] | None = None,
+    trajectories: list[Callable[[float], float]] | None = None,
+    pin_factory: Any = None,
+    noise_counts: float = 0.3,
+    seed: int = 0,
+) -> Hardware:
+    """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on the monotonic clock;
+    clutches, RESET, NPD and GPIO chip selects on a MockFactory."""
+    from gpiozero.pins.mock import MockFactory
+
+    factory = pin_factory if pin_factory is not None else MockFactory(revision=PI4_REVISION)
+    traj = trajectory if trajectory is not None else default_fake_trajectory()
+    clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
+    fakes: list[FakeAdns3080] = []
+    sensors: list[Adns3080] = []
+    closers: list[Callable[[], None]] = []
+    lines: dict[int, Any] = {}
+    on_line: dict[int, list[FakeAdns3080]] = {}  # the fakes whose RESET is wired to each GPIO
+    try:
+        for i, s in enumerate(cfg.sensors):
+            # counts_per_m is calibrated at the configured resolution; the fake takes it at 1600 cpi.
+            fake = FakeAdns3080(trajectories[i] if trajectories else traj,
+                                counts_per_m=s.counts_per_m * 1600 / s.resolution_cpi, axis=s.axis,
+                                sign=s.sign, noise_counts=noise_counts, seed=seed + i, speed_hz=s.spi_speed_hz)
+            closers.append(fake.close)
+            fakes.append(fake)
+            reset = _shared_line(lines, s.reset_pin, factory, closers)
+            npd = None if s.npd_pin is None else _shared_line(lines, s.npd_pin, factory, closers)
+            bus: Any = fake
+            if s.cs_pin is not None:
+                cs = _output(s.cs_pin, active_high=False, pin_factory=factory)
+                closers.append(cs.close)
+                bus = GpioChipSelectBus(fake, cs)
+
+            def drive_reset(on: bool, dev: Any = reset, pin: int = s.reset_pin) -> None:
+                dev.on() if on else dev.off()
+                for f in on_line[pin]:
+                    f.set_reset(on)
+
+            def drive_npd(on: bool, dev: Any = npd, fake: FakeAdns3080 = fake) -> None:
+                dev.on() if on else dev.off()
+                fake.set_npd(on)
+
+            on_line.setdefault(s.reset_pin, []).append(fake)
+            sensor = Adns3080(bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign, reset=drive_reset,
+                              npd=None if npd is None else drive_npd)
+            sensors.append(sensor)
+        _reset_all(sensors, cfg)
+        for sensor, s in zip(sensors, cfg.sensors, strict=True):
+            _configure(sensor, s)
+    except BaseException:
+        Hardware([], clutches, [], closers=closers).close()
+        raise
+    return Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, closers)
+
+
+def _shared_line(lines: dict[int, Any], pin: int, factory: Any, closers: list[Callable[[], None]]) -> Any:
+    """One output device per GPIO (RESET lines may be shared); active high, starting low."""
+    if pin not in lines:
+        lines[pin] = _output(pin, active_high=True, pin_factory=factory)
+        closers.append(lines[pin].close)
+    return lines[pin]
+
+
+def build_real(cfg: RobotConfig) -> Hardware:
+    """Open the SPI buses and GPIO on the Pi, pulse RESET, power up and check every sensor.
+
+    Raises `GpioUnavailable` (one line) when this machine has no usable GPIO, `SensorError` when a
+    sensor cannot be opened or identified.
+    """
+    from rimless.firmware.drivers.spi import SpidevBus
+
+    closers: list[Callable[[], None]] = []
+    sensors: list[Adns3080] = []
+    clutches = open_clutches(cfg.clutch.pins, active_high=cfg.clutch.active_high)  # off first, before anything
+    try:
+        lines: dict[int, Any] = {}
+        buses: dict[tuple[int, int], Any] = {}
+        for s in cfg.sensors:
+            key = (s.spi_bus, s.spi_device)
+            if key not in buses:
+                buses[key] = SpidevBus(s.spi_bus, s.spi_device, speed_hz=s.spi_speed_hz, no_cs=s.cs_pin is not None)
+                closers.append(buses[key].close)
+            bus: Any = buses[key]
+            if s.cs_pin is not None:
+                cs = _output(s.cs_pin, active_high=False)
+                closers.append(cs.close)
+                bus = GpioChipSelectBus(bus, cs)
+            reset_dev = _shared_line(lines, s.reset_pin, None, closers)
+            npd_dev = None if s.npd_pin is None else _shared_line(lines, s.npd_pin, None, closers)
+            sensor = Adns3080(
+                bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign,
+                reset=lambda on, d=reset_dev: d.on() if on else d.off(),
+                npd=None if npd_dev is None else (lambda on, d=npd_dev: d.on() if on else d.off()),
+            )
+            sensors.append(sensor)
+        _reset_all(sensors, cfg)
+        for sensor, s in zip(sensors, cfg.sensors, strict=True):
+            _configure(sensor, s)
+    except BaseException:
+        Hardware([], clutches, [], closers=closers).close()
+        raise
+    return Hardware(_channels(cfg, sensors), clutches, sensors, None, [], closers)
+
+
+def open_clutches(pins: Any, *, active_high: bool, pin_factory: Any = None) -> ClutchBank:
+    """The clutch outputs, driven off; `GpioUnavailable` (one line) when this machine has no GPIO."""
+    import warnings
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
+            return ClutchBank(pins, active_high=active_high, pin_factory=pin_factory)
+    except Exception as err:  # noqa: BLE001 - gpiozero, lgpio and the OS each raise their own
+        if type(err).__name__ in ("BadPinFactory", "PinFactoryFallback") or isinstance(err, ImportError):
+            raise GpioUnavailable(
+                f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
+                "the robot extra (lgpio)"
+            ) from None
+        raise GpioUnavailable(
+            f"cannot drive the clutch pins {list(pins)} ({type(err).__name__}: {err}); is another process "
+            "(a running firmware) holding them?"
+        ) from None
+
+
+def release_pins(pins: Any, *, active_high: bool, pin_factory: Any = None) -> dict[str, str]:
+    """Drive every clutch pin to its off level, then release the lines (`rimless robot release`).
+
+    Returns each pin's level history ("0", "01"...), as read back from the pin factory.
+    """
+    bank = open_clutches(pins, active_high=active_high, pin_factory=pin_factory)
+    try:
+        bank.all_off()
+        levels = {f"GPIO{p}": "".join("1" if st.state else "0" for st in pin_factory.pin(p).states)
+                  for p in pins} if pin_factory is not None else {}
+    finally:
+        bank.close()
+    return levels

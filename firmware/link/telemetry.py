@@ -1,0 +1,170 @@
+"""LAN telemetry: batched JSON over UDP that PlotJuggler's "UDP Server" plots without configuration.
+
+Each datagram is a JSON array of samples (PlotJuggler >= 3.16 parses every element as its own sample)
+or, with `batch = false`, one object (older PlotJuggler). Every object has a numeric `timestamp` in
+epoch seconds and nested numeric fields (`leg/velocity_m_s`, `sensor/squal`, ...); events and faults
+are objects with numeric codes, since PlotJuggler ignores strings. Datagrams stay under
+`max_datagram_bytes` (default 1200, below the Ethernet MTU; an old PlotJuggler read 2048 at most).
+Sending is non-blocking: with nobody listening, datagrams are dropped and counted, never waited on.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from collections.abc import Iterable, Iterator
+from typing import Any
+
+from rimless.firmware.control.controller import EventRecord, Record, SampleRecord
+from rimless.firmware.control.faults import Fault
+
+EVENT_CODES = {
+    "touchdown": 1, "lock": 2, "release": 3, "no_zero_crossing": 4, "arm": 5, "disarm": 6, "param": 7,
+    "trial_start": 8, "trial_stop": 9, "stop": 10, "fault": 11, "sync_lost": 12, "lock_unsynced": 13, "signal": 14,
+}
+
+
+class WallClock:
+    """Maps `monotonic_ns` to epoch seconds (PlotJuggler aligns on wall time)."""
+
+    def __init__(self) -> None:
+        self.offset_s = time.time() - time.monotonic_ns() * 1e-9
+
+    def epoch_s(self, t_ns: int) -> float:
+        """Epoch seconds of a monotonic timestamp."""
+        return round(self.offset_s + t_ns * 1e-9, 6)
+
+
+def record_to_json(rec: Record, clock: WallClock) -> dict[str, Any]:
+    """The JSON object of one record (also the trial-log line)."""
+    if isinstance(rec, SampleRecord):
+        return {
+            "timestamp": clock.epoch_s(rec.t_ns),
+            "t_mono_s": round(rec.t_ns * 1e-9, 6),
+            "seq": rec.seq,
+            "ch": rec.channel,
+            "leg": {
+                "position_m": round(rec.position_m, 7),
+                "velocity_m_s": round(rec.velocity_m_s, 5),
+                "compression_m": round(rec.compression_m, 7),
+                "phase": rec.phase,
+                "stance": rec.stance_leg,
+                "clutch_mask": rec.clutch_mask,
+            },
+            "sensor": {"squal": rec.squal, "shutter": rec.shutter, "max_pixel": rec.max_pixel},
+            "loop": {"armed": int(rec.armed), "latency_ms": round(rec.latency_ns * 1e-6, 4)},
+        }
+    assert isinstance(rec, EventRecord)
+    body: dict[str, Any] = dict(rec.fields)
+    body["name"] = rec.name  # never overridden by a field
+    body["code"] = EVENT_CODES.get(rec.name, 0)
+    if rec.name == "fault":
+        body["fault_code"] = Fault(rec.fields["fault"]).code
+    return {"timestamp": clock.epoch_s(rec.t_ns), "t_mono_s": round(rec.t_ns * 1e-9, 6), "event": body}
+
+
+def _dumps(obj: Any) -> bytes:
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=str).encode()
+
+
+def pack_datagrams(objs: Iterable[dict[str, Any]], max_bytes: int, *, batch: bool = True) -> Iterator[bytes]:
+    """Group JSON objects into datagrams of at most `max_bytes` (an object too big alone is dropped)."""
+    if not batch:
+        for obj in objs:
+            data = _dumps(obj)
+            if len(data) <= max_bytes:
+                yield data
+        return
+    parts: list[bytes] = []
+    size = 2  # the brackets
+    for obj in objs:
+        data = _dumps(obj)
+        if len(data) + 2 > max_bytes:
+            continue
+        if parts and size + len(data) + 1 > max_bytes:
+            yield b"[" + b",".join(parts) + b"]"
+            parts, size = [], 2
+        parts.append(data)
+        size += len(data) + (1 if len(parts) > 1 else 0)
+    if parts:
+        yield b"[" + b",".join(parts) + b"]"
+
+
+class TelemetrySender:
+    """Non-blocking UDP sender to one or more destinations (e.g. `rimless robot listen` and PlotJuggler
+    at once); counts what it sends and what it drops, over all destinations.
+
+    :param destinations: (host, port) pairs; each is resolved once, here.
+    """
+
+    def __init__(
+        self, destinations: list[tuple[str, int]] | str, port: int | None = None, *, max_datagram_bytes: int = 1200,
+        batch: bool = True, decimate: int = 1,
+    ) -> None:
+        if isinstance(destinations, str):  # the one-destination form: TelemetrySender(host, port)
+            destinations = [(destinations, int(port or 9870))]
+        self.max_datagram_bytes = max_datagram_bytes
+        self.batch = batch
+        self.decimate = max(1, decimate)
+        self.clock = WallClock()
+        self.sent_datagrams = 0
+        self.sent_bytes = 0
+        self.dropped_datagrams = 0
+        self._n = 0
+        self.socks: list[socket.socket] = []
+        self.addresses: list[tuple[Any, ...]] = []
+        try:
+            for host, dport in destinations:
+                # Resolve once: sendto() with a host name would do a (blocking) DNS lookup every time.
+                try:
+                    info = socket.getaddrinfo(host, dport, type=socket.SOCK_DGRAM)[0]
+                except (socket.gaierror, UnicodeError) as err:
+                    raise ValueError(f"telemetry host {host!r} cannot be resolved: {err}") from err
+                sock = socket.socket(info[0], socket.SOCK_DGRAM)
+                self.socks.append(sock)
+                sock.setblocking(False)
+                # Connected: the kernel reports an ICMP "port unreachable" as ECONNREFUSED on a later send,
+                # so a dead receiver shows up in dropped_datagrams instead of vanishing silently.
+                sock.connect(info[4])
+                self.addresses.append(info[4])
+        except BaseException:
+            self.close()
+            raise
+        self.address = self.addresses[0] if self.addresses else None
+
+    def send(self, records: Iterable[Record]) -> None:
+        """Encode and send to every destination; never blocks, never raises on a network error."""
+        objs = []
+        for rec in records:
+            if isinstance(rec, SampleRecord):
+                self._n += 1
+                if (self._n - 1) % self.decimate:
+                    continue
+            objs.append(record_to_json(rec, self.clock))
+        for data in pack_datagrams(objs, self.max_datagram_bytes, batch=self.batch):
+            for sock in self.socks:
+                try:
+                    sock.send(data)
+                except OSError:  # nobody listening (ICMP refused), buffer full, network down: drop it
+                    self.dropped_datagrams += 1
+                else:
+                    self.sent_datagrams += 1
+                    self.sent_bytes += len(data)
+
+    def close(self) -> None:
+        """Close the sockets."""
+        for sock in self.socks:
+            sock.close()
+
+
+def parse_datagram(data: bytes) -> list[dict[str, Any]]:
+    """Decode one datagram into its objects (array or single object); ValueError if garbled."""
+    obj = json.loads(data)
+    items = obj if isinstance(obj, list) else [obj]
+    out = []
+    for item in items:
+        if not isinstance(item, dict) or not isinstance(item.get("timestamp"), (int, float)):
+            raise ValueError("telemetry object without a numeric timestamp")
+        out.append(item)
+    return out

@@ -1,0 +1,433 @@
+"""The asyncio application: named tasks around the sampler thread, with an orderly, safe shutdown.
+
+Tasks: `sampler` (awaits the control thread: sensor reads, detector, clutch commands), `controller`
+(routes records, watchdogs: stalled sampler and link loss), `telemetry` (UDP), `trial_log` (disk,
+through `asyncio.to_thread`) and `commands` (TCP). The control path lives in the sampler thread and
+never waits on the network or the disk; it hands records over through a bounded deque.
+
+Shutdown, on SIGINT/SIGTERM/SIGHUP/SIGQUIT, `duration_s`, a fatal error or the sampler ending:
+clutches off first, then the sampler thread is stopped, the last records are flushed, the tasks are
+cancelled, and the hardware is closed (clutches driven off again, then released). Every step of the
+shutdown runs whatever the previous one raised; the hardware is closed last, in a `finally`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import secrets
+import signal
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from rimless.firmware.link.commands import Command, CommandServer, check_token
+from rimless.firmware.service.config import RobotConfig
+from rimless.firmware.control.controller import Controller, EventRecord, Record
+from rimless.firmware.control.faults import Fault
+from rimless.firmware.drivers.hardware import Hardware
+from rimless.firmware.control.sampler import Sampler
+from rimless.firmware.link.telemetry import TelemetrySender
+from rimless.firmware.service.triallog import TrialLog
+
+log = logging.getLogger("rimless.robot")
+
+COMMAND_TIMEOUT_S = 1.0
+ROUTE_PERIOD_S = 0.01
+SWITCH_INTERVAL_S = 0.0005  # let the sampler thread get the GIL back quickly after its sleep
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT") if hasattr(signal, n))
+
+
+@dataclass
+class RunSummary:
+    """What happened in one run."""
+
+    stop_reason: str = ""
+    samples: int = 0
+    missed_deadlines: int = 0
+    achieved_rate_hz: float = 0.0
+    clutch_commands: int = 0
+    faults: list[str] = field(default_factory=list)
+    trials: list[str] = field(default_factory=list)
+    telemetry_sent: int = 0
+    telemetry_dropped: int = 0
+    error: str | None = None
+    command_port: int | None = None
+
+
+class RobotApp:
+    """The firmware around one `Hardware`.
+
+    :param command_port: overrides the config's port (0 = any free port, see `command_port`).
+    :param on_ready: called (in the loop) once every task runs, with the app.
+    """
+
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        hw: Hardware,
+        *,
+        token: str | None = None,
+        command_port: int | None = None,
+        record_timing: bool = False,
+        event_sink: list[EventRecord] | None = None,
+        on_ready: Callable[[RobotApp], None] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.hw = hw
+        self.token = token or cfg.token() or secrets.token_urlsafe(24)
+        self.token_generated = not (token or cfg.token())
+        if cfg.commands.enabled and not self.token_generated:
+            check_token(self.token)  # WeakToken (a ParameterError) names the problem
+        self.controller = Controller(
+            hw.channels, hw.clutches, max_hold_s=cfg.clutch.max_hold_s,
+            id_check_interval_s=cfg.sampling.id_check_interval_s,
+        )
+        self.armed_remotely = False
+        self.signal_received: str | None = None
+        self.sampler: Sampler | None = None
+        self.record_timing = record_timing
+        self.event_sink = event_sink
+        self.on_ready = on_ready
+        self._command_port = cfg.commands.port if command_port is None else command_port
+        self.command_port: int | None = None
+        self.summary = RunSummary()
+        self.trial: TrialLog | None = None
+        self.telemetry: TelemetrySender | None = None
+        self.server: CommandServer | None = None
+        self._tel_pending: list[Record] = []
+        self._log_pending: list[Record] = []
+        self._stop: asyncio.Event | None = None
+        self._last_command_s = time.monotonic()
+        self._trial_lock: asyncio.Lock | None = None
+
+    # --- stop -----------------------------------------------------------------------------------
+    def request_stop(self, reason: str) -> None:
+        """Ask the app to stop (safe from the loop thread)."""
+        if not self.summary.stop_reason:
+            self.summary.stop_reason = reason
+        if self._stop is not None:
+            self._stop.set()
+
+    def _on_signal(self, name: str) -> None:
+        # Clutches off at once (a second signal may not wait), then the orderly shutdown.
+        with contextlib.suppress(Exception):
+            self.hw.clutches.all_off()
+        if self.signal_received is None:
+            self.signal_received = name
+        self.controller.outbox.append(EventRecord(time.monotonic_ns(), "signal", {"signal": name}))
+        self.request_stop(name)
+
+    # --- main -----------------------------------------------------------------------------------
+    async def run(
+        self, *, duration_s: float | None = None, max_samples: int | None = None, arm: bool = False,
+        handle_signals: bool = True,
+    ) -> RunSummary:
+        """Run until stopped; always ends with every clutch off and the hardware closed."""
+        loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        self._trial_lock = asyncio.Lock()
+        old_switch = sys.getswitchinterval()
+        signals: list[tuple[signal.Signals, Any]] = []
+        tasks: list[asyncio.Task[Any]] = []
+        server: CommandServer | None = None
+        try:
+            if handle_signals:
+                for sig in STOP_SIGNALS:
+                    previous = signal.getsignal(sig)
+                    loop.add_signal_handler(sig, self._on_signal, sig.name)
+                    signals.append((sig, previous))
+            sys.setswitchinterval(SWITCH_INTERVAL_S)
+            tcfg = self.cfg.telemetry
+            if tcfg.destinations_list():
+                self.telemetry = TelemetrySender(tcfg.destinations_list(), max_datagram_bytes=tcfg.max_datagram_bytes,
+                                                 batch=tcfg.batch, decimate=tcfg.decimate)
+            if self.cfg.commands.enabled:
+                c = self.cfg.commands
+                server = CommandServer(self._execute, self.token, host=c.bind, port=self._command_port,
+                                       max_message_bytes=c.max_message_bytes, max_connections=c.max_connections,
+                                       auth_timeout_s=c.auth_timeout_s, idle_timeout_s=c.idle_timeout_s,
+                                       on_valid=self._command_seen, on_disarm=self._reserved_disarm,
+                                       on_status=self._reserved_status)
+                self.server = server
+                self.command_port = self.summary.command_port = await server.start()
+            self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
+                                   max_samples=max_samples, record_timing=self.record_timing)
+            if arm:
+                self.controller.arm()
+            self.sampler.start()
+            tasks = [
+                asyncio.create_task(self._sampler_task(), name="sampler"),
+                asyncio.create_task(self._controller_task(), name="controller"),
+                asyncio.create_task(self._telemetry_task(), name="telemetry"),
+                asyncio.create_task(self._trial_log_task(), name="trial_log"),
+            ]
+            if server is not None:
+                tasks.append(asyncio.create_task(self._commands_task(), name="commands"))
+            if self.on_ready is not None:
+                self.on_ready(self)
+            stop_wait = asyncio.create_task(self._stop.wait(), name="stop")
+            done, _ = await asyncio.wait([stop_wait, *tasks], timeout=duration_s, return_when=asyncio.FIRST_COMPLETED)
+            if not done:
+                self.request_stop("duration")
+            for t in done:
+                if t is not stop_wait and not t.cancelled() and t.exception() is not None:
+                    exc = t.exception()
+                    self.summary.error = f"{t.get_name()}: {type(exc).__name__}: {exc}"
+                    self.request_stop("error")
+            stop_wait.cancel()
+            self.request_stop("sampler finished")
+        except BaseException as err:
+            self.summary.error = self.summary.error or f"{type(err).__name__}: {err}"
+            self.request_stop("error")
+            raise
+        finally:
+            try:
+                await self._shutdown(tasks, server)
+            finally:
+                for sig, previous in signals:
+                    loop.remove_signal_handler(sig)
+                    with contextlib.suppress(Exception):
+                        signal.signal(sig, previous)
+                sys.setswitchinterval(old_switch)
+        return self.summary
+
+    def _shutdown_error(self, step: str, err: BaseException) -> None:
+        detail = f"shutdown ({step}): {type(err).__name__}: {err}"
+        log.error("%s", detail)
+        if not self.summary.error:
+            self.summary.error = detail
+
+    async def _shutdown(self, tasks: list[asyncio.Task[Any]], server: CommandServer | None) -> None:
+        ctl = self.controller
+        try:
+            # 1. Outputs safe, whatever state the sampler is in.
+            with contextlib.suppress(Exception):
+                self.hw.clutches.all_off()
+            # 2. Stop the control thread.
+            if self.sampler is not None:
+                self.sampler.stop()
+                await asyncio.to_thread(self.sampler.join, 2.0)
+                st = self.sampler.stats
+                self.summary.samples = st.samples
+                self.summary.missed_deadlines = st.missed_deadlines
+                span = (st.stopped_ns - st.started_ns) * 1e-9
+                self.summary.achieved_rate_hz = st.samples / span if span > 0 else 0.0
+            with contextlib.suppress(Exception):
+                ctl.safe_stop(self.summary.stop_reason or "stop")
+            if self.summary.error:
+                ctl.fault(Fault.EXCEPTION, self.summary.error)
+            self.summary.clutch_commands = ctl.clutch_commands
+            # 3. Cancel the tasks, then flush what is left; each step runs whatever the others raised.
+            for t in tasks:
+                t.cancel()
+            for t in tasks:
+                with contextlib.suppress(BaseException):
+                    await t
+            if server is not None:
+                try:
+                    await server.close()
+                except Exception as err:  # noqa: BLE001
+                    self._shutdown_error("commands", err)
+            try:
+                self._route()
+            except Exception as err:  # noqa: BLE001
+                self._shutdown_error("routing", err)
+            if self.telemetry is not None:
+                try:
+                    self.telemetry.send(self._tel_pending)
+                except Exception as err:  # noqa: BLE001
+                    self._shutdown_error("telemetry", err)
+                finally:
+                    self._tel_pending = []
+                    self.summary.telemetry_sent = self.telemetry.sent_datagrams
+                    self.summary.telemetry_dropped = self.telemetry.dropped_datagrams
+                    with contextlib.suppress(Exception):
+                        self.telemetry.close()
+            if self.trial is not None:
+                try:
+                    self.trial.append(self._log_pending)
+                    self.trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {"reason": "shutdown"})])
+                    self.trial.close()
+                except Exception as err:  # noqa: BLE001
+                    self._shutdown_error("trial log", err)
+                finally:
+                    self._log_pending = []
+                    self.trial = None
+        finally:
+            # 4. Hardware: clutches off again and released, then buses. Always.
+            self.hw.close()
+
+    # --- tasks ----------------------------------------------------------------------------------
+    async def _sampler_task(self) -> None:
+        assert self.sampler is not None
+        done = self.sampler.done
+        # Poll rather than wrap_future: cancelling a wrapper would cancel the thread's future.
+        while not done.done():
+            await asyncio.sleep(ROUTE_PERIOD_S)
+        done.result()
+
+    def _route(self) -> None:
+        """Move records from the control thread's deque to the telemetry and trial-log buffers."""
+        out = self.controller.outbox
+        while out:
+            try:
+                rec = out.popleft()
+            except IndexError:
+                break
+            if self.telemetry is not None:
+                self._tel_pending.append(rec)
+            if self.trial is not None:
+                self._log_pending.append(rec)
+            if isinstance(rec, EventRecord) and self.event_sink is not None:
+                self.event_sink.append(rec)
+            if isinstance(rec, EventRecord) and rec.name == "fault":
+                self.summary.faults.append(rec.fields["fault"])
+                log.warning("fault %s: %s", rec.fields["fault"], rec.fields.get("detail"))
+
+    async def _controller_task(self) -> None:
+        assert self.sampler is not None
+        ctl = self.controller
+        stall_ns = int(self.cfg.sampling.stall_timeout_s * 1e9)
+        link_s = self.cfg.commands.link_timeout_s
+        started = time.monotonic_ns()
+        while True:
+            await asyncio.sleep(ROUTE_PERIOD_S)
+            self._route()
+            now = time.monotonic_ns()
+            last = self.sampler.last_sample_ns or started
+            if now - last > stall_ns and now - started > stall_ns:
+                # The control thread is stuck (sensor call hung?): act from here.
+                ctl.fault(Fault.SENSOR_STALLED, f"no sample for {(now - last) * 1e-9:.3f} s")
+            if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
+                self.hw.clutches.all_off()
+                self.armed_remotely = False
+                self.sampler.submit(lambda c: c.fault(Fault.LINK_LOST, f"no command or heartbeat for {link_s} s"))
+
+    async def _telemetry_task(self) -> None:
+        period = self.cfg.telemetry.period_s
+        while True:
+            await asyncio.sleep(period)
+            if self.telemetry is not None and self._tel_pending:
+                pending, self._tel_pending = self._tel_pending, []
+                try:
+                    self.telemetry.send(pending)
+                except Exception as err:  # noqa: BLE001 - telemetry must never stop the robot
+                    self.telemetry.dropped_datagrams += 1
+                    log.error("telemetry: %s: %s", type(err).__name__, err)
+
+    async def _trial_log_task(self) -> None:
+        period = self.cfg.log.flush_interval_s
+        assert self._trial_lock is not None
+        while True:
+            await asyncio.sleep(period)
+            async with self._trial_lock:
+                if self.trial is not None and self._log_pending:
+                    pending, self._log_pending = self._log_pending, []
+                    self.trial.append(pending)
+                    await asyncio.to_thread(self.trial.sync)
+
+    async def _commands_task(self) -> None:
+        await asyncio.Event().wait()  # the server runs on its own; this task marks its lifetime
+
+    # --- commands -------------------------------------------------------------------------------
+    def _reserved_disarm(self) -> None:
+        """A disarm over the reserved UDP path: clutches off at once, then the control thread."""
+        self.armed_remotely = False
+        self.controller.armed = False  # no new engage from here on (a bool store is atomic)
+        with contextlib.suppress(Exception):
+            self.hw.clutches.all_off()
+        if self.sampler is not None and self.sampler.running:
+            self.sampler.submit(lambda c: c.disarm("reserved path"))  # the event, and off once more
+
+    def _reserved_status(self) -> dict[str, Any]:
+        """A small status for the reserved UDP path (read from its thread: copies only)."""
+        ctl = self.controller
+        return {"armed": ctl.armed, "faults": sorted(f.value for f in list(ctl.active_faults)),
+                "engaged": self.hw.clutches.engaged(), "samples": ctl.samples}
+
+    def _command_seen(self) -> None:
+        self._last_command_s = time.monotonic()
+
+    async def _in_sampler(self, fn: Callable[[Controller], Any]) -> Any:
+        assert self.sampler is not None
+        try:
+            return await asyncio.wait_for(asyncio.wrap_future(self.sampler.submit(fn)), COMMAND_TIMEOUT_S)
+        except TimeoutError:
+            raise RuntimeError("the control loop did not answer in time") from None
+
+    async def _execute(self, cmd: Command) -> dict[str, Any]:
+        if cmd.cmd == "ping":
+            return {"pong": True}
+        if cmd.cmd == "status":
+            status = await self._in_sampler(lambda c: c.status())
+            assert self.sampler is not None
+            status.update(
+                rate_hz=self.cfg.sampling.rate_hz,
+                missed_deadlines=self.sampler.stats.missed_deadlines,
+                trial=None if self.trial is None else str(self.trial.path),
+                params={k: getattr(self.controller.params(), k) for k in self.controller.params().__slots__},
+                link={"timeout_s": self.cfg.commands.link_timeout_s, "armed_remotely": self.armed_remotely,
+                      "connections": 0 if self.server is None else self.server.connections},
+            )
+            return status
+        if cmd.cmd == "arm":
+            leg = cmd.args.get("stance_leg")
+            if leg is not None and (isinstance(leg, bool) or not isinstance(leg, int)):
+                raise ValueError(f"stance_leg must be a clutch index (integer), got {leg!r}")
+            result = await self._in_sampler(lambda c: c.arm(stance_leg=leg))
+            self.armed_remotely = True
+            self._last_command_s = time.monotonic()
+            result["link_timeout_s"] = self.cfg.commands.link_timeout_s
+            return result
+        if cmd.cmd == "disarm":
+            self.armed_remotely = False
+            self.hw.clutches.all_off()  # at once, even if the control loop is not answering
+            return await self._in_sampler(lambda c: c.disarm())
+        if cmd.cmd == "set":
+            name, value = cmd.args["name"], cmd.args["value"]
+            if not isinstance(name, str):
+                raise ValueError("set: name must be a string")
+            return await self._in_sampler(lambda c: c.set_param(name, value))
+        if cmd.cmd == "trial_start":
+            return await self._trial_start(cmd.args.get("name", "trial"))
+        if cmd.cmd == "trial_stop":
+            return await self._trial_stop()
+        raise ValueError(f"unhandled command {cmd.cmd}")  # pragma: no cover - parse_command forbids it
+
+    async def _trial_start(self, name: Any) -> dict[str, Any]:
+        assert self._trial_lock is not None
+        if not isinstance(name, str):
+            raise ValueError("trial name must be a string")
+        async with self._trial_lock:
+            if self.trial is not None:
+                raise ValueError(f"a trial is already running ({self.trial.path.name})")
+            header = {"rate_hz": self.cfg.sampling.rate_hz, "detector": _params_dict(self.controller),
+                      "legs": [list(s.legs) for s in self.cfg.sensors], "clutch_pins": list(self.cfg.clutch.pins)}
+            trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header)
+            self._route()  # records from before the start do not belong to the trial
+            self.trial = trial
+            self._log_pending = [EventRecord(time.monotonic_ns(), "trial_start", {"trial": name})]
+            self.summary.trials.append(str(trial.path))
+            return {"path": str(trial.path)}
+
+    async def _trial_stop(self) -> dict[str, Any]:
+        assert self._trial_lock is not None
+        async with self._trial_lock:
+            if self.trial is None:
+                raise ValueError("no trial is running")
+            self._route()
+            trial, self.trial = self.trial, None
+            trial.append(self._log_pending)
+            trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {})])
+            self._log_pending = []
+            await asyncio.to_thread(trial.close)
+            return {"path": str(trial.path), "lines": trial.lines}
+
+
+def _params_dict(ctl: Controller) -> dict[str, Any]:
+    p = ctl.params()
+    return {k: getattr(p, k) for k in p.__slots__}

@@ -1,0 +1,10 @@
+"""The wheel model itself: parameters, mechanics, generated equations, guards, impact, section, clutch.
+
+What lives here is the physics of `../shared/docs/model.md`, independent of how it is integrated:
+`params` (Table 1, validated), `derive` (sympy) and `generated/` (its numeric output), `mechanics` (M, h and
+Jacobians of one mass model), `dynamics` (the constrained phase dynamics), `guards` (the one guard table:
+every event that ends a phase, with its code, direction and failure class), `impact`, `section`
+(z <-> full post-impact state), `clutch` (real-clutch constraint sets), `rigid` (closed form), `failures`.
+
+May import: the standard library, numpy, sympy (derive only), rimless.errors. Nothing else of rimless.
+"""

@@ -1,0 +1,8 @@
+"""One step of the hybrid system and the Poincaré map built on it.
+
+`hybrid` runs the phase sequence of the ER or VE wheel and the impact, `poincare` the map on the
+post-impact section with its fixed points and stability, `gait` several steps with their trajectory,
+`summary` the plain-dict form of these results that commands print and `--json` emits.
+
+May import: rimless.sim.model, rimless.sim.integrate, rimless.sim.fast, numpy, scipy, rimless.errors.
+"""

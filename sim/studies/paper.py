@@ -1,0 +1,711 @@
+"""The paper's simulation section regenerated: every figure as PNG (150 dpi) with its data as CSV, a table of
+the paper's headline numbers beside ours, and an index page.
+
+Figures (paper section "Numerical Simulation"):
+1. typical gaits, ER and VE side by side: leg lengths, CoM height, stick diagrams with the phases;
+2. vertical ground reaction forces of both, the leading leg's tensile transient marked;
+3. energy transition ratio E+/E- over steps for several k, from a perturbed post-impact state;
+4. max |eig| against slope for several k, both models, every stable branch (unit circle dashed);
+5. CoT = tan(critical slope) against k: ER, every VE branch, the rigid wheel; contact-valid points filled;
+6. the headline table (CSV and Markdown).
+Figures 4-6 come from a sweep over k (rimless.sim.studies.sweep), so they run on Dask and use its cache.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rimless.sim.model.params import WheelParams
+
+K_GRID = tuple(range(1500, 3501, 250))
+ENERGY_K = (2000.0, 2500.0, 3000.0, 3500.0)
+EIGEN_K = (2000.0, 2500.0, 3000.0)
+PERTURBATION = 1.05  # theta'+ of the start state = 1.05 x the fixed point's (figure 3)
+ENERGY_STEPS = 20
+PAPER = {
+    "rigid_critical_deg": 2.80,
+    "ve_critical_deg": (1.27, 1.30),
+    "er_energy_ratio": 0.85,
+    "ve_energy_ratio": (0.79, 0.81),
+    "er_max_eig": (0.75, 0.80),
+    "max_cot_reduction_pct": 16.13,
+    "max_cot_reduction_k": 2500.0,
+    "rigid_cot": 0.048,
+}
+
+
+@dataclass
+class PaperResult:
+    out_dir: Path
+    files: list[Path] = field(default_factory=list)
+    table: list[dict[str, Any]] = field(default_factory=list)
+    timings_s: dict[str, float] = field(default_factory=dict)
+    sweep: Any = None
+
+
+def _plt():  # noqa: ANN202
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _write_csv(frame: Any, path: Path) -> Path:
+    tmp = path.with_name(f".{path.name}.tmp")
+    frame.to_csv(tmp, index=False)
+    tmp.replace(path)
+    return path
+
+
+def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, theta_dot: float | None = None) -> Any:
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.poincare import default_guess, solve_fixed_point
+
+    pmap = make_map(params, model, backend=backend, rtol=rtol)
+    z = default_guess(params, model)
+    if theta_dot is not None:
+        z[1] = theta_dot
+    return pmap, solve_fixed_point(pmap, z, jacobian=getattr(pmap, "jacobian", None))
+
+
+def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 2) -> dict[str, Any]:
+    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.gait import simulate_steps
+
+    out = {}
+    for model in ("er", "ve"):
+        _, fp = _fixed_point(params, model, backend, rtol)
+        out[model] = simulate_steps(params, model, fp.z, steps, make_integrator(backend, rtol), record_dt=1e-3,
+                                    forces=True)
+    return out
+
+
+def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
+    """Figure 1: leg lengths, CoM height and stick diagrams of both wheels side by side."""
+    import pandas as pd
+
+    from rimless.sim.studies.figures import PHASE_COLOURS, _shade_phases, save_figure, stick_diagram
+
+    plt = _plt()
+    fig, axes = plt.subplots(3, 2, figsize=(12, 10), constrained_layout=True)
+    for col, model in enumerate(("ve", "er")):
+        traj = trajs[model]
+        tab = traj.table
+        name = {"er": "energy-recycling", "ve": "viscoelastic"}[model]
+        ax = axes[0, col]
+        _shade_phases(ax, traj)
+        ax.plot(tab["t_s"], tab["L1_m"] * 1e3, label="stance leg L1")
+        ax.plot(tab["t_s"], tab["L2_m"] * 1e3, label="trailing leg L2")
+        ax.set_ylabel("leg length (mm)")
+        ax.set_title(f"({'ad'[col]}) {name}: leg lengths")
+        ax.legend(fontsize=7, loc="lower right")
+        ax = axes[1, col]
+        _shade_phases(ax, traj)
+        ax.plot(tab["t_s"], tab["com_height_normal_m"] * 1e3, color="C2")
+        ax.set_ylabel("CoM height normal to slope (mm)")
+        ax.set_xlabel("time (s)")
+        ax.set_title(f"({'be'[col]}) {name}: CoM height")
+        ax = axes[2, col]
+        stick_diagram(traj, ax, step=0, every_s=0.03)
+        ax.set_title(f"({'cf'[col]}) {name}: stick diagram of one step")
+    fig.suptitle(f"typical gaits at {trajs['er'].params.slope_deg:.3f} deg, k = {trajs['er'].params.k:g} N/m "
+                 f"(phases: {', '.join(PHASE_COLOURS)})")
+    png = save_figure(fig, out / "fig1_typical_gaits.png")
+    frames = [pd.DataFrame(trajs[m].table).assign(model=m.upper()) for m in ("er", "ve")]
+    csv = _write_csv(pd.concat(frames, ignore_index=True), out / "fig1_typical_gaits.csv")
+    return [png, csv]
+
+
+def figure_forces(trajs: dict[str, Any], out: Path) -> list[Path]:
+    """Figure 2: vertical ground reaction forces of both wheels, the tensile transient marked."""
+    import pandas as pd
+
+    from rimless.sim.studies.figures import plot_forces, save_figure
+
+    plt = _plt()
+    fig, axes = plt.subplots(2, 1, figsize=(10, 7), constrained_layout=True, sharex=True)
+    rows = []
+    for ax, model in zip(axes, ("ve", "er")):
+        traj = trajs[model]
+        plot_forces(traj, ax)
+        tab = traj.table
+        lam = np.asarray(tab["lambda_b_y_N"], dtype=float)
+        dl = np.asarray(tab["phase"]) == "dlsp"
+        tmin = float(np.nanmin(np.where(dl, lam, np.nan)))
+        ax.set_title(f"{'viscoelastic' if model == 've' else 'energy-recycling'}: leading-foot minimum in double "
+                     f"support {tmin:.2f} N")
+        for i in range(len(tab["t_s"])):
+            rows.append({"model": model.upper(), "t_s": tab["t_s"][i], "phase": tab["phase"][i],
+                         "grf_b_N": tab["lambda_b_y_N"][i], "grf_a_N": tab["lambda_a_y_N"][i]})
+    axes[-1].set_xlabel("time (s)")
+    png = save_figure(fig, out / "fig2_ground_reaction_forces.png")
+    csv = _write_csv(pd.DataFrame(rows), out / "fig2_ground_reaction_forces.csv")
+    return [png, csv]
+
+
+def energy_ratio_series(params: WheelParams, backend: str, rtol: float, ks: tuple[float, ...] = ENERGY_K,
+                        steps: int = ENERGY_STEPS) -> list[dict[str, Any]]:
+    """E+/E- of each step from a perturbed start (theta'+ x PERTURBATION of the fixed point), per k and model."""
+    from rimless.sim.model.failures import StepFailure
+
+    rows = []
+    for model in ("er", "ve"):
+        for k in ks:
+            p = params.replace(stiffness_n_per_m=float(k))
+            try:
+                pmap, fp = _fixed_point(p, model, backend, rtol)
+            except StepFailure:
+                continue
+            z = np.array([fp.z[0], fp.z[1] * PERTURBATION])
+            for i in range(steps):
+                try:
+                    st = pmap.step(z)
+                except StepFailure as err:
+                    rows.append({"model": model.upper(), "k": k, "step": i + 1, "energy_ratio": math.nan,
+                                 "failure": err.reason.value})
+                    break
+                rows.append({"model": model.upper(), "k": k, "step": i + 1, "energy_ratio": st.impact.energy_ratio,
+                             "failure": ""})
+                z = np.array([st.y_plus[2], st.y_plus[7]])
+    return rows
+
+
+def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
+    import pandas as pd
+
+    from rimless.sim.studies.figures import save_figure
+
+    plt = _plt()
+    frame = pd.DataFrame(rows)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), constrained_layout=True, sharey=True)
+    for ax, model in zip(axes, ("VE", "ER")):
+        sub = frame[frame.model == model]
+        for j, (k, g) in enumerate(sub.groupby("k")):
+            ax.plot(g["step"], g["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m")
+        ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
+        ax.set_xlabel("step")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("energy transition ratio E+/E- (%)")
+    fig.suptitle(f"energy transition ratio at impact from a perturbed start (theta'+ x {PERTURBATION})")
+    return [save_figure(fig, out / "fig3_energy_ratio.png"), _write_csv(frame, out / "fig3_energy_ratio.csv")]
+
+
+def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]], out: Path,
+                       ks: tuple[float, ...] = EIGEN_K) -> list[Path]:
+    """Figure 4: max |eig| against slope along every branch stable at the start slope, down to the end of its
+    stable, valid part (a branch invalid at the start: down to the end of the part that becomes valid, or its
+    end); solid with filled markers where the gait respects unilateral contact, dashed with open markers where
+    it does not (found with the stance foot held)."""
+    import pandas as pd
+
+    from rimless.sim.studies.figures import save_figure
+
+    plt = _plt()
+    frame = pd.DataFrame(points)
+    info = {(r["model"], r["k"], r["branch"]): r for r in rows}
+    keep = []
+    for (model, k, branch), g in frame.groupby(["model", "k", "branch"]):
+        r = info.get((model, k, branch))
+        if k not in ks or r is None or not r.get("stable_at_start"):
+            continue
+        c = r.get("critical_slope_rad", math.nan)
+        if not c == c:
+            c = r.get("valid_end_slope_rad", math.nan)
+        if not c == c:
+            c = r.get("end_slope_rad", math.nan)
+        keep.append(g[g.slope_rad >= c - 1e-12] if c == c else g)
+    data = pd.concat(keep, ignore_index=True) if keep else frame.iloc[:0]
+    if len(data):
+        data = data.assign(contact_valid=data["contact_valid"].map(lambda v: bool(v) if v is not None else True))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), constrained_layout=True, sharey=True)
+    styles = ["-", "-.", ":", (0, (5, 1))]
+    for ax, model in zip(axes, ("VE", "ER")):
+        sub = data[data.model == model] if len(data) else data
+        for j, k in enumerate(ks):
+            for b_i, (branch, g) in enumerate(sub[sub.k == k].groupby("branch") if len(sub) else []):
+                g = g.sort_values("slope_rad")
+                valid = g["contact_valid"].to_numpy(dtype=bool)
+                col = f"C{j}"
+                label = f"k = {k:g}, {g['branch_label'].iloc[0]}"
+                ax.plot(g["slope_deg"].where(valid), g["max_abs_eigenvalue"].where(valid), ls=styles[b_i % 4],
+                        color=col, label=label if valid.any() else None)
+                if (~valid).any():  # the invalid part, and its joint with the valid part, dashed
+                    inv = ~valid | np.r_[~valid[1:], False] | np.r_[False, ~valid[:-1]]
+                    ax.plot(g["slope_deg"].where(inv), g["max_abs_eigenvalue"].where(inv), "--", color=col, lw=1,
+                            label=None if valid.any() else label)
+                    ax.plot(g["slope_deg"][~valid], g["max_abs_eigenvalue"][~valid], "o", mfc="white", color=col,
+                            ms=3.5)
+        ax.axhline(1.0, color="k", ls="--", lw=1)
+        ax.set_xlabel("slope (deg)")
+        ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
+        ax.grid(alpha=0.3)
+        ax.plot([], [], "--o", mfc="white", color="0.4", lw=1, ms=3.5, label="violates unilateral contact")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("max |eigenvalue| of the Poincare map")
+    return [save_figure(fig, out / "fig4_eigenvalue_map.png"), _write_csv(data, out / "fig4_eigenvalue_map.csv")]
+
+
+def cot_rows(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[str, Any]]:
+    """CoT per (k, branch) with validity, plus the rigid wheel (closed form, paper convention)."""
+    from rimless.sim.model.rigid import RigidWheel
+
+    out = []
+    for r in rows:
+        c = r.get("critical_slope_rad", math.nan)
+        if not (isinstance(c, float) and c == c):
+            continue
+        out.append({"model": r["model"], "k": r["k"], "branch": r["branch"], "branch_label": r["branch_label"],
+                    "critical_slope_deg": r["critical_slope_deg"], "cot": r["cot"], "reason": r["reason"],
+                    "contact_valid": bool(r.get("contact_valid_at_start")) and r.get("end_contact_valid") is not False,
+                    "contact_valid_at_start": bool(r.get("contact_valid_at_start")),
+                    "min_stance_force_single_support_N": r.get("min_stance_force_single_support_N", math.nan)})
+    for r in rows:  # a gait invalid at the start slope whose valid part (lower down) ends at a stable end
+        c = r.get("valid_end_slope_rad", math.nan)
+        if not (isinstance(c, float) and c == c) or r.get("valid_end_reason") not in ("fold", "stall"):
+            continue
+        out.append({"model": r["model"], "k": r["k"], "branch": r["branch"], "branch_label": r["branch_label"],
+                    "critical_slope_deg": math.degrees(c), "cot": math.tan(c), "reason": r["valid_end_reason"],
+                    "contact_valid": True, "contact_valid_at_start": False, "valid_part_only": True,
+                    "valid_from_slope_deg": math.degrees(r["valid_from_slope_rad"]),
+                    "min_stance_force_single_support_N": r.get("min_stance_force_single_support_N", math.nan)})
+    phi_r = RigidWheel.from_params(params, "paper").critical_slope_rad()
+    for k in sorted({r["k"] for r in rows}):
+        out.append({"model": "rigid", "k": k, "branch": "rigid", "branch_label": "rigid",
+                    "critical_slope_deg": math.degrees(phi_r), "cot": math.tan(phi_r), "reason": "coleman-closed-form",
+                    "contact_valid": True, "contact_valid_at_start": True, "min_stance_force_single_support_N": math.nan})
+    return out
+
+
+def curve_starts(rows: list[dict[str, Any]], params: WheelParams) -> list[dict[str, Any]]:
+    """One start per stable branch label (ER; VE fast, medium, ...): its row at the grid k nearest Table 1's."""
+    done: set[tuple[str, str]] = set()
+    out = []
+    for r in sorted(rows, key=lambda r: abs(r["k"] - params.k)):
+        key = (r["model"], r.get("branch_label", ""))
+        crit = r.get("critical_slope_rad")
+        if key in done or not (isinstance(crit, float) and crit == crit) or r["reason"] not in ("stall", "fold"):
+            continue
+        done.add(key)
+        out.append(r)
+    return out
+
+
+def boundary_curve(row: dict[str, Any], params: dict[str, Any], backend: str, rtol: float,
+                   k_range: tuple[float, float]) -> list[dict[str, Any]]:
+    """The critical slope of one branch as a curve over k, traced by two-parameter continuation
+    (rimless.sim.continuation.boundary): a VE branch's fold curve, the ER stall curve (each point the located stall).
+    Plain data in and out (runs as a Dask task)."""
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.continuation.boundary import BoundaryContinuation, start_on_boundary
+    from rimless.sim.model.failures import StepFailure
+
+    model = row["model"].lower()
+    test = "stall" if row["reason"] == "stall" else "fold"
+    base = WheelParams(**params).replace(stiffness_n_per_m=float(row["k"]), slope_rad=row["start_slope_rad"])
+
+    def factory(q: WheelParams) -> Any:
+        return make_map(q, model, backend=backend, rtol=rtol)
+
+    try:
+        z, s0 = start_on_boundary(factory, base, model, np.array([row["theta_plus_rad"], row["theta_dot_plus_rad_s"]]),
+                                  test)
+        bc = BoundaryContinuation(factory, base.replace(slope_rad=s0), model, "k", test, max_points=60)
+        curve = bc.trace(z, s0, mu_min=k_range[0], mu_max=k_range[1])
+    except StepFailure:
+        return []
+    name = "ER stall" if model == "er" else f"VE {row['branch_label']} fold"
+    return [{"curve": name, "model": row["model"], "branch_label": row["branch_label"], "test": test, "k": pt.mu,
+             "slope_rad": pt.slope_rad, "slope_deg": pt.slope_deg, "cot": math.tan(pt.slope_rad),
+             "step_period_s": pt.period_s, "max_abs_eigenvalue": float(np.max(np.abs(pt.eigenvalues))),
+             "curve_end": curve.end_reason, "curve_seconds": curve.seconds,
+             "curve_map_evaluations": curve.map_evaluations}
+            for pt in curve.points if k_range[0] - 1e-9 <= pt.mu <= k_range[1] + 1e-9]
+
+
+def validity_range(row: dict[str, Any], params: dict[str, Any], backend: str, rtol: float,
+                   k_range: tuple[float, float]) -> dict[str, Any]:
+    """How far in k the gait of `row` stays stable and contact-valid at its start slope: pseudo-arclength
+    continuation in k both ways with the contact facts at every point, to the first special point (a
+    stance force or impulse through 0, a fold, ...) or the end of k_range. The map holds the stance foot
+    (bilateral contact, where the backend has it), so a stance force through 0 is a located sign change of
+    its test function rather than the end of the branch. Plain data (runs as a Dask task)."""
+    from rimless.sim.continuation.arclength import ArclengthContinuation
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.step.poincare import bilateral_map
+
+    model = row["model"].lower()
+    base = WheelParams(**params).replace(stiffness_n_per_m=float(row["k"]), slope_rad=row["start_slope_rad"])
+    z0 = np.array([row["theta_plus_rad"], row["theta_dot_plus_rad_s"]])
+    out: dict[str, Any] = {"model": row["model"], "branch_label": row["branch_label"], "from_k": row["k"],
+                           "slope_rad": row["start_slope_rad"]}
+    def factory(q: WheelParams) -> Any:  # the stance foot held, so the stance force's sign change is bracketed
+        m = make_map(q, model, backend=backend, rtol=rtol)
+        return bilateral_map(m) or m
+
+    for side, direction, limit in (("low", -1.0, k_range[0]), ("high", 1.0, k_range[1])):
+        # facts (the recorded step) every 5th point; the held map's stance force and impulses at every point
+        cont = ArclengthContinuation(factory, base, model, "k", facts_every=5 if bilateral_map(make_map(
+            base, model, backend=backend, rtol=rtol)) is not None else 1, max_points=60)
+        try:
+            br = cont.trace(z0, direction=direction, p_min=k_range[0], p_max=k_range[1], stop_at_first_loss=True)
+        except StepFailure as err:
+            out[f"k_{side}"], out[f"k_{side}_reason"], out[f"k_{side}_detail"] = math.nan, "solver", str(err)
+            continue
+        sp = br.first_loss()
+        if sp is None:
+            out[f"k_{side}"], out[f"k_{side}_reason"], out[f"k_{side}_detail"] = limit, "grid-end", br.end_detail
+        else:
+            out[f"k_{side}"], out[f"k_{side}_reason"], out[f"k_{side}_detail"] = sp.p, sp.kind, sp.detail
+    return out
+
+
+def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, Any]] | None = None,
+               ranges: list[dict[str, Any]] | None = None) -> list[Path]:
+    """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not; lines: the boundary
+    curves traced by two-parameter continuation."""
+    import pandas as pd
+
+    from rimless.sim.studies.figures import save_figure
+
+    plt = _plt()
+    frame = pd.DataFrame(crows)
+    n_bars = len(ranges or [])
+    fig, (ax, strip) = plt.subplots(2, 1, figsize=(9, 6.2 + 0.15 * n_bars), constrained_layout=True, sharex=True,
+                                    gridspec_kw={"height_ratios": [5, 0.6 + 0.35 * max(n_bars, 1)]})
+    cframe = pd.DataFrame(curves or [])
+    colours0 = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4"}
+    if len(cframe):
+        for (name, label), g in cframe.groupby(["curve", "branch_label"]):
+            g = g.sort_values("k")
+            ax.plot(g["k"], g["cot"], "-", color=colours0.get(label, "C5"), lw=2, alpha=0.35,
+                    label=f"{name} curve (two-parameter continuation)")
+    colours = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4", "rigid": "k"}
+    main = frame[(frame.model != "rigid") & ~frame.get("valid_part_only", pd.Series(False, index=frame.index)).fillna(False).astype(bool)]
+    for label, g in main.groupby("branch_label"):
+        g = g.sort_values("k")
+        name = "ER" if label == "er" else f"VE {label}"
+        col = colours.get(label, "C5")
+        ax.plot(g["k"], g["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends)")
+        v = g[g.contact_valid]
+        nv = g[~g.contact_valid]
+        ax.plot(v["k"], v["cot"], "o", color=col, ms=6)
+        ax.plot(nv["k"], nv["cot"], "o", mfc="white", color=col, ms=6)
+    rg = frame[frame.model == "rigid"].sort_values("k")
+    ax.plot(rg["k"], rg["cot"], "k--", label=f"rigid ({rg['critical_slope_deg'].iloc[0]:.3f} deg)" if len(rg) else "rigid")
+    for i, v in enumerate(ranges or []):
+        col = colours.get(v["branch_label"], "C5")
+        name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
+        for side in ("low", "high"):
+            if v.get(f"k_{side}_reason") in ("stance-force", "impulse"):
+                ax.axvline(v[f"k_{side}"], color=col, ls="-.", lw=1,
+                           label=f"{name} gait loses contact validity at k = {v[f'k_{side}']:.0f} "
+                                 f"({v[f'k_{side}_reason']})")
+        lo, hi = v.get("k_low", math.nan), v.get("k_high", math.nan)
+        if lo == lo and hi == hi:  # the branch's valid range in k at the start slope, a bar in the strip below
+            strip.plot([lo, hi], [i, i], "-", color=col, lw=6, solid_capstyle="butt")
+            strip.text(lo, i + 0.38, f"{name}: stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg for "
+                       f"k = {lo:.0f} ({v['k_low_reason']}) to {hi:.0f} ({v['k_high_reason']})", color=col,
+                       fontsize=7, va="center")
+    late = (frame[frame["valid_part_only"].fillna(False).astype(bool)] if "valid_part_only" in frame else None)
+    if late is not None and len(late):
+        for label, g in late.groupby("branch_label"):
+            ax.plot(g["k"], g["cot"], "D", mfc="white", color=colours.get(label, "C5"), ms=6,
+                    label=f"VE {label}: invalid at the start slope, end of its valid part lower down")
+    ax.plot([], [], "o", color="0.4", label="contact-valid")
+    ax.plot([], [], "o", mfc="white", color="0.4", label="violates unilateral contact")
+    strip.set_ylim(-0.6, max(n_bars, 1) - 0.2)
+    strip.set_yticks([])
+    strip.set_xlabel("leg stiffness k (N/m)")
+    strip.set_title("valid range of each branch in k (continuation in k at the start slope)", fontsize=8)
+    ax.set_ylabel("CoT = tan(critical slope)")
+    ax.set_title("cost of transport per gait branch")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    files = [save_figure(fig, out / "fig5_cot.png"), _write_csv(frame, out / "fig5_cot.csv")]
+    if len(cframe):
+        files.append(_write_csv(cframe, out / "fig5_boundary_curves.csv"))
+    return files
+
+
+def _fmt_range(v: Any) -> str:
+    return f"{v[0]}-{v[1]}" if isinstance(v, tuple) else f"{v}"
+
+
+def headline_table(rows: list[dict[str, Any]], er_series: list[dict[str, Any]], params: WheelParams,
+                   ranges: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
+    """Every headline number of the paper beside ours, with the difference explained."""
+    from rimless.sim.model.rigid import RigidWheel
+
+    def pick(model: str, k: float, label: str | None = None) -> list[dict[str, Any]]:
+        return [r for r in rows if r["model"] == model and abs(r["k"] - k) < 1e-9
+                and (label is None or r.get("branch_label") == label)]
+
+    table = []
+    phi_r = RigidWheel.from_params(params, "paper").critical_slope_rad()
+    table.append({"quantity": "rigid wheel critical slope (deg)", "paper": "2.80", "ours": f"{math.degrees(phi_r):.3f}",
+                  "note": "Coleman's closed form with M = m_H, I_c (model.md section 7)"})
+    table.append({"quantity": "rigid wheel CoT", "paper": "0.048", "ours": f"{math.tan(phi_r):.4f}", "note": "tan(2.799 deg)"})
+    ks_all = sorted({r["k"] for r in rows})
+    k0 = min(ks_all, key=lambda k: abs(k - params.k)) if ks_all else params.k
+    ve0 = [r for r in pick("VE", k0) if r.get("critical_slope_rad") == r.get("critical_slope_rad")
+           and isinstance(r.get("critical_slope_rad"), float)]
+    ve_txt = "; ".join(f"{r['branch_label']} {r['critical_slope_deg']:.3f} ({'valid' if r['contact_valid_at_start'] else 'INVALID'}, "
+                       f"{r['reason']})" for r in ve0) or "no stable VE branch"
+    table.append({"quantity": f"VE critical slope at k = {k0:g} (deg)", "paper": "1.27-1.30 (k = 2700)", "ours": ve_txt,
+                  "note": "one value per VE branch (model.md section 9); the paper follows one branch"})
+    er0 = pick("ER", k0)
+    if er0:
+        r = er0[0]
+        table.append({"quantity": f"ER critical slope at k = {k0:g} (deg)", "paper": "-",
+                      "ours": f"{r['critical_slope_deg']:.3f} ({r['reason']})",
+                      "note": "the ER branch ends in a stall (the wheel no longer clears mid-stance)"})
+        table.append({"quantity": "ER energy ratio E+/E-", "paper": "about 0.85", "ours": f"{r['energy_ratio']:.3f}",
+                      "note": f"at the start slope, k = {k0:g}"})
+        table.append({"quantity": "ER max |eig|", "paper": "0.75-0.8",
+                      "ours": f"{min(x['max_abs_eigenvalue'] for x in rows if x['model'] == 'ER' and x['max_abs_eigenvalue'] == x['max_abs_eigenvalue']):.3f}"
+                              f"-{max(x['max_abs_eigenvalue'] for x in rows if x['model'] == 'ER' and x['max_abs_eigenvalue'] == x['max_abs_eigenvalue']):.3f}",
+                      "note": "largest along each ER branch, over the k grid"})
+    ve_er = [r for r in pick("VE", k0) if r["energy_ratio"] == r["energy_ratio"] and r["stable_at_start"]]
+    table.append({"quantity": "VE energy ratio E+/E-", "paper": "0.79-0.81",
+                  "ours": "; ".join(f"{r['branch_label']} {r['energy_ratio']:.3f}" for r in ve_er),
+                  "note": f"per VE gait at the start slope, k = {k0:g}"})
+    # CoT reduction per k and VE branch
+    best = None
+    for k in sorted({r["k"] for r in rows}):
+        er = [r for r in pick("ER", k) if r["cot"] == r["cot"]]
+        if not er:
+            continue
+        for ve in pick("VE", k):
+            if not (ve["cot"] == ve["cot"]):
+                continue
+            red = 100.0 * (1.0 - er[0]["cot"] / ve["cot"])
+            if best is None or red > best[0]:
+                best = (red, k, ve)
+    kp = PAPER["max_cot_reduction_k"]
+    at_kp = []
+    for ve in pick("VE", kp):
+        er = pick("ER", kp)
+        if er and ve["cot"] == ve["cot"] and er[0]["cot"] == er[0]["cot"]:
+            red = 100.0 * (1.0 - er[0]["cot"] / ve["cot"])
+            at_kp.append(f"vs VE {ve['branch_label']} {red:+.1f}% ({'valid' if ve['contact_valid_at_start'] else 'INVALID'})")
+    table.append({"quantity": f"ER CoT reduction vs VE at k = {kp:g}", "paper": "16.13%", "ours": "; ".join(at_kp) or "-",
+                  "note": "depends on which VE branch is followed; valid = unilateral contact at the start slope"})
+    reds = []
+    for ve in pick("VE", kp):
+        er = pick("ER", kp)
+        if er and ve["cot"] == ve["cot"] and er[0]["cot"] == er[0]["cot"]:
+            reds.append((100.0 * (1.0 - er[0]["cot"] / ve["cot"]), ve))
+    if reds:
+        red, ve = min(reds, key=lambda rv: abs(rv[0] - PAPER["max_cot_reduction_pct"]))
+        rng = next((v for v in ranges or [] if v["model"] == "VE" and v["branch_label"] == ve["branch_label"]), None)
+        valid_txt = ("contact-valid at the start slope" if ve["contact_valid_at_start"]
+                     else f"NOT contact-valid ({ve.get('contact_reason', '')})")
+        if rng is not None:
+            valid_txt += (f"; stable and contact-valid at {math.degrees(rng['slope_rad']):.3f} deg for k = "
+                          f"{rng['k_low']:.0f} ({rng['k_low_reason']}) to {rng['k_high']:.0f} ({rng['k_high_reason']})")
+        table.append({"quantity": f"VE branch that reproduces the paper's 16.13 % at k = {kp:g}", "paper": "16.13%",
+                      "ours": f"VE {ve['branch_label']}: {red:.2f}% ({valid_txt})",
+                      "note": "the VE branch whose CoT reduction is nearest the paper's; the others: "
+                              + ("; ".join(f"VE {o['branch_label']} {r2:+.2f}%" for r2, o in reds if o is not ve)
+                                 or "none")})
+    if best is not None:
+        red, k, ve = best
+        table.append({"quantity": "maximum ER CoT reduction over the k grid", "paper": "16.13% at k = 2500",
+                      "ours": f"{red:.2f}% at k = {k:g} vs VE {ve['branch_label']} "
+                              f"({'valid' if ve['contact_valid_at_start'] else 'INVALID'})",
+                      "note": "the VE fast branch's stance force in single support approaches 0 as k grows"})
+    return table
+
+
+def _write_table(table: list[dict[str, Any]], out: Path) -> list[Path]:
+    import pandas as pd
+
+    csv = _write_csv(pd.DataFrame(table), out / "table6_headline.csv")
+    md = ["| quantity | paper | ours | note |", "|---|---|---|---|"]
+    cell = lambda v: str(v).replace("|", "\\|")  # noqa: E731
+    md += [f"| {cell(r['quantity'])} | {cell(r['paper'])} | {cell(r['ours'])} | {cell(r['note'])} |" for r in table]
+    path = out / "table6_headline.md"
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text("\n".join(md) + "\n")
+    tmp.replace(path)
+    return [csv, path]
+
+
+CAPTIONS = {
+    "fig1_typical_gaits": "Typical gaits of the viscoelastic (left) and energy-recycling (right) wheels: leg lengths, "
+                          "CoM height and a stick diagram of one step, phases coloured.",
+    "fig2_ground_reaction_forces": "Vertical ground reaction forces; red: the leading foot's tensile transient at the "
+                                   "start of double support (a rigid-contact artefact).",
+    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k.",
+    "fig4_eigenvalue_map": "Max |eigenvalue| against slope along every branch stable at the start slope, several k, "
+                           "down to the end of its stable, valid part; dashed with open markers: the gait violates "
+                           "unilateral contact (found with the stance foot held); black dashed: unit circle.",
+    "fig5_cot": "CoT = tan(critical slope) against k for ER, every VE branch and the rigid wheel; open circles violate "
+                "unilateral contact; open diamonds: a gait invalid at the start slope, the end of its valid part "
+                "lower down; bars along the bottom: each branch's contact-valid range in k at the start slope.",
+}
+
+
+def _index(out: Path, table: list[dict[str, Any]], params: WheelParams, timings: dict[str, float]) -> Path:
+    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>rimless paper figures</title>",
+             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}img{max-width:100%}"
+             "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px}</style></head><body>",
+             f"<h1>Simulation figures</h1><p>mass model {html.escape(params.mass_model)}, Table 1 parameters "
+             f"(k = {params.k:g} N/m, c = {params.c:g} N s/m) unless stated.</p>"]
+    for stem, cap in CAPTIONS.items():
+        parts.append(f"<h2>{stem}</h2><p>{html.escape(cap)}</p><img src='{stem}.png' alt='{stem}'>"
+                     f"<p><a href='{stem}.csv'>{stem}.csv</a></p>")
+    parts.append("<h2>table6_headline</h2><table><tr><th>quantity</th><th>paper</th><th>ours</th><th>note</th></tr>")
+    for r in table:
+        parts.append("<tr>" + "".join(f"<td>{html.escape(str(r[c]))}</td>" for c in ("quantity", "paper", "ours", "note"))
+                     + "</tr>")
+    parts.append("</table><p><a href='table6_headline.csv'>table6_headline.csv</a> · "
+                 "<a href='table6_valid_k_ranges.csv'>table6_valid_k_ranges.csv</a> · <a href='sweep.csv'>sweep.csv</a> (every branch) · <a href='sweep-points.csv'>sweep-points.csv</a></p>")
+    parts.append("<p>" + ", ".join(f"{k} {v:.1f}" + ("" if k.startswith("load") else " s") for k, v in timings.items())
+                 + f" on {os.cpu_count()} cores</p></body></html>")
+    path = out / "index.html"
+    tmp = path.with_name(".index.html.tmp")
+    tmp.write_text("\n".join(parts))
+    tmp.replace(path)
+    return path
+
+
+def run_paper(
+    out: Path,
+    params: WheelParams = WheelParams(),
+    *,
+    ks: tuple[float, ...] = tuple(float(k) for k in K_GRID),
+    backend: str = "auto",
+    rtol: float = 1e-10,
+    scheduler: str = "local",
+    workers: int | None = None,
+    cache_dir: Path | None = None,
+    energy_ks: tuple[float, ...] = ENERGY_K,
+    eigen_ks: tuple[float, ...] = EIGEN_K,
+    progress: Callable[[str], None] | None = None,
+) -> PaperResult:
+    """Write every figure, CSV, the headline table and index.html into `out` (see module docstring)."""
+    from rimless.sim.integrate.backend import resolve
+    from rimless.sim.studies.sweep import SweepOptions, grid_points, run_sweep, write_table
+
+    import os
+
+    say = progress or (lambda msg: None)
+    out.mkdir(parents=True, exist_ok=True)
+    res = PaperResult(out)
+    res.timings_s["load_average_before"] = os.getloadavg()[0]
+    backend = resolve(backend)
+    t0 = time.perf_counter()
+    client = cluster = None
+    if scheduler != "sync":
+        from dask.distributed import Client, LocalCluster
+
+        if scheduler == "local":
+            import os
+
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=40)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=15)
+            except (OSError, TimeoutError) as err:
+                raise ConnectionError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
+    try:
+        say("sweep over k: every branch of both wheels")
+        pts = grid_points(params, ("er", "ve"), {"k": list(ks)}, (params.mass_model,))
+        options = SweepOptions(backend=backend, rtol=rtol, start_slope_rad=params.slope_rad)
+
+        def sweep() -> Any:
+            return run_sweep(pts, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir, client=client,
+                             progress=lambda i, n: say(f"sweep over k: {i}/{n} grid points"))
+
+        # on a cluster the sweep's tasks run on the workers while this process draws figures 1-3 (the thread only
+        # waits for results); in-process (sync) everything runs in turn
+        pool = None
+        if client is not None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            pool = ThreadPoolExecutor(max_workers=1)
+            sweep_future = pool.submit(sweep)
+        try:
+            t1 = time.perf_counter()
+            if pool is None:
+                sw = sweep()
+                res.timings_s["sweep"] = time.perf_counter() - t0
+                t1 = time.perf_counter()
+            say("typical gaits and forces")
+            trajs = _typical(params, backend, rtol)
+            res.files += figure_typical_gaits(trajs, out)
+            res.files += figure_forces(trajs, out)
+            res.timings_s["gaits"] = time.perf_counter() - t1
+            t2 = time.perf_counter()
+            say("energy transition ratios")
+            res.files += figure_energy_ratio(energy_ratio_series(params, backend, rtol, energy_ks), out)
+            res.timings_s["energy"] = time.perf_counter() - t2
+            if pool is not None:
+                sw = sweep_future.result()
+                res.timings_s["sweep"] = time.perf_counter() - t0
+        finally:
+            if pool is not None:
+                pool.shutdown(wait=False, cancel_futures=True)
+        res.sweep = sw
+        meta = {"params": params.to_dict(), "ks": list(ks), "backend": backend, "rtol": rtol}
+        res.files += write_table(sw.rows, out / "sweep", meta)
+        if sw.points:
+            res.files += write_table(sw.points, out / "sweep-points", meta)
+        t1 = time.perf_counter()
+        starts = curve_starts(sw.rows, params)
+        k_range = (min(ks), max(ks))
+        futures = ([client.submit(boundary_curve, r, params.to_dict(), backend, rtol, k_range, pure=False)
+                    for r in starts] if client is not None else [])
+        vfutures = ([client.submit(validity_range, r, params.to_dict(), backend, rtol, k_range, pure=False)
+                     for r in starts] if client is not None else [])
+        say("boundary curves over k (two-parameter continuation)")
+        if client is not None:
+            curves = [row for f in futures for row in f.result()]
+            ranges = [f.result() for f in vfutures]
+        else:
+            curves = [row for r in starts for row in boundary_curve(r, params.to_dict(), backend, rtol, k_range)]
+            ranges = [validity_range(r, params.to_dict(), backend, rtol, k_range) for r in starts]
+        res.timings_s["boundary_curves_wait"] = time.perf_counter() - t1
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    t3 = time.perf_counter()
+    say("eigenvalue map, cost of transport and the headline table")
+    res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
+    res.files += figure_cot(cot_rows(sw.rows, params), out, curves, ranges)
+    res.table = headline_table(sw.rows, [], params, ranges)
+    for v in ranges:
+        name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
+        res.table.append({"quantity": f"{name} gait stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg "
+                                      f"for k (N/m)", "paper": "-",
+                          "ours": f"{v['k_low']:.1f} ({v['k_low_reason']}) to {v['k_high']:.1f} ({v['k_high_reason']})",
+                          "note": "continuation in k from the gait at k = "
+                                  f"{v['from_k']:g}; stance-force = its single-support stance force falls through 0"})
+    if ranges:
+        import pandas as pd
+
+        res.files.append(_write_csv(pd.DataFrame(ranges), out / "table6_valid_k_ranges.csv"))
+    res.files += _write_table(res.table, out)
+    res.timings_s["figures"] = time.perf_counter() - t3
+    res.timings_s["total"] = time.perf_counter() - t0
+    res.timings_s["load_average_after"] = os.getloadavg()[0]
+    res.files.append(_index(out, res.table, params, res.timings_s))
+    return res
