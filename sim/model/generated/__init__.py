@@ -1,1 +1,1 @@
-"""Numeric code generated from the symbolic derivation (see rimless.sim.derive)."""
+"""Numeric code generated from the symbolic derivation (see rimless.sim.model.derive)."""
