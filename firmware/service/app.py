@@ -24,13 +24,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from rimless.firmware.link.commands import Command, CommandServer, check_token
-from rimless.firmware.service.config import RobotConfig
 from rimless.firmware.control.controller import Controller, EventRecord, Record
 from rimless.firmware.control.faults import Fault
-from rimless.firmware.drivers.hardware import Hardware
 from rimless.firmware.control.sampler import Sampler
+from rimless.firmware.link.commands import CommandServer
+from rimless.firmware.link.protocol import Command, check_token
 from rimless.firmware.link.telemetry import TelemetrySender
+from rimless.firmware.service.config import RobotConfig
+from rimless.firmware.service.hardware import Hardware
 from rimless.firmware.service.triallog import TrialLog
 
 log = logging.getLogger("rimless.robot")
