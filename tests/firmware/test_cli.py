@@ -72,8 +72,10 @@ def test_check_fake_reports_id_squal_and_clicks() -> None:
     r = invoke("check", "--fake", "--json")
     assert r.exit_code == 0, r.output
     rep = json.loads(r.stdout)
+    # 60: the SQUAL the fake is built with (FakeAdns3080(squal=60)), reported unchanged as the best of 5 reads.
     assert rep["sensors"][0]["product_id_ok"] and rep["sensors"][0]["squal"] == 60
-    assert rep["sensors"][0]["frame_rate_hz"] == 2000.0
+    # 2000 fps: the datasheet's frame period after reset, 0x2EE0 = 12000 cycles of the 24 MHz clock.
+    assert rep["sensors"][0]["frame_rate_hz"] == 24e6 / 0x2EE0 == 2000.0
     assert [c["pin"] for c in rep["clutches"]] == [17, 27, 22, 23, 24, 16, 20, 21]
 
 

@@ -74,3 +74,17 @@ def test_sensors_sharing_a_reset_line_each_get_npd_and_one_pulse(tmp_path) -> No
         assert [s.verify_id() for s in hw.sensors] == [1, 1]
     finally:
         hw.close()
+
+
+def test_release_clutches_reports_the_off_level_of_the_configuration() -> None:
+    from rimless.firmware.service.config import ClutchConfig
+    from rimless.firmware.service.hardware import release_clutches
+
+    report = release_clutches(RobotConfig(), fake=True)
+    js = report.to_json()
+    assert js["released_pins"] == list(RobotConfig().clutch.pins) and js["level"] == "low"
+    assert all(set(h) == {"0"} for h in js["fake_levels"].values())
+    low = release_clutches(RobotConfig(clutch=ClutchConfig(active_high=False)), fake=True)
+    assert low.off_level == "high" and "fake_levels" in low.to_json()
+    assert "fake_levels" not in dataclasses.replace(report, fake_levels=None).to_json()
+
