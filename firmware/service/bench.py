@@ -94,7 +94,7 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
         wire0 = sum(f.wire_time_s for f in hw.fakes)
 
         def ready(app: RobotApp) -> None:
-            asyncio.get_running_loop().create_task(app._trial_start("bench"))
+            asyncio.get_running_loop().create_task(app.start_trial("bench"))
 
         app = RobotApp(cfg, hw, token="bench", record_timing=True, on_ready=ready, event_sink=events)
         cpu0, wall0 = time.process_time(), time.perf_counter()
