@@ -1,7 +1,8 @@
-"""`rimless robot ...`: thin commands over the firmware library.
+"""`rimless robot ...`: thin commands over the firmware library; each parses its options, calls one library
+function and prints what it returns.
 
-Module level imports only typer and the stdlib, so `rimless --help` stays fast; everything else is
-imported inside the commands.
+Module level imports only typer, the stdlib and the CLI rules (`rimless.cli_rules`), so `rimless --help`
+stays fast; the firmware is imported inside the commands.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+
+from rimless.cli_rules import EXIT_INTERRUPTED, print_json, user_facing
 
 # Usage errors (one line, exit 2) and negative numbers as values come from the root group (rimless.cli).
 app = typer.Typer(no_args_is_help=True)
@@ -25,12 +28,6 @@ _CONFIG = Annotated[
 ]
 
 
-def _user_facing(func: Any) -> Any:
-    from rimless.cli import user_facing
-
-    return user_facing(func)
-
-
 def _token(token: str | None) -> str:
     from rimless.firmware.errors import CommandError
 
@@ -41,8 +38,7 @@ def _token(token: str | None) -> str:
 
 
 def _remote(host: str, port: int, token: str | None, cmd: str, args: dict[str, Any] | None = None) -> None:
-    from rimless.cli import print_json, user_facing
-    from rimless.firmware.link.commands import send_command
+    from rimless.firmware.link.remote import send_command
 
     @user_facing
     def go() -> None:
@@ -63,7 +59,7 @@ def _interruptible(fn: Any) -> Any:
         raise typer.Exit(sig.exit_code) from None
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
-        raise typer.Exit(130) from None
+        raise typer.Exit(EXIT_INTERRUPTED) from None
 
 
 _JSON = Annotated[bool, typer.Option("--json", help="Print JSON (these commands always do; accepted for scripts).")]
@@ -76,21 +72,11 @@ def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
     When the TCP channel does not answer, the short status of the reserved UDP path is printed
     instead (armed, faults, engaged clutches), with "via": "udp".
     """
-    from rimless.cli import print_json, user_facing
-    from rimless.firmware.link.commands import send_command, send_reserved_datagram
-    from rimless.firmware.errors import RobotUnreachable
+    from rimless.firmware.link.remote import robot_status
 
     @user_facing
     def go() -> None:
-        tok = _token(token)
-        try:
-            print_json(send_command(host, "status", token=tok, port=port))
-        except RobotUnreachable as err:
-            try:
-                reply = send_reserved_datagram(host, "status", token=tok, port=port, timeout_s=0.5)
-            except RobotUnreachable:
-                raise err from None
-            print_json({**reply.get("status", {}), "via": "udp", "tcp_error": str(err)})
+        print_json(robot_status(host, token=_token(token), port=port))
 
     _interruptible(go)
 
@@ -129,24 +115,11 @@ def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
     Sent first over the robot's reserved UDP path (no connection to wait for, so a flood of TCP
     connections cannot delay it), then confirmed over TCP; prints the robot's state.
     """
-    from rimless.cli import print_json, user_facing
-    from rimless.firmware.link.commands import send_command, send_disarm_datagram
-    from rimless.firmware.errors import RobotUnreachable
+    from rimless.firmware.link.remote import robot_disarm
 
     @user_facing
     def go() -> None:
-        tok = _token(token)
-        try:
-            send_disarm_datagram(host, token=tok, port=port, timeout_s=0.5)
-            udp_ok = True
-        except RobotUnreachable:
-            udp_ok = False
-        try:
-            print_json(send_command(host, "disarm", token=tok, port=port))
-        except RobotUnreachable as err:
-            if not udp_ok:
-                raise
-            print_json({"armed": False, "disarmed_via": "udp", "tcp_error": str(err)})
+        print_json(robot_disarm(host, token=_token(token), port=port))
 
     _interruptible(go)
 
@@ -162,7 +135,6 @@ def set_param(
     as_json: _JSON = False,
 ) -> None:
     """Set a detector parameter on the running robot."""
-    from rimless.cli import user_facing
     from rimless.errors import ParameterError
 
     @user_facing
@@ -211,7 +183,6 @@ def heartbeat(
     Pings every --period-s on one connection and prints a line when the robot's state changes.
     Ctrl-C stops it; the robot then disarms after its link_timeout_s.
     """
-    from rimless.cli import user_facing
     from rimless.firmware.link.heartbeat import Heartbeat
 
     @user_facing
@@ -234,40 +205,20 @@ def release(
     The second line of defence when the firmware could not clean up (SIGKILL, a crash): run it from the
     systemd unit's ExecStopPost= (and ExecStartPre=). It does not need the sensor.
     """
-    from rimless.cli import print_json, user_facing
 
     @user_facing
     def go() -> None:
-        from rimless.firmware.drivers.hardware import release_pins
         from rimless.firmware.service.config import load_config
+        from rimless.firmware.service.hardware import release_clutches
 
-        cfg = load_config(config)
-        factory = None
-        if fake:
-            from gpiozero.pins.mock import MockFactory
-
-            from rimless.firmware.drivers.hardware import PI4_REVISION
-
-            factory = MockFactory(revision=PI4_REVISION)
-        levels = release_pins(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
+        report = release_clutches(load_config(config), fake=fake)
         if as_json:
-            print_json({"released_pins": list(cfg.clutch.pins), "level": "high" if not cfg.clutch.active_high else "low",
-                        **({"fake_levels": levels} if fake else {})})
+            print_json(report.to_json())
         else:
-            level = "low" if cfg.clutch.active_high else "high"
-            typer.echo(f"released: GPIO {', '.join(str(p) for p in cfg.clutch.pins)} driven {level} (clutch off), "
-                       "then given back; the module inputs' pull-downs hold them off from here")
+            typer.echo(f"released: GPIO {', '.join(str(p) for p in report.pins)} driven {report.off_level} "
+                       "(clutch off), then given back; the module inputs' pull-downs hold them off from here")
 
     _interruptible(go)
-
-
-def _pin_history(hw: Any, pins: Any) -> str:
-    """The mock pins' level histories ("GPIO17=010 ..."), so a test (or a curious user) sees the clutches end off."""
-    out = []
-    for pin in pins:
-        levels = "".join("1" if st.state else "0" for st in hw.pin_factory.pin(pin).states)
-        out.append(f"GPIO{pin}={levels}")
-    return " ".join(out)
 
 
 @app.command()
@@ -289,92 +240,45 @@ def run(
     Exit code: 0 after --duration-s or SIGTERM (a service stop), 130 after Ctrl-C, 128 + n after
     another signal n, 1 after a fault in the firmware itself, 2 for a user mistake.
     """
-    import asyncio
-    import dataclasses
-    import logging
+    from rimless.errors import ParameterError
+    from rimless.firmware.service.config import parse_host_port
+    from rimless.firmware.service.runner import run_robot
 
-    from rimless.cli import user_facing
-    from rimless.firmware.service.logsetup import NonBlockingLog
-    from rimless.firmware.service.safety import Interrupted, stop_on_signals
-
-    state: dict[str, Any] = {}
-
-    def release_now() -> None:
-        hw = state.get("hw")
-        if hw is not None:
-            hw.clutches.all_off()
-
-    @user_facing
-    def go() -> int:
-        from rimless.errors import ParameterError
-        from rimless.firmware.service.app import RobotApp
-        from rimless.firmware.service.config import load_config, parse_host_port
-        from rimless.firmware.errors import CommandError, SensorError
-        from rimless.firmware.drivers.hardware import build_fake, build_real
-
-        cfg = load_config(config)
-        if telemetry:
-            extra = []
-            for d in telemetry:
-                try:
-                    parse_host_port(d)
-                except ValueError as err:
-                    raise ParameterError(f"--telemetry: {err}") from None
-                extra.append(d)
-            cfg = dataclasses.replace(cfg, telemetry=dataclasses.replace(
-                cfg.telemetry, destinations=cfg.telemetry.destinations + tuple(extra)))
-        try:
-            hw = build_fake(cfg) if fake else build_real(cfg)
-        except SensorError as err:
-            raise CommandError(f"sensor: {err}") from None
-        state["hw"] = hw
-        try:
-            robot = RobotApp(cfg, hw)
-        except BaseException:
-            hw.close()
-            raise
+    def started(robot: Any) -> None:
         if robot.token_generated:
             typer.echo(f"command token (generated): {robot.token}", err=True)
         mode = "fake" if fake else "hardware"
-        typer.echo(f"rimless robot: running ({mode}) at {cfg.sampling.rate_hz:g} Hz", err=True)
-        try:
-            with NonBlockingLog(level=logging.INFO):
-                summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm_at_start))
-        except OSError as err:
-            raise CommandError(f"cannot start: {err}") from None
-        except ValueError as err:  # a telemetry host that cannot be resolved
-            raise ParameterError(f"cannot start: {err}") from None
-        typer.echo(
-            f"stopped ({summary.stop_reason}): {summary.samples} samples at {summary.achieved_rate_hz:.1f} Hz, "
-            f"{summary.missed_deadlines} missed deadlines, {summary.clutch_commands} clutch commands, "
-            f"faults: {', '.join(summary.faults) or 'none'}; every clutch released",
-            err=True,
-        )
-        if fake and hw.pin_factory is not None:
-            typer.echo("fake clutch pin levels (history): " + _pin_history(hw, cfg.clutch.pins), err=True)
-        if summary.error:
-            typer.echo(f"error: {summary.error}", err=True)
-            return 1
-        sig = robot.signal_received
-        if sig is not None and sig != "SIGTERM":
-            import signal
+        typer.echo(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz", err=True)
 
-            if sig == "SIGINT":
-                typer.echo("interrupted", err=True)  # the last line of every command stopped by Ctrl-C
-            return 128 + int(getattr(signal, sig))
-        return 0
+    @user_facing
+    def go() -> Any:
+        for d in telemetry or []:
+            try:
+                parse_host_port(d)
+            except ValueError as err:
+                raise ParameterError(f"--telemetry: {err}") from None
+        return run_robot(config, telemetry=telemetry or (), fake=fake, duration_s=duration_s, arm=arm_at_start,
+                         on_start=started)
 
-    try:
-        with stop_on_signals(release_now):
-            code = go()
-    except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
-        hw = state.get("hw")
-        if hw is not None:
-            hw.close()
-        typer.echo(f"stopped ({sig.name}) before the firmware ran; every clutch released", err=True)
-        raise typer.Exit(0 if sig.name == "SIGTERM" else sig.exit_code) from None
-    if code:
-        raise typer.Exit(code)
+    outcome = go()
+    summary = outcome.summary
+    if summary is None:  # a stop signal before the firmware ran
+        typer.echo(f"stopped ({outcome.signal}) before the firmware ran; every clutch released", err=True)
+        raise typer.Exit(outcome.exit_code)
+    typer.echo(
+        f"stopped ({summary.stop_reason}): {summary.samples} samples at {summary.achieved_rate_hz:.1f} Hz, "
+        f"{summary.missed_deadlines} missed deadlines, {summary.clutch_commands} clutch commands, "
+        f"faults: {', '.join(summary.faults) or 'none'}; every clutch released",
+        err=True,
+    )
+    if outcome.fake_pins:
+        typer.echo("fake clutch pin levels (history): " + outcome.fake_pins, err=True)
+    if summary.error:
+        typer.echo(f"error: {summary.error}", err=True)
+    elif outcome.signal == "SIGINT":
+        typer.echo("interrupted", err=True)  # the last line of every command stopped by Ctrl-C
+    if outcome.exit_code:
+        raise typer.Exit(outcome.exit_code)
 
 
 @app.command()
@@ -388,76 +292,28 @@ def check(
 
     Any signal (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT) releases every clutch and exits with 128 + its number.
     """
-    import time
+    from rimless.firmware.service.selftest import CLICK_ON_S, self_test
 
-    from rimless.cli import print_json, user_facing
-    from rimless.firmware.service.safety import Interrupted, stop_on_signals
-
-    state: dict[str, Any] = {}
-
-    def release_now() -> None:
-        hw = state.get("hw")
-        if hw is not None:
-            hw.clutches.all_off()
+    def clicking(leg: int, pin: int) -> None:
+        typer.echo(f"clicking clutch {leg} (GPIO{pin}) ...", err=True)
 
     @user_facing
-    def go() -> None:
-        from rimless.firmware.service.config import load_config
-        from rimless.firmware.errors import CommandError, SensorError
-        from rimless.firmware.drivers.hardware import build_fake, build_real
+    def go() -> Any:
+        return self_test(config, fake=fake, click=click, on_click=clicking)
 
-        cfg = load_config(config)
-        try:
-            hw = build_fake(cfg) if fake else build_real(cfg)
-        except SensorError as err:
-            raise CommandError(f"sensor check failed: {err}") from None
-        state["hw"] = hw
-        report: dict[str, Any] = {"sensors": [], "clutches": []}
-        try:
-            for i, sensor in enumerate(hw.sensors):
-                rev = sensor.verify_id()
-                squal = [sensor.squal() for _ in range(5)]
-                report["sensors"].append({
-                    "index": i, "product_id_ok": True, "revision_id": rev, "squal": max(squal),
-                    "frame_rate_hz": round(sensor.frame_rate_hz(), 1), "resolution_cpi": int(sensor.resolution()),
-                })
-            if click:
-                for leg, pin in enumerate(hw.clutches.pins):
-                    typer.echo(f"clicking clutch {leg} (GPIO{pin}) ...", err=True)
-                    hw.clutches.engage(leg)
-                    try:
-                        time.sleep(0.2)
-                    finally:
-                        hw.clutches.release(leg)
-                    time.sleep(0.1)
-                    report["clutches"].append({"leg": leg, "pin": pin, "clicked": True})
-        except SensorError as err:
-            raise CommandError(f"sensor check failed: {err}") from None
-        finally:
-            hw.close()
-        if as_json:
-            print_json(report)
-            return
-        for s in report["sensors"]:
-            typer.echo(
-                f"sensor {s['index']}: ADNS-3080 found (revision 0x{s['revision_id']:02X}), SQUAL {s['squal']}, "
-                f"{s['frame_rate_hz']:.0f} fps, {s['resolution_cpi']} cpi"
-            )
-        for c in report["clutches"]:
-            typer.echo(f"clutch {c['leg']} (GPIO{c['pin']}): clicked on for 0.2 s, off")
-
-    try:
-        with stop_on_signals(release_now):
-            go()
-    except Interrupted as sig:
-        hw = state.get("hw")
-        pins = ""
-        if hw is not None:
-            hw.close()  # idempotent: the finally above already ran
-            if fake and hw.pin_factory is not None:
-                pins = f" (fake pins: {_pin_history(hw, hw.clutches.pins)})"
-        typer.echo(f"error: check interrupted by {sig.name}; every clutch released{pins}", err=True)
-        raise typer.Exit(sig.exit_code) from None
+    report = go()
+    if report.interrupted:
+        pins = f" (fake pins: {report.fake_pins})" if report.fake_pins else ""
+        typer.echo(f"error: check interrupted by {report.interrupted}; every clutch released{pins}", err=True)
+        raise typer.Exit(report.exit_code)
+    if as_json:
+        print_json(report.to_json())
+        return
+    for s in report.sensors:
+        typer.echo(f"sensor {s.index}: ADNS-3080 found (revision 0x{s.revision_id:02X}), SQUAL {s.squal}, "
+                   f"{s.frame_rate_hz:.0f} fps, {s.resolution_cpi} cpi")
+    for c in report.clutches:
+        typer.echo(f"clutch {c.leg} (GPIO{c.pin}): clicked on for {CLICK_ON_S:g} s, off")
 
 
 @app.command()
@@ -493,8 +349,6 @@ def listen(
     """
     import sys
 
-    from rimless.cli import user_facing
-
     @user_facing
     def go() -> None:
         from rimless.firmware.link.listen import listen as do_listen
@@ -526,52 +380,41 @@ def bench(
     Times are in ms; p50/p99 are percentiles. The SPI wire time is what a real bus adds per sample
     (the fake answers at once). Ctrl-C stops it (exit 130).
     """
-    from rimless.cli import print_json, user_facing
 
     @user_facing
     def go() -> None:
         from rimless.errors import ParameterError
-        import logging
-
-        from rimless.firmware.service.bench import bench_rate
-        from rimless.firmware.service.logsetup import NonBlockingLog
-        from rimless.firmware.service.safety import Interrupted
+        from rimless.firmware.service.bench import MAX_RATE_HZ, MIN_RATE_HZ, bench_rates
+        from rimless.values import parse_numbers
 
         if not fake:
             raise ParameterError("--fake is required: the bench runs on the fake sensor (use `run` on the robot)")
-        try:
-            rates = [float(r) for r in rate_hz.split(",") if r.strip()]
-        except ValueError:
-            raise ParameterError(f"--rate-hz must be comma-separated numbers, got {rate_hz!r}") from None
-        if not rates or any(not 10 <= r <= 5000 for r in rates):
-            raise ParameterError(f"--rate-hz values must be in 10..5000, got {rate_hz!r}")
-        results = []
-        for r in rates:
-            typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True)
-            with NonBlockingLog(level=logging.WARNING):
-                res = bench_rate(r, duration_s, handle_signals=True)
-            if res["stopped_by"]:
-                import signal
-
-                raise Interrupted(int(getattr(signal, res["stopped_by"])))
-            results.append(res)
-            if not as_json:
-                typer.echo(
-                    f"{r:7.0f} Hz: achieved {res['achieved_rate_hz']:.1f} Hz, missed {res['missed_deadlines']}, "
-                    f"CPU {100 * res['cpu_share']:.0f} %\n"
-                    f"  period jitter p50/p99     {res['period_jitter_p50_ms']:.3f}/{res['period_jitter_p99_ms']:.3f} ms\n"
-                    f"  wake-up late p50/p99/max  {res['wake_late_p50_ms']:.3f}/{res['wake_late_p99_ms']:.3f}/"
-                    f"{res['wake_late_max_ms']:.3f} ms\n"
-                    f"  control p50/p99/max       {res['latency_p50_ms']:.3f}/{res['latency_p99_ms']:.3f}/"
-                    f"{res['latency_max_ms']:.3f} ms (sample to clutch write)\n"
-                    f"  SPI wire per sample       {res['spi_wire_per_sample_ms']:.3f} ms at "
-                    f"{res['spi_clock_hz'] / 1e6:g} MHz ({100 * res['spi_wire_share']:.0f} % of the period)\n"
-                    f"  lock after true peak      p50 {res['lock_after_peak_p50_ms']:.2f}, max "
-                    f"{res['lock_after_peak_max_ms']:.2f} ms ({res['locks']} locks)\n"
-                    f"  touchdown detected after  p50 {res['touchdown_detect_p50_ms']:.2f}, max "
-                    f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
-                )
+        rates = parse_numbers(rate_hz, "--rate-hz")
+        if any(not MIN_RATE_HZ <= r <= MAX_RATE_HZ for r in rates):
+            raise ParameterError(f"--rate-hz values must be in {MIN_RATE_HZ:g}..{MAX_RATE_HZ:g}, got {rate_hz!r}")
+        results = bench_rates(rates, duration_s,
+                              on_rate=lambda r: typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True),
+                              on_result=None if as_json else lambda res: typer.echo(_bench_text(res)))
         if as_json:
             print_json(results)
 
     _interruptible(go)
+
+
+def _bench_text(res: dict[str, Any]) -> str:
+    """The figures of one rate of `robot bench`, as lines (times in ms)."""
+    return (
+        f"{res['rate_hz']:7.0f} Hz: achieved {res['achieved_rate_hz']:.1f} Hz, missed {res['missed_deadlines']}, "
+        f"CPU {100 * res['cpu_share']:.0f} %\n"
+        f"  period jitter p50/p99     {res['period_jitter_p50_ms']:.3f}/{res['period_jitter_p99_ms']:.3f} ms\n"
+        f"  wake-up late p50/p99/max  {res['wake_late_p50_ms']:.3f}/{res['wake_late_p99_ms']:.3f}/"
+        f"{res['wake_late_max_ms']:.3f} ms\n"
+        f"  control p50/p99/max       {res['latency_p50_ms']:.3f}/{res['latency_p99_ms']:.3f}/"
+        f"{res['latency_max_ms']:.3f} ms (sample to clutch write)\n"
+        f"  SPI wire per sample       {res['spi_wire_per_sample_ms']:.3f} ms at "
+        f"{res['spi_clock_hz'] / 1e6:g} MHz ({100 * res['spi_wire_share']:.0f} % of the period)\n"
+        f"  lock after true peak      p50 {res['lock_after_peak_p50_ms']:.2f}, max "
+        f"{res['lock_after_peak_max_ms']:.2f} ms ({res['locks']} locks)\n"
+        f"  touchdown detected after  p50 {res['touchdown_detect_p50_ms']:.2f}, max "
+        f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
+    )

@@ -1,9 +1,12 @@
-"""Exceptions of the robot firmware, under `rimless.errors.RimlessError`.
+"""Exceptions of the robot firmware, under `rimless.errors.RimlessError`, and `Interrupted` (a stop signal).
 
 Leaves also inherit a builtin, so callers that only know `OSError`/`ValueError` still catch them.
+`Interrupted` is a `BaseException`, like `KeyboardInterrupt`, so that no `except Exception` swallows it.
 """
 
 from __future__ import annotations
+
+import signal
 
 from rimless.errors import InputFileError, ParameterError, RimlessError, UserError
 
@@ -40,11 +43,26 @@ class RobotUnreachable(CommandError, ConnectionError):
     """No answer from the robot's command port (bad host, robot down, firewall)."""
 
 
+class Interrupted(BaseException):
+    """A stop signal arrived; `exit_code` is 128 + its number (130 for Ctrl-C)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        super().__init__(f"interrupted by {self.name}")
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's convention for a process ended by this signal."""
+        return 128 + self.signum
+
+
 __all__ = [
     "CommandError",
     "ConfigError",
     "ConfigFileError",
     "FirmwareError",
+    "Interrupted",
     "RobotUnreachable",
     "SensorError",
     "SensorNotFound",

@@ -1,43 +1,19 @@
-"""Remote operation: a TCP command channel authenticated per connection, that holds under abuse.
+"""The robot side of the command channel: an asyncio TCP server, authenticated per connection, that
+holds under abuse, and the reserved UDP path for `disarm` and `status` on a thread of its own.
 
-Wire format: one JSON object per line (UTF-8, `\\n`-terminated, at most `max_message_bytes`).
-On connect the robot sends a hello line with a fresh random nonce:
-
-    {"hello": "rimless-robot", "version": 2, "nonce": "<32 hex digits>"}
-
-Every command then carries an HMAC-SHA256 keyed with the shared token (the token itself never
-crosses the wire) over the connection's nonce and the command:
-
-    {"seq": 1, "cmd": "arm", "args": {}, "mac": "<64 hex digits>"}
-    mac = HMAC-SHA256(token, nonce + "\\n" + json.dumps([seq, cmd, args], sort_keys=True,
-                                                         separators=(",", ":"), ensure_ascii=True))
-
-`seq` must increase on the connection. A line captured on one connection fails its MAC on any
-other (new nonce), and a replay on the same connection fails the `seq` check. Every line gets
-exactly one reply: `{"ok": true, "seq": 1, "result": {...}}` or `{"ok": false, "seq": 1 | null,
-"error": "..."}`. A refused message changes nothing.
+The wire format and the validation of each message are in `protocol`.
 
 Abuse limits: at most `max_connections` connections; a connection that has not sent a valid
 command within `auth_timeout_s` is closed, so is one idle for `idle_timeout_s`; when the cap is
 reached, the oldest connection that never authenticated is dropped to make room, so a new
 operator connection (for `disarm` or `status`) always gets in. Rejections are logged at most
 `LOG_LINES_PER_S` times per second.
-
-Reserved path for `disarm` and `status`: the same port number on UDP takes one datagram,
-`{"disarm": n, "mac": HMAC-SHA256(token, "disarm\\n" + str(n))}` (any integer n; "status" likewise),
-served by a thread of its own, and answers `{"ok": true, "n": n, "disarmed": true, "status": {...}}`.
-It holds no state per sender, so no number of TCP connections can block it; a replayed disarm can
-only disarm, which is always safe, and a replayed status only reads.
-
-Commands: status, ping, arm {stance_leg?}, disarm, set {name, value}, trial_start {name?}, trial_stop.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import hashlib
-import hmac
 import json
 import logging
 import secrets
@@ -45,90 +21,34 @@ import socket
 import threading
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
 from typing import Any
 
-from rimless.errors import ParameterError
-from rimless.firmware.errors import CommandError, RobotUnreachable
+from rimless.firmware.link.protocol import (
+    COMMANDS,
+    DEFAULT_PORT,
+    HELLO,
+    PROTOCOL_VERSION,
+    Command,
+    Rejected,
+    WeakToken,
+    check_token,
+    command_mac,
+    disarm_mac,
+    parse_command,
+    parse_disarm_datagram,
+    parse_reserved_datagram,
+    reserved_mac,
+)
+
+__all__ = [  # the protocol's names are re-exported: the server and its tests speak them
+    "COMMANDS", "DEFAULT_PORT", "HELLO", "LOG_LINES_PER_S", "PROTOCOL_VERSION", "Command", "CommandServer",
+    "RateLimitedLog", "Rejected", "ReservedListener", "WeakToken", "check_token", "command_mac", "disarm_mac",
+    "parse_command", "parse_disarm_datagram", "parse_reserved_datagram", "reserved_mac",
+]
 
 log = logging.getLogger("rimless.robot.commands")
 
-DEFAULT_PORT = 9871
-PROTOCOL_VERSION = 2
-HELLO = "rimless-robot"
-COMMANDS: dict[str, frozenset[str]] = {
-    "status": frozenset(),
-    "ping": frozenset(),
-    "arm": frozenset({"stance_leg"}),
-    "disarm": frozenset(),
-    "set": frozenset({"name", "value"}),
-    "trial_start": frozenset({"name"}),
-    "trial_stop": frozenset(),
-}
-REQUIRED_ARGS: dict[str, frozenset[str]] = {"set": frozenset({"name", "value"})}
-_TOP_KEYS = frozenset({"seq", "cmd", "args", "mac"})
-MAX_DEPTH = 4  # {"args": {"value": ...}} needs 2; anything deeper is refused
 LOG_LINES_PER_S = 5.0
-MIN_TOKEN_CHARS = 16
-# Values that appeared in examples and tests: never accepted as a real token.
-KNOWN_EXAMPLE_TOKENS = frozenset({"change-me", "changeme", "s3cret", "secret", "token", "tok", "bench", "password"})
-
-
-class WeakToken(ParameterError):
-    """The command token is too short or a published example value."""
-
-
-def check_token(token: str) -> str:
-    """Return `token` if it is acceptable for the command channel, else raise `WeakToken` saying why."""
-    if token.lower() in KNOWN_EXAMPLE_TOKENS:
-        raise WeakToken("the command token is an example value; generate one with `python3 -c "
-                        "\"import secrets; print(secrets.token_urlsafe(24))\"`")
-    if len(token) < MIN_TOKEN_CHARS:
-        raise WeakToken(f"the command token is too short ({len(token)} characters, at least {MIN_TOKEN_CHARS})")
-    if len(set(token)) < 6:
-        raise WeakToken("the command token repeats too few characters to be secret")
-    return token
-
-
-RESERVED_KINDS = ("disarm", "status")
-
-
-def reserved_mac(token: str, kind: str, n: int) -> str:
-    """HMAC-SHA256 (hex) of a reserved-path datagram: `kind` ("disarm" or "status") and number `n`."""
-    return hmac.new(token.encode("utf-8"), f"{kind}\n{n}".encode("ascii"), hashlib.sha256).hexdigest()
-
-
-def disarm_mac(token: str, n: int) -> str:
-    """HMAC-SHA256 (hex) of a reserved-path disarm datagram with number `n`."""
-    return reserved_mac(token, "disarm", n)
-
-
-def parse_reserved_datagram(data: bytes, token: str) -> tuple[str, int]:
-    """Validate a reserved-path datagram; return (kind, number) or raise `Rejected`."""
-    if len(data) > 512 or _max_depth(data) > 1:
-        raise Rejected("reserved datagram: too long or nested")
-    try:
-        obj = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError):
-        raise Rejected("reserved datagram: not UTF-8 JSON") from None
-    kinds = [k for k in RESERVED_KINDS if isinstance(obj, dict) and k in obj]
-    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) != {kinds[0], "mac"}:
-        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status")
-    kind = kinds[0]
-    n, mac = obj[kind], obj["mac"]
-    if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
-        raise Rejected(f"reserved datagram: {kind} must be a non-negative integer and mac a string")
-    if not hmac.compare_digest(mac.encode("ascii", "replace"), reserved_mac(token, kind, n).encode("ascii")):
-        raise Rejected("reserved datagram: bad mac")
-    return kind, n
-
-
-def parse_disarm_datagram(data: bytes, token: str) -> int:
-    """Validate a reserved-path disarm datagram; return its number or raise `Rejected`."""
-    kind, n = parse_reserved_datagram(data, token)
-    if kind != "disarm":
-        raise Rejected("reserved datagram: not a disarm")
-    return n
 
 
 class ReservedListener:
@@ -204,113 +124,6 @@ class ReservedListener:
         self._stop.set()
         self._thread.join(1.0)
         self.sock.close()
-
-
-def command_mac(token: str, nonce: str, seq: int, cmd: str, args: dict[str, Any]) -> str:
-    """HMAC-SHA256 (hex) of one command under `token`, bound to the connection's `nonce`."""
-    body = json.dumps([seq, cmd, args], sort_keys=True, separators=(",", ":"), ensure_ascii=True)
-    return hmac.new(token.encode("utf-8"), f"{nonce}\n{body}".encode("ascii"), hashlib.sha256).hexdigest()
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    """A validated command."""
-
-    seq: int
-    cmd: str
-    args: dict[str, Any]
-
-
-class Rejected(ValueError):
-    """A message that is refused; `seq` is echoed when it could be read."""
-
-    def __init__(self, msg: str, seq: int | None = None) -> None:
-        super().__init__(msg)
-        self.seq = seq
-
-
-def _check_tree(obj: Any, depth: int = 0) -> None:
-    """Refuse deep nesting and strings that are not valid Unicode (lone surrogates)."""
-    if depth > MAX_DEPTH:
-        raise Rejected(f"message nested deeper than {MAX_DEPTH} levels")
-    if isinstance(obj, str):
-        try:
-            obj.encode("utf-8")
-        except UnicodeEncodeError:
-            raise Rejected("garbled message: a string is not valid Unicode (lone surrogate)") from None
-    elif isinstance(obj, dict):
-        for k, v in obj.items():
-            _check_tree(k, depth + 1)
-            _check_tree(v, depth + 1)
-    elif isinstance(obj, list):
-        for v in obj:
-            _check_tree(v, depth + 1)
-
-
-def _max_depth(line: bytes) -> int:
-    """Bracket nesting depth of a JSON text (outside strings), without recursion."""
-    depth = best = 0
-    in_str = esc = False
-    for b in line:
-        if in_str:
-            if esc:
-                esc = False
-            elif b == 0x5C:  # backslash
-                esc = True
-            elif b == 0x22:
-                in_str = False
-        elif b == 0x22:
-            in_str = True
-        elif b in (0x5B, 0x7B):
-            depth += 1
-            best = max(best, depth)
-        elif b in (0x5D, 0x7D):
-            depth -= 1
-    return best
-
-
-def parse_command(line: bytes, token: str, nonce: str, last_seq: int | None) -> Command:
-    """Validate one line; raise `Rejected` with the reason. Checks run before anything is acted on."""
-    if _max_depth(line) > MAX_DEPTH + 1:
-        raise Rejected(f"message nested deeper than {MAX_DEPTH} levels")
-    try:
-        obj = json.loads(line.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError):
-        raise Rejected("garbled message: not UTF-8 JSON") from None
-    if not isinstance(obj, dict):
-        raise Rejected("a message must be a JSON object")
-    _check_tree(obj)
-    seq = obj.get("seq")
-    seq_ok = isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq < 2**63
-    echo = seq if seq_ok else None
-    if "token" in obj:
-        raise Rejected("unauthenticated: clear-text tokens are not accepted; sign with the connection nonce "
-                       "(protocol version 2)", echo)
-    extra = sorted(set(obj) - _TOP_KEYS)
-    if extra:
-        raise Rejected(f"unknown field {extra[0]!r}", echo)
-    if not seq_ok:
-        raise Rejected("seq must be a non-negative integer", None)
-    cmd = obj.get("cmd")
-    args = obj.get("args", {})
-    mac = obj.get("mac")
-    if not isinstance(cmd, str) or not isinstance(args, dict) or not isinstance(mac, str):
-        raise Rejected("unauthenticated: a message needs cmd (string), args (object) and mac (string)", echo)
-    expected = command_mac(token, nonce, seq, cmd, args)
-    if not hmac.compare_digest(mac.encode("ascii", "replace"), expected.encode("ascii")):
-        raise Rejected("unauthenticated: bad mac (wrong token, or a message replayed from another connection)",
-                       echo)
-    if last_seq is not None and seq <= last_seq:
-        raise Rejected(f"out of order: seq {seq} after {last_seq} (replayed?)", echo)
-    if cmd not in COMMANDS:
-        raise Rejected(f"unknown command {cmd!r}; known: {', '.join(sorted(COMMANDS))}", echo)
-    bad = sorted(set(args) - COMMANDS[cmd])
-    if bad:
-        raise Rejected(f"{cmd}: unknown argument {bad[0]!r}", echo)
-    missing = sorted(REQUIRED_ARGS.get(cmd, frozenset()) - set(args))
-    if missing:
-        raise Rejected(f"{cmd}: missing argument {missing[0]!r}", echo)
-    return Command(seq, cmd, args)
 
 
 class RateLimitedLog:
@@ -551,135 +364,3 @@ class CommandServer:
     async def _reply(writer: asyncio.StreamWriter, obj: dict[str, Any]) -> None:
         writer.write(json.dumps(obj, separators=(",", ":"), default=str).encode() + b"\n")
         await asyncio.wait_for(writer.drain(), 5.0)
-
-
-class RobotLink:
-    """PC side: one authenticated connection to the robot; `call` sends a signed command.
-
-    Raises `RobotUnreachable` (bad host, refused, timeout, dropped) or `CommandError` (refused).
-    """
-
-    def __init__(self, host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 3.0) -> None:
-        self.host, self.port, self.timeout_s = host, port, timeout_s
-        self._token = token
-        self._seq = 0
-        self._buf = b""
-        try:
-            self.sock = socket.create_connection((host, port), timeout=timeout_s)
-        except socket.gaierror as err:
-            raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
-        except (TimeoutError, socket.timeout):
-            raise RobotUnreachable(f"no answer from {host}:{port} within {timeout_s} s") from None
-        except OSError as err:
-            raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
-        try:
-            hello = self._read_obj()
-        except BaseException:
-            self.sock.close()
-            raise
-        nonce = hello.get("nonce")
-        if hello.get("hello") != HELLO or not isinstance(nonce, str):
-            self.sock.close()
-            raise CommandError(f"{host}:{port} is not a rimless robot (protocol version {PROTOCOL_VERSION})")
-        self.nonce = nonce
-
-    def _read_obj(self) -> dict[str, Any]:
-        try:
-            while b"\n" not in self._buf:
-                chunk = self.sock.recv(65536)
-                if not chunk:
-                    raise RobotUnreachable(f"the robot at {self.host}:{self.port} closed the connection")
-                self._buf += chunk
-        except (TimeoutError, socket.timeout):
-            raise RobotUnreachable(f"no answer from {self.host}:{self.port} within {self.timeout_s} s") from None
-        except OSError as err:
-            if isinstance(err, RobotUnreachable):
-                raise
-            raise RobotUnreachable(f"connection to {self.host}:{self.port} lost ({err.strerror or err})") from None
-        line, self._buf = self._buf.split(b"\n", 1)
-        try:
-            obj = json.loads(line)
-        except ValueError:
-            raise CommandError(f"garbled reply from {self.host}:{self.port}") from None
-        if not isinstance(obj, dict):
-            raise CommandError(f"garbled reply from {self.host}:{self.port}")
-        return obj
-
-    def call(self, cmd: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
-        """Send one command and return its `result`."""
-        self._seq += 1
-        args = args or {}
-        msg = {"seq": self._seq, "cmd": cmd, "args": args,
-               "mac": command_mac(self._token, self.nonce, self._seq, cmd, args)}
-        try:
-            self.sock.sendall(json.dumps(msg).encode() + b"\n")
-        except OSError as err:
-            raise RobotUnreachable(f"connection to {self.host}:{self.port} lost ({err.strerror or err})") from None
-        reply = self._read_obj()
-        if "ok" not in reply:
-            raise CommandError(f"garbled reply from {self.host}:{self.port}")
-        if not reply["ok"]:
-            raise CommandError(f"robot refused {cmd}: {reply.get('error')}")
-        result = reply.get("result")
-        return result if isinstance(result, dict) else {"result": result}
-
-    def close(self) -> None:
-        """Close the connection."""
-        with contextlib.suppress(OSError):
-            self.sock.close()
-
-    def __enter__(self) -> RobotLink:
-        return self
-
-    def __exit__(self, *_exc: object) -> None:
-        self.close()
-
-
-def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                           copies: int = 3) -> dict[str, Any]:
-    """PC side: `disarm` or `status` over the reserved UDP path; returns the robot's answer.
-
-    Sends up to `copies` datagrams (UDP may drop one), waiting `timeout_s / copies` for an answer
-    after each. Raises `RobotUnreachable` when none comes.
-    """
-    n = secrets.randbits(62)
-    data = json.dumps({kind: n, "mac": reserved_mac(token, kind, n)}).encode()
-    try:
-        info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
-    except socket.gaierror as err:
-        raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
-    with socket.socket(info[0], socket.SOCK_DGRAM) as sock:
-        sock.settimeout(timeout_s / copies)
-        for _ in range(copies):
-            try:
-                sock.sendto(data, info[4])
-                reply, _ = sock.recvfrom(65536)
-            except (TimeoutError, socket.timeout, ConnectionRefusedError):
-                continue
-            except OSError as err:
-                raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
-            try:
-                obj = json.loads(reply)
-            except ValueError:
-                continue
-            if isinstance(obj, dict) and obj.get("ok") and obj.get("n") == n:
-                return obj
-    raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
-
-
-def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                         copies: int = 3) -> dict[str, Any]:
-    """PC side: disarm over the reserved UDP path (see `send_reserved_datagram`)."""
-    return send_reserved_datagram(host, "disarm", token=token, port=port, timeout_s=timeout_s, copies=copies)
-
-
-def send_command(
-    host: str, cmd: str, args: dict[str, Any] | None = None, *, token: str, port: int = DEFAULT_PORT,
-    timeout_s: float = 3.0,
-) -> dict[str, Any]:
-    """PC side: send one command on a fresh connection and return its `result`.
-
-    Raises `RobotUnreachable` (bad host, refused, timeout) or `CommandError` (the robot refused).
-    """
-    with RobotLink(host, token=token, port=port, timeout_s=timeout_s) as link:
-        return link.call(cmd, args)

@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from rimless.firmware.link.commands import RobotLink
+from rimless.firmware.link.remote import RobotLink
 from rimless.firmware.errors import CommandError, RobotUnreachable
 
 

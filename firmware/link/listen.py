@@ -20,8 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from rimless.firmware.errors import CommandError
-from rimless.firmware.service.safety import Interrupted
+from rimless.firmware.errors import CommandError, Interrupted
 from rimless.firmware.link.telemetry import parse_datagram
 
 CSV_COLUMNS = (

@@ -24,13 +24,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from rimless.firmware.link.commands import Command, CommandServer, check_token
-from rimless.firmware.service.config import RobotConfig
 from rimless.firmware.control.controller import Controller, EventRecord, Record
 from rimless.firmware.control.faults import Fault
-from rimless.firmware.drivers.hardware import Hardware
 from rimless.firmware.control.sampler import Sampler
+from rimless.firmware.link.commands import CommandServer
+from rimless.firmware.link.protocol import Command, check_token
 from rimless.firmware.link.telemetry import TelemetrySender
+from rimless.firmware.service.config import RobotConfig
+from rimless.firmware.service.hardware import Hardware
 from rimless.firmware.service.triallog import TrialLog
 
 log = logging.getLogger("rimless.robot")
@@ -393,12 +394,13 @@ class RobotApp:
                 raise ValueError("set: name must be a string")
             return await self._in_sampler(lambda c: c.set_param(name, value))
         if cmd.cmd == "trial_start":
-            return await self._trial_start(cmd.args.get("name", "trial"))
+            return await self.start_trial(cmd.args.get("name", "trial"))
         if cmd.cmd == "trial_stop":
-            return await self._trial_stop()
+            return await self.stop_trial()
         raise ValueError(f"unhandled command {cmd.cmd}")  # pragma: no cover - parse_command forbids it
 
-    async def _trial_start(self, name: Any) -> dict[str, Any]:
+    async def start_trial(self, name: Any) -> dict[str, Any]:
+        """Start a trial log named `name` (the `trial_start` command); returns its path. Needs the loop running."""
         assert self._trial_lock is not None
         if not isinstance(name, str):
             raise ValueError("trial name must be a string")
@@ -414,7 +416,8 @@ class RobotApp:
             self.summary.trials.append(str(trial.path))
             return {"path": str(trial.path)}
 
-    async def _trial_stop(self) -> dict[str, Any]:
+    async def stop_trial(self) -> dict[str, Any]:
+        """Stop the running trial log (the `trial_stop` command); returns its path and line count."""
         assert self._trial_lock is not None
         async with self._trial_lock:
             if self.trial is None:

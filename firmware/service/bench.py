@@ -17,16 +17,24 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import logging
+import signal
 import socket
 import tempfile
 import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
-from rimless.firmware.service.app import RobotApp
-from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.control.controller import EventRecord
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
-from rimless.firmware.drivers.hardware import build_fake
+from rimless.firmware.errors import Interrupted
+from rimless.firmware.service.app import RobotApp
+from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig, TelemetryConfig
+from rimless.firmware.service.hardware import build_fake
+from rimless.firmware.service.logsetup import NonBlockingLog
+
+MIN_RATE_HZ = 10.0  # the range `rimless robot bench --rate-hz` accepts
+MAX_RATE_HZ = 5000.0
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -86,7 +94,7 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
         wire0 = sum(f.wire_time_s for f in hw.fakes)
 
         def ready(app: RobotApp) -> None:
-            asyncio.get_running_loop().create_task(app._trial_start("bench"))
+            asyncio.get_running_loop().create_task(app.start_trial("bench"))
 
         app = RobotApp(cfg, hw, token="bench", record_timing=True, on_ready=ready, event_sink=events)
         cpu0, wall0 = time.process_time(), time.perf_counter()
@@ -131,3 +139,22 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
         "duration_s": round(wall, 2),
         "stopped_by": app.signal_received,
     }
+
+
+def bench_rates(rates_hz: Sequence[float], duration_s: float = 3.0, *,
+                on_rate: Callable[[float], None] | None = None,
+                on_result: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+    """`bench_rate` at each rate in turn, logging only warnings; `on_rate(rate_hz)` before each run,
+    `on_result(figures)` after it. A stop signal ends the bench: raises `Interrupted` naming it."""
+    results = []
+    for rate in rates_hz:
+        if on_rate is not None:
+            on_rate(rate)
+        with NonBlockingLog(level=logging.WARNING):
+            res = bench_rate(rate, duration_s, handle_signals=True)
+        if res["stopped_by"]:
+            raise Interrupted(int(getattr(signal, res["stopped_by"])))
+        results.append(res)
+        if on_result is not None:
+            on_result(res)
+    return results

@@ -16,21 +16,11 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from rimless.firmware.errors import Interrupted
+
+__all__ = ["STOP_SIGNALS", "Interrupted", "stop_on_signals"]
+
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT") if hasattr(signal, n))
-
-
-class Interrupted(BaseException):
-    """A stop signal arrived; `exit_code` is 128 + its number (130 for Ctrl-C)."""
-
-    def __init__(self, signum: int) -> None:
-        self.signum = signum
-        self.name = signal.Signals(signum).name
-        super().__init__(f"interrupted by {self.name}")
-
-    @property
-    def exit_code(self) -> int:
-        """The shell's convention for a process ended by this signal."""
-        return 128 + self.signum
 
 
 @contextlib.contextmanager

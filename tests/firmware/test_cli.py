@@ -16,6 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
+from tests.support.firmware_app import free_port
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 runner = CliRunner()
@@ -24,14 +25,6 @@ STRONG = "cli-test-token-5e8d1f0a9b"
 
 def invoke(*args: str, env: dict | None = None):
     return runner.invoke(app, ["robot", *args], env=env)
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def test_bad_config_file_names_file_and_field(tmp_path) -> None:
@@ -79,8 +72,10 @@ def test_check_fake_reports_id_squal_and_clicks() -> None:
     r = invoke("check", "--fake", "--json")
     assert r.exit_code == 0, r.output
     rep = json.loads(r.stdout)
+    # 60: the SQUAL the fake is built with (FakeAdns3080(squal=60)), reported unchanged as the best of 5 reads.
     assert rep["sensors"][0]["product_id_ok"] and rep["sensors"][0]["squal"] == 60
-    assert rep["sensors"][0]["frame_rate_hz"] == 2000.0
+    # 2000 fps: the datasheet's frame period after reset, 0x2EE0 = 12000 cycles of the 24 MHz clock.
+    assert rep["sensors"][0]["frame_rate_hz"] == 24e6 / 0x2EE0 == 2000.0
     assert [c["pin"] for c in rep["clutches"]] == [17, 27, 22, 23, 24, 16, 20, 21]
 
 
@@ -118,7 +113,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     try:
-        from rimless.firmware.link.commands import send_command
+        from rimless.firmware.link.remote import send_command
         from rimless.firmware.errors import RobotUnreachable
 
         engaged = []
@@ -158,7 +153,7 @@ def test_set_reads_a_negative_number_as_a_value_and_status_takes_json() -> None:
 def test_set_minus_3_reaches_the_robot_and_its_refusal_is_one_line(tmp_path) -> None:
     import asyncio
 
-    from tests.firmware.test_app import TOKEN, config, scenario
+    from tests.support.firmware_app import TOKEN, config, scenario
 
     async def script(app, hw):
         def cli():
@@ -282,7 +277,7 @@ def test_disarm_with_no_robot_is_one_line() -> None:
 def test_disarm_cli_uses_both_paths(tmp_path) -> None:
     import asyncio
 
-    from tests.firmware.test_app import TOKEN, config, scenario
+    from tests.support.firmware_app import TOKEN, config, scenario
 
     async def script(app, hw):
         app.controller.arm()
@@ -292,3 +287,18 @@ def test_disarm_cli_uses_both_paths(tmp_path) -> None:
 
     _app, _s, (r, udp), hw = scenario(config(tmp_path), script)
     assert r.exit_code == 0 and json.loads(r.stdout)["armed"] is False and udp == 1
+
+
+def test_firmware_imports_no_numeric_stack_and_cli_is_lean() -> None:
+    code = (
+        "import sys, pkgutil, importlib, rimless.firmware as f\n"
+        "import rimless.firmware.cli\n"
+        "lean = not any(m in sys.modules for m in ('gpiozero', 'asyncio', 'rimless.firmware.service.app'))\n"
+        "for m in pkgutil.walk_packages(f.__path__, 'rimless.firmware.'):\n"
+        "    importlib.import_module(m.name)\n"
+        "bad = [m for m in ('numpy', 'scipy', 'pandas', 'matplotlib', 'dask', 'spidev') if m in sys.modules]\n"
+        "n = len([m for m in sys.modules if m.startswith('rimless.firmware.')])\n"
+        "print(lean, bad, n > 25)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "True [] True"  # every module, the subpackages' too, was imported

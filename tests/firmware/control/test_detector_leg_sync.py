@@ -127,7 +127,7 @@ def _per_leg_rig(trajectories, rate_hz: float = 300.0):
     from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
     from rimless.firmware.control.faults import HealthLimits, HealthMonitor
 
-    from .conftest import PINS, Rig, VirtualClock
+    from tests.support.firmware_rig import PINS, Rig, VirtualClock
 
     clock = VirtualClock()
     channels, fakes = [], []

@@ -1,5 +1,9 @@
-"""The one place that picks the hardware backend: the real Pi (spidev + gpiozero's default pin
-factory) or the fake (register-level ADNS-3080 fakes and gpiozero's MockFactory)."""
+"""The robot's hardware assembled from its configuration: the one place that picks the backend, the real Pi
+(spidev + gpiozero's default pin factory) or the fake (register-level ADNS-3080 fakes and gpiozero's
+MockFactory), and wires each sensor to its leg detector and health monitor (`Channel`).
+
+It sits in the service layer because it reads `RobotConfig` and builds control objects; the drivers it
+uses (`adns3080`, `spi`, `clutch`, `gpio`, `fake_adns3080`) know nothing of either."""
 
 from __future__ import annotations
 
@@ -8,16 +12,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from rimless.errors import UserError
-from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.drivers.clutch import ClutchBank
-from rimless.firmware.service.config import RobotConfig, SensorConfig
 from rimless.firmware.control.controller import Channel
 from rimless.firmware.control.detector import LegDetector
-from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, GaitTrajectory
 from rimless.firmware.control.faults import HealthMonitor
+from rimless.firmware.drivers.adns3080 import Adns3080
+from rimless.firmware.drivers.clutch import ClutchBank
+from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, GaitTrajectory
+from rimless.firmware.drivers.gpio import GpioChipSelectBus, mock_pin_factory, open_clutches, output, release_pins
+from rimless.firmware.service.config import RobotConfig, SensorConfig
 
-PI4_REVISION = "c03111"  # MockFactory reports a Pi 4B with this revision
 
 
 @dataclass
@@ -69,37 +72,6 @@ def _channels(cfg: RobotConfig, sensors: list[Adns3080]) -> list[Channel]:
     ]
 
 
-class GpioChipSelectBus:
-    """An `SpiBus` whose chip select is a GPIO (active low) around each message of a shared bus
-    opened without its own CS (`dtoverlay=spi0-0cs`): one sensor per leg on one SPI bus."""
-
-    def __init__(self, bus: Any, cs: Any) -> None:
-        self.bus = bus
-        self.cs = cs  # a gpiozero DigitalOutputDevice with active_high=False: on() = CS low
-
-    def message(self, segments: Any) -> list[bytes]:
-        """CS low, the message, CS high (also when the transfer fails)."""
-        self.cs.on()
-        try:
-            return self.bus.message(segments)
-        finally:
-            self.cs.off()
-
-    def close(self) -> None:
-        """Deselect; the shared bus is closed by its owner."""
-        self.cs.off()
-
-
-class GpioUnavailable(UserError):
-    """No GPIO on this machine (not a Pi, or no GPIO library)."""
-
-
-def _output(pin: int, *, active_high: bool, pin_factory: Any = None) -> Any:
-    from gpiozero import DigitalOutputDevice
-
-    return DigitalOutputDevice(pin, active_high=active_high, initial_value=False, pin_factory=pin_factory)
-
-
 def default_fake_trajectory() -> GaitTrajectory:
     """The synthetic gait of `--fake`: a touchdown every 0.4 s, 8 mm compression peaking 60 ms later."""
     return GaitTrajectory(start_s=time.monotonic() + 0.3, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
@@ -116,9 +88,7 @@ def build_fake(
 ) -> Hardware:
     """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on the monotonic clock;
     clutches, RESET, NPD and GPIO chip selects on a MockFactory."""
-    from gpiozero.pins.mock import MockFactory
-
-    factory = pin_factory if pin_factory is not None else MockFactory(revision=PI4_REVISION)
+    factory = pin_factory if pin_factory is not None else mock_pin_factory()
     traj = trajectory if trajectory is not None else default_fake_trajectory()
     clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
     fakes: list[FakeAdns3080] = []
@@ -138,7 +108,7 @@ def build_fake(
             npd = None if s.npd_pin is None else _shared_line(lines, s.npd_pin, factory, closers)
             bus: Any = fake
             if s.cs_pin is not None:
-                cs = _output(s.cs_pin, active_high=False, pin_factory=factory)
+                cs = output(s.cs_pin, active_high=False, pin_factory=factory)
                 closers.append(cs.close)
                 bus = GpioChipSelectBus(fake, cs)
 
@@ -167,7 +137,7 @@ def build_fake(
 def _shared_line(lines: dict[int, Any], pin: int, factory: Any, closers: list[Callable[[], None]]) -> Any:
     """One output device per GPIO (RESET lines may be shared); active high, starting low."""
     if pin not in lines:
-        lines[pin] = _output(pin, active_high=True, pin_factory=factory)
+        lines[pin] = output(pin, active_high=True, pin_factory=factory)
         closers.append(lines[pin].close)
     return lines[pin]
 
@@ -193,7 +163,7 @@ def build_real(cfg: RobotConfig) -> Hardware:
                 closers.append(buses[key].close)
             bus: Any = buses[key]
             if s.cs_pin is not None:
-                cs = _output(s.cs_pin, active_high=False)
+                cs = output(s.cs_pin, active_high=False)
                 closers.append(cs.close)
                 bus = GpioChipSelectBus(bus, cs)
             reset_dev = _shared_line(lines, s.reset_pin, None, closers)
@@ -213,36 +183,28 @@ def build_real(cfg: RobotConfig) -> Hardware:
     return Hardware(_channels(cfg, sensors), clutches, sensors, None, [], closers)
 
 
-def open_clutches(pins: Any, *, active_high: bool, pin_factory: Any = None) -> ClutchBank:
-    """The clutch outputs, driven off; `GpioUnavailable` (one line) when this machine has no GPIO."""
-    import warnings
+@dataclass(frozen=True)
+class ReleaseReport:
+    """What `release_clutches` did: the pins driven to their off level, and that level."""
 
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
-            return ClutchBank(pins, active_high=active_high, pin_factory=pin_factory)
-    except Exception as err:  # noqa: BLE001 - gpiozero, lgpio and the OS each raise their own
-        if type(err).__name__ in ("BadPinFactory", "PinFactoryFallback") or isinstance(err, ImportError):
-            raise GpioUnavailable(
-                f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
-                "the robot extra (lgpio)"
-            ) from None
-        raise GpioUnavailable(
-            f"cannot drive the clutch pins {list(pins)} ({type(err).__name__}: {err}); is another process "
-            "(a running firmware) holding them?"
-        ) from None
+    pins: tuple[int, ...]
+    off_level: str  # "low" or "high"
+    fake_levels: dict[str, str] | None = None  # each mock pin's level history, with `fake`
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON of `rimless robot release --json`."""
+        out: dict[str, Any] = {"released_pins": list(self.pins), "level": self.off_level}
+        if self.fake_levels is not None:
+            out["fake_levels"] = self.fake_levels
+        return out
 
 
-def release_pins(pins: Any, *, active_high: bool, pin_factory: Any = None) -> dict[str, str]:
-    """Drive every clutch pin to its off level, then release the lines (`rimless robot release`).
+def release_clutches(cfg: RobotConfig, *, fake: bool = False) -> ReleaseReport:
+    """Drive every clutch pin of `cfg` to its off level, then give the lines back (on mock pins with `fake`).
 
-    Returns each pin's level history ("0", "01"...), as read back from the pin factory.
+    Raises `GpioUnavailable` (one line) when this machine has no usable GPIO.
     """
-    bank = open_clutches(pins, active_high=active_high, pin_factory=pin_factory)
-    try:
-        bank.all_off()
-        levels = {f"GPIO{p}": "".join("1" if st.state else "0" for st in pin_factory.pin(p).states)
-                  for p in pins} if pin_factory is not None else {}
-    finally:
-        bank.close()
-    return levels
+    factory = mock_pin_factory() if fake else None
+    levels = release_pins(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
+    return ReleaseReport(tuple(cfg.clutch.pins), "low" if cfg.clutch.active_high else "high",
+                         levels if fake else None)

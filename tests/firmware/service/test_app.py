@@ -3,90 +3,14 @@
 from __future__ import annotations
 
 import asyncio
-import hashlib
-import hmac
 import json
 import socket
 import time
-from pathlib import Path
 
-import pytest
 
-from rimless.firmware.service.app import RobotApp
-from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig, TelemetryConfig
-from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
-from rimless.firmware.drivers.hardware import build_fake
+from rimless.firmware.service.config import CommandsConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.service.triallog import read_trial_log
-
-TOKEN = "test-token-7f3a9c2e1b5d"
-
-
-def config(tmp_path: Path, **kw) -> RobotConfig:
-    base = dict(
-        commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN),
-        log=LogConfig(dir=str(tmp_path / "trials"), flush_interval_s=0.05),
-    )
-    base.update(kw)
-    return RobotConfig(**base)
-
-
-def gait(step_period_s: float = 0.4, steps: int | None = None) -> GaitTrajectory:
-    return GaitTrajectory(start_s=time.monotonic() + 0.1, step_period_s=step_period_s, steps=steps)
-
-
-def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=15.0, hw_hook=None):
-    """Run the app with fake hardware; `script(app, hw)` runs once it is ready, then the app stops."""
-    hw = build_fake(cfg, trajectory=trajectory or gait())
-    if hw_hook is not None:
-        hw_hook(hw)
-
-    async def main():
-        ready = asyncio.Event()
-        app = RobotApp(cfg, hw, on_ready=lambda a: ready.set())
-        run = asyncio.create_task(app.run(duration_s=timeout_s, arm=arm, handle_signals=False))
-        await ready.wait()
-        try:
-            result = await script(app, hw)
-        finally:
-            app.request_stop("test done")
-            summary = await run
-        return app, summary, result
-
-    return (*asyncio.run(main()), hw)
-
-
-class Client:
-    """A loopback client of the signed protocol (written from the protocol's description)."""
-
-    def __init__(self, reader, writer, hello) -> None:
-        self.reader, self.writer, self.hello = reader, writer, hello
-        self.nonce = hello["nonce"]
-
-    @classmethod
-    async def connect(cls, port: int) -> Client:
-        reader, writer = await asyncio.open_connection("127.0.0.1", port)
-        hello = json.loads(await asyncio.wait_for(reader.readline(), 5))
-        return cls(reader, writer, hello)
-
-    def sign(self, seq: int, cmd: str, args: dict, token: str = TOKEN) -> bytes:
-        body = json.dumps([seq, cmd, args], sort_keys=True, separators=(",", ":"), ensure_ascii=True)
-        mac = hmac.new(token.encode(), f"{self.nonce}\n{body}".encode(), hashlib.sha256).hexdigest()
-        return json.dumps({"seq": seq, "cmd": cmd, "args": args, "mac": mac}).encode() + b"\n"
-
-    async def raw(self, data: bytes) -> dict:
-        self.writer.write(data)
-        await self.writer.drain()
-        return json.loads(await asyncio.wait_for(self.reader.readline(), 5))
-
-    async def cmd(self, cmd: str, seq: int, token: str = TOKEN, **args) -> dict:
-        return await self.raw(self.sign(seq, cmd, args, token))
-
-    def close(self) -> None:
-        self.writer.close()
-
-
-def all_off(hw) -> bool:
-    return all(hw.pin_factory.pin(p).state is False for p in hw.clutches.pins) if hw.clutches.pins else True
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario
 
 
 def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
@@ -126,7 +50,7 @@ def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
     assert "no trial is running" in replies[13]["error"]
     assert after["armed"] is False and after["params"] == before["params"] and after["trial"] is None
     assert after["engaged"] == [] and all_off(hw)
-    assert not list((tmp_path / "trials").glob("*.jsonl")) if (tmp_path / "trials").exists() else True
+    assert not (tmp_path / "trials").exists() or not list((tmp_path / "trials").glob("*.jsonl"))  # no trial log
     assert summary.error is None
 
 

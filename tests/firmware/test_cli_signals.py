@@ -14,20 +14,13 @@ from pathlib import Path
 
 import pytest
 
-from rimless.firmware.link.commands import send_command
+from rimless.firmware.link.remote import send_command
 from rimless.firmware.errors import RobotUnreachable
+from tests.support.firmware_app import free_port
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 TOKEN = "signal-test-token-3c9e7a1f"
 PINS = ("17", "27", "22", "23", "24", "16", "20", "21")
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def pin_levels(line: str) -> dict[str, str]:

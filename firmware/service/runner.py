@@ -1,0 +1,117 @@
+"""`rimless robot run` as a library call: build the hardware, run the app until a stop, and say how it ended.
+
+`run_robot` owns the fail-safes around the event loop: a stop signal before the loop runs (or after it)
+releases every clutch at once and closes the hardware; inside the loop `RobotApp` handles the signals
+itself. The exit code follows the shell's conventions (`RunOutcome.exit_code`); the command prints.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import logging
+import signal
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from rimless.errors import ParameterError
+from rimless.firmware.drivers.gpio import pin_histories
+from rimless.firmware.errors import CommandError, Interrupted, SensorError
+from rimless.firmware.service.app import RobotApp, RunSummary
+from rimless.firmware.service.config import RobotConfig, load_config
+from rimless.firmware.service.hardware import Hardware, build_fake, build_real
+from rimless.firmware.service.logsetup import NonBlockingLog
+from rimless.firmware.service.safety import stop_on_signals
+
+EXIT_OK = 0
+EXIT_FIRMWARE_FAULT = 1  # an error in the firmware itself (the summary says which)
+
+
+@dataclass
+class RunOutcome:
+    """How a run ended.
+
+    `summary` is None when a stop signal (`signal`) came before the event loop ran (`before_start`);
+    `fake_pins` holds the mock clutch pins' level histories with `fake` ("GPIO17=010 ...").
+    """
+
+    fake: bool
+    summary: RunSummary | None
+    signal: str | None = None
+    before_start: bool = False
+    fake_pins: str = ""
+
+    @property
+    def exit_code(self) -> int:
+        """0 after the duration or SIGTERM (a service stop), 1 after a fault in the firmware itself,
+        128 + n after another signal n (130 for Ctrl-C)."""
+        if self.before_start:
+            return EXIT_OK if self.signal in (None, "SIGTERM") else 128 + int(getattr(signal, str(self.signal)))
+        if self.summary is not None and self.summary.error:
+            return EXIT_FIRMWARE_FAULT
+        if self.signal is not None and self.signal != "SIGTERM":
+            return 128 + int(getattr(signal, self.signal))
+        return EXIT_OK
+
+
+def with_telemetry(cfg: RobotConfig, destinations: Sequence[str]) -> RobotConfig:
+    """`cfg` sending telemetry also to each "host:port" of `destinations` (already checked)."""
+    if not destinations:
+        return cfg
+    return dataclasses.replace(cfg, telemetry=dataclasses.replace(
+        cfg.telemetry, destinations=cfg.telemetry.destinations + tuple(destinations)))
+
+
+def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[str] = (), fake: bool = False,
+              duration_s: float | None = None, arm: bool = False,
+              on_start: Callable[[RobotApp], None] | None = None, log_level: int = logging.INFO) -> RunOutcome:
+    """Run the firmware until a stop signal or `duration_s`.
+
+    `config` is a `RobotConfig` or the robot.toml to load (None: the defaults); `telemetry` adds "host:port"
+    destinations (already checked); `fake` runs on the fake sensors and mock pins. `on_start(app)` is called
+    once the app exists, before its loop starts (to show the token). Every clutch is off and the hardware
+    closed on every path. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be
+    opened or a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved.
+    """
+    state: dict[str, Hardware] = {}
+
+    def release_now() -> None:
+        hw = state.get("hw")
+        if hw is not None:
+            hw.clutches.all_off()
+
+    try:
+        with stop_on_signals(release_now):
+            cfg = config if isinstance(config, RobotConfig) else load_config(config)
+            return _run(with_telemetry(cfg, telemetry), state, fake, duration_s, arm, on_start, log_level)
+    except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
+        hw = state.get("hw")
+        if hw is not None:
+            hw.close()
+        return RunOutcome(fake, None, sig.name, before_start=True)
+
+
+def _run(cfg: RobotConfig, state: dict[str, Hardware], fake: bool, duration_s: float | None, arm: bool,
+         on_start: Callable[[RobotApp], None] | None, log_level: int) -> RunOutcome:
+    try:
+        hw = build_fake(cfg) if fake else build_real(cfg)
+    except SensorError as err:
+        raise CommandError(f"sensor: {err}") from None
+    state["hw"] = hw
+    try:
+        robot = RobotApp(cfg, hw)
+        if on_start is not None:
+            on_start(robot)
+    except BaseException:
+        hw.close()
+        raise
+    try:
+        with NonBlockingLog(level=log_level):
+            summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm))
+    except OSError as err:
+        raise CommandError(f"cannot start: {err}") from None
+    except ValueError as err:  # a telemetry host that cannot be resolved
+        raise ParameterError(f"cannot start: {err}") from None
+    pins = pin_histories(hw.pin_factory, cfg.clutch.pins) if fake and hw.pin_factory is not None else ""
+    return RunOutcome(fake, summary, robot.signal_received, fake_pins=pins)

@@ -1,0 +1,31 @@
+"""The PC side of the command channel: every failure is one line."""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import pytest
+
+from rimless.firmware.link.remote import RobotLink
+from rimless.firmware.errors import CommandError
+from tests.support.firmware_app import TOKEN
+
+
+def test_robot_link_errors_are_one_line(tmp_path) -> None:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    port = s.getsockname()[1]
+
+    def not_a_robot() -> None:
+        conn, _ = s.accept()
+        conn.sendall(b'{"hello": "something else"}\n')
+        conn.close()
+
+    t = threading.Thread(target=not_a_robot)
+    t.start()
+    with pytest.raises(CommandError, match="not a rimless robot"):
+        RobotLink("127.0.0.1", token=TOKEN, port=port, timeout_s=2)
+    t.join()
+    s.close()

@@ -1,0 +1,103 @@
+"""The app's shutdown path runs to the end whatever fails in it, and logging never blocks control."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import logging
+import socket
+import threading
+import time
+
+
+from rimless.firmware.service.config import TelemetryConfig
+from rimless.firmware.service.logsetup import NonBlockingLog
+from rimless.firmware.link.telemetry import TelemetrySender
+from tests.support.firmware_app import Client, all_off, config, scenario
+
+
+def released(hw) -> bool:
+    """Every clutch pin driven low, then given back (gpiozero closes a pin as an input)."""
+    pins = [hw.pin_factory.pin(p) for p in hw.clutches.pins]
+    return all(p.state is False and p.function == "input" for p in pins) and hw.clutches._devices == []
+
+
+def test_an_exception_in_telemetry_still_closes_the_hardware(tmp_path, monkeypatch) -> None:
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    cfg = config(tmp_path, telemetry=TelemetryConfig(host="127.0.0.1", port=rx.getsockname()[1]))
+
+    def broken(self, records):  # noqa: ANN001
+        raise RuntimeError("encoder bug")
+
+    monkeypatch.setattr(TelemetrySender, "send", broken)
+
+    async def script(app, hw):
+        await asyncio.sleep(0.8)
+        return bool(hw.clutches.engaged()) or any(
+            any(s.state for s in hw.pin_factory.pin(p).states) for p in hw.clutches.pins)
+
+    app, summary, was_on, hw = scenario(config(tmp_path, telemetry=cfg.telemetry), script, arm=True)
+    rx.close()
+    assert was_on
+    assert released(hw)
+    assert summary.error is not None and "telemetry" in summary.error and "encoder bug" in summary.error
+
+
+def test_an_open_command_connection_at_shutdown_logs_nothing(tmp_path, caplog, capfd) -> None:
+    caplog.set_level(logging.DEBUG)
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        assert (await c.cmd("status", 1))["ok"]
+        idle = await asyncio.open_connection("127.0.0.1", app.command_port)  # never says a word
+        return c, idle
+
+    app, summary, _conns, hw = scenario(config(tmp_path), script)
+    err = capfd.readouterr().err
+    assert "CancelledError" not in err and "Traceback" not in err
+    assert not [r for r in caplog.records if r.exc_info or "CancelledError" in r.getMessage()]
+    assert summary.error is None and released(hw)
+
+
+class BlockedStream(io.TextIOBase):
+    """stderr that nobody reads: every write blocks until `release` is set."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.writes = 0
+
+    def write(self, s: str) -> int:
+        self.release.wait(30)
+        self.writes += 1
+        return len(s)
+
+
+def test_a_blocked_stderr_does_not_freeze_control(tmp_path) -> None:
+    stream = BlockedStream()
+    logger = logging.getLogger("rimless.robot")
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        t0 = time.perf_counter()
+        for k in range(2000):  # far more than the queue holds
+            logger.warning("flood %d", k)
+        flood_s = time.perf_counter() - t0
+        replies = []
+        for seq in range(1, 6):
+            t0 = time.perf_counter()
+            r = await c.cmd("status", seq)
+            replies.append((r["ok"], time.perf_counter() - t0))
+            await asyncio.sleep(0.05)
+        c.close()
+        return flood_s, replies, app.controller.samples
+
+    log = NonBlockingLog(stream, queue_len=100).start()
+    try:
+        app, summary, (flood_s, replies, samples), hw = scenario(config(tmp_path), script, arm=True)
+    finally:
+        stream.release.set()
+        log.stop()
+    assert flood_s < 0.5  # 2000 log calls returned at once
+    assert all(ok and dt < 0.5 for ok, dt in replies), replies
+    assert log.dropped >= 1800 and summary.samples > 50 and all_off(hw)

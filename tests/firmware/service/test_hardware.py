@@ -1,0 +1,90 @@
+"""The hardware assembly on fakes: one sensor per leg with GPIO chip selects clutches the leg it measures,
+sensors sharing a RESET line each get NPD and one pulse."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import time
+
+
+from rimless.firmware.service.config import RobotConfig, SensorConfig
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from tests.support.firmware_app import config
+
+
+def leg_view(traj: GaitTrajectory, leg: int, legs: int = 8):
+    """What the sensor of `leg` sees: only the stances of that leg (every `legs`-th step)."""
+
+    def f(t: float) -> float:
+        if t < traj.start_s:
+            return 0.0
+        k = int((t - traj.start_s) // traj.step_period_s)
+        return traj(t) if k % legs == leg else 0.0
+
+    return f
+
+
+CS_PINS = (2, 3, 4, 5, 6, 12, 13, 19)
+
+
+def per_leg_config(tmp_path) -> RobotConfig:
+    base = config(tmp_path)
+    sensors = tuple(SensorConfig(spi_device=0, cs_pin=cs, legs=(k,)) for k, cs in enumerate(CS_PINS))
+    return dataclasses.replace(base, sensors=sensors)
+
+
+def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp_path) -> None:
+    from rimless.firmware.service.hardware import build_fake
+
+    cfg = per_leg_config(tmp_path)
+    traj = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3, compression_m=0.008, compression_s=0.06)
+    hw = build_fake(cfg, trajectories=[leg_view(traj, k) for k in range(8)])
+    from rimless.firmware.service.app import RobotApp
+
+    async def main():
+        app = RobotApp(cfg, hw)
+        # Stop between leg 3's lock and leg 4's touchdown.
+        return await app.run(duration_s=traj.touchdown_s(4) - 0.1 - time.monotonic(), arm=True, handle_signals=False)
+
+    summary = asyncio.run(main())
+    assert summary.faults == [] and summary.error is None
+    hist = {k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
+            for k, p in enumerate(cfg.clutch.pins)}
+    for k in range(4):  # legs 0..3 stanced once each, released at the next leg's touchdown (leg 3: at stop)
+        assert hist[k] == "010", hist
+    assert all(hist[k] == "0" for k in range(4, 8)), hist
+    for cs in CS_PINS:  # every chip select idles high and was pulled low for transfers
+        states = [s.state for s in hw.pin_factory.pin(cs).states]
+        assert states[-1] is True and False in states[1:]
+
+
+def test_sensors_sharing_a_reset_line_each_get_npd_and_one_pulse(tmp_path) -> None:
+    from rimless.firmware.service.hardware import build_fake
+
+    base = config(tmp_path)
+    sensors = (SensorConfig(spi_device=0, legs=(0, 1, 2, 3), npd_pin=5),
+               SensorConfig(spi_device=1, legs=(4, 5, 6, 7), npd_pin=6))
+    hw = build_fake(dataclasses.replace(base, sensors=sensors))
+    try:
+        assert [f.resets for f in hw.fakes] == [1, 1] and all(f.powered for f in hw.fakes)
+        reset = [s.state for s in hw.pin_factory.pin(25).states]
+        assert reset == [False, True, False]  # one pulse on the shared line
+        assert all(hw.pin_factory.pin(p).state is True for p in (5, 6))
+        assert [s.verify_id() for s in hw.sensors] == [1, 1]
+    finally:
+        hw.close()
+
+
+def test_release_clutches_reports_the_off_level_of_the_configuration() -> None:
+    from rimless.firmware.service.config import ClutchConfig
+    from rimless.firmware.service.hardware import release_clutches
+
+    report = release_clutches(RobotConfig(), fake=True)
+    js = report.to_json()
+    assert js["released_pins"] == list(RobotConfig().clutch.pins) and js["level"] == "low"
+    assert all(set(h) == {"0"} for h in js["fake_levels"].values())
+    low = release_clutches(RobotConfig(clutch=ClutchConfig(active_high=False)), fake=True)
+    assert low.off_level == "high" and "fake_levels" in low.to_json()
+    assert "fake_levels" not in dataclasses.replace(report, fake_levels=None).to_json()
+
