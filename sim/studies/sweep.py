@@ -289,10 +289,11 @@ def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]]
     """`rimless sim sweep`: every grid point's branches (run_sweep), written as `out`.parquet/.csv and
     `out`-points.parquet/.csv; returns the command's JSON object. An empty grid sweeps the wheel's own k."""
     from rimless.errors import RunFailure
-    from rimless.output import writable_dir
+    from rimless.output import check_output_folder, writable_dir
 
     grid = grid or {"k": [params.k]}
     points = grid_points(params, models, grid, mass_models)
+    check_output_folder(out.parent if str(out.parent) else ".", option="--out")  # before minutes of work
     if cache_dir is not None:
         writable_dir(cache_dir, option="--cache-dir")
     try:

@@ -25,6 +25,7 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
     The summary's `failure` is the reason the walk ended early (None if it did not). progress(k): steps done."""
     import numpy as np
 
+    from rimless.output import check_output_folder
     from rimless.sim.integrate.backend import jacobian_factory, make_integrator, make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import ALPHA
@@ -35,6 +36,9 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
     for path, exts in ((out, TRAJECTORY_SUFFIXES), (plot, FIGURE_SUFFIXES)):
         if path is not None and path.suffix.lower() not in exts:
             raise ParameterError(f"{path}: the file must end in {' or '.join(exts)}")
+    for path, option in ((out, "--out"), (plot, "--plot")):  # before the work, not after
+        if path is not None:
+            check_output_folder(path.parent if str(path.parent) else ".", option=option)
     if theta_dot is not None:
         if not (math.isfinite(theta_dot) and theta_dot > 0):
             raise ParameterError(f"--theta-dot must be a positive angular velocity in rad/s, got {theta_dot}")
