@@ -31,7 +31,8 @@ def fixed_point_cmd(
     with progress_bar("period-1 gait", json_out=json_out) as bar:
         out = fixed_point_study(params, model.value, theta_dot_guess=theta_dot_guess,
                                 theta_plus_guess=theta_plus_guess, gait=gait, strict_contact=strict_contact,
-                                backend=backend.value, rtol=rtol, progress=lambda i, n: bar.update(i, n, "finding the gaits"))
+                                backend=backend.value, rtol=rtol,
+                                progress=lambda i, n: bar.update(i, n, "finding the gaits"))
     if json_out:
         print_json(out)
         return
