@@ -16,7 +16,7 @@ import typer
 from typer import _click
 
 from rimless import __version__
-from rimless.cli_rules import (  # noqa: F401  (re-exported: the parts and users' scripts import them from here)
+from rimless.cli_rules import (  # noqa: F401  (re-exported for users' scripts; parts use rimless.cli_rules)
     EXIT_FAILURE,
     EXIT_INTERRUPTED,
     EXIT_OK,

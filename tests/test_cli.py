@@ -26,7 +26,9 @@ def test_help_imports_no_heavy_library():
 
 
 @pytest.mark.parametrize("module", ["rimless.sim.cli", "rimless.analysis.cli", "rimless.firmware.cli",
-                                    "rimless.sim.cli.firmware", "rimless.cli"])
+                                    "rimless.sim.cli.firmware", "rimless.sim.cli.app", "rimless.sim.cli.fixed_point",
+                                    "rimless.sim.cli.gait", "rimless.sim.cli.sweep", "rimless.sim.cli.replay",
+                                    "rimless.sim.cli.studies", "rimless.cli"])
 def test_each_command_module_imports_on_its_own(module):
     """A part's command module imports first, before rimless.cli registers the parts (no circular import)."""
     res = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True)

@@ -232,7 +232,8 @@ def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str,
 def _by_arclength(pmap: PoincareMap, first: FixedPoint, start_slope_rad: float, step_rad: float, algorithm1: float,
                   algorithm1_fp: FixedPoint, branch: list[BranchPoint], min_slope_rad: float, refine_tol_rad: float,
                   z_guess: np.ndarray, progress: Callable[[float], None] | None) -> CriticalSlope:
-    from rimless.sim.continuation.arclength import PARAMETERS, ArclengthContinuation
+    from rimless.sim.continuation.arclength import ArclengthContinuation
+    from rimless.sim.continuation.oracle import PARAMETERS
 
     scale = PARAMETERS["slope"][1]
     cont = ArclengthContinuation(lambda q: pmap.with_params(q), pmap.params.replace(slope_rad=start_slope_rad),

@@ -29,17 +29,9 @@ from typing import Any
 import numpy as np
 
 from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.continuation.contact import ContactFacts, contact_facts
+from rimless.sim.continuation.oracle import MapOracle
 from rimless.sim.model.params import WheelParams
-
-# parameter name -> (WheelParams field, typical size used to scale it, unit)
-PARAMETERS: dict[str, tuple[str, float, str]] = {
-    "slope": ("slope_rad", 0.01, "rad"),
-    "k": ("stiffness_n_per_m", 1000.0, "N/m"),
-    "c": ("damping_ns_per_m", 5.0, "N s/m"),
-    "hub_mass": ("hub_mass_kg", 1.0, "kg"),
-    "leg_mass": ("leg_mass_kg", 0.02, "kg"),
-    "inertia": ("inertia_kg_m2", 0.02, "kg m^2"),
-}
 
 FOLD, PERIOD_DOUBLING, NEIMARK_SACKER = "fold", "period-doubling", "neimark-sacker"
 STANCE_FORCE, IMPULSE, STALL = "stance-force", "impulse", "stall"
@@ -60,164 +52,6 @@ def eigen_tests(J: np.ndarray) -> dict[str, float]:
 def _complex_pair(J: np.ndarray) -> bool:
     tr, det = float(np.trace(J)), float(np.linalg.det(J))
     return tr * tr - 4.0 * det < 0.0
-
-
-@dataclass
-class ContactFacts:
-    """Contact and stall facts of one step from its recorded trajectory (N, N s, rad/s, s, m)."""
-
-    min_stance_force_single_support_N: float
-    min_impulse_N_s: float
-    min_theta_dot_single_support_rad_s: float
-    leading_foot_tension_N: float  # most negative leading-foot normal force in double support (0 if none)
-    leading_foot_tension_s: float
-    trailing_foot_min_height_m: float
-    friction_required: float  # max over both feet of |tangential| / normal impact impulse
-    period_s: float
-    energy_ratio: float
-    relabel_energy_J: float  # energy added by the relabelling snap of the old trailing leg (+ adds)
-    # under bilateral contact (the stance foot held; a gait that unilateral contact forbids):
-    bilateral: bool = False
-    min_stance_force_time_s: float = math.nan  # when the smallest single-support stance force occurs, s
-    negative_stance_force_s: float = 0.0  # how long that force is below 0, s
-    unilateral_failure: str = ""  # the unilateral map's failure at this point ('' when it accepts the step)
-
-    @property
-    def contact_valid(self) -> bool:
-        """Unilateral contact in single support and at the impact (the double-support transient is reported,
-        not rejected: it is the rigid-contact artefact the paper discusses)."""
-        return (self.min_stance_force_single_support_N >= 0.0 and self.min_impulse_N_s > 0.0
-                and not self.unilateral_failure)
-
-    @property
-    def violation(self) -> str:
-        """What unilateral contact forbids here: 'stance-lift-off', 'negative-impulse' (both: joined by ', '),
-        or '' when the gait is contact-valid."""
-        kinds = []
-        if not self.min_stance_force_single_support_N >= 0.0 or "stance-lift-off" in self.unilateral_failure:
-            kinds.append("stance-lift-off")
-        if not self.min_impulse_N_s > 0.0 or "negative-impulse" in self.unilateral_failure:
-            kinds.append("negative-impulse")
-        if not kinds and self.unilateral_failure:
-            kinds.append("unilateral-map-fails")
-        return ", ".join(kinds)
-
-    @property
-    def strict_contact_valid(self) -> bool:
-        return self.contact_valid and self.leading_foot_tension_N >= 0.0 and self.trailing_foot_min_height_m >= 0.0
-
-    def as_dict(self) -> dict[str, float | bool]:
-        d: dict[str, float | bool] = dict(self.__dict__)
-        d["contact_valid"] = self.contact_valid
-        d["strict_contact_valid"] = self.strict_contact_valid
-        d["violation"] = self.violation
-        return d
-
-
-def contact_facts(pmap: Any, z: np.ndarray, record_dt: float = 2e-4) -> ContactFacts:
-    """Record the step from z (samples every record_dt s plus every solver step) and measure its contact
-    and stall facts.
-
-    A bilateral map (`bilateral` true: the stance foot held) records the step under bilateral contact and adds
-    the compiled map's own record of the stance force (rimless.sim.fast.BilateralContact: its minimum, when, how
-    long it is negative) and the unilateral map's failure at z, if any."""
-    from rimless.sim.model.dynamics import DLSP
-
-    z = np.asarray(z, dtype=float)
-    if getattr(pmap, "bilateral", False):
-        return _bilateral_facts(pmap, z, record_dt)
-    return _facts_of_step(_recorded_step(pmap, z, record_dt), DLSP)
-
-
-def _recorded_step(pmap: Any, z: np.ndarray, record_dt: float) -> Any:
-    """The step from z with its samples and contact diagnostics (hybrid.contact_diagnostics' keys); the
-    normal forces' minima and the leading foot's tension time come from the compiled kernel
-    (rimless.sim.fast.step) on the same samples, the minimum refined by a parabola, the tension time with its
-    zero crossings interpolated."""
-    try:
-        from rimless.sim.fast import step as fs
-        from rimless.sim.fast import mass_model_index, param_vector
-    except ImportError:  # no compiled path: the reference diagnostics
-        return pmap.step(z, diagnostics=True, record_dt=record_dt)
-    from rimless.sim.model.dynamics import DLSP
-    from rimless.sim.step.hybrid import PHASE_NAMES
-    from rimless.sim.model.mechanics import ALPHA
-
-    step = pmap.step(z, record_dt=record_dt)
-    mi, p = mass_model_index(pmap.params), param_vector(pmap.params)
-    inf = math.inf
-    d = {"min_normal_force_b_dlsp_N": inf, "min_normal_force_b_slsp_free_N": inf,
-         "min_normal_force_b_slsp_clutched_N": inf, "leading_foot_tension_s": 0.0, "trailing_foot_min_height_m": inf}
-    for seg in step.segments or []:
-        if not len(seg.t):
-            continue
-        y = np.ascontiguousarray(seg.y, dtype=np.float64)
-        c = np.array([inf, -1.0, 0.0, math.nan])
-        fs._single_support_force(mi, int(seg.phase), np.ascontiguousarray(seg.t, dtype=np.float64), y, p, c)  # noqa: SLF001
-        key = f"min_normal_force_b_{PHASE_NAMES[seg.phase]}_N"
-        d[key] = min(d[key], float(c[fs.C_MIN_FORCE]))
-        if seg.phase == DLSP:
-            d["leading_foot_tension_s"] += float(c[fs.C_NEGATIVE_S])
-        else:  # the lifted trailing foot's height above the slope; when the stance force is smallest
-            if c[fs.C_MIN_FORCE] <= min(d["min_normal_force_b_slsp_free_N"], d["min_normal_force_b_slsp_clutched_N"]):
-                d["min_normal_force_b_single_support_time_s"] = float(c[fs.C_MIN_FORCE_T]) - step.t_start_s
-            q2 = y[:, 2]
-            h = y[:, 1] + y[:, 3] * np.cos(q2) - y[:, 4] * np.cos(q2 + ALPHA)
-            d["trailing_foot_min_height_m"] = min(d["trailing_foot_min_height_m"], float(np.min(h)))
-    step.diagnostics = {k: (v if v != inf else math.nan) for k, v in d.items()}
-    return step
-
-
-def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts:
-    from dataclasses import replace
-
-    from rimless.sim import fast
-    from rimless.sim.model.dynamics import DLSP
-
-    integ = pmap.integrator
-    rec = fast.fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol, bilateral=True)
-    c = rec.contact
-    try:
-        fast.fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol)
-        uni = ""
-    except StepFailure as err:
-        uni = f"{err.reason.value}: {err}"
-    try:
-        facts = _facts_of_step(_recorded_step(pmap, z, record_dt), DLSP)
-    except StepFailure:  # the recorded step's own checks (stance force or impulses at a phase start): the
-        # compiled record alone
-        facts = ContactFacts(c.min_stance_force_N, c.min_impulse_N_s, math.nan, math.nan, math.nan, math.nan,
-                             math.nan, rec.period_s, math.nan, rec.relabel_snap_J)
-    # the stance force from the compiled record (finer samples, parabola at the minimum): the same number the
-    # continuation's test function uses between recorded points
-    return replace(facts, bilateral=True, min_stance_force_single_support_N=c.min_stance_force_N,
-                   min_stance_force_time_s=c.min_stance_force_time_s, negative_stance_force_s=c.negative_force_s,
-                   unilateral_failure=uni)
-
-
-def _facts_of_step(step: Any, DLSP: int) -> ContactFacts:
-    d = step.diagnostics or {}
-    single = [d.get("min_normal_force_b_slsp_free_N", math.nan), d.get("min_normal_force_b_slsp_clutched_N", math.nan)]
-    single = [v for v in single if v == v]
-    th_min = math.inf
-    for seg in step.segments or []:
-        if seg.phase != DLSP and len(seg.t):
-            th_min = min(th_min, float(np.min(seg.y[:, 7])))
-    imp = step.impact
-    lead = d.get("min_normal_force_b_dlsp_N", math.nan)
-    return ContactFacts(
-        min_stance_force_time_s=float(d.get("min_normal_force_b_single_support_time_s", math.nan)),
-        min_stance_force_single_support_N=min(single) if single else math.nan,
-        min_impulse_N_s=float(min(imp.impulse[1], imp.impulse[3])),
-        min_theta_dot_single_support_rad_s=th_min,
-        leading_foot_tension_N=min(0.0, lead) if lead == lead else 0.0,
-        leading_foot_tension_s=float(d.get("leading_foot_tension_s", 0.0)),
-        trailing_foot_min_height_m=float(d.get("trailing_foot_min_height_m", math.nan)),
-        friction_required=float(max(imp.friction_required)),
-        period_s=step.period_s,
-        energy_ratio=imp.energy_ratio,
-        relabel_energy_J=-float(imp.relabel_loss),
-    )
 
 
 @dataclass
@@ -286,76 +120,6 @@ class Branch:
         return None
 
 
-class _Oracle:
-    """P(z; p), J_z and F_p = dP/dp for one base parameter set; counts map evaluations.
-
-    `map_factory(params)` gives a Poincaré map (recorded steps for the contact facts, and the map itself on
-    the reference path). A map with `integrator.rtol` and a compiled `evaluate` is evaluated through
-    rimless.sim.fast.fast_step directly, without building a map object per parameter value.
-    """
-
-    def __init__(self, map_factory: Callable[[WheelParams], Any], base: WheelParams, parameter: str,
-                 model: str) -> None:
-        if parameter not in PARAMETERS:
-            raise ValueError(f"unknown continuation parameter {parameter!r}; known: {', '.join(PARAMETERS)}")
-        self.field, self.scale, self.unit = PARAMETERS[parameter]
-        self.map_factory = map_factory
-        self.base = base
-        self.model = model
-        self.evaluations = 0
-        self._maps: dict[float, Any] = {}
-        self._params: dict[float, WheelParams] = {}
-        probe = map_factory(base)
-        self.compiled = hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None
-        self.rtol = float(getattr(getattr(probe, "integrator", None), "rtol", 1e-10))
-        self.atol = float(getattr(getattr(probe, "integrator", None), "atol", self.rtol * 1e-2))
-        self.bilateral = bool(getattr(probe, "bilateral", False))
-
-    def pmap(self, p: float) -> Any:
-        m = self._maps.get(p)
-        if m is None:
-            if len(self._maps) > 16:
-                self._maps.clear()
-            m = self.map_factory(self.params(p))
-            self._maps[p] = m
-        return m
-
-    def params(self, p: float) -> WheelParams:
-        q = self._params.get(p)
-        if q is None:
-            if len(self._params) > 256:
-                self._params.clear()
-            q = self.base.replace(**{self.field: float(p)})
-            self._params[p] = q
-        return q
-
-    def evaluate(self, z: np.ndarray, p: float, *, jacobian: bool) -> tuple[np.ndarray, float, np.ndarray | None]:
-        """(P(z), period_s, dP/dz or None); raises StepFailure (a parameter out of range is a StepFailure too)."""
-        try:
-            params = self.params(p)
-        except ValueError as err:  # ParameterError: the continuation left the valid parameter range
-            raise StepFailure(FailureReason.NO_CONVERGENCE, f"parameter out of range: {err}") from None
-        self.evaluations += 1
-        z = np.asarray(z, dtype=float)
-        if not np.all(np.isfinite(z)):
-            raise StepFailure(FailureReason.INTEGRATION, "non-finite section point")
-        if self.compiled:
-            from rimless.sim import fast
-
-            r = fast.fast_step(params, self.model, z, rtol=self.rtol, atol=self.atol, jacobian=jacobian,
-                               bilateral=self.bilateral, record_contact=False)
-            zn, period, J = r.z_next, r.period_s, r.jacobian
-        else:
-            from rimless.sim.model.section import section_from_state
-
-            m = self.pmap(p)
-            step = m.step(z)
-            zn, period, J = section_from_state(step.y_plus), step.period_s, (m.jacobian(z) if jacobian else None)
-        if not np.all(np.isfinite(zn)) or not math.isfinite(period) or (J is not None and not np.all(np.isfinite(J))):
-            raise StepFailure(FailureReason.INTEGRATION, "the map returned a non-finite value")
-        return zn, period, J
-
-
 @dataclass
 class _State:
     u: np.ndarray  # (theta+, theta'+, p / scale)
@@ -384,7 +148,7 @@ class ArclengthContinuation:
         facts_dt: float = 1e-3,
         max_points: int = 400,
     ) -> None:
-        self.oracle = _Oracle(map_factory, base, parameter, model)
+        self.oracle = MapOracle(map_factory, base, parameter, model)
         self.parameter = parameter
         self.model = model
         self.ds, self.ds_min, self.ds_max = ds, ds_min, ds_max
@@ -681,7 +445,7 @@ class ArclengthContinuation:
                             (good_pt.tests.get(kind, math.nan), bad_val), detail)
 
 
-def _map_failure(oracle: _Oracle, z: np.ndarray, params: WheelParams) -> StepFailure | None:
+def _map_failure(oracle: MapOracle, z: np.ndarray, params: WheelParams) -> StepFailure | None:
     """The map's own failure at z just past the end (None when the map succeeds there: Newton failed)."""
     try:
         oracle.evaluate(z, float(getattr(params, oracle.field)), jacobian=False)

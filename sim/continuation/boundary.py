@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from rimless.sim.continuation.arclength import PARAMETERS, _Oracle
+from rimless.sim.continuation.oracle import PARAMETERS, MapOracle
 from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.params import WheelParams
 
@@ -77,7 +77,7 @@ class BoundaryContinuation:
                  tol: float = 1e-10, max_points: int = 200) -> None:
         if test not in TESTS:
             raise ValueError(f"unknown boundary test {test!r}; known: {', '.join(TESTS)}")
-        self.slope = _Oracle(map_factory, base, "slope", model)
+        self.slope = MapOracle(map_factory, base, "slope", model)
         self.field, self.mu_scale, self.unit = PARAMETERS[parameter]
         self.base, self.model, self.parameter, self.test = base, model, parameter, test
         self.ds, self.ds_min, self.ds_max, self.tol, self.max_points = ds, ds_min, ds_max, tol, max_points

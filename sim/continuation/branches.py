@@ -18,14 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from rimless.sim.continuation.arclength import (
-    ArclengthContinuation,
-    Branch,
-    BranchPoint,
-    ContactFacts,
-    SpecialPoint,
-    contact_facts,
-)
+from rimless.sim.continuation.arclength import ArclengthContinuation, Branch, BranchPoint, SpecialPoint
+from rimless.sim.continuation.contact import ContactFacts, contact_facts
 from rimless.sim.model.failures import StepFailure
 from rimless.sim.model.params import WheelParams
 

@@ -154,7 +154,7 @@ def replay_trial(path: str | Path, params: Any, *, channel: int = 0, firmware_co
     (a FirmwareLoopConfig), the simulated step under the firmware in the loop.
     Raises rimless.firmware.service.triallog.TrialLogError on a corrupt log and ValueError when it has no step."""
     from rimless.firmware.service.triallog import read_trial_log
-    from rimless.sim.cli.firmware import ideal_fixed_point
+    from rimless.sim.in_the_loop.ideal import ideal_fixed_point
     from rimless.sim.step.hybrid import simulate_step
     from rimless.sim.integrate.reference import ScipyIntegrator
     from rimless.sim.model.mechanics import Mechanics
@@ -229,3 +229,22 @@ def plot_replay(replay: Replay, path: str | Path) -> Path:
     from rimless.sim.studies.figures import save_figure
 
     return save_figure(fig, path, dpi=120, option="--plot")
+
+
+def replay_log(path: Path, params: Any, *, firmware_config: Any = None, plot: Path | None = None) -> dict[str, Any]:
+    """`rimless sim replay`: `replay_trial` and, with `plot`, its figure (key `plot`: its path); returns the
+    command's JSON object. A corrupt log is a ParameterError, a log without a step a RunFailure."""
+    from rimless.errors import ParameterError, RunFailure
+    from rimless.firmware.service.triallog import TrialLogError
+
+    if not path.is_file():
+        raise ParameterError(f"{path}: no such trial log")
+    try:
+        rep = replay_trial(path, params, firmware_config=firmware_config)
+    except TrialLogError as err:
+        raise ParameterError(str(err)) from None
+    except ValueError as err:
+        raise RunFailure(str(err)) from None
+    out = rep.summary()
+    out["plot"] = str(plot_replay(rep, plot)) if plot is not None else None
+    return out

@@ -62,7 +62,7 @@ def firmware_grid_points(params: Any, rates_hz: list[float], delays_ms: list[flo
 @functools.lru_cache(maxsize=8)
 def _ideal_reference(params_json: str) -> dict[str, float]:
     """The ideal-clutch ER fixed point at these parameters (per worker process, computed once)."""
-    from rimless.sim.cli.firmware import ideal_fixed_point
+    from rimless.sim.in_the_loop.ideal import ideal_fixed_point
     from rimless.sim.model.params import WheelParams
 
     params = WheelParams(**json.loads(params_json))
@@ -279,3 +279,56 @@ def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
                  "boundary; red dotted: the walk failed)", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path, dpi=120, option="--plot")
+
+
+def firmware_sweep_table(params: Any, *, rate_hz: str | None, clutch_delay_ms: str | None,
+                         noise_counts: float | None, steps: int, seed: int, critical_slope: bool,
+                         critical_low_deg: float, out: Path, scheduler: str, workers: int | None,
+                         cache_dir: Any, plot: Any, progress: Callable[[int, int], None] | None = None
+                         ) -> dict[str, Any]:
+    """`rimless sim sweep --clutch firmware`: the grid of `rate_hz` x `clutch_delay_ms` (the options' text,
+    Hz and ms) on Dask with the sweep's cache, written as `out`.parquet/.csv, with the figure at `plot`.
+    Errors name the option. Returns the command's JSON object."""
+    from rimless.errors import ParameterError
+    from rimless.output import check_output_folder, writable_dir
+    from rimless.sim.studies.sweep import write_table
+    from rimless.values import parse_range
+
+    rates = parse_range(rate_hz or "300,1000", "--rate-hz")
+    delays = parse_range(clutch_delay_ms or "0:10:2.5", "--clutch-delay-ms")
+    if any(not 1.0 <= r <= 1e6 for r in rates):
+        raise ParameterError(f"--rate-hz must be rates in [1, 1e6] Hz, got {rate_hz!r}")
+    if any(not 0.0 <= d <= 1000.0 for d in delays):
+        raise ParameterError(f"--clutch-delay-ms must be delays in [0, 1000] ms, got {clutch_delay_ms!r}")
+    noise = 1.0 if noise_counts is None else noise_counts
+    if not (noise == noise and 0.0 <= noise <= 1000.0):
+        raise ParameterError(f"--noise-counts must be a noise level in [0, 1000] counts, got {noise}")
+    if not (math.isfinite(critical_low_deg) and 0.0 <= critical_low_deg < params.slope_deg):
+        raise ParameterError(f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), "
+                             f"got {critical_low_deg}")
+    check_output_folder(out.parent if str(out.parent) else ".", option="--out")
+    if cache_dir is not None:
+        writable_dir(cache_dir, option="--cache-dir")
+    options = FirmwareSweepOptions(steps=steps, noise_counts=noise, seed=seed, critical_slope=critical_slope,
+                                   critical_low_deg=critical_low_deg)
+    try:
+        res = run_firmware_grid(params, rates, delays, options, scheduler=scheduler, workers=workers,
+                                cache_dir=cache_dir, progress=progress)
+    except ConnectionError as err:
+        raise ParameterError(f"--scheduler: {err}") from None
+    meta = {"clutch": "firmware", "grid": {"rate_hz": rates, "delay_ms": delays}, "options": options.__dict__,
+            "base_params": params.to_dict(), "scheduler": scheduler, "ideal": res["ideal"]}
+    paths = write_table(res["rows"], out, meta)
+    res["plot"] = str(plot_firmware_sweep(res, plot)) if plot is not None else None
+    return {"clutch": "firmware", "rows": res["rows"], "ideal": res["ideal"], "references": res["references"],
+            "files": [str(p) for p in paths], "plot": res["plot"], "seconds": res["seconds"],
+            "computed": res["computed"], "cached": res["cached"], "scheduler": scheduler,
+            "workers": res["workers"], "grid": meta["grid"]}
+
+
+def firmware_sweep_figure(params: Any, rates_hz: list[float], delays_s: list[float], *, plot: Any = None,
+                          **options: Any) -> dict[str, Any]:
+    """`rimless sim firmware-sweep`: `run_firmware_sweep` and, with `plot`, its figure (key `plot`: its path)."""
+    out = run_firmware_sweep(params, rates_hz, delays_s, **options)
+    out["plot"] = str(plot_firmware_sweep(out, plot)) if plot is not None else None
+    return out

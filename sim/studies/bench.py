@@ -26,6 +26,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -473,3 +474,15 @@ def format_table(result: dict[str, Any]) -> str:
 if __name__ == "__main__":  # python -m rimless.sim.studies.bench [--quick] [--json]
     res = run_bench("--quick" in sys.argv, progress=lambda m: print(m, file=sys.stderr))
     print(json.dumps(res, indent=1, default=str) if "--json" in sys.argv else format_table(res))
+
+
+def bench_study(quick: bool, *, plot: Path | None = None, progress: Callable[[str], None] | None = None
+                ) -> dict[str, Any]:
+    """`rimless bench`: run_bench and, with `plot`, the work-precision figure written atomically there."""
+    result = run_bench(quick, progress)
+    if plot is not None:
+        from rimless.output import atomic_file
+
+        with atomic_file(plot, option="--plot") as tmp:
+            plot_work_precision(result, str(tmp))
+    return result

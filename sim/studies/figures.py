@@ -12,7 +12,8 @@ PHASE_COLOURS = {"dlsp": "#f4cccc", "slsp_free": "#d9ead3", "slsp_clutched": "#c
 PHASE_LABELS = {"dlsp": "double support", "slsp_free": "single support, free", "slsp_clutched": "single support, clutched"}
 
 
-def _shade_phases(ax, traj: GaitTrajectory) -> None:  # noqa: ANN001
+def shade_phases(ax, traj: GaitTrajectory) -> None:  # noqa: ANN001
+    """Shade each phase of every step of `traj` on `ax` (time axis in s) in its PHASE_COLOURS."""
     for step in traj.steps:
         for rec in step.phases:
             if rec.duration_s > 0:
@@ -78,7 +79,7 @@ def plot_forces(traj: GaitTrajectory, ax) -> None:  # noqa: ANN001
     tab = traj.table
     if "lambda_b_y_N" not in tab:
         raise ValueError("the trajectory has no forces: simulate with forces=True")
-    _shade_phases(ax, traj)
+    shade_phases(ax, traj)
     t = tab["t_s"]
     ax.plot(t, tab["lambda_b_y_N"], color="C0", label="foot b (leading/stance) normal")
     ax.plot(t, tab["lambda_a_y_N"], color="C1", label="foot a (trailing) normal")
@@ -108,7 +109,7 @@ def plot_gait(traj: GaitTrajectory, path: str | Path | None = None, *, forces: b
     for i in range(1, 4 if with_forces else 3):
         axes.append(fig.add_subplot(grid[i], sharex=axes[0]))
     ax = axes[0]
-    _shade_phases(ax, traj)
+    shade_phases(ax, traj)
     ax.plot(t, tab["L1_m"] * 1e3, color="C0", label="stance leg L1")
     ax.plot(t, tab["L2_m"] * 1e3, color="C1", label="trailing leg L2", alpha=0.8)
     ax.axhline(traj.params.leg_length_m * 1e3, color="k", lw=0.6, ls=":")
@@ -117,11 +118,11 @@ def plot_gait(traj: GaitTrajectory, path: str | Path | None = None, *, forces: b
                                                   if traj.model == "er" or n != "slsp_clutched"]
     ax.legend(handles=handles, loc="lower right", fontsize=8, ncol=2)
     ax = axes[1]
-    _shade_phases(ax, traj)
+    shade_phases(ax, traj)
     ax.plot(t, tab["com_height_normal_m"] * 1e3, color="C2")
     ax.set_ylabel("CoM height normal\nto slope (mm)")
     ax = axes[2]
-    _shade_phases(ax, traj)
+    shade_phases(ax, traj)
     ax.plot(t, np.degrees(tab["theta_rad"]), color="C3", label="theta (deg)")
     ax2 = ax.twinx()
     ax2.plot(t, tab["dtheta_rad_s"], color="C4", label="theta' (rad/s)")

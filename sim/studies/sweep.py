@@ -42,29 +42,6 @@ def default_cache_dir() -> Path:
     return Path(base) / "rimless" / "sweep"
 
 
-def parse_range(text: str, option: str) -> list[float]:
-    """`START:STOP:STEP` (STOP included when on the grid) or comma-separated values; errors name the option."""
-    text = text.strip()
-    try:
-        if ":" in text:
-            parts = [float(v) for v in text.split(":")]
-            if len(parts) != 3:
-                raise ValueError
-            start, stop, step = parts
-            if not all(math.isfinite(v) for v in parts) or step <= 0 or stop < start:
-                raise ParameterError(f"{option} {text!r}: need START:STOP:STEP with STEP > 0 and STOP >= START")
-            n = int(math.floor((stop - start) / step + 1e-9)) + 1
-            if n > 10000:
-                raise ParameterError(f"{option} {text!r}: {n} values is too many (at most 10000)")
-            return [round(start + i * step, 12) for i in range(n)]
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise ParameterError(f"{option} must be START:STOP:STEP or comma-separated numbers, got {text!r}") from None
-    if not values or not all(math.isfinite(v) for v in values):
-        raise ParameterError(f"{option} must be finite numbers, got {text!r}")
-    return values
-
-
 @dataclass(frozen=True)
 class SweepOptions:
     """What every grid point is computed with (part of the cache key)."""
@@ -283,3 +260,52 @@ def write_table(rows: list[dict[str, Any]], path_stem: Path, metadata: dict[str,
     frame.to_csv(tmp, index=False)
     tmp.replace(csv_path)
     return [pq_path, csv_path]
+
+
+def parse_grid(params: Any, texts: dict[str, str | None]) -> dict[str, list[float]]:
+    """The sweep's grid from the options' text (name of GRID_PARAMETERS -> `START:STOP:STEP` or `a,b`, None
+    when not given), each value checked against `params` (WheelParams.replace); errors name the option."""
+    from rimless.values import parse_range
+
+    grid: dict[str, list[float]] = {}
+    for name, text in texts.items():
+        if text is None:
+            continue
+        option = "--" + name.replace("_", "-")
+        grid[name] = parse_range(text, option)
+        field_name = GRID_PARAMETERS[name][0]
+        for v in grid[name]:
+            try:
+                params.replace(**{field_name: v})
+            except ParameterError as err:
+                raise ParameterError(f"{option} {v:g}: {err}") from None
+    return grid
+
+
+def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]], mass_models: list[str],
+                 options: SweepOptions, out: Path, scheduler: str = "local", workers: int | None = None,
+                 cache_dir: Path | None = None, progress: Callable[[int, int], None] | None = None
+                 ) -> dict[str, Any]:
+    """`rimless sim sweep`: every grid point's branches (run_sweep), written as `out`.parquet/.csv and
+    `out`-points.parquet/.csv; returns the command's JSON object. An empty grid sweeps the wheel's own k."""
+    from rimless.errors import RunFailure
+    from rimless.output import check_output_folder, writable_dir
+
+    grid = grid or {"k": [params.k]}
+    points = grid_points(params, models, grid, mass_models)
+    check_output_folder(out.parent if str(out.parent) else ".", option="--out")  # before minutes of work
+    if cache_dir is not None:
+        writable_dir(cache_dir, option="--cache-dir")
+    try:
+        res = run_sweep(points, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir, progress=progress)
+    except ConnectionError as err:
+        raise ParameterError(f"--scheduler: {err}") from None
+    meta = {"grid": grid, "models": models, "mass_models": mass_models, "options": options.__dict__,
+            "base_params": params.to_dict(), "scheduler": scheduler}
+    if not res.rows:
+        raise RunFailure("the sweep produced no rows")
+    paths = write_table(res.rows, out, meta)
+    if res.points:
+        paths += write_table(res.points, out.with_name(out.name + "-points"), meta)
+    return {"rows": res.rows, "files": [str(p) for p in paths], "seconds": res.seconds, "computed": res.computed,
+            "cached": res.cached, "scheduler": scheduler, "workers": res.workers, "grid": grid}

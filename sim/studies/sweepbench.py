@@ -86,6 +86,16 @@ def branch_end_bench(params: WheelParams = WheelParams(), repeats: int = 3) -> d
     return out
 
 
+def bench_sweep(params: WheelParams, *, models: list[str], grid: dict[str, list[float]], mass_models: list[str],
+                options: Any) -> dict[str, Any]:
+    """`rimless sim sweep --bench`: the grid (no cache) on each scheduler, then the branch-end location at
+    `params` by pseudo-arclength against bisection. An empty grid sweeps the wheel's own k."""
+    from rimless.sim.studies.sweep import grid_points
+
+    points = grid_points(params, models, grid or {"k": [params.k]}, mass_models)
+    return {"sweep": sweep_bench(points, options), "branch_end": branch_end_bench(params)}
+
+
 def format_bench(result: dict[str, Any]) -> str:
     lines = []
     s = result.get("sweep")

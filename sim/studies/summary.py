@@ -1,4 +1,5 @@
-"""Plain-dict summaries of simulator results: what the CLI prints and what --json emits."""
+"""Plain-dict summaries of simulator results (fixed point, critical slope, rigid wheel): what the commands print
+and what --json emits. Keys are a contract: add, never rename."""
 
 from __future__ import annotations
 

@@ -1,0 +1,145 @@
+"""The `rimless sim` typer app and what its commands share: the wheel-parameter options (`wheel_params`),
+the option types, the choices, and the checks of output paths and schedulers made before any work."""
+
+import functools
+import inspect
+import math
+import os
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from rimless.errors import OutputFileError, ParameterError
+
+app = typer.Typer(no_args_is_help=True)
+
+
+class Model(str, Enum):
+    er = "er"
+    ve = "ve"
+
+
+class ModelOrRigid(str, Enum):
+    er = "er"
+    ve = "ve"
+    rigid = "rigid"
+
+
+class MassModel(str, Enum):
+    eight_leg = "eight-leg"
+    sliding_leg = "sliding-leg"
+    active_feet = "active-feet"
+
+
+class ClutchKind(str, Enum):
+    ideal = "ideal"
+    firmware = "firmware"
+
+
+class Backend(str, Enum):
+    auto = "auto"
+    fast = "fast"
+    reference = "reference"
+
+
+_PARAM_OPTIONS: list[tuple[str, Any, str]] = [
+    ("k", Optional[float], "Leg spring stiffness k, N/m [Table 1: 2700]."),
+    ("c", Optional[float], "Leg damping c, N s/m [Table 1: 8]."),
+    ("slope_deg", Optional[float], "Slope, degrees [Table 1: 0.05 rad = 2.865 deg]."),
+    ("slope_rad", Optional[float], "Slope, rad [Table 1: 0.05]."),
+    ("hub_mass_kg", Optional[float], "Hub (main body) mass m_H, kg [1.892]."),
+    ("leg_mass_kg", Optional[float], "Mass of one leg m, kg [0.0378]."),
+    ("inertia_kg_m2", Optional[float], "Hub inertia I_c, kg m^2 [0.036]."),
+    ("leg_length_m", Optional[float], "Free leg length L0, m [0.237]."),
+    ("g", Optional[float], "Gravity, m/s^2 [9.81]."),
+    ("mass_model", Optional[MassModel], "How the legs' mass enters the model (model.md section 8) [eight-leg]."),
+    ("params_file", Optional[Path], "TOML file of parameters (keys: k, c, slope_deg or slope_rad, m_H, m, I_c, L0, g, "
+                                    "mass_model); command-line options win."),
+]
+_OPTION_NAMES = {"params_file": "--params", "g": "--g"}
+
+
+def build_params(values: dict[str, Any]) -> Any:
+    """WheelParams from the parameter options (validated; errors name the parameter)."""
+    from rimless.sim.model.params import WheelParams, load_params, params_from_mapping
+
+    base = WheelParams()
+    if values.get("params_file") is not None:
+        base = load_params(values["params_file"], base=base)
+    if values.get("slope_deg") is not None and values.get("slope_rad") is not None:
+        raise ParameterError("give the slope once: --slope-deg or --slope-rad, not both")
+    mapping: dict[str, Any] = {}
+    for key in ("k", "c", "slope_deg", "slope_rad", "hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "g"):
+        if values.get(key) is not None:
+            mapping[key] = values[key]
+    if values.get("mass_model") is not None:
+        mapping["mass_model"] = values["mass_model"].value
+    try:
+        return params_from_mapping(mapping, base=base, source="the command-line options")
+    except ParameterError as err:
+        if values.get("slope_deg") is not None and "slope" in str(err):
+            from rimless.sim.model.params import SPOKE_ANGLE_RAD
+
+            raise ParameterError(f"--slope-deg must be a finite slope in [0, {math.degrees(SPOKE_ANGLE_RAD / 2):g}) deg, "
+                                 f"got {values['slope_deg']:g} deg") from None
+        raise
+
+
+def wheel_params(func: Any = None, *, exclude: tuple[str, ...] = ()) -> Any:
+    """Add the parameter options to a command; the command receives `params: WheelParams`.
+
+    exclude: parameter options the command defines itself (e.g. a sweep's `--k` grid)."""
+    if func is None:
+        return functools.partial(wheel_params, exclude=exclude)
+    sig = inspect.signature(func)
+    own = [p for p in sig.parameters.values() if p.name != "params"]
+    options = [o for o in _PARAM_OPTIONS if o[0] not in exclude]
+    extra = []
+    for name, annotation, help_text in options:
+        flag = _OPTION_NAMES.get(name, "--" + name.replace("_", "-"))
+        opt = typer.Option(flag, help=help_text, rich_help_panel="Wheel parameters")
+        extra.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None,
+                                       annotation=Annotated[annotation, opt]))
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        values = {name: kwargs.pop(name, None) for name, _, _ in options}
+        kwargs["params"] = build_params(values)
+        return func(*args, **kwargs)
+
+    params = own + extra
+    wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+    wrapper.__annotations__ = {p.name: p.annotation for p in params}
+    del wrapper.__wrapped__  # typer must read the new signature, not the wrapped one
+    return wrapper
+
+
+ModelOpt = Annotated[Model, typer.Option("--model", help="er: energy-recycling (spring-clutch legs); ve: viscoelastic.")]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")]
+BackendOpt = Annotated[Backend, typer.Option("--backend", help="fast (compiled), reference (scipy solve_ivp) or auto.")]
+RtolOpt = Annotated[float, typer.Option("--rtol", min=1e-13, max=1e-3, help="Integrator relative tolerance.")]
+GuessOpt = Annotated[Optional[float], typer.Option("--theta-dot-guess", help="Initial guess of theta'+ (rad/s): picks the branch.")]
+ThetaGuessOpt = Annotated[Optional[float], typer.Option("--theta-plus-guess", help="Initial guess of theta+ (rad), "
+                                                        "the post-impact stance angle [-alpha/2 - 0.07].")]
+GaitOpt = Annotated[Optional[int], typer.Option("--gait", min=1, max=200, metavar="N",
+                                                help="Start from gait N of `rimless sim gaits` (same parameters, "
+                                                     "numbered by step period) instead of a guess.")]
+StrictOpt = Annotated[bool, typer.Option("--strict-contact", help="Reject gaits whose leading foot pulls on the ground in "
+                                                                   "double support or whose lifted foot dips below the slope.")]
+
+
+def check_plot_path(plot: Path) -> None:
+    """Refuse a --plot path that cannot be written before any work is done."""
+    if plot.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise ParameterError(f"{plot}: the file must end in .png, .pdf or .svg")
+    parent = plot.parent if str(plot.parent) else Path(".")
+    if not (parent.is_dir() and os.access(parent, os.W_OK | os.X_OK)):
+        raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
+
+
+def check_scheduler(scheduler: str) -> None:
+    """--scheduler: local, sync or the address of a running Dask scheduler."""
+    if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
+        raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")

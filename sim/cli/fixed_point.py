@@ -1,0 +1,163 @@
+"""`rimless sim fixed-point`, `gaits` and `critical-slope`: parse, call rimless.sim.studies.gaits, print."""
+
+import math
+from typing import Annotated, Any
+
+import typer
+
+from rimless.cli_rules import print_json, user_facing
+from rimless.progress import progress_bar
+from rimless.sim.cli.app import (Backend, BackendOpt, GaitOpt, GuessOpt, JsonOpt, Model, ModelOpt, ModelOrRigid, RtolOpt,
+                                 StrictOpt, ThetaGuessOpt, wheel_params)
+from rimless.sim.cli.output import console, table
+
+
+@user_facing
+@wheel_params
+def fixed_point_cmd(
+    params: Any,
+    model: ModelOpt = Model.er,
+    theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
+    strict_contact: StrictOpt = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Period-1 gait: the fixed point of the Poincaré map, its eigenvalues, period and contact diagnostics."""
+    from rimless.sim.studies.gaits import fixed_point_study
+
+    with progress_bar("period-1 gait", json_out=json_out) as bar:
+        out = fixed_point_study(params, model.value, theta_dot_guess=theta_dot_guess,
+                                theta_plus_guess=theta_plus_guess, gait=gait, strict_contact=strict_contact,
+                                backend=backend.value, rtol=rtol,
+                                progress=lambda i, n: bar.update(i, n, "finding the gaits"))
+    if json_out:
+        print_json(out)
+        return
+    mf = out["min_normal_force_N"]
+    rows = [
+        ("model / mass model", f"{model.value} / {params.mass_model}"),
+        ("slope (deg)", params.slope_deg),
+        ("k (N/m), c (N s/m)", f"{params.k:g}, {params.c:g}"),
+        ("theta+ (rad)", out["theta_plus_rad"]),
+        ("theta'+ (rad/s)", out["theta_dot_plus_rad_s"]),
+        ("step period (s)", out["step_period_s"]),
+        ("eigenvalues", ", ".join(f"{re:.5f}{im:+.5f}j" for re, im in out["eigenvalues"])),
+        ("max |eigenvalue|", out["max_abs_eigenvalue"]),
+        ("orbitally stable (max |eig| < 1)", "yes" if out["stable"] else "no"),
+        ("contact valid (unilateral)", "yes" if out["contact_valid"] else "NO"),
+        ("energy ratio E+/E-", out["energy_ratio"]),
+        ("phase durations (s)", ", ".join(f"{k} {v:.4f}" for k, v in out["phase_durations_s"].items())),
+        ("min normal force b in DLSP (N)", mf["dlsp_leading_b"]),
+        ("min normal force b in SLSP (N)", min(v for v in (mf["slsp_free"], mf["slsp_clutched"]) if v == v)),
+        ("trailing foot lowest point (mm)", out["trailing_foot_min_height_m"] * 1e3),
+        ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
+        ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
+        ("residual |P(z)-z|", out["residual"]),
+    ]
+    con = console()
+    con.print(table("period-1 gait", rows))
+    con.print(out["contact_note"], soft_wrap=True)
+    con.print(out["relabel_note"], soft_wrap=True)
+
+
+@user_facing
+@wheel_params
+def gaits_cmd(
+    params: Any,
+    model: ModelOpt = Model.ve,
+    theta_dot_min: Annotated[float, typer.Option(help="Smallest theta'+ guess scanned, rad/s.")] = 0.8,
+    theta_dot_max: Annotated[float, typer.Option(help="Largest theta'+ guess scanned, rad/s.")] = 6.0,
+    guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses.")] = 14,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Every period-1 gait at one slope: scan initial conditions, solve, de-duplicate."""
+    from rich.table import Table
+
+    from rimless.sim.studies.gaits import gait_scan
+
+    with progress_bar("scanning guesses", guesses, json_out=json_out) as bar:
+        out = gait_scan(params, model.value, theta_dot_min=theta_dot_min, theta_dot_max=theta_dot_max,
+                        guesses=guesses, backend=backend.value, rtol=rtol, progress=lambda i, n: bar.update(i))
+    if json_out:
+        print_json(out)
+        return
+    items = out["gaits"]
+    listing = Table(title=f"period-1 gaits of the {model.value} wheel at {params.slope_deg:.4f} deg")
+    listing.box = None
+    listing.pad_edge = False
+    for col in ("#", "theta+ rad", "theta'+ rad/s", "period s", "max|eig|", "stable", "valid", "Fmin N", "E+/E-"):
+        listing.add_column(col, justify="right", no_wrap=True)
+    for i, it in enumerate(items):
+        fmin = it["contact"]["min_stance_force_single_support_N"] if it["contact"] else float("nan")
+        listing.add_row(str(i + 1), f"{it['theta_plus_rad']:.5f}", f"{it['theta_dot_plus_rad_s']:.5f}",
+                        f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", "yes" if it["stable"] else "no",
+                        "yes" if it["contact_valid"] else "NO", f"{fmin:.3g}", f"{it['energy_ratio']:.4f}")
+    con = console()
+    con.print(listing)
+    con.print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
+              "impulses > 0; a gait that is not was found with the stance foot held); Fmin: smallest stance "
+              "force in single support; theta'+: post-impact angular velocity", soft_wrap=True)
+    for i, it in enumerate(items):
+        if it["contact_reason"]:
+            con.print(f"gait {i + 1}: {it['contact_reason']}", soft_wrap=True)
+    if not items:
+        con.print("no period-1 gait found in the scanned range")
+
+
+@user_facing
+@wheel_params
+def critical_slope_cmd(
+    params: Any,
+    model: Annotated[ModelOrRigid, typer.Option("--model", help="er, ve or rigid (closed form).")] = ModelOrRigid.er,
+    theta_dot_guess: GuessOpt = None,
+    theta_plus_guess: ThetaGuessOpt = None,
+    gait: GaitOpt = None,
+    step_rad: Annotated[float, typer.Option(min=1e-5, max=0.01, help="Algorithm 1 slope step, rad.")] = 0.001,
+    start_slope_rad: Annotated[float, typer.Option(help="Slope where the continuation starts, rad.")] = 0.05,
+    strict_contact: StrictOpt = False,
+    backend: BackendOpt = Backend.auto,
+    rtol: RtolOpt = 1e-10,
+    json_out: JsonOpt = False,
+) -> None:
+    """Critical slope and minimum cost of transport: Algorithm 1 and the refined end of the branch."""
+    from rimless.sim.studies.gaits import critical_slope_study
+
+    with progress_bar("continuation in slope", json_out=json_out) as bar:
+        out = critical_slope_study(
+            params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess, gait=gait,
+            step_rad=step_rad, start_slope_rad=start_slope_rad, strict_contact=strict_contact, backend=backend.value,
+            rtol=rtol, gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
+            progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"))
+    if json_out:
+        print_json(out)
+        return
+    if model == ModelOrRigid.rigid:
+        e8 = out["eight_leg_consistent"]
+        console().print(table("rigid rimless wheel (Coleman)", [
+            ("critical slope (deg), paper convention M = m_H", f"{out['critical_slope_deg']:.3f}"),
+            ("critical slope (rad)", out["critical_slope_rad"]),
+            ("CoT = tan(phi_c)", out["cot"]),
+            ("beta, eigenvalue beta^2", f"{out['beta']:.5f}, {out['eigenvalue']:.5f}"),
+            ("eight-leg-consistent critical slope (deg)", f"{e8['critical_slope_deg']:.3f}"),
+            ("eight-leg-consistent critical slope (rad)", e8["critical_slope_rad"]),
+        ]))
+        return
+    at = out["at_critical"]
+    console().print(table(f"critical slope, {model.value} wheel", [
+        ("critical slope (deg)", out["critical_slope_deg"]),
+        ("critical slope (rad)", out["critical_slope_rad"]),
+        ("CoT = tan(phi_c)", out["cot"]),
+        ("branch ends by", out["reason"]),
+        ("located by", f"{out['method']} ({out['map_evaluations']} map evaluations)"),
+        ("Algorithm 1 slope (rad), step", f"{out['algorithm1_slope_rad']:.6f}, {out['algorithm1_step_rad']:g}"),
+        ("branch followed from", f"theta'+ = {out['branch']['start_theta_dot_plus_rad_s']:.4f} rad/s, period "
+                                 f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad"),
+        ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
+        ("contact valid at critical", ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-"),
+    ]))
+    console().print(f"why: {out['detail']}", soft_wrap=True)

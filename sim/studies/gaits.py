@@ -1,0 +1,157 @@
+"""The work behind `rimless sim fixed-point`, `gaits` and `critical-slope`: one call each, returning the plain
+dict `--json` emits (keys of rimless.sim.studies.summary). Inputs are validated here, errors name the option
+(ParameterError); a valid input without a result raises RunFailure."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, Optional
+
+import numpy as np
+
+from rimless.errors import ParameterError, RunFailure
+
+GaitsProgress = Optional[Callable[[int, int], None]]
+
+
+def guess_from_options(params: Any, model: str, theta_dot_guess: Optional[float],
+                       theta_plus_guess: Optional[float] = None) -> np.ndarray:
+    """The default section guess (theta+ rad, theta'+ rad/s), with either value overridden."""
+    from rimless.sim.model.params import SPOKE_ANGLE_RAD
+    from rimless.sim.step.poincare import default_guess
+
+    z = default_guess(params, model)
+    if theta_dot_guess is not None:
+        if not (math.isfinite(theta_dot_guess) and theta_dot_guess > 0):
+            raise ParameterError(f"--theta-dot-guess must be a positive angular velocity in rad/s, got {theta_dot_guess}")
+        z[1] = theta_dot_guess
+    if theta_plus_guess is not None:
+        if not (math.isfinite(theta_plus_guess) and -SPOKE_ANGLE_RAD < theta_plus_guess < 0):
+            raise ParameterError(f"--theta-plus-guess must be a stance angle in (-{SPOKE_ANGLE_RAD:.4f}, 0) rad, "
+                                 f"got {theta_plus_guess}")
+        z[0] = theta_plus_guess
+    return z
+
+
+def start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], theta_plus_guess: Optional[float],
+                gait: Optional[int], backend: str, rtol: float, progress: GaitsProgress = None) -> np.ndarray:
+    """The section point to start Newton from: gait N of the `gaits` scan, or the (overridden) default guess.
+
+    progress(i, n): guesses of the gait scan done (only with `gait`)."""
+    if gait is None:
+        return guess_from_options(params, model, theta_dot_guess, theta_plus_guess)
+    if theta_dot_guess is not None or theta_plus_guess is not None:
+        raise ParameterError("give either --gait or --theta-dot-guess/--theta-plus-guess, not both")
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.poincare import find_gaits
+
+    pmap = make_map(params, model, backend=backend, rtol=rtol)
+    found = find_gaits(pmap, progress=progress, include_invalid=True)
+    if not found:
+        raise RunFailure(f"--gait {gait}: no period-1 gait of the {model} wheel at {params.slope_deg:.4f} deg")
+    if gait > len(found):
+        raise ParameterError(f"--gait {gait}: only {len(found)} gait(s) of the {model} wheel at "
+                             f"{params.slope_deg:.4f} deg (see `rimless sim gaits`)")
+    fp = found[gait - 1]
+    if fp.bilateral:
+        from rimless.sim.continuation.contact import contact_facts
+        from rimless.sim.continuation.branches import contact_reason
+        from rimless.sim.step.poincare import bilateral_map
+
+        raise RunFailure(f"--gait {gait}: that gait of the {model} wheel violates unilateral contact "
+                         f"({contact_reason(contact_facts(bilateral_map(pmap), fp.z, 5e-4))}); it exists only "
+                         "with the stance foot held")
+    return fp.z.copy()
+
+
+def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[float] = None,
+                      theta_plus_guess: Optional[float] = None, gait: Optional[int] = None,
+                      strict_contact: bool = False, backend: str = "auto", rtol: float = 1e-10,
+                      progress: GaitsProgress = None) -> dict[str, Any]:
+    """The period-1 gait from the start guess: fixed point, eigenvalues, period and contact diagnostics."""
+    from rimless.sim.integrate.backend import jacobian_factory, make_map
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.step.poincare import solve_fixed_point
+    from rimless.sim.studies.summary import fixed_point_summary
+
+    guess = start_guess(params, model, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                        gait=gait, backend=backend, rtol=rtol, progress=progress)
+    pmap = make_map(params, model, backend=backend, rtol=rtol)
+    jf = jacobian_factory(backend)
+    try:
+        fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None, diagnostics=True,
+                               strict_contact=strict_contact)
+    except StepFailure as err:
+        raise RunFailure(f"no period-1 gait found for the {model} wheel from the guess "
+                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
+    return fixed_point_summary(fp, params, model, guess=guess)
+
+
+def gait_scan(params: Any, model: str, *, theta_dot_min: float = 0.8, theta_dot_max: float = 6.0,
+              guesses: int = 14, backend: str = "auto", rtol: float = 1e-10,
+              progress: GaitsProgress = None) -> dict[str, Any]:
+    """Every period-1 gait at one slope (theta'+ guesses in [min, max] rad/s), each with its contact facts."""
+    from rimless.sim.continuation.contact import contact_facts
+    from rimless.sim.continuation.branches import contact_reason
+    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.step.poincare import bilateral_map, find_gaits
+
+    if not 0 < theta_dot_min < theta_dot_max:
+        raise ParameterError("need 0 < --theta-dot-min < --theta-dot-max (rad/s)")
+    pmap = make_map(params, model, backend=backend, rtol=rtol)
+    found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
+                       progress=progress, include_invalid=True)
+    items = []
+    for fp in found:
+        try:  # a gait found with the stance foot held is recorded that way too
+            facts = contact_facts(bilateral_map(pmap) if fp.bilateral else pmap, fp.z, 5e-4)
+        except StepFailure:
+            facts = None
+        items.append({
+            "theta_plus_rad": float(fp.z[0]),
+            "theta_dot_plus_rad_s": float(fp.z[1]),
+            "step_period_s": fp.step.period_s,
+            "eigenvalues": [[float(e.real), float(e.imag)] for e in fp.eigenvalues],
+            "max_abs_eigenvalue": fp.max_abs_eigenvalue,
+            "stable": fp.stable,
+            "energy_ratio": fp.step.impact.energy_ratio,
+            "contact_valid": bool(facts is not None and facts.contact_valid),
+            "contact_reason": contact_reason(facts),
+            "contact_violation": facts.violation if facts is not None else "unknown",
+            "contact_model": "bilateral" if fp.bilateral else "unilateral",
+            "contact": facts.as_dict() if facts is not None else None,
+        })
+    return {"model": model, "slope_rad": params.slope_rad, "k": params.k, "c": params.c, "gaits": items}
+
+
+def critical_slope_study(params: Any, model: str, *, theta_dot_guess: Optional[float] = None,
+                         theta_plus_guess: Optional[float] = None, gait: Optional[int] = None,
+                         step_rad: float = 0.001, start_slope_rad: float = 0.05, strict_contact: bool = False,
+                         backend: str = "auto", rtol: float = 1e-10, gaits_progress: GaitsProgress = None,
+                         progress: Optional[Callable[[float], None]] = None) -> dict[str, Any]:
+    """Critical slope and minimum cost of transport: Algorithm 1 from `start_slope_rad` and the refined end of
+    the branch; model "rigid" gives the closed form. progress(slope_rad): the continuation's current slope."""
+    from rimless.sim.studies.summary import critical_slope_summary, rigid_summary
+
+    if model == "rigid":
+        return rigid_summary(params)
+    from rimless.sim.continuation.algorithm1 import critical_slope
+    from rimless.sim.integrate.backend import jacobian_factory, make_map
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.params import SPOKE_ANGLE_RAD
+
+    if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
+        raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
+    start_params = params.replace(slope_rad=start_slope_rad)
+    pmap = make_map(start_params, model, backend=backend, rtol=rtol)
+    guess = start_guess(start_params, model, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                        gait=gait, backend=backend, rtol=rtol, progress=gaits_progress)
+    try:
+        cs = critical_slope(pmap, guess, start_slope_rad=start_slope_rad, step_rad=step_rad,
+                            strict_contact=strict_contact, jacobian_factory=jacobian_factory(backend),
+                            progress=progress)
+    except StepFailure as err:
+        raise RunFailure(f"critical slope of the {model} wheel: {err}") from None
+    return critical_slope_summary(cs, params)

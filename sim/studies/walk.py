@@ -1,0 +1,83 @@
+"""The work behind `rimless sim gait` with the ideal clutch: N steps from the fixed point (or a given start),
+the trajectory written and plotted on request; returns the command's JSON object."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Optional
+
+from rimless.errors import ParameterError, RunFailure
+
+TRAJECTORY_SUFFIXES = (".parquet", ".csv")
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[float] = None,
+              theta_plus_rad: Optional[float] = None, theta_dot_guess: Optional[float] = None,
+              theta_plus_guess: Optional[float] = None, gait: Optional[int] = None, out: Optional[Path] = None,
+              plot: Optional[Path] = None, forces: bool = False, sample_dt_s: float = 1e-3, backend: str = "auto",
+              rtol: float = 1e-10, progress: Optional[Callable[[int], None]] = None) -> dict[str, Any]:
+    """Simulate `steps` steps from the fixed point, or from theta'+ = `theta_dot` rad/s (and theta+ =
+    `theta_plus_rad`, default -alpha/2) just after an impact; write the trajectory to `out`, the figure to `plot`.
+
+    The summary's `failure` is the reason the walk ended early (None if it did not). progress(k): steps done."""
+    import numpy as np
+
+    from rimless.output import check_output_folder
+    from rimless.sim.integrate.backend import jacobian_factory, make_integrator, make_map
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.mechanics import ALPHA
+    from rimless.sim.step.gait import simulate_steps
+    from rimless.sim.step.poincare import solve_fixed_point
+    from rimless.sim.studies.gaits import start_guess
+
+    for path, exts in ((out, TRAJECTORY_SUFFIXES), (plot, FIGURE_SUFFIXES)):
+        if path is not None and path.suffix.lower() not in exts:
+            raise ParameterError(f"{path}: the file must end in {' or '.join(exts)}")
+    for path, option in ((out, "--out"), (plot, "--plot")):  # before the work, not after
+        if path is not None:
+            check_output_folder(path.parent if str(path.parent) else ".", option=option)
+    if theta_dot is not None:
+        if not (math.isfinite(theta_dot) and theta_dot > 0):
+            raise ParameterError(f"--theta-dot must be a positive angular velocity in rad/s, got {theta_dot}")
+        z0 = np.array([-ALPHA / 2 if theta_plus_rad is None else theta_plus_rad, theta_dot])
+        start = "given"
+    else:
+        pmap = make_map(params, model, backend=backend, rtol=rtol)
+        jf = jacobian_factory(backend)
+        guess = start_guess(params, model, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
+                            gait=gait, backend=backend, rtol=rtol)
+        try:
+            fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None)
+        except StepFailure as err:
+            raise RunFailure(f"no fixed point to start from ({err}); give --theta-dot") from None
+        z0 = fp.z
+        start = "fixed point"
+    traj = simulate_steps(params, model, z0, steps, make_integrator(backend, rtol), record_dt=sample_dt_s,
+                          forces=forces, progress=progress)
+    if out is not None:
+        from rimless.sim.step.gait import write_trajectory
+
+        write_trajectory(traj, out, {"start": start, "backend": backend, "rtol": rtol})
+    if plot is not None and traj.steps:
+        from rimless.sim.studies.figures import plot_gait, save_figure
+
+        save_figure(plot_gait(traj, None, forces=forces), plot)
+    return {
+        "model": model,
+        "slope_rad": params.slope_rad,
+        "k": params.k,
+        "c": params.c,
+        "start": start,
+        "theta_plus_rad": float(z0[0]),
+        "theta_dot_plus_rad_s": float(z0[1]),
+        "steps_done": len(traj.steps),
+        "steps_requested": steps,
+        "step_periods_s": [s.period_s for s in traj.steps],
+        "energy_ratios": [s.impact.energy_ratio for s in traj.steps],
+        "failure": None if traj.failure is None else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
+        "out": str(out) if out else None,
+        "plot": str(plot) if plot and traj.steps else None,
+    }
