@@ -181,7 +181,7 @@ def _fmt(v: float) -> str:
 
 def write_trial_csv(trial: ExampleTrial, path: Path) -> Path:
     """Write the trial in Tracker CSV layout (via `write_tracker_csv`), then reformat numbers and short rows."""
-    from rimless.analysis.io.vicon_csv import write_tracker_csv
+    from rimless.analysis.io.tracker_csv import write_tracker_csv
 
     objects = {"Wheel": trial.pose} if trial.ramp_pose is None else {"Ramp": trial.ramp_pose, "Wheel": trial.pose}
     write_tracker_csv(path, rate_hz=RATE_HZ, objects=objects, length_unit="mm", angle_unit="rad", newline="\r\n")

@@ -217,7 +217,7 @@ def simulate_crit_trial(slope_deg: float, release: float, rng: np.random.Generat
 
 def generate(out_dir: str | Path = DATA_DIR, *, seed: int = SEED) -> list[Path]:
     """Write the SYNTHETIC_crit_*.csv series and SYNTHETIC_crit_truth.toml; returns the CSV paths."""
-    from rimless.analysis.io.vicon_csv import write_tracker_csv
+    from rimless.analysis.io.tracker_csv import write_tracker_csv
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -185,15 +185,15 @@ def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     information). Held at the end values outside the simulated walk (a stall)."""
     from scipy.interpolate import CubicSpline
 
-    from rimless.analysis.inference.compare import _clean_curve
+    from rimless.analysis.inference.compare import clean_curve
 
     t_all = np.asarray(g.table["t_s"], float) - t0
     y_all = np.asarray(g.table["com_height_normal_m"], float)
     step = np.asarray(g.table["step"])
-    st, sy = _clean_curve(t_all, y_all)
+    st, sy = clean_curve(t_all, y_all)
     out = np.interp(tt, st, sy)
     for k in np.unique(step):
-        ts, ys = _clean_curve(t_all[step == k], y_all[step == k])
+        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
         if ts.size < 4:
             continue
         m = (tt >= ts[0]) & (tt <= ts[-1])

@@ -9,19 +9,14 @@ import numpy as np
 import pytest
 
 from rimless.analysis.examples.synthetic import rolling_wheel
-from rimless.analysis.io.trial import TrialRefused, build_trial, fill_short_gaps, import_trial, read_trial
-from rimless.analysis.io.vicon_csv import read_vicon_csv, write_tracker_csv
+from rimless.analysis.io.tracker_csv import write_tracker_csv
+from rimless.analysis.io.trial import read_trial
+from rimless.analysis.io.vicon_csv import read_vicon_csv
+from rimless.analysis.kinematics.build import TrialRefused, build_trial, fill_short_gaps, import_trial
 from rimless.errors import InputFileError
+from tests.support.analysis_data import PUBLIC, public
 
-PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
 NOISE_M = 0.3e-3
-
-
-def public(name: str) -> Path:
-    p = PUBLIC / name
-    if not p.exists():
-        pytest.skip(f"public Vicon exports not found at {PUBLIC} (they live in ../shared beside the repo)")
-    return p
 
 
 def write_markers(tmp_path, w, markers=None, name="m.csv"):

@@ -3,16 +3,13 @@ data cannot identify."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # the truth models beside this file (importlib mode)
-from sim_truth import sim_trial  # noqa: E402
-from rimless.analysis.inference.calibrate import calibrate, least_squares_report, parse_fit  # noqa: E402
-from rimless.errors import ParameterError  # noqa: E402
+from rimless.analysis.inference.calibrate import calibrate, least_squares_report, parse_fit
+from rimless.errors import ParameterError
+from tests.support.analysis_sim_truth import sim_trial
 
 C_TRUE = 11.0  # N s/m; Table 1 has 8
 

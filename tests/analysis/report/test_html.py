@@ -19,7 +19,8 @@ from rimless.analysis.inference.compare import Simulator, compare_trial, step_pe
 from rimless.analysis.examples.bundled import DATA_DIR, TRIALS, data_files, load_truth, simulate_trial, write_trial_csv
 from rimless.analysis.report.html import build_report
 from rimless.analysis.io.timeseries import Event, TimeSeries
-from rimless.analysis.io.trial import Trial, import_trial
+from rimless.analysis.io.trial import Trial
+from rimless.analysis.kinematics.build import import_trial
 from rimless.cli import app as root_app
 
 runner = CliRunner()

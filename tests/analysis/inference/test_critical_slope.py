@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # the truth models beside this file (importlib mode)
-from rigid_truth import RigidTruth, duck_trial  # noqa: E402
-from rimless.analysis.inference.critical_slope import estimate_critical_slope, firth_logistic, group_slopes  # noqa: E402
-from rimless.analysis.inference.sustained import StancePendulum, consecutive_periods, trial_verdict, trial_verdicts  # noqa: E402
+from rimless.analysis.inference.critical_slope import estimate_critical_slope, firth_logistic, group_slopes
+from rimless.analysis.inference.sustained import StancePendulum, consecutive_periods, trial_verdict, trial_verdicts
+from tests.support.analysis_rigid_truth import RigidTruth, duck_trial
 
 TRUTH = RigidTruth()
 SLOPES_DEG = (0.8, 1.0, 1.2, 1.4, 1.6, 1.8)  # straddle Coleman's 1.267 deg, not symmetric about it

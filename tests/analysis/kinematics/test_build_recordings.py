@@ -1,4 +1,5 @@
-"""Recordings made the way the prototype is really recorded, against the independent truth model in truth_wheel.py.
+"""Recordings made the way the prototype is really recorded, against the independent truth model in
+tests/support/analysis_truth_wheel.py.
 
 Each case: a hold before the release, the walk, an ending (walked, left the volume, caught 2 cm / 15 cm, fell,
 stalled), and the mess of real files (gaps, zeros, a ramp, a pasted take, unlabelled or uneven markers, wrong
@@ -7,18 +8,15 @@ units, a lost cell, an absurd rate). Expectations come from the truth model, nev
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import truth_wheel as tw  # noqa: E402
-
-from rimless.analysis.io.trial import TrialRefused, import_trial  # noqa: E402
-from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text  # noqa: E402
+from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text
+from rimless.analysis.kinematics.build import TrialRefused, import_trial
+from tests.support import analysis_truth_wheel as tw
 
 NOISE = 0.3e-3
 FRAME = 0.01
