@@ -145,10 +145,10 @@ def calibrate_cmd(
 
     Also: correlations, identifiability, residuals against Table 1, the calibrated critical slope.
     """
-    from rimless.analysis.inference.calibrate import FIT_FIELDS
+    from rimless.analysis.inference.calibrate import parse_fit
     from rimless.analysis.inference.runs import calibration_run
 
-    names_fit = parse_list(fit, "--fit", choices=list(FIT_FIELDS), unique=True)
+    names_fit = parse_fit(fit)
     models = parse_list(model, "--model", choices=MODELS, lower=True)
     if len(models) != 1:
         raise ParameterError(f"--model must be er or ve, got {model!r}")

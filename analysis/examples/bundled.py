@@ -171,7 +171,7 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
 _EXP = re.compile(r"e([+-])(\d{1,2})$")
 
 
-def _fmt(v: float) -> str:
+def format_number(v: float) -> str:
     """printf("%.7g") with Windows' 3-digit exponent, as Tracker on Windows writes numbers."""
     if not math.isfinite(v):
         return ""
@@ -197,7 +197,7 @@ def write_trial_csv(trial: ExampleTrial, path: Path) -> Path:
             # the wheel's cells are empty; with the ramp (first) still seen, the row ends after it
             out.append(",".join(cells[:8]) if trial.ramp_pose is not None else ",".join(cells[:2]))
             continue
-        out.append(",".join(cells[:2] + [_fmt(float(c)) if c else "" for c in cells[2:]]))
+        out.append(",".join(cells[:2] + [format_number(float(c)) if c else "" for c in cells[2:]]))
     path.write_bytes("\r\n".join(out).encode("utf-8"))
     return path
 

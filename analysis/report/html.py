@@ -20,13 +20,13 @@ import html
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rimless.errors import InputFileError, UserError
+from rimless.errors import InputFileError
 
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step_period_trends
 from rimless.analysis.kinematics.inputs import InputRow, load_input

@@ -80,9 +80,9 @@ def test_bundled_trial_imports_with_true_slope_and_periods(path, truth):
 
 
 def test_number_format_is_printf_with_3_digit_exponents():
-    from rimless.analysis.examples.bundled import _fmt
+    from rimless.analysis.examples.bundled import format_number
 
-    assert [_fmt(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
+    assert [format_number(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
         "7.2e-006", "-1.5e-012", "123.4568", "0.5", ""]
 
 
