@@ -120,5 +120,6 @@ def test_all_sustained_gives_no_estimate_and_says_why():
     rng = np.random.default_rng(1)
     trials = [duck_trial(TRUTH, 2.0, w, rng, name=f"a{w}") for w in (2.0, 2.5)]
     res = estimate_critical_slope([trial_verdict(t, pend_params) for t in trials], ["a", "b"])
-    assert res.chosen is None or res.chosen.method == "fixed-point-extrapolation"
-    assert res.bracket_deg is None
+    # every trial sustained, all at one slope: no bracket, no logistic, and no line of e* against the slope
+    assert res.chosen is None and not res.estimates and res.bracket_deg is None
+    assert "sustained" in res.why and "below" in res.why

@@ -114,7 +114,7 @@ def import_ok_or_refused(text: str, tmp_path) -> None:
     except UserError as e:
         assert str(e)
     else:
-        assert np.isfinite(trial.meta.slope_deg) or trial.meta.slope_deg != trial.meta.slope_deg
+        assert np.isfinite(trial.meta.slope_deg)
         assert np.all(np.isfinite(trial.step_period_s)) and np.all(trial.step_period_s > 0)
         assert trial.meta.outcome in ("walked", "stalled", "fell", "caught", "unknown")
     assert time.perf_counter() - t0 < 3.0  # no hang (a normal import of this file takes ~0.1 s)
