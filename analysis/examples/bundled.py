@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["TRIALS", "SEED", "DATA_DIR", "TRUTH_FILE", "ExampleTrial", "simulate_trial", "generate", "data_files"]
 
 #: Where the bundled dataset lives (package data of rimless.analysis).
@@ -40,7 +42,6 @@ LONG_GAP_TRIAL = 3  # index in TRIALS
 RAMP_TRIAL = 4  # index in TRIALS: this recording also tracks the static Ramp object
 NOISE_M = 0.3e-3
 ANGLE_NOISE_RAD = 1e-3
-ALPHA_RAD = math.pi / 4
 RECORD_DT_S = 1e-3
 RTOL = 1e-9
 #: (slope deg, release theta' rad/s): two releases per slope.

@@ -34,6 +34,8 @@ import numpy as np
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report",
            "NOT_IDENTIFIABLE_REL_SE", "NoTrialCalibrated"]
 
@@ -42,7 +44,6 @@ FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/
               "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
 NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
-ALPHA_RAD = math.pi / 4
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of the full least squares

@@ -36,9 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["TrialComparison", "SlopeGroup", "Simulator", "compare_trial", "step_period_trends", "fit_release_speed"]
 
-ALPHA_RAD = math.pi / 4
 MAX_SHIFT_S = 0.05
 RELEASE_GRID_RAD_S = (0.3, 8.0, 78)  # scan of the release speed: lo, hi, points
 #: a comparison is "suspect" unless: correlation >= min_correlation, RMS / amplitude <= max_relative_rms,
