@@ -15,7 +15,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from rimless.cli_rules import print_json, user_facing
+from rimless.cli_rules import EXIT_USER_ERROR, fail, print_json, user_facing
 from rimless.errors import ParameterError, UserError
 from rimless.values import parse_list, parse_numbers
 
@@ -23,8 +23,7 @@ from rimless.analysis.cli.critical import critical_lines, register as register_c
 
 app = typer.Typer(no_args_is_help=True, help="Vicon trials: import, show, benchmark.")
 
-EXIT_REFUSED = 2
-EXIT_NOTHING_COMPARED = 1
+EXIT_REFUSED = EXIT_USER_ERROR  # an input file was refused (the others were still done)
 #: `rimless.analysis.kinematics.build.DEFAULT_MAX_GAP_S` in ms (kept here so that ``--help`` needs no numpy import).
 DEFAULT_MAX_GAP_MS = 50.0
 MODELS = ("er", "ve")
@@ -243,9 +242,7 @@ def report_cmd(
     if res.refused:
         raise typer.Exit(EXIT_REFUSED)
     if not any(c.status == "ok" for c in res.comparisons):
-        typer.echo(f"error: no trial could be compared with the simulation ({len(res.comparisons)} failed; "
-                   "reasons above)", err=True)
-        raise typer.Exit(EXIT_NOTHING_COMPARED)
+        fail(f"no trial could be compared with the simulation ({len(res.comparisons)} failed; reasons above)")
 
 
 def demo_cmd(
