@@ -1,6 +1,8 @@
-"""``rimless trials critical-slope`` and ``rimless trials calibrate``.
+"""``rimless trials critical-slope`` and ``rimless trials calibrate``: parse, run
+(`rimless.analysis.inference.runs`), print.
 
-Only typer and the standard library at module level (``rimless --help`` stays fast).
+Only typer and the standard library at module level (``rimless --help`` stays fast). The rules come from
+`rimless.cli_rules`, lists are parsed by `rimless.values`.
 """
 
 from __future__ import annotations
@@ -12,66 +14,12 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from rimless.errors import InputFileError, ParameterError
+from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
+from rimless.errors import ParameterError
+from rimless.values import parse_list
 
-EXIT_FAILURE = 1
-EXIT_REFUSED = 2
-_MODELS = ("er", "ve")
-
-
-def _user_facing(func: Any) -> Any:
-    from rimless.analysis.cli import user_facing
-
-    return user_facing(func)
-
-
-def _print_json(obj: Any) -> None:
-    from rimless.analysis.cli import print_json
-
-    print_json(obj)
-
-
-def _load(files: list[Path], import_kwargs: dict[str, Any]) -> tuple[list[Any], list[str], list[str]]:
-    """(trials, their file names, refusal reasons); a missing file stops before any work (exit 2)."""
-    from rimless.analysis.report.html import load_input
-
-    missing = [str(p) for p in files if not p.is_file()]
-    if missing:
-        raise InputFileError(f"{', '.join(missing)}: no such file")
-    trials, names, refused = [], [], []
-    for p in files:
-        row = load_input(p, import_kwargs)
-        if row.trial is None:
-            refused.append(row.reason or f"{p}: refused")
-        else:
-            trials.append(row.trial)
-            names.append(_rel(p))
-    return trials, names, refused
-
-
-def _rel(p: Path) -> str:
-    try:
-        return str(p.resolve().relative_to(Path.cwd().resolve()))
-    except ValueError:
-        return str(p)
-
-
-def _models(text: str) -> list[str]:
-    out = [m.strip().lower() for m in text.split(",") if m.strip()]
-    bad = [m for m in out if m not in _MODELS]
-    if not out or bad:
-        raise ParameterError(f"--model must be er, ve or er,ve; got {text!r}")
-    return out
-
-
-def _params(path: Optional[Path]) -> Any:
-    from rimless.sim.model.params import WheelParams, load_params
-
-    if path is None:
-        return WheelParams()
-    if not path.is_file():
-        raise InputFileError(f"--params {path}: no such file")
-    return load_params(path)
+EXIT_REFUSED = EXIT_USER_ERROR
+MODELS = ("er", "ve")
 
 
 def _fmt(v: Any, fmt: str) -> str:
@@ -80,8 +28,8 @@ def _fmt(v: Any, fmt: str) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add ``critical-slope`` and ``calibrate`` to the ``trials`` app."""
-    app.command("critical-slope")(_user_facing(critical_slope_cmd))
-    app.command("calibrate")(_user_facing(calibrate_cmd))
+    app.command("critical-slope")(user_facing(critical_slope_cmd))
+    app.command("calibrate")(user_facing(calibrate_cmd))
 
 
 ParamsOpt = Annotated[Optional[Path], typer.Option(
@@ -114,50 +62,33 @@ def critical_slope_cmd(
 
     e* is the fitted gait's squared angular speed over the stance foot, rad²/s² (0 = stall).
     """
-    from rich.console import Console
-    from rich.progress import Progress
+    from rimless.analysis.inference.runs import critical_slope_run
 
-    from rimless.analysis.inference.critical_slope import run_critical_slope
-
-    models = _models(model)
-    wheel = _params(params)
-    kwargs: dict[str, Any] = {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0}
-    err = Console(stderr=True)
-    with Progress(console=err, transient=True) as prog:
-        task = prog.add_task("importing", total=None)
-        trials_, names, refused = _load(trials, kwargs)
-        for r in refused:
-            err.print(f"refused: {r}", markup=False, highlight=False)
-        if not trials_:
-            typer.echo("error: no trial could be read (see the refusals above)", err=True)
-            raise typer.Exit(EXIT_REFUSED if refused else EXIT_FAILURE)
-        calibrated = None
-        cal = None
-        if calibrate_c:
-            from rimless.analysis.inference.calibrate import NoTrialCalibrated, calibrate
-
-            prog.update(task, description="calibrating c")
-            try:
-                cal = calibrate(trials_, names, ["c"], params=wheel, model=models[0],
-                                progress=lambda n: prog.update(task, description=f"calibrating c ({n} simulations)"))
-                calibrated = cal.calibrated_params
-            except NoTrialCalibrated as e:
-                err.print(f"calibration skipped: {e}", markup=False, highlight=False)
-        res = run_critical_slope(trials_, names, wheel, models=models, calibrated=calibrated, group_tol_deg=group_tol_deg,
-                                 progress=lambda s: prog.update(task, description=s))
-    out = res.summary()
-    out["refused"] = refused
-    if cal is not None:
-        out["calibration"] = cal.summary()
+    models = parse_list(model, "--model", choices=MODELS, lower=True)
+    run = critical_slope_run(trials, models=models, calibrate_c=calibrate_c, params_path=params,
+                             import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
+                             group_tol_deg=group_tol_deg)
+    _print_refused(run.loaded.refused)
+    if run.result is None:
+        typer.echo("error: no trial could be read (see the refusals above)", err=True)
+        raise typer.Exit(EXIT_REFUSED if run.loaded.refused else EXIT_FAILURE)
+    if run.calibration_skipped is not None:
+        typer.echo(f"calibration skipped: {run.calibration_skipped}", err=True)
+    res, out = run.result, run.summary()
     if json_out:
-        _print_json(out)
+        print_json(out)
     else:
         _print_critical(res, out)
-    if refused:
+    if run.loaded.refused:
         raise typer.Exit(EXIT_REFUSED)
     if res.chosen is None:
         typer.echo(f"no critical slope: {res.why}", err=True)
         raise typer.Exit(EXIT_FAILURE)
+
+
+def _print_refused(refused: list[str]) -> None:
+    for r in refused:
+        typer.echo(f"refused: {r}", err=True)
 
 
 def _print_critical(res: Any, out: dict[str, Any]) -> None:
@@ -214,49 +145,28 @@ def calibrate_cmd(
 
     Also: correlations, identifiability, residuals against Table 1, the calibrated critical slope.
     """
-    from rich.console import Console
-    from rich.progress import Progress
-
-    from rimless.analysis.inference.calibrate import NoTrialCalibrated, calibrate, parse_fit
+    from rimless.analysis.inference.calibrate import parse_fit
+    from rimless.analysis.inference.runs import calibration_run
 
     names_fit = parse_fit(fit)
-    models = _models(model)
+    models = parse_list(model, "--model", choices=MODELS, lower=True)
     if len(models) != 1:
         raise ParameterError(f"--model must be er or ve, got {model!r}")
-    wheel = _params(params)
-    err = Console(stderr=True)
-    with Progress(console=err, transient=True) as prog:
-        task = prog.add_task("importing", total=None)
-        trials_, names, refused = _load(trials, {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0})
-        for r in refused:
-            err.print(f"refused: {r}", markup=False, highlight=False)
-        if not trials_:
-            typer.echo("error: no trial could be read (see the refusals above)", err=True)
-            raise typer.Exit(EXIT_REFUSED if refused else EXIT_FAILURE)
-        try:
-            cal = calibrate(trials_, names, names_fit, params=wheel, model=models[0],
-                            progress=lambda n: prog.update(task, description=f"calibrating ({n} simulations)"))
-        except NoTrialCalibrated as e:
-            typer.echo(str(e), err=True)
-            raise typer.Exit(EXIT_FAILURE) from None
-        crit = None
-        if critical:
-            from rimless.analysis.inference.critical_slope import run_critical_slope
-
-            crit = run_critical_slope(trials_, names, wheel, models=models, calibrated=cal.calibrated_params,
-                                      progress=lambda s: prog.update(task, description=s))
-    out = cal.summary()
-    out["refused"] = refused
-    if crit is not None:
-        out["critical_slope_deg"] = {"trials": crit.critical_slope_deg,
-                                     "trials_method": crit.chosen.method if crit.chosen else None,
-                                     "trials_ci_deg": list(crit.chosen.ci_deg) if crit.chosen else None,
-                                     **{f"model_{k}": v for k, v in crit.model["critical_slope_deg"].items()}}
+    run = calibration_run(trials, names_fit, model=models[0], critical=critical, params_path=params,
+                          import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0})
+    _print_refused(run.loaded.refused)
+    if not run.loaded.trials:
+        typer.echo("error: no trial could be read (see the refusals above)", err=True)
+        raise typer.Exit(EXIT_REFUSED if run.loaded.refused else EXIT_FAILURE)
+    if run.failure is not None:
+        typer.echo(run.failure, err=True)
+        raise typer.Exit(EXIT_FAILURE)
+    out = run.summary()
     if json_out:
-        _print_json(out)
+        print_json(out)
     else:
         _print_calibration(out)
-    if refused:
+    if run.loaded.refused:
         raise typer.Exit(EXIT_REFUSED)
 
 

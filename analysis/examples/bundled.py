@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["TRIALS", "SEED", "DATA_DIR", "TRUTH_FILE", "ExampleTrial", "simulate_trial", "generate", "data_files"]
 
 #: Where the bundled dataset lives (package data of rimless.analysis).
@@ -40,7 +42,6 @@ LONG_GAP_TRIAL = 3  # index in TRIALS
 RAMP_TRIAL = 4  # index in TRIALS: this recording also tracks the static Ramp object
 NOISE_M = 0.3e-3
 ANGLE_NOISE_RAD = 1e-3
-ALPHA_RAD = math.pi / 4
 RECORD_DT_S = 1e-3
 RTOL = 1e-9
 #: (slope deg, release theta' rad/s): two releases per slope.
@@ -171,7 +172,7 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
 _EXP = re.compile(r"e([+-])(\d{1,2})$")
 
 
-def _fmt(v: float) -> str:
+def format_number(v: float) -> str:
     """printf("%.7g") with Windows' 3-digit exponent, as Tracker on Windows writes numbers."""
     if not math.isfinite(v):
         return ""
@@ -181,7 +182,7 @@ def _fmt(v: float) -> str:
 
 def write_trial_csv(trial: ExampleTrial, path: Path) -> Path:
     """Write the trial in Tracker CSV layout (via `write_tracker_csv`), then reformat numbers and short rows."""
-    from rimless.analysis.io.vicon_csv import write_tracker_csv
+    from rimless.analysis.io.tracker_csv import write_tracker_csv
 
     objects = {"Wheel": trial.pose} if trial.ramp_pose is None else {"Ramp": trial.ramp_pose, "Wheel": trial.pose}
     write_tracker_csv(path, rate_hz=RATE_HZ, objects=objects, length_unit="mm", angle_unit="rad", newline="\r\n")
@@ -197,7 +198,7 @@ def write_trial_csv(trial: ExampleTrial, path: Path) -> Path:
             # the wheel's cells are empty; with the ramp (first) still seen, the row ends after it
             out.append(",".join(cells[:8]) if trial.ramp_pose is not None else ",".join(cells[:2]))
             continue
-        out.append(",".join(cells[:2] + [_fmt(float(c)) if c else "" for c in cells[2:]]))
+        out.append(",".join(cells[:2] + [format_number(float(c)) if c else "" for c in cells[2:]]))
     path.write_bytes("\r\n".join(out).encode("utf-8"))
     return path
 

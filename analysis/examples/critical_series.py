@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["SERIES", "TRUTH_FILE", "generate", "data_files", "truth_step", "truth_walk", "truth_critical_slope_deg"]
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "critical"
@@ -34,7 +36,6 @@ SEED = 20261123
 RATE_HZ = 100.0
 NOISE_M = 0.3e-3
 ANGLE_NOISE_RAD = 1e-3
-ALPHA_RAD = math.pi / 4
 RAMP_STEPS = 11
 SUSTAIN_STEPS = 80
 TRUTH_DAMPING_NS_PER_M = 10.0
@@ -217,7 +218,7 @@ def simulate_crit_trial(slope_deg: float, release: float, rng: np.random.Generat
 
 def generate(out_dir: str | Path = DATA_DIR, *, seed: int = SEED) -> list[Path]:
     """Write the SYNTHETIC_crit_*.csv series and SYNTHETIC_crit_truth.toml; returns the CSV paths."""
-    from rimless.analysis.io.vicon_csv import write_tracker_csv
+    from rimless.analysis.io.tracker_csv import write_tracker_csv
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -32,6 +32,9 @@ from typing import Any
 import numpy as np
 
 from rimless.errors import ParameterError, RimlessError
+from rimless.values import parse_list
+
+from rimless.analysis.io.trial import ALPHA_RAD
 
 __all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report",
            "NOT_IDENTIFIABLE_REL_SE", "NoTrialCalibrated"]
@@ -41,7 +44,6 @@ FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/
               "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
 NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
-ALPHA_RAD = math.pi / 4
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of the full least squares
@@ -49,16 +51,8 @@ MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM cu
 
 
 def parse_fit(text: str) -> list[str]:
-    """``"c,k"`` -> ["c", "k"]; raises ParameterError naming --fit."""
-    names = [t.strip() for t in text.split(",") if t.strip()]
-    if not names:
-        raise ParameterError("--fit needs at least one parameter name (e.g. c or c,k)")
-    bad = [n for n in names if n not in FIT_FIELDS]
-    if bad:
-        raise ParameterError(f"--fit: unknown parameter {bad[0]!r}; known: {', '.join(FIT_FIELDS)}")
-    if len(set(names)) != len(names):
-        raise ParameterError(f"--fit: a parameter is named twice in {text!r}")
-    return names
+    """``"c,k"`` -> ["c", "k"] (`rimless.values.parse_list`); a `ParameterError` naming --fit otherwise."""
+    return parse_list(text, "--fit", choices=list(FIT_FIELDS), unique=True)
 
 
 @dataclass
@@ -185,15 +179,15 @@ def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     information). Held at the end values outside the simulated walk (a stall)."""
     from scipy.interpolate import CubicSpline
 
-    from rimless.analysis.inference.compare import _clean_curve
+    from rimless.analysis.inference.compare import clean_curve
 
     t_all = np.asarray(g.table["t_s"], float) - t0
     y_all = np.asarray(g.table["com_height_normal_m"], float)
     step = np.asarray(g.table["step"])
-    st, sy = _clean_curve(t_all, y_all)
+    st, sy = clean_curve(t_all, y_all)
     out = np.interp(tt, st, sy)
     for k in np.unique(step):
-        ts, ys = _clean_curve(t_all[step == k], y_all[step == k])
+        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
         if ts.size < 4:
             continue
         m = (tt >= ts[0]) & (tt <= ts[-1])
@@ -303,68 +297,68 @@ def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tup
     return se, corr, ok, notes
 
 
-def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
-              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3,
-              progress: Callable[[int], None] | None = None) -> CalibrationResult:
-    """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
+@dataclass
+class _Globals:
+    """The global parameters being fitted: WheelParams fields, their Table 1 (start) values and scales.
 
-    Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
-    (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
-    (`PROFILE_FACTORS`), which picks the start; (2) the full least squares on periods and CoM height (recorded
-    walks on the compiled integrator), twice, with the block sigmas of the previous pass.
-    ``progress(n)`` is called after simulations with the running count."""
-    from scipy.optimize import least_squares
+    The optimiser sees them relative to the start, in units of ``scale`` (|start value|, or 1 at zero)."""
 
-    from rimless.sim.model.params import WheelParams
+    base: Any
+    fields: list[str]
+    x0: np.ndarray
+    scale: np.ndarray
 
-    base = params or WheelParams()
-    sim = _Sim(model, rtol, record_dt_s)
-    failed: dict[str, str] = {}
-    data: list[_TrialData] = []
-    for tr, nm in zip(trials, names):
-        d = _trial_data(tr, nm)
-        if isinstance(d, str):
-            failed[nm] = d
-        else:
-            data.append(d)
-    if not data:
-        raise NoTrialCalibrated("no trial could be calibrated: " + "; ".join(failed.values()))
+    @classmethod
+    def of(cls, base: Any, fit: Sequence[str]) -> _Globals:
+        fields = [FIT_FIELDS[n][0] for n in fit]
+        x0 = np.array([float(getattr(base, f)) for f in fields])
+        return cls(base, fields, x0, np.where(x0 != 0, np.abs(x0), 1.0))
 
-    fields = [FIT_FIELDS[n][0] for n in fit]
-    x_global0 = np.array([float(getattr(base, f)) for f in fields])
-    gscale = np.where(x_global0 != 0, np.abs(x_global0), 1.0)
-    n_g = len(fields)
+    @property
+    def n(self) -> int:
+        return len(self.fields)
 
-    def params_of(xg: np.ndarray) -> Any:
+    def params(self, xg: np.ndarray) -> Any:
+        """The wheel with these global values, or None when they are not a valid wheel."""
         try:
-            return base.replace(**{f: float(v) for f, v in zip(fields, xg)})
+            return self.base.replace(**{f: float(v) for f, v in zip(self.fields, xg)})
         except ParameterError:
             return None
 
-    def tick() -> None:
-        if progress:
-            progress(sim.calls)
+    def at(self, ug: np.ndarray) -> Any:
+        """`params` at the relative values ``ug`` (0 = the start)."""
+        return self.params(self.x0 + ug * self.scale)
 
-    def freq_res(p: Any, d: _TrialData, w: float) -> np.ndarray:
+
+class _ReleaseFit:
+    """Stage 1: per trial, the release speed from the step periods alone, on the compiled step map."""
+
+    def __init__(self, sim: _Sim, tick: Callable[[], None]) -> None:
+        self.sim, self.tick = sim, tick
+
+    def freq_res(self, p: Any, d: _TrialData, w: float) -> np.ndarray:
         """Step-frequency residuals (Hz) from the compiled map alone."""
-        f = sim.frequencies(p, d.slope_deg, w, d.periods_s.size)
-        tick()
+        f = self.sim.frequencies(p, d.slope_deg, w, d.periods_s.size)
+        self.tick()
         return f - 1.0 / d.periods_s
 
-    def fit_release(p: Any, d: _TrialData, w0: float | None) -> tuple[float, float]:
-        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then Brent-like LS."""
+    def fit(self, p: Any, d: _TrialData, w0: float | None) -> tuple[float, float]:
+        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then least squares."""
+        from scipy.optimize import least_squares
+
         if w0 is None or not math.isfinite(w0):
-            w0 = first_period_release(p, d)
-        r = least_squares(lambda q: freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
+            w0 = self.first_period_release(p, d)
+        r = least_squares(lambda q: self.freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
                           diff_step=[1e-5], xtol=1e-10, ftol=1e-12, max_nfev=30)
         return float(r.x[0]), float(2 * r.cost)
 
-    def first_period_release(p: Any, d: _TrialData) -> float:
+    def first_period_release(self, p: Any, d: _TrialData) -> float:
         """The release whose first simulated step after the release step lasts the first measured period
         (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
+        sim = self.sim
         grid = np.linspace(0.4, 6.0, 29)
         f1 = np.array([sim.frequencies(p, d.slope_deg, w, 1)[0] for w in grid])
-        tick()
+        self.tick()
         target = 1.0 / d.periods_s[0]
         diff = f1 - target
         for i in range(grid.size - 1):
@@ -377,130 +371,156 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
                     else:
                         b = m
                 return 0.5 * (a + b)
-        costs = [float(np.sum(freq_res(p, d, w) ** 2)) for w in grid]
+        costs = [float(np.sum(self.freq_res(p, d, w) ** 2)) for w in grid]
         return float(grid[int(np.argmin(costs))])
 
-    # stage 1: Table 1, then the coarse profile of each global, on the periods alone
-    p0 = params_of(x_global0)
-    releases = {}
-    for d in list(data):
-        w, _ = fit_release(p0, d, None)
-        if not math.isfinite(w) or np.any(sim.frequencies(p0, d.slope_deg, w, d.periods_s.size) == 0) and False:
-            pass
-        releases[d.name] = w
-        d.release_rad_s = w
-    ug_best = np.zeros(n_g)
-    best = sum(fit_release(p0, d, d.release_rad_s)[1] for d in data)
-    for j in range(n_g):
+
+def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tuple[dict[str, float], np.ndarray]:
+    """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
+    (`PROFILE_FACTORS`) on the periods alone; the best start (relative globals) is returned and every trial's
+    ``release_rad_s`` is set at it."""
+    p0 = glob.at(np.zeros(glob.n))
+    table1 = {}
+    for d in data:
+        d.release_rad_s = table1[d.name] = releases.fit(p0, d, None)[0]
+    ug_best = np.zeros(glob.n)
+    best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
+    for j in range(glob.n):
         for factor in PROFILE_FACTORS:
             ug = ug_best.copy()
             ug[j] = factor - 1.0
-            p = params_of(x_global0 + ug * gscale)
+            p = glob.at(ug)
             if p is None:
                 continue
-            fits = [fit_release(p, d, None) for d in data]
+            fits = [releases.fit(p, d, None) for d in data]
             cost = sum(c for _, c in fits)
             if cost < best:
                 best, ug_best = cost, ug
                 for d, (w, _) in zip(data, fits):
                     d.release_rad_s = w
     if ug_best.any():  # releases at the chosen start
-        pb = params_of(x_global0 + ug_best * gscale)
+        pb = glob.at(ug_best)
         for d in data:
-            d.release_rad_s = fit_release(pb, d, None)[0]
+            d.release_rad_s = releases.fit(pb, d, None)[0]
+    return table1, ug_best
 
-    # stage 2: full least squares on periods and CoM height
-    n_t = len(data)
-    sig = {"t": 0.02, "h": 0.5e-3}  # step frequency (Hz), CoM height (m)
 
-    def trial_res(p: Any, i: int, w: float, shift: float) -> np.ndarray:
-        d = data[i]
+class _Objective:
+    """Stage 2: the scaled residuals of every trial (periods and CoM height) as a function of one vector
+    u = (globals relative to the start, release speeds rad/s, time shifts ms), and its Jacobian."""
+
+    def __init__(self, sim: _Sim, glob: _Globals, data: list[_TrialData], tick: Callable[[], None]) -> None:
+        self.sim, self.glob, self.data, self.tick = sim, glob, data, tick
+        self.sig = {"t": 0.02, "h": 0.5e-3}  # step frequency (Hz), CoM height (m)
+        self.n_g, self.n_t = glob.n, len(data)
+        sizes = [d.periods_s.size + d.t_s.size for d in data]
+        self.offs = np.concatenate([[0], np.cumsum(sizes)])
+
+    def trial_res(self, p: Any, i: int, w: float, shift: float) -> np.ndarray:
+        d = self.data[i]
         if p is None:
             return np.full(d.periods_s.size + d.t_s.size, 1e3)
-        rp, rh = _residuals(sim, p, d, w, shift)
-        tick()
-        return np.concatenate([rp / sig["t"], rh / sig["h"]])
+        rp, rh = _residuals(self.sim, p, d, w, shift)
+        self.tick()
+        return np.concatenate([rp / self.sig["t"], rh / self.sig["h"]])
 
-    sizes = [d.periods_s.size + d.t_s.size for d in data]
-    offs = np.concatenate([[0], np.cumsum(sizes)])
-
-    def unpack(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(globals, release speeds rad/s, time shifts s); u holds globals relative to Table 1, shifts in ms."""
-        return x_global0 + u[:n_g] * gscale, u[n_g:n_g + n_t], u[n_g + n_t:] * 1e-3
+        n_g, n_t = self.n_g, self.n_t
+        return self.glob.x0 + u[:n_g] * self.glob.scale, u[n_g:n_g + n_t], u[n_g + n_t:] * 1e-3
 
-    def fun(u: np.ndarray) -> np.ndarray:
-        xg, ws, sh = unpack(u)
-        p = params_of(xg)
-        return np.concatenate([trial_res(p, i, ws[i], sh[i]) for i in range(n_t)])
+    def fun(self, u: np.ndarray) -> np.ndarray:
+        xg, ws, sh = self.unpack(u)
+        p = self.glob.params(xg)
+        return np.concatenate([self.trial_res(p, i, ws[i], sh[i]) for i in range(self.n_t)])
 
-    def jac(u: np.ndarray, central: bool = False) -> np.ndarray:
+    def cost(self, u: np.ndarray) -> float:
+        return float(np.sum(self.fun(u) ** 2))
+
+    def jac(self, u: np.ndarray, central: bool = False) -> np.ndarray:
         """Forward differences: a global column needs every trial, a trial's release and shift only that trial
         (the shift costs no simulation: the walk is cached and only the interpolation moves)."""
-        xg, ws, sh = unpack(u)
-        p = params_of(xg)
-        r0 = [trial_res(p, i, ws[i], sh[i]) for i in range(n_t)]
+        glob, n_g, n_t, offs, res = self.glob, self.n_g, self.n_t, self.offs, self.trial_res
+        xg, ws, sh = self.unpack(u)
+        p = glob.params(xg)
+        r0 = [res(p, i, ws[i], sh[i]) for i in range(n_t)]
         J = np.zeros((offs[-1], n_g + 2 * n_t))
         for j in range(n_g):
             h = 1e-3
             xg2 = xg.copy()
-            xg2[j] += h * gscale[j]
-            p2 = params_of(xg2)
+            xg2[j] += h * glob.scale[j]
+            p2 = glob.params(xg2)
             xg3 = xg.copy()
-            xg3[j] -= h * gscale[j]
-            p3 = params_of(xg3) if central else None
+            xg3[j] -= h * glob.scale[j]
+            p3 = glob.params(xg3) if central else None
             for i in range(n_t):
                 if p3 is not None:
-                    J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - trial_res(p3, i, ws[i], sh[i])) / (2 * h)
+                    J[offs[i]:offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - res(p3, i, ws[i], sh[i])) / (2 * h)
                 else:
-                    J[offs[i]:offs[i + 1], j] = (trial_res(p2, i, ws[i], sh[i]) - r0[i]) / h
+                    J[offs[i]:offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - r0[i]) / h
         for i in range(n_t):
             h = 1e-5
-            J[offs[i]:offs[i + 1], n_g + i] = (trial_res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
+            J[offs[i]:offs[i + 1], n_g + i] = (res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
             hs = 0.2  # ms
-            J[offs[i]:offs[i + 1], n_g + n_t + i] = (trial_res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
+            J[offs[i]:offs[i + 1], n_g + n_t + i] = (res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
         return J
 
-    lo = np.concatenate([np.full(n_g, -np.inf), np.full(n_t, 0.05), np.full(n_t, -MAX_SHIFT_MS)])
-    hi = np.concatenate([np.full(n_g, np.inf), np.full(n_t, 20.0), np.full(n_t, MAX_SHIFT_MS)])
-
-    def best_shifts(ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
+    def best_shifts(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
         """Per trial the shift (ms) on a 0.5 ms grid that minimises the CoM residual (no new simulation)."""
-        p = params_of(x_global0 + ug * gscale)
+        p = self.glob.at(ug)
         grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
         out = []
-        for i, d in enumerate(data):
-            costs = [float(np.sum(_residuals(sim, p, d, ws[i], g * 1e-3)[1] ** 2)) for g in grid]
+        for i, d in enumerate(self.data):
+            costs = [float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2)) for g in grid]
             out.append(float(grid[int(np.argmin(costs))]))
         return np.array(out)
 
-    ws_t1 = np.array([releases[d.name] for d in data])
-    u_t1 = np.concatenate([np.zeros(n_g), ws_t1, best_shifts(np.zeros(n_g), ws_t1)])
-    rows_t1 = _rms_rows(sim, data, p0, *unpack(u_t1)[1:])
-    ws_start = np.array([d.release_rad_s for d in data])
-    u = np.concatenate([ug_best, ws_start, best_shifts(ug_best, ws_start)])
-    _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
-    cost_t1 = float(np.sum(fun(u_t1) ** 2))
-    # releases stay near their start (the walking branch), shifts within the search
-    lo[n_g:n_g + n_t] = np.maximum(lo[n_g:n_g + n_t], 0.8 * ws_start)
-    hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
-    u = np.clip(u, lo, hi)
-    u = least_squares(fun, u, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-8, ftol=1e-10, max_nfev=MAX_NFEV).x
-    _set_sigmas(sig, _rms_rows(sim, data, params_of(unpack(u)[0]), *unpack(u)[1:]))
-    # CoM samples 10 ms apart are not independent when the model misses a systematic shape (their residuals
-    # are correlated): count them by their effective number, (1 - rho) / (1 + rho) of the samples, rho the
-    # lag-1 autocorrelation of the residuals, by inflating the block's sigma
-    xg_, ws_, sh_ = unpack(u)
-    rhos = []
-    for i, d in enumerate(data):
-        rh = _residuals(sim, params_of(xg_), d, float(ws_[i]), float(sh_[i]))[1]
-        if rh.size > 10 and np.std(rh) > 0:
-            rhos.append(float(np.corrcoef(rh[:-1], rh[1:])[0, 1]))
-    rho = float(np.clip(np.mean(rhos), 0.0, 0.95)) if rhos else 0.0
-    sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
-    J = jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
-    cost_cal = float(np.sum(fun(u) ** 2))
-    se, corr, ok, notes = least_squares_report(J, n_g, np.concatenate([gscale, np.ones(2 * n_t)]))
-    xg, ws, sh = unpack(u)
+    def start(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
+        """u at these globals and releases, with each trial's best time shift."""
+        return np.concatenate([ug, ws, self.best_shifts(ug, ws)])
+
+    def rms_rows(self, u: np.ndarray) -> list[tuple[float, float, float, int]]:
+        xg, ws, sh = self.unpack(u)
+        return _rms_rows(self.sim, self.data, self.glob.params(xg), ws, sh)
+
+    def set_sigmas(self, u: np.ndarray) -> None:
+        """Each block's sigma = its RMS residual at u (reduced chi^2 of 1 per block)."""
+        _set_sigmas(self.sig, self.rms_rows(u))
+
+    def bounds(self, ws_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Globals free; releases within [0.8, 1.25] x their start (the walking branch) and [0.05, 20] rad/s;
+        shifts within +-`MAX_SHIFT_MS`."""
+        n_g, n_t = self.n_g, self.n_t
+        lo = np.concatenate([np.full(n_g, -np.inf), np.full(n_t, 0.05), np.full(n_t, -MAX_SHIFT_MS)])
+        hi = np.concatenate([np.full(n_g, np.inf), np.full(n_t, 20.0), np.full(n_t, MAX_SHIFT_MS)])
+        lo[n_g:n_g + n_t] = np.maximum(lo[n_g:n_g + n_t], 0.8 * ws_start)
+        hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
+        return lo, hi
+
+    def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        from scipy.optimize import least_squares
+
+        return least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac, bounds=(lo, hi), method="trf", xtol=1e-8,
+                             ftol=1e-10, max_nfev=MAX_NFEV).x
+
+    def inflate_com_sigma(self, u: np.ndarray) -> None:
+        """CoM samples 10 ms apart are not independent when the model misses a systematic shape (their residuals
+        are correlated): count them by their effective number, (1 - rho) / (1 + rho) of the samples, rho the
+        lag-1 autocorrelation of the residuals, by inflating the block's sigma."""
+        xg, ws, sh = self.unpack(u)
+        rhos = []
+        for i, d in enumerate(self.data):
+            rh = _residuals(self.sim, self.glob.params(xg), d, float(ws[i]), float(sh[i]))[1]
+            if rh.size > 10 and np.std(rh) > 0:
+                rhos.append(float(np.corrcoef(rh[:-1], rh[1:])[0, 1]))
+        rho = float(np.clip(np.mean(rhos), 0.0, 0.95)) if rhos else 0.0
+        self.sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
+
+
+def _estimates(glob: _Globals, fit: Sequence[str], xg: np.ndarray, se: np.ndarray, ok: list[bool],
+               notes: list[str]) -> list[ParamEstimate]:
+    """One `ParamEstimate` per fitted name; identifiable when the cost is not flat along it and its relative
+    standard error is at most `NOT_IDENTIFIABLE_REL_SE`."""
     estimates = []
     for j, n in enumerate(fit):
         f, unit = FIT_FIELDS[n]
@@ -509,19 +529,83 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
         note = notes[j]
         if ok[j] and not ident:
             note = (f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it")
-        estimates.append(ParamEstimate(n, f, unit, float(getattr(base, f)), float(xg[j]), float(se[j]), ident, note))
-    rows_cal = _rms_rows(sim, data, params_of(xg), ws, sh)
+        estimates.append(ParamEstimate(n, f, unit, float(getattr(glob.base, f)), float(xg[j]), float(se[j]), ident,
+                                       note))
+    return estimates
+
+
+def _residual_rows(data: list[_TrialData], rows_t1: list[tuple], rows_cal: list[tuple], ws_t1: np.ndarray,
+                   ws: np.ndarray, sh: np.ndarray) -> list[dict[str, Any]]:
+    """Per trial, Table 1 against calibrated: RMS period and CoM errors, steps reached, releases and shift."""
     residuals = []
-    for d, a, b, w_t1, w, s_ in zip(data, rows_t1, rows_cal, unpack(u_t1)[1], ws, sh):
+    for d, a, b, w_t1, w, s_ in zip(data, rows_t1, rows_cal, ws_t1, ws, sh):
         residuals.append({"trial": d.name, "slope_deg": d.slope_deg, "n_period": d.periods_s.size,
                           "n_com": d.t_s.size, "table1_release_theta_dot_rad_s": float(w_t1),
                           "calibrated_release_theta_dot_rad_s": float(w), "time_shift_ms": float(s_) * 1e3,
                           "table1_rms_period_ms": a[2] * 1e3, "calibrated_rms_period_ms": b[2] * 1e3,
                           "table1_steps_reached": a[3], "calibrated_steps_reached": b[3],
                           "table1_rms_com_mm": a[1] * 1e3, "calibrated_rms_com_mm": b[1] * 1e3})
-    cal_params = params_of(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
-    return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, sig["t"],
-                             sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model)
+    return residuals
+
+
+def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialData], dict[str, str]]:
+    """The trials that can be fitted, and why the others cannot (by name)."""
+    failed: dict[str, str] = {}
+    data: list[_TrialData] = []
+    for tr, nm in zip(trials, names):
+        d = _trial_data(tr, nm)
+        if isinstance(d, str):
+            failed[nm] = d
+        else:
+            data.append(d)
+    return data, failed
+
+
+def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
+              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3,
+              progress: Callable[[int], None] | None = None) -> CalibrationResult:
+    """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
+
+    Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
+    (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
+    (`PROFILE_FACTORS`), which picks the start (`_start`); (2) the full least squares on periods and CoM height
+    (`_Objective`, recorded walks on the compiled integrator), with the block sigmas of the start, then the
+    sigmas of the solution for the uncertainties. ``progress(n)`` is called after simulations with the
+    running count."""
+    from rimless.sim.model.params import WheelParams
+
+    data, failed = _usable(trials, names)
+    if not data:
+        raise NoTrialCalibrated("no trial could be calibrated: " + "; ".join(failed.values()))
+    sim = _Sim(model, rtol, record_dt_s)
+
+    def tick() -> None:
+        if progress:
+            progress(sim.calls)
+
+    glob = _Globals.of(params or WheelParams(), fit)
+    table1_releases, ug_start = _start(_ReleaseFit(sim, tick), glob, data)
+
+    obj = _Objective(sim, glob, data, tick)
+    ws_t1 = np.array([table1_releases[d.name] for d in data])
+    u_t1 = obj.start(np.zeros(glob.n), ws_t1)
+    rows_t1 = obj.rms_rows(u_t1)
+    ws_start = np.array([d.release_rad_s for d in data])
+    u = obj.start(ug_start, ws_start)
+    obj.set_sigmas(u)
+    cost_t1 = obj.cost(u_t1)
+    u = obj.solve(u, *obj.bounds(ws_start))
+    obj.set_sigmas(u)
+    obj.inflate_com_sigma(u)
+    J = obj.jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
+    cost_cal = obj.cost(u)
+    se, corr, ok, notes = least_squares_report(J, glob.n, np.concatenate([glob.scale, np.ones(2 * obj.n_t)]))
+    xg, ws, sh = obj.unpack(u)
+    estimates = _estimates(glob, fit, xg, se, ok, notes)
+    residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
+    cal_params = glob.params(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
+    return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
+                             obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model)
 
 
 class NoTrialCalibrated(RimlessError):

@@ -36,9 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["TrialComparison", "SlopeGroup", "Simulator", "compare_trial", "step_period_trends", "fit_release_speed"]
 
-ALPHA_RAD = math.pi / 4
 MAX_SHIFT_S = 0.05
 RELEASE_GRID_RAD_S = (0.3, 8.0, 78)  # scan of the release speed: lo, hi, points
 #: a comparison is "suspect" unless: correlation >= min_correlation, RMS / amplitude <= max_relative_rms,
@@ -196,7 +197,8 @@ def fit_release_speed(sim: Simulator, slope_deg: float, first_period_s: float) -
                   f"up to {hi:g} rad/s (at least {first_period_s + float(np.min(fin)):.3f} s)")
 
 
-def _clean_curve(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def clean_curve(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A simulated curve sorted by time with repeated times dropped (the first kept), for interpolation."""
     order = np.argsort(t, kind="stable")
     t, y = t[order], y[order]
     keep = np.concatenate([[True], np.diff(t) > 0]) if t.size else np.zeros(0, bool)
@@ -243,7 +245,7 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
         res.warnings.append(f"simulation ended ({reason}) after {max(len(steps) - 1, 0)} of {n_sim} measured steps")
 
     t0_sim = steps[1].t_start_s if len(steps) > 1 else steps[0].t_start_s + steps[0].period_s
-    st, sy = _clean_curve(np.asarray(gait.table["t_s"], float) - t0_sim,
+    st, sy = clean_curve(np.asarray(gait.table["t_s"], float) - t0_sim,
                           np.asarray(gait.table["com_height_normal_m"], float))
     imp = trial.impact_time_s
     t = trial.time_s - imp[0]

@@ -17,7 +17,7 @@ import numpy as np
 
 from rimless.errors import InputFileError
 
-from rimless.analysis.io.vicon_csv import LENGTH_UNITS_M, MAX_COORDINATE_M, RATE_RANGE_HZ, Column, Section, ViconFile
+from rimless.analysis.io.vicon_file import LENGTH_UNITS_M, MAX_COORDINATE_M, RATE_RANGE_HZ, Column, Section, ViconFile
 
 __all__ = ["read_c3d", "write_c3d"]
 

@@ -1,4 +1,4 @@
-"""Read and write Vicon CSV exports (Tracker 3.x and Nexus 2.x).
+"""Read Vicon CSV exports (Tracker 3.x and Nexus 2.x) into a `ViconFile` (`rimless.analysis.io.vicon_file`).
 
 The reader is strict about structure and tolerant of the layout quirks real exports have:
 
@@ -21,13 +21,15 @@ import io
 import math
 import re
 import warnings
-from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from rimless.errors import InputFileError
+
+from rimless.analysis.io.byte_source import ByteSource
+from rimless.analysis.io.vicon_file import (ANGLE_UNITS_RAD, LENGTH_UNITS_M, MAX_COORDINATE_M, RATE_RANGE_HZ, Column,
+                                           Section, ViconFile)
 
 __all__ = [
     "Column",
@@ -35,16 +37,9 @@ __all__ = [
     "ViconCsvError",
     "ViconFile",
     "read_vicon_csv",
+    "parse_vicon_bytes",
     "parse_vicon_text",
-    "write_tracker_csv",
-    "LENGTH_UNITS_M",
-    "ANGLE_UNITS_RAD",
 ]
-
-#: Length units we convert, and their size in metres.
-LENGTH_UNITS_M: Mapping[str, float] = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-#: Angle units we convert, and their size in radians.
-ANGLE_UNITS_RAD: Mapping[str, float] = {"rad": 1.0, "deg": math.pi / 180.0, "°": math.pi / 180.0}
 
 #: Components that must carry a length unit / an angle unit in pose and marker sections.
 _LENGTH_COMPONENTS = frozenset({"X", "Y", "Z", "TX", "TY", "TZ"})
@@ -57,15 +52,10 @@ _NAME_PREFIXES = ("Global Angle ", "Local Angle ")
 _STRUCTURAL = re.compile(r"\n(?![0-9+\-.])")
 # ASCII digits only: Python's \d also matches other scripts' digits, which no exporter writes.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
-#: Plausible frame rates, Hz; a rate row outside is an error at that row.
-RATE_RANGE_HZ = (1.0, 10000.0)
 #: At most this many errors are collected per file (the first, in file order, is the one raised).
 MAX_ERRORS = 20
 #: Largest frame number accepted (a day at 10 kHz is 8.6e8).
 MAX_FRAME = 1e10
-#: Largest coordinate accepted, m (beyond it the number is not a position in a capture volume).
-MAX_COORDINATE_M = 1e7
-
 
 class ViconCsvError(InputFileError):
     """A Vicon CSV file cannot be parsed; the message names the file, line and column (1-based).
@@ -98,116 +88,6 @@ class ViconCsvError(InputFileError):
         return [e.location() for e in self.errors]
 
 
-@dataclass(frozen=True)
-class Column:
-    """One data column of a section.
-
-    ``group`` is the object/marker/device name (prefix and repeated ``Obj:Obj`` removed), ``component``
-    the header cell (``TX``, ``X``, ``Fz``...), ``unit`` the unit of `Section.values` (SI when converted),
-    ``file_unit`` what the file said, ``column`` the 1-based column in the file.
-    """
-
-    group: str
-    component: str
-    unit: str
-    file_unit: str
-    column: int
-
-
-@dataclass(frozen=True, eq=False)
-class Section:
-    """One section of a Vicon CSV file, values in SI where the unit is a length or an angle.
-
-    Attributes
-    ----------
-    kind : the title row (``"Objects"``, ``"Trajectories"``, ``"Devices"``...).
-    rate_hz : the rate row, Hz.
-    line : 1-based line of the title row.
-    frame, sub_frame : int64 arrays, shape (n,).
-    columns : one `Column` per column of ``values``.
-    values : float64 array, shape (n, len(columns)); NaN where the file had no value.
-    name_prefix : ``"Global Angle"``/``"Local Angle"`` when Tracker wrote one, else ``""``.
-    """
-
-    kind: str
-    rate_hz: float
-    line: int
-    frame: np.ndarray
-    sub_frame: np.ndarray
-    columns: tuple[Column, ...]
-    values: np.ndarray
-    name_prefix: str = ""
-    #: 1-based line of the first data row; data row r is on line ``data_line + r``.
-    data_line: int = 0
-    #: 1-based line of the units row.
-    units_line: int = 0
-
-    @property
-    def n_rows(self) -> int:
-        """Number of data rows."""
-        return int(self.values.shape[0])
-
-    @property
-    def time_s(self) -> np.ndarray:
-        """Time of each row from the first row, s (frames, and sub-frames when there are several)."""
-        n_sub = int(self.sub_frame.max()) + 1 if self.n_rows else 1
-        if self.n_rows == 0:
-            return np.zeros(0)
-        tick = (self.frame - self.frame[0]) * n_sub + self.sub_frame - self.sub_frame[0]
-        return tick / self.rate_hz
-
-    def groups(self) -> list[str]:
-        """Group names (objects, markers, devices) in file order, without repeats."""
-        return list(dict.fromkeys(c.group for c in self.columns))
-
-    def get(self, group: str, components: tuple[str, ...] | None = None) -> np.ndarray:
-        """Values of one group, shape (n, k), in the order of ``components`` (default: file order); a read-only
-        view when the columns are adjacent in that order, else a copy.
-
-        Raises KeyError naming what is missing.
-        """
-        cols = {c.component: i for i, c in enumerate(self.columns) if c.group == group}
-        if not cols:
-            raise KeyError(f"no group {group!r} in section {self.kind!r} (line {self.line})")
-        if components is None:
-            idx = list(cols.values())
-        else:
-            missing = [c for c in components if c not in cols]
-            if missing:
-                raise KeyError(f"group {group!r} of section {self.kind!r} has no column(s) {missing}")
-            idx = [cols[c] for c in components]
-        if idx and idx == list(range(idx[0], idx[0] + len(idx))):
-            view = self.values[:, idx[0]:idx[0] + len(idx)]  # no copy; read-only so the section stays intact
-            view.flags.writeable = False
-            return view
-        return self.values[:, idx]
-
-    def components(self, group: str) -> tuple[str, ...]:
-        """Component names of one group in file order."""
-        return tuple(c.component for c in self.columns if c.group == group)
-
-
-@dataclass(frozen=True, eq=False)
-class ViconFile:
-    """A parsed Vicon CSV file: its sections and how it was written."""
-
-    path: str
-    sections: tuple[Section, ...]
-    delimiter: str = ","
-    decimal: str = "."
-    encoding: str = "utf-8"
-    line_ending: str = "\n"
-    notes: tuple[str, ...] = field(default=())
-
-    def section(self, kind: str) -> Section | None:
-        """The first section titled ``kind``, or None."""
-        return next((s for s in self.sections if s.kind == kind), None)
-
-    def kinds(self) -> list[str]:
-        """Section titles in file order."""
-        return [s.kind for s in self.sections]
-
-
 # ----------------------------------------------------------------------------------------------- reading
 
 
@@ -233,7 +113,7 @@ def read_vicon_csv(path: str | Path) -> ViconFile:
     except OSError as err:
         raise ViconCsvError(str(p), None, None, "unreadable", f"cannot read the file ({err.strerror})") from None
     text, encoding, line_ending = _decode(raw)
-    source = _ByteSource.of(raw, p)  # newline offsets; the data blocks are read back from the file
+    source = ByteSource.of(raw, p)  # newline offsets; the data blocks are read back from the file
     del raw  # only the text stays in memory while the blocks are parsed
     return _parse(text, str(p), encoding, line_ending, source)
 
@@ -252,52 +132,6 @@ def _decode(raw: bytes) -> tuple[str, str, str]:
     return text, encoding, line_ending
 
 
-class _ByteSource:
-    """The bytes of a file whose lines are the lines of its decoded text (every CR is part of a CRLF):
-    newline offsets, and byte ranges read from memory or from the file."""
-
-    def __init__(self, newlines: np.ndarray, size: int, raw: bytes | None, path: Path | None) -> None:
-        self.newlines, self.size, self.raw, self.path = newlines, size, raw, path
-
-    @classmethod
-    def of(cls, raw: bytes, path: Path | None = None) -> _ByteSource | None:
-        """Newline offsets of ``raw`` (found in slices: no file-sized temporary); keeps ``raw`` when no path
-        is given. None when line numbers in ``raw`` differ from the text's (a lone CR)."""
-        if b"\r" in raw and raw.count(b"\r") != raw.count(b"\r\n"):
-            return None
-        parts = []
-        step = 1 << 24
-        for off in range(0, len(raw), step):
-            chunk = np.frombuffer(raw, np.uint8, count=min(step, len(raw) - off), offset=off)
-            parts.append(np.flatnonzero(chunk == 10) + off)
-        nl = np.concatenate(parts) if parts else np.zeros(0, np.int64)
-        return cls(nl, len(raw), raw if path is None else None, path)
-
-    def line_start(self, line0: int) -> int:
-        """Byte offset of the start of 0-based line ``line0`` (the size past the last line)."""
-        if line0 <= 0:
-            return 0
-        return int(self.newlines[line0 - 1]) + 1 if line0 - 1 < self.newlines.size else self.size
-
-    def stream(self, a: int, b: int) -> io.RawIOBase:
-        """Bytes ``a:b`` as a binary stream (no copy of the range)."""
-        if self.raw is not None:
-            return _ViewReader(memoryview(self.raw)[a:b])
-        f = open(self.path, "rb")  # noqa: SIM115 - closed by _FileRange
-        return _FileRange(f, a, b)
-
-    def counts(self, sub: bytes, spans: list[tuple[int, int]]) -> list[int]:
-        """``sub`` occurrences in each byte span."""
-        if self.raw is not None:
-            return [self.raw.count(sub, a, b) for a, b in spans]
-        out = []
-        with open(self.path, "rb") as f:
-            for a, b in spans:
-                f.seek(a)
-                out.append(f.read(b - a).count(sub))
-        return out
-
-
 def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
     """Parse the bytes of a Vicon CSV export (see `read_vicon_csv`).
 
@@ -305,7 +139,7 @@ def parse_vicon_bytes(raw: bytes, name: str = "<bytes>") -> ViconFile:
     straight from ``raw`` (in chunks, into preallocated arrays), so no second copy of the file is made.
     """
     text, encoding, line_ending = _decode(raw)
-    return _parse(text, name, encoding, line_ending, _ByteSource.of(raw))
+    return _parse(text, name, encoding, line_ending, ByteSource.of(raw))
 
 
 def parse_vicon_text(text: str, name: str = "<text>", *, encoding: str = "utf-8") -> ViconFile:
@@ -324,7 +158,7 @@ def _line_ending(text: str) -> str:
     return "\r\n" if "\r\n" in text else "\r"
 
 
-def _parse(text: str, name: str, encoding: str, line_ending: str, raw: _ByteSource | None) -> ViconFile:
+def _parse(text: str, name: str, encoding: str, line_ending: str, raw: ByteSource | None) -> ViconFile:
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
         raise ViconCsvError(name, line, None, "binary", "the file holds NUL bytes: it is not a CSV text file")
@@ -352,7 +186,7 @@ def _detect_delimiter(text: str) -> str:
 class _Parser:
     """Walks the structural lines of a file; data blocks are parsed in bulk."""
 
-    def __init__(self, text: str, name: str, raw: _ByteSource | None = None) -> None:
+    def __init__(self, text: str, name: str, raw: ByteSource | None = None) -> None:
         self.text = text
         self.name = name
         #: The file's bytes, whose lines are the lines of ``text`` (or None: blocks are encoded from ``text``).
@@ -755,44 +589,6 @@ def _to_si_inplace(data: np.ndarray, units: list[str]) -> None:
             data[:, j] *= ANGLE_UNITS_RAD[unit]
 
 
-class _ViewReader(io.RawIOBase):
-    """A read-only binary stream over a memoryview (pandas reads it without a copy of the whole)."""
-
-    def __init__(self, view: memoryview) -> None:
-        super().__init__()
-        self._view, self._pos = view, 0
-
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, buffer) -> int:  # type: ignore[override]
-        n = min(len(buffer), len(self._view) - self._pos)
-        buffer[:n] = self._view[self._pos:self._pos + n]
-        self._pos += n
-        return n
-
-
-class _FileRange(io.RawIOBase):
-    """Bytes ``a:b`` of an open binary file, as a stream (closes the file when closed)."""
-
-    def __init__(self, f: io.BufferedReader, a: int, b: int) -> None:
-        super().__init__()
-        self._f, self._left = f, b - a
-        f.seek(a)
-
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, buffer) -> int:  # type: ignore[override]
-        n = self._f.readinto(memoryview(buffer)[:min(len(buffer), self._left)])
-        self._left -= n
-        return n
-
-    def close(self) -> None:
-        self._f.close()
-        super().close()
-
-
 def _clean_name(name: str) -> tuple[str, str]:
     prefix = ""
     for p in _NAME_PREFIXES:
@@ -811,89 +607,3 @@ def _show(cells: list[str]) -> str:
         cells = cells[:-1]
     s = ",".join(cells)
     return repr(s[:60] + ("..." if len(s) > 60 else ""))
-
-
-# ----------------------------------------------------------------------------------------------- writing
-
-
-def write_tracker_csv(
-    path: str | Path,
-    *,
-    rate_hz: float,
-    objects: Mapping[str, np.ndarray] | None = None,
-    markers: Mapping[str, np.ndarray] | None = None,
-    first_frame: int = 1,
-    length_unit: str = "mm",
-    angle_unit: str = "rad",
-    delimiter: str = ",",
-    newline: str = "\n",
-) -> Path:
-    """Write trajectories in Vicon Tracker CSV layout (an ``Objects`` and/or a ``Trajectories`` section).
-
-    Parameters
-    ----------
-    path : output file.
-    rate_hz : frame rate, Hz.
-    objects : name -> array (n, 6): RX, RY, RZ in rad (helical vector, as Tracker's ``Global Angle``),
-        TX, TY, TZ in m. Written with the ``Global Angle Name:Name`` header Tracker uses.
-    markers : name -> array (n, 3): X, Y, Z in m.
-    first_frame : number of the first frame.
-    length_unit, angle_unit : units to write (``mm``/``cm``/``m``, ``rad``/``deg``); values are converted.
-    delimiter, newline : ``","`` or ``";"``, ``"\\n"`` or ``"\\r\\n"``.
-
-    NaN is written as an empty cell (an occlusion). Numbers use the shortest repr that reads back exactly.
-    """
-    if length_unit not in LENGTH_UNITS_M or angle_unit not in ANGLE_UNITS_RAD:
-        raise ValueError(f"unknown unit {length_unit!r}/{angle_unit!r}")
-    if not objects and not markers:
-        raise ValueError("nothing to write: give objects and/or markers")
-    lscale, ascale = LENGTH_UNITS_M[length_unit], ANGLE_UNITS_RAD[angle_unit]
-    blocks: list[str] = []
-    for kind, groups, comps in (("Objects", objects, ("RX", "RY", "RZ", "TX", "TY", "TZ")),
-                                ("Trajectories", markers, ("X", "Y", "Z"))):
-        if not groups:
-            continue
-        arrays = []
-        names_row = ["", ""]
-        comp_row = ["Frame", "Sub Frame"]
-        unit_row = ["", ""]
-        n = None
-        for name, arr in groups.items():
-            a = np.asarray(arr, dtype=np.float64)
-            if a.ndim != 2 or a.shape[1] != len(comps):
-                raise ValueError(f"{kind} {name!r}: expected shape (n, {len(comps)}), got {a.shape}")
-            n = a.shape[0] if n is None else n
-            if a.shape[0] != n:
-                raise ValueError(f"{kind} {name!r}: {a.shape[0]} rows, others have {n}")
-            if kind == "Objects":
-                a = np.concatenate([a[:, :3] / ascale, a[:, 3:] / lscale], axis=1)
-                names_row += [f"Global Angle {name}:{name}"] + [""] * 5
-                unit_row += [angle_unit] * 3 + [length_unit] * 3
-            else:
-                a = a / lscale
-                names_row += [name, "", ""]
-                unit_row += [length_unit] * 3
-            comp_row += list(comps)
-            arrays.append(a)
-        assert n is not None
-        data = np.concatenate(arrays, axis=1)
-        lines = [kind, _fmt_number(float(rate_hz)), delimiter.join(names_row), delimiter.join(comp_row),
-                 delimiter.join(unit_row)]
-        text_cells = np.where(np.isnan(data), "", np.vectorize(_fmt_number, otypes=[object])(data)) \
-            if data.size else np.zeros((n, 0), dtype=object)
-        frames = np.arange(first_frame, first_frame + n)
-        for i in range(n):
-            lines.append(delimiter.join([str(frames[i]), "0", *text_cells[i]]))
-        blocks.append(newline.join(lines) + newline)
-    out = Path(path)
-    out.write_text(newline.join(blocks) if len(blocks) == 1 else blocks[0] + newline + blocks[1],
-                   encoding="utf-8", newline="")
-    return out
-
-
-def _fmt_number(v: float) -> str:
-    if math.isnan(v):
-        return ""
-    if v == int(v) and abs(v) < 1e15:
-        return str(int(v))
-    return repr(v)

@@ -18,7 +18,7 @@ import numpy as np
 
 from rimless.errors import UserError
 
-from rimless.analysis.io.vicon_csv import Section, ViconFile
+from rimless.analysis.io.vicon_file import Section, ViconFile
 
 __all__ = ["SourceChoice", "choose_source", "UNLABELLED", "zeros_to_nan"]
 

@@ -14,11 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rimless.analysis.io.trial import ALPHA_RAD
+
 __all__ = ["StepResult", "noise_sigma", "find_com_minima", "refine_cusp", "refine_cusps", "detect_steps",
            "ALPHA_RAD"]
-
-#: Inter-leg angle of the eight-legged wheel, rad.
-ALPHA_RAD = np.pi / 4
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,4 +1,8 @@
-"""The trials report: HTML with its figures, CSV metrics, from trials compared with the simulation.
+"""The trials report and the batch jobs of the commands.
 
-May import: rimless.analysis.io, kinematics, inference; rimless.output; numpy, pandas, matplotlib.
+`html` (the report: HTML with its figures and CSV metrics, from trials compared with the simulation), `batch`
+(``trials import`` into Parquet files, the report run with its progress bar, ``rimless demo``).
+
+May import: rimless.analysis.io, kinematics, inference, examples; rimless.output, rimless.progress; numpy,
+pandas, matplotlib.
 """

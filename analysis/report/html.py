@@ -20,15 +20,16 @@ import html
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rimless.errors import InputFileError, UserError
+from rimless.errors import InputFileError
 
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step_period_trends
+from rimless.analysis.kinematics.inputs import InputRow, load_input
 
 __all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES"]
 
@@ -38,28 +39,6 @@ DPI = 150
 METRIC_COLUMNS = ["trial", "file", "status", "slope_deg", "slope_source", "model", "steps", "rms_com_error_mm",
                   "mean_abs_period_error_ms", "rms_com_relative", "com_correlation", "theta_dot_plus_rad_s", "release_theta_dot_rad_s", "time_shift_ms",
                   "height_offset_mm", "message"]
-
-
-@dataclass
-class InputRow:
-    """What became of one input file."""
-
-    file: str
-    kind: str  # "parquet" or "csv"
-    status: str  # "imported", "read" or "refused"
-    reason: str | None = None
-    trial: Any = None
-    warnings: list[str] = field(default_factory=list)
-
-    def summary(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"file": self.file, "kind": self.kind, "status": self.status, "reason": self.reason,
-                             "warnings": self.warnings}
-        if self.trial is not None:
-            m = self.trial.meta
-            d.update(frames=m.n_frames, rate_hz=m.rate_hz, slope_deg=m.slope_deg, slope_source=m.slope_source,
-                     hub_source=m.hub_source, gap_frames=m.n_gap_frames, interpolated_frames=m.n_interpolated_frames,
-                     steps=int(self.trial.step_period_s.size))
-        return d
 
 
 @dataclass
@@ -103,34 +82,6 @@ class ReportResult:
                 "refused": [r.file for r in self.refused],
                 "critical_slope": self.critical.summary() if self.critical is not None else None,
                 "calibration": self.calibration.summary() if self.calibration is not None else None}
-
-
-def _trial_warnings(trial: Any) -> list[str]:
-    m = trial.meta
-    w = list(m.notes)
-    if m.step_refused:
-        w.append(f"steps not detected: {m.step_refused}")
-    if m.n_gap_frames:
-        w.append(f"{m.n_gap_frames} frame(s) without a hub (gaps)")
-    if m.n_interpolated_frames:
-        w.append(f"{m.n_interpolated_frames} frame(s) interpolated over gaps up to {m.max_gap_s * 1e3:g} ms "
-                 "(not used in the RMS)")
-    return w
-
-
-def load_input(path: Path, import_kwargs: dict[str, Any] | None = None) -> InputRow:
-    """Read a Parquet trial, or import a Vicon CSV; a refused file gives status ``refused`` with the reason."""
-    from rimless.analysis.io.trial import import_trial, read_trial
-
-    kind = "parquet" if path.suffix.lower() == ".parquet" else "csv"
-    try:
-        trial = read_trial(path) if kind == "parquet" else import_trial(path, **(import_kwargs or {}))
-    except UserError as err:
-        msg = str(err)
-        return InputRow(str(path), kind, "refused", msg if str(path) in msg else f"{path}: {msg}")
-    except OSError as err:
-        return InputRow(str(path), kind, "refused", f"{path}: {err}")
-    return InputRow(str(path), kind, "read" if kind == "parquet" else "imported", None, trial, _trial_warnings(trial))
 
 
 def build_report(

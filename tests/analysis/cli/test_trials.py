@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 from rimless.analysis.cli import app
 from rimless.analysis.examples.synthetic import rolling_wheel
 from rimless.analysis.io.trial import read_trial
-from rimless.analysis.io.vicon_csv import write_tracker_csv
+from rimless.analysis.io.tracker_csv import write_tracker_csv
+from tests.support.analysis_data import PUBLIC
 
-PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
 runner = CliRunner()
 #: The keys of `trials import --json` (issue contract: the old six plus the walk's).
 CONTRACT = {"file", "status", "reason", "frames", "rate_hz", "steps", "source", "slope_deg", "ramp_slope_deg",

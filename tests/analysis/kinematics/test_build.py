@@ -1,27 +1,19 @@
-"""Trials: synthetic rolling wheels with known slope, impacts and CoM path; the public exports; Parquet."""
+"""Building trials: synthetic rolling wheels with known slope, impacts and CoM path; the public exports."""
 
 from __future__ import annotations
 
 import csv
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rimless.analysis.examples.synthetic import rolling_wheel
-from rimless.analysis.io.trial import TrialRefused, build_trial, fill_short_gaps, import_trial, read_trial
-from rimless.analysis.io.vicon_csv import read_vicon_csv, write_tracker_csv
-from rimless.errors import InputFileError
+from rimless.analysis.io.tracker_csv import write_tracker_csv
+from rimless.analysis.io.vicon_csv import read_vicon_csv
+from rimless.analysis.kinematics.build import TrialRefused, build_trial, fill_short_gaps, import_trial
+from tests.support.analysis_data import PUBLIC, public
 
-PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
 NOISE_M = 0.3e-3
-
-
-def public(name: str) -> Path:
-    p = PUBLIC / name
-    if not p.exists():
-        pytest.skip(f"public Vicon exports not found at {PUBLIC} (they live in ../shared beside the repo)")
-    return p
 
 
 def write_markers(tmp_path, w, markers=None, name="m.csv"):
@@ -151,32 +143,6 @@ def test_missing_frame_rows_become_gaps(tmp_path):
     assert trial.series["gap"][40:43].all()
 
 
-def test_parquet_round_trip(tmp_path):
-    w = rolling_wheel(seed=12)
-    trial = import_trial(write_markers(tmp_path, w), leg_length_m=w.leg_length_m)
-    out = trial.to_parquet(tmp_path / "x" / "t.parquet")
-    back = read_trial(out)
-    assert back.meta == trial.meta
-    for k, v in trial.series.data.items():
-        np.testing.assert_array_equal(back.series[k], v)
-    np.testing.assert_array_equal(back.time_s, trial.time_s)
-    np.testing.assert_array_equal(back.impact_time_s, trial.impact_time_s)
-    assert back.summary() == trial.summary()
-    assert list(tmp_path.joinpath("x").iterdir()) == [out]  # no temp file left
-
-
-def test_read_trial_rejects_other_files(tmp_path):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    pq.write_table(pa.table({"a": [1, 2]}), tmp_path / "a.parquet")
-    with pytest.raises(InputFileError, match="rimless trial metadata"):
-        read_trial(tmp_path / "a.parquet")
-    (tmp_path / "b.parquet").write_text("nope")
-    with pytest.raises(InputFileError, match="not a readable Parquet"):
-        read_trial(tmp_path / "b.parquet")
-
-
 # ------------------------------------------------------------------------------------ public exports
 
 
@@ -221,34 +187,3 @@ def test_public_markers_chosen_by_name_hub_is_centroid():
     exp = np.mean([[float(first[2 + 3 * k + j]) / 1000 for j in range(3)] for k in range(4)], axis=0)
     np.testing.assert_allclose(trial.series["hub"][0], exp, rtol=0, atol=1e-12)
     assert trial.meta.markers == tuple(names)
-
-
-def test_rotation_stack_matches_the_matrix_array():
-    """An object's rotations kept as angles (matrices made slice by slice) give what the (n, 3, 3) array gives."""
-    from rimless.analysis.kinematics import hub
-    from scipy.spatial.transform import Rotation
-
-    rng = np.random.default_rng(4)
-    n = 3000
-    angles = np.cumsum(rng.normal(0.0, 0.05, (n, 3)), axis=0)
-    angles[rng.random(n) < 0.05] = np.nan
-    invalid = rng.random(n) < 0.03
-    mats = Rotation.from_rotvec(np.nan_to_num(angles)).as_matrix()
-    mats[np.isnan(angles).any(axis=1) | invalid] = np.nan
-    stack = hub.RotationStack(angles, "helical", invalid)
-    stack.SLICE = 256  # several slices
-    np.testing.assert_array_equal(stack[:], mats)
-    np.testing.assert_array_equal(stack[[5, 2, 7]], mats[[5, 2, 7]])
-    np.testing.assert_array_equal(stack[11], mats[11])
-    np.testing.assert_array_equal(stack.valid(), ~np.isnan(mats[:, 0, 0]))
-    d, axis = np.array([0.01, -0.02, 0.03]), np.array([0.0, 1.0, 0.0])
-    np.testing.assert_allclose(hub.apply_rotations(stack, d), np.einsum("nij,j->ni", mats, d), rtol=0, atol=1e-15)
-    np.testing.assert_allclose(hub.axis_in_body(stack, axis), axis @ mats, rtol=0, atol=1e-15)
-    a1, x1 = hub.wheel_angle_from_rotations(stack)
-    a2, x2 = hub.wheel_angle_from_rotations(mats)
-    np.testing.assert_array_equal(a1, a2)
-    np.testing.assert_array_equal(x1, x2)
-    mask = rng.random(n) < 0.8
-    np.testing.assert_array_equal(stack.masked(mask).valid(), stack.valid() & mask)
-    with pytest.raises(ValueError):
-        hub.RotationStack(angles, "not-a-sequence")

@@ -10,17 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text, read_vicon_csv, write_tracker_csv
+from rimless.analysis.io.tracker_csv import write_tracker_csv
+from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text, read_vicon_csv
 from rimless.errors import InputFileError
+from tests.support.analysis_data import PUBLIC, public
 
-PUBLIC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "vicon-public"
-
-
-def public(name: str) -> Path:
-    p = PUBLIC / name
-    if not p.exists():
-        pytest.skip(f"public Vicon exports not found at {PUBLIC} (they live in ../shared beside the repo)")
-    return p
 
 
 # --------------------------------------------------------------------------------- independent reference

@@ -28,7 +28,13 @@ def test_critical_slope_json_contract_and_truth():
     truth = load_truth()
     crit = truth["dataset"]["critical_slope_deg"]
     assert abs(out["critical_slope_deg"] - crit) < 0.1
-    assert out["model_critical_slope_deg"]["er"] == pytest.approx(1.263, abs=0.01)  # Table 1 ER (sim continuation)
+    # The Table 1 ER wheel loses less energy than the truth model (c = 8 against 10 N s/m, no guide friction), so
+    # its critical slope lies below the truth's, and above the rigid wheel's order of magnitude.
+    er = out["model_critical_slope_deg"]["er"]
+    assert 1.0 < er < crit
+    # Regression snapshot: 1.263 deg is `rimless sim critical-slope --model er` (Algorithm 1 continuation,
+    # Table 1) at commit ebb1b78; tests/sim checks the continuation itself.
+    assert er == pytest.approx(1.263, abs=0.01)
     # no verdict contradicts the truth model
     by_file = {f"{name}.csv": t for name, t in truth["trials"].items()}
     for row in out["per_trial"]:

@@ -19,7 +19,8 @@ from rimless.analysis.inference.compare import Simulator, compare_trial, step_pe
 from rimless.analysis.examples.bundled import DATA_DIR, TRIALS, data_files, load_truth, simulate_trial, write_trial_csv
 from rimless.analysis.report.html import build_report
 from rimless.analysis.io.timeseries import Event, TimeSeries
-from rimless.analysis.io.trial import Trial, import_trial
+from rimless.analysis.io.trial import Trial
+from rimless.analysis.kinematics.build import import_trial
 from rimless.cli import app as root_app
 
 runner = CliRunner()
@@ -79,9 +80,9 @@ def test_bundled_trial_imports_with_true_slope_and_periods(path, truth):
 
 
 def test_number_format_is_printf_with_3_digit_exponents():
-    from rimless.analysis.examples.bundled import _fmt
+    from rimless.analysis.examples.bundled import format_number
 
-    assert [_fmt(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
+    assert [format_number(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
         "7.2e-006", "-1.5e-012", "123.4568", "0.5", ""]
 
 

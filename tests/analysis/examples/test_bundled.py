@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rimless.analysis.examples.bundled import data_files, load_truth
-from rimless.analysis.io.trial import import_trial
+from rimless.analysis.kinematics.build import import_trial
 
 
 @pytest.mark.parametrize("path", data_files(), ids=lambda p: p.stem)

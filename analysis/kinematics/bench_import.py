@@ -1,6 +1,7 @@
-"""Import benchmark: a synthetic Tracker export of N rows, read by our parser and by plain pandas.
+"""Import benchmark: a synthetic Tracker export of N rows, read by plain pandas, our parser and our import.
 
-Run by hand: ``python -m rimless.analysis.io.bench_import [ROWS]`` or ``rimless trials bench-import``.
+It sits with `build` because it times the whole import (parse, then `import_trial`). Run by hand:
+``python -m rimless.analysis.kinematics.bench_import [ROWS]`` or ``rimless trials bench-import``.
 Prints timings and rows/s; nothing is asserted (timings depend on the machine).
 """
 
@@ -14,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["make_tracker_file", "run_benchmark"]
+__all__ = ["make_tracker_file", "run_benchmark", "benchmark_figures", "rows_for_mb", "BYTES_PER_ROW"]
 
 
 def make_tracker_file(path: Path, rows: int, *, seed: int = 0) -> Path:
@@ -62,8 +63,8 @@ def _phase(name: str, path: str) -> dict[str, float]:
 
     import pandas as pd
 
-    from rimless.analysis.io.trial import import_trial
     from rimless.analysis.io.vicon_csv import read_vicon_csv
+    from rimless.analysis.kinematics.build import import_trial
 
     import scipy.signal  # noqa: F401
     import scipy.spatial.transform  # noqa: F401
@@ -125,7 +126,7 @@ def run_benchmark(rows: int = 1_000_000, path: Path | None = None) -> dict[str, 
         p = path or make_tracker_file(Path(tmp) / "bench.csv", rows)
         out["bytes"] = p.stat().st_size
         for name in _PHASES:
-            res = subprocess.run([sys.executable, "-m", "rimless.analysis.io.bench_import", "--phase", name, str(p)],
+            res = subprocess.run([sys.executable, "-m", "rimless.analysis.kinematics.bench_import", "--phase", name, str(p)],
                                  capture_output=True, text=True, check=False)
             if res.returncode != 0:
                 raise RuntimeError(f"benchmark phase {name} failed: {res.stderr.strip().splitlines()[-1:]}")
@@ -143,6 +144,21 @@ def run_benchmark(rows: int = 1_000_000, path: Path | None = None) -> dict[str, 
 BYTES_PER_ROW = 50.6
 
 
+def rows_for_mb(mb: float) -> int:
+    """Rows of a `make_tracker_file` export of about ``mb`` MB (at least 100)."""
+    return max(100, int(mb * 1e6 / BYTES_PER_ROW))
+
+
+def benchmark_figures(rows: int) -> dict[str, Any]:
+    """`run_benchmark` with the load average before and after and the CPU count (``trials bench-import --json``)."""
+    import os
+
+    load_before = os.getloadavg()[0]
+    res = run_benchmark(rows)
+    return {**res, "load_average_before": load_before, "load_average_after": os.getloadavg()[0],
+            "cpus": os.cpu_count()}
+
+
 def main(argv: list[str] | None = None) -> None:
     """Command-line entry: ``[ROWS]`` or ``--mb SIZE`` (a file of about SIZE MB); ``--phase NAME FILE`` is
     used internally."""
@@ -154,7 +170,7 @@ def main(argv: list[str] | None = None) -> None:
         print(json.dumps(_phase(args[1], args[2])))
         return
     if args and args[0] == "--mb":
-        rows = max(100, int(float(args[1]) * 1e6 / BYTES_PER_ROW))
+        rows = rows_for_mb(float(args[1]))
     else:
         rows = int(args[0]) if args else 1_000_000
     print(f"writing a {rows:,}-row Tracker export and timing 3 fresh processes ...", file=sys.stderr)

@@ -2,19 +2,14 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import truth_wheel as tw  # noqa: E402
+from rimless.analysis.kinematics.build import TrialRefused, import_trial
+from rimless.errors import InputFileError
+from tests.support import analysis_truth_wheel as tw
 
 ezc3d = pytest.importorskip("ezc3d")
-
-from rimless.analysis.io.trial import TrialRefused, import_trial  # noqa: E402
-from rimless.errors import InputFileError  # noqa: E402
 
 
 def write_c3d_with_ezc3d(path, rate, markers_m, *, occluded_zero=None):

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from rigid_truth import DuckTrial
+from tests.support.analysis_rigid_truth import DuckTrial
 
 
 def sim_trial(params, slope_deg: float, release: float, rng: np.random.Generator, *, name: str, n_steps: int = 9,

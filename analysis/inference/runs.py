@@ -1,0 +1,154 @@
+"""The runs behind ``rimless trials critical-slope`` and ``trials calibrate``: load the trials, calibrate,
+estimate the critical slope, and return the JSON-ready summary the commands print.
+
+Progress goes to one bar on stderr (`rimless.progress.progress_bar`); the refusals of the inputs are
+returned, not printed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rimless.errors import InputFileError
+from rimless.progress import progress_bar
+
+from rimless.analysis.inference.calibrate import CalibrationResult, NoTrialCalibrated, calibrate
+from rimless.analysis.inference.critical_slope import CriticalSlopeResult, run_critical_slope
+from rimless.analysis.kinematics.inputs import load_input
+
+__all__ = ["LoadedTrials", "CriticalSlopeRun", "CalibrationRun", "load_trials", "wheel_params",
+           "critical_slope_run", "calibration_run"]
+
+
+@dataclass
+class LoadedTrials:
+    """The trials that could be read, their names (as given, relative to the working folder) and the refusals."""
+
+    trials: list[Any] = field(default_factory=list)
+    names: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)
+
+
+def _rel(p: Path) -> str:
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(p)
+
+
+def load_trials(files: Sequence[Path], import_kwargs: dict[str, Any]) -> LoadedTrials:
+    """Read or import every input; a missing file stops before any work (`InputFileError`)."""
+    missing = [str(p) for p in files if not p.is_file()]
+    if missing:
+        raise InputFileError(f"{', '.join(missing)}: no such file")
+    out = LoadedTrials()
+    for p in files:
+        row = load_input(p, import_kwargs)
+        if row.trial is None:
+            out.refused.append(row.reason or f"{p}: refused")
+        else:
+            out.trials.append(row.trial)
+            out.names.append(_rel(p))
+    return out
+
+
+def wheel_params(path: Path | None) -> Any:
+    """The wheel's parameters from a TOML file (``--params``), default the paper's Table 1."""
+    from rimless.sim.model.params import WheelParams, load_params
+
+    if path is None:
+        return WheelParams()
+    if not path.is_file():
+        raise InputFileError(f"--params {path}: no such file")
+    return load_params(path)
+
+
+@dataclass
+class CriticalSlopeRun:
+    """What ``trials critical-slope`` prints: the inputs, the estimates, and the optional calibration."""
+
+    loaded: LoadedTrials
+    result: CriticalSlopeResult | None = None  # None when no trial could be read
+    calibration: CalibrationResult | None = None
+    calibration_skipped: str | None = None
+
+    def summary(self) -> dict[str, Any]:
+        """The JSON object of ``trials critical-slope --json``."""
+        assert self.result is not None
+        out = self.result.summary()
+        out["refused"] = self.loaded.refused
+        if self.calibration is not None:
+            out["calibration"] = self.calibration.summary()
+        return out
+
+
+def critical_slope_run(files: Sequence[Path], *, models: Sequence[str], calibrate_c: bool, params_path: Path | None,
+                       import_kwargs: dict[str, Any], group_tol_deg: float) -> CriticalSlopeRun:
+    """Verdicts and the critical slope from the trials beside the models'; with ``calibrate_c`` also c
+    calibrated on the trials (first model) and that model's critical slope."""
+    wheel = wheel_params(params_path)
+    with progress_bar("importing") as bar:
+        run = CriticalSlopeRun(load_trials(files, import_kwargs))
+        if not run.loaded.trials:
+            return run
+        calibrated = None
+        if calibrate_c:
+            bar.update(description="calibrating c")
+            try:
+                run.calibration = calibrate(run.loaded.trials, run.loaded.names, ["c"], params=wheel, model=models[0],
+                                            progress=lambda n: bar.update(description=f"calibrating c ({n} simulations)"))
+                calibrated = run.calibration.calibrated_params
+            except NoTrialCalibrated as e:
+                run.calibration_skipped = str(e)
+        run.result = run_critical_slope(run.loaded.trials, run.loaded.names, wheel, models=models,
+                                        calibrated=calibrated, group_tol_deg=group_tol_deg,
+                                        progress=lambda s: bar.update(description=s))
+    return run
+
+
+@dataclass
+class CalibrationRun:
+    """What ``trials calibrate`` prints: the inputs, the calibration and the optional critical slopes."""
+
+    loaded: LoadedTrials
+    calibration: CalibrationResult | None = None
+    failure: str | None = None  # why nothing was calibrated
+    critical: CriticalSlopeResult | None = None
+
+    def summary(self) -> dict[str, Any]:
+        """The JSON object of ``trials calibrate --json``."""
+        assert self.calibration is not None
+        out = self.calibration.summary()
+        out["refused"] = self.loaded.refused
+        crit = self.critical
+        if crit is not None:
+            out["critical_slope_deg"] = {"trials": crit.critical_slope_deg,
+                                         "trials_method": crit.chosen.method if crit.chosen else None,
+                                         "trials_ci_deg": list(crit.chosen.ci_deg) if crit.chosen else None,
+                                         **{f"model_{k}": v for k, v in crit.model["critical_slope_deg"].items()}}
+        return out
+
+
+def calibration_run(files: Sequence[Path], fit: Sequence[str], *, model: str, critical: bool,
+                    params_path: Path | None, import_kwargs: dict[str, Any]) -> CalibrationRun:
+    """Calibrate ``fit`` on the trials; with ``critical`` also the calibrated model's critical slope and the
+    trials'."""
+    wheel = wheel_params(params_path)
+    with progress_bar("importing") as bar:
+        run = CalibrationRun(load_trials(files, import_kwargs))
+        if not run.loaded.trials:
+            return run
+        try:
+            run.calibration = calibrate(run.loaded.trials, run.loaded.names, fit, params=wheel, model=model,
+                                        progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"))
+        except NoTrialCalibrated as e:
+            run.failure = str(e)
+            return run
+        if critical:
+            run.critical = run_critical_slope(run.loaded.trials, run.loaded.names, wheel, models=[model],
+                                              calibrated=run.calibration.calibrated_params,
+                                              progress=lambda s: bar.update(description=s))
+    return run

@@ -1,0 +1,431 @@
+"""Building a `Trial` from a parsed Vicon export: the kinematics of this folder put together.
+
+`build_trial` chooses the wheel's source (`source`), places it on the full frame grid, bridges short gaps
+(`fill_short_gaps`), finds the hub and the wheel angle (`hub`), the walking window (`walk`), the slope frame and
+CoM height (`slope`), the impacts (`steps`) and the ending, checks that the motion is a wheel's, and returns the
+trial of `rimless.analysis.io.trial` (which stores and reads it). `import_trial` reads the file first.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rimless.errors import UserError
+
+from rimless.analysis.io.recording import read_recording
+from rimless.analysis.io.timeseries import Event, TimeSeries
+from rimless.analysis.io.trial import ALPHA_RAD, Trial, TrialMeta, standard_series
+from rimless.analysis.io.vicon_file import Section, ViconFile
+from rimless.analysis.kinematics.hub import (RotationStack, axis_in_body, hub_from_markers, hub_from_pose,
+                                             wheel_angle_from_rotations)
+from rimless.analysis.kinematics.slope import fit_slope
+from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
+from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
+from rimless.analysis.kinematics.walk import classify_ending, find_motion
+
+__all__ = ["TrialRefused", "build_trial", "import_trial", "fill_short_gaps", "DEFAULT_MAX_GAP_S",
+           "TABLE1_LEG_LENGTH_M"]
+
+
+class TrialRefused(UserError):
+    """A file parsed but holds no usable wheel trajectory; the message says why."""
+
+
+#: The one gap rule of `trials import` and `trials report`: gaps up to this long (s) with data on both sides are
+#: bridged by linear interpolation (flagged ``interpolated``, never used as observations); longer gaps split
+#: the trial into observed segments and no step period spans them.
+DEFAULT_MAX_GAP_S = 0.05
+#: Table 1 leg length, m: the plausibility checks compare the recording with a wheel of this size.
+TABLE1_LEG_LENGTH_M = 0.237
+#: A hub jump larger than this (m) plus 5 m/s times the time between two valid frames is a seam.
+JUMP_M = 0.1
+#: Warn when the fitted centre of rotation lies this far (m) from the tracked point, or fits this badly (m).
+HUB_OFFSET_WARN_M = 0.01
+HUB_RESIDUAL_WARN_M = 0.002
+
+
+def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
+    """(all frames from first to last, row index of each in the section or -1)."""
+    if sec.n_rows and sec.sub_frame.max() > 0:
+        raise TrialRefused(f"section {sec.kind!r} (line {sec.line}) has sub frames: not a trajectory")
+    missing = int(sec.frame[-1] - sec.frame[0] + 1 - sec.n_rows) if sec.n_rows else 0
+    if missing > max(sec.n_rows, 10_000):
+        r = int(np.argmax(np.diff(sec.frame))) + 1
+        raise TrialRefused(f"{sec.data_line + r}:1: section {sec.kind!r}: the frame number jumps from "
+                           f"{sec.frame[r - 1]} to {sec.frame[r]}: {missing} frames would be missing (a second take "
+                           "or a wrong frame number?)")
+    frames = np.arange(sec.frame[0], sec.frame[-1] + 1)
+    row = np.full(frames.size, -1, np.int64)
+    row[sec.frame - sec.frame[0]] = np.arange(sec.n_rows)
+    return frames, row
+
+
+def _on_grid(arr: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """``arr`` rows on the full frame grid (NaN at missing frames); ``arr`` itself when no frame is missing."""
+    if row.size == arr.shape[0] and (row.size == 0 or (row[0] == 0 and row[-1] == row.size - 1)):
+        return arr  # rows are 0..n-1 in order (frames strictly increase), nothing to place
+    out = np.full((row.size,) + arr.shape[1:], np.nan)
+    ok = row >= 0
+    out[ok] = arr[row[ok]]
+    return out
+
+
+def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarray, row: np.ndarray) -> None:
+    """Refuse at the seam line when the tracked point jumps (a second take pasted after the first)."""
+    ok = np.flatnonzero(~np.isnan(p).any(axis=1))
+    if ok.size < 2:
+        return
+    d = np.linalg.norm(np.diff(p[ok], axis=0), axis=1)
+    dt = np.diff(time_s[ok])
+    bad = np.flatnonzero(d > JUMP_M + 5.0 * dt)
+    if bad.size:
+        i = ok[bad[0] + 1]
+        where = (f"{path}:{sec.data_line + int(row[i])}:1" if sec.data_line
+                 else f"{path}: frame {int(sec.frame[row[i]])}")
+        raise TrialRefused(f"{where}: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
+                           "here: a second take pasted after the first? split the file here")
+
+
+def build_trial(
+    vf: ViconFile,
+    *,
+    object: str | None = None,  # noqa: A002 - the Vicon word
+    markers: Sequence[str] | None = None,
+    slope_deg: float | None = None,
+    hub_offset_m: Sequence[float] | None = None,
+    orientation: str = "helical",
+    leg_length_m: float | None = None,
+    max_gap_s: float = DEFAULT_MAX_GAP_S,
+    alpha_rad: float = ALPHA_RAD,
+    wheel_leg_length_m: float = TABLE1_LEG_LENGTH_M,
+) -> Trial:
+    """Build a `Trial` from a parsed Vicon file.
+
+    Parameters
+    ----------
+    vf : from `read_vicon_csv` (or `rimless.analysis.io.c3d.read_c3d`).
+    object : tracked object (Objects section) or subject prefix of the markers (CLI ``--object``);
+        default: the candidate that moves like the wheel (`rimless.analysis.kinematics.source.choose_source`).
+    markers : names of the wheel markers (3 or more on the wheel, or 1 at the hub) (CLI ``--markers``).
+    slope_deg : known slope, deg; default: estimated from the hub path in the walking window.
+    hub_offset_m : hub in the object (or marker reference) frame, m (CLI ``--hub-offset-mm``); default: the
+        centre of rotation fitted on the walking window when the wheel turns more than 180 deg there.
+    orientation : convention of RX, RY, RZ (``"helical"`` or a scipy Euler sequence such as ``"xyz"``).
+    leg_length_m : leg length; when given, CoM height is measured from the slope plane
+        (impact line - leg_length * cos(alpha / 2)); otherwise from the line through the impacts.
+    max_gap_s : gaps up to this long are linearly interpolated (flagged ``interpolated``); longer stay NaN.
+    alpha_rad : rotation per step, rad.
+    wheel_leg_length_m : the wheel's leg length for the plausibility checks (Table 1), m.
+
+    Raises
+    ------
+    TrialRefused
+        When the file holds no usable wheel trajectory or is implausible (message says why and where).
+    """
+    if not (math.isfinite(max_gap_s) and max_gap_s >= 0):
+        raise UserError(f"--max-gap-ms must be a finite number >= 0, got {max_gap_s * 1e3!r}")
+    try:
+        choice = choose_source(vf, object, markers)
+    except SourceRefused as err:
+        raise TrialRefused(str(err)) from None
+    sec, obj, mk = choice.section, choice.object, list(choice.markers)
+    warnings: list[str] = list(choice.warnings)
+    if sec.n_rows < 10:
+        raise TrialRefused(f"{vf.path}: section {sec.kind!r} (line {sec.line}) has {sec.n_rows} rows: too short")
+    try:
+        frames, row = _full_grid(sec)
+    except TrialRefused as err:
+        raise TrialRefused(f"{vf.path}:{err}" if str(err)[:1].isdigit() else f"{vf.path}: {err}") from None
+    rate = sec.rate_hz
+    time_s = (frames - frames[0]) / rate
+    notes: list[str] = []
+    rot = None
+    if obj is not None:
+        pose = _on_grid(sec.get(obj, POSE), row)  # a view of the section when no frame is missing
+        zero = ~(pose != 0).any(axis=1)  # six exact zeros: an occlusion (as `zeros_to_nan`, without a copy)
+        if (zero | np.isnan(pose).all(axis=1)).all():
+            raise TrialRefused(f"{vf.path}: object {obj!r} has no values (never tracked)")
+        # matrices made slice by slice from the angles when used (n x 3 x 3 floats are never held at once)
+        rot = RotationStack(pose[:, :3], orientation, invalid=zero)
+        trans = pose[:, 3:].copy()
+        trans[zero] = np.nan
+        del pose, zero
+        what = "object origin"
+        units = {c.component: c.file_unit for c in sec.columns if c.group == obj}
+    else:
+        pts = np.stack([zeros_to_nan(_on_grid(sec.get(m, XYZ), row), 3) for m in mk], axis=1)
+        counts = (~np.isnan(pts).any(axis=2)).sum(axis=0)
+        if (counts == 0).any():
+            dead = [m for m, c in zip(mk, counts) if c == 0]
+            raise TrialRefused(f"{vf.path}: marker(s) {dead} have no values in any frame")
+        if len(mk) == 2:
+            raise TrialRefused(f"{vf.path}: 2 wheel markers ({', '.join(mk)}) fix neither the hub nor the "
+                               "rotation: give 3 or more (or the hub marker) with --markers")
+        try:
+            est0 = hub_from_markers(pts)
+        except ValueError as err:
+            raise TrialRefused(f"{vf.path}: {err}") from None
+        trans = est0.hub_m
+        rot = est0.rotation
+        del est0, pts
+        what = "marker centroid" if len(mk) > 1 else "hub marker"
+        units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
+    _check_jumps(vf.path, sec, time_s, trans, row)
+    del row
+    angle = None
+    axis = None
+    if rot is not None:
+        angle, axis = wheel_angle_from_rotations(rot)
+        if not np.isfinite(angle).any():
+            angle = None
+    motion = find_motion(time_s, angle, trans, leg_length_m=wheel_leg_length_m)
+    rough = np.zeros(time_s.size, bool)
+    rough[motion.release_index:motion.end_index + 1] = True
+    if rot is not None and angle is not None:
+        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
+        hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
+        hub_source = est.source
+        del est
+    else:
+        hub_raw, offset, residual = trans, None, None
+        hub_source = "single marker taken as the hub" if obj is None else "object origin"
+        if hub_offset_m is not None and obj is None:
+            warnings.append("--hub-offset-mm ignored: one marker has no orientation to carry an offset")
+    if offset is not None and hub_offset_m is None and residual is not None:
+        if np.linalg.norm(offset) > HUB_OFFSET_WARN_M:
+            warnings.append(f"the centre of rotation lies {np.linalg.norm(offset) * 1e3:.0f} mm from the {what} "
+                            "(markers not centred on the hub, or the object origin is off the hub): corrected")
+        if residual > HUB_RESIDUAL_WARN_M:
+            warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
+                            "rigid on the wheel, or the wheel does not roll in one plane")
+
+    # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end. A `RotationStack` costs no
+    # memory and makes it then; a matrix array (markers) is replaced by it now. float32: the tilt is compared
+    # with 20 deg; the rounding (1e-7 rad) does not matter there.
+    u = None
+    if rot is not None and axis is not None and not isinstance(rot, RotationStack):
+        u = axis_in_body(rot, axis, np.float32)
+        rot = None
+    max_gap_frames = int(math.floor(min(max_gap_s, 1e6) * rate + 1e-9))
+    hub, filled = fill_short_gaps(hub_raw, max_gap_frames)
+    del hub_raw, trans
+    if angle is not None:
+        angle, _ = fill_short_gaps(angle, max_gap_frames)
+    gap = np.isnan(hub).any(axis=1)
+    if gap.all() or (~gap).sum() < 10:
+        raise TrialRefused(f"{vf.path}: fewer than 10 frames with a known hub")
+
+    fit_mask = rough & ~gap
+    if fit_mask.sum() < 10:
+        fit_mask = ~gap
+    hub_fit = np.where(fit_mask[:, None], hub, np.nan)
+    frame0 = fit_slope(hub_fit, slope_deg=slope_deg)
+    travel = frame0.travel
+    y = np.where(fit_mask, frame0.to_slope(hub)[:, 1], np.nan)
+    period_guess = None
+    if angle is not None and np.isfinite(angle[fit_mask]).sum() > 2:
+        aw = angle[fit_mask]
+        total = float(np.nanmax(aw) - np.nanmin(aw))
+        tw = time_s[fit_mask]
+        if total > 0:
+            period_guess = alpha_rad / (total / max(tw[-1] - tw[0], 1e-9))
+        del aw, tw
+    idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
+    reference = "the robust line through the hub path"
+    frame = frame0
+    if idx.size >= 3:
+        frame = fit_slope(hub_fit, slope_deg=slope_deg, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+        reference = f"the line through the hub at {idx.size} CoM-height minima (impacts)"
+    elif slope_deg is None:
+        notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
+                     "impact line)")
+    del hub_fit, y, idx
+    hub_slope = frame.to_slope(hub)
+    com = hub_slope[:, 1].copy()
+    if leg_length_m is not None:
+        com = com + leg_length_m * math.cos(alpha_rad / 2)
+        reference = f"slope plane = {reference} minus leg_length_m*cos(alpha/2) ({leg_length_m} m)"
+    else:
+        reference = f"height above {reference}"
+    observed = ~gap & ~filled
+    t_rel, t_end = float(time_s[motion.release_index]), float(time_s[motion.end_index])
+    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end),
+                         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0)
+
+    # walking window and ending
+    if steps.impact_time_s.size:
+        i_last = int(np.searchsorted(time_s, steps.impact_time_s[-1]))
+        i_last = min(i_last, time_s.size - 1)
+    else:
+        i_last = motion.end_index
+    window_s = (t_rel, float(steps.impact_time_s[-1]) if steps.impact_time_s.size else t_end)
+    tilt = None
+    if rot is not None and axis is not None:
+        u = axis_in_body(rot, axis, np.float32)
+    del rot
+    if u is not None:
+        win = np.zeros(time_s.size, bool)
+        win[motion.release_index:i_last + 1] = True
+        win &= ~np.isnan(u).any(axis=1)
+        if win.any():
+            a_body = u[win].mean(axis=0, dtype=np.float64)
+            a_body /= np.linalg.norm(a_body)
+            cos_t = np.abs(u @ a_body.astype(np.float32)).astype(np.float64)  # = |axis . (R a_body)|
+            tilt = np.arccos(np.clip(cos_t, 0.0, 1.0))
+            del cos_t
+        del u, win
+    progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
+    sig = noise_sigma(com[rough]) if rough.any() else float("nan")
+    ending = classify_ending(time_s, hub_slope, progress, (motion.release_index, i_last), axis_tilt_rad=tilt,
+                             noise_m=sig if math.isfinite(sig) else 0.0)
+
+    _plausibility(vf.path, sec, time_s, hub_slope, angle, steps, window_s, alpha_rad, wheel_leg_length_m, warnings)
+    n_unseen = _unseen_periods(steps)
+    if n_unseen:
+        warnings.append(f"{n_unseen} step period(s) dropped: an impact fell in a gap longer than "
+                        f"{max_gap_s * 1e3:g} ms (not guessed)")
+    if motion.held:
+        notes.append(f"held still for {t_rel:.2f} s before the release")
+
+    ts = TimeSeries(time_s).add_data("frame", frames)
+    ts = standard_series(ts, hub, hub_slope, com, angle, gap, filled)
+    ts = replace(ts, events=tuple(Event(t, "impact") for t in steps.impact_time_s.tolist()))  # sorted once
+    meta = TrialMeta(
+        source_file=str(vf.path),
+        section=sec.kind,
+        section_line=sec.line,
+        object=obj,
+        markers=tuple(mk),
+        rate_hz=float(rate),
+        first_frame=int(frames[0]),
+        n_frames=int(frames.size),
+        file_units=units,
+        hub_source=hub_source,
+        hub_offset_m=None if offset is None else tuple(float(v) for v in offset),
+        orientation=(orientation if obj is not None else "markers") if angle is not None else None,
+        slope_deg=frame.slope_deg,
+        slope_source=frame.source + (" (walking window)" if frame.source != "given" else ""),
+        slope_residual_m=frame.residual_m,
+        slope_points=frame.n_points,
+        travel_direction=tuple(float(v) for v in travel),
+        slope_origin_m=tuple(float(v) for v in frame.origin_m),
+        com_height_reference=reference,
+        max_gap_s=float(max_gap_s),
+        n_gap_frames=int(gap.sum()),
+        n_interpolated_frames=int(filled.sum()),
+        step_method=steps.method,
+        step_refused=steps.refused,
+        step_phase_rad=steps.phase_rad,
+        alpha_rad=float(alpha_rad),
+        notes=tuple(notes),
+        source_reason=choice.reason,
+        ramp_slope_deg=choice.ramp_slope_deg,
+        ramp_source=choice.ramp_source,
+        outcome=ending.outcome,
+        outcome_reason=ending.reason,
+        window_s=window_s,
+        hub_offset_residual_m=residual,
+        impact_step=tuple(int(k) for k in (steps.impact_step if steps.impact_step is not None else ())),
+        period_step=tuple(int(k) for k in (steps.period_step if steps.period_step is not None else ())),
+        warnings=tuple(warnings),
+    )
+    return Trial(ts, meta)
+
+
+def _unseen_periods(steps: StepResult) -> int:
+    ks = steps.impact_step
+    if ks is None or len(ks) < 2:
+        return 0
+    return int(ks[-1] - ks[0]) - int(len(steps.period_step if steps.period_step is not None else []))
+
+
+def _plausibility(path: str, sec: Section, time_s: np.ndarray, hub_slope: np.ndarray, angle: np.ndarray | None,
+                  steps: StepResult, window_s: tuple[float, float], alpha_rad: float, leg_m: float,
+                  warnings: list[str]) -> None:
+    """Compare the size and speed of the recorded motion with the wheel's (catches a mm/m mislabel)."""
+    expected = 2 * leg_m * math.sin(alpha_rad / 2)  # hub travel per step, m
+    m = (time_s >= window_s[0]) & (time_s <= window_s[1]) & ~np.isnan(hub_slope).any(axis=1)
+    if m.sum() < 3:
+        return
+    x = hub_slope[m, 0]
+    travel = float(np.max(x) - np.min(x))
+    unit = sorted({c.file_unit for c in sec.columns if c.component in ("X", "Y", "Z", "TX", "TY", "TZ")})
+    where = f"{path}:{sec.units_line}:1" if sec.units_line else path
+    if angle is not None and np.isfinite(angle[m]).sum() > 2:
+        turned = float(np.nanmax(angle[m]) - np.nanmin(angle[m]))
+        if turned < alpha_rad:
+            return
+        per_step = travel / (turned / alpha_rad)
+        ratio = per_step / expected
+        if ratio < 0.1 or ratio > 10:
+            raise TrialRefused(
+                f"{where}: the units row says {'/'.join(unit) or '(none)'}, but the wheel moves {per_step:.4g} m per "
+                f"{math.degrees(alpha_rad):.0f} deg of rotation where a wheel with {leg_m} m legs moves "
+                f"{expected:.3f} m: the numbers are likely in "
+                f"{'m (not mm)' if ratio < 0.1 else 'mm (not m)'}; fix the units row")
+        if not 0.5 <= ratio <= 2.0:
+            warnings.append(f"the wheel moves {per_step:.3f} m per step where {expected:.3f} m is expected "
+                            f"(legs of {leg_m} m): check the units row (line {sec.units_line}) and the leg length")
+    else:
+        dur = max(float(np.ptp(time_s[m])), 1e-9)
+        speed = travel / dur
+        if travel > 0 and (speed < 0.01 or speed > 20):
+            raise TrialRefused(
+                f"{where}: the units row says {'/'.join(unit) or '(none)'}, but the hub moves at {speed:.4g} m/s "
+                "while walking (a wheel walks at about 0.1-2 m/s): check the units row")
+
+
+def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Hub at each CoM-height cusp: height from the V fit of Z, horizontal position interpolated."""
+    half = max(3, int(0.25 * np.median(np.diff(idx)))) if idx.size > 1 else 5
+    ok = ~np.isnan(hub).any(axis=1)
+    tv, hv = time_s[ok], hub[ok]
+    out = np.empty((idx.size, 3))
+    out[:, 0], out[:, 2] = refine_cusps(time_s, hub[:, 2], idx, half)
+    tc = out[:, 0].copy()
+    out[:, 0] = np.interp(tc, tv, hv[:, 0])
+    out[:, 1] = np.interp(tc, tv, hv[:, 1])
+    return out
+
+
+
+def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Linearly interpolate runs of at most ``max_gap_frames`` NaN rows that have valid rows on both sides.
+
+    Returns (filled copy, bool mask of filled rows). Longer runs and runs at the ends stay NaN.
+    """
+    v = np.array(values, dtype=np.float64, copy=True)
+    n = v.shape[0]
+    bad = np.isnan(v.reshape(n, -1)).any(axis=1)
+    filled = np.zeros(n, bool)
+    if max_gap_frames <= 0 or not bad.any() or bad.all():
+        return v, filled
+    edges = np.diff(bad.view(np.int8), prepend=np.int8(0), append=np.int8(0))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    del edges
+    short = (starts > 0) & (stops < n) & (stops - starts <= max_gap_frames)
+    if not short.any():
+        return v, filled
+    # every row of every short run, with the valid rows on each side (only those rows are touched)
+    left, right = starts[short] - 1, stops[short]
+    lens = right - left - 1
+    rows = np.arange(int(lens.sum())) + np.repeat(left + 1 - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
+    left, right = np.repeat(left, lens), np.repeat(right, lens)
+    flat = v.reshape(n, -1)
+    for c in range(flat.shape[1]):  # np.interp's formula between the two valid rows: slope * (x - x0) + f0
+        f0, f1 = flat[left, c], flat[right, c]
+        flat[rows, c] = (f1 - f0) / (right - left) * (rows - left) + f0
+    filled[rows] = True
+    return v, filled
+
+
+def import_trial(path: str | Path, **kwargs: Any) -> Trial:
+    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there)."""
+    return build_trial(read_recording(path), **kwargs)
+

@@ -1,0 +1,177 @@
+"""The batch jobs behind ``rimless trials import``, ``trials report`` and ``rimless demo``: each takes the
+parsed options, does the work with a progress bar on stderr, and returns what the command prints.
+
+`import_files` writes one ``<name>.trial.parquet`` per export and returns the JSON rows of ``trials import
+--json``; `run_report` compares the trials with the simulation and writes the report (an interrupted run that
+created its folder removes it); `run_demo` does that on the bundled SYNTHETIC trials.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from rimless.errors import UserError, interrupted_by_user
+from rimless.output import check_output_folder, writable_dir
+from rimless.progress import progress_bar
+
+from rimless.analysis.examples.bundled import data_files
+from rimless.analysis.examples.critical_series import data_files as critical_data_files
+from rimless.analysis.inference.compare import Simulator
+from rimless.analysis.io.vicon_csv import ViconCsvError
+from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
+from rimless.analysis.report.html import ReportResult, build_report
+
+__all__ = ["shown_path", "check_inputs", "import_row", "import_files", "run_report", "run_demo", "demo_inputs",
+           "DEMO_NOTE"]
+
+DEMO_NOTE = ("SYNTHETIC DATA: the bundled example trials are simulated (ER wheel, Table 1 parameters, slopes "
+             "1.5/2/2.5 deg, 0.3 mm noise), not measured; see rimless/analysis/data/README.md. The SYNTHETIC_crit "
+             "series (1.3-2.05 deg, two release speeds, an 11-step ramp) comes from another truth model (c = 10 N s/m "
+             "and guide friction) for the critical slope and the calibration.")
+
+
+def shown_path(path: str | Path) -> str:
+    """``path`` relative to the working directory when it lies below it, else as given."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except (ValueError, OSError):
+        return str(p)
+
+
+def check_inputs(files: Sequence[Path]) -> None:
+    """Refuse a folder or a missing file among the inputs before any work (a `UserError` naming it)."""
+    for f in files:
+        if f.is_dir():
+            raise UserError(f"{shown_path(f)}: is a folder, not a Vicon export (give the files, e.g. {f}/*.csv)")
+        if not f.exists():
+            raise UserError(f"{shown_path(f)}: no such file")
+
+
+def _clean_reason(err: Exception) -> str:
+    """The message of a user error with the Python argument names replaced by the CLI option names."""
+    msg = str(err)
+    for py, opt in (("object=", "--object "), ("markers=", "--markers "), ("hub_offset_m=", "--hub-offset-mm "),
+                    ("max_gap_s", "--max-gap-ms")):
+        msg = msg.replace(py, opt)
+    return msg
+
+
+def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[str, Any]:
+    """The JSON row of one imported (or refused) file: the `trials import --json` contract."""
+    row: dict[str, Any] = {"file": shown_path(path), "status": "refused", "reason": None, "frames": None,
+                           "rate_hz": None, "steps": None, "source": None, "slope_deg": None, "ramp_slope_deg": None,
+                           "outcome": None, "window_s": None, "impact_times_s": [], "step_periods_s": [],
+                           "hub_offset_mm": None, "warnings": [], "errors": [], "trial": None}
+    if error is not None or trial is None:
+        row["reason"] = _clean_reason(error) if error is not None else "not imported"
+        if isinstance(error, ViconCsvError):
+            row["errors"] = error.all_locations()
+        else:
+            row["errors"] = [row["reason"]]
+        return row
+    m = trial.meta
+    row.update(
+        status="imported", frames=m.n_frames, rate_hz=m.rate_hz, steps=int(trial.step_period_s.size),
+        reason=None if m.step_refused is None else f"steps not detected: {m.step_refused}",
+        source={"object": m.object, "markers": list(m.markers), "section": m.section, "why": m.source_reason},
+        slope_deg=m.slope_deg, ramp_slope_deg=m.ramp_slope_deg, outcome=m.outcome,
+        window_s=list(m.window_s) if m.window_s else None,
+        impact_times_s=trial.impact_time_s.tolist(), step_periods_s=trial.step_period_s.tolist(),
+        hub_offset_mm=None if m.hub_offset_m is None else [round(v * 1e3, 3) for v in m.hub_offset_m],
+        warnings=list(m.warnings) + ([f"steps not detected: {m.step_refused}"] if m.step_refused else []),
+    )
+    return row
+
+
+def _stem(path: Path) -> str:
+    name = path.name
+    for suffix in (".csv", ".c3d", ".txt"):
+        if name.lower().endswith(suffix):
+            return name[: -len(suffix)]
+    return path.stem
+
+
+def _import_one(path: Path, out: Path, kwargs: dict[str, Any]) -> dict[str, Any]:
+    try:
+        trial = import_trial(path, **kwargs)
+        target = out / (_stem(path) + ".trial.parquet")
+        trial.to_parquet(target)
+    except UserError as err:
+        return import_row(path, None, err)
+    except OSError as err:
+        return import_row(path, None, UserError(f"{shown_path(path)}: {err.strerror or err}"))
+    row = import_row(path, trial, None)
+    row["trial"] = row["_trial"] = shown_path(target)
+    row["_outcome_reason"] = trial.meta.outcome_reason
+    return row
+
+
+def import_files(files: Sequence[Path], out: Path, import_kwargs: dict[str, Any], *,
+                 json_out: bool = False) -> list[dict[str, Any]]:
+    """Import each export and write ``out/<name>.trial.parquet``; a refused file does not stop the others.
+
+    One `import_row` per file; keys starting with ``_`` (the written path, the outcome's reason) are for the
+    table and are not part of the JSON contract. A folder or a missing input, or an ``out`` that cannot be
+    written, stops before any work (`UserError`).
+    """
+    check_inputs(files)
+    writable_dir(out, option="--out")
+    rows: list[dict[str, Any]] = []
+    with progress_bar("importing", total=len(files), json_out=json_out or len(files) < 2) as bar:
+        for f in files:
+            bar.update(description=f"importing {f.name}")
+            rows.append(_import_one(f, out, import_kwargs))
+            bar.advance()
+    return rows
+
+
+def run_report(files: Sequence[Path], out: Path, *, json_out: bool, import_kwargs: dict[str, Any], model: str,
+               slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation",
+               **report_kwargs: Any) -> ReportResult:
+    """`build_report` with the ``model`` simulator and a progress bar; Ctrl-C removes a folder it created.
+
+    A folder or a missing input stops before any work (`UserError`)."""
+    check_inputs(files)
+    out_is_new = not Path(out).exists()
+    try:
+        with progress_bar("simulator", total=len(files), json_out=json_out) as bar:
+            sim = Simulator(model=model)
+            bar.update(description="comparing")
+
+            def step(name: str) -> None:
+                bar.update(description=f"compared {name}")
+                bar.advance()
+
+            return build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
+                                note=note, title=title, progress=step, **report_kwargs)
+    except BaseException as err:
+        if out_is_new and interrupted_by_user(err):  # an interrupted report leaves no half-filled folder behind
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def demo_inputs() -> list[Path]:
+    """The bundled SYNTHETIC example trials (both series), sorted; a `UserError` when the install lacks them."""
+    files = sorted(set(data_files()) | set(critical_data_files()))
+    if not files:
+        raise UserError("the bundled example dataset is missing from this install (rimless/analysis/data)")
+    return files
+
+
+def run_demo(out: Path, *, json_out: bool, starting: Callable[[int], None] | None = None) -> ReportResult:
+    """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series).
+
+    Checks ``out`` (``--out``) before any work; ``starting(n)`` is called with the number of trials just before
+    the run."""
+    files = demo_inputs()
+    check_output_folder(out, option="--out")
+    if starting is not None:
+        starting(len(files))
+    return run_report(files, out, json_out=json_out, import_kwargs={"max_gap_s": DEFAULT_MAX_GAP_S},
+                      model="er", slope_bin_deg=0.5, note=DEMO_NOTE,
+                      title="rimless demo: SYNTHETIC trials vs simulation",
+                      critical_files=critical_data_files(), calibrate_c=True)
