@@ -21,6 +21,7 @@ import numpy as np
 
 from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
+from rimless.sim.model.guards import DIRECTION
 
 _jit = numba.njit(cache=True)
 
@@ -53,12 +54,13 @@ IMPACT_PHASE = 3
 DLSP_RTOL_SCALE = 1e-4
 DLSP_RTOL_FLOOR = 1e-13
 
+# the guards of each phase, with their directions from the one guard table (rimless.sim.model.guards)
 _DLSP_CODES = np.array([fm.LIFTOFF_A, fm.STALL, fm.TOUCHDOWN], dtype=np.int64)
-_DLSP_DIRS = np.array([-1, -1, -1], dtype=np.int64)
 _FREE_ER_CODES = np.array([fm.CLUTCH_LOCK, fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
-_FREE_ER_DIRS = np.array([1, -1, -1, -1], dtype=np.int64)
 _SS_CODES = np.array([fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
-_SS_DIRS = np.array([-1, -1, -1], dtype=np.int64)
+_DLSP_DIRS = np.array([DIRECTION[int(c)] for c in _DLSP_CODES], dtype=np.int64)
+_FREE_ER_DIRS = np.array([DIRECTION[int(c)] for c in _FREE_ER_CODES], dtype=np.int64)
+_SS_DIRS = np.array([DIRECTION[int(c)] for c in _SS_CODES], dtype=np.int64)
 # bilateral contact: the same guards without the stance foot's lift-off (LIFTOFF_B is last in both lists)
 _FREE_ER_CODES_BI = _FREE_ER_CODES[:-1].copy()
 _FREE_ER_DIRS_BI = _FREE_ER_DIRS[:-1].copy()

@@ -14,7 +14,8 @@ from typer.testing import CliRunner
 
 from rimless.cli import app
 from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.fast import FastPoincareMap, fast_step
+from rimless.sim.fast import fast_step
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.model.params import WheelParams
 
 FAST_2500 = np.array([-0.45035523, 3.17963352])  # the VE fast gait at k = 2500 (what `gaits` lists)
