@@ -18,7 +18,7 @@ from rimless.sim.in_the_loop.loop import FirmwareLoop, FirmwareLoopConfig, Firmw
 from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model.failures import StepFailure
 from rimless.sim.model.params import WheelParams
-from rimless.sim.step.poincare import NoFixedPoint, PoincareMap, default_guess, solve_fixed_point
+from rimless.sim.step.poincare import FixedPoint, NoFixedPoint, PoincareMap, default_guess, solve_fixed_point
 
 
 @dataclass
@@ -156,12 +156,18 @@ class FirmwareBoundaries:
         return (self.mechanical or self.firmware).critical_slope_rad
 
 
+def ideal_gait(params: WheelParams) -> FixedPoint:
+    """The ideal-clutch ER fixed point the walks start from (reference path, rtol 1e-9); raises StepFailure
+    or NoFixedPoint."""
+    return solve_fixed_point(PoincareMap(params, "er", ScipyIntegrator(rtol=1e-9, atol=1e-11)),
+                             default_guess(params, "er"))
+
+
 def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps: int) -> tuple[bool, str]:
     """(True, "") if a walk of `steps` steps from the ideal fixed point at these parameters completes
     without a failed step and without a firmware fault; else (False, the reason)."""
     try:
-        ideal = solve_fixed_point(PoincareMap(params, "er", ScipyIntegrator(rtol=1e-9, atol=1e-11)),
-                                  default_guess(params, "er"))
+        ideal = ideal_gait(params)
     except (StepFailure, NoFixedPoint) as err:
         return False, f"no ideal-clutch gait to start from ({err})"
     loop = FirmwareLoop(params, config)

@@ -20,26 +20,26 @@ import numpy as np
 
 from rimless.sim import fast
 from rimless.sim.fast import FastIntegrator, check_model, mass_model_index, param_vector, raise_failure
-from rimless.sim.fast import model as fm
 from rimless.sim.fast import step as fs
 from rimless.sim.integrate.reference import PhaseRun, ScipyIntegrator
+from rimless.sim.model.guards import LIFTOFF_B
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
 from rimless.sim.step.hybrid import IdealClutch, simulate_step
 
 
-class _HeldStance:
-    """An Integrator without the stance foot's lift-off guard (bilateral contact) for hybrid.simulate_step; its
-    checks at the start of single support and of the impulses' signs still apply."""
+class HeldStance:
+    """An Integrator (any: compiled or reference) without the stance foot's lift-off guard (bilateral contact)
+    for hybrid.simulate_step; its checks at the start of single support and of the impulses' signs still apply."""
 
-    def __init__(self, inner: FastIntegrator) -> None:
+    def __init__(self, inner: Any) -> None:
         self.inner = inner
         self.name = f"{inner.name}+bilateral"
 
     def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
                   t_max: float, **options: Any) -> PhaseRun:
-        return self.inner.run_phase(mech, phase, y0, t0, tuple(g for g in guards if g != fm.LIFTOFF_B), t_max,
+        return self.inner.run_phase(mech, phase, y0, t0, tuple(g for g in guards if g != LIFTOFF_B), t_max,
                                     **options)
 
 
@@ -149,7 +149,7 @@ class FastPoincareMap:
     def step(self, z: np.ndarray, **options: object) -> Any:
         """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
         self.evaluations += 1
-        integ = _HeldStance(self.integrator) if self.bilateral else self.integrator
+        integ = HeldStance(self.integrator) if self.bilateral else self.integrator
         return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
                              integ, clutch=self.clutch, **options)  # type: ignore[arg-type]
 
