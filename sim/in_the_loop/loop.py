@@ -57,7 +57,7 @@ from rimless.sim.model import clutch as ch
 from rimless.sim.model.clutch import Mode
 from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.guards import (FOOT_A_DOWN, LIFTOFF_A, LIFTOFF_B, SLIP_END_1, SLIP_END_2, STALL, STICK_END_1,
-                                      STICK_END_2, TOUCHDOWN, clutch_forces, mode_guard_value)
+                                      STICK_END_2, TOUCHDOWN, clutch_forces, failure_of, mode_guard_value)
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
@@ -439,12 +439,9 @@ class FirmwareLoop:
             modes.append((mode.name, t_mode, t))
             if kind in ("action", "limit"):
                 continue
-            if code == STALL:
-                raise StepFailure(FailureReason.STALL, "theta' reached 0 before touchdown (the wheel rolls back)",
-                                  time_s=t, phase=mode.name)
-            if code == LIFTOFF_B:
-                raise StepFailure(FailureReason.STANCE_LIFT_OFF, "the stance foot's normal force fell below 0",
-                                  time_s=t, phase=mode.name)
+            failure = failure_of(code, t, mode.name)  # stall or stance lift-off
+            if failure is not None:
+                raise failure
             if code == LIFTOFF_A:
                 mode = replace(mode, foot_a=False)
                 # a foot lifted by the clutch still holding its spring comes down again when it lets go

@@ -6,9 +6,10 @@ compile-time constants), with its name, its crossing direction (-1: falls throug
 whether it is a normal-force guard (located also when the force dips below zero and recovers between two
 solver steps, rimless.sim.integrate.events) and the failure it means when it fires (None: it ends a phase).
 
-`guard_value` evaluates the guards of the step's phases (rimless.sim.model.dynamics), `mode_guard_value`
-those of a clutch mode (rimless.sim.model.clutch.Mode, with the clutch's holding force); both return N for
-force guards, rad/s or m/s for rate guards, m for heights.
+`failure_of` turns a failure guard into its classified StepFailure. `guard_value` evaluates the guards of
+the step's phases (rimless.sim.model.dynamics), `mode_guard_value` those of a clutch mode
+(rimless.sim.model.clutch.Mode, with the clutch's holding force); both return N for force guards, rad/s or
+m/s for rate guards, m for heights.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from rimless.sim.model import clutch as ch
 from rimless.sim.model.dynamics import DLSP, accel
-from rimless.sim.model.failures import FailureReason
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.mechanics import Mechanics, swing_height
 
 LIFTOFF_A = 0  # lambda_a,y falls through 0: the trailing foot lifts off (ends DLSP)
@@ -37,21 +38,24 @@ STICK_END_2 = 9  # likewise for the trailing leg
 
 @dataclass(frozen=True)
 class Guard:
-    """One row of the table: code, name, crossing direction, force guard?, failure when it fires."""
+    """One row of the table: code, name, crossing direction, force guard?, failure (and why) when it fires."""
 
     code: int
     name: str
     direction: int
     force: bool = False
     failure: FailureReason | None = None
+    why: str = ""
 
 
 TABLE: dict[int, Guard] = {g.code: g for g in (
     Guard(LIFTOFF_A, "lift-off-a", -1, force=True),
-    Guard(STALL, "stall", -1, failure=FailureReason.STALL),
+    Guard(STALL, "stall", -1, failure=FailureReason.STALL,
+          why="theta' reached 0 before touchdown (the wheel rolls back)"),
     Guard(CLUTCH_LOCK, "clutch-lock", +1),
     Guard(TOUCHDOWN, "touchdown", -1),
-    Guard(LIFTOFF_B, "lift-off-b", -1, force=True, failure=FailureReason.STANCE_LIFT_OFF),
+    Guard(LIFTOFF_B, "lift-off-b", -1, force=True, failure=FailureReason.STANCE_LIFT_OFF,
+          why="the stance foot's normal force fell below 0"),
     Guard(FOOT_A_DOWN, "foot-a-down", -1),
     Guard(SLIP_END_1, "slip-end-1", -1),
     Guard(SLIP_END_2, "slip-end-2", -1),
@@ -63,6 +67,14 @@ GUARD_NAMES = {c: g.name for c, g in TABLE.items()}
 DIRECTION = {c: g.direction for c, g in TABLE.items()}
 FORCE_GUARDS = tuple(c for c, g in TABLE.items() if g.force)  # located also when they dip between solver steps
 FAILURE = {c: g.failure for c, g in TABLE.items() if g.failure is not None}
+
+
+def failure_of(code: int | None, time_s: float, phase: str) -> StepFailure | None:
+    """The classified StepFailure of guard `code` firing at time_s (s) in `phase`, or None if it ends a phase."""
+    row = TABLE.get(code) if code is not None else None
+    if row is None or row.failure is None:
+        return None
+    return StepFailure(row.failure, row.why, time_s=time_s, phase=phase)
 
 
 def guard_value(mech: Mechanics, phase: int, code: int, y: np.ndarray) -> float:

@@ -26,7 +26,8 @@ def make_map(params: WheelParams, model: str, *, backend: str = "auto", rtol: fl
         from rimless.sim.step.fast_map import FastPoincareMap
 
         integrator = FastIntegrator(rtol=rtol, atol=rtol * 1e-2)
-        return FastPoincareMap(params, model, integrator=integrator, jacobian_with_map=True)  # type: ignore[return-value]
+        fast_map = FastPoincareMap(params, model, integrator=integrator, jacobian_with_map=True)
+        return fast_map  # type: ignore[return-value]
     return PoincareMap(params, model, ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2))
 
 

@@ -1,6 +1,5 @@
-"""The one guard table (rimless.sim.model.guards) and the one event engine (rimless.sim.integrate.events):
-closed-form checks of the engine's rules, and the compiled twin (rimless.sim.fast.rk) against the engine on
-the same phase."""
+"""The one event engine (rimless.sim.integrate.events): closed-form checks of its rules, and the compiled
+twin (rimless.sim.fast.rk, codes and directions from the guard table) against the engine on the same phase."""
 
 from __future__ import annotations
 
@@ -16,29 +15,15 @@ from rimless.sim.integrate import events
 from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model import dynamics
 from rimless.sim.model import guards as ev
-from rimless.sim.model.failures import FailureReason
 from rimless.sim.model.mechanics import Mechanics
 from tests.support import sim_dip
-
-GUARD_NAMES = ("LIFTOFF_A", "STALL", "CLUTCH_LOCK", "TOUCHDOWN", "LIFTOFF_B", "FOOT_A_DOWN", "SLIP_END_1",
-               "SLIP_END_2", "STICK_END_1", "STICK_END_2")
-
-
-def test_the_table_has_one_row_per_code() -> None:
-    codes = [getattr(ev, name) for name in GUARD_NAMES]
-    assert sorted(codes) == sorted(ev.TABLE) and len(set(codes)) == len(codes)
-    for code, row in ev.TABLE.items():
-        assert row.code == code and row.direction in (-1, +1)
-    assert set(ev.FORCE_GUARDS) == {ev.LIFTOFF_A, ev.LIFTOFF_B}
-    assert ev.FAILURE == {ev.STALL: FailureReason.STALL, ev.LIFTOFF_B: FailureReason.STANCE_LIFT_OFF}
-
 
 def test_the_compiled_path_uses_the_table() -> None:
     """The compiled kernels' guard codes and the directions the compiled step passes are the table's."""
     for name in ("LIFTOFF_A", "STALL", "CLUTCH_LOCK", "TOUCHDOWN", "LIFTOFF_B"):
         assert getattr(fm, name) == getattr(ev, name), name
-    for codes, dirs in ((fs._DLSP_CODES, fs._DLSP_DIRS), (fs._FREE_ER_CODES, fs._FREE_ER_DIRS),  # noqa: SLF001
-                        (fs._SS_CODES, fs._SS_DIRS)):  # noqa: SLF001
+    for codes, dirs in ((fs.PHASE_DLSP_CODES, fs.PHASE_DLSP_DIRS), (fs.PHASE_FREE_ER_CODES, fs.PHASE_FREE_ER_DIRS),
+                        (fs.PHASE_SS_CODES, fs.PHASE_SS_DIRS)):
         assert [int(d) for d in dirs] == [ev.DIRECTION[int(c)] for c in codes]
 
 

@@ -1,42 +1,41 @@
-"""Events land on their guards, and results converge as the tolerance tightens."""
+"""The one guard table (rimless.sim.model.guards): one row per code, and the step's guards and the clutch
+modes' guards are the same functions where the constraint sets agree."""
 
 import numpy as np
 import pytest
 
 from rimless.sim.model import guards as ev
-from rimless.sim.model.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE
-from rimless.sim.step.hybrid import simulate_step
-from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.clutch import Mode
+from rimless.sim.model.dynamics import DLSP, SLSP_FREE
+from rimless.sim.model.failures import FailureReason
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
-from rimless.sim.model.section import section_from_state, state_from_section
+from tests.support.sim_states import random_states
 
-PHASE_END_GUARD = {"dlsp": (DLSP, ev.LIFTOFF_A), "slsp_free": (SLSP_FREE, ev.CLUTCH_LOCK),
-                   "slsp_clutched": (SLSP_CLUTCHED, ev.TOUCHDOWN)}
+GUARD_NAMES = ("LIFTOFF_A", "STALL", "CLUTCH_LOCK", "TOUCHDOWN", "LIFTOFF_B", "FOOT_A_DOWN", "SLIP_END_1",
+               "SLIP_END_2", "STICK_END_1", "STICK_END_2")
 
 
-@pytest.mark.parametrize("model", ["er", "ve"])
-def test_phase_ends_lie_on_their_guards(model):
+def test_the_table_has_one_row_per_code() -> None:
+    codes = [getattr(ev, name) for name in GUARD_NAMES]
+    assert sorted(codes) == sorted(ev.TABLE) and len(set(codes)) == len(codes)
+    for code, row in ev.TABLE.items():
+        assert row.code == code and row.direction in (-1, +1)
+        assert ev.GUARD_NAMES[code] == row.name
+    assert set(ev.FORCE_GUARDS) == {ev.LIFTOFF_A, ev.LIFTOFF_B}
+    assert ev.FAILURE == {ev.STALL: FailureReason.STALL, ev.LIFTOFF_B: FailureReason.STANCE_LIFT_OFF}
+
+
+@pytest.mark.parametrize(("phase", "mode", "codes"), [
+    (DLSP, Mode(foot_a=True), (ev.LIFTOFF_A, ev.STALL, ev.TOUCHDOWN)),
+    (SLSP_FREE, Mode(foot_a=False), (ev.LIFTOFF_B, ev.STALL, ev.TOUCHDOWN)),
+])
+def test_a_free_clutch_mode_has_the_guards_of_its_phase(phase: int, mode: Mode, codes: tuple[int, ...]) -> None:
+    """Both feet down with free legs is double support, foot b alone single support: same guard values."""
     mech = Mechanics.of(WheelParams())
-    res = simulate_step(mech, model, state_from_section(mech, np.array([-0.46, 2.6])),
-                        ScipyIntegrator(rtol=1e-10, atol=1e-12), record_dt=1e-2)
-    for seg, rec in zip(res.segments, res.phases, strict=True):
-        phase, guard = PHASE_END_GUARD[rec.name]
-        if model == "ve" and rec.name == "slsp_free":
-            guard = ev.TOUCHDOWN
-        value = ev.guard_value(mech, phase, guard, seg.y[-1])
-        assert abs(value) <= 1e-10, f"{rec.name} ends {value:.2e} off its guard"
-    assert abs(ev.guard_value(mech, SLSP_CLUTCHED, ev.TOUCHDOWN, res.y_minus)) <= 1e-10
-
-
-def test_results_converge_as_tolerance_tightens():
-    mech = Mechanics.of(WheelParams())
-    y0 = state_from_section(mech, np.array([-0.46, 2.6]))
-    outs = {}
-    for rtol in (1e-6, 1e-8, 1e-10, 1e-12):
-        r = simulate_step(mech, "er", y0, ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2))
-        outs[rtol] = np.concatenate((section_from_state(r.y_plus), [r.period_s]))
-    ref = outs[1e-12]
-    errs = [np.max(np.abs(outs[t] - ref)) for t in (1e-6, 1e-8, 1e-10)]
-    assert errs[0] > errs[1] > errs[2]
-    assert errs[2] < 1e-8
+    rng = np.random.default_rng(3)
+    for q, qd in random_states(rng, 20):
+        y = np.concatenate((q, qd))
+        for code in codes:
+            assert ev.mode_guard_value(mech, mode, code, y, 100.0) == pytest.approx(
+                ev.guard_value(mech, phase, code, y), rel=1e-9, abs=1e-9)
