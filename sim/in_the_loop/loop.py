@@ -516,10 +516,11 @@ class FirmwareLoop:
         return step, y_plus, t, offset, tr is not None and tr.foot_a_lifts
 
     def integrate_mode(self, mode: Mode, y0: np.ndarray, t0: float, t_bound: float, guards: tuple[int, ...],
-                   offset: float) -> tuple[str, int | None, float, np.ndarray, float, float, float | None]:
-        """Integrate `mode` from (t0, y0), taking the firmware's samples on the way, until a guard fires
-        ("guard"), a clutch action is due ("action") or t_bound ("limit").
-        Returns (kind, guard, t, y, damper energy J, clutch slip energy J, first L1' upward zero crossing)."""
+                       offset: float) -> tuple[str, int | None, float, np.ndarray, float, float, float | None]:
+        """Integrate clutch mode `mode` from (t0 s, y0), taking the firmware's samples on the way (the sensor's
+        accumulated compression is `offset` m plus the stance leg's), until a guard of `guards` (codes of
+        rimless.sim.model.guards) fires ("guard"), a clutch action is due ("action") or t_bound ("limit").
+        Returns (kind, guard, t, y, damper energy J, clutch slip energy J, first L1' upward zero crossing s)."""
         from scipy.integrate import DOP853
         from scipy.optimize import brentq
 
