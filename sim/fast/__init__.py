@@ -1,11 +1,12 @@
-"""The compiled fast path: a numba DOP853 backend for the hybrid simulation, a lean compiled Poincaré map
-with the exact (variational) map Jacobian, and their Python faces.
+"""The compiled fast path: a numba DOP853 backend for the hybrid simulation and a lean compiled step with the
+exact (variational) map Jacobian, and their Python faces.
 
 It is the second implementation of the model whose reference implementation is rimless.sim.step.hybrid,
-integrate.reference, model.dynamics and model.mechanics (scipy, Python right-hand side); both give the same steps, failure classes
-and guards. Modules:
+integrate.reference, model.dynamics and model.mechanics (scipy, Python right-hand side); both give the same
+steps, failure classes and guards (codes and directions of the one table rimless.sim.model.guards, the dip
+rules of the event engine rimless.sim.integrate.events). Modules:
 - rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
-- rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output;
+- rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output (the engine's twin);
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
 - rimless.sim.fast (this file): the Python face below. Import fast-path names from here.
 
@@ -14,22 +15,22 @@ and guards. Modules:
 - `fast_step(params, model, z, ...)` / `fast_map(params, model, z, rtol)`: one whole step compiled
   (phases, guards, pre-checks, failure classes and impact identical to hybrid.simulate_step with the ideal
   clutch); nothing is recorded. Failures raise StepFailure with the same FailureReason as the reference.
-- `FastPoincareMap`: same interface as rimless.sim.step.poincare.PoincareMap (`__call__`, `step`, `jacobian`,
-  `with_params`, attributes params/model/integrator/clutch/evaluations), usable unchanged by
-  solve_fixed_point and the continuation code; its `jacobian` is the exact variational Jacobian.
 - `exact_jacobian(pmap_or_params, model, z)`: dP/dz (2x2) from the variational equations, saltation
   matrices at lift-off and clutch lock, and the exact derivative of the relabel + impact reset.
+The Poincaré map on this path, `FastPoincareMap`, is a step-level object: rimless.sim.step.fast_map.
 
 Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.model.section).
 
 Stiff legs: DOP853 is explicit. A phase needing more than `max_steps` steps is reported as such
-(StepFailure INTEGRATION with "too many steps"); FastPoincareMap(stiff_fallback=True) then recomputes that
-map with scipy's implicit Radau and records it in `last_method` / `method_counts`.
+(StepFailure INTEGRATION with "too many steps", StiffnessLimit); FastPoincareMap(stiff_fallback=True) then
+recomputes that map with scipy's implicit Radau.
+
+May import: rimless.sim.model, rimless.sim.integrate (the Integrator protocol, the event engine's constants),
+numpy, scipy, numba, rimless.errors. Never step/, continuation/, studies/, in_the_loop/ or cli/.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,10 +53,12 @@ def _invalidate_stale_cache() -> None:
     import hashlib
     from pathlib import Path
 
+    from rimless.sim.integrate import events
+    from rimless.sim.model import dynamics, guards
     from rimless.sim.model.generated import active_feet, eight_leg, sliding_leg
 
     digest = hashlib.sha256()
-    for mod in (fm, rk, fs, eight_leg, sliding_leg, active_feet):
+    for mod in (fm, rk, fs, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
         digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
     stamp_value = digest.hexdigest()
     try:
@@ -118,7 +121,8 @@ def param_vector(params: WheelParams) -> np.ndarray:
     return np.array(params.as_vector(), dtype=np.float64)
 
 
-def _check_model(model: str) -> bool:
+def check_model(model: str) -> bool:
+    """True for ER, False for VE; ValueError for another model."""
     if model not in MODELS:
         raise ValueError(f"unknown model {model!r}")
     return model == "er"
@@ -166,7 +170,8 @@ class BilateralContact:
         return self.min_stance_force_N >= 0.0 and self.min_impulse_N_s > 0.0
 
 
-def _raise(status: int, detail: int, phase: int, t: float, nsteps: int) -> None:
+def raise_failure(status: int, detail: int, phase: int, t: float, nsteps: int) -> None:
+    """Raise the StepFailure (FailureReason of the reference) for a compiled step's status and detail codes."""
     reason = _REASON[status]
     msg = _DETAIL.get(detail, "")
     if status == fs.TOO_MANY_STEPS:
@@ -196,7 +201,7 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     unilateral contact would forbid in `contact` (BilateralContact; record_contact=False skips that record,
     which costs about as much as the step): for finding and characterising gaits that are not contact-valid.
     """
-    er = _check_model(model)
+    er = check_model(model)
     atol = rtol * 1e-2 if atol is None else atol
     zz = np.asarray(z, dtype=np.float64).reshape(2)
     counts = np.zeros((3, 2), dtype=np.int64)
@@ -211,7 +216,7 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
             mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
             int(max_steps), counts)
     if st != fs.OK:
-        _raise(st, detail, phase, t, nsteps)
+        raise_failure(st, detail, phase, t, nsteps)
     return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
                     jacobian=J if jacobian else None, phase_end_s=times, nfev=int(nfev), nsteps=int(nsteps),
                     nstiff=int(nstiff), relabel_snap_J=float(snap),
@@ -287,168 +292,6 @@ class FastIntegrator:
             run.t = np.array(rec_t)
             run.y = np.array(rec_y)
         return run
-
-
-class _HeldStance:
-    """An Integrator without the stance foot's lift-off guard (bilateral contact) for hybrid.simulate_step; its
-    checks at the start of single support and of the impulses' signs still apply."""
-
-    def __init__(self, inner: FastIntegrator) -> None:
-        self.inner = inner
-        self.name = f"{inner.name}+bilateral"
-
-    def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
-                  t_max: float, **options: Any) -> PhaseRun:
-        return self.inner.run_phase(mech, phase, y0, t0, tuple(g for g in guards if g != fm.LIFTOFF_B), t_max,
-                                    **options)
-
-
-class _VariationalJacobian:
-    """Callable z -> dP/dz (exact, variational) for solve_fixed_point(..., jacobian=...)."""
-
-    method_name = "variational"
-
-    def __init__(self, pmap: FastPoincareMap) -> None:
-        self.pmap = pmap
-
-    def __call__(self, z: np.ndarray) -> np.ndarray:
-        return self.pmap.jacobian(z)
-
-
-@dataclass
-class FastPoincareMap:
-    """P: z -> z' on the compiled path; interface of rimless.sim.step.poincare.PoincareMap.
-
-    integrator: a FastIntegrator whose rtol/atol the compiled map uses, and which `step` passes to
-    hybrid.simulate_step. A non-ideal clutch policy makes every call go through the reference hybrid code
-    (with the FastIntegrator) and the Jacobian fall back to central differences.
-    """
-
-    params: WheelParams
-    model: str
-    integrator: FastIntegrator = field(default_factory=FastIntegrator)
-    clutch: Any = None
-    evaluations: int = 0
-    stiff_fallback: bool = True
-    jacobian_with_map: bool = False  # compute dP/dz with every map call (cached): cheapest for Newton
-    last_method: str = ""
-    method_counts: dict[str, int] = field(default_factory=dict)
-    bilateral: bool = False  # the stance foot held (fast_step(bilateral=True), and in `step`)
-
-    def __post_init__(self) -> None:
-        _check_model(self.model)
-        self.mech = Mechanics.of(self.params)
-        self._p = param_vector(self.params)
-        self._mi = mass_model_index(self.params)
-        self._cache: tuple[tuple[float, float], np.ndarray, float, np.ndarray | None] | None = None
-        self._counts = np.zeros((3, 2), dtype=np.int64)  # per-phase counters of the last compiled call
-
-    # -- helpers -------------------------------------------------------------------------------
-    def _compiled_ok(self) -> bool:
-        from rimless.sim.step.hybrid import IdealClutch
-
-        return self.clutch is None or isinstance(self.clutch, IdealClutch) or (
-            getattr(self.clutch, "delay_s", 0.0) <= 0.0 and getattr(self.clutch, "name", "") in ("ideal", "delayed"))
-
-    def _count(self, method: str) -> None:
-        self.last_method = method
-        self.method_counts[method] = self.method_counts.get(method, 0) + 1
-
-    def _reference_step(self, z: np.ndarray, integrator: Any) -> np.ndarray:
-        return self._reference_result(z, integrator)[0]
-
-    def _reference_result(self, z: np.ndarray, integrator: Any) -> tuple[np.ndarray, float]:
-        from rimless.sim.step.hybrid import simulate_step
-        from rimless.sim.model.section import section_from_state, state_from_section
-
-        res = simulate_step(self.mech, self.model, state_from_section(self.mech, z), integrator, clutch=self.clutch)
-        return section_from_state(res.y_plus), res.period_s
-
-    def evaluate(self, z: np.ndarray, *, jacobian: bool = False) -> tuple[np.ndarray, float, np.ndarray | None]:
-        """(z_next, period_s, J or None) in one compiled call; raises StepFailure."""
-        z = np.asarray(z, dtype=np.float64).reshape(2)
-        key = (float(z[0]), float(z[1]))
-        if self._cache is not None and self._cache[0] == key and (self._cache[3] is not None or not jacobian):
-            return self._cache[1].copy(), self._cache[2], (None if self._cache[3] is None else self._cache[3].copy())
-        if self.bilateral:
-            st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map_contact(
-                self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-                jacobian, int(self.integrator.max_steps), self._counts, True, np.empty(0))
-        else:
-            st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map(
-                self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-                jacobian, int(self.integrator.max_steps), self._counts)
-        if st == fs.TOO_MANY_STEPS and self.stiff_fallback and not self.bilateral:
-            from rimless.sim.integrate.reference import ScipyIntegrator
-
-            radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10),
-                                    atol=max(self.integrator.atol, 1e-12), max_nfev=RADAU_MAX_NFEV)
-            Jfd = None
-            with np.errstate(over="ignore"):  # scipy's numerical Jacobian grows its step factors
-                zn, period = self._reference_result(z, radau)
-                if jacobian:
-                    h = 1e-5
-                    Jfd = np.empty((2, 2))
-                    for i in range(2):
-                        dz = np.zeros(2)
-                        dz[i] = h
-                        Jfd[:, i] = (self._reference_step(z + dz, radau)
-                                     - self._reference_step(z - dz, radau)) / (2 * h)
-            self._count("scipy-Radau")
-            return zn, period, Jfd
-        if st != fs.OK:
-            _raise(st, detail, phase, t, nsteps)
-        zn = np.array([yp[2], yp[7]])
-        Jout = J.copy() if jacobian else None
-        self._cache = (key, zn, float(t), Jout)
-        self._count("fast-dop853")
-        return zn.copy(), float(t), (None if Jout is None else Jout.copy())
-
-    # -- PoincareMap interface -----------------------------------------------------------------
-    def __call__(self, z: np.ndarray) -> np.ndarray:
-        self.evaluations += 1
-        z = np.asarray(z, dtype=np.float64)
-        if not self._compiled_ok():
-            self._count("hybrid+fast-dop853")
-            return self._reference_step(z, self.integrator)
-        return self.evaluate(z, jacobian=self.jacobian_with_map)[0]
-
-    def step(self, z: np.ndarray, **options: object) -> Any:
-        """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
-        from rimless.sim.step.hybrid import simulate_step
-        from rimless.sim.model.section import state_from_section
-
-        self.evaluations += 1
-        integ = _HeldStance(self.integrator) if self.bilateral else self.integrator
-        return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
-                             integ, clutch=self.clutch, **options)  # type: ignore[arg-type]
-
-    def with_params(self, params: WheelParams) -> FastPoincareMap:
-        return FastPoincareMap(params, self.model, self.integrator, self.clutch, stiff_fallback=self.stiff_fallback,
-                               jacobian_with_map=self.jacobian_with_map, bilateral=self.bilateral)
-
-    def jacobian(self, z: np.ndarray, h: float | None = None) -> np.ndarray:
-        """dP/dz: exact (variational) by default; central differences with step h if h is given."""
-        z = np.asarray(z, dtype=np.float64)
-        if h is None and self._compiled_ok():
-            J = self.evaluate(z, jacobian=True)[2]
-            if J is not None:
-                return J
-            h = 1e-5
-        h = 1e-5 if h is None else h
-        J = np.empty((2, 2))
-        for i in range(2):
-            dz = np.zeros(2)
-            dz[i] = h
-            J[:, i] = (self(z + dz) - self(z - dz)) / (2 * h)
-        return J
-
-    jacobian.method_name = "variational"  # type: ignore[attr-defined]
-
-    @property
-    def variational_jacobian(self) -> Callable[[np.ndarray], np.ndarray]:
-        """A jacobian callable for solve_fixed_point (carries method_name = 'variational')."""
-        return _VariationalJacobian(self)
 
 
 def warm_up(models: tuple[str, ...] = MODELS) -> float:

@@ -21,19 +21,14 @@ from rimless.sim.model.generated import active_feet as _af
 from rimless.sim.model.generated import eight_leg as _el
 from rimless.sim.model.generated import sliding_leg as _sl
 from rimless.sim.model.params import SPOKE_ANGLE_RAD
+from rimless.sim.model.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE  # noqa: F401 (re-exported to the kernels)
+from rimless.sim.model.guards import CLUTCH_LOCK, LIFTOFF_A, LIFTOFF_B, STALL, TOUCHDOWN  # noqa: F401
 
 ALPHA = SPOKE_ANGLE_RAD
 MASS_MODEL_INDEX = {"eight-leg": 0, "sliding-leg": 1, "active-feet": 2}
 
-# Phase codes (as rimless.sim.model.dynamics) and guard codes (as rimless.sim.model.guards).
-DLSP = 0
-SLSP_FREE = 1
-SLSP_CLUTCHED = 2
-LIFTOFF_A = 0
-STALL = 1
-CLUTCH_LOCK = 2
-TOUCHDOWN = 3
-LIFTOFF_B = 4
+# Phase codes and guard codes: the module-level ints of rimless.sim.model.dynamics and of the one guard
+# table rimless.sim.model.guards (numba freezes them into the compiled code as constants).
 
 _jit = numba.njit(cache=True)
 

@@ -1,4 +1,7 @@
-"""Compiled DOP853 (Dormand-Prince 8(5,3), the same tableau, error norm, step-size control, initial step and
+"""One concept: the compiled DOP853 integrator of one phase with its event location (the numba twin of
+rimless.sim.integrate.events), kept in one module so the kernels inline each other.
+
+Compiled DOP853 (Dormand-Prince 8(5,3), the same tableau, error norm, step-size control, initial step and
 7th-order dense output as scipy's solve_ivp 'DOP853') for one phase of the hybrid system, with terminal
 guard location on the dense output (Brent's method to 4 eps in t, the scipy semantics: a guard fires when
 it crosses 0 in its direction between two accepted steps; the earliest root wins).
@@ -31,21 +34,26 @@ import math
 
 import numba
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _dop
+from scipy.integrate import DOP853
 
 from rimless.sim.fast import model as fm
+from rimless.sim.integrate.events import DIP_MARGIN, DIP_SAMPLES
 
 _jit = numba.njit(cache=True)
 
-# Tableau (module-level arrays are frozen into the compiled code as constants).
-_A = np.ascontiguousarray(_dop.A, dtype=np.float64)
-_B = np.ascontiguousarray(_dop.B, dtype=np.float64)
-_C = np.ascontiguousarray(_dop.C, dtype=np.float64)
-_E3 = np.ascontiguousarray(_dop.E3, dtype=np.float64)
-_E5 = np.ascontiguousarray(_dop.E5, dtype=np.float64)
-_D = np.ascontiguousarray(_dop.D, dtype=np.float64)
+# Tableau of scipy's public DOP853 class (module-level arrays are frozen into the compiled code as constants):
+# the 12 stages, the 13th (the B row, the step's end) and the 3 extra stages of the 7th-order dense output.
 _NS = 12
 _NSE = 16
+_A = np.zeros((_NSE, _NSE), dtype=np.float64)
+_A[:_NS, :_NS] = DOP853.A
+_A[_NS, :_NS] = DOP853.B
+_A[_NS + 1:] = DOP853.A_EXTRA
+_B = np.ascontiguousarray(DOP853.B, dtype=np.float64)
+_C = np.ascontiguousarray(np.concatenate((DOP853.C, [1.0], DOP853.C_EXTRA)), dtype=np.float64)
+_E3 = np.ascontiguousarray(DOP853.E3, dtype=np.float64)
+_E5 = np.ascontiguousarray(DOP853.E5, dtype=np.float64)
+_D = np.ascontiguousarray(DOP853.D, dtype=np.float64)
 _SAFETY = 0.9
 _MIN_FACTOR = 0.2
 _MAX_FACTOR = 10.0
@@ -261,7 +269,8 @@ def _build_dense(mi, phase, p, y_old, h, K, F, ytmp, lam, ws, with_var, with_dis
     return _NSE - _NS - 1
 
 
-DIP_SAMPLES = 8  # dense-output samples of a normal force over a step when looking for a dip below zero
+# DIP_SAMPLES (dense-output samples of a normal force over a step when looking for a dip below zero) and
+# DIP_MARGIN (below) are the event engine's, rimless.sim.integrate.events.
 _GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
 DIP_XTOL = 1e-9  # relative to the step: where the minimum of a force over a step is located
 
@@ -269,7 +278,6 @@ DIP_XTOL = 1e-9  # relative to the step: where the minimum of a force over a ste
 # A discrete minimum of a force over three step ends is checked on the dense output unless the parabola
 # through the three values stays above DIP_MARGIN times the lowest of them (the force is resolved by the
 # steps, which control the error of y, so the parabola's undershoot is a safe estimate with this margin).
-DIP_MARGIN = 0.5
 
 
 @_jit

@@ -21,6 +21,7 @@ import numpy as np
 
 from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
+from rimless.sim.model.guards import DIRECTION
 
 _jit = numba.njit(cache=True)
 
@@ -53,17 +54,18 @@ IMPACT_PHASE = 3
 DLSP_RTOL_SCALE = 1e-4
 DLSP_RTOL_FLOOR = 1e-13
 
-_DLSP_CODES = np.array([fm.LIFTOFF_A, fm.STALL, fm.TOUCHDOWN], dtype=np.int64)
-_DLSP_DIRS = np.array([-1, -1, -1], dtype=np.int64)
-_FREE_ER_CODES = np.array([fm.CLUTCH_LOCK, fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
-_FREE_ER_DIRS = np.array([1, -1, -1, -1], dtype=np.int64)
-_SS_CODES = np.array([fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
-_SS_DIRS = np.array([-1, -1, -1], dtype=np.int64)
+# the guards of each phase, with their directions from the one guard table (rimless.sim.model.guards)
+PHASE_DLSP_CODES = np.array([fm.LIFTOFF_A, fm.STALL, fm.TOUCHDOWN], dtype=np.int64)
+PHASE_FREE_ER_CODES = np.array([fm.CLUTCH_LOCK, fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
+PHASE_SS_CODES = np.array([fm.TOUCHDOWN, fm.STALL, fm.LIFTOFF_B], dtype=np.int64)
+PHASE_DLSP_DIRS = np.array([DIRECTION[int(c)] for c in PHASE_DLSP_CODES], dtype=np.int64)
+PHASE_FREE_ER_DIRS = np.array([DIRECTION[int(c)] for c in PHASE_FREE_ER_CODES], dtype=np.int64)
+PHASE_SS_DIRS = np.array([DIRECTION[int(c)] for c in PHASE_SS_CODES], dtype=np.int64)
 # bilateral contact: the same guards without the stance foot's lift-off (LIFTOFF_B is last in both lists)
-_FREE_ER_CODES_BI = _FREE_ER_CODES[:-1].copy()
-_FREE_ER_DIRS_BI = _FREE_ER_DIRS[:-1].copy()
-_SS_CODES_BI = _SS_CODES[:-1].copy()
-_SS_DIRS_BI = _SS_DIRS[:-1].copy()
+PHASE_FREE_ER_CODES_BI = PHASE_FREE_ER_CODES[:-1].copy()
+PHASE_FREE_ER_DIRS_BI = PHASE_FREE_ER_DIRS[:-1].copy()
+PHASE_SS_CODES_BI = PHASE_SS_CODES[:-1].copy()
+PHASE_SS_DIRS_BI = PHASE_SS_DIRS[:-1].copy()
 # step_map_contact's `contact` record (bilateral contact)
 C_MIN_FORCE = 0  # smallest stance normal force lambda_b,y in single support, N
 C_MIN_FORCE_T = 1  # its time, s
@@ -132,7 +134,7 @@ def _map_status(st, fired_ok):
 
 
 @_jit
-def _single_support_force(mi, phase, rec_t, rec_y, p, contact):
+def single_support_force(mi, phase, rec_t, rec_y, p, contact):
     """Fold foot b's normal force lambda_b,y (N) at the recorded states (rec_t s, rec_y) of one phase into
     `contact`: its minimum (refined by a parabola through its neighbours), the minimum's time and the time spent
     below zero. In single support foot b is the stance foot; in double support (as rimless.sim.continuation.arclength also
@@ -194,7 +196,7 @@ def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps
     st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = rk.run_phase(
         mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, want_jac, False, rec_dt, max_steps)
     if rec_dt > 0.0:
-        _single_support_force(mi, phase, rec_t, rec_y, p, contact)
+        single_support_force(mi, phase, rec_t, rec_y, p, contact)
     counts[phase, 0] = nf
     counts[phase, 1] = ns
     if st != rk.STATUS_OK:
@@ -276,7 +278,7 @@ def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bila
     if lam[3] > 0.0:
         rtol_d, atol_d = dlsp_tolerances(rtol, atol)
         st, detail, t_end, y_end, nf, ns, nst = _run_phase(
-            mi, fm.DLSP, p, ya, t, _DLSP_CODES, _DLSP_DIRS, rtol_d, atol_d, want_jac, max_steps, fm.LIFTOFF_A,
+            mi, fm.DLSP, p, ya, t, PHASE_DLSP_CODES, PHASE_DLSP_DIRS, rtol_d, atol_d, want_jac, max_steps, fm.LIFTOFF_A,
             DLSP_NEVER_ENDS, DLSP_NEVER_ENDS, counts, -1.0, contact)
         nfev += nf
         nsteps += ns
@@ -303,8 +305,8 @@ def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bila
     if er:
         if ys[8] >= 0.0:
             return CLUTCH_MISSED, D_PRECHECK, 1, t, yp, J, times, nfev, nsteps, nstiff, snap
-        codes = _FREE_ER_CODES_BI if bilateral else _FREE_ER_CODES
-        dirs = _FREE_ER_DIRS_BI if bilateral else _FREE_ER_DIRS
+        codes = PHASE_FREE_ER_CODES_BI if bilateral else PHASE_FREE_ER_CODES
+        dirs = PHASE_FREE_ER_DIRS_BI if bilateral else PHASE_FREE_ER_DIRS
         st, detail, t_end, y_end, nf, ns, nst = _run_phase(
             mi, fm.SLSP_FREE, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps,
             fm.CLUTCH_LOCK, TOUCHDOWN_BEFORE_CLUTCH, INTEGRATION, counts, rec_dt, contact)
@@ -327,8 +329,8 @@ def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bila
     else:
         final = fm.SLSP_FREE
     times[1] = t
-    codes = _SS_CODES_BI if bilateral else _SS_CODES
-    dirs = _SS_DIRS_BI if bilateral else _SS_DIRS
+    codes = PHASE_SS_CODES_BI if bilateral else PHASE_SS_CODES
+    dirs = PHASE_SS_DIRS_BI if bilateral else PHASE_SS_DIRS
     st, detail, t_end, y_end, nf, ns, nst = _run_phase(
         mi, final, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps, fm.TOUCHDOWN, STALL, STALL,
         counts, rec_dt, contact)

@@ -27,13 +27,18 @@ that has been walking.
 
 Integration: scipy's DOP853 on the mode's constrained dynamics (reference path, Python), stepped freely;
 samples and clutch actions are taken from its dense output, and a clutch action ends the continuous phase.
-Guards are located between solver steps by sign change (brentq on the dense output).
+The guards are those of rimless.sim.model.guards (codes, directions, force guards), located by the one
+engine rimless.sim.integrate.events: sign change on a step (strictly from the non-firing side), Brent on the
+dense output, and the normal forces' dips between step ends, searched on the interpolants of the last two
+steps. A dip found in the step before the current one is located after the firmware already sampled that
+step: the firmware then saw up to one solver step of the motion past the event.
 """
 
 from __future__ import annotations
 
 import math
 import random
+from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -46,22 +51,24 @@ from rimless.firmware.control.controller import Channel, Controller, EventRecord
 from rimless.firmware.control.detector import DetectorParams, LegDetector
 from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
 from rimless.firmware.control.faults import HealthLimits, HealthMonitor
+from rimless.sim.integrate.events import EventLocator, Piecewise
+from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model import clutch as ch
 from rimless.sim.model.clutch import Mode
 from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.step.hybrid import simulate_step
-from rimless.sim.integrate.reference import ScipyIntegrator
-from rimless.sim.model.mechanics import Mechanics, swing_height
+from rimless.sim.model.guards import (FOOT_A_DOWN, LIFTOFF_A, LIFTOFF_B, SLIP_END_1, SLIP_END_2, STALL, STICK_END_1,
+                                      STICK_END_2, TOUCHDOWN, clutch_forces, failure_of, mode_guard_value)
+from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
+from rimless.sim.step.hybrid import simulate_step
 
 N_LEGS = 8
 CLUTCH_PINS = (12, 13, 14, 15, 22, 23, 24, 26)  # the mock pins of the eight clutches (any distinct GPIOs)
 STEP_TIME_LIMIT_S = 5.0
 PRIMING_RECORD_DT_S = 5e-5
 
-# guard codes of this module
-TOUCHDOWN, STALL, LIFTOFF_B, LIFTOFF_A, FOOT_A_DOWN, SLIP_END_1, SLIP_END_2, STICK_END_1, STICK_END_2 = range(9)
+ROOT_TOL_S = 1e-13  # Brent's tolerance on an event time (absolute and relative)
 PEAK_RATE_M_S = 1e-3  # |L1'| below this at the lock: locked at the compression peak
 
 
@@ -334,15 +341,10 @@ class FirmwareLoop:
     def _stick_or_slip(self, mode: Mode, which: int, y: np.ndarray) -> int:
         """At L' = 0: STUCK if the clutch can hold the leg, else the direction it slips."""
         trial = replace(mode, leg1=ch.STUCK) if which == 1 else replace(mode, leg2=ch.STUCK)
-        lam = self._lambda(trial, y)[ch.clutch_force_index(trial, which)]
+        lam = clutch_forces(self.mech, trial, y, self.config.holding_force_N)[ch.clutch_force_index(trial, which)]
         if abs(lam) <= self.config.holding_force_N:
             return ch.STUCK
         return ch.SLIP_DOWN if lam > 0.0 else ch.SLIP_UP
-
-    def _lambda(self, mode: Mode, y: np.ndarray) -> np.ndarray:
-        with np.errstate(over="ignore", invalid="ignore"):
-            _, lam = ch.accel(self.mech, mode, y[:5], y[5:10], self._friction)
-        return lam
 
     @property
     def _friction(self) -> float:
@@ -414,7 +416,7 @@ class FirmwareLoop:
                     mode = replace(mode, leg1=st) if which == 1 else replace(mode, leg2=st)
                 if which == 1 and mode.leg1 == ch.STUCK and not stick_stored:
                     stick_stored = 0.5 * self.params.k * (self.L0 - y[3]) ** 2
-            if mode.foot_a and self._guard(mode, LIFTOFF_A, y) <= 0.0:
+            if mode.foot_a and mode_guard_value(mech, mode, LIFTOFF_A, y, self.config.holding_force_N) <= 0.0:
                 mode = replace(mode, foot_a=False)
                 recontact_armed = mode.leg2 != ch.FREE
             guards = [TOUCHDOWN, STALL, LIFTOFF_B]
@@ -428,7 +430,7 @@ class FirmwareLoop:
                 elif st == ch.STUCK and not rigid:
                     guards.append(STICK_END_1 if which == 1 else STICK_END_2)
             t_mode = t
-            kind, code, t, y, diss, slip, peak = self._integrate(mode, y, t, t0 + STEP_TIME_LIMIT_S + 1e-9,
+            kind, code, t, y, diss, slip, peak = self.integrate_mode(mode, y, t, t0 + STEP_TIME_LIMIT_S + 1e-9,
                                                                  tuple(guards), offset)
             damper += diss
             clutch_loss += slip
@@ -437,12 +439,9 @@ class FirmwareLoop:
             modes.append((mode.name, t_mode, t))
             if kind in ("action", "limit"):
                 continue
-            if code == STALL:
-                raise StepFailure(FailureReason.STALL, "theta' reached 0 before touchdown (the wheel rolls back)",
-                                  time_s=t, phase=mode.name)
-            if code == LIFTOFF_B:
-                raise StepFailure(FailureReason.STANCE_LIFT_OFF, "the stance foot's normal force fell below 0",
-                                  time_s=t, phase=mode.name)
+            failure = failure_of(code, t, mode.name)  # stall or stance lift-off
+            if failure is not None:
+                raise failure
             if code == LIFTOFF_A:
                 mode = replace(mode, foot_a=False)
                 # a foot lifted by the clutch still holding its spring comes down again when it lets go
@@ -456,7 +455,7 @@ class FirmwareLoop:
                     st = self._stick_or_slip(mode, which, y)
                 else:
                     idx = ch.clutch_force_index(mode, which)
-                    st = ch.SLIP_DOWN if self._lambda(mode, y)[idx] > 0.0 else ch.SLIP_UP
+                    st = ch.SLIP_DOWN if clutch_forces(self.mech, mode, y, self.config.holding_force_N)[idx] > 0.0 else ch.SLIP_UP
                 mode = replace(mode, leg1=st) if which == 1 else replace(mode, leg2=st)
                 if which == 1 and st == ch.STUCK and not stick_stored:
                     stick_stored = 0.5 * self.params.k * (self.L0 - y[3]) ** 2
@@ -516,29 +515,12 @@ class FirmwareLoop:
         self.stance_leg = (b_leg + 1) % N_LEGS
         return step, y_plus, t, offset, tr is not None and tr.foot_a_lifts
 
-    def _guard(self, mode: Mode, code: int, y: np.ndarray) -> float:
-        if code == TOUCHDOWN:
-            return swing_height(y[:5], self.L0)
-        if code == STALL:
-            return float(y[7])
-        if code == FOOT_A_DOWN:
-            return ch.foot_a_height(y[:5])
-        if code in (SLIP_END_1, SLIP_END_2):
-            which = 1 if code == SLIP_END_1 else 2
-            st = mode.leg1 if which == 1 else mode.leg2
-            rate = float(y[5 + (ch.L1_INDEX if which == 1 else ch.L2_INDEX)])
-            return rate if st == ch.SLIP_UP else -rate
-        lam = self._lambda(mode, y)
-        if code in (STICK_END_1, STICK_END_2):
-            which = 1 if code == STICK_END_1 else 2
-            return self.config.holding_force_N - abs(float(lam[ch.clutch_force_index(mode, which)]))
-        return float(lam[1] if code == LIFTOFF_B else lam[3])
-
-    def _integrate(self, mode: Mode, y0: np.ndarray, t0: float, t_bound: float, guards: tuple[int, ...],
-                   offset: float) -> tuple[str, int | None, float, np.ndarray, float, float, float | None]:
-        """Integrate `mode` from (t0, y0), taking the firmware's samples on the way, until a guard fires
-        ("guard"), a clutch action is due ("action") or t_bound ("limit").
-        Returns (kind, guard, t, y, damper energy J, clutch slip energy J, first L1' upward zero crossing)."""
+    def integrate_mode(self, mode: Mode, y0: np.ndarray, t0: float, t_bound: float, guards: tuple[int, ...],
+                       offset: float) -> tuple[str, int | None, float, np.ndarray, float, float, float | None]:
+        """Integrate clutch mode `mode` from (t0 s, y0), taking the firmware's samples on the way (the sensor's
+        accumulated compression is `offset` m plus the stance leg's), until a guard of `guards` (codes of
+        rimless.sim.model.guards) fires ("guard"), a clutch action is due ("action") or t_bound ("limit").
+        Returns (kind, guard, t, y, damper energy J, clutch slip energy J, first L1' upward zero crossing s)."""
         from scipy.integrate import DOP853
         from scipy.optimize import brentq
 
@@ -553,7 +535,14 @@ class FirmwareLoop:
 
         yy = np.concatenate((y0, [0.0, 0.0]))
         solver = DOP853(fun, t0, yy, t_bound, rtol=self.rtol, atol=self.atol)
-        g_old = np.array([self._guard(mode, c, y0) for c in guards])
+        pieces: deque[tuple[float, float, Callable[[float], np.ndarray]]] = deque(maxlen=2)  # the last two steps
+
+        def dense_on(ta: float, _ya: np.ndarray, tb: float) -> Piecewise:
+            return Piecewise([piece for piece in pieces if piece[0] >= ta and piece[1] <= tb])
+
+        holding = self.config.holding_force_N
+        locator = EventLocator(guards, lambda code, y: mode_guard_value(mech, mode, code, y[:10], holding), t0, yy,
+                               dense_on=dense_on, strict=True, xtol=ROOT_TOL_S, rtol=ROOT_TOL_S, check_finite=False)
         peak: float | None = None
         while True:
             solver.step()
@@ -561,13 +550,9 @@ class FirmwareLoop:
                 raise StepFailure(FailureReason.INTEGRATION, "the integrator failed", time_s=solver.t, phase=mode.name)
             ta, tb = solver.t_old, solver.t
             sol = solver.dense_output()
-            g_new = np.array([self._guard(mode, c, solver.y[:10]) for c in guards])
-            t_ev, code = math.inf, None
-            for i, c in enumerate(guards):
-                if g_old[i] > 0.0 and g_new[i] <= 0.0:
-                    root = brentq(lambda s, c=c: self._guard(mode, c, sol(s)[:10]), ta, tb, xtol=1e-13, rtol=1e-13)
-                    if root < t_ev:
-                        t_ev, code = root, c
+            pieces.append((ta, tb, sol))
+            event = locator.step(ta, tb, solver.y, lambda sol=sol: sol, last_step=solver.status == "finished")
+            t_ev, code = (event[0], guards[event[1]]) if event is not None else (math.inf, None)
             if mode.leg1 != ch.STUCK and peak is None:
                 l1a, l1b = sol(ta)[8], solver.y[8]
                 if l1a < 0.0 <= l1b:
@@ -584,13 +569,12 @@ class FirmwareLoop:
                     self._sample(ts, offset + self.L0 - float(ys[3]), (float(ys[3]), float(ys[4])))
                     continue
                 break
-            if code is not None:
-                ys = sol(t_ev)
+            if event is not None:
+                ys = event[2]
                 return "guard", code, float(t_ev), ys[:10], float(ys[10]), float(ys[11]), peak
             if solver.status == "finished":
                 ys = solver.y
                 return "limit", None, float(tb), ys[:10].copy(), float(ys[10]), float(ys[11]), peak
-            g_old = g_new
 
 
 @dataclass
@@ -610,233 +594,3 @@ class FirmwareWalk:
         if not self.steps:
             return np.empty((0, 2))
         return np.vstack([self.steps[0].z_start] + [s.z_end for s in self.steps])
-
-
-@dataclass
-class FirmwareFixedPoint:
-    """The period-1 gait under the firmware, from a walk (the map is sampled: see `firmware_fixed_point`)."""
-
-    z: np.ndarray  # extrapolated fixed point (theta+ rad, theta'+ rad/s)
-    z_mean: np.ndarray  # mean of the last `n_average` section points
-    z_std: np.ndarray
-    eigenvalues: np.ndarray  # of the linear map fitted to the walk (nan when the fit is not determined)
-    fit_residual: float  # rms misfit of z_{k+1} = A z_k + c over the fitted steps (the sampling noise), rad-ish
-    period_s: float  # mean over the last steps
-    period_std_s: float
-    stored_energy_J: float  # mean spring energy held at touchdown over the last steps
-    walk: FirmwareWalk
-    n_average: int
-
-    @property
-    def stable(self) -> bool | None:
-        """max |eigenvalue| < 1 of the fitted linear map (None when it could not be fitted)."""
-        if not np.all(np.isfinite(self.eigenvalues)):
-            return None
-        return bool(np.max(np.abs(self.eigenvalues)) < 1.0)
-
-
-def firmware_fixed_point(params: WheelParams, config: FirmwareLoopConfig, z_ideal: np.ndarray, *, steps: int = 12,
-                         n_average: int = 4, progress: Callable[[int], None] | None = None) -> FirmwareFixedPoint:
-    """The fixed point under the firmware, found from one walk started at the ideal-clutch fixed point.
-
-    The firmware samples at instants unrelated to the step, so the step map is not a smooth function of
-    z alone (it depends on the sampling phase and the controller's memory). Instead of Newton on a noisy
-    map, the walk itself is the iteration: its section points z_k are fitted by a linear map
-    z_{k+1} = A z_k + c (least squares over all steps after the first), and the fixed point is
-    z* = (I - A)^-1 c, a derivative-free extrapolation of the transient (exact for a linear map; the
-    fit residual measures what the sampling phase adds). eig(A) estimates the eigenvalues of the map.
-    The mean and spread of the last `n_average` points are reported beside it.
-    Raises StepFailure (classified) if the walk fails before enough steps are done.
-    """
-    loop = FirmwareLoop(params, config)
-    try:
-        walk = loop.walk(z_ideal, steps, progress=progress)
-    finally:
-        loop.close()
-    if walk.failure is not None and len(walk.steps) < 4:
-        raise walk.failure
-    zs = walk.section_points[1:]  # skip the start: the firmware's first step follows the priming step
-    last = zs[-n_average:]
-    eig = np.full(2, np.nan, dtype=complex)
-    z_fit = last.mean(axis=0)
-    misfit = float("nan")
-    if len(zs) >= 5:
-        X = np.hstack((zs[:-1], np.ones((len(zs) - 1, 1))))
-        coef, *_ = np.linalg.lstsq(X, zs[1:], rcond=None)
-        A, c = coef[:2].T, coef[2]
-        misfit = float(np.sqrt(np.mean((X @ coef - zs[1:]) ** 2)))
-        try:
-            cand = np.linalg.solve(np.eye(2) - A, c)
-            if np.all(np.isfinite(cand)) and np.max(np.abs(cand - z_fit)) < 10 * np.max(np.abs(zs[-1] - zs[0]) + 1e-6):
-                z_fit = cand
-                eig = np.linalg.eigvals(A)
-        except np.linalg.LinAlgError:
-            pass
-    tail = walk.steps[-n_average:]
-    periods = np.array([s.period_s for s in tail])
-    return FirmwareFixedPoint(z=z_fit, z_mean=last.mean(axis=0), z_std=last.std(axis=0), eigenvalues=eig,
-                              fit_residual=misfit, period_s=float(periods.mean()), period_std_s=float(periods.std()),
-                              stored_energy_J=float(np.mean([s.stored_energy_J for s in tail])), walk=walk,
-                              n_average=len(tail))
-
-
-@dataclass
-class FirmwareCriticalSlope:
-    """The smallest slope at which the firmware keeps the wheel walking (see `firmware_critical_slope`)."""
-
-    critical_slope_rad: float  # lowest slope found that walks
-    failing_slope_rad: float  # highest slope found that does not (the boundary lies between)
-    reason_below: str  # why the walk fails just below
-    evaluations: list[tuple[float, bool, str]]  # (slope rad, walks, reason)
-
-    @property
-    def limited_by(self) -> str:
-        """"firmware" when a firmware fault (its leg count or clutch timeout) ends the walk just below,
-        "mechanics" when the wheel itself fails (stall, contact, ...)."""
-        return "firmware" if self.reason_below.startswith(FIRMWARE_FAULT_PREFIX) else "mechanics"
-
-
-FIRMWARE_FAULT_PREFIX = "the firmware faulted"
-# what the step-timing checks are relaxed to for the mechanical boundary: the longest step and hold the
-# detector's and controller's validation accept, and the widest period tolerance
-RELAXED_MAX_STEP_S = 10.0
-RELAXED_PERIOD_TOLERANCE = 0.9
-RELAXED_MAX_HOLD_S = 60.0
-
-
-def without_step_timing_checks(config: FirmwareLoopConfig) -> FirmwareLoopConfig:
-    """The same firmware with its step-timing fail-safes (leg count: `max_step_s`, `step_period_tolerance`;
-    clutch timeout: `max_hold_s`) relaxed to their widest valid values, so that a walk under it ends only
-    by the mechanics. Everything else (sensor, detector thresholds, delays) is unchanged."""
-    det = replace(config.detector, max_step_s=RELAXED_MAX_STEP_S, step_period_tolerance=RELAXED_PERIOD_TOLERANCE)
-    return replace(config, detector=det, max_hold_s=RELAXED_MAX_HOLD_S).validated()
-
-
-@dataclass
-class FirmwareBoundaries:
-    """The critical slope under the firmware as configured, and, when a firmware fault limits it, the
-    mechanical one (the same firmware with its step-timing checks relaxed: `without_step_timing_checks`)."""
-
-    firmware: FirmwareCriticalSlope
-    mechanical: FirmwareCriticalSlope | None  # None when the mechanics already limit the configured firmware
-
-    @property
-    def limited_by(self) -> str:
-        """"firmware" when the relaxed firmware walks at a slope where the configured one faults (the
-        fault stops a wheel that would walk), else "mechanics" (the fault, if any, only comes first)."""
-        if self.mechanical is None:
-            return "mechanics"
-        m = self.mechanical.critical_slope_rad
-        return "firmware" if math.isfinite(m) and m <= self.firmware.failing_slope_rad else "mechanics"
-
-    @property
-    def detail(self) -> str:
-        """Why the boundary is where it is, in a sentence."""
-        fw, mech = self.firmware, self.mechanical
-        if mech is None:
-            return f"the wheel fails mechanically below it: {fw.reason_below}"
-        if self.limited_by == "firmware":
-            return (f"a firmware fault stops a wheel that would walk: below it {fw.reason_below}; with the step-timing "
-                    f"checks relaxed it walks down to {math.degrees(mech.critical_slope_rad):.3f} deg")
-        return (f"the firmware's fault fires first ({fw.reason_below}), but with the step-timing checks relaxed the "
-                f"wheel fails there too, in a walk {MECHANICAL_WALK_FACTOR} times as long: {mech.reason_below}")
-
-    @property
-    def mechanical_slope_rad(self) -> float:
-        """The mechanical boundary: the relaxed search's, or the configured one when mechanics limit it."""
-        return (self.mechanical or self.firmware).critical_slope_rad
-
-
-def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps: int) -> tuple[bool, str]:
-    """(True, "") if a walk of `steps` steps from the ideal fixed point at these parameters completes
-    without a failed step and without a firmware fault; else (False, the reason)."""
-    from rimless.sim.step.poincare import NoFixedPoint, default_guess, solve_fixed_point, PoincareMap
-
-    try:
-        ideal = solve_fixed_point(PoincareMap(params, "er", ScipyIntegrator(rtol=1e-9, atol=1e-11)),
-                                  default_guess(params, "er"))
-    except (StepFailure, NoFixedPoint) as err:
-        return False, f"no ideal-clutch gait to start from ({err})"
-    loop = FirmwareLoop(params, config)
-    try:
-        walk = loop.walk(ideal.z, steps)
-    finally:
-        loop.close()
-    if walk.failure is not None:
-        return False, f"step {len(walk.steps) + 1}: {walk.failure}"
-    faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
-    if faults:
-        details = "; ".join(f"{f.get('fault')}: {f.get('detail')}" for _, name, f in walk.events if name == "fault")
-        return False, f"{FIRMWARE_FAULT_PREFIX} ({', '.join(faults)}): it no longer clutches ({details})"
-    return True, ""
-
-
-def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
-                            tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None
-                            ) -> FirmwareCriticalSlope:
-    """Bisection on the slope between `low_rad` (must fail) and params.slope_rad (must walk) for the lowest
-    slope at which `walks_under_firmware` holds, to `tol_rad`. It assumes one boundary (walking at a slope
-    implies walking at steeper ones), which the returned evaluations let the caller check.
-    Raises ValueError if the bracket does not straddle the boundary."""
-    evals: list[tuple[float, bool, str]] = []
-
-    def test(slope: float) -> tuple[bool, str]:
-        ok, why = walks_under_firmware(params.replace(slope_rad=slope), config, steps)
-        evals.append((slope, ok, why))
-        if progress:
-            progress(len(evals))
-        return ok, why
-
-    hi, lo = params.slope_rad, low_rad
-    ok_hi, why_hi = test(hi)
-    if not ok_hi:
-        raise ValueError(f"the wheel does not walk under the firmware at the start slope {hi:.5f} rad: {why_hi}")
-    ok_lo, why_lo = test(lo)
-    if ok_lo:
-        raise ValueError(f"the wheel still walks under the firmware at the low end {lo:.5f} rad; lower it")
-    while hi - lo > tol_rad:
-        mid = 0.5 * (hi + lo)
-        ok, why = test(mid)
-        if ok:
-            hi = mid
-        else:
-            lo, why_lo = mid, why
-    return FirmwareCriticalSlope(critical_slope_rad=hi, failing_slope_rad=lo, reason_below=why_lo, evaluations=evals)
-
-
-MECHANICAL_WALK_FACTOR = 3  # the relaxed walks are this many times longer (see firmware_boundaries)
-
-
-def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
-                        tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None) -> FirmwareBoundaries:
-    """`firmware_critical_slope` under `config`; if a firmware fault is what fails just below it, is that
-    fault what stops the wheel? The same firmware with its step-timing checks relaxed walks
-    MECHANICAL_WALK_FACTOR x `steps` steps at the failing slope: a wheel slowing towards a stall trips the
-    leg-count check (its steps outgrow the running period or `max_step_s`) a step or two before it stalls,
-    and a walk only as long as the configured one could miss that stall. If the long relaxed walk fails
-    too, the boundary is mechanical (the fault only came first); if it walks, the mechanical boundary is
-    bisected below with long relaxed walks. Raises ValueError as `firmware_critical_slope` does."""
-    n = [0]
-
-    def count(_k: int) -> None:
-        n[0] += 1
-        if progress:
-            progress(n[0])
-
-    fw = firmware_critical_slope(params, config, low_rad=low_rad, steps=steps, tol_rad=tol_rad, progress=count)
-    if fw.limited_by != "firmware":
-        return FirmwareBoundaries(fw, None)
-    relaxed = without_step_timing_checks(config)
-    long_steps = MECHANICAL_WALK_FACTOR * steps
-    ok, why = walks_under_firmware(params.replace(slope_rad=fw.failing_slope_rad), relaxed, long_steps)
-    count(0)
-    if not ok:  # the wheel fails there anyway: the boundary is mechanical, the fault only came first
-        return FirmwareBoundaries(fw, FirmwareCriticalSlope(fw.critical_slope_rad, fw.failing_slope_rad, why,
-                                                            [(fw.failing_slope_rad, False, why)]))
-    top = params.replace(slope_rad=fw.failing_slope_rad)
-    try:
-        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=long_steps, tol_rad=tol_rad,
-                                       progress=count)
-    except ValueError as err:  # e.g. relaxed, the wheel still walks at low_rad: the boundary is below the bracket
-        mech = FirmwareCriticalSlope(math.nan, low_rad, f"not bracketed: {err}", [])
-    return FirmwareBoundaries(fw, mech)

@@ -1,8 +1,11 @@
 """Integrating one continuous phase until a guard of rimless.sim.model.guards fires.
 
 `events` is the one event-location engine (sign change of a guard on a step, root on the dense output,
-force-dip check between samples) shared by the reference path, the compiled path and the firmware in the loop;
-`reference` integrates with scipy's public `solve_ivp` API; `backend` picks the compiled path when available.
+force-dip search between step ends), called step by step by the reference integrator and the firmware in
+the loop; the compiled path (rimless.sim.fast.rk) is its numba twin with the same codes, directions and dip
+constants. `reference` integrates with scipy's public ODE solver classes (DOP853 by default); `backend`
+picks the compiled integrator when it is available (the map on it is built in rimless.sim.step.backend).
 
-May import: rimless.sim.model, numpy, scipy, rimless.errors. Never step/, continuation/, studies/ or cli/.
+May import: rimless.sim.model, rimless.sim.fast (backend only, lazily: the same layer), numpy, scipy,
+rimless.errors. Never step/, continuation/, studies/, in_the_loop/ or cli/.
 """

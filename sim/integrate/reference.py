@@ -11,9 +11,11 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
+from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
+from rimless.sim.integrate.events import EventLocator, NonFiniteGuard
 from rimless.sim.model.dynamics import accel, damping_power
-from rimless.sim.model.guards import DIRECTION, FORCE_GUARDS, guard_value
+from rimless.sim.model.guards import guard_value
 from rimless.sim.model.mechanics import Mechanics
 
 
@@ -57,19 +59,19 @@ class _Abort(Exception):
 
 
 MAX_NFEV = 2_000_000  # right-hand-side evaluations per phase before the reference backend gives up
-DIP_MARGIN = 0.5  # as rimless.sim.fast.rk.DIP_MARGIN: skip a force minimum the steps resolve well
-MIN_SAMPLES = 8  # dense-output samples of a normal force when looking for a dip between two solver steps
+SOLVERS = {"RK23": RK23, "RK45": RK45, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
 
 
 @dataclass
 class ScipyIntegrator:
-    """Reference backend: one of scipy's ODE solvers (DOP853 by default), stepped as solve_ivp steps it,
-    with terminal event location on its dense output (brentq to 4 eps, solve_ivp's semantics).
+    """Reference backend: one of scipy's ODE solvers (DOP853 by default, public `scipy.integrate` classes),
+    stepped as solve_ivp steps it, with the guards located by rimless.sim.integrate.events (solve_ivp's
+    semantics: brentq to 4 eps on the dense output).
 
     Two things solve_ivp does not do:
     - the normal-force guards (lift-off of foot a or b) are also located when the force dips below zero
-      and recovers between two solver steps: at every discrete minimum of the force over the step ends,
-      the two steps around it are re-integrated with dense output and the force minimised on it;
+      and recovers between two solver steps (events.EventLocator); the span around a discrete minimum of
+      the force is re-integrated with dense output for that search;
     - bounded work: a non-finite state or derivative, or more than `max_nfev` right-hand-side evaluations
       in one phase, ends the phase as failed (classified by the caller as an integration failure).
     """
@@ -101,7 +103,6 @@ class ScipyIntegrator:
     def _run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
                    t_max: float, record_dt: float | None, track_dissipation: bool) -> PhaseRun:
         from scipy.integrate import OdeSolution, solve_ivp
-        from scipy.integrate._ivp.ivp import METHODS, find_active_events, solve_event_equation
 
         n = 10
         nfev = 0
@@ -119,12 +120,11 @@ class ScipyIntegrator:
                 raise _Abort("non-finite state or forces (the state is too large or the dynamics singular)")
             return out
 
-        def gval(code: int, y: np.ndarray) -> float:
-            return guard_value(mech, phase, code, y[:n])
+        def dense_on(ta: float, ya: np.ndarray, tb: float):  # noqa: ANN202
+            """The span re-integrated with dense output (for the force-dip search)."""
+            sub = solve_ivp(fun, (ta, tb), ya, method=self.method, rtol=self.rtol, atol=self.atol, dense_output=True)
+            return sub.sol if sub.status == 0 else None
 
-        events = [lambda _t, y, code=code: gval(code, y) for code in guards]
-        dirs = np.array([DIRECTION[c] for c in guards], dtype=float)
-        force_guards = [i for i, c in enumerate(guards) if c in FORCE_GUARDS]
         y_init = np.concatenate((y0, [0.0])) if track_dissipation else np.array(y0, dtype=float)
 
         def failed(t: float, y: np.ndarray, message: str) -> PhaseRun:
@@ -134,14 +134,14 @@ class ScipyIntegrator:
         if not np.all(np.isfinite(y_init)):
             return failed(t0, y_init, "non-finite start state")
         try:
-            solver = METHODS[self.method](fun, t0, y_init, t0 + t_max, rtol=self.rtol, atol=self.atol)
-            g = np.array([gval(c, y_init) for c in guards])
+            solver = SOLVERS[self.method](fun, t0, y_init, t0 + t_max, rtol=self.rtol, atol=self.atol)
+            locator = EventLocator(guards, lambda code, y: guard_value(mech, phase, code, y[:n]), t0, y_init,
+                                   dense_on=dense_on)
         except _Abort as err:
             return failed(t0, y_init, str(err))
-        if not np.all(np.isfinite(g)):
+        except NonFiniteGuard:
             return failed(t0, y_init, "non-finite guard value at the start of the phase")
         ts, interpolants = [t0], []
-        hist: list[tuple[float, np.ndarray, np.ndarray]] = [(t0, y_init.copy(), g.copy())]  # last 3 step ends
         fired: int | None = None
         t_end, y_end = t0, y_init
         while True:
@@ -154,36 +154,16 @@ class ScipyIntegrator:
             t_old, t, y = solver.t_old, solver.t, solver.y
             sol = solver.dense_output() if record_dt is not None else None
             try:
-                g_new = np.array([gval(c, y) for c in guards])
-            except _Abort as err:
+                best = locator.step(t_old, t, y, lambda: sol if sol is not None else solver.dense_output(),
+                                    last_step=solver.status == "finished")
+            except (_Abort, NonFiniteGuard) as err:
                 return failed(t, y, str(err))
-            if not np.all(np.isfinite(g_new)):
-                return failed(t, y, "non-finite guard value")
-            best: tuple[float, int, np.ndarray] | None = None
-            active = find_active_events(g, g_new, dirs)
-            if active.size:
-                if sol is None:
-                    sol = solver.dense_output()
-                for e in active:
-                    root = solve_event_equation(events[e], sol, t_old, t)
-                    if best is None or root < best[0]:
-                        best = (root, int(e), sol(root))
-            hist.append((t, y.copy(), g_new.copy()))
-            del hist[:-3]
-            try:
-                dip = self._force_dip(mech, phase, guards, force_guards, hist, active, solver.status == "finished",
-                                      best is not None, fun, solve_ivp)
-            except _Abort as err:
-                return failed(t, y, str(err))
-            if dip is not None and (best is None or dip[0] < best[0]):
-                best = dip
             if record_dt is not None and sol is not None:
                 interpolants.append(sol)
                 ts.append(t)
             if best is not None:
                 t_end, fired, y_end = best[0], guards[best[1]], best[2]
                 break
-            g = g_new
             if solver.status == "finished":
                 t_end, y_end = t, y
                 break
@@ -198,74 +178,3 @@ class ScipyIntegrator:
             run.y = np.atleast_2d(dense(grid)).T[:, :n] if len(grid) > 1 else np.array([y_init[:n]])
             run.y[-1] = run.y_end
         return run
-
-    def _force_dip(self, mech: Mechanics, phase: int, guards: tuple[int, ...], force_guards: list[int],
-                   hist: list, active: np.ndarray, last_step: bool, other_fired: bool,
-                   fun, solve_ivp):  # noqa: ANN001, ANN202
-        """The earliest time at which a normal-force guard dips through zero between step ends where it is
-        positive, as (t, guard index, state), or None. Checked around every discrete minimum of the force
-        over the step ends (and at the phase's first and last step)."""
-        best = None
-        for e in force_guards:
-            if e in active:
-                continue
-            gs = [h[2][e] for h in hist]
-            if min(gs) <= 0.0:
-                continue
-            if len(gs) == 3 and gs[0] > gs[1] < gs[2]:
-                ts = [h[0] for h in hist]
-                if _parabola_min(ts, gs) > DIP_MARGIN * gs[1]:
-                    continue  # resolved by the steps: the force stays well above zero between them
-                span = (hist[0], hist[2])
-            elif len(gs) == 2 and gs[0] < gs[1]:
-                span = (hist[0], hist[1])
-            elif (last_step or other_fired) and gs[-2] > gs[-1]:
-                span = (hist[-2], hist[-1])
-            else:
-                continue
-            (ta, ya, _), (tb, _, _) = span
-            sub = solve_ivp(fun, (ta, tb), ya, method=self.method, rtol=self.rtol, atol=self.atol, dense_output=True)
-            if sub.status != 0:
-                continue
-            code = guards[e]
-
-            def g_at(tt: float, code: int = code, sol=sub.sol) -> float:  # noqa: ANN001
-                return guard_value(mech, phase, code, sol(tt)[:10])
-
-            found = _first_dip(g_at, ta, tb)
-            if found is not None and (best is None or found < best[0]):
-                best = (found, e, sub.sol(found))
-        return best
-
-
-def _parabola_min(ts: list[float], gs: list[float]) -> float:
-    """Minimum of the parabola through three (t, g) points whose middle g is below both neighbours."""
-    d1 = (gs[1] - gs[0]) / (ts[1] - ts[0])
-    d2 = (gs[2] - gs[1]) / (ts[2] - ts[1])
-    a = (d2 - d1) / (ts[2] - ts[0])
-    if not a > 0.0:
-        return -np.inf
-    t_min = 0.5 * (ts[0] + ts[1]) - d1 / (2.0 * a)
-    return gs[1] + d1 * (t_min - ts[1]) + a * (t_min - ts[0]) * (t_min - ts[1])
-
-
-def _first_dip(g_at, ta: float, tb: float) -> float | None:  # noqa: ANN001
-    """The first zero crossing (downwards) of g on [ta, tb] when g(ta) > 0 dips to <= 0 inside, else None.
-    g is sampled at MIN_SAMPLES interior points; the lowest sample is refined by a bounded minimisation."""
-    from scipy.optimize import brentq, minimize_scalar
-
-    ts = np.linspace(ta, tb, MIN_SAMPLES + 2)
-    gs = np.array([g_at(t) for t in ts])
-    neg = np.nonzero(gs <= 0.0)[0]
-    if neg.size:
-        t_low = ts[neg[0]]
-    else:
-        i = int(np.argmin(gs))
-        lo, hi = ts[max(i - 1, 0)], ts[min(i + 1, len(ts) - 1)]
-        res = minimize_scalar(g_at, bounds=(lo, hi), method="bounded", options={"xatol": 1e-9 * (tb - ta)})
-        if not (res.fun <= 0.0):
-            return None
-        t_low = float(res.x)
-    if g_at(t_low) == 0.0:
-        return t_low
-    return float(brentq(g_at, ta, t_low, xtol=4 * np.finfo(float).eps, rtol=4 * np.finfo(float).eps))

@@ -133,12 +133,9 @@ def _check_failed(run: PhaseRun, phase: str) -> None:
 
 
 def _raise_single_support_failure(run: PhaseRun, phase: str) -> None:
-    if run.guard == ev.STALL:
-        raise StepFailure(FailureReason.STALL, "theta' reached 0 before touchdown (the wheel rolls back)",
-                          time_s=run.t_end, phase=phase)
-    if run.guard == ev.LIFTOFF_B:
-        raise StepFailure(FailureReason.STANCE_LIFT_OFF, "the stance foot's normal force fell below 0",
-                          time_s=run.t_end, phase=phase)
+    failure = ev.failure_of(run.guard, run.t_end, phase)  # stall or stance lift-off
+    if failure is not None:
+        raise failure
 
 
 def simulate_step(

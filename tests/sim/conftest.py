@@ -1,6 +1,5 @@
 """Shared, expensive fixtures of the simulator tests (computed once per session)."""
 
-import numpy as np
 import pytest
 
 from rimless.sim.integrate.reference import ScipyIntegrator
@@ -25,12 +24,3 @@ def er_fixed_point(table1):
 def ve_fixed_point(table1):
     pmap = PoincareMap(table1, "ve", TIGHT)
     return pmap, solve_fixed_point(pmap, default_guess(table1, "ve"), diagnostics=True)
-
-
-def random_states(rng: np.random.Generator, n: int):
-    """Plausible configurations: theta within a step, legs compressed by up to 3 cm, random rates."""
-    for _ in range(n):
-        q = np.array([rng.uniform(-1, 1), rng.uniform(-0.01, 0.01), rng.uniform(-0.5, 0.5),
-                      rng.uniform(0.2, 0.237), rng.uniform(0.2, 0.24)])
-        qd = rng.normal(size=5) * np.array([0.5, 0.5, 3.0, 0.5, 0.5])
-        yield q, qd

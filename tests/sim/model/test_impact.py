@@ -7,7 +7,7 @@ from rimless.sim.model.impact import double_support_jacobian, impact, relabel
 from rimless.sim.model.mechanics import ALPHA, Mechanics, swing_height
 from rimless.sim.model.params import WheelParams
 
-from .conftest import random_states
+from tests.support.sim_states import random_states
 
 
 def _touchdown_state(rng, mech):

@@ -12,6 +12,7 @@ import pytest
 from rimless.sim.model import dynamics
 from rimless.sim.model import guards as events
 from rimless.sim import fast
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.fast import model as fm
 from rimless.sim.model import impact as ref_impact
 from rimless.sim.model import section
@@ -202,34 +203,32 @@ def test_exact_jacobian_matches_central_differences_of_the_reference(tight_refer
 @pytest.mark.parametrize("mass_model", ["sliding-leg", "active-feet"])
 def test_exact_jacobian_other_mass_models(mass_model: str) -> None:
     params = WheelParams(mass_model=mass_model)
-    pm = fast.FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-12, atol=1e-14))
+    pm = FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-12, atol=1e-14))
     J = fast.exact_jacobian(pm, z=Z_ER)
     np.testing.assert_allclose(J, pm.jacobian(Z_ER, h=1e-5), atol=1e-6)
 
 
-@pytest.mark.parametrize(("model", "z_star", "eig"), [
-    ("er", Z_ER, (0.1017, 0.7856)),
-])
-def test_fixed_point_on_the_fast_path_with_the_variational_jacobian(model: str, z_star: np.ndarray,
-                                                                     eig: tuple[float, float]) -> None:
-    pm = fast.FastPoincareMap(WheelParams(), model)
-    fp = solve_fixed_point(pm, z_star + np.array([0.01, -0.05]), jacobian=pm.variational_jacobian)
+def test_fixed_point_on_the_fast_path_with_the_variational_jacobian(er_fixed_point) -> None:
+    """Against the reference path (conftest: scipy DOP853 at rtol 1e-12, central-difference Jacobian)."""
+    _, ref = er_fixed_point
+    pm = FastPoincareMap(WheelParams(), "er")
+    fp = solve_fixed_point(pm, ref.z + np.array([0.01, -0.05]), jacobian=pm.variational_jacobian)
     assert fp.jacobian_method == "variational"
-    np.testing.assert_allclose(fp.z, z_star, atol=2e-6)
-    np.testing.assert_allclose(np.sort(np.abs(fp.eigenvalues)), eig, atol=2e-4)
-    assert fp.step.period_s == pytest.approx(0.3095, abs=1e-3)
+    np.testing.assert_allclose(fp.z, ref.z, atol=1e-8)
+    np.testing.assert_allclose(np.sort(np.abs(fp.eigenvalues)), np.sort(np.abs(ref.eigenvalues)), atol=1e-6)
+    assert fp.step.period_s == pytest.approx(ref.step.period_s, abs=1e-8)
     # the default jacobian of the fast map is the variational one too
-    fp2 = solve_fixed_point(pm, z_star)
+    fp2 = solve_fixed_point(pm, ref.z)
     assert fp2.jacobian_method == "variational"
     np.testing.assert_allclose(fp2.z, fp.z, atol=1e-9)
     # continuation code uses with_params
     pm2 = pm.with_params(WheelParams(slope_rad=0.045))
-    assert isinstance(pm2, fast.FastPoincareMap) and pm2.params.slope_rad == 0.045
+    assert isinstance(pm2, FastPoincareMap) and pm2.params.slope_rad == 0.045
 
 
 def test_ve_fixed_point_matches_the_reference_solver() -> None:
     fp_ref = solve_fixed_point(PoincareMap(WheelParams(), "ve"), Z_VE)
-    pm = fast.FastPoincareMap(WheelParams(), "ve")
+    pm = FastPoincareMap(WheelParams(), "ve")
     fp = solve_fixed_point(pm, Z_VE + np.array([0.005, 0.03]))
     np.testing.assert_allclose(fp.z, fp_ref.z, atol=1e-8)
     np.testing.assert_allclose(np.sort(np.abs(fp.eigenvalues)), np.sort(np.abs(fp_ref.eigenvalues)), atol=1e-6)

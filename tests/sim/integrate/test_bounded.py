@@ -9,6 +9,7 @@ import pytest
 
 from rimless.errors import ParameterError
 from rimless.sim import fast
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model.params import WheelParams
@@ -67,7 +68,7 @@ def test_stiff_fallback_is_bounded_and_reports_a_finite_period(monkeypatch: pyte
     fails with a classified reason instead of running for many minutes."""
     params = WheelParams(stiffness_n_per_m=1e4, leg_mass_kg=1.892 * 0.02)
     z = np.array([-0.42, 2.6])
-    pm = fast.FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-8, atol=1e-10, max_steps=20))
+    pm = FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-8, atol=1e-10, max_steps=20))
     z_next, period, _ = pm.evaluate(z)
     assert pm.last_method == "scipy-Radau"
     r = fast.fast_step(params, "er", z, rtol=1e-11)
@@ -75,7 +76,7 @@ def test_stiff_fallback_is_bounded_and_reports_a_finite_period(monkeypatch: pyte
     np.testing.assert_allclose(z_next, r.z_next, atol=1e-6)
 
     monkeypatch.setattr(fast, "RADAU_MAX_NFEV", 3000)
-    tiny = fast.FastPoincareMap(WheelParams(leg_mass_kg=1e-6), "er", fast.FastIntegrator(max_steps=2000))
+    tiny = FastPoincareMap(WheelParams(leg_mass_kg=1e-6), "er", fast.FastIntegrator(max_steps=2000))
     with pytest.raises(StepFailure) as info:
         tiny(Z_ER)
     assert info.value.reason is FailureReason.INTEGRATION
@@ -86,7 +87,7 @@ def test_stiff_fallback_is_bounded_and_reports_a_finite_period(monkeypatch: pyte
 @pytest.mark.parametrize("model", ["er", "ve"])
 def test_very_light_legs_end_in_bounded_steps_on_the_compiled_path(leg_mass_kg: float, model: str) -> None:
     """With the compiled path alone (no fallback) very light legs hit the step limit, classified."""
-    pm = fast.FastPoincareMap(WheelParams(leg_mass_kg=leg_mass_kg), model, fast.FastIntegrator(max_steps=5000),
+    pm = FastPoincareMap(WheelParams(leg_mass_kg=leg_mass_kg), model, fast.FastIntegrator(max_steps=5000),
                               stiff_fallback=False)
     with pytest.raises(StepFailure) as info:
         pm(Z_ER)

@@ -22,11 +22,17 @@ import rimless.firmware.control.detector
 import rimless.firmware.drivers.fake_adns3080
 import rimless.firmware.control.faults
 from rimless.cli import app
-from rimless.firmware.control.detector import DetectorParams
 from rimless.sim.model.failures import StepFailure
-from rimless.sim.in_the_loop.loop import FirmwareLoop, FirmwareLoopConfig, firmware_fixed_point
+from rimless.sim.in_the_loop import loop as loop_module
+from rimless.sim.in_the_loop.loop import FirmwareLoop, FirmwareLoopConfig
+from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model import guards
+from rimless.sim.model.clutch import Mode
+from rimless.sim.model.dynamics import SLSP_FREE
+from rimless.sim.model.mechanics import Mechanics
+from tests.support import sim_dip
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 FIRMWARE_MODULES = [rimless.firmware.drivers.adns3080, rimless.firmware.drivers.clutch, rimless.firmware.control.controller,
                     rimless.firmware.control.detector, rimless.firmware.drivers.fake_adns3080, rimless.firmware.control.faults]
 QUIET = dict(jitter_s=0.0, noise_counts=0.0)
@@ -56,26 +62,35 @@ def _code_objects(path: Path) -> dict[str, bytes]:
     return out
 
 
+def _patched_functions(module: types.ModuleType) -> tuple[list[str], int]:
+    """(qualnames of the module's functions whose bytecode is not the one compiled from its file on disk,
+    how many functions were checked)."""
+    path = Path(inspect.getsourcefile(module))
+    patched, checked = [], 0
+    for qualname, code in _code_objects(path).items():
+        if "<" in qualname:
+            continue  # nested functions and comprehensions live inside the checked ones
+        obj = module
+        for part in qualname.split("."):
+            obj = inspect.getattr_static(obj, part)
+        if inspect.isclass(obj):
+            continue  # a class body
+        fn = getattr(obj, "__func__", getattr(obj, "fget", obj))
+        if fn.__code__.co_code != code:
+            patched.append(qualname)
+        checked += 1
+    return patched, checked
+
+
 def test_the_loop_runs_the_firmware_files_unpatched(table1, er_fixed_point):
-    """Every function of the firmware modules the loop uses is the one compiled from firmware/*.py,
+    """Every function of the firmware modules the loop uses is the one compiled from firmware/**.py,
     the loop's objects are instances of those classes, and no instance overrides a method."""
     loop, walk = _walk(table1, er_fixed_point[1].z, 1)
     for module in FIRMWARE_MODULES:
         path = Path(inspect.getsourcefile(module))
-        assert path == REPO / "firmware" / path.name
-        compiled = _code_objects(path)
-        checked = 0
-        for qualname, code in compiled.items():
-            if "<" in qualname:
-                continue  # nested functions and comprehensions live inside the checked ones
-            obj = module
-            for part in qualname.split("."):
-                obj = inspect.getattr_static(obj, part)
-            if inspect.isclass(obj):
-                continue  # a class body
-            fn = getattr(obj, "__func__", getattr(obj, "fget", obj))
-            assert fn.__code__.co_code == code, f"{module.__name__}.{qualname} is not the code in {path}"
-            checked += 1
+        assert path.is_relative_to(REPO / "firmware"), path
+        patched, checked = _patched_functions(module)
+        assert not patched, f"{module.__name__}: {patched} are not the code in {path}"
         assert checked >= 3
     expected = {"controller": rimless.firmware.control.controller.Controller, "detector": rimless.firmware.control.detector.LegDetector,
                 "sensor": rimless.firmware.drivers.adns3080.Adns3080, "fake": rimless.firmware.drivers.fake_adns3080.FakeAdns3080,
@@ -91,20 +106,20 @@ def test_the_loop_runs_the_firmware_files_unpatched(table1, er_fixed_point):
 
 
 def test_a_patched_firmware_function_is_detected(monkeypatch):
-    """The check above fails when a firmware method is replaced (guards the guard)."""
-    compiled = _code_objects(REPO / "firmware" / "detector.py")
-    LegDetector = rimless.firmware.control.detector.LegDetector
+    """The check above (`_patched_functions`, run here) reports a replaced firmware method (guards the guard)."""
+    module = rimless.firmware.control.detector
+    assert _patched_functions(module)[0] == []
 
     def update(self, t_ns, displacement_m, trusted=True):  # noqa: ANN001, ANN202
-        return rimless.firmware.control.detector.NOTHING
+        return module.NOTHING
 
-    monkeypatch.setattr(LegDetector, "update", update)
-    assert inspect.getattr_static(LegDetector, "update").__code__.co_code != compiled["LegDetector.update"]
+    monkeypatch.setattr(module.LegDetector, "update", update)
+    assert _patched_functions(module)[0] == ["LegDetector.update"]
 
 
 def test_no_simulator_module_copies_firmware_code():
     """Distinctive lines of the firmware's decision code appear only in firmware/."""
-    markers = [line.strip() for line in (REPO / "firmware" / "detector.py").read_text().splitlines()
+    markers = [line.strip() for line in Path(inspect.getsourcefile(rimless.firmware.control.detector)).read_text().splitlines()
                if line.strip().startswith(("det = s0 *", "det_b = s0 *", "det_c = s0 *", "armed = self._peak_v"))]
     markers += ["def _step_channel(", "class VelocityEstimator", "class LegDetector", "def _latch(self)"]
     assert len(markers) >= 8
@@ -112,6 +127,47 @@ def test_no_simulator_module_copies_firmware_code():
         text = path.read_text()
         for marker in markers:
             assert marker not in text, f"{path} contains firmware code: {marker!r}"
+
+
+# --- guards: the one table and the one engine ---------------------------------------------------------
+
+def test_the_loop_numbers_its_guards_by_the_table(monkeypatch, table1, er_fixed_point):
+    """The loop's guard codes are the table's (rimless.sim.model.guards) and every guard it asks the event
+    engine for is a row of the table. Fails on ebb1b78: loop.py numbered its own guards (TOUCHDOWN = 0,
+    STALL = 1, ...) against the table's TOUCHDOWN = 3, and had no foot-a / slip / stick rows in the table."""
+    for name in ("TOUCHDOWN", "STALL", "LIFTOFF_A", "LIFTOFF_B", "FOOT_A_DOWN", "SLIP_END_1", "SLIP_END_2",
+                 "STICK_END_1", "STICK_END_2"):
+        assert getattr(loop_module, name) == getattr(guards, name), name
+    asked: set[int] = set()
+    engine = loop_module.EventLocator
+
+    def spy(codes, *args, **kwargs):  # noqa: ANN001, ANN202
+        asked.update(codes)
+        return engine(codes, *args, **kwargs)
+
+    monkeypatch.setattr(loop_module, "EventLocator", spy)
+    _, walk = _walk(table1, er_fixed_point[1].z, 2, **QUIET)
+    assert walk.failure is None
+    assert {guards.TOUCHDOWN, guards.STALL, guards.LIFTOFF_B} <= asked <= set(guards.TABLE)
+
+
+def test_the_loop_locates_a_stance_force_dip_between_solver_steps():
+    """A stance normal force that dips below zero and recovers inside one solver step (tests.support.sim_dip)
+    ends the loop's single-support phase at the dip, where the reference path ends it. Fails on ebb1b78: the
+    loop tested the sign at step ends only and ran on to the touchdown."""
+    mech = Mechanics.of(sim_dip.DIP_PARAMS)
+    t1, y1 = sim_dip.single_support_start()
+    codes = (guards.TOUCHDOWN, guards.STALL, guards.LIFTOFF_B)
+    loop = FirmwareLoop(sim_dip.DIP_PARAMS, FirmwareLoopConfig(**QUIET))
+    try:
+        kind, code, t, y, *_ = loop.integrate_mode(Mode(foot_a=False), y1, t1, t1 + 5.0, codes, 0.0)
+    finally:
+        loop.close()
+    ref = ScipyIntegrator(rtol=loop.rtol, atol=loop.atol).run_phase(mech, SLSP_FREE, y1, t1, codes, 5.0)
+    assert ref.guard == guards.LIFTOFF_B
+    assert (kind, code) == ("guard", guards.LIFTOFF_B)
+    assert t == pytest.approx(ref.t_end, abs=1e-6)
+    assert guards.guard_value(mech, SLSP_FREE, guards.LIFTOFF_B, y) == pytest.approx(0.0, abs=1e-6)  # N
 
 
 # --- physics ----------------------------------------------------------------------------------------
@@ -147,58 +203,24 @@ def test_added_delay_lowers_the_stored_energy_monotonically(table1, er_fixed_poi
 @pytest.mark.parametrize("delay_s", [0.1, 0.4])
 def test_a_delay_longer_than_the_compression_phase_is_classified(table1, er_fixed_point, delay_s):
     """Compression lasts about 70 ms here; a 100 ms clutch locks in the rebound (or not at all before
-    touchdown), a 400 ms clutch acts a step late. Either way: classified steps or a classified failure."""
+    touchdown), a 400 ms clutch acts a step late. Either way every step is classified; the wheel walks on
+    (both walk the 3 steps: a regression snapshot of ebb1b78)."""
     _, walk = _walk(table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=delay_s, release_delay_s=delay_s,
                     **QUIET)
-    assert walk.steps or walk.failure is not None
+    assert walk.failure is None and len(walk.steps) == 3, walk.failure
+    ideal = 0.5 * table1.k * (table1.leg_length_m - er_fixed_point[1].step.y_minus[3]) ** 2  # locked at the peak
     for s in walk.steps:
         assert s.lock_class in ("rebound", "after-rebound", "none")
         assert math.isfinite(s.period_s) and abs(s.energy_residual_J) < 1e-7
-        assert s.stored_energy_J < 0.8 * 0.2584
-    if walk.failure is not None:
-        assert isinstance(walk.failure, StepFailure) and walk.failure.reason.value
-
-
-HIGH_RATE = dict(jitter_s=0.0, noise_counts=0.0, engage_delay_s=0.0, release_delay_s=0.0,
-                 counts_per_m_1600=6.3e6)  # a 100x finer sensor: quantisation out of the way
-
-
-def _high_rate(rate_hz, window_s):
-    det = DetectorParams(velocity_window_s=window_s, touch_compression_m=1e-5, touch_debounce_samples=1)
-    return dict(HIGH_RATE, rate_hz=rate_hz, detector=det)
-
-
-@pytest.mark.slow
-def test_high_rate_no_noise_no_delay_converges_to_the_ideal_fixed_point(table1, er_fixed_point):
-    """The firmware can only release the trailing clutch after it has seen the touchdown; the trailing leg
-    slips against the holding force meanwhile, which is the remaining difference. Its one-step deficit
-    shrinks as the rate rises (and the velocity window with it), and at 20 kHz the fixed point is within
-    2 % (theta'+) and 3 % (period) of the ideal one: the one-step deficit there is ~0.009 rad/s, and the
-    fixed point moves by about 1 / (1 - 0.79) of it (the map's dominant eigenvalue is 0.79)."""
-    ideal = er_fixed_point[1]
-    deficits = []
-    for rate, window in ((5000.0, 0.008), (20000.0, 0.002)):
-        _, walk = _walk(table1, ideal.z, 2, **_high_rate(rate, window))
-        assert walk.failure is None
-        deficits.append(ideal.z[1] - walk.steps[1].z_end[1])
-    assert 0 < deficits[1] < deficits[0] / 1.6, deficits
-    fp = firmware_fixed_point(table1, FirmwareLoopConfig(**_high_rate(20000.0, 0.002)), ideal.z, steps=9)
-    assert fp.walk.failure is None
-    assert fp.z[1] == pytest.approx(ideal.z[1], rel=0.02)
-    assert fp.z[0] == pytest.approx(ideal.z[0], abs=0.002)
-    assert fp.period_s == pytest.approx(ideal.step.period_s, rel=0.03)
-    assert np.max(np.abs(fp.eigenvalues)) == pytest.approx(np.max(np.abs(ideal.eigenvalues)), abs=0.05)
-    assert fp.stored_energy_J == pytest.approx(0.5 * table1.k * (table1.leg_length_m - ideal.step.y_minus[3]) ** 2,
-                                               rel=0.02)
-    assert all(s.lock_class == "peak" for s in fp.walk.steps)
-    assert max(abs(s.energy_residual_J) for s in fp.walk.steps) < 1e-7
+        assert s.stored_energy_J < 0.8 * ideal
 
 
 def test_a_rigid_clutch_late_release_is_classified_not_a_crash(table1, er_fixed_point):
+    """The firmware releases the trailing clutch only after it saw the touchdown, so a rigid clutch (no slip)
+    is still locked at the impact: the walk ends with a classified failure, not an exception."""
     _, walk = _walk(table1, er_fixed_point[1].z, 3, holding_force_N=math.inf, **QUIET)
-    assert walk.steps or walk.failure is not None
-    if walk.failure is not None:
-        assert walk.failure.reason.value in ("negative-impulse", "stall", "stance-lift-off")
+    assert isinstance(walk.failure, StepFailure), walk.steps
+    assert walk.failure.reason.value in ("negative-impulse", "stall", "stance-lift-off")
 
 
 def test_bad_configuration_names_the_field(table1):
@@ -296,51 +318,6 @@ def test_the_figure_of_a_sweep_with_critical_slopes_shows_the_advantage_kept(tmp
     assert [r["er_advantage_remaining"] for r in rows[2:]] == pytest.approx([0.5, 0.0, -0.5])
     fig = plot_firmware_sweep({"rows": rows, "ideal": {"max_abs_eigenvalue": 0.79}}, tmp_path / "f.png")
     assert fig.stat().st_size > 1000
-
-
-def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(table1):
-    """At 1.9 deg with a 5 ms clutch at 300 Hz the gait slows step by step. The firmware's leg count
-    faults (leg_sync_lost: no touchdown within 1.4 x the running step period) and stops clutching; with
-    the step-timing checks relaxed the same walk stalls mechanically instead, classified."""
-    from rimless.sim.cli.firmware import ideal_fixed_point
-    from rimless.sim.in_the_loop.loop import without_step_timing_checks
-
-    params = table1.replace(slope_rad=math.radians(1.9))
-    z = ideal_fixed_point(params, backend="reference", rtol=1e-9).z
-    cfg = FirmwareLoopConfig()
-    _, walk = _walk(params, z, 5, **cfg.__dict__)
-    faults = [f["fault"] for _, name, f in walk.events if name == "fault"]
-    assert faults == ["leg_sync_lost"]
-    relaxed = without_step_timing_checks(cfg)
-    assert relaxed.detector.max_step_s == 10.0 and relaxed.max_hold_s == 60.0
-    assert relaxed.detector.velocity_window_s == cfg.detector.velocity_window_s
-    loop = FirmwareLoop(params, relaxed)
-    try:
-        relaxed_walk = loop.walk(z, 6)
-    finally:
-        loop.close()
-    assert not [1 for _, name, _ in relaxed_walk.events if name == "fault"]
-    assert relaxed_walk.failure is not None and relaxed_walk.failure.reason.value == "stall"
-    # up to the fault both walks are the same walk (the relaxed checks change nothing else)
-    n = len(relaxed_walk.steps)
-    assert n >= 3
-    assert [s.period_s for s in walk.steps[:n - 1]] == [s.period_s for s in relaxed_walk.steps[:n - 1]]
-
-
-def test_boundaries_say_what_limits_the_critical_slope():
-    from rimless.sim.in_the_loop.loop import FIRMWARE_FAULT_PREFIX, FirmwareBoundaries, FirmwareCriticalSlope
-
-    fault = f"{FIRMWARE_FAULT_PREFIX} (leg_sync_lost): it no longer clutches"
-    fw = FirmwareCriticalSlope(0.036, 0.035, fault, [])
-    stall = "step 6: stall"
-    # relaxed, the wheel walks well below where the firmware faulted: the firmware limits it
-    b = FirmwareBoundaries(fw, FirmwareCriticalSlope(0.030, 0.029, stall, []))
-    assert b.limited_by == "firmware" and b.mechanical_slope_rad == 0.030 and "would walk" in b.detail
-    # relaxed, it fails at the same boundary: the fault only came first
-    b = FirmwareBoundaries(fw, FirmwareCriticalSlope(0.036, 0.0352, stall, []))
-    assert b.limited_by == "mechanics" and "fires first" in b.detail
-    b = FirmwareBoundaries(FirmwareCriticalSlope(0.036, 0.035, stall, []), None)
-    assert b.limited_by == "mechanics" and b.mechanical_slope_rad == 0.036
 
 
 def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():

@@ -16,7 +16,7 @@ from rimless.sim.model.impact import double_support_jacobian
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import MASS_MODELS, WheelParams
 
-from .conftest import random_states
+from tests.support.sim_states import random_states
 
 PHASES = (dynamics.DLSP, dynamics.SLSP_FREE, dynamics.SLSP_CLUTCHED)
 

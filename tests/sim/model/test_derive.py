@@ -9,7 +9,7 @@ from rimless.sim.model import derive
 from rimless.sim.model.mechanics import ALPHA, Mechanics
 from rimless.sim.model.params import WheelParams
 
-from .conftest import random_states
+from tests.support.sim_states import random_states
 
 
 @pytest.mark.parametrize("mass_model", ["eight-leg", "sliding-leg", "active-feet"])

@@ -1,9 +1,7 @@
 """Normal-force guards between solver steps, and the relabelling snap's energy.
 
 A stance force that dips below zero and recovers between two accepted solver steps is positive at both step
-ends, so a sign test on step ends misses it. Truth: the force sampled every 2 us along a tight trajectory
-integrated without the lift-off guard (the VE fast gait at k = 2551.4 N/m, slope 0.05 rad: a dip of about
--4.4 mN lasting 1.3 ms, inside one solver step at rtol 1e-10 and at 1e-8).
+ends, so a sign test on step ends misses it (the case and its truth: tests.support.sim_dip).
 """
 
 from __future__ import annotations
@@ -13,32 +11,20 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim.model import dynamics
-from rimless.sim.model import guards as ev
 from rimless.sim import fast
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.integrate.reference import ScipyIntegrator
-from rimless.sim.model.mechanics import ALPHA, Mechanics, hub_position
+from rimless.sim.model.mechanics import ALPHA
 from rimless.sim.model.params import WheelParams
 from rimless.sim.step.poincare import PoincareMap
-from rimless.sim.model.section import state_from_section
-
-DIP_PARAMS = WheelParams(stiffness_n_per_m=2551.4)
-DIP_Z = np.array([-0.4493748982626989, 3.2115968976066744])  # the VE fast gait listed by `gaits` there
+from tests.support import sim_dip
+from tests.support.sim_dip import DIP_PARAMS, DIP_Z
 
 
 @pytest.fixture(scope="module")
 def dip_truth() -> dict[str, float]:
-    """Sampled stance force along a tight trajectory with the touchdown guard only."""
-    mech = Mechanics.of(DIP_PARAMS)
-    tight = ScipyIntegrator(rtol=1e-12, atol=1e-14)
-    r1 = tight.run_phase(mech, dynamics.DLSP, state_from_section(mech, DIP_Z), 0.0, (ev.LIFTOFF_A,), 5.0)
-    r2 = tight.run_phase(mech, dynamics.SLSP_FREE, r1.y_end, r1.t_end, (ev.TOUCHDOWN,), 5.0, record_dt=2e-6)
-    assert r2.guard == ev.TOUCHDOWN and r2.t is not None and r2.y is not None
-    lam = np.array([dynamics.accel(mech, dynamics.SLSP_FREE, y[:5], y[5:])[1][1] for y in r2.y])
-    neg = np.nonzero(lam < 0.0)[0]
-    assert neg.size, "the truth trajectory must contain the dip"
-    return {"min_N": float(lam.min()), "first_zero_s": float(r2.t[neg[0]]), "last_negative_s": float(r2.t[neg[-1]])}
+    return sim_dip.dip_truth()
 
 
 def test_the_dip_is_short_and_shallow(dip_truth: dict[str, float]) -> None:
@@ -60,7 +46,7 @@ def test_both_backends_catch_a_dip_between_solver_steps(dip_truth: dict[str, flo
         assert info.value.time_s == pytest.approx(dip_truth["first_zero_s"], abs=5e-6)
     # the compiled map through the FastIntegrator (phase by phase) and FastPoincareMap agree
     with pytest.raises(StepFailure) as info_int:
-        fast.FastPoincareMap(DIP_PARAMS, "ve", fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2)).step(DIP_Z)
+        FastPoincareMap(DIP_PARAMS, "ve", fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2)).step(DIP_Z)
     assert info_int.value.reason is FailureReason.STANCE_LIFT_OFF
 
 
@@ -89,7 +75,6 @@ def _snap_energy_closed_form(params: WheelParams, y_minus: np.ndarray) -> float:
     v_after = hub_v - L0 * dth * u_perp
     d_kinetic = 0.5 * m * (v_after @ v_after - v_before @ v_before)
     d_gravity = -m * g * (L0 - L2) * math.cos(th + ALPHA + phi)
-    assert hub_position(q) is not None
     return d_kinetic + d_gravity - 0.5 * k * (L2 - L0) ** 2
 
 
