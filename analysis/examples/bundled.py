@@ -89,7 +89,7 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
     """
     from scipy.spatial.transform import Rotation
 
-    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
     from rimless.sim.model.params import WheelParams
 

@@ -78,7 +78,7 @@ def truth_step(params, y: np.ndarray, integrator, *, t0: float = 0.0, record_dt:
 
 def truth_walk(slope_deg: float, release_rad_s: float, n_steps: int, *, record: bool = False):  # noqa: ANN201
     """(steps done, list of StepResult, stalled?, last post-impact state) of the truth model."""
-    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.backend import make_integrator
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import state_from_section

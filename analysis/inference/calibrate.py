@@ -128,7 +128,7 @@ class _Sim:
     def walk(self, params: Any, slope_deg: float, w: float, n: int, record: bool) -> Any:
         """`simulate_steps` from the rigid-touchdown release; the last walks are cached (a change of the time
         shift alone then costs no simulation)."""
-        from rimless.sim.integrate.backend import make_integrator
+        from rimless.sim.step.backend import make_integrator
         from rimless.sim.step.gait import simulate_steps
 
         key = (params.as_vector(), params.mass_model, slope_deg, w, n, record)

@@ -58,7 +58,7 @@ class Simulator:
     integrator: Any = None
 
     def __post_init__(self) -> None:
-        from rimless.sim.integrate.backend import make_integrator
+        from rimless.sim.step.backend import make_integrator
         from rimless.sim.model.params import WheelParams
 
         if self.params is None:

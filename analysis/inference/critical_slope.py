@@ -219,7 +219,7 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
 def model_critical_slope(params: Any, model: str = "er", *, rtol: float = 1e-9,
                          refine_tol_rad: float = 1e-6) -> dict[str, Any]:
     """The model's critical slope (deg) with the branch end reason, or the classified failure as a message."""
-    from rimless.sim.integrate.backend import jacobian_factory, make_map
+    from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.continuation.algorithm1 import START_SLOPE_RAD, critical_slope
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.poincare import default_guess

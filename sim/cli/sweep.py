@@ -128,7 +128,7 @@ def sweep_cmd(
     """Sweep a parameter grid: every period-1 gait at the start slope, each branch continued down to its end.
 
     Table columns: stable = orbitally stable at the start slope (max |eig| < 1); valid = unilateral contact (stance force >= 0 in single support, impulses > 0); phi_c = critical slope of the branch (end of its stable, valid part); CoT = tan(phi_c)."""
-    from rimless.sim.integrate.backend import resolve
+    from rimless.sim.step.backend import resolve
     from rimless.sim.model.params import MASS_MODELS, SPOKE_ANGLE_RAD
     from rimless.sim.studies.sweep import SweepOptions, branch_sweep, default_cache_dir, parse_grid
 

@@ -227,7 +227,7 @@ def trace_gait_branches(
     to_end: continue past the first special point to the end of the branch (or max_points) instead of
     stopping there.
     """
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import bilateral_map, find_gaits
 
     start_params = params.replace(slope_rad=start_slope_rad)

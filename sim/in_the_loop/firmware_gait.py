@@ -83,7 +83,7 @@ def firmware_gait(params: Any, config: Any, *, steps: int, backend: str, rtol: f
 
     progress(k): k steps done. Raises RunFailure when there is no ideal gait to start from or the walk fails
     within its first steps."""
-    from rimless.sim.in_the_loop.loop import firmware_fixed_point
+    from rimless.sim.in_the_loop.studies import firmware_fixed_point
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.poincare import NoFixedPoint
 
@@ -143,7 +143,7 @@ def firmware_critical(params: Any, config: Any, *, steps: int, low_deg: float, t
 
     progress(k): k walks done (at most `critical_bisections`). Raises ParameterError for a low end outside
     [0, the slope), RunFailure when the bisection has no bracket."""
-    from rimless.sim.in_the_loop.loop import firmware_boundaries
+    from rimless.sim.in_the_loop.studies import firmware_boundaries
 
     if not (math.isfinite(low_deg) and 0.0 <= low_deg < params.slope_deg):
         raise ParameterError(f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), got {low_deg}")
@@ -157,7 +157,7 @@ def firmware_critical(params: Any, config: Any, *, steps: int, low_deg: float, t
 
 def critical_summary(res: Any, config: Any, *, steps: int, tol_deg: float) -> dict[str, Any]:
     """JSON-able summary of `firmware_boundaries`: both boundaries and which one limits the wheel."""
-    from rimless.sim.in_the_loop.loop import MECHANICAL_WALK_FACTOR
+    from rimless.sim.in_the_loop.studies import MECHANICAL_WALK_FACTOR
 
     fw, mech = res.firmware, res.mechanical
 

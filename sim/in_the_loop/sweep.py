@@ -120,7 +120,8 @@ def _reference_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict
 
 def _firmware_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[str, Any]:
     from rimless.sim.model.failures import StepFailure
-    from rimless.sim.in_the_loop.loop import FirmwareLoopConfig, firmware_boundaries, firmware_fixed_point
+    from rimless.sim.in_the_loop.loop import FirmwareLoopConfig
+    from rimless.sim.in_the_loop.studies import firmware_boundaries, firmware_fixed_point
     from rimless.sim.model.params import WheelParams
 
     params = WheelParams(**point["params"])

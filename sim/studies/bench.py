@@ -149,9 +149,9 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
 
     y0, _ = fm.state_from_section(mi, Z_STAR["er"], p)
     none = np.zeros(0, dtype=np.int64)
-    r0 = rk.run_phase(mi, fm.DLSP, p, y0, 0.0, fs._DLSP_CODES, fs._DLSP_DIRS, 5.0, 1e-13, 1e-15, 10,  # noqa: SLF001
+    r0 = rk.run_phase(mi, fm.DLSP, p, y0, 0.0, fs.PHASE_DLSP_CODES, fs.PHASE_DLSP_DIRS, 5.0, 1e-13, 1e-15, 10,
                       False, False, -1.0, 10**6)
-    r1 = rk.run_phase(mi, fm.SLSP_FREE, p, r0[2], r0[1], fs._FREE_ER_CODES, fs._FREE_ER_DIRS, 5.0,  # noqa: SLF001
+    r1 = rk.run_phase(mi, fm.SLSP_FREE, p, r0[2], r0[1], fs.PHASE_FREE_ER_CODES, fs.PHASE_FREE_ER_DIRS, 5.0,
                       1e-13, 1e-15, 10, False, False, -1.0, 10**6)
     ys = np.array(r1[2], dtype=float)
     ys[8] = 0.0
@@ -209,6 +209,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     warm numba cache).
     """
     from rimless.sim import fast
+    from rimless.sim.step.fast_map import FastPoincareMap
     from rimless.sim.integrate.reference import ScipyIntegrator
     from rimless.sim.step.poincare import PoincareMap, solve_fixed_point
 
@@ -242,7 +243,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                 atol = rtol * 1e-2
                 say(f"{model}: {backend} rtol {rtol:g}")
                 if backend == "fast":
-                    pm: Any = fast.FastPoincareMap(params, model, fast.FastIntegrator(rtol=rtol, atol=atol))
+                    pm: Any = FastPoincareMap(params, model, fast.FastIntegrator(rtol=rtol, atol=atol))
                     r = fast.fast_step(params, model, z, rtol=rtol, atol=atol, jacobian=True)
                     z_new, period, J = r.z_next, r.period_s, r.jacobian
                     spm = _time_per_call(lambda pm=pm: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
@@ -293,13 +294,13 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         guess = Z_STAR[model] + np.array([0.01, -0.05])
         say(f"{model}: fixed point, fast path")
         reps = 3 if quick else 10
-        fp, fast_s = _timed_fixed_point(fast.FastPoincareMap(params, model, jacobian_with_map=True), guess, reps)
+        fp, fast_s = _timed_fixed_point(FastPoincareMap(params, model, jacobian_with_map=True), guess, reps)
         # the same fixed point at the loosest rtol whose map meets the target error (the table above), without
         # the recorded step (diagnostics the eigenvalues do not need)
         loose = speedups[model]["fast_rtol"]
         loose_entry: dict[str, Any] = {}
         if loose is not None:
-            pm_loose = fast.FastPoincareMap(params, model, fast.FastIntegrator(rtol=loose, atol=loose * 1e-2),
+            pm_loose = FastPoincareMap(params, model, fast.FastIntegrator(rtol=loose, atol=loose * 1e-2),
                                             jacobian_with_map=True)
             fp_loose, loose_s = _timed_fixed_point(pm_loose, guess, reps, record=False)
             loose_entry = {"rtol": loose, "seconds": loose_s, "iterations": fp_loose.iterations,
@@ -335,7 +336,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     continuation: dict[str, Any] = {}
     for model in ("er", "ve"):
         say(f"{model}: critical-slope continuation, fast path")
-        pm_fast = fast.FastPoincareMap(params, model, jacobian_with_map=True)
+        pm_fast = FastPoincareMap(params, model, jacobian_with_map=True)
         t_s = time.perf_counter()
         cs = critical_slope(pm_fast, Z_STAR[model], jacobian_factory=lambda m: m.variational_jacobian)
         entry: dict[str, Any] = {"fast_seconds": time.perf_counter() - t_s, "fast_critical_slope_rad": cs.critical_slope_rad,

@@ -43,7 +43,7 @@ def start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], th
         return guess_from_options(params, model, theta_dot_guess, theta_plus_guess)
     if theta_dot_guess is not None or theta_plus_guess is not None:
         raise ParameterError("give either --gait or --theta-dot-guess/--theta-plus-guess, not both")
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import find_gaits
 
     pmap = make_map(params, model, backend=backend, rtol=rtol)
@@ -70,7 +70,7 @@ def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[floa
                       strict_contact: bool = False, backend: str = "auto", rtol: float = 1e-10,
                       progress: GaitsProgress = None) -> dict[str, Any]:
     """The period-1 gait from the start guess: fixed point, eigenvalues, period and contact diagnostics."""
-    from rimless.sim.integrate.backend import jacobian_factory, make_map
+    from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.poincare import solve_fixed_point
     from rimless.sim.studies.summary import fixed_point_summary
@@ -94,7 +94,7 @@ def gait_scan(params: Any, model: str, *, theta_dot_min: float = 0.8, theta_dot_
     """Every period-1 gait at one slope (theta'+ guesses in [min, max] rad/s), each with its contact facts."""
     from rimless.sim.continuation.contact import contact_facts
     from rimless.sim.continuation.branches import contact_reason
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.poincare import bilateral_map, find_gaits
 
@@ -138,7 +138,7 @@ def critical_slope_study(params: Any, model: str, *, theta_dot_guess: Optional[f
     if model == "rigid":
         return rigid_summary(params)
     from rimless.sim.continuation.algorithm1 import critical_slope
-    from rimless.sim.integrate.backend import jacobian_factory, make_map
+    from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.params import SPOKE_ANGLE_RAD
 

@@ -53,7 +53,7 @@ class PaperResult:
 
 
 def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, theta_dot: float | None = None) -> Any:
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import default_guess, solve_fixed_point
 
     pmap = make_map(params, model, backend=backend, rtol=rtol)
@@ -64,7 +64,7 @@ def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, the
 
 
 def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 2) -> dict[str, Any]:
-    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
 
     out = {}
@@ -152,7 +152,7 @@ def boundary_curve(row: dict[str, Any], params: dict[str, Any], backend: str, rt
     """The critical slope of one branch as a curve over k, traced by two-parameter continuation
     (rimless.sim.continuation.boundary): a VE branch's fold curve, the ER stall curve (each point the located stall).
     Plain data in and out (runs as a Dask task)."""
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.continuation.boundary import BoundaryContinuation, start_on_boundary
     from rimless.sim.model.failures import StepFailure
 
@@ -187,7 +187,7 @@ def validity_range(row: dict[str, Any], params: dict[str, Any], backend: str, rt
     (bilateral contact, where the backend has it), so a stance force through 0 is a located sign change of
     its test function rather than the end of the branch. Plain data (runs as a Dask task)."""
     from rimless.sim.continuation.arclength import ArclengthContinuation
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.poincare import bilateral_map
 
@@ -375,7 +375,7 @@ def run_paper(
     progress: Callable[[str], None] | None = None,
 ) -> PaperResult:
     """Write every figure, CSV, the headline table and index.html into `out` (see module docstring)."""
-    from rimless.sim.integrate.backend import resolve
+    from rimless.sim.step.backend import resolve
     from rimless.sim.studies.sweep import SweepOptions, grid_points, run_sweep, write_table
 
     import os

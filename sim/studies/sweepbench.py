@@ -56,7 +56,7 @@ def sweep_bench(points: list[dict[str, Any]], options: Any) -> dict[str, Any]:
 
 
 def branch_end_bench(params: WheelParams = WheelParams(), repeats: int = 3) -> dict[str, Any]:
-    from rimless.sim.integrate.backend import make_map
+    from rimless.sim.step.backend import make_map
     from rimless.sim.continuation.algorithm1 import critical_slope
     from rimless.sim.step.poincare import default_guess
 

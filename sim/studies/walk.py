@@ -26,7 +26,7 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
     import numpy as np
 
     from rimless.output import check_output_folder
-    from rimless.sim.integrate.backend import jacobian_factory, make_integrator, make_map
+    from rimless.sim.step.backend import jacobian_factory, make_integrator, make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import ALPHA
     from rimless.sim.step.gait import simulate_steps

@@ -14,7 +14,7 @@ def sim_trial(params, slope_deg: float, release: float, rng: np.random.Generator
               rate_hz: float = 100.0, noise_m: float = 0.3e-3, timing_noise_s: float = 0.5e-3) -> DuckTrial:
     """ER wheel released at theta = -alpha/2 with theta' = release; the recording starts inside step 1;
     CoM height sampled at rate_hz with Gaussian noise, impact times with timing noise."""
-    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
 
     p = params.replace(slope_rad=math.radians(slope_deg))

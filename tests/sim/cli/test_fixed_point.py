@@ -78,7 +78,7 @@ def test_gait_forces_draws_forces_and_a_stick_diagram_and_parquet_says_what_it_i
     matplotlib.use("Agg")
     import pyarrow.parquet as pq
 
-    from rimless.sim.integrate.backend import make_integrator
+    from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
     from rimless.sim.model.params import WheelParams
     from rimless.sim.studies.figures import plot_gait

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rimless.sim.continuation.arclength import FOLD, PERIOD_DOUBLING, ArclengthContinuation, eigen_tests
-from rimless.sim.integrate.backend import make_map
+from rimless.sim.step.backend import make_map
 from rimless.sim.continuation.algorithm1 import critical_slope
 from rimless.sim.model.params import WheelParams
 from rimless.sim.step.poincare import default_guess, find_gaits, solve_fixed_point

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from rimless.sim.integrate.backend import make_map
+from rimless.sim.step.backend import make_map
 from rimless.sim.continuation.boundary import BoundaryContinuation, solve_at, start_on_boundary
 from rimless.sim.continuation.algorithm1 import critical_slope
 from rimless.sim.model.failures import StepFailure

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rimless.errors import ParameterError, RunFailure
-from rimless.sim.integrate.backend import make_map
+from rimless.sim.step.backend import make_map
 from rimless.sim.model.params import WheelParams
 from rimless.sim.studies.gaits import critical_slope_study, fixed_point_study, gait_scan, guess_from_options
 

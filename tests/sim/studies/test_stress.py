@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from rimless.sim import fast
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.fast import rk
 from rimless.sim.model.guards import TOUCHDOWN
 from rimless.sim.model.failures import FailureReason, StepFailure
@@ -132,12 +133,12 @@ def test_step_limit_is_reported_and_falls_back_to_an_implicit_method() -> None:
     with pytest.raises(fast.StiffnessLimit) as info:
         fast.fast_step(params, "er", z, max_steps=20)
     assert info.value.reason is FailureReason.INTEGRATION
-    pm = fast.FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-8, atol=1e-10, max_steps=20))
+    pm = FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-8, atol=1e-10, max_steps=20))
     z_fb = pm(z)
     assert pm.last_method == "scipy-Radau"
     z_fast = fast.fast_map(params, "er", z, rtol=1e-11)[0]
     np.testing.assert_allclose(z_fb, z_fast, atol=1e-6)
-    pm_off = fast.FastPoincareMap(params, "er", fast.FastIntegrator(max_steps=20), stiff_fallback=False)
+    pm_off = FastPoincareMap(params, "er", fast.FastIntegrator(max_steps=20), stiff_fallback=False)
     with pytest.raises(fast.StiffnessLimit):
         pm_off(z)
 
