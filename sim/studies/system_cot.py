@@ -48,6 +48,7 @@ class BranchCot:
     jacobian: Optional[Callable[[Any], Any]] = None
     label: str = ""
     lo_tol_rad: float = 0.0  # how well the lower end (the critical slope) is located, rad
+    guessed: frozenset[float] = frozenset()  # slopes of `points` whose z is only a guess (solved on use)
     _cache: dict[float, Optional[StepTransport]] = field(default_factory=dict)
     failed: int = 0
 
@@ -74,7 +75,7 @@ class BranchCot:
         q = self.params.replace(slope_rad=key)
         pmap = self.make_map(q)
         z0 = min(self.points, key=lambda pt: abs(pt[0] - key))[1]
-        known = any(s == key for s, _ in self.points)
+        known = key not in self.guessed and any(s == key for s, _ in self.points)
         try:
             if not known:
                 fp = solve_fixed_point(pmap, z0, jacobian=self.jacobian(pmap) if self.jacobian else None, record=False)
@@ -226,4 +227,56 @@ def break_even(er: Sequence[BranchCot], ve: Sequence[BranchCot], power: ClutchPo
                           f"slopes' location tolerance {resolution:.2g} rad")
     else:
         out["resolved"] = True
+    return out
+
+
+def sweep_system_cot(rows: list[dict[str, Any]], points: list[dict[str, Any]], power: ClutchPower, *, backend: str,
+                     rtol: float) -> list[dict[str, Any]]:
+    """The sweep's rows with mechanical_cot, electrical_energy_per_step_j and system_cot of the gait at the start
+    slope and the least system CoT along its stable, valid part (min_system_cot, min_system_cot_slope_deg), from
+    the branch points the sweep recorded (`points`, rimless.sim.continuation.branches.GaitBranch.point_rows).
+    With no electrical power these are closed forms (tan of the start slope; the critical slope) and nothing is
+    computed."""
+    from rimless.sim.model.params import WheelParams
+
+    out = []
+    for r in rows:
+        r = dict(r)
+        model = str(r.get("model", "")).lower()
+        start = r.get("start_slope_rad", math.nan)
+        crit = r.get("critical_slope_rad", math.nan)
+        has_gait = model in ("er", "ve") and r.get("branch") and isinstance(start, float) and start == start
+        if not has_gait:
+            out.append(r)
+            continue
+        if power.energy_per_step_j(model, 1.0, 1.0) == 0.0:
+            r.update({"mechanical_cot": math.tan(start), "electrical_energy_per_step_j": 0.0,
+                      "system_cot": math.tan(start)})
+            if isinstance(crit, float) and crit == crit:
+                r.update({"min_system_cot": math.tan(crit), "min_system_cot_slope_rad": crit,
+                          "min_system_cot_slope_deg": math.degrees(crit)})
+            out.append(r)
+            continue
+        params = WheelParams(hub_mass_kg=r["hub_mass_kg"], leg_mass_kg=r["leg_mass_kg"], stiffness_n_per_m=r["k"],
+                             damping_ns_per_m=r["c"], mass_model=r["mass_model"], slope_rad=start)
+        mine = [(pt["slope_rad"], np.array([pt["theta_plus_rad"], pt["theta_dot_plus_rad_s"]])) for pt in points
+                if pt["model"] == r["model"] and pt["branch"] == r["branch"] and pt["k"] == r["k"]
+                and pt["c"] == r["c"] and pt["mass_model"] == r["mass_model"]
+                and pt.get("hub_mass_kg", r["hub_mass_kg"]) == r["hub_mass_kg"]
+                and pt.get("leg_mass_kg", r["leg_mass_kg"]) == r["leg_mass_kg"]]
+        mine.append((start, np.array([r["theta_plus_rad"], r["theta_dot_plus_rad_s"]])))
+        factory, jac = _branch_factory(model, backend, rtol, r.get("contact_model") == "bilateral")
+        at_start = BranchCot(model, params, mine, factory, jac)
+        tr = at_start.transport(start)
+        if tr is not None:
+            r.update({k: v for k, v in cot_of(tr, params, model, power).items()
+                      if k in ("mechanical_cot", "electrical_energy_per_step_j", "system_cot")})
+        if isinstance(crit, float) and crit == crit:
+            part = [(s, z) for s, z in mine if s > crit]
+            near = min(mine, key=lambda q: abs(q[0] - crit))[1]
+            br = BranchCot(model, params, part + [(crit, near)], factory, jac, guessed=frozenset({float(crit)}))
+            m = br.minimise(power)
+            r.update({k: m[k] for k in ("min_system_cot", "min_system_cot_slope_rad", "min_system_cot_slope_deg",
+                                        "min_system_cot_at_bound")})
+        out.append(r)
     return out
