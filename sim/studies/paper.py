@@ -334,6 +334,11 @@ CAPTIONS = {
     "fig5_cot": "CoT = tan(critical slope) against k for ER, every VE branch and the rigid wheel; open circles violate "
                 "unilateral contact; open diamonds: a gait invalid at the start slope, the end of its valid part "
                 "lower down; bars along the bottom: each branch's contact-valid range in k at the start slope.",
+    "fig_system_cot_hold_power": "Least system cost of transport (M g s_z + E_el)/(M g s_x) along each stable, valid "
+                                 "branch at k = 2500 N/m against the ER clutch's holding power (the other electrical "
+                                 "powers as given); dashed: the break-even holding power against the least VE branch; "
+                                 "hollow: the least lies at the start slope (the true least may lie higher). Per k: "
+                                 "table7_system_cot.csv (break-even powers) and table7_system_cot_branches.csv.",
 }
 
 

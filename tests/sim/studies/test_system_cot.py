@@ -141,3 +141,47 @@ def test_a_negative_power_is_a_one_line_error_with_exit_2(cmd, tmp_path):
     assert res.exit_code == 2
     assert "--clutch-hold-power-w" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "unused-dir").exists()
+
+
+@pytest.mark.slow
+def test_the_sweep_rows_carry_the_least_system_cot_of_their_branch():
+    from rimless.sim.continuation.branches import trace_gait_branches
+    from rimless.sim.studies.sweep import SweepOptions, compute_point, grid_points
+    from rimless.sim.studies.system_cot import gait_branch_cot, sweep_system_cot
+
+    options = SweepOptions(backend="fast")
+    res = compute_point(grid_points(P, ["er"], {"k": [2500.0]}, ["eight-leg"])[0], options)
+    power = ClutchPower(hold_power_w=0.1, switch_energy_j=0.002)
+    rows = sweep_system_cot(res["rows"], res["points"], power, backend="fast", rtol=1e-10)
+    plain = sweep_system_cot(res["rows"], res["points"], ClutchPower(), backend="fast", rtol=1e-10)
+    er = next(r for r in rows if r["branch_label"] == "er")
+    er0 = next(r for r in plain if r["branch_label"] == "er")
+    # no power: closed forms, the paper's numbers untouched
+    assert er0["min_system_cot"] == er0["cot"] and er0["system_cot"] == math.tan(0.05)
+    assert all(er0[k] == v for k, v in res["rows"][0].items() if isinstance(v, (int, float, str)) and v == v)
+    # with power: the same least as the branch traced and minimised directly
+    gb = next(g for g in trace_gait_branches(P.replace(stiffness_n_per_m=2500.0), "er", backend="fast")
+              if g.label == "er")
+    direct = gait_branch_cot(gb, "fast", 1e-10).minimise(power)
+    assert er["min_system_cot"] == pytest.approx(direct["min_system_cot"], rel=1e-7)
+    assert er["min_system_cot_slope_rad"] == pytest.approx(direct["min_system_cot_slope_rad"], abs=5e-6)
+    assert er["critical_slope_rad"] < er["min_system_cot_slope_rad"] < 0.05
+    assert er["system_cot"] > er["mechanical_cot"] == pytest.approx(math.tan(0.05), rel=1e-12)
+
+
+def test_the_paper_figure_is_drawn_from_its_series(tmp_path):
+    """figure_system_cot writes the PNG and the CSV of exactly the series it was given (no model run)."""
+    import pandas as pd
+
+    from rimless.sim.studies.paper_system_cot import FIGURE_CSV, FIGURE_PNG, figure_system_cot
+
+    series = [{"model": m, "branch_label": b, "hold_power_w": p, "min_system_cot": v, "min_system_cot_slope_deg": 1.3,
+               "min_system_cot_at_bound": bound}
+              for m, b, p, v, bound in [("ER", "er", 0.0, 0.022, "critical-slope"), ("ER", "er", 0.1, 0.04, ""),
+                                        ("ER", "er", 1.0, 0.11, "start-slope"), ("VE", "fast", 0.0, 0.027, "critical-slope"),
+                                        ("VE", "fast", 1.0, 0.027, "critical-slope")]]
+    files = figure_system_cot(series, 2500.0, 0.018, tmp_path)
+    assert files == [tmp_path / FIGURE_PNG, tmp_path / FIGURE_CSV]
+    assert (tmp_path / FIGURE_PNG).stat().st_size > 1000
+    back = pd.read_csv(tmp_path / FIGURE_CSV)
+    assert list(back.min_system_cot) == [r["min_system_cot"] for r in series]
