@@ -147,6 +147,9 @@ def critical_slope_study(params: Any, model: str, *, theta_dot_guess: Optional[f
     from rimless.sim.studies.summary import critical_slope_summary, rigid_summary
 
     if model == "rigid":
+        if power is not None and not power.is_zero:
+            raise ParameterError("--clutch-hold-power-w, --clutch-switch-energy-j, --electronics-power-w: the rigid "
+                                 "wheel (closed form) has no clutch and no step record; use --model er or ve")
         return rigid_summary(params)
     from rimless.sim.continuation.algorithm1 import critical_slope
     from rimless.sim.step.backend import jacobian_factory, make_map

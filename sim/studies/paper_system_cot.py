@@ -59,6 +59,7 @@ def k_rows(k: float, brs: dict[str, list[BranchCot]], power: ClutchPower) -> tup
         "ve_least_branch": hold["ve_branch"],
         "break_even_hold_power_w": hold["value"], "break_even_hold_power_reason": hold["reason"],
         "break_even_switch_energy_j": switch["value"], "break_even_switch_energy_reason": switch["reason"],
+        "break_even_resolved": hold.get("resolved"),
     }
     for ve in brs["ve"]:
         h = break_even(brs["er"], [ve], power, "hold_power_w")
