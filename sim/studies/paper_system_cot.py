@@ -83,9 +83,11 @@ def figure_series(brs: dict[str, list[BranchCot]], power: ClutchPower,
     return rows
 
 
-def figure_system_cot(series: list[dict[str, Any]], k: float, break_even_w: Optional[float], out: Path) -> list[Path]:
-    """Least system CoT against holding power, one line per branch; a hollow marker where the least lies on the
-    bound of the followed slope range (the start slope: the true least may be higher up)."""
+def figure_system_cot(series: list[dict[str, Any]], k: float, break_even_w: Optional[float], out: Path,
+                      per_branch_w: Optional[dict[str, Optional[float]]] = None) -> list[Path]:
+    """Least system CoT against holding power (symmetric-log axis, linear below 0.01 W), one line per branch; a
+    hollow marker where the least lies on the bound of the followed slope range (the start slope: the true least
+    may be higher up); dashed: the break-even against the least VE, dotted: against each VE branch."""
     import pandas as pd
 
     from rimless.sim.studies.paper_figures import pyplot, write_csv
@@ -102,7 +104,13 @@ def figure_system_cot(series: list[dict[str, Any]], k: float, break_even_w: Opti
     if break_even_w is not None:
         ax.axvline(break_even_w, color="grey", ls="--", lw=1)
         ax.text(break_even_w, ax.get_ylim()[1], f" break-even {break_even_w:.3g} W", va="top", fontsize=8)
-    ax.set_xlabel("ER clutch holding power (W)")
+    for i, (label, w) in enumerate((per_branch_w or {}).items()):
+        if w is not None and w != break_even_w:
+            ax.axvline(w, color="grey", ls=":", lw=1)
+            ax.text(w, ax.get_ylim()[1] * (0.93 - 0.06 * i), f" vs VE {label}: {w:.3g} W", va="top", fontsize=8)
+    ax.set_xscale("symlog", linthresh=0.01)
+    ax.set_xlim(left=0.0)
+    ax.set_xlabel("ER clutch holding power (W, linear below 0.01)")
     ax.set_ylabel("least system CoT along the branch")
     ax.set_title(f"system cost of transport, k = {k:g} N/m (hollow: least at the start slope)")
     ax.legend(fontsize=8)
@@ -136,7 +144,8 @@ def system_cot_paper(out: Path, params: WheelParams, ks: tuple[float, ...], powe
     files.append(write_csv(pd.DataFrame(branch_rows), out / BRANCH_CSV))
     at = next(r for r in rows if r["k"] == FIGURE_K)
     if fig_brs is not None:
-        files += figure_system_cot(figure_series(fig_brs, power), FIGURE_K, at["break_even_hold_power_w"], out)
+        per = {key.rsplit("_vs_ve_", 1)[1]: v for key, v in at.items() if key.startswith("break_even_hold_power_w_vs_ve_")}
+        files += figure_system_cot(figure_series(fig_brs, power), FIGURE_K, at["break_even_hold_power_w"], out, per)
     vs = "; ".join(f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_fmt(v, 'W')}" for key, v in at.items()
                    if key.startswith("break_even_hold_power_w_vs_ve_"))
     vs_sw = "; ".join(f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_fmt(v, 'J')}" for key, v in at.items()

@@ -32,7 +32,7 @@ from rimless.sim.step.cot import StepTransport, cot_of, step_transport
 
 SLOPE_TOL_RAD = 1e-6
 BREAK_EVEN_RTOL = 1e-6
-HOLD_POWER_FIGURE_W = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0)
+HOLD_POWER_FIGURE_W = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
 
 
 @dataclass
