@@ -128,6 +128,23 @@ GaitOpt = Annotated[Optional[int], typer.Option("--gait", min=1, max=200, metava
                                                      "numbered by step period) instead of a guess.")]
 StrictOpt = Annotated[bool, typer.Option("--strict-contact", help="Reject gaits whose leading foot pulls on the ground in "
                                                                    "double support or whose lifted foot dips below the slope.")]
+HoldPowerOpt = Annotated[float, typer.Option("--clutch-hold-power-w", rich_help_panel="Electrical power",
+                                             help="Power the ER clutch draws while it holds (powered = locked), W.")]
+SwitchEnergyOpt = Annotated[float, typer.Option("--clutch-switch-energy-j", rich_help_panel="Electrical power",
+                                                help="Energy per clutch engage or release (two per step), J.")]
+ElectronicsPowerOpt = Annotated[float, typer.Option("--electronics-power-w", rich_help_panel="Electrical power",
+                                                    help="Sensing and computing power over the whole step, W (ER; "
+                                                         "VE only with --ve-electronics).")]
+VeElectronicsOpt = Annotated[bool, typer.Option("--ve-electronics/--no-ve-electronics", rich_help_panel="Electrical power",
+                                                help="The VE wheel carries the same electronics (default: a passive "
+                                                     "VE wheel draws nothing).")]
+
+
+def clutch_power(hold_power_w: float, switch_energy_j: float, electronics_power_w: float, ve_electronics: bool) -> Any:
+    """ClutchPower from the electrical options (validated; errors name the option)."""
+    from rimless.sim.model.electrical import ClutchPower
+
+    return ClutchPower(hold_power_w, switch_energy_j, electronics_power_w, ve_electronics)
 
 
 def check_plot_path(plot: Path) -> None:

@@ -7,8 +7,9 @@ import typer
 
 from rimless.cli_rules import print_json, user_facing
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import (Backend, BackendOpt, GaitOpt, GuessOpt, JsonOpt, Model, ModelOpt, ModelOrRigid, RtolOpt,
-                                 StrictOpt, ThetaGuessOpt, wheel_params)
+from rimless.sim.cli.app import (Backend, BackendOpt, ElectronicsPowerOpt, GaitOpt, GuessOpt, HoldPowerOpt, JsonOpt, Model,
+                                 ModelOpt, ModelOrRigid, RtolOpt, StrictOpt, SwitchEnergyOpt, ThetaGuessOpt,
+                                 VeElectronicsOpt, clutch_power, wheel_params)
 from rimless.sim.cli.output import console, table
 
 
@@ -24,15 +25,20 @@ def fixed_point_cmd(
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
+    clutch_hold_power_w: HoldPowerOpt = 0.0,
+    clutch_switch_energy_j: SwitchEnergyOpt = 0.0,
+    electronics_power_w: ElectronicsPowerOpt = 0.0,
+    ve_electronics: VeElectronicsOpt = False,
 ) -> None:
     """Period-1 gait: the fixed point of the Poincaré map, its eigenvalues, period and contact diagnostics."""
     from rimless.sim.studies.gaits import fixed_point_study
 
+    power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("period-1 gait", json_out=json_out) as bar:
         out = fixed_point_study(params, model.value, theta_dot_guess=theta_dot_guess,
                                 theta_plus_guess=theta_plus_guess, gait=gait, strict_contact=strict_contact,
                                 backend=backend.value, rtol=rtol,
-                                progress=lambda i, n: bar.update(i, n, "finding the gaits"))
+                                progress=lambda i, n: bar.update(i, n, "finding the gaits"), power=power)
     if json_out:
         print_json(out)
         return
@@ -56,6 +62,11 @@ def fixed_point_cmd(
         ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
         ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
         ("residual |P(z)-z|", out["residual"]),
+        ("step length along the slope (m)", out["step_length_m"]),
+        ("clutched time per step (s)", out["clutched_time_s"]),
+        ("mechanical CoT (= tan phi)", out["mechanical_cot"]),
+        ("electrical energy per step (J)", out["electrical_energy_per_step_j"]),
+        ("system CoT (M g s_z + E_el)/(M g s_x)", out["system_cot"]),
     ]
     con = console()
     con.print(table("period-1 gait", rows))
@@ -123,16 +134,21 @@ def critical_slope_cmd(
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
+    clutch_hold_power_w: HoldPowerOpt = 0.0,
+    clutch_switch_energy_j: SwitchEnergyOpt = 0.0,
+    electronics_power_w: ElectronicsPowerOpt = 0.0,
+    ve_electronics: VeElectronicsOpt = False,
 ) -> None:
     """Critical slope and minimum cost of transport: Algorithm 1 and the refined end of the branch."""
     from rimless.sim.studies.gaits import critical_slope_study
 
+    power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("continuation in slope", json_out=json_out) as bar:
         out = critical_slope_study(
             params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess, gait=gait,
             step_rad=step_rad, start_slope_rad=start_slope_rad, strict_contact=strict_contact, backend=backend.value,
             rtol=rtol, gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
-            progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"))
+            progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"), power=power)
     if json_out:
         print_json(out)
         return
@@ -159,5 +175,12 @@ def critical_slope_cmd(
                                  f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad"),
         ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
         ("contact valid at critical", ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-"),
+        ("at critical: electrical energy per step (J)", out.get("electrical_energy_per_step_j", "-")),
+        ("at critical: system CoT", out.get("system_cot", "-")),
+        ("least system CoT along the branch", out["min_system_cot"]),
+        ("  at slope (deg)", f"{out['min_system_cot_slope_deg']:.5f}"
+                             + (f" (on the branch's bound: {out['min_system_cot_at_bound']})"
+                                if out["min_system_cot_at_bound"] else "")),
+        ("  located by", out["min_system_cot_method"]),
     ]))
     console().print(f"why: {out['detail']}", soft_wrap=True)

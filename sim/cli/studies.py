@@ -9,7 +9,8 @@ import typer
 from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import Backend, BackendOpt, JsonOpt, RtolOpt, check_scheduler, wheel_params
+from rimless.sim.cli.app import (Backend, BackendOpt, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt, SwitchEnergyOpt,
+                                 VeElectronicsOpt, check_scheduler, clutch_power, wheel_params)
 from rimless.sim.cli.output import console
 from rimless.values import parse_numbers, parse_range
 
@@ -103,8 +104,14 @@ def paper_cmd(
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
     json_out: JsonOpt = False,
+    clutch_hold_power_w: HoldPowerOpt = 0.0,
+    clutch_switch_energy_j: SwitchEnergyOpt = 0.0,
+    electronics_power_w: ElectronicsPowerOpt = 0.0,
+    ve_electronics: VeElectronicsOpt = False,
 ) -> None:
-    """Regenerate the paper's simulation figures (PNG, 150 dpi) with their CSVs, the headline table and an index."""
+    """Regenerate the paper's simulation figures (PNG, 150 dpi) with their CSVs, the headline table and an index;
+    with the system cost of transport per k (table7_system_cot*.csv) and its figure against the clutch's
+    holding power (fig_system_cot_hold_power.png)."""
     from rich.table import Table
 
     from rimless.sim.studies.paper import paper_study
@@ -112,10 +119,11 @@ def paper_cmd(
 
     ks = tuple(parse_range(k_grid, "--k"))
     check_scheduler(scheduler)
+    power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("paper", json_out=json_out) as bar:
         summary = paper_study(out, params, ks=ks, backend=backend.value, rtol=rtol, scheduler=scheduler,
                               workers=workers, cache_dir=None if no_cache else (cache_dir or default_cache_dir()),
-                              progress=lambda msg: bar.update(description=msg))
+                              progress=lambda msg: bar.update(description=msg), power=power)
     if json_out:
         print_json(summary)
         return

@@ -10,7 +10,8 @@ import typer
 from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, JsonOpt, RtolOpt, check_plot_path, check_scheduler,
+from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt,
+                                 SwitchEnergyOpt, VeElectronicsOpt, check_plot_path, check_scheduler, clutch_power,
                                  wheel_params)
 from rimless.sim.cli.output import console
 from rimless.values import parse_list, parse_range
@@ -124,6 +125,10 @@ def sweep_cmd(
                                                     "(.png, .pdf, .svg): the ER advantage, stored energy and "
                                                     "stability kept against delay, per rate.")] = None,
     json_out: JsonOpt = False,
+    clutch_hold_power_w: HoldPowerOpt = 0.0,
+    clutch_switch_energy_j: SwitchEnergyOpt = 0.0,
+    electronics_power_w: ElectronicsPowerOpt = 0.0,
+    ve_electronics: VeElectronicsOpt = False,
 ) -> None:
     """Sweep a parameter grid: every period-1 gait at the start slope, each branch continued down to its end.
 
@@ -134,6 +139,10 @@ def sweep_cmd(
 
     if fw_plot is not None:
         check_plot_path(fw_plot)
+    power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
+    if clutch is ClutchKind.firmware and not power.is_zero:
+        raise ParameterError("--clutch-hold-power-w, --clutch-switch-energy-j, --electronics-power-w: the system cost "
+                             "of transport is reported by the branch sweep (--clutch ideal)")
     grid_texts = {"k": k_grid, "c": c_grid, "leg_mass_kg": leg_mass_grid, "hub_mass_kg": hub_mass_grid}
     if clutch is ClutchKind.firmware:
         _firmware_sweep(params, models=models, grid_texts=grid_texts, mass_models=mass_models, bench=bench,
@@ -169,11 +178,13 @@ def sweep_cmd(
         summary = branch_sweep(params, models=model_list, grid=grid, mass_models=mm, options=options, out=out,
                                scheduler=scheduler, workers=workers,
                                cache_dir=None if no_cache else (cache_dir or default_cache_dir()),
-                               progress=lambda i, n: bar.update(i, n))
+                               progress=lambda i, n: bar.update(i, n), power=power)
     if json_out:
         print_json(summary)
         return
     _print_sweep_table(summary["rows"])
+    if not power.is_zero:
+        _print_system_cot(summary["rows"])
     con = console()
     for p in summary["files"]:
         con.print(f"wrote {p}", soft_wrap=True)
@@ -206,6 +217,20 @@ def _firmware_sweep(params: Any, *, models: str, grid_texts: dict[str, Optional[
     check_scheduler(scheduler)
     firmware_cli.run_sweep_command(params, out=out, scheduler=scheduler, workers=workers, cache_dir=cache,
                                    json_out=json_out, **options)
+
+
+def _print_system_cot(rows: list[dict[str, Any]]) -> None:
+    """The system cost of transport per branch: at the start slope and its least along the stable, valid part."""
+    con = console()
+    for r in rows:
+        if "min_system_cot" not in r and "system_cot" not in r:
+            continue
+        least = (f"least {r['min_system_cot']:.4f} at {r['min_system_cot_slope_deg']:.4f} deg"
+                 + (f" (bound: {r['min_system_cot_at_bound']})" if r.get("min_system_cot_at_bound") else "")
+                 if "min_system_cot" in r else "no stable, valid part")
+        con.print(f"{r['model']} k={r['k']:g} {r.get('branch')}: system CoT {r.get('system_cot', float('nan')):.4f} at "
+                  f"the start slope (E_el {r.get('electrical_energy_per_step_j', float('nan')):.4g} J/step); {least}",
+                  soft_wrap=True)
 
 
 def _print_sweep_table(rows: list[dict[str, Any]]) -> None:

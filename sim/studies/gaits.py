@@ -68,8 +68,10 @@ def start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], th
 def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[float] = None,
                       theta_plus_guess: Optional[float] = None, gait: Optional[int] = None,
                       strict_contact: bool = False, backend: str = "auto", rtol: float = 1e-10,
-                      progress: GaitsProgress = None) -> dict[str, Any]:
-    """The period-1 gait from the start guess: fixed point, eigenvalues, period and contact diagnostics."""
+                      progress: GaitsProgress = None, power: Any = None) -> dict[str, Any]:
+    """The period-1 gait from the start guess: fixed point, eigenvalues, period and contact diagnostics, and its
+    cost of transport (mechanical_cot, electrical_energy_per_step_j, system_cot; power: a ClutchPower, default
+    none)."""
     from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.poincare import solve_fixed_point
@@ -85,7 +87,14 @@ def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[floa
     except StepFailure as err:
         raise RunFailure(f"no period-1 gait found for the {model} wheel from the guess "
                          f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
-    return fixed_point_summary(fp, params, model, guess=guess)
+    from rimless.sim.model.electrical import ClutchPower
+    from rimless.sim.step.cot import step_cot
+
+    out = fixed_point_summary(fp, params, model, guess=guess)
+    power = power or ClutchPower()
+    out.update(step_cot(fp.step, params, model, power))
+    out["electrical_power"] = power.as_dict()
+    return out
 
 
 def gait_scan(params: Any, model: str, *, theta_dot_min: float = 0.8, theta_dot_max: float = 6.0,
@@ -130,12 +139,17 @@ def critical_slope_study(params: Any, model: str, *, theta_dot_guess: Optional[f
                          theta_plus_guess: Optional[float] = None, gait: Optional[int] = None,
                          step_rad: float = 0.001, start_slope_rad: float = 0.05, strict_contact: bool = False,
                          backend: str = "auto", rtol: float = 1e-10, gaits_progress: GaitsProgress = None,
-                         progress: Optional[Callable[[float], None]] = None) -> dict[str, Any]:
+                         progress: Optional[Callable[[float], None]] = None, power: Any = None) -> dict[str, Any]:
     """Critical slope and minimum cost of transport: Algorithm 1 from `start_slope_rad` and the refined end of
-    the branch; model "rigid" gives the closed form. progress(slope_rad): the continuation's current slope."""
+    the branch; model "rigid" gives the closed form. progress(slope_rad): the continuation's current slope.
+    power (a ClutchPower, default none): also the cost of transport at the critical slope and the least system
+    CoT along the branch (rimless.sim.studies.system_cot)."""
     from rimless.sim.studies.summary import critical_slope_summary, rigid_summary
 
     if model == "rigid":
+        if power is not None and not power.is_zero:
+            raise ParameterError("--clutch-hold-power-w, --clutch-switch-energy-j, --electronics-power-w: the rigid "
+                                 "wheel (closed form) has no clutch and no step record; use --model er or ve")
         return rigid_summary(params)
     from rimless.sim.continuation.algorithm1 import critical_slope
     from rimless.sim.step.backend import jacobian_factory, make_map
@@ -154,4 +168,23 @@ def critical_slope_study(params: Any, model: str, *, theta_dot_guess: Optional[f
                             progress=progress)
     except StepFailure as err:
         raise RunFailure(f"critical slope of the {model} wheel: {err}") from None
-    return critical_slope_summary(cs, params)
+    out = critical_slope_summary(cs, params)
+    out.update(critical_slope_cot(cs, params, model, power, backend=backend, rtol=rtol))
+    return out
+
+
+def critical_slope_cot(cs: Any, params: Any, model: str, power: Any, *, backend: str, rtol: float) -> dict[str, Any]:
+    """The cost of transport at the critical slope and the least system CoT along the stable part of the branch."""
+    from rimless.sim.model.electrical import ClutchPower
+    from rimless.sim.step.cot import cot_of
+    from rimless.sim.studies.system_cot import critical_slope_branch
+
+    power = power or ClutchPower()
+    br = critical_slope_branch(cs, params, backend, rtol)
+    tr = br.transport(br.lo_rad)
+    out: dict[str, Any] = {}
+    if tr is not None:
+        out.update(cot_of(tr, params.replace(slope_rad=br.lo_rad), model, power))
+    out.update(br.minimise(power))
+    out["electrical_power"] = power.as_dict()
+    return out

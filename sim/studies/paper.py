@@ -50,6 +50,7 @@ class PaperResult:
     table: list[dict[str, Any]] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
     sweep: Any = None
+    system_cot: list[dict[str, Any]] = field(default_factory=list)  # rimless.sim.studies.paper_system_cot rows
 
 
 def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, theta_dot: float | None = None) -> Any:
@@ -333,6 +334,11 @@ CAPTIONS = {
     "fig5_cot": "CoT = tan(critical slope) against k for ER, every VE branch and the rigid wheel; open circles violate "
                 "unilateral contact; open diamonds: a gait invalid at the start slope, the end of its valid part "
                 "lower down; bars along the bottom: each branch's contact-valid range in k at the start slope.",
+    "fig_system_cot_hold_power": "Least system cost of transport (M g s_z + E_el)/(M g s_x) along each stable, valid "
+                                 "branch at k = 2500 N/m against the ER clutch's holding power (the other electrical "
+                                 "powers as given); dashed: the break-even holding power against the least VE branch; "
+                                 "hollow: the least lies at the start slope (the true least may lie higher). Per k: "
+                                 "table7_system_cot.csv (break-even powers) and table7_system_cot_branches.csv.",
 }
 
 
@@ -373,6 +379,7 @@ def run_paper(
     energy_ks: tuple[float, ...] = ENERGY_K,
     eigen_ks: tuple[float, ...] = EIGEN_K,
     progress: Callable[[str], None] | None = None,
+    power: Any = None,
 ) -> PaperResult:
     """Write every figure, CSV, the headline table and index.html into `out` (see module docstring)."""
     from rimless.sim.step.backend import resolve
@@ -480,6 +487,15 @@ def run_paper(
         import pandas as pd
 
         res.files.append(write_csv(pd.DataFrame(ranges), out / "table6_valid_k_ranges.csv"))
+    from rimless.sim.model.electrical import ClutchPower
+    from rimless.sim.studies.paper_system_cot import system_cot_paper
+
+    t4 = time.perf_counter()
+    syscot = system_cot_paper(out, params, ks, power or ClutchPower(), backend=backend, rtol=rtol, progress=say)
+    res.files += syscot["files"]
+    res.table += syscot["headline"]
+    res.system_cot = syscot["rows"]
+    res.timings_s["system_cot"] = time.perf_counter() - t4
     res.files += _write_table(res.table, out)
     res.timings_s["figures"] = time.perf_counter() - t3
     res.timings_s["total"] = time.perf_counter() - t0
@@ -490,7 +506,7 @@ def run_paper(
 
 def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backend: str = "auto", rtol: float = 1e-10,
                 scheduler: str = "local", workers: int | None = None, cache_dir: Path | None = None,
-                progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+                progress: Callable[[str], None] | None = None, power: Any = None) -> dict[str, Any]:
     """`rimless paper`: check the k grid (N/m) and the folder `out`, choose the k of figures 3 and 4 among
     `ks`, run_paper; returns the command's JSON object. An interrupted run removes the folder it created."""
     from rimless.errors import ParameterError, interrupted_by_user
@@ -514,7 +530,7 @@ def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backen
     energy_ks = tuple(k for k in ENERGY_K if k in ks) or ks[: min(4, len(ks))]
     try:
         res = run_paper(out, params, ks=ks, backend=backend, rtol=rtol, scheduler=scheduler, workers=workers,
-                        cache_dir=cache_dir, energy_ks=energy_ks, eigen_ks=eigen_ks, progress=progress)
+                        cache_dir=cache_dir, energy_ks=energy_ks, eigen_ks=eigen_ks, progress=progress, power=power)
     except ConnectionError as err:
         raise ParameterError(f"--scheduler: {err}") from None
     except BaseException as err:
@@ -524,4 +540,5 @@ def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backen
             shutil.rmtree(out, ignore_errors=True)
         raise
     return {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "timings_s": res.timings_s,
-            "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers}}
+            "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers},
+            "system_cot": res.system_cot}

@@ -284,8 +284,8 @@ def parse_grid(params: Any, texts: dict[str, str | None]) -> dict[str, list[floa
 
 def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]], mass_models: list[str],
                  options: SweepOptions, out: Path, scheduler: str = "local", workers: int | None = None,
-                 cache_dir: Path | None = None, progress: Callable[[int, int], None] | None = None
-                 ) -> dict[str, Any]:
+                 cache_dir: Path | None = None, progress: Callable[[int, int], None] | None = None,
+                 power: Any = None) -> dict[str, Any]:
     """`rimless sim sweep`: every grid point's branches (run_sweep), written as `out`.parquet/.csv and
     `out`-points.parquet/.csv; returns the command's JSON object. An empty grid sweeps the wheel's own k."""
     from rimless.errors import RunFailure
@@ -304,6 +304,12 @@ def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]]
             "base_params": params.to_dict(), "scheduler": scheduler}
     if not res.rows:
         raise RunFailure("the sweep produced no rows")
+    from rimless.sim.model.electrical import ClutchPower
+    from rimless.sim.studies.system_cot import sweep_system_cot
+
+    power = power or ClutchPower()
+    res.rows = sweep_system_cot(res.rows, res.points, power, backend=options.backend, rtol=options.rtol)
+    meta["electrical_power"] = power.as_dict()
     paths = write_table(res.rows, out, meta)
     if res.points:
         paths += write_table(res.points, out.with_name(out.name + "-points"), meta)
