@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,8 @@ from rimless.analysis.io.trial import ALPHA_RAD, Trial, TrialMeta, standard_seri
 from rimless.analysis.io.vicon_file import Section, ViconFile
 from rimless.analysis.kinematics.hub import (RotationStack, axis_in_body, hub_from_markers, hub_from_pose,
                                              wheel_angle_from_rotations)
-from rimless.analysis.kinematics.slope import fit_slope
+from rimless.analysis.kinematics.contacts import HUB_MAX_SE_M, fit_contacts, hub_from_contacts, slope_from_contacts
+from rimless.analysis.kinematics.slope import fit_slope, travel_direction
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
 from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
 from rimless.analysis.kinematics.walk import classify_ending, find_motion
@@ -187,10 +188,26 @@ def build_trial(
     motion = find_motion(time_s, angle, trans, leg_length_m=wheel_leg_length_m)
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index:motion.end_index + 1] = True
+    contacts = None
     if rot is not None and angle is not None:
-        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
+        ok_t = rough & ~np.isnan(trans).any(axis=1)
+        travel_guess = travel_direction(trans[ok_t]) if ok_t.sum() >= 2 else None
+        contacts = fit_contacts(rot, trans, angle, axis, rough, alpha_rad=alpha_rad, travel=travel_guess)
+        hub_c = hub_from_contacts(contacts, alpha_rad) if contacts is not None and hub_offset_m is None else None
+        given = hub_offset_m
+        if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M:
+            given = hub_c[0]
+        elif hub_c is not None:
+            notes.append(f"the stance feet do not determine the hub (standard error {hub_c[1] * 1e3:.1f} mm)")
+        est = hub_from_pose(rot, trans, hub_offset_m=given, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
+        if given is not None and hub_offset_m is None:
+            d = np.asarray(given)
+            residual = hub_c[2]
+            hub_source = (f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
+                          f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
+                          f"{hub_c[1] * 1e3:.2f} mm, feet residual {hub_c[2] * 1e3:.2f} mm)")
         del est
     else:
         hub_raw, offset, residual = trans, None, None
@@ -227,6 +244,13 @@ def build_trial(
     hub_fit = np.where(fit_mask[:, None], hub, np.nan)
     frame0 = fit_slope(hub_fit, slope_deg=slope_deg)
     travel = frame0.travel
+    contact_slope = None
+    if contacts is not None:
+        sc = slope_from_contacts(contacts.contacts, travel)
+        if sc is not None:
+            contact_slope = sc
+            frame0 = fit_slope(hub_fit, slope_deg=math.degrees(sc[0]) if slope_deg is None else slope_deg,
+                               travel=travel)
     y = np.where(fit_mask, frame0.to_slope(hub)[:, 1], np.nan)
     period_guess = None
     if angle is not None and np.isfinite(angle[fit_mask]).sum() > 2:
@@ -237,14 +261,25 @@ def build_trial(
             period_guess = alpha_rad / (total / max(tw[-1] - tw[0], 1e-9))
         del aw, tw
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
-    reference = "the robust line through the hub path"
-    frame = frame0
+    hub_line = None  # the slope of the line through the hub at the impacts (an estimate and a check)
     if idx.size >= 3:
-        frame = fit_slope(hub_fit, slope_deg=slope_deg, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+        hub_line = fit_slope(hub_fit, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+    evidence = _slope_evidence(choice.ramp_slope_deg, choice.ramp_source, slope_deg, contact_slope,
+                               contacts, hub_line, frame0, idx.size)
+    _check_slope_possible(vf.path, evidence, time_s, angle, rough, alpha_rad)
+    for w in _slope_disagreements(evidence):
+        warnings.append(w)
+    chosen = evidence[0]
+    reference = "the robust line through the hub path"
+    if idx.size >= 3:
+        frame = fit_slope(hub_fit, slope_deg=math.degrees(chosen.slope_rad),
+                          points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
         reference = f"the line through the hub at {idx.size} CoM-height minima (impacts)"
-    elif slope_deg is None:
-        notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
-                     "impact line)")
+    else:
+        frame = fit_slope(hub_fit, slope_deg=math.degrees(chosen.slope_rad), travel=travel)
+        if chosen.source == "estimated" and contact_slope is None:
+            notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
+                         "impact line)")
     del hub_fit, y, idx
     hub_slope = frame.to_slope(hub)
     com = hub_slope[:, 1].copy()
@@ -310,7 +345,11 @@ def build_trial(
         hub_offset_m=None if offset is None else tuple(float(v) for v in offset),
         orientation=(orientation if obj is not None else "markers") if angle is not None else None,
         slope_deg=frame.slope_deg,
-        slope_source=frame.source + (" (walking window)" if frame.source != "given" else ""),
+        slope_source=chosen.source,
+        slope_ci_rad=chosen.ci_rad,
+        slope_method=chosen.method,
+        slope_estimated_deg=next((math.degrees(e.slope_rad) for e in evidence if e.source == "estimated"), None),
+        slope_estimated_ci_rad=next((e.ci_rad for e in evidence if e.source == "estimated"), None),
         slope_residual_m=frame.residual_m,
         slope_points=frame.n_points,
         travel_direction=tuple(float(v) for v in travel),
@@ -336,6 +375,108 @@ def build_trial(
         warnings=tuple(warnings),
     )
     return Trial(ts, meta)
+
+
+#: Half width of the 95 % interval of a slope given by the user (an inclinometer reading), deg.
+GIVEN_SLOPE_HALF_WIDTH_DEG = 0.1
+#: Half width of the 95 % interval of a static ramp's tilt (how well its axis or markers define the plane), deg.
+RAMP_SLOPE_HALF_WIDTH_DEG = 0.05
+#: Least half width of an estimated slope's 95 % interval, deg.
+MIN_ESTIMATE_HALF_WIDTH_DEG = 0.01
+Z95 = 1.959964
+
+
+@dataclass(frozen=True)
+class SlopeEvidence:
+    """One source of the trial's slope: ``source`` ramp | given | estimated, the slope and its 95 % interval
+    (rad), and how it was obtained (``method``)."""
+
+    source: str
+    slope_rad: float
+    ci_rad: tuple[float, float]
+    method: str
+
+
+def _interval(slope_rad: float, half_rad: float) -> tuple[float, float]:
+    return (slope_rad - half_rad, slope_rad + half_rad)
+
+
+def _slope_evidence(ramp_deg: float | None, ramp_src: str | None, given_deg: float | None,
+                    contact_slope: tuple[float, float, float] | None, contacts, hub_line, frame0,  # noqa: ANN001
+                    n_minima: int) -> list[SlopeEvidence]:
+    """Every slope source of the trial, the best first (ramp, given, estimated)."""
+    out = []
+    if ramp_deg is not None and math.isfinite(ramp_deg):
+        r = math.radians(ramp_deg)
+        out.append(SlopeEvidence("ramp", r, _interval(r, math.radians(RAMP_SLOPE_HALF_WIDTH_DEG)),
+                                 f"{ramp_src} (95 % interval +- {RAMP_SLOPE_HALF_WIDTH_DEG} deg assumed)"))
+    if given_deg is not None:
+        g = math.radians(given_deg)
+        out.append(SlopeEvidence("given", g, _interval(g, math.radians(GIVEN_SLOPE_HALF_WIDTH_DEG)),
+                                 f"given by the user (95 % interval +- {GIVEN_SLOPE_HALF_WIDTH_DEG} deg assumed)"))
+    floor = math.radians(MIN_ESTIMATE_HALF_WIDTH_DEG)
+    if contact_slope is not None:
+        phi, se, rms = contact_slope
+        n = len(contacts.contacts)
+        out.append(SlopeEvidence("estimated", phi, _interval(phi, max(Z95 * se, floor)),
+                                 f"line through {n} stance-foot contact points (walking window; no-slip: a stance "
+                                 f"foot does not move), scatter {rms * 1e3:.2f} mm"))
+    elif hub_line is not None:
+        out.append(SlopeEvidence("estimated", hub_line.slope_rad,
+                                 _interval(hub_line.slope_rad, max(Z95 * hub_line.se_rad, floor)),
+                                 f"{hub_line.source} (walking window)"))
+    elif given_deg is None and ramp_deg is None:
+        out.append(SlopeEvidence("estimated", frame0.slope_rad,
+                                 _interval(frame0.slope_rad, max(Z95 * frame0.se_rad, floor)),
+                                 f"{frame0.source} (walking window; {n_minima} CoM minima, 3 needed for the impact "
+                                 "line)"))
+    return out
+
+
+def _slope_disagreements(evidence: list[SlopeEvidence]) -> list[str]:
+    """Warnings for pairs of sources whose difference exceeds their combined uncertainty."""
+    out = []
+    for i, a in enumerate(evidence):
+        for b in evidence[i + 1:]:
+            ha = (a.ci_rad[1] - a.ci_rad[0]) / 2
+            hb = (b.ci_rad[1] - b.ci_rad[0]) / 2
+            diff = abs(a.slope_rad - b.slope_rad)
+            if diff > math.hypot(ha, hb):
+                out.append(f"the {a.source} slope {math.degrees(a.slope_rad):.3f} deg and the {b.source} slope "
+                           f"{math.degrees(b.slope_rad):.3f} deg disagree by {math.degrees(diff):.3f} deg, more "
+                           f"than their uncertainty ({math.degrees(math.hypot(ha, hb)):.3f} deg at 95 %); "
+                           f"{evidence[0].source} is used")
+    return out
+
+
+def _check_slope_possible(path: str, evidence: list[SlopeEvidence], time_s: np.ndarray,
+                          angle: np.ndarray | None, window: np.ndarray, alpha_rad: float) -> None:
+    """Refuse a slope the observed motion rules out: a rimless wheel cannot stand on |slope| >= alpha/2, and a
+    passive wheel that rolls uphill (slope < 0 beyond its interval) only slows down."""
+    if not evidence:
+        return
+    e = evidence[0]
+    lim = alpha_rad / 2
+    if not math.isfinite(e.slope_rad) or abs(e.slope_rad) >= lim:
+        raise TrialRefused(f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg is impossible for a "
+                           f"wheel that walks: beyond +-{math.degrees(lim):.1f} deg (alpha/2) it cannot stand "
+                           f"({e.method})")
+    if e.ci_rad[1] < 0 and angle is not None:
+        a = np.where(window, angle, np.nan)
+        ok = np.flatnonzero(np.isfinite(a))
+        if ok.size > 4:
+            av, tv = a[ok], time_s[ok]
+            first = np.flatnonzero(av <= av[0] + alpha_rad)
+            last = np.flatnonzero(av >= np.nanmax(av) - alpha_rad)
+            if first.size > 1 and last.size > 1 and np.nanmax(av) - av[0] > 2 * alpha_rad:
+                v0 = (av[first[-1]] - av[first[0]]) / max(tv[first[-1]] - tv[first[0]], 1e-9)
+                v1 = (av[last[-1]] - av[last[0]]) / max(tv[last[-1]] - tv[last[0]], 1e-9)
+                if v1 >= v0:
+                    raise TrialRefused(
+                        f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg (uphill) is impossible "
+                        f"for the observed motion: the wheel speeds up from {v0:.2f} to {v1:.2f} rad/s over "
+                        f"{np.degrees(np.nanmax(av) - av[0]):.0f} deg of rotation, and a passive wheel rolling "
+                        f"uphill only slows ({e.method})")
 
 
 def _unseen_periods(steps: StepResult) -> int:
