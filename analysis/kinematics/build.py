@@ -264,9 +264,16 @@ def build_trial(
     hub_line = None  # the slope of the line through the hub at the impacts (an estimate and a check)
     if idx.size >= 3:
         hub_line = fit_slope(hub_fit, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+    hub_unknown = angle is not None and hub_offset_m is None and residual is None and offset is not None
+    hs = frame0.to_slope(hub[fit_mask])[:, 0]
+    travel_m = float(np.nanmax(hs) - np.nanmin(hs)) if hs.size else 0.0
     evidence = _slope_evidence(choice.ramp_slope_deg, choice.ramp_source, slope_deg, contact_slope,
-                               contacts, hub_line, frame0, idx.size)
-    _check_slope_possible(vf.path, evidence, time_s, angle, rough, alpha_rad)
+                               contacts, hub_line, frame0, idx.size, hub_unknown=hub_unknown, travel_m=travel_m)
+    if hub_unknown and evidence and evidence[0].source == "estimated":
+        warnings.append("the slope is not determined by this trial (the hub offset is unknown: fewer than two "
+                        "stance feet seen and too little rotation): its interval is wide; give --slope-deg or "
+                        "--slopes")
+    _check_slope_possible(vf.path, evidence, time_s, angle if contact_slope is not None else None, rough, alpha_rad)
     for w in _slope_disagreements(evidence):
         warnings.append(w)
     chosen = evidence[0]
@@ -384,6 +391,8 @@ RAMP_SLOPE_HALF_WIDTH_DEG = 0.05
 #: Least half width of an estimated slope's 95 % interval, deg.
 MIN_ESTIMATE_HALF_WIDTH_DEG = 0.01
 Z95 = 1.959964
+#: How far an object origin may lie from the hub, m (bounds the slope error when the hub is not determined).
+OFFSET_BOUND_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -403,7 +412,7 @@ def _interval(slope_rad: float, half_rad: float) -> tuple[float, float]:
 
 def _slope_evidence(ramp_deg: float | None, ramp_src: str | None, given_deg: float | None,
                     contact_slope: tuple[float, float, float] | None, contacts, hub_line, frame0,  # noqa: ANN001
-                    n_minima: int) -> list[SlopeEvidence]:
+                    n_minima: int, *, hub_unknown: bool = False, travel_m: float = 1.0) -> list[SlopeEvidence]:
     """Every slope source of the trial, the best first (ramp, given, estimated)."""
     out = []
     if ramp_deg is not None and math.isfinite(ramp_deg):
@@ -421,15 +430,18 @@ def _slope_evidence(ramp_deg: float | None, ramp_src: str | None, given_deg: flo
         out.append(SlopeEvidence("estimated", phi, _interval(phi, max(Z95 * se, floor)),
                                  f"line through {n} stance-foot contact points (walking window; no-slip: a stance "
                                  f"foot does not move), scatter {rms * 1e3:.2f} mm"))
-    elif hub_line is not None:
-        out.append(SlopeEvidence("estimated", hub_line.slope_rad,
-                                 _interval(hub_line.slope_rad, max(Z95 * hub_line.se_rad, floor)),
-                                 f"{hub_line.source} (walking window)"))
-    elif given_deg is None and ramp_deg is None:
-        out.append(SlopeEvidence("estimated", frame0.slope_rad,
-                                 _interval(frame0.slope_rad, max(Z95 * frame0.se_rad, floor)),
-                                 f"{frame0.source} (walking window; {n_minima} CoM minima, 3 needed for the impact "
-                                 "line)"))
+    else:
+        line = hub_line if hub_line is not None else frame0
+        half = max(Z95 * line.se_rad, floor) if math.isfinite(line.se_rad) else math.radians(45.0)
+        how = (f"{line.source} (walking window)" if hub_line is not None else
+               f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)")
+        if hub_unknown:
+            # An origin up to OFFSET_BOUND_M off an unknown hub rises and falls by up to twice that along the path.
+            half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
+            how += ("; the hub is not determined (fewer than two stance feet seen, too little rotation): the "
+                    f"interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off the hub")
+        if hub_line is not None or (given_deg is None and ramp_deg is None):
+            out.append(SlopeEvidence("estimated", line.slope_rad, _interval(line.slope_rad, half), how))
     return out
 
 
@@ -452,7 +464,8 @@ def _slope_disagreements(evidence: list[SlopeEvidence]) -> list[str]:
 def _check_slope_possible(path: str, evidence: list[SlopeEvidence], time_s: np.ndarray,
                           angle: np.ndarray | None, window: np.ndarray, alpha_rad: float) -> None:
     """Refuse a slope the observed motion rules out: a rimless wheel cannot stand on |slope| >= alpha/2, and a
-    passive wheel that rolls uphill (slope < 0 beyond its interval) only slows down."""
+    passive wheel that rolls uphill (slope < 0 beyond its interval) only slows down (checked when ``angle`` is
+    given: pass it only when the body was seen standing on its feet)."""
     if not evidence:
         return
     e = evidence[0]
