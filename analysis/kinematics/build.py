@@ -174,6 +174,12 @@ def build_trial(
             raise TrialRefused(f"{vf.path}: {err}") from None
         trans = est0.hub_m
         rot = est0.rotation
+        if est0.n_relabelled:
+            warnings.append(f"{est0.n_relabelled} frame(s) with swapped marker labels repaired (the exchange that "
+                            "fits the rigid marker shape)")
+        if est0.n_inconsistent:
+            warnings.append(f"{est0.n_inconsistent} frame(s) whose markers fit no rigid shape of the wheel "
+                            "(swapped or ghost markers) treated as gaps")
         del est0, pts
         what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
@@ -193,6 +199,11 @@ def build_trial(
         ok_t = rough & ~np.isnan(trans).any(axis=1)
         travel_guess = travel_direction(trans[ok_t]) if ok_t.sum() >= 2 else None
         contacts = fit_contacts(rot, trans, angle, axis, rough, alpha_rad=alpha_rad, travel=travel_guess)
+        sc0 = slope_from_contacts(contacts.contacts, travel_guess) if contacts is not None else None
+        if sc0 is not None and abs(sc0[0]) >= alpha_rad / 2:
+            notes.append(f"the {len(contacts.contacts)} pivots found lie on a line at {math.degrees(sc0[0]):.1f} "
+                         "deg, where no wheel stands: not stance feet, not used")
+            contacts = None
         hub_c = hub_from_contacts(contacts, alpha_rad) if contacts is not None and hub_offset_m is None else None
         given = hub_offset_m
         if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M:
