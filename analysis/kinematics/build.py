@@ -18,6 +18,7 @@ import numpy as np
 
 from rimless.errors import UserError
 
+from rimless.analysis.io.manifest import slope_for
 from rimless.analysis.io.recording import read_recording
 from rimless.analysis.io.timeseries import Event, TimeSeries
 from rimless.analysis.io.trial import ALPHA_RAD, Trial, TrialMeta, standard_series
@@ -105,6 +106,7 @@ def build_trial(
     max_gap_s: float = DEFAULT_MAX_GAP_S,
     alpha_rad: float = ALPHA_RAD,
     wheel_leg_length_m: float = TABLE1_LEG_LENGTH_M,
+    slope_note: str | None = None,
 ) -> Trial:
     """Build a `Trial` from a parsed Vicon file.
 
@@ -123,6 +125,7 @@ def build_trial(
     max_gap_s : gaps up to this long are linearly interpolated (flagged ``interpolated``); longer stay NaN.
     alpha_rad : rotation per step, rad.
     wheel_leg_length_m : the wheel's leg length for the plausibility checks (Table 1), m.
+    slope_note : where a given slope comes from (e.g. the manifest row), kept in the notes.
 
     Raises
     ------
@@ -145,7 +148,7 @@ def build_trial(
         raise TrialRefused(f"{vf.path}:{err}" if str(err)[:1].isdigit() else f"{vf.path}: {err}") from None
     rate = sec.rate_hz
     time_s = (frames - frames[0]) / rate
-    notes: list[str] = []
+    notes: list[str] = [] if slope_note is None else [slope_note]
     rot = None
     if obj is not None:
         pose = _on_grid(sec.get(obj, POSE), row)  # a view of the section when no frame is missing
@@ -590,7 +593,18 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
     return v, filled
 
 
-def import_trial(path: str | Path, **kwargs: Any) -> Trial:
-    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there)."""
+def import_trial(path: str | Path, *, slopes: dict[str, tuple[float, str]] | None = None, **kwargs: Any) -> Trial:
+    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there).
+
+    ``slopes``: a slope manifest (`rimless.analysis.io.manifest.read_slope_manifest`); the row of this file, when
+    there is one, gives ``slope_deg`` (a ``slope_deg`` keyword and a manifest together are refused).
+    """
+    if slopes is not None:
+        row = slope_for(slopes, path)
+        if row is not None:
+            if kwargs.get("slope_deg") is not None:
+                raise UserError("give either --slope-deg or --slopes, not both")
+            kwargs["slope_deg"] = row[0]
+            kwargs["slope_note"] = f"slope {row[0]:g} deg given in the manifest {row[1]}"
     return build_trial(read_recording(path), **kwargs)
 

@@ -31,6 +31,10 @@ RIGID_TOL_M = 0.005
 MAX_TURN_PER_FRAME_RAD = 0.2
 #: A marker set whose centroid moves more than this (m) plus this per frame is a seam, not a relabelling.
 SEAM_M, SEAM_M_PER_FRAME = 0.1, 0.05
+#: Prior standard deviation of the hub offset from the tracked point, per in-plane component, m, and the nominal
+#: height noise, m, that weighs it against the data in `estimate_hub_offset`.
+HUB_PRIOR_SD_M = 0.04
+PRIOR_NOISE_M = 0.5e-3
 #: Least total rotation (rad) for a hub offset in the object frame to be observable.
 MIN_ROTATION_FOR_OFFSET_RAD = np.pi
 
@@ -427,8 +431,12 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
         _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
         s = xy @ vt[0]
         a = np.column_stack([r[:, 2, :] @ plane, -np.ones(len(s)), -s, bumps])
-        scale = np.maximum(np.abs(a).max(axis=0), 1e-3)
-        sol, *_ = np.linalg.lstsq(a / scale, -t[:, 2], rcond=1e-6)
+        # the prior: the tracked point lies within a few cm of the hub (rows g / sd * noise, noise 0.5 mm)
+        prior = np.zeros((2, a.shape[1]))
+        prior[0, 0] = prior[1, 1] = PRIOR_NOISE_M / HUB_PRIOR_SD_M
+        ap = np.vstack([a, prior])
+        scale = np.maximum(np.abs(ap).max(axis=0), 1e-3)
+        sol, *_ = np.linalg.lstsq(ap / scale, np.concatenate([-t[:, 2], np.zeros(2)]), rcond=1e-6)
         sol = sol / scale
         d = plane @ sol[:2]
         res = a @ sol + t[:, 2]
