@@ -26,7 +26,7 @@ from rimless.analysis.io.vicon_file import Section, ViconFile
 from rimless.analysis.kinematics.hub import (RotationStack, axis_in_body, hub_from_markers, hub_from_pose,
                                              wheel_angle_from_rotations)
 from rimless.analysis.kinematics.contacts import HUB_MAX_SE_M, fit_contacts, hub_from_contacts, slope_from_contacts
-from rimless.analysis.kinematics.slope import fit_slope, travel_direction
+from rimless.analysis.kinematics.slope import MAX_PATH_POINTS, fit_slope, travel_direction
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
 from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
 from rimless.analysis.kinematics.walk import classify_ending, find_motion
@@ -199,8 +199,11 @@ def build_trial(
     rough[motion.release_index:motion.end_index + 1] = True
     contacts = None
     if rot is not None and angle is not None:
-        ok_t = rough & ~np.isnan(trans).any(axis=1)
-        travel_guess = travel_direction(trans[ok_t]) if ok_t.sum() >= 2 else None
+        ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
+        # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
+        sub_t = ok_t[:: max(1, -(-ok_t.size // MAX_PATH_POINTS))]
+        travel_guess = travel_direction(np.concatenate([trans[sub_t], trans[ok_t[-1:]]])) if ok_t.size >= 2 else None
+        del ok_t, sub_t
         contacts = fit_contacts(rot, trans, angle, axis, rough, alpha_rad=alpha_rad, travel=travel_guess)
         sc0 = slope_from_contacts(contacts.contacts, travel_guess) if contacts is not None else None
         if sc0 is not None and abs(sc0[0]) >= alpha_rad / 2:
@@ -279,7 +282,9 @@ def build_trial(
     if idx.size >= 3:
         hub_line = fit_slope(hub_fit, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
     hub_unknown = angle is not None and hub_offset_m is None and residual is None and offset is not None
-    hs = frame0.to_slope(hub[fit_mask])[:, 0]
+    fm = np.flatnonzero(fit_mask)
+    hs = frame0.to_slope(hub[fm[:: max(1, -(-fm.size // MAX_PATH_POINTS))]])[:, 0]
+    del fm
     travel_m = float(np.nanmax(hs) - np.nanmin(hs)) if hs.size else 0.0
     evidence = _slope_evidence(choice.ramp_slope_deg, choice.ramp_source, slope_deg, contact_slope,
                                contacts, hub_line, frame0, idx.size, hub_unknown=hub_unknown, travel_m=travel_m)
