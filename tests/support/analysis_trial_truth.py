@@ -40,6 +40,7 @@ class ErTruth:
     outcome: str
     origin_body_m: np.ndarray
     feet_world: list = field(default_factory=list)
+    rot: Rotation | None = None  # world-from-body, noise-free
 
 
 def _params(slope_deg: float):  # noqa: ANN202
@@ -201,9 +202,21 @@ def simulate(slope_deg: float, release_rad_s: float, *, max_steps: int = 8, endi
     for a, b in gaps:
         pose[(tf >= a) & (tf < b)] = np.nan
     feet_w = [org + f[0] * d + f[1] * nrm for f in feet]
-    return ErTruth(name, slope_deg, tf, pose, hub, np.array(impacts), n_steps, stalled, outcome, o, feet_w)
+    return ErTruth(name, slope_deg, tf, pose, hub, np.array(impacts), n_steps, stalled, outcome, o, feet_w, rot)
 
 
 def write_csv(path, truth: ErTruth) -> str:  # noqa: ANN001
     """The trial as a Vicon Tracker export (object ``Wheel``, rad and mm)."""
     return write(path, objects_section({"Wheel": truth.pose}))
+
+
+def write_markers_csv(path, truth: ErTruth, body_m: np.ndarray, *, noise_m: float = 0.3e-3, seed: int = 0) -> str:  # noqa: ANN001
+    """The trial as a Trajectories section of markers ``wheel:M0..`` at body points ``body_m`` (k, 3) m (body
+    frame: x, y in the wheel plane about the hub, z along the axis), with noise; gaps of the pose are gaps."""
+    from tests.support.analysis_truth_wheel import markers_section
+
+    rng = np.random.default_rng(seed)
+    pts = truth.hub_world[:, None, :] + np.einsum("nij,kj->nki", truth.rot.as_matrix(), np.asarray(body_m))
+    pts = pts + rng.normal(0, noise_m, pts.shape)
+    pts[np.isnan(truth.pose).any(axis=1)] = np.nan
+    return write(path, markers_section({f"wheel:M{i}": pts[:, i] for i in range(pts.shape[1])}))

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from rimless.analysis.kinematics.build import import_trial
-from tests.support.analysis_trial_truth import simulate, write_csv
+from tests.support.analysis_trial_truth import simulate, write_csv, write_markers_csv
+from tests.support.analysis_truth_wheel import UNEVEN_MARKERS
 
 pytestmark = pytest.mark.slow
 
@@ -109,3 +110,25 @@ def test_given_slope_and_disagreement_warning(tmp_path):
     bad = import_trial(path, slope_deg=3.5)
     assert bad.meta.slope_deg == pytest.approx(3.5)
     assert any("disagree" in w for w in bad.meta.warnings)
+
+
+@pytest.mark.parametrize("i", [0, 2, 4, 10])
+def test_marker_set_off_centre(tmp_path, trials, i):
+    """Four markers whose centroid is 14 mm off the hub (the same walks, recorded as markers)."""
+    tr, _ = trials[i]
+    trial = import_trial(write_markers_csv(tmp_path / "m.csv", tr, UNEVEN_MARKERS, seed=i))
+    m = trial.meta
+    lo, hi = (math.degrees(v) for v in m.slope_ci_rad)
+    assert abs(m.slope_deg - tr.slope_deg) <= 0.1 or lo <= tr.slope_deg <= hi, (m.slope_deg, lo, hi)
+    assert m.outcome == tr.outcome
+
+
+@pytest.mark.parametrize("slope, why", [(30.0, "cannot stand"), (-3.0, "only slows")])
+def test_impossible_slope_is_refused_with_the_reason(tmp_path, slope, why):
+    from rimless.analysis.kinematics.build import TrialRefused
+
+    tr = simulate(2.6, 2.0, ending="caught", origin_body_m=(0.02, 0.02, 0.0), seed=7, max_steps=8)
+    assert tr.steps >= 4
+    path = write_csv(tmp_path / "s.csv", tr)
+    with pytest.raises(TrialRefused, match=why):
+        import_trial(path, slope_deg=slope)
