@@ -32,6 +32,9 @@ HUB_PRIOR_SD_M = 0.04
 HUB_MAX_SE_M = 0.005
 #: At most this many stances are used (the first ones of the walk).
 MAX_STANCES = 40
+#: Contact points closer than this along the travel, m, belong to one stance (a step of any wheel this
+#: analysis meets is several times longer: 0.18 m for Table 1).
+STANCE_SEPARATION_M = 0.05
 #: Least frames in a window.
 MIN_WINDOW_FRAMES = 6
 #: Floor of a contact point's height uncertainty, m (feet are not points, legs compress).
@@ -142,7 +145,7 @@ def fit_contacts(rot, trans_m: np.ndarray, angle_rad: np.ndarray, axis: np.ndarr
     order = np.argsort(s)
     groups: list[list[int]] = []
     for i in order:
-        if groups and s[i] - s[groups[-1][-1]] < 0.25 * _step_length_guess(acc, alpha_rad):
+        if groups and s[i] - s[groups[-1][-1]] < STANCE_SEPARATION_M:
             groups[-1].append(int(i))
         else:
             groups.append([int(i)])
@@ -160,12 +163,6 @@ def fit_contacts(rot, trans_m: np.ndarray, angle_rad: np.ndarray, axis: np.ndarr
         contacts.append(Contact(c, f, float(np.median([acc[i][4] for i in g])), sd, len(g),
                                 float(np.median([acc[i][2] for i in g]))))
     return ContactFit(tuple(contacts), plane, a_body, best)
-
-
-def _step_length_guess(acc: list, alpha_rad: float) -> float:
-    """2 L sin(alpha/2) with L the median hub-to-foot distance is unknown here: use the foot radius seen from the
-    spread of the foot points (at least 5 cm apart for any wheel), m."""
-    return 0.2
 
 
 def slope_from_contacts(contacts: tuple[Contact, ...], travel: np.ndarray) -> tuple[float, float, float] | None:
