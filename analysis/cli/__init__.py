@@ -30,13 +30,25 @@ MODELS = ("er", "ve")
 
 
 def import_options(object_: str | None, markers: str | None, hub_offset_mm: str | None, slope_deg: float | None,
-                   leg_length_m: float | None, max_gap_ms: float) -> dict[str, Any]:
+                   leg_length_m: float | None, max_gap_ms: float, slopes: Path | None = None) -> dict[str, Any]:
     """Keyword arguments of `import_trial` from the CLI options shared by ``import`` and ``report``."""
     offset = None if hub_offset_mm is None else tuple(v / 1000.0 for v in
                                                       parse_numbers(hub_offset_mm, "--hub-offset-mm", count=3))
-    return {"slope_deg": slope_deg, "object": object_,
-            "markers": None if markers is None else parse_list(markers, "--markers"),
-            "hub_offset_m": offset, "leg_length_m": leg_length_m, "max_gap_s": max_gap_ms / 1000.0}
+    kw = {"slope_deg": slope_deg, "object": object_,
+          "markers": None if markers is None else parse_list(markers, "--markers"),
+          "hub_offset_m": offset, "leg_length_m": leg_length_m, "max_gap_s": max_gap_ms / 1000.0}
+    if slopes is not None:
+        from rimless.analysis.io.manifest import read_slope_manifest
+
+        if slope_deg is not None:
+            raise ParameterError("give either --slope-deg (one slope for every file) or --slopes (one per file), "
+                                 "not both")
+        kw["slopes"] = read_slope_manifest(slopes)
+    return kw
+
+
+SLOPES_HELP = ("CSV 'file,slope_deg': the measured slope of each export (by file name); files not listed get "
+               "their slope from a ramp object or the motion.")
 
 
 GAP_HELP = ("Bridge gaps up to this long by interpolation, ms (the same rule for import and report); "
@@ -63,11 +75,12 @@ def import_cmd(
     leg_length_m: Annotated[Optional[float], typer.Option(
         "--leg-length-m", min=0.0, help="Leg length, m: CoM height measured from the slope plane.")] = None,
     max_gap_ms: Annotated[float, typer.Option("--max-gap-ms", min=0.0, help=GAP_HELP)] = DEFAULT_MAX_GAP_MS,
+    slopes: Annotated[Optional[Path], typer.Option("--slopes", help=SLOPES_HELP, metavar="FILE")] = None,
 ) -> None:
     """Import Vicon exports as Parquet trials; a refused file does not stop the others (exit 2 if any)."""
     from rimless.analysis.report.batch import import_files
 
-    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms)
+    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes)
     rows = import_files(files, out, kwargs, json_out=json_out)
     if json_out:
         print_json([{k: v for k, v in r.items() if not k.startswith("_")} for r in rows])
@@ -89,9 +102,12 @@ def import_cmd(
             name = Path(r["file"]).name
             if r["status"] == "imported":
                 typer.echo(f"{name}: wrote {r['_trial']}; {r['_outcome_reason']}")
-                if r["ramp_slope_deg"] is not None:
+                ci = r.get("slope_ci_deg")
+                typer.echo(f"{name}: slope {r['slope_deg']:.3f} deg ({r.get('slope_source')}"
+                           + (f", 95 % interval {ci[0]:.3f} to {ci[1]:.3f} deg)" if ci else ")"))
+                if r["ramp_slope_deg"] is not None and r.get("_estimated_deg") is not None:
                     typer.echo(f"{name}: ramp slope {r['ramp_slope_deg']:.3f} deg (static ramp), "
-                               f"hub path {r['slope_deg']:.3f} deg")
+                               f"from the motion {r['_estimated_deg']:.3f} deg")
                 for w in r["warnings"]:
                     typer.echo(f"{name}: warning: {w}")
             else:
@@ -125,7 +141,7 @@ def show_cmd(
     meta.add_column("key", style="bold", no_wrap=True)
     meta.add_column("value", overflow="fold", max_width=56)
     for k in ("object", "markers", "frames", "rate_hz", "duration_s", "outcome", "window_s", "slope_deg",
-              "ramp_slope_deg", "hub_offset_mm", "gap_frames", "interpolated_frames", "max_gap_s", "step_method",
+              "slope_ci_deg", "slope_source", "slope_estimated_deg", "ramp_slope_deg", "hub_offset_mm", "gap_frames", "interpolated_frames", "max_gap_s", "step_method",
               "steps"):
         v = s[k]
         if isinstance(v, float):
@@ -135,7 +151,7 @@ def show_cmd(
         meta.add_row(k, str(v))
     console = Console()
     console.print(meta)
-    for k in ("file", "source", "outcome_reason", "hub_source", "slope_source", "ramp_source",
+    for k in ("file", "source", "outcome_reason", "hub_source", "slope_method", "ramp_source",
               "com_height_reference", "step_refused"):
         if s.get(k):
             typer.echo(f"{k}: {s[k]}")
@@ -227,6 +243,8 @@ def report_cmd(
     model: Annotated[str, typer.Option("--model", help="Simulated model: er or ve.", metavar="er|ve")] = "er",
     slope_bin_deg: Annotated[float, typer.Option(
         "--slope-bin-deg", min=0.01, help="Group trials by slope rounded to this, deg.")] = 0.5,
+    slopes: Annotated[Optional[Path], typer.Option("--slopes", help="Raw inputs: " + SLOPES_HELP,
+                                                   metavar="FILE")] = None,
 ) -> None:
     """Compare trials with the simulation and write an HTML report.
 
@@ -236,7 +254,7 @@ def report_cmd(
 
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
-    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms)
+    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes)
     res = run_report(trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg)
     _print_report(res, model, json_out)
     if res.refused:

@@ -34,7 +34,7 @@ from rimless.errors import InputFileError
 
 from rimless.analysis.io.timeseries import Event, TimeSeries
 
-__all__ = ["Trial", "TrialMeta", "read_trial", "standard_series", "ALPHA_RAD"]
+__all__ = ["Trial", "TrialMeta", "read_trial", "standard_series", "slope_ci_deg", "ALPHA_RAD"]
 
 PARQUET_META_KEY = b"rimless.trial"
 FORMAT_VERSION = 1
@@ -84,6 +84,13 @@ class TrialMeta:
     impact_step: tuple[int, ...] = field(default=())
     period_step: tuple[int, ...] = field(default=())
     warnings: tuple[str, ...] = field(default=())
+    #: 95 % interval of ``slope_deg``, rad; ``slope_source`` says where the slope comes from: ``ramp`` (a static
+    #: ramp object or markers), ``given`` (by the user) or ``estimated`` (from the motion); ``slope_method`` how.
+    slope_ci_rad: tuple[float, float] = (float("nan"), float("nan"))
+    slope_method: str = ""
+    #: The slope estimated from the motion and its 95 % interval, rad (also when another source is used), or None.
+    slope_estimated_deg: float | None = None
+    slope_estimated_ci_rad: tuple[float, float] | None = None
 
     def to_json(self) -> str:
         """JSON text of the metadata (NaN as null)."""
@@ -96,9 +103,11 @@ class TrialMeta:
         d = json.loads(text)
         for k in ("markers", "notes", "impact_step", "period_step", "warnings"):
             d[k] = tuple(d.get(k) or ())
-        for k in ("hub_offset_m", "travel_direction", "slope_origin_m", "window_s"):
+        for k in ("hub_offset_m", "travel_direction", "slope_origin_m", "window_s", "slope_estimated_ci_rad"):
             if d.get(k) is not None:
                 d[k] = tuple(d[k])
+        d["slope_ci_rad"] = tuple(float("nan") if v is None else float(v)
+                                  for v in (d.get("slope_ci_rad") or (None, None)))
         if d.get("slope_residual_m") is None:
             d["slope_residual_m"] = float("nan")
         return cls(**d)
@@ -174,6 +183,10 @@ class Trial:
             "orientation": m.orientation,
             "slope_deg": m.slope_deg,
             "slope_source": m.slope_source,
+            "slope_ci_deg": slope_ci_deg(m.slope_ci_rad),
+            "slope_method": m.slope_method,
+            "slope_estimated_deg": m.slope_estimated_deg,
+            "slope_estimated_ci_deg": slope_ci_deg(m.slope_estimated_ci_rad),
             "slope_residual_m": m.slope_residual_m,
             "com_height_reference": m.com_height_reference,
             "gap_frames": m.n_gap_frames,
@@ -265,6 +278,13 @@ def standard_series(ts: TimeSeries, hub: np.ndarray, hub_slope: np.ndarray, com:
         ts = ts.add_data("wheel_angle", angle, unit="rad")
     ts = ts.add_data("gap", gap)
     return ts.add_data("interpolated", interp)
+
+
+def slope_ci_deg(ci_rad: tuple[float, float] | None) -> list[float] | None:
+    """A slope interval in rad as ``[low, high]`` deg for JSON, or None when unknown."""
+    if ci_rad is None or not all(math.isfinite(v) for v in ci_rad):
+        return None
+    return [math.degrees(ci_rad[0]), math.degrees(ci_rad[1])]
 
 
 def _nan_to_none(obj: Any) -> Any:

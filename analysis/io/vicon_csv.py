@@ -427,9 +427,15 @@ class _Parser:
             n_cells = text.count(self.delim, last, end) + 1
             if n_cells < width:
                 line = data_line + n_rows - 1
-                raise self.err(line, n_cells, "truncated",
-                               f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
-                               "cells and no line end): truncated file?")
+                trunc = self.err(line, n_cells, "truncated",
+                                 f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
+                                 "cells and no line end): truncated file?")
+                # the rows before it are read first: their errors come first (file order)
+                try:
+                    self.parse_block(start, last, data_line, width, kind, first_data, n_cols, bounds)
+                except ViconCsvError as err:
+                    raise self._collect([*(getattr(err, "errors", None) or [err]), trunc]) from None
+                raise trunc
         out = self.fast_block(start, end, data_line, n_rows, width, first_data, n_cols)
         if out is None:
             values = self.slow_block(text[start:end], data_line, width, kind)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -18,13 +18,15 @@ import numpy as np
 
 from rimless.errors import UserError
 
+from rimless.analysis.io.manifest import slope_for
 from rimless.analysis.io.recording import read_recording
 from rimless.analysis.io.timeseries import Event, TimeSeries
 from rimless.analysis.io.trial import ALPHA_RAD, Trial, TrialMeta, standard_series
 from rimless.analysis.io.vicon_file import Section, ViconFile
 from rimless.analysis.kinematics.hub import (RotationStack, axis_in_body, hub_from_markers, hub_from_pose,
                                              wheel_angle_from_rotations)
-from rimless.analysis.kinematics.slope import fit_slope
+from rimless.analysis.kinematics.contacts import HUB_MAX_SE_M, fit_contacts, hub_from_contacts, slope_from_contacts
+from rimless.analysis.kinematics.slope import MAX_PATH_POINTS, fit_slope, travel_direction
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
 from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
 from rimless.analysis.kinematics.walk import classify_ending, find_motion
@@ -104,6 +106,7 @@ def build_trial(
     max_gap_s: float = DEFAULT_MAX_GAP_S,
     alpha_rad: float = ALPHA_RAD,
     wheel_leg_length_m: float = TABLE1_LEG_LENGTH_M,
+    slope_note: str | None = None,
 ) -> Trial:
     """Build a `Trial` from a parsed Vicon file.
 
@@ -122,6 +125,7 @@ def build_trial(
     max_gap_s : gaps up to this long are linearly interpolated (flagged ``interpolated``); longer stay NaN.
     alpha_rad : rotation per step, rad.
     wheel_leg_length_m : the wheel's leg length for the plausibility checks (Table 1), m.
+    slope_note : where a given slope comes from (e.g. the manifest row), kept in the notes.
 
     Raises
     ------
@@ -144,7 +148,7 @@ def build_trial(
         raise TrialRefused(f"{vf.path}:{err}" if str(err)[:1].isdigit() else f"{vf.path}: {err}") from None
     rate = sec.rate_hz
     time_s = (frames - frames[0]) / rate
-    notes: list[str] = []
+    notes: list[str] = [] if slope_note is None else [slope_note]
     rot = None
     if obj is not None:
         pose = _on_grid(sec.get(obj, POSE), row)  # a view of the section when no frame is missing
@@ -173,6 +177,12 @@ def build_trial(
             raise TrialRefused(f"{vf.path}: {err}") from None
         trans = est0.hub_m
         rot = est0.rotation
+        if est0.n_relabelled:
+            warnings.append(f"{est0.n_relabelled} frame(s) with swapped marker labels repaired (the exchange that "
+                            "fits the rigid marker shape)")
+        if est0.n_inconsistent:
+            warnings.append(f"{est0.n_inconsistent} frame(s) whose markers fit no rigid shape of the wheel "
+                            "(swapped or ghost markers) treated as gaps")
         del est0, pts
         what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
@@ -187,10 +197,34 @@ def build_trial(
     motion = find_motion(time_s, angle, trans, leg_length_m=wheel_leg_length_m)
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index:motion.end_index + 1] = True
+    contacts = None
     if rot is not None and angle is not None:
-        est = hub_from_pose(rot, trans, hub_offset_m=hub_offset_m, mask=rough, what=what, angle_axis=(angle, axis))
+        ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
+        # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
+        sub_t = ok_t[:: max(1, -(-ok_t.size // MAX_PATH_POINTS))]
+        travel_guess = travel_direction(np.concatenate([trans[sub_t], trans[ok_t[-1:]]])) if ok_t.size >= 2 else None
+        del ok_t, sub_t
+        contacts = fit_contacts(rot, trans, angle, axis, rough, alpha_rad=alpha_rad, travel=travel_guess)
+        sc0 = slope_from_contacts(contacts.contacts, travel_guess) if contacts is not None else None
+        if sc0 is not None and abs(sc0[0]) >= alpha_rad / 2:
+            notes.append(f"the {len(contacts.contacts)} pivots found lie on a line at {math.degrees(sc0[0]):.1f} "
+                         "deg, where no wheel stands: not stance feet, not used")
+            contacts = None
+        hub_c = hub_from_contacts(contacts, alpha_rad) if contacts is not None and hub_offset_m is None else None
+        given = hub_offset_m
+        if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M:
+            given = hub_c[0]
+        elif hub_c is not None:
+            notes.append(f"the stance feet do not determine the hub (standard error {hub_c[1] * 1e3:.1f} mm)")
+        est = hub_from_pose(rot, trans, hub_offset_m=given, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
+        if given is not None and hub_offset_m is None:
+            d = np.asarray(given)
+            residual = hub_c[2]
+            hub_source = (f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
+                          f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
+                          f"{hub_c[1] * 1e3:.2f} mm, feet residual {hub_c[2] * 1e3:.2f} mm)")
         del est
     else:
         hub_raw, offset, residual = trans, None, None
@@ -227,6 +261,13 @@ def build_trial(
     hub_fit = np.where(fit_mask[:, None], hub, np.nan)
     frame0 = fit_slope(hub_fit, slope_deg=slope_deg)
     travel = frame0.travel
+    contact_slope = None
+    if contacts is not None:
+        sc = slope_from_contacts(contacts.contacts, travel)
+        if sc is not None:
+            contact_slope = sc
+            frame0 = fit_slope(hub_fit, slope_deg=math.degrees(sc[0]) if slope_deg is None else slope_deg,
+                               travel=travel)
     y = np.where(fit_mask, frame0.to_slope(hub)[:, 1], np.nan)
     period_guess = None
     if angle is not None and np.isfinite(angle[fit_mask]).sum() > 2:
@@ -237,14 +278,34 @@ def build_trial(
             period_guess = alpha_rad / (total / max(tw[-1] - tw[0], 1e-9))
         del aw, tw
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
-    reference = "the robust line through the hub path"
-    frame = frame0
+    hub_line = None  # the slope of the line through the hub at the impacts (an estimate and a check)
     if idx.size >= 3:
-        frame = fit_slope(hub_fit, slope_deg=slope_deg, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+        hub_line = fit_slope(hub_fit, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+    hub_unknown = angle is not None and hub_offset_m is None and residual is None and offset is not None
+    fm = np.flatnonzero(fit_mask)
+    hs = frame0.to_slope(hub[fm[:: max(1, -(-fm.size // MAX_PATH_POINTS))]])[:, 0]
+    del fm
+    travel_m = float(np.nanmax(hs) - np.nanmin(hs)) if hs.size else 0.0
+    evidence = _slope_evidence(choice.ramp_slope_deg, choice.ramp_source, slope_deg, contact_slope,
+                               contacts, hub_line, frame0, idx.size, hub_unknown=hub_unknown, travel_m=travel_m)
+    if hub_unknown and evidence and evidence[0].source == "estimated":
+        warnings.append("the slope is not determined by this trial (the hub offset is unknown: fewer than two "
+                        "stance feet seen and too little rotation): its interval is wide; give --slope-deg or "
+                        "--slopes")
+    _check_slope_possible(vf.path, evidence, time_s, angle if contact_slope is not None else None, rough, alpha_rad)
+    for w in _slope_disagreements(evidence):
+        warnings.append(w)
+    chosen = evidence[0]
+    reference = "the robust line through the hub path"
+    if idx.size >= 3:
+        frame = fit_slope(hub_fit, slope_deg=math.degrees(chosen.slope_rad),
+                          points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
         reference = f"the line through the hub at {idx.size} CoM-height minima (impacts)"
-    elif slope_deg is None:
-        notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
-                     "impact line)")
+    else:
+        frame = fit_slope(hub_fit, slope_deg=math.degrees(chosen.slope_rad), travel=travel)
+        if chosen.source == "estimated" and contact_slope is None:
+            notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
+                         "impact line)")
     del hub_fit, y, idx
     hub_slope = frame.to_slope(hub)
     com = hub_slope[:, 1].copy()
@@ -310,7 +371,11 @@ def build_trial(
         hub_offset_m=None if offset is None else tuple(float(v) for v in offset),
         orientation=(orientation if obj is not None else "markers") if angle is not None else None,
         slope_deg=frame.slope_deg,
-        slope_source=frame.source + (" (walking window)" if frame.source != "given" else ""),
+        slope_source=chosen.source,
+        slope_ci_rad=chosen.ci_rad,
+        slope_method=chosen.method,
+        slope_estimated_deg=next((math.degrees(e.slope_rad) for e in evidence if e.source == "estimated"), None),
+        slope_estimated_ci_rad=next((e.ci_rad for e in evidence if e.source == "estimated"), None),
         slope_residual_m=frame.residual_m,
         slope_points=frame.n_points,
         travel_direction=tuple(float(v) for v in travel),
@@ -336,6 +401,114 @@ def build_trial(
         warnings=tuple(warnings),
     )
     return Trial(ts, meta)
+
+
+#: Half width of the 95 % interval of a slope given by the user (an inclinometer reading), deg.
+GIVEN_SLOPE_HALF_WIDTH_DEG = 0.1
+#: Half width of the 95 % interval of a static ramp's tilt (how well its axis or markers define the plane), deg.
+RAMP_SLOPE_HALF_WIDTH_DEG = 0.05
+#: Least half width of an estimated slope's 95 % interval, deg.
+MIN_ESTIMATE_HALF_WIDTH_DEG = 0.01
+Z95 = 1.959964
+#: How far an object origin may lie from the hub, m (bounds the slope error when the hub is not determined).
+OFFSET_BOUND_M = 0.05
+
+
+@dataclass(frozen=True)
+class SlopeEvidence:
+    """One source of the trial's slope: ``source`` ramp | given | estimated, the slope and its 95 % interval
+    (rad), and how it was obtained (``method``)."""
+
+    source: str
+    slope_rad: float
+    ci_rad: tuple[float, float]
+    method: str
+
+
+def _interval(slope_rad: float, half_rad: float) -> tuple[float, float]:
+    return (slope_rad - half_rad, slope_rad + half_rad)
+
+
+def _slope_evidence(ramp_deg: float | None, ramp_src: str | None, given_deg: float | None,
+                    contact_slope: tuple[float, float, float] | None, contacts, hub_line, frame0,  # noqa: ANN001
+                    n_minima: int, *, hub_unknown: bool = False, travel_m: float = 1.0) -> list[SlopeEvidence]:
+    """Every slope source of the trial, the best first (ramp, given, estimated)."""
+    out = []
+    if ramp_deg is not None and math.isfinite(ramp_deg):
+        r = math.radians(ramp_deg)
+        out.append(SlopeEvidence("ramp", r, _interval(r, math.radians(RAMP_SLOPE_HALF_WIDTH_DEG)),
+                                 f"{ramp_src} (95 % interval +- {RAMP_SLOPE_HALF_WIDTH_DEG} deg assumed)"))
+    if given_deg is not None:
+        g = math.radians(given_deg)
+        out.append(SlopeEvidence("given", g, _interval(g, math.radians(GIVEN_SLOPE_HALF_WIDTH_DEG)),
+                                 f"given by the user (95 % interval +- {GIVEN_SLOPE_HALF_WIDTH_DEG} deg assumed)"))
+    floor = math.radians(MIN_ESTIMATE_HALF_WIDTH_DEG)
+    if contact_slope is not None:
+        phi, se, rms = contact_slope
+        n = len(contacts.contacts)
+        out.append(SlopeEvidence("estimated", phi, _interval(phi, max(Z95 * se, floor)),
+                                 f"line through {n} stance-foot contact points (walking window; no-slip: a stance "
+                                 f"foot does not move), scatter {rms * 1e3:.2f} mm"))
+    else:
+        line = hub_line if hub_line is not None else frame0
+        half = max(Z95 * line.se_rad, floor) if math.isfinite(line.se_rad) else math.radians(45.0)
+        how = (f"{line.source} (walking window)" if hub_line is not None else
+               f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)")
+        if hub_unknown:
+            # An origin up to OFFSET_BOUND_M off an unknown hub rises and falls by up to twice that along the path.
+            half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
+            how += ("; the hub is not determined (fewer than two stance feet seen, too little rotation): the "
+                    f"interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off the hub")
+        if hub_line is not None or (given_deg is None and ramp_deg is None):
+            out.append(SlopeEvidence("estimated", line.slope_rad, _interval(line.slope_rad, half), how))
+    return out
+
+
+def _slope_disagreements(evidence: list[SlopeEvidence]) -> list[str]:
+    """Warnings for pairs of sources whose difference exceeds their combined uncertainty."""
+    out = []
+    for i, a in enumerate(evidence):
+        for b in evidence[i + 1:]:
+            ha = (a.ci_rad[1] - a.ci_rad[0]) / 2
+            hb = (b.ci_rad[1] - b.ci_rad[0]) / 2
+            diff = abs(a.slope_rad - b.slope_rad)
+            if diff > math.hypot(ha, hb):
+                out.append(f"the {a.source} slope {math.degrees(a.slope_rad):.3f} deg and the {b.source} slope "
+                           f"{math.degrees(b.slope_rad):.3f} deg disagree by {math.degrees(diff):.3f} deg, more "
+                           f"than their uncertainty ({math.degrees(math.hypot(ha, hb)):.3f} deg at 95 %); "
+                           f"{evidence[0].source} is used")
+    return out
+
+
+def _check_slope_possible(path: str, evidence: list[SlopeEvidence], time_s: np.ndarray,
+                          angle: np.ndarray | None, window: np.ndarray, alpha_rad: float) -> None:
+    """Refuse a slope the observed motion rules out: a rimless wheel cannot stand on |slope| >= alpha/2, and a
+    passive wheel that rolls uphill (slope < 0 beyond its interval) only slows down (checked when ``angle`` is
+    given: pass it only when the body was seen standing on its feet)."""
+    if not evidence:
+        return
+    e = evidence[0]
+    lim = alpha_rad / 2
+    if not math.isfinite(e.slope_rad) or abs(e.slope_rad) >= lim:
+        raise TrialRefused(f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg is impossible for a "
+                           f"wheel that walks: beyond +-{math.degrees(lim):.1f} deg (alpha/2) it cannot stand "
+                           f"({e.method})")
+    if e.ci_rad[1] < 0 and angle is not None:
+        a = np.where(window, angle, np.nan)
+        ok = np.flatnonzero(np.isfinite(a))
+        if ok.size > 4:
+            av, tv = a[ok], time_s[ok]
+            first = np.flatnonzero(av <= av[0] + alpha_rad)
+            last = np.flatnonzero(av >= np.nanmax(av) - alpha_rad)
+            if first.size > 1 and last.size > 1 and np.nanmax(av) - av[0] > 2 * alpha_rad:
+                v0 = (av[first[-1]] - av[first[0]]) / max(tv[first[-1]] - tv[first[0]], 1e-9)
+                v1 = (av[last[-1]] - av[last[0]]) / max(tv[last[-1]] - tv[last[0]], 1e-9)
+                if v1 >= v0:
+                    raise TrialRefused(
+                        f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg (uphill) is impossible "
+                        f"for the observed motion: the wheel speeds up from {v0:.2f} to {v1:.2f} rad/s over "
+                        f"{np.degrees(np.nanmax(av) - av[0]):.0f} deg of rotation, and a passive wheel rolling "
+                        f"uphill only slows ({e.method})")
 
 
 def _unseen_periods(steps: StepResult) -> int:
@@ -425,7 +598,18 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
     return v, filled
 
 
-def import_trial(path: str | Path, **kwargs: Any) -> Trial:
-    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there)."""
+def import_trial(path: str | Path, *, slopes: dict[str, tuple[float, str]] | None = None, **kwargs: Any) -> Trial:
+    """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there).
+
+    ``slopes``: a slope manifest (`rimless.analysis.io.manifest.read_slope_manifest`); the row of this file, when
+    there is one, gives ``slope_deg`` (a ``slope_deg`` keyword and a manifest together are refused).
+    """
+    if slopes is not None:
+        row = slope_for(slopes, path)
+        if row is not None:
+            if kwargs.get("slope_deg") is not None:
+                raise UserError("give either --slope-deg or --slopes, not both")
+            kwargs["slope_deg"] = row[0]
+            kwargs["slope_note"] = f"slope {row[0]:g} deg given in the manifest {row[1]}"
     return build_trial(read_recording(path), **kwargs)
 

@@ -5,6 +5,7 @@ All positions in m, angles in rad, arrays with time on the first axis; NaN marks
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,16 @@ __all__ = [
 
 #: The hub offset fit uses at most this many frames (evenly spaced).
 MAX_FIT_FRAMES = 50_000
+#: A marker frame fits the reference shape to this RMS, m (or 8x the median residual when larger).
+RIGID_TOL_M = 0.005
+#: Largest rotation of a marker set between consecutive frames, rad (a wheel turning 20 rad/s at 100 Hz).
+MAX_TURN_PER_FRAME_RAD = 0.2
+#: A marker set whose centroid moves more than this (m) plus this per frame is a seam, not a relabelling.
+SEAM_M, SEAM_M_PER_FRAME = 0.1, 0.05
+#: Prior standard deviation of the hub offset from the tracked point, per in-plane component, m, and the nominal
+#: height noise, m, that weighs it against the data in `estimate_hub_offset`.
+HUB_PRIOR_SD_M = 0.04
+PRIOR_NOISE_M = 0.5e-3
 #: Least total rotation (rad) for a hub offset in the object frame to be observable.
 MIN_ROTATION_FOR_OFFSET_RAD = np.pi
 
@@ -50,6 +61,8 @@ class HubEstimate:
     offset_m: np.ndarray | None = None
     offset_residual_m: float | None = None
     rotation: np.ndarray | None = None  # (n, 3, 3) world-from-body (marker sets: from the reference frame)
+    n_relabelled: int = 0  # frames whose marker labels were swapped and are repaired (marker sets)
+    n_inconsistent: int = 0  # frames whose markers fit no rigid shape, made gaps (marker sets)
 
 
 def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -> np.ndarray:
@@ -250,8 +263,97 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
         raise ValueError("no frame shows all markers: no reference shape")
     ref = p[full[0]]
     c_ref = ref.mean(axis=0)
-    w = vis.astype(np.float64)
     good = vis.sum(axis=1) >= min(min_markers, k)
+    rot, hub, res = _kabsch_frames(ref, p, vis)
+    n_repaired = n_dropped = 0
+    if k >= 3:
+        n_repaired, n_dropped = _relabel(ref, p, vis, good, rot, hub, res)
+    hub[~good] = np.nan
+    rot[~good] = np.nan
+    angle = axis = None
+    if k >= 3:
+        angle, axis = wheel_angle_from_rotations(rot)
+    return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)",
+                       rotation=rot, n_relabelled=n_repaired, n_inconsistent=n_dropped)
+
+
+def _rot_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle of ``a^T b`` for stacks of rotations, rad."""
+    c = 0.5 * (np.einsum("...ij,...ij->...", a, b) - 1.0)
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def _relabel(ref: np.ndarray, p: np.ndarray, vis: np.ndarray, good: np.ndarray, rot: np.ndarray, hub: np.ndarray,
+             res: np.ndarray) -> tuple[int, int]:
+    """Rigid-body consistency of a marker set, in place: a frame whose markers do not fit the reference shape
+    (RMS above `RIGID_TOL_M` or 8x the median) or whose rotation jumps from the last consistent frame (more than
+    `MAX_TURN_PER_FRAME_RAD` per frame: a symmetric marker layout fits a swap with a flipped pose) had labels
+    swapped or a ghost marker. Every relabelling (sets of up to 5 markers, else every exchange of two) is tried; the one that fits the shape and continues
+    the rotation is kept, else the frame becomes a gap (``good`` False). Returns (repaired, dropped) frames."""
+    n, k, _ = p.shape
+    ok_res = res[good]
+    tol = max(RIGID_TOL_M, 8.0 * float(np.median(ok_res))) if ok_res.size else RIGID_TOL_M
+    idx = np.flatnonzero(good)
+    if idx.size < 2:
+        return 0, 0
+    jump = _rot_angle(rot[idx[:-1]], rot[idx[1:]]) / np.diff(idx)
+    flag = np.zeros(n, bool)
+    flag[idx[1:][jump > MAX_TURN_PER_FRAME_RAD]] = True
+    flag[idx[res[idx] > tol]] = True
+    if not flag.any():
+        return 0, 0
+    if k <= 5:  # every relabelling of a small set; else every exchange of two labels
+        swaps = [np.array(q) for q in itertools.permutations(range(k))][1:]
+    else:
+        swaps = []
+        for i in range(k):
+            for j in range(i + 1, k):
+                perm = np.arange(k)
+                perm[[i, j]] = perm[[j, i]]
+                swaps.append(perm)
+    first = int(np.flatnonzero(flag)[0])
+    prev = idx[idx < first]
+    last_i = int(prev[-1]) if prev.size else None
+    repaired = dropped = 0
+    stop = int(np.flatnonzero(flag)[-1])
+    i = first
+    while i < n:
+        if not good[i]:
+            i += 1
+            continue
+        if i > stop and last_i is not None and last_i >= i - 1 and not flag[i]:
+            break  # back to consistent frames after the last flagged one
+        lim = MAX_TURN_PER_FRAME_RAD * (i - last_i) if last_i is not None else np.inf
+        turn = float(_rot_angle(rot[last_i], rot[i])) if last_i is not None else 0.0
+        if res[i] <= tol and turn <= lim:
+            last_i = i
+            i += 1
+            continue
+        if last_i is not None and np.linalg.norm(hub[i] - hub[last_i]) > SEAM_M + SEAM_M_PER_FRAME * (i - last_i):
+            break  # the whole set jumps: a seam between two takes, not a relabelling (left to the seam check)
+        best = None
+        for perm in swaps:
+            r2, h2, e2 = _kabsch_frames(ref, p[i:i + 1, perm], vis[i:i + 1, perm])
+            t2 = float(_rot_angle(rot[last_i], r2[0])) if last_i is not None else 0.0
+            if e2[0] <= tol and t2 <= lim and (best is None or e2[0] < best[2]):
+                best = (r2[0], h2[0], float(e2[0]))
+        if best is not None:
+            rot[i], hub[i] = best[0], best[1]
+            repaired += 1
+            last_i = i
+        else:
+            good[i] = False
+            dropped += 1
+        i += 1
+    return repaired, dropped
+
+
+def _kabsch_frames(ref: np.ndarray, p: np.ndarray, vis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted Kabsch per frame: (rotations (n, 3, 3), the reference centroid carried (n, 3), RMS residual of the
+    visible markers (n,), m); frames with under 3 visible markers have residual 0 (nothing to check)."""
+    n, k, _ = p.shape
+    c_ref = ref.mean(axis=0)
+    w = vis.astype(np.float64)
     q = np.where(vis[..., None], p, 0.0)
     wsum = np.maximum(w.sum(axis=1, keepdims=True), 1.0)
     cq = (w[..., None] * q).sum(axis=1) / wsum  # (n, 3)
@@ -267,13 +369,11 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
     dm[:, 2, 2] = d
     rot = np.transpose(vt, (0, 2, 1)) @ dm @ np.transpose(u, (0, 2, 1))  # current = R @ ref
     hub = np.einsum("nij,nj->ni", rot, c_ref - cr) + cq
-    hub[~good] = np.nan
-    rot[~good] = np.nan
-    angle = axis = None
-    if k >= 3:
-        angle, axis = wheel_angle_from_rotations(rot)
-    return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)",
-                       rotation=rot)
+    fit = np.einsum("nij,nkj->nki", rot, ref[None] - cr[:, None]) + cq[:, None]
+    err = np.where(vis, np.sum((fit - q) ** 2, axis=2), 0.0)
+    res = np.sqrt(err.sum(axis=1) / wsum[:, 0])
+    res[vis.sum(axis=1) < 3] = 0.0
+    return rot, hub, res
 
 
 def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: float = np.pi / 4,
@@ -331,8 +431,12 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
         _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
         s = xy @ vt[0]
         a = np.column_stack([r[:, 2, :] @ plane, -np.ones(len(s)), -s, bumps])
-        scale = np.maximum(np.abs(a).max(axis=0), 1e-3)
-        sol, *_ = np.linalg.lstsq(a / scale, -t[:, 2], rcond=1e-6)
+        # the prior: the tracked point lies within a few cm of the hub (rows g / sd * noise, noise 0.5 mm)
+        prior = np.zeros((2, a.shape[1]))
+        prior[0, 0] = prior[1, 1] = PRIOR_NOISE_M / HUB_PRIOR_SD_M
+        ap = np.vstack([a, prior])
+        scale = np.maximum(np.abs(ap).max(axis=0), 1e-3)
+        sol, *_ = np.linalg.lstsq(ap / scale, np.concatenate([-t[:, 2], np.zeros(2)]), rcond=1e-6)
         sol = sol / scale
         d = plane @ sol[:2]
         res = a @ sol + t[:, 2]

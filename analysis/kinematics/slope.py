@@ -28,6 +28,7 @@ class SlopeFrame:
     residual_m : RMS residual of the line fit, m (NaN when the slope was given and not fitted).
     source : ``"given"`` or how it was estimated.
     n_points : points used by the fit.
+    se_rad : standard error of the fitted slope, rad (NaN when given or from two points).
     """
 
     slope_rad: float
@@ -36,6 +37,7 @@ class SlopeFrame:
     residual_m: float
     source: str
     n_points: int = 0
+    se_rad: float = float("nan")
 
     @property
     def slope_deg(self) -> float:
@@ -123,5 +125,10 @@ def fit_slope(hub_m: np.ndarray, *, slope_deg: float | None = None, points_m: np
         "robust line through the whole hub path" if points_m is None
         else f"robust line through the hub at {pts.shape[0]} CoM-height minima")
     resid = float(np.sqrt(np.mean(r**2)))
+    se = float("nan")
+    if given is None and s.size > 2:
+        sxx = float(np.sum((s - s.mean()) ** 2))
+        if sxx > 0:  # standard error of the line's slope (from the residual scatter), in angle
+            se = float(np.sqrt(np.sum(r**2) / (s.size - 2) / sxx)) / (1.0 + b * b)
     # The residual is vertical; express it normal to the slope.
-    return SlopeFrame(phi, u, origin, resid * float(np.cos(phi)), source, int(pts.shape[0]))
+    return SlopeFrame(phi, u, origin, resid * float(np.cos(phi)), source, int(pts.shape[0]), se)

@@ -9,6 +9,7 @@ slope frame (x down the slope, y the outward normal, z lateral; m, rad, s).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,8 @@ LIFT_M = 0.005
 LIFT_DURATION_S = 0.1
 #: How long the wheel must stay put after its last impact to count as stalled, s.
 REST_S = 0.3
+#: At the end of the data a wheel turning forward at this fraction of its walking speed (and never back) walked.
+WALKING_SPEED_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -116,27 +119,32 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
     z_mid = float(np.median(z[walk]))
     if not post.any():
         return Ending("walked", "the recording ends at the last impact")
-    # fell: out of the plane of motion
+    # Lifted (caught) and out of the plane of motion (fell): whichever comes first. A catch often moves the
+    # wheel a little sideways; that is not a fall unless the wheel tips or drops.
     lateral = np.abs(z - z_mid) > FALL_DISTANCE_M
     dropped = y < h_lo - FALL_DISTANCE_M
     tilted = np.zeros_like(post) if axis_tilt_rad is None else np.nan_to_num(axis_tilt_rad) > FALL_TILT_RAD
+    lift = max(LIFT_M, 8 * noise_m)
+    up = post & (y > h_hi + lift)
+    t_lift = _first_run_start_s(t, up, LIFT_DURATION_S)
+    tipped = post & (dropped | tilted)
+    t_tip = float(t[int(np.argmax(tipped))]) if tipped.any() else math.inf
+    if t_lift is not None and t_lift <= t_tip:
+        k = int(np.argmax(up & (t >= t_lift)))
+        side = float(np.nanmax(np.abs(np.where(post, z - z_mid, np.nan))))
+        return Ending("caught", f"the hub rises {(np.nanmax(np.where(post, y, np.nan)) - h_hi) * 1e3:.0f} mm "
+                                f"above the walking band from {t[k]:.2f} s: lifted off the slope"
+                                + (f" (moved {side * 1e3:.0f} mm sideways while lifted)" if side > FALL_DISTANCE_M
+                                   else ""))
     fell = post & (lateral | dropped | tilted)
     if fell.any():
         k = int(np.argmax(fell))
         why = ("the wheel axis tilts by more than "
                f"{np.degrees(FALL_TILT_RAD):.0f} deg" if tilted[k] else
-               f"the hub moves {abs(z[k] - z_mid) * 1e3:.0f} mm sideways" if lateral[k] else
-               f"the hub drops {(h_lo - y[k]) * 1e3:.0f} mm below the walking band")
-        return Ending("fell", f"{why} at {t[k]:.2f} s: the wheel left its plane of motion")
-    # caught: lifted above the walking band for a while
-    lift = max(LIFT_M, 8 * noise_m)
-    up = post & (y > h_hi + lift)
-    if up.any():
-        run = _longest_run_s(t, up)
-        if run >= LIFT_DURATION_S:
-            k = int(np.argmax(up))
-            return Ending("caught", f"the hub rises {(np.nanmax(np.where(post, y, np.nan)) - h_hi) * 1e3:.0f} mm "
-                                    f"above the walking band from {t[k]:.2f} s: lifted off the slope")
+               f"the hub drops {(h_lo - y[k]) * 1e3:.0f} mm below the walking band" if dropped[k] else
+               f"the hub moves {abs(z[k] - z_mid) * 1e3:.0f} mm sideways")
+        return Ending("fell", f"{why} at {t[k]:.2f} s: the wheel left its plane of motion (tipped about the travel "
+                              "axis)")
     last_valid = int(np.flatnonzero(ok)[-1])
     trailing_gap_s = float(t[-1] - t[last_valid])
     if progress_rad is not None:
@@ -146,13 +154,16 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
         pp = progress_rad[tail]
         speed_end = (pp[-1] - pp[0]) / max(t[tail][-1] - t[tail][0], 1e-9) if pp.size >= 2 else np.nan
         back = float(np.nanmax(progress_rad[post | walk]) - progress_rad[last_valid])
-        if np.isfinite(speed_end) and speed_walk > 0 and speed_end >= 0.3 * speed_walk:
+        # A stall: the angular velocity goes through zero and back (the wheel rocks back), checked first.
+        if back > MOVE_TOL_RAD:
+            return Ending("stalled", f"after the last impact the wheel turns back {np.degrees(back):.1f} deg "
+                                     "(its angular velocity goes through zero and reverses): a stall")
+        still = (np.isfinite(speed_end) and speed_walk > 0 and speed_end >= WALKING_SPEED_FRACTION * speed_walk)
+        if still:
             where = ("the wheel leaves the capture volume" if trailing_gap_s > 0.05
                      else "the recording ends")
-            return Ending("walked", f"{where} while it still rolls ({speed_end:.2f} rad/s)")
-        if back > MOVE_TOL_RAD:
-            return Ending("stalled", f"after the last impact the wheel rocks back {np.degrees(back):.1f} deg "
-                                     "and comes to rest")
+            return Ending("walked", f"{where} while it still rolls forward ({speed_end:.2f} rad/s, "
+                                    f"{speed_end / speed_walk:.0%} of its walking speed, never turning back)")
         # Near the critical slope the wheel is slowest over the foot: slow is not at rest. A stall needs the
         # wheel to stay put for REST_S; a recording that ends sooner while it slows cannot tell.
         rest = post & (t >= t[last_valid] - REST_S)
@@ -165,6 +176,18 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
             return Ending("unknown", "the recording ends while the wheel slows over its foot, too soon to tell "
                                      "a stall from a slow step")
     return Ending("unknown", "the end of the recording matches no known ending")
+
+
+def _first_run_start_s(t: np.ndarray, m: np.ndarray, min_s: float) -> float | None:
+    """Start time of the first run of True in ``m`` lasting at least ``min_s``, or None."""
+    if not m.any():
+        return None
+    e = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+    s, f = np.flatnonzero(e == 1), np.flatnonzero(e == -1) - 1
+    for a, b in zip(s, f):
+        if t[b] - t[a] >= min_s:
+            return float(t[a])
+    return None
 
 
 def _longest_run_s(t: np.ndarray, m: np.ndarray) -> float:

@@ -20,6 +20,7 @@ from rimless.progress import progress_bar
 from rimless.analysis.examples.bundled import data_files
 from rimless.analysis.examples.critical_series import data_files as critical_data_files
 from rimless.analysis.inference.compare import Simulator
+from rimless.analysis.io.trial import slope_ci_deg
 from rimless.analysis.io.vicon_csv import ViconCsvError
 from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
 from rimless.analysis.report.html import ReportResult, build_report
@@ -65,7 +66,8 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
     row: dict[str, Any] = {"file": shown_path(path), "status": "refused", "reason": None, "frames": None,
                            "rate_hz": None, "steps": None, "source": None, "slope_deg": None, "ramp_slope_deg": None,
                            "outcome": None, "window_s": None, "impact_times_s": [], "step_periods_s": [],
-                           "hub_offset_mm": None, "warnings": [], "errors": [], "trial": None}
+                           "hub_offset_mm": None, "warnings": [], "errors": [], "trial": None,
+                           "slope_source": None, "slope_ci_deg": None}
     if error is not None or trial is None:
         row["reason"] = _clean_reason(error) if error is not None else "not imported"
         if isinstance(error, ViconCsvError):
@@ -83,6 +85,7 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
         impact_times_s=trial.impact_time_s.tolist(), step_periods_s=trial.step_period_s.tolist(),
         hub_offset_mm=None if m.hub_offset_m is None else [round(v * 1e3, 3) for v in m.hub_offset_m],
         warnings=list(m.warnings) + ([f"steps not detected: {m.step_refused}"] if m.step_refused else []),
+        slope_source=m.slope_source, slope_ci_deg=slope_ci_deg(m.slope_ci_rad), _estimated_deg=m.slope_estimated_deg,
     )
     return row
 

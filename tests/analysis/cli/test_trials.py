@@ -19,7 +19,8 @@ runner = CliRunner()
 #: The keys of `trials import --json` (issue contract: the old six plus the walk's).
 CONTRACT = {"file", "status", "reason", "frames", "rate_hz", "steps", "source", "slope_deg", "ramp_slope_deg",
             "outcome", "window_s", "impact_times_s", "step_periods_s", "hub_offset_mm", "warnings", "errors",
-            "trial"}  # the issue's keys, plus the path of the trial written (None when refused)
+            "trial", "slope_source", "slope_ci_deg"}  # the issues' keys, plus the path of the trial written (None when
+# refused); slope_source (ramp | given | estimated) and slope_ci_deg ([low, high]) are issue 19's
 
 
 @pytest.fixture()

@@ -44,7 +44,7 @@ def test_four_markers_slope_steps_and_com(tmp_path, seed):
     trial = import_trial(write_markers(tmp_path, w), leg_length_m=w.leg_length_m)
     m = trial.meta
     assert abs(m.slope_deg - 2.0) < 0.05
-    assert "CoM-height minima" in m.slope_source
+    assert m.slope_source == "estimated" and "contact points" in m.slope_method
     assert m.step_method == "rotation" and m.step_refused is None
     assert_periods_within_one_frame(trial, w)
     err = trial.series["com_height"] - w.com_height_m

@@ -1,0 +1,222 @@
+"""Independent truth model for the per-trial slope, hub and ending: a compliant ER wheel (not Table 1) recorded
+as a Vicon Tracker object, the messy way.
+
+The dynamics come from the simulator (`rimless.sim`, ER model with other c and k); everything the analysis
+estimates is written here apart from ``rimless.analysis`` (it imports nothing from it): the slope frame, the
+world embedding, the object origin off the hub (up to 4 cm, plus an axial offset), the hold before the
+release, the stall (a rigid stance that rises, turns back and rests), the endings (caught with a little
+sideways motion, fell = tipped about the travel axis, walked = the data stop mid-step), noise and gaps.
+
+Slope frame (model.md section 2): x down the slope, y the outward normal, z = x cross y; stance foot b at
+(x_b, y_b); hub = foot + L1 (sin theta, cos theta); the body turns by -beta about z with beta = theta + k alpha.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from tests.support.analysis_truth_wheel import objects_section, write
+
+ALPHA = math.pi / 4
+#: Leg damping and stiffness of the truth wheel (Table 1: 8 N s/m, 2700 N/m).
+C_NS_PER_M = 14.0
+K_N_PER_M = 2000.0
+
+
+@dataclass
+class ErTruth:
+    name: str
+    slope_deg: float
+    time_s: np.ndarray
+    pose: np.ndarray  # (n, 6) helical rad + origin m (NaN rows = gaps)
+    hub_world: np.ndarray
+    impact_time_s: np.ndarray
+    steps: int
+    stalled: bool
+    outcome: str
+    origin_body_m: np.ndarray
+    feet_world: list = field(default_factory=list)
+    rot: Rotation | None = None  # world-from-body, noise-free
+
+
+def _params(slope_deg: float):  # noqa: ANN202
+    from rimless.sim.model.params import WheelParams
+
+    return WheelParams(damping_ns_per_m=C_NS_PER_M, stiffness_n_per_m=K_N_PER_M, slope_rad=math.radians(slope_deg))
+
+
+def _rigid_stance(p, y_plus: np.ndarray, dt: float, *, t_max: float, stop_at_top: bool = False):  # noqa: ANN001, ANN202
+    """A rigid stance on foot b from the post-impact state (RK4, 0.1 ms): (t, theta) sampled every dt, and
+    whether it turned back; it rises, and if it turns back, rolls back to its start angle and rests."""
+    m_all = p.hub_mass_kg + 8 * p.leg_mass_kg
+    ell = float(y_plus[3])
+    inertia = p.inertia_kg_m2 + 8 * p.leg_mass_kg * p.leg_length_m**2 + m_all * ell**2
+    kk = m_all * p.gravity_m_s2 * ell / inertia
+    phi = p.slope_rad
+    th0 = th = float(y_plus[2])
+    w = float(y_plus[7])
+    h = 1e-4
+
+    def f(a: float) -> float:
+        return kk * math.sin(a + phi)
+
+    ts, ths, t, back, nxt = [0.0], [th], 0.0, False, dt
+    while t < t_max:
+        k1v, k1a = f(th), w
+        k2v, k2a = f(th + 0.5 * h * k1a), w + 0.5 * h * k1v
+        k3v, k3a = f(th + 0.5 * h * k2a), w + 0.5 * h * k2v
+        k4v, k4a = f(th + h * k3a), w + h * k3v
+        th += h * (k1a + 2 * k2a + 2 * k3a + k4a) / 6
+        w += h * (k1v + 2 * k2v + 2 * k3v + k4v) / 6
+        t += h
+        if w < 0:
+            back = True
+            if stop_at_top:
+                break
+        if back and th <= th0:
+            th = th0
+            break
+        if t >= nxt:
+            ts.append(t)
+            ths.append(th)
+            nxt += dt
+    return np.array(ts), np.array(ths), back, ell
+
+
+def simulate(slope_deg: float, release_rad_s: float, *, max_steps: int = 8, ending: str = "caught",
+             hold_s: float = 0.4, rate_hz: float = 100.0, origin_body_m=(0.03, -0.025, 0.012), yaw_deg: float = 20.0,
+             noise_m: float = 0.3e-3, angle_noise_rad: float = 1e-3, gaps: tuple[tuple[float, float], ...] = (),
+             seed: int = 0, name: str = "er") -> ErTruth:
+    """Hold, release at theta = -alpha/2 with theta' = release, walk up to ``max_steps`` (a stall ends the walk
+    with a rock back and a rest), then ``ending``: ``caught`` (lifted 8 cm with 15 mm of sideways motion),
+    ``walked`` (the data stop 40 % into the next step), ``fell`` (tips 60 deg about the travel axis)."""
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import state_from_section
+    from rimless.sim.step.backend import make_integrator
+    from rimless.sim.step.hybrid import simulate_step
+
+    p = _params(slope_deg)
+    mech = Mechanics.of(p)
+    integ = make_integrator("auto", rtol=1e-9)
+    y = state_from_section(mech, np.array([-ALPHA / 2, release_rad_s]))
+    dt = 1e-3
+    t_list, x_list, h_list, b_list = [np.arange(0.0, hold_s, dt)], [], [], []
+    th_rel = -ALPHA / 2
+    x_list.append(np.full(t_list[0].size, p.leg_length_m * math.sin(th_rel)))
+    h_list.append(np.full(t_list[0].size, p.leg_length_m * math.cos(th_rel)))
+    b_list.append(np.full(t_list[0].size, th_rel))
+    t0, impacts, stalled, k = hold_s, [], False, 0
+    feet = [np.array([0.0, 0.0])]
+    for k in range(max_steps):
+        try:
+            res = simulate_step(mech, "er", y, integ, t0=0.0, record_dt=dt)
+        except StepFailure:
+            stalled = True
+            break
+        for seg in res.segments:
+            q = seg.y
+            t_list.append(t0 + seg.t)
+            x_list.append(q[:, 0] + q[:, 3] * np.sin(q[:, 2]))
+            h_list.append(q[:, 1] + q[:, 3] * np.cos(q[:, 2]))
+            b_list.append(q[:, 2] + k * ALPHA)
+        t0 += res.period_s
+        impacts.append(t0)
+        y = res.y_plus
+        feet.append(np.array([y[0], y[1]]))
+    n_steps = len(impacts) if not stalled else k
+    beta_off = n_steps * ALPHA
+
+    def stance(ts, ths, ell):  # noqa: ANN001, ANN202
+        return (t0 + ts, y[0] + ell * np.sin(ths), y[1] + ell * np.cos(ths), ths + beta_off)
+
+    outcome = ending
+    lift = None
+    if stalled:
+        ts, ths, back, ell = _rigid_stance(p, y, dt, t_max=3.0)
+        tt, xx, hh, bb = stance(ts, ths, ell)
+        rest = np.arange(tt[-1] + dt, tt[-1] + 0.8, dt)
+        t_list += [tt, rest]
+        x_list += [xx, np.full(rest.size, xx[-1])]
+        h_list += [hh, np.full(rest.size, hh[-1])]
+        b_list += [bb, np.full(rest.size, bb[-1])]
+        outcome = "stalled"
+    else:
+        period = impacts[-1] - (impacts[-2] if len(impacts) > 1 else hold_s)
+        frac = 0.4 if ending == "walked" else 0.3
+        ts, ths, back, ell = _rigid_stance(p, y, dt, t_max=frac * period, stop_at_top=True)
+        tt, xx, hh, bb = stance(ts, ths, ell)
+        t_list.append(tt)
+        x_list.append(xx)
+        h_list.append(hh)
+        b_list.append(bb)
+        if ending in ("caught", "fell"):
+            after = np.arange(tt[-1] + dt, tt[-1] + 0.6, dt)
+            s = np.clip((after - after[0]) / 0.3, 0, 1)
+            lift = (after, s)
+            t_list.append(after)
+            x_list.append(np.full(after.size, xx[-1]))
+            h_list.append(np.full(after.size, hh[-1]))
+            b_list.append(np.full(after.size, bb[-1]))
+    t = np.concatenate(t_list)
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    keep = np.concatenate([[True], np.diff(t) > 1e-12])
+    t = t[keep]
+    x, hgt, beta = (np.concatenate(v)[order][keep] for v in (x_list, h_list, b_list))
+    beta = beta - th_rel  # 0 at the release pose
+
+    rng = np.random.default_rng(seed)
+    tf = np.arange(0.0, t[-1], 1.0 / rate_hz) + float(rng.uniform(0, 1.0 / rate_hz))
+    tf = tf[tf <= t[-1]]
+    xs, hs, bs = (np.interp(tf, t, v) for v in (x, hgt, beta))
+    phi = math.radians(slope_deg)
+    yaw = math.radians(yaw_deg)
+    trv = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    d = math.cos(phi) * trv - math.sin(phi) * up
+    nrm = math.sin(phi) * trv + math.cos(phi) * up
+    w = np.cross(d, nrm)
+    org = np.array([0.4, -0.6, 0.3])
+    hub = org + np.outer(xs, d) + np.outer(hs, nrm)
+    base = Rotation.from_matrix(np.column_stack([d, nrm, w]))
+    rot = Rotation.from_rotvec(np.outer(-bs, w)) * base
+    if lift is not None:
+        after, s = lift
+        sf = np.interp(tf, after, s, left=0.0, right=1.0)
+        if outcome == "caught":
+            hub = hub + np.outer(0.08 * sf, up) + np.outer(0.015 * sf, w)
+        else:  # fell: tips about the travel axis through the foot
+            foot = org + y[0] * d + y[1] * nrm
+            tip = Rotation.from_rotvec(np.outer(math.radians(60) * sf, d))
+            hub = foot + tip.apply(hub - foot)
+            rot = tip * rot
+    o = np.asarray(origin_body_m, float)
+    trans = hub + rot.apply(o)
+    noisy_rot = Rotation.from_rotvec(rng.normal(0, angle_noise_rad, (tf.size, 3))) * rot
+    pose = np.column_stack([noisy_rot.as_rotvec(), trans + rng.normal(0, noise_m, trans.shape)])
+    for a, b in gaps:
+        pose[(tf >= a) & (tf < b)] = np.nan
+    feet_w = [org + f[0] * d + f[1] * nrm for f in feet]
+    return ErTruth(name, slope_deg, tf, pose, hub, np.array(impacts), n_steps, stalled, outcome, o, feet_w, rot)
+
+
+def write_csv(path, truth: ErTruth) -> str:  # noqa: ANN001
+    """The trial as a Vicon Tracker export (object ``Wheel``, rad and mm)."""
+    return write(path, objects_section({"Wheel": truth.pose}))
+
+
+def write_markers_csv(path, truth: ErTruth, body_m: np.ndarray, *, noise_m: float = 0.3e-3, seed: int = 0) -> str:  # noqa: ANN001
+    """The trial as a Trajectories section of markers ``wheel:M0..`` at body points ``body_m`` (k, 3) m (body
+    frame: x, y in the wheel plane about the hub, z along the axis), with noise; gaps of the pose are gaps."""
+    from tests.support.analysis_truth_wheel import markers_section
+
+    rng = np.random.default_rng(seed)
+    pts = truth.hub_world[:, None, :] + np.einsum("nij,kj->nki", truth.rot.as_matrix(), np.asarray(body_m))
+    pts = pts + rng.normal(0, noise_m, pts.shape)
+    pts[np.isnan(truth.pose).any(axis=1)] = np.nan
+    return write(path, markers_section({f"wheel:M{i}": pts[:, i] for i in range(pts.shape[1])}))
