@@ -26,6 +26,13 @@ def _fmt(v: Any, fmt: str) -> str:
     return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
 
 
+def _model_name(key: str) -> str:
+    """``er`` -> ``ER``; ``er_calibrated`` -> ``ER calibrated (fitted on these trials, not a prediction)``."""
+    if key.endswith("_calibrated"):
+        return f"{key.removesuffix('_calibrated').upper()} calibrated (fitted on these trials, not a prediction)"
+    return key.upper()
+
+
 def register(app: typer.Typer) -> None:
     """Add ``critical-slope``, ``calibrate`` and ``coverage`` to the ``trials`` app."""
     app.command("critical-slope")(user_facing(critical_slope_cmd))
@@ -119,7 +126,7 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     for est in res.estimates:
         e.add_row(est.method, f"{est.value_deg:.3f}", f"[{est.ci_deg[0]:.3f}, {est.ci_deg[1]:.3f}]")
     for m, v in out["model_critical_slope_deg"].items():
-        e.add_row(f"model {m.upper().replace('_CALIBRATED', ' (calibrated)')}", _fmt(v, ".3f"), "")
+        e.add_row(f"model {m.upper().replace('_CALIBRATED', ' fitted on these trials')}", _fmt(v, ".3f"), "")
     con.print(e)
     if res.chosen is not None:
         con.print(f"critical slope from the trials: {res.chosen.value_deg:.3f} deg ({res.chosen.method}); {res.why}",
@@ -177,12 +184,20 @@ def _print_calibration(out: dict[str, Any]) -> None:
 
     con = Console()
     t = Table(title=f"calibration of the {out['model'].upper()} model", show_edge=False)
-    for col in ("parameter", "Table 1", "fitted", "± 1 sigma", "identifiable"):
+    for col in ("parameter", "Table 1", "fitted", "± 1 sigma", "95 % interval", "identifiable"):
         t.add_column(col, justify="left" if col == "parameter" else "right", no_wrap=True)
     for p in out["params"]:
+        ci = p.get("ci95")
         t.add_row(f"{p['name']} ({p['unit']})", f"{p['table1']:.4g}",
-                  _fmt(p["estimate"], ".4g"), _fmt(p["se"], ".2g"), "yes" if p["identifiable"] else "[red]NO[/]")
+                  _fmt(p["estimate"], ".4g"), _fmt(p["se"], ".2g"),
+                  f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–", "yes" if p["identifiable"] else "[red]NO[/]")
     con.print(t)
+    opt = out.get("optimizer", {})
+    if opt:
+        con.print(("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
+                  + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
+                  "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty",
+                  markup=False, highlight=False)
     for p in out["params"]:
         if p["note"]:
             con.print(f"  {p['name']}: {p['note']}", markup=False, highlight=False)
@@ -209,7 +224,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
     if "critical_slope_deg" in out:
         c = out["critical_slope_deg"]
         parts = [f"trials {_fmt(c['trials'], '.3f')} deg ({c['trials_method']})"]
-        parts += [f"{k.removeprefix('model_').replace('_', ' ')} {_fmt(v, '.3f')} deg" for k, v in c.items()
+        parts += [f"model {_model_name(k.removeprefix('model_'))} {_fmt(v, '.3f')} deg" for k, v in c.items()
                   if k.startswith("model_")]
         con.print("critical slope: " + ", ".join(parts), markup=False, highlight=False)
     for name, why in out["failed"].items():
@@ -229,7 +244,7 @@ def critical_lines(res: Any) -> str:
     else:
         lines.append(f"critical slope from the trials: none ({cr.why})")
     for m, v in cr.model.get("critical_slope_deg", {}).items():
-        label = m.upper().replace("_CALIBRATED", " with calibrated c")
+        label = m.upper().replace("_CALIBRATED", " with c calibrated on these trials (fitted, not a prediction)")
         lines.append(f"model critical slope, {label}: {_fmt(v, '.3f')} deg")
     if cal is not None:
         for p in cal.params:

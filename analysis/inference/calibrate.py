@@ -15,7 +15,9 @@ sigma_T and sigma_h are the RMS residuals of each block at the start and, for th
 solution (so each block has a reduced chi^2 of 1 and neither swamps the other); for the uncertainties the
 CoM block's sigma is further inflated by sqrt((1 + rho) / (1 - rho)), rho the lag-1 autocorrelation of its
 residuals (correlated samples carry less information than their number suggests). Uncertainties are from the Jacobian
-(cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters.
+(cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters, and from the
+trial-clustered sandwich (`sandwich_se`, robust to correlated residuals and model mismatch): the larger is
+reported.
 A parameter is **not identifiable** when its relative standard error exceeds `NOT_IDENTIFIABLE_REL_SE` or the
 Jacobian has a (near) null direction involving it (flat cost); it is then reported as such, not as a value.
 
@@ -36,7 +38,7 @@ from rimless.values import parse_list
 
 from rimless.analysis.io.trial import ALPHA_RAD
 
-__all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report",
+__all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report", "sandwich_se",
            "NOT_IDENTIFIABLE_REL_SE", "NoTrialCalibrated"]
 
 #: --fit names -> WheelParams fields, with the display unit
@@ -46,7 +48,8 @@ NOT_IDENTIFIABLE_REL_SE = 0.5
 NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
-MAX_NFEV = 20  # residual evaluations of the full least squares
+MAX_NFEV = 20  # residual evaluations of one round of the full least squares
+MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
 
 
@@ -206,11 +209,19 @@ class ParamEstimate:
     se: float
     identifiable: bool
     note: str = ""
+    se_model: float = math.nan  # from the Jacobian with the block sigmas (residuals independent, model right)
+    se_sandwich: float = math.nan  # trial-clustered sandwich (residuals correlated within a trial, model mismatch)
+
+    @property
+    def ci95(self) -> tuple[float, float]:
+        return (self.value - 1.959963984540054 * self.se, self.value + 1.959963984540054 * self.se)
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "field": self.field, "unit": self.unit, "table1": self.table1,
                 "value": self.value if self.identifiable else None, "estimate": self.value, "se": self.se,
-                "identifiable": self.identifiable, "note": self.note}
+                "identifiable": self.identifiable, "note": self.note, "se_model": self.se_model,
+                "se_sandwich": self.se_sandwich,
+                "ci95": list(self.ci95) if math.isfinite(self.se) else None}
 
 
 @dataclass
@@ -227,6 +238,8 @@ class CalibrationResult:
     cost_table1: float = math.nan
     cost_calibrated: float = math.nan
     model: str = "er"
+    converged: bool = True
+    optimizer: dict[str, Any] = field(default_factory=dict)  # status, message, nfev, rounds, starts
 
     @property
     def identifiable(self) -> bool:
@@ -241,13 +254,33 @@ class CalibrationResult:
                                   "calibrated": _total(self.residuals, "calibrated_rms_period_ms")},
                 "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
                                "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
-                "failed": self.failed, "simulations": self.evaluations}
+                "failed": self.failed, "simulations": self.evaluations, "converged": self.converged,
+                "optimizer": self.optimizer}
 
 
 def _total(rows: list[dict[str, Any]], key: str) -> float:
     vals = [(r[key], r["n_" + ("period" if "period" in key else "com")]) for r in rows if math.isfinite(r[key])]
     n = sum(k for _, k in vals)
     return math.sqrt(sum(v * v * k for v, k in vals) / n) if n else math.nan
+
+
+def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray) -> np.ndarray:
+    """Standard errors of the globals (their units) from the trial-clustered sandwich A B A: A = (J^T J)^-1,
+    B = sum over trials of (J_i^T r_i)(J_i^T r_i)^T with the rows of trial i between offs[i] and offs[i+1].
+
+    It stays right when the residuals of a trial are correlated or the model misses something the trials
+    share with each other only through the parameters (each trial's misfit counts once, not once per sample);
+    scaled by n / (n - n_global) for n trials (small-sample correction). NaN with fewer trials than globals + 1."""
+    n_t = offs.size - 1
+    if n_t <= n_global:
+        return np.full(n_global, np.nan)
+    A = np.linalg.pinv(J.T @ J)
+    B = np.zeros_like(A)
+    for i in range(n_t):
+        g = J[offs[i]:offs[i + 1]].T @ r[offs[i]:offs[i + 1]]
+        B += np.outer(g, g)
+    cov = A @ B @ A * (n_t / (n_t - n_global))
+    return np.sqrt(np.clip(np.diag(cov)[:n_global], 0.0, None)) * scale[:n_global]
 
 
 def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
@@ -497,11 +530,22 @@ class _Objective:
         hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
         return lo, hi
 
-    def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_rounds: int = MAX_ROUNDS) -> Any:
+        """Trust-region least squares from u, restarted from where it stopped while it stops on its budget
+        (`MAX_NFEV` evaluations a round, at most ``max_rounds`` rounds). The scipy result of the last round
+        with ``rounds`` and the total ``nfev_total``; ``status == 0`` means the budget ran out (not converged)."""
         from scipy.optimize import least_squares
 
-        return least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac, bounds=(lo, hi), method="trf", xtol=1e-8,
-                             ftol=1e-10, max_nfev=MAX_NFEV).x
+        total = 0
+        for k in range(max_rounds):
+            r = least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac, bounds=(lo, hi), method="trf", xtol=1e-8,
+                              ftol=1e-10, max_nfev=MAX_NFEV)
+            total += int(r.nfev)
+            u = r.x
+            if r.status != 0:
+                break
+        r.rounds, r.nfev_total = k + 1, total
+        return r
 
     def inflate_com_sigma(self, u: np.ndarray) -> None:
         """CoM samples 10 ms apart are not independent when the model misses a systematic shape (their residuals
@@ -518,19 +562,25 @@ class _Objective:
 
 
 def _estimates(glob: _Globals, fit: Sequence[str], xg: np.ndarray, se: np.ndarray, ok: list[bool],
-               notes: list[str]) -> list[ParamEstimate]:
-    """One `ParamEstimate` per fitted name; identifiable when the cost is not flat along it and its relative
-    standard error is at most `NOT_IDENTIFIABLE_REL_SE`."""
+               notes: list[str], se_sand: np.ndarray | None = None, converged: bool = True) -> list[ParamEstimate]:
+    """One `ParamEstimate` per fitted name. Its standard error is the larger of the model-based one and the
+    trial-clustered sandwich (``se_sand``); it is identifiable when the fit converged, the cost is not flat
+    along it and that relative standard error is at most `NOT_IDENTIFIABLE_REL_SE` (a 95 % interval no wider
+    than about +-100 %)."""
     estimates = []
     for j, n in enumerate(fit):
         f, unit = FIT_FIELDS[n]
-        rel = se[j] / abs(xg[j]) if xg[j] != 0 else math.inf
-        ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE
+        s_sand = float(se_sand[j]) if se_sand is not None else math.nan
+        s_use = max(float(se[j]), s_sand) if math.isfinite(s_sand) else float(se[j])
+        rel = s_use / abs(xg[j]) if xg[j] != 0 else math.inf
+        ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged
         note = notes[j]
-        if ok[j] and not ident:
+        if ok[j] and rel > NOT_IDENTIFIABLE_REL_SE:
             note = (f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it")
-        estimates.append(ParamEstimate(n, f, unit, float(getattr(glob.base, f)), float(xg[j]), float(se[j]), ident,
-                                       note))
+        elif ok[j] and not converged:
+            note = "the fit did not converge (optimiser stopped on its budget): the value is where it stopped"
+        estimates.append(ParamEstimate(n, f, unit, float(getattr(glob.base, f)), float(xg[j]), s_use, ident,
+                                       note, float(se[j]), s_sand))
     return estimates
 
 
@@ -562,16 +612,18 @@ def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialDat
 
 
 def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
-              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3,
-              progress: Callable[[int], None] | None = None) -> CalibrationResult:
+              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3, max_rounds: int = MAX_ROUNDS,
+              multi_start: bool = True, progress: Callable[[int], None] | None = None) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
     Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
     (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
     (`PROFILE_FACTORS`), which picks the start (`_start`); (2) the full least squares on periods and CoM height
     (`_Objective`, recorded walks on the compiled integrator), with the block sigmas of the start, then the
-    sigmas of the solution for the uncertainties. ``progress(n)`` is called after simulations with the
-    running count."""
+    sigmas of the solution for the uncertainties. With two or more globals the fit also starts from Table 1
+    (the cost has a ridge, e.g. c-k) and keeps the lower cost; each start runs until converged or
+    ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
+    identifiable). ``progress(n)`` is called after simulations with the running count."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -594,18 +646,33 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     u = obj.start(ug_start, ws_start)
     obj.set_sigmas(u)
     cost_t1 = obj.cost(u_t1)
-    u = obj.solve(u, *obj.bounds(ws_start))
+    lo, hi = obj.bounds(ws_start)
+    starts = [u]
+    if multi_start and glob.n >= 2 and ug_start.any():  # a ridge between globals: also start from Table 1, keep the lower cost
+        starts.append(obj.start(np.zeros(glob.n), ws_t1))
+    best = None
+    for u0 in starts:
+        r = obj.solve(u0, lo, hi, max_rounds)
+        if best is None or r.cost < best.cost:
+            best = r
+    u = best.x
+    converged = bool(best.status > 0)
+    optimizer = {"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev_total),
+                 "rounds": int(best.rounds), "starts": len(starts), "converged": converged}
     obj.set_sigmas(u)
     obj.inflate_com_sigma(u)
     J = obj.jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
     cost_cal = obj.cost(u)
-    se, corr, ok, notes = least_squares_report(J, glob.n, np.concatenate([glob.scale, np.ones(2 * obj.n_t)]))
+    scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
+    se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
+    se_sand = sandwich_se(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
-    estimates = _estimates(glob, fit, xg, se, ok, notes)
+    estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
     cal_params = glob.params(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
     return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
-                             obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model)
+                             obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
+                             optimizer)
 
 
 class NoTrialCalibrated(RimlessError):

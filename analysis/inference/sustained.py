@@ -356,8 +356,10 @@ def trial_verdict(trial: Any, params: Any = None, *, shared_slope: tuple[float, 
     sig_t = max(TIMING_SIGMA_FLOOR_S, 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
     if not (math.isfinite(slope_deg) and 0.0 < slope_deg < math.degrees(params.alpha / 2)):
         n = int(sum(c.size for c in chains))
-        return Verdict("undetermined", f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
-                       "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
+        v = Verdict("undetermined", f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
+                    "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
+        v.slope_sigma_deg, v.slope_sigma_source = trial_slope_sigma_deg(meta)
+        return v
     pend = StancePendulum.from_params(params, math.radians(slope_deg))
     v = verdict_from_periods(chains, pend, slope_deg=slope_deg, stalled=_trial_stalled(trial),
                              timing_sigma_s=sig_t, shared_slope=shared_slope)
