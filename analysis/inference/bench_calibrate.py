@@ -2,8 +2,9 @@
 
 Generates sustained trials of a known ER wheel (default c = 12 N s/m, k = 2200 N/m; Table 1 has 8 and 2500) with
 the compiled simulator (CoM height with 0.3 mm noise at 100 Hz, impact times with 0.5 ms noise), then fits
-``--fit`` (default c,k) twice in one run: the previous method (one start, one budget of `MAX_NFEV` evaluations)
-and the current one (a second start on a ridge, rounds until converged, sandwich uncertainties). Prints, for
+``--fit`` (default c,k) twice in one run: the previous method (one start, one budget of `MAX_NFEV` evaluations,
+its inner loops: `REFERENCE_PATHS`) and the current one (a second start on a ridge, rounds until converged,
+sandwich uncertainties, cached CoM splines, a coarse-to-fine shift search, brentq for the release). Prints, for
 each, the wall time, whether it converged, each parameter's estimate, 1-sigma, error and whether its 95 %
 interval covers the truth.
 """
@@ -66,12 +67,18 @@ def main(argv: list[str] | None = None) -> None:
     names = [t.meta.source_file for t in trials]
     fit = parse_fit(a.fit)
     calibrate(trials[:1], names[:1], ["c"], max_rounds=1, multi_start=False)  # warm the compiled code
+    from rimless.analysis.inference import calibrate as cal_mod
+
     runs = {"old": dict(max_rounds=1, multi_start=False), "new": {}}
     for label, kw in runs.items():
         if a.only not in (label, "both"):
             continue
+        cal_mod.REFERENCE_PATHS = label == "old"
         t0 = time.perf_counter()
-        res = calibrate(trials, names, fit, **kw)
+        try:
+            res = calibrate(trials, names, fit, **kw)
+        finally:
+            cal_mod.REFERENCE_PATHS = False
         dt = time.perf_counter() - t0
         print(f"{label}: {dt:.1f} s, {res.evaluations} simulations, converged {res.converged} "
               f"({res.optimizer.get('message', '')}; {res.optimizer.get('starts')} start(s), "

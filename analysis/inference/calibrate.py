@@ -21,6 +21,9 @@ reported.
 A parameter is **not identifiable** when its relative standard error exceeds `NOT_IDENTIFIABLE_REL_SE` or the
 Jacobian has a (near) null direction involving it (flat cost); it is then reported as such, not as a value.
 
+One concept: the least-squares calibration (data, objective, stages, estimates); its uncertainty algebra is
+`rimless.analysis.inference.identifiability`.
+
 Simulations use the compiled fast path (`rimless.sim.fast.FastIntegrator` under `simulate_steps`).
 """
 
@@ -36,6 +39,7 @@ import numpy as np
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
 
+from rimless.analysis.inference.identifiability import NULL_EIGEN, least_squares_report, sandwich_se
 from rimless.analysis.io.trial import ALPHA_RAD
 
 __all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report", "sandwich_se",
@@ -45,12 +49,14 @@ __all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_s
 FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/m"), "m_H": ("hub_mass_kg", "kg"),
               "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
-NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of one round of the full least squares
 MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
+#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection)
+#: for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
+REFERENCE_PATHS = False
 
 
 def parse_fit(text: str) -> list[str]:
@@ -175,27 +181,44 @@ def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
     return rp, s - (d.com_m + off)
 
 
+def _curve_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float, Any]]]:
+    """The simulated CoM curve of walk ``g`` (times from t0): the clean samples and one cubic spline per step,
+    built once per walk and kept on it (the time-shift search evaluates the same walk hundreds of times)."""
+    from scipy.interpolate import CubicSpline
+
+    from rimless.analysis.inference.compare import clean_curve
+
+    cache = None if REFERENCE_PATHS else getattr(g, "_com_parts", None)
+    if cache is not None and cache[0] == t0:
+        return cache[1]
+    t_all = np.asarray(g.table["t_s"], float) - t0
+    y_all = np.asarray(g.table["com_height_normal_m"], float)
+    step = np.asarray(g.table["step"])
+    st, sy = clean_curve(t_all, y_all)
+    splines = []
+    for k in np.unique(step):
+        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
+        if ts.size >= 4:
+            splines.append((float(ts[0]), float(ts[-1]), CubicSpline(ts, ys)))
+    parts = (st, sy, splines)
+    try:
+        g._com_parts = (t0, parts)  # noqa: SLF001
+    except AttributeError:
+        pass
+    return parts
+
+
 def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
     impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
     interpolation on the record grid puts kinks into the cost that finite differences mistake for
     information). Held at the end values outside the simulated walk (a stall)."""
-    from scipy.interpolate import CubicSpline
-
-    from rimless.analysis.inference.compare import clean_curve
-
-    t_all = np.asarray(g.table["t_s"], float) - t0
-    y_all = np.asarray(g.table["com_height_normal_m"], float)
-    step = np.asarray(g.table["step"])
-    st, sy = clean_curve(t_all, y_all)
+    st, sy, splines = _curve_parts(g, t0)
     out = np.interp(tt, st, sy)
-    for k in np.unique(step):
-        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
-        if ts.size < 4:
-            continue
-        m = (tt >= ts[0]) & (tt <= ts[-1])
+    for lo, hi, sp in splines:
+        m = (tt >= lo) & (tt <= hi)
         if m.any():
-            out[m] = CubicSpline(ts, ys)(tt[m])
+            out[m] = sp(tt[m])
     return out
 
 
@@ -264,72 +287,6 @@ def _total(rows: list[dict[str, Any]], key: str) -> float:
     return math.sqrt(sum(v * v * k for v, k in vals) / n) if n else math.nan
 
 
-def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray) -> np.ndarray:
-    """Standard errors of the globals (their units) from the trial-clustered sandwich A B A: A = (J^T J)^-1,
-    B = sum over trials of (J_i^T r_i)(J_i^T r_i)^T with the rows of trial i between offs[i] and offs[i+1].
-
-    It stays right when the residuals of a trial are correlated or the model misses something the trials
-    share with each other only through the parameters (each trial's misfit counts once, not once per sample);
-    scaled by n / (n - n_global) for n trials (small-sample correction). NaN with fewer trials than globals + 1."""
-    n_t = offs.size - 1
-    if n_t <= n_global:
-        return np.full(n_global, np.nan)
-    A = np.linalg.pinv(J.T @ J)
-    B = np.zeros_like(A)
-    for i in range(n_t):
-        g = J[offs[i]:offs[i + 1]].T @ r[offs[i]:offs[i + 1]]
-        B += np.outer(g, g)
-    cov = A @ B @ A * (n_t / (n_t - n_global))
-    return np.sqrt(np.clip(np.diag(cov)[:n_global], 0.0, None)) * scale[:n_global]
-
-
-def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
-    """From the Jacobian of the scaled residuals (the first n_global columns are the globals, in units of
-    ``scale``): their standard errors (in their units), correlation and identifiability.
-
-    The information about the globals is the Schur complement S = F_gg - F_gl F_ll^-1 F_lg of F = J^T J (the
-    per-trial unknowns profiled out). Normalised to unit diagonal, an eigenvalue below `NULL_EIGEN` is a flat
-    direction of the cost (a parameter, or a combination, the data do not see: finite differences leave it
-    slightly above zero); every global taking part in it, and every global whose column is zero, is not
-    identifiable and gets an infinite standard error."""
-    F = J.T @ J
-    g, l_ = slice(0, n_global), slice(n_global, F.shape[0])
-    S = F[g, g].copy()
-    if F.shape[0] > n_global:
-        S -= F[g, l_] @ np.linalg.pinv(F[l_, l_]) @ F[l_, g]
-    dS = np.clip(np.diag(S), 0.0, None)
-    col = np.linalg.norm(J[:, :n_global], axis=0)
-    zero = (dS <= 1e-12 * max(float(np.max(np.diag(F))), 1e-300)) | (col == 0)
-    flat = zero.copy()
-    ok_idx = np.nonzero(~zero)[0]
-    notes = [""] * n_global
-    if ok_idx.size:
-        d = np.sqrt(dS[ok_idx])
-        R = S[np.ix_(ok_idx, ok_idx)] / np.outer(d, d)
-        w, V = np.linalg.eigh(R)
-        for k in np.nonzero(w < NULL_EIGEN)[0]:
-            vu = V[:, k] / d  # the flat direction in the parameters' own (relative) units
-            vu /= np.max(np.abs(vu))
-            flat[ok_idx[np.abs(vu) > 0.05]] = True
-    cov = np.full((n_global, n_global), np.nan)
-    if ok_idx.size:
-        good = np.nonzero(~flat)[0]
-        if good.size:
-            cov[np.ix_(good, good)] = np.linalg.inv(S[np.ix_(good, good)])
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale[:n_global]
-    se = np.where(flat, np.inf, se)
-    dd = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(dd, dd)
-    ok = []
-    for i in range(n_global):
-        if zero[i]:
-            notes[i] = "flat cost: the data do not change when it changes"
-        elif flat[i]:
-            notes[i] = "flat cost along a combination with other parameters: only the combination is seen"
-        ok.append(not flat[i])
-    return se, corr, ok, notes
-
-
 @dataclass
 class _Globals:
     """The global parameters being fitted: WheelParams fields, their Table 1 (start) values and scales.
@@ -396,14 +353,18 @@ class _ReleaseFit:
         diff = f1 - target
         for i in range(grid.size - 1):
             if f1[i] > 0 and diff[i] <= 0 < diff[i + 1]:
-                a, b = grid[i], grid[i + 1]
-                for _ in range(40):
-                    m = 0.5 * (a + b)
-                    if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0:
-                        a = m
-                    else:
-                        b = m
-                return 0.5 * (a + b)
+                if REFERENCE_PATHS:
+                    a, b = grid[i], grid[i + 1]
+                    for _ in range(40):
+                        m = 0.5 * (a + b)
+                        a, b = (m, b) if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0 else (a, m)
+                    return 0.5 * (a + b)
+                from scipy.optimize import brentq
+
+                def g1(w: float) -> float:
+                    f = sim.frequencies(p, d.slope_deg, w, 1)[0]
+                    return (f - target) if f > 0 else -target  # a stall lies below the root
+                return float(brentq(g1, grid[i], grid[i + 1], xtol=1e-10, rtol=1e-12, maxiter=60))
         costs = [float(np.sum(self.freq_res(p, d, w) ** 2)) for w in grid]
         return float(grid[int(np.argmin(costs))])
 
@@ -499,13 +460,22 @@ class _Objective:
         return J
 
     def best_shifts(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
-        """Per trial the shift (ms) on a 0.5 ms grid that minimises the CoM residual (no new simulation)."""
+        """Per trial the shift (ms) that minimises the CoM residual (no new simulation): a 2 ms grid over
+        +-`MAX_SHIFT_MS`, then a 0.5 ms grid around its best."""
         p = self.glob.at(ug)
-        grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
         out = []
         for i, d in enumerate(self.data):
-            costs = [float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2)) for g in grid]
-            out.append(float(grid[int(np.argmin(costs))]))
+            def cost(g: float) -> float:
+                return float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2))
+
+            if REFERENCE_PATHS:
+                grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
+                out.append(float(grid[int(np.argmin([cost(g) for g in grid]))]))
+                continue
+            coarse = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 2.0)
+            g0 = float(coarse[int(np.argmin([cost(g) for g in coarse]))])
+            fine = np.clip(np.arange(g0 - 2.0, g0 + 2.0 + 1e-9, 0.5), -MAX_SHIFT_MS, MAX_SHIFT_MS)
+            out.append(float(fine[int(np.argmin([cost(g) for g in fine]))]))
         return np.array(out)
 
     def start(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
