@@ -121,7 +121,7 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     for r in out["per_trial"]:
         con.print(f"  {Path(r['file']).name}: {r['reason']}", markup=False, highlight=False)
     e = Table(title="critical slope", show_edge=False)
-    for col in ("estimate", "deg", "95 % interval / bracket"):
+    for col in ("estimate", "deg", "95 % interval"):
         e.add_column(col, no_wrap=True)
     for est in res.estimates:
         e.add_row(est.method, f"{est.value_deg:.3f}", f"[{est.ci_deg[0]:.3f}, {est.ci_deg[1]:.3f}]")
@@ -129,7 +129,11 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
         e.add_row(f"model {m.upper().replace('_CALIBRATED', ' fitted on these trials')}", _fmt(v, ".3f"), "")
     con.print(e)
     if res.chosen is not None:
-        con.print(f"critical slope from the trials: {res.chosen.value_deg:.3f} deg ({res.chosen.method}); {res.why}",
+        lo, hi = res.chosen.ci_deg
+        con.print(f"critical slope from the trials: {res.chosen.value_deg:.3f} deg, 95 % interval {lo:.3f}-{hi:.3f} "
+                  f"deg ({res.chosen.method}); {res.why}" + (
+                      f"; bracket {res.bracket_deg[0]:.3f}-{res.bracket_deg[1]:.3f} deg" if res.bracket_deg else "")
+                  + "; intervals include each trial's slope uncertainty (slope_sigma_deg in --json)",
                   markup=False, highlight=False)
     else:
         con.print(f"no critical slope: {res.why}", markup=False, highlight=False)

@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
     calibrate(trials[:1], names[:1], ["c"], max_rounds=1, multi_start=False)  # warm the compiled code
     from rimless.analysis.inference import calibrate as cal_mod
 
-    runs = {"old": dict(max_rounds=1, multi_start=False), "new": {}}
+    runs = {"old": dict(max_rounds=1, multi_start=False, record_dt_s=4e-3), "new": {}}
     for label, kw in runs.items():
         if a.only not in (label, "both"):
             continue

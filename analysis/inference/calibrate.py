@@ -582,7 +582,7 @@ def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialDat
 
 
 def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
-              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3, max_rounds: int = MAX_ROUNDS,
+              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 8e-3, max_rounds: int = MAX_ROUNDS,
               multi_start: bool = True, progress: Callable[[int], None] | None = None) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
@@ -590,8 +590,9 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
     (`PROFILE_FACTORS`), which picks the start (`_start`); (2) the full least squares on periods and CoM height
     (`_Objective`, recorded walks on the compiled integrator), with the block sigmas of the start, then the
-    sigmas of the solution for the uncertainties. With two or more globals the fit also starts from Table 1
-    (the cost has a ridge, e.g. c-k) and keeps the lower cost; each start runs until converged or
+    sigmas of the solution for the uncertainties. With two or more globals on a ridge (correlation above
+    `RIDGE_CORRELATION`, e.g. c-k) or without convergence, the fit also starts from Table 1 and keeps the
+    lower cost; each start runs until converged or
     ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
     identifiable). ``progress(n)`` is called after simulations with the running count."""
     from rimless.sim.model.params import WheelParams
@@ -617,18 +618,17 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     obj.set_sigmas(u)
     cost_t1 = obj.cost(u_t1)
     lo, hi = obj.bounds(ws_start)
-    starts = [u]
-    if multi_start and glob.n >= 2 and ug_start.any():  # a ridge between globals: also start from Table 1, keep the lower cost
-        starts.append(obj.start(np.zeros(glob.n), ws_t1))
-    best = None
-    for u0 in starts:
-        r = obj.solve(u0, lo, hi, max_rounds)
-        if best is None or r.cost < best.cost:
+    best = obj.solve(u, lo, hi, max_rounds)
+    starts = 1
+    if multi_start and glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
+        starts = 2  # a ridge between globals (or no convergence): also start from Table 1, keep the lower cost
+        r = obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)
+        if r.cost < best.cost:
             best = r
     u = best.x
     converged = bool(best.status > 0)
     optimizer = {"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev_total),
-                 "rounds": int(best.rounds), "starts": len(starts), "converged": converged}
+                 "rounds": int(best.rounds), "starts": starts, "converged": converged}
     obj.set_sigmas(u)
     obj.inflate_com_sigma(u)
     J = obj.jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
@@ -643,6 +643,16 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
                              obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
                              optimizer)
+
+
+RIDGE_CORRELATION = 0.95  # |correlation| between two globals above which the cost is treated as a ridge
+
+
+def _on_ridge(J: np.ndarray, n_global: int) -> bool:
+    """Whether two globals are correlated beyond `RIDGE_CORRELATION` at the optimiser's last Jacobian."""
+    _, corr, _, _ = least_squares_report(np.asarray(J), n_global, np.ones(J.shape[1]))
+    off = np.abs(corr[~np.eye(n_global, dtype=bool)])
+    return bool(np.any(~np.isfinite(off)) or np.any(off > RIDGE_CORRELATION))
 
 
 class NoTrialCalibrated(RimlessError):

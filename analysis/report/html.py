@@ -549,7 +549,7 @@ def _critical_html(res: ReportResult) -> str:
                "the model's critical slope (smallest slope with a stable period-1 gait; dashed: the model calibrated on "
                "these trials, a fit to them and not a prediction). Horizontal bars: each trial's 95 % slope interval "
                "(from its slope's source), which the critical slope's interval propagates.</figcaption></figure>")
-    out.append("<table id=\"critical\"><thead><tr><th>estimate</th><th>deg</th><th>95 % interval / bracket</th>"
+    out.append("<table id=\"critical\"><thead><tr><th>estimate</th><th>deg</th><th>95 % interval</th>"
                "<th>how</th></tr></thead><tbody>")
     for est in cr.estimates:
         out.append(f"<tr><td>{e(est.method)}{' (reported)' if est is cr.chosen else ''}</td>"
