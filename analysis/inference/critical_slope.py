@@ -311,12 +311,13 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
     ex, lg_e = by.get("fixed-point-extrapolation"), by.get("logistic")
 
     def inside(e: Estimate) -> bool:
+        """Agrees with the bracket: its interval overlaps the bracket's (widened by the slope uncertainties) and
+        its value lies within that, give or take half the bracket."""
         if bracket_est is None:
             return True
         blo, bhi = bracket_est.ci_deg
         half = 0.5 * (bracket[1] - bracket[0])
-        return e.ci_deg[0] <= blo + (bhi - blo) and e.ci_deg[1] >= blo and (
-            bracket[0] - half - (bracket[0] - blo) <= e.value_deg <= bracket[1] + half + (bhi - bracket[1]))
+        return e.ci_deg[0] <= bhi and e.ci_deg[1] >= blo and blo - half <= e.value_deg <= bhi + half
 
     if ex is not None and inside(ex) and (ex.ci_deg[1] - ex.ci_deg[0]) < (
             (bracket_est.ci_deg[1] - bracket_est.ci_deg[0]) if bracket_est else math.inf):
