@@ -332,14 +332,16 @@ class _ReleaseFit:
         self.tick()
         return f - 1.0 / d.periods_s
 
-    def fit(self, p: Any, d: _TrialData, w0: float | None) -> tuple[float, float]:
-        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then least squares."""
+    def fit(self, p: Any, d: _TrialData, w0: float | None, coarse: bool = False) -> tuple[float, float]:
+        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then least squares
+        (``coarse``: to 1e-6 relative, enough to rank the starts of `_start`)."""
         from scipy.optimize import least_squares
 
         if w0 is None or not math.isfinite(w0):
             w0 = self.first_period_release(p, d)
+        tol = (1e-6, 1e-8, 12) if coarse and not REFERENCE_PATHS else (1e-10, 1e-12, 30)
         r = least_squares(lambda q: self.freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
-                          diff_step=[1e-5], xtol=1e-10, ftol=1e-12, max_nfev=30)
+                          diff_step=[1e-5], xtol=tol[0], ftol=tol[1], max_nfev=tol[2])
         return float(r.x[0]), float(2 * r.cost)
 
     def first_period_release(self, p: Any, d: _TrialData) -> float:
@@ -375,10 +377,14 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
     ``release_rad_s`` is set at it."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
+    best = 0.0
     for d in data:
-        d.release_rad_s = table1[d.name] = releases.fit(p0, d, None)[0]
+        w, c = releases.fit(p0, d, None)
+        d.release_rad_s = table1[d.name] = w
+        best += c
+    if REFERENCE_PATHS:
+        best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     ug_best = np.zeros(glob.n)
-    best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     for j in range(glob.n):
         for factor in PROFILE_FACTORS:
             ug = ug_best.copy()
@@ -386,7 +392,7 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
             p = glob.at(ug)
             if p is None:
                 continue
-            fits = [releases.fit(p, d, None) for d in data]
+            fits = [releases.fit(p, d, None, coarse=True) for d in data]
             cost = sum(c for _, c in fits)
             if cost < best:
                 best, ug_best = cost, ug
