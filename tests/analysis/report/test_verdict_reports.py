@@ -111,3 +111,19 @@ def test_critical_figure_draws_each_trials_slope_interval(tmp_path):
 
     spans = [seg[1][0] - seg[0][0] for c in ax.collections if isinstance(c, LineCollection) for seg in c.get_segments()]
     assert sum(1 for w in spans if abs(w - 0.2) < 1e-9) == 3
+
+
+@pytest.mark.slow
+def test_bundled_series_interval_covers_its_truth():
+    """The bundled SYNTHETIC_crit series (truth model: ER wheel with c = 10 N s/m and guide friction)."""
+    import json
+
+    from rimless.analysis.examples.critical_series import load_truth
+
+    res = runner.invoke(app, ["trials", "critical-slope", *[str(p) for p in data_files()], "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    truth = load_truth()["dataset"]["critical_slope_deg"]
+    lo, hi = out["ci_deg"]
+    assert lo <= truth <= hi, (out["method"], out["critical_slope_deg"], out["ci_deg"], truth)
+    assert all(r["slope_sigma_deg"] > 0 for r in out["per_trial"])
