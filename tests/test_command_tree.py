@@ -290,6 +290,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
                         "--out", "sweep-out/k"], 5.0),
     ("trials", "calibrate"): ([*CRITICAL_CSVS], 5.0),
     ("trials", "critical-slope"): ([*CRITICAL_CSVS], 2.5),
+    ("trials", "coverage"): (["--series", "500"], 3.0),
 }
 
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.

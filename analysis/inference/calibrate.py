@@ -15,9 +15,14 @@ sigma_T and sigma_h are the RMS residuals of each block at the start and, for th
 solution (so each block has a reduced chi^2 of 1 and neither swamps the other); for the uncertainties the
 CoM block's sigma is further inflated by sqrt((1 + rho) / (1 - rho)), rho the lag-1 autocorrelation of its
 residuals (correlated samples carry less information than their number suggests). Uncertainties are from the Jacobian
-(cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters.
+(cov = (J^T J)^-1 with the scaled residuals), with the correlation between the global parameters, and from the
+trial-clustered sandwich (`sandwich_se`, robust to correlated residuals and model mismatch): the larger is
+reported.
 A parameter is **not identifiable** when its relative standard error exceeds `NOT_IDENTIFIABLE_REL_SE` or the
 Jacobian has a (near) null direction involving it (flat cost); it is then reported as such, not as a value.
+
+One concept: the least-squares calibration (data, objective, stages, estimates); its uncertainty algebra is
+`rimless.analysis.inference.identifiability`.
 
 Simulations use the compiled fast path (`rimless.sim.fast.FastIntegrator` under `simulate_steps`).
 """
@@ -34,20 +39,24 @@ import numpy as np
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
 
+from rimless.analysis.inference.identifiability import NULL_EIGEN, least_squares_report, sandwich_se
 from rimless.analysis.io.trial import ALPHA_RAD
 
-__all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report",
+__all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report", "sandwich_se",
            "NOT_IDENTIFIABLE_REL_SE", "NoTrialCalibrated"]
 
 #: --fit names -> WheelParams fields, with the display unit
 FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/m"), "m_H": ("hub_mass_kg", "kg"),
               "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
-NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
-MAX_NFEV = 20  # residual evaluations of the full least squares
+MAX_NFEV = 20  # residual evaluations of one round of the full least squares
+MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
+#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection)
+#: for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
+REFERENCE_PATHS = False
 
 
 def parse_fit(text: str) -> list[str]:
@@ -172,27 +181,44 @@ def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
     return rp, s - (d.com_m + off)
 
 
+def _curve_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float, Any]]]:
+    """The simulated CoM curve of walk ``g`` (times from t0): the clean samples and one cubic spline per step,
+    built once per walk and kept on it (the time-shift search evaluates the same walk hundreds of times)."""
+    from scipy.interpolate import CubicSpline
+
+    from rimless.analysis.inference.compare import clean_curve
+
+    cache = None if REFERENCE_PATHS else getattr(g, "_com_parts", None)
+    if cache is not None and cache[0] == t0:
+        return cache[1]
+    t_all = np.asarray(g.table["t_s"], float) - t0
+    y_all = np.asarray(g.table["com_height_normal_m"], float)
+    step = np.asarray(g.table["step"])
+    st, sy = clean_curve(t_all, y_all)
+    splines = []
+    for k in np.unique(step):
+        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
+        if ts.size >= 4:
+            splines.append((float(ts[0]), float(ts[-1]), CubicSpline(ts, ys)))
+    parts = (st, sy, splines)
+    try:
+        g._com_parts = (t0, parts)  # noqa: SLF001
+    except AttributeError:
+        pass
+    return parts
+
+
 def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
     impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
     interpolation on the record grid puts kinks into the cost that finite differences mistake for
     information). Held at the end values outside the simulated walk (a stall)."""
-    from scipy.interpolate import CubicSpline
-
-    from rimless.analysis.inference.compare import clean_curve
-
-    t_all = np.asarray(g.table["t_s"], float) - t0
-    y_all = np.asarray(g.table["com_height_normal_m"], float)
-    step = np.asarray(g.table["step"])
-    st, sy = clean_curve(t_all, y_all)
+    st, sy, splines = _curve_parts(g, t0)
     out = np.interp(tt, st, sy)
-    for k in np.unique(step):
-        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
-        if ts.size < 4:
-            continue
-        m = (tt >= ts[0]) & (tt <= ts[-1])
+    for lo, hi, sp in splines:
+        m = (tt >= lo) & (tt <= hi)
         if m.any():
-            out[m] = CubicSpline(ts, ys)(tt[m])
+            out[m] = sp(tt[m])
     return out
 
 
@@ -206,11 +232,19 @@ class ParamEstimate:
     se: float
     identifiable: bool
     note: str = ""
+    se_model: float = math.nan  # from the Jacobian with the block sigmas (residuals independent, model right)
+    se_sandwich: float = math.nan  # trial-clustered sandwich (residuals correlated within a trial, model mismatch)
+
+    @property
+    def ci95(self) -> tuple[float, float]:
+        return (self.value - 1.959963984540054 * self.se, self.value + 1.959963984540054 * self.se)
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "field": self.field, "unit": self.unit, "table1": self.table1,
                 "value": self.value if self.identifiable else None, "estimate": self.value, "se": self.se,
-                "identifiable": self.identifiable, "note": self.note}
+                "identifiable": self.identifiable, "note": self.note, "se_model": self.se_model,
+                "se_sandwich": self.se_sandwich,
+                "ci95": list(self.ci95) if math.isfinite(self.se) else None}
 
 
 @dataclass
@@ -227,6 +261,8 @@ class CalibrationResult:
     cost_table1: float = math.nan
     cost_calibrated: float = math.nan
     model: str = "er"
+    converged: bool = True
+    optimizer: dict[str, Any] = field(default_factory=dict)  # status, message, nfev, rounds, starts
 
     @property
     def identifiable(self) -> bool:
@@ -241,60 +277,14 @@ class CalibrationResult:
                                   "calibrated": _total(self.residuals, "calibrated_rms_period_ms")},
                 "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
                                "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
-                "failed": self.failed, "simulations": self.evaluations}
+                "failed": self.failed, "simulations": self.evaluations, "converged": self.converged,
+                "optimizer": self.optimizer}
 
 
 def _total(rows: list[dict[str, Any]], key: str) -> float:
     vals = [(r[key], r["n_" + ("period" if "period" in key else "com")]) for r in rows if math.isfinite(r[key])]
     n = sum(k for _, k in vals)
     return math.sqrt(sum(v * v * k for v, k in vals) / n) if n else math.nan
-
-
-def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
-    """From the Jacobian of the scaled residuals (the first n_global columns are the globals, in units of
-    ``scale``): their standard errors (in their units), correlation and identifiability.
-
-    The information about the globals is the Schur complement S = F_gg - F_gl F_ll^-1 F_lg of F = J^T J (the
-    per-trial unknowns profiled out). Normalised to unit diagonal, an eigenvalue below `NULL_EIGEN` is a flat
-    direction of the cost (a parameter, or a combination, the data do not see: finite differences leave it
-    slightly above zero); every global taking part in it, and every global whose column is zero, is not
-    identifiable and gets an infinite standard error."""
-    F = J.T @ J
-    g, l_ = slice(0, n_global), slice(n_global, F.shape[0])
-    S = F[g, g].copy()
-    if F.shape[0] > n_global:
-        S -= F[g, l_] @ np.linalg.pinv(F[l_, l_]) @ F[l_, g]
-    dS = np.clip(np.diag(S), 0.0, None)
-    col = np.linalg.norm(J[:, :n_global], axis=0)
-    zero = (dS <= 1e-12 * max(float(np.max(np.diag(F))), 1e-300)) | (col == 0)
-    flat = zero.copy()
-    ok_idx = np.nonzero(~zero)[0]
-    notes = [""] * n_global
-    if ok_idx.size:
-        d = np.sqrt(dS[ok_idx])
-        R = S[np.ix_(ok_idx, ok_idx)] / np.outer(d, d)
-        w, V = np.linalg.eigh(R)
-        for k in np.nonzero(w < NULL_EIGEN)[0]:
-            vu = V[:, k] / d  # the flat direction in the parameters' own (relative) units
-            vu /= np.max(np.abs(vu))
-            flat[ok_idx[np.abs(vu) > 0.05]] = True
-    cov = np.full((n_global, n_global), np.nan)
-    if ok_idx.size:
-        good = np.nonzero(~flat)[0]
-        if good.size:
-            cov[np.ix_(good, good)] = np.linalg.inv(S[np.ix_(good, good)])
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * scale[:n_global]
-    se = np.where(flat, np.inf, se)
-    dd = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(dd, dd)
-    ok = []
-    for i in range(n_global):
-        if zero[i]:
-            notes[i] = "flat cost: the data do not change when it changes"
-        elif flat[i]:
-            notes[i] = "flat cost along a combination with other parameters: only the combination is seen"
-        ok.append(not flat[i])
-    return se, corr, ok, notes
 
 
 @dataclass
@@ -342,14 +332,16 @@ class _ReleaseFit:
         self.tick()
         return f - 1.0 / d.periods_s
 
-    def fit(self, p: Any, d: _TrialData, w0: float | None) -> tuple[float, float]:
-        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then least squares."""
+    def fit(self, p: Any, d: _TrialData, w0: float | None, coarse: bool = False) -> tuple[float, float]:
+        """(release rad/s, cost) from the periods: a grid (first time) or the previous value, then least squares
+        (``coarse``: to 1e-6 relative, enough to rank the starts of `_start`)."""
         from scipy.optimize import least_squares
 
         if w0 is None or not math.isfinite(w0):
             w0 = self.first_period_release(p, d)
+        tol = (1e-6, 1e-8, 12) if coarse and not REFERENCE_PATHS else (1e-10, 1e-12, 30)
         r = least_squares(lambda q: self.freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
-                          diff_step=[1e-5], xtol=1e-10, ftol=1e-12, max_nfev=30)
+                          diff_step=[1e-5], xtol=tol[0], ftol=tol[1], max_nfev=tol[2])
         return float(r.x[0]), float(2 * r.cost)
 
     def first_period_release(self, p: Any, d: _TrialData) -> float:
@@ -363,14 +355,18 @@ class _ReleaseFit:
         diff = f1 - target
         for i in range(grid.size - 1):
             if f1[i] > 0 and diff[i] <= 0 < diff[i + 1]:
-                a, b = grid[i], grid[i + 1]
-                for _ in range(40):
-                    m = 0.5 * (a + b)
-                    if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0:
-                        a = m
-                    else:
-                        b = m
-                return 0.5 * (a + b)
+                if REFERENCE_PATHS:
+                    a, b = grid[i], grid[i + 1]
+                    for _ in range(40):
+                        m = 0.5 * (a + b)
+                        a, b = (m, b) if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0 else (a, m)
+                    return 0.5 * (a + b)
+                from scipy.optimize import brentq
+
+                def g1(w: float) -> float:
+                    f = sim.frequencies(p, d.slope_deg, w, 1)[0]
+                    return (f - target) if f > 0 else -target  # a stall lies below the root
+                return float(brentq(g1, grid[i], grid[i + 1], xtol=1e-10, rtol=1e-12, maxiter=60))
         costs = [float(np.sum(self.freq_res(p, d, w) ** 2)) for w in grid]
         return float(grid[int(np.argmin(costs))])
 
@@ -381,10 +377,14 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
     ``release_rad_s`` is set at it."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
+    best = 0.0
     for d in data:
-        d.release_rad_s = table1[d.name] = releases.fit(p0, d, None)[0]
+        w, c = releases.fit(p0, d, None)
+        d.release_rad_s = table1[d.name] = w
+        best += c
+    if REFERENCE_PATHS:
+        best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     ug_best = np.zeros(glob.n)
-    best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     for j in range(glob.n):
         for factor in PROFILE_FACTORS:
             ug = ug_best.copy()
@@ -392,7 +392,7 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
             p = glob.at(ug)
             if p is None:
                 continue
-            fits = [releases.fit(p, d, None) for d in data]
+            fits = [releases.fit(p, d, None, coarse=True) for d in data]
             cost = sum(c for _, c in fits)
             if cost < best:
                 best, ug_best = cost, ug
@@ -466,13 +466,22 @@ class _Objective:
         return J
 
     def best_shifts(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
-        """Per trial the shift (ms) on a 0.5 ms grid that minimises the CoM residual (no new simulation)."""
+        """Per trial the shift (ms) that minimises the CoM residual (no new simulation): a 2 ms grid over
+        +-`MAX_SHIFT_MS`, then a 0.5 ms grid around its best."""
         p = self.glob.at(ug)
-        grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
         out = []
         for i, d in enumerate(self.data):
-            costs = [float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2)) for g in grid]
-            out.append(float(grid[int(np.argmin(costs))]))
+            def cost(g: float) -> float:
+                return float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2))
+
+            if REFERENCE_PATHS:
+                grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
+                out.append(float(grid[int(np.argmin([cost(g) for g in grid]))]))
+                continue
+            coarse = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 2.0)
+            g0 = float(coarse[int(np.argmin([cost(g) for g in coarse]))])
+            fine = np.clip(np.arange(g0 - 2.0, g0 + 2.0 + 1e-9, 0.5), -MAX_SHIFT_MS, MAX_SHIFT_MS)
+            out.append(float(fine[int(np.argmin([cost(g) for g in fine]))]))
         return np.array(out)
 
     def start(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
@@ -497,11 +506,22 @@ class _Objective:
         hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
         return lo, hi
 
-    def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_rounds: int = MAX_ROUNDS) -> Any:
+        """Trust-region least squares from u, restarted from where it stopped while it stops on its budget
+        (`MAX_NFEV` evaluations a round, at most ``max_rounds`` rounds). The scipy result of the last round
+        with ``rounds`` and the total ``nfev_total``; ``status == 0`` means the budget ran out (not converged)."""
         from scipy.optimize import least_squares
 
-        return least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac, bounds=(lo, hi), method="trf", xtol=1e-8,
-                             ftol=1e-10, max_nfev=MAX_NFEV).x
+        total = 0
+        for k in range(max_rounds):
+            r = least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac, bounds=(lo, hi), method="trf", xtol=1e-8,
+                              ftol=1e-10, max_nfev=MAX_NFEV)
+            total += int(r.nfev)
+            u = r.x
+            if r.status != 0:
+                break
+        r.rounds, r.nfev_total = k + 1, total
+        return r
 
     def inflate_com_sigma(self, u: np.ndarray) -> None:
         """CoM samples 10 ms apart are not independent when the model misses a systematic shape (their residuals
@@ -518,19 +538,25 @@ class _Objective:
 
 
 def _estimates(glob: _Globals, fit: Sequence[str], xg: np.ndarray, se: np.ndarray, ok: list[bool],
-               notes: list[str]) -> list[ParamEstimate]:
-    """One `ParamEstimate` per fitted name; identifiable when the cost is not flat along it and its relative
-    standard error is at most `NOT_IDENTIFIABLE_REL_SE`."""
+               notes: list[str], se_sand: np.ndarray | None = None, converged: bool = True) -> list[ParamEstimate]:
+    """One `ParamEstimate` per fitted name. Its standard error is the larger of the model-based one and the
+    trial-clustered sandwich (``se_sand``); it is identifiable when the fit converged, the cost is not flat
+    along it and that relative standard error is at most `NOT_IDENTIFIABLE_REL_SE` (a 95 % interval no wider
+    than about +-100 %)."""
     estimates = []
     for j, n in enumerate(fit):
         f, unit = FIT_FIELDS[n]
-        rel = se[j] / abs(xg[j]) if xg[j] != 0 else math.inf
-        ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE
+        s_sand = float(se_sand[j]) if se_sand is not None else math.nan
+        s_use = max(float(se[j]), s_sand) if math.isfinite(s_sand) else float(se[j])
+        rel = s_use / abs(xg[j]) if xg[j] != 0 else math.inf
+        ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged
         note = notes[j]
-        if ok[j] and not ident:
+        if ok[j] and rel > NOT_IDENTIFIABLE_REL_SE:
             note = (f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it")
-        estimates.append(ParamEstimate(n, f, unit, float(getattr(glob.base, f)), float(xg[j]), float(se[j]), ident,
-                                       note))
+        elif ok[j] and not converged:
+            note = "the fit did not converge (optimiser stopped on its budget): the value is where it stopped"
+        estimates.append(ParamEstimate(n, f, unit, float(getattr(glob.base, f)), float(xg[j]), s_use, ident,
+                                       note, float(se[j]), s_sand))
     return estimates
 
 
@@ -562,16 +588,19 @@ def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialDat
 
 
 def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
-              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 4e-3,
-              progress: Callable[[int], None] | None = None) -> CalibrationResult:
+              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 8e-3, max_rounds: int = MAX_ROUNDS,
+              multi_start: bool = True, progress: Callable[[int], None] | None = None) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
     Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
     (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
     (`PROFILE_FACTORS`), which picks the start (`_start`); (2) the full least squares on periods and CoM height
     (`_Objective`, recorded walks on the compiled integrator), with the block sigmas of the start, then the
-    sigmas of the solution for the uncertainties. ``progress(n)`` is called after simulations with the
-    running count."""
+    sigmas of the solution for the uncertainties. With two or more globals on a ridge (correlation above
+    `RIDGE_CORRELATION`, e.g. c-k) or without convergence, the fit also starts from Table 1 and keeps the
+    lower cost; each start runs until converged or
+    ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
+    identifiable). ``progress(n)`` is called after simulations with the running count."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -594,18 +623,42 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     u = obj.start(ug_start, ws_start)
     obj.set_sigmas(u)
     cost_t1 = obj.cost(u_t1)
-    u = obj.solve(u, *obj.bounds(ws_start))
+    lo, hi = obj.bounds(ws_start)
+    best = obj.solve(u, lo, hi, max_rounds)
+    starts = 1
+    if multi_start and glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
+        starts = 2  # a ridge between globals (or no convergence): also start from Table 1, keep the lower cost
+        r = obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)
+        if r.cost < best.cost:
+            best = r
+    u = best.x
+    converged = bool(best.status > 0)
+    optimizer = {"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev_total),
+                 "rounds": int(best.rounds), "starts": starts, "converged": converged}
     obj.set_sigmas(u)
     obj.inflate_com_sigma(u)
     J = obj.jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
     cost_cal = obj.cost(u)
-    se, corr, ok, notes = least_squares_report(J, glob.n, np.concatenate([glob.scale, np.ones(2 * obj.n_t)]))
+    scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
+    se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
+    se_sand = sandwich_se(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
-    estimates = _estimates(glob, fit, xg, se, ok, notes)
+    estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
     cal_params = glob.params(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
     return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
-                             obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model)
+                             obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
+                             optimizer)
+
+
+RIDGE_CORRELATION = 0.95  # |correlation| between two globals above which the cost is treated as a ridge
+
+
+def _on_ridge(J: np.ndarray, n_global: int) -> bool:
+    """Whether two globals are correlated beyond `RIDGE_CORRELATION` at the optimiser's last Jacobian."""
+    _, corr, _, _ = least_squares_report(np.asarray(J), n_global, np.ones(J.shape[1]))
+    off = np.abs(corr[~np.eye(n_global, dtype=bool)])
+    return bool(np.any(~np.isfinite(off)) or np.any(off > RIDGE_CORRELATION))
 
 
 class NoTrialCalibrated(RimlessError):

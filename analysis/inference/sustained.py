@@ -31,12 +31,34 @@ from typing import Any
 import numpy as np
 
 __all__ = ["StancePendulum", "Verdict", "trial_verdict", "verdict_from_periods", "consecutive_periods",
-           "MIN_PERIODS", "Z_SIGMA", "A_MAX"]
+           "MIN_PERIODS", "Z_SIGMA", "A_MAX", "trial_slope_sigma_deg", "DEFAULT_SLOPE_SIGMA_DEG"]
 
 MIN_PERIODS = 4  # consecutive periods needed to fit the return map (3 pairs for 2 parameters)
 Z_SIGMA = 2.0  # e* must differ from 0 by this many standard errors for a verdict
 A_MAX = 0.98  # largest return-map slope allowed (a dissipative walker contracts)
 TIMING_SIGMA_FLOOR_S = 2e-4  # smallest per-period timing noise assumed, s
+Z95 = 1.959963984540054
+#: 1-sigma slope uncertainty (deg) assumed when a trial states no interval, by its ``slope_source``
+DEFAULT_SLOPE_SIGMA_DEG = {"ramp": 0.02, "given": 0.05, "estimated": 0.1}
+DEFAULT_SLOPE_SIGMA_UNKNOWN_DEG = 0.1
+
+
+def trial_slope_sigma_deg(meta: Any) -> tuple[float, str]:
+    """(1-sigma uncertainty of a trial's slope in deg, where it comes from).
+
+    From ``meta.slope_ci_rad`` (a 95 % interval (low, high), rad) when present and finite; else the default
+    of its ``meta.slope_source`` (`DEFAULT_SLOPE_SIGMA_DEG`), else `DEFAULT_SLOPE_SIGMA_UNKNOWN_DEG`."""
+    ci = getattr(meta, "slope_ci_rad", None)
+    try:
+        lo, hi = (float(v) for v in ci)  # type: ignore[union-attr]
+        if math.isfinite(lo) and math.isfinite(hi) and hi >= lo:
+            return max(math.degrees(hi - lo) / (2 * Z95), 1e-4), "slope_ci_rad"
+    except (TypeError, ValueError):
+        pass
+    src = getattr(meta, "slope_source", None)
+    if isinstance(src, str) and src in DEFAULT_SLOPE_SIGMA_DEG:
+        return DEFAULT_SLOPE_SIGMA_DEG[src], f"default for slope_source {src}"
+    return DEFAULT_SLOPE_SIGMA_UNKNOWN_DEG, "default (no slope uncertainty given)"
 
 
 @dataclass(frozen=True)
@@ -114,12 +136,17 @@ class Verdict:
     stalled: bool = False
     a_free: float = math.nan  # the slope this trial alone gives, and its standard error
     a_free_se: float = math.nan
+    slope_sigma_deg: float = math.nan  # 1-sigma uncertainty of the trial's slope, deg (`trial_slope_sigma_deg`)
+    slope_sigma_source: str = ""  # where slope_sigma_deg comes from
 
     def as_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "reason": self.reason, "steps": self.steps, "slope_deg": self.slope_deg,
                 "return_map_slope": self.a, "return_map_slope_alone": self.a_free, "fixed_point_e_rad2_s2": self.fixed_point,
                 "fixed_point_e_se_rad2_s2": self.fixed_point_se, "fixed_point_period_s": self.fixed_point_period_s,
-                "stalled": self.stalled}
+                "stalled": self.stalled, "slope_sigma_deg": self.slope_sigma_deg,
+                "slope_ci_deg": ([self.slope_deg - Z95 * self.slope_sigma_deg, self.slope_deg + Z95 * self.slope_sigma_deg]
+                                 if math.isfinite(self.slope_sigma_deg) else None),
+                "slope_sigma_source": self.slope_sigma_source}
 
 
 def consecutive_periods(trial: Any) -> list[np.ndarray]:
@@ -329,8 +356,12 @@ def trial_verdict(trial: Any, params: Any = None, *, shared_slope: tuple[float, 
     sig_t = max(TIMING_SIGMA_FLOOR_S, 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
     if not (math.isfinite(slope_deg) and 0.0 < slope_deg < math.degrees(params.alpha / 2)):
         n = int(sum(c.size for c in chains))
-        return Verdict("undetermined", f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
-                       "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
+        v = Verdict("undetermined", f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
+                    "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
+        v.slope_sigma_deg, v.slope_sigma_source = trial_slope_sigma_deg(meta)
+        return v
     pend = StancePendulum.from_params(params, math.radians(slope_deg))
-    return verdict_from_periods(chains, pend, slope_deg=slope_deg, stalled=_trial_stalled(trial),
-                                timing_sigma_s=sig_t, shared_slope=shared_slope)
+    v = verdict_from_periods(chains, pend, slope_deg=slope_deg, stalled=_trial_stalled(trial),
+                             timing_sigma_s=sig_t, shared_slope=shared_slope)
+    v.slope_sigma_deg, v.slope_sigma_source = trial_slope_sigma_deg(meta)
+    return v

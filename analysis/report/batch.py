@@ -137,7 +137,8 @@ def run_report(files: Sequence[Path], out: Path, *, json_out: bool, import_kwarg
                **report_kwargs: Any) -> ReportResult:
     """`build_report` with the ``model`` simulator and a progress bar; Ctrl-C removes a folder it created.
 
-    A folder or a missing input stops before any work (`UserError`)."""
+    A folder or a missing input stops before any work (`UserError`); when every input is refused, a
+    `UserError` with the first refusal (and no report folder left behind if this run created it)."""
     check_inputs(files)
     out_is_new = not Path(out).exists()
     try:
@@ -149,12 +150,18 @@ def run_report(files: Sequence[Path], out: Path, *, json_out: bool, import_kwarg
                 bar.update(description=f"compared {name}")
                 bar.advance()
 
-            return build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
-                                note=note, title=title, progress=step, **report_kwargs)
+            res = build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
+                               note=note, title=title, progress=step, **report_kwargs)
     except BaseException as err:
         if out_is_new and interrupted_by_user(err):  # an interrupted report leaves no half-filled folder behind
             shutil.rmtree(out, ignore_errors=True)
         raise
+    if res.refused and not res.comparisons:  # nothing could be read: one error, no empty report left behind
+        if out_is_new:
+            shutil.rmtree(out, ignore_errors=True)
+        more = f" (and {len(res.refused) - 1} more input(s) refused)" if len(res.refused) > 1 else ""
+        raise UserError(f"{res.refused[0].reason}{more}")
+    return res
 
 
 def demo_inputs() -> list[Path]:

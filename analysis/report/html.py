@@ -136,6 +136,8 @@ def build_report(
                        groups)
     if critical:
         _add_critical(res, sim, files, critical_files, calibrate_c, progress)
+    if res.calibration is None and all_suspect(res):
+        _calibrate_for_misfit(res, sim, progress)
     _write_csv(res.metrics(), res.metrics_csv)
     res.seconds = time.perf_counter() - t_start
     _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
@@ -146,6 +148,24 @@ def _write_text(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
+
+
+def _calibrate_for_misfit(res: ReportResult, sim: Simulator, progress: Callable[[str], None] | None) -> None:
+    """Every trial suspect: calibrate c on the compared trials, for the comparison shown beside Table 1."""
+    from rimless.analysis.inference.calibrate import NoTrialCalibrated, calibrate
+
+    names = [c.name for c in res.comparisons if c.status in ("ok", "suspect")]
+    pairs = [(row.trial, row.file) for row in res.inputs if row.trial is not None
+             and row.trial.step_period_s.size > 0 and Path(row.file).name in names]
+    if not pairs:
+        return
+    try:
+        res.calibration = calibrate([t for t, _ in pairs], [n for _, n in pairs], ["c"], params=sim.params,
+                                    model=sim.model)
+    except NoTrialCalibrated:
+        res.calibration = None
+    if progress:
+        progress("calibration of c (every trial suspect)")
 
 
 def _add_critical(res: ReportResult, sim: Simulator, files: Sequence[Path], only: Sequence[str | Path] | None,
@@ -277,6 +297,19 @@ def _period_figure(groups: Sequence[SlopeGroup], path: Path, model: str = "er") 
     return path
 
 
+def model_label(key: str, calibrated_text: str = "calibrated on these trials") -> str:
+    """``er`` -> ``ER``; ``er_calibrated`` -> ``ER calibrated on these trials (fitted, not a prediction)``."""
+    if key.endswith("_calibrated"):
+        return f"{key.removesuffix('_calibrated').upper()} {calibrated_text} (fitted, not a prediction)"
+    return key.upper()
+
+
+def all_suspect(res: ReportResult) -> bool:
+    """Every compared trial is suspect against the model's parameters (and at least one was compared)."""
+    compared = [c for c in res.comparisons if c.status in ("ok", "suspect")]
+    return bool(compared) and all(c.status == "suspect" for c in compared)
+
+
 def _critical_figure(cr: Any, path: Path) -> Path:
     """Verdicts against slope, the logistic P(sustained), the bracket, the estimates and the model's values."""
     fig = _figure(9.0, 4.4)
@@ -293,8 +326,12 @@ def _critical_figure(cr: Any, path: Path) -> Path:
         inside = [x for x in xs if x_lo <= x <= x_hi]
         if xs:
             more = f", {len(xs) - len(inside)} outside the plotted slopes" if len(inside) < len(xs) else ""
-            ax.plot(inside, y + rng.uniform(-0.025, 0.025, len(inside)), "o", ms=6, mfc="none", mew=1.5,
-                    color=colors[verdict], label=f"{verdict} ({len(xs)}{more})")
+            rows_in = [r for r in cr.per_trial if r["verdict"] == verdict and x_lo <= r["slope_deg"] <= x_hi]
+            xerr = np.array([[r["slope_deg"] - r["slope_ci_deg"][0], r["slope_ci_deg"][1] - r["slope_deg"]]
+                             if r.get("slope_ci_deg") else [0.0, 0.0] for r in rows_in]).T.reshape(2, -1)
+            ax.errorbar(inside, y + rng.uniform(-0.025, 0.025, len(inside)), xerr=xerr, fmt="o", ms=6, mfc="none",
+                        mew=1.5, elinewidth=1.0, capsize=2, color=colors[verdict],
+                        label=f"{verdict} ({len(xs)}{more}); bars: 95 % slope interval")
     x_all = [x_lo, x_hi]
     if cr.bracket_deg:
         ax.axvspan(*cr.bracket_deg, color="0.9", zorder=0, label=f"bracket {cr.bracket_deg[0]:.2f}-{cr.bracket_deg[1]:.2f} deg")
@@ -312,8 +349,8 @@ def _critical_figure(cr: Any, path: Path) -> Path:
     model_cols = ["tab:purple", "tab:brown", "tab:pink", "tab:cyan"]
     for j, (m, v) in enumerate(cr.model.get("critical_slope_deg", {}).items()):
         if v is not None and math.isfinite(v):
-            ax.axvline(v, color=model_cols[j % 4], lw=1.5,
-                       label=f"model {m.upper().replace('_CALIBRATED', ' calibrated')}: {v:.3f} deg")
+            ax.axvline(v, color=model_cols[j % 4], lw=1.5, ls="--" if m.endswith("_calibrated") else "-",
+                       label=f"model {model_label(m)}: {v:.3f} deg")
             x_all.append(v)
     ax.set_xlim(min(x_all) - 0.05, max(x_all) + 0.05)
     ax.set_ylim(-0.1, 1.1)
@@ -372,6 +409,8 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
              f"{len(ok)} compared ({n_suspect} suspect), {len(res.refused)} refused; built in {res.seconds:.1f} s.</p>"]
     if note:
         parts.append(f"<p class=\"note\">{e(note)}</p>")
+    if all_suspect(res):
+        parts.append(_misfit_html(res))
     parts.append(
         "<p class=\"small\">Model: " + e(sim.model.upper()) + f" wheel, mass model {e(p.mass_model)}, m_H = {p.hub_mass_kg:g} kg, "
         f"m = {p.leg_mass_kg:g} kg, I_c = {p.inertia_kg_m2:g} kg m², L0 = {p.leg_length_m:g} m, k = {p.stiffness_n_per_m:g} N/m, "
@@ -457,6 +496,34 @@ def _fitted_list(comps: Sequence[TrialComparison]) -> str:
     return (" Fitted values: " + "; ".join(items) + ".") if items else ""
 
 
+def _misfit_html(res: ReportResult) -> str:
+    """Every trial suspect: the model's parameters do not fit these trials; the calibrated comparison beside."""
+    e = html.escape
+    out = ["<p class=\"bad\" id=\"model-misfit\"><b>The model's parameters do not fit these trials</b>: every "
+           "compared trial is suspect against them. The per-trial numbers below compare the data with a model that "
+           "does not describe this wheel; the comparison with the model calibrated on these trials is beside "
+           "them.</p>"]
+    cal = res.calibration
+    if cal is None:
+        out.append("<p class=\"small\">No calibration could be made on these trials (see `rimless trials "
+                   "calibrate`).</p>")
+        return "\n".join(out)
+    params = "; ".join(f"{e(p.name)} = {p.value:.4g} ± {1.96 * p.se:.2g} {e(p.unit)} (Table 1: {p.table1:g}"
+                       + (")" if p.identifiable else f"; NOT identifiable: {e(p.note)})") for p in cal.params)
+    out.append(f"<table id=\"misfit\"><thead><tr><th>trial</th><th>slope, deg</th><th>RMS period, ms: Table 1</th>"
+               "<th>calibrated</th><th>RMS CoM, mm: Table 1</th><th>calibrated</th></tr></thead><tbody>")
+    for r in cal.residuals:
+        out.append(f"<tr><td>{e(Path(r['trial']).name)}</td><td class=\"n\">{r['slope_deg']:.3f}</td>"
+                   f"<td class=\"n\">{_num(r['table1_rms_period_ms'], '.1f')}</td>"
+                   f"<td class=\"n\">{_num(r['calibrated_rms_period_ms'], '.1f')}</td>"
+                   f"<td class=\"n\">{_num(r['table1_rms_com_mm'], '.2f')}</td>"
+                   f"<td class=\"n\">{_num(r['calibrated_rms_com_mm'], '.2f')}</td></tr>")
+    out.append(f"</tbody></table><p class=\"small\">Calibrated on these trials ({params}; 95 % intervals; fit "
+               f"{'converged' if getattr(cal, 'converged', True) else 'did NOT converge'}): values fitted to "
+               "these trials, not predictions.</p>")
+    return "\n".join(out)
+
+
 def _critical_html(res: ReportResult) -> str:
     e = html.escape
     cr = res.critical
@@ -465,7 +532,7 @@ def _critical_html(res: ReportResult) -> str:
     if cr.chosen is not None:
         out.append(f"<p class=\"note\" id=\"critical-values\">From the trials: <b>{cr.chosen.value_deg:.3f} deg</b> "
                    f"({e(cr.chosen.method)}, 95 % interval {cr.chosen.ci_deg[0]:.3f}-{cr.chosen.ci_deg[1]:.3f} deg); "
-                   + "; ".join(f"model {e(m.upper().replace('_CALIBRATED', ' with calibrated c'))}: "
+                   + "; ".join(f"model {e(model_label(m, 'with c calibrated on these trials'))}: "
                                f"<b>{_num(v, '.3f')} deg</b>" for m, v in model.items()) + ".</p>")
         out.append(f"<p class=\"small\">Why this estimate: {e(cr.why)}.</p>")
     else:
@@ -479,8 +546,10 @@ def _critical_html(res: ReportResult) -> str:
                "stalled on the ramp), undetermined. Grey band: the bracket between the highest slope without a "
                "sustained trial and the lowest with one; blue: the logistic P(sustained) (when several trials share "
                "a slope); dashed: the slope where the fitted fixed points reach the stall (e* = 0); coloured lines: "
-               "the model's critical slope (smallest slope with a stable period-1 gait).</figcaption></figure>")
-    out.append("<table id=\"critical\"><thead><tr><th>estimate</th><th>deg</th><th>95 % interval / bracket</th>"
+               "the model's critical slope (smallest slope with a stable period-1 gait; dashed: the model calibrated on "
+               "these trials, a fit to them and not a prediction). Horizontal bars: each trial's 95 % slope interval "
+               "(from its slope's source), which the critical slope's interval propagates.</figcaption></figure>")
+    out.append("<table id=\"critical\"><thead><tr><th>estimate</th><th>deg</th><th>95 % interval</th>"
                "<th>how</th></tr></thead><tbody>")
     for est in cr.estimates:
         out.append(f"<tr><td>{e(est.method)}{' (reported)' if est is cr.chosen else ''}</td>"
@@ -488,7 +557,7 @@ def _critical_html(res: ReportResult) -> str:
                    f"<td class=\"n\">{est.ci_deg[0]:.3f}-{est.ci_deg[1]:.3f}</td><td>{e(est.detail)}</td></tr>")
     for m, v in model.items():
         d = cr.model.get("detail", {}).get(m, {})
-        out.append(f"<tr><td>model {e(m.upper())}</td><td class=\"n\">{_num(v, '.3f')}</td><td></td>"
+        out.append(f"<tr><td>model {e(model_label(m))}</td><td class=\"n\">{_num(v, '.3f')}</td><td></td>"
                    f"<td>branch ends by {e(str(d.get('reason', '')))}: {e(str(d.get('detail', '')))}</td></tr>")
     out.append("</tbody></table>")
     out.append("<table id=\"verdicts\"><thead><tr><th>trial</th><th>slope, deg</th><th>steps</th><th>verdict</th>"

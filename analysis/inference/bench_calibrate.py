@@ -1,0 +1,95 @@
+"""Benchmark of `rimless.analysis.inference.calibrate.calibrate`: ``python -m rimless.analysis.inference.bench_calibrate``.
+
+Generates sustained trials of a known ER wheel (default c = 12 N s/m, k = 2200 N/m; Table 1 has 8 and 2500) with
+the compiled simulator (CoM height with 0.3 mm noise at 100 Hz, impact times with 0.5 ms noise), then fits
+``--fit`` (default c,k) twice in one run: the previous method (one start, one budget of `MAX_NFEV` evaluations,
+its inner loops: `REFERENCE_PATHS`) and the current one (a second start on a ridge, rounds until converged,
+sandwich uncertainties, cached CoM splines, a coarse-to-fine shift search, brentq for the release). Prints, for
+each, the wall time, whether it converged, each parameter's estimate, 1-sigma, error and whether its 95 %
+interval covers the truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+SLOPES_DEG = (1.8, 2.2, 2.6, 3.0)
+RELEASES_RAD_S = (1.9, 2.4)
+
+
+def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> list[SimpleNamespace]:
+    """Trial-like objects of the ER wheel ``truth`` on `SLOPES_DEG` x `RELEASES_RAD_S`: the recording starts
+    inside the release step; heights from the impact line."""
+    from rimless.sim.step.backend import make_integrator
+    from rimless.sim.step.gait import simulate_steps
+
+    out = []
+    for slope in SLOPES_DEG:
+        for release in RELEASES_RAD_S:
+            p = truth.replace(slope_rad=math.radians(slope))  # type: ignore[attr-defined]
+            g = simulate_steps(p, "er", np.array([-math.pi / 8, release]), n_steps, make_integrator("auto", rtol=1e-9),
+                               record_dt=1e-3)
+            ts, order = np.unique(np.asarray(g.table["t_s"]), return_index=True)
+            com = np.asarray(g.table["com_height_normal_m"])[order]
+            periods = np.array([s.period_s for s in g.steps])
+            impacts = np.cumsum(periods)
+            t = np.arange(0.5 * periods[0], impacts[-1] + 0.3 * periods[-1], 0.01)
+            t = t[t <= ts[-1]]
+            y = np.interp(t, ts, com) + rng.normal(0.0, 0.3e-3, t.size) - 0.2
+            imp = impacts[:-1] + rng.normal(0.0, 0.5e-3, impacts.size - 1)
+            gap = np.zeros(t.size, bool)
+            meta = SimpleNamespace(slope_deg=slope, source_file=f"er_{slope}deg_{release}", rate_hz=100.0,
+                                   slope_source="given", com_height_reference="impact line", step_refused=None)
+            out.append(SimpleNamespace(time_s=t, impact_time_s=imp, step_period_s=np.diff(imp), meta=meta,
+                                       series={"com_height": y, "gap": gap, "interpolated": gap}))
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    from rimless.sim.model.params import WheelParams
+
+    from rimless.analysis.inference.calibrate import calibrate, parse_fit
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--c", type=float, default=12.0)
+    ap.add_argument("--k", type=float, default=2200.0)
+    ap.add_argument("--fit", default="c,k")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--only", choices=("old", "new", "both"), default="both")
+    a = ap.parse_args(argv)
+    truth = WheelParams(damping_ns_per_m=a.c, stiffness_n_per_m=a.k)
+    trials = make_trials(truth, np.random.default_rng(a.seed))
+    names = [t.meta.source_file for t in trials]
+    fit = parse_fit(a.fit)
+    calibrate(trials[:1], names[:1], ["c"], max_rounds=1, multi_start=False)  # warm the compiled code
+    from rimless.analysis.inference import calibrate as cal_mod
+
+    runs = {"old": dict(max_rounds=1, multi_start=False, record_dt_s=4e-3), "new": {}}
+    for label, kw in runs.items():
+        if a.only not in (label, "both"):
+            continue
+        cal_mod.REFERENCE_PATHS = label == "old"
+        t0 = time.perf_counter()
+        try:
+            res = calibrate(trials, names, fit, **kw)
+        finally:
+            cal_mod.REFERENCE_PATHS = False
+        dt = time.perf_counter() - t0
+        print(f"{label}: {dt:.1f} s, {res.evaluations} simulations, converged {res.converged} "
+              f"({res.optimizer.get('message', '')}; {res.optimizer.get('starts')} start(s), "
+              f"{res.optimizer.get('rounds')} round(s))")
+        for p in res.params:
+            true = float(getattr(truth, p.field))
+            lo, hi = p.ci95
+            print(f"  {p.name}: {p.value:.4g} +- {p.se:.2g} (model {p.se_model:.2g}, sandwich {p.se_sandwich:.2g}) "
+                  f"truth {true:g}: error {100 * (p.value - true) / true:+.2f} %, 95 % interval "
+                  f"{'covers' if lo <= true <= hi else 'MISSES'} it; identifiable {p.identifiable}")
+
+
+if __name__ == "__main__":
+    main()

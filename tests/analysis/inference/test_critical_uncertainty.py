@@ -1,0 +1,121 @@
+"""The critical slope's interval: each trial's slope uncertainty and the spread between trials, and its coverage.
+
+Truths: Coleman's closed form for a rigid wheel (tests/support/analysis_rigid_truth.py, written apart from
+rimless.analysis), and scipy's adaptive quadrature for the coverage model's stance time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+from typer.testing import CliRunner
+
+from rimless.analysis.inference.coverage import RigidFrictionWheel, run_coverage, synthetic_series
+from rimless.analysis.inference.critical_slope import estimate_critical_slope
+from rimless.analysis.inference.sustained import trial_slope_sigma_deg, trial_verdicts
+from tests.support.analysis_rigid_truth import RigidTruth, duck_trial
+
+TRUTH = RigidTruth()
+
+
+def test_slope_sigma_from_interval_source_or_default():
+    lo, hi = math.radians(1.0), math.radians(1.4)
+    s, why = trial_slope_sigma_deg(SimpleNamespace(slope_ci_rad=(lo, hi), slope_source="estimated"))
+    assert s == pytest.approx(0.4 / (2 * 1.959963984540054)) and why == "slope_ci_rad"
+    s_given, _ = trial_slope_sigma_deg(SimpleNamespace(slope_ci_rad=None, slope_source="given"))
+    s_est, _ = trial_slope_sigma_deg(SimpleNamespace(slope_source="estimated"))
+    s_none, why = trial_slope_sigma_deg(SimpleNamespace())
+    assert 0 < s_given < s_est and s_none > 0 and "default" in why
+    assert trial_slope_sigma_deg(SimpleNamespace(slope_ci_rad=(math.nan, 1.0)))[1] != "slope_ci_rad"
+
+
+def test_coverage_model_matches_coleman_and_quadrature():
+    """Without the friction loss the coverage model is the rigid wheel: Coleman's critical slope."""
+    w = RigidFrictionWheel(inertia_hub_kg_m2=TRUTH.inertia_hub_kg_m2, mass_kg=TRUTH.mass_kg, leg_m=TRUTH.leg_m)
+    assert w.critical_slope_deg() == pytest.approx(TRUTH.critical_slope_deg(), abs=1e-6)
+    lossy = dataclasses.replace(w, loss_rad2_s2=0.2)
+    assert lossy.critical_slope_deg() > w.critical_slope_deg() + 0.1  # friction needs a steeper slope
+    phi = math.radians(1.5)
+    for W in (2.2, 4.0, 9.0):
+        assert w.top_margin(W, phi) > 0
+        ref = quad(lambda th: 1 / math.sqrt(W + 2 * w.k * (math.cos(phi - math.pi / 8) - math.cos(th + phi))),
+                   -math.pi / 8, math.pi / 8, points=[-phi], limit=200, epsabs=1e-13)[0]
+        assert w.period_s(W, phi) == pytest.approx(ref, rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def rigid_series():
+    rng = np.random.default_rng(20261124)
+    trials = [duck_trial(TRUTH, s, w, rng, name=f"rigid_{s}deg_{w}_{k}")
+              for s in (0.9, 1.1, 1.3, 1.5, 1.7) for w in (2.0, 3.0) for k in range(2)]
+    return trials, trial_verdicts(trials, TRUTH.wheel_params())
+
+
+def test_interval_covers_coleman_and_says_which_estimate(rigid_series):
+    trials, verdicts = rigid_series
+    res = estimate_critical_slope(verdicts, [t.meta.source_file for t in trials])
+    truth = TRUTH.critical_slope_deg()
+    assert res.chosen is not None and res.why
+    assert res.chosen.ci_deg[0] <= truth <= res.chosen.ci_deg[1], (truth, res.summary()["estimates"])
+    s = res.summary()
+    assert s["method"] in ("bracket", "logistic", "fixed-point-extrapolation")
+    for e in s["estimates"]:
+        assert {"ci_closed_form_deg", "ci_bootstrap_deg"} <= set(e)
+    row = s["per_trial"][0]
+    assert row["slope_sigma_deg"] > 0 and row["slope_ci_deg"][0] < row["slope_deg"] < row["slope_ci_deg"][1]
+
+
+def test_slope_uncertainty_widens_every_interval(rigid_series):
+    trials, verdicts = rigid_series
+    tight = [dataclasses.replace(v, slope_sigma_deg=0.0) for v in verdicts]
+    loose = [dataclasses.replace(v, slope_sigma_deg=0.15) for v in verdicts]
+    names = [t.meta.source_file for t in trials]
+    a = {e.method: e for e in estimate_critical_slope(tight, names).estimates}
+    b = {e.method: e for e in estimate_critical_slope(loose, names).estimates}
+    for m in a:
+        wa, wb = a[m].ci_deg[1] - a[m].ci_deg[0], b[m].ci_deg[1] - b[m].ci_deg[0]
+        assert wb > wa, m
+    # seeded bootstrap: the same inputs give the same interval
+    again = {e.method: e for e in estimate_critical_slope(loose, names).estimates}
+    assert all(again[m].ci_deg == b[m].ci_deg for m in b)
+
+
+def test_synthetic_series_states_its_slope_uncertainty():
+    wheel, crit, trials = synthetic_series(np.random.default_rng(5))
+    assert crit == pytest.approx(wheel.critical_slope_deg())
+    slopes = [t.meta.true_slope_deg for t in trials]
+    assert min(slopes) < crit < max(slopes)
+    for t in trials:
+        lo, hi = t.meta.slope_ci_rad
+        assert lo < math.radians(t.meta.slope_deg) < hi
+        assert t.meta.outcome in ("stalled", "walked")
+        if t.meta.outcome == "walked":
+            assert t.meta.true_slope_deg > crit or t.step_period_s.size >= 8
+
+
+def test_coverage_run_reports_its_figures():
+    res = run_coverage(4, seed=11, n_boot=50)
+    s = res.summary()
+    assert s["series"] == 4 and s["estimated"] <= 4
+    assert 0.0 <= s["coverage"] <= 1.0 and s["coverage_ci95"][0] <= s["coverage"] <= s["coverage_ci95"][1]
+    for o in res.outcomes:  # every estimate lands near its own truth (errors are hundredths of a degree)
+        assert abs(o.estimate_deg - o.truth_deg) < 0.2
+
+
+def test_coverage_command_json():
+    from rimless.cli import app
+
+    r = CliRunner().invoke(app, ["trials", "coverage", "--series", "2", "--seed", "3", "--json"])
+    assert r.exit_code == 0, r.output
+    import json
+
+    out = json.loads(r.stdout)
+    for key in ("series", "coverage", "coverage_ci95", "median_abs_error_deg", "median_error_deg", "per_method"):
+        assert key in out
+    r = CliRunner().invoke(app, ["trials", "coverage", "--series", "0"])
+    assert r.exit_code == 2 and "--series" in r.output
