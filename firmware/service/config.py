@@ -9,13 +9,19 @@ from __future__ import annotations
 import math
 import os
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from rimless.firmware.control.detector import DetectorParams
 from rimless.firmware.errors import ConfigError, ConfigFileError
 from rimless.firmware.control.faults import HealthLimits
+
+# The robot's detector defaults differ from the library's on the leg-count safety checks (a counted leg locks
+# only after two confirmed step intervals; an unconfirmed compression of 0.3 mm loses the count). The
+# firmware-in-the-loop simulator keeps the library defaults unless it reads a robot.toml.
+ROBOT_DETECTOR_SAFETY: dict[str, Any] = {"confirm_steps": 2, "doubt_compression_m": 0.0003}
+ROBOT_DETECTOR = DetectorParams(**ROBOT_DETECTOR_SAFETY)
 
 DEFAULT_CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)  # BCM; all >= 9, so pulled down at power-on
 TOKEN_ENV = "RIMLESS_TOKEN"
@@ -122,7 +128,7 @@ class RobotConfig:
     sensors: tuple[SensorConfig, ...] = (SensorConfig(),)
     clutch: ClutchConfig = field(default_factory=ClutchConfig)
     sampling: SamplingConfig = field(default_factory=SamplingConfig)
-    detector: DetectorParams = field(default_factory=DetectorParams)
+    detector: DetectorParams = field(default_factory=lambda: ROBOT_DETECTOR)
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     commands: CommandsConfig = field(default_factory=CommandsConfig)
     log: LogConfig = field(default_factory=LogConfig)
@@ -257,6 +263,7 @@ def config_from_dict(data: dict[str, Any], source: str = "robot.toml") -> RobotC
             kw[name] = _build(cls, data[name], f"{source}: [{name}]")
     if "detector" in data:
         det = _build(DetectorParams, data["detector"], f"{source}: [detector]")
+        det = replace(det, **{k: v for k, v in ROBOT_DETECTOR_SAFETY.items() if k not in data["detector"]})
         try:
             det.validated()
         except ValueError as err:
