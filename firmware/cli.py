@@ -234,6 +234,16 @@ def run(
         typer.Option("--telemetry", metavar="HOST:PORT", help="Send telemetry here too (repeatable), on top of "
                      "[telemetry] in the config.", show_default=False),
     ] = None,
+    fake_fault: Annotated[
+        Optional[str], typer.Option("--fake-fault", metavar="NAME", help="With --fake: play a fault scenario "
+                                    "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id).",
+                                    show_default=False)
+    ] = None,
+    pin_log: Annotated[
+        Optional[Path], typer.Option("--pin-log", metavar="FILE", help="With --fake: write every pin change as "
+                                     "JSON lines (t_s, pin, level).", show_default=False)
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="End with one JSON summary on stdout.")] = False,
 ) -> None:
     """Run the firmware until SIGINT/SIGTERM/SIGHUP/SIGQUIT (or --duration-s); clutches off on every exit path.
 
@@ -258,10 +268,12 @@ def run(
             except ValueError as err:
                 raise ParameterError(f"--telemetry: {err}") from None
         return run_robot(config, telemetry=telemetry or (), fake=fake, duration_s=duration_s, arm=arm_at_start,
-                         on_start=started)
+                         on_start=started, fake_fault=fake_fault, pin_log=pin_log)
 
     outcome = go()
     summary = outcome.summary
+    if as_json:
+        print_json(outcome.to_json())
     if summary is None:  # a stop signal before the firmware ran
         typer.echo(f"stopped ({outcome.signal}) before the firmware ran; every clutch released", err=True)
         raise typer.Exit(outcome.exit_code)
@@ -273,6 +285,9 @@ def run(
     )
     if outcome.fake_pins:
         typer.echo("fake clutch pin levels (history): " + outcome.fake_pins, err=True)
+    if outcome.airborne_leg_locks is not None:
+        typer.echo(f"fake walk{' (' + outcome.fake_fault + ')' if outcome.fake_fault else ''}: {outcome.engages} "
+                   f"clutch engages, {outcome.airborne_leg_locks} on a leg in the air", err=True)
     if summary.error:
         typer.echo(f"error: {summary.error}", err=True)
     elif outcome.signal == "SIGINT":

@@ -18,7 +18,7 @@ from rimless.firmware.control.faults import HealthMonitor
 from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.drivers.clutch import ClutchBank
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, GaitTrajectory
-from rimless.firmware.drivers.gpio import GpioChipSelectBus, mock_pin_factory, open_clutches, output, release_pins
+from rimless.firmware.drivers.gpio import GpioChipSelectBus, PinLog, mock_pin_factory, open_clutches, output, release_pins
 from rimless.firmware.service.config import RobotConfig, SensorConfig
 
 
@@ -85,10 +85,11 @@ def build_fake(
     pin_factory: Any = None,
     noise_counts: float = 0.3,
     seed: int = 0,
+    pin_log: PinLog | None = None,
 ) -> Hardware:
     """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on the monotonic clock;
-    clutches, RESET, NPD and GPIO chip selects on a MockFactory."""
-    factory = pin_factory if pin_factory is not None else mock_pin_factory()
+    clutches, RESET, NPD and GPIO chip selects on a MockFactory (recording every pin change in `pin_log`)."""
+    factory = pin_factory if pin_factory is not None else mock_pin_factory(pin_log)
     traj = trajectory if trajectory is not None else default_fake_trajectory()
     clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
     fakes: list[FakeAdns3080] = []

@@ -1,0 +1,95 @@
+"""The fault scenarios of `rimless robot run --fake --fake-fault NAME`: a scripted walk (with its truth, so
+that every lock can be judged) and a fault injected into the fake sensor at a set time after start.
+
+- `missed-first-touchdown`: the first step compresses 0.4 mm (peak 10 mm/s, under `touch_velocity_m_s`);
+- `first-step-bounce`: the first foot comes down again 140 ms after its touchdown (a bounce, not a step);
+- `brown-out`: the sensor resets itself 2.5 s after start (registers back to 400 cpi);
+- `wrong-product-id`: Product_ID reads 0x00 from 2.5 s after start (nothing on the bus).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, FakeFault
+from rimless.firmware.drivers.fake_walk import FakeWalk
+
+FAULT_AT_S = 2.5  # when the timed faults strike, after start (s): a clutch is engaged then
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A walk for every fake sensor and, optionally, an action on each fake at `fault_at_s` after start."""
+
+    name: str
+    walk: FakeWalk
+    fault: Callable[[FakeAdns3080], None] | None = None
+    fault_at_s: float = FAULT_AT_S
+
+
+def _wrong_id(fake: FakeAdns3080) -> None:
+    fake.fault = FakeFault.WRONG_ID
+
+
+def _brownout(fake: FakeAdns3080) -> None:
+    fake.brownout()
+
+
+def _walks(start_s: float) -> dict[str, tuple[FakeWalk, Callable[[FakeAdns3080], None] | None]]:
+    plain = FakeWalk(start_s=start_s)
+    return {
+        "none": (plain, None),
+        "missed-first-touchdown": (FakeWalk(start_s=start_s, first_compression_m=0.0004), None),
+        "first-step-bounce": (FakeWalk(start_s=start_s, bounce_after_s=0.14), None),
+        "brown-out": (plain, _brownout),
+        "wrong-product-id": (plain, _wrong_id),
+    }
+
+
+FAKE_FAULTS: tuple[str, ...] = tuple(n for n in _walks(0.0) if n != "none")
+
+
+def scenario(name: str | None, *, lead_s: float = 1.0) -> Scenario:
+    """The scenario `name` (None: a plain walk), its first touchdown `lead_s` from now; ValueError names the
+    known ones."""
+    walks = _walks(time.monotonic() + lead_s)
+    key = name or "none"
+    if key not in walks:
+        raise ValueError(f"unknown fake fault {name!r}; known: {', '.join(FAKE_FAULTS)}")
+    walk, fault = walks[key]
+    return Scenario(key, walk, fault)
+
+
+class ScheduledFaultBus:
+    """The fake's bus, applying `action(fake)` once at the first message from `at_monotonic_s` on."""
+
+    def __init__(self, fake: FakeAdns3080, at_monotonic_s: float, action: Callable[[FakeAdns3080], None]) -> None:
+        self.fake = fake
+        self.at_s = at_monotonic_s
+        self.action: Callable[[FakeAdns3080], None] | None = action
+
+    def message(self, segments: Any) -> list[bytes]:
+        if self.action is not None and time.monotonic() >= self.at_s:
+            action, self.action = self.action, None
+            action(self.fake)
+        return self.fake.message(segments)
+
+    def close(self) -> None:
+        self.fake.close()
+
+
+def inject(sc: Scenario, sensors: Sequence[Any], fakes: Sequence[FakeAdns3080]) -> None:
+    """Put the scenario's timed fault between each sensor driver and its fake (sensors on a GPIO chip select
+    keep their wrapper and get the fault inside it)."""
+    if sc.fault is None:
+        return
+    at = time.monotonic() + sc.fault_at_s
+    for sensor, fake in zip(sensors, fakes, strict=True):
+        bus = ScheduledFaultBus(fake, at, sc.fault)
+        if hasattr(sensor.bus, "cs"):  # GpioChipSelectBus
+            sensor.bus.bus = bus
+        else:
+            sensor.bus = bus
