@@ -236,7 +236,7 @@ def run(
     ] = None,
     fake_fault: Annotated[
         Optional[str], typer.Option("--fake-fault", metavar="NAME", help="With --fake: play a fault scenario "
-                                    "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id).",
+                                    "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id, loop-stall).",
                                     show_default=False)
     ] = None,
     pin_log: Annotated[

@@ -82,6 +82,40 @@ def output(pin: int, *, active_high: bool, pin_factory: Any = None) -> Any:
     return DigitalOutputDevice(pin, active_high=active_high, initial_value=False, pin_factory=pin_factory)
 
 
+class HeartbeatOutput:
+    """The heartbeat pin: `toggle()` flips it (called by the control loop at every sample); `stop()` drives it
+    low and keeps it there (a retriggerable monostable fed by it then times out and drops the clutch enable)."""
+
+    def __init__(self, pin: int, *, pin_factory: Any = None) -> None:
+        self.pin = pin
+        self._dev = output(pin, active_high=True, pin_factory=pin_factory)
+        self._level = False
+        self.enabled = True
+        self.toggles = 0
+
+    def toggle(self) -> None:
+        """Flip the pin, unless stopped."""
+        if self.enabled:
+            self._level = not self._level
+            self._dev.value = self._level
+            self.toggles += 1
+            if not self.enabled:  # stopped meanwhile (another thread): stay low
+                self._dev.off()
+
+    def stop(self) -> None:
+        """Low, and no more toggling."""
+        self.enabled = False
+        self._level = False
+        self._dev.off()
+
+    def close(self) -> None:
+        """Low, then release the line."""
+        try:
+            self.stop()
+        finally:
+            self._dev.close()
+
+
 class GpioChipSelectBus:
     """An `SpiBus` whose chip select is a GPIO (active low) around each message of a shared bus
     opened without its own CS (`dtoverlay=spi0-0cs`): one sensor per leg on one SPI bus."""

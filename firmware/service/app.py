@@ -32,14 +32,18 @@ from rimless.firmware.link.protocol import Command, check_token
 from rimless.firmware.link.telemetry import TelemetrySender
 from rimless.firmware.service.config import RobotConfig
 from rimless.firmware.service.hardware import Hardware
+from rimless.firmware.service.safety import STOP_SIGNALS, install_faulthandler
+from rimless.firmware.service import sdnotify
+from rimless.firmware.control.watchdog import Watchdog
 from rimless.firmware.service.triallog import TrialLog
 
 log = logging.getLogger("rimless.robot")
 
 COMMAND_TIMEOUT_S = 1.0
 ROUTE_PERIOD_S = 0.01
+WATCHDOG_PERIOD_S = 0.01  # the watchdog thread's check period
+CONTROL_LOOP, EVENT_LOOP = "control loop", "event loop"  # the watchdog's deadlines
 SWITCH_INTERVAL_S = 0.0005  # let the sampler thread get the GIL back quickly after its sleep
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT") if hasattr(signal, n))
 
 
 @dataclass
@@ -104,6 +108,7 @@ class RobotApp:
         self._stop: asyncio.Event | None = None
         self._last_command_s = time.monotonic()
         self._trial_lock: asyncio.Lock | None = None
+        self.watchdog: Watchdog | None = None
 
     # --- stop -----------------------------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
@@ -112,6 +117,17 @@ class RobotApp:
             self.summary.stop_reason = reason
         if self._stop is not None:
             self._stop.set()
+
+    def _signal_handler(self, loop: asyncio.AbstractEventLoop) -> Callable[[int, Any], None]:
+        """The handler of every stop signal: clutches off and no new engage right here, in the main thread
+        between two bytecodes (so also while the event loop is blocked), then the orderly stop in the loop."""
+        def handler(signum: int, _frame: Any) -> None:
+            self.controller.armed = False
+            with contextlib.suppress(Exception):
+                self.hw.outputs_off()
+            with contextlib.suppress(Exception):
+                loop.call_soon_threadsafe(self._on_signal, signal.Signals(signum).name)
+        return handler
 
     def _on_signal(self, name: str) -> None:
         # Clutches off at once (a second signal may not wait), then the orderly shutdown.
@@ -137,10 +153,10 @@ class RobotApp:
         server: CommandServer | None = None
         try:
             if handle_signals:
+                install_faulthandler()
+                handler = self._signal_handler(loop)
                 for sig in STOP_SIGNALS:
-                    previous = signal.getsignal(sig)
-                    loop.add_signal_handler(sig, self._on_signal, sig.name)
-                    signals.append((sig, previous))
+                    signals.append((sig, signal.signal(sig, handler)))
             sys.setswitchinterval(SWITCH_INTERVAL_S)
             tcfg = self.cfg.telemetry
             if tcfg.destinations_list():
@@ -156,10 +172,18 @@ class RobotApp:
                 self.server = server
                 self.command_port = self.summary.command_port = await server.start()
             self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
-                                   max_samples=max_samples, record_timing=self.record_timing)
+                                   max_samples=max_samples, record_timing=self.record_timing,
+                                   on_sample=self._on_sample)
+            wd = self.watchdog = Watchdog(self._watchdog_trip, period_s=WATCHDOG_PERIOD_S, notify=sdnotify.notify,
+                                          notify_every_s=sdnotify.watchdog_interval_s())
+            wd.add(CONTROL_LOOP, self.cfg.sampling.stall_timeout_s)
+            wd.add(EVENT_LOOP, self.cfg.sampling.loop_stall_s)
+            wd.checks.append(self._check_link)
+            wd.while_stalled = self._outputs_off
             if arm:
                 self.controller.arm()
             self.sampler.start()
+            wd.start()
             tasks = [
                 asyncio.create_task(self._sampler_task(), name="sampler"),
                 asyncio.create_task(self._controller_task(), name="controller"),
@@ -170,6 +194,7 @@ class RobotApp:
                 tasks.append(asyncio.create_task(self._commands_task(), name="commands"))
             if self.on_ready is not None:
                 self.on_ready(self)
+            sdnotify.notify("READY=1")
             stop_wait = asyncio.create_task(self._stop.wait(), name="stop")
             done, _ = await asyncio.wait([stop_wait, *tasks], timeout=duration_s, return_when=asyncio.FIRST_COMPLETED)
             if not done:
@@ -190,7 +215,6 @@ class RobotApp:
                 await self._shutdown(tasks, server)
             finally:
                 for sig, previous in signals:
-                    loop.remove_signal_handler(sig)
                     with contextlib.suppress(Exception):
                         signal.signal(sig, previous)
                 sys.setswitchinterval(old_switch)
@@ -205,9 +229,12 @@ class RobotApp:
     async def _shutdown(self, tasks: list[asyncio.Task[Any]], server: CommandServer | None) -> None:
         ctl = self.controller
         try:
-            # 1. Outputs safe, whatever state the sampler is in.
+            # 1. Outputs safe, whatever state the sampler is in; the watchdog has nothing left to guard.
+            sdnotify.notify("STOPPING=1")
+            if self.watchdog is not None:
+                self.watchdog.stop()
             with contextlib.suppress(Exception):
-                self.hw.clutches.all_off()
+                self.hw.outputs_off()
             # 2. Stop the control thread.
             if self.sampler is not None:
                 self.sampler.stop()
@@ -290,23 +317,49 @@ class RobotApp:
                 log.warning("fault %s: %s", rec.fields["fault"], rec.fields.get("detail"))
 
     async def _controller_task(self) -> None:
-        assert self.sampler is not None
-        ctl = self.controller
-        stall_ns = int(self.cfg.sampling.stall_timeout_s * 1e9)
-        link_s = self.cfg.commands.link_timeout_s
-        started = time.monotonic_ns()
+        assert self.sampler is not None and self.watchdog is not None
+        wd = self.watchdog
         while True:
             await asyncio.sleep(ROUTE_PERIOD_S)
+            wd.feed(EVENT_LOOP)
             self._route()
-            now = time.monotonic_ns()
-            last = self.sampler.last_sample_ns or started
-            if now - last > stall_ns and now - started > stall_ns:
-                # The control thread is stuck (sensor call hung?): act from here.
-                ctl.fault(Fault.SENSOR_STALLED, f"no sample for {(now - last) * 1e-9:.3f} s")
-            if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
+
+    # --- the dead-man's chain (watchdog thread and control thread) ----------------------------------
+    def _on_sample(self) -> None:
+        """After every control step, in the control thread: feed the watchdog; toggle the heartbeat pin while
+        the watchdog sees every part alive (a stall stops the toggling, and the hardware monostable drops)."""
+        wd = self.watchdog
+        if wd is not None:
+            wd.feed(CONTROL_LOOP)
+            if wd.healthy and self.hw.heartbeat is not None:
+                self.hw.heartbeat.toggle()
+
+    def _outputs_off(self) -> None:
+        self.controller.armed = False
+        with contextlib.suppress(Exception):
+            if self.hw.clutches.engaged():
                 self.hw.clutches.all_off()
-                self.armed_remotely = False
-                self.sampler.submit(lambda c: c.fault(Fault.LINK_LOST, f"no command or heartbeat for {link_s} s"))
+
+    def _watchdog_trip(self, name: str, detail: str) -> None:
+        """A stalled event loop or control thread (in the watchdog thread): every clutch off and disarmed here,
+        the fault reported once."""
+        self.controller.armed = False
+        with contextlib.suppress(Exception):
+            self.hw.clutches.all_off()
+        self.armed_remotely = False
+        fault = Fault.SENSOR_STALLED if name == CONTROL_LOOP else Fault.LOOP_STALLED
+        self.controller.fault(fault, detail)
+
+    def _check_link(self) -> None:
+        """Link loss, checked in the watchdog thread so that it fires while the event loop is blocked."""
+        link_s = self.cfg.commands.link_timeout_s
+        ctl = self.controller
+        if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
+            ctl.armed = False
+            self.armed_remotely = False
+            with contextlib.suppress(Exception):
+                self.hw.clutches.all_off()
+            ctl.fault(Fault.LINK_LOST, f"no command or heartbeat for {link_s} s")
 
     async def _telemetry_task(self) -> None:
         period = self.cfg.telemetry.period_s

@@ -65,6 +65,8 @@ class ClutchConfig:
     max_hold_s: float = 1.0
     start_leg_index: int = 0  # index into each sensor's `legs` of the leg standing on the ground at start
     boot_pull_up_reason: str = ""  # why clutch pins on GPIO 2-8 (pulled up at power-on) are safe here
+    heartbeat_pin: int = 18  # toggled by the control loop at every sample (0 = none): feeds the clutch enable's
+    # retriggerable monostable, so that a dead or stalled firmware cannot hold a clutch
 
 
 @dataclass(frozen=True)
@@ -73,8 +75,9 @@ class SamplingConfig:
 
     rate_hz: float = 300.0
     spin_s: float = 0.0003
-    stall_timeout_s: float = 0.1
+    stall_timeout_s: float = 0.1  # the control thread not sampling this long trips the watchdog (s)
     id_check_interval_s: float = 1.0
+    loop_stall_s: float = 0.25  # the event loop not feeding the watchdog this long trips it (s)
 
 
 @dataclass(frozen=True)
@@ -162,6 +165,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "id_check_interval_s": (0.0, 3600.0), "port": (0, 65535), "period_s": (0.001, 1.0),
     "max_datagram_bytes": (256, 65000), "decimate": (1, 1000), "link_timeout_s": (0.0, 3600.0),
     "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0), "npd_pin": (2, 27), "cs_pin": (2, 27),
+    "heartbeat_pin": (0, 27), "loop_stall_s": (0.02, 10.0),
     "max_connections": (2, 256), "auth_timeout_s": (0.1, 60.0), "idle_timeout_s": (1.0, 86400.0),
 }
 
@@ -303,6 +307,15 @@ def _check_pins(cfg: RobotConfig, source: str) -> None:
                 "use GPIO 12-27, or set [clutch] boot_pull_up_reason to say why it is safe here"
             )
     used = {pin: "a clutch pin" for pin in cfg.clutch.pins}
+    hb = cfg.clutch.heartbeat_pin
+    if hb:
+        if hb == 1:
+            raise ConfigError(f"{source}: [clutch] heartbeat_pin GPIO1 is reserved for the HAT ID EEPROM")
+        if hb in used:
+            raise ConfigError(f"{source}: [clutch] heartbeat_pin GPIO{hb} is also a clutch pin")
+        if hb in spi_lines:
+            raise ConfigError(f"{source}: [clutch] heartbeat_pin GPIO{hb} is an SPI line in use")
+        used[hb] = "[clutch] heartbeat_pin"
     for i, s in enumerate(cfg.sensors):
         for name in ("reset_pin", "npd_pin", "cs_pin"):
             pin = getattr(s, name)

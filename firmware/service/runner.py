@@ -24,7 +24,7 @@ from rimless.firmware.service.config import RobotConfig, load_config
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.logsetup import NonBlockingLog
 from rimless.firmware.service.safety import stop_on_signals
-from rimless.firmware.service.scenarios import Scenario, inject, scenario
+from rimless.firmware.service.scenarios import Scenario, arm_loop_stall, inject, scenario
 
 EXIT_OK = 0
 EXIT_FIRMWARE_FAULT = 1  # an error in the firmware itself (the summary says which)
@@ -134,7 +134,7 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
         raise CommandError(f"sensor: {err}") from None
     state["hw"] = hw
     try:
-        robot = RobotApp(cfg, hw)
+        robot = RobotApp(cfg, hw, on_ready=None if sc is None else (lambda _app: arm_loop_stall(sc)))
         if on_start is not None:
             on_start(robot)
     except BaseException:

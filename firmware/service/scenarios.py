@@ -4,7 +4,8 @@ that every lock can be judged) and a fault injected into the fake sensor at a se
 - `missed-first-touchdown`: the first step compresses 0.4 mm (peak 10 mm/s, under `touch_velocity_m_s`);
 - `first-step-bounce`: the first foot comes down again 140 ms after its touchdown (a bounce, not a step);
 - `brown-out`: the sensor resets itself 2.5 s after start (registers back to 400 cpi);
-- `wrong-product-id`: Product_ID reads 0x00 from 2.5 s after start (nothing on the bus).
+- `wrong-product-id`: Product_ID reads 0x00 from 2.5 s after start (nothing on the bus);
+- `loop-stall`: the event loop is blocked for 4 s from 2.5 s after start (the watchdog thread releases);
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, FakeFault
 from rimless.firmware.drivers.fake_walk import FakeWalk
 
+LOOP_STALL_S = 4.0
 FAULT_AT_S = 2.5  # when the timed faults strike, after start (s): a clutch is engaged then
 
 
@@ -28,6 +30,7 @@ class Scenario:
     walk: FakeWalk
     fault: Callable[[FakeAdns3080], None] | None = None
     fault_at_s: float = FAULT_AT_S
+    stall_loop_s: float = 0.0  # block the event loop this long at `fault_at_s` after start
 
 
 def _wrong_id(fake: FakeAdns3080) -> None:
@@ -46,6 +49,7 @@ def _walks(start_s: float) -> dict[str, tuple[FakeWalk, Callable[[FakeAdns3080],
         "first-step-bounce": (FakeWalk(start_s=start_s, bounce_after_s=0.14), None),
         "brown-out": (plain, _brownout),
         "wrong-product-id": (plain, _wrong_id),
+        "loop-stall": (plain, None),
     }
 
 
@@ -60,7 +64,15 @@ def scenario(name: str | None, *, lead_s: float = 1.0) -> Scenario:
     if key not in walks:
         raise ValueError(f"unknown fake fault {name!r}; known: {', '.join(FAKE_FAULTS)}")
     walk, fault = walks[key]
-    return Scenario(key, walk, fault)
+    return Scenario(key, walk, fault, stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0)
+
+
+def arm_loop_stall(sc: Scenario) -> None:
+    """In the running event loop: block it (a synchronous sleep) for `sc.stall_loop_s` at `sc.fault_at_s`."""
+    if sc.stall_loop_s > 0:
+        import asyncio
+
+        asyncio.get_running_loop().call_later(sc.fault_at_s, time.sleep, sc.stall_loop_s)
 
 
 class ScheduledFaultBus:

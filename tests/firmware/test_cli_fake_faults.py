@@ -44,6 +44,7 @@ def last_levels(lines: list[dict]) -> dict[int, int]:
     ("first-step-bounce", "leg_sync_lost", False),
     ("brown-out", "sensor_reset", True),
     ("wrong-product-id", "id_mismatch", True),
+    ("loop-stall", "loop_stalled", True),
 ])
 def test_every_scenario_ends_released_with_no_airborne_lock(tmp_path, name, fault, engages) -> None:
     summary, lines, proc = run_fake(tmp_path, "--fake-fault", name)

@@ -292,21 +292,25 @@ def test_reserved_udp_status_answers_and_replays_only_read(tmp_path) -> None:
         app.controller.arm()
         st = await asyncio.to_thread(send_reserved_datagram, "127.0.0.1", "status", token=TOKEN,
                                      port=app.command_port)
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.settimeout(1.0)
-        datagram = json.dumps({"status": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
-        replies = []
-        for _ in range(2):  # a replayed status only reads
-            s.sendto(datagram, ("127.0.0.1", app.command_port))
-            replies.append(json.loads(s.recv(65536)))
-        wrong_kind = json.dumps({"disarm": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
-        s.sendto(wrong_kind, ("127.0.0.1", app.command_port))
-        try:
-            s.recv(65536)
-            answered = True
-        except TimeoutError:
-            answered = False
-        s.close()
+        def exchange():  # blocking socket calls, off the event loop (a blocked loop trips the watchdog)
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.settimeout(1.0)
+            datagram = json.dumps({"status": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
+            replies = []
+            for _ in range(2):  # a replayed status only reads
+                s.sendto(datagram, ("127.0.0.1", app.command_port))
+                replies.append(json.loads(s.recv(65536)))
+            wrong_kind = json.dumps({"disarm": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
+            s.sendto(wrong_kind, ("127.0.0.1", app.command_port))
+            try:
+                s.recv(65536)
+                answered = True
+            except TimeoutError:
+                answered = False
+            s.close()
+            return replies, answered
+
+        replies, answered = await asyncio.to_thread(exchange)
         return st, replies, answered, app.controller.armed
 
     app, summary, (st, replies, answered, armed), hw = scenario(config(tmp_path), script)
