@@ -356,6 +356,8 @@ def listen(
     ] = None,
     robot_port: Annotated[int, typer.Option("--robot-port", min=1, max=65535, help="Robot command port (TCP), with --host.")] = 9871,
     token: _TOKEN = None,
+    timeout_s: Annotated[float, typer.Option("--timeout-s", min=0.0, help="Exit 1 (files completed) when no "
+                                             "datagram arrives for this long (s); 0 = wait forever.")] = 10.0,
 ) -> None:
     """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
 
@@ -377,7 +379,7 @@ def listen(
         do_listen(bind=bind, port=port, out=out, csv_out=csv_out, duration_s=duration_s,
                   summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,
                   write_screen=lambda text: (sys.stderr.write(text), sys.stderr.flush()),
-                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb)
+                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb, timeout_s=timeout_s)
 
     _interruptible(go)
 

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
+from rimless.errors import RunFailure
 from rimless.firmware.errors import CommandError, Interrupted
 from rimless.firmware.link.telemetry import parse_datagram
 
@@ -180,9 +181,13 @@ def listen(
     *, bind: str, port: int, out: Path | None, duration_s: float | None, summary_every_s: float = 1.0,
     echo: Callable[[str], None] = print, csv_out: Path | None = None, stale_s: float = 1.0,
     live: bool = False, write_screen: Callable[[str], None] | None = None,
-    heartbeat: Any = None,
+    heartbeat: Any = None, timeout_s: float = 10.0,
 ) -> Summary:
-    """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says."""
+    """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
+
+    Until the first datagram the summary line says what it waits for instead of counting zero samples. When
+    nothing arrives for `timeout_s` (0: wait forever), the files are completed and `RunFailure` says that no
+    robot is sending (the command exits 1)."""
     try:
         sock = socket.socket(socket.AF_INET6 if ":" in bind else socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((bind, port))
@@ -204,6 +209,7 @@ def listen(
     last_data: float | None = None
     stale = False
     stopped_by: BaseException | None = None
+    silent_for: float | None = None
     try:
         while duration_s is None or time.monotonic() - start < duration_s:
             try:
@@ -227,7 +233,15 @@ def listen(
                 stale = True
                 wall = time.strftime("%H:%M:%S", time.localtime(time.time() - (now - last_data)))
                 echo(f"data stopped: nothing for {stale_s:g} s (last datagram at {wall})")
-            if now >= next_line:
+            quiet_s = now - (start if last_data is None else last_data)
+            if timeout_s > 0 and quiet_s >= timeout_s:
+                silent_for = quiet_s
+                break
+            if now >= next_line and last_data is None:
+                echo(f"waiting for telemetry on {bind}:{port}: no robot sending for {quiet_s:.0f} s"
+                     + (f" (giving up after {timeout_s:g} s)" if timeout_s > 0 else ""))
+                next_line = now + summary_every_s
+            elif now >= next_line:
                 if live and write_screen is not None:
                     write_screen("\x1b[H\x1b[J" + "\n".join(summary.view(now, summary_every_s)) + "\n")
                 else:
@@ -243,9 +257,14 @@ def listen(
             if hb_thread is not None:
                 hb_thread.join(2.0)
         paths = rec.close()
-    echo(summary.line(time.monotonic(), summary_every_s))
+    if last_data is not None or silent_for is None:
+        echo(summary.line(time.monotonic(), summary_every_s))
     for p in paths:
         echo(f"wrote {p}")
     if stopped_by is not None:
         raise stopped_by  # after the files are complete: the caller exits 130
+    if silent_for is not None:
+        what = "no robot is sending telemetry" if last_data is None else "the robot stopped sending telemetry"
+        raise RunFailure(f"{what} to {bind}:{port}: nothing for {silent_for:.1f} s (--timeout-s {timeout_s:g}); "
+                         "is this PC in the robot's [telemetry] destinations (or `robot run --telemetry`)?")
     return summary

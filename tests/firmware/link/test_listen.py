@@ -19,3 +19,22 @@ def test_live_view_draws_velocity_compression_and_one_strip_per_clutch() -> None
     assert len(strips) == 8
     assert strips[0].endswith("█" * 10 + "·" * 30) and strips[3].endswith("·" * 30 + "█" * 10)
     assert all(len(line) <= 80 for line in lines)
+
+
+def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) -> None:
+    """Fails on today's main: `robot listen` with nobody sending printed "0 samples" lines forever."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.support.firmware_app import free_port
+
+    out = tmp_path / "tel.jsonl"
+    proc = subprocess.run([str(Path(sys.executable).with_name("rimless")), "robot", "listen", "--bind", "127.0.0.1",
+                           "--port", str(free_port()), "--no-live", "--summary-every-s", "0.2", "--timeout-s", "1",
+                           "--out", str(out)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert lines[-1].startswith("error: no robot is sending telemetry") and "--timeout-s 1" in lines[-1]
+    assert any(line.startswith("waiting for telemetry on 127.0.0.1:") for line in lines)
+    assert "Traceback" not in proc.stderr and out.exists() and not list(tmp_path.glob("*.part"))
