@@ -236,7 +236,8 @@ def run(
     ] = None,
     fake_fault: Annotated[
         Optional[str], typer.Option("--fake-fault", metavar="NAME", help="With --fake: play a fault scenario "
-                                    "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id, loop-stall).",
+                                    "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id, loop-stall, "
+                                    "log-disk-full).",
                                     show_default=False)
     ] = None,
     pin_log: Annotated[
@@ -283,6 +284,9 @@ def run(
         f"faults: {', '.join(summary.faults) or 'none'}; every clutch released",
         err=True,
     )
+    if summary.log_errors:
+        typer.echo(f"trial log degraded: {summary.log_errors} failed writes, {summary.log_dropped_lines} lines "
+                   f"dropped ({summary.log_last_error})", err=True)
     if outcome.fake_pins:
         typer.echo("fake clutch pin levels (history): " + outcome.fake_pins, err=True)
     if outcome.airborne_leg_locks is not None:

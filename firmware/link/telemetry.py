@@ -22,6 +22,7 @@ from rimless.firmware.control.faults import Fault
 EVENT_CODES = {
     "touchdown": 1, "lock": 2, "release": 3, "no_zero_crossing": 4, "arm": 5, "disarm": 6, "param": 7,
     "trial_start": 8, "trial_stop": 9, "stop": 10, "fault": 11, "sync_lost": 12, "lock_unsynced": 13, "signal": 14,
+    "lock_withheld": 15, "log_degraded": 16, "touchdown_dismissed": 17,
 }
 
 

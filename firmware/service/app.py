@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import secrets
 import signal
 import sys
@@ -61,6 +62,10 @@ class RunSummary:
     telemetry_dropped: int = 0
     error: str | None = None
     command_port: int | None = None
+    log_dropped_lines: int = 0  # trial-log lines lost to failed writes (a full disk)
+    log_errors: int = 0  # failed trial-log writes or fsyncs
+    log_last_error: str = ""
+    stderr_dropped: int = 0  # log records dropped because stderr did not keep up (set by the runner)
 
 
 class RobotApp:
@@ -109,6 +114,9 @@ class RobotApp:
         self._last_command_s = time.monotonic()
         self._trial_lock: asyncio.Lock | None = None
         self.watchdog: Watchdog | None = None
+        self.trial_log_write: Callable[[int, Any], int] = os.write  # the trial log's write (a fake fills the disk)
+        self._log_closed = (0, 0)  # dropped lines and errors of the trials already closed
+        self._log_reported = 0  # errors already reported as a log_degraded event
 
     # --- stop -----------------------------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
@@ -280,6 +288,7 @@ class RobotApp:
                     self.trial.append(self._log_pending)
                     self.trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {"reason": "shutdown"})])
                     self.trial.close()
+                    self._account_log(closed=True)
                 except Exception as err:  # noqa: BLE001
                     self._shutdown_error("trial log", err)
                 finally:
@@ -383,6 +392,28 @@ class RobotApp:
                     pending, self._log_pending = self._log_pending, []
                     self.trial.append(pending)
                     await asyncio.to_thread(self.trial.sync)
+                    self._account_log()
+
+    def _account_log(self, *, closed: bool = False) -> None:
+        """Trial-log failures into the summary; the first failure of a run of them becomes a `log_degraded`
+        event (telemetry, and the log itself when it can write again). Logging degrades, control goes on."""
+        trial = self.trial
+        if trial is None:
+            return
+        dropped, errors = self._log_closed
+        self.summary.log_dropped_lines = dropped + trial.dropped_lines
+        self.summary.log_errors = errors + trial.errors
+        if trial.last_error:
+            self.summary.log_last_error = trial.last_error
+        if self.summary.log_errors > self._log_reported:
+            if self._log_reported == 0 or closed:
+                log.warning("trial log: %s (%d lines dropped)", trial.last_error, self.summary.log_dropped_lines)
+            if self._log_reported == 0:
+                self.controller.outbox.append(EventRecord(time.monotonic_ns(), "log_degraded", {
+                    "error": trial.last_error, "dropped_lines": self.summary.log_dropped_lines}))
+            self._log_reported = self.summary.log_errors
+        if closed:
+            self._log_closed = (self.summary.log_dropped_lines, self.summary.log_errors)
 
     async def _commands_task(self) -> None:
         await asyncio.Event().wait()  # the server runs on its own; this task marks its lifetime
@@ -423,6 +454,8 @@ class RobotApp:
                 rate_hz=self.cfg.sampling.rate_hz,
                 missed_deadlines=self.sampler.stats.missed_deadlines,
                 trial=None if self.trial is None else str(self.trial.path),
+                log={"dropped_lines": self.summary.log_dropped_lines, "errors": self.summary.log_errors,
+                     "last_error": self.summary.log_last_error},
                 params={k: getattr(self.controller.params(), k) for k in self.controller.params().__slots__},
                 link={"timeout_s": self.cfg.commands.link_timeout_s, "armed_remotely": self.armed_remotely,
                       "connections": 0 if self.server is None else self.server.connections},
@@ -462,7 +495,7 @@ class RobotApp:
                 raise ValueError(f"a trial is already running ({self.trial.path.name})")
             header = {"rate_hz": self.cfg.sampling.rate_hz, "detector": _params_dict(self.controller),
                       "legs": [list(s.legs) for s in self.cfg.sensors], "clutch_pins": list(self.cfg.clutch.pins)}
-            trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header)
+            trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header, write=self.trial_log_write)
             self._route()  # records from before the start do not belong to the trial
             self.trial = trial
             self._log_pending = [EventRecord(time.monotonic_ns(), "trial_start", {"trial": name})]
@@ -481,7 +514,10 @@ class RobotApp:
             trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {})])
             self._log_pending = []
             await asyncio.to_thread(trial.close)
-            return {"path": str(trial.path), "lines": trial.lines}
+            self.trial = trial
+            self._account_log(closed=True)
+            self.trial = None
+            return {"path": str(trial.path), "lines": trial.lines, "dropped_lines": trial.dropped_lines}
 
 
 def _params_dict(ctl: Controller) -> dict[str, Any]:

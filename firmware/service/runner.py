@@ -24,7 +24,7 @@ from rimless.firmware.service.config import RobotConfig, load_config
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.logsetup import NonBlockingLog
 from rimless.firmware.service.safety import stop_on_signals
-from rimless.firmware.service.scenarios import Scenario, arm_loop_stall, inject, scenario
+from rimless.firmware.service.scenarios import Scenario, inject, on_ready, scenario
 
 EXIT_OK = 0
 EXIT_FIRMWARE_FAULT = 1  # an error in the firmware itself (the summary says which)
@@ -134,15 +134,16 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
         raise CommandError(f"sensor: {err}") from None
     state["hw"] = hw
     try:
-        robot = RobotApp(cfg, hw, on_ready=None if sc is None else (lambda _app: arm_loop_stall(sc)))
+        robot = RobotApp(cfg, hw, on_ready=None if sc is None else (lambda app: on_ready(sc, app)))
         if on_start is not None:
             on_start(robot)
     except BaseException:
         hw.close()
         raise
     try:
-        with NonBlockingLog(level=log_level):
+        with NonBlockingLog(level=log_level) as logs:
             summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm))
+            summary.stderr_dropped = logs.dropped
     except OSError as err:
         raise CommandError(f"cannot start: {err}") from None
     except ValueError as err:  # a telemetry host that cannot be resolved

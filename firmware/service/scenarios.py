@@ -6,10 +6,14 @@ that every lock can be judged) and a fault injected into the fake sensor at a se
 - `brown-out`: the sensor resets itself 2.5 s after start (registers back to 400 cpi);
 - `wrong-product-id`: Product_ID reads 0x00 from 2.5 s after start (nothing on the bus);
 - `loop-stall`: the event loop is blocked for 4 s from 2.5 s after start (the watchdog thread releases);
+- `log-disk-full`: a trial log runs from the start, and its disk fills 2.5 s after start: one write is cut
+  short, every later one fails with ENOSPC (logging degrades, the walk goes on).
 """
 
 from __future__ import annotations
 
+import errno
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -31,6 +35,7 @@ class Scenario:
     fault: Callable[[FakeAdns3080], None] | None = None
     fault_at_s: float = FAULT_AT_S
     stall_loop_s: float = 0.0  # block the event loop this long at `fault_at_s` after start
+    disk_full: bool = False  # run a trial log whose disk fills at `fault_at_s` after start
 
 
 def _wrong_id(fake: FakeAdns3080) -> None:
@@ -50,6 +55,7 @@ def _walks(start_s: float) -> dict[str, tuple[FakeWalk, Callable[[FakeAdns3080],
         "brown-out": (plain, _brownout),
         "wrong-product-id": (plain, _wrong_id),
         "loop-stall": (plain, None),
+        "log-disk-full": (plain, None),
     }
 
 
@@ -64,15 +70,43 @@ def scenario(name: str | None, *, lead_s: float = 1.0) -> Scenario:
     if key not in walks:
         raise ValueError(f"unknown fake fault {name!r}; known: {', '.join(FAKE_FAULTS)}")
     walk, fault = walks[key]
-    return Scenario(key, walk, fault, stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0)
+    return Scenario(key, walk, fault, stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0,
+                    disk_full=key == "log-disk-full")
 
 
-def arm_loop_stall(sc: Scenario) -> None:
-    """In the running event loop: block it (a synchronous sleep) for `sc.stall_loop_s` at `sc.fault_at_s`."""
+class DiskFullWrite:
+    """`os.write` on a disk that fills at `at_monotonic_s`: the first write after it is cut short, every
+    later one raises ENOSPC."""
+
+    def __init__(self, at_monotonic_s: float) -> None:
+        self.at_s = at_monotonic_s
+        self.short_done = False
+
+    def __call__(self, fd: int, data: Any) -> int:
+        if time.monotonic() < self.at_s:
+            return os.write(fd, data)
+        if not self.short_done and len(data) > 1:
+            self.short_done = True
+            return os.write(fd, bytes(data[: len(data) // 2]))
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+_TASKS: set[Any] = set()
+
+
+def on_ready(sc: Scenario, app: Any) -> None:
+    """In the running event loop, once the app runs: block the loop (`stall_loop_s`) or start a trial log on
+    a disk that fills (`disk_full`) at `sc.fault_at_s`."""
+    import asyncio
+
+    loop = asyncio.get_running_loop()
     if sc.stall_loop_s > 0:
-        import asyncio
-
-        asyncio.get_running_loop().call_later(sc.fault_at_s, time.sleep, sc.stall_loop_s)
+        loop.call_later(sc.fault_at_s, time.sleep, sc.stall_loop_s)
+    if sc.disk_full:
+        app.trial_log_write = DiskFullWrite(time.monotonic() + sc.fault_at_s)
+        task = loop.create_task(app.start_trial(f"fake-{sc.name}"))
+        _TASKS.add(task)
+        task.add_done_callback(_TASKS.discard)
 
 
 class ScheduledFaultBus:
