@@ -21,28 +21,45 @@ app = typer.Typer(no_args_is_help=True)
 _HOST = Annotated[str, typer.Option("--host", help="Robot host name or IP address.")]
 _PORT = Annotated[int, typer.Option("--port", min=1, max=65535, help="Robot command port (TCP).")]
 _TOKEN = Annotated[
-    Optional[str], typer.Option("--token", help="Shared command token (default: $RIMLESS_TOKEN).", show_default=False)
+    Optional[str], typer.Option("--token", help="Shared command token (visible in the process list: prefer "
+                                "--token-file or $RIMLESS_TOKEN).", show_default=False)
+]
+_TOKEN_FILE = Annotated[
+    Optional[Path], typer.Option("--token-file", help="File holding the command token, mode 0600 (default: "
+                                 "$RIMLESS_TOKEN_FILE).", show_default=False)
 ]
 _CONFIG = Annotated[
     Optional[Path], typer.Option("--config", help="robot.toml (default: built-in defaults).", show_default=False)
 ]
 
 
-def _token(token: str | None) -> str:
+def _token(token: str | None, token_file: Path | None = None) -> str:
+    """The command token: --token (warned: the process list shows it), --token-file, $RIMLESS_TOKEN, then
+    $RIMLESS_TOKEN_FILE. A token file must be private (mode 0600)."""
     from rimless.firmware.errors import CommandError
+    from rimless.firmware.link.protocol import read_token_file
 
-    tok = token or os.environ.get("RIMLESS_TOKEN", "")
-    if not tok:
-        raise CommandError("no command token: pass --token or set RIMLESS_TOKEN (the robot prints it at start)")
-    return tok
+    if token:
+        typer.echo("warning: --token is visible to every user in the process list; use --token-file or "
+                   "$RIMLESS_TOKEN", err=True)
+        return token
+    if token_file is not None:
+        return read_token_file(token_file, "--token-file")
+    if os.environ.get("RIMLESS_TOKEN"):
+        return os.environ["RIMLESS_TOKEN"]
+    if os.environ.get("RIMLESS_TOKEN_FILE"):
+        return read_token_file(os.environ["RIMLESS_TOKEN_FILE"], "$RIMLESS_TOKEN_FILE")
+    raise CommandError("no command token: pass --token-file or set RIMLESS_TOKEN_FILE or RIMLESS_TOKEN (the robot "
+                       "says at start where its generated token is)")
 
 
-def _remote(host: str, port: int, token: str | None, cmd: str, args: dict[str, Any] | None = None) -> None:
+def _remote(host: str, port: int, tokens: tuple[str | None, Path | None], cmd: str,
+            args: dict[str, Any] | None = None) -> None:
     from rimless.firmware.link.remote import send_command
 
     @user_facing
     def go() -> None:
-        print_json(send_command(host, cmd, args, token=_token(token), port=port))
+        print_json(send_command(host, cmd, args, token=_token(*tokens), port=port))
 
     _interruptible(go)
 
@@ -66,7 +83,7 @@ _JSON = Annotated[bool, typer.Option("--json", help="Print JSON (these commands 
 
 
 @app.command()
-def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON.
 
     When the TCP channel does not answer, the short status of the reserved UDP path is printed
@@ -76,22 +93,22 @@ def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
 
     @user_facing
     def go() -> None:
-        print_json(robot_status(host, token=_token(token), port=port))
+        print_json(robot_status(host, token=_token(token, token_file), port=port))
 
     _interruptible(go)
 
 
 @app.command()
-def ping(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def ping(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Check that the robot answers (and count as a heartbeat)."""
-    _remote(host, port, token, "ping")
+    _remote(host, port, (token, token_file), "ping")
 
 
 @app.command()
 def arm(
     host: _HOST,
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     stance_leg: Annotated[
         Optional[int],
         typer.Option("--stance-leg", min=0, help="Clutch index of the leg on the ground now: re-synchronises "
@@ -105,11 +122,11 @@ def arm(
     link_timeout_s (2 s by default): keep `rimless robot listen --host ...` or
     `rimless robot heartbeat` running.
     """
-    _remote(host, port, token, "arm", {} if stance_leg is None else {"stance_leg": stance_leg})
+    _remote(host, port, (token, token_file), "arm", {} if stance_leg is None else {"stance_leg": stance_leg})
 
 
 @app.command()
-def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Disarm: every clutch off.
 
     Sent first over the robot's reserved UDP path (no connection to wait for, so a flood of TCP
@@ -119,7 +136,7 @@ def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
 
     @user_facing
     def go() -> None:
-        print_json(robot_disarm(host, token=_token(token), port=port))
+        print_json(robot_disarm(host, token=_token(token, token_file), port=port))
 
     _interruptible(go)
 
@@ -131,7 +148,7 @@ def set_param(
                                          "are values, not options).")],
     host: _HOST,
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     as_json: _JSON = False,
 ) -> None:
     """Set a detector parameter on the running robot."""
@@ -147,7 +164,7 @@ def set_param(
             raise ParameterError(f"VALUE must be a finite number, got {value!r}")
         return int(v) if name.endswith("_samples") and v == int(v) else v
 
-    _remote(host, port, token, "set", {"name": name, "value": parse()})
+    _remote(host, port, (token, token_file), "set", {"name": name, "value": parse()})
 
 
 @app.command("trial-start")
@@ -155,24 +172,24 @@ def trial_start(
     host: _HOST,
     name: Annotated[str, typer.Option("--name", help="Trial name (letters, digits, _.-).")] = "trial",
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     as_json: _JSON = False,
 ) -> None:
     """Start a trial log on the robot (every sample and event)."""
-    _remote(host, port, token, "trial_start", {"name": name})
+    _remote(host, port, (token, token_file), "trial_start", {"name": name})
 
 
 @app.command("trial-stop")
-def trial_stop(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def trial_stop(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Stop the running trial log; prints its path on the robot."""
-    _remote(host, port, token, "trial_stop")
+    _remote(host, port, (token, token_file), "trial_stop")
 
 
 @app.command()
 def heartbeat(
     host: _HOST,
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     period_s: Annotated[float, typer.Option("--period-s", min=0.05, max=10.0, help="Seconds between pings.")] = 0.5,
     duration_s: Annotated[
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
@@ -187,7 +204,7 @@ def heartbeat(
 
     @user_facing
     def go() -> None:
-        hb = Heartbeat(host, port=port, token=_token(token), period_s=period_s,
+        hb = Heartbeat(host, port=port, token=_token(token, token_file), period_s=period_s,
                        echo=lambda line: typer.echo(line, err=True))
         hb.run(duration_s=duration_s)
 
@@ -256,8 +273,9 @@ def run(
     from rimless.firmware.service.runner import run_robot
 
     def started(robot: Any) -> None:
-        if robot.token_generated:
-            typer.echo(f"command token (generated): {robot.token}", err=True)
+        if robot.token_path is not None:
+            typer.echo(f"command token (generated) in {robot.token_path} (mode 0600): on this machine, "
+                       f"export RIMLESS_TOKEN_FILE={robot.token_path}", err=True)
         mode = "fake" if fake else "hardware"
         typer.echo(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz", err=True)
 
@@ -359,7 +377,7 @@ def listen(
                                     show_default=False)
     ] = None,
     robot_port: Annotated[int, typer.Option("--robot-port", min=1, max=65535, help="Robot command port (TCP), with --host.")] = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     timeout_s: Annotated[float, typer.Option("--timeout-s", min=0.0, help="Exit 1 (files completed) when no "
                                              "datagram arrives for this long (s); 0 = wait forever.")] = 10.0,
 ) -> None:
@@ -378,7 +396,7 @@ def listen(
         if host is not None:
             from rimless.firmware.link.heartbeat import Heartbeat
 
-            hb = Heartbeat(host, port=robot_port, token=_token(token), echo=lambda line: typer.echo(line, err=True))
+            hb = Heartbeat(host, port=robot_port, token=_token(token, token_file), echo=lambda line: typer.echo(line, err=True))
         use_live = sys.stderr.isatty() if live is None else live
         do_listen(bind=bind, port=port, out=out, csv_out=csv_out, duration_s=duration_s,
                   summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,

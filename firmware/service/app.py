@@ -90,6 +90,7 @@ class RobotApp:
         self.hw = hw
         self.token = token or cfg.token() or secrets.token_urlsafe(24)
         self.token_generated = not (token or cfg.token())
+        self.token_path: Any = None  # where a generated token was written (mode 0600), by the runner
         if cfg.commands.enabled and not self.token_generated:
             check_token(self.token)  # WeakToken (a ParameterError) names the problem
         self.controller = Controller(

@@ -70,6 +70,21 @@ class RunOutcome:
         return EXIT_OK
 
 
+def write_private_token(token: str) -> Path:
+    """Write a generated token to a new private file (mode 0600) in $XDG_RUNTIME_DIR or the temporary directory,
+    so that it is never printed; returns its path."""
+    import os
+    import tempfile
+
+    base = os.environ.get("XDG_RUNTIME_DIR") or None
+    fd, name = tempfile.mkstemp(prefix="rimless-token-", dir=base)
+    try:
+        os.write(fd, (token + "\n").encode())
+    finally:
+        os.close(fd)
+    return Path(name)
+
+
 def with_telemetry(cfg: RobotConfig, destinations: Sequence[str]) -> RobotConfig:
     """`cfg` sending telemetry also to each "host:port" of `destinations` (already checked)."""
     if not destinations:
@@ -135,6 +150,8 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
     state["hw"] = hw
     try:
         robot = RobotApp(cfg, hw, on_ready=None if sc is None else (lambda app: on_ready(sc, app)))
+        if robot.token_generated and cfg.commands.enabled:
+            robot.token_path = write_private_token(robot.token)
         if on_start is not None:
             on_start(robot)
     except BaseException:
@@ -148,6 +165,9 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
         raise CommandError(f"cannot start: {err}") from None
     except ValueError as err:  # a telemetry host that cannot be resolved
         raise ParameterError(f"cannot start: {err}") from None
+    finally:
+        if robot.token_path is not None:
+            robot.token_path.unlink(missing_ok=True)
     pins = pin_histories(hw.pin_factory, cfg.clutch.pins) if fake and hw.pin_factory is not None else ""
     outcome = RunOutcome(fake, summary, robot.signal_received, fake_pins=pins)
     if sc is not None and pins_log is not None:

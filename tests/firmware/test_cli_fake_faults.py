@@ -6,6 +6,7 @@ behind them locked airborne legs in the first two scenarios (tests/firmware/cont
 from __future__ import annotations
 
 import json
+import secrets
 import os
 import subprocess
 import sys
@@ -21,7 +22,7 @@ def run_fake(tmp_path: Path, *args: str, duration_s: float = 4.0) -> tuple[dict,
     cfg = tmp_path / "robot.toml"
     cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
     pins = tmp_path / "pins.jsonl"
-    env = {**os.environ, "RIMLESS_TOKEN": "fake-fault-token-8d2b6e4a1c"}
+    env = {**os.environ, "RIMLESS_TOKEN": secrets.token_urlsafe(18)}
     proc = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s",
                            str(duration_s), "--json", "--pin-log", str(pins), *args],
                           capture_output=True, text=True, env=env, timeout=60)
