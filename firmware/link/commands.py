@@ -54,7 +54,14 @@ LOG_LINES_PER_S = 5.0
 class ReservedListener:
     """The reserved path for `disarm` and `status`: a thread of its own on a UDP socket, so neither
     TCP connections nor a busy event loop can delay it. The callbacks run in this thread (they must
-    be thread-safe); `on_status` returns a small JSON-able dict."""
+    be thread-safe); `on_status` returns a small JSON-able dict.
+
+    Each source may send `PER_SOURCE_PER_S` datagrams per second (the rest are dropped unread); only an
+    authenticated datagram whose number is above the last one accepted for its kind is answered (a captured
+    one replayed, from any source, is ignored), and never with more bytes than it had."""
+
+    PER_SOURCE_PER_S = 20.0
+    MAX_SOURCES = 4096
 
     def __init__(self, sock: socket.socket, token: str, on_disarm: Callable[[], None],
                  on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> None:
@@ -65,6 +72,13 @@ class ReservedListener:
         self.on_rejected = on_rejected
         self.disarms = 0
         self.statuses = 0
+        self.replays = 0
+        self.rate_limited = 0
+        self.per_source_per_s = self.PER_SOURCE_PER_S
+        self._buckets: dict[str, tuple[float, float]] = {}
+        # numbers at or below these are replays; a restart starts 5 min before now (the PC clocks' slack)
+        start = time.time_ns() - 300 * 10**9
+        self._last_n = {"disarm": start, "status": start}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="rimless-reserved", daemon=True)
 
@@ -90,6 +104,17 @@ class ReservedListener:
         except Exception as err:  # noqa: BLE001 - a racing read must not kill the reserved path
             return {"error": f"{type(err).__name__}: {err}"}
 
+    def _allowed(self, source: str) -> bool:
+        """Per-source token bucket (`per_source_per_s`, burst as much), checked before any parsing; the table
+        keeps the `MAX_SOURCES` most recent sources."""
+        now = time.monotonic()
+        level, last = self._buckets.pop(source, (self.per_source_per_s, now))
+        level = min(self.per_source_per_s, level + (now - last) * self.per_source_per_s)
+        self._buckets[source] = (level - 1.0, now) if level >= 1.0 else (level, now)
+        while len(self._buckets) > self.MAX_SOURCES:
+            self._buckets.pop(next(iter(self._buckets)))
+        return level >= 1.0
+
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
@@ -98,14 +123,23 @@ class ReservedListener:
                 continue
             except OSError:
                 return  # closed
+            if not self._allowed(addr[0]):
+                self.rate_limited += 1
+                continue
             try:
                 kind, n = parse_reserved_datagram(data, self.token)
             except Rejected as err:
                 self.on_rejected(str(addr), str(err))
-                continue
+                continue  # no answer to what is not authenticated
             except Exception as err:  # noqa: BLE001 - any datagram gets a log line, never a traceback
                 self.on_rejected(str(addr), f"unreadable reserved datagram ({type(err).__name__})")
                 continue
+            if n <= self._last_n[kind]:
+                self.replays += 1
+                self.on_rejected(str(addr), f"reserved datagram: {kind} number {n} not above the last one "
+                                            f"accepted (a replay)")
+                continue  # no answer either: a replay with a spoofed source must not reflect
+            self._last_n[kind] = n
             reply: dict[str, Any] = {"ok": True, "n": n}
             try:
                 if kind == "disarm":
@@ -115,9 +149,23 @@ class ReservedListener:
                 else:
                     self.statuses += 1
             finally:
-                reply["status"] = self._status()
                 with contextlib.suppress(OSError, TypeError, ValueError):
-                    self.sock.sendto(json.dumps(reply, default=str).encode(), addr)
+                    self.sock.sendto(self._bounded(reply, len(data)), addr)
+
+    def _bounded(self, reply: dict[str, Any], limit: int) -> bytes:
+        """The answer with the status, never larger than the request (`limit` bytes): the status shrinks to
+        its counts, then goes, if need be."""
+        status = self._status()
+        full = dict(reply, status=status)
+        out = json.dumps(full, separators=(",", ":"), default=str).encode()
+        if len(out) <= limit:
+            return out
+        short = {k: (len(v) if isinstance(v, list) else v) for k, v in status.items() if k in ("armed", "faults",
+                                                                                              "engaged")}
+        out = json.dumps(dict(reply, status=short), separators=(",", ":"), default=str).encode()
+        if len(out) <= limit:
+            return out
+        return json.dumps(reply, separators=(",", ":")).encode()[:limit]
 
     def close(self) -> None:
         """Stop the thread and close the socket."""

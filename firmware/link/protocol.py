@@ -150,6 +150,15 @@ def read_token_file(path: str | os.PathLike[str], what: str) -> str:
 
 
 RESERVED_KINDS = ("disarm", "status")
+RESERVED_PAD_BYTES = 400  # clients pad their datagram so that the answer (never larger) can carry the status
+
+
+def reserved_counter() -> int:
+    """The number of a new reserved-path datagram: nanoseconds since the epoch, increasing on one PC; the robot
+    accepts each kind only with a number above the last one it accepted (a replay is ignored)."""
+    import time
+
+    return time.time_ns()
 
 
 def reserved_mac(token: str, kind: str, n: int) -> str:
@@ -171,8 +180,10 @@ def parse_reserved_datagram(data: bytes, token: str) -> tuple[str, int]:
     except (UnicodeDecodeError, ValueError, RecursionError):
         raise Rejected("reserved datagram: not UTF-8 JSON") from None
     kinds = [k for k in RESERVED_KINDS if isinstance(obj, dict) and k in obj]
-    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) != {kinds[0], "mac"}:
-        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status")
+    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) - {"pad"} != {kinds[0], "mac"}:
+        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status (and pad)")
+    if "pad" in obj and not isinstance(obj["pad"], str):
+        raise Rejected("reserved datagram: pad must be a string")
     kind = kinds[0]
     n, mac = obj[kind], obj["mac"]
     if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
