@@ -212,23 +212,30 @@ Handler = Callable[[Command], Awaitable[dict[str, Any]]]
 
 
 class _Conn:
-    __slots__ = ("task", "writer", "opened_s", "authenticated", "peer")
+    __slots__ = ("task", "writer", "opened_s", "authenticated", "peer", "source")
 
-    def __init__(self, task: asyncio.Task[None], writer: asyncio.StreamWriter, peer: str) -> None:
+    def __init__(self, task: asyncio.Task[None], writer: asyncio.StreamWriter, peer: str, source: str) -> None:
         self.task = task
         self.writer = writer
         self.opened_s = time.monotonic()
         self.authenticated = False
         self.peer = peer
+        self.source = source
 
 
 class CommandServer:
     """asyncio TCP server; `handler` executes a validated command or raises ValueError/RuntimeError.
 
+    Per source address, at most `MAX_UNAUTHENTICATED_PER_SOURCE` connections that have not authenticated;
+    `RESERVED_FOR_OPERATORS` of the `max_connections` slots only authenticated connections may hold.
+
     :param max_connections: connections held at once (new ones evict the oldest unauthenticated).
     :param auth_timeout_s: a connection must send a valid command within this time.
     :param idle_timeout_s: an authenticated connection silent this long is closed.
     """
+
+    MAX_UNAUTHENTICATED_PER_SOURCE = 4
+    RESERVED_FOR_OPERATORS = 2
 
     def __init__(
         self,
@@ -263,6 +270,7 @@ class CommandServer:
         self.accepted = 0
         self.evicted = 0
         self.timed_out = 0
+        self.refused_per_source = 0
         self.log = RateLimitedLog(log)
         self._server: asyncio.Server | None = None
         self._conns: dict[asyncio.Task[None], _Conn] = {}
@@ -312,10 +320,28 @@ class CommandServer:
             await asyncio.wait_for(self._server.wait_closed(), 1.0)
         self._server = None
 
-    def _make_room(self) -> None:
-        """At the cap: drop the oldest connection that never authenticated (else the oldest one)."""
-        while len(self._conns) >= self.max_connections:
-            conns = sorted(self._conns.values(), key=lambda c: (c.authenticated, c.opened_s))
+    def _unauthenticated_from(self, source: str) -> int:
+        return sum(1 for c in self._conns.values() if c.source == source and not c.authenticated)
+
+    def _make_room(self, source: str) -> bool:
+        """Room for a new connection from `source`; False when that source already holds
+        `MAX_UNAUTHENTICATED_PER_SOURCE` connections that never authenticated (the new one is refused, no one
+        else's is dropped). At the cap, the victim is the oldest unauthenticated connection of the source
+        holding the most of them, so that a flooding host evicts only itself; authenticated connections go
+        last, and `RESERVED_FOR_OPERATORS` slots are never held by unauthenticated ones."""
+        if self._unauthenticated_from(source) >= self.MAX_UNAUTHENTICATED_PER_SOURCE:
+            return False
+        unauth_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
+        while (len(self._conns) >= self.max_connections
+               or sum(1 for c in self._conns.values() if not c.authenticated) >= unauth_cap):
+            counts: dict[str, int] = {}
+            for c in self._conns.values():
+                if not c.authenticated:
+                    counts[c.source] = counts.get(c.source, 0) + 1
+            conns = sorted(self._conns.values(),
+                           key=lambda c: (c.authenticated, -counts.get(c.source, 0), c.opened_s))
+            if not conns:
+                return True
             victim = conns[0]
             self._conns.pop(victim.task, None)
             victim.task.cancel()
@@ -324,13 +350,22 @@ class CommandServer:
             self.evicted += 1
             self.log.warning("command connection from %s dropped to make room (cap %d)", victim.peer,
                              self.max_connections)
+        return True
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
         assert task is not None
-        peer = str(writer.get_extra_info("peername"))
-        self._make_room()
-        conn = _Conn(task, writer, peer)
+        peername = writer.get_extra_info("peername")
+        peer = str(peername)
+        source = str(peername[0]) if isinstance(peername, tuple) and peername else peer
+        if not self._make_room(source):
+            self.refused_per_source += 1
+            self.log.warning("command connection from %s refused: %d unauthenticated connections from %s already",
+                             peer, self.MAX_UNAUTHENTICATED_PER_SOURCE, source)
+            with contextlib.suppress(Exception):
+                writer.transport.abort()
+            return
+        conn = _Conn(task, writer, peer, source)
         self._conns[task] = conn
         nonce = secrets.token_hex(16)
         last_seq: int | None = None

@@ -139,10 +139,17 @@ def test_unauthenticated_connections_time_out_and_the_cap_evicts_them(tmp_path) 
 
 
 def _open_idle(port: int, n: int, out: list[socket.socket]) -> None:
+    """`n` idle connections from another host than the operator's (127.0.0.2: the per-source limit refuses
+    most of them, which is the point)."""
     for _ in range(n):
         s = socket.socket()
         s.settimeout(5)
-        s.connect(("127.0.0.1", port))
+        s.bind(("127.0.0.2", 0))
+        try:
+            s.connect(("127.0.0.1", port))
+        except OSError:
+            s.close()
+            continue
         out.append(s)
 
 
@@ -179,7 +186,7 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
         opener = threading.Thread(target=_open_idle, args=(port, 1100, idle))
         opener.start()
         opener.join(60)
-        assert len(idle) == 1100
+        assert len(idle) >= 1000  # connected (the robot may have closed most of them at once)
         time.sleep(0.2)
         t0 = time.perf_counter()
         result = send_command("127.0.0.1", "disarm", token=TOKEN, port=port, timeout_s=5)
@@ -350,20 +357,26 @@ def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operator
             stop = threading.Event()
             answers = []
 
+            n = reserved_counter()
+            good = json.dumps({"status": n, "mac": reserved_mac(TOKEN, "status", n)})
+            code = (
+                "import socket, sys\n"
+                "s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); s.bind(('127.0.0.2', 0))\n"
+                "s.setblocking(False); got = 0\n"
+                f"good = {good!r}.encode()\n"
+                "for k in range(20000):\n"
+                "    try:\n"
+                f"        s.sendto(good if k % 2 else b'{{\"disarm\": 1, \"mac\": \"00\"}}', ('127.0.0.1', {app.command_port}))\n"
+                "    except OSError: pass\n"
+                "    try:\n"
+                "        s.recv(4096); got += 1\n"
+                "    except OSError: pass\n"
+                "print(got)\n"
+            )
+
             def flood():
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                s.bind(("127.0.0.2", 0))
-                s.setblocking(False)
-                n = reserved_counter()
-                good = json.dumps({"status": n, "mac": reserved_mac(TOKEN, "status", n)}).encode()
-                for k in range(20_000):
-                    if stop.is_set():
-                        break
-                    with contextlib.suppress(OSError):
-                        s.sendto(good if k % 2 else b'{"disarm": 1, "mac": "00"}', ("127.0.0.1", app.command_port))
-                    with contextlib.suppress(OSError):
-                        answers.append(s.recv(4096))
-                s.close()
+                r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+                answers.extend([None] * int(r.stdout.strip() or 0))
 
             t = threading.Thread(target=flood)
             t.start()
@@ -371,7 +384,6 @@ def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operator
             t0 = time.monotonic()
             reply = send_disarm_datagram("127.0.0.1", token=TOKEN, port=app.command_port, timeout_s=3.0)
             took = time.monotonic() - t0
-            stop.set()
             t.join(30)
             return reply, took, len(answers)
 
@@ -384,3 +396,44 @@ def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operator
     assert took < 1.0  # generous safety bound; the measured figure is printed
     assert answered <= 1  # at most the first copy of the valid status, never the replays
     assert limited > 0
+
+
+def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> None:
+    """Bounded churn (4000 connects from 127.0.0.2 in a separate process, loopback only) while the operator at
+    127.0.0.1 sends five signed commands: every one is answered, and the flood's excess is refused per source.
+    Fails on today's main only on the per-source refusal: at this bounded rate its five commands got through
+    too (the eviction the issue measured needed 14-16 k connects/s, beyond a bounded test on 2 shared cores)."""
+    from rimless.firmware.link.remote import send_command
+
+    code = (
+        "import socket\n"
+        "held = []\n"
+        "for k in range(4000):\n"
+        "    s = socket.socket(); s.settimeout(1); s.bind(('127.0.0.2', 0))\n"
+        "    try:\n"
+        "        s.connect(('127.0.0.1', PORT)); held.append(s)\n"
+        "    except OSError:\n"
+        "        s.close()\n"
+        "    if len(held) > 200:\n"
+        "        held.pop(0).close()\n"
+    )
+
+    async def script(app, hw):
+        def run():
+            flood = subprocess.Popen([sys.executable, "-c", code.replace("PORT", str(app.command_port))])
+            results = []
+            try:
+                time.sleep(0.3)
+                for _ in range(5):
+                    results.append(send_command("127.0.0.1", "status", token=TOKEN, port=app.command_port,
+                                                timeout_s=3)["armed"] is False)
+                    time.sleep(0.05)
+            finally:
+                flood.wait(60)
+            return results, app.server.refused_per_source
+
+        return await asyncio.to_thread(run)
+
+    app, summary, (results, refused), hw = scenario(config(tmp_path), script)
+    assert results == [True] * 5
+    assert refused > 0
