@@ -45,8 +45,10 @@ class WalkResult:
 
 
 def walk_controller(walk: FakeWalk, params: DetectorParams, *, duration_s: float = 3.0, rate_hz: float = 300.0,
-                    start_index: int = 0, seed: int = 0) -> WalkResult:
-    """Arm at t = 0 and step the controller at `rate_hz` for `duration_s` of virtual time."""
+                    start_index: int = 0, seed: int = 0, fault_at: tuple[float, object] | None = None,
+                    verify_before_engage: bool = True, id_check_interval_s: float = 0.0) -> WalkResult:
+    """Arm at t = 0 and step the controller at `rate_hz` for `duration_s` of virtual time; `fault_at` =
+    (t_s, action(fake)) injects a fault into the fake."""
     clock = VirtualClock()
     fake = FakeAdns3080(walk, counts_per_m=DEFAULT_COUNTS_PER_M, noise_counts=0.3, seed=seed, clock=clock.seconds,
                         needs_reset=False)
@@ -54,12 +56,16 @@ def walk_controller(walk: FakeWalk, params: DetectorParams, *, duration_s: float
     drv.set_resolution(1600)
     bank = ClutchBank(PINS, pin_factory=MockFactory())
     ctl = Controller([Channel(drv, LegDetector(params, LEGS, start_index=start_index), HealthMonitor(HealthLimits()))],
-                     bank, clock_ns=clock.ns, id_check_interval_s=0.0)
+                     bank, clock_ns=clock.ns, id_check_interval_s=id_check_interval_s,
+                     verify_before_engage=verify_before_engage)
     res = WalkResult()
     try:
         ctl.arm()
         for k in range(int(duration_s * rate_hz)):
             clock.t_s = k / rate_hz
+            if fault_at is not None and clock.t_s >= fault_at[0]:
+                fault_at[1](fake)  # type: ignore[operator]
+                fault_at = None
             before = set(bank.engaged())
             ctl.step()
             for leg in sorted(set(bank.engaged()) - before):

@@ -55,3 +55,22 @@ def test_a_normal_walk_locks_every_step_from_the_third_touchdown_on_the_right_le
 def test_the_start_leg_index_is_the_truths_when_right() -> None:
     res = walk_controller(FakeWalk(start_s=0.3), ROBOT_DETECTOR, start_index=5)
     assert res.engages and res.airborne == []
+
+
+def test_a_wrong_product_id_is_found_before_the_next_engage() -> None:
+    """Fails on today's main (verify_before_engage=False is its behaviour): with the ID re-read only every
+    id_check_interval_s (1 s), a sensor that stopped answering its Product_ID at 1.5 s still engaged."""
+    from rimless.firmware.drivers.fake_adns3080 import FakeFault
+
+    def wrong(fake):
+        fake.fault = FakeFault.WRONG_ID
+
+    walk = FakeWalk(start_s=0.3)
+    fault_at = walk.touchdown_s(3) + 0.01  # after a touchdown, before its lock
+    old = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, wrong), verify_before_engage=False,
+                          id_check_interval_s=1.0)
+    assert [t for t, _leg in old.engages if t > fault_at]  # the hole
+    new = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, wrong), id_check_interval_s=1.0)
+    assert [t for t, _leg in new.engages if t > fault_at] == []
+    assert "id_mismatch" in new.faults()
+    assert new.airborne == []
