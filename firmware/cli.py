@@ -380,6 +380,10 @@ def listen(
     token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     timeout_s: Annotated[float, typer.Option("--timeout-s", min=0.0, help="Exit 1 (files completed) when no "
                                              "datagram arrives for this long (s); 0 = wait forever.")] = 10.0,
+    robot: Annotated[
+        Optional[str], typer.Option("--robot", help="Accept telemetry only from this host (default: --host, else "
+                                    "the first sender heard).", show_default=False)
+    ] = None,
 ) -> None:
     """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
 
@@ -401,7 +405,8 @@ def listen(
         do_listen(bind=bind, port=port, out=out, csv_out=csv_out, duration_s=duration_s,
                   summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,
                   write_screen=lambda text: (sys.stderr.write(text), sys.stderr.flush()),
-                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb, timeout_s=timeout_s)
+                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb, timeout_s=timeout_s,
+                  robot=robot if robot is not None else host)
 
     _interruptible(go)
 

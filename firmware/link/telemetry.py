@@ -53,6 +53,9 @@ def record_to_json(rec: Record, clock: WallClock) -> dict[str, Any]:
                 "stance": rec.stance_leg,
                 "clutch_mask": rec.clutch_mask,
             },
+            # the same leg values again under the stance leg's own name: one PlotJuggler series per leg
+            f"leg{rec.stance_leg}": {"velocity_m_s": round(rec.velocity_m_s, 5),
+                                     "compression_m": round(rec.compression_m, 7), "phase": rec.phase},
             "sensor": {"squal": rec.squal, "shutter": rec.shutter, "max_pixel": rec.max_pixel},
             "loop": {"armed": int(rec.armed), "latency_ms": round(rec.latency_ns * 1e-6, 4)},
         }
@@ -112,6 +115,7 @@ class TelemetrySender:
         self.sent_datagrams = 0
         self.sent_bytes = 0
         self.dropped_datagrams = 0
+        self.tseq = 0
         self._n = 0
         self.socks: list[socket.socket] = []
         self.addresses: list[tuple[Any, ...]] = []
@@ -142,7 +146,10 @@ class TelemetrySender:
                 self._n += 1
                 if (self._n - 1) % self.decimate:
                     continue
-            objs.append(record_to_json(rec, self.clock))
+            obj = record_to_json(rec, self.clock)
+            self.tseq += 1
+            obj["tseq"] = self.tseq  # every object sent, numbered: a receiver counts what it lost
+            objs.append(obj)
         for data in pack_datagrams(objs, self.max_datagram_bytes, batch=self.batch):
             for sock in self.socks:
                 try:

@@ -118,6 +118,7 @@ class RobotApp:
         self.trial_log_write: Callable[[int, Any], int] = os.write  # the trial log's write (a fake fills the disk)
         self._log_closed = (0, 0)  # dropped lines and errors of the trials already closed
         self._log_reported = 0  # errors already reported as a log_degraded event
+        self._event_seq = 0
 
     # --- stop -----------------------------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
@@ -316,6 +317,9 @@ class RobotApp:
                 rec = out.popleft()
             except IndexError:
                 break
+            if isinstance(rec, EventRecord):
+                self._event_seq += 1
+                rec.fields["event_seq"] = self._event_seq  # a lost event (a fault) shows as a gap
             if self.telemetry is not None:
                 self._tel_pending.append(rec)
             if self.trial is not None:
