@@ -262,6 +262,8 @@ def run(
                                      "JSON lines (t_s, pin, level).", show_default=False)
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="End with one JSON summary on stdout.")] = False,
+    realtime: Annotated[bool, typer.Option("--realtime", help="Real-time control thread (as [sampling] realtime "
+                                           "= true): SCHED_FIFO on one CPU, mlockall, gc frozen.")] = False,
 ) -> None:
     """Run the firmware until SIGINT/SIGTERM/SIGHUP/SIGQUIT (or --duration-s); clutches off on every exit path.
 
@@ -287,7 +289,7 @@ def run(
             except ValueError as err:
                 raise ParameterError(f"--telemetry: {err}") from None
         return run_robot(config, telemetry=telemetry or (), fake=fake, duration_s=duration_s, arm=arm_at_start,
-                         on_start=started, fake_fault=fake_fault, pin_log=pin_log)
+                         on_start=started, fake_fault=fake_fault, pin_log=pin_log, realtime=realtime)
 
     outcome = go()
     summary = outcome.summary
@@ -417,6 +419,8 @@ def bench(
     rate_hz: Annotated[str, typer.Option("--rate-hz", help="Comma-separated sampling rates (Hz).")] = "300,1000,2000",
     duration_s: Annotated[float, typer.Option("--duration-s", min=0.5, help="Seconds per rate.")] = 3.0,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object per rate (a JSON list).")] = False,
+    realtime: Annotated[bool, typer.Option("--realtime", help="The service's real-time settings for the control "
+                                           "thread (SCHED_FIFO on one CPU, mlockall, gc frozen).")] = False,
 ) -> None:
     """Benchmark the control loop on the fake: rate, jitter, wake-up lateness, control latency, SPI wire
     time at the configured clock, and the detector's delay after the true compression peak and touchdown.
@@ -436,7 +440,7 @@ def bench(
         rates = parse_numbers(rate_hz, "--rate-hz")
         if any(not MIN_RATE_HZ <= r <= MAX_RATE_HZ for r in rates):
             raise ParameterError(f"--rate-hz values must be in {MIN_RATE_HZ:g}..{MAX_RATE_HZ:g}, got {rate_hz!r}")
-        results = bench_rates(rates, duration_s,
+        results = bench_rates(rates, duration_s, realtime=realtime,
                               on_rate=lambda r: typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True),
                               on_result=None if as_json else lambda res: typer.echo(_bench_text(res)))
         if as_json:
@@ -461,4 +465,8 @@ def _bench_text(res: dict[str, Any]) -> str:
         f"{res['lock_after_peak_max_ms']:.2f} ms ({res['locks']} locks)\n"
         f"  touchdown detected after  p50 {res['touchdown_detect_p50_ms']:.2f}, max "
         f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
+        + ("" if not res.get("realtime") else
+           f"\n  real time                 {res['realtime']['policy']} {res['realtime']['priority']} on CPU "
+           f"{res['realtime']['cpu']}, memory {'locked' if res['realtime']['memory_locked'] else 'not locked'}"
+           + (f" ({'; '.join(res['realtime']['errors'])})" if res['realtime']['errors'] else ""))
     )

@@ -66,6 +66,7 @@ class RunSummary:
     log_errors: int = 0  # failed trial-log writes or fsyncs
     log_last_error: str = ""
     stderr_dropped: int = 0  # log records dropped because stderr did not keep up (set by the runner)
+    realtime: dict[str, Any] | None = None  # what the control thread's real-time settings achieved
 
 
 class RobotApp:
@@ -183,7 +184,9 @@ class RobotApp:
                 self.command_port = self.summary.command_port = await server.start()
             self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
                                    max_samples=max_samples, record_timing=self.record_timing,
-                                   on_sample=self._on_sample)
+                                   on_sample=self._on_sample,
+                                   realtime=(self.cfg.sampling.realtime_priority, self.cfg.sampling.realtime_cpu)
+                                   if self.cfg.sampling.realtime else None)
             wd = self.watchdog = Watchdog(self._watchdog_trip, period_s=WATCHDOG_PERIOD_S, notify=sdnotify.notify,
                                           notify_every_s=sdnotify.watchdog_interval_s())
             wd.add(CONTROL_LOOP, self.cfg.sampling.stall_timeout_s)
@@ -254,6 +257,8 @@ class RobotApp:
                 self.summary.missed_deadlines = st.missed_deadlines
                 span = (st.stopped_ns - st.started_ns) * 1e-9
                 self.summary.achieved_rate_hz = st.samples / span if span > 0 else 0.0
+                if self.sampler.realtime_report is not None:
+                    self.summary.realtime = self.sampler.realtime_report.to_json()
             with contextlib.suppress(Exception):
                 ctl.safe_stop(self.summary.stop_reason or "stop")
             if self.summary.error:

@@ -78,6 +78,9 @@ class SamplingConfig:
     stall_timeout_s: float = 0.1  # the control thread not sampling this long trips the watchdog (s)
     id_check_interval_s: float = 1.0
     loop_stall_s: float = 0.25  # the event loop not feeding the watchdog this long trips it (s)
+    realtime: bool = False  # the control thread SCHED_FIFO on one CPU, memory locked (`run --realtime`)
+    realtime_priority: int = 50  # SCHED_FIFO priority (1..99; the unit's LimitRTPRIO must allow it)
+    realtime_cpu: int = -1  # the CPU of the control thread (-1: the last one allowed)
 
 
 @dataclass(frozen=True)
@@ -167,6 +170,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "max_datagram_bytes": (256, 65000), "decimate": (1, 1000), "link_timeout_s": (0.0, 3600.0),
     "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0), "npd_pin": (2, 27), "cs_pin": (2, 27),
     "heartbeat_pin": (0, 27), "loop_stall_s": (0.02, 10.0),
+    "realtime_priority": (1, 99), "realtime_cpu": (-1, 1023),
     "max_connections": (2, 256), "auth_timeout_s": (0.1, 60.0), "idle_timeout_s": (1.0, 86400.0),
 }
 

@@ -96,7 +96,7 @@ def with_telemetry(cfg: RobotConfig, destinations: Sequence[str]) -> RobotConfig
 def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[str] = (), fake: bool = False,
               duration_s: float | None = None, arm: bool = False,
               on_start: Callable[[RobotApp], None] | None = None, log_level: int = logging.INFO,
-              fake_fault: str | None = None, pin_log: Path | None = None) -> RunOutcome:
+              fake_fault: str | None = None, pin_log: Path | None = None, realtime: bool = False) -> RunOutcome:
     """Run the firmware until a stop signal or `duration_s`.
 
     `config` is a `RobotConfig` or the robot.toml to load (None: the defaults); `telemetry` adds "host:port"
@@ -122,6 +122,8 @@ def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[s
     try:
         with stop_on_signals(release_now):
             cfg = config if isinstance(config, RobotConfig) else load_config(config)
+            if realtime:
+                cfg = dataclasses.replace(cfg, sampling=dataclasses.replace(cfg.sampling, realtime=True))
             return _run(with_telemetry(cfg, telemetry), state, sc, duration_s, arm, on_start, log_level, pin_log)
     except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
         hw = state.get("hw")

@@ -342,3 +342,18 @@ def test_a_generated_token_is_written_to_a_private_file_never_printed(tmp_path) 
     path = Path(line.split(" in ", 1)[1].split(" ", 1)[0])
     assert path.parent == tmp_path and "mode 0600" in line
     assert not path.exists()  # removed when the robot stops
+
+
+def test_bench_realtime_reports_what_the_control_thread_got() -> None:
+    """Fails on today's main: no --realtime (only Nice=-10 and the switch interval)."""
+    r = subprocess.run([*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "0.5", "--json",
+                        "--realtime"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    row = json.loads(r.stdout)[0]
+    assert {"achieved_rate_hz", "wake_late_p99_ms", "missed_deadlines"} <= set(row)
+    rt = row["realtime"]
+    assert rt["gc_frozen"] is True
+    if os.geteuid() == 0:
+        assert rt["policy"] == "SCHED_FIFO" and rt["cpu"] is not None and rt["errors"] == []
+    else:
+        assert rt["policy"] == "SCHED_FIFO" or any("SCHED_FIFO" in e for e in rt["errors"])
