@@ -33,6 +33,35 @@ _CONFIG = Annotated[
 ]
 
 
+def _say(line: str) -> bool:
+    """One line to stderr that never blocks: written straight to the descriptor in non-blocking mode, dropped
+    (False) when stderr is full or gone, so a stalled terminal or journal never holds up start-up or exit."""
+    import sys
+
+    try:
+        sys.stderr.flush()
+    except Exception:  # noqa: BLE001
+        pass
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # no descriptor (a test runner): the ordinary way
+        typer.echo(line, err=True)
+        return True
+    data = (line + "\n").encode(errors="replace")
+    blocking = os.get_blocking(fd)
+    try:
+        os.set_blocking(fd, False)
+        os.write(fd, data)
+        return True
+    except OSError:
+        return False
+    finally:
+        try:
+            os.set_blocking(fd, blocking)
+        except OSError:
+            pass
+
+
 def _token(token: str | None, token_file: Path | None = None) -> str:
     """The command token: --token (warned: the process list shows it), --token-file, $RIMLESS_TOKEN, then
     $RIMLESS_TOKEN_FILE. A token file must be private (mode 0600)."""
@@ -276,10 +305,10 @@ def run(
 
     def started(robot: Any) -> None:
         if robot.token_path is not None:
-            typer.echo(f"command token (generated) in {robot.token_path} (mode 0600): on this machine, "
-                       f"export RIMLESS_TOKEN_FILE={robot.token_path}", err=True)
+            _say(f"command token (generated) in {robot.token_path} (mode 0600): on this machine, "
+                       f"export RIMLESS_TOKEN_FILE={robot.token_path}")
         mode = "fake" if fake else "hardware"
-        typer.echo(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz", err=True)
+        _say(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz")
 
     @user_facing
     def go() -> Any:
@@ -296,26 +325,25 @@ def run(
     if as_json:
         print_json(outcome.to_json())
     if summary is None:  # a stop signal before the firmware ran
-        typer.echo(f"stopped ({outcome.signal}) before the firmware ran; every clutch released", err=True)
+        _say(f"stopped ({outcome.signal}) before the firmware ran; every clutch released")
         raise typer.Exit(outcome.exit_code)
-    typer.echo(
+    _say(
         f"stopped ({summary.stop_reason}): {summary.samples} samples at {summary.achieved_rate_hz:.1f} Hz, "
         f"{summary.missed_deadlines} missed deadlines, {summary.clutch_commands} clutch commands, "
-        f"faults: {', '.join(summary.faults) or 'none'}; every clutch released",
-        err=True,
+        f"faults: {', '.join(summary.faults) or 'none'}; every clutch released"
     )
     if summary.log_errors:
-        typer.echo(f"trial log degraded: {summary.log_errors} failed writes, {summary.log_dropped_lines} lines "
-                   f"dropped ({summary.log_last_error})", err=True)
+        _say(f"trial log degraded: {summary.log_errors} failed writes, {summary.log_dropped_lines} lines "
+                   f"dropped ({summary.log_last_error})")
     if outcome.fake_pins:
-        typer.echo("fake clutch pin levels (history): " + outcome.fake_pins, err=True)
+        _say("fake clutch pin levels (history): " + outcome.fake_pins)
     if outcome.airborne_leg_locks is not None:
-        typer.echo(f"fake walk{' (' + outcome.fake_fault + ')' if outcome.fake_fault else ''}: {outcome.engages} "
-                   f"clutch engages, {outcome.airborne_leg_locks} on a leg in the air", err=True)
+        _say(f"fake walk{' (' + outcome.fake_fault + ')' if outcome.fake_fault else ''}: {outcome.engages} "
+                   f"clutch engages, {outcome.airborne_leg_locks} on a leg in the air")
     if summary.error:
-        typer.echo(f"error: {summary.error}", err=True)
+        _say(f"error: {summary.error}")
     elif outcome.signal == "SIGINT":
-        typer.echo("interrupted", err=True)  # the last line of every command stopped by Ctrl-C
+        _say("interrupted")  # the last line of every command stopped by Ctrl-C
     if outcome.exit_code:
         raise typer.Exit(outcome.exit_code)
 

@@ -410,6 +410,11 @@ class CommandServer:
                     await self._reply(writer, reply)
         except (ConnectionError, asyncio.IncompleteReadError, asyncio.CancelledError):
             return  # a dropped peer, or shutdown: nothing to report
+        except TimeoutError:  # a peer that does not read its replies (drain timed out): drop it quietly
+            self.timed_out += 1
+            with contextlib.suppress(Exception):
+                writer.transport.abort()
+            return
         finally:
             self._conns.pop(task, None)
             with contextlib.suppress(Exception):
