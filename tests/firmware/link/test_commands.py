@@ -12,7 +12,6 @@ import socket
 import subprocess
 import sys
 import threading
-import contextlib
 import time
 from pathlib import Path
 
@@ -354,7 +353,6 @@ def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operator
         app.controller.arm()
 
         def run():
-            stop = threading.Event()
             answers = []
 
             n = reserved_counter()
