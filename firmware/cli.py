@@ -21,28 +21,74 @@ app = typer.Typer(no_args_is_help=True)
 _HOST = Annotated[str, typer.Option("--host", help="Robot host name or IP address.")]
 _PORT = Annotated[int, typer.Option("--port", min=1, max=65535, help="Robot command port (TCP).")]
 _TOKEN = Annotated[
-    Optional[str], typer.Option("--token", help="Shared command token (default: $RIMLESS_TOKEN).", show_default=False)
+    Optional[str], typer.Option("--token", help="Shared command token (visible in the process list: prefer "
+                                "--token-file or $RIMLESS_TOKEN).", show_default=False)
+]
+_TOKEN_FILE = Annotated[
+    Optional[Path], typer.Option("--token-file", help="File holding the command token, mode 0600 (default: "
+                                 "$RIMLESS_TOKEN_FILE).", show_default=False)
 ]
 _CONFIG = Annotated[
     Optional[Path], typer.Option("--config", help="robot.toml (default: built-in defaults).", show_default=False)
 ]
 
 
-def _token(token: str | None) -> str:
+def _say(line: str) -> bool:
+    """One line to stderr that never blocks: written straight to the descriptor in non-blocking mode, dropped
+    (False) when stderr is full or gone, so a stalled terminal or journal never holds up start-up or exit."""
+    import sys
+
+    try:
+        sys.stderr.flush()
+    except Exception:  # noqa: BLE001
+        pass
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # no descriptor (a test runner): the ordinary way
+        typer.echo(line, err=True)
+        return True
+    data = (line + "\n").encode(errors="replace")
+    blocking = os.get_blocking(fd)
+    try:
+        os.set_blocking(fd, False)
+        os.write(fd, data)
+        return True
+    except OSError:
+        return False
+    finally:
+        try:
+            os.set_blocking(fd, blocking)
+        except OSError:
+            pass
+
+
+def _token(token: str | None, token_file: Path | None = None) -> str:
+    """The command token: --token (warned: the process list shows it), --token-file, $RIMLESS_TOKEN, then
+    $RIMLESS_TOKEN_FILE. A token file must be private (mode 0600)."""
     from rimless.firmware.errors import CommandError
+    from rimless.firmware.link.protocol import read_token_file
 
-    tok = token or os.environ.get("RIMLESS_TOKEN", "")
-    if not tok:
-        raise CommandError("no command token: pass --token or set RIMLESS_TOKEN (the robot prints it at start)")
-    return tok
+    if token:
+        typer.echo("warning: --token is visible to every user in the process list; use --token-file or "
+                   "$RIMLESS_TOKEN", err=True)
+        return token
+    if token_file is not None:
+        return read_token_file(token_file, "--token-file")
+    if os.environ.get("RIMLESS_TOKEN"):
+        return os.environ["RIMLESS_TOKEN"]
+    if os.environ.get("RIMLESS_TOKEN_FILE"):
+        return read_token_file(os.environ["RIMLESS_TOKEN_FILE"], "$RIMLESS_TOKEN_FILE")
+    raise CommandError("no command token: pass --token-file or set RIMLESS_TOKEN_FILE or RIMLESS_TOKEN (the robot "
+                       "says at start where its generated token is)")
 
 
-def _remote(host: str, port: int, token: str | None, cmd: str, args: dict[str, Any] | None = None) -> None:
+def _remote(host: str, port: int, tokens: tuple[str | None, Path | None], cmd: str,
+            args: dict[str, Any] | None = None) -> None:
     from rimless.firmware.link.remote import send_command
 
     @user_facing
     def go() -> None:
-        print_json(send_command(host, cmd, args, token=_token(token), port=port))
+        print_json(send_command(host, cmd, args, token=_token(*tokens), port=port))
 
     _interruptible(go)
 
@@ -66,7 +112,7 @@ _JSON = Annotated[bool, typer.Option("--json", help="Print JSON (these commands 
 
 
 @app.command()
-def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Print the robot's state (armed, faults, phases, stance legs, counters, link) as JSON.
 
     When the TCP channel does not answer, the short status of the reserved UDP path is printed
@@ -76,22 +122,22 @@ def status(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
 
     @user_facing
     def go() -> None:
-        print_json(robot_status(host, token=_token(token), port=port))
+        print_json(robot_status(host, token=_token(token, token_file), port=port))
 
     _interruptible(go)
 
 
 @app.command()
-def ping(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def ping(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Check that the robot answers (and count as a heartbeat)."""
-    _remote(host, port, token, "ping")
+    _remote(host, port, (token, token_file), "ping")
 
 
 @app.command()
 def arm(
     host: _HOST,
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     stance_leg: Annotated[
         Optional[int],
         typer.Option("--stance-leg", min=0, help="Clutch index of the leg on the ground now: re-synchronises "
@@ -105,11 +151,11 @@ def arm(
     link_timeout_s (2 s by default): keep `rimless robot listen --host ...` or
     `rimless robot heartbeat` running.
     """
-    _remote(host, port, token, "arm", {} if stance_leg is None else {"stance_leg": stance_leg})
+    _remote(host, port, (token, token_file), "arm", {} if stance_leg is None else {"stance_leg": stance_leg})
 
 
 @app.command()
-def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Disarm: every clutch off.
 
     Sent first over the robot's reserved UDP path (no connection to wait for, so a flood of TCP
@@ -119,7 +165,7 @@ def disarm(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON
 
     @user_facing
     def go() -> None:
-        print_json(robot_disarm(host, token=_token(token), port=port))
+        print_json(robot_disarm(host, token=_token(token, token_file), port=port))
 
     _interruptible(go)
 
@@ -131,7 +177,7 @@ def set_param(
                                          "are values, not options).")],
     host: _HOST,
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     as_json: _JSON = False,
 ) -> None:
     """Set a detector parameter on the running robot."""
@@ -147,7 +193,7 @@ def set_param(
             raise ParameterError(f"VALUE must be a finite number, got {value!r}")
         return int(v) if name.endswith("_samples") and v == int(v) else v
 
-    _remote(host, port, token, "set", {"name": name, "value": parse()})
+    _remote(host, port, (token, token_file), "set", {"name": name, "value": parse()})
 
 
 @app.command("trial-start")
@@ -155,24 +201,24 @@ def trial_start(
     host: _HOST,
     name: Annotated[str, typer.Option("--name", help="Trial name (letters, digits, _.-).")] = "trial",
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     as_json: _JSON = False,
 ) -> None:
     """Start a trial log on the robot (every sample and event)."""
-    _remote(host, port, token, "trial_start", {"name": name})
+    _remote(host, port, (token, token_file), "trial_start", {"name": name})
 
 
 @app.command("trial-stop")
-def trial_stop(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, as_json: _JSON = False) -> None:
+def trial_stop(host: _HOST, port: _PORT = 9871, token: _TOKEN = None, token_file: _TOKEN_FILE = None, as_json: _JSON = False) -> None:
     """Stop the running trial log; prints its path on the robot."""
-    _remote(host, port, token, "trial_stop")
+    _remote(host, port, (token, token_file), "trial_stop")
 
 
 @app.command()
 def heartbeat(
     host: _HOST,
     port: _PORT = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
     period_s: Annotated[float, typer.Option("--period-s", min=0.05, max=10.0, help="Seconds between pings.")] = 0.5,
     duration_s: Annotated[
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
@@ -187,7 +233,7 @@ def heartbeat(
 
     @user_facing
     def go() -> None:
-        hb = Heartbeat(host, port=port, token=_token(token), period_s=period_s,
+        hb = Heartbeat(host, port=port, token=_token(token, token_file), period_s=period_s,
                        echo=lambda line: typer.echo(line, err=True))
         hb.run(duration_s=duration_s)
 
@@ -234,6 +280,19 @@ def run(
         typer.Option("--telemetry", metavar="HOST:PORT", help="Send telemetry here too (repeatable), on top of "
                      "[telemetry] in the config.", show_default=False),
     ] = None,
+    fake_fault: Annotated[
+        Optional[str], typer.Option("--fake-fault", metavar="NAME", help="With --fake: play a fault scenario "
+                                    "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id, loop-stall, "
+                                    "log-disk-full).",
+                                    show_default=False)
+    ] = None,
+    pin_log: Annotated[
+        Optional[Path], typer.Option("--pin-log", metavar="FILE", help="With --fake: write every pin change as "
+                                     "JSON lines (t_s, pin, level).", show_default=False)
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="End with one JSON summary on stdout.")] = False,
+    realtime: Annotated[bool, typer.Option("--realtime", help="Real-time control thread (as [sampling] realtime "
+                                           "= true): SCHED_FIFO on one CPU, mlockall, gc frozen.")] = False,
 ) -> None:
     """Run the firmware until SIGINT/SIGTERM/SIGHUP/SIGQUIT (or --duration-s); clutches off on every exit path.
 
@@ -245,10 +304,11 @@ def run(
     from rimless.firmware.service.runner import run_robot
 
     def started(robot: Any) -> None:
-        if robot.token_generated:
-            typer.echo(f"command token (generated): {robot.token}", err=True)
+        if robot.token_path is not None:
+            _say(f"command token (generated) in {robot.token_path} (mode 0600): on this machine, "
+                       f"export RIMLESS_TOKEN_FILE={robot.token_path}")
         mode = "fake" if fake else "hardware"
-        typer.echo(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz", err=True)
+        _say(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz")
 
     @user_facing
     def go() -> Any:
@@ -258,25 +318,32 @@ def run(
             except ValueError as err:
                 raise ParameterError(f"--telemetry: {err}") from None
         return run_robot(config, telemetry=telemetry or (), fake=fake, duration_s=duration_s, arm=arm_at_start,
-                         on_start=started)
+                         on_start=started, fake_fault=fake_fault, pin_log=pin_log, realtime=realtime)
 
     outcome = go()
     summary = outcome.summary
+    if as_json:
+        print_json(outcome.to_json())
     if summary is None:  # a stop signal before the firmware ran
-        typer.echo(f"stopped ({outcome.signal}) before the firmware ran; every clutch released", err=True)
+        _say(f"stopped ({outcome.signal}) before the firmware ran; every clutch released")
         raise typer.Exit(outcome.exit_code)
-    typer.echo(
+    _say(
         f"stopped ({summary.stop_reason}): {summary.samples} samples at {summary.achieved_rate_hz:.1f} Hz, "
         f"{summary.missed_deadlines} missed deadlines, {summary.clutch_commands} clutch commands, "
-        f"faults: {', '.join(summary.faults) or 'none'}; every clutch released",
-        err=True,
+        f"faults: {', '.join(summary.faults) or 'none'}; every clutch released"
     )
+    if summary.log_errors:
+        _say(f"trial log degraded: {summary.log_errors} failed writes, {summary.log_dropped_lines} lines "
+                   f"dropped ({summary.log_last_error})")
     if outcome.fake_pins:
-        typer.echo("fake clutch pin levels (history): " + outcome.fake_pins, err=True)
+        _say("fake clutch pin levels (history): " + outcome.fake_pins)
+    if outcome.airborne_leg_locks is not None:
+        _say(f"fake walk{' (' + outcome.fake_fault + ')' if outcome.fake_fault else ''}: {outcome.engages} "
+                   f"clutch engages, {outcome.airborne_leg_locks} on a leg in the air")
     if summary.error:
-        typer.echo(f"error: {summary.error}", err=True)
+        _say(f"error: {summary.error}")
     elif outcome.signal == "SIGINT":
-        typer.echo("interrupted", err=True)  # the last line of every command stopped by Ctrl-C
+        _say("interrupted")  # the last line of every command stopped by Ctrl-C
     if outcome.exit_code:
         raise typer.Exit(outcome.exit_code)
 
@@ -340,7 +407,13 @@ def listen(
                                     show_default=False)
     ] = None,
     robot_port: Annotated[int, typer.Option("--robot-port", min=1, max=65535, help="Robot command port (TCP), with --host.")] = 9871,
-    token: _TOKEN = None,
+    token: _TOKEN = None, token_file: _TOKEN_FILE = None,
+    timeout_s: Annotated[float, typer.Option("--timeout-s", min=0.0, help="Exit 1 (files completed) when no "
+                                             "datagram arrives for this long (s); 0 = wait forever.")] = 10.0,
+    robot: Annotated[
+        Optional[str], typer.Option("--robot", help="Accept telemetry only from this host (default: --host, else "
+                                    "the first sender heard).", show_default=False)
+    ] = None,
 ) -> None:
     """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
 
@@ -357,12 +430,13 @@ def listen(
         if host is not None:
             from rimless.firmware.link.heartbeat import Heartbeat
 
-            hb = Heartbeat(host, port=robot_port, token=_token(token), echo=lambda line: typer.echo(line, err=True))
+            hb = Heartbeat(host, port=robot_port, token=_token(token, token_file), echo=lambda line: typer.echo(line, err=True))
         use_live = sys.stderr.isatty() if live is None else live
         do_listen(bind=bind, port=port, out=out, csv_out=csv_out, duration_s=duration_s,
                   summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,
                   write_screen=lambda text: (sys.stderr.write(text), sys.stderr.flush()),
-                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb)
+                  echo=lambda line: typer.echo(line, err=True), heartbeat=hb, timeout_s=timeout_s,
+                  robot=robot if robot is not None else host)
 
     _interruptible(go)
 
@@ -373,6 +447,8 @@ def bench(
     rate_hz: Annotated[str, typer.Option("--rate-hz", help="Comma-separated sampling rates (Hz).")] = "300,1000,2000",
     duration_s: Annotated[float, typer.Option("--duration-s", min=0.5, help="Seconds per rate.")] = 3.0,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object per rate (a JSON list).")] = False,
+    realtime: Annotated[bool, typer.Option("--realtime", help="The service's real-time settings for the control "
+                                           "thread (SCHED_FIFO on one CPU, mlockall, gc frozen).")] = False,
 ) -> None:
     """Benchmark the control loop on the fake: rate, jitter, wake-up lateness, control latency, SPI wire
     time at the configured clock, and the detector's delay after the true compression peak and touchdown.
@@ -392,7 +468,7 @@ def bench(
         rates = parse_numbers(rate_hz, "--rate-hz")
         if any(not MIN_RATE_HZ <= r <= MAX_RATE_HZ for r in rates):
             raise ParameterError(f"--rate-hz values must be in {MIN_RATE_HZ:g}..{MAX_RATE_HZ:g}, got {rate_hz!r}")
-        results = bench_rates(rates, duration_s,
+        results = bench_rates(rates, duration_s, realtime=realtime,
                               on_rate=lambda r: typer.echo(f"bench: {r:g} Hz for {duration_s:g} s ...", err=True),
                               on_result=None if as_json else lambda res: typer.echo(_bench_text(res)))
         if as_json:
@@ -417,4 +493,8 @@ def _bench_text(res: dict[str, Any]) -> str:
         f"{res['lock_after_peak_max_ms']:.2f} ms ({res['locks']} locks)\n"
         f"  touchdown detected after  p50 {res['touchdown_detect_p50_ms']:.2f}, max "
         f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
+        + ("" if not res.get("realtime") else
+           f"\n  real time                 {res['realtime']['policy']} {res['realtime']['priority']} on CPU "
+           f"{res['realtime']['cpu']}, memory {'locked' if res['realtime']['memory_locked'] else 'not locked'}"
+           + (f" ({'; '.join(res['realtime']['errors'])})" if res['realtime']['errors'] else ""))
     )

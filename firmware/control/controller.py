@@ -75,6 +75,7 @@ class Controller:
 
     :param max_hold_s: a clutch engaged longer than this trips `Fault.CLUTCH_TIMEOUT`.
     :param id_check_interval_s: how often to re-read Product_ID (0 = never).
+    :param verify_before_engage: also re-read it right before every engage (a mismatch faults instead).
     """
 
     def __init__(
@@ -86,11 +87,13 @@ class Controller:
         id_check_interval_s: float = 1.0,
         outbox_len: int = 20000,
         clock_ns: Callable[[], int] = time.monotonic_ns,
+        verify_before_engage: bool = True,
     ) -> None:
         self.channels = list(channels)
         self.clutches = clutches
         self.max_hold_s = max_hold_s
         self.id_check_interval_s = id_check_interval_s
+        self.verify_before_engage = verify_before_engage
         self.clock_ns = clock_ns
         self.outbox: deque[Record] = deque(maxlen=outbox_len)
         self.armed = False
@@ -287,6 +290,16 @@ class Controller:
                     self._mask &= ~(1 << leg)
         if "sync_lost" in decision.events:
             self.fault(Fault.LEG_SYNC_LOST, f"sensor {i}: {det.sync_detail}", s.t_ns)
+        if decision.engage is not None and self.armed and self.verify_before_engage:
+            # Product_ID read back right before every engage: a sensor swapped, unplugged or answering garbage
+            # is found before it can clutch (one register read, ~0.1 ms at 2 MHz), not up to
+            # id_check_interval_s later.
+            try:
+                ch.sensor.verify_id()
+            except SensorNotFound as err:
+                self.fault(Fault.ID_MISMATCH, str(err), s.t_ns)
+            except SensorError as err:
+                self.fault(Fault.SPI_ERROR, str(err), s.t_ns)
         if decision.engage is not None and self.armed:
             self.clutches.engage(decision.engage, s.t_ns)
             self._mask |= 1 << decision.engage

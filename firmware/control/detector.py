@@ -65,6 +65,12 @@ class DetectorParams:
     max_compression_s: float = 0.5  # no zero crossing this long after touchdown: back to wait
     max_step_s: float = 1.0  # no touchdown this long after the previous one: the count is lost
     step_period_tolerance: float = 0.4  # a step outside (1 -/+ this) x the running period loses the count
+    # A counted sensor locks only after this many step intervals since (re)sync, the first setting the period and
+    # each next one within the tolerance of it (0: lock from the first touchdown; the robot's default is 2).
+    confirm_steps: int = 0
+    # A counted sensor loses the count when the leg compresses by this much (m) and stops without a confirmed
+    # touchdown: a gentle step the touchdown test missed (0: off; the robot's default is 0.0003).
+    doubt_compression_m: float = 0.0
 
     def validated(self) -> DetectorParams:
         """Return self, or raise ValueError naming the bad field."""
@@ -81,6 +87,12 @@ class DetectorParams:
             elif f.name in ("lock_lead_s", "double_support_s"):
                 if not 0.0 <= value <= 1.0:
                     raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
+            elif f.name == "confirm_steps":
+                if not isinstance(value, int) or not 0 <= value <= 20:
+                    raise ValueError(f"{f.name} must be an integer in 0..20, got {value!r}")
+            elif f.name == "doubt_compression_m":
+                if not 0.0 <= value <= 0.1:
+                    raise ValueError(f"{f.name} must be in [0, 0.1] m, got {value!r}")
             elif f.name == "step_period_tolerance":
                 if not 0.05 <= value <= 0.9:
                     raise ValueError(f"{f.name} must be in [0.05, 0.9], got {value!r}")
@@ -98,7 +110,7 @@ class DetectorParams:
             raise ValueError(f"unknown detector parameter {name!r}; known: {', '.join(sorted(names))}")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{name} must be a number, got {value!r}")
-        if name.endswith("_samples"):
+        if name.endswith("_samples") or name == "confirm_steps":
             if float(value) != int(value):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             value = int(value)
@@ -226,6 +238,10 @@ class LegDetector:
         self._touchdown_x_m = 0.0
         self._peak_v = 0.0
         self.lock_time_s: float | None = None
+        self._confirmed = 0  # step intervals since (re)sync that set or matched the period
+        self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
+        self._doubt_base_x: float | None = None  # where the current compression (in WAIT/CLUTCHED) started
+        self._doubt_peak_m = 0.0  # how far it has gone (m)
 
     def set_params(self, params: DetectorParams) -> None:
         """Apply new parameters (validated) without losing the phase."""
@@ -248,7 +264,8 @@ class LegDetector:
         until this leg is quiet before it may report a touchdown again."""
         before = getattr(self, "_before_touchdown", None)
         if before is not None:
-            self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s, self._touchdown_x_m = before
+            (self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s, self._touchdown_x_m,
+             self._confirmed) = before
             self._before_touchdown = None
         self.phase = Phase.WAIT
         self._touch_count = 0
@@ -260,6 +277,7 @@ class LegDetector:
         if self.phase is Phase.CLUTCHED:
             self.phase = Phase.WAIT
             self._touch_count = 0
+            self._engaged = False
 
     def _step_window_s(self) -> float:
         """The longest plausible time from one touchdown to the next (s)."""
@@ -268,10 +286,19 @@ class LegDetector:
             return p.max_step_s
         return min(p.max_step_s, self._period_s * (1.0 + p.step_period_tolerance))
 
+    @property
+    def lock_allowed(self) -> bool:
+        """True when a lock may engage the counted stance leg: synchronised, and `confirm_steps` step intervals
+        since (re)sync agreed with the running period (always True for a sensor that measures its leg)."""
+        if not self.counted:
+            return True
+        return self.synced and self._confirmed >= self.params.confirm_steps
+
     def _lose_sync(self, detail: str) -> Decision:
         self.synced = False
         self.sync_detail = detail
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
+        self._engaged = False
         self.phase = Phase.WAIT
         self._touch_count = 0
         self._lock_count = 0
@@ -313,7 +340,12 @@ class LegDetector:
         if self.phase in (Phase.WAIT, Phase.CLUTCHED):
             if self._need_quiet:
                 self._need_quiet = v > p.touch_velocity_m_s
+                self._doubt_base_x = None
                 return NOTHING
+            if self.counted and self.synced and p.doubt_compression_m > 0:
+                doubt = self._doubt(v, p.doubt_compression_m)
+                if doubt is not None:
+                    return doubt
             if v > p.touch_velocity_m_s and t - self._touchdown_s >= p.min_step_s:
                 if self._touch_count == 0:
                     self._onset_x_m = prev_x
@@ -338,8 +370,14 @@ class LegDetector:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
             self.lock_time_s = t
+            self._doubt_base_x = None
             if not self.synced:
+                self._engaged = False
                 return Decision(events=("lock_unsynced",))  # detected, but the leg is not known
+            if not self.lock_allowed:
+                self._engaged = False
+                return Decision(events=("lock_withheld",))  # the count is not confirmed yet
+            self._engaged = True
             return Decision(engage=self.stance_leg, events=("lock",))
         if t - self._touchdown_s > p.max_compression_s:
             self.phase = Phase.WAIT
@@ -347,10 +385,28 @@ class LegDetector:
             return Decision(events=("no_zero_crossing",))
         return NOTHING
 
+    def _doubt(self, v: float, threshold_m: float) -> Decision | None:
+        """Follow a compression in WAIT/CLUTCHED; one of at least `threshold_m` that ends (velocity back to
+        zero or below) without a confirmed touchdown may have been a step: the count is lost."""
+        if v > 0.0:
+            if self._doubt_base_x is None:
+                self._doubt_base_x = self.position_m
+            self._doubt_peak_m = max(self._doubt_peak_m, self.position_m - self._doubt_base_x)
+            return None
+        peak, self._doubt_base_x, self._doubt_peak_m = self._doubt_peak_m, None, 0.0
+        if peak >= threshold_m:
+            return self._lose_sync(
+                f"uncertain touchdown: the leg compressed {peak * 1e3:.2f} mm without a confirmed touchdown "
+                f"(doubt_compression_m {threshold_m * 1e3:.2f} mm); a step may have been missed")
+        return None
+
     def _touchdown(self, t: float) -> Decision:
         self._before_touchdown = (self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s,
-                                  self._touchdown_x_m)
+                                  self._touchdown_x_m, self._confirmed)
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
+        self._engaged = False
+        self._doubt_base_x = None
+        self._doubt_peak_m = 0.0
         self.leg_index = (self.leg_index + 1) % len(self.legs)
         last = self._last_touchdown_s
         self._last_touchdown_s = t
@@ -365,6 +421,7 @@ class LegDetector:
                 lost = f"missed touchdown: step of {step:.3f} s (longest plausible {self._step_window_s():.3f} s)"
             else:
                 self._period_s = step if self._period_s is None else 0.5 * (self._period_s + step)
+                self._confirmed += 1
         self.phase = Phase.DOUBLE_SUPPORT
         self._touch_count = 0
         self._lock_count = 0

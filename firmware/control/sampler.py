@@ -42,6 +42,8 @@ class Sampler:
     :param spin_s: busy-wait this long before each deadline (s).
     :param max_samples: stop by itself after this many periods (None = until stopped).
     :param record_timing: keep per-sample timestamps and latencies for the bench (bounded).
+    :param on_sample: called after every control step, in the thread (watchdog feed, heartbeat pin).
+    :param realtime: (priority, cpu): the thread makes itself SCHED_FIFO on one CPU (`realtime.apply_realtime`).
     """
 
     def __init__(
@@ -53,11 +55,16 @@ class Sampler:
         max_samples: int | None = None,
         record_timing: bool = False,
         timing_capacity: int = 200_000,
+        on_sample: Callable[[], None] | None = None,
+        realtime: tuple[int, int | None] | None = None,
     ) -> None:
         if not 1.0 <= rate_hz <= 5000.0:
             raise ValueError(f"rate_hz must be in 1..5000, got {rate_hz}")
         self.controller = controller
         self.rate_hz = rate_hz
+        self.on_sample = on_sample  # after every control step, in this thread (watchdog feed, heartbeat pin)
+        self.realtime = realtime  # (SCHED_FIFO priority, CPU or -1 for the last or None), applied by the thread
+        self.realtime_report: Any = None
         self.period_ns = round(1e9 / rate_hz)
         self.spin_ns = int(spin_s * 1e9)
         self.max_samples = max_samples
@@ -125,6 +132,10 @@ class Sampler:
         period = self.period_ns
         spin = self.spin_ns
         now_ns = time.monotonic_ns
+        if self.realtime is not None:
+            from rimless.firmware.control.realtime import apply_realtime
+
+            self.realtime_report = apply_realtime(*self.realtime)
         cpu0 = time.thread_time()
         stats.started_ns = deadline = now_ns()
         try:
@@ -139,6 +150,8 @@ class Sampler:
                 t = now_ns()
                 ctl.step()
                 self.last_sample_ns = t
+                if self.on_sample is not None:
+                    self.on_sample()
                 stats.samples += 1
                 if self.record_timing and len(self.sample_times_ns) < self._cap:
                     self.sample_times_ns.append(t)

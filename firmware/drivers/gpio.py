@@ -3,8 +3,13 @@ a GPIO chip select around a shared SPI bus, and opening or releasing the clutch 
 
 from __future__ import annotations
 
+import json
+import os
+import threading
+import time
 import warnings
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 from rimless.errors import UserError
@@ -17,11 +22,57 @@ class GpioUnavailable(UserError):
     """No GPIO on this machine (not a Pi, or no GPIO library)."""
 
 
-def mock_pin_factory() -> Any:
-    """gpiozero's MockFactory for a Pi 4B: the pins of `--fake` and of the tests."""
-    from gpiozero.pins.mock import MockFactory
+class PinLog:
+    """Every level change of the mock pins, kept in memory (`transitions`: (t_s, BCM pin, level)) and, with
+    `path`, appended at once to a JSON Lines file (`{"t_s", "pin", "level"}`; `t_s` on the monotonic clock)
+    with one `os.write` per line, so that a reader outside the process sees each change as it happens,
+    including those made in a signal handler just before the process dies."""
 
-    return MockFactory(revision=PI4_REVISION)
+    def __init__(self, path: Path | str | None = None) -> None:
+        self.path = None if path is None else Path(path)
+        self.transitions: list[tuple[float, int, int]] = []
+        self._lock = threading.Lock()
+        self._fd = None if path is None else os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND,
+                                                     0o644)
+
+    def record(self, pin: int, level: int) -> None:
+        """One change of BCM `pin` to `level` (0 or 1), now."""
+        t = time.monotonic()
+        self.transitions.append((t, pin, level))
+        if self._fd is not None:
+            line = json.dumps({"t_s": round(t, 6), "pin": pin, "level": level}) + "\n"
+            try:
+                os.write(self._fd, line.encode())
+            except OSError:
+                pass  # a full disk loses log lines, never a pin change
+
+    def rising(self, pin: int) -> list[float]:
+        """The times `pin` went high."""
+        return [t for t, p, level in self.transitions if p == pin and level]
+
+    def close(self) -> None:
+        """Close the file (the in-memory record stays)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+def mock_pin_factory(pin_log: PinLog | None = None) -> Any:
+    """gpiozero's MockFactory for a Pi 4B: the pins of `--fake` and of the tests; with `pin_log`, every level
+    change of every pin is recorded there."""
+    from gpiozero.pins.mock import MockFactory, MockPin
+
+    if pin_log is None:
+        return MockFactory(revision=PI4_REVISION)
+
+    class LoggedMockPin(MockPin):
+        def _change_state(self, value: Any) -> bool:
+            changed = super()._change_state(value)
+            if changed:
+                pin_log.record(int(self.info.name.removeprefix("GPIO")), 1 if value else 0)
+            return changed
+
+    return MockFactory(revision=PI4_REVISION, pin_class=LoggedMockPin)
 
 
 def output(pin: int, *, active_high: bool, pin_factory: Any = None) -> Any:
@@ -29,6 +80,40 @@ def output(pin: int, *, active_high: bool, pin_factory: Any = None) -> Any:
     from gpiozero import DigitalOutputDevice
 
     return DigitalOutputDevice(pin, active_high=active_high, initial_value=False, pin_factory=pin_factory)
+
+
+class HeartbeatOutput:
+    """The heartbeat pin: `toggle()` flips it (called by the control loop at every sample); `stop()` drives it
+    low and keeps it there (a retriggerable monostable fed by it then times out and drops the clutch enable)."""
+
+    def __init__(self, pin: int, *, pin_factory: Any = None) -> None:
+        self.pin = pin
+        self._dev = output(pin, active_high=True, pin_factory=pin_factory)
+        self._level = False
+        self.enabled = True
+        self.toggles = 0
+
+    def toggle(self) -> None:
+        """Flip the pin, unless stopped."""
+        if self.enabled:
+            self._level = not self._level
+            self._dev.value = self._level
+            self.toggles += 1
+            if not self.enabled:  # stopped meanwhile (another thread): stay low
+                self._dev.off()
+
+    def stop(self) -> None:
+        """Low, and no more toggling."""
+        self.enabled = False
+        self._level = False
+        self._dev.off()
+
+    def close(self) -> None:
+        """Low, then release the line."""
+        try:
+            self.stop()
+        finally:
+            self._dev.close()
 
 
 class GpioChipSelectBus:

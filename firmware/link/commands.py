@@ -54,7 +54,14 @@ LOG_LINES_PER_S = 5.0
 class ReservedListener:
     """The reserved path for `disarm` and `status`: a thread of its own on a UDP socket, so neither
     TCP connections nor a busy event loop can delay it. The callbacks run in this thread (they must
-    be thread-safe); `on_status` returns a small JSON-able dict."""
+    be thread-safe); `on_status` returns a small JSON-able dict.
+
+    Each source may send `PER_SOURCE_PER_S` datagrams per second (the rest are dropped unread); only an
+    authenticated datagram whose number is above the last one accepted for its kind is answered (a captured
+    one replayed, from any source, is ignored), and never with more bytes than it had."""
+
+    PER_SOURCE_PER_S = 20.0
+    MAX_SOURCES = 4096
 
     def __init__(self, sock: socket.socket, token: str, on_disarm: Callable[[], None],
                  on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> None:
@@ -65,6 +72,13 @@ class ReservedListener:
         self.on_rejected = on_rejected
         self.disarms = 0
         self.statuses = 0
+        self.replays = 0
+        self.rate_limited = 0
+        self.per_source_per_s = self.PER_SOURCE_PER_S
+        self._buckets: dict[str, tuple[float, float]] = {}
+        # numbers at or below these are replays; a restart starts 5 min before now (the PC clocks' slack)
+        start = time.time_ns() - 300 * 10**9
+        self._last_n = {"disarm": start, "status": start}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="rimless-reserved", daemon=True)
 
@@ -90,6 +104,17 @@ class ReservedListener:
         except Exception as err:  # noqa: BLE001 - a racing read must not kill the reserved path
             return {"error": f"{type(err).__name__}: {err}"}
 
+    def _allowed(self, source: str) -> bool:
+        """Per-source token bucket (`per_source_per_s`, burst as much), checked before any parsing; the table
+        keeps the `MAX_SOURCES` most recent sources."""
+        now = time.monotonic()
+        level, last = self._buckets.pop(source, (self.per_source_per_s, now))
+        level = min(self.per_source_per_s, level + (now - last) * self.per_source_per_s)
+        self._buckets[source] = (level - 1.0, now) if level >= 1.0 else (level, now)
+        while len(self._buckets) > self.MAX_SOURCES:
+            self._buckets.pop(next(iter(self._buckets)))
+        return level >= 1.0
+
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
@@ -98,14 +123,23 @@ class ReservedListener:
                 continue
             except OSError:
                 return  # closed
+            if not self._allowed(addr[0]):
+                self.rate_limited += 1
+                continue
             try:
                 kind, n = parse_reserved_datagram(data, self.token)
             except Rejected as err:
                 self.on_rejected(str(addr), str(err))
-                continue
+                continue  # no answer to what is not authenticated
             except Exception as err:  # noqa: BLE001 - any datagram gets a log line, never a traceback
                 self.on_rejected(str(addr), f"unreadable reserved datagram ({type(err).__name__})")
                 continue
+            if n <= self._last_n[kind]:
+                self.replays += 1
+                self.on_rejected(str(addr), f"reserved datagram: {kind} number {n} not above the last one "
+                                            f"accepted (a replay)")
+                continue  # no answer either: a replay with a spoofed source must not reflect
+            self._last_n[kind] = n
             reply: dict[str, Any] = {"ok": True, "n": n}
             try:
                 if kind == "disarm":
@@ -115,9 +149,23 @@ class ReservedListener:
                 else:
                     self.statuses += 1
             finally:
-                reply["status"] = self._status()
                 with contextlib.suppress(OSError, TypeError, ValueError):
-                    self.sock.sendto(json.dumps(reply, default=str).encode(), addr)
+                    self.sock.sendto(self._bounded(reply, len(data)), addr)
+
+    def _bounded(self, reply: dict[str, Any], limit: int) -> bytes:
+        """The answer with the status, never larger than the request (`limit` bytes): the status shrinks to
+        its counts, then goes, if need be."""
+        status = self._status()
+        full = dict(reply, status=status)
+        out = json.dumps(full, separators=(",", ":"), default=str).encode()
+        if len(out) <= limit:
+            return out
+        short = {k: (len(v) if isinstance(v, list) else v) for k, v in status.items() if k in ("armed", "faults",
+                                                                                              "engaged")}
+        out = json.dumps(dict(reply, status=short), separators=(",", ":"), default=str).encode()
+        if len(out) <= limit:
+            return out
+        return json.dumps(reply, separators=(",", ":")).encode()[:limit]
 
     def close(self) -> None:
         """Stop the thread and close the socket."""
@@ -164,23 +212,30 @@ Handler = Callable[[Command], Awaitable[dict[str, Any]]]
 
 
 class _Conn:
-    __slots__ = ("task", "writer", "opened_s", "authenticated", "peer")
+    __slots__ = ("task", "writer", "opened_s", "authenticated", "peer", "source")
 
-    def __init__(self, task: asyncio.Task[None], writer: asyncio.StreamWriter, peer: str) -> None:
+    def __init__(self, task: asyncio.Task[None], writer: asyncio.StreamWriter, peer: str, source: str) -> None:
         self.task = task
         self.writer = writer
         self.opened_s = time.monotonic()
         self.authenticated = False
         self.peer = peer
+        self.source = source
 
 
 class CommandServer:
     """asyncio TCP server; `handler` executes a validated command or raises ValueError/RuntimeError.
 
+    Per source address, at most `MAX_UNAUTHENTICATED_PER_SOURCE` connections that have not authenticated;
+    `RESERVED_FOR_OPERATORS` of the `max_connections` slots only authenticated connections may hold.
+
     :param max_connections: connections held at once (new ones evict the oldest unauthenticated).
     :param auth_timeout_s: a connection must send a valid command within this time.
     :param idle_timeout_s: an authenticated connection silent this long is closed.
     """
+
+    MAX_UNAUTHENTICATED_PER_SOURCE = 4
+    RESERVED_FOR_OPERATORS = 2
 
     def __init__(
         self,
@@ -215,6 +270,7 @@ class CommandServer:
         self.accepted = 0
         self.evicted = 0
         self.timed_out = 0
+        self.refused_per_source = 0
         self.log = RateLimitedLog(log)
         self._server: asyncio.Server | None = None
         self._conns: dict[asyncio.Task[None], _Conn] = {}
@@ -264,10 +320,28 @@ class CommandServer:
             await asyncio.wait_for(self._server.wait_closed(), 1.0)
         self._server = None
 
-    def _make_room(self) -> None:
-        """At the cap: drop the oldest connection that never authenticated (else the oldest one)."""
-        while len(self._conns) >= self.max_connections:
-            conns = sorted(self._conns.values(), key=lambda c: (c.authenticated, c.opened_s))
+    def _unauthenticated_from(self, source: str) -> int:
+        return sum(1 for c in self._conns.values() if c.source == source and not c.authenticated)
+
+    def _make_room(self, source: str) -> bool:
+        """Room for a new connection from `source`; False when that source already holds
+        `MAX_UNAUTHENTICATED_PER_SOURCE` connections that never authenticated (the new one is refused, no one
+        else's is dropped). At the cap, the victim is the oldest unauthenticated connection of the source
+        holding the most of them, so that a flooding host evicts only itself; authenticated connections go
+        last, and `RESERVED_FOR_OPERATORS` slots are never held by unauthenticated ones."""
+        if self._unauthenticated_from(source) >= self.MAX_UNAUTHENTICATED_PER_SOURCE:
+            return False
+        unauth_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
+        while (len(self._conns) >= self.max_connections
+               or sum(1 for c in self._conns.values() if not c.authenticated) >= unauth_cap):
+            counts: dict[str, int] = {}
+            for c in self._conns.values():
+                if not c.authenticated:
+                    counts[c.source] = counts.get(c.source, 0) + 1
+            conns = sorted(self._conns.values(),
+                           key=lambda c: (c.authenticated, -counts.get(c.source, 0), c.opened_s))
+            if not conns:
+                return True
             victim = conns[0]
             self._conns.pop(victim.task, None)
             victim.task.cancel()
@@ -276,13 +350,22 @@ class CommandServer:
             self.evicted += 1
             self.log.warning("command connection from %s dropped to make room (cap %d)", victim.peer,
                              self.max_connections)
+        return True
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
         assert task is not None
-        peer = str(writer.get_extra_info("peername"))
-        self._make_room()
-        conn = _Conn(task, writer, peer)
+        peername = writer.get_extra_info("peername")
+        peer = str(peername)
+        source = str(peername[0]) if isinstance(peername, tuple) and peername else peer
+        if not self._make_room(source):
+            self.refused_per_source += 1
+            self.log.warning("command connection from %s refused: %d unauthenticated connections from %s already",
+                             peer, self.MAX_UNAUTHENTICATED_PER_SOURCE, source)
+            with contextlib.suppress(Exception):
+                writer.transport.abort()
+            return
+        conn = _Conn(task, writer, peer, source)
         self._conns[task] = conn
         nonce = secrets.token_hex(16)
         last_seq: int | None = None
@@ -327,6 +410,11 @@ class CommandServer:
                     await self._reply(writer, reply)
         except (ConnectionError, asyncio.IncompleteReadError, asyncio.CancelledError):
             return  # a dropped peer, or shutdown: nothing to report
+        except TimeoutError:  # a peer that does not read its replies (drain timed out): drop it quietly
+            self.timed_out += 1
+            with contextlib.suppress(Exception):
+                writer.transport.abort()
+            return
         finally:
             self._conns.pop(task, None)
             with contextlib.suppress(Exception):

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
+from rimless.errors import RunFailure
 from rimless.firmware.errors import CommandError, Interrupted
 from rimless.firmware.link.telemetry import parse_datagram
 
@@ -63,6 +64,11 @@ class Summary:
         self.events = 0
         self.faults: list[str] = []
         self.garbled = 0
+        self.foreign = 0  # datagrams from another sender than the robot, ignored
+        self.lost_objects = 0  # gaps in the objects' `tseq`
+        self.lost_events = 0  # gaps in the events' `event_seq`
+        self._tseq: int | None = None
+        self._event_seq: int | None = None
         self.last: dict[str, Any] | None = None
         self._window: list[float] = []
         self.velocity: deque[float] = deque(maxlen=history)
@@ -73,7 +79,19 @@ class Summary:
         """Account for one datagram's objects."""
         self.datagrams += 1
         for obj in objs:
+            t = obj.get("tseq")
+            if isinstance(t, int) and not isinstance(t, bool):
+                if self._tseq is not None and t > self._tseq + 1:
+                    self.lost_objects += t - self._tseq - 1
+                if self._tseq is None or t > self._tseq:
+                    self._tseq = t
             ev = obj.get("event")
+            es = ev.get("event_seq") if isinstance(ev, dict) else None
+            if isinstance(es, int) and not isinstance(es, bool):
+                if self._event_seq is not None and es > self._event_seq + 1:
+                    self.lost_events += es - self._event_seq - 1
+                if self._event_seq is None or es > self._event_seq:
+                    self._event_seq = es
             if isinstance(ev, dict):
                 self.events += 1
                 if ev.get("name") == "fault":
@@ -104,6 +122,8 @@ class Summary:
             f"{self.samples} samples ({rate:.0f}/s), {self.events} events, faults: {', '.join(self.faults[-3:]) or 'none'}"
             f" | stance {leg.get('stance', '-')}, phase {leg.get('phase', '-')}, v {leg.get('velocity_m_s', 0):+.3f} m/s,"
             f" clutch mask {leg.get('clutch_mask', 0)}" + (f", {self.garbled} garbled" if self.garbled else "")
+            + (f", LOST {self.lost_objects} objects ({self.lost_events} events)" if self.lost_objects else "")
+            + (f", {self.foreign} foreign datagrams ignored" if self.foreign else "")
         )
 
     def view(self, now_s: float, span_s: float, width: int = 60, legs: int = 8) -> list[str]:
@@ -180,15 +200,30 @@ def listen(
     *, bind: str, port: int, out: Path | None, duration_s: float | None, summary_every_s: float = 1.0,
     echo: Callable[[str], None] = print, csv_out: Path | None = None, stale_s: float = 1.0,
     live: bool = False, write_screen: Callable[[str], None] | None = None,
-    heartbeat: Any = None,
+    heartbeat: Any = None, timeout_s: float = 10.0, robot: str | None = None,
 ) -> Summary:
-    """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says."""
+    """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
+
+    Until the first datagram the summary line says what it waits for instead of counting zero samples. When
+    nothing arrives for `timeout_s` (0: wait forever), the files are completed and `RunFailure` says that no
+    robot is sending (the command exits 1).
+
+    Only one sender is the robot: `robot` (a host name or address), else the first sender heard; datagrams
+    from any other are counted (`foreign`) and ignored. Gaps in the objects' `tseq` and the events'
+    `event_seq` are counted and shown (a lost fault event does not go unnoticed)."""
     try:
         sock = socket.socket(socket.AF_INET6 if ":" in bind else socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((bind, port))
     except OSError as err:
         raise CommandError(f"cannot listen on {bind}:{port} ({err.strerror or err})") from None
     sock.settimeout(0.1)
+    robot_ip: str | None = None
+    if robot is not None:
+        try:
+            robot_ip = socket.getaddrinfo(robot, None, type=socket.SOCK_DGRAM)[0][4][0]
+        except (socket.gaierror, UnicodeError) as err:
+            sock.close()
+            raise CommandError(f"--robot {robot!r} cannot be resolved ({err})") from None
     try:
         rec = Recorder(out, csv_out)
     except BaseException:
@@ -204,12 +239,20 @@ def listen(
     last_data: float | None = None
     stale = False
     stopped_by: BaseException | None = None
+    silent_for: float | None = None
     try:
         while duration_s is None or time.monotonic() - start < duration_s:
             try:
-                data = sock.recv(65536)
+                data, addr = sock.recvfrom(65536)
             except TimeoutError:
-                data = None
+                data, addr = None, None
+            if data and addr is not None:
+                if robot_ip is None:
+                    robot_ip = addr[0]
+                    echo(f"receiving from {robot_ip} (datagrams from any other sender are ignored)")
+                elif addr[0] != robot_ip:
+                    summary.foreign += 1
+                    data = None
             now = time.monotonic()
             if data:
                 try:
@@ -227,7 +270,15 @@ def listen(
                 stale = True
                 wall = time.strftime("%H:%M:%S", time.localtime(time.time() - (now - last_data)))
                 echo(f"data stopped: nothing for {stale_s:g} s (last datagram at {wall})")
-            if now >= next_line:
+            quiet_s = now - (start if last_data is None else last_data)
+            if timeout_s > 0 and quiet_s >= timeout_s:
+                silent_for = quiet_s
+                break
+            if now >= next_line and last_data is None:
+                echo(f"waiting for telemetry on {bind}:{port}: no robot sending for {quiet_s:.0f} s"
+                     + (f" (giving up after {timeout_s:g} s)" if timeout_s > 0 else ""))
+                next_line = now + summary_every_s
+            elif now >= next_line:
                 if live and write_screen is not None:
                     write_screen("\x1b[H\x1b[J" + "\n".join(summary.view(now, summary_every_s)) + "\n")
                 else:
@@ -243,9 +294,17 @@ def listen(
             if hb_thread is not None:
                 hb_thread.join(2.0)
         paths = rec.close()
-    echo(summary.line(time.monotonic(), summary_every_s))
+    if last_data is not None or silent_for is None:
+        echo(summary.line(time.monotonic(), summary_every_s))
+    if summary.lost_objects:
+        echo(f"lost {summary.lost_objects} telemetry objects on the way, {summary.lost_events} of them events "
+             "(a fault may be among them: see the robot's trial log or `rimless robot status`)")
     for p in paths:
         echo(f"wrote {p}")
     if stopped_by is not None:
         raise stopped_by  # after the files are complete: the caller exits 130
+    if silent_for is not None:
+        what = "no robot is sending telemetry" if last_data is None else "the robot stopped sending telemetry"
+        raise RunFailure(f"{what} to {bind}:{port}: nothing for {silent_for:.1f} s (--timeout-s {timeout_s:g}); "
+                         "is this PC in the robot's [telemetry] destinations (or `robot run --telemetry`)?")
     return summary

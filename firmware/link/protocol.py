@@ -32,6 +32,9 @@ from __future__ import annotations
 import hashlib
 import hmac
 import json
+import math
+import os
+import stat
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,19 +64,101 @@ class WeakToken(ParameterError):
     """The command token is too short or a published example value."""
 
 
+# SHA-256 of tokens published in this repository (tests, docs, examples): never accepted, whatever their
+# strength. Tests generate their tokens at run time.
+PUBLISHED_TOKEN_SHA256 = frozenset({
+    hashlib.sha256(t.encode()).hexdigest() for t in (
+        "test-token-7f3a9c2e1b5d", "cli-test-token-5e8d1f0a9b", "signal-test-token-3c9e7a1f",
+        "fake-fault-token-8d2b6e4a1c", "x7gq-2mpz_9lrt4vb1nk", "token1234token1234")
+})
+# Words and keyboard runs that cost an attacker's dictionary nothing (checked case-insensitively).
+COMMON_PARTS = ("password", "passwort", "passw0rd", "secret", "s3cret", "letmein", "welcome", "admin", "qwerty",
+                "azerty", "asdf", "zxcv", "123456789", "12345", "abcdef", "abc", "changeme", "change", "default",
+                "token", "robot", "rimless", "wheel", "test", "example", "dragon", "monkey", "iloveyou", "master",
+                "login", "pass", "raspberry", "pi")
+MIN_TOKEN_BITS = 64.0
+GENERATE_HINT = "generate one with `python3 -c \"import secrets; print(secrets.token_urlsafe(24))\"`"
+
+
+def token_bits(token: str) -> float:
+    """A conservative estimate of a token's entropy (bits): dictionary words and keyboard runs removed, each
+    remaining character worth log2 of the alphabet its classes span, repeated characters counted once per
+    distinct character beyond the first use of a repeated pattern."""
+    low = token.lower()
+    for part in sorted(COMMON_PARTS, key=len, reverse=True):
+        low = low.replace(part, " ")
+    rest = low.replace(" ", "")
+    if not rest:
+        return 0.0
+    for k in range(1, len(rest) // 2 + 1):  # a repeated block is worth one block
+        if len(rest) % k == 0 and rest == rest[:k] * (len(rest) // k):
+            rest = rest[:k]
+            break
+    alphabet = 0
+    original = {c for c in token if c.lower() in rest}
+    if any(c.islower() for c in original):
+        alphabet += 26
+    if any(c.isupper() for c in original):
+        alphabet += 26
+    if any(c.isdigit() for c in original):
+        alphabet += 10
+    if any(not c.isalnum() for c in original):
+        alphabet += 33
+    distinct = len(set(rest))
+    effective = min(len(rest), 2 * distinct)  # "aaaaab..." runs add little
+    return effective * math.log2(max(alphabet, 2))
+
+
 def check_token(token: str) -> str:
-    """Return `token` if it is acceptable for the command channel, else raise `WeakToken` saying why."""
-    if token.lower() in KNOWN_EXAMPLE_TOKENS:
-        raise WeakToken("the command token is an example value; generate one with `python3 -c "
-                        "\"import secrets; print(secrets.token_urlsafe(24))\"`")
+    """Return `token` if it is acceptable for the command channel, else raise `WeakToken` saying why: an
+    example or published value, shorter than MIN_TOKEN_CHARS, or under MIN_TOKEN_BITS once dictionary words,
+    keyboard runs and repetitions are discounted."""
+    if token.lower() in KNOWN_EXAMPLE_TOKENS or hashlib.sha256(token.lower().encode()).hexdigest() \
+            in PUBLISHED_TOKEN_SHA256 or hashlib.sha256(token.encode()).hexdigest() in PUBLISHED_TOKEN_SHA256:
+        raise WeakToken(f"the command token is an example or published value; {GENERATE_HINT}")
     if len(token) < MIN_TOKEN_CHARS:
         raise WeakToken(f"the command token is too short ({len(token)} characters, at least {MIN_TOKEN_CHARS})")
     if len(set(token)) < 6:
         raise WeakToken("the command token repeats too few characters to be secret")
+    bits = token_bits(token)
+    if bits < MIN_TOKEN_BITS:
+        raise WeakToken(f"the command token is guessable (about {bits:.0f} bits once dictionary words and "
+                        f"repetitions are discounted, at least {MIN_TOKEN_BITS:.0f}); {GENERATE_HINT}")
     return token
 
 
+class TokenFileError(ParameterError):
+    """A token file that cannot be read, or that others may read."""
+
+
+def read_token_file(path: str | os.PathLike[str], what: str) -> str:
+    """The token in `path` (stripped). Refused unless it is a regular file owned by this user with no access for
+    group or others (mode 0600 or 0400); `what` names the option or setting in the message."""
+    try:
+        st = os.stat(path)
+        text = open(path, encoding="utf-8").read().strip()  # noqa: SIM115
+    except (OSError, UnicodeDecodeError) as err:
+        raise TokenFileError(f"{what} {path}: cannot read the token ({getattr(err, 'strerror', None) or err})") from None
+    if st.st_mode & 0o077:
+        raise TokenFileError(f"{what} {path}: mode {stat.S_IMODE(st.st_mode):04o} lets other users read the token; "
+                             f"run `chmod 600 {path}`")
+    if hasattr(os, "getuid") and st.st_uid != os.getuid():
+        raise TokenFileError(f"{what} {path}: owned by uid {st.st_uid}, not by this user ({os.getuid()})")
+    if not text:
+        raise TokenFileError(f"{what} {path}: the file is empty")
+    return text
+
+
 RESERVED_KINDS = ("disarm", "status")
+RESERVED_PAD_BYTES = 400  # clients pad their datagram so that the answer (never larger) can carry the status
+
+
+def reserved_counter() -> int:
+    """The number of a new reserved-path datagram: nanoseconds since the epoch, increasing on one PC; the robot
+    accepts each kind only with a number above the last one it accepted (a replay is ignored)."""
+    import time
+
+    return time.time_ns()
 
 
 def reserved_mac(token: str, kind: str, n: int) -> str:
@@ -95,8 +180,10 @@ def parse_reserved_datagram(data: bytes, token: str) -> tuple[str, int]:
     except (UnicodeDecodeError, ValueError, RecursionError):
         raise Rejected("reserved datagram: not UTF-8 JSON") from None
     kinds = [k for k in RESERVED_KINDS if isinstance(obj, dict) and k in obj]
-    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) != {kinds[0], "mac"}:
-        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status")
+    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) - {"pad"} != {kinds[0], "mac"}:
+        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status (and pad)")
+    if "pad" in obj and not isinstance(obj["pad"], str):
+        raise Rejected("reserved datagram: pad must be a string")
     kind = kinds[0]
     n, mac = obj[kind], obj["mac"]
     if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:

@@ -9,12 +9,19 @@ from __future__ import annotations
 
 import contextlib
 import json
-import secrets
 import socket
 from typing import Any
 
 from rimless.firmware.errors import CommandError, RobotUnreachable
-from rimless.firmware.link.protocol import DEFAULT_PORT, HELLO, PROTOCOL_VERSION, command_mac, reserved_mac
+from rimless.firmware.link.protocol import (
+    DEFAULT_PORT,
+    HELLO,
+    PROTOCOL_VERSION,
+    RESERVED_PAD_BYTES,
+    command_mac,
+    reserved_counter,
+    reserved_mac,
+)
 
 
 class RobotLink:
@@ -106,17 +113,20 @@ def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFA
     Sends up to `copies` datagrams (UDP may drop one), waiting `timeout_s / copies` for an answer
     after each. Raises `RobotUnreachable` when none comes.
     """
-    n = secrets.randbits(62)
-    data = json.dumps({kind: n, "mac": reserved_mac(token, kind, n)}).encode()
     try:
         info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
     except socket.gaierror as err:
         raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
+    sent: set[int] = set()
     with socket.socket(info[0], socket.SOCK_DGRAM) as sock:
         sock.settimeout(timeout_s / copies)
         for _ in range(copies):
+            n = max(reserved_counter(), max(sent, default=0) + 1)  # every copy a new number (no replay)
+            sent.add(n)
+            body: dict[str, Any] = {kind: n, "mac": reserved_mac(token, kind, n)}
+            body["pad"] = "x" * max(0, RESERVED_PAD_BYTES - len(json.dumps(body)) - 10)  # room for the answer
             try:
-                sock.sendto(data, info[4])
+                sock.sendto(json.dumps(body).encode(), info[4])
                 reply, _ = sock.recvfrom(65536)
             except (TimeoutError, socket.timeout, ConnectionRefusedError):
                 continue
@@ -126,7 +136,7 @@ def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFA
                 obj = json.loads(reply)
             except ValueError:
                 continue
-            if isinstance(obj, dict) and obj.get("ok") and obj.get("n") == n:
+            if isinstance(obj, dict) and obj.get("ok") and obj.get("n") in sent:
                 return obj
     raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
 

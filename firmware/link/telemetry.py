@@ -22,6 +22,7 @@ from rimless.firmware.control.faults import Fault
 EVENT_CODES = {
     "touchdown": 1, "lock": 2, "release": 3, "no_zero_crossing": 4, "arm": 5, "disarm": 6, "param": 7,
     "trial_start": 8, "trial_stop": 9, "stop": 10, "fault": 11, "sync_lost": 12, "lock_unsynced": 13, "signal": 14,
+    "lock_withheld": 15, "log_degraded": 16, "touchdown_dismissed": 17,
 }
 
 
@@ -52,6 +53,9 @@ def record_to_json(rec: Record, clock: WallClock) -> dict[str, Any]:
                 "stance": rec.stance_leg,
                 "clutch_mask": rec.clutch_mask,
             },
+            # the same leg values again under the stance leg's own name: one PlotJuggler series per leg
+            f"leg{rec.stance_leg}": {"velocity_m_s": round(rec.velocity_m_s, 5),
+                                     "compression_m": round(rec.compression_m, 7), "phase": rec.phase},
             "sensor": {"squal": rec.squal, "shutter": rec.shutter, "max_pixel": rec.max_pixel},
             "loop": {"armed": int(rec.armed), "latency_ms": round(rec.latency_ns * 1e-6, 4)},
         }
@@ -111,6 +115,7 @@ class TelemetrySender:
         self.sent_datagrams = 0
         self.sent_bytes = 0
         self.dropped_datagrams = 0
+        self.tseq = 0
         self._n = 0
         self.socks: list[socket.socket] = []
         self.addresses: list[tuple[Any, ...]] = []
@@ -141,7 +146,10 @@ class TelemetrySender:
                 self._n += 1
                 if (self._n - 1) % self.decimate:
                     continue
-            objs.append(record_to_json(rec, self.clock))
+            obj = record_to_json(rec, self.clock)
+            self.tseq += 1
+            obj["tseq"] = self.tseq  # every object sent, numbered: a receiver counts what it lost
+            objs.append(obj)
         for data in pack_datagrams(objs, self.max_datagram_bytes, batch=self.batch):
             for sock in self.socks:
                 try:

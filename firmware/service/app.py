@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import secrets
 import signal
 import sys
@@ -32,14 +33,18 @@ from rimless.firmware.link.protocol import Command, check_token
 from rimless.firmware.link.telemetry import TelemetrySender
 from rimless.firmware.service.config import RobotConfig
 from rimless.firmware.service.hardware import Hardware
+from rimless.firmware.service.safety import STOP_SIGNALS, install_faulthandler
+from rimless.firmware.service import sdnotify
+from rimless.firmware.control.watchdog import Watchdog
 from rimless.firmware.service.triallog import TrialLog
 
 log = logging.getLogger("rimless.robot")
 
 COMMAND_TIMEOUT_S = 1.0
 ROUTE_PERIOD_S = 0.01
+WATCHDOG_PERIOD_S = 0.01  # the watchdog thread's check period
+CONTROL_LOOP, EVENT_LOOP = "control loop", "event loop"  # the watchdog's deadlines
 SWITCH_INTERVAL_S = 0.0005  # let the sampler thread get the GIL back quickly after its sleep
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT") if hasattr(signal, n))
 
 
 @dataclass
@@ -57,6 +62,11 @@ class RunSummary:
     telemetry_dropped: int = 0
     error: str | None = None
     command_port: int | None = None
+    log_dropped_lines: int = 0  # trial-log lines lost to failed writes (a full disk)
+    log_errors: int = 0  # failed trial-log writes or fsyncs
+    log_last_error: str = ""
+    stderr_dropped: int = 0  # log records dropped because stderr did not keep up (set by the runner)
+    realtime: dict[str, Any] | None = None  # what the control thread's real-time settings achieved
 
 
 class RobotApp:
@@ -81,6 +91,7 @@ class RobotApp:
         self.hw = hw
         self.token = token or cfg.token() or secrets.token_urlsafe(24)
         self.token_generated = not (token or cfg.token())
+        self.token_path: Any = None  # where a generated token was written (mode 0600), by the runner
         if cfg.commands.enabled and not self.token_generated:
             check_token(self.token)  # WeakToken (a ParameterError) names the problem
         self.controller = Controller(
@@ -104,6 +115,11 @@ class RobotApp:
         self._stop: asyncio.Event | None = None
         self._last_command_s = time.monotonic()
         self._trial_lock: asyncio.Lock | None = None
+        self.watchdog: Watchdog | None = None
+        self.trial_log_write: Callable[[int, Any], int] = os.write  # the trial log's write (a fake fills the disk)
+        self._log_closed = (0, 0)  # dropped lines and errors of the trials already closed
+        self._log_reported = 0  # errors already reported as a log_degraded event
+        self._event_seq = 0
 
     # --- stop -----------------------------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
@@ -112,6 +128,17 @@ class RobotApp:
             self.summary.stop_reason = reason
         if self._stop is not None:
             self._stop.set()
+
+    def _signal_handler(self, loop: asyncio.AbstractEventLoop) -> Callable[[int, Any], None]:
+        """The handler of every stop signal: clutches off and no new engage right here, in the main thread
+        between two bytecodes (so also while the event loop is blocked), then the orderly stop in the loop."""
+        def handler(signum: int, _frame: Any) -> None:
+            self.controller.armed = False
+            with contextlib.suppress(Exception):
+                self.hw.outputs_off()
+            with contextlib.suppress(Exception):
+                loop.call_soon_threadsafe(self._on_signal, signal.Signals(signum).name)
+        return handler
 
     def _on_signal(self, name: str) -> None:
         # Clutches off at once (a second signal may not wait), then the orderly shutdown.
@@ -137,10 +164,10 @@ class RobotApp:
         server: CommandServer | None = None
         try:
             if handle_signals:
+                install_faulthandler()
+                handler = self._signal_handler(loop)
                 for sig in STOP_SIGNALS:
-                    previous = signal.getsignal(sig)
-                    loop.add_signal_handler(sig, self._on_signal, sig.name)
-                    signals.append((sig, previous))
+                    signals.append((sig, signal.signal(sig, handler)))
             sys.setswitchinterval(SWITCH_INTERVAL_S)
             tcfg = self.cfg.telemetry
             if tcfg.destinations_list():
@@ -156,10 +183,20 @@ class RobotApp:
                 self.server = server
                 self.command_port = self.summary.command_port = await server.start()
             self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
-                                   max_samples=max_samples, record_timing=self.record_timing)
+                                   max_samples=max_samples, record_timing=self.record_timing,
+                                   on_sample=self._on_sample,
+                                   realtime=(self.cfg.sampling.realtime_priority, self.cfg.sampling.realtime_cpu)
+                                   if self.cfg.sampling.realtime else None)
+            wd = self.watchdog = Watchdog(self._watchdog_trip, period_s=WATCHDOG_PERIOD_S, notify=sdnotify.notify,
+                                          notify_every_s=sdnotify.watchdog_interval_s())
+            wd.add(CONTROL_LOOP, self.cfg.sampling.stall_timeout_s)
+            wd.add(EVENT_LOOP, self.cfg.sampling.loop_stall_s)
+            wd.checks.append(self._check_link)
+            wd.while_stalled = self._outputs_off
             if arm:
                 self.controller.arm()
             self.sampler.start()
+            wd.start()
             tasks = [
                 asyncio.create_task(self._sampler_task(), name="sampler"),
                 asyncio.create_task(self._controller_task(), name="controller"),
@@ -170,6 +207,7 @@ class RobotApp:
                 tasks.append(asyncio.create_task(self._commands_task(), name="commands"))
             if self.on_ready is not None:
                 self.on_ready(self)
+            sdnotify.notify("READY=1")
             stop_wait = asyncio.create_task(self._stop.wait(), name="stop")
             done, _ = await asyncio.wait([stop_wait, *tasks], timeout=duration_s, return_when=asyncio.FIRST_COMPLETED)
             if not done:
@@ -190,7 +228,6 @@ class RobotApp:
                 await self._shutdown(tasks, server)
             finally:
                 for sig, previous in signals:
-                    loop.remove_signal_handler(sig)
                     with contextlib.suppress(Exception):
                         signal.signal(sig, previous)
                 sys.setswitchinterval(old_switch)
@@ -205,9 +242,12 @@ class RobotApp:
     async def _shutdown(self, tasks: list[asyncio.Task[Any]], server: CommandServer | None) -> None:
         ctl = self.controller
         try:
-            # 1. Outputs safe, whatever state the sampler is in.
+            # 1. Outputs safe, whatever state the sampler is in; the watchdog has nothing left to guard.
+            sdnotify.notify("STOPPING=1")
+            if self.watchdog is not None:
+                self.watchdog.stop()
             with contextlib.suppress(Exception):
-                self.hw.clutches.all_off()
+                self.hw.outputs_off()
             # 2. Stop the control thread.
             if self.sampler is not None:
                 self.sampler.stop()
@@ -217,6 +257,8 @@ class RobotApp:
                 self.summary.missed_deadlines = st.missed_deadlines
                 span = (st.stopped_ns - st.started_ns) * 1e-9
                 self.summary.achieved_rate_hz = st.samples / span if span > 0 else 0.0
+                if self.sampler.realtime_report is not None:
+                    self.summary.realtime = self.sampler.realtime_report.to_json()
             with contextlib.suppress(Exception):
                 ctl.safe_stop(self.summary.stop_reason or "stop")
             if self.summary.error:
@@ -253,6 +295,7 @@ class RobotApp:
                     self.trial.append(self._log_pending)
                     self.trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {"reason": "shutdown"})])
                     self.trial.close()
+                    self._account_log(closed=True)
                 except Exception as err:  # noqa: BLE001
                     self._shutdown_error("trial log", err)
                 finally:
@@ -279,6 +322,9 @@ class RobotApp:
                 rec = out.popleft()
             except IndexError:
                 break
+            if isinstance(rec, EventRecord):
+                self._event_seq += 1
+                rec.fields["event_seq"] = self._event_seq  # a lost event (a fault) shows as a gap
             if self.telemetry is not None:
                 self._tel_pending.append(rec)
             if self.trial is not None:
@@ -290,23 +336,49 @@ class RobotApp:
                 log.warning("fault %s: %s", rec.fields["fault"], rec.fields.get("detail"))
 
     async def _controller_task(self) -> None:
-        assert self.sampler is not None
-        ctl = self.controller
-        stall_ns = int(self.cfg.sampling.stall_timeout_s * 1e9)
-        link_s = self.cfg.commands.link_timeout_s
-        started = time.monotonic_ns()
+        assert self.sampler is not None and self.watchdog is not None
+        wd = self.watchdog
         while True:
             await asyncio.sleep(ROUTE_PERIOD_S)
+            wd.feed(EVENT_LOOP)
             self._route()
-            now = time.monotonic_ns()
-            last = self.sampler.last_sample_ns or started
-            if now - last > stall_ns and now - started > stall_ns:
-                # The control thread is stuck (sensor call hung?): act from here.
-                ctl.fault(Fault.SENSOR_STALLED, f"no sample for {(now - last) * 1e-9:.3f} s")
-            if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
+
+    # --- the dead-man's chain (watchdog thread and control thread) ----------------------------------
+    def _on_sample(self) -> None:
+        """After every control step, in the control thread: feed the watchdog; toggle the heartbeat pin while
+        the watchdog sees every part alive (a stall stops the toggling, and the hardware monostable drops)."""
+        wd = self.watchdog
+        if wd is not None:
+            wd.feed(CONTROL_LOOP)
+            if wd.healthy and self.hw.heartbeat is not None:
+                self.hw.heartbeat.toggle()
+
+    def _outputs_off(self) -> None:
+        self.controller.armed = False
+        with contextlib.suppress(Exception):
+            if self.hw.clutches.engaged():
                 self.hw.clutches.all_off()
-                self.armed_remotely = False
-                self.sampler.submit(lambda c: c.fault(Fault.LINK_LOST, f"no command or heartbeat for {link_s} s"))
+
+    def _watchdog_trip(self, name: str, detail: str) -> None:
+        """A stalled event loop or control thread (in the watchdog thread): every clutch off and disarmed here,
+        the fault reported once."""
+        self.controller.armed = False
+        with contextlib.suppress(Exception):
+            self.hw.clutches.all_off()
+        self.armed_remotely = False
+        fault = Fault.SENSOR_STALLED if name == CONTROL_LOOP else Fault.LOOP_STALLED
+        self.controller.fault(fault, detail)
+
+    def _check_link(self) -> None:
+        """Link loss, checked in the watchdog thread so that it fires while the event loop is blocked."""
+        link_s = self.cfg.commands.link_timeout_s
+        ctl = self.controller
+        if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
+            ctl.armed = False
+            self.armed_remotely = False
+            with contextlib.suppress(Exception):
+                self.hw.clutches.all_off()
+            ctl.fault(Fault.LINK_LOST, f"no command or heartbeat for {link_s} s")
 
     async def _telemetry_task(self) -> None:
         period = self.cfg.telemetry.period_s
@@ -330,6 +402,28 @@ class RobotApp:
                     pending, self._log_pending = self._log_pending, []
                     self.trial.append(pending)
                     await asyncio.to_thread(self.trial.sync)
+                    self._account_log()
+
+    def _account_log(self, *, closed: bool = False) -> None:
+        """Trial-log failures into the summary; the first failure of a run of them becomes a `log_degraded`
+        event (telemetry, and the log itself when it can write again). Logging degrades, control goes on."""
+        trial = self.trial
+        if trial is None:
+            return
+        dropped, errors = self._log_closed
+        self.summary.log_dropped_lines = dropped + trial.dropped_lines
+        self.summary.log_errors = errors + trial.errors
+        if trial.last_error:
+            self.summary.log_last_error = trial.last_error
+        if self.summary.log_errors > self._log_reported:
+            if self._log_reported == 0 or closed:
+                log.warning("trial log: %s (%d lines dropped)", trial.last_error, self.summary.log_dropped_lines)
+            if self._log_reported == 0:
+                self.controller.outbox.append(EventRecord(time.monotonic_ns(), "log_degraded", {
+                    "error": trial.last_error, "dropped_lines": self.summary.log_dropped_lines}))
+            self._log_reported = self.summary.log_errors
+        if closed:
+            self._log_closed = (self.summary.log_dropped_lines, self.summary.log_errors)
 
     async def _commands_task(self) -> None:
         await asyncio.Event().wait()  # the server runs on its own; this task marks its lifetime
@@ -370,6 +464,8 @@ class RobotApp:
                 rate_hz=self.cfg.sampling.rate_hz,
                 missed_deadlines=self.sampler.stats.missed_deadlines,
                 trial=None if self.trial is None else str(self.trial.path),
+                log={"dropped_lines": self.summary.log_dropped_lines, "errors": self.summary.log_errors,
+                     "last_error": self.summary.log_last_error},
                 params={k: getattr(self.controller.params(), k) for k in self.controller.params().__slots__},
                 link={"timeout_s": self.cfg.commands.link_timeout_s, "armed_remotely": self.armed_remotely,
                       "connections": 0 if self.server is None else self.server.connections},
@@ -409,7 +505,7 @@ class RobotApp:
                 raise ValueError(f"a trial is already running ({self.trial.path.name})")
             header = {"rate_hz": self.cfg.sampling.rate_hz, "detector": _params_dict(self.controller),
                       "legs": [list(s.legs) for s in self.cfg.sensors], "clutch_pins": list(self.cfg.clutch.pins)}
-            trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header)
+            trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header, write=self.trial_log_write)
             self._route()  # records from before the start do not belong to the trial
             self.trial = trial
             self._log_pending = [EventRecord(time.monotonic_ns(), "trial_start", {"trial": name})]
@@ -428,7 +524,10 @@ class RobotApp:
             trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {})])
             self._log_pending = []
             await asyncio.to_thread(trial.close)
-            return {"path": str(trial.path), "lines": trial.lines}
+            self.trial = trial
+            self._account_log(closed=True)
+            self.trial = None
+            return {"path": str(trial.path), "lines": trial.lines, "dropped_lines": trial.dropped_lines}
 
 
 def _params_dict(ctl: Controller) -> dict[str, Any]:

@@ -70,8 +70,10 @@ def detector_delays(events: list[EventRecord], traj: GaitTrajectory) -> tuple[li
 
 
 def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None = None,
-               handle_signals: bool = False) -> dict[str, Any]:
-    """Run the fake app at `rate_hz` for `duration_s`; return the figures (times in ms).
+               handle_signals: bool = False, realtime: bool = False) -> dict[str, Any]:
+    """Run the fake app at `rate_hz` for `duration_s`; return the figures (times in ms). With `realtime`, the
+    control thread takes the service's real-time settings (`[sampling] realtime`); `realtime` in the figures
+    says what it got.
 
     With `handle_signals`, SIGINT/SIGTERM stop the run early; `stopped_by` then names the signal.
     """
@@ -83,7 +85,8 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
     with tempfile.TemporaryDirectory(prefix="rimless-bench-") as tmp:
         cfg = dataclasses.replace(
             base,
-            sampling=dataclasses.replace(base.sampling if base else SamplingConfig(), rate_hz=float(rate_hz)),
+            sampling=dataclasses.replace(base.sampling if base else SamplingConfig(), rate_hz=float(rate_hz),
+                                         realtime=realtime or base.sampling.realtime),
             telemetry=TelemetryConfig(host="127.0.0.1", port=port),
             commands=CommandsConfig(enabled=False),
             log=LogConfig(dir=tmp),
@@ -138,10 +141,11 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
         "faults": summary.faults,
         "duration_s": round(wall, 2),
         "stopped_by": app.signal_received,
+        "realtime": summary.realtime,
     }
 
 
-def bench_rates(rates_hz: Sequence[float], duration_s: float = 3.0, *,
+def bench_rates(rates_hz: Sequence[float], duration_s: float = 3.0, *, realtime: bool = False,
                 on_rate: Callable[[float], None] | None = None,
                 on_result: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
     """`bench_rate` at each rate in turn, logging only warnings; `on_rate(rate_hz)` before each run,
@@ -151,7 +155,7 @@ def bench_rates(rates_hz: Sequence[float], duration_s: float = 3.0, *,
         if on_rate is not None:
             on_rate(rate)
         with NonBlockingLog(level=logging.WARNING):
-            res = bench_rate(rate, duration_s, handle_signals=True)
+            res = bench_rate(rate, duration_s, handle_signals=True, realtime=realtime)
         if res["stopped_by"]:
             raise Interrupted(int(getattr(signal, res["stopped_by"])))
         results.append(res)

@@ -9,13 +9,19 @@ from __future__ import annotations
 import math
 import os
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from rimless.firmware.control.detector import DetectorParams
 from rimless.firmware.errors import ConfigError, ConfigFileError
 from rimless.firmware.control.faults import HealthLimits
+
+# The robot's detector defaults differ from the library's on the leg-count safety checks (a counted leg locks
+# only after two confirmed step intervals; an unconfirmed compression of 0.3 mm loses the count). The
+# firmware-in-the-loop simulator keeps the library defaults unless it reads a robot.toml.
+ROBOT_DETECTOR_SAFETY: dict[str, Any] = {"confirm_steps": 2, "doubt_compression_m": 0.0003}
+ROBOT_DETECTOR = DetectorParams(**ROBOT_DETECTOR_SAFETY)
 
 DEFAULT_CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)  # BCM; all >= 9, so pulled down at power-on
 TOKEN_ENV = "RIMLESS_TOKEN"
@@ -59,6 +65,8 @@ class ClutchConfig:
     max_hold_s: float = 1.0
     start_leg_index: int = 0  # index into each sensor's `legs` of the leg standing on the ground at start
     boot_pull_up_reason: str = ""  # why clutch pins on GPIO 2-8 (pulled up at power-on) are safe here
+    heartbeat_pin: int = 18  # toggled by the control loop at every sample (0 = none): feeds the clutch enable's
+    # retriggerable monostable, so that a dead or stalled firmware cannot hold a clutch
 
 
 @dataclass(frozen=True)
@@ -67,8 +75,12 @@ class SamplingConfig:
 
     rate_hz: float = 300.0
     spin_s: float = 0.0003
-    stall_timeout_s: float = 0.1
+    stall_timeout_s: float = 0.1  # the control thread not sampling this long trips the watchdog (s)
     id_check_interval_s: float = 1.0
+    loop_stall_s: float = 0.25  # the event loop not feeding the watchdog this long trips it (s)
+    realtime: bool = False  # the control thread SCHED_FIFO on one CPU, memory locked (`run --realtime`)
+    realtime_priority: int = 50  # SCHED_FIFO priority (1..99; the unit's LimitRTPRIO must allow it)
+    realtime_cpu: int = -1  # the CPU of the control thread (-1: the last one allowed)
 
 
 @dataclass(frozen=True)
@@ -122,29 +134,30 @@ class RobotConfig:
     sensors: tuple[SensorConfig, ...] = (SensorConfig(),)
     clutch: ClutchConfig = field(default_factory=ClutchConfig)
     sampling: SamplingConfig = field(default_factory=SamplingConfig)
-    detector: DetectorParams = field(default_factory=DetectorParams)
+    detector: DetectorParams = field(default_factory=lambda: ROBOT_DETECTOR)
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     commands: CommandsConfig = field(default_factory=CommandsConfig)
     log: LogConfig = field(default_factory=LogConfig)
 
     def token(self) -> str:
         """The command token in force: $RIMLESS_TOKEN, $RIMLESS_TOKEN_FILE, the systemd credential
-        `rimless-token`, `[commands] token_file`, then `[commands] token`. Raises ConfigError if a named
-        file cannot be read."""
+        `rimless-token`, `[commands] token_file`, then `[commands] token`. Raises ConfigError if the credential
+        cannot be read, TokenFileError if a token file cannot be read or is not private (mode 0600, this user's)."""
         if os.environ.get(TOKEN_ENV):
             return os.environ[TOKEN_ENV]
-        candidates = [(os.environ.get(TOKEN_FILE_ENV, ""), f"${TOKEN_FILE_ENV}")]
+        from rimless.firmware.link.protocol import read_token_file
+
+        if os.environ.get(TOKEN_FILE_ENV):
+            return read_token_file(os.environ[TOKEN_FILE_ENV], f"${TOKEN_FILE_ENV}")
         if os.environ.get("CREDENTIALS_DIRECTORY"):
             cred = Path(os.environ["CREDENTIALS_DIRECTORY"]) / CREDENTIAL_NAME
-            if cred.exists():
-                candidates.append((str(cred), "systemd credential"))
-        candidates.append((self.commands.token_file, "[commands] token_file"))
-        for path, what in candidates:
-            if path:
+            if cred.exists():  # systemd keeps its credentials private to the service
                 try:
-                    return Path(path).read_text(encoding="utf-8").strip()
+                    return cred.read_text(encoding="utf-8").strip()
                 except (OSError, UnicodeDecodeError) as err:
-                    raise ConfigError(f"{what} {path}: cannot read the token ({err})") from None
+                    raise ConfigError(f"systemd credential {cred}: cannot read the token ({err})") from None
+        if self.commands.token_file:
+            return read_token_file(self.commands.token_file, "[commands] token_file")
         return self.commands.token
 
 
@@ -156,6 +169,8 @@ _RANGES: dict[str, tuple[float, float]] = {
     "id_check_interval_s": (0.0, 3600.0), "port": (0, 65535), "period_s": (0.001, 1.0),
     "max_datagram_bytes": (256, 65000), "decimate": (1, 1000), "link_timeout_s": (0.0, 3600.0),
     "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0), "npd_pin": (2, 27), "cs_pin": (2, 27),
+    "heartbeat_pin": (0, 27), "loop_stall_s": (0.02, 10.0),
+    "realtime_priority": (1, 99), "realtime_cpu": (-1, 1023),
     "max_connections": (2, 256), "auth_timeout_s": (0.1, 60.0), "idle_timeout_s": (1.0, 86400.0),
 }
 
@@ -257,6 +272,7 @@ def config_from_dict(data: dict[str, Any], source: str = "robot.toml") -> RobotC
             kw[name] = _build(cls, data[name], f"{source}: [{name}]")
     if "detector" in data:
         det = _build(DetectorParams, data["detector"], f"{source}: [detector]")
+        det = replace(det, **{k: v for k, v in ROBOT_DETECTOR_SAFETY.items() if k not in data["detector"]})
         try:
             det.validated()
         except ValueError as err:
@@ -296,6 +312,15 @@ def _check_pins(cfg: RobotConfig, source: str) -> None:
                 "use GPIO 12-27, or set [clutch] boot_pull_up_reason to say why it is safe here"
             )
     used = {pin: "a clutch pin" for pin in cfg.clutch.pins}
+    hb = cfg.clutch.heartbeat_pin
+    if hb:
+        if hb == 1:
+            raise ConfigError(f"{source}: [clutch] heartbeat_pin GPIO1 is reserved for the HAT ID EEPROM")
+        if hb in used:
+            raise ConfigError(f"{source}: [clutch] heartbeat_pin GPIO{hb} is also a clutch pin")
+        if hb in spi_lines:
+            raise ConfigError(f"{source}: [clutch] heartbeat_pin GPIO{hb} is an SPI line in use")
+        used[hb] = "[clutch] heartbeat_pin"
     for i, s in enumerate(cfg.sensors):
         for name in ("reset_pin", "npd_pin", "cs_pin"):
             pin = getattr(s, name)

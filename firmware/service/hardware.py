@@ -7,6 +7,7 @@ uses (`adns3080`, `spi`, `clutch`, `gpio`, `fake_adns3080`) know nothing of eith
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -18,7 +19,7 @@ from rimless.firmware.control.faults import HealthMonitor
 from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.drivers.clutch import ClutchBank
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, GaitTrajectory
-from rimless.firmware.drivers.gpio import GpioChipSelectBus, mock_pin_factory, open_clutches, output, release_pins
+from rimless.firmware.drivers.gpio import GpioChipSelectBus, HeartbeatOutput, PinLog, mock_pin_factory, open_clutches, output, release_pins
 from rimless.firmware.service.config import RobotConfig, SensorConfig
 
 
@@ -33,10 +34,22 @@ class Hardware:
     pin_factory: Any = None
     fakes: list[FakeAdns3080] = field(default_factory=list)
     closers: list[Callable[[], None]] = field(default_factory=list)
+    heartbeat: HeartbeatOutput | None = None
+
+    def outputs_off(self) -> None:
+        """Heartbeat stopped (low) and every clutch off; tries both whatever the first raises."""
+        try:
+            if self.heartbeat is not None:
+                self.heartbeat.stop()
+        finally:
+            self.clutches.all_off()
 
     def close(self) -> None:
-        """Clutches off and released, then the buses and reset pins."""
+        """Heartbeat low, clutches off and released, then the buses and reset pins."""
         try:
+            if self.heartbeat is not None:
+                with contextlib.suppress(Exception):
+                    self.heartbeat.close()
             self.clutches.close()
         finally:
             for close in reversed(self.closers):
@@ -85,10 +98,11 @@ def build_fake(
     pin_factory: Any = None,
     noise_counts: float = 0.3,
     seed: int = 0,
+    pin_log: PinLog | None = None,
 ) -> Hardware:
     """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on the monotonic clock;
-    clutches, RESET, NPD and GPIO chip selects on a MockFactory."""
-    factory = pin_factory if pin_factory is not None else mock_pin_factory()
+    clutches, RESET, NPD and GPIO chip selects on a MockFactory (recording every pin change in `pin_log`)."""
+    factory = pin_factory if pin_factory is not None else mock_pin_factory(pin_log)
     traj = trajectory if trajectory is not None else default_fake_trajectory()
     clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
     fakes: list[FakeAdns3080] = []
@@ -131,7 +145,14 @@ def build_fake(
     except BaseException:
         Hardware([], clutches, [], closers=closers).close()
         raise
-    return Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, closers)
+    hw = Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, closers)
+    if cfg.clutch.heartbeat_pin:
+        try:
+            hw.heartbeat = HeartbeatOutput(cfg.clutch.heartbeat_pin, pin_factory=factory)
+        except BaseException:
+            hw.close()
+            raise
+    return hw
 
 
 def _shared_line(lines: dict[int, Any], pin: int, factory: Any, closers: list[Callable[[], None]]) -> Any:
@@ -180,7 +201,14 @@ def build_real(cfg: RobotConfig) -> Hardware:
     except BaseException:
         Hardware([], clutches, [], closers=closers).close()
         raise
-    return Hardware(_channels(cfg, sensors), clutches, sensors, None, [], closers)
+    hw = Hardware(_channels(cfg, sensors), clutches, sensors, None, [], closers)
+    if cfg.clutch.heartbeat_pin:
+        try:
+            hw.heartbeat = HeartbeatOutput(cfg.clutch.heartbeat_pin)
+        except BaseException:
+            hw.close()
+            raise
+    return hw
 
 
 @dataclass(frozen=True)

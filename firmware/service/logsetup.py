@@ -8,6 +8,7 @@ that do not fit in the queue are dropped and counted.
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import sys
 import threading
@@ -40,6 +41,14 @@ class NonBlockingLog:
     def __init__(self, stream: TextIO | None = None, *, level: int = logging.INFO, queue_len: int = QUEUE_LEN,
                  fmt: str = "%(asctime)s %(levelname)s %(name)s: %(message)s") -> None:
         self.stream = stream if stream is not None else sys.stderr
+        # The process's stderr is written with os.write on its descriptor: a writer stuck on a full pipe then
+        # holds no lock of sys.stderr, so the interpreter can still flush and exit.
+        self._fd: int | None = None
+        if stream is None:
+            try:
+                self._fd = sys.stderr.fileno()
+            except (AttributeError, OSError, ValueError):
+                self._fd = None
         self.queue: queue.Queue[object] = queue.Queue(queue_len)
         self.handler = DroppingQueueHandler(self.queue)
         self.handler.setFormatter(logging.Formatter(fmt))
@@ -58,10 +67,13 @@ class NonBlockingLog:
             if item is _STOP:
                 return
             try:
-                self.stream.write(f"{item}\n")
-                self.stream.flush()
+                if self._fd is not None:
+                    os.write(self._fd, f"{item}\n".encode(errors="replace"))
+                else:
+                    self.stream.write(f"{item}\n")
+                    self.stream.flush()
             except Exception:  # noqa: BLE001 - a closed stderr must not kill the writer
-                pass
+                self.handler.dropped += 1
 
     def start(self) -> NonBlockingLog:
         """Install the handler on the root logger (replacing its handlers) and start the writer."""

@@ -16,13 +16,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rimless.errors import ParameterError
-from rimless.firmware.drivers.gpio import pin_histories
+from rimless.firmware.drivers.fake_walk import airborne_locks
+from rimless.firmware.drivers.gpio import PinLog, pin_histories
 from rimless.firmware.errors import CommandError, Interrupted, SensorError
 from rimless.firmware.service.app import RobotApp, RunSummary
 from rimless.firmware.service.config import RobotConfig, load_config
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.logsetup import NonBlockingLog
 from rimless.firmware.service.safety import stop_on_signals
+from rimless.firmware.service.scenarios import Scenario, inject, on_ready, scenario
 
 EXIT_OK = 0
 EXIT_FIRMWARE_FAULT = 1  # an error in the firmware itself (the summary says which)
@@ -41,6 +43,19 @@ class RunOutcome:
     signal: str | None = None
     before_start: bool = False
     fake_pins: str = ""
+    fake_fault: str | None = None
+    engages: int | None = None  # clutch engages seen on the mock pins (fake)
+    airborne_leg_locks: int | None = None  # of those, on a leg the fake walk's truth has in the air
+
+    def to_json(self) -> dict:
+        """The summary `rimless robot run --json` prints."""
+        s = self.summary
+        out: dict = {"fake": self.fake, "signal": self.signal, "exit_code": self.exit_code}
+        if s is not None:
+            out.update(dataclasses.asdict(s))
+        if self.fake:
+            out.update(fake_fault=self.fake_fault, engages=self.engages, airborne_leg_locks=self.airborne_leg_locks)
+        return out
 
     @property
     def exit_code(self) -> int:
@@ -55,6 +70,21 @@ class RunOutcome:
         return EXIT_OK
 
 
+def write_private_token(token: str) -> Path:
+    """Write a generated token to a new private file (mode 0600) in $XDG_RUNTIME_DIR or the temporary directory,
+    so that it is never printed; returns its path."""
+    import os
+    import tempfile
+
+    base = os.environ.get("XDG_RUNTIME_DIR") or None
+    fd, name = tempfile.mkstemp(prefix="rimless-token-", dir=base)
+    try:
+        os.write(fd, (token + "\n").encode())
+    finally:
+        os.close(fd)
+    return Path(name)
+
+
 def with_telemetry(cfg: RobotConfig, destinations: Sequence[str]) -> RobotConfig:
     """`cfg` sending telemetry also to each "host:port" of `destinations` (already checked)."""
     if not destinations:
@@ -65,15 +95,23 @@ def with_telemetry(cfg: RobotConfig, destinations: Sequence[str]) -> RobotConfig
 
 def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[str] = (), fake: bool = False,
               duration_s: float | None = None, arm: bool = False,
-              on_start: Callable[[RobotApp], None] | None = None, log_level: int = logging.INFO) -> RunOutcome:
+              on_start: Callable[[RobotApp], None] | None = None, log_level: int = logging.INFO,
+              fake_fault: str | None = None, pin_log: Path | None = None, realtime: bool = False) -> RunOutcome:
     """Run the firmware until a stop signal or `duration_s`.
 
     `config` is a `RobotConfig` or the robot.toml to load (None: the defaults); `telemetry` adds "host:port"
     destinations (already checked); `fake` runs on the fake sensors and mock pins. `on_start(app)` is called
     once the app exists, before its loop starts (to show the token). Every clutch is off and the hardware
-    closed on every path. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be
+    closed on every path. With `fake`, `fake_fault` names a scenario of `scenarios.FAKE_FAULTS` and `pin_log` a
+    JSON Lines file receiving every mock pin change. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be
     opened or a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved.
     """
+    if not fake and (fake_fault is not None or pin_log is not None):
+        raise ParameterError("--fake-fault and --pin-log need --fake")
+    try:
+        sc = scenario(fake_fault) if fake else None
+    except ValueError as err:
+        raise ParameterError(f"--fake-fault: {err}") from None
     state: dict[str, Hardware] = {}
 
     def release_now() -> None:
@@ -84,7 +122,9 @@ def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[s
     try:
         with stop_on_signals(release_now):
             cfg = config if isinstance(config, RobotConfig) else load_config(config)
-            return _run(with_telemetry(cfg, telemetry), state, fake, duration_s, arm, on_start, log_level)
+            if realtime:
+                cfg = dataclasses.replace(cfg, sampling=dataclasses.replace(cfg.sampling, realtime=True))
+            return _run(with_telemetry(cfg, telemetry), state, sc, duration_s, arm, on_start, log_level, pin_log)
     except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
         hw = state.get("hw")
         if hw is not None:
@@ -92,26 +132,53 @@ def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[s
         return RunOutcome(fake, None, sig.name, before_start=True)
 
 
-def _run(cfg: RobotConfig, state: dict[str, Hardware], fake: bool, duration_s: float | None, arm: bool,
-         on_start: Callable[[RobotApp], None] | None, log_level: int) -> RunOutcome:
+def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, duration_s: float | None, arm: bool,
+         on_start: Callable[[RobotApp], None] | None, log_level: int, pin_log_path: Path | None) -> RunOutcome:
+    fake = sc is not None
+    pins_log: PinLog | None = None
     try:
-        hw = build_fake(cfg) if fake else build_real(cfg)
+        if sc is not None:
+            sc = scenario(None if sc.name == "none" else sc.name)  # timed from now, just before the hardware
+            try:
+                pins_log = PinLog(pin_log_path)
+            except OSError as err:
+                raise ParameterError(f"--pin-log {pin_log_path}: {err.strerror or err}") from None
+            hw = build_fake(cfg, trajectory=sc.walk, pin_log=pins_log)
+            inject(sc, hw.sensors, hw.fakes)
+        else:
+            hw = build_real(cfg)
     except SensorError as err:
         raise CommandError(f"sensor: {err}") from None
     state["hw"] = hw
     try:
-        robot = RobotApp(cfg, hw)
+        robot = RobotApp(cfg, hw, on_ready=None if sc is None else (lambda app: on_ready(sc, app)))
+        if robot.token_generated and cfg.commands.enabled:
+            robot.token_path = write_private_token(robot.token)
         if on_start is not None:
             on_start(robot)
     except BaseException:
         hw.close()
         raise
     try:
-        with NonBlockingLog(level=log_level):
+        with NonBlockingLog(level=log_level) as logs:
             summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm))
+            summary.stderr_dropped = logs.dropped
     except OSError as err:
         raise CommandError(f"cannot start: {err}") from None
     except ValueError as err:  # a telemetry host that cannot be resolved
         raise ParameterError(f"cannot start: {err}") from None
+    finally:
+        if robot.token_path is not None:
+            robot.token_path.unlink(missing_ok=True)
     pins = pin_histories(hw.pin_factory, cfg.clutch.pins) if fake and hw.pin_factory is not None else ""
-    return RunOutcome(fake, summary, robot.signal_received, fake_pins=pins)
+    outcome = RunOutcome(fake, summary, robot.signal_received, fake_pins=pins)
+    if sc is not None and pins_log is not None:
+        pins_log.close()
+        on = 1 if cfg.clutch.active_high else 0
+        engages = sorted((t, leg) for leg, pin in enumerate(cfg.clutch.pins)
+                         for t, p, level in pins_log.transitions if p == pin and level == on)
+        outcome.fake_fault, outcome.engages = None if sc.name == "none" else sc.name, len(engages)
+        if len(cfg.sensors) == 1:  # the walk's truth is that of one sensor counting its legs
+            outcome.airborne_leg_locks = len(airborne_locks(sc.walk, engages, cfg.sensors[0].legs,
+                                                            cfg.clutch.start_leg_index))
+    return outcome

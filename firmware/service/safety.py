@@ -1,6 +1,12 @@
 """Release the clutches on every signal a process can catch, for the synchronous commands.
 
-`robot run` handles SIGINT/SIGTERM/SIGHUP/SIGQUIT in its event loop (`app.py`); the commands that
+`STOP_SIGNALS` is every signal whose default action ends the process and that Python can catch when another
+process sends it: SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1/2, SIGALRM, SIGPWR, SIGVTALRM, SIGPROF, SIGIO,
+SIGXCPU, SIGXFSZ, SIGSTKFLT, SIGSYS, SIGTRAP and SIGABRT (SIGPIPE is ignored by Python). SIGSEGV, SIGBUS,
+SIGFPE and SIGILL are left to `faulthandler` (a Python handler would return to the faulting instruction and
+spin): it prints every thread's traceback and the process dies; the heartbeat-gated enable (hardware.md,
+firmware README) then drops the clutches. `robot run` releases the clutches in its own handler (`app.py`)
+and stops through its event loop; the commands that
 drive pins without an event loop (`robot check`, `robot release`, and `run` before its loop starts)
 wrap their work in `stop_on_signals`: the first signal calls `on_signal` (clutches off) at once, then
 raises `Interrupted` so that the `finally` blocks close the hardware. SIGKILL, a crash or a power
@@ -20,7 +26,21 @@ from rimless.firmware.errors import Interrupted
 
 __all__ = ["STOP_SIGNALS", "Interrupted", "stop_on_signals"]
 
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT") if hasattr(signal, n))
+STOP_SIGNAL_NAMES = ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM", "SIGPWR",
+                     "SIGVTALRM", "SIGPROF", "SIGIO", "SIGXCPU", "SIGXFSZ", "SIGSTKFLT", "SIGSYS", "SIGTRAP",
+                     "SIGABRT")
+STOP_SIGNALS = tuple(getattr(signal, n) for n in STOP_SIGNAL_NAMES if hasattr(signal, n))
+
+
+def install_faulthandler() -> None:
+    """Dump every thread's traceback to stderr on SIGSEGV/SIGBUS/SIGFPE/SIGILL (and SIGABRT until a stop
+    handler takes it over); idempotent."""
+    import faulthandler
+    import sys
+
+    if not faulthandler.is_enabled():
+        with contextlib.suppress(Exception):  # stderr without a file descriptor (a test runner)
+            faulthandler.enable(file=sys.__stderr__, all_threads=True)
 
 
 @contextlib.contextmanager

@@ -4,6 +4,10 @@ Crash- and power-loss tolerant by construction: the file is append-only, whole l
 one `write` and `fsync`ed every `flush_interval_s` (so at most that much is lost), and the directory
 is fsynced when the file is created. A power cut can leave only a torn *last* line, which
 `read_trial_log` reports and skips; a bad line anywhere else raises, because that is real corruption.
+
+A write that fails (a full disk: ENOSPC, EDQUOT, EIO) never raises into the firmware: the file is cut back
+to its last whole line (so it never ends torn while the process lives), the lines of that write are dropped
+and counted (`dropped_lines`, `errors`, `last_error`), and the next write tries again.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ import json
 import os
 import re
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,7 +41,8 @@ def valid_trial_name(name: str) -> bool:
 class TrialLog:
     """An open trial log file. `append` buffers encoded lines; `sync` writes and fsyncs them."""
 
-    def __init__(self, directory: str | Path, name: str, header: dict[str, Any] | None = None) -> None:
+    def __init__(self, directory: str | Path, name: str, header: dict[str, Any] | None = None, *,
+                 write: Callable[[int, Any], int] = os.write) -> None:
         if not valid_trial_name(name):
             raise ValueError(f"trial name {name!r}: use 1-64 letters, digits, '_', '.', '-'")
         self.dir = Path(directory)
@@ -51,6 +56,11 @@ class TrialLog:
         self.name = name
         self.clock = WallClock()
         self.lines = 0
+        self.dropped_lines = 0
+        self.errors = 0
+        self.last_error = ""
+        self._write = write
+        self._size = 0  # bytes of whole lines in the file
         self._pending: list[bytes] = []
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
         head = {"format": FORMAT, "trial": name, "started_epoch_s": time.time(), **(header or {})}
@@ -64,25 +74,48 @@ class TrialLog:
             self._pending.append(_line(record_to_json(rec, self.clock)))
 
     def sync(self) -> int:
-        """Write the pending lines in one write and fsync; returns the bytes written. Blocking I/O:
-        the app calls it through `asyncio.to_thread`."""
+        """Write the pending lines in one write and fsync; returns the bytes written (0 when the write failed:
+        see the module docstring). Blocking I/O: the app calls it through `asyncio.to_thread`."""
         if not self._pending or self._fd < 0:
             return 0
         data = b"".join(self._pending)
-        self.lines += len(self._pending)
+        n_lines = len(self._pending)
         self._pending = []
         view = memoryview(data)
-        while view:
-            n = os.write(self._fd, view)
-            view = view[n:]
-        os.fsync(self._fd)
+        try:
+            while view:
+                n = self._write(self._fd, view)
+                if n <= 0:
+                    raise OSError(0, "write wrote nothing")
+                view = view[n:]
+        except OSError as err:
+            self._failed(err, n_lines)
+            try:
+                os.ftruncate(self._fd, self._size)  # no torn line: back to the last whole one
+            except OSError:
+                pass
+            return 0
+        self._size += len(data)
+        self.lines += n_lines
+        try:
+            os.fsync(self._fd)
+        except OSError as err:
+            self._failed(err, 0)
         return len(data)
 
+    def _failed(self, err: OSError, n_lines: int) -> None:
+        self.errors += 1
+        self.dropped_lines += n_lines
+        self.last_error = f"{self.path}: {err.strerror or err}"
+
     def close(self) -> None:
-        """Sync and close."""
+        """Sync and close (never raises for a failed write: it is counted)."""
         if self._fd >= 0:
             self.sync()
-            os.close(self._fd)
+            try:
+                os.close(self._fd)
+            except OSError as err:
+                self._failed(err, 0)
             self._fd = -1
 
 

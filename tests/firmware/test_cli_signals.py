@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+import secrets
 import socket
 import subprocess
 import sys
@@ -19,7 +20,7 @@ from rimless.firmware.errors import RobotUnreachable
 from tests.support.firmware_app import free_port
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
-TOKEN = "signal-test-token-3c9e7a1f"
+TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
 PINS = ("17", "27", "22", "23", "24", "16", "20", "21")
 
 

@@ -7,6 +7,7 @@ import asyncio
 import hashlib
 import hmac
 import json
+import secrets
 import socket
 import time
 from pathlib import Path
@@ -16,7 +17,7 @@ from rimless.firmware.service.app import RobotApp
 from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig
 from rimless.firmware.service.hardware import build_fake
 
-TOKEN = "test-token-7f3a9c2e1b5d"
+TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
 
 
 def config(tmp_path: Path, **kw) -> RobotConfig:

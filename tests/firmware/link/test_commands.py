@@ -138,10 +138,17 @@ def test_unauthenticated_connections_time_out_and_the_cap_evicts_them(tmp_path) 
 
 
 def _open_idle(port: int, n: int, out: list[socket.socket]) -> None:
+    """`n` idle connections from another host than the operator's (127.0.0.2: the per-source limit refuses
+    most of them, which is the point)."""
     for _ in range(n):
         s = socket.socket()
         s.settimeout(5)
-        s.connect(("127.0.0.1", port))
+        s.bind(("127.0.0.2", 0))
+        try:
+            s.connect(("127.0.0.1", port))
+        except OSError:
+            s.close()
+            continue
         out.append(s)
 
 
@@ -178,7 +185,7 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
         opener = threading.Thread(target=_open_idle, args=(port, 1100, idle))
         opener.start()
         opener.join(60)
-        assert len(idle) == 1100
+        assert len(idle) >= 1000  # connected (the robot may have closed most of them at once)
         time.sleep(0.2)
         t0 = time.perf_counter()
         result = send_command("127.0.0.1", "disarm", token=TOKEN, port=port, timeout_s=5)
@@ -284,32 +291,147 @@ def _bad_datagram(port: int):
         s.close()
 
 
-def test_reserved_udp_status_answers_and_replays_only_read(tmp_path) -> None:
+def test_reserved_udp_status_answers_once_and_ignores_replays_and_strangers(tmp_path) -> None:
+    """Fails on today's main: a captured status (or disarm) datagram was answered every time it was replayed,
+    from any source (a reflector), and answers could be larger than the request."""
+    from rimless.firmware.link.protocol import reserved_counter, reserved_mac
     from rimless.firmware.link.remote import send_reserved_datagram
-    from rimless.firmware.link.protocol import reserved_mac
 
     async def script(app, hw):
         app.controller.arm()
         st = await asyncio.to_thread(send_reserved_datagram, "127.0.0.1", "status", token=TOKEN,
                                      port=app.command_port)
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        s.settimeout(1.0)
-        datagram = json.dumps({"status": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
-        replies = []
-        for _ in range(2):  # a replayed status only reads
-            s.sendto(datagram, ("127.0.0.1", app.command_port))
-            replies.append(json.loads(s.recv(65536)))
-        wrong_kind = json.dumps({"disarm": 7, "mac": reserved_mac(TOKEN, "status", 7)}).encode()
-        s.sendto(wrong_kind, ("127.0.0.1", app.command_port))
-        try:
-            s.recv(65536)
-            answered = True
-        except TimeoutError:
-            answered = False
-        s.close()
-        return st, replies, answered, app.controller.armed
 
-    app, summary, (st, replies, answered, armed), hw = scenario(config(tmp_path), script)
+        def exchange():  # blocking socket calls, off the event loop (a blocked loop trips the watchdog)
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.settimeout(0.5)
+
+            def ask(obj):
+                data = json.dumps(obj).encode()
+                s.sendto(data, ("127.0.0.1", app.command_port))
+                try:
+                    reply = s.recv(65536)
+                except TimeoutError:
+                    return None
+                assert len(reply) <= len(data)  # never more bytes than the request
+                return json.loads(reply)
+
+            n = reserved_counter()
+            status = {"status": n, "mac": reserved_mac(TOKEN, "status", n)}
+            first = ask(status)
+            replay = ask(status)  # captured and sent again
+            wrong_kind = ask({"disarm": n + 1, "mac": reserved_mac(TOKEN, "status", n + 1)})
+            stranger = ask({"status": n + 2, "mac": reserved_mac("not-the-token-" + TOKEN, "status", n + 2)})
+            disarm_n = reserved_counter()
+            disarm = {"disarm": disarm_n, "mac": reserved_mac(TOKEN, "disarm", disarm_n)}
+            first_disarm = ask(disarm)
+            replayed_disarm = ask(disarm)
+            s.close()
+            return first, replay, wrong_kind, stranger, first_disarm, replayed_disarm
+
+        return st, await asyncio.to_thread(exchange), app.server._udp.replays
+
+    app, summary, (st, answers, replays), hw = scenario(config(tmp_path), script)
+    first, replay, wrong_kind, stranger, first_disarm, replayed_disarm = answers
     assert st["ok"] and st["status"]["armed"] is True and "disarmed" not in st
-    assert all(r["n"] == 7 and r["status"]["armed"] is True for r in replies)
-    assert answered is False and armed is True  # a status mac does not disarm
+    assert first is not None and first["ok"] and first["n"] > 0  # short request: the status shrank or went
+    assert replay is None and wrong_kind is None and stranger is None
+    assert first_disarm is not None and first_disarm["disarmed"] is True
+    assert replayed_disarm is None and replays == 2
+
+
+def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operators_disarm(tmp_path) -> None:
+    """Bounded (20 000 datagrams, loopback only): a flood of garbage and of replays from 127.0.0.2 is rate
+    limited per source and unanswered; the operator's disarm from 127.0.0.1 during it is answered. Fails on
+    today's main: no per-source limit (every datagram was parsed and MAC-checked)."""
+    import threading
+
+    from rimless.firmware.link.protocol import reserved_counter, reserved_mac
+    from rimless.firmware.link.remote import send_disarm_datagram
+
+    async def script(app, hw):
+        app.controller.arm()
+
+        def run():
+            answers = []
+
+            n = reserved_counter()
+            good = json.dumps({"status": n, "mac": reserved_mac(TOKEN, "status", n)})
+            code = (
+                "import socket, sys\n"
+                "s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); s.bind(('127.0.0.2', 0))\n"
+                "s.setblocking(False); got = 0\n"
+                f"good = {good!r}.encode()\n"
+                "for k in range(20000):\n"
+                "    try:\n"
+                f"        s.sendto(good if k % 2 else b'{{\"disarm\": 1, \"mac\": \"00\"}}', ('127.0.0.1', {app.command_port}))\n"
+                "    except OSError: pass\n"
+                "    try:\n"
+                "        s.recv(4096); got += 1\n"
+                "    except OSError: pass\n"
+                "print(got)\n"
+            )
+
+            def flood():
+                r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+                answers.extend([None] * int(r.stdout.strip() or 0))
+
+            t = threading.Thread(target=flood)
+            t.start()
+            time.sleep(0.2)
+            t0 = time.monotonic()
+            reply = send_disarm_datagram("127.0.0.1", token=TOKEN, port=app.command_port, timeout_s=3.0)
+            took = time.monotonic() - t0
+            t.join(30)
+            return reply, took, len(answers)
+
+        reply, took, answered = await asyncio.to_thread(run)
+        return reply, took, answered, app.server._udp.rate_limited
+
+    app, summary, (reply, took, answered, limited), hw = scenario(config(tmp_path), script)
+    print(f"disarm answered {took * 1e3:.1f} ms into the flood; {limited} datagrams rate limited")
+    assert reply["disarmed"] is True
+    assert took < 1.0  # generous safety bound; the measured figure is printed
+    assert answered <= 1  # at most the first copy of the valid status, never the replays
+    assert limited > 0
+
+
+def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> None:
+    """Bounded churn (4000 connects from 127.0.0.2 in a separate process, loopback only) while the operator at
+    127.0.0.1 sends five signed commands: every one is answered, and the flood's excess is refused per source.
+    Fails on today's main only on the per-source refusal: at this bounded rate its five commands got through
+    too (the eviction the issue measured needed 14-16 k connects/s, beyond a bounded test on 2 shared cores)."""
+    from rimless.firmware.link.remote import send_command
+
+    code = (
+        "import socket\n"
+        "held = []\n"
+        "for k in range(4000):\n"
+        "    s = socket.socket(); s.settimeout(1); s.bind(('127.0.0.2', 0))\n"
+        "    try:\n"
+        "        s.connect(('127.0.0.1', PORT)); held.append(s)\n"
+        "    except OSError:\n"
+        "        s.close()\n"
+        "    if len(held) > 200:\n"
+        "        held.pop(0).close()\n"
+    )
+
+    async def script(app, hw):
+        def run():
+            flood = subprocess.Popen([sys.executable, "-c", code.replace("PORT", str(app.command_port))])
+            results = []
+            try:
+                time.sleep(0.3)
+                for _ in range(5):
+                    results.append(send_command("127.0.0.1", "status", token=TOKEN, port=app.command_port,
+                                                timeout_s=3)["armed"] is False)
+                    time.sleep(0.05)
+            finally:
+                flood.wait(60)
+            return results, app.server.refused_per_source
+
+        return await asyncio.to_thread(run)
+
+    app, summary, (results, refused), hw = scenario(config(tmp_path), script)
+    assert results == [True] * 5
+    assert refused > 0

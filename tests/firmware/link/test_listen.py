@@ -19,3 +19,84 @@ def test_live_view_draws_velocity_compression_and_one_strip_per_clutch() -> None
     assert len(strips) == 8
     assert strips[0].endswith("█" * 10 + "·" * 30) and strips[3].endswith("·" * 30 + "█" * 10)
     assert all(len(line) <= 80 for line in lines)
+
+
+def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) -> None:
+    """Fails on today's main: `robot listen` with nobody sending printed "0 samples" lines forever."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.support.firmware_app import free_port
+
+    out = tmp_path / "tel.jsonl"
+    proc = subprocess.run([str(Path(sys.executable).with_name("rimless")), "robot", "listen", "--bind", "127.0.0.1",
+                           "--port", str(free_port()), "--no-live", "--summary-every-s", "0.2", "--timeout-s", "1",
+                           "--out", str(out)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert lines[-1].startswith("error: no robot is sending telemetry") and "--timeout-s 1" in lines[-1]
+    assert any(line.startswith("waiting for telemetry on 127.0.0.1:") for line in lines)
+    assert "Traceback" not in proc.stderr and out.exists() and not list(tmp_path.glob("*.part"))
+
+
+def test_listen_counts_gaps_and_ignores_other_senders() -> None:
+    """Fails on today's main: listen recorded forged datagrams from any sender and said nothing about lost
+    objects or events (which carried no sequence number)."""
+    import socket
+    import threading
+
+    from rimless.firmware.link.listen import listen
+    from tests.support.firmware_app import free_port
+
+    port = free_port()
+    lines: list[str] = []
+
+    def send():
+        import json
+        import time
+
+        time.sleep(0.3)
+        robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        robot.bind(("127.0.0.1", 0))
+        forger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        forger.bind(("127.0.0.2", 0))
+        sent = [1, 2, 3, 6, 7, 10]  # 4, 5, 8, 9 lost on the way; 8 was an event
+        for t in sent:
+            obj = {"timestamp": t, "tseq": t, "leg": {"stance": 1}}
+            if t == 7:
+                obj = {"timestamp": t, "tseq": t, "event": {"name": "arm", "event_seq": 1}}
+            if t == 10:
+                obj = {"timestamp": t, "tseq": t, "event": {"name": "fault", "fault": "x", "event_seq": 3}}
+            robot.sendto(json.dumps([obj]).encode(), ("127.0.0.1", port))
+            forger.sendto(json.dumps([{"timestamp": 0, "event": {"name": "fault", "fault": "forged"}}]).encode(),
+                          ("127.0.0.1", port))
+        robot.close()
+        forger.close()
+
+    t = threading.Thread(target=send)
+    t.start()
+    summary = listen(bind="127.0.0.1", port=port, out=None, duration_s=1.2, summary_every_s=0.5, echo=lines.append,
+                     stale_s=5.0, timeout_s=0)
+    t.join()
+    assert summary.samples == 4 and summary.events == 2 and summary.faults == ["x"]
+    assert summary.foreign == 6
+    assert summary.lost_objects == 4 and summary.lost_events == 1
+    assert any(line.startswith("receiving from 127.0.0.1") for line in lines)
+    assert any("lost 4 telemetry objects" in line and "1 of them events" in line for line in lines)
+
+
+def test_telemetry_numbers_every_object_and_names_a_series_per_leg() -> None:
+    from rimless.firmware.control.controller import EventRecord, SampleRecord
+    from rimless.firmware.link.telemetry import TelemetrySender, parse_datagram
+
+    rx = __import__("socket").socket(2, 2)
+    rx.bind(("127.0.0.1", 0))
+    tx = TelemetrySender([("127.0.0.1", rx.getsockname()[1])])
+    s = SampleRecord(10**9, 1, 0, 0.001, 0.1, 0.002, 60, 133, 42, 2, 3, 8, True, 30_000)
+    tx.send([s, EventRecord(10**9, "lock", {"leg": 3, "event_seq": 1}), s])
+    objs = parse_datagram(rx.recv(65536))
+    rx.close()
+    tx.close()
+    assert [o["tseq"] for o in objs] == [1, 2, 3]
+    assert objs[0]["leg3"]["velocity_m_s"] == 0.1 and objs[1]["event"]["event_seq"] == 1

@@ -23,7 +23,10 @@ def test_weak_tokens_are_refused() -> None:
     for weak in ("change-me", "s3cret", "short-token", "aaaaaaaaaaaaaaaaaaaa", "abababababababababab"):
         with pytest.raises(WeakToken):
             check_token(weak)
-    assert check_token("x7Gq-2mPz_9LrT4vB1nK") == "x7Gq-2mPz_9LrT4vB1nK"
+    import secrets
+
+    fresh = secrets.token_urlsafe(18)
+    assert check_token(fresh) == fresh
     with pytest.raises(WeakToken):
         RobotApp(RobotConfig(commands=CommandsConfig(token="change-me")), hw=None)  # type: ignore[arg-type]
 
@@ -33,3 +36,38 @@ def test_parse_refuses_surrogates_and_depth_directly() -> None:
         parse_command(b'{"seq": 1, "cmd": "\\ud800", "args": {}, "mac": ""}', TOKEN, "n", None)
     with pytest.raises(Rejected, match="nested"):
         parse_command(b"[" * 2000, TOKEN, "n", None)
+
+
+def test_dictionary_like_published_and_repeated_tokens_are_refused() -> None:
+    """Fails on today's main: `passwordpassword` and the tokens published in the tests were accepted."""
+    import secrets
+
+    for weak in ("passwordpassword", "Password12345678", "qwertyuiopasdfgh", "robotrobot1234567890",
+                 "test-token-7f3a9c2e1b5d", "cli-test-token-5e8d1f0a9b", "signal-test-token-3c9e7a1f",
+                 "x7Gq-2mPz_9LrT4vB1nK", "Token1234Token1234"):
+        with pytest.raises(WeakToken):
+            check_token(weak)
+    for _ in range(50):  # what the README's generator gives is always accepted
+        tok = secrets.token_urlsafe(24)
+        assert check_token(tok) == tok
+        tok = secrets.token_hex(16)
+        assert check_token(tok) == tok
+
+
+def test_a_token_file_must_be_private(tmp_path, monkeypatch) -> None:
+    """Fails on today's main: a 0644 token file was accepted silently."""
+    import secrets
+
+    from rimless.firmware.link.protocol import TokenFileError
+    from rimless.firmware.service.config import RobotConfig
+
+    tok = secrets.token_urlsafe(24)
+    path = tmp_path / "token"
+    path.write_text(tok + "\n")
+    path.chmod(0o644)
+    monkeypatch.delenv("RIMLESS_TOKEN", raising=False)
+    monkeypatch.setenv("RIMLESS_TOKEN_FILE", str(path))
+    with pytest.raises(TokenFileError, match="chmod 600"):
+        RobotConfig().token()
+    path.chmod(0o600)
+    assert RobotConfig().token() == tok

@@ -1,0 +1,76 @@
+"""Leg identity never guessed: with one sensor counting eight legs, no lock engages a leg the walk's truth
+(`FakeWalk.stance_leg`, written from the walk's description) says is in the air, in a walk whose first step
+is too gentle for the touchdown test or whose first foot bounces. Per-leg checks: the robot's defaults
+(`ROBOT_DETECTOR`: `confirm_steps = 2`, `doubt_compression_m = 0.3 mm`) against the library's old behaviour
+(both 0), which is what today's main runs and which these scenarios show engaging airborne legs."""
+
+from __future__ import annotations
+
+import pytest
+
+from rimless.firmware.control.detector import DetectorParams
+from rimless.firmware.drivers.fake_walk import FakeWalk
+from rimless.firmware.service.config import ROBOT_DETECTOR
+from tests.support.firmware_walk import walk_controller
+
+OLD = DetectorParams()  # confirm_steps = 0, doubt_compression_m = 0: the behaviour of main before this change
+
+NORMAL = FakeWalk(start_s=0.3)
+GENTLE_FIRST = FakeWalk(start_s=0.3, first_compression_m=0.0004)  # peak 10 mm/s < touch_velocity_m_s 50 mm/s
+BOUNCE = FakeWalk(start_s=0.3, bounce_after_s=0.14)  # the first foot comes down again 140 ms after touchdown
+
+
+@pytest.mark.parametrize("walk", [GENTLE_FIRST, BOUNCE], ids=["missed-first-touchdown", "first-step-bounce"])
+def test_the_old_detector_locks_airborne_legs_in_these_scenarios(walk) -> None:
+    """The independent truth shows the hole (this is today's main): airborne locks with no fault first."""
+    res = walk_controller(walk, OLD)
+    assert res.airborne, res.engages
+
+
+@pytest.mark.parametrize("walk", [GENTLE_FIRST, BOUNCE], ids=["missed-first-touchdown", "first-step-bounce"])
+def test_no_lock_on_an_airborne_leg_and_the_count_is_lost_before_any_lock(walk) -> None:
+    """Fails on today's main (see above): with the robot's defaults nothing engages before leg_sync_lost,
+    which releases and disarms as every fault does."""
+    res = walk_controller(walk, ROBOT_DETECTOR)
+    assert res.airborne == []
+    assert res.engages == []
+    assert "leg_sync_lost" in res.faults()
+    t_fault = next(t for t, name, _f in res.events if name == "fault")
+    assert t_fault < walk.touchdown_s(2)  # found before the next touchdown that could have locked
+
+
+def test_a_normal_walk_locks_every_step_from_the_third_touchdown_on_the_right_leg() -> None:
+    """The price of confirmation: two unclutched steps after arm, then one lock per step, all on the truth's
+    stance leg, and no fault."""
+    res = walk_controller(NORMAL, ROBOT_DETECTOR, duration_s=3.0)
+    assert res.faults() == []
+    assert res.airborne == []
+    assert res.names().count("lock_withheld") == 2
+    first = res.engages[0][0]
+    assert NORMAL.touchdown_s(2) < first < NORMAL.touchdown_s(3)
+    n_steps_after = NORMAL.steps_before(3.0 - 1 / 300) - 2  # touchdowns 3.. that had time to lock
+    assert len(res.engages) in (n_steps_after, n_steps_after - 1)
+
+
+def test_the_start_leg_index_is_the_truths_when_right() -> None:
+    res = walk_controller(FakeWalk(start_s=0.3), ROBOT_DETECTOR, start_index=5)
+    assert res.engages and res.airborne == []
+
+
+def test_a_wrong_product_id_is_found_before_the_next_engage() -> None:
+    """Fails on today's main (verify_before_engage=False is its behaviour): with the ID re-read only every
+    id_check_interval_s (1 s), a sensor that stopped answering its Product_ID at 1.5 s still engaged."""
+    from rimless.firmware.drivers.fake_adns3080 import FakeFault
+
+    def wrong(fake):
+        fake.fault = FakeFault.WRONG_ID
+
+    walk = FakeWalk(start_s=0.3)
+    fault_at = walk.touchdown_s(3) + 0.01  # after a touchdown, before its lock
+    old = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, wrong), verify_before_engage=False,
+                          id_check_interval_s=1.0)
+    assert [t for t, _leg in old.engages if t > fault_at]  # the hole
+    new = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, wrong), id_check_interval_s=1.0)
+    assert [t for t, _leg in new.engages if t > fault_at] == []
+    assert "id_mismatch" in new.faults()
+    assert new.airborne == []

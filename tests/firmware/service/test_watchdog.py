@@ -1,0 +1,85 @@
+"""The dead-man's chain outside the event loop: a 4 s blocked event loop releases every clutch within the
+stated bound (`loop_stall_s` 0.25 s + the watchdog period), no clutch engages while it stays blocked, and the
+heartbeat pin stops toggling; the control thread stalling trips it too. Fails on today's main: the stall and
+link checks lived in the event loop, so the control thread went on clutching through the whole block."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import pytest
+
+from rimless.firmware.control.watchdog import Watchdog
+from rimless.firmware.drivers.fake_walk import FakeWalk
+from rimless.firmware.drivers.gpio import PinLog
+from rimless.firmware.service.app import RobotApp
+from rimless.firmware.service.hardware import build_fake
+from tests.support.firmware_app import config
+
+BOUND_S = 1.0  # asserted release bound; the design bound is loop_stall_s 0.25 s + 0.01 s (+ GIL switches)
+CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)
+HEARTBEAT = 18
+
+
+def block(how: str, seconds: float) -> None:
+    if how == "sleep":  # a blocking call that releases the GIL
+        time.sleep(seconds)
+    else:  # pure Python busy work that keeps taking the GIL back
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            pass
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["sleep", "busy"])
+def test_a_4_s_blocked_event_loop_releases_within_the_bound(tmp_path, how) -> None:
+    cfg = config(tmp_path)
+    log = PinLog()
+    # A slow walk (a touchdown every 0.9 s): the lock before the block is held ~0.84 s unless the watchdog acts.
+    walk = FakeWalk(start_s=time.monotonic() + 0.4, step_period_s=0.9)
+    hw = build_fake(cfg, trajectory=walk, pin_log=log)
+
+    async def main():
+        ready = asyncio.Event()
+        app = RobotApp(cfg, hw, on_ready=lambda a: ready.set())
+        run = asyncio.create_task(app.run(duration_s=20, arm=True, handle_signals=False))
+        await ready.wait()
+        deadline = time.monotonic() + 10
+        while not hw.clutches.engaged() and time.monotonic() < deadline:
+            await asyncio.sleep(0.002)
+        engaged = hw.clutches.engaged()
+        t0 = time.monotonic()
+        block(how, 4.0)  # the event loop blocked (as a hung callback would)
+        t1 = time.monotonic()
+        app.request_stop("test done")
+        summary = await run
+        return engaged, t0, t1, summary
+
+    engaged, t0, t1, summary = asyncio.run(main())
+    assert engaged, "no clutch engaged before the block"
+    pin = CLUTCH_PINS[engaged[0]]
+    offs = [t for t, p, level in log.transitions if p == pin and level == 0 and t >= t0]
+    release_s = offs[0] - t0
+    print(f"release {release_s * 1e3:.1f} ms after the event loop blocked")
+    assert release_s < BOUND_S
+    assert not [t for t, p, level in log.transitions if p in CLUTCH_PINS and level == 1 and t0 < t < t1]
+    beats = [t for t, p, _level in log.transitions if p == HEARTBEAT and t0 + BOUND_S < t < t1]
+    assert beats == []  # the heartbeat stopped: the hardware monostable drops too
+    assert "loop_stalled" in summary.faults
+    assert [p for t, p, level in log.transitions if level == 1 and t > t1 + 0.5 and p in CLUTCH_PINS] == []
+
+
+def test_the_watchdog_trips_once_per_stall_and_recovers() -> None:
+    trips: list[str] = []
+    wd = Watchdog(lambda name, detail: trips.append(name), period_s=0.005)
+    wd.add("a", 0.05)
+    wd.check_now()
+    assert wd.healthy and trips == []
+    time.sleep(0.08)
+    wd.check_now()
+    wd.check_now()
+    assert trips == ["a"] and not wd.healthy
+    wd.feed("a")
+    wd.check_now()
+    assert wd.healthy
