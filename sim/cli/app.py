@@ -139,6 +139,34 @@ def check_plot_path(plot: Path) -> None:
         raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
 
 
+def option_given(name: str) -> bool:
+    """True if the running command's parameter `name` (python name, e.g. "slope_deg") was given by the user."""
+    from typer._click.core import ParameterSource
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    if ctx is None:
+        return False
+    return ctx.get_parameter_source(name) in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)
+
+
+def start_slope(params: Any, start_slope_rad: Optional[float]) -> float:
+    """The slope (rad) a search or continuation starts from: --start-slope-rad, else the wheel's slope
+    (--slope-deg/--slope-rad/--params, Table 1 by default); both given is refused."""
+    from rimless.sim.model.params import SPOKE_ANGLE_RAD
+
+    slope_given = [f for f, n in (("--slope-deg", "slope_deg"), ("--slope-rad", "slope_rad")) if option_given(n)]
+    if start_slope_rad is not None:
+        if slope_given:
+            raise ParameterError(f"give the start slope once: {slope_given[0]} or --start-slope-rad, not both")
+        return start_slope_rad
+    if not 0 < params.slope_rad < SPOKE_ANGLE_RAD / 2:
+        flag = slope_given[0] if slope_given else "--slope-deg"
+        raise ParameterError(f"{flag}: the search starts on a slope in (0, {math.degrees(SPOKE_ANGLE_RAD / 2):g}) "
+                             f"deg, got {params.slope_deg:g} deg")
+    return float(params.slope_rad)
+
+
 def check_scheduler(scheduler: str) -> None:
     """--scheduler: local, sync or the address of a running Dask scheduler."""
     if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):

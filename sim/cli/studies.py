@@ -15,7 +15,7 @@ from rimless.values import parse_numbers, parse_range
 
 
 @user_facing
-@wheel_params
+@wheel_params(exclude=("k", "c", "slope_deg", "slope_rad", "leg_mass_kg"))
 def stress_cmd(
     params: Any,
     k_values: Annotated[str, typer.Option("--k-values", help="Stiffnesses to sweep, N/m, comma-separated.")] =
@@ -98,7 +98,7 @@ def paper_cmd(
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
                                                    "processes \\[default: one per core].")] = None,
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Sweep result cache "
-                                                      "[~/.cache/rimless/sweep].")] = None,
+                                                      "[$RIMLESS_CACHE_DIR/sweep, else ~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every sweep point.")] = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -129,6 +129,8 @@ def paper_cmd(
     con.print(headline)
     for f in summary["files"]:
         con.print(f"wrote {f}", soft_wrap=True)
+    for note in summary["notes"]:
+        con.print(f"note: {note}", soft_wrap=True)
     con.print(f"load average {timings['load_average_before']:.1f} before, "
               f"{timings['load_average_after']:.1f} after (other work on the machine slows every timing)", soft_wrap=True)
     con.print(f"in {timings['total']:.1f} s (sweep {timings['sweep']:.1f} s: {sweep['computed']} grid "

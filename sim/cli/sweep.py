@@ -11,7 +11,7 @@ from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
 from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, JsonOpt, RtolOpt, check_plot_path, check_scheduler,
-                                 wheel_params)
+                                 start_slope, wheel_params)
 from rimless.sim.cli.output import console
 from rimless.values import parse_list, parse_range
 
@@ -83,7 +83,8 @@ def sweep_cmd(
     hub_mass_grid: Annotated[Optional[str], typer.Option("--hub-mass-kg", metavar="START:STOP:STEP|a,b", help="Hub mass grid, kg.")] = None,
     mass_models: Annotated[Optional[str], typer.Option("--mass-model", metavar="NAME[,NAME]", help="Mass models, comma-separated "
                                                       "(eight-leg, sliding-leg, active-feet).")] = None,
-    start_slope_rad: Annotated[float, typer.Option(help="Slope where the gaits are searched, rad.")] = 0.05,
+    start_slope_rad: Annotated[Optional[float], typer.Option(help="Slope where the gaits are searched, rad "
+                                                             "[the wheel's slope: --slope-deg, 0.05 rad].")] = None,
     guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses in the gait search.")] = 14,
     out: Annotated[Path, typer.Option("--out", metavar="STEM", help="Output stem: writes STEM.parquet, STEM.csv "
                                       "and STEM-points.parquet/.csv (branch points).")] = Path("rimless-sweep/sweep"),
@@ -93,7 +94,7 @@ def sweep_cmd(
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
                                                    "processes \\[default: one per core].")] = None,
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
-                                                      "[~/.cache/rimless/sweep].")] = None,
+                                                      "[$RIMLESS_CACHE_DIR/sweep, else ~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
     bench: Annotated[bool, typer.Option("--bench", help="Benchmark instead: the grid (no cache) in-process, on 1 and "
                                         "on 2 workers, and the branch-end location by pseudo-arclength against "
@@ -148,6 +149,7 @@ def sweep_cmd(
             raise ParameterError(f"{flag} {given}: needs --clutch firmware")
     model_list = parse_list(models, "--model", choices=("er", "ve"), lower=True)
     mm = parse_list(mass_models or params.mass_model, "--mass-model", choices=MASS_MODELS)
+    start_slope_rad = start_slope(params, start_slope_rad)
     if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
         raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
     check_scheduler(scheduler)

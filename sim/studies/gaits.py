@@ -65,6 +65,34 @@ def start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], th
     return fp.z.copy()
 
 
+def solve_or_search(pmap: Any, guess: np.ndarray, *, jacobian: Any = None, diagnostics: bool = False,
+                    strict_contact: bool = False, progress: GaitsProgress = None) -> tuple[Any, str]:
+    """The period-1 gait nearest `guess` (theta+ rad, theta'+ rad/s): Newton from the guess, and when that fails,
+    the gaits search (find_gaits, as `rimless sim gaits`) and its stable gait nearest the guess in theta'+ (an
+    unstable one if none is stable). Returns (FixedPoint, how it was found: "newton" or "gaits search").
+    Raises the Newton failure (NoFixedPoint) when the search finds no gait either."""
+    from rimless.errors import interrupted_by_user
+    from rimless.sim.step.poincare import NoFixedPoint, find_gaits, solve_fixed_point
+
+    try:
+        return solve_fixed_point(pmap, guess, jacobian=jacobian, diagnostics=diagnostics,
+                                 strict_contact=strict_contact), "newton"
+    except NoFixedPoint as err:
+        newton_failure = err
+    try:
+        found = find_gaits(pmap, progress=progress)
+    except Exception as err:  # noqa: BLE001 - the Newton failure is the one to report
+        if interrupted_by_user(err):
+            raise KeyboardInterrupt from err
+        raise newton_failure from None
+    if not found:
+        raise newton_failure
+    pool = [fp for fp in found if fp.stable] or found
+    best = min(pool, key=lambda fp: abs(float(fp.z[1]) - float(guess[1])))
+    fp = solve_fixed_point(pmap, best.z, jacobian=jacobian, diagnostics=diagnostics, strict_contact=strict_contact)
+    return fp, "gaits search"
+
+
 def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[float] = None,
                       theta_plus_guess: Optional[float] = None, gait: Optional[int] = None,
                       strict_contact: bool = False, backend: str = "auto", rtol: float = 1e-10,
@@ -79,13 +107,23 @@ def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[floa
                         gait=gait, backend=backend, rtol=rtol, progress=progress)
     pmap = make_map(params, model, backend=backend, rtol=rtol)
     jf = jacobian_factory(backend)
+    jacobian = jf(pmap) if jf else None
     try:
-        fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None, diagnostics=True,
-                               strict_contact=strict_contact)
+        if theta_dot_guess is None and theta_plus_guess is None and gait is None:
+            # the default guess: when Newton fails from it, the gaits search finds the gait if there is one
+            fp, found_by = solve_or_search(pmap, guess, jacobian=jacobian, diagnostics=True,
+                                           strict_contact=strict_contact, progress=progress)
+        else:  # a guess the user chose is followed as given
+            fp = solve_fixed_point(pmap, guess, jacobian=jacobian, diagnostics=True, strict_contact=strict_contact)
+            found_by = "newton"
     except StepFailure as err:
+        searched = " or by the gaits search" if theta_dot_guess is None and theta_plus_guess is None and gait is None \
+            else ""
         raise RunFailure(f"no period-1 gait found for the {model} wheel from the guess "
-                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
-    return fixed_point_summary(fp, params, model, guess=guess)
+                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s{searched}: {err}") from None
+    out = fixed_point_summary(fp, params, model, guess=guess)
+    out["found_by"] = found_by
+    return out
 
 
 def gait_scan(params: Any, model: str, *, theta_dot_min: float = 0.8, theta_dot_max: float = 6.0,

@@ -13,6 +13,7 @@ Figures 4-6 come from a sweep over k (rimless.sim.studies.sweep), so they run on
 
 from __future__ import annotations
 
+import contextlib
 import html
 import math
 import os
@@ -50,26 +51,35 @@ class PaperResult:
     table: list[dict[str, Any]] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
     sweep: Any = None
+    notes: list[str] = field(default_factory=list)  # requested points a figure could not show, and why
 
 
-def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, theta_dot: float | None = None) -> Any:
+def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float) -> Any:
+    """(map, fixed point): Newton from the default guess, the gaits search when that fails."""
     from rimless.sim.step.backend import make_map
-    from rimless.sim.step.poincare import default_guess, solve_fixed_point
+    from rimless.sim.step.poincare import default_guess
+    from rimless.sim.studies.gaits import solve_or_search
 
     pmap = make_map(params, model, backend=backend, rtol=rtol)
-    z = default_guess(params, model)
-    if theta_dot is not None:
-        z[1] = theta_dot
-    return pmap, solve_fixed_point(pmap, z, jacobian=getattr(pmap, "jacobian", None))
+    fp, _ = solve_or_search(pmap, default_guess(params, model), jacobian=getattr(pmap, "jacobian", None))
+    return pmap, fp
 
 
 def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 2) -> dict[str, Any]:
+    """Figures 1 and 2's walks, both models from their period-1 gait; RunFailure when a model has none."""
+    from rimless.errors import RunFailure
+    from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
 
     out = {}
     for model in ("er", "ve"):
-        _, fp = _fixed_point(params, model, backend, rtol)
+        try:
+            _, fp = _fixed_point(params, model, backend, rtol)
+        except StepFailure as err:
+            raise RunFailure(f"figures 1-2: no period-1 gait of the {model.upper()} wheel at "
+                             f"{params.slope_deg:.4f} deg, k = {params.k:g} N/m, c = {params.c:g} N s/m "
+                             f"(Newton and the gaits search): {err}") from None
         out[model] = simulate_steps(params, model, fp.z, steps, make_integrator(backend, rtol), record_dt=1e-3,
                                     forces=True)
     return out
@@ -86,7 +96,9 @@ def energy_ratio_series(params: WheelParams, backend: str, rtol: float, ks: tupl
             p = params.replace(stiffness_n_per_m=float(k))
             try:
                 pmap, fp = _fixed_point(p, model, backend, rtol)
-            except StepFailure:
+            except StepFailure as err:  # kept as a row: the figure and the output name the missing curve
+                rows.append({"model": model.upper(), "k": k, "step": 0, "energy_ratio": math.nan,
+                             "failure": f"no period-1 gait: {err.reason.value}"})
                 continue
             z = np.array([fp.z[0], fp.z[1] * PERTURBATION])
             for i in range(steps):
@@ -376,7 +388,7 @@ def run_paper(
 ) -> PaperResult:
     """Write every figure, CSV, the headline table and index.html into `out` (see module docstring)."""
     from rimless.sim.step.backend import resolve
-    from rimless.sim.studies.sweep import SweepOptions, grid_points, run_sweep, write_table
+    from rimless.sim.studies.sweep import SweepOptions, dask_client, grid_points, run_sweep, write_table
 
     import os
 
@@ -386,22 +398,9 @@ def run_paper(
     res.timings_s["load_average_before"] = os.getloadavg()[0]
     backend = resolve(backend)
     t0 = time.perf_counter()
-    client = cluster = None
-    if scheduler != "sync":
-        from dask.distributed import Client, LocalCluster
-
-        if scheduler == "local":
-            import os
-
-            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=40)
-            client = Client(cluster)
-        else:
-            try:
-                client = Client(scheduler, timeout=15)
-            except (OSError, TimeoutError) as err:
-                raise ConnectionError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
-    try:
+    stack = contextlib.ExitStack()
+    client = stack.enter_context(dask_client(scheduler, workers)) if scheduler != "sync" else None
+    with stack:
         say("sweep over k: every branch of both wheels")
         pts = grid_points(params, ("er", "ve"), {"k": list(ks)}, (params.mass_model,))
         options = SweepOptions(backend=backend, rtol=rtol, start_slope_rad=params.slope_rad)
@@ -431,7 +430,10 @@ def run_paper(
             res.timings_s["gaits"] = time.perf_counter() - t1
             t2 = time.perf_counter()
             say("energy transition ratios")
-            res.files += figure_energy_ratio(energy_ratio_series(params, backend, rtol, energy_ks), out)
+            energy = energy_ratio_series(params, backend, rtol, energy_ks)
+            res.notes += [f"figure 3: {r['model']} at k = {r['k']:g} N/m not shown ({r['failure']})"
+                          for r in energy if r["step"] == 0]
+            res.files += figure_energy_ratio(energy, out)
             res.timings_s["energy"] = time.perf_counter() - t2
             if pool is not None:
                 sw = sweep_future.result()
@@ -459,11 +461,6 @@ def run_paper(
             curves = [row for r in starts for row in boundary_curve(r, params.to_dict(), backend, rtol, k_range)]
             ranges = [validity_range(r, params.to_dict(), backend, rtol, k_range) for r in starts]
         res.timings_s["boundary_curves_wait"] = time.perf_counter() - t1
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
     t3 = time.perf_counter()
     say("eigenvalue map, cost of transport and the headline table")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
@@ -495,6 +492,7 @@ def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backen
     `ks`, run_paper; returns the command's JSON object. An interrupted run removes the folder it created."""
     from rimless.errors import ParameterError, interrupted_by_user
     from rimless.output import writable_dir
+    from rimless.sim.studies.sweep import worker_failure
 
     for k in ks:
         try:
@@ -515,13 +513,16 @@ def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backen
     try:
         res = run_paper(out, params, ks=ks, backend=backend, rtol=rtol, scheduler=scheduler, workers=workers,
                         cache_dir=cache_dir, energy_ks=energy_ks, eigen_ks=eigen_ks, progress=progress)
-    except ConnectionError as err:
-        raise ParameterError(f"--scheduler: {err}") from None
     except BaseException as err:
-        if out_is_new and interrupted_by_user(err):  # an interrupted run leaves no half-filled folder behind
+        if out_is_new:  # an interrupted or failed run leaves no half-filled folder behind
             import shutil
 
             shutil.rmtree(out, ignore_errors=True)
+        if isinstance(err, ConnectionError):
+            raise ParameterError(f"--scheduler: {err}") from None
+        if isinstance(err, Exception) and not interrupted_by_user(err):
+            worker_failure(err, scheduler)
         raise
-    return {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "timings_s": res.timings_s,
+    return {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "notes": res.notes,
+            "timings_s": res.timings_s,
             "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers}}
