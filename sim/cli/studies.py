@@ -47,9 +47,9 @@ def stress_cmd(
     else:
         reasons = sorted({r for m in out["counts"].values() for r in m})
         counts = Table(title=f"stress sweep: {out['points']} steps in {out['seconds']:.1f} s (rtol {rtol:g})")
-        counts.add_column("outcome")
+        counts.add_column("outcome", overflow="fold")
         for model in out["counts"]:
-            counts.add_column(model, justify="right")
+            counts.add_column(model, justify="right", no_wrap=True)
         for r in reasons:
             counts.add_row(r, *[str(out["counts"][m].get(r, 0)) for m in out["counts"]])
         con = console()

@@ -372,6 +372,33 @@ def _index(out: Path, table: list[dict[str, Any]], params: WheelParams, timings:
     return path
 
 
+class _Background:
+    """fn() in a daemon thread; result() waits for it and returns its value or raises its exception. Unlike a
+    ThreadPoolExecutor's thread, an interpreter leaving on Ctrl-C does not wait for it."""
+
+    def __init__(self, fn: Callable[[], Any]) -> None:
+        import threading
+
+        self._value: Any = None
+        self._error: BaseException | None = None
+
+        def run() -> None:
+            try:
+                self._value = fn()
+            except BaseException as err:  # noqa: BLE001 - handed to result()
+                self._error = err
+
+        self._thread = threading.Thread(target=run, name="rimless-paper-sweep", daemon=True)
+        self._thread.start()
+
+    def result(self) -> Any:
+        while self._thread.is_alive():  # short waits keep the main thread responsive to Ctrl-C
+            self._thread.join(0.1)
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
 def run_paper(
     out: Path,
     params: WheelParams = WheelParams(),
@@ -411,36 +438,27 @@ def run_paper(
 
         # on a cluster the sweep's tasks run on the workers while this process draws figures 1-3 (the thread only
         # waits for results); in-process (sync) everything runs in turn
-        pool = None
-        if client is not None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            pool = ThreadPoolExecutor(max_workers=1)
-            sweep_future = pool.submit(sweep)
-        try:
-            t1 = time.perf_counter()
-            if pool is None:
-                sw = sweep()
-                res.timings_s["sweep"] = time.perf_counter() - t0
-                t1 = time.perf_counter()
-            say("typical gaits and forces")
-            trajs = _typical(params, backend, rtol)
-            res.files += figure_typical_gaits(trajs, out)
-            res.files += figure_forces(trajs, out)
-            res.timings_s["gaits"] = time.perf_counter() - t1
-            t2 = time.perf_counter()
-            say("energy transition ratios")
-            energy = energy_ratio_series(params, backend, rtol, energy_ks)
-            res.notes += [f"figure 3: {r['model']} at k = {r['k']:g} N/m not shown ({r['failure']})"
-                          for r in energy if r["step"] == 0]
-            res.files += figure_energy_ratio(energy, out)
-            res.timings_s["energy"] = time.perf_counter() - t2
-            if pool is not None:
-                sw = sweep_future.result()
-                res.timings_s["sweep"] = time.perf_counter() - t0
-        finally:
-            if pool is not None:
-                pool.shutdown(wait=False, cancel_futures=True)
+        pool = _Background(sweep) if client is not None else None  # a daemon: an interrupt never waits for it
+        t1 = time.perf_counter()
+        say("typical gaits and forces")
+        trajs = _typical(params, backend, rtol)
+        res.files += figure_typical_gaits(trajs, out)
+        res.files += figure_forces(trajs, out)
+        res.timings_s["gaits"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        say("energy transition ratios")
+        energy = energy_ratio_series(params, backend, rtol, energy_ks)
+        res.notes += [f"figure 3: {r['model']} at k = {r['k']:g} N/m not shown ({r['failure']})"
+                      for r in energy if r["step"] == 0]
+        res.files += figure_energy_ratio(energy, out)
+        res.timings_s["energy"] = time.perf_counter() - t2
+        if pool is not None:
+            sw = pool.result()
+            res.timings_s["sweep"] = time.perf_counter() - t0
+        else:  # in-process: after figures 1-3, so that a wheel without a gait fails in seconds
+            t_sweep = time.perf_counter()
+            sw = sweep()
+            res.timings_s["sweep"] = time.perf_counter() - t_sweep
         res.sweep = sw
         meta = {"params": params.to_dict(), "ks": list(ks), "backend": backend, "rtol": rtol}
         res.files += write_table(sw.rows, out / "sweep", meta)

@@ -243,8 +243,15 @@ def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
             if scheduler == "local":
                 # created with SIGINT blocked: the cluster's threads and the worker processes they spawn
                 # inherit the mask; a Ctrl-C meanwhile waits for the unblock below
-                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0", silence_logs=logging.ERROR)
+                try:
+                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                                           processes=True, dashboard_address=":0", silence_logs=logging.ERROR)
+                except Exception as err:  # noqa: BLE001 - Dask wraps what went wrong (a worker died, no port, ...)
+                    from rimless.errors import RunFailure
+
+                    cause = err.__cause__ or err
+                    raise RunFailure(f"cannot start a local Dask cluster: {type(cause).__name__}: "
+                                     f"{str(cause).splitlines()[0] if str(cause) else err}") from None
                 client = Client(cluster)
             else:
                 try:
@@ -275,17 +282,20 @@ def _close_at_once(client: Any, cluster: Any) -> None:
     if cluster is not None:
         try:
             import psutil
+            from multiprocessing import resource_tracker
 
+            keep = {getattr(resource_tracker._resource_tracker, "_pid", None)}  # noqa: SLF001 - not a worker
             for child in psutil.Process().children(recursive=True):
-                with contextlib.suppress(Exception):
-                    child.kill()
+                if child.pid not in keep and "resource_tracker" not in " ".join(child.cmdline()):
+                    with contextlib.suppress(Exception):
+                        child.kill()
         except Exception:  # noqa: BLE001 - best effort; close() below ends them anyway
             pass
     for obj in (client, cluster):
         if obj is None:
             continue
         with contextlib.suppress(BaseException):
-            obj.close(timeout=1)
+            obj.close(timeout=0.5)
 
 
 def worker_failure(err: BaseException, scheduler: str) -> None:

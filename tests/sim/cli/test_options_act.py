@@ -127,3 +127,39 @@ def test_fixed_point_falls_back_on_the_gaits_search(model, option, value, change
     assert out["found_by"] in ("newton", "gaits search")
     assert out["stable"] and out["contact_valid"]
     assert _residual_on_the_reference_map(model, [out["theta_plus_rad"], out["theta_dot_plus_rad_s"]], **change) < 1e-7
+
+
+# ------------------------------------------------------------------------ 80 columns: names wrap, numbers never
+
+
+@pytest.mark.parametrize("args", [
+    ["sim", "fixed-point", "--model", "er"],
+    ["sim", "fixed-point", "--model", "ve"],
+    ["sim", "gaits", "--model", "ve", "--guesses", "4"],
+])
+def test_tables_at_80_columns_cut_no_number(args):
+    res = RUN.invoke(app, args, env={"COLUMNS": "80", "TERM": "dumb"})
+    assert res.exit_code == 0, res.output
+    assert "…" not in res.stdout, res.stdout
+    assert all(len(line) <= 80 for line in res.stdout.splitlines())
+    if args[1] == "fixed-point":  # every number of the JSON object is printed whole
+        out = _json([*args, "--json"])
+        assert f"{out['step_period_s']:.6g}" in res.stdout
+        assert f"{out['trailing_foot_min_height_m'] * 1e3:.6g}" in res.stdout
+        assert f"{out['energy_ratio']:.6g}" in res.stdout
+
+
+def test_the_quantity_table_wraps_names_not_numbers():
+    from rich.console import Console
+
+    from rimless.sim.cli.output import table
+
+    rows = [("trailing foot lowest point (mm)", -8.41234567), ("eigenvalues", "0.12345-0.00000j, 0.54321+0.00000j"),
+            ("min normal force b in DLSP (N)", 1.7123456)]
+    for width in (80, 40):
+        con = Console(width=width, record=True, file=open("/dev/null", "w"))
+        con.print(table("t", rows))
+        text = con.export_text()
+        for number in ("-8.41235", "1.71235", "0.12345-0.00000j", "0.54321+0.00000j"):
+            assert number in text, text
+        assert "…" not in text
