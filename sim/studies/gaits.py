@@ -79,6 +79,8 @@ def solve_or_search(pmap: Any, guess: np.ndarray, *, jacobian: Any = None, diagn
                                  strict_contact=strict_contact), "newton"
     except NoFixedPoint as err:
         newton_failure = err
+    if _integrator_gave_up(newton_failure.last_failure):  # the search would fail the same way at every guess
+        raise newton_failure
     try:
         found = find_gaits(pmap, progress=progress)
     except Exception as err:  # noqa: BLE001 - the Newton failure is the one to report
@@ -91,6 +93,30 @@ def solve_or_search(pmap: Any, guess: np.ndarray, *, jacobian: Any = None, diagn
     best = min(pool, key=lambda fp: abs(float(fp.z[1]) - float(guess[1])))
     fp = solve_fixed_point(pmap, best.z, jacobian=jacobian, diagnostics=diagnostics, strict_contact=strict_contact)
     return fp, "gaits search"
+
+
+def _integrator_gave_up(err: Any) -> bool:
+    from rimless.sim.model.failures import FailureReason
+
+    return err is not None and getattr(err, "reason", None) is FailureReason.INTEGRATION
+
+
+def check_integrable(pmap: Any, params: Any, model: str, z: np.ndarray) -> None:
+    """Raise RunFailure at once when the integrator gives up on one step from `z` (its step budget spent, as
+    with very light, stiff legs): a scan of guesses would spend that budget at every guess (minutes) to
+    find nothing. A step failing for a physical reason (stall, lift-off) passes: another guess may walk."""
+    from rimless.sim.model.failures import StepFailure
+
+    try:
+        pmap(z)
+    except StepFailure as err:
+        if not _integrator_gave_up(err):
+            return
+        leg_period = 2 * math.pi * math.sqrt(params.leg_mass_kg / params.k)
+        raise RunFailure(f"no period-1 gait can be searched for the {model} wheel: the integrator gives up on one "
+                         f"step from theta'+ = {z[1]:.3f} rad/s ({err}); legs of {params.leg_mass_kg:g} kg on "
+                         f"k = {params.k:g} N/m oscillate with period {leg_period:.2g} s against a step of about "
+                         "0.3 s") from None
 
 
 def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[float] = None,
@@ -139,6 +165,9 @@ def gait_scan(params: Any, model: str, *, theta_dot_min: float = 0.8, theta_dot_
     if not 0 < theta_dot_min < theta_dot_max:
         raise ParameterError("need 0 < --theta-dot-min < --theta-dot-max (rad/s)")
     pmap = make_map(params, model, backend=backend, rtol=rtol)
+    from rimless.sim.step.poincare import default_guess
+
+    check_integrable(pmap, params, model, default_guess(params, model))
     found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
                        progress=progress, include_invalid=True)
     items = []

@@ -301,8 +301,10 @@ def _close_at_once(client: Any, cluster: Any) -> None:
 def worker_failure(err: BaseException, scheduler: str) -> None:
     """Raise a one-line UserError when `err`, raised by a task or set-up on a Dask worker, says the worker
     cannot import rimless (the package is not installed where the worker runs)."""
-    from rimless.errors import UserError
+    from rimless.errors import RimlessError, UserError
 
+    if isinstance(err, RimlessError):  # already classified
+        return
     text = f"{type(err).__name__}: {err}"
     if isinstance(err, ImportError) or "No module named 'rimless" in text:
         missing = getattr(err, "name", None) or "rimless"
