@@ -62,8 +62,8 @@ def fixed_point_cmd(
     ]
     con = console()
     con.print(table("period-1 gait", rows))
-    con.print(out["contact_note"], soft_wrap=True)
-    con.print(out["relabel_note"], soft_wrap=True)
+    con.print(out["contact_note"])  # prose: wrapped at the terminal's width
+    con.print(out["relabel_note"])
 
 
 @user_facing
@@ -107,10 +107,10 @@ def gaits_cmd(
     con.print(listing)
     con.print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
               "impulses > 0; a gait that is not was found with the stance foot held); Fmin: smallest stance "
-              "force in single support; theta'+: post-impact angular velocity", soft_wrap=True)
+              "force in single support; theta'+: post-impact angular velocity")
     for i, it in enumerate(items):
         if it["contact_reason"]:
-            con.print(f"gait {i + 1}: {it['contact_reason']}", soft_wrap=True)
+            con.print(f"gait {i + 1}: {it['contact_reason']}")
 
 
 @user_facing
@@ -170,4 +170,4 @@ def critical_slope_cmd(
         ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
         ("contact valid at critical", ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-"),
     ]))
-    console().print(f"why: {out['detail']}", soft_wrap=True)
+    console().print(f"why: {out['detail']}")

@@ -130,11 +130,11 @@ def paper_cmd(
     for f in summary["files"]:
         con.print(f"wrote {f}", soft_wrap=True)
     for note in summary["notes"]:
-        con.print(f"note: {note}", soft_wrap=True)
+        con.print(f"note: {note}")
     con.print(f"load average {timings['load_average_before']:.1f} before, "
-              f"{timings['load_average_after']:.1f} after (other work on the machine slows every timing)", soft_wrap=True)
+              f"{timings['load_average_after']:.1f} after (other work on the machine slows every timing)")
     con.print(f"in {timings['total']:.1f} s (sweep {timings['sweep']:.1f} s: {sweep['computed']} grid "
-              f"points computed, {sweep['cached']} cached, {sweep['workers']} worker(s))", soft_wrap=True)
+              f"points computed, {sweep['cached']} cached, {sweep['workers']} worker(s))")
 
 
 def register_top_level(root: typer.Typer) -> None:

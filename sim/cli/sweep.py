@@ -180,7 +180,7 @@ def sweep_cmd(
     for p in summary["files"]:
         con.print(f"wrote {p}", soft_wrap=True)
     con.print(f"{n_points} grid points ({summary['computed']} computed, {summary['cached']} from the cache) in "
-              f"{summary['seconds']:.1f} s on {summary['workers']} worker(s), scheduler {scheduler}", soft_wrap=True)
+              f"{summary['seconds']:.1f} s on {summary['workers']} worker(s), scheduler {scheduler}")
 
 
 def _firmware_sweep(params: Any, *, models: str, grid_texts: dict[str, Optional[str]], mass_models: Optional[str],
@@ -231,4 +231,4 @@ def _print_sweep_table(rows: list[dict[str, Any]]) -> None:
     con = console()
     con.print(table)
     for n in notes:
-        con.print(n, soft_wrap=True)
+        con.print(n)
