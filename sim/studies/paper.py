@@ -27,7 +27,8 @@ import numpy as np
 
 from rimless.sim.model.params import WheelParams
 from rimless.sim.studies.paper_figures import (EIGEN_K, PERTURBATION, figure_cot, figure_eigenvalues,
-                                               figure_energy_ratio, figure_forces, figure_typical_gaits, write_csv)
+                                               figure_energy_ratio, figure_forces, figure_typical_gaits,
+                                               missing_eigen_curves, write_csv)
 
 K_GRID = tuple(range(1500, 3501, 250))
 ENERGY_K = (2000.0, 2500.0, 3000.0, 3500.0)
@@ -482,6 +483,8 @@ def run_paper(
     t3 = time.perf_counter()
     say("eigenvalue map, cost of transport and the headline table")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
+    res.notes += [f"figure 4: {m} at k = {k:g} N/m not shown (no branch stable at the start slope)"
+                  for m, k in missing_eigen_curves(sw.rows, eigen_ks)]
     res.files += figure_cot(cot_rows(sw.rows, params), out, curves, ranges)
     res.table = headline_table(sw.rows, [], params, ranges)
     for v in ranges:

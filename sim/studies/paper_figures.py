@@ -135,6 +135,12 @@ def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     return [save_figure(fig, out / "fig3_energy_ratio.png"), write_csv(frame, out / "fig3_energy_ratio.csv")]
 
 
+def missing_eigen_curves(rows: list[dict[str, Any]], ks: tuple[float, ...] = EIGEN_K) -> list[tuple[str, float]]:
+    """(model, k) of figure 4's requested curves that have no branch stable at the start slope to draw."""
+    have = {(r["model"], r["k"]) for r in rows if r.get("stable_at_start")}
+    return [(m, float(k)) for m in ("VE", "ER") for k in ks if (m, float(k)) not in have]
+
+
 def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]], out: Path,
                        ks: tuple[float, ...] = EIGEN_K) -> list[Path]:
     """Figure 4: max |eig| against slope along every branch stable at the start slope, down to the end of its
@@ -181,6 +187,10 @@ def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]],
                     ax.plot(g["slope_deg"][~valid], g["max_abs_eigenvalue"][~valid], "o", mfc="white", color=col,
                             ms=3.5)
         ax.axhline(1.0, color="k", ls="--", lw=1)
+        missing = [k for m, k in missing_eigen_curves(rows, ks) if m == model]
+        if missing:  # a requested k without a curve is named, not dropped silently
+            ax.text(0.02, 0.02, "no branch stable at the start slope: k = " + ", ".join(f"{k:g}" for k in missing)
+                    + " N/m", transform=ax.transAxes, fontsize=7, color="C3", va="bottom")
         ax.set_xlabel("slope (deg)")
         ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
         ax.grid(alpha=0.3)

@@ -89,3 +89,28 @@ def test_figure1_keys_the_phase_shading_and_figure2_says_slope_normal(drawn, tmp
     paper_figures.figure_forces(one_step_each, tmp_path)
     for ax in drawn[1].axes:
         assert "slope-normal" in ax.get_ylabel() and "vertical" not in ax.get_ylabel()
+
+
+def test_figure4_names_a_requested_k_without_a_curve(drawn, tmp_path):
+    slopes = np.radians(np.linspace(1.3, 2.9, 5))
+    points = [{"model": "ER", "k": 2000.0, "branch": "b0", "branch_label": "er", "slope_rad": s,
+               "slope_deg": math.degrees(s), "max_abs_eigenvalue": 0.6, "contact_valid": True} for s in slopes]
+    rows = [{"model": "ER", "k": 2000.0, "branch": "b0", "stable_at_start": True, "critical_slope_rad": slopes[0]},
+            {"model": "VE", "k": 2000.0, "branch": "", "stable_at_start": False}]
+    assert paper_figures.missing_eigen_curves(rows, (2000.0,)) == [("VE", 2000.0)]
+    paper_figures.figure_eigenvalues(points, rows, tmp_path, ks=(2000.0,))
+    ve, er = drawn[0].axes
+    assert "k = 2000" in " ".join(t.get_text() for t in ve.texts)
+    assert not er.texts
+
+
+@pytest.mark.parametrize("k", [2000.0, 3500.0])
+def test_figure3_has_the_ve_wheel_where_newton_from_the_default_guess_fails(k):
+    """VE at k = 2000 and 3500 N/m: Newton from the default guess fails, the gaits search finds the stable gait."""
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.studies.paper import energy_ratio_series
+
+    rows = energy_ratio_series(WheelParams(), "auto", 1e-10, ks=(k,), steps=3)
+    ve = [r for r in rows if r["model"] == "VE"]
+    assert [r["step"] for r in ve] == [1, 2, 3], ve
+    assert all(0.0 < r["energy_ratio"] < 1.0 for r in ve)
