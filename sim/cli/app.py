@@ -168,6 +168,23 @@ def start_slope(params: Any, start_slope_rad: Optional[float]) -> float:
 
 
 def check_scheduler(scheduler: str) -> None:
-    """--scheduler: local, sync or the address of a running Dask scheduler."""
+    """--scheduler: local, sync or the address of a running Dask scheduler; --workers only with a local
+    cluster; --cache-dir not with --no-cache (each checked where the command has the option)."""
     if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
         raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    if scheduler != "local" and option_given("workers"):
+        raise ParameterError(f"--workers sets the size of a local cluster: it needs --scheduler local, got {scheduler!r}")
+    if option_given("cache_dir") and option_given("no_cache"):
+        raise ParameterError("--cache-dir and --no-cache: give one or the other")
+
+
+def refuse_unused(options: tuple[str, ...], why: str) -> None:
+    """ParameterError naming the first of `options` (python names) the user gave: it would be ignored."""
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    for name in options:
+        if option_given(name):
+            param = next((p for p in (ctx.command.params if ctx else []) if p.name == name), None)
+            longs = [o for o in getattr(param, "opts", []) if o.startswith("--")]
+            raise ParameterError(f"{longs[0] if longs else '--' + name.replace('_', '-')} {why}")

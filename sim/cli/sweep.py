@@ -11,7 +11,7 @@ from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
 from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, JsonOpt, RtolOpt, check_plot_path, check_scheduler,
-                                 start_slope, wheel_params)
+                                 refuse_unused, start_slope, wheel_params)
 from rimless.sim.cli.output import console
 from rimless.values import parse_list, parse_range
 
@@ -137,6 +137,7 @@ def sweep_cmd(
         check_plot_path(fw_plot)
     grid_texts = {"k": k_grid, "c": c_grid, "leg_mass_kg": leg_mass_grid, "hub_mass_kg": hub_mass_grid}
     if clutch is ClutchKind.firmware:
+        refuse_unused(("start_slope_rad", "guesses", "backend", "rtol"), "is not used by --clutch firmware")
         _firmware_sweep(params, models=models, grid_texts=grid_texts, mass_models=mass_models, bench=bench,
                         scheduler=scheduler, workers=workers, cache=None if no_cache else (cache_dir or default_cache_dir()),
                         out=out, json_out=json_out, rate_hz=fw_rate_hz, clutch_delay_ms=fw_delay_ms,
@@ -147,6 +148,7 @@ def sweep_cmd(
                         ("--plot", fw_plot), ("--critical-slope", fw_critical or None)):
         if given is not None:
             raise ParameterError(f"{flag} {given}: needs --clutch firmware")
+    refuse_unused(("fw_steps", "fw_seed", "fw_low_deg"), "needs --clutch firmware")
     model_list = parse_list(models, "--model", choices=("er", "ve"), lower=True)
     mm = parse_list(mass_models or params.mass_model, "--mass-model", choices=MASS_MODELS)
     start_slope_rad = start_slope(params, start_slope_rad)

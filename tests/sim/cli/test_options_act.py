@@ -163,3 +163,18 @@ def test_the_quantity_table_wraps_names_not_numbers():
         for number in ("-8.41235", "1.71235", "0.12345-0.00000j", "0.54321+0.00000j"):
             assert number in text, text
         assert "…" not in text
+
+
+@pytest.mark.parametrize(("args", "option"), [
+    (["sim", "sweep", "--steps", "8"], "--steps"),
+    (["sim", "sweep", "--seed", "3"], "--seed"),
+    (["sim", "sweep", "--critical-low-deg", "1"], "--critical-low-deg"),
+    (["sim", "sweep", "--clutch", "firmware", "--guesses", "5"], "--guesses"),
+    (["sim", "sweep", "--clutch", "firmware", "--start-slope-rad", "0.04"], "--start-slope-rad"),
+    (["sim", "sweep", "--workers", "2", "--scheduler", "sync"], "--workers"),
+    (["paper", "--workers", "2", "--scheduler", "sync"], "--workers"),
+    (["paper", "--cache-dir", "c", "--no-cache"], "--cache-dir"),
+    (["sim", "sweep", "--cache-dir", "c", "--no-cache"], "--cache-dir"),
+])
+def test_an_option_the_run_would_ignore_is_refused(args, option):
+    _one_error(RUN.invoke(app, args), 2, option)
