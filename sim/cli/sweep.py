@@ -43,6 +43,7 @@ def firmware_sweep_cmd(
 
     if plot is not None:
         check_plot_path(plot)
+    check_scheduler(scheduler)
     rates = parse_range(rates_hz, "--rates-hz")
     delays = parse_range(delays_ms, "--delays-ms")
     if any(not 1.0 <= r <= 1e6 for r in rates):
