@@ -96,9 +96,6 @@ def gait_cmd(
         if theta_dot is not None or gait is not None or out is not None or plot is not None:
             raise ParameterError("--clutch firmware starts from the ideal fixed point and writes no trajectory: "
                                  "drop --theta-dot, --gait, --out and --plot")
-        if steps < 6:
-            raise ParameterError(f"--steps must be >= 6 with --clutch firmware (the firmware's fixed point is "
-                                 f"fitted to the walk's section points), got {steps}")
         if bench:
             firmware_cli.run_bench(params, json_out=json_out)
             return
