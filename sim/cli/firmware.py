@@ -52,11 +52,14 @@ def run_gait(params: Any, config: Any, *, steps: int, backend: str, rtol: float,
     ]
     con = console()
     con.print(table("ER gait, firmware in the loop", rows))
-    con.print("fixed point: fitted to the walk (z_{k+1} = A z_k + c, z* = (I - A)^-1 c); eigenvalues are those "
-              "of A. Stored energy: the stance spring's energy held at touchdown.")
-    if f["eigenvalues_fitted"] and f["eigenvalues_fitted"][0][0] is None:
-        con.print(f"the walk of {steps_done} steps is too short to fit the map (it takes 6 steps or more): the fixed "
-                  f"point is the mean of the last {f['n_average']} section points, the eigenvalues are not fitted")
+    if not (f["eigenvalues_fitted"] and f["eigenvalues_fitted"][0][0] is None):
+        con.print("fixed point: fitted to the walk (z_{k+1} = A z_k + c, z* = (I - A)^-1 c); eigenvalues are those "
+                  "of A. Stored energy: the stance spring's energy held at touchdown.")
+    else:
+        why = (f"the walk of {steps_done} steps is too short to fit the map (it takes 6 steps or more)"
+               if steps_done < 6 else "the map could not be fitted to the walk")
+        con.print(f"{why}: the fixed point is the mean of the last {f['n_average']} section points, the eigenvalues "
+                  "are not fitted")
     if out["failure"] is not None:
         con.print(f"[yellow]the walk ended early: {out['failure']['message']}[/yellow]")
 
