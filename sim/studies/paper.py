@@ -3,7 +3,7 @@ the paper's headline numbers beside ours, and an index page.
 
 Figures (paper section "Numerical Simulation"):
 1. typical gaits, ER and VE side by side: leg lengths, CoM height, stick diagrams with the phases;
-2. vertical ground reaction forces of both, the leading leg's tensile transient marked;
+2. slope-normal ground reaction forces of both, the leading leg's tensile transient marked;
 3. energy transition ratio E+/E- over steps for several k, from a perturbed post-impact state;
 4. max |eig| against slope for several k, both models, every stable branch (unit circle dashed);
 5. CoT = tan(critical slope) against k: ER, every VE branch, the rigid wheel; contact-valid points filled;
@@ -337,9 +337,10 @@ def _write_table(table: list[dict[str, Any]], out: Path) -> list[Path]:
 CAPTIONS = {
     "fig1_typical_gaits": "Typical gaits of the viscoelastic (left) and energy-recycling (right) wheels: leg lengths, "
                           "CoM height and a stick diagram of one step, phases coloured.",
-    "fig2_ground_reaction_forces": "Vertical ground reaction forces; red: the leading foot's tensile transient at the "
+    "fig2_ground_reaction_forces": "Ground reaction forces normal to the slope; red: the leading foot's tensile transient at the "
                                    "start of double support (a rigid-contact artefact).",
-    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k.",
+    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k (a k without "
+                         "a gait is named on the figure).",
     "fig4_eigenvalue_map": "Max |eigenvalue| against slope along every branch stable at the start slope, several k, "
                            "down to the end of its stable, valid part; dashed with open markers: the gait violates "
                            "unilateral contact (found with the stance foot held); black dashed: unit circle.",
