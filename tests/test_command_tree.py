@@ -399,3 +399,136 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...],
     assert lines and lines[-1] == "interrupted", f"last line on stderr: {lines[-1:]}"
     left = _leftovers(tmp_path, before, ALLOWED_AFTER_INTERRUPT.get(path, set()))
     assert not left, f"an interrupted `rimless {_name(path)}` left {left} behind"
+
+
+# ------------------------------------------------------------------------------------------ no result
+
+# Valid inputs without a result: exit 1, one line `error: ...` on stderr naming what is missing, nothing on
+# stdout, no output left behind. (Bad values are walked above, Ctrl-C below.)
+NO_RESULT: dict[str, tuple[list[str], list[str], bool]] = {  # id: (args, words in the error, slow)
+    "sim gait from a state that stalls": (["sim", "gait", "--theta-dot", "0.5", "--out", "traj.csv"],
+                                          ["no step completed", "stall"], False),
+    "sim gaits on a slope without gaits": (["sim", "gaits", "--model", "er", "--slope-deg", "0.5", "--guesses", "3"],
+                                           ["no period-1 gait", "0.5000 deg"], False),
+    "sim critical-slope below the ER branch": (["sim", "critical-slope", "--model", "er", "--slope-deg", "1"],
+                                               ["critical slope of the er wheel", "no fixed point"], False),
+    "paper on the level": (["paper", "--slope-deg", "0", "--k", "2500:2750:250", "--scheduler", "sync",
+                            "--out", "p"], ["no period-1 gait", "0.0000 deg"], True),
+    "paper on a 20 deg slope": (["paper", "--slope-deg", "20", "--k", "2500:2750:250", "--scheduler", "sync",
+                                 "--out", "p"], ["no period-1 gait", "20.0000 deg"], True),
+    "sim gaits with legs too light to integrate": (["sim", "gaits", "--model", "ve", "--leg-mass-kg", "1e-6"],
+                                                   ["integrator gives up", "1e-06 kg"], True),
+    "paper with c = 60": (["paper", "--c", "60", "--k", "2500:2750:250", "--scheduler", "sync", "--out", "p"],
+                          ["no period-1 gait", "c = 60"], True),
+}
+
+
+@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.slow) if v[2] else k for k, v in NO_RESULT.items()])
+def test_valid_input_without_a_result_is_one_line_and_exit_1(case: str, tmp_path: Path) -> None:
+    args, words, _ = NO_RESULT[case]
+    res = _run(args, cwd=tmp_path)
+    _one_error_line(res.stderr, 1, res.returncode, words, res.stdout + res.stderr)
+    assert res.stdout.strip() == "", res.stdout
+    assert not list(tmp_path.iterdir()), f"left behind: {sorted(p.name for p in tmp_path.iterdir())}"
+
+
+# ------------------------------------------------------------------------------------------ Dask
+
+
+def _group_processes(pgid: int) -> list[str]:
+    """Command lines of the live (not zombie) processes of process group `pgid`."""
+    out = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+            fields = stat.rsplit(")", 1)[1].split()
+            if int(fields[2]) == pgid and fields[0] != "Z":
+                out.append(Path(f"/proc/{pid}/cmdline").read_text().replace("\0", " "))
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+LOCAL_CLUSTER_RUNS = {
+    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 30.0),
+    "sim sweep": (["sim", "sweep", "--k", "1500:3500:250", "--no-cache", "--workers", "2", "--out", "sweep-out/k"], 20.0),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(LOCAL_CLUSTER_RUNS))
+def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_path: Path) -> None:
+    """A terminal's Ctrl-C reaches every process of the group (the command and its Dask workers): the command
+    prints `interrupted` last, exits 130, leaves no output and no worker behind; the workers print nothing."""
+    args, delay_s = LOCAL_CLUSTER_RUNS[case]
+    env = {**os.environ, "COLUMNS": str(WIDTH)}
+    proc = subprocess.Popen([sys.executable, "-m", "rimless", *args], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
+    try:
+        time.sleep(delay_s)
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        t0 = time.perf_counter()
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+        seconds = time.perf_counter() - t0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    out = stdout + stderr
+    assert proc.returncode == 130, f"exit {proc.returncode}:\n{out[-3000:]}"
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert lines == ["interrupted"], f"stderr after {seconds:.2f} s:\n{stderr[-3000:]}"
+    assert "Traceback" not in out
+    time.sleep(1.0)
+    workers = [c for c in _group_processes(proc.pid) if "resource_tracker" not in c]
+    assert not workers, f"left running: {workers}"
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.fixture()
+def scheduler_whose_worker_lacks_rimless(tmp_path: Path) -> Any:
+    """A Dask scheduler on the loopback with one worker that cannot import rimless (a stand-in package that
+    raises ModuleNotFoundError comes first on its path, as on a machine where rimless is not installed)."""
+    fake = tmp_path / "nopkg" / "rimless"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("raise ModuleNotFoundError(\"No module named 'rimless'\", name='rimless')\n")
+    port = _free_tcp_port()
+    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    sched = subprocess.Popen([*dask, "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL, start_new_session=True)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
+                               "--nthreads", "1", "--no-dashboard"], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True,
+                              env={**os.environ, "PYTHONPATH": str(tmp_path / "nopkg")}, cwd=tmp_path / "nopkg")
+    try:
+        from distributed import Client
+
+        deadline = time.monotonic() + 60
+        while True:  # wait until the worker has joined
+            try:
+                with Client(f"tcp://127.0.0.1:{port}", timeout=5) as client:
+                    if client.scheduler_info().get("workers"):
+                        break
+            except OSError:
+                pass
+            assert time.monotonic() < deadline, "the test's Dask worker did not start"
+            time.sleep(0.5)
+        yield f"tcp://127.0.0.1:{port}"
+    finally:
+        for p in (worker, sched):
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", [["sim", "sweep", "--k", "2700", "--model", "er", "--out", "s/k"],
+                                     ["paper", "--k", "2700", "--out", "paper-out"]], ids=["sim sweep", "paper"])
+def test_a_dask_worker_without_the_package_is_one_error_line(command: list[str], tmp_path: Path,
+                                                             scheduler_whose_worker_lacks_rimless: str) -> None:
+    work = tmp_path / "work"
+    work.mkdir()
+    res = _run([*command, "--no-cache", "--scheduler", scheduler_whose_worker_lacks_rimless], cwd=work)
+    _one_error_line(res.stderr, 2, res.returncode, ["--scheduler", "cannot import rimless"], res.stdout + res.stderr)
+    assert not list(work.iterdir())

@@ -156,7 +156,52 @@ def check_plot_path(plot: Path) -> None:
         raise OutputFileError(f"--plot {plot}: the folder {parent} does not exist or is not writable")
 
 
+def option_given(name: str) -> bool:
+    """True if the running command's parameter `name` (python name, e.g. "slope_deg") was given by the user."""
+    from typer._click.core import ParameterSource
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    if ctx is None:
+        return False
+    return ctx.get_parameter_source(name) in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)
+
+
+def start_slope(params: Any, start_slope_rad: Optional[float]) -> float:
+    """The slope (rad) a search or continuation starts from: --start-slope-rad, else the wheel's slope
+    (--slope-deg/--slope-rad/--params, Table 1 by default); both given is refused."""
+    from rimless.sim.model.params import SPOKE_ANGLE_RAD
+
+    slope_given = [f for f, n in (("--slope-deg", "slope_deg"), ("--slope-rad", "slope_rad")) if option_given(n)]
+    if start_slope_rad is not None:
+        if slope_given:
+            raise ParameterError(f"give the start slope once: {slope_given[0]} or --start-slope-rad, not both")
+        return start_slope_rad
+    if not 0 < params.slope_rad < SPOKE_ANGLE_RAD / 2:
+        flag = slope_given[0] if slope_given else "--slope-deg"
+        raise ParameterError(f"{flag}: the search starts on a slope in (0, {math.degrees(SPOKE_ANGLE_RAD / 2):g}) "
+                             f"deg, got {params.slope_deg:g} deg")
+    return float(params.slope_rad)
+
+
 def check_scheduler(scheduler: str) -> None:
-    """--scheduler: local, sync or the address of a running Dask scheduler."""
+    """--scheduler: local, sync or the address of a running Dask scheduler; --workers only with a local
+    cluster; --cache-dir not with --no-cache (each checked where the command has the option)."""
     if not (scheduler in ("local", "sync") or scheduler.startswith(("tcp://", "tls://"))):
         raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+    if scheduler != "local" and option_given("workers"):
+        raise ParameterError(f"--workers sets the size of a local cluster: it needs --scheduler local, got {scheduler!r}")
+    if option_given("cache_dir") and option_given("no_cache"):
+        raise ParameterError("--cache-dir and --no-cache: give one or the other")
+
+
+def refuse_unused(options: tuple[str, ...], why: str) -> None:
+    """ParameterError naming the first of `options` (python names) the user gave: it would be ignored."""
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    for name in options:
+        if option_given(name):
+            param = next((p for p in (ctx.command.params if ctx else []) if p.name == name), None)
+            longs = [o for o in getattr(param, "opts", []) if o.startswith("--")]
+            raise ParameterError(f"{longs[0] if longs else '--' + name.replace('_', '-')} {why}")

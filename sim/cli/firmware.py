@@ -52,8 +52,14 @@ def run_gait(params: Any, config: Any, *, steps: int, backend: str, rtol: float,
     ]
     con = console()
     con.print(table("ER gait, firmware in the loop", rows))
-    con.print("fixed point: fitted to the walk (z_{k+1} = A z_k + c, z* = (I - A)^-1 c); eigenvalues are those "
-              "of A. Stored energy: the stance spring's energy held at touchdown.", soft_wrap=True)
+    if not (f["eigenvalues_fitted"] and f["eigenvalues_fitted"][0][0] is None):
+        con.print("fixed point: fitted to the walk (z_{k+1} = A z_k + c, z* = (I - A)^-1 c); eigenvalues are those "
+                  "of A. Stored energy: the stance spring's energy held at touchdown.")
+    else:
+        why = (f"the walk of {steps_done} steps is too short to fit the map (it takes 6 steps or more)"
+               if steps_done < 6 else "the map could not be fitted to the walk")
+        con.print(f"{why}: the fixed point is the mean of the last {f['n_average']} section points, the eigenvalues "
+                  "are not fitted")
     if out["failure"] is not None:
         con.print(f"[yellow]the walk ended early: {out['failure']['message']}[/yellow]")
 
@@ -102,10 +108,10 @@ def run_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_de
         ("mechanical boundary (deg)", "-" if mech is None else f"{mech:.3f}"),
         ("walk length (steps)", str(steps)),
     ]))
-    con.print(f"definition: {out['definition']}", soft_wrap=True)
-    con.print(f"what limits it: {out['limit_detail']}", soft_wrap=True)
+    con.print(f"definition: {out['definition']}")
+    con.print(f"what limits it: {out['limit_detail']}")
     if out["mechanical"] is not None:
-        con.print(f"mechanical boundary: {out['mechanical']['definition']}", soft_wrap=True)
+        con.print(f"mechanical boundary: {out['mechanical']['definition']}")
 
 
 def run_sweep_command(params: Any, *, out: Path, scheduler: str, json_out: bool, **options: Any) -> None:
@@ -126,7 +132,7 @@ def run_sweep_command(params: Any, *, out: Path, scheduler: str, json_out: bool,
     for p in summary["files"] + ([summary["plot"]] if summary["plot"] else []):
         con.print(f"wrote {p}", soft_wrap=True)
     con.print(f"{n} grid points ({summary['computed']} computed, {summary['cached']} from the cache) in "
-              f"{summary['seconds']:.1f} s on {summary['workers']} worker(s), scheduler {scheduler}", soft_wrap=True)
+              f"{summary['seconds']:.1f} s on {summary['workers']} worker(s), scheduler {scheduler}")
 
 
 def print_firmware_rows(out: dict[str, Any]) -> None:

@@ -1,15 +1,16 @@
 """`rimless sim fixed-point`, `gaits` and `critical-slope`: parse, call rimless.sim.studies.gaits, print."""
 
 import math
-from typing import Annotated, Any
+from typing import Annotated, Any, Optional
 
 import typer
 
-from rimless.cli_rules import print_json, user_facing
+from rimless.cli_rules import fail, print_json, user_facing
+from rimless.errors import ParameterError
 from rimless.progress import progress_bar
 from rimless.sim.cli.app import (Backend, BackendOpt, ElectronicsPowerOpt, GaitOpt, GuessOpt, HoldPowerOpt, JsonOpt, Model,
                                  ModelOpt, ModelOrRigid, RtolOpt, StrictOpt, SwitchEnergyOpt, ThetaGuessOpt,
-                                 VeElectronicsOpt, clutch_power, wheel_params)
+                                 VeElectronicsOpt, clutch_power, option_given, start_slope, wheel_params)
 from rimless.sim.cli.output import console, table
 
 
@@ -62,6 +63,8 @@ def fixed_point_cmd(
         ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
         ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
         ("residual |P(z)-z|", out["residual"]),
+        ("found by", "Newton from the default guess" if out["found_by"] == "newton" else
+         "the gaits search (Newton from the default guess failed)"),
         ("step length along the slope (m)", out["step_length_m"]),
         ("clutched time per step (s)", out["clutched_time_s"]),
         ("mechanical CoT (= tan phi)", out["mechanical_cot"]),
@@ -70,8 +73,8 @@ def fixed_point_cmd(
     ]
     con = console()
     con.print(table("period-1 gait", rows))
-    con.print(out["contact_note"], soft_wrap=True)
-    con.print(out["relabel_note"], soft_wrap=True)
+    con.print(out["contact_note"])  # prose: wrapped at the terminal's width
+    con.print(out["relabel_note"])
 
 
 @user_facing
@@ -94,6 +97,9 @@ def gaits_cmd(
     with progress_bar("scanning guesses", guesses, json_out=json_out) as bar:
         out = gait_scan(params, model.value, theta_dot_min=theta_dot_min, theta_dot_max=theta_dot_max,
                         guesses=guesses, backend=backend.value, rtol=rtol, progress=lambda i, n: bar.update(i))
+    if not out["gaits"]:
+        fail(f"no period-1 gait of the {model.value} wheel at {params.slope_deg:.4f} deg for theta'+ guesses in "
+             f"[{theta_dot_min:g}, {theta_dot_max:g}] rad/s")
     if json_out:
         print_json(out)
         return
@@ -112,12 +118,10 @@ def gaits_cmd(
     con.print(listing)
     con.print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
               "impulses > 0; a gait that is not was found with the stance foot held); Fmin: smallest stance "
-              "force in single support; theta'+: post-impact angular velocity", soft_wrap=True)
+              "force in single support; theta'+: post-impact angular velocity")
     for i, it in enumerate(items):
         if it["contact_reason"]:
-            con.print(f"gait {i + 1}: {it['contact_reason']}", soft_wrap=True)
-    if not items:
-        con.print("no period-1 gait found in the scanned range")
+            con.print(f"gait {i + 1}: {it['contact_reason']}")
 
 
 @user_facing
@@ -129,7 +133,8 @@ def critical_slope_cmd(
     theta_plus_guess: ThetaGuessOpt = None,
     gait: GaitOpt = None,
     step_rad: Annotated[float, typer.Option(min=1e-5, max=0.01, help="Algorithm 1 slope step, rad.")] = 0.001,
-    start_slope_rad: Annotated[float, typer.Option(help="Slope where the continuation starts, rad.")] = 0.05,
+    start_slope_rad: Annotated[Optional[float], typer.Option(help="Slope where the continuation starts, rad "
+                                                             "[the wheel's slope: --slope-deg, 0.05 rad].")] = None,
     strict_contact: StrictOpt = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -142,6 +147,11 @@ def critical_slope_cmd(
     """Critical slope and minimum cost of transport: Algorithm 1 and the refined end of the branch."""
     from rimless.sim.studies.gaits import critical_slope_study
 
+    if model != ModelOrRigid.rigid:
+        start_slope_rad = start_slope(params, start_slope_rad)
+    elif start_slope_rad is not None or option_given("slope_deg") or option_given("slope_rad"):
+        raise ParameterError("--model rigid is the closed form: it takes no slope (drop --slope-deg, --slope-rad "
+                             "and --start-slope-rad)")
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("continuation in slope", json_out=json_out) as bar:
         out = critical_slope_study(
@@ -183,4 +193,4 @@ def critical_slope_cmd(
                                 if out["min_system_cot_at_bound"] else "")),
         ("  located by", out["min_system_cot_method"]),
     ]))
-    console().print(f"why: {out['detail']}", soft_wrap=True)
+    console().print(f"why: {out['detail']}")

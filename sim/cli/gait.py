@@ -6,12 +6,17 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from rimless.cli_rules import print_json, user_facing
+from rimless.cli_rules import fail, print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
 from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, GaitOpt, GuessOpt, JsonOpt, Model, ModelOpt, RtolOpt,
-                                 ThetaGuessOpt, wheel_params)
+                                 ThetaGuessOpt, option_given, wheel_params)
 from rimless.sim.cli.output import console, table
+
+
+_FIRMWARE_ONLY = ("rate_hz", "clutch_delay_ms", "release_delay_ms", "noise_counts", "jitter_ms", "holding_force_n",
+                  "seed", "bench", "critical_slope", "critical_low_deg", "critical_tol_deg")
+_IDEAL_ONLY = ("theta_dot_guess", "theta_plus_guess", "theta_plus_rad", "forces", "sample_dt_s")
 
 
 @user_facing
@@ -75,6 +80,13 @@ def gait_cmd(
             raise ParameterError(f"--robot-config {robot_config}: no such file")
         if clutch is not ClutchKind.firmware:
             raise ParameterError("--robot-config needs --clutch firmware")
+    firmware_only = [f"--{n.replace('_', '-')}" for n in _FIRMWARE_ONLY if option_given(n)]
+    if clutch is not ClutchKind.firmware and firmware_only:
+        raise ParameterError(f"{firmware_only[0]} needs --clutch firmware")
+    ideal_only = [f"--{n.replace('_', '-')}" for n in _IDEAL_ONLY if option_given(n)]
+    if clutch is ClutchKind.firmware and ideal_only:
+        raise ParameterError(f"{ideal_only[0]}: --clutch firmware starts from the ideal fixed point and writes no "
+                             "trajectory; drop it")
     if clutch is ClutchKind.firmware:
         from rimless.sim.cli import firmware as firmware_cli
         from rimless.sim.in_the_loop.config import build_config
@@ -91,10 +103,10 @@ def gait_cmd(
                               noise_counts=noise_counts, jitter_ms=jitter_ms, holding_force_n=holding_force_n,
                               seed=seed, robot_config=robot_config)
         if critical_slope:
-            firmware_cli.run_critical(params, config, steps=max(steps, 6), low_deg=critical_low_deg,
+            firmware_cli.run_critical(params, config, steps=steps, low_deg=critical_low_deg,
                                       tol_deg=critical_tol_deg, json_out=json_out)
         else:
-            firmware_cli.run_gait(params, config, steps=max(steps, 6), backend=backend.value, rtol=rtol,
+            firmware_cli.run_gait(params, config, steps=steps, backend=backend.value, rtol=rtol,
                                   json_out=json_out)
         return
     from rimless.sim.studies.walk import walk_gait
@@ -105,6 +117,9 @@ def gait_cmd(
                             plot=plot, forces=forces, sample_dt_s=sample_dt_s, backend=backend.value, rtol=rtol,
                             progress=bar.update)
     failure = summary["failure"]
+    if failure is not None and not summary["steps_done"]:
+        fail(f"no step completed from theta+ = {summary['theta_plus_rad']:.4f} rad, theta'+ = "
+             f"{summary['theta_dot_plus_rad_s']:.4f} rad/s: {failure['message']}")
     if json_out:
         print_json(summary)
     else:
@@ -119,5 +134,3 @@ def gait_cmd(
         ]))
         if failure is not None:
             con.print(f"[yellow]the walk ended early: {failure['message']}[/yellow]")
-    if failure is not None and not summary["steps_done"]:
-        raise typer.Exit(1)

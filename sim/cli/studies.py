@@ -16,7 +16,7 @@ from rimless.values import parse_numbers, parse_range
 
 
 @user_facing
-@wheel_params
+@wheel_params(exclude=("k", "c", "slope_deg", "slope_rad", "leg_mass_kg"))
 def stress_cmd(
     params: Any,
     k_values: Annotated[str, typer.Option("--k-values", help="Stiffnesses to sweep, N/m, comma-separated.")] =
@@ -48,9 +48,9 @@ def stress_cmd(
     else:
         reasons = sorted({r for m in out["counts"].values() for r in m})
         counts = Table(title=f"stress sweep: {out['points']} steps in {out['seconds']:.1f} s (rtol {rtol:g})")
-        counts.add_column("outcome")
+        counts.add_column("outcome", overflow="fold")
         for model in out["counts"]:
-            counts.add_column(model, justify="right")
+            counts.add_column(model, justify="right", no_wrap=True)
         for r in reasons:
             counts.add_row(r, *[str(out["counts"][m].get(r, 0)) for m in out["counts"]])
         con = console()
@@ -99,7 +99,7 @@ def paper_cmd(
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
                                                    "processes \\[default: one per core].")] = None,
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Sweep result cache "
-                                                      "[~/.cache/rimless/sweep].")] = None,
+                                                      "[$RIMLESS_CACHE_DIR/sweep, else ~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every sweep point.")] = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -137,10 +137,12 @@ def paper_cmd(
     con.print(headline)
     for f in summary["files"]:
         con.print(f"wrote {f}", soft_wrap=True)
+    for note in summary["notes"]:
+        con.print(f"note: {note}")
     con.print(f"load average {timings['load_average_before']:.1f} before, "
-              f"{timings['load_average_after']:.1f} after (other work on the machine slows every timing)", soft_wrap=True)
+              f"{timings['load_average_after']:.1f} after (other work on the machine slows every timing)")
     con.print(f"in {timings['total']:.1f} s (sweep {timings['sweep']:.1f} s: {sweep['computed']} grid "
-              f"points computed, {sweep['cached']} cached, {sweep['workers']} worker(s))", soft_wrap=True)
+              f"points computed, {sweep['cached']} cached, {sweep['workers']} worker(s))")
 
 
 def register_top_level(root: typer.Typer) -> None:

@@ -12,7 +12,7 @@ from rimless.errors import ParameterError
 from rimless.progress import progress_bar
 from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt,
                                  SwitchEnergyOpt, VeElectronicsOpt, check_plot_path, check_scheduler, clutch_power,
-                                 wheel_params)
+                                 refuse_unused, start_slope, wheel_params)
 from rimless.sim.cli.output import console
 from rimless.values import parse_list, parse_range
 
@@ -44,6 +44,7 @@ def firmware_sweep_cmd(
 
     if plot is not None:
         check_plot_path(plot)
+    check_scheduler(scheduler)
     rates = parse_range(rates_hz, "--rates-hz")
     delays = parse_range(delays_ms, "--delays-ms")
     if any(not 1.0 <= r <= 1e6 for r in rates):
@@ -84,7 +85,8 @@ def sweep_cmd(
     hub_mass_grid: Annotated[Optional[str], typer.Option("--hub-mass-kg", metavar="START:STOP:STEP|a,b", help="Hub mass grid, kg.")] = None,
     mass_models: Annotated[Optional[str], typer.Option("--mass-model", metavar="NAME[,NAME]", help="Mass models, comma-separated "
                                                       "(eight-leg, sliding-leg, active-feet).")] = None,
-    start_slope_rad: Annotated[float, typer.Option(help="Slope where the gaits are searched, rad.")] = 0.05,
+    start_slope_rad: Annotated[Optional[float], typer.Option(help="Slope where the gaits are searched, rad "
+                                                             "[the wheel's slope: --slope-deg, 0.05 rad].")] = None,
     guesses: Annotated[int, typer.Option(min=2, max=200, help="Number of theta'+ guesses in the gait search.")] = 14,
     out: Annotated[Path, typer.Option("--out", metavar="STEM", help="Output stem: writes STEM.parquet, STEM.csv "
                                       "and STEM-points.parquet/.csv (branch points).")] = Path("rimless-sweep/sweep"),
@@ -94,7 +96,7 @@ def sweep_cmd(
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, max=256, help="Local cluster worker "
                                                    "processes \\[default: one per core].")] = None,
     cache_dir: Annotated[Optional[Path], typer.Option("--cache-dir", help="Per-point result cache "
-                                                      "[~/.cache/rimless/sweep].")] = None,
+                                                      "[$RIMLESS_CACHE_DIR/sweep, else ~/.cache/rimless/sweep].")] = None,
     no_cache: Annotated[bool, typer.Option("--no-cache", help="Recompute every point and store nothing.")] = False,
     bench: Annotated[bool, typer.Option("--bench", help="Benchmark instead: the grid (no cache) in-process, on 1 and "
                                         "on 2 workers, and the branch-end location by pseudo-arclength against "
@@ -145,6 +147,7 @@ def sweep_cmd(
                              "of transport is reported by the branch sweep (--clutch ideal)")
     grid_texts = {"k": k_grid, "c": c_grid, "leg_mass_kg": leg_mass_grid, "hub_mass_kg": hub_mass_grid}
     if clutch is ClutchKind.firmware:
+        refuse_unused(("start_slope_rad", "guesses", "backend", "rtol"), "is not used by --clutch firmware")
         _firmware_sweep(params, models=models, grid_texts=grid_texts, mass_models=mass_models, bench=bench,
                         scheduler=scheduler, workers=workers, cache=None if no_cache else (cache_dir or default_cache_dir()),
                         out=out, json_out=json_out, rate_hz=fw_rate_hz, clutch_delay_ms=fw_delay_ms,
@@ -155,8 +158,10 @@ def sweep_cmd(
                         ("--plot", fw_plot), ("--critical-slope", fw_critical or None)):
         if given is not None:
             raise ParameterError(f"{flag} {given}: needs --clutch firmware")
+    refuse_unused(("fw_steps", "fw_seed", "fw_low_deg"), "needs --clutch firmware")
     model_list = parse_list(models, "--model", choices=("er", "ve"), lower=True)
     mm = parse_list(mass_models or params.mass_model, "--mass-model", choices=MASS_MODELS)
+    start_slope_rad = start_slope(params, start_slope_rad)
     if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
         raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
     check_scheduler(scheduler)
@@ -189,7 +194,7 @@ def sweep_cmd(
     for p in summary["files"]:
         con.print(f"wrote {p}", soft_wrap=True)
     con.print(f"{n_points} grid points ({summary['computed']} computed, {summary['cached']} from the cache) in "
-              f"{summary['seconds']:.1f} s on {summary['workers']} worker(s), scheduler {scheduler}", soft_wrap=True)
+              f"{summary['seconds']:.1f} s on {summary['workers']} worker(s), scheduler {scheduler}")
 
 
 def _firmware_sweep(params: Any, *, models: str, grid_texts: dict[str, Optional[str]], mass_models: Optional[str],
@@ -254,4 +259,4 @@ def _print_sweep_table(rows: list[dict[str, Any]]) -> None:
     con = console()
     con.print(table)
     for n in notes:
-        con.print(n, soft_wrap=True)
+        con.print(n)

@@ -86,7 +86,7 @@ def plot_forces(traj: GaitTrajectory, ax) -> None:  # noqa: ANN001
     ax.axhline(0.0, color="k", lw=0.8, ls="--")
     neg = np.where(np.nan_to_num(tab["lambda_b_y_N"], nan=1.0) < 0, tab["lambda_b_y_N"], np.nan)
     ax.plot(t, neg, color="red", lw=2, label="tensile (unphysical) transient")
-    ax.set_ylabel("vertical GRF (N)")
+    ax.set_ylabel("slope-normal GRF (N)")
     ax.legend(fontsize=7, loc="upper right")
 
 

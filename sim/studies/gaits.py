@@ -65,6 +65,60 @@ def start_guess(params: Any, model: str, *, theta_dot_guess: Optional[float], th
     return fp.z.copy()
 
 
+def solve_or_search(pmap: Any, guess: np.ndarray, *, jacobian: Any = None, diagnostics: bool = False,
+                    strict_contact: bool = False, progress: GaitsProgress = None) -> tuple[Any, str]:
+    """The period-1 gait nearest `guess` (theta+ rad, theta'+ rad/s): Newton from the guess, and when that fails,
+    the gaits search (find_gaits, as `rimless sim gaits`) and its stable gait nearest the guess in theta'+ (an
+    unstable one if none is stable). Returns (FixedPoint, how it was found: "newton" or "gaits search").
+    Raises the Newton failure (NoFixedPoint) when the search finds no gait either."""
+    from rimless.errors import interrupted_by_user
+    from rimless.sim.step.poincare import NoFixedPoint, find_gaits, solve_fixed_point
+
+    try:
+        return solve_fixed_point(pmap, guess, jacobian=jacobian, diagnostics=diagnostics,
+                                 strict_contact=strict_contact), "newton"
+    except NoFixedPoint as err:
+        newton_failure = err
+    if _integrator_gave_up(newton_failure.last_failure):  # the search would fail the same way at every guess
+        raise newton_failure
+    try:
+        found = find_gaits(pmap, progress=progress)
+    except Exception as err:  # noqa: BLE001 - the Newton failure is the one to report
+        if interrupted_by_user(err):
+            raise KeyboardInterrupt from err
+        raise newton_failure from None
+    if not found:
+        raise newton_failure
+    pool = [fp for fp in found if fp.stable] or found
+    best = min(pool, key=lambda fp: abs(float(fp.z[1]) - float(guess[1])))
+    fp = solve_fixed_point(pmap, best.z, jacobian=jacobian, diagnostics=diagnostics, strict_contact=strict_contact)
+    return fp, "gaits search"
+
+
+def _integrator_gave_up(err: Any) -> bool:
+    from rimless.sim.model.failures import FailureReason
+
+    return err is not None and getattr(err, "reason", None) is FailureReason.INTEGRATION
+
+
+def check_integrable(pmap: Any, params: Any, model: str, z: np.ndarray) -> None:
+    """Raise RunFailure at once when the integrator gives up on one step from `z` (its step budget spent, as
+    with very light, stiff legs): a scan of guesses would spend that budget at every guess (minutes) to
+    find nothing. A step failing for a physical reason (stall, lift-off) passes: another guess may walk."""
+    from rimless.sim.model.failures import StepFailure
+
+    try:
+        pmap(z)
+    except StepFailure as err:
+        if not _integrator_gave_up(err):
+            return
+        leg_period = 2 * math.pi * math.sqrt(params.leg_mass_kg / params.k)
+        raise RunFailure(f"no period-1 gait can be searched for the {model} wheel: the integrator gives up on one "
+                         f"step from theta'+ = {z[1]:.3f} rad/s ({err}); legs of {params.leg_mass_kg:g} kg on "
+                         f"k = {params.k:g} N/m oscillate with period {leg_period:.2g} s against a step of about "
+                         "0.3 s") from None
+
+
 def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[float] = None,
                       theta_plus_guess: Optional[float] = None, gait: Optional[int] = None,
                       strict_contact: bool = False, backend: str = "auto", rtol: float = 1e-10,
@@ -81,16 +135,25 @@ def fixed_point_study(params: Any, model: str, *, theta_dot_guess: Optional[floa
                         gait=gait, backend=backend, rtol=rtol, progress=progress)
     pmap = make_map(params, model, backend=backend, rtol=rtol)
     jf = jacobian_factory(backend)
+    jacobian = jf(pmap) if jf else None
     try:
-        fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None, diagnostics=True,
-                               strict_contact=strict_contact)
+        if theta_dot_guess is None and theta_plus_guess is None and gait is None:
+            # the default guess: when Newton fails from it, the gaits search finds the gait if there is one
+            fp, found_by = solve_or_search(pmap, guess, jacobian=jacobian, diagnostics=True,
+                                           strict_contact=strict_contact, progress=progress)
+        else:  # a guess the user chose is followed as given
+            fp = solve_fixed_point(pmap, guess, jacobian=jacobian, diagnostics=True, strict_contact=strict_contact)
+            found_by = "newton"
     except StepFailure as err:
+        searched = " or by the gaits search" if theta_dot_guess is None and theta_plus_guess is None and gait is None \
+            else ""
         raise RunFailure(f"no period-1 gait found for the {model} wheel from the guess "
-                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s: {err}") from None
+                         f"theta+ = {guess[0]:.4f} rad, theta'+ = {guess[1]:.4f} rad/s{searched}: {err}") from None
     from rimless.sim.model.electrical import ClutchPower
     from rimless.sim.step.cot import step_cot
 
     out = fixed_point_summary(fp, params, model, guess=guess)
+    out["found_by"] = found_by
     power = power or ClutchPower()
     out.update(step_cot(fp.step, params, model, power))
     out["electrical_power"] = power.as_dict()
@@ -110,6 +173,9 @@ def gait_scan(params: Any, model: str, *, theta_dot_min: float = 0.8, theta_dot_
     if not 0 < theta_dot_min < theta_dot_max:
         raise ParameterError("need 0 < --theta-dot-min < --theta-dot-max (rad/s)")
     pmap = make_map(params, model, backend=backend, rtol=rtol)
+    from rimless.sim.step.poincare import default_guess
+
+    check_integrable(pmap, params, model, default_guess(params, model))
     found = find_gaits(pmap, theta_dot_range=(theta_dot_min, theta_dot_max), n_guesses=guesses,
                        progress=progress, include_invalid=True)
     items = []

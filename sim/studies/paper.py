@@ -3,7 +3,7 @@ the paper's headline numbers beside ours, and an index page.
 
 Figures (paper section "Numerical Simulation"):
 1. typical gaits, ER and VE side by side: leg lengths, CoM height, stick diagrams with the phases;
-2. vertical ground reaction forces of both, the leading leg's tensile transient marked;
+2. slope-normal ground reaction forces of both, the leading leg's tensile transient marked;
 3. energy transition ratio E+/E- over steps for several k, from a perturbed post-impact state;
 4. max |eig| against slope for several k, both models, every stable branch (unit circle dashed);
 5. CoT = tan(critical slope) against k: ER, every VE branch, the rigid wheel; contact-valid points filled;
@@ -13,6 +13,7 @@ Figures 4-6 come from a sweep over k (rimless.sim.studies.sweep), so they run on
 
 from __future__ import annotations
 
+import contextlib
 import html
 import math
 import os
@@ -26,7 +27,8 @@ import numpy as np
 
 from rimless.sim.model.params import WheelParams
 from rimless.sim.studies.paper_figures import (EIGEN_K, PERTURBATION, figure_cot, figure_eigenvalues,
-                                               figure_energy_ratio, figure_forces, figure_typical_gaits, write_csv)
+                                               figure_energy_ratio, figure_forces, figure_typical_gaits,
+                                               missing_eigen_curves, write_csv)
 
 K_GRID = tuple(range(1500, 3501, 250))
 ENERGY_K = (2000.0, 2500.0, 3000.0, 3500.0)
@@ -51,26 +53,35 @@ class PaperResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     sweep: Any = None
     system_cot: list[dict[str, Any]] = field(default_factory=list)  # rimless.sim.studies.paper_system_cot rows
+    notes: list[str] = field(default_factory=list)  # requested points a figure could not show, and why
 
 
-def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float, theta_dot: float | None = None) -> Any:
+def _fixed_point(params: WheelParams, model: str, backend: str, rtol: float) -> Any:
+    """(map, fixed point): Newton from the default guess, the gaits search when that fails."""
     from rimless.sim.step.backend import make_map
-    from rimless.sim.step.poincare import default_guess, solve_fixed_point
+    from rimless.sim.step.poincare import default_guess
+    from rimless.sim.studies.gaits import solve_or_search
 
     pmap = make_map(params, model, backend=backend, rtol=rtol)
-    z = default_guess(params, model)
-    if theta_dot is not None:
-        z[1] = theta_dot
-    return pmap, solve_fixed_point(pmap, z, jacobian=getattr(pmap, "jacobian", None))
+    fp, _ = solve_or_search(pmap, default_guess(params, model), jacobian=getattr(pmap, "jacobian", None))
+    return pmap, fp
 
 
 def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 2) -> dict[str, Any]:
+    """Figures 1 and 2's walks, both models from their period-1 gait; RunFailure when a model has none."""
+    from rimless.errors import RunFailure
+    from rimless.sim.model.failures import StepFailure
     from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
 
     out = {}
     for model in ("er", "ve"):
-        _, fp = _fixed_point(params, model, backend, rtol)
+        try:
+            _, fp = _fixed_point(params, model, backend, rtol)
+        except StepFailure as err:
+            raise RunFailure(f"figures 1-2: no period-1 gait of the {model.upper()} wheel at "
+                             f"{params.slope_deg:.4f} deg, k = {params.k:g} N/m, c = {params.c:g} N s/m "
+                             f"(Newton and the gaits search): {err}") from None
         out[model] = simulate_steps(params, model, fp.z, steps, make_integrator(backend, rtol), record_dt=1e-3,
                                     forces=True)
     return out
@@ -87,7 +98,9 @@ def energy_ratio_series(params: WheelParams, backend: str, rtol: float, ks: tupl
             p = params.replace(stiffness_n_per_m=float(k))
             try:
                 pmap, fp = _fixed_point(p, model, backend, rtol)
-            except StepFailure:
+            except StepFailure as err:  # kept as a row: the figure and the output name the missing curve
+                rows.append({"model": model.upper(), "k": k, "step": 0, "energy_ratio": math.nan,
+                             "failure": f"no period-1 gait: {err.reason.value}"})
                 continue
             z = np.array([fp.z[0], fp.z[1] * PERTURBATION])
             for i in range(steps):
@@ -325,9 +338,10 @@ def _write_table(table: list[dict[str, Any]], out: Path) -> list[Path]:
 CAPTIONS = {
     "fig1_typical_gaits": "Typical gaits of the viscoelastic (left) and energy-recycling (right) wheels: leg lengths, "
                           "CoM height and a stick diagram of one step, phases coloured.",
-    "fig2_ground_reaction_forces": "Vertical ground reaction forces; red: the leading foot's tensile transient at the "
+    "fig2_ground_reaction_forces": "Ground reaction forces normal to the slope; red: the leading foot's tensile transient at the "
                                    "start of double support (a rigid-contact artefact).",
-    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k.",
+    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k (a k without "
+                         "a gait is named on the figure).",
     "fig4_eigenvalue_map": "Max |eigenvalue| against slope along every branch stable at the start slope, several k, "
                            "down to the end of its stable, valid part; dashed with open markers: the gait violates "
                            "unilateral contact (found with the stance foot held); black dashed: unit circle.",
@@ -366,6 +380,33 @@ def _index(out: Path, table: list[dict[str, Any]], params: WheelParams, timings:
     return path
 
 
+class _Background:
+    """fn() in a daemon thread; result() waits for it and returns its value or raises its exception. Unlike a
+    ThreadPoolExecutor's thread, an interpreter leaving on Ctrl-C does not wait for it."""
+
+    def __init__(self, fn: Callable[[], Any]) -> None:
+        import threading
+
+        self._value: Any = None
+        self._error: BaseException | None = None
+
+        def run() -> None:
+            try:
+                self._value = fn()
+            except BaseException as err:  # noqa: BLE001 - handed to result()
+                self._error = err
+
+        self._thread = threading.Thread(target=run, name="rimless-paper-sweep", daemon=True)
+        self._thread.start()
+
+    def result(self) -> Any:
+        while self._thread.is_alive():  # short waits keep the main thread responsive to Ctrl-C
+            self._thread.join(0.1)
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
 def run_paper(
     out: Path,
     params: WheelParams = WheelParams(),
@@ -383,7 +424,7 @@ def run_paper(
 ) -> PaperResult:
     """Write every figure, CSV, the headline table and index.html into `out` (see module docstring)."""
     from rimless.sim.step.backend import resolve
-    from rimless.sim.studies.sweep import SweepOptions, grid_points, run_sweep, write_table
+    from rimless.sim.studies.sweep import SweepOptions, dask_client, grid_points, run_sweep, write_table
 
     import os
 
@@ -393,22 +434,9 @@ def run_paper(
     res.timings_s["load_average_before"] = os.getloadavg()[0]
     backend = resolve(backend)
     t0 = time.perf_counter()
-    client = cluster = None
-    if scheduler != "sync":
-        from dask.distributed import Client, LocalCluster
-
-        if scheduler == "local":
-            import os
-
-            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=40)
-            client = Client(cluster)
-        else:
-            try:
-                client = Client(scheduler, timeout=15)
-            except (OSError, TimeoutError) as err:
-                raise ConnectionError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
-    try:
+    stack = contextlib.ExitStack()
+    client = stack.enter_context(dask_client(scheduler, workers)) if scheduler != "sync" else None
+    with stack:
         say("sweep over k: every branch of both wheels")
         pts = grid_points(params, ("er", "ve"), {"k": list(ks)}, (params.mass_model,))
         options = SweepOptions(backend=backend, rtol=rtol, start_slope_rad=params.slope_rad)
@@ -419,33 +447,27 @@ def run_paper(
 
         # on a cluster the sweep's tasks run on the workers while this process draws figures 1-3 (the thread only
         # waits for results); in-process (sync) everything runs in turn
-        pool = None
-        if client is not None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            pool = ThreadPoolExecutor(max_workers=1)
-            sweep_future = pool.submit(sweep)
-        try:
-            t1 = time.perf_counter()
-            if pool is None:
-                sw = sweep()
-                res.timings_s["sweep"] = time.perf_counter() - t0
-                t1 = time.perf_counter()
-            say("typical gaits and forces")
-            trajs = _typical(params, backend, rtol)
-            res.files += figure_typical_gaits(trajs, out)
-            res.files += figure_forces(trajs, out)
-            res.timings_s["gaits"] = time.perf_counter() - t1
-            t2 = time.perf_counter()
-            say("energy transition ratios")
-            res.files += figure_energy_ratio(energy_ratio_series(params, backend, rtol, energy_ks), out)
-            res.timings_s["energy"] = time.perf_counter() - t2
-            if pool is not None:
-                sw = sweep_future.result()
-                res.timings_s["sweep"] = time.perf_counter() - t0
-        finally:
-            if pool is not None:
-                pool.shutdown(wait=False, cancel_futures=True)
+        pool = _Background(sweep) if client is not None else None  # a daemon: an interrupt never waits for it
+        t1 = time.perf_counter()
+        say("typical gaits and forces")
+        trajs = _typical(params, backend, rtol)
+        res.files += figure_typical_gaits(trajs, out)
+        res.files += figure_forces(trajs, out)
+        res.timings_s["gaits"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        say("energy transition ratios")
+        energy = energy_ratio_series(params, backend, rtol, energy_ks)
+        res.notes += [f"figure 3: {r['model']} at k = {r['k']:g} N/m not shown ({r['failure']})"
+                      for r in energy if r["step"] == 0]
+        res.files += figure_energy_ratio(energy, out)
+        res.timings_s["energy"] = time.perf_counter() - t2
+        if pool is not None:
+            sw = pool.result()
+            res.timings_s["sweep"] = time.perf_counter() - t0
+        else:  # in-process: after figures 1-3, so that a wheel without a gait fails in seconds
+            t_sweep = time.perf_counter()
+            sw = sweep()
+            res.timings_s["sweep"] = time.perf_counter() - t_sweep
         res.sweep = sw
         meta = {"params": params.to_dict(), "ks": list(ks), "backend": backend, "rtol": rtol}
         res.files += write_table(sw.rows, out / "sweep", meta)
@@ -466,14 +488,11 @@ def run_paper(
             curves = [row for r in starts for row in boundary_curve(r, params.to_dict(), backend, rtol, k_range)]
             ranges = [validity_range(r, params.to_dict(), backend, rtol, k_range) for r in starts]
         res.timings_s["boundary_curves_wait"] = time.perf_counter() - t1
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
     t3 = time.perf_counter()
     say("eigenvalue map, cost of transport and the headline table")
     res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
+    res.notes += [f"figure 4: {m} at k = {k:g} N/m not shown (no branch stable at the start slope)"
+                  for m, k in missing_eigen_curves(sw.rows, eigen_ks)]
     res.files += figure_cot(cot_rows(sw.rows, params), out, curves, ranges)
     res.table = headline_table(sw.rows, [], params, ranges)
     for v in ranges:
@@ -511,6 +530,7 @@ def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backen
     `ks`, run_paper; returns the command's JSON object. An interrupted run removes the folder it created."""
     from rimless.errors import ParameterError, interrupted_by_user
     from rimless.output import writable_dir
+    from rimless.sim.studies.sweep import worker_failure
 
     for k in ks:
         try:
@@ -531,14 +551,17 @@ def paper_study(out: Path, params: WheelParams, *, ks: tuple[float, ...], backen
     try:
         res = run_paper(out, params, ks=ks, backend=backend, rtol=rtol, scheduler=scheduler, workers=workers,
                         cache_dir=cache_dir, energy_ks=energy_ks, eigen_ks=eigen_ks, progress=progress, power=power)
-    except ConnectionError as err:
-        raise ParameterError(f"--scheduler: {err}") from None
     except BaseException as err:
-        if out_is_new and interrupted_by_user(err):  # an interrupted run leaves no half-filled folder behind
+        if out_is_new:  # an interrupted or failed run leaves no half-filled folder behind
             import shutil
 
             shutil.rmtree(out, ignore_errors=True)
+        if isinstance(err, ConnectionError):
+            raise ParameterError(f"--scheduler: {err}") from None
+        if isinstance(err, Exception) and not interrupted_by_user(err):
+            worker_failure(err, scheduler)
         raise
-    return {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "timings_s": res.timings_s,
+    return {"out": str(out), "files": [str(f) for f in res.files], "table": res.table, "notes": res.notes,
+            "timings_s": res.timings_s,
             "sweep": {"computed": res.sweep.computed, "cached": res.sweep.cached, "workers": res.sweep.workers},
             "system_cot": res.system_cot}

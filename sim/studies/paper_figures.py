@@ -29,11 +29,21 @@ def write_csv(frame: Any, path: Path) -> Path:
     return path
 
 
+def phase_key(traj: Any) -> list[Any]:
+    """Legend patches for the phase shading of `traj` (the phases it goes through)."""
+    from matplotlib.patches import Patch
+
+    from rimless.sim.studies.figures import PHASE_COLOURS, PHASE_LABELS
+
+    seen = {rec.name for st in traj.steps for rec in st.phases} if getattr(traj, "steps", None) else set(PHASE_COLOURS)
+    return [Patch(color=c, label=f"shading: {PHASE_LABELS[n]}") for n, c in PHASE_COLOURS.items() if n in seen]
+
+
 def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
     """Figure 1: leg lengths, CoM height and stick diagrams of both wheels side by side."""
     import pandas as pd
 
-    from rimless.sim.studies.figures import PHASE_COLOURS, shade_phases, save_figure, stick_diagram
+    from rimless.sim.studies.figures import shade_phases, save_figure, stick_diagram
 
     plt = pyplot()
     fig, axes = plt.subplots(3, 2, figsize=(12, 10), constrained_layout=True)
@@ -47,7 +57,7 @@ def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
         ax.plot(tab["t_s"], tab["L2_m"] * 1e3, label="trailing leg L2")
         ax.set_ylabel("leg length (mm)")
         ax.set_title(f"({'ad'[col]}) {name}: leg lengths")
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(handles=ax.get_legend_handles_labels()[0] + phase_key(traj), fontsize=7, loc="lower right")
         ax = axes[1, col]
         shade_phases(ax, traj)
         ax.plot(tab["t_s"], tab["com_height_normal_m"] * 1e3, color="C2")
@@ -58,7 +68,7 @@ def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
         stick_diagram(traj, ax, step=0, every_s=0.03)
         ax.set_title(f"({'cf'[col]}) {name}: stick diagram of one step")
     fig.suptitle(f"typical gaits at {trajs['er'].params.slope_deg:.3f} deg, k = {trajs['er'].params.k:g} N/m "
-                 f"(phases: {', '.join(PHASE_COLOURS)})")
+                 "(shading: the phase of the step)")
     png = save_figure(fig, out / "fig1_typical_gaits.png")
     frames = [pd.DataFrame(trajs[m].table).assign(model=m.upper()) for m in ("er", "ve")]
     csv = write_csv(pd.concat(frames, ignore_index=True), out / "fig1_typical_gaits.csv")
@@ -66,7 +76,7 @@ def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
 
 
 def figure_forces(trajs: dict[str, Any], out: Path) -> list[Path]:
-    """Figure 2: vertical ground reaction forces of both wheels, the tensile transient marked."""
+    """Figure 2: slope-normal ground reaction forces of both wheels, the tensile transient marked."""
     import pandas as pd
 
     from rimless.sim.studies.figures import plot_forces, save_figure
@@ -97,20 +107,38 @@ def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
 
     from rimless.sim.studies.figures import save_figure
 
+    from matplotlib.ticker import MaxNLocator
+
     plt = pyplot()
     frame = pd.DataFrame(rows)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), constrained_layout=True, sharey=True)
     for ax, model in zip(axes, ("VE", "ER")):
-        sub = frame[frame.model == model]
-        for j, (k, g) in enumerate(sub.groupby("k")):
-            ax.plot(g["step"], g["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m")
+        sub = frame[frame.model == model] if len(frame) else frame
+        missing = []
+        for j, (k, g) in enumerate(sub.groupby("k") if len(sub) else []):
+            walked = g[g["step"] > 0]
+            if not len(walked):  # no gait to start from: named on the figure, not dropped silently
+                missing.append(f"k = {k:g} N/m: {g['failure'].iloc[0]}")
+                continue
+            ax.plot(walked["step"], walked["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m")
+        if missing:
+            ax.text(0.02, 0.02, "not shown (no gait):\n" + "\n".join(missing), transform=ax.transAxes, fontsize=7,
+                    va="bottom", color="C3")
         ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
         ax.set_xlabel("step")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
     axes[0].set_ylabel("energy transition ratio E+/E- (%)")
     fig.suptitle(f"energy transition ratio at impact from a perturbed start (theta'+ x {PERTURBATION})")
     return [save_figure(fig, out / "fig3_energy_ratio.png"), write_csv(frame, out / "fig3_energy_ratio.csv")]
+
+
+def missing_eigen_curves(rows: list[dict[str, Any]], ks: tuple[float, ...] = EIGEN_K) -> list[tuple[str, float]]:
+    """(model, k) of figure 4's requested curves that have no branch stable at the start slope to draw."""
+    have = {(r["model"], r["k"]) for r in rows if r.get("stable_at_start")}
+    return [(m, float(k)) for m in ("VE", "ER") for k in ks if (m, float(k)) not in have]
 
 
 def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]], out: Path,
@@ -159,11 +187,17 @@ def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]],
                     ax.plot(g["slope_deg"][~valid], g["max_abs_eigenvalue"][~valid], "o", mfc="white", color=col,
                             ms=3.5)
         ax.axhline(1.0, color="k", ls="--", lw=1)
+        missing = [k for m, k in missing_eigen_curves(rows, ks) if m == model]
+        if missing:  # a requested k without a curve is named, not dropped silently
+            ax.text(0.02, 0.02, "no branch stable at the start slope: k = " + ", ".join(f"{k:g}" for k in missing)
+                    + " N/m", transform=ax.transAxes, fontsize=7, color="C3", va="bottom")
         ax.set_xlabel("slope (deg)")
         ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
         ax.grid(alpha=0.3)
-        ax.plot([], [], "--o", mfc="white", color="0.4", lw=1, ms=3.5, label="violates unilateral contact")
-        ax.legend(fontsize=7)
+        if len(sub) and not sub[sub.k.isin(ks)]["contact_valid"].astype(bool).all():  # a key only for what is drawn
+            ax.plot([], [], "--o", mfc="white", color="0.4", lw=1, ms=3.5, label="violates unilateral contact")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     axes[0].set_ylabel("max |eigenvalue| of the Poincare map")
     return [save_figure(fig, out / "fig4_eigenvalue_map.png"), write_csv(data, out / "fig4_eigenvalue_map.csv")]
 

@@ -7,26 +7,36 @@ the start slope, each followed down in slope) is independent of every other poin
   (or `workers`), created and closed here;
 - `scheduler="tcp://HOST:8786"`: a cluster a lab already runs.
 Every worker loads the compiled kernels once (numba's on-disk cache, rimless.sim.fast.warm_up) before the
-first task, not per task. Results are cached on disk, one JSON file per grid point named by the hash of
-everything that determines it (parameters, model, options, CACHE_VERSION), so a re-run or an extended grid
-recomputes nothing already done.
+first task, not per task. Results are cached on disk (under $RIMLESS_CACHE_DIR/sweep, else
+~/.cache/rimless/sweep), one JSON file per grid point named by the hash of everything that determines it: its
+parameters, model and options, and the source of the code that computes it (the simulator's model, generated
+kernels, integrators, step and continuation, the computing module and, for the firmware in the loop, the
+firmware's control path; `code_fingerprint`), so a re-run or an extended grid recomputes nothing already done
+and no edit to that code can return a stale row.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
 import json
 import math
 import os
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from rimless.errors import ParameterError
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4  # the layout of a cached file; the code is keyed by code_fingerprint
+# the packages every grid point's result depends on (source files hashed into the cache key)
+CODE_PACKAGES = ("rimless.sim.model", "rimless.sim.integrate", "rimless.sim.fast", "rimless.sim.step",
+                 "rimless.sim.continuation")
+# what a computation in the firmware-in-the-loop package depends on besides
+LOOP_PACKAGES = ("rimless.sim.in_the_loop", "rimless.firmware")
 # sweepable parameters: option name -> (WheelParams field, unit)
 GRID_PARAMETERS: dict[str, tuple[str, str]] = {
     "k": ("stiffness_n_per_m", "N/m"),
@@ -37,9 +47,54 @@ GRID_PARAMETERS: dict[str, tuple[str, str]] = {
 }
 
 
-def default_cache_dir() -> Path:
+def cache_root() -> Path:
+    """Where the project keeps its caches: $RIMLESS_CACHE_DIR, else $XDG_CACHE_HOME/rimless, else ~/.cache/rimless."""
+    own = os.environ.get("RIMLESS_CACHE_DIR")
+    if own:
+        return Path(own).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "rimless" / "sweep"
+    return Path(base) / "rimless"
+
+
+def default_cache_dir() -> Path:
+    """The sweep result cache: cache_root()/sweep."""
+    return cache_root() / "sweep"
+
+
+def _package_files(name: str) -> list[Path]:
+    """The source files of the package or module `name` (found without importing it)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.origin is None:
+        return []
+    origin = Path(spec.origin)
+    if spec.submodule_search_locations:
+        return sorted(p for loc in spec.submodule_search_locations for p in Path(loc).rglob("*.py"))
+    return [origin]
+
+
+@functools.lru_cache(maxsize=None)
+def code_fingerprint(module: str = "") -> str:
+    """sha256 of the source of CODE_PACKAGES and of `module` (the computing function's module; its package's
+    LOOP_PACKAGES too when it belongs to the firmware in the loop), with the versions of numpy, scipy and numba:
+    the part of a grid point's cache key that changes with any edit to the code that computes the point."""
+    import importlib.metadata as md
+
+    names = list(CODE_PACKAGES) + ([module] if module else [])
+    if module.startswith("rimless.sim.in_the_loop"):
+        names += LOOP_PACKAGES
+    h = hashlib.sha256()
+    for name in names:
+        for path in _package_files(name):
+            h.update(f"{name}:{path.name}\0".encode())
+            h.update(path.read_bytes())
+    for dist in ("numpy", "scipy", "numba"):
+        try:
+            h.update(f"{dist}={md.version(dist)}".encode())
+        except md.PackageNotFoundError:
+            h.update(f"{dist}=none".encode())
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -68,9 +123,13 @@ def grid_points(base: Any, models: Iterable[str], grid: dict[str, list[float]], 
     return out
 
 
-def point_key(point: dict[str, Any], options: SweepOptions) -> str:
-    """The cache key of a grid point: sha256 of its parameters, model, options and CACHE_VERSION."""
-    payload = json.dumps({"v": CACHE_VERSION, "point": point, "options": options.__dict__}, sort_keys=True)
+def point_key(point: dict[str, Any], options: Any, compute: Callable[..., Any] | None = None) -> str:
+    """The cache key of a grid point: sha256 of its parameters, model, options, CACHE_VERSION and the
+    fingerprint of the code that computes it (`compute`, default compute_point)."""
+    fn = compute or compute_point
+    payload = json.dumps({"v": CACHE_VERSION, "point": point, "options": options.__dict__,
+                          "compute": f"{fn.__module__}.{fn.__qualname__}", "code": code_fingerprint(fn.__module__)},
+                         sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()[:32]
 
 
@@ -114,11 +173,12 @@ def _worker_setup() -> float:
     return float(fast.warm_up())
 
 
-def _read_cached(cache_dir: str | None, point: dict[str, Any], options: SweepOptions) -> dict[str, Any] | None:
+def _read_cached(cache_dir: str | None, point: dict[str, Any], options: Any,
+                 compute: Callable[..., Any] | None = None) -> dict[str, Any] | None:
     """The cached result of `point` (marked ``cached``), or None when there is none or it cannot be read."""
     if not cache_dir:
         return None
-    path = Path(cache_dir) / f"{point_key(point, options)}.json"
+    path = Path(cache_dir) / f"{point_key(point, options, compute)}.json"
     if not path.exists():
         return None
     try:
@@ -131,12 +191,12 @@ def _read_cached(cache_dir: str | None, point: dict[str, Any], options: SweepOpt
 
 def _cached_compute(point: dict[str, Any], options: Any, cache_dir: str | None,
                     compute: Callable[[dict[str, Any], Any], dict[str, Any]] | None = None) -> dict[str, Any]:
-    hit = _read_cached(cache_dir, point, options)
+    hit = _read_cached(cache_dir, point, options, compute)
     if hit is not None:
         return hit
     out = (compute or compute_point)(point, options)
     if cache_dir:
-        _write_json_atomic(Path(cache_dir) / f"{point_key(point, options)}.json", out)
+        _write_json_atomic(Path(cache_dir) / f"{point_key(point, options, compute)}.json", out)
     out["cached"] = False
     return out
 
@@ -158,6 +218,98 @@ class SweepResult:
     scheduler: str
     workers: int
     setup_s: float
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
+    """A dask.distributed Client on a LocalCluster of `workers` single-threaded processes (scheduler "local")
+    or on a running scheduler ("tcp://HOST:PORT"), closed on the way out.
+
+    Ctrl-C is the main process's alone: the local workers start with SIGINT blocked (so a Ctrl-C sent to
+    the process group does not print a traceback in every worker), and on an interrupt the workers are
+    killed and the cluster closed at once, its shutdown logs silenced, before the KeyboardInterrupt goes on.
+    An unreachable scheduler raises ConnectionError."""
+    import logging
+    import signal
+    import threading
+
+    from dask.distributed import Client, LocalCluster
+
+    cluster = client = None
+    main = threading.current_thread() is threading.main_thread()
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if main else None
+    try:
+        try:
+            if scheduler == "local":
+                # created with SIGINT blocked: the cluster's threads and the worker processes they spawn
+                # inherit the mask; a Ctrl-C meanwhile waits for the unblock below
+                try:
+                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                                           processes=True, dashboard_address=":0", silence_logs=logging.ERROR)
+                except Exception as err:  # noqa: BLE001 - Dask wraps what went wrong (a worker died, no port, ...)
+                    from rimless.errors import RunFailure
+
+                    cause = err.__cause__ or err
+                    raise RunFailure(f"cannot start a local Dask cluster: {type(cause).__name__}: "
+                                     f"{str(cause).splitlines()[0] if str(cause) else err}") from None
+                client = Client(cluster)
+            else:
+                try:
+                    client = Client(scheduler, timeout=15)
+                except (OSError, TimeoutError) as err:
+                    raise ConnectionError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
+        finally:
+            if old_mask is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        yield client
+    except BaseException:
+        _close_at_once(client, cluster)
+        raise
+    else:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _close_at_once(client: Any, cluster: Any) -> None:
+    """After an interrupt or an error: kill the local workers, close client and cluster without waiting for
+    them, and keep Dask's shutdown messages (lost workers, cancelled tasks) off the terminal."""
+    import logging
+
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    if cluster is not None:
+        try:
+            import psutil
+            from multiprocessing import resource_tracker
+
+            keep = {getattr(resource_tracker._resource_tracker, "_pid", None)}  # noqa: SLF001 - not a worker
+            for child in psutil.Process().children(recursive=True):
+                if child.pid not in keep and "resource_tracker" not in " ".join(child.cmdline()):
+                    with contextlib.suppress(Exception):
+                        child.kill()
+        except Exception:  # noqa: BLE001 - best effort; close() below ends them anyway
+            pass
+    for obj in (client, cluster):
+        if obj is None:
+            continue
+        with contextlib.suppress(BaseException):
+            obj.close(timeout=0.5)
+
+
+def worker_failure(err: BaseException, scheduler: str) -> None:
+    """Raise a one-line UserError when `err`, raised by a task or set-up on a Dask worker, says the worker
+    cannot import rimless (the package is not installed where the worker runs)."""
+    from rimless.errors import RimlessError, UserError
+
+    if isinstance(err, RimlessError):  # already classified
+        return
+    text = f"{type(err).__name__}: {err}"
+    if isinstance(err, ImportError) or "No module named 'rimless" in text:
+        missing = getattr(err, "name", None) or "rimless"
+        raise UserError(f"--scheduler {scheduler}: a Dask worker cannot import {missing} ({text.splitlines()[0]}); "
+                        "install rimless (pip install -e \".[pc]\") in the environment every worker runs in") from None
 
 
 def run_sweep(
@@ -183,7 +335,7 @@ def run_sweep(
     results: list[dict[str, Any] | None] = [None] * len(points)
     todo = []
     for i, pt in enumerate(points):  # cache hits never reach a worker
-        results[i] = _read_cached(cache, pt, options)
+        results[i] = _read_cached(cache, pt, options, compute)
         if results[i] is None:
             todo.append(i)
     done = len(points) - len(todo)
@@ -199,39 +351,28 @@ def run_sweep(
             if progress:
                 progress(done, len(points))
     elif todo:
-        from dask.distributed import Client, LocalCluster, as_completed
+        from dask.distributed import as_completed
 
-        own_cluster = None
-        own_client = client is None
-        if client is None:
-            if scheduler == "local":
-                n = workers or os.cpu_count() or 1
-                own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                           silence_logs=40)
-                client = Client(own_cluster)
-            elif scheduler.startswith("tcp://") or scheduler.startswith("tls://"):
-                try:
-                    client = Client(scheduler, timeout=15)
-                except (OSError, TimeoutError) as err:
-                    raise ConnectionError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
-            else:
-                raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
-        try:
-            t_setup = time.perf_counter()
-            client.run(setup)  # once per worker, before any task
-            setup_s = time.perf_counter() - t_setup
-            n_workers = len(client.scheduler_info().get("workers", {})) or 1
-            futures = {client.submit(_cached_compute, points[i], options, cache, compute, pure=False): i for i in todo}
-            for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
-                done += 1
-                if progress:
-                    progress(done, len(points))
-        finally:
-            if own_client:
-                client.close()
-            if own_cluster is not None:
-                own_cluster.close()
+        if client is None and not (scheduler == "local" or scheduler.startswith(("tcp://", "tls://"))):
+            raise ParameterError(f"--scheduler must be local, sync or tcp://HOST:PORT, got {scheduler!r}")
+        with contextlib.ExitStack() as stack:
+            if client is None:
+                client = stack.enter_context(dask_client(scheduler, workers))
+            try:
+                t_setup = time.perf_counter()
+                client.run(setup)  # once per worker, before any task
+                setup_s = time.perf_counter() - t_setup
+                n_workers = len(client.scheduler_info().get("workers", {})) or 1
+                futures = {client.submit(_cached_compute, points[i], options, cache, compute, pure=False): i
+                           for i in todo}
+                for fut in as_completed(futures):
+                    results[futures[fut]] = fut.result()
+                    done += 1
+                    if progress:
+                        progress(done, len(points))
+            except Exception as err:
+                worker_failure(err, scheduler)
+                raise
     rows = [r for res in results if res is not None for r in res["rows"]]
     pts = [r for res in results if res is not None for r in res["points"]]
     computed = sum(1 for res in results if res is not None and not res.get("cached"))

@@ -31,7 +31,7 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
     from rimless.sim.model.mechanics import ALPHA
     from rimless.sim.step.gait import simulate_steps
     from rimless.sim.step.poincare import solve_fixed_point
-    from rimless.sim.studies.gaits import start_guess
+    from rimless.sim.studies.gaits import solve_or_search, start_guess
 
     for path, exts in ((out, TRAJECTORY_SUFFIXES), (plot, FIGURE_SUFFIXES)):
         if path is not None and path.suffix.lower() not in exts:
@@ -50,14 +50,17 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
         guess = start_guess(params, model, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
                             gait=gait, backend=backend, rtol=rtol)
         try:
-            fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None)
+            if theta_dot_guess is None and theta_plus_guess is None and gait is None:
+                fp, _ = solve_or_search(pmap, guess, jacobian=jf(pmap) if jf else None)  # the gaits search if need be
+            else:
+                fp = solve_fixed_point(pmap, guess, jacobian=jf(pmap) if jf else None)
         except StepFailure as err:
             raise RunFailure(f"no fixed point to start from ({err}); give --theta-dot") from None
         z0 = fp.z
         start = "fixed point"
     traj = simulate_steps(params, model, z0, steps, make_integrator(backend, rtol), record_dt=sample_dt_s,
                           forces=forces, progress=progress)
-    if out is not None:
+    if out is not None and traj.steps:  # no step, no file: the command fails with the reason
         from rimless.sim.step.gait import write_trajectory
 
         write_trajectory(traj, out, {"start": start, "backend": backend, "rtol": rtol})
@@ -78,6 +81,6 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
         "step_periods_s": [s.period_s for s in traj.steps],
         "energy_ratios": [s.impact.energy_ratio for s in traj.steps],
         "failure": None if traj.failure is None else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
-        "out": str(out) if out else None,
+        "out": str(out) if out and traj.steps else None,
         "plot": str(plot) if plot and traj.steps else None,
     }
