@@ -424,9 +424,14 @@ def listen(
 
     @user_facing
     def go() -> None:
+        from rimless.errors import ParameterError
         from rimless.firmware.link.listen import listen as do_listen
 
         hb = None
+        if host is None and (token or token_file is not None):
+            if token_file is not None:
+                _token(None, token_file)  # a missing or unsafe file is named first
+            raise ParameterError("--token and --token-file act only with --host (the heartbeat to the robot)")
         if host is not None:
             from rimless.firmware.link.heartbeat import Heartbeat
 
