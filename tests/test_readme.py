@@ -126,6 +126,7 @@ def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return where
 
 
+@pytest.mark.xdist_group("readme")  # in README order on one worker: later commands read what earlier ones wrote
 @pytest.mark.parametrize("command", COMMANDS, ids=[f"{i:02d} {c[:60]}" for i, c in enumerate(COMMANDS)])
 def test_readme_command_runs_as_written(command: str, mirror: Path, request: pytest.FixtureRequest) -> None:
     reason = not_run_reason(command)

@@ -31,19 +31,37 @@ numpy, scipy, numba, rimless.errors. Never step/, continuation/, studies/, in_th
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from rimless.sim.fast import model as fm
-from rimless.sim.fast import rk
-from rimless.sim.fast import step as fs
-from rimless.sim.model.guards import DIRECTION
-from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.integrate.reference import PhaseRun
-from rimless.sim.model.mechanics import Mechanics
-from rimless.sim.model.params import WheelParams
+
+def _use_rimless_cache_dir() -> None:
+    """RIMLESS_CACHE_DIR moves every cache the project keeps; numba's compiled kernels go to its `numba/`
+    subfolder. Set before the kernels below are decorated (numba picks a kernel's cache folder then) and in the
+    environment, so that subprocesses (Dask workers, benchmarks) use the same folder."""
+    root = os.environ.get("RIMLESS_CACHE_DIR")
+    if not root:
+        return
+    folder = os.path.join(os.path.abspath(os.path.expanduser(root)), "numba")
+    os.environ["NUMBA_CACHE_DIR"] = folder
+    import numba
+
+    numba.config.CACHE_DIR = folder
+
+
+_use_rimless_cache_dir()
+
+from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder is chosen)
+from rimless.sim.fast import rk  # noqa: E402
+from rimless.sim.fast import step as fs  # noqa: E402
+from rimless.sim.model.guards import DIRECTION  # noqa: E402
+from rimless.sim.model.failures import FailureReason, StepFailure  # noqa: E402
+from rimless.sim.integrate.reference import PhaseRun  # noqa: E402
+from rimless.sim.model.mechanics import Mechanics  # noqa: E402
+from rimless.sim.model.params import WheelParams  # noqa: E402
 
 def _invalidate_stale_cache() -> None:
     """numba's on-disk cache (cache=True) is keyed on each function's own source file only: a kernel that
@@ -80,6 +98,40 @@ def _invalidate_stale_cache() -> None:
 
 
 _invalidate_stale_cache()
+
+def cache_folder() -> str:
+    """Where the compiled kernels are cached on disk (numba's cache folder of the step kernel)."""
+    try:
+        return str(fs.step_map._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
+    except AttributeError:
+        return "numba's cache"
+
+
+def _is_cached(kernel: Any) -> bool:
+    """Whether `kernel` is compiled in this process or has an entry in the on-disk cache (loading it takes
+    about a second; compiling it a minute or more)."""
+    if kernel.signatures:
+        return True
+    try:
+        from pathlib import Path
+
+        return Path(kernel._cache._cache_file._index_path).exists()  # noqa: SLF001 (numba's cache index)
+    except AttributeError:
+        return True  # another numba: say nothing rather than something wrong
+
+
+def _call_compiling(kernel: Any, *args: Any) -> Any:
+    """kernel(*args); on first use with a cold cache, says on stderr that the simulator is being compiled
+    (spinner and elapsed time; quiet when stderr is not a terminal or with --json)."""
+    if _is_cached(kernel):
+        return kernel(*args)
+    from rimless.progress import spinner
+
+    name = kernel.py_func.__name__
+    with spinner(f"compiling the simulator ({name}; first use only, cached in {cache_folder()})",
+                 done=f"compiled the simulator ({name})"):
+        return kernel(*args)
+
 
 MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
 # right-hand-side evaluations per phase of the implicit fallback (scipy Radau, Python right-hand side):
@@ -208,12 +260,12 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     c = None
     if bilateral:
         c = np.empty(fs.CONTACT_SIZE if record_contact else 0)
-        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map_contact(
-            mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
+        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = _call_compiling(
+            fs.step_map_contact, mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
             int(max_steps), counts, True, c)
     else:
-        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map(
-            mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
+        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = _call_compiling(
+            fs.step_map, mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
             int(max_steps), counts)
     if st != fs.OK:
         raise_failure(st, detail, phase, t, nsteps)
@@ -277,8 +329,8 @@ class FastIntegrator:
         y = np.asarray(y0, dtype=np.float64)
         if track_dissipation:
             y = np.concatenate((y, [0.0]))
-        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = rk.run_phase(
-            fm.MASS_MODEL_INDEX[mech.params.mass_model], int(phase), np.asarray(mech.p, dtype=np.float64), y,
+        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = _call_compiling(
+            rk.run_phase, fm.MASS_MODEL_INDEX[mech.params.mass_model], int(phase), np.asarray(mech.p, dtype=np.float64), y,
             float(t0), codes, dirs, float(t_max), float(self.rtol), float(self.atol), 11 if track_dissipation else 10,
             False, bool(track_dissipation), float(record_dt) if record_dt else -1.0, int(self.max_steps))
         run = PhaseRun(t_end=float(t_end), y_end=np.array(y_end[:10]), guard=(guards[fired] if fired >= 0 else None),
