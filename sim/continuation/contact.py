@@ -104,7 +104,7 @@ def _recorded_step(pmap: Any, z: np.ndarray, record_dt: float) -> Any:
             continue
         y = np.ascontiguousarray(seg.y, dtype=np.float64)
         c = np.array([inf, -1.0, 0.0, math.nan])
-        fs._single_support_force(mi, int(seg.phase), np.ascontiguousarray(seg.t, dtype=np.float64), y, p, c)  # noqa: SLF001
+        fs.single_support_force(mi, int(seg.phase), np.ascontiguousarray(seg.t, dtype=np.float64), y, p, c)
         key = f"min_normal_force_b_{PHASE_NAMES[seg.phase]}_N"
         d[key] = min(d[key], float(c[fs.C_MIN_FORCE]))
         if seg.phase == DLSP:
