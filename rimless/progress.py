@@ -67,6 +67,8 @@ def progress_bar(description: str, total: Optional[float] = None, *, json_out: b
 
     columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                TimeElapsedColumn()]
+    if total is None:  # nothing to count: the spinner and the elapsed time say that work goes on
+        columns = [SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn()]
     with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
         bar = ProgressBar(progress, progress.add_task(description, total=total))
         _ACTIVE.append(bar)
