@@ -92,8 +92,33 @@ def test_first_call_of_a_cold_kernel_is_announced(monkeypatch: pytest.MonkeyPatc
     term = _Terminal()
     monkeypatch.setattr(sys, "stderr", term)
     monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"])
-    assert fast._call_compiling(Callable(**vars(warm)), 1) == 42  # noqa: SLF001
+    assert fast.compiling.call_compiling(Callable(**vars(warm)), 1) == 42  # noqa: SLF001
     assert term.getvalue() == ""
-    assert fast._call_compiling(Callable(**vars(cold)), 2) == 42  # noqa: SLF001
+    assert fast.compiling.call_compiling(Callable(**vars(cold)), 2) == 42  # noqa: SLF001
     assert "compiled the simulator (kernel)" in term.getvalue()
     assert calls == [(1,), (2,)]
+
+
+@pytest.mark.slow
+def test_a_step_compiles_its_own_mass_model_only(tmp_path: Path) -> None:
+    """With an empty cache, a step of the eight-leg wheel compiles the eight-leg generated code and none of the
+    other two mass models' (they were all compiled before: one kernel switched on the mass model at run time)."""
+    code = ("import numpy as np\n"
+            "from rimless.sim import fast\n"
+            "from rimless.sim.fast import model as fm\n"
+            "from rimless.sim.model.params import WheelParams\n"
+            "r = fast.fast_step(WheelParams(), 'er', np.array([-0.465155, 2.604441]), jacobian=True)\n"
+            "print(r.z_next[0], r.z_next[1])\n"
+            "for name in ('_M', '_DL', '_DLD', '_DM', '_T'):\n"
+            "    print(name, *(len(getattr(fm, name + str(i)).signatures) for i in range(3)))\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_CACHE_DIR"}
+    res = subprocess.run([sys.executable, "-c", code], env={**env, "RIMLESS_CACHE_DIR": str(tmp_path)},
+                         capture_output=True, text=True, timeout=1800)
+    assert res.returncode == 0, res.stderr[-2000:]
+    lines = res.stdout.splitlines()
+    z = [float(v) for v in lines[0].split()]
+    assert z == pytest.approx([-0.465155, 2.604441], abs=2e-6)  # the ER gait at Table 1 is a fixed point
+    for line in lines[1:]:
+        name, *counts = line.split()
+        assert counts[1:] == ["0", "0"], line  # sliding-leg, active-feet: not compiled
+        assert name not in ("_M", "_DL", "_DLD") or counts[0] != "0", line  # eight-leg: compiled
