@@ -58,7 +58,8 @@ _use_rimless_cache_dir()
 from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder is chosen)
 from rimless.sim.fast import rk  # noqa: E402
 from rimless.sim.fast import step as fs  # noqa: E402
-from rimless.sim.fast.compiling import cache_folder, call_compiling as _call_compiling  # noqa: E402,F401
+from rimless.sim.fast.compiling import call_compiling as _call_compiling  # noqa: E402
+from rimless.sim.fast.compiling import cache_folder as _cache_folder  # noqa: E402
 from rimless.sim.model.guards import DIRECTION  # noqa: E402
 from rimless.sim.model.failures import FailureReason, StepFailure  # noqa: E402
 from rimless.sim.integrate.reference import PhaseRun  # noqa: E402
@@ -100,6 +101,11 @@ def _invalidate_stale_cache() -> None:
 
 
 _invalidate_stale_cache()
+
+
+def cache_folder() -> str:
+    """Where the compiled kernels are cached on disk (numba's cache folder of the step kernel)."""
+    return _cache_folder(fs.step_kernel)
 
 MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
 # right-hand-side evaluations per phase of the implicit fallback (scipy Radau, Python right-hand side):

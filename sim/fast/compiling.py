@@ -11,12 +11,10 @@ from pathlib import Path
 from typing import Any
 
 
-def cache_folder() -> str:
-    """Where the compiled kernels are cached on disk (numba's cache folder of the step kernel)."""
-    from rimless.sim.fast import step as fs
-
+def cache_folder(kernel: Any) -> str:
+    """Where numba caches `kernel` on disk."""
     try:
-        return str(fs.step_kernel._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
+        return str(kernel._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
     except AttributeError:
         return "numba's cache"
 
@@ -39,6 +37,6 @@ def call_compiling(kernel: Any, *args: Any) -> Any:
     from rimless.progress import spinner
 
     name = kernel.py_func.__name__
-    with spinner(f"compiling the simulator ({name}; first use only, cached in {cache_folder()})",
+    with spinner(f"compiling the simulator ({name}; first use only, cached in {cache_folder(kernel)})",
                  done=f"compiled the simulator ({name})"):
         return kernel(*args)

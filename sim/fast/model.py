@@ -1,6 +1,8 @@
 """Compiled (numba) mechanics of the three mass models: the KKT phase dynamics and their exact derivatives,
 the guards, the impact (relabel + inelastic projection) with its exact Jacobian, and the section map.
 
+One concept: the compiled mechanics of a wheel (one mass model's generated equations and what is built on them).
+
 Same equations and conventions as rimless.sim.model.dynamics / events / impact / section (model.md sections 2-6):
 slope frame (x down the slope, y the outward normal), q = [x_b, y_b, theta, L1, L2] (m, m, rad, m, m),
 y = [q, q'] (10,), parameter vector p = WheelParams.as_vector() = (m_H, m, I_c, L0, k, c, g, phi), SI units.
