@@ -67,7 +67,8 @@ _SSCD0, _SSCD1, _SSCD2 = _compile("slsp_clutched_dir")
 # rimless.sim.fast.step.STEP_MAP / rk.RUN_PHASE call the kernels with a literal 0, 1 or 2, which numba types as
 # Literal[int]), the overloads return the implementation of that model only, so the other two models' generated
 # code is never compiled; called with a run-time int (from Python, e.g. tests and benchmarks), they return the
-# run-time switch over all three. The same generated functions run either way: results are identical.
+# run-time switch over all three (prefer_literal=True: numba would otherwise try, and take, the run-time switch
+# first). The same generated functions run either way: results are identical.
 
 
 def _literal(mi):  # noqa: ANN001, ANN202
@@ -78,7 +79,7 @@ def _terms_of(mi, q, qd, p):  # noqa: ANN001, ANN202
     raise NotImplementedError("compiled code only")
 
 
-@overload(_terms_of)
+@overload(_terms_of, prefer_literal=True)  # the literal first: one mass model
 def _ov_terms_of(mi, q, qd, p):  # noqa: ANN001, ANN202
     v = _literal(mi)
     if v is not None:
@@ -98,7 +99,7 @@ def _energy_of(mi, q, qd, p):  # noqa: ANN001, ANN202
     raise NotImplementedError("compiled code only")
 
 
-@overload(_energy_of)
+@overload(_energy_of, prefer_literal=True)  # the literal first: one mass model
 def _ov_energy_of(mi, q, qd, p):  # noqa: ANN001, ANN202
     v = _literal(mi)
     if v is not None:
@@ -118,7 +119,7 @@ def _derivs_of(mi, q, qd, p):  # noqa: ANN001, ANN202
     raise NotImplementedError("compiled code only")
 
 
-@overload(_derivs_of)
+@overload(_derivs_of, prefer_literal=True)  # the literal first: one mass model
 def _ov_derivs_of(mi, q, qd, p):  # noqa: ANN001, ANN202
     v = _literal(mi)
     if v is not None:
@@ -141,7 +142,7 @@ def _reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
     raise NotImplementedError("compiled code only")
 
 
-@overload(_reduced_of)
+@overload(_reduced_of, prefer_literal=True)  # the literal first: one mass model
 def _ov_reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
     v = _literal(mi)
     if v is not None:
@@ -180,7 +181,7 @@ def _directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, AN
     raise NotImplementedError("compiled code only")
 
 
-@overload(_directional_of)
+@overload(_directional_of, prefer_literal=True)  # the literal first: one mass model
 def _ov_directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
     v = _literal(mi)
     if v is not None:
