@@ -1,7 +1,9 @@
 """A progress bar on stderr for work longer than about two seconds.
 
 Quiet when stderr is not a terminal (pipes, CI, tests) or when the command prints `--json`, so stdout
-stays clean and logs stay readable.
+stays clean and logs stay readable. `spinner(...)` is for library work that cannot count its progress and does
+not know the command's options (compiling the simulator on first use): it infers `--json` from the command line
+and, inside a command's bar, shows its text in that bar instead of opening a second display.
 """
 
 from __future__ import annotations
@@ -39,6 +41,14 @@ class ProgressBar:
             self._progress.advance(self._task, amount)
 
 
+_ACTIVE: list[ProgressBar] = []  # the bar open in this process, if any (rich allows one live display)
+
+
+def json_requested() -> bool:
+    """Whether the running command was given `--json` (for library code that does not see the options)."""
+    return "--json" in sys.argv[1:]
+
+
 def progress_is_shown(json_out: bool = False) -> bool:
     """Whether a progress bar would be drawn: stderr is a terminal and the output is not JSON."""
     isatty = getattr(sys.stderr, "isatty", None)
@@ -57,5 +67,39 @@ def progress_bar(description: str, total: Optional[float] = None, *, json_out: b
 
     columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                TimeElapsedColumn()]
+    if total is None:  # nothing to count: the spinner and the elapsed time say that work goes on
+        columns = [SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn()]
     with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
-        yield ProgressBar(progress, progress.add_task(description, total=total))
+        bar = ProgressBar(progress, progress.add_task(description, total=total))
+        _ACTIVE.append(bar)
+        try:
+            yield bar
+        finally:
+            _ACTIVE.remove(bar)
+
+
+@contextlib.contextmanager
+def spinner(description: str, done: Optional[str] = None) -> Iterator[bool]:
+    """A spinner with the elapsed time on stderr while the block runs, then `done` (if given, with the seconds
+    appended) as one line; quiet like progress_bar, and for `--json` on the command line. Inside an open
+    progress bar the description is shown in that bar. Yields whether anything is shown."""
+    import time
+
+    if not progress_is_shown(json_requested()):
+        yield False
+        return
+    t0 = time.perf_counter()
+    if _ACTIVE:
+        outer = _ACTIVE[-1]
+        task = outer._progress.tasks[-1] if outer._progress.tasks else None  # noqa: SLF001
+        before = task.description if task is not None else ""
+        outer.update(description=description)
+        try:
+            yield True
+        finally:
+            outer.update(description=before)
+        return
+    with progress_bar(description) as _bar:
+        yield True
+    if done:
+        print(f"{done} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)

@@ -1,11 +1,20 @@
-"""Fixtures shared across the test folders."""
+"""Fixtures shared across the test folders.
+
+Under pytest-xdist (`-n 2`) session fixtures run once per worker; the expensive ones below are computed once per
+test run: the first worker to need one computes it under a file lock in the run's shared temporary root, the
+others read what it wrote.
+"""
 
 from __future__ import annotations
 
+import fcntl
+import json
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -20,10 +29,51 @@ class DemoRun:
     returncode: int
 
 
+def shared_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder every xdist worker of this run sees (the basetemp's parent under xdist, the basetemp otherwise)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if base.name.startswith("popen-gw") else base
+
+
+def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, compute: Callable[[Path], dict[str, Any]]
+                 ) -> tuple[Path, dict[str, Any]]:
+    """`compute(folder)` run once per test run whatever the number of workers; its JSON-able result is kept in
+    `name.json` beside `folder` and read back by the other workers."""
+    root = shared_root(tmp_path_factory)
+    folder = root / f"shared-{name}"
+    done = root / f"shared-{name}.json"
+    with open(root / f"shared-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not done.exists():
+            folder.mkdir(exist_ok=True)
+            done.write_text(json.dumps(compute(folder)))
+    return folder, json.loads(done.read_text())
+
+
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
-    """The demo, run once per session (it takes about a minute) for the tests that read what it wrote."""
-    out = tmp_path_factory.mktemp("demo") / "demo"
-    res = subprocess.run([sys.executable, "-m", "rimless", "demo", "--out", str(out)], capture_output=True,
-                         text=True, timeout=900, stdin=subprocess.DEVNULL)
-    return DemoRun(out=out, stdout=res.stdout, stderr=res.stderr, returncode=res.returncode)
+    """The demo, run once per test run (it takes about a minute) for the tests that read what it wrote."""
+
+    def run(folder: Path) -> dict[str, Any]:
+        res = subprocess.run([sys.executable, "-m", "rimless", "demo", "--out", str(folder / "demo")],
+                             capture_output=True, text=True, timeout=900, stdin=subprocess.DEVNULL)
+        return {"stdout": res.stdout, "stderr": res.stderr, "returncode": res.returncode}
+
+    folder, got = once_per_run(tmp_path_factory, "demo", run)
+    return DemoRun(out=folder / "demo", **got)
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """With `-n N`, compile the simulator's kernels into numba's on-disk cache once, in the controller, before
+    the workers start: otherwise each worker compiles the same kernels at the same time (minutes of CPU each on
+    a cold cache). A warm cache makes this a second or two. Without xdist the first test that needs a kernel
+    compiles it, as before."""
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    code = ("import numpy as np\n"
+            "from rimless.sim import fast\n"
+            "from rimless.sim.model.params import WheelParams\n"
+            "fast.warm_up()\n"
+            "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n")
+    subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=1800, stdin=subprocess.DEVNULL)

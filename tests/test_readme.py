@@ -1,10 +1,12 @@
-"""Every command in the README's ```bash blocks runs as written, after the two set-up lines.
+"""Every command in the ```bash blocks of README.md and docs/*.md runs as written, after the two set-up lines.
 
 The commands run in README order (later ones read what earlier ones wrote, e.g. `trials show` reads what
 `trials import` wrote) in a scratch folder that mirrors the repository's root through symbolic links, so
 relative paths such as `analysis/data/...` resolve as in a clone while outputs land in the scratch folder.
 `.venv` there points at the environment running the tests, and its `bin` folder comes first on PATH (what
-`source .venv/bin/activate` does). Whatever bash blocks the README gains later are parsed the same way.
+`source .venv/bin/activate` does). Whatever bash blocks the pages gain later are parsed the same way. Under
+pytest-xdist the commands of one page run in order on one worker (xdist_group per page); pages run in parallel.
+Every relative link of the pages points at a file that exists.
 
 Each command must exit 0 without a traceback, every file or folder it names with `--out` or `--plot` must
 exist afterwards and its path be printed, and every table it prints (lines drawn with box characters) fits 80 columns.
@@ -23,6 +25,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+PAGES = [README, *sorted((ROOT / "docs").glob("*.md"))]  # every page whose bash blocks run
 BLOCK = re.compile(r"^```bash[^\n]*\n(.*?)^```", re.M | re.S)
 
 # Commands the test does not run, each with its reason. Keep this list short and explicit.
@@ -89,6 +92,25 @@ def named_outputs(command: str) -> list[str]:
 
 
 COMMANDS = readme_commands(README.read_text(encoding="utf-8"))
+PAGE_COMMANDS: list[tuple[str, str]] = [(page.relative_to(ROOT).as_posix(), command) for page in PAGES
+                                        for command in readme_commands(page.read_text(encoding="utf-8"))]
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
+def test_every_relative_link_resolves(page: Path) -> None:
+    """A newcomer following a link from the README or docs/ lands on a file that exists."""
+    broken = [target for target in LINK.findall(page.read_text(encoding="utf-8"))
+              if not re.match(r"[a-z]+:", target) and not target.startswith("#")
+              and not (page.parent / target.split("#")[0]).exists()]
+    assert not broken, f"{page.name}: broken links {broken}"
+
+
+def test_docs_hold_the_reference_and_the_readme_stays_short() -> None:
+    """The README is the five-minute page; the reference (every command family) lives in docs/ and still runs."""
+    pages = {page for page, _ in PAGE_COMMANDS}
+    assert {"docs/simulator.md", "docs/trials.md", "docs/robot.md"} <= pages, pages
+    assert len(README.read_text(encoding="utf-8").splitlines()) <= 120
 
 
 def test_the_readme_has_runnable_commands():
@@ -96,7 +118,17 @@ def test_the_readme_has_runnable_commands():
     runnable = [c for c in COMMANDS if not_run_reason(c) is None]
     assert any(_normalised(c).startswith("rimless demo") for c in runnable)
     assert any(_normalised(c).startswith("rimless sim ") for c in runnable)
-    assert len(runnable) >= 10, runnable
+    assert len(runnable) >= 6, runnable
+    everywhere = [c for _, c in PAGE_COMMANDS if not_run_reason(c) is None]
+    assert len(everywhere) >= 30, everywhere
+
+
+def test_ci_runs_the_readmes_test_command() -> None:
+    """.ci/run ends with the README's test command, verbatim (so CI times what a user runs)."""
+    pytest_lines = [c for c in COMMANDS if re.search(r"-m pytest\b", c)]
+    assert len(pytest_lines) == 1, pytest_lines
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    assert pytest_lines[0] in [line.strip() for line in ci.splitlines()], pytest_lines[0]
 
 
 def test_parser_handles_chains_comments_and_the_setup_line():
@@ -126,7 +158,11 @@ def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return where
 
 
-@pytest.mark.parametrize("command", COMMANDS, ids=[f"{i:02d} {c[:60]}" for i, c in enumerate(COMMANDS)])
+# The commands of one page run in page order on one worker (later ones read what earlier ones wrote).
+@pytest.mark.parametrize("command", [pytest.param(c, marks=[pytest.mark.xdist_group(f"readme {page}"),
+                                                                  pytest.mark.slow])
+                                     for page, c in PAGE_COMMANDS],
+                         ids=[f"{page} {i:02d} {c[:60]}" for i, (page, c) in enumerate(PAGE_COMMANDS)])
 def test_readme_command_runs_as_written(command: str, mirror: Path, request: pytest.FixtureRequest) -> None:
     reason = not_run_reason(command)
     if reason is not None:

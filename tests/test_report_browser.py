@@ -78,6 +78,8 @@ def _driver(chromium: str, chromedriver: str, width: int):  # noqa: ANN202
     return webdriver.Chrome(service=Service(executable_path=chromedriver), options=opts)
 
 
+@pytest.mark.xdist_group("demo")  # one worker reads the demo; the other never waits on its lock
+@pytest.mark.slow
 @pytest.mark.parametrize("width", WIDTHS_PX)
 def test_demo_report_renders_in_chromium(browser_paths, demo_report: Path, width: int, tmp_path: Path) -> None:
     import base64

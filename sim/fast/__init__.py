@@ -8,6 +8,7 @@ rules of the event engine rimless.sim.integrate.events). Modules:
 - rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
 - rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output (the engine's twin);
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
+- rimless.sim.fast.compiling: calling a kernel on first use with a notice on stderr while it compiles;
 - rimless.sim.fast (this file): the Python face below. Import fast-path names from here.
 
 - `FastIntegrator(rtol, atol)`: implements rimless.sim.integrate.reference.Integrator (`run_phase`), so
@@ -31,19 +32,39 @@ numpy, scipy, numba, rimless.errors. Never step/, continuation/, studies/, in_th
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from rimless.sim.fast import model as fm
-from rimless.sim.fast import rk
-from rimless.sim.fast import step as fs
-from rimless.sim.model.guards import DIRECTION
-from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.integrate.reference import PhaseRun
-from rimless.sim.model.mechanics import Mechanics
-from rimless.sim.model.params import WheelParams
+
+def _use_rimless_cache_dir() -> None:
+    """RIMLESS_CACHE_DIR moves every cache the project keeps; numba's compiled kernels go to its `numba/`
+    subfolder. Set before the kernels below are decorated (numba picks a kernel's cache folder then) and in the
+    environment, so that subprocesses (Dask workers, benchmarks) use the same folder."""
+    root = os.environ.get("RIMLESS_CACHE_DIR")
+    if not root:
+        return
+    folder = os.path.join(os.path.abspath(os.path.expanduser(root)), "numba")
+    os.environ["NUMBA_CACHE_DIR"] = folder
+    import numba
+
+    numba.config.CACHE_DIR = folder
+
+
+_use_rimless_cache_dir()
+
+from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder is chosen)
+from rimless.sim.fast import rk  # noqa: E402
+from rimless.sim.fast import step as fs  # noqa: E402
+from rimless.sim.fast.compiling import call_compiling as _call_compiling  # noqa: E402
+from rimless.sim.fast.compiling import cache_folder as _cache_folder  # noqa: E402
+from rimless.sim.model.guards import DIRECTION  # noqa: E402
+from rimless.sim.model.failures import FailureReason, StepFailure  # noqa: E402
+from rimless.sim.integrate.reference import PhaseRun  # noqa: E402
+from rimless.sim.model.mechanics import Mechanics  # noqa: E402
+from rimless.sim.model.params import WheelParams  # noqa: E402
 
 def _invalidate_stale_cache() -> None:
     """numba's on-disk cache (cache=True) is keyed on each function's own source file only: a kernel that
@@ -62,7 +83,7 @@ def _invalidate_stale_cache() -> None:
         digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
     stamp_value = digest.hexdigest()
     try:
-        cache_dir = Path(fs.step_map._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
+        cache_dir = Path(fs.step_kernel._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
         stamp = cache_dir / "rimless_fast_kernels.stamp"
         if stamp.exists() and stamp.read_text() == stamp_value:
             return
@@ -80,6 +101,11 @@ def _invalidate_stale_cache() -> None:
 
 
 _invalidate_stale_cache()
+
+
+def cache_folder() -> str:
+    """Where the compiled kernels are cached on disk (numba's cache folder of the step kernel)."""
+    return _cache_folder(fs.step_kernel)
 
 MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
 # right-hand-side evaluations per phase of the implicit fallback (scipy Radau, Python right-hand side):
@@ -205,16 +231,13 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     atol = rtol * 1e-2 if atol is None else atol
     zz = np.asarray(z, dtype=np.float64).reshape(2)
     counts = np.zeros((3, 2), dtype=np.int64)
-    c = None
-    if bilateral:
-        c = np.empty(fs.CONTACT_SIZE if record_contact else 0)
-        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map_contact(
-            mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
-            int(max_steps), counts, True, c)
-    else:
-        st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = fs.step_map(
-            mass_model_index(params), er, param_vector(params), zz, float(rtol), float(atol), bool(jacobian),
-            int(max_steps), counts)
+    c = np.empty(fs.CONTACT_SIZE if bilateral and record_contact else 0)
+    # the mass model's own entry point: only its generated code is compiled (rimless.sim.fast.model)
+    st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = _call_compiling(
+        fs.STEP_MAP_CONTACT[mass_model_index(params)], er, param_vector(params), zz, float(rtol), float(atol),
+        bool(jacobian), int(max_steps), counts, bool(bilateral), c)
+    if not bilateral:
+        c = None
     if st != fs.OK:
         raise_failure(st, detail, phase, t, nsteps)
     return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
@@ -277,8 +300,8 @@ class FastIntegrator:
         y = np.asarray(y0, dtype=np.float64)
         if track_dissipation:
             y = np.concatenate((y, [0.0]))
-        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = rk.run_phase(
-            fm.MASS_MODEL_INDEX[mech.params.mass_model], int(phase), np.asarray(mech.p, dtype=np.float64), y,
+        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = _call_compiling(
+            rk.RUN_PHASE[fm.MASS_MODEL_INDEX[mech.params.mass_model]], int(phase), np.asarray(mech.p, dtype=np.float64), y,
             float(t0), codes, dirs, float(t_max), float(self.rtol), float(self.atol), 11 if track_dissipation else 10,
             False, bool(track_dissipation), float(record_dt) if record_dt else -1.0, int(self.max_steps))
         run = PhaseRun(t_end=float(t_end), y_end=np.array(y_end[:10]), guard=(guards[fired] if fired >= 0 else None),

@@ -1,6 +1,8 @@
 """Compiled (numba) mechanics of the three mass models: the KKT phase dynamics and their exact derivatives,
 the guards, the impact (relabel + inelastic projection) with its exact Jacobian, and the section map.
 
+One concept: the compiled mechanics of a wheel (one mass model's generated equations and what is built on them).
+
 Same equations and conventions as rimless.sim.model.dynamics / events / impact / section (model.md sections 2-6):
 slope frame (x down the slope, y the outward normal), q = [x_b, y_b, theta, L1, L2] (m, m, rad, m, m),
 y = [q, q'] (10,), parameter vector p = WheelParams.as_vector() = (m_H, m, I_c, L0, k, c, g, phi), SI units.
@@ -16,6 +18,8 @@ import math
 
 import numba
 import numpy as np
+from numba.core import types as _nbt
+from numba.extending import overload
 
 from rimless.sim.model.generated import active_feet as _af
 from rimless.sim.model.generated import eight_leg as _el
@@ -58,35 +62,177 @@ _SSFD0, _SSFD1, _SSFD2 = _compile("slsp_free_dir")
 _SSCD0, _SSCD1, _SSCD2 = _compile("slsp_clutched_dir")
 
 
+# One mass model compiled, not three: the kernels pass the mass model index `mi` down to the five places below
+# that pick a model's generated functions. When `mi` is a compile-time constant (the per-model entry points
+# rimless.sim.fast.step.STEP_MAP / rk.RUN_PHASE call the kernels with a literal 0, 1 or 2, which numba types as
+# Literal[int]), the overloads return the implementation of that model only, so the other two models' generated
+# code is never compiled; called with a run-time int (from Python, e.g. tests and benchmarks), they return the
+# run-time switch over all three (prefer_literal=True: numba would otherwise try, and take, the run-time switch
+# first). The same generated functions run either way: results are identical.
+
+
+def _literal(mi):  # noqa: ANN001, ANN202
+    return mi.literal_value if isinstance(mi, _nbt.IntegerLiteral) else None
+
+
+def _terms_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_terms_of, prefer_literal=True)  # the literal first: one mass model
+def _ov_terms_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+    v = _literal(mi)
+    if v is not None:
+        M, H, JA, JD = ((_M0, _H0, _JA0, _JDOT0), (_M1, _H1, _JA1, _JDOT1), (_M2, _H2, _JA2, _JDOT2))[v]
+        return lambda mi, q, qd, p: (M(q, p), H(q, qd, p), JA(q, p), JD(q, qd, p))
+
+    def generic(mi, q, qd, p):  # noqa: ANN001, ANN202
+        if mi == 0:
+            return _M0(q, p), _H0(q, qd, p), _JA0(q, p), _JDOT0(q, qd, p)
+        if mi == 1:
+            return _M1(q, p), _H1(q, qd, p), _JA1(q, p), _JDOT1(q, qd, p)
+        return _M2(q, p), _H2(q, qd, p), _JA2(q, p), _JDOT2(q, qd, p)
+    return generic
+
+
+def _energy_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_energy_of, prefer_literal=True)  # the literal first: one mass model
+def _ov_energy_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+    v = _literal(mi)
+    if v is not None:
+        T, V = ((_T0, _V0), (_T1, _V1), (_T2, _V2))[v]
+        return lambda mi, q, qd, p: T(q, qd, p) + V(q, p)
+
+    def generic(mi, q, qd, p):  # noqa: ANN001, ANN202
+        if mi == 0:
+            return _T0(q, qd, p) + _V0(q, p)
+        if mi == 1:
+            return _T1(q, qd, p) + _V1(q, p)
+        return _T2(q, qd, p) + _V2(q, p)
+    return generic
+
+
+def _derivs_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_derivs_of, prefer_literal=True)  # the literal first: one mass model
+def _ov_derivs_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+    v = _literal(mi)
+    if v is not None:
+        DM, DHQ, DHD, DJA, DJQ, DJD = ((_DM0, _DHQ0, _DHD0, _DJA0, _DJQ0, _DJD0),
+                                       (_DM1, _DHQ1, _DHD1, _DJA1, _DJQ1, _DJD1),
+                                       (_DM2, _DHQ2, _DHD2, _DJA2, _DJQ2, _DJD2))[v]
+        return lambda mi, q, qd, p: (DM(q, p), DHQ(q, qd, p), DHD(q, qd, p), DJA(q, p), DJQ(q, qd, p),
+                                     DJD(q, qd, p))
+
+    def generic(mi, q, qd, p):  # noqa: ANN001, ANN202
+        if mi == 0:
+            return _DM0(q, p), _DHQ0(q, qd, p), _DHD0(q, qd, p), _DJA0(q, p), _DJQ0(q, qd, p), _DJD0(q, qd, p)
+        if mi == 1:
+            return _DM1(q, p), _DHQ1(q, qd, p), _DHD1(q, qd, p), _DJA1(q, p), _DJQ1(q, qd, p), _DJD1(q, qd, p)
+        return _DM2(q, p), _DHQ2(q, qd, p), _DHD2(q, qd, p), _DJA2(q, p), _DJQ2(q, qd, p), _DJD2(q, qd, p)
+    return generic
+
+
+def _reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_reduced_of, prefer_literal=True)  # the literal first: one mass model
+def _ov_reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+    v = _literal(mi)
+    if v is not None:
+        DL, SSF, SSC = ((_DL0, _SSF0, _SSC0), (_DL1, _SSF1, _SSC1), (_DL2, _SSF2, _SSC2))[v]
+
+        def one(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+            if phase == DLSP:
+                return DL(q, qd, p, qdd, lam)
+            if phase == SLSP_FREE:
+                return SSF(q, qd, p, qdd, lam)
+            return SSC(q, qd, p, qdd, lam)
+        return one
+
+    def generic(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+        if phase == DLSP:
+            if mi == 0:
+                return _DL0(q, qd, p, qdd, lam)
+            if mi == 1:
+                return _DL1(q, qd, p, qdd, lam)
+            return _DL2(q, qd, p, qdd, lam)
+        if phase == SLSP_FREE:
+            if mi == 0:
+                return _SSF0(q, qd, p, qdd, lam)
+            if mi == 1:
+                return _SSF1(q, qd, p, qdd, lam)
+            return _SSF2(q, qd, p, qdd, lam)
+        if mi == 0:
+            return _SSC0(q, qd, p, qdd, lam)
+        if mi == 1:
+            return _SSC1(q, qd, p, qdd, lam)
+        return _SSC2(q, qd, p, qdd, lam)
+    return generic
+
+
+def _directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_directional_of, prefer_literal=True)  # the literal first: one mass model
+def _ov_directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+    v = _literal(mi)
+    if v is not None:
+        DLD, SSFD, SSCD = ((_DLD0, _SSFD0, _SSCD0), (_DLD1, _SSFD1, _SSCD1), (_DLD2, _SSFD2, _SSCD2))[v]
+
+        def one(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+            if phase == DLSP:
+                return DLD(q, qd, p, qdd, lam, V, dqdd)
+            if phase == SLSP_FREE:
+                return SSFD(q, qd, p, qdd, lam, V, dqdd)
+            return SSCD(q, qd, p, qdd, lam, V, dqdd)
+        return one
+
+    def generic(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+        if phase == DLSP:
+            if mi == 0:
+                return _DLD0(q, qd, p, qdd, lam, V, dqdd)
+            if mi == 1:
+                return _DLD1(q, qd, p, qdd, lam, V, dqdd)
+            return _DLD2(q, qd, p, qdd, lam, V, dqdd)
+        if phase == SLSP_FREE:
+            if mi == 0:
+                return _SSFD0(q, qd, p, qdd, lam, V, dqdd)
+            if mi == 1:
+                return _SSFD1(q, qd, p, qdd, lam, V, dqdd)
+            return _SSFD2(q, qd, p, qdd, lam, V, dqdd)
+        if mi == 0:
+            return _SSCD0(q, qd, p, qdd, lam, V, dqdd)
+        if mi == 1:
+            return _SSCD1(q, qd, p, qdd, lam, V, dqdd)
+        return _SSCD2(q, qd, p, qdd, lam, V, dqdd)
+    return generic
+
+
 @_jit
 def terms(mi, q, qd, p):
     """(M (5x5), h (5,), J_a (2x5), J_a' q' (2,)) of mass model index mi: the mass matrix (kg, kg m), the
     bias (Coriolis + dV/dq + damping, generalized forces), foot a's position Jacobian and its rate term."""
-    if mi == 0:
-        return _M0(q, p), _H0(q, qd, p), _JA0(q, p), _JDOT0(q, qd, p)
-    if mi == 1:
-        return _M1(q, p), _H1(q, qd, p), _JA1(q, p), _JDOT1(q, qd, p)
-    return _M2(q, p), _H2(q, qd, p), _JA2(q, p), _JDOT2(q, qd, p)
+    return _terms_of(mi, q, qd, p)
 
 
 @_jit
 def energy(mi, q, qd, p):
     """Total mechanical energy T + V (J) of mass model index mi."""
-    if mi == 0:
-        return _T0(q, qd, p) + _V0(q, p)
-    if mi == 1:
-        return _T1(q, qd, p) + _V1(q, p)
-    return _T2(q, qd, p) + _V2(q, p)
+    return _energy_of(mi, q, qd, p)
 
 
 @_jit
 def _derivs(mi, q, qd, p):
     """(dM/dq [k,i,j], dh/dq [i,k], dh/dqd [i,k], dJ_a/dq [k,r,j], d(J_a'q')/dq [r,k], d(J_a'q')/dqd [r,k])."""
-    if mi == 0:
-        return _DM0(q, p), _DHQ0(q, qd, p), _DHD0(q, qd, p), _DJA0(q, p), _DJQ0(q, qd, p), _DJD0(q, qd, p)
-    if mi == 1:
-        return _DM1(q, p), _DHQ1(q, qd, p), _DHD1(q, qd, p), _DJA1(q, p), _DJQ1(q, qd, p), _DJD1(q, qd, p)
-    return _DM2(q, p), _DHQ2(q, qd, p), _DHD2(q, qd, p), _DJA2(q, p), _DJQ2(q, qd, p), _DJD2(q, qd, p)
+    return _derivs_of(mi, q, qd, p)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -204,23 +350,7 @@ def accel_reduced(mi, phase, q, qd, p, qdd, lam, ws):
     dlsp_accel / slsp_free_accel / slsp_clutched_accel: the free block of M, the pinned rows, the bias and in
     double support foot a's constraint rows, common subexpressions shared). Same solution as the full KKT
     solve (accel_kkt) for any state; False if singular. ws is not used (kept for the callers' signature)."""
-    if phase == DLSP:
-        if mi == 0:
-            return _DL0(q, qd, p, qdd, lam)
-        if mi == 1:
-            return _DL1(q, qd, p, qdd, lam)
-        return _DL2(q, qd, p, qdd, lam)
-    if phase == SLSP_FREE:
-        if mi == 0:
-            return _SSF0(q, qd, p, qdd, lam)
-        if mi == 1:
-            return _SSF1(q, qd, p, qdd, lam)
-        return _SSF2(q, qd, p, qdd, lam)
-    if mi == 0:
-        return _SSC0(q, qd, p, qdd, lam)
-    if mi == 1:
-        return _SSC1(q, qd, p, qdd, lam)
-    return _SSC2(q, qd, p, qdd, lam)
+    return _reduced_of(mi, phase, q, qd, p, qdd, lam)
 
 
 @_jit
@@ -229,23 +359,7 @@ def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
     columns of V (10 x ncol), exactly, from the generated reduced equations (*_dir): the differentiated KKT
     system [[M, -A^T], [A, 0]] [dq''; dlambda] = [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q''] in the
     phase's free coordinates, for any state and tangent (the full form is accel_jacobian)."""
-    if phase == DLSP:
-        if mi == 0:
-            return _DLD0(q, qd, p, qdd, lam, V, dqdd)
-        if mi == 1:
-            return _DLD1(q, qd, p, qdd, lam, V, dqdd)
-        return _DLD2(q, qd, p, qdd, lam, V, dqdd)
-    if phase == SLSP_FREE:
-        if mi == 0:
-            return _SSFD0(q, qd, p, qdd, lam, V, dqdd)
-        if mi == 1:
-            return _SSFD1(q, qd, p, qdd, lam, V, dqdd)
-        return _SSFD2(q, qd, p, qdd, lam, V, dqdd)
-    if mi == 0:
-        return _SSCD0(q, qd, p, qdd, lam, V, dqdd)
-    if mi == 1:
-        return _SSCD1(q, qd, p, qdd, lam, V, dqdd)
-    return _SSCD2(q, qd, p, qdd, lam, V, dqdd)
+    return _directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd)
 
 
 @_jit

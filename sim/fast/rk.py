@@ -749,3 +749,28 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             g[e] = g_new[e]
         if t == t_bound:
             return STATUS_OK, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
+
+
+# Per-mass-model entry points (the index a compile-time constant: one mass model's generated code compiled).
+@_jit
+def run_phase_0(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt,
+                max_steps):
+    return run_phase(0, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
+                     record_dt, max_steps)
+
+
+@_jit
+def run_phase_1(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt,
+                max_steps):
+    return run_phase(1, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
+                     record_dt, max_steps)
+
+
+@_jit
+def run_phase_2(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt,
+                max_steps):
+    return run_phase(2, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
+                     record_dt, max_steps)
+
+
+RUN_PHASE = (run_phase_0, run_phase_1, run_phase_2)

@@ -21,6 +21,7 @@ import numpy as np
 
 from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
+from rimless.sim.fast.compiling import call_compiling
 from rimless.sim.model.guards import DIRECTION
 
 _jit = numba.njit(cache=True)
@@ -213,15 +214,22 @@ def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps
     return STANCE_LIFT_OFF, D_GUARD, t_end, y_end, nf, ns, nst
 
 
-@_jit
 def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin); unilateral contact (see
     step_map_contact)."""
-    return step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, False, np.empty(0))
+    return call_compiling(STEP_MAP_CONTACT[mi], er, p, z, rtol, atol, want_jac, max_steps, counts, False,
+                          np.empty(0))
+
+
+def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
+    """step_kernel for mass model index mi through its own entry point (STEP_MAP_CONTACT[mi]), so that only
+    that mass model's generated code is compiled."""
+    return call_compiling(STEP_MAP_CONTACT[mi], er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral,
+                          contact)
 
 
 @_jit
-def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
+def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
 
     bilateral=False: unilateral contact, the step fails with STANCE_LIFT_OFF / NEGATIVE_IMPULSE. bilateral=True:
@@ -370,3 +378,23 @@ def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bila
         J[1, 0] = Vp[7, 0]
         J[1, 1] = Vp[7, 1]
     return OK, D_NONE, IMPACT_PHASE, t, yp, J, times, nfev, nsteps, nstiff, snap
+
+
+# Per-mass-model entry points: the index is a compile-time constant in each, so a command compiles the
+# generated code of its own mass model only (rimless.sim.fast.model's overloads); index them by MASS_MODEL_INDEX.
+@_jit
+def step_map_contact_0(er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
+    return step_kernel(0, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact)
+
+
+@_jit
+def step_map_contact_1(er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
+    return step_kernel(1, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact)
+
+
+@_jit
+def step_map_contact_2(er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
+    return step_kernel(2, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact)
+
+
+STEP_MAP_CONTACT = (step_map_contact_0, step_map_contact_1, step_map_contact_2)

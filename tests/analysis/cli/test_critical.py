@@ -13,6 +13,7 @@ from rimless.cli import app as root_app
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_critical_slope_json_contract_and_truth():
     files = [str(p) for p in data_files()]
     assert len(files) == 12

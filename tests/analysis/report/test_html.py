@@ -235,6 +235,8 @@ def test_cli_report_bad_model(tmp_path):
     assert res.exit_code == 2 and "--model must be one of er, ve" in res.output
 
 
+@pytest.mark.xdist_group("demo")  # one worker reads the demo; the other never waits on its lock
+@pytest.mark.slow
 def test_demo(demo_run, tmp_path):
     from rimless.analysis.examples.critical_series import data_files as critical_files
     from rimless.analysis.examples.critical_series import load_truth as critical_truth

@@ -114,6 +114,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("mass_model", "model", "z"), CASES)
 def test_compiled_map_matches_the_reference_map(mass_model: str, model: str, z: np.ndarray) -> None:
     params = WheelParams(mass_model=mass_model)

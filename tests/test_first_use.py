@@ -1,0 +1,124 @@
+"""First use of the simulator: where the compiled kernels are cached (RIMLESS_CACHE_DIR) and the notice on
+stderr while they compile (rimless.progress.spinner), quiet for pipes and --json."""
+
+from __future__ import annotations
+
+import io
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from rimless import progress
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_rimless_cache_dir_moves_numbas_cache(tmp_path: Path) -> None:
+    """Kernels are cached under $RIMLESS_CACHE_DIR/numba, also for subprocesses (NUMBA_CACHE_DIR exported)."""
+    code = ("import os\nfrom rimless.sim import fast\n"
+            "print(fast.cache_folder())\nprint(os.environ['NUMBA_CACHE_DIR'])\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_CACHE_DIR"}
+    res = subprocess.run([sys.executable, "-c", code], env={**env, "RIMLESS_CACHE_DIR": str(tmp_path / "c")},
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    kernel_folder, exported = res.stdout.split()
+    assert Path(exported) == tmp_path / "c" / "numba"
+    assert Path(kernel_folder).is_relative_to(tmp_path / "c" / "numba")
+
+
+def test_spinner_is_quiet_for_pipes_and_json(monkeypatch: pytest.MonkeyPatch) -> None:
+    pipe = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", pipe)
+    with progress.spinner("compiling", done="compiled") as shown:
+        pass
+    assert shown is False and pipe.getvalue() == ""
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point", "--json"])
+    with progress.spinner("compiling", done="compiled") as shown:
+        pass
+    assert shown is False and term.getvalue() == ""
+
+
+def test_spinner_says_what_it_did_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"])
+    with progress.spinner("compiling the simulator", done="compiled the simulator") as shown:
+        time.sleep(0.05)
+    assert shown is True
+    assert re.search(r"compiled the simulator \(\d+ s\)\n$", term.getvalue()), repr(term.getvalue()[-300:])
+
+
+def test_spinner_inside_a_bar_uses_that_bar(monkeypatch: pytest.MonkeyPatch) -> None:
+    """rich allows one live display: inside a command's bar the spinner's text goes into that bar."""
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(sys, "argv", ["rimless", "sim", "sweep"])
+    with progress.progress_bar("sweep", total=3) as bar:
+        with progress.spinner("compiling the simulator", done="compiled") as shown:
+            assert shown is True
+            assert bar._progress.tasks[-1].description == "compiling the simulator"  # noqa: SLF001
+        assert bar._progress.tasks[-1].description == "sweep"  # noqa: SLF001
+        bar.advance()
+
+
+def test_first_call_of_a_cold_kernel_is_announced(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A kernel neither compiled in this process nor in the on-disk cache is announced; a cached one is not."""
+    from rimless.sim import fast
+
+    calls: list[tuple] = []
+
+    def kernel(*args):  # noqa: ANN002, ANN202
+        calls.append(args)
+        return 42
+
+    cold = SimpleNamespace(signatures=[], py_func=kernel, __call__=None,
+                           _cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(tmp_path / "none"))))
+    warm = SimpleNamespace(signatures=["(int64,)"], py_func=kernel)
+
+    class Callable(SimpleNamespace):
+        def __call__(self, *args):  # noqa: ANN002, ANN204
+            return self.py_func(*args)
+
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"])
+    assert fast.compiling.call_compiling(Callable(**vars(warm)), 1) == 42  # noqa: SLF001
+    assert term.getvalue() == ""
+    assert fast.compiling.call_compiling(Callable(**vars(cold)), 2) == 42  # noqa: SLF001
+    assert "compiled the simulator (kernel)" in term.getvalue()
+    assert calls == [(1,), (2,)]
+
+
+@pytest.mark.slow
+def test_a_step_compiles_its_own_mass_model_only(tmp_path: Path) -> None:
+    """With an empty cache, a step of the eight-leg wheel compiles the eight-leg generated code and none of the
+    other two mass models' (they were all compiled before: one kernel switched on the mass model at run time)."""
+    code = ("import numpy as np\n"
+            "from rimless.sim import fast\n"
+            "from rimless.sim.fast import model as fm\n"
+            "from rimless.sim.model.params import WheelParams\n"
+            "r = fast.fast_step(WheelParams(), 'er', np.array([-0.465155, 2.604441]), jacobian=True)\n"
+            "print(r.z_next[0], r.z_next[1])\n"
+            "for name in ('_M', '_DL', '_DLD', '_DM', '_T'):\n"
+            "    print(name, *(len(getattr(fm, name + str(i)).signatures) for i in range(3)))\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_CACHE_DIR"}
+    res = subprocess.run([sys.executable, "-c", code], env={**env, "RIMLESS_CACHE_DIR": str(tmp_path)},
+                         capture_output=True, text=True, timeout=1800)
+    assert res.returncode == 0, res.stderr[-2000:]
+    lines = res.stdout.splitlines()
+    z = [float(v) for v in lines[0].split()]
+    assert z == pytest.approx([-0.465155, 2.604441], abs=2e-6)  # the ER gait at Table 1 is a fixed point
+    for line in lines[1:]:
+        name, *counts = line.split()
+        assert counts[1:] == ["0", "0"], line  # sliding-leg, active-feet: not compiled
+        assert name not in ("_M", "_DL", "_DLD") or counts[0] != "0", line  # eight-leg: compiled
