@@ -255,7 +255,12 @@ def test_missing_input_or_unwritable_output_is_one_line(path: tuple[str, ...], p
         named = target
     given = [target] if p.param_type_name == "argument" else [flag(p), target]
     extra = ["--duration-s", "3"] if path == ("robot", "listen") else []
-    res = _run([*path, *given, *_placeholders(cmd, param, tmp_path), *extra], cwd=tmp_path)
+    if path == ("robot", "run") and param == "pin_log":
+        extra = ["--fake"]  # the pin log records the fake's pins; without --fake it is refused as such
+    placeholders = _placeholders(cmd, param, tmp_path)
+    if path == ("robot", "set"):  # a valid KEY VALUE, so the command reaches the file
+        placeholders = ["touch_velocity_m_s", "-0.01", *placeholders[2:]]
+    res = _run([*path, *given, *placeholders, *extra], cwd=tmp_path)
     _one_error_line(res.stderr, 2, res.returncode, [named], res.stdout + res.stderr, cwd=tmp_path)
 
 

@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from tests.support.firmware_app import free_port
+from tests.support.firmware_app import free_port, wait_udp_bound
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 runner = CliRunner()
@@ -93,7 +93,7 @@ def test_listen_records_datagrams(tmp_path) -> None:
 
     def send() -> None:
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        time.sleep(0.3)  # let the listener bind first
+        wait_udp_bound(port)  # let the listener bind first
         for k in range(20):
             time.sleep(0.02)
             batch = [{"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
@@ -187,7 +187,7 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
 
     def send() -> None:
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        time.sleep(0.3)
+        wait_udp_bound(port)  # datagrams sent before the listener binds are lost
         for k in range(10):
             time.sleep(0.02)
             batch = [{"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},

@@ -93,3 +93,23 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def wait_udp_bound(port: int, timeout_s: float = 10.0) -> bool:
+    """Wait until some socket is bound to UDP `port` on this host (Linux: /proc/net/udp); False on timeout.
+
+    A sender that starts before the receiver has bound loses its first datagrams (port unreachable), which a
+    loaded machine turns into a flaky count.
+    """
+    needle = f":{port:04X} "
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            with open("/proc/net/udp", encoding="ascii") as fh:
+                if any(needle in line.split()[1] + " " for line in fh.readlines()[1:] if len(line.split()) > 1):
+                    return True
+        except OSError:
+            time.sleep(0.5)  # no /proc: fall back on a fixed head start
+            return False
+        time.sleep(0.01)
+    return False

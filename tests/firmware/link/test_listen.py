@@ -47,7 +47,7 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
     import threading
 
     from rimless.firmware.link.listen import listen
-    from tests.support.firmware_app import free_port
+    from tests.support.firmware_app import free_port, wait_udp_bound
 
     port = free_port()
     lines: list[str] = []
@@ -56,7 +56,7 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
         import json
         import time
 
-        time.sleep(0.3)
+        wait_udp_bound(port)  # datagrams sent before the listener binds are lost
         robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         robot.bind(("127.0.0.1", 0))
         forger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
