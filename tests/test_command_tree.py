@@ -458,8 +458,16 @@ def _group_processes(pgid: int) -> list[str]:
 
 LOCAL_CLUSTER_RUNS = {
     "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 30.0),
-    "sim sweep": (["sim", "sweep", "--k", "1500:3500:250", "--no-cache", "--workers", "2", "--out", "sweep-out/k"], 20.0),
+    # 81 grid points: minutes of work, so the interrupt lands while the workers compute even on a quiet machine
+    "sim sweep": (["sim", "sweep", "--k", "1500:3500:25", "--no-cache", "--workers", "2", "--out", "sweep-out/k"], 3.0),
 }
+
+
+def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
+    """Wait until the process group holds `count` processes besides the command (its Dask workers)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and len(_group_processes(pgid)) < count + 1:
+        time.sleep(0.2)
 
 
 @pytest.mark.slow
@@ -472,6 +480,8 @@ def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_pa
     proc = subprocess.Popen([sys.executable, "-m", "rimless", *args], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
     try:
+        if case == "sim sweep":
+            _wait_for_workers(proc.pid, 2)  # then `delay_s` into the computation
         time.sleep(delay_s)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         t0 = time.perf_counter()
