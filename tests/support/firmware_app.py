@@ -14,7 +14,7 @@ from pathlib import Path
 
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from rimless.firmware.service.app import RobotApp
-from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig
+from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig
 from rimless.firmware.service.hardware import build_fake
 
 TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
@@ -24,6 +24,10 @@ def config(tmp_path: Path, **kw) -> RobotConfig:
     base = dict(
         commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN),
         log=LogConfig(dir=str(tmp_path / "trials"), flush_interval_s=0.05),
+        # The control-thread watchdog at 0.3 s instead of the robot's 0.1 s: a test machine running two test
+        # workers (and numba compiling in one) was seen to pause the sampler thread for 0.2 s. Tests of the
+        # watchdog stall it for longer (0.5 s) or pass their own SamplingConfig.
+        sampling=SamplingConfig(stall_timeout_s=0.3),
     )
     base.update(kw)
     return RobotConfig(**base)
