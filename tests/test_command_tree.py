@@ -471,6 +471,12 @@ def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
 
 
 @pytest.mark.slow
+# Known defect (issue 21 stays open for it): the outcome depends on when the Ctrl-C lands. In three CI runs on a
+# fresh clone the sweep case passed once, finished before its interrupt once, and once printed multiprocessing's
+# "leaked semaphore objects" warning after `interrupted`; a Ctrl-C during the cluster's start can print a
+# distributed traceback. Not strict, so a run that passes shows as XPASS.
+@pytest.mark.xfail(strict=False, reason="known: Ctrl-C during a local Dask cluster's start or stop can print after "
+                                        "`interrupted` (resource-tracker warning, distributed traceback)")
 @pytest.mark.parametrize("case", sorted(LOCAL_CLUSTER_RUNS))
 def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_path: Path) -> None:
     """A terminal's Ctrl-C reaches every process of the group (the command and its Dask workers): the command
