@@ -5,7 +5,7 @@ The commands run in README order (later ones read what earlier ones wrote, e.g. 
 relative paths such as `analysis/data/...` resolve as in a clone while outputs land in the scratch folder.
 `.venv` there points at the environment running the tests, and its `bin` folder comes first on PATH (what
 `source .venv/bin/activate` does). Whatever bash blocks the pages gain later are parsed the same way. Under
-pytest-xdist the commands of every page run in order on one worker (one xdist_group), since pages share folders.
+pytest-xdist the commands of one page run in order on one worker (xdist_group per page); pages run in parallel.
 Every relative link of the pages points at a file that exists.
 
 Each command must exit 0 without a traceback, every file or folder it names with `--out` or `--plot` must
@@ -158,10 +158,8 @@ def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return where
 
 
-# The commands of every page run in order on one worker: later ones read what earlier ones wrote, and pages
-# share folder names (`trials/`), so two pages on two workers raced (a fresh-clone CI run saw `trials show`
-# find no trial file while another page rewrote `trials/`).
-@pytest.mark.parametrize("command", [pytest.param(c, marks=[pytest.mark.xdist_group("readme"),
+# The commands of one page run in page order on one worker (later ones read what earlier ones wrote).
+@pytest.mark.parametrize("command", [pytest.param(c, marks=[pytest.mark.xdist_group(f"readme {page}"),
                                                                   pytest.mark.slow])
                                      for page, c in PAGE_COMMANDS],
                          ids=[f"{page} {i:02d} {c[:60]}" for i, (page, c) in enumerate(PAGE_COMMANDS)])
