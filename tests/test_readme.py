@@ -5,7 +5,8 @@ The commands run in README order (later ones read what earlier ones wrote, e.g. 
 relative paths such as `analysis/data/...` resolve as in a clone while outputs land in the scratch folder.
 `.venv` there points at the environment running the tests, and its `bin` folder comes first on PATH (what
 `source .venv/bin/activate` does). Whatever bash blocks the pages gain later are parsed the same way. Under
-pytest-xdist the commands of one page run in order on one worker (xdist_group per page); pages run in parallel.
+pytest-xdist the commands of one page run in order on one worker (xdist_group per page), in that page's own
+scratch folder; pages run in parallel.
 Every relative link of the pages points at a file that exists.
 
 Each command must exit 0 without a traceback, every file or folder it names with `--out` or `--plot` must
@@ -19,6 +20,7 @@ import re
 import shlex
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -147,23 +149,33 @@ def test_parser_handles_chains_comments_and_the_setup_line():
 
 
 @pytest.fixture(scope="module")
-def mirror(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A scratch folder that looks like the repository's root; outputs land in it, not in the repository."""
-    where = tmp_path_factory.mktemp("readme")
-    for entry in ROOT.iterdir():
-        if entry.name in (".git", ".venv") or entry.name.startswith("."):
-            continue
-        (where / entry.name).symlink_to(entry)
-    (where / ".venv").symlink_to(Path(sys.prefix))
-    return where
+def mirrors(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], Path]:
+    """Per page, a scratch folder that looks like the repository's root; outputs land in it, not in the repository.
+    Each page gets its own (pages write the same relative paths, e.g. `trials/`, and may run on one worker)."""
+    made: dict[str, Path] = {}
+
+    def mirror(page: str) -> Path:
+        if page not in made:
+            where = tmp_path_factory.mktemp("readme-" + re.sub(r"\W+", "-", page))
+            for entry in ROOT.iterdir():
+                if entry.name in (".git", ".venv") or entry.name.startswith("."):
+                    continue
+                (where / entry.name).symlink_to(entry)
+            (where / ".venv").symlink_to(Path(sys.prefix))
+            made[page] = where
+        return made[page]
+
+    return mirror
 
 
 # The commands of one page run in page order on one worker (later ones read what earlier ones wrote).
-@pytest.mark.parametrize("command", [pytest.param(c, marks=[pytest.mark.xdist_group(f"readme {page}"),
-                                                                  pytest.mark.slow])
-                                     for page, c in PAGE_COMMANDS],
+@pytest.mark.parametrize(("page", "command"), [pytest.param(page, c, marks=[pytest.mark.xdist_group(f"readme {page}"),
+                                                                               pytest.mark.slow])
+                                                  for page, c in PAGE_COMMANDS],
                          ids=[f"{page} {i:02d} {c[:60]}" for i, (page, c) in enumerate(PAGE_COMMANDS)])
-def test_readme_command_runs_as_written(command: str, mirror: Path, request: pytest.FixtureRequest) -> None:
+def test_readme_command_runs_as_written(page: str, command: str, mirrors: Callable[[str], Path],
+                                        request: pytest.FixtureRequest) -> None:
+    mirror = mirrors(page)
     reason = not_run_reason(command)
     if reason is not None:
         pytest.skip(f"not run: {reason}")
