@@ -393,6 +393,11 @@ def listen(
     csv_out: Annotated[
         Optional[Path], typer.Option("--csv", help="Record samples and events to this CSV file.", show_default=False)
     ] = None,
+    mcap_out: Annotated[
+        Optional[Path], typer.Option("--mcap", help="Record to this MCAP file (Foxglove): a topic per series, "
+                                     "/leg0../leg7 per leg, /events; needs the mcap package (pc extra).",
+                                     show_default=False)
+    ] = None,
     duration_s: Annotated[
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
     ] = None,
@@ -415,7 +420,7 @@ def listen(
                                     "the first sender heard).", show_default=False)
     ] = None,
 ) -> None:
-    """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
+    """Receive the robot's UDP telemetry: live view, JSONL/CSV/MCAP recording, "data stopped" notices.
 
     The live view (in a terminal) draws leg velocity, compression and one strip per clutch. With
     --host it also keeps the robot's command link alive (a heartbeat), so a remote arm holds.
@@ -441,7 +446,7 @@ def listen(
                   summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,
                   write_screen=lambda text: (sys.stderr.write(text), sys.stderr.flush()),
                   echo=lambda line: typer.echo(line, err=True), heartbeat=hb, timeout_s=timeout_s,
-                  robot=robot if robot is not None else host)
+                  robot=robot if robot is not None else host, mcap_out=mcap_out)
 
     _interruptible(go)
 

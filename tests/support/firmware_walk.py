@@ -50,10 +50,11 @@ class WalkResult:
 def walk_controller(walk: FakeWalk, params: DetectorParams, *, duration_s: float = 3.0, rate_hz: float = 300.0,
                     start_index: int = 0, seed: int = 0, fault_at: tuple[float, object] | None = None,
                     verify_before_engage: bool = True, id_check_interval_s: float = 0.0,
-                    readback_every_samples: int = 1, cpi: int = 1600) -> WalkResult:
+                    readback_every_samples: int = 1, cpi: int = 1600,
+                    records: list | None = None) -> WalkResult:
     """Arm at t = 0 and step the controller at `rate_hz` for `duration_s` of virtual time; `fault_at` =
     (t_s, action(fake)) injects a fault into the fake. The sensor is configured at `cpi` with the automatic
-    frame rate, as the service does (`mark_configured` included)."""
+    frame rate, as the service does (`mark_configured` included). Every controller record goes to `records`."""
     clock = VirtualClock()
     fake = FakeAdns3080(walk, counts_per_m=DEFAULT_COUNTS_PER_M, noise_counts=0.3, seed=seed, clock=clock.seconds,
                         needs_reset=False)
@@ -81,6 +82,8 @@ def walk_controller(walk: FakeWalk, params: DetectorParams, *, duration_s: float
                 res.engages.append((clock.t_s, leg))
             while ctl.outbox:
                 rec = ctl.outbox.popleft()
+                if records is not None:
+                    records.append(rec)
                 if isinstance(rec, EventRecord):
                     res.events.append((clock.t_s, rec.name, rec.fields))
     finally:
