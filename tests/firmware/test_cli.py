@@ -355,5 +355,6 @@ def test_bench_realtime_reports_what_the_control_thread_got() -> None:
     assert rt["gc_frozen"] is True
     if os.geteuid() == 0:
         assert rt["policy"] == "SCHED_FIFO" and rt["cpu"] is not None and rt["errors"] == []
+        assert rt["others_policy"] == "SCHED_FIFO"  # the GIL holders cannot be preempted by ordinary processes
     else:
         assert rt["policy"] == "SCHED_FIFO" or any("SCHED_FIFO" in e for e in rt["errors"])
