@@ -352,21 +352,23 @@ def run(
 def check(
     config: _CONFIG = None,
     fake: Annotated[bool, typer.Option("--fake", help="Check the fake sensor and mock pins.")] = False,
-    click: Annotated[bool, typer.Option("--click/--no-click", help="Click each clutch on for 0.2 s.")] = True,
+    click: Annotated[bool, typer.Option("--click/--no-click", help="Click each clutch on for --click-s.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    click_s: Annotated[float, typer.Option("--click-s", min=0.01, max=10.0,
+                                           help="How long each clutch is engaged in the click test (s).")] = 0.2,
 ) -> None:
     """Check the hardware: sensor IDs, SQUAL, frame rate, and a clutch click test.
 
     Any signal (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT) releases every clutch and exits with 128 + its number.
     """
-    from rimless.firmware.service.selftest import CLICK_ON_S, self_test
+    from rimless.firmware.service.selftest import self_test
 
     def clicking(leg: int, pin: int) -> None:
         typer.echo(f"clicking clutch {leg} (GPIO{pin}) ...", err=True)
 
     @user_facing
     def go() -> Any:
-        return self_test(config, fake=fake, click=click, on_click=clicking)
+        return self_test(config, fake=fake, click=click, on_click=clicking, click_s=click_s)
 
     report = go()
     if report.interrupted:
@@ -380,7 +382,7 @@ def check(
         typer.echo(f"sensor {s.index}: ADNS-3080 found (revision 0x{s.revision_id:02X}), SQUAL {s.squal}, "
                    f"{s.frame_rate_hz:.0f} fps, {s.resolution_cpi} cpi")
     for c in report.clutches:
-        typer.echo(f"clutch {c.leg} (GPIO{c.pin}): clicked on for {CLICK_ON_S:g} s, off")
+        typer.echo(f"clutch {c.leg} (GPIO{c.pin}): clicked on for {click_s:g} s, off")
 
 
 @app.command()
