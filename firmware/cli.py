@@ -507,6 +507,7 @@ def _bench_text(res: dict[str, Any]) -> str:
         f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
         + ("" if not res.get("realtime") else
            f"\n  real time                 {res['realtime']['policy']} {res['realtime']['priority']} on CPU "
-           f"{res['realtime']['cpu']}, memory {'locked' if res['realtime']['memory_locked'] else 'not locked'}"
+           f"{res['realtime']['cpu']}, memory {'locked' if res['realtime']['memory_locked'] else 'not locked'}, "
+           f"other threads {res['realtime'].get('others_policy', 'SCHED_OTHER')}"
            + (f" ({'; '.join(res['realtime']['errors'])})" if res['realtime']['errors'] else ""))
     )
