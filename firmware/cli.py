@@ -352,21 +352,23 @@ def run(
 def check(
     config: _CONFIG = None,
     fake: Annotated[bool, typer.Option("--fake", help="Check the fake sensor and mock pins.")] = False,
-    click: Annotated[bool, typer.Option("--click/--no-click", help="Click each clutch on for 0.2 s.")] = True,
+    click: Annotated[bool, typer.Option("--click/--no-click", help="Click each clutch on for --click-s.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    click_s: Annotated[float, typer.Option("--click-s", min=0.01, max=10.0,
+                                           help="How long each clutch is engaged in the click test (s).")] = 0.2,
 ) -> None:
     """Check the hardware: sensor IDs, SQUAL, frame rate, and a clutch click test.
 
     Any signal (Ctrl-C, SIGTERM, SIGHUP, SIGQUIT) releases every clutch and exits with 128 + its number.
     """
-    from rimless.firmware.service.selftest import CLICK_ON_S, self_test
+    from rimless.firmware.service.selftest import self_test
 
     def clicking(leg: int, pin: int) -> None:
         typer.echo(f"clicking clutch {leg} (GPIO{pin}) ...", err=True)
 
     @user_facing
     def go() -> Any:
-        return self_test(config, fake=fake, click=click, on_click=clicking)
+        return self_test(config, fake=fake, click=click, on_click=clicking, click_s=click_s)
 
     report = go()
     if report.interrupted:
@@ -380,7 +382,7 @@ def check(
         typer.echo(f"sensor {s.index}: ADNS-3080 found (revision 0x{s.revision_id:02X}), SQUAL {s.squal}, "
                    f"{s.frame_rate_hz:.0f} fps, {s.resolution_cpi} cpi")
     for c in report.clutches:
-        typer.echo(f"clutch {c.leg} (GPIO{c.pin}): clicked on for {CLICK_ON_S:g} s, off")
+        typer.echo(f"clutch {c.leg} (GPIO{c.pin}): clicked on for {click_s:g} s, off")
 
 
 @app.command()
@@ -392,6 +394,11 @@ def listen(
     ] = None,
     csv_out: Annotated[
         Optional[Path], typer.Option("--csv", help="Record samples and events to this CSV file.", show_default=False)
+    ] = None,
+    mcap_out: Annotated[
+        Optional[Path], typer.Option("--mcap", help="Record to this MCAP file (Foxglove): a topic per series, "
+                                     "/leg0../leg7 per leg, /events; needs the mcap package (pc extra).",
+                                     show_default=False)
     ] = None,
     duration_s: Annotated[
         Optional[float], typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
@@ -415,7 +422,7 @@ def listen(
                                     "the first sender heard).", show_default=False)
     ] = None,
 ) -> None:
-    """Receive the robot's UDP telemetry: live view, JSONL/CSV recording, "data stopped" notices.
+    """Receive the robot's UDP telemetry: live view, JSONL/CSV/MCAP recording, "data stopped" notices.
 
     The live view (in a terminal) draws leg velocity, compression and one strip per clutch. With
     --host it also keeps the robot's command link alive (a heartbeat), so a remote arm holds.
@@ -441,7 +448,7 @@ def listen(
                   summary_every_s=summary_every_s, stale_s=stale_s, live=use_live,
                   write_screen=lambda text: (sys.stderr.write(text), sys.stderr.flush()),
                   echo=lambda line: typer.echo(line, err=True), heartbeat=hb, timeout_s=timeout_s,
-                  robot=robot if robot is not None else host)
+                  robot=robot if robot is not None else host, mcap_out=mcap_out)
 
     _interruptible(go)
 
@@ -500,6 +507,7 @@ def _bench_text(res: dict[str, Any]) -> str:
         f"{res['touchdown_detect_max_ms']:.2f} ms ({res['touchdowns']} touchdowns)"
         + ("" if not res.get("realtime") else
            f"\n  real time                 {res['realtime']['policy']} {res['realtime']['priority']} on CPU "
-           f"{res['realtime']['cpu']}, memory {'locked' if res['realtime']['memory_locked'] else 'not locked'}"
+           f"{res['realtime']['cpu']}, memory {'locked' if res['realtime']['memory_locked'] else 'not locked'}, "
+           f"other threads {res['realtime'].get('others_policy', 'SCHED_OTHER')}"
            + (f" ({'; '.join(res['realtime']['errors'])})" if res['realtime']['errors'] else ""))
     )

@@ -23,6 +23,10 @@ class SensorNotFound(SensorError):
     """Product_ID / Inverse_Product_ID mismatch: no sensor, or wrong wiring."""
 
 
+class SensorReset(SensorError):
+    """A configuration register reads its power-on value again: the chip reset itself (a brown-out)."""
+
+
 class SpiProtocolError(SensorError):
     """A transaction broke the ADNS-3080 SPI protocol (framing or timing); raised by the fake."""
 

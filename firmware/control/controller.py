@@ -15,7 +15,7 @@ from typing import Any, NamedTuple, Protocol
 from rimless.firmware.drivers.adns3080 import MotionSample
 from rimless.firmware.drivers.clutch import ClutchBank
 from rimless.firmware.control.detector import Decision, DetectorParams, LegDetector, Phase
-from rimless.firmware.errors import SensorError, SensorNotFound
+from rimless.firmware.errors import SensorError, SensorNotFound, SensorReset
 from rimless.firmware.control.faults import Fault, HealthLimits, HealthMonitor
 
 
@@ -74,8 +74,13 @@ class Controller:
     """Owns the clutches and the detectors; applies decisions only while armed.
 
     :param max_hold_s: a clutch engaged longer than this trips `Fault.CLUTCH_TIMEOUT`.
-    :param id_check_interval_s: how often to re-read Product_ID (0 = never).
-    :param verify_before_engage: also re-read it right before every engage (a mismatch faults instead).
+    :param id_check_interval_s: how often to read back every identity and configuration register
+        (`Adns3080.check_all`; 0 = never).
+    :param verify_before_engage: also read them all back right before every engage (a mismatch faults
+        instead of engaging).
+    :param readback_every_samples: read back one of them (`check_next`, in turn) from every sensor every this
+        many samples (0 = never): a wrong Product_ID or a brown-out (at any resolution) is found within
+        `READBACK_REGISTERS` (5) times this many samples.
     """
 
     def __init__(
@@ -88,12 +93,15 @@ class Controller:
         outbox_len: int = 20000,
         clock_ns: Callable[[], int] = time.monotonic_ns,
         verify_before_engage: bool = True,
+        readback_every_samples: int = 1,
     ) -> None:
         self.channels = list(channels)
         self.clutches = clutches
         self.max_hold_s = max_hold_s
         self.id_check_interval_s = id_check_interval_s
         self.verify_before_engage = verify_before_engage
+        self.readback_every_samples = max(0, int(readback_every_samples))
+        self._steps = 0
         self.clock_ns = clock_ns
         self.outbox: deque[Record] = deque(maxlen=outbox_len)
         self.armed = False
@@ -224,21 +232,36 @@ class Controller:
 
     # --- the sample -----------------------------------------------------------------------------
     def step(self) -> None:
-        """Read every channel once and act on it."""
+        """Read every channel once and act on it, then read back one register of each sensor (in turn)."""
         for i, ch in enumerate(self.channels):
             self._step_channel(i, ch)
+        self._steps += 1
+        if self.readback_every_samples and self._steps % self.readback_every_samples == 0 and not self.active_faults:
+            # (with a fault latched the clutches are off and disarmed already: its diagnosis stands alone)
+            for i, ch in enumerate(self.channels):
+                self._read_back(i, ch, full=False)
         now = self.clock_ns()
         if self._mask and self.clutches.longest_hold_s(now) > self.max_hold_s:
             self.fault(Fault.CLUTCH_TIMEOUT, f"clutch held longer than max_hold_s={self.max_hold_s}", now)
         if self.id_check_interval_s > 0 and now >= self._next_id_check_ns:
             self._next_id_check_ns = now + int(self.id_check_interval_s * 1e9)
-            for ch in self.channels:
-                try:
-                    ch.sensor.verify_id()
-                except SensorNotFound as err:
-                    self.fault(Fault.ID_MISMATCH, str(err), now)
-                except SensorError as err:
-                    self.fault(Fault.SPI_ERROR, str(err), now)
+            for i, ch in enumerate(self.channels):
+                self._read_back(i, ch, full=True, t_ns=now)
+
+    def _read_back(self, i: int, ch: Channel, *, full: bool, t_ns: int | None = None) -> None:
+        """Read back the sensor's identity and configuration (all of it, or the next register in turn); a
+        mismatch faults (`id_mismatch`, `sensor_reset`). A sensor without read-back has its ID checked (full)."""
+        check = getattr(ch.sensor, "check_all" if full else "check_next", None)
+        if check is None and not full:
+            return
+        try:
+            check() if check is not None else ch.sensor.verify_id()
+        except SensorReset as err:
+            self.fault(Fault.SENSOR_RESET, f"sensor {i}: {err}", t_ns)
+        except SensorNotFound as err:
+            self.fault(Fault.ID_MISMATCH, str(err), t_ns)
+        except SensorError as err:
+            self.fault(Fault.SPI_ERROR, str(err), t_ns)
 
     def _check_step(self, i: int, det: LegDetector, t_ns: int, decision: Decision) -> Decision:
         """With several sensors, a touchdown is a step only on a leg that is neither on the ground nor the
@@ -291,15 +314,10 @@ class Controller:
         if "sync_lost" in decision.events:
             self.fault(Fault.LEG_SYNC_LOST, f"sensor {i}: {det.sync_detail}", s.t_ns)
         if decision.engage is not None and self.armed and self.verify_before_engage:
-            # Product_ID read back right before every engage: a sensor swapped, unplugged or answering garbage
-            # is found before it can clutch (one register read, ~0.1 ms at 2 MHz), not up to
-            # id_check_interval_s later.
-            try:
-                ch.sensor.verify_id()
-            except SensorNotFound as err:
-                self.fault(Fault.ID_MISMATCH, str(err), s.t_ns)
-            except SensorError as err:
-                self.fault(Fault.SPI_ERROR, str(err), s.t_ns)
+            # Identity and configuration read back right before every engage: a sensor swapped, unplugged,
+            # answering garbage or reset by a brown-out is found before it can clutch (five register reads,
+            # ~0.3 ms at 2 MHz).
+            self._read_back(i, ch, full=True, t_ns=s.t_ns)
         if decision.engage is not None and self.armed:
             self.clutches.engage(decision.engage, s.t_ns)
             self._mask |= 1 << decision.engage

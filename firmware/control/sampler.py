@@ -182,6 +182,10 @@ class Sampler:
             self.done.set_result(stats)
 
     def _finish(self, cpu0: float) -> None:
+        if self.realtime_report is not None:
+            from rimless.firmware.control.realtime import restore_others
+
+            restore_others(self.realtime_report)
         self.stats.stopped_ns = time.monotonic_ns()
         self.stats.cpu_s = time.thread_time() - cpu0
         # Anything still waiting in the inbox gets an answer.

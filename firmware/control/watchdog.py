@@ -23,8 +23,10 @@ class Watchdog:
     """Deadlines fed from other threads, checked by a thread of its own (`rimless-watchdog`)."""
 
     def __init__(self, on_trip: Callable[[str, str], None], *, period_s: float = 0.01,
-                 notify: Callable[[str], None] | None = None, notify_every_s: float = 0.0) -> None:
+                 notify: Callable[[str], None] | None = None, notify_every_s: float = 0.0,
+                 clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
         self.on_trip = on_trip
+        self.clock_ns = clock_ns
         self.period_s = period_s
         self.notify = notify
         self.notify_every_s = notify_every_s
@@ -41,11 +43,11 @@ class Watchdog:
     def add(self, name: str, timeout_s: float) -> None:
         """A deadline `name`: fed at least every `timeout_s`, starting now."""
         self._timeouts_ns[name] = int(timeout_s * 1e9)
-        self._fed_ns[name] = time.monotonic_ns()
+        self._fed_ns[name] = self.clock_ns()
 
     def feed(self, name: str) -> None:
         """`name` is alive now (a plain store: safe from any thread)."""
-        self._fed_ns[name] = time.monotonic_ns()
+        self._fed_ns[name] = self.clock_ns()
 
     def start(self) -> None:
         """Start the thread."""
@@ -60,7 +62,7 @@ class Watchdog:
 
     def check_now(self) -> None:
         """One round of checks (the thread runs this every `period_s`)."""
-        now = time.monotonic_ns()
+        now = self.clock_ns()
         stalled = []
         for name, timeout in self._timeouts_ns.items():
             age = now - self._fed_ns.get(name, now)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import NamedTuple
 
-from rimless.firmware.errors import SensorError, SensorNotFound
+from rimless.firmware.errors import SensorError, SensorNotFound, SensorReset
 from rimless.firmware.drivers.spi import SpiBus, SpiSegment
 
 # --- Register map [DS p.23-38] -------------------------------------------------------------------
@@ -75,6 +75,12 @@ DELTA_MIN, DELTA_MAX = -128, 127
 MAX_PIXEL_MASK = 0x3F
 SQUAL_MAX = 169
 MIN_SHUTTER_MAX_BOUND = 0x0100  # the least shutter bound the driver accepts when it lowers it for a frame rate
+# Power-on values of the registers the read-back check watches [DS p.23]: a chip that reset itself reads them.
+POWER_ON_CONFIGURATION_BITS = 0x09  # 400 cpi
+POWER_ON_EXTENDED_CONFIG = 0x00  # automatic frame rate
+POWER_ON_MAX_BOUND = 0x2EE0  # Frame_Period_Max_Bound: 2000 fps
+RESET_MARKER_MAX_BOUND = POWER_ON_MAX_BOUND - 1  # written with the automatic rate: 2000.2 fps minimum, a no-op
+READBACK_REGISTERS = 5  # Product_ID, Inverse_Product_ID, Configuration_bits, Extended_Config, Max_Bound Lower
 MAX_REREADS = 4  # extra bursts to drain a saturated accumulator before calling the sample saturated
 _BUSY_POLLS = 20
 
@@ -166,6 +172,11 @@ class Adns3080:
         self._reset = reset
         self._npd = npd
         self.expected_cpi: int | None = None  # set by set_resolution; checked on every motion read
+        # (register, expected value, mask) read back by `check_next`/`check_all`; the identity registers only
+        # until `mark_configured` adds the configuration a reset would undo
+        self._readback: list[tuple[int, int, int]] = [
+            (_REG_PRODUCT_ID, PRODUCT_ID, 0xFF), (_REG_INVERSE_PRODUCT_ID, INVERSE_PRODUCT_ID, 0xFF)]
+        self._next_readback = 0
         self._sleep = sleep
         self._clock_ns = clock_ns
 
@@ -229,6 +240,7 @@ class Adns3080:
         cfg = (cfg | _CONFIG_RES_1600) if res is Resolution.CPI_1600 else (cfg & ~_CONFIG_RES_1600)
         self.write_register(_REG_CONFIGURATION_BITS, cfg)
         self.expected_cpi = int(res)
+        self._readback = self._readback[:2]  # the identity only, until `mark_configured`
 
     def resolution(self) -> Resolution:
         """The resolution the chip reports in Configuration_bits."""
@@ -238,6 +250,7 @@ class Adns3080:
     def set_frame_rate(self, rate_hz: float | None) -> None:
         """Fixed frame rate in 2000..6469 fps, or None for the automatic rate (SmartSpeed)."""
         ext = self.read_register(_REG_EXTENDED_CONFIG)
+        self._readback = self._readback[:2]  # the identity only, until `mark_configured`
         if rate_hz is None:
             self.write_register(_REG_EXTENDED_CONFIG, ext & ~_EXT_FIXED_FR & ~_EXT_BUSY)
             return
@@ -281,6 +294,58 @@ class Adns3080:
                 return
             self._sleep(1 / FRAME_RATE_MIN_HZ)
         raise SensorError("ADNS-3080 stayed busy after a frame-period write")
+
+    # --- read-back: identity and configuration, against a swap and a brown-out ----------------------
+    def mark_configured(self) -> None:
+        """Remember the configuration as written, after making sure a reset would change it.
+
+        At 400 cpi with the automatic frame rate every configuration register holds its power-on value, so a
+        brown-out (the chip back in its reset state) would read the same. With the automatic rate,
+        Frame_Period_Max_Bound (the least frame rate, 2000 fps at reset) is therefore written one count lower
+        (2000.2 fps: no effect on tracking) as a reset marker; with a fixed rate, Extended_Config's Fixed_FR
+        bit already differs from its reset value. Call it after `set_resolution` and `set_frame_rate`.
+        """
+        ext = self.read_register(_REG_EXTENDED_CONFIG) & ~_EXT_BUSY
+        if not ext & _EXT_FIXED_FR:
+            marker = RESET_MARKER_MAX_BOUND
+            shutter_max = self.shutter_bound_for(marker)
+            self.write_register(_REG_SHUTTER_MAX_BOUND_LOWER, shutter_max & 0xFF)
+            self.write_register(_REG_SHUTTER_MAX_BOUND_UPPER, shutter_max >> 8)
+            self.write_register(_REG_FRAME_PERIOD_MAX_BOUND_LOWER, marker & 0xFF)
+            self.write_register(_REG_FRAME_PERIOD_MAX_BOUND_UPPER, marker >> 8)
+            self._wait_not_busy()
+        cfg = self.read_register(_REG_CONFIGURATION_BITS)
+        max_lower = self.read_register(_REG_FRAME_PERIOD_MAX_BOUND_LOWER)
+        watched = [(_REG_CONFIGURATION_BITS, cfg, 0xFF), (_REG_EXTENDED_CONFIG, ext, 0xFF & ~_EXT_BUSY),
+                   (_REG_FRAME_PERIOD_MAX_BOUND_LOWER, max_lower, 0xFF)]
+        power_on = (POWER_ON_CONFIGURATION_BITS, POWER_ON_EXTENDED_CONFIG, POWER_ON_MAX_BOUND & 0xFF)
+        if all(value == p for (_, value, _), p in zip(watched, power_on, strict=True)):
+            raise SensorError("ADNS-3080 configuration reads back as its power-on state after the reset marker "
+                              "was written: the chip does not keep its registers")
+        self._readback = self._readback[:2] + watched
+        self._next_readback = 0
+
+    def _check(self, register: int, expected: int, mask: int) -> None:
+        value = self.read_register(register) & mask
+        if value == expected:
+            return
+        if register in (_REG_PRODUCT_ID, _REG_INVERSE_PRODUCT_ID):
+            self.verify_id()  # raises SensorNotFound with both IDs named
+            return  # read right the second time: a glitch the next round checks again
+        raise SensorReset(f"ADNS-3080 register 0x{register:02X} reads 0x{value:02X}, configured 0x{expected:02X}: "
+                          "the chip reset itself (brown-out?); restart the firmware to configure it again")
+
+    def check_next(self) -> None:
+        """Read back one register of the identity and configuration, the next in turn: `READBACK_REGISTERS`
+        calls cover them all. Raises SensorNotFound (Product_ID) or SensorReset (configuration lost)."""
+        register, expected, mask = self._readback[self._next_readback % len(self._readback)]
+        self._next_readback = (self._next_readback + 1) % len(self._readback)
+        self._check(register, expected, mask)
+
+    def check_all(self) -> None:
+        """Read back every identity and configuration register (see `check_next`)."""
+        for register, expected, mask in self._readback:
+            self._check(register, expected, mask)
 
     def frame_rate_hz(self) -> float:
         """Current frame rate from Frame_Period (Upper read first) [DS p.31]."""

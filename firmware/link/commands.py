@@ -236,6 +236,7 @@ class CommandServer:
 
     MAX_UNAUTHENTICATED_PER_SOURCE = 4
     RESERVED_FOR_OPERATORS = 2
+    REPLY_TIMEOUT_S = 5.0  # a peer whose replies cannot be sent for this long (it never reads) is dropped
 
     def __init__(
         self,
@@ -265,11 +266,13 @@ class CommandServer:
         self.on_valid = on_valid
         self.on_disarm = on_disarm
         self.on_status = on_status
+        self.reply_timeout_s = self.REPLY_TIMEOUT_S
         self._udp: ReservedListener | None = None
         self.rejected = 0
         self.accepted = 0
         self.evicted = 0
         self.timed_out = 0
+        self.unread_dropped = 0  # of them: peers that did not read their replies for reply_timeout_s
         self.refused_per_source = 0
         self.log = RateLimitedLog(log)
         self._server: asyncio.Server | None = None
@@ -412,6 +415,7 @@ class CommandServer:
             return  # a dropped peer, or shutdown: nothing to report
         except TimeoutError:  # a peer that does not read its replies (drain timed out): drop it quietly
             self.timed_out += 1
+            self.unread_dropped += 1
             with contextlib.suppress(Exception):
                 writer.transport.abort()
             return
@@ -448,7 +452,6 @@ class CommandServer:
         self.accepted += 1
         return {"ok": True, "seq": cmd.seq, "result": result}, cmd.seq
 
-    @staticmethod
-    async def _reply(writer: asyncio.StreamWriter, obj: dict[str, Any]) -> None:
+    async def _reply(self, writer: asyncio.StreamWriter, obj: dict[str, Any]) -> None:
         writer.write(json.dumps(obj, separators=(",", ":"), default=str).encode() + b"\n")
-        await asyncio.wait_for(writer.drain(), 5.0)
+        await asyncio.wait_for(writer.drain(), self.reply_timeout_s)

@@ -1,7 +1,8 @@
 """PC side of the telemetry: receive the robot's UDP datagrams, record them, show them live.
 
-Records every object as one JSON line (`out`) and the samples and events as CSV rows (`csv_out`); both
-are written under a `.part` name and renamed when the recording ends. In a terminal the live view
+Records every object as one JSON line (`out`), the samples and events as CSV rows (`csv_out`) and as
+MCAP messages, one topic per series (`mcap_out`, see `mcap_record`); each file is written under a `.part`
+name and renamed when the recording ends. In a terminal the live view
 redraws sparklines of leg velocity and compression and a strip per clutch; elsewhere it prints a
 summary line every `summary_every_s`. When no datagram arrives for `stale_s`, it says so once, and
 again when data resume. With a `heartbeat`, the command link is kept alive meanwhile.
@@ -18,7 +19,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, BinaryIO, TextIO
 
 from rimless.errors import RunFailure
 from rimless.firmware.errors import CommandError, Interrupted
@@ -141,14 +142,18 @@ class Summary:
 
 
 class Recorder:
-    """JSON Lines and CSV files written under `.part` names, renamed by `close`."""
+    """JSON Lines, CSV and MCAP files written under `.part` names, renamed by `close`."""
 
-    def __init__(self, out: Path | None, csv_out: Path | None) -> None:
+    def __init__(self, out: Path | None, csv_out: Path | None, mcap_out: Path | None = None,
+                 mcap_metadata: dict[str, str] | None = None) -> None:
         self.paths: list[Path] = []
         self._parts: list[tuple[Path, Path]] = []
         self._jsonl: TextIO | None = None
         self._csv_fh: TextIO | None = None
         self._csv: Any = None
+        self._mcap_fh: BinaryIO | None = None
+        self._mcap: Any = None
+        self._mcap_part: Path | None = None
         self.lines = 0
         try:
             if out is not None:
@@ -157,13 +162,35 @@ class Recorder:
                 self._csv_fh = self._open(csv_out)
                 self._csv = csv.DictWriter(self._csv_fh, CSV_COLUMNS, extrasaction="ignore")
                 self._csv.writeheader()
-        except OSError as err:
-            self.close()
-            raise CommandError(f"cannot write {err.filename} ({err.strerror or err})") from None
+            if mcap_out is not None:
+                from rimless.firmware.link.mcap_record import McapRecorder
 
-    def _open(self, path: Path) -> TextIO:
+                self._mcap_fh = self._open(mcap_out, binary=True)
+                self._mcap_part = self._parts[-1][0]
+                self._mcap = McapRecorder(self._mcap_fh, metadata=mcap_metadata)
+        except OSError as err:
+            self._abandon()
+            raise CommandError(f"cannot write {err.filename} ({err.strerror or err})") from None
+        except BaseException:
+            self._abandon()
+            raise
+
+    def _abandon(self) -> None:
+        """Close and remove the `.part` files of a recording that could not start."""
+        for fh in (self._jsonl, self._csv_fh, self._mcap_fh):
+            if fh is not None:
+                fh.close()
+        for part, _final in self._parts:
+            part.unlink(missing_ok=True)
+        self._parts = []
+        self._jsonl = self._csv_fh = self._mcap_fh = None
+
+    def _open(self, path: Path, *, binary: bool = False) -> Any:
         part = path.with_name(path.name + ".part")
-        fh = open(part, "w", encoding="utf-8", newline="")  # noqa: SIM115 - closed in close()
+        if binary:
+            fh: Any = open(part, "wb")  # noqa: SIM115 - closed in close()
+        else:
+            fh = open(part, "w", encoding="utf-8", newline="")  # noqa: SIM115 - closed in close()
         self._parts.append((part, path))
         return fh
 
@@ -175,6 +202,8 @@ class Recorder:
                 self._jsonl.write(json.dumps(obj, separators=(",", ":")) + "\n")
             if self._csv is not None:
                 self._csv.writerow(_flat(obj))
+        if self._mcap is not None:
+            self._mcap.write(objs)
 
     def flush(self) -> None:
         """Push the buffers to the files."""
@@ -183,11 +212,21 @@ class Recorder:
                 fh.flush()
 
     def close(self) -> list[Path]:
-        """Close and rename every file to its final name; returns the final paths."""
-        for fh in (self._jsonl, self._csv_fh):
+        """Close and rename every file to its final name; returns the final paths. An MCAP file gets its
+        summary and index first; if that fails, it keeps its `.part` name."""
+        mcap_ok = True
+        if self._mcap is not None:
+            try:
+                self._mcap.finish()
+            except Exception:  # noqa: BLE001 - the other files are still completed
+                mcap_ok = False
+            self._mcap = None
+        for fh in (self._jsonl, self._csv_fh, self._mcap_fh):
             if fh is not None:
                 fh.close()
-        self._jsonl = self._csv_fh = None
+        if not mcap_ok:
+            self._parts = [(p, f) for p, f in self._parts if p != self._mcap_part]
+        self._jsonl = self._csv_fh = self._mcap_fh = None
         for part, final in self._parts:
             if part.exists():
                 os.replace(part, final)
@@ -200,7 +239,7 @@ def listen(
     *, bind: str, port: int, out: Path | None, duration_s: float | None, summary_every_s: float = 1.0,
     echo: Callable[[str], None] = print, csv_out: Path | None = None, stale_s: float = 1.0,
     live: bool = False, write_screen: Callable[[str], None] | None = None,
-    heartbeat: Any = None, timeout_s: float = 10.0, robot: str | None = None,
+    heartbeat: Any = None, timeout_s: float = 10.0, robot: str | None = None, mcap_out: Path | None = None,
 ) -> Summary:
     """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
 
@@ -225,7 +264,7 @@ def listen(
             sock.close()
             raise CommandError(f"--robot {robot!r} cannot be resolved ({err})") from None
     try:
-        rec = Recorder(out, csv_out)
+        rec = Recorder(out, csv_out, mcap_out, {"bind": f"{bind}:{port}", "robot": robot or "first sender heard"})
     except BaseException:
         sock.close()
         raise

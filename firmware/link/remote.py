@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import json
 import socket
+import time
 from typing import Any
 
 from rimless.firmware.errors import CommandError, RobotUnreachable
@@ -106,43 +107,56 @@ class RobotLink:
         self.close()
 
 
+RESEND_FIRST_S = 0.05  # the reserved path's first resend, then doubling: a dropped copy costs 50 ms, not 1/3 s
+
+
 def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                           copies: int = 3) -> dict[str, Any]:
+                           copies: int = 5) -> dict[str, Any]:
     """PC side: `disarm` or `status` over the reserved UDP path; returns the robot's answer.
 
-    Sends up to `copies` datagrams (UDP may drop one), waiting `timeout_s / copies` for an answer
-    after each. Raises `RobotUnreachable` when none comes.
+    Sends up to `copies` datagrams (UDP may drop one: a flood can fill the robot's socket buffer), each with
+    a new number, the next one `RESEND_FIRST_S` after the first and then twice as long each time, the last
+    waiting for what is left of `timeout_s`; an answer to any of them counts. Raises `RobotUnreachable` when
+    none comes.
     """
     try:
         info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
     except socket.gaierror as err:
         raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
     sent: set[int] = set()
+    deadline = time.monotonic() + timeout_s
     with socket.socket(info[0], socket.SOCK_DGRAM) as sock:
-        sock.settimeout(timeout_s / copies)
-        for _ in range(copies):
+        for k in range(copies):
             n = max(reserved_counter(), max(sent, default=0) + 1)  # every copy a new number (no replay)
             sent.add(n)
             body: dict[str, Any] = {kind: n, "mac": reserved_mac(token, kind, n)}
             body["pad"] = "x" * max(0, RESERVED_PAD_BYTES - len(json.dumps(body)) - 10)  # room for the answer
+            until = deadline if k == copies - 1 else min(deadline, time.monotonic() + RESEND_FIRST_S * 2**k)
             try:
                 sock.sendto(json.dumps(body).encode(), info[4])
-                reply, _ = sock.recvfrom(65536)
-            except (TimeoutError, socket.timeout, ConnectionRefusedError):
+            except ConnectionRefusedError:
                 continue
             except OSError as err:
                 raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
-            try:
-                obj = json.loads(reply)
-            except ValueError:
-                continue
-            if isinstance(obj, dict) and obj.get("ok") and obj.get("n") in sent:
-                return obj
+            while (left := until - time.monotonic()) > 0:
+                sock.settimeout(left)
+                try:
+                    reply, _ = sock.recvfrom(65536)
+                except (TimeoutError, socket.timeout, ConnectionRefusedError):
+                    break
+                except OSError as err:
+                    raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
+                try:
+                    obj = json.loads(reply)
+                except ValueError:
+                    continue
+                if isinstance(obj, dict) and obj.get("ok") and obj.get("n") in sent:
+                    return obj
     raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
 
 
 def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                         copies: int = 3) -> dict[str, Any]:
+                         copies: int = 5) -> dict[str, Any]:
     """PC side: disarm over the reserved UDP path (see `send_reserved_datagram`)."""
     return send_reserved_datagram(host, "disarm", token=token, port=port, timeout_s=timeout_s, copies=copies)
 

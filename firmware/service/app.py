@@ -97,6 +97,7 @@ class RobotApp:
         self.controller = Controller(
             hw.channels, hw.clutches, max_hold_s=cfg.clutch.max_hold_s,
             id_check_interval_s=cfg.sampling.id_check_interval_s,
+            readback_every_samples=cfg.sampling.readback_every_samples,
         )
         self.armed_remotely = False
         self.signal_received: str | None = None

@@ -77,6 +77,7 @@ class SamplingConfig:
     spin_s: float = 0.0003
     stall_timeout_s: float = 0.1  # the control thread not sampling this long trips the watchdog (s)
     id_check_interval_s: float = 1.0
+    readback_every_samples: int = 1  # one identity/configuration register read back every this many samples
     loop_stall_s: float = 0.25  # the event loop not feeding the watchdog this long trips it (s)
     realtime: bool = False  # the control thread SCHED_FIFO on one CPU, memory locked (`run --realtime`)
     realtime_priority: int = 50  # SCHED_FIFO priority (1..99; the unit's LimitRTPRIO must allow it)
@@ -166,7 +167,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "frame_rate_hz": (2000, 6469), "counts_per_m": (1.0, 1e8), "squal_min": (0, 169), "squal_low_s": (0.0, 10.0),
     "saturated_samples_max": (1, 1000), "max_hold_s": (0.01, 60.0), "start_leg_index": (0, 63),
     "rate_hz": (10.0, 5000.0), "spin_s": (0.0, 0.005), "stall_timeout_s": (0.005, 10.0),
-    "id_check_interval_s": (0.0, 3600.0), "port": (0, 65535), "period_s": (0.001, 1.0),
+    "id_check_interval_s": (0.0, 3600.0), "readback_every_samples": (0, 100000), "port": (0, 65535), "period_s": (0.001, 1.0),
     "max_datagram_bytes": (256, 65000), "decimate": (1, 1000), "link_timeout_s": (0.0, 3600.0),
     "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0), "npd_pin": (2, 27), "cs_pin": (2, 27),
     "heartbeat_pin": (0, 27), "loop_stall_s": (0.02, 10.0),

@@ -63,6 +63,7 @@ def _configure(sensor: Adns3080, cfg: SensorConfig) -> None:
     sensor.power_up(pulse_reset=False)  # the RESET lines were pulsed by `_reset_all`
     sensor.set_resolution(cfg.resolution_cpi)
     sensor.set_frame_rate(cfg.frame_rate_hz)
+    sensor.mark_configured()  # read back from now on: a brown-out is seen at 400 cpi too
     sensor.clear_motion()
 
 

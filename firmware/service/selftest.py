@@ -66,10 +66,10 @@ class SelfTestReport:
 
 
 def self_test(config: RobotConfig | Path | None = None, *, fake: bool = False, click: bool = True,
-              on_click: Callable[[int, int], None] | None = None) -> SelfTestReport:
+              on_click: Callable[[int, int], None] | None = None, click_s: float = CLICK_ON_S) -> SelfTestReport:
     """Open the hardware of `config` (a `RobotConfig`, or the robot.toml to load; None: the defaults), the
-    fakes with `fake`; identify and read every sensor, and with `click` engage each clutch for `CLICK_ON_S`
-    (`on_click(leg, pin)` is called before each click).
+    fakes with `fake`; identify and read every sensor, and with `click` engage each clutch for `click_s`
+    seconds (`on_click(leg, pin)` is called once it is engaged).
 
     Any stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT) releases every clutch at once and ends the test:
     the report then says which signal. Raises `CommandError` ("sensor check failed: ...") when a sensor
@@ -92,7 +92,7 @@ def self_test(config: RobotConfig | Path | None = None, *, fake: bool = False, c
                 raise CommandError(f"sensor check failed: {err}") from None
             state["hw"] = hw
             try:
-                _check(hw, report, click, on_click)
+                _check(hw, report, click, on_click, click_s)
             except SensorError as err:
                 raise CommandError(f"sensor check failed: {err}") from None
             finally:
@@ -107,7 +107,8 @@ def self_test(config: RobotConfig | Path | None = None, *, fake: bool = False, c
     return report
 
 
-def _check(hw: Hardware, report: SelfTestReport, click: bool, on_click: Callable[[int, int], None] | None) -> None:
+def _check(hw: Hardware, report: SelfTestReport, click: bool, on_click: Callable[[int, int], None] | None,
+           click_s: float = CLICK_ON_S) -> None:
     for i, sensor in enumerate(hw.sensors):
         rev = sensor.verify_id()
         squal = [sensor.squal() for _ in range(SQUAL_READS)]
@@ -116,11 +117,11 @@ def _check(hw: Hardware, report: SelfTestReport, click: bool, on_click: Callable
     if not click:
         return
     for leg, pin in enumerate(hw.clutches.pins):
-        if on_click is not None:
-            on_click(leg, pin)
         hw.clutches.engage(leg)
         try:
-            time.sleep(CLICK_ON_S)
+            if on_click is not None:
+                on_click(leg, pin)  # engaged now: a signal from here on finds this clutch on
+            time.sleep(click_s)
         finally:
             hw.clutches.release(leg)
         time.sleep(CLICK_GAP_S)

@@ -104,7 +104,8 @@ def test_listen_records_datagrams(tmp_path) -> None:
 
     t = threading.Thread(target=send)
     t.start()
-    r = invoke("listen", "--bind", "127.0.0.1", "--port", str(port), "--out", str(out), "--duration-s", "1.2",
+    # 3 s for 0.4 s of sending after the bind: a loaded machine may start the sender late
+    r = invoke("listen", "--bind", "127.0.0.1", "--port", str(port), "--out", str(out), "--duration-s", "3.0",
                "--summary-every-s", "0.3")
     t.join()
     assert r.exit_code == 0, r.output
@@ -199,8 +200,9 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
 
     t = threading.Thread(target=send)
     t.start()
+    # 4 s for 1.0 s of sending after the bind (the pause included): room for a late sender on a loaded machine
     r = invoke("listen", "--bind", "127.0.0.1", "--port", str(port), "--out", str(out), "--csv", str(csv_out),
-               "--duration-s", "2.0", "--summary-every-s", "0.5", "--stale-s", "0.4", "--no-live")
+               "--duration-s", "4.0", "--summary-every-s", "0.5", "--stale-s", "0.4", "--no-live")
     t.join()
     assert r.exit_code == 0, r.output
     assert "data stopped: nothing for 0.4 s" in r.output and "data resumed after" in r.output
@@ -256,8 +258,9 @@ def test_bench_reports_every_part_of_the_delay() -> None:
     r = invoke("bench", "--fake", "--rate-hz", "500", "--duration-s", "1.5", "--json")
     assert r.exit_code == 0, r.output
     row = json.loads(r.stdout)[0]
-    # Wire time at 2 MHz: 8 bytes + the 75 us t_SRAD-MOT gap per Motion_Burst (plus rare re-reads).
-    assert 0.107 <= row["spi_wire_per_sample_ms"] < 0.2 and row["spi_clock_hz"] == 2_000_000
+    # Wire time at 2 MHz: 8 bytes + the 75 us t_SRAD-MOT gap per Motion_Burst (0.107 ms), plus the register read
+    # back at every sample, 2 bytes + the 50 us t_SRAD gap (0.058 ms); plus rare re-reads and pre-engage checks.
+    assert 0.165 <= row["spi_wire_per_sample_ms"] < 0.2 and row["spi_clock_hz"] == 2_000_000
     assert row["wake_late_p50_ms"] <= row["wake_late_p99_ms"] <= row["wake_late_max_ms"]
     assert row["locks"] >= 3 and row["touchdowns"] >= 3
     # The lock follows the true peak by less than the velocity window; the touchdown is seen within 20 ms.
@@ -355,5 +358,6 @@ def test_bench_realtime_reports_what_the_control_thread_got() -> None:
     assert rt["gc_frozen"] is True
     if os.geteuid() == 0:
         assert rt["policy"] == "SCHED_FIFO" and rt["cpu"] is not None and rt["errors"] == []
+        assert rt["others_policy"] == "SCHED_FIFO"  # the GIL holders cannot be preempted by ordinary processes
     else:
         assert rt["policy"] == "SCHED_FIFO" or any("SCHED_FIFO" in e for e in rt["errors"])

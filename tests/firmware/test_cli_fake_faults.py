@@ -18,9 +18,10 @@ RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)
 
 
-def run_fake(tmp_path: Path, *args: str, duration_s: float = 4.0) -> tuple[dict, list[dict], subprocess.CompletedProcess]:
+def run_fake(tmp_path: Path, *args: str, duration_s: float = 4.0,
+             sensor: str = "") -> tuple[dict, list[dict], subprocess.CompletedProcess]:
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(f'{sensor}[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
     pins = tmp_path / "pins.jsonl"
     env = {**os.environ, "RIMLESS_TOKEN": secrets.token_urlsafe(18)}
     proc = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s",
@@ -67,6 +68,19 @@ def test_every_scenario_ends_released_with_no_airborne_lock(tmp_path, name, faul
     assert all(levels.get(p, 0) == 0 for p in CLUTCH_PINS)
     ups = sum(1 for rec in lines if rec["pin"] in CLUTCH_PINS and rec["level"] == 1)
     assert ups == summary["engages"]
+
+
+@pytest.mark.slow
+def test_a_brownout_at_400_cpi_is_caught_too(tmp_path) -> None:
+    """Fails before the configuration read-back: at 400 cpi the reset leaves Motion's RES bit as it was, and
+    the walk went on locking with the sensor in its power-on state (no fault)."""
+    sensor = ("[[sensor]]\nreset_pin = 25\nresolution_cpi = 400\ncounts_per_m = 15748.0\n"
+              "legs = [0, 1, 2, 3, 4, 5, 6, 7]\n")
+    summary, lines, proc = run_fake(tmp_path, "--fake-fault", "brown-out", sensor=sensor)
+    assert proc.returncode == 0, proc.stderr
+    assert "sensor_reset" in summary["faults"]
+    assert summary["engages"] > 0 and summary["airborne_leg_locks"] == 0
+    assert all(v == 0 for p, v in last_levels(lines).items() if p in CLUTCH_PINS)
 
 
 def test_a_plain_fake_walk_locks_only_stance_legs(tmp_path) -> None:

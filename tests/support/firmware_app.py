@@ -88,6 +88,17 @@ class Client:
         self.writer.close()
 
 
+async def wait_for(condition, timeout_s: float = 12.0, every_s: float = 0.01) -> None:
+    """Poll `condition()` in the event loop until it holds; AssertionError after `timeout_s` (generous: a
+    loaded test machine is slow, and a condition costs no time when it holds early). Under `scenario`'s
+    default 15 s run."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"condition not met in {timeout_s:g} s")
+        await asyncio.sleep(every_s)
+
+
 def all_off(hw) -> bool:
     return all(hw.pin_factory.pin(p).state is False for p in hw.clutches.pins) if hw.clutches.pins else True
 

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import socket
 import time
 
-
 from rimless.firmware.service.config import CommandsConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.service.triallog import read_trial_log
-from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
 
 
 def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
@@ -61,7 +61,10 @@ def test_arm_set_trial_disarm_over_tcp(tmp_path) -> None:
         r_set = await c.cmd("set", 2, name="touch_velocity_m_s", value=0.06)
         r_start = await c.cmd("trial_start", 3, name="slope1")
         r_again = await c.cmd("trial_start", 4, name="slope2")
-        await asyncio.sleep(1.0)
+        # until the trial has 250 samples and a lock: a condition, not a delay (a loaded machine samples late)
+        s0, locked = app.controller.samples, []
+        await wait_for(lambda: (locked.append(1) if hw.clutches.engaged() else None, locked)[1]
+                       and app.controller.samples - s0 > 250)
         r_status = await c.cmd("status", 5)
         r_stop = await c.cmd("trial_stop", 6)
         r_disarm = await c.cmd("disarm", 7)
@@ -99,13 +102,17 @@ def test_telemetry_reaches_a_udp_receiver_in_plotjuggler_shape(tmp_path) -> None
 
     async def script(app, hw):
         rx.setblocking(False)
-        for _ in range(100):  # read while the app runs, so the socket buffer never overflows
+        deadline = time.monotonic() + 20
+        # read while the app runs, so the socket buffer never overflows, until a lock was sent (and 1 s at least)
+        for k in itertools.count():
             await asyncio.sleep(0.01)
             while True:
                 try:
                     datagrams.append(rx.recv(65536))
                 except BlockingIOError:
                     break
+            if k >= 100 and any(b'"name":"lock"' in d for d in datagrams) or time.monotonic() > deadline:
+                break
         rx.settimeout(0.05)
 
     app, summary, _, hw = scenario(cfg, script, arm=True)
@@ -138,6 +145,7 @@ def test_dead_telemetry_receiver_costs_the_loop_nothing(tmp_path) -> None:
 
     async def script(app, hw):
         await asyncio.sleep(1.0)
+        await wait_for(lambda: app.controller.clutch_commands >= 2)  # a lock and its release
 
     app, summary, _, hw = scenario(cfg, script, arm=True)
     assert app.telemetry is not None
@@ -148,21 +156,17 @@ def test_dead_telemetry_receiver_costs_the_loop_nothing(tmp_path) -> None:
 
 
 def test_link_loss_disarms(tmp_path) -> None:
-    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=0.3))
+    # pings every 0.1 s against a 1 s link timeout: a loaded machine may delay a ping, not by ten times
+    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=1.0))
 
     async def script(app, hw):
         c = await Client.connect(app.command_port)
         assert (await c.cmd("arm", 1))["ok"]
-        for seq in range(2, 8):  # heartbeats keep it armed
+        for seq in range(2, 14):  # heartbeats keep it armed
             await asyncio.sleep(0.1)
             assert (await c.cmd("ping", seq))["ok"]
         armed_while_pinging = app.controller.armed
-        engaged_seen = False
-        for _ in range(60):  # then silence
-            await asyncio.sleep(0.02)
-            engaged_seen |= bool(hw.clutches.engaged())
-            if not app.controller.armed:
-                break
+        await wait_for(lambda: not app.controller.armed)  # then silence: disarmed
         c.close()
         return armed_while_pinging
 
@@ -196,11 +200,14 @@ def test_stalled_sampler_trips_the_watchdog(tmp_path) -> None:
 
     def hook(hw):
         for ch in hw.channels:
-            ch.sensor = StallingSensor(ch.sensor, hw.clutches, stall_s=0.5)
+            # 1.5 s against the test config's 0.3 s stall timeout: the watchdog trips while it is stuck even
+            # when a loaded machine runs the watchdog thread late
+            ch.sensor = StallingSensor(ch.sensor, hw.clutches, stall_s=1.5)
             wrappers.append(ch.sensor)
 
     async def script(app, hw):
-        for _ in range(200):
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
             await asyncio.sleep(0.01)
             if "sensor_stalled" in app.summary.faults:
                 return [hw.pin_factory.pin(p).state for p in hw.clutches.pins]
@@ -218,7 +225,7 @@ def test_exception_in_the_control_path_stops_the_app_safely(tmp_path) -> None:
             ch.sensor = StallingSensor(ch.sensor, hw.clutches, 0, exc=RuntimeError("driver bug"))
 
     async def script(app, hw):
-        await asyncio.sleep(5)
+        await wait_for(lambda: bool(app.summary.stop_reason))  # the app stops by itself
 
     app, summary, _, hw = scenario(config(tmp_path), script, arm=True, hw_hook=hook)
     assert summary.error is not None and "driver bug" in summary.error

@@ -13,11 +13,13 @@ from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from tests.support.firmware_app import config
 
 
-def leg_view(traj: GaitTrajectory, leg: int, legs: int = 8):
-    """What the sensor of `leg` sees: only the stances of that leg (every `legs`-th step)."""
+def leg_view(walk: dict, leg: int, legs: int = 8):
+    """What the sensor of `leg` sees: only the stances of that leg (every `legs`-th step) of `walk["traj"]`
+    (nothing until it is set)."""
 
     def f(t: float) -> float:
-        if t < traj.start_s:
+        traj = walk.get("traj")
+        if traj is None or t < traj.start_s:
             return 0.0
         k = int((t - traj.start_s) // traj.step_period_s)
         return traj(t) if k % legs == leg else 0.0
@@ -38,14 +40,21 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
     from rimless.firmware.service.hardware import build_fake
 
     cfg = per_leg_config(tmp_path)
-    traj = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3, compression_m=0.008, compression_s=0.06)
-    hw = build_fake(cfg, trajectories=[leg_view(traj, k) for k in range(8)])
+    walk: dict = {}
+    hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)])
     from rimless.firmware.service.app import RobotApp
 
+    def ready(app) -> None:
+        # The walk starts once the app runs (a loaded machine may take long to start it), and the app stops
+        # between leg 3's lock and leg 4's touchdown.
+        traj = walk["traj"] = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3,
+                                             compression_m=0.008, compression_s=0.06)
+        asyncio.get_running_loop().call_later(traj.touchdown_s(4) - 0.1 - time.monotonic(), app.request_stop,
+                                              "test done")
+
     async def main():
-        app = RobotApp(cfg, hw)
-        # Stop between leg 3's lock and leg 4's touchdown.
-        return await app.run(duration_s=traj.touchdown_s(4) - 0.1 - time.monotonic(), arm=True, handle_signals=False)
+        app = RobotApp(cfg, hw, on_ready=ready)
+        return await app.run(duration_s=30, arm=True, handle_signals=False)
 
     summary = asyncio.run(main())
     assert summary.faults == [] and summary.error is None
