@@ -43,6 +43,9 @@ PRE_RELEASE_S = 0.02  # the fit starts this long before the release command (the
 SETTLED_S = 0.05  # and ends this long after the motion has ended (or at the log's end)
 MOVE_COUNTS = 3.0  # a departure of this many counts from the held position is motion
 MIN_FREE_SAMPLES = 20
+SLOW_READ_US = 500.0  # a read that took longer (and SLOW_READ_FACTOR x the median) is left out
+SLOW_READ_FACTOR = 3.0
+OUTLIER_SIGMAS = 8.0  # after a first fit, samples beyond this many robust sigmas (MAD) are left out, once
 Z95 = 1.959963984540054
 MAX_NFEV = 400
 N_SHARED, N_PER_LOG = 3, 4  # omega_n, zeta, a; per log x_lock, x_eq, t_r, drift
@@ -62,6 +65,7 @@ class LegLog:
     engage_t_s: float | None
     header: dict[str, Any]
     outcome: str = "ok"
+    read_us: np.ndarray = field(default_factory=lambda: np.zeros(0))  # each read's duration (NaN: not logged)
 
     @property
     def truth(self) -> dict[str, Any] | None:
@@ -92,6 +96,7 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
         raise InputFileError(f"{p}: empty, expected a leg-test log (first line {{\"format\": \"{FORMAT}\", ...}})")
     t: list[float] = []
     c: list[float] = []
+    read_us: list[float] = []
     header: dict[str, Any] = {}
     release = engage = None
     outcome = None
@@ -139,8 +144,12 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
             raise InputFileError(f"{where}: field 'counts' must be an integer (sensor counts), got {cv!r}")
         if t and ts <= t[-1]:
             raise InputFileError(f"{where}: field 't_s' {ts!r} does not increase (previous sample at {t[-1]!r})")
+        ru = obj.get("read_us", math.nan)
+        if ru is not None and not math.isnan(ru if isinstance(ru, float) else 0.0):
+            ru = _num(ru, where, "read_us")
         t.append(ts)
         c.append(float(cv))
+        read_us.append(math.nan if ru is None else float(ru))
     if release is None:
         why = f" (the test ended with {outcome!r})" if outcome not in (None, "ok") else ""
         raise InputFileError(f"{p}: no 'release' event: the clutch never let the leg go{why}, nothing to fit")
@@ -149,7 +158,8 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
     if n_free < MIN_FREE_SAMPLES:
         raise InputFileError(f"{p}: {n_free} samples after the release (at least {MIN_FREE_SAMPLES} needed)")
     cpm = float(counts_per_m) if counts_per_m is not None else float(header["counts_per_m"])
-    return LegLog(p, int(header["leg"]), cpm, tt, np.asarray(c), float(release), engage, header, outcome or "ok")
+    return LegLog(p, int(header["leg"]), cpm, tt, np.asarray(c), float(release), engage, header, outcome or "ok",
+                  np.asarray(read_us))
 
 
 def free_response(t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: float, x_lock: float,
@@ -188,6 +198,8 @@ class _Segment:
     x_lock0: float
     x_eq0: float
     t_r0: float
+    slow_reads: int = 0  # reads left out: the process was descheduled in them (their instant is uncertain)
+    outliers: int = 0  # samples left out by the outlier test after the first fit
 
 
 def _segment(log: LegLog) -> _Segment:
@@ -205,7 +217,14 @@ def _segment(log: LegLog) -> _Segment:
     moving = after & (np.abs(log.counts - x_end) > MOVE_COUNTS)
     t_last = float(t[moving][-1]) if moving.any() else t_move
     keep = (t >= -PRE_RELEASE_S) & (t <= t_last + SETTLED_S)
-    return _Segment(log, t[keep], log.counts[keep], x_lock, x_end, max(t_move - 1e-3, 0.0))
+    slow = np.zeros_like(keep)
+    ru = log.read_us
+    if ru.size == t.size and np.isfinite(ru).any():
+        limit = max(SLOW_READ_US, SLOW_READ_FACTOR * float(np.nanmedian(ru)))
+        slow = np.isfinite(ru) & (ru > limit)
+    seg = _Segment(log, t[keep & ~slow], log.counts[keep & ~slow], x_lock, x_end, max(t_move - 1e-3, 0.0))
+    seg.slow_reads = int(np.sum(keep & slow))
+    return seg
 
 
 @dataclass
@@ -332,6 +351,19 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
         if best is None or r.cost < best.cost:
             best = r
     assert best is not None
+    r = resid(best.x)
+    sig = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    bad = np.abs(r) > OUTLIER_SIGMAS * max(sig, 0.3)
+    if bad.any():  # a read whose count or instant is wrong (a glitch): leave it out once, and fit again
+        for i, sg in enumerate(segs):
+            drop = bad[offs[i]:offs[i + 1]]
+            sg.outliers = int(drop.sum())
+            sg.t, sg.y = sg.t[~drop], sg.y[~drop]
+        offs = np.concatenate([[0], np.cumsum([sg.t.size for sg in segs])])
+        nfev = int(best.nfev)
+        best = least_squares(resid, best.x, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", xtol=1e-10,
+                             ftol=1e-12, max_nfev=MAX_NFEV)
+        best.nfev += nfev
     u = best.x
     w, z, a_um, per = unpack(u)
     if z >= ZETA_MAX * 0.999:
@@ -368,6 +400,7 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
         per_log.append({"file": str(s.log.path), "samples": int(s.t.size), "counts_per_m": s.log.counts_per_m,
                         "held_counts": float(xl), "equilibrium_counts": float(xe),
                         "release_delay_ms": float(tr), "drift_counts_per_s": float(dr), "half_cycles": half_cycles,
+                        "slow_reads_left_out": s.slow_reads, "outliers_left_out": s.outliers,
                         "residual_rms_counts": float(np.sqrt(np.mean(ri ** 2))), "outcome": s.log.outcome})
     if all(pl["half_cycles"] < 2 for pl in per_log):
         raise RunFailure(f"{segs[0].log.path}: the leg stopped in its first half cycle in every log: friction and "

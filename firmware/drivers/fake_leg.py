@@ -9,7 +9,8 @@ The story the fake plays: the leg rests; from `press_start_s` the hand compresse
 (a half-cosine ramp over `press_s`, so the hand stops at the peak), then lets it come back as slowly; the leg
 follows the hand until the clutch holds it. The clutch is read from its output (`clutch_engaged()`, the mock
 pin): it holds the leg `engage_delay_s` after the pin goes on and lets go `release_delay_s` after it goes off
-(an electromagnetic clutch is not instantaneous). Once let go, the leg moves freely: m x'' = -k x - c x'
+(an electromagnetic clutch is not instantaneous; the pin is seen when the fake is next read, at the read
+rate). Once let go, the leg moves freely: m x'' = -k x - c x'
 - F_c sign(x') - m g, with stiction (a leg at rest whose spring and gravity force is within F_c stays at rest),
 integrated with a semi-implicit Euler step of `step_s` (10 us: under 0.3 % of the natural period's radian).
 
@@ -29,8 +30,8 @@ from typing import Any
 @dataclass(frozen=True)
 class FakeLegParams:
     """The simulated leg (SI). Defaults: the paper's k and c, the leg mass of Table 1 as the moving mass, a
-    guide friction of 0.4 N, a 2 mm compression by hand (peak velocity after release about 0.5 m/s and peak
-    acceleration about 14 g, inside the ADNS-3080's rating of 1 m/s and 15 g)."""
+    guide friction of 0.4 N, a 2 mm compression by hand (after the release: peak speed about 0.3 m/s, peak
+    acceleration k x / m = 14.6 g, inside the ADNS-3080's rating of 1 m/s and 15 g)."""
 
     stiffness_n_per_m: float = 2700.0
     damping_n_s_per_m: float = 8.0
@@ -105,7 +106,7 @@ class FakeLeg:
         wants_hold = engaged and self.phase != self.HELD
         wants_free = not engaged and self.phase == self.HELD
         if (wants_hold or wants_free) and self._switch_at is None:
-            self._switch_at = self.t + (self.p.engage_delay_s if wants_hold else self.p.release_delay_s)
+            self._switch_at = u + (self.p.engage_delay_s if wants_hold else self.p.release_delay_s)
         elif not (wants_hold or wants_free):
             self._switch_at = None  # the output went back before the clutch acted
         if self._switch_at is not None and self._switch_at <= u:

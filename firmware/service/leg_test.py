@@ -12,10 +12,11 @@ geometry) and a FIXED frame rate of `LEG_TEST_FRAME_RATE_HZ` = 6000 fps. The dat
 (Frame_Period 3710 counts = Frame_Period_Min_Bound), leaves no room for the shutter under the rule Max_Bound >=
 Min_Bound + Shutter_Max_Bound; 6000 fps (4000 counts) leaves a shutter bound of 290 clock cycles (12 us), twice
 the reset shutter value 0x85, and tracks about 0.94 m/s (the rating, 40 in/s, scaled from 6469 fps), while the
-automatic rate may fall to 2000 fps (about 0.3 m/s) on a dark surface. A free leg released from 2 mm moves at
-about 0.5 m/s. Reads: one Motion_Burst per frame at most (faster reads only return zero deltas), paced to
+automatic rate may fall to 2000 fps (about 0.3 m/s) on a dark surface. A leg of the paper's k and c released from 2 mm
+peaks at about 0.3 m/s and 15 g (its release acceleration k x / m). Reads: one Motion_Burst per frame at most (faster reads only return zero deltas), paced to
 `rate_hz` with a busy wait; a bus or Python slower than that reads back to back (each read is timestamped with
-`monotonic_ns`, the achieved rate is reported). On a Pi 4 from Python expect 3-6 kHz (0.15-0.3 ms a read).
+`monotonic_ns` at its middle, its duration is logged as `read_us`: a read the process was descheduled in has an
+uncertain instant, and the fit leaves it out; the achieved rate is reported). On a Pi 4 from Python expect 3-6 kHz (0.15-0.3 ms a read).
 
 Safety, as for every command that drives a clutch: every stop signal releases the clutch at once
 (`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
@@ -148,10 +149,12 @@ def check_options(cfg: RobotConfig, opts: LegTestOptions) -> int:
 
 
 def run_leg_test(config: RobotConfig | Path | None, opts: LegTestOptions, out: Path, *, fake: bool = False,
-                 on_status: Callable[[str], None] | None = None) -> LegTestReport:
+                 on_status: Callable[[str], None] | None = None,
+                 on_phase: Callable[[str, Hardware], None] | None = None) -> LegTestReport:
     """Run the leg test on the robot (or on the fake leg with `fake`) and write its log to `out`.
 
-    `on_status(text)` hears what the operator should do and what happened. Raises `ParameterError` for a bad
+    `on_status(text)` hears what the operator should do and what happened; `on_phase(phase, hw)` is called in
+    the read loop as each phase begins ("press", "hold", "free": the tests inject faults there). Raises `ParameterError` for a bad
     option (before any pin moves), `OutputFileError` when `out` cannot be written (checked first), `RunFailure`
     when the sensor cannot be opened; every other outcome is in the report.
     """
@@ -171,7 +174,7 @@ def run_leg_test(config: RobotConfig | Path | None, opts: LegTestOptions, out: P
             i_sensor = check_options(cfg, opts)
             hw = _open(cfg, opts, i_sensor, fake, state)
             try:
-                lines = _run(hw, cfg, opts, i_sensor, report, say)
+                lines = _run(hw, cfg, opts, i_sensor, report, say, on_phase)
             finally:
                 hw.close()
             if fake and hw.pin_factory is not None:
@@ -229,8 +232,12 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
 
 
 def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, report: LegTestReport,
-         say: Callable[[str], None]) -> list[dict[str, Any]]:
+         say: Callable[[str], None], on_phase: Callable[[str, Hardware], None] | None) -> list[dict[str, Any]]:
     """The test itself; returns the log's lines (header, samples, events, end)."""
+    def enter(name: str) -> None:
+        if on_phase is not None:
+            on_phase(name, hw)
+
     s = cfg.sensors[i_sensor]
     sensor = hw.sensors[i_sensor]
     cpm = s.counts_per_m * LEG_TEST_CPI / s.resolution_cpi  # counts per metre at 1600 cpi
@@ -278,6 +285,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
     say(f"compress leg {leg} by hand (about 2 mm) and hold it: the clutch engages at maximum compression")
     wd.start()
     try:
+        enter(phase)
         while True:
             deadline += period_ns
             now = time.monotonic_ns()
@@ -289,7 +297,9 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
             else:
                 deadline = now  # late: read at once, never in a burst to catch up
             try:
+                r0 = time.monotonic_ns()
                 m = sensor.read_motion()
+                read_ns = time.monotonic_ns() - r0
             except SensorError as err:
                 hw.outputs_off()
                 faults.append((Fault.SPI_ERROR.value, str(err)))
@@ -300,7 +310,8 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
             n += 1
             counts += m.counts
             t_s = (m.t_ns - t0) * 1e-9
-            row: dict[str, Any] = {"t_s": round(t_s, 7), "counts": counts, "squal": m.squal, "shutter": m.shutter}
+            row: dict[str, Any] = {"t_s": round(t_s, 7), "counts": counts, "squal": m.squal, "shutter": m.shutter,
+                                   "read_us": round(read_ns * 1e-3, 1)}
             if m.overflow or m.saturated:
                 row["saturated"] = True
             (pre if phase == "press" else post).append(row)
@@ -325,6 +336,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
                         events.append({"t_s": round((engaged_ns - t0) * 1e-9, 7), "event": "engage", "leg": leg,
                                        "counts": counts})
                         phase = "hold"
+                        enter(phase)
                         say(f"clutch {leg} engaged at {1e3 * (counts - pre[0]['counts']) / cpm:.2f} mm of "
                             f"compression: let go of the leg; release in {opts.hold_s:g} s")
                 if phase == "press" and (now - t0) * 1e-9 > opts.timeout_s:
@@ -338,6 +350,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
                     events.append({"t_s": round((released_ns - t0) * 1e-9, 7), "event": "release", "leg": leg,
                                    "counts": counts})
                     phase = "free"
+                    enter(phase)
             elif released_ns is not None and now - released_ns >= opts.record_s * 1e9:
                 break
     finally:
