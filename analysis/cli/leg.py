@@ -23,7 +23,7 @@ def register(app: typer.Typer) -> None:
 
 
 def leg_fit_cmd(
-    logs: Annotated[list[Path], typer.Argument(metavar="LOG...", help="Logs of `rimless robot leg-test` (one leg; "
+    logs: Annotated[list[Path], typer.Argument(help="Logs of `rimless robot leg-test` (one leg; "
                                                "several releases fit together).")],
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     plot: Annotated[Optional[Path], typer.Option("--plot", metavar="FILE", help="Figure of the fit and its "

@@ -20,7 +20,8 @@ uncertain instant, and the fit leaves it out; the achieved rate is reported). On
 
 Safety, as for every command that drives a clutch: every stop signal releases the clutch at once
 (`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
-or the clutch is held beyond `[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the
+while it is engaged (which ends the test; a stall before the engage is only reported) or when the clutch is
+held beyond `[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the
 loop alive (the hardware enable drops otherwise), a sensor fault (SPI error, SQUAL low, saturation, a sensor
 reset) releases it, and the hardware is closed (clutches off) on every path. The log is written whole at the
 end (atomically, also after a fault: it says which); an interrupted test writes nothing.
@@ -248,9 +249,14 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
     clutches, leg = hw.clutches, opts.leg
     faults: list[tuple[str, str]] = []
 
+    stalls: list[str] = []
+
     def trip(name: str, detail: str) -> None:  # in the watchdog thread
-        hw.outputs_off()
-        faults.append((Fault.SENSOR_STALLED.value, detail))
+        if clutches.engaged():  # the loop stalled with the leg held: release it, and the test is void
+            hw.outputs_off()
+            faults.append((Fault.SENSOR_STALLED.value, detail))
+        else:  # nothing engaged (the press): the heartbeat stops until the loop runs again, nothing to release
+            stalls.append(detail)
 
     def hold_check() -> None:  # in the watchdog thread
         held = clutches.longest_hold_s(time.monotonic_ns())
@@ -371,6 +377,8 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
     if math.isfinite(report.peak_accel_m_s2) and report.peak_accel_m_s2 > SENSOR_ACCEL_RATING_M_S2:
         report.warnings.append(f"peak acceleration {report.peak_accel_m_s2 / 9.81:.1f} g is above the sensor's "
                                "rating (15 g): compress the leg less")
+    if stalls:
+        report.warnings.append(f"the read loop stalled {len(stalls)} time(s) while no clutch was engaged ({stalls[0]})")
     if report.achieved_rate_hz < 0.8 * opts.rate_hz:
         report.warnings.append(f"read {report.achieved_rate_hz:.0f} times a second, below --rate-hz "
                                f"{opts.rate_hz:g} (the bus or Python is the limit here)")
