@@ -251,6 +251,8 @@ def _print_prior(con: Any, prior: dict[str, Any]) -> None:
             math.isfinite(share) else ""
         con.print(f"  {row['key']}: leg test {row['leg_test']:.4g} (95 %: {lo:.4g} to {hi:.4g}) {row['unit']}: "
                   f"{row['source']}{extra}", markup=False, highlight=False)
+        if "conflict" in row:
+            con.print(f"    warning: {row['conflict']}", markup=False, highlight=False)
     if prior["from_walks_only"]:
         con.print("  from the walks only: " + ", ".join(prior["from_walks_only"]), markup=False, highlight=False)
 

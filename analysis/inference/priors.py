@@ -12,7 +12,8 @@ deviation the interval's half width / 1.96. What happens to each depends on the 
   measured by the leg test and not used by the walk model.
 
 The report says, per parameter, where its value came from: the leg test, the walks, or both (with the share of
-the leg test in the final information, 1 / sd_prior^2 over 1 / se_calibrated^2).
+the leg test in the final information, 1 / sd_prior^2 over the model-based 1 / se_calibrated^2), and flags a
+calibrated value more than `CONFLICT_Z` prior sigmas from the leg test (the two measurements disagree).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ PRIOR_KEYS = {"k_n_per_m": ("stiffness_n_per_m", "k", "N/m"), "c_n_s_per_m": ("d
               "guide_friction_n": ("guide_friction_n", "guide_friction_n", "N")}
 LEG_TEST_SHARE = 0.9  # above this share of the information, a value is "from the leg test"
 WALK_SHARE = 0.1  # below it, "from the walks"
+CONFLICT_Z = 3.0  # a calibrated value this many prior sigmas from the leg test: the two disagree
 
 
 @dataclass
@@ -136,11 +138,18 @@ class LegPriors:
                                    "leg_test_ci": list(p.ci95), "use": p.use}
             if p.use == "penalty":
                 e = est.get(p.field)
-                share = (p.sd ** -2) / (e.se ** -2) if e is not None and math.isfinite(e.se) and e.se > 0 else math.nan
+                se = e.se_model if e is not None and math.isfinite(e.se_model) else (e.se if e is not None else math.nan)
+                share = (p.sd ** -2) / (se ** -2) if math.isfinite(se) and se > 0 else math.nan
                 share = min(share, 1.0) if math.isfinite(share) else share
                 row["leg_test_share"] = share
                 row["source"] = ("leg test" if share >= LEG_TEST_SHARE else "walks" if share <= WALK_SHARE
                                  else "leg test and walks") if math.isfinite(share) else "leg test and walks"
+                if e is not None:
+                    z = (e.value - p.mean) / p.sd
+                    row["calibrated"], row["prior_z"] = e.value, z
+                    if abs(z) > CONFLICT_Z:
+                        row["conflict"] = (f"the walks pull it {abs(z):.1f} sigma away from the leg test: they disagree "
+                                           "(another leg, a wrong moving mass, or what the walk model leaves out)")
             elif p.use == "fixed":
                 row["source"] = "leg test (fixed, not fitted)"
             else:

@@ -147,4 +147,21 @@ def test_prior_removes_the_c_k_ridge_of_the_walk_fit(ck_trials, tmp_path: Path) 
     rows = {r["key"]: r for r in rep["parameters"]}
     assert rows["k_n_per_m"]["use"] == rows["c_n_s_per_m"]["use"] == "penalty"
     assert 0.0 < rows["k_n_per_m"]["leg_test_share"] <= 1.0
+    assert "conflict" not in rows["k_n_per_m"] and "conflict" not in rows["c_n_s_per_m"]  # same wheel
     assert rep["from_walks_only"] == []
+
+
+def test_report_flags_walks_that_disagree_with_the_leg_test(tmp_path: Path) -> None:
+    pri = read_priors(_leg_json(tmp_path / "leg.json"))
+    pri.plan(WheelParams(), ["damping_ns_per_m", "stiffness_n_per_m"])
+    s_c = next(p.sd for p in pri.priors if p.key == "c_n_s_per_m")
+    est = [SimpleNamespace(field="damping_ns_per_m", value=7.5 + 5 * s_c, se=s_c / 2, se_model=s_c / 2),
+           SimpleNamespace(field="stiffness_n_per_m", value=2650.0, se=200.0, se_model=200.0)]
+    rep = pri.report(SimpleNamespace(params=est), ["damping_ns_per_m", "stiffness_n_per_m"], ["c", "k"])
+    rows = {r["key"]: r for r in rep["parameters"]}
+    assert rows["c_n_s_per_m"]["prior_z"] == pytest.approx(5.0) and "disagree" in rows["c_n_s_per_m"]["conflict"]
+    assert rows["c_n_s_per_m"]["leg_test_share"] == pytest.approx(0.25) and rows["c_n_s_per_m"]["source"] == \
+        "leg test and walks"
+    k_share = (next(p.sd for p in pri.priors if p.key == "k_n_per_m") / 200.0) ** -2
+    assert rows["k_n_per_m"]["leg_test_share"] == pytest.approx(min(k_share, 1.0))
+    assert "conflict" not in rows["k_n_per_m"]
