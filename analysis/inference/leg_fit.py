@@ -8,17 +8,25 @@ shifted centre x_eq + a sign(x_start - x_eq), a = F_c / k, and ends at rest afte
 when it comes to rest within the friction band |x - x_eq| <= a (`free_response`, closed form, underdamped).
 
 Unknowns: omega_n, zeta and the friction displacement a (shared by every log, a in metres: `a * counts_per_m`
-counts in each log), and per log the locked position x_lock, x_eq and the instant t_r the clutch let go (its
-release delay is unknown). Least squares on the displacement over the released segment (from `PRE_RELEASE_S`
-before the release command to `SETTLED_S` after the motion ends). Then k = m omega_n^2, c = 2 m zeta omega_n,
+counts in each log), and per log the locked position x_lock, x_eq, the instant t_r the clutch let go (its
+release delay is unknown) and a linear drift of the count (the flow sensor integrates its errors). Least squares
+on the displacement over the released segment (from `PRE_RELEASE_S` before the release command to `SETTLED_S`
+after the motion ends), without the reads the process was descheduled in (`read_us` above `SLOW_READ_US`: their
+instant is uncertain) and, after a first fit, without samples beyond `OUTLIER_SIGMAS` robust sigmas (both
+counted in the report). Several releases of one leg at different compressions fit together: each sees about two
+half cycles of a leg damped like the paper's (zeta 0.4), and their different amplitudes separate the friction
+(a loss per half cycle that does not scale with amplitude) from the damping. Then k = m omega_n^2, c = 2 m zeta omega_n,
 F_c = k a, m the leg's moving mass (an input: `DEFAULT_MOVING_MASS_KG`, the leg mass of Table 1, which the
 wheel model puts entirely at the foot). k and c come from the frequency and the decay, so they do not depend on
 the sensor's counts per metre; F_c does (through a), and scales with it.
 
-Uncertainties: the Jacobian's covariance with the residual variance, inflated for correlated residuals by
-(1 + rho) / (1 - rho) (rho the lag-1 autocorrelation of the residuals), propagated to k, c and F_c (and the
-moving mass's own uncertainty, when given). Their coverage is checked by simulation against an independent
+Uncertainties: the larger of two covariances, propagated to k, c and F_c (with the moving mass's own
+uncertainty, when given): the Jacobian's with the residual variance, inflated for correlated residuals by their
+long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags), and a sandwich over blocks of
+`SANDWICH_BLOCK` consecutive samples (right when the error grows with the speed, as a read's timing error does). Their coverage is checked by simulation against an independent
 truth model in the tests (tests/analysis/inference/test_leg_fit.py); see docs/trials.md for the figures.
+
+One concept: the leg-test fit (log, model, fit, uncertainty, figure).
 """
 
 from __future__ import annotations
@@ -45,6 +53,8 @@ MOVE_COUNTS = 3.0  # a departure of this many counts from the held position is m
 MIN_FREE_SAMPLES = 20
 SLOW_READ_US = 500.0  # a read that took longer (and SLOW_READ_FACTOR x the median) is left out
 SLOW_READ_FACTOR = 3.0
+SANDWICH_BLOCK = 30  # samples per block of the sandwich covariance
+LONG_RUN_LAGS = 30  # lags of the residuals' long-run variance
 OUTLIER_SIGMAS = 8.0  # after a first fit, samples beyond this many robust sigmas (MAD) are left out, once
 Z95 = 1.959963984540054
 MAX_NFEV = 400
@@ -278,7 +288,8 @@ class LegFitResult:
             "scale_dependence": "k and c come from the natural frequency and the decay and do not depend on the "
                                 "sensor's counts per metre; guide_friction_n does (it scales with the counts per "
                                 "metre of each log); k and c scale with the moving mass",
-            "intervals": "95 %: the least-squares covariance, inflated for correlated residuals"
+            "intervals": "95 %: the larger of the least-squares covariance (inflated for correlated residuals) and a "
+                         "block sandwich"
                          + (", with the moving mass's uncertainty" if self.moving_mass_sd_kg > 0 else
                             ", without the moving mass's uncertainty (give --moving-mass-sd-kg)"),
             "residual_rms_counts": self.residual_rms_counts, "residual_lag1_autocorrelation": self.autocorrelation,
@@ -373,13 +384,15 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     n, p = r.size, u.size
     s2 = float(r @ r) / max(n - p, 1)
     rho = _lag1(r, [s.t.size for s in segs])
-    infl = (1 + rho) / (1 - rho)
-    J = best.jac
+    infl = _long_run_inflation(r, [s.t.size for s in segs])
+    J = np.asarray(best.jac)
     try:
-        cov = np.linalg.pinv(J.T @ J) * s2 * infl
+        A = np.linalg.pinv(J.T @ J)
+        cov = A * s2 * infl
+        cov_s = _block_sandwich(A, J, r, offs, p)
     except np.linalg.LinAlgError:
-        cov = np.full((p, p), np.nan)
-    cw = cov[:3, :3]  # omega, zeta, a (um)
+        cov = cov_s = np.full((p, p), np.nan)
+    cw, cws = cov[:3, :3], cov_s[:3, :3]  # omega, zeta, a (um)
     m, sm = moving_mass_kg, moving_mass_sd_kg
     a_m = a_um * 1e-6
     k = m * w * w
@@ -390,8 +403,13 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     gf = np.array([2 * m * w * a_m, 0.0, m * w * w * 1e-6])
 
     def se(g: np.ndarray, value: float) -> float:
-        v = float(g @ cw @ g) + (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
+        """The larger of the model-based and the block-sandwich standard error, with the mass's."""
+        v = max(float(g @ cw @ g), float(g @ cws @ g)) if np.isfinite(cws).all() else float(g @ cw @ g)
+        v += (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
         return math.sqrt(v) if v >= 0 and math.isfinite(v) else math.nan
+
+    def se_param(j: int, unit: float = 1.0) -> float:
+        return se(np.eye(3)[j], 0.0) * unit
 
     per_log = []
     for i, (s, (xl, xe, tr, dr)) in enumerate(zip(segs, per)):
@@ -409,9 +427,9 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     fit = LegFitResult(
         leg=logs[0].leg, files=[str(lg.path) for lg in logs], moving_mass_kg=m, moving_mass_sd_kg=sm,
         k=Estimate(k, se(gk, k), "N/m"), c=Estimate(c, se(gc, c), "N s/m"), friction=Estimate(fc, se(gf, fc), "N"),
-        natural_frequency_hz=Estimate(w / (2 * math.pi), math.sqrt(max(cw[0, 0], 0)) / (2 * math.pi), "Hz"),
-        damping_ratio=Estimate(z, math.sqrt(max(cw[1, 1], 0)), ""),
-        friction_displacement_m=Estimate(a_m, math.sqrt(max(cw[2, 2], 0)) * 1e-6, "m"),
+        natural_frequency_hz=Estimate(w / (2 * math.pi), se_param(0, 1 / (2 * math.pi)), "Hz"),
+        damping_ratio=Estimate(z, se_param(1), ""),
+        friction_displacement_m=Estimate(a_m, se_param(2, 1e-6), "m"),
         per_log=per_log, residual_rms_counts=float(np.sqrt(np.mean(r ** 2))), autocorrelation=rho,
         converged=converged,
         optimizer={"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev),
@@ -455,6 +473,40 @@ def _half_cycles(w: float, z: float, a: float, x_eq: float, x_lock: float) -> in
         xs = e - (xs - e) * r
         n += 1
     return n
+
+
+def _block_sandwich(A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarray, p: int) -> np.ndarray:
+    """The covariance A B A with B summed over blocks of `SANDWICH_BLOCK` consecutive samples of each log: right
+    when the error grows with the speed (timing jitter times velocity) or is correlated over a few samples."""
+    B = np.zeros_like(A)
+    nb = 0
+    for i in range(offs.size - 1):
+        for lo in range(int(offs[i]), int(offs[i + 1]), SANDWICH_BLOCK):
+            hi = min(lo + SANDWICH_BLOCK, int(offs[i + 1]))
+            g = J[lo:hi].T @ r[lo:hi]
+            B += np.outer(g, g)
+            nb += 1
+    if nb <= p:
+        return np.full_like(A, np.nan)
+    return A @ B @ A * (nb / (nb - p))
+
+
+def _long_run_inflation(r: np.ndarray, sizes: list[int]) -> float:
+    """The long-run variance of the residuals over their variance (Bartlett weights up to `LONG_RUN_LAGS`
+    lags, per log, averaged; at least 1): the factor by which correlated residuals (a drifting count, a
+    slightly wrong model) carry less information than their number says."""
+    out, i = [], 0
+    for n in sizes:
+        ri = r[i:i + n] - np.mean(r[i:i + n])
+        i += n
+        v = float(ri @ ri)
+        if n <= 2 * LONG_RUN_LAGS or v <= 0:
+            continue
+        f = 1.0
+        for lag in range(1, LONG_RUN_LAGS + 1):
+            f += 2 * (1 - lag / (LONG_RUN_LAGS + 1)) * float(ri[:-lag] @ ri[lag:]) / v
+        out.append(f)
+    return max(float(np.mean(out)), 1.0) if out else 1.0
 
 
 def _lag1(r: np.ndarray, sizes: list[int]) -> float:

@@ -13,10 +13,11 @@ geometry) and a FIXED frame rate of `LEG_TEST_FRAME_RATE_HZ` = 6000 fps. The dat
 Min_Bound + Shutter_Max_Bound; 6000 fps (4000 counts) leaves a shutter bound of 290 clock cycles (12 us), twice
 the reset shutter value 0x85, and tracks about 0.94 m/s (the rating, 40 in/s, scaled from 6469 fps), while the
 automatic rate may fall to 2000 fps (about 0.3 m/s) on a dark surface. A leg of the paper's k and c released from 2 mm
-peaks at about 0.3 m/s and 15 g (its release acceleration k x / m). Reads: one Motion_Burst per frame at most (faster reads only return zero deltas), paced to
+peaks at about 0.32 m/s and 14.6 g (its release acceleration k x / m). Reads: one Motion_Burst per frame at most (faster reads only return zero deltas), paced to
 `rate_hz` with a busy wait; a bus or Python slower than that reads back to back (each read is timestamped with
-`monotonic_ns` at its middle, its duration is logged as `read_us`: a read the process was descheduled in has an
-uncertain instant, and the fit leaves it out; the achieved rate is reported). On a Pi 4 from Python expect 3-6 kHz (0.15-0.3 ms a read).
+`monotonic_ns` at its start, where the chip freezes the motion at the burst's first byte, and its duration is
+logged as `read_us`: a read the process was descheduled in has an uncertain instant, and the fit leaves it out;
+the achieved rate is reported). On a Pi 4 from Python expect 3-6 kHz (0.15-0.3 ms a read).
 
 Safety, as for every command that drives a clutch: every stop signal releases the clutch at once
 (`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
@@ -61,6 +62,7 @@ PRE_LOCK_KEEP_S = 1.0  # of the hand's press, the log keeps the last second befo
 SENSOR_SPEED_RATING_M_S = 1.016  # 40 in/s [DS p.10]
 SENSOR_ACCEL_RATING_M_S2 = 15 * 9.81  # 15 g [DS p.10]
 WATCHDOG_FEED = "leg_test_loop"
+SLOW_READ_US = 500.0  # a read that took longer has an uncertain instant (the fit leaves such reads out too)
 # The zero-velocity detector of the walking controller with a hand's pace: a press of a few mm over a fraction
 # of a second moves at mm/s to cm/s, not at the 50 mm/s of a touchdown, and may take seconds.
 HAND_DETECTOR = DetectorParams(velocity_window_s=0.03, touch_velocity_m_s=0.004, touch_debounce_samples=3,
@@ -208,8 +210,12 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
             pin = cfg.clutch.pins[opts.leg]
             on_level = cfg.clutch.active_high
 
+            mock: list[Any] = []  # the clutch's mock pin, looked up once (a lookup costs more than a read)
+
             def engaged() -> bool:
-                return bool(factory.pin(pin).state) == on_level
+                if not mock:
+                    mock.append(factory.pin(pin))
+                return bool(mock[0].state) == on_level
 
             leg = FakeLeg(opts.fake_leg, engaged)
             trajectories = [leg if i == i_sensor else still for i in range(len(cfg.sensors))]
@@ -270,6 +276,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
     header = {"format": FORMAT, "leg": leg, "sensor": i_sensor, "counts_per_m": cpm, "resolution_cpi": LEG_TEST_CPI,
               "frame_rate_hz": frame, "frame_rate_requested_hz": opts.frame_rate_hz, "rate_hz": opts.rate_hz,
               "hold_s": opts.hold_s, "record_s": opts.record_s, "axis": s.axis, "sign": s.sign, "fake": hw.fakes != [],
+              "t_s": "start of each read (s from the test's start, monotonic clock)",
               "started_epoch_s": time.time()}
     if hw.fakes:
         header["fake_leg"] = opts.fake_leg.to_json()
@@ -315,7 +322,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
                 hw.heartbeat.toggle()
             n += 1
             counts += m.counts
-            t_s = (m.t_ns - t0) * 1e-9
+            t_s = (r0 - t0) * 1e-9  # the read's start: the chip freezes the motion at the burst's first byte
             row: dict[str, Any] = {"t_s": round(t_s, 7), "counts": counts, "squal": m.squal, "shutter": m.shutter,
                                    "read_us": round(read_ns * 1e-3, 1)}
             if m.overflow or m.saturated:
@@ -409,9 +416,11 @@ def _merge(rows: list[dict[str, Any]], events: list[dict[str, Any]]) -> list[dic
 
 def _peaks(free: list[dict[str, Any]], cpm: float) -> tuple[float, float]:
     """Peak speed (m/s) and acceleration (m/s^2) of the free motion, from positions 1 ms apart (finer steps
-    would measure the count's quantisation)."""
+    would measure the count's quantisation), slow reads left out."""
     pts: list[tuple[float, float]] = []
     for r in free:
+        if r["read_us"] > SLOW_READ_US:
+            continue  # descheduled in the read: its instant is uncertain
         if not pts or r["t_s"] - pts[-1][0] >= 1e-3:
             pts.append((r["t_s"], r["counts"] / cpm))
     if len(pts) < 3:

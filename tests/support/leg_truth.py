@@ -7,7 +7,10 @@ gravity as a force (not as a shifted equilibrium). The sensor side has the mess 
 
 - counts = floor(x * counts_per_m + noise), Gaussian position noise (`noise_counts`), a slow random-walk drift
   of the count (`drift_counts_per_s`, the flow sensor's integration error), and the sensor's zero anywhere;
-- read times with jitter and bunches (a late read, then a few quick ones), as a Python loop on a Pi reads;
+- read times with jitter and bunches (a late read, then a few quick ones), as a Python loop on a Pi reads; each
+  read logged at its start (`t_s`) with its duration (`read_us`, 150-300 us), the motion frozen 5-40 us after
+  the start; now and then the process is descheduled inside a read (1-5 ms), and the motion is frozen anywhere in
+  it (the fit must leave those reads out);
 - the clutch lets go an unknown 2-6 ms after the release command; the operator's compression differs per test.
 
 `write_log` writes the same JSON Lines format as `rimless robot leg-test` (from its documentation, format
@@ -122,9 +125,17 @@ def write_log(path: Path, truth: LegTruth, *, compression_m: float = 0.002, seed
     pieces, _ = free_motion(truth, x_held, truth.record_s + 0.01)
     t_release = 0.2 + hold_s
     t = read_times(truth, 0.0, t_release + truth.record_s, rng)
-    x = np.where(t < t_release + delay, x_held, 0.0)
-    free = t >= t_release + delay
-    x[free] = position(pieces, t[free] - t_release - delay)
+    read_s = rng.uniform(150e-6, 300e-6, t.size)
+    latch = t + rng.uniform(5e-6, 40e-6, t.size)
+    slow = rng.random(t.size) < 0.005  # descheduled inside the read
+    read_s[slow] = rng.uniform(1e-3, 5e-3, int(slow.sum()))
+    latch[slow] = t[slow] + rng.uniform(0.0, 1.0, int(slow.sum())) * read_s[slow]
+    t_next = np.append(t[1:], np.inf)
+    read_s = np.minimum(read_s, np.maximum(t_next - t - 1e-6, 1e-6))  # reads do not overlap
+    latch = np.minimum(latch, t + read_s)
+    x = np.where(latch < t_release + delay, x_held, 0.0)
+    free = latch >= t_release + delay
+    x[free] = position(pieces, latch[free] - t_release - delay)
     zero = rng.uniform(-500, 500)  # the sensor's zero: anywhere
     drift = np.cumsum(rng.standard_normal(t.size) * truth.drift_counts_per_s * np.sqrt(np.diff(t, prepend=0.0)))
     counts = np.floor(x * truth.counts_per_m + zero + drift + truth.noise_counts * rng.standard_normal(t.size))
@@ -135,13 +146,14 @@ def write_log(path: Path, truth: LegTruth, *, compression_m: float = 0.002, seed
     with open(path, "w", encoding="utf-8") as f:
         f.write(json.dumps(header) + "\n")
         engaged = False
-        for ti, ci in zip(t, counts):
+        for ti, ci, ri in zip(t, counts, read_s):
             if not engaged and ti >= 0.2:
                 f.write(json.dumps({"t_s": 0.2, "event": "engage", "leg": leg}) + "\n")
                 engaged = True
             if ti >= t_release and engaged is True:
                 f.write(json.dumps({"t_s": t_release, "event": "release", "leg": leg}) + "\n")
                 engaged = None  # type: ignore[assignment]
-            f.write(json.dumps({"t_s": round(float(ti), 7), "counts": int(ci), "squal": 60, "shutter": 133}) + "\n")
+            f.write(json.dumps({"t_s": round(float(ti), 7), "counts": int(ci), "squal": 60, "shutter": 133,
+                                "read_us": round(float(ri) * 1e6, 1)}) + "\n")
         f.write(json.dumps({"event": "end", "t_s": float(t[-1]), "samples": int(t.size), "outcome": "ok"}) + "\n")
     return {"release_delay_s": delay, "x_held_m": x_held, "rest_m": rest}
