@@ -9,22 +9,26 @@ when it comes to rest within the friction band |x - x_eq| <= a (`free_response`,
 
 Unknowns: omega_n, zeta and the friction displacement a (shared by every log, a in metres: `a * counts_per_m`
 counts in each log), and per log the locked position x_lock, x_eq, the instant t_r the clutch let go (its
-release delay is unknown) and a linear drift of the count (the flow sensor integrates its errors). Least squares
-on the displacement over the released segment (from `PRE_RELEASE_S` before the release command to `SETTLED_S`
-after the motion ends), without the reads the process was descheduled in (`read_us` above `SLOW_READ_US`: their
-instant is uncertain) and, after a first fit, without samples beyond `OUTLIER_SIGMAS` robust sigmas (both
-counted in the report). Several releases of one leg at different compressions fit together: each sees about two
-half cycles of a leg damped like the paper's (zeta 0.4), and their different amplitudes separate the friction
-(a loss per half cycle that does not scale with amplitude) from the damping. Then k = m omega_n^2, c = 2 m zeta omega_n,
-F_c = k a, m the leg's moving mass (an input: `DEFAULT_MOVING_MASS_KG`, the leg mass of Table 1, which the
-wheel model puts entirely at the foot). k and c come from the frequency and the decay, so they do not depend on
-the sensor's counts per metre; F_c does (through a), and scales with it.
+release delay is unknown) and a linear drift of the count (the flow sensor integrates its errors). Least
+squares on the displacement over the released segment (from `PRE_RELEASE_S` before the release command to
+`SETTLED_S` after the motion ends), without the reads the process was descheduled in (`read_us` above
+`SLOW_READ_US`: their instant is uncertain) and, after a first fit, without samples beyond `OUTLIER_SIGMAS`
+robust sigmas (at most `OUTLIER_MAX_SHARE` of them; both counted in the report). Several releases of one leg at
+different compressions fit together: each sees about two half cycles of a leg damped like the paper's (zeta
+0.4), and their different amplitudes separate the friction (a loss per half cycle that does not scale with
+amplitude) from the damping.
+
+Then k = m omega_n^2, c = 2 m zeta omega_n, F_c = k a, m the leg's moving mass (an input:
+`DEFAULT_MOVING_MASS_KG`, the leg mass of Table 1, which the wheel model puts entirely at the foot). k and c
+come from the frequency and the decay, so they do not depend on the sensor's counts per metre; F_c does
+(through a), and scales with it.
 
 Uncertainties: the larger of two covariances, propagated to k, c and F_c (with the moving mass's own
 uncertainty, when given): the Jacobian's with the residual variance, inflated for correlated residuals by their
 long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags), and a sandwich over blocks of
-`SANDWICH_BLOCK` consecutive samples (right when the error grows with the speed, as a read's timing error does). Their coverage is checked by simulation against an independent
-truth model in the tests (tests/analysis/inference/test_leg_fit.py); see docs/trials.md for the figures.
+`SANDWICH_BLOCK` consecutive samples (right when the error grows with the speed, as a read's timing error
+does). Their coverage is checked by simulation against an independent truth model in the tests
+(tests/analysis/inference/test_leg_fit.py); see docs/trials.md for the figures.
 
 One concept: the leg-test fit (log, model, fit, uncertainty, figure).
 """
@@ -55,6 +59,8 @@ SLOW_READ_US = 500.0  # a read that took longer (and SLOW_READ_FACTOR x the medi
 SLOW_READ_FACTOR = 3.0
 SANDWICH_BLOCK = 30  # samples per block of the sandwich covariance
 LONG_RUN_LAGS = 30  # lags of the residuals' long-run variance
+OUTLIER_MAX_SHARE = 0.01  # at most this share of the samples are left out as outliers
+DRIFT_MAX_COUNTS_PER_S = 100.0  # bound of the fitted count drift (a sensor drifting more is broken)
 OUTLIER_SIGMAS = 8.0  # after a first fit, samples beyond this many robust sigmas (MAD) are left out, once
 Z95 = 1.959963984540054
 MAX_NFEV = 400
@@ -119,7 +125,8 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
         except json.JSONDecodeError as err:
             torn = n == len(lines) and not text.endswith("\n")
             raise InputFileError(f"{where}: not JSON ({err.msg}, column {err.colno})"
-                                 + ("; the last line is torn (the test did not finish writing)" if torn else "")) from None
+                                 + ("; the last line is torn (the test did not finish writing)" if torn else "")
+                                 ) from None
         if not isinstance(obj, dict):
             raise InputFileError(f"{where}: expected a JSON object, got {type(obj).__name__}")
         if n == 1:
@@ -131,7 +138,8 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
                 if name not in obj:
                     raise InputFileError(f"{where}: field {name!r} is missing")
             if isinstance(obj["leg"], bool) or not isinstance(obj["leg"], int) or obj["leg"] < 0:
-                raise InputFileError(f"{where}: field 'leg' must be a clutch index (an integer >= 0), got {obj['leg']!r}")
+                raise InputFileError(f"{where}: field 'leg' must be a clutch index (an integer >= 0), "
+                                     f"got {obj['leg']!r}")
             _num(obj["counts_per_m"], where, "counts_per_m", positive=True)
             continue
         if "event" in obj:
@@ -351,8 +359,9 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
 
     u0 = _start(segs, cpms, one)
     lo = np.concatenate([[2 * math.pi * 1.0, 0.0, 0.0],
-                         np.tile([-np.inf, -np.inf, -PRE_RELEASE_S * 1e3, -np.inf], n_l)])
-    hi = np.concatenate([[2 * math.pi * 2000.0, ZETA_MAX, np.inf], np.tile([np.inf, np.inf, np.inf, np.inf], n_l)])
+                         np.tile([-np.inf, -np.inf, -PRE_RELEASE_S * 1e3, -DRIFT_MAX_COUNTS_PER_S], n_l)])
+    hi = np.concatenate([[2 * math.pi * 2000.0, ZETA_MAX, np.inf],
+                         np.tile([np.inf, np.inf, np.inf, DRIFT_MAX_COUNTS_PER_S], n_l)])
     best = None
     for a_start in (0.0, 0.3, 1.0):  # a few starts in the friction (the cost is not convex in it)
         u = u0.copy()
@@ -364,8 +373,10 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     assert best is not None
     r = resid(best.x)
     sig = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-    bad = np.abs(r) > OUTLIER_SIGMAS * max(sig, 0.3)
-    if bad.any():  # a read whose count or instant is wrong (a glitch): leave it out once, and fit again
+    bad = np.abs(r) > OUTLIER_SIGMAS * max(sig, 1.0)
+    # a read whose count or instant is wrong (a glitch): leave it out once, and fit again; more than
+    # OUTLIER_MAX_SHARE of them is a misfit of the model or of the start, not glitches
+    if bad.any() and bad.mean() <= OUTLIER_MAX_SHARE:
         for i, sg in enumerate(segs):
             drop = bad[offs[i]:offs[i + 1]]
             sg.outliers = int(drop.sum())

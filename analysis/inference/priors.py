@@ -138,7 +138,7 @@ class LegPriors:
                                    "leg_test_ci": list(p.ci95), "use": p.use}
             if p.use == "penalty":
                 e = est.get(p.field)
-                se = e.se_model if e is not None and math.isfinite(e.se_model) else (e.se if e is not None else math.nan)
+                se = math.nan if e is None else (e.se_model if math.isfinite(e.se_model) else e.se)
                 share = (p.sd ** -2) / (se ** -2) if math.isfinite(se) and se > 0 else math.nan
                 share = min(share, 1.0) if math.isfinite(share) else share
                 row["leg_test_share"] = share
@@ -148,8 +148,9 @@ class LegPriors:
                     z = (e.value - p.mean) / p.sd
                     row["calibrated"], row["prior_z"] = e.value, z
                     if abs(z) > CONFLICT_Z:
-                        row["conflict"] = (f"the walks pull it {abs(z):.1f} sigma away from the leg test: they disagree "
-                                           "(another leg, a wrong moving mass, or what the walk model leaves out)")
+                        row["conflict"] = (f"the walks pull it {abs(z):.1f} sigma away from the leg test: they "
+                                           "disagree (another leg, a wrong moving mass, or what the walk model "
+                                           "leaves out)")
             elif p.use == "fixed":
                 row["source"] = "leg test (fixed, not fitted)"
             else:

@@ -12,20 +12,21 @@ geometry) and a FIXED frame rate of `LEG_TEST_FRAME_RATE_HZ` = 6000 fps. The dat
 (Frame_Period 3710 counts = Frame_Period_Min_Bound), leaves no room for the shutter under the rule Max_Bound >=
 Min_Bound + Shutter_Max_Bound; 6000 fps (4000 counts) leaves a shutter bound of 290 clock cycles (12 us), twice
 the reset shutter value 0x85, and tracks about 0.94 m/s (the rating, 40 in/s, scaled from 6469 fps), while the
-automatic rate may fall to 2000 fps (about 0.3 m/s) on a dark surface. A leg of the paper's k and c released from 2 mm
-peaks at about 0.32 m/s and 14.6 g (its release acceleration k x / m). Reads: one Motion_Burst per frame at most (faster reads only return zero deltas), paced to
-`rate_hz` with a busy wait; a bus or Python slower than that reads back to back (each read is timestamped with
-`monotonic_ns` at its start, where the chip freezes the motion at the burst's first byte, and its duration is
-logged as `read_us`: a read the process was descheduled in has an uncertain instant, and the fit leaves it out;
-the achieved rate is reported). On a Pi 4 from Python expect 3-6 kHz (0.15-0.3 ms a read).
+automatic rate may fall to 2000 fps (about 0.3 m/s) on a dark surface. A leg of the paper's k and c released
+from 2 mm peaks at about 0.32 m/s and 14.6 g (its release acceleration k x / m). Reads: one Motion_Burst per
+frame at most (faster reads only return zero deltas), paced to `rate_hz` with a busy wait; a bus or Python
+slower than that reads back to back (each read is timestamped with `monotonic_ns` at its start, where the chip
+freezes the motion at the burst's first byte, and its duration is logged as `read_us`: a read the process was
+descheduled in has an uncertain instant, and the fit leaves it out; the achieved rate is reported). On a Pi 4
+from Python expect 3-6 kHz (0.15-0.3 ms a read).
 
 Safety, as for every command that drives a clutch: every stop signal releases the clutch at once
 (`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
 while it is engaged (which ends the test; a stall before the engage is only reported) or when the clutch is
-held beyond `[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the
-loop alive (the hardware enable drops otherwise), a sensor fault (SPI error, SQUAL low, saturation, a sensor
-reset) releases it, and the hardware is closed (clutches off) on every path. The log is written whole at the
-end (atomically, also after a fault: it says which); an interrupted test writes nothing.
+held beyond `[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the loop alive (the
+hardware enable drops otherwise), a sensor fault (SPI error, SQUAL low, saturation, a sensor reset) releases
+it, and the hardware is closed (clutches off) on every path. The log is written whole at the end (atomically,
+also after a fault: it says which); an interrupted test writes nothing.
 
 Times in seconds, displacement in sensor counts (the log) or metres (the detector).
 """
@@ -138,12 +139,14 @@ def check_options(cfg: RobotConfig, opts: LegTestOptions) -> int:
     margin = 0.05
     if not 0.0 < opts.hold_s <= cfg.clutch.max_hold_s - margin:
         raise ParameterError(f"--hold-s must be in (0, {cfg.clutch.max_hold_s - margin:g}] s (the clutch timeout "
-                             f"[clutch] max_hold_s {cfg.clutch.max_hold_s:g} s, less {margin:g} s), got {opts.hold_s:g}")
+                             f"[clutch] max_hold_s {cfg.clutch.max_hold_s:g} s, less {margin:g} s), "
+                             f"got {opts.hold_s:g}")
     if not 1000.0 <= opts.rate_hz <= 20000.0:
         raise ParameterError(f"--rate-hz must be in 1000..20000, got {opts.rate_hz:g}")
     if not 2000.0 <= opts.frame_rate_hz <= 6051.0:
         raise ParameterError(f"--frame-rate-hz must be in 2000..6051 fps (above 6051 the datasheet's rule "
-                             f"Max_Bound >= Min_Bound + Shutter_Max_Bound leaves no shutter), got {opts.frame_rate_hz:g}")
+                             "Max_Bound >= Min_Bound + Shutter_Max_Bound leaves no shutter), "
+                             f"got {opts.frame_rate_hz:g}")
     try:
         opts.fake_leg.validated()
     except ValueError as err:
@@ -157,9 +160,9 @@ def run_leg_test(config: RobotConfig | Path | None, opts: LegTestOptions, out: P
     """Run the leg test on the robot (or on the fake leg with `fake`) and write its log to `out`.
 
     `on_status(text)` hears what the operator should do and what happened; `on_phase(phase, hw)` is called in
-    the read loop as each phase begins ("press", "hold", "free": the tests inject faults there). Raises `ParameterError` for a bad
-    option (before any pin moves), `OutputFileError` when `out` cannot be written (checked first), `RunFailure`
-    when the sensor cannot be opened; every other outcome is in the report.
+    the read loop as each phase begins ("press", "hold", "free": the tests inject faults there). Raises
+    `ParameterError` for a bad option (before any pin moves), `OutputFileError` when `out` cannot be written
+    (checked first), `RunFailure` when the sensor cannot be opened; every other outcome is in the report.
     """
     say = on_status or (lambda _text: None)
     report = LegTestReport(opts.leg, Path(out), fake)
@@ -268,7 +271,8 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
         held = clutches.longest_hold_s(time.monotonic_ns())
         if held > cfg.clutch.max_hold_s:
             hw.outputs_off()
-            faults.append((Fault.CLUTCH_TIMEOUT.value, f"clutch held {held:.3f} s > max_hold_s {cfg.clutch.max_hold_s:g} s"))
+            faults.append((Fault.CLUTCH_TIMEOUT.value,
+                           f"clutch held {held:.3f} s > max_hold_s {cfg.clutch.max_hold_s:g} s"))
 
     wd = Watchdog(trip)
     wd.add(WATCHDOG_FEED, cfg.sampling.stall_timeout_s)

