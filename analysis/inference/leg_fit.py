@@ -547,9 +547,11 @@ def plot_leg_fit(fit: LegFitResult, path: Path | str) -> None:
     for i, (s, (xl, xe, tr, dr)) in enumerate(zip(fit.segments, per)):
         cpm = s.log.counts_per_m
         model = free_response(s.t, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3) + dr * s.t
+        fine = np.linspace(float(s.t[0]), float(s.t[-1]), 2000)
+        curve = free_response(fine, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3) + dr * fine
         col = f"C{i % 10}"
         ax.plot(s.t * 1e3, (s.y - xe) / cpm * 1e3, ".", ms=2, color=col, label=f"{Path(s.log.path).name} (measured)")
-        ax.plot(s.t * 1e3, (model - xe) / cpm * 1e3, "-", lw=1, color="k" if i == 0 else col)
+        ax.plot(fine * 1e3, (curve - xe) / cpm * 1e3, "-", lw=1, color="k", label="fit" if i == 0 else None)
         axr.plot(s.t * 1e3, s.y - model, ".", ms=2, color=col)
     ax.axhspan(-fit.friction_displacement_m.value * 1e3, fit.friction_displacement_m.value * 1e3, color="0.85",
                label="friction band |x - x_eq| <= F_c / k")
