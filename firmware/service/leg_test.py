@@ -354,7 +354,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
                                        "counts": counts})
                         phase = "hold"
                         enter(phase)
-                        say(f"clutch {leg} engaged at {1e3 * (counts - pre[0]['counts']) / cpm:.2f} mm of "
+                        say(f"clutch {leg} engaged at {1e3 * counts / cpm:.2f} mm of "
                             f"compression: let go of the leg; release in {opts.hold_s:g} s")
                 if phase == "press" and (now - t0) * 1e-9 > opts.timeout_s:
                     faults.append(("no_compression", f"no maximum compression detected within {opts.timeout_s:g} s: "
@@ -378,7 +378,7 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
     report.achieved_rate_hz = n / max((t_end - t0) * 1e-9, 1e-9)
     if engaged_ns is not None:
         report.held_s = ((released_ns or t_end) - engaged_ns) * 1e-9
-        report.lock_compression_mm = 1e3 * (lock_counts - (pre[0]["counts"] if pre else 0)) / cpm
+        report.lock_compression_mm = 1e3 * lock_counts / cpm  # from where the leg rested at the start
     free = [r for r in post if released_ns is not None and r["t_s"] >= (released_ns - t0) * 1e-9]
     report.free_samples = len(free)
     report.peak_speed_m_s, report.peak_accel_m_s2 = _peaks(free, cpm)

@@ -165,3 +165,31 @@ def test_report_flags_walks_that_disagree_with_the_leg_test(tmp_path: Path) -> N
     k_share = (next(p.sd for p in pri.priors if p.key == "k_n_per_m") / 200.0) ** -2
     assert rows["k_n_per_m"]["leg_test_share"] == pytest.approx(min(k_share, 1.0))
     assert "conflict" not in rows["k_n_per_m"]
+
+
+@pytest.mark.slow
+def test_calibrate_command_reports_which_parameters_came_from_the_leg_test(tmp_path: Path) -> None:
+    """`trials calibrate --fit c --prior leg.json` on two bundled walks (Table 1 wheel): c fitted with the leg
+    test's prior, k fixed at the leg test's value, the friction reported as not used by the walk model."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[3]
+    leg = _leg_json(tmp_path / "leg.json", k=(2700.0, 2680.0, 2720.0), c=(8.0, 7.85, 8.15))
+    csvs = sorted(str(p) for p in (root / "analysis" / "data").glob("SYNTHETIC_er_slope2.0deg_run*.csv"))
+    res = subprocess.run([sys.executable, "-m", "rimless", "trials", "calibrate", *csvs, "--fit", "c", "--prior",
+                          str(leg), "--no-critical", "--json"], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=900, env={**os.environ, "COLUMNS": "80"})
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads(res.stdout)
+    rows = {r["key"]: r for r in out["prior"]["parameters"]}
+    assert rows["c_n_s_per_m"]["use"] == "penalty" and 0 < rows["c_n_s_per_m"]["leg_test_share"] <= 1
+    assert rows["k_n_per_m"]["use"] == "fixed" and rows["k_n_per_m"]["source"].startswith("leg test")
+    if not hasattr(WheelParams(), "guide_friction_n"):
+        assert rows["guide_friction_n"]["use"] == "not used by the walk model"
+    c = out["params"][0]
+    assert c["name"] == "c" and c["identifiable"] and c["ci95"][0] < c["estimate"] < c["ci95"][1]
+    assert rows["c_n_s_per_m"]["calibrated"] == c["estimate"]
+    assert rows["c_n_s_per_m"]["prior_z"] == pytest.approx((c["estimate"] - 8.0) / (0.15 / Z95))
+    assert out["prior"]["from_walks_only"] == []
