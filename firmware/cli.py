@@ -550,8 +550,16 @@ def leg_test(
 
     @user_facing
     def go() -> Any:
+        from rimless.errors import ParameterError
         from rimless.firmware.drivers.fake_leg import FakeLegParams
         from rimless.firmware.service.leg_test import LegTestOptions, run_leg_test
+
+        given = {"--fake-k-n-per-m": fake_k != 2700.0, "--fake-c-n-s-per-m": fake_c != 8.0,
+                 "--fake-guide-friction-n": fake_friction != 0.4, "--fake-moving-mass-kg": fake_mass != 0.0378,
+                 "--fake-compression-mm": fake_compression_mm != 2.0, "--fake-noise-counts": fake_noise != 0.3,
+                 "--seed": seed != 0}
+        if not fake and any(given.values()):
+            raise ParameterError(f"{next(k for k, v in given.items() if v)} acts only with --fake (the simulated leg)")
 
         truth = FakeLegParams(stiffness_n_per_m=fake_k, damping_n_s_per_m=fake_c, friction_n=fake_friction,
                               moving_mass_kg=fake_mass, compression_m=fake_compression_mm / 1000.0)
