@@ -511,3 +511,85 @@ def _bench_text(res: dict[str, Any]) -> str:
            f"other threads {res['realtime'].get('others_policy', 'SCHED_OTHER')}"
            + (f" ({'; '.join(res['realtime']['errors'])})" if res['realtime']['errors'] else ""))
     )
+
+
+@app.command("leg-test")
+def leg_test(
+    leg: Annotated[int, typer.Option("--leg", min=0, max=63, metavar="K",
+                                     help="Clutch index of the leg under test (hanging free, the wheel held up).")],
+    out: Annotated[Path, typer.Option("--out", metavar="FILE", help="The log to write (JSON Lines; `rimless trials "
+                                      "leg-fit` reads it).")] = Path("leg-test.jsonl"),
+    config: _CONFIG = None,
+    fake: Annotated[bool, typer.Option("--fake", help="A simulated leg (spring, damper, guide friction, gravity), "
+                                       "a scripted hand, the fake sensor and mock pins.")] = False,
+    hold_s: Annotated[float, typer.Option("--hold-s", min=0.01, max=60.0, help="Seconds the clutch holds the "
+                                          "compressed leg before the release (below [clutch] max_hold_s).")] = 0.5,
+    record_s: Annotated[float, typer.Option("--record-s", min=0.1, max=10.0, help="Seconds of free motion "
+                                            "recorded after the release.")] = 1.0,
+    timeout_s: Annotated[float, typer.Option("--timeout-s", min=1.0, max=600.0, help="Fail when no maximum "
+                                             "compression is found within this many seconds.")] = 30.0,
+    rate_hz: Annotated[float, typer.Option("--rate-hz", min=1000.0, max=20000.0, help="Sensor reads per second "
+                                           "(back to back when the bus is slower; one per frame is the most "
+                                           "that is useful).")] = 6000.0,
+    frame_rate_hz: Annotated[float, typer.Option("--frame-rate-hz", min=2000.0, max=6051.0, help="Fixed "
+                                                 "ADNS-3080 frame rate, fps (6051 is the highest that leaves a "
+                                                 "shutter).")] = 6000.0,
+    fake_k: Annotated[float, typer.Option("--fake-k-n-per-m", min=1.0, max=1e6, help="With --fake: spring "
+                                          "stiffness, N/m.")] = 2700.0,
+    fake_c: Annotated[float, typer.Option("--fake-c-n-s-per-m", min=0.0, max=1e4, help="With --fake: damping, "
+                                          "N s/m.")] = 8.0,
+    fake_friction: Annotated[float, typer.Option("--fake-guide-friction-n", min=0.0, max=100.0, help="With --fake: "
+                                                 "Coulomb guide friction, N.")] = 0.4,
+    fake_mass: Annotated[float, typer.Option("--fake-moving-mass-kg", min=1e-4, max=10.0, help="With --fake: the "
+                                             "leg's moving mass, kg.")] = 0.0378,
+    fake_compression_mm: Annotated[float, typer.Option("--fake-compression-mm", min=0.0, max=20.0, help="With "
+                                                       "--fake: how far the hand compresses the leg, mm.")] = 2.0,
+    fake_noise: Annotated[float, typer.Option("--fake-noise-counts", min=0.0, max=100.0, help="With --fake: the "
+                                              "sensor's position noise, counts (1 sigma).")] = 0.3,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="With --fake: the noise's random seed.")] = 0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Measure a leg's free motion: compress it by hand, the clutch holds it at maximum compression, then lets
+    go after --hold-s; the leg's ADNS-3080 records the motion to --out.
+
+    Fit k, c and the guide friction with `rimless trials leg-fit`. Any signal releases the clutch at once
+    and exits 128 + its number (nothing written); a fault releases it and exits 1 (the log says why).
+    """
+
+    @user_facing
+    def go() -> Any:
+        from rimless.errors import ParameterError
+        from rimless.firmware.drivers.fake_leg import FakeLegParams
+        from rimless.firmware.service.leg_test import LegTestOptions, run_leg_test
+
+        given = {"--fake-k-n-per-m": fake_k != 2700.0, "--fake-c-n-s-per-m": fake_c != 8.0,
+                 "--fake-guide-friction-n": fake_friction != 0.4, "--fake-moving-mass-kg": fake_mass != 0.0378,
+                 "--fake-compression-mm": fake_compression_mm != 2.0, "--fake-noise-counts": fake_noise != 0.3,
+                 "--seed": seed != 0}
+        if not fake and any(given.values()):
+            raise ParameterError(f"{next(k for k, v in given.items() if v)} acts only with --fake (the simulated leg)")
+
+        truth = FakeLegParams(stiffness_n_per_m=fake_k, damping_n_s_per_m=fake_c, friction_n=fake_friction,
+                              moving_mass_kg=fake_mass, compression_m=fake_compression_mm / 1000.0)
+        opts = LegTestOptions(leg=leg, hold_s=hold_s, record_s=record_s, timeout_s=timeout_s, rate_hz=rate_hz,
+                              frame_rate_hz=frame_rate_hz, fake_leg=truth, noise_counts=fake_noise, seed=seed)
+        return run_leg_test(config, opts, out, fake=fake, on_status=lambda text: _say(f"leg test: {text}"))
+
+    report = go()
+    if report.interrupted:
+        pins = f" (fake pins: {report.fake_pins})" if report.fake_pins else ""
+        _say(f"leg test stopped by {report.interrupted}; clutch released, nothing written{pins}")
+        _say("interrupted" if report.interrupted == "SIGINT" else f"error: stopped by {report.interrupted}")
+        raise typer.Exit(report.exit_code)
+    for w in report.warnings:
+        _say(f"warning: {w}")
+    if as_json:
+        print_json(report.to_json())
+    else:
+        typer.echo(f"leg {report.leg}: {report.samples} reads at {report.achieved_rate_hz:.0f} Hz (frame rate "
+                   f"{report.frame_rate_hz:.0f} fps), locked at {report.lock_compression_mm:.2f} mm, held "
+                   f"{report.held_s:.3f} s, {report.free_samples} reads of free motion (peak "
+                   f"{report.peak_speed_m_s:.2f} m/s); log {report.out}; clutch released")
+    if report.fault:
+        _say(f"error: leg test failed ({report.fault}): {report.detail}; clutch released, log {report.out}")
+        raise typer.Exit(report.exit_code)

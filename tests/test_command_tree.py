@@ -296,6 +296,8 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("trials", "calibrate"): ([*CRITICAL_CSVS], 5.0),
     ("trials", "critical-slope"): ([*CRITICAL_CSVS], 2.5),
     ("trials", "coverage"): (["--series", "500"], 3.0),
+    ("robot", "leg-test"): (["--fake", "--leg", "0", "--fake-compression-mm", "0", "--timeout-s", "120", "--out",
+                             "leg.jsonl"], 3.0),
 }
 
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.
@@ -317,6 +319,7 @@ QUICK: dict[tuple[str, ...], str] = {
     ("robot", "release"): "drives the clutch pins low once and exits",
     ("robot", "heartbeat"): "without a robot on the loopback it stops at once with one line; its Ctrl-C path "
                             "needs a running robot",
+    ("trials", "leg-fit"): "fits a few leg-test logs in a second or two",
 }
 
 def _free_tcp_port() -> int:

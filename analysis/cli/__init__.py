@@ -20,6 +20,7 @@ from rimless.errors import ParameterError, UserError
 from rimless.values import parse_list, parse_numbers
 
 from rimless.analysis.cli.critical import critical_lines, register as register_critical
+from rimless.analysis.cli.leg import register as register_leg
 
 app = typer.Typer(no_args_is_help=True, help="Vicon trials: import, show, benchmark.")
 
@@ -287,3 +288,4 @@ def register_top_level(root_app: typer.Typer) -> None:
 
 
 register_critical(app)
+register_leg(app)

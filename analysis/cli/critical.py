@@ -150,6 +150,9 @@ def calibrate_cmd(
     params: ParamsOpt = None,
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
+    prior: Annotated[Optional[Path], typer.Option(
+        "--prior", metavar="JSON", help="Leg-test results (`trials leg-fit --json`) as priors: Gaussian penalties on "
+        "the fitted k, c (removes the c-k ridge); unfitted ones fixed at them.", show_default=False)] = None,
 ) -> None:
     """Calibrate the model (c, optionally k ...) on the trials' step periods and CoM height.
 
@@ -165,7 +168,8 @@ def calibrate_cmd(
     if len(models) != 1:
         raise ParameterError(f"--model must be er or ve, got {model!r}")
     run = calibration_run(trials, names_fit, model=models[0], critical=critical, params_path=params,
-                          import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0})
+                          import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
+                          prior_path=prior)
     _print_refused(run.loaded.refused)
     if not run.loaded.trials:
         typer.echo("error: no trial could be read (see the refusals above)", err=True)
@@ -233,6 +237,24 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print("critical slope: " + ", ".join(parts), markup=False, highlight=False)
     for name, why in out["failed"].items():
         con.print(f"not calibrated: {why}", markup=False, highlight=False)
+    if "prior" in out:
+        _print_prior(con, out["prior"])
+
+
+def _print_prior(con: Any, prior: dict[str, Any]) -> None:
+    """Which parameters came from the leg test (`--prior`) and which from the walks."""
+    con.print(f"leg-test priors from {prior['file']}:", markup=False, highlight=False)
+    for row in prior["parameters"]:
+        lo, hi = row["leg_test_ci"]
+        share = row.get("leg_test_share")
+        extra = f", {100 * share:.0f} % of the information from the leg test" if share is not None and \
+            math.isfinite(share) else ""
+        con.print(f"  {row['key']}: leg test {row['leg_test']:.4g} (95 %: {lo:.4g} to {hi:.4g}) {row['unit']}: "
+                  f"{row['source']}{extra}", markup=False, highlight=False)
+        if "conflict" in row:
+            con.print(f"    warning: {row['conflict']}", markup=False, highlight=False)
+    if prior["from_walks_only"]:
+        con.print("  from the walks only: " + ", ".join(prior["from_walks_only"]), markup=False, highlight=False)
 
 
 def critical_lines(res: Any) -> str:

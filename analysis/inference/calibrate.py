@@ -589,7 +589,8 @@ def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialDat
 
 def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
               model: str = "er", rtol: float = 1e-7, record_dt_s: float = 8e-3, max_rounds: int = MAX_ROUNDS,
-              multi_start: bool = True, progress: Callable[[int], None] | None = None) -> CalibrationResult:
+              multi_start: bool = True, progress: Callable[[int], None] | None = None,
+              prior: Any = None) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
     Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
@@ -600,7 +601,8 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     `RIDGE_CORRELATION`, e.g. c-k) or without convergence, the fit also starts from Table 1 and keeps the
     lower cost; each start runs until converged or
     ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
-    identifiable). ``progress(n)`` is called after simulations with the running count."""
+    identifiable). ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
+    priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -616,6 +618,8 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     table1_releases, ug_start = _start(_ReleaseFit(sim, tick), glob, data)
 
     obj = _Objective(sim, glob, data, tick)
+    if prior is not None:
+        prior.attach(obj, glob)  # leg-test priors: penalty rows on the residuals and the Jacobian
     ws_t1 = np.array([table1_releases[d.name] for d in data])
     u_t1 = obj.start(np.zeros(glob.n), ws_t1)
     rows_t1 = obj.rms_rows(u_t1)
@@ -641,7 +645,7 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     cost_cal = obj.cost(u)
     scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
     se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
-    se_sand = sandwich_se(J, obj.fun(u), obj.offs, glob.n, scale_all)
+    se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)

@@ -117,12 +117,18 @@ class CalibrationRun:
     calibration: CalibrationResult | None = None
     failure: str | None = None  # why nothing was calibrated
     critical: CriticalSlopeResult | None = None
+    prior: Any = None  # leg-test priors (`rimless.analysis.inference.priors.LegPriors`), planned
+    fit: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
         """The JSON object of ``trials calibrate --json``."""
         assert self.calibration is not None
         out = self.calibration.summary()
         out["refused"] = self.loaded.refused
+        if self.prior is not None:
+            from rimless.analysis.inference.calibrate import FIT_FIELDS
+
+            out["prior"] = self.prior.report(self.calibration, [FIT_FIELDS[n][0] for n in self.fit], self.fit)
         crit = self.critical
         if crit is not None:
             out["critical_slope_deg"] = {"trials": crit.critical_slope_deg,
@@ -133,17 +139,26 @@ class CalibrationRun:
 
 
 def calibration_run(files: Sequence[Path], fit: Sequence[str], *, model: str, critical: bool,
-                    params_path: Path | None, import_kwargs: dict[str, Any]) -> CalibrationRun:
+                    params_path: Path | None, import_kwargs: dict[str, Any],
+                    prior_path: Path | None = None) -> CalibrationRun:
     """Calibrate ``fit`` on the trials; with ``critical`` also the calibrated model's critical slope and the
-    trials'."""
+    trials'; with ``prior_path`` (a `trials leg-fit --json` output) the leg test's results as priors."""
     wheel = wheel_params(params_path)
+    prior = None
+    if prior_path is not None:
+        from rimless.analysis.inference.calibrate import FIT_FIELDS
+        from rimless.analysis.inference.priors import read_priors
+
+        prior = read_priors(prior_path)
+        wheel = prior.plan(wheel, [FIT_FIELDS[n][0] for n in fit])
     with progress_bar("importing") as bar:
-        run = CalibrationRun(load_trials(files, import_kwargs))
+        run = CalibrationRun(load_trials(files, import_kwargs), prior=prior, fit=list(fit))
         if not run.loaded.trials:
             return run
         try:
             run.calibration = calibrate(run.loaded.trials, run.loaded.names, fit, params=wheel, model=model,
-                                        progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"))
+                                        progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
+                                        prior=prior)
         except NoTrialCalibrated as e:
             run.failure = str(e)
             return run

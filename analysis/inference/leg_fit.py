@@ -1,0 +1,600 @@
+"""Fit a leg's stiffness k, damping c and Coulomb guide friction F_c to the free motion recorded by
+`rimless robot leg-test` (the wheel held up, the leg hanging free, released at rest by its clutch).
+
+The model: m x'' + c x' + k (x - x_eq) + F_c sign(x') = 0 with stiction, x the compression in sensor counts.
+Gravity only shifts the equilibrium x_eq (by m g / k), which is fitted anyway, since the sensor's zero is
+arbitrary. Its free response from rest is piecewise: each half cycle is the damped oscillation about the
+shifted centre x_eq + a sign(x_start - x_eq), a = F_c / k, and ends at rest after pi / omega_d; the leg sticks
+when it comes to rest within the friction band |x - x_eq| <= a (`free_response`, closed form, underdamped).
+
+Unknowns: omega_n, zeta and the friction displacement a (shared by every log, a in metres: `a * counts_per_m`
+counts in each log), and per log the locked position x_lock, x_eq, the instant t_r the clutch let go (its
+release delay is unknown) and a linear drift of the count (the flow sensor integrates its errors). Least
+squares on the displacement over the released segment (from `PRE_RELEASE_S` before the release command to
+`SETTLED_S` after the motion ends), without the reads the process was descheduled in (`read_us` above
+`SLOW_READ_US`: their instant is uncertain) and, after a first fit, without samples beyond `OUTLIER_SIGMAS`
+robust sigmas (at most `OUTLIER_MAX_SHARE` of them; both counted in the report). Several releases of one leg at
+different compressions fit together: each sees about two half cycles of a leg damped like the paper's (zeta
+0.4), and their different amplitudes separate the friction (a loss per half cycle that does not scale with
+amplitude) from the damping.
+
+Then k = m omega_n^2, c = 2 m zeta omega_n, F_c = k a, m the leg's moving mass (an input:
+`DEFAULT_MOVING_MASS_KG`, the leg mass of Table 1, which the wheel model puts entirely at the foot). k and c
+come from the frequency and the decay, so they do not depend on the sensor's counts per metre; F_c does
+(through a), and scales with it.
+
+Uncertainties: the larger of two covariances, propagated to k, c and F_c (with the moving mass's own
+uncertainty, when given): the Jacobian's with the residual variance, inflated for correlated residuals by their
+long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags), and a sandwich over blocks of
+`SANDWICH_BLOCK` consecutive samples (right when the error grows with the speed, as a read's timing error
+does). Their coverage is checked by simulation against an independent truth model in the tests
+(tests/analysis/inference/test_leg_fit.py); see docs/trials.md for the figures.
+
+One concept: the leg-test fit (log, model, fit, uncertainty, figure).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rimless.errors import InputFileError, ParameterError, RunFailure
+
+__all__ = ["FORMAT", "DEFAULT_MOVING_MASS_KG", "LegLog", "LegFitResult", "read_leg_log", "free_response", "fit_leg",
+           "run_leg_fit", "fake_truth",
+           "plot_leg_fit", "Z95"]
+
+FORMAT = "rimless-leg-test/1"  # the first line of a leg-test log (firmware/service/leg_test.py writes it)
+DEFAULT_MOVING_MASS_KG = 0.0378  # Table 1's leg mass, all of it moving with the foot in the wheel model
+PRE_RELEASE_S = 0.02  # the fit starts this long before the release command (the leg still held)
+SETTLED_S = 0.05  # and ends this long after the motion has ended (or at the log's end)
+MOVE_COUNTS = 3.0  # a departure of this many counts from the held position is motion
+MIN_FREE_SAMPLES = 20
+SLOW_READ_US = 500.0  # a read that took longer (and SLOW_READ_FACTOR x the median) is left out
+SLOW_READ_FACTOR = 3.0
+SANDWICH_BLOCK = 30  # samples per block of the sandwich covariance
+LONG_RUN_LAGS = 30  # lags of the residuals' long-run variance
+OUTLIER_MAX_SHARE = 0.01  # at most this share of the samples are left out as outliers
+DRIFT_MAX_COUNTS_PER_S = 100.0  # bound of the fitted count drift (a sensor drifting more is broken)
+OUTLIER_SIGMAS = 8.0  # after a first fit, samples beyond this many robust sigmas (MAD) are left out, once
+Z95 = 1.959963984540054
+MAX_NFEV = 400
+N_SHARED, N_PER_LOG = 3, 4  # omega_n, zeta, a; per log x_lock, x_eq, t_r, drift
+ZETA_MAX = 0.95  # the model is the underdamped response; a fit at this bound is not an oscillation
+
+
+@dataclass
+class LegLog:
+    """One leg-test log: sample times (s, from the run's start), cumulative counts, the clutch events."""
+
+    path: Path
+    leg: int
+    counts_per_m: float
+    t_s: np.ndarray
+    counts: np.ndarray
+    release_t_s: float
+    engage_t_s: float | None
+    header: dict[str, Any]
+    outcome: str = "ok"
+    read_us: np.ndarray = field(default_factory=lambda: np.zeros(0))  # each read's duration (NaN: not logged)
+
+    @property
+    def truth(self) -> dict[str, Any] | None:
+        """The simulated leg's parameters, for a log of `leg-test --fake`."""
+        return self.header.get("fake_leg")
+
+
+def _num(value: Any, where: str, name: str, *, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputFileError(f"{where}: field {name!r} must be a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise InputFileError(f"{where}: field {name!r} must be > 0, got {value!r}")
+    return float(value)
+
+
+def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
+    """Read and check a leg-test log; `InputFileError` names the file, the line and the field of the first
+    problem. `counts_per_m` overrides the header's scale (a calibration made after the test)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputFileError(f"{p}: no such file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputFileError(f"{p}: cannot read ({err})") from None
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise InputFileError(f"{p}: empty, expected a leg-test log (first line {{\"format\": \"{FORMAT}\", ...}})")
+    t: list[float] = []
+    c: list[float] = []
+    read_us: list[float] = []
+    header: dict[str, Any] = {}
+    release = engage = None
+    outcome = None
+    for n, line in enumerate(lines, 1):
+        where = f"{p}:{n}"
+        if not line.strip():
+            continue
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as err:
+            torn = n == len(lines) and not text.endswith("\n")
+            raise InputFileError(f"{where}: not JSON ({err.msg}, column {err.colno})"
+                                 + ("; the last line is torn (the test did not finish writing)" if torn else "")
+                                 ) from None
+        if not isinstance(obj, dict):
+            raise InputFileError(f"{where}: expected a JSON object, got {type(obj).__name__}")
+        if n == 1:
+            if obj.get("format") != FORMAT:
+                raise InputFileError(f"{where}: field 'format' must be {FORMAT!r}, got {obj.get('format')!r} "
+                                     "(not a log of `rimless robot leg-test`)")
+            header = obj
+            for name in ("leg", "counts_per_m"):
+                if name not in obj:
+                    raise InputFileError(f"{where}: field {name!r} is missing")
+            if isinstance(obj["leg"], bool) or not isinstance(obj["leg"], int) or obj["leg"] < 0:
+                raise InputFileError(f"{where}: field 'leg' must be a clutch index (an integer >= 0), "
+                                     f"got {obj['leg']!r}")
+            _num(obj["counts_per_m"], where, "counts_per_m", positive=True)
+            continue
+        if "event" in obj:
+            ev = obj["event"]
+            if ev in ("engage", "release", "fault"):
+                ts = _num(obj.get("t_s"), where, "t_s")
+                if ev == "release":
+                    release = ts
+                elif ev == "engage":
+                    engage = ts
+            if ev == "end":
+                outcome = str(obj.get("outcome", "ok"))
+            continue
+        if "t_s" not in obj or "counts" not in obj:
+            missing = "t_s" if "t_s" not in obj else "counts"
+            raise InputFileError(f"{where}: field {missing!r} is missing (a sample has t_s and counts)")
+        ts = _num(obj["t_s"], where, "t_s")
+        cv = obj["counts"]
+        if isinstance(cv, bool) or not isinstance(cv, int):
+            raise InputFileError(f"{where}: field 'counts' must be an integer (sensor counts), got {cv!r}")
+        if t and ts <= t[-1]:
+            raise InputFileError(f"{where}: field 't_s' {ts!r} does not increase (previous sample at {t[-1]!r})")
+        ru = obj.get("read_us", math.nan)
+        if ru is not None and not math.isnan(ru if isinstance(ru, float) else 0.0):
+            ru = _num(ru, where, "read_us")
+        t.append(ts)
+        c.append(float(cv))
+        read_us.append(math.nan if ru is None else float(ru))
+    if release is None:
+        why = f" (the test ended with {outcome!r})" if outcome not in (None, "ok") else ""
+        raise InputFileError(f"{p}: no 'release' event: the clutch never let the leg go{why}, nothing to fit")
+    tt = np.asarray(t)
+    n_free = int(np.sum(tt >= release))
+    if n_free < MIN_FREE_SAMPLES:
+        raise InputFileError(f"{p}: {n_free} samples after the release (at least {MIN_FREE_SAMPLES} needed)")
+    cpm = float(counts_per_m) if counts_per_m is not None else float(header["counts_per_m"])
+    return LegLog(p, int(header["leg"]), cpm, tt, np.asarray(c), float(release), engage, header, outcome or "ok",
+                  np.asarray(read_us))
+
+
+def free_response(t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: float, x_lock: float,
+                  t_r: float) -> np.ndarray:
+    """The displacement at times `t` (s) of a spring-damper-Coulomb oscillator held at `x_lock` until `t_r`,
+    then released at rest: half cycles about x_eq +/- a, sticking within |x - x_eq| <= a. Displacements in any
+    one unit (counts here); omega_n in rad/s; 0 <= zeta < 1."""
+    t = np.asarray(t, float)
+    x = np.full(t.shape, float(x_lock))
+    wd = omega_n * math.sqrt(max(1.0 - zeta * zeta, 1e-12))
+    half = math.pi / wd
+    sigma = zeta * omega_n
+    r = math.exp(-sigma * half)
+    ratio = sigma / wd
+    xs, ts = float(x_lock), float(t_r)
+    scale = max(abs(x_lock - x_eq), 1e-12)
+    for _ in range(10000):
+        d = xs - x_eq
+        if abs(d) <= a or abs(d) < 1e-9 * scale:
+            break
+        e = x_eq + math.copysign(a, d)
+        m = (t >= ts) & (t < ts + half)
+        tau = t[m] - ts
+        x[m] = e + (xs - e) * np.exp(-sigma * tau) * (np.cos(wd * tau) + ratio * np.sin(wd * tau))
+        xs = e - (xs - e) * r
+        ts += half
+    x[t >= ts] = xs
+    return x
+
+
+@dataclass
+class _Segment:
+    log: LegLog
+    t: np.ndarray  # s from the release command
+    y: np.ndarray  # counts
+    x_lock0: float
+    x_eq0: float
+    t_r0: float
+    slow_reads: int = 0  # reads left out: the process was descheduled in them (their instant is uncertain)
+    outliers: int = 0  # samples left out by the outlier test after the first fit
+
+
+def _segment(log: LegLog) -> _Segment:
+    t = log.t_s - log.release_t_s
+    held = (t >= -PRE_RELEASE_S) & (t < 0)
+    x_lock = float(np.median(log.counts[held])) if held.any() else float(log.counts[np.searchsorted(t, 0.0)])
+    after = t >= 0
+    moved = after & (np.abs(log.counts - x_lock) > MOVE_COUNTS)
+    if not moved.any():
+        raise RunFailure(f"{log.path}: the leg did not move after the release (held position kept within "
+                         f"{MOVE_COUNTS:g} counts): the clutch did not let go, or the leg is jammed")
+    t_move = float(t[np.argmax(moved)])
+    tail = log.counts[after][-max(5, int(after.sum()) // 5):]
+    x_end = float(np.median(tail))
+    moving = after & (np.abs(log.counts - x_end) > MOVE_COUNTS)
+    t_last = float(t[moving][-1]) if moving.any() else t_move
+    keep = (t >= -PRE_RELEASE_S) & (t <= t_last + SETTLED_S)
+    slow = np.zeros_like(keep)
+    ru = log.read_us
+    if ru.size == t.size and np.isfinite(ru).any():
+        limit = max(SLOW_READ_US, SLOW_READ_FACTOR * float(np.nanmedian(ru)))
+        slow = np.isfinite(ru) & (ru > limit)
+    seg = _Segment(log, t[keep & ~slow], log.counts[keep & ~slow], x_lock, x_end, max(t_move - 1e-3, 0.0))
+    seg.slow_reads = int(np.sum(keep & slow))
+    return seg
+
+
+@dataclass
+class Estimate:
+    """A fitted quantity with its standard error and 95 % interval (its unit in `unit`)."""
+
+    value: float
+    se: float
+    unit: str
+
+    @property
+    def ci95(self) -> tuple[float, float]:
+        return (self.value - Z95 * self.se, self.value + Z95 * self.se)
+
+
+@dataclass
+class LegFitResult:
+    """The fit of one leg (from one or more logs)."""
+
+    leg: int
+    files: list[str]
+    moving_mass_kg: float
+    moving_mass_sd_kg: float
+    k: Estimate
+    c: Estimate
+    friction: Estimate
+    natural_frequency_hz: Estimate
+    damping_ratio: Estimate
+    friction_displacement_m: Estimate
+    per_log: list[dict[str, Any]]
+    residual_rms_counts: float
+    autocorrelation: float
+    converged: bool
+    optimizer: dict[str, Any]
+    segments: list[_Segment] = field(default_factory=list, repr=False)
+    params: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    truth: list[dict[str, Any] | None] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        """The JSON of `rimless trials leg-fit --json` (`k_n_per_m`, `c_n_s_per_m`, `guide_friction_n`, each
+        with `_ci`, the 95 % interval)."""
+        out: dict[str, Any] = {"leg": self.leg, "files": self.files}
+        for key, est in (("k_n_per_m", self.k), ("c_n_s_per_m", self.c), ("guide_friction_n", self.friction),
+                         ("natural_frequency_hz", self.natural_frequency_hz), ("damping_ratio", self.damping_ratio),
+                         ("friction_displacement_m", self.friction_displacement_m)):
+            out[key] = est.value
+            out[key + "_se"] = est.se
+            out[key + "_ci"] = list(est.ci95)
+        out.update({
+            "moving_mass_kg": self.moving_mass_kg, "moving_mass_sd_kg": self.moving_mass_sd_kg,
+            "scale_dependence": "k and c come from the natural frequency and the decay and do not depend on the "
+                                "sensor's counts per metre; guide_friction_n does (it scales with the counts per "
+                                "metre of each log); k and c scale with the moving mass",
+            "intervals": "95 %: the larger of the least-squares covariance (inflated for correlated residuals) and a "
+                         "block sandwich"
+                         + (", with the moving mass's uncertainty" if self.moving_mass_sd_kg > 0 else
+                            ", without the moving mass's uncertainty (give --moving-mass-sd-kg)"),
+            "residual_rms_counts": self.residual_rms_counts, "residual_lag1_autocorrelation": self.autocorrelation,
+            "per_log": self.per_log, "converged": self.converged, "optimizer": self.optimizer,
+        })
+        return out
+
+
+def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_KG,
+            moving_mass_sd_kg: float = 0.0) -> LegFitResult:
+    """Fit one leg's k, c and F_c to the released segments of `logs` (one leg; see the module doc).
+
+    Raises `ParameterError` for a bad mass or logs of different legs, `RunFailure` when the motion is no
+    oscillation the model can fit (no release motion, overdamped, stuck in the first half cycle)."""
+    from scipy.optimize import least_squares
+
+    if not logs:
+        raise ParameterError("no log to fit")
+    if not (math.isfinite(moving_mass_kg) and moving_mass_kg > 0):
+        raise ParameterError(f"--moving-mass-kg must be > 0, got {moving_mass_kg!r}")
+    if not (math.isfinite(moving_mass_sd_kg) and moving_mass_sd_kg >= 0):
+        raise ParameterError(f"--moving-mass-sd-kg must be >= 0, got {moving_mass_sd_kg!r}")
+    legs = {lg.leg for lg in logs}
+    if len(legs) > 1:
+        other = next(lg for lg in logs if lg.leg != logs[0].leg)
+        raise ParameterError(f"{other.path}: leg {other.leg}, but {logs[0].path} is leg {logs[0].leg}: fit one leg "
+                             "at a time")
+    segs = [_segment(lg) for lg in logs]
+    n_l = len(segs)
+    cpms = np.array([s.log.counts_per_m for s in segs])
+
+    # u = [omega_n (rad/s), zeta, a (um), then per log: x_lock (counts), x_eq (counts), t_r (ms), drift (counts/s)]
+    def unpack(u: np.ndarray) -> tuple[float, float, float, np.ndarray]:
+        return float(u[0]), float(u[1]), float(u[2]), u[N_SHARED:].reshape(n_l, N_PER_LOG)
+
+    def one(u: np.ndarray, i: int) -> np.ndarray:
+        w, z, a_um, per = unpack(u)
+        s, (xl, xe, tr, dr) = segs[i], per[i]
+        return free_response(s.t, w, z, a_um * 1e-6 * cpms[i], xe, xl, tr * 1e-3) + dr * s.t - s.y
+
+    def resid(u: np.ndarray) -> np.ndarray:
+        return np.concatenate([one(u, i) for i in range(n_l)])
+
+    offs = np.concatenate([[0], np.cumsum([s.t.size for s in segs])])
+    typical = np.concatenate([[1.0, 1e-3, 0.1], np.tile([0.1, 0.1, 1e-3, 0.1], n_l)])
+
+    def jac(u: np.ndarray) -> np.ndarray:
+        """Forward differences: a shared parameter moves every log, a log's own parameters only its rows."""
+        r0 = [one(u, i) for i in range(n_l)]
+        J = np.zeros((int(offs[-1]), u.size))
+        for j in range(u.size):
+            h = 1e-6 * max(abs(u[j]), typical[j])
+            u2 = u.copy()
+            u2[j] += h
+            rows = range(n_l) if j < N_SHARED else [(j - N_SHARED) // N_PER_LOG]
+            for i in rows:
+                J[offs[i]:offs[i + 1], j] = (one(u2, i) - r0[i]) / h
+        return J
+
+    u0 = _start(segs, cpms, one)
+    lo = np.concatenate([[2 * math.pi * 1.0, 0.0, 0.0],
+                         np.tile([-np.inf, -np.inf, -PRE_RELEASE_S * 1e3, -DRIFT_MAX_COUNTS_PER_S], n_l)])
+    hi = np.concatenate([[2 * math.pi * 2000.0, ZETA_MAX, np.inf],
+                         np.tile([np.inf, np.inf, np.inf, DRIFT_MAX_COUNTS_PER_S], n_l)])
+    best = None
+    for a_start in (0.0, 0.3, 1.0):  # a few starts in the friction (the cost is not convex in it)
+        u = u0.copy()
+        u[2] = a_start * _a_guess_um(segs, cpms)
+        r = least_squares(resid, np.clip(u, lo, hi), jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                          xtol=1e-10, ftol=1e-12, max_nfev=MAX_NFEV)
+        if best is None or r.cost < best.cost:
+            best = r
+    assert best is not None
+    r = resid(best.x)
+    sig = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    bad = np.abs(r) > OUTLIER_SIGMAS * max(sig, 1.0)
+    # a read whose count or instant is wrong (a glitch): leave it out once, and fit again; more than
+    # OUTLIER_MAX_SHARE of them is a misfit of the model or of the start, not glitches
+    if bad.any() and bad.mean() <= OUTLIER_MAX_SHARE:
+        for i, sg in enumerate(segs):
+            drop = bad[offs[i]:offs[i + 1]]
+            sg.outliers = int(drop.sum())
+            sg.t, sg.y = sg.t[~drop], sg.y[~drop]
+        offs = np.concatenate([[0], np.cumsum([sg.t.size for sg in segs])])
+        nfev = int(best.nfev)
+        best = least_squares(resid, best.x, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", xtol=1e-10,
+                             ftol=1e-12, max_nfev=MAX_NFEV)
+        best.nfev += nfev
+    u = best.x
+    w, z, a_um, per = unpack(u)
+    if z >= ZETA_MAX * 0.999:
+        raise RunFailure(f"{segs[0].log.path}: the leg does not oscillate (damping ratio at the model's bound "
+                         f"{ZETA_MAX}): k, c and friction cannot be told apart from this motion")
+    r = resid(u)
+    n, p = r.size, u.size
+    s2 = float(r @ r) / max(n - p, 1)
+    rho = _lag1(r, [s.t.size for s in segs])
+    infl = _long_run_inflation(r, [s.t.size for s in segs])
+    J = np.asarray(best.jac)
+    try:
+        A = np.linalg.pinv(J.T @ J)
+        cov = A * s2 * infl
+        cov_s = _block_sandwich(A, J, r, offs, p)
+    except np.linalg.LinAlgError:
+        cov = cov_s = np.full((p, p), np.nan)
+    cw, cws = cov[:3, :3], cov_s[:3, :3]  # omega, zeta, a (um)
+    m, sm = moving_mass_kg, moving_mass_sd_kg
+    a_m = a_um * 1e-6
+    k = m * w * w
+    c = 2 * m * z * w
+    fc = k * a_m
+    gk = np.array([2 * m * w, 0.0, 0.0])
+    gc = np.array([2 * m * z, 2 * m * w, 0.0])
+    gf = np.array([2 * m * w * a_m, 0.0, m * w * w * 1e-6])
+
+    def se(g: np.ndarray, value: float) -> float:
+        """The larger of the model-based and the block-sandwich standard error, with the mass's."""
+        v = max(float(g @ cw @ g), float(g @ cws @ g)) if np.isfinite(cws).all() else float(g @ cw @ g)
+        v += (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
+        return math.sqrt(v) if v >= 0 and math.isfinite(v) else math.nan
+
+    def se_param(j: int, unit: float = 1.0) -> float:
+        return se(np.eye(3)[j], 0.0) * unit
+
+    per_log = []
+    for i, (s, (xl, xe, tr, dr)) in enumerate(zip(segs, per)):
+        ri = r[offs[i]:offs[i + 1]]
+        half_cycles = _half_cycles(w, z, a_um * 1e-6 * s.log.counts_per_m, xe, xl)
+        per_log.append({"file": str(s.log.path), "samples": int(s.t.size), "counts_per_m": s.log.counts_per_m,
+                        "held_counts": float(xl), "equilibrium_counts": float(xe),
+                        "release_delay_ms": float(tr), "drift_counts_per_s": float(dr), "half_cycles": half_cycles,
+                        "slow_reads_left_out": s.slow_reads, "outliers_left_out": s.outliers,
+                        "residual_rms_counts": float(np.sqrt(np.mean(ri ** 2))), "outcome": s.log.outcome})
+    if all(pl["half_cycles"] < 2 for pl in per_log):
+        raise RunFailure(f"{segs[0].log.path}: the leg stopped in its first half cycle in every log: friction and "
+                         "damping cannot be told apart (compress the leg further, or give more logs)")
+    converged = bool(best.status > 0)
+    fit = LegFitResult(
+        leg=logs[0].leg, files=[str(lg.path) for lg in logs], moving_mass_kg=m, moving_mass_sd_kg=sm,
+        k=Estimate(k, se(gk, k), "N/m"), c=Estimate(c, se(gc, c), "N s/m"), friction=Estimate(fc, se(gf, fc), "N"),
+        natural_frequency_hz=Estimate(w / (2 * math.pi), se_param(0, 1 / (2 * math.pi)), "Hz"),
+        damping_ratio=Estimate(z, se_param(1), ""),
+        friction_displacement_m=Estimate(a_m, se_param(2, 1e-6), "m"),
+        per_log=per_log, residual_rms_counts=float(np.sqrt(np.mean(r ** 2))), autocorrelation=rho,
+        converged=converged,
+        optimizer={"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev),
+                   "converged": converged, "starts": 3},
+        segments=segs, params=u, truth=[lg.truth for lg in logs])
+    if not all(math.isfinite(e.value) and math.isfinite(e.se) for e in (fit.k, fit.c, fit.friction)):
+        raise RunFailure(f"{segs[0].log.path}: the fit gave no finite k, c and friction with uncertainties "
+                         "(a flat direction of the cost: the motion does not determine them)")
+    return fit
+
+
+def _a_guess_um(segs: list[_Segment], cpms: np.ndarray) -> float:
+    """A friction displacement of the order of the final offset from the first overshoot's centre (um)."""
+    amp = max(abs(s.x_lock0 - s.x_eq0) / cpm for s, cpm in zip(segs, cpms))
+    return max(0.05 * amp * 1e6, 1.0)
+
+
+def _start(segs: list[_Segment], cpms: np.ndarray, one: Any) -> np.ndarray:
+    """Starting point: the held and final positions and the first motion of each log, and the best (omega_n,
+    zeta) of a grid without friction on the log of the largest motion."""
+    per = np.concatenate([[s.x_lock0, s.x_eq0, s.t_r0 * 1e3, 0.0] for s in segs])
+    i = int(np.argmax([abs(s.x_lock0 - s.x_eq0) for s in segs]))
+    best = (math.inf, 2 * math.pi * 40, 0.3)
+    for f in np.geomspace(2.0, 1000.0, 80):
+        for z in (0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8):
+            cost = float(np.sum(one(np.concatenate([[2 * math.pi * f, z, 0.0], per]), i) ** 2))
+            if cost < best[0]:
+                best = (cost, 2 * math.pi * f, z)
+    return np.concatenate([[best[1], best[2], 0.0], per])
+
+
+def _half_cycles(w: float, z: float, a: float, x_eq: float, x_lock: float) -> int:
+    """How many half cycles the fitted motion makes before it sticks (at most 1000)."""
+    r = math.exp(-z * math.pi / math.sqrt(max(1 - z * z, 1e-12)))
+    xs, n = x_lock, 0
+    while n < 1000:
+        d = xs - x_eq
+        if abs(d) <= a or abs(d) < 1e-6:
+            break
+        e = x_eq + math.copysign(a, d)
+        xs = e - (xs - e) * r
+        n += 1
+    return n
+
+
+def _block_sandwich(A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarray, p: int) -> np.ndarray:
+    """The covariance A B A with B summed over blocks of `SANDWICH_BLOCK` consecutive samples of each log: right
+    when the error grows with the speed (timing jitter times velocity) or is correlated over a few samples."""
+    B = np.zeros_like(A)
+    nb = 0
+    for i in range(offs.size - 1):
+        for lo in range(int(offs[i]), int(offs[i + 1]), SANDWICH_BLOCK):
+            hi = min(lo + SANDWICH_BLOCK, int(offs[i + 1]))
+            g = J[lo:hi].T @ r[lo:hi]
+            B += np.outer(g, g)
+            nb += 1
+    if nb <= p:
+        return np.full_like(A, np.nan)
+    return A @ B @ A * (nb / (nb - p))
+
+
+def _long_run_inflation(r: np.ndarray, sizes: list[int]) -> float:
+    """The long-run variance of the residuals over their variance (Bartlett weights up to `LONG_RUN_LAGS`
+    lags, per log, averaged; at least 1): the factor by which correlated residuals (a drifting count, a
+    slightly wrong model) carry less information than their number says."""
+    out, i = [], 0
+    for n in sizes:
+        ri = r[i:i + n] - np.mean(r[i:i + n])
+        i += n
+        v = float(ri @ ri)
+        if n <= 2 * LONG_RUN_LAGS or v <= 0:
+            continue
+        f = 1.0
+        for lag in range(1, LONG_RUN_LAGS + 1):
+            f += 2 * (1 - lag / (LONG_RUN_LAGS + 1)) * float(ri[:-lag] @ ri[lag:]) / v
+        out.append(f)
+    return max(float(np.mean(out)), 1.0) if out else 1.0
+
+
+def _lag1(r: np.ndarray, sizes: list[int]) -> float:
+    """Mean lag-1 autocorrelation of the residuals within each log, clipped to [0, 0.95]."""
+    rhos, i = [], 0
+    for n in sizes:
+        ri = r[i:i + n]
+        i += n
+        if ri.size > 10 and np.std(ri) > 0:
+            rhos.append(float(np.corrcoef(ri[:-1], ri[1:])[0, 1]))
+    return float(np.clip(np.mean(rhos), 0.0, 0.95)) if rhos else 0.0
+
+
+def plot_leg_fit(fit: LegFitResult, path: Path | str) -> None:
+    """The measured displacement and the fitted model against time from the release (mm), and the residuals
+    (counts), one colour per log; written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rimless.output import atomic_file
+
+    w, z, a_um = fit.params[0], fit.params[1], fit.params[2]
+    per = fit.params[N_SHARED:].reshape(-1, N_PER_LOG)
+    fig, (ax, axr) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    for i, (s, (xl, xe, tr, dr)) in enumerate(zip(fit.segments, per)):
+        cpm = s.log.counts_per_m
+        model = free_response(s.t, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3) + dr * s.t
+        fine = np.linspace(float(s.t[0]), float(s.t[-1]), 2000)
+        curve = free_response(fine, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3) + dr * fine
+        col = f"C{i % 10}"
+        ax.plot(s.t * 1e3, (s.y - xe) / cpm * 1e3, ".", ms=2, color=col, label=f"{Path(s.log.path).name} (measured)")
+        ax.plot(fine * 1e3, (curve - xe) / cpm * 1e3, "-", lw=1, color="k", label="fit" if i == 0 else None)
+        axr.plot(s.t * 1e3, s.y - model, ".", ms=2, color=col)
+    ax.axhspan(-fit.friction_displacement_m.value * 1e3, fit.friction_displacement_m.value * 1e3, color="0.85",
+               label="friction band |x - x_eq| <= F_c / k")
+    ax.set_ylabel("compression from equilibrium (mm)")
+    ax.set_title(f"leg {fit.leg}: k = {fit.k.value:.0f} ± {Z95 * fit.k.se:.0f} N/m, c = {fit.c.value:.2f} ± "
+                 f"{Z95 * fit.c.se:.2f} N s/m, F_c = {fit.friction.value:.3f} ± {Z95 * fit.friction.se:.3f} N (95 %)",
+                 fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    axr.set_ylabel("residual (counts)")
+    axr.set_xlabel("time from the release command (ms)")
+    axr.axhline(0.0, color="k", lw=0.5)
+    fig.tight_layout()
+    with atomic_file(path, option="--plot") as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+
+
+def run_leg_fit(paths: list[Path], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_KG, moving_mass_sd_kg: float = 0.0,
+                counts_per_m: float | None = None, plot: Path | None = None) -> LegFitResult:
+    """`rimless trials leg-fit`: read every log (the first bad one stops it: `InputFileError` naming the file,
+    line and field), fit, and draw the figure to `plot`."""
+    if plot is not None:
+        from rimless.output import check_output_folder
+
+        check_output_folder(Path(plot).parent if str(Path(plot).parent) else Path("."), option="--plot")
+    if counts_per_m is not None and not (math.isfinite(counts_per_m) and counts_per_m > 0):
+        raise ParameterError(f"--counts-per-m must be > 0, got {counts_per_m!r}")
+    logs = [read_leg_log(p, counts_per_m) for p in paths]
+    fit = fit_leg(logs, moving_mass_kg=moving_mass_kg, moving_mass_sd_kg=moving_mass_sd_kg)
+    if plot is not None:
+        plot_leg_fit(fit, plot)
+    return fit
+
+
+def fake_truth(fit: LegFitResult) -> dict[str, float] | None:
+    """The simulated leg of `leg-test --fake` logs, in the keys of `LegFitResult.summary` (None for real logs or
+    logs of different fakes)."""
+    truths = [t for t in fit.truth if t]
+    if len(truths) != len(fit.truth) or not truths or any(t != truths[0] for t in truths):
+        return None
+    t = truths[0]
+    try:
+        return {"k_n_per_m": float(t["stiffness_n_per_m"]), "c_n_s_per_m": float(t["damping_n_s_per_m"]),
+                "guide_friction_n": float(t["friction_n"]), "moving_mass_kg": float(t["moving_mass_kg"])}
+    except (KeyError, TypeError, ValueError):
+        return None

@@ -1,0 +1,216 @@
+"""`rimless trials leg-fit` against the independent truth model of the leg (tests/support/leg_truth.py).
+
+Closed forms check the truth model itself (pure Coulomb friction: linear decay of 4 F_c / k per cycle; pure
+viscous damping: the logarithmic decrement), the fit's closed-form response is checked against the truth's
+numerical integration, then the fit recovers k, c and F_c from logs with the mess of a real recording, its
+95 % intervals cover the truth at about their nominal rate, and bad logs are one-line errors.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rimless.analysis.inference.leg_fit import fit_leg, free_response, read_leg_log
+from tests.support.leg_truth import LegTruth, free_motion, position, write_log
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def test_truth_pure_coulomb_friction_decays_linearly_by_4fc_over_k_per_cycle() -> None:
+    truth = LegTruth(c_n_s_per_m=0.0, friction_n=0.5)
+    k, fc = truth.k_n_per_m, truth.friction_n
+    x_eq = -truth.mass_kg * truth.g_m_s2 / k
+    _, stops = free_motion(truth, x_eq + 0.003, 2.0)
+    amps = [abs(x - x_eq) for _, x in stops]
+    assert len(amps) >= 4
+    drops = np.diff(amps)  # each half cycle loses 2 F_c / k: a cycle 4 F_c / k
+    assert np.allclose(drops, -2 * fc / k, rtol=0, atol=1e-9)
+    cycle = amps[0] - amps[2]
+    assert cycle == pytest.approx(4 * fc / k, rel=1e-6)
+    half = np.diff([t for t, _ in stops])  # the period is that of the undamped spring
+    assert np.allclose(half, math.pi * math.sqrt(truth.mass_kg / k), rtol=1e-6)
+    assert amps[-1] <= fc / k + 1e-12  # it stops inside the friction band
+
+
+def test_truth_pure_viscous_damping_has_the_logarithmic_decrement() -> None:
+    truth = LegTruth(friction_n=0.0, c_n_s_per_m=3.0)
+    k, m, c = truth.k_n_per_m, truth.mass_kg, truth.c_n_s_per_m
+    zeta = c / (2 * math.sqrt(k * m))
+    x_eq = -m * truth.g_m_s2 / k
+    _, stops = free_motion(truth, x_eq + 0.002, 0.1)
+    amps = np.array([abs(x - x_eq) for _, x in stops])
+    ratio = amps[1:] / amps[:-1]
+    assert np.allclose(ratio, math.exp(-math.pi * zeta / math.sqrt(1 - zeta * zeta)), rtol=1e-6)
+
+
+def test_fit_model_matches_the_truth_integration() -> None:
+    """The closed-form half cycles of the fit against the truth's event-located integration, with friction,
+    damping and gravity, through the stick at the end."""
+    truth = LegTruth(friction_n=0.4)
+    k, m, c = truth.k_n_per_m, truth.mass_kg, truth.c_n_s_per_m
+    x_eq = -m * truth.g_m_s2 / k
+    x0 = x_eq + 0.0021
+    pieces, stops = free_motion(truth, x0, 0.2)
+    t = np.linspace(0.0, 0.2, 4001)
+    want = position(pieces, t)
+    got = free_response(t, math.sqrt(k / m), c / (2 * math.sqrt(k * m)), truth.friction_n / k, x_eq, x0, 0.0)
+    assert np.max(np.abs(got - want)) < 1e-9  # metres
+    assert len(stops) >= 2  # it turned at least once before sticking
+
+
+def _logs(tmp_path: Path, truth: LegTruth, seeds: list[int], mm: tuple[float, ...] = (1.5, 2.0, 2.5)) -> list:
+    logs = []
+    for s in seeds:
+        p = tmp_path / f"leg{s}.jsonl"
+        write_log(p, truth, compression_m=mm[s % len(mm)] / 1e3, seed=s)
+        logs.append(read_leg_log(p))
+    return logs
+
+
+@pytest.mark.parametrize("truth", [LegTruth(), LegTruth(k_n_per_m=2000.0, c_n_s_per_m=4.0, friction_n=0.25)],
+                         ids=["paper k c, 0.4 N", "softer, 0.25 N"])
+def test_recovers_k_and_c_within_2_percent_and_friction_within_10_percent(tmp_path: Path, truth: LegTruth) -> None:
+    """Three releases (1.5, 2 and 2.5 mm) at 5 kHz with 0.3 counts of noise, floor quantisation, a random-walk
+    drift, read jitter and late reads, an unknown release delay and sensor zero."""
+    fit = fit_leg(_logs(tmp_path, truth, [0, 1, 2]))
+    assert fit.k.value == pytest.approx(truth.k_n_per_m, rel=0.02)
+    assert fit.c.value == pytest.approx(truth.c_n_s_per_m, rel=0.02)
+    assert fit.friction.value == pytest.approx(truth.friction_n, rel=0.10)
+    assert fit.converged
+    for p in fit.per_log:
+        assert 2.0 <= p["release_delay_ms"] <= 6.0 + 0.3  # the truth's clutch let go 2-6 ms after the command
+
+
+def test_counts_per_metre_scales_the_friction_only(tmp_path: Path) -> None:
+    """Frequency and decay give k and c whatever the scale; the friction is a displacement times k, so it follows
+    the scale (twice the counts per metre: half the metres, half the friction)."""
+    truth = LegTruth()
+    paths = []
+    for s in (0, 1, 2):
+        paths.append(tmp_path / f"l{s}.jsonl")
+        write_log(paths[-1], truth, compression_m=(1.5 + 0.5 * s) / 1e3, seed=s)
+    a = fit_leg([read_leg_log(p) for p in paths])
+    b = fit_leg([read_leg_log(p, counts_per_m=2 * truth.counts_per_m) for p in paths])
+    assert b.k.value == pytest.approx(a.k.value, rel=1e-5)
+    assert b.c.value == pytest.approx(a.c.value, rel=1e-5)
+    assert b.friction.value == pytest.approx(a.friction.value / 2, rel=1e-4)
+
+
+@pytest.mark.slow
+def test_intervals_cover_the_truth() -> None:
+    """Coverage of the 95 % intervals on 30 simulated leg tests (3 releases each) of the truth model. Measured
+    (a regression snapshot of this fit on these seeds): 27 of 30 for each of k, c and F_c, 90 %, a little under
+    the nominal 95 % (the random-walk drift of the count is the main cause: without it c and F_c cover 100 %).
+    The bound, 25 of 30, fails if the intervals get narrower; a nominal 95 % would give 25 or more with
+    probability 0.998."""
+    import tempfile
+
+    truth = LegTruth()
+    hits = np.zeros(3, int)
+    n = 30
+    with tempfile.TemporaryDirectory() as d:
+        for rep in range(n):
+            fit = fit_leg(_logs(Path(d), truth, [100 * rep + j for j in range(3)]))
+            for i, (est, true) in enumerate(((fit.k, truth.k_n_per_m), (fit.c, truth.c_n_s_per_m),
+                                             (fit.friction, truth.friction_n))):
+                lo, hi = est.ci95
+                hits[i] += lo <= true <= hi
+    print(f"coverage of the 95 % intervals over {n} leg tests: k {hits[0]}/{n}, c {hits[1]}/{n}, F_c {hits[2]}/{n}")
+    assert (hits >= 25).all(), hits
+
+
+def test_a_single_release_is_fitted_with_honest_intervals(tmp_path: Path) -> None:
+    """One release sees about two half cycles: the intervals are wide, and still hold the truth."""
+    truth = LegTruth()
+    fit = fit_leg(_logs(tmp_path, truth, [7], mm=(2.0,)))
+    for est, true in ((fit.k, truth.k_n_per_m), (fit.c, truth.c_n_s_per_m), (fit.friction, truth.friction_n)):
+        lo, hi = est.ci95
+        assert lo <= true <= hi
+    assert fit.c.se / fit.c.value > 0.01  # wider than with three releases
+
+
+# ------------------------------------------------------------------------------------------ the command
+
+
+def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "rimless", "trials", "leg-fit", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "COLUMNS": "80"})
+
+
+def test_command_json_and_figure(tmp_path: Path) -> None:
+    truth = LegTruth()
+    for s in (0, 1, 2):
+        write_log(tmp_path / f"l{s}.jsonl", truth, compression_m=(1.5 + 0.5 * s) / 1e3, seed=s)
+    res = _cli("l0.jsonl", "l1.jsonl", "l2.jsonl", "--json", "--plot", "fit.png", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    for key, true in (("k_n_per_m", 2700.0), ("c_n_s_per_m", 8.0), ("guide_friction_n", 0.4)):
+        lo, hi = out[key + "_ci"]
+        assert lo <= true <= hi and lo < out[key] < hi
+    assert "counts per metre" in out["scale_dependence"]
+    assert (tmp_path / "fit.png").stat().st_size > 10_000
+    text = _cli("l0.jsonl", cwd=tmp_path)
+    assert text.returncode == 0, text.stderr
+    assert "do not depend on the sensor's counts per metre; F_c does" in text.stdout
+
+
+def _good(tmp_path: Path) -> list[str]:
+    write_log(tmp_path / "good.jsonl", LegTruth(record_s=0.2), seed=3)
+    return (tmp_path / "good.jsonl").read_text().splitlines()
+
+
+BAD = {
+    "not JSON": (lambda L: L[:5] + ["{\"t_s\": 0.1, "] + L[6:], ":6", "not JSON"),
+    "wrong format": (lambda L: [L[0].replace("rimless-leg-test/1", "rimless-trial-log/1")] + L[1:], ":1", "'format'"),
+    "no counts": (lambda L: L[:3] + [json.dumps({"t_s": 0.0301})] + L[3:], ":4", "'counts'"),
+    "counts not an integer": (lambda L: L[:3] + [L[3].replace('"counts": ', '"counts": 0.5 + ').replace(
+        "0.5 + ", "\"x\", \"_\": ")] + L[4:], ":4", "'counts'"),
+    "time goes back": (lambda L: L[:4] + [L[2]] + L[5:], ":5", "'t_s'"),
+    "no release": (lambda L: [x for x in L if "release" not in x], "", "no 'release' event"),
+    "missing counts_per_m": (lambda L: [json.dumps({k: v for k, v in json.loads(L[0]).items()
+                                                    if k != "counts_per_m"})] + L[1:], ":1", "'counts_per_m'"),
+    "empty": (lambda L: [], "", "empty"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_log_is_one_line_naming_file_line_and_field(tmp_path: Path, case: str) -> None:
+    edit, line, field = BAD[case]
+    lines = edit(_good(tmp_path))
+    (tmp_path / "bad.jsonl").write_text("\n".join(lines) + ("\n" if lines else ""))
+    res = _cli("good.jsonl", "bad.jsonl", cwd=tmp_path)
+    assert res.returncode == 2, res.stdout + res.stderr
+    err = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("error: "), res.stderr
+    assert f"bad.jsonl{line}" in err[0] and field in err[0], err[0]
+    assert "Traceback" not in res.stderr
+
+
+def test_missing_log_and_logs_of_two_legs_are_refused(tmp_path: Path) -> None:
+    res = _cli("nope.jsonl", cwd=tmp_path)
+    assert res.returncode == 2 and "nope.jsonl" in res.stderr
+    write_log(tmp_path / "a.jsonl", LegTruth(record_s=0.2), seed=1, leg=0)
+    write_log(tmp_path / "b.jsonl", LegTruth(record_s=0.2), seed=2, leg=3)
+    res = _cli("a.jsonl", "b.jsonl", cwd=tmp_path)
+    assert res.returncode == 2 and "b.jsonl: leg 3" in res.stderr and "one leg at a time" in res.stderr
+
+
+def test_a_leg_that_does_not_move_is_a_classified_failure(tmp_path: Path) -> None:
+    """The clutch never let go (the counts stay put after the release): exit 1, one line, no NaN result."""
+    lines = _good(tmp_path)
+    head, rest = lines[0], [json.loads(x) for x in lines[1:]]
+    held = next(r["counts"] for r in rest if "counts" in r and "event" not in r and r["t_s"] > 0.25)
+    fixed = [json.dumps({**r, "counts": held}) if "counts" in r and "event" not in r and r["t_s"] > 0.25
+             else json.dumps(r) for r in rest]
+    (tmp_path / "stuck.jsonl").write_text("\n".join([head, *fixed]) + "\n")
+    res = _cli("stuck.jsonl", cwd=tmp_path)
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert res.stderr.startswith("error: ") and "did not move" in res.stderr

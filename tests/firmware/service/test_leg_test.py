@@ -1,0 +1,222 @@
+"""`rimless robot leg-test`: the clutch engages at the leg's maximum compression and lets go after the hold, the
+free motion is logged, and every fault and signal leaves the clutch released.
+
+End to end on the fake: fake run -> log -> `trials leg-fit` recovers the fake leg's k, c and guide friction
+(the fake's truth is written into the log's header by the test's own parameters). Timing-sensitive steps wait
+for a condition with a generous timeout, never for a fixed short delay.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rimless.errors import ParameterError
+from rimless.firmware.drivers.fake_adns3080 import FakeFault
+from rimless.firmware.drivers.fake_leg import FakeLeg, FakeLegParams
+from rimless.firmware.service.config import ClutchConfig, RobotConfig, SamplingConfig
+from rimless.firmware.service.leg_test import LegTestOptions, run_leg_test
+
+LEG = 2
+PIN = ClutchConfig().pins[LEG]
+
+
+def _cfg(**kw) -> RobotConfig:
+    # the read loop's watchdog at 0.5 s: a loaded test machine pauses a process for a few 100 ms
+    return RobotConfig(sampling=SamplingConfig(stall_timeout_s=kw.pop("stall_timeout_s", 0.5)), **kw)
+
+
+def _lines(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def _pin_is_on(hw) -> bool:
+    return bool(hw.pin_factory.pin(PIN).state)
+
+
+def test_fake_leg_rests_in_its_friction_band_and_follows_the_hand() -> None:
+    p = FakeLegParams()
+    engaged = {"on": False}
+    leg = FakeLeg(p, lambda: engaged["on"], t0_s=0.0)
+    rest = -p.moving_mass_kg * p.gravity_m_s2 / p.stiffness_n_per_m  # gravity sags the hanging leg by m g / k
+    assert leg(0.1) == pytest.approx(rest)
+    peak = p.press_start_s + p.press_s
+    assert leg(peak) == pytest.approx(rest + p.compression_m)
+    engaged["on"] = True
+    leg(peak + 1e-4)
+    held = leg(peak + p.engage_delay_s + 0.05)
+    assert leg.held_at_s == pytest.approx(peak + 1e-4 + p.engage_delay_s)  # the clutch's engage delay
+    assert held == pytest.approx(leg.hand_m(leg.held_at_s), abs=1e-12)  # held where the hand was then
+    assert held == pytest.approx(rest + p.compression_m, abs=2e-6)  # near the peak: the hand pauses there
+    engaged["on"] = False
+    t_off = peak + 0.1
+    leg(t_off)
+    assert leg(t_off + 0.9 * p.release_delay_s) == held  # not let go yet
+    x_end = leg(t_off + 1.0)
+    # at rest again, within the friction band around the gravity-sagged equilibrium
+    assert abs(p.stiffness_n_per_m * (x_end - rest)) <= p.friction_n + 1e-9
+    assert leg.v == 0.0
+
+
+def test_leg_test_engages_at_maximum_compression_and_releases_after_the_hold(tmp_path: Path) -> None:
+    out = tmp_path / "leg.jsonl"
+    truth = FakeLegParams(compression_m=0.002)
+    seen: dict[str, bool] = {}
+
+    def phase(name: str, hw) -> None:
+        seen[name] = _pin_is_on(hw)
+
+    rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, hold_s=0.3, record_s=0.3, rate_hz=3000, fake_leg=truth),
+                       out, fake=True, on_phase=phase)
+    assert rep.exit_code == 0 and rep.fault is None and rep.written, rep
+    assert seen == {"press": False, "hold": True, "free": False}
+    assert rep.fake_pins == f"GPIO{PIN}=010"  # engaged once, released once, off at the end
+    # locked at the hand's peak (the hand pauses there): within 2 % of the compression
+    assert rep.lock_compression_mm == pytest.approx(1e3 * truth.compression_m, rel=0.02)
+    assert rep.held_s == pytest.approx(0.3, abs=0.05)
+    lines = _lines(out)
+    assert lines[0]["format"] == "rimless-leg-test/1" and lines[0]["leg"] == LEG
+    assert lines[0]["frame_rate_hz"] == pytest.approx(6000.0, rel=1e-3)  # the fixed frame rate was set
+    events = [ln["event"] for ln in lines if "event" in ln]
+    assert events == ["engage", "release", "end"]
+    assert lines[-1]["outcome"] == "ok"
+    t = [ln["t_s"] for ln in lines[1:] if "counts" in ln and "event" not in ln]
+    assert all(b > a for a, b in zip(t, t[1:]))
+
+
+@pytest.mark.slow
+def test_fake_run_to_log_to_fit_recovers_the_fake_leg(tmp_path: Path) -> None:
+    """Three releases of the fake leg at 1.5, 2 and 2.5 mm; the fit finds the fake's k and c within 2 % and
+    its friction within 10 %, each inside its 95 % interval."""
+    from rimless.analysis.inference.leg_fit import fit_leg, read_leg_log
+
+    truth = {"stiffness_n_per_m": 2400.0, "damping_n_s_per_m": 6.0, "friction_n": 0.3}
+    logs = []
+    for i, mm in enumerate((1.5, 2.0, 2.5)):
+        out = tmp_path / f"leg{i}.jsonl"
+        rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, hold_s=0.2, record_s=0.3, rate_hz=4000, seed=i,
+                                                  fake_leg=FakeLegParams(compression_m=mm / 1e3, **truth)),
+                           out, fake=True)
+        assert rep.exit_code == 0, rep
+        logs.append(read_leg_log(out))
+    fit = fit_leg(logs)
+    for est, true, tol in ((fit.k, 2400.0, 0.02), (fit.c, 6.0, 0.02), (fit.friction, 0.3, 0.10)):
+        assert est.value == pytest.approx(true, rel=tol), (est, true)
+        lo, hi = est.ci95
+        assert lo <= true <= hi, (est, true)
+
+
+def test_sensor_fault_during_the_hold_releases_the_clutch_and_logs_why(tmp_path: Path) -> None:
+    out = tmp_path / "leg.jsonl"
+
+    def phase(name: str, hw) -> None:
+        if name == "hold":
+            hw.fakes[0].fault = FakeFault.SQUAL_DROP
+
+    rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, fake=True, on_phase=phase)
+    assert rep.exit_code == 1 and rep.fault == "squal_low", rep
+    assert rep.fake_pins == f"GPIO{PIN}=010"
+    lines = _lines(out)
+    assert [ln["event"] for ln in lines if "event" in ln] == ["engage", "fault", "end"]
+    assert lines[-1]["outcome"] == "squal_low"
+
+
+def test_stalled_read_loop_releases_the_clutch_from_the_watchdog(tmp_path: Path) -> None:
+    out = tmp_path / "leg.jsonl"
+    during: dict[str, bool] = {}
+
+    def phase(name: str, hw) -> None:
+        if name == "hold":  # the read loop stops here: only the watchdog thread can release the clutch
+            deadline = time.monotonic() + 10.0
+            while _pin_is_on(hw) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            during["released_while_stalled"] = not _pin_is_on(hw)
+
+    rep = run_leg_test(_cfg(stall_timeout_s=0.2), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, fake=True,
+                       on_phase=phase)
+    assert during == {"released_while_stalled": True}
+    assert rep.exit_code == 1 and rep.fault == "sensor_stalled", rep
+
+
+def test_no_compression_times_out_with_the_clutch_never_engaged(tmp_path: Path) -> None:
+    out = tmp_path / "leg.jsonl"
+    rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, timeout_s=1.0, rate_hz=2000,
+                                              fake_leg=FakeLegParams(compression_m=0.0)), out, fake=True)
+    assert rep.exit_code == 1 and rep.fault == "no_compression", rep
+    assert rep.fake_pins == f"GPIO{PIN}=0"
+    assert "compress the leg" in rep.detail
+
+
+@pytest.mark.parametrize(("kw", "named"), [({"leg": 8}, "--leg"), ({"leg": 0, "hold_s": 0.99}, "--hold-s"),
+                                           ({"leg": 0, "frame_rate_hz": 6469.0}, "--frame-rate-hz")])
+def test_bad_options_are_refused_before_any_pin_moves(tmp_path: Path, kw: dict, named: str) -> None:
+    with pytest.raises(ParameterError, match=named):
+        run_leg_test(_cfg(), LegTestOptions(**kw), tmp_path / "leg.jsonl", fake=True)
+    assert not (tmp_path / "leg.jsonl").exists()
+
+
+# ------------------------------------------------------------------------------------------ the command
+
+def _toml(tmp_path: Path) -> Path:
+    p = tmp_path / "robot.toml"
+    p.write_text("[sampling]\nstall_timeout_s = 0.5\n")
+    return p
+
+
+def _start(tmp_path: Path, *args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "rimless", "robot", "leg-test", "--fake", "--leg", str(LEG),
+                             "--config", str(_toml(tmp_path)), *args], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
+@pytest.mark.parametrize(("sig", "code", "last"), [(signal.SIGINT, 130, "interrupted"),
+                                                   (signal.SIGTERM, 143, "error: stopped by SIGTERM")])
+def test_signal_during_the_hold_releases_the_clutch_and_writes_nothing(tmp_path: Path, sig: int, code: int,
+                                                                       last: str) -> None:
+    proc = _start(tmp_path, "--hold-s", "0.9", "--out", "leg.jsonl", "--rate-hz", "2000")
+    assert proc.stderr is not None
+    lines = []
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # wait for the engage, however slow the machine
+        line = proc.stderr.readline()
+        if not line:
+            break
+        lines.append(line)
+        if "engaged" in line:
+            proc.send_signal(sig)
+            break
+    rest = proc.communicate(timeout=60)[1]
+    err = "".join(lines) + rest
+    assert proc.returncode == code, err
+    assert f"GPIO{PIN}=010" in err, err  # the clutch went on once, and off
+    assert err.strip().splitlines()[-1] == last
+    assert "Traceback" not in err
+    assert not (tmp_path / "leg.jsonl").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".leg")]
+
+
+def test_command_json_then_leg_fit_reads_its_log(tmp_path: Path) -> None:
+    res = subprocess.run([sys.executable, "-m", "rimless", "robot", "leg-test", "--fake", "--leg", str(LEG),
+                          "--config", str(_toml(tmp_path)), "--out", "leg.jsonl", "--hold-s", "0.2", "--record-s",
+                          "0.3", "--rate-hz", "3000", "--json"], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=120, env={**os.environ, "COLUMNS": "80"})
+    assert res.returncode == 0, res.stderr
+    rep = json.loads(res.stdout)
+    assert rep["leg"] == LEG and rep["out"] == "leg.jsonl" and rep["fault"] is None
+    assert rep["free_samples"] > 100
+    fit = subprocess.run([sys.executable, "-m", "rimless", "trials", "leg-fit", "leg.jsonl", "--json"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert fit.returncode == 0, fit.stderr
+    out = json.loads(fit.stdout)
+    for key in ("k_n_per_m", "c_n_s_per_m", "guide_friction_n"):
+        lo, hi = out[key + "_ci"]
+        assert lo < out[key] < hi
+        assert lo <= out["fake_truth"][key] <= hi, (key, out[key], out[key + "_ci"])
