@@ -35,6 +35,7 @@ class ClutchBank:
             self.close()
             raise
         self._engaged_since_ns: list[int | None] = [None] * len(self.pins)
+        self._changed_ns: list[int | None] = [None] * len(self.pins)  # monotonic_ns of each output's last change
 
     def __len__(self) -> int:
         return len(self._devices)
@@ -43,11 +44,13 @@ class ClutchBank:
         """Engage (lock) the clutch of `leg`."""
         self._devices[leg].on()
         if self._engaged_since_ns[leg] is None:
-            self._engaged_since_ns[leg] = time.monotonic_ns() if t_ns is None else t_ns
+            self._engaged_since_ns[leg] = self._changed_ns[leg] = time.monotonic_ns() if t_ns is None else t_ns
 
     def release(self, leg: int) -> None:
         """Release the clutch of `leg`."""
         self._devices[leg].off()
+        if self._engaged_since_ns[leg] is not None:
+            self._changed_ns[leg] = time.monotonic_ns()
         self._engaged_since_ns[leg] = None
 
     def all_off(self) -> None:
@@ -58,6 +61,8 @@ class ClutchBank:
                 dev.off()
             except Exception as err:  # keep going: the other clutches must still go off
                 first = first or err
+            if self._engaged_since_ns[i] is not None:
+                self._changed_ns[i] = time.monotonic_ns()
             self._engaged_since_ns[i] = None
         if first is not None:
             raise first
@@ -69,6 +74,10 @@ class ClutchBank:
     def engaged_since_ns(self, leg: int) -> int | None:
         """`monotonic_ns` at which `leg` was engaged, or None."""
         return self._engaged_since_ns[leg]
+
+    def changed_ns(self, leg: int) -> int | None:
+        """`monotonic_ns` of the last engage or release of `leg` (None before the first)."""
+        return self._changed_ns[leg]
 
     def longest_hold_s(self, now_ns: int) -> float:
         """How long the longest-engaged clutch has been on (s), 0 if none."""

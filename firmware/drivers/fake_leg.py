@@ -69,14 +69,18 @@ class FakeLeg:
 
     :param clutch_engaged: True while the clutch output is on (read at every call).
     :param t0_s: the fake's time zero (the hand's schedule counts from it).
+    :param clutch_changed_s: the clock time (s) of the clutch output's last change, if known: the clutch then acts
+        from the edge even when the fake is sampled late (a loaded machine).
     """
 
     HAND, HELD, FREE = "hand", "held", "free"
 
     def __init__(self, params: FakeLegParams, clutch_engaged: Callable[[], bool], *, t0_s: float | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 clutch_changed_s: Callable[[], float | None] | None = None) -> None:
         self.p = params.validated()
         self.clutch_engaged = clutch_engaged
+        self.clutch_changed_s = clutch_changed_s
         self.t0_s = clock() if t0_s is None else t0_s
         p = self.p
         self.rest_m = -p.moving_mass_kg * p.gravity_m_s2 / p.stiffness_n_per_m  # the middle of the friction band
@@ -106,7 +110,8 @@ class FakeLeg:
         wants_hold = engaged and self.phase != self.HELD
         wants_free = not engaged and self.phase == self.HELD
         if (wants_hold or wants_free) and self._switch_at is None:
-            self._switch_at = u + (self.p.engage_delay_s if wants_hold else self.p.release_delay_s)
+            edge = self._edge_s(u)
+            self._switch_at = edge + (self.p.engage_delay_s if wants_hold else self.p.release_delay_s)
         elif not (wants_hold or wants_free):
             self._switch_at = None  # the output went back before the clutch acted
         if self._switch_at is not None and self._switch_at <= u:
@@ -118,6 +123,14 @@ class FakeLeg:
             self._switch_at = None
         self._advance(u)
         return self.x
+
+    def _edge_s(self, u: float) -> float:
+        """When the clutch output changed (s since t0): its recorded time when known (the coil acts on the pin's
+        edge, not when this fake is next sampled), else `u`; never before the state already advanced."""
+        changed = self.clutch_changed_s() if self.clutch_changed_s is not None else None
+        if changed is None:
+            return u
+        return min(u, max(self.t, changed - self.t0_s))
 
     def _advance(self, u: float) -> None:
         """Advance the state from `self.t` to `u` (s since t0)."""

