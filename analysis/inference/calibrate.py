@@ -54,8 +54,9 @@ CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitt
 MAX_NFEV = 20  # residual evaluations of one round of the full least squares
 MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
-#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection)
-#: for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
+#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection,
+#: every sample column of `simulate_steps` recorded, a grid search for every release of the coarse profile, the
+#: BLAS on all threads) for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
 REFERENCE_PATHS = False
 
 
@@ -145,12 +146,52 @@ class _Sim:
             return self.cache[key]
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
-        g = simulate_steps(p, self.model, np.array([-ALPHA_RAD / 2, w]), n, make_integrator("auto", rtol=self.rtol),
-                           record_dt=self.record_dt_s if record else 1.0)
+        z0 = np.array([-ALPHA_RAD / 2, w])
+        if REFERENCE_PATHS:
+            g = simulate_steps(p, self.model, z0, n, make_integrator("auto", rtol=self.rtol),
+                               record_dt=self.record_dt_s if record else 1.0)
+        else:
+            g = _com_walk(p, self.model, z0, n, make_integrator("auto", rtol=self.rtol),
+                          self.record_dt_s if record else 1.0)
         if len(self.cache) > 256:
             self.cache.pop(next(iter(self.cache)))
         self.cache[key] = g
         return g
+
+
+def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator: Any, record_dt: float) -> Any:
+    """`rimless.sim.step.gait.simulate_steps` recording only what the residuals read: the table's ``t_s``,
+    ``step`` and ``com_height_normal_m`` (= L1 cos theta, the hub's height above the stance foot's slope-normal
+    coordinate), computed on whole arrays; the same steps (`simulate_step` on the same integrator)."""
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import state_from_section
+    from rimless.sim.step.gait import GaitTrajectory
+    from rimless.sim.step.hybrid import simulate_step
+
+    mech = Mechanics.of(params)
+    y = state_from_section(mech, np.asarray(z0, dtype=float))
+    t = 0.0
+    steps: list[Any] = []
+    ts: list[np.ndarray] = []
+    ks: list[np.ndarray] = []
+    hs: list[np.ndarray] = []
+    failure = None
+    for k in range(n_steps):
+        try:
+            res = simulate_step(mech, model, y, integrator, t0=t, record_dt=record_dt)
+        except StepFailure as err:
+            failure = err
+            break
+        steps.append(res)
+        for seg in res.segments or []:
+            ts.append(seg.t)
+            ks.append(np.full(len(seg.t), k))
+            hs.append(seg.y[:, 3] * np.cos(seg.y[:, 2]))
+        y, t = res.y_plus, t + res.period_s
+    cat = lambda v: np.concatenate(v) if v else np.empty(0)  # noqa: E731
+    return GaitTrajectory(params, model, steps, {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs)},
+                          failure)
 
 
 def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
@@ -344,6 +385,21 @@ class _ReleaseFit:
                           diff_step=[1e-5], xtol=tol[0], ftol=tol[1], max_nfev=tol[2])
         return float(r.x[0]), float(2 * r.cost)
 
+    def fit_warm(self, p: Any, d: _TrialData, w0: float) -> tuple[float, float]:
+        """`fit` (coarse) started from a release known to walk (e.g. the trial's release at Table 1) instead of
+        the grid of `first_period_release`; the grid fit when that start ends off the walking branch (a step not
+        reached, or the release on its bound)."""
+        from scipy.optimize import least_squares
+
+        if REFERENCE_PATHS or not math.isfinite(w0):
+            return self.fit(p, d, None, coarse=True)
+        r = least_squares(lambda q: self.freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
+                          diff_step=[1e-5], xtol=1e-6, ftol=1e-8, max_nfev=12)
+        w = float(r.x[0])
+        if np.any(r.fun + 1.0 / d.periods_s <= 0.0) or not 0.05 < w < 20.0 or not r.success:
+            return self.fit(p, d, None, coarse=True)
+        return w, float(2 * r.cost)
+
     def first_period_release(self, p: Any, d: _TrialData) -> float:
         """The release whose first simulated step after the release step lasts the first measured period
         (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
@@ -392,7 +448,7 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
             p = glob.at(ug)
             if p is None:
                 continue
-            fits = [releases.fit(p, d, None, coarse=True) for d in data]
+            fits = [releases.fit_warm(p, d, table1[d.name]) for d in data]
             cost = sum(c for _, c in fits)
             if cost < best:
                 best, ug_best = cost, ug
@@ -587,6 +643,27 @@ def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialDat
     return data, failed
 
 
+def _one_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run ``fn`` with the BLAS on one thread (threadpoolctl, when installed): the least squares take the SVD
+    of a tall Jacobian (thousands of rows, a few dozen columns) every iteration, which a multi-threaded
+    OpenBLAS runs some 100x slower on a busy 2-core machine than one thread does (measured 417 ms against 3 ms
+    for 2200 x 18)."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            from threadpoolctl import threadpool_limits
+        except ImportError:  # pragma: no cover - a dependency of the pc install
+            return fn(*args, **kwargs)
+        if REFERENCE_PATHS:
+            return fn(*args, **kwargs)
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+@_one_blas_thread
 def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
               model: str = "er", rtol: float = 1e-7, record_dt_s: float = 8e-3, max_rounds: int = MAX_ROUNDS,
               multi_start: bool = True, progress: Callable[[int], None] | None = None) -> CalibrationResult:
