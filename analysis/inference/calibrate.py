@@ -160,9 +160,9 @@ class _Sim:
 
 
 def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator: Any, record_dt: float) -> Any:
-    """`rimless.sim.step.gait.simulate_steps` recording only what the residuals read: the table's ``t_s``,
-    ``step`` and ``com_height_normal_m`` (= L1 cos theta, the hub's height above the stance foot's slope-normal
-    coordinate), computed on whole arrays; the same steps (`simulate_step` on the same integrator)."""
+    """`rimless.sim.step.gait.simulate_steps` recording only what the calibration reads: the table's ``t_s``,
+    ``step``, ``dL1_m_s`` and ``com_height_normal_m`` (= L1 cos theta, the hub's height above the stance
+    foot's slope-normal coordinate), computed on whole arrays; the same steps (`simulate_step` on the same integrator)."""
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import state_from_section
@@ -176,6 +176,7 @@ def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator:
     ts: list[np.ndarray] = []
     ks: list[np.ndarray] = []
     hs: list[np.ndarray] = []
+    vs: list[np.ndarray] = []
     failure = None
     for k in range(n_steps):
         try:
@@ -188,10 +189,11 @@ def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator:
             ts.append(seg.t)
             ks.append(np.full(len(seg.t), k))
             hs.append(seg.y[:, 3] * np.cos(seg.y[:, 2]))
+            vs.append(seg.y[:, 8])
         y, t = res.y_plus, t + res.period_s
     cat = lambda v: np.concatenate(v) if v else np.empty(0)  # noqa: E731
-    return GaitTrajectory(params, model, steps, {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs)},
-                          failure)
+    return GaitTrajectory(params, model, steps, {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs),
+                                                 "dL1_m_s": cat(vs)}, failure)
 
 
 def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
@@ -275,6 +277,9 @@ class ParamEstimate:
     note: str = ""
     se_model: float = math.nan  # from the Jacobian with the block sigmas (residuals independent, model right)
     se_sandwich: float = math.nan  # trial-clustered sandwich (residuals correlated within a trial, model mismatch)
+    #: the data constrain the value, but only as an effective coefficient of these trials (e.g. c absorbing a
+    #: constant loss per step): the calibrated model uses it, it is not reported as identifiable
+    effective_only: bool = False
 
     @property
     def ci95(self) -> tuple[float, float]:
@@ -284,7 +289,7 @@ class ParamEstimate:
         return {"name": self.name, "field": self.field, "unit": self.unit, "table1": self.table1,
                 "value": self.value if self.identifiable else None, "estimate": self.value, "se": self.se,
                 "identifiable": self.identifiable, "note": self.note, "se_model": self.se_model,
-                "se_sandwich": self.se_sandwich,
+                "se_sandwich": self.se_sandwich, "effective_only": self.effective_only,
                 "ci95": list(self.ci95) if math.isfinite(self.se) else None}
 
 
@@ -304,6 +309,9 @@ class CalibrationResult:
     model: str = "er"
     converged: bool = True
     optimizer: dict[str, Any] = field(default_factory=dict)  # status, message, nfev, rounds, starts
+    #: can c be told from a constant loss per step (`rimless.analysis.inference.loss_separation`); None when c
+    #: is not fitted
+    loss_separation: dict[str, Any] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -319,7 +327,7 @@ class CalibrationResult:
                 "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
                                "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
                 "failed": self.failed, "simulations": self.evaluations, "converged": self.converged,
-                "optimizer": self.optimizer}
+                "optimizer": self.optimizer, "loss_separation": self.loss_separation}
 
 
 def _total(rows: list[dict[str, Any]], key: str) -> float:
@@ -721,11 +729,41 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     se_sand = sandwich_se(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
+    separation = _check_loss_separation(obj, u, J, fit, scale_all, estimates)
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
-    cal_params = glob.params(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
+    cal_params = glob.params(np.array([e.value if e.identifiable or e.effective_only else e.table1
+                                       for e in estimates]))
     return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
                              obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
-                             optimizer)
+                             optimizer, separation)
+
+
+#: fitted names that model a constant loss per step themselves (then c needs no separation check)
+CONSTANT_LOSS_FIELDS = ("guide_friction_n",)
+
+
+def _check_loss_separation(obj: _Objective, u: np.ndarray, J: np.ndarray, fit: Sequence[str], scale: np.ndarray,
+                           estimates: list[ParamEstimate]) -> dict[str, Any] | None:
+    """`rimless.analysis.inference.loss_separation` for c at the solution u (each trial's effective leg speed
+    from its simulated walk); when the trials cannot tell c from a constant loss per step, c's estimate is
+    marked not identifiable, effective only, with the reason."""
+    from rimless.analysis.inference.loss_separation import effective_leg_speed, loss_separation
+
+    if "c" not in fit or any(n in fit for n in CONSTANT_LOSS_FIELDS):
+        return None
+    xg, ws, _ = obj.unpack(u)
+    p = obj.glob.params(xg)
+    v = []
+    for d, w in zip(obj.data, ws):
+        g = obj.sim.walk(p, d.slope_deg, float(w), d.periods_s.size + 2, True)
+        v.append(effective_leg_speed(g.table["t_s"], g.table["dL1_m_s"]) if "dL1_m_s" in g.table else math.nan)
+    j_c = list(fit).index("c")
+    e = estimates[j_c]
+    infl = e.se / e.se_model if e.se_model > 0 and math.isfinite(e.se) else 1.0
+    out = loss_separation(J, obj.fun(u), obj.offs, obj.n_g, j_c, e.value, infl, np.array(v), scale)
+    if not out["damping_identified"] and e.identifiable:
+        e.identifiable, e.effective_only, e.note = False, True, out["note"]
+    return out
 
 
 RIDGE_CORRELATION = 0.95  # |correlation| between two globals above which the cost is treated as a ridge

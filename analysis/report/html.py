@@ -595,4 +595,8 @@ def _critical_html(res: ReportResult) -> str:
                    f"{_num(sm['rms_period_ms']['table1'], '.1f')} ms (Table 1) → "
                    f"{_num(sm['rms_period_ms']['calibrated'], '.1f')} ms; RMS CoM error "
                    f"{_num(sm['rms_com_mm']['table1'], '.2f')} → {_num(sm['rms_com_mm']['calibrated'], '.2f')} mm.</p>")
+        sep = sm.get("loss_separation")
+        if sep and sep.get("note"):
+            out.append(f"<p class=\"{'small' if sep.get('damping_identified') else 'bad'}\" id=\"loss-separation\">"
+                       f"Damping or guide friction? {e(sep['note'])}.</p>")
     return "\n".join(out)
