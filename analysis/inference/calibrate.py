@@ -394,19 +394,39 @@ class _ReleaseFit:
         return float(r.x[0]), float(2 * r.cost)
 
     def fit_warm(self, p: Any, d: _TrialData, w0: float) -> tuple[float, float]:
-        """`fit` (coarse) started from a release known to walk (e.g. the trial's release at Table 1) instead of
-        the grid of `first_period_release`; the grid fit when that start ends off the walking branch (a step not
-        reached, or the release on its bound)."""
-        from scipy.optimize import least_squares
+        """`fit` (coarse, to 1e-6 relative) started from a release known to walk (e.g. the trial's release at
+        Table 1) instead of the grid of `first_period_release`, by Gauss-Newton with a secant slope; the grid fit
+        when that start ends off the walking branch (a step not reached, the release on its bound) or does not
+        converge in 12 iterations."""
 
         if REFERENCE_PATHS or not math.isfinite(w0):
             return self.fit(p, d, None, coarse=True)
-        r = least_squares(lambda q: self.freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
-                          diff_step=[1e-5], xtol=1e-6, ftol=1e-8, max_nfev=12)
-        w = float(r.x[0])
-        if np.any(r.fun + 1.0 / d.periods_s <= 0.0) or not 0.05 < w < 20.0 or not r.success:
+        f_meas = 1.0 / d.periods_s
+
+        def walks(r: np.ndarray) -> bool:
+            return bool(np.all(r + f_meas > 0.0))
+
+        # Gauss-Newton on the step-frequency residuals with a secant slope: one simulation per iteration
+        # (least squares with a finite-difference Jacobian takes two)
+        w_prev, r_prev = w0, self.freq_res(p, d, w0)
+        w, r = w0 * (1.0 + 1e-4), self.freq_res(p, d, w0 * (1.0 + 1e-4))
+        converged = False
+        for _ in range(12):
+            if not (walks(r) and walks(r_prev)):
+                break
+            g = (r - r_prev) / (w - w_prev)
+            gg = float(g @ g)
+            if gg == 0.0:
+                break
+            step = float(np.clip(-(g @ r) / gg, -0.2 * w, 0.2 * w))
+            w_new = float(np.clip(w + step, 0.05, 20.0))
+            w_prev, r_prev, w, r = w, r, w_new, self.freq_res(p, d, w_new)
+            if abs(w - w_prev) <= 1e-6 * abs(w):
+                converged = True
+                break
+        if not converged or not walks(r) or not 0.05 < w < 20.0:
             return self.fit(p, d, None, coarse=True)
-        return w, float(2 * r.cost)
+        return w, float(r @ r)
 
     def first_period_release(self, p: Any, d: _TrialData) -> float:
         """The release whose first simulated step after the release step lasts the first measured period
