@@ -214,6 +214,14 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
                       f(r["mean_abs_period_error_ms"], ".1f"), f(r["theta_dot_plus_rad_s"], ".3f"))
     Console().print(table)
     typer.echo("RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
+    for name, c in getattr(res, "clutch", {}).items():
+        pairs = ", ".join(f"{'–' if r['measured_ms'] is None else format(r['measured_ms'], '.0f')}/"
+                          f"{'–' if r['simulated_ms'] is None else format(r['simulated_ms'], '.0f')}" for r in c["rows"])
+        mm, sm = c["measured_mean_ms"], c["simulated_mean_ms"]
+        typer.echo(f"{name}: clutched time per step, robot log / simulated (ms): {pairs or 'none'}; mean "
+                   f"{'–' if mm is None else format(mm, '.1f')} / {'–' if sm is None else format(sm, '.1f')} ms")
+        for w in c["warnings"]:
+            typer.echo(f"warning: {w}", err=True)
     for r in res.refused:
         typer.echo(f"refused: {r.reason}", err=True)
     for c in res.comparisons:
@@ -246,6 +254,10 @@ def report_cmd(
         "--slope-bin-deg", min=0.01, help="Group trials by slope rounded to this, deg.")] = 0.5,
     slopes: Annotated[Optional[Path], typer.Option("--slopes", help="Raw inputs: " + SLOPES_HELP,
                                                    metavar="FILE")] = None,
+    robot_log: Annotated[Optional[list[str]], typer.Option(
+        "--robot-log", metavar="[TRIAL=]FILE",
+        help="The robot's trial log (JSON Lines) of a trial: its measured clutched time per step beside the "
+             "simulated one. TRIAL= names the trial's input file (needed with several trials); repeatable.")] = None,
 ) -> None:
     """Compare trials with the simulation and write an HTML report.
 
@@ -256,7 +268,11 @@ def report_cmd(
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes)
-    res = run_report(trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg)
+    from rimless.analysis.report.batch import robot_log_pairs
+
+    logs = robot_log_pairs(robot_log or [], trials)
+    res = run_report(trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg,
+                     robot_logs=logs)
     _print_report(res, model, json_out)
     if res.refused:
         raise typer.Exit(EXIT_REFUSED)

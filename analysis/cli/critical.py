@@ -209,6 +209,10 @@ def _print_calibration(out: dict[str, Any]) -> None:
     for p in out["params"]:
         if p["note"]:
             con.print(f"  {p['name']}: {p['note']}", markup=False, highlight=False)
+    sep = out.get("loss_separation")
+    if sep and sep.get("note") and sep["note"] not in {p["note"] for p in out["params"]}:
+        con.print(f"  c against a constant loss per step (guide friction): {sep['note']}", markup=False,
+                  highlight=False)
     names = out["correlation"]["names"]
     if len(names) > 1:
         con.print("correlation: " + "; ".join(
@@ -276,6 +280,9 @@ def critical_lines(res: Any) -> str:
         for p in cal.params:
             lines.append(f"calibrated {p.name}: {p.value:.3f} ± {p.se:.3f} {p.unit} (Table 1: {p.table1:g})"
                          + ("" if p.identifiable else f" NOT identifiable: {p.note}"))
+        sep = getattr(cal, "loss_separation", None)
+        if sep and sep.get("note") and sep["note"] not in {p.note for p in cal.params}:
+            lines.append(f"c against a constant loss per step (guide friction): {sep['note']}")
     return "\n".join(lines)
 
 

@@ -2,17 +2,20 @@
 
 Generates sustained trials of a known ER wheel (default c = 12 N s/m, k = 2200 N/m; Table 1 has 8 and 2500) with
 the compiled simulator (CoM height with 0.3 mm noise at 100 Hz, impact times with 0.5 ms noise), then fits
-``--fit`` (default c,k) twice in one run: the previous method (one start, one budget of `MAX_NFEV` evaluations,
-its inner loops: `REFERENCE_PATHS`) and the current one (a second start on a ridge, rounds until converged,
-sandwich uncertainties, cached CoM splines, a coarse-to-fine shift search, brentq for the release). Prints, for
-each, the wall time, whether it converged, each parameter's estimate, 1-sigma, error and whether its 95 %
-interval covers the truth.
+``--fit`` (default c,k) twice in one run, with the same estimator and stopping rules: the reference inner loops
+(`REFERENCE_PATHS`: every column of `simulate_steps` recorded in Python, a grid search for each release of the
+coarse profile, the full shift grid, bisection, the BLAS on all threads) and the fast ones (only the CoM height
+recorded, on whole arrays; the profile's releases warm-started from Table 1's; one BLAS thread for the SVDs of
+the least squares). Prints, for each, the wall and CPU time, the simulations, whether it converged, each
+parameter's estimate, 1-sigma, error and whether its 95 % interval covers the truth; then the ratio of the times
+and the difference of the estimates and interval bounds between the two (in units of the reference's sigma).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from types import SimpleNamespace
 
@@ -53,6 +56,7 @@ def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> li
 def main(argv: list[str] | None = None) -> None:
     from rimless.sim.model.params import WheelParams
 
+    from rimless.analysis.inference import calibrate as cal_mod
     from rimless.analysis.inference.calibrate import calibrate, parse_fit
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -60,35 +64,44 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--k", type=float, default=2200.0)
     ap.add_argument("--fit", default="c,k")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--only", choices=("old", "new", "both"), default="both")
+    ap.add_argument("--only", choices=("reference", "fast", "both"), default="both")
     a = ap.parse_args(argv)
     truth = WheelParams(damping_ns_per_m=a.c, stiffness_n_per_m=a.k)
     trials = make_trials(truth, np.random.default_rng(a.seed))
     names = [t.meta.source_file for t in trials]
     fit = parse_fit(a.fit)
     calibrate(trials[:1], names[:1], ["c"], max_rounds=1, multi_start=False)  # warm the compiled code
-    from rimless.analysis.inference import calibrate as cal_mod
-
-    runs = {"old": dict(max_rounds=1, multi_start=False, record_dt_s=4e-3), "new": {}}
-    for label, kw in runs.items():
+    results, times = {}, {}
+    for label in ("reference", "fast"):
         if a.only not in (label, "both"):
             continue
-        cal_mod.REFERENCE_PATHS = label == "old"
-        t0 = time.perf_counter()
+        cal_mod.REFERENCE_PATHS = label == "reference"
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
-            res = calibrate(trials, names, fit, **kw)
+            res = calibrate(trials, names, fit)
         finally:
             cal_mod.REFERENCE_PATHS = False
-        dt = time.perf_counter() - t0
-        print(f"{label}: {dt:.1f} s, {res.evaluations} simulations, converged {res.converged} "
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
+        results[label], times[label] = res, (dt, dc)
+        print(f"{label}: {dt:.1f} s wall, {dc:.1f} s CPU, {res.evaluations} simulations, converged {res.converged} "
               f"({res.optimizer.get('message', '')}; {res.optimizer.get('starts')} start(s), "
               f"{res.optimizer.get('rounds')} round(s))")
         for p in res.params:
             true = float(getattr(truth, p.field))
             lo, hi = p.ci95
-            print(f"  {p.name}: {p.value:.4g} +- {p.se:.2g} (model {p.se_model:.2g}, sandwich {p.se_sandwich:.2g}) "
-                  f"truth {true:g}: error {100 * (p.value - true) / true:+.2f} %, 95 % interval "
+            print(f"  {p.name}: {p.value:.6g} +- {p.se:.3g} (model {p.se_model:.2g}, sandwich {p.se_sandwich:.2g}) "
+                  f"truth {true:g}: error {100 * (p.value - true) / true:+.3f} %, 95 % interval [{lo:.6g}, {hi:.6g}] "
                   f"{'covers' if lo <= true <= hi else 'MISSES'} it; identifiable {p.identifiable}")
+    if len(results) == 2:
+        ref, new = results["reference"], results["fast"]
+        (tw, tc), (nw, nc) = times["reference"], times["fast"]
+        print(f"ratio reference/fast: {tw / nw:.2f}x wall, {tc / nc:.2f}x CPU (load average "
+              f"{os.getloadavg()[0]:.1f})")
+        for pr, pn in zip(ref.params, new.params):
+            (rlo, rhi), (nlo, nhi) = pr.ci95, pn.ci95
+            print(f"  {pr.name}: estimate differs by {pn.value - pr.value:+.3g} {pr.unit} "
+                  f"({(pn.value - pr.value) / pr.se:+.3f} sigma), interval bounds by {nlo - rlo:+.3g} / {nhi - rhi:+.3g} "
+                  f"{pr.unit}, sigma by {100 * (pn.se - pr.se) / pr.se:+.2f} %")
 
 
 if __name__ == "__main__":

@@ -54,8 +54,9 @@ CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitt
 MAX_NFEV = 20  # residual evaluations of one round of the full least squares
 MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
-#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection)
-#: for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
+#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection,
+#: every sample column of `simulate_steps` recorded, a grid search for every release of the coarse profile, the
+#: BLAS on all threads) for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
 REFERENCE_PATHS = False
 
 
@@ -145,12 +146,54 @@ class _Sim:
             return self.cache[key]
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
-        g = simulate_steps(p, self.model, np.array([-ALPHA_RAD / 2, w]), n, make_integrator("auto", rtol=self.rtol),
-                           record_dt=self.record_dt_s if record else 1.0)
+        z0 = np.array([-ALPHA_RAD / 2, w])
+        if REFERENCE_PATHS:
+            g = simulate_steps(p, self.model, z0, n, make_integrator("auto", rtol=self.rtol),
+                               record_dt=self.record_dt_s if record else 1.0)
+        else:
+            g = _com_walk(p, self.model, z0, n, make_integrator("auto", rtol=self.rtol),
+                          self.record_dt_s if record else 1.0)
         if len(self.cache) > 256:
             self.cache.pop(next(iter(self.cache)))
         self.cache[key] = g
         return g
+
+
+def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator: Any, record_dt: float) -> Any:
+    """`rimless.sim.step.gait.simulate_steps` recording only what the calibration reads: the table's ``t_s``,
+    ``step``, ``dL1_m_s`` and ``com_height_normal_m`` (= L1 cos theta, the hub's height above the stance
+    foot's slope-normal coordinate), computed on whole arrays; the same steps (`simulate_step` on the same integrator)."""
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import state_from_section
+    from rimless.sim.step.gait import GaitTrajectory
+    from rimless.sim.step.hybrid import simulate_step
+
+    mech = Mechanics.of(params)
+    y = state_from_section(mech, np.asarray(z0, dtype=float))
+    t = 0.0
+    steps: list[Any] = []
+    ts: list[np.ndarray] = []
+    ks: list[np.ndarray] = []
+    hs: list[np.ndarray] = []
+    vs: list[np.ndarray] = []
+    failure = None
+    for k in range(n_steps):
+        try:
+            res = simulate_step(mech, model, y, integrator, t0=t, record_dt=record_dt)
+        except StepFailure as err:
+            failure = err
+            break
+        steps.append(res)
+        for seg in res.segments or []:
+            ts.append(seg.t)
+            ks.append(np.full(len(seg.t), k))
+            hs.append(seg.y[:, 3] * np.cos(seg.y[:, 2]))
+            vs.append(seg.y[:, 8])
+        y, t = res.y_plus, t + res.period_s
+    cat = lambda v: np.concatenate(v) if v else np.empty(0)  # noqa: E731
+    return GaitTrajectory(params, model, steps, {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs),
+                                                 "dL1_m_s": cat(vs)}, failure)
 
 
 def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
@@ -234,6 +277,9 @@ class ParamEstimate:
     note: str = ""
     se_model: float = math.nan  # from the Jacobian with the block sigmas (residuals independent, model right)
     se_sandwich: float = math.nan  # trial-clustered sandwich (residuals correlated within a trial, model mismatch)
+    #: the data constrain the value, but only as an effective coefficient of these trials (e.g. c absorbing a
+    #: constant loss per step): the calibrated model uses it, it is not reported as identifiable
+    effective_only: bool = False
 
     @property
     def ci95(self) -> tuple[float, float]:
@@ -243,7 +289,7 @@ class ParamEstimate:
         return {"name": self.name, "field": self.field, "unit": self.unit, "table1": self.table1,
                 "value": self.value if self.identifiable else None, "estimate": self.value, "se": self.se,
                 "identifiable": self.identifiable, "note": self.note, "se_model": self.se_model,
-                "se_sandwich": self.se_sandwich,
+                "se_sandwich": self.se_sandwich, "effective_only": self.effective_only,
                 "ci95": list(self.ci95) if math.isfinite(self.se) else None}
 
 
@@ -263,6 +309,9 @@ class CalibrationResult:
     model: str = "er"
     converged: bool = True
     optimizer: dict[str, Any] = field(default_factory=dict)  # status, message, nfev, rounds, starts
+    #: can c be told from a constant loss per step (`rimless.analysis.inference.loss_separation`); None when c
+    #: is not fitted
+    loss_separation: dict[str, Any] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -278,7 +327,7 @@ class CalibrationResult:
                 "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
                                "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
                 "failed": self.failed, "simulations": self.evaluations, "converged": self.converged,
-                "optimizer": self.optimizer}
+                "optimizer": self.optimizer, "loss_separation": self.loss_separation}
 
 
 def _total(rows: list[dict[str, Any]], key: str) -> float:
@@ -344,6 +393,41 @@ class _ReleaseFit:
                           diff_step=[1e-5], xtol=tol[0], ftol=tol[1], max_nfev=tol[2])
         return float(r.x[0]), float(2 * r.cost)
 
+    def fit_warm(self, p: Any, d: _TrialData, w0: float) -> tuple[float, float]:
+        """`fit` (coarse, to 1e-6 relative) started from a release known to walk (e.g. the trial's release at
+        Table 1) instead of the grid of `first_period_release`, by Gauss-Newton with a secant slope; the grid fit
+        when that start ends off the walking branch (a step not reached, the release on its bound) or does not
+        converge in 12 iterations."""
+
+        if REFERENCE_PATHS or not math.isfinite(w0):
+            return self.fit(p, d, None, coarse=True)
+        f_meas = 1.0 / d.periods_s
+
+        def walks(r: np.ndarray) -> bool:
+            return bool(np.all(r + f_meas > 0.0))
+
+        # Gauss-Newton on the step-frequency residuals with a secant slope: one simulation per iteration
+        # (least squares with a finite-difference Jacobian takes two)
+        w_prev, r_prev = w0, self.freq_res(p, d, w0)
+        w, r = w0 * (1.0 + 1e-4), self.freq_res(p, d, w0 * (1.0 + 1e-4))
+        converged = False
+        for _ in range(12):
+            if not (walks(r) and walks(r_prev)):
+                break
+            g = (r - r_prev) / (w - w_prev)
+            gg = float(g @ g)
+            if gg == 0.0:
+                break
+            step = float(np.clip(-(g @ r) / gg, -0.2 * w, 0.2 * w))
+            w_new = float(np.clip(w + step, 0.05, 20.0))
+            w_prev, r_prev, w, r = w, r, w_new, self.freq_res(p, d, w_new)
+            if abs(w - w_prev) <= 1e-6 * abs(w):
+                converged = True
+                break
+        if not converged or not walks(r) or not 0.05 < w < 20.0:
+            return self.fit(p, d, None, coarse=True)
+        return w, float(r @ r)
+
     def first_period_release(self, p: Any, d: _TrialData) -> float:
         """The release whose first simulated step after the release step lasts the first measured period
         (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
@@ -392,7 +476,7 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
             p = glob.at(ug)
             if p is None:
                 continue
-            fits = [releases.fit(p, d, None, coarse=True) for d in data]
+            fits = [releases.fit_warm(p, d, table1[d.name]) for d in data]
             cost = sum(c for _, c in fits)
             if cost < best:
                 best, ug_best = cost, ug
@@ -587,6 +671,27 @@ def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialDat
     return data, failed
 
 
+def _one_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run ``fn`` with the BLAS on one thread (threadpoolctl, when installed): the least squares take the SVD
+    of a tall Jacobian (thousands of rows, a few dozen columns) every iteration, which a multi-threaded
+    OpenBLAS runs some 100x slower on a busy 2-core machine than one thread does (measured 417 ms against 3 ms
+    for 2200 x 18)."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            from threadpoolctl import threadpool_limits
+        except ImportError:  # pragma: no cover - a dependency of the pc install
+            return fn(*args, **kwargs)
+        if REFERENCE_PATHS:
+            return fn(*args, **kwargs)
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+@_one_blas_thread
 def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
               model: str = "er", rtol: float = 1e-7, record_dt_s: float = 8e-3, max_rounds: int = MAX_ROUNDS,
               multi_start: bool = True, progress: Callable[[int], None] | None = None,
@@ -648,11 +753,41 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
+    separation = _check_loss_separation(obj, u, J, fit, scale_all, estimates)
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
-    cal_params = glob.params(np.array([e.value if e.identifiable else e.table1 for e in estimates]))
+    cal_params = glob.params(np.array([e.value if e.identifiable or e.effective_only else e.table1
+                                       for e in estimates]))
     return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
                              obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
-                             optimizer)
+                             optimizer, separation)
+
+
+#: fitted names that model a constant loss per step themselves (then c needs no separation check)
+CONSTANT_LOSS_FIELDS = ("guide_friction_n",)
+
+
+def _check_loss_separation(obj: _Objective, u: np.ndarray, J: np.ndarray, fit: Sequence[str], scale: np.ndarray,
+                           estimates: list[ParamEstimate]) -> dict[str, Any] | None:
+    """`rimless.analysis.inference.loss_separation` for c at the solution u (each trial's effective leg speed
+    from its simulated walk); when the trials cannot tell c from a constant loss per step, c's estimate is
+    marked not identifiable, effective only, with the reason."""
+    from rimless.analysis.inference.loss_separation import effective_leg_speed, loss_separation
+
+    if "c" not in fit or any(n in fit for n in CONSTANT_LOSS_FIELDS):
+        return None
+    xg, ws, _ = obj.unpack(u)
+    p = obj.glob.params(xg)
+    v = []
+    for d, w in zip(obj.data, ws):
+        g = obj.sim.walk(p, d.slope_deg, float(w), d.periods_s.size + 2, True)
+        v.append(effective_leg_speed(g.table["t_s"], g.table["dL1_m_s"]) if "dL1_m_s" in g.table else math.nan)
+    j_c = list(fit).index("c")
+    e = estimates[j_c]
+    infl = e.se / e.se_model if e.se_model > 0 and math.isfinite(e.se) else 1.0
+    out = loss_separation(J, obj.fun(u), obj.offs, obj.n_g, j_c, e.value, infl, np.array(v), scale)
+    if not out["damping_identified"] and e.identifiable:
+        e.identifiable, e.effective_only, e.note = False, True, out["note"]
+    return out
 
 
 RIDGE_CORRELATION = 0.95  # |correlation| between two globals above which the cost is treated as a ridge

@@ -97,6 +97,9 @@ class TrialComparison:
     height_offset_m: float = float("nan")
     measured_period_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sim_period_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where the simulation stopped
+    #: simulated clutched time (the ``slsp_clutched`` phase, s) of the step of each measured period; NaN where the
+    #: simulation stopped, 0 for the VE model
+    sim_clutched_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     measured_step: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # step number of each period,
     # 1 = the first measured period; a period lost in a gap keeps its number (empty: 1..n)
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # measured, from the first impact
@@ -235,10 +238,13 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
     steps = gait.steps
     res.theta_dot_plus_rad_s = float(steps[0].y_plus[7])
     sim_p = np.full(periods.size, np.nan)
+    sim_c = np.full(periods.size, np.nan)
     for i, d in enumerate(offset):
         if 1 + d < len(steps):
             sim_p[i] = steps[1 + d].period_s
+            sim_c[i] = float(steps[1 + d].phase_durations_s.get("slsp_clutched", 0.0))
     res.sim_period_s = sim_p
+    res.sim_clutched_s = sim_c
     res.measured_step = offset + 1
     if len(steps) < n_sim + 1:
         reason = gait.failure.reason.value if gait.failure is not None else "stopped"

@@ -203,6 +203,8 @@ class _Parser:
         starts += [m.start() + 1 for m in _STRUCTURAL.finditer(text)]
         self.struct = [s for s in starts if s < len(text)]
         self.ends_with_newline = text.endswith("\n")
+        #: errors of the data rows found so far (every section); raised together, in file order, at the end
+        self.pending: list[ViconCsvError] = []
 
     # -- helpers
     def err(self, line: int | None, column: int | None, cause: str, message: str) -> ViconCsvError:
@@ -245,7 +247,10 @@ class _Parser:
                 k += 1
                 continue
             if cells[0] and not any(cells[1:]) and not _NUMBER.fullmatch(cells[0]):
-                section, data_end = self.parse_section(cells[0], pos, line_no)
+                try:
+                    section, data_end = self.parse_section(cells[0], pos, line_no)
+                except ViconCsvError as err:  # a structural error: what was found before it comes first
+                    raise self._collect([*self.pending, *err.errors]) from None
                 sections.append(section)
                 # Skip structural lines inside the section's header and data.
                 while k < len(struct) and struct[k] < data_end:
@@ -256,6 +261,8 @@ class _Parser:
                                "column header row without a section title row (e.g. 'Trajectories') above it")
             raise self.err(line_no, 1, "unexpected-row",
                            f"expected a section title such as 'Objects' or 'Trajectories', found {_show(cells)}")
+        if self.pending:
+            raise self._collect(self.pending)
         if not sections:
             # Data rows but no structural line: the file starts with numbers.
             raise self.err(1, 1, "missing-title", "no section title row (e.g. 'Objects' or 'Trajectories') found")
@@ -314,23 +321,21 @@ class _Parser:
         frame, sub = self.check_frames(lead, data_line, first_data, kind)
         if extra_at is not None:
             r, c = extra_at
-            raise self.err(data_line + int(r), int(first_data + n_cols + c + 1), "extra-cell",
-                           f"section {kind!r}: a value lies beyond the last column of the header")
+            self.pending.append(self.err(data_line + int(r), int(first_data + n_cols + c + 1), "extra-cell",
+                                         f"section {kind!r}: a value lies beyond the last column of the header"))
         bad = np.isinf(data)
-        if bad.any():
-            r, c = np.argwhere(bad)[0]
-            raise self.err(data_line + int(r), int(first_data + c + 1), "non-finite",
-                           f"section {kind!r}: value is infinite")
+        for r, c in np.argwhere(bad)[:MAX_ERRORS]:
+            self.pending.append(self.err(data_line + int(r), int(first_data + c + 1), "non-finite",
+                                         f"section {kind!r}: value is infinite"))
         del bad
         # Convert to SI by what the units row says (in place: ``data`` is ours).
         _to_si_inplace(data, [c.file_unit for c in columns])
         if kind in _POSE_SECTIONS:
             big = (data > MAX_COORDINATE_M) | (data < -MAX_COORDINATE_M)
-            if big.any():
-                r, c = np.argwhere(big)[0]
-                raise self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
-                               f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): not a "
-                               "position in a capture volume")
+            for r, c in np.argwhere(big)[:MAX_ERRORS]:
+                self.pending.append(self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
+                                             f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): "
+                                             "not a position in a capture volume"))
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
                           columns=tuple(columns), values=data, name_prefix=prefix,
                           data_line=data_line, units_line=units_line)
@@ -400,13 +405,24 @@ class _Parser:
                                      "shifted"))
                 if len(errs) >= MAX_ERRORS:
                     break
-        if errs:
-            raise self._collect(errs)
+        self.pending.extend(errs)
 
     @staticmethod
     def _collect(errs: list[ViconCsvError]) -> ViconCsvError:
-        first = errs[0]
-        first.errors = errs[:MAX_ERRORS]
+        """The first error in file order (line, then column; whole-file causes last), carrying up to
+        `MAX_ERRORS` of them in file order; one error per cell."""
+        seen: set[tuple] = set()
+        uniq = []
+        for e in errs:
+            key = (e.line, e.column)
+            if key in seen and e.line is not None:
+                continue
+            seen.add(key)
+            uniq.append(e)
+        uniq.sort(key=lambda e: (e.line if e.line is not None else math.inf,
+                                 e.column if e.column is not None else 0))
+        first = uniq[0]
+        first.errors = uniq[:MAX_ERRORS]
         return first
 
     # -- data
@@ -430,12 +446,9 @@ class _Parser:
                 trunc = self.err(line, n_cells, "truncated",
                                  f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
                                  "cells and no line end): truncated file?")
-                # the rows before it are read first: their errors come first (file order)
-                try:
-                    self.parse_block(start, last, data_line, width, kind, first_data, n_cols, bounds)
-                except ViconCsvError as err:
-                    raise self._collect([*(getattr(err, "errors", None) or [err]), trunc]) from None
-                raise trunc
+                # the rows before it are read (their errors come first, in file order); the cut row is dropped
+                self.pending.append(trunc)
+                return self.parse_block(start, last, data_line, width, kind, first_data, n_cols, bounds)
         out = self.fast_block(start, end, data_line, n_rows, width, first_data, n_cols)
         if out is None:
             values = self.slow_block(text[start:end], data_line, width, kind)
@@ -537,43 +550,49 @@ class _Parser:
                 out[r, c] = float(s)
             if len(errs) >= MAX_ERRORS:
                 break
-        if errs:
-            raise self._collect(errs)
+        self.pending.extend(errs)
         return out
 
     def check_frames(self, values: np.ndarray, data_line: int, first_data: int,
                      kind: str) -> tuple[np.ndarray, np.ndarray]:
+        """Frame (and sub frame) numbers of the rows; every bad one, a repeat or a step back is added to
+        ``pending`` (rows with a bad number are left out of the order check). Bad numbers are returned as -1."""
         if values.shape[0] == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         f = values[:, 0]
         bad = np.isnan(f) | (f != np.round(f)) | (f < 0) | (f > MAX_FRAME)
-        if bad.any():
-            r = int(np.argmax(bad))
-            raise self.err(data_line + r, 1, "bad-frame",
-                           f"section {kind!r}: frame number must be an integer from 0 to {MAX_FRAME:.0e}")
-        frame = f.astype(np.int64)
+        for r in np.flatnonzero(bad)[:MAX_ERRORS]:
+            self.pending.append(self.err(data_line + int(r), 1, "bad-frame",
+                                         f"section {kind!r}: frame number must be an integer from 0 to "
+                                         f"{MAX_FRAME:.0e}"))
+        frame = np.where(bad, -1.0, f).astype(np.int64)
         if first_data == 2:
             s = values[:, 1]
             s = np.where(np.isnan(s), 0.0, s)  # Nexus writes an empty Sub Frame where nothing was computed
-            bad = (s != np.round(s)) | (s < 0) | (s > MAX_FRAME)
-            if bad.any():
-                r = int(np.argmax(bad))
-                raise self.err(data_line + r, 2, "bad-frame",
-                               f"section {kind!r}: sub frame must be a non-negative integer")
-            sub = s.astype(np.int64)
+            bad_s = (s != np.round(s)) | (s < 0) | (s > MAX_FRAME)
+            for r in np.flatnonzero(bad_s)[:MAX_ERRORS]:
+                self.pending.append(self.err(data_line + int(r), 2, "bad-frame",
+                                             f"section {kind!r}: sub frame must be a non-negative integer"))
+            bad = bad | bad_s
+            sub = np.where(bad_s, 0, s).astype(np.int64)
         else:
             sub = np.zeros_like(frame)
-        key = frame * (int(sub.max()) + 1) + sub
+        rows = np.flatnonzero(~bad)
+        if rows.size < 2:
+            return frame, sub
+        key = frame[rows] * (int(sub[rows].max()) + 1) + sub[rows]
         d = np.diff(key)
-        if (d <= 0).any():
-            r = int(np.argmax(d <= 0)) + 1
-            if d[r - 1] == 0:
-                raise self.err(data_line + r, 1, "duplicate-frame",
-                               f"section {kind!r}: frame {frame[r]} (sub frame {sub[r]}) appears twice "
-                               f"(first at line {data_line + r - 1})")
-            raise self.err(data_line + r, 1, "frame-order",
-                           f"section {kind!r}: frame {frame[r]} comes after frame {frame[r - 1]}: frames must increase"
-                           " (a second take pasted after the first? split the file at this line)")
+        for i in np.flatnonzero(d <= 0)[:MAX_ERRORS]:
+            r, r0 = int(rows[i + 1]), int(rows[i])
+            if d[i] == 0:
+                self.pending.append(self.err(data_line + r, 1, "duplicate-frame",
+                                             f"section {kind!r}: frame {frame[r]} (sub frame {sub[r]}) appears "
+                                             f"twice (first at line {data_line + r0})"))
+            else:
+                self.pending.append(self.err(data_line + r, 1, "frame-order",
+                                             f"section {kind!r}: frame {frame[r]} comes after frame {frame[r0]}: "
+                                             "frames must increase (a second take pasted after the first? split "
+                                             "the file at this line)"))
         return frame, sub
 
 

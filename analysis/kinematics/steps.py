@@ -251,19 +251,21 @@ def detect_steps(
         ang = np.asarray(wheel_angle_rad, dtype=np.float64)
         aw = ang[inwin & ~gap]
         total = float(aw.max() - aw.min())
-        if total < 2 * alpha_rad:
+        if total < alpha_rad:  # two impacts are alpha apart: a shorter turn cannot hold two
             return StepResult.refuse(
-                f"the wheel turns only {np.degrees(total):.1f} deg: fewer than two steps of "
-                f"{np.degrees(alpha_rad):.0f} deg")
+                f"the wheel turns only {np.degrees(total):.1f} deg, less than one step of "
+                f"{np.degrees(alpha_rad):.0f} deg: fewer than two steps (impacts)")
         tw = t[inwin & ~gap]
-        rate = total / max(tw[-1] - tw[0], 1e-9)
+        # the rate of the forward turn only: a wheel that stalls and rocks back spends time without turning on
+        i_top = int(np.argmax(aw))
+        rate = total / max(tw[i_top] - tw[0], 1e-9)
         period_guess = alpha_rad / rate
         del aw, tw
         idx, tmin, sigma = find_com_minima(t, yw, min_period_s=period_guess)
         del yw
-        if idx.size < 2:
+        if idx.size < 1:  # one clear minimum fixes the phase: the impacts then follow every alpha of rotation
             return StepResult.refuse(
-                f"the CoM height shows {idx.size} clear minima (noise {sigma * 1e3:.2f} mm): cannot place the "
+                f"the CoM height shows no clear minimum (noise {sigma * 1e3:.2f} mm): cannot place the "
                 "impacts on the rotation")
         ok_idx = np.flatnonzero(~gap)
         a_min = np.interp(tmin, t[ok_idx], ang[ok_idx])
@@ -290,9 +292,14 @@ def detect_steps(
         frac = np.where(a1 > a0, (targets - a0) / np.where(a1 > a0, a1 - a0, 1.0), 0.0)
         times = tv[j - 1] + frac * (tv[j] - tv[j - 1])
         seen = _observed_impacts(t, obs, times, j, sel)
+        # an impact needs a frame of the window on either side of it: one placed on the first or last frame is
+        # the start or end of the recording crossing the phase (noise), not an observed impact
+        dt_frame = float(np.median(np.diff(tv))) if tv.size > 1 else 0.0
+        seen &= (times > tv[0] + 0.5 * dt_frame) & (times < tv[-1] - 0.5 * dt_frame)
         times, ks = times[seen], ks[seen]
         if times.size < 2:
-            return StepResult.refuse("fewer than two observed impacts (the others fall in gaps)")
+            return StepResult.refuse("fewer than two observed impacts (the others fall in gaps or on the "
+                                     "first or last frame)")
         periods, pk = _periods(ks, times, t, unbridged)
         return StepResult(times, periods, "rotation", None, float(phase + alpha_rad * ks[0]),
                           impact_step=ks - ks[0], period_step=pk - ks[0])

@@ -164,6 +164,33 @@ def run_report(files: Sequence[Path], out: Path, *, json_out: bool, import_kwarg
     return res
 
 
+def robot_log_pairs(specs: Sequence[str], trials: Sequence[Path]) -> dict[str, Path]:
+    """``--robot-log [TRIAL=]FILE`` values -> {trial input file name: log path}. Without ``TRIAL=`` the log
+    belongs to the only trial given; a missing log, an unknown or repeated trial is a `ParameterError` naming
+    the option."""
+    from rimless.errors import ParameterError
+
+    names = [Path(t).name for t in trials]
+    out: dict[str, Path] = {}
+    for spec in specs:
+        trial, sep, file = spec.rpartition("=")
+        if not sep:
+            if len(names) != 1:
+                raise ParameterError(f"--robot-log {spec}: with {len(names)} trials, name the trial: "
+                                     "--robot-log TRIAL=FILE (TRIAL: the trial's file name)")
+            trial = names[0]
+        trial = Path(trial).name
+        if trial not in names:
+            raise ParameterError(f"--robot-log {spec}: {trial!r} is not one of the trials given "
+                                 f"({', '.join(names)})")
+        if trial in out:
+            raise ParameterError(f"--robot-log {spec}: a second log for {trial}")
+        if not Path(file).is_file():
+            raise ParameterError(f"--robot-log {spec}: {file}: no such file")
+        out[trial] = Path(file)
+    return out
+
+
 def demo_inputs() -> list[Path]:
     """The bundled SYNTHETIC example trials (both series), sorted; a `UserError` when the install lacks them."""
     files = sorted(set(data_files()) | set(critical_data_files()))

@@ -20,7 +20,7 @@ import html
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,8 @@ import numpy as np
 from rimless.errors import InputFileError
 
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step_period_trends
+from rimless.analysis.io.robot_log import read_clutch_log
+from rimless.analysis.report.clutch import clutch_comparison, clutch_html
 from rimless.analysis.kinematics.inputs import InputRow, load_input
 
 __all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES"]
@@ -55,6 +57,9 @@ class ReportResult:
     seconds: float = 0.0
     critical: Any = None  # rimless.analysis.inference.critical_slope.CriticalSlopeResult, when computed
     calibration: Any = None  # rimless.analysis.inference.calibrate.CalibrationResult, when computed
+    #: per trial name (input file name): the robot log's measured clutched time per step beside the simulated one
+    #: (`clutch_comparison`), when a robot trial log was given with the trial
+    clutch: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def refused(self) -> list[InputRow]:
@@ -81,7 +86,8 @@ class ReportResult:
                 "step_period_by_slope": [row for g in self.groups for row in g.rows()],
                 "refused": [r.file for r in self.refused],
                 "critical_slope": self.critical.summary() if self.critical is not None else None,
-                "calibration": self.calibration.summary() if self.calibration is not None else None}
+                "calibration": self.calibration.summary() if self.calibration is not None else None,
+                "clutch_time_per_step": self.clutch}
 
 
 def build_report(
@@ -97,6 +103,7 @@ def build_report(
     critical: bool = True,
     calibrate_c: bool = False,
     critical_files: Sequence[str | Path] | None = None,
+    robot_logs: dict[str, Path] | None = None,
 ) -> ReportResult:
     """Import/read every input, compare with the simulation and write the report files (see the module doc).
 
@@ -105,7 +112,8 @@ def build_report(
     ``progress`` is called once per input (with its name) after it is done, and once per later stage.
     ``critical``: add the critical slope from the trials (verdicts, estimates, the model's value);
     ``calibrate_c`` also calibrates c on them and gives the calibrated model's critical slope;
-    ``critical_files``: only these inputs enter the critical slope (default: every input with steps).
+    ``critical_files``: only these inputs enter the critical slope (default: every input with steps);
+    ``robot_logs``: input file name -> the robot's trial log of that trial (`clutch_comparison`).
     """
     t_start = time.perf_counter()
     files = [Path(p) for p in paths]
@@ -130,10 +138,14 @@ def build_report(
         if progress:
             progress(p.name)
     groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
+    clutch = {}
+    for name, log in (robot_logs or {}).items():
+        comp = next((c for c in comps if c.name == name), None)
+        clutch[name] = clutch_comparison(read_clutch_log(log), comp)
     com_png = _com_figure(comps, out / REPORT_FILES["com"])
     per_png = _period_figure(groups, out / REPORT_FILES["period"], sim.model)
     res = ReportResult(out, out / REPORT_FILES["html"], out / REPORT_FILES["csv"], [com_png, per_png], inputs, comps,
-                       groups)
+                       groups, clutch=clutch)
     if critical:
         _add_critical(res, sim, files, critical_files, calibrate_c, progress)
     if res.calibration is None and all_suspect(res):
@@ -420,6 +432,8 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
         "simulated post-impact θ' at the first measured impact. The simulated curve is shifted by the lag (≤ 50 ms) "
         "minimising the RMS; heights measured from the impact line get the best constant offset.</p>")
 
+    if res.clutch:
+        parts.append(clutch_html(res.clutch))
     parts.append("<h2>CoM height</h2><figure>"
                  f"<img src=\"{REPORT_FILES['com']}\" alt=\"CoM height, measured vs simulated\">"
                  "<figcaption>Figure 1. Comparison of measured and simulated vertical CoM trajectories (hub height "
@@ -581,4 +595,8 @@ def _critical_html(res: ReportResult) -> str:
                    f"{_num(sm['rms_period_ms']['table1'], '.1f')} ms (Table 1) → "
                    f"{_num(sm['rms_period_ms']['calibrated'], '.1f')} ms; RMS CoM error "
                    f"{_num(sm['rms_com_mm']['table1'], '.2f')} → {_num(sm['rms_com_mm']['calibrated'], '.2f')} mm.</p>")
+        sep = sm.get("loss_separation")
+        if sep and sep.get("note"):
+            out.append(f"<p class=\"{'small' if sep.get('damping_identified') else 'bad'}\" id=\"loss-separation\">"
+                       f"Damping or guide friction? {e(sep['note'])}.</p>")
     return "\n".join(out)

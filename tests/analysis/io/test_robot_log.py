@@ -1,0 +1,120 @@
+"""The robot's trial log read for the clutch timing (`rimless.analysis.io.robot_log`): against logs written here
+by hand (the times are the expectation), a log written by the fake robot over its command channel, and the
+report's measured-beside-simulated clutched time (`trials report --robot-log`)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from rimless.analysis.io.robot_log import FORMAT, read_clutch_log
+from rimless.errors import InputFileError
+
+
+def write_log(path: Path, locks: list[tuple[float, int, float | None]], *, torn: bool = False,
+              disarmed_lock_at: float | None = None) -> Path:
+    """A trial log with a lock of leg L at t and its release (the next leg's touchdown carrying released_leg)
+    at t + clutched (None: never released); samples between the events as the firmware writes them."""
+    lines = [{"format": FORMAT, "trial": "hand", "started_epoch_s": 1.8e9}]
+    seq = 0
+    for t, leg, held in locks:
+        lines.append({"timestamp": 1.8e9 + t, "t_mono_s": t,
+                      "event": {"channel": 0, "leg": leg, "armed": True, "name": "lock", "code": 2}})
+        seq += 1
+        lines.append({"timestamp": 1.8e9 + t + 0.01, "t_mono_s": t + 0.01, "seq": seq, "ch": 0,
+                      "leg": {"position_m": 0.0, "velocity_m_s": 0.0, "compression_m": 0.008, "phase": 2,
+                              "stance": leg, "clutch_mask": 1 << leg}})
+        if held is not None:
+            lines.append({"timestamp": 1.8e9 + t + held, "t_mono_s": t + held,
+                          "event": {"channel": 0, "leg": leg + 1, "armed": True, "released_leg": leg,
+                                    "name": "touchdown", "code": 1}})
+    if disarmed_lock_at is not None:
+        lines.append({"t_mono_s": disarmed_lock_at, "event": {"leg": 7, "armed": False, "name": "lock"}})
+    text = "".join(json.dumps(o) + "\n" for o in lines)
+    if torn:
+        text += '{"t_mono_s": 99.0, "event": {"na'
+    path.write_text(text)
+    return path
+
+
+def test_clutched_times_from_a_hand_written_log(tmp_path):
+    locks = [(10.0, 1, 0.3471), (10.4, 2, 0.3502), (10.8, 3, 0.3390), (11.2, 4, None)]
+    log = read_clutch_log(write_log(tmp_path / "a.jsonl", locks, torn=True, disarmed_lock_at=11.5))
+    assert log.leg.tolist() == [1, 2, 3, 4]  # the disarmed decision moved no clutch
+    np.testing.assert_allclose(log.complete(), [0.3471, 0.3502, 0.3390], atol=1e-9)
+    assert np.isnan(log.clutched_s[-1])  # still locked when the log ends
+    assert any("torn last line" in w for w in log.warnings)
+
+
+@pytest.mark.parametrize("text, where", [
+    ('{"format": "something-else/2"}\n', ":1:"),
+    (f'{{"format": "{FORMAT}"}}\nnot json\n', ":2:"),
+    (f'{{"format": "{FORMAT}"}}\n{{"t_mono_s": "x", "event": {{"name": "lock", "leg": 1}}}}\n', ":2: field t_mono_s"),
+])
+def test_a_bad_log_is_one_error_naming_file_and_line(tmp_path, text, where):
+    p = tmp_path / "bad.jsonl"
+    p.write_text(text)
+    with pytest.raises(InputFileError) as exc:
+        read_clutch_log(p)
+    assert str(p) + where in str(exc.value) and "\n" not in str(exc.value)
+
+
+@pytest.mark.slow
+def test_a_log_written_by_the_fake_robot(tmp_path):
+    """The fake walks steps of 0.4 s (tests.support.firmware_app.gait): each armed lock is released by the next
+    touchdown, so every clutched time is one and the same fraction of 0.4 s and locks follow each other by 0.4 s."""
+    from tests.support.firmware_app import Client, config, scenario
+
+    async def script(app, hw):
+        c = await Client.connect(app.command_port)
+        await c.cmd("arm", 1)
+        await c.cmd("trial_start", 2, name="clutch")
+        for k in range(200):  # until four locks were released (a generous bound, not a fixed delay)
+            await asyncio.sleep(0.1)
+            await c.cmd("status", 10 + k)  # a command keeps the link alive (the robot disarms after 2 s without)
+            files = list((tmp_path / "trials").glob("*.jsonl"))
+            if files and read_clutch_log(files[0]).complete().size >= 4:
+                break
+        r = await c.cmd("trial_stop", 1000)
+        c.close()
+        return r
+
+    _, _, r, _ = scenario(config(tmp_path), script, timeout_s=30.0)
+    log = read_clutch_log(r["result"]["path"])
+    held = log.complete()
+    assert held.size >= 3
+    assert np.all((held > 0.05) & (held < 0.4))
+    assert np.ptp(held) < 0.005
+    np.testing.assert_allclose(np.diff(log.lock_s[:held.size]), 0.4, atol=0.01)
+
+
+@pytest.mark.slow
+def test_report_shows_measured_beside_simulated(tmp_path):
+    from rimless.analysis.cli import app
+    from rimless.analysis.examples.bundled import data_files
+
+    trial = next(p for p in data_files() if p.name == "SYNTHETIC_er_slope2.0deg_run1.csv")
+    log = write_log(tmp_path / "robot.jsonl", [(1.0 + 0.4 * k, k % 8, 0.30 + 0.001 * k) for k in range(5)])
+    runner = CliRunner()
+    res = runner.invoke(app, ["report", str(trial), "--robot-log", str(log), "--out", str(tmp_path / "rep"),
+                              "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout[res.stdout.index("{"):])
+    c = out["clutch_time_per_step"][trial.name]
+    measured = [r["measured_ms"] for r in c["rows"] if r["measured_ms"] is not None]
+    np.testing.assert_allclose(measured, [300.0, 301.0, 302.0, 303.0, 304.0], atol=1e-6)
+    sim = [r["simulated_ms"] for r in c["rows"] if r["simulated_ms"] is not None]
+    comp_periods = out["trials"][0]
+    assert sim and all(0.0 < s < 1000.0 for s in sim) and comp_periods["status"] == "ok"
+    assert c["difference_ms"] == pytest.approx(c["measured_mean_ms"] - c["simulated_mean_ms"])
+    assert 'id="clutch-time"' in (tmp_path / "rep" / "report.html").read_text()
+    # several trials need TRIAL=FILE; an unknown trial or a missing log is refused naming the option
+    bad = runner.invoke(app, ["report", str(trial), str(trial), "--robot-log", str(log), "--out", str(tmp_path / "r2")])
+    assert bad.exit_code == 2 and "--robot-log" in bad.output
+    bad = runner.invoke(app, ["report", str(trial), "--robot-log", "nope.csv=" + str(log), "--out", str(tmp_path / "r3")])
+    assert bad.exit_code == 2 and "is not one of the trials" in bad.output
