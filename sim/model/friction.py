@@ -30,6 +30,7 @@ from rimless.sim.model.guards import SLIP_END_1, SLIP_END_2, STICK_END_1, STICK_
 from rimless.sim.model.mechanics import Mechanics
 
 FRICTION_PHASE0 = 16  # phase codes >= this are friction phases (encode / decode)
+FRICTION_INDEX = 8  # F_c's index in Mechanics.p (after WheelParams.as_vector()), read by the compiled path
 MAX_SWITCHES = 2000  # stick/slip switches per phase before the phase is reported as failed (chattering)
 SLIP_UP, SLIP_DOWN, STUCK = ch.SLIP_UP, ch.SLIP_DOWN, ch.STUCK
 LEG_INDEX = {1: ch.L1_INDEX, 2: ch.L2_INDEX}
@@ -176,3 +177,17 @@ def guard_value(mech: Mechanics, code: int, guard: int, y: np.ndarray) -> float:
 def damping_power(mech: Mechanics, code: int, qd: np.ndarray) -> float:
     """Power dissipated by the dampers of the legs that slide in friction phase `code`, W."""
     return ch.damping_power(mech, mode_of(code), qd)
+
+
+REST_RATE = 1e-9  # m/s: a recorded leg rate below this counts as at rest (stuck) in `sample_accel`
+
+
+def sample_accel(mech: Mechanics, base: int, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(q'', lambda) of base phase `base` at a recorded sample y, the friction state read off the legs' rates
+    (|L'| < REST_RATE: at rest, stuck or slipping by the stick test); lambda's first rows are the feet's."""
+    y = np.array(y, dtype=float)
+    for leg in friction_legs(base):
+        if abs(y[5 + LEG_INDEX[leg]]) < REST_RATE:
+            y[5 + LEG_INDEX[leg]] = 0.0
+    code, y = initial_phase(mech, base, y)
+    return accel(mech, code, y[:5], y[5:10])

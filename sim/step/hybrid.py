@@ -322,7 +322,8 @@ def contact_diagnostics(mech: Mechanics, segments: list[Segment]) -> dict[str, f
     for seg in segments:
         lam_b = np.empty(len(seg.t))
         for i, yi in enumerate(seg.y):
-            _, lam = accel(mech, seg.phase, yi[:5], yi[5:])
+            _, lam = (fr.sample_accel(mech, seg.phase, yi) if mech.params.guide_friction_n > 0.0
+                      else accel(mech, seg.phase, yi[:5], yi[5:]))
             lam_b[i] = lam[1]
             if seg.phase == DLSP:
                 out["min_normal_force_a_dlsp_N"] = min(out["min_normal_force_a_dlsp_N"], lam[3])
