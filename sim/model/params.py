@@ -137,6 +137,8 @@ def validate(p: WheelParams) -> None:
             raise ParameterError(f"parameter {_name(name)} must be > 0, got {getattr(p, name)}")
     if p.damping_ns_per_m < 0.0:
         raise ParameterError(f"parameter {_name('damping_ns_per_m')} must be >= 0, got {p.damping_ns_per_m}")
+    if p.guide_friction_n < 0.0:
+        raise ParameterError(f"parameter {_name('guide_friction_n')} must be >= 0, got {p.guide_friction_n}")
     if not 0.0 <= p.slope_rad < SPOKE_ANGLE_RAD / 2.0:
         raise ParameterError(
             f"parameter {_name('slope_rad')} must satisfy 0 <= slope < alpha/2 = {SPOKE_ANGLE_RAD / 2:.6f} rad "

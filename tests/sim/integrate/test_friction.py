@@ -163,3 +163,18 @@ def test_zero_friction_is_bit_identical_to_before(model):
     assert [float(v).hex() for v in r.y_plus[[2, 3, 4, 7, 8, 9]]] == ys
     assert float(r.dissipated_J).hex() == diss and float(r.period_s).hex() == period
     assert r.friction_work_J == 0.0
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf"), "1"])
+def test_guide_friction_is_validated(bad):
+    from rimless.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="guide_friction_n"):
+        WheelParams(guide_friction_n=bad)
+
+
+def test_frictionless_records_keep_their_keys():
+    """to_dict (records, sweep cache keys) is unchanged without friction, and carries F_c with it."""
+    assert "guide_friction_n" not in WheelParams().to_dict()
+    assert WheelParams(guide_friction_n=0.5).to_dict()["guide_friction_n"] == 0.5
+    assert WheelParams(**WheelParams(guide_friction_n=0.5).to_dict()).guide_friction_n == 0.5
