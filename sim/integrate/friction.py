@@ -7,7 +7,9 @@ or a stick/slip guard of the one guard table fires (located by the same event ru
 a guard starting at exactly 0 does not fire at once). A stick/slip guard switches the legs' states
 (`friction.switch`) and the phase goes on; a base guard or the time limit ends it. The result is one PhaseRun
 over the whole base phase: end state, base guard, damper loss, friction work (F_c x the distance slid) and the
-time each leg was stuck.
+time each leg was stuck. In free compression of the ER wheel the stance leg's slip ends where the clutch
+locks it (CLUTCH_LOCK, L1' rising through 0): that guard alone ends the slide, so a tie cannot leave the leg
+stuck by friction with the clutch's guard sitting at exactly 0.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 
 from rimless.sim.integrate.reference import PhaseRun
 from rimless.sim.model import friction as fr
+from rimless.sim.model.guards import CLUTCH_LOCK, SLIP_END_1
 from rimless.sim.model.mechanics import Mechanics
 
 
@@ -37,7 +40,8 @@ def run_with_friction(integrator: Any, mech: Mechanics, base: int, y0: np.ndarra
     ts: list[np.ndarray] = []
     ys: list[np.ndarray] = []
     for _ in range(fr.MAX_SWITCHES):
-        own = fr.friction_guards(code)
+        # where the clutch locks the stance leg at L1' = 0 (CLUTCH_LOCK), its slip end is that guard's business
+        own = tuple(g for g in fr.friction_guards(code) if not (g == SLIP_END_1 and CLUTCH_LOCK in guards))
         run = integrator.run_phase(mech, code, y, t, tuple(guards) + own, t_stop - t, record_dt=record_dt,
                                    track_dissipation=track_dissipation)
         nfev += run.nfev

@@ -77,6 +77,10 @@ class ScipyIntegrator:
       the force is re-integrated with dense output for that search;
     - bounded work: a non-finite state or derivative, or more than `max_nfev` right-hand-side evaluations
       in one phase, ends the phase as failed (classified by the caller as an integration failure).
+
+    `phase` is a base phase of rimless.sim.model.dynamics or a guide-friction stick/slip phase of
+    rimless.sim.model.friction (codes >= FRICTION_PHASE0: its dynamics and guards, strict crossings), which
+    rimless.sim.integrate.friction runs one after the other.
     """
 
     method: str = "DOP853"
