@@ -664,22 +664,29 @@ def friction_vs_damping(estimates: Sequence[ParamEstimate], corr: np.ndarray,
     """Whether the fit told guide friction from damping (None unless both c and guide_friction_n were fitted).
 
     A damper's loss per step grows with the legs' speed, Coulomb friction's does not (F_c times the distance
-    slid): only trials at different speeds separate them. They are told apart when both are identifiable and
-    their correlation stays within RIDGE_CORRELATION."""
+    slid): only trials at different speeds separate them. They are told apart when both are identifiable (their
+    intervals, which account for the correlation, are informative); `ridge` when their correlation exceeds
+    RIDGE_CORRELATION (the trials then mostly fix a combination of the two)."""
     names = [e.name for e in estimates]
     if "c" not in names or "guide_friction_n" not in names:
         return None
     i, j = names.index("c"), names.index("guide_friction_n")
     rho = float(corr[i, j])
-    told = bool(estimates[i].identifiable and estimates[j].identifiable and abs(rho) <= RIDGE_CORRELATION)
+    told = bool(estimates[i].identifiable and estimates[j].identifiable)
+    ridge = bool(not math.isfinite(rho) or abs(rho) > RIDGE_CORRELATION)
     spread = (max(releases_rad_s) / min(releases_rad_s)) if len(releases_rad_s) and min(releases_rad_s) > 0 \
         else math.nan
-    why = ("yes: both identifiable, correlation within the ridge limit" if told else
-           f"no: correlation {rho:+.2f}" + (" beyond the ridge limit" if abs(rho) > RIDGE_CORRELATION else "")
-           + ("" if estimates[i].identifiable and estimates[j].identifiable else ", not both identifiable")
-           + "; trials at more different speeds separate them (a damper's loss per step scales with speed, "
-             "friction's does not)")
-    return {"correlation": rho, "told_apart": told, "release_speed_ratio": spread, "statement": why}
+    hint = "trials at more different speeds separate them (a damper's loss per step scales with speed, friction's " \
+        "does not)"
+    if told and not ridge:
+        why = f"yes: both identifiable, correlation {rho:+.2f}"
+    elif told:
+        why = (f"yes, on a ridge: both identifiable but correlation {rho:+.2f} (the trials mostly fix a combination "
+               f"of the two; the intervals account for it); {hint}")
+    else:
+        which = " and ".join(e.name for e in (estimates[i], estimates[j]) if not e.identifiable)
+        why = f"no: {which} not identifiable (correlation {rho:+.2f}); {hint}"
+    return {"correlation": rho, "told_apart": told, "ridge": ridge, "release_speed_ratio": spread, "statement": why}
 
 
 RIDGE_CORRELATION = 0.95  # |correlation| between two globals above which the cost is treated as a ridge
