@@ -50,3 +50,12 @@ def test_commands_without_guide_friction_refuse_it_from_a_params_file(tmp_path):
     assert "guide_friction_n" in res.output
     res = RUN.invoke(app, ["sim", "sweep", "--guide-friction-n", "1"])
     assert res.exit_code == 2  # no such option there
+
+
+def test_gait_reports_the_friction_work_of_every_step():
+    out = _json(["sim", "gait", "--model", "ve", "--steps", "2", "--guide-friction-n", "1", "--json"])
+    assert out["guide_friction_n"] == 1.0
+    assert len(out["friction_work_per_step_j"]) == out["steps_done"] == 2
+    assert all(w > 0 for w in out["friction_work_per_step_j"])
+    base = _json(["sim", "gait", "--model", "ve", "--steps", "2", "--json"])
+    assert base["friction_work_per_step_j"] == [0.0, 0.0]
