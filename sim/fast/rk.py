@@ -38,6 +38,7 @@ from scipy.integrate import DOP853
 
 from rimless.sim.fast import model as fm
 from rimless.sim.integrate.events import DIP_MARGIN, DIP_SAMPLES
+from rimless.sim.model.clutch import SLIP_DOWN, SLIP_UP, STUCK
 from rimless.sim.model.friction import FRICTION_INDEX, FRICTION_PHASE0
 from rimless.sim.model.guards import SLIP_END_1, SLIP_END_2, STICK_END_1, STICK_END_2
 
@@ -106,11 +107,8 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
 # ------------------------------------------------------------------------------------------------
 # Guide friction (rimless.sim.model.friction): phase codes >= FRICTION_PHASE0 are a base phase with each
 # friction leg slipping up/down (-/+ F_c on L) or stuck (L' = 0 a constraint); F_c = p[FRICTION_INDEX].
-# Without the variational equations (the map Jacobian with friction is taken by differences).
-
-_SLIP_UP = 2
-_SLIP_DOWN = 3
-_STUCK = 1
+# Without the variational equations (the map Jacobian with friction is taken by differences). The leg states
+# are rimless.sim.model.clutch's SLIP_UP, SLIP_DOWN and STUCK.
 
 
 @_jit
@@ -131,7 +129,7 @@ def _stuck_row(phase, leg):
     """Row of leg `leg`'s holding force in lambda of a friction phase (b: 0-1, a: 2-3 in double support)."""
     base = _base_phase(phase)
     r = 4 if base == fm.DLSP else 2
-    if leg == 2 and _leg_state(phase, 1) == _STUCK:
+    if leg == 2 and _leg_state(phase, 1) == STUCK:
         r += 1
     return r
 
@@ -156,10 +154,10 @@ def _friction_accel(mi, phase, q, qd, p, qdd, lam):
             for c in range(5):
                 A[2 + r, c] = Ja[r, c]
         nc = 4
-    if s1 == _STUCK:
+    if s1 == STUCK:
         A[nc, 3] = 1.0
         nc += 1
-    if s2 == _STUCK:
+    if s2 == STUCK:
         A[nc, 4] = 1.0
         nc += 1
     n = 5 + nc
@@ -177,13 +175,13 @@ def _friction_accel(mi, phase, q, qd, p, qdd, lam):
     b = np.empty(n)
     for i in range(5):
         b[i] = -h[i]
-    if s1 == _SLIP_UP:
+    if s1 == SLIP_UP:
         b[3] -= F
-    elif s1 == _SLIP_DOWN:
+    elif s1 == SLIP_DOWN:
         b[3] += F
-    if s2 == _SLIP_UP:
+    if s2 == SLIP_UP:
         b[4] -= F
-    elif s2 == _SLIP_DOWN:
+    elif s2 == SLIP_DOWN:
         b[4] += F
     for r in range(nc):
         b[5 + r] = -adot[r]
@@ -217,7 +215,7 @@ def _guard_value(phase, code, y, lam, p):
     if code == SLIP_END_1 or code == SLIP_END_2:
         leg = 1 if code == SLIP_END_1 else 2
         rate = y[8] if leg == 1 else y[9]
-        return rate if _leg_state(phase, leg) == _SLIP_UP else -rate
+        return rate if _leg_state(phase, leg) == SLIP_UP else -rate
     if code == STICK_END_1 or code == STICK_END_2:
         leg = 1 if code == STICK_END_1 else 2
         return p[FRICTION_INDEX] - abs(lam[_stuck_row(phase, leg)])

@@ -206,7 +206,7 @@ def _timed_fixed_point(pmap: Any, guess: np.ndarray, reps: int, *, record: bool 
 FRICTION_N = 0.5  # guide friction of the friction rows, N
 
 
-def _friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
+def friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
     """Guide friction (F_c = FRICTION_N) side by side: one step map from z* on the compiled path (each stick/slip
     phase compiled, rimless.sim.step.fast_map.friction_step) and on the reference path (scipy DOP853), both at
     rtol 1e-10, each against a tight reference (scipy DOP853 rtol REFERENCE_RTOL): error in z (inf-norm), friction
@@ -396,7 +396,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
             entry.update(reference_seconds=time.perf_counter() - t_s, reference_critical_slope_rad=cs_ref.critical_slope_rad,
                          reference_reason=cs_ref.reason)
         continuation[model] = entry
-    friction = _friction_bench(quick, say)
+    friction = friction_bench(quick, say)
     say("third-party compiled integrator on one phase")
     peer = _peer_bench(params, quick)
     say("compile cost (fresh processes)")

@@ -107,3 +107,25 @@ def test_reference_and_compiled_fixed_points_with_friction_agree(er_friction_fix
                             atol=1e-13)), fp.z, record=False)
     assert np.max(np.abs(ref.z - fp.z)) < 1e-8
     assert np.max(np.abs(np.sort(np.abs(ref.eigenvalues)) - np.sort(np.abs(fp.eigenvalues)))) < 1e-4
+
+
+# Regression snapshot: the compiled path's Table 1 fixed points (make_map(backend="fast"), default guess, exact
+# variational Jacobian), computed with the code before guide friction existed (commit c503cc9, run from an export
+# of that commit with its own kernel cache); F_c = 0 reproduces z and |eigenvalues| bit for bit.
+BEFORE_FIXED_POINT = {
+    "er": (['-0x1.dc51b1ecf5bd2p-2', '0x1.4d5e52621633dp+1'], ['0x1.a06fed9a556d0p-4', '0x1.923b8d720315ap-1']),
+    "ve": (['-0x1.bd370598b06d1p-2', '0x1.250772175f88ap+1'], ['0x1.360ea92bb14c2p-2', '0x1.360ea92bb14c2p-2']),
+}
+
+
+@pytest.mark.parametrize("model", ["er", "ve"])
+def test_zero_friction_compiled_fixed_point_is_bit_identical_to_before(model):
+    from rimless.sim.step.poincare import default_guess
+
+    p = WheelParams(guide_friction_n=0.0)
+    pm = make_map(p, model, backend="fast")
+    fp = solve_fixed_point(pm, default_guess(p, model), jacobian=jacobian_factory("fast")(pm), record=False)
+    z, eig = BEFORE_FIXED_POINT[model]
+    assert fp.jacobian_method == "variational"
+    assert [float(v).hex() for v in fp.z] == z
+    assert [float(abs(e)).hex() for e in fp.eigenvalues] == eig

@@ -178,3 +178,24 @@ def test_frictionless_records_keep_their_keys():
     assert "guide_friction_n" not in WheelParams().to_dict()
     assert WheelParams(guide_friction_n=0.5).to_dict()["guide_friction_n"] == 0.5
     assert WheelParams(**WheelParams(guide_friction_n=0.5).to_dict()).guide_friction_n == 0.5
+
+
+# Regression snapshot: the reference path's Table 1 fixed points (PoincareMap default integrator, default guess,
+# central-difference Jacobian), computed with the code before guide friction existed (commit c503cc9, run from an
+# export of that commit); F_c = 0 reproduces z and |eigenvalues| bit for bit.
+BEFORE_FIXED_POINT = {
+    "er": (['-0x1.dc51b1ecd3805p-2', '0x1.4d5e5260c068ap+1'], ['0x1.a06fecf482620p-4', '0x1.923b8d68ffbe3p-1']),
+    "ve": (['-0x1.bd3705988ab90p-2', '0x1.250772176ce53p+1'], ['0x1.360ea86961e2ap-2', '0x1.360ea86961e2ap-2']),
+}
+
+
+@pytest.mark.slow  # about 15 s per model on a loaded machine
+@pytest.mark.parametrize("model", ["er", "ve"])
+def test_zero_friction_fixed_point_is_bit_identical_to_before(model):
+    from rimless.sim.step.poincare import PoincareMap, default_guess, solve_fixed_point
+
+    p = WheelParams(guide_friction_n=0.0)
+    fp = solve_fixed_point(PoincareMap(p, model), default_guess(p, model), record=False)
+    z, eig = BEFORE_FIXED_POINT[model]
+    assert [float(v).hex() for v in fp.z] == z
+    assert [float(abs(e)).hex() for e in fp.eigenvalues] == eig
