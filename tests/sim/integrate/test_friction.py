@@ -199,3 +199,20 @@ def test_zero_friction_fixed_point_is_bit_identical_to_before(model):
     z, eig = BEFORE_FIXED_POINT[model]
     assert [float(v).hex() for v in fp.z] == z
     assert [float(abs(e)).hex() for e in fp.eigenvalues] == eig
+
+
+@pytest.mark.parametrize("model", ["er", "ve"])
+def test_friction_work_is_F_times_the_distance_slid_on_the_recorded_trajectory(model):
+    """Independent of the sub-phase bookkeeping: F_c times the total variation of L1 (outside the clutched
+    phase) and of L2 over the densely recorded step."""
+    from rimless.sim.model.dynamics import SLSP_CLUTCHED
+
+    F = 1.5
+    mech = Mechanics.of(WheelParams(guide_friction_n=F))
+    res = simulate_step(mech, model, state_from_section(mech, np.array([-0.46, 2.6])), TIGHT, record_dt=2e-5)
+    slid = 0.0
+    for seg in res.segments:
+        if seg.phase != SLSP_CLUTCHED:
+            slid += float(np.sum(np.abs(np.diff(seg.y[:, 3]))))
+        slid += float(np.sum(np.abs(np.diff(seg.y[:, 4]))))
+    assert res.friction_work_J == pytest.approx(F * slid, rel=1e-6)
