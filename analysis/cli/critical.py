@@ -141,7 +141,7 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
 
 def calibrate_cmd(
     trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon CSVs.")],
-    fit: Annotated[str, typer.Option("--fit", metavar="c[,k,m_H,m,I_c,L0]",
+    fit: Annotated[str, typer.Option("--fit", metavar="c[,k,m_H,m,I_c,L0,guide_friction_n]",
                                      help="Model parameters to fit, comma-separated.")] = "c",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     model: Annotated[str, typer.Option("--model", metavar="er|ve", help="Simulated model.")] = "er",
@@ -218,6 +218,9 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print("correlation: " + "; ".join(
             f"{names[i]}-{names[j]} {_fmt(out['correlation']['matrix'][i][j], '+.2f')}"
             for i in range(len(names)) for j in range(i + 1, len(names))), markup=False, highlight=False)
+    if out.get("friction_vs_damping"):
+        con.print("guide friction vs damping told apart: " + out["friction_vs_damping"]["statement"],
+                  markup=False, highlight=False)
     r = Table(title="RMS residuals, Table 1 model -> calibrated", show_edge=False)
     for col, width in (("trial", 30), ("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
         r.add_column(col, justify="left" if col == "trial" else "right", no_wrap=True, min_width=width,

@@ -47,7 +47,8 @@ __all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_s
 
 #: --fit names -> WheelParams fields, with the display unit
 FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/m"), "m_H": ("hub_mass_kg", "kg"),
-              "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m")}
+              "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m"),
+              "guide_friction_n": ("guide_friction_n", "N")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
@@ -120,14 +121,16 @@ class _Sim:
         not reached (the wheel stalled or the step failed)."""
         from rimless.sim.model.failures import StepFailure
         from rimless.sim.fast import fast_step
+        from rimless.sim.step.fast_map import friction_step
 
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
         z = np.array([-ALPHA_RAD / 2, w])
         out = np.zeros(n)
+        step = fast_step if p.guide_friction_n == 0.0 else friction_step  # guide friction: phase by phase
         try:
             for k in range(n + 1):
-                r = fast_step(p, self.model, z, rtol=self.rtol)
+                r = step(p, self.model, z, rtol=self.rtol)
                 if k:
                     out[k - 1] = 1.0 / r.period_s
                 z = r.z_next
@@ -141,7 +144,7 @@ class _Sim:
         from rimless.sim.step.backend import make_integrator
         from rimless.sim.step.gait import simulate_steps
 
-        key = (params.as_vector(), params.mass_model, slope_deg, w, n, record)
+        key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record)
         if key in self.cache:
             return self.cache[key]
         self.calls += 1
@@ -312,6 +315,7 @@ class CalibrationResult:
     #: can c be told from a constant loss per step (`rimless.analysis.inference.loss_separation`); None when c
     #: is not fitted
     loss_separation: dict[str, Any] | None = None
+    friction_vs_damping: dict[str, Any] | None = None  # with --fit c,guide_friction_n: can the trials tell them apart
 
     @property
     def identifiable(self) -> bool:
@@ -327,7 +331,8 @@ class CalibrationResult:
                 "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
                                "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
                 "failed": self.failed, "simulations": self.evaluations, "converged": self.converged,
-                "optimizer": self.optimizer, "loss_separation": self.loss_separation}
+                "optimizer": self.optimizer, "loss_separation": self.loss_separation,
+                **({"friction_vs_damping": self.friction_vs_damping} if self.friction_vs_damping else {})}
 
 
 def _total(rows: list[dict[str, Any]], key: str) -> float:
@@ -586,6 +591,9 @@ class _Objective:
         n_g, n_t = self.n_g, self.n_t
         lo = np.concatenate([np.full(n_g, -np.inf), np.full(n_t, 0.05), np.full(n_t, -MAX_SHIFT_MS)])
         hi = np.concatenate([np.full(n_g, np.inf), np.full(n_t, 20.0), np.full(n_t, MAX_SHIFT_MS)])
+        for j, f in enumerate(self.glob.fields):
+            if f == "guide_friction_n":  # a friction force is >= 0
+                lo[j] = -self.glob.x0[j] / self.glob.scale[j]
         lo[n_g:n_g + n_t] = np.maximum(lo[n_g:n_g + n_t], 0.8 * ws_start)
         hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
         return lo, hi
@@ -759,7 +767,8 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
                                        for e in estimates]))
     return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
                              obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
-                             optimizer, separation)
+                             optimizer, separation,
+                             friction_vs_damping(estimates, corr, [d.release_rad_s for d in data]))
 
 
 #: fitted names that model a constant loss per step themselves (then c needs no separation check)
@@ -788,6 +797,39 @@ def _check_loss_separation(obj: _Objective, u: np.ndarray, J: np.ndarray, fit: S
     if not out["damping_identified"] and e.identifiable:
         e.identifiable, e.effective_only, e.note = False, True, out["note"]
     return out
+
+
+def friction_vs_damping(estimates: Sequence[ParamEstimate], corr: np.ndarray,
+                        releases_rad_s: Sequence[float]) -> dict[str, Any] | None:
+    """Whether the fit told guide friction from damping (None unless both c and guide_friction_n were fitted).
+
+    A damper's loss per step grows with the legs' speed, Coulomb friction's does not (F_c times the distance
+    slid): only trials at different speeds separate them. They are told apart when both are identifiable and
+    their correlation stays within RIDGE_CORRELATION; on a ridge the trials fix a combination of the two, and the
+    linearised intervals of each are not to be trusted one by one (the bundled SYNTHETIC series, whose truth has
+    c = 10 N s/m and a different friction model, fits c = 7.5 +- 0.24 and F_c = 1.04 +- 0.05 N at correlation
+    -1.00)."""
+    names = [e.name for e in estimates]
+    if "c" not in names or "guide_friction_n" not in names:
+        return None
+    i, j = names.index("c"), names.index("guide_friction_n")
+    rho = float(corr[i, j])
+    both = bool(estimates[i].identifiable and estimates[j].identifiable)
+    ridge = bool(not math.isfinite(rho) or abs(rho) > RIDGE_CORRELATION)
+    told = both and not ridge
+    spread = (max(releases_rad_s) / min(releases_rad_s)) if len(releases_rad_s) and min(releases_rad_s) > 0 \
+        else math.nan
+    hint = "trials at more different speeds separate them (a damper's loss per step scales with speed, friction's " \
+        "does not)"
+    if told:
+        why = f"yes: both identifiable, correlation {rho:+.2f}"
+    elif ridge:
+        why = (f"no: on a ridge (correlation {rho:+.2f}): the trials fix a combination of c and F_c, not each "
+               f"(their intervals are linearised across the ridge); {hint}")
+    else:
+        which = " and ".join(e.name for e in (estimates[i], estimates[j]) if not e.identifiable)
+        why = f"no: {which} not identifiable (correlation {rho:+.2f}); {hint}"
+    return {"correlation": rho, "told_apart": told, "ridge": ridge, "release_speed_ratio": spread, "statement": why}
 
 
 RIDGE_CORRELATION = 0.95  # |correlation| between two globals above which the cost is treated as a ridge

@@ -55,9 +55,14 @@ _PARAM_OPTIONS: list[tuple[str, Any, str]] = [
     ("leg_length_m", Optional[float], "Free leg length L0, m [0.237]."),
     ("g", Optional[float], "Gravity, m/s^2 [9.81]."),
     ("mass_model", Optional[MassModel], "How the legs' mass enters the model (model.md section 8) [eight-leg]."),
+    ("guide_friction_n", Optional[float], "Coulomb friction F_c of each sliding leg's linear guide, N, with stick "
+                                          "phases (beyond the paper; docs/simulator.md) [0: none]."),
     ("params_file", Optional[Path], "TOML file of parameters (keys: k, c, slope_deg or slope_rad, m_H, m, I_c, L0, g, "
-                                    "mass_model); command-line options win."),
+                                    "mass_model, guide_friction_n); command-line options win."),
 ]
+# commands whose work does not model guide friction (the firmware in the loop, the paper's fixed study) leave
+# the option out: wheel_params(exclude=NO_FRICTION + ...)
+NO_FRICTION = ("guide_friction_n",)
 _OPTION_NAMES = {"params_file": "--params", "g": "--g"}
 
 
@@ -71,7 +76,8 @@ def build_params(values: dict[str, Any]) -> Any:
     if values.get("slope_deg") is not None and values.get("slope_rad") is not None:
         raise ParameterError("give the slope once: --slope-deg or --slope-rad, not both")
     mapping: dict[str, Any] = {}
-    for key in ("k", "c", "slope_deg", "slope_rad", "hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "g"):
+    for key in ("k", "c", "slope_deg", "slope_rad", "hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "g",
+                "guide_friction_n"):
         if values.get(key) is not None:
             mapping[key] = values[key]
     if values.get("mass_model") is not None:
@@ -107,6 +113,9 @@ def wheel_params(func: Any = None, *, exclude: tuple[str, ...] = ()) -> Any:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         values = {name: kwargs.pop(name, None) for name, _, _ in options}
         kwargs["params"] = build_params(values)
+        if "guide_friction_n" in exclude and kwargs["params"].guide_friction_n > 0.0:
+            raise ParameterError("guide_friction_n (from --params) is not modelled by this command; "
+                                 "guide friction is on sim fixed-point, gait, gaits and critical-slope")
         return func(*args, **kwargs)
 
     params = own + extra

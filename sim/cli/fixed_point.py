@@ -62,6 +62,11 @@ def fixed_point_cmd(
         ("trailing foot lowest point (mm)", out["trailing_foot_min_height_m"] * 1e3),
         ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
         ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
+        *([("guide friction F_c (N)", params.guide_friction_n),
+           ("friction work per step (J)", out["friction_work_per_step_j"]),
+           ("stuck time stance, trailing (s)", f"{out['stick_time_s']['stance']:.4f}, "
+                                               f"{out['stick_time_s']['trailing']:.4f}")]
+          if params.guide_friction_n > 0.0 else []),
         ("residual |P(z)-z|", out["residual"]),
         ("found by", "Newton from the default guess" if out["found_by"] == "newton" else
          "the gaits search (Newton from the default guess failed)"),
@@ -152,6 +157,8 @@ def critical_slope_cmd(
     elif start_slope_rad is not None or option_given("slope_deg") or option_given("slope_rad"):
         raise ParameterError("--model rigid is the closed form: it takes no slope (drop --slope-deg, --slope-rad "
                              "and --start-slope-rad)")
+    if model == ModelOrRigid.rigid and params.guide_friction_n > 0.0:
+        raise ParameterError("--model rigid has no sliding legs: --guide-friction-n does not apply to it")
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("continuation in slope", json_out=json_out) as bar:
         out = critical_slope_study(

@@ -93,6 +93,8 @@ def gait_cmd(
 
         if model is not Model.er:
             raise ParameterError("--clutch firmware needs --model er (the viscoelastic wheel has no clutch)")
+        if params.guide_friction_n > 0.0:
+            raise ParameterError("--guide-friction-n is not modelled with --clutch firmware (the ideal clutch only)")
         if theta_dot is not None or gait is not None or out is not None or plot is not None:
             raise ParameterError("--clutch firmware starts from the ideal fixed point and writes no trajectory: "
                                  "drop --theta-dot, --gait, --out and --plot")
@@ -129,6 +131,8 @@ def gait_cmd(
             ("steps", f"{done} of {steps}"),
             ("step periods (s)", ", ".join(f"{p:.4f}" for p in summary["step_periods_s"][:8]) + more),
             ("energy ratios", ", ".join(f"{p:.4f}" for p in summary["energy_ratios"][:8]) + more),
+            *([("friction work per step (J)", ", ".join(f"{w:.4g}" for w in summary["friction_work_per_step_j"][:8])
+                + more)] if params.guide_friction_n > 0.0 else []),
             ("trajectory", summary["out"] or "-"),
             ("figure", summary["plot"] or "-"),
         ]))

@@ -7,12 +7,12 @@ import typer
 
 from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
-from rimless.sim.cli.app import JsonOpt, check_plot_path, wheel_params
+from rimless.sim.cli.app import NO_FRICTION, JsonOpt, check_plot_path, wheel_params
 from rimless.sim.cli.output import console, table
 
 
 @user_facing
-@wheel_params
+@wheel_params(exclude=NO_FRICTION)
 def replay_cmd(
     params: Any,
     log: Annotated[Path, typer.Argument(help="Trial log of `rimless robot run` (JSON Lines).")],

@@ -9,14 +9,14 @@ import typer
 from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import (Backend, BackendOpt, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt, SwitchEnergyOpt,
+from rimless.sim.cli.app import (NO_FRICTION, Backend, BackendOpt, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt, SwitchEnergyOpt,
                                  VeElectronicsOpt, check_scheduler, clutch_power, wheel_params)
 from rimless.sim.cli.output import console
 from rimless.values import parse_numbers, parse_range
 
 
 @user_facing
-@wheel_params(exclude=("k", "c", "slope_deg", "slope_rad", "leg_mass_kg"))
+@wheel_params(exclude=NO_FRICTION + ("k", "c", "slope_deg", "slope_rad", "leg_mass_kg"))
 def stress_cmd(
     params: Any,
     k_values: Annotated[str, typer.Option("--k-values", help="Stiffnesses to sweep, N/m, comma-separated.")] =
@@ -87,7 +87,7 @@ def bench_cmd(
 
 
 @user_facing
-@wheel_params(exclude=("k",))
+@wheel_params(exclude=NO_FRICTION + ("k",))
 def paper_cmd(
     params: Any,
     out: Annotated[Path, typer.Option("--out", metavar="DIR", help="Folder for the figures, CSVs and index.html.")] =

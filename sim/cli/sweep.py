@@ -10,7 +10,7 @@ import typer
 from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import (Backend, BackendOpt, ClutchKind, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt,
+from rimless.sim.cli.app import (NO_FRICTION, Backend, BackendOpt, ClutchKind, ElectronicsPowerOpt, HoldPowerOpt, JsonOpt, RtolOpt,
                                  SwitchEnergyOpt, VeElectronicsOpt, check_plot_path, check_scheduler, clutch_power,
                                  refuse_unused, start_slope, wheel_params)
 from rimless.sim.cli.output import console
@@ -21,7 +21,7 @@ _SWEEP_COLUMNS = (("model", 5), ("k", 6), ("branch", 13), ("stable", 6), ("valid
 
 
 @user_facing
-@wheel_params
+@wheel_params(exclude=NO_FRICTION)
 def firmware_sweep_cmd(
     params: Any,
     rates_hz: Annotated[str, typer.Option("--rates-hz", help="Sensor rates, Hz (comma-separated or START:STOP:STEP).")]
@@ -75,7 +75,7 @@ def firmware_sweep_cmd(
 
 
 @user_facing
-@wheel_params(exclude=("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
+@wheel_params(exclude=NO_FRICTION + ("k", "c", "leg_mass_kg", "hub_mass_kg", "mass_model"))
 def sweep_cmd(
     params: Any,
     models: Annotated[str, typer.Option("--model", metavar="er,ve", help="Models, comma-separated: er, ve.")] = "er,ve",

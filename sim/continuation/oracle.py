@@ -28,7 +28,8 @@ class MapOracle:
 
     `map_factory(params)` gives a Poincaré map (recorded steps for the contact facts, and the map itself on
     the reference path). A map with `integrator.rtol` and a compiled `evaluate` is evaluated through
-    rimless.sim.fast.fast_step directly, without building a map object per parameter value.
+    rimless.sim.fast.fast_step directly, without building a map object per parameter value (not with guide
+    friction, which fast_step does not model: its maps step phase by phase).
     """
 
     def __init__(self, map_factory: Callable[[WheelParams], Any], base: WheelParams, parameter: str,
@@ -43,7 +44,9 @@ class MapOracle:
         self._maps: dict[float, Any] = {}
         self._params: dict[float, WheelParams] = {}
         probe = map_factory(base)
-        self.compiled = hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None
+        # guide friction: the map runs phase by phase (its stick/slip phases), not through fast_step
+        self.compiled = hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None \
+            and base.guide_friction_n == 0.0
         self.rtol = float(getattr(getattr(probe, "integrator", None), "rtol", 1e-10))
         self.atol = float(getattr(getattr(probe, "integrator", None), "atol", self.rtol * 1e-2))
         self.bilateral = bool(getattr(probe, "bilateral", False))

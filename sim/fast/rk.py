@@ -38,6 +38,9 @@ from scipy.integrate import DOP853
 
 from rimless.sim.fast import model as fm
 from rimless.sim.integrate.events import DIP_MARGIN, DIP_SAMPLES
+from rimless.sim.model.clutch import SLIP_DOWN, SLIP_UP, STUCK
+from rimless.sim.model.friction import FRICTION_INDEX, FRICTION_PHASE0
+from rimless.sim.model.guards import SLIP_END_1, SLIP_END_2, STICK_END_1, STICK_END_2
 
 _jit = numba.njit(cache=True)
 
@@ -90,15 +93,133 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
                 f[o + i] = y[o + 5 + i]
                 f[o + 5 + i] = dqdd[i, col]
     else:
-        ok = fm.accel_reduced(mi, phase, q, qd, p, qdd, lam, ws)
+        ok = _accel_any(mi, phase, q, qd, p, qdd, lam, ws)
         if not ok:
             return False
     for i in range(5):
         f[i] = qd[i]
         f[5 + i] = qdd[i]
     if with_diss:
-        f[y.shape[0] - 1] = fm.damping_power(phase, qd, p)
+        f[y.shape[0] - 1] = fm.damping_power(_base_phase(phase), qd, p)
     return True
+
+
+# ------------------------------------------------------------------------------------------------
+# Guide friction (rimless.sim.model.friction): phase codes >= FRICTION_PHASE0 are a base phase with each
+# friction leg slipping up/down (-/+ F_c on L) or stuck (L' = 0 a constraint); F_c = p[FRICTION_INDEX].
+# Without the variational equations (the map Jacobian with friction is taken by differences). The leg states
+# are rimless.sim.model.clutch's SLIP_UP, SLIP_DOWN and STUCK.
+
+
+@_jit
+def _base_phase(phase):
+    if phase >= FRICTION_PHASE0:
+        return (phase - FRICTION_PHASE0) // 16
+    return phase
+
+
+@_jit
+def _leg_state(phase, leg):
+    c = phase - FRICTION_PHASE0
+    return (c % 16) // 4 if leg == 1 else c % 4
+
+
+@_jit
+def _stuck_row(phase, leg):
+    """Row of leg `leg`'s holding force in lambda of a friction phase (b: 0-1, a: 2-3 in double support)."""
+    base = _base_phase(phase)
+    r = 4 if base == fm.DLSP else 2
+    if leg == 2 and _leg_state(phase, 1) == STUCK:
+        r += 1
+    return r
+
+
+@_jit
+def _friction_accel(mi, phase, q, qd, p, qdd, lam):
+    """q'' and lambda (rows: b_x, b_y, [a_x, a_y], [L1], [L2]) of a friction phase by the KKT solve of
+    [[M, -A^T], [A, 0]] [q''; lambda] = [-h + f_friction; -A' q'] (rimless.sim.model.clutch.accel)."""
+    M, h, Ja, jd = fm.terms(mi, q, qd, p)
+    base = _base_phase(phase)
+    s1 = _leg_state(phase, 1)
+    s2 = _leg_state(phase, 2)
+    F = p[FRICTION_INDEX]
+    A = np.zeros((6, 5))
+    adot = np.zeros(6)
+    A[0, 0] = 1.0
+    A[1, 1] = 1.0
+    nc = 2
+    if base == fm.DLSP:
+        for r in range(2):
+            adot[2 + r] = jd[r]
+            for c in range(5):
+                A[2 + r, c] = Ja[r, c]
+        nc = 4
+    if s1 == STUCK:
+        A[nc, 3] = 1.0
+        nc += 1
+    if s2 == STUCK:
+        A[nc, 4] = 1.0
+        nc += 1
+    n = 5 + nc
+    K = np.zeros((11, 11))
+    piv = np.empty(11, dtype=np.int64)
+    for i in range(5):
+        for j in range(5):
+            K[i, j] = M[i, j]
+    for r in range(nc):
+        for c in range(5):
+            K[c, 5 + r] = -A[r, c]
+            K[5 + r, c] = A[r, c]
+    if not fm.lu_factor(K, n, piv):
+        return False
+    b = np.empty(n)
+    for i in range(5):
+        b[i] = -h[i]
+    if s1 == SLIP_UP:
+        b[3] -= F
+    elif s1 == SLIP_DOWN:
+        b[3] += F
+    if s2 == SLIP_UP:
+        b[4] -= F
+    elif s2 == SLIP_DOWN:
+        b[4] += F
+    for r in range(nc):
+        b[5 + r] = -adot[r]
+    fm.lu_solve(K, n, piv, b)
+    for i in range(5):
+        qdd[i] = b[i]
+    for r in range(nc):
+        lam[r] = b[5 + r]
+    for i in range(5):
+        if not math.isfinite(qdd[i]):
+            return False
+    return True
+
+
+@_jit
+def _accel_any(mi, phase, q, qd, p, qdd, lam, ws):
+    """q'' and lambda of a base phase (the generated reduced equations) or of a friction phase."""
+    if phase >= FRICTION_PHASE0:
+        return _friction_accel(mi, phase, q, qd, p, qdd, lam)
+    return fm.accel_reduced(mi, phase, q, qd, p, qdd, lam, ws)
+
+
+@_jit
+def _needs_lambda(code):
+    return fm.guard_needs_lambda(code) or code == STICK_END_1 or code == STICK_END_2
+
+
+@_jit
+def _guard_value(phase, code, y, lam, p):
+    """Guard `code` at y with the phase's lambda (the stick/slip guards of rimless.sim.model.guards too)."""
+    if code == SLIP_END_1 or code == SLIP_END_2:
+        leg = 1 if code == SLIP_END_1 else 2
+        rate = y[8] if leg == 1 else y[9]
+        return rate if _leg_state(phase, leg) == SLIP_UP else -rate
+    if code == STICK_END_1 or code == STICK_END_2:
+        leg = 1 if code == STICK_END_1 else 2
+        return p[FRICTION_INDEX] - abs(lam[_stuck_row(phase, leg)])
+    return fm.guard_value_from(code, y, lam, p[3])
 
 
 @_jit
@@ -133,7 +254,7 @@ def _initial_step(mi, phase, p, t0, y0, f0, t_bound, rtol, atol, n_err, with_var
     for i in range(N):
         y1[i] = y0[i] + h0 * f0[i]
     f1 = np.empty(N)
-    lam = np.zeros(4)
+    lam = np.zeros(6)
     rhs_aug(mi, phase, p, y1, with_var, with_diss, f1, lam, np.empty(fm.WORKSPACE_SIZE + 5))
     for i in range(n_err):
         sc = atol + abs(y0[i]) * rtol
@@ -169,9 +290,12 @@ def _guard_on_dense(mi, phase, p, code, t, t_old, h, F, y_old, ybuf, qdd, lam, r
     _dense_eval(F, y_old, x, 10, ybuf)
     if rate:
         return fm.swing_height_rate(ybuf, p[3])
-    if fm.guard_needs_lambda(code):
-        fm.accel(mi, phase, ybuf[0:5], ybuf[5:10], p, qdd, lam)
-    return fm.guard_value_from(code, ybuf, lam, p[3])
+    if _needs_lambda(code):
+        if phase >= FRICTION_PHASE0:
+            _friction_accel(mi, phase, ybuf[0:5], ybuf[5:10], p, qdd, lam)
+        else:
+            fm.accel(mi, phase, ybuf[0:5], ybuf[5:10], p, qdd, lam)
+    return _guard_value(phase, code, ybuf, lam, p)
 
 
 @_jit
@@ -179,7 +303,7 @@ def _brent(mi, phase, p, code, rate, xa, xb, t_old, h, F, y_old):
     """scipy.optimize.brentq (xtol = rtol = 4 eps) on a guard of the dense output; returns (root, nfev)."""
     ybuf = np.empty(10)
     qdd = np.empty(5)
-    lam = np.zeros(4)
+    lam = np.zeros(6)
     xtol = 4.0 * _EPS
     rtol = 4.0 * _EPS
     xpre = xa
@@ -298,7 +422,7 @@ def _min_on_dense(mi, phase, p, code, a, x, gx, b, t_a, h, F, y_a):
     bracket a < x < b with g(x) below both ends; returns (x_min, g_min, nfev). Stops early at g <= 0."""
     ybuf = np.empty(10)
     qdd = np.empty(5)
-    lam = np.zeros(4)
+    lam = np.zeros(6)
     w = x
     v = x
     gw = gx
@@ -390,7 +514,7 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a, g_a, g_b):
     lowest interior sample is refined by Brent's minimisation. A crossing is located by Brent's root finder."""
     ybuf = np.empty(10)
     qdd = np.empty(5)
-    lam = np.zeros(4)
+    lam = np.zeros(6)
     n = DIP_SAMPLES + 1
     gs = np.empty(n + 1)
     gs[0] = g_a
@@ -430,9 +554,9 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a, g_a, g_b):
 
 
 @_jit
-def _guards_at(codes, y, lam, L0, out):
+def _guards_at(phase, p, codes, y, lam, out):
     for e in range(codes.shape[0]):
-        out[e] = fm.guard_value_from(codes[e], y, lam, L0)
+        out[e] = _guard_value(phase, codes[e], y, lam, p)
 
 
 @_jit
@@ -483,13 +607,14 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
     N = y0.shape[0]
     ng = codes.shape[0]
     L0 = p[3]
+    strict = phase >= FRICTION_PHASE0  # friction phases: a guard at exactly 0 at a step's start does not fire
     t = t0
     y = y0.copy()
     t_bound = t0 + t_max
     K = np.empty((_NSE, N))
     f = np.empty(N)
-    lam = np.zeros(4)
-    lam_new = np.zeros(4)
+    lam = np.zeros(6)
+    lam_new = np.zeros(6)
     nfev = 1
     nsteps = 0
     nstiff = 0
@@ -513,7 +638,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
         return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
     g = np.empty(ng)
     g_new = np.empty(ng)
-    _guards_at(codes, y, lam, L0, g)
+    _guards_at(phase, p, codes, y, lam, g)
     h_abs, nf0 = _initial_step(mi, phase, p, t0, y, f, t_bound, rtol, atol, n_err, with_var, with_diss)
     nfev += nf0
     for e in range(ng):
@@ -612,7 +737,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             stden += d2 * d2
         if stden > 0.0 and h * math.sqrt(stnum / stden) > 6.1:
             nstiff += 1
-        _guards_at(codes, y_new, lam_new, L0, g_new)
+        _guards_at(phase, p, codes, y_new, lam_new, g_new)
         for e in range(ng):
             if not math.isfinite(g_new[e]):
                 return STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
@@ -620,8 +745,8 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
         t_hi_graze = -1.0
         any_active = False
         for e in range(ng):
-            up = g[e] <= 0.0 and g_new[e] >= 0.0
-            down = g[e] >= 0.0 and g_new[e] <= 0.0
+            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
+            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             if (up and directions[e] > 0) or (down and directions[e] < 0):
                 any_active = True
             elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
@@ -659,11 +784,11 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                             best_e = e
         if any_active:
             for e in range(ng):
-                up = g[e] <= 0.0 and g_new[e] >= 0.0
-                down = g[e] >= 0.0 and g_new[e] <= 0.0
+                up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
+                down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
                 if (up and directions[e] > 0) or (down and directions[e] < 0):
                     root, nf = _brent(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
-                    nfev += nf if fm.guard_needs_lambda(codes[e]) else 0
+                    nfev += nf if _needs_lambda(codes[e]) else 0
                     if root < best_t:
                         best_t = root
                         best_e = e

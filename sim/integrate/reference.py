@@ -14,6 +14,7 @@ import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from rimless.sim.integrate.events import EventLocator, NonFiniteGuard
+from rimless.sim.model import friction as fr
 from rimless.sim.model.dynamics import accel, damping_power
 from rimless.sim.model.guards import guard_value
 from rimless.sim.model.mechanics import Mechanics
@@ -28,6 +29,8 @@ class PhaseRun:
     guard: int | None
     nfev: int = 0
     dissipated_J: float = 0.0
+    friction_J: float = 0.0  # guide-friction work over the phase (rimless.sim.integrate.friction), J
+    stick_s: tuple[float, float] = (0.0, 0.0)  # time legs 1 and 2 were stuck by guide friction, s
     t: np.ndarray | None = None  # recorded times, s
     y: np.ndarray | None = None  # recorded states (n, 10)
     message: str = ""
@@ -74,6 +77,10 @@ class ScipyIntegrator:
       the force is re-integrated with dense output for that search;
     - bounded work: a non-finite state or derivative, or more than `max_nfev` right-hand-side evaluations
       in one phase, ends the phase as failed (classified by the caller as an integration failure).
+
+    `phase` is a base phase of rimless.sim.model.dynamics or a guide-friction stick/slip phase of
+    rimless.sim.model.friction (codes >= FRICTION_PHASE0: its dynamics and guards, strict crossings), which
+    rimless.sim.integrate.friction runs one after the other.
     """
 
     method: str = "DOP853"
@@ -107,14 +114,17 @@ class ScipyIntegrator:
         n = 10
         nfev = 0
         budget = self.max_nfev
+        friction = fr.is_friction_phase(phase)  # a stick/slip phase of guide friction (strict crossings)
+        accel_of, power_of, guard_of = (fr.accel, fr.damping_power, fr.guard_value) if friction else \
+            (accel, damping_power, guard_value)
 
         def fun(_t: float, y: np.ndarray) -> np.ndarray:
             nonlocal nfev
             nfev += 1
             if nfev > budget:
                 raise _Abort(f"more than {budget} right-hand-side evaluations in one phase (stiff legs?)")
-            qdd, _ = accel(mech, phase, y[:5], y[5:n])
-            out = np.concatenate((y[5:n], qdd, [damping_power(mech, phase, y[5:n])])) if track_dissipation \
+            qdd, _ = accel_of(mech, phase, y[:5], y[5:n])
+            out = np.concatenate((y[5:n], qdd, [power_of(mech, phase, y[5:n])])) if track_dissipation \
                 else np.concatenate((y[5:n], qdd))
             if not math.isfinite(float(np.sum(out))):
                 raise _Abort("non-finite state or forces (the state is too large or the dynamics singular)")
@@ -135,8 +145,8 @@ class ScipyIntegrator:
             return failed(t0, y_init, "non-finite start state")
         try:
             solver = SOLVERS[self.method](fun, t0, y_init, t0 + t_max, rtol=self.rtol, atol=self.atol)
-            locator = EventLocator(guards, lambda code, y: guard_value(mech, phase, code, y[:n]), t0, y_init,
-                                   dense_on=dense_on)
+            locator = EventLocator(guards, lambda code, y: guard_of(mech, phase, code, y[:n]), t0, y_init,
+                                   dense_on=dense_on, strict=friction)
         except _Abort as err:
             return failed(t0, y_init, str(err))
         except NonFiniteGuard:

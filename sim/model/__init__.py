@@ -4,7 +4,9 @@ What lives here is the physics of `../shared/docs/model.md`, independent of how 
 `params` (Table 1, validated), `derive` (sympy) and `generated/` (its numeric output), `mechanics` (M, h and
 Jacobians of one mass model), `dynamics` (the constrained phase dynamics), `guards` (the one guard table:
 every event that ends a phase, with its code, direction and failure class), `impact`, `section`
-(z <-> full post-impact state), `clutch` (real-clutch constraint sets), `rigid` (closed form), `failures`.
+(z <-> full post-impact state), `clutch` (real-clutch constraint sets), `friction` (Coulomb friction in the
+leg guides: stick/slip phases on the clutch's constraint sets, beyond the paper), `rigid` (closed form),
+`failures`.
 
 May import: the standard library, numpy, sympy (derive only), rimless.errors. Nothing else of rimless.
 """

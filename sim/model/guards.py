@@ -8,7 +8,8 @@ solver steps, rimless.sim.integrate.events) and the failure it means when it fir
 
 `failure_of` turns a failure guard into its classified StepFailure. `guard_value` evaluates the guards of
 the step's phases (rimless.sim.model.dynamics), `mode_guard_value` those of a clutch mode
-(rimless.sim.model.clutch.Mode, with the clutch's holding force); both return N for force guards, rad/s or
+(rimless.sim.model.clutch.Mode, with the clutch's holding force, or the guide friction F_c for the friction
+phases of rimless.sim.model.friction); both return N for force guards, rad/s or
 m/s for rate guards, m for heights.
 """
 
@@ -28,11 +29,12 @@ STALL = 1  # theta' falls through 0: the wheel stops and rolls back (failure)
 CLUTCH_LOCK = 2  # L1' rises through 0: maximum compression, the clutch locks (ends free compression)
 TOUCHDOWN = 3  # swing-foot height falls through 0 (ends single support)
 LIFTOFF_B = 4  # lambda_b,y falls through 0 in single support (failure)
-# the clutch modes of the firmware in the loop (rimless.sim.in_the_loop.loop) add:
+# the clutch modes of the firmware in the loop (rimless.sim.in_the_loop.loop) and the guide friction's
+# stick/slip phases (rimless.sim.model.friction, holding force = F_c) add:
 FOOT_A_DOWN = 5  # the lifted foot a's height falls through 0: it comes down again (a re-contact impact)
 SLIP_END_1 = 6  # the slipping stance leg's rate |L1'| falls through 0 (the slip ends)
 SLIP_END_2 = 7  # the slipping trailing leg's rate |L2'| falls through 0
-STICK_END_1 = 8  # holding force - |clutch force| of the stuck stance leg falls through 0 (it starts to slip)
+STICK_END_1 = 8  # holding force - |holding constraint force| of the stuck stance leg falls through 0 (it slips)
 STICK_END_2 = 9  # likewise for the trailing leg
 
 
@@ -110,6 +112,8 @@ def mode_guard_value(mech: Mechanics, mode: ch.Mode, code: int, y: np.ndarray, h
         return swing_height(y[:5], mech.params.leg_length_m)
     if code == STALL:
         return float(y[7])
+    if code == CLUTCH_LOCK:
+        return float(y[8])
     if code == FOOT_A_DOWN:
         return ch.foot_a_height(y[:5])
     if code in (SLIP_END_1, SLIP_END_2):

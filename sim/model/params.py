@@ -36,6 +36,8 @@ class WheelParams:
     slope_rad : phi, slope angle, 0 <= phi < alpha/2.
     gravity_m_s2 : g.
     mass_model : how the legs' mass enters T and V (model.md section 8).
+    guide_friction_n : F_c, Coulomb friction force of each sliding leg's linear guide, N (0: none, the
+        paper's model; rimless.sim.model.friction and docs/simulator.md "Guide friction").
     """
 
     hub_mass_kg: float = 1.892
@@ -47,6 +49,7 @@ class WheelParams:
     slope_rad: float = 0.05
     gravity_m_s2: float = 9.81
     mass_model: str = "eight-leg"
+    guide_friction_n: float = 0.0
 
     def __post_init__(self) -> None:
         validate(self)
@@ -89,7 +92,12 @@ class WheelParams:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """The fields as a dict; guide_friction_n only when it is not 0 (so that every record and cache key
+        of the frictionless wheel stays as it was)."""
+        d = dataclasses.asdict(self)
+        if d["guide_friction_n"] == 0.0:
+            del d["guide_friction_n"]
+        return d
 
 
 _POSITIVE = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "stiffness_n_per_m", "gravity_m_s2")
@@ -106,6 +114,7 @@ OPTION_OF_FIELD = {
     "slope_rad": "--slope-rad/--slope-deg (phi)",
     "gravity_m_s2": "--g",
     "mass_model": "--mass-model",
+    "guide_friction_n": "--guide-friction-n (F_c)",
 }
 
 
@@ -128,6 +137,8 @@ def validate(p: WheelParams) -> None:
             raise ParameterError(f"parameter {_name(name)} must be > 0, got {getattr(p, name)}")
     if p.damping_ns_per_m < 0.0:
         raise ParameterError(f"parameter {_name('damping_ns_per_m')} must be >= 0, got {p.damping_ns_per_m}")
+    if p.guide_friction_n < 0.0:
+        raise ParameterError(f"parameter {_name('guide_friction_n')} must be >= 0, got {p.guide_friction_n}")
     if not 0.0 <= p.slope_rad < SPOKE_ANGLE_RAD / 2.0:
         raise ParameterError(
             f"parameter {_name('slope_rad')} must satisfy 0 <= slope < alpha/2 = {SPOKE_ANGLE_RAD / 2:.6f} rad "
@@ -156,6 +167,8 @@ _ALIASES = {
     "g": "gravity_m_s2",
     "gravity_m_s2": "gravity_m_s2",
     "mass_model": "mass_model",
+    "F_c": "guide_friction_n",
+    "guide_friction_n": "guide_friction_n",
 }
 
 

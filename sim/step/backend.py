@@ -34,5 +34,19 @@ def make_map(params: WheelParams, model: str, *, backend: str = "auto", rtol: fl
 def jacobian_factory(backend: str = "auto") -> Callable[[PoincareMap], Callable[[np.ndarray], np.ndarray]] | None:
     """The map-Jacobian method for a path: exact (variational) on the fast path, else central differences."""
     if resolve(backend) == "fast":
-        return lambda pmap: pmap.jacobian  # exact: variational equations with saltation
+        # exact (variational equations with saltation) where the whole step is one compiled call; else (guide
+        # friction, a non-ideal clutch) central differences of the map, labelled as such
+        return lambda pmap: pmap.jacobian if getattr(pmap, "exact_jacobian", True) else _Central(pmap)
     return None
+
+
+class _Central:
+    """dP/dz by central differences of the map (FastPoincareMap.jacobian with a step)."""
+
+    method_name = "central-difference"
+
+    def __init__(self, pmap: PoincareMap) -> None:
+        self.pmap = pmap
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        return self.pmap.jacobian(z, 1e-5)

@@ -85,8 +85,17 @@ class FastPoincareMap:
 
     # -- helpers -------------------------------------------------------------------------------
     def _compiled_ok(self) -> bool:
+        """The whole step in one compiled call: not with guide friction (its stick/slip phases run through the
+        hybrid step, each phase compiled) nor with a non-ideal clutch policy."""
+        if self.params.guide_friction_n > 0.0:
+            return False
         return self.clutch is None or isinstance(self.clutch, IdealClutch) or (
             getattr(self.clutch, "delay_s", 0.0) <= 0.0 and getattr(self.clutch, "name", "") in ("ideal", "delayed"))
+
+    @property
+    def exact_jacobian(self) -> bool:
+        """Is `jacobian` the exact variational one (else central differences of the map)?"""
+        return self._compiled_ok()
 
     def _count(self, method: str) -> None:
         self.last_method = method
@@ -179,3 +188,26 @@ class FastPoincareMap:
     def variational_jacobian(self) -> Callable[[np.ndarray], np.ndarray]:
         """A jacobian callable for solve_fixed_point (carries method_name = 'variational')."""
         return _VariationalJacobian(self)
+
+
+@dataclass(frozen=True)
+class FrictionStep:
+    """One step with guide friction on the compiled phase integrator: next section point, period (s), the
+    guide-friction work (J) and the full StepResult."""
+
+    z_next: np.ndarray
+    period_s: float
+    friction_work_J: float
+    result: Any
+
+
+def friction_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10,
+                  atol: float | None = None) -> FrictionStep:
+    """The step map where fast_step (one compiled call) has no guide friction: hybrid.simulate_step with the
+    compiled phase integrator, each stick/slip phase compiled (rimless.sim.integrate.friction). Raises
+    StepFailure."""
+    check_model(model)
+    mech = Mechanics.of(params)
+    res = simulate_step(mech, model, state_from_section(mech, np.asarray(z, dtype=float)),
+                        FastIntegrator(rtol=rtol, atol=rtol * 1e-2 if atol is None else atol))
+    return FrictionStep(section_from_state(res.y_plus), res.period_s, res.friction_work_J, res)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rimless.sim.model import friction as fr
 from rimless.sim.model.dynamics import PHASE_NAMES, accel
 from rimless.sim.model.failures import StepFailure
 from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
@@ -98,7 +99,8 @@ def _append_segment(mech: Mechanics, rows: dict[str, list[np.ndarray]], t: np.nd
     if forces:
         lam_all = np.full((n, 5), np.nan)
         for i, yi in enumerate(y):
-            _, lam = accel(mech, phase, yi[:5], yi[5:])
+            _, lam = (fr.sample_accel(mech, phase, yi) if mech.params.guide_friction_n > 0.0
+                      else accel(mech, phase, yi[:5], yi[5:]))
             lam_all[i, 0:2] = lam[0:2]
             if phase == 0:
                 lam_all[i, 2:4] = lam[2:4]

@@ -13,6 +13,8 @@ from typing import Protocol
 
 import numpy as np
 
+from rimless.sim.integrate.friction import run_with_friction
+from rimless.sim.model import friction as fr
 from rimless.sim.model import guards as ev
 from rimless.sim.model.dynamics import DLSP, PHASE_NAMES, SLSP_CLUTCHED, SLSP_FREE, accel
 from rimless.sim.model.failures import FailureReason, StepFailure
@@ -63,6 +65,8 @@ class StepResult:
     # energy the relabelling adds by snapping the old trailing leg to L0 with zero rate, J (signed: < 0
     # removes energy). Table 1, eight-leg, at the fixed points: about +1.2e-5 J for VE, -2e-6 J for ER.
     relabel_snap_J: float = 0.0
+    friction_work_J: float = 0.0  # guide-friction work over the step, J (0 without guide friction)
+    stick_s: tuple[float, float] = (0.0, 0.0)  # time the stance and trailing legs were stuck by guide friction, s
     segments: list[Segment] | None = None
     diagnostics: dict[str, float] | None = None
 
@@ -110,8 +114,8 @@ class DelayedClutch:
              record_dt: float | None, track_dissipation: bool) -> tuple[np.ndarray, float, list[PhaseRun]]:
         if self.delay_s <= 0.0:
             return IdealClutch().lock(mech, integrator, y, t, record_dt=record_dt, track_dissipation=track_dissipation)
-        run = integrator.run_phase(mech, SLSP_FREE, y, t, (ev.TOUCHDOWN, ev.STALL, ev.LIFTOFF_B), self.delay_s,
-                                   record_dt=record_dt, track_dissipation=track_dissipation)
+        run = run_phase(integrator, mech, SLSP_FREE, y, t, (ev.TOUCHDOWN, ev.STALL, ev.LIFTOFF_B), self.delay_s,
+                        record_dt=record_dt, track_dissipation=track_dissipation)
         _check_failed(run, "slsp_free")
         if run.guard == ev.TOUCHDOWN:
             raise StepFailure(FailureReason.TOUCHDOWN_BEFORE_CLUTCH, "the swing foot landed before the delayed lock",
@@ -125,6 +129,25 @@ class DelayedClutch:
         qd_new = qd - minv_at @ np.linalg.solve(A @ minv_at, A @ qd)
         qd_new[[0, 1, 3]] = 0.0
         return np.concatenate((q, qd_new)), run.t_end, [run]
+
+
+def run_phase(integrator: Integrator, mech: Mechanics, phase: int, y: np.ndarray, t: float, guards: tuple[int, ...],
+              t_max: float, *, record_dt: float | None, track_dissipation: bool) -> PhaseRun:
+    """One base phase on `integrator`: as it is without guide friction, else its stick/slip sub-phases
+    (rimless.sim.integrate.friction)."""
+    if mech.params.guide_friction_n > 0.0:
+        return run_with_friction(integrator, mech, phase, y, t, guards, t_max, record_dt=record_dt,
+                                 track_dissipation=track_dissipation)
+    return integrator.run_phase(mech, phase, y, t, guards, t_max, record_dt=record_dt,
+                                track_dissipation=track_dissipation)
+
+
+def start_guard_value(mech: Mechanics, phase: int, code: int, y: np.ndarray) -> float:
+    """Guard `code` at the start y of base phase `phase` (with guide friction: in the friction phase it starts in)."""
+    if mech.params.guide_friction_n > 0.0:
+        fcode, y = fr.initial_phase(mech, phase, y)
+        return fr.guard_value(mech, fcode, code, y)
+    return ev.guard_value(mech, phase, code, y)
 
 
 def _check_failed(run: PhaseRun, phase: str) -> None:
@@ -166,15 +189,19 @@ def simulate_step(
     phases: list[PhaseRecord] = []
     nfev = 0
     dissipated = 0.0
+    friction_work = 0.0
+    stick = np.zeros(2)
     y = np.asarray(y0, dtype=float)
     t = t0
 
     def run(phase: int, guards: tuple[int, ...]) -> PhaseRun:
-        nonlocal nfev, dissipated
-        r = integrator.run_phase(mech, phase, y, t, guards, PHASE_TIME_LIMIT_S, record_dt=record_dt,
-                                 track_dissipation=track_dissipation)
+        nonlocal nfev, dissipated, friction_work
+        r = run_phase(integrator, mech, phase, y, t, guards, PHASE_TIME_LIMIT_S, record_dt=record_dt,
+                      track_dissipation=track_dissipation)
         nfev += r.nfev
         dissipated += r.dissipated_J
+        friction_work += r.friction_J
+        stick[:] += r.stick_s
         _check_failed(r, PHASE_NAMES[phase])
         runs.append((phase, r, t))
         phases.append(PhaseRecord(PHASE_NAMES[phase], t, r.t_end))
@@ -185,7 +212,7 @@ def simulate_step(
 
     def force(phase: int, code: int, state: np.ndarray, name: str) -> float:
         with np.errstate(over="ignore", invalid="ignore"):
-            value = ev.guard_value(mech, phase, code, state)
+            value = start_guard_value(mech, phase, code, state)
         if not np.isfinite(value):
             raise StepFailure(FailureReason.INTEGRATION, "non-finite contact forces (speeds or parameters too large "
                               "to represent)", time_s=t, phase=name)
@@ -231,6 +258,8 @@ def simulate_step(
         for er in extra:
             nfev += er.nfev
             dissipated += er.dissipated_J
+            friction_work += er.friction_J
+            stick[:] += er.stick_s
             runs.append((SLSP_FREE, er, phases[-1].t_end_s))
             phases.append(PhaseRecord("slsp_free", phases[-1].t_end_s, er.t_end))
         if extra:
@@ -258,7 +287,8 @@ def simulate_step(
     result = StepResult(
         y_start=np.asarray(y0, dtype=float), y_minus=y_minus, y_plus=np.concatenate((imp.q_plus, imp.qd_plus)),
         t_start_s=t0, period_s=t - t0, phases=phases, impact=imp, nfev=nfev, dissipated_J=dissipated,
-        clutch_loss_J=clutch_loss, relabel_snap_J=imp.relabel_snap_J,
+        clutch_loss_J=clutch_loss, relabel_snap_J=imp.relabel_snap_J, friction_work_J=friction_work,
+        stick_s=(float(stick[0]), float(stick[1])),
     )
     if record_dt is not None:
         result.segments = [Segment(ph, r.t, r.y) for ph, r, _ in runs if r.t is not None]
@@ -292,7 +322,8 @@ def contact_diagnostics(mech: Mechanics, segments: list[Segment]) -> dict[str, f
     for seg in segments:
         lam_b = np.empty(len(seg.t))
         for i, yi in enumerate(seg.y):
-            _, lam = accel(mech, seg.phase, yi[:5], yi[5:])
+            _, lam = (fr.sample_accel(mech, seg.phase, yi) if mech.params.guide_friction_n > 0.0
+                      else accel(mech, seg.phase, yi[:5], yi[5:]))
             lam_b[i] = lam[1]
             if seg.phase == DLSP:
                 out["min_normal_force_a_dlsp_N"] = min(out["min_normal_force_a_dlsp_N"], lam[3])

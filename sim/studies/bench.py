@@ -11,7 +11,8 @@ s (period); times in s. Steps and right-hand-side evaluations per map are report
 total and per phase. The speed-up at error <= 1e-9 compares, per backend, the loosest rtol at which that
 rtol and every tighter one run meet the target (the grids include half decades, so neither backend is held
 to a decade step). A compiled third-party integrator (numbakit-ode's DOP853, if installed) runs beside the
-fast path's integrator on one phase (without --quick).
+fast path's integrator on one phase (without --quick). Guide friction (F_c = 0.5 N): one step map on the
+compiled path (stick/slip phase by phase) and on the reference path side by side, ratio and errors.
 
 The load average is recorded before and after the run: a compiled and a Python path slow down differently
 under load, so on a busy machine the ratio is marked and followed by a warning instead of printed bare.
@@ -202,6 +203,52 @@ def _timed_fixed_point(pmap: Any, guess: np.ndarray, reps: int, *, record: bool 
     return fp, float(np.median(times))
 
 
+FRICTION_N = 0.5  # guide friction of the friction rows, N
+
+
+def friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
+    """Guide friction (F_c = FRICTION_N) side by side: one step map from z* on the compiled path (each stick/slip
+    phase compiled, rimless.sim.step.fast_map.friction_step) and on the reference path (scipy DOP853), both at
+    rtol 1e-10, each against a tight reference (scipy DOP853 rtol REFERENCE_RTOL): error in z (inf-norm), friction
+    work error (J), seconds per map (median) and their ratio."""
+    from rimless.sim.integrate.reference import ScipyIntegrator
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import section_from_state, state_from_section
+    from rimless.sim.step.fast_map import friction_step
+    from rimless.sim.step.hybrid import simulate_step
+
+    params = WheelParams(guide_friction_n=FRICTION_N)
+    mech = Mechanics.of(params)
+    rtol = 1e-10
+    out: dict[str, Any] = {"guide_friction_n": FRICTION_N, "rtol": rtol, "rows": []}
+    for model in ("er", "ve"):
+        z = Z_STAR[model]
+        y0 = state_from_section(mech, z)
+        say(f"{model}: guide friction {FRICTION_N:g} N, tight reference")
+        tight = simulate_step(mech, model, y0, ScipyIntegrator("DOP853", rtol=REFERENCE_RTOL,
+                                                               atol=REFERENCE_RTOL * 1e-2))
+        z_ref = section_from_state(tight.y_plus)
+        say(f"{model}: guide friction, compiled and reference paths")
+        fast_r = friction_step(params, model, z, rtol=rtol)
+        ref_integ = ScipyIntegrator("DOP853", rtol=rtol, atol=rtol * 1e-2)
+        ref_r = simulate_step(mech, model, y0, ref_integ)
+        fast_s = _time_per_call(lambda: friction_step(params, model, z, rtol=rtol), 0.1 if quick else 0.5, 200)
+        ref_s = _time_per_call(lambda: simulate_step(mech, model, y0, ref_integ), 0.05 if quick else 0.5,
+                               3 if quick else 20)
+        out["rows"].append({
+            "model": model, "fast_seconds_per_map": fast_s, "reference_seconds_per_map": ref_s,
+            "ratio": ref_s / fast_s,
+            "fast_error": float(np.max(np.abs(fast_r.z_next - z_ref))),
+            "reference_error": float(np.max(np.abs(section_from_state(ref_r.y_plus) - z_ref))),
+            "fast_vs_reference": float(np.max(np.abs(fast_r.z_next - section_from_state(ref_r.y_plus)))),
+            "friction_work_J": tight.friction_work_J,
+            "fast_friction_work_error_J": abs(fast_r.friction_work_J - tight.friction_work_J),
+            "reference_friction_work_error_J": abs(ref_r.friction_work_J - tight.friction_work_J),
+            "stick_s": list(tight.stick_s),
+        })
+    return out
+
+
 def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run the benchmark; returns the JSON-ready result (see the module docstring).
 
@@ -349,6 +396,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
             entry.update(reference_seconds=time.perf_counter() - t_s, reference_critical_slope_rad=cs_ref.critical_slope_rad,
                          reference_reason=cs_ref.reason)
         continuation[model] = entry
+    friction = friction_bench(quick, say)
     say("third-party compiled integrator on one phase")
     peer = _peer_bench(params, quick)
     say("compile cost (fresh processes)")
@@ -367,6 +415,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         "speedup_at_1e-9_by_model": speedups,
         "fixed_point": fixed,
         "critical_slope_continuation": continuation,
+        "guide_friction": friction,
         "peer": peer,
         "compile": compile_cost,
         "total_seconds": time.perf_counter() - t0,
@@ -453,6 +502,16 @@ def format_table(result: dict[str, Any]) -> str:
                f"reference {cont['reference_seconds']:.1f} s -> {cont['reference_critical_slope_rad']:.7f} rad")
         lines.append(f"critical slope {model}: fast {cont['fast_seconds']:.2f} s -> {cont['fast_critical_slope_rad']:.7f} rad "
                      f"({cont['fast_reason']}, {cont['branch_points']} branch points); {ref}")
+    fr = result.get("guide_friction")
+    if fr:
+        lines.append(f"guide friction {fr['guide_friction_n']:g} N, one step map at rtol {fr['rtol']:.0e} "
+                     "(errors against scipy DOP853 at rtol 1e-13):")
+        for r in fr["rows"]:
+            lines.append(f"  {r['model']}: fast {r['fast_seconds_per_map'] * 1e3:.2f} ms (error {r['fast_error']:.1e}), "
+                         f"reference {r['reference_seconds_per_map'] * 1e3:.0f} ms (error {r['reference_error']:.1e}): "
+                         f"{r['ratio']:.0f}x{' (busy machine)' if busy else ''}; fast vs reference "
+                         f"{r['fast_vs_reference']:.1e}; friction work {r['friction_work_J']:.4g} J, errors "
+                         f"{r['fast_friction_work_error_J']:.0e} / {r['reference_friction_work_error_J']:.0e} J")
     peer = result.get("peer") or {}
     if "rows" in peer:
         lines.append(f"peer integrator, one phase: {peer['phase']}, {peer['duration_s']:g} s")

@@ -19,6 +19,7 @@ def params_summary(p: WheelParams) -> dict[str, Any]:
         "k": p.stiffness_n_per_m,
         "c": p.damping_ns_per_m,
         "mass_model": p.mass_model,
+        "guide_friction_n": p.guide_friction_n,
     }
 
 
@@ -55,6 +56,9 @@ def fixed_point_summary(fp: FixedPoint, p: WheelParams, model: str, *, guess: An
         "residual": fp.residual,
         "newton_iterations": fp.iterations,
         "jacobian_method": fp.jacobian_method,
+        # guide friction (beyond the paper): its work per step and how long each leg was stuck (0 without it)
+        "friction_work_per_step_j": step.friction_work_J,
+        "stick_time_s": {"stance": step.stick_s[0], "trailing": step.stick_s[1]},
     }
     out.update(contact_validity(out))
     out["relabel_note"] = relabel_note(-imp.relabel_loss, p.mass_model)
@@ -153,6 +157,7 @@ def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
         "k": p.stiffness_n_per_m,
         "c": p.damping_ns_per_m,
         "mass_model": p.mass_model,
+        "guide_friction_n": p.guide_friction_n,
     }
 
 

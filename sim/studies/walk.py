@@ -80,6 +80,8 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
         "steps_requested": steps,
         "step_periods_s": [s.period_s for s in traj.steps],
         "energy_ratios": [s.impact.energy_ratio for s in traj.steps],
+        "guide_friction_n": params.guide_friction_n,
+        "friction_work_per_step_j": [s.friction_work_J for s in traj.steps],
         "failure": None if traj.failure is None else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
         "out": str(out) if out and traj.steps else None,
         "plot": str(plot) if plot and traj.steps else None,

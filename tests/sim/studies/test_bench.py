@@ -63,3 +63,19 @@ def test_per_phase_counts_and_the_peer_row_fit_the_table() -> None:
     assert all(len(ln) <= 80 for ln in lines)
     res["peer"] = {"skipped": "--quick (nbkode compiles for minutes in each process)"}
     assert all(len(ln) <= 80 for ln in bench.format_table(res).splitlines())
+
+
+def test_the_guide_friction_rows_compare_both_paths_and_fit_the_table() -> None:
+    """The compiled and reference step maps with guide friction side by side: both close to the tight reference,
+    the ratio is what the times say (no timing is asserted), and the table prints each row."""
+    from rimless.sim.studies.bench import FRICTION_N, format_table, friction_bench
+
+    fr = friction_bench(True, lambda _msg: None)
+    assert fr["guide_friction_n"] == FRICTION_N and [r["model"] for r in fr["rows"]] == ["er", "ve"]
+    for r in fr["rows"]:
+        assert r["fast_error"] < 1e-8 and r["reference_error"] < 1e-8 and r["fast_vs_reference"] < 1e-8
+        assert r["fast_friction_work_error_J"] < 1e-9 and r["friction_work_J"] > 0
+        assert r["ratio"] == pytest.approx(r["reference_seconds_per_map"] / r["fast_seconds_per_map"])
+    text = format_table({"rows": [], "speedup_at_1e-9": None, "speedup_at_1e-9_by_model": {}, "fixed_point": {},
+                         "guide_friction": fr, "compile": {}, "total_seconds": 0.0})
+    assert "guide friction 0.5 N" in text and text.count("fast vs reference") == 2
