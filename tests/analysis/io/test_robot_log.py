@@ -87,10 +87,14 @@ def test_a_log_written_by_the_fake_robot(tmp_path):
     _, _, r, _ = scenario(config(tmp_path), script, timeout_s=30.0)
     log = read_clutch_log(r["result"]["path"])
     held = log.complete()
-    assert held.size >= 3
+    events = [json.loads(ln).get("event") for ln in Path(r["result"]["path"]).read_text().splitlines()
+              if ln.strip()]
+    assert held.size >= 3, events
     assert np.all((held > 0.05) & (held < 0.4))
-    assert np.ptp(held) < 0.005
-    np.testing.assert_allclose(np.diff(log.lock_s[:held.size]), 0.4, atol=0.01)
+    # The fake samples at 300 Hz on the wall clock: a lock and a release each land on a sample (3.3 ms apart),
+    # later on a loaded machine; 20 ms still tells a constant hold from one that drifts by a step's fraction.
+    assert np.ptp(held) < 0.02, held
+    np.testing.assert_allclose(np.diff(log.lock_s[:held.size]), 0.4, atol=0.02)
 
 
 @pytest.mark.slow
