@@ -32,14 +32,14 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from scipy.integrate import DOP853
 
 from rimless.sim.fast import model as fm
+from rimless.sim.fast.compiling import kernel
 from rimless.sim.integrate.events import DIP_MARGIN, DIP_SAMPLES
 
-_jit = numba.njit(cache=True)
+_jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
 
 # Tableau of scipy's public DOP853 class (module-level arrays are frozen into the compiled code as constants):
 # the 12 stages, the 13th (the B row, the step's end) and the 3 extra stages of the 7th-order dense output.
