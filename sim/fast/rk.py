@@ -466,8 +466,10 @@ def _room(rec_t, rec_y, nrec):
         return rec_t, rec_y
     rt = np.empty(2 * cap)
     ry = np.empty((2 * cap, 10))
-    rt[:nrec] = rec_t[:nrec]
-    ry[:nrec] = rec_y[:nrec]
+    for i in range(nrec):  # element loops: numba's slice assignment takes seconds to compile
+        rt[i] = rec_t[i]
+        for j in range(10):
+            ry[i, j] = rec_y[i, j]
     return rt, ry
 
 
