@@ -4,7 +4,9 @@ A grid point is one (model, parameter set). Its work (rimless.sim.continuation.b
 the start slope, each followed down in slope) is independent of every other point, so points run as tasks:
 - `scheduler="sync"`: one process, in order (no Dask needed);
 - `scheduler="local"`: a dask.distributed LocalCluster with one single-threaded worker process per core
-  (or `workers`), created and closed here;
+  (or `workers`), created and closed here; its processes write their own messages to
+  $RIMLESS_CACHE_DIR/dask-workers.log (else ~/.cache/rimless/), not to the terminal, and leave Ctrl-C to the
+  command;
 - `scheduler="tcp://HOST:8786"`: a cluster a lab already runs.
 Every worker loads the compiled kernels once (numba's on-disk cache, rimless.sim.fast.warm_up) before the
 first task, not per task. Results are cached on disk (under $RIMLESS_CACHE_DIR/sweep, else
@@ -271,7 +273,12 @@ def _children_write_to(path: Path) -> Iterator[None]:
         return
     with contextlib.suppress(OSError, ValueError):
         sys.stderr.flush()
-    saved = os.dup(2)
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr at all: nothing reaches a terminal anyway
+        os.close(log)
+        yield
+        return
     os.dup2(log, 2)
     try:
         yield
