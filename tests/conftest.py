@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import os
 import subprocess
 import sys
 from collections.abc import Callable
@@ -71,9 +72,28 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    code = ("import numpy as np\n"
+    head = ("import numpy as np\n"
             "from rimless.sim import fast\n"
-            "from rimless.sim.model.params import WheelParams\n"
-            "fast.warm_up()\n"
-            "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n")
-    subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=1800, stdin=subprocess.DEVNULL)
+            "from rimless.sim.model.params import WheelParams\n")
+    codes = [head + "fast.warm_up()\n"
+             "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n"]
+    try:
+        cores = int(config.option.numprocesses)
+    except (TypeError, ValueError):  # "auto" not yet resolved
+        cores = os.cpu_count() or 1
+    if cores > 1:
+        # on a second core meanwhile: the sliding-leg step kernel, which tests/sim/fast compiles otherwise
+        # inside a worker (one mass model per kernel: rimless.sim.fast.step.STEP_MAP_CONTACT)
+        codes.append(head + "try:\n"
+                     "    fast.fast_step(WheelParams(mass_model='sliding-leg'), 'er', np.array([-0.465155, 2.604441]),"
+                     " jacobian=True)\n"
+                     "except Exception:\n"
+                     "    pass\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              stdin=subprocess.DEVNULL) for code in codes]
+    for proc in procs:
+        try:
+            proc.wait(timeout=1800)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()

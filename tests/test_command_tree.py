@@ -461,10 +461,14 @@ def _group_processes(pgid: int) -> list[str]:
     return out
 
 
+_SWEEP_81 = ["sim", "sweep", "--k", "1500:3500:25", "--no-cache", "--workers", "2", "--out", "sweep-out/k"]
+# (arguments, worker processes to wait for (0: none), then seconds before the Ctrl-C)
 LOCAL_CLUSTER_RUNS = {
-    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 30.0),
+    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 0, 30.0),
     # 81 grid points: minutes of work, so the interrupt lands while the workers compute even on a quiet machine
-    "sim sweep": (["sim", "sweep", "--k", "1500:3500:25", "--no-cache", "--workers", "2", "--out", "sweep-out/k"], 3.0),
+    "sim sweep": (_SWEEP_81, 2, 3.0),
+    # the interrupt as the first worker process appears: while the local cluster starts
+    "sim sweep, cluster starting": (_SWEEP_81, 1, 0.0),
 }
 
 
@@ -476,23 +480,20 @@ def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
 
 
 @pytest.mark.slow
-# Known defect (issue 21 stays open for it): the outcome depends on when the Ctrl-C lands. In three CI runs on a
-# fresh clone the sweep case passed once, finished before its interrupt once, and once printed multiprocessing's
-# "leaked semaphore objects" warning after `interrupted`; a Ctrl-C during the cluster's start can print a
-# distributed traceback. Not strict, so a run that passes shows as XPASS.
-@pytest.mark.xfail(strict=False, reason="known: Ctrl-C during a local Dask cluster's start or stop can print after "
-                                        "`interrupted` (resource-tracker warning, distributed traceback)")
+# Strict: multiprocessing's resource tracker is started with its leaked-semaphore warning ignored (the killed
+# workers' semaphores are still unlinked), and after an interrupt nothing of the command's process prints
+# (Dask's logging, thread and finalizer tracebacks silenced) before it exits (rimless.sim.studies.sweep).
 @pytest.mark.parametrize("case", sorted(LOCAL_CLUSTER_RUNS))
 def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_path: Path) -> None:
     """A terminal's Ctrl-C reaches every process of the group (the command and its Dask workers): the command
     prints `interrupted` last, exits 130, leaves no output and no worker behind; the workers print nothing."""
-    args, delay_s = LOCAL_CLUSTER_RUNS[case]
+    args, workers, delay_s = LOCAL_CLUSTER_RUNS[case]
     env = {**os.environ, "COLUMNS": str(WIDTH)}
     proc = subprocess.Popen([sys.executable, "-m", "rimless", *args], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
     try:
-        if case == "sim sweep":
-            _wait_for_workers(proc.pid, 2)  # then `delay_s` into the computation
+        if workers:
+            _wait_for_workers(proc.pid, workers)  # then `delay_s` into the computation
         time.sleep(delay_s)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         t0 = time.perf_counter()

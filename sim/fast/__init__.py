@@ -78,8 +78,10 @@ def _invalidate_stale_cache() -> None:
     from rimless.sim.model import dynamics, guards
     from rimless.sim.model.generated import active_feet, eight_leg, sliding_leg
 
+    from rimless.sim.fast import compiling
+
     digest = hashlib.sha256()
-    for mod in (fm, rk, fs, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
+    for mod in (fm, rk, fs, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
         digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
     stamp_value = digest.hexdigest()
     try:
@@ -297,6 +299,9 @@ class FastIntegrator:
                   t_max: float, *, record_dt: float | None = None, track_dissipation: bool = False) -> PhaseRun:
         codes = np.array(guards, dtype=np.int64)
         dirs = np.array([DIRECTION[g] for g in guards], dtype=np.int64)
+        # read-only, as the step kernel's own guard tables are: one compiled run_phase serves both
+        codes.flags.writeable = False
+        dirs.flags.writeable = False
         y = np.asarray(y0, dtype=np.float64)
         if track_dissipation:
             y = np.concatenate((y, [0.0]))

@@ -2,13 +2,53 @@
 time, quiet when stderr is not a terminal or with --json) when it is neither compiled in this process nor in
 numba's on-disk cache; otherwise just call it.
 
-May import: numba (through the kernels' dispatchers), rimless.progress.
+`kernel` is the decorator of the compiled kernels (numba.njit(cache=True) with one difference, see there).
+
+May import: numba, rimless.progress.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
+
+import numba
+from numba.core import types as _types
+from numba.core.registry import CPUDispatcher
+
+# The one argument whose literal value a kernel is specialised on when called from compiled code: the mass
+# model index (rimless.sim.fast.model picks that model's generated code at compile time from it).
+LITERAL_ARGUMENT = "mi"
+
+
+class _KernelDispatcher(CPUDispatcher):
+    """A numba dispatcher that, called from compiled code, is compiled for the non-literal type of every
+    argument except `mi`.
+
+    numba specialises a jitted function called from jitted code on every literal argument (a constant int or
+    bool at the call site: a phase code, a guard code, `with_diss=False`): one more copy of the function, and
+    of everything below it, per combination of constants, each optimised and emitted by LLVM again. The
+    kernels need the literal only for the mass model index (one model's generated code compiled); every other
+    argument is an ordinary run-time value, as it is when the kernels are called from Python. Same code, same
+    floating-point operations: only fewer copies to compile."""
+
+    def get_call_template(self, args, kws):  # noqa: ANN001, ANN201 (numba's typing hook)
+        pysig, folded = self._compiler.fold_argument_types(args, kws)
+        names = list(pysig.parameters)
+        folded = tuple(a if i < len(names) and names[i] == LITERAL_ARGUMENT else _types.unliteral(a)
+                       for i, a in enumerate(folded))
+        return super().get_call_template(folded, {})
+
+
+def kernel(func: Any = None, *, inline: str = "never") -> Any:
+    """numba.njit(cache=True)(func), specialised from compiled code on the mass model index only (see
+    _KernelDispatcher). inline="always": the function's numba IR is inlined into its compiled callers (no
+    library of its own to optimise, link and emit again above it; for a function with one or two call sites)."""
+    if func is None:
+        return lambda f: kernel(f, inline=inline)
+    disp = numba.njit(cache=True, inline=inline)(func)
+    disp.__class__ = _KernelDispatcher
+    return disp
 
 
 def cache_folder(kernel: Any) -> str:

@@ -7,20 +7,20 @@ Same equations and conventions as rimless.sim.model.dynamics / events / impact /
 slope frame (x down the slope, y the outward normal), q = [x_b, y_b, theta, L1, L2] (m, m, rad, m, m),
 y = [q, q'] (10,), parameter vector p = WheelParams.as_vector() = (m_H, m, I_c, L0, k, c, g, phi), SI units.
 
-The generated functions (rimless.sim.model.generated.*) are compiled as they are; a mass model is selected at run
-time by an integer index (MASS_MODEL_INDEX), so one compiled kernel serves all three models and the
-on-disk cache (cache=True) holds it once.
+The generated functions (rimless.sim.model.generated.*) are compiled as they are; a mass model is selected by an
+integer index (MASS_MODEL_INDEX): a compile-time constant in the per-model entry points (one model's generated
+code compiled, see below), a run-time switch over the three when a kernel is called from Python with it.
 """
 
 from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from numba.core import types as _nbt
 from numba.extending import overload
 
+from rimless.sim.fast.compiling import kernel
 from rimless.sim.model.generated import active_feet as _af
 from rimless.sim.model.generated import eight_leg as _el
 from rimless.sim.model.generated import sliding_leg as _sl
@@ -34,7 +34,7 @@ MASS_MODEL_INDEX = {"eight-leg": 0, "sliding-leg": 1, "active-feet": 2}
 # Phase codes and guard codes: the module-level ints of rimless.sim.model.dynamics and of the one guard
 # table rimless.sim.model.guards (numba freezes them into the compiled code as constants).
 
-_jit = numba.njit(cache=True)
+_jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
 
 
 def _compile(name: str) -> tuple:

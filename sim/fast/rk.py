@@ -32,17 +32,17 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from scipy.integrate import DOP853
 
 from rimless.sim.fast import model as fm
+from rimless.sim.fast.compiling import kernel
 from rimless.sim.integrate.events import DIP_MARGIN, DIP_SAMPLES
 from rimless.sim.model.clutch import SLIP_DOWN, SLIP_UP, STUCK
 from rimless.sim.model.friction import FRICTION_INDEX, FRICTION_PHASE0
 from rimless.sim.model.guards import SLIP_END_1, SLIP_END_2, STICK_END_1, STICK_END_2
 
-_jit = numba.njit(cache=True)
+_jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
 
 # Tableau of scipy's public DOP853 class (module-level arrays are frozen into the compiled code as constants):
 # the 12 stages, the 13th (the B row, the step's end) and the 3 extra stages of the 7th-order dense output.
@@ -590,8 +590,10 @@ def _room(rec_t, rec_y, nrec):
         return rec_t, rec_y
     rt = np.empty(2 * cap)
     ry = np.empty((2 * cap, 10))
-    rt[:nrec] = rec_t[:nrec]
-    ry[:nrec] = rec_y[:nrec]
+    for i in range(nrec):  # element loops: numba's slice assignment takes seconds to compile
+        rt[i] = rec_t[i]
+        for j in range(10):
+            ry[i, j] = rec_y[i, j]
     return rt, ry
 
 

@@ -16,15 +16,14 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
-from rimless.sim.fast.compiling import call_compiling
+from rimless.sim.fast.compiling import call_compiling, kernel
 from rimless.sim.model.guards import DIRECTION
 
-_jit = numba.njit(cache=True)
+_jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
 
 OK = 0
 STALL = 1
@@ -185,7 +184,7 @@ def dlsp_tolerances(rtol, atol):
     return rtol * scale, atol * scale
 
 
-@_jit
+@_jit(inline="always")  # three call sites in step_kernel: no library level of its own
 def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps, ending, touchdown_status,
                time_limit_status, counts, rec_dt, contact):
     """One phase of the map from (t, ya) until a guard of `codes` fires, counted into counts[phase].
@@ -228,7 +227,7 @@ def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bila
                           contact)
 
 
-@_jit
+@_jit(inline="always")  # one call site per mass model entry point below
 def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin).
 

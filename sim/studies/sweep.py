@@ -4,7 +4,9 @@ A grid point is one (model, parameter set). Its work (rimless.sim.continuation.b
 the start slope, each followed down in slope) is independent of every other point, so points run as tasks:
 - `scheduler="sync"`: one process, in order (no Dask needed);
 - `scheduler="local"`: a dask.distributed LocalCluster with one single-threaded worker process per core
-  (or `workers`), created and closed here;
+  (or `workers`), created and closed here; its processes write their own messages to
+  $RIMLESS_CACHE_DIR/dask-workers.log (else ~/.cache/rimless/), not to the terminal, and leave Ctrl-C to the
+  command;
 - `scheduler="tcp://HOST:8786"`: a cluster a lab already runs.
 Every worker loads the compiled kernels once (numba's on-disk cache, rimless.sim.fast.warm_up) before the
 first task, not per task. Results are cached on disk (under $RIMLESS_CACHE_DIR/sweep, else
@@ -220,14 +222,82 @@ class SweepResult:
     setup_s: float
 
 
+def _ignoring_ctrl_c(creator_pid: int) -> Any:
+    """Unpickling the plugin of _ctrl_c_is_the_commands in a process other than the one that made it (a local
+    worker process, which multiprocessing's spawn starts by unpickling the worker's options, before the
+    worker's asyncio loop or any of its code runs): ignore SIGINT from here on (Python and asyncio then install
+    no handler of their own)."""
+    import signal
+    import threading
+
+    if os.getpid() != creator_pid and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return _ctrl_c_is_the_commands(creator_pid)
+
+
+def _ctrl_c_is_the_commands(creator_pid: int | None = None) -> Any:
+    """A Dask worker plugin that does nothing but, unpickled in a worker process, make it ignore SIGINT: a
+    Ctrl-C to the process group is the command's, which then kills its workers (dask_client)."""
+    from distributed import WorkerPlugin
+
+    class CtrlCIsTheCommands(WorkerPlugin):
+        def __init__(self, pid: int) -> None:
+            self.creator_pid = pid
+
+        def __reduce__(self) -> tuple[Any, tuple[int]]:
+            return _ignoring_ctrl_c, (self.creator_pid,)
+
+    return CtrlCIsTheCommands(os.getpid() if creator_pid is None else creator_pid)
+
+
+def workers_log() -> Path:
+    """Where the processes of the last local Dask cluster wrote their own messages (stderr): not the terminal."""
+    return cache_root() / "dask-workers.log"
+
+
+@contextlib.contextmanager
+def _children_write_to(path: Path) -> Iterator[None]:
+    """Point this process's stderr (file descriptor 2) at `path` while the local cluster starts its worker
+    processes (and multiprocessing's resource tracker), which inherit it: whatever they print, also a Ctrl-C
+    landing while one of them is still starting Python, goes to that file, never after `interrupted`. Then
+    stderr is the terminal again. Without a writable cache folder, nothing changes."""
+    import sys
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        log = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)  # the last cluster's only
+    except OSError:
+        log = -1
+    if log < 0:
+        yield
+        return
+    with contextlib.suppress(OSError, ValueError):
+        sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr at all: nothing reaches a terminal anyway
+        os.close(log)
+        yield
+        return
+    os.dup2(log, 2)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            sys.stderr.flush()
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(log)
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
     """A dask.distributed Client on a LocalCluster of `workers` single-threaded processes (scheduler "local")
     or on a running scheduler ("tcp://HOST:PORT"), closed on the way out.
 
-    Ctrl-C is the main process's alone: the local workers start with SIGINT blocked (so a Ctrl-C sent to
-    the process group does not print a traceback in every worker), and on an interrupt the workers are
-    killed and the cluster closed at once, its shutdown logs silenced, before the KeyboardInterrupt goes on.
+    Ctrl-C is the main process's alone: the local workers of the `rimless` command ignore SIGINT (so a Ctrl-C
+    sent to the process group does not print a traceback in every worker), and on an interrupt the workers
+    are killed and the cluster closed at once, its shutdown logs silenced, before the KeyboardInterrupt goes on.
     An unreachable scheduler raises ConnectionError."""
     import logging
     import signal
@@ -241,11 +311,16 @@ def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
     try:
         try:
             if scheduler == "local":
-                # created with SIGINT blocked: the cluster's threads and the worker processes they spawn
-                # inherit the mask; a Ctrl-C meanwhile waits for the unblock below
+                _quiet_resource_tracker()
+                # created with SIGINT blocked: a Ctrl-C meanwhile waits for the unblock below. The worker
+                # processes write to workers_log(), not to the terminal, and ignore SIGINT once started
+                # (_ctrl_c_is_the_commands), so a Ctrl-C to the process group is the command's alone, which
+                # kills its workers
                 try:
-                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                                           processes=True, dashboard_address=":0", silence_logs=logging.ERROR)
+                    with _children_write_to(workers_log()):
+                        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                                               processes=True, dashboard_address=":0", silence_logs=logging.ERROR,
+                                               plugins=(_ctrl_c_is_the_commands(),))
                 except Exception as err:  # noqa: BLE001 - Dask wraps what went wrong (a worker died, no port, ...)
                     from rimless.errors import RunFailure
 
@@ -262,23 +337,44 @@ def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
             if old_mask is not None:
                 signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
         yield client
-    except BaseException:
-        _close_at_once(client, cluster)
-        raise
-    else:
-        if client is not None:
+        if client is not None:  # a Ctrl-C while closing goes to the except below, as one during the work
             client.close()
         if cluster is not None:
             cluster.close()
+    except BaseException as err:
+        from rimless.errors import interrupted_by_user
+
+        _close_at_once(client, cluster, interrupted=interrupted_by_user(err))
+        raise
 
 
-def _close_at_once(client: Any, cluster: Any) -> None:
+def _quiet_resource_tracker() -> None:
+    """multiprocessing's resource tracker (a process of its own, started with the first worker, writing to our
+    stderr) warns at its exit about semaphores of workers that were killed (after a Ctrl-C) and unlinks them:
+    it is started with that warning ignored (it takes the interpreter's -W options from sys.warnoptions), so
+    nothing is printed after `interrupted`; the semaphores are still cleaned up."""
+    import sys
+
+    quiet = "ignore:resource_tracker:UserWarning"
+    if quiet not in sys.warnoptions:
+        sys.warnoptions.append(quiet)
+
+
+def _close_at_once(client: Any, cluster: Any, *, interrupted: bool = False) -> None:
     """After an interrupt or an error: kill the local workers, close client and cluster without waiting for
-    them, and keep Dask's shutdown messages (lost workers, cancelled tasks) off the terminal."""
+    them, and keep Dask's shutdown messages (lost workers, cancelled tasks) off the terminal. After an
+    interrupt the process is about to print `interrupted` and exit: nothing else of this process may print
+    (logging, the threads' and finalizers' tracebacks are silenced for good)."""
     import logging
+    import sys
+    import threading
 
     for name in ("distributed", "tornado", "asyncio"):
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    if interrupted:
+        logging.disable(logging.CRITICAL)
+        threading.excepthook = lambda args: None  # a Dask thread dying in the shutdown says nothing
+        sys.unraisablehook = lambda unraisable: None
     if cluster is not None:
         try:
             import psutil
@@ -286,9 +382,11 @@ def _close_at_once(client: Any, cluster: Any) -> None:
 
             keep = {getattr(resource_tracker._resource_tracker, "_pid", None)}  # noqa: SLF001 - not a worker
             for child in psutil.Process().children(recursive=True):
-                if child.pid not in keep and "resource_tracker" not in " ".join(child.cmdline()):
-                    with contextlib.suppress(Exception):
+                try:  # one child gone or unreadable does not spare the others
+                    if child.pid not in keep and "resource_tracker" not in " ".join(child.cmdline()):
                         child.kill()
+                except Exception:  # noqa: BLE001, S112 - gone already
+                    continue
         except Exception:  # noqa: BLE001 - best effort; close() below ends them anyway
             pass
     for obj in (client, cluster):
