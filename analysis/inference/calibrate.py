@@ -761,7 +761,9 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
-    separation = _check_loss_separation(obj, u, J, fit, scale_all, estimates)
+    from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
+    separation = None if from_leg_test & {"damping_ns_per_m", "guide_friction_n"} else \
+        _check_loss_separation(obj, u, J, fit, scale_all, estimates)  # a leg test measured c or F_c: no ridge to flag
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
     cal_params = glob.params(np.array([e.value if e.identifiable or e.effective_only else e.table1
                                        for e in estimates]))
