@@ -14,13 +14,16 @@ __all__ = ["least_squares_report", "sandwich_se", "NULL_EIGEN"]
 NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
 
 
-def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray) -> np.ndarray:
+def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray,
+                known_rows: bool = False) -> np.ndarray:
     """Standard errors of the globals (their units) from the trial-clustered sandwich A B A: A = (J^T J)^-1,
     B = sum over trials of (J_i^T r_i)(J_i^T r_i)^T with the rows of trial i between offs[i] and offs[i+1].
 
     It stays right when the residuals of a trial are correlated or the model misses something the trials
     share with each other only through the parameters (each trial's misfit counts once, not once per sample);
-    scaled by n / (n - n_global) for n trials (small-sample correction). NaN with fewer trials than globals + 1."""
+    scaled by n / (n - n_global) for n trials (small-sample correction). NaN with fewer trials than globals + 1.
+    With `known_rows`, the rows of J beyond offs[-1] are measurements of known unit variance (prior penalty
+    rows): they count in A, and their information J_k^T J_k joins B unscaled."""
     n_t = offs.size - 1
     if n_t <= n_global:
         return np.full(n_global, np.nan)
@@ -29,7 +32,11 @@ def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, s
     for i in range(n_t):
         g = J[offs[i]:offs[i + 1]].T @ r[offs[i]:offs[i + 1]]
         B += np.outer(g, g)
-    cov = A @ B @ A * (n_t / (n_t - n_global))
+    B *= n_t / (n_t - n_global)
+    if known_rows:
+        Jk = J[int(offs[-1]):]
+        B += Jk.T @ Jk
+    cov = A @ B @ A
     return np.sqrt(np.clip(np.diag(cov)[:n_global], 0.0, None)) * scale[:n_global]
 
 

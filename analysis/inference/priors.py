@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from rimless.analysis.inference.identifiability import sandwich_se
 from rimless.errors import InputFileError
 
 __all__ = ["PRIOR_KEYS", "Prior", "LegPriors", "read_priors"]
@@ -111,22 +112,9 @@ class LegPriors:
 
     def sandwich_se(self, J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int,
                     scale: np.ndarray) -> np.ndarray:
-        """The trial-clustered sandwich A B A of `identifiability.sandwich_se` with the prior rows (the last
-        rows of J beyond offs[-1]) as one more measurement of known variance: A = (J^T J)^-1 over every row,
-        B = sum over trials of (J_i^T r_i)(J_i^T r_i)^T, scaled as there, plus J_p^T J_p."""
-        n_t = offs.size - 1
-        if n_t <= n_global:
-            return np.full(n_global, np.nan)
-        A = np.linalg.pinv(J.T @ J)
-        B = np.zeros_like(A)
-        for i in range(n_t):
-            g = J[offs[i]:offs[i + 1]].T @ r[offs[i]:offs[i + 1]]
-            B += np.outer(g, g)
-        B *= n_t / (n_t - n_global)
-        Jp = J[int(offs[-1]):]
-        B += Jp.T @ Jp
-        cov = A @ B @ A
-        return np.sqrt(np.clip(np.diag(cov)[:n_global], 0.0, None)) * scale[:n_global]
+        """`identifiability.sandwich_se` with the prior rows (the last rows of J beyond offs[-1]) as one more
+        measurement of known variance."""
+        return sandwich_se(J, r, offs, n_global, scale, known_rows=True)
 
     # --- after the calibration ---------------------------------------------------------------------
     def report(self, calibration: Any | None, fit_fields: list[str], fit_names: list[str]) -> dict[str, Any]:
