@@ -225,6 +225,18 @@ class _Parser:
     def is_blank(cells: list[str]) -> bool:
         return not any(cells)
 
+    def starts_section(self, pos: int) -> bool:
+        """Whether the line at ``pos`` opens a section: a title cell alone, then (three lines on) a column
+        header row starting with 'Frame'. A title-like row without that header is a data row with a bad frame."""
+        cells = self.cells(self.line_at(pos))
+        if not (cells[0] and not any(cells[1:]) and not _NUMBER.fullmatch(cells[0])):
+            return False
+        for _ in range(3):
+            pos = self.next_line_pos(pos)
+            if pos >= len(self.text):
+                return True  # a title at the end of the file: parse_section says what is missing
+        return self.cells(self.line_at(pos))[0] == "Frame"
+
     # -- structure
     def parse(self) -> list[Section]:
         text = self.text
@@ -306,14 +318,15 @@ class _Parser:
         data_start = pos
         data_line = line_no + 5
         nxt = next((s for s in self.struct if s >= data_start), len(self.text))
+        bad_row: ViconCsvError | None = None  # a row of this block whose frame cell is not a number
         if nxt < len(self.text):
             cells = self.cells(self.line_at(nxt))
-            is_title = cells[0] and not any(cells[1:]) and not _NUMBER.fullmatch(cells[0])
-            if not self.is_blank(cells) and not is_title:
+            if not self.is_blank(cells) and not self.starts_section(nxt):
                 bad_line = data_line + self.text.count("\n", data_start, nxt)
                 cell = cells[0] if cells[0] else "(empty)"
-                raise self.err(bad_line, 1, "bad-frame",
-                               f"section {kind!r}: frame number {cell!r} is not a number")
+                # raised after the rows above it are read: their errors come first, in file order
+                bad_row = self.err(bad_line, 1, "bad-frame",
+                                   f"section {kind!r}: frame number {cell!r} is not a number")
         width = max(len(comps), len(units), first_data + n_cols)
         bounds = self.group_bounds(columns, first_data)
         lead, data, extra_at = self.parse_block(data_start, nxt, data_line, width, kind, first_data, n_cols,
@@ -336,6 +349,8 @@ class _Parser:
                 self.pending.append(self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
                                              f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): "
                                              "not a position in a capture volume"))
+        if bad_row is not None:
+            raise bad_row
         section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
                           columns=tuple(columns), values=data, name_prefix=prefix,
                           data_line=data_line, units_line=units_line)

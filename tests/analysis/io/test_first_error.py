@@ -72,6 +72,11 @@ def _locations(tmp_path, lines: list[str]) -> tuple[str, list[str]]:
     (lambda L: (_bad(L, 10, 4, "x"), _bad(L, 40, 1, "20")), [(10, "non-numeric"), (40, "frame-order")]),
     (lambda L: (_bad(L, 40, 1, "20"), _bad(L, 50, 4, "x")), [(40, "frame-order"), (50, "non-numeric")]),
     (lambda L: (_bad(L, 12, 1, "6"), _bad(L, 50, 7, "1e999")), [(12, "duplicate-frame"), (50, "non-finite")]),
+    # a frame cell that is not a number ends the rows that can be read: the errors above it still come first
+    (lambda L: (_bad(L, 36, 4, "abc"), _bad(L, 50, 1, "x12")), [(36, "non-numeric"), (50, "bad-frame")]),
+    # a row that looks like a section title (one word, the rest empty) but has no 'Frame' header below it
+    (lambda L: (_bad(L, 36, 4, "abc"), L.__setitem__(49, "Oops" + "," * 7)), [(36, "non-numeric"), (50, "bad-frame")]),
+    (lambda L: L.__setitem__(49, "Oops" + "," * 7), [(50, "bad-frame")]),
 ])
 def test_every_error_is_collected_and_the_first_in_file_order_is_raised(tmp_path, edit, expected):
     """Before: a non-numeric cell stopped the collection (a short row, a repeated frame or an infinite value
