@@ -240,8 +240,9 @@ class LegDetector:
         self.lock_time_s: float | None = None
         self._confirmed = 0  # step intervals since (re)sync that set or matched the period
         self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
-        self._doubt_base_x: float | None = None  # where the current compression (in WAIT/CLUTCHED) started
-        self._doubt_peak_m = 0.0  # how far it has gone (m)
+        self._doubt_lows: deque[tuple[float, float]] = deque()  # (t s, x m): rising minima of the last window
+        self._doubt_peak_m = 0.0  # the largest rise above that window's minimum so far (m)
+        self._doubt_top_x = -math.inf  # the highest position since the rise passed the threshold (m)
 
     def set_params(self, params: DetectorParams) -> None:
         """Apply new parameters (validated) without losing the phase."""
@@ -340,10 +341,10 @@ class LegDetector:
         if self.phase in (Phase.WAIT, Phase.CLUTCHED):
             if self._need_quiet:
                 self._need_quiet = v > p.touch_velocity_m_s
-                self._doubt_base_x = None
+                self._doubt_forget()
                 return NOTHING
             if self.counted and self.synced and p.doubt_compression_m > 0:
-                doubt = self._doubt(v, p.doubt_compression_m)
+                doubt = self._doubt(t, p.doubt_compression_m)
                 if doubt is not None:
                     return doubt
             if v > p.touch_velocity_m_s and t - self._touchdown_s >= p.min_step_s:
@@ -370,7 +371,7 @@ class LegDetector:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
             self.lock_time_s = t
-            self._doubt_base_x = None
+            self._doubt_forget()
             if not self.synced:
                 self._engaged = False
                 return Decision(events=("lock_unsynced",))  # detected, but the leg is not known
@@ -385,28 +386,44 @@ class LegDetector:
             return Decision(events=("no_zero_crossing",))
         return NOTHING
 
-    def _doubt(self, v: float, threshold_m: float) -> Decision | None:
-        """Follow a compression in WAIT/CLUTCHED; one of at least `threshold_m` that ends (velocity back to
-        zero or below) without a confirmed touchdown may have been a step: the count is lost."""
-        if v > 0.0:
-            if self._doubt_base_x is None:
-                self._doubt_base_x = self.position_m
-            self._doubt_peak_m = max(self._doubt_peak_m, self.position_m - self._doubt_base_x)
+    def _doubt_forget(self) -> None:
+        self._doubt_lows.clear()
+        self._doubt_peak_m = 0.0
+        self._doubt_top_x = -math.inf
+
+    def _doubt(self, t: float, threshold_m: float) -> Decision | None:
+        """Follow the leg's position in WAIT/CLUTCHED: a rise of at least `threshold_m` above its lowest
+        position of the last `max_compression_s`, then a fall of half `threshold_m` from the top, without a
+        confirmed touchdown in between, may have been a step: the count is lost. Positions bound the
+        excursion, not the sign of the velocity estimate, which noise can flip inside one rise when few
+        samples fill the velocity window (a loaded loop sampling at 150-200 Hz split a 0.4 mm step in two)."""
+        x = self.position_m
+        lows = self._doubt_lows
+        while lows and lows[-1][1] >= x:
+            lows.pop()
+        lows.append((t, x))
+        while t - lows[0][0] > self.params.max_compression_s:
+            lows.popleft()
+        rise = x - lows[0][1]
+        if rise >= threshold_m:
+            self._doubt_peak_m = max(self._doubt_peak_m, rise)
+        if self._doubt_peak_m < threshold_m:
             return None
-        peak, self._doubt_base_x, self._doubt_peak_m = self._doubt_peak_m, None, 0.0
-        if peak >= threshold_m:
-            return self._lose_sync(
-                f"uncertain touchdown: the leg compressed {peak * 1e3:.2f} mm without a confirmed touchdown "
-                f"(doubt_compression_m {threshold_m * 1e3:.2f} mm); a step may have been missed")
-        return None
+        self._doubt_top_x = max(self._doubt_top_x, x)
+        if self._doubt_top_x - x < 0.5 * threshold_m:
+            return None
+        peak = self._doubt_peak_m
+        self._doubt_forget()
+        return self._lose_sync(
+            f"uncertain touchdown: the leg compressed {peak * 1e3:.2f} mm without a confirmed touchdown "
+            f"(doubt_compression_m {threshold_m * 1e3:.2f} mm); a step may have been missed")
 
     def _touchdown(self, t: float) -> Decision:
         self._before_touchdown = (self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s,
                                   self._touchdown_x_m, self._confirmed)
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
         self._engaged = False
-        self._doubt_base_x = None
-        self._doubt_peak_m = 0.0
+        self._doubt_forget()
         self.leg_index = (self.leg_index + 1) % len(self.legs)
         last = self._last_touchdown_s
         self._last_touchdown_s = t

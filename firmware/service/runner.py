@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import math
 import logging
 import signal
 from collections.abc import Callable, Sequence
@@ -138,12 +139,11 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
     pins_log: PinLog | None = None
     try:
         if sc is not None:
-            sc = scenario(None if sc.name == "none" else sc.name)  # timed from now, just before the hardware
             try:
                 pins_log = PinLog(pin_log_path)
             except OSError as err:
                 raise ParameterError(f"--pin-log {pin_log_path}: {err.strerror or err}") from None
-            hw = build_fake(cfg, trajectory=sc.walk, pin_log=pins_log)
+            hw = build_fake(cfg, trajectory=sc.motion, pin_log=pins_log)  # walks once the app runs
             inject(sc, hw.sensors, hw.fakes)
         else:
             hw = build_real(cfg)
@@ -178,7 +178,9 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
         engages = sorted((t, leg) for leg, pin in enumerate(cfg.clutch.pins)
                          for t, p, level in pins_log.transitions if p == pin and level == on)
         outcome.fake_fault, outcome.engages = None if sc.name == "none" else sc.name, len(engages)
-        if len(cfg.sensors) == 1:  # the walk's truth is that of one sensor counting its legs
-            outcome.airborne_leg_locks = len(airborne_locks(sc.walk, engages, cfg.sensors[0].legs,
+        # the walk's truth (one sensor counting its legs); an app that never ran never walked
+        walk = sc.walk or dataclasses.replace(sc.template, start_s=math.inf)
+        if len(cfg.sensors) == 1:
+            outcome.airborne_leg_locks = len(airborne_locks(walk, engages, cfg.sensors[0].legs,
                                                             cfg.clutch.start_leg_index))
     return outcome

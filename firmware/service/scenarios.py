@@ -8,6 +8,10 @@ that every lock can be judged) and a fault injected into the fake sensor at a se
 - `loop-stall`: the event loop is blocked for 4 s from 2.5 s after start (the watchdog thread releases);
 - `log-disk-full`: a trial log runs from the start, and its disk fills 2.5 s after start: one write is cut
   short, every later one fails with ENOSPC (logging degrades, the walk goes on).
+
+"Start" is the moment the app runs (`on_ready`: the sampler samples, the controller is armed when asked), not
+the moment the scenario is made: a loaded machine may take seconds to get there, and a walk that began
+before the robot looked would be a step no robot could have seen, not a fault of the firmware.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import errno
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, FakeFault
@@ -26,16 +30,58 @@ LOOP_STALL_S = 4.0
 FAULT_AT_S = 2.5  # when the timed faults strike, after start (s): a clutch is engaged then
 
 
+class Timeline:
+    """A scenario's time origin (`time.monotonic()` s): None until `start()`, called once the app runs."""
+
+    def __init__(self) -> None:
+        self.origin_s: float | None = None
+
+    def start(self) -> None:
+        if self.origin_s is None:
+            self.origin_s = time.monotonic()
+
+
+class ScenarioWalk:
+    """The fake's trajectory: the leg rests until the timeline starts, then walks `template` (whose `start_s`
+    counts from the timeline's origin). `walk` is that walk on the fake's clock (None before the start)."""
+
+    def __init__(self, template: FakeWalk, timeline: Timeline) -> None:
+        self.template = template
+        self.timeline = timeline
+        self._walk: FakeWalk | None = None
+
+    @property
+    def walk(self) -> FakeWalk | None:
+        if self._walk is None and self.timeline.origin_s is not None:
+            self._walk = replace(self.template, start_s=self.timeline.origin_s + self.template.start_s)
+        return self._walk
+
+    def __call__(self, t: float) -> float:
+        walk = self.walk
+        return 0.0 if walk is None else walk(t)
+
+
 @dataclass(frozen=True)
 class Scenario:
-    """A walk for every fake sensor and, optionally, an action on each fake at `fault_at_s` after start."""
+    """A walk for every fake sensor and, optionally, an action on each fake at `fault_at_s` after start; both
+    count from `timeline`'s origin (set by `on_ready`)."""
 
     name: str
-    walk: FakeWalk
+    template: FakeWalk  # start_s counts from the start
     fault: Callable[[FakeAdns3080], None] | None = None
     fault_at_s: float = FAULT_AT_S
     stall_loop_s: float = 0.0  # block the event loop this long at `fault_at_s` after start
     disk_full: bool = False  # run a trial log whose disk fills at `fault_at_s` after start
+    timeline: Timeline = field(default_factory=Timeline)
+    motion: ScenarioWalk = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "motion", ScenarioWalk(self.template, self.timeline))
+
+    @property
+    def walk(self) -> FakeWalk | None:
+        """The walk on the fake's clock, once started (the truth of every lock)."""
+        return self.motion.walk
 
 
 def _wrong_id(fake: FakeAdns3080) -> None:
@@ -63,9 +109,9 @@ FAKE_FAULTS: tuple[str, ...] = tuple(n for n in _walks(0.0) if n != "none")
 
 
 def scenario(name: str | None, *, lead_s: float = 1.0) -> Scenario:
-    """The scenario `name` (None: a plain walk), its first touchdown `lead_s` from now; ValueError names the
-    known ones."""
-    walks = _walks(time.monotonic() + lead_s)
+    """The scenario `name` (None: a plain walk), its first touchdown `lead_s` after the start; ValueError names
+    the known ones."""
+    walks = _walks(lead_s)
     key = name or "none"
     if key not in walks:
         raise ValueError(f"unknown fake fault {name!r}; known: {', '.join(FAKE_FAULTS)}")
@@ -99,6 +145,7 @@ def on_ready(sc: Scenario, app: Any) -> None:
     a disk that fills (`disk_full`) at `sc.fault_at_s`."""
     import asyncio
 
+    sc.timeline.start()
     loop = asyncio.get_running_loop()
     if sc.stall_loop_s > 0:
         loop.call_later(sc.fault_at_s, time.sleep, sc.stall_loop_s)
@@ -110,15 +157,19 @@ def on_ready(sc: Scenario, app: Any) -> None:
 
 
 class ScheduledFaultBus:
-    """The fake's bus, applying `action(fake)` once at the first message from `at_monotonic_s` on."""
+    """The fake's bus, applying `action(fake)` once at the first message from `after_s` after the timeline's
+    start on."""
 
-    def __init__(self, fake: FakeAdns3080, at_monotonic_s: float, action: Callable[[FakeAdns3080], None]) -> None:
+    def __init__(self, fake: FakeAdns3080, timeline: Timeline, after_s: float,
+                 action: Callable[[FakeAdns3080], None]) -> None:
         self.fake = fake
-        self.at_s = at_monotonic_s
+        self.timeline = timeline
+        self.after_s = after_s
         self.action: Callable[[FakeAdns3080], None] | None = action
 
     def message(self, segments: Any) -> list[bytes]:
-        if self.action is not None and time.monotonic() >= self.at_s:
+        origin = self.timeline.origin_s
+        if self.action is not None and origin is not None and time.monotonic() >= origin + self.after_s:
             action, self.action = self.action, None
             action(self.fake)
         return self.fake.message(segments)
@@ -132,9 +183,8 @@ def inject(sc: Scenario, sensors: Sequence[Any], fakes: Sequence[FakeAdns3080]) 
     keep their wrapper and get the fault inside it)."""
     if sc.fault is None:
         return
-    at = time.monotonic() + sc.fault_at_s
     for sensor, fake in zip(sensors, fakes, strict=True):
-        bus = ScheduledFaultBus(fake, at, sc.fault)
+        bus = ScheduledFaultBus(fake, sc.timeline, sc.fault_at_s, sc.fault)
         if hasattr(sensor.bus, "cs"):  # GpioChipSelectBus
             sensor.bus.bus = bus
         else:

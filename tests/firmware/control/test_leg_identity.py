@@ -39,6 +39,30 @@ def test_no_lock_on_an_airborne_leg_and_the_count_is_lost_before_any_lock(walk) 
     assert t_fault < walk.touchdown_s(2)  # found before the next touchdown that could have locked
 
 
+@pytest.mark.parametrize("rate_hz", [190.0, 160.0, 100.0])
+@pytest.mark.parametrize("walk", [GENTLE_FIRST, BOUNCE], ids=["missed-first-touchdown", "first-step-bounce"])
+def test_a_loaded_loop_sampling_slowly_still_loses_the_count_before_any_lock(walk, rate_hz) -> None:
+    """A loaded machine ran the fake robot's loop at 170-230 Hz instead of 300 (`robot run --fake
+    --fake-fault missed-first-touchdown` beside three busy loops on 2 cores): fewer samples per velocity window
+    let noise flip the velocity's sign inside the gentle first step, and the doubt test, which followed one
+    run of positive velocity, saw two rises under 0.3 mm: 4-5 airborne locks and no fault (seeds 1 and 3 at
+    190 Hz, 1 and 2 at 160 Hz, all at 100 Hz before the doubt followed positions instead)."""
+    for seed in range(4):
+        res = walk_controller(walk, ROBOT_DETECTOR, rate_hz=rate_hz, seed=seed, duration_s=2.0)
+        assert res.airborne == [] and res.engages == [], (seed, res.engages)
+        assert "leg_sync_lost" in res.faults(), seed
+        t_fault = next(t for t, name, _f in res.events if name == "fault")
+        assert t_fault < walk.touchdown_s(2)
+
+
+@pytest.mark.parametrize("rate_hz", [300.0, 150.0, 100.0])
+def test_a_normal_walk_sampled_slowly_raises_no_doubt(rate_hz) -> None:
+    for seed in range(3):
+        res = walk_controller(NORMAL, ROBOT_DETECTOR, rate_hz=rate_hz, seed=seed, duration_s=3.0)
+        assert res.faults() == [] and res.airborne == [], seed
+        assert len(res.engages) >= 4, seed
+
+
 def test_a_normal_walk_locks_every_step_from_the_third_touchdown_on_the_right_leg() -> None:
     """The price of confirmation: two unclutched steps after arm, then one lock per step, all on the truth's
     stance leg, and no fault."""
