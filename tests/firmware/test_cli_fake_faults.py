@@ -21,7 +21,10 @@ CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)
 def run_fake(tmp_path: Path, *args: str, duration_s: float = 4.0,
              sensor: str = "") -> tuple[dict, list[dict], subprocess.CompletedProcess]:
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'{sensor}[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
+    # the watchdogs at 1 s (the robot's 0.1 s and 0.25 s): a loaded test machine pauses threads for 0.3-0.6 s;
+    # the loop-stall scenario blocks the loop for 4 s
+    cfg.write_text(f'{sensor}[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n'
+                   '[sampling]\nstall_timeout_s = 1.0\nloop_stall_s = 1.0\n')
     pins = tmp_path / "pins.jsonl"
     env = {**os.environ, "RIMLESS_TOKEN": secrets.token_urlsafe(18)}
     proc = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s",

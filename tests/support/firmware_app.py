@@ -20,14 +20,19 @@ from rimless.firmware.service.hardware import build_fake
 TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
 
 
+#: the watchdogs' own tests: the control-thread watchdog at 0.3 s, the event loop's at the robot's 0.25 s
+WATCHDOG_TEST_SAMPLING = SamplingConfig(stall_timeout_s=0.3)
+
+
 def config(tmp_path: Path, **kw) -> RobotConfig:
     base = dict(
         commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN),
         log=LogConfig(dir=str(tmp_path / "trials"), flush_interval_s=0.05),
-        # The control-thread watchdog at 0.3 s instead of the robot's 0.1 s: a test machine running two test
-        # workers (and numba compiling in one) was seen to pause the sampler thread for 0.2 s. Tests of the
-        # watchdog stall it for longer (0.5 s) or pass their own SamplingConfig.
-        sampling=SamplingConfig(stall_timeout_s=0.3),
+        # Both watchdogs at 1 s instead of the robot's 0.1 s (control thread) and 0.25 s (event loop): a test
+        # machine at load 6-7 on 2 cores (two test workers beside other jobs) paused the sampler for 0.3-0.6 s
+        # and the event loop for as long, which faulted tests of other things. Tests of the watchdogs pass
+        # their own SamplingConfig (`WATCHDOG_TEST_SAMPLING`).
+        sampling=SamplingConfig(stall_timeout_s=1.0, loop_stall_s=1.0),
     )
     base.update(kw)
     return RobotConfig(**base)

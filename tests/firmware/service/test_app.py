@@ -10,7 +10,7 @@ import time
 
 from rimless.firmware.service.config import CommandsConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.service.triallog import read_trial_log
-from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for, WATCHDOG_TEST_SAMPLING
 
 
 def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
@@ -213,7 +213,8 @@ def test_stalled_sampler_trips_the_watchdog(tmp_path) -> None:
                 return [hw.pin_factory.pin(p).state for p in hw.clutches.pins]
         return None
 
-    app, summary, states_during_stall, hw = scenario(config(tmp_path), script, arm=True, hw_hook=hook)
+    app, summary, states_during_stall, hw = scenario(config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING), script,
+                                                     arm=True, hw_hook=hook)
     assert wrappers[0].fired
     assert states_during_stall == [False] * 8  # off while the sampler was still stuck
     assert all_off(hw)

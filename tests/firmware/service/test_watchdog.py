@@ -15,7 +15,7 @@ from rimless.firmware.drivers.fake_walk import FakeWalk
 from rimless.firmware.drivers.gpio import PinLog
 from rimless.firmware.service.app import RobotApp
 from rimless.firmware.service.hardware import build_fake
-from tests.support.firmware_app import config
+from tests.support.firmware_app import WATCHDOG_TEST_SAMPLING, config
 
 BOUND_S = 1.0  # asserted release bound; the design bound is loop_stall_s 0.25 s + 0.01 s (+ GIL switches)
 CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)
@@ -34,7 +34,7 @@ def block(how: str, seconds: float) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("how", ["sleep", "busy"])
 def test_a_4_s_blocked_event_loop_releases_within_the_bound(tmp_path, how) -> None:
-    cfg = config(tmp_path)
+    cfg = config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING)
     log = PinLog()
     # A slow walk (a touchdown every 0.9 s): the lock before the block is held ~0.84 s unless the watchdog acts.
     walk = FakeWalk(start_s=time.monotonic() + 0.4, step_period_s=0.9)
