@@ -104,17 +104,30 @@ def test_counts_per_metre_scales_the_friction_only(tmp_path: Path) -> None:
     assert b.friction.value == pytest.approx(a.friction.value / 2, rel=1e-4)
 
 
-def test_count_drift_is_measured_where_the_leg_is_still(tmp_path: Path) -> None:
+def test_count_drift_is_measured_where_the_leg_is_still_and_widens_the_intervals(tmp_path: Path) -> None:
     """The fit measures the count's random-walk rate on the held and settled parts of the logs: the truth's
-    0.5 counts/sqrt(s) (and 2), and about nothing without drift."""
+    0.5 counts/sqrt(s) (and 2), and about nothing without drift. A drift of 2 counts/sqrt(s) moves the fitted
+    decay and friction more than white noise would: their intervals are then the noise model's, well wider
+    than the least squares' (which do not see a wander too slow for one release's residuals)."""
     for drift in (0.5, 2.0, 0.0):
         truth = LegTruth(drift_counts_per_s=drift)
         fit = fit_leg(_logs(tmp_path, truth, [11, 12, 13]))
-        got = fit.summary()["count_drift_counts_per_sqrt_s"]
+        out = fit.summary()
+        got = out["count_drift_counts_per_sqrt_s"]
         if drift:
             assert 0.6 * drift <= got <= 1.5 * drift, (drift, got)
         else:
             assert got < 0.25, got
+        if drift == 2.0:
+            se = out["standard_errors"]
+            for key in ("c_n_s_per_m", "guide_friction_n"):
+                assert se[key + "_noise_model"] > 1.5 * se[key + "_least_squares"], se
+                assert out[key + "_se"] == pytest.approx(se[key + "_noise_model"]), se
+                assert se[key + "_noise_model"] > 1.5 * se[key + "_block_sandwich"], se
+            truth_values = {"c_n_s_per_m": truth.c_n_s_per_m, "guide_friction_n": truth.friction_n}
+            for key, true in truth_values.items():
+                lo, hi = out[key + "_ci"]
+                assert lo <= true <= hi, (key, lo, hi)
 
 
 def test_random_walk_sandwich_equals_the_explicit_covariance() -> None:
