@@ -296,6 +296,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("trials", "calibrate"): ([*CRITICAL_CSVS], 5.0),
     ("trials", "critical-slope"): ([*CRITICAL_CSVS], 2.5),
     ("trials", "coverage"): (["--series", "500"], 3.0),
+    ("trials", "leg-fit-coverage"): (["--tests", "1000"], 4.0),
     ("robot", "leg-test"): (["--fake", "--leg", "0", "--fake-compression-mm", "0", "--timeout-s", "120", "--out",
                              "leg.jsonl"], 3.0),
 }

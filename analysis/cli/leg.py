@@ -1,5 +1,6 @@
 """``rimless trials leg-fit``: fit a leg's k, c and guide friction to `rimless robot leg-test` logs
-(`rimless.analysis.inference.leg_fit`), print.
+(`rimless.analysis.inference.leg_fit`), print; ``rimless trials leg-fit-coverage``: how often its intervals hold
+the truth of simulated leg tests (`rimless.analysis.inference.leg_fit_coverage`).
 
 Only typer and the standard library at module level (``rimless --help`` stays fast).
 """
@@ -18,8 +19,9 @@ DEFAULT_MOVING_MASS_KG = 0.0378
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``leg-fit`` to the ``trials`` app."""
+    """Add ``leg-fit`` and ``leg-fit-coverage`` to the ``trials`` app."""
     app.command("leg-fit")(user_facing(leg_fit_cmd))
+    app.command("leg-fit-coverage")(user_facing(leg_fit_coverage_cmd))
 
 
 def leg_fit_cmd(
@@ -81,13 +83,75 @@ def _print(out: dict[str, Any], plot: Optional[Path]) -> None:
     for p in out["per_log"]:
         typer.echo(f"  {p['file']}: {p['samples']} samples, {p['half_cycles']} half cycles, release delay "
                    f"{p['release_delay_ms']:.1f} ms, residual RMS {p['residual_rms_counts']:.2f} counts")
+    g = out["goal"]
+    widths = ", ".join(f"{name} ±{g['per_parameter'][key]['rel_half_width']:.1%}" for key, name in
+                       (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c")))
+    n = g["releases"]
+    if g["met"]:
+        typer.echo(f"precision goal (95 %: k and c within 2 %, F_c within 10 %) met with {n} release(s): {widths}")
+    else:
+        short = [name for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
+                 if not g["per_parameter"][key]["met"]]
+        more = (f"; about {g['releases_needed']} releases like these would reach it (fewer if they differ in "
+                "compression)" if g["releases_needed"] is not None else "")
+        typer.echo(f"warning: precision goal (95 %: k and c within 2 %, F_c within 10 %) NOT met by "
+                   f"{', '.join(short)} with {n} release(s): {widths}{more}")
     opt = out["optimizer"]
     typer.echo(("fit converged" if out["converged"] else "fit did NOT converge (stopped on its budget)")
                + f": {opt['message']} ({opt['nfev']} evaluations); residual RMS {out['residual_rms_counts']:.2f} "
-               f"counts, lag-1 autocorrelation {out['residual_lag1_autocorrelation']:.2f}")
+               f"counts, lag-1 autocorrelation {out['residual_lag1_autocorrelation']:.2f}; count drift "
+               f"{out['count_drift_counts_per_sqrt_s']:.2f} counts/sqrt(s) (where the leg is still)")
     if "fake_truth" in out:
         t = out["fake_truth"]
         typer.echo(f"fake leg's truth: k = {t['k_n_per_m']:g} N/m, c = {t['c_n_s_per_m']:g} N s/m, F_c = "
                    f"{t['guide_friction_n']:g} N, moving mass {t['moving_mass_kg']:g} kg")
     if plot is not None:
         typer.echo(f"figure: {plot}")
+
+
+def leg_fit_coverage_cmd(
+    tests: Annotated[int, typer.Option("--tests", min=1, max=100000, metavar="N",
+                                       help="Simulated leg tests to fit (a random leg each).")] = 100,
+    releases: Annotated[int, typer.Option("--releases", min=1, max=20, metavar="N",
+                                          help="Releases per leg test (compressions spread over 1.5-2.5 mm).")] = 3,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (the same seed gives the same figures).")] = 0,
+    noise_counts: Annotated[float, typer.Option("--noise-counts", min=0.0, max=100.0, metavar="COUNTS",
+                                                help="Position noise of the sensor (1 sigma, before rounding).")] = 0.3,
+    drift_counts_per_sqrt_s: Annotated[float, typer.Option(
+        "--drift-counts-per-sqrt-s", min=0.0, max=100.0, metavar="RATE",
+        help="Random-walk drift of the count (its sd after 1 s).")] = 0.5,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """How often the 95 % intervals of `trials leg-fit` contain the truth, on simulated leg tests.
+
+    Each test: k, c and guide friction drawn at random (2000-3500 N/m, 4-10 N s/m, 0.1-0.5 N), released
+    --releases times and recorded by an independent truth model (stiction, noise, count drift, rounding, read
+    jitter and late reads, unknown release delay), then fitted like a robot's logs; about a second a test.
+    """
+    from rimless.analysis.inference.leg_fit_coverage import run_leg_fit_coverage
+    from rimless.progress import progress_bar
+
+    with progress_bar("leg-fit coverage", total=tests, json_out=json_out) as bar:
+        res = run_leg_fit_coverage(tests, releases=releases, seed=seed, noise_counts=noise_counts,
+                                   drift_counts_per_sqrt_s=drift_counts_per_sqrt_s,
+                                   progress=lambda i: bar.update(completed=i, description=f"test {i}/{tests}"))
+    out = res.summary()
+    if json_out:
+        print_json(out)
+        return
+    typer.echo(f"{out['fitted']} of {out['tests']} simulated leg tests fitted ({out['releases']} release(s) each, "
+               f"seed {out['seed']}; noise {noise_counts:g} counts, drift {drift_counts_per_sqrt_s:g} counts/sqrt(s))")
+    for key, label in (("k_n_per_m", "k  "), ("c_n_s_per_m", "c  "), ("guide_friction_n", "F_c")):
+        d = out["per_parameter"][key]
+        if not d["fitted"]:
+            continue
+        lo, hi = d["coverage_ci95"]
+        typer.echo(f"{label}: 95 % interval holds the truth in {d['covered']}/{d['fitted']} = {d['coverage']:.1%} "
+                   f"(binomial 95 %: {lo:.1%}-{hi:.1%}; goal 90-98 %); error median {d['median_abs_rel_error']:.2%}, "
+                   f"RMS {d['rms_rel_error']:.2%}; half width median {d['median_rel_half_width']:.2%}; "
+                   f"sd of error/se {d['z_sd']:.2f}")
+    g = out["goal"]
+    typer.echo(f"precision goal (95 % half width: k and c 2 %, F_c 10 %) met in {g['tests_meeting_goal']} of "
+               f"{out['fitted']} tests")
+    if out["failures"]:
+        typer.echo(f"{out['failures']} test(s) gave no fit (classified failures), e.g.: {out['failure_messages'][0]}")

@@ -23,12 +23,15 @@ Then k = m omega_n^2, c = 2 m zeta omega_n, F_c = k a, m the leg's moving mass (
 come from the frequency and the decay, so they do not depend on the sensor's counts per metre; F_c does
 (through a), and scales with it.
 
-Uncertainties: the larger of two covariances, propagated to k, c and F_c (with the moving mass's own
+Uncertainties: the largest of three covariances, propagated to k, c and F_c (with the moving mass's own
 uncertainty, when given): the Jacobian's with the residual variance, inflated for correlated residuals by their
-long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags), and a sandwich over blocks of
-`SANDWICH_BLOCK` consecutive samples (right when the error grows with the speed, as a read's timing error
-does). Their coverage is checked by simulation against an independent truth model in the tests
-(tests/analysis/inference/test_leg_fit.py); see docs/trials.md for the figures.
+long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags); a sandwich over blocks of
+`SANDWICH_BLOCK` consecutive samples; and a noise model's sandwich A J' S J A, S white with each sample's own
+variance (a read's timing error grows with the speed) plus the count's random-walk drift, whose rate is
+measured where the leg is still (held before the release, stuck after the motion: `_count_drift`). The drift is
+what the first two miss: a slow wander of the count, too small to see in the residuals of one release, moves the
+fitted friction and decay. The intervals' coverage is measured by simulation against an independent truth
+model (`rimless trials leg-fit-coverage`, `leg_fit_coverage`); docs/trials.md gives the figures.
 
 One concept: the leg-test fit (log, model, fit, uncertainty, figure).
 """
@@ -47,7 +50,7 @@ from rimless.errors import InputFileError, ParameterError, RunFailure
 
 __all__ = ["FORMAT", "DEFAULT_MOVING_MASS_KG", "LegLog", "LegFitResult", "read_leg_log", "free_response", "fit_leg",
            "run_leg_fit", "fake_truth",
-           "plot_leg_fit", "Z95"]
+           "plot_leg_fit", "Z95", "GOALS", "goal_check"]
 
 FORMAT = "rimless-leg-test/1"  # the first line of a leg-test log (firmware/service/leg_test.py writes it)
 DEFAULT_MOVING_MASS_KG = 0.0378  # Table 1's leg mass, all of it moving with the foot in the wheel model
@@ -58,6 +61,8 @@ MIN_FREE_SAMPLES = 20
 SLOW_READ_US = 500.0  # a read that took longer (and SLOW_READ_FACTOR x the median) is left out
 SLOW_READ_FACTOR = 3.0
 SANDWICH_BLOCK = 30  # samples per block of the sandwich covariance
+DRIFT_BLOCK_S = 0.04  # block of the count-drift estimate (s): its second differences of block means
+HELD_SETTLE_S = 0.02  # the held part the drift is measured on starts this long after the engage
 LONG_RUN_LAGS = 30  # lags of the residuals' long-run variance
 OUTLIER_MAX_SHARE = 0.01  # at most this share of the samples are left out as outliers
 DRIFT_MAX_COUNTS_PER_S = 100.0  # bound of the fitted count drift (a sensor drifting more is broken)
@@ -66,6 +71,23 @@ Z95 = 1.959963984540054
 MAX_NFEV = 400
 N_SHARED, N_PER_LOG = 3, 4  # omega_n, zeta, a; per log x_lock, x_eq, t_r, drift
 ZETA_MAX = 0.95  # the model is the underdamped response; a fit at this bound is not an oscillation
+GOALS = {"k_n_per_m": 0.02, "c_n_s_per_m": 0.02, "guide_friction_n": 0.10}  # precision goal: 95 % half width/value
+
+
+def goal_check(values: dict[str, float], half_widths: dict[str, float], releases: int) -> dict[str, Any]:
+    """Whether a fit of `releases` logs reaches `GOALS` (95 % half width over the value, per parameter), and
+    about how many releases like these would (a half width falls as 1 / sqrt(releases))."""
+    out: dict[str, Any] = {"releases": releases, "per_parameter": {}}
+    need: int | None = releases
+    for key, goal in GOALS.items():
+        rel = half_widths[key] / abs(values[key]) if values[key] else math.inf
+        ok = rel <= goal
+        n = releases if ok else (math.ceil(releases * (rel / goal) ** 2) if math.isfinite(rel) else None)
+        out["per_parameter"][key] = {"rel_half_width": rel, "goal": goal, "met": ok, "releases_needed": n}
+        need = None if need is None or n is None else max(need, n)
+    out["met"] = all(p["met"] for p in out["per_parameter"].values())
+    out["releases_needed"] = need
+    return out
 
 
 @dataclass
@@ -217,6 +239,7 @@ class _Segment:
     x_eq0: float
     t_r0: float
     slow_reads: int = 0  # reads left out: the process was descheduled in them (their instant is uncertain)
+    still: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (t, counts) where the leg is still
     outliers: int = 0  # samples left out by the outlier test after the first fit
 
 
@@ -242,6 +265,9 @@ def _segment(log: LegLog) -> _Segment:
         slow = np.isfinite(ru) & (ru > limit)
     seg = _Segment(log, t[keep & ~slow], log.counts[keep & ~slow], x_lock, x_end, max(t_move - 1e-3, 0.0))
     seg.slow_reads = int(np.sum(keep & slow))
+    held_from = (log.engage_t_s - log.release_t_s + HELD_SETTLE_S) if log.engage_t_s is not None else -PRE_RELEASE_S
+    for part in ((t >= held_from) & (t < 0), t >= t_last + SETTLED_S):  # held by the clutch; stuck after the motion
+        seg.still.append((t[part & ~slow], log.counts[part & ~slow]))
     return seg
 
 
@@ -280,6 +306,9 @@ class LegFitResult:
     segments: list[_Segment] = field(default_factory=list, repr=False)
     params: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     truth: list[dict[str, Any] | None] = field(default_factory=list)
+    count_drift_counts_per_sqrt_s: float = 0.0  # the count's random-walk rate measured where the leg is still
+    count_drift_differences: int = 0  # the block-mean second differences it rests on
+    standard_errors: dict[str, float] = field(default_factory=dict)  # each of the three, before the mass's
 
     def summary(self) -> dict[str, Any]:
         """The JSON of `rimless trials leg-fit --json` (`k_n_per_m`, `c_n_s_per_m`, `guide_friction_n`, each
@@ -296,13 +325,17 @@ class LegFitResult:
             "scale_dependence": "k and c come from the natural frequency and the decay and do not depend on the "
                                 "sensor's counts per metre; guide_friction_n does (it scales with the counts per "
                                 "metre of each log); k and c scale with the moving mass",
-            "intervals": "95 %: the larger of the least-squares covariance (inflated for correlated residuals) and a "
-                         "block sandwich"
+            "intervals": "95 %: the largest of three covariances: least squares (inflated for correlated residuals), "
+                         "a block sandwich, and a noise model (each sample's own variance plus the count's random-walk "
+                         "drift measured where the leg is still)"
                          + (", with the moving mass's uncertainty" if self.moving_mass_sd_kg > 0 else
                             ", without the moving mass's uncertainty (give --moving-mass-sd-kg)"),
             "residual_rms_counts": self.residual_rms_counts, "residual_lag1_autocorrelation": self.autocorrelation,
+            "count_drift_counts_per_sqrt_s": self.count_drift_counts_per_sqrt_s,
+            "count_drift_differences": self.count_drift_differences, "standard_errors": self.standard_errors,
             "per_log": self.per_log, "converged": self.converged, "optimizer": self.optimizer,
         })
+        out["goal"] = goal_check({k: out[k] for k in GOALS}, {k: Z95 * out[k + "_se"] for k in GOALS}, len(self.files))
         return out
 
 
@@ -311,7 +344,19 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     """Fit one leg's k, c and F_c to the released segments of `logs` (one leg; see the module doc).
 
     Raises `ParameterError` for a bad mass or logs of different legs, `RunFailure` when the motion is no
-    oscillation the model can fit (no release motion, overdamped, stuck in the first half cycle)."""
+    oscillation the model can fit (no release motion, overdamped, stuck in the first half cycle).
+
+    The BLAS runs on one thread meanwhile: the least squares take the SVD of a tall Jacobian (~1500 x 15) every
+    iteration, which a multi-threaded OpenBLAS ran some 100x slower on a busy 2-core machine (0.46 s a call)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - a dependency of the pc install
+        return _fit_leg(logs, moving_mass_kg, moving_mass_sd_kg)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit_leg(logs, moving_mass_kg, moving_mass_sd_kg)
+
+
+def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float) -> LegFitResult:
     from scipy.optimize import least_squares
 
     if not logs:
@@ -397,13 +442,16 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     rho = _lag1(r, [s.t.size for s in segs])
     infl = _long_run_inflation(r, [s.t.size for s in segs])
     J = np.asarray(best.jac)
+    q, n_drift = _count_drift(segs)
     try:
         A = np.linalg.pinv(J.T @ J)
         cov = A * s2 * infl
         cov_s = _block_sandwich(A, J, r, offs, p)
+        cov_w, cov_rw = _noise_sandwich(A, J, r, offs, [s.t for s in segs], q)
     except np.linalg.LinAlgError:
-        cov = cov_s = np.full((p, p), np.nan)
+        cov = cov_s = cov_w = cov_rw = np.full((p, p), np.nan)
     cw, cws = cov[:3, :3], cov_s[:3, :3]  # omega, zeta, a (um)
+    cn = (cov_w + cov_rw)[:3, :3]
     m, sm = moving_mass_kg, moving_mass_sd_kg
     a_m = a_um * 1e-6
     k = m * w * w
@@ -414,8 +462,10 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
     gf = np.array([2 * m * w * a_m, 0.0, m * w * w * 1e-6])
 
     def se(g: np.ndarray, value: float) -> float:
-        """The larger of the model-based and the block-sandwich standard error, with the mass's."""
-        v = max(float(g @ cw @ g), float(g @ cws @ g)) if np.isfinite(cws).all() else float(g @ cw @ g)
+        """The largest of the three standard errors (least squares, block sandwich, noise model), with the
+        mass's."""
+        v = max(float(g @ cv @ g) for cv in (cw, cws, cn) if np.isfinite(cv).all()) if np.isfinite(cw).all() \
+            else math.nan
         v += (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
         return math.sqrt(v) if v >= 0 and math.isfinite(v) else math.nan
 
@@ -445,7 +495,11 @@ def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_K
         converged=converged,
         optimizer={"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev),
                    "converged": converged, "starts": 3},
-        segments=segs, params=u, truth=[lg.truth for lg in logs])
+        segments=segs, params=u, truth=[lg.truth for lg in logs], count_drift_counts_per_sqrt_s=math.sqrt(q),
+        count_drift_differences=n_drift)
+    fit.standard_errors = {f"{name}_{kind}": math.sqrt(max(float(g @ cv @ g), 0.0))
+                           for name, g in (("k_n_per_m", gk), ("c_n_s_per_m", gc), ("guide_friction_n", gf))
+                           for kind, cv in (("least_squares", cw), ("block_sandwich", cws), ("noise_model", cn))}
     if not all(math.isfinite(e.value) and math.isfinite(e.se) for e in (fit.k, fit.c, fit.friction)):
         raise RunFailure(f"{segs[0].log.path}: the fit gave no finite k, c and friction with uncertainties "
                          "(a flat direction of the cost: the motion does not determine them)")
@@ -500,6 +554,55 @@ def _block_sandwich(A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarra
     if nb <= p:
         return np.full_like(A, np.nan)
     return A @ B @ A * (nb / (nb - p))
+
+
+def _count_drift(segs: list[_Segment]) -> tuple[float, int]:
+    """The count's random-walk rate q (counts^2/s: its variance after 1 s), measured where the leg is still (held
+    by the clutch before the release, stuck after the motion), and the number of second differences it rests on.
+
+    Each still part is cut into blocks of `DRIFT_BLOCK_S`; the second difference of consecutive block means
+    m[b+2] - 2 m[b+1] + m[b] has the expectation q B (B the block duration) plus the white noise's
+    var(m[b+2]) + 4 var(m[b+1]) + var(m[b]) (each block's sample variance over its size), and none of a linear
+    trend of the count (the fit's drift term takes that)."""
+    num = 0.0
+    n = 0
+    for sg in segs:
+        for t, y in sg.still:
+            if t.size < 10:
+                continue
+            nb = int((t[-1] - t[0]) // DRIFT_BLOCK_S)
+            if nb < 3:
+                continue
+            idx = np.minimum(((t - t[0]) // DRIFT_BLOCK_S).astype(int), nb - 1)
+            size = np.bincount(idx, minlength=nb).astype(float)
+            if (size < 2).any():
+                continue
+            mean = np.bincount(idx, y, nb) / size
+            var = (np.bincount(idx, y * y, nb) - size * mean ** 2) / (size - 1) / size  # of each block's mean
+            d2 = mean[2:] - 2 * mean[1:-1] + mean[:-2]
+            num += float(np.sum(d2 ** 2 - (var[2:] + 4 * var[1:-1] + var[:-2])))
+            n += d2.size
+    return (max(num / (n * DRIFT_BLOCK_S), 0.0), n) if n else (0.0, 0)
+
+
+def _noise_sandwich(A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarray, ts: list[np.ndarray],
+                    q: float) -> tuple[np.ndarray, np.ndarray]:
+    """The covariance A J' S J A of the least squares for residuals whose covariance S is white with each
+    sample's own variance (its squared residual: a read's timing error grows with the speed) plus a random walk
+    of rate q (counts^2/s) in each log, cov = q min(t_i, t_j): returned as its white and its random-walk part.
+    The walk's J' K J is the sum over the sample intervals dt_m of G_m G_m', G_m the sum of the Jacobian's rows
+    from sample m on (the walk's step in interval m moves every later sample)."""
+    n, p = J.shape
+    bw = np.zeros((p, p))
+    brw = np.zeros((p, p))
+    for i in range(offs.size - 1):
+        Ji, ri, t = J[offs[i]:offs[i + 1]], r[offs[i]:offs[i + 1]], ts[i]
+        g = Ji * ri[:, None]
+        bw += g.T @ g
+        tail = np.cumsum(Ji[::-1], axis=0)[::-1]
+        dt = np.diff(t, prepend=t[0])
+        brw += (tail * dt[:, None]).T @ tail
+    return A @ bw @ A * (n / max(n - p, 1)), A @ brw @ A * q
 
 
 def _long_run_inflation(r: np.ndarray, sizes: list[int]) -> float:
