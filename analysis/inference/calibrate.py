@@ -484,6 +484,7 @@ class _ReleaseFit:
         # Gauss-Newton on the step-frequency residuals with a secant slope: one simulation per iteration
         # (least squares with a finite-difference Jacobian takes two)
         w_prev, r_prev = w0, self.freq_res(p, d, w0)
+        r0 = r_prev
         w, r = w0 * (1.0 + 1e-4), self.freq_res(p, d, w0 * (1.0 + 1e-4))
         converged = False
         for _ in range(WARM_ITERATIONS):
@@ -500,7 +501,9 @@ class _ReleaseFit:
                 converged = True
                 break
         if not converged or not walks(r) or not 0.05 < w < 20.0:
-            return self.fit(p, d, None, coarse=True)
+            # least squares from the warm start when it walks (a minimum on the stall edge, where Gauss-Newton
+            # overshoots every step, needs no grid), else from the grid
+            return self.fit(p, d, w0 if walks(r0) else None, coarse=True)
         return w, float(r @ r)
 
     def first_period_release(self, p: Any, d: _TrialData) -> float:
