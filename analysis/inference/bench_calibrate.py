@@ -58,12 +58,15 @@ def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> li
 
 def demo_trials() -> tuple[list[object], list[str]]:
     """The bundled critical series imported as `rimless demo` imports it (the trials with steps), with names."""
-    from rimless.analysis.examples.critical_series import data_files
-    from rimless.analysis.kinematics.inputs import load_input
-    from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S
+    from pathlib import Path
 
+    from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S
+    from rimless.analysis.kinematics.inputs import load_input
+
+    # the files of `rimless.analysis.examples.critical_series.data_files` (a higher layer: not imported here)
+    folder = Path(__file__).resolve().parents[1] / "data" / "critical"
     trials, names = [], []
-    for f in data_files():
+    for f in sorted(folder.glob("SYNTHETIC_crit_*.csv")):
         row = load_input(f, {"max_gap_s": DEFAULT_MAX_GAP_S})
         if row.trial is not None and row.trial.step_period_s.size:
             trials.append(row.trial)
