@@ -592,10 +592,9 @@ def _start(releases: _ReleaseFit, glob: _Globals,
     coarse_releases = [d.release_rad_s for d in data]
     for j in range(glob.n):
         _refine_start(seen[j], lambda: ug_best, j, try_start)
-    if np.any(ug_best != ug_coarse):
-        pb = glob.at(ug_best)
+    if np.any(ug_best != ug_coarse):  # where the least squares begin: the profile's releases (to 1e-6) suffice
         for d, w in zip(data, coarse_releases):
-            d.refined_release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
+            d.refined_release_rad_s = d.release_rad_s
             d.release_rad_s = w
     return table1, ug_coarse, ug_best
 
