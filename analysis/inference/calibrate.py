@@ -51,6 +51,8 @@ FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/
               "guide_friction_n": ("guide_friction_n", "N")}
 NOT_IDENTIFIABLE_REL_SE = 0.5
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
+REFINE_ROUNDS = 2  # parabolic refinements of each global's start between the profile's points (`_refine_start`)
+WARM_ITERATIONS = 12  # Gauss-Newton iterations of `_ReleaseFit.fit_warm` before it falls back on the grid
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of one round of the full least squares
 MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
@@ -59,6 +61,7 @@ MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM cu
 #: every sample column of `simulate_steps` recorded, a grid search for every release of the coarse profile, the
 #: BLAS on all threads) for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
 REFERENCE_PATHS = False
+_REL_STEP = 1e-5
 
 
 def parse_fit(text: str) -> list[str]:
@@ -76,6 +79,7 @@ class _TrialData:
     from_plane: bool
     shift_s: float = 0.0
     release_rad_s: float = math.nan
+    refined_release_rad_s: float = math.nan
 
 
 def _trial_data(trial: Any, name: str) -> _TrialData | str:
@@ -164,8 +168,8 @@ class _Sim:
 
 def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator: Any, record_dt: float) -> Any:
     """`rimless.sim.step.gait.simulate_steps` recording only what the calibration reads: the table's ``t_s``,
-    ``step``, ``dL1_m_s`` and ``com_height_normal_m`` (= L1 cos theta, the hub's height above the stance
-    foot's slope-normal coordinate), computed on whole arrays; the same steps (`simulate_step` on the same integrator)."""
+    ``step``, ``dL1_m_s``, ``com_height_normal_m`` (= L1 cos theta, the hub's height above the stance
+    foot's slope-normal coordinate) and its exact rate ``com_rate_m_s`` (m/s, from the state), on whole arrays; the same steps (`simulate_step` on the same integrator)."""
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import state_from_section
@@ -179,6 +183,7 @@ def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator:
     ts: list[np.ndarray] = []
     ks: list[np.ndarray] = []
     hs: list[np.ndarray] = []
+    rs: list[np.ndarray] = []
     vs: list[np.ndarray] = []
     failure = None
     for k in range(n_steps):
@@ -191,12 +196,14 @@ def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator:
         for seg in res.segments or []:
             ts.append(seg.t)
             ks.append(np.full(len(seg.t), k))
-            hs.append(seg.y[:, 3] * np.cos(seg.y[:, 2]))
+            cos_th, sin_th = np.cos(seg.y[:, 2]), np.sin(seg.y[:, 2])
+            hs.append(seg.y[:, 3] * cos_th)
+            rs.append(seg.y[:, 8] * cos_th - seg.y[:, 3] * sin_th * seg.y[:, 7])  # d/dt (L1 cos theta)
             vs.append(seg.y[:, 8])
         y, t = res.y_plus, t + res.period_s
     cat = lambda v: np.concatenate(v) if v else np.empty(0)  # noqa: E731
     return GaitTrajectory(params, model, steps, {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs),
-                                                 "dL1_m_s": cat(vs)}, failure)
+                                                 "com_rate_m_s": cat(rs), "dL1_m_s": cat(vs)}, failure)
 
 
 def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
@@ -254,11 +261,74 @@ def _curve_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, list[tuple[
     return parts
 
 
+def _hermite_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The knots of the simulated CoM curve of walk ``g`` (times from t0), step after step: times, heights,
+    exact rates (m/s) and whether the interval from each knot to the next lies inside one step (an impact
+    ends every step: the curve has a cusp there). Built once per walk and kept on it."""
+    from rimless.analysis.inference.compare import clean_curve
+
+    cache = getattr(g, "_com_hermite", None)
+    if cache is not None and cache[0] == t0:
+        return cache[1]
+    t_all = np.asarray(g.table["t_s"], float) - t0
+    y_all = np.asarray(g.table["com_height_normal_m"], float)
+    r_all = np.asarray(g.table["com_rate_m_s"], float)
+    step = np.asarray(g.table["step"])
+    ts, ys, rs, inside = [], [], [], []
+    for k in np.unique(step):
+        m = step == k
+        tk, order = clean_curve(t_all[m], np.arange(int(m.sum())))
+        ts.append(tk)
+        ys.append(y_all[m][order])
+        rs.append(r_all[m][order])
+        flag = np.ones(tk.size, bool)
+        flag[-1] = False
+        inside.append(flag)
+    cat = lambda v, dt: np.concatenate(v) if v else np.empty(0, dt)  # noqa: E731
+    parts = (cat(ts, float), cat(ys, float), cat(rs, float), cat(inside, bool))
+    try:
+        g._com_hermite = (t0, parts)  # noqa: SLF001
+    except AttributeError:
+        pass
+    return parts
+
+
+def _hermite_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
+    """`_smooth_curve` by cubic Hermite interpolation on each step's samples with the exact rates of the
+    state (no spline to solve; its error, O(h^4) on the 8 ms record grid, is far below a micrometre)."""
+    kt, ky, kr, inside = _hermite_parts(g, t0)
+    if kt.size == 0:
+        return np.zeros(tt.size)
+    st, sy = _clean_knots(kt, ky)
+    out = np.interp(tt, st, sy)
+    # the interval of tt: the last knot at or before it (at an impact, the next step's first knot)
+    i = np.searchsorted(kt, tt, side="right") - 1
+    ok = (i >= 0) & (i < kt.size - 1)
+    ok[ok] &= inside[i[ok]]
+    if ok.any():
+        i = i[ok]
+        h = kt[i + 1] - kt[i]
+        s_ = (tt[ok] - kt[i]) / h
+        s2, s3 = s_ * s_, s_ * s_ * s_
+        out[ok] = ((2 * s3 - 3 * s2 + 1) * ky[i] + (s3 - 2 * s2 + s_) * h * kr[i]
+                   + (3 * s2 - 2 * s3) * ky[i + 1] + (s3 - s2) * h * kr[i + 1])
+    return out
+
+
+def _clean_knots(kt: np.ndarray, ky: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The knots without repeated times (the first kept): the held end values and stall plateaus."""
+    keep = np.concatenate([[True], np.diff(kt) > 0])
+    return kt[keep], ky[keep]
+
+
 def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
     impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
     interpolation on the record grid puts kinks into the cost that finite differences mistake for
-    information). Held at the end values outside the simulated walk (a stall)."""
+    information). Held at the end values outside the simulated walk (a stall). With the rates recorded
+    (`_com_walk`), a cubic Hermite on the same samples (`_hermite_curve`)."""
+    if not REFERENCE_PATHS and "com_rate_m_s" in g.table:
+        return _hermite_curve(g, t0, tt)
     st, sy, splines = _curve_parts(g, t0)
     out = np.interp(tt, st, sy)
     for lo, hi, sp in splines:
@@ -402,7 +472,7 @@ class _ReleaseFit:
         """`fit` (coarse, to 1e-6 relative) started from a release known to walk (e.g. the trial's release at
         Table 1) instead of the grid of `first_period_release`, by Gauss-Newton with a secant slope; the grid fit
         when that start ends off the walking branch (a step not reached, the release on its bound) or does not
-        converge in 12 iterations."""
+        converge in `WARM_ITERATIONS` iterations."""
 
         if REFERENCE_PATHS or not math.isfinite(w0):
             return self.fit(p, d, None, coarse=True)
@@ -414,9 +484,10 @@ class _ReleaseFit:
         # Gauss-Newton on the step-frequency residuals with a secant slope: one simulation per iteration
         # (least squares with a finite-difference Jacobian takes two)
         w_prev, r_prev = w0, self.freq_res(p, d, w0)
+        r0 = r_prev
         w, r = w0 * (1.0 + 1e-4), self.freq_res(p, d, w0 * (1.0 + 1e-4))
         converged = False
-        for _ in range(12):
+        for _ in range(WARM_ITERATIONS):
             if not (walks(r) and walks(r_prev)):
                 break
             g = (r - r_prev) / (w - w_prev)
@@ -430,7 +501,9 @@ class _ReleaseFit:
                 converged = True
                 break
         if not converged or not walks(r) or not 0.05 < w < 20.0:
-            return self.fit(p, d, None, coarse=True)
+            # least squares from the warm start when it walks (a minimum on the stall edge, where Gauss-Newton
+            # overshoots every step, needs no grid), else from the grid
+            return self.fit(p, d, w0 if walks(r0) else None, coarse=True)
         return w, float(r @ r)
 
     def first_period_release(self, p: Any, d: _TrialData) -> float:
@@ -460,10 +533,13 @@ class _ReleaseFit:
         return float(grid[int(np.argmin(costs))])
 
 
-def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tuple[dict[str, float], np.ndarray]:
+def _start(releases: _ReleaseFit, glob: _Globals,
+           data: list[_TrialData]) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
     """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
-    (`PROFILE_FACTORS`) on the periods alone; the best start (relative globals) is returned and every trial's
-    ``release_rad_s`` is set at it."""
+    (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
+    sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
+    at it. Then that start refined (`_refine_start`, returned as well; `REFERENCE_PATHS`: the coarse one), where
+    the least squares begin: every trial's ``refined_release_rad_s`` is set at it."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
     best = 0.0
@@ -474,24 +550,79 @@ def _start(releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]) -> tup
     if REFERENCE_PATHS:
         best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     ug_best = np.zeros(glob.n)
+
+    tried: dict[tuple[float, ...], list[float]] = {tuple(np.zeros(glob.n)): [table1[d.name] for d in data]}
+
+    def try_start(ug: np.ndarray) -> float:
+        """The periods' cost at relative globals ug (inf for an invalid wheel); the best start kept. Each
+        trial's release is warm-started from its release at the nearest globals tried so far (Table 1's in
+        `REFERENCE_PATHS`), where Gauss-Newton needs the fewest steps and seldom falls back on the grid."""
+        nonlocal best, ug_best
+        p = glob.at(ug)
+        if p is None:
+            return math.inf
+        near = min(tried, key=lambda k: float(np.sum((np.array(k) - ug) ** 2)))
+        w0 = tried[tuple(np.zeros(glob.n))] if REFERENCE_PATHS else tried[near]
+        fits = [releases.fit_warm(p, d, w) for d, w in zip(data, w0)]
+        if all(math.isfinite(c) for _, c in fits):
+            tried[tuple(ug)] = [w for w, _ in fits]
+        cost = sum(c for _, c in fits)
+        if cost < best:
+            best, ug_best = cost, ug
+            for d, (w, _) in zip(data, fits):
+                d.release_rad_s = w
+        return cost
+
+    seen: list[dict[float, float]] = []
     for j in range(glob.n):
-        for factor in PROFILE_FACTORS:
+        seen.append({0.0: best})
+        for factor in sorted(PROFILE_FACTORS, key=lambda f: abs(math.log(f))):  # outwards from Table 1
             ug = ug_best.copy()
             ug[j] = factor - 1.0
-            p = glob.at(ug)
-            if p is None:
-                continue
-            fits = [releases.fit_warm(p, d, table1[d.name]) for d in data]
-            cost = sum(c for _, c in fits)
-            if cost < best:
-                best, ug_best = cost, ug
-                for d, (w, _) in zip(data, fits):
-                    d.release_rad_s = w
-    if ug_best.any():  # releases at the chosen start
+            seen[j][factor - 1.0] = try_start(ug)
+    ug_coarse = ug_best.copy()
+    if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
         pb = glob.at(ug_best)
         for d in data:
-            d.release_rad_s = releases.fit(pb, d, None)[0]
-    return table1, ug_best
+            d.release_rad_s = releases.fit(pb, d, None if REFERENCE_PATHS else d.release_rad_s)[0]
+    for d in data:
+        d.refined_release_rad_s = d.release_rad_s
+    if REFERENCE_PATHS:
+        return table1, ug_coarse, ug_coarse
+    coarse_releases = [d.release_rad_s for d in data]
+    for j in range(glob.n):
+        _refine_start(seen[j], lambda: ug_best, j, try_start)
+    if np.any(ug_best != ug_coarse):  # where the least squares begin: the profile's releases (to 1e-6) suffice
+        for d, w in zip(data, coarse_releases):
+            d.refined_release_rad_s = d.release_rad_s
+            d.release_rad_s = w
+    return table1, ug_coarse, ug_best
+
+
+def _refine_start(seen: dict[float, float], current: Callable[[], np.ndarray], j: int,
+                  try_start: Callable[[np.ndarray], float], rounds: int = REFINE_ROUNDS) -> None:
+    """Refine global j of the start (``current()``, the best so far) between the coarse profile's points
+    (``seen``: relative value -> cost): the vertex of the parabola through the best point and its two neighbours, ``rounds`` times (each a `try_start`, kept when its cost is lower).
+    A start near the periods' own minimum saves the full least squares many iterations on a curved valley."""
+    for _ in range(rounds):
+        ug_best = current()
+        xs = sorted(x for x, c in seen.items() if math.isfinite(c))
+        k = xs.index(float(ug_best[j])) if float(ug_best[j]) in xs else -1
+        if k <= 0 or k >= len(xs) - 1:
+            return  # the best is at an end of the profile (or not on it): nothing to bracket
+        x = np.array(xs[k - 1:k + 2])
+        y = np.array([seen[v] for v in x])
+        den = (x[0] - x[1]) * (x[0] - x[2]) * (x[1] - x[2])
+        a = (x[2] * (y[1] - y[0]) + x[1] * (y[0] - y[2]) + x[0] * (y[2] - y[1])) / den
+        b = (x[2] ** 2 * (y[0] - y[1]) + x[1] ** 2 * (y[2] - y[0]) + x[0] ** 2 * (y[1] - y[2])) / den
+        if not a > 0:
+            return
+        v = float(np.clip(-b / (2 * a), x[0], x[2]))
+        if min(abs(v - xv) for xv in xs) < 1e-3:
+            return  # already evaluated there (0.1 % of the global)
+        ug = ug_best.copy()
+        ug[j] = v
+        seen[v] = try_start(ug)
 
 
 class _Objective:
@@ -548,7 +679,7 @@ class _Objective:
                 else:
                     J[offs[i]:offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - r0[i]) / h
         for i in range(n_t):
-            h = 1e-5
+            h = _REL_STEP
             J[offs[i]:offs[i + 1], n_g + i] = (res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
             hs = 0.2  # ms
             J[offs[i]:offs[i + 1], n_g + n_t + i] = (res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
@@ -732,7 +863,7 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
             progress(sim.calls)
 
     glob = _Globals.of(params or WheelParams(), fit)
-    table1_releases, ug_start = _start(_ReleaseFit(sim, tick), glob, data)
+    table1_releases, ug_start, ug_refined = _start(_ReleaseFit(sim, tick), glob, data)
 
     obj = _Objective(sim, glob, data, tick)
     if prior is not None:
@@ -745,6 +876,8 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     obj.set_sigmas(u)
     cost_t1 = obj.cost(u_t1)
     lo, hi = obj.bounds(ws_start)
+    if np.any(ug_refined != ug_start):  # same objective (sigmas and bounds of the profile's start), nearer start
+        u = obj.start(ug_refined, np.array([d.refined_release_rad_s for d in data]))
     best = obj.solve(u, lo, hi, max_rounds)
     starts = 1
     if multi_start and glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):

@@ -227,7 +227,16 @@ def _figure(w_in: float, h_in: float):  # noqa: ANN202
 def _save(fig: Any, path: Path) -> None:
     """Write the PNG at DPI through a temporary name (a half-written figure never has the final name)."""
     tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=DPI)
+    engine = fig.get_layout_engine()
+    if engine is None:
+        fig.savefig(tmp, dpi=DPI)
+    else:  # lay out once: savefig with a layout engine draws the whole figure twice (layout pass, then render)
+        fig.draw_without_rendering()
+        fig.set_layout_engine("none")
+        try:
+            fig.savefig(tmp, dpi=DPI)
+        finally:
+            fig.set_layout_engine(engine)
     tmp.replace(path)
 
 
