@@ -56,6 +56,10 @@ WARM_ITERATIONS = 12  # Gauss-Newton iterations of `_ReleaseFit.fit_warm` before
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of one round of the full least squares
 MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
+#: the fit has converged when the Gauss-Newton step would lower the cost (0.5 chi-square of unit-variance
+#: residuals) by less than this: the minimum is within about 0.1 standard error (`_Objective.near_minimum`)
+GN_STOP_COST = 0.005
+GN_STOP_STATUS = 5  # the optimizer status reported then (scipy's own are 0 budget, 1-4 its tolerances)
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
 #: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection,
 #: every sample column of `simulate_steps` recorded, a grid search for every release of the coarse profile, the
@@ -632,6 +636,7 @@ class _Objective:
     def __init__(self, sim: _Sim, glob: _Globals, data: list[_TrialData], tick: Callable[[], None]) -> None:
         self.sim, self.glob, self.data, self.tick = sim, glob, data, tick
         self.sig = {"t": 0.02, "h": 0.5e-3}  # step frequency (Hz), CoM height (m)
+        self.last_jac: tuple[np.ndarray, np.ndarray] | None = None  # (u, J) of the latest `jac_kept` call
         self.n_g, self.n_t = glob.n, len(data)
         sizes = [d.periods_s.size + d.t_s.size for d in data]
         self.offs = np.concatenate([[0], np.cumsum(sizes)])
@@ -685,6 +690,27 @@ class _Objective:
             J[offs[i]:offs[i + 1], n_g + n_t + i] = (res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
         return J
 
+    def jac_kept(self, u: np.ndarray) -> np.ndarray:
+        """`jac(u)` (with whatever rows a prior added), kept for `near_minimum`."""
+        J = self.jac(u)
+        self.last_jac = (np.array(u, dtype=float), J)
+        return J
+
+    def stop_near_minimum(self, intermediate_result: Any) -> None:
+        """scipy's least_squares callback (by this parameter name it gets the iterate with its residuals)."""
+        if self.near_minimum(intermediate_result.x, intermediate_result.fun):
+            raise StopIteration
+
+    def near_minimum(self, u: np.ndarray, f: np.ndarray) -> bool:
+        """Whether the Gauss-Newton step from `u` (the latest Jacobian, taken there) would lower the cost
+        0.5 |f|^2 by less than `GN_STOP_COST`: the minimum is then within about 0.1 of a standard error in every
+        direction (the residuals are scaled to unit variance), and further steps only chase it."""
+        if self.last_jac is None or not np.array_equal(self.last_jac[0], u):
+            return False
+        J = self.last_jac[1]
+        dx = np.linalg.lstsq(J, -f, rcond=None)[0]
+        return bool(0.5 * float(np.sum((J @ dx) ** 2)) < GN_STOP_COST)
+
     def best_shifts(self, ug: np.ndarray, ws: np.ndarray) -> np.ndarray:
         """Per trial the shift (ms) that minimises the CoM residual (no new simulation): a 2 ms grid over
         +-`MAX_SHIFT_MS`, then a 0.5 ms grid around its best."""
@@ -732,7 +758,8 @@ class _Objective:
     def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_rounds: int = MAX_ROUNDS) -> Any:
         """Trust-region least squares from u, restarted from where it stopped while it stops on its budget
         (`MAX_NFEV` evaluations a round, at most ``max_rounds`` rounds). The scipy result of the last round
-        with ``rounds`` and the total ``nfev_total``; ``status == 0`` means the budget ran out (not converged)."""
+        with ``rounds`` and the total ``nfev_total``; ``status == 0`` means the budget ran out (not converged),
+        `GN_STOP_STATUS` that the Gauss-Newton step would gain less than `GN_STOP_COST` (converged)."""
         from scipy.optimize import least_squares
 
         total = 0
@@ -741,10 +768,14 @@ class _Objective:
             # for the ~2000 residuals of a series, far below the 1 unit of a one-sigma change) ends the fit; the
             # finite-difference Jacobian of walks integrated at rtol 1e-7 cannot resolve 1e-10 (the bundled
             # critical series ran out of its budget at 1e-10 with c within 4e-5 N s/m of where 1e-6 stops)
-            r = least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac, bounds=(lo, hi), method="trf", xtol=1e-6,
-                              ftol=1e-6, max_nfev=MAX_NFEV)
+            r = least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac_kept, bounds=(lo, hi), method="trf", xtol=1e-6,
+                              ftol=1e-6, max_nfev=MAX_NFEV, callback=self.stop_near_minimum)
             total += int(r.nfev)
             u = r.x
+            if r.status == -2:  # stopped by near_minimum: converged to a tenth of a standard error
+                r.status = GN_STOP_STATUS
+                r.message = (f"the Gauss-Newton step would lower chi-square by less than {2 * GN_STOP_COST:g} "
+                             "(within about 0.1 standard error of the minimum)")
             if r.status != 0:
                 break
         r.rounds, r.nfev_total = k + 1, total

@@ -114,3 +114,23 @@ def test_refined_start_reaches_the_coarse_starts_estimate(monkeypatch):
 
 def calibrate_c(trials, names):
     return cal.calibrate(trials, names, ["c"])
+
+
+def test_the_gauss_newton_stop_is_a_tenth_of_a_standard_error_on_a_linear_problem() -> None:
+    """Unit-variance residuals f(u) = J u - y of a linear model: the cost 0.5 |f|^2 at u exceeds its minimum by
+    exactly 0.5 (u - u*)^T J^T J (u - u*), a half chi-square. The fit may stop when that is below
+    GN_STOP_COST = 0.005 (u within 0.1 standard error of u* along every direction), and not before."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(200, 3))
+    y = rng.normal(size=200)
+    u_star = np.linalg.lstsq(J, y, rcond=None)[0]
+    cov = np.linalg.inv(J.T @ J)
+    obj = object.__new__(cal._Objective)  # noqa: SLF001 - the stopping rule alone, without a wheel
+    for n_se, stops in ((0.05, True), (0.095, True), (0.105, False), (1.0, False)):
+        direction = rng.normal(size=3)
+        step = direction / math.sqrt(direction @ np.linalg.inv(cov) @ direction)  # one standard error (Mahalanobis)
+        u = u_star + n_se * step
+        obj.last_jac = (u.copy(), J)
+        assert obj.near_minimum(u, J @ u - y) is stops, n_se
+    obj.last_jac = (u_star + 1.0, J)  # a Jacobian taken elsewhere says nothing
+    assert obj.near_minimum(u_star, J @ u_star - y) is False
