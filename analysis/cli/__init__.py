@@ -90,8 +90,10 @@ def import_cmd(
         from rich.table import Table
 
         table = Table(title="Vicon import", show_edge=False)
-        for col in ("file", "status", "slope°", "outcome", "steps"):
-            table.add_column(col, no_wrap=True, justify="left" if col in ("file", "status", "outcome") else "right")
+        table.add_column("file", overflow="fold")  # the long name wraps; the numbers and headers never do
+        for col in ("status", "slope°", "outcome", "steps"):
+            table.add_column(col, no_wrap=True, min_width=max(len(col), 8 if col == "status" else 0),
+                             justify="left" if col in ("status", "outcome") else "right")
         for r in rows:
             ok = r["status"] == "imported"
             table.add_row(Path(r["file"]).name, "[green]imported[/]" if ok else "[red]refused[/]",
@@ -201,8 +203,10 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
 
     table = Table(title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation", show_edge=False,
                   collapse_padding=True, pad_edge=False)
-    for col in ("trial", "status", "slope\ndeg", "steps", "RMS\nmm", "|dT|\nms", "θ'+\nrad/s"):
-        table.add_column(col, no_wrap=True, justify="left" if col in ("trial", "status") else "right")
+    table.add_column("trial", overflow="fold")  # the long name wraps; the numbers and headers never do
+    for col in ("status", "slope\ndeg", "steps", "RMS\nmm", "|dT|\nms", "θ'+\nrad/s"):
+        table.add_column(col, no_wrap=True, min_width=max(len(w) for w in col.split("\n")),
+                         justify="left" if col == "status" else "right")
 
     def f(v: Any, fmt: str) -> str:
         return "" if v is None or (isinstance(v, float) and v != v) else format(v, fmt)

@@ -1,0 +1,38 @@
+"""`trials import` and `trials report` at 80 columns: long file names wrap, numbers and headers are never cut
+(rich's ellipsis "…" appears nowhere), every line fits. Before: the import table cut its headers to `slop…`
+and `ste…` to keep the 44-character file name on one line."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+CRITICAL = Path(__file__).resolve().parents[3] / "analysis" / "data" / "critical"
+FILES = [CRITICAL / "SYNTHETIC_crit_slope1.45deg_release1.9.csv", CRITICAL / "SYNTHETIC_crit_slope2.05deg_release2.5.csv"]
+
+
+def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rimless", *args], cwd=cwd, capture_output=True, text=True,
+                          env={**os.environ, "COLUMNS": "80"}, timeout=600, stdin=subprocess.DEVNULL)
+
+
+@pytest.mark.parametrize("command", ["import", "report"])
+def test_the_table_reads_at_80_columns(tmp_path: Path, command: str) -> None:
+    res = _run(["trials", command, *map(str, FILES), "--out", str(tmp_path / "out")], tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    table = [line for line in res.stdout.splitlines() if "│" in line or "┃" in line]
+    assert table, res.stdout
+    assert all(len(line) <= 80 for line in table), res.stdout
+    assert "…" not in res.stdout, res.stdout
+    headers = " ".join(line for line in res.stdout.splitlines() if "┃" in line)
+    for word in (["status", "slope°", "outcome", "steps"] if command == "import"
+                 else ["status", "slope", "deg", "steps", "RMS", "rad/s"]):
+        assert word in headers, (word, res.stdout)
+    for row in (line for line in table if "│" in line and ("imported" in line or "ok" in line or "suspect" in line)):
+        cells = [c.strip() for c in row.split("│")]
+        slope = next(c for c in cells if c.count(".") == 1 and c.replace(".", "").isdigit())
+        assert len(slope.split(".")[1]) == 3  # the slope with its three decimals, whole
