@@ -105,9 +105,10 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
 
     con = Console()
     t = Table(title="verdict from the step-to-step return map (e*: fixed point, rad²/s²)", show_edge=False)
-    for col, just, width in (("trial", "left", 28), ("deg", "right", 6), ("steps", "right", 5),
-                             ("verdict", "left", 12), ("e* ± se", "right", 14)):
-        t.add_column(col, justify=just, no_wrap=True, min_width=width, max_width=width, overflow="ellipsis")
+    t.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
+    for col, just, width in (("deg", "right", 6), ("steps", "right", 5), ("verdict", "left", 12),
+                             ("e* ± se", "right", 14)):
+        t.add_column(col, justify=just, no_wrap=True, min_width=width)
     color = {"sustained": "green", "decaying": "red", "undetermined": "yellow"}
     stems = [Path(r["file"]).stem for r in out["per_trial"]]
     common = os.path.commonprefix(stems) if len(stems) > 1 else ""
@@ -222,11 +223,16 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print("guide friction vs damping told apart: " + out["friction_vs_damping"]["statement"],
                   markup=False, highlight=False)
     r = Table(title="RMS residuals, Table 1 model -> calibrated", show_edge=False)
-    for col, width in (("trial", 30), ("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
-        r.add_column(col, justify="left" if col == "trial" else "right", no_wrap=True, min_width=width,
-                     max_width=width, overflow="ellipsis")
-    for row in out["residuals"]:
-        r.add_row(Path(row["trial"]).stem, f"{row['slope_deg']:.2f}", _fmt(row["table1_rms_period_ms"], ".1f"),
+    r.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
+    for col, width in (("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
+        r.add_column(col, justify="right", no_wrap=True, min_width=width)
+    stems = [Path(row["trial"]).stem for row in out["residuals"]]
+    common = os.path.commonprefix(stems) if len(stems) > 1 else ""
+    if len(common) >= 6:
+        r.caption = f"trial: the file name after {common!r}"
+    for row, stem in zip(out["residuals"], stems):
+        r.add_row(stem[len(common):] if len(common) >= 6 else stem, f"{row['slope_deg']:.2f}",
+                  _fmt(row["table1_rms_period_ms"], ".1f"),
                   _fmt(row["calibrated_rms_period_ms"], ".1f"), _fmt(row["table1_rms_com_mm"], ".2f"),
                   _fmt(row["calibrated_rms_com_mm"], ".2f"))
     con.print(r)

@@ -36,3 +36,16 @@ def test_the_table_reads_at_80_columns(tmp_path: Path, command: str) -> None:
         cells = [c.strip() for c in row.split("│")]
         slope = next(c for c in cells if c.count(".") == 1 and c.replace(".", "").isdigit())
         assert len(slope.split(".")[1]) == 3  # the slope with its three decimals, whole
+
+
+def test_the_calibration_residuals_name_every_trial_at_80_columns(tmp_path: Path) -> None:
+    """Before: the residual table cut every name to `SYNTHETIC_crit_slope1.45deg_r…`, so two trials read the
+    same. Now the common prefix goes to the caption and what differs is shown whole."""
+    files = sorted(CRITICAL.glob("SYNTHETIC_crit_slope1.[46]*deg_release*.csv"))
+    res = _run(["trials", "calibrate", *map(str, files)], tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "…" not in res.stdout, res.stdout
+    shown = [f for f in files if f.stem.removeprefix("SYNTHETIC_crit_slope1.") in res.stdout]
+    assert len(shown) >= 3, res.stdout
+    for f in set(files) - set(shown):  # left out of the calibration, and said so
+        assert f.name in (res.stdout + res.stderr).replace("\n", ""), (f.name, res.stdout, res.stderr)
