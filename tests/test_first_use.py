@@ -122,3 +122,17 @@ def test_a_step_compiles_its_own_mass_model_only(tmp_path: Path) -> None:
         name, *counts = line.split()
         assert counts[1:] == ["0", "0"], line  # sliding-leg, active-feet: not compiled
         assert name not in ("_M", "_DL", "_DLD") or counts[0] != "0", line  # eight-leg: compiled
+
+
+@pytest.mark.parametrize("given", [None, "1"])
+def test_loop_vectoriser_off_unless_the_environment_says(given: str | None) -> None:
+    """rimless.sim.fast compiles without LLVM's loop vectoriser (less compile time, same results,
+    docs/performance.md) unless NUMBA_LOOP_VECTORIZE is set; subprocesses inherit the setting."""
+    code = ("import os, numba\nfrom rimless.sim import fast\n"
+            "print(os.environ['NUMBA_LOOP_VECTORIZE'], numba.config.LOOP_VECTORIZE)\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_LOOP_VECTORIZE"}
+    if given is not None:
+        env["NUMBA_LOOP_VECTORIZE"] = given
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.split() == (["0", "0"] if given is None else ["1", "1"])

@@ -40,13 +40,17 @@ class _KernelDispatcher(CPUDispatcher):
         return super().get_call_template(folded, {})
 
 
-def kernel(func: Any = None, *, inline: str = "never") -> Any:
+def kernel(func: Any = None, *, inline: str = "never", python: bool = True) -> Any:
     """numba.njit(cache=True)(func), specialised from compiled code on the mass model index only (see
     _KernelDispatcher). inline="always": the function's numba IR is inlined into its compiled callers (no
-    library of its own to optimise, link and emit again above it; for a function with one or two call sites)."""
+    library of its own to optimise, link and emit again above it; for a function with one or two call sites).
+
+    Without numba's C-ABI wrapper (for first-class function values, not used here), and with python=False
+    without the wrapper that calls it from Python (for a kernel called from compiled code only): less code
+    to optimise and emit per kernel, the same compiled function."""
     if func is None:
-        return lambda f: kernel(f, inline=inline)
-    disp = numba.njit(cache=True, inline=inline)(func)
+        return lambda f: kernel(f, inline=inline, python=python)
+    disp = numba.njit(cache=True, inline=inline, no_cfunc_wrapper=True, no_cpython_wrapper=not python)(func)
     disp.__class__ = _KernelDispatcher
     return disp
 

@@ -35,10 +35,11 @@ MASS_MODEL_INDEX = {"eight-leg": 0, "sliding-leg": 1, "active-feet": 2}
 # table rimless.sim.model.guards (numba freezes them into the compiled code as constants).
 
 _jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
+_inner = kernel(python=False)  # the same, called from compiled code only (no wrapper for Python)
 
 
 def _compile(name: str) -> tuple:
-    return tuple(_jit(getattr(mod, name)) for mod in (_el, _sl, _af))
+    return tuple(_inner(getattr(mod, name)) for mod in (_el, _sl, _af))
 
 
 _M0, _M1, _M2 = _compile("mass_matrix")
@@ -229,7 +230,7 @@ def energy(mi, q, qd, p):
     return _energy_of(mi, q, qd, p)
 
 
-@_jit
+@_inner
 def _derivs(mi, q, qd, p):
     """(dM/dq [k,i,j], dh/dq [i,k], dh/dqd [i,k], dJ_a/dq [k,r,j], d(J_a'q')/dq [r,k], d(J_a'q')/dqd [r,k])."""
     return _derivs_of(mi, q, qd, p)
@@ -239,7 +240,7 @@ def _derivs(mi, q, qd, p):
 # Small dense LU with partial pivoting (the KKT systems are at most 9x9).
 
 
-@_jit
+@_inner
 def lu_factor(K, n, piv):
     """In-place LU of K[:n, :n] with row pivots; False if singular or not finite."""
     for j in range(n):
@@ -268,7 +269,7 @@ def lu_factor(K, n, piv):
     return True
 
 
-@_jit
+@_inner
 def lu_solve(K, n, piv, b):
     """Solve with the factors of lu_factor, b (n,) overwritten with the solution."""
     for j in range(n):
@@ -293,7 +294,7 @@ def lu_solve(K, n, piv, b):
 # Phase dynamics: [[M, -A^T], [A, 0]] [q''; lambda] = [-h; -A' q'] (rimless.sim.model.dynamics.accel).
 
 
-@_jit
+@_inner
 def n_constraints(phase):
     if phase == DLSP:
         return 4
@@ -302,7 +303,7 @@ def n_constraints(phase):
     return 2
 
 
-@_jit
+@_inner
 def constraint_rows(phase, Ja, jd):
     """(A (n x 5), A' q' (n,)) of a phase, given foot a's Jacobian J_a and J_a' q'."""
     n = n_constraints(phase)
@@ -320,7 +321,7 @@ def constraint_rows(phase, Ja, jd):
     return A, adot
 
 
-@_jit
+@_inner
 def kkt_factor(mi, phase, q, qd, p, K, piv):
     """Assemble and factor the KKT matrix into K (9x9 workspace); returns (ok, n, M, h, A, A'q')."""
     M, h, Ja, jd = terms(mi, q, qd, p)
@@ -353,7 +354,7 @@ def accel_reduced(mi, phase, q, qd, p, qdd, lam, ws):
     return _reduced_of(mi, phase, q, qd, p, qdd, lam)
 
 
-@_jit
+@kernel(inline="always", python=True)  # one call site (two for _guards_at): no library of its own
 def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
     """q'', lambda (as accel_reduced) and the directional derivatives dqdd[:, c] = (dq''/dy) V[:, c] for the
     columns of V (10 x ncol), exactly, from the generated reduced equations (*_dir): the differentiated KKT
@@ -448,7 +449,7 @@ def accel_jacobian(mi, phase, q, qd, p, qdd, lam, Dqdd, Dlam):
     return True
 
 
-@_jit
+@_inner
 def damping_power(phase, qd, p):
     """Power dissipated by the leg dampers, W."""
     l1 = 0.0 if phase == SLSP_CLUTCHED else qd[3]
@@ -459,20 +460,20 @@ def damping_power(phase, qd, p):
 # Guards (rimless.sim.model.guards): value, and gradient with respect to y for the saltation matrices.
 
 
-@_jit
+@_inner
 def swing_height(q, L0):
     """Height of the next swing foot above the slope, m."""
     return q[1] + q[3] * math.cos(q[2]) - L0 * math.cos(ALPHA - q[2])
 
 
-@_jit
+@_inner
 def swing_height_rate(y, L0):
     """d/dt of the swing height along y = [q, q'], m/s."""
     th = y[2]
     return y[6] + y[8] * math.cos(th) - (y[3] * math.sin(th) + L0 * math.sin(ALPHA - th)) * y[7]
 
 
-@_jit
+@_inner
 def guard_value_from(code, y, lam, L0):
     """Guard value given the state and the phase's lambda at that state."""
     if code == STALL:
@@ -486,7 +487,7 @@ def guard_value_from(code, y, lam, L0):
     return lam[1]  # LIFTOFF_B
 
 
-@_jit
+@_inner
 def guard_needs_lambda(code):
     return code == LIFTOFF_A or code == LIFTOFF_B
 
@@ -516,7 +517,7 @@ def guard_gradient(mi, phase, code, y, p):
     return g
 
 
-@_jit
+@_inner
 def phase_field(mi, phase, y, p):
     """f(y) = [q', q''] (10,) of a phase (nan-filled if the KKT matrix is singular)."""
     f = np.empty(10)
@@ -535,7 +536,7 @@ def phase_field(mi, phase, y, p):
 # Impact (rimless.sim.model.impact): relabel, then q'+ = q'~ + M^-1 Jc^T Lambda with Jc q'+ = 0.
 
 
-@_jit
+@_inner
 def relabel_with_jacobian(y, L0):
     """(y~ (10,), dy~/dy (10x10)) of the leg exchange."""
     x, yb, th, L1 = y[0], y[1], y[2], y[3]

@@ -43,6 +43,7 @@ from rimless.sim.model.friction import FRICTION_INDEX, FRICTION_PHASE0
 from rimless.sim.model.guards import SLIP_END_1, SLIP_END_2, STICK_END_1, STICK_END_2
 
 _jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
+_inner = kernel(python=False)  # the same, called from compiled code only (no wrapper for Python)
 
 # Tableau of scipy's public DOP853 class (module-level arrays are frozen into the compiled code as constants):
 # the 12 stages, the 13th (the B row, the step's end) and the 3 extra stages of the 7th-order dense output.
@@ -74,7 +75,7 @@ VAR_OFFSET = 10
 VAR_SIZE = 20
 
 
-@_jit
+@_inner
 def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     """Right-hand side of the augmented vector; lambda at y into lam. False if the KKT matrix is singular.
     ws: float64 workspace of model.WORKSPACE_SIZE + 5."""
@@ -111,20 +112,20 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
 # are rimless.sim.model.clutch's SLIP_UP, SLIP_DOWN and STUCK.
 
 
-@_jit
+@_inner
 def _base_phase(phase):
     if phase >= FRICTION_PHASE0:
         return (phase - FRICTION_PHASE0) // 16
     return phase
 
 
-@_jit
+@_inner
 def _leg_state(phase, leg):
     c = phase - FRICTION_PHASE0
     return (c % 16) // 4 if leg == 1 else c % 4
 
 
-@_jit
+@_inner
 def _stuck_row(phase, leg):
     """Row of leg `leg`'s holding force in lambda of a friction phase (b: 0-1, a: 2-3 in double support)."""
     base = _base_phase(phase)
@@ -134,7 +135,7 @@ def _stuck_row(phase, leg):
     return r
 
 
-@_jit
+@_inner
 def _friction_accel(mi, phase, q, qd, p, qdd, lam):
     """q'' and lambda (rows: b_x, b_y, [a_x, a_y], [L1], [L2]) of a friction phase by the KKT solve of
     [[M, -A^T], [A, 0]] [q''; lambda] = [-h + f_friction; -A' q'] (rimless.sim.model.clutch.accel)."""
@@ -196,7 +197,7 @@ def _friction_accel(mi, phase, q, qd, p, qdd, lam):
     return True
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def _accel_any(mi, phase, q, qd, p, qdd, lam, ws):
     """q'' and lambda of a base phase (the generated reduced equations) or of a friction phase."""
     if phase >= FRICTION_PHASE0:
@@ -204,12 +205,12 @@ def _accel_any(mi, phase, q, qd, p, qdd, lam, ws):
     return fm.accel_reduced(mi, phase, q, qd, p, qdd, lam, ws)
 
 
-@_jit
+@_inner
 def _needs_lambda(code):
     return fm.guard_needs_lambda(code) or code == STICK_END_1 or code == STICK_END_2
 
 
-@_jit
+@_inner
 def _guard_value(phase, code, y, lam, p):
     """Guard `code` at y with the phase's lambda (the stick/slip guards of rimless.sim.model.guards too)."""
     if code == SLIP_END_1 or code == SLIP_END_2:
@@ -222,7 +223,7 @@ def _guard_value(phase, code, y, lam, p):
     return fm.guard_value_from(code, y, lam, p[3])
 
 
-@_jit
+@_inner
 def _rms(x, n):
     s = 0.0
     for i in range(n):
@@ -230,7 +231,7 @@ def _rms(x, n):
     return math.sqrt(s / n)
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def _initial_step(mi, phase, p, t0, y0, f0, t_bound, rtol, atol, n_err, with_var, with_diss):
     """scipy.integrate._ivp.common.select_initial_step with order 7 (on the first n_err components)."""
     interval = abs(t_bound - t0)
@@ -269,7 +270,7 @@ def _initial_step(mi, phase, p, t0, y0, f0, t_bound, rtol, atol, n_err, with_var
     return min(100.0 * h0, h1, interval), 1
 
 
-@_jit
+@_inner
 def _dense_eval(F, y_old, x, nout, out):
     """scipy's Dop853DenseOutput at the normalised time x in [0, 1], first nout components."""
     for i in range(nout):
@@ -283,7 +284,7 @@ def _dense_eval(F, y_old, x, nout, out):
         out[i] = v + y_old[i]
 
 
-@_jit
+@_inner
 def _guard_on_dense(mi, phase, p, code, t, t_old, h, F, y_old, ybuf, qdd, lam, rate):
     """Guard `code` (or, with rate=True, the swing height's rate) at time t on the dense output."""
     x = (t - t_old) / h
@@ -298,7 +299,7 @@ def _guard_on_dense(mi, phase, p, code, t, t_old, h, F, y_old, ybuf, qdd, lam, r
     return _guard_value(phase, code, ybuf, lam, p)
 
 
-@_jit
+@_inner
 def _brent(mi, phase, p, code, rate, xa, xb, t_old, h, F, y_old):
     """scipy.optimize.brentq (xtol = rtol = 4 eps) on a guard of the dense output; returns (root, nfev)."""
     ybuf = np.empty(10)
@@ -363,7 +364,7 @@ def _brent(mi, phase, p, code, rate, xa, xb, t_old, h, F, y_old):
     return xcur, nf
 
 
-@_jit
+@_inner
 def _build_dense(mi, phase, p, y_old, h, K, F, ytmp, lam, ws, with_var, with_diss):
     """The extra stages 13..15 of an accepted step (K rows 0..12 given) and scipy's dense-output
     coefficients F (7 x N) of that step."""
@@ -404,7 +405,7 @@ DIP_XTOL = 1e-9  # relative to the step: where the minimum of a force over a ste
 # steps, which control the error of y, so the parabola's undershoot is a safe estimate with this margin).
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def _parabola_min(t0, g0, t1, g1, t2, g2):
     """Minimum of the parabola through (t0, g0), (t1, g1), (t2, g2) with g1 below both neighbours."""
     d1 = (g1 - g0) / (t1 - t0)
@@ -416,7 +417,7 @@ def _parabola_min(t0, g0, t1, g1, t2, g2):
     return g1 + d1 * (ts - t1) + a * (ts - t0) * (ts - t1)
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def _min_on_dense(mi, phase, p, code, a, x, gx, b, t_a, h, F, y_a):
     """Brent's minimisation (golden section + parabolic interpolation) of a guard on the dense output in the
     bracket a < x < b with g(x) below both ends; returns (x_min, g_min, nfev). Stops early at g <= 0."""
@@ -488,7 +489,7 @@ def _min_on_dense(mi, phase, p, code, a, x, gx, b, t_a, h, F, y_a):
     return x, gx, nf
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def _parabola_min_on(x0, g0, x1, g1, x2, g2):
     """Minimum over [x0, x2] of the parabola through (x0, g0), (x1, g1), (x2, g2)."""
     lo = min(g0, g1, g2)
@@ -503,7 +504,7 @@ def _parabola_min_on(x0, g0, x1, g1, x2, g2):
     return min(lo, g1 + d1 * (xs - x1) + a * (xs - x0) * (xs - x1))
 
 
-@_jit
+@_inner
 def _first_dip(mi, phase, p, code, t_a, h, F, y_a, g_a, g_b):
     """(t, nfev): the first downward zero of a normal-force guard on one step's dense output
     [t_a, t_a + h] where it is positive at both ends (values g_a, g_b), or (inf, nfev) if it stays positive.
@@ -553,13 +554,13 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a, g_a, g_b):
     return root, nf + nfb
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def _guards_at(phase, p, codes, y, lam, out):
     for e in range(codes.shape[0]):
         out[e] = _guard_value(phase, codes[e], y, lam, p)
 
 
-@_jit
+@_inner
 def _rk_stages(mi, phase, p, y, f0, h, K, ytmp, y_new, lam, ws, with_var, with_diss):
     """One DOP853 step of size h from y with f0 = f(y): stages K[0..11] (K[0] = f0), y_new = y + h sum B K;
     ytmp is left holding the last stage's state. False if a right-hand side failed (singular or not finite)."""
@@ -582,7 +583,7 @@ def _rk_stages(mi, phase, p, y, f0, h, K, ytmp, y_new, lam, ws, with_var, with_d
     return ok
 
 
-@_jit
+@_inner
 def _room(rec_t, rec_y, nrec):
     """The record buffers, doubled (contents kept) if the next record nrec would not fit."""
     cap = rec_t.shape[0]

@@ -24,6 +24,7 @@ from rimless.sim.fast.compiling import call_compiling, kernel
 from rimless.sim.model.guards import DIRECTION
 
 _jit = kernel  # numba.njit(cache=True), specialised on the mass model index only (compiling.kernel)
+_inner = kernel(python=False)  # the same, called from compiled code only (no wrapper for Python)
 
 OK = 0
 STALL = 1
@@ -76,7 +77,7 @@ BILATERAL_RECORD_DT = 2e-4  # s: force samples between the solver's steps (bilat
 
 
 
-@_jit
+@_inner
 def _get_V(ya):
     V = np.empty((10, 2))
     for c in range(2):
@@ -85,14 +86,14 @@ def _get_V(ya):
     return V
 
 
-@_jit
+@_inner
 def _set_V(ya, V):
     for c in range(2):
         for i in range(10):
             ya[rk.VAR_OFFSET + 10 * c + i] = V[i, c]
 
 
-@_jit
+@_inner
 def _saltation(V, f_minus, f_plus, dg, reset_index):
     """S V with S = dR + (f+ - dR f-) dg^T / (dg . f-); dR = identity, with row reset_index zeroed if >= 0."""
     den = 0.0
@@ -113,7 +114,7 @@ def _saltation(V, f_minus, f_plus, dg, reset_index):
     return out
 
 
-@_jit
+@_inner
 def _finite(a, b):
     for i in range(a.shape[0]):
         if not math.isfinite(a[i]):
@@ -124,7 +125,7 @@ def _finite(a, b):
     return True
 
 
-@_jit
+@_inner
 def _map_status(st, fired_ok):
     if st == rk.STATUS_NOT_FINITE:
         return NOT_FINITE
@@ -177,7 +178,7 @@ def single_support_force(mi, phase, rec_t, rec_y, p, contact):
         contact[C_MIN_FORCE_T] = tmin
 
 
-@_jit
+@kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
 def dlsp_tolerances(rtol, atol):
     """(rtol, atol) of the double-support phase for the map's (rtol, atol)."""
     scale = min(1.0, max(rtol * DLSP_RTOL_SCALE, DLSP_RTOL_FLOOR) / rtol) if rtol > 0.0 else 1.0
