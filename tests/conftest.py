@@ -97,3 +97,58 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+# Under `-n N` xdist hands the tests out in collection order, a few at a time to whichever worker is free: a long
+# test picked up near the end keeps one worker busy while the other idles. The known-long tests therefore go
+# first, longest first (seconds measured on the 2-core machine; only their order matters, they are not limits),
+# then the other tests marked slow, then the rest in collection order. Scopes of several tests (an xdist_group,
+# e.g. the demo's readers) go before all of these: xdist's --loadscope-reorder, on by default.
+LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (a `-n 2` run at load 4-6, warm numba cache)
+    "tests/analysis/inference/test_calibrate.py::test_recovers_damping_within_its_uncertainty": 200.0,
+    "tests/test_readme.py::test_page_commands_run_as_written[docs/simulator.md]": 154.0,
+    "tests/test_readme.py::test_page_commands_run_as_written[README.md]": 125.0,  # runs the demo
+    "tests/sim/fast/test_fast.py::test_compiled_map_matches_the_reference_map[sliding-leg": 100.0,
+    "tests/sim/fast/test_fast.py::test_compiled_map_matches_the_reference_map[active-feet": 100.0,
+    "tests/analysis/inference/test_leg_fit.py::test_intervals_cover_the_truth": 94.0,
+    "tests/test_first_use.py::test_a_step_compiles_its_own_mass_model_only": 80.0,
+    "tests/sim/studies/test_stress.py::test_grazing_touchdown_inside_one_step_is_not_missed": 70.0,  # cold: compiles
+    "tests/test_readme.py::test_page_commands_run_as_written[docs/trials.md]": 58.0,
+    "tests/analysis/inference/test_leg_fit.py::test_command_json_and_figure": 37.0,
+    "tests/test_command_tree.py::test_ctrl_c_to_the_process_group_with_a_local_dask_cluster[paper]": 32.0,
+    "tests/sim/in_the_loop/test_loop.py::test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points": 27.0,
+    "tests/sim/studies/test_paper.py::test_rimless_paper_writes_every_figure_csv_and_headline_row": 27.0,
+    "tests/analysis/test_readme.py::test_readme_trials_chain_runs_verbatim": 24.0,
+    "tests/sim/step/test_poincare.py::test_fixed_point_residual_and_two_jacobian_estimates_agree": 21.0,
+    "tests/test_readme.py::test_page_commands_run_as_written[docs/robot.md]": 20.0,
+    "tests/analysis/inference/test_priors.py::test_prior_removes_the_c_k_ridge_of_the_walk_fit": 20.0,
+    "tests/sim/in_the_loop/test_studies.py::test_high_rate_no_noise_no_delay_converges_to_the_ideal_fixed_point": 19.0,
+    "tests/firmware/link/test_commands.py::test_a_connect_flood_from_one_host_cannot_evict_the_operator": 18.0,
+    "tests/analysis/cli/test_critical.py::test_critical_slope_json_contract_and_truth": 15.0,
+}
+
+
+def _expected_s(item: pytest.Item) -> float:
+    for prefix, seconds in LONG_TESTS_S.items():
+        if item.nodeid.startswith(prefix):
+            return seconds
+    return 1.0 if item.get_closest_marker("slow") else 0.0
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Longest first (see LONG_TESTS_S); and `xdist_group` working again under pytest 9 with `--dist loadgroup`.
+
+    pytest-xdist 3.8 marks a grouped test by appending `@group` to `item._nodeid`, which pytest 9 no longer
+    reads (a node's id lives in `item._id`): groups were silently split across workers. The demo's readers
+    (xdist_group "demo") must stay on one worker so the other never waits on the demo's lock."""
+    items.sort(key=lambda item: -_expected_s(item))  # stable: collection order within equal expectations
+    if not hasattr(config, "workerinput") or not config.getvalue("loadgroup"):  # a worker's "dist" reads "no"
+        return
+    from _pytest.nodeid import NodeId
+
+    for item in items:
+        names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                        for m in item.iter_markers("xdist_group")})
+        if names and "@" not in item.nodeid:
+            item._id = NodeId.parse(f"{item.nodeid}@{'_'.join(names)}")  # type: ignore[attr-defined]

@@ -13,16 +13,16 @@ from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from tests.support.firmware_app import config
 
 
-def leg_view(walk: dict, leg: int, legs: int = 8):
+def leg_view(walk: dict, leg: int, legs: int = 8, steps: int | None = None):
     """What the sensor of `leg` sees: only the stances of that leg (every `legs`-th step) of `walk["traj"]`
-    (nothing until it is set)."""
+    (nothing until it is set), and only among the first `steps` steps when given."""
 
     def f(t: float) -> float:
         traj = walk.get("traj")
         if traj is None or t < traj.start_s:
             return 0.0
         k = int((t - traj.start_s) // traj.step_period_s)
-        return traj(t) if k % legs == leg else 0.0
+        return traj(t) if k % legs == leg and (steps is None or k < steps) else 0.0
 
     return f
 
@@ -41,16 +41,23 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
 
     cfg = per_leg_config(tmp_path)
     walk: dict = {}
-    hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)])
+    hw = build_fake(cfg, trajectories=[leg_view(walk, k, steps=4) for k in range(8)])
     from rimless.firmware.service.app import RobotApp
 
+    async def stop_once_leg_3_holds(app) -> None:
+        # A condition, not a delay: a loaded machine (CI at load 6) pauses the loop for tenths of a second.
+        leg3 = hw.pin_factory.pin(cfg.clutch.pins[3])
+        deadline = time.monotonic() + 30.0
+        while not leg3.state and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        app.request_stop("test done")
+
     def ready(app) -> None:
-        # The walk starts once the app runs (a loaded machine may take long to start it), and the app stops
-        # between leg 3's lock and leg 4's touchdown.
-        traj = walk["traj"] = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3,
-                                             compression_m=0.008, compression_s=0.06)
-        asyncio.get_running_loop().call_later(traj.touchdown_s(4) - 0.1 - time.monotonic(), app.request_stop,
-                                              "test done")
+        # The walk (four steps: legs 0..3, then none) starts once the app runs (a loaded machine may take long
+        # to start it); the app stops once leg 3 holds, so leg 3 is released at the stop.
+        walk["traj"] = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3,
+                                      compression_m=0.008, compression_s=0.06)
+        walk["stopper"] = asyncio.get_running_loop().create_task(stop_once_leg_3_holds(app))
 
     async def main():
         app = RobotApp(cfg, hw, on_ready=ready)
