@@ -490,8 +490,11 @@ def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_pa
     prints `interrupted` last, exits 130, leaves no output and no worker behind; the workers print nothing."""
     args, workers, delay_s = LOCAL_CLUSTER_RUNS[case]
     env = {**os.environ, "COLUMNS": str(WIDTH)}
+    # SIGINT's default disposition in the child, as in a terminal: a test run started as a background job has
+    # SIGINT ignored, which exec passes on (the command then ignored the Ctrl-C: finished, or hung for 60 s)
     proc = subprocess.Popen([sys.executable, "-m", "rimless", *args], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         if workers:
             _wait_for_workers(proc.pid, workers)  # then `delay_s` into the computation
