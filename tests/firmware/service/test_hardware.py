@@ -41,7 +41,7 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
 
     cfg = per_leg_config(tmp_path)
     walk: dict = {}
-    hw = build_fake(cfg, trajectories=[leg_view(walk, k, steps=4) for k in range(8)])
+    hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)])
     from rimless.firmware.service.app import RobotApp
 
     async def stop_once_leg_3_holds(app) -> None:
@@ -53,8 +53,9 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
         app.request_stop("test done")
 
     def ready(app) -> None:
-        # The walk (four steps: legs 0..3, then none) starts once the app runs (a loaded machine may take long
-        # to start it); the app stops once leg 3 holds, so leg 3 is released at the stop.
+        # The walk starts once the app runs (a loaded machine may take long to start it); the app stops once
+        # leg 3 holds. The walk goes on meanwhile, so a late stop still sees every lock released by the next
+        # touchdown (a walk that ended after leg 3 left its lock to max_hold_s: clutch_timeout in a CI run).
         walk["traj"] = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3,
                                       compression_m=0.008, compression_s=0.06)
         walk["stopper"] = asyncio.get_running_loop().create_task(stop_once_leg_3_holds(app))
@@ -67,9 +68,11 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
     assert summary.faults == [] and summary.error is None
     hist = {k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
             for k, p in enumerate(cfg.clutch.pins)}
-    for k in range(4):  # legs 0..3 stanced once each, released at the next leg's touchdown (leg 3: at stop)
+    for k in range(4):  # legs 0..3 stanced once each, released at the next leg's touchdown (or at the stop)
         assert hist[k] == "010", hist
-    assert all(hist[k] == "0" for k in range(4, 8)), hist
+    # legs 4..7: not yet in stance at the stop, or (a stop delayed by a loaded machine) locked once and released
+    assert all(hist[k] in ("0", "010") for k in range(4, 8)), hist
+    assert hist[7] == "0", hist  # the stop came within a walk round
     for cs in CS_PINS:  # every chip select idles high and was pulled low for transfers
         states = [s.state for s in hw.pin_factory.pin(cs).states]
         assert states[-1] is True and False in states[1:]
