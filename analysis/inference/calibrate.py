@@ -1016,6 +1016,16 @@ class NoTrialCalibrated(RimlessError):
     """Every trial failed before the fit (not a user mistake: exit 1)."""
 
 
+def calibrate_or_none(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str], params: Any,
+                      model: str) -> CalibrationResult | None:
+    """`calibrate` with positional arguments (for a second process: `rimless.analysis.inference.background`),
+    None when no trial could be calibrated."""
+    try:
+        return calibrate(trials, names, fit, params=params, model=model)
+    except NoTrialCalibrated:
+        return None
+
+
 def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray,
               shifts: np.ndarray) -> list[tuple[float, float]]:
     """Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s over the steps

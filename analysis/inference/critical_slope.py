@@ -384,9 +384,16 @@ def run_critical_slope(trials: Sequence[Any], files: Sequence[str], params: Any 
         out = model_critical_slope(params, m)
         res.model["critical_slope_deg"][m] = out["critical_slope_deg"]
         res.model["detail"][m] = out
-        if calibrated is not None:
-            outc = model_critical_slope(calibrated, m)
-            res.model["critical_slope_deg"][f"{m}_calibrated"] = outc["critical_slope_deg"]
-            res.model["detail"][f"{m}_calibrated"] = outc
+    if calibrated is not None:
+        add_calibrated_model(res, calibrated, models=models)
     res.verdicts = verdicts  # type: ignore[attr-defined]
     return res
+
+
+def add_calibrated_model(res: CriticalSlopeResult, calibrated: Any, *, models: Sequence[str] = ("er",)) -> None:
+    """Add the model's critical slope at the ``calibrated`` parameters (keys ``<model>_calibrated``) to a
+    `run_critical_slope` result."""
+    for m in models:
+        outc = model_critical_slope(calibrated, m)
+        res.model["critical_slope_deg"][f"{m}_calibrated"] = outc["critical_slope_deg"]
+        res.model["detail"][f"{m}_calibrated"] = outc

@@ -28,6 +28,7 @@ import numpy as np
 
 from rimless.errors import InputFileError
 
+from rimless.analysis.inference.background import Background
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step_period_trends
 from rimless.analysis.io.robot_log import read_clutch_log
 from rimless.analysis.report.clutch import clutch_comparison, clutch_html
@@ -128,15 +129,35 @@ def build_report(
     except OSError as err:
         raise InputFileError(f"{out}: cannot create the output folder ({err})") from None
     sim = sim or Simulator()
-    inputs: list[InputRow] = []
+    inputs: list[InputRow] = [load_input(p, import_kwargs) for p in files]
     comps: list[TrialComparison] = []
-    for p in files:
-        row = load_input(p, import_kwargs)
-        inputs.append(row)
-        if row.trial is not None:
-            comps.append(compare_trial(row.trial, sim, name=p.name))
-        if progress:
-            progress(p.name)
+    calibrating: Background | None = None
+    start_calibration = critical and calibrate_c
+    try:
+        for p, row in zip(files, inputs):
+            if row.trial is not None:
+                comps.append(compare_trial(row.trial, sim, name=p.name))
+                if start_calibration:
+                    start_calibration = False
+                    # after the first comparison, so that the kernels are compiled (and cached) once, here
+                    calibrating = _start_calibration(sim, *_critical_inputs(files, inputs, critical_files))
+            if progress:
+                progress(p.name)
+        res = _rest_of_report(files, out, sim, inputs, comps, slope_bin_deg, critical, critical_files, calibrating,
+                              robot_logs, progress)
+    finally:
+        if calibrating is not None:
+            calibrating.close()
+    res.seconds = time.perf_counter() - t_start
+    _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
+    return res
+
+
+def _rest_of_report(files: Sequence[Path], out: Path, sim: Simulator, inputs: list[InputRow],
+                    comps: list[TrialComparison], slope_bin_deg: float, critical: bool,
+                    critical_files: Sequence[str | Path] | None, calibrating: Background | None,
+                    robot_logs: dict[str, Path] | None, progress: Callable[[str], None] | None) -> ReportResult:
+    """The report after the comparisons: trends, clutch logs, figures, the critical slope, metrics.csv."""
     groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
     clutch = {}
     for name, log in (robot_logs or {}).items():
@@ -147,12 +168,10 @@ def build_report(
     res = ReportResult(out, out / REPORT_FILES["html"], out / REPORT_FILES["csv"], [com_png, per_png], inputs, comps,
                        groups, clutch=clutch)
     if critical:
-        _add_critical(res, sim, files, critical_files, calibrate_c, progress)
+        _add_critical(res, sim, *_critical_inputs(files, inputs, critical_files), calibrating, progress)
     if res.calibration is None and all_suspect(res):
         _calibrate_for_misfit(res, sim, progress)
     _write_csv(res.metrics(), res.metrics_csv)
-    res.seconds = time.perf_counter() - t_start
-    _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
     return res
 
 
@@ -180,33 +199,45 @@ def _calibrate_for_misfit(res: ReportResult, sim: Simulator, progress: Callable[
         progress("calibration of c (every trial suspect)")
 
 
-def _add_critical(res: ReportResult, sim: Simulator, files: Sequence[Path], only: Sequence[str | Path] | None,
-                  calibrate_c: bool, progress: Callable[[str], None] | None) -> None:
-    from rimless.analysis.inference.critical_slope import run_critical_slope
-
+def _critical_inputs(files: Sequence[Path], inputs: Sequence[InputRow], only: Sequence[str | Path] | None
+                     ) -> tuple[list[Any], list[str]]:
+    """The trials (with steps) and their file names that enter the critical slope: every one, or ``only``."""
     keep = {Path(p).resolve() for p in only} if only is not None else None
     trials, names = [], []
-    for p, row in zip(files, res.inputs):
+    for p, row in zip(files, inputs):
         if row.trial is None or row.trial.step_period_s.size == 0:
             continue
         if keep is not None and p.resolve() not in keep:
             continue
         trials.append(row.trial)
         names.append(row.file)
+    return trials, names
+
+
+def _start_calibration(sim: Simulator, trials: list[Any], names: list[str]) -> Background | None:
+    """The calibration of c on ``trials``, in a second process while the report goes on (None: no trial)."""
+    if not trials:
+        return None
+    from rimless.analysis.inference.calibrate import calibrate_or_none
+
+    return Background(calibrate_or_none, trials, names, ["c"], sim.params, sim.model)
+
+
+def _add_critical(res: ReportResult, sim: Simulator, trials: list[Any], names: list[str],
+                  calibrating: Background | None, progress: Callable[[str], None] | None) -> None:
+    """The critical slope from ``trials``, the model's at ``sim.params``, and with ``calibrating`` (the
+    calibration of c started by `_start_calibration`) the calibration and the calibrated model's."""
+    from rimless.analysis.inference.critical_slope import add_calibrated_model, run_critical_slope
+
     if not trials:
         return
-    calibrated = None
-    if calibrate_c:
-        from rimless.analysis.inference.calibrate import NoTrialCalibrated, calibrate
-
-        try:
-            res.calibration = calibrate(trials, names, ["c"], params=sim.params, model=sim.model)
-            calibrated = res.calibration.calibrated_params
-        except NoTrialCalibrated:
-            res.calibration = None
+    res.critical = run_critical_slope(trials, names, sim.params, models=(sim.model,))
+    if calibrating is not None:
+        res.calibration = calibrating.result()
         if progress:
             progress("calibration of c")
-    res.critical = run_critical_slope(trials, names, sim.params, models=(sim.model,), calibrated=calibrated)
+        if res.calibration is not None:
+            add_calibrated_model(res.critical, res.calibration.calibrated_params, models=(sim.model,))
     if progress:
         progress("critical slope")
     res.figures.append(_critical_figure(res.critical, res.out_dir / REPORT_FILES["critical"]))
