@@ -19,6 +19,8 @@ from typing import Any
 
 import pytest
 
+from tests.support.readme_run import DEMO_COMMAND, DEMO_FOLDER, readme_env
+
 
 @dataclass(frozen=True)
 class DemoRun:
@@ -53,15 +55,17 @@ def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, compute: C
 
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
-    """The demo, run once per test run (it takes about a minute) for the tests that read what it wrote."""
+    """The README's `rimless demo`, run as written once per test run (in a folder with `.venv` pointing at the
+    running environment) for the README's test and the tests that read what it wrote."""
 
     def run(folder: Path) -> dict[str, Any]:
-        res = subprocess.run([sys.executable, "-m", "rimless", "demo", "--out", str(folder / "demo")],
-                             capture_output=True, text=True, timeout=900, stdin=subprocess.DEVNULL)
+        (folder / ".venv").symlink_to(Path(sys.prefix))
+        res = subprocess.run(["bash", "-c", DEMO_COMMAND], cwd=folder, env=readme_env(), capture_output=True,
+                             text=True, timeout=900, stdin=subprocess.DEVNULL)
         return {"stdout": res.stdout, "stderr": res.stderr, "returncode": res.returncode}
 
     folder, got = once_per_run(tmp_path_factory, "demo", run)
-    return DemoRun(out=folder / "demo", **got)
+    return DemoRun(out=folder / DEMO_FOLDER, **got)
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:

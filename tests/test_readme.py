@@ -24,6 +24,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.readme_run import DEMO_COMMAND, DEMO_FOLDER, readme_env
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PAGES = [README, *sorted((ROOT / "docs").glob("*.md"))]  # every page whose bash blocks run
@@ -118,6 +120,7 @@ def test_the_readme_has_runnable_commands():
     """The parser finds the README's commands (a README without any would make every test below vanish)."""
     runnable = [c for c in COMMANDS if not_run_reason(c) is None]
     assert any(_normalised(c).startswith("rimless demo") for c in runnable)
+    assert DEMO_COMMAND in runnable  # the command of the shared demo run (tests/support/readme_run.py)
     assert any(_normalised(c).startswith("rimless sim ") for c in runnable)
     assert len(runnable) >= 6, runnable
     everywhere = [c for _, c in PAGE_COMMANDS if not_run_reason(c) is None]
@@ -160,15 +163,16 @@ def make_mirror(where: Path) -> Path:
 
 def command_problem(command: str, mirror: Path) -> str | None:
     """Run one command (with its quick options) in `mirror`; what is wrong with it, or None."""
-    bin_dir = Path(sys.prefix) / "bin"
-    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", "VIRTUAL_ENV": sys.prefix,
-           "COLUMNS": "80"}
     run = with_quick_options(command)
-    res = subprocess.run(["bash", "-c", run], cwd=mirror, env=env, capture_output=True, text=True,
+    res = subprocess.run(["bash", "-c", run], cwd=mirror, env=readme_env(), capture_output=True, text=True,
                          timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
-    out = res.stdout + res.stderr
-    if res.returncode != 0:
-        return f"`{run}` exited {res.returncode}:\n{out[-3000:]}"
+    return run_problem(run, res.returncode, res.stdout + res.stderr, mirror)
+
+
+def run_problem(run: str, returncode: int, out: str, mirror: Path) -> str | None:
+    """What is wrong with one command's run (exit code, traceback, outputs, table width), or None."""
+    if returncode != 0:
+        return f"`{run}` exited {returncode}:\n{out[-3000:]}"
     if "Traceback" in out:
         return f"`{run}` printed a traceback:\n{out[-3000:]}"
     for path in named_outputs(run):
@@ -188,9 +192,13 @@ def command_problem(command: str, mirror: Path) -> str | None:
 # wrote). Not one test per command grouped with xdist_group: with pytest 9 and pytest-xdist 3.8 `--dist loadgroup`
 # no longer keeps a group on one worker, and a page's commands ran on two workers in two folders (CI saw
 # `trials show` miss the file `trials import` had just written).
+# The README's `rimless demo` is the run shared with the tests that read the demo's report (tests/conftest.py's
+# demo_run: the same command in a folder like this one, with the same environment): checked here like every other
+# command, run once per test run instead of twice. Its page's test joins the demo's readers on one worker.
 @pytest.mark.slow
-@pytest.mark.parametrize("page", sorted({page for page, _ in PAGE_COMMANDS}))
-def test_page_commands_run_as_written(page: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize("page", [pytest.param(page, marks=[pytest.mark.xdist_group("demo")] if page == "README.md"
+                                               else []) for page in sorted({page for page, _ in PAGE_COMMANDS})])
+def test_page_commands_run_as_written(page: str, tmp_path: Path, request: pytest.FixtureRequest) -> None:
     mirror = make_mirror(tmp_path)
     ran: list[str] = []
     known: list[str] = []
@@ -199,7 +207,12 @@ def test_page_commands_run_as_written(page: str, tmp_path: Path) -> None:
         if reason is not None:
             print(f"not run: {command}: {reason}")
             continue
-        problem = command_problem(command, mirror)
+        if command == DEMO_COMMAND:
+            demo = request.getfixturevalue("demo_run")
+            (mirror / DEMO_FOLDER).symlink_to(demo.out, target_is_directory=True)
+            problem = run_problem(command, demo.returncode, demo.stdout + demo.stderr, mirror)
+        else:
+            problem = command_problem(command, mirror)
         if problem is not None:
             if any(re.search(pattern, _normalised(command)) for pattern, _ in KNOWN_VIOLATIONS):
                 known.append(problem)
