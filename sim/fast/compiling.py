@@ -3,18 +3,53 @@ time, quiet when stderr is not a terminal or with --json) when it is neither com
 numba's on-disk cache; otherwise just call it.
 
 `kernel` is the decorator of the compiled kernels (numba.njit(cache=True) with one difference, see there).
+Importing this module also makes numba's on-disk cache safe for processes that compile at the same time
+(`lock_cache_saves`).
 
 May import: numba, rimless.progress.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
 import numba
 from numba.core import types as _types
 from numba.core.registry import CPUDispatcher
+
+def lock_cache_saves() -> None:
+    """Make numba's cache entries safe to add from several processes at once (idempotent).
+
+    numba adds an entry by reading the function's index file, taking the first data file name the index does
+    not use and writing the index and the data back, with no lock. Two processes compiling different
+    specialisations of one function at the same time (two mass models: test workers, Dask workers) can both
+    take the same name; the index of one may then name the machine code of the other, which a later process
+    loads for the wrong mass model. A lock file per index (`fcntl.flock`, where the platform has it) makes
+    read, pick and write one step."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: numba's behaviour as it is
+        return
+    from numba.core import caching
+
+    cls = caching.IndexDataCacheFile
+    if getattr(cls.save, "_rimless_locked", False):
+        return
+    unlocked = cls.save
+
+    def save(self: Any, key: Any, data: Any) -> None:
+        os.makedirs(self._cache_path, exist_ok=True)  # noqa: SLF001 (numba's cache folder)
+        with open(f"{self._index_path}.lock", "a") as lock:  # noqa: SLF001
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            unlocked(self, key, data)
+
+    save._rimless_locked = True  # type: ignore[attr-defined]
+    cls.save = save
+
+
+lock_cache_saves()
 
 # The one argument whose literal value a kernel is specialised on when called from compiled code: the mass
 # model index (rimless.sim.fast.model picks that model's generated code at compile time from it).
