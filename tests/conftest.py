@@ -10,8 +10,10 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +21,7 @@ from typing import Any
 
 import pytest
 
+from tests.support import first_use
 from tests.support.readme_run import DEMO_COMMAND, DEMO_FOLDER, readme_env
 
 
@@ -79,7 +82,11 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     head = ("import numpy as np\n"
             "from rimless.sim import fast\n"
             "from rimless.sim.model.params import WheelParams\n")
-    codes = [head + "fast.warm_up()\n"
+    # first the first-use probe (tests/test_first_use.py): on a cold cache its compile is the one the suite
+    # needs anyway, and its output, left for the workers, spares that test a cold compile of its own
+    record = Path(tempfile.mkdtemp(prefix="rimless-first-use-")) / "probe.txt"
+    os.environ[first_use.RECORD_ENV] = str(record)  # the workers, started after this hook, inherit it
+    codes = [first_use.PROBE + head + "fast.warm_up()\n"
              "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n"]
     try:
         cores = int(config.option.numprocesses)
@@ -93,14 +100,24 @@ def pytest_sessionstart(session: pytest.Session) -> None:
                      " jacobian=True)\n"
                      "except Exception:\n"
                      "    pass\n")
-    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              stdin=subprocess.DEVNULL) for code in codes]
+    with open(record, "w") as probe_out:
+        procs = [subprocess.Popen([sys.executable, "-c", code], stdout=probe_out if i == 0 else subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL) for i, code in enumerate(codes)]
     for proc in procs:
         try:
             proc.wait(timeout=1800)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """The controller removes the folder of the first-use probe's output (see pytest_sessionstart)."""
+    if hasattr(session.config, "workerinput"):
+        return
+    record = os.environ.pop(first_use.RECORD_ENV, None)
+    if record:
+        shutil.rmtree(Path(record).parent, ignore_errors=True)
 
 
 # Under `-n N` xdist hands the tests out in collection order, a few at a time to whichever worker is free: a long
