@@ -101,34 +101,46 @@ def test_first_call_of_a_cold_kernel_is_announced(monkeypatch: pytest.MonkeyPatc
     assert calls == [(1,), (2,)]
 
 
-def _probe_output(tmp_path: Path) -> list[str]:
+@pytest.fixture(scope="module")
+def probe_lines(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
     """The first-use probe's output from a cold cache: the suite's warm-up's, when it found the cache cold
     (tests/conftest.py; a fresh clone), else a run here in an empty RIMLESS_CACHE_DIR."""
+    tmp_path = tmp_path_factory.mktemp("first-use-cache")
     recorded = os.environ.get(first_use.RECORD_ENV)
     if recorded and Path(recorded).is_file():
         lines = Path(recorded).read_text().splitlines()
         if len(lines) == first_use.LINES and lines[0] == "cold":  # whole (a warm-up killed midway is not used)
             return lines
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    res = subprocess.run([sys.executable, "-c", first_use.PROBE], env={**env, "RIMLESS_CACHE_DIR": str(tmp_path)},
+    env.update(RIMLESS_CACHE_DIR=str(tmp_path), RIMLESS_NO_BACKGROUND="1")  # the whole compile in one process
+    res = subprocess.run([sys.executable, "-c", first_use.PROBE], env=env,
                          capture_output=True, text=True, timeout=1800)
     assert res.returncode == 0, res.stderr[-2000:]
     return res.stdout.splitlines()
 
 
 @pytest.mark.slow
-def test_a_step_compiles_its_own_mass_model_only(tmp_path: Path) -> None:
+def test_a_step_compiles_its_own_mass_model_only(probe_lines: list[str]) -> None:
     """With an empty cache, a step of the eight-leg wheel compiles the eight-leg generated code and none of the
     other two mass models' (they were all compiled before: one kernel switched on the mass model at run time)."""
-    lines = _probe_output(tmp_path)
+    lines = probe_lines
     assert lines[0] == "cold"
     z = [float(v) for v in lines[1].split()]
     assert z == pytest.approx([-0.465155, 2.604441], abs=2e-6)  # the ER gait at Table 1 is a fixed point
-    families = [line.split() for line in lines[2:]]
+    families = [line.split() for line in lines[2:-1]]
     assert [f[0] for f in families] == ["_M", "_DL", "_DLD", "_DM", "_T"]
     for name, *counts in families:
         assert counts[1:] == ["0", "0"], (name, counts)  # sliding-leg, active-feet: not compiled
         assert name not in ("_M", "_DL", "_DLD") or counts[0] != "0", (name, counts)  # eight-leg: compiled
+
+
+@pytest.mark.slow
+def test_the_ahead_plan_names_what_the_step_kernel_compiles(probe_lines: list[str]) -> None:
+    """Every function rimless.sim.fast.ahead.PLAN compiles in the second process is one the step kernel calls,
+    with the same argument types (else the step kernel compiles it again, and the second core's work is lost).
+    Same probe, same cold compile as the test above."""
+    assert probe_lines[-1].split()[0] == "stale"
+    assert probe_lines[-1].split()[1:] == [], f"PLAN entries not used as written: {probe_lines[-1]}"
 
 
 @pytest.mark.parametrize("given", [None, "1"])

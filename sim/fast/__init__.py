@@ -9,6 +9,7 @@ rules of the event engine rimless.sim.integrate.events). Modules:
 - rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output (the engine's twin);
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
 - rimless.sim.fast.compiling: calling a kernel on first use with a notice on stderr while it compiles;
+- rimless.sim.fast.ahead: on a cold cache, the step kernel's late callees compiled in a second process;
 - rimless.sim.fast (this file): the Python face below. Import fast-path names from here.
 
 - `FastIntegrator(rtol, atol)`: implements rimless.sim.integrate.reference.Integrator (`run_phase`), so
@@ -74,6 +75,7 @@ _compile_settings()
 from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder is chosen)
 from rimless.sim.fast import rk  # noqa: E402
 from rimless.sim.fast import step as fs  # noqa: E402
+from rimless.sim.fast.ahead import compiling_ahead  # noqa: E402
 from rimless.sim.fast.compiling import call_compiling as _call_compiling  # noqa: E402
 from rimless.sim.fast.compiling import cache_folder as _cache_folder  # noqa: E402
 from rimless.sim.model.guards import DIRECTION  # noqa: E402
@@ -251,9 +253,10 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     counts = np.zeros((3, 2), dtype=np.int64)
     c = np.empty(fs.CONTACT_SIZE if bilateral and record_contact else 0)
     # the mass model's own entry point: only its generated code is compiled (rimless.sim.fast.model)
+    mi = mass_model_index(params)
     st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = _call_compiling(
-        fs.STEP_MAP_CONTACT[mass_model_index(params)], er, param_vector(params), zz, float(rtol), float(atol),
-        bool(jacobian), int(max_steps), counts, bool(bilateral), c)
+        fs.STEP_MAP_CONTACT[mi], er, param_vector(params), zz, float(rtol), float(atol),
+        bool(jacobian), int(max_steps), counts, bool(bilateral), c, ahead=lambda: compiling_ahead(mi))
     if not bilateral:
         c = None
     if st != fs.OK:

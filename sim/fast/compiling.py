@@ -12,6 +12,7 @@ May import: numba, rimless.progress.
 from __future__ import annotations
 
 import os
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -109,8 +110,9 @@ def is_cached(kernel: Any) -> bool:
         return True  # another numba: say nothing rather than something wrong
 
 
-def call_compiling(kernel: Any, *args: Any) -> Any:
-    """kernel(*args), announced on stderr while it compiles on first use."""
+def call_compiling(kernel: Any, *args: Any, ahead: Any = None) -> Any:
+    """kernel(*args), announced on stderr while it compiles on first use. ``ahead``: a context manager
+    factory entered around that first compile only (`rimless.sim.fast.ahead.compiling_ahead`)."""
     if getattr(kernel, "_rimless_called", False):  # skips `is_cached`: its `signatures` costs ~17 us a call
         return kernel(*args)
     if is_cached(kernel):
@@ -120,7 +122,7 @@ def call_compiling(kernel: Any, *args: Any) -> Any:
 
         name = kernel.py_func.__name__
         with spinner(f"compiling the simulator ({name}; first use only, cached in {cache_folder(kernel)})",
-                     done=f"compiled the simulator ({name})"):
+                     done=f"compiled the simulator ({name})"), (ahead() if ahead is not None else nullcontext()):
             out = kernel(*args)
     try:
         kernel._rimless_called = True  # compiled or loaded in this process from now on

@@ -20,6 +20,7 @@ import numpy as np
 
 from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
+from rimless.sim.fast.ahead import compiling_ahead
 from rimless.sim.fast.compiling import call_compiling, kernel
 from rimless.sim.model.guards import DIRECTION
 
@@ -218,14 +219,14 @@ def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin); unilateral contact (see
     step_map_contact)."""
     return call_compiling(STEP_MAP_CONTACT[mi], er, p, z, rtol, atol, want_jac, max_steps, counts, False,
-                          np.empty(0))
+                          np.empty(0), ahead=lambda: compiling_ahead(mi))
 
 
 def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
     """step_kernel for mass model index mi through its own entry point (STEP_MAP_CONTACT[mi]), so that only
     that mass model's generated code is compiled."""
     return call_compiling(STEP_MAP_CONTACT[mi], er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral,
-                          contact)
+                          contact, ahead=lambda: compiling_ahead(mi))
 
 
 @_jit(inline="always")  # one call site per mass model entry point below

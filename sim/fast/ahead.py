@@ -1,0 +1,128 @@
+"""Compiling ahead, in a second process, the kernels a cold step kernel reaches last.
+
+numba compiles a kernel's callees depth first, one after the other, in the calling process: the step kernel of
+one mass model (`rimless.sim.fast.step.STEP_MAP_CONTACT`) spends about 35 s of one core on a cold cache. Some of
+its callees are reached only after the integrator (`rk.run_phase`, about half of it) is compiled: the guard
+gradient, the impact, the single-support force, the energy, and inside the integrator the RK stages, the dense
+output and the guard root finders. `start(mi)` compiles exactly those (same functions, same argument types, so
+the same cache entries) in a second process on another core from the moment the step kernel starts; the step
+kernel then loads them from numba's on-disk cache (`compiling.lock_cache_saves` makes the two processes' cache
+writes safe) instead of compiling them. The machine code is the same whichever process compiled it.
+
+`compiling_ahead(mi)` is the context a cold step kernel compiles in. `PLAN` names each function and its argument types (a token per argument, see `_types`); a plan entry that no
+longer matches the code only costs the second core some work. Off with one core or ``RIMLESS_NO_BACKGROUND=1``.
+
+May import: numba, rimless.sim.fast (run in the second process).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from typing import Any
+
+#: (module of rimless.sim.fast, function, argument types), in the order the step kernel reaches them.
+PLAN: tuple[tuple[str, str, str], ...] = (
+    ("rk", "_rk_stages", "mi i f1 f1 f1 f f2 f1 f1 f1 f1 b b"),
+    ("rk", "_build_dense", "mi i f1 f1 f f2 f2 f1 f1 f1 b b"),
+    ("rk", "_brent", "mi i f1 i b f f f f f2 f1"),
+    ("rk", "_first_dip", "mi i f1 i f f f2 f1 f f"),
+    ("model", "guard_gradient", "mi i i f1 f1"),
+    ("step", "single_support_force", "mi i f1 f2 f1 f1"),
+    ("model", "impact", "mi f1 f1 f2 b"),
+    ("model", "energy", "mi f1 f1 f1"),
+)
+
+
+def _types(spec: str, mi: int) -> tuple[Any, ...]:
+    """The numba argument types of a PLAN entry: mi (the mass model index as a literal, as the kernels see
+    it), i (int64), f (float64), b (bool), f1 / f2 (C-contiguous writable float64 arrays of 1 / 2 dimensions)."""
+    from numba.core import types
+
+    table = {"i": types.int64, "f": types.float64, "b": types.boolean,
+             "f1": types.Array(types.float64, 1, "C"), "f2": types.Array(types.float64, 2, "C")}
+    return tuple(types.literal(mi) if tok == "mi" else table[tok] for tok in spec.split())
+
+
+def dispatcher(module: str, name: str) -> Any:
+    """The kernel a PLAN entry names."""
+    import importlib
+
+    return getattr(importlib.import_module(f"rimless.sim.fast.{module}"), name)
+
+
+def compile_entry(module: str, name: str, spec: str, mi: int) -> bool:
+    """Compile (or load from numba's cache) one PLAN entry for mass model index ``mi``; False if it fails."""
+    try:
+        dispatcher(module, name).compile(_types(spec, mi))
+    except Exception:  # noqa: BLE001 (a stale entry: the step kernel compiles that function itself)
+        return False
+    return True
+
+
+def compile_plan(mi: int) -> None:
+    """Compile (or load) every PLAN entry for mass model index ``mi`` into numba's cache (the second process)."""
+    for module, name, spec in PLAN:
+        compile_entry(module, name, spec, mi)
+
+
+def stale_entries(mi: int) -> list[str]:
+    """In a process that has just run the step kernel of ``mi``: the PLAN entries the kernel did not use as
+    written (never called, or called with other argument types, so that compiling the entry adds a version)."""
+    stale = []
+    for module, name, spec in PLAN:
+        disp = dispatcher(module, name)
+        before = len(disp.overloads)
+        if before == 0 or not compile_entry(module, name, spec, mi) or len(disp.overloads) != before:
+            stale.append(f"{module}.{name}")
+    return stale
+
+
+def _allowed() -> bool:
+    if os.environ.get("RIMLESS_NO_BACKGROUND", "") not in ("", "0"):
+        return False
+    try:
+        return len(os.sched_getaffinity(0)) > 1
+    except (AttributeError, OSError):
+        return (os.cpu_count() or 1) > 1
+
+
+def start(mi: int) -> subprocess.Popen[bytes] | None:
+    """The second process compiling PLAN for ``mi`` (None: not started). Quiet, deaf to Ctrl-C (the caller
+    stops it with `stop`)."""
+    if not _allowed():
+        return None
+    code = f"from rimless.sim.fast import ahead; ahead.compile_plan({int(mi)})"
+    import signal
+
+    try:
+        return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    except OSError:
+        return None
+
+
+def stop(proc: subprocess.Popen[bytes] | None) -> None:
+    """End the second process if it still runs (its finished cache entries stay)."""
+    if proc is None or proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+@contextlib.contextmanager
+def compiling_ahead(mi: int) -> Iterator[None]:
+    """While the block runs, PLAN for ``mi`` compiles in a second process (stopped when the block ends)."""
+    proc = start(mi)
+    try:
+        yield
+    finally:
+        stop(proc)
