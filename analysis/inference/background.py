@@ -54,13 +54,19 @@ def _sigint_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-    """The child's body: quiet, deaf to Ctrl-C, one message back (("ok", value) or ("err", exception))."""
+def _child(conn: Any, fn: Callable[..., Any], prepare: Callable[[], Any] | None) -> None:
+    """The child's body: quiet, deaf to Ctrl-C; ``prepare()``, then the arguments from the pipe, then one
+    message back (("ok", value) or ("err", exception))."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     devnull = open(os.devnull, "w")  # noqa: SIM115 (the child's whole life)
     sys.stdout = sys.stderr = devnull
     try:
+        if prepare is not None:
+            prepare()
+        args = conn.recv()
         msg = ("ok", fn(*args))
+    except EOFError:  # the caller closed the pipe without arguments: nothing to do
+        return
     except BaseException as err:  # noqa: BLE001 (sent to the caller, raised there)
         msg = ("err", err)
     try:
@@ -71,20 +77,44 @@ def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
 
 
 class Background:
-    """``fn(*args)`` in a second process from now on; `result()` for its value (see the module doc)."""
+    """``fn(*args)`` in a second process from now on; `result()` for its value (see the module doc).
 
-    def __init__(self, fn: Callable[..., Any], *args: Any) -> None:
+    `Background.started(fn, prepare)` starts the process before the arguments exist: it imports what ``fn``
+    needs and runs ``prepare()`` (e.g. loading compiled code) while the caller works; `submit(*args)` then
+    hands over the arguments."""
+
+    def __init__(self, fn: Callable[..., Any], *args: Any, _submit: bool = True,
+                 _prepare: Callable[[], Any] | None = None) -> None:
         self._fn, self._args = fn, args
         self._proc: Any = None
         self._conn: Any = None
+        self._submitted = False
         if background_allowed():
             ctx = multiprocessing.get_context("spawn")
-            self._conn, child_conn = ctx.Pipe(duplex=False)
-            self._proc = ctx.Process(target=_child, args=(child_conn, fn, args), daemon=True,
+            self._conn, child_conn = ctx.Pipe(duplex=True)
+            self._proc = ctx.Process(target=_child, args=(child_conn, fn, _prepare), daemon=True,
                                      name=f"rimless-{getattr(fn, '__name__', 'background')}")
             with _sigint_blocked():  # the child is deaf to Ctrl-C from its first instruction (a blocked
                 self._proc.start()   # signal mask survives fork and exec); one pending here is raised after
             child_conn.close()
+        if _submit:
+            self.submit(*args)
+
+    @classmethod
+    def started(cls, fn: Callable[..., Any], prepare: Callable[[], Any] | None = None) -> Background:
+        """The second process started now, waiting (after ``prepare()``) for `submit`."""
+        return cls(fn, _submit=False, _prepare=prepare)
+
+    def submit(self, *args: Any) -> None:
+        """Hand ``args`` to ``fn`` (once)."""
+        if self._submitted:
+            raise RuntimeError("Background.submit: the arguments were given already")
+        self._submitted, self._args = True, args
+        if self._proc is not None:
+            try:
+                self._conn.send(args)
+            except OSError:  # the child has ended already (its prepare failed): result() says why
+                pass
 
     @property
     def in_background(self) -> bool:
@@ -98,6 +128,8 @@ class Background:
 
     def result(self) -> Any:
         """Wait for ``fn(*args)``; its value, or its exception raised here."""
+        if not self._submitted:
+            raise RuntimeError("Background.result: no arguments submitted")
         if self._proc is None:
             return self._fn(*self._args)
         try:

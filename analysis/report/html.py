@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import html
 import math
@@ -28,9 +29,11 @@ import numpy as np
 
 from rimless.errors import InputFileError
 
-from rimless.analysis.inference.background import Background
+from rimless.analysis.inference.background import Background, background_allowed
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step_period_trends
 from rimless.analysis.io.robot_log import read_clutch_log
+from rimless.analysis.report.calibration_beside import (calibration_args, one_blas_thread, prepared_calibration,
+                                                        start_calibration)
 from rimless.analysis.report.clutch import clutch_comparison, clutch_html
 from rimless.analysis.kinematics.inputs import InputRow, load_input
 
@@ -129,28 +132,42 @@ def build_report(
     except OSError as err:
         raise InputFileError(f"{out}: cannot create the output folder ({err})") from None
     sim = sim or Simulator()
-    inputs: list[InputRow] = [load_input(p, import_kwargs) for p in files]
-    comps: list[TrialComparison] = []
-    calibrating: Background | None = None
-    start_calibration = critical and calibrate_c
-    try:
-        for p, row in zip(files, inputs):
-            if row.trial is not None:
-                comps.append(compare_trial(row.trial, sim, name=p.name))
-                if start_calibration:
-                    start_calibration = False
-                    # after the first comparison, so that the kernels are compiled (and cached) once, here
-                    calibrating = _start_calibration(sim, *_critical_inputs(files, inputs, critical_files))
-            if progress:
-                progress(p.name)
-        res = _rest_of_report(files, out, sim, inputs, comps, slope_bin_deg, critical, critical_files, calibrating,
-                              robot_logs, progress)
-    finally:
-        if calibrating is not None:
-            calibrating.close()
+    beside = critical and calibrate_c and background_allowed()
+    # two processes on the cores: BLAS threads here would wait for a core (warm demo 13.0-14.5 s, 14.5-18.5 s)
+    with one_blas_thread() if beside else contextlib.nullcontext():
+        res = _compare_and_report(files, out, sim, import_kwargs, slope_bin_deg, critical, critical and calibrate_c,
+                                  critical_files, robot_logs, progress)
     res.seconds = time.perf_counter() - t_start
     _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
     return res
+
+
+def _compare_and_report(files: Sequence[Path], out: Path, sim: Simulator, import_kwargs: dict[str, Any] | None,
+                        slope_bin_deg: float, critical: bool, calibrate_c: bool,
+                        critical_files: Sequence[str | Path] | None, robot_logs: dict[str, Path] | None,
+                        progress: Callable[[str], None] | None) -> ReportResult:
+    """Import, compare (the calibration of c in a second process meanwhile, when asked), then the rest."""
+    calibrating: Background | None = prepared_calibration(sim.params) if calibrate_c and sim.compiled() else None
+    try:
+        inputs: list[InputRow] = [load_input(p, import_kwargs) for p in files]
+        if calibrating is not None:  # started (imports, kernels) while the files loaded
+            calibrating.submit(*calibration_args(sim.params, sim.model, *_critical_inputs(files, inputs,
+                                                                                         critical_files)))
+        comps: list[TrialComparison] = []
+        for p, row in zip(files, inputs):
+            if row.trial is not None:
+                comps.append(compare_trial(row.trial, sim, name=p.name))
+                if calibrate_c and calibrating is None:  # a cold cache: compiled once, by that comparison
+                    calibrating = start_calibration(sim.params, sim.model,
+                                                    *_critical_inputs(files, inputs, critical_files))
+                    calibrate_c = calibrating is not None
+            if progress:
+                progress(p.name)
+        return _rest_of_report(files, out, sim, inputs, comps, slope_bin_deg, critical, critical_files, calibrating,
+                               robot_logs, progress)
+    finally:
+        if calibrating is not None:
+            calibrating.close()
 
 
 def _rest_of_report(files: Sequence[Path], out: Path, sim: Simulator, inputs: list[InputRow],
@@ -214,19 +231,10 @@ def _critical_inputs(files: Sequence[Path], inputs: Sequence[InputRow], only: Se
     return trials, names
 
 
-def _start_calibration(sim: Simulator, trials: list[Any], names: list[str]) -> Background | None:
-    """The calibration of c on ``trials``, in a second process while the report goes on (None: no trial)."""
-    if not trials:
-        return None
-    from rimless.analysis.inference.calibrate import calibrate_or_none
-
-    return Background(calibrate_or_none, trials, names, ["c"], sim.params, sim.model)
-
-
 def _add_critical(res: ReportResult, sim: Simulator, trials: list[Any], names: list[str],
                   calibrating: Background | None, progress: Callable[[str], None] | None) -> None:
     """The critical slope from ``trials``, the model's at ``sim.params``, and with ``calibrating`` (the
-    calibration of c started by `_start_calibration`) the calibration and the calibrated model's."""
+    calibration of c started beside the comparisons) the calibration and the calibrated model's."""
     from rimless.analysis.inference.critical_slope import add_calibrated_model, run_critical_slope
 
     if not trials:

@@ -82,3 +82,36 @@ def test_ctrl_c_to_the_group_is_one_line_and_leaves_no_child(tmp_path, delay_s):
     time.sleep(0.2)
     with pytest.raises(ProcessLookupError):
         os.kill(child, 0)
+
+
+@two_cores
+def test_started_before_its_arguments_then_submitted():
+    job = Background.started(math.factorial, prepare=os.getpid)
+    assert job.in_background
+    with pytest.raises(RuntimeError, match="no arguments"):
+        job.result()
+    job.submit(10)
+    with pytest.raises(RuntimeError, match="given already"):
+        job.submit(11)
+    assert job.result() == 3628800
+
+
+@two_cores
+def test_a_failing_preparation_is_the_result():
+    job = Background.started(math.factorial, prepare=_fails)
+    job.submit(3)
+    with pytest.raises(ZeroDivisionError):
+        job.result()
+
+
+@two_cores
+def test_closed_before_its_arguments_the_child_ends_quietly():
+    job = Background.started(math.factorial)
+    pid = job.pid
+    job.close()
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
+
+
+def _fails() -> None:
+    1 / 0  # noqa: B018
