@@ -81,7 +81,8 @@ def stale_entries(mi: int) -> list[str]:
     return stale
 
 
-def _allowed() -> bool:
+def allowed() -> bool:
+    """Whether a second process may run: two or more cores, and RIMLESS_NO_BACKGROUND unset."""
     if os.environ.get("RIMLESS_NO_BACKGROUND", "") not in ("", "0"):
         return False
     try:
@@ -93,7 +94,7 @@ def _allowed() -> bool:
 def start(mi: int) -> subprocess.Popen[bytes] | None:
     """The second process compiling PLAN for ``mi`` (None: not started). Quiet, deaf to Ctrl-C (the caller
     stops it with `stop`)."""
-    if not _allowed():
+    if not allowed():
         return None
     code = f"from rimless.sim.fast import ahead; ahead.compile_plan({int(mi)})"
     import signal

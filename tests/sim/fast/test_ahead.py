@@ -5,9 +5,14 @@ kernel uses is checked on a cold compile in tests/test_first_use.py."""
 from __future__ import annotations
 
 import inspect
+import os
+import signal
 import subprocess
 import sys
+import time
 
+import psutil  # with dask.distributed
+import pytest
 from numba.core import types
 
 from rimless.sim.fast import ahead
@@ -39,3 +44,32 @@ def test_stop_ends_a_running_second_process():
     assert proc.poll() is not None
     ahead.stop(proc)  # again: nothing to do
     ahead.stop(None)
+
+
+def test_ctrl_c_during_a_cold_compile_stops_both_processes(tmp_path):
+    """A terminal's Ctrl-C (SIGINT to the process group) while the step kernel compiles cold with the second
+    process beside it: one line `interrupted`, exit 130, no process left."""
+    if not ahead.allowed():
+        pytest.skip("one core: no second process")
+    env = {**os.environ, "RIMLESS_CACHE_DIR": str(tmp_path)}
+    env.pop("RIMLESS_NO_BACKGROUND", None)
+    proc = subprocess.Popen([sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "er"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 60
+        children: list = []
+        while not children and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            children = psutil.Process(proc.pid).children(recursive=True)
+        assert children, "no second process while the step kernel compiled cold"
+        time.sleep(1.0)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err[-2000:]
+    assert [line for line in err.splitlines() if line.strip()][-1:] == ["interrupted"], err[-2000:]
+    time.sleep(0.5)
+    assert not [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
