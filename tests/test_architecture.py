@@ -30,7 +30,8 @@ CROSS = {
     "rimless.firmware": set(),
     "rimless.analysis": {"rimless.sim"},
 }
-SHARED_ROOT = {"rimless", "rimless.errors", "rimless.units", "rimless.output", "rimless.progress", "rimless.values"}
+SHARED_ROOT = {"rimless", "rimless.errors", "rimless.units", "rimless.output", "rimless.progress", "rimless.values",
+               "rimless.second_process"}
 CLI_ROOT = {"rimless.cli", "rimless.cli_rules", "rimless.__main__"}
 HEAVY = ("numpy", "scipy", "pandas", "matplotlib", "dask", "numba", "sympy", "pyarrow", "ezc3d")
 

@@ -10,7 +10,7 @@ command still prints one line. A child that dies without an answer (killed, out 
 environment, ``fn`` runs in the caller's process when `result()` is asked for (the same value: the same code on
 the same, pickled, inputs).
 
-May import: the standard library only.
+May import: the standard library, rimless.second_process.
 """
 
 from __future__ import annotations
@@ -23,6 +23,8 @@ import sys
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from rimless.second_process import second_process_allowed
+
 POLL_S = 0.1  # how often result() checks that the child is still alive while it waits
 
 
@@ -32,13 +34,7 @@ class BackgroundFailed(RuntimeError):
 
 def background_allowed() -> bool:
     """A second process pays only with a second core; ``RIMLESS_NO_BACKGROUND=1`` turns it off."""
-    if os.environ.get("RIMLESS_NO_BACKGROUND", "") not in ("", "0"):
-        return False
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cores = os.cpu_count() or 1
-    return cores > 1
+    return second_process_allowed()
 
 
 @contextlib.contextmanager

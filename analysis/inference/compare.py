@@ -66,13 +66,6 @@ class Simulator:
         if self.integrator is None:
             self.integrator = make_integrator("auto", rtol=self.rtol)
 
-    def compiled(self) -> bool:
-        """Whether the compiled kernels of this simulator's mass model are compiled or cached (a process
-        started now loads them instead of compiling them)."""
-        from rimless.sim.fast import compiled
-
-        return compiled(self.params)
-
     def on_slope(self, slope_deg: float) -> Any:
         """Parameters with the slope replaced (raises `ParameterError` outside 0 <= phi < alpha/2)."""
         return self.params.replace(slope_rad=math.radians(slope_deg))

@@ -14,17 +14,20 @@ from rimless.analysis.inference.background import Background
 
 
 def one_blas_thread() -> contextlib.AbstractContextManager[Any]:
-    """BLAS on one thread in this process (threadpoolctl) for the block."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - a dependency of the pc install
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    """BLAS on one thread in this process for the block (`calibrate.one_blas_thread`)."""
+    from rimless.analysis.inference.calibrate import one_blas_thread as limit
+
+    return limit()
 
 
-def prepared_calibration(params: Any) -> Background:
+def prepared_calibration(params: Any) -> Background | None:
     """The calibration's process started now, loading the kernels of ``params``' mass model; `submit`
-    `calibration_args` once the trials are read."""
+    `calibration_args` once the trials are read. None on a cold cache: the process would compile the kernels
+    a second time beside the report (`start_calibration` after the first comparison then)."""
+    from rimless.sim.fast import compiled
+
+    if not compiled(params):
+        return None
     from rimless.analysis.inference.calibrate import calibrate_or_none
 
     return Background.started(calibrate_or_none, prepare=partial(_load_kernels, params))

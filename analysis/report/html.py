@@ -147,7 +147,7 @@ def _compare_and_report(files: Sequence[Path], out: Path, sim: Simulator, import
                         critical_files: Sequence[str | Path] | None, robot_logs: dict[str, Path] | None,
                         progress: Callable[[str], None] | None) -> ReportResult:
     """Import, compare (the calibration of c in a second process meanwhile, when asked), then the rest."""
-    calibrating: Background | None = prepared_calibration(sim.params) if calibrate_c and sim.compiled() else None
+    calibrating: Background | None = prepared_calibration(sim.params) if calibrate_c else None
     try:
         inputs: list[InputRow] = [load_input(p, import_kwargs) for p in files]
         if calibrating is not None:  # started (imports, kernels) while the files loaded

@@ -12,17 +12,18 @@ writes safe) instead of compiling them. The machine code is the same whichever p
 `compiling_ahead(mi)` is the context a cold step kernel compiles in. `PLAN` names each function and its argument types (a token per argument, see `_types`); a plan entry that no
 longer matches the code only costs the second core some work. Off with one core or ``RIMLESS_NO_BACKGROUND=1``.
 
-May import: numba, rimless.sim.fast (run in the second process).
+May import: rimless.second_process; numba, rimless.sim.fast (run in the second process).
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
 import subprocess
 import sys
 from collections.abc import Iterator
 from typing import Any
+
+from rimless.second_process import second_process_allowed
 
 #: (module of rimless.sim.fast, function, argument types), in the order the step kernel reaches them.
 PLAN: tuple[tuple[str, str, str], ...] = (
@@ -81,20 +82,10 @@ def stale_entries(mi: int) -> list[str]:
     return stale
 
 
-def allowed() -> bool:
-    """Whether a second process may run: two or more cores, and RIMLESS_NO_BACKGROUND unset."""
-    if os.environ.get("RIMLESS_NO_BACKGROUND", "") not in ("", "0"):
-        return False
-    try:
-        return len(os.sched_getaffinity(0)) > 1
-    except (AttributeError, OSError):
-        return (os.cpu_count() or 1) > 1
-
-
 def start(mi: int) -> subprocess.Popen[bytes] | None:
     """The second process compiling PLAN for ``mi`` (None: not started). Quiet, deaf to Ctrl-C (the caller
     stops it with `stop`)."""
-    if not allowed():
+    if not second_process_allowed():
         return None
     code = f"from rimless.sim.fast import ahead; ahead.compile_plan({int(mi)})"
     import signal

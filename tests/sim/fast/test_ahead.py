@@ -15,6 +15,7 @@ import psutil  # with dask.distributed
 import pytest
 from numba.core import types
 
+from rimless.second_process import second_process_allowed
 from rimless.sim.fast import ahead
 
 
@@ -49,7 +50,7 @@ def test_stop_ends_a_running_second_process():
 def test_ctrl_c_during_a_cold_compile_stops_both_processes(tmp_path):
     """A terminal's Ctrl-C (SIGINT to the process group) while the step kernel compiles cold with the second
     process beside it: one line `interrupted`, exit 130, no process left."""
-    if not ahead.allowed():
+    if not second_process_allowed():
         pytest.skip("one core: no second process")
     env = {**os.environ, "RIMLESS_CACHE_DIR": str(tmp_path)}
     env.pop("RIMLESS_NO_BACKGROUND", None)
