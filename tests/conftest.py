@@ -159,13 +159,36 @@ def _expected_s(item: pytest.Item) -> float:
     return 1.0 if item.get_closest_marker("slow") else 0.0
 
 
+#: Set to 1 (as .ci/run does) to run the tests marked `full` too; without it, and without `-m`, they are deselected.
+FULL_TESTS_ENV = "RIMLESS_FULL_TESTS"
+
+
+def full_run(config: pytest.Config) -> bool:
+    """Whether this run keeps the tests marked `full`: RIMLESS_FULL_TESTS=1, or a `-m` expression (which then
+    decides alone, e.g. `-m full` runs only them)."""
+    return os.environ.get(FULL_TESTS_ENV, "") not in ("", "0") or bool(config.getoption("markexpr", ""))
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    if full_run(config):
+        return "rimless: every test (tests marked `full` included)"
+    return (f"rimless: the default run; the tests marked `full` (more cases of checks this run makes) are "
+            f"deselected: {FULL_TESTS_ENV}=1 runs them too, as CI does")
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Longest first (see LONG_TESTS_S); and `xdist_group` working again under pytest 9 with `--dist loadgroup`.
+    """Tests marked `full` out of the default run (see full_run); longest first (see LONG_TESTS_S); and
+    `xdist_group` working again under pytest 9 with `--dist loadgroup`.
 
     pytest-xdist 3.8 marks a grouped test by appending `@group` to `item._nodeid`, which pytest 9 no longer
     reads (a node's id lives in `item._id`): groups were silently split across workers. The demo's readers
     (xdist_group "demo") must stay on one worker so the other never waits on the demo's lock."""
+    if not full_run(config):
+        breadth = [item for item in items if item.get_closest_marker("full")]
+        if breadth:
+            config.hook.pytest_deselected(items=breadth)
+            items[:] = [item for item in items if not item.get_closest_marker("full")]
     items.sort(key=lambda item: -_expected_s(item))  # stable: collection order within equal expectations
     if not hasattr(config, "workerinput") or not config.getvalue("loadgroup"):  # a worker's "dist" reads "no"
         return

@@ -372,7 +372,19 @@ def _leftovers(folder: Path, before: set[str], allowed: set[str]) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if p.name not in before | allowed)
 
 
-@pytest.mark.parametrize("path", [p for p, _ in LEAVES], ids=[_name(p) for p, _ in LEAVES])
+# Interrupted in every run: one command per kind of machinery (the reference integrator, a synchronous Dask
+# sweep with partial output, the demo with its second process and report, the firmware's asyncio loop, a
+# telemetry recording, a least-squares calibration); the other long commands are marked `full` (CI runs them).
+INTERRUPTED_IN_EVERY_RUN = {("sim", "fixed-point"), ("sim", "sweep"), ("demo",), ("robot", "run"),
+                            ("robot", "listen"), ("trials", "calibrate")}
+
+
+def _interrupt_case(path: tuple[str, ...]) -> Any:
+    full = path in LONG_RUNS and path not in INTERRUPTED_IN_EVERY_RUN
+    return pytest.param(path, id=_name(path), marks=[pytest.mark.full] if full else [])
+
+
+@pytest.mark.parametrize("path", [_interrupt_case(p) for p, _ in LEAVES])
 def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...], tmp_path: Path,
                                                           request: pytest.FixtureRequest) -> None:
     if path in QUICK:
@@ -434,7 +446,9 @@ NO_RESULT: dict[str, tuple[list[str], list[str], bool]] = {  # id: (args, words 
 }
 
 
-@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.slow) if v[2] else k for k, v in NO_RESULT.items()])
+# The slow cases beyond the first (one `paper` run on the level) are marked `full` (CI runs them).
+@pytest.mark.parametrize("case", [pytest.param(k, marks=[pytest.mark.slow, *([pytest.mark.full] if k != "paper on the level" else [])])
+                                  if v[2] else k for k, v in NO_RESULT.items()])
 def test_valid_input_without_a_result_is_one_line_and_exit_1(case: str, tmp_path: Path) -> None:
     args, words, _ = NO_RESULT[case]
     res = _run(args, cwd=tmp_path)
@@ -465,7 +479,8 @@ def _group_processes(pgid: int) -> list[str]:
 _SWEEP_81 = ["sim", "sweep", "--k", "1500:3500:25", "--no-cache", "--workers", "2", "--out", "sweep-out/k"]
 # (arguments, worker processes to wait for (0: none), then seconds before the Ctrl-C)
 LOCAL_CLUSTER_RUNS = {
-    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 0, 30.0),
+    # its two workers up, then into the figures' sweeps
+    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 2, 3.0),
     # 81 grid points: minutes of work, so the interrupt lands while the workers compute even on a quiet machine
     "sim sweep": (_SWEEP_81, 2, 3.0),
     # the interrupt as the first worker process appears: while the local cluster starts
@@ -484,7 +499,9 @@ def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
 # Strict: multiprocessing's resource tracker is started with its leaked-semaphore warning ignored (the killed
 # workers' semaphores are still unlinked), and after an interrupt nothing of the command's process prints
 # (Dask's logging, thread and finalizer tracebacks silenced) before it exits (rimless.sim.studies.sweep).
-@pytest.mark.parametrize("case", sorted(LOCAL_CLUSTER_RUNS))
+# "sim sweep" in every run; the other two are marked `full` (CI runs them)
+@pytest.mark.parametrize("case", [pytest.param(c, marks=[] if c == "sim sweep" else [pytest.mark.full])
+                                  for c in sorted(LOCAL_CLUSTER_RUNS)])
 def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_path: Path) -> None:
     """A terminal's Ctrl-C reaches every process of the group (the command and its Dask workers): the command
     prints `interrupted` last, exits 130, leaves no output and no worker behind; the workers print nothing."""

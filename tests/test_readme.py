@@ -133,6 +133,34 @@ def test_ci_runs_the_readmes_test_command() -> None:
     assert len(pytest_lines) == 1, pytest_lines
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
     assert pytest_lines[0] in [line.strip() for line in ci.splitlines()], pytest_lines[0]
+    # and CI runs every test: the ones marked `full` too (tests/conftest.py), exported before the command
+    lines = [line.strip() for line in ci.splitlines()]
+    assert lines.index("export RIMLESS_FULL_TESTS=1") < lines.index(pytest_lines[0])
+
+
+def test_the_default_run_leaves_out_only_tests_marked_full(pytestconfig: pytest.Config) -> None:
+    """Without RIMLESS_FULL_TESTS and `-m`, exactly the tests marked `full` are deselected; with either, none."""
+    from tests.conftest import full_run
+
+    class Config:
+        def __init__(self, markexpr: str) -> None:
+            self.markexpr = markexpr
+
+        def getoption(self, name: str, default: str = "") -> str:
+            return self.markexpr if name == "markexpr" else default
+
+    saved = os.environ.pop("RIMLESS_FULL_TESTS", None)
+    try:
+        assert not full_run(Config(""))  # type: ignore[arg-type]
+        assert full_run(Config("not slow"))  # type: ignore[arg-type]
+        os.environ["RIMLESS_FULL_TESTS"] = "1"
+        assert full_run(Config(""))  # type: ignore[arg-type]
+        os.environ["RIMLESS_FULL_TESTS"] = "0"
+        assert not full_run(Config(""))  # type: ignore[arg-type]
+    finally:
+        os.environ.pop("RIMLESS_FULL_TESTS", None)
+        if saved is not None:
+            os.environ["RIMLESS_FULL_TESTS"] = saved
 
 
 def test_parser_handles_chains_comments_and_the_setup_line():
@@ -195,9 +223,12 @@ def run_problem(run: str, returncode: int, out: str, mirror: Path) -> str | None
 # The README's `rimless demo` is the run shared with the tests that read the demo's report (tests/conftest.py's
 # demo_run: the same command in a folder like this one, with the same environment): checked here like every other
 # command, run once per test run instead of twice. Its page's test joins the demo's readers on one worker.
+# The README's page runs in every run; the reference pages of docs/ (several minutes of commands between them)
+# are marked `full`: CI runs them (tests/conftest.py).
 @pytest.mark.slow
 @pytest.mark.parametrize("page", [pytest.param(page, marks=[pytest.mark.xdist_group("demo")] if page == "README.md"
-                                               else []) for page in sorted({page for page, _ in PAGE_COMMANDS})])
+                                               else [pytest.mark.full])
+                                  for page in sorted({page for page, _ in PAGE_COMMANDS})])
 def test_page_commands_run_as_written(page: str, tmp_path: Path, request: pytest.FixtureRequest) -> None:
     mirror = make_mirror(tmp_path)
     ran: list[str] = []
