@@ -208,6 +208,9 @@ def free_response(t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: fl
     then released at rest: half cycles about x_eq +/- a, sticking within |x - x_eq| <= a. Displacements in any
     one unit (counts here); omega_n in rad/s; 0 <= zeta < 1."""
     t = np.asarray(t, float)
+    in_order = t.size < 2 or bool(np.all(t[1:] >= t[:-1]))
+    order = None if in_order else np.argsort(t, kind="stable")
+    ts_sorted = t if order is None else t[order]
     x = np.full(t.shape, float(x_lock))
     wd = omega_n * math.sqrt(max(1.0 - zeta * zeta, 1e-12))
     half = math.pi / wd
@@ -216,17 +219,23 @@ def free_response(t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: fl
     ratio = sigma / wd
     xs, ts = float(x_lock), float(t_r)
     scale = max(abs(x_lock - x_eq), 1e-12)
+    t_last = float(ts_sorted[-1]) if t.size else -math.inf
     for _ in range(10000):
         d = xs - x_eq
-        if abs(d) <= a or abs(d) < 1e-9 * scale:
+        if abs(d) <= a or abs(d) < 1e-9 * scale or ts > t_last:  # stuck, or no sample left to see the motion
             break
         e = x_eq + math.copysign(a, d)
-        m = (t >= ts) & (t < ts + half)
-        tau = t[m] - ts
-        x[m] = e + (xs - e) * np.exp(-sigma * tau) * (np.cos(wd * tau) + ratio * np.sin(wd * tau))
+        # the samples of this half cycle, ts <= t < ts + half: a slice of the time-ordered samples
+        lo, hi = np.searchsorted(ts_sorted, (ts, ts + half), side="left")
+        tau = ts_sorted[lo:hi] - ts
+        x[lo:hi] = e + (xs - e) * np.exp(-sigma * tau) * (np.cos(wd * tau) + ratio * np.sin(wd * tau))
         xs = e - (xs - e) * r
         ts += half
-    x[t >= ts] = xs
+    x[np.searchsorted(ts_sorted, ts, side="left"):] = xs
+    if order is not None:
+        out = np.empty_like(x)
+        out[order] = x
+        return out
     return x
 
 

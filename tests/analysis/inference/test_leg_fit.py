@@ -66,6 +66,24 @@ def test_fit_model_matches_the_truth_integration() -> None:
     assert len(stops) >= 2  # it turned at least once before sticking
 
 
+def test_fit_model_is_the_truth_integration_at_shuffled_times_too() -> None:
+    """The samples of each half cycle are found by bisection in time order: times out of order, repeated, before
+    the release and long after the stick give, sample by sample, the truth's integration (with and without
+    friction, a stiff fast oscillator among them)."""
+    rng = np.random.default_rng(4)
+    for friction_n, k in ((0.4, 2700.0), (0.0, 2700.0), (0.0, 2.0e5)):
+        truth = LegTruth(friction_n=friction_n, k_n_per_m=k)
+        m, c = truth.mass_kg, truth.c_n_s_per_m
+        x_eq = -m * truth.g_m_s2 / k
+        x0 = x_eq + 0.0021
+        t_r = 0.01
+        pieces, _ = free_motion(truth, x0, 0.3)
+        t = np.concatenate([rng.uniform(-0.02, 0.3, 3000), [0.0, t_r, t_r, 0.3, 0.2, 0.2]])
+        want = np.where(t < t_r, x0, position(pieces, np.maximum(t - t_r, 0.0)))
+        got = free_response(t, math.sqrt(k / m), c / (2 * math.sqrt(k * m)), friction_n / k, x_eq, x0, t_r)
+        assert np.max(np.abs(got - want)) < 1e-9, (friction_n, k)  # metres
+
+
 def _logs(tmp_path: Path, truth: LegTruth, seeds: list[int], mm: tuple[float, ...] = (1.5, 2.0, 2.5)) -> list:
     logs = []
     for s in seeds:
