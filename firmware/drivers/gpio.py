@@ -8,7 +8,7 @@ import os
 import threading
 import time
 import warnings
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -31,12 +31,27 @@ class PinLog:
     def __init__(self, path: Path | str | None = None) -> None:
         self.path = None if path is None else Path(path)
         self.transitions: list[tuple[float, int, int]] = []
-        self._lock = threading.Lock()
+        # held across a pin's change and its record, so that the file's order is the order of the changes (the
+        # control thread's heartbeat and the shutdown's `off` race); re-entrant: a signal handler in the main
+        # thread may switch pins off while the main thread is inside a change
+        self._lock = threading.RLock()
         self._fd = None if path is None else os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND,
                                                      0o644)
 
+    def change(self, pin: int, level: int, apply: Callable[[], bool]) -> bool:
+        """`apply()` (changes BCM `pin` to `level`, True if the level changed) and its record, as one step."""
+        with self._lock:
+            changed = apply()
+            if changed:
+                self.record(pin, level)
+        return changed
+
     def record(self, pin: int, level: int) -> None:
         """One change of BCM `pin` to `level` (0 or 1), now."""
+        with self._lock:
+            self._record(pin, level)
+
+    def _record(self, pin: int, level: int) -> None:
         t = time.monotonic()
         self.transitions.append((t, pin, level))
         if self._fd is not None:
@@ -67,10 +82,8 @@ def mock_pin_factory(pin_log: PinLog | None = None) -> Any:
 
     class LoggedMockPin(MockPin):
         def _change_state(self, value: Any) -> bool:
-            changed = super()._change_state(value)
-            if changed:
-                pin_log.record(int(self.info.name.removeprefix("GPIO")), 1 if value else 0)
-            return changed
+            return pin_log.change(int(self.info.name.removeprefix("GPIO")), 1 if value else 0,
+                                  lambda: super(LoggedMockPin, self)._change_state(value))
 
     return MockFactory(revision=PI4_REVISION, pin_class=LoggedMockPin)
 
