@@ -571,8 +571,10 @@ def scheduler_whose_worker_lacks_rimless(tmp_path: Path) -> Any:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("command", [["sim", "sweep", "--k", "2700", "--model", "er", "--out", "s/k"],
-                                     ["paper", "--k", "2700", "--out", "paper-out"]], ids=["sim sweep", "paper"])
+@pytest.mark.parametrize("command", [pytest.param(["sim", "sweep", "--k", "2700", "--model", "er", "--out", "s/k"],
+                                                  id="sim sweep"),
+                                     pytest.param(["paper", "--k", "2700", "--out", "paper-out"], id="paper",
+                                                  marks=pytest.mark.full)])  # `full`: CI runs it
 def test_a_dask_worker_without_the_package_is_one_error_line(command: list[str], tmp_path: Path,
                                                              scheduler_whose_worker_lacks_rimless: str) -> None:
     work = tmp_path / "work"

@@ -82,6 +82,8 @@ def test_fast_and_reference_agree_on_a_parameter_grid(params: WheelParams, model
         assert fast_out[1] == pytest.approx(ref_out[1], abs=1e-9)
 
 
+@pytest.mark.full  # calls the phase integrator from Python, which compiles it on its own (about 20 s on a cold
+# cache); tests/sim/integrate/test_contact_guards.py checks a dip between solver steps in every run
 def test_grazing_touchdown_inside_one_step_is_not_missed() -> None:
     """The swing foot dips below the slope for a fraction of one solver step and comes back up (a stiff
     stance leg re-extending): the guard is positive at both step ends. A sign test on step ends misses it;
