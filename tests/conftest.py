@@ -90,11 +90,14 @@ def pytest_configure(config: pytest.Config) -> None:
         sys.dont_write_bytecode = False
 
 
+_WARM_UP: list[subprocess.Popen[bytes]] = []  # the controller's compiling processes (pytest_sessionstart)
+
+
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """With `-n N`, compile the simulator's kernels into numba's on-disk cache once, in the controller, before
-    the workers start: otherwise each worker compiles the same kernels at the same time (minutes of CPU each on
-    a cold cache). A warm cache makes this a second or two. Without xdist the first test that needs a kernel
-    compiles it, as before."""
+    """With `-n N`, compile the simulator's kernels into numba's on-disk cache once, in the controller, while the
+    workers start and collect; the tests are handed out once it is done (pytest_xdist_node_collection_finished).
+    Otherwise each worker compiles the same kernels at the same time (minutes of CPU each on a cold cache). A
+    warm cache makes this a second or two. Without xdist the first test that needs a kernel compiles it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
@@ -107,25 +110,29 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     os.environ[first_use.RECORD_ENV] = str(record)  # the workers, started after this hook, inherit it
     codes = [first_use.PROBE + head + "fast.warm_up()\n"
              "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n"]
-    try:
-        cores = int(config.option.numprocesses)
-    except (TypeError, ValueError):  # "auto" not yet resolved
-        cores = os.cpu_count() or 1
-    if cores > 1:
-        # on a second core meanwhile: the sliding-leg step kernel, which tests/sim/fast compiles otherwise
-        # inside a worker (one mass model per kernel: rimless.sim.fast.step.STEP_MAP_CONTACT)
+    if full_run(config):
+        # the sliding-leg step kernel, which the tests marked `full` in tests/sim/fast use (one mass model per
+        # kernel: rimless.sim.fast.step.STEP_MAP_CONTACT); a worker would compile it otherwise
         codes.append(head + "try:\n"
                      "    fast.fast_step(WheelParams(mass_model='sliding-leg'), 'er', np.array([-0.465155, 2.604441]),"
                      " jacobian=True)\n"
                      "except Exception:\n"
                      "    pass\n")
     with open(record, "w") as probe_out:
-        # both cores are busy here: no second process compiling ahead for each (rimless.sim.fast.ahead)
+        # the other core collects the tests meanwhile: no second process compiling ahead (rimless.sim.fast.ahead)
         env = {**os.environ, "RIMLESS_NO_BACKGROUND": "1"}
-        procs = [subprocess.Popen([sys.executable, "-c", code], stdout=probe_out if i == 0 else subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)
-                 for i, code in enumerate(codes)]
-    for proc in procs:
+        _WARM_UP.extend(subprocess.Popen([sys.executable, "-c", code], stdout=probe_out if i == 0 else
+                                         subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                                         env=env)
+                        for i, code in enumerate(codes))
+
+
+def _end_warm_up(*, kill: bool = False) -> None:
+    """Wait for the controller's compiling processes (or kill them), once."""
+    while _WARM_UP:
+        proc = _WARM_UP.pop()
+        if kill and proc.poll() is None:
+            proc.kill()
         try:
             proc.wait(timeout=1800)
         except subprocess.TimeoutExpired:
@@ -133,10 +140,17 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             proc.wait()
 
 
+def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
+    """In the controller, before the first test is handed out: the kernels are compiled."""
+    _end_warm_up()
+
+
 def pytest_sessionfinish(session: pytest.Session) -> None:
-    """The controller removes the folder of the first-use probe's output (see pytest_sessionstart)."""
+    """The controller ends its compiling processes if no worker finished collecting (see pytest_sessionstart)
+    and removes the folder of the first-use probe's output."""
     if hasattr(session.config, "workerinput"):
         return
+    _end_warm_up(kill=True)
     record = os.environ.pop(first_use.RECORD_ENV, None)
     if record:
         shutil.rmtree(Path(record).parent, ignore_errors=True)
@@ -147,27 +161,23 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
 # first, longest first (seconds measured on the 2-core machine; only their order matters, they are not limits),
 # then the other tests marked slow, then the rest in collection order. Scopes of several tests (an xdist_group,
 # e.g. the demo's readers) go before all of these: xdist's --loadscope-reorder, on by default.
-LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (a `-n 2` run at load 4-6, warm numba cache)
-    "tests/analysis/inference/test_calibrate.py::test_recovers_damping_within_its_uncertainty": 200.0,
-    "tests/test_readme.py::test_page_commands_run_as_written[docs/simulator.md]": 154.0,
-    "tests/test_readme.py::test_page_commands_run_as_written[README.md]": 125.0,  # runs the demo
-    "tests/sim/fast/test_fast.py::test_compiled_map_matches_the_reference_map[sliding-leg": 100.0,
-    "tests/sim/fast/test_fast.py::test_compiled_map_matches_the_reference_map[active-feet": 100.0,
-    "tests/analysis/inference/test_leg_fit.py::test_intervals_cover_the_truth": 94.0,
-    "tests/test_first_use.py::test_a_step_compiles_its_own_mass_model_only": 80.0,
-    "tests/sim/studies/test_stress.py::test_grazing_touchdown_inside_one_step_is_not_missed": 70.0,  # cold: compiles
-    "tests/test_readme.py::test_page_commands_run_as_written[docs/trials.md]": 58.0,
-    "tests/analysis/inference/test_leg_fit.py::test_command_json_and_figure": 37.0,
-    "tests/test_command_tree.py::test_ctrl_c_to_the_process_group_with_a_local_dask_cluster[paper]": 32.0,
-    "tests/sim/in_the_loop/test_loop.py::test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points": 27.0,
-    "tests/sim/studies/test_paper.py::test_rimless_paper_writes_every_figure_csv_and_headline_row": 27.0,
-    "tests/analysis/test_readme.py::test_readme_trials_chain_runs_verbatim": 24.0,
-    "tests/sim/step/test_poincare.py::test_fixed_point_residual_and_two_jacobian_estimates_agree": 21.0,
-    "tests/test_readme.py::test_page_commands_run_as_written[docs/robot.md]": 20.0,
-    "tests/analysis/inference/test_priors.py::test_prior_removes_the_c_k_ridge_of_the_walk_fit": 20.0,
-    "tests/sim/in_the_loop/test_studies.py::test_high_rate_no_noise_no_delay_converges_to_the_ideal_fixed_point": 19.0,
+LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (`-n auto`, 3 workers, empty cache, 2026-11-26)
+    "tests/test_readme.py::test_page_commands_run_as_written[docs/simulator.md]": 82.0,  # full
+    "tests/test_readme.py::test_page_commands_run_as_written[docs/trials.md]": 51.0,  # full
+    "tests/test_readme.py::test_page_commands_run_as_written[README.md]": 46.0,  # runs the demo
+    "tests/sim/fast/test_fast.py::test_compiled_map_matches_the_reference_map[active-feet": 30.0,  # full: compiles
+    "tests/analysis/inference/test_leg_fit.py::test_intervals_cover_the_truth": 23.0,
     "tests/firmware/link/test_commands.py::test_a_connect_flood_from_one_host_cannot_evict_the_operator": 18.0,
-    "tests/analysis/cli/test_critical.py::test_critical_slope_json_contract_and_truth": 15.0,
+    "tests/test_readme.py::test_page_commands_run_as_written[docs/robot.md]": 17.0,  # full
+    "tests/sim/in_the_loop/test_loop.py::test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points": 16.0,
+    "tests/sim/studies/test_paper.py::test_rimless_paper_writes_every_figure_csv_and_headline_row": 15.0,
+    "tests/sim/studies/test_stress.py::test_grazing_touchdown_inside_one_step_is_not_missed": 15.0,  # full: compiles
+    "tests/sim/fast/test_reduced.py::test_reduced_variational_equations_match_the_full_kkt_derivative": 14.0,
+    "tests/analysis/test_readme.py::test_readme_trials_chain_runs_verbatim": 13.5,
+    "tests/sim/step/test_poincare.py::test_fixed_point_residual_and_two_jacobian_estimates_agree": 12.5,
+    "tests/analysis/inference/test_calibrate_friction.py::test_recovers_friction_and_damping_from_trials": 12.0,
+    "tests/analysis/cli/test_tables_at_80_columns.py::test_the_calibration_residuals_name_every_trial": 11.5,
+    "tests/firmware/link/test_commands.py::test_1100_idle_connections_do_not_delay_disarm": 11.0,
 }
 
 

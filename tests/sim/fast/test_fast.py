@@ -26,9 +26,9 @@ from rimless.sim.step.poincare import PoincareMap, solve_fixed_point
 Z_ER = np.array([-0.465155, 2.604441])
 Z_VE = np.array([-0.434780, 2.289290])
 
-# The active-feet mass model compiles kernels of its own (tens of seconds on a cold cache): its cases are marked
-# `full` (CI runs them); eight-leg and sliding-leg run in every run.
-MASS_MODEL_CASES = [pytest.param(m, marks=pytest.mark.full) if m == "active-feet" else m for m in MASS_MODELS]
+# Each mass model compiles kernels of its own (tens of seconds on a cold cache): eight-leg (the robot's) runs in
+# every run, the other two are marked `full` (CI runs them).
+MASS_MODEL_CASES = [m if m == "eight-leg" else pytest.param(m, marks=pytest.mark.full) for m in MASS_MODELS]
 
 
 def _state(mech: Mechanics, rng: np.random.Generator) -> np.ndarray:
@@ -113,8 +113,8 @@ CASES = [
     ("eight-leg", "ve", Z_VE),
     ("eight-leg", "er", Z_ER + np.array([0.01, -0.1])),
     ("eight-leg", "ve", Z_VE + np.array([-0.01, 0.15])),
-    ("sliding-leg", "er", Z_ER),
-    # the third mass model's step kernel compiles for about 30 s on a cold cache: `full` (CI runs it)
+    # the other mass models' step kernels compile for about 30 s each on a cold cache: `full` (CI runs them)
+    pytest.param("sliding-leg", "er", Z_ER, marks=pytest.mark.full),
     pytest.param("active-feet", "ve", Z_VE, marks=pytest.mark.full),
 ]
 
@@ -206,7 +206,8 @@ def test_exact_jacobian_matches_central_differences_of_the_reference(tight_refer
     np.testing.assert_allclose(J, J_fd, atol=1e-6, rtol=0)
 
 
-@pytest.mark.parametrize("mass_model", ["sliding-leg", pytest.param("active-feet", marks=pytest.mark.full)])
+@pytest.mark.full  # compiles the step kernels of the other two mass models
+@pytest.mark.parametrize("mass_model", ["sliding-leg", "active-feet"])
 def test_exact_jacobian_other_mass_models(mass_model: str) -> None:
     params = WheelParams(mass_model=mass_model)
     pm = FastPoincareMap(params, "er", fast.FastIntegrator(rtol=1e-12, atol=1e-14))
