@@ -49,17 +49,14 @@ class PinLog:
     def record(self, pin: int, level: int) -> None:
         """One change of BCM `pin` to `level` (0 or 1), now."""
         with self._lock:
-            self._record(pin, level)
-
-    def _record(self, pin: int, level: int) -> None:
-        t = time.monotonic()
-        self.transitions.append((t, pin, level))
-        if self._fd is not None:
-            line = json.dumps({"t_s": round(t, 6), "pin": pin, "level": level}) + "\n"
-            try:
-                os.write(self._fd, line.encode())
-            except OSError:
-                pass  # a full disk loses log lines, never a pin change
+            t = time.monotonic()
+            self.transitions.append((t, pin, level))
+            if self._fd is not None:
+                line = json.dumps({"t_s": round(t, 6), "pin": pin, "level": level}) + "\n"
+                try:
+                    os.write(self._fd, line.encode())
+                except OSError:
+                    pass  # a full disk loses log lines, never a pin change
 
     def rising(self, pin: int) -> list[float]:
         """The times `pin` went high."""
