@@ -138,7 +138,7 @@ def test_ci_runs_the_readmes_test_command() -> None:
     assert lines.index("export RIMLESS_FULL_TESTS=1") < lines.index(pytest_lines[0])
 
 
-def test_the_default_run_leaves_out_only_tests_marked_full(pytestconfig: pytest.Config) -> None:
+def test_the_default_run_leaves_out_only_tests_marked_full(monkeypatch: pytest.MonkeyPatch) -> None:
     """Without RIMLESS_FULL_TESTS and `-m`, exactly the tests marked `full` are deselected; with either, none."""
     from tests.conftest import full_run
 
@@ -149,18 +149,13 @@ def test_the_default_run_leaves_out_only_tests_marked_full(pytestconfig: pytest.
         def getoption(self, name: str, default: str = "") -> str:
             return self.markexpr if name == "markexpr" else default
 
-    saved = os.environ.pop("RIMLESS_FULL_TESTS", None)
-    try:
-        assert not full_run(Config(""))  # type: ignore[arg-type]
-        assert full_run(Config("not slow"))  # type: ignore[arg-type]
-        os.environ["RIMLESS_FULL_TESTS"] = "1"
-        assert full_run(Config(""))  # type: ignore[arg-type]
-        os.environ["RIMLESS_FULL_TESTS"] = "0"
-        assert not full_run(Config(""))  # type: ignore[arg-type]
-    finally:
-        os.environ.pop("RIMLESS_FULL_TESTS", None)
-        if saved is not None:
-            os.environ["RIMLESS_FULL_TESTS"] = saved
+    monkeypatch.delenv("RIMLESS_FULL_TESTS", raising=False)
+    assert not full_run(Config(""))  # type: ignore[arg-type]
+    assert full_run(Config("not slow"))  # type: ignore[arg-type]
+    monkeypatch.setenv("RIMLESS_FULL_TESTS", "1")
+    assert full_run(Config(""))  # type: ignore[arg-type]
+    monkeypatch.setenv("RIMLESS_FULL_TESTS", "0")
+    assert not full_run(Config(""))  # type: ignore[arg-type]
 
 
 def test_parser_handles_chains_comments_and_the_setup_line():
