@@ -71,17 +71,6 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
     return DemoRun(out=folder / DEMO_FOLDER, **got)
 
 
-def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
-    """`-n auto`: one worker more than the cores (PYTEST_XDIST_AUTO_NUM_WORKERS overrides). About a fifth of the
-    suite's test time is spent waiting, not computing (the fake robot's walks run in real time, commands wait on
-    sockets and subprocesses): a third worker on two cores fills it (default run on an empty cache: 381 s
-    against 405 s with two workers)."""
-    env = os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS")
-    if env:
-        return int(env)
-    return (os.cpu_count() or 1) + 1
-
-
 def pytest_configure(config: pytest.Config) -> None:
     """The run caches bytecode even where the environment says not to (PYTHONDONTWRITEBYTECODE, set on the
     shared VM): every `rimless` subprocess of the tests otherwise compiles the project's modules from source

@@ -135,6 +135,7 @@ def test_the_commands_local_cluster_leaves_no_gc_callback_to_swallow_a_ctrl_c():
         gc.collect()  # prints "Exception ignored in ..." and goes on
     finally:
         gc.callbacks.remove(interrupt)
-    before = list(gc.callbacks)
-    with dask_client("local", 1):
-        assert gc.callbacks == before
+    from distributed.gc import GCDiagnosis
+
+    with dask_client("local", 1):  # (another test's cluster in this worker may have installed one before)
+        assert not [cb for cb in gc.callbacks if isinstance(getattr(cb, "__self__", None), GCDiagnosis)]
