@@ -150,7 +150,7 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
 # first, longest first (seconds measured on the 2-core machine; only their order matters, they are not limits),
 # then the other tests marked slow, then the rest in collection order. Scopes of several tests (an xdist_group,
 # e.g. the demo's readers) go before all of these: xdist's --loadscope-reorder, on by default.
-LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (`-n auto`, 3 workers, empty cache, 2026-11-26)
+LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (3 workers on 2 cores, empty cache, 2026-11-26)
     "tests/test_readme.py::test_page_commands_run_as_written[docs/simulator.md]": 82.0,  # full
     "tests/test_readme.py::test_page_commands_run_as_written[docs/trials.md]": 51.0,  # full
     "tests/test_readme.py::test_page_commands_run_as_written[README.md]": 46.0,  # runs the demo
