@@ -156,7 +156,6 @@ LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (3 workers on 2 cor
     "tests/test_readme.py::test_page_commands_run_as_written[README.md]": 46.0,  # runs the demo
     "tests/sim/fast/test_fast.py::test_compiled_map_matches_the_reference_map[active-feet": 30.0,  # full: compiles
     "tests/analysis/inference/test_leg_fit.py::test_intervals_cover_the_truth": 23.0,
-    "tests/firmware/link/test_commands.py::test_a_connect_flood_from_one_host_cannot_evict_the_operator": 18.0,
     "tests/test_readme.py::test_page_commands_run_as_written[docs/robot.md]": 17.0,  # full
     "tests/sim/in_the_loop/test_loop.py::test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points": 16.0,
     "tests/sim/studies/test_paper.py::test_rimless_paper_writes_every_figure_csv_and_headline_row": 15.0,
@@ -166,7 +165,6 @@ LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (3 workers on 2 cor
     "tests/sim/step/test_poincare.py::test_fixed_point_residual_and_two_jacobian_estimates_agree": 12.5,
     "tests/analysis/inference/test_calibrate_friction.py::test_recovers_friction_and_damping_from_trials": 12.0,
     "tests/analysis/cli/test_tables_at_80_columns.py::test_the_calibration_residuals_name_every_trial": 11.5,
-    "tests/firmware/link/test_commands.py::test_1100_idle_connections_do_not_delay_disarm": 11.0,
 }
 
 
