@@ -7,6 +7,7 @@ others read what it wrote.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -14,6 +15,8 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -81,12 +84,25 @@ def pytest_configure(config: pytest.Config) -> None:
 
 _WARM_UP: list[subprocess.Popen[bytes]] = []  # the controller's compiling processes (pytest_sessionstart)
 
+#: the file the controller writes once its compiling processes ended; xdist workers hold every test outside
+#: `KERNEL_FREE` until it exists (pytest_runtest_setup)
+KERNELS_READY_ENV = "RIMLESS_TEST_KERNELS_READY"
+
+#: tests that never run the simulator's compiled kernels: the firmware's (it cannot import the simulator,
+#: docs/architecture.md), which spend much of their time waiting on the wall clock of the fake robot
+KERNEL_FREE = ("tests/firmware/",)
+
+
+def kernel_free(item: pytest.Item) -> bool:
+    return item.nodeid.startswith(KERNEL_FREE)
+
 
 def pytest_sessionstart(session: pytest.Session) -> None:
     """With `-n N`, compile the simulator's kernels into numba's on-disk cache once, in the controller, while the
-    workers start and collect; the tests are handed out once it is done (pytest_xdist_node_collection_finished).
-    Otherwise each worker compiles the same kernels at the same time (minutes of CPU each on a cold cache). A
-    warm cache makes this a second or two. Without xdist the first test that needs a kernel compiles it."""
+    workers start, collect and run the `KERNEL_FREE` tests (ordered first); the other tests wait until it is done
+    (pytest_runtest_setup). Otherwise each worker compiles the same kernels at the same time (minutes of CPU each
+    on a cold cache). A warm cache makes this a second or two. Without xdist the first test that needs a kernel
+    compiles it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
@@ -95,8 +111,11 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             "from rimless.sim.model.params import WheelParams\n")
     # first the first-use probe (tests/test_first_use.py): on a cold cache its compile is the one the suite
     # needs anyway, and its output, left for the workers, spares that test a cold compile of its own
-    record = Path(tempfile.mkdtemp(prefix="rimless-first-use-")) / "probe.txt"
+    folder = Path(tempfile.mkdtemp(prefix="rimless-first-use-"))
+    record = folder / "probe.txt"
     os.environ[first_use.RECORD_ENV] = str(record)  # the workers, started after this hook, inherit it
+    ready = folder / "kernels-ready"
+    os.environ[KERNELS_READY_ENV] = str(ready)
     codes = [first_use.PROBE + head + "fast.warm_up()\n"
              "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n"]
     if full_run(config):
@@ -108,48 +127,114 @@ def pytest_sessionstart(session: pytest.Session) -> None:
                      "except Exception:\n"
                      "    pass\n")
     with open(record, "w") as probe_out:
-        # the other core collects the tests meanwhile: no second process compiling ahead (rimless.sim.fast.ahead)
+        # one process each: the workers use the other core (no second process compiling ahead,
+        # rimless.sim.fast.ahead)
         env = {**os.environ, "RIMLESS_NO_BACKGROUND": "1"}
         _WARM_UP.extend(subprocess.Popen([sys.executable, "-c", code], stdout=probe_out if i == 0 else
                                          subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
                                          env=env)
                         for i, code in enumerate(codes))
+    threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env), daemon=True).start()
 
 
-def _end_warm_up(*, kill: bool = False) -> None:
-    """Wait for the controller's compiling processes (or kill them), once."""
-    while _WARM_UP:
-        proc = _WARM_UP.pop()
-        if kill and proc.poll() is None:
-            proc.kill()
-        try:
-            proc.wait(timeout=1800)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+#: Compiled after the step kernels, while the kernel-free tests still run: kernels that single tests call
+#: directly from Python (the generic dispatches over mass models in tests/sim/fast/test_reduced.py, the friction
+#: integrator of tests/sim/fast/test_friction_fast.py's single leg), with the same argument types. Two workers
+#: otherwise compiled the first at once (15-18 s each) and the second took 18 s inside one test.
+TEST_KERNELS = """
+import math
+import numpy as np
+from rimless.sim.fast import FastIntegrator, model as fm
+from rimless.sim.integrate.friction import run_with_friction
+from rimless.sim.model.dynamics import SLSP_CLUTCHED
+from rimless.sim.model.mechanics import Mechanics
+from rimless.sim.model.params import WheelParams
+mech = Mechanics.of(WheelParams())
+q, qd = np.array([0.1, 0.0, 0.2, 0.22, 0.23]), np.array([0.1, 0.2, 1.0, 0.1, 0.1])
+fm.accel_reduced(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4),
+                 np.empty(fm.WORKSPACE_SIZE))
+fm.accel_kkt(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4))
+fm.accel_directional(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4),
+                     np.ones((10, 2)), np.empty((5, 2)), np.empty(fm.WORKSPACE_SIZE + 5))
+fm.accel_jacobian(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4), np.empty((5, 10)),
+                  np.empty((4, 10)))
+p = WheelParams(mass_model="sliding-leg", damping_ns_per_m=0.0, slope_rad=0.0, guide_friction_n=1.0)
+mech = Mechanics.of(p)
+y0 = np.zeros(10)
+y0[3], y0[4] = p.leg_length_m, p.leg_length_m + 0.004
+t_end = math.pi * math.sqrt(p.leg_mass_kg / p.k)
+run_with_friction(FastIntegrator(rtol=1e-12, atol=1e-14), mech, SLSP_CLUTCHED, y0, 0.0, (), t_end,
+                  record_dt=t_end / 20)
+"""
 
 
-def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
-    """In the controller, before the first test is handed out: the kernels are compiled."""
-    _end_warm_up()
+def _mark_ready_after_warm_up(ready: Path, env: dict[str, str]) -> None:
+    """In the controller: wait for the compiling processes (at most 30 min each), compile `TEST_KERNELS` in one
+    more, then write `ready`."""
+    for proc in list(_WARM_UP):
+        _wait_or_kill(proc)
+    if not _finished:
+        proc = subprocess.Popen([sys.executable, "-c", TEST_KERNELS], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)
+        _WARM_UP.append(proc)
+        _wait_or_kill(proc)
+    with contextlib.suppress(OSError):  # the session ended first and removed the folder
+        ready.touch()
+
+
+def _wait_or_kill(proc: subprocess.Popen[bytes], timeout_s: float = 1800) -> None:
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """In an xdist worker: a test that may run a compiled kernel waits until the controller's compile is done
+    (pytest_sessionstart), so that the workers never compile the same kernels at once."""
+    global _kernels_ready
+    if _kernels_ready or kernel_free(item):
+        return
+    ready = os.environ.get(KERNELS_READY_ENV)
+    if not ready or not hasattr(item.config, "workerinput"):
+        _kernels_ready = True
+        return
+    deadline = time.monotonic() + 1800
+    while not os.path.exists(ready) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    _kernels_ready = True  # after 30 min the test compiles what it needs itself
+
+
+_kernels_ready = False  # in a worker: the controller's compile is done
+_finished = False  # in the controller: the session ended (no more compiling processes)
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
-    """The controller ends its compiling processes if no worker finished collecting (see pytest_sessionstart)
-    and removes the folder of the first-use probe's output."""
+    """The controller ends its compiling processes if they still run (see pytest_sessionstart) and removes the
+    folder of the first-use probe's output."""
+    global _finished
     if hasattr(session.config, "workerinput"):
         return
-    _end_warm_up(kill=True)
+    _finished = True
+    for proc in list(_WARM_UP):
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    _WARM_UP.clear()
     record = os.environ.pop(first_use.RECORD_ENV, None)
+    os.environ.pop(KERNELS_READY_ENV, None)
     if record:
         shutil.rmtree(Path(record).parent, ignore_errors=True)
 
 
-# Under `-n N` xdist hands the tests out in collection order, a few at a time to whichever worker is free: a long
-# test picked up near the end keeps one worker busy while the other idles. The known-long tests therefore go
-# first, longest first (seconds measured on the 2-core machine; only their order matters, they are not limits),
-# then the other tests marked slow, then the rest in collection order. Scopes of several tests (an xdist_group,
-# e.g. the demo's readers) go before all of these: xdist's --loadscope-reorder, on by default.
+# Under `-n N` xdist hands the tests out in collection order, one scope (a test, or an xdist_group such as the
+# demo's readers) at a time to whichever worker is free (`--dist loadgroup --no-loadscope-reorder`, pyproject.toml).
+# First the `KERNEL_FREE` tests, which run while the controller compiles the kernels (pytest_sessionstart). Then,
+# since a long test picked up near the end keeps one worker busy while the other idles, the known-long tests,
+# longest first (seconds measured on the 2-core machine; only their order matters, they are not limits), then the
+# other tests marked slow, then the rest in collection order.
 LONG_TESTS_S: dict[str, float] = {  # nodeid prefix: seconds (3 workers on 2 cores, empty cache, 2026-11-26)
     "tests/test_readme.py::test_page_commands_run_as_written[docs/simulator.md]": 82.0,  # full
     "tests/test_readme.py::test_page_commands_run_as_written[docs/trials.md]": 51.0,  # full
@@ -194,8 +279,8 @@ def pytest_report_header(config: pytest.Config) -> str:
 
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Tests marked `full` out of the default run (see full_run); longest first (see LONG_TESTS_S); and
-    `xdist_group` working again under pytest 9 with `--dist loadgroup`.
+    """Tests marked `full` out of the default run (see full_run); the kernel-free tests first, then longest first
+    (see LONG_TESTS_S); and `xdist_group` working again under pytest 9 with `--dist loadgroup`.
 
     pytest-xdist 3.8 marks a grouped test by appending `@group` to `item._nodeid`, which pytest 9 no longer
     reads (a node's id lives in `item._id`): groups were silently split across workers. The demo's readers
@@ -205,7 +290,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if breadth:
             config.hook.pytest_deselected(items=breadth)
             items[:] = [item for item in items if not item.get_closest_marker("full")]
-    items.sort(key=lambda item: -_expected_s(item))  # stable: collection order within equal expectations
+    # stable: collection order within equal expectations
+    items.sort(key=lambda item: (not kernel_free(item), -_expected_s(item)))
     if not hasattr(config, "workerinput") or not config.getvalue("loadgroup"):  # a worker's "dist" reads "no"
         return
     from _pytest.nodeid import NodeId
