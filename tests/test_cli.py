@@ -344,3 +344,53 @@ def test_ctrl_c_in_compiled_code_is_not_classified_as_a_failed_step(monkeypatch)
         stress_sweep(WheelParams(), k_values=[2700.0], c_values=[8.0], slopes_rad=[0.05], mass_ratios=[0.02])
     assert not interrupted_by_user(SystemError("a real numba failure"))
     assert interrupted_by_user(KeyboardInterrupt())
+
+
+# A Ctrl-C whose KeyboardInterrupt is raised inside a weakref callback (as in `rimless paper`, inside a library's
+# WeakKeyDictionary): Python drops it there and prints "Exception ignored in ...".
+DROPPED_CTRL_C = """
+import sys, time, weakref
+if sys.argv[1] == "main":
+    from rimless.__main__ import main
+    sys.argv = ["rimless", "--version"]
+    try:
+        main()
+    except SystemExit:
+        pass
+class Referent:
+    pass
+def callback(ref):
+    raise KeyboardInterrupt
+r = weakref.ref(obj := Referent(), callback)
+del obj
+t0 = time.monotonic()
+try:
+    while time.monotonic() - t0 < 5:
+        time.sleep(0.005)
+    print("ran on")
+except KeyboardInterrupt:
+    print(f"interrupted after {time.monotonic() - t0:.3f} s")
+"""
+
+
+@pytest.mark.parametrize("entry", ["main", "plain"])
+def test_a_ctrl_c_python_dropped_in_a_callback_still_interrupts(entry):
+    """The `rimless` entry point sends the interrupt again (rimless.__main__.redeliver_swallowed_interrupts); a
+    plain interpreter, the control, runs on and prints Python's "Exception ignored" traceback."""
+    res = subprocess.run([sys.executable, "-c", DROPPED_CTRL_C, entry], capture_output=True, text=True, timeout=60)
+    if entry == "plain":
+        assert res.stdout.strip() == "ran on" and "Exception ignored" in res.stderr
+        return
+    last = res.stdout.splitlines()[-1]  # after the version line
+    assert last.startswith("interrupted after "), res.stdout + res.stderr
+    assert float(last.split()[2]) < 1.0
+    assert "Exception ignored" not in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+def test_other_exceptions_python_drops_still_reach_the_hook_before():
+    code = ("import sys\nfrom rimless.__main__ import redeliver_swallowed_interrupts\n"
+            "redeliver_swallowed_interrupts()\n"
+            "class Noisy:\n    def __del__(self):\n        raise ValueError('from __del__')\n"
+            "Noisy()\nprint('ran on')\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.stdout.strip() == "ran on" and "ValueError: from __del__" in res.stderr
