@@ -134,7 +134,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
                                          subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
                                          env=env)
                         for i, code in enumerate(codes))
-    threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env), daemon=True).start()
+    threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env, record), daemon=True).start()
 
 
 #: Compiled after the step kernels, while the kernel-free tests still run: kernels that single tests call
@@ -168,15 +168,27 @@ run_with_friction(FastIntegrator(rtol=1e-12, atol=1e-14), mech, SLSP_CLUTCHED, y
 """
 
 
-def _mark_ready_after_warm_up(ready: Path, env: dict[str, str]) -> None:
-    """In the controller: wait for the compiling processes (at most 30 min each), compile `TEST_KERNELS` in one
-    more, then write `ready`."""
+def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path) -> None:
+    """In the controller: wait for the compiling processes (at most 30 min each); then compile `TEST_KERNELS`
+    and, if the kernels were already cached, run the first-use probe again in an empty cache of its own (its
+    output goes to `record`: tests/test_first_use.py needs a cold compile, which otherwise two workers ran at
+    once, 37-40 s each); then write `ready`."""
     for proc in list(_WARM_UP):
         _wait_or_kill(proc)
-    if not _finished:
-        proc = subprocess.Popen([sys.executable, "-c", TEST_KERNELS], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)
-        _WARM_UP.append(proc)
+    more = []
+    with _warm_up_lock:  # no process starts after the session's end has killed the others
+        if not _finished:
+            more.append(subprocess.Popen([sys.executable, "-c", TEST_KERNELS], stdout=subprocess.DEVNULL,
+                                         stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env))
+            found = record.read_text().splitlines()[:1] if record.is_file() else []
+            if found == ["warm"]:
+                cold = {k: v for k, v in env.items() if k != "NUMBA_CACHE_DIR"}
+                cold["RIMLESS_CACHE_DIR"] = str(record.parent / "cold-cache")
+                with open(record, "w") as probe_out:
+                    more.append(subprocess.Popen([sys.executable, "-c", first_use.PROBE], stdout=probe_out,
+                                                 stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=cold))
+            _WARM_UP.extend(more)
+    for proc in more:
         _wait_or_kill(proc)
     with contextlib.suppress(OSError):  # the session ended first and removed the folder
         ready.touch()
@@ -209,6 +221,7 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 _kernels_ready = False  # in a worker: the controller's compile is done
 _finished = False  # in the controller: the session ended (no more compiling processes)
+_warm_up_lock = threading.Lock()
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
@@ -217,12 +230,13 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
     global _finished
     if hasattr(session.config, "workerinput"):
         return
-    _finished = True
-    for proc in list(_WARM_UP):
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait()
-    _WARM_UP.clear()
+    with _warm_up_lock:
+        _finished = True
+        for proc in list(_WARM_UP):
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+        _WARM_UP.clear()
     record = os.environ.pop(first_use.RECORD_ENV, None)
     os.environ.pop(KERNELS_READY_ENV, None)
     if record:
