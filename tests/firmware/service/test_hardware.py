@@ -36,13 +36,14 @@ def per_leg_config(tmp_path) -> RobotConfig:
     return dataclasses.replace(base, sensors=sensors)
 
 
-def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp_path) -> None:
+def _walk_until_leg_3_holds(cfg: RobotConfig):
+    """Run the app on fakes with one sensor per leg while the fake walks; returns the run's summary and the
+    hardware."""
+    from rimless.firmware.service.app import RobotApp
     from rimless.firmware.service.hardware import build_fake
 
-    cfg = per_leg_config(tmp_path)
     walk: dict = {}
     hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)])
-    from rimless.firmware.service.app import RobotApp
 
     async def stop_once_leg_3_holds(app) -> None:
         # A condition, not a delay: a loaded machine (CI at load 6) pauses the loop for tenths of a second.
@@ -52,24 +53,42 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
             await asyncio.sleep(0.01)
         app.request_stop("test done")
 
-    def ready(app) -> None:
-        # The walk starts once the app runs (a loaded machine may take long to start it); the app stops once
-        # leg 3 holds. The walk goes on meanwhile, so a late stop still sees every lock released by the next
-        # touchdown (a walk that ended after leg 3 left its lock to max_hold_s: clutch_timeout in a CI run).
+    async def walk_then_stop(app) -> None:
+        # The walk starts once the control loop samples (a loaded machine may take long to start it); the app
+        # stops once leg 3 holds. The walk goes on meanwhile, so a late stop still sees every lock released by
+        # the next touchdown (a walk that ended after leg 3 left its lock to max_hold_s: clutch_timeout in a CI
+        # run).
+        deadline = time.monotonic() + 30.0
+        while app.controller.samples < 30 and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
         walk["traj"] = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3,
                                       compression_m=0.008, compression_s=0.06)
-        walk["stopper"] = asyncio.get_running_loop().create_task(stop_once_leg_3_holds(app))
+        await stop_once_leg_3_holds(app)
+
+    def ready(app) -> None:
+        walk["stopper"] = asyncio.get_running_loop().create_task(walk_then_stop(app))
 
     async def main():
         app = RobotApp(cfg, hw, on_ready=ready)
         return await app.run(duration_s=30, arm=True, handle_signals=False)
 
-    summary = asyncio.run(main())
-    assert summary.faults == [] and summary.error is None
-    hist = {k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
-            for k, p in enumerate(cfg.clutch.pins)}
+    return asyncio.run(main()), hw
+
+
+def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp_path) -> None:
+    """Each stance lasts 60 ms of compression, sampled on the wall clock in this process: a loop that missed
+    its deadlines through one (a loaded test machine; at load 6 one run in two) sees no stance there, and that
+    leg never locks. Such a run, and only such, is started again (at most three runs)."""
+    cfg = per_leg_config(tmp_path)
+    for attempt in range(3):
+        summary, hw = _walk_until_leg_3_holds(cfg)
+        assert summary.faults == [] and summary.error is None
+        hist = {k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
+                for k, p in enumerate(cfg.clutch.pins)}
+        if not (summary.missed_deadlines > 0 and "0" in (hist[k] for k in range(4))):
+            break
     for k in range(4):  # legs 0..3 stanced once each, released at the next leg's touchdown (or at the stop)
-        assert hist[k] == "010", hist
+        assert hist[k] == "010", (hist, summary.missed_deadlines)
     # legs 4..7: not yet in stance at the stop, or (a stop delayed by a loaded machine) locked once and released
     assert all(hist[k] in ("0", "010") for k in range(4, 8)), hist
     assert hist[7] == "0", hist  # the stop came within a walk round
