@@ -130,9 +130,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         # one process each: the workers use the other core (no second process compiling ahead,
         # rimless.sim.fast.ahead)
         env = {**os.environ, "RIMLESS_NO_BACKGROUND": "1"}
-        _WARM_UP.extend(subprocess.Popen([sys.executable, "-c", code], stdout=probe_out if i == 0 else
-                                         subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                         env=env)
+        _WARM_UP.extend(_start([sys.executable, "-c", code], env, probe_out if i == 0 else subprocess.DEVNULL)
                         for i, code in enumerate(codes))
     threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env, record), daemon=True).start()
 
@@ -169,32 +167,34 @@ run_with_friction(FastIntegrator(rtol=1e-12, atol=1e-14), mech, SLSP_CLUTCHED, y
 
 
 def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path) -> None:
-    """In the controller: wait for the compiling processes (at most 30 min each); then compile `TEST_KERNELS`;
-    then, if the kernels were already cached, run the first-use probe again in an empty cache of its own (its
+    """In the controller: wait for the compiling processes (at most 30 min each); then compile `TEST_KERNELS`
+    and, if the kernels were already cached, run the first-use probe again in an empty cache of its own (its
     output goes to `record`: tests/test_first_use.py needs a cold compile, which otherwise two workers ran at
-    once, 37-40 s each); then write `ready`. One process at a time: the firmware's tests beside them keep
-    real time on the wall clock."""
+    once, 37-40 s each); then write `ready`."""
     for proc in list(_WARM_UP):
         _wait_or_kill(proc)
-    _run_unless_finished([sys.executable, "-c", TEST_KERNELS], env, subprocess.DEVNULL)
     found = record.read_text().splitlines()[:1] if record.is_file() else []
-    if found == ["warm"]:
-        cold = {k: v for k, v in env.items() if k != "NUMBA_CACHE_DIR"}
-        cold["RIMLESS_CACHE_DIR"] = str(record.parent / "cold-cache")
-        with open(record, "w") as probe_out:
-            _run_unless_finished([sys.executable, "-c", first_use.PROBE], cold, probe_out)
+    more = []
+    with _warm_up_lock:  # no process starts after the session's end has killed the others
+        if not _finished:
+            more.append(_start([sys.executable, "-c", TEST_KERNELS], env, subprocess.DEVNULL))
+            if found == ["warm"]:
+                cold = {k: v for k, v in env.items() if k != "NUMBA_CACHE_DIR"}
+                cold["RIMLESS_CACHE_DIR"] = str(record.parent / "cold-cache")
+                with open(record, "w") as probe_out:
+                    more.append(_start([sys.executable, "-c", first_use.PROBE], cold, probe_out))
+            _WARM_UP.extend(more)
+    for proc in more:
+        _wait_or_kill(proc)
     with contextlib.suppress(OSError):  # the session ended first and removed the folder
         ready.touch()
 
 
-def _run_unless_finished(args: list[str], env: dict[str, str], stdout: Any) -> None:
-    """Run `args` to its end, unless the session has ended (then pytest_sessionfinish kills it)."""
-    with _warm_up_lock:  # no process starts after the session's end has killed the others
-        if _finished:
-            return
-        proc = subprocess.Popen(args, stdout=stdout, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)
-        _WARM_UP.append(proc)
-    _wait_or_kill(proc)
+def _start(args: list[str], env: dict[str, str], stdout: Any) -> subprocess.Popen[bytes]:
+    """A compiling process at a low priority (nice 15): the firmware's tests beside it run the fake robot on the
+    wall clock and get the CPU when they need it; the compile takes the rest."""
+    return subprocess.Popen(args, stdout=stdout, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env,
+                            preexec_fn=lambda: os.nice(15))
 
 
 def _wait_or_kill(proc: subprocess.Popen[bytes], timeout_s: float = 1800) -> None:
