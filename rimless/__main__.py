@@ -22,7 +22,7 @@ def redeliver_swallowed_interrupts() -> None:
     before = sys.unraisablehook
 
     def hook(unraisable) -> None:
-        if isinstance(unraisable.exc_value, KeyboardInterrupt) or unraisable.exc_type is KeyboardInterrupt:
+        if issubclass(unraisable.exc_type, KeyboardInterrupt):
             # from another thread, a moment later: a signal sent from here would raise inside this hook, where
             # Python drops it too
             again = threading.Timer(0.01, os.kill, (os.getpid(), signal.SIGINT))

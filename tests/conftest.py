@@ -83,6 +83,9 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 _WARM_UP: list[subprocess.Popen[bytes]] = []  # the controller's compiling processes (pytest_sessionstart)
+_warm_up_lock = threading.Lock()  # _WARM_UP and _finished change under it
+_finished = False  # in the controller: the session ended (no more compiling processes)
+_kernels_ready = False  # in a worker: the controller's compile is done
 
 #: the file the controller writes once its compiling processes ended; xdist workers hold every test outside
 #: `KERNEL_FREE` until it exists (pytest_runtest_setup)
@@ -148,14 +151,13 @@ from rimless.sim.model.dynamics import SLSP_CLUTCHED
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 mech = Mechanics.of(WheelParams())
+mi = fm.MASS_MODEL_INDEX["eight-leg"]
 q, qd = np.array([0.1, 0.0, 0.2, 0.22, 0.23]), np.array([0.1, 0.2, 1.0, 0.1, 0.1])
-fm.accel_reduced(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4),
-                 np.empty(fm.WORKSPACE_SIZE))
-fm.accel_kkt(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4))
-fm.accel_directional(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4),
-                     np.ones((10, 2)), np.empty((5, 2)), np.empty(fm.WORKSPACE_SIZE + 5))
-fm.accel_jacobian(fm.MASS_MODEL_INDEX["eight-leg"], 0, q, qd, mech.p, np.empty(5), np.zeros(4), np.empty((5, 10)),
-                  np.empty((4, 10)))
+fm.accel_reduced(mi, 0, q, qd, mech.p, np.empty(5), np.zeros(4), np.empty(fm.WORKSPACE_SIZE))
+fm.accel_kkt(mi, 0, q, qd, mech.p, np.empty(5), np.zeros(4))
+fm.accel_directional(mi, 0, q, qd, mech.p, np.empty(5), np.zeros(4), np.ones((10, 2)), np.empty((5, 2)),
+                     np.empty(fm.WORKSPACE_SIZE + 5))
+fm.accel_jacobian(mi, 0, q, qd, mech.p, np.empty(5), np.zeros(4), np.empty((5, 10)), np.empty((4, 10)))
 p = WheelParams(mass_model="sliding-leg", damping_ns_per_m=0.0, slope_rad=0.0, guide_friction_n=1.0)
 mech = Mechanics.of(p)
 y0 = np.zeros(10)
@@ -221,10 +223,6 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
         time.sleep(0.05)
     _kernels_ready = True  # after 30 min the test compiles what it needs itself
 
-
-_kernels_ready = False  # in a worker: the controller's compile is done
-_finished = False  # in the controller: the session ended (no more compiling processes)
-_warm_up_lock = threading.Lock()
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
