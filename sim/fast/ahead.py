@@ -9,10 +9,14 @@ the same cache entries) in a second process on another core from the moment the 
 kernel then loads them from numba's on-disk cache (`compiling.lock_cache_saves` makes the two processes' cache
 writes safe) instead of compiling them. The machine code is the same whichever process compiled it.
 
+Then, while the step kernel's own code is generated, the second process compiles the phase integrator's entry
+from Python (`rk.RUN_PHASE[mi]`, as `FastIntegrator.run_phase` calls it: the recorded step of a command that
+reports a gait), once `rk.run_phase` is in the cache (`compile_recorder`).
+
 `compiling_ahead(mi)` is the context a cold step kernel compiles in. `PLAN` names each function and its argument types (a token per argument, see `_types`); a plan entry that no
 longer matches the code only costs the second core some work. Off with one core or ``RIMLESS_NO_BACKGROUND=1``.
 
-May import: rimless.second_process; numba, rimless.sim.fast (run in the second process).
+May import: rimless.second_process; numba, numpy, rimless.sim.fast, rimless.sim.model (in the second process).
 """
 
 from __future__ import annotations
@@ -64,21 +68,60 @@ def compile_entry(module: str, name: str, spec: str, mi: int) -> bool:
     return True
 
 
+def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
+    """Compile (or load) `rk.RUN_PHASE[mi]` by calling it as `FastIntegrator.run_phase` does (a short recorded
+    phase of Table 1's wheel with mass model index ``mi``), once `rk.run_phase` has an entry in numba's cache
+    (waits at most ``wait_s`` s for it: the step kernel compiles it); False if the call fails."""
+    import time
+
+    from rimless.sim.fast import compiling, rk
+
+    deadline = time.monotonic() + wait_s
+    while not compiling.is_cached(rk.run_phase) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    try:
+        import numpy as np
+
+        from rimless.sim.fast import FastIntegrator
+        from rimless.sim.fast.model import MASS_MODEL_INDEX
+        from rimless.sim.model.dynamics import DLSP
+        from rimless.sim.model.mechanics import Mechanics
+        from rimless.sim.model.params import WheelParams
+        from rimless.sim.model.section import state_from_section
+
+        name = next(n for n, i in MASS_MODEL_INDEX.items() if i == mi)
+        mech = Mechanics.of(WheelParams(mass_model=name))
+        y0 = state_from_section(mech, np.array([-0.465155, 2.604441]))
+        FastIntegrator().run_phase(mech, DLSP, y0, 0.0, (1,), 1e-3, record_dt=1e-3, track_dissipation=True)
+    except Exception:  # noqa: BLE001 (the command compiles it itself)
+        return False
+    return True
+
+
 def compile_plan(mi: int) -> None:
-    """Compile (or load) every PLAN entry for mass model index ``mi`` into numba's cache (the second process)."""
+    """Compile (or load) every PLAN entry for mass model index ``mi`` into numba's cache, then the recorder
+    entry (the second process)."""
     for module, name, spec in PLAN:
         compile_entry(module, name, spec, mi)
+    compile_recorder(mi)
 
 
 def stale_entries(mi: int) -> list[str]:
-    """In a process that has just run the step kernel of ``mi``: the PLAN entries the kernel did not use as
-    written (never called, or called with other argument types, so that compiling the entry adds a version)."""
+    """In a process that has just run the step kernel of ``mi`` and a recorded step: the PLAN entries the kernel
+    did not use as written (never called, or called with other argument types, so that compiling the entry adds
+    a version), and the recorder entry if the recorded step called it otherwise."""
     stale = []
     for module, name, spec in PLAN:
         disp = dispatcher(module, name)
         before = len(disp.overloads)
         if before == 0 or not compile_entry(module, name, spec, mi) or len(disp.overloads) != before:
             stale.append(f"{module}.{name}")
+    from rimless.sim.fast import rk
+
+    recorder = rk.RUN_PHASE[mi]
+    before = len(recorder.overloads)
+    if before == 0 or not compile_recorder(mi, wait_s=0.0) or len(recorder.overloads) != before:
+        stale.append(f"rk.{recorder.py_func.__name__}")
     return stale
 
 

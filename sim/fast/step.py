@@ -253,7 +253,8 @@ def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral
     y0, T = fm.state_from_section(mi, z, p)
     N = 30 if want_jac else 10
     ya = np.zeros(N)
-    ya[:10] = y0
+    for i in range(10):  # not ya[:10] = y0: numba's slice copy compiles its shape-mismatch message, ~2.5 s cold
+        ya[i] = y0[i]
     if want_jac:
         _set_V(ya, T)
     J = np.zeros((2, 2))

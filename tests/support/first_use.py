@@ -1,6 +1,7 @@
 """The first-use probe: a process that takes one eight-leg step (with the exact Jacobian) and prints the state
 after it and, per generated function family, how many signatures each mass model's version has in this process
-(compiled here). tests/test_first_use.py checks its output from a cold cache; tests/conftest.py runs it as the
+(compiled here); then it takes the step recorded, as `rimless sim fixed-point` does, and prints the stale entries
+of the ahead plan. tests/test_first_use.py checks its output from a cold cache; tests/conftest.py runs it as the
 first thing of the suite's warm-up when the cache is cold (a fresh clone: CI), so that cold compile serves both.
 Both run it with RIMLESS_NO_BACKGROUND=1: the whole compile in the probe's process (rimless.sim.fast.ahead
 would otherwise compile part of it in a second process, whose signatures the probe does not see)."""
@@ -14,7 +15,8 @@ RECORD_ENV = "RIMLESS_TEST_FIRST_USE_PROBE"
 LINES = 8
 #: Python code: prints "cold" or "warm" (was the eight-leg step kernel compiled or cached before?), then the
 #: state after the step, then one line per family: name and the signature counts of mass models 0, 1, 2; last
-#: "stale" and the entries of rimless.sim.fast.ahead.PLAN that the step kernel did not use as written.
+#: "stale" and the entries of rimless.sim.fast.ahead.PLAN that the step kernel did not use as written, and the
+#: recorder entry if the recorded step (as `rimless sim fixed-point` takes it) called it otherwise.
 PROBE = ("import numpy as np\n"
          "from rimless.sim import fast\n"
          "from rimless.sim.fast import compiling, model as fm, step as fs\n"
@@ -24,5 +26,7 @@ PROBE = ("import numpy as np\n"
          "print(r.z_next[0], r.z_next[1])\n"
          "for name in ('_M', '_DL', '_DLD', '_DM', '_T'):\n"
          "    print(name, *(len(getattr(fm, name + str(i)).signatures) for i in range(3)), flush=True)\n"
+         "from rimless.sim.step.backend import make_map\n"
+         "make_map(WheelParams(), 'er').step(np.array([-0.465155, 2.604441]), diagnostics=True)\n"
          "from rimless.sim.fast import ahead\n"
          "print('stale', *ahead.stale_entries(0), flush=True)\n")
