@@ -12,12 +12,22 @@ from __future__ import annotations
 RECORD_ENV = "RIMLESS_TEST_FIRST_USE_PROBE"
 
 #: Lines the probe prints.
-LINES = 8
+LINES = 9
 #: Python code: prints "cold" or "warm" (was the eight-leg step kernel compiled or cached before?), then the
-#: state after the step, then one line per family: name and the signature counts of mass models 0, 1, 2; last
+#: state after the step, then one line per family: name and the signature counts of mass models 0, 1, 2; then
+#: "strings" and the functions of numba's string formatting the step compiled (its own messages); last
 #: "stale" and the entries of rimless.sim.fast.ahead.PLAN that the step kernel did not use as written, and the
 #: recorder entry if the recorded step (as `rimless sim fixed-point` takes it) called it otherwise.
-PROBE = ("import numpy as np\n"
+PROBE = ("from numba.core import event\n"
+         "compiled = []\n"
+         "class Compiled(event.Listener):\n"
+         "    def on_start(self, ev):\n"
+         "        d = (ev.data or {}).get('dispatcher')\n"
+         "        compiled.append(f'{d.py_func.__module__}.{d.py_func.__qualname__}' if d is not None else '')\n"
+         "    def on_end(self, ev):\n"
+         "        pass\n"
+         "event.register('numba:compile', Compiled())\n"
+         "import numpy as np\n"
          "from rimless.sim import fast\n"
          "from rimless.sim.fast import compiling, model as fm, step as fs\n"
          "from rimless.sim.model.params import WheelParams\n"
@@ -26,6 +36,8 @@ PROBE = ("import numpy as np\n"
          "print(r.z_next[0], r.z_next[1])\n"
          "for name in ('_M', '_DL', '_DLD', '_DM', '_T'):\n"
          "    print(name, *(len(getattr(fm, name + str(i)).signatures) for i in range(3)), flush=True)\n"
+         "print('strings', *(n for n in compiled if n.startswith('numba.cpython.unicode')\n"
+         "                   or 'raise_with_shape_context' in n), flush=True)\n"
          "from rimless.sim.step.backend import make_map\n"
          "make_map(WheelParams(), 'er').step(np.array([-0.465155, 2.604441]), diagnostics=True)\n"
          "from rimless.sim.fast import ahead\n"
