@@ -325,18 +325,10 @@ class FastIntegrator:
 
     def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
                   t_max: float, *, record_dt: float | None = None, track_dissipation: bool = False) -> PhaseRun:
-        codes = np.array(guards, dtype=np.int64)
-        dirs = np.array([DIRECTION[g] for g in guards], dtype=np.int64)
-        # read-only, as the step kernel's own guard tables are: one compiled run_phase serves both
-        codes.flags.writeable = False
-        dirs.flags.writeable = False
-        y = np.asarray(y0, dtype=np.float64)
-        if track_dissipation:
-            y = np.concatenate((y, [0.0]))
+        args = rk.phase_call_args(phase, mech.p, y0, t0, guards, [DIRECTION[g] for g in guards], t_max, self.rtol,
+                                  self.atol, track_dissipation, record_dt, self.max_steps)
         st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = _call_compiling(
-            rk.RUN_PHASE[fm.MASS_MODEL_INDEX[mech.params.mass_model]], int(phase), np.asarray(mech.p, dtype=np.float64), y,
-            float(t0), codes, dirs, float(t_max), float(self.rtol), float(self.atol), 11 if track_dissipation else 10,
-            False, bool(track_dissipation), float(record_dt) if record_dt else -1.0, int(self.max_steps))
+            rk.RUN_PHASE[fm.MASS_MODEL_INDEX[mech.params.mass_model]], *args)
         run = PhaseRun(t_end=float(t_end), y_end=np.array(y_end[:10]), guard=(guards[fired] if fired >= 0 else None),
                        nfev=int(nfev), dissipated_J=float(y_end[10]) if track_dissipation else 0.0)
         if st != rk.STATUS_OK:

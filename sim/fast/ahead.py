@@ -69,8 +69,9 @@ def compile_entry(module: str, name: str, spec: str, mi: int) -> bool:
 
 
 def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
-    """Compile (or load) `rk.RUN_PHASE[mi]` by calling it as `FastIntegrator.run_phase` does (a short recorded
-    phase of Table 1's wheel with mass model index ``mi``), once `rk.run_phase` has an entry in numba's cache
+    """Compile (or load) `rk.RUN_PHASE[mi]` by calling it with the argument types of every call from Python
+    (`rk.phase_call_args`, as `FastIntegrator.run_phase`: a short recorded phase of Table 1's wheel with mass
+    model index ``mi``), once `rk.run_phase` has an entry in numba's cache
     (waits at most ``wait_s`` s for it: the step kernel compiles it); False if the call fails."""
     import time
 
@@ -82,9 +83,9 @@ def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
     try:
         import numpy as np
 
-        from rimless.sim.fast import FastIntegrator
         from rimless.sim.fast.model import MASS_MODEL_INDEX
         from rimless.sim.model.dynamics import DLSP
+        from rimless.sim.model.guards import DIRECTION
         from rimless.sim.model.mechanics import Mechanics
         from rimless.sim.model.params import WheelParams
         from rimless.sim.model.section import state_from_section
@@ -92,7 +93,8 @@ def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
         name = next(n for n, i in MASS_MODEL_INDEX.items() if i == mi)
         mech = Mechanics.of(WheelParams(mass_model=name))
         y0 = state_from_section(mech, np.array([-0.465155, 2.604441]))
-        FastIntegrator().run_phase(mech, DLSP, y0, 0.0, (1,), 1e-3, record_dt=1e-3, track_dissipation=True)
+        rk.RUN_PHASE[mi](*rk.phase_call_args(DLSP, mech.p, y0, 0.0, (1,), (DIRECTION[1],), 1e-3, 1e-10, 1e-12,
+                                             True, 1e-3, 10000))
     except Exception:  # noqa: BLE001 (the command compiles it itself)
         return False
     return True

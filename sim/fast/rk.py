@@ -902,3 +902,23 @@ def run_phase_2(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, w
 
 
 RUN_PHASE = (run_phase_0, run_phase_1, run_phase_2)
+
+
+def phase_call_args(phase: int, p: np.ndarray, y0: np.ndarray, t0: float, guards: np.ndarray, directions: np.ndarray,
+                    t_max: float, rtol: float, atol: float, track_dissipation: bool, record_dt: float | None,
+                    max_steps: int) -> tuple:
+    """The arguments of `RUN_PHASE[mi]` called from Python for one phase without variational equations, each of
+    the one type it is compiled for (so that every such call shares one compiled version): p the parameter
+    vector, y0 the state (10,), SI; guards and directions the guard codes and their directions (read-only int64
+    copies); record_dt s (None or 0: no record); with track_dissipation the dissipated energy is integrated
+    as an 11th component (J)."""
+    codes = np.array(guards, dtype=np.int64)
+    dirs = np.array(directions, dtype=np.int64)
+    codes.flags.writeable = False  # read-only, as the step kernel's own guard tables are
+    dirs.flags.writeable = False
+    y = np.asarray(y0, dtype=np.float64)
+    if track_dissipation:
+        y = np.concatenate((y, [0.0]))
+    return (int(phase), np.asarray(p, dtype=np.float64), y, float(t0), codes, dirs, float(t_max), float(rtol),
+            float(atol), 11 if track_dissipation else 10, False, bool(track_dissipation),
+            float(record_dt) if record_dt else -1.0, int(max_steps))
