@@ -100,12 +100,44 @@ PAGE_COMMANDS: list[tuple[str, str]] = [(page.relative_to(ROOT).as_posix(), comm
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
+def heading_anchors(text: str) -> set[str]:
+    """The anchors GitHub gives a Markdown page's headings: lower case, every character but letters, digits,
+    spaces, hyphens and underscores dropped, spaces as hyphens; a repeated one gets -1, -2, ..."""
+    seen: dict[str, int] = {}
+    out = set()
+    in_code = False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            in_code = not in_code
+        m = None if in_code else re.match(r"#{1,6} (.+)", line)
+        if m is None:
+            continue
+        slug = re.sub(r"[^\w\- ]", "", m.group(1).strip().lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        out.add(slug if n == 0 else f"{slug}-{n}")
+    return out
+
+
+def test_heading_anchors_follow_github() -> None:
+    text = "# A\n## The cold step kernel's last seconds (2026-11-26, session 10)\n```\n# not a heading\n```\n## A\n"
+    assert heading_anchors(text) == {"a", "the-cold-step-kernels-last-seconds-2026-11-26-session-10", "a-1"}
+
+
 @pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
 def test_every_relative_link_resolves(page: Path) -> None:
-    """A newcomer following a link from the README or docs/ lands on a file that exists."""
-    broken = [target for target in LINK.findall(page.read_text(encoding="utf-8"))
-              if not re.match(r"[a-z]+:", target) and not target.startswith("#")
-              and not (page.parent / target.split("#")[0]).exists()]
+    """A newcomer following a link from the README or docs/ lands on a file that exists, and on the heading
+    its anchor names."""
+    broken = []
+    for target in LINK.findall(page.read_text(encoding="utf-8")):
+        if re.match(r"[a-z]+:", target):
+            continue
+        path, _, anchor = target.partition("#")
+        file = page if not path else page.parent / path
+        if not file.exists():
+            broken.append(target)
+        elif anchor and file.suffix == ".md" and anchor not in heading_anchors(file.read_text(encoding="utf-8")):
+            broken.append(target)
     assert not broken, f"{page.name}: broken links {broken}"
 
 
