@@ -93,8 +93,9 @@ def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
         name = next(n for n, i in MASS_MODEL_INDEX.items() if i == mi)
         mech = Mechanics.of(WheelParams(mass_model=name))
         y0 = state_from_section(mech, np.array([-0.465155, 2.604441]))
+        # 1 ms of double support recorded, with the dissipated energy (the values do not matter, their types do)
         rk.RUN_PHASE[mi](*rk.phase_call_args(DLSP, mech.p, y0, 0.0, (1,), (DIRECTION[1],), 1e-3, 1e-10, 1e-12,
-                                             True, 1e-3, 10000))
+                                             True, 1e-3, 10_000))
     except Exception:  # noqa: BLE001 (the command compiles it itself)
         return False
     return True

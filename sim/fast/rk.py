@@ -31,6 +31,8 @@ interpolant is an order less accurate, and its error dominated the map's error a
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.integrate import DOP853
@@ -904,9 +906,9 @@ def run_phase_2(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, w
 RUN_PHASE = (run_phase_0, run_phase_1, run_phase_2)
 
 
-def phase_call_args(phase: int, p: np.ndarray, y0: np.ndarray, t0: float, guards: np.ndarray, directions: np.ndarray,
-                    t_max: float, rtol: float, atol: float, track_dissipation: bool, record_dt: float | None,
-                    max_steps: int) -> tuple:
+def phase_call_args(phase: int, p: np.ndarray, y0: np.ndarray, t0: float, guards: Sequence[int],
+                    directions: Sequence[int], t_max: float, rtol: float, atol: float, track_dissipation: bool,
+                    record_dt: float | None, max_steps: int) -> tuple[Any, ...]:
     """The arguments of `RUN_PHASE[mi]` called from Python for one phase without variational equations, each of
     the one type it is compiled for (so that every such call shares one compiled version): p the parameter
     vector, y0 the state (10,), SI; guards and directions the guard codes and their directions (read-only int64
