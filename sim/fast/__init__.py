@@ -356,10 +356,8 @@ def warm_up(models: tuple[str, ...] = MODELS, params: WheelParams | None = None)
                 fast_step(p, model, z, jacobian=jacobian)
             except StepFailure:  # a step from Table 1's gait that fails at other parameters: compiled all the same
                 pass
-    from rimless.sim.model.dynamics import DLSP
-    from rimless.sim.model.section import state_from_section
+    from rimless.sim.fast.ahead import recorded_phase_call
 
-    mech = Mechanics.of(p)
-    FastIntegrator().run_phase(mech, DLSP, state_from_section(mech, z), 0.0, (1,), 1e-3, record_dt=1e-3,
-                               track_dissipation=True)
+    entry, args = recorded_phase_call(p)  # the integrator's entry from Python (recorded steps)
+    _call_compiling(entry, *args)
     return time.perf_counter() - t0

@@ -68,11 +68,29 @@ def compile_entry(module: str, name: str, spec: str, mi: int) -> bool:
     return True
 
 
+def recorded_phase_call(params: Any) -> tuple[Any, tuple[Any, ...]]:
+    """(`rk.RUN_PHASE[mi]` of ``params``' mass model, its arguments for 1 ms of double support recorded with the
+    dissipated energy, from Table 1's ER gait): the call that compiles or loads the integrator's entry from
+    Python with the argument types of every such call (`rk.phase_call_args`, as `FastIntegrator.run_phase`)."""
+    import numpy as np
+
+    from rimless.sim.fast import rk
+    from rimless.sim.fast.model import MASS_MODEL_INDEX
+    from rimless.sim.model.dynamics import DLSP
+    from rimless.sim.model.guards import DIRECTION
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import state_from_section
+
+    mech = Mechanics.of(params)
+    y0 = state_from_section(mech, np.array([-0.465155, 2.604441]))
+    return rk.RUN_PHASE[MASS_MODEL_INDEX[params.mass_model]], rk.phase_call_args(
+        DLSP, mech.p, y0, 0.0, (1,), (DIRECTION[1],), 1e-3, 1e-10, 1e-12, True, 1e-3, 10_000)
+
+
 def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
-    """Compile (or load) `rk.RUN_PHASE[mi]` by calling it with the argument types of every call from Python
-    (`rk.phase_call_args`, as `FastIntegrator.run_phase`: a short recorded phase of Table 1's wheel with mass
-    model index ``mi``), once `rk.run_phase` has an entry in numba's cache
-    (waits at most ``wait_s`` s for it: the step kernel compiles it); False if the call fails."""
+    """Compile (or load) `rk.RUN_PHASE[mi]` (`recorded_phase_call` of Table 1's wheel with mass model index
+    ``mi``) once `rk.run_phase` has an entry in numba's cache (waits at most ``wait_s`` s for it: the step kernel
+    compiles it); False if the call fails."""
     import time
 
     from rimless.sim.fast import compiling, rk
@@ -81,21 +99,12 @@ def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
     while not compiling.is_cached(rk.run_phase) and time.monotonic() < deadline:
         time.sleep(0.2)
     try:
-        import numpy as np
-
         from rimless.sim.fast.model import MASS_MODEL_INDEX
-        from rimless.sim.model.dynamics import DLSP
-        from rimless.sim.model.guards import DIRECTION
-        from rimless.sim.model.mechanics import Mechanics
         from rimless.sim.model.params import WheelParams
-        from rimless.sim.model.section import state_from_section
 
         name = next(n for n, i in MASS_MODEL_INDEX.items() if i == mi)
-        mech = Mechanics.of(WheelParams(mass_model=name))
-        y0 = state_from_section(mech, np.array([-0.465155, 2.604441]))
-        # 1 ms of double support recorded, with the dissipated energy (the values do not matter, their types do)
-        rk.RUN_PHASE[mi](*rk.phase_call_args(DLSP, mech.p, y0, 0.0, (1,), (DIRECTION[1],), 1e-3, 1e-10, 1e-12,
-                                             True, 1e-3, 10_000))
+        entry, args = recorded_phase_call(WheelParams(mass_model=name))
+        entry(*args)
     except Exception:  # noqa: BLE001 (the command compiles it itself)
         return False
     return True
