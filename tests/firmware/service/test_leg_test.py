@@ -8,6 +8,7 @@ for a condition with a generous timeout, never for a fixed short delay.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -39,6 +40,19 @@ def _lines(path: Path) -> list[dict]:
 
 def _pin_is_on(hw) -> bool:
     return bool(hw.pin_factory.pin(PIN).state)
+
+
+def _run_pressed(cfg: RobotConfig, opts: LegTestOptions, out: Path, **kw):
+    """`run_leg_test` on the fake for a test that needs the fake hand's one press (0.3-0.55 s) detected. The reads
+    run on the wall clock: a loaded machine that paused the loop through the press sees no maximum compression,
+    and the test ends `no_compression` (as it would for an operator who pressed once, too fast). Such a run is
+    started again, at most three runs, each waiting 5 s for the press instead of 30."""
+    opts = dataclasses.replace(opts, timeout_s=5.0)
+    for _ in range(3):
+        rep = run_leg_test(cfg, opts, out, fake=True, **kw)
+        if rep.fault != "no_compression":
+            break
+    return rep
 
 
 def test_fake_leg_rests_in_its_friction_band_and_follows_the_hand() -> None:
@@ -73,8 +87,8 @@ def test_leg_test_engages_at_maximum_compression_and_releases_after_the_hold(tmp
     def phase(name: str, hw) -> None:
         seen[name] = _pin_is_on(hw)
 
-    rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, hold_s=0.3, record_s=0.3, rate_hz=3000, fake_leg=truth),
-                       out, fake=True, on_phase=phase)
+    rep = _run_pressed(_cfg(), LegTestOptions(leg=LEG, hold_s=0.3, record_s=0.3, rate_hz=3000, fake_leg=truth),
+                       out, on_phase=phase)
     assert rep.exit_code == 0 and rep.fault is None and rep.written, rep
     assert seen == {"press": False, "hold": True, "free": False}
     assert rep.fake_pins == f"GPIO{PIN}=010"  # engaged once, released once, off at the end
@@ -101,9 +115,9 @@ def test_fake_run_to_log_to_fit_recovers_the_fake_leg(tmp_path: Path) -> None:
     logs = []
     for i, mm in enumerate((1.5, 2.0, 2.5)):
         out = tmp_path / f"leg{i}.jsonl"
-        rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, hold_s=0.2, record_s=0.3, rate_hz=4000, seed=i,
+        rep = _run_pressed(_cfg(), LegTestOptions(leg=LEG, hold_s=0.2, record_s=0.3, rate_hz=4000, seed=i,
                                                   fake_leg=FakeLegParams(compression_m=mm / 1e3, **truth)),
-                           out, fake=True)
+                           out)
         assert rep.exit_code == 0, rep
         logs.append(read_leg_log(out))
     fit = fit_leg(logs)
@@ -124,7 +138,7 @@ def test_sensor_fault_during_the_hold_releases_the_clutch_and_logs_why(tmp_path:
         if name == "hold":
             hw.fakes[0].fault = FakeFault.SQUAL_DROP
 
-    rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, fake=True, on_phase=phase)
+    rep = _run_pressed(_cfg(), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, on_phase=phase)
     assert rep.exit_code == 1 and rep.fault == "squal_low", rep
     assert rep.fake_pins == f"GPIO{PIN}=010"
     lines = _lines(out)
@@ -143,7 +157,7 @@ def test_stalled_read_loop_releases_the_clutch_from_the_watchdog(tmp_path: Path)
                 time.sleep(0.01)
             during["released_while_stalled"] = not _pin_is_on(hw)
 
-    rep = run_leg_test(_cfg(stall_timeout_s=0.2), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, fake=True,
+    rep = _run_pressed(_cfg(stall_timeout_s=0.2), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out,
                        on_phase=phase)
     assert during == {"released_while_stalled": True}
     assert rep.exit_code == 1 and rep.fault == "sensor_stalled", rep
