@@ -280,7 +280,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("bench",): (["--plot", "wp.png"], 6.0),
     ("demo",): (["--out", "demo-out"], 6.0),
     ("sim", "critical-slope"): (["--model", "er", "--backend", "reference"], 4.0),
-    ("sim", "fixed-point"): (["--backend", "reference"], 2.0),
+    ("sim", "fixed-point"): (["--backend", "reference", "--rtol", "1e-13"], 2.0),  # 8.4 s (3.7 s at 1e-10)
     ("sim", "gait"): (["--steps", "10000", "--out", "traj.parquet", "--plot", "gait.png"], 4.0),
     ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], 4.0),
     ("sim", "firmware-sweep"): (["--rates-hz", "300,1000", "--delays-ms", "0,5,10", "--scheduler", "sync"], 4.0),
