@@ -10,7 +10,7 @@ a part's command module can import them on its own. Heavy libraries are imported
 from __future__ import annotations
 
 import sys
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from typer import _click
@@ -50,8 +50,9 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version,
-                                          help="Print the version and exit.")] = False,
+    version: Annotated[
+        bool, typer.Option("--version", is_eager=True, callback=_print_version, help="Print the version and exit.")
+    ] = False,
 ) -> None:
     """Energy-recycling rimless wheel: simulate it, run the robot, analyse Vicon trials."""
 
@@ -78,7 +79,7 @@ def command_tree() -> _click.Command:
     return typer.main.get_command(app)
 
 
-def main(argv: Optional[list[str]] = None) -> None:
+def main(argv: list[str] | None = None) -> None:
     """Entry point of the `rimless` console script."""
     try:
         app(args=argv, prog_name="rimless")

@@ -17,7 +17,7 @@ import functools
 import json
 import re
 from collections.abc import Callable, Iterator
-from typing import Any, NoReturn, Optional, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 import typer
 from typer import _click
@@ -189,7 +189,7 @@ class RimlessGroup(TyperGroup):
         for command in walk_commands(self):
             _adapt_command(command)
 
-    def make_context(self, info_name: Optional[str], args: list[str], parent: Any = None, **extra: Any) -> Any:
+    def make_context(self, info_name: str | None, args: list[str], parent: Any = None, **extra: Any) -> Any:
         with _rules():
             return super().make_context(info_name, args, parent=parent, **extra)
 
@@ -244,8 +244,17 @@ def _parser_reading_negative_numbers(make_parser: Callable[[Any], Any], ctx: _cl
     return parser
 
 
-_TYPE_METAVARS = {"float": "FLOAT", "int": "INTEGER", "str": "TEXT", "bool": "BOOLEAN", "path": "PATH",
-                  "file": "FILE", "directory": "DIRECTORY", "float range": "FLOAT", "int range": "INTEGER"}
+_TYPE_METAVARS = {
+    "float": "FLOAT",
+    "int": "INTEGER",
+    "str": "TEXT",
+    "bool": "BOOLEAN",
+    "path": "PATH",
+    "file": "FILE",
+    "directory": "DIRECTORY",
+    "float range": "FLOAT",
+    "int range": "INTEGER",
+}
 
 
 def _adapt_metavar(param: _click.Parameter) -> None:
@@ -284,7 +293,7 @@ def _choices(param: _click.Parameter) -> list[str]:
     return [str(getattr(c, "value", c)) for c in desc.choices]
 
 
-def _metavar_of(original: Callable[..., Optional[str]], ctx: _click.Context) -> Optional[str]:
+def _metavar_of(original: Callable[..., str | None], ctx: _click.Context) -> str | None:
     shown = original(ctx=ctx)
     if shown is None:
         return None

@@ -13,28 +13,28 @@ import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Optional
 
 from rimless.errors import OutputFileError
 
 
-def _where(target: Path, option: Optional[str]) -> str:
+def _where(target: Path, option: str | None) -> str:
     return f"{option} {target}" if option else str(target)
 
 
-def _prepare_parent(target: Path, option: Optional[str]) -> Path:
+def _prepare_parent(target: Path, option: str | None) -> Path:
     parent = target.parent if str(target.parent) else Path(".")
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise OutputFileError(f"{_where(target, option)}: cannot create the folder {parent} "
-                              f"({err.strerror or err})") from None
+        raise OutputFileError(
+            f"{_where(target, option)}: cannot create the folder {parent} ({err.strerror or err})"
+        ) from None
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputFileError(f"{_where(target, option)}: the folder {parent} is not writable")
     return parent
 
 
-def writable_dir(folder: os.PathLike[str] | str, *, option: Optional[str] = None) -> Path:
+def writable_dir(folder: os.PathLike[str] | str, *, option: str | None = None) -> Path:
     """Create `folder` if needed and check that it is writable; `OutputFileError` naming `option` otherwise."""
     target = Path(folder)
     try:
@@ -46,7 +46,7 @@ def writable_dir(folder: os.PathLike[str] | str, *, option: Optional[str] = None
     return target
 
 
-def check_output_folder(out: os.PathLike[str] | str, *, option: Optional[str] = None) -> None:
+def check_output_folder(out: os.PathLike[str] | str, *, option: str | None = None) -> None:
     """Refuse an output folder that cannot be written, before any work; `OutputFileError` naming `option`.
 
     Unlike `writable_dir` it leaves nothing behind: a folder it had to create to try is removed again.
@@ -71,7 +71,7 @@ def check_output_folder(out: os.PathLike[str] | str, *, option: Optional[str] = 
 
 
 @contextlib.contextmanager
-def atomic_file(target: os.PathLike[str] | str, *, option: Optional[str] = None) -> Iterator[Path]:
+def atomic_file(target: os.PathLike[str] | str, *, option: str | None = None) -> Iterator[Path]:
     """Yield a temporary path (same folder and suffix as `target`); rename it onto `target` when the block ends.
 
     The suffix is kept so writers that choose the format by extension (matplotlib, pandas) still work.
@@ -95,7 +95,7 @@ def atomic_file(target: os.PathLike[str] | str, *, option: Optional[str] = None)
 
 
 @contextlib.contextmanager
-def atomic_dir(target: os.PathLike[str] | str, *, option: Optional[str] = None) -> Iterator[Path]:
+def atomic_dir(target: os.PathLike[str] | str, *, option: str | None = None) -> Iterator[Path]:
     """Yield a temporary folder beside `target`; when the block ends it replaces `target` as a whole.
 
     An existing `target` folder is replaced only after the new one is complete; an existing file there

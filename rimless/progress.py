@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import sys
 from collections.abc import Iterator
-from typing import Any, Optional
+from typing import Any
 
 
 class ProgressBar:
@@ -21,8 +21,9 @@ class ProgressBar:
         self._progress = progress
         self._task = task
 
-    def update(self, completed: Optional[float] = None, total: Optional[float] = None,
-               description: Optional[str] = None) -> None:
+    def update(
+        self, completed: float | None = None, total: float | None = None, description: str | None = None
+    ) -> None:
         """Set how much is done (in the bar's own units), the total, or the text beside the bar."""
         if self._progress is None:
             return
@@ -56,17 +57,21 @@ def progress_is_shown(json_out: bool = False) -> bool:
 
 
 @contextlib.contextmanager
-def progress_bar(description: str, total: Optional[float] = None, *, json_out: bool = False) -> Iterator[ProgressBar]:
+def progress_bar(description: str, total: float | None = None, *, json_out: bool = False) -> Iterator[ProgressBar]:
     """A transient progress bar on stderr for the block; `total=None` shows a spinner and elapsed time."""
     if not progress_is_shown(json_out):
         yield ProgressBar(None, None)
         return
     from rich.console import Console
-    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn,
-                               TimeElapsedColumn)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    columns = [SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-               TimeElapsedColumn()]
+    columns = [
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+    ]
     if total is None:  # nothing to count: the spinner and the elapsed time say that work goes on
         columns = [SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn()]
     with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
@@ -79,7 +84,7 @@ def progress_bar(description: str, total: Optional[float] = None, *, json_out: b
 
 
 @contextlib.contextmanager
-def spinner(description: str, done: Optional[str] = None) -> Iterator[bool]:
+def spinner(description: str, done: str | None = None) -> Iterator[bool]:
     """A spinner with the elapsed time on stderr while the block runs, then `done` (if given, with the seconds
     appended) as one line; quiet like progress_bar, and for `--json` on the command line. Inside an open
     progress bar the description is shown in that bar. Yields whether anything is shown."""
@@ -91,7 +96,7 @@ def spinner(description: str, done: Optional[str] = None) -> Iterator[bool]:
     t0 = time.perf_counter()
     if _ACTIVE:
         outer = _ACTIVE[-1]
-        task = outer._progress.tasks[-1] if outer._progress.tasks else None  # noqa: SLF001
+        task = outer._progress.tasks[-1] if outer._progress.tasks else None
         before = task.description if task is not None else ""
         outer.update(description=description)
         try:

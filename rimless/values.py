@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Optional, TypeVar
+from typing import TypeVar
 
 from rimless.errors import ParameterError
 
@@ -18,9 +18,16 @@ T = TypeVar("T")
 MAX_VALUES = 10000
 
 
-def parse_list(text: str, option: str, item: Callable[[str], T] = str,  # type: ignore[assignment]
-               *, choices: Optional[Sequence[str]] = None, count: Optional[int] = None,
-               unique: bool = False, lower: bool = False) -> list[T]:
+def parse_list(
+    text: str,
+    option: str,
+    item: Callable[[str], T] = str,  # type: ignore[assignment]
+    *,
+    choices: Sequence[str] | None = None,
+    count: int | None = None,
+    unique: bool = False,
+    lower: bool = False,
+) -> list[T]:
     """`a,b,c` -> [item(a), item(b), item(c)]; every error names `option`.
 
     `choices` restricts the (stripped, optionally lower-cased) names; `count` requires exactly that many
@@ -48,7 +55,7 @@ def parse_list(text: str, option: str, item: Callable[[str], T] = str,  # type: 
     return out
 
 
-def parse_numbers(text: str, option: str, *, count: Optional[int] = None) -> list[float]:
+def parse_numbers(text: str, option: str, *, count: int | None = None) -> list[float]:
     """Comma-separated finite numbers; every error names `option`."""
     values = parse_list(text, option, float, count=count)
     if not all(math.isfinite(v) for v in values):

@@ -44,8 +44,9 @@ def shared_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return base.parent if base.name.startswith("popen-gw") else base
 
 
-def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, compute: Callable[[Path], dict[str, Any]]
-                 ) -> tuple[Path, dict[str, Any]]:
+def once_per_run(
+    tmp_path_factory: pytest.TempPathFactory, name: str, compute: Callable[[Path], dict[str, Any]]
+) -> tuple[Path, dict[str, Any]]:
     """`compute(folder)` run once per test run whatever the number of workers; its JSON-able result is kept in
     `name.json` beside `folder` and read back by the other workers."""
     root = shared_root(tmp_path_factory)
@@ -66,8 +67,15 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
 
     def run(folder: Path) -> dict[str, Any]:
         (folder / ".venv").symlink_to(Path(sys.prefix))
-        res = subprocess.run(["bash", "-c", DEMO_COMMAND], cwd=folder, env=readme_env(), capture_output=True,
-                             text=True, timeout=900, stdin=subprocess.DEVNULL)
+        res = subprocess.run(
+            ["bash", "-c", DEMO_COMMAND],
+            cwd=folder,
+            env=readme_env(),
+            capture_output=True,
+            text=True,
+            timeout=900,
+            stdin=subprocess.DEVNULL,
+        )
         return {"stdout": res.stdout, "stderr": res.stderr, "returncode": res.returncode}
 
     folder, got = once_per_run(tmp_path_factory, "demo", run)
@@ -109,9 +117,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    head = ("import numpy as np\n"
-            "from rimless.sim import fast\n"
-            "from rimless.sim.model.params import WheelParams\n")
+    head = "import numpy as np\nfrom rimless.sim import fast\nfrom rimless.sim.model.params import WheelParams\n"
     # first the first-use probe (tests/test_first_use.py): on a cold cache its compile is the one the suite
     # needs anyway, and its output, left for the workers, spares that test a cold compile of its own
     folder = Path(tempfile.mkdtemp(prefix="rimless-first-use-"))
@@ -119,22 +125,28 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     os.environ[first_use.RECORD_ENV] = str(record)  # the workers, started after this hook, inherit it
     ready = folder / "kernels-ready"
     os.environ[KERNELS_READY_ENV] = str(ready)
-    codes = [first_use.PROBE + head + "fast.warm_up()\n"
-             "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n"]
+    codes = [
+        first_use.PROBE + head + "fast.warm_up()\n"
+        "fast.fast_step(WheelParams(), 've', np.array([-0.465155, 2.604441]), bilateral=True)\n"
+    ]
     if full_run(config):
         # the sliding-leg step kernel, which the tests marked `full` in tests/sim/fast use (one mass model per
         # kernel: rimless.sim.fast.step.STEP_MAP_CONTACT); a worker would compile it otherwise
-        codes.append(head + "try:\n"
-                     "    fast.fast_step(WheelParams(mass_model='sliding-leg'), 'er', np.array([-0.465155, 2.604441]),"
-                     " jacobian=True)\n"
-                     "except Exception:\n"
-                     "    pass\n")
+        codes.append(
+            head + "try:\n"
+            "    fast.fast_step(WheelParams(mass_model='sliding-leg'), 'er', np.array([-0.465155, 2.604441]),"
+            " jacobian=True)\n"
+            "except Exception:\n"
+            "    pass\n"
+        )
     with open(record, "w") as probe_out:
         # one process each: the workers use the other core (no second process compiling ahead,
         # rimless.sim.fast.ahead)
         env = {**os.environ, "RIMLESS_NO_BACKGROUND": "1"}
-        _WARM_UP.extend(_start([sys.executable, "-c", code], env, probe_out if i == 0 else subprocess.DEVNULL)
-                        for i, code in enumerate(codes))
+        _WARM_UP.extend(
+            _start([sys.executable, "-c", code], env, probe_out if i == 0 else subprocess.DEVNULL)
+            for i, code in enumerate(codes)
+        )
     threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env, record), daemon=True).start()
 
 
@@ -195,8 +207,14 @@ def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path) ->
 def _start(args: list[str], env: dict[str, str], stdout: Any) -> subprocess.Popen[bytes]:
     """A compiling process at a low priority (nice 15): the firmware's tests beside it run the fake robot on the
     wall clock and get the CPU when they need it; the compile takes the rest."""
-    return subprocess.Popen(args, stdout=stdout, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env,
-                            preexec_fn=lambda: os.nice(15))
+    return subprocess.Popen(
+        args,
+        stdout=stdout,
+        stderr=subprocess.DEVNULL,
+        stdin=subprocess.DEVNULL,
+        env=env,
+        preexec_fn=lambda: os.nice(15),
+    )
 
 
 def _wait_or_kill(proc: subprocess.Popen[bytes], timeout_s: float = 1800) -> None:
@@ -222,7 +240,6 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     while not os.path.exists(ready) and time.monotonic() < deadline:
         time.sleep(0.05)
     _kernels_ready = True  # after 30 min the test compiles what it needs itself
-
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
@@ -288,8 +305,10 @@ def full_run(config: pytest.Config) -> bool:
 def pytest_report_header(config: pytest.Config) -> str:
     if full_run(config):
         return "rimless: every test (tests marked `full` included)"
-    return (f"rimless: the default run; the tests marked `full` (more cases of checks this run makes) are "
-            f"deselected: {FULL_TESTS_ENV}=1 runs them too, as CI does")
+    return (
+        f"rimless: the default run; the tests marked `full` (more cases of checks this run makes) are "
+        f"deselected: {FULL_TESTS_ENV}=1 runs them too, as CI does"
+    )
 
 
 @pytest.hookimpl(trylast=True)
@@ -312,7 +331,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     from _pytest.nodeid import NodeId
 
     for item in items:
-        names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
-                        for m in item.iter_markers("xdist_group")})
+        names = sorted(
+            {str(m.args[0] if m.args else m.kwargs.get("name", "default")) for m in item.iter_markers("xdist_group")}
+        )
         if names and "@" not in item.nodeid:
             item._id = NodeId.parse(f"{item.nodeid}@{'_'.join(names)}")  # type: ignore[attr-defined]

@@ -25,13 +25,25 @@ LAYERS = {
 # What a part may import of the other parts (the shared root modules are open to all, the CLI root to none).
 CROSS = {
     # the firmware in the loop runs the robot's own controller with its config and reads its trial logs
-    "rimless.sim": {"rimless.firmware.errors", "rimless.firmware.drivers", "rimless.firmware.control",
-                    "rimless.firmware.service.config", "rimless.firmware.service.triallog"},
+    "rimless.sim": {
+        "rimless.firmware.errors",
+        "rimless.firmware.drivers",
+        "rimless.firmware.control",
+        "rimless.firmware.service.config",
+        "rimless.firmware.service.triallog",
+    },
     "rimless.firmware": set(),
     "rimless.analysis": {"rimless.sim"},
 }
-SHARED_ROOT = {"rimless", "rimless.errors", "rimless.units", "rimless.output", "rimless.progress", "rimless.values",
-               "rimless.second_process"}
+SHARED_ROOT = {
+    "rimless",
+    "rimless.errors",
+    "rimless.units",
+    "rimless.output",
+    "rimless.progress",
+    "rimless.values",
+    "rimless.second_process",
+}
 CLI_ROOT = {"rimless.cli", "rimless.cli_rules", "rimless.__main__"}
 HEAVY = ("numpy", "scipy", "pandas", "matplotlib", "dask", "numba", "sympy", "pyarrow", "ezc3d")
 
@@ -90,7 +102,7 @@ def _rank(module: str) -> int | None:
     part = _part(module)
     if part is None or module == part:
         return None
-    sub = module[len(part) + 1:].split(".")[0]
+    sub = module[len(part) + 1 :].split(".")[0]
     for i, layer in enumerate(LAYERS[part]):
         if sub in layer.split("|"):
             return i
@@ -149,8 +161,12 @@ def test_library_modules_never_import_cli_modules() -> None:
 
 
 def test_no_private_names_across_modules() -> None:
-    bad = [(m, t, n, line) for m, e in EDGES.items() for t, n, line in e
-           if n and n.startswith("_") and not n.startswith("__")]
+    bad = [
+        (m, t, n, line)
+        for m, e in EDGES.items()
+        for t, n, line in e
+        if n and n.startswith("_") and not n.startswith("__")
+    ]
     assert not bad, f"private names imported from another module: {bad}"
 
 
@@ -186,8 +202,13 @@ def test_firmware_imports_nothing_heavy() -> None:
         if _part(m) != "rimless.firmware":
             continue
         for node in ast.walk(ast.parse(path.read_text())):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom) and not node.level
+                else []
+            )
             bad += [(m, n, node.lineno) for n in names if n.split(".")[0] in HEAVY]
     assert not bad, f"firmware imports a PC-only library: {bad}"
 
@@ -218,7 +239,7 @@ def test_layer_names_exist() -> None:
     for m in MODULES:
         part = _part(m)
         if part and m != part:
-            present[part].add(m[len(part) + 1:].split(".")[0])
+            present[part].add(m[len(part) + 1 :].split(".")[0])
     for part, layers in LAYERS.items():
         named = {s for layer in layers for s in layer.split("|")}
         assert named <= present[part], f"{part}: layers without a folder or module: {named - present[part]}"

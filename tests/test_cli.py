@@ -26,10 +26,22 @@ def test_help_imports_no_heavy_library():
     assert "sim" in out
 
 
-@pytest.mark.parametrize("module", ["rimless.sim.cli", "rimless.analysis.cli", "rimless.firmware.cli",
-                                    "rimless.sim.cli.firmware", "rimless.sim.cli.app", "rimless.sim.cli.fixed_point",
-                                    "rimless.sim.cli.gait", "rimless.sim.cli.sweep", "rimless.sim.cli.replay",
-                                    "rimless.sim.cli.studies", "rimless.cli"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "rimless.sim.cli",
+        "rimless.analysis.cli",
+        "rimless.firmware.cli",
+        "rimless.sim.cli.firmware",
+        "rimless.sim.cli.app",
+        "rimless.sim.cli.fixed_point",
+        "rimless.sim.cli.gait",
+        "rimless.sim.cli.sweep",
+        "rimless.sim.cli.replay",
+        "rimless.sim.cli.studies",
+        "rimless.cli",
+    ],
+)
 def test_each_command_module_imports_on_its_own(module):
     """A part's command module imports first, before rimless.cli registers the parts (no circular import)."""
     res = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True)
@@ -76,9 +88,21 @@ def test_fixed_point_json_has_the_contract_keys():
     res = runner.invoke(app, ["sim", "fixed-point", "--model", "er", "--json", "--rtol", "1e-9"])
     assert res.exit_code == 0, res.output
     out = json.loads(res.output)
-    for key in ("model", "slope_rad", "k", "c", "theta_plus_rad", "theta_dot_plus_rad_s", "step_period_s",
-                "eigenvalues", "max_abs_eigenvalue", "stable", "energy_ratio", "min_normal_force_N",
-                "phase_durations_s"):
+    for key in (
+        "model",
+        "slope_rad",
+        "k",
+        "c",
+        "theta_plus_rad",
+        "theta_dot_plus_rad_s",
+        "step_period_s",
+        "eigenvalues",
+        "max_abs_eigenvalue",
+        "stable",
+        "energy_ratio",
+        "min_normal_force_N",
+        "phase_durations_s",
+    ):
         assert key in out
     assert out["model"] == "er" and out["k"] == 2700 and out["c"] == 8 and out["slope_rad"] == 0.05
     assert len(out["eigenvalues"]) == 2 and all(len(e) == 2 for e in out["eigenvalues"])
@@ -131,14 +155,32 @@ def test_critical_slope_of_the_compliant_wheels(model, reason):
     assert out["reason"] == reason
     assert out["cot"] == pytest.approx(np.tan(out["critical_slope_rad"]), rel=1e-12)
     # Algorithm 1 stops at the last converged multiple of its step, at or above the refined boundary
-    assert out["critical_slope_rad"] <= out["algorithm1_slope_rad"] < out["critical_slope_rad"] + out["algorithm1_step_rad"] + 1e-12
+    assert (
+        out["critical_slope_rad"]
+        <= out["algorithm1_slope_rad"]
+        < out["critical_slope_rad"] + out["algorithm1_step_rad"] + 1e-12
+    )
     assert out["refine_tol_rad"] == 1e-6
     assert out["at_critical"]["max_abs_eigenvalue"] < 1
 
 
 def test_stress_sweep_classifies_every_point():
-    res = runner.invoke(app, ["sim", "stress", "--k-values", "300,2700,1e6", "--c-values", "0,8",
-                              "--slopes-deg", "0.1,2.9,22", "--mass-ratios", "0.02", "--json"])
+    res = runner.invoke(
+        app,
+        [
+            "sim",
+            "stress",
+            "--k-values",
+            "300,2700,1e6",
+            "--c-values",
+            "0,8",
+            "--slopes-deg",
+            "0.1,2.9,22",
+            "--mass-ratios",
+            "0.02",
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     out = json.loads(res.output)
     assert out["points"] == 3 * 2 * 3 * 1 * 2 * 3
@@ -182,7 +224,7 @@ def _toy_app():
 
     @toy.command()
     def missing(path: str = "nope.csv") -> None:
-        open(path)  # noqa: SIM115 - the OSError is the point
+        open(path)
 
     @toy.command()
     def negative(value: float) -> None:
@@ -191,15 +233,18 @@ def _toy_app():
     return toy
 
 
-@pytest.mark.parametrize(("args", "code", "line"), [
-    (["user", "--x", "-2"], 2, "error: --x must be positive, got -2.0"),
-    (["nogait"], 1, "error: no period-1 gait exists at this slope (stall)"),
-    (["ctrlc"], 130, "interrupted"),
-    (["numba-ctrlc"], 130, "interrupted"),
-    (["missing", "--path", "/no/such/file.csv"], 2, "error: /no/such/file.csv: No such file or directory"),
-    (["user", "--x", "abc"], 2, "error: --x must be a number, got 'abc'"),
-    (["negative"], 2, "error: missing argument VALUE (see 'rimless negative --help')"),
-])
+@pytest.mark.parametrize(
+    ("args", "code", "line"),
+    [
+        (["user", "--x", "-2"], 2, "error: --x must be positive, got -2.0"),
+        (["nogait"], 1, "error: no period-1 gait exists at this slope (stall)"),
+        (["ctrlc"], 130, "interrupted"),
+        (["numba-ctrlc"], 130, "interrupted"),
+        (["missing", "--path", "/no/such/file.csv"], 2, "error: /no/such/file.csv: No such file or directory"),
+        (["user", "--x", "abc"], 2, "error: --x must be a number, got 'abc'"),
+        (["negative"], 2, "error: missing argument VALUE (see 'rimless negative --help')"),
+    ],
+)
 def test_root_group_maps_every_failure_to_one_line_and_its_exit_code(args, code, line):
     res = CliRunner().invoke(_toy_app(), args, prog_name="rimless")
     assert res.exit_code == code, res.output
@@ -235,8 +280,9 @@ def test_a_real_bug_still_shows_its_traceback():
 def test_console_script_version_and_a_usage_error():
     res = subprocess.run([sys.executable, "-m", "rimless", "--version"], capture_output=True, text=True)
     assert res.returncode == 0 and res.stdout.startswith("rimless ")
-    res = subprocess.run([sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "xx"],
-                         capture_output=True, text=True)
+    res = subprocess.run(
+        [sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "xx"], capture_output=True, text=True
+    )
     assert res.returncode == 2
     assert res.stderr == "error: --model must be one of er, ve, got 'xx'\n"
 
@@ -313,13 +359,16 @@ def test_progress_bar_is_quiet_off_a_terminal_and_with_json(capsys, monkeypatch)
     assert progress_is_shown(json_out=False) and not progress_is_shown(json_out=True)
 
 
-@pytest.mark.parametrize(("option", "si", "text"), [
-    ("--slope-deg", np.radians(30.0), "--slope-deg 30"),
-    ("--max-gap-ms", 0.05, "--max-gap-ms 50"),
-    ("--hub-offset-mm", 0.0125, "--hub-offset-mm 12.5"),
-    ("--slope-rad", 0.05, "--slope-rad 0.05"),
-    ("--k", 2700.0, "--k 2700"),
-])
+@pytest.mark.parametrize(
+    ("option", "si", "text"),
+    [
+        ("--slope-deg", np.radians(30.0), "--slope-deg 30"),
+        ("--max-gap-ms", 0.05, "--max-gap-ms 50"),
+        ("--hub-offset-mm", 0.0125, "--hub-offset-mm 12.5"),
+        ("--slope-rad", 0.05, "--slope-rad 0.05"),
+        ("--k", 2700.0, "--k 2700"),
+    ],
+)
 def test_values_are_echoed_in_the_unit_of_the_option(option, si, text):
     from rimless.units import typed
 
@@ -379,8 +428,13 @@ def test_a_ctrl_c_python_dropped_in_a_callback_still_interrupts(entry):
     """The `rimless` entry point sends the interrupt again (rimless.__main__.redeliver_swallowed_interrupts); a
     plain interpreter, the control, runs on and prints Python's "Exception ignored" traceback."""
     # SIGINT as on a terminal: a suite started in the background of a non-interactive shell inherits it ignored
-    res = subprocess.run([sys.executable, "-c", DROPPED_CTRL_C, entry], capture_output=True, text=True, timeout=60,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    res = subprocess.run(
+        [sys.executable, "-c", DROPPED_CTRL_C, entry],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     if entry == "plain":
         assert res.stdout.strip() == "ran on" and "Exception ignored" in res.stderr
         return
@@ -391,9 +445,11 @@ def test_a_ctrl_c_python_dropped_in_a_callback_still_interrupts(entry):
 
 
 def test_other_exceptions_python_drops_still_reach_the_hook_before():
-    code = ("import sys\nfrom rimless.__main__ import redeliver_swallowed_interrupts\n"
-            "redeliver_swallowed_interrupts()\n"
-            "class Noisy:\n    def __del__(self):\n        raise ValueError('from __del__')\n"
-            "Noisy()\nprint('ran on')\n")
+    code = (
+        "import sys\nfrom rimless.__main__ import redeliver_swallowed_interrupts\n"
+        "redeliver_swallowed_interrupts()\n"
+        "class Noisy:\n    def __del__(self):\n        raise ValueError('from __del__')\n"
+        "Noisy()\nprint('ran on')\n"
+    )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.stdout.strip() == "ran on" and "ValueError: from __del__" in res.stderr

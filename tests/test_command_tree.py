@@ -92,7 +92,8 @@ def test_help(path: tuple[str, ...]) -> None:
     too_wide = [line for line in out.splitlines() if len(line) > WIDTH]
     assert not too_wide, f"help lines wider than {WIDTH} columns: {too_wide}"
     assert not re.search(r"<(bool|float|int|str|path|text|list)[^>]*>|\{[A-Z_]+\.\.\.\}", out), (
-        f"typer's raw metavars in help:\n{out}")
+        f"typer's raw metavars in help:\n{out}"
+    )
 
 
 @pytest.mark.parametrize("path", [p for p, _ in LEAVES], ids=[_name(p) for p, _ in LEAVES])
@@ -135,8 +136,9 @@ def test_flags_show_no_metavar_and_values_show_theirs() -> None:
 # ------------------------------------------------------------------------------------------ bad values
 
 
-def _one_error_line(stderr: str, code: int, returncode: int, names: list[str], out: str,
-                    cwd: Path | None = None) -> None:
+def _one_error_line(
+    stderr: str, code: int, returncode: int, names: list[str], out: str, cwd: Path | None = None
+) -> None:
     assert returncode == code, f"exit {returncode}, expected {code}:\n{out}"
     lines = [line for line in stderr.splitlines() if line.strip()]
     assert len(lines) == 1, f"expected one line on stderr, got {len(lines)}:\n{stderr}"
@@ -149,13 +151,15 @@ def _one_error_line(stderr: str, code: int, returncode: int, names: list[str], o
 
 BAD_VALUE_CASES = [
     (path, flag(p), "abc" if kind(p) == "number" else "xx")
-    for path, cmd in LEAVES for p in cmd.params
+    for path, cmd in LEAVES
+    for p in cmd.params
     if p.param_type_name == "option" and kind(p) in ("number", "choice")
 ]
 
 
-@pytest.mark.parametrize(("path", "option", "bad"), BAD_VALUE_CASES,
-                         ids=[f"{_name(p)} {o} {b}" for p, o, b in BAD_VALUE_CASES])
+@pytest.mark.parametrize(
+    ("path", "option", "bad"), BAD_VALUE_CASES, ids=[f"{_name(p)} {o} {b}" for p, o, b in BAD_VALUE_CASES]
+)
 def test_bad_value_is_one_line_naming_the_option(path: tuple[str, ...], option: str, bad: str) -> None:
     res = _invoke([*path, option, bad])
     _one_error_line(res.stderr, 2, res.exit_code, [option, repr(bad)], res.output)
@@ -201,8 +205,15 @@ def test_version() -> None:
 def _run(args: list[str], cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "COLUMNS": str(WIDTH)}
     try:
-        return subprocess.run([sys.executable, "-m", "rimless", *args], cwd=cwd, env=env, capture_output=True,
-                              text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+        return subprocess.run(
+            [sys.executable, "-m", "rimless", *args],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            stdin=subprocess.DEVNULL,
+        )
     except subprocess.TimeoutExpired:
         pytest.fail(f"`rimless {' '.join(args)}` hung for {timeout} s")
 
@@ -223,22 +234,22 @@ def _placeholders(cmd: Any, skip: str, tmp: Path) -> list[str]:
     return args
 
 
-FILE_CASES = [
-    (path, p.name, p.name in OUTPUT_PARAMS)
-    for path, cmd in LEAVES for p in cmd.params if kind(p) == "path"
-]
+FILE_CASES = [(path, p.name, p.name in OUTPUT_PARAMS) for path, cmd in LEAVES for p in cmd.params if kind(p) == "path"]
 SUFFIX = {"params_file": ".toml", "config": ".toml", "trial": ".parquet", "plot": ".png"}
 
 # Known violations in commands owned by the parts, as (reason, run): strict=False, so the lead sees an
 # XPASS once a part fixes its command, and deletes the entry. `run=False` where the violation costs minutes.
-KNOWN_FILE_VIOLATIONS: dict[tuple[tuple[str, ...], str], tuple[str, bool]] = {
-}
+KNOWN_FILE_VIOLATIONS: dict[tuple[tuple[str, ...], str], tuple[str, bool]] = {}
 
 
-@pytest.mark.parametrize(("path", "param", "is_output"), FILE_CASES,
-                         ids=[f"{_name(p)} {n}{' (output)' if o else ''}" for p, n, o in FILE_CASES])
-def test_missing_input_or_unwritable_output_is_one_line(path: tuple[str, ...], param: str, is_output: bool,
-                                                        tmp_path: Path, request: pytest.FixtureRequest) -> None:
+@pytest.mark.parametrize(
+    ("path", "param", "is_output"),
+    FILE_CASES,
+    ids=[f"{_name(p)} {n}{' (output)' if o else ''}" for p, n, o in FILE_CASES],
+)
+def test_missing_input_or_unwritable_output_is_one_line(
+    path: tuple[str, ...], param: str, is_output: bool, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
     if (path, param) in KNOWN_FILE_VIOLATIONS:
         reason, run = KNOWN_FILE_VIOLATIONS[(path, param)]
         request.applymarker(pytest.mark.xfail(reason=f"known: {reason}", strict=False, run=run))
@@ -266,6 +277,7 @@ def test_missing_input_or_unwritable_output_is_one_line(path: tuple[str, ...], p
 
 # ------------------------------------------------------------------------------------------ Ctrl-C
 
+
 def _free_udp_port() -> int:
     import socket
 
@@ -291,22 +303,26 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("robot", "listen"): (["--port", str(_free_udp_port()), "--out", "tel.jsonl"], 2.0),
     ("robot", "bench"): (["--fake", "--duration-s", "20"], 3.0),
     ("paper",): (["--out", "paper-out", "--scheduler", "sync", "--no-cache"], 6.0),
-    ("sim", "sweep"): (["--k", "1500:3500:50", "--model", "er,ve", "--scheduler", "sync", "--no-cache",
-                        "--out", "sweep-out/k"], 5.0),
+    ("sim", "sweep"): (
+        ["--k", "1500:3500:50", "--model", "er,ve", "--scheduler", "sync", "--no-cache", "--out", "sweep-out/k"],
+        5.0,
+    ),
     ("trials", "calibrate"): ([*CRITICAL_CSVS], 5.0),
     # --calibrated: without it the command takes about 3 s once compiled, and a CI run's signal landed during the
     # interpreter's exit after the result was printed (killed by SIGINT, nothing on stderr)
     ("trials", "critical-slope"): ([*CRITICAL_CSVS, "--calibrated", "--model", "er,ve"], 4.0),
     ("trials", "coverage"): (["--series", "500"], 3.0),
     ("trials", "leg-fit-coverage"): (["--tests", "1000"], 4.0),
-    ("robot", "leg-test"): (["--fake", "--leg", "0", "--fake-compression-mm", "0", "--timeout-s", "120", "--out",
-                             "leg.jsonl"], 3.0),
+    ("robot", "leg-test"): (
+        ["--fake", "--leg", "0", "--fake-compression-mm", "0", "--timeout-s", "120", "--out", "leg.jsonl"],
+        3.0,
+    ),
 }
 
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.
 QUICK: dict[tuple[str, ...], str] = {
     ("trials", "report"): "the bundled example report takes a few seconds once compiled: a fresh-clone CI run saw "
-                          "it finish before the signal",
+    "it finish before the signal",
     ("robot", "arm"): "one request to the robot, bounded by the command timeout",
     ("robot", "disarm"): "one request to the robot, bounded by the command timeout",
     ("robot", "set"): "one request to the robot, bounded by the command timeout",
@@ -314,16 +330,17 @@ QUICK: dict[tuple[str, ...], str] = {
     ("robot", "trial-start"): "one request to the robot, bounded by the command timeout",
     ("robot", "trial-stop"): "one request to the robot, bounded by the command timeout",
     ("robot", "check"): "needs the hardware; with --fake it clicks 8 clutches in about 2.4 s, too short to "
-                        "aim a signal at reliably",
+    "aim a signal at reliably",
     ("trials", "show"): "reads one Parquet file (well under a second)",
     ("sim", "replay"): "reads one trial log and simulates one step (about a second)",
     ("trials", "import"): "parses a few files in about a second; the long import is `trials bench-import`",
     ("robot", "ping"): "one request to the robot, bounded by the command timeout",
     ("robot", "release"): "drives the clutch pins low once and exits",
     ("robot", "heartbeat"): "without a robot on the loopback it stops at once with one line; its Ctrl-C path "
-                            "needs a running robot",
+    "needs a running robot",
     ("trials", "leg-fit"): "fits a few leg-test logs in a second or two",
 }
+
 
 def _free_tcp_port() -> int:
     import socket
@@ -337,8 +354,9 @@ KNOWN_QUICK_RUN_VIOLATIONS: dict[tuple[str, ...], str] = {}
 
 
 @pytest.mark.parametrize("path", sorted(QUICK), ids=[_name(p) for p in sorted(QUICK)])
-def test_quick_command_run_as_is_ends_cleanly(path: tuple[str, ...], tmp_path: Path,
-                                              request: pytest.FixtureRequest) -> None:
+def test_quick_command_run_as_is_ends_cleanly(
+    path: tuple[str, ...], tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
     """Run with only its required parameters (a robot on a closed local port, a bundled CSV as the file):
     success, or one line `error: ...` with exit 1 or 2; never a traceback or a hang."""
     if path in KNOWN_QUICK_RUN_VIOLATIONS:
@@ -346,8 +364,11 @@ def test_quick_command_run_as_is_ends_cleanly(path: tuple[str, ...], tmp_path: P
     cmd = dict(ALL)[path]
     args = [*path, *_placeholders(cmd, "", tmp_path)]
     if any("--port" in p.opts for p in cmd.params) and path[0] == "robot":
-        args += ["--port", str(_free_tcp_port()), "--token", "t"] if any("--token" in p.opts for p in cmd.params) \
+        args += (
+            ["--port", str(_free_tcp_port()), "--token", "t"]
+            if any("--token" in p.opts for p in cmd.params)
             else ["--port", str(_free_tcp_port())]
+        )
     res = _run(args, cwd=tmp_path, timeout=120)
     out = res.stdout + res.stderr
     assert "Traceback" not in out, out[-3000:]
@@ -359,8 +380,7 @@ def test_quick_command_run_as_is_ends_cleanly(path: tuple[str, ...], tmp_path: P
 
 # Known violations of the Ctrl-C rule in commands owned by the parts: strict=False so the lead sees them
 # turn into XPASS once fixed, and then deletes the entry.
-KNOWN_INTERRUPT_VIOLATIONS: dict[tuple[str, ...], str] = {
-}
+KNOWN_INTERRUPT_VIOLATIONS: dict[tuple[str, ...], str] = {}
 
 
 # What an interrupted command may leave: a recording is complete up to the interrupt (every line is a whole
@@ -377,8 +397,14 @@ def _leftovers(folder: Path, before: set[str], allowed: set[str]) -> list[str]:
 # Interrupted in every run: one command per kind of machinery (the reference integrator, a synchronous Dask
 # sweep with partial output, the demo with its second process and report, the firmware's asyncio loop, a
 # telemetry recording, a least-squares calibration); the other long commands are marked `full` (CI runs them).
-INTERRUPTED_IN_EVERY_RUN = {("sim", "fixed-point"), ("sim", "sweep"), ("demo",), ("robot", "run"),
-                            ("robot", "listen"), ("trials", "calibrate")}
+INTERRUPTED_IN_EVERY_RUN = {
+    ("sim", "fixed-point"),
+    ("sim", "sweep"),
+    ("demo",),
+    ("robot", "run"),
+    ("robot", "listen"),
+    ("trials", "calibrate"),
+}
 
 
 def _interrupt_case(path: tuple[str, ...]) -> Any:
@@ -387,12 +413,15 @@ def _interrupt_case(path: tuple[str, ...]) -> Any:
 
 
 @pytest.mark.parametrize("path", [_interrupt_case(p) for p, _ in LEAVES])
-def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...], tmp_path: Path,
-                                                          request: pytest.FixtureRequest) -> None:
+def test_interrupt_exits_130_and_leaves_no_partial_output(
+    path: tuple[str, ...], tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
     if path in QUICK:
         pytest.skip(f"not interrupted: {QUICK[path]}")
-    assert path in LONG_RUNS, (f"`rimless {_name(path)}` is new: add it to LONG_RUNS (arguments that keep it "
-                               "busy) or to QUICK (with the reason it cannot run long) in this file")
+    assert path in LONG_RUNS, (
+        f"`rimless {_name(path)}` is new: add it to LONG_RUNS (arguments that keep it "
+        "busy) or to QUICK (with the reason it cannot run long) in this file"
+    )
     if path in KNOWN_INTERRUPT_VIOLATIONS:
         request.applymarker(pytest.mark.xfail(reason=KNOWN_INTERRUPT_VIOLATIONS[path], strict=False))
     args, delay_s = LONG_RUNS[path]
@@ -400,9 +429,16 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...],
     env = {**os.environ, "COLUMNS": str(WIDTH)}
     # The child gets SIGINT's default disposition, as a command started in a terminal does: a test run started
     # as a background job (SIGINT ignored, inherited across exec) would otherwise ignore the interrupt.
-    proc = subprocess.Popen([sys.executable, "-m", "rimless", *path, *args], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rimless", *path, *args],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         time.sleep(delay_s)
         finished_early = proc.poll() is not None
@@ -417,7 +453,8 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...],
     finished_at_the_signal = proc.returncode == -signal.SIGINT and not stderr.strip() and stdout.strip()
     assert not (finished_early or finished_at_the_signal), (
         f"`rimless {_name(path)} {' '.join(args)}` finished (exit {proc.returncode}) before the interrupt at "
-        f"{delay_s} s (or as it came); give it longer work:\n{out[-2000:]}")
+        f"{delay_s} s (or as it came); give it longer work:\n{out[-2000:]}"
+    )
     # 130, or killed by SIGINT (-2): a shell shows both as $? = 130. Python ends itself with SIGINT when a
     # KeyboardInterrupt passed through C code that records it (e.g. during an import), even once handled.
     assert proc.returncode in (130, -signal.SIGINT), f"exit {proc.returncode} after SIGINT:\n{out[-3000:]}"
@@ -433,27 +470,54 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(path: tuple[str, ...],
 # Valid inputs without a result: exit 1, one line `error: ...` on stderr naming what is missing, nothing on
 # stdout, no output left behind. (Bad values are walked above, Ctrl-C below.)
 NO_RESULT: dict[str, tuple[list[str], list[str], bool]] = {  # id: (args, words in the error, slow)
-    "sim gait from a state that stalls": (["sim", "gait", "--theta-dot", "0.5", "--out", "traj.csv"],
-                                          ["no step completed", "stall"], False),
-    "sim gaits on a slope without gaits": (["sim", "gaits", "--model", "er", "--slope-deg", "0.5", "--guesses", "3"],
-                                           ["no period-1 gait", "0.5000 deg"], False),
-    "sim critical-slope below the ER branch": (["sim", "critical-slope", "--model", "er", "--slope-deg", "1"],
-                                               ["critical slope of the er wheel", "no fixed point"], False),
-    "paper on the level": (["paper", "--slope-deg", "0", "--k", "2500:2750:250", "--scheduler", "sync",
-                            "--out", "p"], ["no period-1 gait", "0.0000 deg"], True),
-    "paper on a 20 deg slope": (["paper", "--slope-deg", "20", "--k", "2500:2750:250", "--scheduler", "sync",
-                                 "--out", "p"], ["no period-1 gait", "20.0000 deg"], True),
-    "sim gaits with legs too light to integrate": (["sim", "gaits", "--model", "ve", "--leg-mass-kg", "1e-6"],
-                                                   ["integrator gives up", "1e-06 kg"], True),
-    "paper with c = 60": (["paper", "--c", "60", "--k", "2500:2750:250", "--scheduler", "sync", "--out", "p"],
-                          ["no period-1 gait", "c = 60"], True),
+    "sim gait from a state that stalls": (
+        ["sim", "gait", "--theta-dot", "0.5", "--out", "traj.csv"],
+        ["no step completed", "stall"],
+        False,
+    ),
+    "sim gaits on a slope without gaits": (
+        ["sim", "gaits", "--model", "er", "--slope-deg", "0.5", "--guesses", "3"],
+        ["no period-1 gait", "0.5000 deg"],
+        False,
+    ),
+    "sim critical-slope below the ER branch": (
+        ["sim", "critical-slope", "--model", "er", "--slope-deg", "1"],
+        ["critical slope of the er wheel", "no fixed point"],
+        False,
+    ),
+    "paper on the level": (
+        ["paper", "--slope-deg", "0", "--k", "2500:2750:250", "--scheduler", "sync", "--out", "p"],
+        ["no period-1 gait", "0.0000 deg"],
+        True,
+    ),
+    "paper on a 20 deg slope": (
+        ["paper", "--slope-deg", "20", "--k", "2500:2750:250", "--scheduler", "sync", "--out", "p"],
+        ["no period-1 gait", "20.0000 deg"],
+        True,
+    ),
+    "sim gaits with legs too light to integrate": (
+        ["sim", "gaits", "--model", "ve", "--leg-mass-kg", "1e-6"],
+        ["integrator gives up", "1e-06 kg"],
+        True,
+    ),
+    "paper with c = 60": (
+        ["paper", "--c", "60", "--k", "2500:2750:250", "--scheduler", "sync", "--out", "p"],
+        ["no period-1 gait", "c = 60"],
+        True,
+    ),
 }
 
 
 # The slow cases beyond the first (one `paper` run on the level) are marked `full` (CI runs them).
-@pytest.mark.parametrize("case", [pytest.param(k, marks=[pytest.mark.slow,
-                                                          *([pytest.mark.full] if k != "paper on the level" else [])])
-                                  if v[2] else k for k, v in NO_RESULT.items()])
+@pytest.mark.parametrize(
+    "case",
+    [
+        pytest.param(k, marks=[pytest.mark.slow, *([pytest.mark.full] if k != "paper on the level" else [])])
+        if v[2]
+        else k
+        for k, v in NO_RESULT.items()
+    ],
+)
 def test_valid_input_without_a_result_is_one_line_and_exit_1(case: str, tmp_path: Path) -> None:
     args, words, _ = NO_RESULT[case]
     res = _run(args, cwd=tmp_path)
@@ -507,8 +571,9 @@ def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
 # workers' semaphores are still unlinked), and after an interrupt nothing of the command's process prints
 # (Dask's logging, thread and finalizer tracebacks silenced) before it exits (rimless.sim.studies.sweep).
 # "sim sweep" in every run; the other two are marked `full` (CI runs them)
-@pytest.mark.parametrize("case", [pytest.param(c, marks=[] if c == "sim sweep" else [pytest.mark.full])
-                                  for c in sorted(LOCAL_CLUSTER_RUNS)])
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, marks=[] if c == "sim sweep" else [pytest.mark.full]) for c in sorted(LOCAL_CLUSTER_RUNS)]
+)
 def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_path: Path) -> None:
     """A terminal's Ctrl-C reaches every process of the group (the command and its Dask workers): the command
     prints `interrupted` last, exits 130, leaves no output and no worker behind; the workers print nothing."""
@@ -516,9 +581,17 @@ def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_pa
     env = {**os.environ, "COLUMNS": str(WIDTH)}
     # SIGINT's default disposition in the child, as in a terminal: a test run started as a background job has
     # SIGINT ignored, which exec passes on (the command then ignored the Ctrl-C: finished, or hung for 60 s)
-    proc = subprocess.Popen([sys.executable, "-m", "rimless", *args], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rimless", *args],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         if workers:
             _wait_for_workers(proc.pid, workers)  # then `delay_s` into the computation
@@ -551,12 +624,28 @@ def scheduler_whose_worker_lacks_rimless(tmp_path: Path) -> Any:
     (fake / "__init__.py").write_text("raise ModuleNotFoundError(\"No module named 'rimless'\", name='rimless')\n")
     port = _free_tcp_port()
     dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
-    sched = subprocess.Popen([*dask, "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL,
-                             stderr=subprocess.DEVNULL, start_new_session=True)
-    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
-                               "--nthreads", "1", "--no-dashboard"], stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, start_new_session=True,
-                              env={**os.environ, "PYTHONPATH": str(tmp_path / "nopkg")}, cwd=tmp_path / "nopkg")
+    sched = subprocess.Popen(
+        [*dask, "--port", str(port), "--no-dashboard"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    worker = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "distributed.cli.dask_worker",
+            f"tcp://127.0.0.1:{port}",
+            "--nthreads",
+            "1",
+            "--no-dashboard",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env={**os.environ, "PYTHONPATH": str(tmp_path / "nopkg")},
+        cwd=tmp_path / "nopkg",
+    )
     try:
         from distributed import Client
 
@@ -578,12 +667,16 @@ def scheduler_whose_worker_lacks_rimless(tmp_path: Path) -> Any:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("command", [pytest.param(["sim", "sweep", "--k", "2700", "--model", "er", "--out", "s/k"],
-                                                  id="sim sweep"),
-                                     pytest.param(["paper", "--k", "2700", "--out", "paper-out"], id="paper",
-                                                  marks=pytest.mark.full)])  # `full`: CI runs it
-def test_a_dask_worker_without_the_package_is_one_error_line(command: list[str], tmp_path: Path,
-                                                             scheduler_whose_worker_lacks_rimless: str) -> None:
+@pytest.mark.parametrize(
+    "command",
+    [
+        pytest.param(["sim", "sweep", "--k", "2700", "--model", "er", "--out", "s/k"], id="sim sweep"),
+        pytest.param(["paper", "--k", "2700", "--out", "paper-out"], id="paper", marks=pytest.mark.full),
+    ],
+)  # `full`: CI runs it
+def test_a_dask_worker_without_the_package_is_one_error_line(
+    command: list[str], tmp_path: Path, scheduler_whose_worker_lacks_rimless: str
+) -> None:
     work = tmp_path / "work"
     work.mkdir()
     res = _run([*command, "--no-cache", "--scheduler", scheduler_whose_worker_lacks_rimless], cwd=work)

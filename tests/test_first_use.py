@@ -25,11 +25,15 @@ class _Terminal(io.StringIO):
 
 def test_rimless_cache_dir_moves_numbas_cache(tmp_path: Path) -> None:
     """Kernels are cached under $RIMLESS_CACHE_DIR/numba, also for subprocesses (NUMBA_CACHE_DIR exported)."""
-    code = ("import os\nfrom rimless.sim import fast\n"
-            "print(fast.cache_folder())\nprint(os.environ['NUMBA_CACHE_DIR'])\n")
+    code = "import os\nfrom rimless.sim import fast\nprint(fast.cache_folder())\nprint(os.environ['NUMBA_CACHE_DIR'])\n"
     env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_CACHE_DIR"}
-    res = subprocess.run([sys.executable, "-c", code], env={**env, "RIMLESS_CACHE_DIR": str(tmp_path / "c")},
-                         capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**env, "RIMLESS_CACHE_DIR": str(tmp_path / "c")},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     kernel_folder, exported = res.stdout.split()
     assert Path(exported) == tmp_path / "c" / "numba"
@@ -68,8 +72,8 @@ def test_spinner_inside_a_bar_uses_that_bar(monkeypatch: pytest.MonkeyPatch) -> 
     with progress.progress_bar("sweep", total=3) as bar:
         with progress.spinner("compiling the simulator", done="compiled") as shown:
             assert shown is True
-            assert bar._progress.tasks[-1].description == "compiling the simulator"  # noqa: SLF001
-        assert bar._progress.tasks[-1].description == "sweep"  # noqa: SLF001
+            assert bar._progress.tasks[-1].description == "compiling the simulator"
+        assert bar._progress.tasks[-1].description == "sweep"
         bar.advance()
 
 
@@ -79,24 +83,28 @@ def test_first_call_of_a_cold_kernel_is_announced(monkeypatch: pytest.MonkeyPatc
 
     calls: list[tuple] = []
 
-    def kernel(*args):  # noqa: ANN002, ANN202
+    def kernel(*args):
         calls.append(args)
         return 42
 
-    cold = SimpleNamespace(signatures=[], py_func=kernel, __call__=None,
-                           _cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(tmp_path / "none"))))
+    cold = SimpleNamespace(
+        signatures=[],
+        py_func=kernel,
+        __call__=None,
+        _cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(tmp_path / "none"))),
+    )
     warm = SimpleNamespace(signatures=["(int64,)"], py_func=kernel)
 
     class Callable(SimpleNamespace):
-        def __call__(self, *args):  # noqa: ANN002, ANN204
+        def __call__(self, *args):
             return self.py_func(*args)
 
     term = _Terminal()
     monkeypatch.setattr(sys, "stderr", term)
     monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"])
-    assert fast.compiling.call_compiling(Callable(**vars(warm)), 1) == 42  # noqa: SLF001
+    assert fast.compiling.call_compiling(Callable(**vars(warm)), 1) == 42
     assert term.getvalue() == ""
-    assert fast.compiling.call_compiling(Callable(**vars(cold)), 2) == 42  # noqa: SLF001
+    assert fast.compiling.call_compiling(Callable(**vars(cold)), 2) == 42
     assert "compiled the simulator (kernel)" in term.getvalue()
     assert calls == [(1,), (2,)]
 
@@ -113,8 +121,7 @@ def probe_lines(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
             return lines
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env.update(RIMLESS_CACHE_DIR=str(tmp_path), RIMLESS_NO_BACKGROUND="1")  # the whole compile in one process
-    res = subprocess.run([sys.executable, "-c", first_use.PROBE], env=env,
-                         capture_output=True, text=True, timeout=1800)
+    res = subprocess.run([sys.executable, "-c", first_use.PROBE], env=env, capture_output=True, text=True, timeout=1800)
     assert res.returncode == 0, res.stderr[-2000:]
     return res.stdout.splitlines()
 
@@ -156,8 +163,10 @@ def test_the_ahead_plan_names_what_the_step_kernel_compiles(probe_lines: list[st
 def test_loop_vectoriser_off_unless_the_environment_says(given: str | None) -> None:
     """rimless.sim.fast compiles without LLVM's loop vectoriser (less compile time, same results,
     docs/performance.md) unless NUMBA_LOOP_VECTORIZE is set; subprocesses inherit the setting."""
-    code = ("import os, numba\nfrom rimless.sim import fast\n"
-            "print(os.environ['NUMBA_LOOP_VECTORIZE'], numba.config.LOOP_VECTORIZE)\n")
+    code = (
+        "import os, numba\nfrom rimless.sim import fast\n"
+        "print(os.environ['NUMBA_LOOP_VECTORIZE'], numba.config.LOOP_VECTORIZE)\n"
+    )
     env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_LOOP_VECTORIZE"}
     if given is not None:
         env["NUMBA_LOOP_VECTORIZE"] = given

@@ -15,7 +15,6 @@ exist afterwards and its path be printed, and every table it prints (lines drawn
 
 from __future__ import annotations
 
-import os
 import re
 import shlex
 import subprocess
@@ -33,11 +32,16 @@ BLOCK = re.compile(r"^```bash[^\n]*\n(.*?)^```", re.M | re.S)
 
 # Commands the test does not run, each with its reason. Keep this list short and explicit.
 NOT_RUN: list[tuple[str, str]] = [
-    (r"^python3 -m venv\b", "creates the environment the test is already running in (.ci/run does it on a clean clone)"),
+    (
+        r"^python3 -m venv\b",
+        "creates the environment the test is already running in (.ci/run does it on a clean clone)",
+    ),
     (r"/pip install\b|^pip install\b", "installs the project; the test runs inside that installation"),
     (r"-m pytest\b|^pytest\b", "runs the test suite, which includes this test"),
-    (r"^rimless robot (check|run)\b(?!.*--fake)", "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch "
-                                                 "GPIO pins"),
+    (
+        r"^rimless robot (check|run)\b(?!.*--fake)",
+        "needs the robot's hardware: ADNS-3080 sensors on SPI and clutch GPIO pins",
+    ),
     (r"--host[\s=]+(?!127\.0\.0\.1\b|localhost\b)\S", "needs a running robot on the LAN"),
 ]
 
@@ -50,8 +54,7 @@ QUICK: list[tuple[str, list[str]]] = [
 
 # Known violations in the parts' commands (regex on the command, reason): the page's test xfails while one
 # of them fails, and passes (the lead deletes the entry) once the part fixes its command.
-KNOWN_VIOLATIONS: list[tuple[str, str]] = [
-]
+KNOWN_VIOLATIONS: list[tuple[str, str]] = []
 
 TABLE_CHARS = re.compile("[\u2500-\u257f]")  # box drawing: the lines of a rich table
 TIMEOUT_S = 900  # the first simulator command compiles the fast path (about a minute on the CI machine)
@@ -95,8 +98,11 @@ def named_outputs(command: str) -> list[str]:
 
 
 COMMANDS = readme_commands(README.read_text(encoding="utf-8"))
-PAGE_COMMANDS: list[tuple[str, str]] = [(page.relative_to(ROOT).as_posix(), command) for page in PAGES
-                                        for command in readme_commands(page.read_text(encoding="utf-8"))]
+PAGE_COMMANDS: list[tuple[str, str]] = [
+    (page.relative_to(ROOT).as_posix(), command)
+    for page in PAGES
+    for command in readme_commands(page.read_text(encoding="utf-8"))
+]
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
@@ -191,11 +197,17 @@ def test_the_default_run_leaves_out_only_tests_marked_full(monkeypatch: pytest.M
 
 
 def test_parser_handles_chains_comments_and_the_setup_line():
-    text = "x\n```bash\npython3 -m venv .venv && .venv/bin/pip install -e \".[pc]\" && .venv/bin/rimless demo\n" \
-           "rimless sim gaits --model ve   # every gait\n\n# a comment line\n```\n```text\nnot a command\n```\n"
+    text = (
+        'x\n```bash\npython3 -m venv .venv && .venv/bin/pip install -e ".[pc]" && .venv/bin/rimless demo\n'
+        "rimless sim gaits --model ve   # every gait\n\n# a comment line\n```\n```text\nnot a command\n```\n"
+    )
     cmds = readme_commands(text)
-    assert cmds == ["python3 -m venv .venv", ".venv/bin/pip install -e \".[pc]\"", ".venv/bin/rimless demo",
-                    "rimless sim gaits --model ve"]
+    assert cmds == [
+        "python3 -m venv .venv",
+        '.venv/bin/pip install -e ".[pc]"',
+        ".venv/bin/rimless demo",
+        "rimless sim gaits --model ve",
+    ]
     assert [not_run_reason(c) is None for c in cmds] == [False, False, True, True]
     assert with_quick_options("rimless bench --plot wp.png") == "rimless bench --plot wp.png --quick"
     assert with_quick_options("rimless bench --quick") == "rimless bench --quick"
@@ -219,8 +231,15 @@ def make_mirror(where: Path) -> Path:
 def command_problem(command: str, mirror: Path) -> str | None:
     """Run one command (with its quick options) in `mirror`; what is wrong with it, or None."""
     run = with_quick_options(command)
-    res = subprocess.run(["bash", "-c", run], cwd=mirror, env=readme_env(), capture_output=True, text=True,
-                         timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+    res = subprocess.run(
+        ["bash", "-c", run],
+        cwd=mirror,
+        env=readme_env(),
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+        stdin=subprocess.DEVNULL,
+    )
     return run_problem(run, res.returncode, res.stdout + res.stderr, mirror)
 
 
@@ -231,7 +250,9 @@ def run_problem(run: str, returncode: int, out: str, mirror: Path) -> str | None
     if "Traceback" in out:
         return f"`{run}` printed a traceback:\n{out[-3000:]}"
     for path in named_outputs(run):
-        target = mirror / path  # a file, a folder, or an output stem (`sim sweep --out sweep/k` writes k.parquet, k.csv)
+        target = (
+            mirror / path
+        )  # a file, a folder, or an output stem (`sim sweep --out sweep/k` writes k.parquet, k.csv)
         stem_files = list(target.parent.glob(f"{target.name}.*")) if target.parent.is_dir() else []
         if not (target.exists() or stem_files):
             return f"`{run}` did not write {path}"
@@ -253,9 +274,13 @@ def run_problem(run: str, returncode: int, out: str, mirror: Path) -> str | None
 # The README's page runs in every run; the reference pages of docs/ (several minutes of commands between them)
 # are marked `full`: CI runs them (tests/conftest.py).
 @pytest.mark.slow
-@pytest.mark.parametrize("page", [pytest.param(page, marks=[pytest.mark.xdist_group("demo")] if page == "README.md"
-                                               else [pytest.mark.full])
-                                  for page in sorted({page for page, _ in PAGE_COMMANDS})])
+@pytest.mark.parametrize(
+    "page",
+    [
+        pytest.param(page, marks=[pytest.mark.xdist_group("demo")] if page == "README.md" else [pytest.mark.full])
+        for page in sorted({page for page, _ in PAGE_COMMANDS})
+    ],
+)
 def test_page_commands_run_as_written(page: str, tmp_path: Path, request: pytest.FixtureRequest) -> None:
     mirror = make_mirror(tmp_path)
     ran: list[str] = []

@@ -46,33 +46,46 @@ def _required() -> bool:
 def browser_paths() -> tuple[str, str]:
     found = _browser()
     if found is None:
-        message = ("headless Chromium and chromedriver are not installed (Debian packages chromium and "
-                   "chromium-driver; `.ci/run` installs them)")
+        message = (
+            "headless Chromium and chromedriver are not installed (Debian packages chromium and "
+            "chromium-driver; `.ci/run` installs them)"
+        )
         if _required():
-            pytest.fail(f"{message}, and this run requires them (RIMLESS_REQUIRE_BROWSER=1 or CI set): "
-                        "the HTML report would go unchecked")
+            pytest.fail(
+                f"{message}, and this run requires them (RIMLESS_REQUIRE_BROWSER=1 or CI set): "
+                "the HTML report would go unchecked"
+            )
         pytest.skip(message)
     pytest.importorskip("selenium", reason="selenium is in the test extra: pip install -e '.[pc,test]'")
     return found
 
 
 @pytest.fixture(scope="module")
-def demo_report(demo_run) -> Path:  # noqa: ANN001 (tests/conftest.py's DemoRun)
+def demo_report(demo_run) -> Path:
     assert demo_run.returncode == 0, demo_run.stderr[-3000:]
     html = demo_run.out / "report.html"
     assert html.is_file(), f"the demo wrote no {html}"
     return html
 
 
-def _driver(chromium: str, chromedriver: str, width: int):  # noqa: ANN202
+def _driver(chromium: str, chromedriver: str, width: int):
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
     opts = webdriver.ChromeOptions()
     opts.binary_location = chromium
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--hide-scrollbars", f"--window-size={width},900"):
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--hide-scrollbars",
+        f"--window-size={width},900",
+    ):
         opts.add_argument(flag)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     return webdriver.Chrome(service=Service(executable_path=chromedriver), options=opts)
@@ -91,7 +104,8 @@ def test_demo_report_renders_in_chromium(browser_paths, demo_report: Path, width
         driver.get(demo_report.as_uri())
         driver.execute_async_script(
             "const done = arguments[arguments.length - 1];"
-            "if (document.readyState === 'complete') done(); else window.addEventListener('load', () => done());")
+            "if (document.readyState === 'complete') done(); else window.addEventListener('load', () => done());"
+        )
         page = driver.execute_script(CHECK_JS)
         # the whole page, not only the first screen
         shot = driver.execute_cdp_cmd("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": True})
@@ -109,7 +123,8 @@ def test_demo_report_renders_in_chromium(browser_paths, demo_report: Path, width
     tiny = [i["src"] for i in page["imgs"] if i["shown"] < min(i["natural"], 0.5 * page["innerWidth"])]
     assert not tiny, f"figures shown smaller than half the window: {tiny}"
     assert page["scrollWidth"] <= page["innerWidth"], (
-        f"the page scrolls sideways at {width} px: {page['scrollWidth']} px wide; widest elements: {page['wide']}")
+        f"the page scrolls sideways at {width} px: {page['scrollWidth']} px wide; widest elements: {page['wide']}"
+    )
     assert not page["wide"], f"elements reach past the window at {width} px: {page['wide']}"
     assert not logs, f"the browser logged errors: {logs}"
 

@@ -11,16 +11,16 @@ commands, so that ``rimless --help`` needs no numpy); never rimless.cli.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import typer
 
+from rimless.analysis.cli.critical import critical_lines
+from rimless.analysis.cli.critical import register as register_critical
+from rimless.analysis.cli.leg import register as register_leg
 from rimless.cli_rules import EXIT_USER_ERROR, fail, print_json, user_facing
 from rimless.errors import ParameterError, UserError
 from rimless.values import parse_list, parse_numbers
-
-from rimless.analysis.cli.critical import critical_lines, register as register_critical
-from rimless.analysis.cli.leg import register as register_leg
 
 app = typer.Typer(no_args_is_help=True, help="Vicon trials: import, show, benchmark.")
 
@@ -30,53 +30,88 @@ DEFAULT_MAX_GAP_MS = 50.0
 MODELS = ("er", "ve")
 
 
-def import_options(object_: str | None, markers: str | None, hub_offset_mm: str | None, slope_deg: float | None,
-                   leg_length_m: float | None, max_gap_ms: float, slopes: Path | None = None) -> dict[str, Any]:
+def import_options(
+    object_: str | None,
+    markers: str | None,
+    hub_offset_mm: str | None,
+    slope_deg: float | None,
+    leg_length_m: float | None,
+    max_gap_ms: float,
+    slopes: Path | None = None,
+) -> dict[str, Any]:
     """Keyword arguments of `import_trial` from the CLI options shared by ``import`` and ``report``."""
-    offset = None if hub_offset_mm is None else tuple(v / 1000.0 for v in
-                                                      parse_numbers(hub_offset_mm, "--hub-offset-mm", count=3))
-    kw = {"slope_deg": slope_deg, "object": object_,
-          "markers": None if markers is None else parse_list(markers, "--markers"),
-          "hub_offset_m": offset, "leg_length_m": leg_length_m, "max_gap_s": max_gap_ms / 1000.0}
+    offset = (
+        None
+        if hub_offset_mm is None
+        else tuple(v / 1000.0 for v in parse_numbers(hub_offset_mm, "--hub-offset-mm", count=3))
+    )
+    kw = {
+        "slope_deg": slope_deg,
+        "object": object_,
+        "markers": None if markers is None else parse_list(markers, "--markers"),
+        "hub_offset_m": offset,
+        "leg_length_m": leg_length_m,
+        "max_gap_s": max_gap_ms / 1000.0,
+    }
     if slopes is not None:
         from rimless.analysis.io.manifest import read_slope_manifest
 
         if slope_deg is not None:
-            raise ParameterError("give either --slope-deg (one slope for every file) or --slopes (one per file), "
-                                 "not both")
+            raise ParameterError(
+                "give either --slope-deg (one slope for every file) or --slopes (one per file), not both"
+            )
         kw["slopes"] = read_slope_manifest(slopes)
     return kw
 
 
-SLOPES_HELP = ("CSV 'file,slope_deg': the measured slope of each export (by file name); files not listed get "
-               "their slope from a ramp object or the motion.")
+SLOPES_HELP = (
+    "CSV 'file,slope_deg': the measured slope of each export (by file name); files not listed get "
+    "their slope from a ramp object or the motion."
+)
 
 
-GAP_HELP = ("Bridge gaps up to this long by interpolation, ms (the same rule for import and report); "
-            "longer gaps split the trial and no step period spans them.")
+GAP_HELP = (
+    "Bridge gaps up to this long by interpolation, ms (the same rule for import and report); "
+    "longer gaps split the trial and no step period spans them."
+)
 
 
 @app.command("import")
 @user_facing
 def import_cmd(
     files: Annotated[list[Path], typer.Argument(help="Vicon exports: Tracker or Nexus CSV, or C3D.")],
-    slope_deg: Annotated[Optional[float], typer.Option("--slope-deg", min=-45, max=45,
-                                                       help="Known slope, deg (default: estimated).")] = None,
-    out: Annotated[Path, typer.Option("--out", help="Folder for the <name>.trial.parquet files.",
-                                      metavar="DIR")] = Path("."),
+    slope_deg: Annotated[
+        float | None, typer.Option("--slope-deg", min=-45, max=45, help="Known slope, deg (default: estimated).")
+    ] = None,
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for the <name>.trial.parquet files.", metavar="DIR")
+    ] = Path("."),
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON list, one object per file.")] = False,
-    object_: Annotated[Optional[str], typer.Option(
-        "--object", help="Tracked object, or the markers' subject (default: what moves like the wheel).",
-        metavar="NAME")] = None,
-    markers: Annotated[Optional[str], typer.Option("--markers", help="Wheel marker names, comma-separated.",
-                                                   metavar="A,B,C,D")] = None,
-    hub_offset_mm: Annotated[Optional[str], typer.Option(
-        "--hub-offset-mm", help="Hub in the object frame X,Y,Z, mm (default: fitted centre of rotation).",
-        metavar="X,Y,Z")] = None,
-    leg_length_m: Annotated[Optional[float], typer.Option(
-        "--leg-length-m", min=0.0, help="Leg length, m: CoM height measured from the slope plane.")] = None,
+    object_: Annotated[
+        str | None,
+        typer.Option(
+            "--object",
+            help="Tracked object, or the markers' subject (default: what moves like the wheel).",
+            metavar="NAME",
+        ),
+    ] = None,
+    markers: Annotated[
+        str | None, typer.Option("--markers", help="Wheel marker names, comma-separated.", metavar="A,B,C,D")
+    ] = None,
+    hub_offset_mm: Annotated[
+        str | None,
+        typer.Option(
+            "--hub-offset-mm",
+            help="Hub in the object frame X,Y,Z, mm (default: fitted centre of rotation).",
+            metavar="X,Y,Z",
+        ),
+    ] = None,
+    leg_length_m: Annotated[
+        float | None,
+        typer.Option("--leg-length-m", min=0.0, help="Leg length, m: CoM height measured from the slope plane."),
+    ] = None,
     max_gap_ms: Annotated[float, typer.Option("--max-gap-ms", min=0.0, help=GAP_HELP)] = DEFAULT_MAX_GAP_MS,
-    slopes: Annotated[Optional[Path], typer.Option("--slopes", help=SLOPES_HELP, metavar="FILE")] = None,
+    slopes: Annotated[Path | None, typer.Option("--slopes", help=SLOPES_HELP, metavar="FILE")] = None,
 ) -> None:
     """Import Vicon exports as Parquet trials; a refused file does not stop the others (exit 2 if any)."""
     from rimless.analysis.report.batch import import_files
@@ -92,13 +127,21 @@ def import_cmd(
         table = Table(title="Vicon import", show_edge=False)
         table.add_column("file", overflow="fold")  # the long name wraps; the numbers and headers never do
         for col in ("status", "slope°", "outcome", "steps"):
-            table.add_column(col, no_wrap=True, min_width=max(len(col), 8 if col == "status" else 0),
-                             justify="left" if col in ("status", "outcome") else "right")
+            table.add_column(
+                col,
+                no_wrap=True,
+                min_width=max(len(col), 8 if col == "status" else 0),
+                justify="left" if col in ("status", "outcome") else "right",
+            )
         for r in rows:
             ok = r["status"] == "imported"
-            table.add_row(Path(r["file"]).name, "[green]imported[/]" if ok else "[red]refused[/]",
-                          f"{r['slope_deg']:.3f}" if ok else "", str(r["outcome"] or ""),
-                          str(r["steps"] if ok else ""))
+            table.add_row(
+                Path(r["file"]).name,
+                "[green]imported[/]" if ok else "[red]refused[/]",
+                f"{r['slope_deg']:.3f}" if ok else "",
+                str(r["outcome"] or ""),
+                str(r["steps"] if ok else ""),
+            )
         console = Console()
         console.print(table)
         for r in rows:
@@ -106,11 +149,15 @@ def import_cmd(
             if r["status"] == "imported":
                 typer.echo(f"{name}: wrote {r['_trial']}; {r['_outcome_reason']}")
                 ci = r.get("slope_ci_deg")
-                typer.echo(f"{name}: slope {r['slope_deg']:.3f} deg ({r.get('slope_source')}"
-                           + (f", 95 % interval {ci[0]:.3f} to {ci[1]:.3f} deg)" if ci else ")"))
+                typer.echo(
+                    f"{name}: slope {r['slope_deg']:.3f} deg ({r.get('slope_source')}"
+                    + (f", 95 % interval {ci[0]:.3f} to {ci[1]:.3f} deg)" if ci else ")")
+                )
                 if r["ramp_slope_deg"] is not None and r.get("_estimated_deg") is not None:
-                    typer.echo(f"{name}: ramp slope {r['ramp_slope_deg']:.3f} deg (static ramp), "
-                               f"from the motion {r['_estimated_deg']:.3f} deg")
+                    typer.echo(
+                        f"{name}: ramp slope {r['ramp_slope_deg']:.3f} deg (static ramp), "
+                        f"from the motion {r['_estimated_deg']:.3f} deg"
+                    )
                 for w in r["warnings"]:
                     typer.echo(f"{name}: warning: {w}")
             else:
@@ -143,9 +190,26 @@ def show_cmd(
     meta = Table(show_header=False, show_edge=False)
     meta.add_column("key", style="bold", no_wrap=True)
     meta.add_column("value", overflow="fold", max_width=56)
-    for k in ("object", "markers", "frames", "rate_hz", "duration_s", "outcome", "window_s", "slope_deg",
-              "slope_ci_deg", "slope_source", "slope_estimated_deg", "ramp_slope_deg", "hub_offset_mm", "gap_frames", "interpolated_frames", "max_gap_s", "step_method",
-              "steps"):
+    for k in (
+        "object",
+        "markers",
+        "frames",
+        "rate_hz",
+        "duration_s",
+        "outcome",
+        "window_s",
+        "slope_deg",
+        "slope_ci_deg",
+        "slope_source",
+        "slope_estimated_deg",
+        "ramp_slope_deg",
+        "hub_offset_mm",
+        "gap_frames",
+        "interpolated_frames",
+        "max_gap_s",
+        "step_method",
+        "steps",
+    ):
         v = s[k]
         if isinstance(v, float):
             v = f"{v:.6g}"
@@ -154,8 +218,16 @@ def show_cmd(
         meta.add_row(k, str(v))
     console = Console()
     console.print(meta)
-    for k in ("file", "source", "outcome_reason", "hub_source", "slope_method", "ramp_source",
-              "com_height_reference", "step_refused"):
+    for k in (
+        "file",
+        "source",
+        "outcome_reason",
+        "hub_source",
+        "slope_method",
+        "ramp_source",
+        "com_height_reference",
+        "step_refused",
+    ):
         if s.get(k):
             typer.echo(f"{k}: {s[k]}")
     for n in s["notes"]:
@@ -175,10 +247,16 @@ def show_cmd(
 @app.command("bench-import")
 def bench_cmd(
     rows: Annotated[int, typer.Option("--rows", min=100, help="Rows in the synthetic Tracker file.")] = 1_000_000,
-    mb: Annotated[Optional[float], typer.Option("--mb", min=0.01, help="Size of the synthetic file, MB "
-                                                "(instead of --rows).")] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print the figures as one JSON object (times in s, "
-                                                          "memory in MB, load average before and after).")] = False,
+    mb: Annotated[
+        float | None, typer.Option("--mb", min=0.01, help="Size of the synthetic file, MB (instead of --rows).")
+    ] = None,
+    json_out: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help="Print the figures as one JSON object (times in s, memory in MB, load average before and after).",
+        ),
+    ] = False,
 ) -> None:
     """Time the import of a synthetic Tracker export against plain pandas.read_csv (prints, asserts nothing)."""
     from rimless.analysis.kinematics.bench_import import benchmark_figures, main, rows_for_mb
@@ -191,6 +269,7 @@ def bench_cmd(
 
 # ------------------------------------------------------------------------------------- report and demo
 
+
 def _print_report(res: Any, model: str, json_out: bool) -> None:
     """The table (or the JSON summary) of a `rimless.analysis.report.batch.run_report` result."""
     if json_out:
@@ -201,37 +280,60 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
 
     from rimless.analysis.report.batch import shown_path
 
-    table = Table(title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation", show_edge=False,
-                  collapse_padding=True, pad_edge=False)
+    table = Table(
+        title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation",
+        show_edge=False,
+        collapse_padding=True,
+        pad_edge=False,
+    )
     table.add_column("trial", overflow="fold")  # the long name wraps; the numbers and headers never do
     for col in ("status", "slope\ndeg", "steps", "RMS\nmm", "|dT|\nms", "θ'+\nrad/s"):
-        table.add_column(col, no_wrap=True, min_width=max(len(w) for w in col.split("\n")),
-                         justify="left" if col == "status" else "right")
+        table.add_column(
+            col,
+            no_wrap=True,
+            min_width=max(len(w) for w in col.split("\n")),
+            justify="left" if col == "status" else "right",
+        )
 
     def f(v: Any, fmt: str) -> str:
         return "" if v is None or (isinstance(v, float) and v != v) else format(v, fmt)
 
     for r in res.metrics():
-        table.add_row(Path(str(r["trial"])).name.removesuffix(".parquet").removesuffix(".trial")
-                      .removesuffix(".csv").removesuffix(".c3d"), "[green]ok[/]" if r["status"] == "ok" else f"[red]{r['status']}[/]",
-                      f(r["slope_deg"], ".3f"), f(r["steps"], "d"), f(r["rms_com_error_mm"], ".2f"),
-                      f(r["mean_abs_period_error_ms"], ".1f"), f(r["theta_dot_plus_rad_s"], ".3f"))
+        table.add_row(
+            Path(str(r["trial"]))
+            .name.removesuffix(".parquet")
+            .removesuffix(".trial")
+            .removesuffix(".csv")
+            .removesuffix(".c3d"),
+            "[green]ok[/]" if r["status"] == "ok" else f"[red]{r['status']}[/]",
+            f(r["slope_deg"], ".3f"),
+            f(r["steps"], "d"),
+            f(r["rms_com_error_mm"], ".2f"),
+            f(r["mean_abs_period_error_ms"], ".1f"),
+            f(r["theta_dot_plus_rad_s"], ".3f"),
+        )
     Console().print(table)
     typer.echo("RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
     for name, c in getattr(res, "clutch", {}).items():
-        pairs = ", ".join(f"{'–' if r['measured_ms'] is None else format(r['measured_ms'], '.0f')}/"
-                          f"{'–' if r['simulated_ms'] is None else format(r['simulated_ms'], '.0f')}" for r in c["rows"])
+        pairs = ", ".join(
+            f"{'–' if r['measured_ms'] is None else format(r['measured_ms'], '.0f')}/"
+            f"{'–' if r['simulated_ms'] is None else format(r['simulated_ms'], '.0f')}"
+            for r in c["rows"]
+        )
         mm, sm = c["measured_mean_ms"], c["simulated_mean_ms"]
-        typer.echo(f"{name}: clutched time per step, robot log / simulated (ms): {pairs or 'none'}; mean "
-                   f"{'–' if mm is None else format(mm, '.1f')} / {'–' if sm is None else format(sm, '.1f')} ms")
+        typer.echo(
+            f"{name}: clutched time per step, robot log / simulated (ms): {pairs or 'none'}; mean "
+            f"{'–' if mm is None else format(mm, '.1f')} / {'–' if sm is None else format(sm, '.1f')} ms"
+        )
         for w in c["warnings"]:
             typer.echo(f"warning: {w}", err=True)
     for r in res.refused:
         typer.echo(f"refused: {r.reason}", err=True)
     for c in res.comparisons:
         if c.status != "ok":
-            typer.echo(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}",
-                       err=True)
+            typer.echo(
+                f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True
+            )
     typer.echo(f"report: {shown_path(res.report_html)}")
 
 
@@ -239,29 +341,45 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
 @user_facing
 def report_cmd(
     trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon exports.")],
-    out: Annotated[Path, typer.Option("--out", help="Folder for report.html, the PNG figures and metrics.csv.",
-                                      metavar="DIR")],
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for report.html, the PNG figures and metrics.csv.", metavar="DIR")
+    ],
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary (report path, metrics).")] = False,
-    slope_deg: Annotated[Optional[float], typer.Option(
-        "--slope-deg", min=-45, max=45, help="Known slope for raw inputs, deg (default: estimated).")] = None,
-    object_: Annotated[Optional[str], typer.Option(
-        "--object", help="Raw inputs: tracked object or markers' subject.", metavar="NAME")] = None,
-    markers: Annotated[Optional[str], typer.Option("--markers", help="Raw inputs: wheel marker names.",
-                                                   metavar="A,B,C,D")] = None,
-    hub_offset_mm: Annotated[Optional[str], typer.Option(
-        "--hub-offset-mm", help="Raw inputs: hub in the object frame X,Y,Z, mm.", metavar="X,Y,Z")] = None,
+    slope_deg: Annotated[
+        float | None,
+        typer.Option("--slope-deg", min=-45, max=45, help="Known slope for raw inputs, deg (default: estimated)."),
+    ] = None,
+    object_: Annotated[
+        str | None, typer.Option("--object", help="Raw inputs: tracked object or markers' subject.", metavar="NAME")
+    ] = None,
+    markers: Annotated[
+        str | None, typer.Option("--markers", help="Raw inputs: wheel marker names.", metavar="A,B,C,D")
+    ] = None,
+    hub_offset_mm: Annotated[
+        str | None,
+        typer.Option("--hub-offset-mm", help="Raw inputs: hub in the object frame X,Y,Z, mm.", metavar="X,Y,Z"),
+    ] = None,
     max_gap_ms: Annotated[float, typer.Option("--max-gap-ms", min=0.0, help=GAP_HELP)] = DEFAULT_MAX_GAP_MS,
-    leg_length_m: Annotated[Optional[float], typer.Option(
-        "--leg-length-m", min=0.0, help="Raw inputs: CoM height from the slope plane (else from the impact line).")] = None,
+    leg_length_m: Annotated[
+        float | None,
+        typer.Option(
+            "--leg-length-m", min=0.0, help="Raw inputs: CoM height from the slope plane (else from the impact line)."
+        ),
+    ] = None,
     model: Annotated[str, typer.Option("--model", help="Simulated model: er or ve.", metavar="er|ve")] = "er",
-    slope_bin_deg: Annotated[float, typer.Option(
-        "--slope-bin-deg", min=0.01, help="Group trials by slope rounded to this, deg.")] = 0.5,
-    slopes: Annotated[Optional[Path], typer.Option("--slopes", help="Raw inputs: " + SLOPES_HELP,
-                                                   metavar="FILE")] = None,
-    robot_log: Annotated[Optional[list[str]], typer.Option(
-        "--robot-log", metavar="[TRIAL=]FILE",
-        help="The robot's trial log (JSON Lines) of a trial: its measured clutched time per step beside the "
-             "simulated one. TRIAL= names the trial's input file (needed with several trials); repeatable.")] = None,
+    slope_bin_deg: Annotated[
+        float, typer.Option("--slope-bin-deg", min=0.01, help="Group trials by slope rounded to this, deg.")
+    ] = 0.5,
+    slopes: Annotated[Path | None, typer.Option("--slopes", help="Raw inputs: " + SLOPES_HELP, metavar="FILE")] = None,
+    robot_log: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--robot-log",
+            metavar="[TRIAL=]FILE",
+            help="The robot's trial log (JSON Lines) of a trial: its measured clutched time per step beside the "
+            "simulated one. TRIAL= names the trial's input file (needed with several trials); repeatable.",
+        ),
+    ] = None,
 ) -> None:
     """Compare trials with the simulation and write an HTML report.
 
@@ -275,8 +393,9 @@ def report_cmd(
     from rimless.analysis.report.batch import robot_log_pairs
 
     logs = robot_log_pairs(robot_log or [], trials)
-    res = run_report(trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg,
-                     robot_logs=logs)
+    res = run_report(
+        trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg, robot_logs=logs
+    )
     _print_report(res, model, json_out)
     if res.refused:
         raise typer.Exit(EXIT_REFUSED)

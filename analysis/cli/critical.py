@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import typer
 
@@ -40,27 +40,48 @@ def register(app: typer.Typer) -> None:
     app.command("coverage")(user_facing(coverage_cmd))
 
 
-ParamsOpt = Annotated[Optional[Path], typer.Option(
-    "--params", metavar="TOML", help="Wheel parameters (TOML, as `rimless sim`), default the paper's Table 1.")]
-SlopeOpt = Annotated[Optional[float], typer.Option(
-    "--slope-deg", min=-45, max=45, metavar="DEG", help="Known slope for CSV inputs, deg (default: estimated).")]
-GapOpt = Annotated[float, typer.Option("--max-gap-ms", min=0.0, metavar="MS",
-                                       help="CSV inputs: interpolate gaps up to this long, ms.")]
+ParamsOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--params", metavar="TOML", help="Wheel parameters (TOML, as `rimless sim`), default the paper's Table 1."
+    ),
+]
+SlopeOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--slope-deg", min=-45, max=45, metavar="DEG", help="Known slope for CSV inputs, deg (default: estimated)."
+    ),
+]
+GapOpt = Annotated[
+    float, typer.Option("--max-gap-ms", min=0.0, metavar="MS", help="CSV inputs: interpolate gaps up to this long, ms.")
+]
 
 
 def critical_slope_cmd(
     trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon CSVs.")],
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    model: Annotated[str, typer.Option("--model", metavar="er|ve|er,ve",
-                                       help="Model(s) whose critical slope is shown beside the trials'.")] = "er",
-    calibrate_c: Annotated[bool, typer.Option(
-        "--calibrated/--no-calibrated", help="Also calibrate c on the trials and give the model's critical slope "
-                                             "with it (slower).")] = False,
+    model: Annotated[
+        str,
+        typer.Option(
+            "--model", metavar="er|ve|er,ve", help="Model(s) whose critical slope is shown beside the trials'."
+        ),
+    ] = "er",
+    calibrate_c: Annotated[
+        bool,
+        typer.Option(
+            "--calibrated/--no-calibrated",
+            help="Also calibrate c on the trials and give the model's critical slope with it (slower).",
+        ),
+    ] = False,
     params: ParamsOpt = None,
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
-    group_tol_deg: Annotated[float, typer.Option(
-        "--group-tol-deg", min=0.0, metavar="DEG", help="Trials whose slopes differ by less form one slope group.")] = 0.05,
+    group_tol_deg: Annotated[
+        float,
+        typer.Option(
+            "--group-tol-deg", min=0.0, metavar="DEG", help="Trials whose slopes differ by less form one slope group."
+        ),
+    ] = 0.05,
 ) -> None:
     """Critical slope from trials (verdict per trial from its return map) beside the model's.
 
@@ -73,9 +94,14 @@ def critical_slope_cmd(
     from rimless.analysis.inference.runs import critical_slope_run
 
     models = parse_list(model, "--model", choices=MODELS, lower=True)
-    run = critical_slope_run(trials, models=models, calibrate_c=calibrate_c, params_path=params,
-                             import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
-                             group_tol_deg=group_tol_deg)
+    run = critical_slope_run(
+        trials,
+        models=models,
+        calibrate_c=calibrate_c,
+        params_path=params,
+        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
+        group_tol_deg=group_tol_deg,
+    )
     _print_refused(run.loaded.refused)
     if run.result is None:
         typer.echo("error: no trial could be read (see the refusals above)", err=True)
@@ -106,8 +132,12 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     con = Console()
     t = Table(title="verdict from the step-to-step return map (e*: fixed point, rad²/s²)", show_edge=False)
     t.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
-    for col, just, width in (("deg", "right", 6), ("steps", "right", 5), ("verdict", "left", 12),
-                             ("e* ± se", "right", 14)):
+    for col, just, width in (
+        ("deg", "right", 6),
+        ("steps", "right", 5),
+        ("verdict", "left", 12),
+        ("e* ± se", "right", 14),
+    ):
         t.add_column(col, justify=just, no_wrap=True, min_width=width)
     color = {"sustained": "green", "decaying": "red", "undetermined": "yellow"}
     stems = [Path(r["file"]).stem for r in out["per_trial"]]
@@ -115,9 +145,13 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     if len(common) >= 6:
         t.caption = f"trial: the file name after {common!r}"
     for r, stem in zip(out["per_trial"], stems):
-        t.add_row(stem[len(common):] if len(common) >= 6 else stem, f"{r['slope_deg']:.3f}", str(r["steps"]),
-                  f"[{color[r['verdict']]}]{r['verdict']}[/]",
-                  f"{_fmt(r['fixed_point_e_rad2_s2'], '.3f')}±{_fmt(r['fixed_point_e_se_rad2_s2'], '.3f')}")
+        t.add_row(
+            stem[len(common) :] if len(common) >= 6 else stem,
+            f"{r['slope_deg']:.3f}",
+            str(r["steps"]),
+            f"[{color[r['verdict']]}]{r['verdict']}[/]",
+            f"{_fmt(r['fixed_point_e_rad2_s2'], '.3f')}±{_fmt(r['fixed_point_e_se_rad2_s2'], '.3f')}",
+        )
     con.print(t)
     for r in out["per_trial"]:
         con.print(f"  {Path(r['file']).name}: {r['reason']}", markup=False, highlight=False)
@@ -131,29 +165,47 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     con.print(e)
     if res.chosen is not None:
         lo, hi = res.chosen.ci_deg
-        con.print(f"critical slope from the trials: {res.chosen.value_deg:.3f} deg, 95 % interval {lo:.3f}-{hi:.3f} "
-                  f"deg ({res.chosen.method}); {res.why}" + (
-                      f"; bracket {res.bracket_deg[0]:.3f}-{res.bracket_deg[1]:.3f} deg" if res.bracket_deg else "")
-                  + "; intervals include each trial's slope uncertainty (slope_sigma_deg in --json)",
-                  markup=False, highlight=False)
+        con.print(
+            f"critical slope from the trials: {res.chosen.value_deg:.3f} deg, 95 % interval {lo:.3f}-{hi:.3f} "
+            f"deg ({res.chosen.method}); {res.why}"
+            + (f"; bracket {res.bracket_deg[0]:.3f}-{res.bracket_deg[1]:.3f} deg" if res.bracket_deg else "")
+            + "; intervals include each trial's slope uncertainty (slope_sigma_deg in --json)",
+            markup=False,
+            highlight=False,
+        )
     else:
         con.print(f"no critical slope: {res.why}", markup=False, highlight=False)
 
 
 def calibrate_cmd(
     trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon CSVs.")],
-    fit: Annotated[str, typer.Option("--fit", metavar="c[,k,m_H,m,I_c,L0,guide_friction_n]",
-                                     help="Model parameters to fit, comma-separated.")] = "c",
+    fit: Annotated[
+        str,
+        typer.Option(
+            "--fit", metavar="c[,k,m_H,m,I_c,L0,guide_friction_n]", help="Model parameters to fit, comma-separated."
+        ),
+    ] = "c",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     model: Annotated[str, typer.Option("--model", metavar="er|ve", help="Simulated model.")] = "er",
-    critical: Annotated[bool, typer.Option("--critical/--no-critical",
-                                           help="Also give the calibrated model's critical slope and the trials'.")] = True,
+    critical: Annotated[
+        bool,
+        typer.Option(
+            "--critical/--no-critical", help="Also give the calibrated model's critical slope and the trials'."
+        ),
+    ] = True,
     params: ParamsOpt = None,
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
-    prior: Annotated[Optional[Path], typer.Option(
-        "--prior", metavar="JSON", help="Leg-test results (`trials leg-fit --json`) as priors: Gaussian penalties on "
-        "the fitted k, c (removes the c-k ridge); unfitted ones fixed at them.", show_default=False)] = None,
+    prior: Annotated[
+        Path | None,
+        typer.Option(
+            "--prior",
+            metavar="JSON",
+            help="Leg-test results (`trials leg-fit --json`) as priors: Gaussian penalties on "
+            "the fitted k, c (removes the c-k ridge); unfitted ones fixed at them.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Calibrate the model (c, optionally k ...) on the trials' step periods and CoM height.
 
@@ -168,9 +220,15 @@ def calibrate_cmd(
     models = parse_list(model, "--model", choices=MODELS, lower=True)
     if len(models) != 1:
         raise ParameterError(f"--model must be er or ve, got {model!r}")
-    run = calibration_run(trials, names_fit, model=models[0], critical=critical, params_path=params,
-                          import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
-                          prior_path=prior)
+    run = calibration_run(
+        trials,
+        names_fit,
+        model=models[0],
+        critical=critical,
+        params_path=params,
+        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
+        prior_path=prior,
+    )
     _print_refused(run.loaded.refused)
     if not run.loaded.trials:
         typer.echo("error: no trial could be read (see the refusals above)", err=True)
@@ -197,31 +255,50 @@ def _print_calibration(out: dict[str, Any]) -> None:
         t.add_column(col, justify="left" if col == "parameter" else "right", no_wrap=True)
     for p in out["params"]:
         ci = p.get("ci95")
-        t.add_row(f"{p['name']} ({p['unit']})", f"{p['table1']:.4g}",
-                  _fmt(p["estimate"], ".4g"), _fmt(p["se"], ".2g"),
-                  f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–", "yes" if p["identifiable"] else "[red]NO[/]")
+        t.add_row(
+            f"{p['name']} ({p['unit']})",
+            f"{p['table1']:.4g}",
+            _fmt(p["estimate"], ".4g"),
+            _fmt(p["se"], ".2g"),
+            f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–",
+            "yes" if p["identifiable"] else "[red]NO[/]",
+        )
     con.print(t)
     opt = out.get("optimizer", {})
     if opt:
-        con.print(("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
-                  + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
-                  "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty",
-                  markup=False, highlight=False)
+        con.print(
+            ("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
+            + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
+            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty",
+            markup=False,
+            highlight=False,
+        )
     for p in out["params"]:
         if p["note"]:
             con.print(f"  {p['name']}: {p['note']}", markup=False, highlight=False)
     sep = out.get("loss_separation")
     if sep and sep.get("note") and sep["note"] not in {p["note"] for p in out["params"]}:
-        con.print(f"  c against a constant loss per step (guide friction): {sep['note']}", markup=False,
-                  highlight=False)
+        con.print(
+            f"  c against a constant loss per step (guide friction): {sep['note']}", markup=False, highlight=False
+        )
     names = out["correlation"]["names"]
     if len(names) > 1:
-        con.print("correlation: " + "; ".join(
-            f"{names[i]}-{names[j]} {_fmt(out['correlation']['matrix'][i][j], '+.2f')}"
-            for i in range(len(names)) for j in range(i + 1, len(names))), markup=False, highlight=False)
+        con.print(
+            "correlation: "
+            + "; ".join(
+                f"{names[i]}-{names[j]} {_fmt(out['correlation']['matrix'][i][j], '+.2f')}"
+                for i in range(len(names))
+                for j in range(i + 1, len(names))
+            ),
+            markup=False,
+            highlight=False,
+        )
     if out.get("friction_vs_damping"):
-        con.print("guide friction vs damping told apart: " + out["friction_vs_damping"]["statement"],
-                  markup=False, highlight=False)
+        con.print(
+            "guide friction vs damping told apart: " + out["friction_vs_damping"]["statement"],
+            markup=False,
+            highlight=False,
+        )
     r = Table(title="RMS residuals, Table 1 model -> calibrated", show_edge=False)
     r.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
     for col, width in (("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
@@ -231,24 +308,39 @@ def _print_calibration(out: dict[str, Any]) -> None:
     if len(common) >= 6:
         r.caption = f"trial: the file name after {common!r}"
     for row, stem in zip(out["residuals"], stems):
-        r.add_row(stem[len(common):] if len(common) >= 6 else stem, f"{row['slope_deg']:.2f}",
-                  _fmt(row["table1_rms_period_ms"], ".1f"),
-                  _fmt(row["calibrated_rms_period_ms"], ".1f"), _fmt(row["table1_rms_com_mm"], ".2f"),
-                  _fmt(row["calibrated_rms_com_mm"], ".2f"))
+        r.add_row(
+            stem[len(common) :] if len(common) >= 6 else stem,
+            f"{row['slope_deg']:.2f}",
+            _fmt(row["table1_rms_period_ms"], ".1f"),
+            _fmt(row["calibrated_rms_period_ms"], ".1f"),
+            _fmt(row["table1_rms_com_mm"], ".2f"),
+            _fmt(row["calibrated_rms_com_mm"], ".2f"),
+        )
     con.print(r)
-    con.print("dT: step period error over the steps the simulation reached; CoM: CoM height error; a release "
-              "speed and a time shift are fitted per trial in both.", markup=False, highlight=False)
-    con.print(f"all trials: RMS period error {_fmt(out['rms_period_ms']['table1'], '.1f')} -> "
-              f"{_fmt(out['rms_period_ms']['calibrated'], '.1f')} ms, RMS CoM error "
-              f"{_fmt(out['rms_com_mm']['table1'], '.2f')} -> {_fmt(out['rms_com_mm']['calibrated'], '.2f')} mm "
-              f"({out['simulations']} simulations)", markup=False, highlight=False)
+    con.print(
+        "dT: step period error over the steps the simulation reached; CoM: CoM height error; a release "
+        "speed and a time shift are fitted per trial in both.",
+        markup=False,
+        highlight=False,
+    )
+    con.print(
+        f"all trials: RMS period error {_fmt(out['rms_period_ms']['table1'], '.1f')} -> "
+        f"{_fmt(out['rms_period_ms']['calibrated'], '.1f')} ms, RMS CoM error "
+        f"{_fmt(out['rms_com_mm']['table1'], '.2f')} -> {_fmt(out['rms_com_mm']['calibrated'], '.2f')} mm "
+        f"({out['simulations']} simulations)",
+        markup=False,
+        highlight=False,
+    )
     if "critical_slope_deg" in out:
         c = out["critical_slope_deg"]
         parts = [f"trials {_fmt(c['trials'], '.3f')} deg ({c['trials_method']})"]
-        parts += [f"model {_model_name(k.removeprefix('model_'))} {_fmt(v, '.3f')} deg" for k, v in c.items()
-                  if k.startswith("model_")]
+        parts += [
+            f"model {_model_name(k.removeprefix('model_'))} {_fmt(v, '.3f')} deg"
+            for k, v in c.items()
+            if k.startswith("model_")
+        ]
         con.print("critical slope: " + ", ".join(parts), markup=False, highlight=False)
-    for name, why in out["failed"].items():
+    for _name, why in out["failed"].items():
         con.print(f"not calibrated: {why}", markup=False, highlight=False)
     if "prior" in out:
         _print_prior(con, out["prior"])
@@ -260,10 +352,17 @@ def _print_prior(con: Any, prior: dict[str, Any]) -> None:
     for row in prior["parameters"]:
         lo, hi = row["leg_test_ci"]
         share = row.get("leg_test_share")
-        extra = f", {100 * share:.0f} % of the information from the leg test" if share is not None and \
-            math.isfinite(share) else ""
-        con.print(f"  {row['key']}: leg test {row['leg_test']:.4g} (95 %: {lo:.4g} to {hi:.4g}) {row['unit']}: "
-                  f"{row['source']}{extra}", markup=False, highlight=False)
+        extra = (
+            f", {100 * share:.0f} % of the information from the leg test"
+            if share is not None and math.isfinite(share)
+            else ""
+        )
+        con.print(
+            f"  {row['key']}: leg test {row['leg_test']:.4g} (95 %: {lo:.4g} to {hi:.4g}) {row['unit']}: "
+            f"{row['source']}{extra}",
+            markup=False,
+            highlight=False,
+        )
         if "conflict" in row:
             con.print(f"    warning: {row['conflict']}", markup=False, highlight=False)
     if prior["from_walks_only"]:
@@ -277,9 +376,11 @@ def critical_lines(res: Any) -> str:
         return "critical slope: no trial with steps"
     lines = []
     if cr.chosen is not None:
-        lines.append(f"critical slope from the trials: {cr.chosen.value_deg:.3f} deg ({cr.chosen.method}, 95 % "
-                     f"interval {cr.chosen.ci_deg[0]:.3f}-{cr.chosen.ci_deg[1]:.3f} deg"
-                     + (f"; bracket {cr.bracket_deg[0]:.3f}-{cr.bracket_deg[1]:.3f} deg)" if cr.bracket_deg else ")"))
+        lines.append(
+            f"critical slope from the trials: {cr.chosen.value_deg:.3f} deg ({cr.chosen.method}, 95 % "
+            f"interval {cr.chosen.ci_deg[0]:.3f}-{cr.chosen.ci_deg[1]:.3f} deg"
+            + (f"; bracket {cr.bracket_deg[0]:.3f}-{cr.bracket_deg[1]:.3f} deg)" if cr.bracket_deg else ")")
+        )
     else:
         lines.append(f"critical slope from the trials: none ({cr.why})")
     for m, v in cr.model.get("critical_slope_deg", {}).items():
@@ -287,8 +388,10 @@ def critical_lines(res: Any) -> str:
         lines.append(f"model critical slope, {label}: {_fmt(v, '.3f')} deg")
     if cal is not None:
         for p in cal.params:
-            lines.append(f"calibrated {p.name}: {p.value:.3f} ± {p.se:.3f} {p.unit} (Table 1: {p.table1:g})"
-                         + ("" if p.identifiable else f" NOT identifiable: {p.note}"))
+            lines.append(
+                f"calibrated {p.name}: {p.value:.3f} ± {p.se:.3f} {p.unit} (Table 1: {p.table1:g})"
+                + ("" if p.identifiable else f" NOT identifiable: {p.note}")
+            )
         sep = getattr(cal, "loss_separation", None)
         if sep and sep.get("note") and sep["note"] not in {p.note for p in cal.params}:
             lines.append(f"c against a constant loss per step (guide friction): {sep['note']}")
@@ -296,8 +399,10 @@ def critical_lines(res: Any) -> str:
 
 
 def coverage_cmd(
-    series: Annotated[int, typer.Option("--series", min=1, max=10000, metavar="N",
-                                        help="Synthetic series to generate (12 trials each).")] = 60,
+    series: Annotated[
+        int,
+        typer.Option("--series", min=1, max=10000, metavar="N", help="Synthetic series to generate (12 trials each)."),
+    ] = 60,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (the same seed gives the same figures).")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
@@ -320,11 +425,17 @@ def coverage_cmd(
         return
     lo, hi = out["coverage_ci95"]
     typer.echo(f"{out['estimated']} of {out['series']} series gave a critical slope (seed {seed})")
-    typer.echo(f"95 % interval contains the truth in {out['covered']} of {out['estimated']}: "
-               f"{_fmt(out['coverage'], '.1%')} (binomial 95 % interval {_fmt(lo, '.1%')}-{_fmt(hi, '.1%')}; "
-               f"goal 90-98 %)")
-    typer.echo(f"median error {_fmt(out['median_error_deg'], '+.4f')} deg, median |error| "
-               f"{_fmt(out['median_abs_error_deg'], '.4f')} deg, median interval width "
-               f"{_fmt(out['median_ci_width_deg'], '.4f')} deg")
+    typer.echo(
+        f"95 % interval contains the truth in {out['covered']} of {out['estimated']}: "
+        f"{_fmt(out['coverage'], '.1%')} (binomial 95 % interval {_fmt(lo, '.1%')}-{_fmt(hi, '.1%')}; "
+        f"goal 90-98 %)"
+    )
+    typer.echo(
+        f"median error {_fmt(out['median_error_deg'], '+.4f')} deg, median |error| "
+        f"{_fmt(out['median_abs_error_deg'], '.4f')} deg, median interval width "
+        f"{_fmt(out['median_ci_width_deg'], '.4f')} deg"
+    )
     for m, d in out["per_method"].items():
-        typer.echo(f"  {m}: covers {d['covered']}/{d['series']}" + (f", reported in {d['chosen']}" if d["chosen"] else ""))
+        typer.echo(
+            f"  {m}: covers {d['covered']}/{d['series']}" + (f", reported in {d['chosen']}" if d["chosen"] else "")
+        )

@@ -8,7 +8,7 @@ Only typer and the standard library at module level (``rimless --help`` stays fa
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import typer
 
@@ -25,22 +25,48 @@ def register(app: typer.Typer) -> None:
 
 
 def leg_fit_cmd(
-    logs: Annotated[list[Path], typer.Argument(help="Logs of `rimless robot leg-test` (one leg; "
-                                               "several releases fit together).")],
+    logs: Annotated[
+        list[Path], typer.Argument(help="Logs of `rimless robot leg-test` (one leg; several releases fit together).")
+    ],
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    plot: Annotated[Optional[Path], typer.Option("--plot", metavar="FILE", help="Figure of the fit and its "
-                                                 "residuals (PNG, PDF, SVG).", show_default=False)] = None,
-    moving_mass_kg: Annotated[float, typer.Option(
-        "--moving-mass-kg", min=1e-6, max=100.0, metavar="KG",
-        help="The leg's moving mass (default: Table 1's leg mass m, all at the foot in the wheel model); k and "
-             "c scale with it.")] = DEFAULT_MOVING_MASS_KG,
-    moving_mass_sd_kg: Annotated[float, typer.Option(
-        "--moving-mass-sd-kg", min=0.0, max=100.0, metavar="KG",
-        help="Its uncertainty (1 sigma), carried into the intervals of k, c and F_c.")] = 0.0,
-    counts_per_m: Annotated[Optional[float], typer.Option(
-        "--counts-per-m", min=1.0, max=1e9, metavar="N",
-        help="Sensor scale at 1600 cpi (default: each log's); only the friction depends on it.",
-        show_default=False)] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot", metavar="FILE", help="Figure of the fit and its residuals (PNG, PDF, SVG).", show_default=False
+        ),
+    ] = None,
+    moving_mass_kg: Annotated[
+        float,
+        typer.Option(
+            "--moving-mass-kg",
+            min=1e-6,
+            max=100.0,
+            metavar="KG",
+            help="The leg's moving mass (default: Table 1's leg mass m, all at the foot in the wheel model); k and "
+            "c scale with it.",
+        ),
+    ] = DEFAULT_MOVING_MASS_KG,
+    moving_mass_sd_kg: Annotated[
+        float,
+        typer.Option(
+            "--moving-mass-sd-kg",
+            min=0.0,
+            max=100.0,
+            metavar="KG",
+            help="Its uncertainty (1 sigma), carried into the intervals of k, c and F_c.",
+        ),
+    ] = 0.0,
+    counts_per_m: Annotated[
+        float | None,
+        typer.Option(
+            "--counts-per-m",
+            min=1.0,
+            max=1e9,
+            metavar="N",
+            help="Sensor scale at 1600 cpi (default: each log's); only the friction depends on it.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Fit a leg's stiffness k, damping c and Coulomb guide friction F_c to its free motion.
 
@@ -52,8 +78,9 @@ def leg_fit_cmd(
     """
     from rimless.analysis.inference.leg_fit import fake_truth, run_leg_fit
 
-    fit = run_leg_fit(logs, moving_mass_kg=moving_mass_kg, moving_mass_sd_kg=moving_mass_sd_kg,
-                      counts_per_m=counts_per_m, plot=plot)
+    fit = run_leg_fit(
+        logs, moving_mass_kg=moving_mass_kg, moving_mass_sd_kg=moving_mass_sd_kg, counts_per_m=counts_per_m, plot=plot
+    )
     out = fit.summary()
     truth = fake_truth(fit)
     if truth is not None:
@@ -64,62 +91,109 @@ def leg_fit_cmd(
     _print(out, plot)
 
 
-def _print(out: dict[str, Any], plot: Optional[Path]) -> None:
+def _print(out: dict[str, Any], plot: Path | None) -> None:
     def ci(key: str, fmt: str) -> str:
         lo, hi = out[key + "_ci"]
         return f"{out[key]:{fmt}} (95 %: {lo:{fmt}} to {hi:{fmt}})"
 
     n = sum(p["samples"] for p in out["per_log"])
-    typer.echo(f"leg {out['leg']}, {len(out['per_log'])} log(s), {n} samples fitted: natural frequency "
-               f"{ci('natural_frequency_hz', '.2f')} Hz, damping ratio {ci('damping_ratio', '.3f')}")
+    typer.echo(
+        f"leg {out['leg']}, {len(out['per_log'])} log(s), {n} samples fitted: natural frequency "
+        f"{ci('natural_frequency_hz', '.2f')} Hz, damping ratio {ci('damping_ratio', '.3f')}"
+    )
     typer.echo(f"k   = {ci('k_n_per_m', '.0f')} N/m")
     typer.echo(f"c   = {ci('c_n_s_per_m', '.3f')} N s/m")
     typer.echo(f"F_c = {ci('guide_friction_n', '.3f')} N (guide friction)")
-    typer.echo(f"moving mass {out['moving_mass_kg']:g} kg (--moving-mass-kg): k and c scale with it; "
-               + out["intervals"].removeprefix("95 %: "))
+    typer.echo(
+        f"moving mass {out['moving_mass_kg']:g} kg (--moving-mass-kg): k and c scale with it; "
+        + out["intervals"].removeprefix("95 %: ")
+    )
     cpms = sorted({round(p["counts_per_m"], 1) for p in out["per_log"]})
-    typer.echo("k and c come from frequency and decay and do not depend on the sensor's counts per metre; F_c "
-               f"does (it scales with it: {', '.join(f'{c:g}' for c in cpms)} counts/m)")
+    typer.echo(
+        "k and c come from frequency and decay and do not depend on the sensor's counts per metre; F_c "
+        f"does (it scales with it: {', '.join(f'{c:g}' for c in cpms)} counts/m)"
+    )
     for p in out["per_log"]:
-        typer.echo(f"  {p['file']}: {p['samples']} samples, {p['half_cycles']} half cycles, release delay "
-                   f"{p['release_delay_ms']:.1f} ms, residual RMS {p['residual_rms_counts']:.2f} counts")
+        typer.echo(
+            f"  {p['file']}: {p['samples']} samples, {p['half_cycles']} half cycles, release delay "
+            f"{p['release_delay_ms']:.1f} ms, residual RMS {p['residual_rms_counts']:.2f} counts"
+        )
     g = out["goal"]
-    widths = ", ".join(f"{name} ±{g['per_parameter'][key]['rel_half_width']:.1%}" for key, name in
-                       (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c")))
+    widths = ", ".join(
+        f"{name} ±{g['per_parameter'][key]['rel_half_width']:.1%}"
+        for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
+    )
     n = g["releases"]
     if g["met"]:
         typer.echo(f"precision goal (95 %: k and c within 2 %, F_c within 10 %) met with {n} release(s): {widths}")
     else:
-        short = [name for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
-                 if not g["per_parameter"][key]["met"]]
-        more = (f"; about {g['releases_needed']} releases like these would reach it (fewer if they differ in "
-                "compression)" if g["releases_needed"] is not None else "")
-        typer.echo(f"warning: precision goal (95 %: k and c within 2 %, F_c within 10 %) NOT met by "
-                   f"{', '.join(short)} with {n} release(s): {widths}{more}")
+        short = [
+            name
+            for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
+            if not g["per_parameter"][key]["met"]
+        ]
+        more = (
+            f"; about {g['releases_needed']} releases like these would reach it (fewer if they differ in compression)"
+            if g["releases_needed"] is not None
+            else ""
+        )
+        typer.echo(
+            f"warning: precision goal (95 %: k and c within 2 %, F_c within 10 %) NOT met by "
+            f"{', '.join(short)} with {n} release(s): {widths}{more}"
+        )
     opt = out["optimizer"]
-    typer.echo(("fit converged" if out["converged"] else "fit did NOT converge (stopped on its budget)")
-               + f": {opt['message']} ({opt['nfev']} evaluations); residual RMS {out['residual_rms_counts']:.2f} "
-               f"counts, lag-1 autocorrelation {out['residual_lag1_autocorrelation']:.2f}; count drift "
-               f"{out['count_drift_counts_per_sqrt_s']:.2f} counts/sqrt(s) (where the leg is still)")
+    typer.echo(
+        ("fit converged" if out["converged"] else "fit did NOT converge (stopped on its budget)")
+        + f": {opt['message']} ({opt['nfev']} evaluations); residual RMS {out['residual_rms_counts']:.2f} "
+        f"counts, lag-1 autocorrelation {out['residual_lag1_autocorrelation']:.2f}; count drift "
+        f"{out['count_drift_counts_per_sqrt_s']:.2f} counts/sqrt(s) (where the leg is still)"
+    )
     if "fake_truth" in out:
         t = out["fake_truth"]
-        typer.echo(f"fake leg's truth: k = {t['k_n_per_m']:g} N/m, c = {t['c_n_s_per_m']:g} N s/m, F_c = "
-                   f"{t['guide_friction_n']:g} N, moving mass {t['moving_mass_kg']:g} kg")
+        typer.echo(
+            f"fake leg's truth: k = {t['k_n_per_m']:g} N/m, c = {t['c_n_s_per_m']:g} N s/m, F_c = "
+            f"{t['guide_friction_n']:g} N, moving mass {t['moving_mass_kg']:g} kg"
+        )
     if plot is not None:
         typer.echo(f"figure: {plot}")
 
 
 def leg_fit_coverage_cmd(
-    tests: Annotated[int, typer.Option("--tests", min=1, max=100000, metavar="N",
-                                       help="Simulated leg tests to fit (a random leg each).")] = 100,
-    releases: Annotated[int, typer.Option("--releases", min=1, max=20, metavar="N",
-                                          help="Releases per leg test (compressions spread over 1.5-2.5 mm).")] = 3,
+    tests: Annotated[
+        int,
+        typer.Option("--tests", min=1, max=100000, metavar="N", help="Simulated leg tests to fit (a random leg each)."),
+    ] = 100,
+    releases: Annotated[
+        int,
+        typer.Option(
+            "--releases",
+            min=1,
+            max=20,
+            metavar="N",
+            help="Releases per leg test (compressions spread over 1.5-2.5 mm).",
+        ),
+    ] = 3,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (the same seed gives the same figures).")] = 0,
-    noise_counts: Annotated[float, typer.Option("--noise-counts", min=0.0, max=100.0, metavar="COUNTS",
-                                                help="Position noise of the sensor (1 sigma, before rounding).")] = 0.3,
-    drift_counts_per_sqrt_s: Annotated[float, typer.Option(
-        "--drift-counts-per-sqrt-s", min=0.0, max=100.0, metavar="RATE",
-        help="Random-walk drift of the count (its sd after 1 s).")] = 0.5,
+    noise_counts: Annotated[
+        float,
+        typer.Option(
+            "--noise-counts",
+            min=0.0,
+            max=100.0,
+            metavar="COUNTS",
+            help="Position noise of the sensor (1 sigma, before rounding).",
+        ),
+    ] = 0.3,
+    drift_counts_per_sqrt_s: Annotated[
+        float,
+        typer.Option(
+            "--drift-counts-per-sqrt-s",
+            min=0.0,
+            max=100.0,
+            metavar="RATE",
+            help="Random-walk drift of the count (its sd after 1 s).",
+        ),
+    ] = 0.5,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """How often the 95 % intervals of `trials leg-fit` contain the truth, on simulated leg tests.
@@ -132,26 +206,37 @@ def leg_fit_coverage_cmd(
     from rimless.progress import progress_bar
 
     with progress_bar("leg-fit coverage", total=tests, json_out=json_out) as bar:
-        res = run_leg_fit_coverage(tests, releases=releases, seed=seed, noise_counts=noise_counts,
-                                   drift_counts_per_sqrt_s=drift_counts_per_sqrt_s,
-                                   progress=lambda i: bar.update(completed=i, description=f"test {i}/{tests}"))
+        res = run_leg_fit_coverage(
+            tests,
+            releases=releases,
+            seed=seed,
+            noise_counts=noise_counts,
+            drift_counts_per_sqrt_s=drift_counts_per_sqrt_s,
+            progress=lambda i: bar.update(completed=i, description=f"test {i}/{tests}"),
+        )
     out = res.summary()
     if json_out:
         print_json(out)
         return
-    typer.echo(f"{out['fitted']} of {out['tests']} simulated leg tests fitted ({out['releases']} release(s) each, "
-               f"seed {out['seed']}; noise {noise_counts:g} counts, drift {drift_counts_per_sqrt_s:g} counts/sqrt(s))")
+    typer.echo(
+        f"{out['fitted']} of {out['tests']} simulated leg tests fitted ({out['releases']} release(s) each, "
+        f"seed {out['seed']}; noise {noise_counts:g} counts, drift {drift_counts_per_sqrt_s:g} counts/sqrt(s))"
+    )
     for key, label in (("k_n_per_m", "k  "), ("c_n_s_per_m", "c  "), ("guide_friction_n", "F_c")):
         d = out["per_parameter"][key]
         if not d["fitted"]:
             continue
         lo, hi = d["coverage_ci95"]
-        typer.echo(f"{label}: 95 % interval holds the truth in {d['covered']}/{d['fitted']} = {d['coverage']:.1%} "
-                   f"(binomial 95 %: {lo:.1%}-{hi:.1%}; goal 90-98 %); error median {d['median_abs_rel_error']:.2%}, "
-                   f"RMS {d['rms_rel_error']:.2%}; half width median {d['median_rel_half_width']:.2%}; "
-                   f"sd of error/se {d['z_sd']:.2f}")
+        typer.echo(
+            f"{label}: 95 % interval holds the truth in {d['covered']}/{d['fitted']} = {d['coverage']:.1%} "
+            f"(binomial 95 %: {lo:.1%}-{hi:.1%}; goal 90-98 %); error median {d['median_abs_rel_error']:.2%}, "
+            f"RMS {d['rms_rel_error']:.2%}; half width median {d['median_rel_half_width']:.2%}; "
+            f"sd of error/se {d['z_sd']:.2f}"
+        )
     g = out["goal"]
-    typer.echo(f"precision goal (95 % half width: k and c 2 %, F_c 10 %) met in {g['tests_meeting_goal']} of "
-               f"{out['fitted']} tests")
+    typer.echo(
+        f"precision goal (95 % half width: k and c 2 %, F_c 10 %) met in {g['tests_meeting_goal']} of "
+        f"{out['fitted']} tests"
+    )
     if out["failures"]:
         typer.echo(f"{out['failures']} test(s) gave no fit (classified failures), e.g.: {out['failure_messages'][0]}")

@@ -77,9 +77,19 @@ def _trial_name(slope_deg: float, index: int) -> str:
     return f"SYNTHETIC_er_slope{slope_deg:.1f}deg_run{index}"
 
 
-def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.random.Generator, *, name: str = "trial",
-                   noise_m: float = NOISE_M, angle_noise_rad: float = ANGLE_NOISE_RAD, occlusions: bool = True,
-                   n_steps: int = N_STEPS, long_gap: bool = False, ramp: bool = False) -> ExampleTrial:
+def simulate_trial(
+    slope_deg: float,
+    release_theta_dot_rad_s: float,
+    rng: np.random.Generator,
+    *,
+    name: str = "trial",
+    noise_m: float = NOISE_M,
+    angle_noise_rad: float = ANGLE_NOISE_RAD,
+    occlusions: bool = True,
+    n_steps: int = N_STEPS,
+    long_gap: bool = False,
+    ramp: bool = False,
+) -> ExampleTrial:
     """Simulate one ER trial from the rigid-touchdown release and sample it as a Tracker recording at 100 Hz.
 
     The recording: the wheel held still (`HOLD_S`) at the release pose, the simulated walk, then caught inside
@@ -89,9 +99,9 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
     """
     from scipy.spatial.transform import Rotation
 
+    from rimless.sim.model.params import WheelParams
     from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
-    from rimless.sim.model.params import WheelParams
 
     params = WheelParams(slope_rad=math.radians(slope_deg))
     z0 = np.array([-ALPHA_RAD / 2, release_theta_dot_rad_s])
@@ -148,11 +158,11 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
         for k, tm in enumerate(rng.choice(mids, size=3, replace=False)):
             i = int(np.searchsorted(t, tm))
             n = 1 if k == 2 else int(rng.integers(2, 5))
-            pose[i:i + n] = np.nan
+            pose[i : i + n] = np.nan
             if k == 2:
-                short[i:i + n] = True
+                short[i : i + n] = True
         i = int(np.searchsorted(t, impacts[-2] + 0.15 * periods[-1]))
-        pose[i:i + 12] = np.nan
+        pose[i : i + 12] = np.nan
     gap_s = None
     if long_gap:
         t0 = float(impacts[2] + 0.1 * periods[3])
@@ -164,9 +174,27 @@ def simulate_trial(slope_deg: float, release_theta_dot_rad_s: float, rng: np.ran
     ramp_noisy = Rotation.from_rotvec(rng.normal(0.0, angle_noise_rad, (t.size, 3))) * ramp_rot
     ramp_pose = np.column_stack([ramp_noisy.as_rotvec(), ramp_pos + rng.normal(0.0, noise_m, (t.size, 3))])
     post = np.array([s.y_plus[7] for s in gait.steps])
-    return ExampleTrial(name, slope_deg, -ALPHA_RAD / 2, release_theta_dot_rad_s, t, pose, short, h,
-                        impacts, periods, post, -origin_in_body, heading, origin, t_first, hold, float(t_catch),
-                        gap_s, ramp_pose if ramp else None)
+    return ExampleTrial(
+        name,
+        slope_deg,
+        -ALPHA_RAD / 2,
+        release_theta_dot_rad_s,
+        t,
+        pose,
+        short,
+        h,
+        impacts,
+        periods,
+        post,
+        -origin_in_body,
+        heading,
+        origin,
+        t_first,
+        hold,
+        float(t_catch),
+        gap_s,
+        ramp_pose if ramp else None,
+    )
 
 
 _EXP = re.compile(r"e([+-])(\d{1,2})$")
@@ -247,8 +275,7 @@ def generate(out_dir: str | Path = DATA_DIR, *, seed: int = SEED) -> list[Path]:
     for index, (slope, wdot) in enumerate(TRIALS):
         count[slope] = count.get(slope, 0) + 1
         name = _trial_name(slope, count[slope])
-        tr = simulate_trial(slope, wdot, rng, name=name, long_gap=index == LONG_GAP_TRIAL,
-                            ramp=index == RAMP_TRIAL)
+        tr = simulate_trial(slope, wdot, rng, name=name, long_gap=index == LONG_GAP_TRIAL, ramp=index == RAMP_TRIAL)
         paths.append(write_trial_csv(tr, out / f"{name}.csv"))
         toml += [
             "",

@@ -81,5 +81,6 @@ def rolling_wheel(
     o = np.asarray(object_origin_in_body_m, dtype=np.float64)
     trans = hub + mats @ o + rng.normal(0.0, noise_m, hub.shape)
     impacts = bounds[(bounds >= t[0]) & (bounds <= t[-1])]
-    return SyntheticWheel(t, hub, y, beta, impacts, markers, rot.as_rotvec(), trans, -o, slope_deg, rate_hz,
-                          leg_length_m)
+    return SyntheticWheel(
+        t, hub, y, beta, impacts, markers, rot.as_rotvec(), trans, -o, slope_deg, rate_hz, leg_length_m
+    )

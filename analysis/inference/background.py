@@ -54,7 +54,7 @@ def _child(conn: Any, fn: Callable[..., Any], prepare: Callable[[], Any] | None)
     """The child's body: quiet, deaf to Ctrl-C; ``prepare()``, then the arguments from the pipe, then one
     message back (("ok", value) or ("err", exception))."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    devnull = open(os.devnull, "w")  # noqa: SIM115 (the child's whole life)
+    devnull = open(os.devnull, "w")
     sys.stdout = sys.stderr = devnull
     try:
         if prepare is not None:
@@ -79,8 +79,9 @@ class Background:
     needs and runs ``prepare()`` (e.g. loading compiled code) while the caller works; `submit(*args)` then
     hands over the arguments."""
 
-    def __init__(self, fn: Callable[..., Any], *args: Any, _submit: bool = True,
-                 _prepare: Callable[[], Any] | None = None) -> None:
+    def __init__(
+        self, fn: Callable[..., Any], *args: Any, _submit: bool = True, _prepare: Callable[[], Any] | None = None
+    ) -> None:
         self._fn, self._args = fn, args
         self._proc: Any = None
         self._conn: Any = None
@@ -88,10 +89,14 @@ class Background:
         if background_allowed():
             ctx = multiprocessing.get_context("spawn")
             self._conn, child_conn = ctx.Pipe(duplex=True)
-            self._proc = ctx.Process(target=_child, args=(child_conn, fn, _prepare), daemon=True,
-                                     name=f"rimless-{getattr(fn, '__name__', 'background')}")
+            self._proc = ctx.Process(
+                target=_child,
+                args=(child_conn, fn, _prepare),
+                daemon=True,
+                name=f"rimless-{getattr(fn, '__name__', 'background')}",
+            )
             with _sigint_blocked():  # the child is deaf to Ctrl-C from its first instruction (a blocked
-                self._proc.start()   # signal mask survives fork and exec); one pending here is raised after
+                self._proc.start()  # signal mask survives fork and exec); one pending here is raised after
             child_conn.close()
         if _submit:
             self.submit(*args)
@@ -131,13 +136,16 @@ class Background:
         try:
             while not self._conn.poll(POLL_S):
                 if not self._proc.is_alive() and not self._conn.poll(0):
-                    raise BackgroundFailed(f"the background process ({self._proc.name}) ended with exit code "
-                                           f"{self._proc.exitcode} and no result")
+                    raise BackgroundFailed(
+                        f"the background process ({self._proc.name}) ended with exit code "
+                        f"{self._proc.exitcode} and no result"
+                    )
             kind, value = self._conn.recv()
         except EOFError:  # the child's end of the pipe closed: it has ended
             self._proc.join(timeout=5)
-            raise BackgroundFailed(f"the background process ({self._proc.name}) ended with exit code "
-                                   f"{self._proc.exitcode} and no result") from None
+            raise BackgroundFailed(
+                f"the background process ({self._proc.name}) ended with exit code {self._proc.exitcode} and no result"
+            ) from None
         finally:
             self.close()
         if kind == "err":

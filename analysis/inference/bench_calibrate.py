@@ -38,8 +38,9 @@ def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> li
     for slope in SLOPES_DEG:
         for release in RELEASES_RAD_S:
             p = truth.replace(slope_rad=math.radians(slope))  # type: ignore[attr-defined]
-            g = simulate_steps(p, "er", np.array([-math.pi / 8, release]), n_steps, make_integrator("auto", rtol=1e-9),
-                               record_dt=1e-3)
+            g = simulate_steps(
+                p, "er", np.array([-math.pi / 8, release]), n_steps, make_integrator("auto", rtol=1e-9), record_dt=1e-3
+            )
             ts, order = np.unique(np.asarray(g.table["t_s"]), return_index=True)
             com = np.asarray(g.table["com_height_normal_m"])[order]
             periods = np.array([s.period_s for s in g.steps])
@@ -49,10 +50,23 @@ def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> li
             y = np.interp(t, ts, com) + rng.normal(0.0, 0.3e-3, t.size) - 0.2
             imp = impacts[:-1] + rng.normal(0.0, 0.5e-3, impacts.size - 1)
             gap = np.zeros(t.size, bool)
-            meta = SimpleNamespace(slope_deg=slope, source_file=f"er_{slope}deg_{release}", rate_hz=100.0,
-                                   slope_source="given", com_height_reference="impact line", step_refused=None)
-            out.append(SimpleNamespace(time_s=t, impact_time_s=imp, step_period_s=np.diff(imp), meta=meta,
-                                       series={"com_height": y, "gap": gap, "interpolated": gap}))
+            meta = SimpleNamespace(
+                slope_deg=slope,
+                source_file=f"er_{slope}deg_{release}",
+                rate_hz=100.0,
+                slope_source="given",
+                com_height_reference="impact line",
+                step_refused=None,
+            )
+            out.append(
+                SimpleNamespace(
+                    time_s=t,
+                    impact_time_s=imp,
+                    step_period_s=np.diff(imp),
+                    meta=meta,
+                    series={"com_height": y, "gap": gap, "interpolated": gap},
+                )
+            )
     return out
 
 
@@ -75,10 +89,9 @@ def demo_trials() -> tuple[list[object], list[str]]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from rimless.sim.model.params import WheelParams
-
     from rimless.analysis.inference import calibrate as cal_mod
     from rimless.analysis.inference.calibrate import calibrate, parse_fit
+    from rimless.sim.model.params import WheelParams
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--c", type=float, default=12.0)
@@ -86,9 +99,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--fit", default="c,k")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--only", choices=("reference", "fast", "both"), default="both")
-    ap.add_argument("--series", choices=("generated", "demo"), default="generated",
-                    help="generated: trials of the known wheel (--c, --k); demo: the bundled critical series, "
-                         "imported as `rimless demo` does (its calibration; --fit defaults to c, no truth)")
+    ap.add_argument(
+        "--series",
+        choices=("generated", "demo"),
+        default="generated",
+        help="generated: trials of the known wheel (--c, --k); demo: the bundled critical series, "
+        "imported as `rimless demo` does (its calibration; --fit defaults to c, no truth)",
+    )
     a = ap.parse_args(argv)
     truth = WheelParams(damping_ns_per_m=a.c, stiffness_n_per_m=a.k)
     if a.series == "demo":
@@ -118,34 +135,43 @@ def main(argv: list[str] | None = None) -> None:
             cal_mod.REFERENCE_PATHS = False
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
         results[label], times[label] = res, (dt, dc)
-        print(f"{label}: {dt:.1f} s wall, {dc:.1f} s CPU, {res.evaluations} simulations, converged {res.converged} "
-              f"({res.optimizer.get('message', '')}; {res.optimizer.get('starts')} start(s), "
-              f"{res.optimizer.get('rounds')} round(s))")
+        print(
+            f"{label}: {dt:.1f} s wall, {dc:.1f} s CPU, {res.evaluations} simulations, converged {res.converged} "
+            f"({res.optimizer.get('message', '')}; {res.optimizer.get('starts')} start(s), "
+            f"{res.optimizer.get('rounds')} round(s))"
+        )
         for p in res.params:
             lo, hi = p.ci95
             head = f"  {p.name}: {p.value:.6g} +- {p.se:.3g} (model {p.se_model:.2g}, sandwich {p.se_sandwich:.2g})"
             if truth is None:
-                print(f"{head}, 95 % interval [{lo:.6g}, {hi:.6g}]; identifiable {p.identifiable}"
-                      f"{' (effective only)' if p.effective_only else ''}")
+                print(
+                    f"{head}, 95 % interval [{lo:.6g}, {hi:.6g}]; identifiable {p.identifiable}"
+                    f"{' (effective only)' if p.effective_only else ''}"
+                )
                 continue
             true = float(getattr(truth, p.field))
-            print(f"{head} truth {true:g}: error {100 * (p.value - true) / true:+.3f} %, 95 % interval [{lo:.6g}, "
-                  f"{hi:.6g}] {'covers' if lo <= true <= hi else 'MISSES'} it; identifiable {p.identifiable}")
+            print(
+                f"{head} truth {true:g}: error {100 * (p.value - true) / true:+.3f} %, 95 % interval [{lo:.6g}, "
+                f"{hi:.6g}] {'covers' if lo <= true <= hi else 'MISSES'} it; identifiable {p.identifiable}"
+            )
     if len(results) == 2:
         ref, new = results["reference"], results["fast"]
         (tw, tc), (nw, nc) = times["reference"], times["fast"]
-        print(f"ratio reference/fast: {tw / nw:.2f}x wall, {tc / nc:.2f}x CPU (load average "
-              f"{os.getloadavg()[0]:.1f})")
+        print(f"ratio reference/fast: {tw / nw:.2f}x wall, {tc / nc:.2f}x CPU (load average {os.getloadavg()[0]:.1f})")
         for pr, pn in zip(ref.params, new.params):
             (rlo, rhi), (nlo, nhi) = pr.ci95, pn.ci95
-            print(f"  {pr.name}: estimate differs by {pn.value - pr.value:+.3g} {pr.unit} "
-                  f"({(pn.value - pr.value) / pr.se:+.3f} sigma), interval bounds by {nlo - rlo:+.3g} / {nhi - rhi:+.3g} "
-                  f"{pr.unit}, sigma by {100 * (pn.se - pr.se) / pr.se:+.2f} %; identifiable {pr.identifiable} / "
-                  f"{pn.identifiable}")
+            print(
+                f"  {pr.name}: estimate differs by {pn.value - pr.value:+.3g} {pr.unit} "
+                f"({(pn.value - pr.value) / pr.se:+.3f} sigma), interval bounds by {nlo - rlo:+.3g} / {nhi - rhi:+.3g} "
+                f"{pr.unit}, sigma by {100 * (pn.se - pr.se) / pr.se:+.2f} %; identifiable {pr.identifiable} / "
+                f"{pn.identifiable}"
+            )
         dw = max(abs(new.release_rad_s[k] - ref.release_rad_s[k]) for k in ref.release_rad_s)
         sep = [(r.loss_separation or {}).get("damping_identified") for r in (ref, new)]
-        print(f"  releases differ by at most {dw:.2g} rad/s; calibrated cost {ref.cost_calibrated:.6g} / "
-              f"{new.cost_calibrated:.6g}; c told from a constant loss: {sep[0]} / {sep[1]}")
+        print(
+            f"  releases differ by at most {dw:.2g} rad/s; calibrated cost {ref.cost_calibrated:.6g} / "
+            f"{new.cost_calibrated:.6g}; c told from a constant loss: {sep[0]} / {sep[1]}"
+        )
 
 
 if __name__ == "__main__":

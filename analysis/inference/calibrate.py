@@ -37,19 +37,32 @@ from typing import Any
 
 import numpy as np
 
+from rimless.analysis.inference.identifiability import least_squares_report, sandwich_se
+from rimless.analysis.io.trial import ALPHA_RAD
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
 
-from rimless.analysis.inference.identifiability import NULL_EIGEN, least_squares_report, sandwich_se
-from rimless.analysis.io.trial import ALPHA_RAD
-
-__all__ = ["FIT_FIELDS", "CalibrationResult", "calibrate", "parse_fit", "least_squares_report", "sandwich_se",
-           "NOT_IDENTIFIABLE_REL_SE", "NoTrialCalibrated"]
+__all__ = [
+    "FIT_FIELDS",
+    "CalibrationResult",
+    "calibrate",
+    "parse_fit",
+    "least_squares_report",
+    "sandwich_se",
+    "NOT_IDENTIFIABLE_REL_SE",
+    "NoTrialCalibrated",
+]
 
 #: --fit names -> WheelParams fields, with the display unit
-FIT_FIELDS = {"c": ("damping_ns_per_m", "N s/m"), "k": ("stiffness_n_per_m", "N/m"), "m_H": ("hub_mass_kg", "kg"),
-              "m": ("leg_mass_kg", "kg"), "I_c": ("inertia_kg_m2", "kg m^2"), "L0": ("leg_length_m", "m"),
-              "guide_friction_n": ("guide_friction_n", "N")}
+FIT_FIELDS = {
+    "c": ("damping_ns_per_m", "N s/m"),
+    "k": ("stiffness_n_per_m", "N/m"),
+    "m_H": ("hub_mass_kg", "kg"),
+    "m": ("leg_mass_kg", "kg"),
+    "I_c": ("inertia_kg_m2", "kg m^2"),
+    "L0": ("leg_length_m", "m"),
+    "guide_friction_n": ("guide_friction_n", "N"),
+}
 NOT_IDENTIFIABLE_REL_SE = 0.5
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 REFINE_ROUNDS = 2  # parabolic refinements of each global's start between the profile's points (`_refine_start`)
@@ -128,8 +141,8 @@ class _Sim:
     def frequencies(self, params: Any, slope_deg: float, w: float, n: int) -> np.ndarray:
         """Step frequencies (1/s) of the n steps after the release step, on the compiled step map; 0 for steps
         not reached (the wheel stalled or the step failed)."""
-        from rimless.sim.model.failures import StepFailure
         from rimless.sim.fast import fast_step
+        from rimless.sim.model.failures import StepFailure
         from rimless.sim.step.fast_map import friction_step
 
         self.calls += 1
@@ -160,11 +173,18 @@ class _Sim:
         p = params.replace(slope_rad=math.radians(slope_deg))
         z0 = np.array([-ALPHA_RAD / 2, w])
         if REFERENCE_PATHS:
-            g = simulate_steps(p, self.model, z0, n, make_integrator("auto", rtol=self.rtol),
-                               record_dt=self.record_dt_s if record else 1.0)
+            g = simulate_steps(
+                p,
+                self.model,
+                z0,
+                n,
+                make_integrator("auto", rtol=self.rtol),
+                record_dt=self.record_dt_s if record else 1.0,
+            )
         else:
-            g = _com_walk(p, self.model, z0, n, make_integrator("auto", rtol=self.rtol),
-                          self.record_dt_s if record else 1.0)
+            g = _com_walk(
+                p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0
+            )
         if len(self.cache) > 256:
             self.cache.pop(next(iter(self.cache)))
         self.cache[key] = g
@@ -207,12 +227,18 @@ def _com_walk(params: Any, model: str, z0: np.ndarray, n_steps: int, integrator:
             vs.append(seg.y[:, 8])
         y, t = res.y_plus, t + res.period_s
     cat = lambda v: np.concatenate(v) if v else np.empty(0)  # noqa: E731
-    return GaitTrajectory(params, model, steps, {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs),
-                                                 "com_rate_m_s": cat(rs), "dL1_m_s": cat(vs)}, failure)
+    return GaitTrajectory(
+        params,
+        model,
+        steps,
+        {"t_s": cat(ts), "step": cat(ks), "com_height_normal_m": cat(hs), "com_rate_m_s": cat(rs), "dL1_m_s": cat(vs)},
+        failure,
+    )
 
 
-def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
-               with_com: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def _residuals(
+    sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float, with_com: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """(step-frequency residuals 1/T_sim - 1/T_meas in Hz, CoM residuals in m), unscaled.
 
     Frequencies, not periods: a step the simulation does not reach (it stalled) has frequency 0, the limit of
@@ -224,9 +250,9 @@ def _residuals(sim: _Sim, params: Any, d: _TrialData, w: float, shift_s: float,
         if covered < d.t_s[-1] + 0.06:  # the simulated walk is faster: simulate enough steps to cover the window
             extra = int(math.ceil((d.t_s[-1] + 0.06 - covered) / max(g.steps[-1].period_s, 1e-3))) + 1
             g = sim.walk(params, d.slope_deg, w, n + 2 + min(extra, 3 * n + 4), with_com)
-    got = np.array([s.period_s for s in g.steps[1:1 + n]])
+    got = np.array([s.period_s for s in g.steps[1 : 1 + n]])
     f_sim = np.zeros(n)  # a step the simulation did not reach (stalled) has frequency 0: continuous at the stall
-    f_sim[:got.size] = 1.0 / got
+    f_sim[: got.size] = 1.0 / got
     rp = f_sim - 1.0 / d.periods_s
     if not with_com or d.t_s.size == 0:
         return rp, np.zeros(0)
@@ -260,7 +286,7 @@ def _curve_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, list[tuple[
             splines.append((float(ts[0]), float(ts[-1]), CubicSpline(ts, ys)))
     parts = (st, sy, splines)
     try:
-        g._com_parts = (t0, parts)  # noqa: SLF001
+        g._com_parts = (t0, parts)
     except AttributeError:
         pass
     return parts
@@ -292,7 +318,7 @@ def _hermite_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, np.ndarra
     cat = lambda v, dt: np.concatenate(v) if v else np.empty(0, dt)  # noqa: E731
     parts = (cat(ts, float), cat(ys, float), cat(rs, float), cat(inside, bool))
     try:
-        g._com_hermite = (t0, parts)  # noqa: SLF001
+        g._com_hermite = (t0, parts)
     except AttributeError:
         pass
     return parts
@@ -315,8 +341,12 @@ def _hermite_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
         h = kt[i + 1] - kt[i]
         s_ = (tt[ok] - kt[i]) / h
         s2, s3 = s_ * s_, s_ * s_ * s_
-        out[ok] = ((2 * s3 - 3 * s2 + 1) * ky[i] + (s3 - 2 * s2 + s_) * h * kr[i]
-                   + (3 * s2 - 2 * s3) * ky[i + 1] + (s3 - s2) * h * kr[i + 1])
+        out[ok] = (
+            (2 * s3 - 3 * s2 + 1) * ky[i]
+            + (s3 - 2 * s2 + s_) * h * kr[i]
+            + (3 * s2 - 2 * s3) * ky[i + 1]
+            + (s3 - s2) * h * kr[i + 1]
+        )
     return out
 
 
@@ -364,11 +394,21 @@ class ParamEstimate:
         return (self.value - 1.959963984540054 * self.se, self.value + 1.959963984540054 * self.se)
 
     def as_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "field": self.field, "unit": self.unit, "table1": self.table1,
-                "value": self.value if self.identifiable else None, "estimate": self.value, "se": self.se,
-                "identifiable": self.identifiable, "note": self.note, "se_model": self.se_model,
-                "se_sandwich": self.se_sandwich, "effective_only": self.effective_only,
-                "ci95": list(self.ci95) if math.isfinite(self.se) else None}
+        return {
+            "name": self.name,
+            "field": self.field,
+            "unit": self.unit,
+            "table1": self.table1,
+            "value": self.value if self.identifiable else None,
+            "estimate": self.value,
+            "se": self.se,
+            "identifiable": self.identifiable,
+            "note": self.note,
+            "se_model": self.se_model,
+            "se_sandwich": self.se_sandwich,
+            "effective_only": self.effective_only,
+            "ci95": list(self.ci95) if math.isfinite(self.se) else None,
+        }
 
 
 @dataclass
@@ -397,17 +437,29 @@ class CalibrationResult:
         return all(p.identifiable for p in self.params)
 
     def summary(self) -> dict[str, Any]:
-        return {"model": self.model, "params": [p.as_dict() for p in self.params],
-                "correlation": {"names": [p.name for p in self.params], "matrix": self.correlation.tolist()},
-                "release_theta_dot_rad_s": self.release_rad_s, "residuals": self.residuals,
-                "sigma_step_frequency_hz": self.sigma_period_s, "sigma_com_mm": self.sigma_com_m * 1e3,
-                "rms_period_ms": {"table1": _total(self.residuals, "table1_rms_period_ms"),
-                                  "calibrated": _total(self.residuals, "calibrated_rms_period_ms")},
-                "rms_com_mm": {"table1": _total(self.residuals, "table1_rms_com_mm"),
-                               "calibrated": _total(self.residuals, "calibrated_rms_com_mm")},
-                "failed": self.failed, "simulations": self.evaluations, "converged": self.converged,
-                "optimizer": self.optimizer, "loss_separation": self.loss_separation,
-                **({"friction_vs_damping": self.friction_vs_damping} if self.friction_vs_damping else {})}
+        return {
+            "model": self.model,
+            "params": [p.as_dict() for p in self.params],
+            "correlation": {"names": [p.name for p in self.params], "matrix": self.correlation.tolist()},
+            "release_theta_dot_rad_s": self.release_rad_s,
+            "residuals": self.residuals,
+            "sigma_step_frequency_hz": self.sigma_period_s,
+            "sigma_com_mm": self.sigma_com_m * 1e3,
+            "rms_period_ms": {
+                "table1": _total(self.residuals, "table1_rms_period_ms"),
+                "calibrated": _total(self.residuals, "calibrated_rms_period_ms"),
+            },
+            "rms_com_mm": {
+                "table1": _total(self.residuals, "table1_rms_com_mm"),
+                "calibrated": _total(self.residuals, "calibrated_rms_com_mm"),
+            },
+            "failed": self.failed,
+            "simulations": self.evaluations,
+            "converged": self.converged,
+            "optimizer": self.optimizer,
+            "loss_separation": self.loss_separation,
+            **({"friction_vs_damping": self.friction_vs_damping} if self.friction_vs_damping else {}),
+        }
 
 
 def _total(rows: list[dict[str, Any]], key: str) -> float:
@@ -469,8 +521,16 @@ class _ReleaseFit:
         if w0 is None or not math.isfinite(w0):
             w0 = self.first_period_release(p, d)
         tol = (1e-6, 1e-8, 12) if coarse and not REFERENCE_PATHS else (1e-10, 1e-12, 30)
-        r = least_squares(lambda q: self.freq_res(p, d, float(q[0])), [w0], bounds=([0.05], [20.0]), method="trf",
-                          diff_step=[1e-5], xtol=tol[0], ftol=tol[1], max_nfev=tol[2])
+        r = least_squares(
+            lambda q: self.freq_res(p, d, float(q[0])),
+            [w0],
+            bounds=([0.05], [20.0]),
+            method="trf",
+            diff_step=[1e-5],
+            xtol=tol[0],
+            ftol=tol[1],
+            max_nfev=tol[2],
+        )
         return float(r.x[0]), float(2 * r.cost)
 
     def fit_warm(self, p: Any, d: _TrialData, w0: float) -> tuple[float, float]:
@@ -533,13 +593,15 @@ class _ReleaseFit:
                 def g1(w: float) -> float:
                     f = sim.frequencies(p, d.slope_deg, w, 1)[0]
                     return (f - target) if f > 0 else -target  # a stall lies below the root
+
                 return float(brentq(g1, grid[i], grid[i + 1], xtol=1e-10, rtol=1e-12, maxiter=60))
         costs = [float(np.sum(self.freq_res(p, d, w) ** 2)) for w in grid]
         return float(grid[int(np.argmin(costs))])
 
 
-def _start(releases: _ReleaseFit, glob: _Globals,
-           data: list[_TrialData]) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
+def _start(
+    releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]
+) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
     """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
     (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
     sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
@@ -604,8 +666,13 @@ def _start(releases: _ReleaseFit, glob: _Globals,
     return table1, ug_coarse, ug_best
 
 
-def _refine_start(seen: dict[float, float], current: Callable[[], np.ndarray], j: int,
-                  try_start: Callable[[np.ndarray], float], rounds: int = REFINE_ROUNDS) -> None:
+def _refine_start(
+    seen: dict[float, float],
+    current: Callable[[], np.ndarray],
+    j: int,
+    try_start: Callable[[np.ndarray], float],
+    rounds: int = REFINE_ROUNDS,
+) -> None:
     """Refine global j of the start (``current()``, the best so far) between the coarse profile's points
     (``seen``: relative value -> cost): the vertex of the parabola through the best point and its two neighbours, ``rounds`` times (each a `try_start`, kept when its cost is lower).
     A start near the periods' own minimum saves the full least squares many iterations on a curved valley."""
@@ -615,7 +682,7 @@ def _refine_start(seen: dict[float, float], current: Callable[[], np.ndarray], j
         k = xs.index(float(ug_best[j])) if float(ug_best[j]) in xs else -1
         if k <= 0 or k >= len(xs) - 1:
             return  # the best is at an end of the profile (or not on it): nothing to bracket
-        x = np.array(xs[k - 1:k + 2])
+        x = np.array(xs[k - 1 : k + 2])
         y = np.array([seen[v] for v in x])
         den = (x[0] - x[1]) * (x[0] - x[2]) * (x[1] - x[2])
         a = (x[2] * (y[1] - y[0]) + x[1] * (y[0] - y[2]) + x[0] * (y[2] - y[1])) / den
@@ -653,7 +720,7 @@ class _Objective:
     def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(globals, release speeds rad/s, time shifts s); u holds globals relative to Table 1, shifts in ms."""
         n_g, n_t = self.n_g, self.n_t
-        return self.glob.x0 + u[:n_g] * self.glob.scale, u[n_g:n_g + n_t], u[n_g + n_t:] * 1e-3
+        return self.glob.x0 + u[:n_g] * self.glob.scale, u[n_g : n_g + n_t], u[n_g + n_t :] * 1e-3
 
     def fun(self, u: np.ndarray) -> np.ndarray:
         xg, ws, sh = self.unpack(u)
@@ -681,14 +748,14 @@ class _Objective:
             p3 = glob.params(xg3) if central else None
             for i in range(n_t):
                 if p3 is not None:
-                    J[offs[i]:offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - res(p3, i, ws[i], sh[i])) / (2 * h)
+                    J[offs[i] : offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - res(p3, i, ws[i], sh[i])) / (2 * h)
                 else:
-                    J[offs[i]:offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - r0[i]) / h
+                    J[offs[i] : offs[i + 1], j] = (res(p2, i, ws[i], sh[i]) - r0[i]) / h
         for i in range(n_t):
             h = _REL_STEP
-            J[offs[i]:offs[i + 1], n_g + i] = (res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
+            J[offs[i] : offs[i + 1], n_g + i] = (res(p, i, ws[i] + h, sh[i]) - r0[i]) / h
             hs = 0.2  # ms
-            J[offs[i]:offs[i + 1], n_g + n_t + i] = (res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
+            J[offs[i] : offs[i + 1], n_g + n_t + i] = (res(p, i, ws[i], sh[i] + hs * 1e-3) - r0[i]) / hs
         return J
 
     def jac_kept(self, u: np.ndarray) -> np.ndarray:
@@ -718,8 +785,9 @@ class _Objective:
         p = self.glob.at(ug)
         out = []
         for i, d in enumerate(self.data):
+
             def cost(g: float) -> float:
-                return float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2))
+                return float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2))  # noqa: B023
 
             if REFERENCE_PATHS:
                 grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
@@ -752,8 +820,8 @@ class _Objective:
         for j, f in enumerate(self.glob.fields):
             if f == "guide_friction_n":  # a friction force is >= 0
                 lo[j] = -self.glob.x0[j] / self.glob.scale[j]
-        lo[n_g:n_g + n_t] = np.maximum(lo[n_g:n_g + n_t], 0.8 * ws_start)
-        hi[n_g:n_g + n_t] = np.minimum(hi[n_g:n_g + n_t], 1.25 * ws_start)
+        lo[n_g : n_g + n_t] = np.maximum(lo[n_g : n_g + n_t], 0.8 * ws_start)
+        hi[n_g : n_g + n_t] = np.minimum(hi[n_g : n_g + n_t], 1.25 * ws_start)
         return lo, hi
 
     def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_rounds: int = MAX_ROUNDS) -> Any:
@@ -764,19 +832,30 @@ class _Objective:
         from scipy.optimize import least_squares
 
         total = 0
-        for k in range(max_rounds):
+        for k in range(max_rounds):  # noqa: B007
             # ftol 1e-6: a step that lowers the cost by less than 1e-6 of itself (about 0.002 in chi-square units
             # for the ~2000 residuals of a series, far below the 1 unit of a one-sigma change) ends the fit; the
             # finite-difference Jacobian of walks integrated at rtol 1e-7 cannot resolve 1e-10 (the bundled
             # critical series ran out of its budget at 1e-10 with c within 4e-5 N s/m of where 1e-6 stops)
-            r = least_squares(self.fun, np.clip(u, lo, hi), jac=self.jac_kept, bounds=(lo, hi), method="trf", xtol=1e-6,
-                              ftol=1e-6, max_nfev=MAX_NFEV, callback=self.stop_near_minimum)
+            r = least_squares(
+                self.fun,
+                np.clip(u, lo, hi),
+                jac=self.jac_kept,
+                bounds=(lo, hi),
+                method="trf",
+                xtol=1e-6,
+                ftol=1e-6,
+                max_nfev=MAX_NFEV,
+                callback=self.stop_near_minimum,
+            )
             total += int(r.nfev)
             u = r.x
             if r.status == -2:  # stopped by near_minimum: converged to a tenth of a standard error
                 r.status = GN_STOP_STATUS
-                r.message = (f"the Gauss-Newton step would lower chi-square by less than {2 * GN_STOP_COST:g} "
-                             "(within about 0.1 standard error of the minimum)")
+                r.message = (
+                    f"the Gauss-Newton step would lower chi-square by less than {2 * GN_STOP_COST:g} "
+                    "(within about 0.1 standard error of the minimum)"
+                )
             if r.status != 0:
                 break
         r.rounds, r.nfev_total = k + 1, total
@@ -796,8 +875,16 @@ class _Objective:
         self.sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
 
 
-def _estimates(glob: _Globals, fit: Sequence[str], xg: np.ndarray, se: np.ndarray, ok: list[bool],
-               notes: list[str], se_sand: np.ndarray | None = None, converged: bool = True) -> list[ParamEstimate]:
+def _estimates(
+    glob: _Globals,
+    fit: Sequence[str],
+    xg: np.ndarray,
+    se: np.ndarray,
+    ok: list[bool],
+    notes: list[str],
+    se_sand: np.ndarray | None = None,
+    converged: bool = True,
+) -> list[ParamEstimate]:
     """One `ParamEstimate` per fitted name. Its standard error is the larger of the model-based one and the
     trial-clustered sandwich (``se_sand``); it is identifiable when the fit converged, the cost is not flat
     along it and that relative standard error is at most `NOT_IDENTIFIABLE_REL_SE` (a 95 % interval no wider
@@ -811,25 +898,45 @@ def _estimates(glob: _Globals, fit: Sequence[str], xg: np.ndarray, se: np.ndarra
         ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged
         note = notes[j]
         if ok[j] and rel > NOT_IDENTIFIABLE_REL_SE:
-            note = (f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it")
+            note = f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it"
         elif ok[j] and not converged:
             note = "the fit did not converge (optimiser stopped on its budget): the value is where it stopped"
-        estimates.append(ParamEstimate(n, f, unit, float(getattr(glob.base, f)), float(xg[j]), s_use, ident,
-                                       note, float(se[j]), s_sand))
+        estimates.append(
+            ParamEstimate(
+                n, f, unit, float(getattr(glob.base, f)), float(xg[j]), s_use, ident, note, float(se[j]), s_sand
+            )
+        )
     return estimates
 
 
-def _residual_rows(data: list[_TrialData], rows_t1: list[tuple], rows_cal: list[tuple], ws_t1: np.ndarray,
-                   ws: np.ndarray, sh: np.ndarray) -> list[dict[str, Any]]:
+def _residual_rows(
+    data: list[_TrialData],
+    rows_t1: list[tuple],
+    rows_cal: list[tuple],
+    ws_t1: np.ndarray,
+    ws: np.ndarray,
+    sh: np.ndarray,
+) -> list[dict[str, Any]]:
     """Per trial, Table 1 against calibrated: RMS period and CoM errors, steps reached, releases and shift."""
     residuals = []
     for d, a, b, w_t1, w, s_ in zip(data, rows_t1, rows_cal, ws_t1, ws, sh):
-        residuals.append({"trial": d.name, "slope_deg": d.slope_deg, "n_period": d.periods_s.size,
-                          "n_com": d.t_s.size, "table1_release_theta_dot_rad_s": float(w_t1),
-                          "calibrated_release_theta_dot_rad_s": float(w), "time_shift_ms": float(s_) * 1e3,
-                          "table1_rms_period_ms": a[2] * 1e3, "calibrated_rms_period_ms": b[2] * 1e3,
-                          "table1_steps_reached": a[3], "calibrated_steps_reached": b[3],
-                          "table1_rms_com_mm": a[1] * 1e3, "calibrated_rms_com_mm": b[1] * 1e3})
+        residuals.append(
+            {
+                "trial": d.name,
+                "slope_deg": d.slope_deg,
+                "n_period": d.periods_s.size,
+                "n_com": d.t_s.size,
+                "table1_release_theta_dot_rad_s": float(w_t1),
+                "calibrated_release_theta_dot_rad_s": float(w),
+                "time_shift_ms": float(s_) * 1e3,
+                "table1_rms_period_ms": a[2] * 1e3,
+                "calibrated_rms_period_ms": b[2] * 1e3,
+                "table1_steps_reached": a[3],
+                "calibrated_steps_reached": b[3],
+                "table1_rms_com_mm": a[1] * 1e3,
+                "calibrated_rms_com_mm": b[1] * 1e3,
+            }
+        )
     return residuals
 
 
@@ -859,6 +966,7 @@ def _one_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
             return fn(*args, **kwargs)
         with one_blas_thread():
             return fn(*args, **kwargs)
+
     return wrapper
 
 
@@ -872,10 +980,20 @@ def one_blas_thread() -> contextlib.AbstractContextManager[Any]:
 
 
 @_one_blas_thread
-def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = ("c",), *, params: Any = None,
-              model: str = "er", rtol: float = 1e-7, record_dt_s: float = 8e-3, max_rounds: int = MAX_ROUNDS,
-              multi_start: bool = True, progress: Callable[[int], None] | None = None,
-              prior: Any = None) -> CalibrationResult:
+def calibrate(
+    trials: Sequence[Any],
+    names: Sequence[str],
+    fit: Sequence[str] = ("c",),
+    *,
+    params: Any = None,
+    model: str = "er",
+    rtol: float = 1e-7,
+    record_dt_s: float = 8e-3,
+    max_rounds: int = MAX_ROUNDS,
+    multi_start: bool = True,
+    progress: Callable[[int], None] | None = None,
+    prior: Any = None,
+) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
     Stages: (1) per trial, the release speed from the step periods alone on the compiled step map
@@ -924,11 +1042,19 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
             best = r
     u = best.x
     converged = bool(best.status > 0)
-    optimizer = {"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev_total),
-                 "rounds": int(best.rounds), "starts": starts, "converged": converged}
+    optimizer = {
+        "status": int(best.status),
+        "message": str(best.message),
+        "nfev": int(best.nfev_total),
+        "rounds": int(best.rounds),
+        "starts": starts,
+        "converged": converged,
+    }
     obj.set_sigmas(u)
     obj.inflate_com_sigma(u)
-    J = obj.jac(u, central=True)  # central differences for the globals: the curvature of the cost must not fake information
+    J = obj.jac(
+        u, central=True
+    )  # central differences for the globals: the curvature of the cost must not fake information
     cost_cal = obj.cost(u)
     scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
     se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
@@ -936,23 +1062,40 @@ def calibrate(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str] = 
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
     from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
-    separation = None if from_leg_test & {"damping_ns_per_m", "guide_friction_n"} else \
-        _check_loss_separation(obj, u, J, fit, scale_all, estimates)  # a leg test measured c or F_c: no ridge to flag
+    separation = (
+        None
+        if from_leg_test & {"damping_ns_per_m", "guide_friction_n"}
+        else _check_loss_separation(obj, u, J, fit, scale_all, estimates)
+    )  # a leg test measured c or F_c: no ridge to flag
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
-    cal_params = glob.params(np.array([e.value if e.identifiable or e.effective_only else e.table1
-                                       for e in estimates]))
-    return CalibrationResult(estimates, corr, {d.name: float(w) for d, w in zip(data, ws)}, residuals, obj.sig["t"],
-                             obj.sig["h"], cal_params, failed, sim.calls, cost_t1, cost_cal, model, converged,
-                             optimizer, separation,
-                             friction_vs_damping(estimates, corr, [d.release_rad_s for d in data]))
+    cal_params = glob.params(np.array([e.value if e.identifiable or e.effective_only else e.table1 for e in estimates]))
+    return CalibrationResult(
+        estimates,
+        corr,
+        {d.name: float(w) for d, w in zip(data, ws)},
+        residuals,
+        obj.sig["t"],
+        obj.sig["h"],
+        cal_params,
+        failed,
+        sim.calls,
+        cost_t1,
+        cost_cal,
+        model,
+        converged,
+        optimizer,
+        separation,
+        friction_vs_damping(estimates, corr, [d.release_rad_s for d in data]),
+    )
 
 
 #: fitted names that model a constant loss per step themselves (then c needs no separation check)
 CONSTANT_LOSS_FIELDS = ("guide_friction_n",)
 
 
-def _check_loss_separation(obj: _Objective, u: np.ndarray, J: np.ndarray, fit: Sequence[str], scale: np.ndarray,
-                           estimates: list[ParamEstimate]) -> dict[str, Any] | None:
+def _check_loss_separation(
+    obj: _Objective, u: np.ndarray, J: np.ndarray, fit: Sequence[str], scale: np.ndarray, estimates: list[ParamEstimate]
+) -> dict[str, Any] | None:
     """`rimless.analysis.inference.loss_separation` for c at the solution u (each trial's effective leg speed
     from its simulated walk); when the trials cannot tell c from a constant loss per step, c's estimate is
     marked not identifiable, effective only, with the reason."""
@@ -975,8 +1118,9 @@ def _check_loss_separation(obj: _Objective, u: np.ndarray, J: np.ndarray, fit: S
     return out
 
 
-def friction_vs_damping(estimates: Sequence[ParamEstimate], corr: np.ndarray,
-                        releases_rad_s: Sequence[float]) -> dict[str, Any] | None:
+def friction_vs_damping(
+    estimates: Sequence[ParamEstimate], corr: np.ndarray, releases_rad_s: Sequence[float]
+) -> dict[str, Any] | None:
     """Whether the fit told guide friction from damping (None unless both c and guide_friction_n were fitted).
 
     A damper's loss per step grows with the legs' speed, Coulomb friction's does not (F_c times the distance
@@ -993,15 +1137,20 @@ def friction_vs_damping(estimates: Sequence[ParamEstimate], corr: np.ndarray,
     both = bool(estimates[i].identifiable and estimates[j].identifiable)
     ridge = bool(not math.isfinite(rho) or abs(rho) > RIDGE_CORRELATION)
     told = both and not ridge
-    spread = (max(releases_rad_s) / min(releases_rad_s)) if len(releases_rad_s) and min(releases_rad_s) > 0 \
-        else math.nan
-    hint = "trials at more different speeds separate them (a damper's loss per step scales with speed, friction's " \
+    spread = (
+        (max(releases_rad_s) / min(releases_rad_s)) if len(releases_rad_s) and min(releases_rad_s) > 0 else math.nan
+    )
+    hint = (
+        "trials at more different speeds separate them (a damper's loss per step scales with speed, friction's "
         "does not)"
+    )
     if told:
         why = f"yes: both identifiable, correlation {rho:+.2f}"
     elif ridge:
-        why = (f"no: on a ridge (correlation {rho:+.2f}): the trials fix a combination of c and F_c, not each "
-               f"(their intervals are linearised across the ridge); {hint}")
+        why = (
+            f"no: on a ridge (correlation {rho:+.2f}): the trials fix a combination of c and F_c, not each "
+            f"(their intervals are linearised across the ridge); {hint}"
+        )
     else:
         which = " and ".join(e.name for e in (estimates[i], estimates[j]) if not e.identifiable)
         why = f"no: {which} not identifiable (correlation {rho:+.2f}); {hint}"
@@ -1022,8 +1171,9 @@ class NoTrialCalibrated(RimlessError):
     """Every trial failed before the fit (not a user mistake: exit 1)."""
 
 
-def calibrate_or_none(trials: Sequence[Any], names: Sequence[str], fit: Sequence[str], params: Any,
-                      model: str) -> CalibrationResult | None:
+def calibrate_or_none(
+    trials: Sequence[Any], names: Sequence[str], fit: Sequence[str], params: Any, model: str
+) -> CalibrationResult | None:
     """`calibrate` with positional arguments (for a second process: `rimless.analysis.inference.background`),
     None when no trial could be calibrated."""
     try:
@@ -1032,8 +1182,9 @@ def calibrate_or_none(trials: Sequence[Any], names: Sequence[str], fit: Sequence
         return None
 
 
-def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray,
-              shifts: np.ndarray) -> list[tuple[float, float]]:
+def _rms_rows(
+    sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray, shifts: np.ndarray
+) -> list[tuple[float, float]]:
     """Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s over the steps
     the simulation reached, steps reached)."""
     out = []
@@ -1042,8 +1193,14 @@ def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray,
         f_sim = rp + 1.0 / d.periods_s
         ok = f_sim > 0
         dt = 1.0 / f_sim[ok] - d.periods_s[ok]
-        out.append((float(np.sqrt(np.mean(rp**2))), float(np.sqrt(np.mean(rh**2))) if rh.size else math.nan,
-                    float(np.sqrt(np.mean(dt**2))) if dt.size else math.nan, int(ok.sum())))
+        out.append(
+            (
+                float(np.sqrt(np.mean(rp**2))),
+                float(np.sqrt(np.mean(rh**2))) if rh.size else math.nan,
+                float(np.sqrt(np.mean(dt**2))) if dt.size else math.nan,
+                int(ok.sum()),
+            )
+        )
     return out
 
 

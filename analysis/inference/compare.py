@@ -58,8 +58,8 @@ class Simulator:
     integrator: Any = None
 
     def __post_init__(self) -> None:
-        from rimless.sim.step.backend import make_integrator
         from rimless.sim.model.params import WheelParams
+        from rimless.sim.step.backend import make_integrator
 
         if self.params is None:
             self.params = WheelParams()
@@ -75,8 +75,14 @@ class Simulator:
         from rimless.sim.step.gait import simulate_steps
 
         z0 = np.array([-ALPHA_RAD / 2, release_theta_dot_rad_s])
-        return simulate_steps(self.on_slope(slope_deg), self.model, z0, n_steps, self.integrator,
-                              record_dt=self.record_dt_s if record else 1.0)
+        return simulate_steps(
+            self.on_slope(slope_deg),
+            self.model,
+            z0,
+            n_steps,
+            self.integrator,
+            record_dt=self.record_dt_s if record else 1.0,
+        )
 
 
 @dataclass
@@ -190,10 +196,14 @@ def fit_release_speed(sim: Simulator, slope_deg: float, first_period_s: float) -
     if fin.size == 0:
         return None, "the simulated wheel does not complete two steps from any release speed in the scanned range"
     if np.all(fin > 0):
-        return None, (f"the measured first period {first_period_s:.3f} s is longer than any the model gives "
-                      f"(at most {first_period_s + float(np.max(fin)):.3f} s)")
-    return None, (f"the measured first period {first_period_s:.3f} s is shorter than any the model gives for a release "
-                  f"up to {hi:g} rad/s (at least {first_period_s + float(np.min(fin)):.3f} s)")
+        return None, (
+            f"the measured first period {first_period_s:.3f} s is longer than any the model gives "
+            f"(at most {first_period_s + float(np.max(fin)):.3f} s)"
+        )
+    return None, (
+        f"the measured first period {first_period_s:.3f} s is shorter than any the model gives for a release "
+        f"up to {hi:g} rad/s (at least {first_period_s + float(np.min(fin)):.3f} s)"
+    )
 
 
 def _first_bracket(vals: np.ndarray) -> int | None:
@@ -205,8 +215,9 @@ def _first_bracket(vals: np.ndarray) -> int | None:
     return None
 
 
-def _root_in(period2: Any, grid: np.ndarray, i: int, b: float, first_period_s: float,
-             vals: np.ndarray) -> tuple[float | None, str | None]:
+def _root_in(
+    period2: Any, grid: np.ndarray, i: int, b: float, first_period_s: float, vals: np.ndarray
+) -> tuple[float | None, str | None]:
     """Brent's root of period2(w) - first_period_s in [grid[i], grid[i + 1]] (b: the value at grid[i + 1])."""
     from scipy.optimize import brentq
 
@@ -221,8 +232,10 @@ def _root_in(period2: Any, grid: np.ndarray, i: int, b: float, first_period_s: f
     if abs(f(w)) < 1e-4:
         return float(w), None
     fin = vals[np.isfinite(vals)]
-    return None, (f"the measured first period {first_period_s:.3f} s is longer than any the model gives after a "
-                  f"release one step earlier (at most {first_period_s + float(np.max(fin)):.3f} s)")
+    return None, (
+        f"the measured first period {first_period_s:.3f} s is longer than any the model gives after a "
+        f"release one step earlier (at most {first_period_s + float(np.max(fin)):.3f} s)"
+    )
 
 
 def _map_periods(sim: Simulator, slope_deg: float, grid: np.ndarray) -> np.ndarray | None:
@@ -259,8 +272,14 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
     """Fit the release speed to the first measured step, simulate, and align (see the module doc)."""
     sim = sim or Simulator()
     m = trial.meta
-    res = TrialComparison(name=name or Path(m.source_file).name, file=m.source_file, slope_deg=float(m.slope_deg),
-                          slope_source=m.slope_source, model=sim.model, status="failed")
+    res = TrialComparison(
+        name=name or Path(m.source_file).name,
+        file=m.source_file,
+        slope_deg=float(m.slope_deg),
+        slope_source=m.slope_source,
+        model=sim.model,
+        status="failed",
+    )
     periods = np.asarray(trial.step_period_s, float)
     res.measured_period_s = periods
     if periods.size == 0:
@@ -268,7 +287,7 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
         return res
     try:
         sim.on_slope(res.slope_deg)
-    except Exception as err:  # ParameterError: slope outside 0 <= phi < alpha/2
+    except Exception as err:  # ParameterError: slope outside 0 <= phi < alpha/2  # noqa: BLE001
         res.message = f"slope {res.slope_deg:.3f} deg cannot be simulated: {err}"
         return res
     w0, why = fit_release_speed(sim, res.slope_deg, float(periods[0]))
@@ -298,8 +317,9 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
         res.warnings.append(f"simulation ended ({reason}) after {max(len(steps) - 1, 0)} of {n_sim} measured steps")
 
     t0_sim = steps[1].t_start_s if len(steps) > 1 else steps[0].t_start_s + steps[0].period_s
-    st, sy = clean_curve(np.asarray(gait.table["t_s"], float) - t0_sim,
-                          np.asarray(gait.table["com_height_normal_m"], float))
+    st, sy = clean_curve(
+        np.asarray(gait.table["t_s"], float) - t0_sim, np.asarray(gait.table["com_height_normal_m"], float)
+    )
     imp = trial.impact_time_s
     t = trial.time_s - imp[0]
     y = np.asarray(trial.series["com_height"], float)
@@ -320,7 +340,9 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
     rms = np.array([fit(s)[0] for s in shifts])
     best = float(shifts[int(np.argmin(rms))])
     if abs(best) >= MAX_SHIFT_S - 1e-9:
-        res.warnings.append(f"best time shift at the limit ({best * 1e3:+.0f} ms): timing mismatch larger than the search")
+        res.warnings.append(
+            f"best time shift at the limit ({best * 1e3:+.0f} ms): timing mismatch larger than the search"
+        )
     res.time_shift_s = best
     res.rms_com_error_m, res.height_offset_m = fit(best)
     res.time_s = t
@@ -347,11 +369,14 @@ def _plausibility(res: TrialComparison) -> None:
     if not res.com_amplitude_m >= lim["min_amplitude_m"]:
         why.append(f"measured CoM height swings by only {res.com_amplitude_m * 1e3:.2f} mm (no steps visible?)")
     if not res.com_correlation >= lim["min_correlation"]:
-        why.append(f"measured and simulated CoM heights correlate poorly (r = {res.com_correlation:.2f} < "
-                   f"{lim['min_correlation']})")
+        why.append(
+            f"measured and simulated CoM heights correlate poorly (r = {res.com_correlation:.2f} < "
+            f"{lim['min_correlation']})"
+        )
     if not res.rms_com_relative <= lim["max_relative_rms"]:
-        why.append(f"RMS CoM error is {res.rms_com_relative:.0%} of the measured amplitude (> "
-                   f"{lim['max_relative_rms']:.0%})")
+        why.append(
+            f"RMS CoM error is {res.rms_com_relative:.0%} of the measured amplitude (> {lim['max_relative_rms']:.0%})"
+        )
     if any(w.startswith("best time shift at the limit") or w.startswith("simulation ended") for w in res.warnings):
         why.append("the simulation does not follow the whole trial (see above)")
     if why:
@@ -375,14 +400,24 @@ class SlopeGroup:
 
     def rows(self) -> list[dict[str, Any]]:
         """Flat rows (edge units) for tables and JSON."""
-        return [{"slope_deg": self.slope_deg, "step": int(k), "trials": int(c), "mean_period_ms": mu * 1e3,
-                 "std_period_ms": sd * 1e3, "sim_period_ms": sp * 1e3}
-                for k, c, mu, sd, sp in zip(self.step_number, self.count, self.mean_period_s, self.std_period_s,
-                                            self.sim_period_s)]
+        return [
+            {
+                "slope_deg": self.slope_deg,
+                "step": int(k),
+                "trials": int(c),
+                "mean_period_ms": mu * 1e3,
+                "std_period_ms": sd * 1e3,
+                "sim_period_ms": sp * 1e3,
+            }
+            for k, c, mu, sd, sp in zip(
+                self.step_number, self.count, self.mean_period_s, self.std_period_s, self.sim_period_s
+            )
+        ]
 
 
-def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | None = None, *,
-                       slope_bin_deg: float = 0.5) -> list[SlopeGroup]:
+def step_period_trends(
+    comparisons: Sequence[TrialComparison], sim: Simulator | None = None, *, slope_bin_deg: float = 0.5
+) -> list[SlopeGroup]:
     """Group trials with steps by slope (rounded to ``slope_bin_deg``): mean +- std period per step, and the model."""
     sim = sim or Simulator()
     bins: dict[float, list[TrialComparison]] = {}
@@ -393,8 +428,7 @@ def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | 
     groups = []
     for key in sorted(bins):
         cs = bins[key]
-        numbers = [c.measured_step if c.measured_step.size == c.n_steps else np.arange(1, c.n_steps + 1)
-                   for c in cs]
+        numbers = [c.measured_step if c.measured_step.size == c.n_steps else np.arange(1, c.n_steps + 1) for c in cs]
         n = max(int(k[-1]) for k in numbers)
         mat = np.full((len(cs), n), np.nan)
         for i, c in enumerate(cs):
@@ -410,8 +444,8 @@ def step_period_trends(comparisons: Sequence[TrialComparison], sim: Simulator | 
             elif math.isfinite(c.release_theta_dot_rad_s):
                 try:
                     g = sim.walk(c.slope_deg, c.release_theta_dot_rad_s, c.n_steps + 1, record=False)
-                    got = [s.period_s for s in g.steps[1:1 + c.n_steps]]
-                    simmat[i, :len(got)] = got
+                    got = [s.period_s for s in g.steps[1 : 1 + c.n_steps]]
+                    simmat[i, : len(got)] = got
                 except Exception as err:  # noqa: BLE001 - a slope the model cannot take
                     msgs.append(f"{c.name}: simulation failed: {err}")
         ws = [c.release_theta_dot_rad_s for c in cs if math.isfinite(c.release_theta_dot_rad_s)]

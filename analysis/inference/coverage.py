@@ -108,8 +108,12 @@ class RigidFrictionWheel:
         from rimless.sim.model.params import WheelParams
 
         m = 1e-4
-        return WheelParams(hub_mass_kg=self.mass_kg - 8 * m, leg_mass_kg=m,
-                           inertia_kg_m2=self.inertia_hub_kg_m2 - 8 * m * self.leg_m**2, leg_length_m=self.leg_m)
+        return WheelParams(
+            hub_mass_kg=self.mass_kg - 8 * m,
+            leg_mass_kg=m,
+            inertia_kg_m2=self.inertia_hub_kg_m2 - 8 * m * self.leg_m**2,
+            leg_length_m=self.leg_m,
+        )
 
 
 @dataclass
@@ -121,14 +125,16 @@ class _Trial:
     series: dict = field(default_factory=dict)
 
 
-def synthetic_series(rng: np.random.Generator, *, ramp_steps: int = 11, timing_noise_s: float = 1e-3,
-                     rate_hz: float = 100.0) -> tuple[RigidFrictionWheel, float, list[_Trial]]:
+def synthetic_series(
+    rng: np.random.Generator, *, ramp_steps: int = 11, timing_noise_s: float = 1e-3, rate_hz: float = 100.0
+) -> tuple[RigidFrictionWheel, float, list[_Trial]]:
     """One series: a random wheel (hub inertia, friction loss), six slopes straddling its critical slope at
     random offsets (two releases each), each trial's slope measured with a random uncertainty (0.03-0.12 deg,
     1 sigma) that its ``meta.slope_ci_rad`` states. Returns (wheel, true critical slope deg, trials)."""
     while True:
-        wheel = RigidFrictionWheel(inertia_hub_kg_m2=float(rng.uniform(0.06, 0.3)),
-                                   loss_rad2_s2=float(rng.uniform(0.0, 0.25)))
+        wheel = RigidFrictionWheel(
+            inertia_hub_kg_m2=float(rng.uniform(0.06, 0.3)), loss_rad2_s2=float(rng.uniform(0.0, 0.25))
+        )
         crit = wheel.critical_slope_deg()
         if 0.5 < crit < 4.0:
             break
@@ -142,16 +148,25 @@ def synthetic_series(rng: np.random.Generator, *, ramp_steps: int = 11, timing_n
         for release in (float(rng.uniform(1.6, 2.2)), float(rng.uniform(2.4, 3.2))):
             periods, stalled = wheel.walk(slope, release, ramp_steps)
             imp_true = np.cumsum(periods)  # the release step ends at the first impact seen
-            imp = imp_true[:-1] + rng.normal(0.0, timing_noise_s, max(imp_true.size - 1, 0)) if imp_true.size else imp_true
+            imp = (
+                imp_true[:-1] + rng.normal(0.0, timing_noise_s, max(imp_true.size - 1, 0))
+                if imp_true.size
+                else imp_true
+            )
             imp = np.sort(imp)
             sigma = float(rng.uniform(0.03, 0.12))
             measured = slope + float(rng.normal(0.0, sigma))
             half = math.radians(Z95 * sigma)
             end = float(imp_true[-1]) + (1.5 if stalled else 0.2) if imp_true.size else 1.0
-            meta = SimpleNamespace(slope_deg=measured, source_file=f"series_{j}_{release:.2f}", rate_hz=rate_hz,
-                                   outcome="stalled" if stalled else "walked", slope_source="estimated",
-                                   slope_ci_rad=(math.radians(measured) - half, math.radians(measured) + half),
-                                   true_slope_deg=slope)
+            meta = SimpleNamespace(
+                slope_deg=measured,
+                source_file=f"series_{j}_{release:.2f}",
+                rate_hz=rate_hz,
+                outcome="stalled" if stalled else "walked",
+                slope_source="estimated",
+                slope_ci_rad=(math.radians(measured) - half, math.radians(measured) + half),
+                true_slope_deg=slope,
+            )
             trials.append(_Trial(np.arange(0.0, end, 1.0 / rate_hz), imp, np.diff(imp), meta))
     return wheel, crit, trials
 
@@ -185,12 +200,19 @@ class CoverageResult:
                 d["covered"] += int(ok)
             methods.setdefault(o.method or "", {"series": 0, "covered": 0, "chosen": 0})["chosen"] += 1
         lo, hi = _wilson(cov, n)
-        return {"series": len(self.outcomes), "estimated": n, "covered": cov,
-                "coverage": cov / n if n else math.nan, "coverage_ci95": [lo, hi],
-                "median_abs_error_deg": float(np.median(np.abs(err))) if n else math.nan,
-                "median_error_deg": float(np.median(err)) if n else math.nan,
-                "median_ci_width_deg": float(np.median(widths)) if n else math.nan,
-                "per_method": methods, "seed": self.seed, "goal": [0.90, 0.98]}
+        return {
+            "series": len(self.outcomes),
+            "estimated": n,
+            "covered": cov,
+            "coverage": cov / n if n else math.nan,
+            "coverage_ci95": [lo, hi],
+            "median_abs_error_deg": float(np.median(np.abs(err))) if n else math.nan,
+            "median_error_deg": float(np.median(err)) if n else math.nan,
+            "median_ci_width_deg": float(np.median(widths)) if n else math.nan,
+            "per_method": methods,
+            "seed": self.seed,
+            "goal": [0.90, 0.98],
+        }
 
 
 def _wilson(k: int, n: int) -> tuple[float, float]:
@@ -203,8 +225,9 @@ def _wilson(k: int, n: int) -> tuple[float, float]:
     return max(c - h, 0.0), min(c + h, 1.0)
 
 
-def run_coverage(n_series: int = 60, seed: int = 0, *, n_boot: int = 200,
-                 progress: Callable[[int], None] | None = None) -> CoverageResult:
+def run_coverage(
+    n_series: int = 60, seed: int = 0, *, n_boot: int = 200, progress: Callable[[int], None] | None = None
+) -> CoverageResult:
     """Generate ``n_series`` series and estimate each one's critical slope; ``progress(i)`` after each."""
     from rimless.analysis.inference.critical_slope import estimate_critical_slope
     from rimless.analysis.inference.sustained import trial_verdicts
@@ -214,16 +237,25 @@ def run_coverage(n_series: int = 60, seed: int = 0, *, n_boot: int = 200,
     for i in range(n_series):
         wheel, crit, trials = synthetic_series(rng)
         verdicts = trial_verdicts(trials, wheel.wheel_params())
-        res = estimate_critical_slope(verdicts, [t.meta.source_file for t in trials], n_boot=n_boot,
-                                      seed=int(rng.integers(2**31)))
+        res = estimate_critical_slope(
+            verdicts, [t.meta.source_file for t in trials], n_boot=n_boot, seed=int(rng.integers(2**31))
+        )
         c = res.chosen
         per = {}
         for e in res.estimates:
             per[e.method] = bool(e.ci_deg[0] <= crit <= e.ci_deg[1])
             ci = getattr(e, "ci_bootstrap_deg", None)  # the bootstrap check, reported beside
             per[f"{e.method} (bootstrap check)"] = bool(ci and ci[0] <= crit <= ci[1])
-        outcomes.append(SeriesOutcome(crit, c.value_deg if c else math.nan, c.ci_deg if c else None,
-                                      c.method if c else None, bool(c and c.ci_deg[0] <= crit <= c.ci_deg[1]), per))
+        outcomes.append(
+            SeriesOutcome(
+                crit,
+                c.value_deg if c else math.nan,
+                c.ci_deg if c else None,
+                c.method if c else None,
+                bool(c and c.ci_deg[0] <= crit <= c.ci_deg[1]),
+                per,
+            )
+        )
         if progress:
             progress(i + 1)
     return CoverageResult(outcomes, seed)

@@ -46,9 +46,14 @@ class Estimate:
 
     def as_dict(self) -> dict[str, Any]:
         cf, bs = getattr(self, "ci_closed_form_deg", None), getattr(self, "ci_bootstrap_deg", None)
-        return {"method": self.method, "critical_slope_deg": self.value_deg, "ci_deg": list(self.ci_deg),
-                "detail": self.detail, "ci_closed_form_deg": list(cf) if cf else None,
-                "ci_bootstrap_deg": list(bs) if bs else None}
+        return {
+            "method": self.method,
+            "critical_slope_deg": self.value_deg,
+            "ci_deg": list(self.ci_deg),
+            "detail": self.detail,
+            "ci_closed_form_deg": list(cf) if cf else None,
+            "ci_bootstrap_deg": list(bs) if bs else None,
+        }
 
 
 @dataclass
@@ -70,12 +75,17 @@ class CriticalSlopeResult:
 
     def summary(self) -> dict[str, Any]:
         c = self.chosen
-        return {"critical_slope_deg": self.critical_slope_deg,
-                "bracket_deg": list(self.bracket_deg) if self.bracket_deg else None,
-                "ci_deg": list(c.ci_deg) if c else None, "method": c.method if c else None,
-                "why": self.why, "estimates": [e.as_dict() for e in self.estimates],
-                "per_trial": self.per_trial, "model_critical_slope_deg": self.model.get("critical_slope_deg", {}),
-                "model": self.model}
+        return {
+            "critical_slope_deg": self.critical_slope_deg,
+            "bracket_deg": list(self.bracket_deg) if self.bracket_deg else None,
+            "ci_deg": list(c.ci_deg) if c else None,
+            "method": c.method if c else None,
+            "why": self.why,
+            "estimates": [e.as_dict() for e in self.estimates],
+            "per_trial": self.per_trial,
+            "model_critical_slope_deg": self.model.get("critical_slope_deg", {}),
+            "model": self.model,
+        }
 
 
 def _bracket(slopes: np.ndarray, sustained: np.ndarray) -> tuple[float, float] | None:
@@ -134,8 +144,9 @@ def _slope_sigmas(verdicts: Sequence[Verdict]) -> np.ndarray:
     return np.where(np.isfinite(s) & (s >= 0), s, 0.0)
 
 
-def _line_root(x: np.ndarray, y: np.ndarray, se: np.ndarray, sx: np.ndarray
-               ) -> tuple[float, float, float, float, float] | None:
+def _line_root(
+    x: np.ndarray, y: np.ndarray, se: np.ndarray, sx: np.ndarray
+) -> tuple[float, float, float, float, float] | None:
     """Weighted line e* = c0 + c1 x and its root -c0/c1 with errors in both coordinates: the weight of a point
     is 1 / (se^2 + c1^2 sx^2) (its slope uncertainty sx moves it along the line's gradient), iterated.
 
@@ -185,8 +196,9 @@ def _logistic_50(slopes: np.ndarray, sus: np.ndarray) -> tuple[float, float, flo
     return s50, float(math.sqrt(max(g @ cov @ g, 0.0))), b0 - b1 * x0, b1
 
 
-def _bootstrap(verdicts: Sequence[Verdict], sig: np.ndarray, group_tol_deg: float, n_boot: int,
-               rng: np.random.Generator) -> dict[str, np.ndarray]:
+def _bootstrap(
+    verdicts: Sequence[Verdict], sig: np.ndarray, group_tol_deg: float, n_boot: int, rng: np.random.Generator
+) -> dict[str, np.ndarray]:
     """Replicates of each estimate: trials resampled with replacement (the spread between trials) and every
     resampled trial's slope moved by a normal draw of its own uncertainty (the slopes' uncertainty)."""
     n = len(verdicts)
@@ -195,8 +207,12 @@ def _bootstrap(verdicts: Sequence[Verdict], sig: np.ndarray, group_tol_deg: floa
     sus = np.array([v.verdict == "sustained" for v in verdicts])
     fp = np.array([v.fixed_point for v in verdicts], float)
     fse = np.array([v.fixed_point_se for v in verdicts], float)
-    fit_ok = np.array([math.isfinite(v.fixed_point) and math.isfinite(v.fixed_point_se) and v.fixed_point_se > 0
-                       and not v.stalled for v in verdicts])
+    fit_ok = np.array(
+        [
+            math.isfinite(v.fixed_point) and math.isfinite(v.fixed_point_se) and v.fixed_point_se > 0 and not v.stalled
+            for v in verdicts
+        ]
+    )
     out: dict[str, list[float]] = {"bracket": [], "logistic": [], "fixed-point-extrapolation": []}
     for _ in range(n_boot):
         idx = rng.integers(0, n, n)
@@ -208,8 +224,7 @@ def _bootstrap(verdicts: Sequence[Verdict], sig: np.ndarray, group_tol_deg: floa
             b = _bracket(gs, su)
             out["bracket"].append(0.5 * (b[0] + b[1]) if b else math.nan)
             uniq, counts = np.unique(gs, return_counts=True)
-            lg = (_logistic_50(gs, su) if su.any() and (~su).any() and uniq.size >= 2 and np.any(counts >= 2)
-                  else None)
+            lg = _logistic_50(gs, su) if su.any() and (~su).any() and uniq.size >= 2 and np.any(counts >= 2) else None
             out["logistic"].append(lg[0] if lg else math.nan)
         f = fit_ok[idx]
         ln = _line_root(xs[f], fp[idx][f], fse[idx][f], sig[idx][f]) if f.sum() >= 2 else None
@@ -231,8 +246,9 @@ def _boot_ci(reps: np.ndarray | None) -> tuple[tuple[float, float] | None, float
     return (float(np.percentile(ok, 2.5)), float(np.percentile(ok, 97.5))), share
 
 
-def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *,
-                            group_tol_deg: float = 0.05, n_boot: int = 200, seed: int = 0) -> CriticalSlopeResult:
+def estimate_critical_slope(
+    verdicts: Sequence[Verdict], files: Sequence[str], *, group_tol_deg: float = 0.05, n_boot: int = 200, seed: int = 0
+) -> CriticalSlopeResult:
     """Combine per-trial verdicts into the bracket, the logistic and the extrapolated estimates.
 
     Trials whose slopes differ by less than ``group_tol_deg`` form one slope group (its mean slope) for the
@@ -249,15 +265,20 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
     slopes = group_slopes(np.array([v.slope_deg for v in decided]), group_tol_deg)
     sig_dec = sig_all[dec_idx] if dec_idx else np.zeros(0)
     sus = np.array([v.verdict == "sustained" for v in decided])
-    boot = _bootstrap(verdicts, sig_all, group_tol_deg, n_boot, np.random.default_rng(seed)) if (
-        verdicts and n_boot > 0) else {}
+    boot = (
+        _bootstrap(verdicts, sig_all, group_tol_deg, n_boot, np.random.default_rng(seed))
+        if (verdicts and n_boot > 0)
+        else {}
+    )
     estimates: list[Estimate] = []
 
     def finish(method: str, value: float, ci: tuple[float, float], detail: str) -> Estimate:
         bci, share = _boot_ci(boot.get(method))
         if bci is not None:
-            detail += (f"; bootstrap over trials with their slopes redrawn: [{bci[0]:.3f}, {bci[1]:.3f}] deg "
-                       f"(a check, not the reported interval)")
+            detail += (
+                f"; bootstrap over trials with their slopes redrawn: [{bci[0]:.3f}, {bci[1]:.3f}] deg "
+                f"(a check, not the reported interval)"
+            )
         elif boot:
             detail += f"; no bootstrap check (the estimate exists in {share:.0%} of the replicates)"
         e = Estimate(method, float(value), (float(ci[0]), float(ci[1])), detail)
@@ -270,7 +291,7 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
     if bracket is not None:
         lo, hi = bracket
         inconsistent = int(np.sum(~sus & (slopes > hi)))
-        detail = (f"no sustained trial at {lo:.3f} deg or below it; sustained walking at {hi:.3f} deg")
+        detail = f"no sustained trial at {lo:.3f} deg or below it; sustained walking at {hi:.3f} deg"
         if inconsistent:
             detail += f" ({inconsistent} decaying trial(s) above it: slow releases or noise)"
         s_lo = float(np.max(sig_dec[slopes == lo])) if sig_dec.size else 0.0
@@ -285,14 +306,23 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
         if lg is not None:
             s50, se, b0, b1 = lg
             se = math.sqrt(se**2 + float(np.mean(sig_dec**2)))  # the slopes' own uncertainty on the 50 % point
-            estimates.append(finish("logistic", s50, (s50 - Z95 * se, s50 + Z95 * se),
-                                    f"Firth logistic on {sus.size} decided trials at {uniq.size} slopes: "
-                                    f"P = 0.5 at {s50:.3f} deg, slope {b1:.2f} per deg"))
+            estimates.append(
+                finish(
+                    "logistic",
+                    s50,
+                    (s50 - Z95 * se, s50 + Z95 * se),
+                    f"Firth logistic on {sus.size} decided trials at {uniq.size} slopes: "
+                    f"P = 0.5 at {s50:.3f} deg, slope {b1:.2f} per deg",
+                )
+            )
             logistic = (b0, b1)
 
     extrap = None
-    fit_idx = [i for i, v in enumerate(verdicts) if math.isfinite(v.fixed_point) and math.isfinite(v.fixed_point_se)
-               and v.fixed_point_se > 0 and not v.stalled]
+    fit_idx = [
+        i
+        for i, v in enumerate(verdicts)
+        if math.isfinite(v.fixed_point) and math.isfinite(v.fixed_point_se) and v.fixed_point_se > 0 and not v.stalled
+    ]
     if len({round(verdicts[i].slope_deg, 3) for i in fit_idx}) >= 2:
         x = np.array([verdicts[i].slope_deg for i in fit_idx])
         y = np.array([verdicts[i].fixed_point for i in fit_idx])
@@ -300,10 +330,15 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
         ln = _line_root(x, y, se_y, sig_all[fit_idx])
         if ln is not None:
             root, se, c0, c1, chi2 = ln
-            estimates.append(finish(
-                "fixed-point-extrapolation", root, (root - Z95 * se, root + Z95 * se),
-                f"e* = {c1:.3f} (slope - {root:.3f} deg) rad²/s² per deg from {x.size} trials' return maps "
-                f"(reduced chi² {chi2:.2f}, slope uncertainties in the weights)"))
+            estimates.append(
+                finish(
+                    "fixed-point-extrapolation",
+                    root,
+                    (root - Z95 * se, root + Z95 * se),
+                    f"e* = {c1:.3f} (slope - {root:.3f} deg) rad²/s² per deg from {x.size} trials' return maps "
+                    f"(reduced chi² {chi2:.2f}, slope uncertainties in the weights)",
+                )
+            )
             extrap = (c0, c1)
 
     by = {e.method: e for e in estimates}
@@ -319,20 +354,33 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
         half = 0.5 * (bracket[1] - bracket[0])
         return e.ci_deg[0] <= bhi and e.ci_deg[1] >= blo and blo - half <= e.value_deg <= bhi + half
 
-    if ex is not None and inside(ex) and (ex.ci_deg[1] - ex.ci_deg[0]) < (
-            (bracket_est.ci_deg[1] - bracket_est.ci_deg[0]) if bracket_est else math.inf):
+    if (
+        ex is not None
+        and inside(ex)
+        and (ex.ci_deg[1] - ex.ci_deg[0])
+        < ((bracket_est.ci_deg[1] - bracket_est.ci_deg[0]) if bracket_est else math.inf)
+    ):
         chosen = ex
-        why = ("the return-map extrapolation uses every step of every trial, agrees with the bracket and has the "
-               "narrowest interval")
-    elif lg_e is not None and inside(lg_e) and (lg_e.ci_deg[1] - lg_e.ci_deg[0]) < (
-            (bracket_est.ci_deg[1] - bracket_est.ci_deg[0]) if bracket_est else math.inf):
+        why = (
+            "the return-map extrapolation uses every step of every trial, agrees with the bracket and has the "
+            "narrowest interval"
+        )
+    elif (
+        lg_e is not None
+        and inside(lg_e)
+        and (lg_e.ci_deg[1] - lg_e.ci_deg[0])
+        < ((bracket_est.ci_deg[1] - bracket_est.ci_deg[0]) if bracket_est else math.inf)
+    ):
         chosen = lg_e
         why = "the logistic fit agrees with the bracket and is narrower" + (
-            "; the return-map extrapolation does not (or is wider)" if ex is not None else "")
+            "; the return-map extrapolation does not (or is wider)" if ex is not None else ""
+        )
     elif bracket_est is not None:
         chosen = bracket_est
-        why = ("the bracket between decaying and sustained slopes, widened by their slope uncertainties (the other "
-               "estimates are missing, disagree with it or are wider)")
+        why = (
+            "the bracket between decaying and sustained slopes, widened by their slope uncertainties (the other "
+            "estimates are missing, disagree with it or are wider)"
+        )
     elif ex is not None:
         chosen = ex
         why = "no slope has both verdicts: only the return-map extrapolation is available (not checked by a bracket)"
@@ -344,33 +392,46 @@ def estimate_critical_slope(verdicts: Sequence[Verdict], files: Sequence[str], *
     return CriticalSlopeResult(per_trial, bracket, estimates, chosen, why, logistic, extrap)
 
 
-def model_critical_slope(params: Any, model: str = "er", *, rtol: float = 1e-9,
-                         refine_tol_rad: float = 1e-6) -> dict[str, Any]:
+def model_critical_slope(
+    params: Any, model: str = "er", *, rtol: float = 1e-9, refine_tol_rad: float = 1e-6
+) -> dict[str, Any]:
     """The model's critical slope (deg) with the branch end reason, or the classified failure as a message."""
-    from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.continuation.algorithm1 import START_SLOPE_RAD, critical_slope
     from rimless.sim.model.failures import StepFailure
+    from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.step.poincare import default_guess
 
     start = params.replace(slope_rad=START_SLOPE_RAD)
     pmap = make_map(start, model, rtol=rtol)
     try:
-        cs = critical_slope(pmap, default_guess(start, model), refine_tol_rad=refine_tol_rad,
-                            jacobian_factory=jacobian_factory("auto"))
+        cs = critical_slope(
+            pmap, default_guess(start, model), refine_tol_rad=refine_tol_rad, jacobian_factory=jacobian_factory("auto")
+        )
     except StepFailure as err:
         return {"model": model, "critical_slope_deg": math.nan, "reason": "failed", "detail": str(err)}
-    return {"model": model, "critical_slope_deg": cs.critical_slope_deg, "reason": cs.reason, "detail": cs.detail,
-            "algorithm1_slope_deg": math.degrees(cs.algorithm1_slope_rad)}
+    return {
+        "model": model,
+        "critical_slope_deg": cs.critical_slope_deg,
+        "reason": cs.reason,
+        "detail": cs.detail,
+        "algorithm1_slope_deg": math.degrees(cs.algorithm1_slope_rad),
+    }
 
 
-def run_critical_slope(trials: Sequence[Any], files: Sequence[str], params: Any = None, *,
-                       models: Sequence[str] = ("er",), calibrated: Any = None, group_tol_deg: float = 0.05,
-                       progress: Callable[[str], None] | None = None) -> CriticalSlopeResult:
+def run_critical_slope(
+    trials: Sequence[Any],
+    files: Sequence[str],
+    params: Any = None,
+    *,
+    models: Sequence[str] = ("er",),
+    calibrated: Any = None,
+    group_tol_deg: float = 0.05,
+    progress: Callable[[str], None] | None = None,
+) -> CriticalSlopeResult:
     """Verdicts for every trial, the estimates, and the model's critical slopes at ``params`` (and at
     ``calibrated`` parameters when given)."""
-    from rimless.sim.model.params import WheelParams
-
     from rimless.analysis.inference.sustained import trial_verdicts
+    from rimless.sim.model.params import WheelParams
 
     params = params or WheelParams()
     verdicts = trial_verdicts(list(trials), params)

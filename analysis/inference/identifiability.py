@@ -14,8 +14,9 @@ __all__ = ["least_squares_report", "sandwich_se", "NULL_EIGEN"]
 NULL_EIGEN = 1e-5  # smallest eigenvalue of the normalised information about the globals
 
 
-def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray,
-                known_rows: bool = False) -> np.ndarray:
+def sandwich_se(
+    J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray, known_rows: bool = False
+) -> np.ndarray:
     """Standard errors of the globals (their units) from the trial-clustered sandwich A B A: A = (J^T J)^-1,
     B = sum over trials of (J_i^T r_i)(J_i^T r_i)^T with the rows of trial i between offs[i] and offs[i+1].
 
@@ -30,17 +31,19 @@ def sandwich_se(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, s
     A = np.linalg.pinv(J.T @ J)
     B = np.zeros_like(A)
     for i in range(n_t):
-        g = J[offs[i]:offs[i + 1]].T @ r[offs[i]:offs[i + 1]]
+        g = J[offs[i] : offs[i + 1]].T @ r[offs[i] : offs[i + 1]]
         B += np.outer(g, g)
     B *= n_t / (n_t - n_global)
     if known_rows:
-        Jk = J[int(offs[-1]):]
+        Jk = J[int(offs[-1]) :]
         B += Jk.T @ Jk
     cov = A @ B @ A
     return np.sqrt(np.clip(np.diag(cov)[:n_global], 0.0, None)) * scale[:n_global]
 
 
-def least_squares_report(J: np.ndarray, n_global: int, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
+def least_squares_report(
+    J: np.ndarray, n_global: int, scale: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, list[bool], list[str]]:
     """From the Jacobian of the scaled residuals (the first n_global columns are the globals, in units of
     ``scale``): their standard errors (in their units), correlation and identifiability.
 

@@ -48,9 +48,21 @@ import numpy as np
 
 from rimless.errors import InputFileError, ParameterError, RunFailure
 
-__all__ = ["FORMAT", "DEFAULT_MOVING_MASS_KG", "LegLog", "LegFitResult", "read_leg_log", "free_response", "fit_leg",
-           "run_leg_fit", "fake_truth",
-           "plot_leg_fit", "Z95", "GOALS", "goal_check"]
+__all__ = [
+    "FORMAT",
+    "DEFAULT_MOVING_MASS_KG",
+    "LegLog",
+    "LegFitResult",
+    "read_leg_log",
+    "free_response",
+    "fit_leg",
+    "run_leg_fit",
+    "fake_truth",
+    "plot_leg_fit",
+    "Z95",
+    "GOALS",
+    "goal_check",
+]
 
 FORMAT = "rimless-leg-test/1"  # the first line of a leg-test log (firmware/service/leg_test.py writes it)
 DEFAULT_MOVING_MASS_KG = 0.0378  # Table 1's leg mass, all of it moving with the foot in the wheel model
@@ -131,7 +143,7 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
         raise InputFileError(f"{p}: cannot read ({err})") from None
     lines = text.splitlines()
     if not lines or not lines[0].strip():
-        raise InputFileError(f"{p}: empty, expected a leg-test log (first line {{\"format\": \"{FORMAT}\", ...}})")
+        raise InputFileError(f'{p}: empty, expected a leg-test log (first line {{"format": "{FORMAT}", ...}})')
     t: list[float] = []
     c: list[float] = []
     read_us: list[float] = []
@@ -146,22 +158,26 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
             obj = json.loads(line)
         except json.JSONDecodeError as err:
             torn = n == len(lines) and not text.endswith("\n")
-            raise InputFileError(f"{where}: not JSON ({err.msg}, column {err.colno})"
-                                 + ("; the last line is torn (the test did not finish writing)" if torn else "")
-                                 ) from None
+            raise InputFileError(
+                f"{where}: not JSON ({err.msg}, column {err.colno})"
+                + ("; the last line is torn (the test did not finish writing)" if torn else "")
+            ) from None
         if not isinstance(obj, dict):
             raise InputFileError(f"{where}: expected a JSON object, got {type(obj).__name__}")
         if n == 1:
             if obj.get("format") != FORMAT:
-                raise InputFileError(f"{where}: field 'format' must be {FORMAT!r}, got {obj.get('format')!r} "
-                                     "(not a log of `rimless robot leg-test`)")
+                raise InputFileError(
+                    f"{where}: field 'format' must be {FORMAT!r}, got {obj.get('format')!r} "
+                    "(not a log of `rimless robot leg-test`)"
+                )
             header = obj
             for name in ("leg", "counts_per_m"):
                 if name not in obj:
                     raise InputFileError(f"{where}: field {name!r} is missing")
             if isinstance(obj["leg"], bool) or not isinstance(obj["leg"], int) or obj["leg"] < 0:
-                raise InputFileError(f"{where}: field 'leg' must be a clutch index (an integer >= 0), "
-                                     f"got {obj['leg']!r}")
+                raise InputFileError(
+                    f"{where}: field 'leg' must be a clutch index (an integer >= 0), got {obj['leg']!r}"
+                )
             _num(obj["counts_per_m"], where, "counts_per_m", positive=True)
             continue
         if "event" in obj:
@@ -198,12 +214,23 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
     if n_free < MIN_FREE_SAMPLES:
         raise InputFileError(f"{p}: {n_free} samples after the release (at least {MIN_FREE_SAMPLES} needed)")
     cpm = float(counts_per_m) if counts_per_m is not None else float(header["counts_per_m"])
-    return LegLog(p, int(header["leg"]), cpm, tt, np.asarray(c), float(release), engage, header, outcome or "ok",
-                  np.asarray(read_us))
+    return LegLog(
+        p,
+        int(header["leg"]),
+        cpm,
+        tt,
+        np.asarray(c),
+        float(release),
+        engage,
+        header,
+        outcome or "ok",
+        np.asarray(read_us),
+    )
 
 
-def free_response(t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: float, x_lock: float,
-                  t_r: float) -> np.ndarray:
+def free_response(
+    t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: float, x_lock: float, t_r: float
+) -> np.ndarray:
     """The displacement at times `t` (s) of a spring-damper-Coulomb oscillator held at `x_lock` until `t_r`,
     then released at rest: half cycles about x_eq +/- a, sticking within |x - x_eq| <= a. Displacements in any
     one unit (counts here); omega_n in rad/s; 0 <= zeta < 1."""
@@ -231,7 +258,7 @@ def free_response(t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: fl
         x[lo:hi] = e + (xs - e) * np.exp(-sigma * tau) * (np.cos(wd * tau) + ratio * np.sin(wd * tau))
         xs = e - (xs - e) * r
         ts += half
-    x[np.searchsorted(ts_sorted, ts, side="left"):] = xs
+    x[np.searchsorted(ts_sorted, ts, side="left") :] = xs
     if order is not None:
         out = np.empty_like(x)
         out[order] = x
@@ -259,10 +286,12 @@ def _segment(log: LegLog) -> _Segment:
     after = t >= 0
     moved = after & (np.abs(log.counts - x_lock) > MOVE_COUNTS)
     if not moved.any():
-        raise RunFailure(f"{log.path}: the leg did not move after the release (held position kept within "
-                         f"{MOVE_COUNTS:g} counts): the clutch did not let go, or the leg is jammed")
+        raise RunFailure(
+            f"{log.path}: the leg did not move after the release (held position kept within "
+            f"{MOVE_COUNTS:g} counts): the clutch did not let go, or the leg is jammed"
+        )
     t_move = float(t[np.argmax(moved)])
-    tail = log.counts[after][-max(5, int(after.sum()) // 5):]
+    tail = log.counts[after][-max(5, int(after.sum()) // 5) :]
     x_end = float(np.median(tail))
     moving = after & (np.abs(log.counts - x_end) > MOVE_COUNTS)
     t_last = float(t[moving][-1]) if moving.any() else t_move
@@ -323,33 +352,49 @@ class LegFitResult:
         """The JSON of `rimless trials leg-fit --json` (`k_n_per_m`, `c_n_s_per_m`, `guide_friction_n`, each
         with `_ci`, the 95 % interval)."""
         out: dict[str, Any] = {"leg": self.leg, "files": self.files}
-        for key, est in (("k_n_per_m", self.k), ("c_n_s_per_m", self.c), ("guide_friction_n", self.friction),
-                         ("natural_frequency_hz", self.natural_frequency_hz), ("damping_ratio", self.damping_ratio),
-                         ("friction_displacement_m", self.friction_displacement_m)):
+        for key, est in (
+            ("k_n_per_m", self.k),
+            ("c_n_s_per_m", self.c),
+            ("guide_friction_n", self.friction),
+            ("natural_frequency_hz", self.natural_frequency_hz),
+            ("damping_ratio", self.damping_ratio),
+            ("friction_displacement_m", self.friction_displacement_m),
+        ):
             out[key] = est.value
             out[key + "_se"] = est.se
             out[key + "_ci"] = list(est.ci95)
-        out.update({
-            "moving_mass_kg": self.moving_mass_kg, "moving_mass_sd_kg": self.moving_mass_sd_kg,
-            "scale_dependence": "k and c come from the natural frequency and the decay and do not depend on the "
-                                "sensor's counts per metre; guide_friction_n does (it scales with the counts per "
-                                "metre of each log); k and c scale with the moving mass",
-            "intervals": "95 %: the largest of three covariances: least squares (inflated for correlated residuals), "
-                         "a block sandwich, and a noise model (each sample's own variance plus the count's random-walk "
-                         "drift measured where the leg is still)"
-                         + (", with the moving mass's uncertainty" if self.moving_mass_sd_kg > 0 else
-                            ", without the moving mass's uncertainty (give --moving-mass-sd-kg)"),
-            "residual_rms_counts": self.residual_rms_counts, "residual_lag1_autocorrelation": self.autocorrelation,
-            "count_drift_counts_per_sqrt_s": self.count_drift_counts_per_sqrt_s,
-            "count_drift_differences": self.count_drift_differences, "standard_errors": self.standard_errors,
-            "per_log": self.per_log, "converged": self.converged, "optimizer": self.optimizer,
-        })
+        out.update(
+            {
+                "moving_mass_kg": self.moving_mass_kg,
+                "moving_mass_sd_kg": self.moving_mass_sd_kg,
+                "scale_dependence": "k and c come from the natural frequency and the decay and do not depend on the "
+                "sensor's counts per metre; guide_friction_n does (it scales with the counts per "
+                "metre of each log); k and c scale with the moving mass",
+                "intervals": "95 %: the largest of three covariances: least squares (inflated for correlated residuals), "
+                "a block sandwich, and a noise model (each sample's own variance plus the count's random-walk "
+                "drift measured where the leg is still)"
+                + (
+                    ", with the moving mass's uncertainty"
+                    if self.moving_mass_sd_kg > 0
+                    else ", without the moving mass's uncertainty (give --moving-mass-sd-kg)"
+                ),
+                "residual_rms_counts": self.residual_rms_counts,
+                "residual_lag1_autocorrelation": self.autocorrelation,
+                "count_drift_counts_per_sqrt_s": self.count_drift_counts_per_sqrt_s,
+                "count_drift_differences": self.count_drift_differences,
+                "standard_errors": self.standard_errors,
+                "per_log": self.per_log,
+                "converged": self.converged,
+                "optimizer": self.optimizer,
+            }
+        )
         out["goal"] = goal_check({k: out[k] for k in GOALS}, {k: Z95 * out[k + "_se"] for k in GOALS}, len(self.files))
         return out
 
 
-def fit_leg(logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_KG,
-            moving_mass_sd_kg: float = 0.0) -> LegFitResult:
+def fit_leg(
+    logs: list[LegLog], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_KG, moving_mass_sd_kg: float = 0.0
+) -> LegFitResult:
     """Fit one leg's k, c and F_c to the released segments of `logs` (one leg; see the module doc).
 
     Raises `ParameterError` for a bad mass or logs of different legs, `RunFailure` when the motion is no
@@ -377,8 +422,9 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
     legs = {lg.leg for lg in logs}
     if len(legs) > 1:
         other = next(lg for lg in logs if lg.leg != logs[0].leg)
-        raise ParameterError(f"{other.path}: leg {other.leg}, but {logs[0].path} is leg {logs[0].leg}: fit one leg "
-                             "at a time")
+        raise ParameterError(
+            f"{other.path}: leg {other.leg}, but {logs[0].path} is leg {logs[0].leg}: fit one leg at a time"
+        )
     segs = [_segment(lg) for lg in logs]
     n_l = len(segs)
     cpms = np.array([s.log.counts_per_m for s in segs])
@@ -408,20 +454,31 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
             u2[j] += h
             rows = range(n_l) if j < N_SHARED else [(j - N_SHARED) // N_PER_LOG]
             for i in rows:
-                J[offs[i]:offs[i + 1], j] = (one(u2, i) - r0[i]) / h
+                J[offs[i] : offs[i + 1], j] = (one(u2, i) - r0[i]) / h
         return J
 
     u0 = _start(segs, cpms, one)
-    lo = np.concatenate([[2 * math.pi * 1.0, 0.0, 0.0],
-                         np.tile([-np.inf, -np.inf, -PRE_RELEASE_S * 1e3, -DRIFT_MAX_COUNTS_PER_S], n_l)])
-    hi = np.concatenate([[2 * math.pi * 2000.0, ZETA_MAX, np.inf],
-                         np.tile([np.inf, np.inf, np.inf, DRIFT_MAX_COUNTS_PER_S], n_l)])
+    lo = np.concatenate(
+        [[2 * math.pi * 1.0, 0.0, 0.0], np.tile([-np.inf, -np.inf, -PRE_RELEASE_S * 1e3, -DRIFT_MAX_COUNTS_PER_S], n_l)]
+    )
+    hi = np.concatenate(
+        [[2 * math.pi * 2000.0, ZETA_MAX, np.inf], np.tile([np.inf, np.inf, np.inf, DRIFT_MAX_COUNTS_PER_S], n_l)]
+    )
     best = None
     for a_start in (0.0, 0.3, 1.0):  # a few starts in the friction (the cost is not convex in it)
         u = u0.copy()
         u[2] = a_start * _a_guess_um(segs, cpms)
-        r = least_squares(resid, np.clip(u, lo, hi), jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                          xtol=1e-10, ftol=1e-12, max_nfev=MAX_NFEV)
+        r = least_squares(
+            resid,
+            np.clip(u, lo, hi),
+            jac=jac,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale="jac",
+            xtol=1e-10,
+            ftol=1e-12,
+            max_nfev=MAX_NFEV,
+        )
         if best is None or r.cost < best.cost:
             best = r
     assert best is not None
@@ -432,19 +489,30 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
     # OUTLIER_MAX_SHARE of them is a misfit of the model or of the start, not glitches
     if bad.any() and bad.mean() <= OUTLIER_MAX_SHARE:
         for i, sg in enumerate(segs):
-            drop = bad[offs[i]:offs[i + 1]]
+            drop = bad[offs[i] : offs[i + 1]]
             sg.outliers = int(drop.sum())
             sg.t, sg.y = sg.t[~drop], sg.y[~drop]
         offs = np.concatenate([[0], np.cumsum([sg.t.size for sg in segs])])
         nfev = int(best.nfev)
-        best = least_squares(resid, best.x, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", xtol=1e-10,
-                             ftol=1e-12, max_nfev=MAX_NFEV)
+        best = least_squares(
+            resid,
+            best.x,
+            jac=jac,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale="jac",
+            xtol=1e-10,
+            ftol=1e-12,
+            max_nfev=MAX_NFEV,
+        )
         best.nfev += nfev
     u = best.x
     w, z, a_um, per = unpack(u)
     if z >= ZETA_MAX * 0.999:
-        raise RunFailure(f"{segs[0].log.path}: the leg does not oscillate (damping ratio at the model's bound "
-                         f"{ZETA_MAX}): k, c and friction cannot be told apart from this motion")
+        raise RunFailure(
+            f"{segs[0].log.path}: the leg does not oscillate (damping ratio at the model's bound "
+            f"{ZETA_MAX}): k, c and friction cannot be told apart from this motion"
+        )
     r = resid(u)
     n, p = r.size, u.size
     s2 = float(r @ r) / max(n - p, 1)
@@ -473,8 +541,11 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
     def se(g: np.ndarray, value: float) -> float:
         """The largest of the three standard errors (least squares, block sandwich, noise model), with the
         mass's."""
-        v = max(float(g @ cv @ g) for cv in (cw, cws, cn) if np.isfinite(cv).all()) if np.isfinite(cw).all() \
+        v = (
+            max(float(g @ cv @ g) for cv in (cw, cws, cn) if np.isfinite(cv).all())
+            if np.isfinite(cw).all()
             else math.nan
+        )
         v += (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
         return math.sqrt(v) if v >= 0 and math.isfinite(v) else math.nan
 
@@ -483,35 +554,68 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
 
     per_log = []
     for i, (s, (xl, xe, tr, dr)) in enumerate(zip(segs, per)):
-        ri = r[offs[i]:offs[i + 1]]
+        ri = r[offs[i] : offs[i + 1]]
         half_cycles = _half_cycles(w, z, a_um * 1e-6 * s.log.counts_per_m, xe, xl)
-        per_log.append({"file": str(s.log.path), "samples": int(s.t.size), "counts_per_m": s.log.counts_per_m,
-                        "held_counts": float(xl), "equilibrium_counts": float(xe),
-                        "release_delay_ms": float(tr), "drift_counts_per_s": float(dr), "half_cycles": half_cycles,
-                        "slow_reads_left_out": s.slow_reads, "outliers_left_out": s.outliers,
-                        "residual_rms_counts": float(np.sqrt(np.mean(ri ** 2))), "outcome": s.log.outcome})
+        per_log.append(
+            {
+                "file": str(s.log.path),
+                "samples": int(s.t.size),
+                "counts_per_m": s.log.counts_per_m,
+                "held_counts": float(xl),
+                "equilibrium_counts": float(xe),
+                "release_delay_ms": float(tr),
+                "drift_counts_per_s": float(dr),
+                "half_cycles": half_cycles,
+                "slow_reads_left_out": s.slow_reads,
+                "outliers_left_out": s.outliers,
+                "residual_rms_counts": float(np.sqrt(np.mean(ri**2))),
+                "outcome": s.log.outcome,
+            }
+        )
     if all(pl["half_cycles"] < 2 for pl in per_log):
-        raise RunFailure(f"{segs[0].log.path}: the leg stopped in its first half cycle in every log: friction and "
-                         "damping cannot be told apart (compress the leg further, or give more logs)")
+        raise RunFailure(
+            f"{segs[0].log.path}: the leg stopped in its first half cycle in every log: friction and "
+            "damping cannot be told apart (compress the leg further, or give more logs)"
+        )
     converged = bool(best.status > 0)
     fit = LegFitResult(
-        leg=logs[0].leg, files=[str(lg.path) for lg in logs], moving_mass_kg=m, moving_mass_sd_kg=sm,
-        k=Estimate(k, se(gk, k), "N/m"), c=Estimate(c, se(gc, c), "N s/m"), friction=Estimate(fc, se(gf, fc), "N"),
+        leg=logs[0].leg,
+        files=[str(lg.path) for lg in logs],
+        moving_mass_kg=m,
+        moving_mass_sd_kg=sm,
+        k=Estimate(k, se(gk, k), "N/m"),
+        c=Estimate(c, se(gc, c), "N s/m"),
+        friction=Estimate(fc, se(gf, fc), "N"),
         natural_frequency_hz=Estimate(w / (2 * math.pi), se_param(0, 1 / (2 * math.pi)), "Hz"),
         damping_ratio=Estimate(z, se_param(1), ""),
         friction_displacement_m=Estimate(a_m, se_param(2, 1e-6), "m"),
-        per_log=per_log, residual_rms_counts=float(np.sqrt(np.mean(r ** 2))), autocorrelation=rho,
+        per_log=per_log,
+        residual_rms_counts=float(np.sqrt(np.mean(r**2))),
+        autocorrelation=rho,
         converged=converged,
-        optimizer={"status": int(best.status), "message": str(best.message), "nfev": int(best.nfev),
-                   "converged": converged, "starts": 3},
-        segments=segs, params=u, truth=[lg.truth for lg in logs], count_drift_counts_per_sqrt_s=math.sqrt(q),
-        count_drift_differences=n_drift)
-    fit.standard_errors = {f"{name}_{kind}": math.sqrt(max(float(g @ cv @ g), 0.0))
-                           for name, g in (("k_n_per_m", gk), ("c_n_s_per_m", gc), ("guide_friction_n", gf))
-                           for kind, cv in (("least_squares", cw), ("block_sandwich", cws), ("noise_model", cn))}
+        optimizer={
+            "status": int(best.status),
+            "message": str(best.message),
+            "nfev": int(best.nfev),
+            "converged": converged,
+            "starts": 3,
+        },
+        segments=segs,
+        params=u,
+        truth=[lg.truth for lg in logs],
+        count_drift_counts_per_sqrt_s=math.sqrt(q),
+        count_drift_differences=n_drift,
+    )
+    fit.standard_errors = {
+        f"{name}_{kind}": math.sqrt(max(float(g @ cv @ g), 0.0))
+        for name, g in (("k_n_per_m", gk), ("c_n_s_per_m", gc), ("guide_friction_n", gf))
+        for kind, cv in (("least_squares", cw), ("block_sandwich", cws), ("noise_model", cn))
+    }
     if not all(math.isfinite(e.value) and math.isfinite(e.se) for e in (fit.k, fit.c, fit.friction)):
-        raise RunFailure(f"{segs[0].log.path}: the fit gave no finite k, c and friction with uncertainties "
-                         "(a flat direction of the cost: the motion does not determine them)")
+        raise RunFailure(
+            f"{segs[0].log.path}: the fit gave no finite k, c and friction with uncertainties "
+            "(a flat direction of the cost: the motion does not determine them)"
+        )
     return fit
 
 
@@ -587,15 +691,16 @@ def _count_drift(segs: list[_Segment]) -> tuple[float, int]:
             if (size < 2).any():
                 continue
             mean = np.bincount(idx, y, nb) / size
-            var = (np.bincount(idx, y * y, nb) - size * mean ** 2) / (size - 1) / size  # of each block's mean
+            var = (np.bincount(idx, y * y, nb) - size * mean**2) / (size - 1) / size  # of each block's mean
             d2 = mean[2:] - 2 * mean[1:-1] + mean[:-2]
-            num += float(np.sum(d2 ** 2 - (var[2:] + 4 * var[1:-1] + var[:-2])))
+            num += float(np.sum(d2**2 - (var[2:] + 4 * var[1:-1] + var[:-2])))
             n += d2.size
     return (max(num / (n * DRIFT_BLOCK_S), 0.0), n) if n else (0.0, 0)
 
 
-def _noise_sandwich(A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarray, ts: list[np.ndarray],
-                    q: float) -> tuple[np.ndarray, np.ndarray]:
+def _noise_sandwich(
+    A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarray, ts: list[np.ndarray], q: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The covariance A J' S J A of the least squares for residuals whose covariance S is white with each
     sample's own variance (its squared residual: a read's timing error grows with the speed) plus a random walk
     of rate q (counts^2/s) in each log, cov = q min(t_i, t_j): returned as its white and its random-walk part.
@@ -605,7 +710,7 @@ def _noise_sandwich(A: np.ndarray, J: np.ndarray, r: np.ndarray, offs: np.ndarra
     bw = np.zeros((p, p))
     brw = np.zeros((p, p))
     for i in range(offs.size - 1):
-        Ji, ri, t = J[offs[i]:offs[i + 1]], r[offs[i]:offs[i + 1]], ts[i]
+        Ji, ri, t = J[offs[i] : offs[i + 1]], r[offs[i] : offs[i + 1]], ts[i]
         g = Ji * ri[:, None]
         bw += g.T @ g
         tail = np.cumsum(Ji[::-1], axis=0)[::-1]
@@ -620,7 +725,7 @@ def _long_run_inflation(r: np.ndarray, sizes: list[int]) -> float:
     slightly wrong model) carry less information than their number says."""
     out, i = [], 0
     for n in sizes:
-        ri = r[i:i + n] - np.mean(r[i:i + n])
+        ri = r[i : i + n] - np.mean(r[i : i + n])
         i += n
         v = float(ri @ ri)
         if n <= 2 * LONG_RUN_LAGS or v <= 0:
@@ -636,7 +741,7 @@ def _lag1(r: np.ndarray, sizes: list[int]) -> float:
     """Mean lag-1 autocorrelation of the residuals within each log, clipped to [0, 0.95]."""
     rhos, i = [], 0
     for n in sizes:
-        ri = r[i:i + n]
+        ri = r[i : i + n]
         i += n
         if ri.size > 10 and np.std(ri) > 0:
             rhos.append(float(np.corrcoef(ri[:-1], ri[1:])[0, 1]))
@@ -665,12 +770,18 @@ def plot_leg_fit(fit: LegFitResult, path: Path | str) -> None:
         ax.plot(s.t * 1e3, (s.y - xe) / cpm * 1e3, ".", ms=2, color=col, label=f"{Path(s.log.path).name} (measured)")
         ax.plot(fine * 1e3, (curve - xe) / cpm * 1e3, "-", lw=1, color="k", label="fit" if i == 0 else None)
         axr.plot(s.t * 1e3, s.y - model, ".", ms=2, color=col)
-    ax.axhspan(-fit.friction_displacement_m.value * 1e3, fit.friction_displacement_m.value * 1e3, color="0.85",
-               label="friction band |x - x_eq| <= F_c / k")
+    ax.axhspan(
+        -fit.friction_displacement_m.value * 1e3,
+        fit.friction_displacement_m.value * 1e3,
+        color="0.85",
+        label="friction band |x - x_eq| <= F_c / k",
+    )
     ax.set_ylabel("compression from equilibrium (mm)")
-    ax.set_title(f"leg {fit.leg}: k = {fit.k.value:.0f} ± {Z95 * fit.k.se:.0f} N/m, c = {fit.c.value:.2f} ± "
-                 f"{Z95 * fit.c.se:.2f} N s/m, F_c = {fit.friction.value:.3f} ± {Z95 * fit.friction.se:.3f} N (95 %)",
-                 fontsize=9)
+    ax.set_title(
+        f"leg {fit.leg}: k = {fit.k.value:.0f} ± {Z95 * fit.k.se:.0f} N/m, c = {fit.c.value:.2f} ± "
+        f"{Z95 * fit.c.se:.2f} N s/m, F_c = {fit.friction.value:.3f} ± {Z95 * fit.friction.se:.3f} N (95 %)",
+        fontsize=9,
+    )
     ax.legend(fontsize=7, loc="upper right")
     axr.set_ylabel("residual (counts)")
     axr.set_xlabel("time from the release command (ms)")
@@ -681,8 +792,14 @@ def plot_leg_fit(fit: LegFitResult, path: Path | str) -> None:
     plt.close(fig)
 
 
-def run_leg_fit(paths: list[Path], *, moving_mass_kg: float = DEFAULT_MOVING_MASS_KG, moving_mass_sd_kg: float = 0.0,
-                counts_per_m: float | None = None, plot: Path | None = None) -> LegFitResult:
+def run_leg_fit(
+    paths: list[Path],
+    *,
+    moving_mass_kg: float = DEFAULT_MOVING_MASS_KG,
+    moving_mass_sd_kg: float = 0.0,
+    counts_per_m: float | None = None,
+    plot: Path | None = None,
+) -> LegFitResult:
     """`rimless trials leg-fit`: read every log (the first bad one stops it: `InputFileError` naming the file,
     line and field), fit, and draw the figure to `plot`."""
     if plot is not None:
@@ -706,7 +823,11 @@ def fake_truth(fit: LegFitResult) -> dict[str, float] | None:
         return None
     t = truths[0]
     try:
-        return {"k_n_per_m": float(t["stiffness_n_per_m"]), "c_n_s_per_m": float(t["damping_n_s_per_m"]),
-                "guide_friction_n": float(t["friction_n"]), "moving_mass_kg": float(t["moving_mass_kg"])}
+        return {
+            "k_n_per_m": float(t["stiffness_n_per_m"]),
+            "c_n_s_per_m": float(t["damping_n_s_per_m"]),
+            "guide_friction_n": float(t["friction_n"]),
+            "moving_mass_kg": float(t["moving_mass_kg"]),
+        }
     except (KeyError, TypeError, ValueError):
         return None

@@ -65,20 +65,33 @@ class LegCoverageResult:
             rel = (v - t) / t
             k = int(cov.sum())
             lo, hi = _wilson(k, len(fitted))
-            per[key] = {"covered": k, "fitted": len(fitted), "coverage": k / len(fitted), "coverage_ci95": [lo, hi],
-                        "median_abs_rel_error": float(np.median(np.abs(rel))),
-                        "rms_rel_error": float(np.sqrt(np.mean(rel ** 2))),
-                        "median_rel_half_width": float(np.median(Z95 * se / np.abs(v))),
-                        "z_sd": float(np.std((v - t) / se)), "z_mean": float(np.mean((v - t) / se)),
-                        "within_goal_error": int(np.sum(np.abs(rel) <= GOALS[key]))}
+            per[key] = {
+                "covered": k,
+                "fitted": len(fitted),
+                "coverage": k / len(fitted),
+                "coverage_ci95": [lo, hi],
+                "median_abs_rel_error": float(np.median(np.abs(rel))),
+                "rms_rel_error": float(np.sqrt(np.mean(rel**2))),
+                "median_rel_half_width": float(np.median(Z95 * se / np.abs(v))),
+                "z_sd": float(np.std((v - t) / se)),
+                "z_mean": float(np.mean((v - t) / se)),
+                "within_goal_error": int(np.sum(np.abs(rel) <= GOALS[key])),
+            }
         return {
-            "tests": self.tests, "fitted": len(fitted), "failures": len(self.rows) - len(fitted),
+            "tests": self.tests,
+            "fitted": len(fitted),
+            "failures": len(self.rows) - len(fitted),
             "failure_messages": [r["failure"] for r in self.rows if "failure" in r],
-            "releases": self.releases, "seed": self.seed,
-            "truth_model": {"k_n_per_m": list(K_RANGE), "c_n_s_per_m": list(C_RANGE),
-                            "guide_friction_n": list(F_RANGE), "compressions_mm": self._compressions(),
-                            "noise_counts": self.noise_counts,
-                            "drift_counts_per_sqrt_s": self.drift_counts_per_sqrt_s},
+            "releases": self.releases,
+            "seed": self.seed,
+            "truth_model": {
+                "k_n_per_m": list(K_RANGE),
+                "c_n_s_per_m": list(C_RANGE),
+                "guide_friction_n": list(F_RANGE),
+                "compressions_mm": self._compressions(),
+                "noise_counts": self.noise_counts,
+                "drift_counts_per_sqrt_s": self.drift_counts_per_sqrt_s,
+            },
             "per_parameter": per,
             "goal": {"rel_half_width": GOALS, "tests_meeting_goal": sum(1 for r in fitted if r["goal"]["met"])},
         }
@@ -89,9 +102,15 @@ class LegCoverageResult:
         return [float(x) for x in np.linspace(COMPRESSIONS_MM[0], COMPRESSIONS_MM[1], self.releases)]
 
 
-def run_leg_fit_coverage(tests: int = 100, *, releases: int = 3, seed: int = 0, noise_counts: float = 0.3,
-                         drift_counts_per_sqrt_s: float = 0.5,
-                         progress: Callable[[int], None] | None = None) -> LegCoverageResult:
+def run_leg_fit_coverage(
+    tests: int = 100,
+    *,
+    releases: int = 3,
+    seed: int = 0,
+    noise_counts: float = 0.3,
+    drift_counts_per_sqrt_s: float = 0.5,
+    progress: Callable[[int], None] | None = None,
+) -> LegCoverageResult:
     """Simulate and fit `tests` leg tests of `releases` releases each (same `seed`, same figures); `progress(i)`
     after each. About a second a test of three releases."""
     if tests < 1:
@@ -107,8 +126,13 @@ def run_leg_fit_coverage(tests: int = 100, *, releases: int = 3, seed: int = 0, 
     with tempfile.TemporaryDirectory(prefix="rimless-leg-coverage-") as tmp:
         for i in range(tests):
             k, c, f = rng.uniform(*K_RANGE), rng.uniform(*C_RANGE), rng.uniform(*F_RANGE)
-            truth = LegTruth(k_n_per_m=k, c_n_s_per_m=c, friction_n=f, noise_counts=noise_counts,
-                             drift_counts_per_s=drift_counts_per_sqrt_s)
+            truth = LegTruth(
+                k_n_per_m=k,
+                c_n_s_per_m=c,
+                friction_n=f,
+                noise_counts=noise_counts,
+                drift_counts_per_s=drift_counts_per_sqrt_s,
+            )
             row: dict[str, Any] = {"truth": {"k_n_per_m": k, "c_n_s_per_m": c, "guide_friction_n": f}}
             logs = []
             for j, mm in enumerate(comp):
@@ -123,8 +147,9 @@ def run_leg_fit_coverage(tests: int = 100, *, releases: int = 3, seed: int = 0, 
                 for key, attr in _KEYS:
                     est = getattr(fit, attr)
                     row[key], row[key + "_se"] = est.value, est.se
-                row["goal"] = goal_check({key: row[key] for key, _ in _KEYS},
-                                         {key: Z95 * row[key + "_se"] for key, _ in _KEYS}, releases)
+                row["goal"] = goal_check(
+                    {key: row[key] for key, _ in _KEYS}, {key: Z95 * row[key + "_se"] for key, _ in _KEYS}, releases
+                )
             res.rows.append(row)
             if progress is not None:
                 progress(i + 1)

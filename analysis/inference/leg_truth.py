@@ -79,8 +79,17 @@ def free_motion(truth: LegTruth, x0_m: float, t_end_s: float, v0_m_s: float = 0.
 
         turn.terminal = True  # type: ignore[attr-defined]
         turn.direction = -direction  # type: ignore[attr-defined]
-        sol = solve_ivp(rhs, (t, t_end_s), [x, v], method="DOP853", rtol=1e-11, atol=1e-14, events=turn,
-                        dense_output=True, first_step=1e-7)
+        sol = solve_ivp(
+            rhs,
+            (t, t_end_s),
+            [x, v],
+            method="DOP853",
+            rtol=1e-11,
+            atol=1e-14,
+            events=turn,
+            dense_output=True,
+            first_step=1e-7,
+        )
         t_new = float(sol.t[-1])
         pieces.append((t, t_new, sol.sol, None))
         if sol.status == 1 and sol.t_events[0].size:
@@ -118,8 +127,16 @@ def read_times(truth: LegTruth, t0: float, t1: float, rng: np.random.Generator) 
     return np.asarray(out)
 
 
-def write_log(path: Path, truth: LegTruth, *, compression_m: float = 0.002, seed: int = 0, leg: int = 0,
-              hold_s: float = 0.3, release_delay_s: float | None = None) -> dict:
+def write_log(
+    path: Path,
+    truth: LegTruth,
+    *,
+    compression_m: float = 0.002,
+    seed: int = 0,
+    leg: int = 0,
+    hold_s: float = 0.3,
+    release_delay_s: float | None = None,
+) -> dict:
     """A leg-test log of the truth leg: held at `compression_m` above its resting position for `hold_s`, then
     released (the clutch lets go `release_delay_s` after the command, 2-6 ms at random by default); returns
     what was simulated."""
@@ -154,9 +171,18 @@ def write_log(path: Path, truth: LegTruth, *, compression_m: float = 0.002, seed
     if truth.quantised:
         counts = np.floor(counts)
     counts -= counts[0]
-    header = {"format": "rimless-leg-test/1", "leg": leg, "sensor": 0, "counts_per_m": truth.counts_per_m,
-              "resolution_cpi": 1600, "frame_rate_hz": 6000.0, "rate_hz": truth.rate_hz, "hold_s": hold_s,
-              "record_s": truth.record_s, "truth": asdict(truth)}
+    header = {
+        "format": "rimless-leg-test/1",
+        "leg": leg,
+        "sensor": 0,
+        "counts_per_m": truth.counts_per_m,
+        "resolution_cpi": 1600,
+        "frame_rate_hz": 6000.0,
+        "rate_hz": truth.rate_hz,
+        "hold_s": hold_s,
+        "record_s": truth.record_s,
+        "truth": asdict(truth),
+    }
     with open(path, "w", encoding="utf-8") as f:
         f.write(json.dumps(header) + "\n")
         engaged = False
@@ -167,8 +193,17 @@ def write_log(path: Path, truth: LegTruth, *, compression_m: float = 0.002, seed
             if ti >= t_release and engaged is True:
                 f.write(json.dumps({"t_s": t_release, "event": "release", "leg": leg}) + "\n")
                 engaged = None  # type: ignore[assignment]
-            f.write(json.dumps({"t_s": round(float(ti), 7), "counts": int(ci) if truth.quantised else float(ci),
-                                "squal": 60, "shutter": 133,
-                                "read_us": round(float(ri) * 1e6, 1)}) + "\n")
+            f.write(
+                json.dumps(
+                    {
+                        "t_s": round(float(ti), 7),
+                        "counts": int(ci) if truth.quantised else float(ci),
+                        "squal": 60,
+                        "shutter": 133,
+                        "read_us": round(float(ri) * 1e6, 1),
+                    }
+                )
+                + "\n"
+            )
         f.write(json.dumps({"event": "end", "t_s": float(t[-1]), "samples": int(t.size), "outcome": "ok"}) + "\n")
     return {"release_delay_s": delay, "x_held_m": x_held, "rest_m": rest}

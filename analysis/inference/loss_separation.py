@@ -51,9 +51,18 @@ def effective_leg_speed(t_s: np.ndarray, dl1_m_s: np.ndarray) -> float:
     return a2 / a1 if a1 > 0 else math.nan
 
 
-def loss_separation(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, j_c: int, c_value: float,
-                    se_inflation: float, v_eff: np.ndarray, scale: np.ndarray,
-                    max_rel_se: float = SEPARATION_REL_SE) -> dict[str, Any]:
+def loss_separation(
+    J: np.ndarray,
+    r: np.ndarray,
+    offs: np.ndarray,
+    n_global: int,
+    j_c: int,
+    c_value: float,
+    se_inflation: float,
+    v_eff: np.ndarray,
+    scale: np.ndarray,
+    max_rel_se: float = SEPARATION_REL_SE,
+) -> dict[str, Any]:
     """Whether c (global column ``j_c`` of the scaled-residual Jacobian J, trial i's rows offs[i]:offs[i+1],
     residuals r at the solution) can be told from a constant loss per step, given each trial's effective leg
     speed ``v_eff`` (m/s), and whether the residuals show such a loss.
@@ -72,16 +81,22 @@ def loss_separation(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: in
 
     v = np.asarray(v_eff, float)
     good = np.isfinite(v) & (v > 0)
-    out: dict[str, Any] = {"separable": False, "absorbs_constant_loss": None, "damping_identified": False,
-                           "correlation": None, "c_rel_se_with_friction": None, "score_p": None,
-                           "leg_speed_m_s": [float(np.min(v[good])), float(np.max(v[good]))] if good.any() else None}
+    out: dict[str, Any] = {
+        "separable": False,
+        "absorbs_constant_loss": None,
+        "damping_identified": False,
+        "correlation": None,
+        "c_rel_se_with_friction": None,
+        "score_p": None,
+        "leg_speed_m_s": [float(np.min(v[good])), float(np.max(v[good]))] if good.any() else None,
+    }
     if not good.all():
         out["note"] = "a trial's leg never moved in the simulation: the loss mechanism cannot be checked"
         return out
     col = np.zeros(J.shape[0])
     v_ref = float(np.mean(v))
     for i in range(offs.size - 1):
-        col[offs[i]:offs[i + 1]] = J[offs[i]:offs[i + 1], j_c] * (v_ref / v[i])
+        col[offs[i] : offs[i + 1]] = J[offs[i] : offs[i + 1], j_c] * (v_ref / v[i])
     Ja = np.concatenate([J[:, :n_global], col[:, None], J[:, n_global:]], axis=1)
     sc = np.concatenate([np.asarray(scale[:n_global], float), [1.0], np.asarray(scale[n_global:], float)])
     se, corr, ok, _ = least_squares_report(Ja, n_global + 1, sc)
@@ -97,8 +112,8 @@ def loss_separation(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: in
     n_t = offs.size - 1
     s_i = np.zeros(n_t)
     for i in range(n_t):  # each trial's gradient in units of its own spread under no constant loss
-        pi, ri = perp[offs[i]:offs[i + 1]], r[offs[i]:offs[i + 1]]
-        scale_i = float(np.linalg.norm(pi)) * float(np.sqrt(np.mean(ri ** 2))) if ri.size else 0.0
+        pi, ri = perp[offs[i] : offs[i + 1]], r[offs[i] : offs[i + 1]]
+        scale_i = float(np.linalg.norm(pi)) * float(np.sqrt(np.mean(ri**2))) if ri.size else 0.0
         s_i[i] = float(pi @ ri) / scale_i if scale_i > 0 else 0.0
     den = float(np.std(s_i, ddof=1)) / math.sqrt(n_t) if n_t >= 2 else 0.0
     if n_t >= 2 and den > 0:
@@ -110,16 +125,22 @@ def loss_separation(J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: in
     speeds = f"the trials' effective leg speeds span {lo:.3f}-{hi:.3f} m/s"
     if not sep:
         rs = f"{rel:.0%}" if math.isfinite(rel) else "unbounded"
-        out["note"] = (f"c cannot be told from a constant loss per step such as guide friction: {speeds}, and with a "
-                       f"friction-like loss also free c's relative uncertainty would be {rs} (correlation "
-                       f"{rc:+.2f}); the fitted c is an effective loss of these trials, not the leg's damping")
+        out["note"] = (
+            f"c cannot be told from a constant loss per step such as guide friction: {speeds}, and with a "
+            f"friction-like loss also free c's relative uncertainty would be {rs} (correlation "
+            f"{rc:+.2f}); the fitted c is an effective loss of these trials, not the leg's damping"
+        )
     elif out["absorbs_constant_loss"]:
-        out["note"] = (f"the residuals show a constant loss per step the model lacks (score test p = "
-                       f"{out['score_p']:.2g}; {speeds}): c absorbs it (guide friction?), so it is an effective loss "
-                       "of these trials, not the leg's damping")
+        out["note"] = (
+            f"the residuals show a constant loss per step the model lacks (score test p = "
+            f"{out['score_p']:.2g}; {speeds}): c absorbs it (guide friction?), so it is an effective loss "
+            "of these trials, not the leg's damping"
+        )
     else:
         out["damping_identified"] = True
         p_txt = f"p = {out['score_p']:.2g}" if out["score_p"] is not None else "untested"
-        out["note"] = (f"{speeds}: enough to tell a speed-dependent from a constant loss per step (c within "
-                       f"{rel:.0%} with one free), and the residuals show no constant loss ({p_txt})")
+        out["note"] = (
+            f"{speeds}: enough to tell a speed-dependent from a constant loss per step (c within "
+            f"{rel:.0%} with one free), and the residuals show no constant loss ({p_txt})"
+        )
     return out

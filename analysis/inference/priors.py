@@ -33,8 +33,11 @@ __all__ = ["PRIOR_KEYS", "Prior", "LegPriors", "read_priors"]
 
 Z95 = 1.959963984540054
 #: leg-fit JSON key -> (WheelParams field, --fit name when the calibration knows it, unit)
-PRIOR_KEYS = {"k_n_per_m": ("stiffness_n_per_m", "k", "N/m"), "c_n_s_per_m": ("damping_ns_per_m", "c", "N s/m"),
-              "guide_friction_n": ("guide_friction_n", "guide_friction_n", "N")}
+PRIOR_KEYS = {
+    "k_n_per_m": ("stiffness_n_per_m", "k", "N/m"),
+    "c_n_s_per_m": ("damping_ns_per_m", "c", "N s/m"),
+    "guide_friction_n": ("guide_friction_n", "guide_friction_n", "N"),
+}
 LEG_TEST_SHARE = 0.9  # above this share of the information, a value is "from the leg test"
 WALK_SHARE = 0.1  # below it, "from the walks"
 CONFLICT_Z = 3.0  # a calibrated value this many prior sigmas from the leg test: the two disagree
@@ -110,8 +113,9 @@ class LegPriors:
 
         obj.fun, obj.jac = fun_with_prior, jac_with_prior
 
-    def sandwich_se(self, J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int,
-                    scale: np.ndarray) -> np.ndarray:
+    def sandwich_se(
+        self, J: np.ndarray, r: np.ndarray, offs: np.ndarray, n_global: int, scale: np.ndarray
+    ) -> np.ndarray:
         """`identifiability.sandwich_se` with the prior rows (the last rows of J beyond offs[-1]) as one more
         measurement of known variance."""
         return sandwich_se(J, r, offs, n_global, scale, known_rows=True)
@@ -122,23 +126,40 @@ class LegPriors:
         est = {e.field: e for e in calibration.params} if calibration is not None else {}
         rows = []
         for p in self.priors:
-            row: dict[str, Any] = {"key": p.key, "field": p.field, "unit": p.unit, "leg_test": p.mean,
-                                   "leg_test_ci": list(p.ci95), "use": p.use}
+            row: dict[str, Any] = {
+                "key": p.key,
+                "field": p.field,
+                "unit": p.unit,
+                "leg_test": p.mean,
+                "leg_test_ci": list(p.ci95),
+                "use": p.use,
+            }
             if p.use == "penalty":
                 e = est.get(p.field)
                 se = math.nan if e is None else (e.se_model if math.isfinite(e.se_model) else e.se)
-                share = (p.sd ** -2) / (se ** -2) if math.isfinite(se) and se > 0 else math.nan
+                share = (p.sd**-2) / (se**-2) if math.isfinite(se) and se > 0 else math.nan
                 share = min(share, 1.0) if math.isfinite(share) else share
                 row["leg_test_share"] = share
-                row["source"] = ("leg test" if share >= LEG_TEST_SHARE else "walks" if share <= WALK_SHARE
-                                 else "leg test and walks") if math.isfinite(share) else "leg test and walks"
+                row["source"] = (
+                    (
+                        "leg test"
+                        if share >= LEG_TEST_SHARE
+                        else "walks"
+                        if share <= WALK_SHARE
+                        else "leg test and walks"
+                    )
+                    if math.isfinite(share)
+                    else "leg test and walks"
+                )
                 if e is not None:
                     z = (e.value - p.mean) / p.sd
                     row["calibrated"], row["prior_z"] = e.value, z
                     if abs(z) > CONFLICT_Z:
-                        row["conflict"] = (f"the walks pull it {abs(z):.1f} sigma away from the leg test: they "
-                                           "disagree (another leg, a wrong moving mass, or what the walk model "
-                                           "leaves out)")
+                        row["conflict"] = (
+                            f"the walks pull it {abs(z):.1f} sigma away from the leg test: they "
+                            "disagree (another leg, a wrong moving mass, or what the walk model "
+                            "leaves out)"
+                        )
             elif p.use == "fixed":
                 row["source"] = "leg test (fixed, not fitted)"
             else:
@@ -159,8 +180,9 @@ def read_priors(path: Path | str) -> LegPriors:
     except (OSError, UnicodeDecodeError) as err:
         raise InputFileError(f"--prior {p}: cannot read ({err})") from None
     except json.JSONDecodeError as err:
-        raise InputFileError(f"--prior {p}:{err.lineno}: not JSON ({err.msg}); expected the output of "
-                             "`rimless trials leg-fit --json`") from None
+        raise InputFileError(
+            f"--prior {p}:{err.lineno}: not JSON ({err.msg}); expected the output of `rimless trials leg-fit --json`"
+        ) from None
     if not isinstance(data, dict):
         raise InputFileError(f"--prior {p}: expected a JSON object (the output of `rimless trials leg-fit --json`)")
     priors = []
@@ -170,8 +192,11 @@ def read_priors(path: Path | str) -> LegPriors:
         value, ci = data[key], data.get(key + "_ci")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise InputFileError(f"--prior {p}: field {key!r} must be a finite number, got {value!r}")
-        if (not isinstance(ci, list) or len(ci) != 2 or
-                not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in ci)):
+        if (
+            not isinstance(ci, list)
+            or len(ci) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in ci)
+        ):
             raise InputFileError(f"--prior {p}: field {key + '_ci'!r} must be [lo, hi] (finite numbers), got {ci!r}")
         lo, hi = float(ci[0]), float(ci[1])
         if not lo < hi:
@@ -180,7 +205,8 @@ def read_priors(path: Path | str) -> LegPriors:
             raise InputFileError(f"--prior {p}: field {key!r} {value!r} lies outside its interval {ci!r}")
         priors.append(Prior(key, fld, unit, float(value), (hi - lo) / (2 * Z95)))
     if not priors:
-        raise InputFileError(f"--prior {p}: none of the fields {', '.join(PRIOR_KEYS)} (the output of "
-                             "`rimless trials leg-fit --json`)")
+        raise InputFileError(
+            f"--prior {p}: none of the fields {', '.join(PRIOR_KEYS)} (the output of `rimless trials leg-fit --json`)"
+        )
     leg = data.get("leg")
     return LegPriors(p, leg if isinstance(leg, int) and not isinstance(leg, bool) else None, priors)

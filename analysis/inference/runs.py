@@ -12,15 +12,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rimless.errors import InputFileError
-from rimless.progress import progress_bar
-
 from rimless.analysis.inference.calibrate import CalibrationResult, NoTrialCalibrated, calibrate
 from rimless.analysis.inference.critical_slope import CriticalSlopeResult, run_critical_slope
 from rimless.analysis.kinematics.inputs import load_input
+from rimless.errors import InputFileError
+from rimless.progress import progress_bar
 
-__all__ = ["LoadedTrials", "CriticalSlopeRun", "CalibrationRun", "load_trials", "wheel_params",
-           "critical_slope_run", "calibration_run"]
+__all__ = [
+    "LoadedTrials",
+    "CriticalSlopeRun",
+    "CalibrationRun",
+    "load_trials",
+    "wheel_params",
+    "critical_slope_run",
+    "calibration_run",
+]
 
 
 @dataclass
@@ -85,8 +91,15 @@ class CriticalSlopeRun:
         return out
 
 
-def critical_slope_run(files: Sequence[Path], *, models: Sequence[str], calibrate_c: bool, params_path: Path | None,
-                       import_kwargs: dict[str, Any], group_tol_deg: float) -> CriticalSlopeRun:
+def critical_slope_run(
+    files: Sequence[Path],
+    *,
+    models: Sequence[str],
+    calibrate_c: bool,
+    params_path: Path | None,
+    import_kwargs: dict[str, Any],
+    group_tol_deg: float,
+) -> CriticalSlopeRun:
     """Verdicts and the critical slope from the trials beside the models'; with ``calibrate_c`` also c
     calibrated on the trials (first model) and that model's critical slope."""
     wheel = wheel_params(params_path)
@@ -98,14 +111,26 @@ def critical_slope_run(files: Sequence[Path], *, models: Sequence[str], calibrat
         if calibrate_c:
             bar.update(description="calibrating c")
             try:
-                run.calibration = calibrate(run.loaded.trials, run.loaded.names, ["c"], params=wheel, model=models[0],
-                                            progress=lambda n: bar.update(description=f"calibrating c ({n} simulations)"))
+                run.calibration = calibrate(
+                    run.loaded.trials,
+                    run.loaded.names,
+                    ["c"],
+                    params=wheel,
+                    model=models[0],
+                    progress=lambda n: bar.update(description=f"calibrating c ({n} simulations)"),
+                )
                 calibrated = run.calibration.calibrated_params
             except NoTrialCalibrated as e:
                 run.calibration_skipped = str(e)
-        run.result = run_critical_slope(run.loaded.trials, run.loaded.names, wheel, models=models,
-                                        calibrated=calibrated, group_tol_deg=group_tol_deg,
-                                        progress=lambda s: bar.update(description=s))
+        run.result = run_critical_slope(
+            run.loaded.trials,
+            run.loaded.names,
+            wheel,
+            models=models,
+            calibrated=calibrated,
+            group_tol_deg=group_tol_deg,
+            progress=lambda s: bar.update(description=s),
+        )
     return run
 
 
@@ -131,16 +156,25 @@ class CalibrationRun:
             out["prior"] = self.prior.report(self.calibration, [FIT_FIELDS[n][0] for n in self.fit], self.fit)
         crit = self.critical
         if crit is not None:
-            out["critical_slope_deg"] = {"trials": crit.critical_slope_deg,
-                                         "trials_method": crit.chosen.method if crit.chosen else None,
-                                         "trials_ci_deg": list(crit.chosen.ci_deg) if crit.chosen else None,
-                                         **{f"model_{k}": v for k, v in crit.model["critical_slope_deg"].items()}}
+            out["critical_slope_deg"] = {
+                "trials": crit.critical_slope_deg,
+                "trials_method": crit.chosen.method if crit.chosen else None,
+                "trials_ci_deg": list(crit.chosen.ci_deg) if crit.chosen else None,
+                **{f"model_{k}": v for k, v in crit.model["critical_slope_deg"].items()},
+            }
         return out
 
 
-def calibration_run(files: Sequence[Path], fit: Sequence[str], *, model: str, critical: bool,
-                    params_path: Path | None, import_kwargs: dict[str, Any],
-                    prior_path: Path | None = None) -> CalibrationRun:
+def calibration_run(
+    files: Sequence[Path],
+    fit: Sequence[str],
+    *,
+    model: str,
+    critical: bool,
+    params_path: Path | None,
+    import_kwargs: dict[str, Any],
+    prior_path: Path | None = None,
+) -> CalibrationRun:
     """Calibrate ``fit`` on the trials; with ``critical`` also the calibrated model's critical slope and the
     trials'; with ``prior_path`` (a `trials leg-fit --json` output) the leg test's results as priors."""
     wheel = wheel_params(params_path)
@@ -156,14 +190,25 @@ def calibration_run(files: Sequence[Path], fit: Sequence[str], *, model: str, cr
         if not run.loaded.trials:
             return run
         try:
-            run.calibration = calibrate(run.loaded.trials, run.loaded.names, fit, params=wheel, model=model,
-                                        progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
-                                        prior=prior)
+            run.calibration = calibrate(
+                run.loaded.trials,
+                run.loaded.names,
+                fit,
+                params=wheel,
+                model=model,
+                progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
+                prior=prior,
+            )
         except NoTrialCalibrated as e:
             run.failure = str(e)
             return run
         if critical:
-            run.critical = run_critical_slope(run.loaded.trials, run.loaded.names, wheel, models=[model],
-                                              calibrated=run.calibration.calibrated_params,
-                                              progress=lambda s: bar.update(description=s))
+            run.critical = run_critical_slope(
+                run.loaded.trials,
+                run.loaded.names,
+                wheel,
+                models=[model],
+                calibrated=run.calibration.calibrated_params,
+                progress=lambda s: bar.update(description=s),
+            )
     return run

@@ -30,8 +30,18 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["StancePendulum", "Verdict", "trial_verdict", "verdict_from_periods", "consecutive_periods",
-           "MIN_PERIODS", "Z_SIGMA", "A_MAX", "trial_slope_sigma_deg", "DEFAULT_SLOPE_SIGMA_DEG"]
+__all__ = [
+    "StancePendulum",
+    "Verdict",
+    "trial_verdict",
+    "verdict_from_periods",
+    "consecutive_periods",
+    "MIN_PERIODS",
+    "Z_SIGMA",
+    "A_MAX",
+    "trial_slope_sigma_deg",
+    "DEFAULT_SLOPE_SIGMA_DEG",
+]
 
 MIN_PERIODS = 4  # consecutive periods needed to fit the return map (3 pairs for 2 parameters)
 Z_SIGMA = 2.0  # e* must differ from 0 by this many standard errors for a verdict
@@ -140,13 +150,25 @@ class Verdict:
     slope_sigma_source: str = ""  # where slope_sigma_deg comes from
 
     def as_dict(self) -> dict[str, Any]:
-        return {"verdict": self.verdict, "reason": self.reason, "steps": self.steps, "slope_deg": self.slope_deg,
-                "return_map_slope": self.a, "return_map_slope_alone": self.a_free, "fixed_point_e_rad2_s2": self.fixed_point,
-                "fixed_point_e_se_rad2_s2": self.fixed_point_se, "fixed_point_period_s": self.fixed_point_period_s,
-                "stalled": self.stalled, "slope_sigma_deg": self.slope_sigma_deg,
-                "slope_ci_deg": ([self.slope_deg - Z95 * self.slope_sigma_deg, self.slope_deg + Z95 * self.slope_sigma_deg]
-                                 if math.isfinite(self.slope_sigma_deg) else None),
-                "slope_sigma_source": self.slope_sigma_source}
+        return {
+            "verdict": self.verdict,
+            "reason": self.reason,
+            "steps": self.steps,
+            "slope_deg": self.slope_deg,
+            "return_map_slope": self.a,
+            "return_map_slope_alone": self.a_free,
+            "fixed_point_e_rad2_s2": self.fixed_point,
+            "fixed_point_e_se_rad2_s2": self.fixed_point_se,
+            "fixed_point_period_s": self.fixed_point_period_s,
+            "stalled": self.stalled,
+            "slope_sigma_deg": self.slope_sigma_deg,
+            "slope_ci_deg": (
+                [self.slope_deg - Z95 * self.slope_sigma_deg, self.slope_deg + Z95 * self.slope_sigma_deg]
+                if math.isfinite(self.slope_sigma_deg)
+                else None
+            ),
+            "slope_sigma_source": self.slope_sigma_source,
+        }
 
 
 def consecutive_periods(trial: Any) -> list[np.ndarray]:
@@ -209,9 +231,15 @@ def _trial_stalled(trial: Any) -> bool:
     return travel < 0.8 * step_len
 
 
-def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, slope_deg: float,
-                         stalled: bool = False, timing_sigma_s: float | None = None,
-                         shared_slope: tuple[float, float] | None = None) -> Verdict:
+def verdict_from_periods(
+    chains: list[np.ndarray],
+    pendulum: StancePendulum,
+    *,
+    slope_deg: float,
+    stalled: bool = False,
+    timing_sigma_s: float | None = None,
+    shared_slope: tuple[float, float] | None = None,
+) -> Verdict:
     """Fit the return map over the chains of consecutive periods and decide (see the module doc).
 
     ``shared_slope`` = (a, standard error): use this return-map slope (the wheel's step-to-step factor,
@@ -224,8 +252,10 @@ def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, 
     v = Verdict("undetermined", "", n, slope_deg, energies=all_e, periods_s=all_T, stalled=stalled)
     if n and not np.all(np.isfinite(all_e)):
         bad = all_T[~np.isfinite(all_e)]
-        v.reason = (f"step period(s) {', '.join(f'{x:.3f}' for x in bad)} s outside what a wheel of these parameters "
-                    f"can walk at {slope_deg:.2f} deg (shorter than the fastest)")
+        v.reason = (
+            f"step period(s) {', '.join(f'{x:.3f}' for x in bad)} s outside what a wheel of these parameters "
+            f"can walk at {slope_deg:.2f} deg (shorter than the fastest)"
+        )
         if stalled:
             v.verdict, v.reason = "decaying", f"stalled on the ramp after {n} step(s)"
         return v
@@ -238,8 +268,9 @@ def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, 
         if stalled:
             v.verdict, v.reason = "decaying", f"stalled on the ramp after {n} step(s)"
         else:
-            v.reason = (f"too few consecutive steps to fit the return map ({longest} periods in a row, "
-                        f"need {MIN_PERIODS})")
+            v.reason = (
+                f"too few consecutive steps to fit the return map ({longest} periods in a row, need {MIN_PERIODS})"
+            )
         return v
     # per-point noise in e from the timing noise of a period (two impacts)
     sig_t = timing_sigma_s if timing_sigma_s is not None else TIMING_SIGMA_FLOOR_S
@@ -251,8 +282,12 @@ def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, 
         b = float(np.mean(y_arr - a * x_arr))
         r = y_arr - (a * x_arr + b)
         s2 = max(float(r @ r) / max(x_arr.size - 1, 1), float(np.mean(w_sig**2)) * (1.0 + a * a))
-        cov = np.array([[a_se**2, -float(np.mean(x_arr)) * a_se**2],
-                        [-float(np.mean(x_arr)) * a_se**2, s2 / x_arr.size + float(np.mean(x_arr)) ** 2 * a_se**2]])
+        cov = np.array(
+            [
+                [a_se**2, -float(np.mean(x_arr)) * a_se**2],
+                [-float(np.mean(x_arr)) * a_se**2, s2 / x_arr.size + float(np.mean(x_arr)) ** 2 * a_se**2],
+            ]
+        )
     v.a, v.b = a, b
     e_star = b / (1.0 - a)
     g = np.array([b / (1.0 - a) ** 2, 1.0 / (1.0 - a)])  # d e*/d(a, b)
@@ -267,16 +302,22 @@ def verdict_from_periods(chains: list[np.ndarray], pendulum: StancePendulum, *, 
         v.reason = f"stalled on the ramp after {n} steps (fitted fixed point e* = {e_star:.3f} ± {se:.3f} rad²/s²)"
     elif e_star - Z_SIGMA * se > 0:
         v.verdict = "sustained"
-        v.reason = (f"converges to a gait of period {v.fixed_point_period_s:.3f} s (e* = {e_star:.3f} ± {se:.3f} "
-                    f"rad²/s², step-to-step factor {a:.2f})")
+        v.reason = (
+            f"converges to a gait of period {v.fixed_point_period_s:.3f} s (e* = {e_star:.3f} ± {se:.3f} "
+            f"rad²/s², step-to-step factor {a:.2f})"
+        )
     elif e_star + Z_SIGMA * se < 0:
         steps_left = _steps_to_stall(a, b, last)
         v.verdict = "decaying"
-        v.reason = (f"{trend} every step towards a stall: no gait (e* = {e_star:.3f} ± {se:.3f} rad²/s² < 0); "
-                    f"about {steps_left} more step(s) to the stall")
+        v.reason = (
+            f"{trend} every step towards a stall: no gait (e* = {e_star:.3f} ± {se:.3f} rad²/s² < 0); "
+            f"about {steps_left} more step(s) to the stall"
+        )
     else:
-        v.reason = (f"the fitted fixed point e* = {e_star:.3f} ± {se:.3f} rad²/s² cannot be told from the stall "
-                    f"(0) at {Z_SIGMA:g} sigma")
+        v.reason = (
+            f"the fitted fixed point e* = {e_star:.3f} ± {se:.3f} rad²/s² cannot be told from the stall "
+            f"(0) at {Z_SIGMA:g} sigma"
+        )
     return v
 
 
@@ -326,8 +367,11 @@ def trial_verdicts(trials: list[Any], params: Any = None) -> list[Verdict]:
     trial released far from its gait extrapolates a long way to e*: the pooled a makes that extrapolation
     sharp. With fewer than two trials determining a, the single fits stand."""
     first = [trial_verdict(t, params) for t in trials]
-    ok = [(v.a_free, v.a_free_se) for v in first
-          if math.isfinite(v.a_free) and 0.0 < v.a_free < A_MAX and 0 < v.a_free_se < 0.5 and not v.stalled]
+    ok = [
+        (v.a_free, v.a_free_se)
+        for v in first
+        if math.isfinite(v.a_free) and 0.0 < v.a_free < A_MAX and 0 < v.a_free_se < 0.5 and not v.stalled
+    ]
     if len(ok) < 2:
         return first
     a = np.array([x for x, _ in ok])
@@ -356,12 +400,23 @@ def trial_verdict(trial: Any, params: Any = None, *, shared_slope: tuple[float, 
     sig_t = max(TIMING_SIGMA_FLOOR_S, 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
     if not (math.isfinite(slope_deg) and 0.0 < slope_deg < math.degrees(params.alpha / 2)):
         n = int(sum(c.size for c in chains))
-        v = Verdict("undetermined", f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
-                    "deg: a wrong slope estimate? (give --slope-deg)", n, slope_deg)
+        v = Verdict(
+            "undetermined",
+            f"slope {slope_deg:.3f} deg outside (0, {math.degrees(params.alpha / 2):.1f}) "
+            "deg: a wrong slope estimate? (give --slope-deg)",
+            n,
+            slope_deg,
+        )
         v.slope_sigma_deg, v.slope_sigma_source = trial_slope_sigma_deg(meta)
         return v
     pend = StancePendulum.from_params(params, math.radians(slope_deg))
-    v = verdict_from_periods(chains, pend, slope_deg=slope_deg, stalled=_trial_stalled(trial),
-                             timing_sigma_s=sig_t, shared_slope=shared_slope)
+    v = verdict_from_periods(
+        chains,
+        pend,
+        slope_deg=slope_deg,
+        stalled=_trial_stalled(trial),
+        timing_sigma_s=sig_t,
+        shared_slope=shared_slope,
+    )
     v.slope_sigma_deg, v.slope_sigma_source = trial_slope_sigma_deg(meta)
     return v

@@ -42,7 +42,7 @@ class ByteSource:
         """Bytes ``a:b`` as a binary stream (no copy of the range)."""
         if self.raw is not None:
             return _ViewReader(memoryview(self.raw)[a:b])
-        f = open(self.path, "rb")  # noqa: SIM115 - closed by _FileRange
+        f = open(self.path, "rb")
         return _FileRange(f, a, b)
 
     def counts(self, sub: bytes, spans: list[tuple[int, int]]) -> list[int]:
@@ -56,6 +56,7 @@ class ByteSource:
                 out.append(f.read(b - a).count(sub))
         return out
 
+
 class _ViewReader(io.RawIOBase):
     """A read-only binary stream over a memoryview (pandas reads it without a copy of the whole)."""
 
@@ -68,7 +69,7 @@ class _ViewReader(io.RawIOBase):
 
     def readinto(self, buffer) -> int:  # type: ignore[override]
         n = min(len(buffer), len(self._view) - self._pos)
-        buffer[:n] = self._view[self._pos:self._pos + n]
+        buffer[:n] = self._view[self._pos : self._pos + n]
         self._pos += n
         return n
 
@@ -85,7 +86,7 @@ class _FileRange(io.RawIOBase):
         return True
 
     def readinto(self, buffer) -> int:  # type: ignore[override]
-        n = self._f.readinto(memoryview(buffer)[:min(len(buffer), self._left)])
+        n = self._f.readinto(memoryview(buffer)[: min(len(buffer), self._left)])
         self._left -= n
         return n
 

@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rimless.errors import InputFileError
-
 from rimless.analysis.io.vicon_file import LENGTH_UNITS_M, MAX_COORDINATE_M, RATE_RANGE_HZ, Column, Section, ViconFile
+from rimless.errors import InputFileError
 
 __all__ = ["read_c3d", "write_c3d"]
 
@@ -71,11 +70,13 @@ def read_c3d(path: str | Path) -> ViconFile:
         xyz[(xyz == 0).all(axis=2)] = np.nan
         values = xyz.reshape(n, n_pts * 3)
         _check_range(p, values, "POINT")
-        cols = tuple(Column(lab, comp, "m", unit, 3 + 3 * i + j) for i, lab in enumerate(labels)
-                     for j, comp in enumerate("XYZ"))
+        cols = tuple(
+            Column(lab, comp, "m", unit, 3 + 3 * i + j) for i, lab in enumerate(labels) for j, comp in enumerate("XYZ")
+        )
         frames = np.arange(first, first + n, dtype=np.int64)
-        sections.append(Section("Trajectories", rate, 1, frames, np.zeros(n, np.int64), cols,
-                                np.ascontiguousarray(values)))
+        sections.append(
+            Section("Trajectories", rate, 1, frames, np.zeros(n, np.int64), cols, np.ascontiguousarray(values))
+        )
     rot = c["data"].get("rotations")
     if rot is not None and np.size(rot) and np.asarray(rot).ndim == 4 and np.asarray(rot).shape[2] > 0:
         sections.append(_objects(p, c, np.asarray(rot, dtype=np.float64), first))
@@ -99,12 +100,14 @@ def _objects(p: str, c: object, rot: np.ndarray, first: int) -> Section:
         m = rot[:, :, b, :].transpose(2, 0, 1)  # (n, 4, 4)
         ok = np.isfinite(m[:, :3, :]).all(axis=(1, 2)) & (np.abs(np.linalg.det(np.nan_to_num(m[:, :3, :3])) - 1) < 0.1)
         if ok.any():
-            values[ok, 6 * b:6 * b + 3] = Rotation.from_matrix(m[ok, :3, :3]).as_rotvec()
-            values[ok, 6 * b + 3:6 * b + 6] = m[ok, :3, 3] * scale
+            values[ok, 6 * b : 6 * b + 3] = Rotation.from_matrix(m[ok, :3, :3]).as_rotvec()
+            values[ok, 6 * b + 3 : 6 * b + 6] = m[ok, :3, 3] * scale
     _check_range(p, values, "ROTATION")
-    cols = tuple(Column(lab, comp, "rad" if comp[0] == "R" else "m", "rad" if comp[0] == "R" else units[0],
-                        3 + 6 * i + j) for i, lab in enumerate(labels)
-                 for j, comp in enumerate(("RX", "RY", "RZ", "TX", "TY", "TZ")))
+    cols = tuple(
+        Column(lab, comp, "rad" if comp[0] == "R" else "m", "rad" if comp[0] == "R" else units[0], 3 + 6 * i + j)
+        for i, lab in enumerate(labels)
+        for j, comp in enumerate(("RX", "RY", "RZ", "TX", "TY", "TZ"))
+    )
     frames = np.arange(first, first + n, dtype=np.int64)
     return Section("Objects", rate, 1, frames, np.zeros(n, np.int64), cols, np.ascontiguousarray(values))
 
@@ -113,12 +116,13 @@ def _check_range(p: str, values: np.ndarray, group: str) -> None:
     bad = np.abs(values) > MAX_COORDINATE_M
     if bad.any():
         r, col = np.argwhere(bad)[0]
-        raise InputFileError(f"{p}: {group} data, frame index {r}, value {col + 1}: beyond "
-                             f"{MAX_COORDINATE_M:.0e} m: not a position in a capture volume")
+        raise InputFileError(
+            f"{p}: {group} data, frame index {r}, value {col + 1}: beyond "
+            f"{MAX_COORDINATE_M:.0e} m: not a position in a capture volume"
+        )
 
 
-def write_c3d(path: str | Path, *, rate_hz: float, markers: Mapping[str, np.ndarray], length_unit: str = "mm"
-              ) -> Path:
+def write_c3d(path: str | Path, *, rate_hz: float, markers: Mapping[str, np.ndarray], length_unit: str = "mm") -> Path:
     """Write markers (name -> (n, 3) m; NaN = occluded) as a C3D file (float32, as Nexus writes)."""
     import ezc3d
 

@@ -40,8 +40,10 @@ def read_slope_manifest(path: str | Path) -> dict[str, tuple[float, str]]:
             continue
         if not header_seen:
             if [c.lower() for c in cells[:2]] != ["file", "slope_deg"]:
-                raise InputFileError(f"{p}:{line_no}:1: the slope manifest must start with the header "
-                                     f"'file,slope_deg', found {','.join(cells)!r}")
+                raise InputFileError(
+                    f"{p}:{line_no}:1: the slope manifest must start with the header "
+                    f"'file,slope_deg', found {','.join(cells)!r}"
+                )
             header_seen = True
             continue
         if len(cells) < 2 or not cells[0]:
@@ -51,7 +53,9 @@ def read_slope_manifest(path: str | Path) -> dict[str, tuple[float, str]]:
         except ValueError:
             raise InputFileError(f"{p}:{line_no}:2: slope_deg {cells[1]!r} is not a number") from None
         if not math.isfinite(v) or abs(v) > MAX_SLOPE_DEG:
-            raise InputFileError(f"{p}:{line_no}:2: slope_deg {cells[1]} is outside -{MAX_SLOPE_DEG:g}..{MAX_SLOPE_DEG:g}")
+            raise InputFileError(
+                f"{p}:{line_no}:2: slope_deg {cells[1]} is outside -{MAX_SLOPE_DEG:g}..{MAX_SLOPE_DEG:g}"
+            )
         if cells[0] in out:
             raise InputFileError(f"{p}:{line_no}:1: {cells[0]!r} is listed twice (first at {out[cells[0]][1]})")
         out[cells[0]] = (v, f"{p}:{line_no}")

@@ -74,8 +74,9 @@ def read_clutch_log(path: str | Path) -> ClutchLog:
             raise InputFileError(f"{p}:{i}: not a line of a robot trial log ({err})") from None
         if i == 1:
             if obj.get("format") != FORMAT:
-                raise InputFileError(f"{p}:1: not a robot trial log (the header's format is "
-                                     f"{obj.get('format')!r}, expected {FORMAT!r})")
+                raise InputFileError(
+                    f"{p}:1: not a robot trial log (the header's format is {obj.get('format')!r}, expected {FORMAT!r})"
+                )
             continue
         ev = obj.get("event")
         if not isinstance(ev, dict) or not (ev.get("name") == "lock" or "released_leg" in ev):

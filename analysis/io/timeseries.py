@@ -52,8 +52,9 @@ class TimeSeries:
                 raise ValueError(f"data[{k!r}] has first axis {np.shape(v)[:1]}, time has {t.shape}")
         object.__setattr__(self, "data", dict(self.data))
         ev = self.events
-        if not (isinstance(ev, tuple) and all(type(e) is Event for e in ev)
-                and all(a <= b for a, b in zip(ev, ev[1:]))):  # already sorted Events: kept as they are
+        if not (
+            isinstance(ev, tuple) and all(type(e) is Event for e in ev) and all(a <= b for a, b in zip(ev, ev[1:]))
+        ):  # already sorted Events: kept as they are
             ev = tuple(sorted(Event(float(a), str(b)) for a, b in ev))
         object.__setattr__(self, "events", ev)
         object.__setattr__(self, "info", {k: dict(v) for k, v in self.info.items()})
@@ -87,5 +88,9 @@ class TimeSeries:
     def get_ts_between_times(self, t0_s: float, t1_s: float) -> TimeSeries:
         """A copy restricted to ``t0_s <= t <= t1_s`` (events too)."""
         m = (self.time_s >= t0_s) & (self.time_s <= t1_s)
-        return TimeSeries(self.time_s[m], {k: v[m] for k, v in self.data.items()},
-                          tuple(e for e in self.events if t0_s <= e.time_s <= t1_s), self.info)
+        return TimeSeries(
+            self.time_s[m],
+            {k: v[m] for k, v in self.data.items()},
+            tuple(e for e in self.events if t0_s <= e.time_s <= t1_s),
+            self.info,
+        )

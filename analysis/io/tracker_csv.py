@@ -47,8 +47,10 @@ def write_tracker_csv(
         raise ValueError("nothing to write: give objects and/or markers")
     lscale, ascale = LENGTH_UNITS_M[length_unit], ANGLE_UNITS_RAD[angle_unit]
     blocks: list[str] = []
-    for kind, groups, comps in (("Objects", objects, ("RX", "RY", "RZ", "TX", "TY", "TZ")),
-                                ("Trajectories", markers, ("X", "Y", "Z"))):
+    for kind, groups, comps in (
+        ("Objects", objects, ("RX", "RY", "RZ", "TX", "TY", "TZ")),
+        ("Trajectories", markers, ("X", "Y", "Z")),
+    ):
         if not groups:
             continue
         arrays = []
@@ -75,17 +77,26 @@ def write_tracker_csv(
             arrays.append(a)
         assert n is not None
         data = np.concatenate(arrays, axis=1)
-        lines = [kind, _fmt_number(float(rate_hz)), delimiter.join(names_row), delimiter.join(comp_row),
-                 delimiter.join(unit_row)]
-        text_cells = np.where(np.isnan(data), "", np.vectorize(_fmt_number, otypes=[object])(data)) \
-            if data.size else np.zeros((n, 0), dtype=object)
+        lines = [
+            kind,
+            _fmt_number(float(rate_hz)),
+            delimiter.join(names_row),
+            delimiter.join(comp_row),
+            delimiter.join(unit_row),
+        ]
+        text_cells = (
+            np.where(np.isnan(data), "", np.vectorize(_fmt_number, otypes=[object])(data))
+            if data.size
+            else np.zeros((n, 0), dtype=object)
+        )
         frames = np.arange(first_frame, first_frame + n)
         for i in range(n):
             lines.append(delimiter.join([str(frames[i]), "0", *text_cells[i]]))
         blocks.append(newline.join(lines) + newline)
     out = Path(path)
-    out.write_text(newline.join(blocks) if len(blocks) == 1 else blocks[0] + newline + blocks[1],
-                   encoding="utf-8", newline="")
+    out.write_text(
+        newline.join(blocks) if len(blocks) == 1 else blocks[0] + newline + blocks[1], encoding="utf-8", newline=""
+    )
     return out
 
 

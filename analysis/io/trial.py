@@ -30,9 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from rimless.errors import InputFileError
-
 from rimless.analysis.io.timeseries import Event, TimeSeries
+from rimless.errors import InputFileError
 
 __all__ = ["Trial", "TrialMeta", "read_trial", "standard_series", "slope_ci_deg", "ALPHA_RAD"]
 
@@ -106,8 +105,9 @@ class TrialMeta:
         for k in ("hub_offset_m", "travel_direction", "slope_origin_m", "window_s", "slope_estimated_ci_rad"):
             if d.get(k) is not None:
                 d[k] = tuple(d[k])
-        d["slope_ci_rad"] = tuple(float("nan") if v is None else float(v)
-                                  for v in (d.get("slope_ci_rad") or (None, None)))
+        d["slope_ci_rad"] = tuple(
+            float("nan") if v is None else float(v) for v in (d.get("slope_ci_rad") or (None, None))
+        )
         if d.get("slope_residual_m") is None:
             d["slope_residual_m"] = float("nan")
         return cls(**d)
@@ -151,8 +151,10 @@ class Trial:
         if t.size < 2:
             return np.zeros(0)
         pos = {int(k): i for i, k in enumerate(ks)}
-        return np.array([t[pos[int(k)]] - t[pos[int(k) - 1]] for k in self.period_step
-                         if int(k) in pos and int(k) - 1 in pos], dtype=np.float64)
+        return np.array(
+            [t[pos[int(k)]] - t[pos[int(k) - 1]] for k in self.period_step if int(k) in pos and int(k) - 1 in pos],
+            dtype=np.float64,
+        )
 
     @property
     def consecutive_periods_s(self) -> np.ndarray:
@@ -261,15 +263,28 @@ def read_trial(path: str | Path) -> Trial:
     meta = TrialMeta.from_json(json.dumps(extra["meta"]))
     c = {name: table.column(name).to_numpy() for name in table.column_names}
     ts = TimeSeries(c["time_s"]).add_data("frame", c["frame"].astype(np.int64))
-    ts = standard_series(ts, np.column_stack([c["hub_x_m"], c["hub_y_m"], c["hub_z_m"]]),
-                         np.column_stack([c["slope_x_m"], c["slope_y_m"], c["slope_z_m"]]), c["com_height_m"],
-                         c.get("wheel_angle_rad"), c["gap"].astype(bool), c["interpolated"].astype(bool))
+    ts = standard_series(
+        ts,
+        np.column_stack([c["hub_x_m"], c["hub_y_m"], c["hub_z_m"]]),
+        np.column_stack([c["slope_x_m"], c["slope_y_m"], c["slope_z_m"]]),
+        c["com_height_m"],
+        c.get("wheel_angle_rad"),
+        c["gap"].astype(bool),
+        c["interpolated"].astype(bool),
+    )
     ts = replace(ts, events=tuple(Event(float(t), "impact") for t in extra["impact_time_s"]))
     return Trial(ts, meta)
 
 
-def standard_series(ts: TimeSeries, hub: np.ndarray, hub_slope: np.ndarray, com: np.ndarray,
-                    angle: np.ndarray | None, gap: np.ndarray, interp: np.ndarray) -> TimeSeries:
+def standard_series(
+    ts: TimeSeries,
+    hub: np.ndarray,
+    hub_slope: np.ndarray,
+    com: np.ndarray,
+    angle: np.ndarray | None,
+    gap: np.ndarray,
+    interp: np.ndarray,
+) -> TimeSeries:
     """``ts`` with the trial's data keys of the module doc, with their units and frames."""
     ts = ts.add_data("hub", hub, unit="m", frame="world")
     ts = ts.add_data("hub_slope", hub_slope, unit="m", frame="slope (x down the slope, y normal, z lateral)")
@@ -295,4 +310,3 @@ def _nan_to_none(obj: Any) -> Any:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
-

@@ -25,11 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
-from rimless.errors import InputFileError
-
 from rimless.analysis.io.byte_source import ByteSource
-from rimless.analysis.io.vicon_file import (ANGLE_UNITS_RAD, LENGTH_UNITS_M, MAX_COORDINATE_M, RATE_RANGE_HZ, Column,
-                                           Section, ViconFile)
+from rimless.analysis.io.vicon_file import (
+    ANGLE_UNITS_RAD,
+    LENGTH_UNITS_M,
+    MAX_COORDINATE_M,
+    RATE_RANGE_HZ,
+    Column,
+    Section,
+    ViconFile,
+)
+from rimless.errors import InputFileError
 
 __all__ = [
     "Column",
@@ -56,6 +62,7 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 MAX_ERRORS = 20
 #: Largest frame number accepted (a day at 10 kHz is 8.6e8).
 MAX_FRAME = 1e10
+
 
 class ViconCsvError(InputFileError):
     """A Vicon CSV file cannot be parsed; the message names the file, line and column (1-based).
@@ -248,8 +255,12 @@ class _Parser:
         lead = re.match(r"(?:[ ,;\t]*\n)*", text)
         first = lead.end() if lead else 0
         if first < len(text) and text[first] in "0123456789+-.":
-            raise self.err(text.count("\n", 0, first) + 1, 1, "missing-title",
-                           "the file starts with a number: no section title row (e.g. 'Trajectories') above it")
+            raise self.err(
+                text.count("\n", 0, first) + 1,
+                1,
+                "missing-title",
+                "the file starts with a number: no section title row (e.g. 'Trajectories') above it",
+            )
         while k < len(struct):
             pos = struct[k]
             line_no += text.count("\n", last_pos, pos)
@@ -269,10 +280,18 @@ class _Parser:
                     k += 1
                 continue
             if cells[0] == "Frame":
-                raise self.err(line_no, 1, "missing-title",
-                               "column header row without a section title row (e.g. 'Trajectories') above it")
-            raise self.err(line_no, 1, "unexpected-row",
-                           f"expected a section title such as 'Objects' or 'Trajectories', found {_show(cells)}")
+                raise self.err(
+                    line_no,
+                    1,
+                    "missing-title",
+                    "column header row without a section title row (e.g. 'Trajectories') above it",
+                )
+            raise self.err(
+                line_no,
+                1,
+                "unexpected-row",
+                f"expected a section title such as 'Objects' or 'Trajectories', found {_show(cells)}",
+            )
         if self.pending:
             raise self._collect(self.pending)
         if not sections:
@@ -282,8 +301,12 @@ class _Parser:
 
     def header_line(self, pos: int, line_no: int, what: str, kind: str) -> tuple[list[str], int]:
         if pos >= len(self.text):
-            raise self.err(line_no, None, "truncated-header",
-                           f"the file ends before the {what} row of section {kind!r} (truncated?)")
+            raise self.err(
+                line_no,
+                None,
+                "truncated-header",
+                f"the file ends before the {what} row of section {kind!r} (truncated?)",
+            )
         return self.cells(self.line_at(pos)), self.next_line_pos(pos)
 
     def parse_section(self, kind: str, pos: int, line_no: int) -> tuple[Section, int]:
@@ -294,20 +317,32 @@ class _Parser:
         lo_hz, hi_hz = RATE_RANGE_HZ
         if rate is None or not math.isfinite(rate) or not lo_hz <= rate <= hi_hz:
             shown = rate_cells[0] if rate_cells and rate_cells[0] else "(empty)"
-            raise self.err(line_no + 1, 1, "bad-rate",
-                           f"the rate row of section {kind!r} must hold a frame rate of {lo_hz:g}-{hi_hz:g} Hz, "
-                           f"found {shown[:40]!r}")
+            raise self.err(
+                line_no + 1,
+                1,
+                "bad-rate",
+                f"the rate row of section {kind!r} must hold a frame rate of {lo_hz:g}-{hi_hz:g} Hz, "
+                f"found {shown[:40]!r}",
+            )
         names, pos = self.header_line(pos, line_no + 2, "name", kind)
         comps, pos = self.header_line(pos, line_no + 3, "column header", kind)
         if not comps or comps[0] != "Frame":
-            raise self.err(line_no + 3, 1, "bad-header",
-                           f"section {kind!r}: the column header row must start with 'Frame', found {_show(comps)}")
+            raise self.err(
+                line_no + 3,
+                1,
+                "bad-header",
+                f"section {kind!r}: the column header row must start with 'Frame', found {_show(comps)}",
+            )
         first_data = 2 if len(comps) > 1 and comps[1] == "Sub Frame" else 1
         units_line = line_no + 4
         units, pos = self.header_line(pos, units_line, "units", kind)
         if units and _NUMBER.fullmatch(units[0]):
-            raise self.err(units_line, 1, "missing-units",
-                           f"section {kind!r}: expected the units row under the column header, found a data row")
+            raise self.err(
+                units_line,
+                1,
+                "missing-units",
+                f"section {kind!r}: expected the units row under the column header, found a data row",
+            )
         last = max((i for i, c in enumerate(comps) if c), default=0)
         n_cols = last + 1 - first_data
         if n_cols <= 0:
@@ -325,39 +360,64 @@ class _Parser:
                 bad_line = data_line + self.text.count("\n", data_start, nxt)
                 cell = cells[0] if cells[0] else "(empty)"
                 # raised after the rows above it are read: their errors come first, in file order
-                bad_row = self.err(bad_line, 1, "bad-frame",
-                                   f"section {kind!r}: frame number {cell!r} is not a number")
+                bad_row = self.err(bad_line, 1, "bad-frame", f"section {kind!r}: frame number {cell!r} is not a number")
         width = max(len(comps), len(units), first_data + n_cols)
         bounds = self.group_bounds(columns, first_data)
-        lead, data, extra_at = self.parse_block(data_start, nxt, data_line, width, kind, first_data, n_cols,
-                                                bounds=bounds)
+        lead, data, extra_at = self.parse_block(
+            data_start, nxt, data_line, width, kind, first_data, n_cols, bounds=bounds
+        )
         frame, sub = self.check_frames(lead, data_line, first_data, kind)
         if extra_at is not None:
             r, c = extra_at
-            self.pending.append(self.err(data_line + int(r), int(first_data + n_cols + c + 1), "extra-cell",
-                                         f"section {kind!r}: a value lies beyond the last column of the header"))
+            self.pending.append(
+                self.err(
+                    data_line + int(r),
+                    int(first_data + n_cols + c + 1),
+                    "extra-cell",
+                    f"section {kind!r}: a value lies beyond the last column of the header",
+                )
+            )
         bad = np.isinf(data)
         for r, c in np.argwhere(bad)[:MAX_ERRORS]:
-            self.pending.append(self.err(data_line + int(r), int(first_data + c + 1), "non-finite",
-                                         f"section {kind!r}: value is infinite"))
+            self.pending.append(
+                self.err(
+                    data_line + int(r), int(first_data + c + 1), "non-finite", f"section {kind!r}: value is infinite"
+                )
+            )
         del bad
         # Convert to SI by what the units row says (in place: ``data`` is ours).
         _to_si_inplace(data, [c.file_unit for c in columns])
         if kind in _POSE_SECTIONS:
             big = (data > MAX_COORDINATE_M) | (data < -MAX_COORDINATE_M)
             for r, c in np.argwhere(big)[:MAX_ERRORS]:
-                self.pending.append(self.err(data_line + int(r), int(first_data + c + 1), "out-of-range",
-                                             f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): "
-                                             "not a position in a capture volume"))
+                self.pending.append(
+                    self.err(
+                        data_line + int(r),
+                        int(first_data + c + 1),
+                        "out-of-range",
+                        f"section {kind!r}: value beyond {MAX_COORDINATE_M:.0e} m (or rad): "
+                        "not a position in a capture volume",
+                    )
+                )
         if bad_row is not None:
             raise bad_row
-        section = Section(kind=kind, rate_hz=float(rate), line=title_line, frame=frame, sub_frame=sub,
-                          columns=tuple(columns), values=data, name_prefix=prefix,
-                          data_line=data_line, units_line=units_line)
+        section = Section(
+            kind=kind,
+            rate_hz=float(rate),
+            line=title_line,
+            frame=frame,
+            sub_frame=sub,
+            columns=tuple(columns),
+            values=data,
+            name_prefix=prefix,
+            data_line=data_line,
+            units_line=units_line,
+        )
         return section, nxt
 
-    def build_columns(self, kind: str, names: list[str], comps: list[str], units: list[str],
-                      first_data: int, last: int, line_no: int) -> tuple[list[Column], str]:
+    def build_columns(
+        self, kind: str, names: list[str], comps: list[str], units: list[str], first_data: int, last: int, line_no: int
+    ) -> tuple[list[Column], str]:
         columns: list[Column] = []
         group = ""
         prefix = ""
@@ -369,13 +429,21 @@ class _Parser:
             file_unit = units[i] if i < len(units) else ""
             if kind in _POSE_SECTIONS:
                 if comp in _LENGTH_COMPONENTS and file_unit not in LENGTH_UNITS_M:
-                    raise self.err(line_no + 4, i + 1, "bad-unit",
-                                   f"section {kind!r}: unit {file_unit or '(empty)'!r} of {comp} ({group}) is not "
-                                   f"a length unit ({', '.join(LENGTH_UNITS_M)})")
+                    raise self.err(
+                        line_no + 4,
+                        i + 1,
+                        "bad-unit",
+                        f"section {kind!r}: unit {file_unit or '(empty)'!r} of {comp} ({group}) is not "
+                        f"a length unit ({', '.join(LENGTH_UNITS_M)})",
+                    )
                 if comp in _ANGLE_COMPONENTS and file_unit not in ANGLE_UNITS_RAD:
-                    raise self.err(line_no + 4, i + 1, "bad-unit",
-                                   f"section {kind!r}: unit {file_unit or '(empty)'!r} of {comp} ({group}) is not "
-                                   f"an angle unit (rad, deg)")
+                    raise self.err(
+                        line_no + 4,
+                        i + 1,
+                        "bad-unit",
+                        f"section {kind!r}: unit {file_unit or '(empty)'!r} of {comp} ({group}) is not "
+                        f"an angle unit (rad, deg)",
+                    )
             unit = "m" if file_unit in LENGTH_UNITS_M else ("rad" if file_unit in ANGLE_UNITS_RAD else file_unit)
             columns.append(Column(group=group, component=comp, unit=unit, file_unit=file_unit, column=i + 1))
         return columns, prefix
@@ -389,8 +457,9 @@ class _Parser:
                 ends.add(a.column)
         return frozenset(ends)
 
-    def check_cell_counts(self, start: int, end: int, data_line: int, width: int, kind: str,
-                          bounds: frozenset[int], rows: np.ndarray) -> None:
+    def check_cell_counts(
+        self, start: int, end: int, data_line: int, width: int, kind: str, bounds: frozenset[int], rows: np.ndarray
+    ) -> None:
         """A row shorter than the header that does not end at a group boundary lost a cell: error.
 
         Only rows with a missing value can be short, so only ``rows`` (block row indices whose last cell is
@@ -408,16 +477,24 @@ class _Parser:
             data = self.text[start:end].encode("utf-8", "surrogatepass")
             nl = np.flatnonzero(np.frombuffer(data, np.uint8) == 10)
             starts = np.concatenate([[0], nl + 1])
-            n_delims = [data.count(delim, int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size
-                                   else len(data)) for r in rows_l]
+            n_delims = [
+                data.count(delim, int(starts[r]), int(starts[r + 1]) - 1 if r + 1 < starts.size else len(data))
+                for r in rows_l
+            ]
         errs = []
         for r, n_delim in zip(rows_l, n_delims):
             n_cells = n_delim + 1
             if n_cells < width and n_cells not in bounds:
-                errs.append(self.err(data_line + int(r), n_cells + 1, "missing-cell",
-                                     f"section {kind!r}: the row has {n_cells} cells and ends inside a "
-                                     f"marker/object (the header has {width}): a cell is missing, values would be "
-                                     "shifted"))
+                errs.append(
+                    self.err(
+                        data_line + int(r),
+                        n_cells + 1,
+                        "missing-cell",
+                        f"section {kind!r}: the row has {n_cells} cells and ends inside a "
+                        f"marker/object (the header has {width}): a cell is missing, values would be "
+                        "shifted",
+                    )
+                )
                 if len(errs) >= MAX_ERRORS:
                     break
         self.pending.extend(errs)
@@ -434,16 +511,23 @@ class _Parser:
                 continue
             seen.add(key)
             uniq.append(e)
-        uniq.sort(key=lambda e: (e.line if e.line is not None else math.inf,
-                                 e.column if e.column is not None else 0))
+        uniq.sort(key=lambda e: (e.line if e.line is not None else math.inf, e.column if e.column is not None else 0))
         first = uniq[0]
         first.errors = uniq[:MAX_ERRORS]
         return first
 
     # -- data
-    def parse_block(self, start: int, end: int, data_line: int, width: int, kind: str, first_data: int,
-                    n_cols: int, bounds: frozenset[int] = frozenset()
-                    ) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None]:
+    def parse_block(
+        self,
+        start: int,
+        end: int,
+        data_line: int,
+        width: int,
+        kind: str,
+        first_data: int,
+        n_cols: int,
+        bounds: frozenset[int] = frozenset(),
+    ) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None]:
         """Read the data rows in ``text[start:end]``.
 
         Returns (frame cells (n, first_data), data (n, n_cols) C-contiguous and owned, (row, column) of the
@@ -458,9 +542,13 @@ class _Parser:
             n_cells = text.count(self.delim, last, end) + 1
             if n_cells < width:
                 line = data_line + n_rows - 1
-                trunc = self.err(line, n_cells, "truncated",
-                                 f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
-                                 "cells and no line end): truncated file?")
+                trunc = self.err(
+                    line,
+                    n_cells,
+                    "truncated",
+                    f"section {kind!r}: the file ends in the middle of a row ({n_cells} of {width} "
+                    "cells and no line end): truncated file?",
+                )
                 # the rows before it are read (their errors come first, in file order); the cut row is dropped
                 self.pending.append(trunc)
                 return self.parse_block(start, last, data_line, width, kind, first_data, n_cols, bounds)
@@ -468,8 +556,8 @@ class _Parser:
         if out is None:
             values = self.slow_block(text[start:end], data_line, width, kind)
             lead = values[:, :first_data]
-            data = np.ascontiguousarray(values[:, first_data:first_data + n_cols])
-            extra = values[:, first_data + n_cols:]
+            data = np.ascontiguousarray(values[:, first_data : first_data + n_cols])
+            extra = values[:, first_data + n_cols :]
             extra_at = None
             if extra.size and not np.isnan(extra).all():
                 r, c = np.argwhere(~np.isnan(extra))[0]
@@ -484,8 +572,9 @@ class _Parser:
     #: Rows per pandas chunk: bounds the parser's temporary memory.
     CHUNK_ROWS = 200_000
 
-    def fast_block(self, start: int, end: int, data_line: int, n_rows: int, width: int, first_data: int,
-                   n_cols: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None, np.ndarray] | None:
+    def fast_block(
+        self, start: int, end: int, data_line: int, n_rows: int, width: int, first_data: int, n_cols: int
+    ) -> tuple[np.ndarray, np.ndarray, tuple[int, int] | None, np.ndarray] | None:
         """Bulk parse with pandas' C reader, in chunks, into preallocated arrays.
 
         Reads the bytes of the block from ``raw`` when the file's bytes are at hand (no copy), else an encoded
@@ -509,17 +598,28 @@ class _Parser:
             with warnings.catch_warnings():
                 # A row wider than the header makes pandas drop cells with a warning: take the slow path.
                 warnings.simplefilter("error", pd.errors.ParserWarning)
-                reader = pd.read_csv(source, sep=self.delim, header=None, names=range(width), dtype=np.float64,
-                                     na_values=[""], keep_default_na=False, decimal=self.decimal, engine="c",
-                                     skip_blank_lines=False, index_col=False, chunksize=self.CHUNK_ROWS)
+                reader = pd.read_csv(
+                    source,
+                    sep=self.delim,
+                    header=None,
+                    names=range(width),
+                    dtype=np.float64,
+                    na_values=[""],
+                    keep_default_na=False,
+                    decimal=self.decimal,
+                    engine="c",
+                    skip_blank_lines=False,
+                    index_col=False,
+                    chunksize=self.CHUNK_ROWS,
+                )
                 with reader:
                     for chunk in reader:
                         v = chunk.to_numpy(dtype=np.float64)
                         m = v.shape[0]
                         if k + m > n_rows:
                             return None
-                        lead[k:k + m] = v[:, :first_data]
-                        data[k:k + m] = v[:, first_data:stop]
+                        lead[k : k + m] = v[:, :first_data]
+                        data[k : k + m] = v[:, first_data:stop]
                         if extra_at is None and v.shape[1] > stop:
                             seen = ~np.isnan(v[:, stop:])
                             if seen.any():
@@ -546,8 +646,14 @@ class _Parser:
             if len(cells) > width:
                 for c in range(width, len(cells)):
                     if cells[c].strip():
-                        errs.append(self.err(data_line + r, c + 1, "extra-cell",
-                                             f"section {kind!r}: a value lies beyond the last column of the header"))
+                        errs.append(
+                            self.err(
+                                data_line + r,
+                                c + 1,
+                                "extra-cell",
+                                f"section {kind!r}: a value lies beyond the last column of the header",
+                            )
+                        )
                         break
                 cells = cells[:width]
             for c, cell in enumerate(cells):
@@ -557,10 +663,16 @@ class _Parser:
                 if self.decimal == ",":
                     s = s.replace(",", ".")
                 if not _NUMBER.fullmatch(s):
-                    what = ("is not a number (digits must be ASCII 0-9)"
-                            if any(ch.isdigit() and not ch.isascii() for ch in s) else "is not a number")
-                    errs.append(self.err(data_line + r, c + 1, "non-numeric",
-                                         f"section {kind!r}: cell {cell.strip()[:40]!r} {what}"))
+                    what = (
+                        "is not a number (digits must be ASCII 0-9)"
+                        if any(ch.isdigit() and not ch.isascii() for ch in s)
+                        else "is not a number"
+                    )
+                    errs.append(
+                        self.err(
+                            data_line + r, c + 1, "non-numeric", f"section {kind!r}: cell {cell.strip()[:40]!r} {what}"
+                        )
+                    )
                     continue
                 out[r, c] = float(s)
             if len(errs) >= MAX_ERRORS:
@@ -568,8 +680,9 @@ class _Parser:
         self.pending.extend(errs)
         return out
 
-    def check_frames(self, values: np.ndarray, data_line: int, first_data: int,
-                     kind: str) -> tuple[np.ndarray, np.ndarray]:
+    def check_frames(
+        self, values: np.ndarray, data_line: int, first_data: int, kind: str
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Frame (and sub frame) numbers of the rows; every bad one, a repeat or a step back is added to
         ``pending`` (rows with a bad number are left out of the order check). Bad numbers are returned as -1."""
         if values.shape[0] == 0:
@@ -577,17 +690,28 @@ class _Parser:
         f = values[:, 0]
         bad = np.isnan(f) | (f != np.round(f)) | (f < 0) | (f > MAX_FRAME)
         for r in np.flatnonzero(bad)[:MAX_ERRORS]:
-            self.pending.append(self.err(data_line + int(r), 1, "bad-frame",
-                                         f"section {kind!r}: frame number must be an integer from 0 to "
-                                         f"{MAX_FRAME:.0e}"))
+            self.pending.append(
+                self.err(
+                    data_line + int(r),
+                    1,
+                    "bad-frame",
+                    f"section {kind!r}: frame number must be an integer from 0 to {MAX_FRAME:.0e}",
+                )
+            )
         frame = np.where(bad, -1.0, f).astype(np.int64)
         if first_data == 2:
             s = values[:, 1]
             s = np.where(np.isnan(s), 0.0, s)  # Nexus writes an empty Sub Frame where nothing was computed
             bad_s = (s != np.round(s)) | (s < 0) | (s > MAX_FRAME)
             for r in np.flatnonzero(bad_s)[:MAX_ERRORS]:
-                self.pending.append(self.err(data_line + int(r), 2, "bad-frame",
-                                             f"section {kind!r}: sub frame must be a non-negative integer"))
+                self.pending.append(
+                    self.err(
+                        data_line + int(r),
+                        2,
+                        "bad-frame",
+                        f"section {kind!r}: sub frame must be a non-negative integer",
+                    )
+                )
             bad = bad | bad_s
             sub = np.where(bad_s, 0, s).astype(np.int64)
         else:
@@ -600,14 +724,26 @@ class _Parser:
         for i in np.flatnonzero(d <= 0)[:MAX_ERRORS]:
             r, r0 = int(rows[i + 1]), int(rows[i])
             if d[i] == 0:
-                self.pending.append(self.err(data_line + r, 1, "duplicate-frame",
-                                             f"section {kind!r}: frame {frame[r]} (sub frame {sub[r]}) appears "
-                                             f"twice (first at line {data_line + r0})"))
+                self.pending.append(
+                    self.err(
+                        data_line + r,
+                        1,
+                        "duplicate-frame",
+                        f"section {kind!r}: frame {frame[r]} (sub frame {sub[r]}) appears "
+                        f"twice (first at line {data_line + r0})",
+                    )
+                )
             else:
-                self.pending.append(self.err(data_line + r, 1, "frame-order",
-                                             f"section {kind!r}: frame {frame[r]} comes after frame {frame[r0]}: "
-                                             "frames must increase (a second take pasted after the first? split "
-                                             "the file at this line)"))
+                self.pending.append(
+                    self.err(
+                        data_line + r,
+                        1,
+                        "frame-order",
+                        f"section {kind!r}: frame {frame[r]} comes after frame {frame[r0]}: "
+                        "frames must increase (a second take pasted after the first? split "
+                        "the file at this line)",
+                    )
+                )
         return frame, sub
 
 
@@ -633,7 +769,7 @@ def _clean_name(name: str) -> tuple[str, str]:
     prefix = ""
     for p in _NAME_PREFIXES:
         if name.startswith(p):
-            prefix, name = p.strip(), name[len(p):]
+            prefix, name = p.strip(), name[len(p) :]
             break
     if ":" in name:
         a, b = name.split(":", 1)

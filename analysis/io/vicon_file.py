@@ -12,8 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Column", "Section", "ViconFile", "LENGTH_UNITS_M", "ANGLE_UNITS_RAD", "RATE_RANGE_HZ",
-           "MAX_COORDINATE_M"]
+__all__ = ["Column", "Section", "ViconFile", "LENGTH_UNITS_M", "ANGLE_UNITS_RAD", "RATE_RANGE_HZ", "MAX_COORDINATE_M"]
 
 #: Length units we convert, and their size in metres.
 LENGTH_UNITS_M: Mapping[str, float] = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -104,7 +103,7 @@ class Section:
                 raise KeyError(f"group {group!r} of section {self.kind!r} has no column(s) {missing}")
             idx = [cols[c] for c in components]
         if idx and idx == list(range(idx[0], idx[0] + len(idx))):
-            view = self.values[:, idx[0]:idx[0] + len(idx)]  # no copy; read-only so the section stays intact
+            view = self.values[:, idx[0] : idx[0] + len(idx)]  # no copy; read-only so the section stays intact
             view.flags.writeable = False
             return view
         return self.values[:, idx]

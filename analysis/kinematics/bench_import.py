@@ -60,16 +60,14 @@ def _phase(name: str, path: str) -> dict[str, float]:
     """Run one phase in this process: seconds and peak resident memory (sampled every 2 ms from /proc) above the
     resident memory after the imports, MB."""
     import resource
+    import threading
 
     import pandas as pd
+    import scipy.signal
+    import scipy.spatial.transform  # noqa: F401
 
     from rimless.analysis.io.vicon_csv import read_vicon_csv
     from rimless.analysis.kinematics.build import import_trial
-
-    import scipy.signal  # noqa: F401
-    import scipy.spatial.transform  # noqa: F401
-
-    import threading
 
     def rss_mb() -> float:
         try:
@@ -126,8 +124,12 @@ def run_benchmark(rows: int = 1_000_000, path: Path | None = None) -> dict[str, 
         p = path or make_tracker_file(Path(tmp) / "bench.csv", rows)
         out["bytes"] = p.stat().st_size
         for name in _PHASES:
-            res = subprocess.run([sys.executable, "-m", "rimless.analysis.kinematics.bench_import", "--phase", name, str(p)],
-                                 capture_output=True, text=True, check=False)
+            res = subprocess.run(
+                [sys.executable, "-m", "rimless.analysis.kinematics.bench_import", "--phase", name, str(p)],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
             if res.returncode != 0:
                 raise RuntimeError(f"benchmark phase {name} failed: {res.stderr.strip().splitlines()[-1:]}")
             r = json.loads(res.stdout.strip().splitlines()[-1])
@@ -155,8 +157,7 @@ def benchmark_figures(rows: int) -> dict[str, Any]:
 
     load_before = os.getloadavg()[0]
     res = run_benchmark(rows)
-    return {**res, "load_average_before": load_before, "load_average_after": os.getloadavg()[0],
-            "cpus": os.cpu_count()}
+    return {**res, "load_average_before": load_before, "load_average_after": os.getloadavg()[0], "cpus": os.cpu_count()}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -177,14 +178,20 @@ def main(argv: list[str] | None = None) -> None:
     load0 = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     r = run_benchmark(rows)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"{r['rows']:,} rows, {r['bytes'] / 1e6:.1f} MB; one fresh process per line, warmed up on 2000 rows; "
-          f"load average {load0:.1f} before, {load:.1f} after, on {os.cpu_count()} CPUs")
-    print("  (cpu = CPU time of the process; above = peak resident memory above that after the imports and "
-          "the warm-up; rss = peak resident memory of the whole process)")
+    print(
+        f"{r['rows']:,} rows, {r['bytes'] / 1e6:.1f} MB; one fresh process per line, warmed up on 2000 rows; "
+        f"load average {load0:.1f} before, {load:.1f} after, on {os.cpu_count()} CPUs"
+    )
+    print(
+        "  (cpu = CPU time of the process; above = peak resident memory above that after the imports and "
+        "the warm-up; rss = peak resident memory of the whole process)"
+    )
     for key, label in (("pandas", "pandas.read_csv"), ("parse", "our parse"), ("import", "our import (e2e)")):
-        line = (f"  {label:18s} {r[key + '_s']:6.2f} s  cpu {r[key + '_cpu_s']:6.2f} s  "
-                f"{r['rows'] / r[key + '_s']:>10,.0f} rows/s  above {r[key + '_peak_mb']:7.1f} MB  "
-                f"rss {r[key + '_rss_mb']:7.1f} MB")
+        line = (
+            f"  {label:18s} {r[key + '_s']:6.2f} s  cpu {r[key + '_cpu_s']:6.2f} s  "
+            f"{r['rows'] / r[key + '_s']:>10,.0f} rows/s  above {r[key + '_peak_mb']:7.1f} MB  "
+            f"rss {r[key + '_rss_mb']:7.1f} MB"
+        )
         if key == "parse":
             line += f"   parse/pandas = {r['parse_ratio']:.2f}x (cpu {r['parse_cpu_ratio']:.2f}x)"
         if key == "import":

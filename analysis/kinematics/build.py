@@ -16,23 +16,26 @@ from typing import Any
 
 import numpy as np
 
-from rimless.errors import UserError
-
 from rimless.analysis.io.manifest import slope_for
 from rimless.analysis.io.recording import read_recording
 from rimless.analysis.io.timeseries import Event, TimeSeries
 from rimless.analysis.io.trial import ALPHA_RAD, Trial, TrialMeta, standard_series
 from rimless.analysis.io.vicon_file import Section, ViconFile
-from rimless.analysis.kinematics.hub import (RotationStack, axis_in_body, hub_from_markers, hub_from_pose,
-                                             wheel_angle_from_rotations)
 from rimless.analysis.kinematics.contacts import HUB_MAX_SE_M, fit_contacts, hub_from_contacts, slope_from_contacts
+from rimless.analysis.kinematics.hub import (
+    RotationStack,
+    axis_in_body,
+    hub_from_markers,
+    hub_from_pose,
+    wheel_angle_from_rotations,
+)
 from rimless.analysis.kinematics.slope import MAX_PATH_POINTS, fit_slope, travel_direction
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
 from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
 from rimless.analysis.kinematics.walk import classify_ending, find_motion
+from rimless.errors import UserError
 
-__all__ = ["TrialRefused", "build_trial", "import_trial", "fill_short_gaps", "DEFAULT_MAX_GAP_S",
-           "TABLE1_LEG_LENGTH_M"]
+__all__ = ["TrialRefused", "build_trial", "import_trial", "fill_short_gaps", "DEFAULT_MAX_GAP_S", "TABLE1_LEG_LENGTH_M"]
 
 
 class TrialRefused(UserError):
@@ -59,9 +62,11 @@ def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
     missing = int(sec.frame[-1] - sec.frame[0] + 1 - sec.n_rows) if sec.n_rows else 0
     if missing > max(sec.n_rows, 10_000):
         r = int(np.argmax(np.diff(sec.frame))) + 1
-        raise TrialRefused(f"{sec.data_line + r}:1: section {sec.kind!r}: the frame number jumps from "
-                           f"{sec.frame[r - 1]} to {sec.frame[r]}: {missing} frames would be missing (a second take "
-                           "or a wrong frame number?)")
+        raise TrialRefused(
+            f"{sec.data_line + r}:1: section {sec.kind!r}: the frame number jumps from "
+            f"{sec.frame[r - 1]} to {sec.frame[r]}: {missing} frames would be missing (a second take "
+            "or a wrong frame number?)"
+        )
     frames = np.arange(sec.frame[0], sec.frame[-1] + 1)
     row = np.full(frames.size, -1, np.int64)
     row[sec.frame - sec.frame[0]] = np.arange(sec.n_rows)
@@ -88,16 +93,19 @@ def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarr
     bad = np.flatnonzero(d > JUMP_M + 5.0 * dt)
     if bad.size:
         i = ok[bad[0] + 1]
-        where = (f"{path}:{sec.data_line + int(row[i])}:1" if sec.data_line
-                 else f"{path}: frame {int(sec.frame[row[i]])}")
-        raise TrialRefused(f"{where}: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
-                           "here: a second take pasted after the first? split the file here")
+        where = (
+            f"{path}:{sec.data_line + int(row[i])}:1" if sec.data_line else f"{path}: frame {int(sec.frame[row[i]])}"
+        )
+        raise TrialRefused(
+            f"{where}: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
+            "here: a second take pasted after the first? split the file here"
+        )
 
 
 def build_trial(
     vf: ViconFile,
     *,
-    object: str | None = None,  # noqa: A002 - the Vicon word
+    object: str | None = None,
     markers: Sequence[str] | None = None,
     slope_deg: float | None = None,
     hub_offset_m: Sequence[float] | None = None,
@@ -169,8 +177,10 @@ def build_trial(
             dead = [m for m, c in zip(mk, counts) if c == 0]
             raise TrialRefused(f"{vf.path}: marker(s) {dead} have no values in any frame")
         if len(mk) == 2:
-            raise TrialRefused(f"{vf.path}: 2 wheel markers ({', '.join(mk)}) fix neither the hub nor the "
-                               "rotation: give 3 or more (or the hub marker) with --markers")
+            raise TrialRefused(
+                f"{vf.path}: 2 wheel markers ({', '.join(mk)}) fix neither the hub nor the "
+                "rotation: give 3 or more (or the hub marker) with --markers"
+            )
         try:
             est0 = hub_from_markers(pts)
         except ValueError as err:
@@ -178,11 +188,15 @@ def build_trial(
         trans = est0.hub_m
         rot = est0.rotation
         if est0.n_relabelled:
-            warnings.append(f"{est0.n_relabelled} frame(s) with swapped marker labels repaired (the exchange that "
-                            "fits the rigid marker shape)")
+            warnings.append(
+                f"{est0.n_relabelled} frame(s) with swapped marker labels repaired (the exchange that "
+                "fits the rigid marker shape)"
+            )
         if est0.n_inconsistent:
-            warnings.append(f"{est0.n_inconsistent} frame(s) whose markers fit no rigid shape of the wheel "
-                            "(swapped or ghost markers) treated as gaps")
+            warnings.append(
+                f"{est0.n_inconsistent} frame(s) whose markers fit no rigid shape of the wheel "
+                "(swapped or ghost markers) treated as gaps"
+            )
         del est0, pts
         what = "marker centroid" if len(mk) > 1 else "hub marker"
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
@@ -196,7 +210,7 @@ def build_trial(
             angle = None
     motion = find_motion(time_s, angle, trans, leg_length_m=wheel_leg_length_m)
     rough = np.zeros(time_s.size, bool)
-    rough[motion.release_index:motion.end_index + 1] = True
+    rough[motion.release_index : motion.end_index + 1] = True
     contacts = None
     if rot is not None and angle is not None:
         ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
@@ -207,8 +221,10 @@ def build_trial(
         contacts = fit_contacts(rot, trans, angle, axis, rough, alpha_rad=alpha_rad, travel=travel_guess)
         sc0 = slope_from_contacts(contacts.contacts, travel_guess) if contacts is not None else None
         if sc0 is not None and abs(sc0[0]) >= alpha_rad / 2:
-            notes.append(f"the {len(contacts.contacts)} pivots found lie on a line at {math.degrees(sc0[0]):.1f} "
-                         "deg, where no wheel stands: not stance feet, not used")
+            notes.append(
+                f"the {len(contacts.contacts)} pivots found lie on a line at {math.degrees(sc0[0]):.1f} "
+                "deg, where no wheel stands: not stance feet, not used"
+            )
             contacts = None
         hub_c = hub_from_contacts(contacts, alpha_rad) if contacts is not None and hub_offset_m is None else None
         given = hub_offset_m
@@ -222,9 +238,11 @@ def build_trial(
         if given is not None and hub_offset_m is None:
             d = np.asarray(given)
             residual = hub_c[2]
-            hub_source = (f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
-                          f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
-                          f"{hub_c[1] * 1e3:.2f} mm, feet residual {hub_c[2] * 1e3:.2f} mm)")
+            hub_source = (
+                f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
+                f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
+                f"{hub_c[1] * 1e3:.2f} mm, feet residual {hub_c[2] * 1e3:.2f} mm)"
+            )
         del est
     else:
         hub_raw, offset, residual = trans, None, None
@@ -233,11 +251,15 @@ def build_trial(
             warnings.append("--hub-offset-mm ignored: one marker has no orientation to carry an offset")
     if offset is not None and hub_offset_m is None and residual is not None:
         if np.linalg.norm(offset) > HUB_OFFSET_WARN_M:
-            warnings.append(f"the centre of rotation lies {np.linalg.norm(offset) * 1e3:.0f} mm from the {what} "
-                            "(markers not centred on the hub, or the object origin is off the hub): corrected")
+            warnings.append(
+                f"the centre of rotation lies {np.linalg.norm(offset) * 1e3:.0f} mm from the {what} "
+                "(markers not centred on the hub, or the object origin is off the hub): corrected"
+            )
         if residual > HUB_RESIDUAL_WARN_M:
-            warnings.append(f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
-                            "rigid on the wheel, or the wheel does not roll in one plane")
+            warnings.append(
+                f"the centre-of-rotation fit leaves {residual * 1e3:.1f} mm RMS: the markers may not be "
+                "rigid on the wheel, or the wheel does not roll in one plane"
+            )
 
     # The wheel axis in the body frame, R^T axis (n, 3), for the tilt test at the end. A `RotationStack` costs no
     # memory and makes it then; a matrix array (markers) is replaced by it now. float32: the tilt is compared
@@ -266,8 +288,9 @@ def build_trial(
         sc = slope_from_contacts(contacts.contacts, travel)
         if sc is not None:
             contact_slope = sc
-            frame0 = fit_slope(hub_fit, slope_deg=math.degrees(sc[0]) if slope_deg is None else slope_deg,
-                               travel=travel)
+            frame0 = fit_slope(
+                hub_fit, slope_deg=math.degrees(sc[0]) if slope_deg is None else slope_deg, travel=travel
+            )
     y = np.where(fit_mask, frame0.to_slope(hub)[:, 1], np.nan)
     period_guess = None
     if angle is not None and np.isfinite(angle[fit_mask]).sum() > 2:
@@ -286,26 +309,43 @@ def build_trial(
     hs = frame0.to_slope(hub[fm[:: max(1, -(-fm.size // MAX_PATH_POINTS))]])[:, 0]
     del fm
     travel_m = float(np.nanmax(hs) - np.nanmin(hs)) if hs.size else 0.0
-    evidence = _slope_evidence(choice.ramp_slope_deg, choice.ramp_source, slope_deg, contact_slope,
-                               contacts, hub_line, frame0, idx.size, hub_unknown=hub_unknown, travel_m=travel_m)
+    evidence = _slope_evidence(
+        choice.ramp_slope_deg,
+        choice.ramp_source,
+        slope_deg,
+        contact_slope,
+        contacts,
+        hub_line,
+        frame0,
+        idx.size,
+        hub_unknown=hub_unknown,
+        travel_m=travel_m,
+    )
     if hub_unknown and evidence and evidence[0].source == "estimated":
-        warnings.append("the slope is not determined by this trial (the hub offset is unknown: fewer than two "
-                        "stance feet seen and too little rotation): its interval is wide; give --slope-deg or "
-                        "--slopes")
+        warnings.append(
+            "the slope is not determined by this trial (the hub offset is unknown: fewer than two "
+            "stance feet seen and too little rotation): its interval is wide; give --slope-deg or "
+            "--slopes"
+        )
     _check_slope_possible(vf.path, evidence, time_s, angle if contact_slope is not None else None, rough, alpha_rad)
     for w in _slope_disagreements(evidence):
         warnings.append(w)
     chosen = evidence[0]
     reference = "the robust line through the hub path"
     if idx.size >= 3:
-        frame = fit_slope(hub_fit, slope_deg=math.degrees(chosen.slope_rad),
-                          points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+        frame = fit_slope(
+            hub_fit,
+            slope_deg=math.degrees(chosen.slope_rad),
+            points_m=_hub_at_cusps(time_s, hub_fit, idx),
+            travel=travel,
+        )
         reference = f"the line through the hub at {idx.size} CoM-height minima (impacts)"
     else:
         frame = fit_slope(hub_fit, slope_deg=math.degrees(chosen.slope_rad), travel=travel)
         if chosen.source == "estimated" and contact_slope is None:
-            notes.append(f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the "
-                         "impact line)")
+            notes.append(
+                f"slope fitted on the whole hub path ({idx.size} CoM minima found, 3 needed for the impact line)"
+            )
     del hub_fit, y, idx
     hub_slope = frame.to_slope(hub)
     com = hub_slope[:, 1].copy()
@@ -316,8 +356,15 @@ def build_trial(
         reference = f"height above {reference}"
     observed = ~gap & ~filled
     t_rel, t_end = float(time_s[motion.release_index]), float(time_s[motion.end_index])
-    steps = detect_steps(time_s, com, angle, alpha_rad=alpha_rad, observed=observed, window_s=(t_rel, t_end),
-                         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0)
+    steps = detect_steps(
+        time_s,
+        com,
+        angle,
+        alpha_rad=alpha_rad,
+        observed=observed,
+        window_s=(t_rel, t_end),
+        min_advance_rad=0.1 * alpha_rad if motion.held else 0.0,
+    )
 
     # walking window and ending
     if steps.impact_time_s.size:
@@ -332,7 +379,7 @@ def build_trial(
     del rot
     if u is not None:
         win = np.zeros(time_s.size, bool)
-        win[motion.release_index:i_last + 1] = True
+        win[motion.release_index : i_last + 1] = True
         win &= ~np.isnan(u).any(axis=1)
         if win.any():
             a_body = u[win].mean(axis=0, dtype=np.float64)
@@ -343,14 +390,22 @@ def build_trial(
         del u, win
     progress = angle if angle is not None else hub_slope[:, 0] / wheel_leg_length_m
     sig = noise_sigma(com[rough]) if rough.any() else float("nan")
-    ending = classify_ending(time_s, hub_slope, progress, (motion.release_index, i_last), axis_tilt_rad=tilt,
-                             noise_m=sig if math.isfinite(sig) else 0.0)
+    ending = classify_ending(
+        time_s,
+        hub_slope,
+        progress,
+        (motion.release_index, i_last),
+        axis_tilt_rad=tilt,
+        noise_m=sig if math.isfinite(sig) else 0.0,
+    )
 
     _plausibility(vf.path, sec, time_s, hub_slope, angle, steps, window_s, alpha_rad, wheel_leg_length_m, warnings)
     n_unseen = _unseen_periods(steps)
     if n_unseen:
-        warnings.append(f"{n_unseen} step period(s) dropped: an impact fell in a gap longer than "
-                        f"{max_gap_s * 1e3:g} ms (not guessed)")
+        warnings.append(
+            f"{n_unseen} step period(s) dropped: an impact fell in a gap longer than "
+            f"{max_gap_s * 1e3:g} ms (not guessed)"
+        )
     if motion.held:
         notes.append(f"held still for {t_rel:.2f} s before the release")
 
@@ -429,36 +484,69 @@ def _interval(slope_rad: float, half_rad: float) -> tuple[float, float]:
     return (slope_rad - half_rad, slope_rad + half_rad)
 
 
-def _slope_evidence(ramp_deg: float | None, ramp_src: str | None, given_deg: float | None,
-                    contact_slope: tuple[float, float, float] | None, contacts, hub_line, frame0,  # noqa: ANN001
-                    n_minima: int, *, hub_unknown: bool = False, travel_m: float = 1.0) -> list[SlopeEvidence]:
+def _slope_evidence(
+    ramp_deg: float | None,
+    ramp_src: str | None,
+    given_deg: float | None,
+    contact_slope: tuple[float, float, float] | None,
+    contacts,
+    hub_line,
+    frame0,
+    n_minima: int,
+    *,
+    hub_unknown: bool = False,
+    travel_m: float = 1.0,
+) -> list[SlopeEvidence]:
     """Every slope source of the trial, the best first (ramp, given, estimated)."""
     out = []
     if ramp_deg is not None and math.isfinite(ramp_deg):
         r = math.radians(ramp_deg)
-        out.append(SlopeEvidence("ramp", r, _interval(r, math.radians(RAMP_SLOPE_HALF_WIDTH_DEG)),
-                                 f"{ramp_src} (95 % interval +- {RAMP_SLOPE_HALF_WIDTH_DEG} deg assumed)"))
+        out.append(
+            SlopeEvidence(
+                "ramp",
+                r,
+                _interval(r, math.radians(RAMP_SLOPE_HALF_WIDTH_DEG)),
+                f"{ramp_src} (95 % interval +- {RAMP_SLOPE_HALF_WIDTH_DEG} deg assumed)",
+            )
+        )
     if given_deg is not None:
         g = math.radians(given_deg)
-        out.append(SlopeEvidence("given", g, _interval(g, math.radians(GIVEN_SLOPE_HALF_WIDTH_DEG)),
-                                 f"given by the user (95 % interval +- {GIVEN_SLOPE_HALF_WIDTH_DEG} deg assumed)"))
+        out.append(
+            SlopeEvidence(
+                "given",
+                g,
+                _interval(g, math.radians(GIVEN_SLOPE_HALF_WIDTH_DEG)),
+                f"given by the user (95 % interval +- {GIVEN_SLOPE_HALF_WIDTH_DEG} deg assumed)",
+            )
+        )
     floor = math.radians(MIN_ESTIMATE_HALF_WIDTH_DEG)
     if contact_slope is not None:
         phi, se, rms = contact_slope
         n = len(contacts.contacts)
-        out.append(SlopeEvidence("estimated", phi, _interval(phi, max(Z95 * se, floor)),
-                                 f"line through {n} stance-foot contact points (walking window; no-slip: a stance "
-                                 f"foot does not move), scatter {rms * 1e3:.2f} mm"))
+        out.append(
+            SlopeEvidence(
+                "estimated",
+                phi,
+                _interval(phi, max(Z95 * se, floor)),
+                f"line through {n} stance-foot contact points (walking window; no-slip: a stance "
+                f"foot does not move), scatter {rms * 1e3:.2f} mm",
+            )
+        )
     else:
         line = hub_line if hub_line is not None else frame0
         half = max(Z95 * line.se_rad, floor) if math.isfinite(line.se_rad) else math.radians(45.0)
-        how = (f"{line.source} (walking window)" if hub_line is not None else
-               f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)")
+        how = (
+            f"{line.source} (walking window)"
+            if hub_line is not None
+            else f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)"
+        )
         if hub_unknown:
             # An origin up to OFFSET_BOUND_M off an unknown hub rises and falls by up to twice that along the path.
             half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
-            how += ("; the hub is not determined (fewer than two stance feet seen, too little rotation): the "
-                    f"interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off the hub")
+            how += (
+                "; the hub is not determined (fewer than two stance feet seen, too little rotation): the "
+                f"interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off the hub"
+            )
         if hub_line is not None or (given_deg is None and ramp_deg is None):
             out.append(SlopeEvidence("estimated", line.slope_rad, _interval(line.slope_rad, half), how))
     return out
@@ -468,20 +556,28 @@ def _slope_disagreements(evidence: list[SlopeEvidence]) -> list[str]:
     """Warnings for pairs of sources whose difference exceeds their combined uncertainty."""
     out = []
     for i, a in enumerate(evidence):
-        for b in evidence[i + 1:]:
+        for b in evidence[i + 1 :]:
             ha = (a.ci_rad[1] - a.ci_rad[0]) / 2
             hb = (b.ci_rad[1] - b.ci_rad[0]) / 2
             diff = abs(a.slope_rad - b.slope_rad)
             if diff > math.hypot(ha, hb):
-                out.append(f"the {a.source} slope {math.degrees(a.slope_rad):.3f} deg and the {b.source} slope "
-                           f"{math.degrees(b.slope_rad):.3f} deg disagree by {math.degrees(diff):.3f} deg, more "
-                           f"than their uncertainty ({math.degrees(math.hypot(ha, hb)):.3f} deg at 95 %); "
-                           f"{evidence[0].source} is used")
+                out.append(
+                    f"the {a.source} slope {math.degrees(a.slope_rad):.3f} deg and the {b.source} slope "
+                    f"{math.degrees(b.slope_rad):.3f} deg disagree by {math.degrees(diff):.3f} deg, more "
+                    f"than their uncertainty ({math.degrees(math.hypot(ha, hb)):.3f} deg at 95 %); "
+                    f"{evidence[0].source} is used"
+                )
     return out
 
 
-def _check_slope_possible(path: str, evidence: list[SlopeEvidence], time_s: np.ndarray,
-                          angle: np.ndarray | None, window: np.ndarray, alpha_rad: float) -> None:
+def _check_slope_possible(
+    path: str,
+    evidence: list[SlopeEvidence],
+    time_s: np.ndarray,
+    angle: np.ndarray | None,
+    window: np.ndarray,
+    alpha_rad: float,
+) -> None:
     """Refuse a slope the observed motion rules out: a rimless wheel cannot stand on |slope| >= alpha/2, and a
     passive wheel that rolls uphill (slope < 0 beyond its interval) only slows down (checked when ``angle`` is
     given: pass it only when the body was seen standing on its feet)."""
@@ -490,9 +586,11 @@ def _check_slope_possible(path: str, evidence: list[SlopeEvidence], time_s: np.n
     e = evidence[0]
     lim = alpha_rad / 2
     if not math.isfinite(e.slope_rad) or abs(e.slope_rad) >= lim:
-        raise TrialRefused(f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg is impossible for a "
-                           f"wheel that walks: beyond +-{math.degrees(lim):.1f} deg (alpha/2) it cannot stand "
-                           f"({e.method})")
+        raise TrialRefused(
+            f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg is impossible for a "
+            f"wheel that walks: beyond +-{math.degrees(lim):.1f} deg (alpha/2) it cannot stand "
+            f"({e.method})"
+        )
     if e.ci_rad[1] < 0 and angle is not None:
         a = np.where(window, angle, np.nan)
         ok = np.flatnonzero(np.isfinite(a))
@@ -508,7 +606,8 @@ def _check_slope_possible(path: str, evidence: list[SlopeEvidence], time_s: np.n
                         f"{path}: the {e.source} slope {math.degrees(e.slope_rad):.2f} deg (uphill) is impossible "
                         f"for the observed motion: the wheel speeds up from {v0:.2f} to {v1:.2f} rad/s over "
                         f"{np.degrees(np.nanmax(av) - av[0]):.0f} deg of rotation, and a passive wheel rolling "
-                        f"uphill only slows ({e.method})")
+                        f"uphill only slows ({e.method})"
+                    )
 
 
 def _unseen_periods(steps: StepResult) -> int:
@@ -518,9 +617,18 @@ def _unseen_periods(steps: StepResult) -> int:
     return int(ks[-1] - ks[0]) - int(len(steps.period_step if steps.period_step is not None else []))
 
 
-def _plausibility(path: str, sec: Section, time_s: np.ndarray, hub_slope: np.ndarray, angle: np.ndarray | None,
-                  steps: StepResult, window_s: tuple[float, float], alpha_rad: float, leg_m: float,
-                  warnings: list[str]) -> None:
+def _plausibility(
+    path: str,
+    sec: Section,
+    time_s: np.ndarray,
+    hub_slope: np.ndarray,
+    angle: np.ndarray | None,
+    steps: StepResult,
+    window_s: tuple[float, float],
+    alpha_rad: float,
+    leg_m: float,
+    warnings: list[str],
+) -> None:
     """Compare the size and speed of the recorded motion with the wheel's (catches a mm/m mislabel)."""
     expected = 2 * leg_m * math.sin(alpha_rad / 2)  # hub travel per step, m
     m = (time_s >= window_s[0]) & (time_s <= window_s[1]) & ~np.isnan(hub_slope).any(axis=1)
@@ -541,17 +649,21 @@ def _plausibility(path: str, sec: Section, time_s: np.ndarray, hub_slope: np.nda
                 f"{where}: the units row says {'/'.join(unit) or '(none)'}, but the wheel moves {per_step:.4g} m per "
                 f"{math.degrees(alpha_rad):.0f} deg of rotation where a wheel with {leg_m} m legs moves "
                 f"{expected:.3f} m: the numbers are likely in "
-                f"{'m (not mm)' if ratio < 0.1 else 'mm (not m)'}; fix the units row")
+                f"{'m (not mm)' if ratio < 0.1 else 'mm (not m)'}; fix the units row"
+            )
         if not 0.5 <= ratio <= 2.0:
-            warnings.append(f"the wheel moves {per_step:.3f} m per step where {expected:.3f} m is expected "
-                            f"(legs of {leg_m} m): check the units row (line {sec.units_line}) and the leg length")
+            warnings.append(
+                f"the wheel moves {per_step:.3f} m per step where {expected:.3f} m is expected "
+                f"(legs of {leg_m} m): check the units row (line {sec.units_line}) and the leg length"
+            )
     else:
         dur = max(float(np.ptp(time_s[m])), 1e-9)
         speed = travel / dur
         if travel > 0 and (speed < 0.01 or speed > 20):
             raise TrialRefused(
                 f"{where}: the units row says {'/'.join(unit) or '(none)'}, but the hub moves at {speed:.4g} m/s "
-                "while walking (a wheel walks at about 0.1-2 m/s): check the units row")
+                "while walking (a wheel walks at about 0.1-2 m/s): check the units row"
+            )
 
 
 def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -565,7 +677,6 @@ def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.nd
     out[:, 0] = np.interp(tc, tv, hv[:, 0])
     out[:, 1] = np.interp(tc, tv, hv[:, 1])
     return out
-
 
 
 def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray, np.ndarray]:
@@ -612,4 +723,3 @@ def import_trial(path: str | Path, *, slopes: dict[str, tuple[float, str]] | Non
             kwargs["slope_deg"] = row[0]
             kwargs["slope_note"] = f"slope {row[0]:g} deg given in the manifest {row[1]}"
     return build_trial(read_recording(path), **kwargs)
-

@@ -23,8 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Contact", "ContactFit", "fit_contacts", "hub_from_contacts", "slope_from_contacts",
-           "HUB_PRIOR_SD_M"]
+__all__ = ["Contact", "ContactFit", "fit_contacts", "hub_from_contacts", "slope_from_contacts", "HUB_PRIOR_SD_M"]
 
 #: Prior standard deviation of the hub offset from the tracked point, per in-plane component, m.
 HUB_PRIOR_SD_M = 0.04
@@ -81,8 +80,16 @@ def _pivot(r: np.ndarray, t: np.ndarray, plane: np.ndarray) -> tuple[np.ndarray,
     return plane @ sol[:2], sol[2:], math.sqrt(float(res @ res) / n), cov[2:, 2:]
 
 
-def fit_contacts(rot, trans_m: np.ndarray, angle_rad: np.ndarray, axis: np.ndarray, mask: np.ndarray, *,  # noqa: ANN001
-                 alpha_rad: float = math.pi / 4, travel: np.ndarray | None = None) -> ContactFit | None:
+def fit_contacts(
+    rot,
+    trans_m: np.ndarray,
+    angle_rad: np.ndarray,
+    axis: np.ndarray,
+    mask: np.ndarray,
+    *,
+    alpha_rad: float = math.pi / 4,
+    travel: np.ndarray | None = None,
+) -> ContactFit | None:
     """The stances of the frames in ``mask`` (see the module doc); None when the wheel turns under half a step.
 
     ``rot`` (n, 3, 3) or a `RotationStack`, ``trans_m`` (n, 3), ``angle_rad`` (n,) the unwrapped wheel angle,
@@ -160,8 +167,11 @@ def fit_contacts(rot, trans_m: np.ndarray, angle_rad: np.ndarray, axis: np.ndarr
         formal = min(math.sqrt(max(acc[i][3][2, 2], 0.0)) for i in g)
         spread = 1.4826 * float(np.median(np.abs(cs[:, 2] - c[2])))
         sd = math.sqrt(formal**2 + spread**2 + CONTACT_FLOOR_M**2)
-        contacts.append(Contact(c, f, float(np.median([acc[i][4] for i in g])), sd, len(g),
-                                float(np.median([acc[i][2] for i in g]))))
+        contacts.append(
+            Contact(
+                c, f, float(np.median([acc[i][4] for i in g])), sd, len(g), float(np.median([acc[i][2] for i in g]))
+            )
+        )
     return ContactFit(tuple(contacts), plane, a_body, best)
 
 
@@ -190,8 +200,9 @@ def slope_from_contacts(contacts: tuple[Contact, ...], travel: np.ndarray) -> tu
     return float(math.atan(-b)), se, float(np.sqrt(np.mean(res**2)))
 
 
-def hub_from_contacts(fit: ContactFit, alpha_rad: float = math.pi / 4,
-                      prior_sd_m: float = HUB_PRIOR_SD_M) -> tuple[np.ndarray, float, float] | None:
+def hub_from_contacts(
+    fit: ContactFit, alpha_rad: float = math.pi / 4, prior_sd_m: float = HUB_PRIOR_SD_M
+) -> tuple[np.ndarray, float, float] | None:
     """Hub offset in the body frame (in the wheel plane), its standard error (m, largest axis) and the RMS
     residual of the feet about the wheel's star (m), from >= 2 contacts; None with fewer."""
     cs = fit.contacts

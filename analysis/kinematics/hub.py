@@ -104,7 +104,7 @@ class RotationStack:
     def __len__(self) -> int:
         return self.shape[0]
 
-    def __getitem__(self, key) -> np.ndarray:  # noqa: ANN001 - anything numpy takes as rows
+    def __getitem__(self, key) -> np.ndarray:
         a = self.angles[key]
         m = rotations_from_angles(a.reshape(-1, 3), self.convention)
         if self.invalid is not None:
@@ -121,9 +121,9 @@ class RotationStack:
         bad = ~keep if self.invalid is None else self.invalid | ~keep
         return RotationStack(self.angles, self.convention, bad)
 
-    def slices(self):  # noqa: ANN201
+    def slices(self):
         for a in range(0, self.shape[0], self.SLICE):
-            yield a, self[a:a + self.SLICE]
+            yield a, self[a : a + self.SLICE]
 
 
 def _valid_rows(rot: np.ndarray | RotationStack) -> np.ndarray:
@@ -138,7 +138,7 @@ def apply_rotations(rot: np.ndarray | RotationStack, d: np.ndarray) -> np.ndarra
         return np.einsum("nij,j->ni", rot, d)
     out = np.empty((rot.shape[0], 3))
     for a, m in rot.slices():
-        out[a:a + m.shape[0]] = np.einsum("nij,j->ni", m, d)
+        out[a : a + m.shape[0]] = np.einsum("nij,j->ni", m, d)
     return out
 
 
@@ -148,7 +148,7 @@ def axis_in_body(rot: np.ndarray | RotationStack, axis: np.ndarray, dtype: type 
         return (axis @ rot).astype(dtype, copy=False)
     out = np.empty((rot.shape[0], 3), dtype)
     for a, m in rot.slices():
-        out[a:a + m.shape[0]] = axis @ m
+        out[a : a + m.shape[0]] = axis @ m
     return out
 
 
@@ -168,6 +168,7 @@ def _rotvec(m: np.ndarray) -> np.ndarray:
 
 def _increment_rotvec(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation vectors of ``a @ b.T`` for stacks of rotations (k, 3, 3), from the trace and skew part only."""
+
     def dot(i: int, j: int) -> np.ndarray:  # (a @ b.T)[i, j] = row i of a . row j of b
         return np.einsum("nk,nk->n", a[:, i, :], b[:, j, :])
 
@@ -212,13 +213,13 @@ def wheel_angle_from_rotations(rot: np.ndarray | RotationStack) -> tuple[np.ndar
     step = 1 << 18  # pairs per slice: bounds the temporaries
     for a in range(0, ok.size - 1, step):
         b = min(a + step, ok.size - 1)
-        i0, i1 = ok[a:b], ok[a + 1:b + 1]
+        i0, i1 = ok[a:b], ok[a + 1 : b + 1]
         adjacent = i1 - i0 == 1
         lo, hi = int(i0[0]), int(i0[-1])
-        m = rot[lo:hi + 2]
+        m = rot[lo : hi + 2]
         part = _increment_rotvec(m[1:], m[:-1])
         del m
-        inc[a:a + i0.size][adjacent] = part[i0[adjacent] - lo]
+        inc[a : a + i0.size][adjacent] = part[i0[adjacent] - lo]
         jump = np.flatnonzero(~adjacent)
         if jump.size:
             inc[a + jump] = _increment_rotvec(rot[i1[jump]], rot[i0[jump]])
@@ -262,7 +263,7 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
     if full.size == 0:
         raise ValueError("no frame shows all markers: no reference shape")
     ref = p[full[0]]
-    c_ref = ref.mean(axis=0)
+    ref.mean(axis=0)
     good = vis.sum(axis=1) >= min(min_markers, k)
     rot, hub, res = _kabsch_frames(ref, p, vis)
     n_repaired = n_dropped = 0
@@ -273,8 +274,15 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
     angle = axis = None
     if k >= 3:
         angle, axis = wheel_angle_from_rotations(rot)
-    return HubEstimate(hub, angle, axis, f"rigid fit of {k} markers (centroid of the reference frame)",
-                       rotation=rot, n_relabelled=n_repaired, n_inconsistent=n_dropped)
+    return HubEstimate(
+        hub,
+        angle,
+        axis,
+        f"rigid fit of {k} markers (centroid of the reference frame)",
+        rotation=rot,
+        n_relabelled=n_repaired,
+        n_inconsistent=n_dropped,
+    )
 
 
 def _rot_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -283,8 +291,9 @@ def _rot_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(c, -1.0, 1.0))
 
 
-def _relabel(ref: np.ndarray, p: np.ndarray, vis: np.ndarray, good: np.ndarray, rot: np.ndarray, hub: np.ndarray,
-             res: np.ndarray) -> tuple[int, int]:
+def _relabel(
+    ref: np.ndarray, p: np.ndarray, vis: np.ndarray, good: np.ndarray, rot: np.ndarray, hub: np.ndarray, res: np.ndarray
+) -> tuple[int, int]:
     """Rigid-body consistency of a marker set, in place: a frame whose markers do not fit the reference shape
     (RMS above `RIGID_TOL_M` or 8x the median) or whose rotation jumps from the last consistent frame (more than
     `MAX_TURN_PER_FRAME_RAD` per frame: a symmetric marker layout fits a swap with a flipped pose) had labels
@@ -333,7 +342,7 @@ def _relabel(ref: np.ndarray, p: np.ndarray, vis: np.ndarray, good: np.ndarray, 
             break  # the whole set jumps: a seam between two takes, not a relabelling (left to the seam check)
         best = None
         for perm in swaps:
-            r2, h2, e2 = _kabsch_frames(ref, p[i:i + 1, perm], vis[i:i + 1, perm])
+            r2, h2, e2 = _kabsch_frames(ref, p[i : i + 1, perm], vis[i : i + 1, perm])
             t2 = float(_rot_angle(rot[last_i], r2[0])) if last_i is not None else 0.0
             if e2[0] <= tol and t2 <= lim and (best is None or e2[0] < best[2]):
                 best = (r2[0], h2[0], float(e2[0]))
@@ -376,9 +385,15 @@ def _kabsch_frames(ref: np.ndarray, p: np.ndarray, vis: np.ndarray) -> tuple[np.
     return rot, hub, res
 
 
-def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: float = np.pi / 4,
-                        harmonics: int = 3, mask: np.ndarray | None = None,
-                        angle_axis: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, float, float]:
+def estimate_hub_offset(
+    rot: np.ndarray,
+    trans_m: np.ndarray,
+    *,
+    alpha_rad: float = np.pi / 4,
+    harmonics: int = 3,
+    mask: np.ndarray | None = None,
+    angle_axis: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, float, float]:
     """Hub offset in the object frame of a wheel rolling down a plane.
 
     A body point off the hub by e rises and falls by e once per turn, the hub only by the per-step bumps
@@ -400,8 +415,9 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
     if mask is not None:
         ok &= mask
     if angle_axis is None:
-        angle, axis = wheel_angle_from_rotations(rot.masked(ok) if isinstance(rot, RotationStack)
-                                                 else np.where(ok[:, None, None], rot, np.nan))
+        angle, axis = wheel_angle_from_rotations(
+            rot.masked(ok) if isinstance(rot, RotationStack) else np.where(ok[:, None, None], rot, np.nan)
+        )
     else:
         angle, axis = angle_axis
         angle = np.where(ok, angle, np.nan)
@@ -422,7 +438,9 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
     e2 = np.cross(a_body, e1)
     plane = np.column_stack([e1, e2])  # (3, 2)
     k = np.arange(1, harmonics + 1) * (2 * np.pi / alpha_rad)
-    bumps = np.column_stack([np.cos(np.outer(ang, k)), np.sin(np.outer(ang, k))]) if harmonics else np.zeros((ang.size, 0))
+    bumps = (
+        np.column_stack([np.cos(np.outer(ang, k)), np.sin(np.outer(ang, k))]) if harmonics else np.zeros((ang.size, 0))
+    )
     d = np.zeros(3)
     res = np.zeros(1)
     for _ in range(2):
@@ -443,9 +461,15 @@ def estimate_hub_offset(rot: np.ndarray, trans_m: np.ndarray, *, alpha_rad: floa
     return d, float(np.sqrt(np.mean(res**2))), total
 
 
-def hub_from_pose(rot: np.ndarray, trans: np.ndarray, *, hub_offset_m: np.ndarray | None = None,
-                  mask: np.ndarray | None = None, what: str = "object origin",
-                  angle_axis: tuple[np.ndarray, np.ndarray] | None = None) -> HubEstimate:
+def hub_from_pose(
+    rot: np.ndarray,
+    trans: np.ndarray,
+    *,
+    hub_offset_m: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    what: str = "object origin",
+    angle_axis: tuple[np.ndarray, np.ndarray] | None = None,
+) -> HubEstimate:
     """Hub = ``trans + rot @ offset``: the offset given, or fitted as the centre of rotation in the wheel plane.
 
     ``rot`` (n, 3, 3) world-from-body, ``trans`` (n, 3) m the path of the body point called ``what``; the fit
@@ -457,16 +481,23 @@ def hub_from_pose(rot: np.ndarray, trans: np.ndarray, *, hub_offset_m: np.ndarra
     residual = None
     if hub_offset_m is not None:
         d = np.asarray(hub_offset_m, dtype=np.float64).reshape(3)
-        source = (f"{what} (given offset 0)" if not d.any()
-                  else f"{what} + given offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm")
+        source = (
+            f"{what} (given offset 0)"
+            if not d.any()
+            else f"{what} + given offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm"
+        )
     elif total < MIN_ROTATION_FOR_OFFSET_RAD:
         d = np.zeros(3)
-        source = (f"{what} (it turns only {np.degrees(total):.1f} deg: the centre of rotation is not observable, "
-                  "no offset applied)")
+        source = (
+            f"{what} (it turns only {np.degrees(total):.1f} deg: the centre of rotation is not observable, "
+            "no offset applied)"
+        )
     else:
         d, residual, _ = estimate_hub_offset(rot, trans, mask=mask, angle_axis=(angle, axis))
-        source = (f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
-                  f"(centre of rotation fitted on the walking window, residual {residual * 1e3:.2f} mm)")
+        source = (
+            f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
+            f"(centre of rotation fitted on the walking window, residual {residual * 1e3:.2f} mm)"
+        )
     hub = trans + apply_rotations(rot, d)
     return HubEstimate(hub, angle, axis, source, d, residual, rot)
 
@@ -495,15 +526,22 @@ def hub_from_object(
     residual = None
     if hub_offset_m is not None:
         d = np.asarray(hub_offset_m, dtype=np.float64).reshape(3)
-        source = ("object origin (given offset 0)" if not d.any()
-                  else "object origin + given offset [{:.1f}, {:.1f}, {:.1f}] mm".format(*(d * 1e3)))
+        source = (
+            "object origin (given offset 0)"
+            if not d.any()
+            else "object origin + given offset [{:.1f}, {:.1f}, {:.1f}] mm".format(*(d * 1e3))
+        )
     elif total < MIN_ROTATION_FOR_OFFSET_RAD:
         d = np.zeros(3)
-        source = (f"object origin (it turns only {np.degrees(total):.1f} deg: a hub offset is not observable, "
-                  "none applied)")
+        source = (
+            f"object origin (it turns only {np.degrees(total):.1f} deg: a hub offset is not observable, none applied)"
+        )
     else:
         d, residual, _ = estimate_hub_offset(rot, trans)
-        source = ("object origin + estimated offset [{:.1f}, {:.1f}, {:.1f}] mm (hub height fit, residual {:.2f} mm)"
-                  .format(*(d * 1e3), residual * 1e3))
+        source = (
+            "object origin + estimated offset [{:.1f}, {:.1f}, {:.1f}] mm (hub height fit, residual {:.2f} mm)".format(
+                *(d * 1e3), residual * 1e3
+            )
+        )
     hub = trans + np.einsum("nij,j->ni", rot, d)
     return HubEstimate(hub, angle, axis, source, d, residual, rot)

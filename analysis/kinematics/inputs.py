@@ -7,10 +7,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rimless.errors import UserError
-
 from rimless.analysis.io.trial import read_trial
 from rimless.analysis.kinematics.build import import_trial
+from rimless.errors import UserError
 
 __all__ = ["InputRow", "load_input", "trial_warnings"]
 
@@ -27,13 +26,25 @@ class InputRow:
     warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"file": self.file, "kind": self.kind, "status": self.status, "reason": self.reason,
-                             "warnings": self.warnings}
+        d: dict[str, Any] = {
+            "file": self.file,
+            "kind": self.kind,
+            "status": self.status,
+            "reason": self.reason,
+            "warnings": self.warnings,
+        }
         if self.trial is not None:
             m = self.trial.meta
-            d.update(frames=m.n_frames, rate_hz=m.rate_hz, slope_deg=m.slope_deg, slope_source=m.slope_source,
-                     hub_source=m.hub_source, gap_frames=m.n_gap_frames, interpolated_frames=m.n_interpolated_frames,
-                     steps=int(self.trial.step_period_s.size))
+            d.update(
+                frames=m.n_frames,
+                rate_hz=m.rate_hz,
+                slope_deg=m.slope_deg,
+                slope_source=m.slope_source,
+                hub_source=m.hub_source,
+                gap_frames=m.n_gap_frames,
+                interpolated_frames=m.n_interpolated_frames,
+                steps=int(self.trial.step_period_s.size),
+            )
         return d
 
 
@@ -46,8 +57,10 @@ def trial_warnings(trial: Any) -> list[str]:
     if m.n_gap_frames:
         w.append(f"{m.n_gap_frames} frame(s) without a hub (gaps)")
     if m.n_interpolated_frames:
-        w.append(f"{m.n_interpolated_frames} frame(s) interpolated over gaps up to {m.max_gap_s * 1e3:g} ms "
-                 "(not used in the RMS)")
+        w.append(
+            f"{m.n_interpolated_frames} frame(s) interpolated over gaps up to {m.max_gap_s * 1e3:g} ms "
+            "(not used in the RMS)"
+        )
     return w
 
 

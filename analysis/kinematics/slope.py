@@ -73,8 +73,9 @@ def travel_direction(hub_m: np.ndarray) -> np.ndarray:
     return np.array([u[0], u[1], 0.0])
 
 
-def robust_line(x: np.ndarray, y: np.ndarray, *, slope: float | None = None,
-                iterations: int = 20) -> tuple[float, float, np.ndarray]:
+def robust_line(
+    x: np.ndarray, y: np.ndarray, *, slope: float | None = None, iterations: int = 20
+) -> tuple[float, float, np.ndarray]:
     """Huber-weighted line ``y = a + b x`` (b fixed when ``slope`` is given). Returns a, b, residuals."""
     w = np.ones_like(x)
     a = b = 0.0
@@ -95,8 +96,13 @@ def robust_line(x: np.ndarray, y: np.ndarray, *, slope: float | None = None,
     return a, b, y - a - b * x
 
 
-def fit_slope(hub_m: np.ndarray, *, slope_deg: float | None = None, points_m: np.ndarray | None = None,
-              travel: np.ndarray | None = None) -> SlopeFrame:
+def fit_slope(
+    hub_m: np.ndarray,
+    *,
+    slope_deg: float | None = None,
+    points_m: np.ndarray | None = None,
+    travel: np.ndarray | None = None,
+) -> SlopeFrame:
     """Slope frame from the hub path: robust line of Z against horizontal distance along the travel.
 
     Parameters
@@ -110,8 +116,11 @@ def fit_slope(hub_m: np.ndarray, *, slope_deg: float | None = None, points_m: np
     u = travel_direction(hub_m) if travel is None else travel
     ok = np.flatnonzero(~np.isnan(hub_m).any(axis=1))
     # The whole-path fit is a first guess: an even subsample of at most MAX_PATH_POINTS points is enough.
-    pts = (hub_m[ok[:: max(1, int(np.ceil(ok.size / MAX_PATH_POINTS)))]] if points_m is None
-           else np.asarray(points_m, dtype=np.float64))
+    pts = (
+        hub_m[ok[:: max(1, int(np.ceil(ok.size / MAX_PATH_POINTS)))]]
+        if points_m is None
+        else np.asarray(points_m, dtype=np.float64)
+    )
     if pts.shape[0] < 2:
         raise ValueError("fewer than 2 hub samples: cannot fit the slope")
     p0 = hub_m[ok[0]]
@@ -121,9 +130,15 @@ def fit_slope(hub_m: np.ndarray, *, slope_deg: float | None = None, points_m: np
     a, b, r = robust_line(s, z, slope=given)
     phi = float(np.arctan(-b))
     origin = p0 + np.array([0.0, 0.0, a - p0[2]])
-    source = "given" if slope_deg is not None else (
-        "robust line through the whole hub path" if points_m is None
-        else f"robust line through the hub at {pts.shape[0]} CoM-height minima")
+    source = (
+        "given"
+        if slope_deg is not None
+        else (
+            "robust line through the whole hub path"
+            if points_m is None
+            else f"robust line through the hub at {pts.shape[0]} CoM-height minima"
+        )
+    )
     resid = float(np.sqrt(np.mean(r**2)))
     se = float("nan")
     if given is None and s.size > 2:

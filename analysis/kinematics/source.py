@@ -16,9 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rimless.errors import UserError
-
 from rimless.analysis.io.vicon_file import Section, ViconFile
+from rimless.errors import UserError
 
 __all__ = ["SourceChoice", "choose_source", "UNLABELLED", "zeros_to_nan"]
 
@@ -60,7 +59,7 @@ def zeros_to_nan(values: np.ndarray, width: int) -> np.ndarray:
     """Rows of each ``width``-wide group whose values are all exactly 0 become NaN (occlusions written as 0)."""
     v = np.array(values, float, copy=True)
     for g in range(v.shape[1] // width):
-        block = v[:, g * width:(g + 1) * width]
+        block = v[:, g * width : (g + 1) * width]
         block[(block == 0).all(axis=1)] = np.nan
     return v
 
@@ -149,11 +148,13 @@ def _check_span(vf: ViconFile, sec: Section, subj: str, names: list[str]) -> Non
         raise SourceRefused(
             f"{vf.path}:{sec.units_line}:1: the units row says {'/'.join(unit)}, but the markers of "
             f"{subj or 'the file'} lie within {span * 1e3:.2g} mm of each other (a wheel is about 0.2-0.5 m across):"
-            " the numbers are likely in m; fix the units row")
+            " the numbers are likely in m; fix the units row"
+        )
 
 
-def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None, *, label: str = "--object"
-                  ) -> SourceChoice:
+def choose_source(
+    vf: ViconFile, obj: str | None, markers: Sequence[str] | None, *, label: str = "--object"
+) -> SourceChoice:
     """Pick the wheel among the file's objects and marker sets (see the module doc).
 
     ``obj``/``markers`` force a choice (CLI ``--object``/``--markers``); anything missing is refused naming
@@ -196,8 +197,10 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
             elif moving:
                 cands.append(("markers", sec, subj or None, tuple(moving)))
     if unlabelled:
-        warns.append(f"{len(unlabelled)} unlabelled marker(s) ignored ({', '.join(unlabelled[:4])}"
-                     f"{', ...' if len(unlabelled) > 4 else ''})")
+        warns.append(
+            f"{len(unlabelled)} unlabelled marker(s) ignored ({', '.join(unlabelled[:4])}"
+            f"{', ...' if len(unlabelled) > 4 else ''})"
+        )
 
     # forced choices
     if markers:
@@ -205,38 +208,63 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
         if sec is None:
             have = traj_sec[0].groups() if traj_sec else []
             missing = [m for m in markers if m not in have]
-            raise SourceRefused(f"{vf.path}: --markers {','.join(markers)}: "
-                                + (f"marker(s) {missing} not in the Trajectories section (line {traj_sec[0].line})"
-                                   if traj_sec else "the file has no Trajectories section"))
+            raise SourceRefused(
+                f"{vf.path}: --markers {','.join(markers)}: "
+                + (
+                    f"marker(s) {missing} not in the Trajectories section (line {traj_sec[0].line})"
+                    if traj_sec
+                    else "the file has no Trajectories section"
+                )
+            )
         chosen = SourceChoice(sec, None, tuple(markers), "markers given with --markers")
         return _with_ramp(vf, chosen, objects_sec, static_markers, warns, exclude_object=None)
     if obj is not None:
-        for kind, sec, o, mk in cands:
+        for kind, sec, o, mk in cands:  # noqa: B007
             if kind == "object" and o == obj:
-                return _with_ramp(vf, SourceChoice(sec, obj, (), f"object {obj} given with --object"),
-                                  objects_sec, static_markers, warns, exclude_object=obj)
+                return _with_ramp(
+                    vf,
+                    SourceChoice(sec, obj, (), f"object {obj} given with --object"),
+                    objects_sec,
+                    static_markers,
+                    warns,
+                    exclude_object=obj,
+                )
         for kind, sec, o, mk in cands:
             if kind == "markers" and o == obj:
-                return _with_ramp(vf, SourceChoice(sec, None, mk, f"markers of subject {obj} given with --object"),
-                                  objects_sec, static_markers, warns, exclude_object=None)
+                return _with_ramp(
+                    vf,
+                    SourceChoice(sec, None, mk, f"markers of subject {obj} given with --object"),
+                    objects_sec,
+                    static_markers,
+                    warns,
+                    exclude_object=None,
+                )
         names = [o for k, _, o, _ in cands if o]
-        raise SourceRefused(f"{vf.path}: --object {obj}: no object or marker subject of that name; found "
-                            f"{', '.join(names) or 'none'}")
+        raise SourceRefused(
+            f"{vf.path}: --object {obj}: no object or marker subject of that name; found {', '.join(names) or 'none'}"
+        )
 
     scored = []
     if len(cands) == 1 and not too_many:
         # One candidate: take it unless it is static (its rotation is checked by the step detection).
         kind, sec, o, mk = cands[0]
         # zeros_to_nan is row by row: applied to the rows `_extent` measures only
-        ext = (_extent(zeros_to_nan(_subsample(sec.get(o, POSE)), 6)[:, 3:]) if kind == "object"
-               else max(_extent(zeros_to_nan(_subsample(sec.get(m, XYZ)), 3)) for m in mk))
+        ext = (
+            _extent(zeros_to_nan(_subsample(sec.get(o, POSE)), 6)[:, 3:])
+            if kind == "object"
+            else max(_extent(zeros_to_nan(_subsample(sec.get(m, XYZ)), 3)) for m in mk)
+        )
         if ext >= STATIC_EXTENT_M:
             what = f"object {o}" if kind == "object" else f"markers {','.join(mk)}"
-            chosen = SourceChoice(sec, o if kind == "object" else None, mk if kind == "markers" else (),
-                                  f"{what} ({sec.kind}, line {sec.line}): the only moving candidate "
-                                  f"(moves {ext:.2f} m)")
-            return _with_ramp(vf, chosen, objects_sec, static_markers, warns,
-                              exclude_object=o if kind == "object" else None)
+            chosen = SourceChoice(
+                sec,
+                o if kind == "object" else None,
+                mk if kind == "markers" else (),
+                f"{what} ({sec.kind}, line {sec.line}): the only moving candidate (moves {ext:.2f} m)",
+            )
+            return _with_ramp(
+                vf, chosen, objects_sec, static_markers, warns, exclude_object=o if kind == "object" else None
+            )
     for kind, sec, o, mk in cands:
         if kind == "object":
             data = zeros_to_nan(sec.get(o, POSE), 6)
@@ -251,44 +279,76 @@ def choose_source(vf: ViconFile, obj: str | None, markers: Sequence[str] | None,
         scored.append((kind, sec, o, mk, ext, turn))
     walkers = [c for c in scored if c[4] >= 0.1 and (np.isnan(c[5]) or c[5] >= MIN_TURN_RAD)]
     if not walkers:
-        found = [f"{'object ' + str(o) if k == 'object' else (o or '(no subject)') + ': ' + str(len(mk))} "
-                 f"(moves {e * 1e3:.0f} mm, turns {np.degrees(tn):.0f} deg)" for k, _, o, mk, e, tn in scored]
+        found = [
+            f"{'object ' + str(o) if k == 'object' else (o or '(no subject)') + ': ' + str(len(mk))} "
+            f"(moves {e * 1e3:.0f} mm, turns {np.degrees(tn):.0f} deg)"
+            for k, _, o, mk, e, tn in scored
+        ]
         found += [f"{t} markers (too many for a wheel)" for t in too_many]
         if not found and static_markers:
             names = ", ".join(m for _, m in static_markers[:6]) + (", ..." if len(static_markers) > 6 else "")
-            raise SourceRefused(f"{vf.path}: nothing moves like the wheel: only static markers ({names}: each moves "
-                                f"less than {STATIC_EXTENT_M * 1e3:.0f} mm); choose with --markers A,B,C,D")
+            raise SourceRefused(
+                f"{vf.path}: nothing moves like the wheel: only static markers ({names}: each moves "
+                f"less than {STATIC_EXTENT_M * 1e3:.0f} mm); choose with --markers A,B,C,D"
+            )
         if not found:
             others = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
-            raise SourceRefused(f"{vf.path}: no usable trajectory: no Objects or Trajectories section with a "
-                                f"moving object or marker set, only {others}")
-        raise SourceRefused(f"{vf.path}: nothing moves like the wheel (turning more than "
-                            f"{np.degrees(MIN_TURN_RAD):.0f} deg while it travels); found {'; '.join(found)}; "
-                            "choose with --object NAME or --markers A,B,C,D")
+            raise SourceRefused(
+                f"{vf.path}: no usable trajectory: no Objects or Trajectories section with a "
+                f"moving object or marker set, only {others}"
+            )
+        raise SourceRefused(
+            f"{vf.path}: nothing moves like the wheel (turning more than "
+            f"{np.degrees(MIN_TURN_RAD):.0f} deg while it travels); found {'; '.join(found)}; "
+            "choose with --object NAME or --markers A,B,C,D"
+        )
     # Prefer a rigid body that turns (objects, then marker sets of 3 or more), the largest rotation first.
     walkers.sort(key=lambda c: (np.isnan(c[5]), -(c[5] if not np.isnan(c[5]) else 0), c[0] != "object"))
     kind, sec, o, mk, ext, turn = walkers[0]
     others = [c for c in scored if c is not walkers[0]]
     what = f"object {o}" if kind == "object" else f"markers {','.join(mk)}"
-    motion = (f"turns {np.degrees(turn):.0f} deg while it moves {ext:.2f} m" if not np.isnan(turn)
-              else f"moves {ext:.2f} m (one marker: no rotation)")
+    motion = (
+        f"turns {np.degrees(turn):.0f} deg while it moves {ext:.2f} m"
+        if not np.isnan(turn)
+        else f"moves {ext:.2f} m (one marker: no rotation)"
+    )
     reason = f"{what} ({sec.kind}, line {sec.line}) {motion}"
     if others:
         reason += "; also found: " + ", ".join(
             (f"object {c[2]}" if c[0] == "object" else f"markers {','.join(c[3])}")
-            + (" (static)" if c[4] < STATIC_EXTENT_M else f" (turns {np.degrees(c[5]):.0f} deg)"
-               if not np.isnan(c[5]) else " (moves)")
-            for c in others)
+            + (
+                " (static)"
+                if c[4] < STATIC_EXTENT_M
+                else f" (turns {np.degrees(c[5]):.0f} deg)"
+                if not np.isnan(c[5])
+                else " (moves)"
+            )
+            for c in others
+        )
     if len(walkers) > 1:
         warns.append(f"{len(walkers)} candidates move like a wheel; took {what} (choose with --object/--markers)")
     chosen = SourceChoice(sec, o if kind == "object" else None, mk if kind == "markers" else (), reason)
-    return _with_ramp(vf, chosen, objects_sec, static_markers, warns, exclude_object=o if kind == "object" else None,
-                      static_objects=static_objects)
+    return _with_ramp(
+        vf,
+        chosen,
+        objects_sec,
+        static_markers,
+        warns,
+        exclude_object=o if kind == "object" else None,
+        static_objects=static_objects,
+    )
 
 
-def _with_ramp(vf: ViconFile, chosen: SourceChoice, objects_sec: list[Section],
-               static_markers: list[tuple[Section, str]], warns: list[str], *, exclude_object: str | None,
-               static_objects: list[tuple[Section, str]] | None = None) -> SourceChoice:
+def _with_ramp(
+    vf: ViconFile,
+    chosen: SourceChoice,
+    objects_sec: list[Section],
+    static_markers: list[tuple[Section, str]],
+    warns: list[str],
+    *,
+    exclude_object: str | None,
+    static_objects: list[tuple[Section, str]] | None = None,
+) -> SourceChoice:
     if static_objects is None:
         static_objects = []
         for sec in objects_sec:

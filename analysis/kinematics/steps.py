@@ -16,8 +16,7 @@ import numpy as np
 
 from rimless.analysis.io.trial import ALPHA_RAD
 
-__all__ = ["StepResult", "noise_sigma", "find_com_minima", "refine_cusp", "refine_cusps", "detect_steps",
-           "ALPHA_RAD"]
+__all__ = ["StepResult", "noise_sigma", "find_com_minima", "refine_cusp", "refine_cusps", "detect_steps", "ALPHA_RAD"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,11 +70,11 @@ def refine_cusp(t: np.ndarray, y: np.ndarray, i: int, half: int) -> tuple[float,
     one sample of i.
     """
     lo, hi = max(i - half, 0), min(i + half, y.size - 1)
-    if i - lo < 3 or hi - i < 3 or np.isnan(y[lo:hi + 1]).any():
+    if i - lo < 3 or hi - i < 3 or np.isnan(y[lo : hi + 1]).any():
         return float(t[i]), float(y[i])
-    tl, tr = t[lo:i + 1] - t[i], t[i:hi + 1] - t[i]
-    pl = np.polyfit(tl, y[lo:i + 1], 2)
-    pr = np.polyfit(tr, y[i:hi + 1], 2)
+    tl, tr = t[lo : i + 1] - t[i], t[i : hi + 1] - t[i]
+    pl = np.polyfit(tl, y[lo : i + 1], 2)
+    pr = np.polyfit(tr, y[i : hi + 1], 2)
     roots = np.roots(pl - pr) if np.any(pl - pr) else np.zeros(0)
     roots = roots[np.isreal(roots)].real
     roots = roots[(roots >= t[i - 1] - t[i]) & (roots <= t[i + 1] - t[i])]
@@ -144,8 +143,12 @@ def refine_cusps(t: np.ndarray, y: np.ndarray, idx: np.ndarray, half: int) -> tu
     return tc, yc
 
 
-def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: float | None = None,
-                    ) -> tuple[np.ndarray, np.ndarray, float]:
+def find_com_minima(
+    time_s: np.ndarray,
+    height_m: np.ndarray,
+    *,
+    min_period_s: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Prominent minima of the CoM height (candidate impacts).
 
     Returns (indices, refined times in s, noise sigma in m). A minimum must stand out of the noise by
@@ -173,8 +176,8 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
     # both sides: drop it.
     nan_upto = np.cumsum(~ok, dtype=np.int32 if y.size < 2**31 else np.int64)  # NaN samples in y[:k + 1]
 
-    def nan_before(k: np.ndarray) -> np.ndarray:  # NaN samples in y[:k]
-        return np.where(k > 0, nan_upto[np.maximum(k - 1, 0)], 0)
+    def nan_before(k: np.ndarray, counts: np.ndarray = nan_upto) -> np.ndarray:  # NaN samples in y[:k]
+        return np.where(k > 0, counts[np.maximum(k - 1, 0)], 0)
 
     lo, hi = np.clip(idx - half, 0, y.size), np.clip(idx + half + 1, 0, y.size)
     whole = (idx - half >= 0) & (idx + half < y.size) & (nan_before(hi) - nan_before(lo) == 0)
@@ -184,15 +187,17 @@ def find_com_minima(time_s: np.ndarray, height_m: np.ndarray, *, min_period_s: f
     return idx.astype(np.int64), times, sigma
 
 
-def _observed_impacts(t: np.ndarray, observed: np.ndarray, times: np.ndarray, j: np.ndarray,
-                      ok_idx: np.ndarray) -> np.ndarray:
+def _observed_impacts(
+    t: np.ndarray, observed: np.ndarray, times: np.ndarray, j: np.ndarray, ok_idx: np.ndarray
+) -> np.ndarray:
     """An impact is observed when the two samples bracketing it are real, adjacent frames."""
     i0, i1 = ok_idx[j - 1], ok_idx[j]
     return (i1 - i0 == 1) & observed[i0] & observed[i1]
 
 
-def _periods(impact_k: np.ndarray, times: np.ndarray, t: np.ndarray, unbridged: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
+def _periods(
+    impact_k: np.ndarray, times: np.ndarray, t: np.ndarray, unbridged: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(periods, step index of each) between consecutive observed impacts with no unbridged gap between."""
     if times.size < 2:
         return np.zeros(0), np.zeros(0, np.int64)
@@ -254,7 +259,8 @@ def detect_steps(
         if total < alpha_rad:  # two impacts are alpha apart: a shorter turn cannot hold two
             return StepResult.refuse(
                 f"the wheel turns only {np.degrees(total):.1f} deg, less than one step of "
-                f"{np.degrees(alpha_rad):.0f} deg: fewer than two steps (impacts)")
+                f"{np.degrees(alpha_rad):.0f} deg: fewer than two steps (impacts)"
+            )
         tw = t[inwin & ~gap]
         # the rate of the forward turn only: a wheel that stalls and rocks back spends time without turning on
         i_top = int(np.argmax(aw))
@@ -266,7 +272,8 @@ def detect_steps(
         if idx.size < 1:  # one clear minimum fixes the phase: the impacts then follow every alpha of rotation
             return StepResult.refuse(
                 f"the CoM height shows no clear minimum (noise {sigma * 1e3:.2f} mm): cannot place the "
-                "impacts on the rotation")
+                "impacts on the rotation"
+            )
         ok_idx = np.flatnonzero(~gap)
         a_min = np.interp(tmin, t[ok_idx], ang[ok_idx])
         res = np.mod(a_min, alpha_rad) / alpha_rad * 2 * np.pi
@@ -275,7 +282,8 @@ def detect_steps(
         if np.max(spread) > 2 * np.pi / 5:
             return StepResult.refuse(
                 f"CoM minima do not repeat every {np.degrees(alpha_rad):.0f} deg of rotation "
-                f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg)")
+                f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg)"
+            )
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]
         del ok_idx
@@ -298,11 +306,19 @@ def detect_steps(
         seen &= (times > tv[0] + 0.5 * dt_frame) & (times < tv[-1] - 0.5 * dt_frame)
         times, ks = times[seen], ks[seen]
         if times.size < 2:
-            return StepResult.refuse("fewer than two observed impacts (the others fall in gaps or on the "
-                                     "first or last frame)")
+            return StepResult.refuse(
+                "fewer than two observed impacts (the others fall in gaps or on the first or last frame)"
+            )
         periods, pk = _periods(ks, times, t, unbridged)
-        return StepResult(times, periods, "rotation", None, float(phase + alpha_rad * ks[0]),
-                          impact_step=ks - ks[0], period_step=pk - ks[0])
+        return StepResult(
+            times,
+            periods,
+            "rotation",
+            None,
+            float(phase + alpha_rad * ks[0]),
+            impact_step=ks - ks[0],
+            period_step=pk - ks[0],
+        )
 
     idx, tmin, sigma = find_com_minima(t, yw)
     if idx.size < 2:
@@ -311,8 +327,8 @@ def detect_steps(
     med = float(np.median(d))
     if np.any(d < 0.6 * med):
         return StepResult.refuse(
-            f"CoM minima are irregular (periods {d.min():.3f}-{d.max():.3f} s around {med:.3f} s): "
-            "spurious minima")
+            f"CoM minima are irregular (periods {d.min():.3f}-{d.max():.3f} s around {med:.3f} s): spurious minima"
+        )
     # A minimum missed in a gap shows as a period of about twice the median: count the steps.
     ks = np.concatenate([[0], np.cumsum(np.maximum(np.round(d / med), 1).astype(np.int64))])
     seen = obs[idx] & obs[np.clip(idx - 1, 0, None)] & obs[np.clip(idx + 1, None, t.size - 1)]

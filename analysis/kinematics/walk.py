@@ -70,8 +70,9 @@ def _progress(time_s: np.ndarray, angle_rad: np.ndarray | None, hub_m: np.ndarra
     return (xy - xy[ok][0]) @ u / leg_m
 
 
-def find_motion(time_s: np.ndarray, angle_rad: np.ndarray | None, hub_m: np.ndarray, *,
-                leg_length_m: float = 0.237) -> Motion:
+def find_motion(
+    time_s: np.ndarray, angle_rad: np.ndarray | None, hub_m: np.ndarray, *, leg_length_m: float = 0.237
+) -> Motion:
     """Release and end of the forward motion (see `Motion`); needs at least two valid frames."""
     p = _progress(time_s, angle_rad, hub_m, leg_length_m)
     ok = np.flatnonzero(np.isfinite(p))
@@ -95,9 +96,15 @@ def find_motion(time_s: np.ndarray, angle_rad: np.ndarray | None, hub_m: np.ndar
     return Motion(release, max(end, release), held)
 
 
-def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: np.ndarray | None,
-                    window: tuple[int, int], *, axis_tilt_rad: np.ndarray | None = None,
-                    noise_m: float = 0.0) -> Ending:
+def classify_ending(
+    time_s: np.ndarray,
+    hub_slope_m: np.ndarray,
+    progress_rad: np.ndarray | None,
+    window: tuple[int, int],
+    *,
+    axis_tilt_rad: np.ndarray | None = None,
+    noise_m: float = 0.0,
+) -> Ending:
     """Classify what happens after the walking window (indices ``window``, last = the last impact).
 
     ``hub_slope_m`` is the hub in the slope frame (y = height above the impact line); ``progress_rad`` the
@@ -110,11 +117,11 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
     i0, i1 = window
     walk = ok.copy()
     walk[:i0] = False
-    walk[i1 + 1:] = False
+    walk[i1 + 1 :] = False
     if walk.sum() < 3:
         return Ending("unknown", "too few frames in the walking window")
     post = ok.copy()
-    post[:i1 + 1] = False
+    post[: i1 + 1] = False
     h_lo, h_hi = np.percentile(y[walk], [0.5, 99.5])
     z_mid = float(np.median(z[walk]))
     if not post.any():
@@ -132,19 +139,25 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
     if t_lift is not None and t_lift <= t_tip:
         k = int(np.argmax(up & (t >= t_lift)))
         side = float(np.nanmax(np.abs(np.where(post, z - z_mid, np.nan))))
-        return Ending("caught", f"the hub rises {(np.nanmax(np.where(post, y, np.nan)) - h_hi) * 1e3:.0f} mm "
-                                f"above the walking band from {t[k]:.2f} s: lifted off the slope"
-                                + (f" (moved {side * 1e3:.0f} mm sideways while lifted)" if side > FALL_DISTANCE_M
-                                   else ""))
+        return Ending(
+            "caught",
+            f"the hub rises {(np.nanmax(np.where(post, y, np.nan)) - h_hi) * 1e3:.0f} mm "
+            f"above the walking band from {t[k]:.2f} s: lifted off the slope"
+            + (f" (moved {side * 1e3:.0f} mm sideways while lifted)" if side > FALL_DISTANCE_M else ""),
+        )
     fell = post & (lateral | dropped | tilted)
     if fell.any():
         k = int(np.argmax(fell))
-        why = ("the wheel axis tilts by more than "
-               f"{np.degrees(FALL_TILT_RAD):.0f} deg" if tilted[k] else
-               f"the hub drops {(h_lo - y[k]) * 1e3:.0f} mm below the walking band" if dropped[k] else
-               f"the hub moves {abs(z[k] - z_mid) * 1e3:.0f} mm sideways")
-        return Ending("fell", f"{why} at {t[k]:.2f} s: the wheel left its plane of motion (tipped about the travel "
-                              "axis)")
+        why = (
+            f"the wheel axis tilts by more than {np.degrees(FALL_TILT_RAD):.0f} deg"
+            if tilted[k]
+            else f"the hub drops {(h_lo - y[k]) * 1e3:.0f} mm below the walking band"
+            if dropped[k]
+            else f"the hub moves {abs(z[k] - z_mid) * 1e3:.0f} mm sideways"
+        )
+        return Ending(
+            "fell", f"{why} at {t[k]:.2f} s: the wheel left its plane of motion (tipped about the travel axis)"
+        )
     last_valid = int(np.flatnonzero(ok)[-1])
     trailing_gap_s = float(t[-1] - t[last_valid])
     if progress_rad is not None:
@@ -156,25 +169,31 @@ def classify_ending(time_s: np.ndarray, hub_slope_m: np.ndarray, progress_rad: n
         back = float(np.nanmax(progress_rad[post | walk]) - progress_rad[last_valid])
         # A stall: the angular velocity goes through zero and back (the wheel rocks back), checked first.
         if back > MOVE_TOL_RAD:
-            return Ending("stalled", f"after the last impact the wheel turns back {np.degrees(back):.1f} deg "
-                                     "(its angular velocity goes through zero and reverses): a stall")
-        still = (np.isfinite(speed_end) and speed_walk > 0 and speed_end >= WALKING_SPEED_FRACTION * speed_walk)
+            return Ending(
+                "stalled",
+                f"after the last impact the wheel turns back {np.degrees(back):.1f} deg "
+                "(its angular velocity goes through zero and reverses): a stall",
+            )
+        still = np.isfinite(speed_end) and speed_walk > 0 and speed_end >= WALKING_SPEED_FRACTION * speed_walk
         if still:
-            where = ("the wheel leaves the capture volume" if trailing_gap_s > 0.05
-                     else "the recording ends")
-            return Ending("walked", f"{where} while it still rolls forward ({speed_end:.2f} rad/s, "
-                                    f"{speed_end / speed_walk:.0%} of its walking speed, never turning back)")
+            where = "the wheel leaves the capture volume" if trailing_gap_s > 0.05 else "the recording ends"
+            return Ending(
+                "walked",
+                f"{where} while it still rolls forward ({speed_end:.2f} rad/s, "
+                f"{speed_end / speed_walk:.0%} of its walking speed, never turning back)",
+            )
         # Near the critical slope the wheel is slowest over the foot: slow is not at rest. A stall needs the
         # wheel to stay put for REST_S; a recording that ends sooner while it slows cannot tell.
         rest = post & (t >= t[last_valid] - REST_S)
         if t[last_valid] - t[np.flatnonzero(post)[0]] >= REST_S:
             spread = float(np.nanmax(progress_rad[rest]) - np.nanmin(progress_rad[rest]))
             if spread < MOVE_TOL_RAD:
-                return Ending("stalled", f"after the last impact the wheel slows and stays at rest for "
-                                         f"{REST_S:.1f} s")
+                return Ending("stalled", f"after the last impact the wheel slows and stays at rest for {REST_S:.1f} s")
         if np.isfinite(speed_end) and abs(speed_end) < 0.1 * speed_walk:
-            return Ending("unknown", "the recording ends while the wheel slows over its foot, too soon to tell "
-                                     "a stall from a slow step")
+            return Ending(
+                "unknown",
+                "the recording ends while the wheel slows over its foot, too soon to tell a stall from a slow step",
+            )
     return Ending("unknown", "the end of the recording matches no known ending")
 
 

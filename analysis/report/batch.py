@@ -13,10 +13,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from rimless.errors import UserError, interrupted_by_user
-from rimless.output import check_output_folder, writable_dir
-from rimless.progress import progress_bar
-
 from rimless.analysis.examples.bundled import data_files
 from rimless.analysis.examples.critical_series import data_files as critical_data_files
 from rimless.analysis.inference.compare import Simulator
@@ -24,14 +20,27 @@ from rimless.analysis.io.trial import slope_ci_deg
 from rimless.analysis.io.vicon_csv import ViconCsvError
 from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
 from rimless.analysis.report.html import ReportResult, build_report
+from rimless.errors import UserError, interrupted_by_user
+from rimless.output import check_output_folder, writable_dir
+from rimless.progress import progress_bar
 
-__all__ = ["shown_path", "check_inputs", "import_row", "import_files", "run_report", "run_demo", "demo_inputs",
-           "DEMO_NOTE"]
+__all__ = [
+    "shown_path",
+    "check_inputs",
+    "import_row",
+    "import_files",
+    "run_report",
+    "run_demo",
+    "demo_inputs",
+    "DEMO_NOTE",
+]
 
-DEMO_NOTE = ("SYNTHETIC DATA: the bundled example trials are simulated (ER wheel, Table 1 parameters, slopes "
-             "1.5/2/2.5 deg, 0.3 mm noise), not measured; see rimless/analysis/data/README.md. The SYNTHETIC_crit "
-             "series (1.3-2.05 deg, two release speeds, an 11-step ramp) comes from another truth model (c = 10 N s/m "
-             "and guide friction) for the critical slope and the calibration.")
+DEMO_NOTE = (
+    "SYNTHETIC DATA: the bundled example trials are simulated (ER wheel, Table 1 parameters, slopes "
+    "1.5/2/2.5 deg, 0.3 mm noise), not measured; see rimless/analysis/data/README.md. The SYNTHETIC_crit "
+    "series (1.3-2.05 deg, two release speeds, an 11-step ramp) comes from another truth model (c = 10 N s/m "
+    "and guide friction) for the critical slope and the calibration."
+)
 
 
 def shown_path(path: str | Path) -> str:
@@ -55,19 +64,39 @@ def check_inputs(files: Sequence[Path]) -> None:
 def _clean_reason(err: Exception) -> str:
     """The message of a user error with the Python argument names replaced by the CLI option names."""
     msg = str(err)
-    for py, opt in (("object=", "--object "), ("markers=", "--markers "), ("hub_offset_m=", "--hub-offset-mm "),
-                    ("max_gap_s", "--max-gap-ms")):
+    for py, opt in (
+        ("object=", "--object "),
+        ("markers=", "--markers "),
+        ("hub_offset_m=", "--hub-offset-mm "),
+        ("max_gap_s", "--max-gap-ms"),
+    ):
         msg = msg.replace(py, opt)
     return msg
 
 
 def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[str, Any]:
     """The JSON row of one imported (or refused) file: the `trials import --json` contract."""
-    row: dict[str, Any] = {"file": shown_path(path), "status": "refused", "reason": None, "frames": None,
-                           "rate_hz": None, "steps": None, "source": None, "slope_deg": None, "ramp_slope_deg": None,
-                           "outcome": None, "window_s": None, "impact_times_s": [], "step_periods_s": [],
-                           "hub_offset_mm": None, "warnings": [], "errors": [], "trial": None,
-                           "slope_source": None, "slope_ci_deg": None}
+    row: dict[str, Any] = {
+        "file": shown_path(path),
+        "status": "refused",
+        "reason": None,
+        "frames": None,
+        "rate_hz": None,
+        "steps": None,
+        "source": None,
+        "slope_deg": None,
+        "ramp_slope_deg": None,
+        "outcome": None,
+        "window_s": None,
+        "impact_times_s": [],
+        "step_periods_s": [],
+        "hub_offset_mm": None,
+        "warnings": [],
+        "errors": [],
+        "trial": None,
+        "slope_source": None,
+        "slope_ci_deg": None,
+    }
     if error is not None or trial is None:
         row["reason"] = _clean_reason(error) if error is not None else "not imported"
         if isinstance(error, ViconCsvError):
@@ -77,15 +106,23 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
         return row
     m = trial.meta
     row.update(
-        status="imported", frames=m.n_frames, rate_hz=m.rate_hz, steps=int(trial.step_period_s.size),
+        status="imported",
+        frames=m.n_frames,
+        rate_hz=m.rate_hz,
+        steps=int(trial.step_period_s.size),
         reason=None if m.step_refused is None else f"steps not detected: {m.step_refused}",
         source={"object": m.object, "markers": list(m.markers), "section": m.section, "why": m.source_reason},
-        slope_deg=m.slope_deg, ramp_slope_deg=m.ramp_slope_deg, outcome=m.outcome,
+        slope_deg=m.slope_deg,
+        ramp_slope_deg=m.ramp_slope_deg,
+        outcome=m.outcome,
         window_s=list(m.window_s) if m.window_s else None,
-        impact_times_s=trial.impact_time_s.tolist(), step_periods_s=trial.step_period_s.tolist(),
+        impact_times_s=trial.impact_time_s.tolist(),
+        step_periods_s=trial.step_period_s.tolist(),
         hub_offset_mm=None if m.hub_offset_m is None else [round(v * 1e3, 3) for v in m.hub_offset_m],
         warnings=list(m.warnings) + ([f"steps not detected: {m.step_refused}"] if m.step_refused else []),
-        slope_source=m.slope_source, slope_ci_deg=slope_ci_deg(m.slope_ci_rad), _estimated_deg=m.slope_estimated_deg,
+        slope_source=m.slope_source,
+        slope_ci_deg=slope_ci_deg(m.slope_ci_rad),
+        _estimated_deg=m.slope_estimated_deg,
     )
     return row
 
@@ -113,8 +150,9 @@ def _import_one(path: Path, out: Path, kwargs: dict[str, Any]) -> dict[str, Any]
     return row
 
 
-def import_files(files: Sequence[Path], out: Path, import_kwargs: dict[str, Any], *,
-                 json_out: bool = False) -> list[dict[str, Any]]:
+def import_files(
+    files: Sequence[Path], out: Path, import_kwargs: dict[str, Any], *, json_out: bool = False
+) -> list[dict[str, Any]]:
     """Import each export and write ``out/<name>.trial.parquet``; a refused file does not stop the others.
 
     One `import_row` per file; keys starting with ``_`` (the written path, the outcome's reason) are for the
@@ -132,9 +170,18 @@ def import_files(files: Sequence[Path], out: Path, import_kwargs: dict[str, Any]
     return rows
 
 
-def run_report(files: Sequence[Path], out: Path, *, json_out: bool, import_kwargs: dict[str, Any], model: str,
-               slope_bin_deg: float, note: str | None = None, title: str = "Vicon trials vs simulation",
-               **report_kwargs: Any) -> ReportResult:
+def run_report(
+    files: Sequence[Path],
+    out: Path,
+    *,
+    json_out: bool,
+    import_kwargs: dict[str, Any],
+    model: str,
+    slope_bin_deg: float,
+    note: str | None = None,
+    title: str = "Vicon trials vs simulation",
+    **report_kwargs: Any,
+) -> ReportResult:
     """`build_report` with the ``model`` simulator and a progress bar; Ctrl-C removes a folder it created.
 
     A folder or a missing input stops before any work (`UserError`); when every input is refused, a
@@ -150,8 +197,17 @@ def run_report(files: Sequence[Path], out: Path, *, json_out: bool, import_kwarg
                 bar.update(description=f"compared {name}")
                 bar.advance()
 
-            res = build_report(files, out, sim=sim, import_kwargs=import_kwargs, slope_bin_deg=slope_bin_deg,
-                               note=note, title=title, progress=step, **report_kwargs)
+            res = build_report(
+                files,
+                out,
+                sim=sim,
+                import_kwargs=import_kwargs,
+                slope_bin_deg=slope_bin_deg,
+                note=note,
+                title=title,
+                progress=step,
+                **report_kwargs,
+            )
     except BaseException as err:
         if out_is_new and interrupted_by_user(err):  # an interrupted report leaves no half-filled folder behind
             shutil.rmtree(out, ignore_errors=True)
@@ -176,13 +232,14 @@ def robot_log_pairs(specs: Sequence[str], trials: Sequence[Path]) -> dict[str, P
         trial, sep, file = spec.rpartition("=")
         if not sep:
             if len(names) != 1:
-                raise ParameterError(f"--robot-log {spec}: with {len(names)} trials, name the trial: "
-                                     "--robot-log TRIAL=FILE (TRIAL: the trial's file name)")
+                raise ParameterError(
+                    f"--robot-log {spec}: with {len(names)} trials, name the trial: "
+                    "--robot-log TRIAL=FILE (TRIAL: the trial's file name)"
+                )
             trial = names[0]
         trial = Path(trial).name
         if trial not in names:
-            raise ParameterError(f"--robot-log {spec}: {trial!r} is not one of the trials given "
-                                 f"({', '.join(names)})")
+            raise ParameterError(f"--robot-log {spec}: {trial!r} is not one of the trials given ({', '.join(names)})")
         if trial in out:
             raise ParameterError(f"--robot-log {spec}: a second log for {trial}")
         if not Path(file).is_file():
@@ -208,7 +265,15 @@ def run_demo(out: Path, *, json_out: bool, starting: Callable[[int], None] | Non
     check_output_folder(out, option="--out")
     if starting is not None:
         starting(len(files))
-    return run_report(files, out, json_out=json_out, import_kwargs={"max_gap_s": DEFAULT_MAX_GAP_S},
-                      model="er", slope_bin_deg=0.5, note=DEMO_NOTE,
-                      title="rimless demo: SYNTHETIC trials vs simulation",
-                      critical_files=critical_data_files(), calibrate_c=True)
+    return run_report(
+        files,
+        out,
+        json_out=json_out,
+        import_kwargs={"max_gap_s": DEFAULT_MAX_GAP_S},
+        model="er",
+        slope_bin_deg=0.5,
+        note=DEMO_NOTE,
+        title="rimless demo: SYNTHETIC trials vs simulation",
+        critical_files=critical_data_files(),
+        calibrate_c=True,
+    )

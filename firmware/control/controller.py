@@ -12,11 +12,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
+from rimless.firmware.control.detector import Decision, DetectorParams, LegDetector, Phase
+from rimless.firmware.control.faults import Fault, HealthMonitor
 from rimless.firmware.drivers.adns3080 import MotionSample
 from rimless.firmware.drivers.clutch import ClutchBank
-from rimless.firmware.control.detector import Decision, DetectorParams, LegDetector, Phase
 from rimless.firmware.errors import SensorError, SensorNotFound, SensorReset
-from rimless.firmware.control.faults import Fault, HealthLimits, HealthMonitor
 
 
 class MotionSensor(Protocol):
@@ -214,7 +214,11 @@ class Controller:
         if fault not in self.active_faults:
             self.active_faults[fault] = detail
             self.outbox.append(
-                EventRecord(self.clock_ns() if t_ns is None else t_ns, "fault", {"fault": fault.value, "code": fault.code, "detail": detail})
+                EventRecord(
+                    self.clock_ns() if t_ns is None else t_ns,
+                    "fault",
+                    {"fault": fault.value, "code": fault.code, "detail": detail},
+                )
             )
 
     def safe_stop(self, reason: str) -> None:
@@ -271,10 +275,14 @@ class Controller:
         too_soon = self._last_touchdown_ns is not None and t_ns - self._last_touchdown_ns < det.params.min_step_s * 1e9
         if i in (self._stance_channel, self._trailing_channel) or too_soon:
             det.dismiss_touchdown()
-            why = "too soon after the last step" if too_soon else (
-                "the stance leg's" if i == self._stance_channel else "the trailing leg's")
-            self.outbox.append(EventRecord(t_ns, "touchdown_dismissed", {"channel": i, "leg": det.stance_leg,
-                                                                         "why": why}))
+            why = (
+                "too soon after the last step"
+                if too_soon
+                else ("the stance leg's" if i == self._stance_channel else "the trailing leg's")
+            )
+            self.outbox.append(
+                EventRecord(t_ns, "touchdown_dismissed", {"channel": i, "leg": det.stance_leg, "why": why})
+            )
             return Decision(release=decision.release)
         self._trailing_channel, self._stance_channel = self._stance_channel, i
         self._last_touchdown_ns = t_ns
@@ -289,8 +297,10 @@ class Controller:
         self.samples += 1
         bad = ch.health.check(s.t_ns, s.squal, s.saturated or s.overflow, s.stuck)
         if bad is None and s.resolution_reset:
-            bad = (Fault.SENSOR_RESET, "the sensor reports 400 cpi: it reset itself (brown-out?); "
-                                       "restart the firmware to configure it again")
+            bad = (
+                Fault.SENSOR_RESET,
+                "the sensor reports 400 cpi: it reset itself (brown-out?); restart the firmware to configure it again",
+            )
         if bad is not None:
             self.fault(bad[0], bad[1], s.t_ns)
         det = ch.detector
@@ -331,8 +341,20 @@ class Controller:
         self.seq += 1
         self.outbox.append(
             SampleRecord(
-                s.t_ns, self.seq, i, det.position_m, det.velocity_m_s, det.compression_m, s.squal, s.shutter,
-                s.max_pixel, det.phase.code, det.stance_leg, self._mask, self.armed, t_done - s.t_ns,
+                s.t_ns,
+                self.seq,
+                i,
+                det.position_m,
+                det.velocity_m_s,
+                det.compression_m,
+                s.squal,
+                s.shutter,
+                s.max_pixel,
+                det.phase.code,
+                det.stance_leg,
+                self._mask,
+                self.armed,
+                t_done - s.t_ns,
             )
         )
         self.last_latency_ns = t_done - s.t_ns

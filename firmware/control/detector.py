@@ -265,8 +265,14 @@ class LegDetector:
         until this leg is quiet before it may report a touchdown again."""
         before = getattr(self, "_before_touchdown", None)
         if before is not None:
-            (self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s, self._touchdown_x_m,
-             self._confirmed) = before
+            (
+                self.leg_index,
+                self._last_touchdown_s,
+                self._period_s,
+                self._touchdown_s,
+                self._touchdown_x_m,
+                self._confirmed,
+            ) = before
             self._before_touchdown = None
         self.phase = Phase.WAIT
         self._touch_count = 0
@@ -322,8 +328,12 @@ class LegDetector:
         p = self.params
         if not trusted:
             self._distrust_until_s = t + p.velocity_window_s
-        if (self.counted and self.synced and self._last_touchdown_s is not None
-                and t - self._last_touchdown_s > self._step_window_s()):
+        if (
+            self.counted
+            and self.synced
+            and self._last_touchdown_s is not None
+            and t - self._last_touchdown_s > self._step_window_s()
+        ):
             return self._lose_sync(
                 f"missed touchdown: none for {t - self._last_touchdown_s:.3f} s after leg {self.stance_leg}'s "
                 f"(longest plausible step {self._step_window_s():.3f} s)"
@@ -416,11 +426,18 @@ class LegDetector:
         self._doubt_forget()
         return self._lose_sync(
             f"uncertain touchdown: the leg compressed {peak * 1e3:.2f} mm without a confirmed touchdown "
-            f"(doubt_compression_m {threshold_m * 1e3:.2f} mm); a step may have been missed")
+            f"(doubt_compression_m {threshold_m * 1e3:.2f} mm); a step may have been missed"
+        )
 
     def _touchdown(self, t: float) -> Decision:
-        self._before_touchdown = (self.leg_index, self._last_touchdown_s, self._period_s, self._touchdown_s,
-                                  self._touchdown_x_m, self._confirmed)
+        self._before_touchdown = (
+            self.leg_index,
+            self._last_touchdown_s,
+            self._period_s,
+            self._touchdown_s,
+            self._touchdown_x_m,
+            self._confirmed,
+        )
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
         self._engaged = False
         self._doubt_forget()
@@ -432,8 +449,10 @@ class LegDetector:
             step = t - last
             tol = self.params.step_period_tolerance
             if self._period_s is not None and step < self._period_s * (1.0 - tol):
-                lost = (f"extra touchdown: {step:.3f} s after the previous one, expected "
-                        f"{self._period_s:.3f} s +/- {100 * tol:.0f} %")
+                lost = (
+                    f"extra touchdown: {step:.3f} s after the previous one, expected "
+                    f"{self._period_s:.3f} s +/- {100 * tol:.0f} %"
+                )
             elif step > self._step_window_s():
                 lost = f"missed touchdown: step of {step:.3f} s (longest plausible {self._step_window_s():.3f} s)"
             else:

@@ -58,7 +58,10 @@ class HealthMonitor:
     def check(self, t_ns: int, squal: int, saturated: bool, stuck: bool) -> tuple[Fault, str] | None:
         """Return (fault, detail) if this sample makes a fault active, else None."""
         if stuck:
-            return Fault.SENSOR_STUCK, "every byte of the motion burst reads 0xFF or SQUAL > 169 (MISO stuck or link out of sync)"
+            return (
+                Fault.SENSOR_STUCK,
+                "every byte of the motion burst reads 0xFF or SQUAL > 169 (MISO stuck or link out of sync)",
+            )
         if saturated:
             self._saturated += 1
             if self._saturated >= self.limits.saturated_samples_max:

@@ -44,9 +44,16 @@ class RealtimeReport:
     _own_tid: int = 0
 
     def to_json(self) -> dict[str, object]:
-        return {"policy": self.policy, "priority": self.priority, "cpu": self.cpu,
-                "memory_locked": self.memory_locked, "gc_frozen": self.gc_frozen,
-                "others_policy": self.others_policy, "others_cpus": self.others_cpus, "errors": list(self.errors)}
+        return {
+            "policy": self.policy,
+            "priority": self.priority,
+            "cpu": self.cpu,
+            "memory_locked": self.memory_locked,
+            "gc_frozen": self.gc_frozen,
+            "others_policy": self.others_policy,
+            "others_cpus": self.others_cpus,
+            "errors": list(self.errors),
+        }
 
 
 def _other_tids(own: int) -> list[int]:

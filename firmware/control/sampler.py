@@ -123,7 +123,7 @@ class Sampler:
                 continue
             try:
                 fut.set_result(fn(self.controller))
-            except Exception as err:  # a refused command: the reply carries it
+            except Exception as err:  # a refused command: the reply carries it  # noqa: BLE001
                 fut.set_exception(err)
 
     def _run(self) -> None:
@@ -167,7 +167,7 @@ class Sampler:
                     deadline += skipped * period
                 if self.max_samples is not None and stats.samples >= self.max_samples:
                     break
-        except BaseException as err:
+        except BaseException as err:  # noqa: BLE001
             # A bug in the control path: clutches off first, then let the app see the error.
             try:
                 ctl.fault(Fault.EXCEPTION, f"{type(err).__name__}: {err}")

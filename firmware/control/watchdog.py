@@ -22,9 +22,15 @@ from collections.abc import Callable
 class Watchdog:
     """Deadlines fed from other threads, checked by a thread of its own (`rimless-watchdog`)."""
 
-    def __init__(self, on_trip: Callable[[str, str], None], *, period_s: float = 0.01,
-                 notify: Callable[[str], None] | None = None, notify_every_s: float = 0.0,
-                 clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
+    def __init__(
+        self,
+        on_trip: Callable[[str, str], None],
+        *,
+        period_s: float = 0.01,
+        notify: Callable[[str], None] | None = None,
+        notify_every_s: float = 0.0,
+        clock_ns: Callable[[], int] = time.monotonic_ns,
+    ) -> None:
         self.on_trip = on_trip
         self.clock_ns = clock_ns
         self.period_s = period_s

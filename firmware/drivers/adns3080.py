@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import NamedTuple
 
-from rimless.firmware.errors import SensorError, SensorNotFound, SensorReset
 from rimless.firmware.drivers.spi import SpiBus, SpiSegment
+from rimless.firmware.errors import SensorError, SensorNotFound, SensorReset
 
 # --- Register map [DS p.23-38] -------------------------------------------------------------------
 _REG_PRODUCT_ID = 0x00
@@ -175,7 +175,9 @@ class Adns3080:
         # (register, expected value, mask) read back by `check_next`/`check_all`; the identity registers only
         # until `mark_configured` adds the configuration a reset would undo
         self._readback: list[tuple[int, int, int]] = [
-            (_REG_PRODUCT_ID, PRODUCT_ID, 0xFF), (_REG_INVERSE_PRODUCT_ID, INVERSE_PRODUCT_ID, 0xFF)]
+            (_REG_PRODUCT_ID, PRODUCT_ID, 0xFF),
+            (_REG_INVERSE_PRODUCT_ID, INVERSE_PRODUCT_ID, 0xFF),
+        ]
         self._next_readback = 0
         self._sleep = sleep
         self._clock_ns = clock_ns
@@ -316,12 +318,17 @@ class Adns3080:
             self._wait_not_busy()
         cfg = self.read_register(_REG_CONFIGURATION_BITS)
         max_lower = self.read_register(_REG_FRAME_PERIOD_MAX_BOUND_LOWER)
-        watched = [(_REG_CONFIGURATION_BITS, cfg, 0xFF), (_REG_EXTENDED_CONFIG, ext, 0xFF & ~_EXT_BUSY),
-                   (_REG_FRAME_PERIOD_MAX_BOUND_LOWER, max_lower, 0xFF)]
+        watched = [
+            (_REG_CONFIGURATION_BITS, cfg, 0xFF),
+            (_REG_EXTENDED_CONFIG, ext, 0xFF & ~_EXT_BUSY),
+            (_REG_FRAME_PERIOD_MAX_BOUND_LOWER, max_lower, 0xFF),
+        ]
         power_on = (POWER_ON_CONFIGURATION_BITS, POWER_ON_EXTENDED_CONFIG, POWER_ON_MAX_BOUND & 0xFF)
         if all(value == p for (_, value, _), p in zip(watched, power_on, strict=True)):
-            raise SensorError("ADNS-3080 configuration reads back as its power-on state after the reset marker "
-                              "was written: the chip does not keep its registers")
+            raise SensorError(
+                "ADNS-3080 configuration reads back as its power-on state after the reset marker "
+                "was written: the chip does not keep its registers"
+            )
         self._readback = self._readback[:2] + watched
         self._next_readback = 0
 
@@ -332,8 +339,10 @@ class Adns3080:
         if register in (_REG_PRODUCT_ID, _REG_INVERSE_PRODUCT_ID):
             self.verify_id()  # raises SensorNotFound with both IDs named
             return  # read right the second time: a glitch the next round checks again
-        raise SensorReset(f"ADNS-3080 register 0x{register:02X} reads 0x{value:02X}, configured 0x{expected:02X}: "
-                          "the chip reset itself (brown-out?); restart the firmware to configure it again")
+        raise SensorReset(
+            f"ADNS-3080 register 0x{register:02X} reads 0x{value:02X}, configured 0x{expected:02X}: "
+            "the chip reset itself (brown-out?); restart the firmware to configure it again"
+        )
 
     def check_next(self) -> None:
         """Read back one register of the identity and configuration, the next in turn: `READBACK_REGISTERS`
@@ -367,9 +376,7 @@ class Adns3080:
     # --- motion ---------------------------------------------------------------------------------
     def read_raw_motion(self) -> RawMotion:
         """One Motion_Burst: 0x50, t_SRAD-MOT = 75 us with CS low, then 7 bytes with no gaps."""
-        rx = self.bus.message(
-            [SpiSegment(bytes([_REG_MOTION_BURST]), T_SRAD_MOT_US), SpiSegment(bytes(BURST_LEN))]
-        )[1]
+        rx = self.bus.message([SpiSegment(bytes([_REG_MOTION_BURST]), T_SRAD_MOT_US), SpiSegment(bytes(BURST_LEN))])[1]
         return RawMotion(rx[0], _s8(rx[1]), _s8(rx[2]), rx[3], (rx[4] << 8) | rx[5], rx[6] & MAX_PIXEL_MASK)
 
     def read_motion(self) -> MotionSample:
@@ -380,13 +387,14 @@ class Adns3080:
         t0 = self._clock_ns()
         raw = self.read_raw_motion()
         t1 = self._clock_ns()
-        stuck = (raw.motion == 0xFF and raw.dx_counts == -1 and raw.dy_counts == -1 and raw.squal == 0xFF) \
-            or raw.squal > SQUAL_MAX
+        stuck = (
+            raw.motion == 0xFF and raw.dx_counts == -1 and raw.dy_counts == -1 and raw.squal == 0xFF
+        ) or raw.squal > SQUAL_MAX
         # Delta_X/Y mean something only with MOT set [DS p.24].
         dx, dy = (raw.dx_counts, raw.dy_counts) if raw.motion & _MOTION_MOT else (0, 0)
         overflow = bool(raw.motion & _MOTION_OVF)
         reserved = bool(raw.motion & _MOTION_RESERVED)
-        res_reset = (not stuck and self.expected_cpi == Resolution.CPI_1600 and not raw.motion & _MOTION_RES)
+        res_reset = not stuck and self.expected_cpi == Resolution.CPI_1600 and not raw.motion & _MOTION_RES
         saturated = not stuck and (_full_scale(dx) or _full_scale(dy))
         rereads = 0
         while saturated and rereads < MAX_REREADS:

@@ -59,7 +59,7 @@ class ClutchBank:
         for i, dev in enumerate(self._devices):
             try:
                 dev.off()
-            except Exception as err:  # keep going: the other clutches must still go off
+            except Exception as err:  # keep going: the other clutches must still go off  # noqa: BLE001
                 first = first or err
             if self._engaged_since_ns[i] is not None:
                 self._changed_ns[i] = time.monotonic_ns()

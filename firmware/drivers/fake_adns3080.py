@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from enum import Enum
 
 from rimless.firmware.drivers import adns3080 as reg
-from rimless.firmware.errors import SensorError, SpiProtocolError
 from rimless.firmware.drivers.spi import SpiSegment
+from rimless.firmware.errors import SensorError, SpiProtocolError
 
 ACCUMULATOR_LIMIT = 2047  # fake's model of the chip's >8-bit accumulator; beyond it OVF is set
 DEFAULT_COUNTS_PER_M = 1600 / 0.0254  # 1600 cpi on the datasheet's 2.4 mm lens geometry
@@ -217,8 +217,10 @@ class FakeAdns3080:
             self._reported_counts = self._true_counts()
             self._extra_counts = 0
             self._overflow = False
-        elif reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER <= addr <= reg._REG_SHUTTER_MAX_BOUND_UPPER and \
-                self.clock() < self._busy_until_s:
+        elif (
+            reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER <= addr <= reg._REG_SHUTTER_MAX_BOUND_UPPER
+            and self.clock() < self._busy_until_s
+        ):
             raise self._violation("bound register written while Busy (wait two frames): the chip's state is undefined")
         elif addr == reg._REG_FRAME_PERIOD_MAX_BOUND_LOWER:
             self._pending_max_lower = value

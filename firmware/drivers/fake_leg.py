@@ -53,8 +53,15 @@ class FakeLegParams:
         for name in ("stiffness_n_per_m", "moving_mass_kg", "press_s", "step_s"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"fake leg {name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("damping_n_s_per_m", "friction_n", "gravity_m_s2", "compression_m", "press_start_s",
-                     "engage_delay_s", "release_delay_s"):
+        for name in (
+            "damping_n_s_per_m",
+            "friction_n",
+            "gravity_m_s2",
+            "compression_m",
+            "press_start_s",
+            "engage_delay_s",
+            "release_delay_s",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"fake leg {name} must be >= 0, got {getattr(self, name)!r}")
         return self
@@ -75,9 +82,15 @@ class FakeLeg:
 
     HAND, HELD, FREE = "hand", "held", "free"
 
-    def __init__(self, params: FakeLegParams, clutch_engaged: Callable[[], bool], *, t0_s: float | None = None,
-                 clock: Callable[[], float] = time.monotonic,
-                 clutch_changed_s: Callable[[], float | None] | None = None) -> None:
+    def __init__(
+        self,
+        params: FakeLegParams,
+        clutch_engaged: Callable[[], bool],
+        *,
+        t0_s: float | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        clutch_changed_s: Callable[[], float | None] | None = None,
+    ) -> None:
         self.p = params.validated()
         self.clutch_engaged = clutch_engaged
         self.clutch_changed_s = clutch_changed_s

@@ -61,8 +61,9 @@ class FakeWalk:
         return x
 
 
-def airborne_locks(walk: FakeWalk, engages: Sequence[tuple[float, int]], legs: Sequence[int],
-                   start_index: int) -> list[tuple[float, int, int]]:
+def airborne_locks(
+    walk: FakeWalk, engages: Sequence[tuple[float, int]], legs: Sequence[int], start_index: int
+) -> list[tuple[float, int, int]]:
     """The engages `(t_s, leg)` that locked a leg not on the ground by the truth: `(t_s, leg, stance_leg)`."""
     out = []
     for t, leg in engages:

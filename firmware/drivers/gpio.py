@@ -35,8 +35,9 @@ class PinLog:
         # control thread's heartbeat and the shutdown's `off` race); re-entrant: a signal handler in the main
         # thread may switch pins off while the main thread is inside a change
         self._lock = threading.RLock()
-        self._fd = None if path is None else os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND,
-                                                     0o644)
+        self._fd = (
+            None if path is None else os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        )
 
     def change(self, pin: int, level: int, apply: Callable[[], bool]) -> bool:
         """`apply()` (changes BCM `pin` to `level`, True if the level changed) and its record, as one step."""
@@ -79,8 +80,11 @@ def mock_pin_factory(pin_log: PinLog | None = None) -> Any:
 
     class LoggedMockPin(MockPin):
         def _change_state(self, value: Any) -> bool:
-            return pin_log.change(int(self.info.name.removeprefix("GPIO")), 1 if value else 0,
-                                  lambda: super(LoggedMockPin, self)._change_state(value))
+            return pin_log.change(
+                int(self.info.name.removeprefix("GPIO")),
+                1 if value else 0,
+                lambda: super(LoggedMockPin, self)._change_state(value),
+            )
 
     return MockFactory(revision=PI4_REVISION, pin_class=LoggedMockPin)
 

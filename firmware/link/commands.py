@@ -41,9 +41,24 @@ from rimless.firmware.link.protocol import (
 )
 
 __all__ = [  # the protocol's names are re-exported: the server and its tests speak them
-    "COMMANDS", "DEFAULT_PORT", "HELLO", "LOG_LINES_PER_S", "PROTOCOL_VERSION", "Command", "CommandServer",
-    "RateLimitedLog", "Rejected", "ReservedListener", "WeakToken", "check_token", "command_mac", "disarm_mac",
-    "parse_command", "parse_disarm_datagram", "parse_reserved_datagram", "reserved_mac",
+    "COMMANDS",
+    "DEFAULT_PORT",
+    "HELLO",
+    "LOG_LINES_PER_S",
+    "PROTOCOL_VERSION",
+    "Command",
+    "CommandServer",
+    "RateLimitedLog",
+    "Rejected",
+    "ReservedListener",
+    "WeakToken",
+    "check_token",
+    "command_mac",
+    "disarm_mac",
+    "parse_command",
+    "parse_disarm_datagram",
+    "parse_reserved_datagram",
+    "reserved_mac",
 ]
 
 log = logging.getLogger("rimless.robot.commands")
@@ -63,8 +78,14 @@ class ReservedListener:
     PER_SOURCE_PER_S = 20.0
     MAX_SOURCES = 4096
 
-    def __init__(self, sock: socket.socket, token: str, on_disarm: Callable[[], None],
-                 on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> None:
+    def __init__(
+        self,
+        sock: socket.socket,
+        token: str,
+        on_disarm: Callable[[], None],
+        on_status: Callable[[], dict[str, Any]],
+        on_rejected: Callable[[str, str], None],
+    ) -> None:
         self.sock = sock
         self.token = token
         self.on_disarm = on_disarm
@@ -83,8 +104,15 @@ class ReservedListener:
         self._thread = threading.Thread(target=self._run, name="rimless-reserved", daemon=True)
 
     @classmethod
-    def bind(cls, host: str, port: int, token: str, on_disarm: Callable[[], None],
-             on_status: Callable[[], dict[str, Any]], on_rejected: Callable[[str, str], None]) -> ReservedListener:
+    def bind(
+        cls,
+        host: str,
+        port: int,
+        token: str,
+        on_disarm: Callable[[], None],
+        on_status: Callable[[], dict[str, Any]],
+        on_rejected: Callable[[str, str], None],
+    ) -> ReservedListener:
         """Bind the UDP socket (raises OSError) and start the thread."""
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -119,7 +147,7 @@ class ReservedListener:
         while not self._stop.is_set():
             try:
                 data, addr = self.sock.recvfrom(4096)
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 continue
             except OSError:
                 return  # closed
@@ -136,8 +164,9 @@ class ReservedListener:
                 continue
             if n <= self._last_n[kind]:
                 self.replays += 1
-                self.on_rejected(str(addr), f"reserved datagram: {kind} number {n} not above the last one "
-                                            f"accepted (a replay)")
+                self.on_rejected(
+                    str(addr), f"reserved datagram: {kind} number {n} not above the last one accepted (a replay)"
+                )
                 continue  # no answer either: a replay with a spoofed source must not reflect
             self._last_n[kind] = n
             reply: dict[str, Any] = {"ok": True, "n": n}
@@ -160,8 +189,9 @@ class ReservedListener:
         out = json.dumps(full, separators=(",", ":"), default=str).encode()
         if len(out) <= limit:
             return out
-        short = {k: (len(v) if isinstance(v, list) else v) for k, v in status.items() if k in ("armed", "faults",
-                                                                                              "engaged")}
+        short = {
+            k: (len(v) if isinstance(v, list) else v) for k, v in status.items() if k in ("armed", "faults", "engaged")
+        }
         out = json.dumps(dict(reply, status=short), separators=(",", ":"), default=str).encode()
         if len(out) <= limit:
             return out
@@ -177,8 +207,9 @@ class ReservedListener:
 class RateLimitedLog:
     """Logs at most `per_s` lines per second; the rest are counted and summarised in the next line."""
 
-    def __init__(self, logger: logging.Logger, per_s: float = LOG_LINES_PER_S,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self, logger: logging.Logger, per_s: float = LOG_LINES_PER_S, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self.logger = logger
         self.per_s = per_s
         self.clock = clock
@@ -290,13 +321,15 @@ class CommandServer:
         flood cannot exhaust the file descriptors (EMFILE pauses accepting for a second) nor queue
         hundreds of connections ahead of an operator's `disarm`.
         """
-        self._server = await asyncio.start_server(self._client, self.host, self.port,
-                                                  limit=self.max_message_bytes * 2, backlog=64)
+        self._server = await asyncio.start_server(
+            self._client, self.host, self.port, limit=self.max_message_bytes * 2, backlog=64
+        )
         port = int(self._server.sockets[0].getsockname()[1])
         if self.on_disarm is not None:
             try:
-                self._udp = ReservedListener.bind(self.host, port, self.token, self.on_disarm,
-                                                  self.on_status or (lambda: {}), self._rejected)
+                self._udp = ReservedListener.bind(
+                    self.host, port, self.token, self.on_disarm, self.on_status or (lambda: {}), self._rejected
+                )
             except OSError as err:
                 log.warning("reserved UDP path unavailable on port %d: %s", port, err)
         return port
@@ -335,14 +368,15 @@ class CommandServer:
         if self._unauthenticated_from(source) >= self.MAX_UNAUTHENTICATED_PER_SOURCE:
             return False
         unauth_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
-        while (len(self._conns) >= self.max_connections
-               or sum(1 for c in self._conns.values() if not c.authenticated) >= unauth_cap):
+        while (
+            len(self._conns) >= self.max_connections
+            or sum(1 for c in self._conns.values() if not c.authenticated) >= unauth_cap
+        ):
             counts: dict[str, int] = {}
             for c in self._conns.values():
                 if not c.authenticated:
                     counts[c.source] = counts.get(c.source, 0) + 1
-            conns = sorted(self._conns.values(),
-                           key=lambda c: (c.authenticated, -counts.get(c.source, 0), c.opened_s))
+            conns = sorted(self._conns.values(), key=lambda c: (c.authenticated, -counts.get(c.source, 0), c.opened_s))
             if not conns:
                 return True
             victim = conns[0]
@@ -351,8 +385,9 @@ class CommandServer:
             with contextlib.suppress(Exception):
                 victim.writer.transport.abort()
             self.evicted += 1
-            self.log.warning("command connection from %s dropped to make room (cap %d)", victim.peer,
-                             self.max_connections)
+            self.log.warning(
+                "command connection from %s dropped to make room (cap %d)", victim.peer, self.max_connections
+            )
         return True
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -363,8 +398,12 @@ class CommandServer:
         source = str(peername[0]) if isinstance(peername, tuple) and peername else peer
         if not self._make_room(source):
             self.refused_per_source += 1
-            self.log.warning("command connection from %s refused: %d unauthenticated connections from %s already",
-                             peer, self.MAX_UNAUTHENTICATED_PER_SOURCE, source)
+            self.log.warning(
+                "command connection from %s refused: %d unauthenticated connections from %s already",
+                peer,
+                self.MAX_UNAUTHENTICATED_PER_SOURCE,
+                source,
+            )
             with contextlib.suppress(Exception):
                 writer.transport.abort()
             return
@@ -377,8 +416,11 @@ class CommandServer:
         try:
             await self._reply(writer, {"hello": HELLO, "version": PROTOCOL_VERSION, "nonce": nonce})
             while True:
-                timeout = self.idle_timeout_s if conn.authenticated else \
-                    max(0.0, conn.opened_s + self.auth_timeout_s - time.monotonic())
+                timeout = (
+                    self.idle_timeout_s
+                    if conn.authenticated
+                    else max(0.0, conn.opened_s + self.auth_timeout_s - time.monotonic())
+                )
                 try:
                     chunk = await asyncio.wait_for(reader.read(4096), timeout)
                 except TimeoutError:
@@ -393,8 +435,14 @@ class CommandServer:
                         if len(buf) > self.max_message_bytes:
                             if not discarding:
                                 self._rejected(peer, f"message longer than {self.max_message_bytes} bytes")
-                                await self._reply(writer, {"ok": False, "seq": None,
-                                                           "error": f"message longer than {self.max_message_bytes} bytes"})
+                                await self._reply(
+                                    writer,
+                                    {
+                                        "ok": False,
+                                        "seq": None,
+                                        "error": f"message longer than {self.max_message_bytes} bytes",
+                                    },
+                                )
                             discarding = True
                             buf = b""
                         break
@@ -404,8 +452,10 @@ class CommandServer:
                         continue
                     if len(line) > self.max_message_bytes:
                         self._rejected(peer, f"message longer than {self.max_message_bytes} bytes")
-                        await self._reply(writer, {"ok": False, "seq": None,
-                                                   "error": f"message longer than {self.max_message_bytes} bytes"})
+                        await self._reply(
+                            writer,
+                            {"ok": False, "seq": None, "error": f"message longer than {self.max_message_bytes} bytes"},
+                        )
                         continue
                     if not line.strip():
                         continue
@@ -428,8 +478,9 @@ class CommandServer:
         self.rejected += 1
         self.log.warning("command from %s refused: %s", peer, reason)
 
-    async def _handle(self, line: bytes, nonce: str, last_seq: int | None,
-                      conn: _Conn) -> tuple[dict[str, Any], int | None]:
+    async def _handle(
+        self, line: bytes, nonce: str, last_seq: int | None, conn: _Conn
+    ) -> tuple[dict[str, Any], int | None]:
         try:
             cmd = parse_command(line, self.token, nonce, last_seq)
         except Rejected as err:
@@ -448,7 +499,11 @@ class CommandServer:
             return {"ok": False, "seq": cmd.seq, "error": f"{cmd.cmd}: {err}"}, cmd.seq
         except Exception as err:  # noqa: BLE001 - a bug must still get a reply, and must not kill the server
             self._rejected(conn.peer, f"{cmd.cmd}: internal error {type(err).__name__}: {err}")
-            return {"ok": False, "seq": cmd.seq, "error": f"{cmd.cmd}: internal error {type(err).__name__}: {err}"}, cmd.seq
+            return {
+                "ok": False,
+                "seq": cmd.seq,
+                "error": f"{cmd.cmd}: internal error {type(err).__name__}: {err}",
+            }, cmd.seq
         self.accepted += 1
         return {"ok": True, "seq": cmd.seq, "result": result}, cmd.seq
 

@@ -12,15 +12,23 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from rimless.firmware.link.remote import RobotLink
 from rimless.firmware.errors import CommandError, RobotUnreachable
+from rimless.firmware.link.remote import RobotLink
 
 
 class Heartbeat:
     """Ping the robot every `period_s` (s); `status_every` pings, also ask for its status."""
 
-    def __init__(self, host: str, *, token: str, port: int = 9871, period_s: float = 0.5,
-                 echo: Callable[[str], None] = print, status_every: int = 4) -> None:
+    def __init__(
+        self,
+        host: str,
+        *,
+        token: str,
+        port: int = 9871,
+        period_s: float = 0.5,
+        echo: Callable[[str], None] = print,
+        status_every: int = 4,
+    ) -> None:
         self.host, self.port, self.token = host, port, token
         self.period_s = period_s
         self.echo = echo

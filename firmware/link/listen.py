@@ -26,9 +26,25 @@ from rimless.firmware.errors import CommandError, Interrupted
 from rimless.firmware.link.telemetry import parse_datagram
 
 CSV_COLUMNS = (
-    "timestamp", "t_mono_s", "seq", "ch", "leg/position_m", "leg/velocity_m_s", "leg/compression_m", "leg/phase",
-    "leg/stance", "leg/clutch_mask", "sensor/squal", "sensor/shutter", "sensor/max_pixel", "loop/armed",
-    "loop/latency_ms", "event/name", "event/code", "event/fault", "event/detail",
+    "timestamp",
+    "t_mono_s",
+    "seq",
+    "ch",
+    "leg/position_m",
+    "leg/velocity_m_s",
+    "leg/compression_m",
+    "leg/phase",
+    "leg/stance",
+    "leg/clutch_mask",
+    "sensor/squal",
+    "sensor/shutter",
+    "sensor/max_pixel",
+    "loop/armed",
+    "loop/latency_ms",
+    "event/name",
+    "event/code",
+    "event/fault",
+    "event/detail",
 )
 SPARK = " ▁▂▃▄▅▆▇█"
 
@@ -122,7 +138,8 @@ class Summary:
         return (
             f"{self.samples} samples ({rate:.0f}/s), {self.events} events, faults: {', '.join(self.faults[-3:]) or 'none'}"
             f" | stance {leg.get('stance', '-')}, phase {leg.get('phase', '-')}, v {leg.get('velocity_m_s', 0):+.3f} m/s,"
-            f" clutch mask {leg.get('clutch_mask', 0)}" + (f", {self.garbled} garbled" if self.garbled else "")
+            f" clutch mask {leg.get('clutch_mask', 0)}"
+            + (f", {self.garbled} garbled" if self.garbled else "")
             + (f", LOST {self.lost_objects} objects ({self.lost_events} events)" if self.lost_objects else "")
             + (f", {self.foreign} foreign datagrams ignored" if self.foreign else "")
         )
@@ -130,12 +147,14 @@ class Summary:
     def view(self, now_s: float, span_s: float, width: int = 60, legs: int = 8) -> list[str]:
         """The live view's lines: summary, velocity and compression sparklines, one strip per clutch."""
         v, c, m = list(self.velocity), list(self.compression), list(self.mask)[-width:]
-        lines = [self.line(now_s, span_s)[:width + 19]]
+        lines = [self.line(now_s, span_s)[: width + 19]]
         if v:
             lines.append(f"velocity    {sparkline(v, width)}  {min(v[-width:]):+.3f}..{max(v[-width:]):+.3f} m/s")
         if c:
-            lines.append(f"compression {sparkline([x * 1e3 for x in c], width)}  "
-                         f"{1e3 * min(c[-width:]):.1f}..{1e3 * max(c[-width:]):.1f} mm")
+            lines.append(
+                f"compression {sparkline([x * 1e3 for x in c], width)}  "
+                f"{1e3 * min(c[-width:]):.1f}..{1e3 * max(c[-width:]):.1f} mm"
+            )
         for k in range(legs):
             lines.append(f"clutch {k}    " + "".join("█" if (x >> k) & 1 else "·" for x in m))
         return lines
@@ -144,8 +163,13 @@ class Summary:
 class Recorder:
     """JSON Lines, CSV and MCAP files written under `.part` names, renamed by `close`."""
 
-    def __init__(self, out: Path | None, csv_out: Path | None, mcap_out: Path | None = None,
-                 mcap_metadata: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        out: Path | None,
+        csv_out: Path | None,
+        mcap_out: Path | None = None,
+        mcap_metadata: dict[str, str] | None = None,
+    ) -> None:
         self.paths: list[Path] = []
         self._parts: list[tuple[Path, Path]] = []
         self._jsonl: TextIO | None = None
@@ -188,9 +212,9 @@ class Recorder:
     def _open(self, path: Path, *, binary: bool = False) -> Any:
         part = path.with_name(path.name + ".part")
         if binary:
-            fh: Any = open(part, "wb")  # noqa: SIM115 - closed in close()
+            fh: Any = open(part, "wb")
         else:
-            fh = open(part, "w", encoding="utf-8", newline="")  # noqa: SIM115 - closed in close()
+            fh = open(part, "w", encoding="utf-8", newline="")
         self._parts.append((part, path))
         return fh
 
@@ -236,10 +260,21 @@ class Recorder:
 
 
 def listen(
-    *, bind: str, port: int, out: Path | None, duration_s: float | None, summary_every_s: float = 1.0,
-    echo: Callable[[str], None] = print, csv_out: Path | None = None, stale_s: float = 1.0,
-    live: bool = False, write_screen: Callable[[str], None] | None = None,
-    heartbeat: Any = None, timeout_s: float = 10.0, robot: str | None = None, mcap_out: Path | None = None,
+    *,
+    bind: str,
+    port: int,
+    out: Path | None,
+    duration_s: float | None,
+    summary_every_s: float = 1.0,
+    echo: Callable[[str], None] = print,
+    csv_out: Path | None = None,
+    stale_s: float = 1.0,
+    live: bool = False,
+    write_screen: Callable[[str], None] | None = None,
+    heartbeat: Any = None,
+    timeout_s: float = 10.0,
+    robot: str | None = None,
+    mcap_out: Path | None = None,
 ) -> Summary:
     """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
 
@@ -314,8 +349,10 @@ def listen(
                 silent_for = quiet_s
                 break
             if now >= next_line and last_data is None:
-                echo(f"waiting for telemetry on {bind}:{port}: no robot sending for {quiet_s:.0f} s"
-                     + (f" (giving up after {timeout_s:g} s)" if timeout_s > 0 else ""))
+                echo(
+                    f"waiting for telemetry on {bind}:{port}: no robot sending for {quiet_s:.0f} s"
+                    + (f" (giving up after {timeout_s:g} s)" if timeout_s > 0 else "")
+                )
                 next_line = now + summary_every_s
             elif now >= next_line:
                 if live and write_screen is not None:
@@ -336,14 +373,18 @@ def listen(
     if last_data is not None or silent_for is None:
         echo(summary.line(time.monotonic(), summary_every_s))
     if summary.lost_objects:
-        echo(f"lost {summary.lost_objects} telemetry objects on the way, {summary.lost_events} of them events "
-             "(a fault may be among them: see the robot's trial log or `rimless robot status`)")
+        echo(
+            f"lost {summary.lost_objects} telemetry objects on the way, {summary.lost_events} of them events "
+            "(a fault may be among them: see the robot's trial log or `rimless robot status`)"
+        )
     for p in paths:
         echo(f"wrote {p}")
     if stopped_by is not None:
         raise stopped_by  # after the files are complete: the caller exits 130
     if silent_for is not None:
         what = "no robot is sending telemetry" if last_data is None else "the robot stopped sending telemetry"
-        raise RunFailure(f"{what} to {bind}:{port}: nothing for {silent_for:.1f} s (--timeout-s {timeout_s:g}); "
-                         "is this PC in the robot's [telemetry] destinations (or `robot run --telemetry`)?")
+        raise RunFailure(
+            f"{what} to {bind}:{port}: nothing for {silent_for:.1f} s (--timeout-s {timeout_s:g}); "
+            "is this PC in the robot's [telemetry] destinations (or `robot run --telemetry`)?"
+        )
     return summary

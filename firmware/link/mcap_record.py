@@ -27,15 +27,22 @@ from rimless.firmware.errors import CommandError
 _NUM = {"type": "number"}
 _INT = {"type": "integer"}
 SCHEMAS: dict[str, dict[str, Any]] = {
-    "rimless.Leg": {"seq": _INT, "ch": _INT, "stance": _INT, "position_m": _NUM, "velocity_m_s": _NUM,
-                    "compression_m": _NUM, "phase": _INT, "clutch_mask": _INT},
+    "rimless.Leg": {
+        "seq": _INT,
+        "ch": _INT,
+        "stance": _INT,
+        "position_m": _NUM,
+        "velocity_m_s": _NUM,
+        "compression_m": _NUM,
+        "phase": _INT,
+        "clutch_mask": _INT,
+    },
     "rimless.LegOwn": {"leg": _INT, "velocity_m_s": _NUM, "compression_m": _NUM, "phase": _INT},
     "rimless.Sensor": {"ch": _INT, "squal": _INT, "shutter": _INT, "max_pixel": _INT},
     "rimless.Loop": {"armed": _INT, "latency_ms": _NUM},
     "rimless.Event": {"name": {"type": "string"}, "code": _INT, "event_seq": _INT},
 }
-TOPIC_SCHEMA = {"/leg": "rimless.Leg", "/sensor": "rimless.Sensor", "/loop": "rimless.Loop",
-                "/events": "rimless.Event"}
+TOPIC_SCHEMA = {"/leg": "rimless.Leg", "/sensor": "rimless.Sensor", "/loop": "rimless.Loop", "/events": "rimless.Event"}
 
 
 def _schema_bytes(name: str) -> bytes:
@@ -51,8 +58,9 @@ class McapRecorder:
         try:
             from mcap.writer import Writer
         except ImportError:
-            raise CommandError("--mcap needs the `mcap` package, a PC dependency: pip install 'rimless[pc]' "
-                               "(or pip install mcap)") from None
+            raise CommandError(
+                "--mcap needs the `mcap` package, a PC dependency: pip install 'rimless[pc]' (or pip install mcap)"
+            ) from None
         self._writer = Writer(fh)
         self._writer.start(profile="", library="rimless robot listen")
         self._schemas: dict[str, int] = {}
@@ -72,8 +80,9 @@ class McapRecorder:
 
     def _add(self, topic: str, schema: str, t_ns: int, seq: int, body: dict[str, Any]) -> None:
         data = json.dumps(body, separators=(",", ":"), allow_nan=False, default=str).encode()
-        self._writer.add_message(self._channel(topic, schema), log_time=t_ns, data=data, publish_time=t_ns,
-                                 sequence=seq)
+        self._writer.add_message(
+            self._channel(topic, schema), log_time=t_ns, data=data, publish_time=t_ns, sequence=seq
+        )
         self.messages += 1
 
     def write(self, objs: list[dict[str, Any]]) -> None:

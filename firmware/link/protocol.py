@@ -66,18 +66,57 @@ class WeakToken(ParameterError):
 
 # SHA-256 of tokens published in this repository (tests, docs, examples): never accepted, whatever their
 # strength. Tests generate their tokens at run time.
-PUBLISHED_TOKEN_SHA256 = frozenset({
-    hashlib.sha256(t.encode()).hexdigest() for t in (
-        "test-token-7f3a9c2e1b5d", "cli-test-token-5e8d1f0a9b", "signal-test-token-3c9e7a1f",
-        "fake-fault-token-8d2b6e4a1c", "x7gq-2mpz_9lrt4vb1nk", "token1234token1234")
-})
+PUBLISHED_TOKEN_SHA256 = frozenset(
+    {
+        hashlib.sha256(t.encode()).hexdigest()
+        for t in (
+            "test-token-7f3a9c2e1b5d",
+            "cli-test-token-5e8d1f0a9b",
+            "signal-test-token-3c9e7a1f",
+            "fake-fault-token-8d2b6e4a1c",
+            "x7gq-2mpz_9lrt4vb1nk",
+            "token1234token1234",
+        )
+    }
+)
 # Words and keyboard runs that cost an attacker's dictionary nothing (checked case-insensitively).
-COMMON_PARTS = ("password", "passwort", "passw0rd", "secret", "s3cret", "letmein", "welcome", "admin", "qwerty",
-                "azerty", "asdf", "zxcv", "123456789", "12345", "abcdef", "abc", "changeme", "change", "default",
-                "token", "robot", "rimless", "wheel", "test", "example", "dragon", "monkey", "iloveyou", "master",
-                "login", "pass", "raspberry", "pi")
+COMMON_PARTS = (
+    "password",
+    "passwort",
+    "passw0rd",
+    "secret",
+    "s3cret",
+    "letmein",
+    "welcome",
+    "admin",
+    "qwerty",
+    "azerty",
+    "asdf",
+    "zxcv",
+    "123456789",
+    "12345",
+    "abcdef",
+    "abc",
+    "changeme",
+    "change",
+    "default",
+    "token",
+    "robot",
+    "rimless",
+    "wheel",
+    "test",
+    "example",
+    "dragon",
+    "monkey",
+    "iloveyou",
+    "master",
+    "login",
+    "pass",
+    "raspberry",
+    "pi",
+)
 MIN_TOKEN_BITS = 64.0
-GENERATE_HINT = "generate one with `python3 -c \"import secrets; print(secrets.token_urlsafe(24))\"`"
+GENERATE_HINT = 'generate one with `python3 -c "import secrets; print(secrets.token_urlsafe(24))"`'
 
 
 def token_bits(token: str) -> float:
@@ -113,8 +152,11 @@ def check_token(token: str) -> str:
     """Return `token` if it is acceptable for the command channel, else raise `WeakToken` saying why: an
     example or published value, shorter than MIN_TOKEN_CHARS, or under MIN_TOKEN_BITS once dictionary words,
     keyboard runs and repetitions are discounted."""
-    if token.lower() in KNOWN_EXAMPLE_TOKENS or hashlib.sha256(token.lower().encode()).hexdigest() \
-            in PUBLISHED_TOKEN_SHA256 or hashlib.sha256(token.encode()).hexdigest() in PUBLISHED_TOKEN_SHA256:
+    if (
+        token.lower() in KNOWN_EXAMPLE_TOKENS
+        or hashlib.sha256(token.lower().encode()).hexdigest() in PUBLISHED_TOKEN_SHA256
+        or hashlib.sha256(token.encode()).hexdigest() in PUBLISHED_TOKEN_SHA256
+    ):
         raise WeakToken(f"the command token is an example or published value; {GENERATE_HINT}")
     if len(token) < MIN_TOKEN_CHARS:
         raise WeakToken(f"the command token is too short ({len(token)} characters, at least {MIN_TOKEN_CHARS})")
@@ -122,8 +164,10 @@ def check_token(token: str) -> str:
         raise WeakToken("the command token repeats too few characters to be secret")
     bits = token_bits(token)
     if bits < MIN_TOKEN_BITS:
-        raise WeakToken(f"the command token is guessable (about {bits:.0f} bits once dictionary words and "
-                        f"repetitions are discounted, at least {MIN_TOKEN_BITS:.0f}); {GENERATE_HINT}")
+        raise WeakToken(
+            f"the command token is guessable (about {bits:.0f} bits once dictionary words and "
+            f"repetitions are discounted, at least {MIN_TOKEN_BITS:.0f}); {GENERATE_HINT}"
+        )
     return token
 
 
@@ -136,12 +180,16 @@ def read_token_file(path: str | os.PathLike[str], what: str) -> str:
     group or others (mode 0600 or 0400); `what` names the option or setting in the message."""
     try:
         st = os.stat(path)
-        text = open(path, encoding="utf-8").read().strip()  # noqa: SIM115
+        text = open(path, encoding="utf-8").read().strip()
     except (OSError, UnicodeDecodeError) as err:
-        raise TokenFileError(f"{what} {path}: cannot read the token ({getattr(err, 'strerror', None) or err})") from None
+        raise TokenFileError(
+            f"{what} {path}: cannot read the token ({getattr(err, 'strerror', None) or err})"
+        ) from None
     if st.st_mode & 0o077:
-        raise TokenFileError(f"{what} {path}: mode {stat.S_IMODE(st.st_mode):04o} lets other users read the token; "
-                             f"run `chmod 600 {path}`")
+        raise TokenFileError(
+            f"{what} {path}: mode {stat.S_IMODE(st.st_mode):04o} lets other users read the token; "
+            f"run `chmod 600 {path}`"
+        )
     if hasattr(os, "getuid") and st.st_uid != os.getuid():
         raise TokenFileError(f"{what} {path}: owned by uid {st.st_uid}, not by this user ({os.getuid()})")
     if not text:
@@ -279,8 +327,10 @@ def parse_command(line: bytes, token: str, nonce: str, last_seq: int | None) -> 
     seq_ok = isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq < 2**63
     echo = seq if seq_ok else None
     if "token" in obj:
-        raise Rejected("unauthenticated: clear-text tokens are not accepted; sign with the connection nonce "
-                       "(protocol version 2)", echo)
+        raise Rejected(
+            "unauthenticated: clear-text tokens are not accepted; sign with the connection nonce (protocol version 2)",
+            echo,
+        )
     extra = sorted(set(obj) - _TOP_KEYS)
     if extra:
         raise Rejected(f"unknown field {extra[0]!r}", echo)
@@ -293,8 +343,7 @@ def parse_command(line: bytes, token: str, nonce: str, last_seq: int | None) -> 
         raise Rejected("unauthenticated: a message needs cmd (string), args (object) and mac (string)", echo)
     expected = command_mac(token, nonce, seq, cmd, args)
     if not hmac.compare_digest(mac.encode("ascii", "replace"), expected.encode("ascii")):
-        raise Rejected("unauthenticated: bad mac (wrong token, or a message replayed from another connection)",
-                       echo)
+        raise Rejected("unauthenticated: bad mac (wrong token, or a message replayed from another connection)", echo)
     if last_seq is not None and seq <= last_seq:
         raise Rejected(f"out of order: seq {seq} after {last_seq} (replayed?)", echo)
     if cmd not in COMMANDS:

@@ -40,7 +40,7 @@ class RobotLink:
             self.sock = socket.create_connection((host, port), timeout=timeout_s)
         except socket.gaierror as err:
             raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
-        except (TimeoutError, socket.timeout):
+        except TimeoutError:
             raise RobotUnreachable(f"no answer from {host}:{port} within {timeout_s} s") from None
         except OSError as err:
             raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
@@ -62,7 +62,7 @@ class RobotLink:
                 if not chunk:
                     raise RobotUnreachable(f"the robot at {self.host}:{self.port} closed the connection")
                 self._buf += chunk
-        except (TimeoutError, socket.timeout):
+        except TimeoutError:
             raise RobotUnreachable(f"no answer from {self.host}:{self.port} within {self.timeout_s} s") from None
         except OSError as err:
             if isinstance(err, RobotUnreachable):
@@ -81,8 +81,12 @@ class RobotLink:
         """Send one command and return its `result`."""
         self._seq += 1
         args = args or {}
-        msg = {"seq": self._seq, "cmd": cmd, "args": args,
-               "mac": command_mac(self._token, self.nonce, self._seq, cmd, args)}
+        msg = {
+            "seq": self._seq,
+            "cmd": cmd,
+            "args": args,
+            "mac": command_mac(self._token, self.nonce, self._seq, cmd, args),
+        }
         try:
             self.sock.sendall(json.dumps(msg).encode() + b"\n")
         except OSError as err:
@@ -110,8 +114,9 @@ class RobotLink:
 RESEND_FIRST_S = 0.05  # the reserved path's first resend, then doubling: a dropped copy costs 50 ms, not 1/3 s
 
 
-def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                           copies: int = 5) -> dict[str, Any]:
+def send_reserved_datagram(
+    host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0, copies: int = 5
+) -> dict[str, Any]:
     """PC side: `disarm` or `status` over the reserved UDP path; returns the robot's answer.
 
     Sends up to `copies` datagrams (UDP may drop one: a flood can fill the robot's socket buffer), each with
@@ -142,7 +147,7 @@ def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFA
                 sock.settimeout(left)
                 try:
                     reply, _ = sock.recvfrom(65536)
-                except (TimeoutError, socket.timeout, ConnectionRefusedError):
+                except (TimeoutError, ConnectionRefusedError):
                     break
                 except OSError as err:
                     raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
@@ -155,14 +160,20 @@ def send_reserved_datagram(host: str, kind: str, *, token: str, port: int = DEFA
     raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
 
 
-def send_disarm_datagram(host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0,
-                         copies: int = 5) -> dict[str, Any]:
+def send_disarm_datagram(
+    host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0, copies: int = 5
+) -> dict[str, Any]:
     """PC side: disarm over the reserved UDP path (see `send_reserved_datagram`)."""
     return send_reserved_datagram(host, "disarm", token=token, port=port, timeout_s=timeout_s, copies=copies)
 
 
 def send_command(
-    host: str, cmd: str, args: dict[str, Any] | None = None, *, token: str, port: int = DEFAULT_PORT,
+    host: str,
+    cmd: str,
+    args: dict[str, Any] | None = None,
+    *,
+    token: str,
+    port: int = DEFAULT_PORT,
     timeout_s: float = 3.0,
 ) -> dict[str, Any]:
     """PC side: send one command on a fresh connection and return its `result`.

@@ -20,9 +20,23 @@ from rimless.firmware.control.controller import EventRecord, Record, SampleRecor
 from rimless.firmware.control.faults import Fault
 
 EVENT_CODES = {
-    "touchdown": 1, "lock": 2, "release": 3, "no_zero_crossing": 4, "arm": 5, "disarm": 6, "param": 7,
-    "trial_start": 8, "trial_stop": 9, "stop": 10, "fault": 11, "sync_lost": 12, "lock_unsynced": 13, "signal": 14,
-    "lock_withheld": 15, "log_degraded": 16, "touchdown_dismissed": 17,
+    "touchdown": 1,
+    "lock": 2,
+    "release": 3,
+    "no_zero_crossing": 4,
+    "arm": 5,
+    "disarm": 6,
+    "param": 7,
+    "trial_start": 8,
+    "trial_stop": 9,
+    "stop": 10,
+    "fault": 11,
+    "sync_lost": 12,
+    "lock_unsynced": 13,
+    "signal": 14,
+    "lock_withheld": 15,
+    "log_degraded": 16,
+    "touchdown_dismissed": 17,
 }
 
 
@@ -54,8 +68,11 @@ def record_to_json(rec: Record, clock: WallClock) -> dict[str, Any]:
                 "clutch_mask": rec.clutch_mask,
             },
             # the same leg values again under the stance leg's own name: one PlotJuggler series per leg
-            f"leg{rec.stance_leg}": {"velocity_m_s": round(rec.velocity_m_s, 5),
-                                     "compression_m": round(rec.compression_m, 7), "phase": rec.phase},
+            f"leg{rec.stance_leg}": {
+                "velocity_m_s": round(rec.velocity_m_s, 5),
+                "compression_m": round(rec.compression_m, 7),
+                "phase": rec.phase,
+            },
             "sensor": {"squal": rec.squal, "shutter": rec.shutter, "max_pixel": rec.max_pixel},
             "loop": {"armed": int(rec.armed), "latency_ms": round(rec.latency_ns * 1e-6, 4)},
         }
@@ -103,8 +120,13 @@ class TelemetrySender:
     """
 
     def __init__(
-        self, destinations: list[tuple[str, int]] | str, port: int | None = None, *, max_datagram_bytes: int = 1200,
-        batch: bool = True, decimate: int = 1,
+        self,
+        destinations: list[tuple[str, int]] | str,
+        port: int | None = None,
+        *,
+        max_datagram_bytes: int = 1200,
+        batch: bool = True,
+        decimate: int = 1,
     ) -> None:
         if isinstance(destinations, str):  # the one-destination form: TelemetrySender(host, port)
             destinations = [(destinations, int(port or 9870))]

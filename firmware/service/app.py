@@ -28,14 +28,14 @@ from typing import Any
 from rimless.firmware.control.controller import Controller, EventRecord, Record
 from rimless.firmware.control.faults import Fault
 from rimless.firmware.control.sampler import Sampler
+from rimless.firmware.control.watchdog import Watchdog
 from rimless.firmware.link.commands import CommandServer
 from rimless.firmware.link.protocol import Command, check_token
 from rimless.firmware.link.telemetry import TelemetrySender
+from rimless.firmware.service import sdnotify
 from rimless.firmware.service.config import RobotConfig
 from rimless.firmware.service.hardware import Hardware
 from rimless.firmware.service.safety import STOP_SIGNALS, install_faulthandler
-from rimless.firmware.service import sdnotify
-from rimless.firmware.control.watchdog import Watchdog
 from rimless.firmware.service.triallog import TrialLog
 
 log = logging.getLogger("rimless.robot")
@@ -95,7 +95,9 @@ class RobotApp:
         if cfg.commands.enabled and not self.token_generated:
             check_token(self.token)  # WeakToken (a ParameterError) names the problem
         self.controller = Controller(
-            hw.channels, hw.clutches, max_hold_s=cfg.clutch.max_hold_s,
+            hw.channels,
+            hw.clutches,
+            max_hold_s=cfg.clutch.max_hold_s,
             id_check_interval_s=cfg.sampling.id_check_interval_s,
             readback_every_samples=cfg.sampling.readback_every_samples,
         )
@@ -133,12 +135,14 @@ class RobotApp:
     def _signal_handler(self, loop: asyncio.AbstractEventLoop) -> Callable[[int, Any], None]:
         """The handler of every stop signal: clutches off and no new engage right here, in the main thread
         between two bytecodes (so also while the event loop is blocked), then the orderly stop in the loop."""
+
         def handler(signum: int, _frame: Any) -> None:
             self.controller.armed = False
             with contextlib.suppress(Exception):
                 self.hw.outputs_off()
             with contextlib.suppress(Exception):
                 loop.call_soon_threadsafe(self._on_signal, signal.Signals(signum).name)
+
         return handler
 
     def _on_signal(self, name: str) -> None:
@@ -152,7 +156,11 @@ class RobotApp:
 
     # --- main -----------------------------------------------------------------------------------
     async def run(
-        self, *, duration_s: float | None = None, max_samples: int | None = None, arm: bool = False,
+        self,
+        *,
+        duration_s: float | None = None,
+        max_samples: int | None = None,
+        arm: bool = False,
         handle_signals: bool = True,
     ) -> RunSummary:
         """Run until stopped; always ends with every clutch off and the hardware closed."""
@@ -172,24 +180,46 @@ class RobotApp:
             sys.setswitchinterval(SWITCH_INTERVAL_S)
             tcfg = self.cfg.telemetry
             if tcfg.destinations_list():
-                self.telemetry = TelemetrySender(tcfg.destinations_list(), max_datagram_bytes=tcfg.max_datagram_bytes,
-                                                 batch=tcfg.batch, decimate=tcfg.decimate)
+                self.telemetry = TelemetrySender(
+                    tcfg.destinations_list(),
+                    max_datagram_bytes=tcfg.max_datagram_bytes,
+                    batch=tcfg.batch,
+                    decimate=tcfg.decimate,
+                )
             if self.cfg.commands.enabled:
                 c = self.cfg.commands
-                server = CommandServer(self._execute, self.token, host=c.bind, port=self._command_port,
-                                       max_message_bytes=c.max_message_bytes, max_connections=c.max_connections,
-                                       auth_timeout_s=c.auth_timeout_s, idle_timeout_s=c.idle_timeout_s,
-                                       on_valid=self._command_seen, on_disarm=self._reserved_disarm,
-                                       on_status=self._reserved_status)
+                server = CommandServer(
+                    self._execute,
+                    self.token,
+                    host=c.bind,
+                    port=self._command_port,
+                    max_message_bytes=c.max_message_bytes,
+                    max_connections=c.max_connections,
+                    auth_timeout_s=c.auth_timeout_s,
+                    idle_timeout_s=c.idle_timeout_s,
+                    on_valid=self._command_seen,
+                    on_disarm=self._reserved_disarm,
+                    on_status=self._reserved_status,
+                )
                 self.server = server
                 self.command_port = self.summary.command_port = await server.start()
-            self.sampler = Sampler(self.controller, rate_hz=self.cfg.sampling.rate_hz, spin_s=self.cfg.sampling.spin_s,
-                                   max_samples=max_samples, record_timing=self.record_timing,
-                                   on_sample=self._on_sample,
-                                   realtime=(self.cfg.sampling.realtime_priority, self.cfg.sampling.realtime_cpu)
-                                   if self.cfg.sampling.realtime else None)
-            wd = self.watchdog = Watchdog(self._watchdog_trip, period_s=WATCHDOG_PERIOD_S, notify=sdnotify.notify,
-                                          notify_every_s=sdnotify.watchdog_interval_s())
+            self.sampler = Sampler(
+                self.controller,
+                rate_hz=self.cfg.sampling.rate_hz,
+                spin_s=self.cfg.sampling.spin_s,
+                max_samples=max_samples,
+                record_timing=self.record_timing,
+                on_sample=self._on_sample,
+                realtime=(self.cfg.sampling.realtime_priority, self.cfg.sampling.realtime_cpu)
+                if self.cfg.sampling.realtime
+                else None,
+            )
+            wd = self.watchdog = Watchdog(
+                self._watchdog_trip,
+                period_s=WATCHDOG_PERIOD_S,
+                notify=sdnotify.notify,
+                notify_every_s=sdnotify.watchdog_interval_s(),
+            )
             wd.add(CONTROL_LOOP, self.cfg.sampling.stall_timeout_s)
             wd.add(EVENT_LOOP, self.cfg.sampling.loop_stall_s)
             wd.checks.append(self._check_link)
@@ -420,8 +450,13 @@ class RobotApp:
             if self._log_reported == 0 or closed:
                 log.warning("trial log: %s (%d lines dropped)", trial.last_error, self.summary.log_dropped_lines)
             if self._log_reported == 0:
-                self.controller.outbox.append(EventRecord(time.monotonic_ns(), "log_degraded", {
-                    "error": trial.last_error, "dropped_lines": self.summary.log_dropped_lines}))
+                self.controller.outbox.append(
+                    EventRecord(
+                        time.monotonic_ns(),
+                        "log_degraded",
+                        {"error": trial.last_error, "dropped_lines": self.summary.log_dropped_lines},
+                    )
+                )
             self._log_reported = self.summary.log_errors
         if closed:
             self._log_closed = (self.summary.log_dropped_lines, self.summary.log_errors)
@@ -442,8 +477,12 @@ class RobotApp:
     def _reserved_status(self) -> dict[str, Any]:
         """A small status for the reserved UDP path (read from its thread: copies only)."""
         ctl = self.controller
-        return {"armed": ctl.armed, "faults": sorted(f.value for f in list(ctl.active_faults)),
-                "engaged": self.hw.clutches.engaged(), "samples": ctl.samples}
+        return {
+            "armed": ctl.armed,
+            "faults": sorted(f.value for f in list(ctl.active_faults)),
+            "engaged": self.hw.clutches.engaged(),
+            "samples": ctl.samples,
+        }
 
     def _command_seen(self) -> None:
         self._last_command_s = time.monotonic()
@@ -465,11 +504,17 @@ class RobotApp:
                 rate_hz=self.cfg.sampling.rate_hz,
                 missed_deadlines=self.sampler.stats.missed_deadlines,
                 trial=None if self.trial is None else str(self.trial.path),
-                log={"dropped_lines": self.summary.log_dropped_lines, "errors": self.summary.log_errors,
-                     "last_error": self.summary.log_last_error},
+                log={
+                    "dropped_lines": self.summary.log_dropped_lines,
+                    "errors": self.summary.log_errors,
+                    "last_error": self.summary.log_last_error,
+                },
                 params={k: getattr(self.controller.params(), k) for k in self.controller.params().__slots__},
-                link={"timeout_s": self.cfg.commands.link_timeout_s, "armed_remotely": self.armed_remotely,
-                      "connections": 0 if self.server is None else self.server.connections},
+                link={
+                    "timeout_s": self.cfg.commands.link_timeout_s,
+                    "armed_remotely": self.armed_remotely,
+                    "connections": 0 if self.server is None else self.server.connections,
+                },
             )
             return status
         if cmd.cmd == "arm":
@@ -504,8 +549,12 @@ class RobotApp:
         async with self._trial_lock:
             if self.trial is not None:
                 raise ValueError(f"a trial is already running ({self.trial.path.name})")
-            header = {"rate_hz": self.cfg.sampling.rate_hz, "detector": _params_dict(self.controller),
-                      "legs": [list(s.legs) for s in self.cfg.sensors], "clutch_pins": list(self.cfg.clutch.pins)}
+            header = {
+                "rate_hz": self.cfg.sampling.rate_hz,
+                "detector": _params_dict(self.controller),
+                "legs": [list(s.legs) for s in self.cfg.sensors],
+                "clutch_pins": list(self.cfg.clutch.pins),
+            }
             trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header, write=self.trial_log_write)
             self._route()  # records from before the start do not belong to the trial
             self.trial = trial

@@ -69,8 +69,13 @@ def detector_delays(events: list[EventRecord], traj: GaitTrajectory) -> tuple[li
     return lock, touch
 
 
-def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None = None,
-               handle_signals: bool = False, realtime: bool = False) -> dict[str, Any]:
+def bench_rate(
+    rate_hz: float,
+    duration_s: float = 3.0,
+    base: RobotConfig | None = None,
+    handle_signals: bool = False,
+    realtime: bool = False,
+) -> dict[str, Any]:
     """Run the fake app at `rate_hz` for `duration_s`; return the figures (times in ms). With `realtime`, the
     control thread takes the service's real-time settings (`[sampling] realtime`); `realtime` in the figures
     says what it got.
@@ -85,14 +90,18 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
     with tempfile.TemporaryDirectory(prefix="rimless-bench-") as tmp:
         cfg = dataclasses.replace(
             base,
-            sampling=dataclasses.replace(base.sampling if base else SamplingConfig(), rate_hz=float(rate_hz),
-                                         realtime=realtime or base.sampling.realtime),
+            sampling=dataclasses.replace(
+                base.sampling if base else SamplingConfig(),
+                rate_hz=float(rate_hz),
+                realtime=realtime or base.sampling.realtime,
+            ),
             telemetry=TelemetryConfig(host="127.0.0.1", port=port),
             commands=CommandsConfig(enabled=False),
             log=LogConfig(dir=tmp),
         )
-        traj = GaitTrajectory(start_s=time.monotonic() + 0.3, step_period_s=0.25, compression_m=0.008,
-                              compression_s=0.06)
+        traj = GaitTrajectory(
+            start_s=time.monotonic() + 0.3, step_period_s=0.25, compression_m=0.008, compression_s=0.06
+        )
         hw = build_fake(cfg, trajectory=traj)
         wire0 = sum(f.wire_time_s for f in hw.fakes)
 
@@ -145,9 +154,14 @@ def bench_rate(rate_hz: float, duration_s: float = 3.0, base: RobotConfig | None
     }
 
 
-def bench_rates(rates_hz: Sequence[float], duration_s: float = 3.0, *, realtime: bool = False,
-                on_rate: Callable[[float], None] | None = None,
-                on_result: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+def bench_rates(
+    rates_hz: Sequence[float],
+    duration_s: float = 3.0,
+    *,
+    realtime: bool = False,
+    on_rate: Callable[[float], None] | None = None,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
     """`bench_rate` at each rate in turn, logging only warnings; `on_rate(rate_hz)` before each run,
     `on_result(figures)` after it. A stop signal ends the bench: raises `Interrupted` naming it."""
     results = []

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from rimless.firmware.control.detector import DetectorParams
-from rimless.firmware.errors import ConfigError, ConfigFileError
 from rimless.firmware.control.faults import HealthLimits
+from rimless.firmware.errors import ConfigError, ConfigFileError
 
 # The robot's detector defaults differ from the library's on the leg-count safety checks (a counted leg locks
 # only after two confirmed step intervals; an unconfirmed compression of 0.3 mm loses the count). The
@@ -163,16 +163,38 @@ class RobotConfig:
 
 
 _RANGES: dict[str, tuple[float, float]] = {
-    "spi_bus": (0, 6), "spi_device": (0, 3), "spi_speed_hz": (10_000, 2_000_000), "reset_pin": (2, 27),
-    "frame_rate_hz": (2000, 6469), "counts_per_m": (1.0, 1e8), "squal_min": (0, 169), "squal_low_s": (0.0, 10.0),
-    "saturated_samples_max": (1, 1000), "max_hold_s": (0.01, 60.0), "start_leg_index": (0, 63),
-    "rate_hz": (10.0, 5000.0), "spin_s": (0.0, 0.005), "stall_timeout_s": (0.005, 10.0),
-    "id_check_interval_s": (0.0, 3600.0), "readback_every_samples": (0, 100000), "port": (0, 65535), "period_s": (0.001, 1.0),
-    "max_datagram_bytes": (256, 65000), "decimate": (1, 1000), "link_timeout_s": (0.0, 3600.0),
-    "max_message_bytes": (256, 1 << 20), "flush_interval_s": (0.01, 10.0), "npd_pin": (2, 27), "cs_pin": (2, 27),
-    "heartbeat_pin": (0, 27), "loop_stall_s": (0.02, 10.0),
-    "realtime_priority": (1, 99), "realtime_cpu": (-1, 1023),
-    "max_connections": (2, 256), "auth_timeout_s": (0.1, 60.0), "idle_timeout_s": (1.0, 86400.0),
+    "spi_bus": (0, 6),
+    "spi_device": (0, 3),
+    "spi_speed_hz": (10_000, 2_000_000),
+    "reset_pin": (2, 27),
+    "frame_rate_hz": (2000, 6469),
+    "counts_per_m": (1.0, 1e8),
+    "squal_min": (0, 169),
+    "squal_low_s": (0.0, 10.0),
+    "saturated_samples_max": (1, 1000),
+    "max_hold_s": (0.01, 60.0),
+    "start_leg_index": (0, 63),
+    "rate_hz": (10.0, 5000.0),
+    "spin_s": (0.0, 0.005),
+    "stall_timeout_s": (0.005, 10.0),
+    "id_check_interval_s": (0.0, 3600.0),
+    "readback_every_samples": (0, 100000),
+    "port": (0, 65535),
+    "period_s": (0.001, 1.0),
+    "max_datagram_bytes": (256, 65000),
+    "decimate": (1, 1000),
+    "link_timeout_s": (0.0, 3600.0),
+    "max_message_bytes": (256, 1 << 20),
+    "flush_interval_s": (0.01, 10.0),
+    "npd_pin": (2, 27),
+    "cs_pin": (2, 27),
+    "heartbeat_pin": (0, 27),
+    "loop_stall_s": (0.02, 10.0),
+    "realtime_priority": (1, 99),
+    "realtime_cpu": (-1, 1023),
+    "max_connections": (2, 256),
+    "auth_timeout_s": (0.1, 60.0),
+    "idle_timeout_s": (1.0, 86400.0),
 }
 
 
@@ -221,7 +243,7 @@ def _build(cls: type, table: Any, where: str) -> Any:
         hint = str(known[name].type)
         if name == "destinations":
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-                raise ConfigError(f"{where}.{name} must be a list of \"host:port\" strings, got {value!r}")
+                raise ConfigError(f'{where}.{name} must be a list of "host:port" strings, got {value!r}')
             for v in value:
                 try:
                     parse_host_port(v)
@@ -229,8 +251,10 @@ def _build(cls: type, table: Any, where: str) -> Any:
                     raise ConfigError(f"{where}.{name}: {err}") from None
             value = tuple(value)
         elif name in ("legs", "pins"):
-            if not isinstance(value, list) or not value or not all(
-                isinstance(v, int) and not isinstance(v, bool) for v in value
+            if (
+                not isinstance(value, list)
+                or not value
+                or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
             ):
                 raise ConfigError(f"{where}.{name} must be a non-empty list of integers, got {value!r}")
             if len(set(value)) != len(value):
@@ -240,7 +264,7 @@ def _build(cls: type, table: Any, where: str) -> Any:
             value = _check_value(where, name, value, 0.0 if name == "frame_rate_hz" else 0, hint)
         elif name == "axis":
             if value not in ("x", "y"):
-                raise ConfigError(f"{where}.axis must be \"x\" or \"y\", got {value!r}")
+                raise ConfigError(f'{where}.axis must be "x" or "y", got {value!r}')
         elif name == "sign":
             if value not in (1, -1) or isinstance(value, bool):
                 raise ConfigError(f"{where}.sign must be 1 or -1, got {value!r}")
@@ -267,8 +291,13 @@ def config_from_dict(data: dict[str, Any], source: str = "robot.toml") -> RobotC
         if not isinstance(raw, list) or not raw:
             raise ConfigError(f"{source}: [[sensor]] must be one or more tables")
         kw["sensors"] = tuple(_build(SensorConfig, t, f"{source}: [[sensor]] #{i + 1}") for i, t in enumerate(raw))
-    for name, cls in (("clutch", ClutchConfig), ("sampling", SamplingConfig), ("telemetry", TelemetryConfig),
-                      ("commands", CommandsConfig), ("log", LogConfig)):
+    for name, cls in (
+        ("clutch", ClutchConfig),
+        ("sampling", SamplingConfig),
+        ("telemetry", TelemetryConfig),
+        ("commands", CommandsConfig),
+        ("log", LogConfig),
+    ):
         if name in data:
             kw[name] = _build(cls, data[name], f"{source}: [{name}]")
     if "detector" in data:
@@ -285,7 +314,9 @@ def config_from_dict(data: dict[str, Any], source: str = "robot.toml") -> RobotC
     for i, s in enumerate(cfg.sensors):
         for leg in s.legs:
             if not 0 <= leg < n_legs:
-                raise ConfigError(f"{source}: [[sensor]] #{i + 1}.legs: leg {leg} has no clutch pin (clutch.pins has {n_legs})")
+                raise ConfigError(
+                    f"{source}: [[sensor]] #{i + 1}.legs: leg {leg} has no clutch pin (clutch.pins has {n_legs})"
+                )
             if leg in seen:
                 raise ConfigError(f"{source}: [[sensor]] #{i + 1}.legs: leg {leg} is watched by two sensors")
             seen.add(leg)

@@ -19,9 +19,16 @@ from rimless.firmware.control.faults import HealthMonitor
 from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.drivers.clutch import ClutchBank
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, GaitTrajectory
-from rimless.firmware.drivers.gpio import GpioChipSelectBus, HeartbeatOutput, PinLog, mock_pin_factory, open_clutches, output, release_pins
+from rimless.firmware.drivers.gpio import (
+    GpioChipSelectBus,
+    HeartbeatOutput,
+    PinLog,
+    mock_pin_factory,
+    open_clutches,
+    output,
+    release_pins,
+)
 from rimless.firmware.service.config import RobotConfig, SensorConfig
-
 
 
 @dataclass
@@ -81,7 +88,9 @@ def _reset_all(sensors: list[Adns3080], cfg: RobotConfig) -> None:
 
 def _channels(cfg: RobotConfig, sensors: list[Adns3080]) -> list[Channel]:
     return [
-        Channel(sensor, LegDetector(cfg.detector, s.legs, start_index=cfg.clutch.start_leg_index), HealthMonitor(s.health()))
+        Channel(
+            sensor, LegDetector(cfg.detector, s.legs, start_index=cfg.clutch.start_leg_index), HealthMonitor(s.health())
+        )
         for sensor, s in zip(sensors, cfg.sensors, strict=True)
     ]
 
@@ -114,9 +123,15 @@ def build_fake(
     try:
         for i, s in enumerate(cfg.sensors):
             # counts_per_m is calibrated at the configured resolution; the fake takes it at 1600 cpi.
-            fake = FakeAdns3080(trajectories[i] if trajectories else traj,
-                                counts_per_m=s.counts_per_m * 1600 / s.resolution_cpi, axis=s.axis,
-                                sign=s.sign, noise_counts=noise_counts, seed=seed + i, speed_hz=s.spi_speed_hz)
+            fake = FakeAdns3080(
+                trajectories[i] if trajectories else traj,
+                counts_per_m=s.counts_per_m * 1600 / s.resolution_cpi,
+                axis=s.axis,
+                sign=s.sign,
+                noise_counts=noise_counts,
+                seed=seed + i,
+                speed_hz=s.spi_speed_hz,
+            )
             closers.append(fake.close)
             fakes.append(fake)
             reset = _shared_line(lines, s.reset_pin, factory, closers)
@@ -137,8 +152,14 @@ def build_fake(
                 fake.set_npd(on)
 
             on_line.setdefault(s.reset_pin, []).append(fake)
-            sensor = Adns3080(bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign, reset=drive_reset,
-                              npd=None if npd is None else drive_npd)
+            sensor = Adns3080(
+                bus,
+                counts_per_m=s.counts_per_m,
+                axis=s.axis,
+                sign=s.sign,
+                reset=drive_reset,
+                npd=None if npd is None else drive_npd,
+            )
             sensors.append(sensor)
         _reset_all(sensors, cfg)
         for sensor, s in zip(sensors, cfg.sensors, strict=True):
@@ -191,7 +212,10 @@ def build_real(cfg: RobotConfig) -> Hardware:
             reset_dev = _shared_line(lines, s.reset_pin, None, closers)
             npd_dev = None if s.npd_pin is None else _shared_line(lines, s.npd_pin, None, closers)
             sensor = Adns3080(
-                bus, counts_per_m=s.counts_per_m, axis=s.axis, sign=s.sign,
+                bus,
+                counts_per_m=s.counts_per_m,
+                axis=s.axis,
+                sign=s.sign,
                 reset=lambda on, d=reset_dev: d.on() if on else d.off(),
                 npd=None if npd_dev is None else (lambda on, d=npd_dev: d.on() if on else d.off()),
             )
@@ -235,5 +259,4 @@ def release_clutches(cfg: RobotConfig, *, fake: bool = False) -> ReleaseReport:
     """
     factory = mock_pin_factory() if fake else None
     levels = release_pins(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
-    return ReleaseReport(tuple(cfg.clutch.pins), "low" if cfg.clutch.active_high else "high",
-                         levels if fake else None)
+    return ReleaseReport(tuple(cfg.clutch.pins), "low" if cfg.clutch.active_high else "high", levels if fake else None)

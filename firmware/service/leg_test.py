@@ -43,7 +43,6 @@ from pathlib import Path
 from typing import Any
 
 from rimless.errors import OutputFileError, ParameterError, RunFailure
-from rimless.output import atomic_file, check_output_folder
 from rimless.firmware.control.detector import DetectorParams, LegDetector
 from rimless.firmware.control.faults import Fault, HealthMonitor
 from rimless.firmware.control.watchdog import Watchdog
@@ -54,6 +53,7 @@ from rimless.firmware.errors import Interrupted, SensorError
 from rimless.firmware.service.config import RobotConfig, load_config
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.safety import stop_on_signals
+from rimless.output import atomic_file, check_output_folder
 
 FORMAT = "rimless-leg-test/1"
 LEG_TEST_FRAME_RATE_HZ = 6000.0  # fixed frame rate (see the module docstring)
@@ -66,10 +66,21 @@ WATCHDOG_FEED = "leg_test_loop"
 SLOW_READ_US = 500.0  # a read that took longer has an uncertain instant (the fit leaves such reads out too)
 # The zero-velocity detector of the walking controller with a hand's pace: a press of a few mm over a fraction
 # of a second moves at mm/s to cm/s, not at the 50 mm/s of a touchdown, and may take seconds.
-HAND_DETECTOR = DetectorParams(velocity_window_s=0.03, touch_velocity_m_s=0.004, touch_debounce_samples=3,
-                               touch_compression_m=0.0002, lock_velocity_m_s=0.0, lock_debounce_samples=2,
-                               min_compression_m=0.0005, double_support_s=0.0, min_step_s=0.08,
-                               max_compression_s=10.0, max_step_s=10.0, confirm_steps=0, doubt_compression_m=0.0)
+HAND_DETECTOR = DetectorParams(
+    velocity_window_s=0.03,
+    touch_velocity_m_s=0.004,
+    touch_debounce_samples=3,
+    touch_compression_m=0.0002,
+    lock_velocity_m_s=0.0,
+    lock_debounce_samples=2,
+    min_compression_m=0.0005,
+    double_support_s=0.0,
+    min_step_s=0.08,
+    max_compression_s=10.0,
+    max_step_s=10.0,
+    confirm_steps=0,
+    doubt_compression_m=0.0,
+)
 
 
 @dataclass(frozen=True)
@@ -114,13 +125,24 @@ class LegTestReport:
 
     def to_json(self) -> dict[str, Any]:
         """The JSON of `rimless robot leg-test --json`."""
-        return {"leg": self.leg, "out": str(self.out) if self.written else None, "fake": self.fake,
-                "samples": self.samples, "free_samples": self.free_samples,
-                "achieved_rate_hz": _num(self.achieved_rate_hz), "frame_rate_hz": _num(self.frame_rate_hz),
-                "counts_per_m": _num(self.counts_per_m), "lock_compression_mm": _num(self.lock_compression_mm),
-                "held_s": _num(self.held_s), "peak_speed_m_s": _num(self.peak_speed_m_s),
-                "peak_accel_m_s2": _num(self.peak_accel_m_s2), "fault": self.fault, "detail": self.detail,
-                "warnings": self.warnings, "exit_code": self.exit_code}
+        return {
+            "leg": self.leg,
+            "out": str(self.out) if self.written else None,
+            "fake": self.fake,
+            "samples": self.samples,
+            "free_samples": self.free_samples,
+            "achieved_rate_hz": _num(self.achieved_rate_hz),
+            "frame_rate_hz": _num(self.frame_rate_hz),
+            "counts_per_m": _num(self.counts_per_m),
+            "lock_compression_mm": _num(self.lock_compression_mm),
+            "held_s": _num(self.held_s),
+            "peak_speed_m_s": _num(self.peak_speed_m_s),
+            "peak_accel_m_s2": _num(self.peak_accel_m_s2),
+            "fault": self.fault,
+            "detail": self.detail,
+            "warnings": self.warnings,
+            "exit_code": self.exit_code,
+        }
 
 
 def _num(v: float) -> float | None:
@@ -138,15 +160,19 @@ def check_options(cfg: RobotConfig, opts: LegTestOptions) -> int:
         raise ParameterError(f"--leg {opts.leg}: no [[sensor]] watches this leg (legs of each sensor in robot.toml)")
     margin = 0.05
     if not 0.0 < opts.hold_s <= cfg.clutch.max_hold_s - margin:
-        raise ParameterError(f"--hold-s must be in (0, {cfg.clutch.max_hold_s - margin:g}] s (the clutch timeout "
-                             f"[clutch] max_hold_s {cfg.clutch.max_hold_s:g} s, less {margin:g} s), "
-                             f"got {opts.hold_s:g}")
+        raise ParameterError(
+            f"--hold-s must be in (0, {cfg.clutch.max_hold_s - margin:g}] s (the clutch timeout "
+            f"[clutch] max_hold_s {cfg.clutch.max_hold_s:g} s, less {margin:g} s), "
+            f"got {opts.hold_s:g}"
+        )
     if not 1000.0 <= opts.rate_hz <= 20000.0:
         raise ParameterError(f"--rate-hz must be in 1000..20000, got {opts.rate_hz:g}")
     if not 2000.0 <= opts.frame_rate_hz <= 6051.0:
-        raise ParameterError(f"--frame-rate-hz must be in 2000..6051 fps (above 6051 the datasheet's rule "
-                             "Max_Bound >= Min_Bound + Shutter_Max_Bound leaves no shutter), "
-                             f"got {opts.frame_rate_hz:g}")
+        raise ParameterError(
+            f"--frame-rate-hz must be in 2000..6051 fps (above 6051 the datasheet's rule "
+            "Max_Bound >= Min_Bound + Shutter_Max_Bound leaves no shutter), "
+            f"got {opts.frame_rate_hz:g}"
+        )
     try:
         opts.fake_leg.validated()
     except ValueError as err:
@@ -154,9 +180,15 @@ def check_options(cfg: RobotConfig, opts: LegTestOptions) -> int:
     return sensors[0]
 
 
-def run_leg_test(config: RobotConfig | Path | None, opts: LegTestOptions, out: Path, *, fake: bool = False,
-                 on_status: Callable[[str], None] | None = None,
-                 on_phase: Callable[[str, Hardware], None] | None = None) -> LegTestReport:
+def run_leg_test(
+    config: RobotConfig | Path | None,
+    opts: LegTestOptions,
+    out: Path,
+    *,
+    fake: bool = False,
+    on_status: Callable[[str], None] | None = None,
+    on_phase: Callable[[str, Hardware], None] | None = None,
+) -> LegTestReport:
     """Run the leg test on the robot (or on the fake leg with `fake`) and write its log to `out`.
 
     `on_status(text)` hears what the operator should do and what happened; `on_phase(phase, hw)` is called in
@@ -227,8 +259,9 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
 
             leg = FakeLeg(opts.fake_leg, engaged, clutch_changed_s=changed_s)
             trajectories = [leg if i == i_sensor else still for i in range(len(cfg.sensors))]
-            hw = build_fake(cfg, trajectories=trajectories, pin_factory=factory, noise_counts=opts.noise_counts,
-                            seed=opts.seed)
+            hw = build_fake(
+                cfg, trajectories=trajectories, pin_factory=factory, noise_counts=opts.noise_counts, seed=opts.seed
+            )
             state["fake_leg"] = leg
         else:
             hw = build_real(cfg)
@@ -246,9 +279,17 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
     return hw
 
 
-def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, report: LegTestReport,
-         say: Callable[[str], None], on_phase: Callable[[str, Hardware], None] | None) -> list[dict[str, Any]]:
+def _run(
+    hw: Hardware,
+    cfg: RobotConfig,
+    opts: LegTestOptions,
+    i_sensor: int,
+    report: LegTestReport,
+    say: Callable[[str], None],
+    on_phase: Callable[[str, Hardware], None] | None,
+) -> list[dict[str, Any]]:
     """The test itself; returns the log's lines (header, samples, events, end)."""
+
     def enter(name: str) -> None:
         if on_phase is not None:
             on_phase(name, hw)
@@ -276,17 +317,30 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
         held = clutches.longest_hold_s(time.monotonic_ns())
         if held > cfg.clutch.max_hold_s:
             hw.outputs_off()
-            faults.append((Fault.CLUTCH_TIMEOUT.value,
-                           f"clutch held {held:.3f} s > max_hold_s {cfg.clutch.max_hold_s:g} s"))
+            faults.append(
+                (Fault.CLUTCH_TIMEOUT.value, f"clutch held {held:.3f} s > max_hold_s {cfg.clutch.max_hold_s:g} s")
+            )
 
     wd = Watchdog(trip)
     wd.add(WATCHDOG_FEED, cfg.sampling.stall_timeout_s)
     wd.checks.append(hold_check)
-    header = {"format": FORMAT, "leg": leg, "sensor": i_sensor, "counts_per_m": cpm, "resolution_cpi": LEG_TEST_CPI,
-              "frame_rate_hz": frame, "frame_rate_requested_hz": opts.frame_rate_hz, "rate_hz": opts.rate_hz,
-              "hold_s": opts.hold_s, "record_s": opts.record_s, "axis": s.axis, "sign": s.sign, "fake": hw.fakes != [],
-              "t_s": "start of each read (s from the test's start, monotonic clock)",
-              "started_epoch_s": time.time()}
+    header = {
+        "format": FORMAT,
+        "leg": leg,
+        "sensor": i_sensor,
+        "counts_per_m": cpm,
+        "resolution_cpi": LEG_TEST_CPI,
+        "frame_rate_hz": frame,
+        "frame_rate_requested_hz": opts.frame_rate_hz,
+        "rate_hz": opts.rate_hz,
+        "hold_s": opts.hold_s,
+        "record_s": opts.record_s,
+        "axis": s.axis,
+        "sign": s.sign,
+        "fake": hw.fakes != [],
+        "t_s": "start of each read (s from the test's start, monotonic clock)",
+        "started_epoch_s": time.time(),
+    }
     if hw.fakes:
         header["fake_leg"] = opts.fake_leg.to_json()
         header["fake_noise_counts"] = opts.noise_counts
@@ -332,8 +386,13 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
             n += 1
             counts += m.counts
             t_s = (r0 - t0) * 1e-9  # the read's start: the chip freezes the motion at the burst's first byte
-            row: dict[str, Any] = {"t_s": round(t_s, 7), "counts": counts, "squal": m.squal, "shutter": m.shutter,
-                                   "read_us": round(read_ns * 1e-3, 1)}
+            row: dict[str, Any] = {
+                "t_s": round(t_s, 7),
+                "counts": counts,
+                "squal": m.squal,
+                "shutter": m.shutter,
+                "read_us": round(read_ns * 1e-3, 1),
+            }
             if m.overflow or m.saturated:
                 row["saturated"] = True
             (pre if phase == "press" else post).append(row)
@@ -355,22 +414,31 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
                     if d.engage is not None:
                         clutches.engage(leg)
                         engaged_ns, lock_counts = time.monotonic_ns(), counts
-                        events.append({"t_s": round((engaged_ns - t0) * 1e-9, 7), "event": "engage", "leg": leg,
-                                       "counts": counts})
+                        events.append(
+                            {"t_s": round((engaged_ns - t0) * 1e-9, 7), "event": "engage", "leg": leg, "counts": counts}
+                        )
                         phase = "hold"
                         enter(phase)
-                        say(f"clutch {leg} engaged at {1e3 * counts / cpm:.2f} mm of "
-                            f"compression: let go of the leg; release in {opts.hold_s:g} s")
+                        say(
+                            f"clutch {leg} engaged at {1e3 * counts / cpm:.2f} mm of "
+                            f"compression: let go of the leg; release in {opts.hold_s:g} s"
+                        )
                 if phase == "press" and (now - t0) * 1e-9 > opts.timeout_s:
-                    faults.append(("no_compression", f"no maximum compression detected within {opts.timeout_s:g} s: "
-                                   "compress the leg by hand by at least 0.5 mm, at a steady pace, and hold it"))
+                    faults.append(
+                        (
+                            "no_compression",
+                            f"no maximum compression detected within {opts.timeout_s:g} s: "
+                            "compress the leg by hand by at least 0.5 mm, at a steady pace, and hold it",
+                        )
+                    )
                     break
             elif phase == "hold":
                 if engaged_ns is not None and now - engaged_ns >= opts.hold_s * 1e9:
                     clutches.release(leg)
                     released_ns = time.monotonic_ns()
-                    events.append({"t_s": round((released_ns - t0) * 1e-9, 7), "event": "release", "leg": leg,
-                                   "counts": counts})
+                    events.append(
+                        {"t_s": round((released_ns - t0) * 1e-9, 7), "event": "release", "leg": leg, "counts": counts}
+                    )
                     phase = "free"
                     enter(phase)
             elif released_ns is not None and now - released_ns >= opts.record_s * 1e9:
@@ -388,23 +456,34 @@ def _run(hw: Hardware, cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, re
     report.free_samples = len(free)
     report.peak_speed_m_s, report.peak_accel_m_s2 = _peaks(free, cpm)
     if math.isfinite(report.peak_speed_m_s) and report.peak_speed_m_s > SENSOR_SPEED_RATING_M_S:
-        report.warnings.append(f"peak speed {report.peak_speed_m_s:.2f} m/s is above the sensor's rating (1.0 m/s): "
-                               "compress the leg less")
+        report.warnings.append(
+            f"peak speed {report.peak_speed_m_s:.2f} m/s is above the sensor's rating (1.0 m/s): compress the leg less"
+        )
     if math.isfinite(report.peak_accel_m_s2) and report.peak_accel_m_s2 > SENSOR_ACCEL_RATING_M_S2:
-        report.warnings.append(f"peak acceleration {report.peak_accel_m_s2 / 9.81:.1f} g is above the sensor's "
-                               "rating (15 g): compress the leg less")
+        report.warnings.append(
+            f"peak acceleration {report.peak_accel_m_s2 / 9.81:.1f} g is above the sensor's "
+            "rating (15 g): compress the leg less"
+        )
     if stalls:
         report.warnings.append(f"the read loop stalled {len(stalls)} time(s) while no clutch was engaged ({stalls[0]})")
     if report.achieved_rate_hz < 0.8 * opts.rate_hz:
-        report.warnings.append(f"read {report.achieved_rate_hz:.0f} times a second, below --rate-hz "
-                               f"{opts.rate_hz:g} (the bus or Python is the limit here)")
+        report.warnings.append(
+            f"read {report.achieved_rate_hz:.0f} times a second, below --rate-hz "
+            f"{opts.rate_hz:g} (the bus or Python is the limit here)"
+        )
     if faults:
         report.fault, report.detail = faults[0]
         report.exit_code = 1
-        events.append({"t_s": round((t_end - t0) * 1e-9, 7), "event": "fault", "fault": faults[0][0],
-                       "detail": faults[0][1]})
-    end = {"event": "end", "t_s": round((t_end - t0) * 1e-9, 7), "samples": n,
-           "achieved_rate_hz": round(report.achieved_rate_hz, 1), "outcome": report.fault or "ok"}
+        events.append(
+            {"t_s": round((t_end - t0) * 1e-9, 7), "event": "fault", "fault": faults[0][0], "detail": faults[0][1]}
+        )
+    end = {
+        "event": "end",
+        "t_s": round((t_end - t0) * 1e-9, 7),
+        "samples": n,
+        "achieved_rate_hz": round(report.achieved_rate_hz, 1),
+        "outcome": report.fault or "ok",
+    }
     rows = list(pre) + post
     return [header, *_merge(rows, events), end]
 
@@ -446,5 +525,12 @@ def _write(out: Path, lines: list[dict[str, Any]]) -> None:
                 f.write(json.dumps(line, separators=(",", ":")) + "\n")
 
 
-__all__ = ["FORMAT", "LEG_TEST_FRAME_RATE_HZ", "HAND_DETECTOR", "LegTestOptions", "LegTestReport", "check_options",
-           "run_leg_test"]
+__all__ = [
+    "FORMAT",
+    "LEG_TEST_FRAME_RATE_HZ",
+    "HAND_DETECTOR",
+    "LegTestOptions",
+    "LegTestReport",
+    "check_options",
+    "run_leg_test",
+]

@@ -38,8 +38,14 @@ class DroppingQueueHandler(logging.Handler):
 class NonBlockingLog:
     """Route the root logger to `stream` through a writer thread. Use as a context manager."""
 
-    def __init__(self, stream: TextIO | None = None, *, level: int = logging.INFO, queue_len: int = QUEUE_LEN,
-                 fmt: str = "%(asctime)s %(levelname)s %(name)s: %(message)s") -> None:
+    def __init__(
+        self,
+        stream: TextIO | None = None,
+        *,
+        level: int = logging.INFO,
+        queue_len: int = QUEUE_LEN,
+        fmt: str = "%(asctime)s %(levelname)s %(name)s: %(message)s",
+    ) -> None:
         self.stream = stream if stream is not None else sys.stderr
         # The process's stderr is written with os.write on its descriptor: a writer stuck on a full pipe then
         # holds no lock of sys.stderr, so the interpreter can still flush and exit.

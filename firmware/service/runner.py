@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import math
 import logging
+import math
 import signal
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -90,14 +90,24 @@ def with_telemetry(cfg: RobotConfig, destinations: Sequence[str]) -> RobotConfig
     """`cfg` sending telemetry also to each "host:port" of `destinations` (already checked)."""
     if not destinations:
         return cfg
-    return dataclasses.replace(cfg, telemetry=dataclasses.replace(
-        cfg.telemetry, destinations=cfg.telemetry.destinations + tuple(destinations)))
+    return dataclasses.replace(
+        cfg, telemetry=dataclasses.replace(cfg.telemetry, destinations=cfg.telemetry.destinations + tuple(destinations))
+    )
 
 
-def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[str] = (), fake: bool = False,
-              duration_s: float | None = None, arm: bool = False,
-              on_start: Callable[[RobotApp], None] | None = None, log_level: int = logging.INFO,
-              fake_fault: str | None = None, pin_log: Path | None = None, realtime: bool = False) -> RunOutcome:
+def run_robot(
+    config: RobotConfig | Path | None = None,
+    *,
+    telemetry: Sequence[str] = (),
+    fake: bool = False,
+    duration_s: float | None = None,
+    arm: bool = False,
+    on_start: Callable[[RobotApp], None] | None = None,
+    log_level: int = logging.INFO,
+    fake_fault: str | None = None,
+    pin_log: Path | None = None,
+    realtime: bool = False,
+) -> RunOutcome:
     """Run the firmware until a stop signal or `duration_s`.
 
     `config` is a `RobotConfig` or the robot.toml to load (None: the defaults); `telemetry` adds "host:port"
@@ -133,8 +143,16 @@ def run_robot(config: RobotConfig | Path | None = None, *, telemetry: Sequence[s
         return RunOutcome(fake, None, sig.name, before_start=True)
 
 
-def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, duration_s: float | None, arm: bool,
-         on_start: Callable[[RobotApp], None] | None, log_level: int, pin_log_path: Path | None) -> RunOutcome:
+def _run(
+    cfg: RobotConfig,
+    state: dict[str, Hardware],
+    sc: Scenario | None,
+    duration_s: float | None,
+    arm: bool,
+    on_start: Callable[[RobotApp], None] | None,
+    log_level: int,
+    pin_log_path: Path | None,
+) -> RunOutcome:
     fake = sc is not None
     pins_log: PinLog | None = None
     try:
@@ -175,12 +193,17 @@ def _run(cfg: RobotConfig, state: dict[str, Hardware], sc: Scenario | None, dura
     if sc is not None and pins_log is not None:
         pins_log.close()
         on = 1 if cfg.clutch.active_high else 0
-        engages = sorted((t, leg) for leg, pin in enumerate(cfg.clutch.pins)
-                         for t, p, level in pins_log.transitions if p == pin and level == on)
+        engages = sorted(
+            (t, leg)
+            for leg, pin in enumerate(cfg.clutch.pins)
+            for t, p, level in pins_log.transitions
+            if p == pin and level == on
+        )
         outcome.fake_fault, outcome.engages = None if sc.name == "none" else sc.name, len(engages)
         # the walk's truth (one sensor counting its legs); an app that never ran never walked
         walk = sc.walk or dataclasses.replace(sc.template, start_s=math.inf)
         if len(cfg.sensors) == 1:
-            outcome.airborne_leg_locks = len(airborne_locks(walk, engages, cfg.sensors[0].legs,
-                                                            cfg.clutch.start_leg_index))
+            outcome.airborne_leg_locks = len(
+                airborne_locks(walk, engages, cfg.sensors[0].legs, cfg.clutch.start_leg_index)
+            )
     return outcome

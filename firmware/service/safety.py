@@ -26,9 +26,25 @@ from rimless.firmware.errors import Interrupted
 
 __all__ = ["STOP_SIGNALS", "Interrupted", "stop_on_signals"]
 
-STOP_SIGNAL_NAMES = ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM", "SIGPWR",
-                     "SIGVTALRM", "SIGPROF", "SIGIO", "SIGXCPU", "SIGXFSZ", "SIGSTKFLT", "SIGSYS", "SIGTRAP",
-                     "SIGABRT")
+STOP_SIGNAL_NAMES = (
+    "SIGINT",
+    "SIGTERM",
+    "SIGHUP",
+    "SIGQUIT",
+    "SIGUSR1",
+    "SIGUSR2",
+    "SIGALRM",
+    "SIGPWR",
+    "SIGVTALRM",
+    "SIGPROF",
+    "SIGIO",
+    "SIGXCPU",
+    "SIGXFSZ",
+    "SIGSTKFLT",
+    "SIGSYS",
+    "SIGTRAP",
+    "SIGABRT",
+)
 STOP_SIGNALS = tuple(getattr(signal, n) for n in STOP_SIGNAL_NAMES if hasattr(signal, n))
 
 

@@ -116,8 +116,9 @@ def scenario(name: str | None, *, lead_s: float = 1.0) -> Scenario:
     if key not in walks:
         raise ValueError(f"unknown fake fault {name!r}; known: {', '.join(FAKE_FAULTS)}")
     walk, fault = walks[key]
-    return Scenario(key, walk, fault, stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0,
-                    disk_full=key == "log-disk-full")
+    return Scenario(
+        key, walk, fault, stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0, disk_full=key == "log-disk-full"
+    )
 
 
 class DiskFullWrite:
@@ -160,8 +161,9 @@ class ScheduledFaultBus:
     """The fake's bus, applying `action(fake)` once at the first message from `after_s` after the timeline's
     start on."""
 
-    def __init__(self, fake: FakeAdns3080, timeline: Timeline, after_s: float,
-                 action: Callable[[FakeAdns3080], None]) -> None:
+    def __init__(
+        self, fake: FakeAdns3080, timeline: Timeline, after_s: float, action: Callable[[FakeAdns3080], None]
+    ) -> None:
         self.fake = fake
         self.timeline = timeline
         self.after_s = after_s

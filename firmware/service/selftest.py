@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rimless.firmware.errors import CommandError, Interrupted, SensorError
 from rimless.firmware.drivers.gpio import pin_histories
+from rimless.firmware.errors import CommandError, Interrupted, SensorError
 from rimless.firmware.service.config import RobotConfig, load_config
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.safety import stop_on_signals
@@ -34,8 +34,14 @@ class SensorCheck:
     resolution_cpi: int
 
     def to_json(self) -> dict[str, Any]:
-        return {"index": self.index, "product_id_ok": True, "revision_id": self.revision_id, "squal": self.squal,
-                "frame_rate_hz": self.frame_rate_hz, "resolution_cpi": self.resolution_cpi}
+        return {
+            "index": self.index,
+            "product_id_ok": True,
+            "revision_id": self.revision_id,
+            "squal": self.squal,
+            "frame_rate_hz": self.frame_rate_hz,
+            "resolution_cpi": self.resolution_cpi,
+        }
 
 
 @dataclass
@@ -65,8 +71,14 @@ class SelfTestReport:
         return {"sensors": [s.to_json() for s in self.sensors], "clutches": [c.to_json() for c in self.clutches]}
 
 
-def self_test(config: RobotConfig | Path | None = None, *, fake: bool = False, click: bool = True,
-              on_click: Callable[[int, int], None] | None = None, click_s: float = CLICK_ON_S) -> SelfTestReport:
+def self_test(
+    config: RobotConfig | Path | None = None,
+    *,
+    fake: bool = False,
+    click: bool = True,
+    on_click: Callable[[int, int], None] | None = None,
+    click_s: float = CLICK_ON_S,
+) -> SelfTestReport:
     """Open the hardware of `config` (a `RobotConfig`, or the robot.toml to load; None: the defaults), the
     fakes with `fake`; identify and read every sensor, and with `click` engage each clutch for `click_s`
     seconds (`on_click(leg, pin)` is called once it is engaged).
@@ -107,13 +119,19 @@ def self_test(config: RobotConfig | Path | None = None, *, fake: bool = False, c
     return report
 
 
-def _check(hw: Hardware, report: SelfTestReport, click: bool, on_click: Callable[[int, int], None] | None,
-           click_s: float = CLICK_ON_S) -> None:
+def _check(
+    hw: Hardware,
+    report: SelfTestReport,
+    click: bool,
+    on_click: Callable[[int, int], None] | None,
+    click_s: float = CLICK_ON_S,
+) -> None:
     for i, sensor in enumerate(hw.sensors):
         rev = sensor.verify_id()
         squal = [sensor.squal() for _ in range(SQUAL_READS)]
-        report.sensors.append(SensorCheck(i, rev, max(squal), round(sensor.frame_rate_hz(), 1),
-                                          int(sensor.resolution())))
+        report.sensors.append(
+            SensorCheck(i, rev, max(squal), round(sensor.frame_rate_hz(), 1), int(sensor.resolution()))
+        )
     if not click:
         return
     for leg, pin in enumerate(hw.clutches.pins):

@@ -41,8 +41,14 @@ def valid_trial_name(name: str) -> bool:
 class TrialLog:
     """An open trial log file. `append` buffers encoded lines; `sync` writes and fsyncs them."""
 
-    def __init__(self, directory: str | Path, name: str, header: dict[str, Any] | None = None, *,
-                 write: Callable[[int, Any], int] = os.write) -> None:
+    def __init__(
+        self,
+        directory: str | Path,
+        name: str,
+        header: dict[str, Any] | None = None,
+        *,
+        write: Callable[[int, Any], int] = os.write,
+    ) -> None:
         if not valid_trial_name(name):
             raise ValueError(f"trial name {name!r}: use 1-64 letters, digits, '_', '.', '-'")
         self.dir = Path(directory)

@@ -1,16 +1,34 @@
 """`rimless sim fixed-point`, `gaits` and `critical-slope`: parse, call rimless.sim.studies.gaits, print."""
 
 import math
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import typer
 
 from rimless.cli_rules import fail, print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import (Backend, BackendOpt, ElectronicsPowerOpt, GaitOpt, GuessOpt, HoldPowerOpt, JsonOpt, Model,
-                                 ModelOpt, ModelOrRigid, RtolOpt, StrictOpt, SwitchEnergyOpt, ThetaGuessOpt,
-                                 VeElectronicsOpt, clutch_power, option_given, start_slope, wheel_params)
+from rimless.sim.cli.app import (
+    Backend,
+    BackendOpt,
+    ElectronicsPowerOpt,
+    GaitOpt,
+    GuessOpt,
+    HoldPowerOpt,
+    JsonOpt,
+    Model,
+    ModelOpt,
+    ModelOrRigid,
+    RtolOpt,
+    StrictOpt,
+    SwitchEnergyOpt,
+    ThetaGuessOpt,
+    VeElectronicsOpt,
+    clutch_power,
+    option_given,
+    start_slope,
+    wheel_params,
+)
 from rimless.sim.cli.output import console, table
 
 
@@ -36,10 +54,18 @@ def fixed_point_cmd(
 
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("period-1 gait", json_out=json_out) as bar:
-        out = fixed_point_study(params, model.value, theta_dot_guess=theta_dot_guess,
-                                theta_plus_guess=theta_plus_guess, gait=gait, strict_contact=strict_contact,
-                                backend=backend.value, rtol=rtol,
-                                progress=lambda i, n: bar.update(i, n, "finding the gaits"), power=power)
+        out = fixed_point_study(
+            params,
+            model.value,
+            theta_dot_guess=theta_dot_guess,
+            theta_plus_guess=theta_plus_guess,
+            gait=gait,
+            strict_contact=strict_contact,
+            backend=backend.value,
+            rtol=rtol,
+            progress=lambda i, n: bar.update(i, n, "finding the gaits"),
+            power=power,
+        )
     if json_out:
         print_json(out)
         return
@@ -60,16 +86,30 @@ def fixed_point_cmd(
         ("min normal force b in DLSP (N)", mf["dlsp_leading_b"]),
         ("min normal force b in SLSP (N)", min(v for v in (mf["slsp_free"], mf["slsp_clutched"]) if v == v)),
         ("trailing foot lowest point (mm)", out["trailing_foot_min_height_m"] * 1e3),
-        ("friction needed at impact (b, a)", f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}"),
+        (
+            "friction needed at impact (b, a)",
+            f"{out['friction_required']['b']:.3f}, {out['friction_required']['a']:.3f}",
+        ),
         ("relabel snap energy (J)", f"{out['relabel_energy_J']:+.3g}"),
-        *([("guide friction F_c (N)", params.guide_friction_n),
-           ("friction work per step (J)", out["friction_work_per_step_j"]),
-           ("stuck time stance, trailing (s)", f"{out['stick_time_s']['stance']:.4f}, "
-                                               f"{out['stick_time_s']['trailing']:.4f}")]
-          if params.guide_friction_n > 0.0 else []),
+        *(
+            [
+                ("guide friction F_c (N)", params.guide_friction_n),
+                ("friction work per step (J)", out["friction_work_per_step_j"]),
+                (
+                    "stuck time stance, trailing (s)",
+                    f"{out['stick_time_s']['stance']:.4f}, {out['stick_time_s']['trailing']:.4f}",
+                ),
+            ]
+            if params.guide_friction_n > 0.0
+            else []
+        ),
         ("residual |P(z)-z|", out["residual"]),
-        ("found by", "Newton from the default guess" if out["found_by"] == "newton" else
-         "the gaits search (Newton from the default guess failed)"),
+        (
+            "found by",
+            "Newton from the default guess"
+            if out["found_by"] == "newton"
+            else "the gaits search (Newton from the default guess failed)",
+        ),
         ("step length along the slope (m)", out["step_length_m"]),
         ("clutched time per step (s)", out["clutched_time_s"]),
         ("mechanical CoT (= tan phi)", out["mechanical_cot"]),
@@ -100,11 +140,21 @@ def gaits_cmd(
     from rimless.sim.studies.gaits import gait_scan
 
     with progress_bar("scanning guesses", guesses, json_out=json_out) as bar:
-        out = gait_scan(params, model.value, theta_dot_min=theta_dot_min, theta_dot_max=theta_dot_max,
-                        guesses=guesses, backend=backend.value, rtol=rtol, progress=lambda i, n: bar.update(i))
+        out = gait_scan(
+            params,
+            model.value,
+            theta_dot_min=theta_dot_min,
+            theta_dot_max=theta_dot_max,
+            guesses=guesses,
+            backend=backend.value,
+            rtol=rtol,
+            progress=lambda i, n: bar.update(i),
+        )
     if not out["gaits"]:
-        fail(f"no period-1 gait of the {model.value} wheel at {params.slope_deg:.4f} deg for theta'+ guesses in "
-             f"[{theta_dot_min:g}, {theta_dot_max:g}] rad/s")
+        fail(
+            f"no period-1 gait of the {model.value} wheel at {params.slope_deg:.4f} deg for theta'+ guesses in "
+            f"[{theta_dot_min:g}, {theta_dot_max:g}] rad/s"
+        )
     if json_out:
         print_json(out)
         return
@@ -116,14 +166,24 @@ def gaits_cmd(
         listing.add_column(col, justify="right", no_wrap=True)
     for i, it in enumerate(items):
         fmin = it["contact"]["min_stance_force_single_support_N"] if it["contact"] else float("nan")
-        listing.add_row(str(i + 1), f"{it['theta_plus_rad']:.5f}", f"{it['theta_dot_plus_rad_s']:.5f}",
-                        f"{it['step_period_s']:.4f}", f"{it['max_abs_eigenvalue']:.4f}", "yes" if it["stable"] else "no",
-                        "yes" if it["contact_valid"] else "NO", f"{fmin:.3g}", f"{it['energy_ratio']:.4f}")
+        listing.add_row(
+            str(i + 1),
+            f"{it['theta_plus_rad']:.5f}",
+            f"{it['theta_dot_plus_rad_s']:.5f}",
+            f"{it['step_period_s']:.4f}",
+            f"{it['max_abs_eigenvalue']:.4f}",
+            "yes" if it["stable"] else "no",
+            "yes" if it["contact_valid"] else "NO",
+            f"{fmin:.3g}",
+            f"{it['energy_ratio']:.4f}",
+        )
     con = console()
     con.print(listing)
-    con.print("stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
-              "impulses > 0; a gait that is not was found with the stance foot held); Fmin: smallest stance "
-              "force in single support; theta'+: post-impact angular velocity")
+    con.print(
+        "stable: max |eig| < 1; valid: unilateral contact (stance force >= 0 in single support, "
+        "impulses > 0; a gait that is not was found with the stance foot held); Fmin: smallest stance "
+        "force in single support; theta'+: post-impact angular velocity"
+    )
     for i, it in enumerate(items):
         if it["contact_reason"]:
             con.print(f"gait {i + 1}: {it['contact_reason']}")
@@ -138,8 +198,10 @@ def critical_slope_cmd(
     theta_plus_guess: ThetaGuessOpt = None,
     gait: GaitOpt = None,
     step_rad: Annotated[float, typer.Option(min=1e-5, max=0.01, help="Algorithm 1 slope step, rad.")] = 0.001,
-    start_slope_rad: Annotated[Optional[float], typer.Option(help="Slope where the continuation starts, rad "
-                                                             "[the wheel's slope: --slope-deg, 0.05 rad].")] = None,
+    start_slope_rad: Annotated[
+        float | None,
+        typer.Option(help="Slope where the continuation starts, rad [the wheel's slope: --slope-deg, 0.05 rad]."),
+    ] = None,
     strict_contact: StrictOpt = False,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
@@ -155,49 +217,82 @@ def critical_slope_cmd(
     if model != ModelOrRigid.rigid:
         start_slope_rad = start_slope(params, start_slope_rad)
     elif start_slope_rad is not None or option_given("slope_deg") or option_given("slope_rad"):
-        raise ParameterError("--model rigid is the closed form: it takes no slope (drop --slope-deg, --slope-rad "
-                             "and --start-slope-rad)")
+        raise ParameterError(
+            "--model rigid is the closed form: it takes no slope (drop --slope-deg, --slope-rad and --start-slope-rad)"
+        )
     if model == ModelOrRigid.rigid and params.guide_friction_n > 0.0:
         raise ParameterError("--model rigid has no sliding legs: --guide-friction-n does not apply to it")
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("continuation in slope", json_out=json_out) as bar:
         out = critical_slope_study(
-            params, model.value, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess, gait=gait,
-            step_rad=step_rad, start_slope_rad=start_slope_rad, strict_contact=strict_contact, backend=backend.value,
-            rtol=rtol, gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
-            progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"), power=power)
+            params,
+            model.value,
+            theta_dot_guess=theta_dot_guess,
+            theta_plus_guess=theta_plus_guess,
+            gait=gait,
+            step_rad=step_rad,
+            start_slope_rad=start_slope_rad,
+            strict_contact=strict_contact,
+            backend=backend.value,
+            rtol=rtol,
+            gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
+            progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"),
+            power=power,
+        )
     if json_out:
         print_json(out)
         return
     if model == ModelOrRigid.rigid:
         e8 = out["eight_leg_consistent"]
-        console().print(table("rigid rimless wheel (Coleman)", [
-            ("critical slope (deg), paper convention M = m_H", f"{out['critical_slope_deg']:.3f}"),
-            ("critical slope (rad)", out["critical_slope_rad"]),
-            ("CoT = tan(phi_c)", out["cot"]),
-            ("beta, eigenvalue beta^2", f"{out['beta']:.5f}, {out['eigenvalue']:.5f}"),
-            ("eight-leg-consistent critical slope (deg)", f"{e8['critical_slope_deg']:.3f}"),
-            ("eight-leg-consistent critical slope (rad)", e8["critical_slope_rad"]),
-        ]))
+        console().print(
+            table(
+                "rigid rimless wheel (Coleman)",
+                [
+                    ("critical slope (deg), paper convention M = m_H", f"{out['critical_slope_deg']:.3f}"),
+                    ("critical slope (rad)", out["critical_slope_rad"]),
+                    ("CoT = tan(phi_c)", out["cot"]),
+                    ("beta, eigenvalue beta^2", f"{out['beta']:.5f}, {out['eigenvalue']:.5f}"),
+                    ("eight-leg-consistent critical slope (deg)", f"{e8['critical_slope_deg']:.3f}"),
+                    ("eight-leg-consistent critical slope (rad)", e8["critical_slope_rad"]),
+                ],
+            )
+        )
         return
     at = out["at_critical"]
-    console().print(table(f"critical slope, {model.value} wheel", [
-        ("critical slope (deg)", out["critical_slope_deg"]),
-        ("critical slope (rad)", out["critical_slope_rad"]),
-        ("CoT = tan(phi_c)", out["cot"]),
-        ("branch ends by", out["reason"]),
-        ("located by", f"{out['method']} ({out['map_evaluations']} map evaluations)"),
-        ("Algorithm 1 slope (rad), step", f"{out['algorithm1_slope_rad']:.6f}, {out['algorithm1_step_rad']:g}"),
-        ("branch followed from", f"theta'+ = {out['branch']['start_theta_dot_plus_rad_s']:.4f} rad/s, period "
-                                 f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad"),
-        ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
-        ("contact valid at critical", ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-"),
-        ("at critical: electrical energy per step (J)", out.get("electrical_energy_per_step_j", "-")),
-        ("at critical: system CoT", out.get("system_cot", "-")),
-        ("least system CoT along the branch", out["min_system_cot"]),
-        ("  at slope (deg)", f"{out['min_system_cot_slope_deg']:.5f}"
-                             + (f" (on the branch's bound: {out['min_system_cot_at_bound']})"
-                                if out["min_system_cot_at_bound"] else "")),
-        ("  located by", out["min_system_cot_method"]),
-    ]))
+    console().print(
+        table(
+            f"critical slope, {model.value} wheel",
+            [
+                ("critical slope (deg)", out["critical_slope_deg"]),
+                ("critical slope (rad)", out["critical_slope_rad"]),
+                ("CoT = tan(phi_c)", out["cot"]),
+                ("branch ends by", out["reason"]),
+                ("located by", f"{out['method']} ({out['map_evaluations']} map evaluations)"),
+                ("Algorithm 1 slope (rad), step", f"{out['algorithm1_slope_rad']:.6f}, {out['algorithm1_step_rad']:g}"),
+                (
+                    "branch followed from",
+                    f"theta'+ = {out['branch']['start_theta_dot_plus_rad_s']:.4f} rad/s, period "
+                    f"{out['branch']['start_step_period_s']:.4f} s at {start_slope_rad} rad",
+                ),
+                ("at critical: period (s), max |eig|", f"{at['step_period_s']:.4f}, {at['max_abs_eigenvalue']:.4f}"),
+                (
+                    "contact valid at critical",
+                    ("yes" if at["contact"]["contact_valid"] else "NO") if "contact" in at else "-",
+                ),
+                ("at critical: electrical energy per step (J)", out.get("electrical_energy_per_step_j", "-")),
+                ("at critical: system CoT", out.get("system_cot", "-")),
+                ("least system CoT along the branch", out["min_system_cot"]),
+                (
+                    "  at slope (deg)",
+                    f"{out['min_system_cot_slope_deg']:.5f}"
+                    + (
+                        f" (on the branch's bound: {out['min_system_cot_at_bound']})"
+                        if out["min_system_cot_at_bound"]
+                        else ""
+                    ),
+                ),
+                ("  located by", out["min_system_cot_method"]),
+            ],
+        )
+    )
     console().print(f"why: {out['detail']}")

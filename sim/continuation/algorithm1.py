@@ -128,8 +128,11 @@ def critical_slope(
     try:
         first = solve(start_slope_rad, z_guess)
     except StepFailure as err:
-        raise NoFixedPoint(f"no fixed point at the start slope {start_slope_rad} rad from the guess "
-                           f"{np.asarray(z_guess).tolist()}: {err}", getattr(err, "last_failure", None)) from None
+        raise NoFixedPoint(
+            f"no fixed point at the start slope {start_slope_rad} rad from the guess "
+            f"{np.asarray(z_guess).tolist()}: {err}",
+            getattr(err, "last_failure", None),
+        ) from None
     branch = [BranchPoint(start_slope_rad, first.z, first.step.period_s, first.max_abs_eigenvalue, first.eigenvalues)]
     # Algorithm 1: fixed steps down while Newton converges.
     last_conv, last_conv_fp = start_slope_rad, first
@@ -152,7 +155,12 @@ def critical_slope(
             progress(slope)
         branch.append(BranchPoint(slope, fp.z, fp.step.period_s, fp.max_abs_eigenvalue, fp.eigenvalues))
         last_conv, last_conv_fp = slope, fp
-        if good(fp) and last_stable is not None and last_stable_fp is not None and last_stable - slope <= step_rad * 1.5:
+        if (
+            good(fp)
+            and last_stable is not None
+            and last_stable_fp is not None
+            and last_stable - slope <= step_rad * 1.5
+        ):
             last_stable, last_stable_fp = slope, fp
         elif not good(fp) and last_stable is not None and failure is None:
             # loss of stability below last_stable: remember where, keep Algorithm 1 running
@@ -160,17 +168,39 @@ def critical_slope(
             failure_slope = slope
     algorithm1 = last_conv
     if last_stable is None or last_stable_fp is None:
-        raise NoFixedPoint(f"the gait at the start slope {start_slope_rad} rad is not stable "
-                           f"(max |eigenvalue| {first.max_abs_eigenvalue:.4f})")
+        raise NoFixedPoint(
+            f"the gait at the start slope {start_slope_rad} rad is not stable "
+            f"(max |eigenvalue| {first.max_abs_eigenvalue:.4f})"
+        )
     if method == "arclength":
-        cs = _by_arclength(pmap, first, start_slope_rad, step_rad, algorithm1, last_conv_fp, branch, min_slope_rad,
-                           refine_tol_rad, z_guess, progress)
+        cs = _by_arclength(
+            pmap,
+            first,
+            start_slope_rad,
+            step_rad,
+            algorithm1,
+            last_conv_fp,
+            branch,
+            min_slope_rad,
+            refine_tol_rad,
+            z_guess,
+            progress,
+        )
         cs.map_evaluations += counted[0]
         return cs
     if failure is None or failure_slope is None:
-        return CriticalSlope(pmap.model, algorithm1, step_rad, last_stable, refine_tol_rad, "min-slope",
-                             f"the branch reaches the smallest slope tried ({min_slope_rad} rad)", last_stable_fp,
-                             branch, np.asarray(z_guess))
+        return CriticalSlope(
+            pmap.model,
+            algorithm1,
+            step_rad,
+            last_stable,
+            refine_tol_rad,
+            "min-slope",
+            f"the branch reaches the smallest slope tried ({min_slope_rad} rad)",
+            last_stable_fp,
+            branch,
+            np.asarray(z_guess),
+        )
     # Refinement: bisect [bad, good] keeping the stable side's fixed point as the guess.
     lo, hi, hi_fp = failure_slope, last_stable, last_stable_fp
     reason, detail = failure
@@ -200,11 +230,26 @@ def critical_slope(
             hi, hi_fp = mid, fp
         else:
             lo = mid
-            reason, detail = "loss-of-stability", f"max |eigenvalue| = {fp.max_abs_eigenvalue:.4f} >= 1 at {mid:.7f} rad"
+            reason, detail = (
+                "loss-of-stability",
+                f"max |eigenvalue| = {fp.max_abs_eigenvalue:.4f} >= 1 at {mid:.7f} rad",
+            )
     if reason != "loss-of-stability":
         reason, detail = _reason_at_end(pmap, hi_fp, lo, reason, detail)
-    return CriticalSlope(pmap.model, algorithm1, step_rad, hi, refine_tol_rad, reason, detail, hi_fp, branch,
-                         np.asarray(z_guess), "bisection", map_evaluations=counted[0])
+    return CriticalSlope(
+        pmap.model,
+        algorithm1,
+        step_rad,
+        hi,
+        refine_tol_rad,
+        reason,
+        detail,
+        hi_fp,
+        branch,
+        np.asarray(z_guess),
+        "bisection",
+        map_evaluations=counted[0],
+    )
 
 
 FOLD_EIGENVALUE_TOL = 0.02  # |eigenvalue - 1| at a bisected end (bracket 1e-6 rad) that marks a fold
@@ -217,8 +262,10 @@ def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str,
     evs = ", ".join(f"{e.real:.5f}{e.imag:+.5f}j" for e in ev)
     near_one = [e for e in ev if abs(e.imag) < 1e-9 and abs(e.real - 1.0) < FOLD_EIGENVALUE_TOL]
     if near_one:
-        return "fold", (f"an eigenvalue reaches +1 at the located end ({near_one[0].real:.5f}; eigenvalues {evs}) "
-                        "and the fixed point vanishes")
+        return "fold", (
+            f"an eigenvalue reaches +1 at the located end ({near_one[0].real:.5f}; eigenvalues {evs}) "
+            "and the fixed point vanishes"
+        )
     try:
         pmap.with_params(pmap.params.replace(slope_rad=lo))(hi_fp.z)
     except StepFailure as err:
@@ -229,25 +276,77 @@ def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str,
     return reason, f"{detail} (eigenvalues at the end {evs})"
 
 
-def _by_arclength(pmap: PoincareMap, first: FixedPoint, start_slope_rad: float, step_rad: float, algorithm1: float,
-                  algorithm1_fp: FixedPoint, branch: list[BranchPoint], min_slope_rad: float, refine_tol_rad: float,
-                  z_guess: np.ndarray, progress: Callable[[float], None] | None) -> CriticalSlope:
+def _by_arclength(
+    pmap: PoincareMap,
+    first: FixedPoint,
+    start_slope_rad: float,
+    step_rad: float,
+    algorithm1: float,
+    algorithm1_fp: FixedPoint,
+    branch: list[BranchPoint],
+    min_slope_rad: float,
+    refine_tol_rad: float,
+    z_guess: np.ndarray,
+    progress: Callable[[float], None] | None,
+) -> CriticalSlope:
     from rimless.sim.continuation.arclength import ArclengthContinuation
     from rimless.sim.continuation.oracle import PARAMETERS
 
     scale = PARAMETERS["slope"][1]
-    cont = ArclengthContinuation(lambda q: pmap.with_params(q), pmap.params.replace(slope_rad=start_slope_rad),
-                                 pmap.model, "slope", locate_tol=min(1e-7, refine_tol_rad / scale))
-    br = cont.trace(first.z, direction=-1.0, p_min=min_slope_rad, stop_at_first_loss=True,
-                    progress=(lambda pt: progress(pt.p)) if progress else None)
+    cont = ArclengthContinuation(
+        lambda q: pmap.with_params(q),
+        pmap.params.replace(slope_rad=start_slope_rad),
+        pmap.model,
+        "slope",
+        locate_tol=min(1e-7, refine_tol_rad / scale),
+    )
+    br = cont.trace(
+        first.z,
+        direction=-1.0,
+        p_min=min_slope_rad,
+        stop_at_first_loss=True,
+        progress=(lambda pt: progress(pt.p)) if progress else None,
+    )
     end = br.first_loss()
     if end is None:
         last = br.points[-1]
-        return CriticalSlope(pmap.model, algorithm1, step_rad, last.p, refine_tol_rad, "min-slope",
-                             f"the branch reaches the smallest slope tried ({min_slope_rad} rad)", algorithm1_fp, branch,
-                             np.asarray(z_guess), "arclength", None, br.special, br.map_evaluations)
-    reason = {"stance-force": "infeasible", "impulse": "infeasible", "period-doubling": "loss-of-stability",
-              "neimark-sacker": "loss-of-stability", "end": "solver"}.get(end.kind, end.kind)
-    return CriticalSlope(pmap.model, algorithm1, step_rad, end.p, refine_tol_rad, reason,
-                         end.detail, algorithm1_fp, branch, np.asarray(z_guess), "arclength", end, br.special,
-                         br.map_evaluations, abs(end.bracket_p[1] - end.bracket_p[0]))
+        return CriticalSlope(
+            pmap.model,
+            algorithm1,
+            step_rad,
+            last.p,
+            refine_tol_rad,
+            "min-slope",
+            f"the branch reaches the smallest slope tried ({min_slope_rad} rad)",
+            algorithm1_fp,
+            branch,
+            np.asarray(z_guess),
+            "arclength",
+            None,
+            br.special,
+            br.map_evaluations,
+        )
+    reason = {
+        "stance-force": "infeasible",
+        "impulse": "infeasible",
+        "period-doubling": "loss-of-stability",
+        "neimark-sacker": "loss-of-stability",
+        "end": "solver",
+    }.get(end.kind, end.kind)
+    return CriticalSlope(
+        pmap.model,
+        algorithm1,
+        step_rad,
+        end.p,
+        refine_tol_rad,
+        reason,
+        end.detail,
+        algorithm1_fp,
+        branch,
+        np.asarray(z_guess),
+        "arclength",
+        end,
+        br.special,
+        br.map_evaluations,
+        abs(end.bracket_p[1] - end.bracket_p[0]),
+    )

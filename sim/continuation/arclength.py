@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.continuation.contact import ContactFacts, contact_facts
 from rimless.sim.continuation.oracle import MapOracle
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.params import WheelParams
 
 FOLD, PERIOD_DOUBLING, NEIMARK_SACKER = "fold", "period-doubling", "neimark-sacker"
@@ -45,8 +45,11 @@ VALIDITY_TESTS = (STANCE_FORCE, IMPULSE, STALL)
 def eigen_tests(J: np.ndarray) -> dict[str, float]:
     """The bifurcation test functions of a 2x2 map Jacobian (see module docstring)."""
     eye = np.eye(2)
-    return {FOLD: float(np.linalg.det(J - eye)), PERIOD_DOUBLING: float(np.linalg.det(J + eye)),
-            NEIMARK_SACKER: float(np.linalg.det(J)) - 1.0}
+    return {
+        FOLD: float(np.linalg.det(J - eye)),
+        PERIOD_DOUBLING: float(np.linalg.det(J + eye)),
+        NEIMARK_SACKER: float(np.linalg.det(J)) - 1.0,
+    }
 
 
 def _complex_pair(J: np.ndarray) -> bool:
@@ -229,8 +232,9 @@ class ArclengthContinuation:
             except np.linalg.LinAlgError:
                 break
             u = u + du
-        raise StepFailure(FailureReason.NO_CONVERGENCE, f"the pseudo-arclength corrector did not converge "
-                                                         f"(residual {res_prev:.3g})")
+        raise StepFailure(
+            FailureReason.NO_CONVERGENCE, f"the pseudo-arclength corrector did not converge (residual {res_prev:.3g})"
+        )
 
     def _tangent(self, s: _State, previous: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """(unit null vector of [J - I, F_p] (the cross product of its two rows), oriented like `previous`;
@@ -265,8 +269,14 @@ class ArclengthContinuation:
             from rimless.sim import fast
 
             try:
-                c = fast.fast_step(self.oracle.params(p), self.model, s.u[:2], rtol=self.oracle.rtol,
-                                   atol=self.oracle.atol, bilateral=True).contact
+                c = fast.fast_step(
+                    self.oracle.params(p),
+                    self.model,
+                    s.u[:2],
+                    rtol=self.oracle.rtol,
+                    atol=self.oracle.atol,
+                    bilateral=True,
+                ).contact
                 tests[STANCE_FORCE] = c.min_stance_force_N
                 tests[IMPULSE] = c.min_impulse_N_s
                 valid = c.unilateral_valid
@@ -308,8 +318,13 @@ class ArclengthContinuation:
         if start_facts is not None:
             cur.facts = start_facts
             cur.contact_valid = start_facts.contact_valid
-            cur.tests.update({STANCE_FORCE: start_facts.min_stance_force_single_support_N,
-                              IMPULSE: start_facts.min_impulse_N_s, STALL: start_facts.min_theta_dot_single_support_rad_s})
+            cur.tests.update(
+                {
+                    STANCE_FORCE: start_facts.min_stance_force_single_support_N,
+                    IMPULSE: start_facts.min_impulse_N_s,
+                    STALL: start_facts.min_theta_dot_single_support_rad_s,
+                }
+            )
         branch.points.append(cur)
         ds = self.ds
         end_reason, end_detail = "", ""
@@ -361,7 +376,9 @@ class ArclengthContinuation:
     def _on_branch(self, s: _State, t: np.ndarray, sigma: float) -> _State:
         return self._correct(s.u + sigma * t, t, self._Fp_here)
 
-    def _special_between(self, s: _State, t: np.ndarray, a: BranchPoint, b: BranchPoint, ds: float) -> list[SpecialPoint]:
+    def _special_between(
+        self, s: _State, t: np.ndarray, a: BranchPoint, b: BranchPoint, ds: float
+    ) -> list[SpecialPoint]:
         found = []
         for kind in EIGEN_TESTS + VALIDITY_TESTS:
             va, vb = a.tests.get(kind), b.tests.get(kind)
@@ -384,7 +401,9 @@ class ArclengthContinuation:
         v = pt.tests.get(kind, math.nan)
         return v, pt
 
-    def _bisect(self, kind: str, s: _State, t: np.ndarray, a: BranchPoint, b: BranchPoint, ds: float) -> SpecialPoint | None:
+    def _bisect(
+        self, kind: str, s: _State, t: np.ndarray, a: BranchPoint, b: BranchPoint, ds: float
+    ) -> SpecialPoint | None:
         lo, hi = 0.0, ds
         vlo, vhi = a.tests[kind], b.tests[kind]
         plo, phi = a.p, b.p
@@ -441,8 +460,13 @@ class ArclengthContinuation:
         cause = _map_failure(self.oracle, s.u[:2] + hi * t[:2], past)
         kind, detail = _end_reason(good_pt, cause, last_err, self.oracle.unit, self.parameter)
         bad_val = _failing_side_value(kind, cause)
-        return SpecialPoint(kind, good_pt, (good_pt.p, float(getattr(past, self.oracle.field))),
-                            (good_pt.tests.get(kind, math.nan), bad_val), detail)
+        return SpecialPoint(
+            kind,
+            good_pt,
+            (good_pt.p, float(getattr(past, self.oracle.field))),
+            (good_pt.tests.get(kind, math.nan), bad_val),
+            detail,
+        )
 
 
 def _map_failure(oracle: MapOracle, z: np.ndarray, params: WheelParams) -> StepFailure | None:
@@ -462,8 +486,9 @@ def _failing_side_value(kind: str, cause: StepFailure | None) -> float:
     return math.nan
 
 
-def _end_reason(pt: BranchPoint, cause: StepFailure | None, newton_err: StepFailure | None, unit: str,
-                parameter: str) -> tuple[str, str]:
+def _end_reason(
+    pt: BranchPoint, cause: StepFailure | None, newton_err: StepFailure | None, unit: str, parameter: str
+) -> tuple[str, str]:
     """Why the branch ends, from the test functions at the located end (model.md section 7)."""
     ev = pt.eigenvalues
     evs = ", ".join(f"{e.real:.5f}{e.imag:+.5f}j" for e in ev)
@@ -472,14 +497,19 @@ def _end_reason(pt: BranchPoint, cause: StepFailure | None, newton_err: StepFail
     reason = cause.reason if cause is not None else None
     if reason == FailureReason.STALL or (f is not None and f.min_theta_dot_single_support_rad_s < 0.05):
         th = f.min_theta_dot_single_support_rad_s if f is not None else math.nan
-        return STALL, (f"stall: the wheel no longer clears mid-stance (smallest theta' in single support "
-                       f"{th:.4g} rad/s, period {pt.period_s:.4f} s) {where}")
-    near_lift_off = (reason is None and f is not None
-                     and abs(f.min_stance_force_single_support_N) < STANCE_FORCE_END_TOL_N)
+        return STALL, (
+            f"stall: the wheel no longer clears mid-stance (smallest theta' in single support "
+            f"{th:.4g} rad/s, period {pt.period_s:.4f} s) {where}"
+        )
+    near_lift_off = (
+        reason is None and f is not None and abs(f.min_stance_force_single_support_N) < STANCE_FORCE_END_TOL_N
+    )
     if reason == FailureReason.STANCE_LIFT_OFF or near_lift_off:
         fs = f.min_stance_force_single_support_N if f is not None else math.nan
-        return STANCE_FORCE, (f"stance-force: the stance foot's normal force in single support falls through 0 "
-                              f"(last valid minimum {fs:.4g} N) {where}")
+        return STANCE_FORCE, (
+            f"stance-force: the stance foot's normal force in single support falls through 0 "
+            f"(last valid minimum {fs:.4g} N) {where}"
+        )
     if reason == FailureReason.NEGATIVE_IMPULSE:
         imp = f.min_impulse_N_s if f is not None else math.nan
         return IMPULSE, f"impulse: a normal impact impulse falls through 0 (last {imp:.4g} N s) {where}"

@@ -72,9 +72,20 @@ class BoundaryCurve:
 class BoundaryContinuation:
     """Trace {P(z) = z, g = 0} in (z, slope, mu) (see module docstring)."""
 
-    def __init__(self, map_factory: Callable[[WheelParams], Any], base: WheelParams, model: str, parameter: str = "k",
-                 test: str = "fold", *, ds: float = 0.05, ds_min: float = 1e-4, ds_max: float = 0.3,
-                 tol: float = 1e-10, max_points: int = 200) -> None:
+    def __init__(
+        self,
+        map_factory: Callable[[WheelParams], Any],
+        base: WheelParams,
+        model: str,
+        parameter: str = "k",
+        test: str = "fold",
+        *,
+        ds: float = 0.05,
+        ds_min: float = 1e-4,
+        ds_max: float = 0.3,
+        tol: float = 1e-10,
+        max_points: int = 200,
+    ) -> None:
         if test not in TESTS:
             raise ValueError(f"unknown boundary test {test!r}; known: {', '.join(TESTS)}")
         self.slope = MapOracle(map_factory, base, "slope", model)
@@ -138,8 +149,9 @@ class BoundaryContinuation:
                 D[:, j] = col
         return D
 
-    def _correct(self, u_pred: np.ndarray, t: np.ndarray | None, fix: int | None = None, max_iter: int = 10
-                 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    def _correct(
+        self, u_pred: np.ndarray, t: np.ndarray | None, fix: int | None = None, max_iter: int = 10
+    ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
         """Newton on [G(u) = 0, t . (u - u_pred) = 0] (or u[fix] fixed); returns (u, period, J, DG)."""
         u = u_pred.copy()
         G, T, J = self._G(u)
@@ -174,8 +186,9 @@ class BoundaryContinuation:
             u = u + lam * du
         raise StepFailure(FailureReason.NO_CONVERGENCE, "the boundary corrector did not converge")
 
-    def fixed_point_at(self, z0: np.ndarray, slope: float, mu: float, max_iter: int = 15, min_lam: float = 1e-3
-                       ) -> tuple[np.ndarray, float, np.ndarray]:
+    def fixed_point_at(
+        self, z0: np.ndarray, slope: float, mu: float, max_iter: int = 15, min_lam: float = 1e-3
+    ) -> tuple[np.ndarray, float, np.ndarray]:
         """(z, period_s, J) of the fixed point at (slope, mu) by damped Newton from z0 (step factors down to
         min_lam); raises StepFailure."""
         sc = PARAMETERS["slope"][1]
@@ -207,10 +220,13 @@ class BoundaryContinuation:
                 break
             u, f, T, J = trial, f2, T2, J2
             res = float(np.max(np.abs(f)))
-        raise StepFailure(FailureReason.NO_CONVERGENCE, f"no fixed point at slope {slope:.10g} rad (residual {res:.3g})")
+        raise StepFailure(
+            FailureReason.NO_CONVERGENCE, f"no fixed point at slope {slope:.10g} rad (residual {res:.3g})"
+        )
 
-    def locate_stall(self, pt: BoundaryPoint, tol: float = STALL_TOL_RAD, offset_hint: float | None = None,
-                     hint_width: float = 0.05) -> BoundaryPoint:
+    def locate_stall(
+        self, pt: BoundaryPoint, tol: float = STALL_TOL_RAD, offset_hint: float | None = None, hint_width: float = 0.05
+    ) -> BoundaryPoint:
         """The stall at pt.mu: follow the fixed point of pt down in slope (steps doubling from 2e-6 rad) until it
         stops existing, then bisect that end to `tol` in slope; returns the last slope where it exists.
         offset_hint: the expected distance of the stall below pt (rad; e.g. from the neighbouring point), tried
@@ -259,8 +275,15 @@ class BoundaryContinuation:
         t = vt[-1]
         return t if float(t @ previous) >= 0 else -t
 
-    def trace(self, z0: np.ndarray, slope0: float, *, mu_min: float, mu_max: float,
-              progress: Callable[[BoundaryPoint], None] | None = None) -> BoundaryCurve:
+    def trace(
+        self,
+        z0: np.ndarray,
+        slope0: float,
+        *,
+        mu_min: float,
+        mu_max: float,
+        progress: Callable[[BoundaryPoint], None] | None = None,
+    ) -> BoundaryCurve:
         """From a point near the boundary at the base mu (z0, slope0, e.g. a located one-parameter end), trace
         the curve both ways until mu leaves [mu_min, mu_max] or the curve ends."""
         t0 = time.perf_counter()
@@ -289,8 +312,9 @@ class BoundaryContinuation:
                     ds *= 0.5
                     continue
                 uu, tt = un, tn
-                pt = BoundaryPoint(float(un[3] * self.mu_scale), float(un[2] * sc), un[:2].copy(), Tn,
-                                   np.linalg.eigvals(Jn))
+                pt = BoundaryPoint(
+                    float(un[3] * self.mu_scale), float(un[2] * sc), un[:2].copy(), Tn, np.linalg.eigvals(Jn)
+                )
                 pts.append(pt)
                 if progress:
                     progress(pt)
@@ -328,8 +352,9 @@ class BoundaryContinuation:
         return curve
 
 
-def start_on_boundary(map_factory: Callable[[WheelParams], Any], base: WheelParams, model: str, z_guess: np.ndarray,
-                      test: str) -> tuple[np.ndarray, float]:
+def start_on_boundary(
+    map_factory: Callable[[WheelParams], Any], base: WheelParams, model: str, z_guess: np.ndarray, test: str
+) -> tuple[np.ndarray, float]:
     """(z, slope) near the boundary at the base parameters: the first fold of the branch through z_guess
     (continued down in slope), or for a stall its first point whose period reaches 0.8 T_STALL."""
     from rimless.sim.continuation.arclength import FOLD, ArclengthContinuation
@@ -354,6 +379,6 @@ def solve_at(bc: BoundaryContinuation, curve: BoundaryCurve, mu: float) -> Bound
     near = min(curve.level_points or curve.points, key=lambda p: abs(p.mu - mu))
     sc = PARAMETERS["slope"][1]
     u0 = np.array([near.z[0], near.z[1], near.slope_rad / sc, mu / bc.mu_scale])
-    u, T, J, _ = bc._correct(u0, None, fix=3)  # noqa: SLF001
+    u, T, J, _ = bc._correct(u0, None, fix=3)
     pt = BoundaryPoint(mu, float(u[2] * sc), u[:2].copy(), T, np.linalg.eigvals(J))
     return bc.locate_stall(pt) if bc.test == "stall" else pt

@@ -149,7 +149,9 @@ class GaitBranch:
             "end_max_abs_eigenvalue": end_pt.max_abs_eigenvalue if end_pt is not None else math.nan,
             "end_step_period_s": end_pt.period_s if end_pt is not None else math.nan,
             "end_energy_ratio": end_facts.energy_ratio if end_facts is not None else math.nan,
-            "end_min_stance_force_N": end_facts.min_stance_force_single_support_N if end_facts is not None else math.nan,
+            "end_min_stance_force_N": end_facts.min_stance_force_single_support_N
+            if end_facts is not None
+            else math.nan,
             "end_contact_valid": bool(end_facts.contact_valid) if end_facts is not None else None,
             "max_abs_eigenvalue": max(pt.max_abs_eigenvalue for pt in along),
             "period_min_s": min(pt.period_s for pt in along),
@@ -173,7 +175,7 @@ class GaitBranch:
         if i is None:
             return out
         out["valid_from_slope_rad"] = sps[i].p
-        nxt = next((sp for sp in sps[i + 1:]), None)
+        nxt = next((sp for sp in sps[i + 1 :]), None)
         if nxt is not None:
             out["valid_end_slope_rad"], out["valid_end_reason"] = nxt.p, nxt.kind
         return out
@@ -184,16 +186,28 @@ class GaitBranch:
             return []
         out = []
         for pt in self.branch.points:
-            out.append({
-                "model": self.model.upper(), "k": self.params.k, "c": self.params.c,
-                "mass_model": self.params.mass_model, "branch": self.id, "branch_label": self.label,
-                "slope_rad": pt.p, "slope_deg": math.degrees(pt.p), "theta_plus_rad": float(pt.z[0]),
-                "theta_dot_plus_rad_s": float(pt.z[1]), "step_period_s": pt.period_s,
-                "max_abs_eigenvalue": pt.max_abs_eigenvalue, "stable": pt.stable,
-                "energy_ratio": pt.facts.energy_ratio if pt.facts else math.nan,
-                "contact_valid": pt.contact_valid,
-                "min_stance_force_single_support_N": pt.facts.min_stance_force_single_support_N if pt.facts else math.nan,
-            })
+            out.append(
+                {
+                    "model": self.model.upper(),
+                    "k": self.params.k,
+                    "c": self.params.c,
+                    "mass_model": self.params.mass_model,
+                    "branch": self.id,
+                    "branch_label": self.label,
+                    "slope_rad": pt.p,
+                    "slope_deg": math.degrees(pt.p),
+                    "theta_plus_rad": float(pt.z[0]),
+                    "theta_dot_plus_rad_s": float(pt.z[1]),
+                    "step_period_s": pt.period_s,
+                    "max_abs_eigenvalue": pt.max_abs_eigenvalue,
+                    "stable": pt.stable,
+                    "energy_ratio": pt.facts.energy_ratio if pt.facts else math.nan,
+                    "contact_valid": pt.contact_valid,
+                    "min_stance_force_single_support_N": pt.facts.min_stance_force_single_support_N
+                    if pt.facts
+                    else math.nan,
+                }
+            )
         return out
 
 
@@ -205,8 +219,16 @@ def _start_point(pmap: Any, fp: Any, model: str) -> BranchPoint:
         facts = contact_facts(pmap, fp.z, 5e-4)
     except StepFailure:
         pass
-    return BranchPoint(pmap.params.slope_rad, np.asarray(fp.z), np.asarray(fp.jacobian), fp.step.period_s, 0.0,
-                       eigen_tests(np.asarray(fp.jacobian)), facts, facts.contact_valid if facts else None)
+    return BranchPoint(
+        pmap.params.slope_rad,
+        np.asarray(fp.z),
+        np.asarray(fp.jacobian),
+        fp.step.period_s,
+        0.0,
+        eigen_tests(np.asarray(fp.jacobian)),
+        facts,
+        facts.contact_valid if facts else None,
+    )
 
 
 def trace_gait_branches(
@@ -252,8 +274,14 @@ def trace_gait_branches(
         # it stops being stable, so the row can say where its valid part lies
         held_stable = held and start.stable and not to_end
         try:
-            br = cont.trace(fp.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=not (to_end or held_stable),
-                            start_facts=start.facts, stop=(lambda pt: not pt.stable) if held_stable else None)
+            br = cont.trace(
+                fp.z,
+                direction=-1.0,
+                p_min=MIN_SLOPE_RAD,
+                stop_at_first_loss=not (to_end or held_stable),
+                start_facts=start.facts,
+                stop=(lambda pt: not pt.stable) if held_stable else None,
+            )
         except StepFailure as err:
             out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
             continue

@@ -37,8 +37,9 @@ class ContactFacts:
     def contact_valid(self) -> bool:
         """Unilateral contact in single support and at the impact (the double-support transient is reported,
         not rejected: it is the rigid-contact artefact the paper discusses)."""
-        return (self.min_stance_force_single_support_N >= 0.0 and self.min_impulse_N_s > 0.0
-                and not self.unilateral_failure)
+        return (
+            self.min_stance_force_single_support_N >= 0.0 and self.min_impulse_N_s > 0.0 and not self.unilateral_failure
+        )
 
     @property
     def violation(self) -> str:
@@ -86,19 +87,24 @@ def _recorded_step(pmap: Any, z: np.ndarray, record_dt: float) -> Any:
     (rimless.sim.fast.step) on the same samples, the minimum refined by a parabola, the tension time with its
     zero crossings interpolated."""
     try:
-        from rimless.sim.fast import step as fs
         from rimless.sim.fast import mass_model_index, param_vector
+        from rimless.sim.fast import step as fs
     except ImportError:  # no compiled path: the reference diagnostics
         return pmap.step(z, diagnostics=True, record_dt=record_dt)
     from rimless.sim.model.dynamics import DLSP
-    from rimless.sim.step.hybrid import PHASE_NAMES
     from rimless.sim.model.mechanics import ALPHA
+    from rimless.sim.step.hybrid import PHASE_NAMES
 
     step = pmap.step(z, record_dt=record_dt)
     mi, p = mass_model_index(pmap.params), param_vector(pmap.params)
     inf = math.inf
-    d = {"min_normal_force_b_dlsp_N": inf, "min_normal_force_b_slsp_free_N": inf,
-         "min_normal_force_b_slsp_clutched_N": inf, "leading_foot_tension_s": 0.0, "trailing_foot_min_height_m": inf}
+    d = {
+        "min_normal_force_b_dlsp_N": inf,
+        "min_normal_force_b_slsp_free_N": inf,
+        "min_normal_force_b_slsp_clutched_N": inf,
+        "leading_foot_tension_s": 0.0,
+        "trailing_foot_min_height_m": inf,
+    }
     for seg in step.segments or []:
         if not len(seg.t):
             continue
@@ -137,13 +143,28 @@ def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts
         facts = _facts_of_step(_recorded_step(pmap, z, record_dt), DLSP)
     except StepFailure:  # the recorded step's own checks (stance force or impulses at a phase start): the
         # compiled record alone
-        facts = ContactFacts(c.min_stance_force_N, c.min_impulse_N_s, math.nan, math.nan, math.nan, math.nan,
-                             math.nan, rec.period_s, math.nan, rec.relabel_snap_J)
+        facts = ContactFacts(
+            c.min_stance_force_N,
+            c.min_impulse_N_s,
+            math.nan,
+            math.nan,
+            math.nan,
+            math.nan,
+            math.nan,
+            rec.period_s,
+            math.nan,
+            rec.relabel_snap_J,
+        )
     # the stance force from the compiled record (finer samples, parabola at the minimum): the same number the
     # continuation's test function uses between recorded points
-    return replace(facts, bilateral=True, min_stance_force_single_support_N=c.min_stance_force_N,
-                   min_stance_force_time_s=c.min_stance_force_time_s, negative_stance_force_s=c.negative_force_s,
-                   unilateral_failure=uni)
+    return replace(
+        facts,
+        bilateral=True,
+        min_stance_force_single_support_N=c.min_stance_force_N,
+        min_stance_force_time_s=c.min_stance_force_time_s,
+        negative_stance_force_s=c.negative_force_s,
+        unilateral_failure=uni,
+    )
 
 
 def _facts_of_step(step: Any, DLSP: int) -> ContactFacts:

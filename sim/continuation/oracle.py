@@ -32,8 +32,9 @@ class MapOracle:
     friction, which fast_step does not model: its maps step phase by phase).
     """
 
-    def __init__(self, map_factory: Callable[[WheelParams], Any], base: WheelParams, parameter: str,
-                 model: str) -> None:
+    def __init__(
+        self, map_factory: Callable[[WheelParams], Any], base: WheelParams, parameter: str, model: str
+    ) -> None:
         if parameter not in PARAMETERS:
             raise ValueError(f"unknown continuation parameter {parameter!r}; known: {', '.join(PARAMETERS)}")
         self.field, self.scale, self.unit = PARAMETERS[parameter]
@@ -45,8 +46,9 @@ class MapOracle:
         self._params: dict[float, WheelParams] = {}
         probe = map_factory(base)
         # guide friction: the map runs phase by phase (its stick/slip phases), not through fast_step
-        self.compiled = hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None \
-            and base.guide_friction_n == 0.0
+        self.compiled = (
+            hasattr(probe, "evaluate") and getattr(probe, "clutch", None) is None and base.guide_friction_n == 0.0
+        )
         self.rtol = float(getattr(getattr(probe, "integrator", None), "rtol", 1e-10))
         self.atol = float(getattr(getattr(probe, "integrator", None), "atol", self.rtol * 1e-2))
         self.bilateral = bool(getattr(probe, "bilateral", False))
@@ -82,8 +84,16 @@ class MapOracle:
         if self.compiled:
             from rimless.sim import fast
 
-            r = fast.fast_step(params, self.model, z, rtol=self.rtol, atol=self.atol, jacobian=jacobian,
-                               bilateral=self.bilateral, record_contact=False)
+            r = fast.fast_step(
+                params,
+                self.model,
+                z,
+                rtol=self.rtol,
+                atol=self.atol,
+                jacobian=jacobian,
+                bilateral=self.bilateral,
+                record_contact=False,
+            )
             zn, period, J = r.z_next, r.period_s, r.jacobian
         else:
             from rimless.sim.model.section import section_from_state

@@ -76,13 +76,14 @@ from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder i
 from rimless.sim.fast import rk  # noqa: E402
 from rimless.sim.fast import step as fs  # noqa: E402
 from rimless.sim.fast.ahead import compiling_ahead  # noqa: E402
-from rimless.sim.fast.compiling import call_compiling as _call_compiling  # noqa: E402
 from rimless.sim.fast.compiling import cache_folder as _cache_folder  # noqa: E402
-from rimless.sim.model.guards import DIRECTION  # noqa: E402
-from rimless.sim.model.failures import FailureReason, StepFailure  # noqa: E402
+from rimless.sim.fast.compiling import call_compiling as _call_compiling  # noqa: E402
 from rimless.sim.integrate.reference import PhaseRun  # noqa: E402
+from rimless.sim.model.failures import FailureReason, StepFailure  # noqa: E402
+from rimless.sim.model.guards import DIRECTION  # noqa: E402
 from rimless.sim.model.mechanics import Mechanics  # noqa: E402
 from rimless.sim.model.params import WheelParams  # noqa: E402
+
 
 def _invalidate_stale_cache() -> None:
     """numba's on-disk cache (cache=True) is keyed on each function's own source file only: a kernel that
@@ -92,25 +93,24 @@ def _invalidate_stale_cache() -> None:
     import hashlib
     from pathlib import Path
 
+    from rimless.sim.fast import compiling
     from rimless.sim.integrate import events
     from rimless.sim.model import dynamics, guards
     from rimless.sim.model.generated import active_feet, eight_leg, sliding_leg
-
-    from rimless.sim.fast import compiling
 
     digest = hashlib.sha256()
     for mod in (fm, rk, fs, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
         digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
     stamp_value = digest.hexdigest()
     try:
-        cache_dir = Path(fs.step_kernel._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
+        cache_dir = Path(fs.step_kernel._cache._cache_path)
         stamp = cache_dir / "rimless_fast_kernels.stamp"
         if stamp.exists() and stamp.read_text() == stamp_value:
             return
         for pattern in ("model.*.nb[ic]", "rk.*.nb[ic]", "step.*.nb[ic]"):
             for f in cache_dir.glob(pattern):
                 f.unlink(missing_ok=True)
-        gen_dir = Path(fm._M0._cache._cache_path)  # noqa: SLF001
+        gen_dir = Path(fm._M0._cache._cache_path)
         if gen_dir != cache_dir:
             for f in gen_dir.glob("*.nb[ic]"):
                 f.unlink(missing_ok=True)
@@ -126,6 +126,7 @@ _invalidate_stale_cache()
 def cache_folder() -> str:
     """Where the compiled kernels are cached on disk (numba's cache folder of the step kernel)."""
     return _cache_folder(fs.step_kernel)
+
 
 MAX_STEPS = 200_000  # accepted steps per phase before the explicit method gives up
 # right-hand-side evaluations per phase of the implicit fallback (scipy Radau, Python right-hand side):
@@ -217,8 +218,9 @@ class BilateralContact:
 
     @classmethod
     def of(cls, c: np.ndarray) -> BilateralContact:
-        return cls(float(c[fs.C_MIN_FORCE]), float(c[fs.C_MIN_FORCE_T]), float(c[fs.C_NEGATIVE_S]),
-                   float(c[fs.C_MIN_IMPULSE]))
+        return cls(
+            float(c[fs.C_MIN_FORCE]), float(c[fs.C_MIN_FORCE_T]), float(c[fs.C_NEGATIVE_S]), float(c[fs.C_MIN_IMPULSE])
+        )
 
     @property
     def unilateral_valid(self) -> bool:
@@ -230,9 +232,13 @@ def raise_failure(status: int, detail: int, phase: int, t: float, nsteps: int) -
     reason = _REASON[status]
     msg = _DETAIL.get(detail, "")
     if status == fs.TOO_MANY_STEPS:
-        raise StiffnessLimit(reason, f"the explicit DOP853 needed more than the step limit in one phase "
-                                     f"({nsteps} steps in the step): stiff legs, use an implicit method",
-                             time_s=t, phase=_PHASE[phase])
+        raise StiffnessLimit(
+            reason,
+            f"the explicit DOP853 needed more than the step limit in one phase "
+            f"({nsteps} steps in the step): stiff legs, use an implicit method",
+            time_s=t,
+            phase=_PHASE[phase],
+        )
     if status == fs.STALL and detail == fs.D_PRECHECK:
         msg = "theta' <= 0 at the start of the step"
     elif status == fs.CLUTCH_MISSED:
@@ -246,9 +252,18 @@ def raise_failure(status: int, detail: int, phase: int, t: float, nsteps: int) -
     raise StepFailure(reason, f"{msg} (compiled map)", time_s=t, phase=_PHASE[phase])
 
 
-def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10, atol: float | None = None,
-              jacobian: bool = False, max_steps: int = MAX_STEPS, bilateral: bool = False,
-              record_contact: bool = True) -> FastStep:
+def fast_step(
+    params: WheelParams,
+    model: str,
+    z: np.ndarray,
+    *,
+    rtol: float = 1e-10,
+    atol: float | None = None,
+    jacobian: bool = False,
+    max_steps: int = MAX_STEPS,
+    bilateral: bool = False,
+    record_contact: bool = True,
+) -> FastStep:
     """One compiled step from z = (theta+, theta'+); raises StepFailure with the reference's reason.
 
     atol defaults to rtol / 100 (the reference ScipyIntegrator pairs rtol 1e-10 with atol 1e-12).
@@ -264,29 +279,55 @@ def fast_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1
     # the mass model's own entry point: only its generated code is compiled (rimless.sim.fast.model)
     mi = mass_model_index(params)
     st, detail, phase, t, yp, J, times, nfev, nsteps, nstiff, snap = _call_compiling(
-        fs.STEP_MAP_CONTACT[mi], er, param_vector(params), zz, float(rtol), float(atol),
-        bool(jacobian), int(max_steps), counts, bool(bilateral), c, ahead=lambda: compiling_ahead(mi))
+        fs.STEP_MAP_CONTACT[mi],
+        er,
+        param_vector(params),
+        zz,
+        float(rtol),
+        float(atol),
+        bool(jacobian),
+        int(max_steps),
+        counts,
+        bool(bilateral),
+        c,
+        ahead=lambda: compiling_ahead(mi),
+    )
     if not bilateral:
         c = None
     if st != fs.OK:
         raise_failure(st, detail, phase, t, nsteps)
-    return FastStep(z_next=np.array([yp[2], yp[7]]), period_s=float(t), y_plus=yp,
-                    jacobian=J if jacobian else None, phase_end_s=times, nfev=int(nfev), nsteps=int(nsteps),
-                    nstiff=int(nstiff), relabel_snap_J=float(snap),
-                    contact=BilateralContact.of(c) if c is not None and len(c) else None,
-                    phase_nfev=tuple(int(v) for v in counts[:, 0]),  # type: ignore[arg-type]
-                    phase_steps=tuple(int(v) for v in counts[:, 1]))  # type: ignore[arg-type]
+    return FastStep(
+        z_next=np.array([yp[2], yp[7]]),
+        period_s=float(t),
+        y_plus=yp,
+        jacobian=J if jacobian else None,
+        phase_end_s=times,
+        nfev=int(nfev),
+        nsteps=int(nsteps),
+        nstiff=int(nstiff),
+        relabel_snap_J=float(snap),
+        contact=BilateralContact.of(c) if c is not None and len(c) else None,
+        phase_nfev=tuple(int(v) for v in counts[:, 0]),  # type: ignore[arg-type]
+        phase_steps=tuple(int(v) for v in counts[:, 1]),
+    )  # type: ignore[arg-type]
 
 
-def fast_map(params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10,
-             atol: float | None = None) -> tuple[np.ndarray, float]:
+def fast_map(
+    params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10, atol: float | None = None
+) -> tuple[np.ndarray, float]:
     """(z_next, period_s) of the compiled Poincaré map; raises StepFailure."""
     r = fast_step(params, model, z, rtol=rtol, atol=atol)
     return r.z_next, r.period_s
 
 
-def exact_jacobian(pmap_or_params: Any, model: str | None = None, z: np.ndarray | None = None, *,
-                   rtol: float = 1e-10, atol: float | None = None) -> np.ndarray:
+def exact_jacobian(
+    pmap_or_params: Any,
+    model: str | None = None,
+    z: np.ndarray | None = None,
+    *,
+    rtol: float = 1e-10,
+    atol: float | None = None,
+) -> np.ndarray:
     """dP/dz (2x2) by the variational equations with saltation and the exact impact reset Jacobian.
 
     Call as exact_jacobian(params, model, z) or exact_jacobian(pmap, z=z) / exact_jacobian(pmap, z)
@@ -323,19 +364,49 @@ class FastIntegrator:
     def __post_init__(self) -> None:
         self.name = "fast-dop853"
 
-    def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
-                  t_max: float, *, record_dt: float | None = None, track_dissipation: bool = False) -> PhaseRun:
-        args = rk.phase_call_args(phase, mech.p, y0, t0, guards, [DIRECTION[g] for g in guards], t_max, self.rtol,
-                                  self.atol, track_dissipation, record_dt, self.max_steps)
+    def run_phase(
+        self,
+        mech: Mechanics,
+        phase: int,
+        y0: np.ndarray,
+        t0: float,
+        guards: tuple[int, ...],
+        t_max: float,
+        *,
+        record_dt: float | None = None,
+        track_dissipation: bool = False,
+    ) -> PhaseRun:
+        args = rk.phase_call_args(
+            phase,
+            mech.p,
+            y0,
+            t0,
+            guards,
+            [DIRECTION[g] for g in guards],
+            t_max,
+            self.rtol,
+            self.atol,
+            track_dissipation,
+            record_dt,
+            self.max_steps,
+        )
         st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = _call_compiling(
-            rk.RUN_PHASE[fm.MASS_MODEL_INDEX[mech.params.mass_model]], *args)
-        run = PhaseRun(t_end=float(t_end), y_end=np.array(y_end[:10]), guard=(guards[fired] if fired >= 0 else None),
-                       nfev=int(nfev), dissipated_J=float(y_end[10]) if track_dissipation else 0.0)
+            rk.RUN_PHASE[fm.MASS_MODEL_INDEX[mech.params.mass_model]], *args
+        )
+        run = PhaseRun(
+            t_end=float(t_end),
+            y_end=np.array(y_end[:10]),
+            guard=(guards[fired] if fired >= 0 else None),
+            nfev=int(nfev),
+            dissipated_J=float(y_end[10]) if track_dissipation else 0.0,
+        )
         if st != rk.STATUS_OK:
             run.failed = True
-            run.message = {rk.STATUS_STEP_TOO_SMALL: "required step size is less than spacing between numbers",
-                           rk.STATUS_NOT_FINITE: "non-finite state or singular KKT matrix",
-                           rk.STATUS_TOO_MANY_STEPS: f"more than {self.max_steps} steps (stiff legs?)"}[st]
+            run.message = {
+                rk.STATUS_STEP_TOO_SMALL: "required step size is less than spacing between numbers",
+                rk.STATUS_NOT_FINITE: "non-finite state or singular KKT matrix",
+                rk.STATUS_TOO_MANY_STEPS: f"more than {self.max_steps} steps (stiff legs?)",
+            }[st]
         if record_dt:
             run.t = np.array(rec_t)
             run.y = np.array(rec_y)

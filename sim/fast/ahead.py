@@ -47,8 +47,13 @@ def _types(spec: str, mi: int) -> tuple[Any, ...]:
     it), i (int64), f (float64), b (bool), f1 / f2 (C-contiguous writable float64 arrays of 1 / 2 dimensions)."""
     from numba.core import types
 
-    table = {"i": types.int64, "f": types.float64, "b": types.boolean,
-             "f1": types.Array(types.float64, 1, "C"), "f2": types.Array(types.float64, 2, "C")}
+    table = {
+        "i": types.int64,
+        "f": types.float64,
+        "b": types.boolean,
+        "f1": types.Array(types.float64, 1, "C"),
+        "f2": types.Array(types.float64, 2, "C"),
+    }
     return tuple(types.literal(mi) if tok == "mi" else table[tok] for tok in spec.split())
 
 
@@ -84,7 +89,8 @@ def recorded_phase_call(params: Any) -> tuple[Any, tuple[Any, ...]]:
     mech = Mechanics.of(params)
     y0 = state_from_section(mech, np.array([-0.465155, 2.604441]))
     return rk.RUN_PHASE[MASS_MODEL_INDEX[params.mass_model]], rk.phase_call_args(
-        DLSP, mech.p, y0, 0.0, (1,), (DIRECTION[1],), 1e-3, 1e-10, 1e-12, True, 1e-3, 10_000)
+        DLSP, mech.p, y0, 0.0, (1,), (DIRECTION[1],), 1e-3, 1e-10, 1e-12, True, 1e-3, 10_000
+    )
 
 
 def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
@@ -146,9 +152,13 @@ def start(mi: int) -> subprocess.Popen[bytes] | None:
     import signal
 
     try:
-        return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL,
-                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+        return subprocess.Popen(
+            [sys.executable, "-c", code],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+        )
     except OSError:
         return None
 

@@ -20,6 +20,7 @@ import numba
 from numba.core import types as _types
 from numba.core.registry import CPUDispatcher
 
+
 def lock_cache_saves() -> None:
     """Make numba's cache entries safe to add from several processes at once (idempotent).
 
@@ -41,8 +42,8 @@ def lock_cache_saves() -> None:
     unlocked = cls.save
 
     def save(self: Any, key: Any, data: Any) -> None:
-        os.makedirs(self._cache_path, exist_ok=True)  # noqa: SLF001 (numba's cache folder)
-        with open(f"{self._index_path}.lock", "a") as lock:  # noqa: SLF001
+        os.makedirs(self._cache_path, exist_ok=True)
+        with open(f"{self._index_path}.lock", "a") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
             unlocked(self, key, data)
 
@@ -68,11 +69,12 @@ class _KernelDispatcher(CPUDispatcher):
     argument is an ordinary run-time value, as it is when the kernels are called from Python. Same code, same
     floating-point operations: only fewer copies to compile."""
 
-    def get_call_template(self, args, kws):  # noqa: ANN001, ANN201 (numba's typing hook)
+    def get_call_template(self, args, kws):
         pysig, folded = self._compiler.fold_argument_types(args, kws)
         names = list(pysig.parameters)
-        folded = tuple(a if i < len(names) and names[i] == LITERAL_ARGUMENT else _types.unliteral(a)
-                       for i, a in enumerate(folded))
+        folded = tuple(
+            a if i < len(names) and names[i] == LITERAL_ARGUMENT else _types.unliteral(a) for i, a in enumerate(folded)
+        )
         return super().get_call_template(folded, {})
 
 
@@ -94,7 +96,7 @@ def kernel(func: Any = None, *, inline: str = "never", python: bool = True) -> A
 def cache_folder(kernel: Any) -> str:
     """Where numba caches `kernel` on disk."""
     try:
-        return str(kernel._cache._cache_path)  # noqa: SLF001 (numba's cache locator)
+        return str(kernel._cache._cache_path)
     except AttributeError:
         return "numba's cache"
 
@@ -105,7 +107,7 @@ def is_cached(kernel: Any) -> bool:
     if kernel.signatures:
         return True
     try:
-        return Path(kernel._cache._cache_file._index_path).exists()  # noqa: SLF001 (numba's cache index)
+        return Path(kernel._cache._cache_file._index_path).exists()
     except AttributeError:
         return True  # another numba: say nothing rather than something wrong
 
@@ -121,8 +123,13 @@ def call_compiling(kernel: Any, *args: Any, ahead: Any = None) -> Any:
         from rimless.progress import spinner
 
         name = kernel.py_func.__name__
-        with spinner(f"compiling the simulator ({name}; first use only, cached in {cache_folder(kernel)})",
-                     done=f"compiled the simulator ({name})"), (ahead() if ahead is not None else nullcontext()):
+        with (
+            spinner(
+                f"compiling the simulator ({name}; first use only, cached in {cache_folder(kernel)})",
+                done=f"compiled the simulator ({name})",
+            ),
+            ahead() if ahead is not None else nullcontext(),
+        ):
             out = kernel(*args)
     try:
         kernel._rimless_called = True  # compiled or loaded in this process from now on

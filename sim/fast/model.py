@@ -21,12 +21,12 @@ from numba.core import types as _nbt
 from numba.extending import overload
 
 from rimless.sim.fast.compiling import kernel
+from rimless.sim.model.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE
 from rimless.sim.model.generated import active_feet as _af
 from rimless.sim.model.generated import eight_leg as _el
 from rimless.sim.model.generated import sliding_leg as _sl
+from rimless.sim.model.guards import CLUTCH_LOCK, LIFTOFF_A, LIFTOFF_B, STALL, TOUCHDOWN
 from rimless.sim.model.params import SPOKE_ANGLE_RAD
-from rimless.sim.model.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE  # noqa: F401 (re-exported to the kernels)
-from rimless.sim.model.guards import CLUTCH_LOCK, LIFTOFF_A, LIFTOFF_B, STALL, TOUCHDOWN  # noqa: F401
 
 ALPHA = SPOKE_ANGLE_RAD
 MASS_MODEL_INDEX = {"eight-leg": 0, "sliding-leg": 1, "active-feet": 2}
@@ -72,92 +72,97 @@ _SSCD0, _SSCD1, _SSCD2 = _compile("slsp_clutched_dir")
 # first). The same generated functions run either way: results are identical.
 
 
-def _literal(mi):  # noqa: ANN001, ANN202
+def _literal(mi):
     return mi.literal_value if isinstance(mi, _nbt.IntegerLiteral) else None
 
 
-def _terms_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+def _terms_of(mi, q, qd, p):
     raise NotImplementedError("compiled code only")
 
 
 @overload(_terms_of, prefer_literal=True)  # the literal first: one mass model
-def _ov_terms_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+def _ov_terms_of(mi, q, qd, p):
     v = _literal(mi)
     if v is not None:
         M, H, JA, JD = ((_M0, _H0, _JA0, _JDOT0), (_M1, _H1, _JA1, _JDOT1), (_M2, _H2, _JA2, _JDOT2))[v]
         return lambda mi, q, qd, p: (M(q, p), H(q, qd, p), JA(q, p), JD(q, qd, p))
 
-    def generic(mi, q, qd, p):  # noqa: ANN001, ANN202
+    def generic(mi, q, qd, p):
         if mi == 0:
             return _M0(q, p), _H0(q, qd, p), _JA0(q, p), _JDOT0(q, qd, p)
         if mi == 1:
             return _M1(q, p), _H1(q, qd, p), _JA1(q, p), _JDOT1(q, qd, p)
         return _M2(q, p), _H2(q, qd, p), _JA2(q, p), _JDOT2(q, qd, p)
+
     return generic
 
 
-def _energy_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+def _energy_of(mi, q, qd, p):
     raise NotImplementedError("compiled code only")
 
 
 @overload(_energy_of, prefer_literal=True)  # the literal first: one mass model
-def _ov_energy_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+def _ov_energy_of(mi, q, qd, p):
     v = _literal(mi)
     if v is not None:
         T, V = ((_T0, _V0), (_T1, _V1), (_T2, _V2))[v]
         return lambda mi, q, qd, p: T(q, qd, p) + V(q, p)
 
-    def generic(mi, q, qd, p):  # noqa: ANN001, ANN202
+    def generic(mi, q, qd, p):
         if mi == 0:
             return _T0(q, qd, p) + _V0(q, p)
         if mi == 1:
             return _T1(q, qd, p) + _V1(q, p)
         return _T2(q, qd, p) + _V2(q, p)
+
     return generic
 
 
-def _derivs_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+def _derivs_of(mi, q, qd, p):
     raise NotImplementedError("compiled code only")
 
 
 @overload(_derivs_of, prefer_literal=True)  # the literal first: one mass model
-def _ov_derivs_of(mi, q, qd, p):  # noqa: ANN001, ANN202
+def _ov_derivs_of(mi, q, qd, p):
     v = _literal(mi)
     if v is not None:
-        DM, DHQ, DHD, DJA, DJQ, DJD = ((_DM0, _DHQ0, _DHD0, _DJA0, _DJQ0, _DJD0),
-                                       (_DM1, _DHQ1, _DHD1, _DJA1, _DJQ1, _DJD1),
-                                       (_DM2, _DHQ2, _DHD2, _DJA2, _DJQ2, _DJD2))[v]
-        return lambda mi, q, qd, p: (DM(q, p), DHQ(q, qd, p), DHD(q, qd, p), DJA(q, p), DJQ(q, qd, p),
-                                     DJD(q, qd, p))
+        DM, DHQ, DHD, DJA, DJQ, DJD = (
+            (_DM0, _DHQ0, _DHD0, _DJA0, _DJQ0, _DJD0),
+            (_DM1, _DHQ1, _DHD1, _DJA1, _DJQ1, _DJD1),
+            (_DM2, _DHQ2, _DHD2, _DJA2, _DJQ2, _DJD2),
+        )[v]
+        return lambda mi, q, qd, p: (DM(q, p), DHQ(q, qd, p), DHD(q, qd, p), DJA(q, p), DJQ(q, qd, p), DJD(q, qd, p))
 
-    def generic(mi, q, qd, p):  # noqa: ANN001, ANN202
+    def generic(mi, q, qd, p):
         if mi == 0:
             return _DM0(q, p), _DHQ0(q, qd, p), _DHD0(q, qd, p), _DJA0(q, p), _DJQ0(q, qd, p), _DJD0(q, qd, p)
         if mi == 1:
             return _DM1(q, p), _DHQ1(q, qd, p), _DHD1(q, qd, p), _DJA1(q, p), _DJQ1(q, qd, p), _DJD1(q, qd, p)
         return _DM2(q, p), _DHQ2(q, qd, p), _DHD2(q, qd, p), _DJA2(q, p), _DJQ2(q, qd, p), _DJD2(q, qd, p)
+
     return generic
 
 
-def _reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+def _reduced_of(mi, phase, q, qd, p, qdd, lam):
     raise NotImplementedError("compiled code only")
 
 
 @overload(_reduced_of, prefer_literal=True)  # the literal first: one mass model
-def _ov_reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+def _ov_reduced_of(mi, phase, q, qd, p, qdd, lam):
     v = _literal(mi)
     if v is not None:
         DL, SSF, SSC = ((_DL0, _SSF0, _SSC0), (_DL1, _SSF1, _SSC1), (_DL2, _SSF2, _SSC2))[v]
 
-        def one(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+        def one(mi, phase, q, qd, p, qdd, lam):
             if phase == DLSP:
                 return DL(q, qd, p, qdd, lam)
             if phase == SLSP_FREE:
                 return SSF(q, qd, p, qdd, lam)
             return SSC(q, qd, p, qdd, lam)
+
         return one
 
-    def generic(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
+    def generic(mi, phase, q, qd, p, qdd, lam):
         if phase == DLSP:
             if mi == 0:
                 return _DL0(q, qd, p, qdd, lam)
@@ -175,28 +180,30 @@ def _ov_reduced_of(mi, phase, q, qd, p, qdd, lam):  # noqa: ANN001, ANN202
         if mi == 1:
             return _SSC1(q, qd, p, qdd, lam)
         return _SSC2(q, qd, p, qdd, lam)
+
     return generic
 
 
-def _directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+def _directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):
     raise NotImplementedError("compiled code only")
 
 
 @overload(_directional_of, prefer_literal=True)  # the literal first: one mass model
-def _ov_directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+def _ov_directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):
     v = _literal(mi)
     if v is not None:
         DLD, SSFD, SSCD = ((_DLD0, _SSFD0, _SSCD0), (_DLD1, _SSFD1, _SSCD1), (_DLD2, _SSFD2, _SSCD2))[v]
 
-        def one(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+        def one(mi, phase, q, qd, p, qdd, lam, V, dqdd):
             if phase == DLSP:
                 return DLD(q, qd, p, qdd, lam, V, dqdd)
             if phase == SLSP_FREE:
                 return SSFD(q, qd, p, qdd, lam, V, dqdd)
             return SSCD(q, qd, p, qdd, lam, V, dqdd)
+
         return one
 
-    def generic(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001, ANN202
+    def generic(mi, phase, q, qd, p, qdd, lam, V, dqdd):
         if phase == DLSP:
             if mi == 0:
                 return _DLD0(q, qd, p, qdd, lam, V, dqdd)
@@ -214,6 +221,7 @@ def _ov_directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd):  # noqa: ANN001,
         if mi == 1:
             return _SSCD1(q, qd, p, qdd, lam, V, dqdd)
         return _SSCD2(q, qd, p, qdd, lam, V, dqdd)
+
     return generic
 
 

@@ -54,7 +54,7 @@ _NSE = 16
 _A = np.zeros((_NSE, _NSE), dtype=np.float64)
 _A[:_NS, :_NS] = DOP853.A
 _A[_NS, :_NS] = DOP853.B
-_A[_NS + 1:] = DOP853.A_EXTRA
+_A[_NS + 1 :] = DOP853.A_EXTRA
 _B = np.ascontiguousarray(DOP853.B, dtype=np.float64)
 _C = np.ascontiguousarray(np.concatenate((DOP853.C, [1.0], DOP853.C_EXTRA)), dtype=np.float64)
 _E3 = np.ascontiguousarray(DOP853.E3, dtype=np.float64)
@@ -83,9 +83,9 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     ws: float64 workspace of model.WORKSPACE_SIZE + 5."""
     q = y[0:5]
     qd = y[5:10]
-    qdd = ws[fm.WORKSPACE_SIZE:fm.WORKSPACE_SIZE + 5]
+    qdd = ws[fm.WORKSPACE_SIZE : fm.WORKSPACE_SIZE + 5]
     if with_var:
-        V = y[VAR_OFFSET:VAR_OFFSET + VAR_SIZE].reshape((2, 10)).T
+        V = y[VAR_OFFSET : VAR_OFFSET + VAR_SIZE].reshape((2, 10)).T
         dqdd = ws[0:10].reshape((5, 2))  # no allocation per evaluation
         ok = fm.accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws)
         if not ok:
@@ -546,8 +546,20 @@ def _first_dip(mi, phase, p, code, t_a, h, F, y_a, g_a, g_b):
         k0 = min(max(k_min - 1, 0), n - 2)
         if _parabola_min_on(k0, gs[k0], k0 + 1, gs[k0 + 1], k0 + 2, gs[k0 + 2]) > DIP_MARGIN * gs[k_min]:
             return np.inf, nf
-        x, gx, nfm = _min_on_dense(mi, phase, p, code, t_a + h * (k_low - 1) / n, t_a + h * k_low / n, g_low,
-                                   t_a + h * (k_low + 1) / n, t_a, h, F, y_a)
+        x, gx, nfm = _min_on_dense(
+            mi,
+            phase,
+            p,
+            code,
+            t_a + h * (k_low - 1) / n,
+            t_a + h * k_low / n,
+            g_low,
+            t_a + h * (k_low + 1) / n,
+            t_a,
+            h,
+            F,
+            y_a,
+        )
         nf += nfm
         if gx > 0.0:
             return np.inf, nf
@@ -601,8 +613,9 @@ def _room(rec_t, rec_y, nrec):
 
 
 @_jit
-def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
-              record_dt, max_steps):
+def run_phase(
+    mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+):
     """Integrate one phase from (t0, y0) until a guard in `codes` fires or t0 + t_max is reached.
 
     Returns (status, t_end, y_end, fired_index (-1: none), nfev, nsteps, nstiff, rec_t, rec_y).
@@ -664,7 +677,7 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
     ytmp = np.empty(N)
     y_last_stage = np.empty(N)
     F = np.empty((7, N))
-    scale = np.empty(n_err)
+    np.empty(n_err)
     ybuf = np.empty(N)
     while True:
         if nsteps >= max_steps:
@@ -723,12 +736,12 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
                 if error_norm == 0.0:
                     factor = _MAX_FACTOR
                 else:
-                    factor = min(_MAX_FACTOR, _SAFETY * error_norm ** _ERR_EXP)
+                    factor = min(_MAX_FACTOR, _SAFETY * error_norm**_ERR_EXP)
                 if rejected:
                     factor = min(1.0, factor)
                 h_abs *= factor
                 break
-            h_abs *= max(_MIN_FACTOR, _SAFETY * error_norm ** _ERR_EXP)
+            h_abs *= max(_MIN_FACTOR, _SAFETY * error_norm**_ERR_EXP)
             rejected = True
             nreject += 1
         nsteps += 1
@@ -836,8 +849,9 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
             # located on the dense output (the interpolant is an order less accurate than the step)
             y_end = np.empty(N)
             if best_prev:
-                ok = _rk_stages(mi, phase, p, yp_old, Kp[0], best_t - tp_old, K, ytmp, y_end, lam_new, ws,
-                                with_var, with_diss)
+                ok = _rk_stages(
+                    mi, phase, p, yp_old, Kp[0], best_t - tp_old, K, ytmp, y_end, lam_new, ws, with_var, with_diss
+                )
                 while nrec > 0 and rec_t[nrec - 1] >= best_t:
                     nrec -= 1
             else:
@@ -883,32 +897,49 @@ def run_phase(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err,
 
 # Per-mass-model entry points (the index a compile-time constant: one mass model's generated code compiled).
 @_jit
-def run_phase_0(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt,
-                max_steps):
-    return run_phase(0, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
-                     record_dt, max_steps)
+def run_phase_0(
+    phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+):
+    return run_phase(
+        0, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+    )
 
 
 @_jit
-def run_phase_1(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt,
-                max_steps):
-    return run_phase(1, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
-                     record_dt, max_steps)
+def run_phase_1(
+    phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+):
+    return run_phase(
+        1, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+    )
 
 
 @_jit
-def run_phase_2(phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt,
-                max_steps):
-    return run_phase(2, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss,
-                     record_dt, max_steps)
+def run_phase_2(
+    phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+):
+    return run_phase(
+        2, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
+    )
 
 
 RUN_PHASE = (run_phase_0, run_phase_1, run_phase_2)
 
 
-def phase_call_args(phase: int, p: np.ndarray, y0: np.ndarray, t0: float, guards: Sequence[int],
-                    directions: Sequence[int], t_max: float, rtol: float, atol: float, track_dissipation: bool,
-                    record_dt: float | None, max_steps: int) -> tuple[Any, ...]:
+def phase_call_args(
+    phase: int,
+    p: np.ndarray,
+    y0: np.ndarray,
+    t0: float,
+    guards: Sequence[int],
+    directions: Sequence[int],
+    t_max: float,
+    rtol: float,
+    atol: float,
+    track_dissipation: bool,
+    record_dt: float | None,
+    max_steps: int,
+) -> tuple[Any, ...]:
     """The arguments of `RUN_PHASE[mi]` called from Python for one phase without variational equations, each of
     the one type it is compiled for (so that every such call shares one compiled version): p the parameter
     vector, y0 the state (10,), SI; guards and directions the guard codes and their directions (read-only int64
@@ -921,6 +952,19 @@ def phase_call_args(phase: int, p: np.ndarray, y0: np.ndarray, t0: float, guards
     y = np.asarray(y0, dtype=np.float64)
     if track_dissipation:
         y = np.concatenate((y, [0.0]))
-    return (int(phase), np.asarray(p, dtype=np.float64), y, float(t0), codes, dirs, float(t_max), float(rtol),
-            float(atol), 11 if track_dissipation else 10, False, bool(track_dissipation),
-            float(record_dt) if record_dt else -1.0, int(max_steps))
+    return (
+        int(phase),
+        np.asarray(p, dtype=np.float64),
+        y,
+        float(t0),
+        codes,
+        dirs,
+        float(t_max),
+        float(rtol),
+        float(atol),
+        11 if track_dissipation else 10,
+        False,
+        bool(track_dissipation),
+        float(record_dt) if record_dt else -1.0,
+        int(max_steps),
+    )

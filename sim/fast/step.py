@@ -77,7 +77,6 @@ CONTACT_SIZE = 4
 BILATERAL_RECORD_DT = 2e-4  # s: force samples between the solver's steps (bilateral mode only)
 
 
-
 @_inner
 def _get_V(ya):
     V = np.empty((10, 2))
@@ -187,8 +186,25 @@ def dlsp_tolerances(rtol, atol):
 
 
 @_jit(inline="always")  # three call sites in step_kernel: no library level of its own
-def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps, ending, touchdown_status,
-               time_limit_status, counts, rec_dt, contact):
+def _run_phase(
+    mi,
+    phase,
+    p,
+    ya,
+    t,
+    codes,
+    dirs,
+    rtol,
+    atol,
+    want_jac,
+    max_steps,
+    ending,
+    touchdown_status,
+    time_limit_status,
+    counts,
+    rec_dt,
+    contact,
+):
     """One phase of the map from (t, ya) until a guard of `codes` fires, counted into counts[phase].
 
     Returns (status, detail, t_end, y_end, nfev, nsteps, nstiff): status OK when the phase ended at its guard
@@ -196,7 +212,8 @@ def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps
     STALL / STANCE_LIFT_OFF at the stall / stance lift-off guards, touchdown_status at an early touchdown.
     rec_dt > 0 (bilateral contact with a record): the states every rec_dt s go into `contact`'s stance force."""
     st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = rk.run_phase(
-        mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, want_jac, False, rec_dt, max_steps)
+        mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, want_jac, False, rec_dt, max_steps
+    )
     if rec_dt > 0.0:
         single_support_force(mi, phase, rec_t, rec_y, p, contact)
     counts[phase, 0] = nf
@@ -218,15 +235,39 @@ def _run_phase(mi, phase, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps
 def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin); unilateral contact (see
     step_map_contact)."""
-    return call_compiling(STEP_MAP_CONTACT[mi], er, p, z, rtol, atol, want_jac, max_steps, counts, False,
-                          np.empty(0), ahead=lambda: compiling_ahead(mi))
+    return call_compiling(
+        STEP_MAP_CONTACT[mi],
+        er,
+        p,
+        z,
+        rtol,
+        atol,
+        want_jac,
+        max_steps,
+        counts,
+        False,
+        np.empty(0),
+        ahead=lambda: compiling_ahead(mi),
+    )
 
 
 def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
     """step_kernel for mass model index mi through its own entry point (STEP_MAP_CONTACT[mi]), so that only
     that mass model's generated code is compiled."""
-    return call_compiling(STEP_MAP_CONTACT[mi], er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral,
-                          contact, ahead=lambda: compiling_ahead(mi))
+    return call_compiling(
+        STEP_MAP_CONTACT[mi],
+        er,
+        p,
+        z,
+        rtol,
+        atol,
+        want_jac,
+        max_steps,
+        counts,
+        bilateral,
+        contact,
+        ahead=lambda: compiling_ahead(mi),
+    )
 
 
 @_jit(inline="always")  # one call site per mass model entry point below
@@ -288,8 +329,24 @@ def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral
     if lam[3] > 0.0:
         rtol_d, atol_d = dlsp_tolerances(rtol, atol)
         st, detail, t_end, y_end, nf, ns, nst = _run_phase(
-            mi, fm.DLSP, p, ya, t, PHASE_DLSP_CODES, PHASE_DLSP_DIRS, rtol_d, atol_d, want_jac, max_steps, fm.LIFTOFF_A,
-            DLSP_NEVER_ENDS, DLSP_NEVER_ENDS, counts, -1.0, contact)
+            mi,
+            fm.DLSP,
+            p,
+            ya,
+            t,
+            PHASE_DLSP_CODES,
+            PHASE_DLSP_DIRS,
+            rtol_d,
+            atol_d,
+            want_jac,
+            max_steps,
+            fm.LIFTOFF_A,
+            DLSP_NEVER_ENDS,
+            DLSP_NEVER_ENDS,
+            counts,
+            -1.0,
+            contact,
+        )
         nfev += nf
         nsteps += ns
         nstiff += nst
@@ -318,8 +375,24 @@ def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral
         codes = PHASE_FREE_ER_CODES_BI if bilateral else PHASE_FREE_ER_CODES
         dirs = PHASE_FREE_ER_DIRS_BI if bilateral else PHASE_FREE_ER_DIRS
         st, detail, t_end, y_end, nf, ns, nst = _run_phase(
-            mi, fm.SLSP_FREE, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps,
-            fm.CLUTCH_LOCK, TOUCHDOWN_BEFORE_CLUTCH, INTEGRATION, counts, rec_dt, contact)
+            mi,
+            fm.SLSP_FREE,
+            p,
+            ya,
+            t,
+            codes,
+            dirs,
+            rtol,
+            atol,
+            want_jac,
+            max_steps,
+            fm.CLUTCH_LOCK,
+            TOUCHDOWN_BEFORE_CLUTCH,
+            INTEGRATION,
+            counts,
+            rec_dt,
+            contact,
+        )
         nfev += nf
         nsteps += ns
         nstiff += nst
@@ -342,8 +415,24 @@ def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral
     codes = PHASE_SS_CODES_BI if bilateral else PHASE_SS_CODES
     dirs = PHASE_SS_DIRS_BI if bilateral else PHASE_SS_DIRS
     st, detail, t_end, y_end, nf, ns, nst = _run_phase(
-        mi, final, p, ya, t, codes, dirs, rtol, atol, want_jac, max_steps, fm.TOUCHDOWN, STALL, STALL,
-        counts, rec_dt, contact)
+        mi,
+        final,
+        p,
+        ya,
+        t,
+        codes,
+        dirs,
+        rtol,
+        atol,
+        want_jac,
+        max_steps,
+        fm.TOUCHDOWN,
+        STALL,
+        STALL,
+        counts,
+        rec_dt,
+        contact,
+    )
     nfev += nf
     nsteps += ns
     nstiff += nst

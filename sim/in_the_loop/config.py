@@ -7,9 +7,17 @@ from typing import Any
 from rimless.errors import ParameterError
 
 
-def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay_ms: float | None,
-                 noise_counts: float, jitter_ms: float, holding_force_n: float, seed: int,
-                 robot_config: Any = None) -> Any:
+def build_config(
+    *,
+    rate_hz: float | None,
+    clutch_delay_ms: float,
+    release_delay_ms: float | None,
+    noise_counts: float,
+    jitter_ms: float,
+    holding_force_n: float,
+    seed: int,
+    robot_config: Any = None,
+) -> Any:
     """FirmwareLoopConfig from the CLI options; errors name the option.
 
     robot_config: a robot.toml (read by the firmware's own loader) supplying the detector parameters, the
@@ -26,17 +34,27 @@ def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay
         sensor = robot.sensors[0]
         if len(robot.sensors) == 1:
             sensors = "one"
-        elif len(robot.sensors) == 8 and sorted(leg for s in robot.sensors for leg in s.legs) == list(range(8)) \
-                and all(len(s.legs) == 1 for s in robot.sensors):
+        elif (
+            len(robot.sensors) == 8
+            and sorted(leg for s in robot.sensors for leg in s.legs) == list(range(8))
+            and all(len(s.legs) == 1 for s in robot.sensors)
+        ):
             sensors = "per-leg"
         else:
-            raise ParameterError(f"--robot-config {robot_config}: the loop models one sensor counting the legs or "
-                                 f"one sensor per leg (legs 0..7), not {len(robot.sensors)} sensors on "
-                                 f"{[list(s.legs) for s in robot.sensors]}")
+            raise ParameterError(
+                f"--robot-config {robot_config}: the loop models one sensor counting the legs or "
+                f"one sensor per leg (legs 0..7), not {len(robot.sensors)} sensors on "
+                f"{[list(s.legs) for s in robot.sensors]}"
+            )
         cpm_1600 = sensor.counts_per_m * (1.0 if sensor.resolution_cpi == 1600 else 4.0)
-        extra = {"detector": robot.detector, "cpi": sensor.resolution_cpi, "counts_per_m_1600": cpm_1600,
-                 "health": HealthLimits(sensor.squal_min, sensor.squal_low_s, sensor.saturated_samples_max),
-                 "max_hold_s": robot.clutch.max_hold_s, "sensors": sensors}
+        extra = {
+            "detector": robot.detector,
+            "cpi": sensor.resolution_cpi,
+            "counts_per_m_1600": cpm_1600,
+            "health": HealthLimits(sensor.squal_min, sensor.squal_low_s, sensor.saturated_samples_max),
+            "max_hold_s": robot.clutch.max_hold_s,
+            "sensors": sensors,
+        }
         if rate_hz is None:
             rate_hz = robot.sampling.rate_hz
     if rate_hz is None:
@@ -50,12 +68,20 @@ def build_config(*, rate_hz: float | None, clutch_delay_ms: float, release_delay
         ("--holding-force-n", holding_force_n, holding_force_n > 0.0, "a force > 0 N (inf: a rigid clutch)"),
     ]
     if release_delay_ms is not None:
-        checks.append(("--release-delay-ms", release_delay_ms, 0.0 <= release_delay_ms <= 1000.0,
-                       "a delay in [0, 1000] ms"))
+        checks.append(
+            ("--release-delay-ms", release_delay_ms, 0.0 <= release_delay_ms <= 1000.0, "a delay in [0, 1000] ms")
+        )
     for flag, value, ok, what in checks:
         if value != value or not ok:
             raise ParameterError(f"{flag} must be {what}, got {value}")
     release = clutch_delay_ms if release_delay_ms is None else release_delay_ms
-    return FirmwareLoopConfig(rate_hz=rate_hz, jitter_s=jitter_ms * 1e-3, noise_counts=noise_counts,
-                              engage_delay_s=clutch_delay_ms * 1e-3, release_delay_s=release * 1e-3,
-                              holding_force_N=holding_force_n, seed=seed, **extra).validated()
+    return FirmwareLoopConfig(
+        rate_hz=rate_hz,
+        jitter_s=jitter_ms * 1e-3,
+        noise_counts=noise_counts,
+        engage_delay_s=clutch_delay_ms * 1e-3,
+        release_delay_s=release * 1e-3,
+        holding_force_N=holding_force_n,
+        seed=seed,
+        **extra,
+    ).validated()

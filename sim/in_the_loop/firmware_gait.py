@@ -9,7 +9,7 @@ import os
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -47,19 +47,24 @@ def firmware_summary(params: Any, config: Any, ideal: Any, fp: Any) -> dict[str,
         "seed": config.seed,
         "steps_done": len(steps),
         "ideal": {
-            "theta_plus_rad": float(ideal.z[0]), "theta_dot_plus_rad_s": float(ideal.z[1]),
-            "step_period_s": float(ideal.step.period_s), "stored_energy_J": ideal_stored,
+            "theta_plus_rad": float(ideal.z[0]),
+            "theta_dot_plus_rad_s": float(ideal.z[1]),
+            "step_period_s": float(ideal.step.period_s),
+            "stored_energy_J": ideal_stored,
             "max_abs_eigenvalue": float(np.max(np.abs(ideal.eigenvalues))),
         },
         "fixed_point": {
             "method": "linear fit z_{k+1} = A z_k + c to the walk's section points, z* = (I - A)^-1 c",
-            "theta_plus_rad": _f(fp.z[0]), "theta_dot_plus_rad_s": _f(fp.z[1]),
-            "mean_last_rad_rad_s": [_f(v) for v in fp.z_mean], "std_last_rad_rad_s": [_f(v) for v in fp.z_std],
+            "theta_plus_rad": _f(fp.z[0]),
+            "theta_dot_plus_rad_s": _f(fp.z[1]),
+            "mean_last_rad_rad_s": [_f(v) for v in fp.z_mean],
+            "std_last_rad_rad_s": [_f(v) for v in fp.z_std],
             "n_average": fp.n_average,
             "eigenvalues_fitted": [[_f(e.real), _f(e.imag)] for e in fp.eigenvalues],
             "stable_fitted": fp.stable,
             "fit_residual": _f(fp.fit_residual),
-            "step_period_s": fp.period_s, "step_period_std_s": fp.period_std_s,
+            "step_period_s": fp.period_s,
+            "step_period_std_s": fp.period_std_s,
             "stored_energy_J": fp.stored_energy_J,
             "stored_energy_ratio_to_ideal": fp.stored_energy_J / ideal_stored if ideal_stored > 0 else None,
         },
@@ -71,14 +76,16 @@ def firmware_summary(params: Any, config: Any, ideal: Any, fp: Any) -> dict[str,
         },
         "energy_residual_max_J": max((abs(s.energy_residual_J) for s in steps), default=None),
         "firmware_faults": faults,
-        "failure": None if walk.failure is None else {"reason": walk.failure.reason.value,
-                                                      "message": str(walk.failure)},
+        "failure": None
+        if walk.failure is None
+        else {"reason": walk.failure.reason.value, "message": str(walk.failure)},
         "steps": [s.to_dict() for s in steps],
     }
 
 
-def firmware_gait(params: Any, config: Any, *, steps: int, backend: str, rtol: float,
-                  progress: Optional[Callable[[int], None]] = None) -> dict[str, Any]:
+def firmware_gait(
+    params: Any, config: Any, *, steps: int, backend: str, rtol: float, progress: Callable[[int], None] | None = None
+) -> dict[str, Any]:
     """Walk `steps` steps from the ideal-clutch fixed point with the firmware in the loop; its summary.
 
     progress(k): k steps done. Raises RunFailure when there is no ideal gait to start from or the walk fails
@@ -90,8 +97,9 @@ def firmware_gait(params: Any, config: Any, *, steps: int, backend: str, rtol: f
     try:
         ideal = ideal_fixed_point(params, backend=backend, rtol=rtol)
     except (StepFailure, NoFixedPoint) as err:
-        raise RunFailure(f"no ideal-clutch ER gait to start the firmware walk from at {params.slope_deg:.4f} deg: "
-                         f"{err}") from None
+        raise RunFailure(
+            f"no ideal-clutch ER gait to start the firmware walk from at {params.slope_deg:.4f} deg: {err}"
+        ) from None
     try:
         fp = firmware_fixed_point(params, config, ideal.z, steps=steps, n_average=min(4, steps), progress=progress)
     except StepFailure as err:
@@ -125,10 +133,18 @@ def firmware_bench(params: Any, *, rates_hz: tuple[float, ...] = (300.0, 1000.0)
         done = max(len(walk.steps), 1)
         per_step = el / (done + 1)  # the priming step is simulated and sampled as well
         z_err = float(np.max(np.abs(walk.steps[0].z_end - ideal.z))) if walk.steps else float("nan")
-        rows.append({"rate_hz": rate, "sensors": sensors, "steps": len(walk.steps), "steps_per_s": 1.0 / per_step,
-                     "samples_per_step": walk.samples / (done + 1),
-                     "reference_ideal_steps_per_s": 1.0 / ref_s, "slowdown_vs_ideal": per_step / ref_s,
-                     "first_step_section_difference": z_err})
+        rows.append(
+            {
+                "rate_hz": rate,
+                "sensors": sensors,
+                "steps": len(walk.steps),
+                "steps_per_s": 1.0 / per_step,
+                "samples_per_step": walk.samples / (done + 1),
+                "reference_ideal_steps_per_s": 1.0 / ref_s,
+                "slowdown_vs_ideal": per_step / ref_s,
+                "first_step_section_difference": z_err,
+            }
+        )
     return {"benchmark": "firmware-in-the-loop", "steps": steps, "rows": rows, "load_average": list(os.getloadavg())}
 
 
@@ -137,8 +153,15 @@ def critical_bisections(params: Any, low_deg: float, tol_deg: float) -> int:
     return 2 * (2 + max(1, math.ceil(math.log2(max((params.slope_deg - low_deg) / tol_deg, 1.0)))))
 
 
-def firmware_critical(params: Any, config: Any, *, steps: int, low_deg: float, tol_deg: float,
-                      progress: Optional[Callable[[int], None]] = None) -> dict[str, Any]:
+def firmware_critical(
+    params: Any,
+    config: Any,
+    *,
+    steps: int,
+    low_deg: float,
+    tol_deg: float,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
     """The lowest slope (deg) at which the firmware keeps the wheel walking, and the mechanical boundary.
 
     progress(k): k walks done (at most `critical_bisections`). Raises ParameterError for a low end outside
@@ -148,8 +171,9 @@ def firmware_critical(params: Any, config: Any, *, steps: int, low_deg: float, t
     if not (math.isfinite(low_deg) and 0.0 <= low_deg < params.slope_deg):
         raise ParameterError(f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), got {low_deg}")
     try:
-        res = firmware_boundaries(params, config, low_rad=math.radians(low_deg), steps=steps,
-                                  tol_rad=math.radians(tol_deg), progress=progress)
+        res = firmware_boundaries(
+            params, config, low_rad=math.radians(low_deg), steps=steps, tol_rad=math.radians(tol_deg), progress=progress
+        )
     except ValueError as err:
         raise RunFailure(str(err)) from None
     return critical_summary(res, config, steps=steps, tol_deg=tol_deg)
@@ -166,10 +190,13 @@ def critical_summary(res: Any, config: Any, *, steps: int, tol_deg: float) -> di
 
     mech_deg = math.degrees(res.mechanical_slope_rad)
     return {
-        "clutch": "firmware", "rate_hz": config.rate_hz, "engage_delay_ms": config.engage_delay_s * 1e3,
-        "release_delay_ms": config.release_delay_s * 1e3, "noise_counts": config.noise_counts,
+        "clutch": "firmware",
+        "rate_hz": config.rate_hz,
+        "engage_delay_ms": config.engage_delay_s * 1e3,
+        "release_delay_ms": config.release_delay_s * 1e3,
+        "noise_counts": config.noise_counts,
         "definition": f"lowest slope at which a walk of {steps} steps from the ideal-clutch gait completes with no "
-                      "failed step and no firmware fault (bisection; one boundary assumed)",
+        "failed step and no firmware fault (bisection; one boundary assumed)",
         "critical_slope_deg": math.degrees(fw.critical_slope_rad),
         "failing_slope_deg": math.degrees(fw.failing_slope_rad),
         "tolerance_deg": tol_deg,
@@ -178,13 +205,17 @@ def critical_summary(res: Any, config: Any, *, steps: int, tol_deg: float) -> di
         "limit_detail": res.detail,
         "firmware_fault_below": fw.limited_by == "firmware",
         "mechanical_critical_slope_deg": mech_deg if math.isfinite(mech_deg) else None,
-        "mechanical": None if mech is None else {
+        "mechanical": None
+        if mech is None
+        else {
             "definition": f"the firmware's step-timing fail-safes relaxed (max_step_s 10 s, step_period_tolerance "
-                          f"0.9, max_hold_s 60 s) so that a walk ends only by the mechanics, walks "
-                          f"{MECHANICAL_WALK_FACTOR * steps} steps long: first at the failing slope, then bisected "
-                          "below it if the wheel walks there",
+            f"0.9, max_hold_s 60 s) so that a walk ends only by the mechanics, walks "
+            f"{MECHANICAL_WALK_FACTOR * steps} steps long: first at the failing slope, then bisected "
+            "below it if the wheel walks there",
             "critical_slope_deg": mech_deg if math.isfinite(mech_deg) else None,
             "failing_slope_deg": math.degrees(mech.failing_slope_rad),
-            "reason_below": mech.reason_below, "evaluations": evals(mech)},
+            "reason_below": mech.reason_below,
+            "evaluations": evals(mech),
+        },
         "evaluations": evals(fw),
     }

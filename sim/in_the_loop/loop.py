@@ -45,19 +45,31 @@ from typing import Any
 
 import numpy as np
 
-from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.drivers.clutch import ClutchBank
 from rimless.firmware.control.controller import Channel, Controller, EventRecord
 from rimless.firmware.control.detector import DetectorParams, LegDetector
-from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
 from rimless.firmware.control.faults import HealthLimits, HealthMonitor
+from rimless.firmware.drivers.adns3080 import Adns3080
+from rimless.firmware.drivers.clutch import ClutchBank
+from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
 from rimless.sim.integrate.events import EventLocator, Piecewise
 from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model import clutch as ch
 from rimless.sim.model.clutch import Mode
 from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.model.guards import (FOOT_A_DOWN, LIFTOFF_A, LIFTOFF_B, SLIP_END_1, SLIP_END_2, STALL, STICK_END_1,
-                                      STICK_END_2, TOUCHDOWN, clutch_forces, failure_of, mode_guard_value)
+from rimless.sim.model.guards import (
+    FOOT_A_DOWN,
+    LIFTOFF_A,
+    LIFTOFF_B,
+    SLIP_END_1,
+    SLIP_END_2,
+    STALL,
+    STICK_END_1,
+    STICK_END_2,
+    TOUCHDOWN,
+    clutch_forces,
+    failure_of,
+    mode_guard_value,
+)
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
@@ -109,8 +121,12 @@ class FirmwareLoopConfig:
         ]
         for name, ok, what in checks:
             value = getattr(self, name)
-            if isinstance(value, float) and math.isnan(value) or not ok or (name != "holding_force_N" and isinstance(
-                    value, float) and not math.isfinite(value)):
+            if (
+                isinstance(value, float)
+                and math.isnan(value)
+                or not ok
+                or (name != "holding_force_N" and isinstance(value, float) and not math.isfinite(value))
+            ):
                 raise ValueError(f"{name} must be {what}, got {value!r}")
         if self.sensors not in ("one", "per-leg"):
             raise ValueError(f"sensors must be 'one' or 'per-leg', got {self.sensors!r}")
@@ -185,8 +201,9 @@ class FirmwareLoop:
     `walk(z0, n)` warms the firmware up on one ideal step from z0 and then simulates n steps under it.
     """
 
-    def __init__(self, params: WheelParams, config: FirmwareLoopConfig | None = None, *,
-                 rtol: float = 1e-9, atol: float = 1e-11) -> None:
+    def __init__(
+        self, params: WheelParams, config: FirmwareLoopConfig | None = None, *, rtol: float = 1e-9, atol: float = 1e-11
+    ) -> None:
         from gpiozero.pins.mock import MockFactory
 
         self.params = params
@@ -201,10 +218,21 @@ class FirmwareLoop:
         self._leg_compression_m = [0.0] * N_LEGS  # what each per-leg sensor sees: L0 - L of its leg (m)
 
         def sensor(trajectory: Callable[[float], float], seed: int) -> tuple[FakeAdns3080, Adns3080]:
-            fake = FakeAdns3080(trajectory, counts_per_m=cfg.counts_per_m_1600, noise_counts=cfg.noise_counts,
-                                squal=cfg.squal, seed=seed, clock=self.clock.seconds, needs_reset=False)
-            drv = Adns3080(fake, counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
-                           sleep=lambda _s: None, clock_ns=self.clock.ns)
+            fake = FakeAdns3080(
+                trajectory,
+                counts_per_m=cfg.counts_per_m_1600,
+                noise_counts=cfg.noise_counts,
+                squal=cfg.squal,
+                seed=seed,
+                clock=self.clock.seconds,
+                needs_reset=False,
+            )
+            drv = Adns3080(
+                fake,
+                counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
+                sleep=lambda _s: None,
+                clock_ns=self.clock.ns,
+            )
             drv.set_resolution(cfg.cpi)
             return fake, drv
 
@@ -281,8 +309,14 @@ class FirmwareLoop:
         self._schedule_next()
 
     # --- the walk -----------------------------------------------------------------------------------
-    def walk(self, z0: np.ndarray, n_steps: int, *, progress: Callable[[int], None] | None = None,
-             record_samples: bool = False) -> FirmwareWalk:
+    def walk(
+        self,
+        z0: np.ndarray,
+        n_steps: int,
+        *,
+        progress: Callable[[int], None] | None = None,
+        record_samples: bool = False,
+    ) -> FirmwareWalk:
         """Prime the firmware on one ideal step from z0, then simulate up to n_steps under it.
 
         A failing step ends the walk; it is returned in `failure` with the steps done so far."""
@@ -306,8 +340,13 @@ class FirmwareLoop:
     def _prime(self, z0: np.ndarray) -> tuple[np.ndarray, float, float]:
         """One ideal step watched by the firmware (armed, commands without effect); returns the post-impact
         state, the time, and the sensor's accumulated compression at the impact."""
-        res = simulate_step(self.mech, "er", state_from_section(self.mech, z0), ScipyIntegrator(rtol=self.rtol,
-                            atol=self.atol), record_dt=PRIMING_RECORD_DT_S)
+        res = simulate_step(
+            self.mech,
+            "er",
+            state_from_section(self.mech, z0),
+            ScipyIntegrator(rtol=self.rtol, atol=self.atol),
+            record_dt=PRIMING_RECORD_DT_S,
+        )
         tt = np.concatenate([s.t for s in res.segments or []])
         l1 = np.concatenate([s.y[:, 3] for s in res.segments or []])
         l2 = np.concatenate([s.y[:, 4] for s in res.segments or []])
@@ -352,8 +391,9 @@ class FirmwareLoop:
         return f if math.isfinite(f) else 0.0
 
     # --- one step from a post-impact state ---------------------------------------------------------
-    def _step(self, y: np.ndarray, t0: float, offset: float, lifted: bool
-              ) -> tuple[FirmwareStep, np.ndarray, float, float, bool]:
+    def _step(
+        self, y: np.ndarray, t0: float, offset: float, lifted: bool
+    ) -> tuple[FirmwareStep, np.ndarray, float, float, bool]:
         mech = self.mech
         rigid = not math.isfinite(self.config.holding_force_N)
         y = np.asarray(y, dtype=float).copy()
@@ -379,8 +419,9 @@ class FirmwareLoop:
             raise StepFailure(FailureReason.STALL, "theta' <= 0 at the start of the step", time_s=t, phase="dlsp")
         while True:
             if t - t0 > STEP_TIME_LIMIT_S:
-                raise StepFailure(FailureReason.STALL, f"no touchdown within {STEP_TIME_LIMIT_S} s", time_s=t,
-                                  phase=mode.name)
+                raise StepFailure(
+                    FailureReason.STALL, f"no touchdown within {STEP_TIME_LIMIT_S} s", time_s=t, phase=mode.name
+                )
             while self._pending and self._pending[0][0] <= t + 1e-15:  # clutch actions due now
                 _, leg, on = self._pending.pop(0)
                 if on:
@@ -405,8 +446,13 @@ class FirmwareLoop:
                     target = replace(mode, leg1=ch.STUCK) if which == 1 else replace(mode, leg2=ch.STUCK)
                     tr = ch.inelastic_transition(mech, target, y[:5], y[5:])
                     if tr.wheel_stopped:
-                        raise StepFailure(FailureReason.STALL, "a rigid clutch engaged on the trailing leg in double "
-                                          "support: the rigid triangle stops the wheel", time_s=t, phase=mode.name)
+                        raise StepFailure(
+                            FailureReason.STALL,
+                            "a rigid clutch engaged on the trailing leg in double "
+                            "support: the rigid triangle stops the wheel",
+                            time_s=t,
+                            phase=mode.name,
+                        )
                     y = np.concatenate((y[:5], tr.qd_plus))
                     mode = tr.mode
                     recontact_armed = recontact_armed or tr.foot_a_lifts
@@ -430,8 +476,9 @@ class FirmwareLoop:
                 elif st == ch.STUCK and not rigid:
                     guards.append(STICK_END_1 if which == 1 else STICK_END_2)
             t_mode = t
-            kind, code, t, y, diss, slip, peak = self.integrate_mode(mode, y, t, t0 + STEP_TIME_LIMIT_S + 1e-9,
-                                                                 tuple(guards), offset)
+            kind, code, t, y, diss, slip, peak = self.integrate_mode(
+                mode, y, t, t0 + STEP_TIME_LIMIT_S + 1e-9, tuple(guards), offset
+            )
             damper += diss
             clutch_loss += slip
             if peak is not None and peak_time is None and lock_time is None:
@@ -455,7 +502,11 @@ class FirmwareLoop:
                     st = self._stick_or_slip(mode, which, y)
                 else:
                     idx = ch.clutch_force_index(mode, which)
-                    st = ch.SLIP_DOWN if clutch_forces(self.mech, mode, y, self.config.holding_force_N)[idx] > 0.0 else ch.SLIP_UP
+                    st = (
+                        ch.SLIP_DOWN
+                        if clutch_forces(self.mech, mode, y, self.config.holding_force_N)[idx] > 0.0
+                        else ch.SLIP_UP
+                    )
                 mode = replace(mode, leg1=st) if which == 1 else replace(mode, leg2=st)
                 if which == 1 and st == ch.STUCK and not stick_stored:
                     stick_stored = 0.5 * self.params.k * (self.L0 - y[3]) ** 2
@@ -474,19 +525,30 @@ class FirmwareLoop:
         y_minus = y
         e_minus = mech.energy(y[:5], y[5:])
         stance_engaged = b_leg in self._engaged  # the stance leg becomes the trailing leg
-        imp, q_plus, qd_plus, tr = ch.touchdown_with_locks(mech, y[:5], y[5:],
-                                                           trailing_locked=stance_engaged and rigid)
+        imp, q_plus, qd_plus, tr = ch.touchdown_with_locks(mech, y[:5], y[5:], trailing_locked=stance_engaged and rigid)
         if tr is not None and tr.wheel_stopped:
-            raise StepFailure(FailureReason.STALL, "touchdown with the rigid trailing clutch still engaged stopped the "
-                              "wheel (both feet down, the locked leg holds the wheel rigid)", time_s=t, phase="impact")
+            raise StepFailure(
+                FailureReason.STALL,
+                "touchdown with the rigid trailing clutch still engaged stopped the "
+                "wheel (both feet down, the locked leg holds the wheel rigid)",
+                time_s=t,
+                phase="impact",
+            )
         if imp is not None and not (imp.impulse[1] > 0.0 and imp.impulse[3] > 0.0):
-            raise StepFailure(FailureReason.NEGATIVE_IMPULSE,
-                              f"normal impulses b = {imp.impulse[1]:.4g} N s, a = {imp.impulse[3]:.4g} N s must be > 0",
-                              time_s=t, phase="impact")
+            raise StepFailure(
+                FailureReason.NEGATIVE_IMPULSE,
+                f"normal impulses b = {imp.impulse[1]:.4g} N s, a = {imp.impulse[3]:.4g} N s must be > 0",
+                time_s=t,
+                phase="impact",
+            )
         if tr is not None and not (tr.impulse_b[1] > 0.0 and ch.foot_a_normal_velocity(mech, q_plus, qd_plus) >= 0.0):
-            raise StepFailure(FailureReason.NEGATIVE_IMPULSE, "touchdown with the rigid trailing clutch engaged has no "
-                              "consistent rigid-contact outcome (foot a can neither stay down nor lift)",
-                              time_s=t, phase="impact")
+            raise StepFailure(
+                FailureReason.NEGATIVE_IMPULSE,
+                "touchdown with the rigid trailing clutch engaged has no "
+                "consistent rigid-contact outcome (foot a can neither stay down nor lift)",
+                time_s=t,
+                phase="impact",
+            )
         y_plus = np.concatenate((q_plus, qd_plus))
         if not np.all(np.isfinite(y_plus)):
             raise StepFailure(FailureReason.INTEGRATION, "non-finite impact", time_s=t, phase="impact")
@@ -503,20 +565,33 @@ class FirmwareLoop:
         else:
             lock_class = "after-rebound"  # the leg has rebounded and oscillates (or rests) again
         step = FirmwareStep(
-            z_start=z_start, z_end=np.array([y_plus[2], y_plus[7]]), t_start_s=t0, period_s=t - t0, modes=modes,
-            lock_time_s=None if lock_time is None else lock_time - t0, lock_rate_m_s=lock_rate, lock_class=lock_class,
+            z_start=z_start,
+            z_end=np.array([y_plus[2], y_plus[7]]),
+            t_start_s=t0,
+            period_s=t - t0,
+            modes=modes,
+            lock_time_s=None if lock_time is None else lock_time - t0,
+            lock_rate_m_s=lock_rate,
+            lock_class=lock_class,
             peak_time_s=None if peak_time is None else peak_time - t0,
             stored_energy_J=0.5 * self.params.k * (self.L0 - float(y_minus[3])) ** 2 if stance_engaged else 0.0,
-            release_lateness_s=release_late, foot_a_lifted_at_impact=lifted, foot_a_recontact=recontact,
-            energy_start_J=e_start, energy_end_J=e_plus, damper_J=damper, clutch_loss_J=clutch_loss,
-            recontact_loss_J=recontact_loss, impact_loss_J=e_minus - e_plus,
+            release_lateness_s=release_late,
+            foot_a_lifted_at_impact=lifted,
+            foot_a_recontact=recontact,
+            energy_start_J=e_start,
+            energy_end_J=e_plus,
+            damper_J=damper,
+            clutch_loss_J=clutch_loss,
+            recontact_loss_J=recontact_loss,
+            impact_loss_J=e_minus - e_plus,
             firmware_events=[(te - t0, name) for te, name, _ in self.events[ev_start:]],
         )
         self.stance_leg = (b_leg + 1) % N_LEGS
         return step, y_plus, t, offset, tr is not None and tr.foot_a_lifts
 
-    def integrate_mode(self, mode: Mode, y0: np.ndarray, t0: float, t_bound: float, guards: tuple[int, ...],
-                       offset: float) -> tuple[str, int | None, float, np.ndarray, float, float, float | None]:
+    def integrate_mode(
+        self, mode: Mode, y0: np.ndarray, t0: float, t_bound: float, guards: tuple[int, ...], offset: float
+    ) -> tuple[str, int | None, float, np.ndarray, float, float, float | None]:
         """Integrate clutch mode `mode` from (t0 s, y0), taking the firmware's samples on the way (the sensor's
         accumulated compression is `offset` m plus the stance leg's), until a guard of `guards` (codes of
         rimless.sim.model.guards) fires ("guard"), a clutch action is due ("action") or t_bound ("limit").
@@ -530,8 +605,9 @@ class FirmwareLoop:
         def fun(_t: float, y: np.ndarray) -> np.ndarray:
             with np.errstate(over="ignore", invalid="ignore"):
                 qdd, _ = ch.accel(mech, mode, y[:5], y[5:10], fric)
-            return np.concatenate((y[5:10], qdd, [ch.damping_power(mech, mode, y[5:10]),
-                                                  ch.slip_power(mode, y[5:10], fric)]))
+            return np.concatenate(
+                (y[5:10], qdd, [ch.damping_power(mech, mode, y[5:10]), ch.slip_power(mode, y[5:10], fric)])
+            )
 
         yy = np.concatenate((y0, [0.0, 0.0]))
         solver = DOP853(fun, t0, yy, t_bound, rtol=self.rtol, atol=self.atol)
@@ -541,8 +617,17 @@ class FirmwareLoop:
             return Piecewise([piece for piece in pieces if piece[0] >= ta and piece[1] <= tb])
 
         holding = self.config.holding_force_N
-        locator = EventLocator(guards, lambda code, y: mode_guard_value(mech, mode, code, y[:10], holding), t0, yy,
-                               dense_on=dense_on, strict=True, xtol=ROOT_TOL_S, rtol=ROOT_TOL_S, check_finite=False)
+        locator = EventLocator(
+            guards,
+            lambda code, y: mode_guard_value(mech, mode, code, y[:10], holding),
+            t0,
+            yy,
+            dense_on=dense_on,
+            strict=True,
+            xtol=ROOT_TOL_S,
+            rtol=ROOT_TOL_S,
+            check_finite=False,
+        )
         peak: float | None = None
         while True:
             solver.step()
@@ -556,7 +641,7 @@ class FirmwareLoop:
             if mode.leg1 != ch.STUCK and peak is None:
                 l1a, l1b = sol(ta)[8], solver.y[8]
                 if l1a < 0.0 <= l1b:
-                    peak = brentq(lambda s: sol(s)[8], ta, tb, xtol=1e-13)
+                    peak = brentq(lambda s: sol(s)[8], ta, tb, xtol=1e-13)  # noqa: B023
             t_lim = min(tb, t_ev)
             while True:
                 t_act = self._pending[0][0] if self._pending else math.inf

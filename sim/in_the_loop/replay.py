@@ -89,16 +89,30 @@ class Replay:
             "simulated_peak_after_impact_s": self.sim_peak_s,
             "recorded_max_compression_m": _mean([s.recorded_max_compression_m for s in self.steps]),
             "simulated_max_compression_m": self.sim_max_compression_m,
-            "firmware_in_the_loop": None if self.firmware is None else {
-                "rate_hz": self.firmware.rate_hz, "engage_delay_ms": self.firmware.engage_delay_s * 1e3,
-                "release_delay_ms": self.firmware.release_delay_s * 1e3, "noise_counts": self.firmware.noise_counts,
+            "firmware_in_the_loop": None
+            if self.firmware is None
+            else {
+                "rate_hz": self.firmware.rate_hz,
+                "engage_delay_ms": self.firmware.engage_delay_s * 1e3,
+                "release_delay_ms": self.firmware.release_delay_s * 1e3,
+                "noise_counts": self.firmware.noise_counts,
                 "simulated_period_s": self.firmware.period_s if self.firmware.failure is None else None,
                 "lock_command_after_impact_s": self.firmware.lock_command_s,
-                "lock_after_impact_s": self.firmware.lock_s, "lock_class": self.firmware.lock_class,
+                "lock_after_impact_s": self.firmware.lock_s,
+                "lock_class": self.firmware.lock_class,
                 "max_compression_m": float(self.firmware.compression_m.max()) if len(self.firmware.t) else None,
-                "stored_energy_J": self.firmware.stored_energy_J, "failure": self.firmware.failure},
-            "per_step": [{"index": s.index, "period_s": s.recorded_period_s, "lock_after_touchdown_s": s.recorded_lock_s,
-                          "max_compression_m": s.recorded_max_compression_m} for s in self.steps],
+                "stored_energy_J": self.firmware.stored_energy_J,
+                "failure": self.firmware.failure,
+            },
+            "per_step": [
+                {
+                    "index": s.index,
+                    "period_s": s.recorded_period_s,
+                    "lock_after_touchdown_s": s.recorded_lock_s,
+                    "max_compression_m": s.recorded_max_compression_m,
+                }
+                for s in self.steps
+            ],
         }
 
 
@@ -114,8 +128,7 @@ def _max(v: list[float]) -> float | None:
     return float(np.max(v)) if v else None
 
 
-def firmware_step(params: Any, config: Any, z_ideal: np.ndarray, *, steps: int = FIRMWARE_STEPS
-                  ) -> FirmwareReplayStep:
+def firmware_step(params: Any, config: Any, z_ideal: np.ndarray, *, steps: int = FIRMWARE_STEPS) -> FirmwareReplayStep:
     """The last step of a walk of `steps` under the firmware from the ideal fixed point, at the firmware's samples."""
     from rimless.sim.in_the_loop.loop import N_LEGS, FirmwareLoop
 
@@ -127,9 +140,22 @@ def firmware_step(params: Any, config: Any, z_ideal: np.ndarray, *, steps: int =
     cfg = config
     if not walk.steps:
         empty = np.empty(0)
-        return FirmwareReplayStep(cfg.rate_hz, cfg.engage_delay_s, cfg.release_delay_s, cfg.noise_counts, empty,
-                                  empty, empty, np.empty(0, dtype=bool), float("nan"), None, None, "none", 0.0,
-                                  str(walk.failure))
+        return FirmwareReplayStep(
+            cfg.rate_hz,
+            cfg.engage_delay_s,
+            cfg.release_delay_s,
+            cfg.noise_counts,
+            empty,
+            empty,
+            empty,
+            np.empty(0, dtype=bool),
+            float("nan"),
+            None,
+            None,
+            "none",
+            0.0,
+            str(walk.failure),
+        )
     st = walk.steps[-1]
     b_leg = (loop.stance_leg - 1) % N_LEGS  # the stance leg of the last step
     truth = np.array(loop.truth_log or [], dtype=float).reshape(-1, 3)
@@ -143,10 +169,22 @@ def firmware_step(params: Any, config: Any, z_ideal: np.ndarray, *, steps: int =
     e0 = float(np.interp(t0, est[:, 0], est[:, 1]))
     engaged = (truth[sel, 2].astype(int) >> b_leg) & 1 == 1
     lock_cmd = next((te for te, name in st.firmware_events if name == "lock"), None)
-    return FirmwareReplayStep(cfg.rate_hz, cfg.engage_delay_s, cfg.release_delay_s, cfg.noise_counts, t - t0, x - x0,
-                              est[sel_e, 1] - e0, engaged, st.period_s, lock_cmd, st.lock_time_s, st.lock_class,
-                              st.stored_energy_J, None if walk.failure is None or len(walk.steps) == steps
-                              else str(walk.failure))
+    return FirmwareReplayStep(
+        cfg.rate_hz,
+        cfg.engage_delay_s,
+        cfg.release_delay_s,
+        cfg.noise_counts,
+        t - t0,
+        x - x0,
+        est[sel_e, 1] - e0,
+        engaged,
+        st.period_s,
+        lock_cmd,
+        st.lock_time_s,
+        st.lock_class,
+        st.stored_energy_J,
+        None if walk.failure is None or len(walk.steps) == steps else str(walk.failure),
+    )
 
 
 def replay_trial(path: str | Path, params: Any, *, channel: int = 0, firmware_config: Any = None) -> Replay:
@@ -155,10 +193,10 @@ def replay_trial(path: str | Path, params: Any, *, channel: int = 0, firmware_co
     Raises rimless.firmware.service.triallog.TrialLogError on a corrupt log and ValueError when it has no step."""
     from rimless.firmware.service.triallog import read_trial_log
     from rimless.sim.in_the_loop.ideal import ideal_fixed_point
-    from rimless.sim.step.hybrid import simulate_step
     from rimless.sim.integrate.reference import ScipyIntegrator
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import state_from_section
+    from rimless.sim.step.hybrid import simulate_step
 
     path = Path(path)
     log = read_trial_log(path)
@@ -183,16 +221,27 @@ def replay_trial(path: str | Path, params: Any, *, channel: int = 0, firmware_co
         steps.append(ReplayStep(k, t0, t1 - t0, lock, float(comp.max()), t[sel] - t0, comp, mask[sel]))
     fp = ideal_fixed_point(params, backend="reference", rtol=1e-9)
     mech = Mechanics.of(params)
-    res = simulate_step(mech, "er", state_from_section(mech, fp.z), ScipyIntegrator(rtol=1e-9, atol=1e-11),
-                        record_dt=5e-4)
+    res = simulate_step(
+        mech, "er", state_from_section(mech, fp.z), ScipyIntegrator(rtol=1e-9, atol=1e-11), record_dt=5e-4
+    )
     st = np.concatenate([s.t for s in res.segments or []])
     sl = np.concatenate([s.y[:, 3] for s in res.segments or []])
     order = np.argsort(st, kind="stable")
     sim_t, sim_c = st[order], params.leg_length_m - sl[order]
     i_peak = int(np.argmax(sim_c))
     fw = firmware_step(params, firmware_config, fp.z) if firmware_config is not None else None
-    return Replay(path, steps, sim_t, sim_c, float(res.period_s), float(sim_t[i_peak]), float(sim_c[i_peak]), faults,
-                  log.torn_tail, fw)
+    return Replay(
+        path,
+        steps,
+        sim_t,
+        sim_c,
+        float(res.period_s),
+        float(sim_t[i_peak]),
+        float(sim_c[i_peak]),
+        faults,
+        log.torn_tail,
+        fw,
+    )
 
 
 def plot_replay(replay: Replay, path: str | Path) -> Path:
@@ -207,17 +256,36 @@ def plot_replay(replay: Replay, path: str | Path) -> Path:
         ax.plot(s.t * 1e3, s.compression_m * 1e3, color="0.6", lw=0.8)
         on = s.clutch_mask != 0
         ax.plot(s.t[on] * 1e3, s.compression_m[on] * 1e3, ".", color="tab:red", ms=2)
-    ax.plot(replay.sim_t * 1e3, replay.sim_compression_m * 1e3, color="tab:blue", lw=2, label="simulated (ideal clutch)")
+    ax.plot(
+        replay.sim_t * 1e3, replay.sim_compression_m * 1e3, color="tab:blue", lw=2, label="simulated (ideal clutch)"
+    )
     ax.axvline(replay.sim_peak_s * 1e3, color="tab:blue", ls=":", lw=1)
     fw = replay.firmware
     if fw is not None and len(fw.t):
-        ax.plot(fw.t * 1e3, fw.compression_m * 1e3, color="tab:green", lw=1.6,
-                label=f"simulated, firmware in the loop ({fw.rate_hz:g} Hz, {fw.engage_delay_s * 1e3:g} ms)")
-        ax.plot(fw.t * 1e3, fw.sensed_compression_m * 1e3, "x", color="tab:green", ms=3,
-                label="its samples as the firmware integrated them")
+        ax.plot(
+            fw.t * 1e3,
+            fw.compression_m * 1e3,
+            color="tab:green",
+            lw=1.6,
+            label=f"simulated, firmware in the loop ({fw.rate_hz:g} Hz, {fw.engage_delay_s * 1e3:g} ms)",
+        )
+        ax.plot(
+            fw.t * 1e3,
+            fw.sensed_compression_m * 1e3,
+            "x",
+            color="tab:green",
+            ms=3,
+            label="its samples as the firmware integrated them",
+        )
         on = fw.stance_engaged
-        ax.plot(fw.t[on] * 1e3, fw.compression_m[on] * 1e3, ".", color="darkgreen", ms=4,
-                label="stance clutch engaged (simulated)")
+        ax.plot(
+            fw.t[on] * 1e3,
+            fw.compression_m[on] * 1e3,
+            ".",
+            color="darkgreen",
+            ms=4,
+            label="stance clutch engaged (simulated)",
+        )
         if fw.lock_command_s is not None:
             ax.axvline(fw.lock_command_s * 1e3, color="tab:green", ls="--", lw=1, label="firmware lock command")
     ax.plot([], [], color="0.6", label="recorded steps")

@@ -44,8 +44,15 @@ class FirmwareFixedPoint:
         return bool(np.max(np.abs(self.eigenvalues)) < 1.0)
 
 
-def firmware_fixed_point(params: WheelParams, config: FirmwareLoopConfig, z_ideal: np.ndarray, *, steps: int = 12,
-                         n_average: int = 4, progress: Callable[[int], None] | None = None) -> FirmwareFixedPoint:
+def firmware_fixed_point(
+    params: WheelParams,
+    config: FirmwareLoopConfig,
+    z_ideal: np.ndarray,
+    *,
+    steps: int = 12,
+    n_average: int = 4,
+    progress: Callable[[int], None] | None = None,
+) -> FirmwareFixedPoint:
     """The fixed point under the firmware, found from one walk started at the ideal-clutch fixed point.
 
     The firmware samples at instants unrelated to the step, so the step map is not a smooth function of
@@ -83,10 +90,18 @@ def firmware_fixed_point(params: WheelParams, config: FirmwareLoopConfig, z_idea
             pass
     tail = walk.steps[-n_average:]
     periods = np.array([s.period_s for s in tail])
-    return FirmwareFixedPoint(z=z_fit, z_mean=last.mean(axis=0), z_std=last.std(axis=0), eigenvalues=eig,
-                              fit_residual=misfit, period_s=float(periods.mean()), period_std_s=float(periods.std()),
-                              stored_energy_J=float(np.mean([s.stored_energy_J for s in tail])), walk=walk,
-                              n_average=len(tail))
+    return FirmwareFixedPoint(
+        z=z_fit,
+        z_mean=last.mean(axis=0),
+        z_std=last.std(axis=0),
+        eigenvalues=eig,
+        fit_residual=misfit,
+        period_s=float(periods.mean()),
+        period_std_s=float(periods.std()),
+        stored_energy_J=float(np.mean([s.stored_energy_J for s in tail])),
+        walk=walk,
+        n_average=len(tail),
+    )
 
 
 @dataclass
@@ -100,7 +115,7 @@ class FirmwareCriticalSlope:
 
     @property
     def limited_by(self) -> str:
-        """"firmware" when a firmware fault (its leg count or clutch timeout) ends the walk just below,
+        """ "firmware" when a firmware fault (its leg count or clutch timeout) ends the walk just below,
         "mechanics" when the wheel itself fails (stall, contact, ...)."""
         return "firmware" if self.reason_below.startswith(FIRMWARE_FAULT_PREFIX) else "mechanics"
 
@@ -131,7 +146,7 @@ class FirmwareBoundaries:
 
     @property
     def limited_by(self) -> str:
-        """"firmware" when the relaxed firmware walks at a slope where the configured one faults (the
+        """ "firmware" when the relaxed firmware walks at a slope where the configured one faults (the
         fault stops a wheel that would walk), else "mechanics" (the fault, if any, only comes first)."""
         if self.mechanical is None:
             return "mechanics"
@@ -145,10 +160,14 @@ class FirmwareBoundaries:
         if mech is None:
             return f"the wheel fails mechanically below it: {fw.reason_below}"
         if self.limited_by == "firmware":
-            return (f"a firmware fault stops a wheel that would walk: below it {fw.reason_below}; with the step-timing "
-                    f"checks relaxed it walks down to {math.degrees(mech.critical_slope_rad):.3f} deg")
-        return (f"the firmware's fault fires first ({fw.reason_below}), but with the step-timing checks relaxed the "
-                f"wheel fails there too, in a walk {MECHANICAL_WALK_FACTOR} times as long: {mech.reason_below}")
+            return (
+                f"a firmware fault stops a wheel that would walk: below it {fw.reason_below}; with the step-timing "
+                f"checks relaxed it walks down to {math.degrees(mech.critical_slope_rad):.3f} deg"
+            )
+        return (
+            f"the firmware's fault fires first ({fw.reason_below}), but with the step-timing checks relaxed the "
+            f"wheel fails there too, in a walk {MECHANICAL_WALK_FACTOR} times as long: {mech.reason_below}"
+        )
 
     @property
     def mechanical_slope_rad(self) -> float:
@@ -159,8 +178,9 @@ class FirmwareBoundaries:
 def ideal_gait(params: WheelParams) -> FixedPoint:
     """The ideal-clutch ER fixed point the walks start from (reference path, rtol 1e-9); raises StepFailure
     or NoFixedPoint."""
-    return solve_fixed_point(PoincareMap(params, "er", ScipyIntegrator(rtol=1e-9, atol=1e-11)),
-                             default_guess(params, "er"))
+    return solve_fixed_point(
+        PoincareMap(params, "er", ScipyIntegrator(rtol=1e-9, atol=1e-11)), default_guess(params, "er")
+    )
 
 
 def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps: int) -> tuple[bool, str]:
@@ -184,9 +204,15 @@ def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps:
     return True, ""
 
 
-def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
-                            tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None
-                            ) -> FirmwareCriticalSlope:
+def firmware_critical_slope(
+    params: WheelParams,
+    config: FirmwareLoopConfig,
+    *,
+    low_rad: float,
+    steps: int = 10,
+    tol_rad: float = 1e-3,
+    progress: Callable[[int], None] | None = None,
+) -> FirmwareCriticalSlope:
     """Bisection on the slope between `low_rad` (must fail) and params.slope_rad (must walk) for the lowest
     slope at which `walks_under_firmware` holds, to `tol_rad`. It assumes one boundary (walking at a slope
     implies walking at steeper ones), which the returned evaluations let the caller check.
@@ -220,8 +246,15 @@ def firmware_critical_slope(params: WheelParams, config: FirmwareLoopConfig, *, 
 MECHANICAL_WALK_FACTOR = 3  # the relaxed walks are this many times longer (see firmware_boundaries)
 
 
-def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_rad: float, steps: int = 10,
-                        tol_rad: float = 1e-3, progress: Callable[[int], None] | None = None) -> FirmwareBoundaries:
+def firmware_boundaries(
+    params: WheelParams,
+    config: FirmwareLoopConfig,
+    *,
+    low_rad: float,
+    steps: int = 10,
+    tol_rad: float = 1e-3,
+    progress: Callable[[int], None] | None = None,
+) -> FirmwareBoundaries:
     """`firmware_critical_slope` under `config`; if a firmware fault is what fails just below it, is that
     fault what stops the wheel? The same firmware with its step-timing checks relaxed walks
     MECHANICAL_WALK_FACTOR x `steps` steps at the failing slope: a wheel slowing towards a stall trips the
@@ -244,12 +277,15 @@ def firmware_boundaries(params: WheelParams, config: FirmwareLoopConfig, *, low_
     ok, why = walks_under_firmware(params.replace(slope_rad=fw.failing_slope_rad), relaxed, long_steps)
     count(0)
     if not ok:  # the wheel fails there anyway: the boundary is mechanical, the fault only came first
-        return FirmwareBoundaries(fw, FirmwareCriticalSlope(fw.critical_slope_rad, fw.failing_slope_rad, why,
-                                                            [(fw.failing_slope_rad, False, why)]))
+        return FirmwareBoundaries(
+            fw,
+            FirmwareCriticalSlope(
+                fw.critical_slope_rad, fw.failing_slope_rad, why, [(fw.failing_slope_rad, False, why)]
+            ),
+        )
     top = params.replace(slope_rad=fw.failing_slope_rad)
     try:
-        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=long_steps, tol_rad=tol_rad,
-                                       progress=count)
+        mech = firmware_critical_slope(top, relaxed, low_rad=low_rad, steps=long_steps, tol_rad=tol_rad, progress=count)
     except ValueError as err:  # e.g. relaxed, the wheel still walks at low_rad: the boundary is below the bracket
         mech = FirmwareCriticalSlope(math.nan, low_rad, f"not bracketed: {err}", [])
     return FirmwareBoundaries(fw, mech)

@@ -49,14 +49,18 @@ class FirmwareSweepOptions:
     ve_branch: str = "fast"  # the VE gait the ER advantage is measured against (the paper's: fast)
 
 
-def firmware_grid_points(params: Any, rates_hz: list[float], delays_ms: list[float], *,
-                         references: bool = False) -> list[dict[str, Any]]:
+def firmware_grid_points(
+    params: Any, rates_hz: list[float], delays_ms: list[float], *, references: bool = False
+) -> list[dict[str, Any]]:
     """Every (rate, delay) as a plain dict (the task's input), rates outer; with `references`, the
     ideal-ER and VE critical-slope reference points first."""
     base = params.to_dict()
     refs = [{"clutch": "ideal", "model": m, "params": base} for m in ("er", "ve")] if references else []
-    return refs + [{"clutch": "firmware", "params": base, "rate_hz": float(r), "delay_ms": float(d)}
-                   for r in rates_hz for d in delays_ms]
+    return refs + [
+        {"clutch": "firmware", "params": base, "rate_hz": float(r), "delay_ms": float(d)}
+        for r in rates_hz
+        for d in delays_ms
+    ]
 
 
 @functools.lru_cache(maxsize=8)
@@ -67,10 +71,13 @@ def _ideal_reference(params_json: str) -> dict[str, float]:
 
     params = WheelParams(**json.loads(params_json))
     fp = ideal_fixed_point(params, backend="reference", rtol=1e-9)
-    return {"theta_plus_rad": float(fp.z[0]), "theta_dot_plus_rad_s": float(fp.z[1]),
-            "step_period_s": float(fp.step.period_s),
-            "stored_energy_J": 0.5 * params.k * (params.leg_length_m - float(fp.step.y_minus[3])) ** 2,
-            "max_abs_eigenvalue": float(np.max(np.abs(fp.eigenvalues)))}
+    return {
+        "theta_plus_rad": float(fp.z[0]),
+        "theta_dot_plus_rad_s": float(fp.z[1]),
+        "step_period_s": float(fp.step.period_s),
+        "stored_energy_J": 0.5 * params.k * (params.leg_length_m - float(fp.step.y_minus[3])) ** 2,
+        "max_abs_eigenvalue": float(np.max(np.abs(fp.eigenvalues))),
+    }
 
 
 def ideal_reference(params: Any) -> dict[str, float]:
@@ -81,7 +88,7 @@ def ideal_reference(params: Any) -> dict[str, float]:
 def compute_firmware_point(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[str, Any]:
     """One grid point (runs in a worker; plain data in and out): {"rows": [row], "points": [], "seconds"}."""
     t0 = time.perf_counter()
-    row = (_reference_row(point, options) if point["clutch"] == "ideal" else _firmware_row(point, options))
+    row = _reference_row(point, options) if point["clutch"] == "ideal" else _firmware_row(point, options)
     return {"rows": [row], "points": [], "seconds": time.perf_counter() - t0}
 
 
@@ -113,25 +120,43 @@ def _reference_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict
         row.update(critical_slope_deg=None, cot=None, limited_by="no gait", detail=why)
         return row
     b = min(found, key=lambda r: r["critical_slope_rad"])
-    row.update(branch_label=b["branch_label"], critical_slope_deg=b["critical_slope_deg"], cot=b["cot"],
-               limited_by="mechanics", detail=f"{note}{b['reason']}: {b['detail']}", step_period_s=b["step_period_s"])
+    row.update(
+        branch_label=b["branch_label"],
+        critical_slope_deg=b["critical_slope_deg"],
+        cot=b["cot"],
+        limited_by="mechanics",
+        detail=f"{note}{b['reason']}: {b['detail']}",
+        step_period_s=b["step_period_s"],
+    )
     return row
 
 
 def _firmware_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[str, Any]:
-    from rimless.sim.model.failures import StepFailure
     from rimless.sim.in_the_loop.loop import FirmwareLoopConfig
     from rimless.sim.in_the_loop.studies import firmware_boundaries, firmware_fixed_point
+    from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.params import WheelParams
 
     params = WheelParams(**point["params"])
     rate_hz, delay_s = point["rate_hz"], point["delay_ms"] * 1e-3
-    cfg = FirmwareLoopConfig(rate_hz=rate_hz, engage_delay_s=delay_s, release_delay_s=delay_s,
-                             noise_counts=options.noise_counts, jitter_s=options.jitter_ms * 1e-3,
-                             holding_force_N=options.holding_force_N, seed=options.seed)
+    cfg = FirmwareLoopConfig(
+        rate_hz=rate_hz,
+        engage_delay_s=delay_s,
+        release_delay_s=delay_s,
+        noise_counts=options.noise_counts,
+        jitter_s=options.jitter_ms * 1e-3,
+        holding_force_N=options.holding_force_N,
+        seed=options.seed,
+    )
     ideal = ideal_reference(params)
-    row: dict[str, Any] = {"clutch": "firmware", "model": "er", "rate_hz": rate_hz, "delay_ms": point["delay_ms"],
-                           "noise_counts": options.noise_counts, "slope_deg": params.slope_deg}
+    row: dict[str, Any] = {
+        "clutch": "firmware",
+        "model": "er",
+        "rate_hz": rate_hz,
+        "delay_ms": point["delay_ms"],
+        "noise_counts": options.noise_counts,
+        "slope_deg": params.slope_deg,
+    }
     z_ideal = np.array([ideal["theta_plus_rad"], ideal["theta_dot_plus_rad_s"]])
     try:
         fp = firmware_fixed_point(params, cfg, z_ideal, steps=options.steps, n_average=min(4, options.steps))
@@ -143,11 +168,17 @@ def _firmware_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[
         faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
         row.update(
             walks=walk.failure is None and not faults,
-            failure=(walk.failure.reason.value if walk.failure is not None
-                     else f"firmware fault: {', '.join(faults)}" if faults else None),
+            failure=(
+                walk.failure.reason.value
+                if walk.failure is not None
+                else f"firmware fault: {', '.join(faults)}"
+                if faults
+                else None
+            ),
             detail=str(walk.failure) if walk.failure is not None else "",
             steps_done=len(walk.steps),
-            theta_plus_rad=float(fp.z[0]), theta_dot_plus_rad_s=float(fp.z[1]),
+            theta_plus_rad=float(fp.z[0]),
+            theta_dot_plus_rad_s=float(fp.z[1]),
             step_period_s=fp.period_s,
             speed_ratio=ideal["step_period_s"] / fp.period_s,  # same step length: speed ratio = period ratio^-1
             stored_energy_J=fp.stored_energy_J,
@@ -160,17 +191,32 @@ def _firmware_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[
         )
     if options.critical_slope:
         try:
-            b = firmware_boundaries(params, cfg, low_rad=math.radians(options.critical_low_deg), steps=options.steps,
-                                    tol_rad=math.radians(options.critical_tol_deg))
+            b = firmware_boundaries(
+                params,
+                cfg,
+                low_rad=math.radians(options.critical_low_deg),
+                steps=options.steps,
+                tol_rad=math.radians(options.critical_tol_deg),
+            )
         except ValueError as err:
-            row.update(critical_slope_deg=None, cot=None, limited_by="not bracketed", critical_detail=str(err),
-                       mechanical_critical_slope_deg=None)
+            row.update(
+                critical_slope_deg=None,
+                cot=None,
+                limited_by="not bracketed",
+                critical_detail=str(err),
+                mechanical_critical_slope_deg=None,
+            )
         else:
             phi = b.firmware.critical_slope_rad
             mech = b.mechanical_slope_rad
-            row.update(critical_slope_deg=math.degrees(phi), cot=math.tan(phi), limited_by=b.limited_by,
-                       firmware_fault_below=b.firmware.limited_by == "firmware", critical_detail=b.detail,
-                       mechanical_critical_slope_deg=math.degrees(mech) if math.isfinite(mech) else None)
+            row.update(
+                critical_slope_deg=math.degrees(phi),
+                cot=math.tan(phi),
+                limited_by=b.limited_by,
+                firmware_fault_below=b.firmware.limited_by == "firmware",
+                critical_detail=b.detail,
+                mechanical_critical_slope_deg=math.degrees(mech) if math.isfinite(mech) else None,
+            )
     return row
 
 
@@ -198,32 +244,73 @@ def add_advantage(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return {"er_ideal": er, "ve": ve}
 
 
-def run_firmware_grid(params: Any, rates_hz: list[float], delays_ms: list[float], options: FirmwareSweepOptions, *,
-                      scheduler: str = "local", workers: int | None = None, cache_dir: str | Path | None = None,
-                      progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+def run_firmware_grid(
+    params: Any,
+    rates_hz: list[float],
+    delays_ms: list[float],
+    options: FirmwareSweepOptions,
+    *,
+    scheduler: str = "local",
+    workers: int | None = None,
+    cache_dir: str | Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
     """Every (rate, delay) point through rimless.sim.studies.sweep.run_sweep (Dask, on-disk cache); rows in grid
     order (references first when `options.critical_slope`), the ideal clutch's values, the run's counts."""
     from rimless.sim.studies.sweep import run_sweep
 
     points = firmware_grid_points(params, rates_hz, delays_ms, references=options.critical_slope)
     needs_kernels = options.critical_slope  # the reference continuations use the compiled path
-    res = run_sweep(points, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir, progress=progress,
-                    compute=compute_firmware_point, setup=None if needs_kernels else _no_setup)
+    res = run_sweep(
+        points,
+        options,
+        scheduler=scheduler,
+        workers=workers,
+        cache_dir=cache_dir,
+        progress=progress,
+        compute=compute_firmware_point,
+        setup=None if needs_kernels else _no_setup,
+    )
     refs = add_advantage(res.rows)
-    return {"ideal": ideal_reference(params), "references": refs, "rows": res.rows, "steps": options.steps,
-            "noise_counts": options.noise_counts, "seconds": res.seconds, "computed": res.computed,
-            "cached": res.cached, "workers": res.workers}
+    return {
+        "ideal": ideal_reference(params),
+        "references": refs,
+        "rows": res.rows,
+        "steps": options.steps,
+        "noise_counts": options.noise_counts,
+        "seconds": res.seconds,
+        "computed": res.computed,
+        "cached": res.cached,
+        "workers": res.workers,
+    }
 
 
-def run_firmware_sweep(params: Any, rates_hz: list[float], delays_s: list[float], *, steps: int = 8,
-                       noise_counts: float = 1.0, seed: int = 0, scheduler: str = "sync", workers: int | None = None,
-                       progress: Callable[[int, int], None] | None = None,
-                       cache_dir: str | Path | None = None) -> dict[str, Any]:
+def run_firmware_sweep(
+    params: Any,
+    rates_hz: list[float],
+    delays_s: list[float],
+    *,
+    steps: int = 8,
+    noise_counts: float = 1.0,
+    seed: int = 0,
+    scheduler: str = "sync",
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    cache_dir: str | Path | None = None,
+) -> dict[str, Any]:
     """Every (rate, delay s) point, rows in grid order, plus the ideal clutch's reference values
     (`rimless sim firmware-sweep`; no critical slopes; no cache unless `cache_dir`)."""
     opts = FirmwareSweepOptions(steps=steps, noise_counts=noise_counts, seed=seed)
-    return run_firmware_grid(params, rates_hz, [d * 1e3 for d in delays_s], opts, scheduler=scheduler,
-                             workers=workers, cache_dir=cache_dir, progress=progress)
+    return run_firmware_grid(
+        params,
+        rates_hz,
+        [d * 1e3 for d in delays_s],
+        opts,
+        scheduler=scheduler,
+        workers=workers,
+        cache_dir=cache_dir,
+        progress=progress,
+    )
 
 
 def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
@@ -243,17 +330,23 @@ def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
 
     fw_rows = [r for r in out["rows"] if r.get("clutch", "firmware") == "firmware"]
     with_cot = any(r.get("er_advantage_remaining") is not None for r in fw_rows)
-    first = ("er_advantage_remaining", "ER advantage kept\n(CoT saving vs VE / ideal's)") if with_cot else \
-        ("speed_ratio", "walking speed / ideal clutch")
-    panels = [first, ("stored_energy_ratio", "stored energy / ideal clutch"),
-              ("max_abs_eigenvalue_fitted", "max |eigenvalue| (fitted)")]
+    first = (
+        ("er_advantage_remaining", "ER advantage kept\n(CoT saving vs VE / ideal's)")
+        if with_cot
+        else ("speed_ratio", "walking speed / ideal clutch")
+    )
+    panels = [
+        first,
+        ("stored_energy_ratio", "stored energy / ideal clutch"),
+        ("max_abs_eigenvalue_fitted", "max |eigenvalue| (fitted)"),
+    ]
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.8), sharex=True)
     rates = sorted({r["rate_hz"] for r in fw_rows})
     for rate in rates:
         rows = sorted((r for r in fw_rows if r["rate_hz"] == rate), key=lambda r: r["delay_ms"])
         for ax, (key, _) in zip(axes, panels):
             pts = [(r["delay_ms"], r.get(key), r.get("limited_by")) for r in rows if r.get(key) is not None]
-            line, = ax.plot([d for d, _, _ in pts], [v for _, v, _ in pts], "o-", label=f"{rate:g} Hz")
+            (line,) = ax.plot([d for d, _, _ in pts], [v for _, v, _ in pts], "o-", label=f"{rate:g} Hz")
             if key == "er_advantage_remaining":
                 lim = [(d, v) for d, v, by in pts if by == "firmware"]
                 ax.plot([d for d, _ in lim], [v for _, v in lim], "o", mfc="white", color=line.get_color())
@@ -276,17 +369,32 @@ def plot_firmware_sweep(out: dict[str, Any], path: Any) -> Any:
                 ax.axhline(0.0, color="tab:red", lw=0.8, ls="--", label="no better than VE")
     axes[0].legend(fontsize=8)
     axes[2].legend(fontsize=8)
-    fig.suptitle("ER wheel with the firmware in the loop against the ideal clutch (open: firmware-limited "
-                 "boundary; red dotted: the walk failed)", fontsize=10)
+    fig.suptitle(
+        "ER wheel with the firmware in the loop against the ideal clutch (open: firmware-limited "
+        "boundary; red dotted: the walk failed)",
+        fontsize=10,
+    )
     fig.tight_layout()
     return save_figure(fig, path, dpi=120, option="--plot")
 
 
-def firmware_sweep_table(params: Any, *, rate_hz: str | None, clutch_delay_ms: str | None,
-                         noise_counts: float | None, steps: int, seed: int, critical_slope: bool,
-                         critical_low_deg: float, out: Path, scheduler: str, workers: int | None,
-                         cache_dir: Any, plot: Any, progress: Callable[[int, int], None] | None = None
-                         ) -> dict[str, Any]:
+def firmware_sweep_table(
+    params: Any,
+    *,
+    rate_hz: str | None,
+    clutch_delay_ms: str | None,
+    noise_counts: float | None,
+    steps: int,
+    seed: int,
+    critical_slope: bool,
+    critical_low_deg: float,
+    out: Path,
+    scheduler: str,
+    workers: int | None,
+    cache_dir: Any,
+    plot: Any,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
     """`rimless sim sweep --clutch firmware`: the grid of `rate_hz` x `clutch_delay_ms` (the options' text,
     Hz and ms) on Dask with the sweep's cache, written as `out`.parquet/.csv, with the figure at `plot`.
     Errors name the option. Returns the command's JSON object."""
@@ -305,30 +413,50 @@ def firmware_sweep_table(params: Any, *, rate_hz: str | None, clutch_delay_ms: s
     if not (noise == noise and 0.0 <= noise <= 1000.0):
         raise ParameterError(f"--noise-counts must be a noise level in [0, 1000] counts, got {noise}")
     if not (math.isfinite(critical_low_deg) and 0.0 <= critical_low_deg < params.slope_deg):
-        raise ParameterError(f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), "
-                             f"got {critical_low_deg}")
+        raise ParameterError(
+            f"--critical-low-deg must be in [0, the slope {params.slope_deg:g} deg), got {critical_low_deg}"
+        )
     check_output_folder(out.parent if str(out.parent) else ".", option="--out")
     if cache_dir is not None:
         writable_dir(cache_dir, option="--cache-dir")
-    options = FirmwareSweepOptions(steps=steps, noise_counts=noise, seed=seed, critical_slope=critical_slope,
-                                   critical_low_deg=critical_low_deg)
+    options = FirmwareSweepOptions(
+        steps=steps, noise_counts=noise, seed=seed, critical_slope=critical_slope, critical_low_deg=critical_low_deg
+    )
     try:
-        res = run_firmware_grid(params, rates, delays, options, scheduler=scheduler, workers=workers,
-                                cache_dir=cache_dir, progress=progress)
+        res = run_firmware_grid(
+            params, rates, delays, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir, progress=progress
+        )
     except ConnectionError as err:
         raise ParameterError(f"--scheduler: {err}") from None
-    meta = {"clutch": "firmware", "grid": {"rate_hz": rates, "delay_ms": delays}, "options": options.__dict__,
-            "base_params": params.to_dict(), "scheduler": scheduler, "ideal": res["ideal"]}
+    meta = {
+        "clutch": "firmware",
+        "grid": {"rate_hz": rates, "delay_ms": delays},
+        "options": options.__dict__,
+        "base_params": params.to_dict(),
+        "scheduler": scheduler,
+        "ideal": res["ideal"],
+    }
     paths = write_table(res["rows"], out, meta)
     res["plot"] = str(plot_firmware_sweep(res, plot)) if plot is not None else None
-    return {"clutch": "firmware", "rows": res["rows"], "ideal": res["ideal"], "references": res["references"],
-            "files": [str(p) for p in paths], "plot": res["plot"], "seconds": res["seconds"],
-            "computed": res["computed"], "cached": res["cached"], "scheduler": scheduler,
-            "workers": res["workers"], "grid": meta["grid"]}
+    return {
+        "clutch": "firmware",
+        "rows": res["rows"],
+        "ideal": res["ideal"],
+        "references": res["references"],
+        "files": [str(p) for p in paths],
+        "plot": res["plot"],
+        "seconds": res["seconds"],
+        "computed": res["computed"],
+        "cached": res["cached"],
+        "scheduler": scheduler,
+        "workers": res["workers"],
+        "grid": meta["grid"],
+    }
 
 
-def firmware_sweep_figure(params: Any, rates_hz: list[float], delays_s: list[float], *, plot: Any = None,
-                          **options: Any) -> dict[str, Any]:
+def firmware_sweep_figure(
+    params: Any, rates_hz: list[float], delays_s: list[float], *, plot: Any = None, **options: Any
+) -> dict[str, Any]:
     """`rimless sim firmware-sweep`: `run_firmware_sweep` and, with `plot`, its figure (key `plot`: its path)."""
     out = run_firmware_sweep(params, rates_hz, delays_s, **options)
     out["plot"] = str(plot_firmware_sweep(out, plot)) if plot is not None else None

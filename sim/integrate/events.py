@@ -100,7 +100,7 @@ class Piecewise:
         self.pieces = list(pieces)
 
     def __call__(self, t: float) -> np.ndarray:
-        for t_old, t_new, sol in self.pieces:
+        for _t_old, t_new, sol in self.pieces:
             if t <= t_new:
                 return sol(t)
         return self.pieces[-1][2](t)
@@ -115,9 +115,19 @@ class EventLocator:
     guard value at a step's end.
     """
 
-    def __init__(self, codes: Sequence[int], value: Callable[[int, np.ndarray], float], t0: float, y0: np.ndarray, *,
-                 dense_on: Callable[[float, np.ndarray, float], Dense | None] | None = None, strict: bool = False,
-                 xtol: float = EPS4, rtol: float = EPS4, check_finite: bool = True) -> None:
+    def __init__(
+        self,
+        codes: Sequence[int],
+        value: Callable[[int, np.ndarray], float],
+        t0: float,
+        y0: np.ndarray,
+        *,
+        dense_on: Callable[[float, np.ndarray, float], Dense | None] | None = None,
+        strict: bool = False,
+        xtol: float = EPS4,
+        rtol: float = EPS4,
+        check_finite: bool = True,
+    ) -> None:
         self.codes = tuple(codes)
         self.value = value
         self.directions = np.array([DIRECTION[c] for c in self.codes], dtype=float)
@@ -133,8 +143,9 @@ class EventLocator:
             raise NonFiniteGuard("non-finite guard value")
         return g
 
-    def step(self, t_old: float, t: float, y: np.ndarray, dense: Callable[[], Dense], *, last_step: bool = False
-             ) -> tuple[float, int, np.ndarray] | None:
+    def step(
+        self, t_old: float, t: float, y: np.ndarray, dense: Callable[[], Dense], *, last_step: bool = False
+    ) -> tuple[float, int, np.ndarray] | None:
         """The earliest event on the step (t_old, t] ending at y, as (time, index into codes, state), or None.
         dense() gives the step's interpolant (called only when a guard changes sign)."""
         g_new = self.values(y)
@@ -155,8 +166,9 @@ class EventLocator:
         self.g = g_new
         return best
 
-    def _force_dip(self, active: np.ndarray, last_step: bool, other_fired: bool
-                   ) -> tuple[float, int, np.ndarray] | None:
+    def _force_dip(
+        self, active: np.ndarray, last_step: bool, other_fired: bool
+    ) -> tuple[float, int, np.ndarray] | None:
         """The earliest time at which a normal-force guard dips through zero between step ends where it is
         positive, as (t, index, state), or None. Checked around every discrete minimum of the force over the
         step ends (and at the phase's first and last step)."""

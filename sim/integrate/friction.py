@@ -24,9 +24,18 @@ from rimless.sim.model.guards import CLUTCH_LOCK, SLIP_END_1
 from rimless.sim.model.mechanics import Mechanics
 
 
-def run_with_friction(integrator: Any, mech: Mechanics, base: int, y0: np.ndarray, t0: float,
-                      guards: tuple[int, ...], t_max: float, *, record_dt: float | None = None,
-                      track_dissipation: bool = False) -> PhaseRun:
+def run_with_friction(
+    integrator: Any,
+    mech: Mechanics,
+    base: int,
+    y0: np.ndarray,
+    t0: float,
+    guards: tuple[int, ...],
+    t_max: float,
+    *,
+    record_dt: float | None = None,
+    track_dissipation: bool = False,
+) -> PhaseRun:
     """Integrate base phase `base` with guide friction from (t0, y0) until a guard of `guards` fires or
     t0 + t_max is reached (one PhaseRun; `failed` with a message on chattering or an integrator failure)."""
     F = mech.params.guide_friction_n
@@ -42,8 +51,9 @@ def run_with_friction(integrator: Any, mech: Mechanics, base: int, y0: np.ndarra
     for _ in range(fr.MAX_SWITCHES):
         # where the clutch locks the stance leg at L1' = 0 (CLUTCH_LOCK), its slip end is that guard's business
         own = tuple(g for g in fr.friction_guards(code) if not (g == SLIP_END_1 and CLUTCH_LOCK in guards))
-        run = integrator.run_phase(mech, code, y, t, tuple(guards) + own, t_stop - t, record_dt=record_dt,
-                                   track_dissipation=track_dissipation)
+        run = integrator.run_phase(
+            mech, code, y, t, tuple(guards) + own, t_stop - t, record_dt=record_dt, track_dissipation=track_dissipation
+        )
         nfev += run.nfev
         dissipated += run.dissipated_J
         work += fr.slide_work(code, y, run.y_end, F)
@@ -54,8 +64,17 @@ def run_with_friction(integrator: Any, mech: Mechanics, base: int, y0: np.ndarra
         if run.t is not None and run.y is not None:
             ts.append(run.t)
             ys.append(run.y)
-        out = PhaseRun(t_end=run.t_end, y_end=run.y_end, guard=run.guard, nfev=nfev, dissipated_J=dissipated,
-                       friction_J=work, stick_s=(stick[0], stick[1]), message=run.message, failed=run.failed)
+        out = PhaseRun(
+            t_end=run.t_end,
+            y_end=run.y_end,
+            guard=run.guard,
+            nfev=nfev,
+            dissipated_J=dissipated,
+            friction_J=work,
+            stick_s=(stick[0], stick[1]),
+            message=run.message,
+            failed=run.failed,
+        )
         if run.failed or run.guard is None or run.guard not in own:
             if run.guard in own:
                 out.guard = None
@@ -66,8 +85,9 @@ def run_with_friction(integrator: Any, mech: Mechanics, base: int, y0: np.ndarra
         t = run.t_end
     out.failed = True
     out.guard = None
-    out.message = (f"guide friction: more than {fr.MAX_SWITCHES} stick/slip switches in one phase "
-                   f"(chattering; F_c = {F} N)")
+    out.message = (
+        f"guide friction: more than {fr.MAX_SWITCHES} stick/slip switches in one phase (chattering; F_c = {F} N)"
+    )
     return out
 
 

@@ -107,16 +107,26 @@ class ScipyIntegrator:
         with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported as a failure, not a warning
             return self._run_phase(mech, phase, y0, t0, guards, t_max, record_dt, track_dissipation)
 
-    def _run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
-                   t_max: float, record_dt: float | None, track_dissipation: bool) -> PhaseRun:
+    def _run_phase(
+        self,
+        mech: Mechanics,
+        phase: int,
+        y0: np.ndarray,
+        t0: float,
+        guards: tuple[int, ...],
+        t_max: float,
+        record_dt: float | None,
+        track_dissipation: bool,
+    ) -> PhaseRun:
         from scipy.integrate import OdeSolution, solve_ivp
 
         n = 10
         nfev = 0
         budget = self.max_nfev
         friction = fr.is_friction_phase(phase)  # a stick/slip phase of guide friction (strict crossings)
-        accel_of, power_of, guard_of = (fr.accel, fr.damping_power, fr.guard_value) if friction else \
-            (accel, damping_power, guard_value)
+        accel_of, power_of, guard_of = (
+            (fr.accel, fr.damping_power, fr.guard_value) if friction else (accel, damping_power, guard_value)
+        )
 
         def fun(_t: float, y: np.ndarray) -> np.ndarray:
             nonlocal nfev
@@ -124,13 +134,16 @@ class ScipyIntegrator:
             if nfev > budget:
                 raise _Abort(f"more than {budget} right-hand-side evaluations in one phase (stiff legs?)")
             qdd, _ = accel_of(mech, phase, y[:5], y[5:n])
-            out = np.concatenate((y[5:n], qdd, [power_of(mech, phase, y[5:n])])) if track_dissipation \
+            out = (
+                np.concatenate((y[5:n], qdd, [power_of(mech, phase, y[5:n])]))
+                if track_dissipation
                 else np.concatenate((y[5:n], qdd))
+            )
             if not math.isfinite(float(np.sum(out))):
                 raise _Abort("non-finite state or forces (the state is too large or the dynamics singular)")
             return out
 
-        def dense_on(ta: float, ya: np.ndarray, tb: float):  # noqa: ANN202
+        def dense_on(ta: float, ya: np.ndarray, tb: float):
             """The span re-integrated with dense output (for the force-dip search)."""
             sub = solve_ivp(fun, (ta, tb), ya, method=self.method, rtol=self.rtol, atol=self.atol, dense_output=True)
             return sub.sol if sub.status == 0 else None
@@ -138,15 +151,20 @@ class ScipyIntegrator:
         y_init = np.concatenate((y0, [0.0])) if track_dissipation else np.array(y0, dtype=float)
 
         def failed(t: float, y: np.ndarray, message: str) -> PhaseRun:
-            return PhaseRun(t_end=float(t), y_end=np.array(y[:n]), guard=None, nfev=nfev, message=message,
-                            failed=True)
+            return PhaseRun(t_end=float(t), y_end=np.array(y[:n]), guard=None, nfev=nfev, message=message, failed=True)
 
         if not np.all(np.isfinite(y_init)):
             return failed(t0, y_init, "non-finite start state")
         try:
             solver = SOLVERS[self.method](fun, t0, y_init, t0 + t_max, rtol=self.rtol, atol=self.atol)
-            locator = EventLocator(guards, lambda code, y: guard_of(mech, phase, code, y[:n]), t0, y_init,
-                                   dense_on=dense_on, strict=friction)
+            locator = EventLocator(
+                guards,
+                lambda code, y: guard_of(mech, phase, code, y[:n]),
+                t0,
+                y_init,
+                dense_on=dense_on,
+                strict=friction,
+            )
         except _Abort as err:
             return failed(t0, y_init, str(err))
         except NonFiniteGuard:
@@ -164,8 +182,13 @@ class ScipyIntegrator:
             t_old, t, y = solver.t_old, solver.t, solver.y
             sol = solver.dense_output() if record_dt is not None else None
             try:
-                best = locator.step(t_old, t, y, lambda: sol if sol is not None else solver.dense_output(),
-                                    last_step=solver.status == "finished")
+                best = locator.step(
+                    t_old,
+                    t,
+                    y,
+                    lambda: sol if sol is not None else solver.dense_output(),  # noqa: B023
+                    last_step=solver.status == "finished",
+                )
             except (_Abort, NonFiniteGuard) as err:
                 return failed(t, y, str(err))
             if record_dt is not None and sol is not None:
@@ -177,8 +200,13 @@ class ScipyIntegrator:
             if solver.status == "finished":
                 t_end, y_end = t, y
                 break
-        run = PhaseRun(t_end=float(t_end), y_end=np.array(y_end[:n]), guard=fired, nfev=nfev,
-                       dissipated_J=float(y_end[n]) if track_dissipation else 0.0)
+        run = PhaseRun(
+            t_end=float(t_end),
+            y_end=np.array(y_end[:n]),
+            guard=fired,
+            nfev=nfev,
+            dissipated_J=float(y_end[n]) if track_dissipation else 0.0,
+        )
         if record_dt is not None:
             dense = OdeSolution(np.array(ts), interpolants)
             steps = np.array(ts)

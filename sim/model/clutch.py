@@ -92,8 +92,9 @@ def friction_force(mode: Mode, holding_force_N: float) -> np.ndarray:
     return f
 
 
-def accel(mech: Mechanics, mode: Mode, q: np.ndarray, qd: np.ndarray, holding_force_N: float = 0.0
-          ) -> tuple[np.ndarray, np.ndarray]:
+def accel(
+    mech: Mechanics, mode: Mode, q: np.ndarray, qd: np.ndarray, holding_force_N: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """(q'', lambda) in a mode; lambda in the row order of `constraint_rows` (N)."""
     M = mech.mass_matrix(q)
     h = mech.bias(q, qd)
@@ -185,9 +186,9 @@ def _exact(qd: np.ndarray, mode: Mode) -> np.ndarray:
     return qd
 
 
-def touchdown_with_locks(mech: Mechanics, q_minus: np.ndarray, qd_minus: np.ndarray, *,
-                         trailing_locked: bool
-                         ) -> tuple[ImpactResult | None, np.ndarray, np.ndarray, Transition | None]:
+def touchdown_with_locks(
+    mech: Mechanics, q_minus: np.ndarray, qd_minus: np.ndarray, *, trailing_locked: bool
+) -> tuple[ImpactResult | None, np.ndarray, np.ndarray, Transition | None]:
     """Touchdown impact: (reference impact or None, q+, q'+, locked transition or None).
 
     Without a locked trailing leg it is the reference impact (rimless.sim.model.impact), both legs free.

@@ -14,7 +14,7 @@ Regenerate with `python -m rimless.sim.model.derive`; a test checks the files ma
 from __future__ import annotations
 
 import sys
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import sympy as sp
@@ -80,7 +80,7 @@ def energies(model: str) -> tuple[sp.Matrix, sp.Expr]:
     return M, V
 
 
-@lru_cache(maxsize=None)
+@cache
 def equations(model: str) -> dict[str, sp.Matrix | sp.Expr]:
     """Every generated quantity of one mass model, as sympy expressions."""
     q = sp.Matrix(q_syms)
@@ -125,7 +125,7 @@ def equations(model: str) -> dict[str, sp.Matrix | sp.Expr]:
 
 
 class _Printer(PythonCodePrinter):
-    def _print_Pi(self, expr: sp.Expr) -> str:  # noqa: N802 - sympy's naming
+    def _print_Pi(self, expr: sp.Expr) -> str:
         return "math.pi"
 
 
@@ -146,8 +146,9 @@ def _unpack(use_q: bool, use_qd: bool) -> list[str]:
     return lines
 
 
-def _function(name: str, doc: str, outputs: list[tuple[str, sp.Expr]], shape: tuple[int, ...] | None,
-              use_qd: bool) -> str:
+def _function(
+    name: str, doc: str, outputs: list[tuple[str, sp.Expr]], shape: tuple[int, ...] | None, use_qd: bool
+) -> str:
     """Emit a function computing `outputs` (index string, expression) with common subexpressions."""
     exprs = [e for _, e in outputs]
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), optimizations="basic")
@@ -191,27 +192,63 @@ def generate_source(model: str) -> str:
         "import math\n\nimport numpy as np\n\n"
     ]
     # M is symmetric: compute the upper triangle, mirror it exactly.
-    body = _function("mass_matrix", "Mass matrix M(q), kg and kg m (5x5, symmetric).",
-                     _matrix_outputs(M, symmetric=True), (5, 5), False)
-    body = body.replace("    return out", "    for i in range(5):\n        for j in range(i):\n"
-                        "            out[i, j] = out[j, i]\n    return out")
+    body = _function(
+        "mass_matrix",
+        "Mass matrix M(q), kg and kg m (5x5, symmetric).",
+        _matrix_outputs(M, symmetric=True),
+        (5, 5),
+        False,
+    )
+    body = body.replace(
+        "    return out",
+        "    for i in range(5):\n        for j in range(i):\n            out[i, j] = out[j, i]\n    return out",
+    )
     parts.append(body)
-    parts.append(_function("bias", "h(q, qd) = Coriolis + dV/dq + damping, generalized forces (5,).",
-                           [(str(i), eq["h"][i]) for i in range(5)], (5,), True))
-    parts.append(_function("potential", "Potential energy V(q) in J (gravity on every mass, both springs).",
-                           [("", eq["V"])], None, False))
+    parts.append(
+        _function(
+            "bias",
+            "h(q, qd) = Coriolis + dV/dq + damping, generalized forces (5,).",
+            [(str(i), eq["h"][i]) for i in range(5)],
+            (5,),
+            True,
+        )
+    )
+    parts.append(
+        _function(
+            "potential",
+            "Potential energy V(q) in J (gravity on every mass, both springs).",
+            [("", eq["V"])],
+            None,
+            False,
+        )
+    )
     parts.append(_function("kinetic", "Kinetic energy T(q, qd) in J.", [("", eq["T"])], None, True))
     parts.append(_function("jac_a", "Jacobian of foot a's position (2x5).", _matrix_outputs(eq["Ja"]), (2, 5), False))
-    parts.append(_function("jdot_qd_a", "J_a'(q, qd) qd, m/s^2 (2,).",
-                           [(str(i), eq["jdot_qd_a"][i]) for i in range(2)], (2,), True))
-    parts.append(_function("dmass_dq", "dM/dq_k stacked as out[k, i, j] (5x5x5).",
-                           [(f"{k}, {i}, {j}", eq["dM_dq"][k][i, j]) for k in range(5) for i in range(5)
-                            for j in range(5)], (5, 5, 5), False))
+    parts.append(
+        _function(
+            "jdot_qd_a", "J_a'(q, qd) qd, m/s^2 (2,).", [(str(i), eq["jdot_qd_a"][i]) for i in range(2)], (2,), True
+        )
+    )
+    parts.append(
+        _function(
+            "dmass_dq",
+            "dM/dq_k stacked as out[k, i, j] (5x5x5).",
+            [(f"{k}, {i}, {j}", eq["dM_dq"][k][i, j]) for k in range(5) for i in range(5) for j in range(5)],
+            (5, 5, 5),
+            False,
+        )
+    )
     parts.append(_function("dbias_dq", "dh/dq (5x5).", _matrix_outputs(eq["dh_dq"]), (5, 5), True))
     parts.append(_function("dbias_dqd", "dh/dqd (5x5).", _matrix_outputs(eq["dh_dqd"]), (5, 5), True))
-    parts.append(_function("djac_a_dq", "dJ_a/dq_k stacked as out[k, r, j] (5x2x5).",
-                           [(f"{k}, {r}, {j}", eq["dJa_dq"][k][r, j]) for k in range(5) for r in range(2)
-                            for j in range(5)], (5, 2, 5), False))
+    parts.append(
+        _function(
+            "djac_a_dq",
+            "dJ_a/dq_k stacked as out[k, r, j] (5x2x5).",
+            [(f"{k}, {r}, {j}", eq["dJa_dq"][k][r, j]) for k in range(5) for r in range(2) for j in range(5)],
+            (5, 2, 5),
+            False,
+        )
+    )
     parts.append(_function("djdot_qd_a_dq", "d(J_a' qd)/dq (2x5).", _matrix_outputs(eq["djdot_dq"]), (2, 5), True))
     parts.append(_function("djdot_qd_a_dqd", "d(J_a' qd)/dqd (2x5).", _matrix_outputs(eq["djdot_dqd"]), (2, 5), True))
     for name in REDUCED_PHASES:
@@ -296,14 +333,18 @@ def _reduced_function(model: str, name: str, directional: bool = False) -> str:
     phase_name = name.replace("_accel", "").replace("_dir", "")
     nl = len(rows) + (2 if chain else 0)
     if directional:
-        lines = [f"def {name}(q, qd, p, qdd, lam, V, dqdd):",
-                 f'    """As {phase_name}_accel, and dqdd[:, c] = (dq\'\'/dy) V[:, c] for the columns of V (10 x n):'
-                 '\n    exact for any state and tangent (x_b, y_b do not enter M or dh)."""']
+        lines = [
+            f"def {name}(q, qd, p, qdd, lam, V, dqdd):",
+            f'    """As {phase_name}_accel, and dqdd[:, c] = (dq\'\'/dy) V[:, c] for the columns of V (10 x n):'
+            '\n    exact for any state and tangent (x_b, y_b do not enter M or dh)."""',
+        ]
     else:
-        lines = [f"def {name}(q, qd, p, qdd, lam):",
-                 f'    """q\'\' (5,) and lambda ({nl},) of {phase_name} written into qdd and lam, '
-                 "from the phase's free coordinates;\n    False if the free block of M is not positive "
-                 'definite' + (" or the chain's constraints are singular" if chain else "") + '."""']
+        lines = [
+            f"def {name}(q, qd, p, qdd, lam):",
+            f'    """q\'\' (5,) and lambda ({nl},) of {phase_name} written into qdd and lam, '
+            "from the phase's free coordinates;\n    False if the free block of M is not positive "
+            "definite" + (" or the chain's constraints are singular" if chain else "") + '."""',
+        ]
     lines += [ln for ln in _unpack(True, True) if ln.split("=")[0].strip() in {str(x) for x in used}]
     for sym, e in replacements:
         lines.append(f"    {sym} = {_fmt(e)}")
@@ -373,8 +414,9 @@ def _reduced_function(model: str, name: str, directional: bool = False) -> str:
                 for k in positions:
                     terms.append(f"v{k}*(djd{r}_q{k} + " + " + ".join(f"dj{r}{b}_{k}*a{b}" for b in range(nf)) + ")")
                 terms += [f"vd{k}*djd{r}_v{k}" for k in range(5)]
-                lines.append(f"        e{r} = -(" + " + ".join(terms) + ") - "
-                             + " - ".join(f"j{r}{a}*du{a}" for a in range(nf)))
+                lines.append(
+                    f"        e{r} = -(" + " + ".join(terms) + ") - " + " - ".join(f"j{r}{a}*du{a}" for a in range(nf))
+                )
             lines.append("        m0 = (e0*s11 - s01*e1) / det")
             lines.append("        m1 = (s00*e1 - s10*e0) / det")
             for a in range(nf):

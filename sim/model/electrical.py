@@ -62,7 +62,7 @@ class ClutchPower:
         """No electrical energy for either wheel: the system CoT is the mechanical one."""
         return self.hold_power_w == 0.0 and self.switch_energy_j == 0.0 and self.electronics_power_w == 0.0
 
-    def replace(self, **changes: float) -> "ClutchPower":
+    def replace(self, **changes: float) -> ClutchPower:
         from dataclasses import replace
 
         return replace(self, **changes)
@@ -71,15 +71,22 @@ class ClutchPower:
         """Electrical energy of one step, J: ER P_hold t_clutched + 2 E_switch + P_el T; VE P_el T if it carries
         the electronics, else 0. clutched_s, period_s in s."""
         if model == "er":
-            return (self.hold_power_w * clutched_s + SWITCHES_PER_STEP * self.switch_energy_j
-                    + self.electronics_power_w * period_s)
+            return (
+                self.hold_power_w * clutched_s
+                + SWITCHES_PER_STEP * self.switch_energy_j
+                + self.electronics_power_w * period_s
+            )
         if model == "ve":
             return self.electronics_power_w * period_s if self.ve_electronics else 0.0
         raise ValueError(f"unknown model {model!r}")
 
     def as_dict(self) -> dict[str, float | bool]:
-        return {"clutch_hold_power_w": self.hold_power_w, "clutch_switch_energy_j": self.switch_energy_j,
-                "electronics_power_w": self.electronics_power_w, "ve_electronics": self.ve_electronics}
+        return {
+            "clutch_hold_power_w": self.hold_power_w,
+            "clutch_switch_energy_j": self.switch_energy_j,
+            "electronics_power_w": self.electronics_power_w,
+            "ve_electronics": self.ve_electronics,
+        }
 
 
 def system_cot(total_mass_kg: float, gravity_m_s2: float, s_x_m: float, s_z_m: float, electrical_j: float) -> float:

@@ -50,20 +50,34 @@ class Guard:
     why: str = ""
 
 
-TABLE: dict[int, Guard] = {g.code: g for g in (
-    Guard(LIFTOFF_A, "lift-off-a", -1, force=True),
-    Guard(STALL, "stall", -1, failure=FailureReason.STALL,
-          why="theta' reached 0 before touchdown (the wheel rolls back)"),
-    Guard(CLUTCH_LOCK, "clutch-lock", +1),
-    Guard(TOUCHDOWN, "touchdown", -1),
-    Guard(LIFTOFF_B, "lift-off-b", -1, force=True, failure=FailureReason.STANCE_LIFT_OFF,
-          why="the stance foot's normal force fell below 0"),
-    Guard(FOOT_A_DOWN, "foot-a-down", -1),
-    Guard(SLIP_END_1, "slip-end-1", -1),
-    Guard(SLIP_END_2, "slip-end-2", -1),
-    Guard(STICK_END_1, "stick-end-1", -1),
-    Guard(STICK_END_2, "stick-end-2", -1),
-)}
+TABLE: dict[int, Guard] = {
+    g.code: g
+    for g in (
+        Guard(LIFTOFF_A, "lift-off-a", -1, force=True),
+        Guard(
+            STALL,
+            "stall",
+            -1,
+            failure=FailureReason.STALL,
+            why="theta' reached 0 before touchdown (the wheel rolls back)",
+        ),
+        Guard(CLUTCH_LOCK, "clutch-lock", +1),
+        Guard(TOUCHDOWN, "touchdown", -1),
+        Guard(
+            LIFTOFF_B,
+            "lift-off-b",
+            -1,
+            force=True,
+            failure=FailureReason.STANCE_LIFT_OFF,
+            why="the stance foot's normal force fell below 0",
+        ),
+        Guard(FOOT_A_DOWN, "foot-a-down", -1),
+        Guard(SLIP_END_1, "slip-end-1", -1),
+        Guard(SLIP_END_2, "slip-end-2", -1),
+        Guard(STICK_END_1, "stick-end-1", -1),
+        Guard(STICK_END_2, "stick-end-2", -1),
+    )
+}
 
 GUARD_NAMES = {c: g.name for c, g in TABLE.items()}
 DIRECTION = {c: g.direction for c, g in TABLE.items()}

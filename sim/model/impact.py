@@ -17,7 +17,13 @@ def relabel(q: np.ndarray, qd: np.ndarray, leg_length_m: float) -> tuple[np.ndar
     dx, dy, dth, dL1, _ = qd
     L0 = leg_length_m
     q_new = np.array(
-        [x + L1 * math.sin(th) + L0 * math.sin(ALPHA - th), y + L1 * math.cos(th) - L0 * math.cos(ALPHA - th), th - ALPHA, L0, L1]
+        [
+            x + L1 * math.sin(th) + L0 * math.sin(ALPHA - th),
+            y + L1 * math.cos(th) - L0 * math.cos(ALPHA - th),
+            th - ALPHA,
+            L0,
+            L1,
+        ]
     )
     qd_new = np.array(
         [

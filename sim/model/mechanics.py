@@ -37,8 +37,11 @@ class Mechanics:
     def of(cls, params: WheelParams) -> Mechanics:
         """p = WheelParams.as_vector() + (guide_friction_n,): the generated code reads the first eight, the
         compiled friction phases F_c (rimless.sim.model.friction.FRICTION_INDEX)."""
-        return cls(params, generated_module(params.mass_model),
-                   np.array(params.as_vector() + (params.guide_friction_n,), dtype=float))
+        return cls(
+            params,
+            generated_module(params.mass_model),
+            np.array(params.as_vector() + (params.guide_friction_n,), dtype=float),
+        )
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         return self.gen.mass_matrix(q, self.p)

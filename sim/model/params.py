@@ -145,7 +145,9 @@ def validate(p: WheelParams) -> None:
             f"({math.degrees(SPOKE_ANGLE_RAD / 2):.1f} deg), got {p.slope_rad} rad"
         )
     if p.mass_model not in MASS_MODELS:
-        raise ParameterError(f"parameter {_name('mass_model')} must be one of {', '.join(MASS_MODELS)}, got {p.mass_model!r}")
+        raise ParameterError(
+            f"parameter {_name('mass_model')} must be one of {', '.join(MASS_MODELS)}, got {p.mass_model!r}"
+        )
 
 
 # Names accepted in a TOML parameter file, mapped to fields. Paper symbols are accepted as aliases.

@@ -30,8 +30,13 @@ class RigidWheel:
             return cls(p.hub_mass_kg, p.inertia_kg_m2, p.leg_length_m, p.gravity_m_s2, "paper")
         if convention == "eight-leg":
             m8 = 8 * p.leg_mass_kg
-            return cls(p.hub_mass_kg + m8, p.inertia_kg_m2 + m8 * p.leg_length_m**2, p.leg_length_m,
-                       p.gravity_m_s2, "eight-leg")
+            return cls(
+                p.hub_mass_kg + m8,
+                p.inertia_kg_m2 + m8 * p.leg_length_m**2,
+                p.leg_length_m,
+                p.gravity_m_s2,
+                "eight-leg",
+            )
         raise ValueError(f"unknown rigid-wheel convention {convention!r}")
 
     @property
@@ -43,7 +48,11 @@ class RigidWheel:
     def coleman_g(self, slope_rad: float) -> float:
         """Coleman's g(phi): zero at the critical slope."""
         b2 = self.beta**2
-        return 1 - math.cos(slope_rad) * math.cos(ALPHA / 2) - (1 + b2) / (1 - b2) * math.sin(slope_rad) * math.sin(ALPHA / 2)
+        return (
+            1
+            - math.cos(slope_rad) * math.cos(ALPHA / 2)
+            - (1 + b2) / (1 - b2) * math.sin(slope_rad) * math.sin(ALPHA / 2)
+        )
 
     def critical_slope_rad(self) -> float:
         """Root of g(phi) on (0, alpha/2)."""
@@ -54,8 +63,14 @@ class RigidWheel:
     def _gain(self, slope_rad: float) -> float:
         """omega-^2 - omega+^2 over one step, rad^2/s^2."""
         ml = self.mass_kg * self.leg_length_m
-        return 4 * ml * self.gravity_m_s2 * math.sin(slope_rad) * math.sin(ALPHA / 2) / (
-            self.inertia_kg_m2 + ml * self.leg_length_m)
+        return (
+            4
+            * ml
+            * self.gravity_m_s2
+            * math.sin(slope_rad)
+            * math.sin(ALPHA / 2)
+            / (self.inertia_kg_m2 + ml * self.leg_length_m)
+        )
 
     def step_map(self, omega_plus: float, slope_rad: float) -> float:
         """Next post-impact angular velocity (rad/s), or nan when the wheel cannot pass mid-stance."""
@@ -66,8 +81,13 @@ class RigidWheel:
     def barrier(self, slope_rad: float) -> float:
         """Smallest omega+^2 that carries the hub over the top (theta = -phi), rad^2/s^2."""
         ml = self.mass_kg * self.leg_length_m
-        return 2 * ml * self.gravity_m_s2 * (1 - math.cos(ALPHA / 2 - slope_rad)) / (
-            self.inertia_kg_m2 + ml * self.leg_length_m)
+        return (
+            2
+            * ml
+            * self.gravity_m_s2
+            * (1 - math.cos(ALPHA / 2 - slope_rad))
+            / (self.inertia_kg_m2 + ml * self.leg_length_m)
+        )
 
     def fixed_point_omega(self, slope_rad: float) -> float:
         """Post-impact angular velocity of the period-1 gait, rad/s."""

@@ -55,8 +55,9 @@ def clutched_time_s(step: Any) -> float:
 
 def step_transport(step: Any, params: WheelParams) -> StepTransport:
     """The travel and timing of a recorded step (rimless.sim.step.hybrid.StepResult)."""
-    return StepTransport(step_length_m(step.y_minus, params.leg_length_m), float(step.period_s),
-                         clutched_time_s(step), params.slope_rad)
+    return StepTransport(
+        step_length_m(step.y_minus, params.leg_length_m), float(step.period_s), clutched_time_s(step), params.slope_rad
+    )
 
 
 def cot_of(tr: StepTransport, params: WheelParams, model: str, power: ClutchPower) -> dict[str, float]:

@@ -37,10 +37,17 @@ class HeldStance:
         self.inner = inner
         self.name = f"{inner.name}+bilateral"
 
-    def run_phase(self, mech: Mechanics, phase: int, y0: np.ndarray, t0: float, guards: tuple[int, ...],
-                  t_max: float, **options: Any) -> PhaseRun:
-        return self.inner.run_phase(mech, phase, y0, t0, tuple(g for g in guards if g != LIFTOFF_B), t_max,
-                                    **options)
+    def run_phase(
+        self,
+        mech: Mechanics,
+        phase: int,
+        y0: np.ndarray,
+        t0: float,
+        guards: tuple[int, ...],
+        t_max: float,
+        **options: Any,
+    ) -> PhaseRun:
+        return self.inner.run_phase(mech, phase, y0, t0, tuple(g for g in guards if g != LIFTOFF_B), t_max, **options)
 
 
 class _VariationalJacobian:
@@ -89,8 +96,13 @@ class FastPoincareMap:
         hybrid step, each phase compiled) nor with a non-ideal clutch policy."""
         if self.params.guide_friction_n > 0.0:
             return False
-        return self.clutch is None or isinstance(self.clutch, IdealClutch) or (
-            getattr(self.clutch, "delay_s", 0.0) <= 0.0 and getattr(self.clutch, "name", "") in ("ideal", "delayed"))
+        return (
+            self.clutch is None
+            or isinstance(self.clutch, IdealClutch)
+            or (
+                getattr(self.clutch, "delay_s", 0.0) <= 0.0 and getattr(self.clutch, "name", "") in ("ideal", "delayed")
+            )
+        )
 
     @property
     def exact_jacobian(self) -> bool:
@@ -116,15 +128,37 @@ class FastPoincareMap:
             return self._cache[1].copy(), self._cache[2], (None if self._cache[3] is None else self._cache[3].copy())
         if self.bilateral:
             st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map_contact(
-                self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-                jacobian, int(self.integrator.max_steps), self._counts, True, np.empty(0))
+                self._mi,
+                self.model == "er",
+                self._p,
+                z,
+                float(self.integrator.rtol),
+                float(self.integrator.atol),
+                jacobian,
+                int(self.integrator.max_steps),
+                self._counts,
+                True,
+                np.empty(0),
+            )
         else:
             st, detail, phase, t, yp, J, _times, _nfev, nsteps, _nstiff, _snap = fs.step_map(
-                self._mi, self.model == "er", self._p, z, float(self.integrator.rtol), float(self.integrator.atol),
-                jacobian, int(self.integrator.max_steps), self._counts)
+                self._mi,
+                self.model == "er",
+                self._p,
+                z,
+                float(self.integrator.rtol),
+                float(self.integrator.atol),
+                jacobian,
+                int(self.integrator.max_steps),
+                self._counts,
+            )
         if st == fs.TOO_MANY_STEPS and self.stiff_fallback and not self.bilateral:
-            radau = ScipyIntegrator("Radau", rtol=max(self.integrator.rtol, 1e-10),
-                                    atol=max(self.integrator.atol, 1e-12), max_nfev=fast.RADAU_MAX_NFEV)
+            radau = ScipyIntegrator(
+                "Radau",
+                rtol=max(self.integrator.rtol, 1e-10),
+                atol=max(self.integrator.atol, 1e-12),
+                max_nfev=fast.RADAU_MAX_NFEV,
+            )
             Jfd = None
             with np.errstate(over="ignore"):  # scipy's numerical Jacobian grows its step factors
                 zn, period = self._reference_result(z, radau)
@@ -134,8 +168,9 @@ class FastPoincareMap:
                     for i in range(2):
                         dz = np.zeros(2)
                         dz[i] = h
-                        Jfd[:, i] = (self._reference_step(z + dz, radau)
-                                     - self._reference_step(z - dz, radau)) / (2 * h)
+                        Jfd[:, i] = (self._reference_step(z + dz, radau) - self._reference_step(z - dz, radau)) / (
+                            2 * h
+                        )
             self._count("scipy-Radau")
             return zn, period, Jfd
         if st != fs.OK:
@@ -159,12 +194,25 @@ class FastPoincareMap:
         """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
         self.evaluations += 1
         integ = HeldStance(self.integrator) if self.bilateral else self.integrator
-        return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
-                             integ, clutch=self.clutch, **options)  # type: ignore[arg-type]
+        return simulate_step(
+            self.mech,
+            self.model,
+            state_from_section(self.mech, np.asarray(z, dtype=float)),
+            integ,
+            clutch=self.clutch,
+            **options,
+        )  # type: ignore[arg-type]
 
     def with_params(self, params: WheelParams) -> FastPoincareMap:
-        return FastPoincareMap(params, self.model, self.integrator, self.clutch, stiff_fallback=self.stiff_fallback,
-                               jacobian_with_map=self.jacobian_with_map, bilateral=self.bilateral)
+        return FastPoincareMap(
+            params,
+            self.model,
+            self.integrator,
+            self.clutch,
+            stiff_fallback=self.stiff_fallback,
+            jacobian_with_map=self.jacobian_with_map,
+            bilateral=self.bilateral,
+        )
 
     def jacobian(self, z: np.ndarray, h: float | None = None) -> np.ndarray:
         """dP/dz: exact (variational) by default; central differences with step h if h is given."""
@@ -201,13 +249,18 @@ class FrictionStep:
     result: Any
 
 
-def friction_step(params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10,
-                  atol: float | None = None) -> FrictionStep:
+def friction_step(
+    params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10, atol: float | None = None
+) -> FrictionStep:
     """The step map where fast_step (one compiled call) has no guide friction: hybrid.simulate_step with the
     compiled phase integrator, each stick/slip phase compiled (rimless.sim.integrate.friction). Raises
     StepFailure."""
     check_model(model)
     mech = Mechanics.of(params)
-    res = simulate_step(mech, model, state_from_section(mech, np.asarray(z, dtype=float)),
-                        FastIntegrator(rtol=rtol, atol=rtol * 1e-2 if atol is None else atol))
+    res = simulate_step(
+        mech,
+        model,
+        state_from_section(mech, np.asarray(z, dtype=float)),
+        FastIntegrator(rtol=rtol, atol=rtol * 1e-2 if atol is None else atol),
+    )
     return FrictionStep(section_from_state(res.y_plus), res.period_s, res.friction_work_J, res)

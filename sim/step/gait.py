@@ -10,18 +10,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rimless.sim.integrate.reference import Integrator
 from rimless.sim.model import friction as fr
 from rimless.sim.model.dynamics import PHASE_NAMES, accel
 from rimless.sim.model.failures import StepFailure
-from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
-from rimless.sim.integrate.reference import Integrator
 from rimless.sim.model.mechanics import Mechanics, foot_a, hub_position, world_height
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
+from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
 
-COLUMNS = ["t_s", "step", "phase", "x_b_m", "y_b_m", "theta_rad", "L1_m", "L2_m", "dx_b_m_s", "dy_b_m_s",
-           "dtheta_rad_s", "dL1_m_s", "dL2_m_s", "hub_x_m", "hub_y_m", "com_height_normal_m", "com_height_world_m",
-           "foot_a_y_m"]
+COLUMNS = [
+    "t_s",
+    "step",
+    "phase",
+    "x_b_m",
+    "y_b_m",
+    "theta_rad",
+    "L1_m",
+    "L2_m",
+    "dx_b_m_s",
+    "dy_b_m_s",
+    "dtheta_rad_s",
+    "dL1_m_s",
+    "dL2_m_s",
+    "hub_x_m",
+    "hub_y_m",
+    "com_height_normal_m",
+    "com_height_world_m",
+    "foot_a_y_m",
+]
 FORCE_COLUMNS = ["lambda_b_x_N", "lambda_b_y_N", "lambda_a_x_N", "lambda_a_y_N", "lambda_clutch_N"]
 
 
@@ -35,7 +52,7 @@ class GaitTrajectory:
     table: dict[str, np.ndarray]
     failure: StepFailure | None
 
-    def to_frame(self):  # noqa: ANN201 - pandas is imported lazily
+    def to_frame(self):
         import pandas as pd
 
         return pd.DataFrame(self.table)
@@ -81,8 +98,15 @@ def simulate_steps(
     return GaitTrajectory(params, model, steps, table, failure)
 
 
-def _append_segment(mech: Mechanics, rows: dict[str, list[np.ndarray]], t: np.ndarray, y: np.ndarray, step: int,
-                    phase: int, forces: bool) -> None:
+def _append_segment(
+    mech: Mechanics,
+    rows: dict[str, list[np.ndarray]],
+    t: np.ndarray,
+    y: np.ndarray,
+    step: int,
+    phase: int,
+    forces: bool,
+) -> None:
     n = len(t)
     phi = mech.params.slope_rad
     hub = np.array([hub_position(yi[:5]) for yi in y])
@@ -99,8 +123,11 @@ def _append_segment(mech: Mechanics, rows: dict[str, list[np.ndarray]], t: np.nd
     if forces:
         lam_all = np.full((n, 5), np.nan)
         for i, yi in enumerate(y):
-            _, lam = (fr.sample_accel(mech, phase, yi) if mech.params.guide_friction_n > 0.0
-                      else accel(mech, phase, yi[:5], yi[5:]))
+            _, lam = (
+                fr.sample_accel(mech, phase, yi)
+                if mech.params.guide_friction_n > 0.0
+                else accel(mech, phase, yi[:5], yi[5:])
+            )
             lam_all[i, 0:2] = lam[0:2]
             if phase == 0:
                 lam_all[i, 2:4] = lam[2:4]
@@ -112,12 +139,17 @@ def _append_segment(mech: Mechanics, rows: dict[str, list[np.ndarray]], t: np.nd
 
 def trajectory_metadata(traj: GaitTrajectory, extra: dict | None = None) -> dict:
     """What a trajectory file must say about itself: model, wheel parameters (SI), units, steps."""
-    return {"model": traj.model, "params": traj.params.to_dict(), "units": "SI (m, s, rad, N); slope in rad",
-            "steps": len(traj.steps), "failure": None if traj.failure is None else str(traj.failure),
-            **(extra or {})}
+    return {
+        "model": traj.model,
+        "params": traj.params.to_dict(),
+        "units": "SI (m, s, rad, N); slope in rad",
+        "steps": len(traj.steps),
+        "failure": None if traj.failure is None else str(traj.failure),
+        **(extra or {}),
+    }
 
 
-def write_trajectory(traj: GaitTrajectory, path, extra: dict | None = None) -> None:  # noqa: ANN001
+def write_trajectory(traj: GaitTrajectory, path, extra: dict | None = None) -> None:
     """Write the samples as Parquet (the model and wheel parameters in the schema metadata under b"rimless")
     or CSV, to a temporary name renamed when complete."""
     import json

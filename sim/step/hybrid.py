@@ -14,12 +14,12 @@ from typing import Protocol
 import numpy as np
 
 from rimless.sim.integrate.friction import run_with_friction
+from rimless.sim.integrate.reference import Integrator, PhaseRun
 from rimless.sim.model import friction as fr
 from rimless.sim.model import guards as ev
 from rimless.sim.model.dynamics import DLSP, PHASE_NAMES, SLSP_CLUTCHED, SLSP_FREE, accel
 from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.impact import ImpactResult, impact
-from rimless.sim.integrate.reference import Integrator, PhaseRun
 from rimless.sim.model.mechanics import Mechanics, foot_a
 
 MODELS = ("er", "ve")
@@ -83,8 +83,16 @@ class ClutchPolicy(Protocol):
 
     name: str
 
-    def lock(self, mech: Mechanics, integrator: Integrator, y: np.ndarray, t: float, *,
-             record_dt: float | None, track_dissipation: bool) -> tuple[np.ndarray, float, list[PhaseRun]]:
+    def lock(
+        self,
+        mech: Mechanics,
+        integrator: Integrator,
+        y: np.ndarray,
+        t: float,
+        *,
+        record_dt: float | None,
+        track_dissipation: bool,
+    ) -> tuple[np.ndarray, float, list[PhaseRun]]:
         """Given the state at L1' = 0 (ideal lock instant), return (state after lock, time, extra free runs)."""
         ...
 
@@ -95,8 +103,16 @@ class IdealClutch:
 
     name: str = "ideal"
 
-    def lock(self, mech: Mechanics, integrator: Integrator, y: np.ndarray, t: float, *,
-             record_dt: float | None, track_dissipation: bool) -> tuple[np.ndarray, float, list[PhaseRun]]:
+    def lock(
+        self,
+        mech: Mechanics,
+        integrator: Integrator,
+        y: np.ndarray,
+        t: float,
+        *,
+        record_dt: float | None,
+        track_dissipation: bool,
+    ) -> tuple[np.ndarray, float, list[PhaseRun]]:
         y = y.copy()
         y[8] = 0.0  # L1' is zero to the event tolerance; make the clutch constraint exact
         return y, t, []
@@ -110,16 +126,37 @@ class DelayedClutch:
     delay_s: float
     name: str = field(default="delayed")
 
-    def lock(self, mech: Mechanics, integrator: Integrator, y: np.ndarray, t: float, *,
-             record_dt: float | None, track_dissipation: bool) -> tuple[np.ndarray, float, list[PhaseRun]]:
+    def lock(
+        self,
+        mech: Mechanics,
+        integrator: Integrator,
+        y: np.ndarray,
+        t: float,
+        *,
+        record_dt: float | None,
+        track_dissipation: bool,
+    ) -> tuple[np.ndarray, float, list[PhaseRun]]:
         if self.delay_s <= 0.0:
             return IdealClutch().lock(mech, integrator, y, t, record_dt=record_dt, track_dissipation=track_dissipation)
-        run = run_phase(integrator, mech, SLSP_FREE, y, t, (ev.TOUCHDOWN, ev.STALL, ev.LIFTOFF_B), self.delay_s,
-                        record_dt=record_dt, track_dissipation=track_dissipation)
+        run = run_phase(
+            integrator,
+            mech,
+            SLSP_FREE,
+            y,
+            t,
+            (ev.TOUCHDOWN, ev.STALL, ev.LIFTOFF_B),
+            self.delay_s,
+            record_dt=record_dt,
+            track_dissipation=track_dissipation,
+        )
         _check_failed(run, "slsp_free")
         if run.guard == ev.TOUCHDOWN:
-            raise StepFailure(FailureReason.TOUCHDOWN_BEFORE_CLUTCH, "the swing foot landed before the delayed lock",
-                              time_s=run.t_end, phase="slsp_free")
+            raise StepFailure(
+                FailureReason.TOUCHDOWN_BEFORE_CLUTCH,
+                "the swing foot landed before the delayed lock",
+                time_s=run.t_end,
+                phase="slsp_free",
+            )
         _raise_single_support_failure(run, "slsp_free")
         q, qd = run.y_end[:5], run.y_end[5:]
         M = mech.mass_matrix(q)
@@ -131,15 +168,27 @@ class DelayedClutch:
         return np.concatenate((q, qd_new)), run.t_end, [run]
 
 
-def run_phase(integrator: Integrator, mech: Mechanics, phase: int, y: np.ndarray, t: float, guards: tuple[int, ...],
-              t_max: float, *, record_dt: float | None, track_dissipation: bool) -> PhaseRun:
+def run_phase(
+    integrator: Integrator,
+    mech: Mechanics,
+    phase: int,
+    y: np.ndarray,
+    t: float,
+    guards: tuple[int, ...],
+    t_max: float,
+    *,
+    record_dt: float | None,
+    track_dissipation: bool,
+) -> PhaseRun:
     """One base phase on `integrator`: as it is without guide friction, else its stick/slip sub-phases
     (rimless.sim.integrate.friction)."""
     if mech.params.guide_friction_n > 0.0:
-        return run_with_friction(integrator, mech, phase, y, t, guards, t_max, record_dt=record_dt,
-                                 track_dissipation=track_dissipation)
-    return integrator.run_phase(mech, phase, y, t, guards, t_max, record_dt=record_dt,
-                                track_dissipation=track_dissipation)
+        return run_with_friction(
+            integrator, mech, phase, y, t, guards, t_max, record_dt=record_dt, track_dissipation=track_dissipation
+        )
+    return integrator.run_phase(
+        mech, phase, y, t, guards, t_max, record_dt=record_dt, track_dissipation=track_dissipation
+    )
 
 
 def start_guard_value(mech: Mechanics, phase: int, code: int, y: np.ndarray) -> float:
@@ -152,7 +201,9 @@ def start_guard_value(mech: Mechanics, phase: int, code: int, y: np.ndarray) -> 
 
 def _check_failed(run: PhaseRun, phase: str) -> None:
     if run.failed:
-        raise StepFailure(FailureReason.INTEGRATION, run.message or "the integrator failed", time_s=run.t_end, phase=phase)
+        raise StepFailure(
+            FailureReason.INTEGRATION, run.message or "the integrator failed", time_s=run.t_end, phase=phase
+        )
 
 
 def _raise_single_support_failure(run: PhaseRun, phase: str) -> None:
@@ -196,8 +247,17 @@ def simulate_step(
 
     def run(phase: int, guards: tuple[int, ...]) -> PhaseRun:
         nonlocal nfev, dissipated, friction_work
-        r = run_phase(integrator, mech, phase, y, t, guards, PHASE_TIME_LIMIT_S, record_dt=record_dt,
-                      track_dissipation=track_dissipation)
+        r = run_phase(
+            integrator,
+            mech,
+            phase,
+            y,
+            t,
+            guards,
+            PHASE_TIME_LIMIT_S,
+            record_dt=record_dt,
+            track_dissipation=track_dissipation,
+        )
         nfev += r.nfev
         dissipated += r.dissipated_J
         friction_work += r.friction_J
@@ -214,8 +274,12 @@ def simulate_step(
         with np.errstate(over="ignore", invalid="ignore"):
             value = start_guard_value(mech, phase, code, state)
         if not np.isfinite(value):
-            raise StepFailure(FailureReason.INTEGRATION, "non-finite contact forces (speeds or parameters too large "
-                              "to represent)", time_s=t, phase=name)
+            raise StepFailure(
+                FailureReason.INTEGRATION,
+                "non-finite contact forces (speeds or parameters too large to represent)",
+                time_s=t,
+                phase=name,
+            )
         return value
 
     # 1. Double support. It may end at once if the trailing foot is unloaded right after impact.
@@ -226,35 +290,60 @@ def simulate_step(
         if r.guard == ev.STALL:
             raise StepFailure(FailureReason.STALL, "theta' reached 0 in double support", time_s=r.t_end, phase="dlsp")
         if r.guard == ev.TOUCHDOWN:
-            raise StepFailure(FailureReason.DLSP_NEVER_ENDS, "the swing foot landed before the trailing foot lifted off",
-                              time_s=r.t_end, phase="dlsp")
+            raise StepFailure(
+                FailureReason.DLSP_NEVER_ENDS,
+                "the swing foot landed before the trailing foot lifted off",
+                time_s=r.t_end,
+                phase="dlsp",
+            )
         if r.guard is None:
-            raise StepFailure(FailureReason.DLSP_NEVER_ENDS, f"no lift-off within {PHASE_TIME_LIMIT_S} s",
-                              time_s=r.t_end, phase="dlsp")
+            raise StepFailure(
+                FailureReason.DLSP_NEVER_ENDS,
+                f"no lift-off within {PHASE_TIME_LIMIT_S} s",
+                time_s=r.t_end,
+                phase="dlsp",
+            )
         y, t = r.y_end, r.t_end
     else:
         phases.append(PhaseRecord("dlsp", t, t))
 
     # 2. Single support.
     if not force(SLSP_FREE, ev.LIFTOFF_B, y, "slsp_free") > 0.0:
-        raise StepFailure(FailureReason.STANCE_LIFT_OFF, "the stance foot is unloaded at the start of single support",
-                          time_s=t, phase="slsp_free")
+        raise StepFailure(
+            FailureReason.STANCE_LIFT_OFF,
+            "the stance foot is unloaded at the start of single support",
+            time_s=t,
+            phase="slsp_free",
+        )
     clutch_loss = 0.0
     if model == "er":
         if y[8] >= 0.0:
-            raise StepFailure(FailureReason.CLUTCH_MISSED,
-                              f"L1' = {y[8]:.3g} m/s >= 0 at lift-off: the stance leg's maximum compression "
-                              "happened in double support, before the clutch could lock", time_s=t, phase="slsp_free")
+            raise StepFailure(
+                FailureReason.CLUTCH_MISSED,
+                f"L1' = {y[8]:.3g} m/s >= 0 at lift-off: the stance leg's maximum compression "
+                "happened in double support, before the clutch could lock",
+                time_s=t,
+                phase="slsp_free",
+            )
         r = run(SLSP_FREE, (ev.CLUTCH_LOCK, ev.TOUCHDOWN, ev.STALL, ev.LIFTOFF_B))
         if r.guard == ev.TOUCHDOWN:
-            raise StepFailure(FailureReason.TOUCHDOWN_BEFORE_CLUTCH, "the swing foot landed during free compression",
-                              time_s=r.t_end, phase="slsp_free")
+            raise StepFailure(
+                FailureReason.TOUCHDOWN_BEFORE_CLUTCH,
+                "the swing foot landed during free compression",
+                time_s=r.t_end,
+                phase="slsp_free",
+            )
         _raise_single_support_failure(r, "slsp_free")
         if r.guard is None:
-            raise StepFailure(FailureReason.INTEGRATION, f"free compression lasted over {PHASE_TIME_LIMIT_S} s",
-                              time_s=r.t_end, phase="slsp_free")
-        y, t, extra = clutch.lock(mech, integrator, r.y_end, r.t_end, record_dt=record_dt,
-                                  track_dissipation=track_dissipation)
+            raise StepFailure(
+                FailureReason.INTEGRATION,
+                f"free compression lasted over {PHASE_TIME_LIMIT_S} s",
+                time_s=r.t_end,
+                phase="slsp_free",
+            )
+        y, t, extra = clutch.lock(
+            mech, integrator, r.y_end, r.t_end, record_dt=record_dt, track_dissipation=track_dissipation
+        )
         for er in extra:
             nfev += er.nfev
             dissipated += er.dissipated_J
@@ -270,24 +359,41 @@ def simulate_step(
     r = run(final_phase, (ev.TOUCHDOWN, ev.STALL, ev.LIFTOFF_B))
     _raise_single_support_failure(r, PHASE_NAMES[final_phase])
     if r.guard is None:
-        raise StepFailure(FailureReason.STALL, f"no touchdown within {PHASE_TIME_LIMIT_S} s",
-                          time_s=r.t_end, phase=PHASE_NAMES[final_phase])
+        raise StepFailure(
+            FailureReason.STALL,
+            f"no touchdown within {PHASE_TIME_LIMIT_S} s",
+            time_s=r.t_end,
+            phase=PHASE_NAMES[final_phase],
+        )
     y_minus, t = r.y_end, r.t_end
 
     # 3. Impact.
     with np.errstate(over="ignore", invalid="ignore"):
         imp = impact(mech, y_minus[:5], y_minus[5:])
     if not (np.all(np.isfinite(imp.impulse)) and np.all(np.isfinite(imp.qd_plus)) and np.isfinite(t)):
-        raise StepFailure(FailureReason.INTEGRATION, "non-finite impact (speeds too large to represent)",
-                          time_s=t, phase="impact")
+        raise StepFailure(
+            FailureReason.INTEGRATION, "non-finite impact (speeds too large to represent)", time_s=t, phase="impact"
+        )
     if not (imp.impulse[1] > 0.0 and imp.impulse[3] > 0.0):
-        raise StepFailure(FailureReason.NEGATIVE_IMPULSE,
-                          f"normal impulses b = {imp.impulse[1]:.4g} N s, a = {imp.impulse[3]:.4g} N s must be > 0",
-                          time_s=t, phase="impact")
+        raise StepFailure(
+            FailureReason.NEGATIVE_IMPULSE,
+            f"normal impulses b = {imp.impulse[1]:.4g} N s, a = {imp.impulse[3]:.4g} N s must be > 0",
+            time_s=t,
+            phase="impact",
+        )
     result = StepResult(
-        y_start=np.asarray(y0, dtype=float), y_minus=y_minus, y_plus=np.concatenate((imp.q_plus, imp.qd_plus)),
-        t_start_s=t0, period_s=t - t0, phases=phases, impact=imp, nfev=nfev, dissipated_J=dissipated,
-        clutch_loss_J=clutch_loss, relabel_snap_J=imp.relabel_snap_J, friction_work_J=friction_work,
+        y_start=np.asarray(y0, dtype=float),
+        y_minus=y_minus,
+        y_plus=np.concatenate((imp.q_plus, imp.qd_plus)),
+        t_start_s=t0,
+        period_s=t - t0,
+        phases=phases,
+        impact=imp,
+        nfev=nfev,
+        dissipated_J=dissipated,
+        clutch_loss_J=clutch_loss,
+        relabel_snap_J=imp.relabel_snap_J,
+        friction_work_J=friction_work,
         stick_s=(float(stick[0]), float(stick[1])),
     )
     if record_dt is not None:
@@ -297,13 +403,18 @@ def simulate_step(
         if strict_contact:
             d = result.diagnostics
             if d["min_normal_force_b_dlsp_N"] < 0.0:
-                raise StepFailure(FailureReason.LEADING_FOOT_TENSION,
-                                  f"lambda_b,y reaches {d['min_normal_force_b_dlsp_N']:.3g} N in double support "
-                                  "(--strict-contact)", phase="dlsp")
+                raise StepFailure(
+                    FailureReason.LEADING_FOOT_TENSION,
+                    f"lambda_b,y reaches {d['min_normal_force_b_dlsp_N']:.3g} N in double support (--strict-contact)",
+                    phase="dlsp",
+                )
             if d["trailing_foot_min_height_m"] < 0.0:
-                raise StepFailure(FailureReason.TRAILING_FOOT_BELOW,
-                                  f"the lifted trailing foot dips {-d['trailing_foot_min_height_m'] * 1e3:.3g} mm "
-                                  "below the slope (--strict-contact)", phase="slsp")
+                raise StepFailure(
+                    FailureReason.TRAILING_FOOT_BELOW,
+                    f"the lifted trailing foot dips {-d['trailing_foot_min_height_m'] * 1e3:.3g} mm "
+                    "below the slope (--strict-contact)",
+                    phase="slsp",
+                )
     return result
 
 
@@ -322,8 +433,11 @@ def contact_diagnostics(mech: Mechanics, segments: list[Segment]) -> dict[str, f
     for seg in segments:
         lam_b = np.empty(len(seg.t))
         for i, yi in enumerate(seg.y):
-            _, lam = (fr.sample_accel(mech, seg.phase, yi) if mech.params.guide_friction_n > 0.0
-                      else accel(mech, seg.phase, yi[:5], yi[5:]))
+            _, lam = (
+                fr.sample_accel(mech, seg.phase, yi)
+                if mech.params.guide_friction_n > 0.0
+                else accel(mech, seg.phase, yi[:5], yi[5:])
+            )
             lam_b[i] = lam[1]
             if seg.phase == DLSP:
                 out["min_normal_force_a_dlsp_N"] = min(out["min_normal_force_a_dlsp_N"], lam[3])

@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
 from rimless.sim.integrate.reference import Integrator, ScipyIntegrator
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.mechanics import ALPHA, Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
+from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
 
 FIXED_POINT_TOL = 1e-10  # residual |P(z) - z|, rad and rad/s
 JACOBIAN_FD_STEP = 1e-4
@@ -41,8 +41,14 @@ class PoincareMap:
     def step(self, z: np.ndarray, **options: object) -> StepResult:
         """The full step from section point z (options as for simulate_step)."""
         self.evaluations += 1
-        return simulate_step(self.mech, self.model, state_from_section(self.mech, np.asarray(z, dtype=float)),
-                             self.integrator, clutch=self.clutch, **options)  # type: ignore[arg-type]
+        return simulate_step(
+            self.mech,
+            self.model,
+            state_from_section(self.mech, np.asarray(z, dtype=float)),
+            self.integrator,
+            clutch=self.clutch,
+            **options,
+        )  # type: ignore[arg-type]
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
         return section_from_state(self.step(z).y_plus)
@@ -74,8 +80,10 @@ class PoincareMap:
                     step /= 10
                     continue
                 central = 0.5 * (fwd + bwd)
-                if (np.max(np.abs(fwd - bwd)) <= JACOBIAN_CURVATURE_TOL * (1.0 + np.max(np.abs(central)))
-                        or step / 10 < JACOBIAN_MIN_STEP):
+                if (
+                    np.max(np.abs(fwd - bwd)) <= JACOBIAN_CURVATURE_TOL * (1.0 + np.max(np.abs(central)))
+                    or step / 10 < JACOBIAN_MIN_STEP
+                ):
                     break
                 step /= 10
             J[:, i] = central
@@ -219,8 +227,15 @@ def solve_fixed_point(
             raise KnownFixedPoint(f"Newton reached a known fixed point near {z.tolist()}")
     J = jac(z)
     step = pmap.step(z, diagnostics=diagnostics, strict_contact=strict_contact) if record else None
-    return FixedPoint(z=z, residual=res, iterations=it, jacobian=J, eigenvalues=np.linalg.eigvals(J), step=step,
-                      jacobian_method=getattr(jac, "method_name", "central-difference"))
+    return FixedPoint(
+        z=z,
+        residual=res,
+        iterations=it,
+        jacobian=J,
+        eigenvalues=np.linalg.eigvals(J),
+        step=step,
+        jacobian_method=getattr(jac, "method_name", "central-difference"),
+    )
 
 
 _CONTACT_FAILURES = (FailureReason.STANCE_LIFT_OFF, FailureReason.NEGATIVE_IMPULSE)
@@ -277,8 +292,7 @@ def find_gaits(
     for i, w in enumerate(guesses):
         for th in (-ALPHA / 2 - 0.07, -ALPHA / 2 - 0.02):
             try:
-                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15, record=False,
-                                       known=[f.z for f in found])
+                fp = solve_fixed_point(pmap, np.array([th, w]), max_iter=15, record=False, known=[f.z for f in found])
             except KnownFixedPoint:
                 continue
             except StepFailure as err:

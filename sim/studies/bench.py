@@ -76,8 +76,10 @@ def machine_load(before: list[float] | None, after: list[float] | None) -> dict[
 
 def _compile_cost(quick: bool) -> dict[str, Any]:
     """First-call cost of the compiled kernels in a fresh process: cold (empty numba cache) and warm."""
-    code = ("import time; t=time.perf_counter(); from rimless.sim import fast; t1=time.perf_counter(); "
-            "fast.warm_up(); t2=time.perf_counter(); print(t1-t, t2-t1)")
+    code = (
+        "import time; t=time.perf_counter(); from rimless.sim import fast; t1=time.perf_counter(); "
+        "fast.warm_up(); t2=time.perf_counter(); print(t1-t, t2-t1)"
+    )
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as cache_dir:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir)
@@ -86,8 +88,9 @@ def _compile_cost(quick: bool) -> dict[str, Any]:
             env = dict(os.environ)  # the project's own cache, as a user would have it after a first run
         for label in runs:
             try:
-                res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                                     timeout=600, check=True)
+                res = subprocess.run(
+                    [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600, check=True
+                )
                 imp, first = (float(v) for v in res.stdout.split())
                 out[label] = {"import_s": imp, "first_calls_s": first}
             except (subprocess.SubprocessError, ValueError) as err:
@@ -97,8 +100,9 @@ def _compile_cost(quick: bool) -> dict[str, Any]:
     return out
 
 
-def loosest_meeting(rows: list[dict[str, Any]], model: str, backend: str,
-                    target: float = TARGET_ERROR) -> dict[str, Any] | None:
+def loosest_meeting(
+    rows: list[dict[str, Any]], model: str, backend: str, target: float = TARGET_ERROR
+) -> dict[str, Any] | None:
     """The row of the loosest rtol whose error, and that of every tighter rtol run, is <= target (a loose
     rtol that meets it by chance, above a tighter one that does not, does not count); None if none."""
     mine = sorted((r for r in rows if r["model"] == model and r["backend"] == backend), key=lambda r: r["rtol"])
@@ -129,17 +133,16 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
         return {"skipped": "not installed (pip install numbakit-ode)"}
     from scipy.integrate import solve_ivp
 
+    from rimless.sim.fast import mass_model_index, param_vector, rk
     from rimless.sim.fast import model as fm
-    from rimless.sim.fast import rk
     from rimless.sim.fast import step as fs
-    from rimless.sim.fast import mass_model_index, param_vector
 
     mi = mass_model_index(params)
     p = param_vector(params)
     phase = fm.SLSP_CLUTCHED
 
     @numba.njit
-    def rhs(t: float, y: np.ndarray) -> np.ndarray:  # noqa: ARG001 (autonomous)
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
         out = np.empty(10)
         qdd = np.empty(5)
         lam = np.zeros(4)
@@ -150,10 +153,40 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
 
     y0, _ = fm.state_from_section(mi, Z_STAR["er"], p)
     none = np.zeros(0, dtype=np.int64)
-    r0 = rk.run_phase(mi, fm.DLSP, p, y0, 0.0, fs.PHASE_DLSP_CODES, fs.PHASE_DLSP_DIRS, 5.0, 1e-13, 1e-15, 10,
-                      False, False, -1.0, 10**6)
-    r1 = rk.run_phase(mi, fm.SLSP_FREE, p, r0[2], r0[1], fs.PHASE_FREE_ER_CODES, fs.PHASE_FREE_ER_DIRS, 5.0,
-                      1e-13, 1e-15, 10, False, False, -1.0, 10**6)
+    r0 = rk.run_phase(
+        mi,
+        fm.DLSP,
+        p,
+        y0,
+        0.0,
+        fs.PHASE_DLSP_CODES,
+        fs.PHASE_DLSP_DIRS,
+        5.0,
+        1e-13,
+        1e-15,
+        10,
+        False,
+        False,
+        -1.0,
+        10**6,
+    )
+    r1 = rk.run_phase(
+        mi,
+        fm.SLSP_FREE,
+        p,
+        r0[2],
+        r0[1],
+        fs.PHASE_FREE_ER_CODES,
+        fs.PHASE_FREE_ER_DIRS,
+        5.0,
+        1e-13,
+        1e-15,
+        10,
+        False,
+        False,
+        -1.0,
+        10**6,
+    )
     ys = np.array(r1[2], dtype=float)
     ys[8] = 0.0
     t0 = float(r1[1])
@@ -170,9 +203,11 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
         return {"skipped": f"nbkode failed: {type(err).__name__}: {err}"}
     rows = []
     for rtol in (1e-6, 1e-8, 1e-10):
+
         def ours(rtol: float = rtol) -> np.ndarray:
-            return rk.run_phase(mi, phase, p, ys, t0, none, none, PEER_PHASE_S, rtol, rtol * 1e-2, 10, False,
-                                False, -1.0, 10**6)[2]
+            return rk.run_phase(
+                mi, phase, p, ys, t0, none, none, PEER_PHASE_S, rtol, rtol * 1e-2, 10, False, False, -1.0, 10**6
+            )[2]
 
         def peer(rtol: float = rtol) -> np.ndarray:
             # first_step given: nbkode 0.5's own initial-step choice calls scipy's select_initial_step with
@@ -181,10 +216,20 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
             return np.asarray(y).reshape(-1)[:10]
 
         for name, fn in (("fast-dop853", ours), ("nbkode-DOP853", peer)):
-            rows.append({"backend": name, "rtol": rtol, "error": float(np.max(np.abs(fn() - ref))),
-                         "seconds": _time_per_call(fn, 0.3, 200)})
-    return {"phase": "ER clutched single support", "duration_s": PEER_PHASE_S,
-            "peer_first_call_s": compile_s, "rows": rows}
+            rows.append(
+                {
+                    "backend": name,
+                    "rtol": rtol,
+                    "error": float(np.max(np.abs(fn() - ref))),
+                    "seconds": _time_per_call(fn, 0.3, 200),
+                }
+            )
+    return {
+        "phase": "ER clutched single support",
+        "duration_s": PEER_PHASE_S,
+        "peer_first_call_s": compile_s,
+        "rows": rows,
+    }
 
 
 def _timed_fixed_point(pmap: Any, guess: np.ndarray, reps: int, *, record: bool = True) -> tuple[Any, float]:
@@ -225,27 +270,35 @@ def friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
         z = Z_STAR[model]
         y0 = state_from_section(mech, z)
         say(f"{model}: guide friction {FRICTION_N:g} N, tight reference")
-        tight = simulate_step(mech, model, y0, ScipyIntegrator("DOP853", rtol=REFERENCE_RTOL,
-                                                               atol=REFERENCE_RTOL * 1e-2))
+        tight = simulate_step(
+            mech, model, y0, ScipyIntegrator("DOP853", rtol=REFERENCE_RTOL, atol=REFERENCE_RTOL * 1e-2)
+        )
         z_ref = section_from_state(tight.y_plus)
         say(f"{model}: guide friction, compiled and reference paths")
         fast_r = friction_step(params, model, z, rtol=rtol)
         ref_integ = ScipyIntegrator("DOP853", rtol=rtol, atol=rtol * 1e-2)
         ref_r = simulate_step(mech, model, y0, ref_integ)
         fast_s = _time_per_call(lambda: friction_step(params, model, z, rtol=rtol), 0.1 if quick else 0.5, 200)
-        ref_s = _time_per_call(lambda: simulate_step(mech, model, y0, ref_integ), 0.05 if quick else 0.5,
-                               3 if quick else 20)
-        out["rows"].append({
-            "model": model, "fast_seconds_per_map": fast_s, "reference_seconds_per_map": ref_s,
-            "ratio": ref_s / fast_s,
-            "fast_error": float(np.max(np.abs(fast_r.z_next - z_ref))),
-            "reference_error": float(np.max(np.abs(section_from_state(ref_r.y_plus) - z_ref))),
-            "fast_vs_reference": float(np.max(np.abs(fast_r.z_next - section_from_state(ref_r.y_plus)))),
-            "friction_work_J": tight.friction_work_J,
-            "fast_friction_work_error_J": abs(fast_r.friction_work_J - tight.friction_work_J),
-            "reference_friction_work_error_J": abs(ref_r.friction_work_J - tight.friction_work_J),
-            "stick_s": list(tight.stick_s),
-        })
+        ref_s = _time_per_call(
+            lambda: simulate_step(mech, model, y0, ref_integ),
+            0.05 if quick else 0.5,
+            3 if quick else 20,
+        )
+        out["rows"].append(
+            {
+                "model": model,
+                "fast_seconds_per_map": fast_s,
+                "reference_seconds_per_map": ref_s,
+                "ratio": ref_s / fast_s,
+                "fast_error": float(np.max(np.abs(fast_r.z_next - z_ref))),
+                "reference_error": float(np.max(np.abs(section_from_state(ref_r.y_plus) - z_ref))),
+                "fast_vs_reference": float(np.max(np.abs(fast_r.z_next - section_from_state(ref_r.y_plus)))),
+                "friction_work_J": tight.friction_work_J,
+                "fast_friction_work_error_J": abs(fast_r.friction_work_J - tight.friction_work_J),
+                "reference_friction_work_error_J": abs(ref_r.friction_work_J - tight.friction_work_J),
+                "stick_s": list(tight.stick_s),
+            }
+        )
     return out
 
 
@@ -256,8 +309,8 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     warm numba cache).
     """
     from rimless.sim import fast
-    from rimless.sim.step.fast_map import FastPoincareMap
     from rimless.sim.integrate.reference import ScipyIntegrator
+    from rimless.sim.step.fast_map import FastPoincareMap
     from rimless.sim.step.poincare import PoincareMap, solve_fixed_point
 
     say = progress or (lambda _msg: None)
@@ -267,12 +320,15 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     say("compiling / loading the fast kernels")
     warm_s = fast.warm_up()
     if quick:
-        tols = {"fast": [1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7, 1e-8, 1e-10], "DOP853": [1e-6, 1e-7, 1e-8, 1e-9, 1e-10],
-                "RK45": [1e-4, 1e-6]}
+        tols = {
+            "fast": [1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7, 1e-8, 1e-10],
+            "DOP853": [1e-6, 1e-7, 1e-8, 1e-9, 1e-10],
+            "RK45": [1e-4, 1e-6],
+        }
         budget, fast_budget = 0.05, 0.1
     else:
-        full = sorted([10.0 ** -e for e in range(4, 13)] + [3 * 10.0 ** -e for e in range(5, 10)], reverse=True)
-        tols = {"fast": full, "DOP853": full, "RK45": [10.0 ** -e for e in range(4, 10)]}
+        full = sorted([10.0**-e for e in range(4, 13)] + [3 * 10.0**-e for e in range(5, 10)], reverse=True)
+        tols = {"fast": full, "DOP853": full, "RK45": [10.0**-e for e in range(4, 10)]}
         budget, fast_budget = 0.5, 0.5
 
     rows: list[dict[str, Any]] = []
@@ -293,10 +349,23 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     pm: Any = FastPoincareMap(params, model, fast.FastIntegrator(rtol=rtol, atol=atol))
                     r = fast.fast_step(params, model, z, rtol=rtol, atol=atol, jacobian=True)
                     z_new, period, J = r.z_next, r.period_s, r.jacobian
-                    spm = _time_per_call(lambda pm=pm: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
-                                         fast_budget, 2000)
-                    spj = _time_per_call(lambda: fast.fast_step(params, model, z, rtol=rtol, atol=atol,
-                                                                jacobian=True), fast_budget / 2, 500)
+                    spm = _time_per_call(
+                        lambda pm=pm: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
+                        fast_budget,
+                        2000,
+                    )
+                    spj = _time_per_call(
+                        lambda: fast.fast_step(
+                            params,
+                            model,
+                            z,
+                            rtol=rtol,
+                            atol=atol,
+                            jacobian=True,
+                        ),
+                        fast_budget / 2,
+                        500,
+                    )
                     nfev, nsteps = r.nfev, r.nsteps
                     per_phase = {"phase_nfev": list(r.phase_nfev), "phase_steps": list(r.phase_steps)}
                 else:
@@ -309,28 +378,32 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     t_j = time.perf_counter()
                     J = pm.jacobian(z)
                     spj = time.perf_counter() - t_j + spm
-                rows.append({
-                    "model": model,
-                    "backend": "fast-dop853" if backend == "fast" else f"scipy-{backend}",
-                    "rtol": rtol,
-                    "atol": atol,
-                    "error": float(np.max(np.abs(z_new - z_ref))),
-                    "period_error_s": abs(period - ref_step.period_s),
-                    "eigenvalue_error": abs(float(np.max(np.abs(np.linalg.eigvals(J)))) - eig_ref),
-                    "jacobian_method": "variational" if backend == "fast" else "central-difference h=1e-4",
-                    "seconds_per_map": spm,
-                    "seconds_per_map_and_jacobian": spj,
-                    "nfev": int(nfev),
-                    "nsteps": int(nsteps),
-                    **per_phase,
-                })
+                rows.append(
+                    {
+                        "model": model,
+                        "backend": "fast-dop853" if backend == "fast" else f"scipy-{backend}",
+                        "rtol": rtol,
+                        "atol": atol,
+                        "error": float(np.max(np.abs(z_new - z_ref))),
+                        "period_error_s": abs(period - ref_step.period_s),
+                        "eigenvalue_error": abs(float(np.max(np.abs(np.linalg.eigvals(J)))) - eig_ref),
+                        "jacobian_method": "variational" if backend == "fast" else "central-difference h=1e-4",
+                        "seconds_per_map": spm,
+                        "seconds_per_map_and_jacobian": spj,
+                        "nfev": int(nfev),
+                        "nsteps": int(nsteps),
+                        **per_phase,
+                    }
+                )
 
     speedups: dict[str, Any] = {}
     for model in ("er", "ve"):
         f, d = loosest_meeting(rows, model, "fast-dop853"), loosest_meeting(rows, model, "scipy-DOP853")
         speedups[model] = {
-            "fast_rtol": f and f["rtol"], "fast_seconds_per_map": f and f["seconds_per_map"],
-            "dop853_rtol": d and d["rtol"], "dop853_seconds_per_map": d and d["seconds_per_map"],
+            "fast_rtol": f and f["rtol"],
+            "fast_seconds_per_map": f and f["seconds_per_map"],
+            "dop853_rtol": d and d["rtol"],
+            "dop853_seconds_per_map": d and d["seconds_per_map"],
             "speedup": (d["seconds_per_map"] / f["seconds_per_map"]) if (f and d) else None,
         }
     valid = [s["speedup"] for s in speedups.values() if s["speedup"] is not None]
@@ -347,11 +420,17 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         loose = speedups[model]["fast_rtol"]
         loose_entry: dict[str, Any] = {}
         if loose is not None:
-            pm_loose = FastPoincareMap(params, model, fast.FastIntegrator(rtol=loose, atol=loose * 1e-2),
-                                            jacobian_with_map=True)
+            pm_loose = FastPoincareMap(
+                params, model, fast.FastIntegrator(rtol=loose, atol=loose * 1e-2), jacobian_with_map=True
+            )
             fp_loose, loose_s = _timed_fixed_point(pm_loose, guess, reps, record=False)
-            loose_entry = {"rtol": loose, "seconds": loose_s, "iterations": fp_loose.iterations,
-                           "z": fp_loose.z.tolist(), "max_abs_eigenvalue": fp_loose.max_abs_eigenvalue}
+            loose_entry = {
+                "rtol": loose,
+                "seconds": loose_s,
+                "iterations": fp_loose.iterations,
+                "z": fp_loose.z.tolist(),
+                "max_abs_eigenvalue": fp_loose.max_abs_eigenvalue,
+            }
         say(f"{model}: fixed point, reference path")
         pm_ref = PoincareMap(params, model)
         t_s = time.perf_counter()
@@ -361,8 +440,9 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
             "fast_seconds": fast_s,
             "fast_iterations": fp.iterations,
             "fast_z": fp.z.tolist(),
-            "fast_eigenvalues": [complex(e).real if abs(complex(e).imag) < 1e-15 else str(complex(e))
-                                 for e in fp.eigenvalues],
+            "fast_eigenvalues": [
+                complex(e).real if abs(complex(e).imag) < 1e-15 else str(complex(e)) for e in fp.eigenvalues
+            ],
             "fast_jacobian_method": fp.jacobian_method,
             "reference_seconds": t_ref,
             "reference_iterations": fp_ref.iterations,
@@ -373,8 +453,9 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         }
         if loose_entry:
             loose_entry["z_difference"] = float(np.max(np.abs(np.asarray(loose_entry["z"]) - fp_ref.z)))
-            loose_entry["max_abs_eigenvalue_difference"] = abs(loose_entry["max_abs_eigenvalue"]
-                                                               - fp_ref.max_abs_eigenvalue)
+            loose_entry["max_abs_eigenvalue_difference"] = abs(
+                loose_entry["max_abs_eigenvalue"] - fp_ref.max_abs_eigenvalue
+            )
             fixed[model]["at_target_error"] = loose_entry
     # one critical-slope continuation (Algorithm 1 from 0.05 rad, refined to 1e-6 rad) on both paths;
     # the reference path takes about a minute per model, so --quick times the fast path only
@@ -386,15 +467,23 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         pm_fast = FastPoincareMap(params, model, jacobian_with_map=True)
         t_s = time.perf_counter()
         cs = critical_slope(pm_fast, Z_STAR[model], jacobian_factory=lambda m: m.variational_jacobian)
-        entry: dict[str, Any] = {"fast_seconds": time.perf_counter() - t_s, "fast_critical_slope_rad": cs.critical_slope_rad,
-                                 "fast_reason": cs.reason, "branch_points": len(cs.branch),
-                                 "reference_seconds": None, "reference_critical_slope_rad": None}
+        entry: dict[str, Any] = {
+            "fast_seconds": time.perf_counter() - t_s,
+            "fast_critical_slope_rad": cs.critical_slope_rad,
+            "fast_reason": cs.reason,
+            "branch_points": len(cs.branch),
+            "reference_seconds": None,
+            "reference_critical_slope_rad": None,
+        }
         if not quick:
             say(f"{model}: critical-slope continuation, reference path (about a minute)")
             t_s = time.perf_counter()
             cs_ref = critical_slope(PoincareMap(params, model), Z_STAR[model])
-            entry.update(reference_seconds=time.perf_counter() - t_s, reference_critical_slope_rad=cs_ref.critical_slope_rad,
-                         reference_reason=cs_ref.reason)
+            entry.update(
+                reference_seconds=time.perf_counter() - t_s,
+                reference_critical_slope_rad=cs_ref.critical_slope_rad,
+                reference_reason=cs_ref.reason,
+            )
         continuation[model] = entry
     friction = friction_bench(quick, say)
     say("third-party compiled integrator on one phase")
@@ -406,9 +495,13 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     return {
         "quick": quick,
         "load_average": load,
-        "settings": {"params": params.to_dict(), "z": {m: v.tolist() for m, v in Z_STAR.items()},
-                     "reference": f"scipy DOP853 rtol {REFERENCE_RTOL:g} atol {REFERENCE_RTOL * 1e-2:g}",
-                     "atol": "rtol / 100 for every backend", "target_error": TARGET_ERROR},
+        "settings": {
+            "params": params.to_dict(),
+            "z": {m: v.tolist() for m, v in Z_STAR.items()},
+            "reference": f"scipy DOP853 rtol {REFERENCE_RTOL:g} atol {REFERENCE_RTOL * 1e-2:g}",
+            "atol": "rtol / 100 for every backend",
+            "target_error": TARGET_ERROR,
+        },
         "reference": reference,
         "rows": rows,
         "speedup_at_1e-9": min(valid) if valid else None,
@@ -433,11 +526,17 @@ def plot_work_precision(result: dict[str, Any], path: str) -> None:
     styles = {"er": "-", "ve": "--"}
     keys = sorted({(r["backend"], r["model"]) for r in result["rows"]})
     for backend, model in keys:
-        rs = sorted((r for r in result["rows"] if r["backend"] == backend and r["model"] == model),
-                    key=lambda r: r["rtol"])
+        rs = sorted(
+            (r for r in result["rows"] if r["backend"] == backend and r["model"] == model), key=lambda r: r["rtol"]
+        )
         err = [max(r["error"], 1e-17) for r in rs]
-        ax.loglog(err, [r["seconds_per_map"] for r in rs], styles.get(model, "-"), marker="o",
-                  label=f"{backend} ({model.upper()})")
+        ax.loglog(
+            err,
+            [r["seconds_per_map"] for r in rs],
+            styles.get(model, "-"),
+            marker="o",
+            label=f"{backend} ({model.upper()})",
+        )
     ax.axvline(TARGET_ERROR, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("error of the post-impact state z (inf-norm; rad, rad/s)")
     ax.set_ylabel("wall time per map (s)")
@@ -456,18 +555,24 @@ def plot_work_precision(result: dict[str, Any], path: str) -> None:
 
 def format_table(result: dict[str, Any]) -> str:
     """A plain-text summary of a run_bench result."""
-    lines = [f"{'model':5} {'backend':14} {'rtol':>6} {'error':>8} {'T err':>8} {'eig err':>8} {'s/map':>9} "
-             f"{'nfev':>6} {'steps':>5}"]
+    lines = [
+        f"{'model':5} {'backend':14} {'rtol':>6} {'error':>8} {'T err':>8} {'eig err':>8} {'s/map':>9} "
+        f"{'nfev':>6} {'steps':>5}"
+    ]
     for r in result["rows"]:
         steps = r.get("nsteps", -1)
-        lines.append(f"{r['model']:5} {r['backend']:14} {r['rtol']:6.0e} {r['error']:8.1e} {r['period_error_s']:8.1e} "
-                     f"{r['eigenvalue_error']:8.1e} {r['seconds_per_map']:9.2e} {r['nfev']:6d} "
-                     f"{steps if steps >= 0 else '-':>5}")
+        lines.append(
+            f"{r['model']:5} {r['backend']:14} {r['rtol']:6.0e} {r['error']:8.1e} {r['period_error_s']:8.1e} "
+            f"{r['eigenvalue_error']:8.1e} {r['seconds_per_map']:9.2e} {r['nfev']:6d} "
+            f"{steps if steps >= 0 else '-':>5}"
+        )
     load = result.get("load_average") or {}
     busy = load.get("busy")
     if load.get("before") is not None:
-        lines.append(f"load average 1/5/15 min: before {' '.join(f'{v:.2f}' for v in load['before'])}, "
-                     f"after {' '.join(f'{v:.2f}' for v in load['after'])} ({load['cpus']} cores)")
+        lines.append(
+            f"load average 1/5/15 min: before {' '.join(f'{v:.2f}' for v in load['before'])}, "
+            f"after {' '.join(f'{v:.2f}' for v in load['after'])} ({load['cpus']} cores)"
+        )
     sp = result["speedup_at_1e-9"]
     ratio = "n/a" if sp is None else f"{sp:.0f}x"
     if busy and sp is not None:
@@ -478,55 +583,81 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append("the timings and ratios are not representative. Rerun when the machine is quiet.")
     for model, s in result["speedup_at_1e-9_by_model"].items():
         if s["speedup"] is not None:
-            lines.append(f"  {model}: fast rtol {s['fast_rtol']:.0e} {s['fast_seconds_per_map'] * 1e3:.3f} ms, "
-                         f"DOP853 rtol {s['dop853_rtol']:.0e} {s['dop853_seconds_per_map'] * 1e3:.1f} ms: "
-                         f"{s['speedup']:.0f}x")
-        row = next((r for r in result["rows"] if r["model"] == model and r["backend"] == "fast-dop853"
-                    and r["rtol"] == s["fast_rtol"] and "phase_nfev" in r), None)
+            lines.append(
+                f"  {model}: fast rtol {s['fast_rtol']:.0e} {s['fast_seconds_per_map'] * 1e3:.3f} ms, "
+                f"DOP853 rtol {s['dop853_rtol']:.0e} {s['dop853_seconds_per_map'] * 1e3:.1f} ms: "
+                f"{s['speedup']:.0f}x"
+            )
+        row = next(
+            (
+                r
+                for r in result["rows"]
+                if r["model"] == model
+                and r["backend"] == "fast-dop853"
+                and r["rtol"] == s["fast_rtol"]
+                and "phase_nfev" in r
+            ),
+            None,
+        )
         if row is not None:
             names = ("dlsp", "free", "clutched") if model == "er" else ("dlsp", "single")
             nf = [str(row["phase_nfev"][i]) for i in range(len(names))]
             ns = [str(row["phase_steps"][i]) for i in range(len(names))]
             lines.append(f"    per phase ({'/'.join(names)}): nfev {'/'.join(nf)}, steps {'/'.join(ns)}")
     for model, f in result["fixed_point"].items():
-        lines.append(f"fixed point {model}: fast {f['fast_seconds'] * 1e3:.1f} ms ({f['fast_iterations']} it, "
-                     f"{f['fast_jacobian_method']}), reference {f['reference_seconds']:.2f} s; "
-                     f"|dz| {f['z_difference']:.1e}, |d max|eig|| {f['max_abs_eigenvalue_difference']:.1e}")
+        lines.append(
+            f"fixed point {model}: fast {f['fast_seconds'] * 1e3:.1f} ms ({f['fast_iterations']} it, "
+            f"{f['fast_jacobian_method']}), reference {f['reference_seconds']:.2f} s; "
+            f"|dz| {f['z_difference']:.1e}, |d max|eig|| {f['max_abs_eigenvalue_difference']:.1e}"
+        )
         if "at_target_error" in f:
             g = f["at_target_error"]
-            lines.append(f"  at the map's target-error rtol {g['rtol']:.0e}, no recorded step: {g['seconds'] * 1e3:.1f} ms "
-                         f"({g['iterations']} it); |dz| {g['z_difference']:.1e}, |d max|eig|| "
-                         f"{g['max_abs_eigenvalue_difference']:.1e} against the reference")
+            lines.append(
+                f"  at the map's target-error rtol {g['rtol']:.0e}, no recorded step: {g['seconds'] * 1e3:.1f} ms "
+                f"({g['iterations']} it); |dz| {g['z_difference']:.1e}, |d max|eig|| "
+                f"{g['max_abs_eigenvalue_difference']:.1e} against the reference"
+            )
     for model, cont in result.get("critical_slope_continuation", {}).items():
-        ref = ("reference not timed (--quick)" if cont["reference_seconds"] is None else
-               f"reference {cont['reference_seconds']:.1f} s -> {cont['reference_critical_slope_rad']:.7f} rad")
-        lines.append(f"critical slope {model}: fast {cont['fast_seconds']:.2f} s -> {cont['fast_critical_slope_rad']:.7f} rad "
-                     f"({cont['fast_reason']}, {cont['branch_points']} branch points); {ref}")
+        ref = (
+            "reference not timed (--quick)"
+            if cont["reference_seconds"] is None
+            else f"reference {cont['reference_seconds']:.1f} s -> {cont['reference_critical_slope_rad']:.7f} rad"
+        )
+        lines.append(
+            f"critical slope {model}: fast {cont['fast_seconds']:.2f} s -> {cont['fast_critical_slope_rad']:.7f} rad "
+            f"({cont['fast_reason']}, {cont['branch_points']} branch points); {ref}"
+        )
     fr = result.get("guide_friction")
     if fr:
-        lines.append(f"guide friction {fr['guide_friction_n']:g} N, one step map at rtol {fr['rtol']:.0e} "
-                     "(errors against scipy DOP853 at rtol 1e-13):")
+        lines.append(
+            f"guide friction {fr['guide_friction_n']:g} N, one step map at rtol {fr['rtol']:.0e} "
+            "(errors against scipy DOP853 at rtol 1e-13):"
+        )
         for r in fr["rows"]:
-            lines.append(f"  {r['model']}: fast {r['fast_seconds_per_map'] * 1e3:.2f} ms (error {r['fast_error']:.1e}), "
-                         f"reference {r['reference_seconds_per_map'] * 1e3:.0f} ms (error {r['reference_error']:.1e}): "
-                         f"{r['ratio']:.0f}x{' (busy machine)' if busy else ''}; fast vs reference "
-                         f"{r['fast_vs_reference']:.1e}; friction work {r['friction_work_J']:.4g} J, errors "
-                         f"{r['fast_friction_work_error_J']:.0e} / {r['reference_friction_work_error_J']:.0e} J")
+            lines.append(
+                f"  {r['model']}: fast {r['fast_seconds_per_map'] * 1e3:.2f} ms (error {r['fast_error']:.1e}), "
+                f"reference {r['reference_seconds_per_map'] * 1e3:.0f} ms (error {r['reference_error']:.1e}): "
+                f"{r['ratio']:.0f}x{' (busy machine)' if busy else ''}; fast vs reference "
+                f"{r['fast_vs_reference']:.1e}; friction work {r['friction_work_J']:.4g} J, errors "
+                f"{r['fast_friction_work_error_J']:.0e} / {r['reference_friction_work_error_J']:.0e} J"
+            )
     peer = result.get("peer") or {}
     if "rows" in peer:
         lines.append(f"peer integrator, one phase: {peer['phase']}, {peer['duration_s']:g} s")
         lines.append(f"  (nbkode's first call, compiling: {peer['peer_first_call_s']:.0f} s)")
         for r in peer["rows"]:
-            lines.append(f"  {r['backend']:14} rtol {r['rtol']:6.0e} error {r['error']:8.1e} "
-                         f"{r['seconds'] * 1e3:8.3f} ms")
+            lines.append(
+                f"  {r['backend']:14} rtol {r['rtol']:6.0e} error {r['error']:8.1e} {r['seconds'] * 1e3:8.3f} ms"
+            )
     elif peer.get("skipped"):
         lines.append("peer integrator (nbkode) not run:")
         lines.append(f"  {peer['skipped']}")
     c = result["compile"]
     for label in ("cold", "warm"):
         if label in c and "first_calls_s" in c[label]:
-            lines.append(f"compile {label}: import {c[label]['import_s']:.2f} s + first calls "
-                         f"{c[label]['first_calls_s']:.2f} s")
+            lines.append(
+                f"compile {label}: import {c[label]['import_s']:.2f} s + first calls {c[label]['first_calls_s']:.2f} s"
+            )
     lines.append(f"total {result['total_seconds']:.1f} s")
     return "\n".join(lines)
 
@@ -536,8 +667,9 @@ if __name__ == "__main__":  # python -m rimless.sim.studies.bench [--quick] [--j
     print(json.dumps(res, indent=1, default=str) if "--json" in sys.argv else format_table(res))
 
 
-def bench_study(quick: bool, *, plot: Path | None = None, progress: Callable[[str], None] | None = None
-                ) -> dict[str, Any]:
+def bench_study(
+    quick: bool, *, plot: Path | None = None, progress: Callable[[str], None] | None = None
+) -> dict[str, Any]:
     """`rimless bench`: run_bench and, with `plot`, the work-precision figure written atomically there."""
     result = run_bench(quick, progress)
     if plot is not None:

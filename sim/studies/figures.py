@@ -9,10 +9,14 @@ import numpy as np
 from rimless.sim.step.gait import GaitTrajectory
 
 PHASE_COLOURS = {"dlsp": "#f4cccc", "slsp_free": "#d9ead3", "slsp_clutched": "#cfe2f3"}
-PHASE_LABELS = {"dlsp": "double support", "slsp_free": "single support, free", "slsp_clutched": "single support, clutched"}
+PHASE_LABELS = {
+    "dlsp": "double support",
+    "slsp_free": "single support, free",
+    "slsp_clutched": "single support, clutched",
+}
 
 
-def shade_phases(ax, traj: GaitTrajectory) -> None:  # noqa: ANN001
+def shade_phases(ax, traj: GaitTrajectory) -> None:
     """Shade each phase of every step of `traj` on `ax` (time axis in s) in its PHASE_COLOURS."""
     for step in traj.steps:
         for rec in step.phases:
@@ -20,7 +24,7 @@ def shade_phases(ax, traj: GaitTrajectory) -> None:  # noqa: ANN001
                 ax.axvspan(rec.t_start_s, rec.t_end_s, color=PHASE_COLOURS[rec.name], lw=0, zorder=0)
 
 
-def save_figure(fig, path: str | Path, dpi: int = 150, *, option: str | None = None) -> Path:  # noqa: ANN001
+def save_figure(fig, path: str | Path, dpi: int = 150, *, option: str | None = None) -> Path:
     """Write the figure atomically (rimless.output.atomic_file; `option` names the CLI option in errors) and
     close it, also when writing fails."""
     import matplotlib.pyplot as plt
@@ -36,7 +40,7 @@ def save_figure(fig, path: str | Path, dpi: int = 150, *, option: str | None = N
     return path
 
 
-def stick_diagram(traj: GaitTrajectory, ax, *, every_s: float = 0.025, step: int | None = None) -> None:  # noqa: ANN001
+def stick_diagram(traj: GaitTrajectory, ax, *, every_s: float = 0.025, step: int | None = None) -> None:
     """The wheel drawn every `every_s` seconds in the slope frame (x down the slope, y normal, mm): stance and
     trailing legs in the colour of the phase, the other legs grey, the hub as a dot."""
     from rimless.sim.model.mechanics import ALPHA
@@ -59,10 +63,18 @@ def stick_diagram(traj: GaitTrajectory, ax, *, every_s: float = 0.025, step: int
         col = colours.get(str(tab["phase"][i]), "k")
         for j in range(2, 8):
             a = th + j * ALPHA
-            ax.plot([hx * 1e3, (hx - L0 * np.sin(a)) * 1e3], [hy * 1e3, (hy - L0 * np.cos(a)) * 1e3], color="0.8", lw=0.5)
+            ax.plot(
+                [hx * 1e3, (hx - L0 * np.sin(a)) * 1e3], [hy * 1e3, (hy - L0 * np.cos(a)) * 1e3], color="0.8", lw=0.5
+            )
         ax.plot([xb * 1e3, hx * 1e3], [yb * 1e3, hy * 1e3], color=col, lw=1.2)
         a = th + ALPHA
-        ax.plot([hx * 1e3, (hx - L2 * np.sin(a)) * 1e3], [hy * 1e3, (hy - L2 * np.cos(a)) * 1e3], color=col, lw=0.8, alpha=0.7)
+        ax.plot(
+            [hx * 1e3, (hx - L2 * np.sin(a)) * 1e3],
+            [hy * 1e3, (hy - L2 * np.cos(a)) * 1e3],
+            color=col,
+            lw=0.8,
+            alpha=0.7,
+        )
         ax.plot([hx * 1e3], [hy * 1e3], "o", color=col, ms=2)
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_aspect("equal")
@@ -71,10 +83,12 @@ def stick_diagram(traj: GaitTrajectory, ax, *, every_s: float = 0.025, step: int
     from matplotlib.lines import Line2D
 
     names = [n for n in colours if traj.model == "er" or n != "slsp_clutched"]
-    ax.legend(handles=[Line2D([], [], color=colours[n], label=PHASE_LABELS[n]) for n in names], fontsize=7, loc="upper right")
+    ax.legend(
+        handles=[Line2D([], [], color=colours[n], label=PHASE_LABELS[n]) for n in names], fontsize=7, loc="upper right"
+    )
 
 
-def plot_forces(traj: GaitTrajectory, ax) -> None:  # noqa: ANN001
+def plot_forces(traj: GaitTrajectory, ax) -> None:
     """Normal ground reaction forces of the stance (leading) foot b and the trailing foot a, N, phases shaded."""
     tab = traj.table
     if "lambda_b_y_N" not in tab:
@@ -90,7 +104,7 @@ def plot_forces(traj: GaitTrajectory, ax) -> None:  # noqa: ANN001
     ax.legend(fontsize=7, loc="upper right")
 
 
-def plot_gait(traj: GaitTrajectory, path: str | Path | None = None, *, forces: bool = False):  # noqa: ANN201
+def plot_gait(traj: GaitTrajectory, path: str | Path | None = None, *, forces: bool = False):
     """Leg lengths, CoM height and wheel angle against time with the phases shaded (paper's typical gait);
     with forces, also the normal ground reaction forces and a stick diagram of the first step."""
     import matplotlib
@@ -114,8 +128,11 @@ def plot_gait(traj: GaitTrajectory, path: str | Path | None = None, *, forces: b
     ax.plot(t, tab["L2_m"] * 1e3, color="C1", label="trailing leg L2", alpha=0.8)
     ax.axhline(traj.params.leg_length_m * 1e3, color="k", lw=0.6, ls=":")
     ax.set_ylabel("leg length (mm)")
-    handles = ax.get_legend_handles_labels()[0] + [Patch(color=c, label=PHASE_LABELS[n]) for n, c in PHASE_COLOURS.items()
-                                                  if traj.model == "er" or n != "slsp_clutched"]
+    handles = ax.get_legend_handles_labels()[0] + [
+        Patch(color=c, label=PHASE_LABELS[n])
+        for n, c in PHASE_COLOURS.items()
+        if traj.model == "er" or n != "slsp_clutched"
+    ]
     ax.legend(handles=handles, loc="lower right", fontsize=8, ncol=2)
     ax = axes[1]
     shade_phases(ax, traj)
@@ -135,8 +152,10 @@ def plot_gait(traj: GaitTrajectory, path: str | Path | None = None, *, forces: b
     else:
         ax.set_xlabel("time (s)")
     name = {"er": "energy-recycling", "ve": "viscoelastic"}[traj.model]
-    fig.suptitle(f"{name} wheel, slope {traj.params.slope_deg:.3f} deg, k = {traj.params.k:g} N/m, "
-                 f"c = {traj.params.c:g} N s/m ({len(traj.steps)} steps)")
+    fig.suptitle(
+        f"{name} wheel, slope {traj.params.slope_deg:.3f} deg, k = {traj.params.k:g} N/m, "
+        f"c = {traj.params.c:g} N s/m ({len(traj.steps)} steps)"
+    )
     if path is not None:
         save_figure(fig, path)
     return fig

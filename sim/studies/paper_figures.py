@@ -13,7 +13,7 @@ EIGEN_K = (2000.0, 2500.0, 3000.0)  # the k of figure 4's eigenvalue map, N/m
 PERTURBATION = 1.05  # theta'+ of the start state = 1.05 x the fixed point's (figure 3)
 
 
-def pyplot():  # noqa: ANN202
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -43,7 +43,7 @@ def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
     """Figure 1: leg lengths, CoM height and stick diagrams of both wheels side by side."""
     import pandas as pd
 
-    from rimless.sim.studies.figures import shade_phases, save_figure, stick_diagram
+    from rimless.sim.studies.figures import save_figure, shade_phases, stick_diagram
 
     plt = pyplot()
     fig, axes = plt.subplots(3, 2, figsize=(12, 10), constrained_layout=True)
@@ -67,8 +67,10 @@ def figure_typical_gaits(trajs: dict[str, Any], out: Path) -> list[Path]:
         ax = axes[2, col]
         stick_diagram(traj, ax, step=0, every_s=0.03)
         ax.set_title(f"({'cf'[col]}) {name}: stick diagram of one step")
-    fig.suptitle(f"typical gaits at {trajs['er'].params.slope_deg:.3f} deg, k = {trajs['er'].params.k:g} N/m "
-                 "(shading: the phase of the step)")
+    fig.suptitle(
+        f"typical gaits at {trajs['er'].params.slope_deg:.3f} deg, k = {trajs['er'].params.k:g} N/m "
+        "(shading: the phase of the step)"
+    )
     png = save_figure(fig, out / "fig1_typical_gaits.png")
     frames = [pd.DataFrame(trajs[m].table).assign(model=m.upper()) for m in ("er", "ve")]
     csv = write_csv(pd.concat(frames, ignore_index=True), out / "fig1_typical_gaits.csv")
@@ -91,11 +93,20 @@ def figure_forces(trajs: dict[str, Any], out: Path) -> list[Path]:
         lam = np.asarray(tab["lambda_b_y_N"], dtype=float)
         dl = np.asarray(tab["phase"]) == "dlsp"
         tmin = float(np.nanmin(np.where(dl, lam, np.nan)))
-        ax.set_title(f"{'viscoelastic' if model == 've' else 'energy-recycling'}: leading-foot minimum in double "
-                     f"support {tmin:.2f} N")
+        ax.set_title(
+            f"{'viscoelastic' if model == 've' else 'energy-recycling'}: leading-foot minimum in double "
+            f"support {tmin:.2f} N"
+        )
         for i in range(len(tab["t_s"])):
-            rows.append({"model": model.upper(), "t_s": tab["t_s"][i], "phase": tab["phase"][i],
-                         "grf_b_N": tab["lambda_b_y_N"][i], "grf_a_N": tab["lambda_a_y_N"][i]})
+            rows.append(
+                {
+                    "model": model.upper(),
+                    "t_s": tab["t_s"][i],
+                    "phase": tab["phase"][i],
+                    "grf_b_N": tab["lambda_b_y_N"][i],
+                    "grf_a_N": tab["lambda_a_y_N"][i],
+                }
+            )
     axes[-1].set_xlabel("time (s)")
     png = save_figure(fig, out / "fig2_ground_reaction_forces.png")
     csv = write_csv(pd.DataFrame(rows), out / "fig2_ground_reaction_forces.csv")
@@ -104,10 +115,9 @@ def figure_forces(trajs: dict[str, Any], out: Path) -> list[Path]:
 
 def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     import pandas as pd
+    from matplotlib.ticker import MaxNLocator
 
     from rimless.sim.studies.figures import save_figure
-
-    from matplotlib.ticker import MaxNLocator
 
     plt = pyplot()
     frame = pd.DataFrame(rows)
@@ -122,8 +132,15 @@ def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
                 continue
             ax.plot(walked["step"], walked["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m")
         if missing:
-            ax.text(0.02, 0.02, "not shown (no gait):\n" + "\n".join(missing), transform=ax.transAxes, fontsize=7,
-                    va="bottom", color="C3")
+            ax.text(
+                0.02,
+                0.02,
+                "not shown (no gait):\n" + "\n".join(missing),
+                transform=ax.transAxes,
+                fontsize=7,
+                va="bottom",
+                color="C3",
+            )
         ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
         ax.set_xlabel("step")
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -141,8 +158,9 @@ def missing_eigen_curves(rows: list[dict[str, Any]], ks: tuple[float, ...] = EIG
     return [(m, float(k)) for m in ("VE", "ER") for k in ks if (m, float(k)) not in have]
 
 
-def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]], out: Path,
-                       ks: tuple[float, ...] = EIGEN_K) -> list[Path]:
+def figure_eigenvalues(
+    points: list[dict[str, Any]], rows: list[dict[str, Any]], out: Path, ks: tuple[float, ...] = EIGEN_K
+) -> list[Path]:
     """Figure 4: max |eig| against slope along every branch stable at the start slope, down to the end of its
     stable, valid part (a branch invalid at the start: down to the end of the part that becomes valid, or its
     end); solid with filled markers where the gait respects unilateral contact, dashed with open markers where
@@ -173,24 +191,43 @@ def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]],
     for ax, model in zip(axes, ("VE", "ER")):
         sub = data[data.model == model] if len(data) else data
         for j, k in enumerate(ks):
-            for b_i, (branch, g) in enumerate(sub[sub.k == k].groupby("branch") if len(sub) else []):
+            for b_i, (branch, g) in enumerate(sub[sub.k == k].groupby("branch") if len(sub) else []):  # noqa: B007
                 g = g.sort_values("slope_rad")
                 valid = g["contact_valid"].to_numpy(dtype=bool)
                 col = f"C{j}"
                 label = f"k = {k:g}, {g['branch_label'].iloc[0]}"
-                ax.plot(g["slope_deg"].where(valid), g["max_abs_eigenvalue"].where(valid), ls=styles[b_i % 4],
-                        color=col, label=label if valid.any() else None)
+                ax.plot(
+                    g["slope_deg"].where(valid),
+                    g["max_abs_eigenvalue"].where(valid),
+                    ls=styles[b_i % 4],
+                    color=col,
+                    label=label if valid.any() else None,
+                )
                 if (~valid).any():  # the invalid part, and its joint with the valid part, dashed
                     inv = ~valid | np.r_[~valid[1:], False] | np.r_[False, ~valid[:-1]]
-                    ax.plot(g["slope_deg"].where(inv), g["max_abs_eigenvalue"].where(inv), "--", color=col, lw=1,
-                            label=None if valid.any() else label)
-                    ax.plot(g["slope_deg"][~valid], g["max_abs_eigenvalue"][~valid], "o", mfc="white", color=col,
-                            ms=3.5)
+                    ax.plot(
+                        g["slope_deg"].where(inv),
+                        g["max_abs_eigenvalue"].where(inv),
+                        "--",
+                        color=col,
+                        lw=1,
+                        label=None if valid.any() else label,
+                    )
+                    ax.plot(
+                        g["slope_deg"][~valid], g["max_abs_eigenvalue"][~valid], "o", mfc="white", color=col, ms=3.5
+                    )
         ax.axhline(1.0, color="k", ls="--", lw=1)
         missing = [k for m, k in missing_eigen_curves(rows, ks) if m == model]
         if missing:  # a requested k without a curve is named, not dropped silently
-            ax.text(0.02, 0.02, "no branch stable at the start slope: k = " + ", ".join(f"{k:g}" for k in missing)
-                    + " N/m", transform=ax.transAxes, fontsize=7, color="C3", va="bottom")
+            ax.text(
+                0.02,
+                0.02,
+                "no branch stable at the start slope: k = " + ", ".join(f"{k:g}" for k in missing) + " N/m",
+                transform=ax.transAxes,
+                fontsize=7,
+                color="C3",
+                va="bottom",
+            )
         ax.set_xlabel("slope (deg)")
         ax.set_title({"VE": "viscoelastic", "ER": "energy-recycling"}[model])
         ax.grid(alpha=0.3)
@@ -202,8 +239,12 @@ def figure_eigenvalues(points: list[dict[str, Any]], rows: list[dict[str, Any]],
     return [save_figure(fig, out / "fig4_eigenvalue_map.png"), write_csv(data, out / "fig4_eigenvalue_map.csv")]
 
 
-def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, Any]] | None = None,
-               ranges: list[dict[str, Any]] | None = None) -> list[Path]:
+def figure_cot(
+    crows: list[dict[str, Any]],
+    out: Path,
+    curves: list[dict[str, Any]] | None = None,
+    ranges: list[dict[str, Any]] | None = None,
+) -> list[Path]:
     """Figure 5: CoT against k per branch; filled markers contact-valid, open markers not; lines: the boundary
     curves traced by two-parameter continuation."""
     import pandas as pd
@@ -213,17 +254,33 @@ def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, An
     plt = pyplot()
     frame = pd.DataFrame(crows)
     n_bars = len(ranges or [])
-    fig, (ax, strip) = plt.subplots(2, 1, figsize=(9, 6.2 + 0.15 * n_bars), constrained_layout=True, sharex=True,
-                                    gridspec_kw={"height_ratios": [5, 0.6 + 0.35 * max(n_bars, 1)]})
+    fig, (ax, strip) = plt.subplots(
+        2,
+        1,
+        figsize=(9, 6.2 + 0.15 * n_bars),
+        constrained_layout=True,
+        sharex=True,
+        gridspec_kw={"height_ratios": [5, 0.6 + 0.35 * max(n_bars, 1)]},
+    )
     cframe = pd.DataFrame(curves or [])
     colours0 = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4"}
     if len(cframe):
         for (name, label), g in cframe.groupby(["curve", "branch_label"]):
             g = g.sort_values("k")
-            ax.plot(g["k"], g["cot"], "-", color=colours0.get(label, "C5"), lw=2, alpha=0.35,
-                    label=f"{name} curve (two-parameter continuation)")
+            ax.plot(
+                g["k"],
+                g["cot"],
+                "-",
+                color=colours0.get(label, "C5"),
+                lw=2,
+                alpha=0.35,
+                label=f"{name} curve (two-parameter continuation)",
+            )
     colours = {"er": "C3", "fast": "C0", "medium": "C2", "slow": "C4", "rigid": "k"}
-    main = frame[(frame.model != "rigid") & ~frame.get("valid_part_only", pd.Series(False, index=frame.index)).fillna(False).astype(bool)]
+    main = frame[
+        (frame.model != "rigid")
+        & ~frame.get("valid_part_only", pd.Series(False, index=frame.index)).fillna(False).astype(bool)
+    ]
     for label, g in main.groupby("branch_label"):
         g = g.sort_values("k")
         name = "ER" if label == "er" else f"VE {label}"
@@ -234,26 +291,45 @@ def figure_cot(crows: list[dict[str, Any]], out: Path, curves: list[dict[str, An
         ax.plot(v["k"], v["cot"], "o", color=col, ms=6)
         ax.plot(nv["k"], nv["cot"], "o", mfc="white", color=col, ms=6)
     rg = frame[frame.model == "rigid"].sort_values("k")
-    ax.plot(rg["k"], rg["cot"], "k--", label=f"rigid ({rg['critical_slope_deg'].iloc[0]:.3f} deg)" if len(rg) else "rigid")
+    ax.plot(
+        rg["k"], rg["cot"], "k--", label=f"rigid ({rg['critical_slope_deg'].iloc[0]:.3f} deg)" if len(rg) else "rigid"
+    )
     for i, v in enumerate(ranges or []):
         col = colours.get(v["branch_label"], "C5")
         name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
         for side in ("low", "high"):
             if v.get(f"k_{side}_reason") in ("stance-force", "impulse"):
-                ax.axvline(v[f"k_{side}"], color=col, ls="-.", lw=1,
-                           label=f"{name} gait loses contact validity at k = {v[f'k_{side}']:.0f} "
-                                 f"({v[f'k_{side}_reason']})")
+                ax.axvline(
+                    v[f"k_{side}"],
+                    color=col,
+                    ls="-.",
+                    lw=1,
+                    label=f"{name} gait loses contact validity at k = {v[f'k_{side}']:.0f} ({v[f'k_{side}_reason']})",
+                )
         lo, hi = v.get("k_low", math.nan), v.get("k_high", math.nan)
         if lo == lo and hi == hi:  # the branch's valid range in k at the start slope, a bar in the strip below
             strip.plot([lo, hi], [i, i], "-", color=col, lw=6, solid_capstyle="butt")
-            strip.text(lo, i + 0.38, f"{name}: stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg for "
-                       f"k = {lo:.0f} ({v['k_low_reason']}) to {hi:.0f} ({v['k_high_reason']})", color=col,
-                       fontsize=7, va="center")
-    late = (frame[frame["valid_part_only"].fillna(False).astype(bool)] if "valid_part_only" in frame else None)
+            strip.text(
+                lo,
+                i + 0.38,
+                f"{name}: stable and contact-valid at {math.degrees(v['slope_rad']):.3f} deg for "
+                f"k = {lo:.0f} ({v['k_low_reason']}) to {hi:.0f} ({v['k_high_reason']})",
+                color=col,
+                fontsize=7,
+                va="center",
+            )
+    late = frame[frame["valid_part_only"].fillna(False).astype(bool)] if "valid_part_only" in frame else None
     if late is not None and len(late):
         for label, g in late.groupby("branch_label"):
-            ax.plot(g["k"], g["cot"], "D", mfc="white", color=colours.get(label, "C5"), ms=6,
-                    label=f"VE {label}: invalid at the start slope, end of its valid part lower down")
+            ax.plot(
+                g["k"],
+                g["cot"],
+                "D",
+                mfc="white",
+                color=colours.get(label, "C5"),
+                ms=6,
+                label=f"VE {label}: invalid at the start slope, end of its valid part lower down",
+            )
     ax.plot([], [], "o", color="0.4", label="contact-valid")
     ax.plot([], [], "o", mfc="white", color="0.4", label="violates unilateral contact")
     strip.set_ylim(-0.6, max(n_bars, 1) - 0.2)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from rimless.sim.model.electrical import ClutchPower
 from rimless.sim.model.params import WheelParams
@@ -37,28 +37,40 @@ def branches_at_k(params: WheelParams, k: float, backend: str, rtol: float) -> d
     return out
 
 
-def _fmt(x: Optional[float], unit: str) -> str:
+def _fmt(x: float | None, unit: str) -> str:
     return "none" if x is None else f"{x:.4g} {unit}"
 
 
-def k_rows(k: float, brs: dict[str, list[BranchCot]], power: ClutchPower) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+def k_rows(
+    k: float, brs: dict[str, list[BranchCot]], power: ClutchPower
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """One table row for k (break-evens against the least VE and against each VE branch) and one row per branch."""
     branch_rows = []
     for model, items in brs.items():
         for b in items:
             r = b.minimise(power)
-            branch_rows.append({"k": k, "model": model.upper(), "branch_label": b.label,
-                                "critical_slope_deg": math.degrees(b.lo_rad), "mechanical_cot_min": math.tan(b.lo_rad),
-                                **{key: v for key, v in r.items() if key != "slope_range_rad"}})
+            branch_rows.append(
+                {
+                    "k": k,
+                    "model": model.upper(),
+                    "branch_label": b.label,
+                    "critical_slope_deg": math.degrees(b.lo_rad),
+                    "mechanical_cot_min": math.tan(b.lo_rad),
+                    **{key: v for key, v in r.items() if key != "slope_range_rad"},
+                }
+            )
     hold = break_even(brs["er"], brs["ve"], power, "hold_power_w")
     switch = break_even(brs["er"], brs["ve"], power, "switch_energy_j")
     row: dict[str, Any] = {
-        "k": k, **power.as_dict(),
+        "k": k,
+        **power.as_dict(),
         "er_mechanical_cot_min": min((math.tan(b.lo_rad) for b in brs["er"]), default=math.nan),
         "ve_mechanical_cot_min": min((math.tan(b.lo_rad) for b in brs["ve"]), default=math.nan),
         "ve_least_branch": hold["ve_branch"],
-        "break_even_hold_power_w": hold["value"], "break_even_hold_power_reason": hold["reason"],
-        "break_even_switch_energy_j": switch["value"], "break_even_switch_energy_reason": switch["reason"],
+        "break_even_hold_power_w": hold["value"],
+        "break_even_hold_power_reason": hold["reason"],
+        "break_even_switch_energy_j": switch["value"],
+        "break_even_switch_energy_reason": switch["reason"],
         "break_even_resolved": hold.get("resolved"),
     }
     for ve in brs["ve"]:
@@ -69,22 +81,35 @@ def k_rows(k: float, brs: dict[str, list[BranchCot]], power: ClutchPower) -> tup
     return row, branch_rows
 
 
-def figure_series(brs: dict[str, list[BranchCot]], power: ClutchPower,
-                  holds_w: tuple[float, ...] = HOLD_POWER_FIGURE_W) -> list[dict[str, Any]]:
+def figure_series(
+    brs: dict[str, list[BranchCot]], power: ClutchPower, holds_w: tuple[float, ...] = HOLD_POWER_FIGURE_W
+) -> list[dict[str, Any]]:
     """Least system CoT of each branch against the ER clutch's holding power (the other powers as given)."""
     rows = []
     for model, items in brs.items():
         for b in items:
             for p_w in holds_w:
                 r = b.minimise(power.replace(hold_power_w=p_w))
-                rows.append({"model": model.upper(), "branch_label": b.label, "hold_power_w": p_w,
-                             "min_system_cot": r["min_system_cot"], "min_system_cot_slope_deg": r["min_system_cot_slope_deg"],
-                             "min_system_cot_at_bound": r["min_system_cot_at_bound"]})
+                rows.append(
+                    {
+                        "model": model.upper(),
+                        "branch_label": b.label,
+                        "hold_power_w": p_w,
+                        "min_system_cot": r["min_system_cot"],
+                        "min_system_cot_slope_deg": r["min_system_cot_slope_deg"],
+                        "min_system_cot_at_bound": r["min_system_cot_at_bound"],
+                    }
+                )
     return rows
 
 
-def figure_system_cot(series: list[dict[str, Any]], k: float, break_even_w: Optional[float], out: Path,
-                      per_branch_w: Optional[dict[str, Optional[float]]] = None) -> list[Path]:
+def figure_system_cot(
+    series: list[dict[str, Any]],
+    k: float,
+    break_even_w: float | None,
+    out: Path,
+    per_branch_w: dict[str, float | None] | None = None,
+) -> list[Path]:
     """Least system CoT against holding power (symmetric-log axis, linear below 0.01 W), one line per branch; a
     hollow marker where the least lies on the bound of the followed slope range (the start slope: the true least
     may be higher up); dashed: the break-even against the least VE, dotted: against each VE branch."""
@@ -97,7 +122,7 @@ def figure_system_cot(series: list[dict[str, Any]], k: float, break_even_w: Opti
     fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
     for (model, label), g in frame.groupby(["model", "branch_label"], sort=False):
         name = "ER" if model == "ER" else f"VE {label}"
-        line, = ax.plot(g["hold_power_w"], g["min_system_cot"], marker="o", label=name)
+        (line,) = ax.plot(g["hold_power_w"], g["min_system_cot"], marker="o", label=name)
         b = g[g["min_system_cot_at_bound"] == "start-slope"]
         if len(b):
             ax.plot(b["hold_power_w"], b["min_system_cot"], "o", mfc="white", color=line.get_color())
@@ -122,8 +147,16 @@ def figure_system_cot(series: list[dict[str, Any]], k: float, break_even_w: Opti
     return [png, write_csv(frame, out / FIGURE_CSV)]
 
 
-def system_cot_paper(out: Path, params: WheelParams, ks: tuple[float, ...], power: ClutchPower, *, backend: str,
-                     rtol: float, progress: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
+def system_cot_paper(
+    out: Path,
+    params: WheelParams,
+    ks: tuple[float, ...],
+    power: ClutchPower,
+    *,
+    backend: str,
+    rtol: float,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
     """Write the system-CoT table (CSV per k and per branch) and figure; return rows, files and headline lines."""
     import pandas as pd
 
@@ -144,18 +177,32 @@ def system_cot_paper(out: Path, params: WheelParams, ks: tuple[float, ...], powe
     files.append(write_csv(pd.DataFrame(branch_rows), out / BRANCH_CSV))
     at = next(r for r in rows if r["k"] == FIGURE_K)
     if fig_brs is not None:
-        per = {key.rsplit("_vs_ve_", 1)[1]: v for key, v in at.items() if key.startswith("break_even_hold_power_w_vs_ve_")}
+        per = {
+            key.rsplit("_vs_ve_", 1)[1]: v for key, v in at.items() if key.startswith("break_even_hold_power_w_vs_ve_")
+        }
         files += figure_system_cot(figure_series(fig_brs, power), FIGURE_K, at["break_even_hold_power_w"], out, per)
-    vs = "; ".join(f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_fmt(v, 'W')}" for key, v in at.items()
-                   if key.startswith("break_even_hold_power_w_vs_ve_"))
-    vs_sw = "; ".join(f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_fmt(v, 'J')}" for key, v in at.items()
-                      if key.startswith("break_even_switch_energy_j_vs_ve_"))
+    vs = "; ".join(
+        f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_fmt(v, 'W')}"
+        for key, v in at.items()
+        if key.startswith("break_even_hold_power_w_vs_ve_")
+    )
+    vs_sw = "; ".join(
+        f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_fmt(v, 'J')}"
+        for key, v in at.items()
+        if key.startswith("break_even_switch_energy_j_vs_ve_")
+    )
     headline = [
-        {"quantity": f"break-even clutch holding power at k = {FIGURE_K:g} (W)", "paper": "- (not evaluated)",
-         "ours": f"vs the least VE ({at['ve_least_branch']}): {_fmt(at['break_even_hold_power_w'], 'W')}; {vs}",
-         "note": "ER's least system CoT beats VE's below it; " + at["break_even_hold_power_reason"]},
-        {"quantity": f"break-even switching energy, bistable clutch, k = {FIGURE_K:g} (J)", "paper": "-",
-         "ours": f"vs the least VE: {_fmt(at['break_even_switch_energy_j'], 'J')}; {vs_sw}",
-         "note": "no holding power, two switchings per step; " + at["break_even_switch_energy_reason"]},
+        {
+            "quantity": f"break-even clutch holding power at k = {FIGURE_K:g} (W)",
+            "paper": "- (not evaluated)",
+            "ours": f"vs the least VE ({at['ve_least_branch']}): {_fmt(at['break_even_hold_power_w'], 'W')}; {vs}",
+            "note": "ER's least system CoT beats VE's below it; " + at["break_even_hold_power_reason"],
+        },
+        {
+            "quantity": f"break-even switching energy, bistable clutch, k = {FIGURE_K:g} (J)",
+            "paper": "-",
+            "ours": f"vs the least VE: {_fmt(at['break_even_switch_energy_j'], 'J')}; {vs_sw}",
+            "note": "no holding power, two switchings per step; " + at["break_even_switch_energy_reason"],
+        },
     ]
     return {"rows": rows, "branch_rows": branch_rows, "files": files, "headline": headline}

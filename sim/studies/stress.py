@@ -50,8 +50,9 @@ def stress_sweep(
     t_start = time.perf_counter()
     total = len(grid)
     for i, (k, c, phi, ratio) in enumerate(grid):
-        params = base.replace(stiffness_n_per_m=k, damping_ns_per_m=c, slope_rad=phi,
-                              leg_mass_kg=base.hub_mass_kg * ratio)
+        params = base.replace(
+            stiffness_n_per_m=k, damping_ns_per_m=c, slope_rad=phi, leg_mass_kg=base.hub_mass_kg * ratio
+        )
         for model, z in itertools.product(models, starts):
             t0 = time.perf_counter()
             key: str
@@ -61,23 +62,47 @@ def stress_sweep(
                 key = "valid" if ok else "unclassified"
                 max_steps = max(max_steps, int(r.nsteps))
                 if not ok:
-                    unclassified.append({"k": k, "c": c, "slope_rad": phi, "mass_ratio": ratio, "model": model,
-                                         "start": list(z), "error": "non-finite result"})
+                    unclassified.append(
+                        {
+                            "k": k,
+                            "c": c,
+                            "slope_rad": phi,
+                            "mass_ratio": ratio,
+                            "model": model,
+                            "start": list(z),
+                            "error": "non-finite result",
+                        }
+                    )
             except StepFailure as err:
                 key = err.reason.value
-            except Exception as err:  # noqa: BLE001 - the sweep's job is to catch and report these
+            except Exception as err:
                 if interrupted_by_user(err):  # Ctrl-C inside compiled code arrives as a SystemError
                     raise KeyboardInterrupt from err
                 key = "unclassified"
-                unclassified.append({"k": k, "c": c, "slope_rad": phi, "mass_ratio": ratio, "model": model,
-                                     "start": list(z), "error": f"{type(err).__name__}: {err}"})
+                unclassified.append(
+                    {
+                        "k": k,
+                        "c": c,
+                        "slope_rad": phi,
+                        "mass_ratio": ratio,
+                        "model": model,
+                        "start": list(z),
+                        "error": f"{type(err).__name__}: {err}",
+                    }
+                )
             worst_seconds = max(worst_seconds, time.perf_counter() - t0)
             counts[model][key] = counts[model].get(key, 0) + 1
         if progress:
             progress(i + 1, total)
     return {
-        "grid": {"k": list(k_values), "c": list(c_values), "slope_rad": list(slopes_rad),
-                 "mass_ratio": list(mass_ratios), "models": list(models), "starts": [list(z) for z in starts]},
+        "grid": {
+            "k": list(k_values),
+            "c": list(c_values),
+            "slope_rad": list(slopes_rad),
+            "mass_ratio": list(mass_ratios),
+            "models": list(models),
+            "starts": [list(z) for z in starts],
+        },
         "points": total * len(models) * len(starts),
         "counts": counts,
         "unclassified": unclassified,
@@ -116,8 +141,9 @@ def compare_with_reference(
     t_fast = 0.0
     t_ref = 0.0
     for i, (k, c, phi, ratio, model, z) in enumerate(grid):
-        params = base.replace(stiffness_n_per_m=k, damping_ns_per_m=c, slope_rad=phi,
-                              leg_mass_kg=base.hub_mass_kg * ratio)
+        params = base.replace(
+            stiffness_n_per_m=k, damping_ns_per_m=c, slope_rad=phi, leg_mass_kg=base.hub_mass_kg * ratio
+        )
         zz = np.array(z, dtype=float)
         t0 = time.perf_counter()
         try:
@@ -141,11 +167,27 @@ def compare_with_reference(
         elif fast_out == ref_out:
             agree += 1
         else:
-            disagreements.append({"k": k, "c": c, "slope_rad": phi, "mass_ratio": ratio, "model": model,
-                                  "start": list(z),
-                                  "fast": fast_out if isinstance(fast_out, str) else "valid",
-                                  "reference": ref_out if isinstance(ref_out, str) else "valid"})
+            disagreements.append(
+                {
+                    "k": k,
+                    "c": c,
+                    "slope_rad": phi,
+                    "mass_ratio": ratio,
+                    "model": model,
+                    "start": list(z),
+                    "fast": fast_out if isinstance(fast_out, str) else "valid",
+                    "reference": ref_out if isinstance(ref_out, str) else "valid",
+                }
+            )
         if progress:
             progress(i + 1, len(grid))
-    return {"points": len(grid), "agree": agree, "disagreements": disagreements, "max_dz_valid": max_dz,
-            "max_period_difference_s": max_dt, "fast_seconds": t_fast, "reference_seconds": t_ref, "rtol": rtol}
+    return {
+        "points": len(grid),
+        "agree": agree,
+        "disagreements": disagreements,
+        "max_dz_valid": max_dz,
+        "max_period_difference_s": max_dt,
+        "fast_seconds": t_fast,
+        "reference_seconds": t_ref,
+        "rtol": rtol,
+    }

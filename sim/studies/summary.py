@@ -8,8 +8,8 @@ from typing import Any
 
 from rimless.sim.continuation.algorithm1 import CriticalSlope
 from rimless.sim.model.params import WheelParams
-from rimless.sim.step.poincare import FixedPoint
 from rimless.sim.model.rigid import RigidWheel
+from rimless.sim.step.poincare import FixedPoint
 
 
 def params_summary(p: WheelParams) -> dict[str, Any]:
@@ -50,7 +50,12 @@ def fixed_point_summary(fp: FixedPoint, p: WheelParams, model: str, *, guess: An
         },
         "leading_foot_tension_s": d.get("leading_foot_tension_s"),
         "trailing_foot_min_height_m": d.get("trailing_foot_min_height_m"),
-        "impact_impulse_N_s": {"b_x": imp.impulse[0], "b_y": imp.impulse[1], "a_x": imp.impulse[2], "a_y": imp.impulse[3]},
+        "impact_impulse_N_s": {
+            "b_x": imp.impulse[0],
+            "b_y": imp.impulse[1],
+            "a_x": imp.impulse[2],
+            "a_y": imp.impulse[3],
+        },
         "friction_required": {"b": mu_b, "a": mu_a},
         "phase_durations_s": step.phase_durations_s,
         "residual": fp.residual,
@@ -99,19 +104,28 @@ def contact_validity(fp_out: dict[str, Any]) -> dict[str, Any]:
     lead = mf["dlsp_leading_b"]
     tension = min(0.0, lead) if lead is not None and lead == lead else 0.0
     mu = max(fp_out["friction_required"]["b"], fp_out["friction_required"]["a"])
-    note = (f"contact: {'valid' if valid else 'NOT valid'} under unilateral contact (smallest stance force in single "
-            f"support {stance_min:.3g} N, normal impulses {imp['b_y']:.3g} and {imp['a_y']:.3g} N s); leading-foot "
-            f"tension in double support {tension:.3g} N for {1e3 * (fp_out.get('leading_foot_tension_s') or 0.0):.1f} ms "
-            f"(rigid-contact artefact, rejected only with --strict-contact); friction needed {mu:.2f}")
-    return {"contact_valid": valid, "contact_note": note, "min_stance_force_single_support_N": stance_min,
-            "leading_foot_tension_N": tension, "friction_required_max": mu}
+    note = (
+        f"contact: {'valid' if valid else 'NOT valid'} under unilateral contact (smallest stance force in single "
+        f"support {stance_min:.3g} N, normal impulses {imp['b_y']:.3g} and {imp['a_y']:.3g} N s); leading-foot "
+        f"tension in double support {tension:.3g} N for {1e3 * (fp_out.get('leading_foot_tension_s') or 0.0):.1f} ms "
+        f"(rigid-contact artefact, rejected only with --strict-contact); friction needed {mu:.2f}"
+    )
+    return {
+        "contact_valid": valid,
+        "contact_note": note,
+        "min_stance_force_single_support_N": stance_min,
+        "leading_foot_tension_N": tension,
+        "friction_required_max": mu,
+    }
 
 
 def relabel_note(energy_J: float, mass_model: str) -> str:
     """What the relabelling snap of the old trailing leg does to the energy (sign and size)."""
     verb = "adds" if energy_J > 0 else "removes"
-    return (f"relabel snap: snapping the old trailing leg to L0 with zero relative velocity at touchdown {verb} "
-            f"{abs(energy_J):.3g} J per step ({mass_model} mass model; positive relabel_energy_J adds energy)")
+    return (
+        f"relabel snap: snapping the old trailing leg to L0 with zero relative velocity at touchdown {verb} "
+        f"{abs(energy_J):.3g} J per step ({mass_model} mass model; positive relabel_energy_J adds energy)"
+    )
 
 
 def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
@@ -119,15 +133,23 @@ def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
     fp = cs.fixed_point
     if cs.end is not None:
         pt = cs.end.point
-        at = {"theta_plus_rad": float(pt.z[0]), "theta_dot_plus_rad_s": float(pt.z[1]), "step_period_s": pt.period_s,
-              "max_abs_eigenvalue": pt.max_abs_eigenvalue,
-              "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in pt.eigenvalues]}
+        at = {
+            "theta_plus_rad": float(pt.z[0]),
+            "theta_dot_plus_rad_s": float(pt.z[1]),
+            "step_period_s": pt.period_s,
+            "max_abs_eigenvalue": pt.max_abs_eigenvalue,
+            "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in pt.eigenvalues],
+        }
         if pt.facts is not None:
             at["contact"] = pt.facts.as_dict()
     else:
-        at = {"theta_plus_rad": float(fp.z[0]), "theta_dot_plus_rad_s": float(fp.z[1]),
-              "step_period_s": fp.step.period_s, "max_abs_eigenvalue": fp.max_abs_eigenvalue,
-              "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues]}
+        at = {
+            "theta_plus_rad": float(fp.z[0]),
+            "theta_dot_plus_rad_s": float(fp.z[1]),
+            "step_period_s": fp.step.period_s,
+            "max_abs_eigenvalue": fp.max_abs_eigenvalue,
+            "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues],
+        }
     return {
         "model": cs.model,
         "critical_slope_rad": cs.critical_slope_rad,

@@ -35,8 +35,13 @@ from rimless.errors import ParameterError
 
 CACHE_VERSION = 4  # the layout of a cached file; the code is keyed by code_fingerprint
 # the packages every grid point's result depends on (source files hashed into the cache key)
-CODE_PACKAGES = ("rimless.sim.model", "rimless.sim.integrate", "rimless.sim.fast", "rimless.sim.step",
-                 "rimless.sim.continuation")
+CODE_PACKAGES = (
+    "rimless.sim.model",
+    "rimless.sim.integrate",
+    "rimless.sim.fast",
+    "rimless.sim.step",
+    "rimless.sim.continuation",
+)
 # what a computation in the firmware-in-the-loop package depends on besides
 LOOP_PACKAGES = ("rimless.sim.in_the_loop", "rimless.firmware")
 # sweepable parameters: option name -> (WheelParams field, unit)
@@ -76,7 +81,7 @@ def _package_files(name: str) -> list[Path]:
     return [origin]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def code_fingerprint(module: str = "") -> str:
     """sha256 of the source of CODE_PACKAGES and of `module` (the computing function's module; its package's
     LOOP_PACKAGES too when it belongs to the firmware in the loop), with the versions of numpy, scipy and numba:
@@ -110,7 +115,9 @@ class SweepOptions:
     to_end: bool = False
 
 
-def grid_points(base: Any, models: Iterable[str], grid: dict[str, list[float]], mass_models: Iterable[str]) -> list[dict[str, Any]]:
+def grid_points(
+    base: Any, models: Iterable[str], grid: dict[str, list[float]], mass_models: Iterable[str]
+) -> list[dict[str, Any]]:
     """Every combination as a plain dict {model, params (WheelParams.to_dict())} (the task's input)."""
     import itertools
 
@@ -129,9 +136,16 @@ def point_key(point: dict[str, Any], options: Any, compute: Callable[..., Any] |
     """The cache key of a grid point: sha256 of its parameters, model, options, CACHE_VERSION and the
     fingerprint of the code that computes it (`compute`, default compute_point)."""
     fn = compute or compute_point
-    payload = json.dumps({"v": CACHE_VERSION, "point": point, "options": options.__dict__,
-                          "compute": f"{fn.__module__}.{fn.__qualname__}", "code": code_fingerprint(fn.__module__)},
-                         sort_keys=True)
+    payload = json.dumps(
+        {
+            "v": CACHE_VERSION,
+            "point": point,
+            "options": options.__dict__,
+            "compute": f"{fn.__module__}.{fn.__qualname__}",
+            "code": code_fingerprint(fn.__module__),
+        },
+        sort_keys=True,
+    )
     return hashlib.sha256(payload.encode()).hexdigest()[:32]
 
 
@@ -145,9 +159,15 @@ def compute_point(point: dict[str, Any], options: SweepOptions) -> dict[str, Any
     t0 = time.perf_counter()
     params = WheelParams(**point["params"])
     try:
-        branches = trace_gait_branches(params, point["model"], backend=options.backend, rtol=options.rtol,
-                                       start_slope_rad=options.start_slope_rad, n_guesses=options.n_guesses,
-                                       to_end=options.to_end)
+        branches = trace_gait_branches(
+            params,
+            point["model"],
+            backend=options.backend,
+            rtol=options.rtol,
+            start_slope_rad=options.start_slope_rad,
+            n_guesses=options.n_guesses,
+            to_end=options.to_end,
+        )
     except StepFailure as err:  # no gait could even be searched for: one row saying so
         branches = []
         error = str(err)
@@ -156,12 +176,26 @@ def compute_point(point: dict[str, Any], options: SweepOptions) -> dict[str, Any
     rows = [b.row() for b in branches]
     if not rows:
         p = params.replace(slope_rad=options.start_slope_rad)
-        rows = [{"model": point["model"].upper(), "k": p.k, "c": p.c, "mass_model": p.mass_model,
-                 "hub_mass_kg": p.hub_mass_kg, "leg_mass_kg": p.leg_mass_kg, "start_slope_rad": p.slope_rad,
-                 "branch": "", "branch_label": "", "reason": "no-gait",
-                 "detail": error or "no period-1 gait found at the start slope",
-                 "critical_slope_rad": math.nan, "critical_slope_deg": math.nan, "cot": math.nan,
-                 "stable_at_start": False, "contact_valid_at_start": False}]
+        rows = [
+            {
+                "model": point["model"].upper(),
+                "k": p.k,
+                "c": p.c,
+                "mass_model": p.mass_model,
+                "hub_mass_kg": p.hub_mass_kg,
+                "leg_mass_kg": p.leg_mass_kg,
+                "start_slope_rad": p.slope_rad,
+                "branch": "",
+                "branch_label": "",
+                "reason": "no-gait",
+                "detail": error or "no period-1 gait found at the start slope",
+                "critical_slope_rad": math.nan,
+                "critical_slope_deg": math.nan,
+                "cot": math.nan,
+                "stable_at_start": False,
+                "contact_valid_at_start": False,
+            }
+        ]
     pts = [r for b in branches for r in b.point_rows()]
     return {"rows": rows, "points": pts, "seconds": time.perf_counter() - t0}
 
@@ -175,8 +209,9 @@ def _worker_setup() -> float:
     return float(fast.warm_up())
 
 
-def _read_cached(cache_dir: str | None, point: dict[str, Any], options: Any,
-                 compute: Callable[..., Any] | None = None) -> dict[str, Any] | None:
+def _read_cached(
+    cache_dir: str | None, point: dict[str, Any], options: Any, compute: Callable[..., Any] | None = None
+) -> dict[str, Any] | None:
     """The cached result of `point` (marked ``cached``), or None when there is none or it cannot be read."""
     if not cache_dir:
         return None
@@ -191,8 +226,12 @@ def _read_cached(cache_dir: str | None, point: dict[str, Any], options: Any,
     return out
 
 
-def _cached_compute(point: dict[str, Any], options: Any, cache_dir: str | None,
-                    compute: Callable[[dict[str, Any], Any], dict[str, Any]] | None = None) -> dict[str, Any]:
+def _cached_compute(
+    point: dict[str, Any],
+    options: Any,
+    cache_dir: str | None,
+    compute: Callable[[dict[str, Any], Any], dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     hit = _read_cached(cache_dir, point, options, compute)
     if hit is not None:
         return hit
@@ -318,15 +357,22 @@ def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
                 # kills its workers
                 try:
                     with _children_write_to(workers_log()):
-                        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                                               processes=True, dashboard_address=":0", silence_logs=logging.ERROR,
-                                               plugins=(_ctrl_c_is_the_commands(),))
+                        cluster = LocalCluster(
+                            n_workers=workers or os.cpu_count() or 1,
+                            threads_per_worker=1,
+                            processes=True,
+                            dashboard_address=":0",
+                            silence_logs=logging.ERROR,
+                            plugins=(_ctrl_c_is_the_commands(),),
+                        )
                 except Exception as err:  # noqa: BLE001 - Dask wraps what went wrong (a worker died, no port, ...)
                     from rimless.errors import RunFailure
 
                     cause = err.__cause__ or err
-                    raise RunFailure(f"cannot start a local Dask cluster: {type(cause).__name__}: "
-                                     f"{str(cause).splitlines()[0] if str(cause) else err}") from None
+                    raise RunFailure(
+                        f"cannot start a local Dask cluster: {type(cause).__name__}: "
+                        f"{str(cause).splitlines()[0] if str(cause) else err}"
+                    ) from None
                 client = Client(cluster)
                 _no_gc_callback()
             else:
@@ -388,15 +434,16 @@ def _close_at_once(client: Any, cluster: Any, *, interrupted: bool = False) -> N
         sys.unraisablehook = lambda unraisable: None
     if cluster is not None:
         try:
-            import psutil
             from multiprocessing import resource_tracker
 
-            keep = {getattr(resource_tracker._resource_tracker, "_pid", None)}  # noqa: SLF001 - not a worker
+            import psutil
+
+            keep = {getattr(resource_tracker._resource_tracker, "_pid", None)}
             for child in psutil.Process().children(recursive=True):
                 try:  # one child gone or unreadable does not spare the others
                     if child.pid not in keep and "resource_tracker" not in " ".join(child.cmdline()):
                         child.kill()
-                except Exception:  # noqa: BLE001, S112 - gone already
+                except Exception:  # noqa: BLE001 - gone already
                     continue
         except Exception:  # noqa: BLE001 - best effort; close() below ends them anyway
             pass
@@ -417,8 +464,10 @@ def worker_failure(err: BaseException, scheduler: str) -> None:
     text = f"{type(err).__name__}: {err}"
     if isinstance(err, ImportError) or "No module named 'rimless" in text:
         missing = getattr(err, "name", None) or "rimless"
-        raise UserError(f"--scheduler {scheduler}: a Dask worker cannot import {missing} ({text.splitlines()[0]}); "
-                        "install rimless (pip install -e \".[pc]\") in the environment every worker runs in") from None
+        raise UserError(
+            f"--scheduler {scheduler}: a Dask worker cannot import {missing} ({text.splitlines()[0]}); "
+            'install rimless (pip install -e ".[pc]") in the environment every worker runs in'
+        ) from None
 
 
 def run_sweep(
@@ -472,8 +521,9 @@ def run_sweep(
                 client.run(setup)  # once per worker, before any task
                 setup_s = time.perf_counter() - t_setup
                 n_workers = len(client.scheduler_info().get("workers", {})) or 1
-                futures = {client.submit(_cached_compute, points[i], options, cache, compute, pure=False): i
-                           for i in todo}
+                futures = {
+                    client.submit(_cached_compute, points[i], options, cache, compute, pure=False): i for i in todo
+                }
                 for fut in as_completed(futures):
                     results[futures[fut]] = fut.result()
                     done += 1
@@ -485,8 +535,9 @@ def run_sweep(
     rows = [r for res in results if res is not None for r in res["rows"]]
     pts = [r for res in results if res is not None for r in res["points"]]
     computed = sum(1 for res in results if res is not None and not res.get("cached"))
-    return SweepResult(rows, pts, time.perf_counter() - t0, computed, len(points) - computed,
-                       scheduler, n_workers, setup_s)
+    return SweepResult(
+        rows, pts, time.perf_counter() - t0, computed, len(points) - computed, scheduler, n_workers, setup_s
+    )
 
 
 def write_table(rows: list[dict[str, Any]], path_stem: Path, metadata: dict[str, Any]) -> list[Path]:
@@ -532,10 +583,20 @@ def parse_grid(params: Any, texts: dict[str, str | None]) -> dict[str, list[floa
     return grid
 
 
-def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]], mass_models: list[str],
-                 options: SweepOptions, out: Path, scheduler: str = "local", workers: int | None = None,
-                 cache_dir: Path | None = None, progress: Callable[[int, int], None] | None = None,
-                 power: Any = None) -> dict[str, Any]:
+def branch_sweep(
+    params: Any,
+    *,
+    models: list[str],
+    grid: dict[str, list[float]],
+    mass_models: list[str],
+    options: SweepOptions,
+    out: Path,
+    scheduler: str = "local",
+    workers: int | None = None,
+    cache_dir: Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    power: Any = None,
+) -> dict[str, Any]:
     """`rimless sim sweep`: every grid point's branches (run_sweep), written as `out`.parquet/.csv and
     `out`-points.parquet/.csv; returns the command's JSON object. An empty grid sweeps the wheel's own k."""
     from rimless.errors import RunFailure
@@ -550,8 +611,14 @@ def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]]
         res = run_sweep(points, options, scheduler=scheduler, workers=workers, cache_dir=cache_dir, progress=progress)
     except ConnectionError as err:
         raise ParameterError(f"--scheduler: {err}") from None
-    meta = {"grid": grid, "models": models, "mass_models": mass_models, "options": options.__dict__,
-            "base_params": params.to_dict(), "scheduler": scheduler}
+    meta = {
+        "grid": grid,
+        "models": models,
+        "mass_models": mass_models,
+        "options": options.__dict__,
+        "base_params": params.to_dict(),
+        "scheduler": scheduler,
+    }
     if not res.rows:
         raise RunFailure("the sweep produced no rows")
     from rimless.sim.model.electrical import ClutchPower
@@ -563,5 +630,13 @@ def branch_sweep(params: Any, *, models: list[str], grid: dict[str, list[float]]
     paths = write_table(res.rows, out, meta)
     if res.points:
         paths += write_table(res.points, out.with_name(out.name + "-points"), meta)
-    return {"rows": res.rows, "files": [str(p) for p in paths], "seconds": res.seconds, "computed": res.computed,
-            "cached": res.cached, "scheduler": scheduler, "workers": res.workers, "grid": grid}
+    return {
+        "rows": res.rows,
+        "files": [str(p) for p in paths],
+        "seconds": res.seconds,
+        "computed": res.computed,
+        "cached": res.cached,
+        "scheduler": scheduler,
+        "workers": res.workers,
+        "grid": grid,
+    }

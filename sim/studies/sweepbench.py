@@ -36,28 +36,36 @@ def _max_difference(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> float:
 
 
 def sweep_bench(points: list[dict[str, Any]], options: Any) -> dict[str, Any]:
-    from rimless.sim.studies.sweep import run_sweep
-
     import os
 
-    out: dict[str, Any] = {"grid_points": len(points), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
+    from rimless.sim.studies.sweep import run_sweep
+
+    out: dict[str, Any] = {
+        "grid_points": len(points),
+        "cores": os.cpu_count(),
+        "load_average_before": os.getloadavg()[0],
+    }
     runs = {}
-    for label, kwargs in (("sync", {"scheduler": "sync"}), ("1 worker", {"scheduler": "local", "workers": 1}),
-                          ("2 workers", {"scheduler": "local", "workers": 2})):
+    for label, kwargs in (
+        ("sync", {"scheduler": "sync"}),
+        ("1 worker", {"scheduler": "local", "workers": 1}),
+        ("2 workers", {"scheduler": "local", "workers": 2}),
+    ):
         t0 = time.perf_counter()
         res = run_sweep(points, options, **kwargs)
         runs[label] = res
         out[label] = {"seconds": time.perf_counter() - t0, "setup_s": res.setup_s, "rows": len(res.rows)}
     out["load_average_after"] = os.getloadavg()[0]
     out["speedup_1_to_2_workers"] = out["1 worker"]["seconds"] / out["2 workers"]["seconds"]
-    out["max_difference_between_schedulers"] = max(_max_difference(runs["sync"].rows, runs[k].rows)
-                                                   for k in ("1 worker", "2 workers"))
+    out["max_difference_between_schedulers"] = max(
+        _max_difference(runs["sync"].rows, runs[k].rows) for k in ("1 worker", "2 workers")
+    )
     return out
 
 
-def branch_end_bench(params: WheelParams = WheelParams(), repeats: int = 3) -> dict[str, Any]:
-    from rimless.sim.step.backend import make_map
+def branch_end_bench(params: WheelParams = WheelParams(), repeats: int = 3) -> dict[str, Any]:  # noqa: B008
     from rimless.sim.continuation.algorithm1 import critical_slope
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import default_guess
 
     def run(model: str, method: str, rtol: float, **kw: Any) -> dict[str, Any]:
@@ -66,28 +74,40 @@ def branch_end_bench(params: WheelParams = WheelParams(), repeats: int = 3) -> d
         for _ in range(repeats):
             pmap = make_map(params, model, backend="fast", rtol=rtol)
             t0 = time.perf_counter()
-            cs = critical_slope(pmap, default_guess(params, model), jacobian_factory=lambda m: m.jacobian,
-                                method=method, **kw)
+            cs = critical_slope(
+                pmap, default_guess(params, model), jacobian_factory=lambda m: m.jacobian, method=method, **kw
+            )
             best = min(best, time.perf_counter() - t0)
         assert cs is not None
-        return {"seconds": best, "critical_slope_rad": cs.critical_slope_rad, "reason": cs.reason,
-                "map_evaluations": cs.map_evaluations, "rtol": rtol}
+        return {
+            "seconds": best,
+            "critical_slope_rad": cs.critical_slope_rad,
+            "reason": cs.reason,
+            "map_evaluations": cs.map_evaluations,
+            "rtol": rtol,
+        }
 
     out: dict[str, Any] = {}
     for model in ("er", "ve"):
         run(model, "arclength", 1e-10)  # warm-up
-        entry: dict[str, Any] = {"arclength": run(model, "arclength", 1e-10),
-                                 "bisection": run(model, "bisection", 1e-10, refine_tol_rad=1e-8),
-                                 "arclength_rtol_1e-8": run(model, "arclength", 1e-8)}
-        entry["difference_rad"] = abs(entry["arclength"]["critical_slope_rad"] - entry["bisection"]["critical_slope_rad"])
-        entry["rtol_1e-8_difference_rad"] = abs(entry["arclength_rtol_1e-8"]["critical_slope_rad"]
-                                                - entry["arclength"]["critical_slope_rad"])
+        entry: dict[str, Any] = {
+            "arclength": run(model, "arclength", 1e-10),
+            "bisection": run(model, "bisection", 1e-10, refine_tol_rad=1e-8),
+            "arclength_rtol_1e-8": run(model, "arclength", 1e-8),
+        }
+        entry["difference_rad"] = abs(
+            entry["arclength"]["critical_slope_rad"] - entry["bisection"]["critical_slope_rad"]
+        )
+        entry["rtol_1e-8_difference_rad"] = abs(
+            entry["arclength_rtol_1e-8"]["critical_slope_rad"] - entry["arclength"]["critical_slope_rad"]
+        )
         out[model] = entry
     return out
 
 
-def bench_sweep(params: WheelParams, *, models: list[str], grid: dict[str, list[float]], mass_models: list[str],
-                options: Any) -> dict[str, Any]:
+def bench_sweep(
+    params: WheelParams, *, models: list[str], grid: dict[str, list[float]], mass_models: list[str], options: Any
+) -> dict[str, Any]:
     """`rimless sim sweep --bench`: the grid (no cache) on each scheduler, then the branch-end location at
     `params` by pseudo-arclength against bisection. An empty grid sweeps the wheel's own k."""
     from rimless.sim.studies.sweep import grid_points
@@ -100,22 +120,30 @@ def format_bench(result: dict[str, Any]) -> str:
     lines = []
     s = result.get("sweep")
     if s:
-        lines.append(f"sweep of {s['grid_points']} grid points (no cache) on {s['cores']} cores, load average "
-                     f"{s['load_average_before']:.1f} before, {s['load_average_after']:.1f} after (a busy machine "
-                     "shrinks the speed-up):")
+        lines.append(
+            f"sweep of {s['grid_points']} grid points (no cache) on {s['cores']} cores, load average "
+            f"{s['load_average_before']:.1f} before, {s['load_average_after']:.1f} after (a busy machine "
+            "shrinks the speed-up):"
+        )
         for k in ("sync", "1 worker", "2 workers"):
             lines.append(f"  {k:10s} {s[k]['seconds']:7.1f} s (worker set-up {s[k]['setup_s']:.1f} s)")
-        lines.append(f"  speed-up 1 -> 2 workers: {s['speedup_1_to_2_workers']:.2f}x; largest difference between "
-                     f"schedulers {s['max_difference_between_schedulers']:.3g}")
+        lines.append(
+            f"  speed-up 1 -> 2 workers: {s['speedup_1_to_2_workers']:.2f}x; largest difference between "
+            f"schedulers {s['max_difference_between_schedulers']:.3g}"
+        )
     for model, e in result.get("branch_end", {}).items():
         a, b = e["arclength"], e["bisection"]
-        lines.append(f"{model} branch end: pseudo-arclength {a['seconds']:.2f} s, {a['map_evaluations']} maps -> "
-                     f"{a['critical_slope_rad']:.9f} rad ({a['reason']}); bisection {b['seconds']:.2f} s, "
-                     f"{b['map_evaluations']} maps -> {b['critical_slope_rad']:.9f} rad ({b['reason']}); "
-                     f"difference {e['difference_rad']:.2g} rad")
+        lines.append(
+            f"{model} branch end: pseudo-arclength {a['seconds']:.2f} s, {a['map_evaluations']} maps -> "
+            f"{a['critical_slope_rad']:.9f} rad ({a['reason']}); bisection {b['seconds']:.2f} s, "
+            f"{b['map_evaluations']} maps -> {b['critical_slope_rad']:.9f} rad ({b['reason']}); "
+            f"difference {e['difference_rad']:.2g} rad"
+        )
         if "arclength_rtol_1e-8" in e:
             c = e["arclength_rtol_1e-8"]
-            lines.append(f"  pseudo-arclength at rtol 1e-8: {c['seconds']:.2f} s, {c['map_evaluations']} maps -> "
-                         f"{c['critical_slope_rad']:.9f} rad ({c['reason']}); {e['rtol_1e-8_difference_rad']:.2g} rad "
-                         "from rtol 1e-10")
+            lines.append(
+                f"  pseudo-arclength at rtol 1e-8: {c['seconds']:.2f} s, {c['map_evaluations']} maps -> "
+                f"{c['critical_slope_rad']:.9f} rad ({c['reason']}); {e['rtol_1e-8_difference_rad']:.2g} rad "
+                "from rtol 1e-10"
+            )
     return "\n".join(lines)

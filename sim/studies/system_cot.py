@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -45,11 +45,11 @@ class BranchCot:
     params: WheelParams  # any slope: replaced per evaluation
     points: list[tuple[float, np.ndarray]]  # (slope rad, fixed point z), the continuation's
     make_map: Callable[[WheelParams], Any]
-    jacobian: Optional[Callable[[Any], Any]] = None
+    jacobian: Callable[[Any], Any] | None = None
     label: str = ""
     lo_tol_rad: float = 0.0  # how well the lower end (the critical slope) is located, rad
     guessed: frozenset[float] = frozenset()  # slopes of `points` whose z is only a guess (solved on use)
-    _cache: dict[float, Optional[StepTransport]] = field(default_factory=dict)
+    _cache: dict[float, StepTransport | None] = field(default_factory=dict)
     failed: int = 0
 
     def __post_init__(self) -> None:
@@ -65,7 +65,7 @@ class BranchCot:
     def hi_rad(self) -> float:
         return self.points[-1][0]
 
-    def transport(self, slope_rad: float) -> Optional[StepTransport]:
+    def transport(self, slope_rad: float) -> StepTransport | None:
         """The step's travel and timing at this slope (None when the fixed point cannot be solved)."""
         key = float(slope_rad)
         if key in self._cache:
@@ -80,7 +80,7 @@ class BranchCot:
             if not known:
                 fp = solve_fixed_point(pmap, z0, jacobian=self.jacobian(pmap) if self.jacobian else None, record=False)
                 z0 = fp.z
-            tr: Optional[StepTransport] = step_transport(pmap.step(z0), q)
+            tr: StepTransport | None = step_transport(pmap.step(z0), q)
         except StepFailure:
             tr = None
             self.failed += 1
@@ -108,21 +108,29 @@ class BranchCot:
         if len(slopes) == 1:
             return self._result(slopes[0], values[0], power, "one fixed point only")
         a, b = slopes[max(i - 1, 0)], slopes[min(i + 1, len(slopes) - 1)]
-        res = minimize_scalar(lambda s: self.system_cot(s, power), bounds=(a, b), method="bounded",
-                              options={"xatol": tol_rad})
+        res = minimize_scalar(
+            lambda s: self.system_cot(s, power), bounds=(a, b), method="bounded", options={"xatol": tol_rad}
+        )
         s_best, v_best = (float(res.x), float(res.fun)) if res.fun < values[i] else (slopes[i], values[i])
-        how = (f"bounded Brent on [{a:.6f}, {b:.6f}] rad around the least of {len(slopes)} recorded fixed points, "
-               f"xatol {tol_rad:g} rad")
+        how = (
+            f"bounded Brent on [{a:.6f}, {b:.6f}] rad around the least of {len(slopes)} recorded fixed points, "
+            f"xatol {tol_rad:g} rad"
+        )
         if not res.success:
             how += f" (stopped: {res.message})"
         return self._result(s_best, v_best, power, how, tol_rad)
 
     def _result(self, s: float, v: float, power: ClutchPower, how: str, tol: float = 0.0) -> dict[str, Any]:
         tr = self.transport(s) if math.isfinite(s) else None
-        at = (cot_of(tr, self.params.replace(slope_rad=s), self.model, power) if tr is not None else {})
+        at = cot_of(tr, self.params.replace(slope_rad=s), self.model, power) if tr is not None else {}
         near = 2 * tol + 1e-12
-        bound = ("critical-slope" if math.isfinite(s) and s - self.lo_rad <= near
-                 else "start-slope" if math.isfinite(s) and self.hi_rad - s <= near else "")
+        bound = (
+            "critical-slope"
+            if math.isfinite(s) and s - self.lo_rad <= near
+            else "start-slope"
+            if math.isfinite(s) and self.hi_rad - s <= near
+            else ""
+        )
         return {
             "min_system_cot": v,
             "min_system_cot_slope_rad": s,
@@ -138,7 +146,7 @@ class BranchCot:
         }
 
 
-def _branch_factory(model: str, backend: str, rtol: float, held: bool = False) -> tuple[Callable, Optional[Callable]]:
+def _branch_factory(model: str, backend: str, rtol: float, held: bool = False) -> tuple[Callable, Callable | None]:
     from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.step.poincare import bilateral_map
 
@@ -160,7 +168,7 @@ def critical_slope_branch(cs: Any, params: WheelParams, backend: str, rtol: floa
     return BranchCot(cs.model, params, pts, factory, jac, label=cs.model, lo_tol_rad=tol)
 
 
-def gait_branch_cot(gb: Any, backend: str, rtol: float) -> Optional[BranchCot]:
+def gait_branch_cot(gb: Any, backend: str, rtol: float) -> BranchCot | None:
     """The stable, valid part of a traced gait branch (rimless.sim.continuation.branches.GaitBranch), or None
     when the gait is not stable and valid at the start slope."""
     crit = gb.critical_slope_rad
@@ -174,8 +182,8 @@ def gait_branch_cot(gb: Any, backend: str, rtol: float) -> Optional[BranchCot]:
     return BranchCot(gb.model, gb.params, pts, factory, jac, label=gb.label, lo_tol_rad=tol)
 
 
-def _least(branches: Sequence[BranchCot], power: ClutchPower) -> tuple[float, Optional[BranchCot], dict[str, Any]]:
-    best: tuple[float, Optional[BranchCot], dict[str, Any]] = (math.inf, None, {})
+def _least(branches: Sequence[BranchCot], power: ClutchPower) -> tuple[float, BranchCot | None, dict[str, Any]]:
+    best: tuple[float, BranchCot | None, dict[str, Any]] = (math.inf, None, {})
     for br in branches:
         r = br.minimise(power)
         if r["min_system_cot"] < best[0]:
@@ -183,8 +191,14 @@ def _least(branches: Sequence[BranchCot], power: ClutchPower) -> tuple[float, Op
     return best
 
 
-def break_even(er: Sequence[BranchCot], ve: Sequence[BranchCot], power: ClutchPower, field_name: str,
-               *, rtol: float = BREAK_EVEN_RTOL) -> dict[str, Any]:
+def break_even(
+    er: Sequence[BranchCot],
+    ve: Sequence[BranchCot],
+    power: ClutchPower,
+    field_name: str,
+    *,
+    rtol: float = BREAK_EVEN_RTOL,
+) -> dict[str, Any]:
     """The value of `field_name` (hold_power_w or switch_energy_j) at which ER's least system CoT equals the VE
     branches' least, the other powers as in `power` (for switch_energy_j the holding power is set to 0: a
     bistable clutch). ER wins below it. None (with a reason) when ER loses even at 0 or no branch exists."""
@@ -194,8 +208,13 @@ def break_even(er: Sequence[BranchCot], ve: Sequence[BranchCot], power: ClutchPo
     if field_name == "switch_energy_j":
         base = base.replace(hold_power_w=0.0)
     ve_best, ve_br, _ = _least(ve, base)
-    out: dict[str, Any] = {"quantity": field_name, "value": None, "ve_least_system_cot": ve_best,
-                           "ve_branch": ve_br.label if ve_br else "", "reason": ""}
+    out: dict[str, Any] = {
+        "quantity": field_name,
+        "value": None,
+        "ve_least_system_cot": ve_best,
+        "ve_branch": ve_br.label if ve_br else "",
+        "reason": "",
+    }
     if not er or ve_br is None:
         out["reason"] = "no stable, valid " + ("ER" if not er else "VE") + " branch"
         return out
@@ -223,15 +242,18 @@ def break_even(er: Sequence[BranchCot], ve: Sequence[BranchCot], power: ClutchPo
     out["cot_resolution"] = resolution
     if -g0 <= resolution:
         out["resolved"] = False
-        out["reason"] += (f"; NOT resolved: at zero power ER and VE differ by {-g0:.2g} in CoT, within the critical "
-                          f"slopes' location tolerance {resolution:.2g} rad")
+        out["reason"] += (
+            f"; NOT resolved: at zero power ER and VE differ by {-g0:.2g} in CoT, within the critical "
+            f"slopes' location tolerance {resolution:.2g} rad"
+        )
     else:
         out["resolved"] = True
     return out
 
 
-def sweep_system_cot(rows: list[dict[str, Any]], points: list[dict[str, Any]], power: ClutchPower, *, backend: str,
-                     rtol: float) -> list[dict[str, Any]]:
+def sweep_system_cot(
+    rows: list[dict[str, Any]], points: list[dict[str, Any]], power: ClutchPower, *, backend: str, rtol: float
+) -> list[dict[str, Any]]:
     """The sweep's rows with mechanical_cot, electrical_energy_per_step_j and system_cot of the gait at the start
     slope and the least system CoT along its stable, valid part (min_system_cot, min_system_cot_slope_deg), from
     the branch points the sweep recorded (`points`, rimless.sim.continuation.branches.GaitBranch.point_rows).
@@ -250,33 +272,65 @@ def sweep_system_cot(rows: list[dict[str, Any]], points: list[dict[str, Any]], p
             out.append(r)
             continue
         if power.energy_per_step_j(model, 1.0, 1.0) == 0.0:
-            r.update({"mechanical_cot": math.tan(start), "electrical_energy_per_step_j": 0.0,
-                      "system_cot": math.tan(start)})
+            r.update(
+                {"mechanical_cot": math.tan(start), "electrical_energy_per_step_j": 0.0, "system_cot": math.tan(start)}
+            )
             if isinstance(crit, float) and crit == crit:
-                r.update({"min_system_cot": math.tan(crit), "min_system_cot_slope_rad": crit,
-                          "min_system_cot_slope_deg": math.degrees(crit)})
+                r.update(
+                    {
+                        "min_system_cot": math.tan(crit),
+                        "min_system_cot_slope_rad": crit,
+                        "min_system_cot_slope_deg": math.degrees(crit),
+                    }
+                )
             out.append(r)
             continue
-        params = WheelParams(hub_mass_kg=r["hub_mass_kg"], leg_mass_kg=r["leg_mass_kg"], stiffness_n_per_m=r["k"],
-                             damping_ns_per_m=r["c"], mass_model=r["mass_model"], slope_rad=start)
-        mine = [(pt["slope_rad"], np.array([pt["theta_plus_rad"], pt["theta_dot_plus_rad_s"]])) for pt in points
-                if pt["model"] == r["model"] and pt["branch"] == r["branch"] and pt["k"] == r["k"]
-                and pt["c"] == r["c"] and pt["mass_model"] == r["mass_model"]
-                and pt.get("hub_mass_kg", r["hub_mass_kg"]) == r["hub_mass_kg"]
-                and pt.get("leg_mass_kg", r["leg_mass_kg"]) == r["leg_mass_kg"]]
+        params = WheelParams(
+            hub_mass_kg=r["hub_mass_kg"],
+            leg_mass_kg=r["leg_mass_kg"],
+            stiffness_n_per_m=r["k"],
+            damping_ns_per_m=r["c"],
+            mass_model=r["mass_model"],
+            slope_rad=start,
+        )
+        mine = [
+            (pt["slope_rad"], np.array([pt["theta_plus_rad"], pt["theta_dot_plus_rad_s"]]))
+            for pt in points
+            if pt["model"] == r["model"]
+            and pt["branch"] == r["branch"]
+            and pt["k"] == r["k"]
+            and pt["c"] == r["c"]
+            and pt["mass_model"] == r["mass_model"]
+            and pt.get("hub_mass_kg", r["hub_mass_kg"]) == r["hub_mass_kg"]
+            and pt.get("leg_mass_kg", r["leg_mass_kg"]) == r["leg_mass_kg"]
+        ]
         mine.append((start, np.array([r["theta_plus_rad"], r["theta_dot_plus_rad_s"]])))
         factory, jac = _branch_factory(model, backend, rtol, r.get("contact_model") == "bilateral")
         at_start = BranchCot(model, params, mine, factory, jac)
         tr = at_start.transport(start)
         if tr is not None:
-            r.update({k: v for k, v in cot_of(tr, params, model, power).items()
-                      if k in ("mechanical_cot", "electrical_energy_per_step_j", "system_cot")})
+            r.update(
+                {
+                    k: v
+                    for k, v in cot_of(tr, params, model, power).items()
+                    if k in ("mechanical_cot", "electrical_energy_per_step_j", "system_cot")
+                }
+            )
         if isinstance(crit, float) and crit == crit:
             part = [(s, z) for s, z in mine if s > crit]
             near = min(mine, key=lambda q: abs(q[0] - crit))[1]
             br = BranchCot(model, params, part + [(crit, near)], factory, jac, guessed=frozenset({float(crit)}))
             m = br.minimise(power)
-            r.update({k: m[k] for k in ("min_system_cot", "min_system_cot_slope_rad", "min_system_cot_slope_deg",
-                                        "min_system_cot_at_bound")})
+            r.update(
+                {
+                    k: m[k]
+                    for k in (
+                        "min_system_cot",
+                        "min_system_cot_slope_rad",
+                        "min_system_cot_slope_deg",
+                        "min_system_cot_at_bound",
+                    )
+                }
+            )
         out.append(r)
     return out

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from rimless.errors import ParameterError, RunFailure
 
@@ -14,11 +14,24 @@ TRAJECTORY_SUFFIXES = (".parquet", ".csv")
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 
-def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[float] = None,
-              theta_plus_rad: Optional[float] = None, theta_dot_guess: Optional[float] = None,
-              theta_plus_guess: Optional[float] = None, gait: Optional[int] = None, out: Optional[Path] = None,
-              plot: Optional[Path] = None, forces: bool = False, sample_dt_s: float = 1e-3, backend: str = "auto",
-              rtol: float = 1e-10, progress: Optional[Callable[[int], None]] = None) -> dict[str, Any]:
+def walk_gait(
+    params: Any,
+    model: str,
+    *,
+    steps: int = 6,
+    theta_dot: float | None = None,
+    theta_plus_rad: float | None = None,
+    theta_dot_guess: float | None = None,
+    theta_plus_guess: float | None = None,
+    gait: int | None = None,
+    out: Path | None = None,
+    plot: Path | None = None,
+    forces: bool = False,
+    sample_dt_s: float = 1e-3,
+    backend: str = "auto",
+    rtol: float = 1e-10,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
     """Simulate `steps` steps from the fixed point, or from theta'+ = `theta_dot` rad/s (and theta+ =
     `theta_plus_rad`, default -alpha/2) just after an impact; write the trajectory to `out`, the figure to `plot`.
 
@@ -26,9 +39,9 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
     import numpy as np
 
     from rimless.output import check_output_folder
-    from rimless.sim.step.backend import jacobian_factory, make_integrator, make_map
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import ALPHA
+    from rimless.sim.step.backend import jacobian_factory, make_integrator, make_map
     from rimless.sim.step.gait import simulate_steps
     from rimless.sim.step.poincare import solve_fixed_point
     from rimless.sim.studies.gaits import solve_or_search, start_guess
@@ -47,8 +60,15 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
     else:
         pmap = make_map(params, model, backend=backend, rtol=rtol)
         jf = jacobian_factory(backend)
-        guess = start_guess(params, model, theta_dot_guess=theta_dot_guess, theta_plus_guess=theta_plus_guess,
-                            gait=gait, backend=backend, rtol=rtol)
+        guess = start_guess(
+            params,
+            model,
+            theta_dot_guess=theta_dot_guess,
+            theta_plus_guess=theta_plus_guess,
+            gait=gait,
+            backend=backend,
+            rtol=rtol,
+        )
         try:
             if theta_dot_guess is None and theta_plus_guess is None and gait is None:
                 fp, _ = solve_or_search(pmap, guess, jacobian=jf(pmap) if jf else None)  # the gaits search if need be
@@ -58,8 +78,16 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
             raise RunFailure(f"no fixed point to start from ({err}); give --theta-dot") from None
         z0 = fp.z
         start = "fixed point"
-    traj = simulate_steps(params, model, z0, steps, make_integrator(backend, rtol), record_dt=sample_dt_s,
-                          forces=forces, progress=progress)
+    traj = simulate_steps(
+        params,
+        model,
+        z0,
+        steps,
+        make_integrator(backend, rtol),
+        record_dt=sample_dt_s,
+        forces=forces,
+        progress=progress,
+    )
     if out is not None and traj.steps:  # no step, no file: the command fails with the reason
         from rimless.sim.step.gait import write_trajectory
 
@@ -82,7 +110,9 @@ def walk_gait(params: Any, model: str, *, steps: int = 6, theta_dot: Optional[fl
         "energy_ratios": [s.impact.energy_ratio for s in traj.steps],
         "guide_friction_n": params.guide_friction_n,
         "friction_work_per_step_j": [s.friction_work_J for s in traj.steps],
-        "failure": None if traj.failure is None else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
+        "failure": None
+        if traj.failure is None
+        else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
         "out": str(out) if out and traj.steps else None,
         "plot": str(plot) if plot and traj.steps else None,
     }

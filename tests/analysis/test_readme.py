@@ -29,17 +29,22 @@ def test_readme_trials_chain_runs_verbatim(tmp_path):
     (tmp_path / "analysis").symlink_to(REPO / "analysis")  # the commands name repository paths
     env = dict(os.environ, PATH=f"{rimless.parent}{os.pathsep}{os.environ.get('PATH', '')}", COLUMNS="80")
     cmds = chain_commands()
-    assert [c.split()[:3] for c in cmds] == [["rimless", "trials", "import"], ["rimless", "trials", "show"],
-                                             ["rimless", "trials", "report"]]
+    assert [c.split()[:3] for c in cmds] == [
+        ["rimless", "trials", "import"],
+        ["rimless", "trials", "show"],
+        ["rimless", "trials", "report"],
+    ]
     for cmd in cmds:
-        res = subprocess.run(["bash", "-c", cmd], cwd=tmp_path, env=env, capture_output=True, text=True,
-                             timeout=600)
+        res = subprocess.run(["bash", "-c", cmd], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, f"{cmd}\n{res.stdout}\n{res.stderr}"
         assert "Traceback" not in res.stderr
         assert all(len(line) <= 80 for line in res.stdout.splitlines() if "┃" in line or "│" in line), res.stdout
     # what the chain produced, checked against the truth of the bundled data
-    rows = json.loads(subprocess.run(["bash", "-c", cmds[0] + " --json"], cwd=tmp_path, env=env,
-                                     capture_output=True, text=True, timeout=600).stdout)
+    rows = json.loads(
+        subprocess.run(
+            ["bash", "-c", cmds[0] + " --json"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600
+        ).stdout
+    )
     assert len(rows) == 6 and {r["outcome"] for r in rows} == {"caught"}
     ramp = [r for r in rows if r["ramp_slope_deg"] is not None]
     assert len(ramp) == 1 and abs(ramp[0]["ramp_slope_deg"] - 2.5) < 0.05

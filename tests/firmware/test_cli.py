@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import secrets
+import signal
 import socket
 import subprocess
 import sys
@@ -31,7 +31,7 @@ def invoke(*args: str, env: dict | None = None):
     if "--token" in args_list:
         i = args_list.index("--token")
         env = {**(env or {}), "RIMLESS_TOKEN": args_list[i + 1]}
-        del args_list[i:i + 2]
+        del args_list[i : i + 2]
     return runner.invoke(app, ["robot", *args_list], env=env)
 
 
@@ -66,8 +66,15 @@ def test_bench_json_contract() -> None:
     assert r.exit_code == 0, r.output
     rows = json.loads(r.stdout)
     assert len(rows) == 1
-    keys = {"rate_hz", "achieved_rate_hz", "period_jitter_p99_ms", "latency_p50_ms", "latency_p99_ms",
-            "latency_max_ms", "missed_deadlines"}
+    keys = {
+        "rate_hz",
+        "achieved_rate_hz",
+        "period_jitter_p99_ms",
+        "latency_p50_ms",
+        "latency_p99_ms",
+        "latency_max_ms",
+        "missed_deadlines",
+    }
     assert keys <= set(rows[0]) and rows[0]["rate_hz"] == 300.0
     assert rows[0]["latency_p50_ms"] <= rows[0]["latency_p99_ms"] <= rows[0]["latency_max_ms"]
     r = invoke("bench", "--rate-hz", "300")
@@ -96,8 +103,10 @@ def test_listen_records_datagrams(tmp_path) -> None:
         wait_udp_bound(port)  # let the listener bind first
         for k in range(20):
             time.sleep(0.02)
-            batch = [{"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
-                     {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}}]
+            batch = [
+                {"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
+                {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
+            ]
             s.sendto(json.dumps(batch).encode(), ("127.0.0.1", port))
         s.sendto(b"garbage", ("127.0.0.1", port))
         s.close()
@@ -105,8 +114,19 @@ def test_listen_records_datagrams(tmp_path) -> None:
     t = threading.Thread(target=send)
     t.start()
     # 3 s for 0.4 s of sending after the bind: a loaded machine may start the sender late
-    r = invoke("listen", "--bind", "127.0.0.1", "--port", str(port), "--out", str(out), "--duration-s", "3.0",
-               "--summary-every-s", "0.3")
+    r = invoke(
+        "listen",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--out",
+        str(out),
+        "--duration-s",
+        "3.0",
+        "--summary-every-s",
+        "0.3",
+    )
     t.join()
     assert r.exit_code == 0, r.output
     lines = out.read_text().splitlines()
@@ -119,11 +139,16 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     cfg = tmp_path / "robot.toml"
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\n[log]\ndir = "{tmp_path}"\n')
     env = {**os.environ, "RIMLESS_TOKEN": STRONG}
-    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    proc = subprocess.Popen(
+        [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        text=True,
+    )
     try:
-        from rimless.firmware.link.remote import send_command
         from rimless.firmware.errors import RobotUnreachable
+        from rimless.firmware.link.remote import send_command
 
         engaged = []
         deadline = time.monotonic() + 20
@@ -166,12 +191,31 @@ def test_set_minus_3_reaches_the_robot_and_its_refusal_is_one_line(tmp_path) -> 
 
     async def script(app, hw):
         def cli():
-            return (invoke("set", "touch_velocity_m_s", "-3", "--host", "127.0.0.1", "--port", str(app.command_port),
-                           "--token", TOKEN),
-                    invoke("set", "lock_velocity_m_s", "-0.01", "--host", "127.0.0.1", "--port",
-                           str(app.command_port), "--token", TOKEN),
-                    invoke("status", "--json", "--host", "127.0.0.1", "--port", str(app.command_port),
-                           "--token", TOKEN))
+            return (
+                invoke(
+                    "set",
+                    "touch_velocity_m_s",
+                    "-3",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    str(app.command_port),
+                    "--token",
+                    TOKEN,
+                ),
+                invoke(
+                    "set",
+                    "lock_velocity_m_s",
+                    "-0.01",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    str(app.command_port),
+                    "--token",
+                    TOKEN,
+                ),
+                invoke("status", "--json", "--host", "127.0.0.1", "--port", str(app.command_port), "--token", TOKEN),
+            )
 
         return await asyncio.to_thread(cli)
 
@@ -191,8 +235,10 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
         wait_udp_bound(port)  # datagrams sent before the listener binds are lost
         for k in range(10):
             time.sleep(0.02)
-            batch = [{"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},
-                     {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}}]
+            batch = [
+                {"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},
+                {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
+            ]
             s.sendto(json.dumps(batch).encode(), ("127.0.0.1", port))
         time.sleep(0.8)  # a pause longer than --stale-s
         s.sendto(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode(), ("127.0.0.1", port))
@@ -201,8 +247,24 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
     t = threading.Thread(target=send)
     t.start()
     # 4 s for 1.0 s of sending after the bind (the pause included): room for a late sender on a loaded machine
-    r = invoke("listen", "--bind", "127.0.0.1", "--port", str(port), "--out", str(out), "--csv", str(csv_out),
-               "--duration-s", "4.0", "--summary-every-s", "0.5", "--stale-s", "0.4", "--no-live")
+    r = invoke(
+        "listen",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--out",
+        str(out),
+        "--csv",
+        str(csv_out),
+        "--duration-s",
+        "4.0",
+        "--summary-every-s",
+        "0.5",
+        "--stale-s",
+        "0.4",
+        "--no-live",
+    )
     t.join()
     assert r.exit_code == 0, r.output
     assert "data stopped: nothing for 0.4 s" in r.output and "data resumed after" in r.output
@@ -224,8 +286,10 @@ def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
         rx.settimeout(0.2)
         rxs.append(rx)
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nenabled = false\n[telemetry]\nhost = "127.0.0.1"\nport = {rxs[0].getsockname()[1]}\n'
-                   f'[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(
+        f'[commands]\nenabled = false\n[telemetry]\nhost = "127.0.0.1"\nport = {rxs[0].getsockname()[1]}\n'
+        f'[log]\ndir = "{tmp_path}"\n'
+    )
     counts = [0, 0]
     stop = threading.Event()
 
@@ -239,9 +303,23 @@ def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
     threads = [threading.Thread(target=drain, args=(i,)) for i in range(2)]
     for t in threads:
         t.start()
-    r = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1.0",
-                        "--telemetry", f"127.0.0.1:{rxs[1].getsockname()[1]}"], capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run(
+        [
+            *RIMLESS,
+            "robot",
+            "run",
+            "--fake",
+            "--config",
+            str(cfg),
+            "--duration-s",
+            "1.0",
+            "--telemetry",
+            f"127.0.0.1:{rxs[1].getsockname()[1]}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     time.sleep(0.3)
     stop.set()
     for t in threads:
@@ -270,9 +348,13 @@ def test_bench_reports_every_part_of_the_delay() -> None:
 
 @pytest.mark.parametrize(
     ("args", "option"),
-    [(("bench", "--fake", "--duration-s", "abc"), "--duration-s"), (("status",), "--host"),
-     (("arm", "--host"), "--host"), (("status", "--host", "x", "--bogus"), "--bogus"),
-     (("heartbeat", "--host", "h", "--period-s", "-1"), "--period-s")],
+    [
+        (("bench", "--fake", "--duration-s", "abc"), "--duration-s"),
+        (("status",), "--host"),
+        (("arm", "--host"), "--host"),
+        (("status", "--host", "x", "--bogus"), "--bogus"),
+        (("heartbeat", "--host", "h", "--period-s", "-1"), "--period-s"),
+    ],
 )
 def test_usage_errors_are_one_line(args, option) -> None:
     r = invoke(*args)
@@ -292,8 +374,9 @@ def test_disarm_cli_uses_both_paths(tmp_path) -> None:
 
     async def script(app, hw):
         app.controller.arm()
-        r = await asyncio.to_thread(invoke, "disarm", "--host", "127.0.0.1", "--port", str(app.command_port),
-                                    "--token", TOKEN)
+        r = await asyncio.to_thread(
+            invoke, "disarm", "--host", "127.0.0.1", "--port", str(app.command_port), "--token", TOKEN
+        )
         return r, app.server.udp_disarms
 
     _app, _s, (r, udp), hw = scenario(config(tmp_path), script)
@@ -321,14 +404,20 @@ def test_token_from_a_file_and_the_command_line_warning(tmp_path) -> None:
     tok.write_text(STRONG + "\n")
     tok.chmod(0o600)
     port = free_port()
-    r = runner.invoke(app, ["robot", "ping", "--host", "127.0.0.1", "--port", str(port), "--token-file", str(tok)],
-                      env={"RIMLESS_TOKEN": ""})
+    r = runner.invoke(
+        app,
+        ["robot", "ping", "--host", "127.0.0.1", "--port", str(port), "--token-file", str(tok)],
+        env={"RIMLESS_TOKEN": ""},
+    )
     assert r.exit_code == 2 and "warning" not in r.output  # no robot there, but the token was taken
     r = runner.invoke(app, ["robot", "ping", "--host", "127.0.0.1", "--port", str(port), "--token", STRONG])
     assert r.exit_code == 2 and "warning: --token is visible" in r.output
     tok.chmod(0o644)
-    r = runner.invoke(app, ["robot", "ping", "--host", "127.0.0.1", "--port", str(port), "--token-file", str(tok)],
-                      env={"RIMLESS_TOKEN": ""})
+    r = runner.invoke(
+        app,
+        ["robot", "ping", "--host", "127.0.0.1", "--port", str(port), "--token-file", str(tok)],
+        env={"RIMLESS_TOKEN": ""},
+    )
     assert r.exit_code == 2 and "chmod 600" in r.output and STRONG not in r.output
 
 
@@ -338,8 +427,13 @@ def test_a_generated_token_is_written_to_a_private_file_never_printed(tmp_path) 
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\n[log]\ndir = "{tmp_path}"\n')
     env = {k: v for k, v in os.environ.items() if not k.startswith("RIMLESS_TOKEN")}
     env["XDG_RUNTIME_DIR"] = str(tmp_path)
-    r = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "0.5"],
-                       capture_output=True, text=True, env=env, timeout=60)
+    r = subprocess.run(
+        [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "0.5"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     line = next(ln for ln in r.stderr.splitlines() if ln.startswith("command token (generated) in "))
     path = Path(line.split(" in ", 1)[1].split(" ", 1)[0])
@@ -349,8 +443,12 @@ def test_a_generated_token_is_written_to_a_private_file_never_printed(tmp_path) 
 
 def test_bench_realtime_reports_what_the_control_thread_got() -> None:
     """Fails on today's main: no --realtime (only Nice=-10 and the switch interval)."""
-    r = subprocess.run([*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "0.5", "--json",
-                        "--realtime"], capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "0.5", "--json", "--realtime"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     row = json.loads(r.stdout)[0]
     assert {"achieved_rate_hz", "wake_late_p99_ms", "missed_deadlines"} <= set(row)

@@ -34,8 +34,24 @@ def start(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path]:
     cfg = tmp_path / f"{name}.toml"
     cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
     log = tmp_path / f"{name}.jsonl"
-    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s", "30",
-                             "--pin-log", str(log)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            *RIMLESS,
+            "robot",
+            "run",
+            "--fake",
+            "--arm",
+            "--config",
+            str(cfg),
+            "--duration-s",
+            "30",
+            "--pin-log",
+            str(log),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     return proc, log
 
 
@@ -105,8 +121,11 @@ def test_a_blocked_stderr_holds_up_neither_start_nor_exit(tmp_path) -> None:
     cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
     log = tmp_path / "pins.jsonl"
     t0 = time.monotonic()
-    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s", "3",
-                             "--pin-log", str(log)], stdout=subprocess.DEVNULL, stderr=w)
+    proc = subprocess.Popen(
+        [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s", "3", "--pin-log", str(log)],
+        stdout=subprocess.DEVNULL,
+        stderr=w,
+    )
     os.close(w)
     try:
         code = proc.wait(timeout=30)

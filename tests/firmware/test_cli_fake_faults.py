@@ -6,8 +6,8 @@ behind them locked airborne legs in the first two scenarios (tests/firmware/cont
 from __future__ import annotations
 
 import json
-import secrets
 import os
+import secrets
 import subprocess
 import sys
 from pathlib import Path
@@ -18,18 +18,39 @@ RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)
 
 
-def run_fake(tmp_path: Path, *args: str, duration_s: float = 4.0,
-             sensor: str = "") -> tuple[dict, list[dict], subprocess.CompletedProcess]:
+def run_fake(
+    tmp_path: Path, *args: str, duration_s: float = 4.0, sensor: str = ""
+) -> tuple[dict, list[dict], subprocess.CompletedProcess]:
     cfg = tmp_path / "robot.toml"
     # the watchdogs at 1 s (the robot's 0.1 s and 0.25 s): a loaded test machine pauses threads for 0.3-0.6 s;
     # the loop-stall scenario blocks the loop for 4 s
-    cfg.write_text(f'{sensor}[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n'
-                   '[sampling]\nstall_timeout_s = 1.0\nloop_stall_s = 1.0\n')
+    cfg.write_text(
+        f'{sensor}[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n'
+        "[sampling]\nstall_timeout_s = 1.0\nloop_stall_s = 1.0\n"
+    )
     pins = tmp_path / "pins.jsonl"
     env = {**os.environ, "RIMLESS_TOKEN": secrets.token_urlsafe(18)}
-    proc = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s",
-                           str(duration_s), "--json", "--pin-log", str(pins), *args],
-                          capture_output=True, text=True, env=env, timeout=60)
+    proc = subprocess.run(
+        [
+            *RIMLESS,
+            "robot",
+            "run",
+            "--fake",
+            "--arm",
+            "--config",
+            str(cfg),
+            "--duration-s",
+            str(duration_s),
+            "--json",
+            "--pin-log",
+            str(pins),
+            *args,
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     summary = json.loads(proc.stdout)
     lines = [json.loads(line) for line in pins.read_text().splitlines()]
     return summary, lines, proc
@@ -44,14 +65,17 @@ def last_levels(lines: list[dict]) -> dict[int, int]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("name", "fault", "engages"), [
-    ("missed-first-touchdown", "leg_sync_lost", False),
-    ("first-step-bounce", "leg_sync_lost", False),
-    ("brown-out", "sensor_reset", True),
-    ("wrong-product-id", "id_mismatch", True),
-    ("loop-stall", "loop_stalled", True),
-    ("log-disk-full", None, True),
-])
+@pytest.mark.parametrize(
+    ("name", "fault", "engages"),
+    [
+        ("missed-first-touchdown", "leg_sync_lost", False),
+        ("first-step-bounce", "leg_sync_lost", False),
+        ("brown-out", "sensor_reset", True),
+        ("wrong-product-id", "id_mismatch", True),
+        ("loop-stall", "loop_stalled", True),
+        ("log-disk-full", None, True),
+    ],
+)
 def test_every_scenario_ends_released_with_no_airborne_lock(tmp_path, name, fault, engages) -> None:
     summary, lines, proc = run_fake(tmp_path, "--fake-fault", name)
     assert proc.returncode == 0, proc.stderr
@@ -77,8 +101,9 @@ def test_every_scenario_ends_released_with_no_airborne_lock(tmp_path, name, faul
 def test_a_brownout_at_400_cpi_is_caught_too(tmp_path) -> None:
     """Fails before the configuration read-back: at 400 cpi the reset leaves Motion's RES bit as it was, and
     the walk went on locking with the sensor in its power-on state (no fault)."""
-    sensor = ("[[sensor]]\nreset_pin = 25\nresolution_cpi = 400\ncounts_per_m = 15748.0\n"
-              "legs = [0, 1, 2, 3, 4, 5, 6, 7]\n")
+    sensor = (
+        "[[sensor]]\nreset_pin = 25\nresolution_cpi = 400\ncounts_per_m = 15748.0\nlegs = [0, 1, 2, 3, 4, 5, 6, 7]\n"
+    )
     summary, lines, proc = run_fake(tmp_path, "--fake-fault", "brown-out", sensor=sensor)
     assert proc.returncode == 0, proc.stderr
     assert "sensor_reset" in summary["faults"]
@@ -95,10 +120,12 @@ def test_a_plain_fake_walk_locks_only_stance_legs(tmp_path) -> None:
 
 
 def test_bad_fake_fault_is_one_line_exit_2(tmp_path) -> None:
-    proc = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--fake-fault", "meteor"], capture_output=True,
-                          text=True, timeout=60)
+    proc = subprocess.run(
+        [*RIMLESS, "robot", "run", "--fake", "--fake-fault", "meteor"], capture_output=True, text=True, timeout=60
+    )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: ") and "first-step-bounce" in proc.stderr
-    proc = subprocess.run([*RIMLESS, "robot", "run", "--pin-log", str(tmp_path / "p")], capture_output=True,
-                          text=True, timeout=60)
+    proc = subprocess.run(
+        [*RIMLESS, "robot", "run", "--pin-log", str(tmp_path / "p")], capture_output=True, text=True, timeout=60
+    )
     assert proc.returncode == 2 and "--fake" in proc.stderr

@@ -5,8 +5,8 @@ and `run`/`check` on a machine with no GPIO. Each outcome is checked on the mock
 from __future__ import annotations
 
 import os
-import signal
 import secrets
+import signal
 import socket
 import subprocess
 import sys
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from rimless.firmware.link.remote import send_command
 from rimless.firmware.errors import RobotUnreachable
+from rimless.firmware.link.remote import send_command
 from tests.support.firmware_app import free_port
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
@@ -35,8 +35,13 @@ def start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, int]:
     cfg = tmp_path / "robot.toml"
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n')
     env = {**os.environ, "RIMLESS_TOKEN": TOKEN}
-    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    proc = subprocess.Popen(
+        [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        text=True,
+    )
     return proc, port
 
 
@@ -77,8 +82,12 @@ def test_run_fake_releases_every_clutch_on_a_signal(tmp_path, sig, code) -> None
 def test_sigterm_during_check_fake_releases_the_clicked_clutch(tmp_path) -> None:
     """Load-independent: the line "clicking clutch 0" comes once it is engaged, and it stays engaged for 10 s,
     so the signal finds it on however late it is delivered."""
-    proc = subprocess.Popen([*RIMLESS, "robot", "check", "--fake", "--click-s", "10"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [*RIMLESS, "robot", "check", "--fake", "--click-s", "10"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     err_lines = []
     try:
         assert proc.stderr is not None
@@ -131,8 +140,13 @@ def test_weak_token_is_refused_at_start(tmp_path) -> None:
     cfg = tmp_path / "robot.toml"
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\n')
     for weak in ("change-me", "short"):
-        r = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1"],
-                           capture_output=True, text=True, env={**os.environ, "RIMLESS_TOKEN": weak}, timeout=60)
+        r = subprocess.run(
+            [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1"],
+            capture_output=True,
+            text=True,
+            env={**os.environ, "RIMLESS_TOKEN": weak},
+            timeout=60,
+        )
         assert r.returncode == 2, r.stderr
         err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
         assert len(err) == 1 and "token" in err[0], r.stderr
@@ -141,8 +155,12 @@ def test_weak_token_is_refused_at_start(tmp_path) -> None:
 
 
 def test_ctrl_c_in_bench_exits_130_without_cancelled_error() -> None:
-    proc = subprocess.Popen([*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "10"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "10"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stderr is not None
         first = proc.stderr.readline()
@@ -162,9 +180,25 @@ def test_ctrl_c_in_bench_exits_130_without_cancelled_error() -> None:
 def test_ctrl_c_in_listen_completes_the_recording_and_exits_130(tmp_path) -> None:
     out = tmp_path / "tel.jsonl"
     port = free_port()
-    proc = subprocess.Popen([*RIMLESS, "robot", "listen", "--bind", "127.0.0.1", "--port", str(port), "--out",
-                             str(out), "--no-live", "--summary-every-s", "0.2"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            *RIMLESS,
+            "robot",
+            "listen",
+            "--bind",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--out",
+            str(out),
+            "--no-live",
+            "--summary-every-s",
+            "0.2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stderr is not None
         first = proc.stderr.readline()  # the first summary line: it is listening

@@ -50,13 +50,17 @@ class RigidTruth:
                 hi = mid
         return math.degrees(0.5 * (lo + hi))
 
-    def wheel_params(self):  # noqa: ANN201
+    def wheel_params(self):
         """WheelParams describing this wheel for rimless (tiny legs: M = m_H + 8 m, I_hub = I_c + 8 m L^2)."""
         from rimless.sim.model.params import WheelParams
 
         m = 1e-4
-        return WheelParams(hub_mass_kg=self.mass_kg - 8 * m, leg_mass_kg=m,
-                           inertia_kg_m2=self.inertia_hub_kg_m2 - 8 * m * self.leg_m**2, leg_length_m=self.leg_m)
+        return WheelParams(
+            hub_mass_kg=self.mass_kg - 8 * m,
+            leg_mass_kg=m,
+            inertia_kg_m2=self.inertia_hub_kg_m2 - 8 * m * self.leg_m**2,
+            leg_length_m=self.leg_m,
+        )
 
     def walk(self, slope_deg: float, omega0: float, ramp_steps: int = 11, dt: float = 0.002):
         """Release at theta = -alpha/2 with theta' = omega0; returns (t, hub_x, hub_y, angle, impacts, stalled).
@@ -71,18 +75,28 @@ class RigidTruth:
 
         def touchdown(_t, y):
             return y[0] - ALPHA / 2
+
         touchdown.terminal, touchdown.direction = True, 1
 
         def rollback(_t, y):
             return y[1]
+
         rollback.terminal, rollback.direction = True, -1
 
         t0, w, foot_x, turned = 0.0, omega0, 0.0, 0.0
         ts, xs, ys, angs, impacts = [], [], [], [], []
         stalled = False
         for _step in range(ramp_steps):
-            sol = solve_ivp(rhs, (0, 20.0), [-ALPHA / 2, w], events=(touchdown, rollback), rtol=1e-11, atol=1e-12,
-                            dense_output=True, max_step=0.01)
+            sol = solve_ivp(
+                rhs,
+                (0, 20.0),
+                [-ALPHA / 2, w],
+                events=(touchdown, rollback),
+                rtol=1e-11,
+                atol=1e-12,
+                dense_output=True,
+                max_step=0.01,
+            )
             t_end = sol.t[-1]
             tt = np.arange(0.0, t_end, dt)
             th = sol.sol(tt)[0]
@@ -106,16 +120,30 @@ class RigidTruth:
             foot_x += 2 * self.leg_m * math.sin(ALPHA / 2)
             turned += ALPHA
         if not stalled:  # ramp ends: the wheel is caught half a step later (recording stops)
-            sol = solve_ivp(rhs, (0, 20.0), [-ALPHA / 2, w], events=(touchdown, rollback), rtol=1e-11, atol=1e-12,
-                            dense_output=True, max_step=0.01)
+            sol = solve_ivp(
+                rhs,
+                (0, 20.0),
+                [-ALPHA / 2, w],
+                events=(touchdown, rollback),
+                rtol=1e-11,
+                atol=1e-12,
+                dense_output=True,
+                max_step=0.01,
+            )
             tt = np.arange(0.0, 0.5 * sol.t[-1], dt)
             th = sol.sol(tt)[0]
             ts.append(t0 + tt)
             xs.append(foot_x + self.leg_m * np.sin(th))
             ys.append(self.leg_m * np.cos(th))
             angs.append(turned + th + ALPHA / 2)
-        return (np.concatenate(ts), np.concatenate(xs), np.concatenate(ys), np.concatenate(angs), np.array(impacts),
-                stalled)
+        return (
+            np.concatenate(ts),
+            np.concatenate(xs),
+            np.concatenate(ys),
+            np.concatenate(angs),
+            np.array(impacts),
+            stalled,
+        )
 
 
 @dataclass
@@ -129,12 +157,25 @@ class DuckTrial:
     series: dict = field(default_factory=dict)
 
 
-def duck_trial(truth: RigidTruth, slope_deg: float, omega0: float, rng: np.random.Generator, *, name: str,
-               ramp_steps: int = 11, timing_noise_s: float = 1e-3, rate_hz: float = 100.0) -> DuckTrial:
+def duck_trial(
+    truth: RigidTruth,
+    slope_deg: float,
+    omega0: float,
+    rng: np.random.Generator,
+    *,
+    name: str,
+    ramp_steps: int = 11,
+    timing_noise_s: float = 1e-3,
+    rate_hz: float = 100.0,
+) -> DuckTrial:
     t, x, y, _ang, imp, stalled = truth.walk(slope_deg, omega0, ramp_steps)
     # the first impact seen is the release's end: the recording starts after the hand lets go
     imp = imp + rng.normal(0.0, timing_noise_s, imp.size)
-    meta = SimpleNamespace(slope_deg=slope_deg + rng.normal(0.0, 0.01), source_file=name, rate_hz=rate_hz,
-                           outcome="stalled" if stalled else "walked", slope_source="given")
-    return DuckTrial(time_s=t, impact_time_s=imp, step_period_s=np.diff(imp), meta=meta,
-                     series={"com_height": y})
+    meta = SimpleNamespace(
+        slope_deg=slope_deg + rng.normal(0.0, 0.01),
+        source_file=name,
+        rate_hz=rate_hz,
+        outcome="stalled" if stalled else "walked",
+        slope_source="given",
+    )
+    return DuckTrial(time_s=t, impact_time_s=imp, step_period_s=np.diff(imp), meta=meta, series={"com_height": y})

@@ -43,13 +43,13 @@ class ErTruth:
     rot: Rotation | None = None  # world-from-body, noise-free
 
 
-def _params(slope_deg: float):  # noqa: ANN202
+def _params(slope_deg: float):
     from rimless.sim.model.params import WheelParams
 
     return WheelParams(damping_ns_per_m=C_NS_PER_M, stiffness_n_per_m=K_N_PER_M, slope_rad=math.radians(slope_deg))
 
 
-def _rigid_stance(p, y_plus: np.ndarray, dt: float, *, t_max: float, stop_at_top: bool = False):  # noqa: ANN001, ANN202
+def _rigid_stance(p, y_plus: np.ndarray, dt: float, *, t_max: float, stop_at_top: bool = False):
     """A rigid stance on foot b from the post-impact state (RK4, 0.1 ms): (t, theta) sampled every dt, and
     whether it turned back; it rises, and if it turns back, rolls back to its start angle and rests."""
     m_all = p.hub_mass_kg + 8 * p.leg_mass_kg
@@ -87,10 +87,22 @@ def _rigid_stance(p, y_plus: np.ndarray, dt: float, *, t_max: float, stop_at_top
     return np.array(ts), np.array(ths), back, ell
 
 
-def simulate(slope_deg: float, release_rad_s: float, *, max_steps: int = 8, ending: str = "caught",
-             hold_s: float = 0.4, rate_hz: float = 100.0, origin_body_m=(0.03, -0.025, 0.012), yaw_deg: float = 20.0,
-             noise_m: float = 0.3e-3, angle_noise_rad: float = 1e-3, gaps: tuple[tuple[float, float], ...] = (),
-             seed: int = 0, name: str = "er") -> ErTruth:
+def simulate(
+    slope_deg: float,
+    release_rad_s: float,
+    *,
+    max_steps: int = 8,
+    ending: str = "caught",
+    hold_s: float = 0.4,
+    rate_hz: float = 100.0,
+    origin_body_m=(0.03, -0.025, 0.012),
+    yaw_deg: float = 20.0,
+    noise_m: float = 0.3e-3,
+    angle_noise_rad: float = 1e-3,
+    gaps: tuple[tuple[float, float], ...] = (),
+    seed: int = 0,
+    name: str = "er",
+) -> ErTruth:
     """Hold, release at theta = -alpha/2 with theta' = release, walk up to ``max_steps`` (a stall ends the walk
     with a rock back and a rest), then ``ending``: ``caught`` (lifted 8 cm with 15 mm of sideways motion),
     ``walked`` (the data stop 40 % into the next step), ``fell`` (tips 60 deg about the travel axis)."""
@@ -131,7 +143,7 @@ def simulate(slope_deg: float, release_rad_s: float, *, max_steps: int = 8, endi
     n_steps = len(impacts) if not stalled else k
     beta_off = n_steps * ALPHA
 
-    def stance(ts, ths, ell):  # noqa: ANN001, ANN202
+    def stance(ts, ths, ell):
         return (t0 + ts, y[0] + ell * np.sin(ths), y[1] + ell * np.cos(ths), ths + beta_off)
 
     outcome = ending
@@ -205,12 +217,12 @@ def simulate(slope_deg: float, release_rad_s: float, *, max_steps: int = 8, endi
     return ErTruth(name, slope_deg, tf, pose, hub, np.array(impacts), n_steps, stalled, outcome, o, feet_w, rot)
 
 
-def write_csv(path, truth: ErTruth) -> str:  # noqa: ANN001
+def write_csv(path, truth: ErTruth) -> str:
     """The trial as a Vicon Tracker export (object ``Wheel``, rad and mm)."""
     return write(path, objects_section({"Wheel": truth.pose}))
 
 
-def write_markers_csv(path, truth: ErTruth, body_m: np.ndarray, *, noise_m: float = 0.3e-3, seed: int = 0) -> str:  # noqa: ANN001
+def write_markers_csv(path, truth: ErTruth, body_m: np.ndarray, *, noise_m: float = 0.3e-3, seed: int = 0) -> str:
     """The trial as a Trajectories section of markers ``wheel:M0..`` at body points ``body_m`` (k, 3) m (body
     frame: x, y in the wheel plane about the hub, z along the axis), with noise; gaps of the pose are gaps."""
     from tests.support.analysis_truth_wheel import markers_section

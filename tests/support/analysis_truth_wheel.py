@@ -47,10 +47,20 @@ def _stance(u: np.ndarray) -> np.ndarray:
     return -ALPHA / 2 + ALPHA * (u + 0.25 * np.sin(2 * np.pi * u) / (2 * np.pi))
 
 
-def make_truth(*, slope_deg: float = 2.0, periods_s=(0.46, 0.44, 0.42, 0.41, 0.40, 0.39, 0.38, 0.38),
-               hold_s: float = 0.6, ending: str = "walked", end_fraction: float = 0.5, lift_m: float = 0.02,
-               rate_hz: float = 100.0, yaw_deg: float = 35.0, origin=(0.3, -0.8, 0.45), after_s: float = 1.0,
-               ramp: bool = False) -> Truth:
+def make_truth(
+    *,
+    slope_deg: float = 2.0,
+    periods_s=(0.46, 0.44, 0.42, 0.41, 0.40, 0.39, 0.38, 0.38),
+    hold_s: float = 0.6,
+    ending: str = "walked",
+    end_fraction: float = 0.5,
+    lift_m: float = 0.02,
+    rate_hz: float = 100.0,
+    yaw_deg: float = 35.0,
+    origin=(0.3, -0.8, 0.45),
+    after_s: float = 1.0,
+    ramp: bool = False,
+) -> Truth:
     """Sample the wheel; ``end_fraction`` is how far into the step after the last impact the ending starts."""
     phi = math.radians(slope_deg)
     yaw = math.radians(yaw_deg)
@@ -71,7 +81,7 @@ def make_truth(*, slope_deg: float = 2.0, periods_s=(0.46, 0.44, 0.42, 0.41, 0.4
     t = np.arange(0.0, total, 1.0 / rate_hz)
     x = np.zeros(t.size)
     y = np.zeros(t.size)
-    zl = np.zeros(t.size)
+    np.zeros(t.size)
     beta = np.zeros(t.size)
     tip = np.zeros(t.size)  # tipping angle about the down-slope axis
     lift = np.zeros(t.size)
@@ -156,9 +166,17 @@ def _fmt(v: float) -> str:
     return "" if not np.isfinite(v) else f"{v:.6f}"
 
 
-def section_text(kind: str, rate: str, groups: list[tuple[str, str, np.ndarray]], *, comps: tuple[str, ...],
-                 units: tuple[str, ...], scale: tuple[float, ...], first_frame: int = 1,
-                 frames: np.ndarray | None = None) -> list[str]:
+def section_text(
+    kind: str,
+    rate: str,
+    groups: list[tuple[str, str, np.ndarray]],
+    *,
+    comps: tuple[str, ...],
+    units: tuple[str, ...],
+    scale: tuple[float, ...],
+    first_frame: int = 1,
+    frames: np.ndarray | None = None,
+) -> list[str]:
     """Lines of one Tracker/Nexus section; ``groups`` = (name-row text, unused, (n, k) values in SI)."""
     names = ["", ""]
     comp = ["Frame", "Sub Frame"]
@@ -180,14 +198,27 @@ def section_text(kind: str, rate: str, groups: list[tuple[str, str, np.ndarray]]
 
 def markers_section(markers: dict[str, np.ndarray], rate: str = "100", unit: str = "mm", **kw) -> list[str]:
     s = {"mm": 1e-3, "m": 1.0}[unit]
-    return section_text("Trajectories", rate, [(k, "", v) for k, v in markers.items()], comps=("X", "Y", "Z"),
-                        units=(unit,) * 3, scale=(s,) * 3, **kw)
+    return section_text(
+        "Trajectories",
+        rate,
+        [(k, "", v) for k, v in markers.items()],
+        comps=("X", "Y", "Z"),
+        units=(unit,) * 3,
+        scale=(s,) * 3,
+        **kw,
+    )
 
 
 def objects_section(objects: dict[str, np.ndarray], rate: str = "100", **kw) -> list[str]:
-    return section_text("Objects", rate, [(f"Global Angle {k}:{k}", "", v) for k, v in objects.items()],
-                        comps=("RX", "RY", "RZ", "TX", "TY", "TZ"), units=("rad",) * 3 + ("mm",) * 3,
-                        scale=(1.0,) * 3 + (1e-3,) * 3, **kw)
+    return section_text(
+        "Objects",
+        rate,
+        [(f"Global Angle {k}:{k}", "", v) for k, v in objects.items()],
+        comps=("RX", "RY", "RZ", "TX", "TY", "TZ"),
+        units=("rad",) * 3 + ("mm",) * 3,
+        scale=(1.0,) * 3 + (1e-3,) * 3,
+        **kw,
+    )
 
 
 def write(path, *sections: list[str]) -> str:

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 from gpiozero.pins.mock import MockFactory
 
-from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.control.controller import Controller, EventRecord, SampleRecord
+from rimless.firmware.drivers.adns3080 import Adns3080
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080
 
 PINS = (17, 27, 22, 23, 24, 16, 20, 21)
@@ -44,7 +44,7 @@ class Rig:
     pins: tuple[int, ...] = PINS
     lock_times: list[float] = field(default_factory=list)
 
-    def pin(self, leg: int):  # noqa: ANN201 - MockPin
+    def pin(self, leg: int):
         return self.factory.pin(self.pins[leg])
 
     def levels(self, leg: int) -> list[bool]:

@@ -47,27 +47,47 @@ class WalkResult:
         return [f["fault"] for _t, name, f in self.events if name == "fault"]
 
 
-def walk_controller(walk: FakeWalk, params: DetectorParams, *, duration_s: float = 3.0, rate_hz: float = 300.0,
-                    start_index: int = 0, seed: int = 0, fault_at: tuple[float, object] | None = None,
-                    verify_before_engage: bool = True, id_check_interval_s: float = 0.0,
-                    readback_every_samples: int = 1, cpi: int = 1600,
-                    records: list | None = None) -> WalkResult:
+def walk_controller(
+    walk: FakeWalk,
+    params: DetectorParams,
+    *,
+    duration_s: float = 3.0,
+    rate_hz: float = 300.0,
+    start_index: int = 0,
+    seed: int = 0,
+    fault_at: tuple[float, object] | None = None,
+    verify_before_engage: bool = True,
+    id_check_interval_s: float = 0.0,
+    readback_every_samples: int = 1,
+    cpi: int = 1600,
+    records: list | None = None,
+) -> WalkResult:
     """Arm at t = 0 and step the controller at `rate_hz` for `duration_s` of virtual time; `fault_at` =
     (t_s, action(fake)) injects a fault into the fake. The sensor is configured at `cpi` with the automatic
     frame rate, as the service does (`mark_configured` included). Every controller record goes to `records`."""
     clock = VirtualClock()
-    fake = FakeAdns3080(walk, counts_per_m=DEFAULT_COUNTS_PER_M, noise_counts=0.3, seed=seed, clock=clock.seconds,
-                        needs_reset=False)
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M * cpi / 1600, sleep=clock.sleep,  # type: ignore[arg-type]
-                   clock_ns=clock.ns)
+    fake = FakeAdns3080(
+        walk, counts_per_m=DEFAULT_COUNTS_PER_M, noise_counts=0.3, seed=seed, clock=clock.seconds, needs_reset=False
+    )
+    drv = Adns3080(
+        fake,
+        counts_per_m=DEFAULT_COUNTS_PER_M * cpi / 1600,
+        sleep=clock.sleep,  # type: ignore[arg-type]
+        clock_ns=clock.ns,
+    )
     drv.set_resolution(cpi)
     drv.set_frame_rate(None)
     drv.mark_configured()
     clock.t_s = 0.0  # the configuration's waits are over before the walk's time starts
     bank = ClutchBank(PINS, pin_factory=MockFactory())
-    ctl = Controller([Channel(drv, LegDetector(params, LEGS, start_index=start_index), HealthMonitor(HealthLimits()))],
-                     bank, clock_ns=clock.ns, id_check_interval_s=id_check_interval_s,
-                     verify_before_engage=verify_before_engage, readback_every_samples=readback_every_samples)
+    ctl = Controller(
+        [Channel(drv, LegDetector(params, LEGS, start_index=start_index), HealthMonitor(HealthLimits()))],
+        bank,
+        clock_ns=clock.ns,
+        id_check_interval_s=id_check_interval_s,
+        verify_before_engage=verify_before_engage,
+        readback_every_samples=readback_every_samples,
+    )
     res = WalkResult()
     try:
         ctl.arm()

@@ -17,5 +17,9 @@ def readme_env() -> dict[str, str]:
     """The environment the README's commands run in: the running venv first on PATH (what `source
     .venv/bin/activate` does), 80 columns."""
     bin_dir = Path(sys.prefix) / "bin"
-    return {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}", "VIRTUAL_ENV": sys.prefix,
-            "COLUMNS": "80"}
+    return {
+        **os.environ,
+        "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}",
+        "VIRTUAL_ENV": sys.prefix,
+        "COLUMNS": "80",
+    }

@@ -37,9 +37,19 @@ def clutched_and_period_s(step) -> tuple[float, float]:
     return clutched, period
 
 
-def truth_system_cot(total_mass_kg: float, g: float, s_x: float, s_z: float, model: str, clutched_s: float,
-                     period_s: float, hold_w: float, switch_j: float, electronics_w: float,
-                     ve_electronics: bool) -> tuple[float, float]:
+def truth_system_cot(
+    total_mass_kg: float,
+    g: float,
+    s_x: float,
+    s_z: float,
+    model: str,
+    clutched_s: float,
+    period_s: float,
+    hold_w: float,
+    switch_j: float,
+    electronics_w: float,
+    ve_electronics: bool,
+) -> tuple[float, float]:
     """(E_el J, system CoT) from the definition: ER P_hold t_c + 2 E_sw + P_el T; VE P_el T only if it carries the
     electronics; CoT = (M g s_z + E_el) / (M g s_x)."""
     if model == "er":

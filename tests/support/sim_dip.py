@@ -25,8 +25,9 @@ DIP_Z = np.array([-0.4493748982626989, 3.2115968976066744])  # the VE fast gait 
 def single_support_start(rtol: float = 1e-12) -> tuple[float, np.ndarray]:
     """(t s, y) at the end of double support (foot a lifts) of the step from DIP_Z."""
     mech = Mechanics.of(DIP_PARAMS)
-    r1 = ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2).run_phase(mech, dynamics.DLSP, state_from_section(mech, DIP_Z),
-                                                                0.0, (ev.LIFTOFF_A,), 5.0)
+    r1 = ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2).run_phase(
+        mech, dynamics.DLSP, state_from_section(mech, DIP_Z), 0.0, (ev.LIFTOFF_A,), 5.0
+    )
     assert r1.guard == ev.LIFTOFF_A
     return r1.t_end, r1.y_end
 

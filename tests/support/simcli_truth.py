@@ -21,22 +21,23 @@ NEAR_1_26_DEG = (1.21, 1.31)
 def er_stall_by_bisection(k: float = 2700.0) -> tuple[str, float]:
     """(end reason, critical slope rad) of the ER wheel at Table 1 with stiffness k, by bisection to 1e-9 rad."""
     from rimless.sim.continuation.algorithm1 import critical_slope
-    from rimless.sim.step.backend import make_map
     from rimless.sim.model.params import WheelParams
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import default_guess
 
     p = WheelParams(stiffness_n_per_m=k)
-    cs = critical_slope(make_map(p, "er", backend="fast"), default_guess(p, "er"), method="bisection",
-                        refine_tol_rad=1e-9)
+    cs = critical_slope(
+        make_map(p, "er", backend="fast"), default_guess(p, "er"), method="bisection", refine_tol_rad=1e-9
+    )
     return cs.reason, cs.critical_slope_rad
 
 
-def stance_force_n(model: str, k: float, slope_rad: float, z_guess) -> float:  # noqa: ANN001
+def stance_force_n(model: str, k: float, slope_rad: float, z_guess) -> float:
     """Smallest single-support stance force (N) of the `model` gait near `z_guess` at (k N/m, slope rad), the
     stance foot held (so the gait exists on both sides of the force's sign change)."""
     from rimless.sim.continuation.contact import contact_facts
-    from rimless.sim.step.backend import make_map
     from rimless.sim.model.params import WheelParams
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import bilateral_map, solve_fixed_point
 
     q = WheelParams(stiffness_n_per_m=k, slope_rad=slope_rad)

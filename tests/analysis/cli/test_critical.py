@@ -56,8 +56,9 @@ def test_critical_slope_errors():
 
 
 def test_critical_slope_table_fits_80_columns():
-    res = runner.invoke(root_app, ["trials", "critical-slope", *[str(p) for p in data_files()[6:]]],
-                        env={"COLUMNS": "80"})
+    res = runner.invoke(
+        root_app, ["trials", "critical-slope", *[str(p) for p in data_files()[6:]]], env={"COLUMNS": "80"}
+    )
     assert res.exit_code in (0, 1), res.output
     for line in res.stdout.splitlines():
         assert len(line) <= 80, line

@@ -8,8 +8,8 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from rimless.cli import app as root_app
 from rimless.analysis.examples.critical_series import DATA_DIR as CRIT_DIR
+from rimless.cli import app as root_app
 
 runner = CliRunner()
 SHORT = CRIT_DIR / "SYNTHETIC_crit_slope1.45deg_release1.9.csv"
@@ -19,8 +19,9 @@ OTHER = CRIT_DIR / "SYNTHETIC_crit_slope1.30deg_release1.9.csv"
 def test_manifest_gives_the_slope_of_listed_files(tmp_path):
     man = tmp_path / "slopes.csv"
     man.write_text(f"file,slope_deg\n# inclinometer\n{SHORT.name},1.45\n")
-    res = runner.invoke(root_app, ["trials", "import", str(SHORT), str(OTHER), "--out", str(tmp_path),
-                                   "--slopes", str(man), "--json"])
+    res = runner.invoke(
+        root_app, ["trials", "import", str(SHORT), str(OTHER), "--out", str(tmp_path), "--slopes", str(man), "--json"]
+    )
     assert res.exit_code == 0, res.output
     rows = {r["file"].split("/")[-1]: r for r in json.loads(res.stdout)}
     a, b = rows[SHORT.name], rows[OTHER.name]
@@ -33,8 +34,15 @@ def test_manifest_gives_the_slope_of_listed_files(tmp_path):
     assert s["slope_ci_deg"] == pytest.approx(a["slope_ci_deg"])
 
 
-@pytest.mark.parametrize("text, where", [("file,slope\nx,1\n", ":1:1:"), ("file,slope_deg\nx,abc\n", ":2:2:"),
-                                         ("file,slope_deg\nx,1\nx,2\n", ":3:1:"), ("", "empty")])
+@pytest.mark.parametrize(
+    "text, where",
+    [
+        ("file,slope\nx,1\n", ":1:1:"),
+        ("file,slope_deg\nx,abc\n", ":2:2:"),
+        ("file,slope_deg\nx,1\nx,2\n", ":3:1:"),
+        ("", "empty"),
+    ],
+)
 def test_bad_manifest_is_a_one_line_error(tmp_path, text, where):
     man = tmp_path / "m.csv"
     man.write_text(text)
@@ -46,6 +54,7 @@ def test_bad_manifest_is_a_one_line_error(tmp_path, text, where):
 def test_not_with_slope_deg(tmp_path):
     man = tmp_path / "m.csv"
     man.write_text(f"file,slope_deg\n{SHORT.name},1.45\n")
-    res = runner.invoke(root_app, ["trials", "import", str(SHORT), "--out", str(tmp_path), "--slopes", str(man),
-                                   "--slope-deg", "2"])
+    res = runner.invoke(
+        root_app, ["trials", "import", str(SHORT), "--out", str(tmp_path), "--slopes", str(man), "--slope-deg", "2"]
+    )
     assert res.exit_code == 2 and "--slopes" in res.output

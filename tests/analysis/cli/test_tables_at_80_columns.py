@@ -12,12 +12,22 @@ from pathlib import Path
 import pytest
 
 CRITICAL = Path(__file__).resolve().parents[3] / "analysis" / "data" / "critical"
-FILES = [CRITICAL / "SYNTHETIC_crit_slope1.45deg_release1.9.csv", CRITICAL / "SYNTHETIC_crit_slope2.05deg_release2.5.csv"]
+FILES = [
+    CRITICAL / "SYNTHETIC_crit_slope1.45deg_release1.9.csv",
+    CRITICAL / "SYNTHETIC_crit_slope2.05deg_release2.5.csv",
+]
 
 
 def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rimless", *args], cwd=cwd, capture_output=True, text=True,
-                          env={**os.environ, "COLUMNS": "80"}, timeout=600, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [sys.executable, "-m", "rimless", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "COLUMNS": "80"},
+        timeout=600,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 @pytest.mark.parametrize("command", ["import", "report"])
@@ -29,8 +39,11 @@ def test_the_table_reads_at_80_columns(tmp_path: Path, command: str) -> None:
     assert all(len(line) <= 80 for line in table), res.stdout
     assert "…" not in res.stdout, res.stdout
     headers = " ".join(line for line in res.stdout.splitlines() if "┃" in line)
-    for word in (["status", "slope°", "outcome", "steps"] if command == "import"
-                 else ["status", "slope", "deg", "steps", "RMS", "rad/s"]):
+    for word in (
+        ["status", "slope°", "outcome", "steps"]
+        if command == "import"
+        else ["status", "slope", "deg", "steps", "RMS", "rad/s"]
+    ):
         assert word in headers, (word, res.stdout)
     for row in (line for line in table if "│" in line and ("imported" in line or "ok" in line or "suspect" in line)):
         cells = [c.strip() for c in row.split("│")]

@@ -11,23 +11,42 @@ from typer.testing import CliRunner
 
 from rimless.analysis.cli import app
 from rimless.analysis.examples.synthetic import rolling_wheel
-from rimless.analysis.io.trial import read_trial
 from rimless.analysis.io.tracker_csv import write_tracker_csv
+from rimless.analysis.io.trial import read_trial
 from tests.support.analysis_data import PUBLIC
 
 runner = CliRunner()
 #: The keys of `trials import --json` (issue contract: the old six plus the walk's).
-CONTRACT = {"file", "status", "reason", "frames", "rate_hz", "steps", "source", "slope_deg", "ramp_slope_deg",
-            "outcome", "window_s", "impact_times_s", "step_periods_s", "hub_offset_mm", "warnings", "errors",
-            "trial", "slope_source", "slope_ci_deg"}  # the issues' keys, plus the path of the trial written (None when
+CONTRACT = {
+    "file",
+    "status",
+    "reason",
+    "frames",
+    "rate_hz",
+    "steps",
+    "source",
+    "slope_deg",
+    "ramp_slope_deg",
+    "outcome",
+    "window_s",
+    "impact_times_s",
+    "step_periods_s",
+    "hub_offset_mm",
+    "warnings",
+    "errors",
+    "trial",
+    "slope_source",
+    "slope_ci_deg",
+}  # the issues' keys, plus the path of the trial written (None when
 # refused); slope_source (ramp | given | estimated) and slope_ci_deg ([low, high]) are issue 19's
 
 
 @pytest.fixture()
 def wheel_csv(tmp_path):
     w = rolling_wheel(seed=21)
-    p = write_tracker_csv(tmp_path / "wheel.csv", rate_hz=w.rate_hz,
-                          markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)})
+    p = write_tracker_csv(
+        tmp_path / "wheel.csv", rate_hz=w.rate_hz, markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)}
+    )
     return w, p
 
 
@@ -41,8 +60,9 @@ def test_import_json_mixed_good_and_bad(tmp_path, wheel_csv):
     rows = json.loads(res.stdout)
     assert [set(r) for r in rows] == [CONTRACT] * 2
     assert rows[0]["status"] == "refused" and "line 6, column 5" in rows[0]["reason"]
-    assert rows[0]["errors"] == [f"{rows[0]['file']}:6:5: section 'Trajectories': cell 'x' is not a number "
-                                 "[non-numeric]"]
+    assert rows[0]["errors"] == [
+        f"{rows[0]['file']}:6:5: section 'Trajectories': cell 'x' is not a number [non-numeric]"
+    ]
     assert rows[1]["status"] == "imported" and rows[1]["reason"] is None
     assert rows[1]["frames"] == len(w.time_s) and rows[1]["rate_hz"] == 100.0
     assert len(w.impact_time_s) - 3 <= rows[1]["steps"] <= len(w.impact_time_s) - 1
@@ -89,8 +109,11 @@ def test_public_files_through_cli(tmp_path):
     assert res.exit_code == 2
     assert rows["tracker_objects_vantage_tube8.csv"]["status"] == "imported"
     assert rows["tracker_objects_vantage_tube8.csv"]["frames"] == 547
-    for name in ("nexus_devices_pyomeca_analogs.csv", "nexus_trajectories_pyomeca.csv",
-                 "nexus_multisection_wpi_walk.csv"):
+    for name in (
+        "nexus_devices_pyomeca_analogs.csv",
+        "nexus_trajectories_pyomeca.csv",
+        "nexus_multisection_wpi_walk.csv",
+    ):
         assert rows[name]["status"] == "refused" and rows[name]["reason"]
 
 
@@ -124,8 +147,9 @@ def test_object_option_named_in_messages_on_import_and_report(tmp_path, wheel_cs
 def test_report_exits_nonzero_when_no_trial_can_be_compared(tmp_path):
     # a wheel that turns less than two steps: imported, but no steps to compare
     w = rolling_wheel(seed=3, periods_s=(0.4, 0.4))
-    p = write_tracker_csv(tmp_path / "short.csv", rate_hz=w.rate_hz,
-                          markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)})
+    p = write_tracker_csv(
+        tmp_path / "short.csv", rate_hz=w.rate_hz, markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)}
+    )
     res = runner.invoke(app, ["report", str(p), "--out", str(tmp_path / "rep")])
     assert res.exit_code == 1
     assert "no trial could be compared" in res.output

@@ -47,8 +47,10 @@ def test_the_ramp_trial_takes_the_ramp_slope():
 
 def test_the_short_trials_of_the_issue_are_fixed():
     """Before: 1.45 deg read -8.48 deg and 1.30 deg read 7.08 deg (the hub offset ran away on two steps)."""
-    for name, slope in (("SYNTHETIC_crit_slope1.45deg_release1.9.csv", 1.45),
-                        ("SYNTHETIC_crit_slope1.30deg_release1.9.csv", 1.30)):
+    for name, slope in (
+        ("SYNTHETIC_crit_slope1.45deg_release1.9.csv", 1.45),
+        ("SYNTHETIC_crit_slope1.30deg_release1.9.csv", 1.30),
+    ):
         m = import_trial(CRIT_DIR / name).meta
         assert abs(m.slope_deg - slope) <= 0.1
         assert m.outcome == "stalled"

@@ -71,8 +71,14 @@ def test_ctrl_c_to_the_group_is_one_line_and_leaves_no_child(tmp_path, delay_s):
     runs: the caller prints its one line, the child prints nothing and is gone."""
     script = tmp_path / "job.py"
     script.write_text(SCRIPT)
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        [sys.executable, str(script)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     child = int(proc.stdout.readline())
     time.sleep(delay_s)
     os.killpg(proc.pid, signal.SIGINT)

@@ -3,7 +3,6 @@ data cannot identify."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -19,8 +19,7 @@ def _walk(record_dt: float):
     from rimless.sim.step.backend import make_integrator
 
     p = WheelParams().replace(slope_rad=math.radians(1.9))
-    return cal._com_walk(p, "er", np.array([-cal.ALPHA_RAD / 2, 2.3]), 8, make_integrator("auto", rtol=1e-7),
-                         record_dt)
+    return cal._com_walk(p, "er", np.array([-cal.ALPHA_RAD / 2, 2.3]), 8, make_integrator("auto", rtol=1e-7), record_dt)
 
 
 def test_hermite_curve_matches_a_densely_recorded_walk():
@@ -125,7 +124,7 @@ def test_the_gauss_newton_stop_is_a_tenth_of_a_standard_error_on_a_linear_proble
     y = rng.normal(size=200)
     u_star = np.linalg.lstsq(J, y, rcond=None)[0]
     cov = np.linalg.inv(J.T @ J)
-    obj = object.__new__(cal._Objective)  # noqa: SLF001 - the stopping rule alone, without a wheel
+    obj = object.__new__(cal._Objective)
     for n_se, stops in ((0.05, True), (0.095, True), (0.105, False), (1.0, False)):
         direction = rng.normal(size=3)
         step = direction / math.sqrt(direction @ np.linalg.inv(cov) @ direction)  # one standard error (Mahalanobis)

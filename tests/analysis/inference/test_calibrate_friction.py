@@ -11,8 +11,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimless.analysis.inference.calibrate import (RIDGE_CORRELATION, ParamEstimate, calibrate, friction_vs_damping,
-                                                  parse_fit)
+from rimless.analysis.inference.calibrate import (
+    RIDGE_CORRELATION,
+    ParamEstimate,
+    calibrate,
+    friction_vs_damping,
+    parse_fit,
+)
 from tests.support.analysis_sim_truth import sim_trial
 
 C_TRUE = 8.0  # N s/m
@@ -27,8 +32,15 @@ def test_friction_is_a_fit_name():
     assert parse_fit("c,guide_friction_n") == ["c", "guide_friction_n"]
 
 
-@pytest.mark.parametrize("rho, ident, told", [(0.3, (True, True), True), (0.99, (True, True), False),
-                                              (-0.97, (False, True), False), (0.3, (True, False), False)])
+@pytest.mark.parametrize(
+    "rho, ident, told",
+    [
+        (0.3, (True, True), True),
+        (0.99, (True, True), False),
+        (-0.97, (False, True), False),
+        (0.3, (True, False), False),
+    ],
+)
 def test_the_statement_follows_identifiability_and_the_ridge(rho, ident, told):
     est = [_est("c", ident[0]), _est("guide_friction_n", ident[1])]
     out = friction_vs_damping(est, np.array([[1.0, rho], [rho, 1.0]]), [1.9, 2.2])
@@ -47,8 +59,12 @@ def test_recovers_friction_and_damping_from_trials_at_different_speeds():
     truth = WheelParams(damping_ns_per_m=C_TRUE, guide_friction_n=F_TRUE)
     rng = np.random.default_rng(5)
     trials = [sim_trial(truth, s, w, rng, name=f"sim_{s}deg_{w}") for s in (2.5, 3.0) for w in (2.0, 2.6)]
-    res = calibrate(trials, [t.meta.source_file for t in trials], ["c", "guide_friction_n"],
-                    params=WheelParams(guide_friction_n=0.5))
+    res = calibrate(
+        trials,
+        [t.meta.source_file for t in trials],
+        ["c", "guide_friction_n"],
+        params=WheelParams(guide_friction_n=0.5),
+    )
     c, f = res.params
     s = res.summary()
     fvd = s["friction_vs_damping"]

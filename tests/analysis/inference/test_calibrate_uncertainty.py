@@ -30,8 +30,7 @@ def test_sandwich_matches_the_closed_form_of_a_one_parameter_regression():
 
 def test_not_converged_is_never_identifiable():
     glob = cal._Globals.of(__import__("rimless.sim.model.params", fromlist=["WheelParams"]).WheelParams(), ["c"])
-    est = cal._estimates(glob, ["c"], np.array([11.0]), np.array([0.1]), [True], [""], np.array([0.2]),
-                         converged=False)
+    est = cal._estimates(glob, ["c"], np.array([11.0]), np.array([0.1]), [True], [""], np.array([0.2]), converged=False)
     assert not est[0].identifiable and "did not converge" in est[0].note
     assert est[0].se == pytest.approx(0.2)  # the larger of model-based and sandwich
     est = cal._estimates(glob, ["c"], np.array([11.0]), np.array([0.1]), [True], [""], np.array([8.0]))

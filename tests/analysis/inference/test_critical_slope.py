@@ -20,8 +20,12 @@ RELEASES = (2.0, 3.0)  # rad/s: two release speeds
 @pytest.fixture(scope="module")
 def series():
     rng = np.random.default_rng(20261123)
-    trials = [duck_trial(TRUTH, s, w, rng, name=f"rigid_{s}deg_{w}rad_s_{k}")
-              for s in SLOPES_DEG for w in RELEASES for k in range(2)]
+    trials = [
+        duck_trial(TRUTH, s, w, rng, name=f"rigid_{s}deg_{w}rad_s_{k}")
+        for s in SLOPES_DEG
+        for w in RELEASES
+        for k in range(2)
+    ]
     params = TRUTH.wheel_params()
     verdicts = trial_verdicts(trials, params)
     return trials, verdicts
@@ -75,8 +79,9 @@ def test_estimate_within_0p1_deg_of_coleman(series):
 def test_below_critical_trial_that_walks_the_ramp_is_decaying(series):
     trials, verdicts = series
     truth = TRUTH.critical_slope_deg()
-    walked_below = [(t, v) for t, v in zip(trials, verdicts)
-                    if t.meta.slope_deg < truth - 0.1 and t.meta.outcome == "walked"]
+    walked_below = [
+        (t, v) for t, v in zip(trials, verdicts) if t.meta.slope_deg < truth - 0.1 and t.meta.outcome == "walked"
+    ]
     assert walked_below, "the series must hold a below-critical trial that reaches the end of the ramp"
     for t, v in walked_below:
         assert v.verdict == "decaying", (t.meta.source_file, v.reason)
@@ -99,8 +104,9 @@ def test_few_steps_are_undetermined_not_guessed():
 
 
 def test_gap_breaks_the_chain():
-    t = SimpleNamespace(impact_time_s=np.array([0.0, 0.5, 1.0, 2.0, 2.5, 3.0]),
-                        step_period_s=np.array([0.5, 0.5, 0.5, 0.5]))
+    t = SimpleNamespace(
+        impact_time_s=np.array([0.0, 0.5, 1.0, 2.0, 2.5, 3.0]), step_period_s=np.array([0.5, 0.5, 0.5, 0.5])
+    )
     chains = consecutive_periods(t)
     assert [c.size for c in chains] == [2, 2]
 

@@ -43,16 +43,26 @@ def test_coverage_model_matches_coleman_and_quadrature():
     phi = math.radians(1.5)
     for W in (2.2, 4.0, 9.0):
         assert w.top_margin(W, phi) > 0
-        ref = quad(lambda th: 1 / math.sqrt(W + 2 * w.k * (math.cos(phi - math.pi / 8) - math.cos(th + phi))),
-                   -math.pi / 8, math.pi / 8, points=[-phi], limit=200, epsabs=1e-13)[0]
+        ref = quad(
+            lambda th: 1 / math.sqrt(W + 2 * w.k * (math.cos(phi - math.pi / 8) - math.cos(th + phi))),  # noqa: B023
+            -math.pi / 8,
+            math.pi / 8,
+            points=[-phi],
+            limit=200,
+            epsabs=1e-13,
+        )[0]
         assert w.period_s(W, phi) == pytest.approx(ref, rel=1e-9)
 
 
 @pytest.fixture(scope="module")
 def rigid_series():
     rng = np.random.default_rng(20261124)
-    trials = [duck_trial(TRUTH, s, w, rng, name=f"rigid_{s}deg_{w}_{k}")
-              for s in (0.9, 1.1, 1.3, 1.5, 1.7) for w in (2.0, 3.0) for k in range(2)]
+    trials = [
+        duck_trial(TRUTH, s, w, rng, name=f"rigid_{s}deg_{w}_{k}")
+        for s in (0.9, 1.1, 1.3, 1.5, 1.7)
+        for w in (2.0, 3.0)
+        for k in range(2)
+    ]
     return trials, trial_verdicts(trials, TRUTH.wheel_params())
 
 

@@ -93,8 +93,11 @@ def _logs(tmp_path: Path, truth: LegTruth, seeds: list[int], mm: tuple[float, ..
     return logs
 
 
-@pytest.mark.parametrize("truth", [LegTruth(), LegTruth(k_n_per_m=2000.0, c_n_s_per_m=4.0, friction_n=0.25)],
-                         ids=["paper k c, 0.4 N", "softer, 0.25 N"])
+@pytest.mark.parametrize(
+    "truth",
+    [LegTruth(), LegTruth(k_n_per_m=2000.0, c_n_s_per_m=4.0, friction_n=0.25)],
+    ids=["paper k c, 0.4 N", "softer, 0.25 N"],
+)
 def test_recovers_k_and_c_within_2_percent_and_friction_within_10_percent(tmp_path: Path, truth: LegTruth) -> None:
     """Three releases (1.5, 2 and 2.5 mm) at 5 kHz with 0.3 counts of noise, floor quantisation, a random-walk
     drift, read jitter and late reads, an unknown release delay and sensor zero."""
@@ -164,10 +167,10 @@ def test_random_walk_sandwich_equals_the_explicit_covariance() -> None:
     K = np.zeros((sum(sizes), sum(sizes)))
     for i, t in enumerate(ts):
         tt = t - t[0]
-        K[offs[i]:offs[i + 1], offs[i]:offs[i + 1]] = q * np.minimum.outer(tt, tt)
+        K[offs[i] : offs[i + 1], offs[i] : offs[i + 1]] = q * np.minimum.outer(tt, tt)
     n = sum(sizes)
     assert np.allclose(walk, A @ J.T @ K @ J @ A, rtol=1e-10, atol=0)
-    assert np.allclose(white, A @ J.T @ np.diag(r ** 2) @ J @ A * n / (n - p), rtol=1e-10, atol=0)
+    assert np.allclose(white, A @ J.T @ np.diag(r**2) @ J @ A * n / (n - p), rtol=1e-10, atol=0)
 
 
 def test_coverage_study_runs_and_counts_every_test() -> None:
@@ -229,8 +232,14 @@ def test_a_single_release_is_fitted_with_honest_intervals(tmp_path: Path) -> Non
 
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "rimless", "trials", "leg-fit", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "COLUMNS": "80"})
+    return subprocess.run(
+        [sys.executable, "-m", "rimless", "trials", "leg-fit", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "COLUMNS": "80"},
+    )
 
 
 def test_command_json_and_figure(tmp_path: Path) -> None:
@@ -257,13 +266,23 @@ def test_command_json_and_figure(tmp_path: Path) -> None:
 
 
 def test_coverage_command_json(tmp_path: Path) -> None:
-    res = subprocess.run([sys.executable, "-m", "rimless", "trials", "leg-fit-coverage", "--tests", "1", "--json"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [sys.executable, "-m", "rimless", "trials", "leg-fit-coverage", "--tests", "1", "--json"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout)
     assert out["tests"] == 1 and set(out["per_parameter"]) == {"k_n_per_m", "c_n_s_per_m", "guide_friction_n"}
-    text = subprocess.run([sys.executable, "-m", "rimless", "trials", "leg-fit-coverage", "--tests", "1"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    text = subprocess.run(
+        [sys.executable, "-m", "rimless", "trials", "leg-fit-coverage", "--tests", "1"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert text.returncode == 0, text.stderr
     assert "95 % interval holds the truth in" in text.stdout and "goal 90-98 %" in text.stdout
 
@@ -274,15 +293,21 @@ def _good(tmp_path: Path) -> list[str]:
 
 
 BAD = {
-    "not JSON": (lambda L: L[:5] + ["{\"t_s\": 0.1, "] + L[6:], ":6", "not JSON"),
+    "not JSON": (lambda L: L[:5] + ['{"t_s": 0.1, '] + L[6:], ":6", "not JSON"),
     "wrong format": (lambda L: [L[0].replace("rimless-leg-test/1", "rimless-trial-log/1")] + L[1:], ":1", "'format'"),
     "no counts": (lambda L: L[:3] + [json.dumps({"t_s": 0.0301})] + L[3:], ":4", "'counts'"),
-    "counts not an integer": (lambda L: L[:3] + [L[3].replace('"counts": ', '"counts": 0.5 + ').replace(
-        "0.5 + ", "\"x\", \"_\": ")] + L[4:], ":4", "'counts'"),
+    "counts not an integer": (
+        lambda L: L[:3] + [L[3].replace('"counts": ', '"counts": 0.5 + ').replace("0.5 + ", '"x", "_": ')] + L[4:],
+        ":4",
+        "'counts'",
+    ),
     "time goes back": (lambda L: L[:4] + [L[2]] + L[5:], ":5", "'t_s'"),
     "no release": (lambda L: [x for x in L if "release" not in x], "", "no 'release' event"),
-    "missing counts_per_m": (lambda L: [json.dumps({k: v for k, v in json.loads(L[0]).items()
-                                                    if k != "counts_per_m"})] + L[1:], ":1", "'counts_per_m'"),
+    "missing counts_per_m": (
+        lambda L: [json.dumps({k: v for k, v in json.loads(L[0]).items() if k != "counts_per_m"})] + L[1:],
+        ":1",
+        "'counts_per_m'",
+    ),
     "empty": (lambda L: [], "", "empty"),
 }
 
@@ -314,8 +339,10 @@ def test_a_leg_that_does_not_move_is_a_classified_failure(tmp_path: Path) -> Non
     lines = _good(tmp_path)
     head, rest = lines[0], [json.loads(x) for x in lines[1:]]
     held = next(r["counts"] for r in rest if "counts" in r and "event" not in r and r["t_s"] > 0.25)
-    fixed = [json.dumps({**r, "counts": held}) if "counts" in r and "event" not in r and r["t_s"] > 0.25
-             else json.dumps(r) for r in rest]
+    fixed = [
+        json.dumps({**r, "counts": held}) if "counts" in r and "event" not in r and r["t_s"] > 0.25 else json.dumps(r)
+        for r in rest
+    ]
     (tmp_path / "stuck.jsonl").write_text("\n".join([head, *fixed]) + "\n")
     res = _cli("stuck.jsonl", cwd=tmp_path)
     assert res.returncode == 1, res.stdout + res.stderr

@@ -29,15 +29,15 @@ def _design(v_eff, rng, n_rows=40):
     J = np.zeros((offs[-1], 1 + n))
     for i in range(n):
         shape = rng.normal(size=n_rows)
-        J[offs[i]:offs[i + 1], 0] = shape * (1.0 + 0.3 * i)
-        J[offs[i]:offs[i + 1], 1 + i] = rng.normal(size=n_rows)
+        J[offs[i] : offs[i + 1], 0] = shape * (1.0 + 0.3 * i)
+        J[offs[i] : offs[i + 1], 1 + i] = rng.normal(size=n_rows)
     return J, offs
 
 
 def _friction_col(J, offs, v_eff):
     col = np.zeros(J.shape[0])
     for i in range(offs.size - 1):
-        col[offs[i]:offs[i + 1]] = J[offs[i]:offs[i + 1], 0] / v_eff[i]
+        col[offs[i] : offs[i + 1]] = J[offs[i] : offs[i + 1], 0] / v_eff[i]
     return col
 
 

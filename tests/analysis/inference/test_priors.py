@@ -19,8 +19,15 @@ from rimless.sim.model.params import WheelParams
 
 
 def _leg_json(path: Path, k=(2650.0, 2600.0, 2700.0), c=(7.5, 7.3, 7.7), f=(0.4, 0.35, 0.45)) -> Path:
-    data = {"leg": 2, "k_n_per_m": k[0], "k_n_per_m_ci": [k[1], k[2]], "c_n_s_per_m": c[0],
-            "c_n_s_per_m_ci": [c[1], c[2]], "guide_friction_n": f[0], "guide_friction_n_ci": [f[1], f[2]]}
+    data = {
+        "leg": 2,
+        "k_n_per_m": k[0],
+        "k_n_per_m_ci": [k[1], k[2]],
+        "c_n_s_per_m": c[0],
+        "c_n_s_per_m_ci": [c[1], c[2]],
+        "guide_friction_n": f[0],
+        "guide_friction_n_ci": [f[1], f[2]],
+    }
     path.write_text(json.dumps(data))
     return path
 
@@ -33,12 +40,18 @@ def test_reads_mean_and_sd_from_the_interval(tmp_path: Path) -> None:
     assert pri.leg == 2
 
 
-@pytest.mark.parametrize(("text", "named"), [
-    ("{", "not JSON"), ("[]", "JSON object"), ("{}", "none of the fields"),
-    ('{"k_n_per_m": 2600}', "'k_n_per_m_ci'"), ('{"k_n_per_m": 2600, "k_n_per_m_ci": [2700, 2500]}', "lo < hi"),
-    ('{"k_n_per_m": 2900, "k_n_per_m_ci": [2500, 2700]}', "outside its interval"),
-    ('{"k_n_per_m": null, "k_n_per_m_ci": [2500, 2700]}', "'k_n_per_m'"),
-])
+@pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        ("{", "not JSON"),
+        ("[]", "JSON object"),
+        ("{}", "none of the fields"),
+        ('{"k_n_per_m": 2600}', "'k_n_per_m_ci'"),
+        ('{"k_n_per_m": 2600, "k_n_per_m_ci": [2700, 2500]}', "lo < hi"),
+        ('{"k_n_per_m": 2900, "k_n_per_m_ci": [2500, 2700]}', "outside its interval"),
+        ('{"k_n_per_m": null, "k_n_per_m_ci": [2500, 2700]}', "'k_n_per_m'"),
+    ],
+)
 def test_bad_prior_file_names_the_file_and_field(tmp_path: Path, text: str, named: str) -> None:
     p = tmp_path / "leg.json"
     p.write_text(text)
@@ -96,7 +109,7 @@ def test_penalty_rows_remove_an_exact_ridge_with_the_closed_form_uncertainty(tmp
     s_c = next(p.sd for p in pri.priors if p.key == "c_n_s_per_m")
     # the closed form: information on d = c - k/1000 from the data, plus both priors
     i_d = float(np.sum(((1 + x_t) / sd_data) ** 2))
-    F = np.array([[i_d + s_c ** -2, -i_d / 1000], [-i_d / 1000, i_d / 1e6 + s_k ** -2]])
+    F = np.array([[i_d + s_c**-2, -i_d / 1000], [-i_d / 1000, i_d / 1e6 + s_k**-2]])
     cov = np.linalg.inv(F)
     assert se[0] == pytest.approx(math.sqrt(cov[0, 0]), rel=1e-9)
     assert se[1] == pytest.approx(math.sqrt(cov[1, 1]), rel=1e-9)
@@ -114,8 +127,10 @@ def ck_trials():
     rng = np.random.default_rng(19)
     # walks with the noise of a real capture (1.5 mm on the CoM height, 3 ms on the impact times): on their own they
     # see c and k mostly along the ridge
-    return truth, [sim_trial(truth, s, w, rng, name=f"er_{s}deg_{w}", noise_m=1.5e-3, timing_noise_s=3e-3, n_steps=7)
-                   for s, w in ((1.8, 1.9), (2.4, 2.4), (3.0, 1.9), (2.2, 2.2))]
+    return truth, [
+        sim_trial(truth, s, w, rng, name=f"er_{s}deg_{w}", noise_m=1.5e-3, timing_noise_s=3e-3, n_steps=7)
+        for s, w in ((1.8, 1.9), (2.4, 2.4), (3.0, 1.9), (2.2, 2.2))
+    ]
 
 
 @pytest.mark.slow
@@ -130,15 +145,18 @@ def test_prior_removes_the_c_k_ridge_of_the_walk_fit(ck_trials, tmp_path: Path) 
     free = calibrate(trials, names, ["c", "k"], max_rounds=2)
     # the walks' truth has no guide friction, and a leg test of that wheel would measure none: the walk model
     # takes an unfitted leg-test value as fixed, so a friction here would be a different wheel
-    pri = read_priors(_leg_json(tmp_path / "leg.json", k=(2200.0, 2189.0, 2211.0), c=(12.0, 11.87, 12.13),
-                                f=(0.0, 0.0, 0.02)))
+    pri = read_priors(
+        _leg_json(tmp_path / "leg.json", k=(2200.0, 2189.0, 2211.0), c=(12.0, 11.87, 12.13), f=(0.0, 0.0, 0.02))
+    )
     wheel = pri.plan(WheelParams(), ["damping_ns_per_m", "stiffness_n_per_m"])
     held = calibrate(trials, names, ["c", "k"], params=wheel, max_rounds=2, prior=pri)
     width = {p.name: p.ci95[1] - p.ci95[0] for p in free.params}
     width_p = {p.name: p.ci95[1] - p.ci95[0] for p in held.params}
-    print(f"95 % widths without / with the prior: c {width['c']:.3f} / {width_p['c']:.3f} N s/m, "
-          f"k {width['k']:.1f} / {width_p['k']:.1f} N/m; correlation {free.correlation[0, 1]:+.3f} / "
-          f"{held.correlation[0, 1]:+.3f}")
+    print(
+        f"95 % widths without / with the prior: c {width['c']:.3f} / {width_p['c']:.3f} N s/m, "
+        f"k {width['k']:.1f} / {width_p['k']:.1f} N/m; correlation {free.correlation[0, 1]:+.3f} / "
+        f"{held.correlation[0, 1]:+.3f}"
+    )
     assert width_p["c"] < width["c"] and width_p["k"] < width["k"]
     assert abs(free.correlation[0, 1]) > 0.8 and abs(held.correlation[0, 1]) < 0.5
     for p in held.params:
@@ -157,13 +175,17 @@ def test_report_flags_walks_that_disagree_with_the_leg_test(tmp_path: Path) -> N
     pri = read_priors(_leg_json(tmp_path / "leg.json"))
     pri.plan(WheelParams(), ["damping_ns_per_m", "stiffness_n_per_m"])
     s_c = next(p.sd for p in pri.priors if p.key == "c_n_s_per_m")
-    est = [SimpleNamespace(field="damping_ns_per_m", value=7.5 + 5 * s_c, se=s_c / 2, se_model=s_c / 2),
-           SimpleNamespace(field="stiffness_n_per_m", value=2650.0, se=200.0, se_model=200.0)]
+    est = [
+        SimpleNamespace(field="damping_ns_per_m", value=7.5 + 5 * s_c, se=s_c / 2, se_model=s_c / 2),
+        SimpleNamespace(field="stiffness_n_per_m", value=2650.0, se=200.0, se_model=200.0),
+    ]
     rep = pri.report(SimpleNamespace(params=est), ["damping_ns_per_m", "stiffness_n_per_m"], ["c", "k"])
     rows = {r["key"]: r for r in rep["parameters"]}
     assert rows["c_n_s_per_m"]["prior_z"] == pytest.approx(5.0) and "disagree" in rows["c_n_s_per_m"]["conflict"]
-    assert rows["c_n_s_per_m"]["leg_test_share"] == pytest.approx(0.25) and rows["c_n_s_per_m"]["source"] == \
-        "leg test and walks"
+    assert (
+        rows["c_n_s_per_m"]["leg_test_share"] == pytest.approx(0.25)
+        and rows["c_n_s_per_m"]["source"] == "leg test and walks"
+    )
     k_share = (next(p.sd for p in pri.priors if p.key == "k_n_per_m") / 200.0) ** -2
     assert rows["k_n_per_m"]["leg_test_share"] == pytest.approx(min(k_share, 1.0))
     assert "conflict" not in rows["k_n_per_m"]
@@ -181,9 +203,27 @@ def test_calibrate_command_reports_which_parameters_came_from_the_leg_test(tmp_p
     root = Path(__file__).resolve().parents[3]
     leg = _leg_json(tmp_path / "leg.json", k=(2700.0, 2680.0, 2720.0), c=(8.0, 7.85, 8.15), f=(0.0, 0.0, 0.02))
     csvs = sorted(str(p) for p in (root / "analysis" / "data").glob("SYNTHETIC_er_slope2.0deg_run*.csv"))
-    res = subprocess.run([sys.executable, "-m", "rimless", "trials", "calibrate", *csvs, "--fit", "c", "--prior",
-                          str(leg), "--no-critical", "--json"], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=900, env={**os.environ, "COLUMNS": "80"})
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rimless",
+            "trials",
+            "calibrate",
+            *csvs,
+            "--fit",
+            "c",
+            "--prior",
+            str(leg),
+            "--no-critical",
+            "--json",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env={**os.environ, "COLUMNS": "80"},
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     out = json.loads(res.stdout)
     rows = {r["key"]: r for r in out["prior"]["parameters"]}

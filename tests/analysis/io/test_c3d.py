@@ -39,8 +39,13 @@ def test_c3d_round_trip_equals_tracker_csv(tmp_path):
     csv = import_trial(tw.write(tmp_path / "t.csv", tw.markers_section(mk)))
     c3d = import_trial(write_c3d_with_ezc3d(tmp_path / "t.c3d", 100.0, mk))
     a, b = csv.meta, c3d.meta
-    assert (a.outcome, a.markers, a.n_frames, a.rate_hz, a.n_gap_frames) == \
-           (b.outcome, b.markers, b.n_frames, b.rate_hz, b.n_gap_frames)
+    assert (a.outcome, a.markers, a.n_frames, a.rate_hz, a.n_gap_frames) == (
+        b.outcome,
+        b.markers,
+        b.n_frames,
+        b.rate_hz,
+        b.n_gap_frames,
+    )
     # C3D stores float32 mm (0.1 um at 1 m), the CSV 6 decimals of mm: the same trial within that
     np.testing.assert_allclose(c3d.series["hub"], csv.series["hub"], atol=2e-6, equal_nan=True)
     np.testing.assert_allclose(c3d.impact_time_s, csv.impact_time_s, atol=1e-4)
@@ -55,8 +60,9 @@ def test_c3d_vicon_occlusions_zeros_with_negative_residual(tmp_path):
     occ = np.zeros((truth.time_s.size, 4), bool)
     occ[150:160, 2] = True
     occ[200:203] = True
-    trial = import_trial(write_c3d_with_ezc3d(tmp_path / "o.c3d", 100.0,
-                                              {f"w:M{i}": pts[:, i] for i in range(4)}, occluded_zero=occ))
+    trial = import_trial(
+        write_c3d_with_ezc3d(tmp_path / "o.c3d", 100.0, {f"w:M{i}": pts[:, i] for i in range(4)}, occluded_zero=occ)
+    )
     assert trial.meta.n_interpolated_frames == 3  # the frames with every marker lost, bridged
     hub = trial.series["hub"]
     assert np.nanmax(np.linalg.norm(np.diff(hub, axis=0), axis=1)) < 0.02  # no jump to the origin
@@ -72,7 +78,8 @@ def test_c3d_errors(tmp_path):
     p = write_c3d_with_ezc3d(tmp_path / "rate.c3d", 20000.0, {f"w:M{i}": pts[:, i] for i in range(4)})
     with pytest.raises(InputFileError, match="POINT:RATE"):
         import_trial(p)
-    static = write_c3d_with_ezc3d(tmp_path / "static.c3d", 100.0, {f"w:M{i}": pts[:1].repeat(500, 0)[:, i]
-                                                                    for i in range(4)})
+    static = write_c3d_with_ezc3d(
+        tmp_path / "static.c3d", 100.0, {f"w:M{i}": pts[:1].repeat(500, 0)[:, i] for i in range(4)}
+    )
     with pytest.raises(TrialRefused, match="nothing moves like the wheel"):
         import_trial(static)

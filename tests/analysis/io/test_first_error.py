@@ -9,8 +9,13 @@ from rimless.analysis.io.vicon_csv import ViconCsvError, read_vicon_csv
 
 
 def _export(n: int = 60) -> list[str]:
-    lines = ["Objects", "100", ",,Global Angle Wheel:Wheel,,,,,", "Frame,Sub Frame,RX,RY,RZ,TX,TY,TZ",
-             ",,rad,rad,rad,mm,mm,mm"]
+    lines = [
+        "Objects",
+        "100",
+        ",,Global Angle Wheel:Wheel,,,,,",
+        "Frame,Sub Frame,RX,RY,RZ,TX,TY,TZ",
+        ",,rad,rad,rad,mm,mm,mm",
+    ]
     for i in range(n):
         lines.append(f"{i + 1},0,0.1,{0.01 * i:.3f},0.2,{100 + 3 * i},{-50 + i},{300 - 0.1 * i:.1f}")
     return lines
@@ -63,21 +68,29 @@ def _locations(tmp_path, lines: list[str]) -> tuple[str, list[str]]:
     return str(exc.value), exc.value.all_locations()
 
 
-@pytest.mark.parametrize("edit, expected", [
-    # (what is broken, the (line, cause) of every error expected, in file order)
-    (lambda L: (_bad(L, 10, 4, "x"), _bad(L, 20, 6, "1.2.3"), _bad(L, 30, 3, "abc")),
-     [(10, "non-numeric"), (20, "non-numeric"), (30, "non-numeric")]),
-    (lambda L: (_bad(L, 10, 4, "x"), _short(L, 30)), [(10, "non-numeric"), (30, "missing-cell")]),
-    (lambda L: (_short(L, 15), _bad(L, 30, 4, "x")), [(15, "missing-cell"), (30, "non-numeric")]),
-    (lambda L: (_bad(L, 10, 4, "x"), _bad(L, 40, 1, "20")), [(10, "non-numeric"), (40, "frame-order")]),
-    (lambda L: (_bad(L, 40, 1, "20"), _bad(L, 50, 4, "x")), [(40, "frame-order"), (50, "non-numeric")]),
-    (lambda L: (_bad(L, 12, 1, "6"), _bad(L, 50, 7, "1e999")), [(12, "duplicate-frame"), (50, "non-finite")]),
-    # a frame cell that is not a number ends the rows that can be read: the errors above it still come first
-    (lambda L: (_bad(L, 36, 4, "abc"), _bad(L, 50, 1, "x12")), [(36, "non-numeric"), (50, "bad-frame")]),
-    # a row that looks like a section title (one word, the rest empty) but has no 'Frame' header below it
-    (lambda L: (_bad(L, 36, 4, "abc"), L.__setitem__(49, "Oops" + "," * 7)), [(36, "non-numeric"), (50, "bad-frame")]),
-    (lambda L: L.__setitem__(49, "Oops" + "," * 7), [(50, "bad-frame")]),
-])
+@pytest.mark.parametrize(
+    "edit, expected",
+    [
+        # (what is broken, the (line, cause) of every error expected, in file order)
+        (
+            lambda L: (_bad(L, 10, 4, "x"), _bad(L, 20, 6, "1.2.3"), _bad(L, 30, 3, "abc")),
+            [(10, "non-numeric"), (20, "non-numeric"), (30, "non-numeric")],
+        ),
+        (lambda L: (_bad(L, 10, 4, "x"), _short(L, 30)), [(10, "non-numeric"), (30, "missing-cell")]),
+        (lambda L: (_short(L, 15), _bad(L, 30, 4, "x")), [(15, "missing-cell"), (30, "non-numeric")]),
+        (lambda L: (_bad(L, 10, 4, "x"), _bad(L, 40, 1, "20")), [(10, "non-numeric"), (40, "frame-order")]),
+        (lambda L: (_bad(L, 40, 1, "20"), _bad(L, 50, 4, "x")), [(40, "frame-order"), (50, "non-numeric")]),
+        (lambda L: (_bad(L, 12, 1, "6"), _bad(L, 50, 7, "1e999")), [(12, "duplicate-frame"), (50, "non-finite")]),
+        # a frame cell that is not a number ends the rows that can be read: the errors above it still come first
+        (lambda L: (_bad(L, 36, 4, "abc"), _bad(L, 50, 1, "x12")), [(36, "non-numeric"), (50, "bad-frame")]),
+        # a row that looks like a section title (one word, the rest empty) but has no 'Frame' header below it
+        (
+            lambda L: (_bad(L, 36, 4, "abc"), L.__setitem__(49, "Oops" + "," * 7)),
+            [(36, "non-numeric"), (50, "bad-frame")],
+        ),
+        (lambda L: L.__setitem__(49, "Oops" + "," * 7), [(50, "bad-frame")]),
+    ],
+)
 def test_every_error_is_collected_and_the_first_in_file_order_is_raised(tmp_path, edit, expected):
     """Before: a non-numeric cell stopped the collection (a short row, a repeated frame or an infinite value
     elsewhere was not reported), and a short row before it was reported after it or not at all."""

@@ -17,23 +17,57 @@ from rimless.analysis.io.robot_log import FORMAT, read_clutch_log
 from rimless.errors import InputFileError
 
 
-def write_log(path: Path, locks: list[tuple[float, int, float | None]], *, torn: bool = False,
-              disarmed_lock_at: float | None = None) -> Path:
+def write_log(
+    path: Path,
+    locks: list[tuple[float, int, float | None]],
+    *,
+    torn: bool = False,
+    disarmed_lock_at: float | None = None,
+) -> Path:
     """A trial log with a lock of leg L at t and its release (the next leg's touchdown carrying released_leg)
     at t + clutched (None: never released); samples between the events as the firmware writes them."""
     lines = [{"format": FORMAT, "trial": "hand", "started_epoch_s": 1.8e9}]
     seq = 0
     for t, leg, held in locks:
-        lines.append({"timestamp": 1.8e9 + t, "t_mono_s": t,
-                      "event": {"channel": 0, "leg": leg, "armed": True, "name": "lock", "code": 2}})
+        lines.append(
+            {
+                "timestamp": 1.8e9 + t,
+                "t_mono_s": t,
+                "event": {"channel": 0, "leg": leg, "armed": True, "name": "lock", "code": 2},
+            }
+        )
         seq += 1
-        lines.append({"timestamp": 1.8e9 + t + 0.01, "t_mono_s": t + 0.01, "seq": seq, "ch": 0,
-                      "leg": {"position_m": 0.0, "velocity_m_s": 0.0, "compression_m": 0.008, "phase": 2,
-                              "stance": leg, "clutch_mask": 1 << leg}})
+        lines.append(
+            {
+                "timestamp": 1.8e9 + t + 0.01,
+                "t_mono_s": t + 0.01,
+                "seq": seq,
+                "ch": 0,
+                "leg": {
+                    "position_m": 0.0,
+                    "velocity_m_s": 0.0,
+                    "compression_m": 0.008,
+                    "phase": 2,
+                    "stance": leg,
+                    "clutch_mask": 1 << leg,
+                },
+            }
+        )
         if held is not None:
-            lines.append({"timestamp": 1.8e9 + t + held, "t_mono_s": t + held,
-                          "event": {"channel": 0, "leg": leg + 1, "armed": True, "released_leg": leg,
-                                    "name": "touchdown", "code": 1}})
+            lines.append(
+                {
+                    "timestamp": 1.8e9 + t + held,
+                    "t_mono_s": t + held,
+                    "event": {
+                        "channel": 0,
+                        "leg": leg + 1,
+                        "armed": True,
+                        "released_leg": leg,
+                        "name": "touchdown",
+                        "code": 1,
+                    },
+                }
+            )
     if disarmed_lock_at is not None:
         lines.append({"t_mono_s": disarmed_lock_at, "event": {"leg": 7, "armed": False, "name": "lock"}})
     text = "".join(json.dumps(o) + "\n" for o in lines)
@@ -52,11 +86,17 @@ def test_clutched_times_from_a_hand_written_log(tmp_path):
     assert any("torn last line" in w for w in log.warnings)
 
 
-@pytest.mark.parametrize("text, where", [
-    ('{"format": "something-else/2"}\n', ":1:"),
-    (f'{{"format": "{FORMAT}"}}\nnot json\n', ":2:"),
-    (f'{{"format": "{FORMAT}"}}\n{{"t_mono_s": "x", "event": {{"name": "lock", "leg": 1}}}}\n', ":2: field t_mono_s"),
-])
+@pytest.mark.parametrize(
+    "text, where",
+    [
+        ('{"format": "something-else/2"}\n', ":1:"),
+        (f'{{"format": "{FORMAT}"}}\nnot json\n', ":2:"),
+        (
+            f'{{"format": "{FORMAT}"}}\n{{"t_mono_s": "x", "event": {{"name": "lock", "leg": 1}}}}\n',
+            ":2: field t_mono_s",
+        ),
+    ],
+)
 def test_a_bad_log_is_one_error_naming_file_and_line(tmp_path, text, where):
     p = tmp_path / "bad.jsonl"
     p.write_text(text)
@@ -92,7 +132,7 @@ def test_a_log_written_by_the_fake_robot(tmp_path):
         return r
 
     faults: list[str] = []
-    for attempt in range(3):
+    for _attempt in range(3):
         shutil.rmtree(tmp_path / "trials", ignore_errors=True)
         _, summary, r, _ = scenario(config(tmp_path), script, timeout_s=30.0)
         if not summary.faults:
@@ -102,14 +142,13 @@ def test_a_log_written_by_the_fake_robot(tmp_path):
     assert not summary.faults, f"three runs faulted: {faults}"
     log = read_clutch_log(r["result"]["path"])
     held = log.complete()
-    events = [json.loads(ln).get("event") for ln in Path(r["result"]["path"]).read_text().splitlines()
-              if ln.strip()]
+    events = [json.loads(ln).get("event") for ln in Path(r["result"]["path"]).read_text().splitlines() if ln.strip()]
     assert held.size >= 3, events
     assert np.all((held > 0.05) & (held < 0.4))
     # The fake samples at 300 Hz on the wall clock: a lock and a release each land on a sample (3.3 ms apart),
     # later on a loaded machine; 20 ms still tells a constant hold from one that drifts by a step's fraction.
     assert np.ptp(held) < 0.02, held
-    np.testing.assert_allclose(np.diff(log.lock_s[:held.size]), 0.4, atol=0.02)
+    np.testing.assert_allclose(np.diff(log.lock_s[: held.size]), 0.4, atol=0.02)
 
 
 @pytest.mark.slow
@@ -120,10 +159,9 @@ def test_report_shows_measured_beside_simulated(tmp_path):
     trial = next(p for p in data_files() if p.name == "SYNTHETIC_er_slope2.0deg_run1.csv")
     log = write_log(tmp_path / "robot.jsonl", [(1.0 + 0.4 * k, k % 8, 0.30 + 0.001 * k) for k in range(5)])
     runner = CliRunner()
-    res = runner.invoke(app, ["report", str(trial), "--robot-log", str(log), "--out", str(tmp_path / "rep"),
-                              "--json"])
+    res = runner.invoke(app, ["report", str(trial), "--robot-log", str(log), "--out", str(tmp_path / "rep"), "--json"])
     assert res.exit_code == 0, res.output
-    out = json.loads(res.stdout[res.stdout.index("{"):])
+    out = json.loads(res.stdout[res.stdout.index("{") :])
     c = out["clutch_time_per_step"][trial.name]
     measured = [r["measured_ms"] for r in c["rows"] if r["measured_ms"] is not None]
     np.testing.assert_allclose(measured, [300.0, 301.0, 302.0, 303.0, 304.0], atol=1e-6)
@@ -135,5 +173,7 @@ def test_report_shows_measured_beside_simulated(tmp_path):
     # several trials need TRIAL=FILE; an unknown trial or a missing log is refused naming the option
     bad = runner.invoke(app, ["report", str(trial), str(trial), "--robot-log", str(log), "--out", str(tmp_path / "r2")])
     assert bad.exit_code == 2 and "--robot-log" in bad.output
-    bad = runner.invoke(app, ["report", str(trial), "--robot-log", "nope.csv=" + str(log), "--out", str(tmp_path / "r3")])
+    bad = runner.invoke(
+        app, ["report", str(trial), "--robot-log", "nope.csv=" + str(log), "--out", str(tmp_path / "r3")]
+    )
     assert bad.exit_code == 2 and "is not one of the trials" in bad.output

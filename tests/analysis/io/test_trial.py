@@ -13,8 +13,11 @@ from rimless.errors import InputFileError
 
 
 def write_markers(tmp_path, w, name="m.csv"):
-    return write_tracker_csv(tmp_path / name, rate_hz=w.rate_hz,
-                             markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(w.markers_m.shape[1])})
+    return write_tracker_csv(
+        tmp_path / name,
+        rate_hz=w.rate_hz,
+        markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(w.markers_m.shape[1])},
+    )
 
 
 def test_parquet_round_trip(tmp_path):

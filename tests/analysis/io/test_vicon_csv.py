@@ -15,8 +15,6 @@ from rimless.analysis.io.vicon_csv import ViconCsvError, parse_vicon_text, read_
 from rimless.errors import InputFileError
 from tests.support.analysis_data import PUBLIC, public
 
-
-
 # --------------------------------------------------------------------------------- independent reference
 
 
@@ -28,7 +26,7 @@ def csv_block(path: Path, title: str, delimiter: str = ","):
     rate = float(rows[start + 1][0])
     units = rows[start + 4]
     data = []
-    for r in rows[start + 5:]:
+    for r in rows[start + 5 :]:
         if not any(c.strip() for c in r):
             break
         data.append(r)
@@ -75,7 +73,7 @@ def test_public_file_fingerprint(name, title, n_rows, n_cols, nans, groups):
     rate, units, data, first_line = csv_block(path, title)
     assert sec.rate_hz == rate
     assert sec.n_rows == len(data) == n_rows
-    scale = np.array([UNIT.get(u, 1.0) for u in units[2:2 + n_cols]])
+    scale = np.array([UNIT.get(u, 1.0) for u in units[2 : 2 + n_cols]])
     exp = expected_array(data, 2, n_cols, scale)
     exp_nans = int(np.isnan(exp).sum())
     if nans is not None:
@@ -142,11 +140,10 @@ def test_quirks_crlf_bom_blank_rows_padding_first_frame():
 
 
 def test_semicolon_delimiter_with_decimal_commas_and_deg_m_units():
-    text = ("Trajectories\n50\n;;P\nFrame;Sub Frame;X;Y;Z\n;;m;m;m\n1;0;0,5;1,25;-2e-003\n2;0;0,75;;\n")
+    text = "Trajectories\n50\n;;P\nFrame;Sub Frame;X;Y;Z\n;;m;m;m\n1;0;0,5;1,25;-2e-003\n2;0;0,75;;\n"
     vf = parse_vicon_text(text, "semi.csv")
     assert vf.delimiter == ";" and vf.decimal == ","
-    np.testing.assert_array_equal(vf.section("Trajectories").values,
-                                  [[0.5, 1.25, -0.002], [0.75, np.nan, np.nan]])
+    np.testing.assert_array_equal(vf.section("Trajectories").values, [[0.5, 1.25, -0.002], [0.75, np.nan, np.nan]])
     text = "Objects\n100\n,,O\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,deg,deg,deg,m,m,m\n1,0,180,90,0,1,2,3\n"
     sec = parse_vicon_text(text).section("Objects")
     np.testing.assert_allclose(sec.values[0], [math.pi, math.pi / 2, 0, 1, 2, 3])
@@ -206,8 +203,12 @@ def test_malformed_input_gets_located_distinct_error(text, cause, line, column):
 
 
 def test_malformed_errors_are_distinct_messages():
-    texts = [TRACKER.replace("8,0,0.1,0.2", "8,0,0.1,abc"), TRACKER.replace("8,0,", "7,0,"),
-             TRACKER.replace(",,rad,rad,rad,mm,mm,mm", ",,rad,rad,rad,mm,inch,mm"), TRACKER[:-12]]
+    texts = [
+        TRACKER.replace("8,0,0.1,0.2", "8,0,0.1,abc"),
+        TRACKER.replace("8,0,", "7,0,"),
+        TRACKER.replace(",,rad,rad,rad,mm,mm,mm", ",,rad,rad,rad,mm,inch,mm"),
+        TRACKER[:-12],
+    ]
     msgs = {str(err_of(t)).split(": ", 1)[1] for t in texts}
     assert len(msgs) == len(texts)
 
@@ -229,8 +230,16 @@ def test_writer_round_trip(tmp_path, length_unit, newline, delimiter):
     mk = rng.normal(0, 1, (n, 3))
     obj[5, :] = np.nan
     mk[[7, 9], 1] = np.nan
-    p = write_tracker_csv(tmp_path / "rt.csv", rate_hz=250, objects={"Wheel": obj}, markers={"wheel:M1": mk},
-                          first_frame=12, length_unit=length_unit, delimiter=delimiter, newline=newline)
+    p = write_tracker_csv(
+        tmp_path / "rt.csv",
+        rate_hz=250,
+        objects={"Wheel": obj},
+        markers={"wheel:M1": mk},
+        first_frame=12,
+        length_unit=length_unit,
+        delimiter=delimiter,
+        newline=newline,
+    )
     vf = read_vicon_csv(p)
     assert vf.kinds() == ["Objects", "Trajectories"]
     o, t = vf.section("Objects"), vf.section("Trajectories")
@@ -254,28 +263,45 @@ def _outcome(read):
         vf = read()
     except ViconCsvError as e:
         return ("error", e.cause, e.line, e.column, e.detail, e.all_locations())
-    return [(s.kind, s.line, s.frame.tolist(), s.sub_frame.tolist(), [c.column for c in s.columns],
-             np.where(np.isnan(s.values), -1e300, s.values).tolist()) for s in vf.sections]
+    return [
+        (
+            s.kind,
+            s.line,
+            s.frame.tolist(),
+            s.sub_frame.tolist(),
+            [c.column for c in s.columns],
+            np.where(np.isnan(s.values), -1e300, s.values).tolist(),
+        )
+        for s in vf.sections
+    ]
 
 
-MIXED = ("Objects\n100\n,,W,,,,,\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,rad,rad,rad,mm,mm,mm\n"
-         + "".join(f"{k},0,0.1,0.2,{0.01 * k},{1000 + k},2000,3000\n" for k in range(1, 8))
-         + "8,0,,,,,,\n9,0\n10,0,0.1,0.2,0.3,1010,2000,3000\n\n"
-         "Trajectories\n100\n,,A,,,B\nFrame,Sub Frame,X,Y,Z,X,Y,Z\n,,mm,mm,mm,mm,mm,mm\n"
-         "1,0,1,2,3\n2,0,,,,4,5,6\n3,0,1,2,3,4,5,6\n4,0,1,2,3,4,5,6\n5,0,1,2,3,4,5,6\n")
+MIXED = (
+    "Objects\n100\n,,W,,,,,\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,rad,rad,rad,mm,mm,mm\n"
+    + "".join(f"{k},0,0.1,0.2,{0.01 * k},{1000 + k},2000,3000\n" for k in range(1, 8))
+    + "8,0,,,,,,\n9,0\n10,0,0.1,0.2,0.3,1010,2000,3000\n\n"
+    "Trajectories\n100\n,,A,,,B\nFrame,Sub Frame,X,Y,Z,X,Y,Z\n,,mm,mm,mm,mm,mm,mm\n"
+    "1,0,1,2,3\n2,0,,,,4,5,6\n3,0,1,2,3,4,5,6\n4,0,1,2,3,4,5,6\n5,0,1,2,3,4,5,6\n"
+)
 
 
 @pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
-@pytest.mark.parametrize("text", [
-    MIXED,
-    MIXED.replace("3,0,1,2,3,4,5,6", "3,0,1,2,3,4"),  # a lost cell in a later chunk of the second section
-    MIXED.replace("3,0,1,2,3,4,5,6", "3,0,1,2,3,4").replace("5,0,1,2,3,4,5,6", "5,0,1,2"),
-    MIXED.replace("4,0,1,2,3,4,5,6", "4,0,1,2,3,4,5,6,,9"),  # a value beyond the header in a later chunk
-    MIXED.replace("6,0,0.1,0.2", "6,0,0.1,x"),
-    MIXED.replace("1005,2000", "1e999,2000"),
-    MIXED.replace("2,0,,,,4,5,6", "2,0,,,,4,5,٦"),  # non-ASCII digit
-    TRACKER, "\ufeff" + TRACKER, TRACKER[:-12], TRACKER.replace("9,0,", "6,0,"),
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        MIXED,
+        MIXED.replace("3,0,1,2,3,4,5,6", "3,0,1,2,3,4"),  # a lost cell in a later chunk of the second section
+        MIXED.replace("3,0,1,2,3,4,5,6", "3,0,1,2,3,4").replace("5,0,1,2,3,4,5,6", "5,0,1,2"),
+        MIXED.replace("4,0,1,2,3,4,5,6", "4,0,1,2,3,4,5,6,,9"),  # a value beyond the header in a later chunk
+        MIXED.replace("6,0,0.1,0.2", "6,0,0.1,x"),
+        MIXED.replace("1005,2000", "1e999,2000"),
+        MIXED.replace("2,0,,,,4,5,6", "2,0,,,,4,5,٦"),  # non-ASCII digit
+        TRACKER,
+        "\ufeff" + TRACKER,
+        TRACKER[:-12],
+        TRACKER.replace("9,0,", "6,0,"),
+    ],
+)
 def test_file_bytes_and_text_paths_agree_in_small_chunks(tmp_path, monkeypatch, text, newline):
     """read_vicon_csv (data blocks streamed back from the file), parse_vicon_bytes (from memory) and
     parse_vicon_text (encoded copy) give the same sections or the same errors, also when blocks span chunks."""

@@ -18,9 +18,41 @@ VALID = (
     "1,0,0.1,0.2,0.3,1000,2000,3000\n2,0,0.1,0.2,0.3,1001,2000,3000\n\n"
     "Trajectories\n100\n,,M,,\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n1,0,1,2,3\n2,0,,,\n"
 )
-TOKENS = st.sampled_from(["Objects", "Trajectories", "Devices", "Frame", "Sub Frame", "X", "RX", "TX", "mm",
-                          "rad", "deg", "100", "1", "0", "-2.5", "7e-006", "nan", "inf", "abc", "", ",", ";",
-                          "\n", "\r\n", "\t", " ", "\ufeff", "Global Angle W:W", "1e999", ".", "-"])
+TOKENS = st.sampled_from(
+    [
+        "Objects",
+        "Trajectories",
+        "Devices",
+        "Frame",
+        "Sub Frame",
+        "X",
+        "RX",
+        "TX",
+        "mm",
+        "rad",
+        "deg",
+        "100",
+        "1",
+        "0",
+        "-2.5",
+        "7e-006",
+        "nan",
+        "inf",
+        "abc",
+        "",
+        ",",
+        ";",
+        "\n",
+        "\r\n",
+        "\t",
+        " ",
+        "\ufeff",
+        "Global Angle W:W",
+        "1e999",
+        ".",
+        "-",
+    ]
+)
 
 
 def parse_ok_or_located(text: str) -> None:
@@ -59,21 +91,32 @@ def test_random_bytes_never_crash(raw):
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
-    arrays(np.float64, st.tuples(st.integers(1, 30), st.just(3)),
-           elements=st.one_of(st.floats(-1e6, 1e6, allow_nan=False, allow_subnormal=False), st.just(np.nan))),
+    arrays(
+        np.float64,
+        st.tuples(st.integers(1, 30), st.just(3)),
+        elements=st.one_of(st.floats(-1e6, 1e6, allow_nan=False, allow_subnormal=False), st.just(np.nan)),
+    ),
     st.sampled_from([",", ";"]),
     st.sampled_from(["\n", "\r\n"]),
     st.integers(0, 10_000),
 )
 def test_round_trip_in_metres_is_exact(tmp_path, data, delimiter, newline, first_frame):
-    p = write_tracker_csv(tmp_path / "p.csv", rate_hz=120, markers={"m": data}, length_unit="m",
-                          delimiter=delimiter, newline=newline, first_frame=first_frame)
+    p = write_tracker_csv(
+        tmp_path / "p.csv",
+        rate_hz=120,
+        markers={"m": data},
+        length_unit="m",
+        delimiter=delimiter,
+        newline=newline,
+        first_frame=first_frame,
+    )
     sec = parse_vicon_bytes(p.read_bytes(), "p.csv").section("Trajectories")
     np.testing.assert_array_equal(sec.values, data)
     assert sec.frame[0] == first_frame and sec.frame.size == data.shape[0]
 
 
 # ------------------------------------------------------------------ whole import (header rows and data block)
+
 
 def _wheel_lines():
     truth = tw.make_truth(periods_s=(0.42, 0.40, 0.39), hold_s=0.2, ending="caught", after_s=0.3)
@@ -97,10 +140,42 @@ def _warm_up() -> None:
 
 _warm_up()
 HEADER_TOKENS = st.one_of(
-    st.sampled_from(["100", "5e-154", "1e308", "5e-324", "0", "-1", "nan", "inf", "1e999", "12,5", "١٠٠", "",
-                     "mm", "m", "cm", "rad", "deg", "V", "X", "Y", "Z", "Frame", "Sub Frame", "w:M0", "2 1937",
-                     "*3", "Ramp:R1", ",", ",,", "\t"]),
-    st.text(max_size=8))
+    st.sampled_from(
+        [
+            "100",
+            "5e-154",
+            "1e308",
+            "5e-324",
+            "0",
+            "-1",
+            "nan",
+            "inf",
+            "1e999",
+            "12,5",
+            "١٠٠",
+            "",
+            "mm",
+            "m",
+            "cm",
+            "rad",
+            "deg",
+            "V",
+            "X",
+            "Y",
+            "Z",
+            "Frame",
+            "Sub Frame",
+            "w:M0",
+            "2 1937",
+            "*3",
+            "Ramp:R1",
+            ",",
+            ",,",
+            "\t",
+        ]
+    ),
+    st.text(max_size=8),
+)
 
 
 def import_ok_or_refused(text: str, tmp_path) -> None:
@@ -120,8 +195,9 @@ def import_ok_or_refused(text: str, tmp_path) -> None:
     assert time.perf_counter() - t0 < 3.0  # no hang (a normal import of this file takes ~0.1 s)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                 HealthCheck.too_slow])
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(st.integers(1, 4), st.lists(HEADER_TOKENS, min_size=1, max_size=6))
 def test_fuzzed_header_rows_never_crash_or_hang(tmp_path, row, cells):
     lines = list(WHEEL_LINES)
@@ -129,12 +205,23 @@ def test_fuzzed_header_rows_never_crash_or_hang(tmp_path, row, cells):
     import_ok_or_refused("\n".join(lines) + "\n", tmp_path)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                 HealthCheck.too_slow])
-@given(st.lists(st.tuples(st.integers(5, len(WHEEL_LINES) - 1), st.integers(0, 13),
-                          st.one_of(st.sampled_from(["", "0", "nan", "inf", "1e308", "-1e308", "x", "٣", "0,0"]),
-                                    st.floats(allow_nan=False, allow_infinity=False).map(repr))),
-                min_size=1, max_size=30))
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
+@given(
+    st.lists(
+        st.tuples(
+            st.integers(5, len(WHEEL_LINES) - 1),
+            st.integers(0, 13),
+            st.one_of(
+                st.sampled_from(["", "0", "nan", "inf", "1e308", "-1e308", "x", "٣", "0,0"]),
+                st.floats(allow_nan=False, allow_infinity=False).map(repr),
+            ),
+        ),
+        min_size=1,
+        max_size=30,
+    )
+)
 def test_fuzzed_data_block_never_crashes_or_hangs(tmp_path, edits):
     lines = list(WHEEL_LINES)
     for r, c, v in edits:

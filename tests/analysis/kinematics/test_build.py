@@ -18,13 +18,15 @@ NOISE_M = 0.3e-3
 
 def write_markers(tmp_path, w, markers=None, name="m.csv"):
     pts = w.markers_m if markers is None else markers
-    return write_tracker_csv(tmp_path / name, rate_hz=w.rate_hz,
-                             markers={f"wheel:M{i}": pts[:, i] for i in range(pts.shape[1])})
+    return write_tracker_csv(
+        tmp_path / name, rate_hz=w.rate_hz, markers={f"wheel:M{i}": pts[:, i] for i in range(pts.shape[1])}
+    )
 
 
 def write_object(tmp_path, w, name="o.csv"):
-    return write_tracker_csv(tmp_path / name, rate_hz=w.rate_hz,
-                             objects={"Wheel": np.hstack([w.object_rotvec_rad, w.object_trans_m])})
+    return write_tracker_csv(
+        tmp_path / name, rate_hz=w.rate_hz, objects={"Wheel": np.hstack([w.object_rotvec_rad, w.object_trans_m])}
+    )
 
 
 def assert_periods_within_one_frame(trial, w):
@@ -70,8 +72,9 @@ def test_object_with_offset_origin_estimates_hub(tmp_path):
 
 def test_object_with_given_offset_and_slope(tmp_path):
     w = rolling_wheel(seed=6, slope_deg=1.0, noise_m=NOISE_M)
-    trial = import_trial(write_object(tmp_path, w), leg_length_m=w.leg_length_m, slope_deg=1.0,
-                         hub_offset_m=w.hub_offset_m)
+    trial = import_trial(
+        write_object(tmp_path, w), leg_length_m=w.leg_length_m, slope_deg=1.0, hub_offset_m=w.hub_offset_m
+    )
     assert trial.meta.slope_deg == pytest.approx(1.0, abs=1e-12)
     assert trial.meta.slope_source == "given" and "given offset" in trial.meta.hub_source
     np.testing.assert_allclose(trial.series["hub"], w.hub_m, atol=5 * NOISE_M)
@@ -136,7 +139,7 @@ def test_missing_frame_rows_become_gaps(tmp_path):
     w = rolling_wheel(seed=11)
     p = write_markers(tmp_path, w)
     lines = p.read_text().split("\n")
-    del lines[5 + 40:5 + 43]  # drop three data rows (frames 41-43)
+    del lines[5 + 40 : 5 + 43]  # drop three data rows (frames 41-43)
     p.write_text("\n".join(lines))
     trial = import_trial(p, max_gap_s=0)
     assert trial.meta.n_frames == len(w.time_s) and trial.meta.n_gap_frames == 3

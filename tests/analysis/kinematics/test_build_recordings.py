@@ -76,10 +76,12 @@ ENDINGS = [
 def test_endings_after_a_hold(tmp_path, ending, kw, kind):
     truth = tw.make_truth(ending=ending, slope_deg=2.3, **kw)
     if kind == "markers":
+
         def edit(p):
             if ending == "left":  # the wheel leaves the volume: every marker vanishes for the last 0.15 s
                 p = tw.blank(p, truth, truth.time_s[-1] - 0.15, 1e9)
             return p
+
         path, _ = markers_file(tmp_path / "w.csv", truth, edit=edit)
     else:
         pose = tw.pose_of(truth, np.array([0.03, -0.025, 0.01]), NOISE, 2)
@@ -98,8 +100,10 @@ def test_endings_after_a_hold(tmp_path, ending, kw, kind):
 def test_long_gap_mid_walk_keeps_every_fully_observed_period(tmp_path):
     truth = tw.make_truth(ending="caught", lift_m=0.05)
     t_gap = (truth.impact_time_s[2] + 0.1, truth.impact_time_s[2] + 0.55)  # 0.45 s: swallows impact 4
-    short = [(truth.impact_time_s[0] + 0.15, truth.impact_time_s[0] + 0.18),  # 3-frame gaps mid-step
-             (truth.impact_time_s[5] + 0.2, truth.impact_time_s[5] + 0.22)]
+    short = [
+        (truth.impact_time_s[0] + 0.15, truth.impact_time_s[0] + 0.18),  # 3-frame gaps mid-step
+        (truth.impact_time_s[5] + 0.2, truth.impact_time_s[5] + 0.22),
+    ]
 
     def edit(p):
         p = tw.blank(p, truth, *t_gap)
@@ -164,8 +168,10 @@ def test_static_ramp_is_never_the_wheel_and_gives_the_slope(tmp_path, layout):
     elif layout == "ramp-object+markers":
         secs = [tw.objects_section(ramp_first), tw.markers_section({f"wheel:M{i}": wheel_mk[:, i] for i in range(4)})]
     else:
-        secs = [tw.objects_section({"Wheel": wheel_pose}),
-                tw.markers_section({f"R{i}": ramp_mk[:, i] for i in range(4)})]
+        secs = [
+            tw.objects_section({"Wheel": wheel_pose}),
+            tw.markers_section({f"R{i}": ramp_mk[:, i] for i in range(4)}),
+        ]
     trial = import_trial(tw.write(tmp_path / f"{layout}.csv", *secs))
     m = trial.meta
     if layout in ("objects", "object+ramp-markers"):  # the wheel is a tracked object in these files
@@ -186,9 +192,11 @@ def test_only_a_static_object_is_refused_not_taken(tmp_path):
 def test_objects_and_trajectories_of_the_same_wheel(tmp_path):
     truth = tw.make_truth(ending="stalled", end_fraction=0.3)
     pts = tw.noisy(tw.body_points(truth, tw.EVEN_MARKERS), NOISE, 5)
-    path = tw.write(tmp_path / "both.csv",
-                    tw.objects_section({"Wheel": tw.pose_of(truth, np.array([0.0, 0.04, 0.0]), NOISE, 6)}),
-                    tw.markers_section({f"Wheel:M{i}": pts[:, i] for i in range(4)}))
+    path = tw.write(
+        tmp_path / "both.csv",
+        tw.objects_section({"Wheel": tw.pose_of(truth, np.array([0.0, 0.04, 0.0]), NOISE, 6)}),
+        tw.markers_section({f"Wheel:M{i}": pts[:, i] for i in range(4)}),
+    )
     trial = import_trial(path)
     check_walk(trial, truth)
     assert "also found" in trial.meta.source_reason
@@ -234,11 +242,18 @@ def test_uneven_markers_centroid_is_the_hub_when_told(tmp_path):
 def test_units_row_says_mm_but_numbers_are_metres(tmp_path):
     truth = tw.make_truth()
     pts = tw.noisy(tw.body_points(truth, tw.EVEN_MARKERS), 0.3e-6, 1)
-    sec = tw.section_text("Trajectories", "100", [(f"w:M{i}", "", pts[:, i]) for i in range(4)],
-                          comps=("X", "Y", "Z"), units=("mm",) * 3, scale=(1e-3,) * 3)  # metres written, mm said
+    sec = tw.section_text(
+        "Trajectories",
+        "100",
+        [(f"w:M{i}", "", pts[:, i]) for i in range(4)],
+        comps=("X", "Y", "Z"),
+        units=("mm",) * 3,
+        scale=(1e-3,) * 3,
+    )  # metres written, mm said
     # section_text divides by scale: undo it so the numbers are metres
-    lines = sec[:5] + [",".join([c if i < 2 else f"{float(c) * 1e-3:.9f}" for i, c in enumerate(r.split(","))])
-                       for r in sec[5:]]
+    lines = sec[:5] + [
+        ",".join([c if i < 2 else f"{float(c) * 1e-3:.9f}" for i, c in enumerate(r.split(","))]) for r in sec[5:]
+    ]
     with pytest.raises(TrialRefused) as e:
         import_trial(tw.write(tmp_path / "units.csv", lines))
     assert ":5:1:" in str(e.value) and "units row" in str(e.value) and "mm" in str(e.value)

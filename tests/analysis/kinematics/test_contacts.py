@@ -24,8 +24,9 @@ def test_exact_feet_slope_and_hub_without_noise(slope_deg, n_steps):
     assert fit is not None and len(fit.contacts) == n_steps
     # every contact lies on the slope plane through the first foot, one step (2 L sin(alpha/2)) apart
     c = np.array([k.c_m for k in fit.contacts])
-    gaps = np.linalg.norm(np.diff(c, axis=0) - (np.diff(c, axis=0) @ truth.axis_world)[:, None] * truth.axis_world,
-                          axis=1)
+    gaps = np.linalg.norm(
+        np.diff(c, axis=0) - (np.diff(c, axis=0) @ truth.axis_world)[:, None] * truth.axis_world, axis=1
+    )
     np.testing.assert_allclose(gaps, 2 * L * math.sin(math.pi / 8), atol=1e-6)
     np.testing.assert_allclose((c - c[0]) @ truth.normal_world, 0.0, atol=1e-6)
     travel = np.array([truth.down_world[0], truth.down_world[1], 0.0])

@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 
 from rimless.analysis.kinematics.build import import_trial
-from tests.support.analysis_truth_wheel import (EVEN_MARKERS, UNEVEN_MARKERS, body_points, make_truth,
-                                                 markers_section, noisy, write)
+from tests.support.analysis_truth_wheel import (
+    EVEN_MARKERS,
+    UNEVEN_MARKERS,
+    body_points,
+    make_truth,
+    markers_section,
+    noisy,
+    write,
+)
 
 
 def _write(path, pts):
@@ -23,7 +30,7 @@ def test_swap_of_five_frames_is_repaired(tmp_path, layout, perm):
     pts = noisy(body_points(truth, body), 0.3e-3, seed=3)
     clean = import_trial(_write(tmp_path / "clean.csv", pts))
     a = 150
-    pts[a:a + 5] = pts[a:a + 5][:, perm]
+    pts[a : a + 5] = pts[a : a + 5][:, perm]
     swapped = import_trial(_write(tmp_path / "swap.csv", pts))  # a units error before
     assert any("swapped marker labels repaired" in w for w in swapped.meta.warnings)
     np.testing.assert_allclose(swapped.series["hub"], clean.series["hub"], atol=1e-9, equal_nan=True)

@@ -14,11 +14,14 @@ from tests.support.analysis_trial_truth import simulate, write_csv
 pytestmark = pytest.mark.slow
 
 
-@pytest.mark.parametrize("slope, release, origin", [
-    (1.2, 2.0, (0.03, -0.025, 0.012)),
-    (1.0, 2.0, (0.0, 0.0, 0.0)),
-    (1.25, 1.95, (0.01, 0.0, 0.0)),
-])
+@pytest.mark.parametrize(
+    "slope, release, origin",
+    [
+        (1.2, 2.0, (0.03, -0.025, 0.012)),
+        (1.0, 2.0, (0.0, 0.0, 0.0)),
+        (1.25, 1.95, (0.01, 0.0, 0.0)),
+    ],
+)
 def test_two_step_stall_is_stalled_with_its_steps(tmp_path, slope, release, origin):
     tr = simulate(slope, release, ending="caught", origin_body_m=origin, seed=3)
     assert tr.steps == 2 and tr.stalled  # the case asked for: two impacts, then the stall

@@ -20,18 +20,18 @@ pytestmark = pytest.mark.slow
 #: (slope deg, release rad/s, ending asked, object origin in the body frame m); the truth decides whether the
 #: wheel stalls first (then the outcome is "stalled").
 CASES = [
-    (1.2, 2.0, "caught", (0.03, -0.025, 0.012)),   # stalls after 2 steps
-    (1.5, 1.8, "caught", (-0.035, 0.02, 0.0)),     # stalls after 1 step: the slope is not determined
-    (1.6, 2.2, "caught", (0.0, 0.04, 0.01)),       # stalls after 6 steps, just below the critical slope
-    (1.9, 2.3, "walked", (0.025, 0.03, 0.0)),      # the data stop while walking
+    (1.2, 2.0, "caught", (0.03, -0.025, 0.012)),  # stalls after 2 steps
+    (1.5, 1.8, "caught", (-0.035, 0.02, 0.0)),  # stalls after 1 step: the slope is not determined
+    (1.6, 2.2, "caught", (0.0, 0.04, 0.01)),  # stalls after 6 steps, just below the critical slope
+    (1.9, 2.3, "walked", (0.025, 0.03, 0.0)),  # the data stop while walking
     (2.3, 2.0, "caught", (-0.04, 0.0, 0.0)),
     (2.6, 2.3, "fell", (0.02, 0.02, 0.0)),
-    (1.4, 2.4, "walked", (0.03, -0.03, 0.0)),      # stalls after 5 steps
+    (1.4, 2.4, "walked", (0.03, -0.03, 0.0)),  # stalls after 5 steps
     (1.8, 2.1, "caught", (0.01, -0.038, 0.0)),
     (2.0, 2.5, "walked", (-0.03, -0.02, 0.01)),
-    (1.7, 2.0, "caught", (0.04, 0.0, 0.0)),        # just above the critical slope
-    (1.3, 2.2, "caught", (-0.02, -0.03, 0.0)),     # a short stall
-    (1.1, 2.3, "caught", (0.035, 0.01, 0.0)),      # a short stall
+    (1.7, 2.0, "caught", (0.04, 0.0, 0.0)),  # just above the critical slope
+    (1.3, 2.2, "caught", (-0.02, -0.03, 0.0)),  # a short stall
+    (1.1, 2.3, "caught", (0.035, 0.01, 0.0)),  # a short stall
 ]
 
 

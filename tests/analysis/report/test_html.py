@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from rimless.analysis.inference.compare import Simulator, compare_trial, step_period_trends
 from rimless.analysis.examples.bundled import DATA_DIR, TRIALS, data_files, load_truth, simulate_trial, write_trial_csv
-from rimless.analysis.report.html import build_report
+from rimless.analysis.inference.compare import Simulator, compare_trial, step_period_trends
 from rimless.analysis.io.timeseries import Event, TimeSeries
 from rimless.analysis.io.trial import Trial
 from rimless.analysis.kinematics.build import import_trial
+from rimless.analysis.report.html import build_report
 from rimless.cli import app as root_app
 
 runner = CliRunner()
@@ -83,7 +83,12 @@ def test_number_format_is_printf_with_3_digit_exponents():
     from rimless.analysis.examples.bundled import format_number
 
     assert [format_number(v) for v in (7.2e-6, -1.5e-12, 123.45678912, 0.5, float("nan"))] == [
-        "7.2e-006", "-1.5e-012", "123.4568", "0.5", ""]
+        "7.2e-006",
+        "-1.5e-012",
+        "123.4568",
+        "0.5",
+        "",
+    ]
 
 
 def test_generator_is_deterministic_per_seed():
@@ -136,8 +141,9 @@ def test_step_period_trends_group_by_slope(sim):
     from rimless.analysis.inference.compare import TrialComparison
 
     def tc(name, slope, periods):
-        return TrialComparison(name, name, slope, "given", "er", "ok", measured_period_s=np.asarray(periods),
-                               release_theta_dot_rad_s=1.95)
+        return TrialComparison(
+            name, name, slope, "given", "er", "ok", measured_period_s=np.asarray(periods), release_theta_dot_rad_s=1.95
+        )
 
     groups = step_period_trends([tc("a", 1.9, [0.5, 0.4]), tc("b", 2.1, [0.7, 0.6, 0.5]), tc("c", 2.6, [0.3])], sim)
     assert [g.slope_deg for g in groups] == [2.0, 2.5]
@@ -159,7 +165,7 @@ class _Refs(HTMLParser):
         self.metric_rows = 0
         self._in_metrics = False
 
-    def handle_starttag(self, tag, attrs):  # noqa: ANN001
+    def handle_starttag(self, tag, attrs):
         a = dict(attrs)
         if tag == "img":
             self.imgs.append(a["src"])
@@ -214,8 +220,9 @@ def test_report_missing_file_is_named_before_any_work(tmp_path, sim):
 def test_cli_report_json_with_a_refused_file(tmp_path):
     bad = tmp_path / "empty.csv"
     bad.write_text("")
-    res = runner.invoke(root_app, ["trials", "report", str(data_files()[0]), str(bad), "--out", str(tmp_path / "o"),
-                                   "--json"])
+    res = runner.invoke(
+        root_app, ["trials", "report", str(data_files()[0]), str(bad), "--out", str(tmp_path / "o"), "--json"]
+    )
     assert res.exit_code == 2
     out = json.loads(res.stdout)
     assert out["report"].endswith("report.html") and Path(out["report"]).is_file()
@@ -261,8 +268,9 @@ def test_demo(demo_run, tmp_path):
     # the series' truth has guide friction the model lacks: c is never claimed identifiable as the leg's damping
     c_line = next(ln for ln in demo_run.stdout.splitlines() if ln.startswith("calibrated c:"))
     assert "NOT identifiable" in c_line
-    assert ("constant loss per step" in c_line
-            or "c against a constant loss per step (guide friction):" in demo_run.stdout), demo_run.stdout
+    assert (
+        "constant loss per step" in c_line or "c against a constant loss per step (guide friction):" in demo_run.stdout
+    ), demo_run.stdout
     assert 'id="loss-separation"' in page
     assert 'id="critical-values"' in page and "critical_slope.png" in page and "Calibration" in page
     refs = _Refs()
@@ -281,10 +289,26 @@ def test_demo(demo_run, tmp_path):
 def _screenshot_has_content(page: Path, shot: Path) -> None:
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
     with tempfile.TemporaryDirectory() as profile:
-        subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                        "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                        f"--user-data-dir={profile}", f"--screenshot={shot}", "--window-size=1200,2000",
-                        page.resolve().as_uri()], check=True, capture_output=True, timeout=120)
+        subprocess.run(
+            [
+                exe,
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                f"--user-data-dir={profile}",
+                f"--screenshot={shot}",
+                "--window-size=1200,2000",
+                page.resolve().as_uri(),
+            ],
+            check=True,
+            capture_output=True,
+            timeout=120,
+        )
     import matplotlib.image as mpimg
 
     img = mpimg.imread(shot)

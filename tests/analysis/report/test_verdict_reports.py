@@ -22,7 +22,7 @@ def _stall_file() -> Path:
     return f
 
 
-def _error_line(res) -> str:  # noqa: ANN001
+def _error_line(res) -> str:
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert "Traceback" not in res.output
     errors = [ln for ln in lines if ln.startswith("error: ")]
@@ -71,19 +71,33 @@ def test_every_trial_suspect_says_the_parameters_do_not_fit():
     text = _misfit_html(res)
     assert "do not fit these trials" in text and "No calibration" in text
     p = SimpleNamespace(name="c", unit="N s/m", value=11.2, se=0.3, table1=8.0, identifiable=True, note="")
-    row = {"trial": "a/t.csv", "slope_deg": 1.6, "table1_rms_period_ms": 9.0, "calibrated_rms_period_ms": 1.0,
-           "table1_rms_com_mm": 2.0, "calibrated_rms_com_mm": 0.3}
+    row = {
+        "trial": "a/t.csv",
+        "slope_deg": 1.6,
+        "table1_rms_period_ms": 9.0,
+        "calibrated_rms_period_ms": 1.0,
+        "table1_rms_com_mm": 2.0,
+        "calibrated_rms_com_mm": 0.3,
+    }
     res.calibration = SimpleNamespace(params=[p], residuals=[row], converged=True)
     text = _misfit_html(res)
-    assert "id=\"misfit\"" in text and "9.0" in text and "1.0" in text and "not predictions" in text
+    assert 'id="misfit"' in text and "9.0" in text and "1.0" in text and "not predictions" in text
 
 
 def test_critical_figure_draws_each_trials_slope_interval(tmp_path):
-    rows = [{"file": f"t{i}", "slope_deg": s, "verdict": v, "slope_ci_deg": [s - 0.1, s + 0.1] if i else None}
-            for i, (s, v) in enumerate([(1.2, "decaying"), (1.4, "decaying"), (1.6, "sustained"), (1.8, "sustained")])]
+    rows = [
+        {"file": f"t{i}", "slope_deg": s, "verdict": v, "slope_ci_deg": [s - 0.1, s + 0.1] if i else None}
+        for i, (s, v) in enumerate([(1.2, "decaying"), (1.4, "decaying"), (1.6, "sustained"), (1.8, "sustained")])
+    ]
     est = SimpleNamespace(method="bracket", value_deg=1.5, ci_deg=(1.3, 1.7))
-    cr = SimpleNamespace(per_trial=rows, bracket_deg=(1.4, 1.6), logistic=None, estimates=[est], chosen=est,
-                         model={"critical_slope_deg": {"er": 1.26, "er_calibrated": 1.5, "ve": math.nan}})
+    cr = SimpleNamespace(
+        per_trial=rows,
+        bracket_deg=(1.4, 1.6),
+        logistic=None,
+        estimates=[est],
+        chosen=est,
+        model={"critical_slope_deg": {"er": 1.26, "er_calibrated": 1.5, "ve": math.nan}},
+    )
     import matplotlib
 
     matplotlib.use("Agg")
@@ -92,7 +106,7 @@ def test_critical_figure_draws_each_trials_slope_interval(tmp_path):
     captured = {}
     orig = plt.Figure.savefig
 
-    def grab(self, *a, **k):  # noqa: ANN001, ANN002, ANN003
+    def grab(self, *a, **k):
         captured["fig"] = self
         return orig(self, *a, **k)
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from rimless.firmware.control.controller import Controller
-from rimless.firmware.drivers.fake_adns3080 import FakeFault, GaitTrajectory
 from rimless.firmware.control.faults import Fault, HealthLimits
 from rimless.firmware.control.sampler import Sampler
+from rimless.firmware.drivers.fake_adns3080 import FakeFault, GaitTrajectory
 
 TRAJ = GaitTrajectory(start_s=0.1, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 

@@ -36,8 +36,9 @@ def test_too_few_samples_give_no_estimate() -> None:
 def test_clutch_locks_within_one_period_of_max_and_releases_at_next_touchdown(
     make_rig, compression_m, compression_s, seed
 ) -> None:
-    traj = GaitTrajectory(start_s=0.2, step_period_s=0.4, compression_m=compression_m,
-                          compression_s=compression_s, steps=4)
+    traj = GaitTrajectory(
+        start_s=0.2, step_period_s=0.4, compression_m=compression_m, compression_s=compression_s, steps=4
+    )
     rig = make_rig(traj, rate_hz=300.0, noise_counts=0.5, seed=seed)
     period = 1 / 300
     on_times: dict[int, float] = {}

@@ -9,8 +9,8 @@ import math
 import pytest
 
 from rimless.firmware.control.detector import DetectorParams, LegDetector
-from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from rimless.firmware.control.faults import Fault
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 
 TRAJ = GaitTrajectory(start_s=0.1, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 
@@ -27,8 +27,9 @@ def without_step(traj: GaitTrajectory, skipped: int):
 
 def with_bounce(traj: GaitTrajectory, step: int, after_s: float):
     """The gait plus a second, smaller compression `after_s` after touchdown `step` (an extra touchdown)."""
-    bounce = GaitTrajectory(start_s=traj.touchdown_s(step) + after_s, step_period_s=10.0, compression_m=0.004,
-                            compression_s=0.03, steps=1)
+    bounce = GaitTrajectory(
+        start_s=traj.touchdown_s(step) + after_s, step_period_s=10.0, compression_m=0.004, compression_s=0.03, steps=1
+    )
     return lambda t: traj(t) + bounce(t)
 
 
@@ -117,16 +118,16 @@ def test_a_slowing_gait_within_tolerance_keeps_sync(make_rig) -> None:
 
 # --- one sensor per leg: the trailing foot coming down again is not a step -----------------------------
 
+
 def _per_leg_rig(trajectories, rate_hz: float = 300.0):
     """Eight channels (one fake sensor per leg, legs = [k]) on one virtual clock, armed with leg 7 standing."""
     from gpiozero.pins.mock import MockFactory
 
+    from rimless.firmware.control.controller import Channel, Controller
+    from rimless.firmware.control.faults import HealthLimits, HealthMonitor
     from rimless.firmware.drivers.adns3080 import Adns3080
     from rimless.firmware.drivers.clutch import ClutchBank
-    from rimless.firmware.control.controller import Channel, Controller
     from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
-    from rimless.firmware.control.faults import HealthLimits, HealthMonitor
-
     from tests.support.firmware_rig import PINS, Rig, VirtualClock
 
     clock = VirtualClock()
@@ -134,8 +135,9 @@ def _per_leg_rig(trajectories, rate_hz: float = 300.0):
     for k, traj in enumerate(trajectories):
         fake = FakeAdns3080(traj, clock=clock, noise_counts=0.3, seed=k)
         fakes.append(fake)
-        drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep,
-                       clock_ns=clock.ns)
+        drv = Adns3080(
+            fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep, clock_ns=clock.ns
+        )
         drv.power_up()
         drv.set_resolution(1600)
         channels.append(Channel(drv, LegDetector(DetectorParams(), [k]), HealthMonitor(HealthLimits())))

@@ -91,8 +91,14 @@ def test_a_wrong_product_id_is_found_before_the_next_engage() -> None:
 
     walk = FakeWalk(start_s=0.3)
     fault_at = walk.touchdown_s(3) + 0.01  # after a touchdown, before its lock
-    old = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, wrong), verify_before_engage=False,
-                          id_check_interval_s=1.0, readback_every_samples=0)
+    old = walk_controller(
+        walk,
+        ROBOT_DETECTOR,
+        fault_at=(fault_at, wrong),
+        verify_before_engage=False,
+        id_check_interval_s=1.0,
+        readback_every_samples=0,
+    )
     assert [t for t, _leg in old.engages if t > fault_at]  # the hole
     new = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, wrong), id_check_interval_s=1.0)
     assert [t for t, _leg in new.engages if t > fault_at] == []
@@ -127,14 +133,21 @@ def test_a_brownout_at_any_resolution_faults_within_one_round_and_no_lock_follow
     reset went unseen and the walk went on locking with the sensor in its power-on state."""
     walk = FakeWalk(start_s=0.3)
     fault_at = walk.touchdown_s(3) + 0.2
-    res = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, lambda fake: fake.brownout()), cpi=cpi,
-                          verify_before_engage=False)
+    res = walk_controller(
+        walk, ROBOT_DETECTOR, fault_at=(fault_at, lambda fake: fake.brownout()), cpi=cpi, verify_before_engage=False
+    )
     assert [t for t, _leg in res.engages if t < fault_at]  # it walked, and locked, at this resolution
     t_fault = next(t for t, name, f in res.events if name == "fault" and f["fault"] == "sensor_reset")
     bound = 1 / RATE_HZ if cpi == 1600 else READBACK_ROUND / RATE_HZ  # 1600 cpi: Motion's RES bit, next sample
     assert fault_at <= t_fault <= fault_at + bound + 1e-9
     assert [t for t, _leg in res.engages if t > fault_at] == []
     assert res.airborne == []
-    old = walk_controller(walk, ROBOT_DETECTOR, fault_at=(fault_at, lambda fake: fake.brownout()), cpi=cpi,
-                          verify_before_engage=False, readback_every_samples=0)
+    old = walk_controller(
+        walk,
+        ROBOT_DETECTOR,
+        fault_at=(fault_at, lambda fake: fake.brownout()),
+        cpi=cpi,
+        verify_before_engage=False,
+        readback_every_samples=0,
+    )
     assert ("sensor_reset" in old.faults()) is (cpi == 1600)  # the hole at 400 cpi

@@ -8,9 +8,9 @@ import pytest
 
 from rimless.firmware.drivers import adns3080 as reg
 from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.errors import SensorError, SensorNotFound, SpiProtocolError
 from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080, FakeFault
 from rimless.firmware.drivers.spi import SpiSegment
+from rimless.firmware.errors import SensorError, SensorNotFound, SpiProtocolError
 
 
 class Clock:
@@ -27,8 +27,13 @@ class Clock:
 def make(trajectory=lambda t: 0.0, **kw):
     clock = Clock()
     fake = FakeAdns3080(trajectory, clock=clock, **kw)
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep,
-                   clock_ns=lambda: round(clock.t * 1e9))
+    drv = Adns3080(
+        fake,
+        counts_per_m=DEFAULT_COUNTS_PER_M,
+        reset=fake.set_reset,
+        sleep=clock.sleep,
+        clock_ns=lambda: round(clock.t * 1e9),
+    )
     drv.reset_pulse()  # the chip has no power-on reset: nothing answers before this
     clock.t = 0.0
     return clock, fake, drv

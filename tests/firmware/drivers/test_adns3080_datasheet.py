@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
+from rimless.firmware.control.faults import Fault
 from rimless.firmware.drivers import adns3080 as reg
 from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.errors import SensorError, SensorNotFound, SpiProtocolError
 from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080, FakeFault, GaitTrajectory
-from rimless.firmware.control.faults import Fault
 from rimless.firmware.drivers.spi import SpiSegment
+from rimless.firmware.errors import SensorError, SensorNotFound, SpiProtocolError
 
 TRAJ = GaitTrajectory(start_s=0.1, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 
@@ -39,8 +39,14 @@ def chip(**kw):
         pins.append(("npd", on))
         fake.set_npd(on)
 
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=reset, npd=npd, sleep=clock.sleep,
-                   clock_ns=lambda: round(clock.t * 1e9))
+    drv = Adns3080(
+        fake,
+        counts_per_m=DEFAULT_COUNTS_PER_M,
+        reset=reset,
+        npd=npd,
+        sleep=clock.sleep,
+        clock_ns=lambda: round(clock.t * 1e9),
+    )
     return clock, fake, drv, pins
 
 

@@ -33,8 +33,13 @@ class Clock:
 def configured(cpi: int, rate_hz: float | None) -> tuple[FakeAdns3080, Adns3080]:
     clock = Clock()
     fake = FakeAdns3080(lambda t: 0.0, clock=clock)
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, reset=fake.set_reset, sleep=clock.sleep,
-                   clock_ns=lambda: round(clock.t * 1e9))
+    drv = Adns3080(
+        fake,
+        counts_per_m=DEFAULT_COUNTS_PER_M,
+        reset=fake.set_reset,
+        sleep=clock.sleep,
+        clock_ns=lambda: round(clock.t * 1e9),
+    )
     drv.power_up()
     drv.set_resolution(cpi)
     drv.set_frame_rate(rate_hz)
@@ -56,8 +61,7 @@ def test_at_400_cpi_and_the_automatic_rate_the_configuration_alone_cannot_show_a
     assert drv.frame_rate_hz() >= reg.FRAME_RATE_MIN_HZ  # the marker keeps the least frame rate at 2000 fps
 
 
-@pytest.mark.parametrize(("cpi", "rate_hz"), [(400, None), (1600, None), (400, 2000.0), (400, 3000.0),
-                                              (1600, 6000.0)])
+@pytest.mark.parametrize(("cpi", "rate_hz"), [(400, None), (1600, None), (400, 2000.0), (400, 3000.0), (1600, 6000.0)])
 def test_a_brownout_is_found_at_every_setting_within_one_round(cpi, rate_hz) -> None:
     fake, drv = configured(cpi, rate_hz)
     for _ in range(3 * reg.READBACK_REGISTERS):  # a configured chip: no false alarm

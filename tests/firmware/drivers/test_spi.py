@@ -6,8 +6,8 @@ import struct
 
 import pytest
 
-from rimless.firmware.errors import SensorError
 from rimless.firmware.drivers.spi import SPI_IOC_TRANSFER, SpidevBus, SpiSegment, pack_transfers, spi_ioc_message
+from rimless.firmware.errors import SensorError
 
 
 def test_spi_ioc_message_numbers() -> None:

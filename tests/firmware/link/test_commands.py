@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from rimless.firmware.link.remote import RobotLink, send_command
-from rimless.firmware.link.commands import RateLimitedLog
-from rimless.firmware.service.config import CommandsConfig
 from rimless.firmware.errors import RobotUnreachable
+from rimless.firmware.link.commands import RateLimitedLog
 from rimless.firmware.link.heartbeat import Heartbeat
+from rimless.firmware.link.remote import RobotLink, send_command
+from rimless.firmware.service.config import CommandsConfig
 from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
@@ -67,8 +67,9 @@ def test_hostile_json_gets_one_line_refusals_without_tracebacks(tmp_path, caplog
         c.close()
         return replies, ok
 
-    app, summary, (replies, ok), hw = scenario(config(tmp_path, commands=CommandsConfig(
-        bind="127.0.0.1", port=0, token=TOKEN, max_message_bytes=8192)), script)
+    app, summary, (replies, ok), hw = scenario(
+        config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, max_message_bytes=8192)), script
+    )
     for r in replies:
         assert r["ok"] is False and "\n" not in r["error"], r
     assert "surrogate" in replies[0]["error"] and "nested" in replies[1]["error"] and "nested" in replies[3]["error"]
@@ -116,8 +117,9 @@ def test_flood_of_garbage_logs_a_bounded_number_of_lines(tmp_path, caplog) -> No
 
 def test_unauthenticated_connections_time_out_and_the_cap_evicts_them(tmp_path) -> None:
     # 1 s to authenticate: the operator's client does it at once even on a loaded machine
-    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, max_connections=4,
-                                                   auth_timeout_s=1.0))
+    cfg = config(
+        tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, max_connections=4, auth_timeout_s=1.0)
+    )
 
     async def script(app, hw):
         idle = [await asyncio.open_connection("127.0.0.1", app.command_port) for _ in range(10)]
@@ -180,8 +182,14 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
     def pi_limits() -> None:
         resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
 
-    proc = subprocess.Popen([*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True, preexec_fn=pi_limits)
+    proc = subprocess.Popen(
+        [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        text=True,
+        preexec_fn=pi_limits,
+    )
     idle: list[socket.socket] = []
     try:
         deadline = time.monotonic() + 20
@@ -315,8 +323,7 @@ def test_reserved_udp_status_answers_once_and_ignores_replays_and_strangers(tmp_
 
     async def script(app, hw):
         app.controller.arm()
-        st = await asyncio.to_thread(send_reserved_datagram, "127.0.0.1", "status", token=TOKEN,
-                                     port=app.command_port)
+        st = await asyncio.to_thread(send_reserved_datagram, "127.0.0.1", "status", token=TOKEN, port=app.command_port)
 
         def exchange():  # blocking socket calls, off the event loop (a blocked loop trips the watchdog)
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -380,7 +387,7 @@ def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operator
                 f"good = {good!r}.encode()\n"
                 "for k in range(20000):\n"
                 "    try:\n"
-                f"        s.sendto(good if k % 2 else b'{{\"disarm\": 1, \"mac\": \"00\"}}', ('127.0.0.1', {app.command_port}))\n"
+                f'        s.sendto(good if k % 2 else b\'{{"disarm": 1, "mac": "00"}}\', (\'127.0.0.1\', {app.command_port}))\n'
                 "    except OSError: pass\n"
                 "    try:\n"
                 "        s.recv(4096); got += 1\n"
@@ -440,8 +447,10 @@ def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> No
             try:
                 time.sleep(0.3)
                 for _ in range(5):
-                    results.append(send_command("127.0.0.1", "status", token=TOKEN, port=app.command_port,
-                                                timeout_s=3)["armed"] is False)
+                    results.append(
+                        send_command("127.0.0.1", "status", token=TOKEN, port=app.command_port, timeout_s=3)["armed"]
+                        is False
+                    )
                     time.sleep(0.05)
                 flooding = flood.poll() is None  # the five were answered while the flood ran
             finally:

@@ -10,8 +10,15 @@ def test_live_view_draws_velocity_compression_and_one_strip_per_clutch() -> None
     assert sparkline([2.0, 2.0], 10) == "▁▁"
     s = Summary()
     for k in range(40):
-        s.add([{"timestamp": k, "leg": {"velocity_m_s": (k % 10) * 0.01, "compression_m": k * 1e-4,
-                                        "clutch_mask": 1 << (k // 10)}}], now_s=k * 0.01)
+        s.add(
+            [
+                {
+                    "timestamp": k,
+                    "leg": {"velocity_m_s": (k % 10) * 0.01, "compression_m": k * 1e-4, "clutch_mask": 1 << (k // 10)},
+                }
+            ],
+            now_s=k * 0.01,
+        )
     lines = s.view(now_s=0.4, span_s=1.0, width=40)
     assert lines[1].startswith("velocity") and "m/s" in lines[1]
     assert lines[2].startswith("compression") and "0.0..3.9 mm" in lines[2]
@@ -30,9 +37,27 @@ def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) ->
     from tests.support.firmware_app import free_port
 
     out = tmp_path / "tel.jsonl"
-    proc = subprocess.run([str(Path(sys.executable).with_name("rimless")), "robot", "listen", "--bind", "127.0.0.1",
-                           "--port", str(free_port()), "--no-live", "--summary-every-s", "0.2", "--timeout-s", "1",
-                           "--out", str(out)], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [
+            str(Path(sys.executable).with_name("rimless")),
+            "robot",
+            "listen",
+            "--bind",
+            "127.0.0.1",
+            "--port",
+            str(free_port()),
+            "--no-live",
+            "--summary-every-s",
+            "0.2",
+            "--timeout-s",
+            "1",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 1, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert lines[-1].startswith("error: no robot is sending telemetry") and "--timeout-s 1" in lines[-1]
@@ -54,7 +79,6 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
 
     def send():
         import json
-        import time
 
         wait_udp_bound(port)  # datagrams sent before the listener binds are lost
         robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -69,15 +93,25 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
             if t == 10:
                 obj = {"timestamp": t, "tseq": t, "event": {"name": "fault", "fault": "x", "event_seq": 3}}
             robot.sendto(json.dumps([obj]).encode(), ("127.0.0.1", port))
-            forger.sendto(json.dumps([{"timestamp": 0, "event": {"name": "fault", "fault": "forged"}}]).encode(),
-                          ("127.0.0.1", port))
+            forger.sendto(
+                json.dumps([{"timestamp": 0, "event": {"name": "fault", "fault": "forged"}}]).encode(),
+                ("127.0.0.1", port),
+            )
         robot.close()
         forger.close()
 
     t = threading.Thread(target=send)
     t.start()
-    summary = listen(bind="127.0.0.1", port=port, out=None, duration_s=1.2, summary_every_s=0.5, echo=lines.append,
-                     stale_s=5.0, timeout_s=0)
+    summary = listen(
+        bind="127.0.0.1",
+        port=port,
+        out=None,
+        duration_s=1.2,
+        summary_every_s=0.5,
+        echo=lines.append,
+        stale_s=5.0,
+        timeout_s=0,
+    )
     t.join()
     assert summary.samples == 4 and summary.events == 2 and summary.faults == ["x"]
     assert summary.foreign == 6

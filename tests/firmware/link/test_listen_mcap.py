@@ -61,8 +61,10 @@ def read_back(path: Path) -> tuple[list[tuple[str, str, str, int, int, int, dict
 
     with open(path, "rb") as fh:
         reader = make_reader(fh)
-        out = [(ch.topic, ch.message_encoding, schema.encoding, m.log_time, m.publish_time, m.sequence,
-                json.loads(m.data)) for schema, ch, m in reader.iter_messages(log_time_order=False)]
+        out = [
+            (ch.topic, ch.message_encoding, schema.encoding, m.log_time, m.publish_time, m.sequence, json.loads(m.data))
+            for schema, ch, m in reader.iter_messages(log_time_order=False)
+        ]
         summary = reader.get_summary()
     return out, summary
 
@@ -142,8 +144,7 @@ def test_listen_records_mcap_from_the_loopback(tmp_path) -> None:
     out = tmp_path / "t.mcap"
     lines: list[str] = []
     try:
-        listen(bind="127.0.0.1", port=port, out=None, duration_s=None, echo=lines.append, timeout_s=1.5,
-               mcap_out=out)
+        listen(bind="127.0.0.1", port=port, out=None, duration_s=None, echo=lines.append, timeout_s=1.5, mcap_out=out)
     except RunFailure as err:  # ends as "the robot stopped sending" once the sender is done
         assert "stopped sending" in str(err)
     t.join()
@@ -154,8 +155,10 @@ def test_listen_records_mcap_from_the_loopback(tmp_path) -> None:
 
 
 def test_the_robot_side_never_imports_mcap() -> None:
-    code = ("import sys; import rimless.firmware.service.app, rimless.firmware.link.listen, rimless.firmware.cli; "
-            "assert 'mcap' not in sys.modules, 'mcap imported'")
+    code = (
+        "import sys; import rimless.firmware.service.app, rimless.firmware.link.listen, rimless.firmware.cli; "
+        "assert 'mcap' not in sys.modules, 'mcap imported'"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
 
@@ -168,9 +171,28 @@ def test_without_the_mcap_package_mcap_is_a_one_line_error_and_leaves_no_file(tm
     (shadow / "__init__.py").write_text("raise ImportError('No module named mcap')\n")
     env = {**os.environ, "PYTHONPATH": str(shadow.parent)}
     out = tmp_path / "t.mcap"
-    proc = subprocess.run([RIMLESS, "robot", "listen", "--bind", "127.0.0.1", "--port", str(free_port()), "--no-live",
-                           "--mcap", str(out), "--out", str(tmp_path / "t.jsonl"), "--timeout-s", "1"],
-                          capture_output=True, text=True, timeout=60, env=env)
+    proc = subprocess.run(
+        [
+            RIMLESS,
+            "robot",
+            "listen",
+            "--bind",
+            "127.0.0.1",
+            "--port",
+            str(free_port()),
+            "--no-live",
+            "--mcap",
+            str(out),
+            "--out",
+            str(tmp_path / "t.jsonl"),
+            "--timeout-s",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.count("\n") == 1 and "mcap" in proc.stderr and "pip install" in proc.stderr
     assert "Traceback" not in proc.stderr

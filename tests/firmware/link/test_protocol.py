@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from rimless.firmware.link.protocol import Rejected, WeakToken, check_token, command_mac, parse_command
 from rimless.firmware.service.app import RobotApp
-from rimless.firmware.link.protocol import WeakToken, check_token, command_mac, parse_command, Rejected
 from rimless.firmware.service.config import CommandsConfig, RobotConfig
 from tests.support.firmware_app import TOKEN
 
@@ -42,9 +42,17 @@ def test_dictionary_like_published_and_repeated_tokens_are_refused() -> None:
     """Fails on today's main: `passwordpassword` and the tokens published in the tests were accepted."""
     import secrets
 
-    for weak in ("passwordpassword", "Password12345678", "qwertyuiopasdfgh", "robotrobot1234567890",
-                 "test-token-7f3a9c2e1b5d", "cli-test-token-5e8d1f0a9b", "signal-test-token-3c9e7a1f",
-                 "x7Gq-2mPz_9LrT4vB1nK", "Token1234Token1234"):
+    for weak in (
+        "passwordpassword",
+        "Password12345678",
+        "qwertyuiopasdfgh",
+        "robotrobot1234567890",
+        "test-token-7f3a9c2e1b5d",
+        "cli-test-token-5e8d1f0a9b",
+        "signal-test-token-3c9e7a1f",
+        "x7Gq-2mPz_9LrT4vB1nK",
+        "Token1234Token1234",
+    ):
         with pytest.raises(WeakToken):
             check_token(weak)
     for _ in range(50):  # what the README's generator gives is always accepted

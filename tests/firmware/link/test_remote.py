@@ -7,8 +7,8 @@ import threading
 
 import pytest
 
-from rimless.firmware.link.remote import RobotLink
 from rimless.firmware.errors import CommandError
+from rimless.firmware.link.remote import RobotLink
 from tests.support.firmware_app import TOKEN
 
 

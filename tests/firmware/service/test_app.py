@@ -10,7 +10,7 @@ import time
 
 from rimless.firmware.service.config import CommandsConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.service.triallog import read_trial_log
-from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for, WATCHDOG_TEST_SAMPLING
+from tests.support.firmware_app import TOKEN, WATCHDOG_TEST_SAMPLING, Client, all_off, config, scenario, wait_for
 
 
 def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
@@ -63,8 +63,11 @@ def test_arm_set_trial_disarm_over_tcp(tmp_path) -> None:
         r_again = await c.cmd("trial_start", 4, name="slope2")
         # until the trial has 250 samples and a lock: a condition, not a delay (a loaded machine samples late)
         s0, locked = app.controller.samples, []
-        await wait_for(lambda: (locked.append(1) if hw.clutches.engaged() else None, locked)[1]
-                       and app.controller.samples - s0 > 250)
+        await wait_for(
+            lambda: (
+                (locked.append(1) if hw.clutches.engaged() else None, locked)[1] and app.controller.samples - s0 > 250
+            )
+        )
         r_status = await c.cmd("status", 5)
         r_stop = await c.cmd("trial_stop", 6)
         r_disarm = await c.cmd("disarm", 7)
@@ -140,8 +143,11 @@ def test_dead_telemetry_receiver_costs_the_loop_nothing(tmp_path) -> None:
     probe.bind(("127.0.0.1", 0))
     dead_port = probe.getsockname()[1]
     probe.close()  # nobody listens there: every send gets ICMP port-unreachable
-    cfg = config(tmp_path, telemetry=TelemetryConfig(host="127.0.0.1", port=dead_port, period_s=0.005),
-                 sampling=SamplingConfig(rate_hz=500.0))
+    cfg = config(
+        tmp_path,
+        telemetry=TelemetryConfig(host="127.0.0.1", port=dead_port, period_s=0.005),
+        sampling=SamplingConfig(rate_hz=500.0),
+    )
 
     async def script(app, hw):
         await asyncio.sleep(1.0)
@@ -213,8 +219,9 @@ def test_stalled_sampler_trips_the_watchdog(tmp_path) -> None:
                 return [hw.pin_factory.pin(p).state for p in hw.clutches.pins]
         return None
 
-    app, summary, states_during_stall, hw = scenario(config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING), script,
-                                                     arm=True, hw_hook=hook)
+    app, summary, states_during_stall, hw = scenario(
+        config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING), script, arm=True, hw_hook=hook
+    )
     assert wrappers[0].fired
     assert states_during_stall == [False] * 8  # off while the sampler was still stuck
     assert all_off(hw)

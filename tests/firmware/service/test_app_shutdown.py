@@ -9,10 +9,9 @@ import socket
 import threading
 import time
 
-
+from rimless.firmware.link.telemetry import TelemetrySender
 from rimless.firmware.service.config import TelemetryConfig
 from rimless.firmware.service.logsetup import NonBlockingLog
-from rimless.firmware.link.telemetry import TelemetrySender
 from tests.support.firmware_app import Client, all_off, config, scenario, wait_for
 
 
@@ -27,7 +26,7 @@ def test_an_exception_in_telemetry_still_closes_the_hardware(tmp_path, monkeypat
     rx.bind(("127.0.0.1", 0))
     cfg = config(tmp_path, telemetry=TelemetryConfig(host="127.0.0.1", port=rx.getsockname()[1]))
 
-    def broken(self, records):  # noqa: ANN001
+    def broken(self, records):
         raise RuntimeError("encoder bug")
 
     monkeypatch.setattr(TelemetrySender, "send", broken)
@@ -35,7 +34,8 @@ def test_an_exception_in_telemetry_still_closes_the_hardware(tmp_path, monkeypat
     async def script(app, hw):
         def was_on() -> bool:
             return bool(hw.clutches.engaged()) or any(
-                any(s.state for s in hw.pin_factory.pin(p).states) for p in hw.clutches.pins)
+                any(s.state for s in hw.pin_factory.pin(p).states) for p in hw.clutches.pins
+            )
 
         # a counted leg locks from the third touchdown (0.1, 0.5, 0.9 s) on; a loaded machine may take longer
         await asyncio.sleep(1.4)

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-
 import pytest
 
 from rimless.errors import ParameterError, UserError
-from rimless.firmware.service.config import config_from_dict, example_config_path, load_config
 from rimless.firmware.errors import ConfigError, ConfigFileError
+from rimless.firmware.service.config import config_from_dict, example_config_path, load_config
 
 
 def test_example_config_loads_and_documents_every_section() -> None:
@@ -52,8 +51,12 @@ def test_clutch_pins_off_spi_lines_and_off_boot_pull_ups_without_a_reason() -> N
         config_from_dict({"clutch": {"pins": [9, 27]}, "sensor": {"legs": [0, 1]}})
     with pytest.raises(ConfigError, match="GPIO4 is pulled up at power-on"):
         config_from_dict({"clutch": {"pins": [4, 27]}, "sensor": {"legs": [0, 1]}})
-    ok = config_from_dict({"clutch": {"pins": [4, 27], "boot_pull_up_reason": "1k pull-down on the module input"},
-                           "sensor": {"legs": [0, 1]}})
+    ok = config_from_dict(
+        {
+            "clutch": {"pins": [4, 27], "boot_pull_up_reason": "1k pull-down on the module input"},
+            "sensor": {"legs": [0, 1]},
+        }
+    )
     assert ok.clutch.pins == (4, 27)
     with pytest.raises(ConfigError, match="GPIO7 is an SPI line"):
         config_from_dict({"clutch": {"pins": [7, 27], "boot_pull_up_reason": "x"}, "sensor": {"legs": [0, 1]}})

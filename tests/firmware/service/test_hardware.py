@@ -7,9 +7,8 @@ import asyncio
 import dataclasses
 import time
 
-
-from rimless.firmware.service.config import RobotConfig, SensorConfig
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from rimless.firmware.service.config import RobotConfig, SensorConfig
 from tests.support.firmware_app import config
 
 
@@ -61,8 +60,9 @@ def _walk_until_leg_3_holds(cfg: RobotConfig):
         deadline = time.monotonic() + 30.0
         while app.controller.samples < 30 and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
-        walk["traj"] = GaitTrajectory(start_s=time.monotonic() + 0.15, step_period_s=0.3,
-                                      compression_m=0.008, compression_s=0.06)
+        walk["traj"] = GaitTrajectory(
+            start_s=time.monotonic() + 0.15, step_period_s=0.3, compression_m=0.008, compression_s=0.06
+        )
         await stop_once_leg_3_holds(app)
 
     def ready(app) -> None:
@@ -81,11 +81,13 @@ def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp
     leg does not lock (then the walk goes round again until leg 3 holds). A run whose loop missed deadlines and
     whose legs 0..3 did not lock once each is started again (at most three runs)."""
     cfg = per_leg_config(tmp_path)
-    for attempt in range(3):
+    for _attempt in range(3):
         summary, hw = _walk_until_leg_3_holds(cfg)
         assert summary.faults == [] and summary.error is None
-        hist = {k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
-                for k, p in enumerate(cfg.clutch.pins)}
+        hist = {
+            k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
+            for k, p in enumerate(cfg.clutch.pins)
+        }
         if summary.missed_deadlines == 0 or all(hist[k] == "010" for k in range(4)):
             break
     for k in range(4):  # legs 0..3 stanced once each, released at the next leg's touchdown (or at the stop)
@@ -102,8 +104,10 @@ def test_sensors_sharing_a_reset_line_each_get_npd_and_one_pulse(tmp_path) -> No
     from rimless.firmware.service.hardware import build_fake
 
     base = config(tmp_path)
-    sensors = (SensorConfig(spi_device=0, legs=(0, 1, 2, 3), npd_pin=5),
-               SensorConfig(spi_device=1, legs=(4, 5, 6, 7), npd_pin=6))
+    sensors = (
+        SensorConfig(spi_device=0, legs=(0, 1, 2, 3), npd_pin=5),
+        SensorConfig(spi_device=1, legs=(4, 5, 6, 7), npd_pin=6),
+    )
     hw = build_fake(dataclasses.replace(base, sensors=sensors))
     try:
         assert [f.resets for f in hw.fakes] == [1, 1] and all(f.powered for f in hw.fakes)
@@ -126,4 +130,3 @@ def test_release_clutches_reports_the_off_level_of_the_configuration() -> None:
     low = release_clutches(RobotConfig(clutch=ClutchConfig(active_high=False)), fake=True)
     assert low.off_level == "high" and "fake_levels" in low.to_json()
     assert "fake_levels" not in dataclasses.replace(report, fake_levels=None).to_json()
-

@@ -87,8 +87,9 @@ def test_leg_test_engages_at_maximum_compression_and_releases_after_the_hold(tmp
     def phase(name: str, hw) -> None:
         seen[name] = _pin_is_on(hw)
 
-    rep = _run_pressed(_cfg(), LegTestOptions(leg=LEG, hold_s=0.3, record_s=0.3, rate_hz=3000, fake_leg=truth),
-                       out, on_phase=phase)
+    rep = _run_pressed(
+        _cfg(), LegTestOptions(leg=LEG, hold_s=0.3, record_s=0.3, rate_hz=3000, fake_leg=truth), out, on_phase=phase
+    )
     assert rep.exit_code == 0 and rep.fault is None and rep.written, rep
     assert seen == {"press": False, "hold": True, "free": False}
     assert rep.fake_pins == f"GPIO{PIN}=010"  # engaged once, released once, off at the end
@@ -115,9 +116,18 @@ def test_fake_run_to_log_to_fit_recovers_the_fake_leg(tmp_path: Path) -> None:
     logs = []
     for i, mm in enumerate((1.5, 2.0, 2.5)):
         out = tmp_path / f"leg{i}.jsonl"
-        rep = _run_pressed(_cfg(), LegTestOptions(leg=LEG, hold_s=0.2, record_s=0.3, rate_hz=4000, seed=i,
-                                                  fake_leg=FakeLegParams(compression_m=mm / 1e3, **truth)),
-                           out)
+        rep = _run_pressed(
+            _cfg(),
+            LegTestOptions(
+                leg=LEG,
+                hold_s=0.2,
+                record_s=0.3,
+                rate_hz=4000,
+                seed=i,
+                fake_leg=FakeLegParams(compression_m=mm / 1e3, **truth),
+            ),
+            out,
+        )
         assert rep.exit_code == 0, rep
         logs.append(read_leg_log(out))
     fit = fit_leg(logs)
@@ -157,23 +167,34 @@ def test_stalled_read_loop_releases_the_clutch_from_the_watchdog(tmp_path: Path)
                 time.sleep(0.01)
             during["released_while_stalled"] = not _pin_is_on(hw)
 
-    rep = _run_pressed(_cfg(stall_timeout_s=0.2), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out,
-                       on_phase=phase)
+    rep = _run_pressed(
+        _cfg(stall_timeout_s=0.2), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, on_phase=phase
+    )
     assert during == {"released_while_stalled": True}
     assert rep.exit_code == 1 and rep.fault == "sensor_stalled", rep
 
 
 def test_no_compression_times_out_with_the_clutch_never_engaged(tmp_path: Path) -> None:
     out = tmp_path / "leg.jsonl"
-    rep = run_leg_test(_cfg(), LegTestOptions(leg=LEG, timeout_s=1.0, rate_hz=2000,
-                                              fake_leg=FakeLegParams(compression_m=0.0)), out, fake=True)
+    rep = run_leg_test(
+        _cfg(),
+        LegTestOptions(leg=LEG, timeout_s=1.0, rate_hz=2000, fake_leg=FakeLegParams(compression_m=0.0)),
+        out,
+        fake=True,
+    )
     assert rep.exit_code == 1 and rep.fault == "no_compression", rep
     assert rep.fake_pins == f"GPIO{PIN}=0"
     assert "compress the leg" in rep.detail
 
 
-@pytest.mark.parametrize(("kw", "named"), [({"leg": 8}, "--leg"), ({"leg": 0, "hold_s": 0.99}, "--hold-s"),
-                                           ({"leg": 0, "frame_rate_hz": 6469.0}, "--frame-rate-hz")])
+@pytest.mark.parametrize(
+    ("kw", "named"),
+    [
+        ({"leg": 8}, "--leg"),
+        ({"leg": 0, "hold_s": 0.99}, "--hold-s"),
+        ({"leg": 0, "frame_rate_hz": 6469.0}, "--frame-rate-hz"),
+    ],
+)
 def test_bad_options_are_refused_before_any_pin_moves(tmp_path: Path, kw: dict, named: str) -> None:
     with pytest.raises(ParameterError, match=named):
         run_leg_test(_cfg(), LegTestOptions(**kw), tmp_path / "leg.jsonl", fake=True)
@@ -182,6 +203,7 @@ def test_bad_options_are_refused_before_any_pin_moves(tmp_path: Path, kw: dict, 
 
 # ------------------------------------------------------------------------------------------ the command
 
+
 def _toml(tmp_path: Path) -> Path:
     p = tmp_path / "robot.toml"
     p.write_text("[sampling]\nstall_timeout_s = 0.5\n")
@@ -189,16 +211,35 @@ def _toml(tmp_path: Path) -> Path:
 
 
 def _start(tmp_path: Path, *args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "rimless", "robot", "leg-test", "--fake", "--leg", str(LEG),
-                             "--config", str(_toml(tmp_path)), *args], cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "rimless",
+            "robot",
+            "leg-test",
+            "--fake",
+            "--leg",
+            str(LEG),
+            "--config",
+            str(_toml(tmp_path)),
+            *args,
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
 
 
-@pytest.mark.parametrize(("sig", "code", "last"), [(signal.SIGINT, 130, "interrupted"),
-                                                   (signal.SIGTERM, 143, "error: stopped by SIGTERM")])
-def test_signal_during_the_hold_releases_the_clutch_and_writes_nothing(tmp_path: Path, sig: int, code: int,
-                                                                       last: str) -> None:
+@pytest.mark.parametrize(
+    ("sig", "code", "last"), [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "error: stopped by SIGTERM")]
+)
+def test_signal_during_the_hold_releases_the_clutch_and_writes_nothing(
+    tmp_path: Path, sig: int, code: int, last: str
+) -> None:
     proc = _start(tmp_path, "--hold-s", "0.9", "--out", "leg.jsonl", "--rate-hz", "2000")
     assert proc.stderr is not None
     lines = []
@@ -222,16 +263,45 @@ def test_signal_during_the_hold_releases_the_clutch_and_writes_nothing(tmp_path:
 
 
 def test_command_json_then_leg_fit_reads_its_log(tmp_path: Path) -> None:
-    res = subprocess.run([sys.executable, "-m", "rimless", "robot", "leg-test", "--fake", "--leg", str(LEG),
-                          "--config", str(_toml(tmp_path)), "--out", "leg.jsonl", "--hold-s", "0.2", "--record-s",
-                          "0.3", "--rate-hz", "3000", "--json"], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=120, env={**os.environ, "COLUMNS": "80"})
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rimless",
+            "robot",
+            "leg-test",
+            "--fake",
+            "--leg",
+            str(LEG),
+            "--config",
+            str(_toml(tmp_path)),
+            "--out",
+            "leg.jsonl",
+            "--hold-s",
+            "0.2",
+            "--record-s",
+            "0.3",
+            "--rate-hz",
+            "3000",
+            "--json",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "COLUMNS": "80"},
+    )
     assert res.returncode == 0, res.stderr
     rep = json.loads(res.stdout)
     assert rep["leg"] == LEG and rep["out"] == "leg.jsonl" and rep["fault"] is None
     assert rep["free_samples"] > 50  # 0.3 s at 3 kHz asked; a loaded machine delivers fewer
-    fit = subprocess.run([sys.executable, "-m", "rimless", "trials", "leg-fit", "leg.jsonl", "--json"], cwd=tmp_path,
-                         capture_output=True, text=True, timeout=120)
+    fit = subprocess.run(
+        [sys.executable, "-m", "rimless", "trials", "leg-fit", "leg.jsonl", "--json"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert fit.returncode == 0, fit.stderr
     out = json.loads(fit.stdout)
     for key in ("k_n_per_m", "c_n_s_per_m", "guide_friction_n"):

@@ -20,17 +20,28 @@ RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 
 def test_the_unit_has_a_watchdog_and_the_device_acl() -> None:
     text = UNIT.read_text()
-    for line in ("Type=notify", "NotifyAccess=main", "NoNewPrivileges=yes", "ProtectSystem=strict",
-                 "DevicePolicy=closed", "DeviceAllow=/dev/gpiochip0 rw", "DeviceAllow=/dev/spidev0.0 rw",
-                 "LimitRTPRIO=", "LimitMEMLOCK=", "CPUAffinity=", "CPUSchedulingPolicy="):
+    for line in (
+        "Type=notify",
+        "NotifyAccess=main",
+        "NoNewPrivileges=yes",
+        "ProtectSystem=strict",
+        "DevicePolicy=closed",
+        "DeviceAllow=/dev/gpiochip0 rw",
+        "DeviceAllow=/dev/spidev0.0 rw",
+        "LimitRTPRIO=",
+        "LimitMEMLOCK=",
+        "CPUAffinity=",
+        "CPUSchedulingPolicy=",
+    ):
         assert line in text, line
     assert re.search(r"^WatchdogSec=\d", text, re.M)
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze")
 def test_systemd_analyze_security_exposure_is_below_5() -> None:
-    r = subprocess.run(["systemd-analyze", "security", "--offline=true", str(UNIT)], capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run(
+        ["systemd-analyze", "security", "--offline=true", str(UNIT)], capture_output=True, text=True, timeout=60
+    )
     m = re.search(r"Overall exposure level for \S+: (\d+\.\d)", r.stdout + r.stderr)
     if m is None:
         pytest.skip(f"systemd-analyze cannot score a unit file offline here: {r.stderr.strip()[:200]}")
@@ -46,8 +57,13 @@ def test_the_firmware_notifies_ready_and_feeds_the_watchdog(tmp_path) -> None:
     cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
     env = {**os.environ, "NOTIFY_SOCKET": path, "WATCHDOG_USEC": "400000"}
     env.pop("WATCHDOG_PID", None)
-    proc = subprocess.run([*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1.5"],
-                          capture_output=True, text=True, env=env, timeout=60)
+    proc = subprocess.run(
+        [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1.5"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert proc.returncode == 0, proc.stderr
     got = []
     rx.settimeout(0.1)

@@ -23,8 +23,21 @@ def test_the_k2500_fast_gait_that_gaits_lists_can_be_continued():
     assert fast["step_period_s"] == pytest.approx(0.26, abs=0.01) and fast["stable"]
     assert "contact_valid" in fast and fast["contact_valid"]
     by_index = _json(["sim", "critical-slope", "--model", "ve", "--k", "2500", "--gait", "1", "--json"])
-    by_guess = _json(["sim", "critical-slope", "--model", "ve", "--k", "2500", "--theta-plus-guess",
-                      str(fast["theta_plus_rad"]), "--theta-dot-guess", str(fast["theta_dot_plus_rad_s"]), "--json"])
+    by_guess = _json(
+        [
+            "sim",
+            "critical-slope",
+            "--model",
+            "ve",
+            "--k",
+            "2500",
+            "--theta-plus-guess",
+            str(fast["theta_plus_rad"]),
+            "--theta-dot-guess",
+            str(fast["theta_dot_plus_rad_s"]),
+            "--json",
+        ]
+    )
     # the two ways of choosing the branch follow the same branch to the same fold
     assert by_index["critical_slope_rad"] == pytest.approx(by_guess["critical_slope_rad"], abs=1e-8)
     for out in (by_index, by_guess):
@@ -50,12 +63,15 @@ def test_fixed_point_reports_validity_and_the_relabel_energy_beside_stability():
     assert "orbitally stable" in res.stdout and "contact valid" in res.stdout
 
 
-@pytest.mark.parametrize("args, option", [
-    (["sim", "fixed-point", "--gait", "9"], "--gait"),
-    (["sim", "fixed-point", "--theta-plus-guess", "0.3"], "--theta-plus-guess"),
-    (["sim", "critical-slope", "--gait", "1", "--theta-dot-guess", "3"], "--gait"),
-    (["sim", "fixed-point", "--slope-deg", "30"], "--slope-deg"),
-])
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["sim", "fixed-point", "--gait", "9"], "--gait"),
+        (["sim", "fixed-point", "--theta-plus-guess", "0.3"], "--theta-plus-guess"),
+        (["sim", "critical-slope", "--gait", "1", "--theta-dot-guess", "3"], "--gait"),
+        (["sim", "fixed-point", "--slope-deg", "30"], "--slope-deg"),
+    ],
+)
 def test_bad_branch_choices_are_one_line_errors(args, option):
     res = RUN.invoke(app, args)
     assert res.exit_code == 2
@@ -78,9 +94,9 @@ def test_gait_forces_draws_forces_and_a_stick_diagram_and_parquet_says_what_it_i
     matplotlib.use("Agg")
     import pyarrow.parquet as pq
 
+    from rimless.sim.model.params import WheelParams
     from rimless.sim.step.backend import make_integrator
     from rimless.sim.step.gait import simulate_steps
-    from rimless.sim.model.params import WheelParams
     from rimless.sim.studies.figures import plot_gait
 
     p = WheelParams()
@@ -88,8 +104,25 @@ def test_gait_forces_draws_forces_and_a_stick_diagram_and_parquet_says_what_it_i
     assert len(plot_gait(traj).axes) == 4  # three panels and theta' on a twin axis
     assert len(plot_gait(traj, forces=True).axes) == 6  # + forces + stick diagram
     out = tmp_path / "g.parquet"
-    res = RUN.invoke(app, ["sim", "gait", "--model", "ve", "--k", "2500", "--steps", "1", "--forces",
-                           "--out", str(out), "--plot", str(tmp_path / "g.png"), "--json"])
+    res = RUN.invoke(
+        app,
+        [
+            "sim",
+            "gait",
+            "--model",
+            "ve",
+            "--k",
+            "2500",
+            "--steps",
+            "1",
+            "--forces",
+            "--out",
+            str(out),
+            "--plot",
+            str(tmp_path / "g.png"),
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     meta = json.loads(pq.read_schema(out).metadata[b"rimless"])
     assert meta["model"] == "ve" and meta["params"]["stiffness_n_per_m"] == 2500.0

@@ -21,7 +21,10 @@ def test_fixed_point_reports_the_friction_work_and_the_stuck_time():
     base = _json(["sim", "fixed-point", "--model", "er", "--json"])
     assert base["friction_work_per_step_j"] == 0.0 and base["guide_friction_n"] == 0.0
     zero = _json(["sim", "fixed-point", "--model", "er", "--guide-friction-n", "0", "--json"])
-    assert zero["theta_plus_rad"] == base["theta_plus_rad"] and zero["theta_dot_plus_rad_s"] == base["theta_dot_plus_rad_s"]
+    assert (
+        zero["theta_plus_rad"] == base["theta_plus_rad"]
+        and zero["theta_dot_plus_rad_s"] == base["theta_dot_plus_rad_s"]
+    )
     out = _json(["sim", "fixed-point", "--model", "er", "--guide-friction-n", "0.5", "--json"])
     assert out["guide_friction_n"] == 0.5
     assert out["friction_work_per_step_j"] > 0.005
@@ -30,12 +33,15 @@ def test_fixed_point_reports_the_friction_work_and_the_stuck_time():
     assert out["jacobian_method"] == "central-difference"
 
 
-@pytest.mark.parametrize("args", [
-    ["sim", "fixed-point", "--guide-friction-n", "-1"],
-    ["sim", "fixed-point", "--guide-friction-n", "nan"],
-    ["sim", "critical-slope", "--model", "rigid", "--guide-friction-n", "1"],
-    ["sim", "gait", "--clutch", "firmware", "--guide-friction-n", "1"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["sim", "fixed-point", "--guide-friction-n", "-1"],
+        ["sim", "fixed-point", "--guide-friction-n", "nan"],
+        ["sim", "critical-slope", "--model", "rigid", "--guide-friction-n", "1"],
+        ["sim", "gait", "--clutch", "firmware", "--guide-friction-n", "1"],
+    ],
+)
 def test_bad_or_unmodelled_friction_is_refused_in_one_line(args):
     res = RUN.invoke(app, args)
     assert res.exit_code == 2, res.output

@@ -43,8 +43,12 @@ def test_critical_slope_starts_on_the_slope_given(monkeypatch):
     assert seen["start_slope_rad"] == pytest.approx(0.05, rel=1e-12)
     res = RUN.invoke(app, ["sim", "critical-slope", "--start-slope-rad", "0.04", "--json"])
     assert res.exit_code == 0 and seen["start_slope_rad"] == pytest.approx(0.04)
-    _one_error(RUN.invoke(app, ["sim", "critical-slope", "--slope-deg", "2", "--start-slope-rad", "0.04"]), 2,
-               "--slope-deg", "--start-slope-rad")
+    _one_error(
+        RUN.invoke(app, ["sim", "critical-slope", "--slope-deg", "2", "--start-slope-rad", "0.04"]),
+        2,
+        "--slope-deg",
+        "--start-slope-rad",
+    )
     _one_error(RUN.invoke(app, ["sim", "critical-slope", "--model", "rigid", "--slope-deg", "2"]), 2, "--slope-deg")
 
 
@@ -58,8 +62,23 @@ def test_sweep_searches_on_the_slope_given(monkeypatch, tmp_path):
         return {"rows": [], "files": [], "computed": 0, "cached": 0, "seconds": 0.0, "workers": 1}
 
     monkeypatch.setattr(sweep, "branch_sweep", fake)
-    res = RUN.invoke(app, ["sim", "sweep", "--k", "2700", "--slope-deg", "2", "--scheduler", "sync", "--no-cache",
-                           "--out", str(tmp_path / "s"), "--json"])
+    res = RUN.invoke(
+        app,
+        [
+            "sim",
+            "sweep",
+            "--k",
+            "2700",
+            "--slope-deg",
+            "2",
+            "--scheduler",
+            "sync",
+            "--no-cache",
+            "--out",
+            str(tmp_path / "s"),
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert seen["start"] == pytest.approx(math.radians(2.0), rel=1e-12)
     _one_error(RUN.invoke(app, ["sim", "sweep", "--slope-deg", "0", "--scheduler", "sync"]), 2, "--slope-deg")
@@ -71,8 +90,12 @@ def test_stress_refuses_the_options_its_grid_replaces():
 
 
 def test_gait_refuses_what_the_chosen_clutch_does_not_use():
-    for args, option in ((["--bench"], "--bench"), (["--rate-hz", "1000"], "--rate-hz"),
-                         (["--clutch-delay-ms", "3"], "--clutch-delay-ms"), (["--seed", "3"], "--seed")):
+    for args, option in (
+        (["--bench"], "--bench"),
+        (["--rate-hz", "1000"], "--rate-hz"),
+        (["--clutch-delay-ms", "3"], "--clutch-delay-ms"),
+        (["--seed", "3"], "--seed"),
+    ):
         _one_error(RUN.invoke(app, ["sim", "gait", *args]), 2, option, "--clutch firmware")
     _one_error(RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--forces"]), 2, "--forces")
 
@@ -127,10 +150,13 @@ def _residual_on_the_reference_map(model: str, z, **changes) -> float:
     return float(np.max(np.abs(pmap(z) - z)))
 
 
-@pytest.mark.parametrize(("model", "option", "value", "change"), [
-    ("ve", "--k", "2000", {"stiffness_n_per_m": 2000.0}),
-    ("er", "--c", "0", {"damping_ns_per_m": 0.0}),
-])
+@pytest.mark.parametrize(
+    ("model", "option", "value", "change"),
+    [
+        ("ve", "--k", "2000", {"stiffness_n_per_m": 2000.0}),
+        ("er", "--c", "0", {"damping_ns_per_m": 0.0}),
+    ],
+)
 def test_fixed_point_falls_back_on_the_gaits_search(model, option, value, change):
     out = _json(["sim", "fixed-point", "--model", model, option, value, "--json"])
     assert out["found_by"] in ("newton", "gaits search")
@@ -141,11 +167,14 @@ def test_fixed_point_falls_back_on_the_gaits_search(model, option, value, change
 # ------------------------------------------------------------------------ 80 columns: names wrap, numbers never
 
 
-@pytest.mark.parametrize("args", [
-    ["sim", "fixed-point", "--model", "er"],
-    ["sim", "fixed-point", "--model", "ve"],
-    ["sim", "gaits", "--model", "ve", "--guesses", "4"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["sim", "fixed-point", "--model", "er"],
+        ["sim", "fixed-point", "--model", "ve"],
+        ["sim", "gaits", "--model", "ve", "--guesses", "4"],
+    ],
+)
 def test_tables_at_80_columns_cut_no_number(args):
     res = RUN.invoke(app, args, env={"COLUMNS": "80", "TERM": "dumb"})
     assert res.exit_code == 0, res.output
@@ -163,8 +192,11 @@ def test_the_quantity_table_wraps_names_not_numbers():
 
     from rimless.sim.cli.output import table
 
-    rows = [("trailing foot lowest point (mm)", -8.41234567), ("eigenvalues", "0.12345-0.00000j, 0.54321+0.00000j"),
-            ("min normal force b in DLSP (N)", 1.7123456)]
+    rows = [
+        ("trailing foot lowest point (mm)", -8.41234567),
+        ("eigenvalues", "0.12345-0.00000j, 0.54321+0.00000j"),
+        ("min normal force b in DLSP (N)", 1.7123456),
+    ]
     for width in (80, 40):
         con = Console(width=width, record=True, file=open("/dev/null", "w"))
         con.print(table("t", rows))
@@ -174,16 +206,19 @@ def test_the_quantity_table_wraps_names_not_numbers():
         assert "…" not in text
 
 
-@pytest.mark.parametrize(("args", "option"), [
-    (["sim", "sweep", "--steps", "8"], "--steps"),
-    (["sim", "sweep", "--seed", "3"], "--seed"),
-    (["sim", "sweep", "--critical-low-deg", "1"], "--critical-low-deg"),
-    (["sim", "sweep", "--clutch", "firmware", "--guesses", "5"], "--guesses"),
-    (["sim", "sweep", "--clutch", "firmware", "--start-slope-rad", "0.04"], "--start-slope-rad"),
-    (["sim", "sweep", "--workers", "2", "--scheduler", "sync"], "--workers"),
-    (["paper", "--workers", "2", "--scheduler", "sync"], "--workers"),
-    (["paper", "--cache-dir", "c", "--no-cache"], "--cache-dir"),
-    (["sim", "sweep", "--cache-dir", "c", "--no-cache"], "--cache-dir"),
-])
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (["sim", "sweep", "--steps", "8"], "--steps"),
+        (["sim", "sweep", "--seed", "3"], "--seed"),
+        (["sim", "sweep", "--critical-low-deg", "1"], "--critical-low-deg"),
+        (["sim", "sweep", "--clutch", "firmware", "--guesses", "5"], "--guesses"),
+        (["sim", "sweep", "--clutch", "firmware", "--start-slope-rad", "0.04"], "--start-slope-rad"),
+        (["sim", "sweep", "--workers", "2", "--scheduler", "sync"], "--workers"),
+        (["paper", "--workers", "2", "--scheduler", "sync"], "--workers"),
+        (["paper", "--cache-dir", "c", "--no-cache"], "--cache-dir"),
+        (["sim", "sweep", "--cache-dir", "c", "--no-cache"], "--cache-dir"),
+    ],
+)
 def test_an_option_the_run_would_ignore_is_refused(args, option):
     _one_error(RUN.invoke(app, args), 2, option)

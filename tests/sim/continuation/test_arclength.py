@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim.continuation.arclength import FOLD, PERIOD_DOUBLING, ArclengthContinuation, eigen_tests
-from rimless.sim.step.backend import make_map
 from rimless.sim.continuation.algorithm1 import critical_slope
+from rimless.sim.continuation.arclength import FOLD, PERIOD_DOUBLING, ArclengthContinuation, eigen_tests
 from rimless.sim.model.params import WheelParams
+from rimless.sim.step.backend import make_map
 from rimless.sim.step.poincare import default_guess, find_gaits, solve_fixed_point
 from tests.support.simcli_truth import NEAR_1_26_DEG, er_stall_by_bisection
 
@@ -32,8 +32,11 @@ def ve_medium_branch():
     cont = ArclengthContinuation(_factory("ve"), p, "ve", "slope", max_points=120)
     seen = []
     # stop once the fold and a period doubling beyond it are located
-    return cont.trace(default_guess(p, "ve"), direction=-1.0,
-                      stop=lambda pt: seen.append(pt) or pt.max_abs_eigenvalue < 1.0 and len(seen) > 30)
+    return cont.trace(
+        default_guess(p, "ve"),
+        direction=-1.0,
+        stop=lambda pt: seen.append(pt) or pt.max_abs_eigenvalue < 1.0 and len(seen) > 30,
+    )
 
 
 def test_test_functions_are_the_eigenvalue_conditions():
@@ -98,8 +101,9 @@ def test_continuation_passes_the_fold_onto_the_unstable_branch(ve_medium_branch)
 def test_fold_agrees_with_the_bisection_of_algorithm_1():
     p = WheelParams(stiffness_n_per_m=K)
     pmap = make_map(p, "ve", backend="fast")
-    bis = critical_slope(pmap, default_guess(p, "ve"), jacobian_factory=lambda m: m.jacobian, method="bisection",
-                         refine_tol_rad=1e-8)
+    bis = critical_slope(
+        pmap, default_guess(p, "ve"), jacobian_factory=lambda m: m.jacobian, method="bisection", refine_tol_rad=1e-8
+    )
     arc = critical_slope(pmap, default_guess(p, "ve"), jacobian_factory=lambda m: m.jacobian, method="arclength")
     assert bis.reason == arc.reason == "fold"
     assert arc.critical_slope_rad == pytest.approx(bis.critical_slope_rad, abs=1e-6)
@@ -127,8 +131,13 @@ def test_continuation_up_from_the_medium_gait_reaches_the_unstable_gait_gaits_fi
     cont = ArclengthContinuation(_factory("ve"), p, "ve", "slope", max_points=60)
     crossed = []
 
-    br = cont.trace(default_guess(p, "ve"), direction=+1.0, stop=lambda pt: crossed.append(pt) or (
-        len(crossed) > 2 and pt.p < p.slope_rad and crossed[-2].p >= p.slope_rad))
+    br = cont.trace(
+        default_guess(p, "ve"),
+        direction=+1.0,
+        stop=lambda pt: (
+            crossed.append(pt) or (len(crossed) > 2 and pt.p < p.slope_rad and crossed[-2].p >= p.slope_rad)
+        ),
+    )
     # it went up in slope, turned at a fold above the start slope, and came back down through it
     assert any(sp.kind == FOLD and sp.p > p.slope_rad for sp in br.special)
     a, b = br.points[-2], br.points[-1]

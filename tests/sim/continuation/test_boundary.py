@@ -4,11 +4,11 @@ import math
 
 import pytest
 
-from rimless.sim.step.backend import make_map
-from rimless.sim.continuation.boundary import BoundaryContinuation, solve_at, start_on_boundary
 from rimless.sim.continuation.algorithm1 import critical_slope
+from rimless.sim.continuation.boundary import BoundaryContinuation, solve_at, start_on_boundary
 from rimless.sim.model.failures import StepFailure
 from rimless.sim.model.params import WheelParams
+from rimless.sim.step.backend import make_map
 from rimless.sim.step.poincare import default_guess
 
 
@@ -46,8 +46,9 @@ def test_er_stall_curve_is_the_stall_itself_point_by_point():
         assert stall.mu == level.mu and 0 < level.slope_rad - stall.slope_rad < math.radians(0.002)
     pt = next(pt for pt in curve.points if pt.mu != 2700.0)  # a point the continuation put at its own k
     q = WheelParams(stiffness_n_per_m=pt.mu)
-    one = critical_slope(make_map(q, "er", backend="fast"), default_guess(q, "er"), method="bisection",
-                         refine_tol_rad=1e-9)
+    one = critical_slope(
+        make_map(q, "er", backend="fast"), default_guess(q, "er"), method="bisection", refine_tol_rad=1e-9
+    )
     assert one.reason == "stall"
     assert pt.slope_rad == pytest.approx(one.critical_slope_rad, abs=1e-6)
     with pytest.raises(StepFailure):

@@ -28,8 +28,14 @@ def test_every_plan_entry_is_a_kernel_with_one_type_per_parameter():
 
 def test_types_of_an_entry():
     got = ahead._types("mi i f b f1 f2", 2)
-    assert got == (types.literal(2), types.int64, types.float64, types.boolean,
-                   types.Array(types.float64, 1, "C"), types.Array(types.float64, 2, "C"))
+    assert got == (
+        types.literal(2),
+        types.int64,
+        types.float64,
+        types.boolean,
+        types.Array(types.float64, 1, "C"),
+        types.Array(types.float64, 2, "C"),
+    )
 
 
 def test_turned_off_it_starts_nothing(monkeypatch):
@@ -54,9 +60,15 @@ def test_ctrl_c_during_a_cold_compile_stops_both_processes(tmp_path):
         pytest.skip("one core: no second process")
     env = {**os.environ, "RIMLESS_CACHE_DIR": str(tmp_path)}
     env.pop("RIMLESS_NO_BACKGROUND", None)
-    proc = subprocess.Popen([sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "er"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "er"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         deadline = time.monotonic() + 60
         children: list = []

@@ -9,18 +9,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimless.sim.model import dynamics
-from rimless.sim.model import guards as events
 from rimless.sim import fast
-from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.fast import model as fm
-from rimless.sim.model import impact as ref_impact
-from rimless.sim.model import section
-from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.step.hybrid import simulate_step
 from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model import dynamics, section
+from rimless.sim.model import guards as events
+from rimless.sim.model import impact as ref_impact
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import MASS_MODELS, WheelParams
+from rimless.sim.step.fast_map import FastPoincareMap
+from rimless.sim.step.hybrid import simulate_step
 from rimless.sim.step.poincare import PoincareMap, solve_fixed_point
 
 Z_ER = np.array([-0.465155, 2.604441])
@@ -97,14 +96,20 @@ def test_impact_section_and_guard_gradients_match_the_reference(mass_model: str)
         dy[j] = e
         np.testing.assert_allclose(V[:, j], (reset(y_minus + dy) - reset(y_minus - dy)) / (2 * e), atol=1e-7)
     # guard values and gradients
-    for phase, code in ((dynamics.DLSP, events.LIFTOFF_A), (dynamics.SLSP_FREE, events.LIFTOFF_B),
-                        (dynamics.SLSP_CLUTCHED, events.TOUCHDOWN), (dynamics.SLSP_FREE, events.CLUTCH_LOCK)):
+    for phase, code in (
+        (dynamics.DLSP, events.LIFTOFF_A),
+        (dynamics.SLSP_FREE, events.LIFTOFF_B),
+        (dynamics.SLSP_CLUTCHED, events.TOUCHDOWN),
+        (dynamics.SLSP_FREE, events.CLUTCH_LOCK),
+    ):
         g = fm.guard_gradient(mi, phase, code, y_minus, mech.p)
         for j in range(10):
             dy = np.zeros(10)
             dy[j] = e
-            fd = (events.guard_value(mech, phase, code, y_minus + dy)
-                  - events.guard_value(mech, phase, code, y_minus - dy)) / (2 * e)
+            fd = (
+                events.guard_value(mech, phase, code, y_minus + dy)
+                - events.guard_value(mech, phase, code, y_minus - dy)
+            ) / (2 * e)
             assert g[j] == pytest.approx(fd, rel=1e-6, abs=1e-6)
 
 
@@ -141,8 +146,7 @@ def test_fast_integrator_reproduces_the_reference_step_with_records_and_dissipat
     mech = Mechanics.of(params)
     y0 = section.state_from_section(mech, Z_ER)
     ref = simulate_step(mech, "er", y0, ScipyIntegrator(), record_dt=1e-3, track_dissipation=True, diagnostics=True)
-    got = simulate_step(mech, "er", y0, fast.FastIntegrator(), record_dt=1e-3, track_dissipation=True,
-                        diagnostics=True)
+    got = simulate_step(mech, "er", y0, fast.FastIntegrator(), record_dt=1e-3, track_dissipation=True, diagnostics=True)
     np.testing.assert_allclose(got.y_plus, ref.y_plus, atol=1e-9)
     assert got.dissipated_J == pytest.approx(ref.dissipated_J, rel=1e-8)
     assert [p.name for p in got.phases] == [p.name for p in ref.phases]
@@ -195,12 +199,18 @@ def tight_reference() -> dict[str, PoincareMap]:
     return {m: PoincareMap(WheelParams(), m, ScipyIntegrator(rtol=1e-12, atol=1e-14)) for m in ("er", "ve")}
 
 
-@pytest.mark.parametrize(("model", "z"), [
-    ("er", Z_ER), ("ve", Z_VE),
-    ("er", Z_ER + np.array([0.015, 0.2])), ("ve", Z_VE + np.array([-0.01, -0.1])),
-])
-def test_exact_jacobian_matches_central_differences_of_the_reference(tight_reference, model: str,
-                                                                     z: np.ndarray) -> None:
+@pytest.mark.parametrize(
+    ("model", "z"),
+    [
+        ("er", Z_ER),
+        ("ve", Z_VE),
+        ("er", Z_ER + np.array([0.015, 0.2])),
+        ("ve", Z_VE + np.array([-0.01, -0.1])),
+    ],
+)
+def test_exact_jacobian_matches_central_differences_of_the_reference(
+    tight_reference, model: str, z: np.ndarray
+) -> None:
     J = fast.exact_jacobian(WheelParams(), model, z, rtol=1e-12, atol=1e-14)
     J_fd = tight_reference[model].jacobian(z, h=1e-5)
     np.testing.assert_allclose(J, J_fd, atol=1e-6, rtol=0)
@@ -249,20 +259,29 @@ def test_failure_reason_and_phase_are_reported() -> None:
         fast.fast_map(WheelParams(), "rigid", Z_ER)
 
 
-PHASE_END_GUARD = {"dlsp": (dynamics.DLSP, events.LIFTOFF_A), "slsp_free": (dynamics.SLSP_FREE, events.CLUTCH_LOCK),
-                   "slsp_clutched": (dynamics.SLSP_CLUTCHED, events.TOUCHDOWN)}
+PHASE_END_GUARD = {
+    "dlsp": (dynamics.DLSP, events.LIFTOFF_A),
+    "slsp_free": (dynamics.SLSP_FREE, events.CLUTCH_LOCK),
+    "slsp_clutched": (dynamics.SLSP_CLUTCHED, events.TOUCHDOWN),
+}
 
 
 @pytest.mark.parametrize(("model", "z"), [("er", Z_ER), ("ve", Z_VE)])
 @pytest.mark.parametrize(("rtol", "bound"), [(1e-10, 1e-10), (1e-6, 1e-7)])
-def test_phase_ends_lie_on_their_guards_on_the_fast_backend(model: str, z: np.ndarray, rtol: float,
-                                                            bound: float) -> None:
+def test_phase_ends_lie_on_their_guards_on_the_fast_backend(
+    model: str, z: np.ndarray, rtol: float, bound: float
+) -> None:
     """The state at a guard comes from a step to the time located on the dense output: on the guard to the
     interpolant's error, at loose rtol too. Bounds in m, m/s, rad/s; a normal-force guard (N) to 100 x the
     bound (1e-8 N is 4e-10 of the wheel's weight at rtol 1e-10)."""
     mech = Mechanics.of(WheelParams())
-    res = simulate_step(mech, model, section.state_from_section(mech, z),
-                        fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2), record_dt=1e-2)
+    res = simulate_step(
+        mech,
+        model,
+        section.state_from_section(mech, z),
+        fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2),
+        record_dt=1e-2,
+    )
     assert res.segments is not None
     for seg, rec in zip(res.segments, res.phases, strict=True):
         phase, guard = PHASE_END_GUARD[rec.name]

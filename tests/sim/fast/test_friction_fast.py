@@ -47,8 +47,9 @@ def test_compiled_single_leg_matches_the_closed_form():
     y0[3], y0[4] = p.leg_length_m, p.leg_length_m + x0
     w = math.sqrt(p.k / p.leg_mass_kg)
     t_end = 12 * math.pi / w
-    run = run_with_friction(FastIntegrator(rtol=1e-12, atol=1e-14), mech, SLSP_CLUTCHED, y0, 0.0, (), t_end,
-                            record_dt=t_end / 2000)
+    run = run_with_friction(
+        FastIntegrator(rtol=1e-12, atol=1e-14), mech, SLSP_CLUTCHED, y0, 0.0, (), t_end, record_dt=t_end / 2000
+    )
     truth = friction_leg.position(run.t, x0, p.k, p.leg_mass_kg, F)
     assert np.max(np.abs(run.y[:, 4] - p.leg_length_m - truth)) < 1e-9
     tps = friction_leg.turning_points(x0, p.k, F)
@@ -57,8 +58,10 @@ def test_compiled_single_leg_matches_the_closed_form():
 
 # Regression snapshot: fast_step(Table 1, model, z = (-0.46, 2.6)).z_next computed with the code before guide
 # friction existed (commit c503cc9); F_c = 0 must reproduce it bit for bit.
-BEFORE = {"er": ['-0x1.db977945fa16ap-2', '0x1.4a4fc7a36d96fp+1'],
-          "ve": ['-0x1.99addd2eab2abp-2', '0x1.5a24e7506bfe3p+1']}
+BEFORE = {
+    "er": ["-0x1.db977945fa16ap-2", "0x1.4a4fc7a36d96fp+1"],
+    "ve": ["-0x1.99addd2eab2abp-2", "0x1.5a24e7506bfe3p+1"],
+}
 
 
 @pytest.mark.parametrize("model", ["er", "ve"])
@@ -103,8 +106,11 @@ def test_gravity_input_balances_losses_with_friction_at_the_fixed_point(er_frict
 @pytest.mark.slow
 def test_reference_and_compiled_fixed_points_with_friction_agree(er_friction_fixed_point):
     _, fp = er_friction_fixed_point
-    ref = solve_fixed_point(PoincareMap(WheelParams(guide_friction_n=0.5), "er", ScipyIntegrator(rtol=1e-11,
-                            atol=1e-13)), fp.z, record=False)
+    ref = solve_fixed_point(
+        PoincareMap(WheelParams(guide_friction_n=0.5), "er", ScipyIntegrator(rtol=1e-11, atol=1e-13)),
+        fp.z,
+        record=False,
+    )
     assert np.max(np.abs(ref.z - fp.z)) < 1e-8
     assert np.max(np.abs(np.sort(np.abs(ref.eigenvalues)) - np.sort(np.abs(fp.eigenvalues)))) < 1e-4
 
@@ -113,8 +119,8 @@ def test_reference_and_compiled_fixed_points_with_friction_agree(er_friction_fix
 # variational Jacobian), computed with the code before guide friction existed (commit c503cc9, run from an export
 # of that commit with its own kernel cache); F_c = 0 reproduces z and |eigenvalues| bit for bit.
 BEFORE_FIXED_POINT = {
-    "er": (['-0x1.dc51b1ecf5bd2p-2', '0x1.4d5e52621633dp+1'], ['0x1.a06fed9a556d0p-4', '0x1.923b8d720315ap-1']),
-    "ve": (['-0x1.bd370598b06d1p-2', '0x1.250772175f88ap+1'], ['0x1.360ea92bb14c2p-2', '0x1.360ea92bb14c2p-2']),
+    "er": (["-0x1.dc51b1ecf5bd2p-2", "0x1.4d5e52621633dp+1"], ["0x1.a06fed9a556d0p-4", "0x1.923b8d720315ap-1"]),
+    "ve": (["-0x1.bd370598b06d1p-2", "0x1.250772175f88ap+1"], ["0x1.360ea92bb14c2p-2", "0x1.360ea92bb14c2p-2"]),
 }
 
 

@@ -10,12 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rimless.sim.model import dynamics
 from rimless.sim.fast import model as fm
+from rimless.sim.model import dynamics
 from rimless.sim.model.impact import double_support_jacobian
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import MASS_MODELS, WheelParams
-
 from tests.support.sim_states import random_states
 
 PHASES = (dynamics.DLSP, dynamics.SLSP_FREE, dynamics.SLSP_CLUTCHED)
@@ -80,8 +79,7 @@ def test_reduced_variational_equations_match_the_full_kkt_derivative(mass_model:
         y = np.concatenate((q, qd))
         V = rng.normal(size=(10, 2))
         qdd, lam, dqdd = np.empty(5), np.zeros(4), np.empty((5, 2))
-        assert fm.accel_directional(mi, phase, y[:5], y[5:], mech.p, qdd, lam, V, dqdd,
-                                    np.empty(fm.WORKSPACE_SIZE + 5))
+        assert fm.accel_directional(mi, phase, y[:5], y[5:], mech.p, qdd, lam, V, dqdd, np.empty(fm.WORKSPACE_SIZE + 5))
         b, lb, D, Dl = np.empty(5), np.zeros(4), np.empty((5, 10)), np.empty((4, 10))
         assert fm.accel_jacobian(mi, phase, y[:5], y[5:], mech.p, b, lb, D, Dl)
         full = D @ V

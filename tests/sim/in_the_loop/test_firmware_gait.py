@@ -8,8 +8,15 @@ from rimless.sim.in_the_loop.config import build_config
 from rimless.sim.in_the_loop.firmware_gait import firmware_critical, firmware_gait
 from rimless.sim.model.params import WheelParams
 
-OPTIONS = dict(rate_hz=300.0, clutch_delay_ms=5.0, release_delay_ms=None, noise_counts=1.0, jitter_ms=0.05,
-               holding_force_n=100.0, seed=0)
+OPTIONS = dict(
+    rate_hz=300.0,
+    clutch_delay_ms=5.0,
+    release_delay_ms=None,
+    noise_counts=1.0,
+    jitter_ms=0.05,
+    holding_force_n=100.0,
+    seed=0,
+)
 
 
 def test_the_config_is_in_si_and_the_release_delay_follows_the_engage_delay():

@@ -15,26 +15,32 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import rimless.firmware.drivers.adns3080
-import rimless.firmware.drivers.clutch
 import rimless.firmware.control.controller
 import rimless.firmware.control.detector
-import rimless.firmware.drivers.fake_adns3080
 import rimless.firmware.control.faults
+import rimless.firmware.drivers.adns3080
+import rimless.firmware.drivers.clutch
+import rimless.firmware.drivers.fake_adns3080
 from rimless.cli import app
-from rimless.sim.model.failures import StepFailure
 from rimless.sim.in_the_loop import loop as loop_module
 from rimless.sim.in_the_loop.loop import FirmwareLoop, FirmwareLoopConfig
 from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model import guards
 from rimless.sim.model.clutch import Mode
 from rimless.sim.model.dynamics import SLSP_FREE
+from rimless.sim.model.failures import StepFailure
 from rimless.sim.model.mechanics import Mechanics
 from tests.support import sim_dip
 
 REPO = Path(__file__).resolve().parents[3]
-FIRMWARE_MODULES = [rimless.firmware.drivers.adns3080, rimless.firmware.drivers.clutch, rimless.firmware.control.controller,
-                    rimless.firmware.control.detector, rimless.firmware.drivers.fake_adns3080, rimless.firmware.control.faults]
+FIRMWARE_MODULES = [
+    rimless.firmware.drivers.adns3080,
+    rimless.firmware.drivers.clutch,
+    rimless.firmware.control.controller,
+    rimless.firmware.control.detector,
+    rimless.firmware.drivers.fake_adns3080,
+    rimless.firmware.control.faults,
+]
 QUIET = dict(jitter_s=0.0, noise_counts=0.0)
 
 
@@ -47,6 +53,7 @@ def _walk(params, z, steps, **cfg):
 
 
 # --- the same firmware code runs on the robot and in the loop --------------------------------------
+
 
 def _code_objects(path: Path) -> dict[str, bytes]:
     """qualname -> bytecode of every function compiled from the file on disk."""
@@ -92,9 +99,13 @@ def test_the_loop_runs_the_firmware_files_unpatched(table1, er_fixed_point):
         patched, checked = _patched_functions(module)
         assert not patched, f"{module.__name__}: {patched} are not the code in {path}"
         assert checked >= 3
-    expected = {"controller": rimless.firmware.control.controller.Controller, "detector": rimless.firmware.control.detector.LegDetector,
-                "sensor": rimless.firmware.drivers.adns3080.Adns3080, "fake": rimless.firmware.drivers.fake_adns3080.FakeAdns3080,
-                "clutches": rimless.firmware.drivers.clutch.ClutchBank}
+    expected = {
+        "controller": rimless.firmware.control.controller.Controller,
+        "detector": rimless.firmware.control.detector.LegDetector,
+        "sensor": rimless.firmware.drivers.adns3080.Adns3080,
+        "fake": rimless.firmware.drivers.fake_adns3080.FakeAdns3080,
+        "clutches": rimless.firmware.drivers.clutch.ClutchBank,
+    }
     for attr, cls in expected.items():
         obj = getattr(loop, attr)
         assert type(obj) is cls, attr
@@ -110,7 +121,7 @@ def test_a_patched_firmware_function_is_detected(monkeypatch):
     module = rimless.firmware.control.detector
     assert _patched_functions(module)[0] == []
 
-    def update(self, t_ns, displacement_m, trusted=True):  # noqa: ANN001, ANN202
+    def update(self, t_ns, displacement_m, trusted=True):
         return module.NOTHING
 
     monkeypatch.setattr(module.LegDetector, "update", update)
@@ -119,8 +130,11 @@ def test_a_patched_firmware_function_is_detected(monkeypatch):
 
 def test_no_simulator_module_copies_firmware_code():
     """Distinctive lines of the firmware's decision code appear only in firmware/."""
-    markers = [line.strip() for line in Path(inspect.getsourcefile(rimless.firmware.control.detector)).read_text().splitlines()
-               if line.strip().startswith(("det = s0 *", "det_b = s0 *", "det_c = s0 *", "armed = self._peak_v"))]
+    markers = [
+        line.strip()
+        for line in Path(inspect.getsourcefile(rimless.firmware.control.detector)).read_text().splitlines()
+        if line.strip().startswith(("det = s0 *", "det_b = s0 *", "det_c = s0 *", "armed = self._peak_v"))
+    ]
     markers += ["def _step_channel(", "class VelocityEstimator", "class LegDetector", "def _latch(self)"]
     assert len(markers) >= 8
     for path in (REPO / "sim").rglob("*.py"):
@@ -131,17 +145,27 @@ def test_no_simulator_module_copies_firmware_code():
 
 # --- guards: the one table and the one engine ---------------------------------------------------------
 
+
 def test_the_loop_numbers_its_guards_by_the_table(monkeypatch, table1, er_fixed_point):
     """The loop's guard codes are the table's (rimless.sim.model.guards) and every guard it asks the event
     engine for is a row of the table. Fails on ebb1b78: loop.py numbered its own guards (TOUCHDOWN = 0,
     STALL = 1, ...) against the table's TOUCHDOWN = 3, and had no foot-a / slip / stick rows in the table."""
-    for name in ("TOUCHDOWN", "STALL", "LIFTOFF_A", "LIFTOFF_B", "FOOT_A_DOWN", "SLIP_END_1", "SLIP_END_2",
-                 "STICK_END_1", "STICK_END_2"):
+    for name in (
+        "TOUCHDOWN",
+        "STALL",
+        "LIFTOFF_A",
+        "LIFTOFF_B",
+        "FOOT_A_DOWN",
+        "SLIP_END_1",
+        "SLIP_END_2",
+        "STICK_END_1",
+        "STICK_END_2",
+    ):
         assert getattr(loop_module, name) == getattr(guards, name), name
     asked: set[int] = set()
     engine = loop_module.EventLocator
 
-    def spy(codes, *args, **kwargs):  # noqa: ANN001, ANN202
+    def spy(codes, *args, **kwargs):
         asked.update(codes)
         return engine(codes, *args, **kwargs)
 
@@ -172,10 +196,12 @@ def test_the_loop_locates_a_stance_force_dip_between_solver_steps():
 
 # --- physics ----------------------------------------------------------------------------------------
 
+
 def test_energy_budget_closes_with_delays_noise_and_slip(table1, er_fixed_point):
     """E(start) - damper - clutch slip/lock - foot-a re-contact - impact = E(end), step by step."""
-    _, walk = _walk(table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=0.005, release_delay_s=0.005,
-                    noise_counts=1.0)
+    _, walk = _walk(
+        table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=0.005, release_delay_s=0.005, noise_counts=1.0
+    )
     assert walk.failure is None and len(walk.steps) == 3
     for s in walk.steps:
         assert abs(s.energy_residual_J) < 1e-7, s.energy_residual_J
@@ -190,8 +216,9 @@ def test_energy_budget_closes_with_delays_noise_and_slip(table1, er_fixed_point)
 def test_added_delay_lowers_the_stored_energy_monotonically(table1, er_fixed_point):
     stored = []
     for delay in (0.0, 0.005, 0.010, 0.020):
-        _, walk = _walk(table1, er_fixed_point[1].z, 1, rate_hz=1000.0, engage_delay_s=delay, release_delay_s=0.0,
-                        **QUIET)
+        _, walk = _walk(
+            table1, er_fixed_point[1].z, 1, rate_hz=1000.0, engage_delay_s=delay, release_delay_s=0.0, **QUIET
+        )
         assert walk.failure is None
         stored.append(walk.steps[0].stored_energy_J)
     ideal = 0.5 * table1.k * (table1.leg_length_m - er_fixed_point[1].step.y_minus[3]) ** 2
@@ -205,8 +232,9 @@ def test_a_delay_longer_than_the_compression_phase_is_classified(table1, er_fixe
     """Compression lasts about 70 ms here; a 100 ms clutch locks in the rebound (or not at all before
     touchdown), a 400 ms clutch acts a step late. Either way every step is classified; the wheel walks on
     (both walk the 3 steps: a regression snapshot of ebb1b78)."""
-    _, walk = _walk(table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=delay_s, release_delay_s=delay_s,
-                    **QUIET)
+    _, walk = _walk(
+        table1, er_fixed_point[1].z, 3, rate_hz=300.0, engage_delay_s=delay_s, release_delay_s=delay_s, **QUIET
+    )
     assert walk.failure is None and len(walk.steps) == 3, walk.failure
     ideal = 0.5 * table1.k * (table1.leg_length_m - er_fixed_point[1].step.y_minus[3]) ** 2  # locked at the peak
     for s in walk.steps:
@@ -236,8 +264,24 @@ RUN = CliRunner()
 
 
 def test_cli_gait_with_the_firmware_clutch_reports_fixed_point_and_energy():
-    res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", "--rate-hz", "300", "--clutch-delay-ms", "5",
-                           "--noise-counts", "1", "--steps", "6", "--json"])
+    res = RUN.invoke(
+        app,
+        [
+            "sim",
+            "gait",
+            "--clutch",
+            "firmware",
+            "--rate-hz",
+            "300",
+            "--clutch-delay-ms",
+            "5",
+            "--noise-counts",
+            "1",
+            "--steps",
+            "6",
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     assert out["steps_done"] == 6 and out["failure"] is None
@@ -248,8 +292,14 @@ def test_cli_gait_with_the_firmware_clutch_reports_fixed_point_and_energy():
     assert set(out["lock_classes"]) <= {"compression", "peak", "rebound", "after-rebound", "none"}
 
 
-@pytest.mark.parametrize("args, flag", [(["--rate-hz", "0"], "--rate-hz"), (["--clutch-delay-ms", "-1"],
-                                        "--clutch-delay-ms"), (["--model", "ve"], "--model er")])
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        (["--rate-hz", "0"], "--rate-hz"),
+        (["--clutch-delay-ms", "-1"], "--clutch-delay-ms"),
+        (["--model", "ve"], "--model er"),
+    ],
+)
 def test_cli_firmware_bad_options_are_one_line_errors(args, flag):
     res = RUN.invoke(app, ["sim", "gait", "--clutch", "firmware", *args])
     assert res.exit_code == 2
@@ -262,8 +312,23 @@ def test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points(tmp_path)
     rows are the first run's."""
     import pandas as pd
 
-    base = ["sim", "sweep", "--clutch", "firmware", "--rate-hz", "300", "--steps", "6", "--scheduler", "sync",
-            "--cache-dir", str(tmp_path / "cache"), "--out", str(tmp_path / "fw"), "--json"]
+    base = [
+        "sim",
+        "sweep",
+        "--clutch",
+        "firmware",
+        "--rate-hz",
+        "300",
+        "--steps",
+        "6",
+        "--scheduler",
+        "sync",
+        "--cache-dir",
+        str(tmp_path / "cache"),
+        "--out",
+        str(tmp_path / "fw"),
+        "--json",
+    ]
     res = RUN.invoke(app, base + ["--clutch-delay-ms", "0,10"])
     assert res.exit_code == 0, res.output
     first = json.loads(res.stdout)
@@ -284,11 +349,16 @@ def test_sim_sweep_firmware_orders_the_cost_of_delay_and_caches_points(tmp_path)
     assert fast["stored_energy_ratio"] > second["rows"][1]["stored_energy_ratio"] > slow["stored_energy_ratio"]
 
 
-@pytest.mark.parametrize("args, flag", [(["--clutch", "firmware", "--k", "2500,2700"], "--k"),
-                                        (["--clutch", "firmware", "--rate-hz", "0"], "--rate-hz"),
-                                        (["--clutch", "firmware", "--clutch-delay-ms", "a"], "--clutch-delay-ms"),
-                                        (["--rate-hz", "300"], "--rate-hz"),
-                                        (["--clutch", "firmware", "--model", "ve"], "--model")])
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        (["--clutch", "firmware", "--k", "2500,2700"], "--k"),
+        (["--clutch", "firmware", "--rate-hz", "0"], "--rate-hz"),
+        (["--clutch", "firmware", "--clutch-delay-ms", "a"], "--clutch-delay-ms"),
+        (["--rate-hz", "300"], "--rate-hz"),
+        (["--clutch", "firmware", "--model", "ve"], "--model"),
+    ],
+)
 def test_sim_sweep_firmware_bad_options_are_one_line_errors(args, flag, tmp_path):
     res = RUN.invoke(app, ["sim", "sweep", "--out", str(tmp_path / "x"), *args])
     assert res.exit_code == 2 and flag in res.output and "Traceback" not in res.output, res.output
@@ -296,8 +366,22 @@ def test_sim_sweep_firmware_bad_options_are_one_line_errors(args, flag, tmp_path
 
 def test_firmware_sweep_alias_still_answers(table1):
     """The old command runs the same grid code: one point, the old JSON keys."""
-    res = RUN.invoke(app, ["sim", "firmware-sweep", "--rates-hz", "1000", "--delays-ms", "0", "--steps", "6",
-                           "--scheduler", "sync", "--json"])
+    res = RUN.invoke(
+        app,
+        [
+            "sim",
+            "firmware-sweep",
+            "--rates-hz",
+            "1000",
+            "--delays-ms",
+            "0",
+            "--steps",
+            "6",
+            "--scheduler",
+            "sync",
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     assert {"ideal", "rows", "steps", "noise_counts", "plot"} <= set(out)
@@ -310,9 +394,19 @@ def test_the_figure_of_a_sweep_with_critical_slopes_shows_the_advantage_kept(tmp
     from rimless.sim.in_the_loop.sweep import add_advantage, plot_firmware_sweep
 
     rows = [{"clutch": "ideal", "model": "er", "cot": 0.02}, {"clutch": "none (VE)", "model": "ve", "cot": 0.03}]
-    rows += [{"clutch": "firmware", "rate_hz": 300.0, "delay_ms": d, "walks": True, "cot": cot,
-              "stored_energy_ratio": 0.9, "max_abs_eigenvalue_fitted": 0.7, "limited_by": by}
-             for d, cot, by in ((0.0, 0.025, "mechanics"), (5.0, 0.03, "firmware"), (10.0, 0.035, "mechanics"))]
+    rows += [
+        {
+            "clutch": "firmware",
+            "rate_hz": 300.0,
+            "delay_ms": d,
+            "walks": True,
+            "cot": cot,
+            "stored_energy_ratio": 0.9,
+            "max_abs_eigenvalue_fitted": 0.7,
+            "limited_by": by,
+        }
+        for d, cot, by in ((0.0, 0.025, "mechanics"), (5.0, 0.03, "firmware"), (10.0, 0.035, "mechanics"))
+    ]
     refs = add_advantage(rows)
     assert refs["er_ideal"]["cot_saving_vs_ve"] == pytest.approx(1 / 3)
     assert [r["er_advantage_remaining"] for r in rows[2:]] == pytest.approx([0.5, 0.0, -0.5])
@@ -326,6 +420,7 @@ def test_cli_firmware_sweep_rejects_a_bad_scheduler_and_rate():
 
 
 # --- replay of a trial log --------------------------------------------------------------------------
+
 
 def test_replay_of_a_trial_log_written_by_the_firmware_logger(table1, er_fixed_point, tmp_path):
     """A walk's controller records go through the firmware's own TrialLog writer; the replay finds the same
@@ -421,8 +516,16 @@ def test_robot_config_supplies_the_firmware_settings(tmp_path):
     text = text.replace("touch_debounce_samples = 2", "touch_debounce_samples = 3")
     good = tmp_path / "robot.toml"
     good.write_text(text)
-    cfg = build_config(rate_hz=None, clutch_delay_ms=5, release_delay_ms=None, noise_counts=1, jitter_ms=0.05,
-                       holding_force_n=100, seed=0, robot_config=good)
+    cfg = build_config(
+        rate_hz=None,
+        clutch_delay_ms=5,
+        release_delay_ms=None,
+        noise_counts=1,
+        jitter_ms=0.05,
+        holding_force_n=100,
+        seed=0,
+        robot_config=good,
+    )
     assert cfg.rate_hz == 500.0 and cfg.detector.touch_debounce_samples == 3 and cfg.cpi == 1600
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace("touch_debounce_samples = 3", "touch_debounce_samples = -3"))

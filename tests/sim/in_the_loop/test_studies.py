@@ -8,8 +8,14 @@ import pytest
 
 from rimless.firmware.control.detector import DetectorParams
 from rimless.sim.in_the_loop.loop import FirmwareLoop, FirmwareLoopConfig
-from rimless.sim.in_the_loop.studies import (FIRMWARE_FAULT_PREFIX, FirmwareBoundaries, FirmwareCriticalSlope,
-                                             firmware_fixed_point, ideal_gait, without_step_timing_checks)
+from rimless.sim.in_the_loop.studies import (
+    FIRMWARE_FAULT_PREFIX,
+    FirmwareBoundaries,
+    FirmwareCriticalSlope,
+    firmware_fixed_point,
+    ideal_gait,
+    without_step_timing_checks,
+)
 
 
 def _walk(params, z, steps, **cfg):
@@ -20,8 +26,9 @@ def _walk(params, z, steps, **cfg):
         loop.close()
 
 
-HIGH_RATE = dict(jitter_s=0.0, noise_counts=0.0, engage_delay_s=0.0, release_delay_s=0.0,
-                 counts_per_m_1600=6.3e6)  # a 100x finer sensor: quantisation out of the way
+HIGH_RATE = dict(
+    jitter_s=0.0, noise_counts=0.0, engage_delay_s=0.0, release_delay_s=0.0, counts_per_m_1600=6.3e6
+)  # a 100x finer sensor: quantisation out of the way
 
 
 def _high_rate(rate_hz, window_s):
@@ -49,8 +56,9 @@ def test_high_rate_no_noise_no_delay_converges_to_the_ideal_fixed_point(table1, 
     assert fp.z[0] == pytest.approx(ideal.z[0], abs=0.002)
     assert fp.period_s == pytest.approx(ideal.step.period_s, rel=0.03)
     assert np.max(np.abs(fp.eigenvalues)) == pytest.approx(np.max(np.abs(ideal.eigenvalues)), abs=0.05)
-    assert fp.stored_energy_J == pytest.approx(0.5 * table1.k * (table1.leg_length_m - ideal.step.y_minus[3]) ** 2,
-                                               rel=0.02)
+    assert fp.stored_energy_J == pytest.approx(
+        0.5 * table1.k * (table1.leg_length_m - ideal.step.y_minus[3]) ** 2, rel=0.02
+    )
     assert all(s.lock_class == "peak" for s in fp.walk.steps)
     assert max(abs(s.energy_residual_J) for s in fp.walk.steps) < 1e-7
 
@@ -78,7 +86,7 @@ def test_a_leg_sync_fault_before_a_stall_is_reported_with_the_mechanical_cause(t
     # up to the fault both walks are the same walk (the relaxed checks change nothing else)
     n = len(relaxed_walk.steps)
     assert n >= 3
-    assert [s.period_s for s in walk.steps[:n - 1]] == [s.period_s for s in relaxed_walk.steps[:n - 1]]
+    assert [s.period_s for s in walk.steps[: n - 1]] == [s.period_s for s in relaxed_walk.steps[: n - 1]]
 
 
 def test_boundaries_say_what_limits_the_critical_slope():

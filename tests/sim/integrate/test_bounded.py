@@ -9,10 +9,10 @@ import pytest
 
 from rimless.errors import ParameterError
 from rimless.sim import fast
-from rimless.sim.step.fast_map import FastPoincareMap
-from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.params import WheelParams
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.step.poincare import PoincareMap
 
 Z_ER = np.array([-0.465155, 2.604441])
@@ -42,10 +42,16 @@ def test_non_finite_section_points_fail(z: np.ndarray) -> None:
         PoincareMap(WheelParams(), "er").step(z)
 
 
-@pytest.mark.parametrize(("field", "option"), [
-    ("leg_mass_kg", "--leg-mass-kg"), ("stiffness_n_per_m", "--k"), ("damping_ns_per_m", "--c"),
-    ("slope_rad", "--slope-rad"), ("hub_mass_kg", "--hub-mass-kg"),
-])
+@pytest.mark.parametrize(
+    ("field", "option"),
+    [
+        ("leg_mass_kg", "--leg-mass-kg"),
+        ("stiffness_n_per_m", "--k"),
+        ("damping_ns_per_m", "--c"),
+        ("slope_rad", "--slope-rad"),
+        ("hub_mass_kg", "--hub-mass-kg"),
+    ],
+)
 @pytest.mark.parametrize("value", [math.nan, math.inf])
 def test_non_finite_parameter_is_a_parameter_error_naming_the_option(field: str, option: str, value: float) -> None:
     with pytest.raises(ParameterError) as info:
@@ -87,8 +93,9 @@ def test_stiff_fallback_is_bounded_and_reports_a_finite_period(monkeypatch: pyte
 @pytest.mark.parametrize("model", ["er", "ve"])
 def test_very_light_legs_end_in_bounded_steps_on_the_compiled_path(leg_mass_kg: float, model: str) -> None:
     """With the compiled path alone (no fallback) very light legs hit the step limit, classified."""
-    pm = FastPoincareMap(WheelParams(leg_mass_kg=leg_mass_kg), model, fast.FastIntegrator(max_steps=5000),
-                              stiff_fallback=False)
+    pm = FastPoincareMap(
+        WheelParams(leg_mass_kg=leg_mass_kg), model, fast.FastIntegrator(max_steps=5000), stiff_fallback=False
+    )
     with pytest.raises(StepFailure) as info:
         pm(Z_ER)
     assert info.value.reason is FailureReason.INTEGRATION

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from rimless.sim import fast
-from rimless.sim.step.fast_map import FastPoincareMap
-from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.mechanics import ALPHA
 from rimless.sim.model.params import WheelParams
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.step.poincare import PoincareMap
 from tests.support import sim_dip
 from tests.support.sim_dip import DIP_PARAMS, DIP_Z
@@ -61,14 +61,20 @@ def test_a_positive_force_minimum_is_not_a_lift_off() -> None:
 def _snap_energy_closed_form(params: WheelParams, y_minus: np.ndarray) -> float:
     """Energy the snap adds (eight-leg): the old trailing foot (mass m) goes from length L2 and rate L2' to L0
     and rate 0 while the hub and theta' are unchanged; its spring energy vanishes."""
-    m, k, g, phi, L0 = (params.leg_mass_kg, params.stiffness_n_per_m, params.gravity_m_s2, params.slope_rad,
-                        params.leg_length_m)
+    m, k, g, phi, L0 = (
+        params.leg_mass_kg,
+        params.stiffness_n_per_m,
+        params.gravity_m_s2,
+        params.slope_rad,
+        params.leg_length_m,
+    )
     q, qd = y_minus[:5], y_minus[5:]
     th, L2, dth, dL2 = q[2], q[4], qd[2], qd[4]
     x_b, y_b, _, L1, _ = q
     dx, dy, _, dL1, _ = qd
-    hub_v = np.array([dx + dL1 * math.sin(th) + L1 * math.cos(th) * dth,
-                      dy + dL1 * math.cos(th) - L1 * math.sin(th) * dth])
+    hub_v = np.array(
+        [dx + dL1 * math.sin(th) + L1 * math.cos(th) * dth, dy + dL1 * math.cos(th) - L1 * math.sin(th) * dth]
+    )
     u = np.array([math.sin(th + ALPHA), math.cos(th + ALPHA)])
     u_perp = np.array([math.cos(th + ALPHA), -math.sin(th + ALPHA)])
     v_before = hub_v - dL2 * u - L2 * dth * u_perp
@@ -78,10 +84,13 @@ def _snap_energy_closed_form(params: WheelParams, y_minus: np.ndarray) -> float:
     return d_kinetic + d_gravity - 0.5 * k * (L2 - L0) ** 2
 
 
-@pytest.mark.parametrize(("model", "z", "sign"), [
-    ("ve", np.array([-0.434780, 2.289290]), +1.0),
-    ("er", np.array([-0.465155, 2.604441]), -1.0),
-])
+@pytest.mark.parametrize(
+    ("model", "z", "sign"),
+    [
+        ("ve", np.array([-0.434780, 2.289290]), +1.0),
+        ("er", np.array([-0.465155, 2.604441]), -1.0),
+    ],
+)
 def test_relabel_snap_energy_sign_size_and_both_backends(model: str, z: np.ndarray, sign: float) -> None:
     params = WheelParams()
     step = PoincareMap(params, model, ScipyIntegrator(rtol=1e-12, atol=1e-14)).step(z)

@@ -18,12 +18,16 @@ from rimless.sim.model import guards as ev
 from rimless.sim.model.mechanics import Mechanics
 from tests.support import sim_dip
 
+
 def test_the_compiled_path_uses_the_table() -> None:
     """The compiled kernels' guard codes and the directions the compiled step passes are the table's."""
     for name in ("LIFTOFF_A", "STALL", "CLUTCH_LOCK", "TOUCHDOWN", "LIFTOFF_B"):
         assert getattr(fm, name) == getattr(ev, name), name
-    for codes, dirs in ((fs.PHASE_DLSP_CODES, fs.PHASE_DLSP_DIRS), (fs.PHASE_FREE_ER_CODES, fs.PHASE_FREE_ER_DIRS),
-                        (fs.PHASE_SS_CODES, fs.PHASE_SS_DIRS)):
+    for codes, dirs in (
+        (fs.PHASE_DLSP_CODES, fs.PHASE_DLSP_DIRS),
+        (fs.PHASE_FREE_ER_CODES, fs.PHASE_FREE_ER_DIRS),
+        (fs.PHASE_SS_CODES, fs.PHASE_SS_DIRS),
+    ):
         assert [int(d) for d in dirs] == [ev.DIRECTION[int(c)] for c in codes]
 
 
@@ -46,12 +50,18 @@ def test_the_locator_finds_a_dip_inside_one_step_on_a_closed_form_trajectory() -
     """A force guard g(t) = 4 t^2 - 3.9 t + 0.75 over one step [0, 1]: positive at both ends (0.75, 0.85),
     negative inside; the locator returns its first zero (3.9 - sqrt(3.21)) / 8 with the state there, and
     nothing when the same curve is lifted to stay positive."""
+
     def g(t: float, lift: float = 0.0) -> np.ndarray:
         return np.array([4 * t * t - 3.9 * t + 0.75 + lift])
 
     for lift, expected in ((0.0, (3.9 - math.sqrt(3.21)) / 8), (0.3, None)):
-        loc = events.EventLocator((ev.STALL, ev.LIFTOFF_B), lambda c, y: 1.0 if c == ev.STALL else float(y[0]),
-                                  0.0, g(0.0, lift), dense_on=lambda ta, _ya, tb, lift=lift: lambda t: g(t, lift))
+        loc = events.EventLocator(
+            (ev.STALL, ev.LIFTOFF_B),
+            lambda c, y: 1.0 if c == ev.STALL else float(y[0]),
+            0.0,
+            g(0.0, lift),
+            dense_on=lambda ta, _ya, tb, lift=lift: lambda t: g(t, lift),
+        )
         found = loc.step(0.0, 1.0, g(1.0, lift), lambda lift=lift: lambda t: g(t, lift), last_step=True)
         if expected is None:
             assert found is None

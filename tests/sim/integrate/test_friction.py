@@ -127,8 +127,9 @@ def test_step_energy_budget_closes_with_friction_work(model, F):
     e_end = mech.energy(res.y_plus[:5], res.y_plus[5:])
     impact_loss = imp.kinetic_relabelled - imp.kinetic_plus
     assert res.friction_work_J > 0.0
-    assert e_start - e_end == pytest.approx(res.dissipated_J + res.friction_work_J + impact_loss + imp.relabel_loss,
-                                            abs=1e-9)
+    assert e_start - e_end == pytest.approx(
+        res.dissipated_J + res.friction_work_J + impact_loss + imp.relabel_loss, abs=1e-9
+    )
     # the lifted trailing leg comes to rest and sticks before touchdown
     assert res.stick_s[1] > 0.1
 
@@ -157,19 +158,42 @@ SNAPSHOT_EIG_REL = 1e-8
 def _matches_snapshot(values, hexes, rel):
     want = np.array([float.fromhex(h) for h in hexes])
     return np.allclose(np.asarray(values, dtype=float), want, rtol=rel, atol=0.0)
+
+
 BEFORE = {
-    "er": (['-0x1.db977945fa474p-2', '0x1.e5604189374bcp-3', '0x1.c950187fb0e71p-3', '0x1.4a4fc7a36e21dp+1',
-            '-0x1.a06789f50b003p-3', '0x1.279e822e2399bp-2'], '0x1.26b3613725f0dp-4', '0x1.40143571e152ap-2'),
-    "ve": (['-0x1.99addd2eaabecp-2', '0x1.e5604189374bcp-3', '0x1.e26b100f7eb02p-3', '0x1.5a24e7506d3ddp+1',
-            '-0x1.0a30259c42022p-2', '0x1.13d7de35bdc36p-2'], '0x1.d998da1672778p-4', '0x1.60e2c28a518cfp-2'),
+    "er": (
+        [
+            "-0x1.db977945fa474p-2",
+            "0x1.e5604189374bcp-3",
+            "0x1.c950187fb0e71p-3",
+            "0x1.4a4fc7a36e21dp+1",
+            "-0x1.a06789f50b003p-3",
+            "0x1.279e822e2399bp-2",
+        ],
+        "0x1.26b3613725f0dp-4",
+        "0x1.40143571e152ap-2",
+    ),
+    "ve": (
+        [
+            "-0x1.99addd2eaabecp-2",
+            "0x1.e5604189374bcp-3",
+            "0x1.e26b100f7eb02p-3",
+            "0x1.5a24e7506d3ddp+1",
+            "-0x1.0a30259c42022p-2",
+            "0x1.13d7de35bdc36p-2",
+        ],
+        "0x1.d998da1672778p-4",
+        "0x1.60e2c28a518cfp-2",
+    ),
 }
 
 
 @pytest.mark.parametrize("model", ["er", "ve"])
 def test_zero_friction_reproduces_the_step_before_friction(model):
     mech = Mechanics.of(WheelParams(guide_friction_n=0.0))
-    r = simulate_step(mech, model, state_from_section(mech, np.array([-0.46, 2.6])), ScipyIntegrator(),
-                      track_dissipation=True)
+    r = simulate_step(
+        mech, model, state_from_section(mech, np.array([-0.46, 2.6])), ScipyIntegrator(), track_dissipation=True
+    )
     ys, diss, period = BEFORE[model]
     assert _matches_snapshot(r.y_plus[[2, 3, 4, 7, 8, 9]], ys, SNAPSHOT_REL)
     assert _matches_snapshot([r.dissipated_J, r.period_s], [diss, period], SNAPSHOT_REL)
@@ -195,8 +219,8 @@ def test_frictionless_records_keep_their_keys():
 # central-difference Jacobian), computed with the code before guide friction existed (commit c503cc9, run from an
 # export of that commit); F_c = 0 reproduced z and |eigenvalues| bit for bit there (tolerances: see BEFORE).
 BEFORE_FIXED_POINT = {
-    "er": (['-0x1.dc51b1ecd3805p-2', '0x1.4d5e5260c068ap+1'], ['0x1.a06fecf482620p-4', '0x1.923b8d68ffbe3p-1']),
-    "ve": (['-0x1.bd3705988ab90p-2', '0x1.250772176ce53p+1'], ['0x1.360ea86961e2ap-2', '0x1.360ea86961e2ap-2']),
+    "er": (["-0x1.dc51b1ecd3805p-2", "0x1.4d5e5260c068ap+1"], ["0x1.a06fecf482620p-4", "0x1.923b8d68ffbe3p-1"]),
+    "ve": (["-0x1.bd3705988ab90p-2", "0x1.250772176ce53p+1"], ["0x1.360ea86961e2ap-2", "0x1.360ea86961e2ap-2"]),
 }
 
 

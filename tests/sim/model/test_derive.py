@@ -8,7 +8,6 @@ import pytest
 from rimless.sim.model import derive
 from rimless.sim.model.mechanics import ALPHA, Mechanics
 from rimless.sim.model.params import WheelParams
-
 from tests.support.sim_states import random_states
 
 
@@ -16,7 +15,8 @@ from tests.support.sim_states import random_states
 def test_generated_code_matches_a_fresh_derivation(mass_model):
     path = derive.GENERATED_DIR / f"{derive.MODEL_NAMES[mass_model]}.py"
     assert path.read_text(encoding="utf-8") == derive.generate_source(mass_model), (
-        "generated code is stale: run `python -m rimless.sim.model.derive`")
+        "generated code is stale: run `python -m rimless.sim.model.derive`"
+    )
 
 
 @pytest.mark.parametrize("mass_model", ["eight-leg", "sliding-leg", "active-feet"])
@@ -48,12 +48,16 @@ def test_eight_leg_energies_match_point_masses():
     for q, qd in random_states(rng, 20):
         # kinetic energy from numerically differentiated positions of every point mass
         t_num = 0.5 * p.inertia_kg_m2 * qd[2] ** 2
-        for (m, pos_plus), (_, pos_minus) in zip(_point_masses(q + h * qd, p), _point_masses(q - h * qd, p), strict=True):
+        for (m, pos_plus), (_, pos_minus) in zip(
+            _point_masses(q + h * qd, p), _point_masses(q - h * qd, p), strict=True
+        ):
             v = (pos_plus - pos_minus) / (2 * h)
             t_num += 0.5 * m * v @ v
         assert mech.kinetic(q, qd) == pytest.approx(t_num, rel=1e-8)
-        v_num = sum(m * p.gravity_m_s2 * (-pos[0] * math.sin(p.slope_rad) + pos[1] * math.cos(p.slope_rad))
-                    for m, pos in _point_masses(q, p))
+        v_num = sum(
+            m * p.gravity_m_s2 * (-pos[0] * math.sin(p.slope_rad) + pos[1] * math.cos(p.slope_rad))
+            for m, pos in _point_masses(q, p)
+        )
         v_num += 0.5 * p.k * ((q[3] - p.leg_length_m) ** 2 + (q[4] - p.leg_length_m) ** 2)
         assert mech.potential(q) == pytest.approx(v_num, rel=1e-12, abs=1e-12)
 
@@ -63,10 +67,12 @@ def test_foot_a_jacobian_is_the_papers():
     rng = np.random.default_rng(3)
     for q, _ in random_states(rng, 20):
         _, _, th, L1, L2 = q
-        paper = np.array([
-            [1, 0, L1 * math.cos(th) - L2 * math.cos(th + ALPHA), math.sin(th), -math.sin(th + ALPHA)],
-            [0, 1, -L1 * math.sin(th) + L2 * math.sin(th + ALPHA), math.cos(th), -math.cos(th + ALPHA)],
-        ])
+        paper = np.array(
+            [
+                [1, 0, L1 * math.cos(th) - L2 * math.cos(th + ALPHA), math.sin(th), -math.sin(th + ALPHA)],
+                [0, 1, -L1 * math.sin(th) + L2 * math.sin(th + ALPHA), math.cos(th), -math.cos(th + ALPHA)],
+            ]
+        )
         np.testing.assert_allclose(mech.jac_a(q), paper, rtol=0, atol=1e-15)
 
 

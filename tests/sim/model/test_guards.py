@@ -12,8 +12,18 @@ from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from tests.support.sim_states import random_states
 
-GUARD_NAMES = ("LIFTOFF_A", "STALL", "CLUTCH_LOCK", "TOUCHDOWN", "LIFTOFF_B", "FOOT_A_DOWN", "SLIP_END_1",
-               "SLIP_END_2", "STICK_END_1", "STICK_END_2")
+GUARD_NAMES = (
+    "LIFTOFF_A",
+    "STALL",
+    "CLUTCH_LOCK",
+    "TOUCHDOWN",
+    "LIFTOFF_B",
+    "FOOT_A_DOWN",
+    "SLIP_END_1",
+    "SLIP_END_2",
+    "STICK_END_1",
+    "STICK_END_2",
+)
 
 
 def test_the_table_has_one_row_per_code() -> None:
@@ -26,10 +36,13 @@ def test_the_table_has_one_row_per_code() -> None:
     assert ev.FAILURE == {ev.STALL: FailureReason.STALL, ev.LIFTOFF_B: FailureReason.STANCE_LIFT_OFF}
 
 
-@pytest.mark.parametrize(("phase", "mode", "codes"), [
-    (DLSP, Mode(foot_a=True), (ev.LIFTOFF_A, ev.STALL, ev.TOUCHDOWN)),
-    (SLSP_FREE, Mode(foot_a=False), (ev.LIFTOFF_B, ev.STALL, ev.TOUCHDOWN)),
-])
+@pytest.mark.parametrize(
+    ("phase", "mode", "codes"),
+    [
+        (DLSP, Mode(foot_a=True), (ev.LIFTOFF_A, ev.STALL, ev.TOUCHDOWN)),
+        (SLSP_FREE, Mode(foot_a=False), (ev.LIFTOFF_B, ev.STALL, ev.TOUCHDOWN)),
+    ],
+)
 def test_a_free_clutch_mode_has_the_guards_of_its_phase(phase: int, mode: Mode, codes: tuple[int, ...]) -> None:
     """Both feet down with free legs is double support, foot b alone single support: same guard values."""
     mech = Mechanics.of(WheelParams())
@@ -38,4 +51,5 @@ def test_a_free_clutch_mode_has_the_guards_of_its_phase(phase: int, mode: Mode, 
         y = np.concatenate((q, qd))
         for code in codes:
             assert ev.mode_guard_value(mech, mode, code, y, 100.0) == pytest.approx(
-                ev.guard_value(mech, phase, code, y), rel=1e-9, abs=1e-9)
+                ev.guard_value(mech, phase, code, y), rel=1e-9, abs=1e-9
+            )

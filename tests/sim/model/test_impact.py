@@ -6,7 +6,6 @@ import pytest
 from rimless.sim.model.impact import double_support_jacobian, impact, relabel
 from rimless.sim.model.mechanics import ALPHA, Mechanics, swing_height
 from rimless.sim.model.params import WheelParams
-
 from tests.support.sim_states import random_states
 
 
@@ -50,10 +49,16 @@ def test_relabel_puts_the_new_stance_foot_where_the_swing_foot_was():
         hub_new = np.array([qn[0] + qn[3] * math.sin(qn[2]), qn[1] + qn[3] * math.cos(qn[2])])
         np.testing.assert_allclose(hub_new, hub, atol=1e-15)  # the hub does not move
         assert qn[3] == L0 and qdn[3] == 0.0 and qn[4] == q[3] and qdn[4] == qd[3]
+
         # hub velocity unchanged by relabelling
         def hub_vel(q_, qd_):
-            return np.array([qd_[0] + qd_[3] * math.sin(q_[2]) + q_[3] * math.cos(q_[2]) * qd_[2],
-                             qd_[1] + qd_[3] * math.cos(q_[2]) - q_[3] * math.sin(q_[2]) * qd_[2]])
+            return np.array(
+                [
+                    qd_[0] + qd_[3] * math.sin(q_[2]) + q_[3] * math.cos(q_[2]) * qd_[2],
+                    qd_[1] + qd_[3] * math.cos(q_[2]) - q_[3] * math.sin(q_[2]) * qd_[2],
+                ]
+            )
+
         np.testing.assert_allclose(hub_vel(qn, qdn), hub_vel(q, qd), atol=1e-13)
 
 

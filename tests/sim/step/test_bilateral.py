@@ -15,9 +15,9 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.fast import fast_step
 from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
@@ -86,7 +86,8 @@ def test_k2700_fast_gait_is_listed_invalid_with_its_lift_off_and_k2500_valid():
     assert len(fast2500) == 1 and fast2500[0]["contact_valid"] and fast2500[0]["contact_model"] == "unilateral"
     z2500 = np.array([fast2500[0]["theta_plus_rad"], fast2500[0]["theta_dot_plus_rad_s"]])
     assert fast2500[0]["contact"]["min_stance_force_single_support_N"] == pytest.approx(
-        _reference_min_stance_force(2500.0, z2500), abs=SAMPLED_MIN_TOL_N)
+        _reference_min_stance_force(2500.0, z2500), abs=SAMPLED_MIN_TOL_N
+    )
 
 
 def test_sweep_row_of_the_invalid_gait_says_why_and_gait_n_refuses_it():
@@ -98,8 +99,9 @@ def test_sweep_row_of_the_invalid_gait_says_why_and_gait_n_refuses_it():
     assert len(bad) == 1 and bad[0]["step_period_s"] == pytest.approx(0.25, abs=0.01)
     assert bad[0]["reason"] == "contact-invalid-at-start" and bad[0]["contact_violation"] == "stance-lift-off"
     z = np.array([bad[0]["theta_plus_rad"], bad[0]["theta_dot_plus_rad_s"]])
-    assert bad[0]["min_stance_force_single_support_N"] == pytest.approx(_reference_min_stance_force(2700.0, z),
-                                                                        abs=SAMPLED_MIN_TOL_N)
+    assert bad[0]["min_stance_force_single_support_N"] == pytest.approx(
+        _reference_min_stance_force(2700.0, z), abs=SAMPLED_MIN_TOL_N
+    )
     assert np.isnan(bad[0]["critical_slope_rad"])
     res = CliRunner().invoke(app, ["sim", "fixed-point", "--model", "ve", "--k", "2700", "--gait", "1"])
     assert res.exit_code == 1 and "violates unilateral contact" in res.stderr
@@ -113,8 +115,9 @@ def test_stance_force_test_function_brackets_the_zero_of_the_stance_force():
     from rimless.sim.step.poincare import bilateral_map
 
     base = WheelParams().replace(stiffness_n_per_m=2500.0)
-    cont = ArclengthContinuation(lambda q: bilateral_map(FastPoincareMap(q, "ve")), base, "ve", "k", facts_every=1,
-                                 max_points=40)
+    cont = ArclengthContinuation(
+        lambda q: bilateral_map(FastPoincareMap(q, "ve")), base, "ve", "k", facts_every=1, max_points=40
+    )
     br = cont.trace(FAST_2500, direction=1.0, p_max=2700.0, stop_at_first_loss=True)
     sp = br.first_loss()
     assert sp is not None and sp.kind == STANCE_FORCE

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from rimless.sim.step.hybrid import simulate_step
 from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
+from rimless.sim.step.hybrid import simulate_step
 
 TIGHT = ScipyIntegrator(rtol=1e-12, atol=1e-14)
 

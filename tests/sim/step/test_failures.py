@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.step.hybrid import DelayedClutch, IdealClutch, simulate_step
 from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
+from rimless.sim.step.hybrid import DelayedClutch, IdealClutch, simulate_step
 
 INTEG = ScipyIntegrator(rtol=1e-10, atol=1e-12)
 

@@ -3,23 +3,31 @@
 import numpy as np
 import pytest
 
+from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model import guards as ev
 from rimless.sim.model.dynamics import DLSP, SLSP_CLUTCHED, SLSP_FREE
-from rimless.sim.step.hybrid import simulate_step
-from rimless.sim.integrate.reference import ScipyIntegrator
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
+from rimless.sim.step.hybrid import simulate_step
 
-PHASE_END_GUARD = {"dlsp": (DLSP, ev.LIFTOFF_A), "slsp_free": (SLSP_FREE, ev.CLUTCH_LOCK),
-                   "slsp_clutched": (SLSP_CLUTCHED, ev.TOUCHDOWN)}
+PHASE_END_GUARD = {
+    "dlsp": (DLSP, ev.LIFTOFF_A),
+    "slsp_free": (SLSP_FREE, ev.CLUTCH_LOCK),
+    "slsp_clutched": (SLSP_CLUTCHED, ev.TOUCHDOWN),
+}
 
 
 @pytest.mark.parametrize("model", ["er", "ve"])
 def test_phase_ends_lie_on_their_guards(model):
     mech = Mechanics.of(WheelParams())
-    res = simulate_step(mech, model, state_from_section(mech, np.array([-0.46, 2.6])),
-                        ScipyIntegrator(rtol=1e-10, atol=1e-12), record_dt=1e-2)
+    res = simulate_step(
+        mech,
+        model,
+        state_from_section(mech, np.array([-0.46, 2.6])),
+        ScipyIntegrator(rtol=1e-10, atol=1e-12),
+        record_dt=1e-2,
+    )
     for seg, rec in zip(res.segments, res.phases, strict=True):
         phase, guard = PHASE_END_GUARD[rec.name]
         if model == "ve" and rec.name == "slsp_free":

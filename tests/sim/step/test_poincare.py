@@ -64,10 +64,10 @@ def test_reference_jacobian_next_to_the_er_stall_matches_the_variational_one():
     """Next to the stall, a fixed central-difference step of 1e-4 crosses the stall boundary (the perturbed
     step rolls back); the curvature-scaled step must agree with the exact (variational) Jacobian."""
     from rimless.sim.continuation.arclength import ArclengthContinuation
-    from rimless.sim.step.backend import make_map
-    from rimless.sim.model.failures import StepFailure
     from rimless.sim.integrate.reference import ScipyIntegrator
+    from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.params import WheelParams
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import default_guess
 
     base = WheelParams()
@@ -77,7 +77,8 @@ def test_reference_jacobian_next_to_the_er_stall_matches_the_variational_one():
     assert end.kind == "stall"
     # a fixed point 1e-5 rad above the stall, reached along the branch
     br2 = ArclengthContinuation(lambda q: make_map(q, "er", backend="fast"), base, "er").trace(
-        default_guess(base, "er"), stop=lambda pt: pt.p < end.p + 1e-5)
+        default_guess(base, "er"), stop=lambda pt: pt.p < end.p + 1e-5
+    )
     pt = br2.points[-1]
     ref = PoincareMap(base.replace(slope_rad=pt.p), "er", ScipyIntegrator(rtol=1e-10, atol=1e-12))
     with pytest.raises(StepFailure):
@@ -90,8 +91,8 @@ def test_newton_tolerance_follows_the_maps_own_noise():
     """Very light legs (m = 1e-4 kg) at a loose rtol (1e-6): the map's noise sits above the 1e-10 tolerance;
     Newton must accept its own noise floor instead of reporting that no gait exists. (At the default rtol the
     compiled map is now accurate enough to meet 1e-10 there.)"""
-    from rimless.sim.step.backend import make_map
     from rimless.sim.model.params import WheelParams
+    from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import FIXED_POINT_TOL, default_guess, map_noise, solve_fixed_point
 
     p = WheelParams(leg_mass_kg=1e-4)

@@ -45,15 +45,28 @@ def test_with_no_power_the_system_cot_is_the_mechanical_cot_tan_phi(recorded):
 @pytest.mark.parametrize("ve_electronics", [False, True])
 def test_electrical_energy_and_system_cot_match_the_recorded_trajectory(recorded, ve_electronics):
     model, ref, fast = recorded
-    power = ClutchPower(hold_power_w=0.7, switch_energy_j=0.013, electronics_power_w=0.25, ve_electronics=ve_electronics)
+    power = ClutchPower(
+        hold_power_w=0.7, switch_energy_j=0.013, electronics_power_w=0.25, ve_electronics=ve_electronics
+    )
     t_c, period = clutched_and_period_s(ref)
     if model == "er":
         assert t_c > 0.5 * period  # the clutch holds for most of the ER step (lock at max compression to impact)
     else:
         assert t_c == 0.0
     s_x, s_z = world_travel(ref, P.slope_rad)
-    e_true, cot_true = truth_system_cot(P.hub_mass_kg + 8 * P.leg_mass_kg, P.gravity_m_s2, s_x, s_z, model, t_c, period,
-                                        0.7, 0.013, 0.25, ve_electronics)
+    e_true, cot_true = truth_system_cot(
+        P.hub_mass_kg + 8 * P.leg_mass_kg,
+        P.gravity_m_s2,
+        s_x,
+        s_z,
+        model,
+        t_c,
+        period,
+        0.7,
+        0.013,
+        0.25,
+        ve_electronics,
+    )
     out = step_cot(ref, P, model, power)
     assert out["electrical_energy_per_step_j"] == pytest.approx(e_true, rel=1e-9, abs=1e-15)
     assert out["system_cot"] == pytest.approx(cot_true, rel=1e-6)
@@ -63,9 +76,14 @@ def test_electrical_energy_and_system_cot_match_the_recorded_trajectory(recorded
     assert step_cot(fast, P, model, power)["electrical_energy_per_step_j"] == pytest.approx(e_true, rel=1e-6, abs=1e-12)
 
 
-@pytest.mark.parametrize("field,option", [("hold_power_w", "--clutch-hold-power-w"),
-                                          ("switch_energy_j", "--clutch-switch-energy-j"),
-                                          ("electronics_power_w", "--electronics-power-w")])
+@pytest.mark.parametrize(
+    "field,option",
+    [
+        ("hold_power_w", "--clutch-hold-power-w"),
+        ("switch_energy_j", "--clutch-switch-energy-j"),
+        ("electronics_power_w", "--electronics-power-w"),
+    ],
+)
 @pytest.mark.parametrize("bad", [-1e-3, math.nan, math.inf])
 def test_a_bad_power_names_its_option(field, option, bad):
     with pytest.raises(ParameterError, match=option):

@@ -9,8 +9,19 @@ from rimless.sim.studies import bench
 
 def _result(busy: bool | None) -> dict:
     return {
-        "rows": [{"model": "er", "backend": "fast-dop853", "rtol": 1e-9, "error": 5e-10, "period_error_s": 1e-11,
-                  "eigenvalue_error": 1e-9, "seconds_per_map": 4e-4, "nfev": 1200, "nsteps": 90}],
+        "rows": [
+            {
+                "model": "er",
+                "backend": "fast-dop853",
+                "rtol": 1e-9,
+                "error": 5e-10,
+                "period_error_s": 1e-11,
+                "eigenvalue_error": 1e-9,
+                "seconds_per_map": 4e-4,
+                "nfev": 1200,
+                "nsteps": 90,
+            }
+        ],
         "load_average": {"before": [1.9, 1.5, 1.0], "after": [2.8, 1.7, 1.1], "cpus": 2, "busy": busy},
         "speedup_at_1e-9": 70.0,
         "speedup_at_1e-9_by_model": {},
@@ -41,8 +52,10 @@ def test_the_table_warns_instead_of_printing_a_bare_ratio_on_a_busy_machine() ->
 
 
 def test_the_loosest_tolerance_counts_only_if_every_tighter_one_meets_the_target() -> None:
-    rows = [{"model": "er", "backend": "b", "rtol": r, "error": e}
-            for r, e in [(1e-4, 5e-10), (1e-5, 2e-9), (1e-6, 4e-10), (1e-7, 1e-11)]]
+    rows = [
+        {"model": "er", "backend": "b", "rtol": r, "error": e}
+        for r, e in [(1e-4, 5e-10), (1e-5, 2e-9), (1e-6, 4e-10), (1e-7, 1e-11)]
+    ]
     rows.append({"model": "ve", "backend": "b", "rtol": 1e-3, "error": 1e-12})
     # 1e-4 meets 1e-9 by chance above 1e-5, which does not
     assert bench.loosest_meeting(rows, "er", "b")["rtol"] == 1e-6
@@ -53,10 +66,21 @@ def test_the_loosest_tolerance_counts_only_if_every_tighter_one_meets_the_target
 def test_per_phase_counts_and_the_peer_row_fit_the_table() -> None:
     res = _result(False)
     res["rows"][0].update(phase_nfev=[60, 155, 336], phase_steps=[2, 8, 24])
-    res["speedup_at_1e-9_by_model"] = {"er": {"fast_rtol": 1e-9, "fast_seconds_per_map": 4e-4, "dop853_rtol": 1e-8,
-                                              "dop853_seconds_per_map": 0.08, "speedup": 200.0}}
-    res["peer"] = {"phase": "ER clutched single support", "duration_s": 0.2, "peer_first_call_s": 65.0,
-                   "rows": [{"backend": "nbkode-DOP853", "rtol": 1e-8, "error": 5.6e-12, "seconds": 7e-4}]}
+    res["speedup_at_1e-9_by_model"] = {
+        "er": {
+            "fast_rtol": 1e-9,
+            "fast_seconds_per_map": 4e-4,
+            "dop853_rtol": 1e-8,
+            "dop853_seconds_per_map": 0.08,
+            "speedup": 200.0,
+        }
+    }
+    res["peer"] = {
+        "phase": "ER clutched single support",
+        "duration_s": 0.2,
+        "peer_first_call_s": 65.0,
+        "rows": [{"backend": "nbkode-DOP853", "rtol": 1e-8, "error": 5.6e-12, "seconds": 7e-4}],
+    }
     lines = bench.format_table(res).splitlines()
     assert "    per phase (dlsp/free/clutched): nfev 60/155/336, steps 2/8/24" in lines
     assert any(ln.startswith("  nbkode-DOP853") and "5.6e-12" in ln and "0.700 ms" in ln for ln in lines)
@@ -76,6 +100,15 @@ def test_the_guide_friction_rows_compare_both_paths_and_fit_the_table() -> None:
         assert r["fast_error"] < 1e-8 and r["reference_error"] < 1e-8 and r["fast_vs_reference"] < 1e-8
         assert r["fast_friction_work_error_J"] < 1e-9 and r["friction_work_J"] > 0
         assert r["ratio"] == pytest.approx(r["reference_seconds_per_map"] / r["fast_seconds_per_map"])
-    text = format_table({"rows": [], "speedup_at_1e-9": None, "speedup_at_1e-9_by_model": {}, "fixed_point": {},
-                         "guide_friction": fr, "compile": {}, "total_seconds": 0.0})
+    text = format_table(
+        {
+            "rows": [],
+            "speedup_at_1e-9": None,
+            "speedup_at_1e-9_by_model": {},
+            "fixed_point": {},
+            "guide_friction": fr,
+            "compile": {},
+            "total_seconds": 0.0,
+        }
+    )
     assert "guide friction 0.5 N" in text and text.count("fast vs reference") == 2

@@ -46,19 +46,22 @@ def test_an_edit_to_the_code_is_a_new_key(edited_package):
 
 def test_an_edit_returns_no_stale_row(edited_package, tmp_path):
     cache = tmp_path / "cache"
-    first = run_sweep([{"k": 1.0}], SweepOptions(), scheduler="sync", cache_dir=cache, compute=double_k,
-                      setup=lambda: 0.0)
-    again = run_sweep([{"k": 1.0}], SweepOptions(), scheduler="sync", cache_dir=cache, compute=double_k,
-                      setup=lambda: 0.0)
+    first = run_sweep(
+        [{"k": 1.0}], SweepOptions(), scheduler="sync", cache_dir=cache, compute=double_k, setup=lambda: 0.0
+    )
+    again = run_sweep(
+        [{"k": 1.0}], SweepOptions(), scheduler="sync", cache_dir=cache, compute=double_k, setup=lambda: 0.0
+    )
     assert (first.computed, again.cached) == (1, 1)
     edited_package("def f(x):\n    return -x\n")
-    after_edit = run_sweep([{"k": 1.0}], SweepOptions(), scheduler="sync", cache_dir=cache, compute=double_k,
-                           setup=lambda: 0.0)
+    after_edit = run_sweep(
+        [{"k": 1.0}], SweepOptions(), scheduler="sync", cache_dir=cache, compute=double_k, setup=lambda: 0.0
+    )
     assert after_edit.computed == 1 and after_edit.cached == 0
 
 
 def test_the_fingerprint_covers_the_generated_kernels_and_the_dynamics():
-    files = {p.name for name in sweep.CODE_PACKAGES for p in sweep._package_files(name)}  # noqa: SLF001
+    files = {p.name for name in sweep.CODE_PACKAGES for p in sweep._package_files(name)}
     root = Path(sweep.__file__).resolve().parents[1]
     for kernel in (root / "model" / "generated").glob("*.py"):
         assert kernel.name in files
@@ -68,7 +71,7 @@ def test_the_fingerprint_covers_the_generated_kernels_and_the_dynamics():
 
 def test_the_firmware_sweep_key_covers_the_controller():
     assert code_fingerprint("rimless.sim.in_the_loop.sweep") != code_fingerprint("rimless.sim.studies.sweep")
-    files = {p.name for p in sweep._package_files("rimless.firmware")}  # noqa: SLF001
+    files = {p.name for p in sweep._package_files("rimless.firmware")}
     assert "controller.py" in files and "detector.py" in files
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rimless.errors import ParameterError, RunFailure
-from rimless.sim.step.backend import make_map
 from rimless.sim.model.params import WheelParams
+from rimless.sim.step.backend import make_map
 from rimless.sim.studies.gaits import critical_slope_study, fixed_point_study, gait_scan, guess_from_options
 
 
@@ -40,13 +40,16 @@ def test_the_rigid_critical_slope_is_coleman_s_closed_form():
     assert out["eigenvalue"] == pytest.approx(out["beta"] ** 2, rel=1e-12)
 
 
-@pytest.mark.parametrize(("call", "option"), [
-    (lambda: guess_from_options(WheelParams(), "er", -1.0), "--theta-dot-guess"),
-    (lambda: guess_from_options(WheelParams(), "er", None, 0.3), "--theta-plus-guess"),
-    (lambda: gait_scan(WheelParams(), "ve", theta_dot_min=3.0, theta_dot_max=2.0), "--theta-dot-min"),
-    (lambda: critical_slope_study(WheelParams(), "er", start_slope_rad=0.5), "--start-slope-rad"),
-    (lambda: fixed_point_study(WheelParams(), "er", gait=1, theta_dot_guess=2.0), "--gait"),
-])
+@pytest.mark.parametrize(
+    ("call", "option"),
+    [
+        (lambda: guess_from_options(WheelParams(), "er", -1.0), "--theta-dot-guess"),
+        (lambda: guess_from_options(WheelParams(), "er", None, 0.3), "--theta-plus-guess"),
+        (lambda: gait_scan(WheelParams(), "ve", theta_dot_min=3.0, theta_dot_max=2.0), "--theta-dot-min"),
+        (lambda: critical_slope_study(WheelParams(), "er", start_slope_rad=0.5), "--start-slope-rad"),
+        (lambda: fixed_point_study(WheelParams(), "er", gait=1, theta_dot_guess=2.0), "--gait"),
+    ],
+)
 def test_bad_inputs_are_parameter_errors_naming_the_option(call, option):
     with pytest.raises(ParameterError, match=option):
         call()

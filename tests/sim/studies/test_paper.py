@@ -13,12 +13,30 @@ from tests.support.simcli_truth import stance_force_n
 
 def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
     out = tmp_path / "paper"
-    res = CliRunner().invoke(app, ["paper", "--out", str(out), "--k", "2500,2700", "--scheduler", "sync",
-                                   "--cache-dir", str(tmp_path / "cache"), "--json"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "paper",
+            "--out",
+            str(out),
+            "--k",
+            "2500,2700",
+            "--scheduler",
+            "sync",
+            "--cache-dir",
+            str(tmp_path / "cache"),
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
-    for stem in ("fig1_typical_gaits", "fig2_ground_reaction_forces", "fig3_energy_ratio", "fig4_eigenvalue_map",
-                 "fig5_cot"):
+    for stem in (
+        "fig1_typical_gaits",
+        "fig2_ground_reaction_forces",
+        "fig3_energy_ratio",
+        "fig4_eigenvalue_map",
+        "fig5_cot",
+    ):
         png = out / f"{stem}.png"
         assert png.exists() and (out / f"{stem}.csv").exists()
         from PIL import Image
@@ -30,8 +48,14 @@ def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
     index = (out / "index.html").read_text()
     assert all(f"fig{i}_" in index for i in range(1, 6))
     quantities = " | ".join(r["quantity"] for r in data["table"])
-    for needle in ("rigid wheel critical slope", "VE critical slope", "ER energy ratio", "VE energy ratio",
-                   "ER max |eig|", "CoT reduction"):
+    for needle in (
+        "rigid wheel critical slope",
+        "VE critical slope",
+        "ER energy ratio",
+        "VE energy ratio",
+        "ER max |eig|",
+        "CoT reduction",
+    ):
         assert needle in quantities
     rigid = next(r for r in data["table"] if r["quantity"].startswith("rigid wheel critical slope"))
     assert rigid["ours"] == "2.799"
@@ -50,11 +74,15 @@ def test_rimless_paper_writes_every_figure_csv_and_headline_row(tmp_path):
     # independently: the fast gait's own stance force (fixed point and recorded step, the foot held) is
     # positive just below the located end and negative just above it
     sweep_rows = pd.read_csv(out / "sweep.csv")
-    start = sweep_rows[(sweep_rows.model == "VE") & (sweep_rows.branch_label == "fast")
-                       & (sweep_rows.k == vr.from_k)].iloc[0]
+    start = sweep_rows[
+        (sweep_rows.model == "VE") & (sweep_rows.branch_label == "fast") & (sweep_rows.k == vr.from_k)
+    ].iloc[0]
     z = np.array([start.theta_plus_rad, start.theta_dot_plus_rad_s])
-    assert stance_force_n("ve", vr.k_high - 10.0, vr.slope_rad, z) > 0 > stance_force_n("ve", vr.k_high + 10.0,
-                                                                                         vr.slope_rad, z)
+    assert (
+        stance_force_n("ve", vr.k_high - 10.0, vr.slope_rad, z)
+        > 0
+        > stance_force_n("ve", vr.k_high + 10.0, vr.slope_rad, z)
+    )
     # which VE branch reproduces 16.13 %, with its validity and valid k range
     rep = next(r for r in data["table"] if r["quantity"].startswith("VE branch that reproduces"))
     assert rep["ours"].startswith("VE fast") and "contact-valid" in rep["ours"] and "(stance-force)" in rep["ours"]

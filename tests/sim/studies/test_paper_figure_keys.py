@@ -34,8 +34,11 @@ def _legend_labels(ax):
 
 
 def test_figure3_names_the_point_it_cannot_show_and_counts_steps_in_integers(drawn, tmp_path):
-    rows = [{"model": m, "k": 2000.0, "step": i, "energy_ratio": 0.8 + 0.001 * i, "failure": ""}
-            for m in ("ER", "VE") for i in range(1, 21)]
+    rows = [
+        {"model": m, "k": 2000.0, "step": i, "energy_ratio": 0.8 + 0.001 * i, "failure": ""}
+        for m in ("ER", "VE")
+        for i in range(1, 21)
+    ]
     rows.append({"model": "VE", "k": 3500.0, "step": 0, "energy_ratio": math.nan, "failure": "no period-1 gait: stall"})
     paper_figures.figure_energy_ratio(rows, tmp_path)
     ve, er = drawn[0].axes
@@ -50,11 +53,24 @@ def test_figure3_names_the_point_it_cannot_show_and_counts_steps_in_integers(dra
 
 def test_figure4_has_no_legend_entry_without_a_curve(drawn, tmp_path):
     slopes = np.radians(np.linspace(1.3, 2.9, 8))
-    points = [{"model": m, "k": 2000.0, "branch": "b0", "branch_label": "er" if m == "ER" else "fast",
-               "slope_rad": s, "slope_deg": math.degrees(s), "max_abs_eigenvalue": 0.5 + 0.1 * i,
-               "contact_valid": True} for m in ("ER", "VE") for i, s in enumerate(slopes)]
-    rows = [{"model": m, "k": 2000.0, "branch": "b0", "stable_at_start": True, "critical_slope_rad": slopes[0]}
-            for m in ("ER", "VE")]
+    points = [
+        {
+            "model": m,
+            "k": 2000.0,
+            "branch": "b0",
+            "branch_label": "er" if m == "ER" else "fast",
+            "slope_rad": s,
+            "slope_deg": math.degrees(s),
+            "max_abs_eigenvalue": 0.5 + 0.1 * i,
+            "contact_valid": True,
+        }
+        for m in ("ER", "VE")
+        for i, s in enumerate(slopes)
+    ]
+    rows = [
+        {"model": m, "k": 2000.0, "branch": "b0", "stable_at_start": True, "critical_slope_rad": slopes[0]}
+        for m in ("ER", "VE")
+    ]
     paper_figures.figure_eigenvalues(points, rows, tmp_path, ks=(2000.0,))
     for ax in drawn[0].axes:
         drawn_labels = {ln.get_label() for ln in ax.get_lines() if len(ln.get_xdata())}
@@ -93,10 +109,23 @@ def test_figure1_keys_the_phase_shading_and_figure2_says_slope_normal(drawn, tmp
 
 def test_figure4_names_a_requested_k_without_a_curve(drawn, tmp_path):
     slopes = np.radians(np.linspace(1.3, 2.9, 5))
-    points = [{"model": "ER", "k": 2000.0, "branch": "b0", "branch_label": "er", "slope_rad": s,
-               "slope_deg": math.degrees(s), "max_abs_eigenvalue": 0.6, "contact_valid": True} for s in slopes]
-    rows = [{"model": "ER", "k": 2000.0, "branch": "b0", "stable_at_start": True, "critical_slope_rad": slopes[0]},
-            {"model": "VE", "k": 2000.0, "branch": "", "stable_at_start": False}]
+    points = [
+        {
+            "model": "ER",
+            "k": 2000.0,
+            "branch": "b0",
+            "branch_label": "er",
+            "slope_rad": s,
+            "slope_deg": math.degrees(s),
+            "max_abs_eigenvalue": 0.6,
+            "contact_valid": True,
+        }
+        for s in slopes
+    ]
+    rows = [
+        {"model": "ER", "k": 2000.0, "branch": "b0", "stable_at_start": True, "critical_slope_rad": slopes[0]},
+        {"model": "VE", "k": 2000.0, "branch": "", "stable_at_start": False},
+    ]
     assert paper_figures.missing_eigen_curves(rows, (2000.0,)) == [("VE", 2000.0)]
     paper_figures.figure_eigenvalues(points, rows, tmp_path, ks=(2000.0,))
     ve, er = drawn[0].axes

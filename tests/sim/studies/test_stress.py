@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from rimless.sim import fast
-from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.fast import rk
-from rimless.sim.model.guards import TOUCHDOWN
-from rimless.sim.model.failures import FailureReason, StepFailure
 from rimless.sim.integrate.reference import ScipyIntegrator
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.model.guards import TOUCHDOWN
 from rimless.sim.model.mechanics import ALPHA, Mechanics
 from rimless.sim.model.params import WheelParams
+from rimless.sim.step.fast_map import FastPoincareMap
 from rimless.sim.step.poincare import PoincareMap
 
 HUB = 1.892
@@ -25,8 +25,9 @@ Z_GRID = (np.array([-0.44, 1.0]), np.array([-0.45, 2.0]), np.array([-0.43, 3.0])
 
 def test_sweep_every_point_is_a_valid_step_or_a_classified_failure() -> None:
     outcomes: dict[str, int] = {}
-    for k, c, phi, ratio in itertools.product([300.0, 2700.0, 1e5, 1e6], [0.0, 8.0, 100.0],
-                                              [0.001, 0.05, 0.99 * ALPHA / 2], [0.002, 0.02, 0.2]):
+    for k, c, phi, ratio in itertools.product(
+        [300.0, 2700.0, 1e5, 1e6], [0.0, 8.0, 100.0], [0.001, 0.05, 0.99 * ALPHA / 2], [0.002, 0.02, 0.2]
+    ):
         params = WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c, slope_rad=phi, leg_mass_kg=HUB * ratio)
         for model in ("er", "ve"):
             for z in Z_GRID:
@@ -55,8 +56,9 @@ GRID = [
     (WheelParams(stiffness_n_per_m=1e5, leg_mass_kg=HUB * 0.002), "er", np.array([-0.41, 1.5])),
     (WheelParams(damping_ns_per_m=0.0, slope_rad=0.02), "ve", np.array([-0.44, 1.8])),
     (WheelParams(damping_ns_per_m=100.0, leg_mass_kg=HUB * 0.2), "er", np.array([-0.45, 2.0])),
-    pytest.param(WheelParams(mass_model="sliding-leg", slope_rad=0.1), "ve", np.array([-0.43, 2.5]),
-                 marks=pytest.mark.full),  # compiles the sliding-leg step kernel
+    pytest.param(
+        WheelParams(mass_model="sliding-leg", slope_rad=0.1), "ve", np.array([-0.43, 2.5]), marks=pytest.mark.full
+    ),  # compiles the sliding-leg step kernel
     (WheelParams(stiffness_n_per_m=1e6), "ve", np.array([-0.42, 2.6])),
     (WheelParams(stiffness_n_per_m=300.0), "er", np.array([-0.45, 2.0])),
 ]
@@ -148,8 +150,12 @@ def test_step_limit_is_reported_and_falls_back_to_an_implicit_method() -> None:
 
 def test_stiffness_indicator_flags_stiff_legs_only() -> None:
     soft = fast.fast_step(WheelParams(), "er", np.array([-0.465155, 2.604441]), rtol=1e-8)
-    stiff = fast.fast_step(WheelParams(stiffness_n_per_m=3000.0, damping_ns_per_m=100.0, leg_mass_kg=HUB * 0.002),
-                           "ve", np.array([-0.43, 3.0]), rtol=1e-8)
+    stiff = fast.fast_step(
+        WheelParams(stiffness_n_per_m=3000.0, damping_ns_per_m=100.0, leg_mass_kg=HUB * 0.002),
+        "ve",
+        np.array([-0.43, 3.0]),
+        rtol=1e-8,
+    )
     assert soft.nstiff < 0.1 * soft.nsteps
     assert stiff.nstiff > 0.5 * stiff.nsteps
 
@@ -157,8 +163,9 @@ def test_stiffness_indicator_flags_stiff_legs_only() -> None:
 def test_outcome_classes_agree_with_the_reference_on_a_small_stress_grid() -> None:
     from rimless.sim.studies.stress import compare_with_reference
 
-    res = compare_with_reference(WheelParams(), k_values=(1000.0,), c_values=(0.0, 8.0), slopes_rad=(0.05,),
-                                 mass_ratios=(0.02,), rtol=1e-10)
+    res = compare_with_reference(
+        WheelParams(), k_values=(1000.0,), c_values=(0.0, 8.0), slopes_rad=(0.05,), mass_ratios=(0.02,), rtol=1e-10
+    )
     assert res["points"] == 2 * 2 * 3
     assert res["agree"] == res["points"], res["disagreements"]
     assert res["max_dz_valid"] < 1e-8

@@ -32,8 +32,9 @@ def cluster_client(request):
     """A real dask.distributed LocalCluster of worker processes, closed after the tests."""
     from dask.distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=request.param, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=40)
+    cluster = LocalCluster(
+        n_workers=request.param, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=40
+    )
     client = Client(cluster)
     yield client
     client.close()
@@ -81,13 +82,47 @@ def test_cache_recomputes_nothing_already_done(points, tmp_path):
 
 def test_sweep_cli_json_rows_carry_the_contract_keys(tmp_path):
     out = tmp_path / "s"
-    res = CliRunner().invoke(app, ["sim", "sweep", "--k", "2700", "--model", "ve", "--scheduler", "sync", "--guesses",
-                                   "6", "--out", str(out), "--cache-dir", str(tmp_path / "cache"), "--json"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "sim",
+            "sweep",
+            "--k",
+            "2700",
+            "--model",
+            "ve",
+            "--scheduler",
+            "sync",
+            "--guesses",
+            "6",
+            "--out",
+            str(out),
+            "--cache-dir",
+            str(tmp_path / "cache"),
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
-    keys = {"model", "k", "c", "mass_model", "branch", "theta_plus_rad", "theta_dot_plus_rad_s", "step_period_s",
-            "stable_at_start", "contact_valid_at_start", "contact_reason", "critical_slope_rad", "critical_slope_deg",
-            "reason", "cot", "energy_ratio", "max_abs_eigenvalue"}
+    keys = {
+        "model",
+        "k",
+        "c",
+        "mass_model",
+        "branch",
+        "theta_plus_rad",
+        "theta_dot_plus_rad_s",
+        "step_period_s",
+        "stable_at_start",
+        "contact_valid_at_start",
+        "contact_reason",
+        "critical_slope_rad",
+        "critical_slope_deg",
+        "reason",
+        "cot",
+        "energy_ratio",
+        "max_abs_eigenvalue",
+    }
     assert data["rows"] and all(keys <= set(r) for r in data["rows"])
     assert {r["model"] for r in data["rows"]} == {"VE"}
     medium = [r for r in data["rows"] if r["branch_label"] == "medium"]
@@ -104,13 +139,16 @@ def test_sweep_cli_json_rows_carry_the_contract_keys(tmp_path):
     assert out.with_suffix(".csv").exists()
 
 
-@pytest.mark.parametrize("args, option", [
-    (["--k", "1:2:0"], "--k"),
-    (["--k", "-5"], "--k"),
-    (["--model", "xx"], "--model"),
-    (["--scheduler", "bogus"], "--scheduler"),
-    (["--mass-model", "wrong"], "--mass-model"),
-])
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["--k", "1:2:0"], "--k"),
+        (["--k", "-5"], "--k"),
+        (["--model", "xx"], "--model"),
+        (["--scheduler", "bogus"], "--scheduler"),
+        (["--mass-model", "wrong"], "--mass-model"),
+    ],
+)
 def test_sweep_cli_bad_values_are_one_line_errors(args, option, tmp_path):
     res = CliRunner().invoke(app, ["sim", "sweep", *args, "--out", str(tmp_path / "s")])
     assert res.exit_code == 2

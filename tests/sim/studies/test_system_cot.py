@@ -25,8 +25,9 @@ RUN = CliRunner()
 @pytest.fixture(scope="module")
 def er_branch():
     pmap = make_map(P, "er", backend="fast")
-    cs = critical_slope(pmap, default_guess(P, "er"), start_slope_rad=0.05, step_rad=0.001,
-                        jacobian_factory=jacobian_factory("fast"))
+    cs = critical_slope(
+        pmap, default_guess(P, "er"), start_slope_rad=0.05, step_rad=0.001, jacobian_factory=jacobian_factory("fast")
+    )
     return cs, critical_slope_branch(cs, P, "fast", 1e-10)
 
 
@@ -38,8 +39,19 @@ def _truth_cot_at(slope, z_guess, power):
     step = make_map(q, "er", backend="reference").step(fp.z, record_dt=1e-3)
     s_x, s_z = world_travel(step, slope)
     t_c, period = clutched_and_period_s(step)
-    return truth_system_cot(P.total_mass_kg, P.gravity_m_s2, s_x, s_z, "er", t_c, period, power.hold_power_w,
-                            power.switch_energy_j, power.electronics_power_w, False)[1]
+    return truth_system_cot(
+        P.total_mass_kg,
+        P.gravity_m_s2,
+        s_x,
+        s_z,
+        "er",
+        t_c,
+        period,
+        power.hold_power_w,
+        power.switch_energy_j,
+        power.electronics_power_w,
+        False,
+    )[1]
 
 
 def test_with_no_power_the_least_is_tan_of_the_critical_slope(er_branch):
@@ -118,10 +130,22 @@ def test_fixed_point_reports_the_three_keys_and_defaults_change_nothing():
     powered = _json(["sim", "fixed-point", "--json", "--clutch-hold-power-w", "0.5"])
     for key in ("theta_plus_rad", "theta_dot_plus_rad_s", "step_period_s", "eigenvalues", "energy_ratio"):
         assert powered[key] == plain[key]  # the mechanics does not see the electrical options
-    assert powered["electrical_energy_per_step_j"] == pytest.approx(0.5 * powered["phase_durations_s"]["slsp_clutched"],
-                                                                    rel=1e-12)
-    ve = _json(["sim", "fixed-point", "--model", "ve", "--json", "--clutch-hold-power-w", "0.5",
-                "--electronics-power-w", "0.2"])
+    assert powered["electrical_energy_per_step_j"] == pytest.approx(
+        0.5 * powered["phase_durations_s"]["slsp_clutched"], rel=1e-12
+    )
+    ve = _json(
+        [
+            "sim",
+            "fixed-point",
+            "--model",
+            "ve",
+            "--json",
+            "--clutch-hold-power-w",
+            "0.5",
+            "--electronics-power-w",
+            "0.2",
+        ]
+    )
     assert ve["electrical_energy_per_step_j"] == 0.0  # no clutch, and by default no electronics on the VE wheel
     ve_on = _json(["sim", "fixed-point", "--model", "ve", "--json", "--electronics-power-w", "0.2", "--ve-electronics"])
     assert ve_on["electrical_energy_per_step_j"] == pytest.approx(0.2 * ve_on["step_period_s"], rel=1e-12)
@@ -160,8 +184,9 @@ def test_the_sweep_rows_carry_the_least_system_cot_of_their_branch():
     assert er0["min_system_cot"] == er0["cot"] and er0["system_cot"] == math.tan(0.05)
     assert all(er0[k] == v for k, v in res["rows"][0].items() if isinstance(v, (int, float, str)) and v == v)
     # with power: the same least as the branch traced and minimised directly
-    gb = next(g for g in trace_gait_branches(P.replace(stiffness_n_per_m=2500.0), "er", backend="fast")
-              if g.label == "er")
+    gb = next(
+        g for g in trace_gait_branches(P.replace(stiffness_n_per_m=2500.0), "er", backend="fast") if g.label == "er"
+    )
     direct = gait_branch_cot(gb, "fast", 1e-10).minimise(power)
     assert er["min_system_cot"] == pytest.approx(direct["min_system_cot"], rel=1e-7)
     assert er["min_system_cot_slope_rad"] == pytest.approx(direct["min_system_cot_slope_rad"], abs=5e-6)
@@ -175,11 +200,23 @@ def test_the_paper_figure_is_drawn_from_its_series(tmp_path):
 
     from rimless.sim.studies.paper_system_cot import FIGURE_CSV, FIGURE_PNG, figure_system_cot
 
-    series = [{"model": m, "branch_label": b, "hold_power_w": p, "min_system_cot": v, "min_system_cot_slope_deg": 1.3,
-               "min_system_cot_at_bound": bound}
-              for m, b, p, v, bound in [("ER", "er", 0.0, 0.022, "critical-slope"), ("ER", "er", 0.1, 0.04, ""),
-                                        ("ER", "er", 1.0, 0.11, "start-slope"), ("VE", "fast", 0.0, 0.027, "critical-slope"),
-                                        ("VE", "fast", 1.0, 0.027, "critical-slope")]]
+    series = [
+        {
+            "model": m,
+            "branch_label": b,
+            "hold_power_w": p,
+            "min_system_cot": v,
+            "min_system_cot_slope_deg": 1.3,
+            "min_system_cot_at_bound": bound,
+        }
+        for m, b, p, v, bound in [
+            ("ER", "er", 0.0, 0.022, "critical-slope"),
+            ("ER", "er", 0.1, 0.04, ""),
+            ("ER", "er", 1.0, 0.11, "start-slope"),
+            ("VE", "fast", 0.0, 0.027, "critical-slope"),
+            ("VE", "fast", 1.0, 0.027, "critical-slope"),
+        ]
+    ]
     files = figure_system_cot(series, 2500.0, 0.018, tmp_path)
     assert files == [tmp_path / FIGURE_PNG, tmp_path / FIGURE_CSV]
     assert (tmp_path / FIGURE_PNG).stat().st_size > 1000
