@@ -1,1 +1,78 @@
-"""Trial analysis: Vicon CSV import, CoM height and step periods, comparison with the simulator."""
+"""Trial analysis: Vicon exports in, CoM height and step periods, comparison with the simulator, calibration,
+critical slope from trials, reports.
+
+The public API (docs/api.md), imported lazily so that `import rimless.analysis` stays light:
+
+- `read_recording(path)`: a Vicon export (CSV of Tracker or Nexus, or C3D) as a `ViconFile`, SI units;
+- `import_trial(path, ...)`: the wheel's `Trial` (hub, slope frame, CoM height, impacts; `to_frame()` gives a
+  DataFrame with `time_s`, `com_height_m`, ...); `read_trial(path)` reads one written by `Trial.to_parquet`;
+- `compare(trial, wheel=None)`, `calibrate(trials, fit=("c",), wheel=None)`, `critical_slope(trials, wheel=None)`,
+  `write_report(files, out, wheel=None)`: each takes the simulator's `rimless.sim.Wheel` and returns the object
+  whose `to_dict()` is the matching `rimless trials` command's `--json` object;
+- `load_trials(trials)`: `Trial` objects or paths -> (trials, names).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rimless.analysis.api.trials import calibrate, compare, critical_slope, load_trials, write_report
+    from rimless.analysis.inference.calibrate import CalibrationResult
+    from rimless.analysis.inference.compare import TrialComparison
+    from rimless.analysis.inference.critical_slope import CriticalSlopeResult
+    from rimless.analysis.io.recording import read_recording
+    from rimless.analysis.io.trial import Trial, read_trial
+    from rimless.analysis.io.vicon_file import ViconFile
+    from rimless.analysis.kinematics.build import TrialRefused, import_trial
+    from rimless.analysis.report.html import ReportResult
+
+_LAZY = {
+    "read_recording": "rimless.analysis.io.recording",
+    "ViconFile": "rimless.analysis.io.vicon_file",
+    "import_trial": "rimless.analysis.kinematics.build",
+    "TrialRefused": "rimless.analysis.kinematics.build",
+    "Trial": "rimless.analysis.io.trial",
+    "read_trial": "rimless.analysis.io.trial",
+    "load_trials": "rimless.analysis.api.trials",
+    "compare": "rimless.analysis.api.trials",
+    "calibrate": "rimless.analysis.api.trials",
+    "critical_slope": "rimless.analysis.api.trials",
+    "write_report": "rimless.analysis.api.trials",
+    "TrialComparison": "rimless.analysis.inference.compare",
+    "CalibrationResult": "rimless.analysis.inference.calibrate",
+    "CriticalSlopeResult": "rimless.analysis.inference.critical_slope",
+    "ReportResult": "rimless.analysis.report.html",
+}
+
+__all__ = [
+    "CalibrationResult",
+    "CriticalSlopeResult",
+    "ReportResult",
+    "Trial",
+    "TrialComparison",
+    "TrialRefused",
+    "ViconFile",
+    "calibrate",
+    "compare",
+    "critical_slope",
+    "import_trial",
+    "load_trials",
+    "read_recording",
+    "read_trial",
+    "write_report",
+]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'rimless.analysis' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

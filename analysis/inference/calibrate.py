@@ -436,6 +436,21 @@ class CalibrationResult:
     def identifiable(self) -> bool:
         return all(p.identifiable for p in self.params)
 
+    def __repr__(self) -> str:
+        est = "; ".join(
+            f"{p.name} {p.value:.4g} +- {1.959963984540054 * p.se:.2g} {p.unit}"
+            + ("" if p.identifiable else " (not identifiable)")
+            for p in self.params
+        )
+        return (
+            f"CalibrationResult({self.model}, converged={self.converged}: {est}; "
+            f"{len(self.release_rad_s)} trial(s), {len(self.failed)} failed; .summary())"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """`summary()`: the JSON object of `rimless trials calibrate --json` (without the command's `refused`)."""
+        return self.summary()
+
     def summary(self) -> dict[str, Any]:
         return {
             "model": self.model,

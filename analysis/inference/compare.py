@@ -118,6 +118,16 @@ class TrialComparison:
     com_amplitude_m: float = float("nan")  # measured peak-to-peak (1st-99th percentile) in the RMS window
     com_correlation: float = float("nan")  # Pearson r, measured vs simulated, in the RMS window
 
+    def __repr__(self) -> str:
+        return (
+            f"TrialComparison({self.name}: {self.status}, {self.model} at {self.slope_deg:.3f} deg, "
+            f"{self.n_steps} step(s), RMS CoM {self.rms_com_error_m * 1e3:.2f} mm; .to_dict())"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The trial's row of `rimless trials report --json` (`metrics()`)."""
+        return self.metrics()
+
     @property
     def rms_com_relative(self) -> float:
         """RMS CoM error / measured CoM amplitude (a flat line scores about 0.3-0.4)."""

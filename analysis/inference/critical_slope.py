@@ -73,6 +73,19 @@ class CriticalSlopeResult:
     def critical_slope_deg(self) -> float:
         return self.chosen.value_deg if self.chosen else math.nan
 
+    def __repr__(self) -> str:
+        c = self.chosen
+        if c is None:
+            return f"CriticalSlopeResult(no estimate: {self.why}; {len(self.per_trial)} trial(s))"
+        return (
+            f"CriticalSlopeResult({c.value_deg:.3f} deg, 95 % interval {c.ci_deg[0]:.3f}-{c.ci_deg[1]:.3f} deg by "
+            f"{c.method}; {len(self.per_trial)} trial(s); .summary())"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """`summary()`: the JSON object of `rimless trials critical-slope --json` (without `refused`)."""
+        return self.summary()
+
     def summary(self) -> dict[str, Any]:
         c = self.chosen
         return {

@@ -213,14 +213,20 @@ class Trial:
             "warnings": list(m.warnings),
         }
 
-    # -- storage
-    def to_parquet(self, path: str | Path) -> Path:
-        """Write the trial as one Parquet file (columns below, metadata as JSON); atomic (temp + rename)."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+    def __repr__(self) -> str:
+        m = self.meta
+        return (
+            f"Trial({Path(m.source_file).name}: {m.n_frames} frames at {m.rate_hz:g} Hz, slope {m.slope_deg:.3f} deg "
+            f"({m.slope_source}), {int(self.step_period_s.size)} step period(s), outcome {m.outcome}; "
+            ".to_frame(), .summary())"
+        )
 
+    def columns(self) -> dict[str, np.ndarray]:
+        """The samples as named SI columns: frame, time_s, hub_{x,y,z}_m (lab frame), slope_{x,y,z}_m (hub in the
+        slope frame: x down the slope, y the slope normal), com_height_m, wheel_angle_rad (when known), gap,
+        interpolated (the columns of the Parquet file)."""
         s = self.series
-        cols: dict[str, Any] = {"frame": s["frame"].astype(np.int64), "time_s": s.time_s}
+        cols: dict[str, np.ndarray] = {"frame": s["frame"].astype(np.int64), "time_s": s.time_s}
         for i, ax in enumerate("xyz"):
             cols[f"hub_{ax}_m"] = s["hub"][:, i]
         for i, ax in enumerate("xyz"):
@@ -230,7 +236,23 @@ class Trial:
             cols["wheel_angle_rad"] = s["wheel_angle"]
         cols["gap"] = s["gap"].astype(bool)
         cols["interpolated"] = s["interpolated"].astype(bool)
-        table = pa.table(cols)
+        return cols
+
+    def to_frame(self) -> Any:
+        """The samples as a pandas DataFrame (`columns()`; NaN in a gap); `attrs["meta"]` holds `summary()`."""
+        import pandas as pd
+
+        frame = pd.DataFrame(self.columns())
+        frame.attrs["meta"] = self.summary()
+        return frame
+
+    # -- storage
+    def to_parquet(self, path: str | Path) -> Path:
+        """Write the trial as one Parquet file (`columns()`, metadata as JSON); atomic (temp + rename)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table(self.columns())
         extra = {"meta": json.loads(self.meta.to_json()), "impact_time_s": self.impact_time_s.tolist()}
         table = table.replace_schema_metadata({PARQUET_META_KEY: json.dumps(extra).encode()})
         out = Path(path)

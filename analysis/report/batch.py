@@ -180,9 +180,11 @@ def run_report(
     slope_bin_deg: float,
     note: str | None = None,
     title: str = "Vicon trials vs simulation",
+    params: Any = None,
     **report_kwargs: Any,
 ) -> ReportResult:
-    """`build_report` with the ``model`` simulator and a progress bar; Ctrl-C removes a folder it created.
+    """`build_report` with the ``model`` simulator at ``params`` (WheelParams, default Table 1; the slope is each
+    trial's) and a progress bar; Ctrl-C removes a folder it created.
 
     A folder or a missing input stops before any work (`UserError`); when every input is refused, a
     `UserError` with the first refusal (and no report folder left behind if this run created it)."""
@@ -190,7 +192,7 @@ def run_report(
     out_is_new = not Path(out).exists()
     try:
         with progress_bar("simulator", total=len(files), json_out=json_out) as bar:
-            sim = Simulator(model=model)
+            sim = Simulator(model=model, params=params)
             bar.update(description="comparing")
 
             def step(name: str) -> None:

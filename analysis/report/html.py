@@ -107,6 +107,17 @@ class ReportResult:
                 )
         return rows
 
+    def __repr__(self) -> str:
+        ok = sum(c.status == "ok" for c in self.comparisons)
+        return (
+            f"ReportResult({self.report_html}: {len(self.comparisons)} trial(s) compared, {ok} ok, "
+            f"{len(self.refused)} refused; .summary())"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """`summary()`: the JSON object of `rimless trials report --json`."""
+        return self.summary()
+
     def summary(self) -> dict[str, Any]:
         """The JSON summary of `rimless trials report --json`."""
         return {

@@ -50,22 +50,19 @@ def fixed_point_cmd(
     ve_electronics: VeElectronicsOpt = False,
 ) -> None:
     """Period-1 gait: the fixed point of the Poincaré map, its eigenvalues, period and contact diagnostics."""
-    from rimless.sim.studies.gaits import fixed_point_study
+    from rimless.sim.api.wheel import Wheel
 
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
+    wheel = Wheel(params, model.value, backend=backend.value, rtol=rtol)
     with progress_bar("period-1 gait", json_out=json_out) as bar:
-        out = fixed_point_study(
-            params,
-            model.value,
+        out = wheel.fixed_point(
             theta_dot_guess=theta_dot_guess,
             theta_plus_guess=theta_plus_guess,
             gait=gait,
             strict_contact=strict_contact,
-            backend=backend.value,
-            rtol=rtol,
             progress=lambda i, n: bar.update(i, n, "finding the gaits"),
             power=power,
-        )
+        ).to_dict()
     if json_out:
         print_json(out)
         return
@@ -137,19 +134,16 @@ def gaits_cmd(
     """Every period-1 gait at one slope: scan initial conditions, solve, de-duplicate."""
     from rich.table import Table
 
-    from rimless.sim.studies.gaits import gait_scan
+    from rimless.sim.api.wheel import Wheel
 
+    wheel = Wheel(params, model.value, backend=backend.value, rtol=rtol)
     with progress_bar("scanning guesses", guesses, json_out=json_out) as bar:
-        out = gait_scan(
-            params,
-            model.value,
+        out = wheel.gaits(
             theta_dot_min=theta_dot_min,
             theta_dot_max=theta_dot_max,
             guesses=guesses,
-            backend=backend.value,
-            rtol=rtol,
             progress=lambda i, n: bar.update(i),
-        )
+        ).to_dict()
     if not out["gaits"]:
         fail(
             f"no period-1 gait of the {model.value} wheel at {params.slope_deg:.4f} deg for theta'+ guesses in "
@@ -212,7 +206,7 @@ def critical_slope_cmd(
     ve_electronics: VeElectronicsOpt = False,
 ) -> None:
     """Critical slope and minimum cost of transport: Algorithm 1 and the refined end of the branch."""
-    from rimless.sim.studies.gaits import critical_slope_study
+    from rimless.sim.api.wheel import Wheel
 
     if model != ModelOrRigid.rigid:
         start_slope_rad = start_slope(params, start_slope_rad)
@@ -224,21 +218,17 @@ def critical_slope_cmd(
         raise ParameterError("--model rigid has no sliding legs: --guide-friction-n does not apply to it")
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("continuation in slope", json_out=json_out) as bar:
-        out = critical_slope_study(
-            params,
-            model.value,
+        out = Wheel(params, model.value, backend=backend.value, rtol=rtol).critical_slope(
             theta_dot_guess=theta_dot_guess,
             theta_plus_guess=theta_plus_guess,
             gait=gait,
             step_rad=step_rad,
             start_slope_rad=start_slope_rad,
             strict_contact=strict_contact,
-            backend=backend.value,
-            rtol=rtol,
             gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
             progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"),
             power=power,
-        )
+        ).to_dict()
     if json_out:
         print_json(out)
         return

@@ -115,6 +115,13 @@ class FixedPoint:
     # rimless.sim.fast.BilateralContact (None for a gait of the unilateral map)
     contact: Any = None
 
+    def __repr__(self) -> str:
+        return (
+            f"FixedPoint(z=[{self.z[0]:.6g} rad, {self.z[1]:.6g} rad/s], residual {self.residual:.2g}, "
+            f"max|eig| {self.max_abs_eigenvalue:.4g}, {'stable' if self.stable else 'unstable'}"
+            f"{', bilateral' if self.bilateral else ''}, {self.iterations} Newton iterations)"
+        )
+
     @property
     def bilateral(self) -> bool:
         return self.contact is not None

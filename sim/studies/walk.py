@@ -32,19 +32,10 @@ def walk_gait(
     rtol: float = 1e-10,
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
-    """Simulate `steps` steps from the fixed point, or from theta'+ = `theta_dot` rad/s (and theta+ =
-    `theta_plus_rad`, default -alpha/2) just after an impact; write the trajectory to `out`, the figure to `plot`.
+    """`simulate_walk`, then the trajectory written to `out` and the figure to `plot` (`rimless sim gait`).
 
     The summary's `failure` is the reason the walk ended early (None if it did not). progress(k): steps done."""
-    import numpy as np
-
     from rimless.output import check_output_folder
-    from rimless.sim.model.failures import StepFailure
-    from rimless.sim.model.mechanics import ALPHA
-    from rimless.sim.step.backend import jacobian_factory, make_integrator, make_map
-    from rimless.sim.step.gait import simulate_steps
-    from rimless.sim.step.poincare import solve_fixed_point
-    from rimless.sim.studies.gaits import solve_or_search, start_guess
 
     for path, exts in ((out, TRAJECTORY_SUFFIXES), (plot, FIGURE_SUFFIXES)):
         if path is not None and path.suffix.lower() not in exts:
@@ -52,6 +43,62 @@ def walk_gait(
     for path, option in ((out, "--out"), (plot, "--plot")):  # before the work, not after
         if path is not None:
             check_output_folder(path.parent if str(path.parent) else ".", option=option)
+    traj, summary = simulate_walk(
+        params,
+        model,
+        steps=steps,
+        theta_dot=theta_dot,
+        theta_plus_rad=theta_plus_rad,
+        theta_dot_guess=theta_dot_guess,
+        theta_plus_guess=theta_plus_guess,
+        gait=gait,
+        forces=forces,
+        sample_dt_s=sample_dt_s,
+        backend=backend,
+        rtol=rtol,
+        progress=progress,
+    )
+    if out is not None and traj.steps:  # no step, no file: the command fails with the reason
+        from rimless.sim.step.gait import write_trajectory
+
+        write_trajectory(traj, out, {"start": summary["start"], "backend": backend, "rtol": rtol})
+    if plot is not None and traj.steps:
+        from rimless.sim.studies.figures import plot_gait, save_figure
+
+        save_figure(plot_gait(traj, None, forces=forces), plot)
+    summary["out"] = str(out) if out and traj.steps else None
+    summary["plot"] = str(plot) if plot and traj.steps else None
+    return summary
+
+
+def simulate_walk(
+    params: Any,
+    model: str,
+    *,
+    steps: int = 6,
+    theta_dot: float | None = None,
+    theta_plus_rad: float | None = None,
+    theta_dot_guess: float | None = None,
+    theta_plus_guess: float | None = None,
+    gait: int | None = None,
+    forces: bool = False,
+    sample_dt_s: float = 1e-3,
+    backend: str = "auto",
+    rtol: float = 1e-10,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[Any, dict[str, Any]]:
+    """Simulate `steps` steps from the fixed point, or from theta'+ = `theta_dot` rad/s (and theta+ =
+    `theta_plus_rad`, default -alpha/2) just after an impact. Returns the `GaitTrajectory` and the summary
+    (`rimless sim gait --json` without `out` and `plot`)."""
+    import numpy as np
+
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.mechanics import ALPHA
+    from rimless.sim.step.backend import jacobian_factory, make_integrator, make_map
+    from rimless.sim.step.gait import simulate_steps
+    from rimless.sim.step.poincare import solve_fixed_point
+    from rimless.sim.studies.gaits import solve_or_search, start_guess
+
     if theta_dot is not None:
         if not (math.isfinite(theta_dot) and theta_dot > 0):
             raise ParameterError(f"--theta-dot must be a positive angular velocity in rad/s, got {theta_dot}")
@@ -88,15 +135,7 @@ def walk_gait(
         forces=forces,
         progress=progress,
     )
-    if out is not None and traj.steps:  # no step, no file: the command fails with the reason
-        from rimless.sim.step.gait import write_trajectory
-
-        write_trajectory(traj, out, {"start": start, "backend": backend, "rtol": rtol})
-    if plot is not None and traj.steps:
-        from rimless.sim.studies.figures import plot_gait, save_figure
-
-        save_figure(plot_gait(traj, None, forces=forces), plot)
-    return {
+    return traj, {
         "model": model,
         "slope_rad": params.slope_rad,
         "k": params.k,
@@ -113,6 +152,4 @@ def walk_gait(
         "failure": None
         if traj.failure is None
         else {"reason": traj.failure.reason.value, "message": str(traj.failure)},
-        "out": str(out) if out and traj.steps else None,
-        "plot": str(plot) if plot and traj.steps else None,
     }

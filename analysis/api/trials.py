@@ -1,0 +1,160 @@
+"""The trial analysis from Python: recordings in, `Trial`s, comparison with the simulator, calibration, critical
+slope, report. Every function takes the simulator's `rimless.sim.Wheel` (one simulator object) and returns the
+object whose `to_dict()` (or `summary()`) is the matching `rimless trials` command's `--json` object.
+
+    >>> from rimless.analysis import import_trial, compare
+    >>> trial = import_trial("analysis/data/SYNTHETIC_er_slope2.0deg_run1.csv")
+    >>> trial.to_frame()[["time_s", "com_height_m"]]
+    >>> compare(trial).to_dict()["rms_com_error_mm"]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rimless.errors import ParameterError
+
+if TYPE_CHECKING:
+    from rimless.analysis.inference.calibrate import CalibrationResult
+    from rimless.analysis.inference.compare import TrialComparison
+    from rimless.analysis.inference.critical_slope import CriticalSlopeResult
+    from rimless.analysis.io.trial import Trial
+    from rimless.analysis.report.html import ReportResult
+    from rimless.sim.api.wheel import Wheel
+
+__all__ = ["load_trials", "compare", "calibrate", "critical_slope", "write_report"]
+
+TrialLike = Any  # a `Trial`, or the path of a Vicon export (.csv, .c3d) or of an imported trial (.parquet)
+
+
+def _wheel(wheel: Wheel | None) -> Wheel:
+    from rimless.sim.api.wheel import Wheel
+
+    if wheel is None:
+        return Wheel()
+    if not isinstance(wheel, Wheel):
+        raise ParameterError(f"wheel must be a rimless.sim.Wheel, got {type(wheel).__name__}")
+    return wheel
+
+
+def load_trials(trials: Sequence[TrialLike] | TrialLike, **import_options: Any) -> tuple[list[Trial], list[str]]:
+    """Trials and their names from `Trial` objects or paths (Vicon exports are imported with `import_options`,
+    the keyword arguments of `import_trial`; `.parquet` files are read as imported trials)."""
+    from rimless.analysis.io.trial import Trial, read_trial
+    from rimless.analysis.kinematics.build import import_trial
+
+    items = [trials] if isinstance(trials, (str, Path, Trial)) else list(trials)
+    if not items:
+        raise ParameterError("trials: none given")
+    out: list[Trial] = []
+    names: list[str] = []
+    for item in items:
+        if isinstance(item, Trial):
+            out.append(item)
+            names.append(Path(item.meta.source_file).name)
+        elif isinstance(item, (str, Path)):
+            path = Path(item)
+            trial = read_trial(path) if path.suffix.lower() == ".parquet" else import_trial(path, **import_options)
+            out.append(trial)
+            names.append(path.name)
+        else:
+            raise ParameterError(f"trials: expected a Trial or a path, got {type(item).__name__}")
+    return out, names
+
+
+def compare(trial: TrialLike, wheel: Wheel | None = None, *, rtol: float = 1e-8) -> TrialComparison:
+    """Measured against simulated for one trial (`rimless trials report`'s per-trial row): the release speed
+    fitted to the first measured step on the trial's slope, the CoM height and step periods compared.
+
+    wheel : the simulated wheel (model and parameters; its slope is replaced by the trial's). Default Table 1, ER.
+    rtol : the comparison's integrator tolerance (the report's default)."""
+    from rimless.analysis.inference.compare import Simulator, compare_trial
+
+    w = _wheel(wheel)
+    (t,), (name,) = load_trials([trial])
+    sim = Simulator(model=w.compliant_model("compare()"), params=w.params, rtol=rtol)
+    return compare_trial(t, sim, name=name)
+
+
+def calibrate(
+    trials: Sequence[TrialLike],
+    fit: Sequence[str] = ("c",),
+    wheel: Wheel | None = None,
+    *,
+    prior: Any = None,
+    progress: Callable[[int], None] | None = None,
+) -> CalibrationResult:
+    """Fit model parameters (`fit`: names among c, k, guide_friction_n, ...) to the trials' step periods and CoM
+    heights (`rimless trials calibrate`); the others are held at the wheel's values. `summary()` is the
+    command's JSON object (`converged`, estimates with intervals, what was held)."""
+    from rimless.analysis.inference.calibrate import calibrate as run_calibration
+    from rimless.analysis.inference.calibrate import parse_fit
+
+    w = _wheel(wheel)
+    fit_names = parse_fit(",".join(fit)) if not isinstance(fit, str) else parse_fit(fit)
+    loaded, names = load_trials(trials)
+    return run_calibration(
+        loaded,
+        names,
+        fit_names,
+        params=w.params,
+        model=w.compliant_model("calibrate()"),
+        progress=progress,
+        prior=prior,
+    )
+
+
+def critical_slope(
+    trials: Sequence[TrialLike],
+    wheel: Wheel | None = None,
+    *,
+    models: Sequence[str] | None = None,
+    calibrated: Any = None,
+    group_tol_deg: float = 0.05,
+    progress: Callable[[str], None] | None = None,
+) -> CriticalSlopeResult:
+    """The critical slope from trials (`rimless trials critical-slope`): a verdict per trial (sustained walk or
+    not, from its motion), the estimate with its 95 % interval, and the models' critical slopes at the wheel's
+    parameters (`models`, default the wheel's model) beside it; `calibrated` parameters add those models'."""
+    from rimless.analysis.inference.critical_slope import run_critical_slope
+
+    w = _wheel(wheel)
+    loaded, names = load_trials(trials)
+    return run_critical_slope(
+        loaded,
+        names,
+        w.params,
+        models=tuple(models) if models is not None else (w.model,),
+        calibrated=calibrated,
+        group_tol_deg=group_tol_deg,
+        progress=progress,
+    )
+
+
+def write_report(
+    files: Sequence[str | Path],
+    out: str | Path,
+    wheel: Wheel | None = None,
+    *,
+    slope_bin_deg: float = 0.5,
+    title: str = "Vicon trials vs simulation",
+    **import_options: Any,
+) -> ReportResult:
+    """Compare Vicon exports (paths) with the simulation and write the HTML report, figures and metrics to the
+    folder `out` (`rimless trials report`). Returns the report (`summary()` is the command's JSON object)."""
+    from rimless.analysis.report.batch import run_report
+
+    w = _wheel(wheel)
+    paths = [Path(f) for f in ([files] if isinstance(files, (str, Path)) else files)]
+    return run_report(
+        paths,
+        Path(out),
+        json_out=True,
+        import_kwargs=import_options,
+        model=w.compliant_model("write_report()"),
+        slope_bin_deg=slope_bin_deg,
+        title=title,
+        params=w.params,
+    )
