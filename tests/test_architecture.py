@@ -221,16 +221,20 @@ def test_every_package_says_what_lives_there(package: str) -> None:
         assert re.search(r"May import", doc), f"{package}: say what it may import"
 
 
+MAX_STATEMENTS = 450  # lines where a statement starts: the formatter cannot move it (about 600 lines of the old style)
+
+
 def test_long_modules_are_one_concept() -> None:
     long = []
     for m, path in MODULES.items():
         if m.startswith(GENERATED):
             continue
-        n = len(path.read_text().splitlines())
-        doc = ast.get_docstring(ast.parse(path.read_text())) or ""
-        if n > 650 and "One concept" not in doc:
+        tree = ast.parse(path.read_text())
+        n = len({node.lineno for node in ast.walk(tree) if isinstance(node, ast.stmt)})
+        doc = ast.get_docstring(tree) or ""
+        if n > MAX_STATEMENTS and "One concept" not in doc:
             long.append((m, n))
-    assert not long, f"modules over 650 lines without 'One concept: ...' in their docstring: {long}"
+    assert not long, f"modules over {MAX_STATEMENTS} statements without 'One concept: ...' in their docstring: {long}"
 
 
 def test_layer_names_exist() -> None:

@@ -2,4 +2,7 @@
 `calibrate`, `critical_slope`, `write_report`, each taking the simulator's `rimless.sim.Wheel`.
 
 Layer: above every other part of `rimless.analysis` except its CLI.
+
+May import: every other layer of `rimless.analysis`, `rimless.sim`'s public API and the
+shared root modules; only `rimless.analysis.cli` imports it.
 """

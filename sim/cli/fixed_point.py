@@ -218,17 +218,21 @@ def critical_slope_cmd(
         raise ParameterError("--model rigid has no sliding legs: --guide-friction-n does not apply to it")
     power = clutch_power(clutch_hold_power_w, clutch_switch_energy_j, electronics_power_w, ve_electronics)
     with progress_bar("continuation in slope", json_out=json_out) as bar:
-        out = Wheel(params, model.value, backend=backend.value, rtol=rtol).critical_slope(
-            theta_dot_guess=theta_dot_guess,
-            theta_plus_guess=theta_plus_guess,
-            gait=gait,
-            step_rad=step_rad,
-            start_slope_rad=start_slope_rad,
-            strict_contact=strict_contact,
-            gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
-            progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"),
-            power=power,
-        ).to_dict()
+        out = (
+            Wheel(params, model.value, backend=backend.value, rtol=rtol)
+            .critical_slope(
+                theta_dot_guess=theta_dot_guess,
+                theta_plus_guess=theta_plus_guess,
+                gait=gait,
+                step_rad=step_rad,
+                start_slope_rad=start_slope_rad,
+                strict_contact=strict_contact,
+                gaits_progress=lambda i, n: bar.update(description=f"finding the gaits {i}/{n}"),
+                progress=lambda s: bar.update(description=f"slope {math.degrees(s):.4f} deg"),
+                power=power,
+            )
+            .to_dict()
+        )
     if json_out:
         print_json(out)
         return
