@@ -41,13 +41,25 @@ def _same(a: object, b: object, path: str = "") -> list[str]:
     return [] if a == b else [f"{path}: {a!r} != {b!r}"]
 
 
+def _python_blocks(page: Path) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), re.S)
+
+
+def test_the_readme_python_runs_as_written(monkeypatch: pytest.MonkeyPatch) -> None:
+    (code,) = _python_blocks(ROOT / "README.md")
+    monkeypatch.chdir(ROOT)
+    namespace: dict[str, object] = {"__name__": "__readme__"}
+    exec(compile(code, "README.md python block", "exec"), namespace)
+    assert not _same(namespace["fp"].to_dict(), _cli_json(["sim", "fixed-point", "--k", "2500"]))  # type: ignore[attr-defined]
+
+
 @pytest.mark.slow
 def test_the_tour_runs_as_written(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """Every python block of docs/api.md, in order, in one namespace, from the repository's root."""
     import matplotlib
 
     matplotlib.use("Agg")
-    blocks = re.findall(r"```python\n(.*?)```", API_PAGE.read_text(encoding="utf-8"), re.S)
+    blocks = _python_blocks(API_PAGE)
     assert len(blocks) >= 5, "the tour lost its code"
     monkeypatch.chdir(ROOT)
     namespace: dict[str, object] = {"__name__": "__api_tour__"}
