@@ -13,7 +13,6 @@ import sys
 from typing import Annotated
 
 import typer
-from typer import _click
 
 from rimless import __version__
 from rimless.cli_rules import (  # noqa: F401  (re-exported for users' scripts; parts use rimless.cli_rules)
@@ -22,6 +21,7 @@ from rimless.cli_rules import (  # noqa: F401  (re-exported for users' scripts; 
     EXIT_OK,
     EXIT_USER_ERROR,
     RimlessGroup,
+    click,
     fail,
     print_json,
     usage_message,
@@ -74,7 +74,7 @@ def _register_subapps() -> None:
 _register_subapps()
 
 
-def command_tree() -> _click.Command:
+def command_tree() -> click.Command:
     """The click command of the whole `rimless` app (as the console script builds it)."""
     return typer.main.get_command(app)
 

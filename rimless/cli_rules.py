@@ -20,7 +20,10 @@ from collections.abc import Callable, Iterator
 from typing import Any, NoReturn, TypeVar
 
 import typer
-from typer import _click
+
+# typer's own copy of click (typer >= 0.29 vendors it as the private `typer._click`): this is the one place that
+# imports it; the pin typer<0.30 in pyproject.toml bounds the private API to the version tested here.
+from typer import _click as click
 from typer.core import TyperGroup
 
 from rimless.errors import RunFailure, UserError, interrupted_by_user
@@ -90,9 +93,9 @@ def _rules() -> Iterator[None]:
     """Map what a command raises onto the CLI's exit codes and one-line messages."""
     try:
         yield
-    except (typer.Exit, _click.exceptions.NoArgsIsHelpError):
+    except (typer.Exit, click.exceptions.NoArgsIsHelpError):
         raise
-    except _click.exceptions.ClickException as err:
+    except click.exceptions.ClickException as err:
         _error(usage_message(err), EXIT_USER_ERROR)
     except typer.Abort:
         typer.echo("interrupted", err=True)
@@ -116,7 +119,7 @@ def _rules() -> Iterator[None]:
         _error(f"{where}: {err.strerror or err}", EXIT_USER_ERROR)
 
 
-def _param_name(err: _click.exceptions.ClickException) -> str | None:
+def _param_name(err: click.exceptions.ClickException) -> str | None:
     param = getattr(err, "param", None)
     if param is None:
         return None
@@ -126,7 +129,7 @@ def _param_name(err: _click.exceptions.ClickException) -> str | None:
     return (longs or param.opts or [param.name])[0]
 
 
-def _pydantic_detail(err: _click.exceptions.BadParameter) -> str | None:
+def _pydantic_detail(err: click.exceptions.BadParameter) -> str | None:
     """The offending value and the rule it broke, from the validation error typer wraps (if any)."""
     cause = err.__cause__
     errors = getattr(cause, "errors", None)
@@ -155,15 +158,15 @@ def _pydantic_detail(err: _click.exceptions.BadParameter) -> str | None:
     return None
 
 
-def usage_message(err: _click.exceptions.ClickException) -> str:
+def usage_message(err: click.exceptions.ClickException) -> str:
     """One line for a usage error, naming the option or argument; no box, no `Usage:` block."""
     name = _param_name(err)
     ctx = getattr(err, "ctx", None)
     see = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
-    if isinstance(err, _click.exceptions.MissingParameter):
+    if isinstance(err, click.exceptions.MissingParameter):
         kind = "argument" if getattr(err.param, "param_type_name", "") == "argument" else "option"
         return f"missing {kind} {name}{see}"
-    if isinstance(err, _click.exceptions.BadParameter) and name:
+    if isinstance(err, click.exceptions.BadParameter) and name:
         detail = _pydantic_detail(err)
         if detail is None:
             detail = err.message.replace("Value error, ", "").strip().rstrip(".")
@@ -193,19 +196,19 @@ class RimlessGroup(TyperGroup):
         with _rules():
             return super().make_context(info_name, args, parent=parent, **extra)
 
-    def invoke(self, ctx: _click.Context) -> Any:
+    def invoke(self, ctx: click.Context) -> Any:
         with _rules():
             return super().invoke(ctx)
 
 
-def walk_commands(root: _click.Command) -> Iterator[_click.Command]:
+def walk_commands(root: click.Command) -> Iterator[click.Command]:
     """Every command of the tree under `root`, `root` included (depth first, sorted by name)."""
     yield root
     for name in sorted(getattr(root, "commands", {}) or {}):
         yield from walk_commands(root.commands[name])  # type: ignore[attr-defined]
 
 
-def _adapt_command(command: _click.Command) -> None:
+def _adapt_command(command: click.Command) -> None:
     from rich.markup import escape
 
     if command.help:
@@ -222,14 +225,14 @@ def _adapt_command(command: _click.Command) -> None:
         command.make_parser = functools.partial(_parser_reading_negative_numbers, original)  # type: ignore[method-assign]
 
 
-def _help_option_without_metavar(get_help_option: Callable[[Any], Any], ctx: _click.Context) -> Any:
+def _help_option_without_metavar(get_help_option: Callable[[Any], Any], ctx: click.Context) -> Any:
     option = get_help_option(ctx)
     if option is not None:
         _adapt_metavar(option)
     return option
 
 
-def _parser_reading_negative_numbers(make_parser: Callable[[Any], Any], ctx: _click.Context) -> Any:
+def _parser_reading_negative_numbers(make_parser: Callable[[Any], Any], ctx: click.Context) -> Any:
     """The command's parser, with `-3` or `-0.5` read as a value where no option has that name."""
     parser = make_parser(ctx)
     process_opts = parser._process_opts
@@ -257,7 +260,7 @@ _TYPE_METAVARS = {
 }
 
 
-def _adapt_metavar(param: _click.Parameter) -> None:
+def _adapt_metavar(param: click.Parameter) -> None:
     """Upper-case metavars in help: FLOAT, PATH, [er|ve], NAME; nothing after a flag."""
     if param.metavar is not None:
         return
@@ -286,14 +289,14 @@ def _adapt_metavar(param: _click.Parameter) -> None:
 _MAX_CHOICE_METAVAR = 24
 
 
-def _choices(param: _click.Parameter) -> list[str]:
+def _choices(param: click.Parameter) -> list[str]:
     desc = getattr(param, "type_descriptor", None)
     if desc is None or not desc.is_choice or not desc.choices:
         return []
     return [str(getattr(c, "value", c)) for c in desc.choices]
 
 
-def _metavar_of(original: Callable[..., str | None], ctx: _click.Context) -> str | None:
+def _metavar_of(original: Callable[..., str | None], ctx: click.Context) -> str | None:
     shown = original(ctx=ctx)
     if shown is None:
         return None

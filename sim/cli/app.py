@@ -233,8 +233,10 @@ def check_plot_path(plot: Path) -> None:
 
 def option_given(name: str) -> bool:
     """True if the running command's parameter `name` (python name, e.g. "slope_deg") was given by the user."""
-    from typer._click.core import ParameterSource
-    from typer._click.globals import get_current_context
+    from rimless.cli_rules import click
+
+    ParameterSource = click.core.ParameterSource
+    get_current_context = click.globals.get_current_context
 
     ctx = get_current_context(silent=True)
     if ctx is None:
@@ -276,7 +278,9 @@ def check_scheduler(scheduler: str) -> None:
 
 def refuse_unused(options: tuple[str, ...], why: str) -> None:
     """ParameterError naming the first of `options` (python names) the user gave: it would be ignored."""
-    from typer._click.globals import get_current_context
+    from rimless.cli_rules import click
+
+    get_current_context = click.globals.get_current_context
 
     ctx = get_current_context(silent=True)
     for name in options:
