@@ -43,6 +43,7 @@ SHARED_ROOT = {
     "rimless.progress",
     "rimless.values",
     "rimless.second_process",
+    "rimless.lazy",
 }
 CLI_ROOT = {"rimless.cli", "rimless.cli_rules", "rimless.__main__"}
 HEAVY = ("numpy", "scipy", "pandas", "matplotlib", "dask", "numba", "sympy", "pyarrow", "ezc3d")
