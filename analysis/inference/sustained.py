@@ -259,7 +259,8 @@ def verdict_from_periods(
         if stalled:
             v.verdict, v.reason = "decaying", f"stalled on the ramp after {n} step(s)"
         return v
-    x, y = [], []
+    x: list[float] = []
+    y: list[float] = []
     for e in es:
         x.extend(e[:-1])
         y.extend(e[1:])
