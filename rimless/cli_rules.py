@@ -146,7 +146,7 @@ def _pydantic_detail(err: click.exceptions.BadParameter) -> str | None:
     if kind in ("int_parsing", "int_type", "int_from_float"):
         return f"must be a whole number, {got}"
     if kind.startswith(("greater", "less")):
-        low, high = getattr(err.param, "min", None), getattr(err.param, "max", None)  # type: ignore[attr-defined]
+        low, high = getattr(err.param, "min", None), getattr(err.param, "max", None)
         if low is not None and high is not None:
             return f"must be between {low:g} and {high:g}, {got}"
         for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):

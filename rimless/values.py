@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TypeVar
+from typing import Any, TypeVar, overload
 
 from rimless.errors import ParameterError
 
@@ -18,16 +18,41 @@ T = TypeVar("T")
 MAX_VALUES = 10000
 
 
+@overload
 def parse_list(
     text: str,
     option: str,
-    item: Callable[[str], T] = str,  # type: ignore[assignment]
     *,
     choices: Sequence[str] | None = None,
     count: int | None = None,
     unique: bool = False,
     lower: bool = False,
-) -> list[T]:
+) -> list[str]: ...
+
+
+@overload
+def parse_list(
+    text: str,
+    option: str,
+    item: Callable[[str], T],
+    *,
+    choices: Sequence[str] | None = None,
+    count: int | None = None,
+    unique: bool = False,
+    lower: bool = False,
+) -> list[T]: ...
+
+
+def parse_list(
+    text: str,
+    option: str,
+    item: Callable[[str], Any] = str,
+    *,
+    choices: Sequence[str] | None = None,
+    count: int | None = None,
+    unique: bool = False,
+    lower: bool = False,
+) -> list[Any]:
     """`a,b,c` -> [item(a), item(b), item(c)]; every error names `option`.
 
     `choices` restricts the (stripped, optionally lower-cased) names; `count` requires exactly that many
@@ -46,7 +71,7 @@ def parse_list(
             raise ParameterError(f"{option}: unknown value {bad[0]!r}; known: {', '.join(choices)}")
     if unique and len(set(raw)) != len(raw):
         raise ParameterError(f"{option}: a value is named twice in {text!r}")
-    out: list[T] = []
+    out: list[Any] = []
     for t in raw:
         try:
             out.append(item(t))

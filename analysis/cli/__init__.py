@@ -45,7 +45,7 @@ def import_options(
         if hub_offset_mm is None
         else tuple(v / 1000.0 for v in parse_numbers(hub_offset_mm, "--hub-offset-mm", count=3))
     )
-    kw = {
+    kw: dict[str, Any] = {
         "slope_deg": slope_deg,
         "object": object_,
         "markers": None if markers is None else parse_list(markers, "--markers"),

@@ -10,13 +10,16 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.values import parse_list
+
+if TYPE_CHECKING:
+    from rich.console import JustifyMethod
 
 EXIT_REFUSED = EXIT_USER_ERROR
 MODELS = ("er", "ve")
@@ -132,12 +135,13 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     con = Console()
     t = Table(title="verdict from the step-to-step return map (e*: fixed point, rad²/s²)", show_edge=False)
     t.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
-    for col, just, width in (
+    columns: tuple[tuple[str, JustifyMethod, int], ...] = (
         ("deg", "right", 6),
         ("steps", "right", 5),
         ("verdict", "left", 12),
         ("e* ± se", "right", 14),
-    ):
+    )
+    for col, just, width in columns:
         t.add_column(col, justify=just, no_wrap=True, min_width=width)
     color = {"sustained": "green", "decaying": "red", "undetermined": "yellow"}
     stems = [Path(r["file"]).stem for r in out["per_trial"]]

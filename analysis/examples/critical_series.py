@@ -133,7 +133,8 @@ def _rollback(params, y_plus: np.ndarray, t_start: float, dt: float):
     k = mass * params.gravity_m_s2 * L / (params.inertia_kg_m2 + m8 * L**2 + mass * L**2)
     phi = params.slope_rad
     th, w = float(y_plus[2]), float(y_plus[7])
-    ts, ths = [], []
+    ts: list[float] = []
+    ths: list[float] = []
     t = 0.0
     while True:  # semi-implicit Euler with a fine step: up and back
         w += k * math.sin(th + phi) * 1e-4
@@ -145,10 +146,10 @@ def _rollback(params, y_plus: np.ndarray, t_start: float, dt: float):
             ts.append(t)
             ths.append(th)
     rest = np.arange(ts[-1] + dt, ts[-1] + 1.2, dt)
-    ts = np.concatenate([ts, rest])
-    ths = np.concatenate([ths, np.full(rest.size, -ALPHA_RAD / 2)])
+    t_all = np.concatenate([ts, rest])
+    th_all = np.concatenate([ths, np.full(rest.size, -ALPHA_RAD / 2)])
     fx, fy = float(y_plus[0]), float(y_plus[1])
-    return t_start + ts, fx + L * np.sin(ths), fy + L * np.cos(ths), ths
+    return t_start + t_all, fx + L * np.sin(th_all), fy + L * np.cos(th_all), th_all
 
 
 def simulate_crit_trial(slope_deg: float, release: float, rng: np.random.Generator, name: str) -> CritTrial:
@@ -158,22 +159,26 @@ def simulate_crit_trial(slope_deg: float, release: float, rng: np.random.Generat
 
     n, steps, stalled, y_last = truth_walk(slope_deg, release, RAMP_STEPS, record=True)
     p = _truth_params(slope_deg)
-    ts, hx, hy, ang = [], [], [], []
+    # pieces of the path: times, hub x and y, wheel angle
+    ts: list[np.ndarray] = []
+    hxs: list[np.ndarray] = []
+    hys: list[np.ndarray] = []
+    angs: list[np.ndarray] = []
     for k, s in enumerate(steps):
         for seg in s.segments or []:
             hub = np.array([hub_position(yi[:5]) for yi in seg.y])
             ts.append(seg.t)
-            hx.append(hub[:, 0])
-            hy.append(hub[:, 1])
-            ang.append(seg.y[:, 2] + ALPHA_RAD * k + ALPHA_RAD / 2)
+            hxs.append(hub[:, 0])
+            hys.append(hub[:, 1])
+            angs.append(seg.y[:, 2] + ALPHA_RAD * k + ALPHA_RAD / 2)
     impacts = np.array([s.t_start_s + s.period_s for s in steps])
     t_end_walk = impacts[-1] if impacts.size else 0.0
     if stalled:
         tb, xb, yb, thb = _rollback(p, y_last, t_end_walk, RECORD_DT_S)
         ts.append(tb)
-        hx.append(xb)
-        hy.append(yb)
-        ang.append(thb + ALPHA_RAD * n + ALPHA_RAD / 2)
+        hxs.append(xb)
+        hys.append(yb)
+        angs.append(thb + ALPHA_RAD * n + ALPHA_RAD / 2)
         t_stop = tb[-1]
     else:
         t_stop = t_end_walk + 0.5 * steps[-1].period_s if steps else 0.5
@@ -182,7 +187,7 @@ def simulate_crit_trial(slope_deg: float, release: float, rng: np.random.Generat
     tt = tt[order]
     keep = np.concatenate([[True], np.diff(tt) > 0])
     tt = tt[keep]
-    hx, hy, ang = (np.concatenate(v)[order][keep] for v in (hx, hy, ang))
+    hx, hy, ang = (np.concatenate(v)[order][keep] for v in (hxs, hys, angs))
     if not stalled:  # after the last impact: the next step's start, as a rigid stance (the ramp ends)
         tb, xb, yb, thb = _rollback(p, y_last, t_end_walk, RECORD_DT_S)
         # the wheel leaves the ramp still rolling forward: the recording ends before the rigid stance

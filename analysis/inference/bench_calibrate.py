@@ -21,14 +21,18 @@ import math
 import os
 import time
 from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from rimless.sim.model.params import WheelParams
 
 SLOPES_DEG = (1.8, 2.2, 2.6, 3.0)
 RELEASES_RAD_S = (1.9, 2.4)
 
 
-def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> list[SimpleNamespace]:
+def make_trials(truth: WheelParams, rng: np.random.Generator, n_steps: int = 9) -> list[SimpleNamespace]:
     """Trial-like objects of the ER wheel ``truth`` on `SLOPES_DEG` x `RELEASES_RAD_S`: the recording starts
     inside the release step; heights from the impact line."""
     from rimless.sim.step.backend import make_integrator
@@ -37,7 +41,7 @@ def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> li
     out = []
     for slope in SLOPES_DEG:
         for release in RELEASES_RAD_S:
-            p = truth.replace(slope_rad=math.radians(slope))  # type: ignore[attr-defined]
+            p = truth.replace(slope_rad=math.radians(slope))
             g = simulate_steps(
                 p, "er", np.array([-math.pi / 8, release]), n_steps, make_integrator("auto", rtol=1e-9), record_dt=1e-3
             )
@@ -70,7 +74,7 @@ def make_trials(truth: object, rng: np.random.Generator, n_steps: int = 9) -> li
     return out
 
 
-def demo_trials() -> tuple[list[object], list[str]]:
+def demo_trials() -> tuple[list[Any], list[str]]:
     """The bundled critical series imported as `rimless demo` imports it (the trials with steps), with names."""
     from pathlib import Path
 
@@ -107,14 +111,14 @@ def main(argv: list[str] | None = None) -> None:
         "imported as `rimless demo` does (its calibration; --fit defaults to c, no truth)",
     )
     a = ap.parse_args(argv)
-    truth = WheelParams(damping_ns_per_m=a.c, stiffness_n_per_m=a.k)
+    wheel = WheelParams(damping_ns_per_m=a.c, stiffness_n_per_m=a.k)
+    truth = None if a.series == "demo" else wheel  # the wheel that made the trials (none: the demo's)
     if a.series == "demo":
         trials, names = demo_trials()
-        truth = None
         if a.fit == "c,k":
             a.fit = "c"
     else:
-        trials = make_trials(truth, np.random.default_rng(a.seed))
+        trials = make_trials(wheel, np.random.default_rng(a.seed))
         names = [t.meta.source_file for t in trials]
     fit = parse_fit(a.fit)
     for t, n in zip(trials, names):  # warm the compiled code on the first trial that can be calibrated

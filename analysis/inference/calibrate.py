@@ -42,6 +42,9 @@ from rimless.analysis.io.trial import ALPHA_RAD
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
 
+#: Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s, steps reached).
+_RmsRow = tuple[float, float, float, int]
+
 __all__ = [
     "FIT_FIELDS",
     "CalibrationResult",
@@ -818,7 +821,7 @@ class _Objective:
         """u at these globals and releases, with each trial's best time shift."""
         return np.concatenate([ug, ws, self.best_shifts(ug, ws)])
 
-    def rms_rows(self, u: np.ndarray) -> list[tuple[float, float, float, int]]:
+    def rms_rows(self, u: np.ndarray) -> list[_RmsRow]:
         xg, ws, sh = self.unpack(u)
         return _rms_rows(self.sim, self.data, self.glob.params(xg), ws, sh)
 
@@ -926,8 +929,8 @@ def _estimates(
 
 def _residual_rows(
     data: list[_TrialData],
-    rows_t1: list[tuple],
-    rows_cal: list[tuple],
+    rows_t1: Sequence[_RmsRow],
+    rows_cal: Sequence[_RmsRow],
     ws_t1: np.ndarray,
     ws: np.ndarray,
     sh: np.ndarray,
@@ -1197,12 +1200,10 @@ def calibrate_or_none(
         return None
 
 
-def _rms_rows(
-    sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray, shifts: np.ndarray
-) -> list[tuple[float, float]]:
+def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray, shifts: np.ndarray) -> list[_RmsRow]:
     """Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s over the steps
     the simulation reached, steps reached)."""
-    out = []
+    out: list[_RmsRow] = []
     for d, w, sh in zip(data, ws, shifts):
         rp, rh = _residuals(sim, p, d, float(w), float(sh))
         f_sim = rp + 1.0 / d.periods_s
@@ -1219,7 +1220,7 @@ def _rms_rows(
     return out
 
 
-def _set_sigmas(sig: dict[str, float], rows: list[tuple[float, ...]]) -> None:
+def _set_sigmas(sig: dict[str, float], rows: Sequence[_RmsRow]) -> None:
     tp = [r[0] for r in rows if math.isfinite(r[0])]
     th = [r[1] for r in rows if math.isfinite(r[1])]
     if tp:

@@ -95,7 +95,7 @@ class RigidFrictionWheel:
         """Step periods (s) from the release, and whether the wheel stalled on the ramp."""
         phi = math.radians(slope_deg)
         w = release_rad_s**2
-        periods = []
+        periods: list[float] = []
         for _ in range(ramp_steps):
             if w <= 0 or self.top_margin(w, phi) <= 1e-6:
                 return np.array(periods), True
@@ -191,7 +191,8 @@ class CoverageResult:
         n = len(est)
         cov = sum(o.covered for o in est)
         err = np.array([o.estimate_deg - o.truth_deg for o in est])
-        widths = np.array([o.ci_deg[1] - o.ci_deg[0] for o in est]) if est else np.zeros(0)
+        cis = [o.ci_deg for o in est if o.ci_deg is not None]  # all of est (the test narrows the type)
+        widths = np.array([hi - lo for lo, hi in cis]) if est else np.zeros(0)
         methods: dict[str, dict[str, int]] = {}
         for o in est:
             for m, ok in o.per_method.items():

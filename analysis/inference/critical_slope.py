@@ -178,7 +178,8 @@ def _line_root(
             cov = np.linalg.inv(XtW @ X)
         except np.linalg.LinAlgError:
             return None
-        c0, c1 = cov @ (XtW @ y)
+        sol = cov @ (XtW @ y)
+        c0, c1 = np.float64(sol[0]), np.float64(sol[1])
     r = y - (c0 + c1 * x)
     chi2 = float(np.sum(w * r**2)) / max(x.size - 2, 1)
     cov = cov * max(chi2, 1.0)
@@ -186,12 +187,12 @@ def _line_root(
         return None
     root = -c0 / c1
     g = np.array([-1.0 / c1, c0 / c1**2])
-    se = float(math.sqrt(max(g @ cov @ g, 0.0)))
+    se_root = float(math.sqrt(max(g @ cov @ g, 0.0)))
     if chi2 > 1.0 and x.size > 2:
         from scipy.stats import t as student
 
-        se *= float(student.ppf(0.975, x.size - 2)) / Z95
-    return float(root), se, float(c0), float(c1), chi2
+        se_root *= float(student.ppf(0.975, x.size - 2)) / Z95
+    return float(root), se_root, float(c0), float(c1), chi2
 
 
 def _logistic_50(slopes: np.ndarray, sus: np.ndarray) -> tuple[float, float, float, float] | None:
@@ -361,7 +362,7 @@ def estimate_critical_slope(
     def inside(e: Estimate) -> bool:
         """Agrees with the bracket: its interval overlaps the bracket's (widened by the slope uncertainties) and
         its value lies within that, give or take half the bracket."""
-        if bracket_est is None:
+        if bracket_est is None or bracket is None:  # both set together
             return True
         blo, bhi = bracket_est.ci_deg
         half = 0.5 * (bracket[1] - bracket[0])

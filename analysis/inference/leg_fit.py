@@ -552,7 +552,7 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
     def se_param(j: int, unit: float = 1.0) -> float:
         return se(np.eye(3)[j], 0.0) * unit
 
-    per_log = []
+    per_log: list[dict[str, Any]] = []
     for i, (s, (xl, xe, tr, dr)) in enumerate(zip(segs, per)):
         ri = r[offs[i] : offs[i + 1]]
         half_cycles = _half_cycles(w, z, a_um * 1e-6 * s.log.counts_per_m, xe, xl)

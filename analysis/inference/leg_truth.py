@@ -185,14 +185,14 @@ def write_log(
     }
     with open(path, "w", encoding="utf-8") as f:
         f.write(json.dumps(header) + "\n")
-        engaged = False
+        engaged = released = False  # the clutch engages once (at 0.2 s) and is released once
         for ti, ci, ri in zip(t, counts, read_s):
-            if not engaged and ti >= 0.2:
+            if not engaged and not released and ti >= 0.2:
                 f.write(json.dumps({"t_s": 0.2, "event": "engage", "leg": leg}) + "\n")
                 engaged = True
-            if ti >= t_release and engaged is True:
+            if ti >= t_release and engaged:
                 f.write(json.dumps({"t_s": t_release, "event": "release", "leg": leg}) + "\n")
-                engaged = None  # type: ignore[assignment]
+                engaged, released = False, True
             f.write(
                 json.dumps(
                     {

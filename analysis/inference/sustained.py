@@ -58,9 +58,9 @@ def trial_slope_sigma_deg(meta: Any) -> tuple[float, str]:
 
     From ``meta.slope_ci_rad`` (a 95 % interval (low, high), rad) when present and finite; else the default
     of its ``meta.slope_source`` (`DEFAULT_SLOPE_SIGMA_DEG`), else `DEFAULT_SLOPE_SIGMA_UNKNOWN_DEG`."""
-    ci = getattr(meta, "slope_ci_rad", None)
+    ci: Any = getattr(meta, "slope_ci_rad", None)  # anything: what is not two numbers raises below
     try:
-        lo, hi = (float(v) for v in ci)  # type: ignore[union-attr]
+        lo, hi = (float(v) for v in ci)
         if math.isfinite(lo) and math.isfinite(hi) and hi >= lo:
             return max(math.degrees(hi - lo) / (2 * Z95), 1e-4), "slope_ci_rad"
     except (TypeError, ValueError):
@@ -259,7 +259,8 @@ def verdict_from_periods(
         if stalled:
             v.verdict, v.reason = "decaying", f"stalled on the ramp after {n} step(s)"
         return v
-    x, y = [], []
+    x: list[float] = []
+    y: list[float] = []
     for e in es:
         x.extend(e[:-1])
         y.extend(e[1:])

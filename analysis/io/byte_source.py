@@ -32,6 +32,12 @@ class ByteSource:
         nl = np.concatenate(parts) if parts else np.zeros(0, np.int64)
         return cls(nl, len(raw), raw if path is None else None, path)
 
+    def _open(self) -> io.BufferedReader:
+        """The file, opened for reading bytes (``raw`` is kept whenever there is no ``path``: see `of`)."""
+        if self.path is None:
+            raise ValueError("a ByteSource holds either the bytes or the path of its file")
+        return open(self.path, "rb")
+
     def line_start(self, line0: int) -> int:
         """Byte offset of the start of 0-based line ``line0`` (the size past the last line)."""
         if line0 <= 0:
@@ -42,15 +48,14 @@ class ByteSource:
         """Bytes ``a:b`` as a binary stream (no copy of the range)."""
         if self.raw is not None:
             return _ViewReader(memoryview(self.raw)[a:b])
-        f = open(self.path, "rb")
-        return _FileRange(f, a, b)
+        return _FileRange(self._open(), a, b)
 
     def counts(self, sub: bytes, spans: list[tuple[int, int]]) -> list[int]:
         """``sub`` occurrences in each byte span."""
         if self.raw is not None:
             return [self.raw.count(sub, a, b) for a, b in spans]
         out = []
-        with open(self.path, "rb") as f:
+        with self._open() as f:
             for a, b in spans:
                 f.seek(a)
                 out.append(f.read(b - a).count(sub))
@@ -67,7 +72,7 @@ class _ViewReader(io.RawIOBase):
     def readable(self) -> bool:
         return True
 
-    def readinto(self, buffer) -> int:  # type: ignore[override]
+    def readinto(self, buffer) -> int:
         n = min(len(buffer), len(self._view) - self._pos)
         buffer[:n] = self._view[self._pos : self._pos + n]
         self._pos += n
@@ -85,7 +90,7 @@ class _FileRange(io.RawIOBase):
     def readable(self) -> bool:
         return True
 
-    def readinto(self, buffer) -> int:  # type: ignore[override]
+    def readinto(self, buffer) -> int:
         n = self._f.readinto(memoryview(buffer)[: min(len(buffer), self._left)])
         self._left -= n
         return n

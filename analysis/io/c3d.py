@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -21,9 +22,10 @@ from rimless.errors import InputFileError
 __all__ = ["read_c3d", "write_c3d"]
 
 
-def _param(c: object, group: str, name: str, default: object = None) -> object:
+def _param(c: Any, group: str, name: str, default: object = None) -> Any:
+    """The value of parameter ``group:name`` of the ezc3d object ``c`` (its type is whatever the file holds)."""
     try:
-        return c["parameters"][group][name]["value"]  # type: ignore[index]
+        return c["parameters"][group][name]["value"]
     except (KeyError, TypeError):
         return default
 
@@ -85,7 +87,7 @@ def read_c3d(path: str | Path) -> ViconFile:
     return ViconFile(path=p, sections=tuple(sections), delimiter="", encoding="c3d")
 
 
-def _objects(p: str, c: object, rot: np.ndarray, first: int) -> Section:
+def _objects(p: str, c: Any, rot: np.ndarray, first: int) -> Section:
     """Rigid bodies from the ROTATION group: (4, 4, n_bodies, n_frames) poses, translation in POINT units."""
     from scipy.spatial.transform import Rotation
 

@@ -87,7 +87,9 @@ def read_clutch_log(path: str | Path) -> ClutchLog:
         events.append((float(t), str(ev.get("name")), ev))
     if not lines:
         raise InputFileError(f"{p}: empty: not a robot trial log")
-    lock_s, release_s, legs = [], [], []
+    lock_s: list[float] = []
+    release_s: list[float] = []
+    legs: list[int] = []
     open_lock: dict[int, int] = {}
     for t, name, ev in sorted(events, key=lambda e: e[0]):
         if "released_leg" in ev:

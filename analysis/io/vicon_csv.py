@@ -585,7 +585,7 @@ class _Parser:
 
         if self.raw is not None:
             a, b = self.raw.line_start(data_line - 1), self.raw.line_start(data_line - 1 + n_rows)
-            source: io.RawIOBase = self.raw.stream(a, b)
+            source: io.RawIOBase | io.BytesIO = self.raw.stream(a, b)
         else:
             source = io.BytesIO(self.text[start:end].encode("utf-8", "surrogatepass"))
         lead = np.empty((n_rows, first_data))

@@ -102,6 +102,12 @@ def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarr
         )
 
 
+def _xyz(v: np.ndarray) -> tuple[float, float, float]:
+    """A (3,) vector as a tuple of floats."""
+    x, y, z = (float(c) for c in v)
+    return x, y, z
+
+
 def build_trial(
     vf: ViconFile,
     *,
@@ -157,7 +163,7 @@ def build_trial(
     rate = sec.rate_hz
     time_s = (frames - frames[0]) / rate
     notes: list[str] = [] if slope_note is None else [slope_note]
-    rot = None
+    rot: np.ndarray | RotationStack | None = None
     if obj is not None:
         pose = _on_grid(sec.get(obj, POSE), row)  # a view of the section when no frame is missing
         zero = ~(pose != 0).any(axis=1)  # six exact zeros: an occlusion (as `zeros_to_nan`, without a copy)
@@ -202,8 +208,8 @@ def build_trial(
         units = {f"{m}.{c.component}": c.file_unit for m in mk for c in sec.columns if c.group == m}
     _check_jumps(vf.path, sec, time_s, trans, row)
     del row
-    angle = None
-    axis = None
+    angle: np.ndarray | None = None
+    axis: np.ndarray | None = None
     if rot is not None:
         angle, axis = wheel_angle_from_rotations(rot)
         if not np.isfinite(angle).any():
@@ -212,36 +218,39 @@ def build_trial(
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index : motion.end_index + 1] = True
     contacts = None
-    if rot is not None and angle is not None:
+    if rot is not None and angle is not None and axis is not None:  # the axis comes with the angle
         ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
         # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
         sub_t = ok_t[:: max(1, -(-ok_t.size // MAX_PATH_POINTS))]
         travel_guess = travel_direction(np.concatenate([trans[sub_t], trans[ok_t[-1:]]])) if ok_t.size >= 2 else None
         del ok_t, sub_t
         contacts = fit_contacts(rot, trans, angle, axis, rough, alpha_rad=alpha_rad, travel=travel_guess)
-        sc0 = slope_from_contacts(contacts.contacts, travel_guess) if contacts is not None else None
-        if sc0 is not None and abs(sc0[0]) >= alpha_rad / 2:
-            notes.append(
-                f"the {len(contacts.contacts)} pivots found lie on a line at {math.degrees(sc0[0]):.1f} "
-                "deg, where no wheel stands: not stance feet, not used"
-            )
-            contacts = None
+        # (fit_contacts finds no contact without two frames of the path, i.e. without travel_guess)
+        if contacts is not None and travel_guess is not None:
+            sc0 = slope_from_contacts(contacts.contacts, travel_guess)
+            if sc0 is not None and abs(sc0[0]) >= alpha_rad / 2:
+                notes.append(
+                    f"the {len(contacts.contacts)} pivots found lie on a line at {math.degrees(sc0[0]):.1f} "
+                    "deg, where no wheel stands: not stance feet, not used"
+                )
+                contacts = None
         hub_c = hub_from_contacts(contacts, alpha_rad) if contacts is not None and hub_offset_m is None else None
-        given = hub_offset_m
-        if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M:
-            given = hub_c[0]
+        feet = hub_c if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M else None  # the hub the feet determine
+        given: np.ndarray | Sequence[float] | None = hub_offset_m
+        if feet is not None:
+            given = feet[0]
         elif hub_c is not None:
             notes.append(f"the stance feet do not determine the hub (standard error {hub_c[1] * 1e3:.1f} mm)")
         est = hub_from_pose(rot, trans, hub_offset_m=given, mask=rough, what=what, angle_axis=(angle, axis))
         hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
         hub_source = est.source
-        if given is not None and hub_offset_m is None:
-            d = np.asarray(given)
-            residual = hub_c[2]
+        if feet is not None and contacts is not None:  # (contacts: where the feet came from)
+            d = np.asarray(feet[0])
+            residual = feet[2]
             hub_source = (
                 f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
                 f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
-                f"{hub_c[1] * 1e3:.2f} mm, feet residual {hub_c[2] * 1e3:.2f} mm)"
+                f"{feet[1] * 1e3:.2f} mm, feet residual {feet[2] * 1e3:.2f} mm)"
             )
         del est
     else:
@@ -423,7 +432,7 @@ def build_trial(
         n_frames=int(frames.size),
         file_units=units,
         hub_source=hub_source,
-        hub_offset_m=None if offset is None else tuple(float(v) for v in offset),
+        hub_offset_m=None if offset is None else _xyz(offset),
         orientation=(orientation if obj is not None else "markers") if angle is not None else None,
         slope_deg=frame.slope_deg,
         slope_source=chosen.source,
@@ -433,8 +442,8 @@ def build_trial(
         slope_estimated_ci_rad=next((e.ci_rad for e in evidence if e.source == "estimated"), None),
         slope_residual_m=frame.residual_m,
         slope_points=frame.n_points,
-        travel_direction=tuple(float(v) for v in travel),
-        slope_origin_m=tuple(float(v) for v in frame.origin_m),
+        travel_direction=_xyz(travel),
+        slope_origin_m=_xyz(frame.origin_m),
         com_height_reference=reference,
         max_gap_s=float(max_gap_s),
         n_gap_frames=int(gap.sum()),

@@ -142,8 +142,8 @@ def fit_contacts(
             wins.append((f, c, rms, cov, float(np.mean(ang[run]))))
     if len(wins) < 2:
         return None
-    rms = np.array([w[2] for w in wins])
-    best = float(np.percentile(rms, 20))
+    rms_wins = np.array([w[2] for w in wins])
+    best = float(np.percentile(rms_wins, 20))
     thr = 3.0 * best + 0.3e-3
     acc = [w for w in wins if w[2] <= thr]
     if not acc:

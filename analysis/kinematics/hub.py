@@ -6,6 +6,7 @@ All positions in m, angles in rad, arrays with time on the first axis; NaN marks
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,7 +61,8 @@ class HubEstimate:
     source: str
     offset_m: np.ndarray | None = None
     offset_residual_m: float | None = None
-    rotation: np.ndarray | None = None  # (n, 3, 3) world-from-body (marker sets: from the reference frame)
+    # (n, 3, 3) world-from-body (marker sets: from the reference frame); a RotationStack from hub_from_pose
+    rotation: np.ndarray | RotationStack | None = None
     n_relabelled: int = 0  # frames whose marker labels were swapped and are repaired (marker sets)
     n_inconsistent: int = 0  # frames whose markers fit no rigid shape, made gaps (marker sets)
 
@@ -76,7 +78,7 @@ def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -
     a = np.asarray(angles_rad, dtype=np.float64)
     if a.shape[0] == 0:
         return np.zeros((0, 3, 3))
-    ok = ~np.isnan(a).any(axis=1)
+    ok = ~np.any(np.isnan(a), axis=1)
     # NaN rows are computed as zero rotations and set to NaN after: no masked copies of the matrices
     filled = np.where(ok[:, None], a, 0.0)  # also a writable copy of a read-only view (scipy needs one)
     rot = Rotation.from_rotvec(filled) if convention == "helical" else Rotation.from_euler(convention, filled)
@@ -146,7 +148,7 @@ def axis_in_body(rot: np.ndarray | RotationStack, axis: np.ndarray, dtype: type 
     """``rot.T @ axis`` for every frame (a world axis in the body frame), (n, 3)."""
     if not isinstance(rot, RotationStack):
         return (axis @ rot).astype(dtype, copy=False)
-    out = np.empty((rot.shape[0], 3), dtype)
+    out: np.ndarray = np.empty((rot.shape[0], 3), dtype)
     for a, m in rot.slices():
         out[a : a + m.shape[0]] = axis @ m
     return out
@@ -258,7 +260,7 @@ def hub_from_markers(points_m: np.ndarray, min_markers: int = 3) -> HubEstimate:
     n, k, _ = p.shape
     if k == 1:
         return HubEstimate(p[:, 0].copy(), None, None, "single marker taken as the hub")
-    vis = ~np.isnan(p).any(axis=2)  # (n, k)
+    vis = ~np.any(np.isnan(p), axis=2)  # (n, k)
     full = np.flatnonzero(vis.all(axis=1))
     if full.size == 0:
         raise ValueError("no frame shows all markers: no reference shape")
@@ -386,7 +388,7 @@ def _kabsch_frames(ref: np.ndarray, p: np.ndarray, vis: np.ndarray) -> tuple[np.
 
 
 def estimate_hub_offset(
-    rot: np.ndarray,
+    rot: np.ndarray | RotationStack,
     trans_m: np.ndarray,
     *,
     alpha_rad: float = np.pi / 4,
@@ -462,10 +464,10 @@ def estimate_hub_offset(
 
 
 def hub_from_pose(
-    rot: np.ndarray,
+    rot: np.ndarray | RotationStack,
     trans: np.ndarray,
     *,
-    hub_offset_m: np.ndarray | None = None,
+    hub_offset_m: np.ndarray | Sequence[float] | None = None,
     mask: np.ndarray | None = None,
     what: str = "object origin",
     angle_axis: tuple[np.ndarray, np.ndarray] | None = None,

@@ -204,8 +204,8 @@ def choose_source(
 
     # forced choices
     if markers:
-        sec = next((s for s in traj_sec if all(m in s.groups() for m in markers)), None)
-        if sec is None:
+        msec = next((s for s in traj_sec if all(m in s.groups() for m in markers)), None)
+        if msec is None:
             have = traj_sec[0].groups() if traj_sec else []
             missing = [m for m in markers if m not in have]
             raise SourceRefused(
@@ -216,7 +216,7 @@ def choose_source(
                     else "the file has no Trajectories section"
                 )
             )
-        chosen = SourceChoice(sec, None, tuple(markers), "markers given with --markers")
+        chosen = SourceChoice(msec, None, tuple(markers), "markers given with --markers")
         return _with_ramp(vf, chosen, objects_sec, static_markers, warns, exclude_object=None)
     if obj is not None:
         for kind, sec, o, mk in cands:  # noqa: B007
@@ -249,11 +249,11 @@ def choose_source(
         # One candidate: take it unless it is static (its rotation is checked by the step detection).
         kind, sec, o, mk = cands[0]
         # zeros_to_nan is row by row: applied to the rows `_extent` measures only
-        ext = (
-            _extent(zeros_to_nan(_subsample(sec.get(o, POSE)), 6)[:, 3:])
-            if kind == "object"
-            else max(_extent(zeros_to_nan(_subsample(sec.get(m, XYZ)), 3)) for m in mk)
-        )
+        if kind == "object":
+            assert o is not None  # an object candidate is named by its group
+            ext = _extent(zeros_to_nan(_subsample(sec.get(o, POSE)), 6)[:, 3:])
+        else:
+            ext = max(_extent(zeros_to_nan(_subsample(sec.get(m, XYZ)), 3)) for m in mk)
         if ext >= STATIC_EXTENT_M:
             what = f"object {o}" if kind == "object" else f"markers {','.join(mk)}"
             chosen = SourceChoice(
@@ -267,6 +267,7 @@ def choose_source(
             )
     for kind, sec, o, mk in cands:
         if kind == "object":
+            assert o is not None  # an object candidate is named by its group
             data = zeros_to_nan(sec.get(o, POSE), 6)
             ext = _extent(data[:, 3:])
             turn = _object_turn(data[:, :3]) if ext >= STATIC_EXTENT_M else 0.0
@@ -286,16 +287,16 @@ def choose_source(
         ]
         found += [f"{t} markers (too many for a wheel)" for t in too_many]
         if not found and static_markers:
-            names = ", ".join(m for _, m in static_markers[:6]) + (", ..." if len(static_markers) > 6 else "")
+            shown = ", ".join(m for _, m in static_markers[:6]) + (", ..." if len(static_markers) > 6 else "")
             raise SourceRefused(
-                f"{vf.path}: nothing moves like the wheel: only static markers ({names}: each moves "
+                f"{vf.path}: nothing moves like the wheel: only static markers ({shown}: each moves "
                 f"less than {STATIC_EXTENT_M * 1e3:.0f} mm); choose with --markers A,B,C,D"
             )
         if not found:
-            others = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
+            kinds = ", ".join(f"{s.kind} (line {s.line}, {len(s.groups())} channels)" for s in vf.sections)
             raise SourceRefused(
                 f"{vf.path}: no usable trajectory: no Objects or Trajectories section with a "
-                f"moving object or marker set, only {others}"
+                f"moving object or marker set, only {kinds}"
             )
         raise SourceRefused(
             f"{vf.path}: nothing moves like the wheel (turning more than "

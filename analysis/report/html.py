@@ -710,18 +710,18 @@ def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope
         '<h2>Imported files</h2><table id="imports"><thead><tr><th>file</th><th>status</th><th>frames</th>'
         "<th>slope (source)</th><th>hub</th><th>steps</th><th>warnings / reason</th></tr></thead><tbody>"
     )
-    for r in res.inputs:
-        s = r.summary()
-        cls = "bad" if r.status == "refused" else "ok"
-        if r.trial is not None:
+    for inp in res.inputs:
+        s = inp.summary()
+        cls = "bad" if inp.status == "refused" else "ok"
+        if inp.trial is not None:
             cells = (
                 f'<td class="n">{s["frames"]} @ {s["rate_hz"]:g} Hz</td>'
                 f"<td>{s['slope_deg']:.3f} deg ({e(s['slope_source'])})</td><td>{e(s['hub_source'])}</td>"
-                f'<td class="n">{s["steps"]}</td><td>{"<br>".join(e(w) for w in r.warnings) or "none"}</td>'
+                f'<td class="n">{s["steps"]}</td><td>{"<br>".join(e(w) for w in inp.warnings) or "none"}</td>'
             )
         else:
-            cells = f'<td></td><td></td><td></td><td></td><td class="bad">{e(r.reason or "")}</td>'
-        parts.append(f'<tr><td>{e(r.file)}</td><td class="{cls}">{e(r.status)}</td>{cells}</tr>')
+            cells = f'<td></td><td></td><td></td><td></td><td class="bad">{e(inp.reason or "")}</td>'
+        parts.append(f'<tr><td>{e(inp.file)}</td><td class="{cls}">{e(inp.status)}</td>{cells}</tr>')
     parts.append("</tbody></table></body></html>\n")
     return "\n".join(parts)
 

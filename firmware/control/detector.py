@@ -193,6 +193,10 @@ class LegDetector:
     stance leg to the next one in `legs`, so the first touchdown is that of `legs[start_index + 1]`.
     """
 
+    # what `_touchdown` changed, for `dismiss_touchdown` to undo: (leg_index, _last_touchdown_s, _period_s,
+    # _touchdown_s, _touchdown_x_m, _confirmed); unset until the first touchdown
+    _before_touchdown: tuple[int, float | None, float | None, float, float, int] | None
+
     def __init__(self, params: DetectorParams, legs: list[int] | tuple[int, ...], *, start_index: int = 0) -> None:
         if not legs:
             raise ValueError("a detector needs at least one leg")

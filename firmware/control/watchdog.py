@@ -27,7 +27,7 @@ class Watchdog:
         on_trip: Callable[[str, str], None],
         *,
         period_s: float = 0.01,
-        notify: Callable[[str], None] | None = None,
+        notify: Callable[[str], object] | None = None,
         notify_every_s: float = 0.0,
         clock_ns: Callable[[], int] = time.monotonic_ns,
     ) -> None:

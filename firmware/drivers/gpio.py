@@ -36,7 +36,9 @@ class PinLog:
         # thread may switch pins off while the main thread is inside a change
         self._lock = threading.RLock()
         self._fd = (
-            None if path is None else os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+            None
+            if self.path is None
+            else os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
         )
 
     def change(self, pin: int, level: int, apply: Callable[[], bool]) -> bool:
@@ -77,10 +79,11 @@ def mock_pin_factory(pin_log: PinLog | None = None) -> Any:
 
     if pin_log is None:
         return MockFactory(revision=PI4_REVISION)
+    log = pin_log  # not None (narrowed for the method below)
 
     class LoggedMockPin(MockPin):
         def _change_state(self, value: Any) -> bool:
-            return pin_log.change(
+            return log.change(
                 int(self.info.name.removeprefix("GPIO")),
                 1 if value else 0,
                 lambda: super(LoggedMockPin, self)._change_state(value),

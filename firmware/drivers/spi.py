@@ -100,7 +100,7 @@ class SpidevBus:
         self.speed_hz = int(speed_hz)
         self._spidev = None
         try:
-            import spidev  # type: ignore[import-not-found]  # only on the Pi
+            import spidev  # only on the Pi
         except ImportError:
             spidev = None
         try:

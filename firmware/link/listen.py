@@ -117,7 +117,8 @@ class Summary:
                 self.samples += 1
                 self.last = obj
                 self._window.append(now_s)
-                leg = obj.get("leg") if isinstance(obj.get("leg"), dict) else {}
+                raw_leg = obj.get("leg")
+                leg = raw_leg if isinstance(raw_leg, dict) else {}
                 for name, dq in (("velocity_m_s", self.velocity), ("compression_m", self.compression)):
                     v = leg.get(name)
                     if isinstance(v, (int, float)):
@@ -270,7 +271,7 @@ def listen(
     csv_out: Path | None = None,
     stale_s: float = 1.0,
     live: bool = False,
-    write_screen: Callable[[str], None] | None = None,
+    write_screen: Callable[[str], object] | None = None,
     heartbeat: Any = None,
     timeout_s: float = 10.0,
     robot: str | None = None,
@@ -294,7 +295,7 @@ def listen(
     robot_ip: str | None = None
     if robot is not None:
         try:
-            robot_ip = socket.getaddrinfo(robot, None, type=socket.SOCK_DGRAM)[0][4][0]
+            robot_ip = str(socket.getaddrinfo(robot, None, type=socket.SOCK_DGRAM)[0][4][0])  # an IP address
         except (socket.gaierror, UnicodeError) as err:
             sock.close()
             raise CommandError(f"--robot {robot!r} cannot be resolved ({err})") from None

@@ -95,7 +95,8 @@ class McapRecorder:
             if isinstance(ev, dict):
                 self._add("/events", "rimless.Event", t_ns, seq, ev)
                 continue
-            leg = obj.get("leg") if isinstance(obj.get("leg"), dict) else {}
+            raw_leg = obj.get("leg")
+            leg = raw_leg if isinstance(raw_leg, dict) else {}
             ch = obj.get("ch")
             self._add("/leg", "rimless.Leg", t_ns, seq, {"seq": obj.get("seq"), "ch": ch, **leg})
             stance = leg.get("stance")

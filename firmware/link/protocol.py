@@ -323,9 +323,9 @@ def parse_command(line: bytes, token: str, nonce: str, last_seq: int | None) -> 
     if not isinstance(obj, dict):
         raise Rejected("a message must be a JSON object")
     _check_tree(obj)
-    seq = obj.get("seq")
-    seq_ok = isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq < 2**63
-    echo = seq if seq_ok else None
+    raw_seq = obj.get("seq")
+    seq = raw_seq if isinstance(raw_seq, int) and not isinstance(raw_seq, bool) and 0 <= raw_seq < 2**63 else None
+    echo = seq
     if "token" in obj:
         raise Rejected(
             "unauthenticated: clear-text tokens are not accepted; sign with the connection nonce (protocol version 2)",
@@ -334,7 +334,7 @@ def parse_command(line: bytes, token: str, nonce: str, last_seq: int | None) -> 
     extra = sorted(set(obj) - _TOP_KEYS)
     if extra:
         raise Rejected(f"unknown field {extra[0]!r}", echo)
-    if not seq_ok:
+    if seq is None:
         raise Rejected("seq must be a non-negative integer", None)
     cmd = obj.get("cmd")
     args = obj.get("args", {})

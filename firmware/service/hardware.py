@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -104,7 +104,7 @@ def build_fake(
     cfg: RobotConfig,
     *,
     trajectory: Callable[[float], float] | None = None,
-    trajectories: list[Callable[[float], float]] | None = None,
+    trajectories: Sequence[Callable[[float], float]] | None = None,
     pin_factory: Any = None,
     noise_counts: float = 0.3,
     seed: int = 0,
@@ -177,6 +177,18 @@ def build_fake(
     return hw
 
 
+def _drive(dev: Any) -> Callable[[bool], None]:
+    """A pin driver for the sensor: `drive(True)` sets the output device `dev` high, `drive(False)` low."""
+
+    def drive(on: bool) -> None:
+        if on:
+            dev.on()
+        else:
+            dev.off()
+
+    return drive
+
+
 def _shared_line(lines: dict[int, Any], pin: int, factory: Any, closers: list[Callable[[], None]]) -> Any:
     """One output device per GPIO (RESET lines may be shared); active high, starting low."""
     if pin not in lines:
@@ -216,8 +228,8 @@ def build_real(cfg: RobotConfig) -> Hardware:
                 counts_per_m=s.counts_per_m,
                 axis=s.axis,
                 sign=s.sign,
-                reset=lambda on, d=reset_dev: d.on() if on else d.off(),
-                npd=None if npd_dev is None else (lambda on, d=npd_dev: d.on() if on else d.off()),
+                reset=_drive(reset_dev),
+                npd=None if npd_dev is None else _drive(npd_dev),
             )
             sensors.append(sensor)
         _reset_all(sensors, cfg)

@@ -186,7 +186,7 @@ def run_leg_test(
     out: Path,
     *,
     fake: bool = False,
-    on_status: Callable[[str], None] | None = None,
+    on_status: Callable[[str], object] | None = None,
     on_phase: Callable[[str, Hardware], None] | None = None,
 ) -> LegTestReport:
     """Run the leg test on the robot (or on the fake leg with `fake`) and write its log to `out`.
@@ -220,11 +220,11 @@ def run_leg_test(
             _write(Path(out), lines)
             report.written = True
     except Interrupted as sig:
-        hw = state.get("hw")
-        if hw is not None:
-            hw.close()  # idempotent
-            if fake and hw.pin_factory is not None:
-                report.fake_pins = pin_histories(hw.pin_factory, hw.clutches.pins)
+        opened = state.get("hw")
+        if opened is not None:
+            opened.close()  # idempotent
+            if fake and opened.pin_factory is not None:
+                report.fake_pins = pin_histories(opened.pin_factory, opened.clutches.pins)
         report.interrupted, report.exit_code = sig.name, sig.exit_code
     return report
 
@@ -285,7 +285,7 @@ def _run(
     opts: LegTestOptions,
     i_sensor: int,
     report: LegTestReport,
-    say: Callable[[str], None],
+    say: Callable[[str], object],
     on_phase: Callable[[str, Hardware], None] | None,
 ) -> list[dict[str, Any]]:
     """The test itself; returns the log's lines (header, samples, events, end)."""

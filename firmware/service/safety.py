@@ -56,7 +56,8 @@ def install_faulthandler() -> None:
 
     if not faulthandler.is_enabled():
         with contextlib.suppress(Exception):  # stderr without a file descriptor (a test runner)
-            faulthandler.enable(file=sys.__stderr__, all_threads=True)
+            # no sys.__stderr__ (pythonw): sys.stderr, which is what faulthandler takes for None
+            faulthandler.enable(file=sys.__stderr__ or sys.stderr, all_threads=True)
 
 
 @contextlib.contextmanager

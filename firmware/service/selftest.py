@@ -110,11 +110,11 @@ def self_test(
             finally:
                 hw.close()
     except Interrupted as sig:
-        hw = state.get("hw")
-        if hw is not None:
-            hw.close()  # idempotent: the finally above already ran
-            if fake and hw.pin_factory is not None:
-                report.fake_pins = pin_histories(hw.pin_factory, hw.clutches.pins)
+        opened = state.get("hw")
+        if opened is not None:
+            opened.close()  # idempotent: the finally above already ran
+            if fake and opened.pin_factory is not None:
+                report.fake_pins = pin_histories(opened.pin_factory, opened.clutches.pins)
         report.interrupted, report.exit_code = sig.name, sig.exit_code
     return report
 

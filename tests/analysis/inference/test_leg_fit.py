@@ -24,6 +24,17 @@ from tests.support.leg_truth import LegTruth, free_motion, position, write_log
 ROOT = Path(__file__).resolve().parents[3]
 
 
+def test_truth_log_engages_and_releases_the_clutch_once(tmp_path: Path) -> None:
+    # the writer's released state was None, which `not engaged` read as disengaged: every sample after the
+    # release wrote another engage and release (1174 pairs in this log)
+    path = tmp_path / "a.jsonl"
+    write_log(path, LegTruth(record_s=0.2), seed=3)
+    events = [json.loads(line).get("event") for line in path.read_text().splitlines()[1:]]
+    assert [e for e in events if e] == ["engage", "release", "end"]
+    log = read_leg_log(path)
+    assert log.engage_t_s == pytest.approx(0.2)
+
+
 def test_truth_pure_coulomb_friction_decays_linearly_by_4fc_over_k_per_cycle() -> None:
     truth = LegTruth(c_n_s_per_m=0.0, friction_n=0.5)
     k, fc = truth.k_n_per_m, truth.friction_n
