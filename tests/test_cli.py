@@ -306,6 +306,38 @@ def test_atomic_file_appears_only_when_complete(tmp_path):
     assert sorted(p.name for p in target.parent.iterdir()) == ["traj.csv"]
 
 
+def test_atomic_files_renames_all_or_none(tmp_path, monkeypatch):
+    import os
+    from pathlib import Path
+
+    from rimless.output import atomic_files
+
+    traj, fig = tmp_path / "traj.csv", tmp_path / "fig.png"
+    with pytest.raises(KeyboardInterrupt):  # interrupted after the first output was written: neither appears
+        with atomic_files((traj, "--out"), (None, "--json"), (fig, "--plot")) as (t, none, f):
+            assert none is None and t.suffix == ".csv" and f.suffix == ".png"
+            t.write_text("a\n")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    # a SIGINT while the outputs are renamed waits until every one is in place
+    renamed = []
+    real_replace = os.replace
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        renamed.append(Path(dst).name)
+        if len(renamed) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # held back: no KeyboardInterrupt between the two renames
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_files((traj, "--out"), (fig, "--plot")) as (t, f):
+            t.write_text("a\n")
+            f.write_bytes(b"png")
+    assert renamed == ["traj.csv", "fig.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png", "traj.csv"]
+
+
 def test_atomic_dir_replaces_the_folder_whole(tmp_path):
     from rimless.output import atomic_dir
 

@@ -33,7 +33,8 @@ def walk_gait(
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Simulate `steps` steps from the fixed point, or from theta'+ = `theta_dot` rad/s (and theta+ =
-    `theta_plus_rad`, default -alpha/2) just after an impact; write the trajectory to `out`, the figure to `plot`.
+    `theta_plus_rad`, default -alpha/2) just after an impact; write the trajectory to `out`, the figure to `plot`
+    (both or neither: rimless.output.atomic_files).
 
     The summary's `failure` is the reason the walk ended early (None if it did not). progress(k): steps done."""
     import numpy as np
@@ -88,14 +89,20 @@ def walk_gait(
         forces=forces,
         progress=progress,
     )
-    if out is not None and traj.steps:  # no step, no file: the command fails with the reason
-        from rimless.sim.step.gait import write_trajectory
+    if traj.steps and (out is not None or plot is not None):  # no step, no file: the command fails with the reason
+        from rimless.output import atomic_files
 
-        write_trajectory(traj, out, {"start": start, "backend": backend, "rtol": rtol})
-    if plot is not None and traj.steps:
-        from rimless.sim.studies.figures import plot_gait, save_figure
+        # both under temporary names, renamed together at the end: a Ctrl-C while the figure is drawn leaves
+        # no trajectory behind (nor a figure without its trajectory)
+        with atomic_files((out, "--out"), (plot, "--plot")) as (out_tmp, plot_tmp):
+            if out_tmp is not None:
+                from rimless.sim.step.gait import write_trajectory
 
-        save_figure(plot_gait(traj, None, forces=forces), plot)
+                write_trajectory(traj, out_tmp, {"start": start, "backend": backend, "rtol": rtol})
+            if plot_tmp is not None:
+                from rimless.sim.studies.figures import plot_gait, save_figure
+
+                save_figure(plot_gait(traj, None, forces=forces), plot_tmp, option="--plot")
     return {
         "model": model,
         "slope_rad": params.slope_rad,
