@@ -134,18 +134,23 @@ def atomic_files(*targets: tuple[os.PathLike[str] | str | None, str | None]) -> 
 
 @contextlib.contextmanager
 def _sigint_held() -> Iterator[None]:
-    """Hold SIGINT back for the block (main thread only; elsewhere Python delivers no signal anyway)."""
+    """Hold a Ctrl-C back for the block: SIGINT only noted meanwhile, then sent again once the block is over
+    (main thread only; elsewhere Python raises no KeyboardInterrupt anyway). Not a signal mask: the signal may
+    be delivered to any thread of the process, and Python raises it in the main thread all the same."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    noted: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        signal.signal(signal.SIGINT, previous)
+        if noted and previous is not signal.SIG_IGN:
+            signal.raise_signal(signal.SIGINT)
 
 
 @contextlib.contextmanager

@@ -330,10 +330,15 @@ def test_atomic_files_renames_all_or_none(tmp_path, monkeypatch):
             os.kill(os.getpid(), signal.SIGINT)  # held back: no KeyboardInterrupt between the two renames
 
     monkeypatch.setattr(os, "replace", replace)
-    with pytest.raises(KeyboardInterrupt):
-        with atomic_files((traj, "--out"), (fig, "--plot")) as (t, f):
-            t.write_text("a\n")
-            f.write_bytes(b"png")
+    # Python's own handler, as in a terminal (a suite started in the background inherits SIGINT ignored)
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with atomic_files((traj, "--out"), (fig, "--plot")) as (t, f):
+                t.write_text("a\n")
+                f.write_bytes(b"png")
+    finally:
+        signal.signal(signal.SIGINT, before)
     assert renamed == ["traj.csv", "fig.png"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png", "traj.csv"]
 
