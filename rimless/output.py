@@ -122,7 +122,7 @@ def atomic_files(*targets: tuple[os.PathLike[str] | str | None, str | None]) -> 
             if not tmp.exists():
                 raise OutputFileError(f"{_where(target, option)}: nothing was written")
             os.chmod(tmp, 0o666 & ~_umask())
-        with _sigint_held():
+        with ctrl_c_held():
             for tmp, target, _option in written:
                 os.replace(tmp, target)
     except BaseException:
@@ -133,7 +133,7 @@ def atomic_files(*targets: tuple[os.PathLike[str] | str | None, str | None]) -> 
 
 
 @contextlib.contextmanager
-def _sigint_held() -> Iterator[None]:
+def ctrl_c_held() -> Iterator[None]:
     """Hold a Ctrl-C back for the block: SIGINT only noted meanwhile, then sent again once the block is over
     (main thread only; elsewhere Python raises no KeyboardInterrupt anyway). Not a signal mask: the signal may
     be delivered to any thread of the process, and Python raises it in the main thread all the same."""

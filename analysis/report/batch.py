@@ -3,7 +3,8 @@ parsed options, does the work with a progress bar on stderr, and returns what th
 
 `import_files` writes one ``<name>.trial.parquet`` per export and returns the JSON rows of ``trials import
 --json``; `run_report` compares the trials with the simulation and writes the report (whole or not at all: an
-interrupted run or one in which no trial could be compared leaves nothing behind); `run_demo` does that on the bundled SYNTHETIC trials.
+interrupted run or one in which no trial could be compared leaves nothing behind); `run_demo` does that on the
+bundled SYNTHETIC trials.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from rimless.analysis.io.vicon_csv import ViconCsvError
 from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
 from rimless.analysis.report.html import ReportResult, build_report
 from rimless.errors import OutputFileError, RunFailure, UserError
-from rimless.output import check_output_folder, writable_dir
+from rimless.output import check_output_folder, ctrl_c_held, writable_dir
 from rimless.progress import progress_bar
 
 __all__ = [
@@ -184,14 +185,16 @@ def run_report(
 ) -> ReportResult:
     """`build_report` with the ``model`` simulator and a progress bar, written whole or not at all.
 
-    The report is built in a temporary folder (in or beside ``out``) and its files are moved into ``out`` (created if
-    needed; other files there stay) only once it is complete: a Ctrl-C or an error leaves nothing behind, and
-    an earlier report in ``out`` stays until the new one replaces it. A folder or a missing input stops before
+    The report is built in a temporary folder (in or beside ``out``) and its files are moved into ``out``
+    (created if needed; other files there stay) only once it is complete, with a Ctrl-C held back while they
+    are: a Ctrl-C or an error leaves nothing behind, and an earlier report in ``out`` stays until the new one
+    replaces it. A folder or a missing input stops before
     any work (`UserError`). When no trial could be compared (every input refused or its comparison failed)
     nothing is written: a `UserError` with the first refusal when an input was refused, else a `RunFailure`
     with the first failure."""
     check_inputs(files)
     out = Path(out)
+    out_is_new = not out.exists()
     building, created = _report_draft(out)
     try:
         with progress_bar("simulator", total=len(files), json_out=json_out) as bar:
@@ -217,8 +220,9 @@ def run_report(
         _move_report(res, building, out)
     except BaseException:
         shutil.rmtree(building, ignore_errors=True)
-        if created is not None:
-            shutil.rmtree(created, ignore_errors=True)
+        for folder in (out if out_is_new else None, created):
+            if folder is not None:
+                shutil.rmtree(folder, ignore_errors=True)
         raise
     shutil.rmtree(building, ignore_errors=True)
     return res
@@ -271,8 +275,9 @@ def _move_report(res: ReportResult, building: Path, out: Path) -> None:
         if (out / item.name).is_dir() and not item.is_dir():
             raise OutputFileError(f"--out {out}: {out / item.name} is a folder, the report writes a file there")
     # the page last: until it is replaced, an earlier report.html still finds its own figures' names
-    for item in sorted(building.iterdir(), key=lambda p: p == res.report_html):
-        os.replace(item, out / item.name)
+    with ctrl_c_held():
+        for item in sorted(building.iterdir(), key=lambda p: p == res.report_html):
+            os.replace(item, out / item.name)
 
     def moved(p: Path) -> Path:
         return out / p.name if p.parent == building else p
