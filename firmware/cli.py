@@ -513,7 +513,8 @@ def listen(
         typer.Option(
             "--timeout-s",
             min=0.0,
-            help="Exit 1 (files completed) when no datagram arrives for this long (s); 0 = wait forever.",
+            help="Exit 1 when no datagram arrives for this long (s): no file written if none arrived, else the "
+            "recording up to then; 0 = wait forever.",
         ),
     ] = 10.0,
     robot: Annotated[

@@ -81,14 +81,20 @@ def command_tree() -> click.Command:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the `rimless` console script."""
+    from rimless.cli_rules import commit_result, committed_result
+
     try:
         app(args=argv, prog_name="rimless")
     except KeyboardInterrupt:
+        code = committed_result()
+        if code is not None:  # it came after the result was complete: not an interrupt of the command
+            raise SystemExit(code) from None
         typer.echo("interrupted", err=True)
         _leave_interrupted()
     except SystemExit as done:
         if done.code == EXIT_INTERRUPTED:
             _leave_interrupted()
+        commit_result(EXIT_OK if done.code is None else done.code if isinstance(done.code, int) else EXIT_FAILURE)
         raise
 
 

@@ -5,6 +5,9 @@ command modules can import them without importing the whole command tree.
   the option and exits 2; so does a `UserError` raised by a command, or an `OSError` naming a file;
 - a `RunFailure` (valid input, no result) prints one line and exits 1;
 - Ctrl-C (KeyboardInterrupt, also when numba wraps it in a SystemError) prints `interrupted` and exits 130;
+  once the command's result (or its `error:` line) is complete it is committed (`commit_result`): a Ctrl-C
+  after that no longer interrupts it (the `rimless` entry point then ignores SIGINT for the interpreter's
+  teardown, rimless.__main__);
 - a negative number is read as a value, not as an option (`robot set touch_velocity_m_s -3`);
 - `--help` shows upper-case metavars (`FLOAT`, `PATH`, `[er|ve]`), none on flags, and prints help text
   literally (square brackets are not rich markup).
@@ -76,11 +79,43 @@ def _jsonable(obj: Any) -> Any:
     return obj
 
 
+# ------------------------------------------------------------------------------------------ the end of a run
+
+_committed: list[int] = []  # the exit code of the run whose result is complete (empty while it runs)
+_after_result: list[Callable[[int], None]] = []  # what the entry point does then (rimless.__main__)
+
+
+def commit_result(code: int) -> None:
+    """Record that the run's result is complete (printed, outputs renamed into place), to exit with `code`:
+    from here a Ctrl-C is not an interrupt of the command. Calls the hooks of `after_result` once."""
+    if _committed:
+        return
+    _committed.append(code)
+    for hook in _after_result:
+        hook(code)
+
+
+def committed_result() -> int | None:
+    """The exit code of the committed result, or None while the command still runs."""
+    return _committed[0] if _committed else None
+
+
+def after_result(hook: Callable[[int], None]) -> None:
+    """Call `hook(code)` when the result is committed (the entry point installs its SIGINT policy here)."""
+    _after_result.append(hook)
+
+
+def start_run() -> None:
+    """A new run in this process (the root group parses its command line): nothing committed yet."""
+    _committed.clear()
+
+
 # ------------------------------------------------------------------------------------------ the rules
 
 
 def _error(message: str, code: int) -> NoReturn:
     typer.echo(f"error: {_one_line(message)}", err=True)
+    commit_result(code)  # the error line is the run's result
     raise typer.Exit(code)
 
 
@@ -193,12 +228,17 @@ class RimlessGroup(TyperGroup):
             _adapt_command(command)
 
     def make_context(self, info_name: str | None, args: list[str], parent: Any = None, **extra: Any) -> Any:
+        if parent is None:
+            start_run()
         with _rules():
             return super().make_context(info_name, args, parent=parent, **extra)
 
     def invoke(self, ctx: click.Context) -> Any:
         with _rules():
-            return super().invoke(ctx)
+            result = super().invoke(ctx)
+        if ctx.parent is None:  # the command returned: its result is complete
+            commit_result(EXIT_OK)
+        return result
 
 
 def walk_commands(root: click.Command) -> Iterator[click.Command]:

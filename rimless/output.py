@@ -95,6 +95,65 @@ def atomic_file(target: os.PathLike[str] | str, *, option: str | None = None) ->
 
 
 @contextlib.contextmanager
+def atomic_files(*targets: tuple[os.PathLike[str] | str | None, str | None]) -> Iterator[list[Path | None]]:
+    """Several outputs of one command, all or none: `targets` are (path or None, option) pairs; yield one
+    temporary path per target (same folder and suffix; None for a None target).
+
+    When the block ends, every temporary is renamed onto its target with SIGINT held back (in the main thread),
+    so a Ctrl-C never leaves some outputs renamed and others not: one arriving meanwhile is delivered once all
+    are in place. If the block raises (a Ctrl-C included), every temporary is removed and no target changes.
+    """
+    planned: list[tuple[Path, Path, str | None] | None] = []
+    try:
+        for target, option in targets:
+            if target is None:
+                planned.append(None)
+                continue
+            target = Path(target)
+            if target.is_dir():
+                raise OutputFileError(f"{_where(target, option)}: is a folder, expected a file name")
+            parent = _prepare_parent(target, option)
+            fd, name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".part{target.suffix}", dir=parent)
+            os.close(fd)
+            planned.append((Path(name), target, option))
+        yield [None if p is None else p[0] for p in planned]
+        written = [p for p in planned if p is not None]
+        for tmp, target, option in written:
+            if not tmp.exists():
+                raise OutputFileError(f"{_where(target, option)}: nothing was written")
+            os.chmod(tmp, 0o666 & ~_umask())
+        with ctrl_c_held():
+            for tmp, target, _option in written:
+                os.replace(tmp, target)
+    except BaseException:
+        for p in planned:
+            if p is not None:
+                p[0].unlink(missing_ok=True)
+        raise
+
+
+@contextlib.contextmanager
+def ctrl_c_held() -> Iterator[None]:
+    """Hold a Ctrl-C back for the block: SIGINT only noted meanwhile, then sent again once the block is over
+    (main thread only; elsewhere Python raises no KeyboardInterrupt anyway). Not a signal mask: the signal may
+    be delivered to any thread of the process, and Python raises it in the main thread all the same."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    noted: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if noted and previous is not signal.SIG_IGN:
+            signal.raise_signal(signal.SIGINT)
+
+
+@contextlib.contextmanager
 def atomic_dir(target: os.PathLike[str] | str, *, option: str | None = None) -> Iterator[Path]:
     """Yield a temporary folder beside `target`; when the block ends it replaces `target` as a whole.
 

@@ -1,7 +1,7 @@
 """A progress bar on stderr for work longer than about two seconds.
 
 Quiet when stderr is not a terminal (pipes, CI, tests) or when the command prints `--json`, so stdout
-stays clean and logs stay readable. `spinner(...)` is for library work that cannot count its progress and does
+stays clean and logs stay readable (a `spinner` may print one plain line there instead). `spinner(...)` is for library work that cannot count its progress and does
 not know the command's options (compiling the simulator on first use): it infers `--json` from the command line
 and, inside a command's bar, shows its text in that bar instead of opening a second display.
 """
@@ -83,16 +83,31 @@ def progress_bar(description: str, total: float | None = None, *, json_out: bool
             _ACTIVE.remove(bar)
 
 
+# room for a spinner's text on an 80-column line: the spinner, two spaces and the elapsed time (0:00:00) beside it
+SPINNER_TEXT_WIDTH = 80 - 12
+
+
+def _fit(text: str, width: int = SPINNER_TEXT_WIDTH) -> str:
+    """`text` cut to `width` characters (an ellipsis last), so that the columns after it stay on the line."""
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
 @contextlib.contextmanager
-def spinner(description: str, done: str | None = None) -> Iterator[bool]:
+def spinner(description: str, done: str | None = None, *, plain: str | None = None) -> Iterator[bool]:
     """A spinner with the elapsed time on stderr while the block runs, then `done` (if given, with the seconds
-    appended) as one line; quiet like progress_bar, and for `--json` on the command line. Inside an open
-    progress bar the description is shown in that bar. Yields whether anything is shown."""
+    appended) as one line; inside an open progress bar the description is shown in that bar. The description
+    is cut to fit 80 columns with the elapsed time (SPINNER_TEXT_WIDTH). Where no spinner is drawn (stderr not
+    a terminal, or `--json` on the command line), `plain` (if given) is printed as one line on stderr instead,
+    before the work: a pipe, a log or a notebook still learns why the command is silent. Yields whether the
+    spinner is shown."""
     import time
 
     if not progress_is_shown(json_requested()):
+        if plain:
+            print(plain, file=sys.stderr, flush=True)
         yield False
         return
+    description = _fit(description)
     t0 = time.perf_counter()
     if _ACTIVE:
         outer = _ACTIVE[-1]

@@ -306,6 +306,43 @@ def test_atomic_file_appears_only_when_complete(tmp_path):
     assert sorted(p.name for p in target.parent.iterdir()) == ["traj.csv"]
 
 
+def test_atomic_files_renames_all_or_none(tmp_path, monkeypatch):
+    import os
+    from pathlib import Path
+
+    from rimless.output import atomic_files
+
+    traj, fig = tmp_path / "traj.csv", tmp_path / "fig.png"
+    with pytest.raises(KeyboardInterrupt):  # interrupted after the first output was written: neither appears
+        with atomic_files((traj, "--out"), (None, "--json"), (fig, "--plot")) as (t, none, f):
+            assert none is None and t.suffix == ".csv" and f.suffix == ".png"
+            t.write_text("a\n")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    # a SIGINT while the outputs are renamed waits until every one is in place
+    renamed = []
+    real_replace = os.replace
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        renamed.append(Path(dst).name)
+        if len(renamed) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # held back: no KeyboardInterrupt between the two renames
+
+    monkeypatch.setattr(os, "replace", replace)
+    # Python's own handler, as in a terminal (a suite started in the background inherits SIGINT ignored)
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with atomic_files((traj, "--out"), (fig, "--plot")) as (t, f):
+                t.write_text("a\n")
+                f.write_bytes(b"png")
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert renamed == ["traj.csv", "fig.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png", "traj.csv"]
+
+
 def test_atomic_dir_replaces_the_folder_whole(tmp_path):
     from rimless.output import atomic_dir
 
@@ -407,6 +444,10 @@ if sys.argv[1] == "main":
         main()
     except SystemExit:
         pass
+    # the entry point ignores Ctrl-C once its result is complete (the interpreter's teardown follows); this
+    # script runs on as a command would, with the entry point's unraisable hook still installed
+    import signal
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 class Referent:
     pass
 def callback(ref):
@@ -453,3 +494,92 @@ def test_other_exceptions_python_drops_still_reach_the_hook_before():
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.stdout.strip() == "ran on" and "ValueError: from __del__" in res.stderr
+
+
+# The `rimless` entry point with a stop that waits for the test's SIGINT after the command's result: as click
+# closes the root context (the command has returned), or as the interpreter tears the modules down (Python has
+# put SIGINT back to its default there unless it is ignored).
+CTRL_C_AFTER_THE_RESULT = """
+import sys
+
+WHEN = sys.argv.pop(1)
+
+
+def wait_for_the_signal():
+    print(WHEN, file=sys.stderr, flush=True)
+    sys.stdin.readline()  # the test sends SIGINT, then this line
+
+
+if WHEN == "closing":
+    from typer import _click
+
+    close = _click.Context.close
+
+    def closing(self):
+        if self.parent is None:
+            wait_for_the_signal()
+        close(self)
+
+    _click.Context.close = closing
+else:
+
+    class Last:
+        def __del__(self):
+            wait_for_the_signal()
+
+    last = Last()  # deleted with this module's globals, late in the interpreter's teardown
+
+from rimless.__main__ import main
+
+sys.argv = ["rimless", *sys.argv[1:]]
+main()
+"""
+
+
+@pytest.mark.parametrize(
+    ("when", "args", "code"),
+    [
+        ("closing", ["trials", "import", "SYNTHETIC_er_slope1.5deg_run1.csv", "--out", "imp", "--json"], 0),
+        ("finalizing", ["trials", "import", "SYNTHETIC_er_slope1.5deg_run1.csv", "--out", "imp", "--json"], 0),
+        ("finalizing", ["sim", "gait", "--model", "xx"], 2),
+    ],
+)
+def test_a_ctrl_c_after_the_result_neither_interrupts_nor_kills(when, args, code, tmp_path):
+    """Once the result is printed and the outputs are complete, a Ctrl-C is not reported `interrupted` (it was,
+    as click closed its context: exit 130 after the JSON) and does not kill the process by the signal (it did
+    in the teardown: exit -2, nothing said); the run ends with its own exit code."""
+    import shutil
+
+    from rimless.analysis.examples.bundled import data_files
+
+    shutil.copy(next(f for f in data_files() if f.name == "SYNTHETIC_er_slope1.5deg_run1.csv"), tmp_path)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CTRL_C_AFTER_THE_RESULT, when, *args],
+        cwd=tmp_path,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        assert proc.stderr is not None
+        before = []
+        for line in proc.stderr:
+            if line.strip() == when:
+                break
+            before.append(line)
+        else:
+            raise AssertionError("".join(before))
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate("go\n", timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == code, f"exit {proc.returncode}: {before} {stderr}"
+    assert stderr == "", stderr  # nothing after the stop: no `interrupted`, no traceback
+    if code == 0:
+        assert json.loads(stdout)[0]["status"] == "imported" and (tmp_path / "imp").is_dir()
+    else:
+        assert [line for line in before if line.strip()] == ["error: --model must be one of er, ve, got 'xx'\n"]

@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import pytest
 
@@ -173,3 +174,60 @@ def test_loop_vectoriser_off_unless_the_environment_says(given: str | None) -> N
     res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
     assert res.stdout.split() == (["0", "0"] if given is None else ["1", "1"])
+
+
+def _cold_kernel(tmp_path: Path, name: str = "run_phase_0") -> Any:
+    """A stand-in for a numba kernel that is neither compiled in this process nor in the on-disk cache."""
+
+    def body(*args):
+        return 42
+
+    body.__name__ = name
+
+    class Cold(SimpleNamespace):
+        def __call__(self, *args):
+            return self.py_func(*args)
+
+    folder = tmp_path / "a-long-cache-folder" / "numba" / "rimless" / "sim" / "fast"
+    return Cold(
+        signatures=[],
+        py_func=body,
+        _cache=SimpleNamespace(
+            _cache_path=str(folder), _cache_file=SimpleNamespace(_index_path=str(folder / "none.nbi"))
+        ),
+    )
+
+
+@pytest.mark.parametrize("where", ["pipe", "terminal with --json"])
+def test_a_cold_compile_says_so_in_one_plain_line_where_no_spinner_is_drawn(
+    where: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Fails before: a redirected run (a log, a notebook) or one with --json was silent through the whole compile."""
+    from rimless.sim.fast import compiling
+
+    monkeypatch.setattr(compiling, "_told", False)
+    err = io.StringIO() if where == "pipe" else _Terminal()
+    monkeypatch.setattr(sys, "stderr", err)
+    monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"] + (["--json"] if "json" in where else []))
+    assert compiling.call_compiling(_cold_kernel(tmp_path, "step_map_contact_0"), 1) == 42
+    assert compiling.call_compiling(_cold_kernel(tmp_path, "run_phase_0"), 2) == 42  # once per process
+    assert err.getvalue() == "rimless: compiling the simulator (first use, about a minute)...\n"
+
+
+def test_the_compile_spinner_keeps_its_elapsed_time_on_an_80_column_line(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Fails before: the kernel's name and its cache folder in the text pushed the elapsed time off the line."""
+    from rimless.sim.fast import compiling
+
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"])
+    assert compiling.call_compiling(_cold_kernel(tmp_path, "step_map_contact_0"), 1) == 42
+    drawn = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", term.getvalue()).replace("\r", "\n").splitlines()
+    spinner_lines = [line for line in drawn if "compiling the simulator" in line]
+    assert spinner_lines, drawn
+    for line in spinner_lines:
+        assert len(line) <= 80 and re.search(r"\d:\d\d:\d\d$", line.rstrip()), repr(line)
+    assert re.search(r"compiled the simulator \(step_map_contact_0\) \(\d+ s\)\n$", term.getvalue())  # then

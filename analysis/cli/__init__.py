@@ -383,9 +383,10 @@ def report_cmd(
 ) -> None:
     """Compare trials with the simulation and write an HTML report.
 
-    Exit 2 if an input was refused, 1 if no trial could be compared.
+    Exit 2 if an input was refused, 1 if no trial could be compared (no report written) or every compared trial
+    is suspect (the report is kept and named).
     """
-    from rimless.analysis.report.batch import run_report
+    from rimless.analysis.report.batch import run_report, shown_path
 
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
@@ -399,8 +400,12 @@ def report_cmd(
     _print_report(res, model, json_out)
     if res.refused:
         raise typer.Exit(EXIT_REFUSED)
-    if not any(c.status == "ok" for c in res.comparisons):
-        fail(f"no trial could be compared with the simulation ({len(res.comparisons)} failed; reasons above)")
+    if not any(c.status == "ok" for c in res.comparisons):  # every compared trial suspect (run_report raised
+        # when none could be compared): the report is kept, it shows the misfit and c calibrated on the trials
+        fail(
+            f"no trial agrees with the {model.upper()} simulation ({len(res.comparisons)} suspect or failed; reasons "
+            f"above); the report is kept for the misfit: {shown_path(res.report_html)}"
+        )
 
 
 def demo_cmd(

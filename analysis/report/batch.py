@@ -2,8 +2,9 @@
 parsed options, does the work with a progress bar on stderr, and returns what the command prints.
 
 `import_files` writes one ``<name>.trial.parquet`` per export and returns the JSON rows of ``trials import
---json``; `run_report` compares the trials with the simulation and writes the report (an interrupted run that
-created its folder removes it); `run_demo` does that on the bundled SYNTHETIC trials.
+--json``; `run_report` compares the trials with the simulation and writes the report (whole or not at all: an
+interrupted run or one in which no trial could be compared leaves nothing behind); `run_demo` does that on the
+bundled SYNTHETIC trials.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from rimless.analysis.io.trial import slope_ci_deg
 from rimless.analysis.io.vicon_csv import ViconCsvError
 from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
 from rimless.analysis.report.html import ReportResult, build_report
-from rimless.errors import UserError, interrupted_by_user
-from rimless.output import check_output_folder, writable_dir
+from rimless.errors import OutputFileError, RunFailure, UserError
+from rimless.output import check_output_folder, ctrl_c_held, writable_dir
 from rimless.progress import progress_bar
 
 __all__ = [
@@ -184,12 +185,19 @@ def run_report(
     **report_kwargs: Any,
 ) -> ReportResult:
     """`build_report` with the ``model`` simulator at ``params`` (WheelParams, default Table 1; the slope is each
-    trial's) and a progress bar; Ctrl-C removes a folder it created.
+    trial's) and a progress bar, written whole or not at all.
 
-    A folder or a missing input stops before any work (`UserError`); when every input is refused, a
-    `UserError` with the first refusal (and no report folder left behind if this run created it)."""
+    The report is built in a temporary folder (in or beside ``out``) and its files are moved into ``out``
+    (created if needed; other files there stay) only once it is complete, with a Ctrl-C held back while they
+    are: a Ctrl-C or an error leaves nothing behind, and an earlier report in ``out`` stays until the new one
+    replaces it. A folder or a missing input stops before
+    any work (`UserError`). When no trial could be compared (every input refused or its comparison failed)
+    nothing is written: a `UserError` with the first refusal when an input was refused, else a `RunFailure`
+    with the first failure."""
     check_inputs(files)
-    out_is_new = not Path(out).exists()
+    out = Path(out)
+    out_is_new = not out.exists()
+    building, created = _report_draft(out)
     try:
         with progress_bar("simulator", total=len(files), json_out=json_out) as bar:
             sim = Simulator(model=model, params=params)
@@ -201,7 +209,7 @@ def run_report(
 
             res = build_report(
                 files,
-                out,
+                building,
                 sim=sim,
                 import_kwargs=import_kwargs,
                 slope_bin_deg=slope_bin_deg,
@@ -210,16 +218,76 @@ def run_report(
                 progress=step,
                 **report_kwargs,
             )
-    except BaseException as err:
-        if out_is_new and interrupted_by_user(err):  # an interrupted report leaves no half-filled folder behind
-            shutil.rmtree(out, ignore_errors=True)
+        _no_result(res)
+        _move_report(res, building, out)
+    except BaseException:
+        shutil.rmtree(building, ignore_errors=True)
+        for folder in (out if out_is_new else None, created):
+            if folder is not None:
+                shutil.rmtree(folder, ignore_errors=True)
         raise
-    if res.refused and not res.comparisons:  # nothing could be read: one error, no empty report left behind
-        if out_is_new:
-            shutil.rmtree(out, ignore_errors=True)
+    shutil.rmtree(building, ignore_errors=True)
+    return res
+
+
+def _report_draft(out: Path) -> tuple[Path, Path | None]:
+    """A new temporary folder for the report (hidden, ``.NAME.*.part``: inside ``out`` when it exists, else
+    beside it) and the first folder that had to be created for it (None when none was): removed again if the
+    report fails."""
+    import tempfile
+
+    if out.exists() and not out.is_dir():
+        raise OutputFileError(f"--out {out}: exists and is not a folder")
+    parent = out if out.is_dir() else (out.parent if str(out.parent) else Path("."))
+    created = None
+    probe = parent
+    while not probe.exists() and probe != probe.parent:
+        created, probe = probe, probe.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=f".{out.name or 'report'}.", suffix=".part", dir=parent)), created
+    except OSError as err:
+        if created is not None:
+            shutil.rmtree(created, ignore_errors=True)
+        raise OutputFileError(f"--out {out}: cannot create the folder ({err.strerror or err})") from None
+
+
+def _no_result(res: ReportResult) -> None:
+    """Raise when no trial could be compared: the first refusal (`UserError`) or the first failure (`RunFailure`)."""
+    if any(c.status in ("ok", "suspect") for c in res.comparisons):
+        return
+    if res.refused:  # nothing could be read: one error, no empty report left behind
         more = f" (and {len(res.refused) - 1} more input(s) refused)" if len(res.refused) > 1 else ""
         raise UserError(f"{res.refused[0].reason}{more}")
-    return res
+    failed = [c for c in res.comparisons if c.status == "failed"]
+    first = f": {shown_path(failed[0].file)}: {failed[0].message}" if failed else ""
+    more = f" (and {len(failed) - 1} more failed)" if len(failed) > 1 else ""
+    raise RunFailure(f"no trial could be compared with the simulation{first}{more}; no report written")
+
+
+def _move_report(res: ReportResult, building: Path, out: Path) -> None:
+    """Move the complete report's files from ``building`` into ``out`` and point ``res`` at them there."""
+    import os
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputFileError(f"--out {out}: cannot create the folder ({err.strerror or err})") from None
+    for item in sorted(building.iterdir()):
+        if (out / item.name).is_dir() and not item.is_dir():
+            raise OutputFileError(f"--out {out}: {out / item.name} is a folder, the report writes a file there")
+    # the page last: until it is replaced, an earlier report.html still finds its own figures' names
+    with ctrl_c_held():
+        for item in sorted(building.iterdir(), key=lambda p: p == res.report_html):
+            os.replace(item, out / item.name)
+
+    def moved(p: Path) -> Path:
+        return out / p.name if p.parent == building else p
+
+    res.out_dir = out
+    res.report_html = moved(res.report_html)
+    res.metrics_csv = moved(res.metrics_csv)
+    res.figures = [moved(p) for p in res.figures]
 
 
 def robot_log_pairs(specs: Sequence[str], trials: Sequence[Path]) -> dict[str, Path]:

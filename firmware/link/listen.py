@@ -2,7 +2,7 @@
 
 Records every object as one JSON line (`out`), the samples and events as CSV rows (`csv_out`) and as
 MCAP messages, one topic per series (`mcap_out`, see `mcap_record`); each file is written under a `.part`
-name and renamed when the recording ends. In a terminal the live view
+name and renamed when the recording ends (removed instead when it gave up on a robot that never sent). In a terminal the live view
 redraws sparklines of leg velocity and compression and a strip per clutch; elsewhere it prints a
 summary line every `summary_every_s`. When no datagram arrives for `stale_s`, it says so once, and
 again when data resume. With a `heartbeat`, the command link is kept alive meanwhile.
@@ -200,8 +200,13 @@ class Recorder:
             self._abandon()
             raise
 
+    def discard(self) -> None:
+        """Close and remove every `.part` file: a recording that holds nothing leaves no file behind."""
+        self._mcap = None
+        self._abandon()
+
     def _abandon(self) -> None:
-        """Close and remove the `.part` files of a recording that could not start."""
+        """Close and remove the `.part` files of a recording that could not start (or holds nothing)."""
         for fh in (self._jsonl, self._csv_fh, self._mcap_fh):
             if fh is not None:
                 fh.close()
@@ -280,8 +285,9 @@ def listen(
     """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
 
     Until the first datagram the summary line says what it waits for instead of counting zero samples. When
-    nothing arrives for `timeout_s` (0: wait forever), the files are completed and `RunFailure` says that no
-    robot is sending (the command exits 1).
+    nothing arrives for `timeout_s` (0: wait forever), `RunFailure` says that no robot is sending (the command
+    exits 1): if no datagram arrived at all, no file is left behind; if the robot stopped sending, the files are
+    completed (the recording up to then) and the message names them.
 
     Only one sender is the robot: `robot` (a host name or address), else the first sender heard; datagrams
     from any other are counted (`foreign`) and ignored. Gaps in the objects' `tseq` and the events'
@@ -370,7 +376,11 @@ def listen(
             heartbeat.stop()
             if hb_thread is not None:
                 hb_thread.join(2.0)
-        paths = rec.close()
+        if silent_for is not None and last_data is None:  # nothing heard: a run without a result leaves no file
+            rec.discard()
+            paths = []
+        else:
+            paths = rec.close()
     if last_data is not None or silent_for is None:
         echo(summary.line(time.monotonic(), summary_every_s))
     if summary.lost_objects:
@@ -384,8 +394,14 @@ def listen(
         raise stopped_by  # after the files are complete: the caller exits 130
     if silent_for is not None:
         what = "no robot is sending telemetry" if last_data is None else "the robot stopped sending telemetry"
+        kept = (
+            "nothing recorded"
+            if last_data is None
+            else (f"the recording up to then is kept ({', '.join(str(p) for p in paths)})" if paths else "")
+        )
         raise RunFailure(
             f"{what} to {bind}:{port}: nothing for {silent_for:.1f} s (--timeout-s {timeout_s:g}); "
             "is this PC in the robot's [telemetry] destinations (or `robot run --telemetry`)?"
+            + (f" ({kept})" if kept else "")
         )
     return summary

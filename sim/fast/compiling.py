@@ -1,6 +1,6 @@
 """Calling a compiled kernel on first use: say on stderr that it is being compiled (a spinner with the elapsed
-time, quiet when stderr is not a terminal or with --json) when it is neither compiled in this process nor in
-numba's on-disk cache; otherwise just call it.
+time; one plain line, once per process, when stderr is not a terminal or with --json) when it is neither
+compiled in this process nor in numba's on-disk cache; otherwise just call it.
 
 `kernel` is the decorator of the compiled kernels (numba.njit(cache=True) with one difference, see there).
 Importing this module also makes numba's on-disk cache safe for processes that compile at the same time
@@ -112,6 +112,12 @@ def is_cached(kernel: Any) -> bool:
         return True  # another numba: say nothing rather than something wrong
 
 
+# what a first use costs, as the notice says it (docs/performance.md: 25-45 s on a quiet 2-core machine, more
+# when the machine is busy)
+COMPILE_TIME = "about a minute"
+_told = False  # the plain notice (no terminal, or --json) was printed in this process: once is enough
+
+
 def call_compiling(kernel: Any, *args: Any, ahead: Any = None) -> Any:
     """kernel(*args), announced on stderr while it compiles on first use. ``ahead``: a context manager
     factory entered around that first compile only (`rimless.sim.fast.ahead.compiling_ahead`)."""
@@ -122,11 +128,15 @@ def call_compiling(kernel: Any, *args: Any, ahead: Any = None) -> Any:
     else:
         from rimless.progress import spinner
 
+        global _told
         name = kernel.py_func.__name__
+        plain = None if _told else f"rimless: compiling the simulator (first use, {COMPILE_TIME})..."
+        _told = True
         with (
             spinner(
-                f"compiling the simulator ({name}; first use only, cached in {cache_folder(kernel)})",
+                f"compiling the simulator (first use, {COMPILE_TIME})",
                 done=f"compiled the simulator ({name})",
+                plain=plain,
             ),
             ahead() if ahead is not None else nullcontext(),
         ):

@@ -158,15 +158,15 @@ def write_trajectory(traj: GaitTrajectory, path, extra: dict | None = None) -> N
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from rimless.output import atomic_file
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
     frame = traj.to_frame()
-    if path.suffix.lower() == ".parquet":
-        table = pa.Table.from_pandas(frame, preserve_index=False)
-        meta = dict(table.schema.metadata or {})
-        meta[b"rimless"] = json.dumps(trajectory_metadata(traj, extra)).encode()
-        pq.write_table(table.replace_schema_metadata(meta), tmp)
-    else:
-        frame.to_csv(tmp, index=False)
-    tmp.replace(path)
+    with atomic_file(path) as tmp:  # an interrupted write leaves neither the file nor its temporary
+        if path.suffix.lower() == ".parquet":
+            table = pa.Table.from_pandas(frame, preserve_index=False)
+            meta = dict(table.schema.metadata or {})
+            meta[b"rimless"] = json.dumps(trajectory_metadata(traj, extra)).encode()
+            pq.write_table(table.replace_schema_metadata(meta), tmp)
+        else:
+            frame.to_csv(tmp, index=False)

@@ -583,6 +583,18 @@ def parse_grid(params: Any, texts: dict[str, str | None]) -> dict[str, list[floa
     return grid
 
 
+def _no_gait_anywhere(rows: list[dict[str, Any]], options: SweepOptions) -> str:
+    """The one-line reason of a sweep in which no grid point has a gait (every row is a `no-gait` row)."""
+    details = list(dict.fromkeys(str(r.get("detail") or "no period-1 gait found") for r in rows))
+    more = f" (and {len(details) - 2} other reasons)" if len(details) > 2 else ""
+    n = len(rows)
+    return (
+        f"no period-1 gait at any of the {n} grid point{'s' if n != 1 else ''} at the start slope "
+        f"{math.degrees(options.start_slope_rad):.4f} deg ({options.start_slope_rad:g} rad, "
+        f"{options.n_guesses} guesses): {'; '.join(details[:2])}{more}"
+    )
+
+
 def branch_sweep(
     params: Any,
     *,
@@ -598,7 +610,9 @@ def branch_sweep(
     power: Any = None,
 ) -> dict[str, Any]:
     """`rimless sim sweep`: every grid point's branches (run_sweep), written as `out`.parquet/.csv and
-    `out`-points.parquet/.csv; returns the command's JSON object. An empty grid sweeps the wheel's own k."""
+    `out`-points.parquet/.csv; returns the command's JSON object. An empty grid sweeps the wheel's own k.
+    A grid on which no point has a gait is a RunFailure (no file written); points without one, among points
+    with gaits, are `no-gait` rows."""
     from rimless.errors import RunFailure
     from rimless.output import check_output_folder, writable_dir
 
@@ -621,6 +635,8 @@ def branch_sweep(
     }
     if not res.rows:
         raise RunFailure("the sweep produced no rows")
+    if all(r.get("reason") == "no-gait" for r in res.rows):  # nothing to tabulate: no table is written
+        raise RunFailure(_no_gait_anywhere(res.rows, options))
     from rimless.sim.model.electrical import ClutchPower
     from rimless.sim.studies.system_cot import sweep_system_cot
 

@@ -32,7 +32,8 @@ def walk_gait(
     rtol: float = 1e-10,
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
-    """`simulate_walk`, then the trajectory written to `out` and the figure to `plot` (`rimless sim gait`).
+    """`simulate_walk`, then the trajectory written to `out` and the figure to `plot` (`rimless sim gait`): both or
+    neither (rimless.output.atomic_files).
 
     The summary's `failure` is the reason the walk ended early (None if it did not). progress(k): steps done."""
     from rimless.output import check_output_folder
@@ -58,14 +59,20 @@ def walk_gait(
         rtol=rtol,
         progress=progress,
     )
-    if out is not None and traj.steps:  # no step, no file: the command fails with the reason
-        from rimless.sim.step.gait import write_trajectory
+    if traj.steps and (out is not None or plot is not None):  # no step, no file: the command fails with the reason
+        from rimless.output import atomic_files
 
-        write_trajectory(traj, out, {"start": summary["start"], "backend": backend, "rtol": rtol})
-    if plot is not None and traj.steps:
-        from rimless.sim.studies.figures import plot_gait, save_figure
+        # both under temporary names, renamed together at the end: a Ctrl-C while the figure is drawn leaves
+        # no trajectory behind (nor a figure without its trajectory)
+        with atomic_files((out, "--out"), (plot, "--plot")) as (out_tmp, plot_tmp):
+            if out_tmp is not None:
+                from rimless.sim.step.gait import write_trajectory
 
-        save_figure(plot_gait(traj, None, forces=forces), plot)
+                write_trajectory(traj, out_tmp, {"start": summary["start"], "backend": backend, "rtol": rtol})
+            if plot_tmp is not None:
+                from rimless.sim.studies.figures import plot_gait, save_figure
+
+                save_figure(plot_gait(traj, None, forces=forces), plot_tmp, option="--plot")
     summary["out"] = str(out) if out and traj.steps else None
     summary["plot"] = str(plot) if plot and traj.steps else None
     return summary

@@ -150,9 +150,23 @@ def test_report_exits_nonzero_when_no_trial_can_be_compared(tmp_path):
     p = write_tracker_csv(
         tmp_path / "short.csv", rate_hz=w.rate_hz, markers={f"wheel:M{i}": w.markers_m[:, i] for i in range(4)}
     )
-    res = runner.invoke(app, ["report", str(p), "--out", str(tmp_path / "rep")])
-    assert res.exit_code == 1
-    assert "no trial could be compared" in res.output
+    before = set(tmp_path.iterdir())
+    for out in (tmp_path / "rep", tmp_path / "new" / "rep"):
+        res = runner.invoke(app, ["report", str(p), "--out", str(out)])
+        assert res.exit_code == 1, res.output
+        lines = res.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: no trial could be compared"), lines
+        assert "short.csv: no steps detected" in lines[0] and "no report written" in lines[0]
+        assert res.stdout.strip() == ""
+        assert set(tmp_path.iterdir()) == before  # no report folder, no empty one, no temporary
+    # into a folder that holds an earlier report and other files: they stay as they were
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "report.html").write_text("the earlier report")
+    (kept / "notes.txt").write_text("mine")
+    res = runner.invoke(app, ["report", str(p), "--out", str(kept), "--json"])
+    assert res.exit_code == 1 and res.stdout.strip() == ""
+    assert {q.name: q.read_text() for q in kept.iterdir()} == {"report.html": "the earlier report", "notes.txt": "mine"}
 
 
 def test_show_on_a_folder_is_a_user_error(tmp_path):

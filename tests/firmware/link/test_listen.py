@@ -29,7 +29,8 @@ def test_live_view_draws_velocity_compression_and_one_strip_per_clutch() -> None
 
 
 def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) -> None:
-    """Fails on today's main: `robot listen` with nobody sending printed "0 samples" lines forever."""
+    """Fails on today's main: `robot listen` with nobody sending printed "0 samples" lines forever (and then,
+    once it gave up, left empty recordings behind)."""
     import subprocess
     import sys
     from pathlib import Path
@@ -53,6 +54,10 @@ def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) ->
             "1",
             "--out",
             str(out),
+            "--csv",
+            str(tmp_path / "tel.csv"),
+            "--mcap",
+            str(tmp_path / "tel.mcap"),
         ],
         capture_output=True,
         text=True,
@@ -61,8 +66,11 @@ def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) ->
     assert proc.returncode == 1, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert lines[-1].startswith("error: no robot is sending telemetry") and "--timeout-s 1" in lines[-1]
+    assert "nothing recorded" in lines[-1]
     assert any(line.startswith("waiting for telemetry on 127.0.0.1:") for line in lines)
-    assert "Traceback" not in proc.stderr and out.exists() and not list(tmp_path.glob("*.part"))
+    assert not any(line.startswith("wrote ") for line in lines), lines
+    # exit 1, nothing heard: no recording is left behind, not even an empty one (nor a .part)
+    assert "Traceback" not in proc.stderr and not list(tmp_path.iterdir()), list(tmp_path.iterdir())
 
 
 def test_listen_counts_gaps_and_ignores_other_senders() -> None:
@@ -134,3 +142,36 @@ def test_telemetry_numbers_every_object_and_names_a_series_per_leg() -> None:
     tx.close()
     assert [o["tseq"] for o in objs] == [1, 2, 3]
     assert objs[0]["leg3"]["velocity_m_s"] == 0.1 and objs[1]["event"]["event_seq"] == 1
+
+
+def test_listen_whose_robot_stops_keeps_the_recording_up_to_then_and_says_so(tmp_path) -> None:
+    """Exit 1 after data stopped: the recording is the useful part of the run; it is completed and named."""
+    import json
+    import socket
+    import threading
+
+    import pytest
+
+    from rimless.errors import RunFailure
+    from rimless.firmware.link.listen import listen
+    from tests.support.firmware_app import free_port, wait_udp_bound
+
+    port = free_port()
+    out = tmp_path / "tel.jsonl"
+
+    def send():
+        wait_udp_bound(port)
+        robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for t in range(3):
+            robot.sendto(json.dumps([{"timestamp": t, "tseq": t, "leg": {"stance": 1}}]).encode(), ("127.0.0.1", port))
+        robot.close()
+
+    t = threading.Thread(target=send)
+    t.start()
+    lines: list[str] = []
+    with pytest.raises(RunFailure, match="the robot stopped sending") as err:
+        listen(bind="127.0.0.1", port=port, out=out, duration_s=None, echo=lines.append, stale_s=0.2, timeout_s=0.5)
+    t.join()
+    assert f"the recording up to then is kept ({out})" in str(err.value)
+    assert len(out.read_text().splitlines()) == 3 and f"wrote {out}" in lines
+    assert not list(tmp_path.glob("*.part"))

@@ -139,6 +139,33 @@ def test_sweep_cli_json_rows_carry_the_contract_keys(tmp_path):
     assert out.with_suffix(".csv").exists()
 
 
+def _sweep(tmp_path, *args):
+    return CliRunner().invoke(
+        app,
+        ["sim", "sweep", "--model", "er", "--guesses", "4", "--scheduler", "sync", "--no-cache"]
+        + ["--out", str(tmp_path / "out" / "s"), *args],
+    )
+
+
+def test_sweep_without_a_gait_at_any_point_is_exit_1_and_writes_no_table(tmp_path):
+    res = _sweep(tmp_path, "--model", "er,ve", "--k", "2700", "--start-slope-rad", "0.0087", "--guesses", "3")
+    assert res.exit_code == 1, res.output
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: no period-1 gait at any of the 2 grid points"), lines
+    assert "0.4985 deg" in lines[0]
+    assert res.stdout.strip() == ""
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+
+
+def test_sweep_where_some_points_have_gaits_is_exit_0_with_a_no_gait_row(tmp_path):
+    # at 0.0225 rad the ER wheel of k = 3500 N/m walks (its branch stalls at 1.21 deg), that of 1500 N/m does not
+    res = _sweep(tmp_path, "--k", "1500,3500", "--start-slope-rad", "0.0225", "--json")
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)["rows"]
+    assert [(r["k"], r["reason"]) for r in rows] == [(1500.0, "no-gait"), (3500.0, "stall")]
+    assert (tmp_path / "out" / "s.parquet").exists() and (tmp_path / "out" / "s.csv").exists()
+
+
 @pytest.mark.parametrize(
     "args, option",
     [
