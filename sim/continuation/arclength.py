@@ -277,6 +277,7 @@ class ArclengthContinuation:
                     atol=self.oracle.atol,
                     bilateral=True,
                 ).contact
+                assert c is not None  # bilateral=True records it
                 tests[STANCE_FORCE] = c.min_stance_force_N
                 tests[IMPULSE] = c.min_impulse_N_s
                 valid = c.unilateral_valid
