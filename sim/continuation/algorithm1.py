@@ -213,14 +213,13 @@ def critical_slope(
         guesses = [hi_fp.z]
         if prev_slope != hi:
             guesses.insert(0, hi_fp.z + (mid - hi) * (hi_fp.z - prev_z) / (hi - prev_slope))
-        fp = None
         for guess in guesses:
             try:
                 fp = solve(mid, guess)
                 break
             except StepFailure as err:
                 last_err = err
-        if fp is None:
+        else:  # no guess converged
             lo = mid
             if reason != "loss-of-stability":
                 reason, detail = _classify(last_err, hi_fp)
