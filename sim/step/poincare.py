@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,6 +18,11 @@ from rimless.sim.model.mechanics import ALPHA, Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
 from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+    from rimless.sim.step.hybrid import StepOptions
 
 FIXED_POINT_TOL = 1e-10  # residual |P(z) - z|, rad and rad/s
 JACOBIAN_FD_STEP = 1e-4
@@ -38,7 +43,7 @@ class PoincareMap:
     def __post_init__(self) -> None:
         self.mech = Mechanics.of(self.params)
 
-    def step(self, z: np.ndarray, **options: object) -> StepResult:
+    def step(self, z: np.ndarray, **options: Unpack[StepOptions]) -> StepResult:
         """The full step from section point z (options as for simulate_step)."""
         self.evaluations += 1
         return simulate_step(
@@ -48,7 +53,7 @@ class PoincareMap:
             self.integrator,
             clutch=self.clutch,
             **options,
-        )  # type: ignore[arg-type]
+        )
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
         return section_from_state(self.step(z).y_plus)
