@@ -84,8 +84,8 @@ def _classify(err: StepFailure, last_good: FixedPoint | None) -> tuple[str, str]
         real_max = float(np.max(last_good.eigenvalues.real))
         if real_max > 0.9 and np.max(np.abs(last_good.eigenvalues.imag)) < 1e-9:
             return "fold", f"an eigenvalue approaches +1 ({real_max:.4f}) and the fixed point vanishes"
-        if last_good.step.period_s > 0.6:
-            return "stall", f"the period grows ({last_good.step.period_s:.3f} s) as the wheel nearly stops"
+        if last_good.recorded_step.period_s > 0.6:
+            return "stall", f"the period grows ({last_good.recorded_step.period_s:.3f} s) as the wheel nearly stops"
     return "solver", str(err)
 
 
@@ -133,7 +133,9 @@ def critical_slope(
             f"{np.asarray(z_guess).tolist()}: {err}",
             getattr(err, "last_failure", None),
         ) from None
-    branch = [BranchPoint(start_slope_rad, first.z, first.step.period_s, first.max_abs_eigenvalue, first.eigenvalues)]
+    branch = [
+        BranchPoint(start_slope_rad, first.z, first.recorded_step.period_s, first.max_abs_eigenvalue, first.eigenvalues)
+    ]
     # Algorithm 1: fixed steps down while Newton converges.
     last_conv, last_conv_fp = start_slope_rad, first
     last_stable = start_slope_rad if good(first) else None
@@ -153,7 +155,7 @@ def critical_slope(
             break
         if progress:
             progress(slope)
-        branch.append(BranchPoint(slope, fp.z, fp.step.period_s, fp.max_abs_eigenvalue, fp.eigenvalues))
+        branch.append(BranchPoint(slope, fp.z, fp.recorded_step.period_s, fp.max_abs_eigenvalue, fp.eigenvalues))
         last_conv, last_conv_fp = slope, fp
         if (
             good(fp)

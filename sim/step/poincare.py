@@ -114,7 +114,7 @@ class FixedPoint:
     iterations: int
     jacobian: np.ndarray
     eigenvalues: np.ndarray
-    step: StepResult
+    step: StepResult | None  # None when solved with record=False
     jacobian_method: str
     # found under bilateral contact (the stance foot held): it violates unilateral contact; what it violates,
     # rimless.sim.fast.BilateralContact (None for a gait of the unilateral map)
@@ -123,6 +123,13 @@ class FixedPoint:
     @property
     def bilateral(self) -> bool:
         return self.contact is not None
+
+    @property
+    def recorded_step(self) -> StepResult:
+        """`step`, for a fixed point solved with record=True (ValueError when it was solved without)."""
+        if self.step is None:
+            raise ValueError("the fixed point was solved with record=False: no recorded step")
+        return self.step
 
     @property
     def max_abs_eigenvalue(self) -> float:
@@ -309,6 +316,7 @@ def find_gaits(
         if progress:
             progress(i + 1, len(guesses))
     for z0 in retry:
+        assert bmap is not None  # only guesses that met a contact failure with a bilateral map are retried
         try:
             fp = solve_fixed_point(bmap, z0, max_iter=15, record=False)
             if not new(fp):
@@ -328,9 +336,11 @@ def find_gaits(
     recorded = []
     for fp in found:  # the full step of each distinct gait only
         try:
-            fp.step = (bmap if fp.bilateral else pmap).step(fp.z)
+            smap = bmap if fp.bilateral else pmap
+            assert smap is not None  # a bilateral gait comes from the bilateral map
+            fp.step = smap.step(fp.z)
         except StepFailure:
             continue
         recorded.append(fp)
-    recorded.sort(key=lambda fp: fp.step.period_s)
+    recorded.sort(key=lambda fp: fp.recorded_step.period_s)
     return recorded

@@ -245,11 +245,11 @@ def gait_scan(
             {
                 "theta_plus_rad": float(fp.z[0]),
                 "theta_dot_plus_rad_s": float(fp.z[1]),
-                "step_period_s": fp.step.period_s,
+                "step_period_s": fp.recorded_step.period_s,
                 "eigenvalues": [[float(e.real), float(e.imag)] for e in fp.eigenvalues],
                 "max_abs_eigenvalue": fp.max_abs_eigenvalue,
                 "stable": fp.stable,
-                "energy_ratio": fp.step.impact.energy_ratio,
+                "energy_ratio": fp.recorded_step.impact.energy_ratio,
                 "contact_valid": bool(facts is not None and facts.contact_valid),
                 "contact_reason": contact_reason(facts),
                 "contact_violation": facts.violation if facts is not None else "unknown",
