@@ -51,7 +51,7 @@ def _use_rimless_cache_dir() -> None:
     os.environ["NUMBA_CACHE_DIR"] = folder
     import numba
 
-    numba.config.CACHE_DIR = folder
+    numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # config names are set at run time
 
 
 _use_rimless_cache_dir()
@@ -67,7 +67,7 @@ def _compile_settings() -> None:
     os.environ["NUMBA_LOOP_VECTORIZE"] = "0"
     import numba
 
-    numba.config.LOOP_VECTORIZE = 0
+    numba.config.LOOP_VECTORIZE = 0  # type: ignore[attr-defined]  # (as CACHE_DIR)
 
 
 _compile_settings()
@@ -292,8 +292,6 @@ def fast_step(
         c,
         ahead=lambda: compiling_ahead(mi),
     )
-    if not bilateral:
-        c = None
     if st != fs.OK:
         raise_failure(st, detail, phase, t, nsteps)
     return FastStep(
@@ -306,10 +304,10 @@ def fast_step(
         nsteps=int(nsteps),
         nstiff=int(nstiff),
         relabel_snap_J=float(snap),
-        contact=BilateralContact.of(c) if c is not None and len(c) else None,
-        phase_nfev=tuple(int(v) for v in counts[:, 0]),  # type: ignore[arg-type]
-        phase_steps=tuple(int(v) for v in counts[:, 1]),
-    )  # type: ignore[arg-type]
+        contact=BilateralContact.of(c) if bilateral and len(c) else None,
+        phase_nfev=(int(counts[0, 0]), int(counts[1, 0]), int(counts[2, 0])),
+        phase_steps=(int(counts[0, 1]), int(counts[1, 1]), int(counts[2, 1])),
+    )
 
 
 def fast_map(
