@@ -20,16 +20,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.step.poincare import FixedPoint, NoFixedPoint, PoincareMap, solve_fixed_point
+from rimless.sim.step.poincare import FixedPoint, NoFixedPoint, SectionMap, solve_fixed_point
 
 START_SLOPE_RAD = 0.05
 DEFAULT_STEP_RAD = 0.001
 REFINE_TOL_RAD = 1e-6
+
+M = TypeVar("M", bound=SectionMap)  # the map critical_slope is given (its jacobian_factory takes the same kind)
 
 
 @dataclass
@@ -90,7 +92,7 @@ def _classify(err: StepFailure, last_good: FixedPoint | None) -> tuple[str, str]
 
 
 def critical_slope(
-    pmap: PoincareMap,
+    pmap: M,
     z_guess: np.ndarray,
     *,
     start_slope_rad: float = START_SLOPE_RAD,
@@ -98,7 +100,7 @@ def critical_slope(
     min_slope_rad: float = 1e-4,
     refine_tol_rad: float = REFINE_TOL_RAD,
     strict_contact: bool = False,
-    jacobian_factory: Callable[[PoincareMap], Callable[[np.ndarray], np.ndarray]] | None = None,
+    jacobian_factory: Callable[[M], Callable[[np.ndarray], np.ndarray]] | None = None,
     progress: Callable[[float], None] | None = None,
     method: str = "auto",
 ) -> CriticalSlope:
@@ -256,7 +258,7 @@ def critical_slope(
 FOLD_EIGENVALUE_TOL = 0.02  # |eigenvalue - 1| at a bisected end (bracket 1e-6 rad) that marks a fold
 
 
-def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str, detail: str) -> tuple[str, str]:
+def _reason_at_end(pmap: SectionMap, hi_fp: FixedPoint, lo: float, reason: str, detail: str) -> tuple[str, str]:
     """The reason from the located end itself: an eigenvalue at +1 is a fold whatever failed at a trial
     point; else the map's own failure just past the end (stall, lift-off, impulse)."""
     ev = hi_fp.eigenvalues
@@ -278,7 +280,7 @@ def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str,
 
 
 def _by_arclength(
-    pmap: PoincareMap,
+    pmap: SectionMap,
     first: FixedPoint,
     start_slope_rad: float,
     step_rad: float,

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, Self
 
 import numpy as np
 
@@ -28,6 +28,25 @@ FIXED_POINT_TOL = 1e-10  # residual |P(z) - z|, rad and rad/s
 JACOBIAN_FD_STEP = 1e-4
 JACOBIAN_MIN_STEP = 1e-7
 JACOBIAN_CURVATURE_TOL = 1e-3  # |forward - backward difference| / (1 + |central|) above which h shrinks
+
+
+class SectionMap(Protocol):
+    """What Newton (solve_fixed_point) and the slope continuation need of a Poincare map: PoincareMap here,
+    rimless.sim.step.fast_map.FastPoincareMap on the compiled path."""
+
+    @property
+    def params(self) -> WheelParams: ...
+
+    @property
+    def model(self) -> str: ...
+
+    def __call__(self, z: np.ndarray) -> np.ndarray: ...
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray: ...
+
+    def step(self, z: np.ndarray, **options: Unpack[StepOptions]) -> StepResult: ...
+
+    def with_params(self, params: WheelParams) -> Self: ...
 
 
 @dataclass
@@ -157,7 +176,7 @@ NOISE_FACTOR = 10.0
 NOISE_ACCEPT_MAX = 1e-6  # never accept a residual above this as noise
 
 
-def map_noise(pmap: PoincareMap, z: np.ndarray, J: np.ndarray, delta: float = 1e-7) -> float:
+def map_noise(pmap: SectionMap, z: np.ndarray, J: np.ndarray, delta: float = 1e-7) -> float:
     """The map's numerical noise at z (rad, rad/s): how far P(z + d) - P(z) departs from J d for tiny
     perturbations d of size delta along each axis and the diagonal (the curvature term, O(delta^2), is far
     below it). Newton cannot push |P(z) - z| below this, whatever its tolerance."""
@@ -173,7 +192,7 @@ def map_noise(pmap: PoincareMap, z: np.ndarray, J: np.ndarray, delta: float = 1e
 
 
 def solve_fixed_point(
-    pmap: PoincareMap,
+    pmap: SectionMap,
     z_guess: np.ndarray,
     *,
     tol: float = FIXED_POINT_TOL,
