@@ -100,7 +100,8 @@ def _invalidate_stale_cache() -> None:
 
     digest = hashlib.sha256()
     for mod in (fm, rk, fs, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
-        digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
+        assert mod.__file__ is not None  # modules loaded from source files
+        digest.update(Path(mod.__file__).read_bytes())
     stamp_value = digest.hexdigest()
     try:
         cache_dir = Path(fs.step_kernel._cache._cache_path)
