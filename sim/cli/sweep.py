@@ -299,8 +299,8 @@ def sweep_cmd(
         if given is not None:
             raise ParameterError(f"{flag} {given}: needs --clutch firmware")
     refuse_unused(("fw_steps", "fw_seed", "fw_low_deg"), "needs --clutch firmware")
-    model_list = parse_list(models, "--model", choices=("er", "ve"), lower=True)
-    mm = parse_list(mass_models or params.mass_model, "--mass-model", choices=MASS_MODELS)
+    model_list: list[str] = parse_list(models, "--model", choices=("er", "ve"), lower=True)
+    mm: list[str] = parse_list(mass_models or params.mass_model, "--mass-model", choices=MASS_MODELS)
     start_slope_rad = start_slope(params, start_slope_rad)
     if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
         raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")

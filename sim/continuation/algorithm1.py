@@ -20,16 +20,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from rimless.sim.model.failures import FailureReason, StepFailure
-from rimless.sim.step.poincare import FixedPoint, NoFixedPoint, PoincareMap, solve_fixed_point
+from rimless.sim.step.poincare import FixedPoint, NoFixedPoint, SectionMap, solve_fixed_point
 
 START_SLOPE_RAD = 0.05
 DEFAULT_STEP_RAD = 0.001
 REFINE_TOL_RAD = 1e-6
+
+M = TypeVar("M", bound=SectionMap)  # the map critical_slope is given (its jacobian_factory takes the same kind)
 
 
 @dataclass
@@ -84,13 +86,13 @@ def _classify(err: StepFailure, last_good: FixedPoint | None) -> tuple[str, str]
         real_max = float(np.max(last_good.eigenvalues.real))
         if real_max > 0.9 and np.max(np.abs(last_good.eigenvalues.imag)) < 1e-9:
             return "fold", f"an eigenvalue approaches +1 ({real_max:.4f}) and the fixed point vanishes"
-        if last_good.step.period_s > 0.6:
-            return "stall", f"the period grows ({last_good.step.period_s:.3f} s) as the wheel nearly stops"
+        if last_good.recorded_step.period_s > 0.6:
+            return "stall", f"the period grows ({last_good.recorded_step.period_s:.3f} s) as the wheel nearly stops"
     return "solver", str(err)
 
 
 def critical_slope(
-    pmap: PoincareMap,
+    pmap: M,
     z_guess: np.ndarray,
     *,
     start_slope_rad: float = START_SLOPE_RAD,
@@ -98,7 +100,7 @@ def critical_slope(
     min_slope_rad: float = 1e-4,
     refine_tol_rad: float = REFINE_TOL_RAD,
     strict_contact: bool = False,
-    jacobian_factory: Callable[[PoincareMap], Callable[[np.ndarray], np.ndarray]] | None = None,
+    jacobian_factory: Callable[[M], Callable[[np.ndarray], np.ndarray]] | None = None,
     progress: Callable[[float], None] | None = None,
     method: str = "auto",
 ) -> CriticalSlope:
@@ -133,7 +135,9 @@ def critical_slope(
             f"{np.asarray(z_guess).tolist()}: {err}",
             getattr(err, "last_failure", None),
         ) from None
-    branch = [BranchPoint(start_slope_rad, first.z, first.step.period_s, first.max_abs_eigenvalue, first.eigenvalues)]
+    branch = [
+        BranchPoint(start_slope_rad, first.z, first.recorded_step.period_s, first.max_abs_eigenvalue, first.eigenvalues)
+    ]
     # Algorithm 1: fixed steps down while Newton converges.
     last_conv, last_conv_fp = start_slope_rad, first
     last_stable = start_slope_rad if good(first) else None
@@ -153,7 +157,7 @@ def critical_slope(
             break
         if progress:
             progress(slope)
-        branch.append(BranchPoint(slope, fp.z, fp.step.period_s, fp.max_abs_eigenvalue, fp.eigenvalues))
+        branch.append(BranchPoint(slope, fp.z, fp.recorded_step.period_s, fp.max_abs_eigenvalue, fp.eigenvalues))
         last_conv, last_conv_fp = slope, fp
         if (
             good(fp)
@@ -213,14 +217,13 @@ def critical_slope(
         guesses = [hi_fp.z]
         if prev_slope != hi:
             guesses.insert(0, hi_fp.z + (mid - hi) * (hi_fp.z - prev_z) / (hi - prev_slope))
-        fp = None
         for guess in guesses:
             try:
                 fp = solve(mid, guess)
                 break
             except StepFailure as err:
                 last_err = err
-        if fp is None:
+        else:  # no guess converged
             lo = mid
             if reason != "loss-of-stability":
                 reason, detail = _classify(last_err, hi_fp)
@@ -255,7 +258,7 @@ def critical_slope(
 FOLD_EIGENVALUE_TOL = 0.02  # |eigenvalue - 1| at a bisected end (bracket 1e-6 rad) that marks a fold
 
 
-def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str, detail: str) -> tuple[str, str]:
+def _reason_at_end(pmap: SectionMap, hi_fp: FixedPoint, lo: float, reason: str, detail: str) -> tuple[str, str]:
     """The reason from the located end itself: an eigenvalue at +1 is a fold whatever failed at a trial
     point; else the map's own failure just past the end (stall, lift-off, impulse)."""
     ev = hi_fp.eigenvalues
@@ -277,7 +280,7 @@ def _reason_at_end(pmap: PoincareMap, hi_fp: FixedPoint, lo: float, reason: str,
 
 
 def _by_arclength(
-    pmap: PoincareMap,
+    pmap: SectionMap,
     first: FixedPoint,
     start_slope_rad: float,
     step_rad: float,

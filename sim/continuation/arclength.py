@@ -172,16 +172,18 @@ class ArclengthContinuation:
             zn, period, J = self.oracle.evaluate(z, p, jacobian=True)
         except StepFailure as err:
             raise NoFixedPoint(f"the map fails at the start guess {z.tolist()}: {err}", err) from None
+        assert J is not None  # jacobian=True
         f = zn - z
         res = float(np.max(np.abs(f)))
         for _ in range(max_iter):
             if res <= self.tol:
-                return _State(np.array([z[0], z[1], p / self.oracle.scale]), J, period, f)  # type: ignore[arg-type]
-            dz = -np.linalg.solve(J - np.eye(2), f)  # type: ignore[operator]
+                return _State(np.array([z[0], z[1], p / self.oracle.scale]), J, period, f)
+            dz = -np.linalg.solve(J - np.eye(2), f)
             lam = 1.0
             while lam >= 1e-4:
                 try:
                     zn2, period2, J2 = self.oracle.evaluate(z + lam * dz, p, jacobian=True)
+                    assert J2 is not None  # jacobian=True
                     f2 = zn2 - (z + lam * dz)
                     if float(np.max(np.abs(f2))) < res:
                         break
@@ -277,6 +279,7 @@ class ArclengthContinuation:
                     atol=self.oracle.atol,
                     bilateral=True,
                 ).contact
+                assert c is not None  # bilateral=True records it
                 tests[STANCE_FORCE] = c.min_stance_force_N
                 tests[IMPULSE] = c.min_impulse_N_s
                 valid = c.unilateral_valid

@@ -210,6 +210,7 @@ class BoundaryContinuation:
                 trial[:2] += lam * dz
                 try:
                     zn2, T2, J2 = self._eval(trial)
+                    assert J2 is not None
                     f2 = zn2 - trial[:2]
                     if float(np.max(np.abs(f2))) < res:
                         break
@@ -295,7 +296,7 @@ class BoundaryContinuation:
         pieces = []
         for direction in (+1.0, -1.0):
             t = self._tangent(D, np.array([0, 0, 0, direction]))
-            pts = []
+            pts: list[BoundaryPoint] = []
             uu, tt, ds = u.copy(), t, self.ds
             reason = ""
             while len(pts) < self.max_points:

@@ -58,8 +58,8 @@ class ContactFacts:
     def strict_contact_valid(self) -> bool:
         return self.contact_valid and self.leading_foot_tension_N >= 0.0 and self.trailing_foot_min_height_m >= 0.0
 
-    def as_dict(self) -> dict[str, float | bool]:
-        d: dict[str, float | bool] = dict(self.__dict__)
+    def as_dict(self) -> dict[str, float | bool | str]:
+        d: dict[str, float | bool | str] = dict(self.__dict__)
         d["contact_valid"] = self.contact_valid
         d["strict_contact_valid"] = self.strict_contact_valid
         d["violation"] = self.violation
@@ -134,6 +134,7 @@ def _bilateral_facts(pmap: Any, z: np.ndarray, record_dt: float) -> ContactFacts
     integ = pmap.integrator
     rec = fast.fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol, bilateral=True)
     c = rec.contact
+    assert c is not None  # bilateral=True records it
     try:
         fast.fast_step(pmap.params, pmap.model, z, rtol=integ.rtol, atol=integ.atol)
         uni = ""

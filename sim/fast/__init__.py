@@ -51,7 +51,7 @@ def _use_rimless_cache_dir() -> None:
     os.environ["NUMBA_CACHE_DIR"] = folder
     import numba
 
-    numba.config.CACHE_DIR = folder
+    numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # config names are set at run time
 
 
 _use_rimless_cache_dir()
@@ -67,7 +67,7 @@ def _compile_settings() -> None:
     os.environ["NUMBA_LOOP_VECTORIZE"] = "0"
     import numba
 
-    numba.config.LOOP_VECTORIZE = 0
+    numba.config.LOOP_VECTORIZE = 0  # type: ignore[attr-defined]  # (as CACHE_DIR)
 
 
 _compile_settings()
@@ -100,7 +100,8 @@ def _invalidate_stale_cache() -> None:
 
     digest = hashlib.sha256()
     for mod in (fm, rk, fs, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
-        digest.update(Path(mod.__file__).read_bytes())  # type: ignore[arg-type]
+        assert mod.__file__ is not None  # modules loaded from source files
+        digest.update(Path(mod.__file__).read_bytes())
     stamp_value = digest.hexdigest()
     try:
         cache_dir = Path(fs.step_kernel._cache._cache_path)
@@ -292,8 +293,6 @@ def fast_step(
         c,
         ahead=lambda: compiling_ahead(mi),
     )
-    if not bilateral:
-        c = None
     if st != fs.OK:
         raise_failure(st, detail, phase, t, nsteps)
     return FastStep(
@@ -306,10 +305,10 @@ def fast_step(
         nsteps=int(nsteps),
         nstiff=int(nstiff),
         relabel_snap_J=float(snap),
-        contact=BilateralContact.of(c) if c is not None and len(c) else None,
-        phase_nfev=tuple(int(v) for v in counts[:, 0]),  # type: ignore[arg-type]
-        phase_steps=tuple(int(v) for v in counts[:, 1]),
-    )  # type: ignore[arg-type]
+        contact=BilateralContact.of(c) if bilateral and len(c) else None,
+        phase_nfev=(int(counts[0, 0]), int(counts[1, 0]), int(counts[2, 0])),
+        phase_steps=(int(counts[0, 1]), int(counts[1, 1]), int(counts[2, 1])),
+    )
 
 
 def fast_map(

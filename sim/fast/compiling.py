@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from contextlib import nullcontext
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numba
 from numba.core import types as _types
@@ -48,7 +48,7 @@ def lock_cache_saves() -> None:
             unlocked(self, key, data)
 
     save._rimless_locked = True  # type: ignore[attr-defined]
-    cls.save = save
+    cls.save = save  # type: ignore[method-assign]  # the point: numba's own save, wrapped in the lock
 
 
 lock_cache_saves()
@@ -78,7 +78,7 @@ class _KernelDispatcher(CPUDispatcher):
         return super().get_call_template(folded, {})
 
 
-def kernel(func: Any = None, *, inline: str = "never", python: bool = True) -> Any:
+def kernel(func: Any = None, *, inline: Literal["never", "always"] = "never", python: bool = True) -> Any:
     """numba.njit(cache=True)(func), specialised from compiled code on the mass model index only (see
     _KernelDispatcher). inline="always": the function's numba IR is inlined into its compiled callers (no
     library of its own to optimise, link and emit again above it; for a function with one or two call sites).
@@ -88,7 +88,10 @@ def kernel(func: Any = None, *, inline: str = "never", python: bool = True) -> A
     to optimise and emit per kernel, the same compiled function."""
     if func is None:
         return lambda f: kernel(f, inline=inline, python=python)
-    disp = numba.njit(cache=True, inline=inline, no_cfunc_wrapper=True, no_cpython_wrapper=not python)(func)
+    # numba's stubs list only the public jit options; its njit takes every target option (these two included)
+    disp = numba.njit(  # type: ignore[call-overload]
+        cache=True, inline=inline, no_cfunc_wrapper=True, no_cpython_wrapper=not python
+    )(func)
     disp.__class__ = _KernelDispatcher
     return disp
 

@@ -229,18 +229,21 @@ class FirmwareLoop:
             )
             drv = Adns3080(
                 fake,
-                counts_per_m=cfg.counts_per_m,  # type: ignore[arg-type]
+                counts_per_m=cfg.counts_per_m,
                 sleep=lambda _s: None,
                 clock_ns=self.clock.ns,
             )
             drv.set_resolution(cfg.cpi)
             return fake, drv
 
+        def leg_compression(k: int) -> Callable[[float], float]:
+            return lambda _t: self._leg_compression_m[k]
+
         channels = []
         if cfg.sensors == "per-leg":  # robot.toml with one [[sensor]] per leg, legs = [k]: the leg is measured
             self.fakes = []
             for k in range(N_LEGS):
-                fake, drv = sensor(lambda _t, k=k: self._leg_compression_m[k], cfg.seed * N_LEGS + k)
+                fake, drv = sensor(leg_compression(k), cfg.seed * N_LEGS + k)
                 self.fakes.append(fake)
                 channels.append(Channel(drv, LegDetector(cfg.detector, [k]), HealthMonitor(cfg.health)))
         else:  # the prototype: one sensor on the stance-leg mechanism, the stance leg counted
@@ -525,8 +528,9 @@ class FirmwareLoop:
         y_minus = y
         e_minus = mech.energy(y[:5], y[5:])
         stance_engaged = b_leg in self._engaged  # the stance leg becomes the trailing leg
-        imp, q_plus, qd_plus, tr = ch.touchdown_with_locks(mech, y[:5], y[5:], trailing_locked=stance_engaged and rigid)
-        if tr is not None and tr.wheel_stopped:
+        # td: the locked touchdown's transition (None: the reference impact, both legs free)
+        imp, q_plus, qd_plus, td = ch.touchdown_with_locks(mech, y[:5], y[5:], trailing_locked=stance_engaged and rigid)
+        if td is not None and td.wheel_stopped:
             raise StepFailure(
                 FailureReason.STALL,
                 "touchdown with the rigid trailing clutch still engaged stopped the "
@@ -541,7 +545,7 @@ class FirmwareLoop:
                 time_s=t,
                 phase="impact",
             )
-        if tr is not None and not (tr.impulse_b[1] > 0.0 and ch.foot_a_normal_velocity(mech, q_plus, qd_plus) >= 0.0):
+        if td is not None and not (td.impulse_b[1] > 0.0 and ch.foot_a_normal_velocity(mech, q_plus, qd_plus) >= 0.0):
             raise StepFailure(
                 FailureReason.NEGATIVE_IMPULSE,
                 "touchdown with the rigid trailing clutch engaged has no "
@@ -587,7 +591,7 @@ class FirmwareLoop:
             firmware_events=[(te - t0, name) for te, name, _ in self.events[ev_start:]],
         )
         self.stance_leg = (b_leg + 1) % N_LEGS
-        return step, y_plus, t, offset, tr is not None and tr.foot_a_lifts
+        return step, y_plus, t, offset, td is not None and td.foot_a_lifts
 
     def integrate_mode(
         self, mode: Mode, y0: np.ndarray, t0: float, t_bound: float, guards: tuple[int, ...], offset: float
@@ -636,7 +640,7 @@ class FirmwareLoop:
             ta, tb = solver.t_old, solver.t
             sol = solver.dense_output()
             pieces.append((ta, tb, sol))
-            event = locator.step(ta, tb, solver.y, lambda sol=sol: sol, last_step=solver.status == "finished")
+            event = locator.step(ta, tb, solver.y, lambda: sol, last_step=solver.status == "finished")  # noqa: B023
             t_ev, code = (event[0], guards[event[1]]) if event is not None else (math.inf, None)
             if mode.leg1 != ch.STUCK and peak is None:
                 l1a, l1b = sol(ta)[8], solver.y[8]

@@ -197,7 +197,7 @@ def walks_under_firmware(params: WheelParams, config: FirmwareLoopConfig, steps:
         loop.close()
     if walk.failure is not None:
         return False, f"step {len(walk.steps) + 1}: {walk.failure}"
-    faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
+    faults = [f["fault"] for _, name, f in walk.events if name == "fault"]
     if faults:
         details = "; ".join(f"{f.get('fault')}: {f.get('detail')}" for _, name, f in walk.events if name == "fault")
         return False, f"{FIRMWARE_FAULT_PREFIX} ({', '.join(faults)}): it no longer clutches ({details})"

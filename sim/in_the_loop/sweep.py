@@ -165,7 +165,7 @@ def _firmware_row(point: dict[str, Any], options: FirmwareSweepOptions) -> dict[
     else:
         walk = fp.walk
         eig = np.abs(fp.eigenvalues)
-        faults = [f.get("fault") for _, name, f in walk.events if name == "fault"]
+        faults = [f["fault"] for _, name, f in walk.events if name == "fault"]
         row.update(
             walks=walk.failure is None and not faults,
             failure=(

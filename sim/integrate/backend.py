@@ -39,5 +39,7 @@ def resolve(backend: str) -> str:
 def make_integrator(backend: str = "auto", rtol: float = DEFAULT_RTOL) -> Integrator:
     """An integrator for trajectory recording (phase by phase); atol = rtol / 100."""
     if resolve(backend) == "fast":
-        return fast_module().FastIntegrator(rtol=rtol, atol=rtol * 1e-2)  # type: ignore[union-attr]
+        fast = fast_module()
+        assert fast is not None  # resolve() picks fast only when it imports
+        return fast.FastIntegrator(rtol=rtol, atol=rtol * 1e-2)
     return ScipyIntegrator(rtol=rtol, atol=rtol * 1e-2)

@@ -155,7 +155,7 @@ class EventLocator:
             sol = dense()
             for e in active:
                 code = self.codes[e]
-                root = locate(lambda s, code=code: self.value(code, sol(s)), t_old, t, xtol=self.xtol, rtol=self.rtol)
+                root = locate(lambda s: self.value(code, sol(s)), t_old, t, xtol=self.xtol, rtol=self.rtol)  # noqa: B023
                 if best is None or root < best[0]:
                     best = (root, int(e), sol(root))
         self.hist.append((t, np.array(y, dtype=float), g_new.copy()))
@@ -196,7 +196,7 @@ class EventLocator:
             if sol is None:
                 continue
             code = self.codes[e]
-            found = first_dip(lambda tt, code=code, sol=sol: self.value(code, sol(tt)), ta, tb)
+            found = first_dip(lambda tt: self.value(code, sol(tt)), ta, tb)  # noqa: B023
             if found is not None and (best is None or found < best[0]):
                 best = (found, e, sol(found))
         return best

@@ -40,8 +40,11 @@ class PhaseRun:
 class Integrator(Protocol):
     """What the hybrid simulation needs from an integrator."""
 
-    name: str
-    rtol: float
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def rtol(self) -> float: ...
 
     def run_phase(
         self,

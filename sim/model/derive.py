@@ -16,6 +16,7 @@ from __future__ import annotations
 import sys
 from functools import cache
 from pathlib import Path
+from typing import TypedDict
 
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
@@ -257,12 +258,18 @@ def generate_source(model: str) -> str:
     return "\n\n".join(parts)
 
 
+class _PhaseSpec(TypedDict):
+    free: tuple[int, ...]  # the free coordinates (q indices)
+    rows: tuple[int, ...]  # the pinned coordinates (q indices), whose constraint forces are reported
+    chain: bool  # double support: foot a's constraint rows J_a solved with the free block
+
+
 # Phases reduced to their free coordinates (q indices). Foot b is pinned in every phase and L1 too when
 # clutched; the pinned coordinates' accelerations are zero in the KKT solution for any state (their constraint
 # rows have no velocity term), so the reduced equations equal the full KKT solve for every state, not only
 # for consistent rates. Double support is one closed chain: foot a's two constraint rows J_a are kept and
 # solved with the free block (Schur complement, 2x2), which again equals the KKT solve for any state.
-REDUCED_PHASES = {
+REDUCED_PHASES: dict[str, _PhaseSpec] = {
     "dlsp_accel": {"free": (2, 3, 4), "rows": (0, 1), "chain": True},
     "slsp_free_accel": {"free": (2, 3, 4), "rows": (0, 1), "chain": False},
     "slsp_clutched_accel": {"free": (2, 4), "rows": (0, 1, 3), "chain": False},

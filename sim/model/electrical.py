@@ -22,8 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypedDict
 
 from rimless.errors import ParameterError
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 SWITCHES_PER_STEP = 2  # the ER clutch engages once (maximum compression) and releases once (impact) per step
 
@@ -32,6 +36,15 @@ OPTION_OF_FIELD = {
     "switch_energy_j": "--clutch-switch-energy-j",
     "electronics_power_w": "--electronics-power-w",
 }
+
+
+class ClutchPowerChanges(TypedDict, total=False):
+    """The fields ClutchPower.replace may change."""
+
+    hold_power_w: float
+    switch_energy_j: float
+    electronics_power_w: float
+    ve_electronics: bool
 
 
 @dataclass(frozen=True)
@@ -62,7 +75,7 @@ class ClutchPower:
         """No electrical energy for either wheel: the system CoT is the mechanical one."""
         return self.hold_power_w == 0.0 and self.switch_energy_j == 0.0 and self.electronics_power_w == 0.0
 
-    def replace(self, **changes: float) -> ClutchPower:
+    def replace(self, **changes: Unpack[ClutchPowerChanges]) -> ClutchPower:
         from dataclasses import replace
 
         return replace(self, **changes)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,11 @@ from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
 from rimless.sim.step.hybrid import IdealClutch, simulate_step
 
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+    from rimless.sim.step.hybrid import StepOptions
+
 
 class HeldStance:
     """An Integrator (any: compiled or reference) without the stance foot's lift-off guard (bilateral contact)
@@ -36,6 +41,10 @@ class HeldStance:
     def __init__(self, inner: Any) -> None:
         self.inner = inner
         self.name = f"{inner.name}+bilateral"
+
+    @property
+    def rtol(self) -> float:  # Integrator's
+        return float(self.inner.rtol)
 
     def run_phase(
         self,
@@ -190,7 +199,7 @@ class FastPoincareMap:
             return self._reference_step(z, self.integrator)
         return self.evaluate(z, jacobian=self.jacobian_with_map)[0]
 
-    def step(self, z: np.ndarray, **options: object) -> Any:
+    def step(self, z: np.ndarray, **options: Unpack[StepOptions]) -> Any:
         """The full StepResult (hybrid.simulate_step with the FastIntegrator; options as simulate_step)."""
         self.evaluations += 1
         integ = HeldStance(self.integrator) if self.bilateral else self.integrator
@@ -201,7 +210,7 @@ class FastPoincareMap:
             integ,
             clutch=self.clutch,
             **options,
-        )  # type: ignore[arg-type]
+        )
 
     def with_params(self, params: WheelParams) -> FastPoincareMap:
         return FastPoincareMap(

@@ -9,7 +9,7 @@ A step either returns a valid StepResult or raises StepFailure with a classified
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, TypedDict
 
 import numpy as np
 
@@ -81,7 +81,8 @@ class StepResult:
 class ClutchPolicy(Protocol):
     """Decides when free compression ends and the stance leg locks (ER only)."""
 
-    name: str
+    @property
+    def name(self) -> str: ...  # read-only: the policies are frozen dataclasses
 
     def lock(
         self,
@@ -210,6 +211,16 @@ def _raise_single_support_failure(run: PhaseRun, phase: str) -> None:
     failure = ev.failure_of(run.guard, run.t_end, phase)  # stall or stance lift-off
     if failure is not None:
         raise failure
+
+
+class StepOptions(TypedDict, total=False):
+    """simulate_step's keyword options that the Poincare maps' `step(z, **options)` pass through."""
+
+    t0: float
+    record_dt: float | None
+    track_dissipation: bool
+    diagnostics: bool
+    strict_contact: bool
 
 
 def simulate_step(
@@ -397,7 +408,7 @@ def simulate_step(
         stick_s=(float(stick[0]), float(stick[1])),
     )
     if record_dt is not None:
-        result.segments = [Segment(ph, r.t, r.y) for ph, r, _ in runs if r.t is not None]
+        result.segments = [Segment(ph, r.t, r.y) for ph, r, _ in runs if r.t is not None and r.y is not None]
     if diagnostics or strict_contact:
         result.diagnostics = contact_diagnostics(mech, result.segments or [])
         if strict_contact:

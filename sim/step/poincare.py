@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol, Self
 
 import numpy as np
 
@@ -19,10 +19,34 @@ from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
 from rimless.sim.step.hybrid import ClutchPolicy, StepResult, simulate_step
 
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+    from rimless.sim.step.hybrid import StepOptions
+
 FIXED_POINT_TOL = 1e-10  # residual |P(z) - z|, rad and rad/s
 JACOBIAN_FD_STEP = 1e-4
 JACOBIAN_MIN_STEP = 1e-7
 JACOBIAN_CURVATURE_TOL = 1e-3  # |forward - backward difference| / (1 + |central|) above which h shrinks
+
+
+class SectionMap(Protocol):
+    """What Newton (solve_fixed_point) and the slope continuation need of a Poincare map: PoincareMap here,
+    rimless.sim.step.fast_map.FastPoincareMap on the compiled path."""
+
+    @property
+    def params(self) -> WheelParams: ...
+
+    @property
+    def model(self) -> str: ...
+
+    def __call__(self, z: np.ndarray) -> np.ndarray: ...
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray: ...
+
+    def step(self, z: np.ndarray, **options: Unpack[StepOptions]) -> StepResult: ...
+
+    def with_params(self, params: WheelParams) -> Self: ...
 
 
 @dataclass
@@ -38,7 +62,7 @@ class PoincareMap:
     def __post_init__(self) -> None:
         self.mech = Mechanics.of(self.params)
 
-    def step(self, z: np.ndarray, **options: object) -> StepResult:
+    def step(self, z: np.ndarray, **options: Unpack[StepOptions]) -> StepResult:
         """The full step from section point z (options as for simulate_step)."""
         self.evaluations += 1
         return simulate_step(
@@ -48,7 +72,7 @@ class PoincareMap:
             self.integrator,
             clutch=self.clutch,
             **options,
-        )  # type: ignore[arg-type]
+        )
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
         return section_from_state(self.step(z).y_plus)
@@ -109,7 +133,7 @@ class FixedPoint:
     iterations: int
     jacobian: np.ndarray
     eigenvalues: np.ndarray
-    step: StepResult
+    step: StepResult | None  # None when solved with record=False
     jacobian_method: str
     # found under bilateral contact (the stance foot held): it violates unilateral contact; what it violates,
     # rimless.sim.fast.BilateralContact (None for a gait of the unilateral map)
@@ -125,6 +149,13 @@ class FixedPoint:
     @property
     def bilateral(self) -> bool:
         return self.contact is not None
+
+    @property
+    def recorded_step(self) -> StepResult:
+        """`step`, for a fixed point solved with record=True (ValueError when it was solved without)."""
+        if self.step is None:
+            raise ValueError("the fixed point was solved with record=False: no recorded step")
+        return self.step
 
     @property
     def max_abs_eigenvalue(self) -> float:
@@ -152,7 +183,7 @@ NOISE_FACTOR = 10.0
 NOISE_ACCEPT_MAX = 1e-6  # never accept a residual above this as noise
 
 
-def map_noise(pmap: PoincareMap, z: np.ndarray, J: np.ndarray, delta: float = 1e-7) -> float:
+def map_noise(pmap: SectionMap, z: np.ndarray, J: np.ndarray, delta: float = 1e-7) -> float:
     """The map's numerical noise at z (rad, rad/s): how far P(z + d) - P(z) departs from J d for tiny
     perturbations d of size delta along each axis and the diagonal (the curvature term, O(delta^2), is far
     below it). Newton cannot push |P(z) - z| below this, whatever its tolerance."""
@@ -168,7 +199,7 @@ def map_noise(pmap: PoincareMap, z: np.ndarray, J: np.ndarray, delta: float = 1e
 
 
 def solve_fixed_point(
-    pmap: PoincareMap,
+    pmap: SectionMap,
     z_guess: np.ndarray,
     *,
     tol: float = FIXED_POINT_TOL,
@@ -311,6 +342,7 @@ def find_gaits(
         if progress:
             progress(i + 1, len(guesses))
     for z0 in retry:
+        assert bmap is not None  # only guesses that met a contact failure with a bilateral map are retried
         try:
             fp = solve_fixed_point(bmap, z0, max_iter=15, record=False)
             if not new(fp):
@@ -330,9 +362,11 @@ def find_gaits(
     recorded = []
     for fp in found:  # the full step of each distinct gait only
         try:
-            fp.step = (bmap if fp.bilateral else pmap).step(fp.z)
+            smap = bmap if fp.bilateral else pmap
+            assert smap is not None  # a bilateral gait comes from the bilateral map
+            fp.step = smap.step(fp.z)
         except StepFailure:
             continue
         recorded.append(fp)
-    recorded.sort(key=lambda fp: fp.step.period_s)
+    recorded.sort(key=lambda fp: fp.recorded_step.period_s)
     return recorded

@@ -349,8 +349,9 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     pm: Any = FastPoincareMap(params, model, fast.FastIntegrator(rtol=rtol, atol=atol))
                     r = fast.fast_step(params, model, z, rtol=rtol, atol=atol, jacobian=True)
                     z_new, period, J = r.z_next, r.period_s, r.jacobian
+                    assert J is not None  # jacobian=True
                     spm = _time_per_call(
-                        lambda pm=pm: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
+                        lambda: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
                         fast_budget,
                         2000,
                     )
@@ -374,7 +375,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     st = pm.step(z)
                     z_new, period = np.array([st.y_plus[2], st.y_plus[7]]), st.period_s
                     nfev, nsteps = st.nfev, -1
-                    spm = _time_per_call(lambda pm=pm: pm(z), budget, 20)
+                    spm = _time_per_call(lambda: pm(z), budget, 20)
                     t_j = time.perf_counter()
                     J = pm.jacobian(z)
                     spj = time.perf_counter() - t_j + spm

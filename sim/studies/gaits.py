@@ -245,11 +245,11 @@ def gait_scan(
             {
                 "theta_plus_rad": float(fp.z[0]),
                 "theta_dot_plus_rad_s": float(fp.z[1]),
-                "step_period_s": fp.step.period_s,
+                "step_period_s": fp.recorded_step.period_s,
                 "eigenvalues": [[float(e.real), float(e.imag)] for e in fp.eigenvalues],
                 "max_abs_eigenvalue": fp.max_abs_eigenvalue,
                 "stable": fp.stable,
-                "energy_ratio": fp.step.impact.energy_ratio,
+                "energy_ratio": fp.recorded_step.impact.energy_ratio,
                 "contact_valid": bool(facts is not None and facts.contact_valid),
                 "contact_reason": contact_reason(facts),
                 "contact_violation": facts.violation if facts is not None else "unknown",
@@ -268,7 +268,7 @@ def critical_slope_study(
     theta_plus_guess: float | None = None,
     gait: int | None = None,
     step_rad: float = 0.001,
-    start_slope_rad: float = 0.05,
+    start_slope_rad: float | None = 0.05,
     strict_contact: bool = False,
     backend: str = "auto",
     rtol: float = 1e-10,
@@ -277,7 +277,7 @@ def critical_slope_study(
     power: Any = None,
 ) -> dict[str, Any]:
     """Critical slope and minimum cost of transport: Algorithm 1 from `start_slope_rad` and the refined end of
-    the branch; model "rigid" gives the closed form. progress(slope_rad): the continuation's current slope.
+    the branch; model "rigid" gives the closed form (it takes no slope: start_slope_rad None). progress(slope_rad): the continuation's current slope.
     power (a ClutchPower, default none): also the cost of transport at the critical slope and the least system
     CoT along the branch (rimless.sim.studies.system_cot)."""
     from rimless.sim.studies.summary import critical_slope_summary, rigid_summary
@@ -294,7 +294,7 @@ def critical_slope_study(
     from rimless.sim.model.params import SPOKE_ANGLE_RAD
     from rimless.sim.step.backend import jacobian_factory, make_map
 
-    if not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
+    if start_slope_rad is None or not 0 < start_slope_rad < SPOKE_ANGLE_RAD / 2:
         raise ParameterError(f"--start-slope-rad must be in (0, {SPOKE_ANGLE_RAD / 2:.4f}) rad, got {start_slope_rad}")
     start_params = params.replace(slope_rad=start_slope_rad)
     pmap = make_map(start_params, model, backend=backend, rtol=rtol)

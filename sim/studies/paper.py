@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -41,7 +41,20 @@ from rimless.sim.studies.paper_figures import (
 K_GRID = tuple(range(1500, 3501, 250))
 ENERGY_K = (2000.0, 2500.0, 3000.0, 3500.0)
 ENERGY_STEPS = 20
-PAPER = {
+
+
+class _PaperNumbers(TypedDict):
+    rigid_critical_deg: float
+    ve_critical_deg: tuple[float, float]
+    er_energy_ratio: float
+    ve_energy_ratio: tuple[float, float]
+    er_max_eig: tuple[float, float]
+    max_cot_reduction_pct: float
+    max_cot_reduction_k: float
+    rigid_cot: float
+
+
+PAPER: _PaperNumbers = {
     "rigid_critical_deg": 2.80,
     "ve_critical_deg": (1.27, 1.30),
     "er_energy_ratio": 0.85,
@@ -587,7 +600,7 @@ def run_paper(
     out: Path,
     params: WheelParams = WheelParams(),  # noqa: B008
     *,
-    ks: tuple[float, ...] = tuple(float(k) for k in K_GRID),
+    ks: tuple[float, ...] = tuple(map(float, K_GRID)),  # not a generator: mypy 2.4 misreads its name there
     backend: str = "auto",
     rtol: float = 1e-10,
     scheduler: str = "local",

@@ -25,7 +25,7 @@ def params_summary(p: WheelParams) -> dict[str, Any]:
 
 def fixed_point_summary(fp: FixedPoint, p: WheelParams, model: str, *, guess: Any = None) -> dict[str, Any]:
     """The `rimless sim fixed-point` JSON object (keys are a contract: add, never rename)."""
-    step = fp.step
+    step = fp.recorded_step
     imp = step.impact
     d = step.diagnostics or {}
     mu_b, mu_a = imp.friction_required
@@ -146,7 +146,7 @@ def critical_slope_summary(cs: CriticalSlope, p: WheelParams) -> dict[str, Any]:
         at = {
             "theta_plus_rad": float(fp.z[0]),
             "theta_dot_plus_rad_s": float(fp.z[1]),
-            "step_period_s": fp.step.period_s,
+            "step_period_s": fp.recorded_step.period_s,
             "max_abs_eigenvalue": fp.max_abs_eigenvalue,
             "eigenvalues": [[float(ev.real), float(ev.imag)] for ev in fp.eigenvalues],
         }

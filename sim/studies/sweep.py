@@ -29,9 +29,12 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rimless.errors import ParameterError
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 CACHE_VERSION = 4  # the layout of a cached file; the code is keyed by code_fingerprint
 # the packages every grid point's result depends on (source files hashed into the cache key)
@@ -472,7 +475,7 @@ def worker_failure(err: BaseException, scheduler: str) -> None:
 
 def run_sweep(
     points: list[dict[str, Any]],
-    options: SweepOptions = SweepOptions(),
+    options: DataclassInstance = SweepOptions(),
     *,
     scheduler: str = "local",
     workers: int | None = None,

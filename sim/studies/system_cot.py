@@ -21,11 +21,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
-from rimless.sim.model.electrical import ClutchPower
+from rimless.sim.model.electrical import ClutchPower, ClutchPowerChanges
 from rimless.sim.model.failures import StepFailure
 from rimless.sim.model.params import WheelParams
 from rimless.sim.step.cot import StepTransport, cot_of, step_transport
@@ -204,7 +204,7 @@ def break_even(
     bistable clutch). ER wins below it. None (with a reason) when ER loses even at 0 or no branch exists."""
     from scipy.optimize import brentq
 
-    base = power.replace(**{field_name: 0.0})
+    base = power.replace(**cast(ClutchPowerChanges, {field_name: 0.0}))  # field_name: one of its power fields
     if field_name == "switch_energy_j":
         base = base.replace(hold_power_w=0.0)
     ve_best, ve_br, _ = _least(ve, base)
@@ -220,7 +220,7 @@ def break_even(
         return out
 
     def gap(x: float) -> float:
-        return _least(er, base.replace(**{field_name: x}))[0] - ve_best
+        return _least(er, base.replace(**cast(ClutchPowerChanges, {field_name: x})))[0] - ve_best
 
     g0 = gap(0.0)
     out["er_least_system_cot_at_zero"] = g0 + ve_best
