@@ -229,7 +229,9 @@ def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path, co
                     more.append(_start([sys.executable, "-c", first_use.PROBE], cold, probe_out))
             _WARM_UP.extend(more)
     for proc in more:
-        _wait_or_kill(proc, on_every_minute=lambda: still("the kernels single tests call (and the first-use test's cold compile)"))
+        _wait_or_kill(
+            proc, on_every_minute=lambda: still("the kernels single tests call (and the first-use test's cold compile)")
+        )
     with contextlib.suppress(OSError):  # the session ended first and removed the folder
         ready.touch()
     with _warm_up_lock:
