@@ -575,8 +575,8 @@ LOCAL_CLUSTER_RUNS: dict[str, tuple[list[str], dict[str, Any]]] = {
     # inside the in-process Dask scheduler's gc callback, where Python swallows it, and the paper ran on to exit
     # 0 (rimless.sim.studies.sweep._no_gc_callback)
     "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], {"stage": "grid points submitted"}),
-    # 81 grid points (minutes of work) handed to the two workers: the interrupt lands while they compute
-    "sim sweep": (_SWEEP_81, {"stage": "sweep: 81 grid points submitted to 2 worker(s)"}),
+    # 162 grid points (81 per model; minutes of work) handed to the two workers: the interrupt lands while they compute
+    "sim sweep": (_SWEEP_81, {"stage": "grid points submitted to 2 worker(s)"}),
     # the interrupt as the first worker process appears: while the local cluster starts
     "sim sweep, cluster starting": (_SWEEP_81, {"workers": 1}),
 }
