@@ -1,17 +1,44 @@
 """A progress bar on stderr for work longer than about two seconds.
 
 Quiet when stderr is not a terminal (pipes, CI, tests) or when the command prints `--json`, so stdout
-stays clean and logs stay readable (a `spinner` may print one plain line there instead). `spinner(...)` is for library work that cannot count its progress and does
-not know the command's options (compiling the simulator on first use): it infers `--json` from the command line
-and, inside a command's bar, shows its text in that bar instead of opening a second display.
+stays clean and logs stay readable (a `spinner` may print one plain line there instead). `spinner(...)` is for
+library work that cannot count its progress and does not know the command's options (compiling the simulator on
+first use): it infers `--json` from the command line and, inside a command's bar, shows its text in that bar
+instead of opening a second display.
+
+`stage(name)` is the tests' hook: with `RIMLESS_TEST_STAGE_FILE=PATH` set, a command appends the name of each
+stage it reaches to PATH (every bar or spinner it opens and every text it shows beside a bar is a stage, plus a few
+named in the library, such as "calibration started"), so that a test can send its Ctrl-C when the command is
+inside its work instead of after a fixed delay. Unset (always, outside the tests), it costs one lookup in
+os.environ.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 from collections.abc import Iterator
 from typing import Any
+
+#: test-only: the file (or FIFO) `stage` appends the names of the stages reached to (docs/cli.md, Environment)
+STAGE_FILE_ENV = "RIMLESS_TEST_STAGE_FILE"
+
+
+def stage(name: str) -> None:
+    """Record that the command reached the stage `name` (one line in $RIMLESS_TEST_STAGE_FILE; nothing when that
+    variable is unset). Never fails the command: a file that cannot be written, or a FIFO that no test reads
+    any more (opened without blocking), is ignored."""
+    path = os.environ.get(STAGE_FILE_ENV)
+    if not path:
+        return
+    line = (" ".join(str(name).split()) + "\n").encode("utf-8", "replace")
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        try:
+            os.write(fd, line)
+        finally:
+            os.close(fd)
 
 
 class ProgressBar:
@@ -24,7 +51,9 @@ class ProgressBar:
     def update(
         self, completed: float | None = None, total: float | None = None, description: str | None = None
     ) -> None:
-        """Set how much is done (in the bar's own units), the total, or the text beside the bar."""
+        """Set how much is done (in the bar's own units), the total, or the text beside the bar (a `stage`)."""
+        if description is not None:
+            stage(description)
         if self._progress is None:
             return
         kwargs: dict[str, Any] = {}
@@ -58,7 +87,9 @@ def progress_is_shown(json_out: bool = False) -> bool:
 
 @contextlib.contextmanager
 def progress_bar(description: str, total: float | None = None, *, json_out: bool = False) -> Iterator[ProgressBar]:
-    """A transient progress bar on stderr for the block; `total=None` shows a spinner and elapsed time."""
+    """A transient progress bar on stderr for the block; `total=None` shows a spinner and elapsed time. Opening
+    it is a `stage` named `description`."""
+    stage(description)
     if not progress_is_shown(json_out):
         yield ProgressBar(None, None)
         return
@@ -99,9 +130,10 @@ def spinner(description: str, done: str | None = None, *, plain: str | None = No
     is cut to fit 80 columns with the elapsed time (SPINNER_TEXT_WIDTH). Where no spinner is drawn (stderr not
     a terminal, or `--json` on the command line), `plain` (if given) is printed as one line on stderr instead,
     before the work: a pipe, a log or a notebook still learns why the command is silent. Yields whether the
-    spinner is shown."""
+    spinner is shown. Entering it is a `stage` named `description`."""
     import time
 
+    stage(description)
     if not progress_is_shown(json_requested()):
         if plain:
             print(plain, file=sys.stderr, flush=True)

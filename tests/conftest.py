@@ -139,6 +139,11 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             "except Exception:\n"
             "    pass\n"
         )
+    say(
+        config,
+        "rimless: compiling the simulator's kernels for the tests (about a minute on an empty cache, seconds once "
+        "cached; longer on a busy machine): the firmware's tests run meanwhile, the others wait for it",
+    )
     with open(record, "w") as probe_out:
         # one process each: the workers use the other core (no second process compiling ahead,
         # rimless.sim.fast.ahead)
@@ -147,7 +152,26 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             _start([sys.executable, "-c", code], env, probe_out if i == 0 else subprocess.DEVNULL)
             for i, code in enumerate(codes)
         )
-    threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env, record), daemon=True).start()
+    threading.Thread(target=_mark_ready_after_warm_up, args=(ready, env, record, config), daemon=True).start()
+
+
+_say_lock = threading.Lock()
+
+
+def say(config: pytest.Config, line: str) -> None:
+    """One line on the terminal through pytest's terminal reporter (flushed at once: under `-q`, with the workers
+    waiting, nothing else shows that the run goes on). Also from the controller's compiling thread: the lock
+    keeps its lines whole; a progress dot of the main thread may land just before one."""
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is None:
+        return
+    with _say_lock:
+        reporter.write_line(line)
+        reporter.flush()
+
+
+#: while the controller compiles, a line this often says that it still does (seconds)
+STILL_COMPILING_EVERY_S = 60.0
 
 
 #: Compiled after the step kernels, while the kernel-free tests still run: kernels that single tests call
@@ -180,13 +204,19 @@ run_with_friction(FastIntegrator(rtol=1e-12, atol=1e-14), mech, SLSP_CLUTCHED, y
 """
 
 
-def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path) -> None:
+def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path, config: pytest.Config) -> None:
     """In the controller: wait for the compiling processes (at most 30 min each); then compile `TEST_KERNELS`
     and, if the kernels were already cached, run the first-use probe again in an empty cache of its own (its
     output goes to `record`: tests/test_first_use.py needs a cold compile, which otherwise two workers ran at
-    once, 37-40 s each); then write `ready`."""
+    once, 37-40 s each); then write `ready`. Says on the terminal every minute that it still compiles, and
+    when it is done."""
+    t0 = time.monotonic()
+
+    def still(what: str) -> None:
+        say(config, f"rimless: still compiling {what} ({(time.monotonic() - t0) / 60:.0f} min so far)")
+
     for proc in list(_WARM_UP):
-        _wait_or_kill(proc)
+        _wait_or_kill(proc, on_every_minute=lambda: still("the simulator's kernels"))
     found = record.read_text().splitlines()[:1] if record.is_file() else []
     more = []
     with _warm_up_lock:  # no process starts after the session's end has killed the others
@@ -199,9 +229,18 @@ def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path) ->
                     more.append(_start([sys.executable, "-c", first_use.PROBE], cold, probe_out))
             _WARM_UP.extend(more)
     for proc in more:
-        _wait_or_kill(proc)
+        _wait_or_kill(
+            proc, on_every_minute=lambda: still("the kernels single tests call (and the first-use test's cold compile)")
+        )
     with contextlib.suppress(OSError):  # the session ended first and removed the folder
         ready.touch()
+    with _warm_up_lock:
+        if not _finished:
+            say(
+                config,
+                f"rimless: the simulator's kernels are compiled ({time.monotonic() - t0:.0f} s): the tests that "
+                "need them run now",
+            )
 
 
 def _start(args: list[str], env: dict[str, str], stdout: Any) -> subprocess.Popen[bytes]:
@@ -217,12 +256,26 @@ def _start(args: list[str], env: dict[str, str], stdout: Any) -> subprocess.Pope
     )
 
 
-def _wait_or_kill(proc: subprocess.Popen[bytes], timeout_s: float = 1800) -> None:
-    try:
-        proc.wait(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+def _wait_or_kill(
+    proc: subprocess.Popen[bytes], timeout_s: float = 1800, on_every_minute: Callable[[], None] | None = None
+) -> None:
+    """Wait for `proc` (killed after `timeout_s`), calling `on_every_minute()` each STILL_COMPILING_EVERY_S."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = deadline - time.monotonic()
+        try:
+            proc.wait(timeout=max(0.0, min(left, STILL_COMPILING_EVERY_S)))
+            return
+        except subprocess.TimeoutExpired:
+            if time.monotonic() >= deadline:
+                proc.kill()
+                proc.wait()
+                return
+            if on_every_minute is not None:
+                with _warm_up_lock:
+                    if _finished:
+                        continue
+                on_every_minute()
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -14,6 +14,7 @@ QUICK (with the reason it cannot run long); the test says so when it is in neith
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -27,6 +28,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app, command_tree
+from tests.support.interrupt import STAGE_TIMEOUT_S, NotReached, Watched
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "analysis" / "data"
@@ -286,36 +288,53 @@ def _free_udp_port() -> int:
         return int(sock.getsockname()[1])
 
 
-# Arguments that keep each long-running command busy for well over the delay, and the delay (s) before
-# SIGINT: long enough that the command is past its imports and inside its work (numba code included).
-LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
-    ("bench",): (["--plot", "wp.png"], 6.0),
-    ("demo",): (["--out", "demo-out"], 6.0),
-    ("sim", "critical-slope"): (["--model", "er", "--backend", "reference"], 4.0),
-    ("sim", "fixed-point"): (["--backend", "reference", "--rtol", "1e-13"], 2.0),  # 8.4 s (3.7 s at 1e-10)
-    ("sim", "gait"): (["--steps", "10000", "--out", "traj.parquet", "--plot", "gait.png"], 4.0),
-    ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], 4.0),
-    ("sim", "firmware-sweep"): (["--rates-hz", "300,1000", "--delays-ms", "0,5,10", "--scheduler", "sync"], 4.0),
-    ("sim", "stress"): (["--k-values", ",".join(str(300 + 10 * i) for i in range(200))], 4.0),
-    ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], 5.0),
-    ("trials", "bench-import"): (["--rows", "5000000"], 4.0),
-    ("robot", "run"): (["--fake", "--arm"], 3.0),
-    ("robot", "listen"): (["--port", str(_free_udp_port()), "--out", "tel.jsonl"], 2.0),
-    ("robot", "bench"): (["--fake", "--duration-s", "20"], 3.0),
-    ("paper",): (["--out", "paper-out", "--scheduler", "sync", "--no-cache"], 6.0),
+# replaced by the address of a UDP socket of the test, which waits for the command's first datagram there
+TELEMETRY_TO_TEST = "<the test's UDP socket>"
+
+# Arguments that keep each long-running command busy, and the event on which the test sends SIGINT: a stage the
+# command reaches inside its work (`rimless.progress.stage`: the bar or the text beside it it shows, or a stage
+# named in the library, reported through RIMLESS_TEST_STAGE_FILE), or a line it prints on stderr (the firmware's
+# commands, whose code reports no stage). Never a delay: the machine's speed does not matter.
+LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
+    ("bench",): (["--plot", "wp.png"], {"stage": "benchmark"}),
+    # the calibration of c runs in a second process beside the comparisons (on one core: after them, here)
+    ("demo",): (["--out", "demo-out"], {"stage": "calibration started"}),
+    ("sim", "critical-slope"): (["--model", "er", "--backend", "reference"], {"stage": "continuation in slope"}),
+    ("sim", "fixed-point"): (["--backend", "reference", "--rtol", "1e-13"], {"stage": "period-1 gait"}),  # 8.4 s
+    ("sim", "gait"): (["--steps", "10000", "--out", "traj.parquet", "--plot", "gait.png"], {"stage": "simulating"}),
+    ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], {"stage": "scanning guesses"}),
+    ("sim", "firmware-sweep"): (
+        ["--rates-hz", "300,1000", "--delays-ms", "0,5,10", "--scheduler", "sync"],
+        {"stage": "firmware sweep"},
+    ),
+    ("sim", "stress"): (
+        ["--k-values", ",".join(str(300 + 10 * i) for i in range(200))],
+        {"stage": "stress sweep"},
+    ),
+    ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], {"stage": "comparing"}),
+    ("trials", "bench-import"): (["--rows", "5000000"], {"stderr": "writing a 5,000,000-row Tracker export"}),
+    # the first telemetry datagram: the firmware's loop runs (its "running" line comes before the loop starts, and
+    # a Ctrl-C there ends with "stopped (SIGINT) before the firmware ran", not `interrupted`)
+    ("robot", "run"): (["--fake", "--arm", "--telemetry", TELEMETRY_TO_TEST], {"datagram": "telemetry"}),
+    # its first "waiting for telemetry" line comes after --summary-every-s (1 s): inside its receiving loop
+    ("robot", "listen"): (["--port", str(_free_udp_port()), "--out", "tel.jsonl"], {"stderr": "waiting for telemetry"}),
+    ("robot", "bench"): (["--fake", "--duration-s", "20"], {"stderr": "bench: "}),
+    ("paper",): (["--out", "paper-out", "--scheduler", "sync", "--no-cache"], {"stage": "paper"}),
     ("sim", "sweep"): (
         ["--k", "1500:3500:50", "--model", "er,ve", "--scheduler", "sync", "--no-cache", "--out", "sweep-out/k"],
-        5.0,
+        {"stage": "sweep: "},
     ),
-    ("trials", "calibrate"): ([*CRITICAL_CSVS], 5.0),
-    # --calibrated: without it the command takes about 3 s once compiled, and a CI run's signal landed during the
-    # interpreter's exit after the result was printed (killed by SIGINT, nothing on stderr)
-    ("trials", "critical-slope"): ([*CRITICAL_CSVS, "--calibrated", "--model", "er,ve"], 4.0),
-    ("trials", "coverage"): (["--series", "500"], 3.0),
-    ("trials", "leg-fit-coverage"): (["--tests", "1000"], 4.0),
+    ("trials", "calibrate"): ([*CRITICAL_CSVS], {"stage": "calibration started"}),
+    # --calibrated: without it the command takes about 3 s once compiled; the interrupt lands in its calibration
+    ("trials", "critical-slope"): (
+        [*CRITICAL_CSVS, "--calibrated", "--model", "er,ve"],
+        {"stage": "calibration started"},
+    ),
+    ("trials", "coverage"): (["--series", "500"], {"stage": "coverage"}),
+    ("trials", "leg-fit-coverage"): (["--tests", "1000"], {"stage": "leg-fit coverage"}),
     ("robot", "leg-test"): (
         ["--fake", "--leg", "0", "--fake-compression-mm", "0", "--timeout-s", "120", "--out", "leg.jsonl"],
-        3.0,
+        {"stderr": "leg test: compress leg 0"},
     ),
 }
 
@@ -424,45 +443,48 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(
     )
     if path in KNOWN_INTERRUPT_VIOLATIONS:
         request.applymarker(pytest.mark.xfail(reason=KNOWN_INTERRUPT_VIOLATIONS[path], strict=False))
-    args, delay_s = LONG_RUNS[path]
+    args, event = LONG_RUNS[path]
     before = {p.name for p in tmp_path.iterdir()}
     env = {**os.environ, "COLUMNS": str(WIDTH)}
-    # The child gets SIGINT's default disposition, as a command started in a terminal does: a test run started
-    # as a background job (SIGINT ignored, inherited across exec) would otherwise ignore the interrupt.
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "rimless", *path, *args],
-        cwd=tmp_path,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    try:
-        time.sleep(delay_s)
-        finished_early = proc.poll() is not None
-        if not finished_early:
-            proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        stdout, stderr = proc.communicate()
-        pytest.fail(f"`rimless {_name(path)}` did not stop within 60 s of SIGINT:\n{stderr[-2000:]}")
+    with contextlib.ExitStack() as stack:
+        if "datagram" in event:
+            import socket
+
+            sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+            sock.bind(("127.0.0.1", 0))
+            args = [f"127.0.0.1:{sock.getsockname()[1]}" if a == TELEMETRY_TO_TEST else a for a in args]
+        cmd = stack.enter_context(Watched([sys.executable, "-m", "rimless", *path, *args], cwd=tmp_path, env=env))
+        try:
+            if "datagram" in event:
+                sock.settimeout(STAGE_TIMEOUT_S)
+                try:
+                    sock.recv(65536)
+                except TimeoutError:
+                    raise NotReached(f"no {event['datagram']} datagram within {STAGE_TIMEOUT_S:g} s") from None
+            else:
+                cmd.wait_for(**event)
+        except NotReached as err:
+            pytest.fail(f"`rimless {_name(path)} {' '.join(args)}` never reached {event}; give it longer work:\n{err}")
+        cmd.interrupt()
+        try:
+            res = cmd.finish(timeout_s=60)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"`rimless {_name(path)}` did not stop within 60 s of SIGINT:\n{''.join(cmd.lines['stderr'])}")
+    stdout, stderr = res.stdout, res.stderr
     out = stdout + stderr
     # a run whose result was complete when the signal came ends with its own exit code (the entry point ignores
     # SIGINT from then on: rimless.__main__.ignore_ctrl_c_from_here); -2 with the result and nothing said was how
     # such a run ended before
-    finished_at_the_signal = proc.returncode in (0, 1, 2) or (
-        proc.returncode == -signal.SIGINT and not stderr.strip() and stdout.strip()
+    finished_at_the_signal = res.returncode in (0, 1, 2) or (
+        res.returncode == -signal.SIGINT and not stderr.strip() and stdout.strip()
     )
-    assert not (finished_early or finished_at_the_signal), (
-        f"`rimless {_name(path)} {' '.join(args)}` finished (exit {proc.returncode}) before the interrupt at "
-        f"{delay_s} s (or as it came); give it longer work:\n{out[-2000:]}"
+    assert not finished_at_the_signal, (
+        f"`rimless {_name(path)} {' '.join(args)}` finished (exit {res.returncode}) as the interrupt came at "
+        f"{event}; give it longer work:\n{out[-2000:]}"
     )
     # 130, or killed by SIGINT (-2): a shell shows both as $? = 130. Python ends itself with SIGINT when a
     # KeyboardInterrupt passed through C code that records it (e.g. during an import), even once handled.
-    assert proc.returncode in (130, -signal.SIGINT), f"exit {proc.returncode} after SIGINT:\n{out[-3000:]}"
+    assert res.returncode in (130, -signal.SIGINT), f"exit {res.returncode} after SIGINT:\n{out[-3000:]}"
     assert "Traceback" not in out and "CancelledError" not in out, out[-3000:]
     lines = [line for line in stderr.splitlines() if line.strip()]
     assert lines and lines[-1] == "interrupted", f"last line on stderr: {lines[-1:]}"
@@ -551,24 +573,42 @@ def _group_processes(pgid: int) -> list[str]:
 
 
 _SWEEP_81 = ["sim", "sweep", "--k", "1500:3500:25", "--no-cache", "--workers", "2", "--out", "sweep-out/k"]
-# (arguments, worker processes to wait for (0: none), then seconds before the Ctrl-C)
-LOCAL_CLUSTER_RUNS = {
-    # its two workers up, then 2 s into the figures' sweeps: there the KeyboardInterrupt was raised inside the
-    # in-process Dask scheduler's gc callback, where Python swallows it, and the paper ran on to exit 0
-    # (rimless.sim.studies.sweep._no_gc_callback)
-    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], 2, 2.0),
-    # 81 grid points: minutes of work, so the interrupt lands while the workers compute even on a quiet machine
-    "sim sweep": (_SWEEP_81, 2, 3.0),
+# (arguments, the event on which the Ctrl-C is sent: a stage the command reaches (rimless.progress.stage), or
+# "workers": N, the first time the process group holds N processes besides the command)
+LOCAL_CLUSTER_RUNS: dict[str, tuple[list[str], dict[str, Any]]] = {
+    # in the figures' sweeps, the grid points handed to the two workers: there the KeyboardInterrupt was raised
+    # inside the in-process Dask scheduler's gc callback, where Python swallows it, and the paper ran on to exit
+    # 0 (rimless.sim.studies.sweep._no_gc_callback)
+    "paper": (["paper", "--no-cache", "--out", "paper-out", "--workers", "2"], {"stage": "grid points submitted"}),
+    # 162 grid points (81 per model; minutes of work) handed to the two workers: the interrupt lands while they compute
+    "sim sweep": (_SWEEP_81, {"stage": "grid points submitted to 2 worker(s)"}),
     # the interrupt as the first worker process appears: while the local cluster starts
-    "sim sweep, cluster starting": (_SWEEP_81, 1, 0.0),
+    "sim sweep, cluster starting": (_SWEEP_81, {"workers": 1}),
 }
 
 
-def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
-    """Wait until the process group holds `count` processes besides the command (its Dask workers)."""
+def _wait_for_workers(pgid: int, count: int, timeout_s: float = 300.0) -> None:
+    """Wait until the process group holds `count` processes besides the command (its Dask workers): the event
+    is a process appearing, which nothing announces, so /proc is looked at every 0.2 s."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and len(_group_processes(pgid)) < count + 1:
         time.sleep(0.2)
+
+
+def _wait_until_gone(pgid: int, timeout_s: float = 60.0) -> list[str]:
+    """The group's processes (but the resource tracker) still alive after waiting up to `timeout_s` for them
+    to end (the killed workers are reaped by init once the command has exited)."""
+    import psutil
+
+    procs = []
+    for pid in os.listdir("/proc"):
+        if pid.isdigit():
+            with contextlib.suppress(psutil.Error):
+                p = psutil.Process(int(pid))
+                if os.getpgid(p.pid) == pgid and "resource_tracker" not in " ".join(p.cmdline()):
+                    procs.append(p)
+    _, alive = psutil.wait_procs(procs, timeout=timeout_s)
+    return [" ".join(p.cmdline()) for p in alive if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
 
 
 @pytest.mark.slow
@@ -582,41 +622,23 @@ def _wait_for_workers(pgid: int, count: int, timeout_s: float = 120.0) -> None:
 def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_path: Path) -> None:
     """A terminal's Ctrl-C reaches every process of the group (the command and its Dask workers): the command
     prints `interrupted` last, exits 130, leaves no output and no worker behind; the workers print nothing."""
-    args, workers, delay_s = LOCAL_CLUSTER_RUNS[case]
+    args, event = LOCAL_CLUSTER_RUNS[case]
     env = {**os.environ, "COLUMNS": str(WIDTH)}
-    # SIGINT's default disposition in the child, as in a terminal: a test run started as a background job has
-    # SIGINT ignored, which exec passes on (the command then ignored the Ctrl-C: finished, or hung for 60 s)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "rimless", *args],
-        cwd=tmp_path,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        text=True,
-        start_new_session=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    try:
-        if workers:
-            _wait_for_workers(proc.pid, workers)  # then `delay_s` into the computation
-        time.sleep(delay_s)
-        assert proc.poll() is None, proc.communicate()[1][-2000:]
-        t0 = time.perf_counter()
-        os.killpg(proc.pid, signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=60)
-        seconds = time.perf_counter() - t0
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    out = stdout + stderr
-    assert proc.returncode == 130, f"exit {proc.returncode}:\n{out[-3000:]}"
-    lines = [line for line in stderr.splitlines() if line.strip()]
-    assert lines == ["interrupted"], f"stderr after {seconds:.2f} s:\n{stderr[-3000:]}"
+    with Watched([sys.executable, "-m", "rimless", *args], cwd=tmp_path, env=env, new_session=True) as cmd:
+        if "workers" in event:
+            _wait_for_workers(cmd.proc.pid, event["workers"])
+        else:
+            cmd.wait_for(**event)
+        assert cmd.proc.poll() is None, "".join(cmd.lines["stderr"])[-2000:]
+        cmd.interrupt()  # to the process group, as a terminal's Ctrl-C
+        res = cmd.finish(timeout_s=60)
+        left = _wait_until_gone(cmd.proc.pid)
+    out = res.stdout + res.stderr
+    assert res.returncode == 130, f"exit {res.returncode}:\n{out[-3000:]}"
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert lines == ["interrupted"], f"stderr:\n{res.stderr[-3000:]}"
     assert "Traceback" not in out
-    time.sleep(1.0)
-    workers = [c for c in _group_processes(proc.pid) if "resource_tracker" not in c]
-    assert not workers, f"left running: {workers}"
+    assert not left, f"left running: {left}"
     assert not list(tmp_path.iterdir())
 
 

@@ -1029,6 +1029,9 @@ def calibrate(
     data, failed = _usable(trials, names)
     if not data:
         raise NoTrialCalibrated("no trial could be calibrated: " + "; ".join(failed.values()))
+    from rimless.progress import stage
+
+    stage("calibration started")
     sim = _Sim(model, rtol, record_dt_s)
 
     def tick() -> None:

@@ -179,6 +179,10 @@ def stop(proc: subprocess.Popen[bytes] | None) -> None:
 def compiling_ahead(mi: int) -> Iterator[None]:
     """While the block runs, PLAN for ``mi`` compiles in a second process (stopped when the block ends)."""
     proc = start(mi)
+    if proc is not None:
+        from rimless.progress import stage
+
+        stage("compiling ahead in a second process")
     try:
         yield
     finally:

@@ -358,6 +358,9 @@ def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
                 # processes write to workers_log(), not to the terminal, and ignore SIGINT once started
                 # (_ctrl_c_is_the_commands), so a Ctrl-C to the process group is the command's alone, which
                 # kills its workers
+                from rimless.progress import stage
+
+                stage("sweep: starting a local Dask cluster")
                 try:
                     with _children_write_to(workers_log()):
                         cluster = LocalCluster(
@@ -527,6 +530,9 @@ def run_sweep(
                 futures = {
                     client.submit(_cached_compute, points[i], options, cache, compute, pure=False): i for i in todo
                 }
+                from rimless.progress import stage
+
+                stage(f"sweep: {len(todo)} grid points submitted to {n_workers} worker(s)")
                 for fut in as_completed(futures):
                     results[futures[fut]] = fut.result()
                     done += 1

@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import inspect
 import os
-import signal
 import subprocess
 import sys
-import time
 
 import psutil  # with dask.distributed
 import pytest
@@ -17,6 +15,7 @@ from numba.core import types
 
 from rimless.second_process import second_process_allowed
 from rimless.sim.fast import ahead
+from tests.support.interrupt import Watched
 
 
 def test_every_plan_entry_is_a_kernel_with_one_type_per_parameter():
@@ -60,29 +59,19 @@ def test_ctrl_c_during_a_cold_compile_stops_both_processes(tmp_path):
         pytest.skip("one core: no second process")
     env = {**os.environ, "RIMLESS_CACHE_DIR": str(tmp_path)}
     env.pop("RIMLESS_NO_BACKGROUND", None)
-    proc = subprocess.Popen(
+    with Watched(
         [sys.executable, "-m", "rimless", "sim", "fixed-point", "--model", "er"],
+        cwd=tmp_path,
         env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    try:
-        deadline = time.monotonic() + 60
-        children: list = []
-        while not children and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
-            children = psutil.Process(proc.pid).children(recursive=True)
+        new_session=True,
+    ) as cmd:
+        # the event: the second process has started beside the cold compile (rimless.sim.fast.ahead)
+        cmd.wait_for(stage="compiling ahead in a second process")
+        children = psutil.Process(cmd.proc.pid).children(recursive=True)
         assert children, "no second process while the step kernel compiled cold"
-        time.sleep(1.0)
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 130, err[-2000:]
-    assert [line for line in err.splitlines() if line.strip()][-1:] == ["interrupted"], err[-2000:]
-    time.sleep(0.5)
-    assert not [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
+        cmd.interrupt()  # to the process group
+        res = cmd.finish(timeout_s=60)
+    assert res.returncode == 130, res.stderr[-2000:]
+    assert [line for line in res.stderr.splitlines() if line.strip()][-1:] == ["interrupted"], res.stderr[-2000:]
+    _, alive = psutil.wait_procs(children, timeout=60)  # the event: each one's end
+    assert not [c for c in alive if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
