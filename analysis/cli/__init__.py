@@ -38,6 +38,7 @@ def import_options(
     leg_length_m: float | None,
     max_gap_ms: float,
     slopes: Path | None = None,
+    up_axis: str | None = None,
 ) -> dict[str, Any]:
     """Keyword arguments of `import_trial` from the CLI options shared by ``import`` and ``report``."""
     offset = (
@@ -52,6 +53,7 @@ def import_options(
         "hub_offset_m": offset,
         "leg_length_m": leg_length_m,
         "max_gap_s": max_gap_ms / 1000.0,
+        "up_axis": parse_up_axis(up_axis),
     }
     if slopes is not None:
         from rimless.analysis.io.manifest import read_slope_manifest
@@ -62,6 +64,20 @@ def import_options(
             )
         kw["slopes"] = read_slope_manifest(slopes)
     return kw
+
+
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
+UP_AXIS_HELP = "The lab's up axis (x, y, z, -x, -y, -z; default: found from the data: the ramp's normal)."
+
+
+def parse_up_axis(up_axis: str | None) -> str | None:
+    """``--up-axis`` checked (one of `UP_AXES`, a leading + allowed), lower case; None stays None."""
+    if up_axis is None:
+        return None
+    key = up_axis.strip().lower().lstrip("+")
+    if key not in UP_AXES:
+        raise ParameterError(f"--up-axis must be one of {', '.join(UP_AXES)}, got {up_axis!r}")
+    return key
 
 
 SLOPES_HELP = (
@@ -112,14 +128,19 @@ def import_cmd(
     ] = None,
     max_gap_ms: Annotated[float, typer.Option("--max-gap-ms", min=0.0, help=GAP_HELP)] = DEFAULT_MAX_GAP_MS,
     slopes: Annotated[Path | None, typer.Option("--slopes", help=SLOPES_HELP, metavar="FILE")] = None,
+    up_axis: Annotated[str | None, typer.Option("--up-axis", help=UP_AXIS_HELP, metavar="AXIS")] = None,
 ) -> None:
     """Import Vicon exports as Parquet trials; a refused file does not stop the others (exit 2 if any)."""
     from rimless.analysis.report.batch import import_files
 
-    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes)
+    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes, up_axis)
     rows = import_files(files, out, kwargs, json_out=json_out)
     if json_out:
         print_json([{k: v for k, v in r.items() if not k.startswith("_")} for r in rows])
+        for r in rows:  # stderr, as without --json: a refused file says why on the error stream too
+            if r["status"] != "imported":
+                for e in r["errors"][:20]:
+                    typer.echo(f"error: {e}", err=True)
     else:
         from rich.console import Console
         from rich.table import Table
@@ -371,6 +392,7 @@ def report_cmd(
         float, typer.Option("--slope-bin-deg", min=0.01, help="Group trials by slope rounded to this, deg.")
     ] = 0.5,
     slopes: Annotated[Path | None, typer.Option("--slopes", help="Raw inputs: " + SLOPES_HELP, metavar="FILE")] = None,
+    up_axis: Annotated[str | None, typer.Option("--up-axis", help=UP_AXIS_HELP, metavar="AXIS")] = None,
     robot_log: Annotated[
         list[str] | None,
         typer.Option(
@@ -390,7 +412,7 @@ def report_cmd(
 
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
-    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes)
+    kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes, up_axis)
     from rimless.analysis.report.batch import robot_log_pairs
 
     logs = robot_log_pairs(robot_log or [], trials)

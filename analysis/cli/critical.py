@@ -55,6 +55,14 @@ SlopeOpt = Annotated[
         "--slope-deg", min=-45, max=45, metavar="DEG", help="Known slope for CSV inputs, deg (default: estimated)."
     ),
 ]
+UpOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--up-axis",
+        metavar="AXIS",
+        help="Raw inputs: the lab's up axis (x, y, z, -x, -y, -z; default: found from the data).",
+    ),
+]
 GapOpt = Annotated[
     float, typer.Option("--max-gap-ms", min=0.0, metavar="MS", help="CSV inputs: interpolate gaps up to this long, ms.")
 ]
@@ -79,6 +87,7 @@ def critical_slope_cmd(
     params: ParamsOpt = None,
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
+    up_axis: UpOpt = None,
     group_tol_deg: Annotated[
         float,
         typer.Option(
@@ -102,7 +111,7 @@ def critical_slope_cmd(
         models=models,
         calibrate_c=calibrate_c,
         params_path=params,
-        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
+        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
         group_tol_deg=group_tol_deg,
     )
     _print_refused(run.loaded.refused)
@@ -121,6 +130,16 @@ def critical_slope_cmd(
     if res.chosen is None:
         typer.echo(f"error: no critical slope: {res.why}", err=True)
         raise typer.Exit(EXIT_FAILURE)
+
+
+def _up(up_axis: str | None) -> str | None:
+    """``--up-axis`` checked (one of x, y, z, -x, -y, -z), lower case; None stays None."""
+    if up_axis is None:
+        return None
+    key = up_axis.strip().lower().lstrip("+")
+    if key not in ("x", "y", "z", "-x", "-y", "-z"):
+        raise ParameterError(f"--up-axis must be one of x, y, z, -x, -y, -z, got {up_axis!r}")
+    return key
 
 
 def _print_refused(refused: list[str]) -> None:
@@ -200,6 +219,7 @@ def calibrate_cmd(
     params: ParamsOpt = None,
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
+    up_axis: UpOpt = None,
     prior: Annotated[
         Path | None,
         typer.Option(
@@ -230,7 +250,7 @@ def calibrate_cmd(
         model=models[0],
         critical=critical,
         params_path=params,
-        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0},
+        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
         prior_path=prior,
     )
     _print_refused(run.loaded.refused)

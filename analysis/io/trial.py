@@ -90,6 +90,10 @@ class TrialMeta:
     #: The slope estimated from the motion and its 95 % interval, rad (also when another source is used), or None.
     slope_estimated_deg: float | None = None
     slope_estimated_ci_rad: tuple[float, float] | None = None
+    #: The lab's up axis of the file (``z``, ``y``, ``-x``...: world outputs stay in the file's frame) and how it
+    #: was found (from the data, or given with ``--up-axis``).
+    up_axis: str = "z"
+    up_axis_reason: str = ""
 
     def to_json(self) -> str:
         """JSON text of the metadata (NaN as null)."""
@@ -211,6 +215,8 @@ class Trial:
             "hub_offset_mm": None if m.hub_offset_m is None else [v * 1e3 for v in m.hub_offset_m],
             "hub_offset_residual_mm": None if m.hub_offset_residual_m is None else m.hub_offset_residual_m * 1e3,
             "warnings": list(m.warnings),
+            "up_axis": m.up_axis,
+            "up_axis_reason": m.up_axis_reason,
         }
 
     def __repr__(self) -> str:

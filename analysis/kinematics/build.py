@@ -32,6 +32,15 @@ from rimless.analysis.kinematics.hub import (
 from rimless.analysis.kinematics.slope import MAX_PATH_POINTS, fit_slope, travel_direction
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
 from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
+from rimless.analysis.kinematics.vertical import (
+    UpAxis,
+    VerticalUndecided,
+    find_up,
+    is_z_up,
+    rotate_file,
+    rotation_to_z_up,
+    up_vector,
+)
 from rimless.analysis.kinematics.walk import classify_ending, find_motion
 from rimless.errors import UserError
 
@@ -121,6 +130,7 @@ def build_trial(
     alpha_rad: float = ALPHA_RAD,
     wheel_leg_length_m: float = TABLE1_LEG_LENGTH_M,
     slope_note: str | None = None,
+    up_axis: str | None = None,
 ) -> Trial:
     """Build a `Trial` from a parsed Vicon file.
 
@@ -140,6 +150,8 @@ def build_trial(
     alpha_rad : rotation per step, rad.
     wheel_leg_length_m : the wheel's leg length for the plausibility checks (Table 1), m.
     slope_note : where a given slope comes from (e.g. the manifest row), kept in the notes.
+    up_axis : the lab's up axis (``x``, ``y``, ``z``, ``-x``, ``-y``, ``-z``; CLI ``--up-axis``); default: found
+        from the data (`rimless.analysis.kinematics.vertical.find_up`). World outputs stay in the file's frame.
 
     Raises
     ------
@@ -152,6 +164,22 @@ def build_trial(
         choice = choose_source(vf, object, markers)
     except SourceRefused as err:
         raise TrialRefused(str(err)) from None
+    if up_axis is not None:
+        up = UpAxis(up_axis.strip().lower().lstrip("+"), f"{up_axis.strip().upper()} up (given with --up-axis)")
+        up_vector(up.name)  # a bad name is refused here
+    else:
+        try:
+            up = find_up(vf, choice, orientation)
+        except VerticalUndecided as err:
+            raise TrialRefused(str(err)) from None
+    q_lab: np.ndarray | None = None  # rotates the file's frame to Z up (None: it is Z up)
+    if not is_z_up(up.name):
+        q_lab = rotation_to_z_up(up_vector(up.name))
+        vf = rotate_file(vf, q_lab, orientation)
+        try:
+            choice = choose_source(vf, object, markers)
+        except SourceRefused as err:
+            raise TrialRefused(str(err)) from None
     sec, obj, mk = choice.section, choice.object, list(choice.markers)
     warnings: list[str] = list(choice.warnings)
     if sec.n_rows < 10:
@@ -419,6 +447,11 @@ def build_trial(
         notes.append(f"held still for {t_rel:.2f} s before the release")
 
     ts = TimeSeries(time_s).add_data("frame", frames)
+    if q_lab is not None:  # world outputs back in the file's frame (p = Q^T p')
+        hub = hub @ q_lab
+        travel = travel @ q_lab
+        frame = replace(frame, origin_m=frame.origin_m @ q_lab)
+        notes.append(f"the lab's vertical: {up.reason}; heights measured along it, world outputs in the file's frame")
     ts = standard_series(ts, hub, hub_slope, com, angle, gap, filled)
     ts = replace(ts, events=tuple(Event(t, "impact") for t in steps.impact_time_s.tolist()))  # sorted once
     meta = TrialMeta(
@@ -463,6 +496,8 @@ def build_trial(
         impact_step=tuple(int(k) for k in (steps.impact_step if steps.impact_step is not None else ())),
         period_step=tuple(int(k) for k in (steps.period_step if steps.period_step is not None else ())),
         warnings=tuple(warnings),
+        up_axis=up.name,
+        up_axis_reason=up.reason,
     )
     return Trial(ts, meta)
 

@@ -286,6 +286,25 @@ def choose_source(
             for k, _, o, mk, e, tn in scored
         ]
         found += [f"{t} markers (too many for a wheel)" for t in too_many]
+        if unlabelled:
+            moving_u = (
+                [
+                    g
+                    for g in unlabelled
+                    if _extent(zeros_to_nan(_subsample(traj_sec[0].get(g, XYZ)), 3)) >= STATIC_EXTENT_M
+                ]
+                if len(traj_sec) == 1
+                else []
+            )
+            pick = (moving_u or unlabelled)[:MAX_WHEEL_MARKERS]
+            raise SourceRefused(
+                f"{vf.path}: nothing labelled moves like the wheel"
+                + (f" (found {'; '.join(found)})" if found else "")
+                + f"; {len(unlabelled)} unlabelled marker(s) ({', '.join(unlabelled[:6])}"
+                + (", ..." if len(unlabelled) > 6 else "")
+                + f"{'; ' + str(len(moving_u)) + ' of them move' if moving_u else ''}) are never taken "
+                f"as the wheel without a name: name the wheel's markers with --markers {','.join(pick)}"
+            )
         if not found and static_markers:
             shown = ", ".join(m for _, m in static_markers[:6]) + (", ..." if len(static_markers) > 6 else "")
             raise SourceRefused(

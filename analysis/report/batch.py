@@ -97,6 +97,7 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
         "trial": None,
         "slope_source": None,
         "slope_ci_deg": None,
+        "up_axis": None,
     }
     if error is not None or trial is None:
         row["reason"] = _clean_reason(error) if error is not None else "not imported"
@@ -123,6 +124,7 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
         warnings=list(m.warnings) + ([f"steps not detected: {m.step_refused}"] if m.step_refused else []),
         slope_source=m.slope_source,
         slope_ci_deg=slope_ci_deg(m.slope_ci_rad),
+        up_axis=m.up_axis,
         _estimated_deg=m.slope_estimated_deg,
     )
     return row

@@ -232,3 +232,27 @@ def write_markers_csv(path, truth: ErTruth, body_m: np.ndarray, *, noise_m: floa
     pts = pts + rng.normal(0, noise_m, pts.shape)
     pts[np.isnan(truth.pose).any(axis=1)] = np.nan
     return write(path, markers_section({f"wheel:M{i}": pts[:, i] for i in range(pts.shape[1])}))
+
+
+#: A Y-up lab (X right, Y up, Z toward the viewer) from the model's Z-up frame: (x, y, z) -> (x, z, -y).
+Y_UP_FROM_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def in_lab(truth: ErTruth, lab_from_model: np.ndarray) -> ErTruth:
+    """The same trial recorded in another lab frame: positions ``M p`` and orientations ``M R`` (M a proper
+    rotation, e.g. `Y_UP_FROM_Z_UP`); the gaps stay gaps. The truth's slope and impacts do not change."""
+    from dataclasses import replace
+
+    m = np.asarray(lab_from_model, float)
+    rm = Rotation.from_matrix(m)
+    pose = truth.pose.copy()
+    ok = ~np.isnan(pose).any(axis=1)
+    pose[ok, :3] = (rm * Rotation.from_rotvec(pose[ok, :3])).as_rotvec()
+    pose[ok, 3:] = pose[ok, 3:] @ m.T
+    return replace(
+        truth,
+        pose=pose,
+        hub_world=truth.hub_world @ m.T,
+        feet_world=[m @ f for f in truth.feet_world],
+        rot=None if truth.rot is None else rm * truth.rot,
+    )
