@@ -28,6 +28,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app, command_tree
+from tests.support.cli_lines import stderr_lines
 from tests.support.interrupt import STAGE_TIMEOUT_S, NotReached, Watched
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -142,7 +143,7 @@ def _one_error_line(
     stderr: str, code: int, returncode: int, names: list[str], out: str, cwd: Path | None = None
 ) -> None:
     assert returncode == code, f"exit {returncode}, expected {code}:\n{out}"
-    lines = [line for line in stderr.splitlines() if line.strip()]
+    lines = stderr_lines(stderr)
     assert len(lines) == 1, f"expected one line on stderr, got {len(lines)}:\n{stderr}"
     assert lines[0].startswith("error: "), lines[0]
     for name in names:  # a path may be shown relative to the working folder (as the trials commands do)
@@ -393,7 +394,7 @@ def test_quick_command_run_as_is_ends_cleanly(
     assert "Traceback" not in out, out[-3000:]
     assert res.returncode in (0, 1, 2), out[-3000:]
     if res.returncode:
-        lines = [line for line in res.stderr.splitlines() if line.strip()]
+        lines = stderr_lines(res.stderr)
         assert lines and lines[-1].startswith("error: "), out[-3000:]
 
 
@@ -486,7 +487,7 @@ def test_interrupt_exits_130_and_leaves_no_partial_output(
     # KeyboardInterrupt passed through C code that records it (e.g. during an import), even once handled.
     assert res.returncode in (130, -signal.SIGINT), f"exit {res.returncode} after SIGINT:\n{out[-3000:]}"
     assert "Traceback" not in out and "CancelledError" not in out, out[-3000:]
-    lines = [line for line in stderr.splitlines() if line.strip()]
+    lines = stderr_lines(stderr)
     assert lines and lines[-1] == "interrupted", f"last line on stderr: {lines[-1:]}"
     left = _leftovers(tmp_path, before, ALLOWED_AFTER_INTERRUPT.get(path, set()))
     assert not left, f"an interrupted `rimless {_name(path)}` left {left} behind"
@@ -635,7 +636,7 @@ def test_ctrl_c_to_the_process_group_with_a_local_dask_cluster(case: str, tmp_pa
         left = _wait_until_gone(cmd.proc.pid)
     out = res.stdout + res.stderr
     assert res.returncode == 130, f"exit {res.returncode}:\n{out[-3000:]}"
-    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    lines = stderr_lines(res.stderr)
     assert lines == ["interrupted"], f"stderr:\n{res.stderr[-3000:]}"
     assert "Traceback" not in out
     assert not left, f"left running: {left}"

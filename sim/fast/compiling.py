@@ -118,6 +118,8 @@ def is_cached(kernel: Any) -> bool:
 # what a first use costs, as the notice says it (docs/performance.md: 25-45 s on a quiet 2-core machine, more
 # when the machine is busy)
 COMPILE_TIME = "about a minute"
+#: the one line a cold compile prints on stderr where no spinner is drawn (a pipe, a log, a notebook, --json)
+COMPILE_NOTICE = f"rimless: compiling the simulator (first use, {COMPILE_TIME})..."
 _told = False  # the plain notice (no terminal, or --json) was printed in this process: once is enough
 
 
@@ -133,7 +135,7 @@ def call_compiling(kernel: Any, *args: Any, ahead: Any = None) -> Any:
 
         global _told
         name = kernel.py_func.__name__
-        plain = None if _told else f"rimless: compiling the simulator (first use, {COMPILE_TIME})..."
+        plain = None if _told else COMPILE_NOTICE
         _told = True
         with (
             spinner(

@@ -14,6 +14,7 @@ from rimless.analysis.examples.synthetic import rolling_wheel
 from rimless.analysis.io.tracker_csv import write_tracker_csv
 from rimless.analysis.io.trial import read_trial
 from tests.support.analysis_data import PUBLIC
+from tests.support.cli_lines import stderr_lines
 
 runner = CliRunner()
 #: The keys of `trials import --json` (issue contract: the old six plus the walk's).
@@ -154,7 +155,7 @@ def test_report_exits_nonzero_when_no_trial_can_be_compared(tmp_path):
     for out in (tmp_path / "rep", tmp_path / "new" / "rep"):
         res = runner.invoke(app, ["report", str(p), "--out", str(out)])
         assert res.exit_code == 1, res.output
-        lines = res.stderr.strip().splitlines()
+        lines = stderr_lines(res.stderr)
         assert len(lines) == 1 and lines[0].startswith("error: no trial could be compared"), lines
         assert "short.csv: no steps detected" in lines[0] and "no report written" in lines[0]
         assert res.stdout.strip() == ""

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from rimless.analysis.examples.critical_series import data_files
 from rimless.analysis.report.html import _critical_figure, _misfit_html, all_suspect, model_label
 from rimless.cli import app
+from tests.support.cli_lines import stderr_lines
 
 runner = CliRunner()
 
@@ -23,7 +24,7 @@ def _stall_file() -> Path:
 
 
 def _error_line(res) -> str:
-    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    lines = stderr_lines(res.stderr)
     assert "Traceback" not in res.output
     errors = [ln for ln in lines if ln.startswith("error: ")]
     assert len(errors) == 1, res.stderr

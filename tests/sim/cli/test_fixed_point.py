@@ -7,6 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
+from tests.support.cli_lines import stderr_lines
 
 RUN = CliRunner()
 
@@ -75,7 +76,7 @@ def test_fixed_point_reports_validity_and_the_relabel_energy_beside_stability():
 def test_bad_branch_choices_are_one_line_errors(args, option):
     res = RUN.invoke(app, args)
     assert res.exit_code == 2
-    lines = res.stderr.strip().splitlines()
+    lines = stderr_lines(res.stderr)
     assert len(lines) == 1 and lines[0].startswith("error:") and option in lines[0]
     if option == "--slope-deg":
         assert "30 deg" in lines[0]  # echoed in the unit typed
@@ -84,7 +85,7 @@ def test_bad_branch_choices_are_one_line_errors(args, option):
 def test_no_gait_is_a_failure_not_a_user_mistake():
     res = RUN.invoke(app, ["sim", "fixed-point", "--model", "ve", "--theta-dot-guess", "0.3"])
     assert res.exit_code == 1
-    lines = res.stderr.strip().splitlines()
+    lines = stderr_lines(res.stderr)
     assert len(lines) == 1 and lines[0].startswith("error: no period-1 gait")
 
 

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.support.cli_lines import stderr_lines
+
 # The command as the console script runs it, with the figure's drawing announced on stderr and then blocked until
 # a signal arrives: the test sends SIGINT on that line, so the interrupt lands inside the figure every time.
 _DRAWING_THEN_WAIT = """
@@ -49,7 +51,7 @@ def test_ctrl_c_while_the_figure_is_drawn_leaves_no_trajectory(tmp_path: Path) -
             proc.kill()
             proc.communicate()
     assert proc.returncode == 130, stderr
-    assert [line for line in stderr.splitlines() if line.strip()] == ["interrupted"], stderr
+    assert stderr_lines(stderr) == ["interrupted"], stderr
     assert stdout.strip() == "" and "Traceback" not in stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # neither the trajectory nor a temporary
 

@@ -8,13 +8,14 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
+from tests.support.cli_lines import stderr_lines
 
 RUN = CliRunner()
 
 
 def _one_error(res, code: int, *words: str) -> str:
     assert res.exit_code == code, res.output
-    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    lines = stderr_lines(res.stderr)
     assert len(lines) == 1 and lines[0].startswith("error: "), res.stderr
     for w in words:
         assert w in lines[0], lines[0]

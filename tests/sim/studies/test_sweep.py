@@ -11,6 +11,7 @@ from rimless.cli import app
 from rimless.sim.model.params import WheelParams
 from rimless.sim.studies.sweep import SweepOptions, grid_points, point_key, run_sweep
 from rimless.values import parse_range
+from tests.support.cli_lines import stderr_lines
 from tests.support.simcli_truth import NEAR_1_26_DEG, er_stall_by_bisection
 
 OPTIONS = SweepOptions(n_guesses=4)
@@ -150,7 +151,7 @@ def _sweep(tmp_path, *args):
 def test_sweep_without_a_gait_at_any_point_is_exit_1_and_writes_no_table(tmp_path):
     res = _sweep(tmp_path, "--model", "er,ve", "--k", "2700", "--start-slope-rad", "0.0087", "--guesses", "3")
     assert res.exit_code == 1, res.output
-    lines = res.stderr.strip().splitlines()
+    lines = stderr_lines(res.stderr)
     assert len(lines) == 1 and lines[0].startswith("error: no period-1 gait at any of the 2 grid points"), lines
     assert "0.4985 deg" in lines[0]
     assert res.stdout.strip() == ""
@@ -179,7 +180,7 @@ def test_sweep_where_some_points_have_gaits_is_exit_0_with_a_no_gait_row(tmp_pat
 def test_sweep_cli_bad_values_are_one_line_errors(args, option, tmp_path):
     res = CliRunner().invoke(app, ["sim", "sweep", *args, "--out", str(tmp_path / "s")])
     assert res.exit_code == 2
-    lines = res.stderr.strip().splitlines()
+    lines = stderr_lines(res.stderr)
     assert len(lines) == 1 and lines[0].startswith("error:") and option in lines[0]
 
 
