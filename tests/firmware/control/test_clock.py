@@ -9,6 +9,7 @@ import time
 from rimless.firmware.clock import MonotonicClock, VirtualClock, seconds, sleeper
 from rimless.firmware.control.sampler import Sampler
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from rimless.firmware.service.bench import detector_delays
 
 TRAJ = GaitTrajectory(start_s=0.1, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 RATE_HZ = 300.0
@@ -31,6 +32,11 @@ def test_the_sampler_on_a_virtual_clock_samples_every_deadline(make_rig) -> None
     assert [rig.levels(leg) for leg in range(8)] == [by_hand.levels(leg) for leg in range(8)]
     assert rig.levels(0) == [False, True, False] and rig.levels(1) == [False, True, False]
     assert [e.fields["leg"] for e in rig.events("lock")] == [0, 1, 2]
+    # every part of the delay on the detector's side, exact here (the bench measures it on the wall clock)
+    lock_ms, touch_ms = detector_delays(rig.events("lock") + rig.events("touchdown"), TRAJ)
+    print(f"lock after the peak {lock_ms} ms, touchdown seen after {touch_ms} ms")
+    assert len(lock_ms) == 3 and all(abs(d) <= 1e3 / RATE_HZ for d in lock_ms), lock_ms  # within one sample
+    assert len(touch_ms) == 3 and all(0.0 <= d <= 20.0 for d in touch_ms), touch_ms
 
 
 def test_the_virtual_clock_moves_only_to_the_deadlines_asked_for() -> None:
