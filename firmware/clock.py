@@ -54,7 +54,7 @@ class VirtualClock:
 
     def __init__(self, start_ns: int | None = None, *, paced: bool = True, slack_s: float = 0.002) -> None:
         self._wall0 = time.monotonic_ns()
-        self._t0 = self._wall0 if start_ns is None else start_ns
+        self._t0 = self.start_ns = self._wall0 if start_ns is None else start_ns
         self._t = self._t0
         self.paced = paced
         self.slack_ns = int(slack_s * 1e9)
@@ -73,8 +73,11 @@ class VirtualClock:
 
 
 def seconds(clock: Clock) -> Callable[[], float]:
-    """`clock`'s time in seconds, as a callable (the fakes' and the pin log's time source)."""
-    return lambda: clock.now_ns() * 1e-9
+    """`clock`'s time in seconds as a callable (the time of the fakes, their trajectories and the pin log): from the
+    clock's `start_ns` when it has one (a `VirtualClock`), else on its own scale. Small numbers keep the fakes'
+    float arithmetic the same from run to run (seconds near 1e4 round differently with each start)."""
+    start = getattr(clock, "start_ns", 0)
+    return lambda: (clock.now_ns() - start) * 1e-9
 
 
 def sleeper(clock: Clock) -> Callable[[float], None]:

@@ -254,12 +254,13 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
                     mock.append(factory.pin(pin))
                 return bool(mock[0].state) == on_level
 
-            def changed_s() -> float | None:  # the clutch output's last edge (s, on the clock), once the pins exist
+            clock = VirtualClock()  # every read at its deadline: a loaded machine cannot thin out the reads
+
+            def changed_s() -> float | None:  # the clutch output's last edge (s, as `seconds(clock)`), once pins exist
                 hw_now = state.get("hw")
                 t_ns = hw_now.clutches.changed_ns(opts.leg) if hw_now is not None else None
-                return None if t_ns is None else t_ns * 1e-9
+                return None if t_ns is None else (t_ns - clock.start_ns) * 1e-9
 
-            clock = VirtualClock()  # every read at its deadline: a loaded machine cannot thin out the reads
             leg = FakeLeg(opts.fake_leg, engaged, clutch_changed_s=changed_s, clock=seconds(clock))
             trajectories = [leg if i == i_sensor else still for i in range(len(cfg.sensors))]
             hw = build_fake(

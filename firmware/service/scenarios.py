@@ -27,7 +27,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from rimless.firmware.clock import Clock, MonotonicClock
+from rimless.firmware.clock import Clock, MonotonicClock, seconds
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, FakeFault
 from rimless.firmware.drivers.fake_walk import FakeWalk
 
@@ -36,16 +36,15 @@ FAULT_AT_S = 2.5  # when the timed faults strike, after start (s): a clutch is e
 
 
 class Timeline:
-    """A scenario's time origin (s on `clock`, the monotonic clock by default): None until `start()`, called
+    """A scenario's time origin (s on `clock` as `seconds` reads it, the monotonic clock by default): None until
+    `start()`, called
     once the app runs (or, on a virtual clock, before: its time does not move until the sampler's first
     deadline)."""
 
     def __init__(self, clock: Clock | None = None) -> None:
         self.clock: Clock = clock if clock is not None else MonotonicClock()
+        self.now_s = seconds(self.clock)
         self.origin_s: float | None = None
-
-    def now_s(self) -> float:
-        return self.clock.now_ns() * 1e-9
 
     def start(self) -> None:
         if self.origin_s is None:

@@ -13,7 +13,7 @@ import socket
 import time
 from pathlib import Path
 
-from rimless.firmware.clock import VirtualClock
+from rimless.firmware.clock import VirtualClock, seconds
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from rimless.firmware.service.app import RobotApp
 from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig
@@ -51,7 +51,7 @@ def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=
     by default a walk from 0.1 s after the first sample); `script(app, hw)` runs once it is ready, then the app
     stops."""
     clock = VirtualClock()
-    hw = build_fake(cfg, trajectory=trajectory or gait(now_s=clock.now_ns() * 1e-9), clock=clock)
+    hw = build_fake(cfg, trajectory=trajectory or gait(now_s=seconds(clock)()), clock=clock)
     if hw_hook is not None:
         hw_hook(hw)
 

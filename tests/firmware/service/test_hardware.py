@@ -45,7 +45,7 @@ def _walk_to_leg_3(cfg: RobotConfig):
     """Run the app on fakes with one sensor per leg while the fake walks, for `RUN_SAMPLES` samples on a
     virtual clock (every sample at its deadline, however loaded the machine); returns the run's summary and the
     hardware."""
-    from rimless.firmware.clock import VirtualClock
+    from rimless.firmware.clock import VirtualClock, seconds
     from rimless.firmware.service.app import RobotApp
     from rimless.firmware.service.hardware import build_fake
 
@@ -54,7 +54,7 @@ def _walk_to_leg_3(cfg: RobotConfig):
     hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)], clock=clock)
     # the virtual time moves no more until the sampler's first deadline: the walk counts from there
     walk["traj"] = GaitTrajectory(
-        start_s=clock.now_ns() * 1e-9 + 0.15, step_period_s=STEP_S, compression_m=0.008, compression_s=0.06
+        start_s=seconds(clock)() + 0.15, step_period_s=STEP_S, compression_m=0.008, compression_s=0.06
     )
 
     async def main():

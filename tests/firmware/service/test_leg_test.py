@@ -291,9 +291,10 @@ def test_command_json_then_leg_fit_reads_its_log(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr
     rep = json.loads(res.stdout)
     assert rep["leg"] == LEG and rep["out"] == "leg.jsonl" and rep["fault"] is None
-    # 0.3 s at 3 kHz, every read on time (a virtual clock): the release's read, then 0.3 s of reads up to the
-    # first one past it (the time is checked before each read's wait)
-    assert rep["free_samples"] == 902 and rep["achieved_rate_hz"] == pytest.approx(3000.0, rel=1e-4)
+    # 0.3 s at 3 kHz, every read on time (a virtual clock, the same run every time): the release's own read, the
+    # 901 periods up to 0.3 s (900 periods of 333333 ns fall short) and the read after the one that sees them
+    # (the end is checked on the time before each read's wait)
+    assert rep["free_samples"] == 903 and rep["achieved_rate_hz"] == pytest.approx(3000.0, rel=1e-4)
     fit = subprocess.run(
         [sys.executable, "-m", "rimless", "trials", "leg-fit", "leg.jsonl", "--json"],
         cwd=tmp_path,
