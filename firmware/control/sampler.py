@@ -1,9 +1,10 @@
 """The sampler thread: steady-rate sampling on absolute deadlines, commands through an inbox.
 
 asyncio's timers round up to whole milliseconds (selectors.EpollSelector), so a steady 300 Hz to
-2 kHz cannot come from `asyncio.sleep`. The control path runs in this dedicated thread instead:
-`time.sleep` until `spin_s` before each absolute deadline (releasing the GIL), then a short
-busy-wait; every read is timestamped. A late sample never shifts later deadlines; when more than
+2 kHz cannot come from `asyncio.sleep`. The control path runs in this dedicated thread instead, waiting
+for each absolute deadline on its `Clock` (on the robot `MonotonicClock`: `time.sleep` until `spin_s`
+before the deadline, releasing the GIL, then a short busy-wait; on the fakes a `VirtualClock`, whose
+time moves only to the next deadline); every read is timestamped. A late sample never shifts later deadlines; when more than
 one period late, the missed deadlines are counted and skipped (no catch-up bursts).
 
 Commands from the asyncio side are callables put in `inbox`; the thread runs them between
@@ -21,13 +22,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from rimless.firmware.clock import Clock, MonotonicClock
 from rimless.firmware.control.controller import Controller
 from rimless.firmware.control.faults import Fault
 
 
 @dataclass
 class SamplerStats:
-    """Timing statistics of one run (times in ns, monotonic)."""
+    """Timing statistics of one run (times in ns, on the sampler's clock)."""
 
     samples: int = 0
     missed_deadlines: int = 0
@@ -39,11 +41,12 @@ class SamplerStats:
 class Sampler:
     """Runs `controller.step()` at `rate_hz` in its own thread.
 
-    :param spin_s: busy-wait this long before each deadline (s).
+    :param spin_s: busy-wait this long before each deadline (s), on the default clock.
     :param max_samples: stop by itself after this many periods (None = until stopped).
     :param record_timing: keep per-sample timestamps and latencies for the bench (bounded).
     :param on_sample: called after every control step, in the thread (watchdog feed, heartbeat pin).
     :param realtime: (priority, cpu): the thread makes itself SCHED_FIFO on one CPU (`realtime.apply_realtime`).
+    :param clock: the deadlines' clock (None: `MonotonicClock(spin_s)`; the fakes' `VirtualClock`).
     """
 
     def __init__(
@@ -57,6 +60,7 @@ class Sampler:
         timing_capacity: int = 200_000,
         on_sample: Callable[[], None] | None = None,
         realtime: tuple[int, int | None] | None = None,
+        clock: Clock | None = None,
     ) -> None:
         if not 1.0 <= rate_hz <= 5000.0:
             raise ValueError(f"rate_hz must be in 1..5000, got {rate_hz}")
@@ -67,6 +71,7 @@ class Sampler:
         self.realtime_report: Any = None
         self.period_ns = round(1e9 / rate_hz)
         self.spin_ns = int(spin_s * 1e9)
+        self.clock: Clock = clock if clock is not None else MonotonicClock(spin_s)
         self.max_samples = max_samples
         self.inbox: queue.SimpleQueue[tuple[Callable[[Controller], Any], concurrent.futures.Future[Any]]] = (
             queue.SimpleQueue()
@@ -130,8 +135,8 @@ class Sampler:
         ctl = self.controller
         stats = self.stats
         period = self.period_ns
-        spin = self.spin_ns
-        now_ns = time.monotonic_ns
+        now_ns = self.clock.now_ns
+        sleep_until = self.clock.sleep_until
         if self.realtime is not None:
             from rimless.firmware.control.realtime import apply_realtime
 
@@ -141,12 +146,7 @@ class Sampler:
         try:
             while not self._stop.is_set():
                 self._drain_inbox()
-                # Wait for the absolute deadline: sleep (GIL released), then spin the last bit.
-                remaining = deadline - now_ns()
-                if remaining > spin:
-                    time.sleep((remaining - spin) * 1e-9)
-                while now_ns() < deadline:
-                    pass
+                sleep_until(deadline)  # the absolute deadline (on the robot: sleep, then spin the last bit)
                 t = now_ns()
                 ctl.step()
                 self.last_sample_ns = t
@@ -186,7 +186,7 @@ class Sampler:
             from rimless.firmware.control.realtime import restore_others
 
             restore_others(self.realtime_report)
-        self.stats.stopped_ns = time.monotonic_ns()
+        self.stats.stopped_ns = self.clock.now_ns()
         self.stats.cpu_s = time.thread_time() - cpu0
         # Anything still waiting in the inbox gets an answer.
         while True:

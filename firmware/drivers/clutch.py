@@ -8,7 +8,7 @@ safe state must be driven first (and an external pull-down should hold the modul
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from gpiozero import DigitalOutputDevice
@@ -19,12 +19,21 @@ class ClutchBank:
 
     :param active_high: True if a high pin engages the clutch.
     :param pin_factory: the gpiozero pin factory (MockFactory in tests and `--fake`).
+    :param clock_ns: the time of each engage and release (the fakes' virtual clock with `--fake`).
     """
 
-    def __init__(self, pins: Sequence[int], *, active_high: bool = True, pin_factory: Any = None) -> None:
+    def __init__(
+        self,
+        pins: Sequence[int],
+        *,
+        active_high: bool = True,
+        pin_factory: Any = None,
+        clock_ns: Callable[[], int] = time.monotonic_ns,
+    ) -> None:
         if len(set(pins)) != len(pins):
             raise ValueError(f"clutch pins must be distinct, got {list(pins)}")
         self.pins = list(pins)
+        self.clock_ns = clock_ns
         self._devices: list[DigitalOutputDevice] = []
         try:
             for pin in self.pins:
@@ -35,7 +44,7 @@ class ClutchBank:
             self.close()
             raise
         self._engaged_since_ns: list[int | None] = [None] * len(self.pins)
-        self._changed_ns: list[int | None] = [None] * len(self.pins)  # monotonic_ns of each output's last change
+        self._changed_ns: list[int | None] = [None] * len(self.pins)  # clock_ns of each output's last change
 
     def __len__(self) -> int:
         return len(self._devices)
@@ -44,13 +53,13 @@ class ClutchBank:
         """Engage (lock) the clutch of `leg`."""
         self._devices[leg].on()
         if self._engaged_since_ns[leg] is None:
-            self._engaged_since_ns[leg] = self._changed_ns[leg] = time.monotonic_ns() if t_ns is None else t_ns
+            self._engaged_since_ns[leg] = self._changed_ns[leg] = self.clock_ns() if t_ns is None else t_ns
 
     def release(self, leg: int) -> None:
         """Release the clutch of `leg`."""
         self._devices[leg].off()
         if self._engaged_since_ns[leg] is not None:
-            self._changed_ns[leg] = time.monotonic_ns()
+            self._changed_ns[leg] = self.clock_ns()
         self._engaged_since_ns[leg] = None
 
     def all_off(self) -> None:
@@ -62,7 +71,7 @@ class ClutchBank:
             except Exception as err:  # keep going: the other clutches must still go off  # noqa: BLE001
                 first = first or err
             if self._engaged_since_ns[i] is not None:
-                self._changed_ns[i] = time.monotonic_ns()
+                self._changed_ns[i] = self.clock_ns()
             self._engaged_since_ns[i] = None
         if first is not None:
             raise first
@@ -72,11 +81,11 @@ class ClutchBank:
         return [i for i, since in enumerate(self._engaged_since_ns) if since is not None]
 
     def engaged_since_ns(self, leg: int) -> int | None:
-        """`monotonic_ns` at which `leg` was engaged, or None."""
+        """`clock_ns` at which `leg` was engaged, or None."""
         return self._engaged_since_ns[leg]
 
     def changed_ns(self, leg: int) -> int | None:
-        """`monotonic_ns` of the last engage or release of `leg` (None before the first)."""
+        """`clock_ns` of the last engage or release of `leg` (None before the first)."""
         return self._changed_ns[leg]
 
     def longest_hold_s(self, now_ns: int) -> float:

@@ -24,12 +24,13 @@ class GpioUnavailable(UserError):
 
 class PinLog:
     """Every level change of the mock pins, kept in memory (`transitions`: (t_s, BCM pin, level)) and, with
-    `path`, appended at once to a JSON Lines file (`{"t_s", "pin", "level"}`; `t_s` on the monotonic clock)
-    with one `os.write` per line, so that a reader outside the process sees each change as it happens,
-    including those made in a signal handler just before the process dies."""
+    `path`, appended at once to a JSON Lines file (`{"t_s", "pin", "level"}`; `t_s` on `clock`, the monotonic
+    clock or the fakes' virtual clock) with one `os.write` per line, so that a reader outside the process sees
+    each change as it happens, including those made in a signal handler just before the process dies."""
 
-    def __init__(self, path: Path | str | None = None) -> None:
+    def __init__(self, path: Path | str | None = None, clock: Callable[[], float] = time.monotonic) -> None:
         self.path = None if path is None else Path(path)
+        self.clock = clock
         self.transitions: list[tuple[float, int, int]] = []
         # held across a pin's change and its record, so that the file's order is the order of the changes (the
         # control thread's heartbeat and the shutdown's `off` race); re-entrant: a signal handler in the main
@@ -52,7 +53,7 @@ class PinLog:
     def record(self, pin: int, level: int) -> None:
         """One change of BCM `pin` to `level` (0 or 1), now."""
         with self._lock:
-            t = time.monotonic()
+            t = self.clock()
             self.transitions.append((t, pin, level))
             if self._fd is not None:
                 line = json.dumps({"t_s": round(t, 6), "pin": pin, "level": level}) + "\n"

@@ -100,6 +100,7 @@ class RobotApp:
             max_hold_s=cfg.clutch.max_hold_s,
             id_check_interval_s=cfg.sampling.id_check_interval_s,
             readback_every_samples=cfg.sampling.readback_every_samples,
+            clock_ns=time.monotonic_ns if hw.clock is None else hw.clock.now_ns,
         )
         self.armed_remotely = False
         self.signal_received: str | None = None
@@ -151,7 +152,7 @@ class RobotApp:
             self.hw.clutches.all_off()
         if self.signal_received is None:
             self.signal_received = name
-        self.controller.outbox.append(EventRecord(time.monotonic_ns(), "signal", {"signal": name}))
+        self.controller.outbox.append(EventRecord(self.controller.clock_ns(), "signal", {"signal": name}))
         self.request_stop(name)
 
     # --- main -----------------------------------------------------------------------------------
@@ -213,6 +214,7 @@ class RobotApp:
                 realtime=(self.cfg.sampling.realtime_priority, self.cfg.sampling.realtime_cpu)
                 if self.cfg.sampling.realtime
                 else None,
+                clock=self.hw.clock,
             )
             wd = self.watchdog = Watchdog(
                 self._watchdog_trip,
@@ -324,7 +326,7 @@ class RobotApp:
             if self.trial is not None:
                 try:
                     self.trial.append(self._log_pending)
-                    self.trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {"reason": "shutdown"})])
+                    self.trial.append([EventRecord(self.controller.clock_ns(), "trial_stop", {"reason": "shutdown"})])
                     self.trial.close()
                     self._account_log(closed=True)
                 except Exception as err:  # noqa: BLE001
@@ -452,7 +454,7 @@ class RobotApp:
             if self._log_reported == 0:
                 self.controller.outbox.append(
                     EventRecord(
-                        time.monotonic_ns(),
+                        self.controller.clock_ns(),
                         "log_degraded",
                         {"error": trial.last_error, "dropped_lines": self.summary.log_dropped_lines},
                     )
@@ -558,7 +560,7 @@ class RobotApp:
             trial = await asyncio.to_thread(TrialLog, self.cfg.log.dir, name, header, write=self.trial_log_write)
             self._route()  # records from before the start do not belong to the trial
             self.trial = trial
-            self._log_pending = [EventRecord(time.monotonic_ns(), "trial_start", {"trial": name})]
+            self._log_pending = [EventRecord(self.controller.clock_ns(), "trial_start", {"trial": name})]
             self.summary.trials.append(str(trial.path))
             return {"path": str(trial.path)}
 
@@ -571,7 +573,7 @@ class RobotApp:
             self._route()
             trial, self.trial = self.trial, None
             trial.append(self._log_pending)
-            trial.append([EventRecord(time.monotonic_ns(), "trial_stop", {})])
+            trial.append([EventRecord(self.controller.clock_ns(), "trial_stop", {})])
             self._log_pending = []
             await asyncio.to_thread(trial.close)
             self.trial = trial

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from rimless.firmware.clock import Clock, seconds, sleeper
 from rimless.firmware.control.controller import Channel
 from rimless.firmware.control.detector import LegDetector
 from rimless.firmware.control.faults import HealthMonitor
@@ -42,6 +43,7 @@ class Hardware:
     fakes: list[FakeAdns3080] = field(default_factory=list)
     closers: list[Callable[[], None]] = field(default_factory=list)
     heartbeat: HeartbeatOutput | None = None
+    clock: Clock | None = None  # the control loop's clock (None: the monotonic clock; the fakes' virtual clock)
 
     def outputs_off(self) -> None:
         """Heartbeat stopped (low) and every clutch off; tries both whatever the first raises."""
@@ -95,9 +97,11 @@ def _channels(cfg: RobotConfig, sensors: list[Adns3080]) -> list[Channel]:
     ]
 
 
-def default_fake_trajectory() -> GaitTrajectory:
-    """The synthetic gait of `--fake`: a touchdown every 0.4 s, 8 mm compression peaking 60 ms later."""
-    return GaitTrajectory(start_s=time.monotonic() + 0.3, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
+def default_fake_trajectory(now_s: float | None = None) -> GaitTrajectory:
+    """The synthetic gait of `--fake`: a touchdown every 0.4 s from 0.3 s after `now_s` (default: the monotonic
+    clock now), 8 mm compression peaking 60 ms later."""
+    start = time.monotonic() if now_s is None else now_s
+    return GaitTrajectory(start_s=start + 0.3, step_period_s=0.4, compression_m=0.008, compression_s=0.06)
 
 
 def build_fake(
@@ -109,12 +113,17 @@ def build_fake(
     noise_counts: float = 0.3,
     seed: int = 0,
     pin_log: PinLog | None = None,
+    clock: Clock | None = None,
 ) -> Hardware:
-    """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on the monotonic clock;
-    clutches, RESET, NPD and GPIO chip selects on a MockFactory (recording every pin change in `pin_log`)."""
+    """Fake sensors replaying `trajectory` (or one of `trajectories` per sensor) on `clock` (None: the monotonic
+    clock; a `VirtualClock` samples every deadline whatever the load, see `rimless.firmware.clock`), which is
+    also the clock of the drivers, the clutches and the app's control loop (`Hardware.clock`); clutches, RESET,
+    NPD and GPIO chip selects on a MockFactory (recording every pin change in `pin_log`)."""
     factory = pin_factory if pin_factory is not None else mock_pin_factory(pin_log)
-    traj = trajectory if trajectory is not None else default_fake_trajectory()
-    clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory)
+    now_s = time.monotonic if clock is None else seconds(clock)
+    traj = trajectory if trajectory is not None else default_fake_trajectory(now_s())
+    clock_ns = time.monotonic_ns if clock is None else clock.now_ns
+    clutches = ClutchBank(cfg.clutch.pins, active_high=cfg.clutch.active_high, pin_factory=factory, clock_ns=clock_ns)
     fakes: list[FakeAdns3080] = []
     sensors: list[Adns3080] = []
     closers: list[Callable[[], None]] = []
@@ -131,6 +140,7 @@ def build_fake(
                 noise_counts=noise_counts,
                 seed=seed + i,
                 speed_hz=s.spi_speed_hz,
+                clock=now_s,
             )
             closers.append(fake.close)
             fakes.append(fake)
@@ -159,6 +169,8 @@ def build_fake(
                 sign=s.sign,
                 reset=drive_reset,
                 npd=None if npd is None else drive_npd,
+                sleep=time.sleep if clock is None else sleeper(clock),
+                clock_ns=clock_ns,
             )
             sensors.append(sensor)
         _reset_all(sensors, cfg)
@@ -167,7 +179,7 @@ def build_fake(
     except BaseException:
         Hardware([], clutches, [], closers=closers).close()
         raise
-    hw = Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, closers)
+    hw = Hardware(_channels(cfg, sensors), clutches, sensors, factory, fakes, closers, clock=clock)
     if cfg.clutch.heartbeat_pin:
         try:
             hw.heartbeat = HeartbeatOutput(cfg.clutch.heartbeat_pin, pin_factory=factory)

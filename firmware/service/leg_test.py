@@ -18,7 +18,8 @@ frame at most (faster reads only return zero deltas), paced to `rate_hz` with a 
 slower than that reads back to back (each read is timestamped with `monotonic_ns` at its start, where the chip
 freezes the motion at the burst's first byte, and its duration is logged as `read_us`: a read the process was
 descheduled in has an uncertain instant, and the fit leaves it out; the achieved rate is reported). On a Pi 4
-from Python expect 3-6 kHz (0.15-0.3 ms a read).
+from Python expect 3-6 kHz (0.15-0.3 ms a read). With `--fake` the loop, the fake sensor and the fake leg run on
+a `VirtualClock` (`rimless.firmware.clock`): every read is taken at its deadline, whatever the machine's load.
 
 Safety, as for every command that drives a clutch: every stop signal releases the clutch at once
 (`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
@@ -43,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from rimless.errors import OutputFileError, ParameterError, RunFailure
+from rimless.firmware.clock import Clock, MonotonicClock, VirtualClock, seconds
 from rimless.firmware.control.detector import DetectorParams, LegDetector
 from rimless.firmware.control.faults import Fault, HealthMonitor
 from rimless.firmware.control.watchdog import Watchdog
@@ -252,15 +254,22 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
                     mock.append(factory.pin(pin))
                 return bool(mock[0].state) == on_level
 
-            def changed_s() -> float | None:  # the clutch output's last edge (s, monotonic), once the pins exist
+            clock = VirtualClock()  # every read at its deadline: a loaded machine cannot thin out the reads
+
+            def changed_s() -> float | None:  # the clutch output's last edge (s, as `seconds(clock)`), once pins exist
                 hw_now = state.get("hw")
                 t_ns = hw_now.clutches.changed_ns(opts.leg) if hw_now is not None else None
-                return None if t_ns is None else t_ns * 1e-9
+                return None if t_ns is None else (t_ns - clock.start_ns) * 1e-9
 
-            leg = FakeLeg(opts.fake_leg, engaged, clutch_changed_s=changed_s)
+            leg = FakeLeg(opts.fake_leg, engaged, clutch_changed_s=changed_s, clock=seconds(clock))
             trajectories = [leg if i == i_sensor else still for i in range(len(cfg.sensors))]
             hw = build_fake(
-                cfg, trajectories=trajectories, pin_factory=factory, noise_counts=opts.noise_counts, seed=opts.seed
+                cfg,
+                trajectories=trajectories,
+                pin_factory=factory,
+                noise_counts=opts.noise_counts,
+                seed=opts.seed,
+                clock=clock,
             )
             state["fake_leg"] = leg
         else:
@@ -302,6 +311,7 @@ def _run(
     detector = LegDetector(HAND_DETECTOR, [opts.leg])
     health = HealthMonitor(s.health())
     clutches, leg = hw.clutches, opts.leg
+    clock: Clock = hw.clock if hw.clock is not None else MonotonicClock()
     faults: list[tuple[str, str]] = []
 
     stalls: list[str] = []
@@ -314,7 +324,7 @@ def _run(
             stalls.append(detail)
 
     def hold_check() -> None:  # in the watchdog thread
-        held = clutches.longest_hold_s(time.monotonic_ns())
+        held = clutches.longest_hold_s(clock.now_ns())
         if held > cfg.clutch.max_hold_s:
             hw.outputs_off()
             faults.append(
@@ -338,7 +348,9 @@ def _run(
         "axis": s.axis,
         "sign": s.sign,
         "fake": hw.fakes != [],
-        "t_s": "start of each read (s from the test's start, monotonic clock)",
+        "t_s": "start of each read (s from the test's start, monotonic clock)"
+        if hw.clock is None
+        else "start of each read (s from the test's start, the fake's virtual clock)",
         "started_epoch_s": time.time(),
     }
     if hw.fakes:
@@ -349,7 +361,7 @@ def _run(
     events: list[dict[str, Any]] = []
     period_ns = round(1e9 / opts.rate_hz)
     det_period_ns = round(1e9 / DETECTOR_RATE_HZ)
-    t0 = time.monotonic_ns()
+    t0 = clock.now_ns()
     counts = 0
     det_counts = 0
     det_next = t0
@@ -364,18 +376,15 @@ def _run(
         enter(phase)
         while True:
             deadline += period_ns
-            now = time.monotonic_ns()
+            now = clock.now_ns()
             if now < deadline:
-                if deadline - now > 300_000:
-                    time.sleep((deadline - now - 300_000) * 1e-9)
-                while time.monotonic_ns() < deadline:
-                    pass
+                clock.sleep_until(deadline)  # on the robot: sleep, then spin the last 0.3 ms
             else:
                 deadline = now  # late: read at once, never in a burst to catch up
             try:
-                r0 = time.monotonic_ns()
+                r0 = clock.now_ns()
                 m = sensor.read_motion()
-                read_ns = time.monotonic_ns() - r0
+                read_ns = clock.now_ns() - r0
             except SensorError as err:
                 hw.outputs_off()
                 faults.append((Fault.SPI_ERROR.value, str(err)))
@@ -413,7 +422,7 @@ def _run(
                     det_counts = 0
                     if d.engage is not None:
                         clutches.engage(leg)
-                        engaged_ns, lock_counts = time.monotonic_ns(), counts
+                        engaged_ns, lock_counts = clock.now_ns(), counts
                         events.append(
                             {"t_s": round((engaged_ns - t0) * 1e-9, 7), "event": "engage", "leg": leg, "counts": counts}
                         )
@@ -435,7 +444,7 @@ def _run(
             elif phase == "hold":
                 if engaged_ns is not None and now - engaged_ns >= opts.hold_s * 1e9:
                     clutches.release(leg)
-                    released_ns = time.monotonic_ns()
+                    released_ns = clock.now_ns()
                     events.append(
                         {"t_s": round((released_ns - t0) * 1e-9, 7), "event": "release", "leg": leg, "counts": counts}
                     )
@@ -446,7 +455,7 @@ def _run(
     finally:
         wd.stop()
         hw.outputs_off()
-    t_end = time.monotonic_ns()
+    t_end = clock.now_ns()
     report.samples = n
     report.achieved_rate_hz = n / max((t_end - t0) * 1e-9, 1e-9)
     if engaged_ns is not None:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rimless.errors import ParameterError
+from rimless.firmware.clock import VirtualClock, seconds
 from rimless.firmware.drivers.fake_walk import airborne_locks
 from rimless.firmware.drivers.gpio import PinLog, pin_histories
 from rimless.firmware.errors import CommandError, Interrupted, SensorError
@@ -120,7 +121,8 @@ def run_robot(
     if not fake and (fake_fault is not None or pin_log is not None):
         raise ParameterError("--fake-fault and --pin-log need --fake")
     try:
-        sc = scenario(fake_fault) if fake else None
+        # the fakes run on a virtual clock paced to the wall clock: every deadline sampled whatever the load
+        sc = scenario(fake_fault, clock=VirtualClock()) if fake else None
     except ValueError as err:
         raise ParameterError(f"--fake-fault: {err}") from None
     state: dict[str, Hardware] = {}
@@ -157,11 +159,14 @@ def _run(
     pins_log: PinLog | None = None
     try:
         if sc is not None:
+            clock = sc.timeline.clock
             try:
-                pins_log = PinLog(pin_log_path)
+                pins_log = PinLog(pin_log_path, clock=seconds(clock))  # the engages on the walk's clock
             except OSError as err:
                 raise ParameterError(f"--pin-log {pin_log_path}: {err.strerror or err}") from None
-            hw = build_fake(cfg, trajectory=sc.motion, pin_log=pins_log)  # walks once the app runs
+            hw = build_fake(cfg, trajectory=sc.motion, pin_log=pins_log, clock=clock)
+            # the virtual time moves no more until the sampler's first deadline: the walk starts there
+            sc.timeline.start()
             inject(sc, hw.sensors, hw.fakes)
         else:
             hw = build_real(cfg)

@@ -11,7 +11,11 @@ that every lock can be judged) and a fault injected into the fake sensor at a se
 
 "Start" is the moment the app runs (`on_ready`: the sampler samples, the controller is armed when asked), not
 the moment the scenario is made: a loaded machine may take seconds to get there, and a walk that began
-before the robot looked would be a step no robot could have seen, not a fault of the firmware.
+before the robot looked would be a step no robot could have seen, not a fault of the firmware. The walk and the
+sensor faults count on the scenario's clock: the fakes' `VirtualClock` in `robot run --fake`, whose time does
+not move before the sampler's first deadline, so there the start is that deadline (`Timeline.start` before the
+app runs) and every sample sees the walk at its own deadline whatever the load. The loop stall and the full disk
+strike on the wall clock (they are about the event loop and the disk).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from rimless.firmware.clock import Clock, MonotonicClock, seconds
 from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, FakeFault
 from rimless.firmware.drivers.fake_walk import FakeWalk
 
@@ -31,14 +36,19 @@ FAULT_AT_S = 2.5  # when the timed faults strike, after start (s): a clutch is e
 
 
 class Timeline:
-    """A scenario's time origin (`time.monotonic()` s): None until `start()`, called once the app runs."""
+    """A scenario's time origin (s on `clock` as `seconds` reads it, the monotonic clock by default): None until
+    `start()`, called
+    once the app runs (or, on a virtual clock, before: its time does not move until the sampler's first
+    deadline)."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock | None = None) -> None:
+        self.clock: Clock = clock if clock is not None else MonotonicClock()
+        self.now_s = seconds(self.clock)
         self.origin_s: float | None = None
 
     def start(self) -> None:
         if self.origin_s is None:
-            self.origin_s = time.monotonic()
+            self.origin_s = self.now_s()
 
 
 class ScenarioWalk:
@@ -108,16 +118,21 @@ def _walks(start_s: float) -> dict[str, tuple[FakeWalk, Callable[[FakeAdns3080],
 FAKE_FAULTS: tuple[str, ...] = tuple(n for n in _walks(0.0) if n != "none")
 
 
-def scenario(name: str | None, *, lead_s: float = 1.0) -> Scenario:
-    """The scenario `name` (None: a plain walk), its first touchdown `lead_s` after the start; ValueError names
-    the known ones."""
+def scenario(name: str | None, *, lead_s: float = 1.0, clock: Clock | None = None) -> Scenario:
+    """The scenario `name` (None: a plain walk), its first touchdown `lead_s` after the start, on `clock` (None:
+    the monotonic clock); ValueError names the known ones."""
     walks = _walks(lead_s)
     key = name or "none"
     if key not in walks:
         raise ValueError(f"unknown fake fault {name!r}; known: {', '.join(FAKE_FAULTS)}")
     walk, fault = walks[key]
     return Scenario(
-        key, walk, fault, stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0, disk_full=key == "log-disk-full"
+        key,
+        walk,
+        fault,
+        stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0,
+        disk_full=key == "log-disk-full",
+        timeline=Timeline(clock),
     )
 
 
@@ -159,7 +174,7 @@ def on_ready(sc: Scenario, app: Any) -> None:
 
 class ScheduledFaultBus:
     """The fake's bus, applying `action(fake)` once at the first message from `after_s` after the timeline's
-    start on."""
+    start on (on the timeline's clock)."""
 
     def __init__(
         self, fake: FakeAdns3080, timeline: Timeline, after_s: float, action: Callable[[FakeAdns3080], None]
@@ -171,7 +186,7 @@ class ScheduledFaultBus:
 
     def message(self, segments: Any) -> list[bytes]:
         origin = self.timeline.origin_s
-        if self.action is not None and origin is not None and time.monotonic() >= origin + self.after_s:
+        if self.action is not None and origin is not None and self.timeline.now_s() >= origin + self.after_s:
             action, self.action = self.action, None
             action(self.fake)
         return self.fake.message(segments)

@@ -20,6 +20,9 @@ RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 CLUTCH_PINS = {17, 27, 22, 23, 24, 16, 20, 21}
 HEARTBEAT = 18
 OLD = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT}
+# the watchdogs at 1 s (the robot's 0.1 s and 0.25 s), as in the other fake runs: a test machine at load 14
+# pauses a process for tenths of a second, and a `sensor_stalled` fault disarms it before its first lock
+SAMPLING = "[sampling]\nstall_timeout_s = 1.0\nloop_stall_s = 1.0\n"
 
 
 def read_log(path: Path) -> list[dict]:
@@ -32,7 +35,7 @@ def read_log(path: Path) -> list[dict]:
 
 def start(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path]:
     cfg = tmp_path / f"{name}.toml"
-    cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n{SAMPLING}')
     log = tmp_path / f"{name}.jsonl"
     proc = subprocess.Popen(
         [
@@ -44,7 +47,7 @@ def start(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path]:
             "--config",
             str(cfg),
             "--duration-s",
-            "30",
+            "90",
             "--pin-log",
             str(log),
         ],
@@ -55,7 +58,8 @@ def start(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path]:
     return proc, log
 
 
-def wait_for(proc: subprocess.Popen, log: Path, pins: set[int], timeout_s: float = 20.0) -> None:
+def wait_for(proc: subprocess.Popen, log: Path, pins: set[int], timeout_s: float = 60.0) -> None:
+    """Until one of `pins` went high (the timeout is a hang guard: several processes start at once)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
@@ -118,7 +122,7 @@ def test_a_blocked_stderr_holds_up_neither_start_nor_exit(tmp_path) -> None:
         pass
     os.set_blocking(w, True)
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(f'[commands]\nenabled = false\n[log]\ndir = "{tmp_path}"\n{SAMPLING}')
     log = tmp_path / "pins.jsonl"
     t0 = time.monotonic()
     proc = subprocess.Popen(

@@ -1,4 +1,5 @@
-"""Shared by the firmware tests: a `RobotApp` on fake hardware over loopback sockets (`scenario`), a client
+"""Shared by the firmware tests: a `RobotApp` on fake hardware over loopback sockets (`scenario`; the control
+loop and the fakes on a `VirtualClock`, so a loaded machine never makes the fake walk miss a sample), a client
 of the signed command protocol written from its description (`Client`), and small probes."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import socket
 import time
 from pathlib import Path
 
+from rimless.firmware.clock import VirtualClock, seconds
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from rimless.firmware.service.app import RobotApp
 from rimless.firmware.service.config import CommandsConfig, LogConfig, RobotConfig, SamplingConfig
@@ -38,13 +40,18 @@ def config(tmp_path: Path, **kw) -> RobotConfig:
     return RobotConfig(**base)
 
 
-def gait(step_period_s: float = 0.4, steps: int | None = None) -> GaitTrajectory:
-    return GaitTrajectory(start_s=time.monotonic() + 0.1, step_period_s=step_period_s, steps=steps)
+def gait(step_period_s: float = 0.4, steps: int | None = None, now_s: float | None = None) -> GaitTrajectory:
+    """A walk from 0.1 s after `now_s` (default: the monotonic clock now)."""
+    start = time.monotonic() if now_s is None else now_s
+    return GaitTrajectory(start_s=start + 0.1, step_period_s=step_period_s, steps=steps)
 
 
 def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=15.0, hw_hook=None):
-    """Run the app with fake hardware; `script(app, hw)` runs once it is ready, then the app stops."""
-    hw = build_fake(cfg, trajectory=trajectory or gait())
+    """Run the app with fake hardware on a virtual clock (paced to the wall clock; `trajectory` on that clock,
+    by default a walk from 0.1 s after the first sample); `script(app, hw)` runs once it is ready, then the app
+    stops."""
+    clock = VirtualClock()
+    hw = build_fake(cfg, trajectory=trajectory or gait(now_s=seconds(clock)()), clock=clock)
     if hw_hook is not None:
         hw_hook(hw)
 

@@ -16,7 +16,8 @@ PINS = (17, 27, 22, 23, 24, 16, 20, 21)
 
 
 class VirtualClock:
-    """Seconds, advanced by hand."""
+    """Seconds, advanced by hand (`t`, `sleep`) or by a loop waiting for its next deadline: it is also a
+    `rimless.firmware.clock.Clock` (`now_ns`, `sleep_until`), so the sampler thread can run on it."""
 
     def __init__(self) -> None:
         self.t = 0.0
@@ -29,6 +30,12 @@ class VirtualClock:
 
     def sleep(self, s: float) -> None:
         self.t += s
+
+    def now_ns(self) -> int:
+        return self.ns()
+
+    def sleep_until(self, deadline_ns: int) -> None:
+        self.t = max(self.t, deadline_ns * 1e-9)
 
 
 @dataclass

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import time
 
 from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
 from rimless.firmware.service.config import RobotConfig, SensorConfig
@@ -35,66 +34,50 @@ def per_leg_config(tmp_path) -> RobotConfig:
     return dataclasses.replace(base, sensors=sensors)
 
 
-def _walk_until_leg_3_holds(cfg: RobotConfig):
-    """Run the app on fakes with one sensor per leg while the fake walks; returns the run's summary and the
+STEP_S = 0.3
+RATE_HZ = 300.0  # the default [sampling] rate_hz
+# legs k touch down at 0.15 + 0.3 k s after the first sample: stop 0.2 s after leg 3's touchdown (its lock
+# 0.06 s after it), 0.1 s before leg 4's
+RUN_SAMPLES = round((0.15 + 3 * STEP_S + 0.2) * RATE_HZ)
+
+
+def _walk_to_leg_3(cfg: RobotConfig):
+    """Run the app on fakes with one sensor per leg while the fake walks, for `RUN_SAMPLES` samples on a
+    virtual clock (every sample at its deadline, however loaded the machine); returns the run's summary and the
     hardware."""
+    from rimless.firmware.clock import VirtualClock, seconds
     from rimless.firmware.service.app import RobotApp
     from rimless.firmware.service.hardware import build_fake
 
+    clock = VirtualClock()
     walk: dict = {}
-    hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)])
-
-    async def stop_once_leg_3_holds(app) -> None:
-        # A condition, not a delay: a loaded machine (CI at load 6) pauses the loop for tenths of a second.
-        leg3 = hw.pin_factory.pin(cfg.clutch.pins[3])
-        deadline = time.monotonic() + 30.0
-        while not leg3.state and time.monotonic() < deadline:
-            await asyncio.sleep(0.01)
-        app.request_stop("test done")
-
-    async def walk_then_stop(app) -> None:
-        # The walk starts once the control loop samples (a loaded machine may take long to start it); the app
-        # stops once leg 3 holds. The walk goes on meanwhile, so a late stop still sees every lock released by
-        # the next touchdown (a walk that ended after leg 3 left its lock to max_hold_s: clutch_timeout in a CI
-        # run).
-        deadline = time.monotonic() + 30.0
-        while app.controller.samples < 30 and time.monotonic() < deadline:
-            await asyncio.sleep(0.01)
-        walk["traj"] = GaitTrajectory(
-            start_s=time.monotonic() + 0.15, step_period_s=0.3, compression_m=0.008, compression_s=0.06
-        )
-        await stop_once_leg_3_holds(app)
-
-    def ready(app) -> None:
-        walk["stopper"] = asyncio.get_running_loop().create_task(walk_then_stop(app))
+    hw = build_fake(cfg, trajectories=[leg_view(walk, k) for k in range(8)], clock=clock)
+    # the virtual time moves no more until the sampler's first deadline: the walk counts from there
+    walk["traj"] = GaitTrajectory(
+        start_s=seconds(clock)() + 0.15, step_period_s=STEP_S, compression_m=0.008, compression_s=0.06
+    )
 
     async def main():
-        app = RobotApp(cfg, hw, on_ready=ready)
-        return await app.run(duration_s=30, arm=True, handle_signals=False)
+        app = RobotApp(cfg, hw)
+        # duration_s only guards against a hang: the run ends after its samples
+        return await app.run(duration_s=120, max_samples=RUN_SAMPLES, arm=True, handle_signals=False)
 
     return asyncio.run(main()), hw
 
 
 def test_one_sensor_per_leg_with_gpio_chip_selects_clutches_the_measured_leg(tmp_path) -> None:
-    """Each stance lasts 60 ms of compression, sampled on the wall clock in this process: a loop that missed
-    its deadlines through one (a loaded test machine; at load 6 one run in two) sees no stance there, and that
-    leg does not lock (then the walk goes round again until leg 3 holds). A run whose loop missed deadlines and
-    whose legs 0..3 did not lock once each is started again (at most three runs)."""
+    """Each stance lasts 60 ms of compression; the loop and the fakes run on a virtual clock, so every sample is
+    taken and one run is the whole test."""
     cfg = per_leg_config(tmp_path)
-    for _attempt in range(3):
-        summary, hw = _walk_until_leg_3_holds(cfg)
-        assert summary.faults == [] and summary.error is None
-        hist = {
-            k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states)
-            for k, p in enumerate(cfg.clutch.pins)
-        }
-        if summary.missed_deadlines == 0 or all(hist[k] == "010" for k in range(4)):
-            break
-    for k in range(4):  # legs 0..3 stanced once each, released at the next leg's touchdown (or at the stop)
-        assert hist[k] == "010", (hist, summary.missed_deadlines)
-    # legs 4..7: not yet in stance at the stop, or (a stop delayed by a loaded machine) locked once and released
-    assert all(hist[k] in ("0", "010") for k in range(4, 8)), hist
-    assert hist[7] == "0", hist  # the stop came within a walk round
+    summary, hw = _walk_to_leg_3(cfg)
+    assert summary.faults == [] and summary.error is None
+    assert summary.samples == RUN_SAMPLES and summary.missed_deadlines == 0
+    assert summary.stop_reason == "sampler finished"
+    hist = {
+        k: "".join("1" if s.state else "0" for s in hw.pin_factory.pin(p).states) for k, p in enumerate(cfg.clutch.pins)
+    }
+    # legs 0..3 stanced once each, released at the next leg's touchdown (leg 3 at the stop); legs 4..7 not yet
+    assert hist == {0: "010", 1: "010", 2: "010", 3: "010", 4: "0", 5: "0", 6: "0", 7: "0"}, hist
     for cs in CS_PINS:  # every chip select idles high and was pulled low for transfers
         states = [s.state for s in hw.pin_factory.pin(cs).states]
         assert states[-1] is True and False in states[1:]
