@@ -19,7 +19,7 @@ GENERATED = "rimless.sim.model.generated"
 # Layers inside each part, lowest first. A module may import its own layer (no cycle) and every lower one.
 LAYERS = {
     "rimless.sim": ["model", "integrate|fast", "step", "continuation", "studies", "in_the_loop", "api", "cli"],
-    "rimless.firmware": ["errors", "drivers", "control", "link", "service", "cli"],
+    "rimless.firmware": ["errors|clock", "drivers", "control", "link", "service", "cli"],
     "rimless.analysis": ["io", "kinematics", "inference", "examples|report", "api", "cli"],
 }
 # What a part may import of the other parts (the shared root modules are open to all, the CLI root to none).
