@@ -217,7 +217,13 @@ def find_up(vf: ViconFile, choice: SourceChoice, orientation: str = "helical") -
         axis, turn = _spin_axis_object(pose[:, :3], orientation)
     else:
         pts = np.stack([zeros_to_nan(sec.get(m, XYZ), 3) for m in choice.markers], axis=1)
-        path = np.nanmean(pts, axis=1) if pts.shape[1] > 1 else pts[:, 0]
+        if pts.shape[1] > 1:  # the markers' centroid per frame (NaN where none is seen: a gap, as elsewhere)
+            seen = np.isfinite(pts).all(axis=2)
+            n = seen.sum(axis=1)
+            total = np.where(seen[:, :, None], pts, 0.0).sum(axis=1)
+            path = np.where(n[:, None] > 0, total / np.maximum(n, 1)[:, None], np.nan)
+        else:
+            path = pts[:, 0]
         if pts.shape[1] >= 3:
             axis, turn = _spin_axis_markers(pts)
     travel, extent = _travel(path)

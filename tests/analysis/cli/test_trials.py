@@ -38,8 +38,10 @@ CONTRACT = {
     "trial",
     "slope_source",
     "slope_ci_deg",
+    "up_axis",
 }  # the issues' keys, plus the path of the trial written (None when
-# refused); slope_source (ramp | given | estimated) and slope_ci_deg ([low, high]) are issue 19's
+# refused); slope_source (ramp | given | estimated) and slope_ci_deg ([low, high]) are issue 19's; up_axis (the lab
+# axis taken as up, found or given by --up-axis) issue 31's
 
 
 @pytest.fixture()
