@@ -161,7 +161,7 @@ def mfpt_cmd(
             _wheel(params, model, backend, rtol)
             .mfpt(
                 terrain_sd_deg,
-                method=method,  # type: ignore[arg-type]
+                method=method,
                 walks=walks,
                 cap=cap,
                 seed=seed,

@@ -74,7 +74,7 @@ class SlopeMap:
 
     def _map_at(self, slope_rad: float) -> Any:
         """The map of the wheel with this slope (a valid WheelParams slope), built once per slope."""
-        pm = self._maps.get(slope_rad)
+        pm: Any = self._maps.get(slope_rad)
         if pm is None:
             from rimless.sim.step.backend import make_map
 

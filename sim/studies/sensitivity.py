@@ -51,6 +51,17 @@ def checked_derivative(f: Callable[[float], np.ndarray], h0: float, tries: int =
     return ders[best], hs[best], errs[best]
 
 
+def _along(
+    ind: Callable[[np.ndarray, float], np.ndarray], z: np.ndarray, slope: float, i: int, part: slice
+) -> Callable[[float], np.ndarray]:
+    """e -> part of ind(z + e * unit vector i, slope)."""
+
+    def f(e: float) -> np.ndarray:
+        return ind(z + e * np.eye(2)[i], slope)[part]
+
+    return f
+
+
 def _norms(g: np.ndarray, nominal: np.ndarray) -> dict[str, Any]:
     return {
         "gsn": float(np.sqrt(np.sum(g**2))),
@@ -91,11 +102,11 @@ def gait_sensitivity(
         a_method = "exact (given)"
         a_err = 0.0
     else:
-        cols = [checked_derivative(lambda e, i=i: ind(zs + e * np.eye(2)[i], slope_rad)[:2], 1e-3) for i in range(2)]
+        cols = [checked_derivative(_along(ind, zs, slope_rad, i, slice(0, 2)), 1e-3) for i in range(2)]
         A = np.column_stack([c[0] for c in cols])
         a_method = "central differences (checked step)"
         a_err = max(c[2] for c in cols)
-    dT = [checked_derivative(lambda e, i=i: ind(zs + e * np.eye(2)[i], slope_rad)[2:], 1e-3) for i in range(2)]
+    dT = [checked_derivative(_along(ind, zs, slope_rad, i, slice(2, 3)), 1e-3) for i in range(2)]
     C = np.vstack([[d[0][0] for d in dT], A[1]])
     eig = np.linalg.eigvals(A)
     if np.max(np.abs(eig)) >= 1:
@@ -119,7 +130,7 @@ def gait_sensitivity(
     }
     out_d: dict[str, Any] = {}
     for name, (f, eps, unit, what, h0) in disturbances.items():
-        der, h, err = checked_derivative(f, h0)
+        der, h, fd_err = checked_derivative(f, h0)
         B, D = der[:2], np.array([der[2], der[1]])
         resp = [D]
         x = B.copy()
@@ -156,7 +167,7 @@ def gait_sensitivity(
             **lin_n,
             "steps_summed": len(resp),
             "fd_step": h,
-            "fd_error_estimate": err,
+            "fd_error_estimate": fd_err,
             "simulated": {"disturbance": eps, "steps": n_sim, **sim_n},
             "relative_difference": abs(sim_n["gsn"] - lin_n["gsn"]) / lin_n["gsn"],
             "relative_difference_by_indicator": {
@@ -198,6 +209,9 @@ def sensitivity_study(
     from rimless.sim.studies.gaits import fixed_point_study
     from rimless.sim.studies.section_map import SlopeMap
 
+    for name, v in (("push_rad_s", push_rad_s), ("slope_step_deg", slope_step_deg)):  # before the work
+        if not (math.isfinite(v) and v != 0):
+            raise ParameterError(f"{name} must be a finite number other than 0, got {v!r}")
     fp = fixed_point_study(params, model, backend=backend, rtol=rtol)
     z_star = np.array([fp["theta_plus_rad"], fp["theta_dot_plus_rad_s"]])
     smap = SlopeMap(params, model, backend=backend, rtol=rtol)
