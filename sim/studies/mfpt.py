@@ -20,8 +20,12 @@ Two methods:
   With Q the chain among the nodes, the expected number of transitions to absorption t solves (I - Q) t = 1;
   mfpt_steps = t(z*) - 1 (t interpolated at z* by the same weights; the failing step is not counted). Also
   reported: Q's largest eigenvalue lambda_2 and lambda_2 / (1 - lambda_2), the MFPT from the quasi-stationary
-  distribution (Byl and Tedrake's measure). The discretisation error is estimated by a second, coarser mesh
-  (about 2/3 of the nodes per axis and of the slope values): `mfpt_discretisation_error_steps` = |fine - coarse|.
+  distribution (Byl and Tedrake's measure). Where a node's outcome (fails or not) changes between neighbouring
+  slope values, the slope where it changes is found by bisection and the two bins' common edge moved there, so
+  the failure probability, which decides the MFPT, is not the midpoint rule's. The discretisation error is
+  estimated by a second, coarser mesh (about 2/3 of the nodes per axis and of the slope values): for
+  first-order convergence the fine mesh's error is 2 |fine - coarse| (`mfpt_discretisation_error_steps`), and
+  `mfpt_extrapolated_steps` = fine + 2 (fine - coarse) (Richardson).
 """
 
 from __future__ import annotations
@@ -39,6 +43,8 @@ from rimless.sim.studies.section_map import StepMap, apply, failure_fate
 
 Z95 = 1.959963984540054
 SLOPE_SPAN_SD = 6.0  # the slope bins cover +- this many standard deviations
+RICHARDSON = 2.0  # error of the fine mesh = 2 |fine - coarse| for first-order convergence at spacing ratio 2/3
+SWITCH_BISECTIONS = 12  # bisections for the slope where a node's step starts to fail
 SLOPE_LIMIT_RAD = SPOKE_ANGLE_RAD / 2 - 0.01  # slopes beyond +- this (about 21.9 deg) are taken at it
 
 
@@ -111,8 +117,8 @@ def monte_carlo_mfpt(
 
 
 def slope_nodes(slope_rad: float, sd_rad: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(slopes, probabilities): the centres of n equal bins over slope +- 6 sd and the normal's mass in each
-    (the tails folded into the end bins; the probabilities sum to 1)."""
+    """(slopes, edges): the centres of n equal bins over slope +- 6 sd (within +-SLOPE_LIMIT_RAD) and the n + 1
+    bin edges as the normal's CDF (0 and 1 at the ends: the tails are folded into the end bins)."""
     from scipy.stats import norm
 
     lo = max(-SLOPE_SPAN_SD, (-SLOPE_LIMIT_RAD - slope_rad) / sd_rad)
@@ -121,7 +127,23 @@ def slope_nodes(slope_rad: float, sd_rad: float, n: int) -> tuple[np.ndarray, np
     cdf = norm.cdf(edges)
     cdf[0], cdf[-1] = 0.0, 1.0
     centres = 0.5 * (edges[:-1] + edges[1:])
-    return slope_rad + sd_rad * centres, np.diff(cdf)
+    return slope_rad + sd_rad * centres, cdf
+
+
+def _switch_slope(step_map: StepMap, z: np.ndarray, a: float, b: float, a_fails: bool, iterations: int) -> float:
+    """Bisection for the slope between a and b where the step's outcome (fails or not) changes."""
+    for _ in range(iterations):
+        m = 0.5 * (a + b)
+        try:
+            apply(step_map, z, m)
+            fails = False
+        except StepFailure:
+            fails = True
+        if fails == a_fails:
+            a = m
+        else:
+            b = m
+    return 0.5 * (a + b)
 
 
 def clipped_probability(slope_rad: float, sd_rad: float) -> float:
@@ -169,23 +191,38 @@ def mesh_mfpt_once(
     nt, nw = shape
     thetas = np.linspace(t_lo, t_hi, nt) if nt > 1 else np.array([0.5 * (t_lo + t_hi)])
     omegas = np.linspace(w_lo, w_hi, nw) if nw > 1 else np.array([0.5 * (w_lo + w_hi)])
-    s_vals, s_prob = slope_nodes(slope_rad, sd_rad, slopes)
+    from scipy.stats import norm
+
+    s_vals, cdf_edges = slope_nodes(slope_rad, sd_rad, slopes)
     n = nt * nw
     rows: list[int] = []
     cols: list[int] = []
     vals: list[float] = []
-    fail = np.zeros(n)
     outside_max = 0.0
+    extra = 0
     for j in range(nw):
         for i in range(nt):
             k = j * nt + i
             z = np.array([thetas[i], omegas[j]])
-            out_mass = 0.0
-            for s, pr in zip(s_vals, s_prob, strict=True):
+            images: list[np.ndarray | None] = []
+            for s in s_vals:
                 try:
-                    zn = apply(step_map, z, float(s))
+                    images.append(apply(step_map, z, float(s)))
                 except StepFailure:
-                    fail[k] += pr
+                    images.append(None)
+            # where the outcome changes between neighbouring slopes, the bins' common edge moves to the slope
+            # where it changes (bisection): the failure probability is not the midpoint rule's
+            cdf = cdf_edges.copy()
+            for q in range(slopes - 1):
+                a_fails, b_fails = images[q] is None, images[q + 1] is None
+                if a_fails != b_fails:
+                    sw = _switch_slope(step_map, z, float(s_vals[q]), float(s_vals[q + 1]), a_fails, SWITCH_BISECTIONS)
+                    extra += SWITCH_BISECTIONS
+                    cdf[q + 1] = norm.cdf((sw - slope_rad) / sd_rad)
+            out_mass = 0.0
+            for q, zn in enumerate(images):
+                pr = float(cdf[q + 1] - cdf[q])
+                if zn is None or pr <= 0.0:
                     continue
                 idx, wts, outside = _weights(zn, box, shape)
                 if outside:
@@ -214,7 +251,7 @@ def mesh_mfpt_once(
         "lambda2": lam2,
         "mfpt_quasi_stationary_steps": lam2 / (1.0 - lam2),
         "max_probability_outside_box": outside_max,
-        "map_evaluations": n * slopes,
+        "map_evaluations": n * slopes + extra,
     }
 
 
@@ -261,10 +298,12 @@ def mesh_mfpt(
 
     fine = mesh_mfpt_once(step_map, slope_rad, sd, zs, box, (nt, nw), slopes, fine_progress)
     coarse = mesh_mfpt_once(step_map, slope_rad, sd, zs, box, coarse_shape, coarse_slopes, coarse_progress)
-    err = abs(fine["mfpt_steps"] - coarse["mfpt_steps"])
+    diff = fine["mfpt_steps"] - coarse["mfpt_steps"]
+    err = RICHARDSON * abs(diff)
     return {
         "method": "mesh",
         "mfpt_steps": fine["mfpt_steps"],
+        "mfpt_extrapolated_steps": fine["mfpt_steps"] + RICHARDSON * diff,
         "mfpt_discretisation_error_steps": err,
         "mfpt_discretisation_error_relative": err / max(fine["mfpt_steps"], 1e-300),
         "lambda2": fine["lambda2"],
