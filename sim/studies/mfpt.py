@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from rimless.errors import ParameterError
+from rimless.errors import ParameterError, RunFailure
 from rimless.sim.model.failures import StepFailure
 from rimless.sim.model.params import SPOKE_ANGLE_RAD
 from rimless.sim.studies.section_map import StepMap, apply, failure_fate
@@ -239,9 +239,14 @@ def mesh_mfpt_once(
     if outside0:
         raise ParameterError("the start point z0 is outside the mesh's box")
     t0 = float(sum(w * t[i] for i, w in zip(idx, wts, strict=True)))
+    lam2 = -1.0
     if n > 2:
-        lam2 = float(np.max(np.real(spla.eigs(Q, k=1, which="LM", return_eigenvectors=False))))
-    else:
+        try:
+            lam2 = float(np.max(np.real(spla.eigs(Q, k=1, which="LM", return_eigenvectors=False))))
+        except spla.ArpackNoConvergence:
+            if n > 4000:
+                raise RunFailure("the mesh's largest eigenvalue did not converge (ARPACK)") from None
+    if lam2 < 0:
         lam2 = float(np.max(np.abs(np.linalg.eigvals(Q.toarray()))))
     lam2 = min(lam2, 1.0 - 1e-300)
     return {

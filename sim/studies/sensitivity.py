@@ -169,7 +169,7 @@ def gait_sensitivity(
             "fd_step": h,
             "fd_error_estimate": fd_err,
             "simulated": {"disturbance": eps, "steps": n_sim, **sim_n},
-            "relative_difference": abs(sim_n["gsn"] - lin_n["gsn"]) / lin_n["gsn"],
+            "relative_difference": abs(sim_n["gsn"] - lin_n["gsn"]) / max(lin_n["gsn"], 1e-300),
             "relative_difference_by_indicator": {
                 k_: abs(sim_n["gsn_by_indicator"][k_] - lin_n["gsn_by_indicator"][k_])
                 / max(lin_n["gsn_by_indicator"][k_], 1e-300)
