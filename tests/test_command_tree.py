@@ -297,6 +297,8 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
     ("sim", "gaits"): (["--guesses", "200", "--backend", "reference"], 4.0),
     ("sim", "firmware-sweep"): (["--rates-hz", "300,1000", "--delays-ms", "0,5,10", "--scheduler", "sync"], 4.0),
     ("sim", "stress"): (["--k-values", ",".join(str(300 + 10 * i) for i in range(200))], 4.0),
+    ("sim", "basin"): (["--grid", "100", "--out", "basin-out"], 4.0),
+    ("sim", "mfpt"): (["--terrain-sd-deg", "3"], 4.0),
     ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], 5.0),
     ("trials", "bench-import"): (["--rows", "5000000"], 4.0),
     ("robot", "run"): (["--fake", "--arm"], 3.0),
@@ -321,6 +323,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], float]] = {
 
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.
 QUICK: dict[tuple[str, ...], str] = {
+    ("sim", "sensitivity"): "one fixed point and a few hundred compiled steps: about 2 s of CPU once compiled",
     ("trials", "report"): "the bundled example report takes a few seconds once compiled: a fresh-clone CI run saw "
     "it finish before the signal",
     ("robot", "arm"): "one request to the robot, bounded by the command timeout",
