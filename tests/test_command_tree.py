@@ -312,6 +312,8 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
         ["--k-values", ",".join(str(300 + 10 * i) for i in range(200))],
         {"stage": "stress sweep"},
     ),
+    ("sim", "basin"): (["--grid", "100", "--out", "basin-out"], {"stage": "basin of attraction"}),
+    ("sim", "mfpt"): (["--terrain-sd-deg", "3"], {"stage": "MFPT (mesh)"}),
     ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], {"stage": "comparing"}),
     ("trials", "bench-import"): (["--rows", "5000000"], {"stderr": "writing a 5,000,000-row Tracker export"}),
     # the first telemetry datagram: the firmware's loop runs (its "running" line comes before the loop starts, and
@@ -341,6 +343,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
 
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.
 QUICK: dict[tuple[str, ...], str] = {
+    ("sim", "sensitivity"): "one fixed point and a few hundred compiled steps: about 2 s of CPU once compiled",
     ("trials", "report"): "the bundled example report takes a few seconds once compiled: a fresh-clone CI run saw "
     "it finish before the signal",
     ("robot", "arm"): "one request to the robot, bounded by the command timeout",

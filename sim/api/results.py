@@ -14,7 +14,17 @@ import math
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-__all__ = ["Result", "FixedPointResult", "GaitsResult", "CriticalSlopeResult", "Simulation", "BranchesResult"]
+__all__ = [
+    "Result",
+    "FixedPointResult",
+    "GaitsResult",
+    "CriticalSlopeResult",
+    "Simulation",
+    "BranchesResult",
+    "BasinResult",
+    "SensitivityResult",
+    "MfptResult",
+]
 
 
 def _fmt(value: Any) -> str:
@@ -191,3 +201,57 @@ class BranchesResult(Result):
         import pandas as pd
 
         return pd.DataFrame(self.data["branches"])
+
+
+class BasinResult(Result):
+    """The basin of attraction (`rimless sim basin --json`) and every grid point (`points`, `to_frame()`)."""
+
+    headline = (
+        "basin_area_rad2_per_s",
+        "basin_area_fraction",
+        "nearest_failure_distance",
+        "grid",
+        "steps",
+    )
+
+    def __init__(self, data: dict[str, Any], points: Any) -> None:
+        super().__init__(data)
+        self.points = points
+
+    @property
+    def title(self) -> str:
+        return f"{self.data['model']} wheel at {self.data['slope_deg']:.4f} deg"
+
+    def to_frame(self) -> Any:
+        """One row per grid point: theta_plus_rad, theta_dot_plus_rad_s, fate, steps, distance_scaled."""
+        import pandas as pd
+
+        return pd.DataFrame(self.points)
+
+
+class SensitivityResult(Result):
+    """The gait sensitivity norm (`rimless sim sensitivity --json`): `slope` and `push` blocks."""
+
+    @property
+    def title(self) -> str:
+        return f"{self.data['model']} wheel at {self.data['slope_deg']:.4f} deg"
+
+    def _rows(self) -> list[tuple[str, str]]:
+        return [
+            (
+                f"GSN {name} (per {self.data[name]['unit']})",
+                f"{self.data[name]['gsn']:.6g}, simulated {self.data[name]['simulated']['gsn']:.6g} "
+                f"(relative difference {self.data[name]['relative_difference']:.2g})",
+            )
+            for name in ("slope", "push")
+        ]
+
+
+class MfptResult(Result):
+    """The mean first-passage time on rough terrain (`rimless sim mfpt --json`)."""
+
+    headline = ("mfpt_steps", "mfpt_ci_steps", "mfpt_discretisation_error_steps", "method", "terrain_sd_deg")
+
+    @property
+    def title(self) -> str:
+        return f"{self.data['model']} wheel at {self.data['slope_deg']:.4f} deg"

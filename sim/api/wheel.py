@@ -16,10 +16,13 @@ from typing import Any, Literal, get_args
 
 from rimless.errors import ParameterError
 from rimless.sim.api.results import (
+    BasinResult,
     BranchesResult,
     CriticalSlopeResult,
     FixedPointResult,
     GaitsResult,
+    MfptResult,
+    SensitivityResult,
     Simulation,
 )
 from rimless.sim.model.params import WheelParams, load_params
@@ -294,3 +297,97 @@ class Wheel:
             progress=progress,
         )
         return BranchesResult({"model": self.model, "start_slope_rad": start, "branches": [b.row() for b in found]})
+
+    # -- robustness beyond local stability (docs/simulator.md "Robustness")
+    def basin(
+        self,
+        *,
+        grid: int = 50,
+        steps: int = 100,
+        box: Any = None,
+        tol: float = 1e-4,
+        out: str | Path | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> BasinResult:
+        """The basin of attraction of the period-1 gait (`rimless sim basin`): the fate of each of grid x grid
+        section points (cell centres) over `box` = ((theta+ lo, hi) rad, (theta'+ lo, hi) rad/s) (default: the
+        gait's theta+ +- 0.15 rad, theta'+ in [0.02, 2.5] x the gait's) after at most `steps` map steps.
+
+        `out`: a folder for basin.png and basin.csv. progress(i, n): points done."""
+        from rimless.sim.studies.basin import basin_study, write_basin
+
+        if out is not None:
+            from rimless.output import check_output_folder
+
+            check_output_folder(out, option="--out")
+        data, points = basin_study(
+            self.params,
+            self.compliant_model("basin()"),
+            grid=grid,
+            steps=steps,
+            box=box,
+            tol=tol,
+            backend=self.backend,
+            rtol=self.rtol,
+            progress=progress,
+        )
+        if out is not None:
+            data["files"] = write_basin(data, points, out)
+        return BasinResult(data, points)
+
+    def sensitivity(self, *, push_rad_s: float = 0.02, slope_step_deg: float = 0.05) -> SensitivityResult:
+        """The gait sensitivity norm (`rimless sim sensitivity`) for a one-step slope change and a push (a change
+        of theta'+), from the exact map Jacobian, checked against simulated disturbances of these sizes."""
+        from rimless.sim.studies.sensitivity import sensitivity_study
+
+        return SensitivityResult(
+            sensitivity_study(
+                self.params,
+                self.compliant_model("sensitivity()"),
+                push_rad_s=push_rad_s,
+                slope_step_deg=slope_step_deg,
+                backend=self.backend,
+                rtol=self.rtol,
+            )
+        )
+
+    def mfpt(
+        self,
+        terrain_sd_deg: float,
+        *,
+        method: Literal["mesh", "monte-carlo"] = "mesh",
+        walks: int = 200,
+        cap: int = 10_000,
+        seed: int = 0,
+        nodes: tuple[int, int] = (15, 60),
+        slopes: int = 48,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> MfptResult:
+        """The mean first-passage time (`rimless sim mfpt`): the mean number of steps before a failure when each
+        step's slope is drawn from a normal of standard deviation `terrain_sd_deg` about the wheel's slope.
+
+        method "mesh": a Markov chain on nodes = (n_theta, n_theta_dot) section nodes and `slopes` slope values,
+        with a coarser mesh for its discretisation error; "monte-carlo": `walks` walks of at most `cap` steps
+        (seeded), with a 95 % interval."""
+        import math
+
+        from rimless.sim.studies.mfpt import mfpt_study
+
+        if not (isinstance(terrain_sd_deg, float | int) and math.isfinite(terrain_sd_deg) and terrain_sd_deg > 0):
+            raise ParameterError(f"terrain_sd_deg must be a number > 0, got {terrain_sd_deg!r}")
+        return MfptResult(
+            mfpt_study(
+                self.params,
+                self.compliant_model("mfpt()"),
+                math.radians(terrain_sd_deg),
+                method=method,
+                walks=walks,
+                cap=cap,
+                seed=seed,
+                nodes=nodes,
+                slopes=slopes,
+                backend=self.backend,
+                rtol=self.rtol,
+                progress=progress,
+            )
+        )

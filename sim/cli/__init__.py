@@ -3,7 +3,7 @@
 `app` holds the typer app and what commands share (the wheel-parameter options, option types, path checks),
 `output` the console and table they print through; one module per family of commands: `fixed_point`
 (fixed-point, gaits, critical-slope), `gait`, `firmware` (what `--clutch firmware` prints), `sweep`
-(sweep, firmware-sweep), `replay`, `studies` (stress and the top-level bench and paper). The rules of every
+(sweep, firmware-sweep), `replay`, `robustness` (basin, sensitivity, mfpt), `studies` (stress and the top-level bench and paper). The rules of every
 command (one-line errors, exit codes) come from rimless.cli_rules; progress bars from rimless.progress;
 lists typed on the command line are read by rimless.values. Heavy imports happen inside the commands.
 
@@ -15,6 +15,7 @@ from rimless.sim.cli.app import app
 from rimless.sim.cli.fixed_point import critical_slope_cmd, fixed_point_cmd, gaits_cmd
 from rimless.sim.cli.gait import gait_cmd
 from rimless.sim.cli.replay import replay_cmd
+from rimless.sim.cli.robustness import basin_cmd, mfpt_cmd, sensitivity_cmd
 from rimless.sim.cli.studies import bench_cmd, paper_cmd, register_top_level, stress_cmd
 from rimless.sim.cli.sweep import firmware_sweep_cmd, sweep_cmd
 
@@ -29,3 +30,6 @@ app.command("stress")(stress_cmd)
 app.command("firmware-sweep")(firmware_sweep_cmd)
 app.command("replay")(replay_cmd)
 app.command("sweep")(sweep_cmd)
+app.command("basin")(basin_cmd)
+app.command("sensitivity")(sensitivity_cmd)
+app.command("mfpt")(mfpt_cmd)
