@@ -434,6 +434,8 @@ class CalibrationResult:
     #: is not fitted
     loss_separation: dict[str, Any] | None = None
     friction_vs_damping: dict[str, Any] | None = None  # with --fit c,guide_friction_n: can the trials tell them apart
+    #: every wheel parameter's value, sd, unit and source (held and fitted), when the caller states the wheel
+    parameters: list[dict[str, Any]] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -477,6 +479,7 @@ class CalibrationResult:
             "optimizer": self.optimizer,
             "loss_separation": self.loss_separation,
             **({"friction_vs_damping": self.friction_vs_damping} if self.friction_vs_damping else {}),
+            **({"parameters": self.parameters} if self.parameters is not None else {}),
         }
 
 
