@@ -105,6 +105,7 @@ def calibrate(
         model=w.compliant_model("calibrate()"),
         progress=progress,
         prior=prior,
+        held=[(e.name, e.sd) for e in w.input.held()],
     )
     res.parameters = calibrated_input(w.input, res).parameters()
     return res

@@ -302,16 +302,27 @@ def _print_calibration(out: dict[str, Any]) -> None:
 
     con = Console()
     t = Table(title=f"calibration of the {out['model'].upper()} model", show_edge=False)
-    for col in ("parameter", "Table 1", "fitted", "± 1 sigma", "95 % interval", "identifiable"):
+    for col in (
+        "parameter",
+        "Table 1",
+        "fitted",
+        "± 1 sigma",
+        "95 % interval",
+        "±held",
+        "95% +held",
+        "identifiable",
+    ):
         t.add_column(col, justify="left" if col == "parameter" else "right", no_wrap=True)
     for p in out["params"]:
-        ci = p.get("ci95")
+        ci, cih = p.get("ci95"), p.get("ci95_with_held")
         t.add_row(
             f"{p['name']} ({p['unit']})",
             f"{p['table1']:.4g}",
             _fmt(p["estimate"], ".4g"),
             _fmt(p["se"], ".2g"),
             f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–",
+            _fmt(p.get("se_held"), ".2g"),
+            f"{cih[0]:.4g}-{cih[1]:.4g}" if cih else "–",
             "yes" if p["identifiable"] else "[red]NO[/]",
         )
     con.print(t)
@@ -320,7 +331,8 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(
             ("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
             + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
-            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty",
+            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty; ±held: "
+            "the held parameters' part (linear response of the refit to each at ± 1 sd, in quadrature)",
             markup=False,
             highlight=False,
         )

@@ -30,6 +30,7 @@ Simulations use the compiled fast path (`rimless.sim.fast.FastIntegrator` under 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -391,6 +392,14 @@ class ParamEstimate:
     #: the data constrain the value, but only as an effective coefficient of these trials (e.g. c absorbing a
     #: constant loss per step): the calibrated model uses it, it is not reported as identifiable
     effective_only: bool = False
+    #: the held parameters' contribution (`held_response`): None when not computed; per held field, its part
+    se_held: float | None = None
+    held_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    @property
+    def se_with_held(self) -> float | None:
+        """The data's and the held parameters' standard errors in quadrature (None without `se_held`)."""
+        return math.hypot(self.se, self.se_held) if self.se_held is not None and math.isfinite(self.se) else None
 
     @property
     def ci95(self) -> tuple[float, float]:
@@ -411,6 +420,14 @@ class ParamEstimate:
             "se_sandwich": self.se_sandwich,
             "effective_only": self.effective_only,
             "ci95": list(self.ci95) if math.isfinite(self.se) else None,
+            "se_held": self.se_held,
+            "se_with_held": self.se_with_held,
+            "ci95_with_held": (
+                [self.value - 1.959963984540054 * s, self.value + 1.959963984540054 * s]
+                if (s := self.se_with_held) is not None
+                else None
+            ),
+            "held_contributions": self.held_contributions,
         }
 
 
@@ -896,6 +913,51 @@ class _Objective:
         self.sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
 
 
+def held_response(
+    obj: _Objective, u: np.ndarray, J: np.ndarray, held: Sequence[tuple[str, float]], estimates: list[ParamEstimate]
+) -> None:
+    """Carry held parameters' uncertainty into the fitted ones: for each held field h with 1-sigma s, the
+    residuals at h + s and h - s (one-sided where h - s is not a valid wheel) give the change of the residuals
+    per sigma r_h; the least-squares solution moves by -pinv(J) r_h (every unknown re-adjusts, release speeds and
+    shifts too: the linear response of the refit); each fitted value's part is that move, and ``se_held`` the
+    parts in quadrature. Two residual evaluations per held parameter."""
+    glob = obj.glob
+    base = glob.base
+    pinv = np.linalg.pinv(J)
+    parts: list[dict[str, float]] = [{} for _ in estimates]
+    f0: np.ndarray | None = None
+    try:
+        for name, sd in held:
+            if not sd > 0 or name in glob.fields:
+                continue
+            v = float(getattr(base, name))
+            res: dict[float, np.ndarray] = {}
+            for sign in (1.0, -1.0):
+                try:
+                    glob.base = base.replace(**{name: v + sign * sd})
+                except ParameterError:
+                    continue
+                res[sign] = obj.fun(u)
+            glob.base = base
+            if len(res) == 2:
+                r_h = (res[1.0] - res[-1.0]) / 2.0
+            elif len(res) == 1:
+                if f0 is None:
+                    f0 = obj.fun(u)
+                ((sign, r),) = res.items()
+                r_h = sign * (r - f0)
+            else:
+                continue
+            du = -(pinv @ r_h)
+            for j in range(len(estimates)):
+                parts[j][name] = abs(float(du[j] * glob.scale[j]))
+    finally:
+        glob.base = base
+    for e, pj in zip(estimates, parts):
+        e.held_contributions = pj
+        e.se_held = math.sqrt(sum(x * x for x in pj.values()))
+
+
 def _estimates(
     glob: _Globals,
     fit: Sequence[str],
@@ -1014,6 +1076,7 @@ def calibrate(
     multi_start: bool = True,
     progress: Callable[[int], None] | None = None,
     prior: Any = None,
+    held: Sequence[tuple[str, float]] = (),
 ) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
@@ -1026,7 +1089,9 @@ def calibrate(
     lower cost; each start runs until converged or
     ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
     identifiable). ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
-    priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals."""
+    priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
+    ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
+    ``se_held`` (`held_response`)."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -1082,6 +1147,8 @@ def calibrate(
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
+    if held:
+        held_response(obj, u, J, held, estimates)
     from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
     separation = (
         None

@@ -262,6 +262,7 @@ def calibration_run(
                 model=model,
                 progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
                 prior=prior,
+                held=[(e.name, e.sd) for e in win.held()],
             )
         except NoTrialCalibrated as e:
             run.failure = str(e)

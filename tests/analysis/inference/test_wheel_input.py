@@ -59,7 +59,7 @@ def test_defaults_are_table1_with_stated_uncertainties():
 def test_wheel_file_forms(tmp_path):
     f = tmp_path / "wheel.toml"
     f.write_text(
-        "[wheel]\nm_H = 1.9\nk = {value = 2500, sd = 300}\nc = \"fit\"\nL0 = {sd = 0.002}\nF_c = {value = 0.1}\n"
+        '[wheel]\nm_H = 1.9\nk = {value = 2500, sd = 300}\nc = "fit"\nL0 = {sd = 0.002}\nF_c = {value = 0.1}\n'
         "[wheel.inertia_kg_m2]\nvalue = 0.04\nsd = 0.004\n",
         encoding="utf-8",
     )
@@ -72,9 +72,7 @@ def test_wheel_file_forms(tmp_path):
     assert (e["guide_friction_n"].value, e["guide_friction_n"].sd) == (0.1, 0.2)  # value alone: default sd
     assert win.fit == ("damping_ns_per_m",)
     assert e["leg_mass_kg"].source == "table1" and e["leg_mass_kg"].sd == pytest.approx(0.02 * 0.0378)
-    assert win.params == WheelParams(
-        hub_mass_kg=1.9, stiffness_n_per_m=2500, inertia_kg_m2=0.04, guide_friction_n=0.1
-    )
+    assert win.params == WheelParams(hub_mass_kg=1.9, stiffness_n_per_m=2500, inertia_kg_m2=0.04, guide_friction_n=0.1)
     assert load_params(f) == win.params  # the simulator reads the same values (sd ignored)
 
 
