@@ -332,7 +332,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
             ("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
             + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
             "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty; ±held: "
-            "the held parameters' part (linear response of the refit to each at ± 1 sd, in quadrature)",
+            "the held parameters' part (refits with each at ± 1 sd, in quadrature)",
             markup=False,
             highlight=False,
         )

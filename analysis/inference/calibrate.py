@@ -914,48 +914,51 @@ class _Objective:
 
 
 def held_response(
-    obj: _Objective, u: np.ndarray, J: np.ndarray, held: Sequence[tuple[str, float]], estimates: list[ParamEstimate]
+    obj: _Objective,
+    u: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    held: Sequence[tuple[str, float]],
+    estimates: list[ParamEstimate],
+    max_rounds: int = MAX_ROUNDS,
 ) -> None:
-    """Carry held parameters' uncertainty into the fitted ones: for each held field h with 1-sigma s, the
-    residuals at h + s and h - s (one-sided where h - s is not a valid wheel) give the change of the residuals
-    per sigma r_h; the least-squares solution moves by -pinv(J) r_h (every unknown re-adjusts, release speeds and
-    shifts too: the linear response of the refit); each fitted value's part is that move, and ``se_held`` the
-    parts in quadrature. Two residual evaluations per held parameter."""
+    """Carry held parameters' uncertainty into the fitted ones by refitting: for each held field h with 1-sigma
+    s, the least squares is solved again from the solution u with h at h + s and at h - s (the same residual
+    sigmas; every unknown re-adjusts, release speeds and shifts too); each fitted value's part is half the
+    difference of the two refits (one-sided, |refit - value|, where h - s is not a valid wheel), ``se_held`` the
+    parts in quadrature. The Jacobian's linear response was tried first and missed the refits by a factor of 5
+    (the residuals are not linear in the release speeds over that range), hence the refits: two short solves
+    (warm, a few evaluations each) per held parameter."""
     glob = obj.glob
     base = glob.base
-    pinv = np.linalg.pinv(J)
+    x0 = obj.unpack(u)[0]
     parts: list[dict[str, float]] = [{} for _ in estimates]
-    f0: np.ndarray | None = None
     try:
         for name, sd in held:
             if not sd > 0 or name in glob.fields:
                 continue
             v = float(getattr(base, name))
-            res: dict[float, np.ndarray] = {}
+            moved: dict[float, np.ndarray] = {}
             for sign in (1.0, -1.0):
                 try:
                     glob.base = base.replace(**{name: v + sign * sd})
                 except ParameterError:
                     continue
-                res[sign] = obj.fun(u)
+                r = obj.solve(u, bounds[0], bounds[1], max_rounds)
+                moved[sign] = obj.unpack(r.x)[0]
             glob.base = base
-            if len(res) == 2:
-                r_h = (res[1.0] - res[-1.0]) / 2.0
-            elif len(res) == 1:
-                if f0 is None:
-                    f0 = obj.fun(u)
-                ((sign, r),) = res.items()
-                r_h = sign * (r - f0)
+            if len(moved) == 2:
+                dx = np.abs(moved[1.0] - moved[-1.0]) / 2.0
+            elif len(moved) == 1:
+                dx = np.abs(next(iter(moved.values())) - x0)
             else:
                 continue
-            du = -(pinv @ r_h)
-            for j in range(len(estimates)):
-                parts[j][name] = abs(float(du[j] * glob.scale[j]))
+            for k in range(len(estimates)):
+                parts[k][name] = float(dx[k])
     finally:
         glob.base = base
-    for e, pj in zip(estimates, parts):
-        e.held_contributions = pj
-        e.se_held = math.sqrt(sum(x * x for x in pj.values()))
+    for e, pk in zip(estimates, parts):
+        e.held_contributions = pk
+        e.se_held = math.sqrt(sum(x * x for x in pk.values()))
 
 
 def _estimates(
@@ -1091,7 +1094,7 @@ def calibrate(
     identifiable). ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
     priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
     ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
-    ``se_held`` (`held_response`)."""
+    ``se_held`` (`held_response`: two warm refits per held parameter)."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -1148,7 +1151,7 @@ def calibrate(
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
     if held:
-        held_response(obj, u, J, held, estimates)
+        held_response(obj, u, (lo, hi), held, estimates, max_rounds)
     from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
     separation = (
         None
