@@ -913,6 +913,9 @@ class _Objective:
         self.sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
 
 
+REFIT_COST_RATIO = 3.0  # a warm refit above this times the fit's cost is redone from scratch (`held_response`)
+
+
 def held_response(
     obj: _Objective,
     u: np.ndarray,
@@ -920,6 +923,7 @@ def held_response(
     held: Sequence[tuple[str, float]],
     estimates: list[ParamEstimate],
     max_rounds: int = MAX_ROUNDS,
+    recalibrate: Callable[[Any], np.ndarray | None] | None = None,
 ) -> None:
     """Carry held parameters' uncertainty into the fitted ones by refitting: for each held field h with 1-sigma
     s, the least squares is solved again from the solution u with h at h + s and at h - s (the same residual
@@ -927,10 +931,14 @@ def held_response(
     difference of the two refits (one-sided, |refit - value|, where h - s is not a valid wheel), ``se_held`` the
     parts in quadrature. The Jacobian's linear response was tried first and missed the refits by a factor of 5
     (the residuals are not linear in the release speeds over that range), hence the refits: two short solves
-    (warm, a few evaluations each) per held parameter."""
+    (warm, a few evaluations each) per held parameter. A warm refit that ends far above the fit's own cost
+    (more than `REFIT_COST_RATIO` times: it stuck on a local minimum, as with guide friction, where c and F_c
+    trade along a ridge) is replaced by ``recalibrate(params)``, a whole calibration from scratch at the moved
+    wheel (its fitted values, None when it fails: the parameter is then not carried and the note says so)."""
     glob = obj.glob
     base = glob.base
     x0 = obj.unpack(u)[0]
+    cost0 = obj.cost(u)
     parts: list[dict[str, float]] = [{} for _ in estimates]
     try:
         for name, sd in held:
@@ -944,7 +952,12 @@ def held_response(
                 except ParameterError:
                     continue
                 r = obj.solve(u, bounds[0], bounds[1], max_rounds)
-                moved[sign] = obj.unpack(r.x)[0]
+                if 2.0 * float(r.cost) <= REFIT_COST_RATIO * cost0 or recalibrate is None:
+                    moved[sign] = obj.unpack(r.x)[0]
+                    continue
+                whole = recalibrate(glob.base)
+                if whole is not None:
+                    moved[sign] = whole
             glob.base = base
             if len(moved) == 2:
                 dx = np.abs(moved[1.0] - moved[-1.0]) / 2.0
@@ -1151,7 +1164,18 @@ def calibrate(
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
     if held:
-        held_response(obj, u, (lo, hi), held, estimates, max_rounds)
+
+        def recalibrate(moved: Any) -> np.ndarray | None:
+            try:
+                again = calibrate(
+                    trials, names, fit, params=moved, model=model, rtol=rtol, record_dt_s=record_dt_s,
+                    max_rounds=max_rounds, multi_start=multi_start, prior=prior,
+                )  # fmt: skip
+            except NoTrialCalibrated:
+                return None
+            return np.array([e.value for e in again.params])
+
+        held_response(obj, u, (lo, hi), held, estimates, max_rounds, recalibrate)
     from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
     separation = (
         None
