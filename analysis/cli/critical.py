@@ -300,29 +300,20 @@ def _print_calibration(out: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from rimless.sim.model.uncertain import SYMBOLS
+
     con = Console()
     t = Table(title=f"calibration of the {out['model'].upper()} model", show_edge=False)
-    for col in (
-        "parameter",
-        "Table 1",
-        "fitted",
-        "± 1 sigma",
-        "95 % interval",
-        "±held",
-        "95% +held",
-        "identifiable",
-    ):
+    for col in ("parameter", "Table 1", "fitted", "± 1 sigma", "95 % interval", "identifiable"):
         t.add_column(col, justify="left" if col == "parameter" else "right", no_wrap=True)
     for p in out["params"]:
-        ci, cih = p.get("ci95"), p.get("ci95_with_held")
+        ci = p.get("ci95")
         t.add_row(
             f"{p['name']} ({p['unit']})",
             f"{p['table1']:.4g}",
             _fmt(p["estimate"], ".4g"),
             _fmt(p["se"], ".2g"),
             f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–",
-            _fmt(p.get("se_held"), ".2g"),
-            f"{cih[0]:.4g}-{cih[1]:.4g}" if cih else "–",
             "yes" if p["identifiable"] else "[red]NO[/]",
         )
     con.print(t)
@@ -331,11 +322,27 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(
             ("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
             + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
-            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty; ±held: "
-            "the held parameters' part (refits with each at ± 1 sd, in quadrature)",
+            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty"
+            + (
+                "; the data's alone: the held parameters' part is below"
+                if any(p.get("se_held") for p in out["params"])
+                else ""
+            ),
             markup=False,
             highlight=False,
         )
+    for p in out["params"]:
+        cih = p.get("ci95_with_held")
+        if cih:
+            parts = sorted(p["held_contributions"].items(), key=lambda kv: -kv[1])[:3]
+            con.print(
+                f"  {p['name']}: ± {p['se_held']:.2g} {p['unit']} from the held parameters (refits with each at ± 1 "
+                f"sd, in quadrature; largest: "
+                + ", ".join(f"{SYMBOLS.get(n, n)} {v:.2g}" for n, v in parts)
+                + f"); 95 % interval with them {cih[0]:.4g}-{cih[1]:.4g}",
+                markup=False,
+                highlight=False,
+            )
     for p in out["params"]:
         if p["note"]:
             con.print(f"  {p['name']}: {p['note']}", markup=False, highlight=False)
