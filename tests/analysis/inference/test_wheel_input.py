@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -209,3 +210,51 @@ def test_held_inertia_is_carried_into_the_critical_slope(truth_series, tmp_path)
     assert summary["ci_with_parameters_deg"] == x["ci_deg"] and len(summary["parameters"]) == len(UNCERTAIN_FIELDS)
     new = {k: summary[k] for k in ("parameters", "ci_with_parameters_deg", "parameter_uncertainty")}
     json.dumps(new, allow_nan=False)  # the new keys carry no NaN
+
+
+# ------------------------------------------------------------------------------------------------ commands
+
+CRITICAL_FILES = sorted((Path(__file__).resolve().parents[3] / "analysis" / "data" / "critical").glob("*.csv"))
+
+
+def test_critical_slope_command_lists_and_carries_the_parameters(tmp_path):
+    f = tmp_path / "wheel.toml"
+    f.write_text("[wheel]\nI_c = {value = 0.036, sd = 0.004}\nk = 2700\n", encoding="utf-8")
+    res = runner.invoke(app, ["trials", "critical-slope", *map(str, CRITICAL_FILES), "--params", str(f), "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    rows = {r["symbol"]: r for r in out["parameters"]}
+    assert set(rows) == {"m_H", "m", "I_c", "L0", "k", "c", "F_c", "g"}
+    assert (rows["I_c"]["sd"], rows["I_c"]["source"]) == (0.004, "wheel_file")
+    assert (rows["k"]["sd"], rows["k"]["source"]) == (0.0, "wheel_file")
+    assert (rows["c"]["sd"], rows["c"]["source"]) == (4.0, "table1")
+    held = out["parameter_uncertainty"]
+    lo, hi = out["ci_with_parameters_deg"]
+    assert lo <= out["ci_deg"][0] and hi >= out["ci_deg"][1]  # the data's interval, widened
+    er = held["models"]["er"]
+    assert er["critical_slope_deg"] == out["model_critical_slope_deg"]["er"]
+    by = {r["symbol"]: r for r in er["contributions"]}
+    assert "k" not in by and by["c"]["contribution_deg"] > by["I_c"]["contribution_deg"] > 0  # c +-50 % dominates
+    assert by["F_c"]["note"] == "one-sided"
+    assert er["ci_deg"][0] < er["critical_slope_deg"] < er["ci_deg"][1]
+    json.dumps({k: out[k] for k in ("parameters", "parameter_uncertainty", "ci_with_parameters_deg")}, allow_nan=False)
+
+
+@pytest.mark.slow
+def test_calibrate_command_lists_fitted_and_held_with_se_held(tmp_path):
+    f = tmp_path / "wheel.toml"
+    f.write_text(
+        '[wheel]\nm_H = 1.892\nm = 0.0378\nL0 = 0.237\nk = 2700\nF_c = 0\nI_c = {sd = 0.0036}\nc = "fit"\n',
+        encoding="utf-8",
+    )
+    files = [p for p in CRITICAL_FILES if "slope1.90" in p.name or "slope2.05" in p.name]
+    res = runner.invoke(app, ["trials", "calibrate", *map(str, files), "--params", str(f), "--json", "--no-critical"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    rows = {r["symbol"]: r for r in out["parameters"]}
+    (c,) = out["params"]
+    assert rows["c"]["source"] == "fitted" and rows["c"]["value"] == c["estimate"] and rows["c"]["sd"] == c["se"]
+    assert (rows["I_c"]["value"], rows["I_c"]["sd"], rows["I_c"]["source"]) == (0.036, 0.0036, "wheel_file")
+    assert set(c["held_contributions"]) == {"inertia_kg_m2"}  # the only held parameter with an sd
+    assert c["se_held"] > 0 and c["se_with_held"] == pytest.approx(math.hypot(c["se"], c["se_held"]))
+    assert c["ci95_with_held"][0] < c["ci95"][0] and c["ci95_with_held"][1] > c["ci95"][1]
