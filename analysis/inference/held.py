@@ -42,11 +42,17 @@ def _finite(v: Any) -> float | None:
 
 
 def sensitivities(
-    f: Callable[[Any], float | None], win: Any, fields: Sequence[str] | None = None, *, base: float | None = None
+    f: Callable[[Any], float | None],
+    win: Any,
+    fields: Sequence[str] | None = None,
+    *,
+    base: float | None = None,
+    central: bool = True,
 ) -> tuple[float | None, list[dict[str, Any]]]:
     """(f at the wheel's values, one row per held parameter with sd > 0: {name, symbol, sd, unit, minus, plus,
     contribution}) for a scalar ``f(params)`` (None or NaN when it does not exist there). A parameter outside
-    ``fields`` contributes 0 without evaluation; ``base``: f at the wheel's values when already known."""
+    ``fields`` contributes 0 without evaluation; ``base``: f at the wheel's values when already known;
+    ``central`` False: forward differences only (|f(p + sd) - f(p)|, half the evaluations)."""
     base = _finite(base) if base is not None else _finite(f(win.params))
     rows = []
     for e in win.held():
@@ -56,6 +62,9 @@ def sensitivities(
             continue
         vals: dict[str, float | None] = {}
         for sign, key in ((1.0, "plus_deg"), (-1.0, "minus_deg")):
+            if sign < 0 and not central and base is not None:
+                vals[key] = None
+                continue
             try:
                 p = win.params.replace(**{e.name: e.value + sign * e.sd})
             except ParameterError:
@@ -68,7 +77,7 @@ def sensitivities(
             note = ""
         elif base is not None and (hi is not None or lo is not None):
             contrib = abs((hi if hi is not None else lo) - base)  # type: ignore[operator]
-            note = "one-sided"
+            note = "one-sided" if central else "forward difference"
         else:
             contrib, note = None, "no value at p +- sd: not propagated"
         rows.append({**row, **vals, "contribution_deg": contrib, "note": note})
@@ -121,10 +130,13 @@ def carry_critical(
     models: Sequence[str] = (),
     group_tol_deg: float = 0.05,
     progress: Callable[[str], None] | None = None,
+    central_models: bool = True,
 ) -> dict[str, Any]:
     """Propagate the held parameters of ``win`` (`rimless.sim.model.uncertain.WheelInput`) into the chosen
     estimate from the trials and the models' critical slopes of ``res``; sets ``res.parameters`` and
-    ``res.held`` (the JSON's ``parameters`` and ``parameter_uncertainty``) and returns the latter."""
+    ``res.held`` (the JSON's ``parameters`` and ``parameter_uncertainty``) and returns the latter.
+    ``central_models`` False: the models' sensitivities by forward differences (half the Algorithm 1 runs; the
+    report and the demo)."""
     out: dict[str, Any] = {"method": METHOD, "trials": None, "models": {}}
     c = res.chosen
     if c is not None:
@@ -147,7 +159,7 @@ def carry_critical(
         if progress:
             progress(f"held parameters: model {m}")
         known = res.model.get("critical_slope_deg", {}).get(m)
-        base, rows = sensitivities(_model_at(m), win, base=known)
+        base, rows = sensitivities(_model_at(m), win, base=known, central=central_models)
         if base is None:
             out["models"][m] = {"critical_slope_deg": None, "note": "no critical slope at the held values"}
             continue
@@ -157,6 +169,7 @@ def carry_critical(
             "se_parameters_deg": se,
             "ci_deg": [base - Z95 * se, base + Z95 * se],
             "complete": complete,
+            "differences": "central" if central_models else "forward",
             "contributions": rows,
         }
     res.parameters = win.parameters()
