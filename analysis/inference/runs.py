@@ -7,6 +7,7 @@ returned, not printed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -175,7 +176,9 @@ def calibrated_input(win: Any, cal: CalibrationResult) -> Any:
     """``win`` with the fitted parameters' values and standard errors (source ``fitted``)."""
     for e in cal.params:
         if e.identifiable or e.effective_only:
-            win = win.with_entry(e.field, e.value, e.se if e.se == e.se else 0.0, "fitted", "fitted on these trials")
+            ok = math.isfinite(e.se)
+            basis = "fitted on these trials" if ok else "fitted on these trials (no standard error: sd shown as 0)"
+            win = win.with_entry(e.field, e.value, e.se if ok else 0.0, "fitted", basis)
     return win
 
 
