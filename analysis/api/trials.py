@@ -88,14 +88,16 @@ def calibrate(
 ) -> CalibrationResult:
     """Fit model parameters (`fit`: names among c, k, guide_friction_n, ...) to the trials' step periods and CoM
     heights (`rimless trials calibrate`); the others are held at the wheel's values. `summary()` is the
-    command's JSON object (`converged`, estimates with intervals, what was held)."""
+    command's JSON object (`converged`, estimates with intervals, what was held; ``parameters``: every
+    parameter's value, uncertainty and source, the wheel's `Wheel.input`)."""
     from rimless.analysis.inference.calibrate import calibrate as run_calibration
     from rimless.analysis.inference.calibrate import parse_fit
+    from rimless.analysis.inference.runs import calibrated_input
 
     w = _wheel(wheel)
     fit_names = parse_fit(",".join(fit)) if not isinstance(fit, str) else parse_fit(fit)
     loaded, names = load_trials(trials)
-    return run_calibration(
+    res = run_calibration(
         loaded,
         names,
         fit_names,
@@ -103,7 +105,10 @@ def calibrate(
         model=w.compliant_model("calibrate()"),
         progress=progress,
         prior=prior,
+        held=[(e.name, e.sd) for e in w.input.held()],
     )
+    res.parameters = calibrated_input(w.input, res).parameters()
+    return res
 
 
 def critical_slope(
@@ -117,20 +122,27 @@ def critical_slope(
 ) -> CriticalSlopeResult:
     """The critical slope from trials (`rimless trials critical-slope`): a verdict per trial (sustained walk or
     not, from its motion), the estimate with its 95 % interval, and the models' critical slopes at the wheel's
-    parameters (`models`, default the wheel's model) beside it; `calibrated` parameters add those models'."""
+    parameters (`models`, default the wheel's model) beside it; `calibrated` parameters add those models'.
+    The wheel's parameters are held with their uncertainties (`Wheel.input`: a wheel file's ``{value, sd}``, the
+    ``uncertainty=`` given, else the defaults), listed (``parameters``) and carried into the intervals
+    (``parameter_uncertainty``, ``ci_with_parameters_deg``; `rimless.analysis.inference.held`)."""
     from rimless.analysis.inference.critical_slope import run_critical_slope
+    from rimless.analysis.inference.held import carry_critical
 
     w = _wheel(wheel)
     loaded, names = load_trials(trials)
-    return run_critical_slope(
+    ms = tuple(models) if models is not None else (w.model,)
+    res = run_critical_slope(
         loaded,
         names,
         w.params,
-        models=tuple(models) if models is not None else (w.model,),
+        models=ms,
         calibrated=calibrated,
         group_tol_deg=group_tol_deg,
         progress=progress,
     )
+    carry_critical(res, loaded, names, w.input, models=ms, group_tol_deg=group_tol_deg, progress=progress)
+    return res
 
 
 def write_report(
@@ -157,4 +169,5 @@ def write_report(
         slope_bin_deg=slope_bin_deg,
         title=title,
         params=w.params,
+        wheel_input=w.input,
     )

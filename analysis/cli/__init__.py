@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from rimless.analysis.cli.critical import critical_lines
+from rimless.analysis.cli.critical import ParamsOpt, critical_lines, held_lines
 from rimless.analysis.cli.critical import register as register_critical
 from rimless.analysis.cli.leg import register as register_leg
 from rimless.cli_rules import EXIT_USER_ERROR, fail, print_json, user_facing
@@ -402,6 +402,7 @@ def report_cmd(
             "simulated one. TRIAL= names the trial's input file (needed with several trials); repeatable.",
         ),
     ] = None,
+    params: ParamsOpt = None,
 ) -> None:
     """Compare trials with the simulation and write an HTML report.
 
@@ -413,13 +414,28 @@ def report_cmd(
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes, up_axis)
+    from rimless.analysis.inference.runs import wheel_input
     from rimless.analysis.report.batch import robot_log_pairs
 
     logs = robot_log_pairs(robot_log or [], trials)
+    win = wheel_input(params)
     res = run_report(
-        trials, out, json_out=json_out, import_kwargs=kwargs, model=model, slope_bin_deg=slope_bin_deg, robot_logs=logs
+        trials,
+        out,
+        json_out=json_out,
+        import_kwargs=kwargs,
+        model=model,
+        slope_bin_deg=slope_bin_deg,
+        robot_logs=logs,
+        params=win.params,
+        wheel_input=win,
     )
     _print_report(res, model, json_out)
+    if not json_out:
+        for line in held_lines(res.critical.held_summary() if res.critical is not None else {}) or held_lines(
+            {"parameters": res.parameters}
+        ):
+            typer.echo(line)
     if res.refused:
         raise typer.Exit(EXIT_REFUSED)
     if not any(c.status == "ok" for c in res.comparisons):  # every compared trial suspect (run_report raised
@@ -433,15 +449,19 @@ def report_cmd(
 def demo_cmd(
     out: Annotated[Path, typer.Option("--out", help="Folder for the demo report.")] = Path("rimless-demo"),
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary instead of the table.")] = False,
+    params: ParamsOpt = None,
 ) -> None:
     """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
+    from rimless.analysis.inference.runs import wheel_input
     from rimless.analysis.report.batch import run_demo
+
+    win = wheel_input(params)
 
     def starting(n: int) -> None:
         if not json_out:
             typer.echo(f"{n} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
 
-    res = run_demo(out, json_out=json_out, starting=starting)
+    res = run_demo(out, json_out=json_out, starting=starting, wheel_input=win)
     _print_report(res, "er", json_out)
     if not json_out:
         typer.echo(critical_lines(res))

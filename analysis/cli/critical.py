@@ -46,7 +46,10 @@ def register(app: typer.Typer) -> None:
 ParamsOpt = Annotated[
     Path | None,
     typer.Option(
-        "--params", metavar="TOML", help="Wheel parameters (TOML, as `rimless sim`), default the paper's Table 1."
+        "--params",
+        metavar="TOML",
+        help="Wheel file (TOML, as `rimless sim`; `k = {value = 2700, sd = 300}` gives an uncertainty, a plain "
+        'number is exact, `c = "fit"` fits it), default the paper\'s Table 1 with assumed uncertainties.',
     ),
 ]
 SlopeOpt = Annotated[
@@ -198,6 +201,50 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
         )
     else:
         con.print(f"no critical slope: {res.why}", markup=False, highlight=False)
+    for line in held_lines(out):
+        con.print(line, markup=False, highlight=False)
+
+
+def parameter_lines(parameters: list[dict[str, Any]] | None) -> list[str]:
+    """The wheel's parameters as printed: value, 1 sigma, unit, source."""
+    if not parameters:
+        return []
+    out = ["wheel parameters (1 sigma; source: basis):"]
+    for p in parameters:
+        sd = "exact" if p["sd"] == 0 else f"± {p['sd']:.3g}"
+        out.append(f"  {p['symbol']} = {p['value']:.4g} {sd} {p['unit']}  ({p['source']}: {p['basis']})")
+    return out
+
+
+def held_lines(out: dict[str, Any]) -> list[str]:
+    """The parameters and the critical slopes' intervals with the held parameters' uncertainty."""
+    lines = parameter_lines(out.get("parameters"))
+    held = out.get("parameter_uncertainty")
+    if not held:
+        return lines
+    tr = held.get("trials")
+    if tr:
+        lo, hi = tr["ci_deg"]
+        lines.append(
+            f"critical slope from the trials with the held parameters' uncertainty: {tr['critical_slope_deg']:.3f} "
+            f"deg, 95 % interval {lo:.3f}-{hi:.3f} deg (parameters: ± {tr['se_parameters_deg']:.3f} deg 1 sigma)"
+            + ("" if tr["complete"] else "; NOT every parameter could be propagated")
+        )
+    for m, d in held.get("models", {}).items():
+        if d.get("critical_slope_deg") is None:
+            lines.append(f"model {m.upper()}: {d.get('note', 'no critical slope')}")
+            continue
+        lo, hi = d["ci_deg"]
+        big = sorted((r for r in d["contributions"] if r["contribution_deg"]), key=lambda r: -r["contribution_deg"])[:3]
+        lines.append(
+            f"model {m.upper()} critical slope {d['critical_slope_deg']:.3f} deg, 95 % interval {lo:.3f}-{hi:.3f} "
+            f"deg from the held parameters (largest: "
+            + ", ".join(f"{r['symbol']} ± {r['contribution_deg']:.3f}" for r in big)
+            + ")"
+            + ("" if d["complete"] else "; NOT every parameter could be propagated")
+        )
+    lines.append(f"propagation: {held['method']}")
+    return lines
 
 
 def calibrate_cmd(
@@ -273,6 +320,8 @@ def _print_calibration(out: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from rimless.sim.model.uncertain import SYMBOLS
+
     con = Console()
     t = Table(title=f"calibration of the {out['model'].upper()} model", show_edge=False)
     for col in ("parameter", "Table 1", "fitted", "± 1 sigma", "95 % interval", "identifiable"):
@@ -293,10 +342,27 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(
             ("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
             + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
-            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty",
+            "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty"
+            + (
+                "; the data's alone: the held parameters' part is below"
+                if any(p.get("se_held") for p in out["params"])
+                else ""
+            ),
             markup=False,
             highlight=False,
         )
+    for p in out["params"]:
+        cih = p.get("ci95_with_held")
+        if cih:
+            parts = sorted(p["held_contributions"].items(), key=lambda kv: -kv[1])[:3]
+            con.print(
+                f"  {p['name']}: ± {p['se_held']:.2g} {p['unit']} from the held parameters (refits with each at ± 1 "
+                f"sd, in quadrature; largest: "
+                + ", ".join(f"{SYMBOLS.get(n, n)} {v:.2g}" for n, v in parts)
+                + f"); 95 % interval with them {cih[0]:.4g}-{cih[1]:.4g}",
+                markup=False,
+                highlight=False,
+            )
     for p in out["params"]:
         if p["note"]:
             con.print(f"  {p['name']}: {p['note']}", markup=False, highlight=False)
@@ -368,6 +434,16 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(f"not calibrated: {why}", markup=False, highlight=False)
     if "prior" in out:
         _print_prior(con, out["prior"])
+    for line in parameter_lines(out.get("parameters")):
+        con.print(line, markup=False, highlight=False)
+    tc = out.get("critical_slope_deg", {}).get("trials_ci_with_parameters_deg")
+    if tc:
+        con.print(
+            f"critical slope from the trials, 95 % interval with the held parameters' uncertainty: "
+            f"{tc[0]:.3f}-{tc[1]:.3f} deg",
+            markup=False,
+            highlight=False,
+        )
 
 
 def _print_prior(con: Any, prior: dict[str, Any]) -> None:
@@ -419,6 +495,7 @@ def critical_lines(res: Any) -> str:
         sep = getattr(cal, "loss_separation", None)
         if sep and sep.get("note") and sep["note"] not in {p.note for p in cal.params}:
             lines.append(f"c against a constant loss per step (guide friction): {sep['note']}")
+    lines += held_lines(cr.held_summary())
     return "\n".join(lines)
 
 

@@ -30,6 +30,7 @@ Simulations use the compiled fast path (`rimless.sim.fast.FastIntegrator` under 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -391,6 +392,14 @@ class ParamEstimate:
     #: the data constrain the value, but only as an effective coefficient of these trials (e.g. c absorbing a
     #: constant loss per step): the calibrated model uses it, it is not reported as identifiable
     effective_only: bool = False
+    #: the held parameters' contribution (`held_response`): None when not computed; per held field, its part
+    se_held: float | None = None
+    held_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    @property
+    def se_with_held(self) -> float | None:
+        """The data's and the held parameters' standard errors in quadrature (None without `se_held`)."""
+        return math.hypot(self.se, self.se_held) if self.se_held is not None and math.isfinite(self.se) else None
 
     @property
     def ci95(self) -> tuple[float, float]:
@@ -411,6 +420,14 @@ class ParamEstimate:
             "se_sandwich": self.se_sandwich,
             "effective_only": self.effective_only,
             "ci95": list(self.ci95) if math.isfinite(self.se) else None,
+            "se_held": self.se_held,
+            "se_with_held": self.se_with_held,
+            "ci95_with_held": (
+                [self.value - 1.959963984540054 * s, self.value + 1.959963984540054 * s]
+                if (s := self.se_with_held) is not None
+                else None
+            ),
+            "held_contributions": self.held_contributions,
         }
 
 
@@ -434,6 +451,8 @@ class CalibrationResult:
     #: is not fitted
     loss_separation: dict[str, Any] | None = None
     friction_vs_damping: dict[str, Any] | None = None  # with --fit c,guide_friction_n: can the trials tell them apart
+    #: every wheel parameter's value, sd, unit and source (held and fitted), when the caller states the wheel
+    parameters: list[dict[str, Any]] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -477,6 +496,7 @@ class CalibrationResult:
             "optimizer": self.optimizer,
             "loss_separation": self.loss_separation,
             **({"friction_vs_damping": self.friction_vs_damping} if self.friction_vs_damping else {}),
+            **({"parameters": self.parameters} if self.parameters is not None else {}),
         }
 
 
@@ -893,6 +913,67 @@ class _Objective:
         self.sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
 
 
+REFIT_COST_RATIO = 3.0  # a warm refit above this times the fit's cost is redone from scratch (`held_response`)
+
+
+def held_response(
+    obj: _Objective,
+    u: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    held: Sequence[tuple[str, float]],
+    estimates: list[ParamEstimate],
+    max_rounds: int = MAX_ROUNDS,
+    recalibrate: Callable[[Any], np.ndarray | None] | None = None,
+) -> None:
+    """Carry held parameters' uncertainty into the fitted ones by refitting: for each held field h with 1-sigma
+    s, the least squares is solved again from the solution u with h at h + s and at h - s (the same residual
+    sigmas; every unknown re-adjusts, release speeds and shifts too); each fitted value's part is half the
+    difference of the two refits (one-sided, |refit - value|, where h - s is not a valid wheel), ``se_held`` the
+    parts in quadrature. The Jacobian's linear response was tried first and missed the refits by a factor of 5
+    (the residuals are not linear in the release speeds over that range), hence the refits: two short solves
+    (warm, a few evaluations each) per held parameter. A warm refit that ends far above the fit's own cost
+    (more than `REFIT_COST_RATIO` times: it stuck on a local minimum, as with guide friction, where c and F_c
+    trade along a ridge) is replaced by ``recalibrate(params)``, a whole calibration from scratch at the moved
+    wheel (its fitted values, None when it fails: the parameter is then not carried and the note says so)."""
+    glob = obj.glob
+    base = glob.base
+    x0 = obj.unpack(u)[0]
+    cost0 = obj.cost(u)
+    parts: list[dict[str, float]] = [{} for _ in estimates]
+    try:
+        for name, sd in held:
+            if not sd > 0 or name in glob.fields:
+                continue
+            v = float(getattr(base, name))
+            moved: dict[float, np.ndarray] = {}
+            for sign in (1.0, -1.0):
+                try:
+                    glob.base = base.replace(**{name: v + sign * sd})
+                except ParameterError:
+                    continue
+                r = obj.solve(u, bounds[0], bounds[1], max_rounds)
+                if 2.0 * float(r.cost) <= REFIT_COST_RATIO * cost0 or recalibrate is None:
+                    moved[sign] = obj.unpack(r.x)[0]
+                    continue
+                whole = recalibrate(glob.base)
+                if whole is not None:
+                    moved[sign] = whole
+            glob.base = base
+            if len(moved) == 2:
+                dx = np.abs(moved[1.0] - moved[-1.0]) / 2.0
+            elif len(moved) == 1:
+                dx = np.abs(next(iter(moved.values())) - x0)
+            else:
+                continue
+            for k in range(len(estimates)):
+                parts[k][name] = float(dx[k])
+    finally:
+        glob.base = base
+    for e, pk in zip(estimates, parts):
+        e.held_contributions = pk
+        e.se_held = math.sqrt(sum(x * x for x in pk.values()))
+
+
 def _estimates(
     glob: _Globals,
     fit: Sequence[str],
@@ -1011,6 +1092,7 @@ def calibrate(
     multi_start: bool = True,
     progress: Callable[[int], None] | None = None,
     prior: Any = None,
+    held: Sequence[tuple[str, float]] = (),
 ) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
@@ -1023,7 +1105,9 @@ def calibrate(
     lower cost; each start runs until converged or
     ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
     identifiable). ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
-    priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals."""
+    priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
+    ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
+    ``se_held`` (`held_response`: two warm refits per held parameter)."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -1082,6 +1166,19 @@ def calibrate(
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
+    if held:
+
+        def recalibrate(moved: Any) -> np.ndarray | None:
+            try:
+                again = calibrate(
+                    trials, names, fit, params=moved, model=model, rtol=rtol, record_dt_s=record_dt_s,
+                    max_rounds=max_rounds, multi_start=multi_start, prior=prior,
+                )  # fmt: skip
+            except NoTrialCalibrated:
+                return None
+            return np.array([e.value for e in again.params])
+
+        held_response(obj, u, (lo, hi), held, estimates, max_rounds, recalibrate)
     from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
     separation = (
         None

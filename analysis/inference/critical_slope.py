@@ -68,6 +68,10 @@ class CriticalSlopeResult:
     logistic: tuple[float, float] | None = None  # (b0, b1 per deg)
     extrapolation: tuple[float, float] | None = None  # (e* intercept, slope per deg)
     model: dict[str, Any] = field(default_factory=dict)
+    #: every wheel parameter's value, sd, unit and source (`rimless.sim.model.uncertain.WheelInput.parameters`)
+    parameters: list[dict[str, Any]] | None = None
+    #: the held parameters' uncertainty carried into the estimates (`rimless.analysis.inference.held`)
+    held: dict[str, Any] | None = None
 
     @property
     def critical_slope_deg(self) -> float:
@@ -98,7 +102,19 @@ class CriticalSlopeResult:
             "per_trial": self.per_trial,
             "model_critical_slope_deg": self.model.get("critical_slope_deg", {}),
             "model": self.model,
+            **self.held_summary(),
         }
+
+    def held_summary(self) -> dict[str, Any]:
+        """The keys ``parameters``, ``ci_with_parameters_deg`` and ``parameter_uncertainty`` (when computed)."""
+        out: dict[str, Any] = {}
+        if self.parameters is not None:
+            out["parameters"] = self.parameters
+        if self.held is not None:
+            tr = self.held.get("trials")
+            out["ci_with_parameters_deg"] = tr["ci_deg"] if tr else None
+            out["parameter_uncertainty"] = self.held
+        return out
 
 
 def _bracket(slopes: np.ndarray, sustained: np.ndarray) -> tuple[float, float] | None:

@@ -7,6 +7,7 @@ returned, not printed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,8 +15,9 @@ from typing import Any
 
 from rimless.analysis.inference.calibrate import CalibrationResult, NoTrialCalibrated, calibrate
 from rimless.analysis.inference.critical_slope import CriticalSlopeResult, run_critical_slope
+from rimless.analysis.inference.held import carry_critical
 from rimless.analysis.kinematics.inputs import load_input
-from rimless.errors import InputFileError
+from rimless.errors import InputFileError, ParameterError
 from rimless.progress import progress_bar
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "CalibrationRun",
     "load_trials",
     "wheel_params",
+    "wheel_input",
     "critical_slope_run",
     "calibration_run",
 ]
@@ -72,6 +75,30 @@ def wheel_params(path: Path | None) -> Any:
     return load_params(path)
 
 
+def wheel_input(path: Path | None) -> Any:
+    """The wheel's parameters with their uncertainties and sources (`rimless.sim.model.uncertain.WheelInput`)
+    from a wheel file (``--params``; plain numbers are exact), default Table 1 with the default uncertainties."""
+    from rimless.sim.model.uncertain import default_wheel_input, read_wheel_input
+
+    if path is None:
+        return default_wheel_input()
+    if not path.is_file():
+        raise InputFileError(f"--params {path}: no such file")
+    return read_wheel_input(path)
+
+
+def _no_fit_here(win: Any, allowed: tuple[str, ...], what: str) -> None:
+    """A wheel file marking a parameter "fit" where the command cannot fit it: a `ParameterError` naming both."""
+    from rimless.sim.model.uncertain import SYMBOLS
+
+    extra = [n for n in win.fit if n not in allowed]
+    if extra:
+        names = ", ".join(SYMBOLS[n] for n in extra)
+        raise ParameterError(
+            f'{win.path}: key {names} = "fit": {what}; give a value (and sd) or use `trials calibrate`'
+        )
+
+
 @dataclass
 class CriticalSlopeRun:
     """What ``trials critical-slope`` prints: the inputs, the estimates, and the optional calibration."""
@@ -102,7 +129,9 @@ def critical_slope_run(
 ) -> CriticalSlopeRun:
     """Verdicts and the critical slope from the trials beside the models'; with ``calibrate_c`` also c
     calibrated on the trials (first model) and that model's critical slope."""
-    wheel = wheel_params(params_path)
+    win = wheel_input(params_path)
+    _no_fit_here(win, ("damping_ns_per_m",) if calibrate_c else (), "trials critical-slope fits only c (--calibrated)")
+    wheel = win.params
     with progress_bar("importing") as bar:
         run = CriticalSlopeRun(load_trials(files, import_kwargs))
         if not run.loaded.trials:
@@ -131,7 +160,35 @@ def critical_slope_run(
             group_tol_deg=group_tol_deg,
             progress=lambda s: bar.update(description=s),
         )
+        carry_critical(  # the models at the held values (c too): the calibrated model's is not carried
+            run.result,
+            run.loaded.trials,
+            run.loaded.names,
+            win,
+            models=models,
+            group_tol_deg=group_tol_deg,
+            progress=lambda s: bar.update(description=s),
+        )
     return run
+
+
+def calibrated_input(win: Any, cal: CalibrationResult) -> Any:
+    """``win`` with the fitted parameters' values and standard errors (source ``fitted``)."""
+    for e in cal.params:
+        if e.identifiable or e.effective_only:
+            ok = math.isfinite(e.se)
+            basis = "fitted on these trials" if ok else "fitted on these trials (no standard error: sd shown as 0)"
+            win = win.with_entry(e.field, e.value, e.se if ok else 0.0, "fitted", basis)
+    return win
+
+
+def prior_input(win: Any, prior: Any) -> Any:
+    """``win`` with the leg test's values and uncertainties where the calibration holds them (source
+    ``leg_test_prior``)."""
+    for q in prior.priors:
+        if q.use == "fixed" and q.field in win.entries:
+            win = win.with_entry(q.field, q.mean, q.sd, "leg_test_prior", f"leg test {prior.path}")
+    return win
 
 
 @dataclass
@@ -144,12 +201,15 @@ class CalibrationRun:
     critical: CriticalSlopeResult | None = None
     prior: Any = None  # leg-test priors (`rimless.analysis.inference.priors.LegPriors`), planned
     fit: list[str] = field(default_factory=list)
+    wheel: Any = None  # the wheel's parameters with their uncertainties (`rimless.sim.model.uncertain.WheelInput`)
 
     def summary(self) -> dict[str, Any]:
         """The JSON object of ``trials calibrate --json``."""
         assert self.calibration is not None
         out = self.calibration.summary()
         out["refused"] = self.loaded.refused
+        if self.wheel is not None:
+            out["parameters"] = self.wheel.parameters()  # also after a failed calibration's inputs
         if self.prior is not None:
             from rimless.analysis.inference.calibrate import FIT_FIELDS
 
@@ -160,6 +220,7 @@ class CalibrationRun:
                 "trials": crit.critical_slope_deg,
                 "trials_method": crit.chosen.method if crit.chosen else None,
                 "trials_ci_deg": list(crit.chosen.ci_deg) if crit.chosen else None,
+                "trials_ci_with_parameters_deg": crit.held_summary().get("ci_with_parameters_deg"),
                 **{f"model_{k}": v for k, v in crit.model["critical_slope_deg"].items()},
             }
         return out
@@ -177,7 +238,12 @@ def calibration_run(
 ) -> CalibrationRun:
     """Calibrate ``fit`` on the trials; with ``critical`` also the calibrated model's critical slope and the
     trials'; with ``prior_path`` (a `trials leg-fit --json` output) the leg test's results as priors."""
-    wheel = wheel_params(params_path)
+    win = wheel_input(params_path)
+    from rimless.analysis.inference.calibrate import FIT_FIELDS
+
+    by_field = {f: n for n, (f, _) in FIT_FIELDS.items()}
+    fit = list(fit) + [by_field[f] for f in win.fit if by_field[f] not in fit]  # the file's "fit" too
+    wheel = win.params
     prior = None
     if prior_path is not None:
         from rimless.analysis.inference.calibrate import FIT_FIELDS
@@ -185,8 +251,9 @@ def calibration_run(
 
         prior = read_priors(prior_path)
         wheel = prior.plan(wheel, [FIT_FIELDS[n][0] for n in fit])
+        win = prior_input(win, prior)
     with progress_bar("importing") as bar:
-        run = CalibrationRun(load_trials(files, import_kwargs), prior=prior, fit=list(fit))
+        run = CalibrationRun(load_trials(files, import_kwargs), prior=prior, fit=list(fit), wheel=win)
         if not run.loaded.trials:
             return run
         try:
@@ -198,10 +265,13 @@ def calibration_run(
                 model=model,
                 progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
                 prior=prior,
+                held=[(e.name, e.sd) for e in win.held()],
             )
         except NoTrialCalibrated as e:
             run.failure = str(e)
             return run
+        run.wheel = win = calibrated_input(win, run.calibration)
+        run.calibration.parameters = win.parameters()
         if critical:
             run.critical = run_critical_slope(
                 run.loaded.trials,
@@ -211,4 +281,5 @@ def calibration_run(
                 calibrated=run.calibration.calibrated_params,
                 progress=lambda s: bar.update(description=s),
             )
+            carry_critical(run.critical, run.loaded.trials, run.loaded.names, win)  # the trials' estimate
     return run

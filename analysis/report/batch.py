@@ -184,6 +184,7 @@ def run_report(
     note: str | None = None,
     title: str = "Vicon trials vs simulation",
     params: Any = None,
+    wheel_input: Any = None,
     **report_kwargs: Any,
 ) -> ReportResult:
     """`build_report` with the ``model`` simulator at ``params`` (WheelParams, default Table 1; the slope is each
@@ -218,6 +219,7 @@ def run_report(
                 note=note,
                 title=title,
                 progress=step,
+                wheel_input=wheel_input,
                 **report_kwargs,
             )
         _no_result(res)
@@ -328,7 +330,9 @@ def demo_inputs() -> list[Path]:
     return files
 
 
-def run_demo(out: Path, *, json_out: bool, starting: Callable[[int], None] | None = None) -> ReportResult:
+def run_demo(
+    out: Path, *, json_out: bool, starting: Callable[[int], None] | None = None, wheel_input: Any = None
+) -> ReportResult:
     """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series).
 
     Checks ``out`` (``--out``) before any work; ``starting(n)`` is called with the number of trials just before
@@ -348,4 +352,6 @@ def run_demo(out: Path, *, json_out: bool, starting: Callable[[int], None] | Non
         title="rimless demo: SYNTHETIC trials vs simulation",
         critical_files=critical_data_files(),
         calibrate_c=True,
+        params=wheel_input.params if wheel_input is not None else None,
+        wheel_input=wheel_input,
     )

@@ -87,6 +87,8 @@ class ReportResult:
     #: per trial name (input file name): the robot log's measured clutched time per step beside the simulated one
     #: (`clutch_comparison`), when a robot trial log was given with the trial
     clutch: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: every wheel parameter's value, sd, unit and source (`rimless.sim.model.uncertain.WheelInput.parameters`)
+    parameters: list[dict[str, Any]] | None = None
 
     @property
     def refused(self) -> list[InputRow]:
@@ -131,6 +133,7 @@ class ReportResult:
             "critical_slope": self.critical.summary() if self.critical is not None else None,
             "calibration": self.calibration.summary() if self.calibration is not None else None,
             "clutch_time_per_step": self.clutch,
+            "parameters": self.parameters,
         }
 
 
@@ -148,6 +151,7 @@ def build_report(
     calibrate_c: bool = False,
     critical_files: Sequence[str | Path] | None = None,
     robot_logs: dict[str, Path] | None = None,
+    wheel_input: Any = None,
 ) -> ReportResult:
     """Import/read every input, compare with the simulation and write the report files (see the module doc).
 
@@ -157,7 +161,10 @@ def build_report(
     ``critical``: add the critical slope from the trials (verdicts, estimates, the model's value);
     ``calibrate_c`` also calibrates c on them and gives the calibrated model's critical slope;
     ``critical_files``: only these inputs enter the critical slope (default: every input with steps);
-    ``robot_logs``: input file name -> the robot's trial log of that trial (`clutch_comparison`).
+    ``robot_logs``: input file name -> the robot's trial log of that trial (`clutch_comparison`);
+    ``wheel_input``: the wheel's parameters with their uncertainties (`rimless.sim.model.uncertain.WheelInput`,
+    default ``sim.params`` with the default uncertainties), listed and carried into the critical slopes
+    (`rimless.analysis.inference.held`).
     """
     t_start = time.perf_counter()
     files = [Path(p) for p in paths]
@@ -187,9 +194,30 @@ def build_report(
             robot_logs,
             progress,
         )
+    _carry(res, sim, files, critical_files, wheel_input, progress)
     res.seconds = time.perf_counter() - t_start
     _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
     return res
+
+
+def _carry(
+    res: ReportResult,
+    sim: Simulator,
+    files: Sequence[Path],
+    critical_files: Sequence[str | Path] | None,
+    wheel_input: Any,
+    progress: Callable[[str], None] | None,
+) -> None:
+    """List the wheel's parameters and carry the held ones' uncertainty into the critical slopes."""
+    from rimless.analysis.inference.held import carry_critical
+    from rimless.sim.model.uncertain import default_wheel_input
+
+    win = wheel_input if wheel_input is not None else default_wheel_input(sim.params)
+    res.parameters = win.parameters()
+    if res.critical is not None:
+        trials, names = _critical_inputs(files, res.inputs, critical_files)
+        # the models by forward differences: half the Algorithm 1 runs (about 5 s of the demo instead of 10)
+        carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress, central_models=False)
 
 
 def _compare_and_report(

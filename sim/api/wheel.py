@@ -10,7 +10,7 @@ Each method calls the same library function as the matching `rimless sim` comman
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, get_args
 
@@ -26,6 +26,7 @@ from rimless.sim.api.results import (
     Simulation,
 )
 from rimless.sim.model.params import WheelParams, load_params
+from rimless.sim.model.uncertain import WheelInput, read_wheel_input, wheel_input_for
 
 __all__ = ["Wheel", "Model", "Backend", "MODELS"]
 
@@ -53,6 +54,9 @@ class Wheel:
     model : "er" (energy-recycling, default), "ve" (viscoelastic) or "rigid".
     backend : "auto" (compiled where possible), "fast" or "reference" (scipy).
     rtol : relative tolerance of the integrator (atol = rtol / 100).
+    uncertainty : 1-sigma uncertainties of parameters (field names or the paper's symbols, e.g. ``{"I_c": 0.004}``;
+        0 = exact) over those of a wheel file (``{value, sd}`` tables) or the defaults
+        (`rimless.sim.model.uncertain.DEFAULT_SD`, assumed, not measured); the trial analysis carries them.
     **changes : fields of WheelParams to change, e.g. ``Wheel(stiffness_n_per_m=2500)``.
     """
 
@@ -63,14 +67,20 @@ class Wheel:
         *,
         backend: Backend = "auto",
         rtol: float = DEFAULT_RTOL,
+        uncertainty: Mapping[str, float] | None = None,
         **changes: Any,
     ) -> None:
+        from_file = None
         if isinstance(params, (str, Path)):
-            params = load_params(params)
+            from_file = read_wheel_input(params) if Path(params).is_file() else None
+            params = from_file.params if from_file is not None else load_params(params)
         base = params if params is not None else WheelParams()
         if not isinstance(base, WheelParams):
             raise ParameterError(f"params must be a WheelParams or a TOML file's path, got {type(base).__name__}")
         self.params: WheelParams = base.replace(**changes) if changes else base
+        #: every parameter's value, 1-sigma uncertainty and source (what the trial analysis holds and carries)
+        self.input: WheelInput = wheel_input_for(self.params, from_file, uncertainty)
+        self.uncertainty: dict[str, float] = {n: e.sd for n, e in self.input.entries.items()}
         self.model: Model = _check_model(model)  # type: ignore[assignment]
         if backend not in get_args(Backend):
             raise ParameterError(f"backend must be one of {', '.join(get_args(Backend))}, got {backend!r}")
@@ -83,11 +93,16 @@ class Wheel:
     # -- construction
     def with_params(self, **changes: Any) -> Wheel:
         """A copy with some parameters changed (validated), e.g. ``wheel.with_params(slope_rad=0.03)``."""
-        return Wheel(self.params.replace(**changes), self.model, backend=self.backend, rtol=self.rtol)
+        w = Wheel(self.params.replace(**changes), self.model, backend=self.backend, rtol=self.rtol)
+        w.input = wheel_input_for(w.params, self.input)  # the unchanged parameters keep their uncertainty
+        w.uncertainty = {n: e.sd for n, e in w.input.entries.items()}
+        return w
 
     def with_model(self, model: Model) -> Wheel:
         """The same wheel and path with another model."""
-        return Wheel(self.params, model, backend=self.backend, rtol=self.rtol)
+        w = Wheel(self.params, model, backend=self.backend, rtol=self.rtol)
+        w.input, w.uncertainty = self.input, dict(self.uncertainty)
+        return w
 
     def __repr__(self) -> str:
         p = self.params

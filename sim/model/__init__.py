@@ -6,7 +6,7 @@ Jacobians of one mass model), `dynamics` (the constrained phase dynamics), `guar
 every event that ends a phase, with its code, direction and failure class), `impact`, `section`
 (z <-> full post-impact state), `clutch` (real-clutch constraint sets), `friction` (Coulomb friction in the
 leg guides: stick/slip phases on the clutch's constraint sets, beyond the paper), `rigid` (closed form),
-`failures`.
+`failures`, `uncertain` (each parameter's uncertainty and source: the wheel file).
 
 May import: the standard library, numpy, sympy (derive only), rimless.errors. Nothing else of rimless.
 """

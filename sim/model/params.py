@@ -174,6 +174,10 @@ _ALIASES = {
 }
 
 
+#: The names a parameter file may use (field names and the paper's symbols) -> fields.
+PARAM_ALIASES = _ALIASES
+
+
 def params_from_mapping(values: dict[str, Any], *, base: WheelParams | None = None, source: str = "") -> WheelParams:
     """Build parameters from a mapping of field names or paper symbols (`slope_deg` accepted)."""
     where = f" in {source}" if source else ""
@@ -197,7 +201,8 @@ def params_from_mapping(values: dict[str, Any], *, base: WheelParams | None = No
 
 
 def load_params(path: str | Path, *, base: WheelParams | None = None) -> WheelParams:
-    """Read a TOML parameter file; its keys may sit at top level or under a [wheel] table."""
+    """Read a TOML parameter file; its keys may sit at top level or under a [wheel] table (uncertainties, if
+    any, are ignored here: `rimless.sim.model.uncertain.read_wheel_input` reads them)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -209,4 +214,11 @@ def load_params(path: str | Path, *, base: WheelParams | None = None) -> WheelPa
         raise InputFileError(f"{path}: not valid TOML: {err}") from None
     if "wheel" in data and isinstance(data["wheel"], dict):
         data = data["wheel"]
+    # a wheel file with uncertainties (`rimless.sim.model.uncertain`): {value, sd} tables give their value, a
+    # parameter marked "fit" (or given only an sd) keeps the base's value
+    data = {
+        k: (v["value"] if isinstance(v, dict) else v)
+        for k, v in data.items()
+        if not (v == "fit" or (isinstance(v, dict) and "value" not in v))
+    }
     return params_from_mapping(data, base=base, source=str(path))
