@@ -173,17 +173,20 @@ def stop(proc: subprocess.Popen[bytes] | None) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()
+    except KeyboardInterrupt:  # a second Ctrl-C while it ends: it is killed all the same, then the Ctrl-C goes on
+        proc.kill()
+        raise
 
 
 @contextlib.contextmanager
 def compiling_ahead(mi: int) -> Iterator[None]:
     """While the block runs, PLAN for ``mi`` compiles in a second process (stopped when the block ends)."""
     proc = start(mi)
-    if proc is not None:
-        from rimless.progress import stage
+    try:  # the stage is reported inside: a Ctrl-C that lands while it is written still stops the second process
+        if proc is not None:
+            from rimless.progress import stage
 
-        stage("compiling ahead in a second process")
-    try:
+            stage("compiling ahead in a second process")
         yield
     finally:
         stop(proc)
