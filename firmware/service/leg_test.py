@@ -25,8 +25,9 @@ Safety, as for every command that drives a clutch: every stop signal releases th
 (`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
 while it is engaged (which ends the test; a stall before the engage is only reported) or when the clutch is
 held beyond `[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the loop alive (the
-hardware enable drops otherwise), a sensor fault (SPI error, SQUAL low, saturation, a sensor reset) releases
-it, and the hardware is closed (clutches off) on every path. The log is written whole at the end (atomically,
+hardware enable drops otherwise), a sensor fault (SPI error, SQUAL low, saturation, a sensor reset, a wrong Product_ID: its identity and
+configuration are read back one register every `READBACK_PERIOD_S` and all before the engage, classed as the
+walking controller classes them) releases it, and the hardware is closed (clutches off) on every path. The log is written whole at the end (atomically,
 also after a fault: it says which); an interrupted test writes nothing.
 
 Times in seconds, displacement in sensor counts (the log) or metres (the detector).
@@ -51,7 +52,7 @@ from rimless.firmware.control.watchdog import Watchdog
 from rimless.firmware.drivers.fake_adns3080 import still
 from rimless.firmware.drivers.fake_leg import FakeLeg, FakeLegParams
 from rimless.firmware.drivers.gpio import mock_pin_factory, pin_histories
-from rimless.firmware.errors import Interrupted, SensorError
+from rimless.firmware.errors import Interrupted, SensorError, SensorNotFound, SensorReset
 from rimless.firmware.service.config import RobotConfig, load_config
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.safety import stop_on_signals
@@ -65,6 +66,7 @@ PRE_LOCK_KEEP_S = 1.0  # of the hand's press, the log keeps the last second befo
 SENSOR_SPEED_RATING_M_S = 1.016  # 40 in/s [DS p.10]
 SENSOR_ACCEL_RATING_M_S2 = 15 * 9.81  # 15 g [DS p.10]
 WATCHDOG_FEED = "leg_test_loop"
+READBACK_PERIOD_S = 1e-3  # one identity/configuration register read back this often (a round of 5 in 5 ms)
 SLOW_READ_US = 500.0  # a read that took longer has an uncertain instant (the fit leaves such reads out too)
 # The zero-velocity detector of the walking controller with a hand's pace: a press of a few mm over a fraction
 # of a second moves at mm/s to cm/s, not at the 50 mm/s of a touchdown, and may take seconds.
@@ -279,6 +281,7 @@ def _open(cfg: RobotConfig, opts: LegTestOptions, i_sensor: int, fake: bool, sta
         try:
             sensor.set_resolution(LEG_TEST_CPI)
             sensor.set_frame_rate(opts.frame_rate_hz)
+            sensor.mark_configured()  # read back in the loop from now on: a reset or a wrong ID faults
             sensor.clear_motion()
         except BaseException:
             hw.close()
@@ -331,6 +334,17 @@ def _run(
                 (Fault.CLUTCH_TIMEOUT.value, f"clutch held {held:.3f} s > max_hold_s {cfg.clutch.max_hold_s:g} s")
             )
 
+    def read_back(check: Callable[[], None]) -> tuple[str, str] | None:  # classified as `robot run` does
+        try:
+            check()
+        except SensorReset as err:
+            return Fault.SENSOR_RESET.value, str(err)
+        except SensorNotFound as err:
+            return Fault.ID_MISMATCH.value, str(err)
+        except SensorError as err:
+            return Fault.SPI_ERROR.value, str(err)
+        return None
+
     wd = Watchdog(trip)
     wd.add(WATCHDOG_FEED, cfg.sampling.stall_timeout_s)
     wd.checks.append(hold_check)
@@ -365,6 +379,8 @@ def _run(
     counts = 0
     det_counts = 0
     det_next = t0
+    readback_period_ns = round(READBACK_PERIOD_S * 1e9)
+    readback_next = t0
     phase = "press"
     engaged_ns = released_ns = None
     lock_counts = 0
@@ -412,6 +428,13 @@ def _run(
                 hw.outputs_off()
                 faults.append((bad[0].value, bad[1]))
                 break
+            if m.t_ns >= readback_next:  # the sensor's identity and configuration, one register in turn
+                readback_next = m.t_ns + readback_period_ns
+                wrong = read_back(sensor.check_next)
+                if wrong is not None:
+                    hw.outputs_off()
+                    faults.append(wrong)
+                    break
             if faults:
                 break
             if phase == "press":
@@ -420,6 +443,11 @@ def _run(
                     det_next = m.t_ns + det_period_ns
                     d = detector.update(m.t_ns, det_counts / cpm, trusted=True)
                     det_counts = 0
+                    wrong = read_back(sensor.check_all) if d.engage is not None else None
+                    if wrong is not None:  # every register read back right before the engage
+                        hw.outputs_off()
+                        faults.append(wrong)
+                        break
                     if d.engage is not None:
                         clutches.engage(leg)
                         engaged_ns, lock_counts = clock.now_ns(), counts

@@ -149,6 +149,35 @@ def test_sensor_fault_during_the_hold_releases_the_clutch_and_logs_why(tmp_path:
     assert lines[-1]["outcome"] == "squal_low"
 
 
+@pytest.mark.parametrize(
+    ("at", "pins", "events"),
+    [
+        ("press", "0", ["fault", "end"]),
+        ("hold", "010", ["engage", "fault", "end"]),
+        ("free", "010", ["engage", "release", "fault", "end"]),
+    ],
+)
+def test_a_wrong_product_id_mid_test_stops_it_released_as_id_mismatch(tmp_path: Path, at, pins, events) -> None:
+    """Fails before the read-back in the read loop: the Product_ID went wrong (a brown-out, a swapped sensor) and
+    the test ended "ok" with a log that looked valid."""
+    out = tmp_path / "leg.jsonl"
+
+    def phase(name: str, hw) -> None:
+        if name == at:  # as `robot run --fake-fault wrong-product-id`: Product_ID reads 0x00 from now on
+            hw.fakes[0].fault = FakeFault.WRONG_ID
+
+    rep = _run_fake(_cfg(), LegTestOptions(leg=LEG, hold_s=0.3, record_s=0.3, rate_hz=2000), out, on_phase=phase)
+    assert rep.exit_code == 1 and rep.fault == "id_mismatch", rep  # the controller's class for SensorNotFound
+    assert "Product_ID=0x00" in rep.detail
+    assert rep.fake_pins == f"GPIO{PIN}={pins}"  # released (or never engaged), off at the end
+    lines = _lines(out)
+    assert [ln["event"] for ln in lines if "event" in ln] == events
+    assert lines[-1]["outcome"] == "id_mismatch"
+    fault_t = next(ln["t_s"] for ln in lines if ln.get("event") == "fault")
+    sample_t = [ln["t_s"] for ln in lines[1:] if "counts" in ln and "event" not in ln]
+    assert sample_t[-1] - fault_t <= 0.0  # nothing read after the fault was found
+
+
 def test_stalled_read_loop_releases_the_clutch_from_the_watchdog(tmp_path: Path) -> None:
     out = tmp_path / "leg.jsonl"
     during: dict[str, bool] = {}
