@@ -26,6 +26,7 @@ class Fault(str, Enum):
     LEG_SYNC_LOST = "leg_sync_lost"  # a missed or extra touchdown: the stance leg is not known
     SENSOR_RESET = "sensor_reset"  # the sensor reset itself (Motion RES bit back to 400 cpi)
     LOOP_STALLED = "loop_stalled"  # the event loop did not feed the watchdog in time
+    WATCHDOG_STALLED = "watchdog_stalled"  # the watchdog thread itself completed no round in time
 
     @property
     def code(self) -> int:

@@ -10,6 +10,11 @@ every `notify_every_s` (systemd's `WatchdogSec=`: a stalled firmware is restarte
 `ExecStopPost=` releases the pins).
 
 Release bound on a stall: the feeder's timeout + `period_s` + one switch interval of the GIL.
+
+The watchdog thread is watched in turn: it counts its completed rounds (`rounds`), and the control thread asks
+`thread_alive()` before every heartbeat toggle. No new round for `self_timeout_s` (on the watchdog's clock)
+means the watchdog thread itself is blocked: the control thread then stops toggling the heartbeat (the hardware
+monostable drops the clutches), releases every clutch and reports `watchdog_stalled`.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ class Watchdog:
         notify: Callable[[str], object] | None = None,
         notify_every_s: float = 0.0,
         clock_ns: Callable[[], int] = time.monotonic_ns,
+        self_timeout_s: float = 0.25,
     ) -> None:
         self.on_trip = on_trip
         self.clock_ns = clock_ns
@@ -45,6 +51,10 @@ class Watchdog:
         self._tripped: set[str] = set()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.rounds = 0  # completed rounds of checks: the evidence that the watchdog thread itself runs
+        self.self_timeout_ns = int(self_timeout_s * 1e9)
+        self._seen_rounds = -1  # the count `thread_alive` last saw, and when it saw it change
+        self._seen_ns = 0
 
     def add(self, name: str, timeout_s: float) -> None:
         """A deadline `name`: fed at least every `timeout_s`, starting now."""
@@ -66,8 +76,25 @@ class Watchdog:
         if self._thread is not None:
             self._thread.join(1.0)
 
+    def thread_alive(self) -> bool:
+        """Has a round of checks completed within `self_timeout_s`? Asked by one thread only (the control
+        thread, before each heartbeat toggle); the first call starts the count."""
+        now = self.clock_ns()
+        rounds = self.rounds
+        if rounds != self._seen_rounds:
+            self._seen_rounds, self._seen_ns = rounds, now
+            return True
+        return now - self._seen_ns <= self.self_timeout_ns
+
     def check_now(self) -> None:
-        """One round of checks (the thread runs this every `period_s`)."""
+        """One round of checks (the thread runs this every `period_s`); counted in `rounds` when it returns
+        (or raises: a bad check is not a blocked thread)."""
+        try:
+            self._check_round()
+        finally:
+            self.rounds += 1
+
+    def _check_round(self) -> None:
         now = self.clock_ns()
         stalled = []
         for name, timeout in self._timeouts_ns.items():

@@ -221,6 +221,7 @@ class RobotApp:
                 period_s=WATCHDOG_PERIOD_S,
                 notify=sdnotify.notify,
                 notify_every_s=sdnotify.watchdog_interval_s(),
+                self_timeout_s=self.cfg.sampling.loop_stall_s,
             )
             wd.add(CONTROL_LOOP, self.cfg.sampling.stall_timeout_s)
             wd.add(EVENT_LOOP, self.cfg.sampling.loop_stall_s)
@@ -379,10 +380,18 @@ class RobotApp:
     # --- the dead-man's chain (watchdog thread and control thread) ----------------------------------
     def _on_sample(self) -> None:
         """After every control step, in the control thread: feed the watchdog; toggle the heartbeat pin while
-        the watchdog sees every part alive (a stall stops the toggling, and the hardware monostable drops)."""
+        the watchdog sees every part alive (a stall stops the toggling, and the hardware monostable drops) and
+        the watchdog thread itself is seen alive (its rounds advance: else every clutch off, `watchdog_stalled`)."""
         wd = self.watchdog
         if wd is not None:
             wd.feed(CONTROL_LOOP)
+            if not wd.thread_alive():
+                self.armed_remotely = False
+                self.controller.fault(  # in the control thread: all clutches off, disarmed, reported once
+                    Fault.WATCHDOG_STALLED,
+                    f"the watchdog thread completed no round for {wd.self_timeout_ns * 1e-9:g} s: heartbeat stopped",
+                )
+                return
             if wd.healthy and self.hw.heartbeat is not None:
                 self.hw.heartbeat.toggle()
 

@@ -22,13 +22,15 @@ from Python expect 3-6 kHz (0.15-0.3 ms a read). With `--fake` the loop, the fak
 a `VirtualClock` (`rimless.firmware.clock`): every read is taken at its deadline, whatever the machine's load.
 
 Safety, as for every command that drives a clutch: every stop signal releases the clutch at once
-(`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s`
-while it is engaged (which ends the test; a stall before the engage is only reported) or when the clutch is
-held beyond `[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the loop alive (the
-hardware enable drops otherwise), a sensor fault (SPI error, SQUAL low, saturation, a sensor reset, a wrong Product_ID: its identity and
-configuration are read back one register every `READBACK_PERIOD_S` and all before the engage, classed as the
-walking controller classes them) releases it, and the hardware is closed (clutches off) on every path. The log is written whole at the end (atomically,
-also after a fault: it says which); an interrupted test writes nothing.
+(`stop_on_signals`), a watchdog thread releases it when the read loop stalls for `[sampling] stall_timeout_s` while
+it is engaged (which ends the test; a stall before the engage is only reported) or when the clutch is held beyond
+`[clutch] max_hold_s`, the heartbeat pin toggles only while the watchdog sees the loop alive (the hardware enable
+drops otherwise) and the loop sees the watchdog thread alive (a round completed within `[sampling] loop_stall_s`;
+else the clutch is released and the test ends `watchdog_stalled`), a sensor fault (SPI error, SQUAL low, saturation,
+a sensor reset, a wrong Product_ID: its identity and configuration are read back one register every
+`READBACK_PERIOD_S` and all before the engage, classed as the walking controller classes them) releases it, and the
+hardware is closed (clutches off) on every path. The log is written whole at the end (atomically, also after a
+fault: it says which); an interrupted test writes nothing.
 
 Times in seconds, displacement in sensor counts (the log) or metres (the detector).
 """
@@ -345,7 +347,7 @@ def _run(
             return Fault.SPI_ERROR.value, str(err)
         return None
 
-    wd = Watchdog(trip)
+    wd = Watchdog(trip, self_timeout_s=cfg.sampling.loop_stall_s)
     wd.add(WATCHDOG_FEED, cfg.sampling.stall_timeout_s)
     wd.checks.append(hold_check)
     header = {
@@ -406,6 +408,16 @@ def _run(
                 faults.append((Fault.SPI_ERROR.value, str(err)))
                 break
             wd.feed(WATCHDOG_FEED)
+            if not wd.thread_alive():  # the watchdog thread is blocked: no heartbeat, clutch off, the test void
+                hw.outputs_off()
+                faults.append(
+                    (
+                        Fault.WATCHDOG_STALLED.value,
+                        f"the watchdog thread completed no round for {wd.self_timeout_ns * 1e-9:g} s: "
+                        "heartbeat stopped",
+                    )
+                )
+                break
             if wd.healthy and hw.heartbeat is not None:
                 hw.heartbeat.toggle()
             n += 1

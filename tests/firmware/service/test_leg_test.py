@@ -200,6 +200,55 @@ def test_stalled_read_loop_releases_the_clutch_from_the_watchdog(tmp_path: Path)
     assert rep.exit_code == 1 and rep.fault == "sensor_stalled", rep
 
 
+def test_a_blocked_watchdog_thread_ends_the_test_released_with_the_heartbeat_stopped(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """Fails before the loop checked the watchdog thread's own liveness: the test ended "ok". From the hold on, the
+    watchdog thread completes no round (it is never started: as blocked as a thread can be) while the time it
+    reads moves 1 ms with every read, on the test's own count (no wall clock, no sleeps)."""
+    from rimless.firmware.control.watchdog import Watchdog
+    from rimless.firmware.service import leg_test
+
+    ticks = [0]
+    blocked = {"from": False}
+
+    class NeverRuns(Watchdog):
+        def __init__(self, *a, **kw) -> None:
+            super().__init__(*a, **kw, clock_ns=lambda: ticks[0])
+
+        def start(self) -> None:  # the thread never runs a round
+            pass
+
+        def feed(self, name: str) -> None:  # one read: 1 ms on the watchdog's clock once the thread "blocks"
+            if blocked["from"]:
+                ticks[0] += 1_000_000
+            super().feed(name)
+
+    monkeypatch.setattr(leg_test, "Watchdog", NeverRuns)
+    beats: list[int] = []  # the watchdog's clock at each heartbeat toggle
+
+    def phase(name: str, hw) -> None:
+        if name == "press":
+            toggle = hw.heartbeat.toggle
+
+            def counted() -> None:
+                beats.append(ticks[0])
+                toggle()
+
+            hw.heartbeat.toggle = counted
+        if name == "hold":
+            blocked["from"] = True
+
+    out = tmp_path / "leg.jsonl"
+    rep = _run_fake(_cfg(), LegTestOptions(leg=LEG, hold_s=0.5, rate_hz=2000), out, on_phase=phase)
+    assert rep.exit_code == 1 and rep.fault == "watchdog_stalled", rep
+    assert rep.fake_pins == f"GPIO{PIN}=010"
+    assert [ln["event"] for ln in _lines(out) if "event" in ln] == ["engage", "fault", "end"]
+    # the heartbeat toggled until the bound ([sampling] loop_stall_s, 0.25 s) and never after it
+    assert beats and max(beats) <= 250_000_000 and beats.count(0) < len(beats)
+    assert "watchdog thread" in rep.detail
+
+
 def test_no_compression_times_out_with_the_clutch_never_engaged(tmp_path: Path) -> None:
     out = tmp_path / "leg.jsonl"
     rep = run_leg_test(

@@ -89,3 +89,53 @@ def test_the_watchdog_trips_once_per_stall_and_recovers() -> None:
     wd.feed("a")
     wd.check_now()
     assert wd.healthy
+
+
+def test_a_blocked_watchdog_thread_stops_the_heartbeat_releases_and_faults(tmp_path) -> None:
+    """Fails before the watchdog's own liveness check: with the watchdog thread blocked, `healthy` stayed True
+    and the control thread went on toggling the heartbeat (the hardware backstop never acted) with the clutch
+    held. On a clock of the test's own: the control thread's steps and the watchdog's rounds are called here,
+    one by one (no threads, no sleeps)."""
+    from rimless.firmware.control.faults import Fault
+    from rimless.firmware.service.app import CONTROL_LOOP
+
+    cfg = config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING)
+    log = PinLog()
+    hw = build_fake(cfg, trajectory=lambda t: 0.0, pin_log=log)
+    app = RobotApp(cfg, hw)
+    now = [0]
+    wd = app.watchdog = Watchdog(app._watchdog_trip, period_s=0.01, clock_ns=lambda: now[0], self_timeout_s=0.25)
+    wd.add(CONTROL_LOOP, cfg.sampling.stall_timeout_s)
+
+    def beats() -> int:
+        return sum(1 for _t, p, _level in log.transitions if p == HEARTBEAT)
+
+    def run_ms(ms: int, *, watchdog_runs: bool) -> None:  # the control thread at 1 kHz, the watchdog every 10 ms
+        for i in range(ms):
+            now[0] += 1_000_000
+            app._on_sample()
+            if watchdog_runs and i % 10 == 9:
+                wd.check_now()
+
+    try:
+        run_ms(100, watchdog_runs=True)
+        assert beats() >= 99 and not app.controller.active_faults
+        hw.clutches.engage(0)
+        app.controller.armed = True
+        run_ms(250, watchdog_runs=False)  # the watchdog thread blocks: the bound (0.25 s) is not over yet
+        assert hw.clutches.engaged() == [0] and not app.controller.active_faults
+        held = beats()
+        run_ms(20, watchdog_runs=False)  # past the bound: released, disarmed, reported, heartbeat stopped
+        assert hw.clutches.engaged() == [] and not app.controller.armed
+        assert list(app.controller.active_faults) == [Fault.WATCHDOG_STALLED]
+        assert "watchdog thread" in app.controller.active_faults[Fault.WATCHDOG_STALLED]
+        stopped = beats()
+        assert stopped - held <= 11  # toggled until the bound, then never
+        run_ms(500, watchdog_runs=False)
+        assert beats() == stopped and hw.clutches.engaged() == []
+        faults = [r for r in app.controller.outbox if getattr(r, "name", "") == "fault"]
+        assert len(faults) == 1  # reported once
+        run_ms(30, watchdog_runs=True)  # the watchdog runs again: the heartbeat resumes, the fault stays latched
+        assert beats() > stopped and hw.clutches.engaged() == [] and not app.controller.armed
+    finally:
+        hw.close()
