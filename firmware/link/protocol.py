@@ -148,25 +148,51 @@ def token_bits(token: str) -> float:
     return effective * math.log2(max(alphabet, 2))
 
 
-def check_token(token: str) -> str:
-    """Return `token` if it is acceptable for the command channel, else raise `WeakToken` saying why: an
-    example or published value, shorter than MIN_TOKEN_CHARS, or under MIN_TOKEN_BITS once dictionary words,
-    keyboard runs and repetitions are discounted."""
+def estimated_bits(token: str) -> tuple[float, str]:
+    """zxcvbn's estimate of the guesses an attacker needs (as bits: log2 of the guesses), and its warning ("" if
+    none). zxcvbn (Dropbox's estimator: sequences, repeats, keyboard walks on QWERTY/Dvorak/keypad, dates, l33t,
+    30 000 English words, names and leaked passwords) is imported here, only when a token is checked. Only the
+    first 72 characters are rated (zxcvbn's own limit; a prefix never rates above the whole)."""
+    try:
+        from zxcvbn import zxcvbn
+    except ImportError:
+        raise WeakToken(
+            'cannot rate the command token: the strength estimator zxcvbn is not installed (pip install -e ".[robot]")'
+        ) from None
+    result = zxcvbn(token[:72])
+    warning = str(result.get("feedback", {}).get("warning") or "").rstrip(".")
+    return float(result["guesses_log10"]) * math.log2(10.0), warning
+
+
+def check_token(token: str, *, setting: str = "the command token") -> str:
+    """Return `token` if it is acceptable for the command channel, else raise `WeakToken` (one line, starting
+    with `setting`: where the token came from) saying why: an example or published value, shorter than
+    MIN_TOKEN_CHARS, or under MIN_TOKEN_BITS by the lesser of two estimates: zxcvbn's (`estimated_bits`) and
+    this module's own (`token_bits`: dictionary words, keyboard runs and repetitions discounted)."""
     if (
         token.lower() in KNOWN_EXAMPLE_TOKENS
         or hashlib.sha256(token.lower().encode()).hexdigest() in PUBLISHED_TOKEN_SHA256
         or hashlib.sha256(token.encode()).hexdigest() in PUBLISHED_TOKEN_SHA256
     ):
-        raise WeakToken(f"the command token is an example or published value; {GENERATE_HINT}")
+        raise WeakToken(f"{setting}: the command token is an example or published value; {GENERATE_HINT}")
     if len(token) < MIN_TOKEN_CHARS:
-        raise WeakToken(f"the command token is too short ({len(token)} characters, at least {MIN_TOKEN_CHARS})")
-    if len(set(token)) < 6:
-        raise WeakToken("the command token repeats too few characters to be secret")
-    bits = token_bits(token)
-    if bits < MIN_TOKEN_BITS:
         raise WeakToken(
-            f"the command token is guessable (about {bits:.0f} bits once dictionary words and "
+            f"{setting}: the command token is too short ({len(token)} characters, at least {MIN_TOKEN_CHARS})"
+        )
+    if len(set(token)) < 6:
+        raise WeakToken(f"{setting}: the command token repeats too few characters to be secret")
+    own = token_bits(token)
+    if own < MIN_TOKEN_BITS:
+        raise WeakToken(
+            f"{setting}: the command token is guessable (about {own:.0f} bits once dictionary words and "
             f"repetitions are discounted, at least {MIN_TOKEN_BITS:.0f}); {GENERATE_HINT}"
+        )
+    bits, warning = estimated_bits(token)
+    if bits < MIN_TOKEN_BITS:
+        why = f": {warning}" if warning else ""
+        raise WeakToken(
+            f"{setting}: the command token is guessable (about {bits:.0f} bits by zxcvbn, at least "
+            f"{MIN_TOKEN_BITS:.0f}{why}); {GENERATE_HINT}"
         )
     return token
 

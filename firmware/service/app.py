@@ -89,11 +89,12 @@ class RobotApp:
     ) -> None:
         self.cfg = cfg
         self.hw = hw
-        self.token = token or cfg.token() or secrets.token_urlsafe(24)
-        self.token_generated = not (token or cfg.token())
+        configured, setting = (token, "the token given") if token else cfg.token_and_setting()
+        self.token = configured or secrets.token_urlsafe(24)
+        self.token_generated = not configured
         self.token_path: Any = None  # where a generated token was written (mode 0600), by the runner
         if cfg.commands.enabled and not self.token_generated:
-            check_token(self.token)  # WeakToken (a ParameterError) names the problem
+            check_token(self.token, setting=setting)  # WeakToken (a ParameterError) names the setting and why
         self.controller = Controller(
             hw.channels,
             hw.clutches,

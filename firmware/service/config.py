@@ -144,22 +144,26 @@ class RobotConfig:
         """The command token in force: $RIMLESS_TOKEN, $RIMLESS_TOKEN_FILE, the systemd credential
         `rimless-token`, `[commands] token_file`, then `[commands] token`. Raises ConfigError if the credential
         cannot be read, TokenFileError if a token file cannot be read or is not private (mode 0600, this user's)."""
+        return self.token_and_setting()[0]
+
+    def token_and_setting(self) -> tuple[str, str]:
+        """The command token in force (see `token`) and the name of the setting it came from (for messages)."""
         if os.environ.get(TOKEN_ENV):
-            return os.environ[TOKEN_ENV]
+            return os.environ[TOKEN_ENV], f"${TOKEN_ENV}"
         from rimless.firmware.link.protocol import read_token_file
 
         if os.environ.get(TOKEN_FILE_ENV):
-            return read_token_file(os.environ[TOKEN_FILE_ENV], f"${TOKEN_FILE_ENV}")
+            return read_token_file(os.environ[TOKEN_FILE_ENV], f"${TOKEN_FILE_ENV}"), f"${TOKEN_FILE_ENV}"
         if os.environ.get("CREDENTIALS_DIRECTORY"):
             cred = Path(os.environ["CREDENTIALS_DIRECTORY"]) / CREDENTIAL_NAME
             if cred.exists():  # systemd keeps its credentials private to the service
                 try:
-                    return cred.read_text(encoding="utf-8").strip()
+                    return cred.read_text(encoding="utf-8").strip(), f"systemd credential {CREDENTIAL_NAME}"
                 except (OSError, UnicodeDecodeError) as err:
                     raise ConfigError(f"systemd credential {cred}: cannot read the token ({err})") from None
         if self.commands.token_file:
-            return read_token_file(self.commands.token_file, "[commands] token_file")
-        return self.commands.token
+            return read_token_file(self.commands.token_file, "[commands] token_file"), "[commands] token_file"
+        return self.commands.token, "[commands] token"
 
 
 _RANGES: dict[str, tuple[float, float]] = {

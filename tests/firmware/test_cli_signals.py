@@ -222,3 +222,23 @@ def test_ctrl_c_in_listen_completes_the_recording_and_exits_130(tmp_path) -> Non
     assert err.rstrip().splitlines()[-1] == "interrupted"
     assert f"wrote {out}" in err and len(out.read_text().splitlines()) == 5
     assert not list(tmp_path.glob("*.part")) and "Traceback" not in err
+
+
+def test_a_guessable_token_is_refused_naming_its_setting(tmp_path) -> None:
+    """Fails on today's main: a keyboard walk from a private token file started the robot."""
+    tok = tmp_path / "token"
+    tok.write_text("1q2w3e4r5t6y7u8i9o0p\n")
+    tok.chmod(0o600)
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\ntoken_file = "{tok}"\n')
+    env = {k: v for k, v in os.environ.items() if k not in ("RIMLESS_TOKEN", "RIMLESS_TOKEN_FILE")}
+    r = subprocess.run(
+        [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), "--duration-s", "1"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert r.returncode == 2, r.stderr
+    err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(err) == 1 and "[commands] token_file" in err[0] and "guessable" in err[0], r.stderr

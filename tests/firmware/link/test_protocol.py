@@ -79,3 +79,29 @@ def test_a_token_file_must_be_private(tmp_path, monkeypatch) -> None:
         RobotConfig().token()
     path.chmod(0o600)
     assert RobotConfig().token() == tok
+
+
+def test_sequences_keyboard_walks_and_dictionary_words_are_refused_by_a_real_estimator() -> None:
+    """Fails on today's main: the hand-made estimate gave these 94-113 bits and accepted them."""
+    import secrets
+    import subprocess
+    import sys
+
+    for weak in (
+        "abcdefghijklmnopqrstuvwxyz",  # a sequence
+        "1q2w3e4r5t6y7u8i9o0p",  # a keyboard walk
+        "correcthorsebatterystaple",  # dictionary words (xkcd 936: now in every list)
+        "zaqwsxcderfvbgtyhnmjuiklop",  # a keyboard walk down the columns
+        "monkeydragonsunshine2024",
+    ):
+        with pytest.raises(WeakToken, match="guessable") as err:
+            check_token(weak, setting="$RIMLESS_TOKEN")
+        msg = str(err.value)
+        assert msg.startswith("$RIMLESS_TOKEN: ") and "\n" not in msg and "bits" in msg, msg
+    for _ in range(100):  # what the firmware and the README generate always passes
+        tok = secrets.token_urlsafe(24)
+        assert check_token(tok) == tok
+    # the estimator is imported only where a token is checked: not by the firmware's modules themselves
+    code = "import sys, rimless.firmware.service.app, rimless.firmware.cli; print('zxcvbn' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
