@@ -235,20 +235,7 @@ def _run_phase(
 def step_map(mi, er, p, z, rtol, atol, want_jac, max_steps, counts):
     """One step from z = (theta+ rad, theta'+ rad/s) (foot b at the origin); unilateral contact (see
     step_map_contact)."""
-    return call_compiling(
-        STEP_MAP_CONTACT[mi],
-        er,
-        p,
-        z,
-        rtol,
-        atol,
-        want_jac,
-        max_steps,
-        counts,
-        False,
-        np.empty(0),
-        ahead=lambda: compiling_ahead(mi),
-    )
+    return step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, False, np.empty(0))
 
 
 def step_map_contact(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral, contact):
