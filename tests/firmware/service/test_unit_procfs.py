@@ -129,6 +129,37 @@ def test_gpiozero_identifies_the_pi_in_a_procfs_mounted_as_the_unit_mounts_it(na
     assert (seen["soc"], seen["manufacturer"]) == ("BCM2711", "Sony")
 
 
+def _release_in(namespaces: list[str], options: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    """The unit's ExecStartPre= (`rimless robot release`) in a procfs mounted with `options` on a Pi's cpuinfo."""
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text(PI4B_CPUINFO)
+    script = (
+        'mount -t proc -o "$1" proc /proc && { [ ! -e /proc/cpuinfo ] || mount --bind "$2" /proc/cpuinfo; } '
+        '&& exec "$3" robot release'
+    )
+    rimless = str(Path(sys.executable).with_name("rimless"))
+    return subprocess.run(
+        [*namespaces, "sh", "-c", script, "sh", options, str(cpuinfo), rimless],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def test_the_units_release_gets_past_the_board_to_the_pins(namespaces, tmp_path) -> None:
+    """`rimless robot release` in the unit's procfs: every pin factory identifies the Pi and stops only where the
+    pins are (no gpiochip or /dev/gpiomem here: exit 2 naming them; on a Pi it would drive them, exit 0)."""
+    options = unit_proc_mount_options(UNIT.read_text())
+    r = _release_in(namespaces, options, tmp_path)
+    if r.returncode == 0:
+        return  # a real Pi: the pins were driven off
+    assert r.returncode == 2, r.stderr
+    assert "/proc/cpuinfo" not in r.stderr and "unable to locate Pi revision" not in r.stderr, r.stderr
+    assert "gpiochip" in r.stderr or "/dev/gpiomem" in r.stderr, r.stderr  # lgpio's, or the native factory's
+    pid_only = _release_in(namespaces, "nosuid,nodev,noexec,hidepid=invisible,subset=pid", tmp_path)
+    assert pid_only.returncode == 2 and "No such file or directory: '/proc/cpuinfo'" in pid_only.stderr
+
+
 def test_a_pid_only_procfs_hides_the_revision_from_gpiozero(namespaces, tmp_path) -> None:
     """What `ProcSubset=pid` did: the check above can fail (and did, on the unit before this fix)."""
     seen = _board_seen_by_gpiozero(namespaces, "nosuid,nodev,noexec,hidepid=invisible,subset=pid", tmp_path)
