@@ -368,7 +368,11 @@ def run(
                 f"export RIMLESS_TOKEN_FILE={robot.token_path}"
             )
         mode = "fake" if fake else "hardware"
-        _say(f"rimless robot: running ({mode}) at {robot.cfg.sampling.rate_hz:g} Hz")
+        sampling = robot.cfg.sampling
+        _say(
+            f"rimless robot: running ({mode}) at {sampling.rate_hz:g} Hz, real time "
+            f"{'on' if sampling.realtime else 'off'} ({sampling.realtime_why})"
+        )
 
     @user_facing
     def go() -> Any:

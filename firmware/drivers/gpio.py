@@ -156,15 +156,22 @@ class GpioChipSelectBus:
 
 
 def open_clutches(pins: Any, *, active_high: bool, pin_factory: Any = None) -> ClutchBank:
-    """The clutch outputs, driven off; `GpioUnavailable` (one line) when this machine has no GPIO."""
+    """The clutch outputs, driven off; `GpioUnavailable` (one line) when this machine has no GPIO, naming why each
+    of gpiozero's pin factories failed (a sandbox hiding /proc/cpuinfo shows there, not only a missing library)."""
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # gpiozero warns once per factory it falls back from
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")  # gpiozero warns once per factory it falls back from: kept for the error
             return ClutchBank(pins, active_high=active_high, pin_factory=pin_factory)
     except Exception as err:  # noqa: BLE001 - gpiozero, lgpio and the OS each raise their own
         if type(err).__name__ in ("BadPinFactory", "PinFactoryFallback") or isinstance(err, ImportError):
+            tried = [
+                str(w.message).removeprefix("Falling back from ")
+                for w in caught
+                if type(w.message).__name__ == "PinFactoryFallback"
+            ]
+            why = f"; {'; '.join(tried)}" if tried else ""
             raise GpioUnavailable(
-                f"no GPIO on this machine ({type(err).__name__}: {err}); on a PC use --fake, on a Pi install "
+                f"no GPIO on this machine ({type(err).__name__}: {err}{why}); on a PC use --fake, on a Pi install "
                 "the robot extra (lgpio)"
             ) from None
         raise GpioUnavailable(

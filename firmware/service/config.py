@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -79,9 +80,13 @@ class SamplingConfig:
     id_check_interval_s: float = 1.0
     readback_every_samples: int = 1  # one identity/configuration register read back every this many samples
     loop_stall_s: float = 0.25  # the event loop not feeding the watchdog this long trips it (s)
-    realtime: bool = False  # the control thread SCHED_FIFO on one CPU, memory locked (`run --realtime`)
+    # the control thread SCHED_FIFO on one CPU, memory locked (`run --realtime`); None (not set): on when systemd
+    # started this process (the unit), off elsewhere (`decide_realtime`; `run_robot` resolves it)
+    realtime: bool | None = None
     realtime_priority: int = 50  # SCHED_FIFO priority (1..99; the unit's LimitRTPRIO must allow it)
     realtime_cpu: int = -1  # the CPU of the control thread (-1: the last one allowed)
+    # why `realtime` is what it is (set with it by `with_realtime`; not a robot.toml key)
+    realtime_why: str = field(default="", metadata={"toml": False})
 
 
 @dataclass(frozen=True)
@@ -236,7 +241,7 @@ def _check_value(where: str, name: str, value: Any, default: Any, hint: str) -> 
 def _build(cls: type, table: Any, where: str) -> Any:
     if not isinstance(table, dict):
         raise ConfigError(f"{where} must be a table")
-    known = {f.name: f for f in fields(cls)}
+    known = {f.name: f for f in fields(cls) if f.metadata.get("toml", True)}
     unknown = sorted(set(table) - set(known))
     if unknown:
         raise ConfigError(f"{where}: unknown field {unknown[0]!r} (known: {', '.join(sorted(known))})")
@@ -264,6 +269,8 @@ def _build(cls: type, table: Any, where: str) -> Any:
             if len(set(value)) != len(value):
                 raise ConfigError(f"{where}.{name} has duplicates: {value!r}")
             value = tuple(value)
+        elif name == "realtime":  # omitted = None (decided at start); written, a plain boolean
+            value = _check_value(where, name, value, False, "bool")
         elif name in ("npd_pin", "cs_pin", "frame_rate_hz"):
             value = _check_value(where, name, value, 0.0 if name == "frame_rate_hz" else 0, hint)
         elif name == "axis":
@@ -372,6 +379,64 @@ def _check_pins(cfg: RobotConfig, source: str) -> None:
     selects = [(s.spi_bus, s.spi_device if s.cs_pin is None else f"GPIO{s.cs_pin}") for s in cfg.sensors]
     if len(set(selects)) != len(selects):
         raise ConfigError(f"{source}: two sensors share a chip select (spi_bus/spi_device or cs_pin)")
+
+
+@dataclass(frozen=True)
+class RealtimeChoice:
+    """Whether the control thread runs real time (`on`) and why (`why`, for the start-up line)."""
+
+    on: bool
+    why: str
+
+
+def started_by_systemd(environ: Mapping[str, str] | None = None, pid: int | None = None) -> tuple[bool, str]:
+    """Whether systemd started this very process as a service (the unit), and the evidence, from the environment
+    systemd gives the processes it starts: $INVOCATION_ID (every unit, systemd >= 232) and $SYSTEMD_EXEC_PID
+    (the PID it executed, systemd >= 248), or on an older systemd $NOTIFY_SOCKET (the unit is Type=notify).
+
+    A shell or a test run from inside some service inherits $INVOCATION_ID (a desktop's terminal does), but
+    $SYSTEMD_EXEC_PID then names another process: that is not the unit. `environ` and `pid` default to this
+    process's own."""
+    env = os.environ if environ is None else environ
+    pid = os.getpid() if pid is None else pid
+    if not env.get("INVOCATION_ID"):
+        return False, "$INVOCATION_ID not set"
+    exec_pid = env.get("SYSTEMD_EXEC_PID", "")
+    if exec_pid:
+        if exec_pid.strip() == str(pid):
+            return True, "$INVOCATION_ID set and $SYSTEMD_EXEC_PID is this process"
+        return False, f"$INVOCATION_ID inherited: $SYSTEMD_EXEC_PID is process {exec_pid.strip()}, not this one"
+    if env.get("NOTIFY_SOCKET"):
+        return True, "$INVOCATION_ID and $NOTIFY_SOCKET set"
+    return False, "$INVOCATION_ID set but neither $SYSTEMD_EXEC_PID nor $NOTIFY_SOCKET"
+
+
+def decide_realtime(
+    sampling: SamplingConfig,
+    *,
+    flag: bool = False,
+    source: str = "the configuration",
+    environ: Mapping[str, str] | None = None,
+    pid: int | None = None,
+) -> RealtimeChoice:
+    """Real time or not, and why: `--realtime` (`flag`) turns it on; else `[sampling] realtime` in `source` if
+    written; else on when systemd started this process (`started_by_systemd`) and off elsewhere (a developer's
+    runs, fake or not)."""
+    if flag:
+        return RealtimeChoice(True, "--realtime")
+    if sampling.realtime is not None:
+        return RealtimeChoice(sampling.realtime, f"[sampling] realtime = {str(sampling.realtime).lower()} in {source}")
+    systemd, evidence = started_by_systemd(environ, pid)
+    if systemd:
+        return RealtimeChoice(True, f"started by systemd: {evidence}; [sampling] realtime not set")
+    return RealtimeChoice(
+        False, f"not started by systemd ({evidence}) and [sampling] realtime not set; --realtime turns it on"
+    )
+
+
+def with_realtime(cfg: RobotConfig, choice: RealtimeChoice) -> RobotConfig:
+    """`cfg` with `[sampling] realtime` decided (`choice.on`) and the reason kept (`realtime_why`)."""
+    return replace(cfg, sampling=replace(cfg.sampling, realtime=choice.on, realtime_why=choice.why))
 
 
 def load_config(path: str | Path | None) -> RobotConfig:

@@ -22,7 +22,7 @@ from rimless.firmware.drivers.fake_walk import airborne_locks
 from rimless.firmware.drivers.gpio import PinLog, pin_histories
 from rimless.firmware.errors import CommandError, Interrupted, SensorError
 from rimless.firmware.service.app import RobotApp, RunSummary
-from rimless.firmware.service.config import RobotConfig, load_config
+from rimless.firmware.service.config import RobotConfig, decide_realtime, load_config, with_realtime
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.logsetup import NonBlockingLog
 from rimless.firmware.service.safety import stop_on_signals
@@ -114,9 +114,11 @@ def run_robot(
     `config` is a `RobotConfig` or the robot.toml to load (None: the defaults); `telemetry` adds "host:port"
     destinations (already checked); `fake` runs on the fake sensors and mock pins. `on_start(app)` is called
     once the app exists, before its loop starts (to show the token). Every clutch is off and the hardware
-    closed on every path. With `fake`, `fake_fault` names a scenario of `scenarios.FAKE_FAULTS` and `pin_log` a
-    JSON Lines file receiving every mock pin change. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be
-    opened or a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved.
+    closed on every path. Real time: `realtime` (--realtime), else `[sampling] realtime`, else on when systemd
+    started this process (`config.decide_realtime`; the reason in `cfg.sampling.realtime_why`). With `fake`,
+    `fake_fault` names a scenario of `scenarios.FAKE_FAULTS` and `pin_log` a JSON Lines file receiving every
+    mock pin change. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be opened or
+    a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved.
     """
     if not fake and (fake_fault is not None or pin_log is not None):
         raise ParameterError("--fake-fault and --pin-log need --fake")
@@ -135,8 +137,8 @@ def run_robot(
     try:
         with stop_on_signals(release_now):
             cfg = config if isinstance(config, RobotConfig) else load_config(config)
-            if realtime:
-                cfg = dataclasses.replace(cfg, sampling=dataclasses.replace(cfg.sampling, realtime=True))
+            source = str(config) if config is not None and not isinstance(config, RobotConfig) else "the configuration"
+            cfg = with_realtime(cfg, decide_realtime(cfg.sampling, flag=realtime, source=source))
             return _run(with_telemetry(cfg, telemetry), state, sc, duration_s, arm, on_start, log_level, pin_log)
     except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
         hw = state.get("hw")
