@@ -287,6 +287,8 @@ def test_sensitivity_and_mfpt_commands_json_keys():
         ["sim", "mfpt", "--terrain-sd-deg", "2", "--method", "exact"],
         ["sim", "basin", "--theta-min", "-0.5"],
         ["sim", "sensitivity", "--push-rad-s", "0"],
+        ["sim", "basin", "--scheduler", "threads"],
+        ["sim", "basin", "--scheduler", "sync", "--workers", "2"],
     ],
 )
 def test_bad_input_is_one_error_line_and_exit_2(args):
