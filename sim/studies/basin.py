@@ -175,7 +175,7 @@ def basin_of_attraction(
     row_points = [{"theta_dot_plus_rad_s": float(w)} for w in omegas]
     run = run_sweep(
         row_points,
-        task,  # type: ignore[arg-type]  # a frozen dataclass: run_sweep's options
+        task,  # a frozen dataclass: run_sweep's options
         scheduler=where,
         workers=workers if where == "local" else None,
         compute=basin_row,
@@ -274,7 +274,7 @@ class WheelSlopeMap:
 
             params, model, backend, rtol = self.recipe
             self._map = SlopeMap(params, model, backend=backend, rtol=rtol)
-        return self._map(z, slope_rad)  # type: ignore[no-any-return]
+        return self._map(z, slope_rad)
 
     def __getstate__(self) -> dict[str, Any]:
         return {"recipe": self.recipe, "_map": None}

@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from typing import Any
@@ -94,8 +95,13 @@ def branch_end_bench(params: WheelParams = WheelParams(), repeats: int = 3) -> d
         for _ in range(repeats):
             pmap = make_map(params, model, backend="fast", rtol=rtol)
             cs, t = time_once(
-                lambda pmap=pmap: critical_slope(
-                    pmap, default_guess(params, model), jacobian_factory=lambda m: m.jacobian, method=method, **kw
+                functools.partial(
+                    critical_slope,
+                    pmap,
+                    default_guess(params, model),
+                    jacobian_factory=lambda m: m.jacobian,
+                    method=method,
+                    **kw,
                 )
             )
             best, best_cpu = min(best, t.wall_s), min(best_cpu, t.cpu_s)

@@ -108,6 +108,16 @@ def test_the_printed_speed_up_is_the_ratio_of_cpu_times_not_of_wall_times(monkey
     assert "    wall: fast 0.140 ms, DOP853 560.0 ms: 4000x" in lines
 
 
+def test_the_repetitions_fill_a_budget_of_cpu_time_whatever_the_wall_clock_does(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    for stretch in (1.0, 25.0):  # a quiet and a loaded machine: the same four repetitions
+        fake = FakeClocks()
+        monkeypatch.setattr(bench, "CLOCKS", fake.clocks())
+        bench._time_per_call(fake.work(0.3, stretch), budget_s=1.0, max_reps=100)
+        assert fake.cpu_s == pytest.approx(1.2)
+
+
 def test_time_once_reads_both_clocks(monkeypatch: pytest.MonkeyPatch) -> None:
     fake = FakeClocks()
     monkeypatch.setattr(bench, "CLOCKS", fake.clocks())
