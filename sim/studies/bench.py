@@ -449,7 +449,8 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     z_new, period = np.array([st.y_plus[2], st.y_plus[7]]), st.period_s
                     nfev, nsteps = st.nfev, -1
                     tm = _time_per_call(lambda: pm(z), budget, 20)
-                    J, tjac = time_once(functools.partial(pm.jacobian, z))
+                    J_ref, tjac = time_once(functools.partial(pm.jacobian, z))
+                    J = np.asarray(J_ref)
                     tj = Timing(tjac.cpu_s + tm.cpu_s, tjac.wall_s + tm.wall_s)
                 rows.append(
                     {
