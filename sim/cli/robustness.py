@@ -154,10 +154,7 @@ def sensitivity_cmd(
             (f"{name}: by indicator ({per})", ", ".join(f"{k} {v:.5g}" for k, v in d["gsn_by_indicator"].items())),
             (f"{name}: simulated, {d['simulated']['disturbance']:.4g} {d['unit']}", d["simulated"]["gsn"]),
             (f"{name}: relative difference", d["relative_difference"]),
-            (
-                f"{name}: simulated +-{d['simulated']['disturbance']:.4g}, difference",
-                d["relative_difference_two_sided"],
-            ),
+            (f"{name}: two-sided (+-e), difference", d["relative_difference_two_sided"]),
         ]
     console().print(table("gait sensitivity norm", rows))
 
