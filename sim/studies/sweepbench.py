@@ -1,7 +1,8 @@
 """Benchmark of the sweep and of the branch-end location, fast path and reference side by side in one run.
 
 - Sweep: the same grid (no cache) on 1 worker, 2 workers (LocalCluster) and in-process; CPU times (of this
-  thread in-process; of each worker process, time.process_time read on the workers before and after) and wall
+  thread in-process; of each worker process, time.process_time read on the workers before and after the sweep, so their loading of the compiled kernels
+  and Dask's own work on them are included) and wall
   times; the speed-up from 1 to 2 workers from CPU time: the 1-worker run's CPU over the busiest worker's CPU in
   the 2-worker run (what two free cores would give: it measures the split of the work and the overhead of a
   second worker, not the load), with the wall-time speed-up beside (which other processes on the machine
