@@ -323,12 +323,17 @@ class Wheel:
         tol: float = 1e-4,
         out: str | Path | None = None,
         progress: Callable[[int, int], None] | None = None,
+        scheduler: str = "auto",
+        workers: int | None = None,
     ) -> BasinResult:
         """The basin of attraction of the period-1 gait (`rimless sim basin`): the fate of each of grid x grid
         section points (cell centres) over `box` = ((theta+ lo, hi) rad, (theta'+ lo, hi) rad/s) (default: the
         gait's theta+ +- 0.15 rad, theta'+ in [0.02, 2.5] x the gait's) after at most `steps` map steps.
 
-        `out`: a folder for basin.png and basin.csv. progress(i, n): points done."""
+        `out`: a folder for basin.png and basin.csv. progress(i, n): points done. `scheduler`: where the grid's
+        rows run, as `sweep()`'s: "sync" (this process), "local" (a Dask LocalCluster of `workers` processes,
+        default one per core), "tcp://HOST:PORT", or "auto" (local from 64 x 64 points on a machine with a
+        second core, else sync); the fates do not depend on it."""
         from rimless.sim.studies.basin import basin_study, write_basin
 
         if out is not None:
@@ -345,6 +350,8 @@ class Wheel:
             backend=self.backend,
             rtol=self.rtol,
             progress=progress,
+            scheduler=scheduler,
+            workers=workers,
         )
         if out is not None:
             data["files"] = write_basin(data, points, out)

@@ -8,7 +8,18 @@ import typer
 from rimless.cli_rules import print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.progress import progress_bar
-from rimless.sim.cli.app import NO_FRICTION, Backend, BackendOpt, JsonOpt, Model, ModelOpt, RtolOpt, wheel_params
+from rimless.sim.cli.app import (
+    NO_FRICTION,
+    Backend,
+    BackendOpt,
+    JsonOpt,
+    Model,
+    ModelOpt,
+    RtolOpt,
+    check_scheduler,
+    option_given,
+    wheel_params,
+)
 from rimless.sim.cli.output import console, table
 
 
@@ -40,9 +51,24 @@ def basin_cmd(
     ] = None,
     backend: BackendOpt = Backend.auto,
     rtol: RtolOpt = 1e-10,
+    scheduler: Annotated[
+        str,
+        typer.Option(
+            "--scheduler",
+            metavar="auto|local|sync|tcp://HOST:8786",
+            help="Where the grid's rows run: auto (a local Dask cluster from 64 x 64 points), a local Dask "
+            "cluster, this process, or a running Dask scheduler.",
+        ),
+    ] = "auto",
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", min=1, max=256, help="Local cluster worker processes \\[default: one per core]."),
+    ] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Basin of attraction of the period-1 gait: the fate of every point of a grid over the section."""
+    if scheduler != "auto" or option_given("workers"):
+        check_scheduler("local" if scheduler == "auto" else scheduler)
     given = [theta_min, theta_max, theta_dot_min, theta_dot_max]
     box = None
     if any(v is not None for v in given):
@@ -53,7 +79,15 @@ def basin_cmd(
         box = ((theta_min, theta_max), (theta_dot_min, theta_dot_max))
     wheel = _wheel(params, model, backend, rtol)
     with progress_bar("basin of attraction", grid * grid, json_out=json_out) as bar:
-        res = wheel.basin(grid=grid, steps=steps, box=box, out=out, progress=lambda i, n: bar.update(i, n))
+        res = wheel.basin(
+            grid=grid,
+            steps=steps,
+            box=box,
+            out=out,
+            progress=lambda i, n: bar.update(i, n),
+            scheduler=scheduler,
+            workers=workers,
+        )
     data = res.to_dict()
     if json_out:
         print_json(data)
@@ -76,6 +110,7 @@ def basin_cmd(
             + f" +- {data['resolution_scaled']:.3f}",
         ),
         ("map evaluations", data["map_evaluations"]),
+        ("scheduler, workers", f"{data['scheduler']}, {data['workers']}"),
     ]
     if "files" in data:
         rows.append(("written", f"{data['files']['figure']}, {data['files']['csv']}"))
@@ -119,6 +154,7 @@ def sensitivity_cmd(
             (f"{name}: by indicator ({per})", ", ".join(f"{k} {v:.5g}" for k, v in d["gsn_by_indicator"].items())),
             (f"{name}: simulated, {d['simulated']['disturbance']:.4g} {d['unit']}", d["simulated"]["gsn"]),
             (f"{name}: relative difference", d["relative_difference"]),
+            (f"{name}: two-sided (+-e), difference", d["relative_difference_two_sided"]),
         ]
     console().print(table("gait sensitivity norm", rows))
 

@@ -15,12 +15,21 @@ d = sqrt((dtheta / (alpha/2))^2 + (dtheta' / theta'*)^2), alpha/2 = pi/8 the hal
 gait's theta'+. `nearest_failure_distance` is the smallest d of a point whose fate is a failure class (known to
 within the half diagonal of a cell, `resolution_scaled`); with no failing point in the box it is the distance
 to the box's nearest edge, a lower bound (`nearest_failure_is_lower_bound`).
+
+Where the rows run (`scheduler`): the grid's rows of constant theta'+ are the tasks of
+rimless.sim.studies.sweep.run_sweep, so a big grid spreads over the same Dask schedulers as `rimless sim sweep`
+("sync": this process; "local": a LocalCluster of single-threaded worker processes; "tcp://HOST:PORT": a
+running scheduler; "auto": local for grids of at least DASK_MIN_POINTS points when a second core is there,
+else sync). Each row is computed by the same function on every scheduler and the rows are put back in grid
+order, so the fates do not depend on the scheduler.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +41,7 @@ from rimless.sim.model.params import SPOKE_ANGLE_RAD
 from rimless.sim.studies.section_map import FATES, GAIT, OTHER_GAIT, UNDECIDED, StepMap, apply, failure_fate
 
 NOT_FAILURES = (GAIT, OTHER_GAIT, UNDECIDED)
+DASK_MIN_POINTS = 64 * 64  # "auto" puts grids of this many points and more on a local Dask cluster
 DEFAULT_THETA_HALF_WIDTH_RAD = 0.15
 DEFAULT_THETA_DOT_RANGE = (0.02, 2.5)  # times the gait's theta'+
 
@@ -83,6 +93,43 @@ def point_fate(
     return UNDECIDED, steps, z
 
 
+@dataclass(frozen=True)
+class BasinRows:
+    """What every row task needs (sent to the Dask workers: `step_map` must pickle)."""
+
+    step_map: StepMap
+    slope_rad: float
+    z_star: tuple[float, float]
+    thetas: tuple[float, ...]
+    steps: int
+    tol: float
+
+
+def basin_row(point: dict[str, Any], task: BasinRows) -> dict[str, Any]:
+    """The fates of one grid row (theta'+ = point["theta_dot_plus_rad_s"], every theta+ of the grid), as a
+    run_sweep task: {"rows": [{fate, steps, theta_end_rad, theta_dot_end_rad_s}, ...], "points": [], "seconds"}."""
+    t0 = time.perf_counter()
+    zs = np.array(task.z_star)
+    w = float(point["theta_dot_plus_rad_s"])
+    rows = []
+    for th in task.thetas:
+        fate, k, z_end = point_fate(task.step_map, task.slope_rad, np.array([th, w]), zs, task.steps, task.tol)
+        rows.append(
+            {"fate": fate, "steps": int(k), "theta_end_rad": float(z_end[0]), "theta_dot_end_rad_s": float(z_end[1])}
+        )
+    return {"rows": rows, "points": [], "seconds": time.perf_counter() - t0}
+
+
+def resolve_scheduler(scheduler: str, points: int) -> str:
+    """ "auto": "local" for at least DASK_MIN_POINTS points when a second process is allowed, else "sync"; any
+    other value as given (checked by run_sweep)."""
+    if scheduler != "auto":
+        return scheduler
+    from rimless.second_process import second_process_allowed
+
+    return "local" if points >= DASK_MIN_POINTS and second_process_allowed() else "sync"
+
+
 def basin_of_attraction(
     step_map: StepMap,
     slope_rad: float,
@@ -93,8 +140,13 @@ def basin_of_attraction(
     steps: int = 100,
     tol: float = 1e-4,
     progress: Callable[[int, int], None] | None = None,
+    scheduler: str = "sync",
+    workers: int | None = None,
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """The basin of the gait z* of `step_map(z, slope_rad)`: (the JSON object, the per-point arrays).
+
+    scheduler: where the grid's rows run (module doc; with Dask, `step_map` must pickle); workers: the size
+    of a local cluster (default one per core). progress(i, n): points done.
 
     The arrays (one entry per grid point, theta+ varying fastest): theta_plus_rad, theta_dot_plus_rad_s, fate
     (strings), steps (map steps taken), distance_scaled (from z* at the start)."""
@@ -114,22 +166,34 @@ def basin_of_attraction(
     n = grid * grid
     th_pts = np.tile(thetas, grid)
     w_pts = np.repeat(omegas, grid)
+    from rimless.sim.studies.sweep import run_sweep
+
+    where = resolve_scheduler(scheduler, n)
+    task = BasinRows(
+        step_map, float(slope_rad), (float(zs[0]), float(zs[1])), tuple(float(t) for t in thetas), steps, tol
+    )
+    row_points = [{"theta_dot_plus_rad_s": float(w)} for w in omegas]
+    run = run_sweep(
+        row_points,
+        task,  # a frozen dataclass: run_sweep's options
+        scheduler=where,
+        workers=workers if where == "local" else None,
+        compute=basin_row,
+        setup=_no_setup if where == "sync" else None,
+        progress=None if progress is None else (lambda done, total: progress(done * grid, total * grid)),
+    )
     fates: list[str] = []
     taken = np.zeros(n, dtype=np.int64)
     dist = np.zeros(n)
-    evaluations = 0
     other: list[list[float]] = []
-    for i in range(n):
-        z0 = np.array([th_pts[i], w_pts[i]])
-        fate, k, z_end = point_fate(step_map, slope_rad, z0, zs, steps, tol)
-        fates.append(fate)
-        taken[i] = k
-        evaluations += k
-        dist[i] = scaled_distance(z0, zs)
-        if fate == OTHER_GAIT and all(scaled_distance(z_end, np.array(o)) > 1e3 * tol for o in other):
+    for i, r in enumerate(run.rows):  # grid order: rows of constant theta'+, theta+ fastest
+        fates.append(r["fate"])
+        taken[i] = r["steps"]
+        dist[i] = scaled_distance(np.array([th_pts[i], w_pts[i]]), zs)
+        z_end = np.array([r["theta_end_rad"], r["theta_dot_end_rad_s"]])
+        if r["fate"] == OTHER_GAIT and all(scaled_distance(z_end, np.array(o)) > 1e3 * tol for o in other):
             other.append([float(z_end[0]), float(z_end[1])])
-        if progress is not None:
-            progress(i + 1, n)
+    evaluations = int(taken.sum())
     fate_arr = np.array(fates)
     counts = {f: int(np.sum(fate_arr == f)) for f in FATES}
     failing = ~np.isin(fate_arr, NOT_FAILURES)
@@ -178,6 +242,8 @@ def basin_of_attraction(
         "nearest_non_gait_point": ng_point,
         "other_gaits": [{"theta_plus_rad": o[0], "theta_dot_plus_rad_s": o[1]} for o in other],
         "map_evaluations": evaluations,
+        "scheduler": where,
+        "workers": run.workers,
     }
     points = {
         "theta_plus_rad": th_pts,
@@ -187,6 +253,31 @@ def basin_of_attraction(
         "distance_scaled": dist,
     }
     return out, points
+
+
+def _no_setup() -> float:
+    """In this process the map compiles on first use: no worker warm-up."""
+    return 0.0
+
+
+class WheelSlopeMap:
+    """SlopeMap(params, model, backend, rtol) built on first use; it pickles as its recipe (for Dask workers),
+    never as the compiled map."""
+
+    def __init__(self, params: Any, model: str, backend: str, rtol: float) -> None:
+        self.recipe = (params, model, backend, float(rtol))
+        self._map: Any = None
+
+    def __call__(self, z: np.ndarray, slope_rad: float) -> np.ndarray:
+        if self._map is None:
+            from rimless.sim.studies.section_map import SlopeMap
+
+            params, model, backend, rtol = self.recipe
+            self._map = SlopeMap(params, model, backend=backend, rtol=rtol)
+        return self._map(z, slope_rad)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"recipe": self.recipe, "_map": None}
 
 
 def basin_study(
@@ -200,10 +291,12 @@ def basin_study(
     backend: str = "auto",
     rtol: float = 1e-10,
     progress: Callable[[int, int], None] | None = None,
+    scheduler: str = "auto",
+    workers: int | None = None,
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """The basin of the wheel's period-1 gait (found as `rimless sim fixed-point` finds it)."""
+    """The basin of the wheel's period-1 gait (found as `rimless sim fixed-point` finds it); scheduler and
+    workers: where the grid's rows run (module doc)."""
     from rimless.sim.studies.gaits import fixed_point_study
-    from rimless.sim.studies.section_map import SlopeMap
 
     if box is not None:
         check_box(box)
@@ -211,9 +304,18 @@ def basin_study(
         raise ParameterError(f"grid must be an integer in [2, 1000], got {grid!r}")
     fp = fixed_point_study(params, model, backend=backend, rtol=rtol)
     z_star = np.array([fp["theta_plus_rad"], fp["theta_dot_plus_rad_s"]])
-    smap = SlopeMap(params, model, backend=backend, rtol=rtol)
+    smap = WheelSlopeMap(params, model, backend, rtol)
     out, points = basin_of_attraction(
-        smap, params.slope_rad, z_star, box=box, grid=grid, steps=steps, tol=tol, progress=progress
+        smap,
+        params.slope_rad,
+        z_star,
+        box=box,
+        grid=grid,
+        steps=steps,
+        tol=tol,
+        progress=progress,
+        scheduler=scheduler,
+        workers=workers,
     )
     out = {"model": model, "slope_deg": params.slope_deg, **out}
     out["fixed_point"].update(

@@ -5,30 +5,36 @@ For the ER and VE wheels at Table 1 (eight-leg), at the fixed points z*, and eac
 (atol = rtol / 100), every backend gives P(z*), the step period and max |eigenvalue| of dP/dz
 (fast path: exact variational Jacobian; scipy backends: PoincareMap.jacobian, central differences with
 its default step). Errors are against a tight reference: scipy DOP853 at rtol 1e-13 (atol 1e-15), its
-eigenvalues from central differences with h = 1e-5 (accurate to about 1e-8). Time per map is the wall
-time of P alone (no Jacobian), median over repetitions. Units: errors in rad, rad/s (inf-norm over z),
-s (period); times in s. Steps and right-hand-side evaluations per map are reported for the fast path, in
+eigenvalues from central differences with h = 1e-5 (accurate to about 1e-8). Time per map is
+the time of P alone (no Jacobian), median over repetitions. Units: errors in rad, rad/s (inf-norm over z),
+s (period); times in s. Every time is measured twice: CPU time of the thread that ran it (time.thread_time)
+and wall time (time.perf_counter); every ratio printed comes from CPU time, so other processes on the machine
+do not change it (they stretch the wall time of a compiled and a Python path differently: 405x at load 4 and
+4578x at load 22 from wall medians), and the wall figures are printed beside. Steps and right-hand-side evaluations per map are reported for the fast path, in
 total and per phase. The speed-up at error <= 1e-9 compares, per backend, the loosest rtol at which that
 rtol and every tighter one run meet the target (the grids include half decades, so neither backend is held
 to a decade step). A compiled third-party integrator (numbakit-ode's DOP853, if installed) runs beside the
 fast path's integrator on one phase (without --quick). Guide friction (F_c = 0.5 N): one step map on the
 compiled path (stick/slip phase by phase) and on the reference path side by side, ratio and errors.
 
-The load average is recorded before and after the run: a compiled and a Python path slow down differently
-under load, so on a busy machine the ratio is marked and followed by a warning instead of printed bare.
+The load average is recorded before and after the run: on a busy machine the wall times are marked and
+followed by a warning (the CPU-time ratios stand; a loaded core's shared caches still move them a little).
 """
 
 from __future__ import annotations
 
+import functools
 import json
+import math
 import os
 import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -36,20 +42,56 @@ from rimless.sim.model.params import WheelParams
 
 Z_STAR = {"er": np.array([-0.465155, 2.604441]), "ve": np.array([-0.434780, 2.289290])}
 REFERENCE_RTOL = 1e-13
+T = TypeVar("T")
 TARGET_ERROR = 1e-9
 
 
-def _time_per_call(fn: Callable[[], Any], budget_s: float, max_reps: int) -> float:
-    """Median wall time of fn() over repetitions filling about budget_s (at least 1, at most max_reps)."""
-    times: list[float] = []
-    t_total = time.perf_counter()
-    while len(times) < max_reps:
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-        if time.perf_counter() - t_total > budget_s:
+@dataclass(frozen=True)
+class Clocks:
+    """The two clocks of every timing (a seam: tests put fakes here). cpu: CPU time of the calling thread (s);
+    wall: a monotonic wall clock (s)."""
+
+    cpu: Callable[[], float] = time.thread_time
+    wall: Callable[[], float] = time.perf_counter
+
+
+CLOCKS = Clocks()
+
+
+@dataclass(frozen=True)
+class Timing:
+    """CPU and wall seconds of one piece of work (medians where it was repeated)."""
+
+    cpu_s: float
+    wall_s: float
+
+
+def time_once(fn: Callable[[], T]) -> tuple[T, Timing]:
+    """fn()'s result and its CPU and wall time."""
+    c0, w0 = CLOCKS.cpu(), CLOCKS.wall()
+    out = fn()
+    return out, Timing(CLOCKS.cpu() - c0, CLOCKS.wall() - w0)
+
+
+def _time_per_call(fn: Callable[[], Any], budget_s: float, max_reps: int) -> Timing:
+    """Median CPU and wall time of fn() over repetitions filling about budget_s of CPU time (at least 1, at most
+    max_reps): the number of repetitions does not depend on the machine's load either."""
+    cpu: list[float] = []
+    wall: list[float] = []
+    while len(cpu) < max_reps:
+        _, t = time_once(fn)
+        cpu.append(t.cpu_s)
+        wall.append(t.wall_s)
+        if sum(cpu) > budget_s:
             break
-    return float(np.median(times))
+    return Timing(float(np.median(cpu)), float(np.median(wall)))
+
+
+def cpu_ratio(slow_cpu_s: float | None, fast_cpu_s: float | None) -> float | None:
+    """slow / fast in CPU time; None when either is missing or the fast one took no measurable CPU time."""
+    if slow_cpu_s is None or fast_cpu_s is None or not fast_cpu_s > 0:
+        return None
+    return slow_cpu_s / fast_cpu_s
 
 
 def load_average() -> list[float] | None:
@@ -77,8 +119,9 @@ def machine_load(before: list[float] | None, after: list[float] | None) -> dict[
 def _compile_cost(quick: bool) -> dict[str, Any]:
     """First-call cost of the compiled kernels in a fresh process: cold (empty numba cache) and warm."""
     code = (
-        "import time; t=time.perf_counter(); from rimless.sim import fast; t1=time.perf_counter(); "
-        "fast.warm_up(); t2=time.perf_counter(); print(t1-t, t2-t1)"
+        "import time; c=time.process_time(); t=time.perf_counter(); from rimless.sim import fast; "
+        "t1=time.perf_counter(); c1=time.process_time(); fast.warm_up(); "
+        "print(t1-t, time.perf_counter()-t1, c1-c, time.process_time()-c1)"
     )
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as cache_dir:
@@ -91,8 +134,13 @@ def _compile_cost(quick: bool) -> dict[str, Any]:
                 res = subprocess.run(
                     [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600, check=True
                 )
-                imp, first = (float(v) for v in res.stdout.split())
-                out[label] = {"import_s": imp, "first_calls_s": first}
+                imp, first, imp_cpu, first_cpu = (float(v) for v in res.stdout.split())
+                out[label] = {
+                    "import_s": imp,
+                    "first_calls_s": first,
+                    "import_cpu_s": imp_cpu,
+                    "first_calls_cpu_s": first_cpu,
+                }
             except (subprocess.SubprocessError, ValueError) as err:
                 out[label] = {"error": str(err)}
     if quick:
@@ -112,6 +160,26 @@ def loosest_meeting(
             break
         best = r
     return best
+
+
+def speedups_at_target(rows: list[dict[str, Any]], target: float = TARGET_ERROR) -> dict[str, dict[str, Any]]:
+    """Per model: the fast path's and scipy DOP853's loosest rtol meeting `target` (loosest_meeting), their CPU
+    and wall seconds per map, and the speed-up DOP853 / fast in CPU time (`speedup`; `speedup_wall` beside)."""
+    out: dict[str, dict[str, Any]] = {}
+    for model in sorted({r["model"] for r in rows}):
+        f = loosest_meeting(rows, model, "fast-dop853", target)
+        d = loosest_meeting(rows, model, "scipy-DOP853", target)
+        out[model] = {
+            "fast_rtol": f and f["rtol"],
+            "fast_seconds_per_map": f and f["seconds_per_map"],
+            "fast_cpu_seconds_per_map": f and f["cpu_seconds_per_map"],
+            "dop853_rtol": d and d["rtol"],
+            "dop853_seconds_per_map": d and d["seconds_per_map"],
+            "dop853_cpu_seconds_per_map": d and d["cpu_seconds_per_map"],
+            "speedup": cpu_ratio(d["cpu_seconds_per_map"], f["cpu_seconds_per_map"]) if (f and d) else None,
+            "speedup_wall": (d["seconds_per_map"] / f["seconds_per_map"]) if (f and d) else None,
+        }
+    return out
 
 
 PEER_PHASE_S = 0.2  # the peer comparison integrates clutched single support for this long (s)
@@ -196,9 +264,10 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
     warnings.filterwarnings("ignore", module="nbkode")  # its numba performance / experimental-feature notes
     warnings.filterwarnings("ignore", category=numba.NumbaWarning)
     try:
-        t_c = time.perf_counter()
-        nbkode.DOP853(rhs, t0, ys, rtol=1e-6, atol=1e-8, first_step=1e-3).run(t0 + PEER_PHASE_S)
-        compile_s = time.perf_counter() - t_c
+        _, first_call = time_once(
+            lambda: nbkode.DOP853(rhs, t0, ys, rtol=1e-6, atol=1e-8, first_step=1e-3).run(t0 + PEER_PHASE_S)
+        )
+        compile_s = first_call.wall_s
     except Exception as err:  # noqa: BLE001 (a third-party failure is reported, not raised)
         return {"skipped": f"nbkode failed: {type(err).__name__}: {err}"}
     rows = []
@@ -216,12 +285,14 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
             return np.asarray(y).reshape(-1)[:10]
 
         for name, fn in (("fast-dop853", ours), ("nbkode-DOP853", peer)):
+            t = _time_per_call(fn, 0.3, 200)
             rows.append(
                 {
                     "backend": name,
                     "rtol": rtol,
                     "error": float(np.max(np.abs(fn() - ref))),
-                    "seconds": _time_per_call(fn, 0.3, 200),
+                    "seconds": t.wall_s,
+                    "cpu_seconds": t.cpu_s,
                 }
             )
     return {
@@ -232,20 +303,19 @@ def _peer_bench(params: WheelParams, quick: bool) -> dict[str, Any]:
     }
 
 
-def _timed_fixed_point(pmap: Any, guess: np.ndarray, reps: int, *, record: bool = True) -> tuple[Any, float]:
-    """The fixed point from `guess` with the exact Jacobian, and its median wall time (s) over `reps` runs
-    after one warm-up run."""
+def _timed_fixed_point(pmap: Any, guess: np.ndarray, reps: int, *, record: bool = True) -> tuple[Any, Timing]:
+    """The fixed point from `guess` with the exact Jacobian, and its median CPU and wall time (s) over `reps`
+    runs after one warm-up run."""
     from rimless.sim.step.poincare import solve_fixed_point
 
     solve_fixed_point(pmap, guess, record=record)  # warm
-    times = []
-    fp = None
-    for _ in range(reps):
-        t_s = time.perf_counter()
-        fp = solve_fixed_point(pmap, guess, jacobian=pmap.variational_jacobian, record=record)
-        times.append(time.perf_counter() - t_s)
-    assert fp is not None
-    return fp, float(np.median(times))
+    found: list[Any] = []
+
+    def solve() -> None:
+        found.append(solve_fixed_point(pmap, guess, jacobian=pmap.variational_jacobian, record=record))
+
+    t = _time_per_call(solve, math.inf, reps)
+    return found[-1], t
 
 
 FRICTION_N = 0.5  # guide friction of the friction rows, N
@@ -255,7 +325,7 @@ def friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
     """Guide friction (F_c = FRICTION_N) side by side: one step map from z* on the compiled path (each stick/slip
     phase compiled, rimless.sim.step.fast_map.friction_step) and on the reference path (scipy DOP853), both at
     rtol 1e-10, each against a tight reference (scipy DOP853 rtol REFERENCE_RTOL): error in z (inf-norm), friction
-    work error (J), seconds per map (median) and their ratio."""
+    work error (J), CPU and wall seconds per map (median) and their ratio (CPU; `ratio_wall` beside)."""
     from rimless.sim.integrate.reference import ScipyIntegrator
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import section_from_state, state_from_section
@@ -278,8 +348,8 @@ def friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
         fast_r = friction_step(params, model, z, rtol=rtol)
         ref_integ = ScipyIntegrator("DOP853", rtol=rtol, atol=rtol * 1e-2)
         ref_r = simulate_step(mech, model, y0, ref_integ)
-        fast_s = _time_per_call(lambda: friction_step(params, model, z, rtol=rtol), 0.1 if quick else 0.5, 200)
-        ref_s = _time_per_call(
+        fast_t = _time_per_call(lambda: friction_step(params, model, z, rtol=rtol), 0.1 if quick else 0.5, 200)
+        ref_t = _time_per_call(
             lambda: simulate_step(mech, model, y0, ref_integ),
             0.05 if quick else 0.5,
             3 if quick else 20,
@@ -287,9 +357,12 @@ def friction_bench(quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
         out["rows"].append(
             {
                 "model": model,
-                "fast_seconds_per_map": fast_s,
-                "reference_seconds_per_map": ref_s,
-                "ratio": ref_s / fast_s,
+                "fast_seconds_per_map": fast_t.wall_s,
+                "reference_seconds_per_map": ref_t.wall_s,
+                "fast_cpu_seconds_per_map": fast_t.cpu_s,
+                "reference_cpu_seconds_per_map": ref_t.cpu_s,
+                "ratio": cpu_ratio(ref_t.cpu_s, fast_t.cpu_s),
+                "ratio_wall": ref_t.wall_s / fast_t.wall_s,
                 "fast_error": float(np.max(np.abs(fast_r.z_next - z_ref))),
                 "reference_error": float(np.max(np.abs(section_from_state(ref_r.y_plus) - z_ref))),
                 "fast_vs_reference": float(np.max(np.abs(fast_r.z_next - section_from_state(ref_r.y_plus)))),
@@ -316,7 +389,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     say = progress or (lambda _msg: None)
     params = WheelParams()
     load_before = load_average()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), CLOCKS.cpu()
     say("compiling / loading the fast kernels")
     warm_s = fast.warm_up()
     if quick:
@@ -325,7 +398,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
             "DOP853": [1e-6, 1e-7, 1e-8, 1e-9, 1e-10],
             "RK45": [1e-4, 1e-6],
         }
-        budget, fast_budget = 0.05, 0.1
+        budget, fast_budget = 0.2, 0.1
     else:
         full = sorted([10.0**-e for e in range(4, 13)] + [3 * 10.0**-e for e in range(5, 10)], reverse=True)
         tols = {"fast": full, "DOP853": full, "RK45": [10.0**-e for e in range(4, 10)]}
@@ -350,12 +423,12 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     r = fast.fast_step(params, model, z, rtol=rtol, atol=atol, jacobian=True)
                     z_new, period, J = r.z_next, r.period_s, r.jacobian
                     assert J is not None  # jacobian=True
-                    spm = _time_per_call(
+                    tm = _time_per_call(
                         lambda: fast.fast_step(params, model, z, rtol=rtol, atol=atol),
                         fast_budget,
                         2000,
                     )
-                    spj = _time_per_call(
+                    tj = _time_per_call(
                         lambda: fast.fast_step(
                             params,
                             model,
@@ -375,10 +448,10 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                     st = pm.step(z)
                     z_new, period = np.array([st.y_plus[2], st.y_plus[7]]), st.period_s
                     nfev, nsteps = st.nfev, -1
-                    spm = _time_per_call(lambda: pm(z), budget, 20)
-                    t_j = time.perf_counter()
-                    J = pm.jacobian(z)
-                    spj = time.perf_counter() - t_j + spm
+                    tm = _time_per_call(lambda: pm(z), budget, 20)
+                    J_ref, tjac = time_once(functools.partial(pm.jacobian, z))
+                    J = np.asarray(J_ref)
+                    tj = Timing(tjac.cpu_s + tm.cpu_s, tjac.wall_s + tm.wall_s)
                 rows.append(
                     {
                         "model": model,
@@ -389,25 +462,19 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
                         "period_error_s": abs(period - ref_step.period_s),
                         "eigenvalue_error": abs(float(np.max(np.abs(np.linalg.eigvals(J)))) - eig_ref),
                         "jacobian_method": "variational" if backend == "fast" else "central-difference h=1e-4",
-                        "seconds_per_map": spm,
-                        "seconds_per_map_and_jacobian": spj,
+                        "seconds_per_map": tm.wall_s,
+                        "seconds_per_map_and_jacobian": tj.wall_s,
+                        "cpu_seconds_per_map": tm.cpu_s,
+                        "cpu_seconds_per_map_and_jacobian": tj.cpu_s,
                         "nfev": int(nfev),
                         "nsteps": int(nsteps),
                         **per_phase,
                     }
                 )
 
-    speedups: dict[str, Any] = {}
-    for model in ("er", "ve"):
-        f, d = loosest_meeting(rows, model, "fast-dop853"), loosest_meeting(rows, model, "scipy-DOP853")
-        speedups[model] = {
-            "fast_rtol": f and f["rtol"],
-            "fast_seconds_per_map": f and f["seconds_per_map"],
-            "dop853_rtol": d and d["rtol"],
-            "dop853_seconds_per_map": d and d["seconds_per_map"],
-            "speedup": (d["seconds_per_map"] / f["seconds_per_map"]) if (f and d) else None,
-        }
+    speedups = speedups_at_target(rows)
     valid = [s["speedup"] for s in speedups.values() if s["speedup"] is not None]
+    valid_wall = [s["speedup_wall"] for s in speedups.values() if s["speedup"] is not None]
 
     # fixed point with eigenvalues on both paths (after warm-up)
     fixed: dict[str, Any] = {}
@@ -415,7 +482,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         guess = Z_STAR[model] + np.array([0.01, -0.05])
         say(f"{model}: fixed point, fast path")
         reps = 3 if quick else 10
-        fp, fast_s = _timed_fixed_point(FastPoincareMap(params, model, jacobian_with_map=True), guess, reps)
+        fp, fast_t = _timed_fixed_point(FastPoincareMap(params, model, jacobian_with_map=True), guess, reps)
         # the same fixed point at the loosest rtol whose map meets the target error (the table above), without
         # the recorded step (diagnostics the eigenvalues do not need)
         loose = speedups[model]["fast_rtol"]
@@ -424,28 +491,30 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
             pm_loose = FastPoincareMap(
                 params, model, fast.FastIntegrator(rtol=loose, atol=loose * 1e-2), jacobian_with_map=True
             )
-            fp_loose, loose_s = _timed_fixed_point(pm_loose, guess, reps, record=False)
+            fp_loose, loose_t = _timed_fixed_point(pm_loose, guess, reps, record=False)
             loose_entry = {
                 "rtol": loose,
-                "seconds": loose_s,
+                "seconds": loose_t.wall_s,
+                "cpu_seconds": loose_t.cpu_s,
                 "iterations": fp_loose.iterations,
                 "z": fp_loose.z.tolist(),
                 "max_abs_eigenvalue": fp_loose.max_abs_eigenvalue,
             }
         say(f"{model}: fixed point, reference path")
         pm_ref = PoincareMap(params, model)
-        t_s = time.perf_counter()
-        fp_ref = solve_fixed_point(pm_ref, guess)
-        t_ref = time.perf_counter() - t_s
+        fp_ref, ref_t = time_once(functools.partial(solve_fixed_point, pm_ref, guess))
         fixed[model] = {
-            "fast_seconds": fast_s,
+            "fast_seconds": fast_t.wall_s,
+            "fast_cpu_seconds": fast_t.cpu_s,
             "fast_iterations": fp.iterations,
             "fast_z": fp.z.tolist(),
             "fast_eigenvalues": [
                 complex(e).real if abs(complex(e).imag) < 1e-15 else str(complex(e)) for e in fp.eigenvalues
             ],
             "fast_jacobian_method": fp.jacobian_method,
-            "reference_seconds": t_ref,
+            "reference_seconds": ref_t.wall_s,
+            "reference_cpu_seconds": ref_t.cpu_s,
+            "ratio": cpu_ratio(ref_t.cpu_s, fast_t.cpu_s),
             "reference_iterations": fp_ref.iterations,
             "reference_z": fp_ref.z.tolist(),
             "reference_jacobian_method": fp_ref.jacobian_method,
@@ -466,22 +535,27 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
     for model in ("er", "ve"):
         say(f"{model}: critical-slope continuation, fast path")
         pm_fast = FastPoincareMap(params, model, jacobian_with_map=True)
-        t_s = time.perf_counter()
-        cs = critical_slope(pm_fast, Z_STAR[model], jacobian_factory=lambda m: m.variational_jacobian)
+        cs, cs_t = time_once(
+            functools.partial(critical_slope, pm_fast, Z_STAR[model], jacobian_factory=lambda m: m.variational_jacobian)
+        )
         entry: dict[str, Any] = {
-            "fast_seconds": time.perf_counter() - t_s,
+            "fast_seconds": cs_t.wall_s,
+            "fast_cpu_seconds": cs_t.cpu_s,
             "fast_critical_slope_rad": cs.critical_slope_rad,
             "fast_reason": cs.reason,
             "branch_points": len(cs.branch),
             "reference_seconds": None,
+            "reference_cpu_seconds": None,
+            "ratio": None,
             "reference_critical_slope_rad": None,
         }
         if not quick:
             say(f"{model}: critical-slope continuation, reference path (about a minute)")
-            t_s = time.perf_counter()
-            cs_ref = critical_slope(PoincareMap(params, model), Z_STAR[model])
+            cs_ref, ref_cs_t = time_once(functools.partial(critical_slope, PoincareMap(params, model), Z_STAR[model]))
             entry.update(
-                reference_seconds=time.perf_counter() - t_s,
+                reference_seconds=ref_cs_t.wall_s,
+                reference_cpu_seconds=ref_cs_t.cpu_s,
+                ratio=cpu_ratio(ref_cs_t.cpu_s, cs_t.cpu_s),
                 reference_critical_slope_rad=cs_ref.critical_slope_rad,
                 reference_reason=cs_ref.reason,
             )
@@ -506,6 +580,8 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         "reference": reference,
         "rows": rows,
         "speedup_at_1e-9": min(valid) if valid else None,
+        "speedup_at_1e-9_wall": min(valid_wall) if valid_wall else None,
+        "ratios_from": "CPU time of the thread that ran the work (time.thread_time); *_wall and seconds* beside",
         "speedup_at_1e-9_by_model": speedups,
         "fixed_point": fixed,
         "critical_slope_continuation": continuation,
@@ -513,6 +589,7 @@ def run_bench(quick: bool, progress: Callable[[str], None] | None = None) -> dic
         "peer": peer,
         "compile": compile_cost,
         "total_seconds": time.perf_counter() - t0,
+        "total_cpu_seconds": CLOCKS.cpu() - c0,
     }
 
 
@@ -533,19 +610,19 @@ def plot_work_precision(result: dict[str, Any], path: str) -> None:
         err = [max(r["error"], 1e-17) for r in rs]
         ax.loglog(
             err,
-            [r["seconds_per_map"] for r in rs],
+            [r.get("cpu_seconds_per_map", r["seconds_per_map"]) for r in rs],
             styles.get(model, "-"),
             marker="o",
             label=f"{backend} ({model.upper()})",
         )
     ax.axvline(TARGET_ERROR, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("error of the post-impact state z (inf-norm; rad, rad/s)")
-    ax.set_ylabel("wall time per map (s)")
+    ax.set_ylabel("CPU time per map (s)")
     sp = result.get("speedup_at_1e-9")
     title = "Poincaré map work-precision"
     if sp:
         busy = (result.get("load_average") or {}).get("busy")
-        title += f" (speed-up at 1e-9: {sp:.0f}x{', busy machine' if busy else ''})"
+        title += f" (speed-up at 1e-9: {sp:.0f}x CPU time{', busy machine' if busy else ''})"
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
@@ -554,18 +631,27 @@ def plot_work_precision(result: dict[str, Any], path: str) -> None:
     plt.close(fig)
 
 
+def _ms(seconds: float | None, digits: int = 3) -> str:
+    return "-" if seconds is None else f"{seconds * 1e3:.{digits}f} ms"
+
+
+def _x(ratio: float | None) -> str:
+    return "n/a" if ratio is None else f"{ratio:.0f}x"
+
+
 def format_table(result: dict[str, Any]) -> str:
-    """A plain-text summary of a run_bench result."""
+    """A plain-text summary of a run_bench result: every ratio in CPU time, wall time beside."""
     lines = [
-        f"{'model':5} {'backend':14} {'rtol':>6} {'error':>8} {'T err':>8} {'eig err':>8} {'s/map':>9} "
-        f"{'nfev':>6} {'steps':>5}"
+        f"{'model':5} {'backend':12} {'rtol':>6} {'error':>7} {'T err':>7} {'eig err':>7} {'cpu s':>8} "
+        f"{'wall':>8} {'nfev':>6} {'steps':>5}"
     ]
     for r in result["rows"]:
         steps = r.get("nsteps", -1)
+        cpu = r.get("cpu_seconds_per_map")
         lines.append(
-            f"{r['model']:5} {r['backend']:14} {r['rtol']:6.0e} {r['error']:8.1e} {r['period_error_s']:8.1e} "
-            f"{r['eigenvalue_error']:8.1e} {r['seconds_per_map']:9.2e} {r['nfev']:6d} "
-            f"{steps if steps >= 0 else '-':>5}"
+            f"{r['model']:5} {r['backend']:12} {r['rtol']:6.0e} {r['error']:7.1e} {r['period_error_s']:7.1e} "
+            f"{r['eigenvalue_error']:7.1e} {'-' if cpu is None else f'{cpu:.2e}':>8} {r['seconds_per_map']:8.2e} "
+            f"{r['nfev']:6d} {steps if steps >= 0 else '-':>5}"
         )
     load = result.get("load_average") or {}
     busy = load.get("busy")
@@ -574,21 +660,25 @@ def format_table(result: dict[str, Any]) -> str:
             f"load average 1/5/15 min: before {' '.join(f'{v:.2f}' for v in load['before'])}, "
             f"after {' '.join(f'{v:.2f}' for v in load['after'])} ({load['cpus']} cores)"
         )
-    sp = result["speedup_at_1e-9"]
-    ratio = "n/a" if sp is None else f"{sp:.0f}x"
-    if busy and sp is not None:
-        ratio += " (busy machine)"
-    lines.append(f"speed-up at error <= 1e-9 (DOP853 / fast, worst model): {ratio}")
+    lines.append("s per map above; every ratio from CPU time (the thread that ran it), wall beside")
+    sp, sp_wall = result["speedup_at_1e-9"], result.get("speedup_at_1e-9_wall")
+    wall = "" if sp_wall is None else f" (wall {_x(sp_wall)}{', busy machine' if busy else ''})"
+    lines.append(f"speed-up at error <= 1e-9 (DOP853/fast, worst): {_x(sp)}{wall}")
     if busy:
-        lines.append("WARNING: other processes loaded the machine during the run (load average above);")
-        lines.append("the timings and ratios are not representative. Rerun when the machine is quiet.")
+        lines.append("WARNING: other processes loaded the machine during the run (load average above):")
+        lines.append("the wall times are not representative; the CPU-time ratios stand.")
     for model, s in result["speedup_at_1e-9_by_model"].items():
         if s["speedup"] is not None:
             lines.append(
-                f"  {model}: fast rtol {s['fast_rtol']:.0e} {s['fast_seconds_per_map'] * 1e3:.3f} ms, "
-                f"DOP853 rtol {s['dop853_rtol']:.0e} {s['dop853_seconds_per_map'] * 1e3:.1f} ms: "
-                f"{s['speedup']:.0f}x"
+                f"  {model}: fast rtol {s['fast_rtol']:.0e} {_ms(s.get('fast_cpu_seconds_per_map'))}, "
+                f"DOP853 rtol {s['dop853_rtol']:.0e} {_ms(s.get('dop853_cpu_seconds_per_map'), 1)}: "
+                f"{_x(s['speedup'])}"
             )
+            if s.get("speedup_wall") is not None:
+                lines.append(
+                    f"    wall: fast {_ms(s['fast_seconds_per_map'])}, DOP853 "
+                    f"{_ms(s['dop853_seconds_per_map'], 1)}: {_x(s['speedup_wall'])}"
+                )
         row = next(
             (
                 r
@@ -606,26 +696,32 @@ def format_table(result: dict[str, Any]) -> str:
             ns = [str(row["phase_steps"][i]) for i in range(len(names))]
             lines.append(f"    per phase ({'/'.join(names)}): nfev {'/'.join(nf)}, steps {'/'.join(ns)}")
     for model, f in result["fixed_point"].items():
+        cpu_f, cpu_r = f.get("fast_cpu_seconds"), f.get("reference_cpu_seconds")
         lines.append(
-            f"fixed point {model}: fast {f['fast_seconds'] * 1e3:.1f} ms ({f['fast_iterations']} it, "
-            f"{f['fast_jacobian_method']}), reference {f['reference_seconds']:.2f} s; "
+            f"fixed point {model}: fast {_ms(cpu_f, 1)} CPU ({f['fast_iterations']} it, "
+            f"{f['fast_jacobian_method']}), reference {'-' if cpu_r is None else f'{cpu_r:.2f}'} s CPU: "
+            f"{_x(f.get('ratio'))}; wall {_ms(f['fast_seconds'], 1)} / {f['reference_seconds']:.2f} s; "
             f"|dz| {f['z_difference']:.1e}, |d max|eig|| {f['max_abs_eigenvalue_difference']:.1e}"
         )
         if "at_target_error" in f:
             g = f["at_target_error"]
             lines.append(
-                f"  at the map's target-error rtol {g['rtol']:.0e}, no recorded step: {g['seconds'] * 1e3:.1f} ms "
-                f"({g['iterations']} it); |dz| {g['z_difference']:.1e}, |d max|eig|| "
-                f"{g['max_abs_eigenvalue_difference']:.1e} against the reference"
+                f"  at the map's target-error rtol {g['rtol']:.0e}, no recorded step: {_ms(g.get('cpu_seconds'), 1)} "
+                f"CPU, {_ms(g['seconds'], 1)} wall ({g['iterations']} it); |dz| {g['z_difference']:.1e}, "
+                f"|d max|eig|| {g['max_abs_eigenvalue_difference']:.1e} against the reference"
             )
     for model, cont in result.get("critical_slope_continuation", {}).items():
         ref = (
             "reference not timed (--quick)"
             if cont["reference_seconds"] is None
-            else f"reference {cont['reference_seconds']:.1f} s -> {cont['reference_critical_slope_rad']:.7f} rad"
+            else f"reference {cont.get('reference_cpu_seconds') or float('nan'):.1f} s CPU "
+            f"({cont['reference_seconds']:.1f} s wall) -> {cont['reference_critical_slope_rad']:.7f} rad: "
+            f"{_x(cont.get('ratio'))}"
         )
+        fast_cpu = cont.get("fast_cpu_seconds")
         lines.append(
-            f"critical slope {model}: fast {cont['fast_seconds']:.2f} s -> {cont['fast_critical_slope_rad']:.7f} rad "
+            f"critical slope {model}: fast {'-' if fast_cpu is None else f'{fast_cpu:.2f}'} s CPU "
+            f"({cont['fast_seconds']:.2f} s wall) -> {cont['fast_critical_slope_rad']:.7f} rad "
             f"({cont['fast_reason']}, {cont['branch_points']} branch points); {ref}"
         )
     fr = result.get("guide_friction")
@@ -636,9 +732,11 @@ def format_table(result: dict[str, Any]) -> str:
         )
         for r in fr["rows"]:
             lines.append(
-                f"  {r['model']}: fast {r['fast_seconds_per_map'] * 1e3:.2f} ms (error {r['fast_error']:.1e}), "
-                f"reference {r['reference_seconds_per_map'] * 1e3:.0f} ms (error {r['reference_error']:.1e}): "
-                f"{r['ratio']:.0f}x{' (busy machine)' if busy else ''}; fast vs reference "
+                f"  {r['model']}: fast {_ms(r.get('fast_cpu_seconds_per_map'), 2)} CPU (error {r['fast_error']:.1e}), "
+                f"reference {_ms(r.get('reference_cpu_seconds_per_map'), 0)} CPU (error {r['reference_error']:.1e}): "
+                f"{_x(r['ratio'])}; wall {_ms(r['fast_seconds_per_map'], 2)} / "
+                f"{_ms(r['reference_seconds_per_map'], 0)}: {_x(r.get('ratio_wall'))}"
+                f"{' (busy machine)' if busy else ''}; fast vs reference "
                 f"{r['fast_vs_reference']:.1e}; friction work {r['friction_work_J']:.4g} J, errors "
                 f"{r['fast_friction_work_error_J']:.0e} / {r['reference_friction_work_error_J']:.0e} J"
             )
@@ -647,8 +745,10 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"peer integrator, one phase: {peer['phase']}, {peer['duration_s']:g} s")
         lines.append(f"  (nbkode's first call, compiling: {peer['peer_first_call_s']:.0f} s)")
         for r in peer["rows"]:
+            cpu = r.get("cpu_seconds")
             lines.append(
-                f"  {r['backend']:14} rtol {r['rtol']:6.0e} error {r['error']:8.1e} {r['seconds'] * 1e3:8.3f} ms"
+                f"  {r['backend']:14} rtol {r['rtol']:6.0e} error {r['error']:8.1e} "
+                f"{'-' if cpu is None else f'{cpu * 1e3:.3f}'} ms CPU, {r['seconds'] * 1e3:.3f} ms wall"
             )
     elif peer.get("skipped"):
         lines.append("peer integrator (nbkode) not run:")
@@ -658,8 +758,10 @@ def format_table(result: dict[str, Any]) -> str:
         if label in c and "first_calls_s" in c[label]:
             lines.append(
                 f"compile {label}: import {c[label]['import_s']:.2f} s + first calls {c[label]['first_calls_s']:.2f} s"
+                + (f" wall ({c[label]['first_calls_cpu_s']:.2f} s CPU)" if "first_calls_cpu_s" in c[label] else "")
             )
-    lines.append(f"total {result['total_seconds']:.1f} s")
+    total_cpu = result.get("total_cpu_seconds")
+    lines.append(f"total {result['total_seconds']:.1f} s" + ("" if total_cpu is None else f" ({total_cpu:.1f} s CPU)"))
     return "\n".join(lines)
 
 

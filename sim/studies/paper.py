@@ -37,6 +37,7 @@ from rimless.sim.studies.paper_figures import (
     missing_eigen_curves,
     write_csv,
 )
+from rimless.sim.studies.paper_mfpt import metastability_paper
 
 K_GRID = tuple(range(1500, 3501, 250))
 ENERGY_K = (2000.0, 2500.0, 3000.0, 3500.0)
@@ -725,6 +726,7 @@ def run_paper(
     res.table += syscot["headline"]
     res.system_cot = syscot["rows"]
     res.timings_s["system_cot"] = time.perf_counter() - t4
+    res.files += metastability_paper(out, params, ks, backend=backend, rtol=rtol, progress=say)["files"]
     res.files += _write_table(res.table, out)
     res.timings_s["figures"] = time.perf_counter() - t3
     res.timings_s["total"] = time.perf_counter() - t0
