@@ -65,7 +65,8 @@ def floquet_cmd(
         raise ParameterError(f"--up-axis must be one of x, y, z, -x, -y, -z, got {up_axis!r}")
     if params is not None and not params.is_file():
         raise ParameterError(f"--params {params}: no such file")
-    wheel = Wheel(params, key) if params is not None else Wheel(model=key)
+    which = "er" if key == "er" else "ve"
+    wheel = Wheel(params, which) if params is not None else Wheel(model=which)
     if wheel.input.fit:
         raise ParameterError(f'{params}: a parameter marked "fit": trials floquet fits none; give a value (and sd)')
     with progress_bar("importing", json_out=json_out) as bar:

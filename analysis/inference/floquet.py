@@ -344,7 +344,9 @@ def estimate_multiplier(
     )
 
 
-def group_data(members: Sequence[SectionPoints]) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+def group_data(
+    members: Sequence[SectionPoints],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Pairs (x_k, x_{k+1}, v_k) and triples (x_{k-1}, x_k, x_{k+1}) over the used members' runs."""
     xs, ys, vs, t0, t1, t2 = [], [], [], [], [], []
     for p in members:

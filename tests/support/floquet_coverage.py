@@ -47,6 +47,7 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
     wheel, slope, truth = truth_of(kind)
     rng = np.random.default_rng(seed)
     rows, flags, failed = [], [], []
+    stalls = 0
     cpu = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"trial{os.getpid()}.csv"
@@ -58,6 +59,7 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
                     walk = rigid_walk(wheel, slope, slope_sd_deg, steps, rng, start=rel * wheel.fixed_point(slope))
                 else:
                     walk = er_walk(wheel, slope, slope_sd_deg, steps, rng, release=rel)
+                stalls += walk.stalled
                 record(walk, path, rng)
                 p = section_points(import_trial(path), path.name)
                 if p.status != "used":
@@ -80,6 +82,7 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
         "slope_sd_deg": slope_sd_deg,
         "seed": seed,
         "estimated": len(rows),
+        "stalled_trials": stalls,
         "flagged_trials": {k: flags.count(k) for k in sorted(set(flags))},
         "not_estimated": {k: failed.count(k) for k in sorted(set(failed))},
         "median_reliability": float(np.median([e.reliability for e in rows])),

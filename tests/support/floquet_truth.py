@@ -3,7 +3,8 @@
 Written apart from ``rimless.analysis`` (it imports nothing from it). Each step's slope is drawn
 N(slope, slope_sd^2) (the rough-slope model of Byl and Tedrake: gravity's direction per step), so the walk
 wanders about its fixed point; the recorded geometry stays on the nominal slope (the importer sees one ramp).
-The recording: a hold, the release, the walk, the data stop 40 % into the step after the last impact;
+The recording: a hold, the release, the walk, the data stop 40 % into the step after the last impact (at the
+last impact when the ER wheel stalls on a shallow step);
 100 Hz, sub-frame start drawn at random, Tracker-like noise on the object's origin (mm) and orientation (mrad),
 the object origin off the hub.
 
@@ -42,6 +43,7 @@ class Walk:
     impacts: np.ndarray
     post_impact_speed: np.ndarray  # true omega+ per impact, rad/s
     slope_deg: float
+    stalled: bool = False  # the walk ended in a stall (the data stop at its last impact)
 
 
 @dataclass(frozen=True)
@@ -149,6 +151,7 @@ def er_walk(
 ) -> Walk:
     """``steps`` impacts of the simulator's ER wheel (``params``: WheelParams) released from its gait at
     ``slope_deg`` with theta'+ times ``release`` (a hand release is never exactly at the gait)."""
+    from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import state_from_section
     from rimless.sim.step.backend import make_integrator, make_map
@@ -164,7 +167,12 @@ def er_walk(
     T, X, H, B, impacts, speeds = [], [], [], [], [], []
     for k in range(steps + 1):
         p = params.replace(slope_rad=math.radians(slope_deg + slope_sd_deg * float(rng.standard_normal())))
-        res = simulate_step(Mechanics.of(p), "er", y, integ, t0=0.0, record_dt=dt)
+        try:
+            res = simulate_step(Mechanics.of(p), "er", y, integ, t0=0.0, record_dt=dt)
+        except StepFailure:  # a stall (a slope drawn too shallow): the data stop at the last impact
+            if len(impacts) < 2:
+                raise
+            return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
         for seg in res.segments:
             q = seg.y
             T.append(t0 + seg.t)
@@ -179,7 +187,7 @@ def er_walk(
     return _walk(T, X, H, B, impacts, speeds, slope_deg)
 
 
-def _walk(T, X, H, B, impacts, speeds, slope_deg) -> Walk:
+def _walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> Walk:
     t = np.concatenate(T)
     order = np.argsort(t, kind="stable")
     t = t[order]
@@ -189,7 +197,7 @@ def _walk(T, X, H, B, impacts, speeds, slope_deg) -> Walk:
     last = impacts[-1]
     period = last - (impacts[-2] if len(impacts) > 1 else 0.0)
     stop = t <= last + 0.4 * period  # the data stop 40 % into the next step
-    return Walk(t[stop], x[stop], h[stop], b[stop], np.array(impacts), np.array(speeds), slope_deg)
+    return Walk(t[stop], x[stop], h[stop], b[stop], np.array(impacts), np.array(speeds), slope_deg, stalled)
 
 
 def record(
