@@ -24,6 +24,7 @@ def floquet(
     *,
     group_tol_deg: float = 0.05,
     with_model: bool = True,
+    calibrate_c: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> FloquetResult:
     """The multiplier of the trials' return map of the post-impact angular speed, one per slope group, with the
@@ -35,6 +36,8 @@ def floquet(
         and each group's slope uncertainty are carried into the model's interval (``model.ci95``).
     group_tol_deg : trials whose slopes differ by less form one group (one multiplier).
     with_model : False skips the model (its eigenvalue is then None).
+    calibrate_c : the model's c calibrated on the trials first (`calibrate(trials, ("c",))`; source ``fitted``,
+        its standard error carried into the model's interval; ``calibration`` in the result says how it went).
     Trials too short or transient-only are flagged with the reason (``trials[i].status``, ``reason``); a group
     without an estimate says why (``groups[j].status``, ``reason``)."""
     from rimless.analysis.api.trials import load_trials
@@ -55,5 +58,6 @@ def floquet(
         model=w.compliant_model("floquet()"),
         group_tol_deg=float(group_tol_deg),
         with_model=with_model,
+        calibrate_c=calibrate_c,
         progress=progress,
     )

@@ -34,6 +34,13 @@ def floquet_cmd(
     model: Annotated[
         str, typer.Option("--model", metavar="er|ve", help="Model whose eigenvalue is shown beside the trials'.")
     ] = "er",
+    calibrate_c: Annotated[
+        bool,
+        typer.Option(
+            "--calibrated/--no-calibrated",
+            help="Calibrate the model's c on the trials first (as `trials calibrate --fit c`; slower).",
+        ),
+    ] = False,
     params: ParamsOpt = None,
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
@@ -67,8 +74,11 @@ def floquet_cmd(
         raise ParameterError(f"--params {params}: no such file")
     which = "er" if key == "er" else "ve"
     wheel = Wheel(params, which) if params is not None else Wheel(model=which)
-    if wheel.input.fit:
-        raise ParameterError(f'{params}: a parameter marked "fit": trials floquet fits none; give a value (and sd)')
+    extra = [n for n in wheel.input.fit if n != "damping_ns_per_m"]
+    if extra or (wheel.input.fit and not calibrate_c):
+        raise ParameterError(
+            f'{params}: a parameter marked "fit": trials floquet fits only c (--calibrated); give a value (and sd)'
+        )
     with progress_bar("importing", json_out=json_out) as bar:
         loaded = load_trials(trials, {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up})
         for r in loaded.refused:
@@ -76,7 +86,13 @@ def floquet_cmd(
         if not loaded.trials:
             typer.echo("error: no trial could be read (see the refusals above)", err=True)
             raise typer.Exit(EXIT_USER_ERROR if loaded.refused else EXIT_FAILURE)
-        res = floquet(loaded.trials, wheel, group_tol_deg=group_tol_deg, progress=lambda s: bar.update(description=s))
+        res = floquet(
+            loaded.trials,
+            wheel,
+            group_tol_deg=group_tol_deg,
+            calibrate_c=calibrate_c or bool(wheel.input.fit),
+            progress=lambda s: bar.update(description=s),
+        )
     res.refused = list(loaded.refused)
     out = res.to_dict()
     if json_out:
@@ -165,6 +181,14 @@ def _lines(con: Any, out: dict[str, Any]) -> None:
     for r in out["trials"]:
         if r["status"] != "used":
             say(f"{Path(r['file']).name}: {r['status']}: {r['reason']}")
+    cal = out.get("calibration")
+    if cal:
+        say(
+            f"c calibrated on these trials: {cal['c_ns_per_m']:.3g} ± {cal['se_ns_per_m']:.2g} N s/m (the model's "
+            "column uses it: fitted, not a prediction)"
+            if cal["calibrated"]
+            else f"c not calibrated: {cal['note']}"
+        )
     say(f"section: {out['section']}")
     for line in parameter_lines(out.get("parameters")):
         say(line)

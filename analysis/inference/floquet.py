@@ -397,6 +397,7 @@ def model_multiplier(params: Any, model: str, *, rtol: float = 1e-9) -> dict[str
 def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg: float) -> dict[str, Any]:
     """`model_multiplier` at the group's slope with the held parameters' and the slope's uncertainty."""
     from rimless.analysis.inference.held import combine, sensitivities
+    from rimless.errors import ParameterError
 
     slope = math.radians(slope_deg)
     base = model_multiplier(win.params.replace(slope_rad=slope), model)
@@ -420,6 +421,29 @@ def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg
         }
         for r in rows
     ]
+    for e in win.entries.values():  # a fitted parameter (source fitted): its standard error, the same way
+        if e.source != "fitted" or not e.sd > 0:
+            continue
+        ends = []
+        for sign in (1.0, -1.0):
+            try:
+                ends.append(f(win.params.replace(**{e.name: e.value + sign * e.sd})))
+            except ParameterError:
+                ends.append(None)
+        hi, lo = ends
+        c = abs(hi - lo) / 2 if hi is not None and lo is not None else None
+        contributions.append(
+            {
+                "name": e.name,
+                "symbol": e.symbol,
+                "sd": e.sd,
+                "unit": e.unit,
+                "minus": lo,
+                "plus": hi,
+                "contribution": c,
+                "note": "fitted on these trials: its standard error",
+            }
+        )
     if slope_sd_deg > 0:
         vals = [
             model_multiplier(win.params.replace(slope_rad=math.radians(slope_deg + s * slope_sd_deg)), model)[
@@ -465,6 +489,8 @@ class FloquetResult:
     trials: list[dict[str, Any]]
     parameters: list[dict[str, Any]] = field(default_factory=list)
     refused: list[str] = field(default_factory=list)
+    #: with ``calibrate_c``: c calibrated on the trials (`trials calibrate`'s estimate), or why not; else None
+    calibration: dict[str, Any] | None = None
 
     @property
     def estimated(self) -> list[dict[str, Any]]:
@@ -478,6 +504,7 @@ class FloquetResult:
             "groups": self.groups,
             "trials": self.trials,
             "parameters": self.parameters,
+            "calibration": self.calibration,
             "refused": self.refused,
         }
 
@@ -540,11 +567,18 @@ def run_floquet(
     model: str = "er",
     group_tol_deg: float = 0.05,
     with_model: bool = True,
+    calibrate_c: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> FloquetResult:
     """The multiplier per slope group of ``trials`` beside the model's eigenvalue at ``win``'s parameters
-    (`rimless.sim.model.uncertain.WheelInput`, their uncertainty carried)."""
+    (`rimless.sim.model.uncertain.WheelInput`, their uncertainty carried); ``calibrate_c``: the model's c first
+    calibrated on the trials (`trials calibrate --fit c`, the held parameters not refitted), its standard error
+    carried like a held parameter's."""
     from rimless.analysis.inference.critical_slope import group_slopes
+
+    calibration = None
+    if calibrate_c and with_model:
+        win, calibration = _calibrated(trials, names, win, model, progress)
 
     pts = [section_points(t, n) for t, n in zip(trials, names)]
     slopes = group_slopes(np.array([p.slope_deg for p in pts]), group_tol_deg)
@@ -577,7 +611,44 @@ def run_floquet(
         trial_rows += [p.row(gi) for p in members]
     order = {n: i for i, n in enumerate(names)}
     trial_rows.sort(key=lambda r: order.get(r["file"], 0))
-    return FloquetResult(model=model, groups=groups, trials=trial_rows, parameters=win.parameters())
+    return FloquetResult(
+        model=model, groups=groups, trials=trial_rows, parameters=win.parameters(), calibration=calibration
+    )
+
+
+def _calibrated(
+    trials: Sequence[Any], names: Sequence[str], win: Any, model: str, progress: Callable[[str], None] | None
+) -> tuple[Any, dict[str, Any]]:
+    """``win`` with c calibrated on the trials (source ``fitted``), and what the JSON says of it."""
+    from rimless.analysis.inference.calibrate import NoTrialCalibrated, calibrate
+    from rimless.analysis.inference.runs import calibrated_input
+
+    if progress:
+        progress("calibrating c")
+    try:
+        cal = calibrate(
+            list(trials),
+            list(names),
+            ["c"],
+            params=win.params,
+            model=model,
+            progress=(lambda n: progress(f"calibrating c ({n} simulations)")) if progress else None,
+        )
+    except NoTrialCalibrated as err:
+        return win, {"fit": ["c"], "calibrated": False, "note": str(err)}
+    (p,) = cal.params
+    used = p.identifiable or p.effective_only
+    out = {
+        "fit": ["c"],
+        "calibrated": used,
+        "c_ns_per_m": p.value,
+        "se_ns_per_m": p.se,
+        "identifiable": p.identifiable,
+        "effective_only": p.effective_only,
+        "converged": cal.summary().get("converged", True),
+        "note": p.note,
+    }
+    return (calibrated_input(win, cal) if used else win), out
 
 
 def shown(name: str) -> str:

@@ -206,3 +206,24 @@ def test_bad_options_are_one_error_line(args, names, er_files) -> None:
     res = runner.invoke(app, ["trials", "floquet", str(files[0]), *args])
     assert res.exit_code == 2, res.output
     assert names in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.slow
+def test_calibrated_c_is_fitted_on_the_trials_and_carried(er_files) -> None:
+    """`--calibrated`: c is calibrated on the trials (source `fitted`), its standard error enters the model's
+    interval like a held parameter's; the eigenvalue then comes from a fitted wheel, said so in the output."""
+    from rimless.analysis import floquet
+    from rimless.cli import app
+
+    files, _ = er_files
+    res = floquet(files, calibrate_c=True)
+    cal = res.calibration
+    assert cal is not None and cal["calibrated"] and cal["fit"] == ["c"], cal
+    (c,) = [p for p in res.parameters if p["symbol"] == "c"]
+    assert c["source"] == "fitted" and c["value"] == cal["c_ns_per_m"] and c["sd"] == cal["se_ns_per_m"] > 0
+    (g,) = res.estimated
+    rows = {r["symbol"]: r for r in g["model"]["contributions"]}
+    assert rows["c"]["note"].startswith("fitted") and rows["c"]["contribution"] > 0
+    text = runner.invoke(app, ["trials", "floquet", *map(str, files), "--calibrated"])
+    assert text.exit_code == 0, text.output
+    assert "c calibrated on these trials" in text.stdout
