@@ -173,7 +173,9 @@ def section_points(trial: Any, name: str) -> SectionPoints:
     impacts = np.asarray(trial.impact_time_s, float)
     steps = np.asarray(trial.impact_step, np.int64)
     if impacts.size == 0 or t.size < MIN_FIT_FRAMES:
-        pts.status, pts.reason = "flagged", "too short: no impact observed"
+        why = getattr(meta, "step_refused", None)
+        pts.status = "flagged"
+        pts.reason = f"no impacts: the import found none ({why})" if why else "too short: no impact observed"
         return pts
     ends = np.append(impacts[1:], math.inf)
     speed = np.full(impacts.size, math.nan)
