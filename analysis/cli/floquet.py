@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import typer
 
@@ -72,10 +72,10 @@ def floquet_cmd(
         raise ParameterError(f"--up-axis must be one of x, y, z, -x, -y, -z, got {up_axis!r}")
     if params is not None and not params.is_file():
         raise ParameterError(f"--params {params}: no such file")
-    which = "er" if key == "er" else "ve"
+    which: Literal["er", "ve"] = "er" if key == "er" else "ve"
     wheel = Wheel(params, which) if params is not None else Wheel(model=which)
     extra = [n for n in wheel.input.fit if n != "damping_ns_per_m"]
-    if extra or (wheel.input.fit and not calibrate_c):
+    if extra:
         raise ParameterError(
             f'{params}: a parameter marked "fit": trials floquet fits only c (--calibrated); give a value (and sd)'
         )
