@@ -9,6 +9,8 @@ The public API (docs/api.md), imported lazily so that `import rimless.analysis` 
 - `compare(trial, wheel=None)`, `calibrate(trials, fit=("c",), wheel=None)`, `critical_slope(trials, wheel=None)`,
   `write_report(files, out, wheel=None)`: each takes the simulator's `rimless.sim.Wheel` and returns the object
   whose `to_dict()` is the matching `rimless trials` command's `--json` object;
+- `floquet(trials, wheel=None)`: the trials' step-to-step multiplier (noise bias corrected, 95 % interval)
+  beside the model's eigenvalue (`rimless trials floquet`);
 - `load_trials(trials)`: `Trial` objects or paths -> (trials, names).
 """
 
@@ -19,10 +21,12 @@ from typing import TYPE_CHECKING
 from rimless.lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from rimless.analysis.api.floquet import floquet
     from rimless.analysis.api.trials import calibrate, compare, critical_slope, load_trials, write_report
     from rimless.analysis.inference.calibrate import CalibrationResult
     from rimless.analysis.inference.compare import TrialComparison
     from rimless.analysis.inference.critical_slope import CriticalSlopeResult
+    from rimless.analysis.inference.floquet import FloquetResult
     from rimless.analysis.io.recording import read_recording
     from rimless.analysis.io.trial import Trial, read_trial
     from rimless.analysis.io.vicon_file import ViconFile
@@ -41,6 +45,8 @@ _LAZY = {
     "calibrate": "rimless.analysis.api.trials",
     "critical_slope": "rimless.analysis.api.trials",
     "write_report": "rimless.analysis.api.trials",
+    "floquet": "rimless.analysis.api.floquet",
+    "FloquetResult": "rimless.analysis.inference.floquet",
     "TrialComparison": "rimless.analysis.inference.compare",
     "CalibrationResult": "rimless.analysis.inference.calibrate",
     "CriticalSlopeResult": "rimless.analysis.inference.critical_slope",
@@ -50,6 +56,7 @@ _LAZY = {
 __all__ = [
     "CalibrationResult",
     "CriticalSlopeResult",
+    "FloquetResult",
     "ReportResult",
     "Trial",
     "TrialComparison",
@@ -58,6 +65,7 @@ __all__ = [
     "calibrate",
     "compare",
     "critical_slope",
+    "floquet",
     "import_trial",
     "load_trials",
     "read_recording",

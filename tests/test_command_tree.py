@@ -334,6 +334,8 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
         {"stage": "calibration started"},
     ),
     ("trials", "coverage"): (["--series", "500"], {"stage": "coverage"}),
+    # after the imports: the model's eigenvalue at each of the seven slopes with the held parameters' differences
+    ("trials", "floquet"): ([*CRITICAL_CSVS], {"stage": "model at"}),
     ("trials", "leg-fit-coverage"): (["--tests", "1000"], {"stage": "leg-fit coverage"}),
     ("robot", "leg-test"): (
         ["--fake", "--leg", "0", "--fake-compression-mm", "0", "--timeout-s", "120", "--out", "leg.jsonl"],

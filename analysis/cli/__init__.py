@@ -17,6 +17,7 @@ import typer
 
 from rimless.analysis.cli.critical import ParamsOpt, critical_lines, held_lines
 from rimless.analysis.cli.critical import register as register_critical
+from rimless.analysis.cli.floquet import register as register_floquet
 from rimless.analysis.cli.leg import register as register_leg
 from rimless.cli_rules import EXIT_USER_ERROR, fail, print_json, user_facing
 from rimless.errors import ParameterError, UserError
@@ -475,3 +476,4 @@ def register_top_level(root_app: typer.Typer) -> None:
 
 register_critical(app)
 register_leg(app)
+register_floquet(app)

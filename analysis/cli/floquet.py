@@ -1,0 +1,194 @@
+"""``rimless trials floquet``: the trials' step-to-step multiplier beside the model's eigenvalue.
+
+Parses, calls `rimless.analysis.floquet` (the public API; the inputs are read first so that a refused file
+does not stop the others), prints. Only typer and the standard library at module level.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import typer
+
+from rimless.analysis.cli.critical import GapOpt, ParamsOpt, SlopeOpt, UpOpt, parameter_lines
+from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
+from rimless.errors import ParameterError
+
+MODELS = ("er", "ve")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``floquet`` to the ``trials`` app."""
+    app.command("floquet")(user_facing(floquet_cmd))
+
+
+def _fmt(v: Any, fmt: str) -> str:
+    return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+
+
+def floquet_cmd(
+    trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon CSVs.")],
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    model: Annotated[
+        str, typer.Option("--model", metavar="er|ve", help="Model whose eigenvalue is shown beside the trials'.")
+    ] = "er",
+    calibrate_c: Annotated[
+        bool,
+        typer.Option(
+            "--calibrated/--no-calibrated",
+            help="Calibrate the model's c on the trials first (as `trials calibrate --fit c`; slower).",
+        ),
+    ] = False,
+    params: ParamsOpt = None,
+    slope_deg: SlopeOpt = None,
+    max_gap_ms: GapOpt = 50.0,
+    up_axis: UpOpt = None,
+    group_tol_deg: Annotated[
+        float,
+        typer.Option(
+            "--group-tol-deg", min=0.0, metavar="DEG", help="Trials whose slopes differ by less form one slope group."
+        ),
+    ] = 0.05,
+) -> None:
+    """Step-to-step return map of the post-impact angular speed: its multiplier per slope, beside the model's.
+
+    The regression's noise bias is corrected with the noise measured from the recording (95 % t interval);
+    a lagged-covariance estimate (x_{k-1} as the instrument) is the check.
+
+    Trials too short or transient-only are flagged with the reason. Exit 1 when no slope gives an estimate.
+    """
+    from rimless.analysis import floquet
+    from rimless.analysis.inference.runs import load_trials
+    from rimless.progress import progress_bar
+    from rimless.sim import Wheel
+
+    key = model.strip().lower()
+    if key not in MODELS:
+        raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    up = None if up_axis is None else up_axis.strip().lower().lstrip("+")
+    if up is not None and up not in ("x", "y", "z", "-x", "-y", "-z"):
+        raise ParameterError(f"--up-axis must be one of x, y, z, -x, -y, -z, got {up_axis!r}")
+    if params is not None and not params.is_file():
+        raise ParameterError(f"--params {params}: no such file")
+    which: Literal["er", "ve"] = "er" if key == "er" else "ve"
+    wheel = Wheel(params, which) if params is not None else Wheel(model=which)
+    extra = [n for n in wheel.input.fit if n != "damping_ns_per_m"]
+    if extra:
+        raise ParameterError(
+            f'{params}: a parameter marked "fit": trials floquet fits only c (--calibrated); give a value (and sd)'
+        )
+    with progress_bar("importing", json_out=json_out) as bar:
+        loaded = load_trials(trials, {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up})
+        for r in loaded.refused:
+            typer.echo(f"refused: {r}", err=True)
+        if not loaded.trials:
+            typer.echo("error: no trial could be read (see the refusals above)", err=True)
+            raise typer.Exit(EXIT_USER_ERROR if loaded.refused else EXIT_FAILURE)
+        res = floquet(
+            loaded.trials,
+            wheel,
+            group_tol_deg=group_tol_deg,
+            calibrate_c=calibrate_c or bool(wheel.input.fit),
+            progress=lambda s: bar.update(description=s),
+        )
+    res.refused = list(loaded.refused)
+    out = res.to_dict()
+    if json_out:
+        print_json(out)
+    else:
+        _print(out)
+    if loaded.refused:
+        raise typer.Exit(EXIT_USER_ERROR)
+    if not res.estimated:
+        why = "; ".join(f"{g['slope_deg']:.2f} deg: {g['reason']}" for g in out["groups"])
+        typer.echo(f"error: no multiplier from the trials: {why}", err=True)
+        raise typer.Exit(EXIT_FAILURE)
+
+
+def _print(out: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    model = out["model"].upper()
+    t = Table(title=f"multiplier of the post-impact speed: trials, {model} model", show_edge=False)
+    for col, width in (
+        ("deg", 5),
+        ("pairs", 5),
+        ("trials", 6),
+        ("95 %", 11),
+        ("OLS", 5),
+        ("lag", 5),
+        (model, 5),
+        ("95 %", 11),
+    ):
+        t.add_column(col, justify="right", no_wrap=True, min_width=width)
+    for g in out["groups"]:
+        m = g.get("model") or {}
+        mci = m.get("ci95")
+        if g["status"] == "estimated":
+            lo, hi = g["ci95"]
+            t.add_row(
+                f"{g['slope_deg']:.3f}",
+                str(g["pairs"]),
+                f"{g['multiplier']:.3f}",
+                f"{lo:.3f}-{hi:.3f}",
+                _fmt(g["ols_multiplier"], ".3f"),
+                _fmt(g["lagged_multiplier"], ".3f"),
+                _fmt(m.get("eigenvalue"), ".3f"),
+                f"{mci[0]:.3f}-{mci[1]:.3f}" if mci else "–",
+            )
+        else:
+            t.add_row(
+                f"{g['slope_deg']:.3f}",
+                str(g.get("pairs", 0)),
+                "–",
+                "–",
+                "–",
+                "–",
+                _fmt(m.get("eigenvalue"), ".3f"),
+                f"{mci[0]:.3f}-{mci[1]:.3f}" if mci else "–",
+            )
+    con.print(t)
+    _lines(con, out)
+
+
+def _lines(con: Any, out: dict[str, Any]) -> None:
+    model = out["model"].upper()
+    say = lambda s: con.print(s, markup=False, highlight=False)  # noqa: E731
+    say(
+        "trials: the corrected multiplier (noise bias removed) and its 95 % interval; OLS: the plain regression "
+        "(biased toward 0 by the noise); lagged: x_{k-1} as the instrument (a check); "
+        f"model {model}: the dominant eigenvalue of the model's map at that slope, its interval from the held "
+        "parameters and the slope's uncertainty"
+    )
+    for g in out["groups"]:
+        if g["status"] == "estimated":
+            inside = g.get("model_inside_ci95")
+            say(
+                f"{g['slope_deg']:.3f} deg: {len(g['used_trials'])} trial(s), {g['pairs']} pairs, noise "
+                f"{g['noise_sd_rad_s']:.3g} rad/s against a wander of {g['wander_sd_rad_s']:.3g} rad/s "
+                f"(reliability {g['reliability']:.2f}), gait x* {g['fixed_point_rad_s']:.3f} rad/s"
+                + ("" if inside is None else f"; the model's eigenvalue is {'inside' if inside else 'OUTSIDE'}")
+            )
+        else:
+            say(f"{g['slope_deg']:.3f} deg: no estimate: {g['reason']}")
+        note = (g.get("model") or {}).get("note")
+        if note:
+            say(f"  model: {note}")
+    for r in out["trials"]:
+        if r["status"] != "used":
+            say(f"{Path(r['file']).name}: {r['status']}: {r['reason']}")
+    cal = out.get("calibration")
+    if cal:
+        say(
+            f"c calibrated on these trials: {cal['c_ns_per_m']:.3g} ± {cal['se_ns_per_m']:.2g} N s/m (the model's "
+            "column uses it: fitted, not a prediction)"
+            if cal["calibrated"]
+            else f"c not calibrated: {cal['note']}"
+        )
+    say(f"section: {out['section']}")
+    for line in parameter_lines(out.get("parameters")):
+        say(line)
