@@ -429,8 +429,10 @@ class LegDetector:
             moved = self.position_m - self._onset_x_m >= p.touch_compression_m
             if self._touch_count >= p.touch_debounce_samples and moved:
                 if self._windowed() and t < self._next_touchdown_s() - self._early_window_s():
-                    # Too early for the next step: the stance foot coming down again. It does not move the count.
+                    # Too early for the next step: the stance foot coming down again. It does not move the count,
+                    # and the pattern must be confirmed again (a period measured double shows as a bounce every step).
                     self._touch_count = 0
+                    self._confirmed = 0
                     self._need_quiet = True
                     self._doubt_forget()
                     return Decision(events=("bounce_ignored",))
@@ -446,6 +448,13 @@ class LegDetector:
             self._lock_count += 1
         else:
             self._lock_count = 0
+        if self.counted and not armed and v <= p.lock_velocity_m_s and t - self._touchdown_s >= p.double_support_s:
+            # The compression peaked too shallow or too slow to lock: it is over, and the next rise must be a
+            # touchdown or a doubt (not hidden in this phase until max_compression_s).
+            self.phase = Phase.WAIT
+            self._touch_count = 0
+            self._doubt_forget()
+            return Decision(events=("no_lock",))
         if self._lock_count >= p.lock_debounce_samples:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
@@ -504,6 +513,7 @@ class LegDetector:
         began = self._rise.cross_s
         self._doubt_forget()
         if self._windowed() and began is not None and began < self._next_touchdown_s() - self._early_window_s():
+            self._confirmed = 0
             return Decision(events=("bounce_ignored",))
         return self._lose_sync(
             f"uncertain touchdown: the leg compressed {peak * 1e3:.3f} mm without a confirmed touchdown "
