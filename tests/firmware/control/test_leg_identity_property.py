@@ -175,3 +175,50 @@ def test_a_wrong_start_leg_locks_nothing_until_the_operator_names_the_stance_leg
     assert "lock_withheld" in run.names()
     named = run_walk(walk, params, duration_s=4.0, configured_start_index=configured, named=True)
     assert named.airborne == [] and len(named.engages) >= 5
+
+
+# --- one sensor per leg: the stance leg is the one measured compressing, whatever the operator names ----------
+
+
+@pytest.mark.parametrize("named", [7, 3, 0, None])
+def test_per_leg_sensors_lock_only_the_leg_measured_compressing(named) -> None:
+    """Eight sensors, one per leg (legs touch down in order 0, 1, ... from 0.1 s; leg 7 stands before), the
+    trailing foot coming down again 0.15 s after each step. Whichever leg the operator names at arm (the right
+    one, 7, or a wrong one), every engage holds the leg the walk's truth has on the ground; a wrong one is found
+    from the first measured step (fails before this change: the trailing foot of leg 7 was taken for a step
+    and locked, and every step after it on the wrong leg)."""
+    from tests.firmware.control.test_detector_leg_sync import TRAJ, _leg_view, _per_leg_rig
+
+    rig, bank = _per_leg_rig([_leg_view(TRAJ, k, 0.15) for k in range(8)])
+    try:
+        if named is None:
+            rig.controller.disarm()
+            rig.controller.arm()
+        else:
+            rig.controller.arm(stance_leg=named)
+        engages: list[tuple[float, int]] = []
+        held: set[int] = set()
+
+        def record(r) -> None:
+            now = set(bank.engaged())
+            engages.extend((r.clock.t, leg) for leg in sorted(now - held))
+            held.clear()
+            held.update(now)
+
+        rig.run(TRAJ.touchdown_s(9) + 0.1, on_sample=record)
+
+        def truth(t: float) -> int:
+            return 7 if t < TRAJ.start_s else int((t - TRAJ.start_s) // TRAJ.step_period_s) % 8
+
+        assert [(t, leg) for t, leg in engages if leg != truth(t)] == []
+        faults = [e.fields for e in rig.events("fault")]
+        if named in (7, None):
+            assert faults == [] and len(engages) >= 9  # it walks, every step locked
+        else:  # measured: the first step is leg 0's, not the one after the named leg
+            assert [f["fault"] for f in faults] == ["leg_sync_lost"] and "named at arm is wrong" in faults[0]["detail"]
+            assert engages == [] and not rig.controller.armed
+            with pytest.raises(ValueError, match="stance_leg"):
+                rig.controller.arm()
+    finally:
+        bank.close()
+        rig.factory.close()
