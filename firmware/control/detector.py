@@ -12,6 +12,13 @@ touchdown at all within the longest plausible step, loses synchronisation: the d
 `sync_lost`, stops locking, and stays so until `resync` names the leg on the ground. A sensor that
 watches one leg measures it and needs no count.
 
+A counted sensor proves its count rather than assuming it (each check has a parameter, off in the library's
+defaults, on in the robot's): every compression since (re)sync is explained by a touchdown it confirmed, judged
+against the position noise it measured (`doubt_noise_sigmas`, `rise_watch`); once the period is measured a
+touchdown is accepted only inside the window it predicts, and an earlier one is a bounce that does not move the
+count (`touch_window_early_fraction`); no lock before the predicted touchdown time, nor before `confirm_steps`
+intervals matched the measured period, nor (`named_stance_required`) before the operator named the stance leg.
+
 Samples the caller does not trust (low SQUAL: the chip may report frozen motion) make no decision:
 no touchdown and no lock while any untrusted sample is inside the velocity window.
 
