@@ -277,7 +277,7 @@ class LegDetector:
         self._touchdown_x_m = 0.0
         self._peak_v = 0.0
         self.lock_time_s: float | None = None
-        self._confirmed = 0  # step intervals since (re)sync that set or matched the period
+        self._confirmed = 0  # step intervals since (re)sync that matched a measured period
         self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
         self._rise = RiseWatch(self.params.doubt_smooth_s, self.params.max_compression_s)
         self._predicted_touchdown_s: float | None = None  # when the stance leg's touchdown was due (s)

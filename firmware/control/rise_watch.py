@@ -37,7 +37,10 @@ class NoiseMeter:
             self.quantum_m = a
 
     def add_quiet(self, dx_m: float, dt_s: float) -> None:
-        """A displacement (m) over `dt_s` while the leg is at rest."""
+        """A displacement (m) over `dt_s` while the leg is at rest; once measured, one beyond 4 sigma (and two
+        quanta) is motion, not noise, and is left out."""
+        if self.measured and abs(dx_m) > max(4.0 * self.sigma_m, 2.0 * (self.quantum_m or 0.0)):
+            return
         self.samples += 1
         self.quiet_s += dt_s
         alpha = 1.0 / self.samples if self.quiet_s < self.tau_s else min(1.0, dt_s / self.tau_s)

@@ -94,12 +94,13 @@ def run_walk(
     return Run(engages, events, airborne_locks(walk, engages, LEGS, true_start_index), high)
 
 
-@settings(max_examples=150, deadline=None, derandomize=True)
+@settings(max_examples=100, deadline=None, derandomize=True)
 @given(
     first_compression_m=st.one_of(st.floats(0.00005, 0.002), st.none()),  # None: a first step like the others
     bounce_step=st.integers(0, 6),
     bounce_fraction=st.floats(0.0, 0.999),
     bounce_compression_m=st.floats(0.0005, 0.006),
+    bounce_peak_s=st.floats(0.01, 0.06),
     start_index=st.integers(0, 7),
     rate_hz=st.floats(100.0, 1000.0),
     noise_counts=st.floats(0.0, 0.5),
@@ -111,6 +112,7 @@ def test_no_walk_locks_a_leg_in_the_air_and_every_run_ends_released(
     bounce_step,
     bounce_fraction,
     bounce_compression_m,
+    bounce_peak_s,
     start_index,
     rate_hz,
     noise_counts,
@@ -123,6 +125,7 @@ def test_no_walk_locks_a_leg_in_the_air_and_every_run_ends_released(
         bounce_step=bounce_step,
         bounce_after_s=bounce_fraction * 0.4,
         bounce_compression_m=bounce_compression_m,
+        bounce_compression_s=bounce_peak_s,
     )
     run = run_walk(
         walk, rate_hz=rate_hz, duration_s=3.2, true_start_index=start_index, noise_counts=noise_counts, seed=seed
