@@ -455,9 +455,16 @@ class LegDetector:
             self._lock_count += 1
         else:
             self._lock_count = 0
-        if self.counted and not armed and v <= p.lock_velocity_m_s and t - self._touchdown_s >= p.double_support_s:
+        doubting = p.doubt_compression_m > 0 or p.doubt_noise_sigmas > 0
+        if (
+            self.counted
+            and doubting
+            and not armed
+            and v <= p.lock_velocity_m_s
+            and t - self._touchdown_s >= p.double_support_s
+        ):
             # The compression peaked too shallow or too slow to lock: it is over, and the next rise must be a
-            # touchdown or a doubt (not hidden in this phase until max_compression_s).
+            # touchdown or a doubt (not hidden in this phase until max_compression_s). With the doubt test on only.
             self.phase = Phase.WAIT
             self._touch_count = 0
             self._doubt_forget()
