@@ -118,6 +118,7 @@ class Controller:
         self._stance_channel: int | None = None
         self._trailing_channel: int | None = None
         self._last_touchdown_ns: int | None = None
+        self._order_lost = ""  # several sensors: a step measured out of order (the named stance leg was wrong)
 
     # --- commands (called in the sampler thread) ------------------------------------------------
     def arm(self, stance_leg: int | None = None) -> dict[str, Any]:
@@ -132,6 +133,11 @@ class Controller:
             owners = [ch for ch in self.channels if stance_leg in ch.detector.legs]
             if not owners:
                 raise ValueError(f"stance_leg {stance_leg} is not a leg any sensor watches")
+        if self._order_lost and stance_leg is None:
+            raise ValueError(
+                f"the stance leg is not known ({self._order_lost}); arm with stance_leg = the clutch index "
+                "of the leg on the ground now"
+            )
         lost = [ch.detector for ch in self.channels if not ch.detector.synced and stance_leg not in ch.detector.legs]
         if lost:
             raise ValueError(
@@ -154,6 +160,7 @@ class Controller:
         owner = [i for i, ch in enumerate(self.channels) if stance_leg is not None and stance_leg in ch.detector.legs]
         if owner:
             self._stance_channel, self._trailing_channel = owner[0], None
+            self._order_lost = ""
         self._last_touchdown_ns = self.clock_ns()
         self._event("arm", stance_leg=stance_leg)
         return self.status()
@@ -271,7 +278,9 @@ class Controller:
         """With several sensors, a touchdown is a step only on a leg that is neither on the ground nor the
         one just before it (the trailing leg, whose foot may come down again after its clutch lets go),
         and at least `min_step_s` after the last step (or the arm). Otherwise the detector is told to
-        dismiss it and nothing is switched (event `touchdown_dismissed`)."""
+        dismiss it and nothing is switched (event `touchdown_dismissed`). A step on any leg but the one after the
+        stance leg (channels in touchdown order) is measured proof that the stance leg is wrong: `leg_sync_lost`,
+        and `arm` then needs the stance leg named."""
         too_soon = self._last_touchdown_ns is not None and t_ns - self._last_touchdown_ns < det.params.min_step_s * 1e9
         if i in (self._stance_channel, self._trailing_channel) or too_soon:
             det.dismiss_touchdown()
@@ -283,6 +292,18 @@ class Controller:
             self.outbox.append(
                 EventRecord(t_ns, "touchdown_dismissed", {"channel": i, "leg": det.stance_leg, "why": why})
             )
+            return Decision(release=decision.release)
+        expected = None if self._stance_channel is None else (self._stance_channel + 1) % len(self.channels)
+        if expected is not None and i != expected:
+            # A step measured on a leg that is not the next one after the stance leg (channels are in touchdown
+            # order): the stance leg named at arm, or the one followed since, is not the leg on the ground.
+            det.dismiss_touchdown()
+            self._order_lost = (
+                f"sensor {i} measured a step, but the leg after the stance leg is sensor {expected}'s: "
+                "the stance leg named at arm is wrong"
+            )
+            self._stance_channel = self._trailing_channel = None
+            self.fault(Fault.LEG_SYNC_LOST, self._order_lost, t_ns)
             return Decision(release=decision.release)
         self._trailing_channel, self._stance_channel = self._stance_channel, i
         self._last_touchdown_ns = t_ns

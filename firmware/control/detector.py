@@ -12,6 +12,13 @@ touchdown at all within the longest plausible step, loses synchronisation: the d
 `sync_lost`, stops locking, and stays so until `resync` names the leg on the ground. A sensor that
 watches one leg measures it and needs no count.
 
+A counted sensor proves its count rather than assuming it (each check has a parameter, off in the library's
+defaults, on in the robot's): every compression since (re)sync is explained by a touchdown it confirmed, judged
+against the position noise it measured (`doubt_noise_sigmas`, `rise_watch`); once the period is measured a
+touchdown is accepted only inside the window it predicts, and an earlier one is a bounce that does not move the
+count (`touch_window_early_fraction`); no lock before the predicted touchdown time, nor before `confirm_steps`
+intervals matched the measured period, nor (`named_stance_required`) before the operator named the stance leg.
+
 Samples the caller does not trust (low SQUAL: the chip may report frozen motion) make no decision:
 no touchdown and no lock while any untrusted sample is inside the velocity window.
 
@@ -29,6 +36,8 @@ from collections import deque
 from dataclasses import dataclass, fields, replace
 from enum import Enum
 from typing import Any
+
+from rimless.firmware.control.rise_watch import NoiseMeter, RiseWatch
 
 
 class Phase(str, Enum):
@@ -65,12 +74,26 @@ class DetectorParams:
     max_compression_s: float = 0.5  # no zero crossing this long after touchdown: back to wait
     max_step_s: float = 1.0  # no touchdown this long after the previous one: the count is lost
     step_period_tolerance: float = 0.4  # a step outside (1 -/+ this) x the running period loses the count
-    # A counted sensor locks only after this many step intervals since (re)sync, the first setting the period and
-    # each next one within the tolerance of it (0: lock from the first touchdown; the robot's default is 2).
+    # A counted sensor locks only after this many step intervals since (re)sync matched the measured period (the
+    # first interval measures it and confirms nothing; 0: lock from the first touchdown; the robot's default is 2).
     confirm_steps: int = 0
     # A counted sensor loses the count when the leg compresses by this much (m) and stops without a confirmed
     # touchdown: a gentle step the touchdown test missed (0: off; the robot's default is 0.0003).
     doubt_compression_m: float = 0.0
+    # A counted sensor's doubt threshold relative to the measured noise: this many standard deviations of the
+    # smoothed position's rise (noise measured at rest, in WAIT), at least two position quanta; it replaces
+    # doubt_compression_m as the threshold, which then bounds it: a sensor too noisy to see a rise of
+    # doubt_compression_m withholds every lock (0: off, the fixed doubt_compression_m; the robot's default is 6).
+    doubt_noise_sigmas: float = 0.0
+    doubt_smooth_s: float = 0.04  # the doubt test follows the mean position over this span (s)
+    # A counted sensor with a measured period accepts a touchdown no earlier than this fraction of the measured
+    # touchdown-to-lock time before the predicted one (a compression earlier in the step is a bounce: ignored, it
+    # does not move the count), and never locks before the predicted touchdown time (0: off, an early touchdown
+    # is an extra one, sync lost; the robot's default is 0.5).
+    touch_window_early_fraction: float = 0.0
+    # 1: a counted sensor locks only after `resync` (arm with stance_leg) named the leg on the ground: one sensor
+    # cannot tell the legs apart, so a configured start leg is never trusted (0: trusted).
+    named_stance_required: int = 0
 
     def validated(self) -> DetectorParams:
         """Return self, or raise ValueError naming the bad field."""
@@ -93,6 +116,15 @@ class DetectorParams:
             elif f.name == "doubt_compression_m":
                 if not 0.0 <= value <= 0.1:
                     raise ValueError(f"{f.name} must be in [0, 0.1] m, got {value!r}")
+            elif f.name == "doubt_noise_sigmas":
+                if not 0.0 <= value <= 100.0:
+                    raise ValueError(f"{f.name} must be in [0, 100], got {value!r}")
+            elif f.name == "named_stance_required":
+                if value not in (0, 1):
+                    raise ValueError(f"{f.name} must be 0 or 1, got {value!r}")
+            elif f.name == "touch_window_early_fraction":
+                if not 0.0 <= value <= 1.0:
+                    raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
             elif f.name == "step_period_tolerance":
                 if not 0.05 <= value <= 0.9:
                     raise ValueError(f"{f.name} must be in [0.05, 0.9], got {value!r}")
@@ -110,7 +142,7 @@ class DetectorParams:
             raise ValueError(f"unknown detector parameter {name!r}; known: {', '.join(sorted(names))}")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{name} must be a number, got {value!r}")
-        if name.endswith("_samples") or name == "confirm_steps":
+        if name.endswith("_samples") or name in ("confirm_steps", "named_stance_required"):
             if float(value) != int(value):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             value = int(value)
@@ -204,6 +236,8 @@ class LegDetector:
         self.legs = list(legs)
         self._start_index = start_index % len(self.legs)
         self._est = VelocityEstimator(params.velocity_window_s)
+        self.noise = NoiseMeter()  # the sensor's, kept across (re)syncs
+        self.named = False  # an operator named the leg on the ground (`resync`)
         self.reset()
 
     @property
@@ -216,6 +250,7 @@ class LegDetector:
         if leg not in self.legs:
             raise ValueError(f"leg {leg} is not watched by this sensor (legs {self.legs})")
         self.reset(self.legs.index(leg))
+        self.named = True
 
     def reset(self, start_index: int | None = None) -> None:
         """Back to WAIT and synchronised, with legs[start_index] on the ground."""
@@ -242,16 +277,17 @@ class LegDetector:
         self._touchdown_x_m = 0.0
         self._peak_v = 0.0
         self.lock_time_s: float | None = None
-        self._confirmed = 0  # step intervals since (re)sync that set or matched the period
+        self._confirmed = 0  # step intervals since (re)sync that matched a measured period
         self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
-        self._doubt_lows: deque[tuple[float, float]] = deque()  # (t s, x m): rising minima of the last window
-        self._doubt_peak_m = 0.0  # the largest rise above that window's minimum so far (m)
-        self._doubt_top_x = -math.inf  # the highest position since the rise passed the threshold (m)
+        self._rise = RiseWatch(self.params.doubt_smooth_s, self.params.max_compression_s)
+        self._predicted_touchdown_s: float | None = None  # when the stance leg's touchdown was due (s)
+        self._lock_delay_min_s: float | None = None  # shortest touchdown-to-zero-crossing time measured (s)
 
     def set_params(self, params: DetectorParams) -> None:
         """Apply new parameters (validated) without losing the phase."""
         self.params = params.validated()
         self._est.window_s = params.velocity_window_s
+        self._rise.smooth_s, self._rise.span_s = params.doubt_smooth_s, params.max_compression_s
 
     @property
     def stance_leg(self) -> int:
@@ -290,6 +326,29 @@ class LegDetector:
             self._touch_count = 0
             self._engaged = False
 
+    def _early_window_s(self) -> float:
+        """How long before the predicted touchdown one is accepted (s): a fraction of the shortest measured
+        touchdown-to-lock time, at most the period tolerance."""
+        p = self.params
+        assert self._period_s is not None
+        w = p.step_period_tolerance * self._period_s
+        if self._lock_delay_min_s is not None:
+            w = min(w, p.touch_window_early_fraction * self._lock_delay_min_s)
+        return w
+
+    def _windowed(self) -> bool:
+        """True when touchdowns are accepted only inside the window the measured period predicts."""
+        p = self.params
+        return self.counted and self.synced and p.touch_window_early_fraction > 0 and self._period_s is not None
+
+    def doubt_threshold_m(self) -> float:
+        """The rise (m) that must be explained by a touchdown: relative to the measured noise when
+        `doubt_noise_sigmas` is set (+inf until measured), else `doubt_compression_m`."""
+        p = self.params
+        if p.doubt_noise_sigmas > 0:
+            return self.noise.rise_threshold_m(p.doubt_noise_sigmas, self._rise.samples_in_mean)
+        return p.doubt_compression_m
+
     def _step_window_s(self) -> float:
         """The longest plausible time from one touchdown to the next (s)."""
         p = self.params
@@ -303,7 +362,12 @@ class LegDetector:
         since (re)sync agreed with the running period (always True for a sensor that measures its leg)."""
         if not self.counted:
             return True
-        return self.synced and self._confirmed >= self.params.confirm_steps
+        p = self.params
+        if p.named_stance_required and not self.named:
+            return False  # the start leg was configured, not named
+        if p.doubt_noise_sigmas > 0 and not self.doubt_threshold_m() <= p.doubt_compression_m:
+            return False  # noise not measured yet, or too large to see a missed step
+        return self.synced and self._confirmed >= p.confirm_steps
 
     def _lose_sync(self, detail: str) -> Decision:
         self.synced = False
@@ -329,6 +393,8 @@ class LegDetector:
         prev_x = self.position_m
         self.position_m += displacement_m
         self._est.add(t, self.position_m)
+        self._rise.add_position(t, self.position_m)
+        self.noise.see(displacement_m)
         p = self.params
         if not trusted:
             self._distrust_until_s = t + p.velocity_window_s
@@ -357,8 +423,8 @@ class LegDetector:
                 self._need_quiet = v > p.touch_velocity_m_s
                 self._doubt_forget()
                 return NOTHING
-            if self.counted and self.synced and p.doubt_compression_m > 0:
-                doubt = self._doubt(t, p.doubt_compression_m)
+            if self.counted and self.synced and (p.doubt_compression_m > 0 or p.doubt_noise_sigmas > 0):
+                doubt = self._doubt(t, v, displacement_m)
                 if doubt is not None:
                     return doubt
             if v > p.touch_velocity_m_s and t - self._touchdown_s >= p.min_step_s:
@@ -369,6 +435,14 @@ class LegDetector:
                 self._touch_count = 0
             moved = self.position_m - self._onset_x_m >= p.touch_compression_m
             if self._touch_count >= p.touch_debounce_samples and moved:
+                if self._windowed() and t < self._next_touchdown_s() - self._early_window_s():
+                    # Too early for the next step: the stance foot coming down again. It does not move the count,
+                    # and the pattern must be confirmed again (a period measured double shows as a bounce every step).
+                    self._touch_count = 0
+                    self._confirmed = 0
+                    self._need_quiet = True
+                    self._doubt_forget()
+                    return Decision(events=("bounce_ignored",))
                 return self._touchdown(t)
             return NOTHING
 
@@ -381,10 +455,26 @@ class LegDetector:
             self._lock_count += 1
         else:
             self._lock_count = 0
+        doubting = p.doubt_compression_m > 0 or p.doubt_noise_sigmas > 0
+        if (
+            self.counted
+            and doubting
+            and not armed
+            and v <= p.lock_velocity_m_s
+            and t - self._touchdown_s >= p.double_support_s
+        ):
+            # The compression peaked too shallow or too slow to lock: it is over, and the next rise must be a
+            # touchdown or a doubt (not hidden in this phase until max_compression_s). With the doubt test on only.
+            self.phase = Phase.WAIT
+            self._touch_count = 0
+            self._doubt_forget()
+            return Decision(events=("no_lock",))
         if self._lock_count >= p.lock_debounce_samples:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
             self.lock_time_s = t
+            delay = t - self._touchdown_s
+            self._lock_delay_min_s = delay if self._lock_delay_min_s is None else min(self._lock_delay_min_s, delay)
             self._doubt_forget()
             if not self.synced:
                 self._engaged = False
@@ -392,6 +482,14 @@ class LegDetector:
             if not self.lock_allowed:
                 self._engaged = False
                 return Decision(events=("lock_withheld",))  # the count is not confirmed yet
+            if (
+                self.counted
+                and p.touch_window_early_fraction > 0
+                and (self._predicted_touchdown_s is None or t < self._predicted_touchdown_s)
+            ):
+                # Before the step the measured period predicts: the touchdown may have been a bounce.
+                self._engaged = False
+                return Decision(events=("lock_early_withheld",))
             self._engaged = True
             return Decision(engage=self.stance_leg, events=("lock",))
         if t - self._touchdown_s > p.max_compression_s:
@@ -401,36 +499,39 @@ class LegDetector:
         return NOTHING
 
     def _doubt_forget(self) -> None:
-        self._doubt_lows.clear()
-        self._doubt_peak_m = 0.0
-        self._doubt_top_x = -math.inf
+        self._rise.forget()
 
-    def _doubt(self, t: float, threshold_m: float) -> Decision | None:
-        """Follow the leg's position in WAIT/CLUTCHED: a rise of at least `threshold_m` above its lowest
-        position of the last `max_compression_s`, then a fall of half `threshold_m` from the top, without a
-        confirmed touchdown in between, may have been a step: the count is lost. Positions bound the
-        excursion, not the sign of the velocity estimate, which noise can flip inside one rise when few
-        samples fill the velocity window (a loaded loop sampling at 150-200 Hz split a 0.4 mm step in two)."""
-        x = self.position_m
-        lows = self._doubt_lows
-        while lows and lows[-1][1] >= x:
-            lows.pop()
-        lows.append((t, x))
-        while t - lows[0][0] > self.params.max_compression_s:
-            lows.popleft()
-        rise = x - lows[0][1]
-        if rise >= threshold_m:
-            self._doubt_peak_m = max(self._doubt_peak_m, rise)
-        if self._doubt_peak_m < threshold_m:
+    def _next_touchdown_s(self) -> float:
+        assert self._last_touchdown_s is not None and self._period_s is not None
+        return self._last_touchdown_s + self._period_s
+
+    def _doubt(self, t: float, v: float, dx_m: float) -> Decision | None:
+        """Follow the leg's mean position in WAIT/CLUTCHED: a rise of at least `doubt_threshold_m` above its lowest
+        mean of the last `max_compression_s`, then a fall of half of it, without a confirmed touchdown in between,
+        may have been a step: the count is lost. With a measured period and the touchdown window on, a rise that
+        began before the window is a bounce and is forgotten. Quiet samples (slow, no rise) measure the noise."""
+        p = self.params
+        threshold = self.doubt_threshold_m()
+        if abs(v) < 0.5 * p.touch_velocity_m_s and self._rise.rise_m() < 0.5 * threshold:
+            self.noise.add_quiet(dx_m, self._dt_s)
+        if self.phase is Phase.CLUTCHED and v < -0.5 * p.touch_velocity_m_s:
+            self._doubt_forget()  # the locked step's own rebound (the mean lags it): explained
             return None
-        self._doubt_top_x = max(self._doubt_top_x, x)
-        if self._doubt_top_x - x < 0.5 * threshold_m:
+        if not math.isfinite(threshold):
+            threshold = p.doubt_compression_m if p.doubt_compression_m > 0 else math.inf
+            if not math.isfinite(threshold):
+                return None
+        peak = self._rise.watch(t, threshold)
+        if peak is None:
             return None
-        peak = self._doubt_peak_m
+        began = self._rise.cross_s
         self._doubt_forget()
+        if self._windowed() and began is not None and began < self._next_touchdown_s() - self._early_window_s():
+            self._confirmed = 0
+            return Decision(events=("bounce_ignored",))
         return self._lose_sync(
-            f"uncertain touchdown: the leg compressed {peak * 1e3:.2f} mm without a confirmed touchdown "
-            f"(doubt_compression_m {threshold_m * 1e3:.2f} mm); a step may have been missed"
+            f"uncertain touchdown: the leg compressed {peak * 1e3:.3f} mm without a confirmed touchdown "
+            f"(threshold {threshold * 1e3:.3f} mm); a step may have been missed"
         )
 
     def _touchdown(self, t: float) -> Decision:
@@ -447,6 +548,7 @@ class LegDetector:
         self._doubt_forget()
         self.leg_index = (self.leg_index + 1) % len(self.legs)
         last = self._last_touchdown_s
+        self._predicted_touchdown_s = None if last is None or self._period_s is None else last + self._period_s
         self._last_touchdown_s = t
         lost = ""
         if self.counted and self.synced and last is not None:
@@ -459,8 +561,10 @@ class LegDetector:
                 )
             elif step > self._step_window_s():
                 lost = f"missed touchdown: step of {step:.3f} s (longest plausible {self._step_window_s():.3f} s)"
+            elif self._period_s is None:
+                self._period_s = step  # the first interval measures the period; it confirms nothing
             else:
-                self._period_s = step if self._period_s is None else 0.5 * (self._period_s + step)
+                self._period_s = 0.5 * (self._period_s + step)
                 self._confirmed += 1
         self.phase = Phase.DOUBLE_SUPPORT
         self._touch_count = 0

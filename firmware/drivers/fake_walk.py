@@ -4,8 +4,8 @@ A `FakeWalk` is the compression displacement (m) the stance-leg mechanism shows 
 one pulse per step, `compression_m * sin(pi * tau / (2 * compression_s))` for tau in [0, 2 compression_s]
 after each touchdown, touchdowns every `step_period_s` from `start_s`. Its variations are the fault
 scenarios of `rimless robot run --fake --fake-fault`: a first step too gentle for the touchdown test
-(`first_compression_m`), and a bounce of the first foot (`bounce_after_s`: the same foot lifts and comes
-down again; a bounce is not a step). The truth (`steps_before`, `stance_leg`) is written from this
+(`first_compression_m`), and a bounce of the foot of step `bounce_step` (`bounce_after_s` after its touchdown:
+the same foot lifts and comes down again; a bounce is not a step). The truth (`steps_before`, `stance_leg`) is written from this
 description alone, independently of the detector, so a lock can be judged against it.
 """
 
@@ -25,9 +25,10 @@ class FakeWalk:
     compression_m: float = 0.008
     compression_s: float = 0.06
     first_compression_m: float | None = None  # the first step's compression (None: as the others)
-    bounce_after_s: float | None = None  # the first foot comes down again this long after its touchdown
+    bounce_after_s: float | None = None  # step `bounce_step`'s foot comes down again this long after its touchdown
     bounce_compression_m: float = 0.004
     bounce_compression_s: float = 0.04
+    bounce_step: int = 0  # which step's foot bounces (0: the first)
 
     def touchdown_s(self, k: int) -> float:
         """True time of the k-th step's touchdown (s)."""
@@ -54,8 +55,8 @@ class FakeWalk:
         if tau < 2 * self.compression_s:
             amp = self.first_compression_m if (k == 0 and self.first_compression_m is not None) else self.compression_m
             x += amp * math.sin(math.pi * tau / (2 * self.compression_s))
-        if k == 0 and self.bounce_after_s is not None:
-            b = tau - self.bounce_after_s
+        if self.bounce_after_s is not None:
+            b = t - self.touchdown_s(self.bounce_step) - self.bounce_after_s
             if 0.0 <= b < 2 * self.bounce_compression_s:
                 x += self.bounce_compression_m * math.sin(math.pi * b / (2 * self.bounce_compression_s))
         return x

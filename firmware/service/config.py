@@ -21,7 +21,12 @@ from rimless.firmware.errors import ConfigError, ConfigFileError
 # The robot's detector defaults differ from the library's on the leg-count safety checks (a counted leg locks
 # only after two confirmed step intervals; an unconfirmed compression of 0.3 mm loses the count). The
 # firmware-in-the-loop simulator keeps the library defaults unless it reads a robot.toml.
-ROBOT_DETECTOR_SAFETY: dict[str, Any] = {"confirm_steps": 2, "doubt_compression_m": 0.0003}
+ROBOT_DETECTOR_SAFETY: dict[str, Any] = {
+    "confirm_steps": 2,
+    "doubt_compression_m": 0.0003,
+    "doubt_noise_sigmas": 6.0,
+    "touch_window_early_fraction": 0.5,
+}
 ROBOT_DETECTOR = DetectorParams(**ROBOT_DETECTOR_SAFETY)
 
 DEFAULT_CLUTCH_PINS = (17, 27, 22, 23, 24, 16, 20, 21)  # BCM; all >= 9, so pulled down at power-on

@@ -63,16 +63,16 @@ def test_a_normal_walk_sampled_slowly_raises_no_doubt(rate_hz) -> None:
         assert len(res.engages) >= 4, seed
 
 
-def test_a_normal_walk_locks_every_step_from_the_third_touchdown_on_the_right_leg() -> None:
-    """The price of confirmation: two unclutched steps after arm, then one lock per step, all on the truth's
-    stance leg, and no fault."""
+def test_a_normal_walk_locks_every_step_from_the_fourth_touchdown_on_the_right_leg() -> None:
+    """The price of confirmation: three unclutched steps after arm (the first interval measures the period, the
+    next two confirm it), then one lock per step, all on the truth's stance leg, and no fault."""
     res = walk_controller(NORMAL, ROBOT_DETECTOR, duration_s=3.0)
     assert res.faults() == []
     assert res.airborne == []
-    assert res.names().count("lock_withheld") == 2
+    assert res.names().count("lock_withheld") == 3
     first = res.engages[0][0]
-    assert NORMAL.touchdown_s(2) < first < NORMAL.touchdown_s(3)
-    n_steps_after = NORMAL.steps_before(3.0 - 1 / 300) - 2  # touchdowns 3.. that had time to lock
+    assert NORMAL.touchdown_s(3) < first < NORMAL.touchdown_s(4)
+    n_steps_after = NORMAL.steps_before(3.0 - 1 / 300) - 3  # touchdowns 4.. that had time to lock
     assert len(res.engages) in (n_steps_after, n_steps_after - 1)
 
 
