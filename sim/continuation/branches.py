@@ -33,8 +33,12 @@ from rimless.sim.model.params import WheelParams
 
 START_SLOPE_RAD = 0.05
 MIN_SLOPE_RAD = 1e-4
-#: where gaits are searched again below the start slope, as fractions of it (0.05 rad: 0.04, 0.032, 0.026, 0.022 rad)
-SEARCH_SLOPE_FRACTIONS = (0.8, 0.64, 0.52, 0.44)
+#: where gaits are searched again below the start slope, as fractions of it (0.05 rad: 0.04, 0.032, 0.026, then
+#: every 0.001 rad from 0.023 to 0.019 rad, where the critical slopes of Table 1's neighbourhood lie)
+SEARCH_SLOPE_FRACTIONS = (0.8, 0.64, 0.52, 0.46, 0.44, 0.42, 0.40, 0.38)
+#: theta'+ guesses per search slope: 14 (the start slope's) missed the stable VE "slow" gait at k = 3000 N/m,
+#: 0.022 rad, that 40 find
+SEARCH_GUESSES = 40
 #: a gait found at a search slope lies on an already traced branch when its section point is this close (rad,
 #: rad/s, max norm) to the branch interpolated at that slope; distinct gaits differ by 0.1 rad/s and more
 SAME_BRANCH_TOL = 0.02
@@ -371,13 +375,14 @@ def trace_gait_branches(
     max_points: int = 200,
     progress: Callable[[str], None] | None = None,
     search_slopes_rad: tuple[float, ...] = (),
+    search_guesses: int = SEARCH_GUESSES,
 ) -> list[GaitBranch]:
     """Every period-1 gait at start_slope_rad and its branch down in slope (see module docstring).
 
     to_end: continue past the first special point to the end of the branch (or max_points) instead of
     stopping there. search_slopes_rad: further slopes (rad, below the start slope) at which gaits are searched
-    again; each stable, contact-valid one not on a branch already traced is followed down too (rows after those
-    of the start slope, `found_by` "search at a lower slope").
+    again (search_guesses theta'+ guesses each); each stable, contact-valid one not on a branch already traced is
+    followed down too (rows after those of the start slope, `found_by` "search at a lower slope").
     """
     from rimless.sim.step.backend import make_map
     from rimless.sim.step.poincare import find_gaits
@@ -407,7 +412,7 @@ def trace_gait_branches(
         q = params.replace(slope_rad=slope)
         qmap = make_map(q, model, backend=backend, rtol=rtol)
         try:
-            found = find_gaits(qmap, n_guesses=n_guesses)  # unilateral gaits only: a candidate must be valid
+            found = find_gaits(qmap, n_guesses=search_guesses)  # unilateral gaits only: a candidate must be valid
         except StepFailure:
             continue
         for fp in sorted(found, key=lambda g: g.step.period_s):

@@ -144,7 +144,8 @@ def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
                 continue
             gait = ""
             if "branch_label" in walked and isinstance(walked["branch_label"].iloc[0], str):
-                gait = f", {model} {walked['branch_label'].iloc[0]} gait ({walked['gait_period_s'].iloc[0]:.3f} s)"
+                name = "" if model == "ER" else f" {walked['branch_label'].iloc[0]}"
+                gait = f", {model}{name} gait, step {walked['gait_period_s'].iloc[0]:.3f} s"
             ax.plot(
                 walked["step"], walked["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m{gait}"
             )

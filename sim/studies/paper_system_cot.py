@@ -165,10 +165,11 @@ def k_rows(
         "er_minus_ve_least_cot_at_zero_power": hold.get("cot_difference_at_zero", math.nan),
     }
     for ve in brs["ve"]:
-        h = break_even(brs["er"], [ve], power, "hold_power_w")
+        h = break_even(brs["er"], [ve], power, "hold_power_w", interval=True)
         s = break_even(brs["er"], [ve], power, "switch_energy_j")
         row[f"break_even_hold_power_w_vs_ve_{ve.label}"] = h["value"]
         row[f"break_even_hold_power_tie_vs_ve_{ve.label}"] = bool(h.get("tie"))
+        row[f"break_even_hold_power_interval_w_vs_ve_{ve.label}"] = h.get("interval")
         row[f"break_even_switch_energy_j_vs_ve_{ve.label}"] = s["value"]
     return row, branch_rows
 
@@ -288,9 +289,15 @@ def system_cot_paper(
             key.rsplit("_vs_ve_", 1)[1]: v for key, v in at.items() if key.startswith("break_even_hold_power_w_vs_ve_")
         }
         files += figure_system_cot(figure_series(fig_brs, power), fig_k, at["break_even_hold_power_w"], out, per)
+
+    def _vs(key: str, v: float | None) -> str:
+        if at.get(key.replace("_hold_power_w_", "_hold_power_tie_")):
+            return "tie"
+        iv = at.get(key.replace("_hold_power_w_", "_hold_power_interval_w_"))
+        return _fmt(v, "W") + (f" ({iv[0]:.3g}-{iv[1]:.3g} W)" if iv else "")
+
     vs = "; ".join(
-        f"vs VE {key.rsplit('_vs_ve_', 1)[1]} "
-        + ("tie" if at.get(key.replace("_hold_power_w_", "_hold_power_tie_")) else _fmt(v, "W"))
+        f"vs VE {key.rsplit('_vs_ve_', 1)[1]} {_vs(key, v)}"
         for key, v in at.items()
         if key.startswith("break_even_hold_power_w_vs_ve_")
     )
