@@ -33,12 +33,14 @@ from rimless.sim.model.params import WheelParams
 
 START_SLOPE_RAD = 0.05
 MIN_SLOPE_RAD = 1e-4
-#: where gaits are searched again below the start slope, as fractions of it (0.05 rad: 0.04, 0.032, 0.026, then
-#: every 0.001 rad from 0.023 to 0.019 rad, where the critical slopes of Table 1's neighbourhood lie)
-SEARCH_SLOPE_FRACTIONS = (0.8, 0.64, 0.52, 0.46, 0.44, 0.42, 0.40, 0.38)
-#: theta'+ guesses per search slope: 14 (the start slope's) missed the stable VE "slow" gait at k = 3000 N/m,
-#: 0.022 rad, that 40 find
-SEARCH_GUESSES = 40
+#: where gaits are searched again below the start slope, as fractions of it (0.05 rad: 0.04, 0.03, 0.024, 0.022 and
+#: 0.0205 rad; the critical slopes of Table 1's neighbourhood lie at 0.020-0.027 rad)
+SEARCH_SLOPE_FRACTIONS = (0.8, 0.6, 0.48, 0.44, 0.41)
+#: theta'+ guesses per search slope over SEARCH_THETA_DOT_RAD_S: 14 guesses over the start slope's 0.8-6 rad/s
+#: missed the stable VE "slow" gait at k = 3000 N/m, 0.022 rad (theta'+ 1.98 rad/s), that 40 over 0.8-6 find; the
+#: gaits near the critical slopes start their step at 1.8-2.7 rad/s
+SEARCH_GUESSES = 20
+SEARCH_THETA_DOT_RAD_S = (1.0, 3.5)
 #: a gait found at a search slope lies on an already traced branch when its section point is this close (rad,
 #: rad/s, max norm) to the branch interpolated at that slope; distinct gaits differ by 0.1 rad/s and more
 SAME_BRANCH_TOL = 0.02
@@ -381,7 +383,7 @@ def trace_gait_branches(
 
     to_end: continue past the first special point to the end of the branch (or max_points) instead of
     stopping there. search_slopes_rad: further slopes (rad, below the start slope) at which gaits are searched
-    again (search_guesses theta'+ guesses each); each stable, contact-valid one not on a branch already traced is
+    again (search_guesses theta'+ guesses over SEARCH_THETA_DOT_RAD_S each); each stable, contact-valid one not on a branch already traced is
     followed down too (rows after those of the start slope, `found_by` "search at a lower slope").
     """
     from rimless.sim.step.backend import make_map
@@ -412,10 +414,11 @@ def trace_gait_branches(
         q = params.replace(slope_rad=slope)
         qmap = make_map(q, model, backend=backend, rtol=rtol)
         try:
-            found = find_gaits(qmap, n_guesses=search_guesses)  # unilateral gaits only: a candidate must be valid
+            # unilateral gaits only: a candidate must be valid
+            found = find_gaits(qmap, theta_dot_range=SEARCH_THETA_DOT_RAD_S, n_guesses=search_guesses)
         except StepFailure:
             continue
-        for fp in sorted(found, key=lambda g: g.step.period_s):
+        for fp in sorted(found, key=lambda g: g.recorded_step.period_s):
             if not fp.stable or _on_traced_branch(out, slope, fp.z) is not None:
                 continue
             n += 1

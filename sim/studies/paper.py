@@ -354,8 +354,8 @@ def _tol(r: dict[str, Any]) -> float:
     """How well the row's critical slope is located, rad (0 when the row does not say)."""
     for key in ("critical_slope_tol_rad", "end_location_tol_rad"):
         v = r.get(key)
-        if _finite(v):
-            return float(v)
+        if isinstance(v, float) and math.isfinite(v):
+            return v
     return 0.0
 
 

@@ -118,7 +118,7 @@ class SweepOptions:
     to_end: bool = False
     # further slopes (rad) at which gaits are searched (rimless.sim.continuation.branches.search_slopes)
     search_slopes_rad: tuple[float, ...] = ()
-    search_guesses: int = 40  # theta'+ guesses at each search slope
+    search_guesses: int = 20  # theta'+ guesses at each search slope (branches.SEARCH_THETA_DOT_RAD_S)
     # each critical slope also re-located at rtol x 10 (critical_slope_rtol_shift_rad, critical_slope_tol_rad)
     locate_tolerance: bool = False
 
@@ -176,7 +176,7 @@ def compute_point(point: dict[str, Any], options: SweepOptions) -> dict[str, Any
             n_guesses=options.n_guesses,
             to_end=options.to_end,
             search_slopes_rad=tuple(getattr(options, "search_slopes_rad", ())),
-            search_guesses=int(getattr(options, "search_guesses", 40)),
+            search_guesses=int(getattr(options, "search_guesses", 20)),
         )
     except StepFailure as err:  # no gait could even be searched for: one row saying so
         branches = []

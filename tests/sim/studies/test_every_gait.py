@@ -32,6 +32,12 @@ def ve_swept():
     return compute_point(_point("ve"), options)
 
 
+@pytest.fixture(scope="module")
+def er_swept():
+    options = SweepOptions(backend="fast", start_slope_rad=0.05, search_slopes_rad=search_slopes(0.05))
+    return compute_point(_point("er"), options)
+
+
 def test_the_ve_medium_gait_at_k_2000_is_real_and_the_sweep_lists_it(ve_swept):
     truth = check_gait("ve", K, SLOPE, (-0.45, 2.05))
     assert truth.residual < 1e-9
@@ -65,12 +71,22 @@ def test_the_start_slope_alone_misses_it():
     assert crit and min(crit) > ER_STALL
 
 
-def test_the_system_cot_table_takes_the_lower_gait(ve_swept):
+def test_the_headline_table_lists_the_ve_gait_below_er(ve_swept, er_swept):
+    from rimless.sim.studies.paper import headline_table
+
+    table = headline_table(er_swept["rows"] + ve_swept["rows"], [], WheelParams())
+    rows = {r["quantity"]: r["ours"] for r in table}
+    below = rows["VE gaits that walk below ER's critical slope"]
+    assert "k = 2000: VE medium (found at" in below
+    assert f"down to {math.degrees(VE_MEDIUM_CRITICAL):.4f} deg" in below
+    assert "k = 2000: +3.8% vs VE medium" in rows["ER CoT against the least stable, valid VE gait, per k"]
+
+
+def test_the_system_cot_table_takes_the_lower_gait(ve_swept, er_swept):
     from rimless.sim.model.electrical import ClutchPower
     from rimless.sim.studies.paper_system_cot import branches_from_sweep, k_rows
 
-    options = SweepOptions(backend="fast", start_slope_rad=0.05, search_slopes_rad=search_slopes(0.05))
-    er = compute_point(_point("er"), options)
+    er = er_swept
     rows, points = er["rows"] + ve_swept["rows"], er["points"] + ve_swept["points"]
     brs = branches_from_sweep(rows, points, K, "fast", 1e-10)
     assert min(b.lo_rad for b in brs["er"]) == pytest.approx(ER_STALL, abs=1e-5)
