@@ -305,7 +305,9 @@ def figure_cot(
         g = g.sort_values("k")
         name = "ER" if label == "er" else f"VE {label}"
         col = colours.get(label, "C5")
-        ax.plot(g["k"], g["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends)")
+        # two gaits of one label at one k (found at different slopes): the line joins the least, markers show all
+        least = g.loc[g.groupby("k")["cot"].idxmin()].sort_values("k")
+        ax.plot(least["k"], least["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends; line: least)")
         v = g[g.contact_valid]
         nv = g[~g.contact_valid]
         ax.plot(v["k"], v["cot"], "o", color=col, ms=6)
