@@ -6,7 +6,15 @@ continuation in the slope, decreasing, until its first special point (fold, peri
 Neimark-Sacker, loss of contact validity, stall or the end of the branch). For a gait stable and valid
 at the start, that point is the branch's critical slope (model.md section 7: the smallest slope of the
 followed branch with a stable, valid period-1 gait); for an unstable or invalid one it is where the branch
-first changes character. Slopes in rad; forces N; periods s.
+first changes character.
+
+One start slope misses gaits: a stable, valid segment of a branch need not reach the start slope (at k = 2000 N/m
+the VE "medium" gait walks from 0.0224 rad up to a fold at 0.0477 rad, so a search at 0.05 rad never meets it).
+`search_slopes_rad` names further slopes at which gaits are searched again (search_slopes gives the default set);
+each gait stable and contact-valid there, not already on a traced branch, is followed down to the end of its
+stable, valid part too (rows with `found_at_slope_rad` = that slope). Assumption, carried in the rows: a stable,
+valid segment that contains none of the search slopes is not found (the spacing of the slopes is the limit).
+Slopes in rad; forces N; periods s.
 """
 
 from __future__ import annotations
@@ -25,6 +33,22 @@ from rimless.sim.model.params import WheelParams
 
 START_SLOPE_RAD = 0.05
 MIN_SLOPE_RAD = 1e-4
+#: where gaits are searched again below the start slope, as fractions of it (0.05 rad: 0.04, 0.03, 0.024, 0.022 and
+#: 0.0205 rad; the critical slopes of Table 1's neighbourhood lie at 0.020-0.027 rad)
+SEARCH_SLOPE_FRACTIONS = (0.8, 0.6, 0.48, 0.44, 0.41)
+#: theta'+ guesses per search slope over SEARCH_THETA_DOT_RAD_S: 14 guesses over the start slope's 0.8-6 rad/s
+#: missed the stable VE "slow" gait at k = 3000 N/m, 0.022 rad (theta'+ 1.98 rad/s), that 40 over 0.8-6 find; the
+#: gaits near the critical slopes start their step at 1.8-2.7 rad/s
+SEARCH_GUESSES = 20
+SEARCH_THETA_DOT_RAD_S = (1.0, 3.5)
+#: a gait found at a search slope lies on an already traced branch when its section point is this close (rad,
+#: rad/s, max norm) to the branch interpolated at that slope; distinct gaits differ by 0.1 rad/s and more
+SAME_BRANCH_TOL = 0.02
+
+
+def search_slopes(start_slope_rad: float, fractions: tuple[float, ...] = SEARCH_SLOPE_FRACTIONS) -> tuple[float, ...]:
+    """The default slopes (rad) below `start_slope_rad` at which gaits are searched again."""
+    return tuple(float(start_slope_rad) * f for f in fractions)
 
 
 def branch_label(model: str, period_s: float, stable: bool, k: float = 2700.0) -> str:
@@ -74,6 +98,7 @@ class GaitBranch:
     branch: Branch | None
     end: SpecialPoint | None
     error: str = ""
+    found_by: str = "start-slope"  # or "search at a lower slope" (a gait the start slope does not have)
 
     @property
     def stable_at_start(self) -> bool:
@@ -119,6 +144,8 @@ class GaitBranch:
             "hub_mass_kg": p.hub_mass_kg,
             "leg_mass_kg": p.leg_mass_kg,
             "start_slope_rad": p.slope_rad,
+            "found_at_slope_rad": p.slope_rad,
+            "found_by": self.found_by,
             "branch": self.id,
             "branch_label": self.label,
             "theta_plus_rad": float(self.start.z[0]),
@@ -146,6 +173,11 @@ class GaitBranch:
             "reason": self.reason,
             "detail": self.error or (self.end.detail if self.end is not None else ""),
             "end_slope_rad": self.end.p if self.end is not None else math.nan,
+            "end_location_tol_rad": abs(self.end.bracket_p[1] - self.end.bracket_p[0])
+            if self.end is not None
+            else math.nan,
+            "end_theta_plus_rad": float(end_pt.z[0]) if end_pt is not None else math.nan,
+            "end_theta_dot_plus_rad_s": float(end_pt.z[1]) if end_pt is not None else math.nan,
             "end_max_abs_eigenvalue": end_pt.max_abs_eigenvalue if end_pt is not None else math.nan,
             "end_step_period_s": end_pt.period_s if end_pt is not None else math.nan,
             "end_energy_ratio": end_facts.energy_ratio if end_facts is not None else math.nan,
@@ -162,6 +194,46 @@ class GaitBranch:
             "branch_points": len(pts),
             "map_evaluations": self.branch.map_evaluations if self.branch else 0,
             "continuation_s": self.branch.seconds if self.branch else 0.0,
+        }
+
+    def location_tolerance(self, backend: str, rtol: float, factor: float = 10.0) -> dict[str, float]:
+        """How well the critical slope is known (rad): the final bracket of its location, and how far it moves
+        when the map is integrated with rtol x `factor` (re-traced down from the branch point just above it).
+        critical_slope_tol_rad is the larger; NaN keys when the gait has no critical slope or the re-trace fails."""
+        nan = {"critical_slope_bracket_rad": math.nan, "critical_slope_rtol_shift_rad": math.nan}
+        crit = self.critical_slope_rad
+        if crit is None or self.end is None or self.branch is None:
+            return {**nan, "critical_slope_tol_rad": math.nan}
+        from rimless.sim.step.backend import make_map
+
+        bracket = abs(self.end.bracket_p[1] - self.end.bracket_p[0])
+        above = [pt for pt in self.branch.points if pt.p > crit and pt.arclength < self.end.point.arclength]
+        shift = math.nan
+        if above:
+            pt = above[-1]
+            q = self.params.replace(slope_rad=pt.p)
+            held = bool(self.start.facts is not None and self.start.facts.bilateral)
+
+            def factory(w: WheelParams) -> Any:
+                from rimless.sim.step.poincare import bilateral_map
+
+                m = make_map(w, self.model, backend=backend, rtol=rtol * factor)
+                return bilateral_map(m) if held else m
+
+            try:
+                br = ArclengthContinuation(factory, q, self.model, "slope", max_points=60).trace(
+                    pt.z, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=True
+                )
+                sp = br.first_loss()
+                if sp is not None and sp.kind == self.end.kind:
+                    shift = abs(sp.p - crit)
+            except StepFailure:
+                pass
+        tol = max(bracket, shift) if shift == shift else bracket
+        return {
+            "critical_slope_bracket_rad": bracket,
+            "critical_slope_rtol_shift_rad": shift,
+            "critical_slope_tol_rad": tol,
         }
 
     def _valid_part(self) -> dict[str, Any]:
@@ -231,6 +303,67 @@ def _start_point(pmap: Any, fp: Any, model: str) -> BranchPoint:
     )
 
 
+def _on_traced_branch(branches: list[GaitBranch], slope_rad: float, z: np.ndarray) -> GaitBranch | None:
+    """The traced branch through (slope_rad, z), if any: z within SAME_BRANCH_TOL of the branch linearly
+    interpolated between two neighbouring points that straddle the slope (or of a point at it)."""
+    z = np.asarray(z, dtype=float)
+    for gb in branches:
+        pts = gb.branch.points if gb.branch is not None else [gb.start]
+        for a, b in zip(pts, pts[1:] or pts):
+            lo, hi = sorted((a.p, b.p))
+            if not lo - 1e-12 <= slope_rad <= hi + 1e-12:
+                continue
+            w = 0.0 if hi - lo < 1e-15 else (slope_rad - a.p) / (b.p - a.p)
+            if float(np.max(np.abs(a.z + w * (b.z - a.z) - z))) < SAME_BRANCH_TOL:
+                return gb
+    return None
+
+
+def _trace_one(
+    fp: Any,
+    gid: str,
+    model: str,
+    start_params: WheelParams,
+    pmap: Any,
+    *,
+    backend: str,
+    rtol: float,
+    to_end: bool,
+    max_points: int,
+    found_by: str = "start-slope",
+) -> GaitBranch:
+    """One gait (a FixedPoint at start_params.slope_rad) followed down in slope (see trace_gait_branches)."""
+    from rimless.sim.step.backend import make_map
+    from rimless.sim.step.poincare import bilateral_map
+
+    held = getattr(fp, "bilateral", False)  # violates unilateral contact: followed with the foot held
+    start = _start_point(bilateral_map(pmap) if held else pmap, fp, model)
+    label = branch_label(model, start.period_s, start.stable, start_params.k)
+    gid = f"{gid}-{label}"
+
+    def factory(q: WheelParams) -> Any:
+        m = make_map(q, model, backend=backend, rtol=rtol)
+        return bilateral_map(m) if held else m
+
+    cont = ArclengthContinuation(factory, start_params, model, "slope", max_points=max_points)
+    # a gait invalid at the start may become valid lower down: followed (foot held) past that point until
+    # it stops being stable, so the row can say where its valid part lies
+    held_stable = held and start.stable and not to_end
+    try:
+        br = cont.trace(
+            fp.z,
+            direction=-1.0,
+            p_min=MIN_SLOPE_RAD,
+            stop_at_first_loss=not (to_end or held_stable),
+            start_facts=start.facts,
+            stop=(lambda pt: not pt.stable) if held_stable else None,
+        )
+    except StepFailure as err:
+        return GaitBranch(gid, label, model, start_params, start, None, None, error=str(err), found_by=found_by)
+    end = next(iter(br.special), None)
+    return GaitBranch(gid, label, model, start_params, start, br, end, found_by=found_by)
+
+
 def trace_gait_branches(
     params: WheelParams,
     model: str,
@@ -243,14 +376,18 @@ def trace_gait_branches(
     to_end: bool = False,
     max_points: int = 200,
     progress: Callable[[str], None] | None = None,
+    search_slopes_rad: tuple[float, ...] = (),
+    search_guesses: int = SEARCH_GUESSES,
 ) -> list[GaitBranch]:
     """Every period-1 gait at start_slope_rad and its branch down in slope (see module docstring).
 
     to_end: continue past the first special point to the end of the branch (or max_points) instead of
-    stopping there.
+    stopping there. search_slopes_rad: further slopes (rad, below the start slope) at which gaits are searched
+    again (search_guesses theta'+ guesses over SEARCH_THETA_DOT_RAD_S each); each stable, contact-valid one not on a branch already traced is
+    followed down too (rows after those of the start slope, `found_by` "search at a lower slope").
     """
     from rimless.sim.step.backend import make_map
-    from rimless.sim.step.poincare import bilateral_map, find_gaits
+    from rimless.sim.step.poincare import find_gaits
 
     start_params = params.replace(slope_rad=start_slope_rad)
     pmap = make_map(start_params, model, backend=backend, rtol=rtol)
@@ -258,33 +395,65 @@ def trace_gait_branches(
         gaits = find_gaits(pmap, n_guesses=n_guesses, include_invalid=True)
     out: list[GaitBranch] = []
     for i, fp in enumerate(sorted(gaits, key=lambda g: g.step.period_s)):
-        held = getattr(fp, "bilateral", False)  # violates unilateral contact: followed with the foot held
-        start = _start_point(bilateral_map(pmap) if held else pmap, fp, model)
-        label = branch_label(model, start.period_s, start.stable, params.k)
-        gid = f"{model}-{i + 1}-{label}"
         if progress:
-            progress(f"{model} k={params.k:g}: branch {gid}")
-
-        def factory(q: WheelParams, held: bool = held) -> Any:
-            m = make_map(q, model, backend=backend, rtol=rtol)
-            return bilateral_map(m) if held else m
-
-        cont = ArclengthContinuation(factory, start_params, model, "slope", max_points=max_points)
-        # a gait invalid at the start may become valid lower down: followed (foot held) past that point until
-        # it stops being stable, so the row can say where its valid part lies
-        held_stable = held and start.stable and not to_end
+            progress(f"{model} k={params.k:g}: branch {i + 1} at {start_slope_rad:.5f} rad")
+        gb = _trace_one(
+            fp,
+            f"{model}-{i + 1}",
+            model,
+            start_params,
+            pmap,
+            backend=backend,
+            rtol=rtol,
+            to_end=to_end,
+            max_points=max_points,
+        )
+        out.append(gb)
+    n = len(out)
+    for slope in sorted((float(x) for x in search_slopes_rad if 0 < x < start_slope_rad), reverse=True):
+        q = params.replace(slope_rad=slope)
+        qmap = make_map(q, model, backend=backend, rtol=rtol)
         try:
-            br = cont.trace(
-                fp.z,
-                direction=-1.0,
-                p_min=MIN_SLOPE_RAD,
-                stop_at_first_loss=not (to_end or held_stable),
-                start_facts=start.facts,
-                stop=(lambda pt: not pt.stable) if held_stable else None,
-            )
-        except StepFailure as err:
-            out.append(GaitBranch(gid, label, model, start_params, start, None, None, error=str(err)))
+            # unilateral gaits only: a candidate must be valid
+            found = find_gaits(qmap, theta_dot_range=SEARCH_THETA_DOT_RAD_S, n_guesses=search_guesses)
+        except StepFailure:
             continue
-        end = next(iter(br.special), None)
-        out.append(GaitBranch(gid, label, model, start_params, start, br, end))
+        for fp in sorted(found, key=lambda g: g.recorded_step.period_s):
+            if not fp.stable or _on_traced_branch(out, slope, fp.z) is not None:
+                continue
+            n += 1
+            if progress:
+                progress(f"{model} k={params.k:g}: branch {n} found at {slope:.5f} rad")
+            gb = _trace_one(
+                fp,
+                f"{model}-{n}",
+                model,
+                q,
+                qmap,
+                backend=backend,
+                rtol=rtol,
+                to_end=to_end,
+                max_points=max_points,
+                found_by="search at a lower slope",
+            )
+            if not (gb.stable_at_start and gb.contact_valid_at_start) or _same_end(out, gb):
+                n -= 1
+                continue
+            out.append(gb)
     return out
+
+
+def _same_end(branches: list[GaitBranch], gb: GaitBranch) -> bool:
+    """gb's stable, valid part ends where one of `branches` ends (the same segment, found from another slope)."""
+    if gb.end is None:
+        return False
+    for other in branches:
+        if other.end is None or other.end.kind != gb.end.kind:
+            continue
+        tol = max(abs(other.end.bracket_p[1] - other.end.bracket_p[0]), abs(gb.end.bracket_p[1] - gb.end.bracket_p[0]))
+        if (
+            abs(other.end.p - gb.end.p) <= 10 * tol + 1e-9
+            and float(np.max(np.abs(other.end.point.z - gb.end.point.z))) < SAME_BRANCH_TOL
+        ):
+            return True
+    return False

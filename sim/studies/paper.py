@@ -115,7 +115,9 @@ def _typical(params: WheelParams, backend: str, rtol: float, steps: int = 2) -> 
 def energy_ratio_series(
     params: WheelParams, backend: str, rtol: float, ks: tuple[float, ...] = ENERGY_K, steps: int = ENERGY_STEPS
 ) -> list[dict[str, Any]]:
-    """E+/E- of each step from a perturbed start (theta'+ x PERTURBATION of the fixed point), per k and model."""
+    """E+/E- of each step from a perturbed start (theta'+ x PERTURBATION of the fixed point), per k and model;
+    each row names the gait it starts from (`branch_label`, `gait_period_s`): for VE, Newton from the default
+    guess (or the gaits search) may land on the fast gait at one k and the medium one at another."""
     from rimless.sim.model.failures import StepFailure
 
     rows = []
@@ -135,7 +137,12 @@ def energy_ratio_series(
                     }
                 )
                 continue
+            from rimless.sim.continuation.branches import branch_label
+
+            period = fp.recorded_step.period_s
+            label = branch_label(model, period, fp.stable, float(k))  # which VE gait the curve starts from
             z = np.array([fp.z[0], fp.z[1] * PERTURBATION])
+            n0 = len(rows)
             for i in range(steps):
                 try:
                     st = pmap.step(z)
@@ -160,6 +167,10 @@ def energy_ratio_series(
                     }
                 )
                 z = np.array([st.y_plus[2], st.y_plus[7]])
+            for r in rows[n0:]:
+                r.update(
+                    {"branch_label": label, "gait_period_s": period, "gait_max_abs_eigenvalue": fp.max_abs_eigenvalue}
+                )
     return rows
 
 
@@ -336,6 +347,27 @@ def validity_range(
     return out
 
 
+def _finite(x: Any) -> bool:
+    return isinstance(x, float) and math.isfinite(x)
+
+
+def _tol(r: dict[str, Any]) -> float:
+    """How well the row's critical slope is located, rad (0 when the row does not say)."""
+    for key in ("critical_slope_tol_rad", "end_location_tol_rad"):
+        v = r.get(key)
+        if isinstance(v, float) and math.isfinite(v):
+            return v
+    return 0.0
+
+
+def _ve_name(r: dict[str, Any]) -> str:
+    """VE <label>, with the slope it was found at when that is not the start slope."""
+    name = f"VE {r.get('branch_label', '')}"
+    if r.get("found_by", "start-slope") != "start-slope":
+        name += f" (found at {math.degrees(r['start_slope_rad']):.3f} deg)"
+    return name
+
+
 def _fmt_range(v: Any) -> str:
     return f"{v[0]}-{v[1]}" if isinstance(v, tuple) else f"{v}"
 
@@ -347,6 +379,7 @@ def headline_table(
     ranges: list[dict[str, Any]] | None = None,
 ) -> list[dict[str, Any]]:
     """Every headline number of the paper beside ours, with the difference explained."""
+    from rimless.sim.continuation.branches import search_slopes
     from rimless.sim.model.rigid import RigidWheel
 
     def pick(model: str, k: float, label: str | None = None) -> list[dict[str, Any]]:
@@ -392,7 +425,14 @@ def headline_table(
             "note": "one value per VE branch (model.md section 9); the paper follows one branch",
         }
     )
-    er0 = pick("ER", k0)
+    er0 = [r for r in pick("ER", k0) if r.get("branch")]
+    er_eigs = [
+        float(x["max_abs_eigenvalue"])
+        for x in rows
+        if x["model"] == "ER"
+        and x.get("branch")
+        and x.get("max_abs_eigenvalue", math.nan) == x.get("max_abs_eigenvalue")
+    ]
     if er0:
         r = er0[0]
         table.append(
@@ -407,26 +447,94 @@ def headline_table(
             {
                 "quantity": "ER energy ratio E+/E-",
                 "paper": "about 0.85",
-                "ours": f"{r['energy_ratio']:.3f}",
+                "ours": f"{r.get('energy_ratio', math.nan):.3f}",
                 "note": f"at the start slope, k = {k0:g}",
             }
         )
+    else:
+        table.append(
+            {
+                "quantity": f"ER critical slope at k = {k0:g} (deg)",
+                "paper": "-",
+                "ours": "no period-1 gait",
+                "note": "; ".join(str(r.get("detail", "")) for r in pick("ER", k0)) or "no ER row at this k",
+            }
+        )
+    if er_eigs:
         table.append(
             {
                 "quantity": "ER max |eig|",
                 "paper": "0.75-0.8",
-                "ours": f"{min(x['max_abs_eigenvalue'] for x in rows if x['model'] == 'ER' and x['max_abs_eigenvalue'] == x['max_abs_eigenvalue']):.3f}"
-                f"-{max(x['max_abs_eigenvalue'] for x in rows if x['model'] == 'ER' and x['max_abs_eigenvalue'] == x['max_abs_eigenvalue']):.3f}",
+                "ours": f"{min(er_eigs):.3f}-{max(er_eigs):.3f}",
                 "note": "largest along each ER branch, over the k grid",
             }
         )
-    ve_er = [r for r in pick("VE", k0) if r["energy_ratio"] == r["energy_ratio"] and r["stable_at_start"]]
+    ve_er = [
+        r
+        for r in pick("VE", k0)
+        if r.get("branch") and r.get("energy_ratio", math.nan) == r.get("energy_ratio") and r.get("stable_at_start")
+    ]
     table.append(
         {
             "quantity": "VE energy ratio E+/E-",
             "paper": "0.79-0.81",
-            "ours": "; ".join(f"{r['branch_label']} {r['energy_ratio']:.3f}" for r in ve_er),
+            "ours": "; ".join(f"{r['branch_label']} {r['energy_ratio']:.3f}" for r in ve_er) or "no stable VE gait",
             "note": f"per VE gait at the start slope, k = {k0:g}",
+        }
+    )
+    for k in ks_all:  # a k without any gait is a result, said in the table
+        for model in ("ER", "VE"):
+            if pick(model, k) and not [r for r in pick(model, k) if r.get("branch")]:
+                table.append(
+                    {
+                        "quantity": f"{model} gaits at k = {k:g} N/m",
+                        "paper": "-",
+                        "ours": "no period-1 gait",
+                        "note": "; ".join(dict.fromkeys(str(r.get("detail", "")) for r in pick(model, k))),
+                    }
+                )
+    # ER against every stable, valid VE gait per k (gaits searched at the start slope and below)
+    below, vs_least = [], []
+    for k in ks_all:
+        er_c = [r["critical_slope_rad"] for r in pick("ER", k) if _finite(r.get("critical_slope_rad"))]
+        ve_rows = [r for r in pick("VE", k) if _finite(r.get("critical_slope_rad")) and r.get("contact_valid_at_start")]
+        if not er_c or not ve_rows:
+            continue
+        er_min = min(er_c)
+        least = min(ve_rows, key=lambda r: r["critical_slope_rad"])
+        tol = _tol(least) + max(_tol(r) for r in pick("ER", k) if _finite(r.get("critical_slope_rad")))
+        diff = er_min - least["critical_slope_rad"]
+        verdict = (
+            "tie"
+            if abs(diff) <= tol
+            else f"{100.0 * (math.tan(er_min) / math.tan(least['critical_slope_rad']) - 1):+.1f}%"
+        )
+        vs_least.append(f"k = {k:g}: {verdict} vs {_ve_name(least)}")
+        for r in ve_rows:
+            if r["critical_slope_rad"] < er_min - tol:
+                below.append(
+                    f"k = {k:g}: {_ve_name(r)} walks down to {r['critical_slope_deg']:.4f} deg "
+                    f"({r['reason']}; max |eig| {r.get('max_abs_eigenvalue', math.nan):.3f} along it), "
+                    f"below ER's {math.degrees(er_min):.4f} deg"
+                )
+    table.append(
+        {
+            "quantity": "ER CoT against the least stable, valid VE gait, per k",
+            "paper": "ER lower at every k (16.13% at best)",
+            "ours": "; ".join(vs_least) or "-",
+            "note": "+: ER dearer; tie: the critical slopes differ by no more than their location tolerance "
+            "(bracket and rtol shift); VE gaits searched at the start slope and at "
+            + ", ".join(f"{math.degrees(x):.3f}" for x in (params.slope_rad, *search_slopes(params.slope_rad)))
+            + " deg, each followed down to the end of its stable, valid part",
+        }
+    )
+    table.append(
+        {
+            "quantity": "VE gaits that walk below ER's critical slope",
+            "paper": "none",
+            "ours": "; ".join(below) or "none",
+            "note": "stable and contact-valid (unilateral contact) down to their critical slope; ER cannot walk "
+            "there, so at these k recycling does not lower the least CoT",
         }
     )
     # CoT reduction per k and VE branch
@@ -447,9 +555,7 @@ def headline_table(
         er = pick("ER", kp)
         if er and ve["cot"] == ve["cot"] and er[0]["cot"] == er[0]["cot"]:
             red = 100.0 * (1.0 - er[0]["cot"] / ve["cot"])
-            at_kp.append(
-                f"vs VE {ve['branch_label']} {red:+.1f}% ({'valid' if ve['contact_valid_at_start'] else 'INVALID'})"
-            )
+            at_kp.append(f"vs {_ve_name(ve)} {red:+.1f}% ({'valid' if ve['contact_valid_at_start'] else 'INVALID'})")
     table.append(
         {
             "quantity": f"ER CoT reduction vs VE at k = {kp:g}",
@@ -480,9 +586,9 @@ def headline_table(
             {
                 "quantity": f"VE branch that reproduces the paper's 16.13 % at k = {kp:g}",
                 "paper": "16.13%",
-                "ours": f"VE {ve['branch_label']}: {red:.2f}% ({valid_txt})",
+                "ours": f"{_ve_name(ve)}: {red:.2f}% ({valid_txt})",
                 "note": "the VE branch whose CoT reduction is nearest the paper's; the others: "
-                + ("; ".join(f"VE {o['branch_label']} {r2:+.2f}%" for r2, o in reds if o is not ve) or "none"),
+                + ("; ".join(f"{_ve_name(o)} {r2:+.2f}%" for r2, o in reds if o is not ve) or "none"),
             }
         )
     if best is not None:
@@ -491,7 +597,7 @@ def headline_table(
             {
                 "quantity": "maximum ER CoT reduction over the k grid",
                 "paper": "16.13% at k = 2500",
-                "ours": f"{red:.2f}% at k = {k:g} vs VE {ve['branch_label']} "
+                "ours": f"{red:.2f}% at k = {k:g} vs {_ve_name(ve)} "
                 f"({'valid' if ve['contact_valid_at_start'] else 'INVALID'})",
                 "note": "the VE fast branch's stance force in single support approaches 0 as k grows",
             }
@@ -518,8 +624,9 @@ CAPTIONS = {
     "CoM height and a stick diagram of one step, phases coloured.",
     "fig2_ground_reaction_forces": "Ground reaction forces normal to the slope; red: the leading foot's tensile transient at the "
     "start of double support (a rigid-contact artefact).",
-    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k (a k without "
-    "a gait is named on the figure).",
+    "fig3_energy_ratio": "Energy transition ratio E+/E- over steps from a perturbed start, several k, each curve "
+    "named by the gait it starts from (VE: fast or medium, by its step period; a k without a gait is named on "
+    "the figure).",
     "fig4_eigenvalue_map": "Max |eigenvalue| against slope along every branch stable at the start slope, several k, "
     "down to the end of its stable, valid part; dashed with open markers: the gait violates "
     "unilateral contact (found with the stance foot held); black dashed: unit circle.",
@@ -615,6 +722,7 @@ def run_paper(
     """Write every figure, CSV, the headline table and index.html into `out` (see module docstring)."""
     import os
 
+    from rimless.sim.continuation.branches import search_slopes
     from rimless.sim.step.backend import resolve
     from rimless.sim.studies.sweep import SweepOptions, dask_client, grid_points, run_sweep, write_table
 
@@ -628,8 +736,16 @@ def run_paper(
     client = stack.enter_context(dask_client(scheduler, workers)) if scheduler != "sync" else None
     with stack:
         say("sweep over k: every branch of both wheels")
-        pts = grid_points(params, ("er", "ve"), {"k": list(ks)}, (params.mass_model,))
-        options = SweepOptions(backend=backend, rtol=rtol, start_slope_rad=params.slope_rad)
+        # the grid and the wheel's own k (the system CoT's headline); gaits searched at the start slope and below
+        sweep_ks = sorted(set(ks) | {float(params.k)})
+        pts = grid_points(params, ("er", "ve"), {"k": sweep_ks}, (params.mass_model,))
+        options = SweepOptions(
+            backend=backend,
+            rtol=rtol,
+            start_slope_rad=params.slope_rad,
+            search_slopes_rad=search_slopes(params.slope_rad),
+            locate_tolerance=True,
+        )
 
         def sweep() -> Any:
             return run_sweep(
@@ -671,8 +787,10 @@ def run_paper(
         res.files += write_table(sw.rows, out / "sweep", meta)
         if sw.points:
             res.files += write_table(sw.points, out / "sweep-points", meta)
+        on_grid = [r for r in sw.rows if any(abs(r["k"] - k) < 1e-9 for k in ks)]  # figures 4-5, table 6
+        grid_points_rows = [p for p in sw.points if any(abs(p["k"] - k) < 1e-9 for k in ks)]
         t1 = time.perf_counter()
-        starts = curve_starts(sw.rows, params)
+        starts = curve_starts(on_grid, params)
         k_range = (min(ks), max(ks))
         futures = (
             [client.submit(boundary_curve, r, params.to_dict(), backend, rtol, k_range, pure=False) for r in starts]
@@ -694,13 +812,13 @@ def run_paper(
         res.timings_s["boundary_curves_wait"] = time.perf_counter() - t1
     t3 = time.perf_counter()
     say("eigenvalue map, cost of transport and the headline table")
-    res.files += figure_eigenvalues(sw.points, sw.rows, out, eigen_ks)
+    res.files += figure_eigenvalues(grid_points_rows, on_grid, out, eigen_ks)
     res.notes += [
         f"figure 4: {m} at k = {k:g} N/m not shown (no branch stable at the start slope)"
-        for m, k in missing_eigen_curves(sw.rows, eigen_ks)
+        for m, k in missing_eigen_curves(on_grid, eigen_ks)
     ]
-    res.files += figure_cot(cot_rows(sw.rows, params), out, curves, ranges)
-    res.table = headline_table(sw.rows, [], params, ranges)
+    res.files += figure_cot(cot_rows(on_grid, params), out, curves, ranges)
+    res.table = headline_table(on_grid, [], params, ranges)
     for v in ranges:
         name = "ER" if v["model"] == "ER" else f"VE {v['branch_label']}"
         res.table.append(
@@ -721,7 +839,17 @@ def run_paper(
     from rimless.sim.studies.paper_system_cot import system_cot_paper
 
     t4 = time.perf_counter()
-    syscot = system_cot_paper(out, params, ks, power or ClutchPower(), backend=backend, rtol=rtol, progress=say)
+    syscot = system_cot_paper(
+        out,
+        params,
+        ks,
+        power or ClutchPower(),
+        backend=backend,
+        rtol=rtol,
+        progress=say,
+        rows=sw.rows,
+        points=sw.points,
+    )
     res.files += syscot["files"]
     res.table += syscot["headline"]
     res.system_cot = syscot["rows"]

@@ -11,6 +11,18 @@ import numpy as np
 
 EIGEN_K = (2000.0, 2500.0, 3000.0)  # the k of figure 4's eigenvalue map, N/m
 PERTURBATION = 1.05  # theta'+ of the start state = 1.05 x the fixed point's (figure 3)
+# the columns of the sweep's branch points (rimless.sim.continuation.branches.GaitBranch.point_rows) figure 4 reads
+POINT_COLUMNS = (
+    "model",
+    "k",
+    "branch",
+    "branch_label",
+    "slope_rad",
+    "slope_deg",
+    "max_abs_eigenvalue",
+    "stable",
+    "contact_valid",
+)
 
 
 def pyplot():
@@ -130,7 +142,13 @@ def figure_energy_ratio(rows: list[dict[str, Any]], out: Path) -> list[Path]:
             if not len(walked):  # no gait to start from: named on the figure, not dropped silently
                 missing.append(f"k = {k:g} N/m: {g['failure'].iloc[0]}")
                 continue
-            ax.plot(walked["step"], walked["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m")
+            gait = ""
+            if "branch_label" in walked and isinstance(walked["branch_label"].iloc[0], str):
+                name = "" if model == "ER" else f" {walked['branch_label'].iloc[0]}"
+                gait = f", {model}{name} gait, step {walked['gait_period_s'].iloc[0]:.3f} s"
+            ax.plot(
+                walked["step"], walked["energy_ratio"] * 100, "o-", ms=3, color=f"C{j}", label=f"k = {k:g} N/m{gait}"
+            )
         if missing:
             ax.text(
                 0.02,
@@ -171,7 +189,9 @@ def figure_eigenvalues(
 
     plt = pyplot()
     frame = pd.DataFrame(points)
-    info = {(r["model"], r["k"], r["branch"]): r for r in rows}
+    if not len(frame):  # no branch anywhere on the grid (every k without a gait): the axes say so, not a KeyError
+        frame = pd.DataFrame(columns=POINT_COLUMNS)
+    info = {(r["model"], r["k"], r.get("branch", "")): r for r in rows}
     keep = []
     for (model, k, branch), g in frame.groupby(["model", "k", "branch"]):
         r = info.get((model, k, branch))
@@ -285,7 +305,9 @@ def figure_cot(
         g = g.sort_values("k")
         name = "ER" if label == "er" else f"VE {label}"
         col = colours.get(label, "C5")
-        ax.plot(g["k"], g["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends)")
+        # two gaits of one label at one k (found at different slopes): the line joins the least, markers show all
+        least = g.loc[g.groupby("k")["cot"].idxmin()].sort_values("k")
+        ax.plot(least["k"], least["cot"], ":", color=col, lw=1, label=f"{name} (sweep, located ends; line: least)")
         v = g[g.contact_valid]
         nv = g[~g.contact_valid]
         ax.plot(v["k"], v["cot"], "o", color=col, ms=6)

@@ -116,6 +116,11 @@ class SweepOptions:
     start_slope_rad: float = 0.05
     n_guesses: int = 14
     to_end: bool = False
+    # further slopes (rad) at which gaits are searched (rimless.sim.continuation.branches.search_slopes)
+    search_slopes_rad: tuple[float, ...] = ()
+    search_guesses: int = 20  # theta'+ guesses at each search slope (branches.SEARCH_THETA_DOT_RAD_S)
+    # each critical slope also re-located at rtol x 10 (critical_slope_rtol_shift_rad, critical_slope_tol_rad)
+    locate_tolerance: bool = False
 
 
 def grid_points(
@@ -170,6 +175,8 @@ def compute_point(point: dict[str, Any], options: SweepOptions) -> dict[str, Any
             start_slope_rad=options.start_slope_rad,
             n_guesses=options.n_guesses,
             to_end=options.to_end,
+            search_slopes_rad=tuple(getattr(options, "search_slopes_rad", ())),
+            search_guesses=int(getattr(options, "search_guesses", 20)),
         )
     except StepFailure as err:  # no gait could even be searched for: one row saying so
         branches = []
@@ -177,6 +184,9 @@ def compute_point(point: dict[str, Any], options: SweepOptions) -> dict[str, Any
     else:
         error = ""
     rows = [b.row() for b in branches]
+    if getattr(options, "locate_tolerance", False):
+        for b, r in zip(branches, rows):
+            r.update(b.location_tolerance(options.backend, options.rtol))
     if not rows:
         p = params.replace(slope_rad=options.start_slope_rad)
         rows = [

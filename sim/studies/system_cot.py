@@ -146,7 +146,7 @@ class BranchCot:
         }
 
 
-def _branch_factory(model: str, backend: str, rtol: float, held: bool = False) -> tuple[Callable, Callable | None]:
+def branch_factory(model: str, backend: str, rtol: float, held: bool = False) -> tuple[Callable, Callable | None]:
     from rimless.sim.step.backend import jacobian_factory, make_map
     from rimless.sim.step.poincare import bilateral_map
 
@@ -163,7 +163,7 @@ def critical_slope_branch(cs: Any, params: WheelParams, backend: str, rtol: floa
     pts = [(bp.slope_rad, bp.z) for bp in cs.branch if bp.slope_rad > crit]
     end_z = cs.end.point.z if cs.end is not None else cs.fixed_point.z
     pts.append((crit, end_z))
-    factory, jac = _branch_factory(cs.model, backend, rtol)
+    factory, jac = branch_factory(cs.model, backend, rtol)
     tol = cs.located_to_rad if cs.located_to_rad is not None else cs.refine_tol_rad
     return BranchCot(cs.model, params, pts, factory, jac, label=cs.model, lo_tol_rad=tol)
 
@@ -177,7 +177,7 @@ def gait_branch_cot(gb: Any, backend: str, rtol: float) -> BranchCot | None:
     pts = [(pt.p, pt.z) for pt in gb.branch.points if pt.p > crit]
     pts.append((crit, gb.end.point.z))
     held = bool(gb.start.facts is not None and gb.start.facts.bilateral)
-    factory, jac = _branch_factory(gb.model, backend, rtol, held)
+    factory, jac = branch_factory(gb.model, backend, rtol, held)
     tol = abs(gb.end.bracket_p[1] - gb.end.bracket_p[0])
     return BranchCot(gb.model, gb.params, pts, factory, jac, label=gb.label, lo_tol_rad=tol)
 
@@ -198,10 +198,13 @@ def break_even(
     field_name: str,
     *,
     rtol: float = BREAK_EVEN_RTOL,
+    interval: bool = False,
 ) -> dict[str, Any]:
     """The value of `field_name` (hold_power_w or switch_energy_j) at which ER's least system CoT equals the VE
     branches' least, the other powers as in `power` (for switch_energy_j the holding power is set to 0: a
-    bistable clutch). ER wins below it. None (with a reason) when ER loses even at 0 or no branch exists."""
+    bistable clutch). ER wins below it. None (with a reason) when ER loses even at 0 or no branch exists, and
+    a tie (`tie` true, no value) when at zero power the two least CoTs differ by no more than they are known
+    (`cot_resolution`). interval: also the roots with ER's least shifted by -/+ that resolution (`interval`)."""
     from scipy.optimize import brentq
 
     base = power.replace(**cast(ClutchPowerChanges, {field_name: 0.0}))  # field_name: one of its power fields
@@ -224,6 +227,21 @@ def break_even(
 
     g0 = gap(0.0)
     out["er_least_system_cot_at_zero"] = g0 + ve_best
+    # how well the two least CoTs are known: each critical slope to its location tolerance (bracket, rtol), and
+    # ER's least with power on to the minimiser's slope tolerance (d tan(phi)/d phi = sec^2 phi, about 1)
+    er_br = min(er, key=lambda b: b.lo_rad)
+    resolution = max(b.lo_tol_rad for b in er) + ve_br.lo_tol_rad + SLOPE_TOL_RAD / math.cos(er_br.lo_rad) ** 2
+    out["cot_resolution"] = resolution
+    out["cot_difference_at_zero"] = g0
+    if abs(g0) <= resolution:
+        out["tie"], out["resolved"] = True, False
+        out["reason"] = (
+            f"tie: at zero {field_name} ER and VE ({ve_br.label}) differ by {g0:+.2g} in least CoT, within the "
+            f"location tolerance {resolution:.2g} (critical slopes' brackets and rtol shifts, the minimiser's "
+            f"{SLOPE_TOL_RAD:g} rad): no break-even is resolved"
+        )
+        return out
+    out["tie"] = False
     if not g0 < 0.0:
         out["reason"] = "ER's least system CoT is not below VE's even at zero " + field_name
         return out
@@ -237,17 +255,15 @@ def break_even(
     out["value"] = float(x)
     out["er_least_system_cot"] = gap(x) + ve_best
     out["reason"] = f"root of ER least - VE least (brentq, rtol {rtol:g})"
-    # the least CoTs at zero power are tan(critical slope): each known to its branch end's location tolerance
-    resolution = max(b.lo_tol_rad for b in er) + (ve_br.lo_tol_rad if ve_br else 0.0)
-    out["cot_resolution"] = resolution
-    if -g0 <= resolution:
-        out["resolved"] = False
-        out["reason"] += (
-            f"; NOT resolved: at zero power ER and VE differ by {-g0:.2g} in CoT, within the critical "
-            f"slopes' location tolerance {resolution:.2g} rad"
-        )
-    else:
-        out["resolved"] = True
+    out["resolved"] = True
+    if interval:  # the roots with ER's least shifted by -/+ the resolution
+        lo = brentq(lambda v: gap(v) + resolution, 0.0, x, rtol=rtol, xtol=1e-12)
+        top = hi
+        while gap(top) - resolution < 0.0 and top < 1e6:
+            top *= 4.0
+        up = brentq(lambda v: gap(v) - resolution, x, top, rtol=rtol, xtol=1e-12) if top < 1e6 else math.inf
+        out["interval"] = [float(lo), float(up)]
+        out["reason"] += f"; {lo:.3g}-{up:.3g} with the least CoTs shifted by their resolution {resolution:.2g}"
     return out
 
 
@@ -305,7 +321,7 @@ def sweep_system_cot(
             and pt.get("leg_mass_kg", r["leg_mass_kg"]) == r["leg_mass_kg"]
         ]
         mine.append((start, np.array([r["theta_plus_rad"], r["theta_dot_plus_rad_s"]])))
-        factory, jac = _branch_factory(model, backend, rtol, r.get("contact_model") == "bilateral")
+        factory, jac = branch_factory(model, backend, rtol, r.get("contact_model") == "bilateral")
         at_start = BranchCot(model, params, mine, factory, jac)
         tr = at_start.transport(start)
         if tr is not None:
