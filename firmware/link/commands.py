@@ -4,10 +4,10 @@ holds under abuse, and the reserved UDP path for `disarm` and `status` on a thre
 The wire format and the validation of each message are in `protocol`.
 
 Abuse limits: at most `max_connections` connections; a connection that has not sent a valid
-command within `auth_timeout_s` is closed, so is one idle for `idle_timeout_s`; when the cap is
-reached, the oldest connection that never authenticated is dropped to make room, so a new
-operator connection (for `disarm` or `status`) always gets in. Rejections are logged at most
-`LOG_LINES_PER_S` times per second.
+command within `auth_timeout_s` is closed, so is one idle for `idle_timeout_s`; an authenticated
+connection is never dropped to make room, and a stranger's connection makes room only by dropping
+another stranger's, never one from an address that authenticated before (`CommandServer`).
+Rejections are logged at most `LOG_LINES_PER_S` times per second.
 """
 
 from __future__ import annotations
@@ -319,10 +319,16 @@ class _Conn:
 class CommandServer:
     """asyncio TCP server; `handler` executes a validated command or raises ValueError/RuntimeError.
 
-    Per source address, at most `MAX_UNAUTHENTICATED_PER_SOURCE` connections that have not authenticated;
-    `RESERVED_FOR_OPERATORS` of the `max_connections` slots only authenticated connections may hold.
+    Connections are of three kinds: authenticated (sent a valid command: never dropped to make room),
+    pending from an operator's address (an address that authenticated before, `KNOWN_OPERATORS` remembered:
+    TCP's handshake proves the address, so no stranger can pose as one), and pending from a stranger. A
+    stranger's connection can only make room by dropping another stranger's (the oldest of the source holding
+    the most), never an operator's; `RESERVED_FOR_OPERATORS` of the `max_connections` slots strangers never
+    hold; per source address at most `MAX_UNAUTHENTICATED_PER_SOURCE` pending connections. So the operator's
+    session, and each new connection of the operator's PC, stays whatever strangers do from any number of
+    addresses.
 
-    :param max_connections: connections held at once (new ones evict the oldest unauthenticated).
+    :param max_connections: connections held at once.
     :param auth_timeout_s: a connection must send a valid command within this time.
     :param idle_timeout_s: an authenticated connection silent this long is closed.
     :param boot: this start's nonce, announced in the hello and used by the reserved UDP path.
@@ -330,6 +336,7 @@ class CommandServer:
 
     MAX_UNAUTHENTICATED_PER_SOURCE = 4
     RESERVED_FOR_OPERATORS = 2
+    KNOWN_OPERATORS = 64
     REPLY_TIMEOUT_S = 5.0  # a peer whose replies cannot be sent for this long (it never reads) is dropped
 
     def __init__(
@@ -366,6 +373,7 @@ class CommandServer:
         self.boot = boot or new_boot_nonce()
         self.clock = clock
         self._udp: ReservedListener | None = None
+        self._operators: dict[str, None] = {}  # addresses that authenticated, most recent last
         self.connects = 0  # connections accepted by the kernel and seen by the server
         self.rejected = 0
         self.accepted = 0
@@ -434,27 +442,40 @@ class CommandServer:
     def _unauthenticated_from(self, source: str) -> int:
         return sum(1 for c in self._conns.values() if c.source == source and not c.authenticated)
 
+    def is_operator(self, source: str) -> bool:
+        """Whether `source` (an address) authenticated on this server before."""
+        return source in self._operators
+
+    def _mark_operator(self, source: str) -> None:
+        self._operators.pop(source, None)
+        self._operators[source] = None
+        while len(self._operators) > self.KNOWN_OPERATORS:
+            self._operators.pop(next(iter(self._operators)))
+
     def _make_room(self, source: str) -> bool:
-        """Room for a new connection from `source`; False when that source already holds
-        `MAX_UNAUTHENTICATED_PER_SOURCE` connections that never authenticated (the new one is refused, no one
-        else's is dropped). At the cap, the victim is the oldest unauthenticated connection of the source
-        holding the most of them, so that a flooding host evicts only itself; authenticated connections go
-        last, and `RESERVED_FOR_OPERATORS` slots are never held by unauthenticated ones."""
+        """Room for a new connection from `source`, or False (refused; no one else's is dropped): see the class
+        docstring. Authenticated connections are never dropped; a stranger drops only strangers."""
         if self._unauthenticated_from(source) >= self.MAX_UNAUTHENTICATED_PER_SOURCE:
             return False
-        unauth_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
-        while (
-            len(self._conns) >= self.max_connections
-            or sum(1 for c in self._conns.values() if not c.authenticated) >= unauth_cap
-        ):
-            counts: dict[str, int] = {}
-            for c in self._conns.values():
-                if not c.authenticated:
-                    counts[c.source] = counts.get(c.source, 0) + 1
-            conns = sorted(self._conns.values(), key=lambda c: (c.authenticated, -counts.get(c.source, 0), c.opened_s))
-            if not conns:
+        operator = self.is_operator(source)
+        stranger_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
+
+        def pending(strangers: bool) -> list[_Conn]:
+            return [c for c in self._conns.values() if not c.authenticated and self.is_operator(c.source) != strangers]
+
+        while True:
+            strangers = pending(True)
+            if len(self._conns) < self.max_connections and (operator or len(strangers) < stranger_cap):
                 return True
-            victim = conns[0]
+            victims = strangers or (pending(False) if operator else [])
+            if operator and not strangers:
+                victims = [c for c in victims if c.source == source]  # an operator's PC makes room only in its own
+            if not victims:
+                return False
+            counts: dict[str, int] = {}
+            for c in victims:
+                counts[c.source] = counts.get(c.source, 0) + 1
+            victim = min(victims, key=lambda c: (-counts[c.source], c.opened_s))
             self._conns.pop(victim.task, None)
             victim.task.cancel()
             with contextlib.suppress(Exception):
@@ -463,7 +484,6 @@ class CommandServer:
             self.log.warning(
                 "command connection from %s dropped to make room (cap %d)", victim.peer, self.max_connections
             )
-        return True
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
@@ -475,8 +495,9 @@ class CommandServer:
         if not self._make_room(source):
             self.refused_per_source += 1
             self.log.warning(
-                "command connection from %s refused: %d unauthenticated connections from %s already",
+                "command connection from %s refused: no room (%d connections; at most %d unauthenticated from %s)",
                 peer,
+                len(self._conns),
                 self.MAX_UNAUTHENTICATED_PER_SOURCE,
                 source,
             )
@@ -566,6 +587,7 @@ class CommandServer:
             self._rejected(conn.peer, f"unreadable message ({type(err).__name__})")
             return {"ok": False, "seq": None, "error": "garbled message"}, last_seq
         conn.authenticated = True
+        self._mark_operator(conn.source)
         if self.on_valid is not None:
             self.on_valid()
         try:

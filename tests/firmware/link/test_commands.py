@@ -22,7 +22,7 @@ from rimless.firmware.link.commands import RateLimitedLog
 from rimless.firmware.link.heartbeat import Heartbeat
 from rimless.firmware.link.remote import RobotLink, send_command
 from rimless.firmware.service.config import CommandsConfig
-from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 
@@ -407,3 +407,58 @@ def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> No
     assert results == [True] * 5
     assert flooding
     assert refused > 0
+
+
+def _churn(port: int, addresses: int, per_address: int) -> list[socket.socket]:
+    """Connections from `addresses` loopback addresses (127.0.2.x), `per_address` each, held open: strangers
+    that never authenticate."""
+    held = []
+    for k in range(addresses):
+        for _ in range(per_address):
+            s = socket.socket()
+            s.settimeout(5)
+            s.bind((f"127.0.2.{k + 1}", 0))
+            try:
+                s.connect(("127.0.0.1", port))
+            except OSError:
+                s.close()
+                continue
+            held.append(s)
+    return held
+
+
+@pytest.mark.parametrize(("addresses", "per_address"), [(64, 4), (250, 1)])
+def test_connect_churn_from_many_addresses_evicts_neither_the_operators_session_nor_its_next_connection(
+    tmp_path, addresses, per_address
+) -> None:
+    """Issue 32: churn from 64 addresses dropped the operator's connection 4 times in 12. Here the operator at
+    127.0.0.1 holds an authenticated session and opens its next connection (hello read, command not yet sent);
+    then 256 connections from 64 other addresses (or 250 from 250) arrive and stay. In three rounds, the pending connection's
+    command and the session's ping are both answered. Fails on main: the operator's pending connection was the
+    oldest unauthenticated one, the first dropped to make room. The connections are counted in, not timed."""
+
+    async def script(app, hw):
+        srv = app.server
+        session = await Client.connect(app.command_port)
+        assert (await session.cmd("status", 1))["ok"]
+        seq = 1
+        answers = []
+        for _ in range(3):
+            pending = await Client.connect(app.command_port)
+            before = srv.evicted + srv.refused_per_source + srv.timed_out + srv.connections
+            held = await asyncio.to_thread(_churn, app.command_port, addresses, per_address)
+            # every stranger's connection seen by the server (held, dropped or refused) before the operator speaks
+            seen = before + len(held)
+            await wait_for(lambda n=seen: srv.evicted + srv.refused_per_source + srv.timed_out + srv.connections >= n)
+            seq += 1
+            answers.append((await pending.cmd("status", 1))["ok"])
+            answers.append((await session.cmd("ping", seq))["ok"])
+            pending.close()
+            for s in held:
+                s.close()
+        session.close()
+        return answers, srv.evicted
+
+    app, summary, (answers, evicted), hw = scenario(config(tmp_path), script)
+    assert answers == [True] * 6
+    assert evicted > 0  # the strangers made room among themselves
