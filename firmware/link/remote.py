@@ -129,8 +129,8 @@ def send_reserved_datagram(
     returns the robot's authenticated answer with the status.
 
     The first request carries no challenge: a disarm is acted on at once, and the robot's signed answer (bound
-    to this request's random nonce) says so and brings its challenge; the second answers the challenge and
-    gets the status. Up to `copies` datagrams per round (UDP may drop one: a flood can fill the robot's socket
+    to this request's random nonce) says so and brings its challenge; the second, a status, answers the
+    challenge and gets the status. Up to `copies` datagrams per round (UDP may drop one: a flood can fill the robot's socket
     buffer), each with a new nonce, the next one `RESEND_FIRST_S` after the first and then twice as long up to
     `RESEND_MAX_S`, the last waiting for what is left of `timeout_s`; only answers whose MAC holds count. Neither this PC's clock
     nor any earlier datagram matters. Raises `RobotUnreachable` when the robot does not answer; a disarm
@@ -148,9 +148,9 @@ def send_reserved_datagram(
         if "status" in first:
             return first
         challenge = first.get("challenge") if isinstance(first.get("challenge"), dict) else {}
-        second = _round(sock, info[4], token, kind, challenge, deadline, copies)
+        second = _round(sock, info[4], token, "status", challenge, deadline, copies)  # a disarm is done: read
     if second is not None and "status" in second:
-        return second
+        return {**second, "disarmed": True} if kind == "disarm" else second
     if kind == "disarm":
         return first  # acted on and confirmed; the status did not come back in time
     raise RobotUnreachable(f"no status in the answers to the UDP {kind} from {host}:{port} within {timeout_s} s")

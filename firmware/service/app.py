@@ -188,6 +188,8 @@ class RobotApp:
                     max_datagram_bytes=tcfg.max_datagram_bytes,
                     batch=tcfg.batch,
                     decimate=tcfg.decimate,
+                    token=self.token,  # signed with this start's key: `robot listen` knows the robot by it
+                    boot=self.boot,
                 )
             if self.cfg.commands.enabled:
                 c = self.cfg.commands
