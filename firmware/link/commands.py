@@ -221,8 +221,8 @@ class ReservedListener:
             + (" (the disarm was acted on)" if kind == "disarm" else "")
             + "; upgrade rimless on the PC",
         }
-        out = json.dumps(msg, separators=(",", ":")).encode()
-        return out if len(out) <= len(data) else None
+        answer = json.dumps(msg, separators=(",", ":")).encode()
+        return answer if len(answer) <= len(data) else None
 
     def _run(self) -> None:
         while not self._stop.is_set():
