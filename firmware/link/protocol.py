@@ -27,7 +27,7 @@ thread of its own, by challenge and response, so that no clock, counter, restart
 A first request carries no challenge ("-"). The robot answers each authenticated request it has not seen
 (its MAC is the replay key, kept for `RESERVED_WINDOW_S`) with JSON bound to the client nonce:
 
-    {"v": 3, "for": <client nonce>, "challenge": {"boot": <boot nonce>, "t": <robot's uptime s>},
+    {"v": 3, "ok": true, "for": <client nonce>, "challenge": {"boot": <boot nonce>, "t": <robot's uptime s>},
      "disarmed": true (a disarm), "status": {...} (a fresh request only), "mac": HMAC(token, "reply\\n" + JSON)}
 
 A request is fresh when it answers this start's challenge (its boot nonce, a second at most
@@ -35,7 +35,8 @@ A request is fresh when it answers this start's challenge (its boot nonce, a sec
 status. A disarm is acted on whatever its challenge (releasing the clutches is always safe; an old one, a
 replay, or one from the last start still disarm), so nothing the PC's clock or an earlier datagram did can
 stop it. Answers are never larger than the request (no amplification) and never go to a datagram that fails
-its MAC. The robot's boot nonce is also in the TCP hello.
+its MAC. The robot's boot nonce is also in the TCP hello. The PC (`remote.send_reserved_datagram`) sends a
+first request of its kind, then a status answering the challenge it got back.
 
 Commands: status, ping, arm {stance_leg?}, disarm, set {name, value}, trial_start {name?}, trial_stop.
 """
