@@ -525,7 +525,8 @@ def listen(
         str | None,
         typer.Option(
             "--robot",
-            help="Accept telemetry only from this host (default: --host, else the first sender heard).",
+            help="Accept telemetry only from this host (default: --host; else, with the token, any address whose "
+            "telemetry authenticates, without it the first sender whose datagrams carry a tag).",
             show_default=False,
         ),
     ] = None,
@@ -533,20 +534,21 @@ def listen(
     """Receive the robot's UDP telemetry: live view, JSONL/CSV/MCAP recording, "data stopped" notices.
 
     The live view (in a terminal) draws leg velocity, compression and one strip per clutch. With
-    --host it also keeps the robot's command link alive (a heartbeat), so a remote arm holds.
+    --host it also keeps the robot's command link alive (a heartbeat), so a remote arm holds. The command
+    token (--token-file, $RIMLESS_TOKEN_FILE or $RIMLESS_TOKEN) authenticates the telemetry: without it
+    any host on the LAN can forge what is recorded (said at the start).
     """
     import sys
 
     @user_facing
     def go() -> None:
-        from rimless.errors import ParameterError
         from rimless.firmware.link.listen import listen as do_listen
 
         hb = None
-        if host is None and (token or token_file is not None):
-            if token_file is not None:
-                _token(None, token_file)  # a missing or unsafe file is named first
-            raise ParameterError("--token and --token-file act only with --host (the heartbeat to the robot)")
+        # the token authenticates the telemetry (and, with --host, keeps the command link alive); without one
+        # in an option or the environment, listen runs unauthenticated and says so
+        has_token = bool(token or token_file is not None or os.environ.get("RIMLESS_TOKEN"))
+        key = _token(token, token_file) if has_token or os.environ.get("RIMLESS_TOKEN_FILE") else None
         if host is not None:
             from rimless.firmware.link.heartbeat import Heartbeat
 
@@ -569,6 +571,7 @@ def listen(
             timeout_s=timeout_s,
             robot=robot if robot is not None else host,
             mcap_out=mcap_out,
+            token=key,
         )
 
     _interruptible(go)

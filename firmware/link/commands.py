@@ -4,10 +4,10 @@ holds under abuse, and the reserved UDP path for `disarm` and `status` on a thre
 The wire format and the validation of each message are in `protocol`.
 
 Abuse limits: at most `max_connections` connections; a connection that has not sent a valid
-command within `auth_timeout_s` is closed, so is one idle for `idle_timeout_s`; when the cap is
-reached, the oldest connection that never authenticated is dropped to make room, so a new
-operator connection (for `disarm` or `status`) always gets in. Rejections are logged at most
-`LOG_LINES_PER_S` times per second.
+command within `auth_timeout_s` is closed, so is one idle for `idle_timeout_s`; an authenticated
+connection is never dropped to make room, and a stranger's connection makes room only by dropping
+another stranger's, never one from an address that authenticated before (`CommandServer`).
+Rejections are logged at most `LOG_LINES_PER_S` times per second.
 """
 
 from __future__ import annotations
@@ -28,16 +28,19 @@ from rimless.firmware.link.protocol import (
     DEFAULT_PORT,
     HELLO,
     PROTOCOL_VERSION,
+    RESERVED_WINDOW_S,
     Command,
     Rejected,
+    Sha256Mac,
     WeakToken,
+    check_reserved_request,
     check_token,
+    check_v2_reserved,
     command_mac,
-    disarm_mac,
+    new_boot_nonce,
     parse_command,
-    parse_disarm_datagram,
-    parse_reserved_datagram,
-    reserved_mac,
+    parse_reserved_request,
+    reply_mac,
 )
 
 __all__ = [  # the protocol's names are re-exported: the server and its tests speak them
@@ -54,11 +57,8 @@ __all__ = [  # the protocol's names are re-exported: the server and its tests sp
     "WeakToken",
     "check_token",
     "command_mac",
-    "disarm_mac",
     "parse_command",
-    "parse_disarm_datagram",
-    "parse_reserved_datagram",
-    "reserved_mac",
+    "parse_reserved_request",
 ]
 
 log = logging.getLogger("rimless.robot.commands")
@@ -67,16 +67,22 @@ LOG_LINES_PER_S = 5.0
 
 
 class ReservedListener:
-    """The reserved path for `disarm` and `status`: a thread of its own on a UDP socket, so neither
-    TCP connections nor a busy event loop can delay it. The callbacks run in this thread (they must
-    be thread-safe); `on_status` returns a small JSON-able dict.
+    """The reserved path for `disarm` and `status` (see `protocol`): a thread of its own on a UDP socket, so
+    neither TCP connections nor a busy event loop can delay it. The callbacks run in this thread (they must be
+    thread-safe); `on_status` returns a small JSON-able dict.
 
-    Each source may send `PER_SOURCE_PER_S` datagrams per second (the rest are dropped unread); only an
-    authenticated datagram whose number is above the last one accepted for its kind is answered (a captured
-    one replayed, from any source, is ignored), and never with more bytes than it had."""
+    Nothing a sender does changes how the next sender is served, except through the token: no counter to push
+    into the future, no per-source budget to drain with a spoofed address. Every datagram is checked on its raw
+    bytes (a layout check and one HMAC, no JSON); one that fails gets no answer. An authenticated disarm
+    disarms, whatever its challenge. An authenticated request is answered once (its MAC, kept
+    `RESERVED_WINDOW_S`, is the replay key), with the status only when it answers this start's challenge.
+    Rejection logs go through the caller's rate-limited log.
 
-    PER_SOURCE_PER_S = 20.0
-    MAX_SOURCES = 4096
+    :param clock: the robot's seconds (monotonic); the challenges' seconds count from the listener's start.
+    :param boot: this start's nonce (default: a fresh one).
+    """
+
+    MAX_REPLAY_KEYS = 16384  # authenticated requests remembered; only token holders can add one
 
     def __init__(
         self,
@@ -85,21 +91,27 @@ class ReservedListener:
         on_disarm: Callable[[], None],
         on_status: Callable[[], dict[str, Any]],
         on_rejected: Callable[[str, str], None],
+        *,
+        boot: str | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.sock = sock
         self.token = token
+        self._mac = Sha256Mac(token.encode("utf-8"))
         self.on_disarm = on_disarm
         self.on_status = on_status
         self.on_rejected = on_rejected
+        self.boot = boot or new_boot_nonce()
+        self.clock = clock
+        self._t0 = clock()
         self.disarms = 0
         self.statuses = 0
-        self.replays = 0
-        self.rate_limited = 0
-        self.per_source_per_s = self.PER_SOURCE_PER_S
-        self._buckets: dict[str, tuple[float, float]] = {}
-        # numbers at or below these are replays; a restart starts 5 min before now (the PC clocks' slack)
-        start = time.time_ns() - 300 * 10**9
-        self._last_n = {"disarm": start, "status": start}
+        self.replays = 0  # authenticated requests seen before: acted on if disarms, not answered
+        self.rejected = 0  # datagrams that failed their MAC or layout: not answered
+        self.challenges = 0  # authenticated but not fresh: answered with a challenge, no status
+        self.version_errors = 0  # authenticated version-2 datagrams: answered with an error naming the versions
+        self.received = 0
+        self._seen: dict[str, float] = {}  # replay key (MAC) -> the second it expires
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="rimless-reserved", daemon=True)
 
@@ -112,6 +124,9 @@ class ReservedListener:
         on_disarm: Callable[[], None],
         on_status: Callable[[], dict[str, Any]],
         on_rejected: Callable[[str, str], None],
+        *,
+        boot: str | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> ReservedListener:
         """Bind the UDP socket (raises OSError) and start the thread."""
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -119,12 +134,18 @@ class ReservedListener:
         try:
             sock.bind((host, port))
             sock.settimeout(0.2)
+            with contextlib.suppress(OSError):  # room for a burst while the thread waits for the GIL
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         except OSError:
             sock.close()
             raise
-        listener = cls(sock, token, on_disarm, on_status, on_rejected)
+        listener = cls(sock, token, on_disarm, on_status, on_rejected, boot=boot, clock=clock)
         listener._thread.start()
         return listener
+
+    def now_s(self) -> int:
+        """The challenge's second: whole seconds of the robot's clock since this listener started."""
+        return int(self.clock() - self._t0)
 
     def _status(self) -> dict[str, Any]:
         try:
@@ -132,70 +153,111 @@ class ReservedListener:
         except Exception as err:  # noqa: BLE001 - a racing read must not kill the reserved path
             return {"error": f"{type(err).__name__}: {err}"}
 
-    def _allowed(self, source: str) -> bool:
-        """Per-source token bucket (`per_source_per_s`, burst as much), checked before any parsing; the table
-        keeps the `MAX_SOURCES` most recent sources."""
-        now = time.monotonic()
-        level, last = self._buckets.pop(source, (self.per_source_per_s, now))
-        level = min(self.per_source_per_s, level + (now - last) * self.per_source_per_s)
-        self._buckets[source] = (level - 1.0, now) if level >= 1.0 else (level, now)
-        while len(self._buckets) > self.MAX_SOURCES:
-            self._buckets.pop(next(iter(self._buckets)))
-        return level >= 1.0
+    def _first_time(self, key: str, now: int) -> bool:
+        """True the first time `key` is seen within `RESERVED_WINDOW_S`; remembers it."""
+        if self._seen.get(key, -1) >= now:
+            return False
+        self._seen[key] = now + RESERVED_WINDOW_S
+        if len(self._seen) > self.MAX_REPLAY_KEYS:
+            for k in [k for k, until in self._seen.items() if until < now] or [next(iter(self._seen))]:
+                del self._seen[k]
+        return True
+
+    def handle(self, data: bytes, addr: Any) -> bytes | None:
+        """Act on one datagram; return the answer to send (None: no answer). Public for the tests and the
+        bench, which feed it directly."""
+        self.received += 1
+        if data.startswith(b"{"):
+            return self._handle_v2(data, addr)
+        req = check_reserved_request(data, self._mac)
+        if isinstance(req, str):
+            self.rejected += 1
+            self.on_rejected(str(addr), req)
+            return None  # no answer to what is not authenticated
+        if req.kind == "disarm":
+            self.on_disarm()  # before anything else: a disarm is never withheld
+            self.disarms += 1
+        now = self.now_s()
+        if not self._first_time(req.mac, now):
+            self.replays += 1
+            self.on_rejected(str(addr), f"reserved {req.kind}: seen before (a replay); acted on, not answered")
+            return None  # a replay with a spoofed source must not reflect
+        fresh = req.boot == self.boot and req.t_s is not None and now - RESERVED_WINDOW_S <= req.t_s <= now
+        reply: dict[str, Any] = {
+            "v": PROTOCOL_VERSION,
+            "ok": True,
+            "for": req.client_nonce,
+            "challenge": {"boot": self.boot, "t": now},
+        }
+        if req.kind == "disarm":
+            reply["disarmed"] = True
+        if fresh:
+            self.statuses += req.kind == "status"
+            return self._bounded(reply, self._status(), len(data))
+        self.challenges += 1
+        return self._bounded(reply, None, len(data))
+
+    def _handle_v2(self, data: bytes, addr: Any) -> bytes | None:
+        """A protocol-version-2 datagram: a disarm whose MAC holds is acted on; each authenticated one is
+        answered once with an error naming the versions (never the status)."""
+        out = check_v2_reserved(data, self._mac)
+        if isinstance(out, str):
+            self.rejected += 1
+            self.on_rejected(str(addr), out)
+            return None
+        kind, n = out
+        if kind == "disarm":
+            self.on_disarm()
+            self.disarms += 1
+        self.version_errors += 1
+        if not self._first_time(f"v2:{kind}:{n}", self.now_s()):
+            self.replays += 1
+            return None
+        msg = {
+            "ok": False,
+            "n": n,
+            "version": PROTOCOL_VERSION,
+            "error": f"protocol version 2 datagram: this robot speaks version {PROTOCOL_VERSION}"
+            + (" (the disarm was acted on)" if kind == "disarm" else "")
+            + "; upgrade rimless on the PC",
+        }
+        answer = json.dumps(msg, separators=(",", ":")).encode()
+        return answer if len(answer) <= len(data) else None
 
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                data, addr = self.sock.recvfrom(4096)
+                data, addr = self.sock.recvfrom(1024)
             except TimeoutError:
                 continue
             except OSError:
                 return  # closed
-            if not self._allowed(addr[0]):
-                self.rate_limited += 1
-                continue
             try:
-                kind, n = parse_reserved_datagram(data, self.token)
-            except Rejected as err:
-                self.on_rejected(str(addr), str(err))
-                continue  # no answer to what is not authenticated
+                out = self.handle(data, addr)
             except Exception as err:  # noqa: BLE001 - any datagram gets a log line, never a traceback
                 self.on_rejected(str(addr), f"unreadable reserved datagram ({type(err).__name__})")
                 continue
-            if n <= self._last_n[kind]:
-                self.replays += 1
-                self.on_rejected(
-                    str(addr), f"reserved datagram: {kind} number {n} not above the last one accepted (a replay)"
-                )
-                continue  # no answer either: a replay with a spoofed source must not reflect
-            self._last_n[kind] = n
-            reply: dict[str, Any] = {"ok": True, "n": n}
-            try:
-                if kind == "disarm":
-                    self.on_disarm()
-                    self.disarms += 1
-                    reply["disarmed"] = True
-                else:
-                    self.statuses += 1
-            finally:
+            if out is not None:
                 with contextlib.suppress(OSError, TypeError, ValueError):
-                    self.sock.sendto(self._bounded(reply, len(data)), addr)
+                    self.sock.sendto(out, addr)
 
-    def _bounded(self, reply: dict[str, Any], limit: int) -> bytes:
-        """The answer with the status, never larger than the request (`limit` bytes): the status shrinks to
-        its counts, then goes, if need be."""
-        status = self._status()
-        full = dict(reply, status=status)
-        out = json.dumps(full, separators=(",", ":"), default=str).encode()
-        if len(out) <= limit:
-            return out
-        short = {
-            k: (len(v) if isinstance(v, list) else v) for k, v in status.items() if k in ("armed", "faults", "engaged")
-        }
-        out = json.dumps(dict(reply, status=short), separators=(",", ":"), default=str).encode()
-        if len(out) <= limit:
-            return out
-        return json.dumps(reply, separators=(",", ":")).encode()[:limit]
+    def _bounded(self, reply: dict[str, Any], status: dict[str, Any] | None, limit: int) -> bytes | None:
+        """The signed answer, never larger than the request (`limit` bytes): the status shrinks to its counts,
+        then goes, if need be (None when even the bare answer does not fit)."""
+        candidates = [reply] if status is None else [dict(reply, status=status)]
+        if status is not None:
+            short = {
+                k: (len(v) if isinstance(v, list) else v)
+                for k, v in status.items()
+                if k in ("armed", "faults", "engaged")
+            }
+            candidates += [dict(reply, status=short), reply]
+        for cand in candidates:
+            cand = dict(cand, mac=reply_mac(self.token, cand))
+            out = json.dumps(cand, separators=(",", ":"), default=str).encode()
+            if len(out) <= limit:
+                return out
+        return None
 
     def close(self) -> None:
         """Stop the thread and close the socket."""
@@ -257,16 +319,24 @@ class _Conn:
 class CommandServer:
     """asyncio TCP server; `handler` executes a validated command or raises ValueError/RuntimeError.
 
-    Per source address, at most `MAX_UNAUTHENTICATED_PER_SOURCE` connections that have not authenticated;
-    `RESERVED_FOR_OPERATORS` of the `max_connections` slots only authenticated connections may hold.
+    Connections are of three kinds: authenticated (sent a valid command: never dropped to make room),
+    pending from an operator's address (an address that authenticated before, `KNOWN_OPERATORS` remembered:
+    TCP's handshake proves the address, so no stranger can pose as one), and pending from a stranger. A
+    stranger's connection can only make room by dropping another stranger's (the oldest of the source holding
+    the most), never an operator's; `RESERVED_FOR_OPERATORS` of the `max_connections` slots strangers never
+    hold; per source address at most `MAX_UNAUTHENTICATED_PER_SOURCE` pending connections. So the operator's
+    session, and each new connection of the operator's PC, stays whatever strangers do from any number of
+    addresses.
 
-    :param max_connections: connections held at once (new ones evict the oldest unauthenticated).
+    :param max_connections: connections held at once.
     :param auth_timeout_s: a connection must send a valid command within this time.
     :param idle_timeout_s: an authenticated connection silent this long is closed.
+    :param boot: this start's nonce, announced in the hello and used by the reserved UDP path.
     """
 
     MAX_UNAUTHENTICATED_PER_SOURCE = 4
     RESERVED_FOR_OPERATORS = 2
+    KNOWN_OPERATORS = 64
     REPLY_TIMEOUT_S = 5.0  # a peer whose replies cannot be sent for this long (it never reads) is dropped
 
     def __init__(
@@ -283,6 +353,8 @@ class CommandServer:
         on_valid: Callable[[], None] | None = None,
         on_disarm: Callable[[], None] | None = None,
         on_status: Callable[[], dict[str, Any]] | None = None,
+        boot: str | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not token:
             raise ValueError("the command server needs a non-empty token")
@@ -298,7 +370,11 @@ class CommandServer:
         self.on_disarm = on_disarm
         self.on_status = on_status
         self.reply_timeout_s = self.REPLY_TIMEOUT_S
+        self.boot = boot or new_boot_nonce()
+        self.clock = clock
         self._udp: ReservedListener | None = None
+        self._operators: dict[str, None] = {}  # addresses that authenticated, most recent last
+        self.connects = 0  # connections accepted by the kernel and seen by the server
         self.rejected = 0
         self.accepted = 0
         self.evicted = 0
@@ -328,7 +404,14 @@ class CommandServer:
         if self.on_disarm is not None:
             try:
                 self._udp = ReservedListener.bind(
-                    self.host, port, self.token, self.on_disarm, self.on_status or (lambda: {}), self._rejected
+                    self.host,
+                    port,
+                    self.token,
+                    self.on_disarm,
+                    self.on_status or (lambda: {}),
+                    self._rejected,
+                    boot=self.boot,
+                    clock=self.clock,
                 )
             except OSError as err:
                 log.warning("reserved UDP path unavailable on port %d: %s", port, err)
@@ -359,27 +442,40 @@ class CommandServer:
     def _unauthenticated_from(self, source: str) -> int:
         return sum(1 for c in self._conns.values() if c.source == source and not c.authenticated)
 
+    def is_operator(self, source: str) -> bool:
+        """Whether `source` (an address) authenticated on this server before."""
+        return source in self._operators
+
+    def _mark_operator(self, source: str) -> None:
+        self._operators.pop(source, None)
+        self._operators[source] = None
+        while len(self._operators) > self.KNOWN_OPERATORS:
+            self._operators.pop(next(iter(self._operators)))
+
     def _make_room(self, source: str) -> bool:
-        """Room for a new connection from `source`; False when that source already holds
-        `MAX_UNAUTHENTICATED_PER_SOURCE` connections that never authenticated (the new one is refused, no one
-        else's is dropped). At the cap, the victim is the oldest unauthenticated connection of the source
-        holding the most of them, so that a flooding host evicts only itself; authenticated connections go
-        last, and `RESERVED_FOR_OPERATORS` slots are never held by unauthenticated ones."""
+        """Room for a new connection from `source`, or False (refused; no one else's is dropped): see the class
+        docstring. Authenticated connections are never dropped; a stranger drops only strangers."""
         if self._unauthenticated_from(source) >= self.MAX_UNAUTHENTICATED_PER_SOURCE:
             return False
-        unauth_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
-        while (
-            len(self._conns) >= self.max_connections
-            or sum(1 for c in self._conns.values() if not c.authenticated) >= unauth_cap
-        ):
-            counts: dict[str, int] = {}
-            for c in self._conns.values():
-                if not c.authenticated:
-                    counts[c.source] = counts.get(c.source, 0) + 1
-            conns = sorted(self._conns.values(), key=lambda c: (c.authenticated, -counts.get(c.source, 0), c.opened_s))
-            if not conns:
+        operator = self.is_operator(source)
+        stranger_cap = self.max_connections - self.RESERVED_FOR_OPERATORS
+
+        def pending(strangers: bool) -> list[_Conn]:
+            return [c for c in self._conns.values() if not c.authenticated and self.is_operator(c.source) != strangers]
+
+        while True:
+            strangers = pending(True)
+            if len(self._conns) < self.max_connections and (operator or len(strangers) < stranger_cap):
                 return True
-            victim = conns[0]
+            victims = strangers or (pending(False) if operator else [])
+            if operator and not strangers:
+                victims = [c for c in victims if c.source == source]  # an operator's PC makes room only in its own
+            if not victims:
+                return False
+            counts: dict[str, int] = {}
+            for c in victims:
+                counts[c.source] = counts.get(c.source, 0) + 1
+            victim = min(victims, key=lambda c: (-counts[c.source], c.opened_s))
             self._conns.pop(victim.task, None)
             victim.task.cancel()
             with contextlib.suppress(Exception):
@@ -388,7 +484,6 @@ class CommandServer:
             self.log.warning(
                 "command connection from %s dropped to make room (cap %d)", victim.peer, self.max_connections
             )
-        return True
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
@@ -396,11 +491,13 @@ class CommandServer:
         peername = writer.get_extra_info("peername")
         peer = str(peername)
         source = str(peername[0]) if isinstance(peername, tuple) and peername else peer
+        self.connects += 1
         if not self._make_room(source):
             self.refused_per_source += 1
             self.log.warning(
-                "command connection from %s refused: %d unauthenticated connections from %s already",
+                "command connection from %s refused: no room (%d connections; at most %d unauthenticated from %s)",
                 peer,
+                len(self._conns),
                 self.MAX_UNAUTHENTICATED_PER_SOURCE,
                 source,
             )
@@ -414,7 +511,7 @@ class CommandServer:
         buf = b""
         discarding = False
         try:
-            await self._reply(writer, {"hello": HELLO, "version": PROTOCOL_VERSION, "nonce": nonce})
+            await self._reply(writer, {"hello": HELLO, "version": PROTOCOL_VERSION, "nonce": nonce, "boot": self.boot})
             while True:
                 timeout = (
                     self.idle_timeout_s
@@ -490,6 +587,7 @@ class CommandServer:
             self._rejected(conn.peer, f"unreadable message ({type(err).__name__})")
             return {"ok": False, "seq": None, "error": "garbled message"}, last_seq
         conn.authenticated = True
+        self._mark_operator(conn.source)
         if self.on_valid is not None:
             self.on_valid()
         try:

@@ -23,7 +23,13 @@ from typing import Any, BinaryIO, TextIO
 
 from rimless.errors import RunFailure
 from rimless.firmware.errors import CommandError, Interrupted
-from rimless.firmware.link.telemetry import parse_datagram
+from rimless.firmware.link.telemetry import (
+    has_tag,
+    parse_datagram,
+    strip_tag,
+    telemetry_key,
+    verify_datagram,
+)
 
 CSV_COLUMNS = (
     "timestamp",
@@ -72,43 +78,118 @@ def sparkline(values: list[float], width: int) -> str:
     return "".join(SPARK[1 + int((v - lo) / span * (len(SPARK) - 2) + 0.5)] for v in vals)
 
 
+class SeqTracker:
+    """Counts the numbers of one numbered stream (the objects' `tseq`, the events' `event_seq`) that never came,
+    so that no single number can poison the count: duplicates are ignored, a late one (reordered) fills its gap,
+    one more than `WINDOW` below the highest is stale, and with `confirm_jumps` (an unauthenticated stream) a
+    number more than `MAX_JUMP` ahead is held until the next number confirms it (a forged 1e9 alone moves
+    nothing). Lost = (highest - first + 1) - distinct numbers seen, summed over confirmed jumps."""
+
+    WINDOW = 4096
+    MAX_JUMP = 1 << 16
+
+    def __init__(self, *, confirm_jumps: bool = False) -> None:
+        self.confirm_jumps = confirm_jumps
+        self.first: int | None = None
+        self.high = 0
+        self.distinct = 0
+        self.duplicates = 0
+        self.stale = 0
+        self.held = 0  # numbers far ahead not (yet) confirmed
+        self._lost_before = 0
+        self._seen: set[int] = set()
+        self._pending: int | None = None
+
+    @property
+    def lost(self) -> int:
+        """Numbers that never came (so far)."""
+        if self.first is None:
+            return 0
+        return self._lost_before + max(0, self.high - self.first + 1 - self.distinct)
+
+    def add(self, n: int) -> bool:
+        """Account for number `n`; True if it is new (to be recorded)."""
+        if self.first is None:
+            self.first = self.high = n
+            self.distinct = 1
+            self._seen = {n}
+            return True
+        if n in self._seen:
+            self.duplicates += 1
+            return False
+        if n < self.high - self.WINDOW:
+            self.stale += 1
+            return False
+        if self.confirm_jumps and n > self.high + self.MAX_JUMP:
+            if self._pending is None or not 0 < n - self._pending <= self.MAX_JUMP:
+                self._pending = n
+                self.held += 1
+                return False
+            self._lost_before = self.lost + (self._pending - self.high - 1)
+            self.first, self.high, self.distinct = self._pending, self._pending, 1
+            self._seen = {self._pending}
+            self.held -= 1
+        self._pending = None
+        self._seen.add(n)
+        self.distinct += 1
+        self.high = max(self.high, n)
+        if len(self._seen) > 2 * self.WINDOW:
+            self._seen = {k for k in self._seen if k >= self.high - self.WINDOW}
+        return True
+
+
 class Summary:
     """Running counts over the received telemetry, and the recent history the live view draws."""
 
-    def __init__(self, history: int = 600) -> None:
+    def __init__(self, history: int = 600, *, authenticated: bool = False) -> None:
         self.datagrams = 0
         self.samples = 0
         self.events = 0
         self.faults: list[str] = []
         self.garbled = 0
         self.foreign = 0  # datagrams from another sender than the robot, ignored
-        self.lost_objects = 0  # gaps in the objects' `tseq`
-        self.lost_events = 0  # gaps in the events' `event_seq`
-        self._tseq: int | None = None
-        self._event_seq: int | None = None
+        self.unauthenticated = 0  # of them: datagrams whose tag is missing or does not hold
+        self.duplicates = 0  # objects received twice (a replay, or the network), recorded once
+        self.restarts = 0  # the robot started again (a new boot nonce) during the recording
+        self.authenticated = authenticated
+        self._seq: list[tuple[SeqTracker, SeqTracker]] = []  # (tseq, event_seq) per start of the robot
+        self.new_start()
         self.last: dict[str, Any] | None = None
         self._window: list[float] = []
         self.velocity: deque[float] = deque(maxlen=history)
         self.compression: deque[float] = deque(maxlen=history)
         self.mask: deque[int] = deque(maxlen=history)
 
-    def add(self, objs: list[dict[str, Any]], now_s: float) -> None:
-        """Account for one datagram's objects."""
+    def new_start(self) -> None:
+        """The robot started again: its numbers start again (the losses so far are kept)."""
+        confirm = not self.authenticated
+        self._seq.append((SeqTracker(confirm_jumps=confirm), SeqTracker(confirm_jumps=confirm)))
+
+    @property
+    def lost_objects(self) -> int:
+        """Gaps in the objects' `tseq`, over every start of the robot."""
+        return sum(t.lost for t, _ in self._seq)
+
+    @property
+    def lost_events(self) -> int:
+        """Gaps in the events' `event_seq`, over every start of the robot."""
+        return sum(e.lost for _, e in self._seq)
+
+    def add(self, objs: list[dict[str, Any]], now_s: float) -> list[dict[str, Any]]:
+        """Account for one datagram's objects; returns those to record (not seen before)."""
         self.datagrams += 1
+        tseq, eseq = self._seq[-1]
+        new = []
         for obj in objs:
             t = obj.get("tseq")
-            if isinstance(t, int) and not isinstance(t, bool):
-                if self._tseq is not None and t > self._tseq + 1:
-                    self.lost_objects += t - self._tseq - 1
-                if self._tseq is None or t > self._tseq:
-                    self._tseq = t
+            if isinstance(t, int) and not isinstance(t, bool) and not tseq.add(t):
+                self.duplicates += 1
+                continue
+            new.append(obj)
             ev = obj.get("event")
             es = ev.get("event_seq") if isinstance(ev, dict) else None
             if isinstance(es, int) and not isinstance(es, bool):
-                if self._event_seq is not None and es > self._event_seq + 1:
-                    self.lost_events += es - self._event_seq - 1
-                if self._event_seq is None or es > self._event_seq:
-                    self._event_seq = es
+                eseq.add(es)
             if isinstance(ev, dict):
                 self.events += 1
                 if ev.get("name") == "fault":
@@ -126,6 +207,7 @@ class Summary:
                 m = leg.get("clutch_mask")
                 if isinstance(m, int):
                     self.mask.append(m)
+        return new
 
     def rate(self, now_s: float, span_s: float) -> float:
         """Samples per second over the last `span_s`."""
@@ -143,6 +225,7 @@ class Summary:
             + (f", {self.garbled} garbled" if self.garbled else "")
             + (f", LOST {self.lost_objects} objects ({self.lost_events} events)" if self.lost_objects else "")
             + (f", {self.foreign} foreign datagrams ignored" if self.foreign else "")
+            + (f" ({self.unauthenticated} unauthenticated)" if self.unauthenticated else "")
         )
 
     def view(self, now_s: float, span_s: float, width: int = 60, legs: int = 8) -> list[str]:
@@ -236,10 +319,13 @@ class Recorder:
             self._mcap.write(objs)
 
     def flush(self) -> None:
-        """Push the buffers to the files."""
+        """Push the buffers to the files; the MCAP file ends its chunk (readable up to here, whatever kills
+        the process next)."""
         for fh in (self._jsonl, self._csv_fh):
             if fh is not None:
                 fh.flush()
+        if self._mcap is not None:
+            self._mcap.flush()
 
     def close(self) -> list[Path]:
         """Close and rename every file to its final name; returns the final paths. An MCAP file gets its
@@ -265,6 +351,15 @@ class Recorder:
         return self.paths
 
 
+def _parse(data: bytes, summary: Summary) -> list[dict[str, Any]] | None:
+    """The objects of a datagram, or None (counted as garbled)."""
+    try:
+        return parse_datagram(data)
+    except ValueError:
+        summary.garbled += 1
+        return None
+
+
 def listen(
     *,
     bind: str,
@@ -281,6 +376,7 @@ def listen(
     timeout_s: float = 10.0,
     robot: str | None = None,
     mcap_out: Path | None = None,
+    token: str | None = None,
 ) -> Summary:
     """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
 
@@ -289,9 +385,14 @@ def listen(
     exits 1): if no datagram arrived at all, no file is left behind; if the robot stopped sending, the files are
     completed (the recording up to then) and the message names them.
 
-    Only one sender is the robot: `robot` (a host name or address), else the first sender heard; datagrams
-    from any other are counted (`foreign`) and ignored. Gaps in the objects' `tseq` and the events'
-    `event_seq` are counted and shown (a lost fault event does not go unnoticed)."""
+    With `token` (the command token), only datagrams whose authentication tag holds are the robot's (see
+    `telemetry`), from whatever address, and (with `robot` too) only from that address; a new boot nonce whose
+    objects are newer than the last recorded is the robot starting again (said, and its numbers start again),
+    an older one a replay (ignored). Without a token, nothing can be authenticated (said once at the start):
+    the robot is `robot` (a host name or address), else the first sender whose datagrams carry a tag. Every other
+    datagram is counted (`foreign`, of them `unauthenticated`) and ignored. Objects received twice are recorded
+    once; gaps in the objects' `tseq` and the events' `event_seq` are counted (`SeqTracker`: no single number
+    can poison the count) and shown (a lost fault event does not go unnoticed)."""
     try:
         sock = socket.socket(socket.AF_INET6 if ":" in bind else socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((bind, port))
@@ -314,7 +415,23 @@ def listen(
     if heartbeat is not None:
         hb_thread = threading.Thread(target=heartbeat.run, name="rimless-heartbeat", daemon=True)
         hb_thread.start()
-    summary = Summary()
+    summary = Summary(authenticated=token is not None)
+    keys: dict[str, bytes] = {}
+
+    def key_for(boot: str) -> bytes:
+        if boot not in keys:
+            if len(keys) > 64:
+                keys.clear()
+            keys[boot] = telemetry_key(token or "", boot)
+        return keys[boot]
+
+    boot: str | None = None
+    last_t = float("-inf")  # the newest robot timestamp recorded (a replayed older start is refused by it)
+    if token is None:
+        echo(
+            "telemetry not authenticated: without the command token (--token-file, $RIMLESS_TOKEN_FILE or "
+            "$RIMLESS_TOKEN) any host on the LAN can forge it"
+        )
     start = time.monotonic()
     next_line = start + summary_every_s
     last_data: float | None = None
@@ -327,26 +444,48 @@ def listen(
                 data, addr = sock.recvfrom(65536)
             except TimeoutError:
                 data, addr = None, None
+            objs: list[dict[str, Any]] | None = None
             if data and addr is not None:
-                if robot_ip is None:
-                    robot_ip = addr[0]
-                    echo(f"receiving from {robot_ip} (datagrams from any other sender are ignored)")
-                elif addr[0] != robot_ip:
+                if robot_ip is not None and addr[0] != robot_ip:
                     summary.foreign += 1
-                    data = None
-            now = time.monotonic()
-            if data:
-                try:
-                    objs = parse_datagram(data)
-                except ValueError:
-                    summary.garbled += 1
+                elif token is not None:
+                    checked = verify_datagram(data, key_for)
+                    if isinstance(checked, str):
+                        summary.foreign += 1
+                        summary.unauthenticated += 1
+                    else:
+                        objs = _parse(checked[1], summary)
+                        if objs is not None and checked[0] != boot:
+                            newest = max((float(o["timestamp"]) for o in objs), default=float("-inf"))
+                            if boot is None:
+                                echo(f"receiving from {addr[0]} (authenticated: the robot's start {checked[0][:8]})")
+                            elif newest > last_t:
+                                summary.restarts += 1
+                                summary.new_start()
+                                echo(f"the robot started again (start {checked[0][:8]}): its numbers start again")
+                            else:
+                                summary.foreign += 1  # an older start's datagram: a replay
+                                objs = None
+                            if objs is not None:
+                                boot = checked[0]
+                elif robot_ip is None and not has_tag(data):
+                    summary.foreign += 1
+                    summary.unauthenticated += 1
                 else:
-                    if stale and last_data is not None:
-                        echo(f"data resumed after {now - last_data:.1f} s")
-                    stale = False
-                    last_data = now
-                    summary.add(objs, now)
-                    rec.write(objs)
+                    if robot_ip is None:
+                        robot_ip = addr[0]
+                        echo(f"receiving from {robot_ip} (datagrams from any other sender are ignored)")
+                    objs = _parse(strip_tag(data), summary)  # the tag cannot be checked without the token
+            now = time.monotonic()
+            if objs is not None:
+                if stale and last_data is not None:
+                    echo(f"data resumed after {now - last_data:.1f} s")
+                stale = False
+                last_data = now
+                new = summary.add(objs, now)
+                if new:
+                    last_t = max(last_t, max(float(o["timestamp"]) for o in new))
+                    rec.write(new)
             elif last_data is not None and not stale and now - last_data >= stale_s:
                 stale = True
                 wall = time.strftime("%H:%M:%S", time.localtime(time.time() - (now - last_data)))
@@ -359,15 +498,21 @@ def listen(
                 echo(
                     f"waiting for telemetry on {bind}:{port}: no robot sending for {quiet_s:.0f} s"
                     + (f" (giving up after {timeout_s:g} s)" if timeout_s > 0 else "")
+                    + (
+                        f"; {summary.foreign} datagrams ignored ({summary.unauthenticated} without a valid "
+                        "authentication tag: another token, or a robot before protocol version 3?)"
+                        if summary.foreign
+                        else ""
+                    )
                 )
                 next_line = now + summary_every_s
             elif now >= next_line:
+                rec.flush()  # before the line: a line seen means the files hold what it counts
                 if live and write_screen is not None:
                     write_screen("\x1b[H\x1b[J" + "\n".join(summary.view(now, summary_every_s)) + "\n")
                 else:
                     echo(summary.line(now, summary_every_s))
                 next_line = now + summary_every_s
-                rec.flush()
     except (KeyboardInterrupt, Interrupted) as err:
         stopped_by = err
     finally:

@@ -51,8 +51,8 @@ def _schema_bytes(name: str) -> bytes:
 
 
 class McapRecorder:
-    """Telemetry objects to an open binary file as MCAP (see the module docstring); `finish` writes the
-    summary and index (the file is readable only after it)."""
+    """Telemetry objects to an open binary file as MCAP (see the module docstring); `flush` ends a chunk
+    (the file is readable up to it, whatever happens next), `finish` writes the summary and index."""
 
     def __init__(self, fh: BinaryIO, *, metadata: dict[str, str] | None = None) -> None:
         try:
@@ -68,6 +68,7 @@ class McapRecorder:
         self.messages = 0
         if metadata:
             self._writer.add_metadata("rimless", dict(metadata))
+        fh.flush()  # the header on disk at once: a recording killed before its first chunk is not 0 bytes
 
     def _channel(self, topic: str, schema: str) -> int:
         ch = self._channels.get(topic)
@@ -107,6 +108,11 @@ class McapRecorder:
                 self._add("/sensor", "rimless.Sensor", t_ns, seq, {"ch": ch, **obj["sensor"]})
             if isinstance(obj.get("loop"), dict):
                 self._add("/loop", "rimless.Loop", t_ns, seq, dict(obj["loop"]))
+
+    def flush(self) -> None:
+        """End the chunk in progress and push it to the file (`mcap`'s `Writer.flush`): a process killed after
+        this leaves a file that mcap's readers read up to this chunk (without the summary `finish` writes)."""
+        self._writer.flush()
 
     def finish(self) -> None:
         """Write the MCAP summary, index and footer."""

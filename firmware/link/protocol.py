@@ -4,7 +4,7 @@ the token rule and the validation of every message before anything is acted on.
 Wire format: one JSON object per line (UTF-8, `\\n`-terminated, at most `max_message_bytes`).
 On connect the robot sends a hello line with a fresh random nonce:
 
-    {"hello": "rimless-robot", "version": 2, "nonce": "<32 hex digits>"}
+    {"hello": "rimless-robot", "version": 3, "nonce": "<32 hex digits>", "boot": "<32 hex digits>"}
 
 Every command then carries an HMAC-SHA256 keyed with the shared token (the token itself never
 crosses the wire) over the connection's nonce and the command:
@@ -18,11 +18,25 @@ other (new nonce), and a replay on the same connection fails the `seq` check. Ev
 exactly one reply: `{"ok": true, "seq": 1, "result": {...}}` or `{"ok": false, "seq": 1 | null,
 "error": "..."}`. A refused message changes nothing.
 
-Reserved path for `disarm` and `status`: the same port number on UDP takes one datagram,
-`{"disarm": n, "mac": HMAC-SHA256(token, "disarm\\n" + str(n))}` (any integer n; "status" likewise),
-served by a thread of its own, and answers `{"ok": true, "n": n, "disarmed": true, "status": {...}}`.
-It holds no state per sender, so no number of TCP connections can block it; a replayed disarm can
-only disarm, which is always safe, and a replayed status only reads.
+Reserved path for `disarm` and `status` (protocol version 3): the same port number on UDP, served by a
+thread of its own, by challenge and response, so that no clock, counter, restart or replay can silence it:
+
+    PC -> robot  rimless3 <kind> <client nonce> <boot nonce | -> <second | -> <mac> [pad]
+                 mac = HMAC-SHA256(token, everything before " <mac>")
+
+A first request carries no challenge ("-"). The robot answers each authenticated request it has not seen
+(its MAC is the replay key, kept for `RESERVED_WINDOW_S`) with JSON bound to the client nonce:
+
+    {"v": 3, "ok": true, "for": <client nonce>, "challenge": {"boot": <boot nonce>, "t": <robot's uptime s>},
+     "disarmed": true (a disarm), "status": {...} (a fresh request only), "mac": HMAC(token, "reply\\n" + JSON)}
+
+A request is fresh when it answers this start's challenge (its boot nonce, a second at most
+`RESERVED_WINDOW_S` old on the robot's own clock) and was not seen before; only a fresh request gets the
+status. A disarm is acted on whatever its challenge (releasing the clutches is always safe; an old one, a
+replay, or one from the last start still disarm), so nothing the PC's clock or an earlier datagram did can
+stop it. Answers are never larger than the request (no amplification) and never go to a datagram that fails
+its MAC. The robot's boot nonce is also in the TCP hello. The PC (`remote.send_reserved_datagram`) sends a
+first request of its kind, then a status answering the challenge it got back.
 
 Commands: status, ping, arm {stance_leg?}, disarm, set {name, value}, trial_start {name?}, trial_stop.
 """
@@ -34,6 +48,8 @@ import hmac
 import json
 import math
 import os
+import re
+import secrets
 import stat
 from dataclasses import dataclass
 from typing import Any
@@ -41,7 +57,7 @@ from typing import Any
 from rimless.errors import ParameterError
 
 DEFAULT_PORT = 9871
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3  # 3: reserved path by challenge, authenticated telemetry (CHANGELOG.md)
 HELLO = "rimless-robot"
 COMMANDS: dict[str, frozenset[str]] = {
     "status": frozenset(),
@@ -224,55 +240,161 @@ def read_token_file(path: str | os.PathLike[str], what: str) -> str:
 
 
 RESERVED_KINDS = ("disarm", "status")
+RESERVED_MAGIC = b"rimless3"
 RESERVED_PAD_BYTES = 400  # clients pad their datagram so that the answer (never larger) can carry the status
+RESERVED_WINDOW_S = 30  # a challenge (the robot's boot nonce and its uptime second) is good this long
+_HEX32 = re.compile(rb"[0-9a-f]{32}")
+_HEX64 = re.compile(rb"[0-9a-f]{64}")
 
 
-def reserved_counter() -> int:
-    """The number of a new reserved-path datagram: nanoseconds since the epoch, increasing on one PC; the robot
-    accepts each kind only with a number above the last one it accepted (a replay is ignored)."""
-    import time
-
-    return time.time_ns()
+def new_boot_nonce() -> str:
+    """A fresh random nonce (32 hex digits) naming one start of the robot: the reserved path's challenges and the
+    telemetry's key are bound to it, so nothing captured before a restart is fresh after it."""
+    return secrets.token_hex(16)
 
 
-def reserved_mac(token: str, kind: str, n: int) -> str:
-    """HMAC-SHA256 (hex) of a reserved-path datagram: `kind` ("disarm" or "status") and number `n`."""
-    return hmac.new(token.encode("utf-8"), f"{kind}\n{n}".encode("ascii"), hashlib.sha256).hexdigest()
+def new_client_nonce() -> str:
+    """A fresh random nonce (32 hex digits) for one reserved-path request: the robot's answer is bound to it."""
+    return secrets.token_hex(16)
 
 
-def disarm_mac(token: str, n: int) -> str:
-    """HMAC-SHA256 (hex) of a reserved-path disarm datagram with number `n`."""
-    return reserved_mac(token, "disarm", n)
+@dataclass(frozen=True, slots=True)
+class ReservedRequest:
+    """An authenticated reserved-path request: `kind` ("disarm" or "status"), the PC's `client_nonce`, the
+    challenge it answers (`boot`, `t_s`: None on a first contact) and its `mac` (hex, the replay key)."""
+
+    kind: str
+    client_nonce: str
+    boot: str | None
+    t_s: int | None
+    mac: str
 
 
-def parse_reserved_datagram(data: bytes, token: str) -> tuple[str, int]:
-    """Validate a reserved-path datagram; return (kind, number) or raise `Rejected`."""
-    if len(data) > 512 or _max_depth(data) > 1:
-        raise Rejected("reserved datagram: too long or nested")
+def _reserved_body(kind: str, client_nonce: str, boot: str | None, t_s: int | None) -> bytes:
+    return b" ".join(
+        (
+            RESERVED_MAGIC,
+            kind.encode(),
+            client_nonce.encode(),
+            (boot or "-").encode(),
+            str("-" if t_s is None else t_s).encode(),
+        )
+    )
+
+
+def reserved_request(
+    token: str,
+    kind: str,
+    client_nonce: str,
+    boot: str | None = None,
+    t_s: int | None = None,
+    *,
+    pad: int = RESERVED_PAD_BYTES,
+) -> bytes:
+    """The datagram of a reserved-path request (protocol version 3), padded to `pad` bytes:
+
+        rimless3 <kind> <client nonce> <boot nonce | -> <challenge second | -> <mac> [padding]
+        mac = HMAC-SHA256(token, the bytes before " <mac>")
+
+    A fixed layout: the robot checks the MAC on the raw bytes before it parses anything."""
+    body = _reserved_body(kind, client_nonce, boot, t_s)
+    mac = hmac.digest(token.encode("utf-8"), body, "sha256").hex().encode()
+    data = body + b" " + mac
+    return data + (b" " + b"x" * (pad - len(data) - 1) if pad > len(data) + 1 else b"")
+
+
+class Sha256Mac:
+    """HMAC-SHA256 under one key with its padded key blocks hashed once (RFC 2104): about half the cost of
+    `hmac.digest` per message, for the reserved path's check of every datagram of a flood."""
+
+    def __init__(self, key: bytes) -> None:
+        if len(key) > 64:
+            key = hashlib.sha256(key).digest()
+        block = key.ljust(64, b"\0")
+        self._inner = hashlib.sha256(bytes(b ^ 0x36 for b in block))
+        self._outer = hashlib.sha256(bytes(b ^ 0x5C for b in block))
+
+    def digest(self, msg: bytes) -> bytes:
+        """HMAC-SHA256(key, msg)."""
+        inner = self._inner.copy()
+        inner.update(msg)
+        outer = self._outer.copy()
+        outer.update(inner.digest())
+        return outer.digest()
+
+
+def check_reserved_request(data: bytes, mac: Sha256Mac) -> ReservedRequest | str:
+    """Validate a version-3 reserved-path datagram with the token's `mac`; the request, or why not (a string:
+    no exception, so a flood of garbage costs a layout check and at most one HMAC each, no JSON)."""
+    if not 100 <= len(data) <= 512 or not data.startswith(RESERVED_MAGIC + b" "):
+        return "reserved datagram: not a version-3 request"
+    parts = data.split(b" ", 6)
+    if len(parts) < 6:
+        return "reserved datagram: not a version-3 request"
+    _magic, kind, cnonce, boot, t, sig = parts[:6]
+    if kind not in (b"disarm", b"status") or not _HEX32.fullmatch(cnonce) or not _HEX64.fullmatch(sig):
+        return "reserved datagram: malformed version-3 request"
+    if not (boot == b"-" or _HEX32.fullmatch(boot)) or not (t == b"-" or (t.isdigit() and len(t) <= 12)):
+        return "reserved datagram: malformed challenge"
+    end = len(kind) + len(cnonce) + len(boot) + len(t) + len(RESERVED_MAGIC) + 4
+    if not hmac.compare_digest(mac.digest(data[:end]), bytes.fromhex(sig.decode("ascii"))):
+        return "reserved datagram: bad mac"
+    return ReservedRequest(
+        kind.decode(),
+        cnonce.decode(),
+        None if boot == b"-" else boot.decode(),
+        None if t == b"-" else int(t),
+        sig.decode(),
+    )
+
+
+def parse_reserved_request(data: bytes, key: bytes) -> ReservedRequest:
+    """`check_reserved_request` with the token's bytes `key`, raising `Rejected` with the reason."""
+    out = check_reserved_request(data, Sha256Mac(key))
+    if isinstance(out, str):
+        raise Rejected(out)
+    return out
+
+
+def reply_mac(token: str, reply: dict[str, Any]) -> str:
+    """HMAC-SHA256 (hex) of a reserved-path answer: over its canonical JSON without the "mac" key."""
+    body = json.dumps(
+        {k: v for k, v in reply.items() if k != "mac"}, sort_keys=True, separators=(",", ":"), default=str
+    )
+    return hmac.new(token.encode("utf-8"), b"reply\n" + body.encode(), hashlib.sha256).hexdigest()
+
+
+def check_reply(token: str, data: bytes, client_nonce: str) -> dict[str, Any] | None:
+    """The robot's answer to the request with `client_nonce`, if `data` is one and its MAC holds; else None (a
+    stranger's datagram, a replayed answer to another request, a robot on another protocol version)."""
     try:
-        obj = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError):
-        raise Rejected("reserved datagram: not UTF-8 JSON") from None
-    kinds = [k for k in RESERVED_KINDS if isinstance(obj, dict) and k in obj]
-    if not isinstance(obj, dict) or len(kinds) != 1 or set(obj) - {"pad"} != {kinds[0], "mac"}:
-        raise Rejected("reserved datagram: expected exactly mac and one of disarm, status (and pad)")
-    if "pad" in obj and not isinstance(obj["pad"], str):
-        raise Rejected("reserved datagram: pad must be a string")
-    kind = kinds[0]
-    n, mac = obj[kind], obj["mac"]
-    if isinstance(n, bool) or not isinstance(n, int) or not isinstance(mac, str) or not 0 <= n < 2**63:
-        raise Rejected(f"reserved datagram: {kind} must be a non-negative integer and mac a string")
-    if not hmac.compare_digest(mac.encode("ascii", "replace"), reserved_mac(token, kind, n).encode("ascii")):
-        raise Rejected("reserved datagram: bad mac")
+        obj = json.loads(data)
+    except ValueError:
+        return None
+    if not isinstance(obj, dict):
+        return None
+    if obj.get("for") == client_nonce and obj.get("v") == PROTOCOL_VERSION:
+        mac = obj.get("mac")
+        if isinstance(mac, str) and hmac.compare_digest(mac.encode("ascii", "replace"), reply_mac(token, obj).encode()):
+            return obj
+    return None
+
+
+_V2 = re.compile(rb'\{"(disarm|status)": ?([0-9]{1,19}), ?"mac": ?"([0-9a-f]{64})"(, ?"pad": ?"x*")?\}')
+
+
+def check_v2_reserved(data: bytes, mac: Sha256Mac) -> tuple[str, int] | str:
+    """A protocol-version-2 reserved datagram, as that PC wrote it (`{"disarm": n, "mac": HMAC(token,
+    "disarm\\n" + n), "pad": "xx.."}`): (kind, n) if its MAC holds, else why not. One regular expression and one
+    HMAC, no JSON. The robot acts on such a disarm (releasing is always safe) and answers it with an error naming
+    the versions; it never answers a version-2 status with the status."""
+    m = _V2.fullmatch(data) if len(data) <= 512 else None
+    if m is None:
+        return "reserved datagram: neither a version-3 request nor a version-2 datagram"
+    kind, n = m.group(1).decode(), int(m.group(2))
+    if n >= 2**63 or not hmac.compare_digest(mac.digest(f"{kind}\n{n}".encode()), bytes.fromhex(m.group(3).decode())):
+        return "reserved datagram: bad mac"
     return kind, n
-
-
-def parse_disarm_datagram(data: bytes, token: str) -> int:
-    """Validate a reserved-path disarm datagram; return its number or raise `Rejected`."""
-    kind, n = parse_reserved_datagram(data, token)
-    if kind != "disarm":
-        raise Rejected("reserved datagram: not a disarm")
-    return n
 
 
 def command_mac(token: str, nonce: str, seq: int, cmd: str, args: dict[str, Any]) -> str:
@@ -354,7 +476,7 @@ def parse_command(line: bytes, token: str, nonce: str, last_seq: int | None) -> 
     echo = seq
     if "token" in obj:
         raise Rejected(
-            "unauthenticated: clear-text tokens are not accepted; sign with the connection nonce (protocol version 2)",
+            "unauthenticated: clear-text tokens are not accepted; sign with the connection nonce (protocol version 2 and later)",
             echo,
         )
     extra = sorted(set(obj) - _TOP_KEYS)

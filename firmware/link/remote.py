@@ -18,10 +18,10 @@ from rimless.firmware.link.protocol import (
     DEFAULT_PORT,
     HELLO,
     PROTOCOL_VERSION,
-    RESERVED_PAD_BYTES,
+    check_reply,
     command_mac,
-    reserved_counter,
-    reserved_mac,
+    new_client_nonce,
+    reserved_request,
 )
 
 
@@ -53,7 +53,14 @@ class RobotLink:
         if hello.get("hello") != HELLO or not isinstance(nonce, str):
             self.sock.close()
             raise CommandError(f"{host}:{port} is not a rimless robot (protocol version {PROTOCOL_VERSION})")
+        if hello.get("version") != PROTOCOL_VERSION:
+            self.sock.close()
+            raise CommandError(
+                f"the robot at {host}:{port} speaks protocol version {hello.get('version')}, this PC version "
+                f"{PROTOCOL_VERSION}: install the same rimless release on both (see CHANGELOG.md)"
+            )
         self.nonce = nonce
+        self.boot = hello.get("boot")
 
     def _read_obj(self) -> dict[str, Any]:
         try:
@@ -112,56 +119,89 @@ class RobotLink:
 
 
 RESEND_FIRST_S = 0.05  # the reserved path's first resend, then doubling: a dropped copy costs 50 ms, not 1/3 s
+RESEND_MAX_S = 0.2  # and at least every 0.2 s until the deadline: under a flood each copy is a new chance
 
 
 def send_reserved_datagram(
-    host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0, copies: int = 5
+    host: str, kind: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0, copies: int = 20
 ) -> dict[str, Any]:
-    """PC side: `disarm` or `status` over the reserved UDP path; returns the robot's answer.
+    """PC side: `disarm` or `status` over the reserved UDP path (challenge and response, see `protocol`);
+    returns the robot's authenticated answer with the status.
 
-    Sends up to `copies` datagrams (UDP may drop one: a flood can fill the robot's socket buffer), each with
-    a new number, the next one `RESEND_FIRST_S` after the first and then twice as long each time, the last
-    waiting for what is left of `timeout_s`; an answer to any of them counts. Raises `RobotUnreachable` when
-    none comes.
+    The first request carries no challenge: a disarm is acted on at once, and the robot's signed answer (bound
+    to this request's random nonce) says so and brings its challenge; the second, a status, answers the
+    challenge and gets the status. Up to `copies` datagrams per round (UDP may drop one: a flood can fill the robot's socket
+    buffer), each with a new nonce, the next one `RESEND_FIRST_S` after the first and then twice as long up to
+    `RESEND_MAX_S`, the last waiting for what is left of `timeout_s`; only answers whose MAC holds count. Neither this PC's clock
+    nor any earlier datagram matters. Raises `RobotUnreachable` when the robot does not answer; a disarm
+    answered without its status (the second round lost) returns that answer (`"disarmed": true`).
     """
     try:
         info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
     except socket.gaierror as err:
         raise RobotUnreachable(f"robot host {host!r} cannot be resolved ({err.strerror})") from None
-    sent: set[int] = set()
     deadline = time.monotonic() + timeout_s
     with socket.socket(info[0], socket.SOCK_DGRAM) as sock:
-        for k in range(copies):
-            n = max(reserved_counter(), max(sent, default=0) + 1)  # every copy a new number (no replay)
-            sent.add(n)
-            body: dict[str, Any] = {kind: n, "mac": reserved_mac(token, kind, n)}
-            body["pad"] = "x" * max(0, RESERVED_PAD_BYTES - len(json.dumps(body)) - 10)  # room for the answer
-            until = deadline if k == copies - 1 else min(deadline, time.monotonic() + RESEND_FIRST_S * 2**k)
+        first = _round(sock, info[4], token, kind, None, deadline, copies)
+        if first is None:
+            raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
+        if "status" in first:
+            return first
+        challenge = first.get("challenge") if isinstance(first.get("challenge"), dict) else {}
+        second = _round(sock, info[4], token, "status", challenge, deadline, copies)  # a disarm is done: read
+    if second is not None and "status" in second:
+        return {**second, "disarmed": True} if kind == "disarm" else second
+    if kind == "disarm":
+        return first  # acted on and confirmed; the status did not come back in time
+    raise RobotUnreachable(f"no status in the answers to the UDP {kind} from {host}:{port} within {timeout_s} s")
+
+
+def _round(
+    sock: socket.socket,
+    address: Any,
+    token: str,
+    kind: str,
+    challenge: dict[str, Any] | None,
+    deadline: float,
+    copies: int,
+) -> dict[str, Any] | None:
+    """Send up to `copies` requests (each a new nonce) until one is answered; the answer, or None."""
+    sent: dict[str, None] = {}
+    boot = challenge.get("boot") if challenge else None
+    t = challenge.get("t") if challenge else None
+    for k in range(copies):
+        nonce = new_client_nonce()
+        sent[nonce] = None
+        data = reserved_request(
+            token, kind, nonce, boot if isinstance(boot, str) else None, t if isinstance(t, int) else None
+        )
+        wait_s = min(RESEND_MAX_S, RESEND_FIRST_S * 2**k)
+        until = deadline if k == copies - 1 else min(deadline, time.monotonic() + wait_s)
+        try:
+            sock.sendto(data, address)
+        except ConnectionRefusedError:
+            continue
+        except OSError as err:
+            raise RobotUnreachable(f"cannot reach the robot at {address} ({err.strerror or err})") from None
+        while (left := until - time.monotonic()) > 0:
+            sock.settimeout(left)
             try:
-                sock.sendto(json.dumps(body).encode(), info[4])
-            except ConnectionRefusedError:
-                continue
+                reply, _ = sock.recvfrom(65536)
+            except (TimeoutError, ConnectionRefusedError):
+                break
             except OSError as err:
-                raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
-            while (left := until - time.monotonic()) > 0:
-                sock.settimeout(left)
-                try:
-                    reply, _ = sock.recvfrom(65536)
-                except (TimeoutError, ConnectionRefusedError):
-                    break
-                except OSError as err:
-                    raise RobotUnreachable(f"cannot reach the robot at {host}:{port} ({err.strerror or err})") from None
-                try:
-                    obj = json.loads(reply)
-                except ValueError:
-                    continue
-                if isinstance(obj, dict) and obj.get("ok") and obj.get("n") in sent:
+                raise RobotUnreachable(f"cannot reach the robot at {address} ({err.strerror or err})") from None
+            for n in sent:
+                obj = check_reply(token, reply, n)
+                if obj is not None:
                     return obj
-    raise RobotUnreachable(f"no answer to the UDP {kind} from {host}:{port} within {timeout_s} s")
+        if time.monotonic() >= deadline:
+            break
+    return None
 
 
 def send_disarm_datagram(
-    host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0, copies: int = 5
+    host: str, *, token: str, port: int = DEFAULT_PORT, timeout_s: float = 1.0, copies: int = 20
 ) -> dict[str, Any]:
     """PC side: disarm over the reserved UDP path (see `send_reserved_datagram`)."""
     return send_reserved_datagram(host, "disarm", token=token, port=port, timeout_s=timeout_s, copies=copies)

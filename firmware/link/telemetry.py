@@ -6,11 +6,25 @@ epoch seconds and nested numeric fields (`leg/velocity_m_s`, `sensor/squal`, ...
 are objects with numeric codes, since PlotJuggler ignores strings. Datagrams stay under
 `max_datagram_bytes` (default 1200, below the Ethernet MTU; an old PlotJuggler read 2048 at most).
 Sending is non-blocking: with nobody listening, datagrams are dropped and counted, never waited on.
+
+Authentication (protocol version 3): with the command token, every datagram ends with a tag,
+
+    [obj, ..., obj, {"timestamp": T, "rimless_auth": "3.<boot nonce>.<mac>"}]     (batch)
+    {..., "rimless_auth": "3.<boot nonce>.<mac>"}                                 (one object)
+
+mac = the first 16 bytes (hex) of HMAC-SHA256(key, the datagram's bytes before the tag), key =
+HMAC-SHA256(token, "rimless telemetry\n" + boot nonce): a key per start of the robot, the token never on the
+wire. PlotJuggler ignores the tag (a string); `verify_datagram` checks it and gives back the datagram without
+it. A receiver with the token accepts only what the robot sent, from any address, and tells the robot's starts
+apart by the nonce.
 """
 
 from __future__ import annotations
 
+import hmac
 import json
+import re
+import secrets
 import socket
 import time
 from collections.abc import Iterable, Iterator
@@ -85,6 +99,64 @@ def record_to_json(rec: Record, clock: WallClock) -> dict[str, Any]:
     return {"timestamp": clock.epoch_s(rec.t_ns), "t_mono_s": round(rec.t_ns * 1e-9, 6), "event": body}
 
 
+AUTH_VERSION = 3
+AUTH_TAG_BYTES = 128  # room the tag takes at most (a batch's tag with a 20-digit timestamp: about 110 bytes)
+_BATCH_TAIL = re.compile(rb',\{"timestamp":[-0-9.eE+]{1,24},"rimless_auth":"3\.([0-9a-f]{32})\.([0-9a-f]{32})"\}\]')
+_SINGLE_TAIL = re.compile(rb',"rimless_auth":"3\.([0-9a-f]{32})\.([0-9a-f]{32})"\}')
+
+
+def telemetry_key(token: str, boot: str) -> bytes:
+    """The telemetry key of one start of the robot: HMAC-SHA256(token, "rimless telemetry\\n" + boot)."""
+    return hmac.digest(token.encode("utf-8"), b"rimless telemetry\n" + boot.encode("ascii"), "sha256")
+
+
+def _tag_mac(key: bytes, signed: bytes) -> bytes:
+    return hmac.digest(key, signed, "sha256")[:16].hex().encode()
+
+
+def sign_datagram(data: bytes, key: bytes, boot: str) -> bytes:
+    """`data` (a batch `[...]` or one object `{...}`, as `pack_datagrams` makes them) with its tag appended."""
+    if data.startswith(b"["):
+        body = data[:-1]
+        ts = re.search(rb'"timestamp":([-0-9.eE+]{1,24})', body)
+        t = ts.group(1) if ts else b"0"
+        return (
+            body + b',{"timestamp":' + t + b',"rimless_auth":"3.' + boot.encode() + b"." + _tag_mac(key, body) + b'"}]'
+        )
+    body = data[:-1]
+    return body + b',"rimless_auth":"3.' + boot.encode() + b"." + _tag_mac(key, body) + b'"}'
+
+
+def has_tag(data: bytes) -> bool:
+    """Whether `data` ends with a telemetry tag (not checked: anyone can write one)."""
+    i = data.rfind(b',{"timestamp":') if data.endswith(b"]") else data.rfind(b',"rimless_auth":"')
+    pattern = _BATCH_TAIL if data.endswith(b"]") else _SINGLE_TAIL
+    return i > 0 and pattern.fullmatch(data, i) is not None
+
+
+def strip_tag(data: bytes) -> bytes:
+    """`data` without its tag (unchecked), or `data` as it is when it has none."""
+    if not has_tag(data):
+        return data
+    if data.endswith(b"]"):
+        return data[: data.rfind(b',{"timestamp":')] + b"]"
+    return data[: data.rfind(b',"rimless_auth":"')] + b"}"
+
+
+def verify_datagram(data: bytes, key_for: Any) -> tuple[str, bytes] | str:
+    """(boot nonce, the datagram without its tag) if its tag holds under `key_for(boot)` (the key of that start),
+    else why not (a string)."""
+    batch = data.endswith(b"]")
+    i = data.rfind(b',{"timestamp":') if batch else data.rfind(b',"rimless_auth":"')
+    m = (_BATCH_TAIL if batch else _SINGLE_TAIL).fullmatch(data, i) if i > 0 else None
+    if m is None:
+        return "no authentication tag (a robot before protocol version 3, or not the robot)"
+    boot, mac = m.group(1).decode(), m.group(2)
+    if not hmac.compare_digest(_tag_mac(key_for(boot), data[:i]), mac):
+        return "bad authentication tag (another token, or forged)"
+    return boot, data[:i] + (b"]" if batch else b"}")
+
+
 def _dumps(obj: Any) -> bytes:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=str).encode()
 
@@ -117,6 +189,8 @@ class TelemetrySender:
     at once); counts what it sends and what it drops, over all destinations.
 
     :param destinations: (host, port) pairs; each is resolved once, here.
+    :param token: the command token: every datagram is signed with this start's key (module docstring).
+    :param boot: this start's nonce (default: a fresh one).
     """
 
     def __init__(
@@ -127,6 +201,8 @@ class TelemetrySender:
         max_datagram_bytes: int = 1200,
         batch: bool = True,
         decimate: int = 1,
+        token: str | None = None,
+        boot: str | None = None,
     ) -> None:
         if isinstance(destinations, str):  # the one-destination form: TelemetrySender(host, port)
             destinations = [(destinations, int(port or 9870))]
@@ -139,6 +215,8 @@ class TelemetrySender:
         self.dropped_datagrams = 0
         self.tseq = 0
         self._n = 0
+        self.boot = boot or secrets.token_hex(16)
+        self._key = None if token is None else telemetry_key(token, self.boot)
         self.socks: list[socket.socket] = []
         self.addresses: list[tuple[Any, ...]] = []
         try:
@@ -172,7 +250,10 @@ class TelemetrySender:
             self.tseq += 1
             obj["tseq"] = self.tseq  # every object sent, numbered: a receiver counts what it lost
             objs.append(obj)
-        for data in pack_datagrams(objs, self.max_datagram_bytes, batch=self.batch):
+        room = self.max_datagram_bytes - (AUTH_TAG_BYTES if self._key is not None else 0)
+        for data in pack_datagrams(objs, room, batch=self.batch):
+            if self._key is not None:
+                data = sign_datagram(data, self._key, self.boot)
             for sock in self.socks:
                 try:
                     sock.send(data)

@@ -30,7 +30,7 @@ from rimless.firmware.control.faults import Fault
 from rimless.firmware.control.sampler import Sampler
 from rimless.firmware.control.watchdog import Watchdog
 from rimless.firmware.link.commands import CommandServer
-from rimless.firmware.link.protocol import Command, check_token
+from rimless.firmware.link.protocol import Command, check_token, new_boot_nonce
 from rimless.firmware.link.telemetry import TelemetrySender
 from rimless.firmware.service import sdnotify
 from rimless.firmware.service.config import RobotConfig
@@ -115,6 +115,7 @@ class RobotApp:
         self.trial: TrialLog | None = None
         self.telemetry: TelemetrySender | None = None
         self.server: CommandServer | None = None
+        self.boot = new_boot_nonce()  # this start's nonce: the reserved UDP path's challenges, the telemetry's key
         self._tel_pending: list[Record] = []
         self._log_pending: list[Record] = []
         self._stop: asyncio.Event | None = None
@@ -187,6 +188,8 @@ class RobotApp:
                     max_datagram_bytes=tcfg.max_datagram_bytes,
                     batch=tcfg.batch,
                     decimate=tcfg.decimate,
+                    token=self.token,  # signed with this start's key: `robot listen` knows the robot by it
+                    boot=self.boot,
                 )
             if self.cfg.commands.enabled:
                 c = self.cfg.commands
@@ -202,6 +205,7 @@ class RobotApp:
                     on_valid=self._command_seen,
                     on_disarm=self._reserved_disarm,
                     on_status=self._reserved_status,
+                    boot=self.boot,
                 )
                 self.server = server
                 self.command_port = self.summary.command_port = await server.start()

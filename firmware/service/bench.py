@@ -16,8 +16,10 @@ socket nobody reads, a trial log on disk) and reports:
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
+import os
 import signal
 import socket
 import tempfile
@@ -176,3 +178,231 @@ def bench_rates(
         if on_result is not None:
             on_result(res)
     return results
+
+
+# --- the reserved UDP path under a flood (issue 32) ----------------------------------------------------------
+
+FLOOD_SOURCES = {
+    "none": [],
+    "spoof": ["127.0.0.1"],
+    "spread": [f"127.0.{1 + k // 250}.{1 + k % 250}" for k in range(900)],
+}
+
+_FLOOD = """
+import random, socket, sys, threading
+sources, port = sys.argv[1].split(","), int(sys.argv[2])
+socks = []
+for src in sources:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); s.bind((src, 0)); s.setblocking(False); socks.append(s)
+junk = [b"rimless3 disarm " + b"%032x" % random.getrandbits(128) + b" - - " + b"0" * 64 + b" " + b"x" * 300,
+        b'{"disarm": 9223372036854775807, "mac": "' + b"0" * 64 + b'", "pad": "' + b"x" * 300 + b'"}',
+        b"garbage" * 50]
+stop = threading.Event()
+threading.Thread(target=lambda: (sys.stdin.readline(), stop.set()), daemon=True).start()
+sent = k = 0
+print("flooding", flush=True)
+while not stop.is_set() and k < 50_000_000:
+    try:
+        socks[k % len(socks)].sendto(junk[k % 3], ("127.0.0.1", port)); sent += 1
+    except OSError:
+        pass
+    k += 1
+print(sent, flush=True)
+"""
+
+_DISARMS = """
+import sys, time
+from rimless.errors import RimlessError
+from rimless.firmware.link.remote import send_disarm_datagram
+port, n, token = int(sys.argv[1]), int(sys.argv[2]), sys.stdin.readline().strip()
+for _ in range(n):
+    t0 = time.perf_counter()
+    try:
+        send_disarm_datagram("127.0.0.1", token=token, port=port, timeout_s=2.0)
+        print(round((time.perf_counter() - t0) * 1e3, 3), flush=True)
+    except RimlessError:
+        print("lost", flush=True)
+    time.sleep(0.05)
+"""
+
+
+def bench_flood(
+    flood: str = "spoof", rate_hz: float = 1000.0, phase_s: float = 2.0, disarms: int = 10, realtime: bool = False
+) -> dict[str, Any]:
+    """The whole fake app with its command server on the loopback, armed, at `rate_hz`: `phase_s` without a
+    flood (the reference), then `phase_s` with a flood of junk (bad MACs, version-2 garbage, garbage) from
+    another process at the rate it can send, from the operator's own address (`flood="spoof"`) or spread over
+    900 addresses (`"spread"`), or none; during the flood, `disarms` UDP disarms from a third process (an
+    operator PC on the same machine). Returns the loop rate of each phase and their ratio, the time each
+    disarm took to be confirmed (the robot's signed answer to its first round: the disarm is acted on before
+    it is sent), the datagrams the flood sent and the reserved path checked. Everything shares this machine's
+    CPUs: a real flood and operator would be other machines."""
+    import secrets
+    import subprocess
+    import sys
+    import threading
+
+    if flood not in FLOOD_SOURCES:
+        raise ValueError(f"flood must be one of {', '.join(FLOOD_SOURCES)}, got {flood!r}")
+    token = secrets.token_urlsafe(24)
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sink.bind(("127.0.0.1", 0))
+    marks: dict[str, int] = {}
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="rimless-bench-") as tmp:
+        cfg = RobotConfig(
+            sampling=SamplingConfig(rate_hz=float(rate_hz), realtime=realtime),
+            telemetry=TelemetryConfig(host="127.0.0.1", port=sink.getsockname()[1]),
+            commands=CommandsConfig(bind="127.0.0.1", port=0, token=token, link_timeout_s=0.0),
+            log=LogConfig(dir=tmp),
+        )
+        traj = GaitTrajectory(
+            start_s=time.monotonic() + 0.3, step_period_s=0.25, compression_m=0.008, compression_s=0.06
+        )
+        hw = build_fake(cfg, trajectory=traj)
+
+        def plain() -> None:  # the flood and the operator are other machines: never the robot's real-time class
+            with contextlib.suppress(OSError, AttributeError):
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+        def drive(app: RobotApp, loop: asyncio.AbstractEventLoop) -> None:
+            proc = None
+            try:
+                time.sleep(phase_s)
+                marks["flood_ns"] = time.monotonic_ns()
+                if FLOOD_SOURCES[flood]:
+                    proc = subprocess.Popen(
+                        [sys.executable, "-c", _FLOOD, ",".join(FLOOD_SOURCES[flood]), str(app.command_port)],
+                        stdin=subprocess.PIPE,
+                        stdout=subprocess.PIPE,
+                        text=True,
+                        preexec_fn=plain,
+                    )
+                    assert proc.stdin is not None and proc.stdout is not None
+                    proc.stdout.readline()
+                client = subprocess.run(
+                    [sys.executable, "-c", _DISARMS, str(app.command_port), str(disarms)],
+                    input=token + "\n",
+                    capture_output=True,
+                    text=True,
+                    timeout=120,
+                    preexec_fn=plain,
+                )
+                out["disarm_ms"] = [float(x) if x != "lost" else None for x in client.stdout.split()]
+                time.sleep(max(0.0, phase_s - (time.monotonic_ns() - marks["flood_ns"]) * 1e-9))
+                marks["end_ns"] = time.monotonic_ns()
+                udp = app.server._udp if app.server is not None else None
+                out["reserved_checked"] = 0 if udp is None else udp.received
+                out["reserved_rejected"] = 0 if udp is None else udp.rejected
+                if proc is not None:
+                    assert proc.stdin is not None and proc.stdout is not None
+                    with contextlib.suppress(BrokenPipeError):
+                        proc.stdin.write("stop\n")
+                        proc.stdin.flush()
+                    out["flood_sent"] = int(proc.stdout.readline() or 0)
+            finally:
+                if proc is not None:
+                    proc.kill()
+                    proc.wait(30)
+                loop.call_soon_threadsafe(app.request_stop, "bench done")
+
+        def ready(app: RobotApp) -> None:
+            threading.Thread(target=drive, args=(app, asyncio.get_running_loop()), daemon=True).start()
+
+        app = RobotApp(cfg, hw, token=token, record_timing=True, on_ready=ready)
+        cpu0 = time.process_time()
+        asyncio.run(app.run(duration_s=4 * phase_s + 120, arm=True, handle_signals=False))
+        cpu = time.process_time() - cpu0
+    sink.close()
+    assert app.sampler is not None
+    times = list(app.sampler.sample_times_ns)
+
+    def rate(lo: int, hi: int) -> float:
+        ts = [t for t in times if lo <= t < hi]
+        return round((len(ts) - 1) / ((ts[-1] - ts[0]) * 1e-9), 1) if len(ts) > 1 else 0.0
+
+    if "end_ns" not in marks:
+        raise RuntimeError("the flood bench did not complete (see the error above)")
+    before = rate(times[0] + 300_000_000, marks["flood_ns"])
+    during = rate(marks["flood_ns"], marks["end_ns"])
+    ms = [x for x in out.get("disarm_ms", []) if x is not None]
+    return {
+        "flood": flood,
+        "sources": len(FLOOD_SOURCES[flood]),
+        "rate_hz": float(rate_hz),
+        "loop_rate_before_hz": before,
+        "loop_rate_during_hz": during,
+        "loop_rate_ratio": round(during / before, 3) if before else float("nan"),
+        "disarms": disarms,
+        "disarms_confirmed": len(ms),
+        "disarm_ms": out.get("disarm_ms", []),
+        **_ms(ms, "disarm"),
+        "flood_sent": out.get("flood_sent", 0),
+        "reserved_checked": out.get("reserved_checked", 0),
+        "reserved_rejected": out.get("reserved_rejected", 0),
+        "cpu_s": round(cpu, 2),
+        "realtime": realtime,
+    }
+
+
+def bench_check_cost(n: int = 20000) -> dict[str, Any]:
+    """CPU time per junk datagram of the reserved path's check (`check_reserved_request`: layout, one HMAC with
+    precomputed pads, no JSON) beside the reference the version-2 path did on every datagram (`json.loads`, then
+    `hmac.new` over the number), both on the same datagrams in one run; the ratio from CPU time."""
+    import hashlib
+    import hmac
+    import json
+    import random
+
+    from rimless.firmware.link.protocol import Sha256Mac, check_reserved_request
+
+    token = f"bench-{random.getrandbits(128):032x}"
+    mac = Sha256Mac(token.encode())
+    v3 = b"rimless3 disarm " + b"%032x" % random.getrandbits(128) + b" - - " + b"0" * 64 + b" " + b"x" * 300
+    v2 = json.dumps({"disarm": 2**62, "mac": "0" * 64, "pad": "x" * 300}).encode()
+
+    def reference(data: bytes) -> bool:
+        obj = json.loads(data)
+        n = obj["disarm"]
+        good = hmac.new(token.encode(), f"disarm\n{n}".encode(), hashlib.sha256).hexdigest()
+        return hmac.compare_digest(obj["mac"].encode(), good.encode())
+
+    t0 = time.process_time()
+    for _ in range(n):
+        check_reserved_request(v3, mac)
+    fast = (time.process_time() - t0) / n
+    t0 = time.process_time()
+    for _ in range(n):
+        reference(v2)
+    ref = (time.process_time() - t0) / n
+    return {
+        "datagrams": n,
+        "check_us": round(fast * 1e6, 2),
+        "reference_us": round(ref * 1e6, 2),
+        "ratio": round(ref / fast, 2) if fast > 0 else float("nan"),
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m rimless.firmware.service.bench --flood none,spoof,spread [--rate-hz 1000] [--phase-s 2]
+    [--realtime]`: the reserved path's figures under floods, one JSON object per line."""
+    import argparse
+    import json
+
+    p = argparse.ArgumentParser(prog="python -m rimless.firmware.service.bench")
+    p.add_argument("--flood", default="none,spoof,spread")
+    p.add_argument("--rate-hz", type=float, default=1000.0)
+    p.add_argument("--phase-s", type=float, default=2.0)
+    p.add_argument("--disarms", type=int, default=10)
+    p.add_argument("--realtime", action="store_true")
+    args = p.parse_args(argv)
+    print(json.dumps({"check_cost": bench_check_cost()}), flush=True)
+    for flood in args.flood.split(","):
+        with NonBlockingLog(level=logging.ERROR):
+            res = bench_flood(flood, args.rate_hz, args.phase_s, args.disarms, args.realtime)
+        print(json.dumps(res), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -94,6 +94,14 @@ def test_check_fake_reports_id_squal_and_clicks() -> None:
     assert [c["pin"] for c in rep["clutches"]] == [17, 27, 22, 23, 24, 16, 20, 21]
 
 
+def _signed(data: bytes) -> bytes:
+    """A datagram as a robot of protocol version 3 sends it: with its tag (`robot listen` without the token takes
+    the first sender whose datagrams carry one for the robot)."""
+    from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
+
+    return sign_datagram(data, telemetry_key("any-token-of-this-robot", "e" * 32), "e" * 32)
+
+
 def test_listen_records_datagrams(tmp_path) -> None:
     port = free_port()
     out = tmp_path / "tel.jsonl"
@@ -107,7 +115,7 @@ def test_listen_records_datagrams(tmp_path) -> None:
                 {"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
                 {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
             ]
-            s.sendto(json.dumps(batch).encode(), ("127.0.0.1", port))
+            s.sendto(_signed(json.dumps(batch).encode()), ("127.0.0.1", port))
         s.sendto(b"garbage", ("127.0.0.1", port))
         s.close()
 
@@ -239,9 +247,11 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
                 {"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},
                 {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
             ]
-            s.sendto(json.dumps(batch).encode(), ("127.0.0.1", port))
+            s.sendto(_signed(json.dumps(batch).encode()), ("127.0.0.1", port))
         time.sleep(0.8)  # a pause longer than --stale-s
-        s.sendto(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode(), ("127.0.0.1", port))
+        s.sendto(
+            _signed(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode()), ("127.0.0.1", port)
+        )
         s.close()
 
     t = threading.Thread(target=send)

@@ -22,7 +22,7 @@ from rimless.firmware.link.commands import RateLimitedLog
 from rimless.firmware.link.heartbeat import Heartbeat
 from rimless.firmware.link.remote import RobotLink, send_command
 from rimless.firmware.service.config import CommandsConfig
-from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 
@@ -176,7 +176,11 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
     port = sock.getsockname()[1]
     sock.close()
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n')
+    # idle connections get 60 s to authenticate: a disarm answered while they are still held did not wait for them
+    cfg.write_text(
+        f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\nauth_timeout_s = 60.0\n'
+        f'[log]\ndir = "{tmp_path}"\n'
+    )
     env = {**os.environ, "RIMLESS_TOKEN": TOKEN}
 
     def pi_limits() -> None:
@@ -204,22 +208,17 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
         opener.start()
         opener.join(60)
         assert len(idle) >= 1000  # connected (the robot may have closed most of them at once)
-        time.sleep(0.2)
-        took = []
-        for _ in range(3):  # the best of three: one scheduling hiccup of a loaded machine is not the design
-            t0 = time.perf_counter()
-            result = send_command("127.0.0.1", "disarm", token=TOKEN, port=port, timeout_s=5)
-            took.append(time.perf_counter() - t0)
-        elapsed = min(took)
-        status = send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=5)
+        result = send_command("127.0.0.1", "disarm", token=TOKEN, port=port, timeout_s=30)
+        status = send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=30)
     finally:
         for s in idle:
             s.close()
         proc.terminate()
         _, err = proc.communicate(timeout=20)
     assert result["armed"] is False and status["engaged"] == []
-    assert elapsed < 0.1, f"disarm took {', '.join(f'{t * 1e3:.0f}' for t in took)} ms"
-    assert status["link"]["connections"] <= 16
+    # answered while idle connections still held slots (none can have timed out: 60 s), at most the cap
+    # (the time it takes is measured by the bench, docs/robot.md: no wall-clock assert here)
+    assert 2 <= status["link"]["connections"] <= 16
     assert "Traceback" not in err
 
 
@@ -282,24 +281,24 @@ def test_reserved_udp_path_disarms_during_a_live_connection_flood(tmp_path) -> N
         try:
             while counter[0] < 300:
                 await asyncio.sleep(0.01)
-            t0 = time.perf_counter()
-            reply = await asyncio.to_thread(send_disarm_datagram, "127.0.0.1", token=TOKEN, port=app.command_port)
-            elapsed = time.perf_counter() - t0
+            reply = await asyncio.to_thread(
+                send_disarm_datagram, "127.0.0.1", token=TOKEN, port=app.command_port, timeout_s=10.0
+            )
+            at_reply = counter[0]
             armed_after = app.controller.armed
+            while counter[0] == at_reply:  # the flood still ran after the answer: it came during the flood
+                await asyncio.sleep(0.01)
             bad = await asyncio.to_thread(_bad_datagram, app.command_port)
         finally:
             stop.set()
             await asyncio.to_thread(flooder.join, 30)
         c.close()
-        return reply, elapsed, armed_after, bad, counter[0]
+        return reply, armed_after, bad, at_reply
 
-    app, summary, (reply, elapsed, armed_after, bad, flooded), hw = scenario(config(tmp_path), script)
+    app, summary, (reply, armed_after, bad, at_reply), hw = scenario(config(tmp_path), script)
     assert reply["ok"] and reply["disarmed"] and armed_after is False and all_off(hw)
     assert reply["status"]["engaged"] == [] and isinstance(reply["status"]["faults"], list)
-    # The flood runs in this process, so its thread competes with the server for the GIL (on the robot it comes
-    # from another machine): the bound here is looser than the 100 ms the idle-connection test holds, measured
-    # 3-330 ms depending on the machine's load. What it guards is that disarm gets through at all, at once.
-    assert elapsed < 1.0, f"UDP disarm took {elapsed * 1e3:.0f} ms under a flood of {flooded} connections"
+    assert at_reply >= 300  # answered with 300 connections or more made, and the flood went on after it
     assert bad is None  # a datagram with a wrong mac gets no answer and changes nothing
 
 
@@ -316,9 +315,9 @@ def _bad_datagram(port: int):
 
 
 def test_reserved_udp_status_answers_once_and_ignores_replays_and_strangers(tmp_path) -> None:
-    """Fails on today's main: a captured status (or disarm) datagram was answered every time it was replayed,
-    from any source (a reflector), and answers could be larger than the request."""
-    from rimless.firmware.link.protocol import reserved_counter, reserved_mac
+    """A status by challenge and response; the same request sent again, a request signed with another token, and
+    a disarm replayed are not answered (the disarm still disarms: releasing is always safe)."""
+    from rimless.firmware.link.protocol import reserved_request
     from rimless.firmware.link.remote import send_reserved_datagram
 
     async def script(app, hw):
@@ -328,8 +327,7 @@ def test_reserved_udp_status_answers_once_and_ignores_replays_and_strangers(tmp_
         def exchange():  # blocking socket calls, off the event loop (a blocked loop trips the watchdog)
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 
-            def ask(obj, timeout_s=0.5):  # 0.5 s of silence for the ignored ones, 5 s for an expected answer
-                data = json.dumps(obj).encode()
+            def ask(data, timeout_s=0.5):  # 0.5 s of silence for the ignored ones, 5 s for an expected answer
                 s.settimeout(timeout_s)
                 s.sendto(data, ("127.0.0.1", app.command_port))
                 try:
@@ -339,84 +337,29 @@ def test_reserved_udp_status_answers_once_and_ignores_replays_and_strangers(tmp_
                 assert len(reply) <= len(data)  # never more bytes than the request
                 return json.loads(reply)
 
-            n = reserved_counter()
-            status = {"status": n, "mac": reserved_mac(TOKEN, "status", n)}
-            first = ask(status, 5.0)
-            replay = ask(status)  # captured and sent again
-            wrong_kind = ask({"disarm": n + 1, "mac": reserved_mac(TOKEN, "status", n + 1)})
-            stranger = ask({"status": n + 2, "mac": reserved_mac("not-the-token-" + TOKEN, "status", n + 2)})
-            disarm_n = reserved_counter()
-            disarm = {"disarm": disarm_n, "mac": reserved_mac(TOKEN, "disarm", disarm_n)}
+            first = ask(reserved_request(TOKEN, "status", "1" * 32), 5.0)
+            ch = first["challenge"]
+            fresh = ask(reserved_request(TOKEN, "status", "2" * 32, ch["boot"], ch["t"]), 5.0)
+            replay = ask(reserved_request(TOKEN, "status", "2" * 32, ch["boot"], ch["t"]))
+            stranger = ask(reserved_request("not-the-token-" + TOKEN, "status", "3" * 32, ch["boot"], ch["t"]))
+            disarm = reserved_request(TOKEN, "disarm", "4" * 32, ch["boot"], ch["t"])
             first_disarm = ask(disarm, 5.0)
+            app.controller.arm()
             replayed_disarm = ask(disarm)
             s.close()
-            return first, replay, wrong_kind, stranger, first_disarm, replayed_disarm
+            return first, fresh, replay, stranger, first_disarm, replayed_disarm
 
-        return st, await asyncio.to_thread(exchange), app.server._udp.replays
+        answers = await asyncio.to_thread(exchange)
+        return st, answers, app.server._udp.replays, app.controller.armed
 
-    app, summary, (st, answers, replays), hw = scenario(config(tmp_path), script)
-    first, replay, wrong_kind, stranger, first_disarm, replayed_disarm = answers
+    app, summary, (st, answers, replays, armed), hw = scenario(config(tmp_path), script)
+    first, fresh, replay, stranger, first_disarm, replayed_disarm = answers
     assert st["ok"] and st["status"]["armed"] is True and "disarmed" not in st
-    assert first is not None and first["ok"] and first["n"] > 0  # short request: the status shrank or went
-    assert replay is None and wrong_kind is None and stranger is None
+    assert first is not None and "status" not in first  # a first contact gets a challenge only
+    assert fresh is not None and fresh["status"]["armed"] is True
+    assert replay is None and stranger is None
     assert first_disarm is not None and first_disarm["disarmed"] is True
-    assert replayed_disarm is None and replays == 2
-
-
-def test_a_udp_flood_from_one_source_neither_gets_answers_nor_delays_an_operators_disarm(tmp_path) -> None:
-    """Bounded (20 000 datagrams, loopback only): a flood of garbage and of replays from 127.0.0.2 is rate
-    limited per source and unanswered; the operator's disarm from 127.0.0.1 during it is answered. Fails on
-    today's main: no per-source limit (every datagram was parsed and MAC-checked)."""
-    import threading
-
-    from rimless.firmware.link.protocol import reserved_counter, reserved_mac
-    from rimless.firmware.link.remote import send_disarm_datagram
-
-    async def script(app, hw):
-        app.controller.arm()
-
-        def run():
-            answers = []
-
-            n = reserved_counter()
-            good = json.dumps({"status": n, "mac": reserved_mac(TOKEN, "status", n)})
-            code = (
-                "import socket, sys\n"
-                "s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); s.bind(('127.0.0.2', 0))\n"
-                "s.setblocking(False); got = 0\n"
-                f"good = {good!r}.encode()\n"
-                "for k in range(20000):\n"
-                "    try:\n"
-                f'        s.sendto(good if k % 2 else b\'{{"disarm": 1, "mac": "00"}}\', (\'127.0.0.1\', {app.command_port}))\n'
-                "    except OSError: pass\n"
-                "    try:\n"
-                "        s.recv(4096); got += 1\n"
-                "    except OSError: pass\n"
-                "print(got)\n"
-            )
-
-            def flood():
-                r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-                answers.extend([None] * int(r.stdout.strip() or 0))
-
-            t = threading.Thread(target=flood)
-            t.start()
-            time.sleep(0.2)
-            t0 = time.monotonic()
-            reply = send_disarm_datagram("127.0.0.1", token=TOKEN, port=app.command_port, timeout_s=3.0)
-            took = time.monotonic() - t0
-            t.join(30)
-            return reply, took, len(answers)
-
-        reply, took, answered = await asyncio.to_thread(run)
-        return reply, took, answered, app.server._udp.rate_limited
-
-    app, summary, (reply, took, answered, limited), hw = scenario(config(tmp_path), script)
-    print(f"disarm answered {took * 1e3:.1f} ms into the flood; {limited} datagrams rate limited")
-    assert reply["disarmed"] is True
-    assert took < 1.0  # generous safety bound; the measured figure is printed
-    assert answered <= 1  # at most the first copy of the valid status, never the replays
-    assert limited > 0
+    assert replayed_disarm is None and replays == 2 and armed is False and all_off(hw)
 
 
 def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> None:
@@ -464,3 +407,58 @@ def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> No
     assert results == [True] * 5
     assert flooding
     assert refused > 0
+
+
+def _churn(port: int, addresses: int, per_address: int) -> list[socket.socket]:
+    """Connections from `addresses` loopback addresses (127.0.2.x), `per_address` each, held open: strangers
+    that never authenticate."""
+    held = []
+    for k in range(addresses):
+        for _ in range(per_address):
+            s = socket.socket()
+            s.settimeout(5)
+            s.bind((f"127.0.2.{k + 1}", 0))
+            try:
+                s.connect(("127.0.0.1", port))
+            except OSError:
+                s.close()
+                continue
+            held.append(s)
+    return held
+
+
+@pytest.mark.parametrize(("addresses", "per_address"), [(64, 4), (250, 1)])
+def test_connect_churn_from_many_addresses_evicts_neither_the_operators_session_nor_its_next_connection(
+    tmp_path, addresses, per_address
+) -> None:
+    """Issue 32: churn from 64 addresses dropped the operator's connection 4 times in 12. Here the operator at
+    127.0.0.1 holds an authenticated session and opens its next connection (hello read, command not yet sent);
+    then 256 connections from 64 other addresses (or 250 from 250) arrive and stay. In three rounds, the pending connection's
+    command and the session's ping are both answered. Fails on main: the operator's pending connection was the
+    oldest unauthenticated one, the first dropped to make room. The connections are counted in, not timed."""
+
+    async def script(app, hw):
+        srv = app.server
+        session = await Client.connect(app.command_port)
+        assert (await session.cmd("status", 1))["ok"]
+        seq = 1
+        answers = []
+        for _ in range(3):
+            pending = await Client.connect(app.command_port)
+            before = srv.evicted + srv.refused_per_source + srv.timed_out + srv.connections
+            held = await asyncio.to_thread(_churn, app.command_port, addresses, per_address)
+            # every stranger's connection seen by the server (held, dropped or refused) before the operator speaks
+            seen = before + len(held)
+            await wait_for(lambda n=seen: srv.evicted + srv.refused_per_source + srv.timed_out + srv.connections >= n)
+            seq += 1
+            answers.append((await pending.cmd("status", 1))["ok"])
+            answers.append((await session.cmd("ping", seq))["ok"])
+            pending.close()
+            for s in held:
+                s.close()
+        session.close()
+        return answers, srv.evicted
+
+    app, summary, (answers, evicted), hw = scenario(config(tmp_path), script)
+    assert answers == [True] * 6
+    assert evicted > 0  # the strangers made room among themselves

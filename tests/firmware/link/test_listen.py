@@ -75,12 +75,15 @@ def test_listen_with_no_robot_says_so_and_exits_1_after_its_timeout(tmp_path) ->
 
 def test_listen_counts_gaps_and_ignores_other_senders() -> None:
     """Fails on today's main: listen recorded forged datagrams from any sender and said nothing about lost
-    objects or events (which carried no sequence number)."""
+    objects or events (which carried no sequence number). The robot's datagrams are signed (protocol 3)."""
     import socket
     import threading
 
     from rimless.firmware.link.listen import listen
-    from tests.support.firmware_app import free_port, wait_udp_bound
+    from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
+    from tests.support.firmware_app import TOKEN, free_port, wait_udp_bound
+
+    key = telemetry_key(TOKEN, "b" * 32)
 
     port = free_port()
     lines: list[str] = []
@@ -100,7 +103,7 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
                 obj = {"timestamp": t, "tseq": t, "event": {"name": "arm", "event_seq": 1}}
             if t == 10:
                 obj = {"timestamp": t, "tseq": t, "event": {"name": "fault", "fault": "x", "event_seq": 3}}
-            robot.sendto(json.dumps([obj]).encode(), ("127.0.0.1", port))
+            robot.sendto(sign_datagram(json.dumps([obj]).encode(), key, "b" * 32), ("127.0.0.1", port))
             forger.sendto(
                 json.dumps([{"timestamp": 0, "event": {"name": "fault", "fault": "forged"}}]).encode(),
                 ("127.0.0.1", port),
@@ -119,6 +122,7 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
         echo=lines.append,
         stale_s=5.0,
         timeout_s=0,
+        token=TOKEN,
     )
     t.join()
     assert summary.samples == 4 and summary.events == 2 and summary.faults == ["x"]
@@ -154,23 +158,35 @@ def test_listen_whose_robot_stops_keeps_the_recording_up_to_then_and_says_so(tmp
 
     from rimless.errors import RunFailure
     from rimless.firmware.link.listen import listen
-    from tests.support.firmware_app import free_port, wait_udp_bound
+    from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
+    from tests.support.firmware_app import TOKEN, free_port, wait_udp_bound
 
     port = free_port()
     out = tmp_path / "tel.jsonl"
+    key = telemetry_key(TOKEN, "c" * 32)
 
     def send():
         wait_udp_bound(port)
         robot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         for t in range(3):
-            robot.sendto(json.dumps([{"timestamp": t, "tseq": t, "leg": {"stance": 1}}]).encode(), ("127.0.0.1", port))
+            data = json.dumps([{"timestamp": t, "tseq": t, "leg": {"stance": 1}}]).encode()
+            robot.sendto(sign_datagram(data, key, "c" * 32), ("127.0.0.1", port))
         robot.close()
 
     t = threading.Thread(target=send)
     t.start()
     lines: list[str] = []
     with pytest.raises(RunFailure, match="the robot stopped sending") as err:
-        listen(bind="127.0.0.1", port=port, out=out, duration_s=None, echo=lines.append, stale_s=0.2, timeout_s=0.5)
+        listen(
+            bind="127.0.0.1",
+            port=port,
+            out=out,
+            duration_s=None,
+            echo=lines.append,
+            stale_s=0.2,
+            timeout_s=0.5,
+            token=TOKEN,
+        )
     t.join()
     assert f"the recording up to then is kept ({out})" in str(err.value)
     assert len(out.read_text().splitlines()) == 3 and f"wrote {out}" in lines

@@ -128,23 +128,34 @@ def test_listen_records_mcap_from_the_loopback(tmp_path) -> None:
 
     from rimless.errors import RunFailure
     from rimless.firmware.link.listen import listen
-    from tests.support.firmware_app import free_port, wait_udp_bound
+    from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
+    from tests.support.firmware_app import TOKEN, free_port, wait_udp_bound
 
     port = free_port()
     datagrams, _n = fake_run_datagrams()
+    key = telemetry_key(TOKEN, "d" * 32)
 
     def send() -> None:
         wait_udp_bound(port)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
             for d in datagrams[:20]:
-                tx.sendto(d, ("127.0.0.1", port))
+                tx.sendto(sign_datagram(d, key, "d" * 32), ("127.0.0.1", port))
 
     t = threading.Thread(target=send)
     t.start()
     out = tmp_path / "t.mcap"
     lines: list[str] = []
     try:
-        listen(bind="127.0.0.1", port=port, out=None, duration_s=None, echo=lines.append, timeout_s=1.5, mcap_out=out)
+        listen(
+            bind="127.0.0.1",
+            port=port,
+            out=None,
+            duration_s=None,
+            echo=lines.append,
+            timeout_s=1.5,
+            mcap_out=out,
+            token=TOKEN,
+        )
     except RunFailure as err:  # ends as "the robot stopped sending" once the sender is done
         assert "stopped sending" in str(err)
     t.join()

@@ -29,3 +29,26 @@ def test_robot_link_errors_are_one_line(tmp_path) -> None:
         RobotLink("127.0.0.1", token=TOKEN, port=port, timeout_s=2)
     t.join()
     s.close()
+
+
+def test_a_robot_of_another_protocol_version_is_a_clear_error_not_a_silent_failure() -> None:
+    """A robot of release 0.1 (protocol version 2) greets with version 2: the PC stops there with one line naming
+    both versions, before it signs anything."""
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    port = s.getsockname()[1]
+
+    def old_robot() -> None:
+        conn, _ = s.accept()
+        conn.sendall(b'{"hello": "rimless-robot", "version": 2, "nonce": "' + b"0" * 32 + b'"}\n')
+        conn.recv(100)
+        conn.close()
+
+    t = threading.Thread(target=old_robot)
+    t.start()
+    with pytest.raises(CommandError, match=r"speaks protocol version 2, this PC version 3") as err:
+        RobotLink("127.0.0.1", token=TOKEN, port=port, timeout_s=2)
+    t.join()
+    s.close()
+    assert "\n" not in str(err.value)
