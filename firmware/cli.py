@@ -313,6 +313,16 @@ def run(
         float | None, typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
     ] = None,
     arm_at_start: Annotated[bool, typer.Option("--arm", help="Arm at start (default: wait for `arm`).")] = False,
+    stance_leg: Annotated[
+        int | None,
+        typer.Option(
+            "--stance-leg",
+            min=0,
+            help="With --arm: the clutch index of the leg on the ground at start (needed by a sensor "
+            "counting legs: [detector] named_stance_required).",
+            show_default=False,
+        ),
+    ] = None,
     telemetry: Annotated[
         list[str] | None,
         typer.Option(
@@ -329,7 +339,7 @@ def run(
             metavar="NAME",
             help="With --fake: play a fault scenario "
             "(missed-first-touchdown, first-step-bounce, brown-out, wrong-product-id, loop-stall, "
-            "log-disk-full).",
+            "log-disk-full, wrong-start-leg).",
             show_default=False,
         ),
     ] = None,
@@ -391,6 +401,7 @@ def run(
             fake_fault=fake_fault,
             pin_log=pin_log,
             realtime=realtime,
+            stance_leg=stance_leg,
         )
 
     outcome = go()

@@ -137,7 +137,7 @@ def test_firmware_imports_and_runs_without_numeric_libraries(tmp_path):
         f"        if name.split('.')[0] in {HEAVY!r}:\n"
         "            raise ImportError('blocked on the robot: ' + name)\n"
         "sys.meta_path.insert(0, Block())\n"
-        "sys.argv = ['rimless', 'robot', 'run', '--fake', '--arm', '--duration-s', '1']\n"
+        "sys.argv = ['rimless', 'robot', 'run', '--fake', '--arm', '--stance-leg', '0', '--duration-s', '1']\n"
         "from rimless.cli import main\n"
         "main()\n"
     )

@@ -318,7 +318,10 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
     ("trials", "bench-import"): (["--rows", "5000000"], {"stderr": "writing a 5,000,000-row Tracker export"}),
     # the first telemetry datagram: the firmware's loop runs (its "running" line comes before the loop starts, and
     # a Ctrl-C there ends with "stopped (SIGINT) before the firmware ran", not `interrupted`)
-    ("robot", "run"): (["--fake", "--arm", "--telemetry", TELEMETRY_TO_TEST], {"datagram": "telemetry"}),
+    ("robot", "run"): (
+        ["--fake", "--arm", "--stance-leg", "0", "--telemetry", TELEMETRY_TO_TEST],
+        {"datagram": "telemetry"},
+    ),
     # its first "waiting for telemetry" line comes after --summary-every-s (1 s): inside its receiving loop
     ("robot", "listen"): (["--port", str(_free_udp_port()), "--out", "tel.jsonl"], {"stderr": "waiting for telemetry"}),
     ("robot", "bench"): (["--fake", "--duration-s", "20"], {"stderr": "bench: "}),

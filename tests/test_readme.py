@@ -214,7 +214,7 @@ def test_parser_handles_chains_comments_and_the_setup_line():
     assert named_outputs("rimless trials report a b --out report/ --json") == ["report/"]
     assert not_run_reason("RIMLESS_TOKEN=x .venv/bin/rimless robot run --config /etc/rimless/robot.toml")
     assert not_run_reason("rimless robot arm --host=10.0.0.5") == "needs a running robot on the LAN"
-    assert not_run_reason("rimless robot run --fake --arm --duration-s 5") is None
+    assert not_run_reason("rimless robot run --fake --arm --stance-leg 0 --duration-s 5") is None
 
 
 def make_mirror(where: Path) -> Path:

@@ -92,7 +92,7 @@ class DetectorParams:
     # is an extra one, sync lost; the robot's default is 0.5).
     touch_window_early_fraction: float = 0.0
     # 1: a counted sensor locks only after `resync` (arm with stance_leg) named the leg on the ground: one sensor
-    # cannot tell the legs apart, so a configured start leg is never trusted (0: trusted).
+    # cannot tell the legs apart, so a configured start leg is never trusted (0: trusted; the robot's default is 1).
     named_stance_required: int = 0
 
     def validated(self) -> DetectorParams:

@@ -165,8 +165,10 @@ class RobotApp:
         max_samples: int | None = None,
         arm: bool = False,
         handle_signals: bool = True,
+        stance_leg: int | None = None,
     ) -> RunSummary:
-        """Run until stopped; always ends with every clutch off and the hardware closed."""
+        """Run until stopped; always ends with every clutch off and the hardware closed. `arm`: armed at start,
+        naming `stance_leg` (a clutch index) as the leg on the ground, as `arm` over the link does."""
         loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
         self._trial_lock = asyncio.Lock()
@@ -233,7 +235,7 @@ class RobotApp:
             wd.checks.append(self._check_link)
             wd.while_stalled = self._outputs_off
             if arm:
-                self.controller.arm()
+                self.controller.arm(stance_leg=stance_leg)
             self.sampler.start()
             wd.start()
             tasks = [

@@ -112,7 +112,14 @@ def bench_rate(
 
         app = RobotApp(cfg, hw, token="bench", record_timing=True, on_ready=ready, event_sink=events)
         cpu0, wall0 = time.process_time(), time.perf_counter()
-        summary = asyncio.run(app.run(duration_s=duration_s, arm=True, handle_signals=handle_signals))
+        summary = asyncio.run(
+            app.run(
+                duration_s=duration_s,
+                arm=True,
+                handle_signals=handle_signals,
+                stance_leg=cfg.configured_stance_leg(),  # the fake gait starts on it: named at arm
+            )
+        )
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
     sink.close()
     assert app.sampler is not None
@@ -311,7 +318,11 @@ def bench_flood(
 
         app = RobotApp(cfg, hw, token=token, record_timing=True, on_ready=ready)
         cpu0 = time.process_time()
-        asyncio.run(app.run(duration_s=4 * phase_s + 120, arm=True, handle_signals=False))
+        asyncio.run(
+            app.run(
+                duration_s=4 * phase_s + 120, arm=True, handle_signals=False, stance_leg=cfg.configured_stance_leg()
+            )
+        )
         cpu = time.process_time() - cpu0
     sink.close()
     assert app.sampler is not None

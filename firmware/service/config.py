@@ -19,13 +19,15 @@ from rimless.firmware.control.faults import HealthLimits
 from rimless.firmware.errors import ConfigError, ConfigFileError
 
 # The robot's detector defaults differ from the library's on the leg-count safety checks (a counted leg locks
-# only after two confirmed step intervals; an unconfirmed compression of 0.3 mm loses the count). The
-# firmware-in-the-loop simulator keeps the library defaults unless it reads a robot.toml.
+# only after two confirmed step intervals; an unconfirmed compression of 0.3 mm loses the count; nothing locks
+# until the operator named the stance leg at arm). The firmware-in-the-loop simulator keeps the library
+# defaults unless it reads a robot.toml.
 ROBOT_DETECTOR_SAFETY: dict[str, Any] = {
     "confirm_steps": 2,
     "doubt_compression_m": 0.0003,
     "doubt_noise_sigmas": 6.0,
     "touch_window_early_fraction": 0.5,
+    "named_stance_required": 1,
 }
 ROBOT_DETECTOR = DetectorParams(**ROBOT_DETECTOR_SAFETY)
 
@@ -149,6 +151,15 @@ class RobotConfig:
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     commands: CommandsConfig = field(default_factory=CommandsConfig)
     log: LogConfig = field(default_factory=LogConfig)
+
+    def configured_stance_leg(self) -> int | None:
+        """The clutch index `[clutch] start_leg_index` names on the first sensor counting legs (None: every sensor
+        measures its one leg). What a walk that starts as configured stands on, for the fakes and the bench to name
+        at arm; a robot does not trust it when `[detector] named_stance_required` is on."""
+        for s in self.sensors:
+            if len(s.legs) > 1:
+                return s.legs[self.clutch.start_leg_index % len(s.legs)]
+        return None
 
     def token(self) -> str:
         """The command token in force: $RIMLESS_TOKEN, $RIMLESS_TOKEN_FILE, the systemd credential

@@ -108,6 +108,7 @@ def run_robot(
     fake_fault: str | None = None,
     pin_log: Path | None = None,
     realtime: bool = False,
+    stance_leg: int | None = None,
 ) -> RunOutcome:
     """Run the firmware until a stop signal or `duration_s`.
 
@@ -118,7 +119,9 @@ def run_robot(
     started this process (`config.decide_realtime`; the reason in `cfg.sampling.realtime_why`). With `fake`,
     `fake_fault` names a scenario of `scenarios.FAKE_FAULTS` and `pin_log` a JSON Lines file receiving every
     mock pin change. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be opened or
-    a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved.
+    a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved. `arm` arms at start naming
+    `stance_leg` (the clutch index of the leg on the ground; `check_arm_at_start`: a `ParameterError` when a
+    sensor counting legs needs it and it is missing, or it is given without `arm`).
     """
     if not fake and (fake_fault is not None or pin_log is not None):
         raise ParameterError("--fake-fault and --pin-log need --fake")
@@ -139,7 +142,9 @@ def run_robot(
             cfg = config if isinstance(config, RobotConfig) else load_config(config)
             source = str(config) if config is not None and not isinstance(config, RobotConfig) else "the configuration"
             cfg = with_realtime(cfg, decide_realtime(cfg.sampling, flag=realtime, source=source))
-            return _run(with_telemetry(cfg, telemetry), state, sc, duration_s, arm, on_start, log_level, pin_log)
+            return _run(
+                with_telemetry(cfg, telemetry), state, sc, duration_s, arm, on_start, log_level, pin_log, stance_leg
+            )
     except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
         hw = state.get("hw")
         if hw is not None:
@@ -156,7 +161,9 @@ def _run(
     on_start: Callable[[RobotApp], None] | None,
     log_level: int,
     pin_log_path: Path | None,
+    stance_leg: int | None = None,
 ) -> RunOutcome:
+    check_arm_at_start(cfg, arm, stance_leg)
     fake = sc is not None
     pins_log: PinLog | None = None
     try:
@@ -186,7 +193,7 @@ def _run(
         raise
     try:
         with NonBlockingLog(level=log_level) as logs:
-            summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm))
+            summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm, stance_leg=stance_leg))
             summary.stderr_dropped = logs.dropped
     except OSError as err:
         raise CommandError(f"cannot start: {err}") from None
@@ -211,6 +218,33 @@ def _run(
         walk = sc.walk or dataclasses.replace(sc.template, start_s=math.inf)
         if len(cfg.sensors) == 1:
             outcome.airborne_leg_locks = len(
-                airborne_locks(walk, engages, cfg.sensors[0].legs, cfg.clutch.start_leg_index)
+                airborne_locks(walk, engages, cfg.sensors[0].legs, cfg.clutch.start_leg_index + sc.start_leg_offset)
             )
     return outcome
+
+
+def check_arm_at_start(cfg: RobotConfig, arm: bool, stance_leg: int | None) -> None:
+    """Refuse (`ParameterError`, naming --stance-leg) arming at start without naming the leg on the ground when
+    a sensor counts legs and `named_stance_required` is on (it would arm and never lock: refused, so that the
+    operator does not take a robot that cannot lock for one that is walking), a `stance_leg` without `arm`, and
+    a `stance_leg` no sensor watches."""
+    if stance_leg is not None and not arm:
+        raise ParameterError(
+            "--stance-leg names the leg on the ground at arm: add --arm (or name it later: "
+            "rimless robot arm --stance-leg K)"
+        )
+    if not arm:
+        return
+    if stance_leg is None:
+        counted = [s.legs for s in cfg.sensors if len(s.legs) > 1]
+        if counted and cfg.detector.named_stance_required:
+            raise ParameterError(
+                f"--arm needs --stance-leg K, the clutch index of the leg on the ground now: one sensor counting "
+                f"legs {', '.join(map(str, counted[0]))} cannot tell which one stands "
+                "([detector] named_stance_required = 1)"
+            )
+    elif not any(stance_leg in s.legs for s in cfg.sensors):
+        watched = sorted({leg for s in cfg.sensors for leg in s.legs})
+        raise ParameterError(
+            f"--stance-leg {stance_leg}: not a leg any [[sensor]] watches (legs {', '.join(map(str, watched))})"
+        )

@@ -7,7 +7,9 @@ that every lock can be judged) and a fault injected into the fake sensor at a se
 - `wrong-product-id`: Product_ID reads 0x00 from 2.5 s after start (nothing on the bus);
 - `loop-stall`: the event loop is blocked for 4 s from 2.5 s after start (the watchdog thread releases);
 - `log-disk-full`: a trial log runs from the start, and its disk fills 2.5 s after start: one write is cut
-  short, every later one fails with ENOSPC (logging degrades, the walk goes on).
+  short, every later one fails with ENOSPC (logging degrades, the walk goes on);
+- `wrong-start-leg`: the wheel stands on the leg `WRONG_START_OFFSET` (3) after the configured
+  `[clutch] start_leg_index` (a plain walk): the configured start leg is wrong, only a leg named at arm is right.
 
 "Start" is the moment the app runs (`on_ready`: the sampler samples, the controller is armed when asked), not
 the moment the scenario is made: a loaded machine may take seconds to get there, and a walk that began
@@ -32,6 +34,7 @@ from rimless.firmware.drivers.fake_adns3080 import FakeAdns3080, FakeFault
 from rimless.firmware.drivers.fake_walk import FakeWalk
 
 LOOP_STALL_S = 4.0
+WRONG_START_OFFSET = 3  # `wrong-start-leg`: the true start leg, counted in `legs` from the configured one
 FAULT_AT_S = 2.5  # when the timed faults strike, after start (s): a clutch is engaged then
 
 
@@ -82,6 +85,7 @@ class Scenario:
     fault_at_s: float = FAULT_AT_S
     stall_loop_s: float = 0.0  # block the event loop this long at `fault_at_s` after start
     disk_full: bool = False  # run a trial log whose disk fills at `fault_at_s` after start
+    start_leg_offset: int = 0  # the leg on the ground at start: this many legs after the configured start leg
     timeline: Timeline = field(default_factory=Timeline)
     motion: ScenarioWalk = field(init=False)
 
@@ -112,6 +116,7 @@ def _walks(start_s: float) -> dict[str, tuple[FakeWalk, Callable[[FakeAdns3080],
         "wrong-product-id": (plain, _wrong_id),
         "loop-stall": (plain, None),
         "log-disk-full": (plain, None),
+        "wrong-start-leg": (plain, None),
     }
 
 
@@ -132,6 +137,7 @@ def scenario(name: str | None, *, lead_s: float = 1.0, clock: Clock | None = Non
         fault,
         stall_loop_s=LOOP_STALL_S if key == "loop-stall" else 0.0,
         disk_full=key == "log-disk-full",
+        start_leg_offset=WRONG_START_OFFSET if key == "wrong-start-leg" else 0,
         timeline=Timeline(clock),
     )
 

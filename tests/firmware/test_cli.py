@@ -148,7 +148,7 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\n[log]\ndir = "{tmp_path}"\n')
     env = {**os.environ, "RIMLESS_TOKEN": STRONG}
     proc = subprocess.Popen(
-        [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
+        [*RIMLESS, "robot", "run", "--fake", "--arm", "--stance-leg", "0", "--config", str(cfg)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         env=env,

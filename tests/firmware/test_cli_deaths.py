@@ -44,6 +44,8 @@ def start(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path]:
             "run",
             "--fake",
             "--arm",
+            "--stance-leg",
+            "0",
             "--config",
             str(cfg),
             "--duration-s",
@@ -126,7 +128,21 @@ def test_a_blocked_stderr_holds_up_neither_start_nor_exit(tmp_path) -> None:
     log = tmp_path / "pins.jsonl"
     t0 = time.monotonic()
     proc = subprocess.Popen(
-        [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg), "--duration-s", "3", "--pin-log", str(log)],
+        [
+            *RIMLESS,
+            "robot",
+            "run",
+            "--fake",
+            "--arm",
+            "--stance-leg",
+            "0",
+            "--config",
+            str(cfg),
+            "--duration-s",
+            "3",
+            "--pin-log",
+            str(log),
+        ],
         stdout=subprocess.DEVNULL,
         stderr=w,
     )

@@ -60,7 +60,7 @@ def wait_engaged(proc: subprocess.Popen, port: int) -> None:
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGHUP, 129), (signal.SIGQUIT, 131), (signal.SIGINT, 130)])
 def test_run_fake_releases_every_clutch_on_a_signal(tmp_path, sig, code) -> None:
-    proc, port = start_run(tmp_path, "--arm")
+    proc, port = start_run(tmp_path, "--arm", "--stance-leg", "0")
     try:
         wait_engaged(proc, port)
         proc.send_signal(sig)

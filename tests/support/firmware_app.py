@@ -58,7 +58,9 @@ def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=
     async def main():
         ready = asyncio.Event()
         app = RobotApp(cfg, hw, on_ready=lambda a: ready.set())
-        run = asyncio.create_task(app.run(duration_s=timeout_s, arm=arm, handle_signals=False))
+        # armed as an operator arms the robot: naming the leg the fake walk starts on (the configured one)
+        leg = cfg.configured_stance_leg() if arm else None
+        run = asyncio.create_task(app.run(duration_s=timeout_s, arm=arm, handle_signals=False, stance_leg=leg))
         await ready.wait()
         try:
             result = await script(app, hw)

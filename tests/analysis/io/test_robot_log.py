@@ -117,7 +117,7 @@ def test_a_log_written_by_the_fake_robot(tmp_path):
 
     async def script(app, hw):
         c = await Client.connect(app.command_port)
-        await c.cmd("arm", 1)
+        await c.cmd("arm", 1, stance_leg=0)  # the leg the fake walk starts on
         await c.cmd("trial_start", 2, name="clutch")
         for k in range(200):  # until four locks were released (a generous bound, not a fixed delay)
             await asyncio.sleep(0.1)

@@ -187,7 +187,7 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
         resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
 
     proc = subprocess.Popen(
-        [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],
+        [*RIMLESS, "robot", "run", "--fake", "--arm", "--stance-leg", "0", "--config", str(cfg)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         env=env,

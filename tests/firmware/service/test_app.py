@@ -57,7 +57,7 @@ def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
 def test_arm_set_trial_disarm_over_tcp(tmp_path) -> None:
     async def script(app, hw):
         c = await Client.connect(app.command_port)
-        r_arm = await c.cmd("arm", 1)
+        r_arm = await c.cmd("arm", 1, stance_leg=0)  # the leg the fake walk starts on
         r_set = await c.cmd("set", 2, name="touch_velocity_m_s", value=0.06)
         r_start = await c.cmd("trial_start", 3, name="slope1")
         r_again = await c.cmd("trial_start", 4, name="slope2")

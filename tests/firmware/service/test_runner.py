@@ -37,7 +37,7 @@ def test_with_telemetry_appends_destinations() -> None:
 def test_fake_run_for_a_moment_ends_with_every_clutch_off(tmp_path) -> None:
     cfg = RobotConfig(commands=CommandsConfig(enabled=False), log=LogConfig(dir=str(tmp_path)))
     started = []
-    outcome = run_robot(cfg, fake=True, duration_s=0.5, arm=True, on_start=started.append)
+    outcome = run_robot(cfg, fake=True, duration_s=0.5, arm=True, on_start=started.append, stance_leg=0)
     assert len(started) == 1 and outcome.exit_code == 0 and outcome.summary is not None
     assert outcome.summary.stop_reason == "duration" and outcome.summary.samples > 0
     levels = dict(item.split("=") for item in outcome.fake_pins.split())

@@ -44,7 +44,9 @@ def test_a_4_s_blocked_event_loop_releases_within_the_bound(tmp_path, how) -> No
     async def main():
         ready = asyncio.Event()
         app = RobotApp(cfg, hw, on_ready=lambda a: ready.set())
-        run = asyncio.create_task(app.run(duration_s=20, arm=True, handle_signals=False))
+        run = asyncio.create_task(
+            app.run(duration_s=20, arm=True, handle_signals=False, stance_leg=cfg.configured_stance_leg())
+        )
         await ready.wait()
         deadline = time.monotonic() + 10
         while not hw.clutches.engaged() and time.monotonic() < deadline:
