@@ -62,7 +62,8 @@ def walk_controller(
     cpi: int = 1600,
     records: list | None = None,
 ) -> WalkResult:
-    """Arm at t = 0 and step the controller at `rate_hz` for `duration_s` of virtual time; `fault_at` =
+    """Arm at t = 0 naming the leg the walk starts on (`LEGS[start_index]`, as the operator does: the robot's
+    defaults lock nothing before) and step the controller at `rate_hz` for `duration_s` of virtual time; `fault_at` =
     (t_s, action(fake)) injects a fault into the fake. The sensor is configured at `cpi` with the automatic
     frame rate, as the service does (`mark_configured` included). Every controller record goes to `records`."""
     clock = VirtualClock()
@@ -90,7 +91,7 @@ def walk_controller(
     )
     res = WalkResult()
     try:
-        ctl.arm()
+        ctl.arm(stance_leg=LEGS[start_index])
         for k in range(int(duration_s * rate_hz)):
             clock.t_s = k / rate_hz
             if fault_at is not None and clock.t_s >= fault_at[0]:
