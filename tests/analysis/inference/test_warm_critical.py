@@ -89,3 +89,18 @@ def test_a_nominal_trace_that_disagrees_with_the_known_value_turns_the_warm_star
     near = WHEEL.replace(hub_mass_kg=2.35)
     assert f(near) == model_critical_slope(near, "er")["critical_slope_deg"]
     assert (f.warm, f.straightforward) == (0, 1)
+
+
+def test_the_benchmark_prints_both_paths_their_ratio_and_difference(tmp_path, capsys):
+    from rimless.analysis.inference.bench_carry import main
+
+    wheel = tmp_path / "wheel.toml"  # plain numbers are exact: only I_c is held
+    wheel.write_text(
+        "[wheel]\nm_H = 2.3\nm = 0.05\nL0 = 0.25\nk = 3500.0\nc = 5.0\nF_c = 0.0\nI_c = {value = 0.05, sd = 0.008}\n",
+        encoding="utf-8",
+    )
+    main(["--params", str(wheel), "--central"])
+    out = capsys.readouterr().out
+    assert "straightforward:" in out and "warm:" in out and "ratio (CPU):" in out
+    diff = float(out.split("largest difference of a perturbed critical slope:")[1].split("deg")[0])
+    assert diff <= TOL_DEG
