@@ -235,7 +235,7 @@ def leg_fit_coverage_cmd(
             help="How well the leg's moving mass is known: the fit is told the truth off by this share (1 sigma) "
             "with this uncertainty (0: the true mass, a study of the fit alone).",
         ),
-    ] = 0.02,
+    ] = 0.005,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """How often the 95 % intervals of `trials leg-fit` contain the truth, on simulated leg tests.

@@ -38,7 +38,7 @@ K_RANGE = (2000.0, 3500.0)  # N/m (the paper's leg: 2700)
 C_RANGE = (4.0, 10.0)  # N s/m (8; with m = 0.0378 kg the damping ratio spans about 0.2-0.6)
 F_RANGE = (0.1, 0.5)  # N
 MASS_RANGE = (0.030, 0.046)  # kg: the leg's moving mass (Table 1's leg: 0.0378), never handed to the fit
-MASS_REL_SD = 0.02  # the fit is told a weighed mass: the truth times (1 + this x N(0, 1)), with this sd (relative)
+MASS_REL_SD = 0.005  # the fit is told a weighed mass: the truth times (1 + this x N(0, 1)), with this sd (relative)
 COMPRESSIONS_MM = (1.5, 2.5)  # the releases' compressions, spread evenly (one release: the middle)
 _KEYS = (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "friction"))
 
