@@ -85,7 +85,7 @@ N_SHARED, N_PER_LOG = 3, 4  # omega_n, zeta, a; per log x_lock, x_eq, t_r, drift
 A_STARTS = (0.0, 0.3, 1.0)  # starts of the friction displacement, times `_a_guess_um`
 NO_FRICTION_UM = 1e-9  # the frictionless model: a bounded to this (um)
 SEGMENTATION_CHI2 = 3.84  # a segmentation this close to the best (delta chi2) is plausible: chi2(1) at 95 %
-MIN_SAMPLES_PER_HALF_CYCLE = 15  # fewer reads in a half cycle of the leg do not resolve it (refused)
+MIN_SAMPLES_PER_HALF_CYCLE = 12  # fewer reads in a half cycle of the leg do not resolve it (refused)
 ZETA_MAX = 0.95  # the model is the underdamped response; a fit at this bound is not an oscillation
 ONE_RELEASE_NOTE = (
     "one release: friction and damping are told apart only by the few half cycles of one motion; its intervals "
