@@ -30,8 +30,19 @@ long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags); a sandwich
 variance (a read's timing error grows with the speed) plus the count's random-walk drift, whose rate is
 measured where the leg is still (held before the release, stuck after the motion: `_count_drift`). The drift is
 what the first two miss: a slow wander of the count, too small to see in the residuals of one release, moves the
-fitted friction and decay. The intervals' coverage is measured by simulation against an independent truth
-model (`rimless trials leg-fit-coverage`, `leg_fit_coverage`); docs/trials.md gives the figures.
+fitted friction and decay.
+
+The segmentation is chosen by the data: the half cycles each log makes before it sticks follow from the friction
+band, and a motion that nearly sticks makes a last half cycle of a fraction of a count, so each log is also
+fitted stuck one half cycle earlier (`max_half_cycles`); every segmentation within `SEGMENTATION_CHI2` of the
+best (in units of the residual variance, inflated for correlated residuals) is plausible, and the intervals
+span the intervals of every plausible one. Friction is claimed only when the frictionless model (a = 0) is
+worse by more than the BIC's log(n) (and `SEGMENTATION_CHI2`); else its interval spans the frictionless fit
+too and the summary gives an upper bound. A log with fewer than `MIN_SAMPLES_PER_HALF_CYCLE` reads in a half
+cycle of the fitted motion, or an interval of k or c reaching zero, is refused (`RunFailure`), never a number.
+
+The intervals' coverage is measured by simulation against an independent truth model (`rimless trials
+leg-fit-coverage`, `leg_fit_coverage`); docs/trials.md gives the figures.
 
 One concept: the leg-test fit (log, model, fit, uncertainty, figure).
 """
@@ -96,7 +107,8 @@ GOALS = {"k_n_per_m": 0.02, "c_n_s_per_m": 0.02, "guide_friction_n": 0.10}  # pr
 
 def goal_check(values: dict[str, float], half_widths: dict[str, float], releases: int) -> dict[str, Any]:
     """Whether a fit of `releases` logs reaches `GOALS` (95 % half width over the value, per parameter), and
-    about how many releases like these would (a half width falls as 1 / sqrt(releases))."""
+    about how many releases like these would (a half width falls as 1 / sqrt(releases)). A value whose interval
+    reaches zero has no relative precision: its entry has `rel_half_width` None, `met` None and `upper_95`."""
     out: dict[str, Any] = {"releases": releases, "per_parameter": {}}
     need: int | None = releases
     for key, goal in GOALS.items():
@@ -427,6 +439,8 @@ class LegFitResult:
                 "intervals": "95 %: the largest of three covariances: least squares (inflated for correlated residuals), "
                 "a block sandwich, and a noise model (each sample's own variance plus the count's random-walk "
                 "drift measured where the leg is still)"
+                + ", spanning every plausible segmentation (and the frictionless model when friction is not "
+                "resolved)"
                 + (
                     ", with the moving mass's uncertainty"
                     if self.moving_mass_sd_kg > 0
@@ -606,7 +620,7 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
 
     def chi2(res: Any) -> float:
         """The cost over the best's, in units of the residual variance (inflated for correlated residuals)."""
-        return 2.0 * (float(res.cost) - float(best.cost)) / s2_eff if s2_eff > 0 else math.inf
+        return 2.0 * (float(res.cost) - float(best.cost)) / max(s2_eff, 1e-12)
 
     best_seg = free_seg
     plausible = [(key, rc) for key, rc in by_seg.items() if chi2(rc[0]) <= SEGMENTATION_CHI2]
