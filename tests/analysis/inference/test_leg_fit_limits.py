@@ -52,6 +52,7 @@ def _error_line(res: subprocess.CompletedProcess[str]) -> str:
     return lines[0]
 
 
+@pytest.mark.slow
 def test_one_release_near_a_stick_covers_and_says_what_one_release_cannot(tmp_path: Path) -> None:
     write_log(tmp_path / "one.jsonl", NEAR_STICK, compression_m=2e-3, seed=NEAR_STICK_SEED)
     res = _cli("one.jsonl", "--json", cwd=tmp_path)
@@ -71,6 +72,7 @@ def test_one_release_near_a_stick_covers_and_says_what_one_release_cannot(tmp_pa
     assert "met with 1 release" not in text.stdout, text.stdout
 
 
+@pytest.mark.slow
 def test_one_release_intervals_cover_over_seeded_truths() -> None:
     """Six seeded one-release leg tests of random legs (and masses, told as weighed): every interval of k, c
     and F_c holds its truth but at most one of the 18 (a nominal 95 % misses none in six with probability
@@ -84,6 +86,7 @@ def test_one_release_intervals_cover_over_seeded_truths() -> None:
     assert missed <= 1, per
 
 
+@pytest.mark.slow
 def test_a_log_read_too_slowly_is_refused(tmp_path: Path) -> None:
     """800 reads a second: about 10 in a half cycle of the paper's leg (12.8 ms). Refused, exit 1, one line
     naming the samples per half cycle and the sample rate; never a number."""
@@ -108,6 +111,7 @@ def _fit_json(tmp_path: Path) -> dict:
     return json.loads(res.stdout)
 
 
+@pytest.mark.slow
 def test_prior_refuses_a_leg_fit_that_failed_its_checks(tmp_path: Path) -> None:
     from rimless.analysis.inference.priors import read_priors
 
@@ -146,6 +150,7 @@ def test_prior_refuses_a_leg_fit_that_failed_its_checks(tmp_path: Path) -> None:
     assert "failed.json" in line and "converged" in line, line
 
 
+@pytest.mark.slow
 def test_no_friction_gets_an_upper_bound_not_a_percentage(tmp_path: Path) -> None:
     truth = LegTruth(friction_n=0.0)
     for s in (0, 1, 2):
