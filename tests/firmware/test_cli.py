@@ -151,16 +151,16 @@ def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
         from rimless.firmware.link.remote import send_command
 
         engaged = []
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 300  # a hang guard: the loop ends on the event
         while time.monotonic() < deadline and not engaged:
             try:
                 engaged = send_command("127.0.0.1", "status", token=STRONG, port=port, timeout_s=1)["engaged"]
             except RobotUnreachable:
                 pass
             time.sleep(0.02)
-        assert engaged, "no clutch engaged in 20 s"
+        assert engaged, "no clutch engaged in 300 s"
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=300)
     finally:
         if proc.poll() is None:
             proc.kill()
