@@ -137,7 +137,11 @@ def test_listen_records_datagrams(tmp_path) -> None:
 def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
     port = free_port()
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\n[log]\ndir = "{tmp_path}"\n')
+    # the watchdogs at 5 s (the robot's 0.1 s and 0.25 s): a stall fault on a loaded machine would disarm it for good
+    cfg.write_text(
+        f'[commands]\nbind = "127.0.0.1"\nport = {port}\n[log]\ndir = "{tmp_path}"\n'
+        "[sampling]\nstall_timeout_s = 5.0\nloop_stall_s = 5.0\n"
+    )
     env = {**os.environ, "RIMLESS_TOKEN": STRONG}
     proc = subprocess.Popen(
         [*RIMLESS, "robot", "run", "--fake", "--arm", "--config", str(cfg)],

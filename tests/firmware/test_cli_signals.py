@@ -22,6 +22,10 @@ from tests.support.firmware_app import free_port
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
 PINS = ("17", "27", "22", "23", "24", "16", "20", "21")
+#: the watchdogs at 5 s (the robot's 0.1 s and 0.25 s): a loaded test machine pauses a process for tenths of a
+#: second, and a `sensor_stalled` fault disarms the fake robot for good, so that no clutch ever engages (a run at
+#: load 14 waited 300 s for one); these tests are about signals, not stalls
+SAMPLING = "[sampling]\nstall_timeout_s = 5.0\nloop_stall_s = 5.0\n"
 #: how long a test waits for an event or an exit (a hang guard, not a bound: only a hung process takes this long)
 HANG_GUARD_S = 300.0
 
@@ -35,7 +39,9 @@ def pin_levels(line: str) -> dict[str, str]:
 def start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, int]:
     port = free_port()
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(
+        f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n{SAMPLING}'
+    )
     env = {**os.environ, "RIMLESS_TOKEN": TOKEN}
     proc = subprocess.Popen(
         [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), *args],
@@ -49,15 +55,17 @@ def start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, int]:
 
 def wait_engaged(proc: subprocess.Popen, port: int) -> None:
     deadline = time.monotonic() + HANG_GUARD_S
+    status = None
     while time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
         try:
-            if send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=1)["engaged"]:
+            status = send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=1)
+            if status["engaged"]:
                 return
         except RobotUnreachable:
             pass
         time.sleep(0.02)
-    raise AssertionError(f"no clutch engaged in {HANG_GUARD_S:g} s")
+    raise AssertionError(f"no clutch engaged in {HANG_GUARD_S:g} s; last status: {status}")
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGHUP, 129), (signal.SIGQUIT, 131), (signal.SIGINT, 130)])
@@ -279,7 +287,7 @@ def test_ctrl_c_on_a_start_up_line_of_run_exits_130_with_interrupted(tmp_path, l
     from tests.support.interrupt import Watched
 
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\n[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\n[log]\ndir = "{tmp_path}"\n{SAMPLING}')
     env = {k: v for k, v in os.environ.items() if not k.startswith("RIMLESS_TOKEN")}
     env["XDG_RUNTIME_DIR"] = str(tmp_path)  # the generated token's file
     pin_log = tmp_path / "pins.jsonl"
