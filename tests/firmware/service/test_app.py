@@ -11,7 +11,7 @@ import time
 
 from rimless.firmware.service.config import CommandsConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.service.triallog import read_trial_log
-from tests.support.firmware_app import TOKEN, WATCHDOG_TEST_SAMPLING, Client, all_off, config, scenario, wait_for
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
 
 
 def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
@@ -227,8 +227,11 @@ def test_stalled_sampler_trips_the_watchdog(tmp_path) -> None:
         finally:
             seen.set()
 
+    # both watchdogs at 2 s: the stall lasts until the trip (an event), so a longer deadline proves the same, and a
+    # machine at load 10-20 no longer trips them before the engage (at 0.3 s / 0.25 s it did, after 0.26-0.30 s)
+    sampling = SamplingConfig(stall_timeout_s=2.0, loop_stall_s=2.0)
     app, summary, (states_during_stall, still_stuck), hw = scenario(
-        config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING), script, arm=True, hw_hook=hook
+        config(tmp_path, sampling=sampling), script, arm=True, hw_hook=hook
     )
     assert wrappers[0].fired and still_stuck
     assert states_during_stall == [False] * 8  # off while the sampler was still stuck
