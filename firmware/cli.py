@@ -377,6 +377,8 @@ def run(
                 f"command token (generated) in {robot.token_path} (mode 0600): on this machine, "
                 f"export RIMLESS_TOKEN_FILE={robot.token_path}"
             )
+
+    def running(robot: Any) -> None:  # in the firmware's loop, which handles the stop signals from here
         mode = "fake" if fake else "hardware"
         sampling = robot.cfg.sampling
         _say(
@@ -398,6 +400,7 @@ def run(
             duration_s=duration_s,
             arm=arm_at_start,
             on_start=started,
+            on_running=running,
             fake_fault=fake_fault,
             pin_log=pin_log,
             realtime=realtime,
@@ -410,6 +413,8 @@ def run(
         print_json(outcome.to_json())
     if summary is None:  # a stop signal before the firmware ran
         _say(f"stopped ({outcome.signal}) before the firmware ran; every clutch released")
+        if outcome.signal == "SIGINT":
+            _say("interrupted")  # the last line of every command stopped by Ctrl-C
         raise typer.Exit(outcome.exit_code)
     _say(
         f"stopped ({summary.stop_reason}): {summary.samples} samples at {summary.achieved_rate_hz:.1f} Hz, "

@@ -100,7 +100,7 @@ _kernels_ready = False  # in a worker: the controller's compile is done
 KERNELS_READY_ENV = "RIMLESS_TEST_KERNELS_READY"
 
 #: tests that never run the simulator's compiled kernels: the firmware's (it cannot import the simulator,
-#: docs/architecture.md), which spend much of their time waiting on the wall clock of the fake robot
+#: docs/architecture.md), which spend much of their time on the fake robot's clock (paced to the wall clock)
 KERNEL_FREE = ("tests/firmware/",)
 
 
@@ -117,6 +117,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
+    threading.Thread(target=_say_what_still_runs, args=(config,), daemon=True).start()
     head = "import numpy as np\nfrom rimless.sim import fast\nfrom rimless.sim.model.params import WheelParams\n"
     # first the first-use probe (tests/test_first_use.py): on a cold cache its compile is the one the suite
     # needs anyway, and its output, left for the workers, spares that test a cold compile of its own
@@ -244,16 +245,10 @@ def _mark_ready_after_warm_up(ready: Path, env: dict[str, str], record: Path, co
 
 
 def _start(args: list[str], env: dict[str, str], stdout: Any) -> subprocess.Popen[bytes]:
-    """A compiling process at a low priority (nice 15): the firmware's tests beside it run the fake robot on the
-    wall clock and get the CPU when they need it; the compile takes the rest."""
-    return subprocess.Popen(
-        args,
-        stdout=stdout,
-        stderr=subprocess.DEVNULL,
-        stdin=subprocess.DEVNULL,
-        env=env,
-        preexec_fn=lambda: os.nice(15),
-    )
+    """A compiling process at the tests' own priority. It ran at nice 15 while the firmware's fakes ran on the
+    wall clock; now they run on a virtual clock (firmware/clock.py), and at nice 15 beside two busy loops the
+    compile got almost no CPU and the suite never finished."""
+    return subprocess.Popen(args, stdout=stdout, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)
 
 
 def _wait_or_kill(
@@ -276,6 +271,45 @@ def _wait_or_kill(
                     if _finished:
                         continue
                 on_every_minute()
+
+
+#: under xdist, when no test has ended for this long, the controller names the tests still running (seconds)
+STILL_RUNNING_EVERY_S = 120.0
+_running: dict[str, float] = {}  # in the controller: nodeid -> when its worker started it (monotonic s)
+_last_end = [time.monotonic()]  # in the controller: when a test last ended
+
+
+def pytest_runtest_logstart(nodeid: str, location: Any) -> None:
+    """In the controller (xdist relays each worker's start of a test): the test runs from now."""
+    with _say_lock:
+        _running[nodeid] = time.monotonic()
+
+
+def pytest_runtest_logfinish(nodeid: str, location: Any) -> None:
+    with _say_lock:
+        _running.pop(nodeid, None)
+        _last_end[0] = time.monotonic()
+
+
+def _say_what_still_runs(config: pytest.Config) -> None:
+    """In the controller: a line naming the running tests and their minutes whenever no test has ended for
+    STILL_RUNNING_EVERY_S, so that a long test on a busy machine never looks like a hung run (`-q` prints a
+    test's dot only when it ends). Stops with the session."""
+    while True:
+        time.sleep(STILL_RUNNING_EVERY_S / 4)
+        with _warm_up_lock:
+            if _finished:
+                return
+        now = time.monotonic()
+        with _say_lock:
+            quiet_s = now - _last_end[0]
+            running = sorted(_running.items(), key=lambda kv: kv[1])
+        if quiet_s < STILL_RUNNING_EVERY_S or not running:
+            continue
+        names = ", ".join(f"{nodeid} ({(now - t) / 60:.0f} min)" for nodeid, t in running)
+        say(config, f"rimless: no test ended for {quiet_s / 60:.0f} min; still running: {names}")
+        with _say_lock:
+            _last_end[0] = now  # the next line after as long again
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -314,10 +314,11 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
     ),
     ("sim", "basin"): (["--grid", "100", "--out", "basin-out"], {"stage": "basin of attraction"}),
     ("sim", "mfpt"): (["--terrain-sd-deg", "3"], {"stage": "MFPT (mesh)"}),
+    # "comparing": the six trials, the critical slope and the held parameters' sensitivities follow (8-26 s)
     ("trials", "report"): ([*BUNDLED_CSVS, "--out", "report-out"], {"stage": "comparing"}),
     ("trials", "bench-import"): (["--rows", "5000000"], {"stderr": "writing a 5,000,000-row Tracker export"}),
-    # the first telemetry datagram: the firmware's loop runs (its "running" line comes before the loop starts, and
-    # a Ctrl-C there ends with "stopped (SIGINT) before the firmware ran", not `interrupted`)
+    # the first telemetry datagram: the firmware's loop runs and sends (its "running" line, printed from the loop,
+    # is an event too: tests/firmware/test_cli_signals.py)
     ("robot", "run"): (
         ["--fake", "--arm", "--stance-leg", "0", "--telemetry", TELEMETRY_TO_TEST],
         {"datagram": "telemetry"},
@@ -349,8 +350,6 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
 # Commands that finish quickly by design, so there is nothing to interrupt; each with its reason.
 QUICK: dict[tuple[str, ...], str] = {
     ("sim", "sensitivity"): "one fixed point and a few hundred compiled steps: about 2 s of CPU once compiled",
-    ("trials", "report"): "the bundled example report takes a few seconds once compiled: a fresh-clone CI run saw "
-    "it finish before the signal",
     ("robot", "arm"): "one request to the robot, bounded by the command timeout",
     ("robot", "disarm"): "one request to the robot, bounded by the command timeout",
     ("robot", "set"): "one request to the robot, bounded by the command timeout",

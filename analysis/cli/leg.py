@@ -103,7 +103,15 @@ def _print(out: dict[str, Any], plot: Path | None) -> None:
     )
     typer.echo(f"k   = {ci('k_n_per_m', '.0f')} N/m")
     typer.echo(f"c   = {ci('c_n_s_per_m', '.3f')} N s/m")
-    typer.echo(f"F_c = {ci('guide_friction_n', '.3f')} N (guide friction)")
+    if out.get("friction_resolved", True):
+        typer.echo(f"F_c = {ci('guide_friction_n', '.3f')} N (guide friction)")
+    else:
+        ft = out["friction_test"]
+        typer.echo(
+            f"F_c < {out['guide_friction_n_upper_95']:.3g} N (95 % upper bound; guide friction not resolved: the "
+            f"frictionless model fits within delta chi2 {ft['delta_chi2_without_friction']:.1f}, or the interval "
+            "reaches zero)"
+        )
     typer.echo(
         f"moving mass {out['moving_mass_kg']:g} kg (--moving-mass-kg): k and c scale with it; "
         + out["intervals"].removeprefix("95 %: ")
@@ -118,10 +126,33 @@ def _print(out: dict[str, Any], plot: Path | None) -> None:
             f"  {p['file']}: {p['samples']} samples, {p['half_cycles']} half cycles, release delay "
             f"{p['release_delay_ms']:.1f} ms, residual RMS {p['residual_rms_counts']:.2f} counts"
         )
+    seg = out["segmentation"]
+    others = [c for c in seg["candidates"] if c["half_cycles"] != seg["chosen"]]
+    typer.echo(
+        f"half cycles chosen by the data: {', '.join(map(str, seg['chosen']))} (per log)"
+        + (
+            "; also tried: "
+            + ", ".join(
+                f"{'/'.join(map(str, c['half_cycles']))} (delta chi2 {c['delta_chi2']:.1f}, "
+                f"{'plausible: the intervals span it' if c['plausible'] else 'rejected'})"
+                for c in others
+            )
+            if others
+            else ""
+        )
+    )
+    if "one_release" in out:
+        typer.echo(out["one_release"])
     g = out["goal"]
+
+    def width(key: str, name: str) -> str:
+        pp = g["per_parameter"][key]
+        if pp["rel_half_width"] is None:
+            return f"{name} consistent with zero (< {pp['upper_95']:.3g})"
+        return f"{name} ±{pp['rel_half_width']:.1%}"
+
     widths = ", ".join(
-        f"{name} ±{g['per_parameter'][key]['rel_half_width']:.1%}"
-        for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
+        width(key, name) for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
     )
     n = g["releases"]
     if g["met"]:
@@ -130,7 +161,7 @@ def _print(out: dict[str, Any], plot: Path | None) -> None:
         short = [
             name
             for key, name in (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "F_c"))
-            if not g["per_parameter"][key]["met"]
+            if g["per_parameter"][key]["met"] is False
         ]
         more = (
             f"; about {g['releases_needed']} releases like these would reach it (fewer if they differ in compression)"
@@ -194,11 +225,23 @@ def leg_fit_coverage_cmd(
             help="Random-walk drift of the count (its sd after 1 s).",
         ),
     ] = 0.5,
+    mass_sd_rel: Annotated[
+        float,
+        typer.Option(
+            "--mass-sd-rel",
+            min=0.0,
+            max=0.5,
+            metavar="SHARE",
+            help="How well the leg's moving mass is known: the fit is told the truth off by this share (1 sigma) "
+            "with this uncertainty (0: the true mass, a study of the fit alone).",
+        ),
+    ] = 0.005,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """How often the 95 % intervals of `trials leg-fit` contain the truth, on simulated leg tests.
 
-    Each test: k, c and guide friction drawn at random (2000-3500 N/m, 4-10 N s/m, 0.1-0.5 N), released
+    Each test: k, c, guide friction and moving mass drawn at random (2000-3500 N/m, 4-10 N s/m, 0.1-0.5 N,
+    30-46 g; the fit is told the mass as weighed, --mass-sd-rel off, never the truth), released
     --releases times and recorded by an independent truth model (stiction, noise, count drift, rounding, read
     jitter and late reads, unknown release delay), then fitted like a robot's logs; about a second a test.
     """
@@ -212,6 +255,7 @@ def leg_fit_coverage_cmd(
             seed=seed,
             noise_counts=noise_counts,
             drift_counts_per_sqrt_s=drift_counts_per_sqrt_s,
+            mass_rel_sd=mass_sd_rel,
             progress=lambda i: bar.update(completed=i, description=f"test {i}/{tests}"),
         )
     out = res.summary()
@@ -222,6 +266,7 @@ def leg_fit_coverage_cmd(
         f"{out['fitted']} of {out['tests']} simulated leg tests fitted ({out['releases']} release(s) each, "
         f"seed {out['seed']}; noise {noise_counts:g} counts, drift {drift_counts_per_sqrt_s:g} counts/sqrt(s))"
     )
+    typer.echo(f"moving mass 30-46 g, told to the fit as {out['truth_model']['stated_moving_mass']}")
     for key, label in (("k_n_per_m", "k  "), ("c_n_s_per_m", "c  "), ("guide_friction_n", "F_c")):
         d = out["per_parameter"][key]
         if not d["fitted"]:

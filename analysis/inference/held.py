@@ -11,7 +11,15 @@ Linear propagation: it is exact for a quantity linear in the parameters over +-1
 - **from the trials**: the verdicts and the estimate use the wheel only through the stance pendulum of
   `rimless.analysis.inference.sustained.StancePendulum` (m_H, m, I_c, L0, g): the verdicts are recomputed and the
   reported method's estimate re-made at each perturbed value; k, c and F_c do not enter (contribution 0).
-- **the models' critical slopes**: Algorithm 1 (`model_critical_slope`) at each perturbed value.
+- **the models' critical slopes**: the critical slope of `model_critical_slope` at each perturbed value, by
+  default warm-started (`WarmCritical`): the nominal wheel's branch is traced once from Algorithm 1's start
+  slope, and each perturbed wheel's branch is traced from the nominal branch's point `WARM_MARGIN_RAD` above the
+  nominal critical slope (its fixed point the guess) down to its first loss, instead of Algorithm 1's fixed steps
+  from 0.05 rad and a trace from there. Assumed, and checked where it can be: the perturbed branch between the
+  start slope and that point has no special point (none on the nominal one); the perturbed gait there is
+  stable with the signs of the nominal start's test functions (stance force, impulse, stall), else that run is
+  the straightforward `model_critical_slope`. The two agree to the root location (about 1e-9 rad;
+  tests/analysis/inference/test_warm_critical.py); ``warm=False`` gives the straightforward runs.
 
 The interval with the parameters is ``value -+ sqrt(half-width^2 + (1.96 se_parameters)^2)`` on each side (the
 data's interval may be asymmetric, as the bracket's is). The data-only intervals (``ci_deg``) keep their meaning.
@@ -25,8 +33,9 @@ from typing import Any
 
 from rimless.analysis.inference.critical_slope import Z95, CriticalSlopeResult, estimate_critical_slope
 from rimless.errors import ParameterError
+from rimless.sim.model.failures import StepFailure
 
-__all__ = ["PENDULUM_FIELDS", "sensitivities", "combine", "carry_critical", "trial_estimate_at"]
+__all__ = ["PENDULUM_FIELDS", "sensitivities", "combine", "carry_critical", "trial_estimate_at", "WarmCritical"]
 
 #: the parameters the verdicts and the trial estimates depend on (the stance pendulum's)
 PENDULUM_FIELDS = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "gravity_m_s2")
@@ -121,6 +130,100 @@ def _model_at(model: str) -> Callable[[Any], float | None]:
     return f
 
 
+#: a warm-started branch starts at the nominal branch's point at least this far above the nominal critical
+#: slope (rad; 0.5 deg: the Table 1 wheel's largest 1-sd change, c's, is 0.22 deg)
+WARM_MARGIN_RAD = math.radians(0.5)
+#: `model_critical_slope`'s settings: map tolerance, root location (rad), and Algorithm 1's smallest slope
+RTOL = 1e-9
+REFINE_TOL_RAD = 1e-6
+MIN_SLOPE_RAD = 1e-4
+
+
+class WarmCritical:
+    """``f(params)``: the ``model``'s critical slope (deg, None where there is none) at wheels near ``nominal``,
+    each traced from the nominal branch (see the module doc). `warm` and `straightforward` count the runs of
+    each kind; ``known_deg``: the nominal critical slope already found (`model_critical_slope`), which the
+    nominal trace must reproduce to the root location, else every run is the straightforward one."""
+
+    def __init__(self, nominal: Any, model: str, known_deg: float | None = None) -> None:
+        self.model = model
+        self.warm = 0
+        self.straightforward = 0
+        self.start: tuple[float, Any] | None = None  # (slope rad, fixed point) the perturbed branches start from
+        self._signs: dict[str, bool] = {}
+        self._slow = _model_at(model)
+        try:
+            self._trace_nominal(nominal, known_deg)
+        except StepFailure:
+            self.start = None
+
+    def _trace_nominal(self, nominal: Any, known_deg: float | None) -> None:
+        from rimless.sim.continuation.algorithm1 import START_SLOPE_RAD
+        from rimless.sim.step.backend import jacobian_factory, make_map
+        from rimless.sim.step.poincare import default_guess, solve_fixed_point
+
+        start = nominal.replace(slope_rad=START_SLOPE_RAD)
+        pmap = make_map(start, self.model, rtol=RTOL)
+        if not hasattr(pmap, "evaluate"):  # the reference path's Algorithm 1 bisects: no branch to start from
+            return
+        jac = jacobian_factory("auto")
+        guess = default_guess(start, self.model)
+        first = solve_fixed_point(pmap, guess, jacobian=jac(pmap) if jac else None, max_iter=20)
+        if not first.stable:
+            return
+        br = _trace(pmap, first.z)
+        end = br.first_loss()
+        if end is None or not br.points[0].stable:
+            return
+        if known_deg is not None and abs(math.degrees(end.p) - known_deg) > math.degrees(REFINE_TOL_RAD):
+            return
+        self._signs = {k: v > 0 for k, v in br.points[0].tests.items() if math.isfinite(v)}
+        above = [pt for pt in br.points if pt.p >= end.p + WARM_MARGIN_RAD and pt.p < START_SLOPE_RAD]
+        if above:
+            self.start = (above[-1].p, above[-1].z)
+
+    def _from_start(self, params: Any) -> float | None:
+        """The critical slope (deg) traced from `start` at ``params``; None where that start does not hold."""
+        from rimless.sim.step.backend import make_map
+
+        assert self.start is not None
+        slope, z = self.start
+        try:
+            br = _trace(make_map(params.replace(slope_rad=slope), self.model, rtol=RTOL), z)
+        except StepFailure:  # no fixed point near the nominal one at that slope
+            return None
+        first = br.points[0]
+        if not first.stable or any((first.tests[k] > 0) != good for k, good in self._signs.items() if k in first.tests):
+            return None
+        end = br.first_loss()
+        return math.degrees(end.p if end is not None else br.points[-1].p)
+
+    def __call__(self, params: Any) -> float | None:
+        if self.start is not None:
+            v = self._from_start(params)
+            if v is not None:
+                self.warm += 1
+                return v
+        self.straightforward += 1
+        return self._slow(params)
+
+
+def _trace(pmap: Any, z0: Any) -> Any:
+    """The slope branch of ``pmap`` through the fixed point near ``z0`` at its slope, down to its first loss
+    (as `rimless.sim.continuation.algorithm1.critical_slope` traces it)."""
+    from rimless.sim.continuation.arclength import ArclengthContinuation
+    from rimless.sim.continuation.oracle import PARAMETERS
+
+    cont = ArclengthContinuation(
+        lambda q: pmap.with_params(q),
+        pmap.params,
+        pmap.model,
+        "slope",
+        locate_tol=min(1e-7, REFINE_TOL_RAD / PARAMETERS["slope"][1]),
+    )
+    return cont.trace(z0, direction=-1.0, p_min=MIN_SLOPE_RAD, stop_at_first_loss=True)
+
+
 def carry_critical(
     res: CriticalSlopeResult,
     trials: Sequence[Any],
@@ -131,12 +234,14 @@ def carry_critical(
     group_tol_deg: float = 0.05,
     progress: Callable[[str], None] | None = None,
     central_models: bool = True,
+    warm: bool = True,
 ) -> dict[str, Any]:
     """Propagate the held parameters of ``win`` (`rimless.sim.model.uncertain.WheelInput`) into the chosen
     estimate from the trials and the models' critical slopes of ``res``; sets ``res.parameters`` and
     ``res.held`` (the JSON's ``parameters`` and ``parameter_uncertainty``) and returns the latter.
     ``central_models`` False: the models' sensitivities by forward differences (half the Algorithm 1 runs; the
-    report and the demo)."""
+    report and the demo); ``warm`` False: each of them by the straightforward `model_critical_slope` (else
+    warm-started, `WarmCritical`)."""
     out: dict[str, Any] = {"method": METHOD, "trials": None, "models": {}}
     c = res.chosen
     if c is not None:
@@ -159,7 +264,8 @@ def carry_critical(
         if progress:
             progress(f"held parameters: model {m}")
         known = res.model.get("critical_slope_deg", {}).get(m)
-        base, rows = sensitivities(_model_at(m), win, base=known, central=central_models)
+        f = WarmCritical(win.params, m, known) if warm and _finite(known) is not None else _model_at(m)
+        base, rows = sensitivities(f, win, base=known, central=central_models)
         if base is None:
             out["models"][m] = {"critical_slope_deg": None, "note": "no critical slope at the held values"}
             continue

@@ -30,8 +30,19 @@ long-run variance ratio (Bartlett weights over `LONG_RUN_LAGS` lags); a sandwich
 variance (a read's timing error grows with the speed) plus the count's random-walk drift, whose rate is
 measured where the leg is still (held before the release, stuck after the motion: `_count_drift`). The drift is
 what the first two miss: a slow wander of the count, too small to see in the residuals of one release, moves the
-fitted friction and decay. The intervals' coverage is measured by simulation against an independent truth
-model (`rimless trials leg-fit-coverage`, `leg_fit_coverage`); docs/trials.md gives the figures.
+fitted friction and decay.
+
+The segmentation is chosen by the data: the half cycles each log makes before it sticks follow from the friction
+band, and a motion that nearly sticks makes a last half cycle of a fraction of a count, so each log is also
+fitted stuck one half cycle earlier (`max_half_cycles`); every segmentation within `SEGMENTATION_CHI2` of the
+best (in units of the residual variance, inflated for correlated residuals) is plausible, and the intervals
+span the intervals of every plausible one. Friction is claimed only when the frictionless model (a = 0) is
+worse by more than the BIC's log(n) (and `SEGMENTATION_CHI2`); else its interval spans the frictionless fit
+too and the summary gives an upper bound. A log with fewer than `MIN_SAMPLES_PER_HALF_CYCLE` reads in a half
+cycle of the fitted motion, or an interval of k or c reaching zero, is refused (`RunFailure`), never a number.
+
+The intervals' coverage is measured by simulation against an independent truth model (`rimless trials
+leg-fit-coverage`, `leg_fit_coverage`); docs/trials.md gives the figures.
 
 One concept: the leg-test fit (log, model, fit, uncertainty, figure).
 """
@@ -82,22 +93,42 @@ OUTLIER_SIGMAS = 8.0  # after a first fit, samples beyond this many robust sigma
 Z95 = 1.959963984540054
 MAX_NFEV = 400
 N_SHARED, N_PER_LOG = 3, 4  # omega_n, zeta, a; per log x_lock, x_eq, t_r, drift
+A_STARTS = (0.0, 0.3, 1.0)  # starts of the friction displacement, times `_a_guess_um`
+NO_FRICTION_UM = 1e-9  # the frictionless model: a bounded to this (um)
+SEGMENTATION_CHI2 = 3.84  # a segmentation this close to the best (delta chi2) is plausible: chi2(1) at 95 %
+MIN_SAMPLES_PER_HALF_CYCLE = 12  # fewer reads in a half cycle of the leg do not resolve it (refused)
 ZETA_MAX = 0.95  # the model is the underdamped response; a fit at this bound is not an oscillation
+ONE_RELEASE_NOTE = (
+    "one release: friction and damping are told apart only by the few half cycles of one motion; its intervals "
+    "span every segmentation the data allow; releases at several compressions reach the precision goal reliably "
+    "(one release reached it in about a third of simulated tests)"
+)
 GOALS = {"k_n_per_m": 0.02, "c_n_s_per_m": 0.02, "guide_friction_n": 0.10}  # precision goal: 95 % half width/value
 
 
 def goal_check(values: dict[str, float], half_widths: dict[str, float], releases: int) -> dict[str, Any]:
     """Whether a fit of `releases` logs reaches `GOALS` (95 % half width over the value, per parameter), and
-    about how many releases like these would (a half width falls as 1 / sqrt(releases))."""
+    about how many releases like these would (a half width falls as 1 / sqrt(releases)). A value whose interval
+    reaches zero has no relative precision: its entry has `rel_half_width` None, `met` None and `upper_95`."""
     out: dict[str, Any] = {"releases": releases, "per_parameter": {}}
     need: int | None = releases
     for key, goal in GOALS.items():
-        rel = half_widths[key] / abs(values[key]) if values[key] else math.inf
+        if values[key] - half_widths[key] <= 0:  # consistent with zero: no relative precision, an upper bound
+            out["per_parameter"][key] = {
+                "rel_half_width": None,
+                "goal": goal,
+                "met": None,
+                "releases_needed": None,
+                "upper_95": max(values[key] + half_widths[key], 0.0),
+                "consistent_with_zero": True,
+            }
+            continue
+        rel = half_widths[key] / abs(values[key])
         ok = rel <= goal
         n = releases if ok else (math.ceil(releases * (rel / goal) ** 2) if math.isfinite(rel) else None)
         out["per_parameter"][key] = {"rel_half_width": rel, "goal": goal, "met": ok, "releases_needed": n}
         need = None if need is None or n is None else max(need, n)
-    out["met"] = all(p["met"] for p in out["per_parameter"].values())
+    out["met"] = all(p["met"] for p in out["per_parameter"].values() if p["met"] is not None)
     out["releases_needed"] = need
     return out
 
@@ -229,11 +260,19 @@ def read_leg_log(path: Path | str, counts_per_m: float | None = None) -> LegLog:
 
 
 def free_response(
-    t: np.ndarray, omega_n: float, zeta: float, a: float, x_eq: float, x_lock: float, t_r: float
+    t: np.ndarray,
+    omega_n: float,
+    zeta: float,
+    a: float,
+    x_eq: float,
+    x_lock: float,
+    t_r: float,
+    max_half_cycles: int | None = None,
 ) -> np.ndarray:
     """The displacement at times `t` (s) of a spring-damper-Coulomb oscillator held at `x_lock` until `t_r`,
-    then released at rest: half cycles about x_eq +/- a, sticking within |x - x_eq| <= a. Displacements in any
-    one unit (counts here); omega_n in rad/s; 0 <= zeta < 1."""
+    then released at rest: half cycles about x_eq +/- a, sticking within |x - x_eq| <= a (or, given
+    `max_half_cycles`, at the end of that half cycle at the latest: a stick event the data choose). Displacements
+    in any one unit (counts here); omega_n in rad/s; 0 <= zeta < 1."""
     t = np.asarray(t, float)
     in_order = t.size < 2 or bool(np.all(t[1:] >= t[:-1]))
     order = None if in_order else np.argsort(t, kind="stable")
@@ -247,8 +286,10 @@ def free_response(
     xs, ts = float(x_lock), float(t_r)
     scale = max(abs(x_lock - x_eq), 1e-12)
     t_last = float(ts_sorted[-1]) if t.size else -math.inf
-    for _ in range(10000):
+    for n_half in range(10000):
         d = xs - x_eq
+        if max_half_cycles is not None and n_half >= max_half_cycles:
+            break
         if abs(d) <= a or abs(d) < 1e-9 * scale or ts > t_last:  # stuck, or no sample left to see the motion
             break
         e = x_eq + math.copysign(a, d)
@@ -347,6 +388,32 @@ class LegFitResult:
     count_drift_counts_per_sqrt_s: float = 0.0  # the count's random-walk rate measured where the leg is still
     count_drift_differences: int = 0  # the block-mean second differences it rests on
     standard_errors: dict[str, float] = field(default_factory=dict)  # each of the three, before the mass's
+    segmentation: dict[str, Any] = field(default_factory=dict)  # the half cycles chosen, the candidates
+    friction_test: dict[str, Any] = field(default_factory=dict)  # friction against the frictionless model
+    stick_caps: list[int | None] = field(default_factory=list)  # each log's stick event at the latest (None: band)
+
+    @property
+    def friction_resolved(self) -> bool:
+        """Whether the data support friction over the frictionless model and its interval excludes zero."""
+        return bool(self.friction_test.get("resolved", True)) and self.friction.ci95[0] > 0
+
+    def checks(self) -> dict[str, Any]:
+        """The checks a fit must pass to be used as a prior (`rimless trials calibrate --prior`): each with
+        `passed` and what it found; `passed` overall."""
+        sph = min(p.get("samples_per_half_cycle", math.inf) for p in self.per_log)
+        out: dict[str, Any] = {
+            "converged": {"passed": self.converged, "found": self.optimizer.get("message", "")},
+            "resolution": {
+                "passed": sph >= MIN_SAMPLES_PER_HALF_CYCLE,
+                "found": f"{sph:.1f} samples per half cycle (at least {MIN_SAMPLES_PER_HALF_CYCLE})",
+            },
+            "intervals_positive": {
+                "passed": self.k.ci95[0] > 0 and self.c.ci95[0] > 0,
+                "found": f"k from {self.k.ci95[0]:.4g} N/m, c from {self.c.ci95[0]:.4g} N s/m",
+            },
+        }
+        out["passed"] = all(v["passed"] for v in out.values())
+        return out
 
     def summary(self) -> dict[str, Any]:
         """The JSON of `rimless trials leg-fit --json` (`k_n_per_m`, `c_n_s_per_m`, `guide_friction_n`, each
@@ -373,6 +440,8 @@ class LegFitResult:
                 "intervals": "95 %: the largest of three covariances: least squares (inflated for correlated residuals), "
                 "a block sandwich, and a noise model (each sample's own variance plus the count's random-walk "
                 "drift measured where the leg is still)"
+                + ", spanning every plausible segmentation (and the frictionless model when friction is not "
+                "resolved)"
                 + (
                     ", with the moving mass's uncertainty"
                     if self.moving_mass_sd_kg > 0
@@ -389,6 +458,14 @@ class LegFitResult:
             }
         )
         out["goal"] = goal_check({k: out[k] for k in GOALS}, {k: Z95 * out[k + "_se"] for k in GOALS}, len(self.files))
+        out["friction_resolved"] = self.friction_resolved
+        if not self.friction_resolved:  # an upper bound, never a relative precision of about zero
+            out["guide_friction_n_upper_95"] = max(self.friction.ci95[1], 0.0)
+        out["friction_test"] = self.friction_test
+        out["segmentation"] = self.segmentation
+        out["checks"] = self.checks()
+        if len(self.files) == 1:
+            out["one_release"] = ONE_RELEASE_NOTE
         return out
 
 
@@ -433,10 +510,12 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
     def unpack(u: np.ndarray) -> tuple[float, float, float, np.ndarray]:
         return float(u[0]), float(u[1]), float(u[2]), u[N_SHARED:].reshape(n_l, N_PER_LOG)
 
+    caps: list[int | None] = [None] * n_l  # each log's stick event at the latest (None: where the band says)
+
     def one(u: np.ndarray, i: int) -> np.ndarray:
         w, z, a_um, per = unpack(u)
         s, (xl, xe, tr, dr) = segs[i], per[i]
-        return free_response(s.t, w, z, a_um * 1e-6 * cpms[i], xe, xl, tr * 1e-3) + dr * s.t - s.y
+        return free_response(s.t, w, z, a_um * 1e-6 * cpms[i], xe, xl, tr * 1e-3, caps[i]) + dr * s.t - s.y
 
     def resid(u: np.ndarray) -> np.ndarray:
         return np.concatenate([one(u, i) for i in range(n_l)])
@@ -464,24 +543,33 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
     hi = np.concatenate(
         [[2 * math.pi * 2000.0, ZETA_MAX, np.inf], np.tile([np.inf, np.inf, np.inf, DRIFT_MAX_COUNTS_PER_S], n_l)]
     )
-    best = None
-    for a_start in (0.0, 0.3, 1.0):  # a few starts in the friction (the cost is not convex in it)
-        u = u0.copy()
-        u[2] = a_start * _a_guess_um(segs, cpms)
-        r = least_squares(
+
+    def solve(u_start: np.ndarray, hi_a: float = np.inf) -> Any:
+        h = hi.copy()
+        h[2] = hi_a
+        return least_squares(
             resid,
-            np.clip(u, lo, hi),
+            np.clip(u_start, lo, h),
             jac=jac,
-            bounds=(lo, hi),
+            bounds=(lo, h),
             method="trf",
             x_scale="jac",
             xtol=1e-10,
             ftol=1e-12,
             max_nfev=MAX_NFEV,
         )
-        if best is None or r.cost < best.cost:
-            best = r
-    assert best is not None
+
+    def segmentation(u: np.ndarray) -> tuple[int, ...]:
+        w, z, a_um, per = unpack(u)
+        return tuple(_half_cycles(w, z, a_um * 1e-6 * cpms[i], per[i][1], per[i][0], caps[i]) for i in range(n_l))
+
+    runs = []
+    for a_start in A_STARTS:  # a few starts in the friction (the cost is not convex in it)
+        u = u0.copy()
+        u[2] = a_start * _a_guess_um(segs, cpms)
+        runs.append(solve(u))
+    no_friction = solve(u0, NO_FRICTION_UM)  # the simpler, nested model
+    best = min(runs, key=lambda res: res.cost)
     r = resid(best.x)
     sig = 1.4826 * float(np.median(np.abs(r - np.median(r))))
     bad = np.abs(r) > OUTLIER_SIGMAS * max(sig, 1.0)
@@ -493,19 +581,26 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
             sg.outliers = int(drop.sum())
             sg.t, sg.y = sg.t[~drop], sg.y[~drop]
         offs = np.concatenate([[0], np.cumsum([sg.t.size for sg in segs])])
-        nfev = int(best.nfev)
-        best = least_squares(
-            resid,
-            best.x,
-            jac=jac,
-            bounds=(lo, hi),
-            method="trf",
-            x_scale="jac",
-            xtol=1e-10,
-            ftol=1e-12,
-            max_nfev=MAX_NFEV,
-        )
+        nfev = sum(int(res.nfev) for res in runs)
+        best = solve(best.x)
+        no_friction = solve(no_friction.x, NO_FRICTION_UM)
         best.nfev += nfev
+    # the segmentation (half cycles before each log's stick event): the band's, and each log stuck one half
+    # cycle earlier (the last half cycle of a motion that nearly sticks is a few counts: the data choose)
+    free_seg = segmentation(best.x)
+    by_seg: dict[tuple[int, ...], tuple[Any, list[int | None]]] = {free_seg: (best, [None] * n_l)}
+    for i in range(n_l):
+        if free_seg[i] < 2:
+            continue
+        caps[:] = [None] * n_l
+        caps[i] = free_seg[i] - 1
+        res = solve(best.x)
+        key = segmentation(res.x)
+        if key not in by_seg or res.cost < by_seg[key][0].cost:
+            by_seg[key] = (res, list(caps))
+    free_seg = min(by_seg, key=lambda key: by_seg[key][0].cost)
+    best, best_caps = by_seg[free_seg]
+    caps[:] = best_caps
     u = best.x
     w, z, a_um, per = unpack(u)
     if z >= ZETA_MAX * 0.999:
@@ -513,49 +608,44 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
             f"{segs[0].log.path}: the leg does not oscillate (damping ratio at the model's bound "
             f"{ZETA_MAX}): k, c and friction cannot be told apart from this motion"
         )
+    _check_resolution(segs, w, z)
     r = resid(u)
+    caps[:] = [None] * n_l
     n, p = r.size, u.size
     s2 = float(r @ r) / max(n - p, 1)
     rho = _lag1(r, [s.t.size for s in segs])
     infl = _long_run_inflation(r, [s.t.size for s in segs])
-    J = np.asarray(best.jac)
     q, n_drift = _count_drift(segs)
-    try:
-        A = np.linalg.pinv(J.T @ J)
-        cov = A * s2 * infl
-        cov_s = _block_sandwich(A, J, r, offs, p)
-        cov_w, cov_rw = _noise_sandwich(A, J, r, offs, [s.t for s in segs], q)
-    except np.linalg.LinAlgError:
-        cov = cov_s = cov_w = cov_rw = np.full((p, p), np.nan)
-    cw, cws = cov[:3, :3], cov_s[:3, :3]  # omega, zeta, a (um)
-    cn = (cov_w + cov_rw)[:3, :3]
     m, sm = moving_mass_kg, moving_mass_sd_kg
-    a_m = a_um * 1e-6
-    k = m * w * w
-    c = 2 * m * z * w
-    fc = k * a_m
-    gk = np.array([2 * m * w, 0.0, 0.0])
-    gc = np.array([2 * m * z, 2 * m * w, 0.0])
-    gf = np.array([2 * m * w * a_m, 0.0, m * w * w * 1e-6])
+    s2_eff = s2 * infl
 
-    def se(g: np.ndarray, value: float) -> float:
-        """The largest of the three standard errors (least squares, block sandwich, noise model), with the
-        mass's."""
-        v = (
-            max(float(g @ cv @ g) for cv in (cw, cws, cn) if np.isfinite(cv).all())
-            if np.isfinite(cw).all()
-            else math.nan
-        )
-        v += (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
-        return math.sqrt(v) if v >= 0 and math.isfinite(v) else math.nan
+    def chi2(res: Any) -> float:
+        """The cost over the best's, in units of the residual variance (inflated for correlated residuals)."""
+        return 2.0 * (float(res.cost) - float(best.cost)) / max(s2_eff, 1e-12)
 
-    def se_param(j: int, unit: float = 1.0) -> float:
-        return se(np.eye(3)[j], 0.0) * unit
+    best_seg = free_seg
+    plausible = [(key, rc) for key, rc in by_seg.items() if chi2(rc[0]) <= SEGMENTATION_CHI2]
+    candidates = [
+        {"half_cycles": list(key), "delta_chi2": chi2(rc[0]), "plausible": chi2(rc[0]) <= SEGMENTATION_CHI2}
+        for key, rc in sorted(by_seg.items(), key=lambda kv: kv[1][0].cost)
+    ]
+    # friction is claimed only when the data support it over the frictionless model (BIC: one parameter more)
+    friction_chi2 = chi2(no_friction)
+    friction_resolved = bool(friction_chi2 > max(math.log(n), SEGMENTATION_CHI2))
+    ests = []
+    for _key, (res, cap) in sorted(plausible, key=lambda kv: kv[1][0].cost):
+        caps[:] = cap
+        ests.append(_estimates(res.x, np.asarray(res.jac), resid(res.x), offs, segs, q, s2, infl, m, sm))
+    caps[:] = [None] * n_l
+    if not friction_resolved:
+        J = np.asarray(no_friction.jac)
+        ests.append(_estimates(no_friction.x, J, resid(no_friction.x), offs, segs, q, s2, infl, m, sm))
+    main = ests[0]
+    spans = {name: _span(main[name], [e[name] for e in ests]) for name in main if name != "standard_errors"}
 
     per_log: list[dict[str, Any]] = []
     for i, (s, (xl, xe, tr, dr)) in enumerate(zip(segs, per)):
         ri = r[offs[i] : offs[i + 1]]
-        half_cycles = _half_cycles(w, z, a_um * 1e-6 * s.log.counts_per_m, xe, xl)
         per_log.append(
             {
                 "file": str(s.log.path),
@@ -565,7 +655,8 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
                 "equilibrium_counts": float(xe),
                 "release_delay_ms": float(tr),
                 "drift_counts_per_s": float(dr),
-                "half_cycles": half_cycles,
+                "half_cycles": best_seg[i],
+                "samples_per_half_cycle": _samples_per_half_cycle(s, w, z),
                 "slow_reads_left_out": s.slow_reads,
                 "outliers_left_out": s.outliers,
                 "residual_rms_counts": float(np.sqrt(np.mean(ri**2))),
@@ -583,12 +674,12 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
         files=[str(lg.path) for lg in logs],
         moving_mass_kg=m,
         moving_mass_sd_kg=sm,
-        k=Estimate(k, se(gk, k), "N/m"),
-        c=Estimate(c, se(gc, c), "N s/m"),
-        friction=Estimate(fc, se(gf, fc), "N"),
-        natural_frequency_hz=Estimate(w / (2 * math.pi), se_param(0, 1 / (2 * math.pi)), "Hz"),
-        damping_ratio=Estimate(z, se_param(1), ""),
-        friction_displacement_m=Estimate(a_m, se_param(2, 1e-6), "m"),
+        k=spans["k"],
+        c=spans["c"],
+        friction=spans["friction"],
+        natural_frequency_hz=spans["natural_frequency_hz"],
+        damping_ratio=spans["damping_ratio"],
+        friction_displacement_m=spans["friction_displacement_m"],
         per_log=per_log,
         residual_rms_counts=float(np.sqrt(np.mean(r**2))),
         autocorrelation=rho,
@@ -598,7 +689,7 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
             "message": str(best.message),
             "nfev": int(best.nfev),
             "converged": converged,
-            "starts": 3,
+            "starts": len(A_STARTS) + 1,
         },
         segments=segs,
         params=u,
@@ -606,17 +697,117 @@ def _fit_leg(logs: list[LegLog], moving_mass_kg: float, moving_mass_sd_kg: float
         count_drift_counts_per_sqrt_s=math.sqrt(q),
         count_drift_differences=n_drift,
     )
-    fit.standard_errors = {
-        f"{name}_{kind}": math.sqrt(max(float(g @ cv @ g), 0.0))
-        for name, g in (("k_n_per_m", gk), ("c_n_s_per_m", gc), ("guide_friction_n", gf))
-        for kind, cv in (("least_squares", cw), ("block_sandwich", cws), ("noise_model", cn))
+    fit.standard_errors = main["standard_errors"]
+    fit.stick_caps = best_caps
+    fit.segmentation = {
+        "chosen": list(best_seg),
+        "candidates": candidates,
+        "rule": f"a segmentation within delta chi2 {SEGMENTATION_CHI2:g} of the best (residual variance "
+        "inflated for correlated residuals) is plausible; the intervals span every plausible one",
+        "ambiguous": len(plausible) > 1,
+    }
+    fit.friction_test = {
+        "delta_chi2_without_friction": friction_chi2,
+        "bic_penalty": math.log(n),
+        "resolved": friction_resolved,
     }
     if not all(math.isfinite(e.value) and math.isfinite(e.se) for e in (fit.k, fit.c, fit.friction)):
         raise RunFailure(
             f"{segs[0].log.path}: the fit gave no finite k, c and friction with uncertainties "
             "(a flat direction of the cost: the motion does not determine them)"
         )
+    for name, est in (("k", fit.k), ("c", fit.c)):
+        if est.ci95[0] <= 0:
+            raise RunFailure(
+                f"{segs[0].log.path}: the 95 % interval of {name} reaches zero ({est.value:.4g} +- "
+                f"{Z95 * est.se:.3g} {est.unit}): the motion does not determine the leg"
+            )
     return fit
+
+
+def _samples_per_half_cycle(seg: _Segment, w: float, z: float) -> float:
+    """The median number of reads in one half cycle of the fitted motion (pi / omega_d) in this log."""
+    moving = seg.t[seg.t >= 0]
+    dt = float(np.median(np.diff(moving))) if moving.size > 1 else math.inf
+    half = math.pi / (w * math.sqrt(max(1.0 - z * z, 1e-12)))
+    return half / dt if dt > 0 else math.inf
+
+
+def _check_resolution(segs: list[_Segment], w: float, z: float) -> None:
+    """Refuse (`RunFailure`) a log read too slowly to resolve the fitted leg: fewer than
+    `MIN_SAMPLES_PER_HALF_CYCLE` reads in a half cycle, where the fit's k, c and friction are not determined
+    (an alias of the motion, or a frequency the reads cannot see)."""
+    for s in segs:
+        sph = _samples_per_half_cycle(s, w, z)
+        if sph < MIN_SAMPLES_PER_HALF_CYCLE:
+            moving = s.t[s.t >= 0]
+            rate = (moving.size - 1) / float(moving[-1] - moving[0]) if moving.size > 1 else 0.0
+            half_ms = 1e3 * math.pi / (w * math.sqrt(max(1.0 - z * z, 1e-12)))
+            raise RunFailure(
+                f"{s.log.path}: {sph:.1f} samples per half cycle (read {rate:.0f} times a second, the fitted "
+                f"half cycle {half_ms:.2g} ms): at least {MIN_SAMPLES_PER_HALF_CYCLE} are needed, the sample rate "
+                "cannot resolve the leg (record again on an idle machine or on the robot)"
+            )
+
+
+def _estimates(
+    u: np.ndarray,
+    J: np.ndarray,
+    r: np.ndarray,
+    offs: np.ndarray,
+    segs: list[_Segment],
+    q: float,
+    s2: float,
+    infl: float,
+    m: float,
+    sm: float,
+) -> dict[str, Any]:
+    """k, c, F_c and the oscillator's parameters at `u`, each with the largest of the three standard errors
+    (least squares inflated by `infl`, block sandwich, noise model) and the moving mass's; and each of the
+    three in `standard_errors`."""
+    p = u.size
+    try:
+        A = np.linalg.pinv(J.T @ J)
+        cov = A * s2 * infl
+        cov_s = _block_sandwich(A, J, r, offs, p)
+        cov_w, cov_rw = _noise_sandwich(A, J, r, offs, [s.t for s in segs], q)
+    except np.linalg.LinAlgError:
+        cov = cov_s = cov_w = cov_rw = np.full((p, p), np.nan)
+    covs = (cov[:3, :3], cov_s[:3, :3], (cov_w + cov_rw)[:3, :3])  # omega, zeta, a (um)
+    w, z, a_m = float(u[0]), float(u[1]), float(u[2]) * 1e-6
+    k, c = m * w * w, 2 * m * z * w
+    fc = k * a_m
+    gk = np.array([2 * m * w, 0.0, 0.0])
+    gc = np.array([2 * m * z, 2 * m * w, 0.0])
+    gf = np.array([2 * m * w * a_m, 0.0, m * w * w * 1e-6])
+
+    def se(g: np.ndarray, value: float) -> float:
+        fin = [float(g @ cv @ g) for cv in covs if np.isfinite(cv).all()]
+        v = max(fin) if fin and np.isfinite(covs[0]).all() else math.nan
+        v += (value / m * sm) ** 2  # each of k, c, F_c is proportional to m
+        return math.sqrt(v) if v >= 0 and math.isfinite(v) else math.nan
+
+    unit = np.eye(3)
+    return {
+        "k": Estimate(k, se(gk, k), "N/m"),
+        "c": Estimate(c, se(gc, c), "N s/m"),
+        "friction": Estimate(fc, se(gf, fc), "N"),
+        "natural_frequency_hz": Estimate(w / (2 * math.pi), se(unit[0], 0.0) / (2 * math.pi), "Hz"),
+        "damping_ratio": Estimate(z, se(unit[1], 0.0), ""),
+        "friction_displacement_m": Estimate(a_m, se(unit[2], 0.0) * 1e-6, "m"),
+        "standard_errors": {
+            f"{name}_{kind}": math.sqrt(max(float(g @ cv @ g), 0.0)) if np.isfinite(cv).all() else math.nan
+            for name, g in (("k_n_per_m", gk), ("c_n_s_per_m", gc), ("guide_friction_n", gf))
+            for kind, cv in zip(("least_squares", "block_sandwich", "noise_model"), covs)
+        },
+    }
+
+
+def _span(main: Estimate, others: list[Estimate]) -> Estimate:
+    """`main` with a standard error widened so that its 95 % interval spans the 95 % interval of every
+    plausible alternative model (a segmentation, the frictionless model)."""
+    se = max(((abs(e.value - main.value) + Z95 * e.se) / Z95 for e in others), default=main.se)
+    return Estimate(main.value, max(se, main.se), main.unit)
 
 
 def _a_guess_um(segs: list[_Segment], cpms: np.ndarray) -> float:
@@ -639,11 +830,11 @@ def _start(segs: list[_Segment], cpms: np.ndarray, one: Any) -> np.ndarray:
     return np.concatenate([[best[1], best[2], 0.0], per])
 
 
-def _half_cycles(w: float, z: float, a: float, x_eq: float, x_lock: float) -> int:
-    """How many half cycles the fitted motion makes before it sticks (at most 1000)."""
+def _half_cycles(w: float, z: float, a: float, x_eq: float, x_lock: float, cap: int | None = None) -> int:
+    """How many half cycles the fitted motion makes before it sticks (at most 1000, or `cap`)."""
     r = math.exp(-z * math.pi / math.sqrt(max(1 - z * z, 1e-12)))
     xs, n = x_lock, 0
-    while n < 1000:
+    while n < (1000 if cap is None else cap):
         d = xs - x_eq
         if abs(d) <= a or abs(d) < 1e-6:
             break
@@ -761,11 +952,12 @@ def plot_leg_fit(fit: LegFitResult, path: Path | str) -> None:
     w, z, a_um = fit.params[0], fit.params[1], fit.params[2]
     per = fit.params[N_SHARED:].reshape(-1, N_PER_LOG)
     fig, (ax, axr) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    caps = fit.stick_caps or [None] * len(fit.segments)
     for i, (s, (xl, xe, tr, dr)) in enumerate(zip(fit.segments, per)):
         cpm = s.log.counts_per_m
-        model = free_response(s.t, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3) + dr * s.t
+        model = free_response(s.t, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3, caps[i]) + dr * s.t
         fine = np.linspace(float(s.t[0]), float(s.t[-1]), 2000)
-        curve = free_response(fine, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3) + dr * fine
+        curve = free_response(fine, w, z, a_um * 1e-6 * cpm, xe, xl, tr * 1e-3, caps[i]) + dr * fine
         col = f"C{i % 10}"
         ax.plot(s.t * 1e3, (s.y - xe) / cpm * 1e3, ".", ms=2, color=col, label=f"{Path(s.log.path).name} (measured)")
         ax.plot(fine * 1e3, (curve - xe) / cpm * 1e3, "-", lw=1, color="k", label="fit" if i == 0 else None)

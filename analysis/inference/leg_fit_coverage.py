@@ -5,7 +5,9 @@ Each simulated leg test is a leg drawn at random (k, c and the guide friction F_
 compressions spread over `COMPRESSIONS_MM`, recorded by the truth model `rimless.analysis.inference.leg_truth`
 (numerical integration with stiction; position noise, a random-walk drift of the count, floor quantisation,
 read jitter, late and descheduled reads, an unknown release delay and sensor zero), written as leg-test logs and
-fitted by `rimless.analysis.inference.leg_fit.fit_leg` exactly as a robot's logs are. The report, per
+fitted by `rimless.analysis.inference.leg_fit.fit_leg` exactly as a robot's logs are. The leg's moving mass is
+drawn too (`MASS_RANGE`) and the fit is told it as a user knows it: a weighed value off by `MASS_REL_SD` (relative,
+1 sigma) with that uncertainty, carried into its intervals; never the truth. The report, per
 parameter: how often the 95 % interval holds the truth (with the binomial 95 % interval of that share), the
 median and RMS relative error, the median relative 95 % half width, and the spread of (estimate - truth) / se
 (1 for honest standard errors); and how many tests reach the precision goal (k and c to 2 %, F_c to 10 %, as
@@ -35,6 +37,8 @@ __all__ = ["K_RANGE", "C_RANGE", "F_RANGE", "COMPRESSIONS_MM", "LegCoverageResul
 K_RANGE = (2000.0, 3500.0)  # N/m (the paper's leg: 2700)
 C_RANGE = (4.0, 10.0)  # N s/m (8; with m = 0.0378 kg the damping ratio spans about 0.2-0.6)
 F_RANGE = (0.1, 0.5)  # N
+MASS_RANGE = (0.030, 0.046)  # kg: the leg's moving mass (Table 1's leg: 0.0378), never handed to the fit
+MASS_REL_SD = 0.005  # the fit is told a weighed mass: the truth times (1 + this x N(0, 1)), with this sd (relative)
 COMPRESSIONS_MM = (1.5, 2.5)  # the releases' compressions, spread evenly (one release: the middle)
 _KEYS = (("k_n_per_m", "k"), ("c_n_s_per_m", "c"), ("guide_friction_n", "friction"))
 
@@ -48,6 +52,7 @@ class LegCoverageResult:
     seed: int
     noise_counts: float
     drift_counts_per_sqrt_s: float
+    mass_rel_sd: float = MASS_REL_SD
     rows: list[dict[str, Any]] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
@@ -89,6 +94,9 @@ class LegCoverageResult:
                 "c_n_s_per_m": list(C_RANGE),
                 "guide_friction_n": list(F_RANGE),
                 "compressions_mm": self._compressions(),
+                "moving_mass_kg": list(MASS_RANGE),
+                "stated_moving_mass": f"the truth times (1 + {self.mass_rel_sd:g} N(0, 1)), sd {self.mass_rel_sd:g} "
+                "of the stated value (the leg as its user weighed it; the fit never sees the truth)",
                 "noise_counts": self.noise_counts,
                 "drift_counts_per_sqrt_s": self.drift_counts_per_sqrt_s,
             },
@@ -109,6 +117,7 @@ def run_leg_fit_coverage(
     seed: int = 0,
     noise_counts: float = 0.3,
     drift_counts_per_sqrt_s: float = 0.5,
+    mass_rel_sd: float = MASS_REL_SD,
     progress: Callable[[int], None] | None = None,
 ) -> LegCoverageResult:
     """Simulate and fit `tests` leg tests of `releases` releases each (same `seed`, same figures); `progress(i)`
@@ -117,30 +126,41 @@ def run_leg_fit_coverage(
         raise ParameterError(f"--tests must be >= 1, got {tests}")
     if releases < 1:
         raise ParameterError(f"--releases must be >= 1, got {releases}")
-    for name, v in (("--noise-counts", noise_counts), ("--drift-counts-per-sqrt-s", drift_counts_per_sqrt_s)):
+    for name, v in (
+        ("--noise-counts", noise_counts),
+        ("--drift-counts-per-sqrt-s", drift_counts_per_sqrt_s),
+        ("--mass-sd-rel", mass_rel_sd),
+    ):
         if not (math.isfinite(v) and v >= 0):
             raise ParameterError(f"{name} must be >= 0, got {v!r}")
-    res = LegCoverageResult(tests, releases, seed, noise_counts, drift_counts_per_sqrt_s)
+    res = LegCoverageResult(tests, releases, seed, noise_counts, drift_counts_per_sqrt_s, mass_rel_sd)
     rng = np.random.default_rng(seed)
     comp = res._compressions()
     with tempfile.TemporaryDirectory(prefix="rimless-leg-coverage-") as tmp:
         for i in range(tests):
             k, c, f = rng.uniform(*K_RANGE), rng.uniform(*C_RANGE), rng.uniform(*F_RANGE)
+            mass = rng.uniform(*MASS_RANGE)
+            stated = mass * (1.0 + mass_rel_sd * rng.standard_normal())
             truth = LegTruth(
                 k_n_per_m=k,
                 c_n_s_per_m=c,
                 friction_n=f,
+                mass_kg=mass,
                 noise_counts=noise_counts,
                 drift_counts_per_s=drift_counts_per_sqrt_s,
             )
-            row: dict[str, Any] = {"truth": {"k_n_per_m": k, "c_n_s_per_m": c, "guide_friction_n": f}}
+            row: dict[str, Any] = {
+                "truth": {"k_n_per_m": k, "c_n_s_per_m": c, "guide_friction_n": f, "moving_mass_kg": mass},
+                "stated_moving_mass_kg": stated,
+                "stated_moving_mass_sd_kg": mass_rel_sd * stated,
+            }
             logs = []
             for j, mm in enumerate(comp):
                 p = Path(tmp) / f"release{j}.jsonl"
                 write_log(p, truth, compression_m=mm * 1e-3, seed=int(rng.integers(2**31)))
                 logs.append(read_leg_log(p))
             try:
-                fit = fit_leg(logs, moving_mass_kg=truth.mass_kg)
+                fit = fit_leg(logs, moving_mass_kg=stated, moving_mass_sd_kg=mass_rel_sd * stated)
             except RunFailure as err:
                 row["failure"] = str(err).replace(str(Path(tmp)) + "/", "")
             else:

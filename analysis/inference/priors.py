@@ -11,7 +11,9 @@ deviation the interval's half width / 1.96. What happens to each depends on the 
 - not a parameter of the wheel model (`guide_friction_n` before the model has guide friction): reported as
   measured by the leg test and not used by the walk model.
 
-The report says, per parameter, where its value came from: the leg test, the walks, or both (with the share of
+A leg fit that failed its checks is refused (`InputFileError`, naming the file and the check): its `checks`
+not passed, `converged` false, or an interval of k or c reaching zero or below (older leg-fit outputs have no
+`checks`; the last two still apply). The report says, per parameter, where its value came from: the leg test, the walks, or both (with the share of
 the leg test in the final information, 1 / sd_prior^2 over the model-based 1 / se_calibrated^2), and flags a
 calibrated value more than `CONFLICT_Z` prior sigmas from the leg test (the two measurements disagree).
 """
@@ -40,6 +42,7 @@ PRIOR_KEYS = {
 }
 LEG_TEST_SHARE = 0.9  # above this share of the information, a value is "from the leg test"
 WALK_SHARE = 0.1  # below it, "from the walks"
+POSITIVE_KEYS = ("k_n_per_m", "c_n_s_per_m")  # a leg's k and c are > 0: an interval reaching zero is a failed fit
 CONFLICT_Z = 3.0  # a calibrated value this many prior sigmas from the leg test: the two disagree
 
 
@@ -170,6 +173,30 @@ class LegPriors:
         return {"file": str(self.path), "leg": self.leg, "parameters": rows, "from_walks_only": walks}
 
 
+def _refuse_failed_fit(p: Path, data: dict[str, Any]) -> None:
+    """`InputFileError` for a leg fit that failed its checks (its `checks`, or `converged` false): such a fit
+    is no measurement to pin a calibration with."""
+    checks = data.get("checks")
+    if checks is not None:
+        if not isinstance(checks, dict) or not isinstance(checks.get("passed"), bool):
+            raise InputFileError(f"--prior {p}: field 'checks' must be an object with 'passed' true or false")
+        failed = [
+            f"{name} ({v.get('found', '')})" if isinstance(v, dict) else name
+            for name, v in checks.items()
+            if name != "passed" and not (isinstance(v, dict) and v.get("passed") is True)
+        ]
+        if not checks["passed"] or failed:
+            raise InputFileError(
+                f"--prior {p}: the leg fit failed its check(s) {'; '.join(failed) or 'passed: false'}: not used as "
+                "a prior (refit or repeat the leg test)"
+            )
+    if data.get("converged") is False:
+        raise InputFileError(
+            f"--prior {p}: the leg fit failed its check 'converged' (field 'converged' is false: the optimiser "
+            "stopped on its budget): not used as a prior"
+        )
+
+
 def read_priors(path: Path | str) -> LegPriors:
     """Read a `rimless trials leg-fit --json` output; `InputFileError` names the file and the field."""
     p = Path(path)
@@ -185,6 +212,7 @@ def read_priors(path: Path | str) -> LegPriors:
         ) from None
     if not isinstance(data, dict):
         raise InputFileError(f"--prior {p}: expected a JSON object (the output of `rimless trials leg-fit --json`)")
+    _refuse_failed_fit(p, data)
     priors = []
     for key, (fld, _name, unit) in PRIOR_KEYS.items():
         if key not in data:
@@ -203,6 +231,11 @@ def read_priors(path: Path | str) -> LegPriors:
             raise InputFileError(f"--prior {p}: field {key + '_ci'!r} must have lo < hi, got {ci!r}")
         if not lo <= value <= hi:
             raise InputFileError(f"--prior {p}: field {key!r} {value!r} lies outside its interval {ci!r}")
+        if key in POSITIVE_KEYS and lo <= 0:
+            raise InputFileError(
+                f"--prior {p}: the leg fit failed its check 'intervals_positive': field {key + '_ci'!r} {ci!r} "
+                "reaches zero or below (the leg test did not determine it; refit or repeat the leg test)"
+            )
         priors.append(Prior(key, fld, unit, float(value), (hi - lo) / (2 * Z95)))
     if not priors:
         raise InputFileError(

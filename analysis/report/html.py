@@ -179,6 +179,9 @@ def build_report(
     except OSError as err:
         raise InputFileError(f"{out}: cannot create the output folder ({err})") from None
     sim = sim or Simulator()
+    from rimless.sim.model.uncertain import default_wheel_input
+
+    win = wheel_input if wheel_input is not None else default_wheel_input(sim.params)
     beside = critical and calibrate_c and background_allowed()
     # two processes on the cores: BLAS threads here would wait for a core (warm demo 13.0-14.5 s, 14.5-18.5 s)
     with one_blas_thread() if beside else contextlib.nullcontext():
@@ -193,31 +196,12 @@ def build_report(
             critical_files,
             robot_logs,
             progress,
+            win,
         )
-    _carry(res, sim, files, critical_files, wheel_input, progress)
+    res.parameters = win.parameters()
     res.seconds = time.perf_counter() - t_start
     _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
     return res
-
-
-def _carry(
-    res: ReportResult,
-    sim: Simulator,
-    files: Sequence[Path],
-    critical_files: Sequence[str | Path] | None,
-    wheel_input: Any,
-    progress: Callable[[str], None] | None,
-) -> None:
-    """List the wheel's parameters and carry the held ones' uncertainty into the critical slopes."""
-    from rimless.analysis.inference.held import carry_critical
-    from rimless.sim.model.uncertain import default_wheel_input
-
-    win = wheel_input if wheel_input is not None else default_wheel_input(sim.params)
-    res.parameters = win.parameters()
-    if res.critical is not None:
-        trials, names = _critical_inputs(files, res.inputs, critical_files)
-        # the models by forward differences: half the Algorithm 1 runs (about 5 s of the demo instead of 10)
-        carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress, central_models=False)
 
 
 def _compare_and_report(
@@ -231,6 +215,7 @@ def _compare_and_report(
     critical_files: Sequence[str | Path] | None,
     robot_logs: dict[str, Path] | None,
     progress: Callable[[str], None] | None,
+    win: Any,
 ) -> ReportResult:
     """Import, compare (the calibration of c in a second process meanwhile, when asked), then the rest."""
     calibrating: Background | None = prepared_calibration(sim.params) if calibrate_c else None
@@ -252,7 +237,18 @@ def _compare_and_report(
             if progress:
                 progress(p.name)
         return _rest_of_report(
-            files, out, sim, inputs, comps, slope_bin_deg, critical, critical_files, calibrating, robot_logs, progress
+            files,
+            out,
+            sim,
+            inputs,
+            comps,
+            slope_bin_deg,
+            critical,
+            critical_files,
+            calibrating,
+            robot_logs,
+            progress,
+            win,
         )
     finally:
         if calibrating is not None:
@@ -271,6 +267,7 @@ def _rest_of_report(
     calibrating: Background | None,
     robot_logs: dict[str, Path] | None,
     progress: Callable[[str], None] | None,
+    win: Any,
 ) -> ReportResult:
     """The report after the comparisons: trends, clutch logs, figures, the critical slope, metrics.csv."""
     groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
@@ -291,7 +288,7 @@ def _rest_of_report(
         clutch=clutch,
     )
     if critical:
-        _add_critical(res, sim, *_critical_inputs(files, inputs, critical_files), calibrating, progress)
+        _add_critical(res, sim, *_critical_inputs(files, inputs, critical_files), calibrating, progress, win)
     if res.calibration is None and all_suspect(res):
         _calibrate_for_misfit(res, sim, progress)
     _write_csv(res.metrics(), res.metrics_csv)
@@ -349,14 +346,20 @@ def _add_critical(
     names: list[str],
     calibrating: Background | None,
     progress: Callable[[str], None] | None,
+    win: Any,
 ) -> None:
-    """The critical slope from ``trials``, the model's at ``sim.params``, and with ``calibrating`` (the
-    calibration of c started beside the comparisons) the calibration and the calibrated model's."""
+    """The critical slope from ``trials``, the model's at ``sim.params`` with the held parameters of ``win``
+    carried (`rimless.analysis.inference.held`), and with ``calibrating`` (the calibration of c started beside
+    the comparisons) the calibration and the calibrated model's."""
     from rimless.analysis.inference.critical_slope import add_calibrated_model, run_critical_slope
+    from rimless.analysis.inference.held import carry_critical
 
     if not trials:
         return
     res.critical = run_critical_slope(trials, names, sim.params, models=(sim.model,))
+    # the held parameters' runs while the calibration goes on beside (they need only the model's critical slope);
+    # the models by forward differences: half the runs
+    carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress, central_models=False)
     if calibrating is not None:
         res.calibration = calibrating.result()
         if progress:

@@ -104,6 +104,7 @@ def run_robot(
     duration_s: float | None = None,
     arm: bool = False,
     on_start: Callable[[RobotApp], None] | None = None,
+    on_running: Callable[[RobotApp], None] | None = None,
     log_level: int = logging.INFO,
     fake_fault: str | None = None,
     pin_log: Path | None = None,
@@ -114,14 +115,16 @@ def run_robot(
 
     `config` is a `RobotConfig` or the robot.toml to load (None: the defaults); `telemetry` adds "host:port"
     destinations (already checked); `fake` runs on the fake sensors and mock pins. `on_start(app)` is called
-    once the app exists, before its loop starts (to show the token). Every clutch is off and the hardware
-    closed on every path. Real time: `realtime` (--realtime), else `[sampling] realtime`, else on when systemd
-    started this process (`config.decide_realtime`; the reason in `cfg.sampling.realtime_why`). With `fake`,
-    `fake_fault` names a scenario of `scenarios.FAKE_FAULTS` and `pin_log` a JSON Lines file receiving every
-    mock pin change. Raises `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be opened or
-    a socket cannot be bound, `ParameterError` when a telemetry host cannot be resolved. `arm` arms at start naming
-    `stance_leg` (the clutch index of the leg on the ground; `check_arm_at_start`: a `ParameterError` when a
-    sensor counting legs needs it and it is missing, or it is given without `arm`).
+    once the app exists, before its loop starts (to show the token); `on_running(app)` in the loop once every
+    task runs and the app handles the stop signals itself (a Ctrl-C from then on stops the firmware's loop,
+    with its summary). Every clutch is off and the hardware closed on every path. Real time: `realtime`
+    (--realtime), else `[sampling] realtime`, else on when systemd started this process
+    (`config.decide_realtime`; the reason in `cfg.sampling.realtime_why`). With `fake`, `fake_fault` names a
+    scenario of `scenarios.FAKE_FAULTS` and `pin_log` a JSON Lines file receiving every mock pin change. Raises
+    `ConfigError` for a bad robot.toml, `CommandError` when a sensor cannot be opened or a socket cannot be
+    bound, `ParameterError` when a telemetry host cannot be resolved. `arm` arms at start naming `stance_leg`
+    (the clutch index of the leg on the ground; `check_arm_at_start`: a `ParameterError` when a sensor counting
+    legs needs it and it is missing, or it is given without `arm`).
     """
     if not fake and (fake_fault is not None or pin_log is not None):
         raise ParameterError("--fake-fault and --pin-log need --fake")
@@ -130,11 +133,11 @@ def run_robot(
         sc = scenario(fake_fault, clock=VirtualClock()) if fake else None
     except ValueError as err:
         raise ParameterError(f"--fake-fault: {err}") from None
-    state: dict[str, Hardware] = {}
+    state: dict[str, Hardware | RunSummary] = {}
 
     def release_now() -> None:
         hw = state.get("hw")
-        if hw is not None:
+        if isinstance(hw, Hardware):
             hw.clutches.all_off()
 
     try:
@@ -143,22 +146,33 @@ def run_robot(
             source = str(config) if config is not None and not isinstance(config, RobotConfig) else "the configuration"
             cfg = with_realtime(cfg, decide_realtime(cfg.sampling, flag=realtime, source=source))
             return _run(
-                with_telemetry(cfg, telemetry), state, sc, duration_s, arm, on_start, log_level, pin_log, stance_leg
+                with_telemetry(cfg, telemetry),
+                state,
+                sc,
+                duration_s,
+                arm,
+                (on_start, on_running),
+                log_level,
+                pin_log,
+                stance_leg,
             )
     except Interrupted as sig:  # before or after the event loop ran: the hardware is closed by now
         hw = state.get("hw")
-        if hw is not None:
+        if isinstance(hw, Hardware):
             hw.close()
+        ran = state.get("summary")
+        if isinstance(ran, RunSummary):  # after the loop: its summary stands, the signal ends the command
+            return RunOutcome(fake, ran, sig.name)
         return RunOutcome(fake, None, sig.name, before_start=True)
 
 
 def _run(
     cfg: RobotConfig,
-    state: dict[str, Hardware],
+    state: dict[str, Hardware | RunSummary],
     sc: Scenario | None,
     duration_s: float | None,
     arm: bool,
-    on_start: Callable[[RobotApp], None] | None,
+    callbacks: tuple[Callable[[RobotApp], None] | None, Callable[[RobotApp], None] | None],
     log_level: int,
     pin_log_path: Path | None,
     stance_leg: int | None = None,
@@ -182,8 +196,16 @@ def _run(
     except SensorError as err:
         raise CommandError(f"sensor: {err}") from None
     state["hw"] = hw
+    on_start, on_running = callbacks
+
+    def ready(app: RobotApp) -> None:
+        if sc is not None:
+            on_ready(sc, app)
+        if on_running is not None:
+            on_running(app)
+
     try:
-        robot = RobotApp(cfg, hw, on_ready=None if sc is None else (lambda app: on_ready(sc, app)))
+        robot = RobotApp(cfg, hw, on_ready=ready)
         if robot.token_generated and cfg.commands.enabled:
             robot.token_path = write_private_token(robot.token)
         if on_start is not None:
@@ -194,6 +216,7 @@ def _run(
     try:
         with NonBlockingLog(level=log_level) as logs:
             summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm, stance_leg=stance_leg))
+            state["summary"] = summary
             summary.stderr_dropped = logs.dropped
     except OSError as err:
         raise CommandError(f"cannot start: {err}") from None

@@ -20,9 +20,12 @@ RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 CLUTCH_PINS = {17, 27, 22, 23, 24, 16, 20, 21}
 HEARTBEAT = 18
 OLD = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT}
-# the watchdogs at 1 s (the robot's 0.1 s and 0.25 s), as in the other fake runs: a test machine at load 14
-# pauses a process for tenths of a second, and a `sensor_stalled` fault disarms it before its first lock
-SAMPLING = "[sampling]\nstall_timeout_s = 1.0\nloop_stall_s = 1.0\n"
+# the watchdogs at 5 s (the robot's 0.1 s and 0.25 s): a test machine at load 14 pauses a process for tenths of a
+# second, and a `sensor_stalled` fault disarms it for good (these tests are about signals, not stalls)
+SAMPLING = "[sampling]\nstall_timeout_s = 5.0\nloop_stall_s = 5.0\n"
+#: how long a test waits for a process that should end by itself (a hang guard, not a bound: only a hung process
+#: takes this long, whatever the machine's load)
+HANG_GUARD_S = 300.0
 
 
 def read_log(path: Path) -> list[dict]:
@@ -60,7 +63,7 @@ def start(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path]:
     return proc, log
 
 
-def wait_for(proc: subprocess.Popen, log: Path, pins: set[int], timeout_s: float = 60.0) -> None:
+def wait_for(proc: subprocess.Popen, log: Path, pins: set[int], timeout_s: float = HANG_GUARD_S) -> None:
     """Until one of `pins` went high (the timeout is a hang guard: several processes start at once)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -73,7 +76,7 @@ def wait_for(proc: subprocess.Popen, log: Path, pins: set[int], timeout_s: float
 
 def finish(proc: subprocess.Popen, log: Path, sig: signal.Signals) -> None:
     try:
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=HANG_GUARD_S)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -114,7 +117,9 @@ def test_every_catchable_terminating_signal_leaves_every_pin_low(tmp_path, batch
 @pytest.mark.slow
 def test_a_blocked_stderr_holds_up_neither_start_nor_exit(tmp_path) -> None:
     """stderr is a pipe already full that nobody reads (a hung terminal or journal). Fails on today's main: the
-    first status line blocked start-up, and the exit waited on stderr (the unit then SIGKILLs it)."""
+    first status line blocked start-up, and the exit waited on stderr (the unit then SIGKILLs it). On events,
+    not times: nobody reads the pipe before the process has exited, so a start-up or an exit that waited on
+    stderr would wait for ever (the hang guard then kills it and the test fails); the time is printed only."""
     r, w = os.pipe()
     os.set_blocking(w, False)
     try:
@@ -148,15 +153,14 @@ def test_a_blocked_stderr_holds_up_neither_start_nor_exit(tmp_path) -> None:
     )
     os.close(w)
     try:
-        code = proc.wait(timeout=30)
+        code = proc.wait(timeout=HANG_GUARD_S)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-        os.close(r)
-    took = time.monotonic() - t0
-    print(f"exit after {took:.1f} s with stderr blocked")
-    assert code == 0
-    assert took < 20  # generous: start-up about 1 s, 3 s of run, exit
+        os.close(r)  # the first time anything is done with the pipe's reading end
+    print(f"exit after {time.monotonic() - t0:.1f} s with stderr blocked")  # a figure, not a bound
+    assert code == 0  # it ended by itself, on its --duration-s, its stderr still full
     recs = read_log(log)
     assert any(rec["pin"] in CLUTCH_PINS and rec["level"] == 1 for rec in recs)  # it ran: a clutch engaged
+    assert all(level == 0 for level in {rec["pin"]: rec["level"] for rec in recs}.values())

@@ -22,6 +22,12 @@ from tests.support.firmware_app import free_port
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
 PINS = ("17", "27", "22", "23", "24", "16", "20", "21")
+#: the watchdogs at 5 s (the robot's 0.1 s and 0.25 s): a loaded test machine pauses a process for tenths of a
+#: second, and a `sensor_stalled` fault disarms the fake robot for good, so that no clutch ever engages (a run at
+#: load 14 waited 300 s for one); these tests are about signals, not stalls
+SAMPLING = "[sampling]\nstall_timeout_s = 5.0\nloop_stall_s = 5.0\n"
+#: how long a test waits for an event or an exit (a hang guard, not a bound: only a hung process takes this long)
+HANG_GUARD_S = 300.0
 
 
 def pin_levels(line: str) -> dict[str, str]:
@@ -33,7 +39,9 @@ def pin_levels(line: str) -> dict[str, str]:
 def start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, int]:
     port = free_port()
     cfg = tmp_path / "robot.toml"
-    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n')
+    cfg.write_text(
+        f'[commands]\nbind = "127.0.0.1"\nport = {port}\nlink_timeout_s = 0.0\n[log]\ndir = "{tmp_path}"\n{SAMPLING}'
+    )
     env = {**os.environ, "RIMLESS_TOKEN": TOKEN}
     proc = subprocess.Popen(
         [*RIMLESS, "robot", "run", "--fake", "--config", str(cfg), *args],
@@ -46,16 +54,18 @@ def start_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, int]:
 
 
 def wait_engaged(proc: subprocess.Popen, port: int) -> None:
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + HANG_GUARD_S
+    status = None
     while time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
         try:
-            if send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=1)["engaged"]:
+            status = send_command("127.0.0.1", "status", token=TOKEN, port=port, timeout_s=1)
+            if status["engaged"]:
                 return
         except RobotUnreachable:
             pass
         time.sleep(0.02)
-    raise AssertionError("no clutch engaged in 20 s")
+    raise AssertionError(f"no clutch engaged in {HANG_GUARD_S:g} s; last status: {status}")
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGHUP, 129), (signal.SIGQUIT, 131), (signal.SIGINT, 130)])
@@ -64,7 +74,7 @@ def test_run_fake_releases_every_clutch_on_a_signal(tmp_path, sig, code) -> None
     try:
         wait_engaged(proc, port)
         proc.send_signal(sig)
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=HANG_GUARD_S)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -96,7 +106,7 @@ def test_sigterm_during_check_fake_releases_the_clicked_clutch(tmp_path) -> None
             if line.startswith("clicking clutch 0"):
                 break
         proc.send_signal(signal.SIGTERM)
-        out, rest = proc.communicate(timeout=20)
+        out, rest = proc.communicate(timeout=HANG_GUARD_S)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -154,20 +164,26 @@ def test_weak_token_is_refused_at_start(tmp_path) -> None:
     assert "RIMLESS_TOKEN=" not in unit and "LoadCredential=" in unit
 
 
-def test_ctrl_c_in_bench_exits_130_without_cancelled_error() -> None:
+def test_ctrl_c_in_bench_exits_130_without_cancelled_error(tmp_path) -> None:
+    """The Ctrl-C lands inside the bench's event loop, on an event: the bench's trial log appears (in its
+    temporary folder, under $TMPDIR) once the app's loop runs (`on_ready`), and the bench runs 10 s more."""
     proc = subprocess.Popen(
         [*RIMLESS, "robot", "bench", "--fake", "--rate-hz", "300", "--duration-s", "10"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, "TMPDIR": str(tmp_path)},
     )
     try:
         assert proc.stderr is not None
         first = proc.stderr.readline()
         assert first.startswith("bench:"), first
-        time.sleep(1.0)
+        deadline = time.monotonic() + HANG_GUARD_S  # a file appearing is announced by nothing: looked for
+        while not list(tmp_path.glob("rimless-bench-*/*bench.jsonl")):
+            assert proc.poll() is None and time.monotonic() < deadline, "the bench's loop never started its trial"
+            time.sleep(0.01)
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=20)
+        out, err = proc.communicate(timeout=HANG_GUARD_S)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -175,6 +191,7 @@ def test_ctrl_c_in_bench_exits_130_without_cancelled_error() -> None:
     assert proc.returncode == 130, err
     assert "CancelledError" not in err and "Traceback" not in err
     assert [ln for ln in err.splitlines() if ln.strip()] == ["interrupted"]
+    assert out == "" and not list(tmp_path.iterdir())  # no figures, and its temporary folder removed
 
 
 def test_ctrl_c_in_listen_completes_the_recording_and_exits_130(tmp_path) -> None:
@@ -212,7 +229,7 @@ def test_ctrl_c_in_listen_completes_the_recording_and_exits_130(tmp_path) -> Non
             assert line, "".join(seen)  # listen ends by itself after --timeout-s (10 s) of silence
             seen.append(line)
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=HANG_GUARD_S)
         err = "".join(seen) + err
     finally:
         if proc.poll() is None:
@@ -242,3 +259,60 @@ def test_a_guessable_token_is_refused_naming_its_setting(tmp_path) -> None:
     assert r.returncode == 2, r.stderr
     err = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
     assert len(err) == 1 and "[commands] token_file" in err[0] and "guessable" in err[0], r.stderr
+
+
+def _pins_at_the_end(pin_log: Path) -> dict[int, int]:
+    import json
+
+    last: dict[int, int] = {}
+    for line in pin_log.read_text().splitlines():
+        if line.endswith("}"):
+            rec = json.loads(line)
+            last[rec["pin"]] = rec["level"]
+    return last
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        # printed from the firmware's loop once it runs and handles the signals itself
+        "rimless robot: running (fake)",
+        # printed before the loop starts: the Ctrl-C lands before the loop or just after it started (either way)
+        "command token (generated) in ",
+    ],
+)
+def test_ctrl_c_on_a_start_up_line_of_run_exits_130_with_interrupted(tmp_path, line) -> None:
+    """Fails before: a Ctrl-C right after the "running" line (printed before the loop started) ended with
+    "stopped (SIGINT) before the firmware ran" and no `interrupted` line. The signal is sent on the line."""
+    from tests.support.interrupt import Watched
+
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(f'[commands]\nbind = "127.0.0.1"\nport = {free_port()}\n[log]\ndir = "{tmp_path}"\n{SAMPLING}')
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RIMLESS_TOKEN")}
+    env["XDG_RUNTIME_DIR"] = str(tmp_path)  # the generated token's file
+    pin_log = tmp_path / "pins.jsonl"
+    argv = [
+        *RIMLESS,
+        "robot",
+        "run",
+        "--fake",
+        "--arm",
+        "--stance-leg",
+        "0",
+        "--config",
+        str(cfg),
+        "--pin-log",
+        str(pin_log),
+    ]
+    with Watched(argv, cwd=tmp_path, env=env) as cmd:
+        cmd.wait_for(stderr=line, timeout_s=HANG_GUARD_S)
+        cmd.interrupt()
+        res = cmd.finish(timeout_s=HANG_GUARD_S)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == 130, res.stderr
+    assert lines[-1] == "interrupted", res.stderr
+    assert any(ln.startswith("stopped (SIGINT)") and ln.endswith("every clutch released") for ln in lines), lines
+    assert "Traceback" not in res.stderr and "CancelledError" not in res.stderr
+    assert set(_pins_at_the_end(pin_log).values()) <= {0}  # every pin that ever changed ends low
+    if line.startswith("rimless robot: running"):  # the loop ran: its summary, not "before the firmware ran"
+        assert any(ln.startswith("stopped (SIGINT): ") for ln in lines), lines

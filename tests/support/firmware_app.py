@@ -22,6 +22,9 @@ from rimless.firmware.service.hardware import build_fake
 TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
 
 
+#: how long the test client waits for a reply that should come (a hang guard, not a bound)
+REPLY_GUARD_S = 30.0
+
 #: the watchdogs' own tests: the control-thread watchdog at 0.3 s, the event loop's at the robot's 0.25 s
 WATCHDOG_TEST_SAMPLING = SamplingConfig(stall_timeout_s=0.3)
 
@@ -46,10 +49,10 @@ def gait(step_period_s: float = 0.4, steps: int | None = None, now_s: float | No
     return GaitTrajectory(start_s=start + 0.1, step_period_s=step_period_s, steps=steps)
 
 
-def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=15.0, hw_hook=None):
+def scenario(cfg: RobotConfig, script, *, trajectory=None, arm=False, timeout_s=60.0, hw_hook=None):
     """Run the app with fake hardware on a virtual clock (paced to the wall clock; `trajectory` on that clock,
     by default a walk from 0.1 s after the first sample); `script(app, hw)` runs once it is ready, then the app
-    stops."""
+    stops. `timeout_s` is a hang guard (the app's --duration-s), not a bound: scripts end on their own events."""
     clock = VirtualClock()
     hw = build_fake(cfg, trajectory=trajectory or gait(now_s=seconds(clock)()), clock=clock)
     if hw_hook is not None:
@@ -82,7 +85,7 @@ class Client:
     @classmethod
     async def connect(cls, port: int) -> Client:
         reader, writer = await asyncio.open_connection("127.0.0.1", port)
-        hello = json.loads(await asyncio.wait_for(reader.readline(), 5))
+        hello = json.loads(await asyncio.wait_for(reader.readline(), REPLY_GUARD_S))
         return cls(reader, writer, hello)
 
     def sign(self, seq: int, cmd: str, args: dict, token: str = TOKEN) -> bytes:
@@ -93,7 +96,7 @@ class Client:
     async def raw(self, data: bytes) -> dict:
         self.writer.write(data)
         await self.writer.drain()
-        return json.loads(await asyncio.wait_for(self.reader.readline(), 5))
+        return json.loads(await asyncio.wait_for(self.reader.readline(), REPLY_GUARD_S))
 
     async def cmd(self, cmd: str, seq: int, token: str = TOKEN, **args) -> dict:
         return await self.raw(self.sign(seq, cmd, args, token))
@@ -102,10 +105,10 @@ class Client:
         self.writer.close()
 
 
-async def wait_for(condition, timeout_s: float = 12.0, every_s: float = 0.01) -> None:
+async def wait_for(condition, timeout_s: float = 50.0, every_s: float = 0.01) -> None:
     """Poll `condition()` in the event loop until it holds; AssertionError after `timeout_s` (generous: a
     loaded test machine is slow, and a condition costs no time when it holds early). Under `scenario`'s
-    default 15 s run."""
+    default 60 s run."""
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:

@@ -6,11 +6,12 @@ import asyncio
 import itertools
 import json
 import socket
+import threading
 import time
 
 from rimless.firmware.service.config import CommandsConfig, SamplingConfig, TelemetryConfig
 from rimless.firmware.service.triallog import read_trial_log
-from tests.support.firmware_app import TOKEN, WATCHDOG_TEST_SAMPLING, Client, all_off, config, scenario, wait_for
+from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
 
 
 def test_bad_messages_are_refused_and_change_nothing(tmp_path) -> None:
@@ -105,7 +106,7 @@ def test_telemetry_reaches_a_udp_receiver_in_plotjuggler_shape(tmp_path) -> None
 
     async def script(app, hw):
         rx.setblocking(False)
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 50  # a hang guard
         # read while the app runs, so the socket buffer never overflows, until a lock was sent (and 1 s at least)
         for k in itertools.count():
             await asyncio.sleep(0.01)
@@ -183,18 +184,25 @@ def test_link_loss_disarms(tmp_path) -> None:
 
 
 class StallingSensor:
-    """Wraps a sensor; blocks one read for `stall_s` once a clutch is engaged."""
+    """Wraps a sensor; once a clutch is engaged, blocks one read until `until()` holds (at most `stall_s`, a hang
+    guard), or raises `exc` there. `stuck` is True while that read blocks."""
 
-    def __init__(self, inner, clutches, stall_s: float, exc: Exception | None = None) -> None:
+    def __init__(self, inner, clutches, stall_s: float, exc: Exception | None = None, until=None) -> None:
         self.inner, self.clutches, self.stall_s, self.exc = inner, clutches, stall_s, exc
+        self.until = until or (lambda: False)
         self.fired = False
+        self.stuck = False
 
     def read_motion(self):
         if not self.fired and self.clutches.engaged():
             self.fired = True
             if self.exc is not None:
                 raise self.exc
-            time.sleep(self.stall_s)
+            self.stuck = True
+            end = time.monotonic() + self.stall_s
+            while not self.until() and time.monotonic() < end:
+                time.sleep(0.005)
+            self.stuck = False
         return self.inner.read_motion()
 
     def verify_id(self):
@@ -202,27 +210,30 @@ class StallingSensor:
 
 
 def test_stalled_sampler_trips_the_watchdog(tmp_path) -> None:
+    """On events: the sampler stays stuck in a read until the test has seen the watchdog's fault and read the
+    pins (all off while it was still stuck), however late a loaded machine runs the watchdog thread."""
     wrappers = []
+    seen = threading.Event()
 
     def hook(hw):
         for ch in hw.channels:
-            # 1.5 s against the test config's 0.3 s stall timeout: the watchdog trips while it is stuck even
-            # when a loaded machine runs the watchdog thread late
-            ch.sensor = StallingSensor(ch.sensor, hw.clutches, stall_s=1.5)
+            ch.sensor = StallingSensor(ch.sensor, hw.clutches, stall_s=120.0, until=seen.is_set)
             wrappers.append(ch.sensor)
 
     async def script(app, hw):
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            await asyncio.sleep(0.01)
-            if "sensor_stalled" in app.summary.faults:
-                return [hw.pin_factory.pin(p).state for p in hw.clutches.pins]
-        return None
+        try:
+            await wait_for(lambda: "sensor_stalled" in app.summary.faults)
+            return [hw.pin_factory.pin(p).state for p in hw.clutches.pins], wrappers[0].stuck
+        finally:
+            seen.set()
 
-    app, summary, states_during_stall, hw = scenario(
-        config(tmp_path, sampling=WATCHDOG_TEST_SAMPLING), script, arm=True, hw_hook=hook
+    # both watchdogs at 2 s: the stall lasts until the trip (an event), so a longer deadline proves the same, and a
+    # machine at load 10-20 no longer trips them before the engage (at 0.3 s / 0.25 s it did, after 0.26-0.30 s)
+    sampling = SamplingConfig(stall_timeout_s=2.0, loop_stall_s=2.0)
+    app, summary, (states_during_stall, still_stuck), hw = scenario(
+        config(tmp_path, sampling=sampling), script, arm=True, hw_hook=hook
     )
-    assert wrappers[0].fired
+    assert wrappers[0].fired and still_stuck
     assert states_during_stall == [False] * 8  # off while the sampler was still stuck
     assert all_off(hw)
 

@@ -43,3 +43,22 @@ def test_fake_run_for_a_moment_ends_with_every_clutch_off(tmp_path) -> None:
     levels = dict(item.split("=") for item in outcome.fake_pins.split())
     assert set(levels) == {f"GPIO{p}" for p in cfg.clutch.pins}
     assert all(h.endswith("0") for h in levels.values()), levels
+
+
+def test_a_stop_signal_after_the_loop_keeps_the_runs_summary(tmp_path, monkeypatch) -> None:
+    """Fails before: a signal landing after the firmware's loop had ended (here while the pin histories are
+    read) was reported as "before the firmware ran", its summary lost. Now the summary stands and the signal
+    sets the exit code (130 for Ctrl-C)."""
+    from rimless.firmware.errors import Interrupted
+    from rimless.firmware.service import runner
+
+    def signal_now(*args, **kwargs):
+        raise Interrupted(signal.SIGINT)
+
+    monkeypatch.setattr(runner, "pin_histories", signal_now)
+    cfg = RobotConfig(commands=CommandsConfig(enabled=False), log=LogConfig(dir=str(tmp_path)))
+    running = []
+    outcome = run_robot(cfg, fake=True, duration_s=0.3, arm=True, on_running=running.append, stance_leg=0)
+    assert len(running) == 1  # called once, in the loop
+    assert not outcome.before_start and outcome.signal == "SIGINT" and outcome.exit_code == 130
+    assert outcome.summary is not None and outcome.summary.stop_reason == "duration" and outcome.summary.samples > 0
