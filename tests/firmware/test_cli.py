@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from tests.support.firmware_app import free_port, wait_udp_bound
+from tests.support.firmware_app import free_port, signed_datagram, wait_udp_bound
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 runner = CliRunner()
@@ -94,14 +94,6 @@ def test_check_fake_reports_id_squal_and_clicks() -> None:
     assert [c["pin"] for c in rep["clutches"]] == [17, 27, 22, 23, 24, 16, 20, 21]
 
 
-def _signed(data: bytes) -> bytes:
-    """A datagram as a robot of protocol version 3 sends it: with its tag (`robot listen` without the token takes
-    the first sender whose datagrams carry one for the robot)."""
-    from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
-
-    return sign_datagram(data, telemetry_key("any-token-of-this-robot", "e" * 32), "e" * 32)
-
-
 def test_listen_records_datagrams(tmp_path) -> None:
     port = free_port()
     out = tmp_path / "tel.jsonl"
@@ -115,7 +107,7 @@ def test_listen_records_datagrams(tmp_path) -> None:
                 {"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
                 {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
             ]
-            s.sendto(_signed(json.dumps(batch).encode()), ("127.0.0.1", port))
+            s.sendto(signed_datagram(json.dumps(batch).encode()), ("127.0.0.1", port))
         s.sendto(b"garbage", ("127.0.0.1", port))
         s.close()
 
@@ -251,10 +243,11 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
                 {"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},
                 {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
             ]
-            s.sendto(_signed(json.dumps(batch).encode()), ("127.0.0.1", port))
+            s.sendto(signed_datagram(json.dumps(batch).encode()), ("127.0.0.1", port))
         time.sleep(0.8)  # a pause longer than --stale-s
         s.sendto(
-            _signed(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode()), ("127.0.0.1", port)
+            signed_datagram(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode()),
+            ("127.0.0.1", port),
         )
         s.close()
 
@@ -347,7 +340,9 @@ def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
 
 
 def test_bench_reports_every_part_of_the_delay() -> None:
-    r = invoke("bench", "--fake", "--rate-hz", "500", "--duration-s", "1.5", "--json")
+    # 2.5 s: the fake walk's touchdowns come every 0.4 s and the first lock at the 4th (confirm_steps 2, the
+    # robot's default since the leg identity is proved), so 1.5 s gave 5 touchdowns and only 2 locks
+    r = invoke("bench", "--fake", "--rate-hz", "500", "--duration-s", "2.5", "--json")
     assert r.exit_code == 0, r.output
     row = json.loads(r.stdout)[0]
     # Wire time at 2 MHz: 8 bytes + the 75 us t_SRAD-MOT gap per Motion_Burst (0.107 ms), plus the register read

@@ -17,7 +17,7 @@ import pytest
 
 from rimless.firmware.errors import RobotUnreachable
 from rimless.firmware.link.remote import send_command
-from tests.support.firmware_app import free_port
+from tests.support.firmware_app import free_port, signed_datagram
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 TOKEN = secrets.token_urlsafe(18)  # generated: a token published in the tests is refused
@@ -221,7 +221,7 @@ def test_ctrl_c_in_listen_completes_the_recording_and_exits_130(tmp_path) -> Non
         first = proc.stderr.readline()  # the first summary line: it is listening
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         for k in range(5):
-            s.sendto(b'[{"timestamp": %d, "leg": {"stance": 1}}]' % k, ("127.0.0.1", port))
+            s.sendto(signed_datagram(b'[{"timestamp": %d, "leg": {"stance": 1}}]' % k), ("127.0.0.1", port))
         s.close()
         seen = [first]
         while not seen[-1].startswith("5 samples"):  # a summary line every 0.2 s: all five received
