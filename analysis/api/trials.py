@@ -39,6 +39,14 @@ def _wheel(wheel: Wheel | None) -> Wheel:
     return wheel
 
 
+def _named(names: Sequence[str] | None, file_names: list[str]) -> list[str]:
+    if names is None:
+        return file_names
+    if len(names) != len(file_names):
+        raise ParameterError(f"names: {len(names)} given for {len(file_names)} trials")
+    return list(names)
+
+
 def load_trials(trials: Sequence[TrialLike] | TrialLike, **import_options: Any) -> tuple[list[Trial], list[str]]:
     """Trials and their names from `Trial` objects or paths (Vicon exports are imported with `import_options`,
     the keyword arguments of `import_trial`; `.parquet` files are read as imported trials)."""
@@ -85,21 +93,23 @@ def calibrate(
     *,
     prior: Any = None,
     progress: Callable[[int], None] | None = None,
+    names: Sequence[str] | None = None,
 ) -> CalibrationResult:
     """Fit model parameters (`fit`: names among c, k, guide_friction_n, ...) to the trials' step periods and CoM
     heights (`rimless trials calibrate`); the others are held at the wheel's values. `summary()` is the
     command's JSON object (`converged`, estimates with intervals, what was held; ``parameters``: every
-    parameter's value, uncertainty and source, the wheel's `Wheel.input`)."""
+    parameter's value, uncertainty and source, the wheel's `Wheel.input`). `names`: the trials' names in the
+    output (default the file names)."""
     from rimless.analysis.inference.calibrate import calibrate as run_calibration
     from rimless.analysis.inference.calibrate import parse_fit
     from rimless.analysis.inference.runs import calibrated_input
 
     w = _wheel(wheel)
     fit_names = parse_fit(",".join(fit)) if not isinstance(fit, str) else parse_fit(fit)
-    loaded, names = load_trials(trials)
+    loaded, file_names = load_trials(trials)
     res = run_calibration(
         loaded,
-        names,
+        _named(names, file_names),
         fit_names,
         params=w.params,
         model=w.compliant_model("calibrate()"),
@@ -119,18 +129,21 @@ def critical_slope(
     calibrated: Any = None,
     group_tol_deg: float = 0.05,
     progress: Callable[[str], None] | None = None,
+    names: Sequence[str] | None = None,
 ) -> CriticalSlopeResult:
     """The critical slope from trials (`rimless trials critical-slope`): a verdict per trial (sustained walk or
     not, from its motion), the estimate with its 95 % interval, and the models' critical slopes at the wheel's
     parameters (`models`, default the wheel's model) beside it; `calibrated` parameters add those models'.
     The wheel's parameters are held with their uncertainties (`Wheel.input`: a wheel file's ``{value, sd}``, the
     ``uncertainty=`` given, else the defaults), listed (``parameters``) and carried into the intervals
-    (``parameter_uncertainty``, ``ci_with_parameters_deg``; `rimless.analysis.inference.held`)."""
+    (``parameter_uncertainty``, ``ci_with_parameters_deg``; `rimless.analysis.inference.held`). `names`: the
+    trials' names in the output (default the file names)."""
     from rimless.analysis.inference.critical_slope import run_critical_slope
     from rimless.analysis.inference.held import carry_critical
 
     w = _wheel(wheel)
-    loaded, names = load_trials(trials)
+    loaded, file_names = load_trials(trials)
+    names = _named(names, file_names)
     ms = tuple(models) if models is not None else (w.model,)
     res = run_critical_slope(
         loaded,

@@ -1,5 +1,5 @@
 """``rimless trials critical-slope`` and ``rimless trials calibrate``: parse, run
-(`rimless.analysis.inference.runs`), print.
+(`rimless.analysis.api.runs`, which calls the public API), print.
 
 Only typer and the standard library at module level (``rimless --help`` stays fast). The rules come from
 `rimless.cli_rules`, lists are parsed by `rimless.values`.
@@ -106,7 +106,7 @@ def critical_slope_cmd(
 
     e* is the fitted gait's squared angular speed over the stance foot, rad²/s² (0 = stall).
     """
-    from rimless.analysis.inference.runs import critical_slope_run
+    from rimless.analysis.api.runs import critical_slope_run
 
     models = parse_list(model, "--model", choices=MODELS, lower=True)
     run = critical_slope_run(
@@ -284,8 +284,8 @@ def calibrate_cmd(
 
     Also: correlations, identifiability, residuals against Table 1, the calibrated critical slope.
     """
+    from rimless.analysis.api.runs import calibration_run
     from rimless.analysis.inference.calibrate import parse_fit
-    from rimless.analysis.inference.runs import calibration_run
 
     names_fit = parse_fit(fit)
     models = parse_list(model, "--model", choices=MODELS, lower=True)
