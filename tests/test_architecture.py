@@ -20,7 +20,7 @@ GENERATED = "rimless.sim.model.generated"
 LAYERS = {
     "rimless.sim": ["model", "integrate|fast", "step", "continuation", "studies", "in_the_loop", "api", "cli"],
     "rimless.firmware": ["errors|clock", "drivers", "control", "link", "service", "cli"],
-    "rimless.analysis": ["io", "kinematics", "inference", "examples|report", "api", "cli"],
+    "rimless.analysis": ["io", "kinematics", "inference", "examples|report|validation|bench", "api", "cli"],
 }
 # What a part may import of the other parts (the shared root modules are open to all, the CLI root to none).
 CROSS = {
