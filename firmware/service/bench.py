@@ -353,12 +353,15 @@ def bench_flood(
         def drive(app: RobotApp, loop: asyncio.AbstractEventLoop) -> None:
             proc = None
             try:
+                port = app.command_port
+                if port is None:
+                    raise RuntimeError("the command server did not start")
                 time.sleep(phase_s)
                 marks["flood_ns"] = time.monotonic_ns()
                 if FLOOD_SOURCES[flood]:
-                    proc = Flood(FLOOD_SOURCES[flood], app.command_port, preexec_fn=plain)
+                    proc = Flood(FLOOD_SOURCES[flood], port, preexec_fn=plain)
                 client = subprocess.run(
-                    [sys.executable, "-c", _DISARMS, str(app.command_port), str(disarms)],
+                    [sys.executable, "-c", _DISARMS, str(port), str(disarms)],
                     input=token + "\n",
                     capture_output=True,
                     text=True,
