@@ -195,9 +195,14 @@ FLOOD_SOURCES = {
     "spread": [f"127.0.{1 + k // 250}.{1 + k % 250}" for k in range(900)],
 }
 
+#: the flood's own bound (a safety: the bench stops it long before)
+FLOOD_MAX_DATAGRAMS = 50_000_000
+
+# argv: sources (comma-separated), port, count, listen (1: after each datagram, read what came back); stdin: a line
+# stops it; stdout: "flooding" once its sockets are bound, then "sent answered stopped" (stopped: 1 if by stdin)
 _FLOOD = """
 import random, socket, sys, threading
-sources, port = sys.argv[1].split(","), int(sys.argv[2])
+sources, port, count, listen = sys.argv[1].split(","), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4] == "1"
 socks = []
 for src in sources:
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); s.bind((src, 0)); s.setblocking(False); socks.append(s)
@@ -206,16 +211,89 @@ junk = [b"rimless3 disarm " + b"%032x" % random.getrandbits(128) + b" - - " + b"
         b"garbage" * 50]
 stop = threading.Event()
 threading.Thread(target=lambda: (sys.stdin.readline(), stop.set()), daemon=True).start()
-sent = k = 0
+answered = sent = 0
 print("flooding", flush=True)
-while not stop.is_set() and k < 50_000_000:
+for k in range(count):
+    if stop.is_set():
+        break
+    s = socks[k % len(socks)]
     try:
-        socks[k % len(socks)].sendto(junk[k % 3], ("127.0.0.1", port)); sent += 1
+        s.sendto(junk[k % 3], ("127.0.0.1", port)); sent += 1
     except OSError:
         pass
-    k += 1
-print(sent, flush=True)
+    if listen:
+        try:
+            s.recv(65536); answered += 1
+        except OSError:
+            pass
+print(sent, answered, int(stop.is_set()), flush=True)
 """
+
+
+@dataclasses.dataclass(frozen=True)
+class FloodCount:
+    """What a `Flood` did: datagrams sent, answers it read (0 unless it listened), and whether it was still
+    flooding when stopped (False: it had ended on its count)."""
+
+    sent: int
+    answered: int
+    stopped: bool
+
+
+class Flood:
+    """A flood of junk datagrams (a version-3 disarm with a bad MAC, a version-2 disarm numbered 2^63-1, garbage)
+    to 127.0.0.1:`port` from another process, at the rate it can send, from each address of `sources` in turn,
+    up to `count` datagrams; with `listen`, it reads after each datagram whatever was answered. It floods once
+    constructed (it has said so: its sockets are bound); `stop()` ends it and returns its counts."""
+
+    def __init__(
+        self,
+        sources: Sequence[str],
+        port: int,
+        *,
+        count: int = FLOOD_MAX_DATAGRAMS,
+        listen: bool = False,
+        preexec_fn: Callable[[], Any] | None = None,
+    ) -> None:
+        import subprocess
+        import sys
+
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", _FLOOD, ",".join(sources), str(port), str(count), str(int(listen))],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            preexec_fn=preexec_fn,
+        )
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        first = self.proc.stdout.readline().strip()
+        if first != "flooding":
+            self.close()
+            raise RuntimeError(f"the flood did not start (it said {first!r})")
+
+    def stop(self) -> FloodCount:
+        """Stop the flood (if it still runs) and return its counts."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        with contextlib.suppress(BrokenPipeError):  # a flood that ended on its count
+            self.proc.stdin.write("stop\n")
+            self.proc.stdin.flush()
+        words = self.proc.stdout.readline().split()
+        if len(words) != 3:
+            raise RuntimeError(f"the flood ended without its counts (it said {' '.join(words)!r})")
+        sent, answered, stopped = (int(w) for w in words)
+        return FloodCount(sent, answered, bool(stopped))
+
+    def close(self) -> None:
+        """Kill the flood's process if it still runs, and wait for it."""
+        self.proc.kill()
+        self.proc.wait(30)
+
+    def __enter__(self) -> Flood:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
 
 _DISARMS = """
 import sys, time
@@ -275,20 +353,15 @@ def bench_flood(
         def drive(app: RobotApp, loop: asyncio.AbstractEventLoop) -> None:
             proc = None
             try:
+                port = app.command_port
+                if port is None:
+                    raise RuntimeError("the command server did not start")
                 time.sleep(phase_s)
                 marks["flood_ns"] = time.monotonic_ns()
                 if FLOOD_SOURCES[flood]:
-                    proc = subprocess.Popen(
-                        [sys.executable, "-c", _FLOOD, ",".join(FLOOD_SOURCES[flood]), str(app.command_port)],
-                        stdin=subprocess.PIPE,
-                        stdout=subprocess.PIPE,
-                        text=True,
-                        preexec_fn=plain,
-                    )
-                    assert proc.stdin is not None and proc.stdout is not None
-                    proc.stdout.readline()
+                    proc = Flood(FLOOD_SOURCES[flood], port, preexec_fn=plain)
                 client = subprocess.run(
-                    [sys.executable, "-c", _DISARMS, str(app.command_port), str(disarms)],
+                    [sys.executable, "-c", _DISARMS, str(port), str(disarms)],
                     input=token + "\n",
                     capture_output=True,
                     text=True,
@@ -302,15 +375,10 @@ def bench_flood(
                 out["reserved_checked"] = 0 if udp is None else udp.received
                 out["reserved_rejected"] = 0 if udp is None else udp.rejected
                 if proc is not None:
-                    assert proc.stdin is not None and proc.stdout is not None
-                    with contextlib.suppress(BrokenPipeError):
-                        proc.stdin.write("stop\n")
-                        proc.stdin.flush()
-                    out["flood_sent"] = int(proc.stdout.readline() or 0)
+                    out["flood_sent"] = proc.stop().sent
             finally:
                 if proc is not None:
-                    proc.kill()
-                    proc.wait(30)
+                    proc.close()
                 loop.call_soon_threadsafe(app.request_stop, "bench done")
 
         def ready(app: RobotApp) -> None:

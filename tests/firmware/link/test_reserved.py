@@ -8,14 +8,11 @@ by `python -m rimless.firmware.service.bench --flood` (docs/robot.md)."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import hashlib
 import hmac
 import json
 import secrets
 import socket
-import subprocess
-import sys
 import threading
 import time
 
@@ -24,6 +21,7 @@ import pytest
 from rimless.firmware.errors import RobotUnreachable
 from rimless.firmware.link.commands import ReservedListener
 from rimless.firmware.link.remote import send_disarm_datagram, send_reserved_datagram
+from rimless.firmware.service.bench import Flood
 from rimless.firmware.service.config import CommandsConfig
 from tests.support.firmware_app import TOKEN, all_off, config, free_port, scenario
 
@@ -200,57 +198,14 @@ def test_captured_datagrams_replayed_after_a_restart_from_a_spoofed_source_get_n
     assert armed is False and all_off(hw)  # a captured disarm still disarms: releasing is always safe
 
 
-FLOOD = """
-import random, socket, sys, threading
-sources, port, count = sys.argv[1].split(","), int(sys.argv[2]), int(sys.argv[3])
-socks = []
-for src in sources:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM); s.bind((src, 0)); s.setblocking(False); socks.append(s)
-junk = [b"rimless3 disarm " + b"%032x" % random.getrandbits(128) + b" - - " + b"0" * 64 + b" " + b"x" * 300,
-        b'{"disarm": 9223372036854775807, "mac": "' + b"0" * 64 + b'", "pad": "' + b"x" * 300 + b'"}',
-        b"garbage" * 50]
-stop = threading.Event()
-threading.Thread(target=lambda: (sys.stdin.readline(), stop.set()), daemon=True).start()
-answered = sent = 0
-print("flooding", flush=True)
-for k in range(count):
-    if stop.is_set():
-        break
-    s = socks[k % len(socks)]
-    try:
-        s.sendto(junk[k % 3], ("127.0.0.1", port)); sent += 1
-    except OSError:
-        pass
-    try:
-        s.recv(65536); answered += 1
-    except OSError:
-        pass
-print(sent, answered, int(stop.is_set()), flush=True)
-"""
-
-
 def _flood_during_disarms(port: int, sources: list[str], count: int) -> tuple[list[bool], bool, int]:
-    """Start a bounded flood (another process) from `sources`; once it prints that it floods, ten disarms from
-    127.0.0.1; returns their results, whether the flood still ran when they were done, and how many of the
-    flood's datagrams were answered."""
-    proc = subprocess.Popen(
-        [sys.executable, "-c", FLOOD, ",".join(sources), str(port), str(count)],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert proc.stdin is not None and proc.stdout is not None
-        assert proc.stdout.readline().strip() == "flooding"
+    """Start a bounded flood (the bench's, another process, listening for answers) from `sources`; once it says it
+    floods, ten disarms from 127.0.0.1; returns their results, whether the flood still ran when they were done,
+    and how many of the flood's datagrams were answered."""
+    with Flood(sources, port, count=count, listen=True) as flood:
         results = _disarms(port, 10)
-        with contextlib.suppress(BrokenPipeError):  # a flood that ended on its count
-            proc.stdin.write("stop\n")
-            proc.stdin.flush()
-        _sent, answered, stopped = (int(x) for x in proc.stdout.readline().split())
-    finally:
-        proc.kill()
-        proc.wait(30)
-    return results, bool(stopped), answered
+        counted = flood.stop()
+    return results, counted.stopped, counted.answered
 
 
 def test_a_flood_spoofing_the_operators_address_leaves_every_disarm_answered(tmp_path) -> None:
