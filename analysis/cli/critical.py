@@ -515,7 +515,7 @@ def coverage_cmd(
 
     The trials go through the verdicts and estimates of `trials critical-slope`, not the importer; ~1 s a series.
     """
-    from rimless.analysis.inference.coverage import run_coverage
+    from rimless.analysis.validation.coverage import run_coverage
     from rimless.progress import progress_bar
 
     with progress_bar("coverage", total=series, json_out=json_out) as bar:

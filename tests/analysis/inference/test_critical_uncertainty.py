@@ -15,9 +15,9 @@ import pytest
 from scipy.integrate import quad
 from typer.testing import CliRunner
 
-from rimless.analysis.inference.coverage import RigidFrictionWheel, run_coverage, synthetic_series
 from rimless.analysis.inference.critical_slope import estimate_critical_slope
 from rimless.analysis.inference.sustained import trial_slope_sigma_deg, trial_verdicts
+from rimless.analysis.validation.coverage import RigidFrictionWheel, run_coverage, synthetic_series
 from tests.support.analysis_rigid_truth import RigidTruth, duck_trial
 
 TRUTH = RigidTruth()
