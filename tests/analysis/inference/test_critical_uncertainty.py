@@ -120,7 +120,7 @@ def test_coverage_run_reports_its_figures():
 def test_coverage_command_json():
     from rimless.cli import app
 
-    r = CliRunner().invoke(app, ["trials", "coverage", "--series", "2", "--seed", "3", "--json"])
+    r = CliRunner().invoke(app, ["trials", "coverage", "--truth", "pendulum", "--series", "2", "--seed", "3", "--json"])
     assert r.exit_code == 0, r.output
     import json
 
