@@ -210,6 +210,15 @@ def floquet_coverage_cmd(
         ),
     ] = None,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (the same seed gives the same figures).")] = 0,
+    labs: Annotated[
+        str,
+        typer.Option(
+            "--labs",
+            metavar="fixed|drawn",
+            help="fixed: Z-up, ramp heading 25 deg, a Tracker object; drawn: per series Z-up or Y-up, any heading, "
+            "an object or 4 markers.",
+        ),
+    ] = "fixed",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """How often `trials floquet`'s 95 % interval holds the truth's multiplier, on truth trials through the importer.
@@ -225,6 +234,9 @@ def floquet_coverage_cmd(
     key = kind.strip().lower()
     if key not in ("rigid", "er"):
         raise ParameterError(f"--kind must be rigid or er, got {kind!r}")
+    lab_mode = labs.strip().lower()
+    if lab_mode not in ("fixed", "drawn"):
+        raise ParameterError(f"--labs must be fixed or drawn, got {labs!r}")
     sd = slope_sd_deg if slope_sd_deg is not None else (0.8 if key == "rigid" else 0.6)
     with progress_bar("floquet coverage", total=series, json_out=json_out) as bar:
         out = run(
@@ -235,6 +247,7 @@ def floquet_coverage_cmd(
             sd,
             seed,
             progress=lambda i: bar.update(completed=i, description=f"series {i}/{series}"),
+            labs=lab_mode,
         )
     if json_out:
         print_json(out)
@@ -243,7 +256,15 @@ def floquet_coverage_cmd(
         f"truth: {key} wheel at {out['slope_deg']:g} deg, slope sd {sd:g} deg per step, multiplier "
         f"{out['truth_multiplier']:.4f}; {series} series of {trials} trials x {steps} impacts (seed {seed})"
     )
-    typer.echo(f"{out['estimated']} of {series} series gave an estimate; CPU {out['cpu_s']:.1f} s")
+    drawn = out["drawn_labs"]
+    typer.echo(
+        f"{out['estimated']} of {series} series gave an estimate; CPU {out['cpu_s']:.1f} s; labs: "
+        + (
+            f"drawn ({drawn['y_up']} Y-up, {drawn['markers']} with markers)"
+            if drawn
+            else "Z-up, heading 25 deg, object"
+        )
+    )
     for name, label in (("corrected", "corrected (the estimate)"), ("ols", "OLS (plain)"), ("lagged", "lagged")):
         d = out[name]
         if not d["of"]:

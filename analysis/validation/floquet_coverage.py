@@ -47,13 +47,24 @@ def run(
     slope_sd_deg: float,
     seed: int,
     progress: Callable[[int], None] | None = None,
+    labs: str = "fixed",
 ) -> dict[str, Any]:
-    """The study's JSON object (see the module's docstring); ``progress(i)`` after each series."""
+    """The study's JSON object (see the module's docstring); ``progress(i)`` after each series. ``labs``:
+    ``fixed`` (a Z-up lab, the ramp heading 25 deg, a Tracker object: the figures of docs/trials.md) or
+    ``drawn`` (per series a lab drawn by `importer_coverage.draw_lab` from its own generator: Z-up or Y-up, any
+    heading, an object or four markers; `critical_truth.record`)."""
     from rimless.analysis.inference.floquet import NotIdentifiable, estimate_multiplier, group_data, section_points
     from rimless.analysis.kinematics.build import import_trial
+    from rimless.analysis.validation.critical_truth import record as record_in_lab
+    from rimless.analysis.validation.importer_coverage import draw_lab
+    from rimless.errors import RimlessError
 
+    if labs not in ("fixed", "drawn"):
+        raise ValueError(f"labs must be 'fixed' or 'drawn', got {labs!r}")
     wheel, slope, truth = truth_of(kind)
     rng = np.random.default_rng(seed)
+    lab_rng = np.random.default_rng([seed, 1])  # apart from rng: the fixed labs' figures do not change
+    lab_counts = {"y_up": 0, "markers": 0}
     rows, flags, failed = [], [], []
     stalls = 0
     cpu = time.process_time()
@@ -62,6 +73,10 @@ def run(
         for i_series in range(series):
             if progress is not None and i_series:
                 progress(i_series)
+            lab = draw_lab(lab_rng) if labs == "drawn" else None
+            if lab is not None:
+                lab_counts["y_up"] += lab.up == "y"
+                lab_counts["markers"] += lab.markers
             pts = []
             for _ in range(trials):
                 rel = float(rng.uniform(0.9, 1.1))
@@ -70,8 +85,16 @@ def run(
                 else:
                     walk = er_walk(wheel, slope, slope_sd_deg, steps, rng, release=rel)
                 stalls += walk.stalled
-                record(walk, path, rng)
-                p = section_points(import_trial(path), path.name)
+                if lab is None:
+                    record(walk, path, rng)
+                else:
+                    record_in_lab(walk, path, rng, lab, rest_s=0.0)
+                try:
+                    trial = import_trial(path)
+                except RimlessError as err:  # a refused import is counted, as a user would drop the file
+                    flags.append("refused: " + str(err).splitlines()[0][:60])
+                    continue
+                p = section_points(trial, path.name)
                 if p.status != "used":
                     flags.append(p.reason.split(":")[0])
                 pts.append(p)
@@ -93,6 +116,8 @@ def run(
         "slope_deg": slope,
         "slope_sd_deg": slope_sd_deg,
         "seed": seed,
+        "labs": labs,
+        "drawn_labs": lab_counts if labs == "drawn" else None,
         "estimated": len(rows),
         "stalled_trials": stalls,
         "flagged_trials": {k: flags.count(k) for k in sorted(set(flags))},

@@ -120,3 +120,15 @@ def test_floquet_coverage_command() -> None:
     assert out["corrected"]["of"] == out["estimated"] <= 1
     r = runner.invoke(app, ["trials", "floquet-coverage", "--kind", "soft"])
     assert r.exit_code == 2 and "--kind" in r.output
+    r = runner.invoke(app, ["trials", "floquet-coverage", "--labs", "nowhere"])
+    assert r.exit_code == 2 and "--labs" in r.output
+
+
+def test_floquet_coverage_in_drawn_labs_imports_every_trial() -> None:
+    """Y-up and Z-up labs, objects and markers: the floquet study's trials import (none refused) and estimate."""
+    from rimless.analysis.validation.floquet_coverage import run
+
+    out = run("rigid", 4, 3, 15, 0.8, 1, labs="drawn")
+    assert out["labs"] == "drawn" and out["drawn_labs"]["y_up"] >= 1 and out["drawn_labs"]["markers"] >= 1
+    assert not any(k.startswith("refused") for k in out["flagged_trials"]), out["flagged_trials"]
+    assert out["estimated"] == out["corrected"]["of"] >= 3
