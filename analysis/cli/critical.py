@@ -564,14 +564,14 @@ def coverage_cmd(
 
     chosen = parse_list(inputs, "--inputs", str, choices=INPUTS, unique=True, lower=True)
     with progress_bar("coverage", total=n, json_out=json_out) as bar:
-        res = run_importer_coverage(
+        study = run_importer_coverage(
             n,
             seed,
             critical_slope,
             inputs=chosen,
             progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
         )
-    out = res.summary()
+    out = study.summary()
     if json_out:
         print_json(out)
         return

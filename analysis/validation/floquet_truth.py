@@ -165,7 +165,12 @@ def er_walk(
     y = state_from_section(Mechanics.of(p0), np.asarray(z, float) * np.array([1.0, release]))
     dt = 1e-3
     t0 = 0.0
-    T, X, H, B, impacts, speeds = [], [], [], [], [], []
+    T: list[np.ndarray] = []
+    X: list[np.ndarray] = []
+    H: list[np.ndarray] = []
+    B: list[np.ndarray] = []
+    impacts: list[float] = []
+    speeds: list[float] = []
     for k in range(steps + 1):
         p = params.replace(slope_rad=math.radians(slope_deg + slope_sd_deg * float(rng.standard_normal())))
         try:
@@ -174,7 +179,7 @@ def er_walk(
             if len(impacts) < 2:
                 raise
             return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
-        for seg in res.segments:
+        for seg in res.segments or []:  # recorded: record_dt was given
             q = seg.y
             T.append(t0 + seg.t)
             X.append(q[:, 0] + q[:, 3] * np.sin(q[:, 2]))
