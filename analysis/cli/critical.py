@@ -529,6 +529,15 @@ def coverage_cmd(
             "truth's parameters with an uncertainty).",
         ),
     ] = "table1,truth",
+    of: Annotated[
+        str,
+        typer.Option(
+            "--of",
+            metavar="critical-slope|calibrate",
+            help="The method checked: the critical slope (default) or `trials calibrate --fit c,k` (per parameter; "
+            "through the importer, the simulator's ER wheel as truth, k and c drawn).",
+        ),
+    ] = "critical-slope",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """How often the critical slope's 95 % interval contains the truth, on truth series.
@@ -547,6 +556,14 @@ def coverage_cmd(
     if mode not in ("importer", "pendulum"):
         raise ParameterError(f"--truth must be importer or pendulum, got {truth!r}")
     n = series if series is not None else (4 if mode == "importer" else 60)
+    method = of.strip().lower()
+    if method not in ("critical-slope", "calibrate"):
+        raise ParameterError(f"--of must be critical-slope or calibrate, got {of!r}")
+    if method == "calibrate":
+        if mode != "importer":
+            raise ParameterError("--of calibrate runs through the importer only (not with --truth pendulum)")
+        _calibrate_coverage(n, seed, json_out)
+        return
     if mode == "pendulum":
         from rimless.analysis.validation.coverage import run_coverage
 
@@ -624,3 +641,38 @@ def _print_coverage(out: dict[str, Any], seed: int) -> None:
             f"  {m}: covers {d['covered']}/{d['series']}{share}"
             + (f", reported in {d['chosen']}" if d["chosen"] else "")
         )
+
+
+def _calibrate_coverage(n: int, seed: int, json_out: bool) -> None:
+    """``trials coverage --of calibrate``: run the study, print its per-parameter coverage."""
+    from rimless.analysis import calibrate
+    from rimless.analysis.validation.calibrate_coverage import run_calibrate_coverage
+    from rimless.progress import progress_bar
+
+    with progress_bar("coverage", total=n, json_out=json_out) as bar:
+        out = run_calibrate_coverage(
+            n,
+            seed,
+            calibrate,
+            progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
+        )
+    if json_out:
+        print_json(out)
+        return
+    typer.echo(f"truth: {out['truth_model']}; held parameters exact (the data's intervals)")
+    typer.echo(
+        f"{out['fitted']} of {out['series']} series fitted ({out['converged']} converged), "
+        f"{out['imports']['trials']} trials, {out['imports']['refused']} refused; {out['wall_s']:.0f} s wall"
+    )
+    for name, d in out["parameters"].items():
+        if not d["fitted"]:
+            typer.echo(f"  {name}: never fitted")
+            continue
+        lo, hi = d["coverage_ci95"]
+        typer.echo(
+            f"  {name}: 95 % interval holds the truth in {d['covered']} of {d['fitted']} = {d['coverage']:.1%} "
+            f"({lo:.1%}-{hi:.1%}; goal 90-98 %), median relative error {d['median_relative_error']:+.2%}, "
+            f"median half width {_fmt(d['median_relative_half_width'], '.2%')}, identifiable in {d['identifiable']}"
+        )
+    for why, k in out["failed"].items():
+        typer.echo(f"  failed in {k} series: {why}")
