@@ -542,13 +542,15 @@ def coverage_cmd(
 ) -> None:
     """How often the critical slope's 95 % interval contains the truth, on truth series.
 
-    importer (default): each series draws a rigid wheel away from Table 1 (inertia ratio 0.3-3, guide friction
-    0-0.6 N as a loss per step) and a lab (Z-up or Y-up, any heading, object or 4 markers), walks it on 6 slopes
-    around its own critical slope, writes Vicon exports, imports them and runs `rimless.analysis.critical_slope`
-    with each wheel input; a few seconds a series.
+    importer (default): rigid wheels away from Table 1 (inertia ratio 0.3-3, guide friction 0-0.6 N) in drawn labs.
 
-    pendulum: a rigid wheel with a friction loss per step, impact times with 1 ms noise and stated slope
-    uncertainties, through the verdicts and estimates only (not the importer); ~1 s a series.
+    Each series: 12 trials on 6 slopes around the wheel's own critical slope, written as Vicon exports and imported.
+
+    They go to `rimless.analysis.critical_slope` with each wheel input of --inputs; a few seconds a series.
+
+    pendulum: the fast model of the verdict process (true parameters, 1 ms timing noise, no importer); ~1 s a series.
+
+    --of calibrate: `trials calibrate --fit c,k` per parameter, on ER wheels with k and c drawn, through the importer.
     """
     from rimless.progress import progress_bar
 

@@ -223,10 +223,11 @@ def floquet_coverage_cmd(
 ) -> None:
     """How often `trials floquet`'s 95 % interval holds the truth's multiplier, on truth trials through the importer.
 
-    Truth: rigid (M 2.6 kg, I_hub 0.05 kg m^2, L 0.21 m at 4.5 deg; multiplier beta^2, closed form) or er (the
-    simulator's ER wheel, k = 2000 N/m, c = 14 N s/m at 2.5 deg; its dominant eigenvalue), each step's slope drawn.
+    rigid: M 2.6 kg, I_hub 0.05 kg m^2, L 0.21 m at 4.5 deg; its multiplier beta^2 (closed form).
 
-    Each trial is written as a Vicon Tracker export (100 Hz, noise), imported and estimated as `trials floquet` does.
+    er: the simulator's ER wheel, k = 2000 N/m, c = 14 N s/m at 2.5 deg; its dominant eigenvalue.
+
+    Each step's slope is drawn; each trial is written as a Vicon export, imported and estimated as `trials floquet` does.
     """
     from rimless.analysis.validation.floquet_coverage import run
     from rimless.progress import progress_bar
