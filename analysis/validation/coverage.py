@@ -1,4 +1,4 @@
-"""Coverage of the critical-slope interval, measured by simulation (``rimless trials coverage``).
+"""Coverage of the critical-slope interval on the pendulum model of the verdicts (``rimless trials coverage --truth pendulum``).
 
 Each synthetic series is a wheel drawn at random, walked on slopes straddling its own critical slope, turned into
 trial-like objects (impact times with timing noise, a measured slope with its stated 95 % interval), and fed to
