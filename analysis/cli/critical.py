@@ -501,30 +501,125 @@ def critical_lines(res: Any) -> str:
 
 def coverage_cmd(
     series: Annotated[
-        int,
-        typer.Option("--series", min=1, max=10000, metavar="N", help="Synthetic series to generate (12 trials each)."),
-    ] = 60,
+        int | None,
+        typer.Option(
+            "--series",
+            min=1,
+            max=10000,
+            metavar="N",
+            help="Series to generate (12 trials each; default 4 through the importer, 60 with --truth pendulum).",
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (the same seed gives the same figures).")] = 0,
+    truth: Annotated[
+        str,
+        typer.Option(
+            "--truth",
+            metavar="importer|pendulum",
+            help="importer: truth trials written as Vicon exports and imported (default); pendulum: the fast model "
+            "of the verdict process, handed the true parameters, no importer.",
+        ),
+    ] = "importer",
+    inputs: Annotated[
+        str,
+        typer.Option(
+            "--inputs",
+            metavar="table1,truth",
+            help="With --truth importer: the wheel inputs to check (Table 1 with its default uncertainties; the "
+            "truth's parameters with an uncertainty).",
+        ),
+    ] = "table1,truth",
+    of: Annotated[
+        str,
+        typer.Option(
+            "--of",
+            metavar="critical-slope|calibrate",
+            help="The method checked: the critical slope (default) or `trials calibrate --fit c,k` (per parameter; "
+            "through the importer, the simulator's ER wheel as truth, k and c drawn).",
+        ),
+    ] = "critical-slope",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """How often the critical slope's 95 % interval contains the truth, on synthetic series.
+    """How often the critical slope's 95 % interval contains the truth, on truth series.
 
-    Each series: a rigid wheel with a friction loss per step (random critical slope), 12 trials on 6 slopes around it.
+    importer (default): rigid wheels away from Table 1 (inertia ratio 0.3-3, guide friction 0-0.6 N) in drawn labs.
 
-    Impact times carry 1 ms noise; each slope is measured with a stated uncertainty (0.03-0.12 deg).
+    Each series: 12 trials on 6 slopes around the wheel's own critical slope, written as Vicon exports and imported.
 
-    The trials go through the verdicts and estimates of `trials critical-slope`, not the importer; ~1 s a series.
+    They go to `rimless.analysis.critical_slope` with each wheel input of --inputs; a few seconds a series.
+
+    pendulum: the fast model of the verdict process (true parameters, 1 ms timing noise, no importer); ~1 s a series.
+
+    --of calibrate: `trials calibrate --fit c,k` per parameter, on ER wheels with k and c drawn, through the importer.
     """
-    from rimless.analysis.inference.coverage import run_coverage
     from rimless.progress import progress_bar
 
-    with progress_bar("coverage", total=series, json_out=json_out) as bar:
-        res = run_coverage(series, seed, progress=lambda i: bar.update(completed=i, description=f"series {i}/{series}"))
-    out = res.summary()
+    mode = truth.strip().lower()
+    if mode not in ("importer", "pendulum"):
+        raise ParameterError(f"--truth must be importer or pendulum, got {truth!r}")
+    n = series if series is not None else (4 if mode == "importer" else 60)
+    method = of.strip().lower()
+    if method not in ("critical-slope", "calibrate"):
+        raise ParameterError(f"--of must be critical-slope or calibrate, got {of!r}")
+    if method == "calibrate":
+        if mode != "importer":
+            raise ParameterError("--of calibrate runs through the importer only (not with --truth pendulum)")
+        _calibrate_coverage(n, seed, json_out)
+        return
+    if mode == "pendulum":
+        from rimless.analysis.validation.coverage import run_coverage
+
+        with progress_bar("coverage", total=n, json_out=json_out) as bar:
+            res = run_coverage(n, seed, progress=lambda i: bar.update(completed=i, description=f"series {i}/{n}"))
+        out = res.summary()
+        if json_out:
+            print_json({"truth": "pendulum", **out})
+            return
+        typer.echo("truth: the pendulum model of the verdict process (the true parameters, no importer)")
+        _print_coverage(out, seed)
+        return
+    from rimless.analysis import critical_slope
+    from rimless.analysis.validation.importer_coverage import INPUTS, TRUTH_MODEL, run_importer_coverage
+
+    chosen = parse_list(inputs, "--inputs", str, choices=INPUTS, unique=True, lower=True)
+    with progress_bar("coverage", total=n, json_out=json_out) as bar:
+        study = run_importer_coverage(
+            n,
+            seed,
+            critical_slope,
+            inputs=chosen,
+            progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
+        )
+    out = study.summary()
     if json_out:
         print_json(out)
         return
-    lo, hi = out["coverage_ci95"]
+    typer.echo(f"truth: {TRUTH_MODEL}")
+    imp = out["imports"]
+    typer.echo(
+        f"{out['series']} series, {imp['trials']} trials ({out['labs']['y_up']} series in Y-up labs, "
+        f"{out['labs']['markers']} with markers), {imp['refused']} imports refused"
+        + ("".join(f"; {k}: {v}" for k, v in imp["reasons"].items()))
+        + f"; {out['wall_s']:.0f} s wall, {out['cpu_s']:.0f} s CPU"
+    )
+    labels = {"table1": "wheel input: Table 1 with its default uncertainties", "truth": "wheel input: the truth's"}
+    for name, d in out["inputs"].items():
+        typer.echo(labels.get(name, name) + " parameters" * (name == "truth"))
+        _print_coverage(d, seed)
+        if d.get("coverage_with_parameters") is not None:
+            lo, hi = d["coverage_with_parameters_ci95"]
+            typer.echo(
+                f"  with the held parameters' uncertainty: {d['covered_with_parameters']} of {d['estimated']} = "
+                f"{d['coverage_with_parameters']:.1%} ({lo:.1%}-{hi:.1%}), median width "
+                f"{_fmt(d['median_ci_with_parameters_width_deg'], '.4f')} deg"
+            )
+        for why, k in d["not_estimated"].items():
+            typer.echo(f"  no estimate in {k} series: {why}")
+
+
+def _print_coverage(out: dict[str, Any], seed: int) -> None:
+    """The lines of one coverage summary (the pendulum study's keys)."""
+    lo, hi = out["coverage_ci95"] or (math.nan, math.nan)
     typer.echo(f"{out['estimated']} of {out['series']} series gave a critical slope (seed {seed})")
     typer.echo(
         f"95 % interval contains the truth in {out['covered']} of {out['estimated']}: "
@@ -537,6 +632,49 @@ def coverage_cmd(
         f"{_fmt(out['median_ci_width_deg'], '.4f')} deg"
     )
     for m, d in out["per_method"].items():
+        share = ""
+        if d.get("coverage_ci95"):  # the importer study also gives each estimator's share and median error
+            lo_m, hi_m = d["coverage_ci95"]
+            share = (
+                f" = {d['coverage']:.1%} ({lo_m:.1%}-{hi_m:.1%}), median error "
+                f"{_fmt(d.get('median_error_deg'), '+.4f')} deg"
+            )
         typer.echo(
-            f"  {m}: covers {d['covered']}/{d['series']}" + (f", reported in {d['chosen']}" if d["chosen"] else "")
+            f"  {m}: covers {d['covered']}/{d['series']}{share}"
+            + (f", reported in {d['chosen']}" if d["chosen"] else "")
         )
+
+
+def _calibrate_coverage(n: int, seed: int, json_out: bool) -> None:
+    """``trials coverage --of calibrate``: run the study, print its per-parameter coverage."""
+    from rimless.analysis import calibrate
+    from rimless.analysis.validation.calibrate_coverage import run_calibrate_coverage
+    from rimless.progress import progress_bar
+
+    with progress_bar("coverage", total=n, json_out=json_out) as bar:
+        out = run_calibrate_coverage(
+            n,
+            seed,
+            calibrate,
+            progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
+        )
+    if json_out:
+        print_json(out)
+        return
+    typer.echo(f"truth: {out['truth_model']}; held parameters exact (the data's intervals)")
+    typer.echo(
+        f"{out['fitted']} of {out['series']} series fitted ({out['converged']} converged), "
+        f"{out['imports']['trials']} trials, {out['imports']['refused']} refused; {out['wall_s']:.0f} s wall"
+    )
+    for name, d in out["parameters"].items():
+        if not d["fitted"]:
+            typer.echo(f"  {name}: never fitted")
+            continue
+        lo, hi = d["coverage_ci95"]
+        typer.echo(
+            f"  {name}: 95 % interval holds the truth in {d['covered']} of {d['fitted']} = {d['coverage']:.1%} "
+            f"({lo:.1%}-{hi:.1%}; goal 90-98 %), median relative error {d['median_relative_error']:+.2%}, "
+            f"median half width {_fmt(d['median_relative_half_width'], '.2%')}, identifiable in {d['identifiable']}"
+        )
+    for why, k in out["failed"].items():
+        typer.echo(f"  failed in {k} series: {why}")

@@ -1,6 +1,6 @@
 """``rimless trials leg-fit``: fit a leg's k, c and guide friction to `rimless robot leg-test` logs
 (`rimless.analysis.inference.leg_fit`), print; ``rimless trials leg-fit-coverage``: how often its intervals hold
-the truth of simulated leg tests (`rimless.analysis.inference.leg_fit_coverage`).
+the truth of simulated leg tests (`rimless.analysis.validation.leg_fit_coverage`).
 
 Only typer and the standard library at module level (``rimless --help`` stays fast).
 """
@@ -245,7 +245,7 @@ def leg_fit_coverage_cmd(
     --releases times and recorded by an independent truth model (stiction, noise, count drift, rounding, read
     jitter and late reads, unknown release delay), then fitted like a robot's logs; about a second a test.
     """
-    from rimless.analysis.inference.leg_fit_coverage import run_leg_fit_coverage
+    from rimless.analysis.validation.leg_fit_coverage import run_leg_fit_coverage
     from rimless.progress import progress_bar
 
     with progress_bar("leg-fit coverage", total=tests, json_out=json_out) as bar:

@@ -14,7 +14,7 @@ Every interval propagates each trial's slope uncertainty (``Verdict.slope_sigma_
 trials: the extrapolation weighs each trial by its e* and slope uncertainties and inflates by the reduced chi^2;
 the logistic adds the slopes' uncertainty to its 50 % point; the bracket's ends are widened by their trials'
 slope uncertainty. A bootstrap over trials that redraws each slope is reported beside each interval as a check.
-Coverage of the intervals is measured by `rimless.analysis.inference.coverage` (``rimless trials coverage``).
+Coverage of the intervals is measured by `rimless.analysis.validation.coverage` (``rimless trials coverage``).
 
 The reported estimate is the best supported one: the extrapolation when it agrees with the bracket and is
 narrower (it then uses every step of every trial); else the logistic when it agrees and is narrower; else the
@@ -286,7 +286,7 @@ def estimate_critical_slope(
     (``ci_deg``) is its closed form, which includes each trial's slope uncertainty (``Verdict.slope_sigma_deg``)
     and, through the reduced chi^2, a spread between trials beyond their stated uncertainties; the percentile
     interval of ``n_boot`` bootstrap replicates over trials with the slopes redrawn (`_bootstrap`, seeded) is
-    given beside it as a check (``ci_bootstrap_deg``). Both were measured by `rimless.analysis.inference.coverage`:
+    given beside it as a check (``ci_bootstrap_deg``). Both were measured by `rimless.analysis.validation.coverage`:
     the hull of the two over-covers (100 % of 30 series), each alone is near 95 %."""
     per_trial = [{"file": f, **v.as_dict()} for f, v in zip(files, verdicts)]
     sig_all = _slope_sigmas(verdicts)

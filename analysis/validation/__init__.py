@@ -4,6 +4,11 @@ their data to the methods and count how often the stated intervals hold.
 Nothing here is a method a user's result comes from: it checks `rimless.analysis.inference` (and the importer,
 `rimless.analysis.kinematics`) against wheels and labs it was not fitted with.
 
+The truth models (`critical_truth`, `floquet_truth`, `leg_truth`) and their Vicon writer (`vicon_writer`) import
+nothing from the methods or the importer. The studies: `importer_coverage` (``rimless trials coverage``, the
+default: truth exports through the importer), `coverage` (``--truth pendulum``), `floquet_coverage`
+(``rimless trials floquet-coverage``), `leg_fit_coverage` (``rimless trials leg-fit-coverage``).
+
 May import: rimless.analysis.io, kinematics, inference, examples; rimless.sim (truth dynamics);
 rimless.progress; numpy, scipy, pandas.
 """

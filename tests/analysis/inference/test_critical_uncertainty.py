@@ -15,9 +15,9 @@ import pytest
 from scipy.integrate import quad
 from typer.testing import CliRunner
 
-from rimless.analysis.inference.coverage import RigidFrictionWheel, run_coverage, synthetic_series
 from rimless.analysis.inference.critical_slope import estimate_critical_slope
 from rimless.analysis.inference.sustained import trial_slope_sigma_deg, trial_verdicts
+from rimless.analysis.validation.coverage import RigidFrictionWheel, run_coverage, synthetic_series
 from tests.support.analysis_rigid_truth import RigidTruth, duck_trial
 
 TRUTH = RigidTruth()
@@ -120,7 +120,7 @@ def test_coverage_run_reports_its_figures():
 def test_coverage_command_json():
     from rimless.cli import app
 
-    r = CliRunner().invoke(app, ["trials", "coverage", "--series", "2", "--seed", "3", "--json"])
+    r = CliRunner().invoke(app, ["trials", "coverage", "--truth", "pendulum", "--series", "2", "--seed", "3", "--json"])
     assert r.exit_code == 0, r.output
     import json
 

@@ -3,7 +3,7 @@ corrected, beside the model's eigenvalue.
 
 Expectations from outside the code under test: an AR(1) sequence with known slope and known measurement noise
 (the attenuation of the plain regression is the reliability ratio, a closed form); the rigid wheel of
-`tests/support/floquet_truth.py` (written apart: its multiplier is beta^2 exactly); and the ER wheel with
+`rimless.analysis.validation.floquet_truth` (written apart: its multiplier is beta^2 exactly); and the ER wheel with
 parameters away from Table 1, walking on per-step random slopes, recorded as Vicon Tracker exports with noise
 and imported by the real importer (its multiplier is the model's eigenvalue the command prints beside).
 """
@@ -18,8 +18,8 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.analysis.inference.floquet import NotIdentifiable, estimate_multiplier
+from rimless.analysis.validation.floquet_truth import RigidWheel, er_walk, record, rigid_multiplier, rigid_walk
 from tests.support.cli_lines import stderr_lines
-from tests.support.floquet_truth import RigidWheel, er_walk, record, rigid_multiplier, rigid_walk
 
 runner = CliRunner()
 

@@ -186,7 +186,7 @@ def test_random_walk_sandwich_equals_the_explicit_covariance() -> None:
 
 def test_coverage_study_runs_and_counts_every_test() -> None:
     """Two simulated leg tests: each fitted (or a counted failure), coverage and errors per parameter."""
-    from rimless.analysis.inference.leg_fit_coverage import run_leg_fit_coverage
+    from rimless.analysis.validation.leg_fit_coverage import run_leg_fit_coverage
 
     seen = []
     out = run_leg_fit_coverage(2, releases=3, seed=5, progress=seen.append).summary()
@@ -205,7 +205,7 @@ def test_intervals_cover_the_truth() -> None:
     95 % gives 24 or more with probability 0.997); the median half widths bound them from being needlessly wide
     (the 2 % goal of k and c, 10 % of F_c). The honest large-N figure: `rimless trials leg-fit-coverage`
     (docs/trials.md)."""
-    from rimless.analysis.inference.leg_fit_coverage import run_leg_fit_coverage
+    from rimless.analysis.validation.leg_fit_coverage import run_leg_fit_coverage
 
     out = run_leg_fit_coverage(30, releases=3, seed=1).summary()
     per = out["per_parameter"]

@@ -77,7 +77,7 @@ def test_one_release_intervals_cover_over_seeded_truths() -> None:
     """Six seeded one-release leg tests of random legs (and masses, told as weighed): every interval of k, c
     and F_c holds its truth but at most one of the 18 (a nominal 95 % misses none in six with probability
     0.74 per parameter, at most one of 18 with probability 0.77; the large-N figure is in docs/trials.md)."""
-    from rimless.analysis.inference.leg_fit_coverage import run_leg_fit_coverage
+    from rimless.analysis.validation.leg_fit_coverage import run_leg_fit_coverage
 
     out = run_leg_fit_coverage(6, releases=1, seed=11).summary()
     per = out["per_parameter"]
@@ -176,7 +176,7 @@ def test_no_friction_gets_an_upper_bound_not_a_percentage(tmp_path: Path) -> Non
 
 def test_coverage_never_hands_the_fit_the_true_leg_mass(monkeypatch: pytest.MonkeyPatch) -> None:
     """The fit is told a stated mass with its uncertainty, never the mass the truth model simulated."""
-    from rimless.analysis.inference import leg_fit_coverage as cov
+    from rimless.analysis.validation import leg_fit_coverage as cov
     from rimless.errors import RunFailure
 
     simulated: list[float] = []
@@ -204,7 +204,7 @@ def test_coverage_never_hands_the_fit_the_true_leg_mass(monkeypatch: pytest.Monk
 
 def test_truth_model_shares_no_code_with_the_fit() -> None:
     """leg_truth imports neither the fit nor the firmware's fake leg (written apart from both)."""
-    tree = ast.parse((ROOT / "analysis/inference/leg_truth.py").read_text())
+    tree = ast.parse((ROOT / "analysis/validation/leg_truth.py").read_text())
     imported = {
         node.module if isinstance(node, ast.ImportFrom) else alias.name
         for node in ast.walk(tree)

@@ -1,6 +1,7 @@
 """Truth models for `trials floquet`: wheels that wander about their gait, recorded as Vicon Tracker objects.
 
-Written apart from ``rimless.analysis`` (it imports nothing from it). Each step's slope is drawn
+Written apart from the trial methods (it imports nothing from `rimless.analysis.inference` or `.kinematics`; the
+Vicon CSV comes from its own writer, `rimless.analysis.validation.vicon_writer`). Each step's slope is drawn
 N(slope, slope_sd^2) (the rough-slope model of Byl and Tedrake: gravity's direction per step), so the walk
 wanders about its fixed point; the recorded geometry stays on the nominal slope (the importer sees one ramp).
 The recording: a hold, the release, the walk, the data stop 40 % into the step after the last impact (at the
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from tests.support.analysis_truth_wheel import objects_section, write
+from rimless.analysis.validation.vicon_writer import objects_section, write
 
 ALPHA = math.pi / 4
 G = 9.81
@@ -164,7 +165,12 @@ def er_walk(
     y = state_from_section(Mechanics.of(p0), np.asarray(z, float) * np.array([1.0, release]))
     dt = 1e-3
     t0 = 0.0
-    T, X, H, B, impacts, speeds = [], [], [], [], [], []
+    T: list[np.ndarray] = []
+    X: list[np.ndarray] = []
+    H: list[np.ndarray] = []
+    B: list[np.ndarray] = []
+    impacts: list[float] = []
+    speeds: list[float] = []
     for k in range(steps + 1):
         p = params.replace(slope_rad=math.radians(slope_deg + slope_sd_deg * float(rng.standard_normal())))
         try:
@@ -173,7 +179,7 @@ def er_walk(
             if len(impacts) < 2:
                 raise
             return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
-        for seg in res.segments:
+        for seg in res.segments or []:  # recorded: record_dt was given
             q = seg.y
             T.append(t0 + seg.t)
             X.append(q[:, 0] + q[:, 3] * np.sin(q[:, 2]))
@@ -235,7 +241,7 @@ def record(
 
 
 def main() -> None:
-    """``python -m tests.support.floquet_truth --out DIR``: three SYNTHETIC ER trials that wander about their gait
+    """``python -m rimless.analysis.validation.floquet_truth --out DIR``: three SYNTHETIC ER trials that wander about their gait
     (k = 2000 N/m, c = 14 N s/m, 2.5 deg, per-step slope sd 0.6 deg, 15 impacts) and DIR/wheel.toml with k and c."""
     import argparse
     from pathlib import Path

@@ -2,7 +2,7 @@
 
 Each simulated leg test is a leg drawn at random (k, c and the guide friction F_c uniform over `K_RANGE`,
 `C_RANGE`, `F_RANGE`: damping ratios 0.2-0.6 about the paper's leg), released `releases` times at
-compressions spread over `COMPRESSIONS_MM`, recorded by the truth model `rimless.analysis.inference.leg_truth`
+compressions spread over `COMPRESSIONS_MM`, recorded by the truth model `rimless.analysis.validation.leg_truth`
 (numerical integration with stiction; position noise, a random-walk drift of the count, floor quantisation,
 read jitter, late and descheduled reads, an unknown release delay and sensor zero), written as leg-test logs and
 fitted by `rimless.analysis.inference.leg_fit.fit_leg` exactly as a robot's logs are. The leg's moving mass is
@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from rimless.analysis.inference.leg_fit import GOALS, Z95, fit_leg, goal_check, read_leg_log
-from rimless.analysis.inference.leg_truth import LegTruth, write_log
+from rimless.analysis.validation.leg_truth import LegTruth, write_log
 from rimless.errors import ParameterError, RunFailure
 
 __all__ = ["K_RANGE", "C_RANGE", "F_RANGE", "COMPRESSIONS_MM", "LegCoverageResult", "run_leg_fit_coverage"]

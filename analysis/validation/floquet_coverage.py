@@ -1,9 +1,9 @@
-"""How honest is `trials floquet`'s interval: series of truth trials (`tests/support/floquet_truth.py`), recorded
-as Vicon Tracker exports, imported and estimated as the command does; the share of 95 % intervals holding the
-truth's multiplier, with the errors. Run from the repository's root:
+"""How honest is `trials floquet`'s interval (``rimless trials floquet-coverage``): series of truth trials
+(`rimless.analysis.validation.floquet_truth`), recorded as Vicon Tracker exports, imported and estimated as the
+command does; the share of 95 % intervals holding the truth's multiplier, with the errors:
 
-    .venv/bin/python -m tests.support.floquet_coverage --kind rigid --series 300 --seed 3
-    .venv/bin/python -m tests.support.floquet_coverage --kind er --series 100 --seed 4
+    rimless trials floquet-coverage --kind rigid --series 300 --seed 3
+    rimless trials floquet-coverage --kind er --series 100 --seed 4
 
 Each series: ``--trials`` trials of ``--steps`` impacts at one slope, each released at its gait's speed times
 U(0.9, 1.1), each step's slope N(slope, ``--slope-sd-deg``^2). rigid: the rigid truth wheel (M 2.6 kg, I_hub
@@ -13,19 +13,18 @@ k = 2000 N/m, c = 14 N s/m (Table 1: 2700, 8) at 2.5 deg, truth the model's domi
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.stats import binomtest
 
-from tests.support.floquet_truth import RigidWheel, er_walk, record, rigid_multiplier, rigid_walk
+from rimless.analysis.validation.floquet_truth import RigidWheel, er_walk, record, rigid_multiplier, rigid_walk
 
 
 def truth_of(kind: str) -> tuple[Any, float, float]:
@@ -40,18 +39,44 @@ def truth_of(kind: str) -> tuple[Any, float, float]:
     return params, 2.5, float(model_multiplier(params.replace(slope_rad=math.radians(2.5)), "er")["eigenvalue"])
 
 
-def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, seed: int) -> dict[str, Any]:
+def run(
+    kind: str,
+    series: int,
+    trials: int,
+    steps: int,
+    slope_sd_deg: float,
+    seed: int,
+    progress: Callable[[int], None] | None = None,
+    labs: str = "fixed",
+) -> dict[str, Any]:
+    """The study's JSON object (see the module's docstring); ``progress(i)`` after each series. ``labs``:
+    ``fixed`` (a Z-up lab, the ramp heading 25 deg, a Tracker object: the figures of docs/trials.md) or
+    ``drawn`` (per series a lab drawn by `importer_coverage.draw_lab` from its own generator: Z-up or Y-up, any
+    heading, an object or four markers; `critical_truth.record`)."""
     from rimless.analysis.inference.floquet import NotIdentifiable, estimate_multiplier, group_data, section_points
     from rimless.analysis.kinematics.build import import_trial
+    from rimless.analysis.validation.critical_truth import record as record_in_lab
+    from rimless.analysis.validation.importer_coverage import draw_lab
+    from rimless.errors import RimlessError
 
+    if labs not in ("fixed", "drawn"):
+        raise ValueError(f"labs must be 'fixed' or 'drawn', got {labs!r}")
     wheel, slope, truth = truth_of(kind)
     rng = np.random.default_rng(seed)
+    lab_rng = np.random.default_rng([seed, 1])  # apart from rng: the fixed labs' figures do not change
+    lab_counts = {"y_up": 0, "markers": 0}
     rows, flags, failed = [], [], []
     stalls = 0
     cpu = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"trial{os.getpid()}.csv"
-        for _ in range(series):
+        for i_series in range(series):
+            if progress is not None and i_series:
+                progress(i_series)
+            lab = draw_lab(lab_rng) if labs == "drawn" else None
+            if lab is not None:
+                lab_counts["y_up"] += lab.up == "y"
+                lab_counts["markers"] += lab.markers
             pts = []
             for _ in range(trials):
                 rel = float(rng.uniform(0.9, 1.1))
@@ -60,8 +85,16 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
                 else:
                     walk = er_walk(wheel, slope, slope_sd_deg, steps, rng, release=rel)
                 stalls += walk.stalled
-                record(walk, path, rng)
-                p = section_points(import_trial(path), path.name)
+                if lab is None:
+                    record(walk, path, rng)
+                else:
+                    record_in_lab(walk, path, rng, lab, rest_s=0.0)
+                try:
+                    trial = import_trial(path)
+                except RimlessError as err:  # a refused import is counted, as a user would drop the file
+                    flags.append("refused: " + str(err).splitlines()[0][:60])
+                    continue
+                p = section_points(trial, path.name)
                 if p.status != "used":
                     flags.append(p.reason.split(":")[0])
                 pts.append(p)
@@ -72,6 +105,8 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
                 failed.append(str(err).split(":")[0])
                 continue
             rows.append(e)
+    if progress is not None:
+        progress(series)
     out: dict[str, Any] = {
         "kind": kind,
         "truth_multiplier": truth,
@@ -81,11 +116,13 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
         "slope_deg": slope,
         "slope_sd_deg": slope_sd_deg,
         "seed": seed,
+        "labs": labs,
+        "drawn_labs": lab_counts if labs == "drawn" else None,
         "estimated": len(rows),
         "stalled_trials": stalls,
         "flagged_trials": {k: flags.count(k) for k in sorted(set(flags))},
         "not_estimated": {k: failed.count(k) for k in sorted(set(failed))},
-        "median_reliability": float(np.median([e.reliability for e in rows])),
+        "median_reliability": float(np.median([e.reliability for e in rows])) if rows else None,
         "cpu_s": time.process_time() - cpu,
     }
     for name, est, ci in (
@@ -93,6 +130,9 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
         ("ols", [e.ols for e in rows], [e.ols_ci95 for e in rows]),
         ("lagged", [e.lagged for e in rows if e.lagged is not None], [e.lagged_ci95 for e in rows if e.lagged_ci95]),
     ):
+        if not ci:  # no series gave an estimate: nothing to count (never NaN)
+            out[name] = {"covered": 0, "of": 0, "coverage": None, "coverage_ci95": None}
+            continue
         a, c = np.array(est, float), np.array(ci, float)
         hits = int(np.sum((c[:, 0] <= truth) & (truth <= c[:, 1])))
         lo, hi = binomtest(hits, len(c)).proportion_ci(0.95)
@@ -106,20 +146,3 @@ def run(kind: str, series: int, trials: int, steps: int, slope_sd_deg: float, se
             "median_ci_width": float(np.median(c[:, 1] - c[:, 0])),
         }
     return out
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--kind", choices=("rigid", "er"), default="rigid")
-    ap.add_argument("--series", type=int, default=100)
-    ap.add_argument("--trials", type=int, default=3)
-    ap.add_argument("--steps", type=int, default=15)
-    ap.add_argument("--slope-sd-deg", type=float, default=None)
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args()
-    sd = a.slope_sd_deg if a.slope_sd_deg is not None else (0.8 if a.kind == "rigid" else 0.6)
-    print(json.dumps(run(a.kind, a.series, a.trials, a.steps, sd, a.seed), indent=1))
-
-
-if __name__ == "__main__":
-    main()

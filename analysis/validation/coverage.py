@@ -1,4 +1,4 @@
-"""Coverage of the critical-slope interval, measured by simulation (``rimless trials coverage``).
+"""Coverage of the critical-slope interval on the pendulum model of the verdicts (``rimless trials coverage --truth pendulum``).
 
 Each synthetic series is a wheel drawn at random, walked on slopes straddling its own critical slope, turned into
 trial-like objects (impact times with timing noise, a measured slope with its stated 95 % interval), and fed to
@@ -27,7 +27,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RigidFrictionWheel", "SeriesOutcome", "CoverageResult", "synthetic_series", "run_coverage"]
+__all__ = [
+    "RigidFrictionWheel",
+    "SeriesOutcome",
+    "CoverageResult",
+    "synthetic_series",
+    "run_coverage",
+    "wilson_interval",
+]
 
 ALPHA = math.pi / 4
 G = 9.81
@@ -200,7 +207,7 @@ class CoverageResult:
                 d["series"] += 1
                 d["covered"] += int(ok)
             methods.setdefault(o.method or "", {"series": 0, "covered": 0, "chosen": 0})["chosen"] += 1
-        lo, hi = _wilson(cov, n)
+        lo, hi = wilson_interval(cov, n)
         return {
             "series": len(self.outcomes),
             "estimated": n,
@@ -216,7 +223,7 @@ class CoverageResult:
         }
 
 
-def _wilson(k: int, n: int) -> tuple[float, float]:
+def wilson_interval(k: int, n: int) -> tuple[float, float]:
     """95 % Wilson interval of a binomial proportion k/n."""
     if n == 0:
         return math.nan, math.nan

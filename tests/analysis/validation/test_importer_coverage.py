@@ -1,0 +1,134 @@
+"""`rimless trials coverage` through the importer: the machinery of the study (truths, draws, imports, counts)
+checked on a small run; the figures themselves come from the long run in docs/trials.md."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import rimless.analysis as ra
+from rimless.analysis.validation.critical_truth import LossyWheel
+from rimless.analysis.validation.importer_coverage import (
+    draw_lab,
+    draw_wheel,
+    run_importer_coverage,
+    summarise_input,
+    truth_input,
+    write_series,
+)
+from tests.support.analysis_rigid_truth import RigidTruth
+
+runner = CliRunner()
+
+
+def test_draws_are_away_from_table1_and_straddle_their_own_critical_slope(tmp_path) -> None:
+    rng = np.random.default_rng(4)
+    ratios, frictions = [], []
+    for _ in range(30):
+        wheel, crit = draw_wheel(rng)
+        assert crit == pytest.approx(wheel.critical_slope_deg()) and 0.5 < crit < 4.0
+        assert 0.3 <= wheel.inertia_ratio <= 3.0 and 0.0 <= wheel.friction_n <= 0.6
+        ratios.append(wheel.inertia_ratio)
+        frictions.append(wheel.friction_n)
+    assert min(ratios) < 0.6 and max(ratios) > 1.5 and max(frictions) > 0.3  # the ranges are used
+    labs = [draw_lab(rng) for _ in range(20)]
+    assert {lab.up for lab in labs} == {"y", "z"} and {lab.markers for lab in labs} == {True, False}
+    wheel, crit = draw_wheel(rng)
+    trials = write_series(rng, wheel, crit, labs[0], tmp_path, ramp_steps=8)
+    slopes = [t.slope_deg for t in trials]
+    assert min(slopes) < crit < max(slopes)
+    for t in trials:  # a walk below the critical slope stalls or is cut by the ramp's end; above it never stalls
+        assert t.path.is_file()
+        if t.slope_deg > crit:
+            assert not t.stalled and t.impacts == 8
+
+
+def test_the_truth_input_is_the_wheel_a_user_would_write() -> None:
+    wheel = LossyWheel(mass_kg=2.5, inertia_hub_kg_m2=0.2, leg_m=0.22, friction_n=0.3)
+    params, sd = truth_input(wheel)
+    assert params.hub_mass_kg + 8 * params.leg_mass_kg == pytest.approx(2.5)
+    assert params.inertia_kg_m2 + 8 * params.leg_mass_kg * 0.22**2 == pytest.approx(0.2)
+    assert sd["inertia_kg_m2"] == pytest.approx(0.1 * params.inertia_kg_m2) and sd["leg_length_m"] == 0.001
+
+
+def test_a_small_study_through_the_importer_counts_what_it_saw() -> None:
+    """Two series, both inputs: the truths are Coleman's where there is no loss and the map's otherwise, every
+    trial goes through the importer, the counts add up, and with the truth's parameters each estimate lands near
+    its own truth."""
+    stages: list[str] = []
+    res = run_importer_coverage(2, 7, ra.critical_slope, progress=lambda i, what: stages.append(what))
+    assert {"importing", "critical slope, table1 wheel", "critical slope, truth wheel", "done"} <= set(stages)
+    out = res.summary()
+    assert out["truth"] == "importer" and out["input"] == "table1" and out["series"] == 2
+    assert set(out["inputs"]) == {"table1", "truth"}
+    assert out["imports"]["trials"] == sum(s.trials for s in res.series) >= 20
+    for s in res.series:
+        w = s.wheel
+        lossless = LossyWheel(mass_kg=w.mass_kg, inertia_hub_kg_m2=w.inertia_hub_kg_m2, leg_m=w.leg_m)
+        coleman = RigidTruth(w.mass_kg, w.inertia_hub_kg_m2, w.leg_m).critical_slope_deg()
+        assert lossless.critical_slope_deg() == pytest.approx(coleman, abs=1e-9)
+        assert s.truth_deg >= coleman  # a loss per step never lowers it
+        row = s.results["truth"]
+        assert row["estimated"], row
+        assert abs(row["error_deg"]) < 0.25 and row["critical_slope_deg"] - s.truth_deg == pytest.approx(
+            row["error_deg"]
+        )
+        assert row["covered"] == (row["ci_deg"][0] <= s.truth_deg <= row["ci_deg"][1])
+    for name in ("table1", "truth"):
+        d = out["inputs"][name]
+        rows = [s.results[name] for s in res.series]
+        assert d["estimated"] == sum(r["estimated"] for r in rows)
+        assert d["covered"] == sum(bool(r.get("covered")) for r in rows)
+        if d["estimated"]:
+            lo, hi = d["coverage_ci95"]
+            assert lo <= d["coverage"] <= hi
+    assert summarise_input(res.series, "table1")["median_error_deg"] == out["median_error_deg"]
+    assert math.isfinite(out["cpu_s"]) and out["wall_s"] > 0
+
+
+def test_coverage_command_defaults_to_the_importer_and_keeps_the_pendulum() -> None:
+    from rimless.cli import app
+
+    r = runner.invoke(app, ["trials", "coverage", "--series", "1", "--seed", "2", "--inputs", "truth", "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["truth"] == "importer" and out["input"] == "truth" and list(out["inputs"]) == ["truth"]
+    for key in ("series", "coverage", "coverage_ci95", "median_abs_error_deg", "median_error_deg", "per_method"):
+        assert key in out
+    r = runner.invoke(app, ["trials", "coverage", "--series", "1", "--seed", "2", "--inputs", "truth"])
+    assert r.exit_code == 0, r.output
+    assert "truth: rigid rimless wheel" in r.stdout and "wheel input: the truth's parameters" in r.stdout
+    r = runner.invoke(app, ["trials", "coverage", "--truth", "pendulum", "--series", "2", "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["truth"] == "pendulum"
+    for bad in (["--truth", "vicon"], ["--inputs", "table2"], ["--series", "0"]):
+        r = runner.invoke(app, ["trials", "coverage", *bad])
+        assert r.exit_code == 2 and "error:" in r.output, (bad, r.output)
+
+
+def test_floquet_coverage_command() -> None:
+    from rimless.cli import app
+
+    r = runner.invoke(app, ["trials", "floquet-coverage", "--series", "1", "--seed", "3", "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["kind"] == "rigid" and out["truth_multiplier"] == pytest.approx(LossyWheel(2.6, 0.05, 0.21).beta ** 2)
+    assert out["corrected"]["of"] == out["estimated"] <= 1
+    r = runner.invoke(app, ["trials", "floquet-coverage", "--kind", "soft"])
+    assert r.exit_code == 2 and "--kind" in r.output
+    r = runner.invoke(app, ["trials", "floquet-coverage", "--labs", "nowhere"])
+    assert r.exit_code == 2 and "--labs" in r.output
+
+
+def test_floquet_coverage_in_drawn_labs_imports_every_trial() -> None:
+    """Y-up and Z-up labs, objects and markers: the floquet study's trials import (none refused) and estimate."""
+    from rimless.analysis.validation.floquet_coverage import run
+
+    out = run("rigid", 4, 3, 15, 0.8, 1, labs="drawn")
+    assert out["labs"] == "drawn" and out["drawn_labs"]["y_up"] >= 1 and out["drawn_labs"]["markers"] >= 1
+    assert not any(k.startswith("refused") for k in out["flagged_trials"]), out["flagged_trials"]
+    assert out["estimated"] == out["corrected"]["of"] >= 3
