@@ -79,10 +79,6 @@ MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 GN_STOP_COST = 0.005
 GN_STOP_STATUS = 5  # the optimizer status reported then (scipy's own are 0 budget, 1-4 its tolerances)
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
-#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection,
-#: every sample column of `simulate_steps` recorded, a grid search for every release of the coarse profile, the
-#: BLAS on all threads) for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
-REFERENCE_PATHS = False
 _REL_STEP = 1e-5
 
 
@@ -168,7 +164,6 @@ class _Sim:
         """`simulate_steps` from the rigid-touchdown release; the last walks are cached (a change of the time
         shift alone then costs no simulation)."""
         from rimless.sim.step.backend import make_integrator
-        from rimless.sim.step.gait import simulate_steps
 
         key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record)
         if key in self.cache:
@@ -176,19 +171,9 @@ class _Sim:
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
         z0 = np.array([-ALPHA_RAD / 2, w])
-        if REFERENCE_PATHS:
-            g = simulate_steps(
-                p,
-                self.model,
-                z0,
-                n,
-                make_integrator("auto", rtol=self.rtol),
-                record_dt=self.record_dt_s if record else 1.0,
-            )
-        else:
-            g = _com_walk(
-                p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0
-            )
+        g = _com_walk(
+            p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0
+        )
         if len(self.cache) > 256:
             self.cache.pop(next(iter(self.cache)))
         self.cache[key] = g
@@ -269,33 +254,6 @@ def _residuals(
     return rp, s - (d.com_m + off)
 
 
-def _curve_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float, Any]]]:
-    """The simulated CoM curve of walk ``g`` (times from t0): the clean samples and one cubic spline per step,
-    built once per walk and kept on it (the time-shift search evaluates the same walk hundreds of times)."""
-    from scipy.interpolate import CubicSpline
-
-    from rimless.analysis.inference.compare import clean_curve
-
-    cache = None if REFERENCE_PATHS else getattr(g, "_com_parts", None)
-    if cache is not None and cache[0] == t0:
-        return cache[1]
-    t_all = np.asarray(g.table["t_s"], float) - t0
-    y_all = np.asarray(g.table["com_height_normal_m"], float)
-    step = np.asarray(g.table["step"])
-    st, sy = clean_curve(t_all, y_all)
-    splines = []
-    for k in np.unique(step):
-        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
-        if ts.size >= 4:
-            splines.append((float(ts[0]), float(ts[-1]), CubicSpline(ts, ys)))
-    parts = (st, sy, splines)
-    try:
-        g._com_parts = (t0, parts)
-    except AttributeError:
-        pass
-    return parts
-
-
 def _hermite_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The knots of the simulated CoM curve of walk ``g`` (times from t0), step after step: times, heights,
     exact rates (m/s) and whether the interval from each knot to the next lies inside one step (an impact
@@ -361,20 +319,12 @@ def _clean_knots(kt: np.ndarray, ky: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
-    """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
-    impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
-    interpolation on the record grid puts kinks into the cost that finite differences mistake for
-    information). Held at the end values outside the simulated walk (a stall). With the rates recorded
-    (`_com_walk`), a cubic Hermite on the same samples (`_hermite_curve`)."""
-    if not REFERENCE_PATHS and "com_rate_m_s" in g.table:
-        return _hermite_curve(g, t0, tt)
-    st, sy, splines = _curve_parts(g, t0)
-    out = np.interp(tt, st, sy)
-    for lo, hi, sp in splines:
-        m = (tt >= lo) & (tt <= hi)
-        if m.any():
-            out[m] = sp(tt[m])
-    return out
+    """The simulated CoM height at times tt (s from t0): a cubic Hermite through each step's samples with the
+    exact rates recorded by `_com_walk` (`_hermite_curve`; the impact cusp stays a cusp), so the residuals change
+    smoothly with the parameters (a piecewise-linear interpolation on the record grid puts kinks into the cost
+    that finite differences mistake for information). Held at the end values outside the simulated walk (a
+    stall)."""
+    return _hermite_curve(g, t0, tt)
 
 
 @dataclass
@@ -558,7 +508,7 @@ class _ReleaseFit:
 
         if w0 is None or not math.isfinite(w0):
             w0 = self.first_period_release(p, d)
-        tol = (1e-6, 1e-8, 12) if coarse and not REFERENCE_PATHS else (1e-10, 1e-12, 30)
+        tol = (1e-6, 1e-8, 12) if coarse else (1e-10, 1e-12, 30)
         r = least_squares(
             lambda q: self.freq_res(p, d, float(q[0])),
             [w0],
@@ -577,7 +527,7 @@ class _ReleaseFit:
         when that start ends off the walking branch (a step not reached, the release on its bound) or does not
         converge in `WARM_ITERATIONS` iterations."""
 
-        if REFERENCE_PATHS or not math.isfinite(w0):
+        if not math.isfinite(w0):
             return self.fit(p, d, None, coarse=True)
         f_meas = 1.0 / d.periods_s
 
@@ -620,12 +570,6 @@ class _ReleaseFit:
         diff = f1 - target
         for i in range(grid.size - 1):
             if f1[i] > 0 and diff[i] <= 0 < diff[i + 1]:
-                if REFERENCE_PATHS:
-                    a, b = grid[i], grid[i + 1]
-                    for _ in range(40):
-                        m = 0.5 * (a + b)
-                        a, b = (m, b) if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0 else (a, m)
-                    return 0.5 * (a + b)
                 from scipy.optimize import brentq
 
                 def g1(w: float) -> float:
@@ -643,7 +587,7 @@ def _start(
     """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
     (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
     sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
-    at it. Then that start refined (`_refine_start`, returned as well; `REFERENCE_PATHS`: the coarse one), where
+    at it. Then that start refined (`_refine_start`, returned as well), where
     the least squares begin: every trial's ``refined_release_rad_s`` is set at it."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
@@ -652,22 +596,19 @@ def _start(
         w, c = releases.fit(p0, d, None)
         d.release_rad_s = table1[d.name] = w
         best += c
-    if REFERENCE_PATHS:
-        best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     ug_best = np.zeros(glob.n)
 
     tried: dict[tuple[float, ...], list[float]] = {tuple(np.zeros(glob.n)): [table1[d.name] for d in data]}
 
     def try_start(ug: np.ndarray) -> float:
         """The periods' cost at relative globals ug (inf for an invalid wheel); the best start kept. Each
-        trial's release is warm-started from its release at the nearest globals tried so far (Table 1's in
-        `REFERENCE_PATHS`), where Gauss-Newton needs the fewest steps and seldom falls back on the grid."""
+        trial's release is warm-started from its release at the nearest globals tried so far, where Gauss-Newton needs the fewest steps and seldom falls back on the grid."""
         nonlocal best, ug_best
         p = glob.at(ug)
         if p is None:
             return math.inf
         near = min(tried, key=lambda k: float(np.sum((np.array(k) - ug) ** 2)))
-        w0 = tried[tuple(np.zeros(glob.n))] if REFERENCE_PATHS else tried[near]
+        w0 = tried[near]
         fits = [releases.fit_warm(p, d, w) for d, w in zip(data, w0)]
         if all(math.isfinite(c) for _, c in fits):
             tried[tuple(ug)] = [w for w, _ in fits]
@@ -689,11 +630,9 @@ def _start(
     if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
         pb = glob.at(ug_best)
         for d in data:
-            d.release_rad_s = releases.fit(pb, d, None if REFERENCE_PATHS else d.release_rad_s)[0]
+            d.release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
     for d in data:
         d.refined_release_rad_s = d.release_rad_s
-    if REFERENCE_PATHS:
-        return table1, ug_coarse, ug_coarse
     coarse_releases = [d.release_rad_s for d in data]
     for j in range(glob.n):
         _refine_start(seen[j], lambda: ug_best, j, try_start)
@@ -827,10 +766,6 @@ class _Objective:
             def cost(g: float) -> float:
                 return float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2))  # noqa: B023
 
-            if REFERENCE_PATHS:
-                grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
-                out.append(float(grid[int(np.argmin([cost(g) for g in grid]))]))
-                continue
             coarse = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 2.0)
             g0 = float(coarse[int(np.argmin([cost(g) for g in coarse]))])
             fine = np.clip(np.arange(g0 - 2.0, g0 + 2.0 + 1e-9, 0.5), -MAX_SHIFT_MS, MAX_SHIFT_MS)
@@ -1061,8 +996,6 @@ def _one_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        if REFERENCE_PATHS:
-            return fn(*args, **kwargs)
         with one_blas_thread():
             return fn(*args, **kwargs)
 
