@@ -55,6 +55,7 @@ _REL_STEP = 1e-5
 __all__ = ["calibrate_reference"]
 
 
+@dataclass
 class _TrialData:
     name: str
     slope_deg: float
@@ -207,6 +208,7 @@ def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     return out
 
 
+@dataclass
 class _Globals:
     """The global parameters being fitted: WheelParams fields, their Table 1 (start) values and scales.
 
