@@ -399,8 +399,6 @@ def _print_calibration(out: dict[str, Any]) -> None:
     r.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
     for col, width in (("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
         r.add_column(col, justify="right", no_wrap=True, min_width=width)
-    if per_trial:
-        r.add_column("chi2/dof CoM, T", justify="right", no_wrap=True, min_width=9)
     stems = [Path(row["trial"]).stem for row in out["residuals"]]
     common = os.path.commonprefix(stems) if len(stems) > 1 else ""
     if len(common) >= 6:
@@ -413,17 +411,11 @@ def _print_calibration(out: dict[str, Any]) -> None:
             _fmt(row["calibrated_rms_period_ms"], ".1f"),
             _fmt(row["table1_rms_com_mm"], ".2f"),
             _fmt(row["calibrated_rms_com_mm"], ".2f"),
-            *([_adequacy_cell(per_trial.get(row["trial"]))] if per_trial else []),
         )
     con.print(r)
     con.print(
         "dT: step period error over the steps the simulation reached; CoM: CoM height error; a release "
-        "speed and a time shift are fitted per trial in both"
-        + (
-            "; chi2/dof: the calibrated model's residuals against the recording's noise (1: fits)."
-            if per_trial
-            else "."
-        ),
+        "speed and a time shift are fitted per trial in both.",
         markup=False,
         highlight=False,
     )
@@ -433,10 +425,17 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(
             f"model adequacy: {adequacy['statement']}; overall chi2/dof {_fmt(o['total']['ratio'], '.3g')} "
             f"(p = {_fmt(o['total']['p_value'], '.2g')}) against the noise measured from the recordings: CoM "
-            f"{_fmt(noise.get('com_mm'), '.3f')} mm, impact times {_fmt(noise.get('impact_time_ms'), '.2f')} ms",
+            f"{_fmt(noise.get('com_mm'), '.3f')} mm, impact times {_fmt(noise.get('impact_time_ms'), '.2f')} ms "
+            "(chi2/dof 1: residuals as large as the noise)",
             markup=False,
             highlight=False,
         )
+        for row, stem in zip(out["residuals"], stems):
+            con.print(
+                f"  {stem}: chi2/dof CoM, periods {_adequacy_cell(per_trial.get(row['trial']))}",
+                markup=False,
+                highlight=False,
+            )
     con.print(
         f"all trials: RMS period error {_fmt(out['rms_period_ms']['table1'], '.1f')} -> "
         f"{_fmt(out['rms_period_ms']['calibrated'], '.1f')} ms, RMS CoM error "
@@ -471,10 +470,12 @@ def _print_calibration(out: dict[str, Any]) -> None:
 
 
 def _adequacy_cell(row: dict[str, Any] | None) -> str:
-    """``1.02, 0.87`` (CoM, periods chi2/dof) and ``!`` when the trial does not fit."""
+    """``1.02, 0.87`` (CoM, periods chi2/dof), and ``: does NOT fit`` when the trial does not."""
     if row is None:
         return "–"
-    return f"{_fmt(row['com']['ratio'], '.3g')}, {_fmt(row['periods']['ratio'], '.3g')}" + ("" if row["fits"] else " !")
+    return f"{_fmt(row['com']['ratio'], '.3g')}, {_fmt(row['periods']['ratio'], '.3g')}" + (
+        "" if row["fits"] else ": does NOT fit"
+    )
 
 
 def optimizer_lines(opt: dict[str, Any]) -> list[str]:
