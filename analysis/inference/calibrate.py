@@ -1051,7 +1051,8 @@ def calibrate(
     each estimate's ``identifiable`` / ``effective_only``. ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
     priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
     ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
-    ``se_held`` (`held_response`: two warm refits per held parameter)."""
+    ``se_held`` (`held_response`: two warm refits per held parameter; a whole recalibration where one sticks,
+    with the ``"ridge"`` rule of starts)."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -1129,7 +1130,7 @@ def calibrate(
             try:
                 again = calibrate(
                     trials, names, fit, params=moved, model=model, rtol=rtol, record_dt_s=record_dt_s,
-                    max_rounds=max_rounds, multi_start=multi_start, prior=prior,
+                    max_rounds=max_rounds, multi_start="ridge" if multi_start else False, prior=prior,
                 )  # fmt: skip
             except NoTrialCalibrated:
                 return None
