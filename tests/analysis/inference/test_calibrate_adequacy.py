@@ -202,3 +202,95 @@ def test_a_model_that_does_not_fit_is_flagged():
     assert s["adequacy"]["overall"]["total"]["ratio"] > adq.ADEQUACY_RATIO
     (c,) = res.params
     assert not c.identifiable and c.effective_only and "does NOT fit" in c.note
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the verdicts' bookkeeping, by hand
+
+
+def _est(name: str, value: float, se: float, ident: bool = True):
+    from rimless.analysis.inference.calibrate import ParamEstimate
+
+    return ParamEstimate(name, name, "", 0.0, value, se, ident)
+
+
+def _minimum(start: str, values: dict, delta: float, similar: bool, status: int = 5) -> dict:
+    return {
+        "start": start,
+        "values": values,
+        "chi2": 100.0 + delta,
+        "delta_chi2": delta,
+        "similar": similar,
+        "converged": status > 0,
+        "status": status,
+        "stopped_on_budget": status == 0,
+        "abandoned": False,
+        "nfev": 10,
+    }
+
+
+def test_the_interval_spans_minima_the_noise_cannot_tell_apart():
+    """c = 10 +- 0.1 with another minimum at 10.5 (delta chi2 1.2, similar): se becomes 0.5 / 1.96, so the 95 %
+    interval reaches 10.5 exactly; a far minimum of much higher cost (not similar) changes nothing."""
+    from rimless.analysis.inference import calibrate as cal
+
+    est = [_est("c", 10.0, 0.1), _est("k", 2200.0, 10.0)]
+    opt = {
+        "minima": [
+            _minimum("profile", {"c": 10.0, "k": 2200.0}, 0.0, True),
+            _minimum("Table 1", {"c": 10.5, "k": 2205.0}, 1.2, True),
+            _minimum("spread 1", {"c": 6.0, "k": 1300.0}, 5e4, False, status=0),
+        ]
+    }
+    cal._span_minima(opt, est)
+    assert opt["several_minima"] is True
+    assert est[0].se == pytest.approx(0.5 / 1.959963984540054)
+    assert est[0].ci95[1] == pytest.approx(10.5)
+    assert est[1].se == 10.0  # 5 N/m away: inside its own interval already
+    assert "minima of similar cost" in est[0].note and est[0].identifiable
+    opt2 = {"minima": [_minimum("profile", {"c": 10.0, "k": 2200.0}, 0.0, True)]}
+    est2 = [_est("c", 10.0, 0.1), _est("k", 2200.0, 10.0)]
+    cal._span_minima(opt2, est2)
+    assert opt2["several_minima"] is False and est2[0].se == 0.1
+
+
+def test_the_verdicts_never_leave_a_contradiction():
+    from rimless.analysis.inference import calibrate as cal
+
+    fits = {"fits": False, "statement": "the model does NOT fit the trials: ..."}
+    est = [_est("c", 10.0, 0.1)]
+    cal._judge(est, fits, None, None)
+    assert not est[0].identifiable and est[0].effective_only and "does NOT fit" in est[0].note
+    ok = {"fits": True, "statement": "fits"}
+    choice = {
+        "guide_friction_n": {
+            "supported": False,
+            "statement": "not supported over the fit without it",
+            "without": {"c": 11.0},
+        }
+    }
+    est = [_est("c", 10.0, 0.1), _est("guide_friction_n", 0.2, 0.02)]
+    cal._judge(est, ok, choice, {"ridge": False, "told_apart": True})
+    assert est[0].identifiable and "fit without guide_friction_n: c = 11" in est[0].note
+    assert not est[1].identifiable and not est[1].effective_only and "not supported" in est[1].note
+    est = [_est("c", 10.0, 0.1), _est("guide_friction_n", 0.2, 0.02)]
+    cal._judge(est, ok, None, {"ridge": True, "told_apart": False, "statement": "no: on a ridge"})
+    assert all(not e.identifiable and e.effective_only and "not told apart" in e.note for e in est)
+
+
+def test_the_text_output_names_the_minima_and_the_budget():
+    from rimless.analysis.cli.critical import optimizer_lines
+
+    opt = {
+        "best_start": "profile",
+        "several_minima": True,
+        "minima": [
+            _minimum("profile", {"c": 10.0}, 0.0, True),
+            _minimum("Table 1", {"c": 10.5}, 1.2, True),
+            _minimum("spread 1", {"c": 6.0}, 5e4, False, status=0),
+        ],
+    }
+    lines = optimizer_lines(opt)
+    assert lines[0].startswith("starts: 3 (profile, Table 1, spread 1)")
+    assert "several minima" in lines[1] and "c 10.5" in lines[1] and "c 6" not in lines[1]
+    assert "stopped on its budget" in lines[2] and "spread 1" in lines[2]
