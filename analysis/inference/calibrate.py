@@ -1112,7 +1112,7 @@ def calibrate(
         "starts": len(runs),
         "converged": converged,
         "best_start": best_label,
-        "minima": _minima(obj, runs, fit, u),
+        "minima": _minima(obj, runs, fit),
     }
     J = obj.jac(
         u, central=True
@@ -1360,16 +1360,16 @@ def _widened(obj: _Objective, bounds: tuple[np.ndarray, np.ndarray], ws: np.ndar
     return lo, hi
 
 
-def _minima(obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str], u_best: np.ndarray) -> list[dict]:
+def _minima(obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str]) -> list[dict]:
     """Where each start ended, on the sigmas of the solution: its globals, its chi-square and its excess over
-    the best (``delta_chi2``), whether it converged, and ``similar``: within the 95 % joint region of the globals
+    the lowest of them (``delta_chi2``), whether it converged, and ``similar``: within the 95 % joint region of the globals
     (delta_chi2 below the chi-square quantile of as many degrees of freedom), which the noise cannot tell apart."""
-    cost_best = obj.cost(u_best)
     limit = _CHI2_95.get(obj.n_g, 2.0 * obj.n_g + 2.0)
+    costs = [obj.cost(r.x) for _, r in runs]
+    cost_best = min(costs)  # on these sigmas (the kept start has the lowest cost on the start's sigmas)
     out = []
-    for label, r in runs:
+    for (label, r), c in zip(runs, costs):
         xg = obj.unpack(r.x)[0]
-        c = obj.cost(r.x)
         out.append(
             {
                 "start": label,
