@@ -492,6 +492,11 @@ def optimizer_lines(opt: dict[str, Any]) -> list[str]:
     out = [
         f"starts: {len(minima)} ({', '.join(m['start'] for m in minima)}); kept the lowest cost, from "
         f"{opt.get('best_start', '?')}"
+        + (
+            " (one parameter: its profile on the step periods, 0.5-2 times Table 1, has one valley)"
+            if opt.get("profile_one_valley")
+            else ""
+        )
     ]
     if opt.get("several_minima"):
         similar = [m for m in minima if m["similar"]]

@@ -589,12 +589,13 @@ class _ReleaseFit:
 
 def _start(
     releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]
-) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
+) -> tuple[dict[str, float], np.ndarray, np.ndarray, list[dict[float, float]]]:
     """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
     (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
     sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
     at it. Then that start refined (`_refine_start`, returned as well), where
-    the least squares begin: every trial's ``refined_release_rad_s`` is set at it."""
+    the least squares begin: every trial's ``refined_release_rad_s`` is set at it. Last, the profile: per
+    global, relative value -> the periods' cost."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
     best = 0.0
@@ -646,7 +647,7 @@ def _start(
         for d, w in zip(data, coarse_releases):
             d.refined_release_rad_s = d.release_rad_s
             d.release_rad_s = w
-    return table1, ug_coarse, ug_best
+    return table1, ug_coarse, ug_best, seen
 
 
 def _refine_start(
@@ -1068,7 +1069,7 @@ def calibrate(
             progress(sim.calls)
 
     glob = _Globals.of(params or WheelParams(), fit)
-    table1_releases, ug_start, ug_refined = _start(_ReleaseFit(sim, tick), glob, data)
+    table1_releases, ug_start, ug_refined, profile = _start(_ReleaseFit(sim, tick), glob, data)
 
     obj = _Objective(sim, glob, data, tick)
     if prior is not None:
@@ -1089,7 +1090,7 @@ def calibrate(
         if glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
             runs.append(("Table 1", obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)))
     elif multi_start:
-        for label, ug_s in _spread_starts(glob, ug_refined):
+        for label, ug_s in _spread_starts(glob, ug_refined, profile):
             r = _solve_from(obj, _ReleaseFit(sim, tick), ug_s, ws_start, (lo, hi), 1)
             if r is not None and r.status == 0 and max_rounds > 1 and r.cost <= ABANDON_COST_RATIO * runs[0][1].cost:
                 again = obj.solve(r.x, *_widened(obj, (lo, hi), obj.unpack(r.x)[1]), max_rounds - 1)
@@ -1113,6 +1114,8 @@ def calibrate(
         "converged": converged,
         "best_start": best_label,
         "minima": _minima(obj, runs, fit),
+        #: one global: its profile on the periods (`PROFILE_FACTORS`) had one valley, so no further start was run
+        "profile_one_valley": bool(glob.n == 1 and _one_valley(profile[0])) if multi_start is True else None,
     }
     J = obj.jac(
         u, central=True
@@ -1311,11 +1314,17 @@ SPREAD_AT_ZERO = (0.2, 0.5)  # ... or at these (in its unit) when its start valu
 _CHI2_95 = {1: 3.841, 2: 5.991, 3: 7.815, 4: 9.488, 5: 11.07, 6: 12.59, 7: 14.07}  # chi2.ppf(0.95, n)
 
 
-def _spread_starts(glob: _Globals, ug_refined: np.ndarray) -> list[tuple[str, np.ndarray]]:
+def _spread_starts(
+    glob: _Globals, ug_refined: np.ndarray, profile: Sequence[dict[float, float]]
+) -> list[tuple[str, np.ndarray]]:
     """The starts besides the profile's: Table 1 (when the profile moved away from it) and, with two or more
     globals, two points spread within the profile's box (`SPREAD_FACTORS`, alternating between the globals so
-    that the two lie on either side of a ridge; `SPREAD_AT_ZERO` for a global whose start is 0)."""
+    that the two lie on either side of a ridge; `SPREAD_AT_ZERO` for a global whose start is 0). With one
+    global whose profile (the periods' cost at 0.5-2 times its start, `PROFILE_FACTORS`, and the refinements)
+    has one valley, the profile itself was the several starts: none more."""
     out: list[tuple[str, np.ndarray]] = []
+    if glob.n == 1 and _one_valley(profile[0]):
+        return out
     if np.any(ug_refined != 0):
         out.append(("Table 1", np.zeros(glob.n)))
     if glob.n >= 2:
@@ -1328,6 +1337,15 @@ def _spread_starts(glob: _Globals, ug_refined: np.ndarray) -> list[tuple[str, np
             )
             out.append((f"spread {i + 1}", ug))
     return out
+
+
+def _one_valley(seen: dict[float, float]) -> bool:
+    """Whether the profile's finite costs, in order of the parameter, fall and then rise (one local minimum)."""
+    costs = [c for _, c in sorted(seen.items()) if math.isfinite(c)]
+    k = int(np.argmin(costs)) if costs else 0
+    return all(a >= b for a, b in zip(costs[:k], costs[1 : k + 1])) and all(
+        a <= b for a, b in zip(costs[k:], costs[k + 1 :])
+    )
 
 
 def _solve_from(

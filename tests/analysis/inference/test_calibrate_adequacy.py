@@ -294,3 +294,12 @@ def test_the_text_output_names_the_minima_and_the_budget():
     assert lines[0].startswith("starts: 3 (profile, Table 1, spread 1)")
     assert "several minima" in lines[1] and "c 10.5" in lines[1] and "c 6" not in lines[1]
     assert "stopped on its budget" in lines[2] and "spread 1" in lines[2]
+
+
+def test_one_parameter_needs_no_further_start_when_its_profile_has_one_valley():
+    from rimless.analysis.inference.calibrate import _one_valley
+
+    assert _one_valley({-0.5: 9.0, -0.3: 4.0, 0.0: 1.0, 0.4: 3.0, 1.0: 8.0})
+    assert _one_valley({-0.5: 9.0, 0.0: 4.0, 1.0: 1.0})  # the minimum at an end
+    assert not _one_valley({-0.5: 2.0, -0.3: 4.0, 0.0: 1.0, 0.4: 3.0, 1.0: 8.0})  # a second dip at -0.5
+    assert _one_valley({-0.5: float("inf"), 0.0: 1.0, 0.4: 3.0})  # an invalid wheel is not a valley
