@@ -351,6 +351,8 @@ def _print_calibration(out: dict[str, Any]) -> None:
             markup=False,
             highlight=False,
         )
+    for line in optimizer_lines(opt):
+        con.print(line, markup=False, highlight=False)
     for p in out["params"]:
         cih = p.get("ci95_with_held")
         if cih:
@@ -389,6 +391,10 @@ def _print_calibration(out: dict[str, Any]) -> None:
             markup=False,
             highlight=False,
         )
+    for name, row in (out.get("model_choice") or {}).items():
+        con.print(f"model choice, {name} ({row['why_extra']}): {row['statement']}", markup=False, highlight=False)
+    adequacy = out.get("adequacy") or {}
+    per_trial = {row["trial"]: row for row in adequacy.get("per_trial", [])}
     r = Table(title="RMS residuals, Table 1 model -> calibrated", show_edge=False)
     r.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
     for col, width in (("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
@@ -413,6 +419,23 @@ def _print_calibration(out: dict[str, Any]) -> None:
         markup=False,
         highlight=False,
     )
+    if adequacy:
+        noise = adequacy.get("noise", {})
+        o = adequacy["overall"]
+        con.print(
+            f"model adequacy: {adequacy['statement']}; overall chi2/dof {_fmt(o['total']['ratio'], '.3g')} "
+            f"(p = {_fmt(o['total']['p_value'], '.2g')}) against the noise measured from the recordings: CoM "
+            f"{_fmt(noise.get('com_mm'), '.3f')} mm, impact times {_fmt(noise.get('impact_time_ms'), '.2f')} ms "
+            "(chi2/dof 1: residuals as large as the noise)",
+            markup=False,
+            highlight=False,
+        )
+        for row, stem in zip(out["residuals"], stems):
+            con.print(
+                f"  {stem}: chi2/dof CoM, periods {_adequacy_cell(per_trial.get(row['trial']))}",
+                markup=False,
+                highlight=False,
+            )
     con.print(
         f"all trials: RMS period error {_fmt(out['rms_period_ms']['table1'], '.1f')} -> "
         f"{_fmt(out['rms_period_ms']['calibrated'], '.1f')} ms, RMS CoM error "
@@ -444,6 +467,51 @@ def _print_calibration(out: dict[str, Any]) -> None:
             markup=False,
             highlight=False,
         )
+
+
+def _adequacy_cell(row: dict[str, Any] | None) -> str:
+    """``1.02, 0.87`` (CoM, periods chi2/dof), and ``: does NOT fit`` when the trial does not."""
+    if row is None:
+        return "–"
+    return f"{_fmt(row['com']['ratio'], '.3g')}, {_fmt(row['periods']['ratio'], '.3g')}" + (
+        "" if row["fits"] else ": does NOT fit"
+    )
+
+
+def optimizer_lines(opt: dict[str, Any]) -> list[str]:
+    """Where the starts ended (JSON ``optimizer.minima``): several minima of similar cost, starts that stopped on
+    their budget."""
+    minima = opt.get("minima") or []
+    if not minima:
+        return []
+    names = list(minima[0]["values"])
+
+    def where(m: dict[str, Any]) -> str:
+        return ", ".join(f"{n} {m['values'][n]:.4g}" for n in names)
+
+    out = [
+        f"starts: {len(minima)} ({', '.join(m['start'] for m in minima)}); kept the lowest cost, from "
+        f"{opt.get('best_start', '?')}"
+        + (
+            " (one parameter: its profile on the step periods, 0.5-2 times Table 1, has one valley)"
+            if opt.get("profile_one_valley")
+            else ""
+        )
+    ]
+    if opt.get("several_minima"):
+        similar = [m for m in minima if m["similar"]]
+        out.append(
+            "  several minima of similar cost (the noise cannot tell them apart; the intervals span them): "
+            + "; ".join(f"{where(m)} (delta chi2 {m['delta_chi2']:.2g}, from {m['start']})" for m in similar)
+        )
+    budget = [
+        m["start"] + (" (left after one round, far above the best)" if m.get("abandoned") else "")
+        for m in minima
+        if m.get("stopped_on_budget")
+    ]
+    if budget:
+        out.append("  stopped on its budget (not converged) from: " + ", ".join(budget))
+    return out
 
 
 def _print_prior(con: Any, prior: dict[str, Any]) -> None:

@@ -79,10 +79,6 @@ MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
 GN_STOP_COST = 0.005
 GN_STOP_STATUS = 5  # the optimizer status reported then (scipy's own are 0 budget, 1-4 its tolerances)
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
-#: run the previous implementation's inner loops (no spline cache, a full 0.5 ms shift grid, 40-step bisection,
-#: every sample column of `simulate_steps` recorded, a grid search for every release of the coarse profile, the
-#: BLAS on all threads) for `rimless.analysis.inference.bench_calibrate`; results agree to the grid's resolution
-REFERENCE_PATHS = False
 _REL_STEP = 1e-5
 
 
@@ -168,7 +164,6 @@ class _Sim:
         """`simulate_steps` from the rigid-touchdown release; the last walks are cached (a change of the time
         shift alone then costs no simulation)."""
         from rimless.sim.step.backend import make_integrator
-        from rimless.sim.step.gait import simulate_steps
 
         key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record)
         if key in self.cache:
@@ -176,19 +171,9 @@ class _Sim:
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
         z0 = np.array([-ALPHA_RAD / 2, w])
-        if REFERENCE_PATHS:
-            g = simulate_steps(
-                p,
-                self.model,
-                z0,
-                n,
-                make_integrator("auto", rtol=self.rtol),
-                record_dt=self.record_dt_s if record else 1.0,
-            )
-        else:
-            g = _com_walk(
-                p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0
-            )
+        g = _com_walk(
+            p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0
+        )
         if len(self.cache) > 256:
             self.cache.pop(next(iter(self.cache)))
         self.cache[key] = g
@@ -269,33 +254,6 @@ def _residuals(
     return rp, s - (d.com_m + off)
 
 
-def _curve_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float, Any]]]:
-    """The simulated CoM curve of walk ``g`` (times from t0): the clean samples and one cubic spline per step,
-    built once per walk and kept on it (the time-shift search evaluates the same walk hundreds of times)."""
-    from scipy.interpolate import CubicSpline
-
-    from rimless.analysis.inference.compare import clean_curve
-
-    cache = None if REFERENCE_PATHS else getattr(g, "_com_parts", None)
-    if cache is not None and cache[0] == t0:
-        return cache[1]
-    t_all = np.asarray(g.table["t_s"], float) - t0
-    y_all = np.asarray(g.table["com_height_normal_m"], float)
-    step = np.asarray(g.table["step"])
-    st, sy = clean_curve(t_all, y_all)
-    splines = []
-    for k in np.unique(step):
-        ts, ys = clean_curve(t_all[step == k], y_all[step == k])
-        if ts.size >= 4:
-            splines.append((float(ts[0]), float(ts[-1]), CubicSpline(ts, ys)))
-    parts = (st, sy, splines)
-    try:
-        g._com_parts = (t0, parts)
-    except AttributeError:
-        pass
-    return parts
-
-
 def _hermite_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The knots of the simulated CoM curve of walk ``g`` (times from t0), step after step: times, heights,
     exact rates (m/s) and whether the interval from each knot to the next lies inside one step (an impact
@@ -361,20 +319,12 @@ def _clean_knots(kt: np.ndarray, ky: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
-    """The simulated CoM height at times tt (s from t0): a cubic spline through each step's samples (the
-    impact cusp stays a cusp), so the residuals change smoothly with the parameters (a piecewise-linear
-    interpolation on the record grid puts kinks into the cost that finite differences mistake for
-    information). Held at the end values outside the simulated walk (a stall). With the rates recorded
-    (`_com_walk`), a cubic Hermite on the same samples (`_hermite_curve`)."""
-    if not REFERENCE_PATHS and "com_rate_m_s" in g.table:
-        return _hermite_curve(g, t0, tt)
-    st, sy, splines = _curve_parts(g, t0)
-    out = np.interp(tt, st, sy)
-    for lo, hi, sp in splines:
-        m = (tt >= lo) & (tt <= hi)
-        if m.any():
-            out[m] = sp(tt[m])
-    return out
+    """The simulated CoM height at times tt (s from t0): a cubic Hermite through each step's samples with the
+    exact rates recorded by `_com_walk` (`_hermite_curve`; the impact cusp stays a cusp), so the residuals change
+    smoothly with the parameters (a piecewise-linear interpolation on the record grid puts kinks into the cost
+    that finite differences mistake for information). Held at the end values outside the simulated walk (a
+    stall)."""
+    return _hermite_curve(g, t0, tt)
 
 
 @dataclass
@@ -453,6 +403,10 @@ class CalibrationResult:
     friction_vs_damping: dict[str, Any] | None = None  # with --fit c,guide_friction_n: can the trials tell them apart
     #: every wheel parameter's value, sd, unit and source (held and fitted), when the caller states the wheel
     parameters: list[dict[str, Any]] | None = None
+    #: goodness of fit against the recording's own noise (`rimless.analysis.inference.adequacy`)
+    adequacy: dict[str, Any] | None = None
+    #: per extra parameter (`EXTRA_PARAMETERS`): the likelihood-ratio test against the fit without it
+    model_choice: dict[str, Any] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -497,6 +451,8 @@ class CalibrationResult:
             "loss_separation": self.loss_separation,
             **({"friction_vs_damping": self.friction_vs_damping} if self.friction_vs_damping else {}),
             **({"parameters": self.parameters} if self.parameters is not None else {}),
+            **({"adequacy": self.adequacy} if self.adequacy is not None else {}),
+            **({"model_choice": self.model_choice} if self.model_choice is not None else {}),
         }
 
 
@@ -558,7 +514,7 @@ class _ReleaseFit:
 
         if w0 is None or not math.isfinite(w0):
             w0 = self.first_period_release(p, d)
-        tol = (1e-6, 1e-8, 12) if coarse and not REFERENCE_PATHS else (1e-10, 1e-12, 30)
+        tol = (1e-6, 1e-8, 12) if coarse else (1e-10, 1e-12, 30)
         r = least_squares(
             lambda q: self.freq_res(p, d, float(q[0])),
             [w0],
@@ -577,7 +533,7 @@ class _ReleaseFit:
         when that start ends off the walking branch (a step not reached, the release on its bound) or does not
         converge in `WARM_ITERATIONS` iterations."""
 
-        if REFERENCE_PATHS or not math.isfinite(w0):
+        if not math.isfinite(w0):
             return self.fit(p, d, None, coarse=True)
         f_meas = 1.0 / d.periods_s
 
@@ -620,12 +576,6 @@ class _ReleaseFit:
         diff = f1 - target
         for i in range(grid.size - 1):
             if f1[i] > 0 and diff[i] <= 0 < diff[i + 1]:
-                if REFERENCE_PATHS:
-                    a, b = grid[i], grid[i + 1]
-                    for _ in range(40):
-                        m = 0.5 * (a + b)
-                        a, b = (m, b) if sim.frequencies(p, d.slope_deg, m, 1)[0] - target <= 0 else (a, m)
-                    return 0.5 * (a + b)
                 from scipy.optimize import brentq
 
                 def g1(w: float) -> float:
@@ -639,12 +589,13 @@ class _ReleaseFit:
 
 def _start(
     releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]
-) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
+) -> tuple[dict[str, float], np.ndarray, np.ndarray, list[dict[float, float]]]:
     """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
     (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
     sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
-    at it. Then that start refined (`_refine_start`, returned as well; `REFERENCE_PATHS`: the coarse one), where
-    the least squares begin: every trial's ``refined_release_rad_s`` is set at it."""
+    at it. Then that start refined (`_refine_start`, returned as well), where
+    the least squares begin: every trial's ``refined_release_rad_s`` is set at it. Last, the profile: per
+    global, relative value -> the periods' cost."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
     best = 0.0
@@ -652,22 +603,19 @@ def _start(
         w, c = releases.fit(p0, d, None)
         d.release_rad_s = table1[d.name] = w
         best += c
-    if REFERENCE_PATHS:
-        best = sum(releases.fit(p0, d, d.release_rad_s)[1] for d in data)
     ug_best = np.zeros(glob.n)
 
     tried: dict[tuple[float, ...], list[float]] = {tuple(np.zeros(glob.n)): [table1[d.name] for d in data]}
 
     def try_start(ug: np.ndarray) -> float:
         """The periods' cost at relative globals ug (inf for an invalid wheel); the best start kept. Each
-        trial's release is warm-started from its release at the nearest globals tried so far (Table 1's in
-        `REFERENCE_PATHS`), where Gauss-Newton needs the fewest steps and seldom falls back on the grid."""
+        trial's release is warm-started from its release at the nearest globals tried so far, where Gauss-Newton needs the fewest steps and seldom falls back on the grid."""
         nonlocal best, ug_best
         p = glob.at(ug)
         if p is None:
             return math.inf
         near = min(tried, key=lambda k: float(np.sum((np.array(k) - ug) ** 2)))
-        w0 = tried[tuple(np.zeros(glob.n))] if REFERENCE_PATHS else tried[near]
+        w0 = tried[near]
         fits = [releases.fit_warm(p, d, w) for d, w in zip(data, w0)]
         if all(math.isfinite(c) for _, c in fits):
             tried[tuple(ug)] = [w for w, _ in fits]
@@ -689,11 +637,9 @@ def _start(
     if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
         pb = glob.at(ug_best)
         for d in data:
-            d.release_rad_s = releases.fit(pb, d, None if REFERENCE_PATHS else d.release_rad_s)[0]
+            d.release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
     for d in data:
         d.refined_release_rad_s = d.release_rad_s
-    if REFERENCE_PATHS:
-        return table1, ug_coarse, ug_coarse
     coarse_releases = [d.release_rad_s for d in data]
     for j in range(glob.n):
         _refine_start(seen[j], lambda: ug_best, j, try_start)
@@ -701,7 +647,7 @@ def _start(
         for d, w in zip(data, coarse_releases):
             d.refined_release_rad_s = d.release_rad_s
             d.release_rad_s = w
-    return table1, ug_coarse, ug_best
+    return table1, ug_coarse, ug_best, seen
 
 
 def _refine_start(
@@ -827,10 +773,6 @@ class _Objective:
             def cost(g: float) -> float:
                 return float(np.sum(_residuals(self.sim, p, d, ws[i], g * 1e-3)[1] ** 2))  # noqa: B023
 
-            if REFERENCE_PATHS:
-                grid = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 0.5)
-                out.append(float(grid[int(np.argmin([cost(g) for g in grid]))]))
-                continue
             coarse = np.arange(-MAX_SHIFT_MS, MAX_SHIFT_MS + 1e-9, 2.0)
             g0 = float(coarse[int(np.argmin([cost(g) for g in coarse]))])
             fine = np.clip(np.arange(g0 - 2.0, g0 + 2.0 + 1e-9, 0.5), -MAX_SHIFT_MS, MAX_SHIFT_MS)
@@ -1061,8 +1003,6 @@ def _one_blas_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        if REFERENCE_PATHS:
-            return fn(*args, **kwargs)
         with one_blas_thread():
             return fn(*args, **kwargs)
 
@@ -1089,7 +1029,7 @@ def calibrate(
     rtol: float = 1e-7,
     record_dt_s: float = 8e-3,
     max_rounds: int = MAX_ROUNDS,
-    multi_start: bool = True,
+    multi_start: bool | str = True,
     progress: Callable[[int], None] | None = None,
     prior: Any = None,
     held: Sequence[tuple[str, float]] = (),
@@ -1100,14 +1040,20 @@ def calibrate(
     (`rimless.sim.fast.fast_step`, no trajectory) at Table 1 and at a coarse profile of each global
     (`PROFILE_FACTORS`), which picks the start (`_start`); (2) the full least squares on periods and CoM height
     (`_Objective`, recorded walks on the compiled integrator), with the block sigmas of the start, then the
-    sigmas of the solution for the uncertainties. With two or more globals on a ridge (correlation above
-    `RIDGE_CORRELATION`, e.g. c-k) or without convergence, the fit also starts from Table 1 and keeps the
-    lower cost; each start runs until converged or
-    ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False then, and no parameter is
-    identifiable). ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
+    sigmas of the solution for the uncertainties. ``multi_start`` (default): the least squares also start from
+    Table 1 and, with two or more globals, from `spread starts <_spread_starts>` within the profile's box; the
+    lowest cost is kept, and other minima the noise cannot tell from it widen the intervals to span them
+    (`_minima`, `_span_minima`; JSON ``optimizer.minima``); ``"ridge"``: the previous rule (Table 1 only on a
+    ridge, correlation above `RIDGE_CORRELATION`, or without convergence); False: one start. Each start runs
+    until converged or ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False when the kept one
+    stopped so, and no parameter is identifiable). Then the model's adequacy against the recording's noise
+    (`rimless.analysis.inference.adequacy`) and, for an extra parameter (`EXTRA_PARAMETERS`), the
+    likelihood-ratio test against the fit without it (`_model_choice`); `_judge` turns their verdicts into
+    each estimate's ``identifiable`` / ``effective_only``. ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
     priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
     ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
-    ``se_held`` (`held_response`: two warm refits per held parameter)."""
+    ``se_held`` (`held_response`: two warm refits per held parameter; a whole recalibration where one sticks,
+    with the ``"ridge"`` rule of starts)."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -1123,7 +1069,7 @@ def calibrate(
             progress(sim.calls)
 
     glob = _Globals.of(params or WheelParams(), fit)
-    table1_releases, ug_start, ug_refined = _start(_ReleaseFit(sim, tick), glob, data)
+    table1_releases, ug_start, ug_refined, profile = _start(_ReleaseFit(sim, tick), glob, data)
 
     obj = _Objective(sim, glob, data, tick)
     if prior is not None:
@@ -1138,25 +1084,39 @@ def calibrate(
     lo, hi = obj.bounds(ws_start)
     if np.any(ug_refined != ug_start):  # same objective (sigmas and bounds of the profile's start), nearer start
         u = obj.start(ug_refined, np.array([d.refined_release_rad_s for d in data]))
-    best = obj.solve(u, lo, hi, max_rounds)
-    starts = 1
-    if multi_start and glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
-        starts = 2  # a ridge between globals (or no convergence): also start from Table 1, keep the lower cost
-        r = obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)
-        if r.cost < best.cost:
-            best = r
+    runs = [("profile", obj.solve(u, lo, hi, max_rounds))]
+    if multi_start == "ridge":  # the previous rule (the benchmark's): Table 1 only on a ridge or without convergence
+        best = runs[0][1]
+        if glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
+            runs.append(("Table 1", obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)))
+    elif multi_start:
+        for label, ug_s in _spread_starts(glob, ug_refined, profile):
+            r = _solve_from(obj, _ReleaseFit(sim, tick), ug_s, ws_start, (lo, hi), 1)
+            if r is not None and r.status == 0 and max_rounds > 1 and r.cost <= ABANDON_COST_RATIO * runs[0][1].cost:
+                again = obj.solve(r.x, *_widened(obj, (lo, hi), obj.unpack(r.x)[1]), max_rounds - 1)
+                again.rounds, again.nfev_total = again.rounds + 1, again.nfev_total + r.nfev_total
+                r = again
+            elif r is not None and r.status == 0:
+                r.abandoned = True  # far above the first start's cost after one round: not followed further
+            runs.append((label, r))
+    runs = [(label, r) for label, r in runs if r is not None]
+    best_label, best = min(runs, key=lambda lr: float(lr[1].cost))
     u = best.x
     converged = bool(best.status > 0)
+    obj.set_sigmas(u)
+    obj.inflate_com_sigma(u)
     optimizer = {
         "status": int(best.status),
         "message": str(best.message),
-        "nfev": int(best.nfev_total),
+        "nfev": int(sum(r.nfev_total for _, r in runs)),
         "rounds": int(best.rounds),
-        "starts": starts,
+        "starts": len(runs),
         "converged": converged,
+        "best_start": best_label,
+        "minima": _minima(obj, runs, fit),
+        #: one global: its profile on the periods (`PROFILE_FACTORS`) had one valley, so no further start was run
+        "profile_one_valley": bool(glob.n == 1 and _one_valley(profile[0])) if multi_start is True else None,
     }
-    obj.set_sigmas(u)
-    obj.inflate_com_sigma(u)
     J = obj.jac(
         u, central=True
     )  # central differences for the globals: the curvature of the cost must not fake information
@@ -1166,13 +1126,14 @@ def calibrate(
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
+    _span_minima(optimizer, estimates)
     if held:
 
         def recalibrate(moved: Any) -> np.ndarray | None:
             try:
                 again = calibrate(
                     trials, names, fit, params=moved, model=model, rtol=rtol, record_dt_s=record_dt_s,
-                    max_rounds=max_rounds, multi_start=multi_start, prior=prior,
+                    max_rounds=max_rounds, multi_start="ridge" if multi_start else False, prior=prior,
                 )  # fmt: skip
             except NoTrialCalibrated:
                 return None
@@ -1186,8 +1147,17 @@ def calibrate(
         else _check_loss_separation(obj, u, J, fit, scale_all, estimates)
     )  # a leg test measured c or F_c: no ridge to flag
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
-    cal_params = glob.params(np.array([e.value if e.identifiable or e.effective_only else e.table1 for e in estimates]))
-    return CalibrationResult(
+    fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])
+    choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds)
+    fits = _adequacy(obj, u)
+    _judge(estimates, fits, choice, fvd)
+    fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
+    used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
+    for row in (choice or {}).values():
+        if not row["supported"]:  # the simpler model is the calibrated one: its values of the others
+            used.update({n: v for n, v in row["without"].items() if n in used})
+    cal_params = glob.params(np.array([used[n] for n in fit]))
+    result = CalibrationResult(
         estimates,
         corr,
         {d.name: float(w) for d, w in zip(data, ws)},
@@ -1203,8 +1173,11 @@ def calibrate(
         converged,
         optimizer,
         separation,
-        friction_vs_damping(estimates, corr, [d.release_rad_s for d in data]),
+        fvd,
+        adequacy=fits,
+        model_choice=choice,
     )
+    return result
 
 
 #: fitted names that model a constant loss per step themselves (then c needs no separation check)
@@ -1327,3 +1300,252 @@ def _set_sigmas(sig: dict[str, float], rows: Sequence[_RmsRow]) -> None:
         sig["t"] = max(float(np.sqrt(np.mean(np.square(tp)))), 1e-4)
     if th:
         sig["h"] = max(float(np.sqrt(np.mean(np.square(th)))), 5e-5)
+
+
+#: extra parameters: each is claimed only when the likelihood-ratio test supports it over the fit without it
+#: (held at the wheel's value, 0 for friction), with the reason it is extra
+EXTRA_PARAMETERS = {"guide_friction_n": "a second loss beside the damper (Coulomb friction in the guides)"}
+MODEL_CHOICE_P = 0.01  # the likelihood-ratio test's p-value below which an extra parameter is supported
+SPREAD_FACTORS = (0.7, 1.4)  # spread starts: each global at these times its start value (alternating)
+#: a further start whose cost after one round (`MAX_NFEV` evaluations) is above this times the first start's final
+#: cost is not followed further (reported as stopped on its budget, ``abandoned``): it is in another valley
+ABANDON_COST_RATIO = 2.0
+SPREAD_AT_ZERO = (0.2, 0.5)  # ... or at these (in its unit) when its start value is 0 (guide friction)
+_CHI2_95 = {1: 3.841, 2: 5.991, 3: 7.815, 4: 9.488, 5: 11.07, 6: 12.59, 7: 14.07}  # chi2.ppf(0.95, n)
+
+
+def _spread_starts(
+    glob: _Globals, ug_refined: np.ndarray, profile: Sequence[dict[float, float]]
+) -> list[tuple[str, np.ndarray]]:
+    """The starts besides the profile's: Table 1 (when the profile moved away from it) and, with two or more
+    globals, two points spread within the profile's box (`SPREAD_FACTORS`, alternating between the globals so
+    that the two lie on either side of a ridge; `SPREAD_AT_ZERO` for a global whose start is 0). With one
+    global whose profile (the periods' cost at 0.5-2 times its start, `PROFILE_FACTORS`, and the refinements)
+    has one valley, the profile itself was the several starts: none more."""
+    out: list[tuple[str, np.ndarray]] = []
+    if glob.n == 1 and _one_valley(profile[0]):
+        return out
+    if np.any(ug_refined != 0):
+        out.append(("Table 1", np.zeros(glob.n)))
+    if glob.n >= 2:
+        for i in range(2):
+            ug = np.array(
+                [
+                    (SPREAD_AT_ZERO[(i + j) % 2] if glob.x0[j] == 0 else SPREAD_FACTORS[(i + j) % 2] - 1.0)
+                    for j in range(glob.n)
+                ]
+            )
+            out.append((f"spread {i + 1}", ug))
+    return out
+
+
+def _one_valley(seen: dict[float, float]) -> bool:
+    """Whether the profile's finite costs, in order of the parameter, fall and then rise (one local minimum)."""
+    costs = [c for _, c in sorted(seen.items()) if math.isfinite(c)]
+    k = int(np.argmin(costs)) if costs else 0
+    return all(a >= b for a, b in zip(costs[:k], costs[1 : k + 1])) and all(
+        a <= b for a, b in zip(costs[k:], costs[k + 1 :])
+    )
+
+
+def _solve_from(
+    obj: _Objective,
+    releases: _ReleaseFit,
+    ug: np.ndarray,
+    ws_start: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_rounds: int,
+) -> Any:
+    """The least squares from relative globals ``ug``: each trial's release found there (warm from the main
+    start's), the release bounds widened to cover them; None when the wheel there is not valid or a trial does
+    not walk."""
+    p = obj.glob.at(ug)
+    if p is None:
+        return None
+    fits = [releases.fit_warm(p, d, float(w)) for d, w in zip(obj.data, ws_start)]
+    ws = np.array([w for w, _ in fits])
+    if not all(math.isfinite(c) for _, c in fits) or not np.all(ws > 0.05):
+        return None
+    return obj.solve(obj.start(ug, ws), *_widened(obj, bounds, ws), max_rounds)
+
+
+def _widened(obj: _Objective, bounds: tuple[np.ndarray, np.ndarray], ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds with each trial's release range widened to cover [0.8, 1.25] x ``ws`` (within [0.05, 20])."""
+    lo, hi = bounds[0].copy(), bounds[1].copy()
+    n_g, n_t = obj.n_g, obj.n_t
+    lo[n_g : n_g + n_t] = np.maximum(np.minimum(lo[n_g : n_g + n_t], 0.8 * ws), 0.05)
+    hi[n_g : n_g + n_t] = np.minimum(np.maximum(hi[n_g : n_g + n_t], 1.25 * ws), 20.0)
+    return lo, hi
+
+
+def _minima(obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str]) -> list[dict]:
+    """Where each start ended, on the sigmas of the solution: its globals, its chi-square and its excess over
+    the lowest of them (``delta_chi2``), whether it converged, and ``similar``: within the 95 % joint region of the globals
+    (delta_chi2 below the chi-square quantile of as many degrees of freedom), which the noise cannot tell apart."""
+    limit = _CHI2_95.get(obj.n_g, 2.0 * obj.n_g + 2.0)
+    costs = [obj.cost(r.x) for _, r in runs]
+    cost_best = min(costs)  # on these sigmas (the kept start has the lowest cost on the start's sigmas)
+    out = []
+    for (label, r), c in zip(runs, costs):
+        xg = obj.unpack(r.x)[0]
+        out.append(
+            {
+                "start": label,
+                "values": {n: float(v) for n, v in zip(fit, xg)},
+                "chi2": c,
+                "delta_chi2": c - cost_best,
+                "similar": bool(c - cost_best <= limit),
+                "converged": bool(r.status > 0),
+                "status": int(r.status),
+                "stopped_on_budget": bool(r.status == 0),
+                "abandoned": bool(getattr(r, "abandoned", False)),
+                "nfev": int(r.nfev_total),
+            }
+        )
+    return out
+
+
+def _span_minima(optimizer: dict[str, Any], estimates: list[ParamEstimate]) -> None:
+    """Minima of similar cost away from the best (more than a tenth of a standard error): each estimate's
+    standard error grows so that its 95 % interval spans them (``se_minima``, the note says so);
+    ``optimizer["several_minima"]`` states it."""
+    similar = [m for m in optimizer["minima"] if m["similar"]]
+    far = [
+        m
+        for m in similar
+        if any(abs(m["values"][e.name] - e.value) > 0.1 * e.se for e in estimates if math.isfinite(e.se))
+    ]
+    optimizer["several_minima"] = bool(far)
+    if not far:
+        return
+    for e in estimates:
+        reach = max(abs(m["values"][e.name] - e.value) for m in far)
+        need = reach / 1.959963984540054
+        if math.isfinite(e.se) and need > e.se:
+            e.se = need
+            others = ", ".join(f"{m['values'][e.name]:.4g}" for m in far)
+            extra = (
+                f"{len(far) + 1} minima of similar cost from different starts: the interval spans them "
+                f"({others} besides {e.value:.4g})"
+            )
+            e.note = f"{e.note}; {extra}" if e.note else extra
+            if e.identifiable and abs(e.value) > 0 and e.se / abs(e.value) > NOT_IDENTIFIABLE_REL_SE:
+                e.identifiable = False
+                e.note += f"; relative uncertainty {e.se / abs(e.value):.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}"
+
+
+def _model_choice(
+    obj: _Objective, u: np.ndarray, fit: Sequence[str], bounds: tuple[np.ndarray, np.ndarray], max_rounds: int
+) -> dict[str, Any] | None:
+    """Per extra parameter fitted beside others (`EXTRA_PARAMETERS`): the fit solved again without it (held at
+    the wheel's value; warm, from the solution, the same sigmas), and the likelihood-ratio test: delta chi^2 =
+    chi^2 without - chi^2 with, on the residuals scaled by the solution's sigmas (the CoM block's inflated for
+    its correlation: its effective number of samples). A force on its bound 0 under the simpler model: the
+    null distribution is half chi^2_0, half chi^2_1 (p halved). Also delta AIC = delta chi^2 - 2. None when no
+    extra parameter is fitted beside another."""
+    from scipy.stats import chi2 as chi2_dist
+
+    extras = [n for n in fit if n in EXTRA_PARAMETERS and len(fit) > 1]
+    if not extras:
+        return None
+    cost_full = obj.cost(u)
+    n_g = obj.n_g
+    out: dict[str, Any] = {}
+    for name in extras:
+        j = list(fit).index(name)
+        keep = [k for k in range(n_g) if k != j]
+        simpler = [fit[k] for k in keep]
+        glob2 = _Globals.of(obj.glob.base, simpler)
+        obj2 = _Objective(obj.sim, glob2, obj.data, obj.tick)
+        obj2.sig = dict(obj.sig)
+        sel = np.concatenate([keep, np.arange(n_g, u.size)]).astype(int)
+        r = obj2.solve(u[sel], bounds[0][sel], bounds[1][sel], max_rounds)
+        cost_red = obj2.cost(r.x)
+        delta = max(cost_red - cost_full, 0.0)
+        held_at = float(getattr(obj.glob.base, FIT_FIELDS[name][0]))
+        boundary = name == "guide_friction_n" and held_at == 0.0
+        p = float(chi2_dist.sf(delta, 1)) * (0.5 if boundary else 1.0)
+        supported = bool(p < MODEL_CHOICE_P and r.status > 0)
+        why = (
+            f"supported over the fit without it: likelihood ratio delta chi^2 = {delta:.3g}, p = {p:.2g}"
+            if supported
+            else (
+                f"not supported over the fit without it ({name} held at {held_at:g}): delta chi^2 = {delta:.3g}, "
+                f"p = {p:.2g} >= {MODEL_CHOICE_P:g}"
+                if r.status > 0
+                else "the fit without it did not converge: the test cannot be made"
+            )
+        )
+        out[name] = {
+            "why_extra": EXTRA_PARAMETERS[name],
+            "simpler_fit": simpler,
+            "held_at": held_at,
+            "chi2_with": cost_full,
+            "chi2_without": cost_red,
+            "delta_chi2": delta,
+            "p_value": p,
+            "delta_aic": delta - 2.0,
+            "boundary": boundary,
+            "supported": supported,
+            "threshold_p": MODEL_CHOICE_P,
+            "without": {n: float(v) for n, v in zip(simpler, obj2.unpack(r.x)[0])},
+            "statement": why,
+        }
+    return out
+
+
+def _adequacy(obj: _Objective, u: np.ndarray) -> dict[str, Any]:
+    """`rimless.analysis.inference.adequacy.adequacy` at the solution u (each trial's CoM and period residuals,
+    its measured CoM and impact times)."""
+    from rimless.analysis.inference.adequacy import adequacy
+
+    xg, ws, sh = obj.unpack(u)
+    p = obj.glob.params(xg)
+    blocks = []
+    for d, w, s_ in zip(obj.data, ws, sh):
+        rp, rh = _residuals(obj.sim, p, d, float(w), float(s_))
+        f_sim = rp + 1.0 / d.periods_s
+        reached = f_sim > 0
+        blocks.append(
+            {
+                "trial": d.name,
+                "com_t_s": d.t_s,
+                "com_m": d.com_m,
+                "com_res_m": rh,
+                "impacts_s": np.concatenate([[0.0], np.cumsum(d.periods_s)]),
+                "period_res_s": np.where(reached, 1.0 / np.where(reached, f_sim, 1.0) - d.periods_s, d.periods_s),
+            }
+        )
+    return adequacy(blocks, obj.n_g)
+
+
+def _judge(
+    estimates: list[ParamEstimate],
+    fits: dict[str, Any],
+    choice: dict[str, Any] | None,
+    fvd: dict[str, Any] | None,
+) -> None:
+    """The verdicts that no single estimate's interval shows: a model that does not fit (`_adequacy`) makes every
+    parameter effective only; an extra parameter the likelihood-ratio test does not support is not identifiable
+    (the reason given; the other parameters' values of the fit without it make the calibrated model); c and
+    guide friction on a ridge (`friction_vs_damping`) are effective only (their combination is fitted, not each). None of these ever makes a parameter identifiable."""
+    if not fits["fits"]:
+        for e in estimates:
+            if e.identifiable or e.effective_only:
+                e.identifiable, e.effective_only = False, True
+                e.note = "effective only: " + fits["statement"] + (f"; {e.note}" if e.note else "")
+    for name, row in (choice or {}).items():
+        if row["supported"]:
+            continue
+        for e in estimates:
+            if e.name == name:
+                e.identifiable, e.effective_only = False, False
+                e.note = row["statement"] + (f"; {e.note}" if e.note else "")
+            elif e.name in row["without"]:
+                simpler = f"the calibrated model is the fit without {name}: {e.name} = {row['without'][e.name]:.4g}"
+                e.note = f"{e.note}; {simpler}" if e.note else simpler
+    if fvd is not None and fvd["ridge"]:
+        for e in estimates:
+            if e.name in ("c", "guide_friction_n") and e.identifiable:
+                e.identifiable, e.effective_only = False, True
+                e.note = "effective only: c and F_c are not told apart (" + fvd["statement"] + ")"

@@ -92,7 +92,7 @@ def test_a_nominal_trace_that_disagrees_with_the_known_value_turns_the_warm_star
 
 
 def test_the_benchmark_prints_both_paths_their_ratio_and_difference(tmp_path, capsys):
-    from rimless.analysis.inference.bench_carry import main
+    from rimless.analysis.bench.carry import main
 
     wheel = tmp_path / "wheel.toml"  # plain numbers are exact: only I_c is held
     wheel.write_text(

@@ -1,5 +1,5 @@
 """Benchmark of the held parameters carried into a model's critical slope: ``python -m
-rimless.analysis.inference.bench_carry``.
+rimless.analysis.bench.carry``.
 
 Runs the carry of `rimless.analysis.inference.held.carry_critical` (the model's part, as ``rimless demo`` does it:
 forward differences, default Table 1 with its default uncertainties; ``--params`` a wheel file, ``--central``
@@ -52,7 +52,7 @@ def compare(win: Any, model: str = "er", *, central: bool = False) -> dict[str, 
 def main(argv: list[str] | None = None) -> None:
     from rimless.analysis.inference.runs import wheel_input
 
-    ap = argparse.ArgumentParser(prog="python -m rimless.analysis.inference.bench_carry", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m rimless.analysis.bench.carry", description=__doc__)
     ap.add_argument("--params", type=Path, default=None, help="wheel file (default Table 1, default sds)")
     ap.add_argument("--model", default="er", choices=("er", "ve"))
     ap.add_argument("--central", action="store_true", help="both sides (trials critical-slope), not forward")
