@@ -1,0 +1,91 @@
+"""The table `rimless trials report` and `rimless demo` print never wraps inside a number (issue 31): at 80 and
+120 columns every number of each trial's metrics row (the JSON's values, formatted as the table does) is whole
+on that trial's line, each trial name is whole once its lines are joined and is broken after a ``_`` or ``-``
+only (before: ``SYNTHETIC_crit_slope1.30deg_release1.`` / ``9`` at 80 columns), and no line is wider than
+the terminal."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from rimless.analysis.cli import _print_report
+from rimless.analysis.examples.bundled import data_files
+from rimless.analysis.examples.critical_series import data_files as critical_files
+from rimless.analysis.report.html import build_report
+
+GAP = {"max_gap_s": 0.05}
+FORMATS = (
+    ("slope_deg", ".3f"),
+    ("steps", "d"),
+    ("rms_com_error_mm", ".2f"),
+    ("mean_abs_period_error_ms", ".1f"),
+    ("theta_dot_plus_rad_s", ".3f"),
+)
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """The demo's two series (its longest names, numbers inside them) and a long name without a series."""
+    folder = tmp_path_factory.mktemp("names")
+    files = [shutil.copy(f, folder / f.name) for f in (*critical_files()[:2], *critical_files()[10:], data_files()[0])]
+    files.append(shutil.copy(data_files()[1], folder / "a_much_longer_trial_name_of_wheel-7_at_slope_1.53deg_r2.csv"))
+    return build_report([Path(f) for f in files], folder / "rep", import_kwargs=GAP, critical=False)
+
+
+def parse_table(text: str) -> tuple[list[tuple[str, list[str]]], str | None]:
+    """The printed rows: (the trial name, its lines joined; the cells of its first line), and the prefix the
+    caption says was left out of the names."""
+    rows: list[tuple[str, list[str]]] = []
+    for line in text.splitlines():
+        if "│" not in line:
+            continue
+        cells = [c.strip() for c in line.split("│")]
+        if cells[1]:  # a row's first line: its status and numbers
+            rows.append((cells[0], cells[1:]))
+        else:  # the name continues
+            rows[-1] = (rows[-1][0] + cells[0], rows[-1][1])
+    caption = re.search(r"trial: the file name after '([^']*)'", text)
+    return rows, caption.group(1) if caption else None
+
+
+def name_lines(text: str) -> list[list[str]]:
+    """Each row's name as printed, line by line."""
+    out: list[list[str]] = []
+    for line in text.splitlines():
+        if "│" not in line:
+            continue
+        cells = [c.strip() for c in line.split("│")]
+        if cells[1]:
+            out.append([cells[0]])
+        else:
+            out[-1].append(cells[0])
+    return out
+
+
+@pytest.mark.parametrize("columns", [80, 120])
+def test_no_number_is_split_across_lines(report, columns, monkeypatch, capsys):
+    monkeypatch.setenv("COLUMNS", str(columns))
+    _print_report(report, "er", json_out=False)
+    text = capsys.readouterr().out
+    assert "…" not in text, text
+    table = [ln for ln in text.splitlines() if "│" in ln or "┃" in ln or "━" in ln]
+    assert table and all(len(ln) <= columns for ln in table), text
+    rows, prefix = parse_table(text)
+    metrics = report.metrics()
+    assert len(rows) == len(metrics)
+    for (name, cells), m in zip(rows, metrics):
+        stem = Path(m["trial"]).name.removesuffix(".csv")
+        assert (prefix or "") + name == stem, (name, stem)
+        for key, fmt in FORMATS:
+            if m[key] is not None and m[key] == m[key]:  # NaN: an empty cell
+                assert format(m[key], fmt) in cells, (key, m[key], cells)
+    for lines, m in zip(name_lines(text), metrics):
+        for line in lines[:-1]:
+            assert line[-1] in "_-", lines  # broken after a separator only
+        stem = Path(m["trial"]).name.removesuffix(".csv")
+        for number in re.findall(r"\d+(?:\.\d+)?", stem):  # every number in the name whole on one line
+            assert any(number in line for line in lines), (number, lines)
