@@ -27,7 +27,6 @@ from rimless.analysis.examples.critical_series import data_files as critical_fil
 from rimless.analysis.inference.compare import Simulator
 from rimless.analysis.kinematics.build import import_trial
 from rimless.analysis.report.html import build_report
-from rimless.analysis.report.series import series_name
 from rimless.cli import app as root_app
 
 runner = CliRunner()
@@ -236,6 +235,8 @@ def test_the_command_line_is_in_the_report_without_its_folders(tmp_path):
 
 
 def test_series_names_from_file_names():
+    from rimless.analysis.report.series import series_name
+
     # hand-made cases: what varies from run to run goes, the wheel and set-up stay
     assert series_name("SYNTHETIC_er_slope2.0deg_run2.csv") == "SYNTHETIC_er"
     assert series_name("SYNTHETIC_crit_slope1.90deg_release1.9.csv") == "SYNTHETIC_crit"
