@@ -33,6 +33,9 @@ def report(tmp_path_factory):
     folder = tmp_path_factory.mktemp("names")
     files = [shutil.copy(f, folder / f.name) for f in (*critical_files()[:2], *critical_files()[10:], data_files()[0])]
     files.append(shutil.copy(data_files()[1], folder / "a_much_longer_trial_name_of_wheel-7_at_slope_1.53deg_r2.csv"))
+    # longer than the name column at 120 columns, and mostly numbers: a fold anywhere would split one
+    numbers = "_".join(f"{10 + i}.{3 * i % 10}{7 * i % 10}" for i in range(16))
+    files.append(shutil.copy(data_files()[2], folder / f"w_{numbers}.csv"))
     return build_report([Path(f) for f in files], folder / "rep", import_kwargs=GAP, critical=False)
 
 
