@@ -125,6 +125,7 @@ class ReportResult:
         """metrics.csv rows: one per input (a refused file has status ``refused`` and the reason), with its
         series."""
         rows = []
+        pairs: list[tuple[Any, Any, str | None]]
         if self.sections:
             pairs = [(s.row, s.comparison, s.series) for s in self.sections]
         else:  # a result assembled by hand: the comparisons by their trial's source file

@@ -260,6 +260,20 @@ def test_demo(demo_run, tmp_path):
         rows = list(csv.DictReader(fh))
     assert len(rows) == n_all
     assert all(r["status"] == "ok" for r in rows if "_er_" in r["trial"])
+    # the printed table at the README's 80 columns: every number of metrics.csv whole on its trial's line
+    from tests.analysis.cli.test_report_table_numbers import parse_table
+
+    printed, prefix = parse_table(demo_run.stdout)
+    assert len(printed) == n_all
+    for (name, cells), r in zip(printed, rows):
+        assert (prefix or "") + name == r["trial"].removesuffix(".csv")
+        for key, fmt in (("slope_deg", ".3f"), ("rms_com_error_mm", ".2f"), ("theta_dot_plus_rad_s", ".3f")):
+            if r[key]:
+                assert format(float(r[key]), fmt) in cells, (key, r[key], cells)
+    # the two series stay apart; every trial has its section; no folder of this machine on the page
+    assert {r["series"] for r in rows} == {"SYNTHETIC_er", "SYNTHETIC_crit"}
+    assert page.count('<section class="trial"') == n_all
+    assert str(out.resolve().parent) not in page and str(Path.cwd()) not in page
     # the critical slope: printed, on the page, and near the truth model's
     crit = critical_truth()["dataset"]["critical_slope_deg"]
     line = next(ln for ln in demo_run.stdout.splitlines() if ln.startswith("critical slope from the trials:"))
