@@ -16,6 +16,7 @@ from rimless.analysis.cli import _print_report
 from rimless.analysis.examples.bundled import data_files
 from rimless.analysis.examples.critical_series import data_files as critical_files
 from rimless.analysis.report.html import build_report
+from tests.support.printed_table import name_lines, parse_table
 
 GAP = {"max_gap_s": 0.05}
 FORMATS = (
@@ -37,36 +38,6 @@ def report(tmp_path_factory):
     numbers = "_".join(f"{10 + i}.{3 * i % 10}{7 * i % 10}" for i in range(16))
     files.append(shutil.copy(data_files()[2], folder / f"w_{numbers}.csv"))
     return build_report([Path(f) for f in files], folder / "rep", import_kwargs=GAP, critical=False)
-
-
-def parse_table(text: str) -> tuple[list[tuple[str, list[str]]], str | None]:
-    """The printed rows: (the trial name, its lines joined; the cells of its first line), and the prefix the
-    caption says was left out of the names."""
-    rows: list[tuple[str, list[str]]] = []
-    for line in text.splitlines():
-        if "│" not in line:
-            continue
-        cells = [c.strip() for c in line.split("│")]
-        if cells[1]:  # a row's first line: its status and numbers
-            rows.append((cells[0], cells[1:]))
-        else:  # the name continues
-            rows[-1] = (rows[-1][0] + cells[0], rows[-1][1])
-    caption = re.search(r"trial: the file name after '([^']*)'", text)
-    return rows, caption.group(1) if caption else None
-
-
-def name_lines(text: str) -> list[list[str]]:
-    """Each row's name as printed, line by line."""
-    out: list[list[str]] = []
-    for line in text.splitlines():
-        if "│" not in line:
-            continue
-        cells = [c.strip() for c in line.split("│")]
-        if cells[1]:
-            out.append([cells[0]])
-        else:
-            out[-1].append(cells[0])
-    return out
 
 
 @pytest.mark.parametrize("columns", [80, 120])

@@ -261,7 +261,7 @@ def test_demo(demo_run, tmp_path):
     assert len(rows) == n_all
     assert all(r["status"] == "ok" for r in rows if "_er_" in r["trial"])
     # the printed table at the README's 80 columns: every number of metrics.csv whole on its trial's line
-    from tests.analysis.cli.test_report_table_numbers import parse_table
+    from tests.support.printed_table import parse_table
 
     printed, prefix = parse_table(demo_run.stdout)
     assert len(printed) == n_all
