@@ -325,3 +325,13 @@ def test_the_metrics_tables_fit_1280_px_and_numbers_never_wrap(tmp_path, sim):
     # a name breaks after '_' or '-' only, never inside a number such as 1.9
     first = page.tables["metrics"][1][0]
     assert all(first["text"][i - 1] in "_-" for i in first["breaks"])
+
+
+def test_a_report_from_python_names_the_function(tmp_path):
+    from rimless.analysis import write_report
+
+    res = write_report([data_files()[0]], tmp_path / "rep", max_gap_s=0.05)
+    facts = {r[0]["text"]: r[1]["text"] for r in _page(res.report_html).tables["provenance-facts"]}
+    assert facts["command"] == "Python API: rimless.analysis.write_report"
+    assert facts["wheel file"].startswith("none")  # Table 1, said so
+    assert res.summary()["provenance"]["command"] == facts["command"]
