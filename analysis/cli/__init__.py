@@ -10,6 +10,7 @@ commands, so that ``rimless --help`` needs no numpy); never rimless.cli.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -292,41 +293,79 @@ def bench_cmd(
 # ------------------------------------------------------------------------------------- report and demo
 
 
-def _print_report(res: Any, model: str, json_out: bool) -> None:
-    """The table (or the JSON summary) of a `rimless.analysis.report.batch.run_report` result."""
-    if json_out:
-        print_json(res.summary())
-        return
+def command_words(ctx: typer.Context) -> list[str]:
+    """The running command as its words from ``rimless`` on (what the report's provenance shows): the command's
+    path and every argument and option given on the command line (or by the environment), as parsed."""
+    words = ["rimless", *ctx.command_path.split()[1:]]
+    for p in ctx.command.params:
+        source = ctx.get_parameter_source(p.name) if p.name else None
+        if p.name is None or getattr(source, "name", None) not in ("COMMANDLINE", "ENVIRONMENT"):
+            continue
+        value = ctx.params.get(p.name)
+        values = list(value) if isinstance(value, list | tuple) else [value]
+        if p.param_type_name == "argument":
+            words += [str(v) for v in values]
+        elif getattr(p, "is_flag", False):
+            if value:
+                words.append(p.opts[0])
+            elif getattr(p, "secondary_opts", None):
+                words.append(p.secondary_opts[0])
+        else:
+            for v in values if getattr(p, "multiple", False) else [value]:
+                words += [p.opts[0], str(v)]
+    return words
+
+
+_NAME_BREAK = re.compile(r"(?<=[_\- ])")
+
+
+def wrap_name(name: str, width: int) -> str:
+    """``name`` on lines of at most ``width`` characters, broken after ``_``, ``-`` or a space only (a number
+    such as ``1.9`` in a name is never split); a piece longer than ``width`` stays whole on its line."""
+    lines: list[str] = []
+    for piece in _NAME_BREAK.split(name):
+        if lines and len(lines[-1]) + len(piece) <= width:
+            lines[-1] += piece
+        else:
+            lines.append(piece)
+    return "\n".join(line.rstrip() for line in lines)
+
+
+def _names_shown(names: list[str]) -> tuple[list[str], str | None]:
+    """The trial names with their common prefix (up to a ``_`` or ``-``, 6 characters or more) left out, and
+    the caption that says so."""
+    import os
+
+    prefix = os.path.commonprefix(names) if len(names) > 1 else ""
+    cut = max(prefix.rfind("_"), prefix.rfind("-")) + 1
+    prefix = prefix[:cut]
+    if len(prefix) < 6 or any(len(n) <= len(prefix) for n in names):
+        return names, None
+    return [n[len(prefix) :] for n in names], f"trial: the file name after {prefix!r}"
+
+
+def _report_table(res: Any, model: str, width: int) -> Any:
+    """The report's rich table at most ``width`` columns wide: numbers and headers never wrapped, the trial names
+    broken after ``_`` or ``-`` only, as narrow as they need."""
     from rich.console import Console
     from rich.table import Table
-
-    from rimless.analysis.report.batch import shown_path
-
-    table = Table(
-        title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation",
-        show_edge=False,
-        collapse_padding=True,
-        pad_edge=False,
-    )
-    table.add_column("trial", overflow="fold")  # the long name wraps; the numbers and headers never do
-    for col in ("status", "slope\ndeg", "steps", "RMS\nmm", "|dT|\nms", "θ'+\nrad/s"):
-        table.add_column(
-            col,
-            no_wrap=True,
-            min_width=max(len(w) for w in col.split("\n")),
-            justify="left" if col == "status" else "right",
-        )
 
     def f(v: Any, fmt: str) -> str:
         return "" if v is None or (isinstance(v, float) and v != v) else format(v, fmt)
 
-    for r in res.metrics():
-        table.add_row(
+    metrics = res.metrics()
+    names, caption = _names_shown(
+        [
             Path(str(r["trial"]))
             .name.removesuffix(".parquet")
             .removesuffix(".trial")
             .removesuffix(".csv")
-            .removesuffix(".c3d"),
+            .removesuffix(".c3d")
+            for r in metrics
+        ]
+    )
+    cells = [
+        (
             "[green]ok[/]" if r["status"] == "ok" else f"[red]{r['status']}[/]",
             f(r["slope_deg"], ".3f"),
             f(r["steps"], "d"),
@@ -334,7 +373,49 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
             f(r["mean_abs_period_error_ms"], ".1f"),
             f(r["theta_dot_plus_rad_s"], ".3f"),
         )
-    Console().print(table)
+        for r in metrics
+    ]
+
+    def build(name_width: int) -> Table:
+        table = Table(
+            title=f"{len(res.comparisons)} trial(s) vs the {model.upper()} simulation",
+            caption=caption,
+            show_edge=False,
+            collapse_padding=True,
+            pad_edge=False,
+        )
+        table.add_column("trial", no_wrap=True)  # broken by wrap_name, never inside a number
+        for col in ("status", "slope\ndeg", "steps", "RMS\nmm", "|dT|\nms", "θ'+\nrad/s"):
+            table.add_column(
+                col,
+                no_wrap=True,
+                min_width=max(len(w) for w in col.split("\n")),
+                justify="left" if col == "status" else "right",
+            )
+        for name, row in zip(names, cells):
+            table.add_row(wrap_name(name, name_width), *row)
+        return table
+
+    probe = Console(width=10_000, color_system=None)
+    longest = max((len(n) for n in names), default=5)
+    for name_width in range(longest, 4, -1):  # the widest name column that fits
+        table = build(name_width)
+        if probe.measure(table).maximum <= width:
+            return table
+    return build(5)
+
+
+def _print_report(res: Any, model: str, json_out: bool) -> None:
+    """The table (or the JSON summary) of a `rimless.analysis.report.batch.run_report` result."""
+    if json_out:
+        print_json(res.summary())
+        return
+    from rich.console import Console
+
+    from rimless.analysis.report.batch import shown_path
+
+    console = Console()
+    console.print(_report_table(res, model, console.width))
     typer.echo("RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
     for name, c in getattr(res, "clutch", {}).items():
         pairs = ", ".join(
@@ -362,6 +443,7 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
 @app.command("report")
 @user_facing
 def report_cmd(
+    ctx: typer.Context,
     trials: Annotated[list[Path], typer.Argument(help="Parquet trials (from `trials import`) or raw Vicon exports.")],
     out: Annotated[
         Path, typer.Option("--out", help="Folder for report.html, the PNG figures and metrics.csv.", metavar="DIR")
@@ -430,6 +512,7 @@ def report_cmd(
         robot_logs=logs,
         params=win.params,
         wheel_input=win,
+        argv=command_words(ctx),
     )
     _print_report(res, model, json_out)
     if not json_out:
@@ -448,6 +531,7 @@ def report_cmd(
 
 
 def demo_cmd(
+    ctx: typer.Context,
     out: Annotated[Path, typer.Option("--out", help="Folder for the demo report.")] = Path("rimless-demo"),
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary instead of the table.")] = False,
     params: ParamsOpt = None,
@@ -462,7 +546,7 @@ def demo_cmd(
         if not json_out:
             typer.echo(f"{n} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
 
-    res = run_demo(out, json_out=json_out, starting=starting, wheel_input=win)
+    res = run_demo(out, json_out=json_out, starting=starting, wheel_input=win, argv=command_words(ctx))
     _print_report(res, "er", json_out)
     if not json_out:
         typer.echo(critical_lines(res))

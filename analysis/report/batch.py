@@ -185,6 +185,8 @@ def run_report(
     title: str = "Vicon trials vs simulation",
     params: Any = None,
     wheel_input: Any = None,
+    argv: Sequence[str] | None = None,
+    api: str = "rimless.analysis.write_report",
     **report_kwargs: Any,
 ) -> ReportResult:
     """`build_report` with the ``model`` simulator at ``params`` (WheelParams, default Table 1; the slope is each
@@ -196,7 +198,8 @@ def run_report(
     replaces it. A folder or a missing input stops before
     any work (`UserError`). When no trial could be compared (every input refused or its comparison failed)
     nothing is written: a `UserError` with the first refusal when an input was refused, else a `RunFailure`
-    with the first failure."""
+    with the first failure. ``argv``: the command's words for the report's provenance (None: a Python call of
+    ``api``, by default `rimless.analysis.write_report`, whose implementation this is)."""
     check_inputs(files)
     out = Path(out)
     out_is_new = not out.exists()
@@ -220,6 +223,8 @@ def run_report(
                 title=title,
                 progress=step,
                 wheel_input=wheel_input,
+                argv=argv,
+                api=api,
                 **report_kwargs,
             )
         _no_result(res)
@@ -331,12 +336,17 @@ def demo_inputs() -> list[Path]:
 
 
 def run_demo(
-    out: Path, *, json_out: bool, starting: Callable[[int], None] | None = None, wheel_input: Any = None
+    out: Path,
+    *,
+    json_out: bool,
+    starting: Callable[[int], None] | None = None,
+    wheel_input: Any = None,
+    argv: Sequence[str] | None = None,
 ) -> ReportResult:
     """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series).
 
     Checks ``out`` (``--out``) before any work; ``starting(n)`` is called with the number of trials just before
-    the run."""
+    the run; ``argv``: the command's words for the report's provenance (None: ``run_demo`` from Python)."""
     files = demo_inputs()
     check_output_folder(out, option="--out")
     if starting is not None:
@@ -354,4 +364,6 @@ def run_demo(
         calibrate_c=True,
         params=wheel_input.params if wheel_input is not None else None,
         wheel_input=wheel_input,
+        argv=argv,
+        api="rimless.analysis.report.batch.run_demo",
     )

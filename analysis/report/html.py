@@ -3,12 +3,20 @@
 ``build_report(paths, out_dir)`` writes into ``out_dir``:
 
 - ``report.html`` — one page, no scripts and no external resources; the figures are PNG files beside it,
-  referenced by relative paths (copy or zip the folder to share it);
-- ``com_height.png`` — measured vs simulated CoM height per trial (paper: "Comparison of experimental and
+  referenced by relative paths (copy or zip the folder to share it). It holds the metrics (a row per input,
+  linking to the input's section), the wheel's parameters with their sources, the step periods by series, the
+  critical slope, a section per input (its figure, the importer's notes and warnings, its slope and the
+  slope's source) and the provenance (`rimless.analysis.report.provenance`: version, command line, date, wheel
+  file, every input by name and SHA-256). No absolute path of the machine appears in the page, the CSV or the
+  figures' metadata;
+- ``trial-<name>.png`` — per compared trial: CoM height and step periods, measured vs simulated;
+- ``com_height.png`` — measured vs simulated CoM height of every trial (paper: "Comparison of experimental and
   simulated vertical CoM trajectories");
-- ``step_period.png`` — step period vs step number, mean +- std over the trials of each slope bin, with the
-  simulation (paper: "step-period trends");
-- ``metrics.csv`` — one row per input (slope, steps, RMS CoM error, mean |period error|, fitted theta'+ ...);
+- ``step_period.png`` — step period vs step number, mean +- std over the trials of each slope bin within each
+  series (`rimless.analysis.report.series`: never pooled across series), with the simulation (paper:
+  "step-period trends");
+- ``metrics.csv`` — one row per input (slope, steps, RMS CoM error, mean |period error|, fitted theta'+ ...,
+  its series; the file by name);
 - ``critical_slope.png`` (when asked, default on) — verdicts (sustained / decaying / undetermined) against
   slope, the fitted probability of sustained walking, the bracket and the model's critical slopes.
 """
@@ -20,7 +28,7 @@ import csv
 import html
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from rimless.analysis.inference.background import Background, background_allowed
-from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial, step_period_trends
+from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial
 from rimless.analysis.io.robot_log import read_clutch_log
 from rimless.analysis.kinematics.inputs import InputRow, load_input
 from rimless.analysis.report.calibration_beside import (
@@ -38,9 +46,23 @@ from rimless.analysis.report.calibration_beside import (
     start_calibration,
 )
 from rimless.analysis.report.clutch import clutch_comparison, clutch_html
+from rimless.analysis.report.figures import DPI, com_figure, new_figure, period_figure, save_png, trial_figure
+from rimless.analysis.report.provenance import PathScrubber, Provenance, make_provenance
+from rimless.analysis.report.sections import (
+    CSS,
+    TrialSection,
+    anchors,
+    metrics_tables_html,
+    num,
+    parameters_html,
+    periods_html,
+    provenance_html,
+    trial_sections_html,
+)
+from rimless.analysis.report.series import file_stem, series_of, series_trends
 from rimless.errors import InputFileError
 
-__all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES"]
+__all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES", "DPI"]
 
 REPORT_FILES = {
     "html": "report.html",
@@ -49,7 +71,6 @@ REPORT_FILES = {
     "csv": "metrics.csv",
     "critical": "critical_slope.png",
 }
-DPI = 150
 METRIC_COLUMNS = [
     "trial",
     "file",
@@ -67,7 +88,10 @@ METRIC_COLUMNS = [
     "time_shift_ms",
     "height_offset_mm",
     "message",
+    "series",
 ]
+#: what the provenance says made a report built by a call of `build_report`
+BUILD_REPORT_API = "rimless.analysis.report.html.build_report"
 
 
 @dataclass
@@ -80,7 +104,7 @@ class ReportResult:
     figures: list[Path]
     inputs: list[InputRow]
     comparisons: list[TrialComparison]
-    groups: list[SlopeGroup]
+    groups: list[SlopeGroup]  # `rimless.analysis.report.series.SeriesSlopeGroup`: per series and slope bin
     seconds: float = 0.0
     critical: Any = None  # rimless.analysis.inference.critical_slope.CriticalSlopeResult, when computed
     calibration: Any = None  # rimless.analysis.inference.calibrate.CalibrationResult, when computed
@@ -89,23 +113,34 @@ class ReportResult:
     clutch: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: every wheel parameter's value, sd, unit and source (`rimless.sim.model.uncertain.WheelInput.parameters`)
     parameters: list[dict[str, Any]] | None = None
+    #: one per input, in the order given: its anchor on the page, series, comparison and figure
+    sections: list[TrialSection] = field(default_factory=list)
+    provenance: Provenance | None = None
 
     @property
     def refused(self) -> list[InputRow]:
         return [r for r in self.inputs if r.status == "refused"]
 
     def metrics(self) -> list[dict[str, Any]]:
-        """metrics.csv rows: one per input (a refused file has status ``refused`` and the reason)."""
+        """metrics.csv rows: one per input (a refused file has status ``refused`` and the reason), with its
+        series."""
         rows = []
-        by_file = {c.file: c for c in self.comparisons}
-        for r in self.inputs:
-            c = by_file.get(r.trial.meta.source_file) if r.trial is not None else None
+        pairs: list[tuple[Any, Any, str | None]]
+        if self.sections:
+            pairs = [(s.row, s.comparison, s.series) for s in self.sections]
+        else:  # a result assembled by hand: the comparisons by their trial's source file
+            by_file = {c.file: c for c in self.comparisons}
+            pairs = [
+                (r, by_file.get(r.trial.meta.source_file) if r.trial is not None else None, None) for r in self.inputs
+            ]
+        for r, c, series in pairs:
             if c is not None:
-                rows.append(c.metrics())
+                rows.append(c.metrics() | {"series": series})
             else:
                 rows.append(
                     {k: None for k in METRIC_COLUMNS}
                     | {"trial": Path(r.file).name, "file": r.file, "status": "refused", "message": r.reason}
+                    | {"series": series}
                 )
         return rows
 
@@ -134,6 +169,8 @@ class ReportResult:
             "calibration": self.calibration.summary() if self.calibration is not None else None,
             "clutch_time_per_step": self.clutch,
             "parameters": self.parameters,
+            "sections": [{"trial": s.name, "anchor": s.anchor, "series": s.series} for s in self.sections],
+            "provenance": self.provenance.to_dict() if self.provenance is not None else None,
         }
 
 
@@ -152,6 +189,9 @@ def build_report(
     critical_files: Sequence[str | Path] | None = None,
     robot_logs: dict[str, Path] | None = None,
     wheel_input: Any = None,
+    series: Mapping[str, str] | None = None,
+    argv: Sequence[str] | None = None,
+    api: str = BUILD_REPORT_API,
 ) -> ReportResult:
     """Import/read every input, compare with the simulation and write the report files (see the module doc).
 
@@ -164,7 +204,9 @@ def build_report(
     ``robot_logs``: input file name -> the robot's trial log of that trial (`clutch_comparison`);
     ``wheel_input``: the wheel's parameters with their uncertainties (`rimless.sim.model.uncertain.WheelInput`,
     default ``sim.params`` with the default uncertainties), listed and carried into the critical slopes
-    (`rimless.analysis.inference.held`).
+    (`rimless.analysis.inference.held`); ``series``: input file name or path -> its series (default: from the
+    file name, `rimless.analysis.report.series`); ``argv``: the command line that asked for the report (its
+    words after ``rimless``, shown with absolute paths shortened to names), None for a Python call of ``api``.
     """
     t_start = time.perf_counter()
     files = [Path(p) for p in paths]
@@ -182,6 +224,9 @@ def build_report(
     from rimless.sim.model.uncertain import default_wheel_input
 
     win = wheel_input if wheel_input is not None else default_wheel_input(sim.params)
+    logs = list((robot_logs or {}).values())
+    prov = make_provenance(files, argv=argv, api=api, wheel_path=win.path, robot_logs=logs)
+    scrub = PathScrubber([*files, *logs, *([win.path] if win.path is not None else [])], [out])
     beside = critical and calibrate_c and background_allowed()
     # two processes on the cores: BLAS threads here would wait for a core (warm demo 13.0-14.5 s, 14.5-18.5 s)
     with one_blas_thread() if beside else contextlib.nullcontext():
@@ -197,10 +242,13 @@ def build_report(
             robot_logs,
             progress,
             win,
+            series_of(files, series),
+            prov,
+            scrub,
         )
     res.parameters = win.parameters()
     res.seconds = time.perf_counter() - t_start
-    _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg))
+    _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg, win, scrub))
     return res
 
 
@@ -216,6 +264,9 @@ def _compare_and_report(
     robot_logs: dict[str, Path] | None,
     progress: Callable[[str], None] | None,
     win: Any,
+    series: list[str],
+    prov: Provenance,
+    scrub: PathScrubber,
 ) -> ReportResult:
     """Import, compare (the calibration of c in a second process meanwhile, when asked), then the rest."""
     calibrating: Background | None = prepared_calibration(sim.params) if calibrate_c else None
@@ -226,9 +277,13 @@ def _compare_and_report(
                 *calibration_args(sim.params, sim.model, *_critical_inputs(files, inputs, critical_files))
             )
         comps: list[TrialComparison] = []
-        for p, row in zip(files, inputs):
+        sections: list[TrialSection] = []
+        hashes = [f.sha256 for f in prov.files if f.role == "trial"]
+        for p, row, anchor, s, sha in zip(files, inputs, anchors([file_stem(p.name) for p in files]), series, hashes):
+            sections.append(TrialSection(anchor, p.name, s, row, sha256=sha))
             if row.trial is not None:
                 comps.append(compare_trial(row.trial, sim, name=p.name))
+                sections[-1].comparison = comps[-1]
                 if calibrate_c and calibrating is None:  # a cold cache: compiled once, by that comparison
                     calibrating = start_calibration(
                         sim.params, sim.model, *_critical_inputs(files, inputs, critical_files)
@@ -236,31 +291,31 @@ def _compare_and_report(
                     calibrate_c = calibrating is not None
             if progress:
                 progress(p.name)
-        return _rest_of_report(
-            files,
+        res = ReportResult(
             out,
-            sim,
+            out / REPORT_FILES["html"],
+            out / REPORT_FILES["csv"],
+            [],
             inputs,
             comps,
-            slope_bin_deg,
-            critical,
-            critical_files,
-            calibrating,
-            robot_logs,
-            progress,
-            win,
+            [],
+            sections=sections,
+            provenance=prov,
         )
+        _rest_of_report(
+            res, files, sim, slope_bin_deg, critical, critical_files, calibrating, robot_logs, progress, win
+        )
+        _write_csv(res.metrics(), res.metrics_csv, scrub)
+        return res
     finally:
         if calibrating is not None:
             calibrating.close()
 
 
 def _rest_of_report(
+    res: ReportResult,
     files: Sequence[Path],
-    out: Path,
     sim: Simulator,
-    inputs: list[InputRow],
-    comps: list[TrialComparison],
     slope_bin_deg: float,
     critical: bool,
     critical_files: Sequence[str | Path] | None,
@@ -268,31 +323,28 @@ def _rest_of_report(
     robot_logs: dict[str, Path] | None,
     progress: Callable[[str], None] | None,
     win: Any,
-) -> ReportResult:
-    """The report after the comparisons: trends, clutch logs, figures, the critical slope, metrics.csv."""
-    groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
-    clutch = {}
-    for name, log in (robot_logs or {}).items():
-        comp = next((c for c in comps if c.name == name), None)
-        clutch[name] = clutch_comparison(read_clutch_log(log), comp)
-    com_png = _com_figure(comps, out / REPORT_FILES["com"])
-    per_png = _period_figure(groups, out / REPORT_FILES["period"], sim.model)
-    res = ReportResult(
-        out,
-        out / REPORT_FILES["html"],
-        out / REPORT_FILES["csv"],
-        [com_png, per_png],
-        inputs,
-        comps,
-        groups,
-        clutch=clutch,
+) -> None:
+    """The report after the comparisons: trends by series, clutch logs, figures, the critical slope."""
+    compared = [s for s in res.sections if s.comparison is not None]
+    res.groups = list(
+        series_trends([s.comparison for s in compared], [s.series for s in compared], sim, slope_bin_deg=slope_bin_deg)
     )
+    for name, log in (robot_logs or {}).items():
+        comp = next((c for c in res.comparisons if c.name == name), None)
+        res.clutch[name] = clutch_comparison(read_clutch_log(log), comp)
+    out = res.out_dir
+    res.figures += [
+        com_figure(res.comparisons, out / REPORT_FILES["com"]),
+        period_figure(res.groups, out / REPORT_FILES["period"], sim.model),
+    ]
+    for s in compared:
+        if s.comparison.status != "failed":
+            s.figure = f"{s.anchor}.png"
+            res.figures.append(trial_figure(s.comparison, out / s.figure, s.name, sim.model))
     if critical:
-        _add_critical(res, sim, *_critical_inputs(files, inputs, critical_files), calibrating, progress, win)
+        _add_critical(res, sim, *_critical_inputs(files, res.inputs, critical_files), calibrating, progress, win)
     if res.calibration is None and all_suspect(res):
         _calibrate_for_misfit(res, sim, progress)
-    _write_csv(res.metrics(), res.metrics_csv)
-    return res
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -374,135 +426,6 @@ def _add_critical(
 # ------------------------------------------------------------------------------------------------ figures
 
 
-def _figure(w_in: float, h_in: float):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(w_in, h_in), dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _save(fig: Any, path: Path) -> None:
-    """Write the PNG at DPI through a temporary name (a half-written figure never has the final name)."""
-    tmp = path.with_name(path.stem + ".tmp.png")
-    engine = fig.get_layout_engine()
-    if engine is None:
-        fig.savefig(tmp, dpi=DPI)
-    else:  # lay out once: savefig with a layout engine draws the whole figure twice (layout pass, then render)
-        fig.draw_without_rendering()
-        fig.set_layout_engine("none")
-        try:
-            fig.savefig(tmp, dpi=DPI)
-        finally:
-            fig.set_layout_engine(engine)
-    tmp.replace(path)
-
-
-def _com_figure(comps: Sequence[TrialComparison], path: Path) -> Path:
-    from matplotlib.lines import Line2D
-
-    n = max(len(comps), 1)
-    ncol = 2 if n > 1 else 1
-    nrow = math.ceil(n / ncol)
-    fig = _figure(6.0 * ncol, 2.8 * nrow + 0.8)
-    fig.suptitle("CoM height: measured (dots) vs simulated (line); t = 0 at the first measured impact", fontsize=10)
-    handles = [
-        Line2D([], [], ls="", marker=".", color="tab:blue", label="measured (+ fitted height offset)"),
-        Line2D([], [], color="tab:orange", label="simulated (fitted release, time-shifted)"),
-        Line2D([], [], color="0.8", lw=0.8, label="measured impacts"),
-    ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
-    axes = []
-    for i in range(nrow * ncol):
-        ax = fig.add_subplot(nrow, ncol, i + 1)
-        axes.append(ax)
-        if i >= len(comps):
-            ax.axis("off")
-            if not comps:
-                ax.text(0.5, 0.5, "no trial to compare", ha="center", va="center", transform=ax.transAxes)
-            continue
-        c = comps[i]
-        if c.status == "failed":
-            ax.text(
-                0.5,
-                0.5,
-                _wrap(f"{c.name}\n{c.message}", 70),
-                ha="center",
-                va="center",
-                fontsize=8,
-                transform=ax.transAxes,
-                color="firebrick",
-            )
-            ax.set_xticks([])
-            ax.set_yticks([])
-            continue
-        ax.plot(c.time_s, c.measured_com_m * 1e3, ".", ms=2.5, color="tab:blue")
-        lo, hi = np.nanmin(c.time_s), np.nanmax(c.time_s)
-        m = (c.sim_time_s >= lo) & (c.sim_time_s <= hi)
-        ax.plot(c.sim_time_s[m], c.sim_curve_m[m] * 1e3, "-", lw=1.2, color="tab:orange")
-        for ti in c.measured_impact_time_s:
-            ax.axvline(ti, color="0.85", lw=0.6, zorder=0)
-        flag = "SUSPECT  " if c.status == "suspect" else ""
-        ax.set_title(
-            f"{flag}{c.name}, {c.slope_deg:.2f} deg\nRMS {c.rms_com_error_m * 1e3:.2f} mm, "
-            f"r {c.com_correlation:.2f}; fitted: shift {c.time_shift_s * 1e3:+.1f} ms, "
-            f"offset {c.height_offset_m * 1e3:+.1f} mm",
-            fontsize=7,
-            color="firebrick" if c.status == "suspect" else "black",
-        )
-        ax.set_xlabel("time from first impact, s", fontsize=8)
-        ax.set_ylabel("CoM height, mm", fontsize=8)
-        ax.tick_params(labelsize=7)
-    for r in range(nrow):  # one x-range per figure row
-        row = [
-            (axes[r * ncol + j], comps[r * ncol + j])
-            for j in range(ncol)
-            if r * ncol + j < len(comps) and comps[r * ncol + j].status != "failed"
-        ]
-        if row:
-            hi = max(float(np.nanmax(c.time_s)) for _, c in row)
-            lo = min(float(np.nanmin(c.time_s)) for _, c in row)
-            for ax, _ in row:
-                ax.set_xlim(lo, hi)
-    _save(fig, path)
-    return path
-
-
-def _period_figure(groups: Sequence[SlopeGroup], path: Path, model: str = "er") -> Path:
-    fig = _figure(7.0, 4.2)
-    ax = fig.add_subplot(1, 1, 1)
-    if not groups:
-        ax.text(0.5, 0.5, "no trial with detected steps", ha="center", va="center", transform=ax.transAxes)
-    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:gray"]
-    for j, g in enumerate(groups):
-        col = colors[j % len(colors)]
-        dx = (j - (len(groups) - 1) / 2) * 0.06
-        std = np.where(np.isfinite(g.std_period_s), g.std_period_s, 0.0)
-        ax.errorbar(
-            g.step_number + dx,
-            g.mean_period_s * 1e3,
-            yerr=std * 1e3,
-            fmt="o",
-            ms=4,
-            capsize=3,
-            color=col,
-            label=f"measured {g.slope_deg:g} deg (n = {len(g.trials)})",
-        )
-        if np.isfinite(g.sim_period_s).any():
-            ax.plot(
-                g.step_number, g.sim_period_s * 1e3, "--", color=col, lw=1.2, label=f"simulated {g.slope_deg:g} deg"
-            )
-    ax.set_xlabel("step number (1 = first measured step)")
-    ax.set_ylabel("step period, ms")
-    ax.set_title(f"Step period vs step number: mean ± std over trials, and the {model.upper()} simulation")
-    if groups:
-        ax.legend(fontsize=8, ncol=2)
-        ax.xaxis.get_major_locator().set_params(integer=True)
-    _save(fig, path)
-    return path
-
-
 def model_label(key: str, calibrated_text: str = "calibrated on these trials") -> str:
     """``er`` -> ``ER``; ``er_calibrated`` -> ``ER calibrated on these trials (fitted, not a prediction)``."""
     if key.endswith("_calibrated"):
@@ -518,7 +441,7 @@ def all_suspect(res: ReportResult) -> bool:
 
 def _critical_figure(cr: Any, path: Path) -> Path:
     """Verdicts against slope, the logistic P(sustained), the bracket, the estimates and the model's values."""
-    fig = _figure(9.0, 4.4)
+    fig = new_figure(9.0, 4.4)
     ax = fig.add_subplot(1, 1, 1)
     decided = [r["slope_deg"] for r in cr.per_trial if r["verdict"] != "undetermined"]
     ref = decided + [e.value_deg for e in cr.estimates]
@@ -591,24 +514,23 @@ def _critical_figure(cr: Any, path: Path) -> Path:
     ax.set_xlabel("slope, deg")
     ax.set_title("Critical slope: verdict of each trial from its step-to-step return map", fontsize=10)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-    _save(fig, path)
+    save_png(fig, path)
     return path
-
-
-def _wrap(text: str, width: int) -> str:
-    import textwrap
-
-    return "\n".join(textwrap.fill(line, width) for line in text.splitlines())
 
 
 # ------------------------------------------------------------------------------------------------- tables
 
 
-def _write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+def _write_csv(rows: list[dict[str, Any]], path: Path, scrub: Callable[[str], str] = str) -> None:
+    """metrics.csv: the rows with each file by name and the messages without absolute paths."""
     with open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=METRIC_COLUMNS)
+        w = csv.DictWriter(fh, fieldnames=METRIC_COLUMNS, extrasaction="ignore")
         w.writeheader()
         for r in rows:
+            r = r | {
+                "file": Path(str(r["file"])).name if r.get("file") else r.get("file"),
+                "message": scrub(r["message"]) if r.get("message") else r.get("message"),
+            }
             w.writerow(
                 {
                     k: (
@@ -621,155 +543,96 @@ def _write_csv(rows: list[dict[str, Any]], path: Path) -> None:
             )
 
 
-def _num(v: Any, fmt: str) -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "–"
-    return format(v, fmt)
+def _html(
+    res: ReportResult,
+    sim: Simulator,
+    title: str,
+    note: str | None,
+    slope_bin_deg: float,
+    win: Any = None,
+    scrub: Callable[[str], str] = str,
+) -> str:
+    def text(s: Any) -> str:
+        return html.escape(scrub(str(s)))
 
-
-_CSS = """
-body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2em auto;max-width:1200px;color:#222;padding:0 1em}
-h1{font-size:1.5em;margin-bottom:.2em} h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ddd}
-table{border-collapse:collapse;font-size:.85em;margin:.5em 0;max-width:100%} th,td{overflow-wrap:anywhere;border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}
-th{background:#f3f3f3} td.n{text-align:right;font-variant-numeric:tabular-nums}
-.ok{color:#1a7f37} .bad{color:#b42318} .suspect{color:#b54708;font-weight:bold} .note{background:#fff8e1;border-left:4px solid #f0b400;padding:.5em .8em}
-figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee} figcaption{font-size:.85em;color:#555}
-.small{font-size:.85em;color:#555}
-"""
-
-
-def _html(res: ReportResult, sim: Simulator, title: str, note: str | None, slope_bin_deg: float) -> str:
-    e = html.escape
     p = sim.params
-    rows = res.metrics()
     ok = [c for c in res.comparisons if c.status in ("ok", "suspect")]
     n_suspect = sum(c.status == "suspect" for c in res.comparisons)
+    prov = res.provenance
+    made = (
+        f"rimless {html.escape(prov.version)}, {html.escape(prov.date_utc)}; " if prov is not None else ""
+    ) + '<a href="#provenance">provenance</a>'
     parts = [
-        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{e(title)}</title>',
-        f"<style>{_CSS}</style></head><body>",
-        f"<h1>{e(title)}</h1>",
-        f'<p class="small">rimless trials report, {time.strftime("%Y-%m-%d %H:%M")}; {len(res.inputs)} input(s), '
-        f"{len(ok)} compared ({n_suspect} suspect), {len(res.refused)} refused; built in {res.seconds:.1f} s.</p>",
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{text(title)}</title>',
+        f"<style>{CSS}</style></head><body>",
+        f"<h1>{text(title)}</h1>",
+        f'<p class="small">{made}; {len(res.inputs)} input(s), {len(ok)} compared ({n_suspect} suspect), '
+        f"{len(res.refused)} refused; built in {res.seconds:.1f} s.</p>",
     ]
     if note:
-        parts.append(f'<p class="note">{e(note)}</p>')
+        parts.append(f'<p class="note">{text(note)}</p>')
     if all_suspect(res):
-        parts.append(_misfit_html(res))
+        parts.append(_misfit_html(res, text))
     parts.append(
         '<p class="small">Model: '
-        + e(sim.model.upper())
-        + f" wheel, mass model {e(p.mass_model)}, m_H = {p.hub_mass_kg:g} kg, "
-        f"m = {p.leg_mass_kg:g} kg, I_c = {p.inertia_kg_m2:g} kg m², L0 = {p.leg_length_m:g} m, k = {p.stiffness_n_per_m:g} N/m, "
-        f"c = {p.damping_ns_per_m:g} N s/m; slope = each trial's (given or estimated); rtol = {sim.rtol:g}. "
-        "Fitted per trial: the release speed θ' at the rigid-touchdown state θ = −α/2 one step before the first "
-        "measured impact, so that the first simulated step period equals the first measured one; θ'+ is the "
-        "simulated post-impact θ' at the first measured impact. The simulated curve is shifted by the lag (≤ 50 ms) "
-        "minimising the RMS; heights measured from the impact line get the best constant offset.</p>"
+        + html.escape(sim.model.upper())
+        + f" wheel, mass model {html.escape(p.mass_model)}, m_H = {p.hub_mass_kg:g} kg, "
+        f"m = {p.leg_mass_kg:g} kg, I_c = {p.inertia_kg_m2:g} kg m², L0 = {p.leg_length_m:g} m, "
+        f"k = {p.stiffness_n_per_m:g} N/m, c = {p.damping_ns_per_m:g} N s/m (sources and uncertainties: "
+        '<a href="#parameters">wheel parameters</a>); slope = each trial\'s (given or estimated); '
+        f"rtol = {sim.rtol:g}. Fitted per trial: the release speed θ' at the rigid-touchdown state θ = −α/2 one "
+        "step before the first measured impact, so that the first simulated step period equals the first "
+        "measured one; θ'+ is the simulated post-impact θ' at the first measured impact. The simulated curve is "
+        "shifted by the lag (≤ 50 ms) minimising the RMS; heights measured from the impact line get the best "
+        "constant offset.</p>"
     )
-
     if res.clutch:
         parts.append(clutch_html(res.clutch))
+    parts.append(metrics_tables_html(res.sections, res.metrics(), REPORT_FILES["csv"]))
+    if res.parameters:
+        fitted = []
+        if res.calibration is not None and win is not None:
+            from rimless.analysis.inference.runs import calibrated_input
+
+            fitted = [q for q in calibrated_input(win, res.calibration).parameters() if q["source"] == "fitted"]
+        parts.append(parameters_html(res.parameters, fitted, text))
+    series = list(dict.fromkeys(getattr(g, "series", "") for g in res.groups))
     parts.append(
-        "<h2>CoM height</h2><figure>"
+        '<h2 id="step-period">Step period</h2><figure>'
+        f'<img src="{REPORT_FILES["period"]}" alt="step period vs step number, one panel per series">'
+        f"<figcaption>Figure 1. Step period vs step number, one panel per series ({len(series)}: "
+        + text(", ".join(series) or "none")
+        + f"), mean ± std over the trials of each slope bin of that series (slopes rounded to {slope_bin_deg:g} "
+        "deg; trials of different series are never averaged together), with the simulation (dashed): each trial "
+        "simulated at its own slope from its own fitted release speed, averaged over the bin. Step 1 is fitted "
+        "(the release speed is chosen to match it), so it agrees by construction and is left out of the period "
+        "errors. A series is the file name without its slope and run tokens (see each trial's section).</figcaption>"
+        "</figure>"
+    )
+    parts.append(periods_html(res.groups, slope_bin_deg))
+    parts.append(
+        '<h2 id="com-height">CoM height</h2><figure>'
         f'<img src="{REPORT_FILES["com"]}" alt="CoM height, measured vs simulated">'
-        "<figcaption>Figure 1. Comparison of measured and simulated vertical CoM trajectories (hub height "
+        "<figcaption>Figure 2. Comparison of measured and simulated vertical CoM trajectories (hub height "
         "normal to the slope); grey lines: measured impacts. <b>Fitted per trial</b> (values in each panel's "
         "title and in the table): the release speed θ' (so that the first simulated period equals the "
         "first measured one), a time shift of the simulated curve (≤ 50 ms) and a constant height offset of "
         "the measured curve (heights measured from the impact line). Each trial is simulated at its own "
-        "slope. r: correlation of the two curves; a trial failing a plausibility check is marked SUSPECT."
-        + _fitted_list(res.comparisons)
-        + "</figcaption></figure>"
+        "slope. r: correlation of the two curves; a trial failing a plausibility check is marked SUSPECT. "
+        "Each trial's own figure is in its section.</figcaption></figure>"
     )
-    parts.append(
-        "<h2>Step period</h2><figure>"
-        f'<img src="{REPORT_FILES["period"]}" alt="step period vs step number">'
-        f"<figcaption>Figure 2. Step period vs step number, mean ± std over the trials of each slope bin "
-        f"(slopes rounded to {slope_bin_deg:g} deg), with the simulation (dashed): each trial simulated at "
-        "its own slope from its own fitted release speed, averaged over the bin. Step 1 is fitted (the "
-        "release speed is chosen to match it), so it agrees by construction and is left out of the period "
-        "errors.</figcaption></figure>"
-    )
-
-    parts.append(
-        '<h2>Metrics</h2><table id="metrics"><thead><tr><th>trial</th><th>status</th><th>slope, deg</th>'
-        "<th>steps</th><th>RMS CoM error, mm</th><th>RMS / amplitude</th><th>r</th>"
-        "<th>mean |period error|, steps 2..N, ms</th><th>fitted θ'+, rad/s</th>"
-        "<th>fitted release θ', rad/s</th><th>fitted time shift, ms</th><th>fitted height offset, mm</th>"
-        "<th>message</th></tr></thead><tbody>"
-    )
-    for r in rows:
-        cls = "ok" if r["status"] == "ok" else ("suspect" if r["status"] == "suspect" else "bad")
-        parts.append(
-            f'<tr class="trial"><td>{e(str(r["trial"]))}</td><td class="{cls}">{e(str(r["status"]))}</td>'
-            f'<td class="n">{_num(r["slope_deg"], ".3f")}</td><td class="n">{_num(r["steps"], "d")}</td>'
-            f'<td class="n">{_num(r["rms_com_error_mm"], ".2f")}</td>'
-            f'<td class="n">{_num(r.get("rms_com_relative"), ".2f")}</td>'
-            f'<td class="n">{_num(r.get("com_correlation"), ".3f")}</td>'
-            f'<td class="n">{_num(r["mean_abs_period_error_ms"], ".1f")}</td>'
-            f'<td class="n">{_num(r["theta_dot_plus_rad_s"], ".3f")}</td>'
-            f'<td class="n">{_num(r["release_theta_dot_rad_s"], ".3f")}</td>'
-            f'<td class="n">{_num(r["time_shift_ms"], "+.1f")}</td>'
-            f'<td class="n">{_num(r["height_offset_mm"], "+.1f")}</td><td>{e(r["message"] or "")}</td></tr>'
-        )
-    parts.append(
-        f'</tbody></table><p class="small">Also in <a href="{REPORT_FILES["csv"]}">{REPORT_FILES["csv"]}</a>.</p>'
-    )
-
-    if res.groups:
-        parts.append(
-            '<h2>Step period by slope</h2><table id="periods"><thead><tr><th>slope bin, deg</th><th>step</th>'
-            "<th>trials</th><th>mean, ms</th><th>std, ms</th><th>simulated, ms</th></tr></thead><tbody>"
-        )
-        for g in res.groups:
-            for row in g.rows():
-                parts.append(
-                    f'<tr><td class="n">{row["slope_deg"]:g}</td><td class="n">{row["step"]}</td>'
-                    f'<td class="n">{row["trials"]}</td><td class="n">{_num(row["mean_period_ms"], ".1f")}</td>'
-                    f'<td class="n">{_num(row["std_period_ms"], ".1f")}</td>'
-                    f'<td class="n">{_num(row["sim_period_ms"], ".1f")}</td></tr>'
-                )
-        parts.append("</tbody></table>")
-        for g in res.groups:
-            if g.message:
-                parts.append(f'<p class="bad">{g.slope_deg:g} deg: {e(g.message)}</p>')
-
     if res.critical is not None:
-        parts.append(_critical_html(res))
-
-    parts.append(
-        '<h2>Imported files</h2><table id="imports"><thead><tr><th>file</th><th>status</th><th>frames</th>'
-        "<th>slope (source)</th><th>hub</th><th>steps</th><th>warnings / reason</th></tr></thead><tbody>"
-    )
-    for inp in res.inputs:
-        s = inp.summary()
-        cls = "bad" if inp.status == "refused" else "ok"
-        if inp.trial is not None:
-            cells = (
-                f'<td class="n">{s["frames"]} @ {s["rate_hz"]:g} Hz</td>'
-                f"<td>{s['slope_deg']:.3f} deg ({e(s['slope_source'])})</td><td>{e(s['hub_source'])}</td>"
-                f'<td class="n">{s["steps"]}</td><td>{"<br>".join(e(w) for w in inp.warnings) or "none"}</td>'
-            )
-        else:
-            cells = f'<td></td><td></td><td></td><td></td><td class="bad">{e(inp.reason or "")}</td>'
-        parts.append(f'<tr><td>{e(inp.file)}</td><td class="{cls}">{e(inp.status)}</td>{cells}</tr>')
-    parts.append("</tbody></table></body></html>\n")
+        parts.append(_critical_html(res, text))
+    parts.append(trial_sections_html(res.sections, text))
+    if prov is not None:
+        parts.append(provenance_html(prov))
+    parts.append("</body></html>\n")
     return "\n".join(parts)
 
 
-def _fitted_list(comps: Sequence[TrialComparison]) -> str:
-    items = [
-        f"{html.escape(c.name)}: θ' = {c.release_theta_dot_rad_s:.3f} rad/s, shift {c.time_shift_s * 1e3:+.1f} ms, "
-        f"offset {c.height_offset_m * 1e3:+.1f} mm"
-        for c in comps
-        if c.status != "failed"
-    ]
-    return (" Fitted values: " + "; ".join(items) + ".") if items else ""
-
-
-def _misfit_html(res: ReportResult) -> str:
+def _misfit_html(res: ReportResult, text: Callable[[Any], str] = html.escape) -> str:
     """Every trial suspect: the model's parameters do not fit these trials; the calibrated comparison beside."""
-    e = html.escape
+    e = text
     out = [
         '<p class="bad" id="model-misfit"><b>The model\'s parameters do not fit these trials</b>: every '
         "compared trial is suspect against them. The per-trial numbers below compare the data with a model that "
@@ -794,10 +657,10 @@ def _misfit_html(res: ReportResult) -> str:
     for r in cal.residuals:
         out.append(
             f'<tr><td>{e(Path(r["trial"]).name)}</td><td class="n">{r["slope_deg"]:.3f}</td>'
-            f'<td class="n">{_num(r["table1_rms_period_ms"], ".1f")}</td>'
-            f'<td class="n">{_num(r["calibrated_rms_period_ms"], ".1f")}</td>'
-            f'<td class="n">{_num(r["table1_rms_com_mm"], ".2f")}</td>'
-            f'<td class="n">{_num(r["calibrated_rms_com_mm"], ".2f")}</td></tr>'
+            f'<td class="n">{num(r["table1_rms_period_ms"], ".1f")}</td>'
+            f'<td class="n">{num(r["calibrated_rms_period_ms"], ".1f")}</td>'
+            f'<td class="n">{num(r["table1_rms_com_mm"], ".2f")}</td>'
+            f'<td class="n">{num(r["calibrated_rms_com_mm"], ".2f")}</td></tr>'
         )
     out.append(
         f'</tbody></table><p class="small">Calibrated on these trials ({params}; 95 % intervals; fit '
@@ -807,8 +670,8 @@ def _misfit_html(res: ReportResult) -> str:
     return "\n".join(out)
 
 
-def _critical_html(res: ReportResult) -> str:
-    e = html.escape
+def _critical_html(res: ReportResult, text: Callable[[Any], str] = html.escape) -> str:
+    e = text
     cr = res.critical
     out = ['<h2 id="critical-slope">Critical slope</h2>']
     model = cr.model.get("critical_slope_deg", {})
@@ -817,7 +680,7 @@ def _critical_html(res: ReportResult) -> str:
             f'<p class="note" id="critical-values">From the trials: <b>{cr.chosen.value_deg:.3f} deg</b> '
             f"({e(cr.chosen.method)}, 95 % interval {cr.chosen.ci_deg[0]:.3f}-{cr.chosen.ci_deg[1]:.3f} deg); "
             + "; ".join(
-                f"model {e(model_label(m, 'with c calibrated on these trials'))}: <b>{_num(v, '.3f')} deg</b>"
+                f"model {e(model_label(m, 'with c calibrated on these trials'))}: <b>{num(v, '.3f')} deg</b>"
                 for m, v in model.items()
             )
             + ".</p>"
@@ -826,7 +689,7 @@ def _critical_html(res: ReportResult) -> str:
     else:
         out.append(
             f'<p class="bad" id="critical-values">No critical slope from the trials: {e(cr.why)}. '
-            + "; ".join(f"Model {e(m.upper())}: {_num(v, '.3f')} deg" for m, v in model.items())
+            + "; ".join(f"Model {e(m.upper())}: {num(v, '.3f')} deg" for m, v in model.items())
             + ".</p>"
         )
     out.append(
@@ -855,7 +718,7 @@ def _critical_html(res: ReportResult) -> str:
     for m, v in model.items():
         d = cr.model.get("detail", {}).get(m, {})
         out.append(
-            f'<tr><td>model {e(model_label(m))}</td><td class="n">{_num(v, ".3f")}</td><td></td>'
+            f'<tr><td>model {e(model_label(m))}</td><td class="n">{num(v, ".3f")}</td><td></td>'
             f"<td>branch ends by {e(str(d.get('reason', '')))}: {e(str(d.get('detail', '')))}</td></tr>"
         )
     out.append("</tbody></table>")
@@ -885,9 +748,9 @@ def _critical_html(res: ReportResult) -> str:
             f"<th>fitted ± 1 sigma</th><th>identifiable</th></tr></thead><tbody>{rows}</tbody></table>"
             f'<p class="small">Least squares on the step periods and CoM heights of {len(cal.residuals)} '
             "trials (a release speed and a time shift fitted per trial). RMS period error "
-            f"{_num(sm['rms_period_ms']['table1'], '.1f')} ms (Table 1) → "
-            f"{_num(sm['rms_period_ms']['calibrated'], '.1f')} ms; RMS CoM error "
-            f"{_num(sm['rms_com_mm']['table1'], '.2f')} → {_num(sm['rms_com_mm']['calibrated'], '.2f')} mm.</p>"
+            f"{num(sm['rms_period_ms']['table1'], '.1f')} ms (Table 1) → "
+            f"{num(sm['rms_period_ms']['calibrated'], '.1f')} ms; RMS CoM error "
+            f"{num(sm['rms_com_mm']['table1'], '.2f')} → {num(sm['rms_com_mm']['calibrated'], '.2f')} mm.</p>"
         )
         sep = sm.get("loss_separation")
         if sep and sep.get("note"):

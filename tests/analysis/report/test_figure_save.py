@@ -7,9 +7,9 @@ import numpy as np
 
 
 def _figure():
-    from rimless.analysis.report import html
+    from rimless.analysis.report import figures
 
-    fig = html._figure(8.0, 5.0)
+    fig = figures.new_figure(8.0, 5.0)
     for i in range(4):
         ax = fig.add_subplot(2, 2, i + 1)
         ax.plot(np.linspace(0, 1, 50), np.sin(np.linspace(0, 6 * (i + 1), 50)), ".-")
@@ -24,11 +24,11 @@ def _figure():
 def test_saved_png_is_the_one_savefig_writes(tmp_path):
     from PIL import Image
 
-    from rimless.analysis.report import html
+    from rimless.analysis.report import figures
 
     ours, plain = _figure(), _figure()
-    html._save(ours, tmp_path / "ours.png")
-    plain.savefig(tmp_path / "plain.png", dpi=html.DPI)
+    figures.save_png(ours, tmp_path / "ours.png")
+    plain.savefig(tmp_path / "plain.png", dpi=figures.DPI)
     a = np.asarray(Image.open(tmp_path / "ours.png"))
     b = np.asarray(Image.open(tmp_path / "plain.png"))
     assert a.shape == b.shape

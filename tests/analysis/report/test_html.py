@@ -186,19 +186,20 @@ def test_report_files_and_structure(tmp_path, sim):
     page = res.report_html.read_text()
     refs = _Refs()
     refs.feed(page)
-    assert sorted(refs.imgs) == ["com_height.png", "critical_slope.png", "step_period.png"]
+    trial_imgs = [f"trial-{n}.png" for n in (files[0].stem, files[1].stem, "third")]
+    assert sorted(refs.imgs) == sorted(["com_height.png", "critical_slope.png", "step_period.png", *trial_imgs])
     for img in refs.imgs:  # print resolution
         from PIL import Image
 
         with Image.open(res.out_dir / img) as im:
             assert im.info["dpi"][0] >= 149.5
     assert "steps 2..N" in page and "Fitted per trial" in page and "time shift" in page
-    for ref in refs.imgs + refs.links:
-        assert not ref.startswith(("/", "http")) and (res.out_dir / ref).stat().st_size > 1000
+    for ref in refs.imgs + [r for r in refs.links if not r.startswith("#")]:  # anchors: test_report_page.py
+        assert not ref.startswith(("/", "http")) and (res.out_dir / ref).stat().st_size > 500
     assert refs.metric_rows == 4
     assert [r.status for r in res.inputs] == ["imported", "imported", "read", "refused"]
     assert str(bad) in res.inputs[3].reason and "line 6" in res.inputs[3].reason
-    assert str(bad) in page
+    assert "bad.csv" in page and str(bad) not in page  # by name: no folder of this machine in the report
     with open(res.metrics_csv, newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["status"] for r in rows] == ["ok", "ok", "ok", "refused"]
@@ -259,6 +260,20 @@ def test_demo(demo_run, tmp_path):
         rows = list(csv.DictReader(fh))
     assert len(rows) == n_all
     assert all(r["status"] == "ok" for r in rows if "_er_" in r["trial"])
+    # the printed table at the README's 80 columns: every number of metrics.csv whole on its trial's line
+    from tests.support.printed_table import parse_table
+
+    printed, prefix = parse_table(demo_run.stdout)
+    assert len(printed) == n_all
+    for (name, cells), r in zip(printed, rows):
+        assert (prefix or "") + name == r["trial"].removesuffix(".csv")
+        for key, fmt in (("slope_deg", ".3f"), ("rms_com_error_mm", ".2f"), ("theta_dot_plus_rad_s", ".3f")):
+            if r[key]:
+                assert format(float(r[key]), fmt) in cells, (key, r[key], cells)
+    # the two series stay apart; every trial has its section; no folder of this machine on the page
+    assert {r["series"] for r in rows} == {"SYNTHETIC_er", "SYNTHETIC_crit"}
+    assert page.count('<section class="trial"') == n_all
+    assert str(out.resolve().parent) not in page and str(Path.cwd()) not in page
     # the critical slope: printed, on the page, and near the truth model's
     crit = critical_truth()["dataset"]["critical_slope_deg"]
     line = next(ln for ln in demo_run.stdout.splitlines() if ln.startswith("critical slope from the trials:"))

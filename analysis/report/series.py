@@ -1,0 +1,109 @@
+"""Series of trials: the step-period trends are averaged within a series, never across series.
+
+A series is the trials of one wheel and one set-up: by default the file name without what varies from run to
+run (a slope token such as ``slope2.0deg`` or ``1.5deg``, a run token such as ``run2``, ``take3``,
+``release1.9``, ``trial04``, a trailing counter), so ``wheelA_slope2.0deg_run1.csv`` and
+``wheelA_slope1.5deg_run2.csv`` are series ``wheelA``, and a file name with nothing left (``run1.csv``) belongs
+to the series of its folder's name. A mapping given by the caller (file name or path -> series) overrides
+this. Within a series the trials are binned by slope (`rimless.analysis.inference.compare.step_period_trends`);
+two series at the same rounded slope stay two groups (a wheel with another damping walks at other periods).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, step_period_trends
+
+__all__ = ["SeriesSlopeGroup", "series_name", "series_of", "series_trends", "file_stem"]
+
+_SUFFIXES = (".trial.parquet", ".parquet", ".csv", ".c3d", ".txt")
+#: tokens that vary from run to run within a series: a slope, a run/take/trial/release number, a bare counter
+_RUN_TOKEN = re.compile(
+    r"^(?:slope)?[+-]?\d+(?:[.p]\d+)?(?:deg|d|°)$"
+    r"|^slope[+-]?\d+(?:[.p]\d+)?$"
+    r"|^(?:run|take|trial|rep|repeat|release|try|attempt|r|t)[+-]?\d+(?:[.p]\d+)?$"
+    r"|^\d+$",
+    re.IGNORECASE,
+)
+_SEPARATORS = re.compile(r"[_\-\s]+")
+
+
+def file_stem(name: str) -> str:
+    """A trial's file name without its format suffix (``a.trial.parquet`` -> ``a``, ``b.csv`` -> ``b``)."""
+    base = Path(name).name
+    for suffix in _SUFFIXES:
+        if base.lower().endswith(suffix):
+            return base[: -len(suffix)]
+    return Path(base).stem
+
+
+def series_name(path: str | Path) -> str:
+    """The series of a trial file from its name (see the module doc); its folder's name when nothing is left."""
+    stem = file_stem(str(path))
+    kept = [t for t in _SEPARATORS.split(stem) if t and not _RUN_TOKEN.match(t)]
+    if kept:
+        sep = m.group(0)[0] if (m := _SEPARATORS.search(stem)) else "_"
+        return sep.join(kept)
+    folder = Path(path).parent.name
+    return folder or stem
+
+
+def series_of(files: Sequence[str | Path], given: Mapping[str, str] | None = None) -> list[str]:
+    """The series of each trial file: ``given`` (keyed by the file's name, its path as given or resolved) first,
+    else `series_name`."""
+    given = dict(given or {})
+    resolved = {}
+    for k, v in given.items():
+        try:
+            resolved[str(Path(k).resolve())] = v
+        except OSError:
+            continue
+    out = []
+    for f in files:
+        key = next((k for k in (str(f), Path(f).name) if k in given), None)
+        if key is not None:
+            out.append(given[key])
+            continue
+        try:
+            hit = resolved.get(str(Path(f).resolve()))
+        except OSError:
+            hit = None
+        out.append(hit if hit is not None else series_name(f))
+    return out
+
+
+@dataclass
+class SeriesSlopeGroup(SlopeGroup):
+    """A `SlopeGroup` of one series: the slope bin's trials are all of ``series``."""
+
+    series: str = ""
+
+    def rows(self) -> list[dict[str, Any]]:
+        """`SlopeGroup.rows` with the series named in each row."""
+        return [{"series": self.series} | row for row in super().rows()]
+
+
+def series_trends(
+    comparisons: Sequence[TrialComparison],
+    series: Sequence[str],
+    sim: Simulator | None = None,
+    *,
+    slope_bin_deg: float = 0.5,
+) -> list[SeriesSlopeGroup]:
+    """Step period against step number per series and slope bin (series in order of first appearance, slopes
+    ascending within each); ``series``: the series of each comparison (`series_of`), in the same order."""
+    if len(series) != len(comparisons):
+        raise ValueError(f"{len(series)} series for {len(comparisons)} comparisons")
+    order: dict[str, list[TrialComparison]] = {}
+    for c, s in zip(comparisons, series):
+        order.setdefault(s, []).append(c)
+    out = []
+    for name, comps in order.items():
+        for g in step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg):
+            out.append(SeriesSlopeGroup(**{f.name: getattr(g, f.name) for f in fields(g)}, series=name))
+    return out
