@@ -422,7 +422,8 @@ def build_trial(
         observed=observed,
         window_s=(t_rel, t_end),
         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0,
-        kink_channels=[hub_slope[:, 0], hub_slope[:, 1]] + ([] if angle is None else [angle]),
+        # the hub's velocity turns by alpha at an impact (the wheel's angular velocity may barely change)
+        kink_channels=[hub_slope[:, 0], hub_slope[:, 1]],
     )
 
     # walking window and ending

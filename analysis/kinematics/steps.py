@@ -309,12 +309,10 @@ def _rotation_at_kinks(
     ks: np.ndarray,
     alpha_rad: float,
 ) -> tuple[np.ndarray, float]:
-    """Impacts on the rotation, ``phase + k alpha + drift(k)``, with the phase and its drift taken from where the
-    motion kinks (`refine_kinks`) rather than from the CoM minima: a compliant leg keeps compressing after the
-    impact (the minimum comes late), and its stance length at the impact changes the angle between impacts a
-    little with the speed. One kink fixes the phase; four or more a linear drift (robust line). The times stay
-    those of the rotation when no kink is found. Returns (times s, phase of the first impact rad)."""
-    from rimless.analysis.kinematics.slope import robust_line
+    """Impacts on the rotation, ``phase + k alpha``, with the phase taken from where the motion kinks
+    (`refine_kinks`; the median over the impacts) rather than from the CoM minima: a compliant leg keeps
+    compressing after the impact, so its minimum comes late. The times stay those of the rotation when no kink
+    is found. Returns (times s, phase rad)."""
 
     if times.size < 1:
         return times, phase
@@ -325,21 +323,19 @@ def _rotation_at_kinks(
         return times, phase
     a_kink = np.interp(kt[done], tv, av)
     resid = a_kink - (phase + alpha_rad * ks[done])
-    if done.sum() >= 4:
-        a, b, _ = robust_line(ks[done].astype(np.float64), resid)
-        shift = a + b * ks
-    else:
-        shift = np.full(ks.size, float(np.median(resid)))
-    if np.max(np.abs(shift)) > 0.25 * alpha_rad:  # not a correction of the placement: keep the rotation's
+    shift = float(np.median(resid))
+    # the search reaches KINK_SEARCH_FRAMES: a larger shift is not a correction of the placement
+    step_rate = alpha_rad / max(float(np.median(np.diff(times))), 1e-9) if times.size > 1 else 0.0
+    if abs(shift) > KINK_SEARCH_FRAMES * float(np.median(np.diff(t))) * step_rate:
         return times, phase
-    targets = phase + alpha_rad * ks + shift
+    targets = phase + shift + alpha_rad * ks
     j = np.clip(np.searchsorted(av, targets, side="left"), 1, av.size - 1)
     a0, a1 = av[j - 1], av[j]
     frac = np.where(a1 > a0, (targets - a0) / np.where(a1 > a0, a1 - a0, 1.0), 0.0)
     out = tv[j - 1] + frac * (tv[j] - tv[j - 1])
     if not np.all(np.diff(out) > 0):
         return times, phase
-    return out, float(phase + shift[0])
+    return out, float(phase + shift)
 
 
 def detect_steps(

@@ -345,3 +345,27 @@ def rigid_walk(
         stalled=stalled,
         outcome=outcome,
     )
+
+
+def simulate_wheel(slope_deg: float, release_rad_s: float, *, c_ns_per_m: float, k_n_per_m: float, **kw) -> ErTruth:
+    """`simulate` with another leg damping and stiffness (the module's `C_NS_PER_M`, `K_N_PER_M` for the call)."""
+    global C_NS_PER_M, K_N_PER_M
+    old = C_NS_PER_M, K_N_PER_M
+    C_NS_PER_M, K_N_PER_M = c_ns_per_m, k_n_per_m
+    try:
+        return simulate(slope_deg, release_rad_s, **kw)
+    finally:
+        C_NS_PER_M, K_N_PER_M = old
+
+
+def mid_stance_gaps(truth: ErTruth, keep: tuple[int, ...], fraction: float, hold_s: float = 0.4) -> tuple:
+    """Occlusions of the middle ``fraction`` of every stance but those numbered in ``keep`` (0 = the stance after
+    the release): the impacts stay in view (the CoM minima), the stance feet only in the kept stances. Pass the
+    result as ``gaps=`` to `simulate` with the same arguments."""
+    imp = np.concatenate([[hold_s], truth.impact_time_s])
+    f = fraction / 2
+    return tuple(
+        (a + (0.5 - f) * (b - a), a + (0.5 + f) * (b - a))
+        for j, (a, b) in enumerate(zip(imp[:-1], imp[1:]))
+        if j not in keep
+    )
