@@ -10,6 +10,7 @@ were observed with no unbridged gap between them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,10 @@ __all__ = [
 
 #: Half window of the kink fit at each impact, frames (clipped to a fifth of a step).
 KINK_HALF_FRAMES = (4, 10)
+#: CoM minima agree on the impacts' phase when within this much of it (a fifth of a step, in phase radians) ...
+MINIMA_PHASE_TOL = 2 * np.pi / 5
+#: ... and at least this fraction of them must agree.
+MINIMA_AGREE_FRACTION = 0.6
 #: The kink is sought this far (frames) either side of the first placement of the impact.
 KINK_SEARCH_FRAMES = 1.5
 
@@ -410,10 +415,21 @@ def detect_steps(
         res = np.mod(a_min, alpha_rad) / alpha_rad * 2 * np.pi
         mean = np.angle(np.mean(np.exp(1j * res)))
         spread = np.abs(np.angle(np.exp(1j * (res - mean))))
-        if np.max(spread) > 2 * np.pi / 5:
+        # A wandering walk (a step steeper or shallower than the others) moves a compliant wheel's minimum
+        # within its step: a few minima off the others' phase do not make the rotation wrong. The phase is
+        # that of the minima that agree when they are at least 60 % of them (the kinks then place the impacts).
+        for _ in range(2):
+            agree = spread <= MINIMA_PHASE_TOL
+            if agree.all() or agree.sum() < max(2, math.ceil(MINIMA_AGREE_FRACTION * res.size)):
+                break
+            mean = np.angle(np.mean(np.exp(1j * res[agree])))
+            spread = np.abs(np.angle(np.exp(1j * (res - mean))))
+        agree = spread <= MINIMA_PHASE_TOL
+        if not agree.all() and agree.sum() < max(2, math.ceil(MINIMA_AGREE_FRACTION * res.size)):
             return StepResult.refuse(
                 f"CoM minima do not repeat every {np.degrees(alpha_rad):.0f} deg of rotation "
-                f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg)"
+                f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg; "
+                f"{int(agree.sum())} of {res.size} agree)"
             )
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]

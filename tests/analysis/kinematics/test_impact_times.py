@@ -44,3 +44,31 @@ def test_rigid_wheel_impacts_within_a_frame_and_unbiased(tmp_path):
     assert np.max(np.abs(err)) < 0.3 * frame, err
     assert np.median(np.abs(err)) < 0.1 * frame, err
     assert abs(np.median(err)) < 0.1 * frame, err
+
+
+def test_wandering_walk_is_not_refused_and_its_impacts_are_within_a_frame(tmp_path):
+    """A compliant ER wheel (k = 2000 N/m, c = 14 N s/m) whose steps wander (each step's slope drawn
+    N(2.5, 1.2^2) deg, `tests.support.floquet_truth`): 15 clear impacts, but a few CoM minima move within their
+    step. Main refused it: "CoM minima do not repeat every 45 deg of rotation (worst misfit 9.1 deg)"."""
+    import copy
+
+    from rimless.sim.model.params import WheelParams
+    from tests.support.floquet_truth import er_walk, record
+
+    rng = np.random.default_rng(4)
+    walk = er_walk(
+        WheelParams(stiffness_n_per_m=2000.0, damping_ns_per_m=14.0),
+        2.5,
+        1.2,
+        15,
+        rng,
+        release=float(rng.uniform(0.9, 1.1)),
+    )
+    assert not walk.stalled and walk.impacts.size == 15
+    start = copy.deepcopy(rng).uniform(0, 0.01)  # `record` draws its first frame's offset first
+    trial = import_trial(record(walk, tmp_path / "w.csv", rng, hold_s=0.4))
+    assert trial.meta.step_refused is None
+    got = trial.impact_time_s + start
+    assert got.size == 15
+    err = got - (0.4 + walk.impacts)
+    assert np.max(np.abs(err)) < 0.01, err
