@@ -377,6 +377,7 @@ def build_trial(
         idx.size,
         hub_unknown=hub_unknown,
         travel_m=travel_m,
+        step_m=2 * wheel_leg_length_m * math.sin(alpha_rad / 2),
     )
     if hub_unknown and evidence and evidence[0].source == "estimated":
         warnings.append(

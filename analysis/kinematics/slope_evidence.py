@@ -11,11 +11,13 @@ the motion (``estimated``), each a line of height against the horizontal distanc
   the slope when every impact looks alike; its standard error from the scatter about the line (Student t), plus
   `MINIMA_DRIFT_M` of unseen drift of the minima depth (a compliant leg compresses more when the wheel speeds
   up: a trend that looks like slope).
-* ``path``: the robust line through the whole hub path, used only when neither of the others exists.
+* ``path``: the robust line through the whole hub path, used only when neither of the others exists; the hub
+  rises and falls once a step, so its scatter counts as one sample a step (Student t).
 
-The estimate used is the best conditioned (narrowest interval). When two estimates disagree by more than their
-combined uncertainty, one of them is wrong and the data cannot say which: the interval used is widened to span
-the other's, and a warning says so. Angles in rad, lengths in m.
+The estimate used is the best conditioned (narrowest interval), combined by inverse variance with the others
+that agree with it (they come from different data: stance pivots, impact cusps). When two estimates disagree by
+more than their combined uncertainty, one of them is wrong and the data cannot say which: the interval of the
+best conditioned is widened to span the other's, and a warning says so. Angles in rad, lengths in m.
 """
 
 from __future__ import annotations
@@ -119,10 +121,11 @@ def slope_evidence(
     *,
     hub_unknown: bool = False,
     travel_m: float = 1.0,
+    step_m: float = 0.18,
 ) -> list[SlopeEvidence]:
     """Every slope source of the trial: ramp, given, then the estimates (contacts, impact line, or the whole
     path when neither exists). ``hub_line`` and ``frame0`` are `slope.SlopeFrame` fits (the hub at the CoM
-    minima, the whole path); ``travel_m`` the distance walked along the slope."""
+    minima, the whole path); ``travel_m`` the distance walked along the slope, ``step_m`` the hub's travel per step."""
     out = []
     if ramp_deg is not None and math.isfinite(ramp_deg):
         r = math.radians(ramp_deg)
@@ -170,6 +173,13 @@ def slope_evidence(
         line = hub_line if hub_line is not None else frame0
         half = max(Z95 * line.se_rad, floor) if math.isfinite(line.se_rad) else math.radians(45.0)
         how = f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)"
+        if hub_line is None and math.isfinite(line.residual_m) and travel_m > 0:
+            # The hub rises and falls once a step: its residuals are not independent samples. One per step:
+            # the standard error of a line through n_steps points spread evenly over the travel.
+            n_steps = max(travel_m / max(step_m, 1e-3), 1.0)
+            se_steps = line.residual_m * math.sqrt(12.0 / n_steps) / travel_m
+            half = max(half, _quantile(max(int(n_steps) - 2, 1)) * se_steps)
+            how += f"; the hub's rise and fall counted once a step ({n_steps:.1f} steps)"
         if hub_unknown:
             # An origin up to OFFSET_BOUND_M off an unknown hub rises and falls by up to twice that along the path.
             half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
@@ -230,10 +240,25 @@ def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], li
                 + ", ".join(e.kind for e in others)
                 + " estimate (the data cannot say which is wrong)",
             )
+        agreeing = [e for e in evidence[1:] if e.source == "estimated" and not _disagree(used, e)]
+        if agreeing and not others:
+            # consistent estimates from different data (stance pivots, impact cusps): inverse-variance combined
+            group = [used] + agreeing
+            w = [1.0 / max(e.half_rad, 1e-12) ** 2 for e in group]
+            mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sum(w)
+            half = 1.0 / math.sqrt(sum(w))
+            used = SlopeEvidence(
+                "estimated",
+                mean,
+                _interval(mean, half),
+                "inverse-variance combination of the consistent estimates: "
+                + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
+                "combined " + " and ".join(e.kind for e in group),
+            )
         rest = [e for e in evidence[1:] if e.source == "estimated"]
         if rest:
             notes.append(
-                f"slope from the {used.kind} (the narrowest interval); also estimated: "
+                f"slope from the {used.kind}; also estimated: "
                 + "; ".join(
                     f"{e.kind} {math.degrees(e.slope_rad):.3f} deg [{math.degrees(e.ci_rad[0]):.3f}, "
                     f"{math.degrees(e.ci_rad[1]):.3f}]"

@@ -116,7 +116,10 @@ def test_narrowest_used_and_disagreement_spanned_and_warned():
     assert lo == pytest.approx(b.ci_rad[0]) and hi == pytest.approx(a.ci_rad[1])  # spans the other estimate
     assert len(warnings) == 1 and "disagree" in warnings[0] and "impact line" in warnings[0]
     assert notes and "also estimated" in notes[0]
-    # estimates that agree: the narrowest, its interval unchanged, no warning
+    # estimates that agree: combined by inverse variance (by hand), no warning
     c = SlopeEvidence("estimated", math.radians(1.42), (math.radians(1.2), math.radians(1.64)), "c", "contacts")
     used, warnings, _ = choose_slope(sorted([c, b], key=lambda e: e.half_rad))
-    assert used[0] is b and not warnings
+    wb, wc = 1 / math.radians(0.05) ** 2, 1 / math.radians(0.22) ** 2
+    assert used[0].slope_rad == pytest.approx((wb * math.radians(1.4) + wc * math.radians(1.42)) / (wb + wc))
+    assert used[0].half_rad == pytest.approx(1 / math.sqrt(wb + wc))
+    assert "combined" in used[0].kind and "inverse-variance" in used[0].method and not warnings
