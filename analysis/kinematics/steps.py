@@ -318,7 +318,6 @@ def _rotation_at_kinks(
     (`refine_kinks`; the median over the impacts) rather than from the CoM minima: a compliant leg keeps
     compressing after the impact, so its minimum comes late. The times stay those of the rotation when no kink
     is found. Returns (times s, phase rad)."""
-
     if times.size < 1:
         return times, phase
     frames = float(np.median(np.diff(times))) / float(np.median(np.diff(t))) if times.size > 1 else 20.0
@@ -366,8 +365,9 @@ def detect_steps(
     window_s : (t0, t1) s: only impacts inside are sought (the walking window).
     min_advance_rad : an impact needs the wheel to have turned this much since t0 (a release from rest on two
         feet is not an impact), rad.
-    kink_channels : series (n,) that jump in slope at an impact (hub coordinates m, wheel angle rad): each
-        impact placed by the rotation or the CoM minima is then moved to where they kink (`refine_kinks`).
+    kink_channels : series (n,) whose rate jumps at an impact (the hub's slope-frame coordinates, m): with the
+        rotation, the phase of the impacts is taken from where they kink (`refine_kinks`, the median over the
+        impacts); without it, each CoM minimum is moved to its kink.
 
     Returns
     -------
