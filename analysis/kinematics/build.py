@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,16 @@ from rimless.analysis.kinematics.hub import (
     wheel_angle_from_rotations,
 )
 from rimless.analysis.kinematics.slope import MAX_PATH_POINTS, fit_slope, travel_direction
+from rimless.analysis.kinematics.slope_evidence import (  # noqa: F401  (the constants were defined here)
+    GIVEN_SLOPE_HALF_WIDTH_DEG,
+    MIN_ESTIMATE_HALF_WIDTH_DEG,
+    OFFSET_BOUND_M,
+    RAMP_SLOPE_HALF_WIDTH_DEG,
+    Z95,
+    SlopeEvidence,
+    choose_slope,
+    slope_evidence,
+)
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
 from rimless.analysis.kinematics.steps import StepResult, detect_steps, find_com_minima, noise_sigma, refine_cusps
 from rimless.analysis.kinematics.vertical import (
@@ -62,6 +72,9 @@ JUMP_M = 0.1
 #: Warn when the fitted centre of rotation lies this far (m) from the tracked point, or fits this badly (m).
 HUB_OFFSET_WARN_M = 0.01
 HUB_RESIDUAL_WARN_M = 0.002
+#: Stance-foot pivots that scatter more than this (RMS, m) about the wheel's star of feet are not all stance feet
+#: (windows cut by occlusions fit spurious pivots): neither their hub nor their slope line is used.
+FEET_MAX_RESIDUAL_M = 0.005
 
 
 def _full_grid(sec: Section) -> tuple[np.ndarray, np.ndarray]:
@@ -263,6 +276,13 @@ def build_trial(
                 )
                 contacts = None
         hub_c = hub_from_contacts(contacts, alpha_rad) if contacts is not None and hub_offset_m is None else None
+        if hub_c is not None and contacts is not None and hub_c[2] > FEET_MAX_RESIDUAL_M:
+            notes.append(
+                f"the {len(contacts.contacts)} pivots found do not sit on the wheel's star of feet (RMS "
+                f"{hub_c[2] * 1e3:.1f} mm, more than {FEET_MAX_RESIDUAL_M * 1e3:.0f} mm): not all are stance feet "
+                "(occlusions cut the stances?); neither their hub nor their slope line is used"
+            )
+            hub_c = contacts = None
         feet = hub_c if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M else None  # the hub the feet determine
         given: np.ndarray | Sequence[float] | None = hub_offset_m
         if feet is not None:
@@ -346,7 +366,7 @@ def build_trial(
     hs = frame0.to_slope(hub[fm[:: max(1, -(-fm.size // MAX_PATH_POINTS))]])[:, 0]
     del fm
     travel_m = float(np.nanmax(hs) - np.nanmin(hs)) if hs.size else 0.0
-    evidence = _slope_evidence(
+    evidence = slope_evidence(
         choice.ramp_slope_deg,
         choice.ramp_source,
         slope_deg,
@@ -357,6 +377,7 @@ def build_trial(
         idx.size,
         hub_unknown=hub_unknown,
         travel_m=travel_m,
+        step_m=2 * wheel_leg_length_m * math.sin(alpha_rad / 2),
     )
     if hub_unknown and evidence and evidence[0].source == "estimated":
         warnings.append(
@@ -364,9 +385,10 @@ def build_trial(
             "stance feet seen and too little rotation): its interval is wide; give --slope-deg or "
             "--slopes"
         )
+    evidence, slope_warnings, slope_notes = choose_slope(evidence)
     _check_slope_possible(vf.path, evidence, time_s, angle if contact_slope is not None else None, rough, alpha_rad)
-    for w in _slope_disagreements(evidence):
-        warnings.append(w)
+    warnings.extend(slope_warnings)
+    notes.extend(slope_notes)
     chosen = evidence[0]
     reference = "the robust line through the hub path"
     if idx.size >= 3:
@@ -401,6 +423,8 @@ def build_trial(
         observed=observed,
         window_s=(t_rel, t_end),
         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0,
+        # the hub's velocity turns by alpha at an impact (the wheel's angular velocity may barely change)
+        kink_channels=[hub_slope[:, 0], hub_slope[:, 1]],
     )
 
     # walking window and ending
@@ -500,118 +524,6 @@ def build_trial(
         up_axis_reason=up.reason,
     )
     return Trial(ts, meta)
-
-
-#: Half width of the 95 % interval of a slope given by the user (an inclinometer reading), deg.
-GIVEN_SLOPE_HALF_WIDTH_DEG = 0.1
-#: Half width of the 95 % interval of a static ramp's tilt (how well its axis or markers define the plane), deg.
-RAMP_SLOPE_HALF_WIDTH_DEG = 0.05
-#: Least half width of an estimated slope's 95 % interval, deg.
-MIN_ESTIMATE_HALF_WIDTH_DEG = 0.01
-Z95 = 1.959964
-#: How far an object origin may lie from the hub, m (bounds the slope error when the hub is not determined).
-OFFSET_BOUND_M = 0.05
-
-
-@dataclass(frozen=True)
-class SlopeEvidence:
-    """One source of the trial's slope: ``source`` ramp | given | estimated, the slope and its 95 % interval
-    (rad), and how it was obtained (``method``)."""
-
-    source: str
-    slope_rad: float
-    ci_rad: tuple[float, float]
-    method: str
-
-
-def _interval(slope_rad: float, half_rad: float) -> tuple[float, float]:
-    return (slope_rad - half_rad, slope_rad + half_rad)
-
-
-def _slope_evidence(
-    ramp_deg: float | None,
-    ramp_src: str | None,
-    given_deg: float | None,
-    contact_slope: tuple[float, float, float] | None,
-    contacts,
-    hub_line,
-    frame0,
-    n_minima: int,
-    *,
-    hub_unknown: bool = False,
-    travel_m: float = 1.0,
-) -> list[SlopeEvidence]:
-    """Every slope source of the trial, the best first (ramp, given, estimated)."""
-    out = []
-    if ramp_deg is not None and math.isfinite(ramp_deg):
-        r = math.radians(ramp_deg)
-        out.append(
-            SlopeEvidence(
-                "ramp",
-                r,
-                _interval(r, math.radians(RAMP_SLOPE_HALF_WIDTH_DEG)),
-                f"{ramp_src} (95 % interval +- {RAMP_SLOPE_HALF_WIDTH_DEG} deg assumed)",
-            )
-        )
-    if given_deg is not None:
-        g = math.radians(given_deg)
-        out.append(
-            SlopeEvidence(
-                "given",
-                g,
-                _interval(g, math.radians(GIVEN_SLOPE_HALF_WIDTH_DEG)),
-                f"given by the user (95 % interval +- {GIVEN_SLOPE_HALF_WIDTH_DEG} deg assumed)",
-            )
-        )
-    floor = math.radians(MIN_ESTIMATE_HALF_WIDTH_DEG)
-    if contact_slope is not None:
-        phi, se, rms = contact_slope
-        n = len(contacts.contacts)
-        out.append(
-            SlopeEvidence(
-                "estimated",
-                phi,
-                _interval(phi, max(Z95 * se, floor)),
-                f"line through {n} stance-foot contact points (walking window; no-slip: a stance "
-                f"foot does not move), scatter {rms * 1e3:.2f} mm",
-            )
-        )
-    else:
-        line = hub_line if hub_line is not None else frame0
-        half = max(Z95 * line.se_rad, floor) if math.isfinite(line.se_rad) else math.radians(45.0)
-        how = (
-            f"{line.source} (walking window)"
-            if hub_line is not None
-            else f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)"
-        )
-        if hub_unknown:
-            # An origin up to OFFSET_BOUND_M off an unknown hub rises and falls by up to twice that along the path.
-            half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
-            how += (
-                "; the hub is not determined (fewer than two stance feet seen, too little rotation): the "
-                f"interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off the hub"
-            )
-        if hub_line is not None or (given_deg is None and ramp_deg is None):
-            out.append(SlopeEvidence("estimated", line.slope_rad, _interval(line.slope_rad, half), how))
-    return out
-
-
-def _slope_disagreements(evidence: list[SlopeEvidence]) -> list[str]:
-    """Warnings for pairs of sources whose difference exceeds their combined uncertainty."""
-    out = []
-    for i, a in enumerate(evidence):
-        for b in evidence[i + 1 :]:
-            ha = (a.ci_rad[1] - a.ci_rad[0]) / 2
-            hb = (b.ci_rad[1] - b.ci_rad[0]) / 2
-            diff = abs(a.slope_rad - b.slope_rad)
-            if diff > math.hypot(ha, hb):
-                out.append(
-                    f"the {a.source} slope {math.degrees(a.slope_rad):.3f} deg and the {b.source} slope "
-                    f"{math.degrees(b.slope_rad):.3f} deg disagree by {math.degrees(diff):.3f} deg, more "
-                    f"than their uncertainty ({math.degrees(math.hypot(ha, hb)):.3f} deg at 95 %); "
-                    f"{evidence[0].source} is used"
-                )
-    return out
 
 
 def _check_slope_possible(

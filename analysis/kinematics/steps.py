@@ -10,13 +10,32 @@ were observed with no unbridged gap between them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from rimless.analysis.io.trial import ALPHA_RAD
 
-__all__ = ["StepResult", "noise_sigma", "find_com_minima", "refine_cusp", "refine_cusps", "detect_steps", "ALPHA_RAD"]
+__all__ = [
+    "StepResult",
+    "noise_sigma",
+    "find_com_minima",
+    "refine_cusp",
+    "refine_cusps",
+    "refine_kinks",
+    "detect_steps",
+    "ALPHA_RAD",
+]
+
+#: Half window of the kink fit at each impact, frames (clipped to a fifth of a step).
+KINK_HALF_FRAMES = (4, 10)
+#: CoM minima agree on the impacts' phase when within this much of it (a fifth of a step, in phase radians) ...
+MINIMA_PHASE_TOL = 2 * np.pi / 5
+#: ... and at least this fraction of them must agree.
+MINIMA_AGREE_FRACTION = 0.6
+#: The kink is sought this far (frames) either side of the first placement of the impact.
+KINK_SEARCH_FRAMES = 1.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,6 +162,70 @@ def refine_cusps(t: np.ndarray, y: np.ndarray, idx: np.ndarray, half: int) -> tu
     return tc, yc
 
 
+def _kink_cost(u: np.ndarray, ys: np.ndarray) -> float:
+    """Residual sum of squares of continuous piecewise quadratics joined at u = 0 (a jump of the slope there)
+    fitted to every column of ``ys`` (already scaled by its noise)."""
+    right = (u > 0).astype(np.float64)
+    a = np.column_stack([np.ones_like(u), u, u * u, right * u, right * u * u])
+    sol, *_ = np.linalg.lstsq(a, ys, rcond=None)
+    r = ys - a @ sol
+    return float(np.sum(r * r))
+
+
+def refine_kinks(
+    time_s: np.ndarray,
+    channels: list[np.ndarray],
+    times: np.ndarray,
+    observed: np.ndarray,
+    half_frames: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each impact where the motion's velocity jumps: (times s, True where refined).
+
+    At an impact the feet are pinned at once: the hub's velocity and the wheel's angular velocity jump, so each
+    channel (hub coordinates m, wheel angle rad; NaN at gaps) is continuous with a kink. Around each time in
+    ``times`` a window of ``half_frames`` observed frames either side is fitted with a continuous piecewise
+    quadratic per channel (weighted by its noise, `noise_sigma`) whose join moves within `KINK_SEARCH_FRAMES`
+    frames; the join with the least residual is the impact. A window with an unobserved frame, or whose best
+    join sits on the edge of the search, keeps its time (not refined)."""
+    t = np.asarray(time_s, dtype=np.float64)
+    out = np.asarray(times, dtype=np.float64).copy()
+    done = np.zeros(out.size, bool)
+    if out.size == 0 or t.size < 2 * half_frames + 1 or not channels:
+        return out, done
+    dt = float(np.median(np.diff(t)))
+    scaled = []
+    for c in channels:
+        c = np.asarray(c, dtype=np.float64)
+        sig = noise_sigma(c)
+        if not np.isfinite(sig):
+            continue
+        # a floor: noise-free data would weigh one channel infinitely
+        scale = max(sig, 1e-6 * max(float(np.nanmax(np.abs(c))), 1e-3))
+        scaled.append(c / scale)
+    if not scaled:
+        return out, done
+    ys_all = np.column_stack(scaled)
+    good = observed & ~np.isnan(ys_all).any(axis=1)
+    grid = np.linspace(-KINK_SEARCH_FRAMES, KINK_SEARCH_FRAMES, int(round(KINK_SEARCH_FRAMES * 20)) * 2 + 1) * dt
+    for j, t0 in enumerate(out):
+        i = int(np.clip(np.searchsorted(t, t0), 0, t.size - 1))
+        lo, hi = i - half_frames, i + half_frames + 1
+        if lo < 0 or hi > t.size or not good[lo:hi].all():
+            continue
+        tw, yw = t[lo:hi] - t0, ys_all[lo:hi]
+        cost = np.array([_kink_cost(tw - g, yw) for g in grid])
+        k = int(np.argmin(cost))
+        if k == 0 or k == grid.size - 1:
+            continue
+        c0, c1, c2 = cost[k - 1 : k + 2]
+        den = c0 - 2 * c1 + c2
+        step = float(grid[1] - grid[0])
+        shift = 0.5 * (c0 - c2) / den * step if den > 0 else 0.0
+        out[j] = t0 + float(grid[k]) + float(np.clip(shift, -step, step))
+        done[j] = True
+    return out, done
+
+
 def find_com_minima(
     time_s: np.ndarray,
     height_m: np.ndarray,
@@ -210,6 +293,55 @@ def _periods(
     return np.diff(times)[keep], impact_k[1:][keep]
 
 
+def _at_kinks(t: np.ndarray, channels: list[np.ndarray] | None, times: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """`refine_kinks` with a window of a fifth of the median step (within `KINK_HALF_FRAMES`); sorted times."""
+    if channels is None or times.size < 2:
+        return times
+    frames = float(np.median(np.diff(times))) / float(np.median(np.diff(t)))
+    half = int(np.clip(round(0.2 * frames), *KINK_HALF_FRAMES))
+    refined, _ = refine_kinks(t, channels, times, obs, half)
+    return refined if np.all(np.diff(refined) > 0) else times
+
+
+def _rotation_at_kinks(
+    t: np.ndarray,
+    channels: list[np.ndarray],
+    times: np.ndarray,
+    obs: np.ndarray,
+    tv: np.ndarray,
+    av: np.ndarray,
+    phase: float,
+    ks: np.ndarray,
+    alpha_rad: float,
+) -> tuple[np.ndarray, float]:
+    """Impacts on the rotation, ``phase + k alpha``, with the phase taken from where the motion kinks
+    (`refine_kinks`; the median over the impacts) rather than from the CoM minima: a compliant leg keeps
+    compressing after the impact, so its minimum comes late. The times stay those of the rotation when no kink
+    is found. Returns (times s, phase rad)."""
+    if times.size < 1:
+        return times, phase
+    frames = float(np.median(np.diff(times))) / float(np.median(np.diff(t))) if times.size > 1 else 20.0
+    half = int(np.clip(round(0.2 * frames), *KINK_HALF_FRAMES))
+    kt, done = refine_kinks(t, channels, times, obs, half)
+    if not done.any():
+        return times, phase
+    a_kink = np.interp(kt[done], tv, av)
+    resid = a_kink - (phase + alpha_rad * ks[done])
+    shift = float(np.median(resid))
+    # the search reaches KINK_SEARCH_FRAMES: a larger shift is not a correction of the placement
+    step_rate = alpha_rad / max(float(np.median(np.diff(times))), 1e-9) if times.size > 1 else 0.0
+    if abs(shift) > KINK_SEARCH_FRAMES * float(np.median(np.diff(t))) * step_rate:
+        return times, phase
+    targets = phase + shift + alpha_rad * ks
+    j = np.clip(np.searchsorted(av, targets, side="left"), 1, av.size - 1)
+    a0, a1 = av[j - 1], av[j]
+    frac = np.where(a1 > a0, (targets - a0) / np.where(a1 > a0, a1 - a0, 1.0), 0.0)
+    out = tv[j - 1] + frac * (tv[j] - tv[j - 1])
+    if not np.all(np.diff(out) > 0):
+        return times, phase
+    return out, float(phase + shift)
+
+
 def detect_steps(
     time_s: np.ndarray,
     com_height_m: np.ndarray,
@@ -219,6 +351,7 @@ def detect_steps(
     observed: np.ndarray | None = None,
     window_s: tuple[float, float] | None = None,
     min_advance_rad: float = 0.0,
+    kink_channels: list[np.ndarray] | None = None,
 ) -> StepResult:
     """Impacts and step periods of a trial, per observed segment.
 
@@ -232,6 +365,9 @@ def detect_steps(
     window_s : (t0, t1) s: only impacts inside are sought (the walking window).
     min_advance_rad : an impact needs the wheel to have turned this much since t0 (a release from rest on two
         feet is not an impact), rad.
+    kink_channels : series (n,) whose rate jumps at an impact (the hub's slope-frame coordinates, m): with the
+        rotation, the phase of the impacts is taken from where they kink (`refine_kinks`, the median over the
+        impacts); without it, each CoM minimum is moved to its kink.
 
     Returns
     -------
@@ -279,10 +415,21 @@ def detect_steps(
         res = np.mod(a_min, alpha_rad) / alpha_rad * 2 * np.pi
         mean = np.angle(np.mean(np.exp(1j * res)))
         spread = np.abs(np.angle(np.exp(1j * (res - mean))))
-        if np.max(spread) > 2 * np.pi / 5:
+        # A wandering walk (a step steeper or shallower than the others) moves a compliant wheel's minimum
+        # within its step: a few minima off the others' phase do not make the rotation wrong. The phase is
+        # that of the minima that agree when they are at least 60 % of them (the kinks then place the impacts).
+        for _ in range(2):
+            agree = spread <= MINIMA_PHASE_TOL
+            if agree.all() or agree.sum() < max(2, math.ceil(MINIMA_AGREE_FRACTION * res.size)):
+                break
+            mean = np.angle(np.mean(np.exp(1j * res[agree])))
+            spread = np.abs(np.angle(np.exp(1j * (res - mean))))
+        agree = spread <= MINIMA_PHASE_TOL
+        if not agree.all() and agree.sum() < max(2, math.ceil(MINIMA_AGREE_FRACTION * res.size)):
             return StepResult.refuse(
                 f"CoM minima do not repeat every {np.degrees(alpha_rad):.0f} deg of rotation "
-                f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg)"
+                f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg; "
+                f"{int(agree.sum())} of {res.size} agree)"
             )
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]
@@ -309,6 +456,8 @@ def detect_steps(
             return StepResult.refuse(
                 "fewer than two observed impacts (the others fall in gaps or on the first or last frame)"
             )
+        if kink_channels is not None:
+            times, phase = _rotation_at_kinks(t, kink_channels, times, obs, tv, av, phase, ks, alpha_rad)
         periods, pk = _periods(ks, times, t, unbridged)
         return StepResult(
             times,
@@ -335,5 +484,6 @@ def detect_steps(
     times, ks = tmin[seen], ks[seen]
     if times.size < 2:
         return StepResult.refuse("fewer than two observed CoM minima")
+    times = _at_kinks(t, kink_channels, times, obs)
     periods, pk = _periods(ks, times, t, unbridged)
     return StepResult(times, periods, "com-minima", None, None, impact_step=ks - ks[0], period_step=pk - ks[0])

@@ -256,3 +256,116 @@ def in_lab(truth: ErTruth, lab_from_model: np.ndarray) -> ErTruth:
         feet_world=[m @ f for f in truth.feet_world],
         rot=None if truth.rot is None else rm * truth.rot,
     )
+
+
+def _embed(
+    name: str,
+    slope_deg: float,
+    t: np.ndarray,
+    x: np.ndarray,
+    hgt: np.ndarray,
+    beta: np.ndarray,
+    impacts: np.ndarray,
+    *,
+    rate_hz: float,
+    origin_body_m,
+    yaw_deg: float,
+    noise_m: float,
+    angle_noise_rad: float,
+    seed: int,
+    steps: int,
+    stalled: bool,
+    outcome: str,
+) -> ErTruth:
+    """Sample a slope-frame motion (hub x, height, body turn beta since the release; fine time grid ``t``) at
+    ``rate_hz`` with a random sub-frame offset and embed it in a Z-up world as `simulate` does."""
+    rng = np.random.default_rng(seed)
+    tf = np.arange(0.0, t[-1], 1.0 / rate_hz) + float(rng.uniform(0, 1.0 / rate_hz))
+    tf = tf[tf <= t[-1]]
+    xs, hs, bs = (np.interp(tf, t, v) for v in (x, hgt, beta))
+    phi, yaw = math.radians(slope_deg), math.radians(yaw_deg)
+    trv = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    d = math.cos(phi) * trv - math.sin(phi) * up
+    nrm = math.sin(phi) * trv + math.cos(phi) * up
+    w = np.cross(d, nrm)
+    org = np.array([-0.2, 0.5, 0.25])
+    hub = org + np.outer(xs, d) + np.outer(hs, nrm)
+    rot = Rotation.from_rotvec(np.outer(-bs, w)) * Rotation.from_matrix(np.column_stack([d, nrm, w]))
+    o = np.asarray(origin_body_m, float)
+    trans = hub + rot.apply(o)
+    noisy_rot = Rotation.from_rotvec(rng.normal(0, angle_noise_rad, (tf.size, 3))) * rot
+    pose = np.column_stack([noisy_rot.as_rotvec(), trans + rng.normal(0, noise_m, trans.shape)])
+    return ErTruth(name, slope_deg, tf, pose, hub, np.asarray(impacts, float), steps, stalled, outcome, o, [], rot)
+
+
+def rigid_walk(
+    slope_deg: float,
+    omega0_rad_s: float,
+    *,
+    truth=None,
+    ramp_steps: int = 11,
+    hold_s: float = 0.3,
+    rate_hz: float = 100.0,
+    origin_body_m=(0.02, -0.03, 0.01),
+    yaw_deg: float = -25.0,
+    noise_m: float = 0.3e-3,
+    angle_noise_rad: float = 1e-3,
+    seed: int = 0,
+) -> ErTruth:
+    """A rigid wheel (`tests.support.analysis_rigid_truth.RigidTruth`: a pendulum stance integrated by scipy,
+    angular momentum kept about the new foot at impact) held for ``hold_s``, released at theta = -alpha/2 with
+    ``omega0``, walking ``ramp_steps`` steps (or stalling), recorded as `simulate` records: the impact times are
+    the truth's own (the touchdown events located by solve_ivp)."""
+    from tests.support.analysis_rigid_truth import RigidTruth
+
+    rt = RigidTruth() if truth is None else truth
+    tt, xx, yy, ang, imp, stalled = rt.walk(slope_deg, omega0_rad_s, ramp_steps, dt=2e-4)
+    hold = np.arange(0.0, hold_s, 2e-4)
+    t = np.concatenate([hold, hold_s + tt])
+    x = np.concatenate([np.full(hold.size, xx[0]), xx])
+    h = np.concatenate([np.full(hold.size, yy[0]), yy])
+    b = np.concatenate([np.zeros(hold.size), ang])
+    outcome = "stalled" if stalled else "walked"
+    return _embed(
+        f"rigid_{slope_deg}deg",
+        slope_deg,
+        t,
+        x,
+        h,
+        b,
+        hold_s + imp,
+        rate_hz=rate_hz,
+        origin_body_m=origin_body_m,
+        yaw_deg=yaw_deg,
+        noise_m=noise_m,
+        angle_noise_rad=angle_noise_rad,
+        seed=seed,
+        steps=len(imp),
+        stalled=stalled,
+        outcome=outcome,
+    )
+
+
+def simulate_wheel(slope_deg: float, release_rad_s: float, *, c_ns_per_m: float, k_n_per_m: float, **kw) -> ErTruth:
+    """`simulate` with another leg damping and stiffness (the module's `C_NS_PER_M`, `K_N_PER_M` for the call)."""
+    global C_NS_PER_M, K_N_PER_M
+    old = C_NS_PER_M, K_N_PER_M
+    C_NS_PER_M, K_N_PER_M = c_ns_per_m, k_n_per_m
+    try:
+        return simulate(slope_deg, release_rad_s, **kw)
+    finally:
+        C_NS_PER_M, K_N_PER_M = old
+
+
+def mid_stance_gaps(truth: ErTruth, keep: tuple[int, ...], fraction: float, hold_s: float = 0.4) -> tuple:
+    """Occlusions of the middle ``fraction`` of every stance but those numbered in ``keep`` (0 = the stance after
+    the release): the impacts stay in view (the CoM minima), the stance feet only in the kept stances. Pass the
+    result as ``gaps=`` to `simulate` with the same arguments."""
+    imp = np.concatenate([[hold_s], truth.impact_time_s])
+    f = fraction / 2
+    return tuple(
+        (a + (0.5 - f) * (b - a), a + (0.5 + f) * (b - a))
+        for j, (a, b) in enumerate(zip(imp[:-1], imp[1:]))
+        if j not in keep
+    )

@@ -46,7 +46,8 @@ def test_four_markers_slope_steps_and_com(tmp_path, seed):
     trial = import_trial(write_markers(tmp_path, w), leg_length_m=w.leg_length_m)
     m = trial.meta
     assert abs(m.slope_deg - 2.0) < 0.05
-    assert m.slope_source == "estimated" and "contact points" in m.slope_method
+    # the best conditioned estimate: the contact line or the line through the hub at the impacts
+    assert m.slope_source == "estimated" and ("contact points" in m.slope_method or "minima" in m.slope_method)
     assert m.step_method == "rotation" and m.step_refused is None
     assert_periods_within_one_frame(trial, w)
     err = trial.series["com_height"] - w.com_height_m

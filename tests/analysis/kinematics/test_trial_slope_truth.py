@@ -61,7 +61,8 @@ def test_slope_within_0p1_deg_or_interval_covers_truth(trials, i):
     assert m.slope_source == "estimated"
     if tr.steps >= 2:  # two stances or more determine the slope: a useful interval, not a shrug
         assert hi - lo < 1.5
-        assert "contact points" in m.slope_method
+        # the best conditioned of the contact line and the line through the hub at the impacts
+        assert "contact points" in m.slope_method or "CoM-height minima" in m.slope_method
 
 
 def test_one_step_trial_says_the_slope_is_not_determined(trials):

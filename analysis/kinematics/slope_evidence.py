@@ -1,0 +1,268 @@
+"""The trial's slope from every source there is, each with an honest 95 % interval, and the one used.
+
+Sources, best first: a static ramp in the file (``ramp``), the user's value (``given``), then the estimates from
+the motion (``estimated``), each a line of height against the horizontal distance along the travel:
+
+* ``contacts``: the line through the stance-foot contact points (`contacts.slope_from_contacts`; no-slip: a
+  stance foot does not move). Its standard error comes from the contacts' height errors, scaled up by their
+  scatter about the line when there are three or more. Two contacts cannot show their scatter: their errors are
+  floored at `TWO_CONTACT_SD_M` each (a foot is no point and a leg compresses: the pivot moves that much).
+* ``impact line``: the line through the hub at the CoM-height minima (impacts), which lie on a line parallel to
+  the slope when every impact looks alike; its standard error from the scatter about the line (Student t), plus
+  `MINIMA_DRIFT_M` of unseen drift of the minima depth (a compliant leg compresses more when the wheel speeds
+  up: a trend that looks like slope).
+* ``path``: the robust line through the whole hub path, used only when neither of the others exists; the hub
+  rises and falls once a step, so its scatter counts as one sample a step (Student t).
+
+The estimate used is the best conditioned (narrowest interval), combined by inverse variance with the others
+that agree with it (they come from different data: stance pivots, impact cusps). When two estimates disagree by
+more than their combined uncertainty, one of them is wrong and the data cannot say which: the interval of the
+best conditioned is widened to span the other's, and a warning says so. Angles in rad, lengths in m.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.stats import t as student_t
+
+__all__ = [
+    "SlopeEvidence",
+    "slope_evidence",
+    "choose_slope",
+    "GIVEN_SLOPE_HALF_WIDTH_DEG",
+    "RAMP_SLOPE_HALF_WIDTH_DEG",
+    "MIN_ESTIMATE_HALF_WIDTH_DEG",
+    "OFFSET_BOUND_M",
+    "TWO_CONTACT_SD_M",
+    "MINIMA_DRIFT_M",
+    "Z95",
+]
+
+#: Half width of the 95 % interval of a slope given by the user (an inclinometer reading), deg.
+GIVEN_SLOPE_HALF_WIDTH_DEG = 0.1
+#: Half width of the 95 % interval of a static ramp's tilt (how well its axis or markers define the plane), deg.
+RAMP_SLOPE_HALF_WIDTH_DEG = 0.05
+#: Least half width of an estimated slope's 95 % interval, deg.
+MIN_ESTIMATE_HALF_WIDTH_DEG = 0.01
+Z95 = 1.959964
+#: How far an object origin may lie from the hub, m (bounds the slope error when the hub is not determined).
+OFFSET_BOUND_M = 0.05
+#: Least height error (1 sigma) of each of only two contact points, m: the pivot of a rounded, compressing foot
+#: moves this much within a stance (the contacts of the independent ER truth scatter 0.2-0.6 mm about their line).
+TWO_CONTACT_SD_M = 0.5e-3
+#: Unseen drift (1 sigma) of the CoM-minima depth from the first impact to the last, m: a compliant leg's
+#: compression at impact grows with the speed (the ER truth's minima drift by up to about 1 mm over 11 steps).
+MINIMA_DRIFT_M = 0.5e-3
+
+
+@dataclass(frozen=True)
+class SlopeEvidence:
+    """One source of the trial's slope: ``source`` ramp | given | estimated, the slope and its 95 % interval
+    (rad), how it was obtained (``method``, in words) and ``kind`` (ramp, given, contacts, impact line, path)."""
+
+    source: str
+    slope_rad: float
+    ci_rad: tuple[float, float]
+    method: str
+    kind: str = ""
+
+    @property
+    def half_rad(self) -> float:
+        """Half the interval's width, rad."""
+        return (self.ci_rad[1] - self.ci_rad[0]) / 2
+
+
+def _interval(slope_rad: float, half_rad: float) -> tuple[float, float]:
+    return (slope_rad - half_rad, slope_rad + half_rad)
+
+
+def _quantile(dof: int) -> float:
+    """Two-sided 95 % quantile of Student's t with ``dof`` degrees of freedom (normal for none)."""
+    return Z95 if dof <= 0 else float(student_t.ppf(0.975, dof))
+
+
+def _contact_evidence(contacts, contact_slope: tuple[float, float, float], floor: float) -> SlopeEvidence:
+    """The contact line's evidence; two contacts get `TWO_CONTACT_SD_M` each (they cannot show their scatter)."""
+    phi, se, rms = contact_slope
+    cs = contacts.contacts
+    n = len(cs)
+    if n == 2:
+        c = np.array([k.c_m for k in cs])
+        run = float(np.linalg.norm(c[1, :2] - c[0, :2]))
+        sd = [max(k.sd_m, TWO_CONTACT_SD_M) for k in cs]
+        se = max(se, math.hypot(*sd) / max(run, 1e-3) * math.cos(phi) ** 2)
+        how = (
+            f"line through 2 stance-foot contact points (walking window; no-slip: a stance foot does not move), "
+            f"each height +- {max(sd) * 1e3:.2f} mm (two points show no scatter: at least "
+            f"{TWO_CONTACT_SD_M * 1e3:.1f} mm assumed)"
+        )
+        half = Z95 * se
+    else:
+        how = (
+            f"line through {n} stance-foot contact points (walking window; no-slip: a stance foot does not "
+            f"move), scatter {rms * 1e3:.2f} mm"
+        )
+        half = Z95 * se
+    return SlopeEvidence("estimated", phi, _interval(phi, max(half, floor)), how, "contacts")
+
+
+def slope_evidence(
+    ramp_deg: float | None,
+    ramp_src: str | None,
+    given_deg: float | None,
+    contact_slope: tuple[float, float, float] | None,
+    contacts,
+    hub_line,
+    frame0,
+    n_minima: int,
+    *,
+    hub_unknown: bool = False,
+    travel_m: float = 1.0,
+    step_m: float = 0.18,
+) -> list[SlopeEvidence]:
+    """Every slope source of the trial: ramp, given, then the estimates (contacts, impact line, or the whole
+    path when neither exists). ``hub_line`` and ``frame0`` are `slope.SlopeFrame` fits (the hub at the CoM
+    minima, the whole path); ``travel_m`` the distance walked along the slope, ``step_m`` the hub's travel per step."""
+    out = []
+    if ramp_deg is not None and math.isfinite(ramp_deg):
+        r = math.radians(ramp_deg)
+        out.append(
+            SlopeEvidence(
+                "ramp",
+                r,
+                _interval(r, math.radians(RAMP_SLOPE_HALF_WIDTH_DEG)),
+                f"{ramp_src} (95 % interval +- {RAMP_SLOPE_HALF_WIDTH_DEG} deg assumed)",
+                "ramp",
+            )
+        )
+    if given_deg is not None:
+        g = math.radians(given_deg)
+        out.append(
+            SlopeEvidence(
+                "given",
+                g,
+                _interval(g, math.radians(GIVEN_SLOPE_HALF_WIDTH_DEG)),
+                f"given by the user (95 % interval +- {GIVEN_SLOPE_HALF_WIDTH_DEG} deg assumed)",
+                "given",
+            )
+        )
+    floor = math.radians(MIN_ESTIMATE_HALF_WIDTH_DEG)
+    estimates = []
+    if contact_slope is not None:
+        estimates.append(_contact_evidence(contacts, contact_slope, floor))
+    if hub_line is not None and math.isfinite(hub_line.se_rad):
+        dof = hub_line.n_points - 2
+        drift = math.atan(MINIMA_DRIFT_M / max(travel_m, 1e-3))
+        half = max(math.hypot(_quantile(dof) * hub_line.se_rad, Z95 * drift), floor)
+        how = (
+            f"{hub_line.source} (walking window; scatter {hub_line.residual_m * 1e3:.2f} mm, Student t with {dof} "
+            f"degrees of freedom, and {MINIMA_DRIFT_M * 1e3:.1f} mm of drift of the minima depth allowed)"
+        )
+        if hub_unknown:
+            half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
+            how += (
+                f"; the hub is not determined: the interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off it"
+            )
+        estimates.append(
+            SlopeEvidence("estimated", hub_line.slope_rad, _interval(hub_line.slope_rad, half), how, "impact line")
+        )
+    if not estimates and (given_deg is None and ramp_deg is None or hub_line is not None):
+        line = hub_line if hub_line is not None else frame0
+        half = max(Z95 * line.se_rad, floor) if math.isfinite(line.se_rad) else math.radians(45.0)
+        how = f"{line.source} (walking window; {n_minima} CoM minima, 3 needed for the impact line)"
+        if hub_line is None and math.isfinite(line.residual_m) and travel_m > 0:
+            # The hub rises and falls once a step: its residuals are not independent samples. One per step:
+            # the standard error of a line through n_steps points spread evenly over the travel.
+            n_steps = max(travel_m / max(step_m, 1e-3), 1.0)
+            se_steps = line.residual_m * math.sqrt(12.0 / n_steps) / travel_m
+            half = max(half, _quantile(max(int(n_steps) - 2, 1)) * se_steps)
+            how += f"; the hub's rise and fall counted once a step ({n_steps:.1f} steps)"
+        if hub_unknown:
+            # An origin up to OFFSET_BOUND_M off an unknown hub rises and falls by up to twice that along the path.
+            half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
+            how += (
+                "; the hub is not determined (fewer than two stance feet seen, too little rotation): the "
+                f"interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off the hub"
+            )
+        estimates.append(SlopeEvidence("estimated", line.slope_rad, _interval(line.slope_rad, half), how, "path"))
+    estimates.sort(key=lambda e: e.half_rad)  # the best conditioned first
+    return out + estimates
+
+
+def _disagree(a: SlopeEvidence, b: SlopeEvidence) -> bool:
+    return abs(a.slope_rad - b.slope_rad) > math.hypot(a.half_rad, b.half_rad)
+
+
+def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], list[str], list[str]]:
+    """(evidence with the one used first, warnings, notes): the first source is used (ramp, given, else the best
+    conditioned estimate); an estimate used that disagrees with another estimate gets an interval spanning both;
+    every pair that disagrees is warned about."""
+    if not evidence:
+        return evidence, [], []
+    warnings: list[str] = []
+    notes: list[str] = []
+    used = evidence[0]
+    for i, a in enumerate(evidence):
+        for b in evidence[i + 1 :]:
+            if not _disagree(a, b):
+                continue
+            h = math.hypot(a.half_rad, b.half_rad)
+            diff = abs(a.slope_rad - b.slope_rad)
+            what = (
+                f"the {a.source} slope {math.degrees(a.slope_rad):.3f} deg"
+                if a.kind in ("ramp", "given")
+                else f"the slope from the {a.kind} {math.degrees(a.slope_rad):.3f} deg"
+            )
+            other = (
+                f"the {b.source} slope {math.degrees(b.slope_rad):.3f} deg"
+                if b.kind in ("ramp", "given")
+                else f"the slope from the {b.kind} {math.degrees(b.slope_rad):.3f} deg"
+            )
+            warnings.append(
+                f"{what} and {other} disagree by {math.degrees(diff):.3f} deg, more than their uncertainty "
+                f"({math.degrees(h):.3f} deg at 95 %); {used.source}"
+                + (f" ({used.kind})" if used.source == "estimated" else "")
+                + " is used"
+            )
+    if used.source == "estimated":
+        others = [e for e in evidence[1:] if e.source == "estimated" and _disagree(used, e)]
+        if others:
+            lo = min([used.ci_rad[0]] + [e.ci_rad[0] for e in others])
+            hi = max([used.ci_rad[1]] + [e.ci_rad[1] for e in others])
+            used = replace(
+                used,
+                ci_rad=(lo, hi),
+                method=used.method
+                + "; the interval spans the disagreeing "
+                + ", ".join(e.kind for e in others)
+                + " estimate (the data cannot say which is wrong)",
+            )
+        agreeing = [e for e in evidence[1:] if e.source == "estimated" and not _disagree(used, e)]
+        if agreeing and not others:
+            # consistent estimates from different data (stance pivots, impact cusps): inverse-variance combined
+            group = [used] + agreeing
+            w = [1.0 / max(e.half_rad, 1e-12) ** 2 for e in group]
+            mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sum(w)
+            half = 1.0 / math.sqrt(sum(w))
+            used = SlopeEvidence(
+                "estimated",
+                mean,
+                _interval(mean, half),
+                "inverse-variance combination of the consistent estimates: "
+                + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
+                "combined " + " and ".join(e.kind for e in group),
+            )
+        rest = [e for e in evidence[1:] if e.source == "estimated"]
+        if rest:
+            notes.append(
+                f"slope from the {used.kind}; also estimated: "
+                + "; ".join(
+                    f"{e.kind} {math.degrees(e.slope_rad):.3f} deg [{math.degrees(e.ci_rad[0]):.3f}, "
+                    f"{math.degrees(e.ci_rad[1]):.3f}]"
+                    for e in rest
+                )
+            )
+    return [used] + evidence[1:], warnings, notes
