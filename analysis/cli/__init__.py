@@ -20,6 +20,7 @@ from rimless.analysis.cli.critical import ParamsOpt, critical_lines, held_lines
 from rimless.analysis.cli.critical import register as register_critical
 from rimless.analysis.cli.floquet import register as register_floquet
 from rimless.analysis.cli.leg import register as register_leg
+from rimless.analysis.cli.names import names_shown
 from rimless.cli_rules import EXIT_USER_ERROR, fail, print_json, user_facing
 from rimless.errors import ParameterError, UserError
 from rimless.values import parse_list, parse_numbers
@@ -331,19 +332,6 @@ def wrap_name(name: str, width: int) -> str:
     return "\n".join(line.rstrip() for line in lines)
 
 
-def _names_shown(names: list[str]) -> tuple[list[str], str | None]:
-    """The trial names with their common prefix (up to a ``_`` or ``-``, 6 characters or more) left out, and
-    the caption that says so."""
-    import os
-
-    prefix = os.path.commonprefix(names) if len(names) > 1 else ""
-    cut = max(prefix.rfind("_"), prefix.rfind("-")) + 1
-    prefix = prefix[:cut]
-    if len(prefix) < 6 or any(len(n) <= len(prefix) for n in names):
-        return names, None
-    return [n[len(prefix) :] for n in names], f"trial: the file name after {prefix!r}"
-
-
 def _report_table(res: Any, model: str, width: int) -> Any:
     """The report's rich table at most ``width`` columns wide: numbers and headers never wrapped, the trial names
     broken after ``_`` or ``-`` only, as narrow as they need."""
@@ -354,7 +342,7 @@ def _report_table(res: Any, model: str, width: int) -> Any:
         return "" if v is None or (isinstance(v, float) and v != v) else format(v, fmt)
 
     metrics = res.metrics()
-    names, caption = _names_shown(
+    names, caption = names_shown(
         [
             Path(str(r["trial"]))
             .name.removesuffix(".parquet")

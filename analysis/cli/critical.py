@@ -8,12 +8,12 @@ Only typer and the standard library at module level (``rimless --help`` stays fa
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from rimless.analysis.cli.names import names_shown
 from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.values import parse_list
@@ -166,13 +166,10 @@ def _print_critical(res: Any, out: dict[str, Any]) -> None:
     for col, just, width in columns:
         t.add_column(col, justify=just, no_wrap=True, min_width=width)
     color = {"sustained": "green", "decaying": "red", "undetermined": "yellow"}
-    stems = [Path(r["file"]).stem for r in out["per_trial"]]
-    common = os.path.commonprefix(stems) if len(stems) > 1 else ""
-    if len(common) >= 6:
-        t.caption = f"trial: the file name after {common!r}"
-    for r, stem in zip(out["per_trial"], stems):
+    shown, t.caption = names_shown([Path(r["file"]).stem for r in out["per_trial"]])
+    for r, stem in zip(out["per_trial"], shown):
         t.add_row(
-            stem[len(common) :] if len(common) >= 6 else stem,
+            stem,
             f"{r['slope_deg']:.3f}",
             str(r["steps"]),
             f"[{color[r['verdict']]}]{r['verdict']}[/]",
@@ -399,13 +396,10 @@ def _print_calibration(out: dict[str, Any]) -> None:
     r.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
     for col, width in (("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
         r.add_column(col, justify="right", no_wrap=True, min_width=width)
-    stems = [Path(row["trial"]).stem for row in out["residuals"]]
-    common = os.path.commonprefix(stems) if len(stems) > 1 else ""
-    if len(common) >= 6:
-        r.caption = f"trial: the file name after {common!r}"
-    for row, stem in zip(out["residuals"], stems):
+    shown, r.caption = names_shown([Path(row["trial"]).stem for row in out["residuals"]])
+    for row, stem in zip(out["residuals"], shown):
         r.add_row(
-            stem[len(common) :] if len(common) >= 6 else stem,
+            stem,
             f"{row['slope_deg']:.2f}",
             _fmt(row["table1_rms_period_ms"], ".1f"),
             _fmt(row["calibrated_rms_period_ms"], ".1f"),
@@ -430,9 +424,9 @@ def _print_calibration(out: dict[str, Any]) -> None:
             markup=False,
             highlight=False,
         )
-        for row, stem in zip(out["residuals"], stems):
+        for row in out["residuals"]:
             con.print(
-                f"  {stem}: chi2/dof CoM, periods {_adequacy_cell(per_trial.get(row['trial']))}",
+                f"  {Path(row['trial']).stem}: chi2/dof CoM, periods {_adequacy_cell(per_trial.get(row['trial']))}",
                 markup=False,
                 highlight=False,
             )
