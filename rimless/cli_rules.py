@@ -9,23 +9,33 @@ command modules can import them without importing the whole command tree.
   after that no longer interrupts it (the `rimless` entry point then ignores SIGINT for the interpreter's
   teardown, rimless.__main__);
 - a negative number is read as a value, not as an option (`robot set touch_velocity_m_s -3`);
+- a bad number says what was expected (`--duration-s must be >= 0.0, got '-1'`), and NaN is no value of an
+  option with bounds;
 - `--help` shows upper-case metavars (`FLOAT`, `PATH`, `[er|ve]`), none on flags, and prints help text
   literally (square brackets are not rich markup).
+
+The same words and labels with the robot's typer 0.28 (click types convert and name the values) and the
+PC's 0.29 (pydantic converts, the parameter names its type): each rule acts where both versions look
+(a parameter's `process_value`, `metavar`, `get_usage_pieces`); only the type's own name is read where each
+version keeps it (`_typer_type_label`), and an argument's type column is set where each version reads it.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import functools
 import json
+import math
 import re
 from collections.abc import Callable, Iterator
 from typing import Any, NoReturn, TypeVar
 
 import typer
 
-# typer's own copy of click (typer >= 0.29 vendors it as the private `typer._click`): this is the one place that
-# imports it; the pin typer<0.30 in pyproject.toml bounds the private API to the version tested here.
+# typer's own copy of click (typer 0.28 and 0.29 vendor it as the private `typer._click`): this is the one place
+# that imports it; the pin typer>=0.28,<0.30 in pyproject.toml bounds the private API to the versions tested here
+# (0.28 on the robot, 0.29 on the PC; .ci/wheel-check runs the rules on the robot's install).
 from typer import _click as click
 from typer.core import TyperGroup
 
@@ -165,7 +175,9 @@ def _param_name(err: click.exceptions.ClickException) -> str | None:
 
 
 def _pydantic_detail(err: click.exceptions.BadParameter) -> str | None:
-    """The offending value and the rule it broke, from the validation error typer wraps (if any)."""
+    """The offending value and the rule it broke, from the validation error typer 0.29 wraps (if any): the
+    choices of an enum (typer 0.28's click words it as `'x' is not one of ...`, read in `usage_message`).
+    Numbers are worded before typer sees them fail (`_number_problem`)."""
     cause = err.__cause__
     errors = getattr(cause, "errors", None)
     if not callable(errors):
@@ -175,21 +187,9 @@ def _pydantic_detail(err: click.exceptions.BadParameter) -> str | None:
     except Exception:  # noqa: BLE001 - any shape we do not know falls back to click's text
         return None
     kind, value, bounds = first.get("type", ""), first.get("input"), first.get("ctx") or {}
-    got = f"got {value!r}"
-    if kind in ("float_parsing", "float_type"):
-        return f"must be a number, {got}"
-    if kind in ("int_parsing", "int_type", "int_from_float"):
-        return f"must be a whole number, {got}"
-    if kind.startswith(("greater", "less")):
-        low, high = getattr(err.param, "min", None), getattr(err.param, "max", None)
-        if low is not None and high is not None:
-            return f"must be between {low:g} and {high:g}, {got}"
-        for key, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
-            if key in bounds:
-                return f"must be {word} {bounds[key]}, {got}"
     if kind == "enum" and "expected" in bounds:
         choices = str(bounds["expected"]).replace("'", "").replace(" or ", ", ")
-        return f"must be one of {choices}, {got}"
+        return f"must be one of {choices}, got {value!r}"
     return None
 
 
@@ -255,10 +255,11 @@ def _adapt_command(command: click.Command) -> None:
         command.help = escape(command.help)
     if command.short_help:
         command.short_help = escape(command.short_help)
+    ctx = click.Context(command)  # what typer needs to name a type (a choice's spelling), outside a run
     for param in command.params:
         if getattr(param, "help", None):
             param.help = escape(param.help)  # type: ignore[attr-defined]
-        _adapt_metavar(param)
+        _adapt_param(param, ctx)
     command.get_help_option = functools.partial(_help_option_without_metavar, command.get_help_option)  # type: ignore[method-assign]
     if not hasattr(command, "commands"):
         original = command.make_parser
@@ -267,8 +268,8 @@ def _adapt_command(command: click.Command) -> None:
 
 def _help_option_without_metavar(get_help_option: Callable[[Any], Any], ctx: click.Context) -> Any:
     option = get_help_option(ctx)
-    if option is not None:
-        _adapt_metavar(option)
+    if option is not None and option.metavar is None:
+        option.metavar = ""  # a flag: nothing in the type column
     return option
 
 
@@ -287,65 +288,169 @@ def _parser_reading_negative_numbers(make_parser: Callable[[Any], Any], ctx: cli
     return parser
 
 
+# ------------------------------------------------------------------------------- parameters: numbers and help
+
+
+def _adapt_param(param: click.Parameter, ctx: click.Context) -> None:
+    """Numbers worded by the rules, upper-case metavars: the same with typer 0.28 and 0.29."""
+    flag = bool(getattr(param, "is_flag", False) or getattr(param, "count", False))
+    label = None if flag else _type_label(param, ctx)
+    if label is not None and label.removesuffix("...") in _NUMBER_WORDS:
+        whole = label.startswith("INTEGER")
+        param.process_value = functools.partial(_process_number, param.process_value, param, whole)  # type: ignore[method-assign]
+    if param.metavar is not None:
+        return
+    if flag:
+        param.metavar = ""  # nothing in the type column (typer 0.28 and 0.29 both show an option's metavar)
+        return
+    choices = label[1:-1].split("|") if label and label.startswith("[") else []
+    if label and choices and len(label) > _MAX_CHOICE_METAVAR:
+        # a long list of choices would be folded mid-word in the metavar column: name them in the help
+        param.help = f"{param.help or ''} One of: {', '.join(choices)}.".strip()  # type: ignore[attr-defined]
+        label = "CHOICE"
+    if getattr(param, "param_type_name", "") != "argument":
+        param.metavar = label  # the one label both versions' help shows for an option, before its type's own
+        return
+    name = (param.name or "value").upper()
+    param.metavar = name
+    if label:
+        _show_argument_type(param, label)
+
+    def usage_pieces(ctx: click.Context) -> list[str]:
+        text = name + ("..." if param.nargs != 1 else "")
+        return [text if param.required else f"[{text}]"]
+
+    param.get_usage_pieces = usage_pieces  # type: ignore[method-assign]
+
+
+_MAX_CHOICE_METAVAR = 24
+
+# the labels of numbers, and the noun a bad value is told it is not
+_NUMBER_WORDS = {"FLOAT": "a number", "INTEGER": "a whole number"}
+
 _TYPE_METAVARS = {
     "float": "FLOAT",
     "int": "INTEGER",
     "str": "TEXT",
+    "text": "TEXT",
     "bool": "BOOLEAN",
     "path": "PATH",
     "file": "FILE",
+    "filename": "FILE",
     "directory": "DIRECTORY",
     "float range": "FLOAT",
     "int range": "INTEGER",
 }
 
 
-def _adapt_metavar(param: click.Parameter) -> None:
-    """Upper-case metavars in help: FLOAT, PATH, [er|ve], NAME; nothing after a flag."""
-    if param.metavar is not None:
-        return
-    if getattr(param, "is_flag", False) or getattr(param, "count", False):
-        param.display_type_rich = lambda ctx: None  # type: ignore[attr-defined]
-        return
-    original = getattr(param, "display_type_rich", None)
-    choices = _choices(param)
-    if choices and len("|".join(choices)) + 2 > _MAX_CHOICE_METAVAR:
-        # a long list of choices would be folded mid-word in the metavar column: name them in the help
-        param.help = f"{param.help or ''} One of: {', '.join(choices)}.".strip()  # type: ignore[attr-defined]
-        param.display_type_rich = lambda ctx: "CHOICE"  # type: ignore[attr-defined]
-    elif original is not None:
-        param.display_type_rich = functools.partial(_metavar_of, original)  # type: ignore[attr-defined]
-    if getattr(param, "param_type_name", "") == "argument":
-        name = (param.name or "value").upper()
-        param.metavar = name
+def _typer_type_label(param: click.Parameter, ctx: click.Context) -> str | None:
+    """The type as the installed typer names it (`<float range>`, `<er|ve>`, `<list[Path]>`), its metavar aside.
 
-        def usage_name() -> str:
-            text = name + ("..." if param.nargs != 1 else "")
-            return text if param.required else f"[{text}]"
-
-        param._usage_display_name = usage_name  # type: ignore[attr-defined]
-
-
-_MAX_CHOICE_METAVAR = 24
-
-
-def _choices(param: click.Parameter) -> list[str]:
-    desc = getattr(param, "type_descriptor", None)
-    if desc is None or not desc.is_choice or not desc.choices:
-        return []
-    return [str(getattr(c, "value", c)) for c in desc.choices]
-
-
-def _metavar_of(original: Callable[..., str | None], ctx: click.Context) -> str | None:
-    shown = original(ctx=ctx)
-    if shown is None:
+    Typer 0.29 describes the parameter itself (`display_type`); 0.28 leaves it to the parameter's click type
+    (`get_metavar`, else its `name`), as click does.
+    """
+    describe = getattr(param, "display_type", None)
+    if describe is not None:  # typer 0.29
+        return describe(ctx)
+    kind = getattr(param, "type", None)  # typer 0.28
+    if kind is None:
         return None
-    dots = shown.endswith("...")
-    label = shown.removesuffix("...").strip("<>")
+    return kind.get_metavar(param, ctx) or f"<{kind.name}>"
+
+
+def _type_label(param: click.Parameter, ctx: click.Context) -> str | None:
+    """The upper-case label of the parameter's type in help: FLOAT, INTEGER, PATH, [er|ve], PATH... (several)."""
+    shown = _typer_type_label(param, ctx)
+    if not shown:
+        return None
+    label = shown.removesuffix("...")
+    if label[:1] + label[-1:] in ("<>", "[]", "{}"):
+        label = label[1:-1]
+    several = shown.endswith("...") or param.nargs != 1 or bool(getattr(param, "multiple", False))
     if label.startswith("list[") and label.endswith("]"):
-        label, dots = label[5:-1], True
+        label, several = label[5:-1], True
     if "|" in label:
         label = f"[{label}]"
     else:
-        label = _TYPE_METAVARS.get(label, label.upper())
-    return label + ("..." if dots else "")
+        label = _TYPE_METAVARS.get(label.lower(), label.upper())
+    return label + ("..." if several else "")
+
+
+def _show_argument_type(param: click.Parameter, label: str) -> None:
+    """Show `label` in an argument's type column, which is not its metavar (that is its name there): typer 0.29
+    asks the parameter (`display_type_rich`), 0.28 the parameter's click type (`get_metavar`)."""
+    if hasattr(param, "display_type_rich"):  # typer 0.29
+        param.display_type_rich = lambda ctx: label
+        return
+    kind = getattr(param, "type", None)  # typer 0.28: a copy, as click shares one instance per type (STRING)
+    if kind is not None:
+        kind = copy.copy(kind)
+        kind.get_metavar = lambda param, ctx: label
+        param.type = kind  # type: ignore[attr-defined]  # typer 0.29's parameter has none
+
+
+def _bounds(param: click.Parameter) -> tuple[Any, Any]:
+    """The inclusive bounds typer was given (`min=`, `max=`): typer 0.29 keeps them on the parameter, 0.28 on its
+    click range type."""
+    holder = param if hasattr(param, "min") else getattr(param, "type", None)
+    return getattr(holder, "min", None), getattr(holder, "max", None)
+
+
+def _number_problem(text: Any, whole: bool, low: Any, high: Any) -> str | None:
+    """What is wrong with `text` as a value of a number option (inclusive bounds, None for none), or None.
+
+    NaN is within no bounds; None (no value) is no problem here."""
+    if text is None:
+        return None
+    try:
+        number = int(_whole_number_text(text)) if whole else float(text)
+    except (TypeError, ValueError):
+        return f"must be {_NUMBER_WORDS['INTEGER' if whole else 'FLOAT']}, got {text!r}"
+    if (low is None or number >= low) and (high is None or number <= high):
+        return None
+    if low is not None and high is not None:
+        return f"must be between {low:g} and {high:g}, got {text!r}"
+    return f"must be >= {low}, got {text!r}" if low is not None else f"must be <= {high}, got {text!r}"
+
+
+# a whole number written with a zero fraction, `5.0`: typer 0.29 (pydantic) reads it as 5, 0.28 (click) did not
+_ZERO_FRACTION = re.compile(r"\s*([-+]?[\d_]+)\.0+\s*")
+
+
+def _whole_number_text(text: Any) -> Any:
+    """`5.0` -> `5`, as pydantic reads it; anything else as it is."""
+    match = _ZERO_FRACTION.fullmatch(text) if isinstance(text, str) else None
+    return match.group(1) if match else text
+
+
+def _process_number(
+    process_value: Callable[[click.Context, Any], Any],
+    param: Any,  # the installed typer's parameter class (the one BadParameter takes)
+    whole: bool,
+    ctx: click.Context,
+    value: Any,
+) -> Any:
+    """The parameter's own conversion (click's types in typer 0.28, pydantic in 0.29), its failure worded by the
+    rules; a NaN that typer 0.28 let through bounds (0.29 does not) fails the same way."""
+    items = value if isinstance(value, (list, tuple)) else [value]
+    if whole:  # the same whole numbers with either typer
+        value = (
+            type(value)(map(_whole_number_text, value))
+            if isinstance(value, (list, tuple))
+            else _whole_number_text(value)
+        )
+    low, high = _bounds(param)
+    try:
+        result = process_value(ctx, value)
+    except click.exceptions.MissingParameter:
+        raise
+    except click.exceptions.BadParameter as err:
+        problem = next((p for p in (_number_problem(v, whole, low, high) for v in items) if p), None)
+        if problem is None:
+            raise
+        raise click.exceptions.BadParameter(problem, ctx=ctx, param=param) from err
+    if low is not None or high is not None:
+        for item, number in zip(items, result if isinstance(result, (list, tuple)) else [result]):
+            if isinstance(number, float) and math.isnan(number):
+                raise click.exceptions.BadParameter(_number_problem(item, whole, low, high) or "", ctx=ctx, param=param)
+    return result

@@ -76,8 +76,15 @@ def parse_list(
         try:
             out.append(item(t))
         except (TypeError, ValueError):
-            raise ParameterError(f"{option}: {t!r} is not a valid value in {text!r}") from None
+            where = "" if t == str(text).strip() else f" in {text!r}"
+            raise ParameterError(f"{option} must be {_expected(item)} separated by commas, got {t!r}{where}") from None
     return out
+
+
+def _expected(item: Callable[[str], Any]) -> str:
+    """What `item` reads, in the plural: `numbers` for float, `whole numbers` for int, else its name."""
+    names: dict[Any, str] = {float: "numbers", int: "whole numbers"}
+    return names.get(item, f"{getattr(item, '__name__', 'value')} values")
 
 
 def parse_numbers(text: str, option: str, *, count: int | None = None) -> list[float]:
