@@ -51,7 +51,7 @@ def test_the_trials_inertia_ratio_covers_the_truth(ratio, mass, leg, seed):
     est = estimate_inertia_ratio(trials, p)
     assert est.ok and est.pairs >= 40, est.note
     assert abs(est.ratio - ratio) <= Z95 * est.ratio_se, est.as_dict()
-    assert est.ratio_se < 0.05 * ratio  # informative, not a wide net
+    assert est.ratio_se < 0.1 * ratio  # informative, not a wide net (a loss per step is fitted beside it)
     # the I_c reported is the one that gives that ratio at the wheel's masses
     assert inertia_ratio(p.replace(inertia_kg_m2=est.inertia_kg_m2)) == pytest.approx(est.ratio, rel=1e-9)
 
@@ -134,3 +134,38 @@ def test_the_trials_ratio_is_what_the_verdicts_need():
     i_c = {r["symbol"]: r for r in tr["contributions"]}["I_c"]["contribution_deg"]
     assert abs(res_est.critical_slope_deg - res_true.critical_slope_deg) <= 3 * i_c + 1e-4
     assert not math.isclose(i_c, 0.0)
+
+
+def test_a_compliant_er_wheel_is_not_told_its_true_inertia_is_wrong(tmp_path):
+    """A compliant ER wheel (tests/support/analysis_trial_truth.py: Table 1's inertia, c = 14, k = 2000; the
+    simulator's dynamics recorded and imported as Vicon exports): its stance is not the rigid pendulum, so the
+    trials' ratio either covers the true one or is flagged effective only; a wheel file stating the true inertia
+    gets no warning; the default input's critical-slope interval covers the ER model's critical slope."""
+    from rimless.analysis.inference.critical_slope import model_critical_slope
+    from rimless.analysis.kinematics.build import import_trial
+    from tests.support.analysis_trial_truth import C_NS_PER_M, K_N_PER_M, simulate, write_csv
+
+    crit = model_critical_slope(WheelParams(damping_ns_per_m=C_NS_PER_M, stiffness_n_per_m=K_N_PER_M), "er")[
+        "critical_slope_deg"
+    ]
+    rng = np.random.default_rng(7)
+    trials, files = [], []
+    for i, off in enumerate((-0.4, 0.1, 0.3, 0.5, 0.7)):
+        for j, w in enumerate((1.7, 2.2)):
+            tr = simulate(crit + off, w, ending="walked", seed=10 * i + j, max_steps=10)
+            slope = crit + off + float(rng.normal(0.0, 0.02))  # a measured ramp, 0.02 deg
+            trials.append(import_trial(write_csv(tmp_path / f"er{i}{j}.csv", tr), slope_deg=slope))
+            files.append(f"er{i}{j}.csv")
+    truth_ratio = inertia_ratio(WheelParams())
+    est = estimate_inertia_ratio(trials, WheelParams())
+    assert est.ok, est.note
+    assert (not est.adequate and "EFFECTIVE ONLY" in est.note) or abs(est.ratio - truth_ratio) <= Z95 * est.ratio_se
+
+    stated = tmp_path / "table1.toml"
+    stated.write_text("[wheel]\nI_c = {value = 0.036, sd = 0.0036}\n", encoding="utf-8")
+    res_s, _ = _carried(trials, files, read_wheel_input(stated))
+    assert res_s.warnings == [], res_s.warnings
+
+    res, tr = _carried(trials, files, default_wheel_input())
+    assert tr["ci_deg"][0] <= crit <= tr["ci_deg"][1], (crit, tr)
+    assert {r["symbol"]: r for r in res.parameters}["I_c"]["source"] == "trials"
