@@ -267,7 +267,7 @@ def carry_critical(
         if progress:
             progress("held parameters: trials")
         f_trials = trial_estimate_at(trials, files, c.method, group_tol_deg)
-        fields = PENDULUM_FIELDS
+        fields: tuple[str, ...] = PENDULUM_FIELDS
         if from_trials:  # the trials determine the inertia ratio: refit it at each perturbed L0 and g (the
             # pendulum depends on the masses only through that ratio: they do not enter)
             f_trials = _refitting(f_trials, trials, win.params)

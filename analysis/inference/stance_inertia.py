@@ -14,7 +14,8 @@ e_k is the measured period T_k turned into a speed through the pendulum (`Stance
 bends both the conversion and the map, so r is estimated by **weighted least squares over every pair of
 consecutive periods of every trial** (a one-dimensional fit in log r; each residual
 ``e_{k+1} - map(e_k)`` weighed by the timing noise of both periods through de/dT), its standard error from
-the Gauss-Newton curvature inflated by the reduced chi^2 when that exceeds 1. A compliant wheel's stance is
+the Gauss-Newton curvature inflated by the reduced chi^2 when that exceeds 1, or the sandwich over trials
+when larger (the pairs of one trial share its slope error). A compliant wheel's stance is
 not this pendulum: its r is then the effective one the verdicts' pendulum needs (the reduced chi^2 says how
 well it fits). L0 and g are held at the wheel's values; the masses only set I_c = r M L0^2 - 8 m L0^2.
 
@@ -66,6 +67,7 @@ class _Pairs:
     phi: np.ndarray
     sig: np.ndarray
     phi_sd: np.ndarray  # the slope's 1-sigma uncertainty, rad
+    trial: np.ndarray  # the index of the trial each pair comes from
 
 
 def _pairs(trials: Sequence[Any], alpha: float) -> _Pairs:
@@ -76,7 +78,8 @@ def _pairs(trials: Sequence[Any], alpha: float) -> _Pairs:
     phi: list[float] = []
     sig: list[float] = []
     phi_sd: list[float] = []
-    for tr in trials:
+    trial: list[int] = []
+    for i_trial, tr in enumerate(trials):
         slope = float(getattr(tr.meta, "slope_deg", math.nan))
         if not (math.isfinite(slope) and 0.0 < math.radians(slope) < alpha / 2):
             continue
@@ -92,7 +95,8 @@ def _pairs(trials: Sequence[Any], alpha: float) -> _Pairs:
                 phi.extend([math.radians(slope)] * n)
                 sig.extend([s] * n)
                 phi_sd.extend([s_phi] * n)
-    return _Pairs(np.array(t0), np.array(t1), np.array(phi), np.array(sig), np.array(phi_sd))
+                trial.extend([i_trial] * n)
+    return _Pairs(np.array(t0), np.array(t1), np.array(phi), np.array(sig), np.array(phi_sd), np.array(trial, int))
 
 
 def _period(e: np.ndarray, alpha: float, kappa: float, phi: np.ndarray) -> np.ndarray:
@@ -223,6 +227,13 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
     jac = (_residuals(x + h, pairs, alpha, L, g) - _residuals(x - h, pairs, alpha, L, g)) / (2 * h)
     jj = float(jac @ jac)
     se_log = math.sqrt(max(chi2, 1.0) / jj) if jj > 0 else math.inf
+    # the pairs of one trial share its slope error (and its release): a sandwich over trials, when larger
+    res0 = _residuals(x, pairs, alpha, L, g)
+    groups = np.unique(pairs.trial)
+    if groups.size >= 2 and jj > 0:
+        score = np.array([float(jac[pairs.trial == k] @ res0[pairs.trial == k]) for k in groups])
+        se_cluster = math.sqrt(groups.size / (groups.size - 1) * float(score @ score)) / jj
+        se_log = max(se_log, se_cluster)
     r = math.exp(x)
     at_bound = x - lo < 0.05 or hi - x < 0.05
     est = InertiaEstimate(True, "", n, r, r * se_log, reduced_chi2=chi2, at_bound=at_bound)
