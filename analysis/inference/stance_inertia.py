@@ -21,7 +21,8 @@ well it fits). L0 and g are held at the wheel's values; the masses only set I_c 
 
 `trial_inertia_input` uses it: a wheel input whose inertia is not stated (source ``table1``) takes the trials'
 I_c (source ``trials``, its sd from the fit); a stated one is compared with it and a disagreement beyond their
-combined uncertainty is a warning. Too few consecutive periods (fewer than `MIN_PAIRS` pairs) leave the input
+combined uncertainty is a warning. An effective-only ratio (the rigid map does not fit) is neither used nor
+compared: it is no measurement of the wheel's inertia (the models' critical slopes would be made at it). Too few consecutive periods (fewer than `MIN_PAIRS` pairs) leave the input
 as it is, with a note.
 """
 
@@ -281,22 +282,30 @@ def _weighted_loss(gap: np.ndarray, s: np.ndarray) -> float:
 def trial_inertia_input(win: Any, trials: Sequence[Any]) -> tuple[Any, InertiaEstimate, list[str]]:
     """(the wheel input to use, the trials' estimate, warnings). ``win``'s inertia not stated (source
     ``table1``): replaced by the trials' (source ``trials``). Stated: kept, and compared with the trials'
-    (a warning beyond `Z_DISAGREE` combined standard errors)."""
+    (a warning beyond `Z_DISAGREE` combined standard errors). An effective-only ratio: neither."""
     est = estimate_inertia_ratio(trials, win.params)
     entry = win.entries["inertia_kg_m2"]
     if not est.ok:
         if entry.source == "table1":
             est.note += "; Table 1's inertia is held"
         return win, est, []
+    if not est.adequate:  # an effective ratio is no measurement of the inertia: neither used nor compared
+        if entry.source == "table1":
+            est.note += "; not used: Table 1's inertia is held"
+        else:
+            est.comparison = {
+                "stated_kg_m2": entry.value,
+                "stated_sd_kg_m2": entry.sd,
+                "source": entry.source,
+                "z": None,
+            }
+            est.note += "; not compared with the stated inertia"
+        return win, est, []
     if entry.source == "table1":
         new = win.with_entry(
             "inertia_kg_m2", est.inertia_kg_m2, est.inertia_sd_kg_m2, "trials", est.note + " (in place of Table 1's)"
         )
         return new, est, []
-    if not est.adequate:  # an effective ratio is no measurement of the inertia: not compared
-        est.comparison = {"stated_kg_m2": entry.value, "stated_sd_kg_m2": entry.sd, "source": entry.source, "z": None}
-        est.note += "; not compared with the stated inertia"
-        return win, est, []
     diff = entry.value - est.inertia_kg_m2
     comb = math.hypot(entry.sd, est.inertia_sd_kg_m2)
     z = abs(diff) / comb if comb > 0 else math.inf
