@@ -172,3 +172,7 @@ def test_a_compliant_er_wheel_is_not_told_its_true_inertia_is_wrong(tmp_path):
     source = {r["symbol"]: r for r in res.parameters}["I_c"]["source"]
     assert source == ("trials" if est.adequate else "table1")  # an effective ratio is not the wheel's inertia
     assert res.inertia["rigid_map_fits"] == est.adequate and res.warnings == []
+    from rimless.analysis.cli.critical import held_lines
+
+    printed = "\n".join(held_lines(res.summary()))
+    assert ("inertia from the trials:" in printed) == (not est.adequate)  # else in I_c's row
