@@ -216,6 +216,10 @@ def parameter_lines(parameters: list[dict[str, Any]] | None) -> list[str]:
 def held_lines(out: dict[str, Any]) -> list[str]:
     """The parameters and the critical slopes' intervals with the held parameters' uncertainty."""
     lines = parameter_lines(out.get("parameters"))
+    inertia = out.get("inertia_from_trials")
+    if inertia and not (inertia.get("estimated") and inertia.get("rigid_map_fits")):  # else in I_c's basis
+        lines.append(f"inertia from the trials: {inertia['note']}")
+    lines += [f"warning: {w}" for w in out.get("warnings", [])]
     held = out.get("parameter_uncertainty")
     if not held:
         return lines

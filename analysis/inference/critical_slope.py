@@ -72,6 +72,10 @@ class CriticalSlopeResult:
     parameters: list[dict[str, Any]] | None = None
     #: the held parameters' uncertainty carried into the estimates (`rimless.analysis.inference.held`)
     held: dict[str, Any] | None = None
+    #: the inertia the trials' step periods determine (`rimless.analysis.inference.stance_inertia`), when tried
+    inertia: dict[str, Any] | None = None
+    #: what the reader must know (a wheel input the trials contradict)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def critical_slope_deg(self) -> float:
@@ -106,10 +110,14 @@ class CriticalSlopeResult:
         }
 
     def held_summary(self) -> dict[str, Any]:
-        """The keys ``parameters``, ``ci_with_parameters_deg`` and ``parameter_uncertainty`` (when computed)."""
+        """The keys ``parameters``, ``inertia_from_trials``, ``ci_with_parameters_deg`` and
+        ``parameter_uncertainty`` (when computed), and ``warnings``."""
         out: dict[str, Any] = {}
         if self.parameters is not None:
             out["parameters"] = self.parameters
+        if self.inertia is not None:
+            out["inertia_from_trials"] = self.inertia
+        out["warnings"] = list(self.warnings)
         if self.held is not None:
             tr = self.held.get("trials")
             out["ci_with_parameters_deg"] = tr["ci_deg"] if tr else None

@@ -35,10 +35,21 @@ from rimless.analysis.inference.critical_slope import Z95, CriticalSlopeResult, 
 from rimless.errors import ParameterError
 from rimless.sim.model.failures import StepFailure
 
-__all__ = ["PENDULUM_FIELDS", "sensitivities", "combine", "carry_critical", "trial_estimate_at", "WarmCritical"]
+__all__ = [
+    "PENDULUM_FIELDS",
+    "sensitivities",
+    "combine",
+    "carry_critical",
+    "trial_estimate_at",
+    "WarmCritical",
+    "inertia_from_trials",
+]
 
 #: the parameters the verdicts and the trial estimates depend on (the stance pendulum's)
 PENDULUM_FIELDS = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "gravity_m_s2")
+#: those that still enter when the trials determine the inertia ratio I_hub / (M L0^2) (the pendulum's kappa
+#: and beta depend on the masses and the inertia only through it)
+RATIO_FIELDS = ("inertia_kg_m2", "leg_length_m", "gravity_m_s2")
 
 METHOD = (
     "finite-difference sensitivities at +-1 sd of each held parameter (one-sided at a bound), combined in "
@@ -235,21 +246,33 @@ def carry_critical(
     progress: Callable[[str], None] | None = None,
     central_models: bool = True,
     warm: bool = True,
+    estimate_inertia: bool = True,
 ) -> dict[str, Any]:
     """Propagate the held parameters of ``win`` (`rimless.sim.model.uncertain.WheelInput`) into the chosen
     estimate from the trials and the models' critical slopes of ``res``; sets ``res.parameters`` and
     ``res.held`` (the JSON's ``parameters`` and ``parameter_uncertainty``) and returns the latter.
     ``central_models`` False: the models' sensitivities by forward differences (half the Algorithm 1 runs; the
     report and the demo); ``warm`` False: each of them by the straightforward `model_critical_slope` (else
-    warm-started, `WarmCritical`)."""
+    warm-started, `WarmCritical`). ``estimate_inertia`` (default): the inertia ratio the trials' step periods
+    determine (`inertia_from_trials`) replaces an inertia the input does not state, or is compared with a stated
+    one (``res.inertia``, ``res.warnings``)."""
     out: dict[str, Any] = {"method": METHOD, "trials": None, "models": {}}
+    if estimate_inertia and trials:
+        if progress:
+            progress("inertia from the trials")
+        win = inertia_from_trials(res, trials, files, win, group_tol_deg=group_tol_deg)
+    from_trials = win.entries["inertia_kg_m2"].source == "trials"
     c = res.chosen
     if c is not None:
         if progress:
             progress("held parameters: trials")
-        _, rows = sensitivities(
-            trial_estimate_at(trials, files, c.method, group_tol_deg), win, PENDULUM_FIELDS, base=c.value_deg
-        )
+        f_trials = trial_estimate_at(trials, files, c.method, group_tol_deg)
+        fields: tuple[str, ...] = PENDULUM_FIELDS
+        if from_trials:  # the trials determine the inertia ratio: refit it at each perturbed L0 and g (the
+            # pendulum depends on the masses only through that ratio: they do not enter)
+            f_trials = _refitting(f_trials, trials, win.params)
+            fields = RATIO_FIELDS
+        _, rows = sensitivities(f_trials, win, fields, base=c.value_deg)
         se, complete = combine(rows)
         out["trials"] = {
             "method": c.method,
@@ -281,3 +304,47 @@ def carry_critical(
     res.parameters = win.parameters()
     res.held = out
     return out
+
+
+def _refitting(f: Callable[[Any], float | None], trials: Sequence[Any], nominal: Any) -> Callable[[Any], float | None]:
+    """``f`` at wheels whose inertia, where it is the nominal one, is refitted to the trials at their masses and
+    L0 (the trials determine the inertia ratio, not I_c: a perturbed mass or L0 moves I_c, not the ratio)."""
+    from rimless.analysis.inference.stance_inertia import estimate_inertia_ratio
+
+    def g(params: Any) -> float | None:
+        if params.inertia_kg_m2 == nominal.inertia_kg_m2:
+            est = estimate_inertia_ratio(trials, params)
+            if not est.ok:
+                return None
+            params = params.replace(inertia_kg_m2=est.inertia_kg_m2)
+        return f(params)
+
+    return g
+
+
+def inertia_from_trials(
+    res: CriticalSlopeResult, trials: Sequence[Any], files: Sequence[str], win: Any, *, group_tol_deg: float = 0.05
+) -> Any:
+    """The wheel input with the trials' inertia (`rimless.analysis.inference.stance_inertia.trial_inertia_input`);
+    when it replaces Table 1's, ``res``'s verdicts, estimates and models are re-made at it. Sets ``res.inertia``
+    and adds to ``res.warnings``; returns the input to carry."""
+    from rimless.analysis.inference.critical_slope import model_critical_slope
+    from rimless.analysis.inference.stance_inertia import trial_inertia_input
+    from rimless.analysis.inference.sustained import trial_verdicts
+
+    new, est, warnings = trial_inertia_input(win, trials)
+    res.inertia = est.as_dict()
+    res.warnings = [*res.warnings, *warnings]
+    if new is win:
+        return win
+    verdicts = trial_verdicts(list(trials), new.params)
+    again = estimate_critical_slope(verdicts, files, group_tol_deg=group_tol_deg)
+    for name in ("per_trial", "bracket_deg", "estimates", "chosen", "why", "logistic", "extrapolation"):
+        setattr(res, name, getattr(again, name))
+    res.verdicts = verdicts  # type: ignore[attr-defined]
+    crit = res.model.get("critical_slope_deg", {})
+    for m in [m for m in crit if not m.endswith("_calibrated")]:  # the models at the trials' inertia
+        outm = model_critical_slope(new.params, m)
+        crit[m] = outm["critical_slope_deg"]
+        res.model.setdefault("detail", {})[m] = outm
+    return new

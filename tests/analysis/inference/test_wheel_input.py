@@ -2,8 +2,9 @@
 
 Truth: a rigid wheel with a large inertia ratio, I_hub / (M L0^2) = 3 (Table 1: about 0.43), written apart from
 rimless (tests/support/analysis_rigid_truth.py); its critical slope is Coleman's closed form. Its trials, read
-with Table 1 held, give an interval that misses the truth; a wheel file stating the inertia with an honest sd
-gives one that covers it; the true inertia, exact, a narrower one that covers it too.
+with Table 1 held, give an interval that misses the truth; without a wheel file the trials' own inertia (from
+their step periods) gives one that covers it, and so does a wheel file stating the inertia with an honest sd;
+the true inertia, exact, a narrower one that covers it too.
 """
 
 from __future__ import annotations
@@ -170,9 +171,10 @@ def truth_series():
     return trials, [t.meta.source_file for t in trials]
 
 
-def _interval(trials, files, win):
+def _interval(trials, files, win, **kw):
     res = estimate_critical_slope(trial_verdicts(trials, win.params), files)
-    held = carry_critical(res, trials, files, win)
+    res.model = {"critical_slope_deg": {}}
+    held = carry_critical(res, trials, files, win, **kw)
     return res, held["trials"]
 
 
@@ -182,10 +184,17 @@ def test_held_inertia_is_carried_into_the_critical_slope(truth_series, tmp_path)
     assert truth == pytest.approx(0.8662, abs=1e-4)
     true_params = TRUTH.wheel_params()
 
-    # today: Table 1 held (with its default uncertainties): a confident interval that misses the truth
-    res_t1, t1 = _interval(trials, files, default_wheel_input())
+    # Table 1 held (with its default uncertainties; the behaviour before the trials' inertia): a confident
+    # interval that misses the truth
+    res_t1, t1 = _interval(trials, files, default_wheel_input(), estimate_inertia=False)
     assert not t1["ci_deg"][0] <= truth <= t1["ci_deg"][1], t1
     assert t1["se_parameters_deg"] > 0
+
+    # the default input (no wheel file): the inertia comes from the trials' step periods, and the interval covers
+    res_d, d = _interval(trials, files, default_wheel_input())
+    assert d["ci_deg"][0] <= truth <= d["ci_deg"][1], d
+    rows_d = {r["symbol"]: r for r in res_d.parameters}
+    assert rows_d["I_c"]["source"] == "trials" and rows_d["I_c"]["sd"] > 0 and res_d.warnings == []
 
     # a wheel file: masses and leg length known, the inertia 0.27 +- 0.07 kg m^2 (truth 0.337: 1 sd off)
     f = tmp_path / "ratio3.toml"
@@ -199,6 +208,7 @@ def test_held_inertia_is_carried_into_the_critical_slope(truth_series, tmp_path)
     assert h["ci_deg"][0] <= truth <= h["ci_deg"][1], h
     assert [r["symbol"] for r in h["contributions"] if r["contribution_deg"] > 0] == ["I_c"]
     assert h["ci_deg"][0] < res_h.chosen.ci_deg[0] and h["ci_deg"][1] > res_h.chosen.ci_deg[1]  # wider than data
+    assert res_h.warnings == [] and res_h.inertia["comparison"]["source"] == "wheel_file"  # 1 sd off: no warning
 
     # the true inertia, exact: the interval covers the truth and is narrower than with the inertia's sd
     exact = wheel_input_from(true_params, EXACT)

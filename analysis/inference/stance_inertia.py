@@ -1,0 +1,321 @@
+"""The wheel's inertia ratio from its trials: what the step periods determine of the stance pendulum.
+
+The verdicts and the critical slope from trials use the wheel only through the rigid stance pendulum
+(`rimless.analysis.inference.sustained.StancePendulum`). For the rigid wheel of the eight-leg mass model
+(M = m_H + 8 m, I_hub = I_c + 8 m L0^2) that pendulum and its impact depend on the masses and the inertia only
+through the **inertia ratio** r = I_hub / (M L0^2):
+
+- the stance: theta'^2 = e + kappa (1 - cos(theta + phi)), kappa = 2 g / (L0 (1 + r)) (1/s^2);
+- the impact (angular momentum about the new foot): theta'+ = beta theta'-, beta = (r + cos alpha) / (r + 1);
+
+so the squared speed over the top of consecutive steps obeys the exact affine return map (Coleman)
+``e_{k+1} = beta^2 e_k + kappa [beta^2 (1 - cos(alpha/2 + phi)) - (1 - cos(alpha/2 - phi))]``, where every
+e_k is the measured period T_k turned into a speed through the pendulum (`StancePendulum.energy`). A wrong r
+bends both the conversion and the map, so r is estimated by **weighted least squares over every pair of
+consecutive periods of every trial** (a one-dimensional fit in log r; each residual
+``e_{k+1} - map(e_k)`` weighed by the timing noise of both periods through de/dT), its standard error from
+the Gauss-Newton curvature inflated by the reduced chi^2 when that exceeds 1, or the sandwich over trials
+when larger (the pairs of one trial share its slope error). A compliant wheel's stance is
+not this pendulum: its r is then the effective one the verdicts' pendulum needs (the reduced chi^2 says how
+well it fits). L0 and g are held at the wheel's values; the masses only set I_c = r M L0^2 - 8 m L0^2.
+
+`trial_inertia_input` uses it: a wheel input whose inertia is not stated (source ``table1``) takes the trials'
+I_c (source ``trials``, its sd from the fit); a stated one is compared with it and a disagreement beyond their
+combined uncertainty is a warning. An effective-only ratio (the rigid map does not fit) is neither used nor
+compared: it is no measurement of the wheel's inertia (the models' critical slopes would be made at it). Too few consecutive periods (fewer than `MIN_PAIRS` pairs) leave the input
+as it is, with a note.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["InertiaEstimate", "estimate_inertia_ratio", "trial_inertia_input", "inertia_ratio", "MIN_PAIRS"]
+
+MIN_PAIRS = 6  # consecutive-period pairs needed for an estimate
+R_BOUNDS = (0.02, 50.0)  # the inertia ratios searched
+Z_DISAGREE = 2.0  # a stated inertia further than this many combined standard errors from the trials' is a warning
+#: above this reduced chi^2 the rigid return map does not describe the periods (a compliant wheel: measured 3-8 on
+#: the ER truth of tests/support/analysis_trial_truth.py, 0.1-0.6 on rigid truths): the ratio is effective only
+CHI2_ADEQUATE = 2.0
+
+
+def inertia_ratio(params: Any) -> float:
+    """r = I_hub / (M L0^2) of the eight-leg-consistent rigid wheel of ``params`` (`WheelParams`)."""
+    m8 = 8.0 * params.leg_mass_kg
+    L = params.leg_length_m
+    return (params.inertia_kg_m2 + m8 * L**2) / ((params.hub_mass_kg + m8) * L**2)
+
+
+def inertia_for_ratio(params: Any, r: float) -> float:
+    """The I_c (kg m^2) that gives ``params`` the inertia ratio r."""
+    m8 = 8.0 * params.leg_mass_kg
+    L = params.leg_length_m
+    return r * (params.hub_mass_kg + m8) * L**2 - m8 * L**2
+
+
+@dataclass
+class _Pairs:
+    """Consecutive periods (s) of all trials, with each pair's slope (rad) and timing noise (s)."""
+
+    t0: np.ndarray
+    t1: np.ndarray
+    phi: np.ndarray
+    sig: np.ndarray
+    phi_sd: np.ndarray  # the slope's 1-sigma uncertainty, rad
+    trial: np.ndarray  # the index of the trial each pair comes from
+
+
+def _pairs(trials: Sequence[Any], alpha: float) -> _Pairs:
+    from rimless.analysis.inference.sustained import TIMING_SIGMA_FLOOR_S, consecutive_periods, trial_slope_sigma_deg
+
+    t0: list[float] = []
+    t1: list[float] = []
+    phi: list[float] = []
+    sig: list[float] = []
+    phi_sd: list[float] = []
+    trial: list[int] = []
+    for i_trial, tr in enumerate(trials):
+        slope = float(getattr(tr.meta, "slope_deg", math.nan))
+        if not (math.isfinite(slope) and 0.0 < math.radians(slope) < alpha / 2):
+            continue
+        rate = float(getattr(tr.meta, "rate_hz", 0.0) or 0.0)
+        s = max(TIMING_SIGMA_FLOOR_S, 0.1 * math.sqrt(2.0) / rate) if rate > 0 else TIMING_SIGMA_FLOOR_S
+        s_phi = math.radians(trial_slope_sigma_deg(tr.meta)[0])
+        for c in consecutive_periods(tr):
+            c = np.asarray(c, float)
+            n = c.size - 1
+            if n > 0:
+                t0.extend(c[:-1])
+                t1.extend(c[1:])
+                phi.extend([math.radians(slope)] * n)
+                sig.extend([s] * n)
+                phi_sd.extend([s_phi] * n)
+                trial.extend([i_trial] * n)
+    return _Pairs(np.array(t0), np.array(t1), np.array(phi), np.array(sig), np.array(phi_sd), np.array(trial, int))
+
+
+def _period(e: np.ndarray, alpha: float, kappa: float, phi: np.ndarray) -> np.ndarray:
+    """Rigid stance period (s) at squared top speeds e > 0 (vectorised `StancePendulum.period_s`)."""
+    from scipy.special import ellipkinc
+
+    m = -2.0 * kappa / e
+    return 2.0 / np.sqrt(e) * (ellipkinc(0.5 * (phi + alpha / 2), m) - ellipkinc(0.5 * (phi - alpha / 2), m))
+
+
+def _energy(T: np.ndarray, alpha: float, kappa: float, phi: np.ndarray) -> np.ndarray:
+    """Inverse of `_period` by bisection in log e (NaN where T is outside (T(1e4), T(e^-25)))."""
+    lo = np.full(T.shape, -25.0)
+    hi = np.full(T.shape, math.log(1e4))
+    ok = (T < _period(np.exp(lo), alpha, kappa, phi)) & (T > _period(np.exp(hi), alpha, kappa, phi))
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        longer = _period(np.exp(mid), alpha, kappa, phi) > T  # too slow: raise e
+        lo = np.where(longer, mid, lo)
+        hi = np.where(longer, hi, mid)
+    return np.where(ok, np.exp(0.5 * (lo + hi)), np.nan)
+
+
+def _gaps(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> tuple[np.ndarray, np.ndarray]:
+    """(what each step loses beyond the rigid impact, ``beta^2 e_k + b - e_{k+1}``, rad^2/s^2; its 1-sigma
+    noise from the two periods' timing and the slope's uncertainty) at the inertia ratio exp(log_r); NaN where a
+    measured period is outside what that pendulum can walk."""
+    r = math.exp(log_r)
+    kappa = 2.0 * g / (L * (1.0 + r))
+    beta2 = ((r + math.cos(alpha)) / (r + 1.0)) ** 2
+    phi = pairs.phi
+    e0 = _energy(pairs.t0, alpha, kappa, phi)
+    e1 = _energy(pairs.t1, alpha, kappa, phi)
+    b = kappa * (beta2 * (1.0 - np.cos(alpha / 2 + phi)) - (1.0 - np.cos(alpha / 2 - phi)))
+    h = 1e-4  # de/dT by a difference in log e
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d0 = (
+            e0
+            * 2
+            * math.sinh(h)
+            / (_period(e0 * math.exp(h), alpha, kappa, phi) - _period(e0 * math.exp(-h), alpha, kappa, phi))
+        )
+        d1 = (
+            e1
+            * 2
+            * math.sinh(h)
+            / (_period(e1 * math.exp(h), alpha, kappa, phi) - _period(e1 * math.exp(-h), alpha, kappa, phi))
+        )
+        db = kappa * (beta2 * np.sin(alpha / 2 + phi) + np.sin(alpha / 2 - phi))  # d b / d phi
+        s = np.sqrt(pairs.sig**2 * (d1**2 + beta2**2 * d0**2) + (db * pairs.phi_sd) ** 2)
+    return beta2 * e0 + b - e1, s
+
+
+def _residuals(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> np.ndarray:
+    """Weighted residuals of the return map at the inertia ratio exp(log_r), with the constant loss per step
+    that fits best there (profiled out); a large constant where a measured period is outside what that
+    pendulum can walk."""
+    gap, s = _gaps(log_r, pairs, alpha, L, g)
+    loss = _weighted_loss(gap, s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        res = (loss - gap) / s
+    return np.where(np.isfinite(res), res, 1e3)
+
+
+@dataclass
+class InertiaEstimate:
+    """The trials' inertia ratio r = I_hub / (M L0^2) and what it gives I_c (kg m^2); ``ok`` False: none."""
+
+    ok: bool
+    note: str
+    pairs: int = 0
+    ratio: float = math.nan
+    ratio_se: float = math.nan
+    inertia_kg_m2: float = math.nan
+    inertia_sd_kg_m2: float = math.nan
+    reduced_chi2: float = math.nan
+    at_bound: bool = False
+    adequate: bool = True  # the rigid return map fits (reduced chi^2 <= CHI2_ADEQUATE)
+    loss_per_step: float = math.nan  # the constant loss per step fitted beside r, rad^2/s^2 (in e)
+    comparison: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        def num(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+
+        return {
+            "estimated": self.ok,
+            "note": self.note,
+            "consecutive_period_pairs": self.pairs,
+            "inertia_ratio": num(self.ratio),
+            "inertia_ratio_se": num(self.ratio_se),
+            "inertia_kg_m2": num(self.inertia_kg_m2),
+            "inertia_sd_kg_m2": num(self.inertia_sd_kg_m2),
+            "reduced_chi2": num(self.reduced_chi2),
+            "rigid_map_fits": self.adequate,
+            "loss_per_step_rad2_s2": num(self.loss_per_step),
+            "method": "weighted least squares of the rigid return map over consecutive step periods (log r)",
+            **({"comparison": self.comparison} if self.comparison else {}),
+        }
+
+
+def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimate:
+    """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
+    and g of ``params`` (`WheelParams`)."""
+    from scipy.optimize import minimize_scalar
+
+    alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
+    pairs = _pairs(trials, alpha)
+    n = int(pairs.t0.size)
+    if n < MIN_PAIRS:
+        return InertiaEstimate(
+            False, f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS}): the inertia is not estimated", n
+        )
+    lo, hi = math.log(R_BOUNDS[0]), math.log(R_BOUNDS[1])
+    grid = np.linspace(lo, hi, 25)
+    cost = [float(np.sum(_residuals(x, pairs, alpha, L, g) ** 2)) for x in grid]
+    i = int(np.argmin(cost))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    opt = minimize_scalar(
+        lambda x: float(np.sum(_residuals(x, pairs, alpha, L, g) ** 2)),
+        bounds=(a, b),
+        method="bounded",
+        options={"xatol": 1e-6},
+    )
+    x = float(opt.x)
+    chi2 = float(opt.fun) / max(n - 1, 1)
+    h = 1e-3
+    jac = (_residuals(x + h, pairs, alpha, L, g) - _residuals(x - h, pairs, alpha, L, g)) / (2 * h)
+    jj = float(jac @ jac)
+    se_log = math.sqrt(max(chi2, 1.0) / jj) if jj > 0 else math.inf
+    # the pairs of one trial share its slope error (and its release): a sandwich over trials, when larger
+    res0 = _residuals(x, pairs, alpha, L, g)
+    groups = np.unique(pairs.trial)
+    if groups.size >= 2 and jj > 0:
+        score = np.array([float(jac[pairs.trial == k] @ res0[pairs.trial == k]) for k in groups])
+        se_cluster = math.sqrt(groups.size / (groups.size - 1) * float(score @ score)) / jj
+        se_log = max(se_log, se_cluster)
+    r = math.exp(x)
+    at_bound = x - lo < 0.05 or hi - x < 0.05
+    est = InertiaEstimate(True, "", n, r, r * se_log, reduced_chi2=chi2, at_bound=at_bound)
+    m8 = 8.0 * params.leg_mass_kg
+    est.inertia_kg_m2 = inertia_for_ratio(params, r)
+    est.inertia_sd_kg_m2 = est.ratio_se * (params.hub_mass_kg + m8) * L**2
+    if at_bound or not math.isfinite(se_log) or est.inertia_kg_m2 <= 0:
+        est.ok = False
+        est.note = (
+            f"the step periods give no usable inertia ratio (r = {r:.3g}"
+            + (", at the end of the range searched" if at_bound else "")
+            + (", I_c <= 0 at these masses" if est.inertia_kg_m2 <= 0 else "")
+            + ")"
+        )
+    else:
+        est.adequate = chi2 <= CHI2_ADEQUATE
+        est.note = (
+            f"inertia ratio I_hub/(M L0^2) = {r:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive step "
+            f"periods (reduced chi² {chi2:.2f})"
+            + (
+                ""
+                if est.adequate
+                else f"; EFFECTIVE ONLY: the rigid return map does not fit these periods (reduced chi² above "
+                f"{CHI2_ADEQUATE:g}; a compliant wheel?)"
+            )
+        )
+    est.loss_per_step = _loss(x, pairs, alpha, L, g)
+    return est
+
+
+def _loss(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> float:
+    """The constant loss per step (rad^2/s^2, in e) profiled out at the inertia ratio exp(log_r)."""
+    gap, s = _gaps(log_r, pairs, alpha, L, g)
+    return _weighted_loss(gap, s)
+
+
+def _weighted_loss(gap: np.ndarray, s: np.ndarray) -> float:
+    ok = np.isfinite(gap) & np.isfinite(s) & (s > 0)
+    if not ok.any():
+        return math.nan
+    w = 1.0 / s[ok] ** 2
+    return float(np.sum(w * gap[ok]) / np.sum(w))
+
+
+def trial_inertia_input(win: Any, trials: Sequence[Any]) -> tuple[Any, InertiaEstimate, list[str]]:
+    """(the wheel input to use, the trials' estimate, warnings). ``win``'s inertia not stated (source
+    ``table1``): replaced by the trials' (source ``trials``). Stated: kept, and compared with the trials'
+    (a warning beyond `Z_DISAGREE` combined standard errors). An effective-only ratio: neither."""
+    est = estimate_inertia_ratio(trials, win.params)
+    entry = win.entries["inertia_kg_m2"]
+    if not est.ok:
+        if entry.source == "table1":
+            est.note += "; Table 1's inertia is held"
+        return win, est, []
+    if not est.adequate:  # an effective ratio is no measurement of the inertia: neither used nor compared
+        if entry.source == "table1":
+            est.note += "; not used: Table 1's inertia is held"
+        else:
+            est.comparison = {
+                "stated_kg_m2": entry.value,
+                "stated_sd_kg_m2": entry.sd,
+                "source": entry.source,
+                "z": None,
+            }
+            est.note += "; not compared with the stated inertia"
+        return win, est, []
+    if entry.source == "table1":
+        new = win.with_entry(
+            "inertia_kg_m2", est.inertia_kg_m2, est.inertia_sd_kg_m2, "trials", est.note + " (in place of Table 1's)"
+        )
+        return new, est, []
+    diff = entry.value - est.inertia_kg_m2
+    comb = math.hypot(entry.sd, est.inertia_sd_kg_m2)
+    z = abs(diff) / comb if comb > 0 else math.inf
+    est.comparison = {"stated_kg_m2": entry.value, "stated_sd_kg_m2": entry.sd, "source": entry.source, "z": z}
+    warnings = []
+    if z > Z_DISAGREE:
+        warnings.append(
+            f"the wheel's inertia I_c = {entry.value:.4g} +- {entry.sd:.2g} kg m^2 ({entry.source}) disagrees with "
+            f"the trials' {est.inertia_kg_m2:.4g} +- {est.inertia_sd_kg_m2:.2g} kg m^2 ({z:.1f} combined standard "
+            f"errors; inertia ratio {inertia_ratio(win.params):.3f} stated, {est.ratio:.3f} +- {est.ratio_se:.3f} "
+            "from the step periods): the stated value is used"
+        )
+    return win, est, warnings
