@@ -48,12 +48,12 @@ def test_rigid_wheel_impacts_within_a_frame_and_unbiased(tmp_path):
 
 def test_wandering_walk_is_not_refused_and_its_impacts_are_within_a_frame(tmp_path):
     """A compliant ER wheel (k = 2000 N/m, c = 14 N s/m) whose steps wander (each step's slope drawn
-    N(2.5, 1.2^2) deg, `rimless.analysis.validation.floquet_truth`): 15 clear impacts, but a few CoM minima move within their
-    step. Main refused it: "CoM minima do not repeat every 45 deg of rotation (worst misfit 9.1 deg)"."""
+    N(2.5, 1.2^2) deg, `rimless.analysis.validation.floquet_truth`): 15 clear impacts, but a few CoM minima move
+    within their step. Main refused it: "CoM minima do not repeat every 45 deg of rotation (worst misfit 9.1 deg)"."""
     import copy
 
-    from rimless.sim.model.params import WheelParams
     from rimless.analysis.validation.floquet_truth import er_walk, record
+    from rimless.sim.model.params import WheelParams
 
     rng = np.random.default_rng(4)
     walk = er_walk(
