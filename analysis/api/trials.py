@@ -136,7 +136,10 @@ def critical_slope(
     parameters (`models`, default the wheel's model) beside it; `calibrated` parameters add those models'.
     The wheel's parameters are held with their uncertainties (`Wheel.input`: a wheel file's ``{value, sd}``, the
     ``uncertainty=`` given, else the defaults), listed (``parameters``) and carried into the intervals
-    (``parameter_uncertainty``, ``ci_with_parameters_deg``; `rimless.analysis.inference.held`). `names`: the
+    (``parameter_uncertainty``, ``ci_with_parameters_deg``; `rimless.analysis.inference.held`). When the wheel
+    does not state its inertia (Table 1's default), the trials' own inertia ratio I_hub / (M L0^2), fitted to
+    their consecutive step periods (`rimless.analysis.inference.stance_inertia`), takes its place (source
+    "trials", ``inertia_from_trials``); a stated inertia is compared with it (``warnings``). `names`: the
     trials' names in the output (default the file names)."""
     from rimless.analysis.inference.critical_slope import run_critical_slope
     from rimless.analysis.inference.held import carry_critical
