@@ -29,7 +29,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
-from rimless.analysis.validation.floquet_truth import RigidWheel, Walk
+from rimless.analysis.validation.floquet_truth import RigidWheel, Walk, slope_to_lab
 from rimless.analysis.validation.vicon_writer import markers_section, objects_section, write
 
 __all__ = [
@@ -217,14 +217,7 @@ def record(
     tf = np.arange(0.0, t[-1], 1.0 / lab.rate_hz) + float(rng.uniform(0, 1.0 / lab.rate_hz))
     tf = tf[tf <= t[-1]]
     xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
-    phi, yaw = math.radians(wk.slope_deg), math.radians(lab.heading_deg)
-    trv = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    up = np.array([0.0, 0.0, 1.0])
-    d = math.cos(phi) * trv - math.sin(phi) * up
-    nrm = math.sin(phi) * trv + math.cos(phi) * up
-    w = np.cross(d, nrm)
-    hub = np.array([0.3, -0.5, 0.25]) + np.outer(xs, d) + np.outer(hs, nrm)
-    rot = Rotation.from_rotvec(np.outer(-bs, w)) * Rotation.from_matrix(np.column_stack([d, nrm, w]))
+    hub, rot = slope_to_lab(xs, hs, bs, wk.slope_deg, lab.heading_deg)
     if lab.up == "y":
         m = Rotation.from_matrix(Y_UP_FROM_Z_UP)
         hub, rot = m.apply(hub), m * rot

@@ -206,6 +206,22 @@ def _walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> W
     return Walk(t[stop], x[stop], h[stop], b[stop], np.array(impacts), np.array(speeds), slope_deg, stalled)
 
 
+def slope_to_lab(
+    x_m: np.ndarray, h_m: np.ndarray, body_rad: np.ndarray, slope_deg: float, heading_deg: float
+) -> tuple[np.ndarray, Rotation]:
+    """The hub (n, 3), m, and the body's rotation in a Z-up lab from slope-frame samples: x down the slope, h
+    along its normal, the body angle; the ramp heads ``heading_deg`` off the lab's X axis."""
+    phi, yaw = math.radians(slope_deg), math.radians(heading_deg)
+    trv = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    d = math.cos(phi) * trv - math.sin(phi) * up
+    nrm = math.sin(phi) * trv + math.cos(phi) * up
+    w = np.cross(d, nrm)
+    hub = np.array([0.3, -0.5, 0.25]) + np.outer(x_m, d) + np.outer(h_m, nrm)
+    rot = Rotation.from_rotvec(np.outer(-body_rad, w)) * Rotation.from_matrix(np.column_stack([d, nrm, w]))
+    return hub, rot
+
+
 def record(
     walk: Walk,
     path,
@@ -226,14 +242,7 @@ def record(
     tf = np.arange(0.0, t[-1], 1.0 / rate_hz) + float(rng.uniform(0, 1.0 / rate_hz))
     tf = tf[tf <= t[-1]]
     xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
-    phi, yaw = math.radians(walk.slope_deg), math.radians(yaw_deg)
-    trv = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    up = np.array([0.0, 0.0, 1.0])
-    d = math.cos(phi) * trv - math.sin(phi) * up
-    nrm = math.sin(phi) * trv + math.cos(phi) * up
-    w = np.cross(d, nrm)
-    hub = np.array([0.3, -0.5, 0.25]) + np.outer(xs, d) + np.outer(hs, nrm)
-    rot = Rotation.from_rotvec(np.outer(-bs, w)) * Rotation.from_matrix(np.column_stack([d, nrm, w]))
+    hub, rot = slope_to_lab(xs, hs, bs, walk.slope_deg, yaw_deg)
     trans = hub + rot.apply(np.asarray(origin_body_m, float))
     noisy = Rotation.from_rotvec(rng.normal(0, angle_noise_rad, (tf.size, 3))) * rot
     pose = np.column_stack([noisy.as_rotvec(), trans + rng.normal(0, noise_m, trans.shape)])
