@@ -11,6 +11,8 @@ command modules can import them without importing the whole command tree.
 - a negative number is read as a value, not as an option (`robot set touch_velocity_m_s -3`);
 - a bad number says what was expected (`--duration-s must be >= 0.0, got '-1'`), and NaN is no value of an
   option with bounds;
+- plain text for a terminal breaks only between words (`echo_text`), never inside a number or a path; piped
+  output keeps each line whole;
 - `--help` shows upper-case metavars (`FLOAT`, `PATH`, `[er|ve]`), none on flags, and prints help text
   literally (square brackets are not rich markup).
 
@@ -28,6 +30,9 @@ import functools
 import json
 import math
 import re
+import shutil
+import sys
+import textwrap
 from collections.abc import Callable, Iterator
 from typing import Any, NoReturn, TypeVar
 
@@ -75,6 +80,37 @@ def fail(message: str) -> NoReturn:
 def print_json(obj: Any) -> None:
     """Print one JSON object on stdout (NaN/inf become null, numpy scalars become numbers)."""
     typer.echo(json.dumps(_jsonable(obj), indent=2, allow_nan=False))
+
+
+def wrap_words(text: str, width: int) -> list[str]:
+    """The lines of ``text`` folded to ``width`` columns between words only (a number, a path or any other
+    word longer than the line stays whole); a folded line continues two spaces deeper than its own indent."""
+    out: list[str] = []
+    for line in text.splitlines() or [""]:
+        indent = line[: len(line) - len(line.lstrip(" "))]
+        out.extend(
+            textwrap.wrap(
+                line,
+                width=max(width, 20),
+                subsequent_indent=indent + "  ",
+                break_long_words=False,
+                break_on_hyphens=False,
+                drop_whitespace=True,
+            )
+            or [line]
+        )
+    return out
+
+
+def echo_text(text: str, *, err: bool = False) -> None:
+    """Print ``text``: folded between words to the terminal's width when the stream is a terminal (the terminal
+    would otherwise cut a number in two), unchanged when piped or redirected (one result a line, for grep)."""
+    stream = sys.stderr if err else sys.stdout
+    if not getattr(stream, "isatty", lambda: False)():
+        typer.echo(text, err=err)
+        return
+    width = shutil.get_terminal_size((80, 24)).columns - 1
+    typer.echo("\n".join(wrap_words(text, width)), err=err)
 
 
 def _jsonable(obj: Any) -> Any:

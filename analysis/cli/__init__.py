@@ -21,7 +21,7 @@ from rimless.analysis.cli.critical import register as register_critical
 from rimless.analysis.cli.floquet import register as register_floquet
 from rimless.analysis.cli.leg import register as register_leg
 from rimless.analysis.cli.names import names_shown
-from rimless.cli_rules import EXIT_USER_ERROR, fail, print_json, user_facing
+from rimless.cli_rules import EXIT_USER_ERROR, echo_text, fail, print_json, user_facing
 from rimless.errors import ParameterError, UserError
 from rimless.values import parse_list, parse_numbers
 
@@ -404,7 +404,7 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
 
     console = Console()
     console.print(_report_table(res, model, console.width))
-    typer.echo("RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
+    echo_text("RMS: CoM-height RMS error; |dT|: mean |period error|; θ'+: fitted post-impact speed")
     for name, c in getattr(res, "clutch", {}).items():
         pairs = ", ".join(
             f"{'–' if r['measured_ms'] is None else format(r['measured_ms'], '.0f')}/"
@@ -412,20 +412,18 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
             for r in c["rows"]
         )
         mm, sm = c["measured_mean_ms"], c["simulated_mean_ms"]
-        typer.echo(
+        echo_text(
             f"{name}: clutched time per step, robot log / simulated (ms): {pairs or 'none'}; mean "
             f"{'–' if mm is None else format(mm, '.1f')} / {'–' if sm is None else format(sm, '.1f')} ms"
         )
         for w in c["warnings"]:
-            typer.echo(f"warning: {w}", err=True)
+            echo_text(f"warning: {w}", err=True)
     for r in res.refused:
-        typer.echo(f"refused: {r.reason}", err=True)
+        echo_text(f"refused: {r.reason}", err=True)
     for c in res.comparisons:
         if c.status != "ok":
-            typer.echo(
-                f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True
-            )
-    typer.echo(f"report: {shown_path(res.report_html)}")
+            echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True)
+    echo_text(f"report: {shown_path(res.report_html)}")
 
 
 @app.command("report")
@@ -507,7 +505,7 @@ def report_cmd(
         for line in held_lines(res.critical.held_summary() if res.critical is not None else {}) or held_lines(
             {"parameters": res.parameters}
         ):
-            typer.echo(line)
+            echo_text(line)
     if res.refused:
         raise typer.Exit(EXIT_REFUSED)
     if not any(c.status == "ok" for c in res.comparisons):  # every compared trial suspect (run_report raised
@@ -532,13 +530,13 @@ def demo_cmd(
 
     def starting(n: int) -> None:
         if not json_out:
-            typer.echo(f"{n} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
+            echo_text(f"{n} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
 
     res = run_demo(out, json_out=json_out, starting=starting, wheel_input=win, argv=command_words(ctx))
     _print_report(res, "er", json_out)
     if not json_out:
-        typer.echo(critical_lines(res))
-        typer.echo(f"open file://{res.report_html.resolve()}")
+        echo_text(critical_lines(res))
+        echo_text(f"open file://{res.report_html.resolve()}")
 
 
 def register_top_level(root_app: typer.Typer) -> None:
