@@ -43,6 +43,18 @@ Z_DISAGREE = 2.0  # a stated inertia further than this many combined standard er
 #: above this reduced chi^2 the rigid return map does not describe the periods (a compliant wheel: measured 3-8 on
 #: the ER truth of tests/support/analysis_trial_truth.py, 0.1-0.6 on rigid truths): the ratio is effective only
 CHI2_ADEQUATE = 2.0
+#: the joint fit searches L0 within this factor of the held one
+L0_FACTOR = 2.0
+#: the joint fit's covariance is scaled by its reduced chi^2 (below 1 too) from this many degrees of freedom
+MIN_DOF_SCALE = 30
+ASSUMED_JOINT = (
+    "rigid stance pendulum and impact (r, L0 and a constant loss per step fitted together from the periods; "
+    "g held; r's se includes L0's and the loss's)"
+)
+ASSUMED_HELD_L0 = (
+    "rigid stance pendulum and impact at the held L0 and g (a constant loss per step fitted beside r; L0's "
+    "uncertainty not in r's se)"
+)
 
 
 def inertia_ratio(params: Any) -> float:
@@ -178,6 +190,17 @@ class InertiaEstimate:
     adequate: bool = True  # the rigid return map fits (reduced chi^2 <= CHI2_ADEQUATE)
     loss_per_step: float = math.nan  # the constant loss per step fitted beside r, rad^2/s^2 (in e)
     comparison: dict[str, Any] = field(default_factory=dict)
+    #: the ratio the pendulum needs at the held L0 (what I_c is given from; equal to ``ratio`` when L0 was not fitted)
+    ratio_at_held_l0: float = math.nan
+    ratio_at_held_l0_se: float = math.nan
+    reduced_chi2_at_held_l0: float = math.nan
+    held_l0_m: float = math.nan
+    #: L0 the periods determine beside r (NaN: not fitted)
+    leg_length_m: float = math.nan
+    leg_length_sd_m: float = math.nan
+    assumption: str = ""
+    #: the rigid map fits with L0 fitted beside r (reduced chi^2 <= CHI2_ADEQUATE)
+    fits_with_fitted_l0: bool = True
 
     def as_dict(self) -> dict[str, Any]:
         def num(x: float) -> float | None:
@@ -193,24 +216,27 @@ class InertiaEstimate:
             "inertia_sd_kg_m2": num(self.inertia_sd_kg_m2),
             "reduced_chi2": num(self.reduced_chi2),
             "rigid_map_fits": self.adequate,
+            "rigid_map_fits_with_fitted_leg_length": self.fits_with_fitted_l0,
+            "reduced_chi2_at_held_leg_length": num(self.reduced_chi2_at_held_l0),
             "loss_per_step_rad2_s2": num(self.loss_per_step),
-            "method": "weighted least squares of the rigid return map over consecutive step periods (log r)",
+            "leg_length_m": num(self.leg_length_m),
+            "leg_length_sd_m": num(self.leg_length_sd_m),
+            "held_leg_length_m": num(self.held_l0_m),
+            "inertia_ratio_at_held_leg_length": num(self.ratio_at_held_l0),
+            "inertia_ratio_at_held_leg_length_se": num(self.ratio_at_held_l0_se),
+            "assumption": self.assumption,
+            "method": "weighted least squares of the rigid return map over consecutive step periods (log r"
+            + (", log L0" if math.isfinite(self.leg_length_m) else "")
+            + "; the constant loss per step profiled out)",
             **({"comparison": self.comparison} if self.comparison else {}),
         }
 
 
-def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimate:
-    """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
-    and g of ``params`` (`WheelParams`)."""
+def _fit_at_held_l0(pairs: _Pairs, alpha: float, L: float, g: float) -> tuple[float, float, float, bool]:
+    """(log r, its standard error, reduced chi^2, at the end of the range) with L0 held at ``L``."""
     from scipy.optimize import minimize_scalar
 
-    alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
-    pairs = _pairs(trials, alpha)
     n = int(pairs.t0.size)
-    if n < MIN_PAIRS:
-        return InertiaEstimate(
-            False, f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS}): the inertia is not estimated", n
-        )
     lo, hi = math.log(R_BOUNDS[0]), math.log(R_BOUNDS[1])
     grid = np.linspace(lo, hi, 25)
     cost = [float(np.sum(_residuals(x, pairs, alpha, L, g) ** 2)) for x in grid]
@@ -223,7 +249,7 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
         options={"xatol": 1e-6},
     )
     x = float(opt.x)
-    chi2 = float(opt.fun) / max(n - 1, 1)
+    chi2 = float(opt.fun) / max(n - 2, 1)
     h = 1e-3
     jac = (_residuals(x + h, pairs, alpha, L, g) - _residuals(x - h, pairs, alpha, L, g)) / (2 * h)
     jj = float(jac @ jac)
@@ -235,12 +261,76 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
         score = np.array([float(jac[pairs.trial == k] @ res0[pairs.trial == k]) for k in groups])
         se_cluster = math.sqrt(groups.size / (groups.size - 1) * float(score @ score)) / jj
         se_log = max(se_log, se_cluster)
+    return x, se_log, chi2, bool(x - lo < 0.05 or hi - x < 0.05)
+
+
+@dataclass
+class _Joint:
+    """The fit of log r and log L0 together (the constant loss per step profiled out)."""
+
+    x: np.ndarray  # (log r, log L0)
+    cov: np.ndarray  # 2 x 2 covariance of x
+    chi2: float
+    ok: bool
+    why: str = ""
+
+
+def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -> _Joint:
+    """r and L0 from the periods together: the stance pendulum is kappa = 2 g / (L0 (1 + r)) and the impact's
+    beta(r), so the periods fix both; started at (``log_r0``, held L0), L0 searched within a factor 2."""
+    from scipy.optimize import least_squares
+
+    n = int(pairs.t0.size)
+    lb = [math.log(R_BOUNDS[0]), math.log(L / L0_FACTOR)]
+    ub = [math.log(R_BOUNDS[1]), math.log(L * L0_FACTOR)]
+    x0 = [min(max(log_r0, lb[0] + 1e-3), ub[0] - 1e-3), math.log(L)]
+
+    def f(x: np.ndarray) -> np.ndarray:
+        return _residuals(float(x[0]), pairs, alpha, math.exp(float(x[1])), g)
+
+    sol = least_squares(f, x0, bounds=(lb, ub), x_scale=[0.1, 0.05], diff_step=1e-4, max_nfev=200)
+    x = np.asarray(sol.x, float)
+    chi2 = float(np.sum(sol.fun**2)) / max(n - 3, 1)
+    jac = np.asarray(sol.jac, float)
+    jj = jac.T @ jac
+    nan2 = np.full((2, 2), math.nan)
+    if not sol.success and sol.status == 0:
+        return _Joint(x, nan2, chi2, False, "the joint fit of r and L0 stopped on its budget (200 evaluations)")
+    if min(x[0] - lb[0], ub[0] - x[0], x[1] - lb[1], ub[1] - x[1]) < 0.02:
+        return _Joint(x, nan2, chi2, False, "the joint fit of r and L0 ended at the end of the range searched")
+    if np.linalg.cond(jj) > 1e12:
+        return _Joint(x, nan2, chi2, False, "these periods do not separate r from L0")
+    inv = np.linalg.inv(jj)
+    # the noise scale from the residuals when there are enough of them (the timing floor assumed in the weights
+    # is above the importer's period errors: reduced chi^2 0.1-0.6 on rigid truths), else never below the weights'
+    cov = inv * (chi2 if n - 3 >= MIN_DOF_SCALE else max(chi2, 1.0))
+    groups = np.unique(pairs.trial)
+    if groups.size >= 2:  # the pairs of one trial share its slope error: the sandwich over trials, when larger
+        score = np.array([jac[pairs.trial == k].T @ sol.fun[pairs.trial == k] for k in groups])
+        sw = inv @ (groups.size / (groups.size - 1) * score.T @ score) @ inv
+        if sw[0, 0] > cov[0, 0]:
+            cov = sw
+    return _Joint(x, cov, chi2, True)
+
+
+def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimate:
+    """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
+    and g of ``params`` (`WheelParams`)."""
+    alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
+    pairs = _pairs(trials, alpha)
+    n = int(pairs.t0.size)
+    if n < MIN_PAIRS:
+        return InertiaEstimate(
+            False, f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS}): the inertia is not estimated", n
+        )
+    x, se_log, chi2, at_bound = _fit_at_held_l0(pairs, alpha, L, g)
     r = math.exp(x)
-    at_bound = x - lo < 0.05 or hi - x < 0.05
     est = InertiaEstimate(True, "", n, r, r * se_log, reduced_chi2=chi2, at_bound=at_bound)
+    est.ratio_at_held_l0, est.ratio_at_held_l0_se, est.reduced_chi2_at_held_l0 = r, r * se_log, chi2
     m8 = 8.0 * params.leg_mass_kg
     est.inertia_kg_m2 = inertia_for_ratio(params, r)
-    est.inertia_sd_kg_m2 = est.ratio_se * (params.hub_mass_kg + m8) * L**2
+    est.inertia_sd_kg_m2 = est.ratio_at_held_l0_se * (params.hub_mass_kg + m8) * L**2
+    est.held_l0_m = L
     if at_bound or not math.isfinite(se_log) or est.inertia_kg_m2 <= 0:
         est.ok = False
         est.note = (
@@ -249,19 +339,50 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
             + (", I_c <= 0 at these masses" if est.inertia_kg_m2 <= 0 else "")
             + ")"
         )
+        est.loss_per_step = _loss(x, pairs, alpha, L, g)
+        return est
+    est.adequate = chi2 <= CHI2_ADEQUATE
+    joint = _fit_joint(pairs, alpha, L, g, x)
+    effective = (
+        ""
+        if est.adequate
+        else f"; EFFECTIVE ONLY: the rigid return map at the held L0 does not fit these periods (reduced chi² "
+        f"{chi2:.2f}, above {CHI2_ADEQUATE:g}"
+        + (
+            f"; it fits with L0 = {1000 * math.exp(float(joint.x[1])):.1f} mm: is the held L0 the wheel's?)"
+            if joint.ok and joint.chi2 <= CHI2_ADEQUATE
+            else "; a compliant wheel?)"
+        )
+    )
+    if joint.ok:
+        est.fits_with_fitted_l0 = joint.chi2 <= CHI2_ADEQUATE
+        est.ratio = math.exp(float(joint.x[0]))
+        est.ratio_se = est.ratio * math.sqrt(float(joint.cov[0, 0]))
+        est.leg_length_m = math.exp(float(joint.x[1]))
+        est.leg_length_sd_m = est.leg_length_m * math.sqrt(float(joint.cov[1, 1]))
+        est.reduced_chi2 = joint.chi2
+        est.assumption = ASSUMED_JOINT
+        est.loss_per_step = _loss(float(joint.x[0]), pairs, alpha, est.leg_length_m, g)
+        z_l = abs(est.leg_length_m - L) / est.leg_length_sd_m if est.leg_length_sd_m > 0 else math.inf
+        est.note = (
+            f"inertia ratio I_hub/(M L0^2) = {est.ratio:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive "
+            f"step periods (L0 = {1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm and a "
+            f"constant loss per step fitted beside it; reduced chi² {joint.chi2:.2f})"
+        )
+        if z_l > Z_DISAGREE:
+            est.note += (
+                f"; the held L0 {1000 * L:.1f} mm is {z_l:.1f} sd from the periods': at it the pendulum needs "
+                f"r = {r:.3f} +- {est.ratio_at_held_l0_se:.3f} (an effective ratio: the one I_c is given from)"
+            )
+        est.note += effective
     else:
-        est.adequate = chi2 <= CHI2_ADEQUATE
+        est.fits_with_fitted_l0 = est.adequate
+        est.assumption = ASSUMED_HELD_L0
+        est.loss_per_step = _loss(x, pairs, alpha, L, g)
         est.note = (
             f"inertia ratio I_hub/(M L0^2) = {r:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive step "
-            f"periods (reduced chi² {chi2:.2f})"
-            + (
-                ""
-                if est.adequate
-                else f"; EFFECTIVE ONLY: the rigid return map does not fit these periods (reduced chi² above "
-                f"{CHI2_ADEQUATE:g}; a compliant wheel?)"
-            )
+            f"periods at the held L0 {1000 * L:.1f} mm (reduced chi² {chi2:.2f}; {joint.why})" + effective
         )
-    est.loss_per_step = _loss(x, pairs, alpha, L, g)
     return est
 
 
@@ -277,6 +398,23 @@ def _weighted_loss(gap: np.ndarray, s: np.ndarray) -> float:
         return math.nan
     w = 1.0 / s[ok] ** 2
     return float(np.sum(w * gap[ok]) / np.sum(w))
+
+
+def _leg_length_warning(win: Any, est: InertiaEstimate) -> list[str]:
+    """A stated L0 further than `Z_DISAGREE` combined standard errors from the one the periods determine."""
+    entry = win.entries["leg_length_m"]
+    if entry.source == "table1" or not math.isfinite(est.leg_length_m):
+        return []
+    comb = math.hypot(entry.sd, est.leg_length_sd_m)
+    z = abs(entry.value - est.leg_length_m) / comb if comb > 0 else math.inf
+    est.comparison["leg_length"] = {"stated_m": entry.value, "stated_sd_m": entry.sd, "source": entry.source, "z": z}
+    if z <= Z_DISAGREE:
+        return []
+    return [
+        f"the wheel's L0 = {1000 * entry.value:.1f} +- {1000 * entry.sd:.1f} mm ({entry.source}) disagrees with the "
+        f"{1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm the step periods determine ({z:.1f} "
+        "combined standard errors): the stated value is used"
+    ]
 
 
 def trial_inertia_input(win: Any, trials: Sequence[Any]) -> tuple[Any, InertiaEstimate, list[str]]:
@@ -300,17 +438,18 @@ def trial_inertia_input(win: Any, trials: Sequence[Any]) -> tuple[Any, InertiaEs
                 "z": None,
             }
             est.note += "; not compared with the stated inertia"
-        return win, est, []
+        # a rigid map that fits with L0 fitted but not at the held one: a stated L0 is compared
+        return win, est, _leg_length_warning(win, est) if est.fits_with_fitted_l0 else []
     if entry.source == "table1":
         new = win.with_entry(
             "inertia_kg_m2", est.inertia_kg_m2, est.inertia_sd_kg_m2, "trials", est.note + " (in place of Table 1's)"
         )
-        return new, est, []
+        return new, est, _leg_length_warning(win, est)
+    warnings = _leg_length_warning(win, est)
     diff = entry.value - est.inertia_kg_m2
     comb = math.hypot(entry.sd, est.inertia_sd_kg_m2)
     z = abs(diff) / comb if comb > 0 else math.inf
-    est.comparison = {"stated_kg_m2": entry.value, "stated_sd_kg_m2": entry.sd, "source": entry.source, "z": z}
-    warnings = []
+    est.comparison.update({"stated_kg_m2": entry.value, "stated_sd_kg_m2": entry.sd, "source": entry.source, "z": z})
     if z > Z_DISAGREE:
         warnings.append(
             f"the wheel's inertia I_c = {entry.value:.4g} +- {entry.sd:.2g} kg m^2 ({entry.source}) disagrees with "
