@@ -12,18 +12,30 @@ so the squared speed over the top of consecutive steps obeys the exact affine re
 ``e_{k+1} = beta^2 e_k + kappa [beta^2 (1 - cos(alpha/2 + phi)) - (1 - cos(alpha/2 - phi))]``, where every
 e_k is the measured period T_k turned into a speed through the pendulum (`StancePendulum.energy`). A wrong r
 bends both the conversion and the map, so r is estimated by **weighted least squares over every pair of
-consecutive periods of every trial** (a one-dimensional fit in log r; each residual
-``e_{k+1} - map(e_k)`` weighed by the timing noise of both periods through de/dT), its standard error from
-the Gauss-Newton curvature inflated by the reduced chi^2 when that exceeds 1, or the sandwich over trials
-when larger (the pairs of one trial share its slope error). A compliant wheel's stance is
-not this pendulum: its r is then the effective one the verdicts' pendulum needs (the reduced chi^2 says how
-well it fits). L0 and g are held at the wheel's values; the masses only set I_c = r M L0^2 - 8 m L0^2.
+consecutive periods of every trial**, each residual ``e_{k+1} - map(e_k)`` weighed by the timing noise of both
+periods through de/dT and the slope's uncertainty, with a constant loss per step (guide friction, in e) profiled
+out beside it. The pendulum is kappa and beta, so the periods fix L0 as well as r: **r and L0 are fitted
+together** (`_fit_joint`; g held). There each trial's slope error is what it is, an offset shared by
+all its pairs (d b / d phi times the slope's sd, standard normal, profiled out per trial: generalised least
+squares of a rank-one block), the timing noise is scaled by the residuals of a first pass (never below
+`K_TIMING_FLOOR` of the weights': the importer's period errors are below the 1.4 ms floor), and r's standard
+error carries L0's, the loss's and the slopes' (the Gauss-Newton covariance, inflated by the reduced chi^2 above
+1, or the sandwich over trials when larger). Held at a wrong L0 (Table 1's 237 mm for a
+wheel of 210-260 mm) the one-dimensional fit's r is the effective ratio that pendulum needs, not the wheel's: on 120
+series of `rimless.analysis.validation.importer_coverage` its interval held the truth's r in 41 of 120 (at the
+truth's L0: 119), the joint fit's in 120 of 120 (rms z 0.3-0.5: wide, mostly from the importer's slope sds;
+with them a third, rms z 0.74 on 80); guide friction made no difference. That ratio at the held L0
+(``ratio_at_held_l0``, JSON ``inertia_ratio_at_held_leg_length``) is still the one I_c is given from: the
+verdicts' pendulum is made at the held L0. A compliant wheel's stance is not this pendulum: its r is then the
+effective one (the reduced chi^2 at the held L0 says how well it fits). The masses only set
+I_c = r M L0^2 - 8 m L0^2.
 
 `trial_inertia_input` uses it: a wheel input whose inertia is not stated (source ``table1``) takes the trials'
-I_c (source ``trials``, its sd from the fit); a stated one is compared with it and a disagreement beyond their
-combined uncertainty is a warning. An effective-only ratio (the rigid map does not fit) is neither used nor
-compared: it is no measurement of the wheel's inertia (the models' critical slopes would be made at it). Too few consecutive periods (fewer than `MIN_PAIRS` pairs) leave the input
-as it is, with a note.
+I_c (source ``trials``, its sd from the fit at the held L0); a stated one is compared with it, and a stated L0
+with the periods' L0: a disagreement beyond their combined uncertainty is a warning. An effective-only ratio
+(the rigid map at the held L0 does not fit) is neither used nor compared: it is no measurement of the wheel's
+inertia (the models' critical slopes would be made at it). Too few consecutive periods (fewer than `MIN_PAIRS`
+pairs) leave the input as it is, with a note.
 """
 
 from __future__ import annotations
@@ -45,11 +57,11 @@ Z_DISAGREE = 2.0  # a stated inertia further than this many combined standard er
 CHI2_ADEQUATE = 2.0
 #: the joint fit searches L0 within this factor of the held one
 L0_FACTOR = 2.0
-#: the joint fit's covariance is scaled by its reduced chi^2 (below 1 too) from this many degrees of freedom
-MIN_DOF_SCALE = 30
+#: the least scale of the timing noise the joint fit takes from its residuals (of the weights' floor)
+K_TIMING_FLOOR = 0.2
 ASSUMED_JOINT = (
-    "rigid stance pendulum and impact (r, L0 and a constant loss per step fitted together from the periods; "
-    "g held; r's se includes L0's and the loss's)"
+    "rigid stance pendulum and impact; r, L0, a constant loss per step and each trial's slope error (within "
+    "its sd) fitted together from the periods, g held: r's se includes L0's, the loss's and the slopes'"
 )
 ASSUMED_HELD_L0 = (
     "rigid stance pendulum and impact at the held L0 and g (a constant loss per step fitted beside r; L0's "
@@ -137,6 +149,15 @@ def _gaps(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> tupl
     """(what each step loses beyond the rigid impact, ``beta^2 e_k + b - e_{k+1}``, rad^2/s^2; its 1-sigma
     noise from the two periods' timing and the slope's uncertainty) at the inertia ratio exp(log_r); NaN where a
     measured period is outside what that pendulum can walk."""
+    gap, s_timing, s_slope = _gap_parts(log_r, pairs, alpha, L, g)
+    return gap, np.sqrt(s_timing**2 + s_slope**2)
+
+
+def _gap_parts(
+    log_r: float, pairs: _Pairs, alpha: float, L: float, g: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`_gaps` with the noise in its two parts: (gap, the periods' timing 1-sigma, the slope's 1-sigma: shared by
+    every pair of a trial, d b / d phi times the slope's sd)."""
     r = math.exp(log_r)
     kappa = 2.0 * g / (L * (1.0 + r))
     beta2 = ((r + math.cos(alpha)) / (r + 1.0)) ** 2
@@ -159,8 +180,32 @@ def _gaps(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> tupl
             / (_period(e1 * math.exp(h), alpha, kappa, phi) - _period(e1 * math.exp(-h), alpha, kappa, phi))
         )
         db = kappa * (beta2 * np.sin(alpha / 2 + phi) + np.sin(alpha / 2 - phi))  # d b / d phi
-        s = np.sqrt(pairs.sig**2 * (d1**2 + beta2**2 * d0**2) + (db * pairs.phi_sd) ** 2)
-    return beta2 * e0 + b - e1, s
+        s_timing = pairs.sig * np.sqrt(d1**2 + beta2**2 * d0**2)
+    return beta2 * e0 + b - e1, s_timing, db * pairs.phi_sd
+
+
+def _trial_residuals(x: np.ndarray, pairs: _Pairs, alpha: float, g: float, k: float) -> tuple[np.ndarray, float]:
+    """The joint fit's residuals at (log r, log L0): each trial's slope error a shared offset of its gaps
+    (standard normal in units of its sd, profiled out per trial: the generalised least squares of a rank-one
+    block), the constant loss per step profiled out, the timing noise scaled by ``k``; (residuals: the pairs'
+    then one per trial, the degrees of freedom the trials' offsets take)."""
+    gap, st, c = _gap_parts(float(x[0]), pairs, alpha, math.exp(float(x[1])), g)
+    st = st * k
+    ok = np.isfinite(gap) & np.isfinite(st) & (st > 0) & np.isfinite(c)
+    _, inv = np.unique(pairs.trial, return_inverse=True)
+    w = np.where(ok, 1.0 / np.where(ok, st, 1.0) ** 2, 0.0)
+    gz = np.where(ok, gap, 0.0)
+    A = np.bincount(inv, w)
+    B = np.bincount(inv, w * gz)
+    ct = np.bincount(inv, np.where(ok, c, 0.0)) / np.maximum(np.bincount(inv, ok.astype(float)), 1.0)
+    q = 1.0 / (1.0 + ct**2 * A)  # 1 - gamma A
+    den = float(np.sum(q * A))
+    loss = float(np.sum(q * B)) / den if den > 0 else 0.0
+    delta = ct * (B - loss * A) * q
+    with np.errstate(invalid="ignore", divide="ignore"):
+        res = (gz - loss - ct[inv] * delta[inv]) / st
+    res = np.where(ok, res, 1e3)
+    return np.concatenate([res, delta]), float(np.sum(1.0 - q))
 
 
 def _residuals(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> np.ndarray:
@@ -273,6 +318,7 @@ class _Joint:
     chi2: float
     ok: bool
     why: str = ""
+    timing_scale: float = 1.0  # the periods' timing noise over the weights' (`TIMING_SIGMA_FLOOR_S`)
 
 
 def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -> _Joint:
@@ -285,12 +331,20 @@ def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -
     ub = [math.log(R_BOUNDS[1]), math.log(L * L0_FACTOR)]
     x0 = [min(max(log_r0, lb[0] + 1e-3), ub[0] - 1e-3), math.log(L)]
 
-    def f(x: np.ndarray) -> np.ndarray:
-        return _residuals(float(x[0]), pairs, alpha, math.exp(float(x[1])), g)
+    k = 1.0
+    for _pass in range(2):  # the timing noise's scale from the first pass's pairs (the weights' floor is above it)
 
-    sol = least_squares(f, x0, bounds=(lb, ub), x_scale=[0.1, 0.05], diff_step=1e-4, max_nfev=200)
+        def f(x: np.ndarray, k: float = k) -> np.ndarray:
+            return _trial_residuals(x, pairs, alpha, g, k)[0]
+
+        sol = least_squares(f, x0, bounds=(lb, ub), x_scale=[0.1, 0.05], diff_step=1e-4, max_nfev=200)
+        res, dof_trials = _trial_residuals(sol.x, pairs, alpha, g, k)
+        dof = max(n - 3 - dof_trials, 1.0)
+        chi2 = float(np.sum(res[:n] ** 2)) / dof
+        x0 = list(sol.x)
+        if _pass == 0:
+            k = max(K_TIMING_FLOOR, math.sqrt(chi2))
     x = np.asarray(sol.x, float)
-    chi2 = float(np.sum(sol.fun**2)) / max(n - 3, 1)
     jac = np.asarray(sol.jac, float)
     jj = jac.T @ jac
     nan2 = np.full((2, 2), math.nan)
@@ -301,15 +355,15 @@ def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -
     if np.linalg.cond(jj) > 1e12:
         return _Joint(x, nan2, chi2, False, "these periods do not separate r from L0")
     inv = np.linalg.inv(jj)
-    # the noise scale from the residuals when there are enough of them (the timing floor assumed in the weights
-    # is above the importer's period errors: reduced chi^2 0.1-0.6 on rigid truths), else never below the weights'
-    cov = inv * (chi2 if n - 3 >= MIN_DOF_SCALE else max(chi2, 1.0))
+    cov = inv * max(chi2, 1.0)
+    trial = np.concatenate([pairs.trial, np.unique(pairs.trial)])  # a trial's offset residual is its own
     groups = np.unique(pairs.trial)
-    if groups.size >= 2:  # the pairs of one trial share its slope error: the sandwich over trials, when larger
-        score = np.array([jac[pairs.trial == k].T @ sol.fun[pairs.trial == k] for k in groups])
+    if groups.size >= 2:  # the sandwich over trials, when larger
+        score = np.array([jac[trial == t].T @ sol.fun[trial == t] for t in groups])
         sw = inv @ (groups.size / (groups.size - 1) * score.T @ score) @ inv
         if sw[0, 0] > cov[0, 0]:
             cov = sw
+    return _Joint(x, cov, chi2 * k**2, True, timing_scale=k)
     return _Joint(x, cov, chi2, True)
 
 
