@@ -420,5 +420,10 @@ def run_importer_coverage(
             if progress:
                 progress(i + 1, "done")
     return ImporterCoverageResult(
-        done, seed, tuple(inputs), time.process_time() - cpu, time.perf_counter() - wall, tuple(friction_n)
+        done,
+        seed,
+        tuple(inputs),
+        time.process_time() - cpu,
+        time.perf_counter() - wall,
+        (float(friction_n[0]), float(friction_n[1])),
     )
