@@ -403,7 +403,8 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
         else f"; EFFECTIVE ONLY: the rigid return map at the held L0 does not fit these periods (reduced chi² "
         f"{chi2:.2f}, above {CHI2_ADEQUATE:g}"
         + (
-            f"; it fits with L0 = {1000 * math.exp(float(joint.x[1])):.1f} mm: is the held L0 the wheel's?)"
+            f"; it fits with L0 = {1000 * math.exp(float(joint.x[1])):.1f} mm: the held L0 is not the wheel's, or its "
+            "legs give (a compliant wheel's stance is a shorter pendulum), and r is then effective too)"
             if joint.ok and joint.chi2 <= CHI2_ADEQUATE
             else "; a compliant wheel?)"
         )
