@@ -681,6 +681,16 @@ def coverage_cmd(
             )
         for why, k in d["not_estimated"].items():
             typer.echo(f"  no estimate in {k} series: {why}")
+        ir = d.get("inertia_ratio_from_trials")
+        if ir and ir["of"]:
+            lo, hi = ir["coverage_ci95"]
+            held = ir["at_held_leg_length"]
+            typer.echo(
+                f"  inertia ratio from trials: 95 % interval holds the truth's in {ir['covered']} of {ir['of']} = "
+                f"{ir['coverage']:.1%} ({lo:.1%}-{hi:.1%}; goal 90-98 %), median error "
+                f"{_fmt(ir['median_error_pct'], '+.2f')} % (largest |error| {_fmt(ir['max_abs_error_pct'], '.1f')} %), "
+                f"median se {_fmt(ir['median_se_pct'], '.2f')} %; at the held L0: {held['covered']} of {held['of']}"
+            )
 
 
 def _print_coverage(out: dict[str, Any], seed: int) -> None:

@@ -12,18 +12,30 @@ so the squared speed over the top of consecutive steps obeys the exact affine re
 ``e_{k+1} = beta^2 e_k + kappa [beta^2 (1 - cos(alpha/2 + phi)) - (1 - cos(alpha/2 - phi))]``, where every
 e_k is the measured period T_k turned into a speed through the pendulum (`StancePendulum.energy`). A wrong r
 bends both the conversion and the map, so r is estimated by **weighted least squares over every pair of
-consecutive periods of every trial** (a one-dimensional fit in log r; each residual
-``e_{k+1} - map(e_k)`` weighed by the timing noise of both periods through de/dT), its standard error from
-the Gauss-Newton curvature inflated by the reduced chi^2 when that exceeds 1, or the sandwich over trials
-when larger (the pairs of one trial share its slope error). A compliant wheel's stance is
-not this pendulum: its r is then the effective one the verdicts' pendulum needs (the reduced chi^2 says how
-well it fits). L0 and g are held at the wheel's values; the masses only set I_c = r M L0^2 - 8 m L0^2.
+consecutive periods of every trial**, each residual ``e_{k+1} - map(e_k)`` weighed by the timing noise of both
+periods through de/dT and the slope's uncertainty, with a constant loss per step (guide friction, in e) profiled
+out beside it. The pendulum is kappa and beta, so the periods fix L0 as well as r: **r and L0 are fitted
+together** (`_fit_joint`; g held). There each trial's slope error is what it is, an offset shared by
+all its pairs (d b / d phi times the slope's sd, standard normal, profiled out per trial: generalised least
+squares of a rank-one block), the timing noise is scaled by the residuals of a first pass (never below
+`K_TIMING_FLOOR` of the weights': the importer's period errors are below the 1.4 ms floor), and r's standard
+error carries L0's, the loss's and the slopes' (the Gauss-Newton covariance, inflated by the reduced chi^2 above
+1, or the sandwich over trials when larger). Held at a wrong L0 (Table 1's 237 mm for a
+wheel of 210-260 mm) the one-dimensional fit's r is the effective ratio that pendulum needs, not the wheel's: on 120
+series of `rimless.analysis.validation.importer_coverage` its interval held the truth's r in 41 of 120 (at the
+truth's L0: 119), the joint fit's in 120 of 120 (rms z 0.3-0.5: wide, mostly from the importer's slope sds;
+with them a third, rms z 0.74 on 80); guide friction made no difference. That ratio at the held L0
+(``ratio_at_held_l0``, JSON ``inertia_ratio_at_held_leg_length``) is still the one I_c is given from: the
+verdicts' pendulum is made at the held L0. A compliant wheel's stance is not this pendulum: its r is then the
+effective one (the reduced chi^2 at the held L0 says how well it fits). The masses only set
+I_c = r M L0^2 - 8 m L0^2.
 
 `trial_inertia_input` uses it: a wheel input whose inertia is not stated (source ``table1``) takes the trials'
-I_c (source ``trials``, its sd from the fit); a stated one is compared with it and a disagreement beyond their
-combined uncertainty is a warning. An effective-only ratio (the rigid map does not fit) is neither used nor
-compared: it is no measurement of the wheel's inertia (the models' critical slopes would be made at it). Too few consecutive periods (fewer than `MIN_PAIRS` pairs) leave the input
-as it is, with a note.
+I_c (source ``trials``, its sd from the fit at the held L0); a stated one is compared with it, and a stated L0
+with the periods' L0: a disagreement beyond their combined uncertainty is a warning. An effective-only ratio
+(the rigid map at the held L0 does not fit) is neither used nor compared: it is no measurement of the wheel's
+inertia (the models' critical slopes would be made at it). Too few consecutive periods (fewer than `MIN_PAIRS`
+pairs) leave the input as it is, with a note.
 """
 
 from __future__ import annotations
@@ -43,6 +55,18 @@ Z_DISAGREE = 2.0  # a stated inertia further than this many combined standard er
 #: above this reduced chi^2 the rigid return map does not describe the periods (a compliant wheel: measured 3-8 on
 #: the ER truth of tests/support/analysis_trial_truth.py, 0.1-0.6 on rigid truths): the ratio is effective only
 CHI2_ADEQUATE = 2.0
+#: the joint fit searches L0 within this factor of the held one
+L0_FACTOR = 2.0
+#: the least scale of the timing noise the joint fit takes from its residuals (of the weights' floor)
+K_TIMING_FLOOR = 0.2
+ASSUMED_JOINT = (
+    "rigid stance pendulum and impact; r, L0, a constant loss per step and each trial's slope error (within "
+    "its sd) fitted together from the periods, g held: r's se includes L0's, the loss's and the slopes'"
+)
+ASSUMED_HELD_L0 = (
+    "rigid stance pendulum and impact at the held L0 and g (a constant loss per step fitted beside r; L0's "
+    "uncertainty not in r's se)"
+)
 
 
 def inertia_ratio(params: Any) -> float:
@@ -125,6 +149,15 @@ def _gaps(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> tupl
     """(what each step loses beyond the rigid impact, ``beta^2 e_k + b - e_{k+1}``, rad^2/s^2; its 1-sigma
     noise from the two periods' timing and the slope's uncertainty) at the inertia ratio exp(log_r); NaN where a
     measured period is outside what that pendulum can walk."""
+    gap, s_timing, s_slope = _gap_parts(log_r, pairs, alpha, L, g)
+    return gap, np.sqrt(s_timing**2 + s_slope**2)
+
+
+def _gap_parts(
+    log_r: float, pairs: _Pairs, alpha: float, L: float, g: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`_gaps` with the noise in its two parts: (gap, the periods' timing 1-sigma, the slope's 1-sigma: shared by
+    every pair of a trial, d b / d phi times the slope's sd)."""
     r = math.exp(log_r)
     kappa = 2.0 * g / (L * (1.0 + r))
     beta2 = ((r + math.cos(alpha)) / (r + 1.0)) ** 2
@@ -147,8 +180,32 @@ def _gaps(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> tupl
             / (_period(e1 * math.exp(h), alpha, kappa, phi) - _period(e1 * math.exp(-h), alpha, kappa, phi))
         )
         db = kappa * (beta2 * np.sin(alpha / 2 + phi) + np.sin(alpha / 2 - phi))  # d b / d phi
-        s = np.sqrt(pairs.sig**2 * (d1**2 + beta2**2 * d0**2) + (db * pairs.phi_sd) ** 2)
-    return beta2 * e0 + b - e1, s
+        s_timing = pairs.sig * np.sqrt(d1**2 + beta2**2 * d0**2)
+    return beta2 * e0 + b - e1, s_timing, db * pairs.phi_sd
+
+
+def _trial_residuals(x: np.ndarray, pairs: _Pairs, alpha: float, g: float, k: float) -> tuple[np.ndarray, float]:
+    """The joint fit's residuals at (log r, log L0): each trial's slope error a shared offset of its gaps
+    (standard normal in units of its sd, profiled out per trial: the generalised least squares of a rank-one
+    block), the constant loss per step profiled out, the timing noise scaled by ``k``; (residuals: the pairs'
+    then one per trial, the degrees of freedom the trials' offsets take)."""
+    gap, st, c = _gap_parts(float(x[0]), pairs, alpha, math.exp(float(x[1])), g)
+    st = st * k
+    ok = np.isfinite(gap) & np.isfinite(st) & (st > 0) & np.isfinite(c)
+    _, inv = np.unique(pairs.trial, return_inverse=True)
+    w = np.where(ok, 1.0 / np.where(ok, st, 1.0) ** 2, 0.0)
+    gz = np.where(ok, gap, 0.0)
+    A = np.bincount(inv, w)
+    B = np.bincount(inv, w * gz)
+    ct = np.bincount(inv, np.where(ok, c, 0.0)) / np.maximum(np.bincount(inv, ok.astype(float)), 1.0)
+    q = 1.0 / (1.0 + ct**2 * A)  # 1 - gamma A
+    den = float(np.sum(q * A))
+    loss = float(np.sum(q * B)) / den if den > 0 else 0.0
+    delta = ct * (B - loss * A) * q
+    with np.errstate(invalid="ignore", divide="ignore"):
+        res = (gz - loss - ct[inv] * delta[inv]) / st
+    res = np.where(ok, res, 1e3)
+    return np.concatenate([res, delta]), float(np.sum(1.0 - q))
 
 
 def _residuals(log_r: float, pairs: _Pairs, alpha: float, L: float, g: float) -> np.ndarray:
@@ -178,6 +235,17 @@ class InertiaEstimate:
     adequate: bool = True  # the rigid return map fits (reduced chi^2 <= CHI2_ADEQUATE)
     loss_per_step: float = math.nan  # the constant loss per step fitted beside r, rad^2/s^2 (in e)
     comparison: dict[str, Any] = field(default_factory=dict)
+    #: the ratio the pendulum needs at the held L0 (what I_c is given from; equal to ``ratio`` when L0 was not fitted)
+    ratio_at_held_l0: float = math.nan
+    ratio_at_held_l0_se: float = math.nan
+    reduced_chi2_at_held_l0: float = math.nan
+    held_l0_m: float = math.nan
+    #: L0 the periods determine beside r (NaN: not fitted)
+    leg_length_m: float = math.nan
+    leg_length_sd_m: float = math.nan
+    assumption: str = ""
+    #: the rigid map fits with L0 fitted beside r (reduced chi^2 <= CHI2_ADEQUATE)
+    fits_with_fitted_l0: bool = True
 
     def as_dict(self) -> dict[str, Any]:
         def num(x: float) -> float | None:
@@ -193,24 +261,27 @@ class InertiaEstimate:
             "inertia_sd_kg_m2": num(self.inertia_sd_kg_m2),
             "reduced_chi2": num(self.reduced_chi2),
             "rigid_map_fits": self.adequate,
+            "rigid_map_fits_with_fitted_leg_length": self.fits_with_fitted_l0,
+            "reduced_chi2_at_held_leg_length": num(self.reduced_chi2_at_held_l0),
             "loss_per_step_rad2_s2": num(self.loss_per_step),
-            "method": "weighted least squares of the rigid return map over consecutive step periods (log r)",
+            "leg_length_m": num(self.leg_length_m),
+            "leg_length_sd_m": num(self.leg_length_sd_m),
+            "held_leg_length_m": num(self.held_l0_m),
+            "inertia_ratio_at_held_leg_length": num(self.ratio_at_held_l0),
+            "inertia_ratio_at_held_leg_length_se": num(self.ratio_at_held_l0_se),
+            "assumption": self.assumption,
+            "method": "weighted least squares of the rigid return map over consecutive step periods (log r"
+            + (", log L0" if math.isfinite(self.leg_length_m) else "")
+            + "; the constant loss per step profiled out)",
             **({"comparison": self.comparison} if self.comparison else {}),
         }
 
 
-def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimate:
-    """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
-    and g of ``params`` (`WheelParams`)."""
+def _fit_at_held_l0(pairs: _Pairs, alpha: float, L: float, g: float) -> tuple[float, float, float, bool]:
+    """(log r, its standard error, reduced chi^2, at the end of the range) with L0 held at ``L``."""
     from scipy.optimize import minimize_scalar
 
-    alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
-    pairs = _pairs(trials, alpha)
     n = int(pairs.t0.size)
-    if n < MIN_PAIRS:
-        return InertiaEstimate(
-            False, f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS}): the inertia is not estimated", n
-        )
     lo, hi = math.log(R_BOUNDS[0]), math.log(R_BOUNDS[1])
     grid = np.linspace(lo, hi, 25)
     cost = [float(np.sum(_residuals(x, pairs, alpha, L, g) ** 2)) for x in grid]
@@ -223,7 +294,7 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
         options={"xatol": 1e-6},
     )
     x = float(opt.x)
-    chi2 = float(opt.fun) / max(n - 1, 1)
+    chi2 = float(opt.fun) / max(n - 2, 1)
     h = 1e-3
     jac = (_residuals(x + h, pairs, alpha, L, g) - _residuals(x - h, pairs, alpha, L, g)) / (2 * h)
     jj = float(jac @ jac)
@@ -235,12 +306,85 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
         score = np.array([float(jac[pairs.trial == k] @ res0[pairs.trial == k]) for k in groups])
         se_cluster = math.sqrt(groups.size / (groups.size - 1) * float(score @ score)) / jj
         se_log = max(se_log, se_cluster)
+    return x, se_log, chi2, bool(x - lo < 0.05 or hi - x < 0.05)
+
+
+@dataclass
+class _Joint:
+    """The fit of log r and log L0 together (the constant loss per step profiled out)."""
+
+    x: np.ndarray  # (log r, log L0)
+    cov: np.ndarray  # 2 x 2 covariance of x
+    chi2: float
+    ok: bool
+    why: str = ""
+    timing_scale: float = 1.0  # the periods' timing noise over the weights' (`TIMING_SIGMA_FLOOR_S`)
+
+
+def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -> _Joint:
+    """r and L0 from the periods together: the stance pendulum is kappa = 2 g / (L0 (1 + r)) and the impact's
+    beta(r), so the periods fix both; started at (``log_r0``, held L0), L0 searched within a factor 2."""
+    from scipy.optimize import least_squares
+
+    n = int(pairs.t0.size)
+    lb = [math.log(R_BOUNDS[0]), math.log(L / L0_FACTOR)]
+    ub = [math.log(R_BOUNDS[1]), math.log(L * L0_FACTOR)]
+    x0 = [min(max(log_r0, lb[0] + 1e-3), ub[0] - 1e-3), math.log(L)]
+
+    k = 1.0
+    for _pass in range(2):  # the timing noise's scale from the first pass's pairs (the weights' floor is above it)
+
+        def f(x: np.ndarray, k: float = k) -> np.ndarray:
+            return _trial_residuals(x, pairs, alpha, g, k)[0]
+
+        sol = least_squares(f, x0, bounds=(lb, ub), x_scale=[0.1, 0.05], diff_step=1e-4, max_nfev=200)
+        res, dof_trials = _trial_residuals(sol.x, pairs, alpha, g, k)
+        dof = max(n - 3 - dof_trials, 1.0)
+        chi2 = float(np.sum(res[:n] ** 2)) / dof
+        x0 = list(sol.x)
+        if _pass == 0:
+            k = max(K_TIMING_FLOOR, math.sqrt(chi2))
+    x = np.asarray(sol.x, float)
+    jac = np.asarray(sol.jac, float)
+    jj = jac.T @ jac
+    nan2 = np.full((2, 2), math.nan)
+    if not sol.success and sol.status == 0:
+        return _Joint(x, nan2, chi2, False, "the joint fit of r and L0 stopped on its budget (200 evaluations)")
+    if min(x[0] - lb[0], ub[0] - x[0], x[1] - lb[1], ub[1] - x[1]) < 0.02:
+        return _Joint(x, nan2, chi2, False, "the joint fit of r and L0 ended at the end of the range searched")
+    if np.linalg.cond(jj) > 1e12:
+        return _Joint(x, nan2, chi2, False, "these periods do not separate r from L0")
+    inv = np.linalg.inv(jj)
+    cov = inv * max(chi2, 1.0)
+    trial = np.concatenate([pairs.trial, np.unique(pairs.trial)])  # a trial's offset residual is its own
+    groups = np.unique(pairs.trial)
+    if groups.size >= 2:  # the sandwich over trials, when larger
+        score = np.array([jac[trial == t].T @ sol.fun[trial == t] for t in groups])
+        sw = inv @ (groups.size / (groups.size - 1) * score.T @ score) @ inv
+        if sw[0, 0] > cov[0, 0]:
+            cov = sw
+    return _Joint(x, cov, chi2 * k**2, True, timing_scale=k)
+    return _Joint(x, cov, chi2, True)
+
+
+def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimate:
+    """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
+    and g of ``params`` (`WheelParams`)."""
+    alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
+    pairs = _pairs(trials, alpha)
+    n = int(pairs.t0.size)
+    if n < MIN_PAIRS:
+        return InertiaEstimate(
+            False, f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS}): the inertia is not estimated", n
+        )
+    x, se_log, chi2, at_bound = _fit_at_held_l0(pairs, alpha, L, g)
     r = math.exp(x)
-    at_bound = x - lo < 0.05 or hi - x < 0.05
     est = InertiaEstimate(True, "", n, r, r * se_log, reduced_chi2=chi2, at_bound=at_bound)
+    est.ratio_at_held_l0, est.ratio_at_held_l0_se, est.reduced_chi2_at_held_l0 = r, r * se_log, chi2
     m8 = 8.0 * params.leg_mass_kg
     est.inertia_kg_m2 = inertia_for_ratio(params, r)
-    est.inertia_sd_kg_m2 = est.ratio_se * (params.hub_mass_kg + m8) * L**2
+    est.inertia_sd_kg_m2 = est.ratio_at_held_l0_se * (params.hub_mass_kg + m8) * L**2
+    est.held_l0_m = L
     if at_bound or not math.isfinite(se_log) or est.inertia_kg_m2 <= 0:
         est.ok = False
         est.note = (
@@ -249,19 +393,51 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
             + (", I_c <= 0 at these masses" if est.inertia_kg_m2 <= 0 else "")
             + ")"
         )
+        est.loss_per_step = _loss(x, pairs, alpha, L, g)
+        return est
+    est.adequate = chi2 <= CHI2_ADEQUATE
+    joint = _fit_joint(pairs, alpha, L, g, x)
+    effective = (
+        ""
+        if est.adequate
+        else f"; EFFECTIVE ONLY: the rigid return map at the held L0 does not fit these periods (reduced chi² "
+        f"{chi2:.2f}, above {CHI2_ADEQUATE:g}"
+        + (
+            f"; it fits with L0 = {1000 * math.exp(float(joint.x[1])):.1f} mm: the held L0 is not the wheel's, or its "
+            "legs give (a compliant wheel's stance is a shorter pendulum), and r is then effective too)"
+            if joint.ok and joint.chi2 <= CHI2_ADEQUATE
+            else "; a compliant wheel?)"
+        )
+    )
+    if joint.ok:
+        est.fits_with_fitted_l0 = joint.chi2 <= CHI2_ADEQUATE
+        est.ratio = math.exp(float(joint.x[0]))
+        est.ratio_se = est.ratio * math.sqrt(float(joint.cov[0, 0]))
+        est.leg_length_m = math.exp(float(joint.x[1]))
+        est.leg_length_sd_m = est.leg_length_m * math.sqrt(float(joint.cov[1, 1]))
+        est.reduced_chi2 = joint.chi2
+        est.assumption = ASSUMED_JOINT
+        est.loss_per_step = _loss(float(joint.x[0]), pairs, alpha, est.leg_length_m, g)
+        z_l = abs(est.leg_length_m - L) / est.leg_length_sd_m if est.leg_length_sd_m > 0 else math.inf
+        est.note = (
+            f"inertia ratio I_hub/(M L0^2) = {est.ratio:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive "
+            f"step periods (L0 = {1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm and a "
+            f"constant loss per step fitted beside it; reduced chi² {joint.chi2:.2f})"
+        )
+        if z_l > Z_DISAGREE:
+            est.note += (
+                f"; the held L0 {1000 * L:.1f} mm is {z_l:.1f} sd from the periods': at it the pendulum needs "
+                f"r = {r:.3f} +- {est.ratio_at_held_l0_se:.3f} (an effective ratio: the one I_c is given from)"
+            )
+        est.note += effective
     else:
-        est.adequate = chi2 <= CHI2_ADEQUATE
+        est.fits_with_fitted_l0 = est.adequate
+        est.assumption = ASSUMED_HELD_L0
+        est.loss_per_step = _loss(x, pairs, alpha, L, g)
         est.note = (
             f"inertia ratio I_hub/(M L0^2) = {r:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive step "
-            f"periods (reduced chi² {chi2:.2f})"
-            + (
-                ""
-                if est.adequate
-                else f"; EFFECTIVE ONLY: the rigid return map does not fit these periods (reduced chi² above "
-                f"{CHI2_ADEQUATE:g}; a compliant wheel?)"
-            )
+            f"periods at the held L0 {1000 * L:.1f} mm (reduced chi² {chi2:.2f}; {joint.why})" + effective
         )
-    est.loss_per_step = _loss(x, pairs, alpha, L, g)
     return est
 
 
@@ -277,6 +453,23 @@ def _weighted_loss(gap: np.ndarray, s: np.ndarray) -> float:
         return math.nan
     w = 1.0 / s[ok] ** 2
     return float(np.sum(w * gap[ok]) / np.sum(w))
+
+
+def _leg_length_warning(win: Any, est: InertiaEstimate) -> list[str]:
+    """A stated L0 further than `Z_DISAGREE` combined standard errors from the one the periods determine."""
+    entry = win.entries["leg_length_m"]
+    if entry.source == "table1" or not math.isfinite(est.leg_length_m):
+        return []
+    comb = math.hypot(entry.sd, est.leg_length_sd_m)
+    z = abs(entry.value - est.leg_length_m) / comb if comb > 0 else math.inf
+    est.comparison["leg_length"] = {"stated_m": entry.value, "stated_sd_m": entry.sd, "source": entry.source, "z": z}
+    if z <= Z_DISAGREE:
+        return []
+    return [
+        f"the wheel's L0 = {1000 * entry.value:.1f} +- {1000 * entry.sd:.1f} mm ({entry.source}) disagrees with the "
+        f"{1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm the step periods determine ({z:.1f} "
+        "combined standard errors): the stated value is used"
+    ]
 
 
 def trial_inertia_input(win: Any, trials: Sequence[Any]) -> tuple[Any, InertiaEstimate, list[str]]:
@@ -300,17 +493,18 @@ def trial_inertia_input(win: Any, trials: Sequence[Any]) -> tuple[Any, InertiaEs
                 "z": None,
             }
             est.note += "; not compared with the stated inertia"
-        return win, est, []
+        # a rigid map that fits with L0 fitted but not at the held one: a stated L0 is compared
+        return win, est, _leg_length_warning(win, est) if est.fits_with_fitted_l0 else []
     if entry.source == "table1":
         new = win.with_entry(
             "inertia_kg_m2", est.inertia_kg_m2, est.inertia_sd_kg_m2, "trials", est.note + " (in place of Table 1's)"
         )
-        return new, est, []
+        return new, est, _leg_length_warning(win, est)
+    warnings = _leg_length_warning(win, est)
     diff = entry.value - est.inertia_kg_m2
     comb = math.hypot(entry.sd, est.inertia_sd_kg_m2)
     z = abs(diff) / comb if comb > 0 else math.inf
-    est.comparison = {"stated_kg_m2": entry.value, "stated_sd_kg_m2": entry.sd, "source": entry.source, "z": z}
-    warnings = []
+    est.comparison.update({"stated_kg_m2": entry.value, "stated_sd_kg_m2": entry.sd, "source": entry.source, "z": z})
     if z > Z_DISAGREE:
         warnings.append(
             f"the wheel's inertia I_c = {entry.value:.4g} +- {entry.sd:.2g} kg m^2 ({entry.source}) disagrees with "

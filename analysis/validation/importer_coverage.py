@@ -55,16 +55,20 @@ RAMP_STEPS = 11
 #: the wheel file's uncertainty for the ``truth`` input: relative for masses and inertia, absolute for L0 (m)
 TRUTH_SD_REL = {"hub_mass_kg": 0.02, "inertia_kg_m2": 0.10}
 TRUTH_SD_L0_M = 0.001
+Z95 = 1.959963984540054
+#: the guide friction drawn (uniform), N: the truth's constant loss per step is F_c x 20 mm
+FRICTION_N = (0.0, 0.6)
 
 
-def draw_wheel(rng: np.random.Generator) -> tuple[LossyWheel, float]:
-    """A wheel away from Table 1 whose true critical slope is 0.5-4 deg: (wheel, critical slope deg)."""
+def draw_wheel(rng: np.random.Generator, friction_n: tuple[float, float] = FRICTION_N) -> tuple[LossyWheel, float]:
+    """A wheel away from Table 1 whose true critical slope is 0.5-4 deg: (wheel, critical slope deg); its guide
+    friction uniform in ``friction_n`` (N; (0, 0) for a lossless truth)."""
     while True:
         mass = float(rng.uniform(1.6, 3.0))
         leg = float(rng.uniform(0.21, 0.26))
         ratio = float(np.exp(rng.uniform(math.log(0.3), math.log(3.0))))
         wheel = LossyWheel(
-            mass_kg=mass, inertia_hub_kg_m2=ratio * mass * leg**2, leg_m=leg, friction_n=float(rng.uniform(0.0, 0.6))
+            mass_kg=mass, inertia_hub_kg_m2=ratio * mass * leg**2, leg_m=leg, friction_n=float(rng.uniform(*friction_n))
         )
         crit = wheel.critical_slope_deg()
         if 0.5 < crit < 4.0:
@@ -163,11 +167,42 @@ def _covers(ci: Sequence[float] | None, truth: float) -> bool | None:
     return bool(ci[0] <= truth <= ci[1])
 
 
-def _result_row(res: Any, truth: float) -> dict[str, Any]:
-    """What one series' estimate says about the truth (JSON-ready)."""
+def _inertia_row(inertia: dict[str, Any] | None, wheel: LossyWheel) -> dict[str, Any]:
+    """What the trials' inertia ratio (JSON ``inertia_from_trials``) says about the truth's r = I_hub / (M L^2):
+    the ratio reported (r and L0 fitted together) and the one at the held L0 (what I_c is given from)."""
+    truth = wheel.inertia_ratio
+    row: dict[str, Any] = {"truth_inertia_ratio": truth, "truth_leg_m": wheel.leg_m}
+    if not inertia or not inertia.get("estimated"):
+        return {**row, "estimated": False, "why": (inertia or {}).get("note", "not tried")}
+    r, se = inertia["inertia_ratio"], inertia["inertia_ratio_se"]
+    rh, seh = inertia.get("inertia_ratio_at_held_leg_length"), inertia.get("inertia_ratio_at_held_leg_length_se")
+    return {
+        **row,
+        "estimated": True,
+        "inertia_ratio": r,
+        "inertia_ratio_se": se,
+        "error_pct": 100 * (r / truth - 1),
+        "z": (r - truth) / se,
+        "covered": bool(abs(r - truth) <= Z95 * se),
+        "leg_length_m": inertia.get("leg_length_m"),
+        "leg_length_sd_m": inertia.get("leg_length_sd_m"),
+        "rigid_map_fits": inertia.get("rigid_map_fits"),
+        "reduced_chi2": inertia.get("reduced_chi2"),
+        "loss_per_step_rad2_s2": inertia.get("loss_per_step_rad2_s2"),
+        "truth_loss_per_step_rad2_s2": 2 * wheel.loss_j / wheel.inertia_foot,
+        "inertia_ratio_at_held_leg_length": rh,
+        "covered_at_held_leg_length": bool(abs(rh - truth) <= Z95 * seh) if rh is not None and seh else None,
+        "assumption": inertia.get("assumption"),
+    }
+
+
+def _result_row(res: Any, truth: float, wheel: LossyWheel | None = None) -> dict[str, Any]:
+    """What one series' estimate says about the truth (JSON-ready); with ``wheel``, the trials' inertia ratio
+    against the truth's (``inertia_from_trials``)."""
     c = res.chosen
+    inertia = {"inertia_from_trials": _inertia_row(res.inertia, wheel)} if wheel is not None else {}
     if c is None:
-        return {"estimated": False, "why": res.why}
+        return {"estimated": False, "why": res.why, **inertia}
     held = (res.held or {}).get("trials") or {}
     ci_par = held.get("ci_deg")
     return {
@@ -183,6 +218,7 @@ def _result_row(res: Any, truth: float) -> dict[str, Any]:
             e.method: {"value_deg": e.value_deg, "ci_deg": list(e.ci_deg), "covered": _covers(e.ci_deg, truth)}
             for e in res.estimates
         },
+        **inertia,
     }
 
 
@@ -193,6 +229,34 @@ def _share(k: int, n: int) -> dict[str, Any]:
 
 def _median(v: list[float]) -> float | None:
     return float(np.median(v)) if v else None
+
+
+def summarise_inertia(series: list[ImporterSeries], name: str) -> dict[str, Any]:
+    """The row "inertia ratio from trials" of one input: how often r's 95 % interval holds the truth's r
+    (Wilson interval), its median and largest errors (%), median se (%), the 95th percentile of |error| / se, and
+    the same coverage for the ratio at the held L0."""
+    rows = [
+        r["inertia_from_trials"]
+        for s in series
+        if name in s.results and "inertia_from_trials" in (r := s.results[name])
+    ]
+    est = [r for r in rows if r["estimated"]]
+    share = _share(sum(r["covered"] for r in est), len(est))
+    held = [r for r in est if r["covered_at_held_leg_length"] is not None]
+    held_share = _share(sum(r["covered_at_held_leg_length"] for r in held), len(held))
+    err = [r["error_pct"] for r in est]
+    return {
+        "series": len(rows),
+        "estimated": len(est),
+        **share,
+        "median_error_pct": _median(err),
+        "median_abs_error_pct": _median([abs(e) for e in err]),
+        "max_abs_error_pct": max((abs(e) for e in err), default=None),
+        "median_se_pct": _median([100 * r["inertia_ratio_se"] / r["inertia_ratio"] for r in est]),
+        "abs_z_p95": float(np.percentile([abs(r["z"]) for r in est], 95)) if est else None,
+        "at_held_leg_length": {k: held_share[k] for k in ("covered", "of", "coverage", "coverage_ci95")},
+        "assumption": next((r["assumption"] for r in est if r.get("assumption")), None),
+    }
 
 
 def summarise_input(series: list[ImporterSeries], name: str) -> dict[str, Any]:
@@ -239,6 +303,7 @@ def summarise_input(series: list[ImporterSeries], name: str) -> dict[str, Any]:
         ),
         "per_method": methods,
         "not_estimated": why,
+        "inertia_ratio_from_trials": summarise_inertia(series, name),
     }
 
 
@@ -249,6 +314,7 @@ class ImporterCoverageResult:
     inputs: tuple[str, ...]
     cpu_s: float
     wall_s: float
+    friction_n: tuple[float, float] = FRICTION_N
 
     def summary(self) -> dict[str, Any]:
         """The JSON of ``rimless trials coverage``: the first input's coverage at the top level (the keys of the
@@ -280,7 +346,7 @@ class ImporterCoverageResult:
                 "mass_kg": [1.6, 3.0],
                 "leg_m": [0.21, 0.26],
                 "inertia_ratio": [0.3, 3.0],
-                "friction_n": [0.0, 0.6],
+                "friction_n": list(self.friction_n),
                 "critical_slope_deg": [0.5, 4.0],
             },
             "per_series": [s.as_dict() for s in self.series],
@@ -298,10 +364,12 @@ def run_importer_coverage(
     *,
     inputs: Sequence[str] = INPUTS,
     ramp_steps: int = RAMP_STEPS,
+    friction_n: tuple[float, float] = FRICTION_N,
     progress: Callable[[int, str], None] | None = None,
 ) -> ImporterCoverageResult:
     """``n_series`` series through the importer; ``critical_slope(trials, wheel, models=[], names=...)`` is the
-    estimate (the public `rimless.analysis.critical_slope`); ``progress(i, stage)`` as it goes."""
+    estimate (the public `rimless.analysis.critical_slope`); ``friction_n`` the guide friction's range (N; (0, 0):
+    lossless truths); ``progress(i, stage)`` as it goes."""
     from rimless.analysis.kinematics.build import import_trial
     from rimless.errors import RimlessError
     from rimless.sim import Wheel
@@ -314,7 +382,7 @@ def run_importer_coverage(
     done: list[ImporterSeries] = []
     with tempfile.TemporaryDirectory(prefix=f"rimless-coverage-{os.getpid()}-") as tmp:
         for i in range(n_series):
-            wheel, crit = draw_wheel(rng)
+            wheel, crit = draw_wheel(rng, friction_n)
             lab = draw_lab(rng)
             folder = Path(tmp) / f"series{i}"
             folder.mkdir()
@@ -347,8 +415,15 @@ def run_importer_coverage(
                 except RimlessError as err:
                     s.results[name] = {"estimated": False, "why": f"{type(err).__name__}: {err}"}
                     continue
-                s.results[name] = _result_row(res, crit)
+                s.results[name] = _result_row(res, crit, wheel)
             done.append(s)
             if progress:
                 progress(i + 1, "done")
-    return ImporterCoverageResult(done, seed, tuple(inputs), time.process_time() - cpu, time.perf_counter() - wall)
+    return ImporterCoverageResult(
+        done,
+        seed,
+        tuple(inputs),
+        time.process_time() - cpu,
+        time.perf_counter() - wall,
+        (float(friction_n[0]), float(friction_n[1])),
+    )

@@ -88,6 +88,30 @@ def test_a_small_study_through_the_importer_counts_what_it_saw() -> None:
             assert lo <= d["coverage"] <= hi
     assert summarise_input(res.series, "table1")["median_error_deg"] == out["median_error_deg"]
     assert math.isfinite(out["cpu_s"]) and out["wall_s"] > 0
+    # the inertia ratio's own coverage: per series against the truth's r, counted per input
+    for name in ("table1", "truth"):
+        rows = [s.results[name]["inertia_from_trials"] for s in res.series]
+        ir = out["inputs"][name]["inertia_ratio_from_trials"]
+        assert ir["of"] == ir["estimated"] == sum(r["estimated"] for r in rows)
+        assert ir["covered"] == sum(r["covered"] for r in rows if r["estimated"])
+        for s, r in zip(res.series, rows, strict=True):
+            assert r["truth_inertia_ratio"] == pytest.approx(s.wheel.inertia_ratio)
+            if r["estimated"]:
+                assert r["covered"] == (
+                    abs(r["inertia_ratio"] - r["truth_inertia_ratio"]) <= 1.96 * r["inertia_ratio_se"]
+                )
+                assert r["error_pct"] == pytest.approx(100 * (r["inertia_ratio"] / s.wheel.inertia_ratio - 1))
+                assert "L0" in r["assumption"]
+    assert out["inertia_ratio_from_trials"] == out["inputs"]["table1"]["inertia_ratio_from_trials"]
+
+
+def test_a_lossless_truth_on_request() -> None:
+    """The friction knob: (0, 0) draws lossless wheels (Coleman's critical slope), the default range is kept."""
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        wheel, crit = draw_wheel(rng, (0.0, 0.0))
+        coleman = RigidTruth(wheel.mass_kg, wheel.inertia_hub_kg_m2, wheel.leg_m).critical_slope_deg()
+        assert wheel.friction_n == 0.0 and wheel.loss_j == 0.0 and crit == pytest.approx(coleman, abs=1e-9)
 
 
 def test_coverage_command_defaults_to_the_importer_and_keeps_the_pendulum() -> None:
@@ -102,6 +126,7 @@ def test_coverage_command_defaults_to_the_importer_and_keeps_the_pendulum() -> N
     r = runner.invoke(app, ["trials", "coverage", "--series", "1", "--seed", "2", "--inputs", "truth"])
     assert r.exit_code == 0, r.output
     assert "truth: rigid rimless wheel" in r.stdout and "wheel input: the truth's parameters" in r.stdout
+    assert "inertia ratio from trials: 95 % interval holds the truth's in" in r.stdout
     r = runner.invoke(app, ["trials", "coverage", "--truth", "pendulum", "--series", "2", "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["truth"] == "pendulum"
