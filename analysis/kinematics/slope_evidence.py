@@ -223,6 +223,8 @@ def slope_evidence(
     if hub_line is not None and math.isfinite(hub_line.se_rad):
         dof = hub_line.n_points - 2
         along = None if impact_along_m is None else np.asarray(impact_along_m, float)
+        if along is not None and not np.isfinite(along).all():
+            along = None  # (not expected: then the drift over the whole travel, and no hub term)
         span = float(np.ptp(along)) if along is not None and along.size > 1 else travel_m
         drift = Z95 * math.atan(MINIMA_DRIFT_M / max(span, 1e-3))
         hub_rad = _hub_offset_sd(along, hub_sd_m, step_m, alpha_rad) if along is not None else 0.0

@@ -192,7 +192,7 @@ def captured_evidence() -> Iterator[dict[str, Any]]:
     try:
         yield seen
     finally:
-        build.slope_evidence, build.choose_slope = evidence, choose  # type: ignore[assignment]
+        build.slope_evidence, build.choose_slope = evidence, choose
 
 
 def _row(e: Any, truth_rad: float) -> dict[str, Any]:
