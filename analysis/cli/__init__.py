@@ -21,6 +21,7 @@ from rimless.analysis.cli.critical import register as register_critical
 from rimless.analysis.cli.floquet import register as register_floquet
 from rimless.analysis.cli.leg import register as register_leg
 from rimless.analysis.cli.names import names_shown
+from rimless.analysis.cli.slope import register as register_slope
 from rimless.cli_rules import EXIT_USER_ERROR, echo_text, fail, print_json, user_facing
 from rimless.errors import ParameterError, UserError
 from rimless.values import parse_list, parse_numbers
@@ -547,3 +548,4 @@ def register_top_level(root_app: typer.Typer) -> None:
 register_critical(app)
 register_leg(app)
 register_floquet(app)
+register_slope(app)

@@ -259,6 +259,7 @@ def build_trial(
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index : motion.end_index + 1] = True
     contacts = None
+    hub_sd_m: float | None = None  # standard error of the hub the stance feet determine, m
     if rot is not None and angle is not None and axis is not None:  # the axis comes with the angle
         ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
         # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
@@ -284,6 +285,7 @@ def build_trial(
             )
             hub_c = contacts = None
         feet = hub_c if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M else None  # the hub the feet determine
+        hub_sd_m = None if feet is None else float(feet[1])
         given: np.ndarray | Sequence[float] | None = hub_offset_m
         if feet is not None:
             given = feet[0]
@@ -359,8 +361,10 @@ def build_trial(
         del aw, tw
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
     hub_line = None  # the slope of the line through the hub at the impacts (an estimate and a check)
+    cusps = None
     if idx.size >= 3:
-        hub_line = fit_slope(hub_fit, points_m=_hub_at_cusps(time_s, hub_fit, idx), travel=travel)
+        cusps = _hub_at_cusps(time_s, hub_fit, idx)
+        hub_line = fit_slope(hub_fit, points_m=cusps, travel=travel)
     hub_unknown = angle is not None and hub_offset_m is None and residual is None and offset is not None
     fm = np.flatnonzero(fit_mask)
     hs = frame0.to_slope(hub[fm[:: max(1, -(-fm.size // MAX_PATH_POINTS))]])[:, 0]
@@ -378,6 +382,9 @@ def build_trial(
         hub_unknown=hub_unknown,
         travel_m=travel_m,
         step_m=2 * wheel_leg_length_m * math.sin(alpha_rad / 2),
+        impact_along_m=None if cusps is None else (cusps - cusps[0]) @ travel,
+        hub_sd_m=hub_sd_m,
+        alpha_rad=alpha_rad,
     )
     if hub_unknown and evidence and evidence[0].source == "estimated":
         warnings.append(

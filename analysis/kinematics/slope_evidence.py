@@ -4,18 +4,22 @@ Sources, best first: a static ramp in the file (``ramp``), the user's value (``g
 the motion (``estimated``), each a line of height against the horizontal distance along the travel:
 
 * ``contacts``: the line through the stance-foot contact points (`contacts.slope_from_contacts`; no-slip: a
-  stance foot does not move). Its standard error comes from the contacts' height errors, scaled up by their
-  scatter about the line when there are three or more. Two contacts cannot show their scatter: their errors are
-  floored at `TWO_CONTACT_SD_M` each (a foot is no point and a leg compresses: the pivot moves that much).
+  stance foot does not move). Its standard error comes from the contacts' height errors, scaled by their scatter
+  about the line when there are three or more (down by at most half, `CONTACT_CHI2_FLOOR`: each contact's stated
+  error is the spread of its stance's pivots, not the error of their median), plus `CONTACT_DRIFT_M` of unseen
+  drift of the contact heights. Two contacts cannot show their scatter: their errors are floored at
+  `TWO_CONTACT_SD_M` each (a foot is no point and a leg compresses: the pivot moves that much).
 * ``impact line``: the line through the hub at the CoM-height minima (impacts), which lie on a line parallel to
   the slope when every impact looks alike; its standard error from the scatter about the line (Student t), plus
   `MINIMA_DRIFT_M` of unseen drift of the minima depth (a compliant leg compresses more when the wheel speeds
-  up: a trend that looks like slope).
+  up: a trend that looks like slope), plus the hub's standard error when the stance feet placed it (the error
+  turns with the wheel and a line through a few impacts reads part of it as slope; propagated exactly).
 * ``path``: the robust line through the whole hub path, used only when neither of the others exists; the hub
   rises and falls once a step, so its scatter counts as one sample a step (Student t).
 
 The estimate used is the best conditioned (narrowest interval), combined by inverse variance with the others
-that agree with it (they come from different data: stance pivots, impact cusps). When two estimates disagree by
+that agree with it (they come from different data: stance pivots, impact cusps; the drift they share,
+``common_half_rad``, is not averaged down). When two estimates disagree by
 more than their combined uncertainty, one of them is wrong and the data cannot say which: the interval of the
 best conditioned is widened to span the other's, and a warning says so. Angles in rad, lengths in m.
 """
@@ -38,6 +42,8 @@ __all__ = [
     "OFFSET_BOUND_M",
     "TWO_CONTACT_SD_M",
     "MINIMA_DRIFT_M",
+    "CONTACT_DRIFT_M",
+    "CONTACT_CHI2_FLOOR",
     "Z95",
 ]
 
@@ -55,7 +61,19 @@ OFFSET_BOUND_M = 0.05
 TWO_CONTACT_SD_M = 0.5e-3
 #: Unseen drift (1 sigma) of the CoM-minima depth from the first impact to the last, m: a compliant leg's
 #: compression at impact grows with the speed (the ER truth's minima drift by up to about 1 mm over 11 steps).
-MINIMA_DRIFT_M = 0.5e-3
+#: Sized with `CONTACT_DRIFT_M` on the compliant truth of the tests, released away from its gait, whose lines both
+#: read shallow (0.4 and 0.35 mm: its slope interval holds the truth in 77 of 80 walks; 0.5 and 0.4 mm: 80 of 80;
+#: none: 61 of 80); the rigid truth does not drift, but the motion cannot tell the two apart.
+MINIMA_DRIFT_M = 0.4e-3
+#: Least factor on the contact heights' stated errors (squared): each contact's error is the spread of the pivots
+#: within its stance, larger than the error of their median; scaled down by their scatter about the line, but
+#: by at most half (successive pivots share the rotation's errors, which the scatter does not show).
+CONTACT_CHI2_FLOOR = 0.25
+#: Unseen drift (1 sigma) of the contact heights from the first stance to the last, m: a compliant leg's
+#: compression within a stance changes with the speed, and the pivot the importer finds with it (on the compliant
+#: truth of the tests, released away from its gait, the contact lines read 0.014 deg shallow in the median, 0.4 mm
+#: over their 1.8 m, mostly in the same walks as the impact line; see `MINIMA_DRIFT_M`).
+CONTACT_DRIFT_M = 0.35e-3
 
 
 @dataclass(frozen=True)
@@ -68,6 +86,9 @@ class SlopeEvidence:
     ci_rad: tuple[float, float]
     method: str
     kind: str = ""
+    #: the part of the half width (rad, 95 %) from a drift every estimate of the trial shares (a compliant leg's
+    #: compression changing with the speed): combining estimates does not reduce it
+    common_half_rad: float = 0.0
 
     @property
     def half_rad(self) -> float:
@@ -84,29 +105,72 @@ def _quantile(dof: int) -> float:
     return Z95 if dof <= 0 else float(student_t.ppf(0.975, dof))
 
 
+def _contact_chi2(cs) -> float:
+    """Reduced chi-square of the contact heights about their weighted line (against the distance along the
+    line from the first contact to the last)."""
+    c = np.array([k.c_m for k in cs])
+    w = 1.0 / np.array([k.sd_m for k in cs]) ** 2
+    u = c[-1, :2] - c[0, :2]
+    s = (c[:, :2] - c[0, :2]) @ (u / max(float(np.linalg.norm(u)), 1e-12))
+    z = c[:, 2]
+    sm, zm = (w * s).sum() / w.sum(), (w * z).sum() / w.sum()
+    sxx = float((w * (s - sm) ** 2).sum())
+    if sxx <= 0:
+        return 1.0
+    b = float((w * (s - sm) * (z - zm)).sum()) / sxx
+    r = z - zm - b * (s - sm)
+    return float((w * r**2).sum()) / (len(cs) - 2)
+
+
+def _hub_offset_sd(along: np.ndarray, hub_sd_m: float | None, step_m: float, alpha_rad: float) -> float:
+    """1-sigma slope error (rad) of the line through the hub at the impacts from an error of the hub offset
+    (``hub_sd_m`` on each axis in the wheel plane): the error turns with the wheel, alpha a step, so the heights
+    at the impacts carry a sinusoid a line may read as slope. Its least-squares slope, propagated exactly."""
+    if hub_sd_m is None or not math.isfinite(hub_sd_m) or hub_sd_m <= 0 or along.size < 2:
+        return 0.0
+    s = along - along.mean()
+    sxx = float(s @ s)
+    if sxx <= 0:
+        return 0.0
+    turn = alpha_rad * np.round((along - along[0]) / max(step_m, 1e-6))
+    w = s / sxx
+    return hub_sd_m * math.hypot(float(w @ np.cos(turn)), float(w @ np.sin(turn)))
+
+
 def _contact_evidence(contacts, contact_slope: tuple[float, float, float], floor: float) -> SlopeEvidence:
-    """The contact line's evidence; two contacts get `TWO_CONTACT_SD_M` each (they cannot show their scatter)."""
+    """The contact line's evidence: the contacts' height errors (two contacts: at least `TWO_CONTACT_SD_M` each,
+    they cannot show their scatter; three or more: scaled by their scatter, `CONTACT_CHI2_FLOOR`) and
+    `CONTACT_DRIFT_M` of drift over the contacts' run."""
     phi, se, rms = contact_slope
     cs = contacts.contacts
     n = len(cs)
+    c = np.array([k.c_m for k in cs])
+    run = max(float(np.ptp((c[:, :2] - c[0, :2]) @ _unit(c[-1, :2] - c[0, :2]))), 1e-3)
+    drift = Z95 * math.atan(CONTACT_DRIFT_M / run)
     if n == 2:
-        c = np.array([k.c_m for k in cs])
-        run = float(np.linalg.norm(c[1, :2] - c[0, :2]))
         sd = [max(k.sd_m, TWO_CONTACT_SD_M) for k in cs]
-        se = max(se, math.hypot(*sd) / max(run, 1e-3) * math.cos(phi) ** 2)
+        se = max(se, math.hypot(*sd) / run * math.cos(phi) ** 2)
         how = (
             f"line through 2 stance-foot contact points (walking window; no-slip: a stance foot does not move), "
             f"each height +- {max(sd) * 1e3:.2f} mm (two points show no scatter: at least "
-            f"{TWO_CONTACT_SD_M * 1e3:.1f} mm assumed)"
+            f"{TWO_CONTACT_SD_M * 1e3:.1f} mm assumed, which covers their drift)"
         )
-        half = Z95 * se
-    else:
-        how = (
-            f"line through {n} stance-foot contact points (walking window; no-slip: a stance foot does not "
-            f"move), scatter {rms * 1e3:.2f} mm"
-        )
-        half = Z95 * se
-    return SlopeEvidence("estimated", phi, _interval(phi, max(half, floor)), how, "contacts")
+        half = max(Z95 * se, floor)
+        return SlopeEvidence("estimated", phi, _interval(phi, half), how, "contacts", min(drift, half))
+    chi2 = _contact_chi2(cs)
+    scale = math.sqrt(max(chi2, CONTACT_CHI2_FLOOR))
+    se = se / math.sqrt(max(chi2, 1.0)) * scale  # (slope_from_contacts scaled by chi2 only when above 1)
+    half = max(math.hypot(Z95 * se, drift), floor)
+    how = (
+        f"line through {n} stance-foot contact points (walking window; no-slip: a stance foot does not "
+        f"move), scatter {rms * 1e3:.2f} mm (reduced chi-square {chi2:.2f}: their stated height errors scaled by "
+        f"{scale:.2f}), and {CONTACT_DRIFT_M * 1e3:.1f} mm of drift of the contact heights allowed"
+    )
+    return SlopeEvidence("estimated", phi, _interval(phi, half), how, "contacts", min(drift, half))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / max(float(np.linalg.norm(v)), 1e-12)
 
 
 def slope_evidence(
@@ -122,10 +186,16 @@ def slope_evidence(
     hub_unknown: bool = False,
     travel_m: float = 1.0,
     step_m: float = 0.18,
+    impact_along_m: np.ndarray | None = None,
+    hub_sd_m: float | None = None,
+    alpha_rad: float = math.pi / 4,
 ) -> list[SlopeEvidence]:
     """Every slope source of the trial: ramp, given, then the estimates (contacts, impact line, or the whole
     path when neither exists). ``hub_line`` and ``frame0`` are `slope.SlopeFrame` fits (the hub at the CoM
-    minima, the whole path); ``travel_m`` the distance walked along the slope, ``step_m`` the hub's travel per step."""
+    minima, the whole path); ``travel_m`` the distance walked along the slope, ``step_m`` the hub's travel per step;
+    ``impact_along_m`` the impacts' horizontal distances along the travel (the points of ``hub_line``), ``hub_sd_m``
+    the standard error of the hub the stance feet placed (None when the hub was given or found otherwise),
+    ``alpha_rad`` the angle between legs."""
     out = []
     if ramp_deg is not None and math.isfinite(ramp_deg):
         r = math.radians(ramp_deg)
@@ -155,11 +225,22 @@ def slope_evidence(
         estimates.append(_contact_evidence(contacts, contact_slope, floor))
     if hub_line is not None and math.isfinite(hub_line.se_rad):
         dof = hub_line.n_points - 2
-        drift = math.atan(MINIMA_DRIFT_M / max(travel_m, 1e-3))
-        half = max(math.hypot(_quantile(dof) * hub_line.se_rad, Z95 * drift), floor)
+        along = None if impact_along_m is None else np.asarray(impact_along_m, float)
+        if along is not None and not np.isfinite(along).all():
+            along = None  # (not expected: then the drift over the whole travel, and no hub term)
+        span = float(np.ptp(along)) if along is not None and along.size > 1 else travel_m
+        drift = Z95 * math.atan(MINIMA_DRIFT_M / max(span, 1e-3))
+        hub_rad = _hub_offset_sd(along, hub_sd_m, step_m, alpha_rad) if along is not None else 0.0
+        half = max(math.hypot(_quantile(dof) * hub_line.se_rad, drift, Z95 * hub_rad), floor)
         how = (
             f"{hub_line.source} (walking window; scatter {hub_line.residual_m * 1e3:.2f} mm, Student t with {dof} "
-            f"degrees of freedom, and {MINIMA_DRIFT_M * 1e3:.1f} mm of drift of the minima depth allowed)"
+            f"degrees of freedom, and {MINIMA_DRIFT_M * 1e3:.1f} mm of drift of the minima depth allowed"
+            + (
+                f"; the hub's standard error {hub_sd_m * 1e3:.2f} mm carried ({math.degrees(hub_rad):.4f} deg)"
+                if hub_rad > 0 and hub_sd_m is not None
+                else ""
+            )
+            + ")"
         )
         if hub_unknown:
             half = max(half, math.atan(2 * OFFSET_BOUND_M / max(travel_m, 1e-3)))
@@ -167,7 +248,14 @@ def slope_evidence(
                 f"; the hub is not determined: the interval allows an origin up to {OFFSET_BOUND_M * 1e3:.0f} mm off it"
             )
         estimates.append(
-            SlopeEvidence("estimated", hub_line.slope_rad, _interval(hub_line.slope_rad, half), how, "impact line")
+            SlopeEvidence(
+                "estimated",
+                hub_line.slope_rad,
+                _interval(hub_line.slope_rad, half),
+                how,
+                "impact line",
+                min(drift, half),
+            )
         )
     if not estimates and (given_deg is None and ramp_deg is None or hub_line is not None):
         line = hub_line if hub_line is not None else frame0
@@ -246,7 +334,10 @@ def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], li
             group = [used] + agreeing
             w = [1.0 / max(e.half_rad, 1e-12) ** 2 for e in group]
             mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sum(w)
-            half = 1.0 / math.sqrt(sum(w))
+            # their own parts average down; the drift they share does not (it moves every estimate alike)
+            own = sum(wi**2 * (e.half_rad**2 - e.common_half_rad**2) for wi, e in zip(w, group))
+            common = sum(wi * e.common_half_rad for wi, e in zip(w, group))
+            half = math.sqrt(own + common**2) / sum(w)
             used = SlopeEvidence(
                 "estimated",
                 mean,
@@ -254,6 +345,7 @@ def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], li
                 "inverse-variance combination of the consistent estimates: "
                 + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
                 "combined " + " and ".join(e.kind for e in group),
+                common / sum(w),
             )
         rest = [e for e in evidence[1:] if e.source == "estimated"]
         if rest:

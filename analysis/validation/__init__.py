@@ -7,7 +7,8 @@ Nothing here is a method a user's result comes from: it checks `rimless.analysis
 The truth models (`critical_truth`, `floquet_truth`, `leg_truth`) and their Vicon writer (`vicon_writer`) import
 nothing from the methods or the importer. The studies: `importer_coverage` (``rimless trials coverage``, the
 default: truth exports through the importer), `coverage` (``--truth pendulum``), `floquet_coverage`
-(``rimless trials floquet-coverage``), `leg_fit_coverage` (``rimless trials leg-fit-coverage``).
+(``rimless trials floquet-coverage``), `leg_fit_coverage` (``rimless trials leg-fit-coverage``),
+`slope_coverage` (``rimless trials slope-coverage``: the importer's slope interval).
 
 May import: rimless.analysis.io, kinematics, inference, examples; rimless.sim (truth dynamics);
 rimless.progress; numpy, scipy, pandas.

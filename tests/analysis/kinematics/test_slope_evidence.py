@@ -6,6 +6,7 @@ narrowest used, disagreements warned about. Expected values come from the indepe
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ import pytest
 from rimless.analysis.kinematics.build import import_trial
 from rimless.analysis.kinematics.contacts import Contact, ContactFit, slope_from_contacts
 from rimless.analysis.kinematics.slope_evidence import (
+    CONTACT_DRIFT_M,
     TWO_CONTACT_SD_M,
     Z95,
     SlopeEvidence,
@@ -123,3 +125,60 @@ def test_narrowest_used_and_disagreement_spanned_and_warned():
     assert used[0].slope_rad == pytest.approx((wb * math.radians(1.4) + wc * math.radians(1.42)) / (wb + wc))
     assert used[0].half_rad == pytest.approx(1 / math.sqrt(wb + wc))
     assert "combined" in used[0].kind and "inverse-variance" in used[0].method and not warnings
+
+
+def _line_frame(slope_rad: float, se_rad: float, n: int):
+    from rimless.analysis.kinematics.slope import SlopeFrame
+
+    return SlopeFrame(slope_rad, np.array([1.0, 0.0, 0.0]), np.zeros(3), 1e-4, "line through the hub", n, se_rad)
+
+
+def test_impact_line_carries_the_hub_error_that_turns_with_the_wheel():
+    """Six impacts one step (0.18 m) apart, the hub placed by the feet with 1 mm standard error on each axis: an
+    offset error d turns alpha a step, so the heights at the impacts carry d_x cos(k alpha) + d_y sin(k alpha),
+    whose least-squares slope (np.polyfit, for d along each axis) has the sd hypot(slope_x, slope_y)."""
+    step, n, sd = 0.18, 6, 1e-3
+    along = step * np.arange(n)
+    k = np.arange(n) * math.pi / 4
+    sx = np.polyfit(along, sd * np.cos(k), 1)[0]
+    sy = np.polyfit(along, sd * np.sin(k), 1)[0]
+    hub_sd = math.hypot(sx, sy)
+    line = _line_frame(math.radians(2.0), 1e-5, n)
+    ev = slope_evidence(None, None, None, None, None, line, line, n, travel_m=1.0, step_m=step, impact_along_m=along,
+                        hub_sd_m=sd)  # fmt: skip
+    without = slope_evidence(None, None, None, None, None, line, line, n, travel_m=1.0, step_m=step,
+                             impact_along_m=along)  # fmt: skip
+    assert ev[0].kind == without[0].kind == "impact line"
+    assert ev[0].half_rad ** 2 - without[0].half_rad ** 2 == pytest.approx((Z95 * hub_sd) ** 2, rel=1e-9)
+    assert "hub's standard error 1.00 mm" in ev[0].method
+    assert hub_sd > 1e-3  # a mm off the hub over 0.9 m of impacts: more than a mrad, the size of the misses
+
+
+def test_a_drift_both_estimates_share_is_not_averaged_down():
+    """Two estimates whose whole width is a drift they share (a compliant leg's compression moves the contacts
+    and the impact cusps alike): combining them gains nothing. With nothing shared: 1 / sqrt(sum 1/h^2)."""
+    h = math.radians(0.03)
+    a = SlopeEvidence("estimated", math.radians(2.0), (math.radians(1.97), math.radians(2.03)), "a", "contacts", h)
+    b = SlopeEvidence("estimated", math.radians(2.0), (math.radians(1.97), math.radians(2.03)), "b", "impact line", h)
+    used, warnings, _ = choose_slope([a, b])
+    assert not warnings and "combined" in used[0].kind
+    assert used[0].half_rad == pytest.approx(h, rel=1e-9)
+    a0, b0 = (replace(e, common_half_rad=0.0) for e in (a, b))
+    used, _, _ = choose_slope([a0, b0])
+    assert used[0].half_rad == pytest.approx(h / math.sqrt(2), rel=1e-9)
+
+
+def test_contacts_on_a_clean_line_are_scaled_by_at_most_half():
+    """Eleven contacts exactly on a 1.5 deg line, each stated +-1 mm: their scatter (none) says the stated errors
+    are too large, but they are scaled down by at most half; the half width is hypot(Z95 * se / 2, drift) with se
+    the weighted line's formal error and drift Z95 * atan(CONTACT_DRIFT_M / run) (by hand)."""
+    phi, sd, step = math.radians(1.5), 1e-3, 0.18
+    xs = step * np.arange(11)
+    cs = tuple(_contact(x, -x * math.tan(phi), sd) for x in xs)
+    sc = slope_from_contacts(cs, np.array([1.0, 0.0, 0.0]))
+    fit = ContactFit(cs, np.zeros((3, 2)), np.array([0.0, 0.0, 1.0]), 1e-4)
+    ev = slope_evidence(None, None, None, sc, fit, None, None, 0)
+    se = sd / math.sqrt(float(np.sum((xs - xs.mean()) ** 2))) / (1 + math.tan(phi) ** 2)
+    drift = Z95 * math.atan(CONTACT_DRIFT_M / xs[-1])
+    assert ev[0].kind == "contacts" and ev[0].half_rad == pytest.approx(math.hypot(Z95 * se / 2, drift), rel=1e-9)
+    assert ev[0].common_half_rad == pytest.approx(drift, rel=1e-9)
