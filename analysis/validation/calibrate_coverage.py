@@ -107,6 +107,7 @@ def run_calibrate_coverage(
                 rows.append(row)
                 continue
             row["converged"] = bool(res.converged)
+            row["optimizer"] = {k: res.optimizer.get(k) for k in ("status", "message", "best_start", "several_minima")}
             row["params"] = {}
             for pe in res.params:
                 key = next((n for n, f in FIELDS.items() if f == pe.field), pe.name)
@@ -122,6 +123,11 @@ def run_calibrate_coverage(
                     "covered": bool(finite and lo <= t <= hi),
                     "relative_error": pe.value / t - 1.0,
                     "identifiable": bool(pe.identifiable),
+                    "effective_only": bool(pe.effective_only),
+                    "z": (pe.value - t) / pe.se if finite and pe.se > 0 else None,
+                    "se_model": pe.se_model,
+                    "se_sandwich": pe.se_sandwich,
+                    "se_slope": pe.se_slope,
                 }
             rows.append(row)
             if progress:
