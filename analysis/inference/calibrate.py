@@ -1284,7 +1284,12 @@ def _check_loss_separation(
         v.append(effective_leg_speed(g.table["t_s"], g.table["dL1_m_s"]) if "dL1_m_s" in g.table else math.nan)
     j_c = list(fit).index("c")
     e = estimates[j_c]
-    infl = e.se / e.se_model if e.se_model > 0 and math.isfinite(e.se) else 1.0
+    # the data's inflation over the model-based se (sandwich, minima spanned), without the slopes' part: the
+    # slopes' error moves c the same with or without a friction-like loss beside it
+    s_slope = e.se_slope if math.isfinite(e.se_slope) else 0.0
+    data_se = math.sqrt(max(e.se**2 - s_slope**2, 0.0)) if math.isfinite(e.se) else math.nan
+    floor = max(e.se_model, e.se_sandwich) if math.isfinite(e.se_sandwich) else e.se_model
+    infl = max(data_se, floor) / e.se_model if e.se_model > 0 and math.isfinite(data_se) else 1.0
     out = loss_separation(J, obj.fun(u), obj.offs, obj.n_g, j_c, e.value, infl, np.array(v), scale)
     if not out["damping_identified"] and e.identifiable:
         e.identifiable, e.effective_only, e.note = False, True, out["note"]
