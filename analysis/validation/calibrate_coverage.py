@@ -110,7 +110,10 @@ def run_calibrate_coverage(
                 rows.append(row)
                 continue
             row["converged"] = bool(res.converged)
-            row["optimizer"] = {k: res.optimizer.get(k) for k in ("status", "message", "best_start", "several_minima")}
+            row["optimizer"] = {
+                k: res.optimizer.get(k)
+                for k in ("status", "message", "best_start", "several_minima", "polish", "above_optimum_chi2")
+            }
             row["params"] = {}
             for pe in res.params:
                 key = next((n for n, f in FIELDS.items() if f == pe.field), pe.name)
