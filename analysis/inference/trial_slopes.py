@@ -50,7 +50,3 @@ def slope_response(
         total += du * du
     return np.sqrt(total), parts
 
-
-def slope_parts_dict(names: Sequence[str], parts: Sequence[np.ndarray], j: int) -> dict[str, float]:
-    """Per trial name, its slope's part of global j's standard error (its units)."""
-    return {n: float(abs(p[j])) for n, p in zip(names, parts)}
