@@ -49,4 +49,3 @@ def slope_response(
         parts.append(du)
         total += du * du
     return np.sqrt(total), parts
-
