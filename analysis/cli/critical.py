@@ -752,5 +752,11 @@ def _calibrate_coverage(n: int, seed: int, json_out: bool) -> None:
             f"({lo:.1%}-{hi:.1%}; goal 90-98 %), median relative error {d['median_relative_error']:+.2%}, "
             f"median half width {_fmt(d['median_relative_half_width'], '.2%')}, identifiable in {d['identifiable']}"
         )
+        parts = d.get("median_relative_se") or {}
+        typer.echo(
+            f"    rms (estimate - truth) / se {_fmt(d.get('rms_z'), '.2f')} (1 when the se is honest); median se: "
+            f"data {_fmt(parts.get('se_model'), '.2%')}, sandwich over trials {_fmt(parts.get('se_sandwich'), '.2%')}, "
+            f"the trials' slopes {_fmt(parts.get('se_slope'), '.2%')}; effective only in {d.get('effective_only')}"
+        )
     for why, k in out["failed"].items():
         typer.echo(f"  failed in {k} series: {why}")

@@ -98,10 +98,11 @@ class _TrialData:
     shift_s: float = 0.0
     release_rad_s: float = math.nan
     refined_release_rad_s: float = math.nan
+    slope_sd_deg: float = math.nan  # 1 sigma of the measured slope (`trial_slope_sigma_deg`)
 
 
 def _trial_data(trial: Any, name: str) -> _TrialData | str:
-    from rimless.analysis.inference.sustained import consecutive_periods
+    from rimless.analysis.inference.sustained import consecutive_periods, trial_slope_sigma_deg
 
     chains = consecutive_periods(trial)
     if not chains or chains[0].size < 2:
@@ -127,7 +128,10 @@ def _trial_data(trial: Any, name: str) -> _TrialData | str:
     near = np.min(np.abs(t[:, None] - impacts_rel[None, :]), axis=1) < CUSP_GUARD_S
     win &= ~near
     ref = str(getattr(trial.meta, "com_height_reference", ""))
-    return _TrialData(name, float(trial.meta.slope_deg), periods, t[win], y[win], ref.startswith("slope plane"))
+    slope_sd = trial_slope_sigma_deg(trial.meta)[0]
+    return _TrialData(
+        name, float(trial.meta.slope_deg), periods, t[win], y[win], ref.startswith("slope plane"), slope_sd_deg=slope_sd
+    )
 
 
 @dataclass
@@ -345,6 +349,10 @@ class ParamEstimate:
     #: the held parameters' contribution (`held_response`): None when not computed; per held field, its part
     se_held: float | None = None
     held_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
+    #: the trials' measured slopes' part (`rimless.analysis.inference.trial_slopes`), in ``se`` with se_model;
+    #: per trial, its part
+    se_slope: float = math.nan
+    slope_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def se_with_held(self) -> float | None:
@@ -378,6 +386,8 @@ class ParamEstimate:
                 else None
             ),
             "held_contributions": self.held_contributions,
+            "se_slope": self.se_slope,
+            "slope_contributions": self.slope_contributions,
         }
 
 
@@ -855,6 +865,61 @@ class _Objective:
         self.sig["h"] *= math.sqrt((1 + rho) / (1 - rho))
 
 
+def _gauss_newton_gain(J: np.ndarray, f: np.ndarray) -> float:
+    """The chi-square (|f|^2, unit-variance residuals) a Gauss-Newton step from here would gain: |J J^+ f|^2."""
+    dx = np.linalg.lstsq(J, -f, rcond=None)[0]
+    return float(np.sum((J @ dx) ** 2))
+
+
+def _polish(
+    obj: _Objective,
+    u: np.ndarray,
+    J: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_rounds: int,
+    optimizer: dict[str, Any],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The kept solution checked on the sigmas of the uncertainties (the solution's own, not the start's the
+    solve weighed with; scipy may also stop on ftol short of the minimum): when a Gauss-Newton step from u
+    (central Jacobian J) would still gain more than 2 `GN_STOP_COST` in chi-square, the least squares go on
+    from u (``optimizer["polish"]``: the gain before and after, whether it moved; ``above_optimum_chi2``: the
+    gain left; the cost is not smooth at the scale of a tenth of a standard error, as the CoM samples near an
+    impact move with the walk, so the predicted gain may not be there to take: ``gained_chi2`` says what was).
+    Returns (u, J) at the kept point."""
+    gain = _gauss_newton_gain(J, obj.fun(u))
+    row: dict[str, Any] = {"gain_chi2_before": gain, "polished": False}
+    if gain > 2 * GN_STOP_COST:
+        lo, hi = _widened(obj, bounds, obj.unpack(u)[1])
+        r = obj.solve(u, lo, hi, max_rounds)
+        cost_before, cost_after = obj.cost(u), obj.cost(r.x)
+        row["gained_chi2"] = max(cost_before - cost_after, 0.0)  # what it gained: less than predicted on a rough cost
+        if cost_after < cost_before:
+            u = np.asarray(r.x, float)
+            J = obj.jac(u, central=True)
+            row.update(polished=True, status=int(r.status), nfev=int(r.nfev_total))
+            gain = _gauss_newton_gain(J, obj.fun(u))
+        row["gain_chi2_after"] = gain
+    optimizer["polish"] = row
+    optimizer["above_optimum_chi2"] = gain
+    return u, J
+
+
+def _slope_part(obj: _Objective, u: np.ndarray, J: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, list]:
+    """`rimless.analysis.inference.trial_slopes.slope_response` at the solution u: the globals' standard errors
+    from the trials' measured slopes, and each trial's parts."""
+    from rimless.analysis.inference.trial_slopes import slope_response
+
+    xg, ws, sh = obj.unpack(u)
+    p = obj.glob.params(xg)
+
+    def moved(i: int, d_slope_deg: float) -> np.ndarray:
+        d = dataclasses.replace(obj.data[i], slope_deg=obj.data[i].slope_deg + d_slope_deg)
+        rp, rh = _residuals(obj.sim, p, d, float(ws[i]), float(sh[i]))
+        return np.concatenate([rp / obj.sig["t"], rh / obj.sig["h"]])
+
+    return slope_response(J, obj.n_g, scale, [d.slope_sd_deg for d in obj.data], moved, obj.offs)
+
+
 REFIT_COST_RATIO = 3.0  # a warm refit above this times the fit's cost is redone from scratch (`held_response`)
 
 
@@ -925,16 +990,20 @@ def _estimates(
     notes: list[str],
     se_sand: np.ndarray | None = None,
     converged: bool = True,
+    se_slope: np.ndarray | None = None,
 ) -> list[ParamEstimate]:
-    """One `ParamEstimate` per fitted name. Its standard error is the larger of the model-based one and the
-    trial-clustered sandwich (``se_sand``); it is identifiable when the fit converged, the cost is not flat
+    """One `ParamEstimate` per fitted name. Its standard error is the larger of the model-based one (with the
+    trials' slopes' part ``se_slope`` in quadrature) and the trial-clustered sandwich (``se_sand``, which sees
+    the slopes' errors only through four or so trials' scatter); it is identifiable when the fit converged, the cost is not flat
     along it and that relative standard error is at most `NOT_IDENTIFIABLE_REL_SE` (a 95 % interval no wider
     than about +-100 %)."""
     estimates = []
     for j, n in enumerate(fit):
         f, unit = FIT_FIELDS[n]
         s_sand = float(se_sand[j]) if se_sand is not None else math.nan
-        s_use = max(float(se[j]), s_sand) if math.isfinite(s_sand) else float(se[j])
+        s_slope = float(se_slope[j]) if se_slope is not None else math.nan
+        s_mod = math.hypot(float(se[j]), s_slope) if math.isfinite(s_slope) else float(se[j])
+        s_use = max(s_mod, s_sand) if math.isfinite(s_sand) else s_mod
         rel = s_use / abs(xg[j]) if xg[j] != 0 else math.inf
         ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged
         note = notes[j]
@@ -944,8 +1013,18 @@ def _estimates(
             note = "the fit did not converge (optimiser stopped on its budget): the value is where it stopped"
         estimates.append(
             ParamEstimate(
-                n, f, unit, float(getattr(glob.base, f)), float(xg[j]), s_use, ident, note, float(se[j]), s_sand
-            )
+                n,
+                f,
+                unit,
+                float(getattr(glob.base, f)),
+                float(xg[j]),
+                s_use,
+                ident,
+                note,
+                float(se[j]),
+                s_sand,
+                se_slope=s_slope,
+            )  # fmt: skip
         )
     return estimates
 
@@ -1117,15 +1196,18 @@ def calibrate(
         #: one global: its profile on the periods (`PROFILE_FACTORS`) had one valley, so no further start was run
         "profile_one_valley": bool(glob.n == 1 and _one_valley(profile[0])) if multi_start is True else None,
     }
-    J = obj.jac(
-        u, central=True
-    )  # central differences for the globals: the curvature of the cost must not fake information
+    # central differences for the globals: the curvature of the cost must not fake information
+    J = obj.jac(u, central=True)
+    u, J = _polish(obj, u, J, (lo, hi), max_rounds, optimizer)
     cost_cal = obj.cost(u)
     scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
     se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
-    estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged)
+    se_slope, slope_parts = _slope_part(obj, u, J, scale_all)
+    estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged, se_slope)
+    for j, e in enumerate(estimates):
+        e.slope_contributions = {d.name: float(abs(pt[j])) for d, pt in zip(data, slope_parts)}
     _span_minima(optimizer, estimates)
     if held:
 
@@ -1202,7 +1284,12 @@ def _check_loss_separation(
         v.append(effective_leg_speed(g.table["t_s"], g.table["dL1_m_s"]) if "dL1_m_s" in g.table else math.nan)
     j_c = list(fit).index("c")
     e = estimates[j_c]
-    infl = e.se / e.se_model if e.se_model > 0 and math.isfinite(e.se) else 1.0
+    # the data's inflation over the model-based se (sandwich, minima spanned), without the slopes' part: the
+    # slopes' error moves c the same with or without a friction-like loss beside it
+    s_slope = e.se_slope if math.isfinite(e.se_slope) else 0.0
+    data_se = math.sqrt(max(e.se**2 - s_slope**2, 0.0)) if math.isfinite(e.se) else math.nan
+    floor = max(e.se_model, e.se_sandwich) if math.isfinite(e.se_sandwich) else e.se_model
+    infl = max(data_se, floor) / e.se_model if e.se_model > 0 and math.isfinite(data_se) else 1.0
     out = loss_separation(J, obj.fun(u), obj.offs, obj.n_g, j_c, e.value, infl, np.array(v), scale)
     if not out["damping_identified"] and e.identifiable:
         e.identifiable, e.effective_only, e.note = False, True, out["note"]

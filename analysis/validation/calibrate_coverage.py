@@ -6,8 +6,11 @@ rest Table 1's), walks it with the simulator's ER model (`floquet_truth.er_walk`
 Vicon export in a lab drawn per series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it and
 fits ``fit`` (default c and k) with the held parameters at the truth's values, exact (``uncertainty`` 0: the
 intervals are the data's; the held parameters' part is not exercised here). Reported per parameter: how often
-the 95 % interval (``ci95``) holds the truth (Wilson interval), the median relative error, how often the
-parameter was called identifiable, and every refused import and failed fit with its reason.
+the 95 % interval (``ci95``) holds the truth (Wilson interval), the median relative error, the rms of
+(estimate - truth) / se (``rms_z``: 1 for an honest se), the median parts of the se (the data's, the
+trial-clustered sandwich's and the measured slopes', `rimless.analysis.inference.trial_slopes`), how often the
+parameter was called identifiable (or effective only), the optimiser's end states, and every refused import and
+failed fit with its reason.
 
 The truth's dynamics are the calibration's own model (the simulator's ER wheel): this checks the importer,
 the fit and its intervals, not the model's adequacy (`critical_truth` does that for the critical slope).
@@ -107,6 +110,10 @@ def run_calibrate_coverage(
                 rows.append(row)
                 continue
             row["converged"] = bool(res.converged)
+            row["optimizer"] = {
+                k: res.optimizer.get(k)
+                for k in ("status", "message", "best_start", "several_minima", "polish", "above_optimum_chi2")
+            }
             row["params"] = {}
             for pe in res.params:
                 key = next((n for n, f in FIELDS.items() if f == pe.field), pe.name)
@@ -122,11 +129,26 @@ def run_calibrate_coverage(
                     "covered": bool(finite and lo <= t <= hi),
                     "relative_error": pe.value / t - 1.0,
                     "identifiable": bool(pe.identifiable),
+                    "effective_only": bool(pe.effective_only),
+                    "z": (pe.value - t) / pe.se if finite and pe.se > 0 else None,
+                    "se_model": pe.se_model,
+                    "se_sandwich": pe.se_sandwich,
+                    "se_slope": pe.se_slope,
                 }
             rows.append(row)
             if progress:
                 progress(i + 1, "done")
     return _summary(rows, tuple(fit), seed, trials, steps, time.process_time() - cpu, time.perf_counter() - wall)
+
+
+def _rel(got: list[dict[str, Any]], rows: list[dict[str, Any]], name: str, part: str) -> list[float]:
+    """Each series' ``part`` of the standard error over its truth (the finite ones)."""
+    out = []
+    for g, r in zip(got, rows):
+        v = g.get(part)
+        if v is not None and math.isfinite(v):
+            out.append(v / r["truth"][name])
+    return out
 
 
 def _summary(
@@ -135,7 +157,8 @@ def _summary(
     per: dict[str, Any] = {}
     fitted = [r for r in rows if "params" in r]
     for name in fit:
-        got = [r["params"][name] for r in fitted if name in r["params"]]
+        rows_of = [r for r in fitted if name in r["params"]]
+        got = [r["params"][name] for r in rows_of]
         k = sum(g["covered"] for g in got)
         lo, hi = wilson_interval(k, len(got))
         errs = [g["relative_error"] for g in got]
@@ -147,12 +170,26 @@ def _summary(
             "identifiable": sum(g["identifiable"] for g in got),
             "median_relative_error": float(np.median(errs)) if errs else None,
             "median_abs_relative_error": float(np.median(np.abs(errs))) if errs else None,
+            "rms_z": (
+                float(np.sqrt(np.mean(np.square(zs))))
+                if (zs := [g["z"] for g in got if g.get("z") is not None])
+                else None
+            ),
+            "median_relative_se": {
+                part: float(np.median(v)) if (v := _rel(got, rows_of, name, part)) else None
+                for part in ("se_model", "se_sandwich", "se_slope")
+            },
+            "effective_only": sum(bool(g.get("effective_only")) for g in got),
             "median_relative_half_width": (
                 float(np.median([(g["ci95"][1] - g["ci95"][0]) / 2 / g["value"] for g in got if g["ci95"]]))
                 if any(g["ci95"] for g in got)
                 else None
             ),
         }
+    statuses: dict[str, int] = {}
+    for r in fitted:
+        key = str((r.get("optimizer") or {}).get("status"))
+        statuses[key] = statuses.get(key, 0) + 1
     failed: dict[str, int] = {}
     for r in rows:
         if "failed" in r:
@@ -164,6 +201,7 @@ def _summary(
         "fitted": len(fitted),
         "converged": sum(bool(r.get("converged")) for r in fitted),
         "parameters": per,
+        "optimizer_status": statuses,
         "failed": failed,
         "imports": {
             "trials": sum(r["trials"] for r in rows),

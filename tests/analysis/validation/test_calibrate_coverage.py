@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from typer.testing import CliRunner
 
 from rimless.analysis.validation.calibrate_coverage import C_RANGE, K_RANGE
@@ -30,5 +31,9 @@ def test_one_series_is_drawn_away_from_table1_imported_and_fitted() -> None:
         assert abs(p["value"] / row["truth"][name] - 1) < 0.1  # the simulator's own model: close to its truth
         d = out["parameters"][name]
         assert d["fitted"] == 1 and d["covered"] == int(p["covered"])
+        # the se's parts: the imported slopes' (stated sd > 0) is carried, and the se is at least the data's with it
+        assert p["se_slope"] > 0 and p["se"] >= (p["se_model"] ** 2 + p["se_slope"] ** 2) ** 0.5 * (1 - 1e-12)
+        assert d["rms_z"] == pytest.approx(abs(p["value"] - row["truth"][name]) / p["se"], rel=1e-9)
+    assert sum(out["optimizer_status"].values()) == 1
     r = runner.invoke(app, ["trials", "coverage", "--of", "nothing"])
     assert r.exit_code == 2 and "--of" in r.output
