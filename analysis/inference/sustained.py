@@ -259,12 +259,6 @@ def verdict_from_periods(
         if stalled:
             v.verdict, v.reason = "decaying", f"stalled on the ramp after {n} step(s)"
         return v
-    x: list[float] = []
-    y: list[float] = []
-    for e in es:
-        x.extend(e[:-1])
-        y.extend(e[1:])
-    x_arr, y_arr = np.array(x), np.array(y)
     if longest < MIN_PERIODS:
         if stalled:
             v.verdict, v.reason = "decaying", f"stalled on the ramp after {n} step(s)"
@@ -273,22 +267,19 @@ def verdict_from_periods(
                 f"too few consecutive steps to fit the return map ({longest} periods in a row, need {MIN_PERIODS})"
             )
         return v
-    # per-point noise in e from the timing noise of a period (two impacts)
+    x_arr = np.concatenate([e[:-1] for e in es])
+    y_arr = np.concatenate([e[1:] for e in es])
+    # each impact time carries its own noise; a period is the difference of two (sig_t is a period's noise)
     sig_t = timing_sigma_s if timing_sigma_s is not None else TIMING_SIGMA_FLOOR_S
-    w_sig = np.array([abs(pendulum.energy_slope(max(e, 1e-9))) * sig_t for e in x_arr])
-    a, b, cov, rms = _fit_affine(x_arr, y_arr, w_sig)
+    jx, jy = _impact_jacobians(es, pendulum, sig_t / math.sqrt(2.0))
+    a, b, cov = _fit_affine(x_arr, y_arr, jx, jy)
     v.a_free, v.a_free_se = a, (math.sqrt(cov[0, 0]) if cov[0, 0] > 0 else math.inf)
     if shared_slope is not None:
         a, a_se = shared_slope
         b = float(np.mean(y_arr - a * x_arr))
-        r = y_arr - (a * x_arr + b)
-        s2 = max(float(r @ r) / max(x_arr.size - 1, 1), float(np.mean(w_sig**2)) * (1.0 + a * a))
-        cov = np.array(
-            [
-                [a_se**2, -float(np.mean(x_arr)) * a_se**2],
-                [-float(np.mean(x_arr)) * a_se**2, s2 / x_arr.size + float(np.mean(x_arr)) ** 2 * a_se**2],
-            ]
-        )
+        var_b = _mean_noise_var(y_arr - a * x_arr, jy - a * jx)
+        mx = float(np.mean(x_arr))
+        cov = np.array([[a_se**2, -mx * a_se**2], [-mx * a_se**2, var_b + mx**2 * a_se**2]])
     v.a, v.b = a, b
     e_star = b / (1.0 - a)
     g = np.array([b / (1.0 - a) ** 2, 1.0 / (1.0 - a)])  # d e*/d(a, b)
@@ -330,35 +321,61 @@ def _steps_to_stall(a: float, b: float, e: float) -> str:
     return ">1000"
 
 
-def _fit_affine(x: np.ndarray, y: np.ndarray, sig_pt: np.ndarray) -> tuple[float, float, np.ndarray, float]:
-    """Least squares y = a x + b with 0 <= a <= A_MAX; covariance from the larger of the residual scatter and
-    the timing noise propagated through both coordinates."""
+def _impact_jacobians(
+    es: list[np.ndarray], pendulum: StancePendulum, sig_impact_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """d(x, y)/d(impact times) of the return-map pairs (x = e_k, y = e_k+1 over each chain), times the noise of
+    one impact time (s): rows are pairs, columns impacts (a chain of m periods has m + 1 impacts of its own).
+    Consecutive periods share an impact, so their energies' errors are correlated (e_k = E(t_k+1 - t_k))."""
+    n_pairs = sum(max(e.size - 1, 0) for e in es)
+    n_imp = sum(e.size + 1 for e in es)
+    jx, jy = np.zeros((n_pairs, n_imp)), np.zeros((n_pairs, n_imp))
+    row, col = 0, 0
+    for e in es:
+        g = np.array([pendulum.energy_slope(max(float(v), 1e-9)) for v in e]) * sig_impact_s  # de/dT per impact
+        for k in range(e.size - 1):
+            jx[row, col + k], jx[row, col + k + 1] = -g[k], g[k]
+            jy[row, col + k + 1], jy[row, col + k + 2] = -g[k + 1], g[k + 1]
+            row += 1
+        col += e.size + 1
+    return jx, jy
+
+
+def _scatter_scale(resid: np.ndarray, resid_noise: np.ndarray) -> float:
+    """How much larger the residuals are than the timing noise predicts (>= 1: never deflated): r'r over its
+    expectation under the noise (``resid_noise``: the residuals' linear map of the unit impact noises)."""
+    expected = float(np.sum(resid_noise**2))
+    return max(float(resid @ resid) / expected, 1.0) if expected > 0 else 1.0
+
+
+def _mean_noise_var(r: np.ndarray, noise: np.ndarray) -> float:
+    """Variance of mean(r) (r = y - a x at a given a; ``noise`` = d r / d(impact noises)): the timing noise
+    propagated with its correlations (the mean over a chain nearly telescopes), scaled up by the residual
+    scatter when that is larger."""
+    mean_row = noise.mean(axis=0)
+    return float(mean_row @ mean_row) * _scatter_scale(r - r.mean(), noise - mean_row)
+
+
+def _fit_affine(x: np.ndarray, y: np.ndarray, jx: np.ndarray, jy: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Least squares y = a x + b with 0 <= a <= A_MAX; covariance of (a, b) from the timing noise of the impact
+    times propagated through both coordinates with its correlations (``jx``, ``jy``: `_impact_jacobians`),
+    scaled up by the residual scatter when that is larger."""
     A = np.column_stack([x, np.ones_like(x)])
     sol, *_ = np.linalg.lstsq(A, y, rcond=None)
     a, b = float(sol[0]), float(sol[1])
-    if not 0.0 <= a <= A_MAX:  # constrain the slope, refit the intercept
+    free = 0.0 <= a <= A_MAX
+    if not free:  # constrain the slope, refit the intercept
         a = min(max(a, 0.0), A_MAX)
         b = float(np.mean(y - a * x))
-        A_eff = np.ones((x.size, 1))
-        free = False
-    else:
-        A_eff = A
-        free = True
-    r = y - (a * x + b)
-    dof = max(x.size - (2 if free else 1), 1)
-    s2_fit = float(r @ r) / dof
-    # noise of y and of a * x (both are measured): per-point variance
-    s2_noise = float(np.mean(sig_pt**2)) * (1.0 + a * a)
-    s2 = max(s2_fit, s2_noise)
+        var_b = _mean_noise_var(y - a * x, jy - a * jx)
+        return a, b, np.array([[0.0, 0.0], [0.0, var_b]])
+    noise = jy - a * jx  # d(y - a x)/d(impact noises) at the fitted a
     try:
-        inv = np.linalg.inv(A_eff.T @ A_eff) * s2
+        P = np.linalg.solve(A.T @ A, A.T)
     except np.linalg.LinAlgError:
-        inv = np.full((A_eff.shape[1],) * 2, np.inf)
-    if free:
-        cov = inv
-    else:
-        cov = np.array([[0.0, 0.0], [0.0, inv[0, 0]]])
-    return a, b, cov, math.sqrt(float(r @ r) / max(x.size, 1))
+        return a, b, np.full((2, 2), np.inf)
+    pn = P @ noise
+    return a, b, (pn @ pn.T) * _scatter_scale(y - (a * x + b), noise - A @ pn)
 
 
 def trial_verdicts(trials: list[Any], params: Any = None) -> list[Verdict]:
