@@ -10,6 +10,8 @@ noise, 100 Hz), imports it and calibrates it under one `SCENARIOS` entry, the he
 
 - ``adequate``: frictionless truth, ``--fit c,k``: the model is the truth, so "does not fit" is a false alarm
   (nominal: below ``ADEQUACY_P`` = 0.1 %, the ratio condition making it rarer still);
+- ``adequate-true-slope``: as ``adequate`` with each trial's imported slope replaced by the truth's (a
+  diagnosis: the calibration holds the importer's slope exact, and the step periods resolve its error);
 - ``held-k``: frictionless truth, ``--fit c`` with k held 25 % off the truth (sign drawn): a misfit, counted
   as detected when the check says "does not fit" (the known gap: c may absorb it);
 - ``friction-misfit``: a truth with guide friction fitted as ``c,k`` with F_c held at 0: a misfit;
@@ -33,7 +35,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -62,10 +64,14 @@ class Scenario:
     truth_answer: bool  # the right verdict: True when the truth makes it so
     nominal_rate: float | None  # the rate the thresholds promise when the right verdict is False
     what: str
+    true_slope: bool = False  # a diagnosis: each trial's slope replaced by the truth's (the importer's is held exact)
 
 
 SCENARIOS = {
     "adequate": Scenario(False, ("c", "k"), 0.0, "does_not_fit", False, 1e-3, "frictionless truth, fit c,k"),
+    "adequate-true-slope": Scenario(
+        False, ("c", "k"), 0.0, "does_not_fit", False, 1e-3, "as adequate, the trials' true slopes given", True
+    ),
     "held-k": Scenario(
         False, ("c",), HELD_K_ERROR, "does_not_fit", True, None, "frictionless truth, fit c, k held 25 % off"
     ),
@@ -172,7 +178,7 @@ def _series(
     if progress:
         progress(done, f"{what}: walking and writing")
     stem.mkdir(parents=True, exist_ok=True)
-    paths, refused = [], []
+    paths, refused, slopes = [], [], {}
     for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
         try:
             wk = er_walk(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
@@ -180,6 +186,7 @@ def _series(
             refused.append(f"truth walk failed: {err}")
             continue
         paths.append(Path(record(wk, stem / f"t{j}.csv", rng, lab, rest_s=0.0)))
+        slopes[paths[-1].name] = float(slope)
     if progress:
         progress(done, f"{what}: importing and calibrating")
     loaded, names = [], []
@@ -189,7 +196,14 @@ def _series(
             names.append(p.name)
         except RimlessError as err:
             refused.append(str(err).splitlines()[0])
-    row.update(trials=len(paths), refused=refused)
+    row.update(
+        trials=len(paths),
+        refused=refused,
+        slope_error_deg=[t.meta.slope_deg - slopes[n] for t, n in zip(loaded, names)],
+        slope_ci_deg=[[math.degrees(v) for v in t.meta.slope_ci_rad] for t in loaded],
+    )
+    if sc.true_slope:
+        loaded = [replace(t, meta=replace(t.meta, slope_deg=slopes[n])) for t, n in zip(loaded, names)]
     cpu = time.process_time()
     try:
         if len(loaded) < 2:
@@ -215,6 +229,7 @@ def _verdicts(res: Any) -> dict[str, Any]:
         "converged": bool(res.converged),
         "fits": bool(adq.get("fits", True)),
         "trials_flagged": sum(not t["fits"] for t in per_trial),
+        "per_trial_ratio": [{k: t[k]["ratio"] for k in ("com", "periods")} for t in per_trial],
         "overall": {
             k: {"ratio": ov[k]["ratio"], "p_value": ov[k]["p_value"]} for k in ("com", "periods", "total") if k in ov
         },
