@@ -117,6 +117,7 @@ def _print(out: dict[str, Any]) -> None:
             if key in s:
                 parts = s[key].items() if key == "by_friction_n" else [("", s[key])]
                 for sub, r in parts:
-                    typer.echo(f"  {' '.join([key.replace('_', ' '), sub]).strip()}: {label} in {_pct(r)}")
+                    head = " ".join([key.replace("_", " "), sub]).strip()
+                    typer.echo(f"  {head}: {label} in {_pct(r)}" if r["of"] else f"  {head}: no series")
         for why, k in s["failed"].items():
             typer.echo(f"  failed in {k} series: {why}")
