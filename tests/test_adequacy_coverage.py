@@ -51,7 +51,7 @@ def test_a_held_stiffness_25_percent_off_is_a_misfit_the_check_finds_and_counts_
         assert len(row["slope_error_deg"]) == 4 and all(abs(e) < 0.2 for e in row["slope_error_deg"])
     (h,) = held["per_series"]
     assert abs(h["held_k_n_per_m"] / h["truth"]["k"] - 1) == 0.25
-    assert h["overall"]["periods"]["ratio"] > 4 and not h["fits"]
+    assert h["overall"]["periods"]["ratio"] > ADEQUACY_RATIO and not h["fits"]  # docs: 3.7-476 in 30 series
     assert held["right_verdict"] and held["does_not_fit"]["count"] == 1
     (a,) = adequate["per_series"]
     assert a["held_k_n_per_m"] == a["truth"]["k"]  # nothing held wrong: the model is the truth
