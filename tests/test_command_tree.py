@@ -340,6 +340,7 @@ LONG_RUNS: dict[tuple[str, ...], tuple[list[str], dict[str, str]]] = {
     ("trials", "coverage"): (["--series", "500"], {"stage": "coverage"}),
     ("trials", "floquet-coverage"): (["--series", "500"], {"stage": "floquet coverage"}),
     ("trials", "slope-coverage"): (["--series", "500"], {"stage": "slope coverage"}),
+    ("trials", "adequacy-coverage"): (["--series", "500"], {"stage": "adequacy coverage"}),
     # after the imports: the model's eigenvalue at each of the seven slopes with the held parameters' differences
     ("trials", "floquet"): ([*CRITICAL_CSVS], {"stage": "model at"}),
     ("trials", "leg-fit-coverage"): (["--tests", "1000"], {"stage": "leg-fit coverage"}),

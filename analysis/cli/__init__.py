@@ -16,6 +16,7 @@ from typing import Annotated, Any
 
 import typer
 
+from rimless.analysis.cli.adequacy import register as register_adequacy
 from rimless.analysis.cli.critical import ParamsOpt, critical_lines, held_lines
 from rimless.analysis.cli.critical import register as register_critical
 from rimless.analysis.cli.floquet import register as register_floquet
@@ -549,3 +550,4 @@ register_critical(app)
 register_leg(app)
 register_floquet(app)
 register_slope(app)
+register_adequacy(app)

@@ -1,0 +1,310 @@
+"""How often `rimless.analysis.calibrate`'s adequacy check and model choice give the right verdict, by simulation.
+
+Each series draws an ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m: `calibrate_coverage.K_RANGE`,
+``C_RANGE``; guide friction F_c 0 or U(0.1, 0.6) N; the rest Table 1's), walks it with the simulator's ER model
+(`floquet_truth.er_walk`, which integrates guide friction phase by phase when F_c > 0; no slope wander) on
+``trials`` slopes of 2-3.5 deg, each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon
+export in a lab drawn per series (`importer_coverage.draw_lab`, `critical_truth.record`: 0.3 mm, 1 mrad of
+noise, 100 Hz), imports it and calibrates it under one `SCENARIOS` entry, the held parameters exact
+(``uncertainty`` 0) except the one the scenario makes wrong:
+
+- ``adequate``: frictionless truth, ``--fit c,k``: the model is the truth, so "does not fit" is a false alarm
+  (nominal: below ``ADEQUACY_P`` = 0.1 %, the ratio condition making it rarer still);
+- ``adequate-true-slope``: as ``adequate`` with each trial's imported slope replaced by the truth's (a
+  diagnosis: the calibration holds the importer's slope exact, and the step periods resolve its error);
+- ``held-k``: frictionless truth, ``--fit c`` with k held 25 % off the truth (sign drawn): a misfit, counted
+  as detected when the check says "does not fit" (the known gap: c may absorb it);
+- ``friction-misfit``: a truth with guide friction fitted as ``c,k`` with F_c held at 0: a misfit;
+- ``choice-null``: frictionless truth, ``--fit c,guide_friction_n`` (k exact): friction claimed (the
+  likelihood-ratio test's p < ``MODEL_CHOICE_P``) is a false claim (nominal 1 %);
+- ``choice-friction``: a truth with friction, ``--fit c,guide_friction_n`` (k exact, F_c starting at 0):
+  friction found is the power.
+
+Reported per scenario: the rate of each verdict with its Wilson 95 % interval, the overall chi^2/dof ratios and
+p-values (how often p < 0.05 and 0.01: for the adequate and null scenarios these should be about 5 % and 1 %
+if the noise estimate and the tests are calibrated), and every refused import and failed fit with its reason.
+
+The truth's dynamics are the calibration's own model (the simulator's ER wheel, with its guide friction): the
+null scenarios check the tests' calibration when the model is right, not the model's adequacy to a real wheel.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rimless.analysis.validation.calibrate_coverage import C_RANGE, K_RANGE
+from rimless.analysis.validation.coverage import wilson_interval
+from rimless.analysis.validation.critical_truth import record
+from rimless.analysis.validation.floquet_truth import er_walk
+from rimless.analysis.validation.importer_coverage import draw_lab
+
+__all__ = ["F_RANGE", "HELD_K_ERROR", "SCENARIOS", "Scenario", "run_adequacy_coverage"]
+
+F_RANGE = (0.1, 0.6)  # guide friction of the friction truths, N
+HELD_K_ERROR = 0.25  # the held-k scenario's relative error of the held stiffness
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One calibration set-up: the truth (``friction``), what is fitted, what a right verdict is."""
+
+    friction: bool  # the truth has guide friction F_c ~ U(F_RANGE)
+    fit: tuple[str, ...]
+    k_error: float  # relative error of the held k (0: exact)
+    verdict: str  # "does_not_fit" (adequacy) or "friction_claimed" (model choice)
+    truth_answer: bool  # the right verdict: True when the truth makes it so
+    nominal_rate: float | None  # the rate the thresholds promise when the right verdict is False
+    what: str
+    true_slope: bool = False  # a diagnosis: each trial's slope replaced by the truth's (the importer's is held exact)
+
+
+SCENARIOS = {
+    "adequate": Scenario(False, ("c", "k"), 0.0, "does_not_fit", False, 1e-3, "frictionless truth, fit c,k"),
+    "adequate-true-slope": Scenario(
+        False, ("c", "k"), 0.0, "does_not_fit", False, 1e-3, "as adequate, the trials' true slopes given", True
+    ),
+    "held-k": Scenario(
+        False, ("c",), HELD_K_ERROR, "does_not_fit", True, None, "frictionless truth, fit c, k held 25 % off"
+    ),
+    "friction-misfit": Scenario(
+        True, ("c", "k"), 0.0, "does_not_fit", True, None, "truth with guide friction, fit c,k (F_c held at 0)"
+    ),
+    "choice-null": Scenario(
+        False, ("c", "guide_friction_n"), 0.0, "friction_claimed", False, 0.01, "frictionless truth, fit c,F_c"
+    ),
+    "choice-friction": Scenario(
+        True, ("c", "guide_friction_n"), 0.0, "friction_claimed", True, None, "truth with guide friction, fit c,F_c"
+    ),
+}
+
+_FIELD = {"c": "damping_ns_per_m", "k": "stiffness_n_per_m", "guide_friction_n": "guide_friction_n"}
+
+
+def run_adequacy_coverage(
+    n_series: int,
+    seed: int,
+    calibrate: Callable[..., Any],
+    *,
+    scenarios: Sequence[str] = tuple(SCENARIOS),
+    trials: int = 4,
+    steps: int = 10,
+    progress: Callable[[int, str], None] | None = None,
+) -> dict[str, Any]:
+    """``n_series`` series per scenario (the same seed draws the same wheels in every scenario that shares the
+    truth's kind); ``calibrate(trials, fit=..., wheel=..., names=...)`` is the public `rimless.analysis.calibrate`.
+    ``progress(done, what)`` counts series over all scenarios. Returns the JSON-ready summary."""
+    bad = [s for s in scenarios if s not in SCENARIOS]
+    if bad or not scenarios:
+        raise ValueError(f"scenario takes {', '.join(SCENARIOS)}, got {list(scenarios)}")
+    cpu, wall = time.process_time(), time.perf_counter()
+    out: dict[str, Any] = {}
+    done = 0
+    with tempfile.TemporaryDirectory(prefix=f"rimless-adqcov-{os.getpid()}-") as tmp:
+        for name in scenarios:
+            sc = SCENARIOS[name]
+            rng = np.random.default_rng([seed, int(sc.friction)])
+            rows = []
+            for i in range(n_series):
+                what = f"{name} {i + 1}/{n_series}"
+                rows.append(_series(sc, rng, Path(tmp) / f"{name}_{i}", calibrate, trials, steps, progress, what, done))
+                done += 1
+                if progress:
+                    progress(done, f"{what}: done")
+            out[name] = _summary(sc, rows)
+    return {
+        "truth_model": "the simulator's ER wheel (k, c drawn; guide friction F_c drawn in the friction scenarios), "
+        "recorded as Vicon exports in drawn labs and imported (rimless.analysis.validation.adequacy_coverage)",
+        "thresholds": _thresholds(),
+        "scenarios": out,
+        "series_per_scenario": n_series,
+        "trials_per_series": trials,
+        "steps": steps,
+        "seed": seed,
+        "cpu_s": time.process_time() - cpu,
+        "wall_s": time.perf_counter() - wall,
+    }
+
+
+def _thresholds() -> dict[str, float]:
+    from rimless.analysis.inference.adequacy import ADEQUACY_P, ADEQUACY_RATIO
+    from rimless.analysis.inference.calibrate import MODEL_CHOICE_P
+
+    return {"adequacy_p": ADEQUACY_P, "adequacy_ratio": ADEQUACY_RATIO, "model_choice_p": MODEL_CHOICE_P}
+
+
+def _series(
+    sc: Scenario,
+    rng: np.random.Generator,
+    stem: Path,
+    calibrate: Callable[..., Any],
+    trials: int,
+    steps: int,
+    progress: Callable[[int, str], None] | None,
+    what: str,
+    done: int,
+) -> dict[str, Any]:
+    """One series: draw the wheel and lab, walk, write, import, calibrate; the verdicts and figures."""
+    from rimless.analysis.kinematics.build import import_trial
+    from rimless.errors import RimlessError
+    from rimless.sim import Wheel
+    from rimless.sim.model.failures import StepFailure
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.model.uncertain import UNCERTAIN_FIELDS
+
+    truth = WheelParams(
+        stiffness_n_per_m=float(rng.uniform(*K_RANGE)),
+        damping_ns_per_m=float(rng.uniform(*C_RANGE)),
+        guide_friction_n=float(rng.uniform(*F_RANGE)) if sc.friction else 0.0,
+    )
+    sign = float(rng.choice([-1.0, 1.0]))
+    held = truth.replace(
+        stiffness_n_per_m=truth.stiffness_n_per_m * (1.0 + sign * sc.k_error), guide_friction_n=0.0
+    )  # the model the calibration holds: F_c 0 (fitted from 0 when in ``fit``), k off by the scenario's error
+    lab = draw_lab(rng)
+    row: dict[str, Any] = {
+        "truth": {n: getattr(truth, f) for n, f in _FIELD.items()},
+        "held_k_n_per_m": held.stiffness_n_per_m,
+        "lab": {"up": lab.up, "heading_deg": lab.heading_deg, "markers": lab.markers},
+    }
+    if progress:
+        progress(done, f"{what}: walking and writing")
+    stem.mkdir(parents=True, exist_ok=True)
+    paths, refused, slopes = [], [], {}
+    for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
+        try:
+            wk = er_walk(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
+        except StepFailure as err:
+            refused.append(f"truth walk failed: {err}")
+            continue
+        paths.append(Path(record(wk, stem / f"t{j}.csv", rng, lab, rest_s=0.0)))
+        slopes[paths[-1].name] = float(slope)
+    if progress:
+        progress(done, f"{what}: importing and calibrating")
+    loaded, names = [], []
+    for p in paths:
+        try:
+            loaded.append(import_trial(p))
+            names.append(p.name)
+        except RimlessError as err:
+            refused.append(str(err).splitlines()[0])
+    row.update(
+        trials=len(paths),
+        refused=refused,
+        slope_error_deg=[t.meta.slope_deg - slopes[n] for t, n in zip(loaded, names)],
+        slope_ci_deg=[[math.degrees(v) for v in t.meta.slope_ci_rad] for t in loaded],
+    )
+    if sc.true_slope:
+        loaded = [replace(t, meta=replace(t.meta, slope_deg=slopes[n])) for t, n in zip(loaded, names)]
+    cpu = time.process_time()
+    try:
+        if len(loaded) < 2:
+            raise RimlessError(f"{len(loaded)} trial(s) imported")
+        res = calibrate(
+            loaded, fit=sc.fit, wheel=Wheel(held, uncertainty={f: 0.0 for f in UNCERTAIN_FIELDS}), names=names
+        )
+    except RimlessError as err:
+        row["failed"] = f"{type(err).__name__}: {str(err).splitlines()[0]}"
+        return row
+    row["calibrate_cpu_s"] = time.process_time() - cpu
+    row.update(_verdicts(res))
+    return row
+
+
+def _verdicts(res: Any) -> dict[str, Any]:
+    """What the calibration said: adequacy (overall ratios, p-values, fits), the model choice, each estimate."""
+    adq = res.adequacy or {}
+    ov = adq.get("overall", {})
+    per_trial = adq.get("per_trial", [])
+    choice = (res.model_choice or {}).get("guide_friction_n")
+    return {
+        "converged": bool(res.converged),
+        "fits": bool(adq.get("fits", True)),
+        "trials_flagged": sum(not t["fits"] for t in per_trial),
+        "per_trial_ratio": [{k: t[k]["ratio"] for k in ("com", "periods")} for t in per_trial],
+        "overall": {
+            k: {"ratio": ov[k]["ratio"], "p_value": ov[k]["p_value"]} for k in ("com", "periods", "total") if k in ov
+        },
+        "noise": {k: (adq.get("noise") or {}).get(k) for k in ("com_mm", "impact_time_ms")},
+        "model_choice": None
+        if choice is None
+        else {k: choice[k] for k in ("delta_chi2", "p_value", "supported", "boundary", "statement")},
+        "estimates": {
+            e.name: {
+                "value": e.value,
+                "se": e.se if math.isfinite(e.se) else None,
+                "identifiable": bool(e.identifiable),
+                "effective_only": bool(e.effective_only),
+            }
+            for e in res.params
+        },
+    }
+
+
+def _rate(k: int, n: int) -> dict[str, Any]:
+    lo, hi = wilson_interval(k, n)
+    return {"count": k, "of": n, "rate": k / n if n else None, "ci95": [lo, hi] if n else None}
+
+
+def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
+    done = [r for r in rows if "failed" not in r]
+    if sc.verdict == "does_not_fit":
+        said = [not r["fits"] for r in done]
+    else:
+        said = [bool(r["model_choice"] and r["model_choice"]["supported"]) for r in done]
+    out: dict[str, Any] = {
+        "what": sc.what,
+        "fit": list(sc.fit),
+        "held_k_error": sc.k_error,
+        "verdict": sc.verdict,
+        "right_verdict": sc.truth_answer,
+        "nominal_rate": sc.nominal_rate,
+        "series": len(rows),
+        "calibrated": len(done),
+        "converged": sum(r["converged"] for r in done),
+        sc.verdict: _rate(sum(said), len(done)),
+        "right": _rate(sum(s == sc.truth_answer for s in said), len(done)),
+        "does_not_fit_trials": {"count": sum(r["trials_flagged"] for r in done), "of": sum(r["trials"] for r in done)},
+    }
+    for key in ("com", "periods"):
+        ps = [r["overall"][key]["p_value"] for r in done if r["overall"].get(key, {}).get("p_value") is not None]
+        ratios = [r["overall"][key]["ratio"] for r in done if r["overall"].get(key, {}).get("ratio") is not None]
+        out[f"{key}_figure"] = {
+            "median_ratio": float(np.median(ratios)) if ratios else None,
+            "max_ratio": float(np.max(ratios)) if ratios else None,
+            "p_below_0.05": _rate(sum(p < 0.05 for p in ps), len(ps)),
+            "p_below_0.01": _rate(sum(p < 0.01 for p in ps), len(ps)),
+        }
+    mc = [r["model_choice"] for r in done if r.get("model_choice")]
+    if mc:
+        out["model_choice_p"] = {
+            "p_below_0.05": _rate(sum(m["p_value"] < 0.05 for m in mc), len(mc)),
+            "median_delta_chi2": float(np.median([m["delta_chi2"] for m in mc])),
+        }
+    if sc.friction:
+        fc = [(r["truth"]["guide_friction_n"], s) for r, s in zip(done, said)]
+        out["by_friction_n"] = {
+            f"{a:g}-{b:g}": _rate(sum(s for f, s in fc if a <= f < b), sum(a <= f < b for f, _ in fc))
+            for a, b in ((0.1, 0.3), (0.3, 0.6))
+        }
+    if sc.k_error:
+        for label, sgn in (("k_held_high", 1.0), ("k_held_low", -1.0)):
+            pick = [s for r, s in zip(done, said) if (r["held_k_n_per_m"] > r["truth"]["k"]) == (sgn > 0)]
+            out[label] = _rate(sum(pick), len(pick))
+    failed: dict[str, int] = {}
+    for r in rows:
+        if "failed" in r:
+            failed[r["failed"][:80]] = failed.get(r["failed"][:80], 0) + 1
+    out["failed"] = failed
+    out["imports"] = {"trials": sum(r["trials"] for r in rows), "refused": sum(len(r["refused"]) for r in rows)}
+    out["calibrate_cpu_s"] = sum(r.get("calibrate_cpu_s", 0.0) for r in rows)
+    out["per_series"] = rows
+    return out
