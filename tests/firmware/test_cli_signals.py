@@ -214,7 +214,9 @@ def test_ctrl_c_on_a_start_up_line_of_run_exits_130_with_interrupted(tmp_path, l
     assert res.returncode == 130, res.stderr
     assert lines[-1] == "interrupted", res.stderr
     assert any(ln.startswith("stopped (SIGINT)") and ln.endswith("every clutch released") for ln in lines), lines
-    assert "Traceback" not in res.stderr and "CancelledError" not in res.stderr
+    # the whole stderr in the message: a traceback seen once (2026-11-27, in a loop's __del__ -> close() on a full
+    # run at load ~2) was cut by pytest's comparison output, so its cause could not be read
+    assert "Traceback" not in res.stderr and "CancelledError" not in res.stderr, "\n" + res.stderr
     assert pin_log.exists() and set(last_levels(read_pin_log(pin_log)).values()) <= {0}  # every pin changed ends low
     if line.startswith("rimless robot: running"):  # the loop ran: its summary, not "before the firmware ran"
         assert any(ln.startswith("stopped (SIGINT): ") for ln in lines), lines
