@@ -12,6 +12,13 @@ trials. Against them, per trial and overall:
   period is the difference of two impact times: neighbours share one), with n - 1 degrees of freedom (the
   release speed is fitted).
 
+Each trial is held at its measured slope, whose error is shared by all its residuals and is not noise the
+recording shows. A block's chi^2 therefore allows the trial's slope to lie anywhere within its stated
+uncertainty: with b the block's residual change per 1-sigma of the slope (``period_slope_s``, ``com_slope_m``;
+central differences at the solution) the covariance is N + b b^T, and by Sherman-Morrison
+chi^2 = r^T N^-1 r - (b^T N^-1 r)^2 / (1 + b^T N^-1 b) (the chi^2 at the best slope with the measured one as a
+Gaussian prior; no degree of freedom is taken). Without b the block is judged at the measured slope, exact.
+
 Overall the sums, less one degree of freedom per fitted global. Each figure is the ratio chi^2 / dof (1 for a
 model that fits to the noise) with the upper-tail p-value. The model **does not fit** when the overall misfit is
 both significant (p < `ADEQUACY_P`) and material (ratio above `ADEQUACY_RATIO`: the residual variance exceeds
@@ -98,15 +105,39 @@ def timing_noise_sd(impacts_per_trial: Sequence[np.ndarray]) -> tuple[float, int
     return math.sqrt(rss / tr_sum), dof
 
 
-def period_chi2(residuals_s: np.ndarray, sigma_t: float) -> float:
+def period_chi2(residuals_s: np.ndarray, sigma_t: float, slope_s: np.ndarray | None = None) -> float:
     """chi^2 of period residuals (s) whose periods are differences of impact times of noise sigma_t:
-    r^T (sigma_t^2 D D^T)^-1 r, D D^T tridiagonal (2 on the diagonal, -1 beside)."""
+    r^T (sigma_t^2 D D^T)^-1 r, D D^T tridiagonal (2 on the diagonal, -1 beside); with ``slope_s`` (the
+    residuals' change per 1-sigma of the trial's slope, s) the slope's uncertainty allowed (`_allow_slope`)."""
     r = np.asarray(residuals_s, float)
     n = r.size
     if n == 0:
         return 0.0
     cov = (2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)) * sigma_t**2
-    return float(r @ np.linalg.solve(cov, r))
+    ninv_r = np.linalg.solve(cov, r)
+    if slope_s is None:
+        return float(r @ ninv_r)
+    b = np.asarray(slope_s, float)
+    return _allow_slope(float(r @ ninv_r), float(b @ ninv_r), float(b @ np.linalg.solve(cov, b)))
+
+
+def com_chi2(residuals_m: np.ndarray, sigma_h: float, slope_m: np.ndarray | None = None) -> float:
+    """chi^2 of CoM-height residuals (m) against white noise sigma_h; with ``slope_m`` (their change per 1-sigma
+    of the trial's slope, m) the slope's uncertainty allowed (`_allow_slope`)."""
+    r = np.asarray(residuals_m, float)
+    c2 = float(r @ r) / sigma_h**2
+    if slope_m is None:
+        return c2
+    b = np.asarray(slope_m, float)
+    return _allow_slope(c2, float(b @ r) / sigma_h**2, float(b @ b) / sigma_h**2)
+
+
+def _allow_slope(rNr: float, bNr: float, bNb: float) -> float:
+    """r^T (N + b b^T)^-1 r from r^T N^-1 r, b^T N^-1 r and b^T N^-1 b (Sherman-Morrison): the chi^2 with the
+    trial's slope free within its 1-sigma prior; never below 0, the plain chi^2 when a term is not finite."""
+    if not (math.isfinite(bNr) and math.isfinite(bNb) and bNb >= 0):
+        return rNr
+    return max(rNr - bNr * bNr / (1.0 + bNb), 0.0)
 
 
 def _figure(chi2: float, dof: int, noise_dof: float) -> dict[str, Any]:
@@ -129,7 +160,8 @@ def _misfit(fig: dict[str, Any]) -> bool:
 def adequacy(blocks: Sequence[dict[str, Any]], n_global: int) -> dict[str, Any]:
     """The adequacy figures. ``blocks``: per trial ``trial``, ``com_t_s``, ``com_m`` (measured), ``com_res_m``
     (model minus measured, at the solution), ``impacts_s`` (measured), ``period_res_s`` (simulated minus
-    measured, steps reached). Returns ``noise`` (the sigmas with how they were measured), ``per_trial`` (each
+    measured, steps reached) and, optionally, ``com_slope_m`` and ``period_slope_s`` (the residuals' change per
+    1-sigma of the trial's slope: that uncertainty is then allowed). Returns ``noise`` (the sigmas with how they were measured), ``per_trial`` (each
     with ``com`` and ``periods`` figures and ``fits``), ``overall`` (``com``, ``periods``, ``total``) and
     ``fits`` with ``statement``."""
     sig_t, dof_t = timing_noise_sd([b["impacts_s"] for b in blocks])
@@ -145,8 +177,17 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int) -> dict[str, Any]:
         nd_h = m_h * MAD_DOF_PER_DIFFERENCE if own else dof_h
         rh = np.asarray(b["com_res_m"], float)
         rp = np.asarray(b["period_res_s"], float)
-        c2h = float(np.sum(rh**2) / s_h**2) if rh.size and s_h > 0 else math.nan
-        c2p = period_chi2(rp, sig_t) if rp.size and sig_t > 0 else math.nan
+        bh, bp = b.get("com_slope_m"), b.get("period_slope_s")
+        c2h = (
+            com_chi2(rh, s_h, bh if bh is not None and len(bh) == rh.size else None)
+            if rh.size and s_h > 0
+            else math.nan
+        )
+        c2p = (
+            period_chi2(rp, sig_t, bp if bp is not None and len(bp) == rp.size else None)
+            if rp.size and sig_t > 0
+            else math.nan
+        )
         fh, fp = _figure(c2h, rh.size - 2, nd_h), _figure(c2p, rp.size - 1, dof_t)
         for key, c2, dof in (("com", c2h, rh.size - 2), ("periods", c2p, rp.size - 1)):
             if math.isfinite(c2) and dof > 0:
@@ -185,7 +226,8 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int) -> dict[str, Any]:
             "impact_time_dof": dof_t,
             "method": "from the recordings apart from the model: CoM height from its third differences on evenly "
             "spaced runs (median absolute deviation); impact times from each trial's periods about their own "
-            "geometric trend, pooled; p-values by the F test against these estimates",
+            "geometric trend, pooled; each trial's slope free within its stated uncertainty; p-values by the F "
+            "test against these estimates",
         },
         "per_trial": per_trial,
         "overall": {"com": oc, "periods": op, "total": total},

@@ -1588,21 +1588,33 @@ def _adequacy(obj: _Objective, u: np.ndarray) -> dict[str, Any]:
 
     xg, ws, sh = obj.unpack(u)
     p = obj.glob.params(xg)
-    blocks = []
-    for d, w, s_ in zip(obj.data, ws, sh):
-        rp, rh = _residuals(obj.sim, p, d, float(w), float(s_))
+
+    def residuals(d: _TrialData, w: float, s_: float) -> tuple[np.ndarray, np.ndarray]:
+        """(period residuals s, CoM residuals m) of trial d: a step not reached counts its whole period."""
+        rp, rh = _residuals(obj.sim, p, d, w, s_)
         f_sim = rp + 1.0 / d.periods_s
         reached = f_sim > 0
-        blocks.append(
-            {
-                "trial": d.name,
-                "com_t_s": d.t_s,
-                "com_m": d.com_m,
-                "com_res_m": rh,
-                "impacts_s": np.concatenate([[0.0], np.cumsum(d.periods_s)]),
-                "period_res_s": np.where(reached, 1.0 / np.where(reached, f_sim, 1.0) - d.periods_s, d.periods_s),
-            }
-        )
+        return np.where(reached, 1.0 / np.where(reached, f_sim, 1.0) - d.periods_s, d.periods_s), rh
+
+    blocks = []
+    for d, w, s_ in zip(obj.data, ws, sh):
+        rp, rh = residuals(d, float(w), float(s_))
+        block = {
+            "trial": d.name,
+            "com_t_s": d.t_s,
+            "com_m": d.com_m,
+            "com_res_m": rh,
+            "impacts_s": np.concatenate([[0.0], np.cumsum(d.periods_s)]),
+            "period_res_s": rp,
+        }
+        sd = float(d.slope_sd_deg)
+        if math.isfinite(sd) and sd > 0:  # the residuals' change per sd of the trial's slope (central difference)
+            up = residuals(dataclasses.replace(d, slope_deg=d.slope_deg + sd), float(w), float(s_))
+            down = residuals(dataclasses.replace(d, slope_deg=d.slope_deg - sd), float(w), float(s_))
+            if up[0].size == rp.size and up[1].size == rh.size and down[0].size == rp.size and down[1].size == rh.size:
+                block["period_slope_s"] = (up[0] - down[0]) / 2.0
+                block["com_slope_m"] = (up[1] - down[1]) / 2.0
+        blocks.append(block)
     return adequacy(blocks, obj.n_g)
 
 

@@ -41,10 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from rimless.analysis.validation.calibrate_coverage import C_RANGE, K_RANGE
+from rimless.analysis.validation.calibrate_coverage import C_RANGE, K_RANGE, walk_and_import
 from rimless.analysis.validation.coverage import wilson_interval
-from rimless.analysis.validation.critical_truth import record
-from rimless.analysis.validation.floquet_truth import er_walk
 from rimless.analysis.validation.importer_coverage import draw_lab
 
 __all__ = ["F_RANGE", "HELD_K_ERROR", "SCENARIOS", "Scenario", "run_adequacy_coverage"]
@@ -153,10 +151,8 @@ def _series(
     done: int,
 ) -> dict[str, Any]:
     """One series: draw the wheel and lab, walk, write, import, calibrate; the verdicts and figures."""
-    from rimless.analysis.kinematics.build import import_trial
     from rimless.errors import RimlessError
     from rimless.sim import Wheel
-    from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.params import WheelParams
     from rimless.sim.model.uncertain import UNCERTAIN_FIELDS
 
@@ -178,24 +174,17 @@ def _series(
     if progress:
         progress(done, f"{what}: walking and writing")
     stem.mkdir(parents=True, exist_ok=True)
-    paths, refused, slopes = [], [], {}
-    for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
-        try:
-            wk = er_walk(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
-        except StepFailure as err:
-            refused.append(f"truth walk failed: {err}")
-            continue
-        paths.append(Path(record(wk, stem / f"t{j}.csv", rng, lab, rest_s=0.0)))
-        slopes[paths[-1].name] = float(slope)
-    if progress:
-        progress(done, f"{what}: importing and calibrating")
-    loaded, names = [], []
-    for p in paths:
-        try:
-            loaded.append(import_trial(p))
-            names.append(p.name)
-        except RimlessError as err:
-            refused.append(str(err).splitlines()[0])
+    series = walk_and_import(
+        truth,
+        lab,
+        rng,
+        stem,
+        "",
+        trials,
+        steps,
+        importing=(lambda: progress(done, f"{what}: importing and calibrating")) if progress else None,
+    )
+    paths, refused, slopes, loaded, names = series.paths, series.refused, series.slopes_deg, series.loaded, series.names
     row.update(
         trials=len(paths),
         refused=refused,

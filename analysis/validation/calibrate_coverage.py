@@ -23,6 +23,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,11 +34,63 @@ from rimless.analysis.validation.critical_truth import record
 from rimless.analysis.validation.floquet_truth import er_walk
 from rimless.analysis.validation.importer_coverage import draw_lab
 
-__all__ = ["K_RANGE", "C_RANGE", "run_calibrate_coverage"]
+__all__ = ["K_RANGE", "C_RANGE", "WalkedSeries", "run_calibrate_coverage", "walk_and_import"]
 
 K_RANGE = (1500.0, 4000.0)
 C_RANGE = (2.0, 20.0)
 FIELDS = {"c": "damping_ns_per_m", "k": "stiffness_n_per_m"}
+
+
+@dataclass
+class WalkedSeries:
+    """One series' trials: the exports written (``paths``), the true slope of each by file name (deg), the walks
+    that stalled, what was refused (truth walks that failed, imports refused) and the imported trials."""
+
+    paths: list[Path] = field(default_factory=list)
+    slopes_deg: dict[str, float] = field(default_factory=dict)
+    stalled: int = 0
+    refused: list[str] = field(default_factory=list)
+    loaded: list[Any] = field(default_factory=list)
+    names: list[str] = field(default_factory=list)
+
+
+def walk_and_import(
+    truth: Any,
+    lab: Any,
+    rng: np.random.Generator,
+    folder: Path,
+    prefix: str,
+    trials: int,
+    steps: int,
+    *,
+    importing: Callable[[], None] | None = None,
+) -> WalkedSeries:
+    """``trials`` walks of the ER wheel ``truth`` on sorted slopes U(2, 3.5) deg, each released at its gait's
+    speed times U(0.95, 1.08) (`floquet_truth.er_walk`), written as Vicon exports ``folder/{prefix}t{j}.csv`` in
+    ``lab`` (`critical_truth.record`), then imported (`import_trial`, defaults); ``importing`` is called between."""
+    from rimless.analysis.kinematics.build import import_trial
+    from rimless.errors import RimlessError
+    from rimless.sim.model.failures import StepFailure
+
+    out = WalkedSeries()
+    for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
+        try:
+            wk = er_walk(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
+        except StepFailure as err:
+            out.refused.append(f"truth walk failed: {err}")
+            continue
+        out.stalled += wk.stalled
+        out.paths.append(Path(record(wk, folder / f"{prefix}t{j}.csv", rng, lab, rest_s=0.0)))
+        out.slopes_deg[out.paths[-1].name] = float(slope)
+    if importing:
+        importing()
+    for p in out.paths:
+        try:
+            out.loaded.append(import_trial(p))
+            out.names.append(p.name)
+        except RimlessError as err:
+            out.refused.append(str(err).splitlines()[0])
+    return out
 
 
 def run_calibrate_coverage(
@@ -52,10 +105,8 @@ def run_calibrate_coverage(
 ) -> dict[str, Any]:
     """``n_series`` series; ``calibrate(trials, fit=..., wheel=..., names=...)`` is the fit (the public
     `rimless.analysis.calibrate`). Returns the JSON-ready summary with ``per_series``."""
-    from rimless.analysis.kinematics.build import import_trial
     from rimless.errors import RimlessError
     from rimless.sim import Wheel
-    from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.params import WheelParams
     from rimless.sim.model.uncertain import UNCERTAIN_FIELDS
 
@@ -73,24 +124,23 @@ def run_calibrate_coverage(
             lab = draw_lab(rng)
             if progress:
                 progress(i, "walking and writing")
-            paths, refused, stalled = [], [], 0
-            for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
-                try:
-                    wk = er_walk(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
-                except StepFailure as err:
-                    refused.append(f"truth walk failed: {err}")
-                    continue
-                stalled += wk.stalled
-                paths.append(Path(record(wk, Path(tmp) / f"s{i}_t{j}.csv", rng, lab, rest_s=0.0)))
-            if progress:
-                progress(i, "importing")
-            loaded, names = [], []
-            for p in paths:
-                try:
-                    loaded.append(import_trial(p))
-                    names.append(p.name)
-                except RimlessError as err:
-                    refused.append(str(err).splitlines()[0])
+            series = walk_and_import(
+                truth,
+                lab,
+                rng,
+                Path(tmp),
+                f"s{i}_",
+                trials,
+                steps,
+                importing=(lambda i=i: progress(i, "importing")) if progress else None,
+            )
+            paths, refused, stalled, loaded, names = (
+                series.paths,
+                series.refused,
+                series.stalled,
+                series.loaded,
+                series.names,
+            )
             row: dict[str, Any] = {
                 "truth": {n: getattr(truth, FIELDS[n]) for n in fit},
                 "lab": {"up": lab.up, "heading_deg": lab.heading_deg, "markers": lab.markers},

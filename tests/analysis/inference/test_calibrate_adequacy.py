@@ -61,6 +61,52 @@ def test_period_chi_square_of_differenced_noise():
     assert np.mean(vals) == pytest.approx(8.0, rel=0.04)
 
 
+def test_the_slope_allowance_is_the_chi_square_under_noise_plus_the_slope_term():
+    """With b the residuals' change per 1-sigma of the slope, the block's chi-square is r^T (N + b b^T)^-1 r
+    (the covariance inverted directly here), for the periods' differenced noise and the CoM's white noise."""
+    rng = np.random.default_rng(3)
+    n, sig_t = 9, 0.7e-3
+    N = (2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)) * sig_t**2
+    r, b = rng.normal(0, 2e-3, n), rng.normal(0, 3e-3, n)
+    assert adq.period_chi2(r, sig_t, b) == pytest.approx(float(r @ np.linalg.inv(N + np.outer(b, b)) @ r), rel=1e-9)
+    assert adq.period_chi2(r, sig_t, b) < adq.period_chi2(r, sig_t)
+    rh, bh = rng.normal(0, 0.4e-3, 50), rng.normal(0, 1e-3, 50)
+    full = (0.3e-3) ** 2 * np.eye(50) + np.outer(bh, bh)
+    assert adq.com_chi2(rh, 0.3e-3, bh) == pytest.approx(float(rh @ np.linalg.solve(full, rh)), rel=1e-9)
+    assert adq.com_chi2(rh, 0.3e-3) == pytest.approx(float(rh @ rh) / 0.3e-3**2)
+
+
+def test_a_slope_error_within_its_uncertainty_is_not_a_misfit():
+    """Each trial's residuals are noise plus its slope's error (0.5-1.5 sd) along b: judged at the measured slope
+    as exact the model does not fit; with the slope's stated uncertainty allowed it fits (ratio near 1). A slope
+    error of 8 sd is still a misfit."""
+    rng = np.random.default_rng(7)
+    blocks = _blocks(rng, 1.0)
+    moved, far = [], []
+    for blk in blocks:
+        b_p = np.linspace(2e-3, 4e-3, 8)  # a steeper slope shortens every period, later ones more
+        b_h = np.full(blk["com_res_m"].size, 1.5e-3)
+        delta = rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 1.5)
+        for out, d in ((moved, delta), (far, 8.0)):
+            out.append(
+                {
+                    **blk,
+                    "period_res_s": blk["period_res_s"] + d * b_p,
+                    "com_res_m": blk["com_res_m"] + d * b_h,
+                    "period_slope_s": b_p,
+                    "com_slope_m": b_h,
+                }
+            )
+    exact = adq.adequacy(
+        [{k: v for k, v in m.items() if not k.endswith("_slope_s") and k != "com_slope_m"} for m in moved], 1
+    )
+    assert not exact["fits"]
+    allowed = adq.adequacy(moved, 1)
+    assert allowed["fits"], allowed["statement"]
+    assert allowed["overall"]["periods"]["ratio"] == pytest.approx(1.0, abs=0.5)
+    assert not adq.adequacy(far, 1)["fits"]
+
+
 def _blocks(rng, scale: float, n_trials: int = 6):
     out = []
     for i in range(n_trials):
