@@ -124,16 +124,12 @@ def run_calibrate_coverage(
             lab = draw_lab(rng)
             if progress:
                 progress(i, "walking and writing")
-            series = walk_and_import(
-                truth,
-                lab,
-                rng,
-                Path(tmp),
-                f"s{i}_",
-                trials,
-                steps,
-                importing=(lambda i=i: progress(i, "importing")) if progress else None,
-            )
+
+            def importing(i: int = i) -> None:
+                if progress:
+                    progress(i, "importing")
+
+            series = walk_and_import(truth, lab, rng, Path(tmp), f"s{i}_", trials, steps, importing=importing)
             paths, refused, stalled, loaded, names = (
                 series.paths,
                 series.refused,
