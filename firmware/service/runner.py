@@ -25,7 +25,7 @@ from rimless.firmware.service.app import RobotApp, RunSummary
 from rimless.firmware.service.config import RobotConfig, decide_realtime, load_config, with_realtime
 from rimless.firmware.service.hardware import Hardware, build_fake, build_real
 from rimless.firmware.service.logsetup import NonBlockingLog
-from rimless.firmware.service.safety import stop_on_signals
+from rimless.firmware.service.safety import signals_held, stop_on_signals
 from rimless.firmware.service.scenarios import Scenario, inject, on_ready, scenario
 
 EXIT_OK = 0
@@ -215,7 +215,7 @@ def _run(
         raise
     try:
         with NonBlockingLog(level=log_level) as logs:
-            summary = asyncio.run(robot.run(duration_s=duration_s, arm=arm, stance_leg=stance_leg))
+            summary = _run_loop(robot, duration_s, arm, stance_leg)
             state["summary"] = summary
             summary.stderr_dropped = logs.dropped
     except OSError as err:
@@ -244,6 +244,28 @@ def _run(
                 airborne_locks(walk, engages, cfg.sensors[0].legs, cfg.clutch.start_leg_index + sc.start_leg_offset)
             )
     return outcome
+
+
+def _run_loop(robot: RobotApp, duration_s: float | None, arm: bool, stance_leg: int | None) -> RunSummary:
+    """``robot.run`` in an event loop of its own that is closed here on every path, as `asyncio.run` does
+    (the remaining tasks cancelled, async generators and the default executor shut down), also when a stop
+    signal's `Interrupted` lands while the loop is being made or set up: `asyncio.run` then leaves its new
+    loop unclosed, and its ``__del__`` closes it later, wherever the garbage collector or the interpreter's
+    shutdown happens to run (a traceback on stderr after the "stopped" line was seen once, 2026-11-27). The
+    loop is made with the signal held (`signals_held`: the clutches are still released at once)."""
+    loop = None
+    try:
+        with signals_held():  # a stop signal now raises once `loop` is ours to close
+            loop = asyncio.new_event_loop()
+        coro = robot.run(duration_s=duration_s, arm=arm, stance_leg=stance_leg)
+        try:
+            with asyncio.Runner(loop_factory=lambda: loop) as runner:
+                return runner.run(coro)
+        finally:
+            coro.close()  # never awaited when the signal came before the loop ran it (no warning then)
+    finally:
+        if loop is not None and not loop.is_closed():
+            loop.close()
 
 
 def check_arm_at_start(cfg: RobotConfig, arm: bool, stance_leg: int | None) -> None:

@@ -24,7 +24,11 @@ from typing import Any
 
 from rimless.firmware.errors import Interrupted
 
-__all__ = ["STOP_SIGNALS", "Interrupted", "stop_on_signals"]
+__all__ = ["STOP_SIGNALS", "Interrupted", "signals_held", "stop_on_signals"]
+
+#: the state of each `stop_on_signals` block now active (the innermost last): how deep `signals_held` is, and the
+#: signal it held back
+_ACTIVE: list[dict[str, Any]] = []
 
 STOP_SIGNAL_NAMES = (
     "SIGINT",
@@ -63,13 +67,15 @@ def install_faulthandler() -> None:
 @contextlib.contextmanager
 def stop_on_signals(on_signal: Callable[[], None] | None = None) -> Iterator[list[int]]:
     """Within the block, a stop signal runs `on_signal` and raises `Interrupted` once; later signals
-    only run `on_signal` again (the cleanup in progress is not interrupted). Yields the list of
-    signals received."""
+    only run `on_signal` again (the cleanup in progress is not interrupted). Inside `signals_held` the
+    first signal still runs `on_signal` at once but its `Interrupted` waits for the end of that block.
+    Yields the list of signals received."""
     received: list[int] = []
     previous: dict[int, Any] = {}
     if threading.current_thread() is not threading.main_thread():
         yield received  # only the main thread receives signals (and may set handlers)
         return
+    state: dict[str, Any] = {"held": 0, "pending": None}
 
     def handler(signum: int, _frame: Any) -> None:
         if on_signal is not None:
@@ -77,13 +83,40 @@ def stop_on_signals(on_signal: Callable[[], None] | None = None) -> Iterator[lis
                 on_signal()
         received.append(signum)
         if len(received) == 1:
+            if state["held"]:
+                state["pending"] = signum
+                return
             raise Interrupted(signum)
 
     for sig in STOP_SIGNALS:
         previous[sig] = signal.signal(sig, handler)
+    _ACTIVE.append(state)
     try:
         yield received
     finally:
+        _ACTIVE.remove(state)
         for sig, old in previous.items():
             with contextlib.suppress(Exception):
                 signal.signal(sig, old)
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Within the block, the enclosing `stop_on_signals` still releases the clutches on a stop signal at once,
+    but raises its `Interrupted` only when the block ends (then, also in place of an exception the block
+    raised): for a few steps that must not be cut in two, such as creating an event loop and taking hold of
+    it, so that whatever they made can be closed. Outside `stop_on_signals` (or off the main thread) it
+    does nothing."""
+    if not _ACTIVE or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    state = _ACTIVE[-1]
+    state["held"] += 1
+    try:
+        yield
+    finally:
+        state["held"] -= 1
+        pending = state["pending"]
+        if not state["held"] and pending is not None:
+            state["pending"] = None
+            raise Interrupted(pending)

@@ -62,3 +62,40 @@ def test_a_stop_signal_after_the_loop_keeps_the_runs_summary(tmp_path, monkeypat
     assert len(running) == 1  # called once, in the loop
     assert not outcome.before_start and outcome.signal == "SIGINT" and outcome.exit_code == 130
     assert outcome.summary is not None and outcome.summary.stop_reason == "duration" and outcome.summary.samples > 0
+
+
+@pytest.mark.parametrize("where", ["making the loop", "setting it up"])
+def test_a_stop_signal_while_the_loop_is_made_leaves_no_loop_unclosed(tmp_path, monkeypatch, where) -> None:
+    """Fails before (while it is made): a Ctrl-C landing while `asyncio.run` made its event loop left that loop
+    unclosed; its ``__del__`` closed it later wherever the garbage collector ran (a traceback on the command's
+    stderr, seen once). A real SIGINT is raised in the process at that moment (`signal.raise_signal` runs the
+    Python handler before it returns); the run ends as stopped before the firmware ran, the loop closed."""
+    import asyncio
+
+    made = []
+    real_new_loop = asyncio.new_event_loop
+
+    def new_loop_then_signal():
+        loop = real_new_loop()
+        made.append(loop)
+        if where == "making the loop":
+            signal.raise_signal(signal.SIGINT)
+        return loop
+
+    real_runner = asyncio.Runner
+
+    class RunnerSignalledOnEntry(real_runner):  # the signal once the loop exists, before the run starts
+        def __enter__(self):
+            runner = super().__enter__()
+            if where == "setting it up":
+                signal.raise_signal(signal.SIGINT)
+            return runner
+
+    monkeypatch.setattr(asyncio, "new_event_loop", new_loop_then_signal)
+    monkeypatch.setattr(asyncio.events, "new_event_loop", new_loop_then_signal)  # what asyncio.run calls
+    monkeypatch.setattr(asyncio, "Runner", RunnerSignalledOnEntry)
+    monkeypatch.setattr(asyncio.runners, "Runner", RunnerSignalledOnEntry)
+    cfg = RobotConfig(commands=CommandsConfig(enabled=False), log=LogConfig(dir=str(tmp_path)))
+    outcome = run_robot(cfg, fake=True, duration_s=5.0, arm=True, stance_leg=0)
+    assert outcome.before_start and outcome.signal == "SIGINT" and outcome.exit_code == 130
+    assert len(made) == 1 and made[0].is_closed()
