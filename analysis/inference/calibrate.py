@@ -904,20 +904,36 @@ def _polish(
     return u, J
 
 
-def _slope_part(obj: _Objective, u: np.ndarray, J: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, list]:
-    """`rimless.analysis.inference.trial_slopes.slope_response` at the solution u: the globals' standard errors
-    from the trials' measured slopes, and each trial's parts."""
-    from rimless.analysis.inference.trial_slopes import slope_response
+_Moved = Callable[[int, float], tuple[np.ndarray, np.ndarray]]
 
+
+def _slope_moved(obj: _Objective, u: np.ndarray) -> _Moved:
+    """moved(i, d_slope_deg): trial i's unscaled residuals (`_residuals`: Hz, m) at the solution u with its slope
+    moved by d_slope_deg, each walk simulated once (the slopes' part of the se and the adequacy check both use
+    the walks at +-1 sd)."""
     xg, ws, sh = obj.unpack(u)
     p = obj.glob.params(xg)
+    cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray]] = {}
 
-    def moved(i: int, d_slope_deg: float) -> np.ndarray:
-        d = dataclasses.replace(obj.data[i], slope_deg=obj.data[i].slope_deg + d_slope_deg)
-        rp, rh = _residuals(obj.sim, p, d, float(ws[i]), float(sh[i]))
+    def moved(i: int, d_slope_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        if (i, d_slope_deg) not in cache:
+            d = dataclasses.replace(obj.data[i], slope_deg=obj.data[i].slope_deg + d_slope_deg)
+            cache[(i, d_slope_deg)] = _residuals(obj.sim, p, d, float(ws[i]), float(sh[i]))
+        return cache[(i, d_slope_deg)]
+
+    return moved
+
+
+def _slope_part(obj: _Objective, J: np.ndarray, scale: np.ndarray, moved: _Moved) -> tuple[np.ndarray, list]:
+    """`rimless.analysis.inference.trial_slopes.slope_response` at the solution of ``moved`` (`_slope_moved`): the
+    globals' standard errors from the trials' measured slopes, and each trial's parts."""
+    from rimless.analysis.inference.trial_slopes import slope_response
+
+    def scaled(i: int, d_slope_deg: float) -> np.ndarray:
+        rp, rh = moved(i, d_slope_deg)
         return np.concatenate([rp / obj.sig["t"], rh / obj.sig["h"]])
 
-    return slope_response(J, obj.n_g, scale, [d.slope_sd_deg for d in obj.data], moved, obj.offs)
+    return slope_response(J, obj.n_g, scale, [d.slope_sd_deg for d in obj.data], scaled, obj.offs)
 
 
 REFIT_COST_RATIO = 3.0  # a warm refit above this times the fit's cost is redone from scratch (`held_response`)
@@ -1204,7 +1220,8 @@ def calibrate(
     se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
     se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
     xg, ws, sh = obj.unpack(u)
-    se_slope, slope_parts = _slope_part(obj, u, J, scale_all)
+    moved = _slope_moved(obj, u)
+    se_slope, slope_parts = _slope_part(obj, J, scale_all, moved)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged, se_slope)
     for j, e in enumerate(estimates):
         e.slope_contributions = {d.name: float(abs(pt[j])) for d, pt in zip(data, slope_parts)}
@@ -1231,7 +1248,7 @@ def calibrate(
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])
     choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds)
-    fits = _adequacy(obj, u)
+    fits = _adequacy(obj, u, moved)
     _judge(estimates, fits, choice, fvd)
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
     used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
@@ -1581,24 +1598,25 @@ def _model_choice(
     return out
 
 
-def _adequacy(obj: _Objective, u: np.ndarray) -> dict[str, Any]:
+def _adequacy(obj: _Objective, u: np.ndarray, moved: _Moved) -> dict[str, Any]:
     """`rimless.analysis.inference.adequacy.adequacy` at the solution u (each trial's CoM and period residuals,
-    its measured CoM and impact times)."""
+    its measured CoM and impact times, and their change per 1-sigma of its slope from ``moved``,
+    `_slope_moved` at u)."""
     from rimless.analysis.inference.adequacy import adequacy
 
     xg, ws, sh = obj.unpack(u)
     p = obj.glob.params(xg)
 
-    def residuals(d: _TrialData, w: float, s_: float) -> tuple[np.ndarray, np.ndarray]:
-        """(period residuals s, CoM residuals m) of trial d: a step not reached counts its whole period."""
-        rp, rh = _residuals(obj.sim, p, d, w, s_)
-        f_sim = rp + 1.0 / d.periods_s
+    def periods(d: _TrialData, rf: np.ndarray) -> np.ndarray:
+        """Period residuals (s) from `_residuals`' frequency residuals (Hz): a step not reached counts its period."""
+        f_sim = rf + 1.0 / d.periods_s
         reached = f_sim > 0
-        return np.where(reached, 1.0 / np.where(reached, f_sim, 1.0) - d.periods_s, d.periods_s), rh
+        return np.where(reached, 1.0 / np.where(reached, f_sim, 1.0) - d.periods_s, d.periods_s)
 
     blocks = []
-    for d, w, s_ in zip(obj.data, ws, sh):
-        rp, rh = residuals(d, float(w), float(s_))
+    for i, (d, w, s_) in enumerate(zip(obj.data, ws, sh)):
+        rf, rh = _residuals(obj.sim, p, d, float(w), float(s_))
+        rp = periods(d, rf)
         block = {
             "trial": d.name,
             "com_t_s": d.t_s,
@@ -1609,11 +1627,9 @@ def _adequacy(obj: _Objective, u: np.ndarray) -> dict[str, Any]:
         }
         sd = float(d.slope_sd_deg)
         if math.isfinite(sd) and sd > 0:  # the residuals' change per sd of the trial's slope (central difference)
-            up = residuals(dataclasses.replace(d, slope_deg=d.slope_deg + sd), float(w), float(s_))
-            down = residuals(dataclasses.replace(d, slope_deg=d.slope_deg - sd), float(w), float(s_))
-            if up[0].size == rp.size and up[1].size == rh.size and down[0].size == rp.size and down[1].size == rh.size:
-                block["period_slope_s"] = (up[0] - down[0]) / 2.0
-                block["com_slope_m"] = (up[1] - down[1]) / 2.0
+            (rf_up, rh_up), (rf_down, rh_down) = moved(i, sd), moved(i, -sd)
+            block["period_slope_s"] = (periods(d, rf_up) - periods(d, rf_down)) / 2.0
+            block["com_slope_m"] = (rh_up - rh_down) / 2.0  # `adequacy` uses them only where the sizes agree
         blocks.append(block)
     return adequacy(blocks, obj.n_g)
 
