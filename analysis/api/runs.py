@@ -75,7 +75,8 @@ def critical_slope_run(
     no_fit_here(win, ("damping_ns_per_m",) if calibrate_c else (), "trials critical-slope fits only c (--calibrated)")
     wheel = win.params
     with progress_bar("importing") as bar:
-        run = CriticalSlopeRun(load_trials(files, import_kwargs))
+        legs = _wheel(win, "rigid" if models and all(m == "rigid" for m in models) else "er")
+        run = CriticalSlopeRun(load_trials(files, {**import_kwargs, "wheel": legs}))  # (the legs' drift)
         if not run.loaded.trials:
             return run
         calibrated = None
@@ -168,7 +169,11 @@ def calibration_run(
         wheel = prior.plan(wheel, [FIT_FIELDS[n][0] for n in fit])
         win = prior_input(win, prior)
     with progress_bar("importing") as bar:
-        run = CalibrationRun(load_trials(files, import_kwargs), prior=prior, fit=list(fit), wheel=win)
+        # the importer's legs' drift: the wheel's k, or its own bound when k is fitted (not known)
+        legs = None if "k" in fit else _wheel(win, model)
+        run = CalibrationRun(
+            load_trials(files, {**import_kwargs, "wheel": legs}), prior=prior, fit=list(fit), wheel=win
+        )
         if not run.loaded.trials:
             return run
         planned = _wheel(win, model)
