@@ -41,6 +41,12 @@ def _wheel(win: Any, model: str) -> Any:
     return w
 
 
+def import_wheel(params_path: Path | None, rigid_legs: bool) -> Any:
+    """The wheel ``trials import`` hands the importer (`import_trial(wheel=)`, for the legs' drift): the wheel
+    file's (``--params``, default Table 1 with its stated uncertainties), rigid with ``rigid_legs``."""
+    return _wheel(wheel_input(params_path), "rigid" if rigid_legs else "er")
+
+
 @dataclass
 class CriticalSlopeRun:
     """What ``trials critical-slope`` prints: the inputs, the estimates, and the optional calibration."""

@@ -282,3 +282,37 @@ def test_compliant_truth_speeding_up_keeps_its_allowance_and_covers(tmp_path):
     assert ev and all(e.common_half_rad > 0 and "impact speed change" in e.method for e in ev)
     lo, hi = (math.degrees(v) for v in trial.meta.slope_ci_rad)
     assert lo <= 1.8 <= hi, (lo, hi, trial.meta.slope_method)
+
+
+def test_trials_import_is_told_the_wheel_as_the_api_is(tmp_path):
+    """`rimless trials import --rigid-legs` (and `--params` with a wheel file) gives the importer the wheel, as
+    `import_trial(wheel=)` does: the same slope interval as the API's, narrower than when not told (the
+    independent rigid truth, speeding up: `test_rigid_truth_told_rigid_carries_no_drift_and_covers`)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from rimless.cli import app
+    from rimless.sim import Wheel
+    from tests.support.analysis_trial_truth import rigid_walk, write_csv
+
+    path = write_csv(tmp_path / "rigid.csv", rigid_walk(4.0, 2.0, ramp_steps=11, seed=1))
+    runner = CliRunner()
+
+    def cli_ci(*extra: str) -> list[float]:
+        r = runner.invoke(app, ["trials", "import", path, "--out", str(tmp_path), "--json", *extra])
+        assert r.exit_code == 0, r.output
+        return json.loads(r.stdout)[0]["slope_ci_deg"]
+
+    def api_ci(wheel) -> list[float]:
+        return [math.degrees(v) for v in import_trial(path, wheel=wheel).meta.slope_ci_rad]
+
+    assert cli_ci("--rigid-legs") == pytest.approx(api_ci(Wheel(model="rigid")), abs=1e-9)
+    untold = cli_ci()
+    assert untold == pytest.approx(api_ci(None), abs=1e-9)
+    stiff = tmp_path / "stiff.toml"
+    stiff.write_text("[wheel]\nk = {value = 20000, sd = 1000}\n", encoding="utf-8")
+    told = cli_ci("--params", str(stiff))
+    assert told == pytest.approx(api_ci(Wheel(stiff)), abs=1e-9)
+    rigid = cli_ci("--rigid-legs")
+    assert rigid[1] - rigid[0] < told[1] - told[0] < untold[1] - untold[0]
