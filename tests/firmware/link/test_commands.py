@@ -223,20 +223,46 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
 
 
 def test_heartbeat_keeps_a_remote_arm_and_its_loss_disarms(tmp_path) -> None:
-    # a heartbeat every 0.1 s against a 1 s link timeout: ten times the period, for a loaded machine
+    """The link-loss timer runs on a virtual clock (`app.link_clock`) the test moves: 12 steps of 0.6 s (7.2 s,
+    seven link timeouts), each followed by a whole heartbeat (`Heartbeat.pings` up by two: the one in flight may
+    have been seen before the step) and a whole round of the watchdog thread's link check, keep the remote arm;
+    once the heartbeat stopped, 1.1 s without a command (more than the 1 s link timeout) disarms. No step of the
+    machine's is timed."""
+    from tests.support.firmware_app import TurnClock
+
     cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=1.0))
+    clock = TurnClock()  # never released: it moves only by `advance`
+
+    def wait_until(condition, guard_s: float = 30.0) -> None:
+        """Poll for an event; the guard only stops a broken build."""
+        deadline = time.monotonic() + guard_s
+        while not condition() and time.monotonic() < deadline:
+            time.sleep(0.01)
 
     async def script(app, hw):
+        app.link_clock = clock
+
         def operator() -> tuple[bool, bool]:
             lines: list[str] = []
             with RobotLink("127.0.0.1", token=TOKEN, port=app.command_port) as link:
                 link.call("arm")
-            hb = Heartbeat("127.0.0.1", token=TOKEN, port=app.command_port, period_s=0.1, echo=lines.append)
-            hb.run(duration_s=2.5)  # two and a half link timeouts, kept alive
-            armed_with_heartbeat = app.controller.armed
-            deadline = time.monotonic() + 10  # heartbeat stopped: disarmed after link_timeout_s
-            while app.controller.armed and time.monotonic() < deadline:
-                time.sleep(0.02)
+            hb = Heartbeat("127.0.0.1", token=TOKEN, port=app.command_port, period_s=0.02, echo=lines.append)
+            beating = threading.Thread(target=hb.run, daemon=True)
+            beating.start()
+            try:
+                for _ in range(12):
+                    clock.advance(0.6)
+                    beats = hb.pings
+                    wait_until(lambda beats=beats: hb.pings >= beats + 2 or not beating.is_alive())
+                    assert hb.pings >= beats + 2, lines
+                    rounds = app.watchdog.rounds  # a whole round of the link check after that heartbeat
+                    wait_until(lambda rounds=rounds: app.watchdog.rounds >= rounds + 2)
+                armed_with_heartbeat = app.controller.armed
+            finally:
+                hb.stop()
+                beating.join(30)
+            clock.advance(1.1)  # heartbeat stopped: disarmed (by the watchdog thread)
+            wait_until(lambda: not app.controller.armed)
             return armed_with_heartbeat, app.controller.armed
 
         return await asyncio.to_thread(operator)
