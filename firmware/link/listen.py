@@ -379,6 +379,7 @@ def listen(
     mcap_out: Path | None = None,
     token: str | None = None,
     max_datagrams: int | None = None,
+    clock: Callable[[], float] = time.monotonic,
 ) -> Summary:
     """Receive until `duration_s`, until `max_datagrams` of the robot's datagrams are in (None: no limit), or
     Ctrl-C; record and show as the module docstring says.
@@ -399,7 +400,10 @@ def listen(
 
     Stages (`rimless.progress.stage`, for tests that wait on events): ``listen: listening`` once bound,
     ``listen: datagram N from the robot`` as each is accounted for, ``listen: data stopped``, ``listen: data
-    resumed``."""
+    resumed``.
+
+    `clock` (s, monotonic) times the duration, the summary lines, "data stopped" and the silence timeout: the wall
+    clock on the robot's PC; a test's virtual clock."""
     try:
         sock = socket.socket(socket.AF_INET6 if ":" in bind else socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((bind, port))
@@ -440,14 +444,14 @@ def listen(
             "telemetry not authenticated: without the command token (--token-file, $RIMLESS_TOKEN_FILE or "
             "$RIMLESS_TOKEN) any host on the LAN can forge it"
         )
-    start = time.monotonic()
+    start = clock()
     next_line = start + summary_every_s
     last_data: float | None = None
     stale = False
     stopped_by: BaseException | None = None
     silent_for: float | None = None
     try:
-        while duration_s is None or time.monotonic() - start < duration_s:
+        while duration_s is None or clock() - start < duration_s:
             try:
                 data, addr = sock.recvfrom(65536)
             except TimeoutError:
@@ -484,7 +488,7 @@ def listen(
                         robot_ip = addr[0]
                         echo(f"receiving from {robot_ip} (datagrams from any other sender are ignored)")
                     objs = _parse(strip_tag(data), summary)  # the tag cannot be checked without the token
-            now = time.monotonic()
+            now = clock()
             if objs is not None:
                 if stale and last_data is not None:
                     echo(f"data resumed after {now - last_data:.1f} s")
@@ -540,7 +544,7 @@ def listen(
         else:
             paths = rec.close()
     if last_data is not None or silent_for is None:
-        echo(summary.line(time.monotonic(), summary_every_s))
+        echo(summary.line(clock(), summary_every_s))
     if summary.lost_objects:
         echo(
             f"lost {summary.lost_objects} telemetry objects on the way, {summary.lost_events} of them events "

@@ -119,7 +119,9 @@ class RobotApp:
         self._tel_pending: list[Record] = []
         self._log_pending: list[Record] = []
         self._stop: asyncio.Event | None = None
-        self._last_command_s = time.monotonic()
+        # the link-loss timer's clock (s, monotonic): the robot's; a test's virtual clock moves it by hand
+        self.link_clock: Callable[[], float] = time.monotonic
+        self._last_command_s = self.link_clock()
         self._trial_lock: asyncio.Lock | None = None
         self.watchdog: Watchdog | None = None
         self.trial_log_write: Callable[[int, Any], int] = os.write  # the trial log's write (a fake fills the disk)
@@ -422,7 +424,7 @@ class RobotApp:
         """Link loss, checked in the watchdog thread so that it fires while the event loop is blocked."""
         link_s = self.cfg.commands.link_timeout_s
         ctl = self.controller
-        if link_s > 0 and ctl.armed and self.armed_remotely and time.monotonic() - self._last_command_s > link_s:
+        if link_s > 0 and ctl.armed and self.armed_remotely and self.link_clock() - self._last_command_s > link_s:
             ctl.armed = False
             self.armed_remotely = False
             with contextlib.suppress(Exception):
@@ -503,7 +505,7 @@ class RobotApp:
         }
 
     def _command_seen(self) -> None:
-        self._last_command_s = time.monotonic()
+        self._last_command_s = self.link_clock()
 
     async def _in_sampler(self, fn: Callable[[Controller], Any]) -> Any:
         assert self.sampler is not None
@@ -541,7 +543,7 @@ class RobotApp:
                 raise ValueError(f"stance_leg must be a clutch index (integer), got {leg!r}")
             result = await self._in_sampler(lambda c: c.arm(stance_leg=leg))
             self.armed_remotely = True
-            self._last_command_s = time.monotonic()
+            self._last_command_s = self.link_clock()
             result["link_timeout_s"] = self.cfg.commands.link_timeout_s
             return result
         if cmd.cmd == "disarm":

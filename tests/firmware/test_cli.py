@@ -284,6 +284,8 @@ def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -
 
 
 def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
+    """`robot run --fake` with a [telemetry] host and a --telemetry one: each destination gets every sample the
+    run reports taking (its --json `samples`), whatever the machine's speed made of its 1 s."""
     rxs = []
     for _ in range(2):
         rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -320,23 +322,30 @@ def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
             "1.0",
             "--telemetry",
             f"127.0.0.1:{rxs[1].getsockname()[1]}",
+            "--json",
         ],
         capture_output=True,
         text=True,
         timeout=60,
     )
-    # the run has ended: whatever it sent is in the sockets' queues (loopback delivers on send), read to the end
+    assert r.returncode == 0, r.stderr
+    # the run has ended and says how many samples it took: every one reaches each destination (the run flushes
+    # its telemetry before it exits); read until they are in (a hang guard on each read), then nothing more
+    samples = json.loads(r.stdout)["samples"]
     stop.set()
     for t in threads:
         t.join()
     for i, rx in enumerate(rxs):
+        rx.settimeout(30.0)  # a hang guard: the datagrams were sent
+        with contextlib.suppress(TimeoutError):
+            while counts[i] < samples:
+                counts[i] += sum(1 for o in json.loads(rx.recv(65536)) if "leg" in o)
         rx.setblocking(False)
         with contextlib.suppress(BlockingIOError):
             while True:
                 counts[i] += sum(1 for o in json.loads(rx.recv(65536)) if "leg" in o)
         rx.close()
-    assert r.returncode == 0, r.stderr
-    assert counts[0] > 100 and counts[0] == counts[1]
+    assert samples > 0 and counts == [samples, samples], (counts, samples)
     r = invoke("run", "--fake", "--telemetry", "nohostport")
     assert r.exit_code == 2 and "--telemetry" in r.output
 

@@ -10,7 +10,9 @@ import hmac
 import json
 import secrets
 import socket
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from rimless.firmware.clock import VirtualClock, seconds
@@ -153,3 +155,43 @@ def signed_datagram(data: bytes) -> bytes:
     from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
 
     return sign_datagram(data, telemetry_key("any-token-of-this-robot", "e" * 32), "e" * 32)
+
+
+class TurnClock:
+    """A virtual clock (s) for `listen(clock=...)` and `RobotApp.link_clock`, moved by events, never by the
+    machine's speed: it stands still until released (`release()`, or `release_when()` holding at a reading: say,
+    once listen reached the stage of its last datagram), then moves `step_s` at each reading (listen reads it
+    once or twice a turn of its loop, and a turn without a datagram waits 0.1 s on its socket: a silence is
+    counted in listen's idle turns). `advance(s)` moves it by hand."""
+
+    def __init__(self, step_s: float = 0.1, release_when: Callable[[], bool] | None = None) -> None:
+        self.t = 0.0
+        self.step_s = step_s
+        self.release_when = release_when
+        self.released = threading.Event()
+
+    def release(self) -> None:
+        self.released.set()
+
+    def advance(self, s: float) -> None:
+        self.t += s
+
+    def __call__(self) -> float:
+        if not self.released.is_set() and self.release_when is not None and self.release_when():
+            self.released.set()
+        if self.released.is_set():
+            self.t += self.step_s
+        return self.t
+
+
+def stage_reached(path: Path, name: str) -> Callable[[], bool]:
+    """Whether the stage `name` is in the stage file `path` (`rimless.progress.stage` with
+    RIMLESS_TEST_STAGE_FILE set to a plain file: for code run in the test's own process)."""
+
+    def reached() -> bool:
+        try:
+            return name in path.read_text().splitlines()
+        except FileNotFoundError:
+            return False
+
+    return reached

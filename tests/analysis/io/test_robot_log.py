@@ -4,9 +4,7 @@ report's measured-beside-simulated clutched time (`trials report --robot-log`)."
 
 from __future__ import annotations
 
-import asyncio
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -110,43 +108,36 @@ def test_a_log_written_by_the_fake_robot(tmp_path):
     """The fake walks steps of 0.4 s (tests.support.firmware_app.gait): each armed lock is released by the next
     touchdown, so every clutched time is one and the same fraction of 0.4 s and locks follow each other by 0.4 s.
 
-    The fake samples on the wall clock in this process: on a loaded test machine a sampler paused past a
-    touchdown makes the robot fault (leg_sync_lost) and disarm, as the robot would. Such a run is started
-    again, at most three times; any other fault fails at once."""
-    from tests.support.firmware_app import Client, config, scenario
+    The fake, its walk and the log's times are on a virtual clock (`scenario`): a loaded machine makes the run
+    slower, never different. The robot is armed at its start (`scenario(arm=True)`, naming the leg the walk
+    starts on), before the walk's first touchdown on that clock: an `arm` command landed wherever the machine's
+    speed put it in the walk, and one landed in a step's compression is a missed touchdown (leg_sync_lost, which
+    the test used to retry). Armed locally, no link-loss timer runs. The trial is started and stopped over the
+    command channel; the test ends on the event, four clutched times in the log (or a fault), not after a time."""
+    from tests.support.firmware_app import Client, config, scenario, wait_for
+
+    def four_locks() -> bool:
+        files = list((tmp_path / "trials").glob("*.jsonl"))
+        return bool(files) and read_clutch_log(files[0]).complete().size >= 4
 
     async def script(app, hw):
         c = await Client.connect(app.command_port)
-        await c.cmd("arm", 1, stance_leg=0)  # the leg the fake walk starts on
-        await c.cmd("trial_start", 2, name="clutch")
-        for k in range(200):  # until four locks were released (a generous bound, not a fixed delay)
-            await asyncio.sleep(0.1)
-            status = await c.cmd("status", 10 + k)  # a command keeps the link alive (the robot disarms after 2 s)
-            if status["result"]["faults"]:
-                break
-            files = list((tmp_path / "trials").glob("*.jsonl"))
-            if files and read_clutch_log(files[0]).complete().size >= 4:
-                break
-        r = await c.cmd("trial_stop", 1000)
+        await c.cmd("trial_start", 1, name="clutch")
+        # a hang guard, not a bound: the log is read as it is flushed (every 0.05 s)
+        await wait_for(lambda: bool(app.controller.active_faults) or four_locks(), timeout_s=120.0, every_s=0.05)
+        r = await c.cmd("trial_stop", 2)
         c.close()
         return r
 
-    faults: list[str] = []
-    for _attempt in range(3):
-        shutil.rmtree(tmp_path / "trials", ignore_errors=True)
-        _, summary, r, _ = scenario(config(tmp_path), script, timeout_s=30.0)
-        if not summary.faults:
-            break
-        assert set(summary.faults) == {"leg_sync_lost"}, summary.faults
-        faults += summary.faults
-    assert not summary.faults, f"three runs faulted: {faults}"
+    _, summary, r, _ = scenario(config(tmp_path), script, arm=True, timeout_s=150.0)
+    assert not summary.faults, summary.faults
     log = read_clutch_log(r["result"]["path"])
     held = log.complete()
     events = [json.loads(ln).get("event") for ln in Path(r["result"]["path"]).read_text().splitlines() if ln.strip()]
     assert held.size >= 3, events
     assert np.all((held > 0.05) & (held < 0.4))
-    # The fake samples at 300 Hz on the wall clock: a lock and a release each land on a sample (3.3 ms apart),
-    # later on a loaded machine; 20 ms still tells a constant hold from one that drifts by a step's fraction.
+    # The fake samples at 300 Hz on its virtual clock: a lock and a release each land on a sample (3.3 ms apart);
+    # 20 ms still tells a constant hold from one that drifts by a step's fraction.
     assert np.ptp(held) < 0.02, held
     np.testing.assert_allclose(np.diff(log.lock_s[: held.size]), 0.4, atol=0.02)
 

@@ -22,7 +22,7 @@ from rimless.firmware.link.commands import RateLimitedLog
 from rimless.firmware.link.heartbeat import Heartbeat
 from rimless.firmware.link.remote import RobotLink, send_command
 from rimless.firmware.service.config import CommandsConfig
-from tests.support.firmware_app import TOKEN, Client, all_off, config, scenario, wait_for
+from tests.support.firmware_app import REPLY_GUARD_S, TOKEN, Client, all_off, config, scenario, wait_for
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 
@@ -116,28 +116,45 @@ def test_flood_of_garbage_logs_a_bounded_number_of_lines(tmp_path, caplog) -> No
 
 
 def test_unauthenticated_connections_time_out_and_the_cap_evicts_them(tmp_path) -> None:
-    # 1 s to authenticate: the operator's client does it at once even on a loaded machine
+    """The cap, then the timeout, each on its own event, not racing each other. Hand-counted: a cap of 4 with 2
+    slots kept for operators leaves strangers 2; 10 idle connections from a stranger (127.0.0.1 has not
+    authenticated yet) keep the 2 newest and evict 8, oldest first; the operator's connection, a stranger until it
+    authenticates, evicts a 9th and gets in. The auth timeout is a 600 s hang guard while the cap is counted (a
+    loaded machine opening the 10 slowly cannot turn evictions into timeouts); then the server's auth timeout is
+    0.2 s for new connections: 2 idle ones from another stranger are closed by it, not by the cap, and the
+    authenticated connection stays."""
     cfg = config(
-        tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, max_connections=4, auth_timeout_s=1.0)
+        tmp_path,
+        commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, max_connections=4, auth_timeout_s=600.0),
     )
 
     async def script(app, hw):
+        server = app.server
         idle = [await asyncio.open_connection("127.0.0.1", app.command_port) for _ in range(10)]
-        await asyncio.sleep(0.05)
-        at_cap = app.server.connections
+        await wait_for(lambda: server.connects == 10)  # the server has seen every one (and made room for it)
+        at_cap, evicted_by_cap = server.connections, server.evicted
         c = await Client.connect(app.command_port)  # gets in although the cap is reached
         ok = await c.cmd("status", 1)
-        # the idle ones never authenticated: each is closed (EOF) within auth_timeout_s
-        eof = [await asyncio.wait_for(r.read(), 10) for r, _ in idle]
+        # the 9 oldest idle ones were dropped: their hello, then the end (or a reset: b"")
+        eof = [await asyncio.wait_for(r.read(), REPLY_GUARD_S) for r, _ in idle[:9]]
+        held = server.connections  # the operator's and the newest idle one
+        server.auth_timeout_s = 0.2  # for connections opened from now on
+        late = [
+            await asyncio.open_connection("127.0.0.1", app.command_port, local_addr=("127.0.0.2", 0)) for _ in range(2)
+        ]
+        late_eof = [await asyncio.wait_for(r.read(), REPLY_GUARD_S) for r, _ in late]  # closed by the timeout
         still = await c.cmd("ping", 2)  # the authenticated one stays
-        for _, w in idle:
+        for _, w in idle + late:
             w.close()
         c.close()
-        return at_cap, ok, eof, still, app.server.evicted
+        return at_cap, evicted_by_cap, ok, eof, held, late_eof, server.timed_out, still, server.evicted
 
-    app, summary, (at_cap, ok, eof, still, evicted), hw = scenario(cfg, script)
-    assert at_cap <= 4 and ok["ok"] and still["ok"] and evicted >= 6
+    app, summary, result, hw = scenario(cfg, script)
+    at_cap, evicted_by_cap, ok, eof, held, late_eof, timed_out, still, evicted = result
+    assert at_cap == 2 <= 4 and evicted_by_cap == 8 and evicted == 9
+    assert ok["ok"] and still["ok"] and held == 2
     assert all(data.startswith(b'{"hello"') or data == b"" for data in eof)
+    assert all(data.startswith(b'{"hello"') for data in late_eof) and timed_out == 2
 
 
 def _open_idle(port: int, n: int, out: list[socket.socket], threads: int = 100) -> None:
@@ -223,20 +240,46 @@ def test_1100_idle_connections_do_not_delay_disarm(tmp_path) -> None:
 
 
 def test_heartbeat_keeps_a_remote_arm_and_its_loss_disarms(tmp_path) -> None:
-    # a heartbeat every 0.1 s against a 1 s link timeout: ten times the period, for a loaded machine
+    """The link-loss timer runs on a virtual clock (`app.link_clock`) the test moves: 12 steps of 0.6 s (7.2 s,
+    seven link timeouts), each followed by a whole heartbeat (`Heartbeat.pings` up by two: the one in flight may
+    have been seen before the step) and a whole round of the watchdog thread's link check, keep the remote arm;
+    once the heartbeat stopped, 1.1 s without a command (more than the 1 s link timeout) disarms. No step of the
+    machine's is timed."""
+    from tests.support.firmware_app import TurnClock
+
     cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=1.0))
+    clock = TurnClock()  # never released: it moves only by `advance`
+
+    def wait_until(condition, guard_s: float = 30.0) -> None:
+        """Poll for an event; the guard only stops a broken build."""
+        deadline = time.monotonic() + guard_s
+        while not condition() and time.monotonic() < deadline:
+            time.sleep(0.01)
 
     async def script(app, hw):
+        app.link_clock = clock
+
         def operator() -> tuple[bool, bool]:
             lines: list[str] = []
             with RobotLink("127.0.0.1", token=TOKEN, port=app.command_port) as link:
                 link.call("arm")
-            hb = Heartbeat("127.0.0.1", token=TOKEN, port=app.command_port, period_s=0.1, echo=lines.append)
-            hb.run(duration_s=2.5)  # two and a half link timeouts, kept alive
-            armed_with_heartbeat = app.controller.armed
-            deadline = time.monotonic() + 10  # heartbeat stopped: disarmed after link_timeout_s
-            while app.controller.armed and time.monotonic() < deadline:
-                time.sleep(0.02)
+            hb = Heartbeat("127.0.0.1", token=TOKEN, port=app.command_port, period_s=0.02, echo=lines.append)
+            beating = threading.Thread(target=hb.run, daemon=True)
+            beating.start()
+            try:
+                for _ in range(12):
+                    clock.advance(0.6)
+                    beats = hb.pings
+                    wait_until(lambda beats=beats: hb.pings >= beats + 2 or not beating.is_alive())
+                    assert hb.pings >= beats + 2, lines
+                    rounds = app.watchdog.rounds  # a whole round of the link check after that heartbeat
+                    wait_until(lambda rounds=rounds: app.watchdog.rounds >= rounds + 2)
+                armed_with_heartbeat = app.controller.armed
+            finally:
+                hb.stop()
+                beating.join(30)
+            clock.advance(1.1)  # heartbeat stopped: disarmed (by the watchdog thread)
+            wait_until(lambda: not app.controller.armed)
             return armed_with_heartbeat, app.controller.armed
 
         return await asyncio.to_thread(operator)

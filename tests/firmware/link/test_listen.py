@@ -149,8 +149,13 @@ def test_telemetry_numbers_every_object_and_names_a_series_per_leg() -> None:
     assert objs[0]["leg3"]["velocity_m_s"] == 0.1 and objs[1]["event"]["event_seq"] == 1
 
 
-def test_listen_whose_robot_stops_keeps_the_recording_up_to_then_and_says_so(tmp_path) -> None:
-    """Exit 1 after data stopped: the recording is the useful part of the run; it is completed and named."""
+def test_listen_whose_robot_stops_keeps_the_recording_up_to_then_and_says_so(tmp_path, monkeypatch) -> None:
+    """Exit 1 after data stopped: the recording is the useful part of the run; it is completed and named.
+
+    Listen runs on a virtual clock (`TurnClock`) that stands still until listen reached the stage of the robot's
+    third and last datagram, then moves 0.1 s at each of listen's readings (one or two a turn of its loop): "data
+    stopped" and the timeout come after a few idle turns, whatever the machine's load. Fails with the timeout
+    broken (listen runs to its duration: no RunFailure)."""
     import json
     import socket
     import threading
@@ -160,11 +165,15 @@ def test_listen_whose_robot_stops_keeps_the_recording_up_to_then_and_says_so(tmp
     from rimless.errors import RunFailure
     from rimless.firmware.link.listen import listen
     from rimless.firmware.link.telemetry import sign_datagram, telemetry_key
-    from tests.support.firmware_app import TOKEN, free_port, wait_udp_bound
+    from rimless.progress import STAGE_FILE_ENV
+    from tests.support.firmware_app import TOKEN, TurnClock, free_port, stage_reached, wait_udp_bound
 
     port = free_port()
     out = tmp_path / "tel.jsonl"
     key = telemetry_key(TOKEN, "c" * 32)
+    stages = tmp_path / "stages"
+    monkeypatch.setenv(STAGE_FILE_ENV, str(stages))
+    clock = TurnClock(step_s=0.1, release_when=stage_reached(stages, "listen: datagram 3 from the robot"))
 
     def send():
         wait_udp_bound(port)
@@ -182,13 +191,16 @@ def test_listen_whose_robot_stops_keeps_the_recording_up_to_then_and_says_so(tmp
             bind="127.0.0.1",
             port=port,
             out=out,
-            duration_s=None,
+            duration_s=60.0,  # on the virtual clock: a hang guard (some 300 idle turns) should the timeout not come
             echo=lines.append,
             stale_s=0.2,
             timeout_s=0.5,
             token=TOKEN,
+            clock=clock,
         )
     t.join()
     assert f"the recording up to then is kept ({out})" in str(err.value)
+    assert any(line.startswith("data stopped: nothing for 0.2 s") for line in lines), lines
+    # the clock moved only after the three datagrams: all three recorded, then the silence ended the run
     assert len(out.read_text().splitlines()) == 3 and f"wrote {out}" in lines
     assert not list(tmp_path.glob("*.part"))

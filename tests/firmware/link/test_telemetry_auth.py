@@ -20,7 +20,7 @@ import pytest
 
 from rimless.errors import RunFailure
 from rimless.firmware.link.listen import listen
-from tests.support.firmware_app import TOKEN, free_port, wait_udp_bound
+from tests.support.firmware_app import TOKEN, TurnClock, free_port, wait_udp_bound
 
 RIMLESS = str(Path(sys.executable).with_name("rimless"))
 
@@ -38,11 +38,19 @@ def sample(n: int, t0: float = 1.7e9) -> dict:
     return {"timestamp": t0 + n * 1e-3, "tseq": n, "leg": {"stance": 1, "velocity_m_s": 0.1}}
 
 
-def run_listen(datagrams: list[tuple[str, bytes]], tmp_path: Path, **kw) -> tuple[list[str], list[dict]]:
-    """Send `datagrams` ((source address, bytes), in order) to a `listen` on the loopback; it ends 3 s after the
-    last (the robot "stopped sending"). Returns its lines and the JSON Lines it recorded."""
+def run_listen(
+    datagrams: list[tuple[str, bytes]], tmp_path: Path, robot_datagrams: int, **kw
+) -> tuple[list[str], list[dict]]:
+    """Send `datagrams` ((source address, bytes), in order) to a `listen` on the loopback; it ends on the
+    `robot_datagrams`-th datagram it takes for the robot's (`max_datagrams`: the event), which must be the last
+    one sent. Returns its lines and the JSON Lines it recorded. Listen's clock (`TurnClock`) stands still until
+    everything was sent: a listen that takes fewer for the robot's ends on its silence timeout, a hang guard of
+    some 100 idle turns (10 s) with nothing arriving, and fails here; one that takes more stops early and misses
+    objects."""
+    assert datagrams[-1][0] == "127.0.0.1", "the last datagram sent must be the robot's (listen stops on it)"
     port = free_port()
     out = tmp_path / "tel.jsonl"
+    clock = TurnClock(step_s=0.1)
 
     def send() -> None:
         wait_udp_bound(port)
@@ -54,16 +62,35 @@ def run_listen(datagrams: list[tuple[str, bytes]], tmp_path: Path, **kw) -> tupl
             socks[src].sendto(data, ("127.0.0.1", port))
         for s in socks.values():
             s.close()
+        clock.release()
 
     lines: list[str] = []
     t = threading.Thread(target=send)
     t.start()
     try:
-        listen(bind="127.0.0.1", port=port, out=out, duration_s=None, echo=lines.append, timeout_s=3.0, **kw)
+        summary = listen(
+            bind="127.0.0.1",
+            port=port,
+            out=out,
+            duration_s=HANG_GUARD_S,
+            echo=lines.append,
+            timeout_s=20.0,  # virtual: the hang guard above (passing runs end on max_datagrams)
+            max_datagrams=robot_datagrams,
+            clock=clock,
+            **kw,
+        )
     except RunFailure as err:
-        assert "stopped sending" in str(err), err
-    t.join()
+        raise AssertionError(
+            f"listen took fewer than {robot_datagrams} datagrams for the robot's: {err}; {lines}"
+        ) from None
+    finally:
+        t.join()
+    assert summary.datagrams == robot_datagrams, (summary.datagrams, lines)
     return lines, [json.loads(line) for line in out.read_text().splitlines()]
+
+
+#: the longest a listen here runs, on its virtual clock (a hang guard: the tests end on events, never on it)
+HANG_GUARD_S = 120.0
 
 
 BOOT = "a" * 32
@@ -85,6 +112,7 @@ def test_a_datagram_forged_from_the_robots_own_address_is_neither_recorded_nor_s
             ("127.0.0.1", tagged([sample(3)], BOOT)),
         ],
         tmp_path,
+        2,  # the real one and sample 3: the forged, the other token's and the changed one are not the robot's
         token=TOKEN,
     )
     assert [o["tseq"] for o in recorded] == [1, 2, 3]  # the robot's objects, the tag removed
@@ -100,9 +128,10 @@ def test_one_forged_sequence_number_of_1e9_cannot_poison_the_loss_count(tmp_path
     forged = json.dumps([sample(10**9)]).encode()
     robot = [("127.0.0.1", tagged([sample(n) for n in sent[k : k + 5]], BOOT)) for k in range(0, len(sent), 5)]
     datagrams = robot[:40] + [("127.0.0.1", forged)] + robot[40:]
-    lines, recorded = run_listen(datagrams, tmp_path, robot="127.0.0.1")
+    # bound by address only, the forged datagram comes from the robot's address: taken for the robot's (93)
+    lines, recorded = run_listen(datagrams, tmp_path, len(robot) + 1, robot="127.0.0.1")
     assert len(recorded) == 460 and any("lost 10 telemetry objects" in line for line in lines), lines
-    lines, recorded = run_listen(datagrams, tmp_path, token=TOKEN)
+    lines, recorded = run_listen(datagrams, tmp_path, len(robot), token=TOKEN)
     assert len(recorded) == 460 and any("lost 10 telemetry objects" in line for line in lines), lines
 
 
@@ -129,7 +158,7 @@ def test_listen_is_bound_to_the_robot_by_default(tmp_path) -> None:
     early = ("127.0.0.2", json.dumps([{"timestamp": 1.0, "tseq": 1, "leg": {"stance": 0}}]).encode())
     robot = [("127.0.0.1", tagged([sample(n)], BOOT)) for n in range(1, 461)]
     for kw in ({}, {"token": TOKEN}):
-        lines, recorded = run_listen([early, *robot[:230]], tmp_path, **kw)  # half: the socket buffer holds it
+        lines, recorded = run_listen([early, *robot[:230]], tmp_path, 230, **kw)  # half: the socket buffer holds it
         assert [o["tseq"] for o in recorded] == list(range(1, 231)), kw
         assert any("1 foreign datagrams ignored" in line for line in lines), (kw, lines)
 
@@ -138,9 +167,10 @@ def test_a_replayed_earlier_start_is_refused_and_a_restart_is_said(tmp_path) -> 
     """The robot's datagrams of an earlier start (another boot nonce, older timestamps) replayed after it
     restarted are refused; its new start (newer timestamps) is said, and its numbers start again."""
     old = [("127.0.0.1", tagged([sample(n, t0=1.7e9)], BOOT)) for n in range(1, 4)]
-    new = [("127.0.0.1", tagged([sample(n, t0=1.8e9)], "b" * 32)) for n in range(1, 4)]
-    lines, recorded = run_listen([*old, *new, *old], tmp_path, token=TOKEN)
-    assert [o["tseq"] for o in recorded] == [1, 2, 3, 1, 2, 3]
+    new = [("127.0.0.1", tagged([sample(n, t0=1.8e9)], "b" * 32)) for n in range(1, 5)]
+    # the new start's 4th after the replay: listen stops on it (the event), having seen the replay
+    lines, recorded = run_listen([*old, *new[:3], *old, new[3]], tmp_path, 7, token=TOKEN)
+    assert [o["tseq"] for o in recorded] == [1, 2, 3, 1, 2, 3, 4]
     assert sum("the robot started again" in line for line in lines) == 1
     assert any("3 foreign datagrams ignored" in line for line in lines), lines
     assert not any("lost" in line for line in lines), lines
@@ -198,25 +228,43 @@ def test_listen_killed_by_sigkill_leaves_an_mcap_readable_up_to_its_last_chunk(t
     assert seqs == list(range(1, 51))
 
 
-def test_the_robots_telemetry_is_signed_with_its_start_and_listen_with_the_token_records_it(tmp_path) -> None:
+def test_the_robots_telemetry_is_signed_with_its_start_and_listen_with_the_token_records_it(
+    tmp_path, monkeypatch
+) -> None:
     """End to end on the fake robot (virtual clock): the app signs every datagram with the key of its start
-    (`app.boot`); a `listen` given the token records every object the app sent, and says it authenticated."""
+    (`app.boot`); a `listen` given the token records every object the app sent, and says it authenticated.
+    Listen's clock (`TurnClock`) stands still until listen reached the stage of the last datagram the app sent
+    (known once the app stopped), then moves at each of its readings: listen ends on "the robot stopped sending"
+    a few idle turns later, never because the machine was slow."""
 
     from rimless.firmware.service.config import TelemetryConfig
-    from tests.support.firmware_app import config, scenario, wait_for
+    from rimless.progress import STAGE_FILE_ENV
+    from tests.support.firmware_app import config, scenario, stage_reached, wait_for
 
     port = free_port()
     out = tmp_path / "tel.jsonl"
+    stages = tmp_path / "stages"
+    monkeypatch.setenv(STAGE_FILE_ENV, str(stages))
     lines: list[str] = []
     result: list[object] = []
+    clock = TurnClock(step_s=0.1)
 
     def receive() -> None:
         try:
-            listen(bind="127.0.0.1", port=port, out=out, duration_s=None, echo=lines.append, timeout_s=3.0, token=TOKEN)
+            listen(
+                bind="127.0.0.1",
+                port=port,
+                out=out,
+                duration_s=HANG_GUARD_S,  # on the virtual clock: should the silence timeout not come
+                echo=lines.append,
+                timeout_s=0.5,
+                token=TOKEN,
+                clock=clock,
+            )
         except RunFailure as err:
             result.append(err)
 
-    rx = threading.Thread(target=receive)
+    rx = threading.Thread(target=receive, daemon=True)
     rx.start()
     assert wait_udp_bound(port)
 
@@ -225,7 +273,10 @@ def test_the_robots_telemetry_is_signed_with_its_start_and_listen_with_the_token
         return app.boot
 
     app, summary, boot, hw = scenario(config(tmp_path, telemetry=TelemetryConfig(host="127.0.0.1", port=port)), script)
-    rx.join(60)
+    # the app stopped: listen's time moves once it has accounted for the app's last datagram
+    assert app.telemetry.dropped_datagrams == 0 and app.telemetry.sent_datagrams > 0
+    clock.release_when = stage_reached(stages, f"listen: datagram {app.telemetry.sent_datagrams} from the robot")
+    rx.join(HANG_GUARD_S)
     assert result and "stopped sending" in str(result[0])
     recorded = [json.loads(line) for line in out.read_text().splitlines()]
     assert any(

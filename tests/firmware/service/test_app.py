@@ -163,17 +163,27 @@ def test_dead_telemetry_receiver_costs_the_loop_nothing(tmp_path) -> None:
 
 
 def test_link_loss_disarms(tmp_path) -> None:
-    # pings every 0.1 s against a 1 s link timeout: a loaded machine may delay a ping, not by ten times
+    """The link-loss timer runs on a virtual clock (`app.link_clock`) moved by the test: 12 pings 0.9 s apart
+    (each inside the 1 s link timeout, 10.8 s in all; the watchdog thread's link check runs a whole round after
+    each) keep the remote arm; then 1.1 s with no command disarms, every clutch off. Nothing depends on how fast
+    the machine delivers a ping."""
+    from tests.support.firmware_app import TurnClock
+
     cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=1.0))
+    clock = TurnClock()  # never released: it moves only by `advance`
 
     async def script(app, hw):
+        app.link_clock = clock
         c = await Client.connect(app.command_port)
         assert (await c.cmd("arm", 1))["ok"]
         for seq in range(2, 14):  # heartbeats keep it armed
-            await asyncio.sleep(0.1)
+            clock.advance(0.9)
             assert (await c.cmd("ping", seq))["ok"]
+            rounds = app.watchdog.rounds  # a whole round of the link check (the watchdog thread's) after the ping
+            await wait_for(lambda rounds=rounds: app.watchdog.rounds >= rounds + 2)
         armed_while_pinging = app.controller.armed
-        await wait_for(lambda: not app.controller.armed)  # then silence: disarmed
+        clock.advance(1.1)  # then silence, longer than the link timeout: disarmed (by the watchdog thread)
+        await wait_for(lambda: not app.controller.armed)
         c.close()
         return armed_while_pinging
 
