@@ -214,6 +214,37 @@ def importer_columns(t_s: np.ndarray, impacts_s: np.ndarray, alpha_rad: float) -
     return np.column_stack([np.ones(th.size), np.sin(th), np.cos(th), th - float(np.mean(th))])
 
 
+def joint_chi2(
+    rp: np.ndarray,
+    cov_p: np.ndarray,
+    rh: np.ndarray,
+    var_h: float,
+    prior: tuple[np.ndarray, np.ndarray] | None,
+    free: tuple[np.ndarray, np.ndarray],
+) -> tuple[float, float, int]:
+    """(periods' chi^2, CoM's chi^2, rank of the free columns) of one trial judged as a whole: the periods' residuals
+    ``rp`` (covariance ``cov_p``) and the CoM's ``rh`` (white, variance ``var_h``) with the same nuisances in both
+    blocks: ``free`` = (Fp, Fh), columns at any amplitude (the release speed and time shift the calibration fitted,
+    the import's errors: `importer_columns`), and ``prior`` = (bp, bh), the slope's shape per 1-sigma under its unit
+    Gaussian prior (its penalty counted with the periods). Generalised least squares on the whitened blocks."""
+    lp = np.linalg.cholesky(np.linalg.inv(cov_p)).T  # lp^T lp = cov_p^-1
+    sh = 1.0 / math.sqrt(var_h)
+    fp, fh = (np.asarray(f, float).reshape(n, -1) for f, n in zip(free, (rp.size, rh.size)))
+    x = np.vstack([lp @ fp, fh * sh])
+    y = np.concatenate([lp @ rp, rh * sh])
+    n_free = fp.shape[1]
+    if prior is not None:
+        bcol = np.concatenate([lp @ prior[0], prior[1] * sh])
+        x = np.vstack([np.column_stack([x, bcol]), np.eye(1, n_free + 1, n_free)])
+        y = np.concatenate([y, [0.0]])
+    scale = np.maximum(np.sqrt(np.sum(x**2, axis=0)), 1e-300)
+    coef, _, rank, _ = np.linalg.lstsq(x / scale, y, rcond=1e-10)
+    e = y - (x / scale) @ coef
+    c2p = float(e[: rp.size] @ e[: rp.size]) + (float(e[-1] ** 2) if prior is not None else 0.0)
+    c2h = float(e[rp.size : rp.size + rh.size] @ e[rp.size : rp.size + rh.size])
+    return c2p, c2h, int(rank) - (prior is not None)
+
+
 def release_column(n: int) -> np.ndarray:
     """(n, 1): the first period's residual alone: the release state beyond its speed (the stance angle and the
     leg's compression and rate at the release, which the calibration does not fit) shows mostly there."""
@@ -244,9 +275,9 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
     """The adequacy figures. ``blocks``: per trial ``trial``, ``com_t_s``, ``com_m`` (measured), ``com_res_m``
     (model minus measured, at the solution), ``impacts_s`` (measured), ``period_res_s`` (simulated minus
     measured, steps reached) and, optionally, ``com_slope_m`` and ``period_slope_s`` (the residuals' change per
-    1-sigma of the trial's slope: that uncertainty is then allowed) and ``period_release_s`` (their change with the
-    fitted release speed, any scale: the slope and the release then move together). ``alpha_rad``: the angle
-    between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
+    1-sigma of the trial's slope: that uncertainty is then allowed) and ``period_release_s``, ``com_release_m``,
+    ``com_shift_m`` (their change with the fitted release speed and time shift, any scale: the trial is then
+    judged as a whole, `joint_chi2`). ``alpha_rad``: the angle between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
     residuals may hold besides the noise), ``per_trial`` (each with ``com`` and ``periods`` figures and ``fits``),
     ``overall`` (``com``, ``periods``, ``total``) and ``fits`` with ``statement``."""
     sig_t, dof_t = timing_noise_sd([b["impacts_s"] for b in blocks])
@@ -264,17 +295,22 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
         rp = np.asarray(b["period_res_s"], float)
         bh, bp = b.get("com_slope_m"), b.get("period_slope_s")
         c2h, dof_c = math.nan, rh.size - 2
-        if rh.size and s_h > 0:
+        c2p, dof_p = math.nan, rp.size - 1
+        joint = _joint_columns(b, rp.size, rh.size, alpha_rad)
+        if joint is not None and s_h > 0 and sig_t > 0:  # the trial as a whole: its nuisances shared by both blocks
+            cov = (2.0 * np.eye(rp.size) - np.eye(rp.size, k=1) - np.eye(rp.size, k=-1)) * sig_t**2
+            bpp, bhh = _sized(bp, rp.size), _sized(bh, rh.size)
+            c2p, c2h, k = joint_chi2(rp, cov, rh, s_h**2, None if bpp is None or bhh is None else (bpp, bhh), joint)
+            dof_p -= 1  # the release state
+            dof_c -= max(k - 4, 0)  # release speed, time shift, offset fitted already, the release state: the import's
+        elif rh.size and s_h > 0:
             free_h = importer_columns(b["com_t_s"], b["impacts_s"], alpha_rad) if rh.size == len(b["com_t_s"]) else None
             c2h, k_h = block_chi2(rh, s_h**2, _sized(bh, rh.size), free_h)
             dof_c -= max(k_h - 1, 0)  # the offset's column was fitted already (or is the importer's plane's)
-        c2p, dof_p = math.nan, rp.size - 1
-        if rp.size and sig_t > 0:
+        if joint is None and rp.size and sig_t > 0:
             cov = (2.0 * np.eye(rp.size) - np.eye(rp.size, k=1) - np.eye(rp.size, k=-1)) * sig_t**2
-            release = _sized(b.get("period_release_s"), rp.size)
-            free_p = release_column(rp.size) if release is None else np.column_stack([release, release_column(rp.size)])
-            c2p, k_p = block_chi2(rp, cov, _sized(bp, rp.size), free_p)
-            dof_p = rp.size - max(k_p, 1) - (release is None)  # the release speed's column was fitted already
+            c2p, k_p = block_chi2(rp, cov, _sized(bp, rp.size), release_column(rp.size))
+            dof_p -= k_p
         fh, fp = _figure(c2h, dof_c, nd_h), _figure(c2p, dof_p, dof_t)
         for key, c2, dof in (("com", c2h, dof_c), ("periods", c2p, dof_p)):
             if math.isfinite(c2) and dof > 0:
@@ -318,12 +354,14 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             "estimates",
         },
         "allowed": {
-            "com": "per trial, besides its time shift and height offset: the slope within its stated uncertainty, "
-            "and at any amplitude an error of the importer's hub offset (sin, cos of the wheel's angle) and of its "
-            "slope frame's tilt (a height proportional to the distance travelled): 3 degrees of freedom",
-            "periods": "per trial, besides its release speed: the slope within its stated uncertainty (moving the "
-            "release speed with it), and the first period at any amplitude (the release state beyond its "
-            "speed): 1 degree of freedom",
+            "com": "per trial, besides its time shift and height offset: at any amplitude an error of the importer's "
+            "hub offset (sin, cos of the wheel's angle) and of its slope frame's tilt (a height proportional to the "
+            "distance travelled): 3 degrees of freedom",
+            "periods": "per trial, besides its release speed: the first period at any amplitude (the release state "
+            "beyond its speed): 1 degree of freedom",
+            "both": "each trial's slope within its stated uncertainty; with the calibration's shapes of the release "
+            "speed and time shift, each trial judged as a whole: the slope, the release speed, the time shift and "
+            "the import's errors moved together in both blocks",
         },
         "per_trial": per_trial,
         "overall": {"com": oc, "periods": op, "total": total},
@@ -331,6 +369,22 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
         "fits": fits,
         "statement": statement,
     }
+
+
+def _joint_columns(b: dict[str, Any], n_p: int, n_h: int, alpha_rad: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(Fp, Fh): the free columns of a trial judged as a whole (`joint_chi2`), or None without the calibration's
+    shapes of the release speed (``period_release_s``, ``com_release_m``) and time shift (``com_shift_m``)."""
+    wp, wh, th = (
+        _sized(b.get("period_release_s"), n_p),
+        _sized(b.get("com_release_m"), n_h),
+        _sized(b.get("com_shift_m"), n_h),
+    )
+    imp = importer_columns(b["com_t_s"], b["impacts_s"], alpha_rad) if n_h == len(b["com_t_s"]) else None
+    if wp is None or wh is None or th is None or imp is None or n_p < 2:
+        return None
+    fp = np.column_stack([wp, np.zeros((n_p, 1 + imp.shape[1])), release_column(n_p)])
+    fh = np.column_stack([wh, th, imp, np.zeros(n_h)])
+    return fp, fh
 
 
 def _sized(v: Any, n: int) -> np.ndarray | None:
