@@ -62,6 +62,10 @@ def test_a_held_stiffness_25_percent_off_is_a_misfit_the_check_finds_and_counts_
         if not a["fits"]:  # a misfit makes every parameter effective only, never identifiable
             assert a["estimates"][name]["effective_only"] and not a["estimates"][name]["identifiable"]
     assert h["estimates"]["c"]["effective_only"] and not h["estimates"]["c"]["identifiable"]  # fitted alone
+    for name in ("c", "k"):  # the scenario's count of identifiable and covering estimates is the series' own
+        e, count = a["estimates"][name], adequate["estimates"][name]
+        assert count["identifiable"]["count"] == int(e["identifiable"]) and count["identifiable"]["of"] == 1
+        assert count["covered_95"]["count"] == int(abs(e["value"] - a["truth"][name]) <= 1.96 * e["se"])
 
 
 def test_a_bad_scenario_is_one_error_line() -> None:
