@@ -1630,8 +1630,21 @@ def _adequacy(obj: _Objective, u: np.ndarray, moved: _Moved) -> dict[str, Any]:
             (rf_up, rh_up), (rf_down, rh_down) = moved(i, sd), moved(i, -sd)
             block["period_slope_s"] = (periods(d, rf_up) - periods(d, rf_down)) / 2.0
             block["com_slope_m"] = (rh_up - rh_down) / 2.0  # `adequacy` uses them only where the sizes agree
+        # the residuals' change with the release speed and the time shift (fitted: the check moves them with the
+        # slope and the import's errors, both blocks together); central differences, 0.2 % and 2 ms
+        dw = 2e-3 * float(w)
+        (rf_fast, rh_fast), (rf_slow, rh_slow) = (
+            _residuals(obj.sim, p, d, float(w) + k * dw, float(s_)) for k in (1, -1)
+        )
+        if np.all(rf_fast + 1.0 / d.periods_s > 0) and np.all(rf_slow + 1.0 / d.periods_s > 0):
+            block["period_release_s"] = (periods(d, rf_fast) - periods(d, rf_slow)) / 2.0
+            block["com_release_m"] = (rh_fast - rh_slow) / 2.0
+            block["com_shift_m"] = (
+                _residuals(obj.sim, p, d, float(w), float(s_) + 2e-3)[1]
+                - _residuals(obj.sim, p, d, float(w), float(s_) - 2e-3)[1]
+            ) / 2.0
         blocks.append(block)
-    return adequacy(blocks, obj.n_g)
+    return adequacy(blocks, obj.n_g, alpha_rad=ALPHA_RAD)
 
 
 def _judge(

@@ -22,7 +22,9 @@ noise, 100 Hz), imports it and calibrates it under one `SCENARIOS` entry, the he
 
 Reported per scenario: the rate of each verdict with its Wilson 95 % interval, the overall chi^2/dof ratios and
 p-values (how often p < 0.05 and 0.01: for the adequate and null scenarios these should be about 5 % and 1 %
-if the noise estimate and the tests are calibrated), and every refused import and failed fit with its reason.
+if the noise estimate and the tests are calibrated), per fitted parameter (``estimates``) how often it is called
+identifiable and how often its 95 % interval holds the truth, and every refused import and failed fit with its
+reason.
 
 The truth's dynamics are the calibration's own model (the simulator's ER wheel, with its guide friction): the
 null scenarios check the tests' calibration when the model is right, not the model's adequacy to a real wheel.
@@ -243,6 +245,22 @@ def _rate(k: int, n: int) -> dict[str, Any]:
     return {"count": k, "of": n, "rate": k / n if n else None, "ci95": [lo, hi] if n else None}
 
 
+def _estimate_summary(done: list[dict[str, Any]], name: str) -> dict[str, Any]:
+    """How often a fitted parameter is called identifiable, how often its 95 % interval (value +- 1.96 se) holds
+    the truth (all series, and those called identifiable), and its median absolute error relative to the truth."""
+    rows = [(r["estimates"][name], r["truth"][name]) for r in done if name in r.get("estimates", {})]
+    with_se = [(e, t) for e, t in rows if e["se"] is not None]
+    covers = [abs(e["value"] - t) <= 1.96 * e["se"] for e, t in with_se]
+    ident = [c for (e, _), c in zip(with_se, covers) if e["identifiable"]]
+    errs = [abs(e["value"] / t - 1.0) for e, t in rows if t]
+    return {
+        "identifiable": _rate(sum(e["identifiable"] for e, _ in rows), len(rows)),
+        "covered_95": _rate(sum(covers), len(covers)),
+        "covered_95_when_identifiable": _rate(sum(ident), len(ident)),
+        "median_abs_error_rel": float(np.median(errs)) if errs else None,
+    }
+
+
 def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
     done = [r for r in rows if "failed" not in r]
     if sc.verdict == "does_not_fit":
@@ -272,6 +290,7 @@ def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
             "p_below_0.05": _rate(sum(p < 0.05 for p in ps), len(ps)),
             "p_below_0.01": _rate(sum(p < 0.01 for p in ps), len(ps)),
         }
+    out["estimates"] = {name: _estimate_summary(done, name) for name in sc.fit}
     mc = [r["model_choice"] for r in done if r.get("model_choice")]
     if mc:
         out["model_choice_p"] = {
