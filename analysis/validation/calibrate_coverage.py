@@ -240,10 +240,8 @@ def run_calibrate_coverage(
         for i in range(n_series):
             held = draw_held(held_rng) if drawn else {}
             truth = WheelParams(
-                stiffness_n_per_m=float(rng.uniform(*K_RANGE)),
-                damping_ns_per_m=float(rng.uniform(*C_RANGE)),
-                **held,
-            )
+                stiffness_n_per_m=float(rng.uniform(*K_RANGE)), damping_ns_per_m=float(rng.uniform(*C_RANGE))
+            ).replace(**held)
             lab = draw_lab(rng)
             if progress:
                 progress(i, "walking and writing")
