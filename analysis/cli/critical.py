@@ -619,9 +619,9 @@ def coverage_cmd(
 
     pendulum: the fast model of the verdict process (true parameters, 1 ms timing noise, no importer); ~1 s a series.
 
-    --of calibrate: `trials calibrate --fit c,k` per parameter, on ER wheels with k and c drawn, through the importer;
-    --inputs exact (default), table1, truth: the held parameters exact, or Table 1's stated with their uncertainty
-    (the held ones drawn from it), or the truth's with an uncertainty.
+    --of calibrate: `trials calibrate --fit c,k` per parameter, on ER wheels with k and c drawn, through the importer.
+
+    --of calibrate --inputs: exact (default), the held parameters the truth's; table1, drawn from Table 1's sd.
     """
     from rimless.progress import progress_bar
 
