@@ -135,3 +135,19 @@ def test_inputs_reach_the_study_from_the_cli(monkeypatch: pytest.MonkeyPatch) ->
         assert seen[-1] == want and json.loads(r.stdout)["n"] == 2
     r = runner.invoke(app, ["trials", "coverage", "--of", "calibrate", "--inputs", "table2"])
     assert r.exit_code == 2 and "--inputs" in r.output
+
+
+def test_truth_input_states_the_truths_values_with_the_default_uncertainties() -> None:
+    """``truth``: the truth's held values, each with the stated sd at that value (relative ones scale with it)."""
+    from rimless.analysis.validation.calibrate_coverage import _user_wheel
+    from rimless.sim.model.params import WheelParams
+
+    held = {"hub_mass_kg": 2.0, "leg_mass_kg": 0.04, "inertia_kg_m2": 0.03, "leg_length_m": 0.24}
+    w = _user_wheel("truth", WheelParams(guide_friction_n=0.3, **held))
+    for name, v in held.items():
+        assert getattr(w.params, name) == v
+    assert w.uncertainty["hub_mass_kg"] == pytest.approx(0.02 * 2.0)
+    assert w.uncertainty["inertia_kg_m2"] == pytest.approx(0.1 * 0.03)
+    assert w.uncertainty["leg_length_m"] == pytest.approx(1e-3)
+    assert w.params.guide_friction_n == 0.3 and w.uncertainty["guide_friction_n"] == pytest.approx(FRICTION_SD_N)
+    assert w.uncertainty["gravity_m_s2"] == 0.0
