@@ -505,6 +505,15 @@ def listen(
     duration_s: Annotated[
         float | None, typer.Option("--duration-s", min=0.0, help="Stop after this many seconds.", show_default=False)
     ] = None,
+    max_datagrams: Annotated[
+        int | None,
+        typer.Option(
+            "--max-datagrams",
+            min=1,
+            help="Stop after this many datagrams from the robot (default: no limit).",
+            show_default=False,
+        ),
+    ] = None,
     summary_every_s: Annotated[
         float, typer.Option("--summary-every-s", min=0.05, help="Live view refresh period (s).")
     ] = 1.0,
@@ -588,6 +597,7 @@ def listen(
             robot=robot if robot is not None else host,
             mcap_out=mcap_out,
             token=key,
+            max_datagrams=max_datagrams,
         )
 
     _interruptible(go)

@@ -41,6 +41,12 @@ def _wheel(win: Any, model: str) -> Any:
     return w
 
 
+def import_wheel(params_path: Path | None, rigid_legs: bool) -> Any:
+    """The wheel ``trials import`` hands the importer (`import_trial(wheel=)`, for the legs' drift): the wheel
+    file's (``--params``, default Table 1 with its stated uncertainties), rigid with ``rigid_legs``."""
+    return _wheel(wheel_input(params_path), "rigid" if rigid_legs else "er")
+
+
 @dataclass
 class CriticalSlopeRun:
     """What ``trials critical-slope`` prints: the inputs, the estimates, and the optional calibration."""
@@ -75,7 +81,8 @@ def critical_slope_run(
     no_fit_here(win, ("damping_ns_per_m",) if calibrate_c else (), "trials critical-slope fits only c (--calibrated)")
     wheel = win.params
     with progress_bar("importing") as bar:
-        run = CriticalSlopeRun(load_trials(files, import_kwargs))
+        legs = _wheel(win, "rigid" if models and all(m == "rigid" for m in models) else "er")
+        run = CriticalSlopeRun(load_trials(files, {**import_kwargs, "wheel": legs}))  # (the legs' drift)
         if not run.loaded.trials:
             return run
         calibrated = None
@@ -168,7 +175,11 @@ def calibration_run(
         wheel = prior.plan(wheel, [FIT_FIELDS[n][0] for n in fit])
         win = prior_input(win, prior)
     with progress_bar("importing") as bar:
-        run = CalibrationRun(load_trials(files, import_kwargs), prior=prior, fit=list(fit), wheel=win)
+        # the importer's legs' drift: the wheel's k, or its own bound when k is fitted (not known)
+        legs = None if "k" in fit else _wheel(win, model)
+        run = CalibrationRun(
+            load_trials(files, {**import_kwargs, "wheel": legs}), prior=prior, fit=list(fit), wheel=win
+        )
         if not run.loaded.trials:
             return run
         planned = _wheel(win, model)

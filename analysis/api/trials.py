@@ -81,7 +81,7 @@ def compare(trial: TrialLike, wheel: Wheel | None = None, *, rtol: float = 1e-8)
     from rimless.analysis.inference.compare import Simulator, compare_trial
 
     w = _wheel(wheel)
-    (t,), (name,) = load_trials([trial])
+    (t,), (name,) = load_trials([trial], wheel=w)
     sim = Simulator(model=w.compliant_model("compare()"), params=w.params, rtol=rtol)
     return compare_trial(t, sim, name=name)
 
@@ -106,7 +106,8 @@ def calibrate(
 
     w = _wheel(wheel)
     fit_names = parse_fit(",".join(fit)) if not isinstance(fit, str) else parse_fit(fit)
-    loaded, file_names = load_trials(trials)
+    # the importer bounds the legs' drift with the wheel's k, or (k to be fitted: not known) its own bound
+    loaded, file_names = load_trials(trials, wheel=None if "k" in fit_names else w)
     res = run_calibration(
         loaded,
         _named(names, file_names),
@@ -145,7 +146,7 @@ def critical_slope(
     from rimless.analysis.inference.held import carry_critical
 
     w = _wheel(wheel)
-    loaded, file_names = load_trials(trials)
+    loaded, file_names = load_trials(trials, wheel=w)
     names = _named(names, file_names)
     ms = tuple(models) if models is not None else (w.model,)
     res = run_critical_slope(

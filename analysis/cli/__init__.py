@@ -134,11 +134,24 @@ def import_cmd(
     max_gap_ms: Annotated[float, typer.Option("--max-gap-ms", min=0.0, help=GAP_HELP)] = DEFAULT_MAX_GAP_MS,
     slopes: Annotated[Path | None, typer.Option("--slopes", help=SLOPES_HELP, metavar="FILE")] = None,
     up_axis: Annotated[str | None, typer.Option("--up-axis", help=UP_AXIS_HELP, metavar="AXIS")] = None,
+    params: ParamsOpt = None,
+    rigid_legs: Annotated[
+        bool,
+        typer.Option(
+            "--rigid-legs",
+            help="The wheel's legs have no springs: the slope's interval allows no drift of their compression "
+            "(default: the --params wheel's k, or a bound when no wheel is given).",
+        ),
+    ] = False,
 ) -> None:
     """Import Vicon exports as Parquet trials; a refused file does not stop the others (exit 2 if any)."""
     from rimless.analysis.report.batch import import_files
 
     kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes, up_axis)
+    if params is not None or rigid_legs:  # the wheel, for the legs' drift in the slope's interval only
+        from rimless.analysis.api.runs import import_wheel
+
+        kwargs["wheel"] = import_wheel(params, rigid_legs)
     rows = import_files(files, out, kwargs, json_out=json_out)
     if json_out:
         print_json([{k: v for k, v in r.items() if not k.startswith("_")} for r in rows])

@@ -46,7 +46,8 @@ def slope_coverage_cmd(
     drawn slope, recorded in a drawn lab (Z-up or Y-up, any heading, a Tracker object or 4 markers, some with the
     middle of most stances hidden) and imported with no slope given. Per evidence (contacts, impact line, path,
     and the slope used: slope_ci_rad): coverage with its binomial 95 % interval, rms of error / sd (1 when
-    honest), median error and half width.
+    honest), median error and half width; each walk imported without the wheel (the importer bounds the legs'
+    drift) and with it (wheel_given: rigid legs, or the ER wheel's k).
     """
     from rimless.analysis.validation.slope_coverage import KINDS, TRUTHS, run_slope_coverage
     from rimless.progress import progress_bar
@@ -67,7 +68,8 @@ def slope_coverage_cmd(
     typer.echo("z = error / sd, sd = half width / 1.96 (rms z 1 when honest); medians in deg")
     names = {"rigid": "rigid wheel with guide friction", "er": "compliant ER wheel of the simulator"}
     for truth, d in out["truths"].items():
-        typer.echo(f"{names[truth]}:")
+        told = out["wheel_given"]["truths"][truth]
+        typer.echo(f"{names[truth]}, the wheel not given:")
         typer.echo(HEADER)
         typer.echo("  per evidence:")
         for kind in KINDS:
@@ -75,6 +77,9 @@ def slope_coverage_cmd(
         typer.echo("  slope used, per lab:")
         for lab, g in d["labs"].items():
             typer.echo(_line(lab, g))
+        typer.echo(f"  the wheel given ({'rigid legs' if truth == 'rigid' else 'its k +- 10 %'}), per evidence:")
+        for kind in KINDS:
+            typer.echo(_line("slope used" if kind == "used" else kind, told["evidence"][kind]))
     for reason in out["refused_reasons"]:
         typer.echo(f"refused: {reason}")
     if not out["used"]["n"]:

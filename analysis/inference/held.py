@@ -313,7 +313,7 @@ def _refitting(f: Callable[[Any], float | None], trials: Sequence[Any], nominal:
 
     def g(params: Any) -> float | None:
         if params.inertia_kg_m2 == nominal.inertia_kg_m2:
-            est = estimate_inertia_ratio(trials, params)
+            est = estimate_inertia_ratio(trials, params, fit_leg_length=False)  # only I_c at the held L0 is used
             if not est.ok:
                 return None
             params = params.replace(inertia_kg_m2=est.inertia_kg_m2)

@@ -63,6 +63,7 @@ ASSUMED_JOINT = (
     "rigid stance pendulum and impact; r, L0, a constant loss per step and each trial's slope error (within "
     "its sd) fitted together from the periods, g held: r's se includes L0's, the loss's and the slopes'"
 )
+NOT_JOINT = "the joint fit of r and L0 not made: only the ratio at the held L0 was asked for"
 ASSUMED_HELD_L0 = (
     "rigid stance pendulum and impact at the held L0 and g (a constant loss per step fitted beside r; L0's "
     "uncertainty not in r's se)"
@@ -367,9 +368,12 @@ def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -
     return _Joint(x, cov, chi2, True)
 
 
-def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimate:
+def estimate_inertia_ratio(trials: Sequence[Any], params: Any, *, fit_leg_length: bool = True) -> InertiaEstimate:
     """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
-    and g of ``params`` (`WheelParams`)."""
+    and g of ``params`` (`WheelParams`). ``fit_leg_length`` False: the ratio at the held L0 only (what I_c is
+    given from: ``ok``, ``inertia_kg_m2`` and ``ratio_at_held_l0`` are the same as with it), without the joint
+    fit of r and L0 (``leg_length_m`` NaN, ``ratio`` the one at the held L0; for refits at perturbed held
+    parameters)."""
     alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
     pairs = _pairs(trials, alpha)
     n = int(pairs.t0.size)
@@ -396,7 +400,11 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any) -> InertiaEstimat
         est.loss_per_step = _loss(x, pairs, alpha, L, g)
         return est
     est.adequate = chi2 <= CHI2_ADEQUATE
-    joint = _fit_joint(pairs, alpha, L, g, x)
+    joint = (
+        _fit_joint(pairs, alpha, L, g, x)
+        if fit_leg_length
+        else _Joint(np.full(2, math.nan), np.full((2, 2), math.nan), math.nan, False, NOT_JOINT)
+    )
     effective = (
         ""
         if est.adequate

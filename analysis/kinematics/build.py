@@ -38,6 +38,7 @@ from rimless.analysis.kinematics.slope_evidence import (  # noqa: F401  (the con
     Z95,
     SlopeEvidence,
     choose_slope,
+    leg_compliance,
     slope_evidence,
 )
 from rimless.analysis.kinematics.source import POSE, XYZ, SourceRefused, choose_source, zeros_to_nan
@@ -144,6 +145,7 @@ def build_trial(
     wheel_leg_length_m: float = TABLE1_LEG_LENGTH_M,
     slope_note: str | None = None,
     up_axis: str | None = None,
+    wheel: Any = None,
 ) -> Trial:
     """Build a `Trial` from a parsed Vicon file.
 
@@ -165,6 +167,8 @@ def build_trial(
     slope_note : where a given slope comes from (e.g. the manifest row), kept in the notes.
     up_axis : the lab's up axis (``x``, ``y``, ``z``, ``-x``, ``-y``, ``-z``; CLI ``--up-axis``); default: found
         from the data (`rimless.analysis.kinematics.vertical.find_up`). World outputs stay in the file's frame.
+    wheel : the wheel (a `rimless.sim.Wheel` or wheel input), for its legs' spring only: how far their compression
+        may drift as the speed changes (`slope_evidence.leg_compliance`); default: not told, a bound assumed.
 
     Raises
     ------
@@ -361,9 +365,9 @@ def build_trial(
         del aw, tw
     idx, _, _ = find_com_minima(time_s, y, min_period_s=period_guess)
     hub_line = None  # the slope of the line through the hub at the impacts (an estimate and a check)
-    cusps = None
+    cusps = cusp_t = None
     if idx.size >= 3:
-        cusps = _hub_at_cusps(time_s, hub_fit, idx)
+        cusp_t, cusps = _cusps(time_s, hub_fit, idx)
         hub_line = fit_slope(hub_fit, points_m=cusps, travel=travel)
     hub_unknown = angle is not None and hub_offset_m is None and residual is None and offset is not None
     fm = np.flatnonzero(fit_mask)
@@ -385,6 +389,8 @@ def build_trial(
         impact_along_m=None if cusps is None else (cusps - cusps[0]) @ travel,
         hub_sd_m=hub_sd_m,
         alpha_rad=alpha_rad,
+        impact_time_s=cusp_t,
+        legs=leg_compliance(wheel),
     )
     if hub_unknown and evidence and evidence[0].source == "estimated":
         warnings.append(
@@ -631,6 +637,11 @@ def _plausibility(
 
 def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Hub at each CoM-height cusp: height from the V fit of Z, horizontal position interpolated."""
+    return _cusps(time_s, hub, idx)[1]
+
+
+def _cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(time s, hub m (n, 3)) at each CoM-height cusp (`_hub_at_cusps`)."""
     half = max(3, int(0.25 * np.median(np.diff(idx)))) if idx.size > 1 else 5
     ok = ~np.isnan(hub).any(axis=1)
     tv, hv = time_s[ok], hub[ok]
@@ -639,7 +650,7 @@ def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.nd
     tc = out[:, 0].copy()
     out[:, 0] = np.interp(tc, tv, hv[:, 0])
     out[:, 1] = np.interp(tc, tv, hv[:, 1])
-    return out
+    return tc, out
 
 
 def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,9 @@ writes each trial as a Vicon export, imports it as a user would (`import_trial`:
 ending from the recording) and hands the imported trials to the critical-slope estimate with the wheel input a
 user would give (`INPUTS`): ``table1``, Table 1 with its stated default uncertainties (the user who does not
 know the wheel), and ``truth``, the truth's own parameters with an uncertainty (m_H 2 %, I_c 10 %, L0 1 mm, as
-a wheel file would state them). The estimate is called through the function the caller gives (the CLI passes
+a wheel file would state them). Each input imports the trials with its wheel (`import_trial(wheel=)`, for the
+legs' drift allowed in the slope interval): ``table1`` Table 1's compliant legs, ``truth`` rigid legs (the user
+who measured the wheel knows it has no springs). The estimate is called through the function the caller gives (the CLI passes
 the public `rimless.analysis.critical_slope`; this room may not import the API), without model critical slopes
 (``models=[]``: the coverage is the trials' estimate's).
 
@@ -391,22 +393,27 @@ def run_importer_coverage(
             written = write_series(rng, wheel, crit, lab, folder, ramp_steps=ramp_steps)
             if progress:
                 progress(i, "importing")
-            trials, names, refused = [], [], []
-            for st in written:
-                try:
-                    trials.append(import_trial(st.path))
-                    names.append(st.path.name)
-                except RimlessError as err:
-                    refused.append(f"{err}".splitlines()[0])
-            s = ImporterSeries(wheel, crit, lab, len(written), refused)
+            s = ImporterSeries(wheel, crit, lab, len(written), [])
             for name in inputs:
-                if progress:
-                    progress(i, f"critical slope, {name} wheel")
                 if name == "table1":
                     user_wheel = Wheel()
                 else:
                     params, sd = truth_input(wheel)
                     user_wheel = Wheel(params, uncertainty=sd)
+                # imported with the wheel the user states, for its legs' drift (`import_trial(wheel=)`): Table 1's
+                # compliant legs, or the measured wheel's rigid ones
+                import_wheel = user_wheel if name == "table1" else user_wheel.with_model("rigid")
+                trials, names, refused = [], [], []
+                for st in written:
+                    try:
+                        trials.append(import_trial(st.path, wheel=import_wheel))
+                        names.append(st.path.name)
+                    except RimlessError as err:
+                        refused.append(f"{err}".splitlines()[0])
+                if not s.refused:
+                    s.refused = refused
+                if progress:
+                    progress(i, f"critical slope, {name} wheel")
                 if not trials:
                     s.results[name] = {"estimated": False, "why": "every import refused"}
                     continue

@@ -17,6 +17,11 @@ Labs (`importer_coverage.draw_lab`): Z-up or Y-up, any ramp heading, a Tracker o
 100 Hz, 0.3 mm and 1 mrad of noise; in `HIDDEN_SHARE` of the trials the middle 20-60 % of every stance but two is
 hidden (the impacts stay in view, most stance feet do not).
 
+Each recording is imported twice: as a user who does not say what wheel it is (no ``wheel=``: the importer
+bounds the legs' drift, `slope_evidence.UNKNOWN_LEG_TIME_S`; the keys ``truths`` and ``used``), and as one who
+states it (``wheel_given``: `told_wheel`, a rigid model for the rigid truth, the ER wheel's k with Table 1's
+stated 10 % for the ER truth).
+
 The study sees every evidence, not only the one used, by wrapping the importer's `slope_evidence` and
 `choose_slope` while it imports (`captured_evidence`).
 """
@@ -209,11 +214,37 @@ def _row(e: Any, truth_rad: float) -> dict[str, Any]:
     }
 
 
-def measure_draw(draw: SlopeDraw, folder: Path, rng: np.random.Generator) -> dict[str, Any]:
-    """Record, import and compare one draw (JSON-ready): per evidence and for the slope used."""
+def told_wheel(draw: SlopeDraw) -> Any:
+    """The wheel a user who knows the truth's wheel would state (`rimless.sim.Wheel`): a rigid model for the
+    rigid truth; the simulator's ER wheel with the truth's k and c (and Table 1's default sd of k, 10 %)."""
+    from rimless.sim import Wheel
+
+    if draw.truth == "rigid":
+        return Wheel(model="rigid")
+    return Wheel(stiffness_n_per_m=draw.wheel["k_n_per_m"], damping_ns_per_m=draw.wheel["c_ns_per_m"])
+
+
+def _import(path: Path, truth_rad: float, wheel: Any) -> dict[str, Any]:
+    """Import one recording (``wheel=``) and compare its evidence and the slope used with the truth."""
     from rimless.analysis.kinematics.build import import_trial
     from rimless.errors import RimlessError
 
+    with captured_evidence() as seen:
+        try:
+            trial = import_trial(path, wheel=wheel)
+        except RimlessError as err:
+            return {"refused": str(err).splitlines()[0]}
+    est = [e for e in seen.get("evidence", []) if e.source == "estimated"]
+    used = _row(seen["used"], truth_rad) if seen.get("used") is not None else None
+    if used is not None:  # the slope used, as the trial's meta states it (``slope_ci_rad``)
+        lo, hi = trial.meta.slope_ci_rad
+        used["covered"] = bool(lo <= truth_rad <= hi)
+    return {"evidence": [_row(e, truth_rad) for e in est], "used": used}
+
+
+def measure_draw(draw: SlopeDraw, folder: Path, rng: np.random.Generator) -> dict[str, Any]:
+    """Record, import and compare one draw (JSON-ready): per evidence and for the slope used, without the wheel
+    (``evidence``, ``used``) and with it (``wheel_given``)."""
     path = folder / "trial.csv"
     record(draw, path, rng)
     out: dict[str, Any] = {
@@ -227,19 +258,10 @@ def measure_draw(draw: SlopeDraw, folder: Path, rng: np.random.Generator) -> dic
         "hidden_stances": len(draw.gaps),
     }
     truth_rad = math.radians(draw.walk.slope_deg)
-    with captured_evidence() as seen:
-        try:
-            trial = import_trial(path)
-        except RimlessError as err:
-            return {**out, "refused": str(err).splitlines()[0]}
-    est = [e for e in seen.get("evidence", []) if e.source == "estimated"]
-    out["evidence"] = [_row(e, truth_rad) for e in est]
-    used = _row(seen["used"], truth_rad) if seen.get("used") is not None else None
-    if used is not None:  # the slope used, as the trial's meta states it (``slope_ci_rad``)
-        lo, hi = trial.meta.slope_ci_rad
-        used["covered"] = bool(lo <= truth_rad <= hi)
-    out["used"] = used
-    return out
+    unknown = _import(path, truth_rad, None)
+    if "refused" in unknown:
+        return {**out, **unknown}
+    return {**out, **unknown, "wheel_given": _import(path, truth_rad, told_wheel(draw))}
 
 
 def _group(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -269,14 +291,18 @@ class SlopeCoverageResult:
     wall_s: float
     truths: tuple[str, ...] = field(default=TRUTHS)
 
-    def rows(self, kind: str, **where: Any) -> list[dict[str, Any]]:
+    def rows(self, kind: str, *, wheel_given: bool = False, **where: Any) -> list[dict[str, Any]]:
         """The comparison rows of one evidence ``kind`` (or ``used``) over the draws matching ``where``
-        (``truth``, ``lab``, ``hidden``: True for draws with hidden stances, ``ending``)."""
+        (``truth``, ``lab``, ``hidden``: True for draws with hidden stances, ``ending``); ``wheel_given``: of the
+        imports told the wheel."""
         out = []
-        for d in self.draws:
-            if "refused" in d:
+        for d0 in self.draws:
+            if "refused" in d0:
                 continue
-            if any((bool(d["hidden_stances"]) if key == "hidden" else d[key]) != v for key, v in where.items()):
+            if any((bool(d0["hidden_stances"]) if key == "hidden" else d0[key]) != v for key, v in where.items()):
+                continue
+            d = d0.get("wheel_given", {}) if wheel_given else d0
+            if "refused" in d or "used" not in d:
                 continue
             if kind == "used":
                 if d["used"] is not None:
@@ -288,20 +314,29 @@ class SlopeCoverageResult:
     def summary(self) -> dict[str, Any]:
         """The JSON of ``rimless trials slope-coverage``: per truth, per evidence kind (``used``: the slope the
         importer used, ``slope_ci_rad``) and per lab kind."""
-        per: dict[str, Any] = {}
-        for truth in self.truths:
-            kinds = {k: _group(self.rows(k, truth=truth)) for k in KINDS}
-            labs = {
-                lab: _group(self.rows("used", truth=truth, lab=lab))
-                for lab in sorted({d["lab"] for d in self.draws if d["truth"] == truth})
-            }
-            labs["hidden stances"] = _group(self.rows("used", truth=truth, hidden=True))
-            labs["all stances seen"] = _group(self.rows("used", truth=truth, hidden=False))
-            per[truth] = {"evidence": kinds, "labs": labs}
+
+        def per_truth(told: bool) -> dict[str, Any]:
+            per: dict[str, Any] = {}
+            for truth in self.truths:
+                kinds = {k: _group(self.rows(k, wheel_given=told, truth=truth)) for k in KINDS}
+                labs = {
+                    lab: _group(self.rows("used", wheel_given=told, truth=truth, lab=lab))
+                    for lab in sorted({d["lab"] for d in self.draws if d["truth"] == truth})
+                }
+                labs["hidden stances"] = _group(self.rows("used", wheel_given=told, truth=truth, hidden=True))
+                labs["all stances seen"] = _group(self.rows("used", wheel_given=told, truth=truth, hidden=False))
+                per[truth] = {"evidence": kinds, "labs": labs}
+            return per
+
         refused = [d["refused"] for d in self.draws if "refused" in d]
         return {
-            "truths": per,
+            "truths": per_truth(False),
             "used": _group(self.rows("used")),
+            "wheel_given": {
+                "truths": per_truth(True),
+                "used": _group(self.rows("used", wheel_given=True)),
+                "wheel": "told_wheel: rigid model for the rigid truth, the ER truth's k (sd 10 %) and c",
+            },
             "draws": len(self.draws),
             "refused": len(refused),
             "refused_reasons": refused,

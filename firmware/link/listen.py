@@ -30,6 +30,7 @@ from rimless.firmware.link.telemetry import (
     telemetry_key,
     verify_datagram,
 )
+from rimless.progress import stage
 
 CSV_COLUMNS = (
     "timestamp",
@@ -377,8 +378,10 @@ def listen(
     robot: str | None = None,
     mcap_out: Path | None = None,
     token: str | None = None,
+    max_datagrams: int | None = None,
 ) -> Summary:
-    """Receive until `duration_s` (or Ctrl-C); record and show as the module docstring says.
+    """Receive until `duration_s`, until `max_datagrams` of the robot's datagrams are in (None: no limit), or
+    Ctrl-C; record and show as the module docstring says.
 
     Until the first datagram the summary line says what it waits for instead of counting zero samples. When
     nothing arrives for `timeout_s` (0: wait forever), `RunFailure` says that no robot is sending (the command
@@ -392,13 +395,18 @@ def listen(
     the robot is `robot` (a host name or address), else the first sender whose datagrams carry a tag. Every other
     datagram is counted (`foreign`, of them `unauthenticated`) and ignored. Objects received twice are recorded
     once; gaps in the objects' `tseq` and the events' `event_seq` are counted (`SeqTracker`: no single number
-    can poison the count) and shown (a lost fault event does not go unnoticed)."""
+    can poison the count) and shown (a lost fault event does not go unnoticed).
+
+    Stages (`rimless.progress.stage`, for tests that wait on events): ``listen: listening`` once bound,
+    ``listen: datagram N from the robot`` as each is accounted for, ``listen: data stopped``, ``listen: data
+    resumed``."""
     try:
         sock = socket.socket(socket.AF_INET6 if ":" in bind else socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind((bind, port))
     except OSError as err:
         raise CommandError(f"cannot listen on {bind}:{port} ({err.strerror or err})") from None
     sock.settimeout(0.1)
+    stage("listen: listening")
     robot_ip: str | None = None
     if robot is not None:
         try:
@@ -480,16 +488,21 @@ def listen(
             if objs is not None:
                 if stale and last_data is not None:
                     echo(f"data resumed after {now - last_data:.1f} s")
+                    stage("listen: data resumed")
                 stale = False
                 last_data = now
                 new = summary.add(objs, now)
                 if new:
                     last_t = max(last_t, max(float(o["timestamp"]) for o in new))
                     rec.write(new)
+                stage(f"listen: datagram {summary.datagrams} from the robot")
+                if max_datagrams is not None and summary.datagrams >= max_datagrams:
+                    break
             elif last_data is not None and not stale and now - last_data >= stale_s:
                 stale = True
                 wall = time.strftime("%H:%M:%S", time.localtime(time.time() - (now - last_data)))
                 echo(f"data stopped: nothing for {stale_s:g} s (last datagram at {wall})")
+                stage("listen: data stopped")
             quiet_s = now - (start if last_data is None else last_data)
             if timeout_s > 0 and quiet_s >= timeout_s:
                 silent_for = quiet_s

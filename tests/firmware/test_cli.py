@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import secrets
@@ -17,7 +18,8 @@ import pytest
 from typer.testing import CliRunner
 
 from rimless.cli import app
-from tests.support.firmware_app import free_port, signed_datagram, wait_udp_bound
+from tests.support.firmware_app import free_port, signed_datagram
+from tests.support.interrupt import Watched
 
 RIMLESS = [str(Path(sys.executable).with_name("rimless"))]
 runner = CliRunner()
@@ -94,44 +96,57 @@ def test_check_fake_reports_id_squal_and_clicks() -> None:
     assert [c["pin"] for c in rep["clutches"]] == [17, 27, 22, 23, 24, 16, 20, 21]
 
 
-def test_listen_records_datagrams(tmp_path) -> None:
-    port = free_port()
-    out = tmp_path / "tel.jsonl"
-
-    def send() -> None:
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        wait_udp_bound(port)  # let the listener bind first
-        for k in range(20):
-            time.sleep(0.02)
-            batch = [
-                {"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
-                {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
-            ]
-            s.sendto(signed_datagram(json.dumps(batch).encode()), ("127.0.0.1", port))
-        s.sendto(b"garbage", ("127.0.0.1", port))
-        s.close()
-
-    t = threading.Thread(target=send)
-    t.start()
-    # 3 s for 0.4 s of sending after the bind: a loaded machine may start the sender late
-    r = invoke(
+def _listen(port: int, *args: str) -> list[str]:
+    """`rimless robot listen` on 127.0.0.1:`port` as a process: it ends on an event (`--max-datagrams`), never
+    on a clock (`--timeout-s 0`: no giving up on a late sender; the test's hang guard stops a lost one)."""
+    return [
+        *RIMLESS,
+        "robot",
         "listen",
         "--bind",
         "127.0.0.1",
         "--port",
         str(port),
-        "--out",
-        str(out),
-        "--duration-s",
-        "3.0",
-        "--summary-every-s",
-        "0.3",
-    )
-    t.join()
-    assert r.exit_code == 0, r.output
+        "--no-live",
+        "--timeout-s",
+        "0",
+        *args,
+    ]
+
+
+def _without_token() -> dict[str, str]:
+    """The environment without a command token: listen takes the first sender whose datagrams carry a tag."""
+    return {k: v for k, v in os.environ.items() if not k.startswith("RIMLESS_TOKEN")}
+
+
+#: the longest a listen test waits for an event or for the end (a hang guard, not a timing: nothing is sent on it)
+LISTEN_HANG_GUARD_S = 120.0
+
+
+def test_listen_records_datagrams(tmp_path) -> None:
+    """20 datagrams of a sample and an event each, and one garbled, sent once the listener has bound (its stage);
+    it stops after the 20th (`--max-datagrams`). No sleep, no duration."""
+    port = free_port()
+    out = tmp_path / "tel.jsonl"
+    with Watched(_listen(port, "--out", str(out), "--max-datagrams", "20"), cwd=tmp_path, env=_without_token()) as cmd:
+        # datagrams sent before the listener binds are lost
+        cmd.wait_for(stage="listen: listening", timeout_s=LISTEN_HANG_GUARD_S)
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for k in range(20):
+            if k == 10:  # once the robot is known (its first datagram is ahead in the queue): its datagram, garbled
+                s.sendto(b"garbage", ("127.0.0.1", port))
+            batch = [
+                {"timestamp": 1.0 + k, "leg": {"stance": 1, "velocity_m_s": 0.1}},
+                {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
+            ]
+            s.sendto(signed_datagram(json.dumps(batch).encode()), ("127.0.0.1", port))
+        s.close()
+        res = cmd.finish(timeout_s=LISTEN_HANG_GUARD_S)
+    assert res.returncode == 0, res.stderr
     lines = out.read_text().splitlines()
     assert len(lines) == 40
-    assert "20 samples" in r.output and "20 events" in r.output and "1 garbled" in r.output
+    assert "20 samples" in res.stderr and "20 events" in res.stderr and "1 garbled" in res.stderr
+    assert [st for st in res.stages if st.startswith("listen: datagram")][-1] == "listen: datagram 20 from the robot"
 
 
 def test_sigterm_to_run_fake_turns_every_clutch_off(tmp_path) -> None:
@@ -231,51 +246,34 @@ def test_set_minus_3_reaches_the_robot_and_its_refusal_is_one_line(tmp_path) -> 
 
 
 def test_listen_writes_csv_says_when_data_stop_and_renames_when_done(tmp_path) -> None:
+    """10 datagrams, then nothing until the listener says "data stopped" (the event: no pause is timed here), then
+    one more; it stops after that 11th (`--max-datagrams`) and renames its files."""
     port = free_port()
     out, csv_out = tmp_path / "tel.jsonl", tmp_path / "tel.csv"
-
-    def send() -> None:
+    argv = _listen(port, "--out", str(out), "--csv", str(csv_out), "--stale-s", "0.4", "--max-datagrams", "11")
+    with Watched(argv, cwd=tmp_path, env=_without_token()) as cmd:
+        # datagrams sent before the listener binds are lost
+        cmd.wait_for(stage="listen: listening", timeout_s=LISTEN_HANG_GUARD_S)
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        wait_udp_bound(port)  # datagrams sent before the listener binds are lost
         for k in range(10):
-            time.sleep(0.02)
             batch = [
                 {"timestamp": 1.0 + k, "seq": k, "leg": {"stance": 1, "velocity_m_s": 0.1 * k, "clutch_mask": 2}},
                 {"timestamp": 1.0 + k, "event": {"name": "lock", "code": 2}},
             ]
             s.sendto(signed_datagram(json.dumps(batch).encode()), ("127.0.0.1", port))
-        time.sleep(0.8)  # a pause longer than --stale-s
+        cmd.wait_for(stderr="data stopped", timeout_s=LISTEN_HANG_GUARD_S)
         s.sendto(
             signed_datagram(json.dumps([{"timestamp": 20.0, "seq": 10, "leg": {"stance": 2}}]).encode()),
             ("127.0.0.1", port),
         )
         s.close()
-
-    t = threading.Thread(target=send)
-    t.start()
-    # 4 s for 1.0 s of sending after the bind (the pause included): room for a late sender on a loaded machine
-    r = invoke(
-        "listen",
-        "--bind",
-        "127.0.0.1",
-        "--port",
-        str(port),
-        "--out",
-        str(out),
-        "--csv",
-        str(csv_out),
-        "--duration-s",
-        "4.0",
-        "--summary-every-s",
-        "0.5",
-        "--stale-s",
-        "0.4",
-        "--no-live",
-    )
-    t.join()
-    assert r.exit_code == 0, r.output
-    assert "data stopped: nothing for 0.4 s" in r.output and "data resumed after" in r.output
-    assert f"wrote {out}" in r.output and f"wrote {csv_out}" in r.output
+        res = cmd.finish(timeout_s=LISTEN_HANG_GUARD_S)
+    assert res.returncode == 0, res.stderr
+    assert "data stopped: nothing for 0.4 s" in res.stderr and "data resumed after" in res.stderr
+    # said before the last datagram came, and its return said when it came
+    assert res.stages.index("listen: data stopped") < res.stages.index("listen: datagram 11 from the robot")
+    assert res.stages.index("listen: data resumed") < res.stages.index("listen: datagram 11 from the robot")
+    assert f"wrote {out}" in res.stderr and f"wrote {csv_out}" in res.stderr
     assert not list(tmp_path.glob("*.part"))
     assert len(out.read_text().splitlines()) == 21
     import csv as csvmod
@@ -327,11 +325,15 @@ def test_run_sends_telemetry_to_several_destinations(tmp_path) -> None:
         text=True,
         timeout=60,
     )
-    time.sleep(0.3)
+    # the run has ended: whatever it sent is in the sockets' queues (loopback delivers on send), read to the end
     stop.set()
     for t in threads:
         t.join()
-    for rx in rxs:
+    for i, rx in enumerate(rxs):
+        rx.setblocking(False)
+        with contextlib.suppress(BlockingIOError):
+            while True:
+                counts[i] += sum(1 for o in json.loads(rx.recv(65536)) if "leg" in o)
         rx.close()
     assert r.returncode == 0, r.stderr
     assert counts[0] > 100 and counts[0] == counts[1]

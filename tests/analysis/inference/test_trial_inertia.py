@@ -232,3 +232,37 @@ def test_a_compliant_er_wheel_is_not_told_its_true_inertia_is_wrong(tmp_path):
 
     printed = "\n".join(held_lines(res.summary()))
     assert ("inertia from the trials:" in printed) == (not est.adequate)  # else in I_c's row
+
+
+def test_the_held_parameters_refit_gives_the_full_estimates_ratio_at_the_held_leg_length(monkeypatch):
+    """The refit at each perturbed held L0 and g (`held._refitting`) skips the joint fit of r and L0
+    (``fit_leg_length=False``): at the held values and at perturbed ones it gives the inertia, and so the ratio,
+    of the full estimate's ``inertia_ratio_at_held_leg_length``; what it did not fit it does not report."""
+    from rimless.analysis.inference import stance_inertia
+    from rimless.analysis.inference.held import _refitting
+    from rimless.analysis.inference.stance_inertia import NOT_JOINT
+
+    def _no_joint_fit(*args, **kwargs):
+        raise AssertionError("the refit made the joint fit of r and L0")
+
+    truth = RigidTruth(mass_kg=2.3, inertia_hub_kg_m2=1.6 * 2.3 * 0.25**2, leg_m=0.25)  # r 1.6, L0 250 mm
+    trials, _ = _series(truth, 7)
+    nominal = WheelParams()  # Table 1 held: L0 237 mm, not the truth's
+    refit = _refitting(inertia_ratio, trials, nominal)
+    for p in (nominal, nominal.replace(leg_length_m=0.237 * 1.02), nominal.replace(gravity_m_s2=9.78)):
+        full = estimate_inertia_ratio(trials, p)
+        held_only = estimate_inertia_ratio(trials, p, fit_leg_length=False)
+        assert full.ok and held_only.ok, full.note
+        assert math.isfinite(full.leg_length_m)  # the full estimate made the joint fit
+        assert held_only.ratio_at_held_l0 == full.ratio_at_held_l0
+        assert held_only.inertia_kg_m2 == full.inertia_kg_m2
+        assert held_only.inertia_sd_kg_m2 == full.inertia_sd_kg_m2
+        assert held_only.ratio == held_only.ratio_at_held_l0 and math.isnan(held_only.leg_length_m)
+        assert NOT_JOINT in held_only.note
+        at_held = full.as_dict()["inertia_ratio_at_held_leg_length"]
+        with monkeypatch.context() as m:  # the refit makes no joint fit
+            m.setattr(stance_inertia, "_fit_joint", _no_joint_fit)
+            assert refit(p) == pytest.approx(at_held, rel=1e-12)
+    # a stated inertia (not the nominal one) is not refitted
+    stated = nominal.replace(inertia_kg_m2=0.05)
+    assert refit(stated) == inertia_ratio(stated)

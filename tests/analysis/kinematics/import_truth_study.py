@@ -2,7 +2,7 @@
 
 Run from the repository root (not collected by pytest; minutes of CPU):
 
-    PYTHONPATH=. python tests/analysis/kinematics/import_truth_study.py slope --draws 40 --seed 5
+    PYTHONPATH=. python tests/analysis/kinematics/import_truth_study.py slope --draws 40 --seed 5 [--wheel-given]
     PYTHONPATH=. python tests/analysis/kinematics/import_truth_study.py impacts --draws 24
 
 ``slope``: marker-only walks of the compliant ER truth (`tests.support.analysis_trial_truth`) with c 2-20 N s/m,
@@ -27,7 +27,11 @@ from tests.support import analysis_trial_truth as truth
 from tests.support.analysis_truth_wheel import EVEN_MARKERS, UNEVEN_MARKERS
 
 
-def slope_study(draws: int, seed: int, folder: Path) -> None:
+def slope_study(draws: int, seed: int, folder: Path, wheel_given: bool = False) -> None:
+    """``wheel_given``: each import is told the wheel (its c and k, k with Table 1's stated 10 %), as a user who
+    knows it would (`import_trial(wheel=...)`); else the importer bounds the legs' drift."""
+    from rimless.sim import Wheel
+
     rng = np.random.default_rng(seed)
     covered = within = n = 0
     for i in range(draws):
@@ -44,7 +48,8 @@ def slope_study(draws: int, seed: int, folder: Path) -> None:
         lab = truth.in_lab(tr, truth.Y_UP_FROM_Z_UP) if y_up else tr
         body = UNEVEN_MARKERS if i % 2 else EVEN_MARKERS
         try:
-            m = import_trial(truth.write_markers_csv(folder / "m.csv", lab, body, seed=i)).meta
+            wheel = Wheel(stiffness_n_per_m=k, damping_ns_per_m=c) if wheel_given else None
+            m = import_trial(truth.write_markers_csv(folder / "m.csv", lab, body, seed=i), wheel=wheel).meta
         except TrialRefused as err:
             print(i, "refused", str(err)[:120])
             continue
@@ -97,9 +102,13 @@ def main() -> None:
     ap.add_argument("study", choices=["slope", "impacts"])
     ap.add_argument("--draws", type=int, default=40)
     ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--wheel-given", action="store_true", help="slope: tell the importer the wheel's c and k")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        (slope_study if a.study == "slope" else impact_study)(a.draws, a.seed, Path(tmp))
+        if a.study == "slope":
+            slope_study(a.draws, a.seed, Path(tmp), a.wheel_given)
+        else:
+            impact_study(a.draws, a.seed, Path(tmp))
 
 
 if __name__ == "__main__":

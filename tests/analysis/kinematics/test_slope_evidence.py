@@ -15,10 +15,12 @@ from rimless.analysis.kinematics.build import import_trial
 from rimless.analysis.kinematics.contacts import Contact, ContactFit, slope_from_contacts
 from rimless.analysis.kinematics.slope_evidence import (
     CONTACT_DRIFT_M,
+    MINIMA_DRIFT_PER_IMPULSE,
     TWO_CONTACT_SD_M,
     Z95,
     SlopeEvidence,
     choose_slope,
+    leg_compliance,
     slope_evidence,
 )
 from tests.support.analysis_trial_truth import (
@@ -182,3 +184,135 @@ def test_contacts_on_a_clean_line_are_scaled_by_at_most_half():
     drift = Z95 * math.atan(CONTACT_DRIFT_M / xs[-1])
     assert ev[0].kind == "contacts" and ev[0].half_rad == pytest.approx(math.hypot(Z95 * se / 2, drift), rel=1e-9)
     assert ev[0].common_half_rad == pytest.approx(drift, rel=1e-9)
+
+
+def _impacts(speeds_m_s: list[float], step_m: float = 0.18) -> tuple[np.ndarray, np.ndarray]:
+    """Impacts one step apart along the travel, the hub's mean speed from one to the next as given: (along m,
+    time s)."""
+    along = step_m * np.arange(len(speeds_m_s) + 1)
+    t = np.concatenate([[0.0], np.cumsum(step_m / np.asarray(speeds_m_s, float))])
+    return along, t
+
+
+def test_a_steady_walk_gets_the_width_its_scatter_warrants():
+    """Eleven impacts at one steady speed: nothing changes the legs' compression, so the impact line's half width
+    is its scatter's alone, Student t (9 dof) x se, whatever the wheel (by hand). Today's main adds a fixed
+    0.4 mm of drift over the 1.8 m (0.025 deg at 95 %) to every trial."""
+    from scipy.stats import t as student_t
+
+    from rimless.sim import Wheel
+
+    se = math.radians(0.006)
+    line = _line_frame(math.radians(2.0), se, 11)
+    along, t = _impacts([0.55] * 10)
+    for wheel in (None, Wheel(), Wheel(model="rigid")):
+        ev = slope_evidence(None, None, None, None, None, line, line, 11, travel_m=1.9, impact_along_m=along,
+                            impact_time_s=t, legs=leg_compliance(wheel))  # fmt: skip
+        assert ev[0].kind == "impact line"
+        assert ev[0].half_rad == pytest.approx(float(student_t.ppf(0.975, 9)) * se, rel=1e-9)
+        assert ev[0].common_half_rad == pytest.approx(0.0, abs=1e-12)  # (the speeds agree to rounding)
+
+
+def test_a_compliant_wheel_speeding_up_keeps_the_allowance_a_rigid_one_does_not():
+    """The hub's speed from impact to impact grows 0.50 -> 0.62 m/s: a spring leg (k = 2000 +- 200 N/m, Table 1
+    masses +- 2 %) compresses more at each impact, dv_n sqrt(m/k) with dv_n = 0.12 m/s x cos(alpha/2) and k at
+    its 95 % low end, m at its high end (by hand); the allowance is MINIMA_DRIFT_PER_IMPULSE of that over the
+    impacts' 1.8 m. Told the legs are rigid: none. Not told: the bound UNKNOWN_LEG_TIME_S, wider still."""
+    from scipy.stats import t as student_t
+
+    from rimless.sim import Wheel
+
+    se = math.radians(0.006)
+    line = _line_frame(math.radians(2.0), se, 11)
+    along, t = _impacts(list(np.linspace(0.50, 0.62, 10)))
+    soft = Wheel(stiffness_n_per_m=2000.0, uncertainty={"k": 200.0})
+
+    def half(wheel) -> float:
+        ev = slope_evidence(None, None, None, None, None, line, line, 11, travel_m=1.9, impact_along_m=along,
+                            impact_time_s=t, legs=leg_compliance(wheel))  # fmt: skip
+        return ev[0].half_rad
+
+    scatter = float(student_t.ppf(0.975, 9)) * se
+    assert half(Wheel(model="rigid")) == pytest.approx(scatter, rel=1e-9)
+    mass_hi = 1.892 + 8 * 0.0378 + Z95 * math.hypot(0.02 * 1.892, 8 * 0.02 * 0.0378)  # Table 1, DEFAULT_SD 2 %
+    tau = math.sqrt(mass_hi / (2000.0 - Z95 * 200.0))
+    dvn = 0.12 * math.cos(math.pi / 8)
+    drift = Z95 * math.atan(MINIMA_DRIFT_PER_IMPULSE * dvn * tau / 1.8)
+    assert half(soft) == pytest.approx(math.hypot(scatter, drift), rel=1e-6)
+    assert half(None) > half(soft) > 1.5 * scatter  # the allowance is kept, and more when the wheel is not told
+
+
+def _imported_evidence(path, wheel):
+    from rimless.analysis.validation.slope_coverage import captured_evidence
+
+    with captured_evidence() as seen:
+        trial = import_trial(path, wheel=wheel)
+    return trial, [e for e in seen["evidence"] if e.source == "estimated"]
+
+
+def test_rigid_truth_told_rigid_carries_no_drift_and_covers(tmp_path):
+    """The independent rigid truth (`rigid_walk`: a pendulum stance integrated by scipy) released at 2 rad/s on
+    4 deg, speeding up over 11 steps (periods 0.41 -> 0.34 s), as a Tracker object. Told the wheel is rigid
+    (``wheel=Wheel(model="rigid")``): no leg drift in any evidence, and the interval still holds the true slope;
+    not told, the importer keeps its bound (a wider interval)."""
+    from rimless.sim import Wheel
+    from tests.support.analysis_trial_truth import rigid_walk, write_csv
+
+    path = write_csv(tmp_path / "rigid.csv", rigid_walk(4.0, 2.0, ramp_steps=11, seed=1))
+    told, ev = _imported_evidence(path, Wheel(model="rigid"))
+    assert ev and all(e.common_half_rad == 0.0 and "no drift: rigid legs" in e.method for e in ev)
+    lo, hi = (math.degrees(v) for v in told.meta.slope_ci_rad)
+    assert lo <= 4.0 <= hi, (lo, hi)
+    untold, ev0 = _imported_evidence(path, None)
+    assert all(e.common_half_rad > 0 for e in ev0)
+    assert np.ptp(untold.meta.slope_ci_rad) > np.ptp(told.meta.slope_ci_rad)
+
+
+def test_compliant_truth_speeding_up_keeps_its_allowance_and_covers(tmp_path):
+    """The tests' compliant ER truth (k = 1800 N/m, c = 6 N s/m, away from Table 1) released at 2.9 rad/s on
+    1.8 deg, its speed changing over 11 steps, 4 markers: told its k (Table 1's stated 10 %), the slope's
+    interval carries the legs' drift and holds the true slope."""
+    from rimless.sim import Wheel
+
+    kw = dict(c_ns_per_m=6.0, k_n_per_m=1800.0, max_steps=11, ending="walked", seed=4, yaw_deg=40.0)
+    tr = simulate_wheel(1.8, 2.9, **kw)
+    assert tr.steps == 11
+    path = write_markers_csv(tmp_path / "er.csv", tr, EVEN_MARKERS, seed=4)
+    trial, ev = _imported_evidence(path, Wheel(stiffness_n_per_m=1800.0, damping_ns_per_m=6.0))
+    assert ev and all(e.common_half_rad > 0 and "impact speed change" in e.method for e in ev)
+    lo, hi = (math.degrees(v) for v in trial.meta.slope_ci_rad)
+    assert lo <= 1.8 <= hi, (lo, hi, trial.meta.slope_method)
+
+
+def test_trials_import_is_told_the_wheel_as_the_api_is(tmp_path):
+    """`rimless trials import --rigid-legs` (and `--params` with a wheel file) gives the importer the wheel, as
+    `import_trial(wheel=)` does: the same slope interval as the API's, narrower than when not told (the
+    independent rigid truth, speeding up: `test_rigid_truth_told_rigid_carries_no_drift_and_covers`)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from rimless.cli import app
+    from rimless.sim import Wheel
+    from tests.support.analysis_trial_truth import rigid_walk, write_csv
+
+    path = write_csv(tmp_path / "rigid.csv", rigid_walk(4.0, 2.0, ramp_steps=11, seed=1))
+    runner = CliRunner()
+
+    def cli_ci(*extra: str) -> list[float]:
+        r = runner.invoke(app, ["trials", "import", path, "--out", str(tmp_path), "--json", *extra])
+        assert r.exit_code == 0, r.output
+        return json.loads(r.stdout)[0]["slope_ci_deg"]
+
+    def api_ci(wheel) -> list[float]:
+        return [math.degrees(v) for v in import_trial(path, wheel=wheel).meta.slope_ci_rad]
+
+    assert cli_ci("--rigid-legs") == pytest.approx(api_ci(Wheel(model="rigid")), abs=1e-9)
+    untold = cli_ci()
+    assert untold == pytest.approx(api_ci(None), abs=1e-9)
+    stiff = tmp_path / "stiff.toml"
+    stiff.write_text("[wheel]\nk = {value = 20000, sd = 1000}\n", encoding="utf-8")
+    told = cli_ci("--params", str(stiff))
+    assert told == pytest.approx(api_ci(Wheel(stiff)), abs=1e-9)
+    rigid = cli_ci("--rigid-legs")
+    assert rigid[1] - rigid[0] < told[1] - told[0] < untold[1] - untold[0]

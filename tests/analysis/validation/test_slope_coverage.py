@@ -58,6 +58,15 @@ def test_cli_small_run_counts_what_its_draws_say() -> None:
         lo, hi = used["coverage_ci95"]
         assert 0 <= lo <= used["coverage"] <= hi <= 1
     assert set(out["truths"]["rigid"]["evidence"]) == set(KINDS)
+    for d in out["per_draw"]:  # imported again, told the wheel: rigid legs carry no drift, compliant ones do
+        told = d["wheel_given"]
+        assert told["used"] is not None and [r["kind"] for r in told["evidence"]] == [r["kind"] for r in d["evidence"]]
+        for row in told["evidence"]:
+            assert ("impact speed change" if d["truth"] == "rigid" else "rigid legs") not in row["method"]
+    given = out["wheel_given"]["truths"]["er"]["evidence"]["used"]
+    assert given["n"] == 2 and given["covered"] == sum(
+        d["wheel_given"]["used"]["covered"] for d in out["per_draw"][1::2]
+    )
     table = runner.invoke(app, ["trials", "slope-coverage", "--series", "1"])
     assert table.exit_code == 0 and "slope used" in table.stdout and "hidden stances" in table.stdout
     assert max(len(line) for line in table.stdout.splitlines()) <= 80
@@ -70,12 +79,13 @@ def test_rigid_walks_with_hidden_stances_are_covered_and_z_is_near_one() -> None
     as slope) and the hidden-stance walks' rms z was 2.8; the contact line's rms z was 0.40 (its stated errors
     were the spread within a stance, not the error of its median)."""
     res = run_slope_coverage(40, 0, truths=("rigid",))
-    used = res.rows("used")
-    assert len(used) == 40 and sum(r["covered"] for r in used) >= 39
-    hidden = res.rows("used", hidden=True)
+    # told the wheel is rigid (no leg drift): not told, the importer bounds a compliant leg's drift and over-covers
+    used = res.rows("used", wheel_given=True)
+    assert len(used) == 40 and sum(r["covered"] for r in used) >= 38
+    hidden = res.rows("used", wheel_given=True, hidden=True)
     assert len(hidden) >= 8
     assert all(abs(r["z"]) < 2.5 for r in hidden)
     rms = math.sqrt(np.mean([r["z"] ** 2 for r in hidden]))
     assert 0.5 <= rms <= 1.5
-    contacts = [r["z"] for r in res.rows("contacts")]
+    contacts = [r["z"] for r in res.rows("contacts", wheel_given=True)]
     assert len(contacts) >= 30 and 0.5 <= math.sqrt(np.mean(np.square(contacts))) <= 1.5

@@ -388,7 +388,10 @@ def test_a_connect_flood_from_one_host_cannot_evict_the_operator(tmp_path) -> No
             flood = subprocess.Popen([sys.executable, "-c", code.replace("PORT", str(app.command_port))])
             results = []
             try:
-                time.sleep(0.3)
+                deadline = time.monotonic() + 60  # a hang guard: the event is the flood's first refusal
+                while app.server.refused_per_source == 0:  # nothing announces it: looked at
+                    assert flood.poll() is None and time.monotonic() < deadline, "the flood was never refused"
+                    time.sleep(0.01)
                 for _ in range(5):
                     results.append(
                         send_command("127.0.0.1", "status", token=TOKEN, port=app.command_port, timeout_s=3)["armed"]

@@ -103,11 +103,11 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
                 obj = {"timestamp": t, "tseq": t, "event": {"name": "arm", "event_seq": 1}}
             if t == 10:
                 obj = {"timestamp": t, "tseq": t, "event": {"name": "fault", "fault": "x", "event_seq": 3}}
-            robot.sendto(sign_datagram(json.dumps([obj]).encode(), key, "b" * 32), ("127.0.0.1", port))
-            forger.sendto(
+            forger.sendto(  # before the robot's: the listener stops at the robot's 6th, the last datagram sent
                 json.dumps([{"timestamp": 0, "event": {"name": "fault", "fault": "forged"}}]).encode(),
                 ("127.0.0.1", port),
             )
+            robot.sendto(sign_datagram(json.dumps([obj]).encode(), key, "b" * 32), ("127.0.0.1", port))
         robot.close()
         forger.close()
 
@@ -117,12 +117,13 @@ def test_listen_counts_gaps_and_ignores_other_senders() -> None:
         bind="127.0.0.1",
         port=port,
         out=None,
-        duration_s=1.2,
+        duration_s=120.0,  # a hang guard: it ends on the robot's 6th datagram
         summary_every_s=0.5,
         echo=lines.append,
         stale_s=5.0,
         timeout_s=0,
         token=TOKEN,
+        max_datagrams=6,
     )
     t.join()
     assert summary.samples == 4 and summary.events == 2 and summary.faults == ["x"]

@@ -105,6 +105,8 @@ def test_a_blocked_stderr_does_not_freeze_control(tmp_path) -> None:
             replies.append(r["ok"])
             await asyncio.sleep(0.05)
         writes_after_replies = stream.writes
+        # the control loop samples meanwhile: waited for (its 50 samples are an event, not the replies' 0.25 s)
+        await wait_for(lambda: app.sampler.stats.samples > 50)
         c.close()
         loop_wrote = threading.get_ident() in stream.writers
         return flood_s, writes_after_flood, replies, writes_after_replies, loop_wrote
