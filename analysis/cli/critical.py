@@ -587,14 +587,17 @@ def coverage_cmd(
         ),
     ] = "importer",
     inputs: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--inputs",
             metavar="table1,truth",
-            help="With --truth importer: the wheel inputs to check (Table 1 with its default uncertainties; the "
-            "truth's parameters with an uncertainty).",
+            help="With --truth importer: the wheel inputs to check (table1: Table 1 with its default uncertainties; "
+            "truth: the truth's parameters with an uncertainty; default both). --of calibrate also takes exact: the "
+            "truth's held parameters, exact (its default); with table1 or truth its truths' held parameters are "
+            "drawn from Table 1's stated uncertainties.",
+            show_default=False,
         ),
-    ] = "table1,truth",
+    ] = None,
     of: Annotated[
         str,
         typer.Option(
@@ -617,6 +620,8 @@ def coverage_cmd(
     pendulum: the fast model of the verdict process (true parameters, 1 ms timing noise, no importer); ~1 s a series.
 
     --of calibrate: `trials calibrate --fit c,k` per parameter, on ER wheels with k and c drawn, through the importer.
+
+    --of calibrate --inputs: exact (default), the held parameters the truth's; table1, drawn from Table 1's sd.
     """
     from rimless.progress import progress_bar
 
@@ -630,7 +635,7 @@ def coverage_cmd(
     if method == "calibrate":
         if mode != "importer":
             raise ParameterError("--of calibrate runs through the importer only (not with --truth pendulum)")
-        _calibrate_coverage(n, seed, json_out)
+        _calibrate_coverage(n, seed, json_out, inputs)
         return
     if mode == "pendulum":
         from rimless.analysis.validation.coverage import run_coverage
@@ -647,7 +652,7 @@ def coverage_cmd(
     from rimless.analysis import critical_slope
     from rimless.analysis.validation.importer_coverage import INPUTS, TRUTH_MODEL, run_importer_coverage
 
-    chosen = parse_list(inputs, "--inputs", str, choices=INPUTS, unique=True, lower=True)
+    chosen = parse_list(inputs or ",".join(INPUTS), "--inputs", str, choices=INPUTS, unique=True, lower=True)
     with progress_bar("coverage", total=n, json_out=json_out) as bar:
         study = run_importer_coverage(
             n,
@@ -721,42 +726,73 @@ def _print_coverage(out: dict[str, Any], seed: int) -> None:
         )
 
 
-def _calibrate_coverage(n: int, seed: int, json_out: bool) -> None:
-    """``trials coverage --of calibrate``: run the study, print its per-parameter coverage."""
+def _calibrate_coverage(n: int, seed: int, json_out: bool, inputs: str | None = None) -> None:
+    """``trials coverage --of calibrate``: run the study, print its per-parameter coverage per wheel input."""
     from rimless.analysis import calibrate
-    from rimless.analysis.validation.calibrate_coverage import run_calibrate_coverage
+    from rimless.analysis.validation.calibrate_coverage import INPUTS, run_calibrate_coverage
     from rimless.progress import progress_bar
 
+    chosen = parse_list(inputs or "exact", "--inputs", str, choices=INPUTS, unique=True, lower=True)
     with progress_bar("coverage", total=n, json_out=json_out) as bar:
         out = run_calibrate_coverage(
             n,
             seed,
             calibrate,
+            inputs=chosen,
             progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
         )
     if json_out:
         print_json(out)
         return
-    typer.echo(f"truth: {out['truth_model']}; held parameters exact (the data's intervals)")
+    typer.echo(f"truth: {out['truth_model']}")
     typer.echo(
-        f"{out['fitted']} of {out['series']} series fitted ({out['converged']} converged), "
-        f"{out['imports']['trials']} trials, {out['imports']['refused']} refused; {out['wall_s']:.0f} s wall"
+        f"{out['series']} series, {out['imports']['trials']} trials, {out['imports']['refused']} refused; "
+        f"{out['wall_s']:.0f} s wall, {out['cpu_s']:.0f} s CPU"
     )
-    for name, d in out["parameters"].items():
-        if not d["fitted"]:
-            typer.echo(f"  {name}: never fitted")
-            continue
-        lo, hi = d["coverage_ci95"]
+    for name, res in out["inputs"].items():
         typer.echo(
-            f"  {name}: 95 % interval holds the truth in {d['covered']} of {d['fitted']} = {d['coverage']:.1%} "
-            f"({lo:.1%}-{hi:.1%}; goal 90-98 %), median relative error {d['median_relative_error']:+.2%}, "
-            f"median half width {_fmt(d['median_relative_half_width'], '.2%')}, identifiable in {d['identifiable']}"
+            f"wheel input {name}: {res['wheel']}; {res['fitted']} of {out['series']} series fitted "
+            f"({res['converged']} converged)"
         )
-        parts = d.get("median_relative_se") or {}
+        for pname, d in res["parameters"].items():
+            _print_calibrate_parameter(pname, d)
+        for why, k in res["failed"].items():
+            typer.echo(f"  failed in {k} series: {why}")
+
+
+def _print_calibrate_parameter(name: str, d: dict[str, Any]) -> None:
+    """The lines of one parameter of one input of ``trials coverage --of calibrate``."""
+    if not d["fitted"]:
+        typer.echo(f"  {name}: never fitted")
+        return
+    lo, hi = d["coverage_ci95"]
+    held = " (with the held parameters' part)" if d["held_carried"] else ""
+    typer.echo(
+        f"  {name}: 95 % interval{held} holds the truth in {d['covered']} of {d['fitted']} = {d['coverage']:.1%} "
+        f"({lo:.1%}-{hi:.1%}; goal 90-98 %), median relative error {d['median_relative_error']:+.2%}, "
+        f"median half width {_fmt(d['median_relative_half_width'], '.2%')}, identifiable in {d['identifiable']}"
+    )
+    if d["held_carried"]:
+        lo_d, hi_d = d["coverage_data_only_ci95"]
         typer.echo(
-            f"    rms (estimate - truth) / se {_fmt(d.get('rms_z'), '.2f')} (1 when the se is honest); median se: "
-            f"data {_fmt(parts.get('se_model'), '.2%')}, sandwich over trials {_fmt(parts.get('se_sandwich'), '.2%')}, "
-            f"the trials' slopes {_fmt(parts.get('se_slope'), '.2%')}; effective only in {d.get('effective_only')}"
+            f"    the data's interval alone: {d['covered_data_only']} of {d['fitted']} = "
+            f"{d['coverage_data_only']:.1%} ({lo_d:.1%}-{hi_d:.1%}), rms z {_fmt(d.get('rms_z_data_only'), '.2f')}"
         )
-    for why, k in out["failed"].items():
-        typer.echo(f"  failed in {k} series: {why}")
+    parts = d.get("median_relative_se") or {}
+    typer.echo(
+        f"    rms (estimate - truth) / se {_fmt(d.get('rms_z'), '.2f')} (1 when the se is honest); median se: "
+        f"data {_fmt(parts.get('se_model'), '.2%')}, sandwich over trials {_fmt(parts.get('se_sandwich'), '.2%')}, "
+        f"the trials' slopes {_fmt(parts.get('se_slope'), '.2%')}, held parameters {_fmt(parts.get('se_held'), '.2%')}"
+        f"; effective only in {d.get('effective_only')}"
+    )
+    contrib = d.get("median_relative_held_contributions") or {}
+    if contrib:
+        from rimless.sim.model.uncertain import SYMBOLS
+
+        typer.echo(
+            "    median held parts: "
+            + ", ".join(
+                f"{SYMBOLS.get(h, h)} {_fmt(v, '.2%')}"
+                for h, v in sorted(contrib.items(), key=lambda kv: -(kv[1] or 0))
+            )
+        )

@@ -1,19 +1,34 @@
 """Coverage of `rimless.analysis.calibrate`'s per-parameter intervals through the importer.
 
-Each series draws a compliant ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m; Table 1: 2700, 8; the
-rest Table 1's), walks it with the simulator's ER model (`floquet_truth.er_walk`, no slope wander) on
-``trials`` slopes of 2-3.5 deg, each released at its gait's speed times U(0.95, 1.08), writes each walk as a
-Vicon export in a lab drawn per series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it and
-fits ``fit`` (default c and k) with the held parameters at the truth's values, exact (``uncertainty`` 0: the
-intervals are the data's; the held parameters' part is not exercised here). Reported per parameter: how often
-the 95 % interval (``ci95``) holds the truth (Wilson interval), the median relative error, the rms of
-(estimate - truth) / se (``rms_z``: 1 for an honest se), the median parts of the se (the data's, the
-trial-clustered sandwich's and the measured slopes', `rimless.analysis.inference.trial_slopes`), how often the
+Each series draws a compliant ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m; Table 1: 2700, 8), walks
+it with the simulator's ER model (`floquet_truth.er_walk`, no slope wander) on ``trials`` slopes of 2-3.5 deg,
+each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon export in a lab drawn per
+series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it and fits ``fit`` (default c and k)
+with each wheel input of ``inputs`` (`INPUTS`):
+
+- ``exact`` (default): the held parameters at the truth's values, exact (``uncertainty`` 0: the intervals are
+  the data's; the held parameters' part is not exercised). The truth's held parameters are Table 1's.
+- ``table1``: Table 1 with its default uncertainties (`rimless.sim.model.uncertain.DEFAULT_SD`; the user who does
+  not know the wheel), while the truth's held parameters are drawn from those stated uncertainties
+  (`draw_held`: m_H, m, I_c, L0 normal about Table 1 with their default sd; F_c, stated 0 +- 0.2 N at its bound
+  0, half-normal |N(0, 0.2)|; g exact): each interval must then include the held parameters' part
+  (``se_held``, `rimless.analysis.inference.calibrate.held_response`).
+- ``truth``: the truth's parameters as a wheel file would state them, with the default uncertainties at those
+  values (F_c +- 0.2 N): the held part is carried but the held values are right (it should over-cover).
+
+With ``table1`` or ``truth`` among the inputs every series' truth has drawn held parameters (from their own
+random stream, so k, c, the labs and the slopes are those of the ``exact`` run of the same seed). Reported per
+input and parameter: how often the 95 % interval holds the truth (Wilson interval) with the held part
+(``ci95_with_held``, where it was computed) and with the data's alone (``ci95``), the median relative error, the
+rms of (estimate - truth) / se (``rms_z``: 1 for an honest se; with ``se_with_held`` where computed), the median
+parts of the se (the data's, the trial-clustered sandwich's, the measured slopes',
+`rimless.analysis.inference.trial_slopes`, and the held parameters', per held parameter too), how often the
 parameter was called identifiable (or effective only), the optimiser's end states, and every refused import and
 failed fit with its reason.
 
-The truth's dynamics are the calibration's own model (the simulator's ER wheel): this checks the importer,
-the fit and its intervals, not the model's adequacy (`critical_truth` does that for the critical slope).
+The truth's dynamics are the calibration's own model (the simulator's ER wheel, with the drawn guide friction):
+this checks the importer, the fit and its intervals, not the model's adequacy (`critical_truth` does that for
+the critical slope).
 """
 
 from __future__ import annotations
@@ -34,11 +49,28 @@ from rimless.analysis.validation.critical_truth import record
 from rimless.analysis.validation.floquet_truth import er_walk
 from rimless.analysis.validation.importer_coverage import draw_lab
 
-__all__ = ["K_RANGE", "C_RANGE", "WalkedSeries", "run_calibrate_coverage", "walk_and_import"]
+Z95 = 1.959963984540054
+
+__all__ = [
+    "K_RANGE",
+    "C_RANGE",
+    "INPUTS",
+    "HELD_DRAWN",
+    "WalkedSeries",
+    "draw_held",
+    "run_calibrate_coverage",
+    "walk_and_import",
+]
 
 K_RANGE = (1500.0, 4000.0)
 C_RANGE = (2.0, 20.0)
 FIELDS = {"c": "damping_ns_per_m", "k": "stiffness_n_per_m"}
+#: the wheel inputs the calibration can be given (see the module doc); ``exact`` is the default
+INPUTS = ("exact", "table1", "truth")
+#: the truth's held parameters drawn for the ``table1`` and ``truth`` inputs (`draw_held`)
+HELD_DRAWN = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "guide_friction_n")
+#: the stream of the held draws beside the seed (the other draws keep the ``exact`` run's stream)
+HELD_STREAM = 31
 
 
 @dataclass
@@ -93,6 +125,89 @@ def walk_and_import(
     return out
 
 
+def draw_held(rng: np.random.Generator) -> dict[str, float]:
+    """The truth's held parameters (`HELD_DRAWN`) drawn from the uncertainties Table 1 is stated with
+    (`rimless.sim.model.uncertain.default_sd` at Table 1's values): normal about Table 1, except F_c, stated
+    0 +- 0.2 N at its bound 0, drawn half-normal |N(0, sd)|."""
+    from rimless.sim.model.params import WheelParams
+    from rimless.sim.model.uncertain import default_sd
+
+    t1 = WheelParams()
+    out = {}
+    for name in HELD_DRAWN:
+        v = float(getattr(t1, name))
+        d = float(rng.normal(0.0, default_sd(name, v)))
+        out[name] = abs(d) if name == "guide_friction_n" else v + d
+    return out
+
+
+def _user_wheel(name: str, truth: Any) -> Any:
+    """The wheel input ``name`` (`INPUTS`) a user would give for the truth's wheel ``truth``."""
+    from rimless.sim import Wheel
+    from rimless.sim.model.uncertain import UNCERTAIN_FIELDS, default_sd
+
+    if name == "exact":
+        return Wheel(truth, uncertainty={f: 0.0 for f in UNCERTAIN_FIELDS})
+    if name == "table1":
+        return Wheel()
+    return Wheel(truth, uncertainty={f: default_sd(f, float(getattr(truth, f))) for f in UNCERTAIN_FIELDS})
+
+
+def _param_row(pe: Any, t: float) -> dict[str, Any]:
+    """What one estimate says about its truth ``t`` (JSON-ready): the interval with the held part (``ci95``
+    widened by ``se_held`` where computed) and the data's alone, z with each, and the se's parts."""
+    lo, hi = pe.ci95
+    finite = math.isfinite(pe.se)
+    se_all = pe.se_with_held if pe.se_with_held is not None else pe.se
+    ci_all = [pe.value - Z95 * se_all, pe.value + Z95 * se_all] if finite else None
+    return {
+        "value": pe.value,
+        "se": pe.se if finite else None,
+        "ci95": [lo, hi] if finite else None,
+        "covered_data": bool(finite and lo <= t <= hi),
+        "se_with_held": pe.se_with_held,
+        "ci95_with_held": ci_all if pe.se_held is not None else None,
+        "covered": bool(ci_all is not None and ci_all[0] <= t <= ci_all[1]),
+        "relative_error": pe.value / t - 1.0,
+        "identifiable": bool(pe.identifiable),
+        "effective_only": bool(pe.effective_only),
+        "z": (pe.value - t) / se_all if finite and se_all > 0 else None,
+        "z_data": (pe.value - t) / pe.se if finite and pe.se > 0 else None,
+        "se_model": pe.se_model,
+        "se_sandwich": pe.se_sandwich,
+        "se_slope": pe.se_slope,
+        "se_held": pe.se_held,
+        "held_contributions": dict(pe.held_contributions),
+    }
+
+
+def _fit_row(calibrate: Callable[..., Any], loaded: list[Any], names: list[str], fit: tuple[str, ...], wheel: Any,
+             truth: dict[str, float]) -> dict[str, Any]:  # fmt: skip
+    """One calibration of a series' trials with the wheel input ``wheel``: its optimiser's end and, per fitted
+    parameter, `_param_row`; or ``failed`` with the reason."""
+    from rimless.errors import RimlessError
+
+    try:
+        if len(loaded) < 2:
+            raise RimlessError(f"{len(loaded)} trial(s) imported")
+        res = calibrate(loaded, fit=fit, wheel=wheel, names=names)
+    except RimlessError as err:
+        return {"failed": f"{type(err).__name__}: {str(err).splitlines()[0]}"}
+    row: dict[str, Any] = {
+        "converged": bool(res.converged),
+        "optimizer": {
+            k: res.optimizer.get(k)
+            for k in ("status", "message", "best_start", "several_minima", "polish", "above_optimum_chi2")
+        },
+        "params": {},
+    }
+    for pe in res.params:
+        key = next((n for n, f in FIELDS.items() if f == pe.field), pe.name)
+        if key in truth:
+            row["params"][key] = _param_row(pe, truth[key])
+    return row
+
+
 def run_calibrate_coverage(
     n_series: int,
     seed: int,
@@ -101,26 +216,32 @@ def run_calibrate_coverage(
     fit: Sequence[str] = ("c", "k"),
     trials: int = 4,
     steps: int = 10,
+    inputs: Sequence[str] = ("exact",),
     progress: Callable[[int, str], None] | None = None,
 ) -> dict[str, Any]:
     """``n_series`` series; ``calibrate(trials, fit=..., wheel=..., names=...)`` is the fit (the public
-    `rimless.analysis.calibrate`). Returns the JSON-ready summary with ``per_series``."""
-    from rimless.errors import RimlessError
-    from rimless.sim import Wheel
+    `rimless.analysis.calibrate`), called once per series and wheel input of ``inputs`` (`INPUTS`). Returns the
+    JSON-ready summary: the first input's figures at the top level (the keys as before), each input's under
+    ``inputs``, and ``per_series``."""
     from rimless.sim.model.params import WheelParams
-    from rimless.sim.model.uncertain import UNCERTAIN_FIELDS
 
     bad = [f for f in fit if f not in FIELDS]
     if bad or not fit:
         raise ValueError(f"fit takes {', '.join(FIELDS)}, got {list(fit)}")
+    bad = [i for i in inputs if i not in INPUTS]
+    if bad or not inputs or len(set(inputs)) != len(inputs):
+        raise ValueError(f"inputs must be distinct among {', '.join(INPUTS)}, got {list(inputs)}")
+    drawn = any(i != "exact" for i in inputs)
     rng = np.random.default_rng(seed)
+    held_rng = np.random.default_rng((seed, HELD_STREAM))
     cpu, wall = time.process_time(), time.perf_counter()
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix=f"rimless-calcov-{os.getpid()}-") as tmp:
         for i in range(n_series):
+            held = draw_held(held_rng) if drawn else {}
             truth = WheelParams(
                 stiffness_n_per_m=float(rng.uniform(*K_RANGE)), damping_ns_per_m=float(rng.uniform(*C_RANGE))
-            )
+            ).replace(**held)
             lab = draw_lab(rng)
             if progress:
                 progress(i, "walking and writing")
@@ -130,125 +251,148 @@ def run_calibrate_coverage(
                     progress(i, "importing")
 
             series = walk_and_import(truth, lab, rng, Path(tmp), f"s{i}_", trials, steps, importing=importing)
-            paths, refused, stalled, loaded, names = (
-                series.paths,
-                series.refused,
-                series.stalled,
-                series.loaded,
-                series.names,
-            )
             row: dict[str, Any] = {
                 "truth": {n: getattr(truth, FIELDS[n]) for n in fit},
+                "truth_held": {n: float(getattr(truth, n)) for n in HELD_DRAWN},
                 "lab": {"up": lab.up, "heading_deg": lab.heading_deg, "markers": lab.markers},
-                "trials": len(paths),
-                "refused": refused,
-                "stalled_walks": stalled,
+                "trials": len(series.paths),
+                "refused": series.refused,
+                "stalled_walks": series.stalled,
+                "inputs": {},
             }
-            if progress:
-                progress(i, "calibrating")
-            exact = Wheel(truth, uncertainty={f: 0.0 for f in UNCERTAIN_FIELDS})
-            try:
-                if len(loaded) < 2:
-                    raise RimlessError(f"{len(loaded)} trial(s) imported")
-                res = calibrate(loaded, fit=tuple(fit), wheel=exact, names=names)
-            except RimlessError as err:
-                row["failed"] = f"{type(err).__name__}: {str(err).splitlines()[0]}"
-                rows.append(row)
-                continue
-            row["converged"] = bool(res.converged)
-            row["optimizer"] = {
-                k: res.optimizer.get(k)
-                for k in ("status", "message", "best_start", "several_minima", "polish", "above_optimum_chi2")
-            }
-            row["params"] = {}
-            for pe in res.params:
-                key = next((n for n, f in FIELDS.items() if f == pe.field), pe.name)
-                t = row["truth"].get(key)
-                if t is None:
-                    continue
-                lo, hi = pe.ci95
-                finite = math.isfinite(pe.se)
-                row["params"][key] = {
-                    "value": pe.value,
-                    "se": pe.se if finite else None,
-                    "ci95": [lo, hi] if finite else None,
-                    "covered": bool(finite and lo <= t <= hi),
-                    "relative_error": pe.value / t - 1.0,
-                    "identifiable": bool(pe.identifiable),
-                    "effective_only": bool(pe.effective_only),
-                    "z": (pe.value - t) / pe.se if finite and pe.se > 0 else None,
-                    "se_model": pe.se_model,
-                    "se_sandwich": pe.se_sandwich,
-                    "se_slope": pe.se_slope,
-                }
+            for name in inputs:
+                if progress:
+                    progress(i, f"calibrating, {name} wheel")
+                row["inputs"][name] = _fit_row(
+                    calibrate, series.loaded, series.names, tuple(fit), _user_wheel(name, truth), row["truth"]
+                )
+            row.update(row["inputs"][inputs[0]])  # the first input's fit at the row's top level (as before)
             rows.append(row)
             if progress:
                 progress(i + 1, "done")
-    return _summary(rows, tuple(fit), seed, trials, steps, time.process_time() - cpu, time.perf_counter() - wall)
+    return _summary(
+        rows, tuple(fit), tuple(inputs), seed, trials, steps, time.process_time() - cpu, time.perf_counter() - wall
+    )
 
 
-def _rel(got: list[dict[str, Any]], rows: list[dict[str, Any]], name: str, part: str) -> list[float]:
+def _rel(got: list[dict[str, Any]], truths: list[float], part: str) -> list[float]:
     """Each series' ``part`` of the standard error over its truth (the finite ones)."""
     out = []
-    for g, r in zip(got, rows):
+    for g, t in zip(got, truths):
         v = g.get(part)
         if v is not None and math.isfinite(v):
-            out.append(v / r["truth"][name])
+            out.append(v / t)
     return out
 
 
-def _summary(
-    rows: list[dict[str, Any]], fit: tuple[str, ...], seed: int, trials: int, steps: int, cpu_s: float, wall_s: float
-) -> dict[str, Any]:
-    per: dict[str, Any] = {}
-    fitted = [r for r in rows if "params" in r]
-    for name in fit:
-        rows_of = [r for r in fitted if name in r["params"]]
-        got = [r["params"][name] for r in rows_of]
-        k = sum(g["covered"] for g in got)
-        lo, hi = wilson_interval(k, len(got))
-        errs = [g["relative_error"] for g in got]
-        per[name] = {
-            "fitted": len(got),
-            "covered": k,
-            "coverage": k / len(got) if got else None,
-            "coverage_ci95": [lo, hi] if got else None,
-            "identifiable": sum(g["identifiable"] for g in got),
-            "median_relative_error": float(np.median(errs)) if errs else None,
-            "median_abs_relative_error": float(np.median(np.abs(errs))) if errs else None,
-            "rms_z": (
-                float(np.sqrt(np.mean(np.square(zs))))
-                if (zs := [g["z"] for g in got if g.get("z") is not None])
-                else None
-            ),
-            "median_relative_se": {
-                part: float(np.median(v)) if (v := _rel(got, rows_of, name, part)) else None
-                for part in ("se_model", "se_sandwich", "se_slope")
-            },
-            "effective_only": sum(bool(g.get("effective_only")) for g in got),
-            "median_relative_half_width": (
-                float(np.median([(g["ci95"][1] - g["ci95"][0]) / 2 / g["value"] for g in got if g["ci95"]]))
-                if any(g["ci95"] for g in got)
-                else None
-            ),
-        }
+def _median(v: list[float]) -> float | None:
+    return float(np.median(v)) if v else None
+
+
+def _rms(v: list[float]) -> float | None:
+    return float(np.sqrt(np.mean(np.square(v)))) if v else None
+
+
+def _per_parameter(rows: list[dict[str, Any]], fits: list[dict[str, Any]], name: str) -> dict[str, Any]:
+    """One parameter's figures over the series of one input (``fits``: each series' fit row, beside ``rows``)."""
+    pairs = [(r, f["params"][name]) for r, f in zip(rows, fits) if name in f.get("params", {})]
+    got = [g for _, g in pairs]
+    truths = [r["truth"][name] for r, _ in pairs]
+    k = sum(g["covered"] for g in got)
+    k_data = sum(g["covered_data"] for g in got)
+    lo, hi = wilson_interval(k, len(got))
+    lo_d, hi_d = wilson_interval(k_data, len(got))
+    errs = [g["relative_error"] for g in got]
+    held_names = sorted({h for g in got for h in g["held_contributions"]})
+    return {
+        "fitted": len(got),
+        "covered": k,
+        "coverage": k / len(got) if got else None,
+        "coverage_ci95": [lo, hi] if got else None,
+        "covered_data_only": k_data,
+        "coverage_data_only": k_data / len(got) if got else None,
+        "coverage_data_only_ci95": [lo_d, hi_d] if got else None,
+        "held_carried": sum(g["se_held"] is not None for g in got),
+        "identifiable": sum(g["identifiable"] for g in got),
+        "median_relative_error": _median(errs),
+        "median_abs_relative_error": _median([abs(e) for e in errs]),
+        "rms_z": _rms([g["z"] for g in got if g.get("z") is not None]),
+        "rms_z_data_only": _rms([g["z_data"] for g in got if g.get("z_data") is not None]),
+        "median_relative_se": {
+            part: _median(_rel(got, truths, part)) for part in ("se_model", "se_sandwich", "se_slope", "se_held")
+        },
+        "median_relative_held_contributions": {
+            h: _median([g["held_contributions"][h] / t for g, t in zip(got, truths) if h in g["held_contributions"]])
+            for h in held_names
+        },
+        "effective_only": sum(bool(g.get("effective_only")) for g in got),
+        "median_relative_half_width": _median(
+            [((c := g["ci95_with_held"] or g["ci95"])[1] - c[0]) / 2 / g["value"] for g in got if g["ci95"]]
+        ),
+    }
+
+
+def _per_input(rows: list[dict[str, Any]], name: str, fit: tuple[str, ...]) -> dict[str, Any]:
+    """One wheel input's figures: per parameter, the fits' end states and the failures."""
+    fits = [r["inputs"][name] for r in rows]
+    fitted = [f for f in fits if "params" in f]
     statuses: dict[str, int] = {}
-    for r in fitted:
-        key = str((r.get("optimizer") or {}).get("status"))
+    for f in fitted:
+        key = str((f.get("optimizer") or {}).get("status"))
         statuses[key] = statuses.get(key, 0) + 1
     failed: dict[str, int] = {}
-    for r in rows:
-        if "failed" in r:
-            failed[r["failed"][:80]] = failed.get(r["failed"][:80], 0) + 1
+    for f in fits:
+        if "failed" in f:
+            failed[f["failed"][:80]] = failed.get(f["failed"][:80], 0) + 1
     return {
-        "truth_model": "the simulator's ER wheel (k, c drawn), recorded as Vicon exports in drawn labs and imported",
-        "fit": list(fit),
-        "series": len(rows),
         "fitted": len(fitted),
-        "converged": sum(bool(r.get("converged")) for r in fitted),
-        "parameters": per,
+        "converged": sum(bool(f.get("converged")) for f in fitted),
+        "parameters": {n: _per_parameter(rows, fits, n) for n in fit},
         "optimizer_status": statuses,
         "failed": failed,
+    }
+
+
+#: what each input tells the calibration (the JSON's ``inputs.<name>.wheel``)
+INPUT_MEANING = {
+    "exact": "the truth's held parameters, exact (the data's intervals)",
+    "table1": "Table 1 with its default uncertainties (the truth's held parameters drawn from them)",
+    "truth": "the truth's held parameters with the default uncertainties at their values",
+}
+
+
+def _summary(
+    rows: list[dict[str, Any]],
+    fit: tuple[str, ...],
+    inputs: tuple[str, ...],
+    seed: int,
+    trials: int,
+    steps: int,
+    cpu_s: float,
+    wall_s: float,
+) -> dict[str, Any]:
+    per = {name: {"wheel": INPUT_MEANING[name], **_per_input(rows, name, fit)} for name in inputs}
+    first = per[inputs[0]]
+    drawn = any(i != "exact" for i in inputs)
+    return {
+        "truth_model": "the simulator's ER wheel (k, c drawn"
+        + ("; m_H, m, I_c, L0 and F_c drawn from Table 1's stated uncertainties" if drawn else "; the rest Table 1's")
+        + "), recorded as Vicon exports in drawn labs and imported",
+        "fit": list(fit),
+        "input": inputs[0],
+        "series": len(rows),
+        **{k: first[k] for k in ("fitted", "converged", "parameters", "optimizer_status", "failed")},
+        "inputs": per,
+        "draws": {
+            "k_n_per_m": list(K_RANGE),
+            "c_ns_per_m": list(C_RANGE),
+            "held": (
+                "normal about Table 1 with the default sd (m_H, m 2 %, I_c 10 %, L0 1 mm); F_c half-normal, sd "
+                "0.2 N; g exact"
+                if drawn
+                else "Table 1's, exact"
+            ),
+        },
         "imports": {
             "trials": sum(r["trials"] for r in rows),
             "refused": sum(len(r["refused"]) for r in rows),

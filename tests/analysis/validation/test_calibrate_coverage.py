@@ -37,3 +37,117 @@ def test_one_series_is_drawn_away_from_table1_imported_and_fitted() -> None:
     assert sum(out["optimizer_status"].values()) == 1
     r = runner.invoke(app, ["trials", "coverage", "--of", "nothing"])
     assert r.exit_code == 2 and "--of" in r.output
+
+
+# --inputs: the held parameters' part (issue 31, "What is held, is carried")
+
+#: Table 1 (the paper's) and the stated default 1-sigma uncertainties of docs/trials.md "The wheel is an input",
+#: typed here from the docs, not read from the code under test
+TABLE1 = {"hub_mass_kg": 1.892, "leg_mass_kg": 0.0378, "inertia_kg_m2": 0.036, "leg_length_m": 0.237}
+STATED_SD = {
+    "hub_mass_kg": 0.02 * 1.892,
+    "leg_mass_kg": 0.02 * 0.0378,
+    "inertia_kg_m2": 0.1 * 0.036,
+    "leg_length_m": 1e-3,
+}
+FRICTION_SD_N = 0.2
+
+
+def test_held_draws_follow_the_stated_uncertainties() -> None:
+    """The truths' held parameters: normal about Table 1 with the stated sd; F_c half-normal (mean sd sqrt(2/pi))."""
+    import numpy as np
+
+    from rimless.analysis.validation.calibrate_coverage import draw_held
+
+    rng = np.random.default_rng(7)
+    draws = [draw_held(rng) for _ in range(4000)]
+    for name, t1 in TABLE1.items():
+        v = np.array([d[name] for d in draws])
+        sd = STATED_SD[name]
+        assert abs(v.mean() - t1) < 4 * sd / np.sqrt(v.size)  # 4 standard errors of the mean
+        assert v.std(ddof=1) == pytest.approx(sd, rel=0.06)  # the sd's standard error is 1.1 % here
+    f = np.array([d["guide_friction_n"] for d in draws])
+    assert f.min() >= 0.0
+    assert f.mean() == pytest.approx(FRICTION_SD_N * np.sqrt(2 / np.pi), rel=0.05)
+    assert np.sqrt(np.mean(f**2)) == pytest.approx(FRICTION_SD_N, rel=0.05)
+
+
+def test_table1_input_carries_the_held_part_into_each_interval() -> None:
+    """One series with ``inputs=("exact", "table1")`` (the real calibration): the truth's held parameters are drawn
+    (not Table 1's), the exact input is told them exactly and carries nothing, the table1 input is told Table 1
+    with its stated sd and carries every held parameter with sd > 0 (not g: exact; not c, k: fitted) into an
+    interval value +- 1.96 hypot(se, se_held)."""
+    import math
+
+    from rimless.analysis import calibrate
+    from rimless.analysis.validation.calibrate_coverage import run_calibrate_coverage
+
+    wheels: dict[str, object] = {}
+
+    def recording(trials, *, fit, wheel, names):  # type: ignore[no-untyped-def]
+        wheels["exact" if not wheel.input.held() else "table1"] = wheel
+        return calibrate(trials, fit=fit, wheel=wheel, names=names)
+
+    out = run_calibrate_coverage(1, 3, recording, inputs=("exact", "table1"), trials=2, steps=8)
+    (row,) = out["per_series"]
+    held = row["truth_held"]
+    for name, t1 in TABLE1.items():
+        assert held[name] != t1 and abs(held[name] - t1) < 5 * STATED_SD[name]
+    assert held["guide_friction_n"] > 0
+    exact, table1 = wheels["exact"], wheels["table1"]
+    for name in TABLE1:
+        assert getattr(exact.params, name) == held[name] and exact.uncertainty[name] == 0  # type: ignore[attr-defined]
+        assert getattr(table1.params, name) == TABLE1[name]  # type: ignore[attr-defined]
+        assert table1.uncertainty[name] == pytest.approx(STATED_SD[name])  # type: ignore[attr-defined]
+    assert table1.uncertainty["guide_friction_n"] == pytest.approx(FRICTION_SD_N)  # type: ignore[attr-defined]
+    assert set(out["inputs"]) == {"exact", "table1"} and out["input"] == "exact"
+    for name in ("c", "k"):
+        e, p = row["inputs"]["exact"]["params"][name], row["inputs"]["table1"]["params"][name]
+        assert e["se_held"] is None and e["covered"] == e["covered_data"]  # nothing held with an sd: as before
+        assert set(p["held_contributions"]) == {*TABLE1, "guide_friction_n"}
+        assert p["se_held"] > 0
+        assert p["se_held"] == pytest.approx(math.sqrt(sum(v * v for v in p["held_contributions"].values())))
+        half = 1.959963984540054 * math.hypot(p["se"], p["se_held"])
+        assert p["ci95_with_held"] == pytest.approx([p["value"] - half, p["value"] + half])
+        truth = row["truth"][name]
+        assert p["covered"] == (abs(p["value"] - truth) <= half)
+        assert p["covered_data"] == (p["ci95"][0] <= truth <= p["ci95"][1])
+        d = out["inputs"]["table1"]["parameters"][name]
+        assert d["held_carried"] == 1 and d["covered"] == int(p["covered"])
+        assert d["median_relative_se"]["se_held"] == pytest.approx(p["se_held"] / truth)
+
+
+def test_inputs_reach_the_study_from_the_cli(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--inputs` is passed through as given (default exact for --of calibrate); a bad one is refused, exit 2."""
+    import rimless.analysis.validation.calibrate_coverage as cc
+    from rimless.cli import app
+
+    seen: list[list[str]] = []
+
+    def fake(n, seed, calibrate, *, inputs, progress):  # type: ignore[no-untyped-def]
+        seen.append(list(inputs))
+        return {"inputs": {}, "n": n}
+
+    monkeypatch.setattr(cc, "run_calibrate_coverage", fake)
+    for args, want in ((["--inputs", "table1,exact"], ["table1", "exact"]), ([], ["exact"])):
+        r = runner.invoke(app, ["trials", "coverage", "--of", "calibrate", "--series", "2", "--json", *args])
+        assert r.exit_code == 0, r.output
+        assert seen[-1] == want and json.loads(r.stdout)["n"] == 2
+    r = runner.invoke(app, ["trials", "coverage", "--of", "calibrate", "--inputs", "table2"])
+    assert r.exit_code == 2 and "--inputs" in r.output
+
+
+def test_truth_input_states_the_truths_values_with_the_default_uncertainties() -> None:
+    """``truth``: the truth's held values, each with the stated sd at that value (relative ones scale with it)."""
+    from rimless.analysis.validation.calibrate_coverage import _user_wheel
+    from rimless.sim.model.params import WheelParams
+
+    held = {"hub_mass_kg": 2.0, "leg_mass_kg": 0.04, "inertia_kg_m2": 0.03, "leg_length_m": 0.24}
+    w = _user_wheel("truth", WheelParams(guide_friction_n=0.3, **held))
+    for name, v in held.items():
+        assert getattr(w.params, name) == v
+    assert w.uncertainty["hub_mass_kg"] == pytest.approx(0.02 * 2.0)
+    assert w.uncertainty["inertia_kg_m2"] == pytest.approx(0.1 * 0.03)
+    assert w.uncertainty["leg_length_m"] == pytest.approx(1e-3)
+    assert w.params.guide_friction_n == 0.3 and w.uncertainty["guide_friction_n"] == pytest.approx(FRICTION_SD_N)
+    assert w.uncertainty["gravity_m_s2"] == 0.0
