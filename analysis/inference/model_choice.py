@@ -30,7 +30,10 @@ trial-clustered sandwich set it (a variance estimated from that many trials' sca
 is supported when p < `MODEL_CHOICE_P` and the simpler fit converged.
 
 Measured on the model's own truth (docs/trials.md, `rimless trials adequacy-coverage --scenario
-choice-null,choice-friction`): the false claims and the power with their Wilson intervals.
+choice-null,choice-friction --series 30 --seed 0`): friction claimed on 0 of 30 frictionless series (the plain
+likelihood ratio on the same fits: 8 of 30) and found on 2 of 30 with F_c 0.1-0.6 N (plain: 20 of 30); phi came
+from the slopes' part in 56 of 60 series (median 46 and 91): with four trials, F_c trades with the slopes' errors,
+and the test is as strong as the stated slope uncertainty lets it be.
 """
 
 from __future__ import annotations
