@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from rimless.analysis.inference.identifiability import least_squares_report, sandwich_se
+from rimless.analysis.inference.model_choice import EXTRA_PARAMETERS, MODEL_CHOICE_P  # noqa: F401 (re-exported)
 from rimless.analysis.io.trial import ALPHA_RAD
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
@@ -415,7 +416,8 @@ class CalibrationResult:
     parameters: list[dict[str, Any]] | None = None
     #: goodness of fit against the recording's own noise (`rimless.analysis.inference.adequacy`)
     adequacy: dict[str, Any] | None = None
-    #: per extra parameter (`EXTRA_PARAMETERS`): the likelihood-ratio test against the fit without it
+    #: per extra parameter (`EXTRA_PARAMETERS`): the quasi-likelihood test against the fit without it
+    #: (`rimless.analysis.inference.model_choice`)
     model_choice: dict[str, Any] | None = None
 
     @property
@@ -1143,7 +1145,8 @@ def calibrate(
     until converged or ``max_rounds`` rounds of `MAX_NFEV` evaluations (``converged`` False when the kept one
     stopped so, and no parameter is identifiable). Then the model's adequacy against the recording's noise
     (`rimless.analysis.inference.adequacy`) and, for an extra parameter (`EXTRA_PARAMETERS`), the
-    likelihood-ratio test against the fit without it (`_model_choice`); `_judge` turns their verdicts into
+    quasi-likelihood test against the fit without it (`_model_choice`, its dispersion from the estimate's carried
+    standard error); `_judge` turns their verdicts into
     each estimate's ``identifiable`` / ``effective_only``. ``progress(n)`` is called after simulations with the running count. ``prior``: leg-test
     priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
     ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
@@ -1247,8 +1250,8 @@ def calibrate(
     )  # a leg test measured c or F_c: no ridge to flag
     residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])
-    choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds)
     fits = _adequacy(obj, u, moved)
+    choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds, estimates)
     _judge(estimates, fits, choice, fvd)
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
     used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
@@ -1406,10 +1409,6 @@ def _set_sigmas(sig: dict[str, float], rows: Sequence[_RmsRow]) -> None:
         sig["h"] = max(float(np.sqrt(np.mean(np.square(th)))), 5e-5)
 
 
-#: extra parameters: each is claimed only when the likelihood-ratio test supports it over the fit without it
-#: (held at the wheel's value, 0 for friction), with the reason it is extra
-EXTRA_PARAMETERS = {"guide_friction_n": "a second loss beside the damper (Coulomb friction in the guides)"}
-MODEL_CHOICE_P = 0.01  # the likelihood-ratio test's p-value below which an extra parameter is supported
 SPREAD_FACTORS = (0.7, 1.4)  # spread starts: each global at these times its start value (alternating)
 #: a further start whose cost after one round (`MAX_NFEV` evaluations) is above this times the first start's final
 #: cost is not followed further (reported as stopped on its budget, ``abandoned``): it is in another valley
@@ -1539,15 +1538,20 @@ def _span_minima(optimizer: dict[str, Any], estimates: list[ParamEstimate]) -> N
 
 
 def _model_choice(
-    obj: _Objective, u: np.ndarray, fit: Sequence[str], bounds: tuple[np.ndarray, np.ndarray], max_rounds: int
+    obj: _Objective,
+    u: np.ndarray,
+    fit: Sequence[str],
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_rounds: int,
+    estimates: Sequence[ParamEstimate],
 ) -> dict[str, Any] | None:
     """Per extra parameter fitted beside others (`EXTRA_PARAMETERS`): the fit solved again without it (held at
-    the wheel's value; warm, from the solution, the same sigmas), and the likelihood-ratio test: delta chi^2 =
-    chi^2 without - chi^2 with, on the residuals scaled by the solution's sigmas (the CoM block's inflated for
-    its correlation: its effective number of samples). A force on its bound 0 under the simpler model: the
-    null distribution is half chi^2_0, half chi^2_1 (p halved). Also delta AIC = delta chi^2 - 2. None when no
-    extra parameter is fitted beside another."""
-    from scipy.stats import chi2 as chi2_dist
+    the wheel's value; warm, from the solution, the same sigmas: the CoM block's inflated for its correlation)
+    and `rimless.analysis.inference.model_choice`'s quasi-likelihood test of delta chi^2 = chi^2 without -
+    chi^2 with, scaled by the dispersion the calibration carries in that parameter's direction (its ``se`` over
+    its ``se_model``, squared: slopes, trial scatter, held parameters). None when no extra parameter is fitted
+    beside another."""
+    from rimless.analysis.inference.model_choice import choice_row, dispersion
 
     extras = [n for n in fit if n in EXTRA_PARAMETERS and len(fit) > 1]
     if not extras:
@@ -1564,37 +1568,18 @@ def _model_choice(
         obj2.sig = dict(obj.sig)
         sel = np.concatenate([keep, np.arange(n_g, u.size)]).astype(int)
         r = obj2.solve(u[sel], bounds[0][sel], bounds[1][sel], max_rounds)
-        cost_red = obj2.cost(r.x)
-        delta = max(cost_red - cost_full, 0.0)
-        held_at = float(getattr(obj.glob.base, FIT_FIELDS[name][0]))
-        boundary = name == "guide_friction_n" and held_at == 0.0
-        p = float(chi2_dist.sf(delta, 1)) * (0.5 if boundary else 1.0)
-        supported = bool(p < MODEL_CHOICE_P and r.status > 0)
-        why = (
-            f"supported over the fit without it: likelihood ratio delta chi^2 = {delta:.3g}, p = {p:.2g}"
-            if supported
-            else (
-                f"not supported over the fit without it ({name} held at {held_at:g}): delta chi^2 = {delta:.3g}, "
-                f"p = {p:.2g} >= {MODEL_CHOICE_P:g}"
-                if r.status > 0
-                else "the fit without it did not converge: the test cannot be made"
-            )
+        e = next(e for e in estimates if e.name == name)
+        disp = dispersion(e.se_model, e.se_slope, e.se_sandwich, e.se_held, obj.n_t)
+        out[name] = choice_row(
+            name,
+            simpler,
+            float(getattr(obj.glob.base, FIT_FIELDS[name][0])),
+            cost_full,
+            obj2.cost(r.x),
+            bool(r.status > 0),
+            {n: float(v) for n, v in zip(simpler, obj2.unpack(r.x)[0])},
+            disp,
         )
-        out[name] = {
-            "why_extra": EXTRA_PARAMETERS[name],
-            "simpler_fit": simpler,
-            "held_at": held_at,
-            "chi2_with": cost_full,
-            "chi2_without": cost_red,
-            "delta_chi2": delta,
-            "p_value": p,
-            "delta_aic": delta - 2.0,
-            "boundary": boundary,
-            "supported": supported,
-            "threshold_p": MODEL_CHOICE_P,
-            "without": {n: float(v) for n, v in zip(simpler, obj2.unpack(r.x)[0])},
-            "statement": why,
-        }
     return out
 
 
@@ -1654,9 +1639,10 @@ def _judge(
     fvd: dict[str, Any] | None,
 ) -> None:
     """The verdicts that no single estimate's interval shows: a model that does not fit (`_adequacy`) makes every
-    parameter effective only; an extra parameter the likelihood-ratio test does not support is not identifiable
-    (the reason given; the other parameters' values of the fit without it make the calibrated model); c and
-    guide friction on a ridge (`friction_vs_damping`) are effective only (their combination is fitted, not each). None of these ever makes a parameter identifiable."""
+    parameter effective only; an extra parameter the quasi-likelihood test (`_model_choice`) does not support is
+    not identifiable (the reason given; the other parameters' values of the fit without it make the calibrated
+    model); c and guide friction on a ridge (`friction_vs_damping`) are effective only (their combination is
+    fitted, not each). None of these ever makes a parameter identifiable."""
     if not fits["fits"]:
         for e in estimates:
             if e.identifiable or e.effective_only:

@@ -212,7 +212,9 @@ def test_friction_on_a_frictionless_wheel_is_never_identifiable():
     _consistent(s)
     f = next(p for p in s["params"] if p["name"] == "guide_friction_n")
     assert f["identifiable"] is False and f["note"]
-    assert "guide_friction_n" in s["model_choice"]
+    mc = s["model_choice"]["guide_friction_n"]  # the quasi-likelihood test: its statistic and dispersion stated
+    assert mc["dispersion"] >= 1.0 and mc["statistic"] == pytest.approx(mc["delta_chi2"] / mc["dispersion"])
+    assert f"dispersion {mc['dispersion']:.3g}" in mc["statement"] and 0.0 <= mc["p_value"] <= 1.0
 
 
 @pytest.mark.slow

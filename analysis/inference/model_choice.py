@@ -1,0 +1,148 @@
+"""Model choice of a calibration: is an extra parameter (guide friction beside c) supported over the fit without it?
+
+The calibration (`rimless.analysis.inference.calibrate`) solves the fit again without the extra parameter (held at
+the wheel's value, 0 for friction; warm, the same residual sigmas) and hands over delta chi^2 = chi^2 without -
+chi^2 with, on its residuals scaled by the solution's sigmas. Against chi^2_1 that likelihood-ratio statistic
+assumes the scaled residuals are independent with unit variance. They are not: each trial's residuals share the
+error of its measured slope (which shifts all its periods together, as a constant loss per step does) and the
+imported CoM height and impact times carry correlated errors, so delta chi^2 is larger than chi^2_1 on a wheel
+without friction (7 of 30 false claims at p < 0.01 on the model's own truth, `rimless trials adequacy-coverage`).
+
+The test here is a **quasi-likelihood** test: the statistic is scaled by the dispersion the data show in the
+direction of the extra parameter,
+
+    F = delta chi^2 / phi,   phi = (se / se_model)^2 (at least 1),
+
+se_model the parameter's standard error from the Jacobian with the block sigmas (independent residuals, the
+model right: the one the likelihood ratio assumes; in the linear regime delta chi^2 = (estimate / se_model)^2)
+and se the standard error the calibration carries (`dispersion`): the larger of the model's with each trial's
+slope uncertainty in quadrature and the trial-clustered sandwich (within-trial correlation and model mismatch,
+seen through the trials' scatter), with the held parameters' part in quadrature when it was computed. So F is,
+in the linear regime, (estimate / se)^2: the test and the reported interval agree, and the test carries what
+the interval carries. phi is the variance-inflation factor of the misspecified likelihood ratio for one
+parameter (Kent 1982: under misspecification delta chi^2 tends to phi chi^2_1 with phi the ratio of the
+sandwich variance to the model's), with the slopes' and held parameters' stated uncertainties added.
+
+Reference distribution: F(1, nu) with nu the degrees of freedom of the estimate that set phi: infinite
+(chi^2_1) when it came from the stated slope or held-parameter uncertainties or the model, n_trials - 1 when the
+trial-clustered sandwich set it (a variance estimated from that many trials' scatter). On the bound (a force at
+0 under the simpler model) the null is half the point mass at 0 and half F(1, nu): p halved. The extra parameter
+is supported when p < `MODEL_CHOICE_P` and the simpler fit converged.
+
+Measured on the model's own truth (docs/trials.md, `rimless trials adequacy-coverage --scenario
+choice-null,choice-friction --series 30 --seed 0`): friction claimed on 0 of 30 frictionless series (the plain
+likelihood ratio on the same fits: 8 of 30) and found on 2 of 30 with F_c 0.1-0.6 N (plain: 20 of 30); phi came
+from the slopes' part in 56 of 60 series (median 46 and 91): with four trials, F_c trades with the slopes' errors,
+and the test is as strong as the stated slope uncertainty lets it be.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+#: extra parameters: each is claimed only when the quasi-likelihood test supports it over the fit without it
+#: (held at the wheel's value, 0 for friction), with the reason it is extra
+EXTRA_PARAMETERS = {"guide_friction_n": "a second loss beside the damper (Coulomb friction in the guides)"}
+MODEL_CHOICE_P = 0.01  # the test's p-value below which an extra parameter is supported
+TEST_NAME = "quasi-likelihood ratio: F = delta chi^2 / dispersion against F(1, nu)"
+
+
+def dispersion(
+    se_model: float,
+    se_slope: float = math.nan,
+    se_sandwich: float = math.nan,
+    se_held: float | None = None,
+    n_trials: int = 0,
+) -> dict[str, Any]:
+    """phi = (se / se_model)^2, at least 1, with se the carried standard error: max(hypot(se_model, se_slope),
+    se_sandwich), with ``se_held`` in quadrature (any unit, the same for all). Returns ``dispersion`` (phi),
+    ``source`` (what set it: "model", "slopes", "trial scatter", "held parameters"), ``dof`` (nu: None for
+    infinite, n_trials - 1 for the trial scatter) and the parts. A missing or non-finite part is left out; phi is
+    1 (the plain likelihood ratio) when se_model is not finite and positive."""
+    parts = {"se_model": se_model, "se_slope": se_slope, "se_sandwich": se_sandwich, "se_held": se_held}
+    out: dict[str, Any] = {"dispersion": 1.0, "source": "model", "dof": None, "parts": parts}
+    if not (math.isfinite(se_model) and se_model > 0):
+        out["source"] = "model (no finite standard error: not scaled)"
+        return out
+    with_slopes = math.hypot(se_model, se_slope) if math.isfinite(se_slope) else se_model
+    se, source, dof = with_slopes, ("slopes" if with_slopes > se_model else "model"), None
+    if math.isfinite(se_sandwich) and se_sandwich > se:
+        se, source, dof = se_sandwich, "trial scatter", max(n_trials - 1, 1)
+    if se_held is not None and math.isfinite(se_held) and se_held > 0:
+        total = math.hypot(se, se_held)
+        if se_held > se:  # the larger part names the source; the dof stay the estimated part's
+            source = "held parameters"
+        se = total
+    out.update(dispersion=max((se / se_model) ** 2, 1.0), source=source, dof=dof)
+    return out
+
+
+def quasi_likelihood_p(delta_chi2: float, phi: float, dof: int | None, boundary: bool) -> tuple[float, float]:
+    """(F = delta_chi2 / phi, its upper-tail p-value against F(1, dof), chi^2_1 when dof is None), p halved on
+    the boundary (half the null's mass at 0)."""
+    from scipy.stats import chi2, f
+
+    stat = max(delta_chi2, 0.0) / max(phi, 1.0)
+    p = float(chi2.sf(stat, 1)) if dof is None else float(f.sf(stat, 1, dof))
+    return stat, p * (0.5 if boundary else 1.0)
+
+
+def choice_row(
+    name: str,
+    simpler_fit: list[str],
+    held_at: float,
+    chi2_with: float,
+    chi2_without: float,
+    simpler_converged: bool,
+    without: Mapping[str, float],
+    disp: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The JSON row of one extra parameter: the likelihood-ratio figures (``delta_chi2``, ``p_value_chi2`` the
+    plain chi^2_1 p), the quasi-likelihood test's (``dispersion``, ``dispersion_source``, ``dispersion_dof``,
+    ``statistic``, ``p_value``, ``test``), ``supported`` and the ``statement`` naming the dispersion used."""
+    from scipy.stats import chi2
+
+    delta = max(chi2_without - chi2_with, 0.0)
+    boundary = name == "guide_friction_n" and held_at == 0.0
+    phi, dof = float(disp["dispersion"]), disp["dof"]
+    stat, p = quasi_likelihood_p(delta, phi, dof, boundary)
+    supported = bool(p < MODEL_CHOICE_P and simpler_converged)
+    nu = "inf" if dof is None else str(dof)
+    test = (
+        f"delta chi^2 = {delta:.3g} / dispersion {phi:.3g} (from the {disp['source']}) = {stat:.3g} against "
+        f"F(1, {nu}){', p halved on the bound' if boundary else ''}: p = {p:.2g}"
+    )
+    if supported:
+        why = f"supported over the fit without it: {test}"
+    elif simpler_converged:
+        why = f"not supported over the fit without it ({name} held at {held_at:g}): {test} >= {MODEL_CHOICE_P:g}"
+    else:
+        why = "the fit without it did not converge: the test cannot be made"
+    return {
+        "why_extra": EXTRA_PARAMETERS.get(name, ""),
+        "simpler_fit": list(simpler_fit),
+        "held_at": held_at,
+        "chi2_with": chi2_with,
+        "chi2_without": chi2_without,
+        "delta_chi2": delta,
+        "p_value": p,
+        "p_value_chi2": float(chi2.sf(delta, 1)) * (0.5 if boundary else 1.0),
+        "dispersion": phi,
+        "dispersion_source": disp["source"],
+        "dispersion_dof": dof,
+        "dispersion_parts": {k: _finite(v) for k, v in disp["parts"].items()},
+        "statistic": stat,
+        "test": TEST_NAME,
+        "delta_aic": delta - 2.0,
+        "boundary": boundary,
+        "supported": supported,
+        "threshold_p": MODEL_CHOICE_P,
+        "without": dict(without),
+        "statement": why,
+    }
+
+
+def _finite(v: float | None) -> float | None:
+    return float(v) if v is not None and math.isfinite(v) else None
