@@ -1253,6 +1253,7 @@ def calibrate(
     fits = _adequacy(obj, u, moved)
     choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds, estimates)
     _judge(estimates, fits, choice, fvd)
+    tick()  # the adequacy check's and the model choice's walks counted too: the last count is the total
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
     used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
     for row in (choice or {}).values():
