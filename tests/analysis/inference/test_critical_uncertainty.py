@@ -168,3 +168,43 @@ def test_fixed_point_se_matches_its_error_against_the_lossy_truth(shared):
     covered = float(np.mean(np.abs(z_arr) <= 1.96))
     assert 0.75 < rms < 1.3, rms
     assert 0.9 <= covered <= 0.995, covered
+
+
+def test_extrapolation_half_width_parts_match_their_monte_carlo_spread():
+    """The root's standard error split by source (`line_root_parts`): each part must be the spread of the root
+    when only that source is redrawn (an independent Monte Carlo of a known line, e* = 1.6 (x - 2.0)), and the
+    parts add in quadrature to the fit's own standard error when the points scatter as stated."""
+    from rimless.analysis.inference.critical_slope import _line_root, line_root_parts
+
+    x0 = np.array([1.7, 1.8, 1.9, 2.1, 2.2, 2.3, 2.4, 2.5])
+    y0 = 1.6 * (x0 - 2.0)
+    se = np.array([0.02, 0.03, 0.015, 0.02, 0.04, 0.02, 0.03, 0.025])  # e*, rad^2/s^2
+    sx = np.array([0.01, 0.02, 0.015, 0.005, 0.01, 0.02, 0.01, 0.015])  # slope, deg
+    root, se_root, c0, c1, _ = _line_root(x0, y0, se, sx)
+    parts = line_root_parts(x0, y0, se, sx, c0, c1, se_root)
+    assert root == pytest.approx(2.0) and parts["scatter"] == pytest.approx(1.0)
+    assert math.hypot(parts["fixed_points"], parts["slopes"]) == pytest.approx(se_root, rel=1e-9)
+    rng = np.random.default_rng(11)
+    only_fp, only_sx = [], []
+    for _ in range(3000):
+        r = _line_root(x0, y0 + rng.normal(0.0, se), se, sx)
+        only_fp.append(r[0] if r else math.nan)
+        xs = x0 + rng.normal(0.0, sx)  # the slope is measured off, the fixed point is the walk's own
+        r = _line_root(xs, y0, se, sx)
+        only_sx.append(r[0] if r else math.nan)
+    assert np.std(only_fp) == pytest.approx(parts["fixed_points"], rel=0.08)
+    assert np.std(only_sx) == pytest.approx(parts["slopes"], rel=0.08)
+
+
+def test_reported_extrapolation_states_its_half_width_parts(rigid_series):
+    """On the rigid truth's series the reported extrapolation carries its parts (JSON ``se_parts_deg``), and
+    1.96 x their quadrature sum x the scatter factor is its interval's half width."""
+    trials, verdicts = rigid_series
+    res = estimate_critical_slope(verdicts, [t.meta.source_file for t in trials], n_boot=0)
+    ex = next(e for e in res.estimates if e.method == "fixed-point-extrapolation")
+    parts = ex.as_dict()["se_parts_deg"]
+    assert parts["scatter"] >= 1.0 and parts["fixed_points"] > 0 and parts["slopes"] > 0
+    half = 0.5 * (ex.ci_deg[1] - ex.ci_deg[0])
+    assert 1.959963984540054 * math.hypot(parts["fixed_points"], parts["slopes"]) * parts["scatter"] == pytest.approx(
+        half, rel=1e-9
+    )
