@@ -208,3 +208,50 @@ def test_reported_extrapolation_states_its_half_width_parts(rigid_series):
     assert 1.959963984540054 * math.hypot(parts["fixed_points"], parts["slopes"]) * parts["scatter"] == pytest.approx(
         half, rel=1e-9
     )
+
+
+def test_fixed_point_se_follows_the_timing_noise_the_trials_show():
+    """Six walks of the independent lossy rigid truth (`critical_truth`) whose impact times carry 0.3 ms of
+    noise at 100 Hz, a third of the tenth of a frame assumed: each trial's e* against the truth's own fixed point
+    (its step map's w* less the stance's top threshold) must have a standard error its error's size (rms z
+    0.7-1.3). With the assumed noise alone (never lowered by the trials' scatter) it was three times too wide
+    (rms z about 0.3), as on the imported walks of ``rimless trials coverage`` (0.29-0.37 on eight series)."""
+    from rimless.analysis.inference.sustained import pooled_timing_scale, trial_verdict
+    from rimless.analysis.validation.critical_truth import LossyWheel, walk
+
+    wheel = LossyWheel(mass_kg=2.4, inertia_hub_kg_m2=1.2 * 2.4 * 0.24**2, leg_m=0.24, friction_n=0.2)
+    crit = wheel.critical_slope_deg()
+    slopes = [crit + d for d in (0.2, 0.35, 0.5)]
+    walks = []
+    for s in slopes:
+        phi = math.radians(s)
+        top = math.sqrt(wheel.top_threshold(phi))
+        for f in (1.3, 2.0):
+            walks.append((s, walk(wheel, s, f * top, 10).impacts, wheel.fixed_point_w(phi) - wheel.top_threshold(phi)))
+    params = wheel.wheel_params()
+    rng = np.random.default_rng(5)
+    z, scales = [], []
+    for _ in range(25):
+        trials = []
+        for k, (s, imp, _e) in enumerate(walks):
+            noisy = imp + rng.normal(0.0, 3e-4, imp.size)
+            meta = SimpleNamespace(
+                slope_deg=s, source_file=f"w{k}", rate_hz=100.0, outcome="walked", slope_source="given"
+            )
+            trials.append(
+                SimpleNamespace(
+                    time_s=np.arange(0.0, noisy[-1] + 0.3, 0.01),
+                    impact_time_s=noisy,
+                    step_period_s=np.diff(noisy),
+                    meta=meta,
+                    series={},
+                )
+            )
+        verdicts = trial_verdicts(trials, params)
+        scales.append(pooled_timing_scale([trial_verdict(t, params) for t in trials]))  # at the assumed noise
+        for v, (_s, _imp, e_true) in zip(verdicts, walks, strict=True):
+            assert v.verdict == "sustained", v.reason
+            z.append((v.fixed_point - e_true) / v.fixed_point_se)
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.7 < rms < 1.3, (rms, np.median(scales))
+    assert 0.15 < float(np.median(scales)) < 0.6  # about 0.3 ms of the 1 ms assumed per impact
