@@ -260,7 +260,7 @@ def summarise_parts(est: list[dict[str, Any]]) -> dict[str, Any]:
         return {}
     parts = [r["half_width_parts_deg"] for r in rows]
     keys = ("data", "fixed_points", "slopes", "scatter", "parameters", "total")
-    med = {k: _median([p[k] for p in parts if p.get(k) is not None]) for k in keys}
+    med: dict[str, Any] = {k: _median([p[k] for p in parts if p.get(k) is not None]) for k in keys}
     names = sorted({n for p in parts for n in p.get("parameters_by_name", {})})
     med["parameters_by_name"] = {n: _median([p["parameters_by_name"].get(n, 0.0) for p in parts]) for n in names}
     z_data = [r["error_deg"] / (p["data"] / Z95) for r, p in zip(rows, parts) if p["data"] > 0]
