@@ -255,3 +255,20 @@ def test_fixed_point_se_follows_the_timing_noise_the_trials_show():
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.7 < rms < 1.3, (rms, np.median(scales))
     assert 0.15 < float(np.median(scales)) < 0.6  # about 0.3 ms of the 1 ms assumed per impact
+
+
+def test_pooled_timing_scale_only_lowers_and_needs_enough_pairs():
+    """By hand: r'r 0.25 of its expectation over 30 degrees of freedom gives sqrt(0.25) = 0.5; a scatter larger
+    than the assumed noise never raises it (1: each fit inflates its own); fewer than 20 pooled degrees of
+    freedom leave the assumed noise (1)."""
+    from rimless.analysis.inference.sustained import Verdict, pooled_timing_scale
+
+    def v(rr: float, expected: float, dof: int) -> Verdict:
+        out = Verdict("sustained", "", dof + 3, 2.0)
+        out.timing_scatter = (rr, expected, dof)
+        return out
+
+    assert pooled_timing_scale([v(0.1, 0.5, 15), v(0.15, 0.5, 15)]) == pytest.approx(0.5)
+    assert pooled_timing_scale([v(2.0, 0.5, 15), v(0.1, 0.5, 15)]) == 1.0
+    assert pooled_timing_scale([v(0.1, 0.5, 9), v(0.1, 0.5, 9)]) == 1.0
+    assert pooled_timing_scale([v(0.0, 0.0, 0)]) == 1.0
