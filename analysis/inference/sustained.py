@@ -453,7 +453,8 @@ def trial_verdict(
     slope_deg = float(meta.slope_deg)
     chains = consecutive_periods(trial)
     rate = float(getattr(meta, "rate_hz", 0.0) or 0.0)
-    # impact times come from sub-frame fits: about a tenth of a frame each, two per period
+    # impact times come from sub-frame fits: about a tenth of a frame each (at most; `timing_scale` lowers it to
+    # what the trials of one wheel show together), two per period
     sig_t = max(TIMING_SIGMA_FLOOR_S, timing_scale * 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
     if not (math.isfinite(slope_deg) and 0.0 < slope_deg < math.degrees(params.alpha / 2)):
         n = int(sum(c.size for c in chains))
