@@ -53,6 +53,7 @@ class Estimate:
             "detail": self.detail,
             "ci_closed_form_deg": list(cf) if cf else None,
             "ci_bootstrap_deg": list(bs) if bs else None,
+            "se_parts_deg": getattr(self, "se_parts_deg", None),
         }
 
 
@@ -219,6 +220,25 @@ def _line_root(
     return float(root), se_root, float(c0), float(c1), chi2
 
 
+def line_root_parts(
+    x: np.ndarray, y: np.ndarray, se: np.ndarray, sx: np.ndarray, c0: float, c1: float, se_root: float
+) -> dict[str, float]:
+    """The root's standard error (deg) of `_line_root` split by source: ``fixed_points`` (the trials' e*
+    standard errors, timing noise) and ``slopes`` (the trials' slope uncertainties moving them along the line),
+    each propagated alone through the fit's final weights (their variances add up to the unscaled total), then
+    ``scatter`` the factor the reduced chi^2 and Student's t put on both (1 when the points scatter less than
+    their uncertainties say: never deflated)."""
+    X = np.column_stack([np.ones_like(x), x])
+    v_fp, v_sx = se**2, (c1 * sx) ** 2
+    w = 1.0 / (v_fp + v_sx)
+    B = np.linalg.solve(X.T @ (X * w[:, None]), X.T * w)  # d(c0, c1) / d(y)
+    gb = np.array([-1.0 / c1, c0 / c1**2]) @ B  # d root / d(y)
+    var_fp, var_sx = float(np.sum(gb**2 * v_fp)), float(np.sum(gb**2 * v_sx))
+    unscaled = math.sqrt(var_fp + var_sx)
+    scale = se_root / unscaled if unscaled > 0 else 1.0
+    return {"fixed_points": math.sqrt(var_fp), "slopes": math.sqrt(var_sx), "scatter": scale}
+
+
 def _logistic_50(slopes: np.ndarray, sus: np.ndarray) -> tuple[float, float, float, float] | None:
     """(50 % slope, its delta-method standard error, b0, b1) of the Firth logistic, or None."""
     x0 = float(np.mean(slopes))
@@ -368,15 +388,15 @@ def estimate_critical_slope(
         ln = _line_root(x, y, se_y, sig_all[fit_idx])
         if ln is not None:
             root, se, c0, c1, chi2 = ln
-            estimates.append(
-                finish(
-                    "fixed-point-extrapolation",
-                    root,
-                    (root - Z95 * se, root + Z95 * se),
-                    f"e* = {c1:.3f} (slope - {root:.3f} deg) rad²/s² per deg from {x.size} trials' return maps "
-                    f"(reduced chi² {chi2:.2f}, slope uncertainties in the weights)",
-                )
+            e_ex = finish(
+                "fixed-point-extrapolation",
+                root,
+                (root - Z95 * se, root + Z95 * se),
+                f"e* = {c1:.3f} (slope - {root:.3f} deg) rad²/s² per deg from {x.size} trials' return maps "
+                f"(reduced chi² {chi2:.2f}, slope uncertainties in the weights)",
             )
+            e_ex.se_parts_deg = line_root_parts(x, y, se_y, sig_all[fit_idx], c0, c1, se)  # type: ignore[attr-defined]
+            estimates.append(e_ex)
             extrap = (c0, c1)
 
     by = {e.method: e for e in estimates}

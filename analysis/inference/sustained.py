@@ -25,6 +25,7 @@ wheel the relation is an approximation whose error shifts e* a little; the sign 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,6 +48,7 @@ MIN_PERIODS = 4  # consecutive periods needed to fit the return map (3 pairs for
 Z_SIGMA = 2.0  # e* must differ from 0 by this many standard errors for a verdict
 A_MAX = 0.98  # largest return-map slope allowed (a dissipative walker contracts)
 TIMING_SIGMA_FLOOR_S = 2e-4  # smallest per-period timing noise assumed, s
+POOL_MIN_PAIRS = 20  # return-map pairs beyond the fits' parameters before the pooled scatter may lower the noise
 Z95 = 1.959963984540054
 #: 1-sigma slope uncertainty (deg) assumed when a trial states no interval, by its ``slope_source``
 DEFAULT_SLOPE_SIGMA_DEG = {"ramp": 0.02, "given": 0.05, "estimated": 0.1}
@@ -148,6 +150,9 @@ class Verdict:
     a_free_se: float = math.nan
     slope_sigma_deg: float = math.nan  # 1-sigma uncertainty of the trial's slope, deg (`trial_slope_sigma_deg`)
     slope_sigma_source: str = ""  # where slope_sigma_deg comes from
+    #: the free fit's residual r'r, its expectation under the assumed timing noise and its degrees of freedom
+    #: (`_fit_affine`), for the timing scale pooled over a wheel's trials (`pooled_timing_scale`); zeros without
+    timing_scatter: tuple[float, float, int] = (0.0, 0.0, 0)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -272,7 +277,7 @@ def verdict_from_periods(
     # each impact time carries its own noise; a period is the difference of two (sig_t is a period's noise)
     sig_t = timing_sigma_s if timing_sigma_s is not None else TIMING_SIGMA_FLOOR_S
     jx, jy = _impact_jacobians(es, pendulum, sig_t / math.sqrt(2.0))
-    a, b, cov = _fit_affine(x_arr, y_arr, jx, jy)
+    a, b, cov, v.timing_scatter = _fit_affine(x_arr, y_arr, jx, jy)
     v.a_free, v.a_free_se = a, (math.sqrt(cov[0, 0]) if cov[0, 0] > 0 else math.inf)
     if shared_slope is not None:
         a, a_se = shared_slope
@@ -356,10 +361,13 @@ def _mean_noise_var(r: np.ndarray, noise: np.ndarray) -> float:
     return float(mean_row @ mean_row) * _scatter_scale(r - r.mean(), noise - mean_row)
 
 
-def _fit_affine(x: np.ndarray, y: np.ndarray, jx: np.ndarray, jy: np.ndarray) -> tuple[float, float, np.ndarray]:
+def _fit_affine(
+    x: np.ndarray, y: np.ndarray, jx: np.ndarray, jy: np.ndarray
+) -> tuple[float, float, np.ndarray, tuple[float, float, int]]:
     """Least squares y = a x + b with 0 <= a <= A_MAX; covariance of (a, b) from the timing noise of the impact
     times propagated through both coordinates with its correlations (``jx``, ``jy``: `_impact_jacobians`),
-    scaled up by the residual scatter when that is larger."""
+    scaled up by the residual scatter when that is larger; and (r'r, its expectation under the noise, degrees of
+    freedom) of a free fit (zeros when the slope is constrained)."""
     A = np.column_stack([x, np.ones_like(x)])
     sol, *_ = np.linalg.lstsq(A, y, rcond=None)
     a, b = float(sol[0]), float(sol[1])
@@ -368,14 +376,29 @@ def _fit_affine(x: np.ndarray, y: np.ndarray, jx: np.ndarray, jy: np.ndarray) ->
         a = min(max(a, 0.0), A_MAX)
         b = float(np.mean(y - a * x))
         var_b = _mean_noise_var(y - a * x, jy - a * jx)
-        return a, b, np.array([[0.0, 0.0], [0.0, var_b]])
+        return a, b, np.array([[0.0, 0.0], [0.0, var_b]]), (0.0, 0.0, 0)
     noise = jy - a * jx  # d(y - a x)/d(impact noises) at the fitted a
     try:
         P = np.linalg.solve(A.T @ A, A.T)
     except np.linalg.LinAlgError:
-        return a, b, np.full((2, 2), np.inf)
+        return a, b, np.full((2, 2), np.inf), (0.0, 0.0, 0)
     pn = P @ noise
-    return a, b, (pn @ pn.T) * _scatter_scale(y - (a * x + b), noise - A @ pn)
+    resid, resid_noise = y - (a * x + b), noise - A @ pn
+    scatter = (float(resid @ resid), float(np.sum(resid_noise**2)), max(int(resid.size) - 2, 0))
+    return a, b, (pn @ pn.T) * _scatter_scale(resid, resid_noise), scatter
+
+
+def pooled_timing_scale(verdicts: Sequence[Verdict]) -> float:
+    """The factor (<= 1) on the assumed timing noise that the residual scatter of all the trials' free return-map
+    fits together supports: sqrt(sum r'r / sum expectation), pooled over the trials of one wheel (one lab, one
+    rate), when they have at least `POOL_MIN_PAIRS` pairs beyond their fits' parameters; 1 otherwise. Never
+    above 1 (each trial's own scatter still inflates its fit) and never below `TIMING_SIGMA_FLOOR_S`'s share."""
+    rr = sum(v.timing_scatter[0] for v in verdicts)
+    expected = sum(v.timing_scatter[1] for v in verdicts)
+    dof = sum(v.timing_scatter[2] for v in verdicts)
+    if expected <= 0 or dof < POOL_MIN_PAIRS:
+        return 1.0
+    return min(math.sqrt(rr / expected), 1.0)
 
 
 def trial_verdicts(trials: list[Any], params: Any = None) -> list[Verdict]:
@@ -383,30 +406,46 @@ def trial_verdicts(trials: list[Any], params: Any = None) -> list[Verdict]:
     trials that determine it are pooled (inverse-variance mean, scatter-inflated: a is the wheel's
     step-to-step factor, the same on every slope), and every trial is then decided with the pooled a. A
     trial released far from its gait extrapolates a long way to e*: the pooled a makes that extrapolation
-    sharp. With fewer than two trials determining a, the single fits stand."""
+    sharp. With fewer than two trials determining a, the single fits stand. The assumed timing noise (a tenth of
+    a frame per impact) is lowered to what the residual scatter of all the trials' fits together supports
+    (`pooled_timing_scale`: one lab's impacts, pooled over tens of pairs), never raised: each fit's own larger
+    scatter still inflates it."""
     first = [trial_verdict(t, params) for t in trials]
     ok = [
         (v.a_free, v.a_free_se)
         for v in first
         if math.isfinite(v.a_free) and 0.0 < v.a_free < A_MAX and 0 < v.a_free_se < 0.5 and not v.stalled
     ]
+    scale = pooled_timing_scale(first)
     if len(ok) < 2:
-        return first
+        return first if scale == 1.0 else [trial_verdict(t, params, timing_scale=scale) for t in trials]
+    # each trial's a_free se at the pooled timing noise: its covariance goes as the noise squared, times its own
+    # scatter factor max(r'r / expected, 1) at that noise
+    ratio = {id(v): (v.timing_scatter[0] / v.timing_scatter[1] if v.timing_scatter[1] > 0 else 0.0) for v in first}
+    ok = [
+        (v.a_free, v.a_free_se * math.sqrt(scale**2 * max(ratio[id(v)] / scale**2, 1.0) / max(ratio[id(v)], 1.0)))
+        for v in first
+        if math.isfinite(v.a_free) and 0.0 < v.a_free < A_MAX and 0 < v.a_free_se < 0.5 and not v.stalled
+    ]
     a = np.array([x for x, _ in ok])
     w = 1.0 / np.array([s for _, s in ok]) ** 2
     mean = float(np.sum(w * a) / np.sum(w))
     chi2 = float(np.sum(w * (a - mean) ** 2)) / (a.size - 1)
     se = math.sqrt(max(chi2, 1.0) / float(np.sum(w)))
-    out = [trial_verdict(t, params, shared_slope=(mean, se)) for t in trials]
+    out = [trial_verdict(t, params, shared_slope=(mean, se), timing_scale=scale) for t in trials]
     for i, (v, f) in enumerate(zip(out, first)):
         if v.verdict == "undetermined" and f.verdict != "undetermined":
             out[i] = f  # never lose a verdict the trial gives on its own
     return out
 
 
-def trial_verdict(trial: Any, params: Any = None, *, shared_slope: tuple[float, float] | None = None) -> Verdict:
+def trial_verdict(
+    trial: Any, params: Any = None, *, shared_slope: tuple[float, float] | None = None, timing_scale: float = 1.0
+) -> Verdict:
     """The verdict of one imported trial (`rimless.analysis.io.trial.Trial` or anything with its public fields:
-    ``step_period_s``, ``impact_time_s``, ``meta.slope_deg``, ``meta.rate_hz``, ``time_s``)."""
+    ``step_period_s``, ``impact_time_s``, ``meta.slope_deg``, ``meta.rate_hz``, ``time_s``); ``timing_scale``
+    (<= 1): the factor on the assumed timing noise that the wheel's trials together support
+    (`pooled_timing_scale`)."""
     from rimless.sim.model.params import WheelParams
 
     params = params or WheelParams()
@@ -414,8 +453,9 @@ def trial_verdict(trial: Any, params: Any = None, *, shared_slope: tuple[float, 
     slope_deg = float(meta.slope_deg)
     chains = consecutive_periods(trial)
     rate = float(getattr(meta, "rate_hz", 0.0) or 0.0)
-    # impact times come from sub-frame fits: about a tenth of a frame each, two per period
-    sig_t = max(TIMING_SIGMA_FLOOR_S, 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
+    # impact times come from sub-frame fits: about a tenth of a frame each (at most; `timing_scale` lowers it to
+    # what the trials of one wheel show together), two per period
+    sig_t = max(TIMING_SIGMA_FLOOR_S, timing_scale * 0.1 * math.sqrt(2.0) / rate) if rate > 0 else None
     if not (math.isfinite(slope_deg) and 0.0 < slope_deg < math.degrees(params.alpha / 2)):
         n = int(sum(c.size for c in chains))
         v = Verdict(

@@ -216,11 +216,62 @@ def _result_row(res: Any, truth: float, wheel: LossyWheel | None = None) -> dict
         "covered": _covers(c.ci_deg, truth),
         "ci_with_parameters_deg": list(ci_par) if ci_par else None,
         "covered_with_parameters": _covers(ci_par, truth),
+        "half_width_parts_deg": half_width_parts(c, held),
         "per_method": {
             e.method: {"value_deg": e.value_deg, "ci_deg": list(e.ci_deg), "covered": _covers(e.ci_deg, truth)}
             for e in res.estimates
         },
         **inertia,
+    }
+
+
+def half_width_parts(chosen: Any, held: dict[str, Any]) -> dict[str, Any]:
+    """The chosen estimate's 95 % half width (deg) and its parts, each alone as a 95 % half width: ``data`` (the
+    trials' interval, ``ci_deg``), for the extrapolation split into ``fixed_points`` (the e* standard errors:
+    impact timing), ``slopes`` (the trials' slope uncertainties) and ``scatter`` (the factor the line's reduced
+    chi^2 and Student's t put on both; 1 when not inflated); ``parameters`` (the held parameters' standard error,
+    per parameter under ``parameters_by_name``); ``total`` (``ci_with_parameters_deg``: data and parameters in
+    quadrature). Parts add in quadrature to the total."""
+    half = 0.5 * (chosen.ci_deg[1] - chosen.ci_deg[0])
+    se_par = held.get("se_parameters_deg")
+    out: dict[str, Any] = {"data": half}
+    parts = getattr(chosen, "se_parts_deg", None)
+    if parts:
+        out["fixed_points"] = Z95 * parts["fixed_points"] * parts["scatter"]
+        out["slopes"] = Z95 * parts["slopes"] * parts["scatter"]
+        out["scatter"] = parts["scatter"]
+    out["parameters"] = Z95 * se_par if se_par is not None else None
+    out["parameters_by_name"] = {
+        r["name"]: Z95 * r["contribution_deg"]
+        for r in held.get("contributions", [])
+        if r.get("contribution_deg") is not None
+    }
+    out["total"] = math.hypot(half, out["parameters"]) if out["parameters"] is not None else None
+    return out
+
+
+def summarise_parts(est: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median half-width parts (deg, `half_width_parts`) of one input's series beside the spread of the actual
+    errors: ``rms_z_data`` and ``rms_z_with_parameters`` (error over the interval's se: 1 for an honest
+    interval) and ``rms_z_expected_with_parameters``, the rms z the carried interval would show were the data's
+    interval honest and the held parameters exact (as the ``truth`` input's are): below 1 by design."""
+    rows = [r for r in est if r.get("half_width_parts_deg")]
+    if not rows:
+        return {}
+    parts = [r["half_width_parts_deg"] for r in rows]
+    keys = ("data", "fixed_points", "slopes", "scatter", "parameters", "total")
+    med: dict[str, Any] = {k: _median([p[k] for p in parts if p.get(k) is not None]) for k in keys}
+    names = sorted({n for p in parts for n in p.get("parameters_by_name", {})})
+    med["parameters_by_name"] = {n: _median([p["parameters_by_name"].get(n, 0.0) for p in parts]) for n in names}
+    z_data = [r["error_deg"] / (p["data"] / Z95) for r, p in zip(rows, parts) if p["data"] > 0]
+    z_tot = [r["error_deg"] / (p["total"] / Z95) for r, p in zip(rows, parts) if p.get("total")]
+    share = [(p["data"] / p["total"]) ** 2 for p in parts if p.get("total")]
+    return {
+        "median_half_width_parts_deg": med,
+        "rms_z_data": float(np.sqrt(np.mean(np.square(z_data)))) if z_data else None,
+        "rms_z_with_parameters": float(np.sqrt(np.mean(np.square(z_tot)))) if z_tot else None,
+        "rms_z_expected_with_parameters": float(np.sqrt(np.mean(share))) if share else None,
+        "rms_error_deg": float(np.sqrt(np.mean([r["error_deg"] ** 2 for r in rows]))),
     }
 
 
@@ -305,6 +356,7 @@ def summarise_input(series: list[ImporterSeries], name: str) -> dict[str, Any]:
         ),
         "per_method": methods,
         "not_estimated": why,
+        **summarise_parts(est),
         "inertia_ratio_from_trials": summarise_inertia(series, name),
     }
 

@@ -168,3 +168,107 @@ def test_fixed_point_se_matches_its_error_against_the_lossy_truth(shared):
     covered = float(np.mean(np.abs(z_arr) <= 1.96))
     assert 0.75 < rms < 1.3, rms
     assert 0.9 <= covered <= 0.995, covered
+
+
+def test_extrapolation_half_width_parts_match_their_monte_carlo_spread():
+    """The root's standard error split by source (`line_root_parts`): each part must be the spread of the root
+    when only that source is redrawn (an independent Monte Carlo of a known line, e* = 1.6 (x - 2.0)), and the
+    parts add in quadrature to the fit's own standard error when the points scatter as stated."""
+    from rimless.analysis.inference.critical_slope import _line_root, line_root_parts
+
+    x0 = np.array([1.7, 1.8, 1.9, 2.1, 2.2, 2.3, 2.4, 2.5])
+    y0 = 1.6 * (x0 - 2.0)
+    se = np.array([0.02, 0.03, 0.015, 0.02, 0.04, 0.02, 0.03, 0.025])  # e*, rad^2/s^2
+    sx = np.array([0.01, 0.02, 0.015, 0.005, 0.01, 0.02, 0.01, 0.015])  # slope, deg
+    root, se_root, c0, c1, _ = _line_root(x0, y0, se, sx)
+    parts = line_root_parts(x0, y0, se, sx, c0, c1, se_root)
+    assert root == pytest.approx(2.0) and parts["scatter"] == pytest.approx(1.0)
+    assert math.hypot(parts["fixed_points"], parts["slopes"]) == pytest.approx(se_root, rel=1e-9)
+    rng = np.random.default_rng(11)
+    only_fp, only_sx = [], []
+    for _ in range(3000):
+        r = _line_root(x0, y0 + rng.normal(0.0, se), se, sx)
+        only_fp.append(r[0] if r else math.nan)
+        xs = x0 + rng.normal(0.0, sx)  # the slope is measured off, the fixed point is the walk's own
+        r = _line_root(xs, y0, se, sx)
+        only_sx.append(r[0] if r else math.nan)
+    assert np.std(only_fp) == pytest.approx(parts["fixed_points"], rel=0.08)
+    assert np.std(only_sx) == pytest.approx(parts["slopes"], rel=0.08)
+
+
+def test_reported_extrapolation_states_its_half_width_parts(rigid_series):
+    """On the rigid truth's series the reported extrapolation carries its parts (JSON ``se_parts_deg``), and
+    1.96 x their quadrature sum x the scatter factor is its interval's half width."""
+    trials, verdicts = rigid_series
+    res = estimate_critical_slope(verdicts, [t.meta.source_file for t in trials], n_boot=0)
+    ex = next(e for e in res.estimates if e.method == "fixed-point-extrapolation")
+    parts = ex.as_dict()["se_parts_deg"]
+    assert parts["scatter"] >= 1.0 and parts["fixed_points"] > 0 and parts["slopes"] > 0
+    half = 0.5 * (ex.ci_deg[1] - ex.ci_deg[0])
+    assert 1.959963984540054 * math.hypot(parts["fixed_points"], parts["slopes"]) * parts["scatter"] == pytest.approx(
+        half, rel=1e-9
+    )
+
+
+def test_fixed_point_se_follows_the_timing_noise_the_trials_show():
+    """Six walks of the independent lossy rigid truth (`critical_truth`) whose impact times carry 0.3 ms of
+    noise at 100 Hz, a third of the tenth of a frame assumed: each trial's e* against the truth's own fixed point
+    (its step map's w* less the stance's top threshold) must have a standard error its error's size (rms z
+    0.7-1.3). With the assumed noise alone (never lowered by the trials' scatter) it was three times too wide
+    (rms z about 0.3), as on the imported walks of ``rimless trials coverage`` (0.29-0.37 on eight series)."""
+    from rimless.analysis.inference.sustained import pooled_timing_scale, trial_verdict
+    from rimless.analysis.validation.critical_truth import LossyWheel, walk
+
+    wheel = LossyWheel(mass_kg=2.4, inertia_hub_kg_m2=1.2 * 2.4 * 0.24**2, leg_m=0.24, friction_n=0.2)
+    crit = wheel.critical_slope_deg()
+    slopes = [crit + d for d in (0.2, 0.35, 0.5)]
+    walks = []
+    for s in slopes:
+        phi = math.radians(s)
+        top = math.sqrt(wheel.top_threshold(phi))
+        for f in (1.3, 2.0):
+            walks.append((s, walk(wheel, s, f * top, 10).impacts, wheel.fixed_point_w(phi) - wheel.top_threshold(phi)))
+    params = wheel.wheel_params()
+    rng = np.random.default_rng(5)
+    z, scales = [], []
+    for _ in range(25):
+        trials = []
+        for k, (s, imp, _e) in enumerate(walks):
+            noisy = imp + rng.normal(0.0, 3e-4, imp.size)
+            meta = SimpleNamespace(
+                slope_deg=s, source_file=f"w{k}", rate_hz=100.0, outcome="walked", slope_source="given"
+            )
+            trials.append(
+                SimpleNamespace(
+                    time_s=np.arange(0.0, noisy[-1] + 0.3, 0.01),
+                    impact_time_s=noisy,
+                    step_period_s=np.diff(noisy),
+                    meta=meta,
+                    series={},
+                )
+            )
+        verdicts = trial_verdicts(trials, params)
+        scales.append(pooled_timing_scale([trial_verdict(t, params) for t in trials]))  # at the assumed noise
+        for v, (_s, _imp, e_true) in zip(verdicts, walks, strict=True):
+            assert v.verdict == "sustained", v.reason
+            z.append((v.fixed_point - e_true) / v.fixed_point_se)
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.7 < rms < 1.3, (rms, np.median(scales))
+    assert 0.15 < float(np.median(scales)) < 0.6  # about 0.3 ms of the 1 ms assumed per impact
+
+
+def test_pooled_timing_scale_only_lowers_and_needs_enough_pairs():
+    """By hand: r'r 0.25 of its expectation over 30 degrees of freedom gives sqrt(0.25) = 0.5; a scatter larger
+    than the assumed noise never raises it (1: each fit inflates its own); fewer than 20 pooled degrees of
+    freedom leave the assumed noise (1)."""
+    from rimless.analysis.inference.sustained import Verdict, pooled_timing_scale
+
+    def v(rr: float, expected: float, dof: int) -> Verdict:
+        out = Verdict("sustained", "", dof + 3, 2.0)
+        out.timing_scatter = (rr, expected, dof)
+        return out
+
+    assert pooled_timing_scale([v(0.1, 0.5, 15), v(0.15, 0.5, 15)]) == pytest.approx(0.5)
+    assert pooled_timing_scale([v(2.0, 0.5, 15), v(0.1, 0.5, 15)]) == 1.0
+    assert pooled_timing_scale([v(0.1, 0.5, 9), v(0.1, 0.5, 9)]) == 1.0
+    assert pooled_timing_scale([v(0.0, 0.0, 0)]) == 1.0

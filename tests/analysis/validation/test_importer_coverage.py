@@ -17,6 +17,7 @@ from rimless.analysis.validation.importer_coverage import (
     draw_wheel,
     run_importer_coverage,
     summarise_input,
+    summarise_parts,
     truth_input,
     write_series,
 )
@@ -103,6 +104,20 @@ def test_a_small_study_through_the_importer_counts_what_it_saw() -> None:
                 assert r["error_pct"] == pytest.approx(100 * (r["inertia_ratio"] / s.wheel.inertia_ratio - 1))
                 assert "L0" in r["assumption"]
     assert out["inertia_ratio_from_trials"] == out["inputs"]["table1"]["inertia_ratio_from_trials"]
+    # the half width's parts: they add in quadrature to the intervals the rows report
+    for s in res.series:
+        for row in s.results.values():
+            if not row["estimated"]:
+                continue
+            p = row["half_width_parts_deg"]
+            assert p["data"] == pytest.approx(0.5 * (row["ci_deg"][1] - row["ci_deg"][0]))
+            lo, hi = row["ci_with_parameters_deg"]
+            assert p["total"] == pytest.approx(0.5 * (hi - lo), rel=1e-6)
+            assert math.hypot(p["data"], p["parameters"]) == pytest.approx(p["total"])
+            if row["method"] == "fixed-point-extrapolation":
+                assert math.hypot(p["fixed_points"], p["slopes"]) == pytest.approx(p["data"], rel=1e-6)
+    for name in ("table1", "truth"):
+        assert out["inputs"][name]["median_half_width_parts_deg"]["total"] > 0
 
 
 def test_a_lossless_truth_on_request() -> None:
@@ -157,3 +172,39 @@ def test_floquet_coverage_in_drawn_labs_imports_every_trial() -> None:
     assert out["labs"] == "drawn" and out["drawn_labs"]["y_up"] >= 1 and out["drawn_labs"]["markers"] >= 1
     assert not any(k.startswith("refused") for k in out["flagged_trials"]), out["flagged_trials"]
     assert out["estimated"] == out["corrected"]["of"] >= 3
+
+
+def test_half_width_parts_summary_by_hand() -> None:
+    """Two hand-made rows: medians of the parts, rms z of the data's and the carried interval, and the rms z
+    the carried interval would show were the data's honest and the parameters exact (sqrt(mean(data^2 /
+    total^2)), by hand: data 0.03 and 0.04 of totals 0.05 and 0.05 -> sqrt((0.36 + 0.64) / 2))."""
+    z95 = 1.959963984540054
+    rows = [
+        {
+            "error_deg": 0.01,
+            "half_width_parts_deg": {
+                "data": 0.03,
+                "parameters": 0.04,
+                "total": 0.05,
+                "parameters_by_name": {"inertia_kg_m2": 0.04},
+            },
+        },
+        {
+            "error_deg": -0.02,
+            "half_width_parts_deg": {
+                "data": 0.04,
+                "parameters": 0.03,
+                "total": 0.05,
+                "parameters_by_name": {"inertia_kg_m2": 0.03},
+            },
+        },
+    ]
+    out = summarise_parts(rows)
+    med = out["median_half_width_parts_deg"]
+    assert med["data"] == pytest.approx(0.035) and med["parameters"] == pytest.approx(0.035)
+    assert med["parameters_by_name"] == {"inertia_kg_m2": pytest.approx(0.035)}
+    assert med["fixed_points"] is None  # not an extrapolation: no split
+    assert out["rms_z_data"] == pytest.approx(math.sqrt(((0.01 / 0.03) ** 2 + (0.02 / 0.04) ** 2) / 2) * z95)
+    assert out["rms_z_with_parameters"] == pytest.approx(math.sqrt((0.01**2 + 0.02**2) / 2) / 0.05 * z95)
+    assert out["rms_z_expected_with_parameters"] == pytest.approx(math.sqrt(0.5))
+    assert out["rms_error_deg"] == pytest.approx(math.sqrt((0.01**2 + 0.02**2) / 2))
