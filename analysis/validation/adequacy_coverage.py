@@ -210,6 +210,23 @@ def _series(
     return row
 
 
+#: the model choice's keys a series keeps: its verdict, and the test's figures, so that another rule can be
+#: checked on a study's JSON offline
+CHOICE_KEYS = (
+    "delta_chi2",
+    "p_value",
+    "supported",
+    "boundary",
+    "statement",
+    "p_value_chi2",
+    "dispersion",
+    "dispersion_source",
+    "dispersion_dof",
+    "dispersion_parts",
+    "statistic",
+)
+
+
 def _verdicts(res: Any) -> dict[str, Any]:
     """What the calibration said: adequacy (overall ratios, p-values, fits), the model choice, each estimate."""
     adq = res.adequacy or {}
@@ -225,9 +242,7 @@ def _verdicts(res: Any) -> dict[str, Any]:
             k: {"ratio": ov[k]["ratio"], "p_value": ov[k]["p_value"]} for k in ("com", "periods", "total") if k in ov
         },
         "noise": {k: (adq.get("noise") or {}).get(k) for k in ("com_mm", "impact_time_ms")},
-        "model_choice": None
-        if choice is None
-        else {k: choice[k] for k in ("delta_chi2", "p_value", "supported", "boundary", "statement")},
+        "model_choice": None if choice is None else {k: choice[k] for k in CHOICE_KEYS if k in choice},
         "estimates": {
             e.name: {
                 "value": e.value,

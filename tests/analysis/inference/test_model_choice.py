@@ -120,3 +120,13 @@ def test_on_a_linear_truth_with_shared_trial_errors_friction_is_claimed_at_most_
     assert wilson_interval(quasi, 600)[0] <= 0.05 and quasi / 600 > 0.005, quasi
     found = sum(q < 0.05 for _, q in (_linear_series(rng, 16.0) for _ in range(200)))
     assert found / 200 > 0.5, found
+
+
+def test_the_adequacy_study_keeps_every_figure_of_the_test():
+    """`trials adequacy-coverage --json` keeps per series the model choice's verdict and its test's figures (so
+    another rule can be checked offline): every key it names is one the model choice writes."""
+    from rimless.analysis.validation.adequacy_coverage import CHOICE_KEYS
+
+    row = choice_row("guide_friction_n", ["c"], 0.0, 100.0, 120.0, True, {"c": 11.0}, dispersion(0.05, 0.1))
+    assert set(CHOICE_KEYS) <= set(row)
+    assert {"dispersion", "dispersion_parts", "statistic", "p_value_chi2"} <= set(CHOICE_KEYS)
