@@ -33,7 +33,8 @@ def floquet(
 
     trials : `Trial`s or paths (Vicon exports or imported ``.parquet`` trials; see `load_trials`).
     wheel : the model and its parameters (default Table 1, ER); the parameters' uncertainties (``wheel.input``)
-        and each group's slope uncertainty are carried into the model's interval (``model.ci95``).
+        and each group's slope uncertainty are carried into the model's interval (``model.ci95``). Vicon exports
+        are imported with it (`import_trial(wheel=)`: its legs' k bounds the drift in the slope's interval).
     group_tol_deg : trials whose slopes differ by less form one group (one multiplier).
     with_model : False skips the model (its eigenvalue is then None).
     calibrate_c : the model's c calibrated on the trials first (`calibrate(trials, ("c",))`; source ``fitted``,
@@ -50,7 +51,7 @@ def floquet(
     if wheel is not None and not isinstance(wheel, Wheel):
         raise ParameterError(f"wheel must be a rimless.sim.Wheel, got {type(wheel).__name__}")
     w = wheel if wheel is not None else Wheel()
-    loaded, names = load_trials(trials)
+    loaded, names = load_trials(trials, wheel=w)  # Vicon exports imported with the wheel (its legs' drift)
     return run_floquet(
         loaded,
         names,

@@ -61,6 +61,7 @@ def floquet_cmd(
     Trials too short or transient-only are flagged with the reason. Exit 1 when no slope gives an estimate.
     """
     from rimless.analysis import floquet
+    from rimless.analysis.api.runs import import_wheel
     from rimless.analysis.inference.runs import load_trials
     from rimless.progress import progress_bar
     from rimless.sim import Wheel
@@ -81,7 +82,10 @@ def floquet_cmd(
             f'{params}: a parameter marked "fit": trials floquet fits only c (--calibrated); give a value (and sd)'
         )
     with progress_bar("importing", json_out=json_out) as bar:
-        loaded = load_trials(trials, {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up})
+        # the importer gets the --params wheel (as `trials import --params`): its legs' k bounds the slope's drift
+        legs = import_wheel(params, rigid_legs=False)
+        opts = {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up, "wheel": legs}
+        loaded = load_trials(trials, opts)
         for r in loaded.refused:
             typer.echo(f"refused: {r}", err=True)
         if not loaded.trials:
@@ -266,6 +270,7 @@ def floquet_coverage_cmd(
             else "Z-up, heading 25 deg, object"
         )
     )
+    typer.echo(f"the importer is told the wheel, for its legs' drift: {out['import_legs']}")
     for name, label in (("corrected", "corrected (the estimate)"), ("ols", "OLS (plain)"), ("lagged", "lagged")):
         d = out[name]
         if not d["of"]:

@@ -8,7 +8,8 @@ command does; the share of 95 % intervals holding the truth's multiplier, with t
 Each series: ``--trials`` trials of ``--steps`` impacts at one slope, each released at its gait's speed times
 U(0.9, 1.1), each step's slope N(slope, ``--slope-sd-deg``^2). rigid: the rigid truth wheel (M 2.6 kg, I_hub
 0.05 kg m^2, L 0.21 m; truth beta^2 = 0.634, closed form) at 4.5 deg; er: the simulator's ER wheel with
-k = 2000 N/m, c = 14 N s/m (Table 1: 2700, 8) at 2.5 deg, truth the model's dominant eigenvalue there.
+k = 2000 N/m, c = 14 N s/m (Table 1: 2700, 8) at 2.5 deg, truth the model's dominant eigenvalue there. The
+importer is told the wheel (`told_wheel`, for its legs' drift in the slope's interval), as a user would.
 """
 
 from __future__ import annotations
@@ -39,6 +40,17 @@ def truth_of(kind: str) -> tuple[Any, float, float]:
     return params, 2.5, float(model_multiplier(params.replace(slope_rad=math.radians(2.5)), "er")["eigenvalue"])
 
 
+def told_wheel(kind: str, truth: Any) -> Any:
+    """The wheel a user who knows the truth states, handed to the importer for its legs' drift (as `trials import
+    --rigid-legs` or `trials floquet --params` do): rigid legs for the rigid truth; for the ER truth its k and c
+    with the example's uncertainties (``floquet_truth``'s wheel.toml: k 2000 +- 100 N/m, c 14 +- 2 N s/m)."""
+    from rimless.sim import Wheel
+
+    if kind == "rigid":
+        return Wheel(model="rigid")
+    return Wheel(truth, uncertainty={"k": 100.0, "c": 2.0})
+
+
 def run(
     kind: str,
     series: int,
@@ -55,6 +67,7 @@ def run(
     heading, an object or four markers; `critical_truth.record`)."""
     from rimless.analysis.inference.floquet import NotIdentifiable, estimate_multiplier, group_data, section_points
     from rimless.analysis.kinematics.build import import_trial
+    from rimless.analysis.kinematics.slope_evidence import leg_compliance
     from rimless.analysis.validation.critical_truth import record as record_in_lab
     from rimless.analysis.validation.importer_coverage import draw_lab
     from rimless.errors import RimlessError
@@ -62,6 +75,7 @@ def run(
     if labs not in ("fixed", "drawn"):
         raise ValueError(f"labs must be 'fixed' or 'drawn', got {labs!r}")
     wheel, slope, truth = truth_of(kind)
+    told = told_wheel(kind, wheel)
     rng = np.random.default_rng(seed)
     lab_rng = np.random.default_rng([seed, 1])  # apart from rng: the fixed labs' figures do not change
     lab_counts = {"y_up": 0, "markers": 0}
@@ -90,7 +104,7 @@ def run(
                 else:
                     record_in_lab(walk, path, rng, lab, rest_s=0.0)
                 try:
-                    trial = import_trial(path)
+                    trial = import_trial(path, wheel=told)
                 except RimlessError as err:  # a refused import is counted, as a user would drop the file
                     flags.append("refused: " + str(err).splitlines()[0][:60])
                     continue
@@ -118,6 +132,7 @@ def run(
         "seed": seed,
         "labs": labs,
         "drawn_labs": lab_counts if labs == "drawn" else None,
+        "import_legs": leg_compliance(told).source,
         "estimated": len(rows),
         "stalled_trials": stalls,
         "flagged_trials": {k: flags.count(k) for k in sorted(set(flags))},

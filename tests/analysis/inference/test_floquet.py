@@ -170,6 +170,23 @@ def test_the_command_prints_the_apis_object(er_files) -> None:
     assert "k = 2000 ± 100 N/m  (wheel_file" in text.stdout and "95 %" in text.stdout
 
 
+def test_vicon_exports_are_imported_with_the_wheel(er_files) -> None:
+    """`floquet(paths, wheel)` (and so `trials floquet --params`, which prints the API's object) imports with the
+    wheel: the group's slope sd is that of the trials imported with it (its legs' k bounds the slope's drift)
+    and narrower than that of the trials imported without it (the importer's 45 ms bound)."""
+    from rimless.analysis import floquet
+    from rimless.analysis.kinematics.build import import_trial
+    from rimless.sim import Wheel
+
+    files, toml = er_files
+    wheel = Wheel(toml)
+    (paths,) = floquet(files, wheel, with_model=False).estimated
+    (told,) = floquet([import_trial(f, wheel=wheel) for f in files], wheel, with_model=False).estimated
+    (blind,) = floquet([import_trial(f) for f in files], wheel, with_model=False).estimated
+    assert paths["slope_sd_deg"] == told["slope_sd_deg"] < blind["slope_sd_deg"], (paths, told, blind)
+    assert paths["multiplier"] == pytest.approx(told["multiplier"], rel=1e-9)
+
+
 def test_short_and_transient_only_trials_are_flagged(tmp_path) -> None:
     """A trial of two impacts is too short; a release far above the gait on an even slope (no wander) decays
     the same way every step: transient-only. Neither is fitted; with nothing left the command exits 1."""

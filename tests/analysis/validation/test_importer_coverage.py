@@ -172,6 +172,17 @@ def test_floquet_coverage_in_drawn_labs_imports_every_trial() -> None:
     assert out["labs"] == "drawn" and out["drawn_labs"]["y_up"] >= 1 and out["drawn_labs"]["markers"] >= 1
     assert not any(k.startswith("refused") for k in out["flagged_trials"]), out["flagged_trials"]
     assert out["estimated"] == out["corrected"]["of"] >= 3
+    assert out["import_legs"].startswith("rigid legs"), out["import_legs"]  # the importer told the rigid wheel
+
+
+def test_floquet_coverage_tells_the_importer_the_er_truths_legs() -> None:
+    """The ER truth's wheel as the example's wheel.toml states it (k 2000 +- 100 N/m): the importer's legs'
+    stiffness is its 95 % low end, 2000 - 1.96 * 100 = 1804 N/m, not the unknown wheel's bound."""
+    from rimless.analysis.kinematics.slope_evidence import leg_compliance
+    from rimless.analysis.validation.floquet_coverage import told_wheel, truth_of
+
+    legs = leg_compliance(told_wheel("er", truth_of("er")[0]))
+    assert "k >= 1804 N/m" in legs.source and 0 < legs.time_s < 0.045, legs
 
 
 def test_half_width_parts_summary_by_hand() -> None:
