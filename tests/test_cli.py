@@ -78,7 +78,7 @@ def test_params_file_errors_name_the_file(tmp_path):
 def test_rigid_critical_slope_json_is_the_papers_2_80_deg():
     res = runner.invoke(app, ["sim", "critical-slope", "--model", "rigid", "--json"])
     assert res.exit_code == 0, res.output
-    out = json.loads(res.output)
+    out = json.loads(res.stdout)
     assert round(out["critical_slope_deg"], 2) == 2.80
     assert out["cot"] == pytest.approx(0.0489, abs=1e-4)
     assert "m_H" in out["mass_convention"]
@@ -88,7 +88,7 @@ def test_rigid_critical_slope_json_is_the_papers_2_80_deg():
 def test_fixed_point_json_has_the_contract_keys():
     res = runner.invoke(app, ["sim", "fixed-point", "--model", "er", "--json", "--rtol", "1e-9"])
     assert res.exit_code == 0, res.output
-    out = json.loads(res.output)
+    out = json.loads(res.stdout)
     for key in (
         "model",
         "slope_rad",
@@ -151,7 +151,7 @@ def test_critical_slope_of_the_compliant_wheels(model, reason):
     """model.md section 9: both near 1.26 deg; ER ends in a stall, the VE medium branch in a fold."""
     res = runner.invoke(app, ["sim", "critical-slope", "--model", model, "--json"])
     assert res.exit_code == 0, res.output
-    out = json.loads(res.output)
+    out = json.loads(res.stdout)
     assert 1.2 < out["critical_slope_deg"] < 1.32
     assert out["reason"] == reason
     assert out["cot"] == pytest.approx(np.tan(out["critical_slope_rad"]), rel=1e-12)
@@ -183,7 +183,7 @@ def test_stress_sweep_classifies_every_point():
         ],
     )
     assert res.exit_code == 0, res.output
-    out = json.loads(res.output)
+    out = json.loads(res.stdout)
     assert out["points"] == 3 * 2 * 3 * 1 * 2 * 3
     assert sum(sum(c.values()) for c in out["counts"].values()) == out["points"]
     assert out["unclassified"] == []
@@ -474,11 +474,12 @@ def test_unwritable_output_names_the_option_and_path(tmp_path):
             pass
 
 
-def test_progress_bar_is_quiet_off_a_terminal_and_with_json(capsys, monkeypatch):
+def test_progress_bar_is_quiet_off_a_terminal_and_drawn_on_one_with_json(capsys, monkeypatch):
     import io
 
     from rimless.progress import progress_bar, progress_is_shown
 
+    monkeypatch.delenv("RIMLESS_PROGRESS_EVERY_S", raising=False)
     with progress_bar("work", total=3) as bar:  # pytest's stderr is not a terminal
         bar.advance()
         bar.update(completed=3, description="done")
@@ -489,7 +490,7 @@ def test_progress_bar_is_quiet_off_a_terminal_and_with_json(capsys, monkeypatch)
             return True
 
     monkeypatch.setattr(sys, "stderr", Tty())
-    assert progress_is_shown(json_out=False) and not progress_is_shown(json_out=True)
+    assert progress_is_shown(json_out=False) and progress_is_shown(json_out=True)
 
 
 @pytest.mark.parametrize(

@@ -1,5 +1,5 @@
 """First use of the simulator: where the compiled kernels are cached (RIMLESS_CACHE_DIR) and the notice on
-stderr while they compile (rimless.progress.spinner), quiet for pipes and --json."""
+stderr while they compile (rimless.progress.spinner), quiet for pipes, on stderr with --json."""
 
 from __future__ import annotations
 
@@ -41,18 +41,22 @@ def test_rimless_cache_dir_moves_numbas_cache(tmp_path: Path) -> None:
     assert Path(kernel_folder).is_relative_to(tmp_path / "c" / "numba")
 
 
-def test_spinner_is_quiet_for_pipes_and_json(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_spinner_is_quiet_for_pipes_and_on_stderr_with_json(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     pipe = io.StringIO()
     monkeypatch.setattr(sys, "stderr", pipe)
     with progress.spinner("compiling", done="compiled") as shown:
         pass
     assert shown is False and pipe.getvalue() == ""
+    # on a terminal with --json the spinner is drawn on stderr; stdout (the JSON) is untouched
     term = _Terminal()
     monkeypatch.setattr(sys, "stderr", term)
     monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point", "--json"])
     with progress.spinner("compiling", done="compiled") as shown:
-        pass
-    assert shown is False and term.getvalue() == ""
+        print('{"a": 1}')
+    assert shown is True and re.search(r"compiled \(\d+ s\)\n$", term.getvalue()), repr(term.getvalue()[-300:])
+    assert capsys.readouterr().out == '{"a": 1}\n' and '{"a": 1}' not in term.getvalue()
 
 
 def test_spinner_says_what_it_did_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -198,15 +202,16 @@ def _cold_kernel(tmp_path: Path, name: str = "run_phase_0") -> Any:
     )
 
 
-@pytest.mark.parametrize("where", ["pipe", "terminal with --json"])
+@pytest.mark.parametrize("where", ["pipe", "pipe with --json"])
 def test_a_cold_compile_says_so_in_one_plain_line_where_no_spinner_is_drawn(
     where: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    """Fails before: a redirected run (a log, a notebook) or one with --json was silent through the whole compile."""
+    """Fails before: a redirected run (a log, a notebook) or one with --json was silent through the whole compile.
+    (On a terminal with --json the spinner is drawn on stderr: `test_spinner_is_quiet_for_pipes_and_on_stderr...`.)"""
     from rimless.sim.fast import compiling
 
     monkeypatch.setattr(compiling, "_told", False)
-    err = io.StringIO() if where == "pipe" else _Terminal()
+    err = io.StringIO()
     monkeypatch.setattr(sys, "stderr", err)
     monkeypatch.setattr(sys, "argv", ["rimless", "sim", "fixed-point"] + (["--json"] if "json" in where else []))
     assert compiling.call_compiling(_cold_kernel(tmp_path, "step_map_contact_0"), 1) == 42
