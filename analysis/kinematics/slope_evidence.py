@@ -8,9 +8,10 @@ the motion (``estimated``), each a line of height against the horizontal distanc
   height errors scaled by their scatter about the line (the reduced chi-square: each contact's stated error is
   the spread of its stance's pivots, not the error of their median, 2-20 times too large in variance on the
   coverage study's truths), with Student t (n - 2 degrees of freedom: the scale is estimated), the scaled errors
-  never below `contacts.CONTACT_FLOOR_M`; plus the legs' drift of the contact heights (`LegCompliance`). Two
-  contacts cannot show their scatter: their errors are floored at `TWO_CONTACT_SD_M` each (a foot is no point
-  and a leg compresses: the pivot moves that much).
+  never below `contacts.CONTACT_FLOOR_M`; the stated errors (normal) when they give the narrower interval
+  (they bound the scale: with three or four contacts the t quantile is 4-13); plus the legs' drift of the
+  contact heights (`LegCompliance`). Two contacts cannot show their scatter: their errors are floored at
+  `TWO_CONTACT_SD_M` each (a foot is no point and a leg compresses: the pivot moves that much).
 * ``impact line``: the line through the hub at the CoM-height minima (impacts), which lie on a line parallel to
   the slope when every impact looks alike; its standard error from the scatter about the line (Student t), plus
   the legs' drift of the minima depth (`LegCompliance`: a compliant leg compresses more when the wheel speeds
@@ -212,6 +213,8 @@ class SlopeEvidence:
     #: the part of the half width (rad, 95 %) from a drift every estimate of the trial shares (a compliant leg's
     #: compression changing with the speed): combining estimates does not reduce it
     common_half_rad: float = 0.0
+    #: degrees of freedom of the scale behind the rest of the half width (Student t; 0: normal, the scale known)
+    dof: int = 0
 
     @property
     def half_rad(self) -> float:
@@ -291,15 +294,22 @@ def _contact_evidence(
     # the scaled errors no smaller than a contact's own floor (a foot is no point): the least scale
     least = CONTACT_FLOOR_M / float(np.median([k.sd_m for k in cs]))
     scale = math.sqrt(max(chi2, CONTACT_CHI2_FLOOR, least**2))
-    se = se / math.sqrt(max(chi2, 1.0)) * scale  # (slope_from_contacts scaled by chi2 only when above 1)
-    half = max(math.hypot(_quantile(n - 2) * se, drift), floor)
+    stated = se / math.sqrt(max(chi2, 1.0))  # the line's error from the stated errors (chi2 undone when above 1)
+    # the scatter's scale with its Student t, or the stated errors' (normal: they bound the scale), the narrower
+    dof = n - 2 if _quantile(n - 2) * scale < Z95 * max(scale, 1.0) else 0
+    se = stated * (scale if dof else max(scale, 1.0))
+    half = max(math.hypot(_quantile(dof) * se, drift), floor)
     how = (
         f"line through {n} stance-foot contact points (walking window; no-slip: a stance foot does not "
-        f"move), scatter {rms * 1e3:.2f} mm (reduced chi-square {chi2:.2f}: their stated height errors scaled by "
-        f"{scale:.2f}; Student t with {n - 2} degrees of freedom), and "
-        f"{drift_how.replace('drift allowed', 'drift of the contact heights allowed', 1)}"
+        f"move), scatter {rms * 1e3:.2f} mm (reduced chi-square {chi2:.2f}: "
+        + (
+            f"their stated height errors scaled by {scale:.2f}; Student t with {dof} degrees of freedom)"
+            if dof
+            else "their stated height errors, which bound the scale, too few contacts to narrow them)"
+        )
+        + f", and {drift_how.replace('drift allowed', 'drift of the contact heights allowed', 1)}"
     )
-    return SlopeEvidence("estimated", phi, _interval(phi, half), how, "contacts", min(drift, half))
+    return SlopeEvidence("estimated", phi, _interval(phi, half), how, "contacts", min(drift, half), dof)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -394,6 +404,7 @@ def slope_evidence(
                 how,
                 "impact line",
                 min(drift, half),
+                max(dof, 0),
             )
         )
     if not estimates and (given_deg is None and ramp_deg is None or hub_line is not None):
@@ -421,6 +432,39 @@ def slope_evidence(
 
 def _disagree(a: SlopeEvidence, b: SlopeEvidence) -> bool:
     return abs(a.slope_rad - b.slope_rad) > math.hypot(a.half_rad, b.half_rad)
+
+
+def _combine(group: list[SlopeEvidence]) -> SlopeEvidence:
+    """Consistent estimates from different data (stance pivots, impact cusps), combined by inverse variance.
+    Each half width is a quantile (Student t on the estimate's ``dof``, normal for 0) times its own standard
+    error, and Z95 times the drift the estimates share (``common_half_rad``). The own parts average down; the
+    shared drift does not (it moves every estimate alike). The combined own part's quantile is Student t on the
+    Welch-Satterthwaite degrees of freedom (two lines of nine each: about 18, t 2.10 where each had 2.26)."""
+    own_var = [max(e.half_rad**2 - e.common_half_rad**2, 0.0) / _quantile(e.dof) ** 2 for e in group]
+    common_sd = [e.common_half_rad / Z95 for e in group]
+    w = [1.0 / max(v + c**2, 1e-30) for v, c in zip(own_var, common_sd)]
+    sw = sum(w)
+    mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sw
+    parts = [wi**2 * v / sw**2 for wi, v in zip(w, own_var)]
+    own = sum(parts)
+    common = sum(wi * c for wi, c in zip(w, common_sd)) / sw
+    if any(e.dof <= 0 for e in group) or own <= 0:
+        dof = 0  # a scale known exactly in one: normal
+    else:
+        dof = int(own**2 / sum(p**2 / e.dof for p, e in zip(parts, group)))
+    half = math.hypot(_quantile(dof) * math.sqrt(own), Z95 * common)
+    return SlopeEvidence(
+        "estimated",
+        mean,
+        _interval(mean, half),
+        "inverse-variance combination of the consistent estimates"
+        + (f" (Student t with {dof} degrees of freedom, Welch-Satterthwaite)" if dof > 0 else "")
+        + ": "
+        + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
+        "combined " + " and ".join(e.kind for e in group),
+        Z95 * common,
+        dof,
+    )
 
 
 def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], list[str], list[str]]:
@@ -469,23 +513,7 @@ def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], li
             )
         agreeing = [e for e in evidence[1:] if e.source == "estimated" and not _disagree(used, e)]
         if agreeing and not others:
-            # consistent estimates from different data (stance pivots, impact cusps): inverse-variance combined
-            group = [used] + agreeing
-            w = [1.0 / max(e.half_rad, 1e-12) ** 2 for e in group]
-            mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sum(w)
-            # their own parts average down; the drift they share does not (it moves every estimate alike)
-            own = sum(wi**2 * (e.half_rad**2 - e.common_half_rad**2) for wi, e in zip(w, group))
-            common = sum(wi * e.common_half_rad for wi, e in zip(w, group))
-            half = math.sqrt(own + common**2) / sum(w)
-            used = SlopeEvidence(
-                "estimated",
-                mean,
-                _interval(mean, half),
-                "inverse-variance combination of the consistent estimates: "
-                + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
-                "combined " + " and ".join(e.kind for e in group),
-                common / sum(w),
-            )
+            used = _combine([used] + agreeing)
         rest = [e for e in evidence[1:] if e.source == "estimated"]
         if rest:
             notes.append(
