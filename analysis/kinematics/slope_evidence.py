@@ -213,8 +213,6 @@ class SlopeEvidence:
     #: the part of the half width (rad, 95 %) from a drift every estimate of the trial shares (a compliant leg's
     #: compression changing with the speed): combining estimates does not reduce it
     common_half_rad: float = 0.0
-    #: degrees of freedom of the scale behind the rest of the half width (Student t; 0: normal, the scale known)
-    dof: int = 0
 
     @property
     def half_rad(self) -> float:
@@ -309,7 +307,7 @@ def _contact_evidence(
         )
         + f", and {drift_how.replace('drift allowed', 'drift of the contact heights allowed', 1)}"
     )
-    return SlopeEvidence("estimated", phi, _interval(phi, half), how, "contacts", min(drift, half), dof)
+    return SlopeEvidence("estimated", phi, _interval(phi, half), how, "contacts", min(drift, half))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -404,7 +402,6 @@ def slope_evidence(
                 how,
                 "impact line",
                 min(drift, half),
-                max(dof, 0),
             )
         )
     if not estimates and (given_deg is None and ramp_deg is None or hub_line is not None):
@@ -432,39 +429,6 @@ def slope_evidence(
 
 def _disagree(a: SlopeEvidence, b: SlopeEvidence) -> bool:
     return abs(a.slope_rad - b.slope_rad) > math.hypot(a.half_rad, b.half_rad)
-
-
-def _combine(group: list[SlopeEvidence]) -> SlopeEvidence:
-    """Consistent estimates from different data (stance pivots, impact cusps), combined by inverse variance.
-    Each half width is a quantile (Student t on the estimate's ``dof``, normal for 0) times its own standard
-    error, and Z95 times the drift the estimates share (``common_half_rad``). The own parts average down; the
-    shared drift does not (it moves every estimate alike). The combined own part's quantile is Student t on the
-    Welch-Satterthwaite degrees of freedom (two lines of nine each: about 18, t 2.10 where each had 2.26)."""
-    own_var = [max(e.half_rad**2 - e.common_half_rad**2, 0.0) / _quantile(e.dof) ** 2 for e in group]
-    common_sd = [e.common_half_rad / Z95 for e in group]
-    w = [1.0 / max(v + c**2, 1e-30) for v, c in zip(own_var, common_sd)]
-    sw = sum(w)
-    mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sw
-    parts = [wi**2 * v / sw**2 for wi, v in zip(w, own_var)]
-    own = sum(parts)
-    common = sum(wi * c for wi, c in zip(w, common_sd)) / sw
-    if any(e.dof <= 0 for e in group) or own <= 0:
-        dof = 0  # a scale known exactly in one: normal
-    else:
-        dof = int(own**2 / sum(p**2 / e.dof for p, e in zip(parts, group)))
-    half = math.hypot(_quantile(dof) * math.sqrt(own), Z95 * common)
-    return SlopeEvidence(
-        "estimated",
-        mean,
-        _interval(mean, half),
-        "inverse-variance combination of the consistent estimates"
-        + (f" (Student t with {dof} degrees of freedom, Welch-Satterthwaite)" if dof > 0 else "")
-        + ": "
-        + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
-        "combined " + " and ".join(e.kind for e in group),
-        Z95 * common,
-        dof,
-    )
 
 
 def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], list[str], list[str]]:
@@ -513,7 +477,26 @@ def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], li
             )
         agreeing = [e for e in evidence[1:] if e.source == "estimated" and not _disagree(used, e)]
         if agreeing and not others:
-            used = _combine([used] + agreeing)
+            # consistent estimates from different data (stance pivots, impact cusps): inverse-variance combined
+            group = [used] + agreeing
+            w = [1.0 / max(e.half_rad, 1e-12) ** 2 for e in group]
+            mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sum(w)
+            # their own parts average down; the drift they share does not (it moves every estimate alike). Each
+            # keeps its own quantile (a Student t above the normal): combined, the estimates' errors are not
+            # independent enough to earn less (the rigid truth's contact and impact lines err together,
+            # correlation 0.7 on the slope-coverage study's walks; Welch-Satterthwaite's t lost it a walk)
+            own = sum(wi**2 * max(e.half_rad**2 - e.common_half_rad**2, 0.0) for wi, e in zip(w, group))
+            common = sum(wi * e.common_half_rad for wi, e in zip(w, group))
+            half = math.sqrt(own + common**2) / sum(w)
+            used = SlopeEvidence(
+                "estimated",
+                mean,
+                _interval(mean, half),
+                "inverse-variance combination of the consistent estimates: "
+                + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
+                "combined " + " and ".join(e.kind for e in group),
+                common / sum(w),
+            )
         rest = [e for e in evidence[1:] if e.source == "estimated"]
         if rest:
             notes.append(
