@@ -174,6 +174,10 @@ class VelocityEstimator:
             self._t.popleft()
             self._x.popleft()
 
+    def lowest_m(self) -> float:
+        """The lowest position in the window (m); 0 when empty."""
+        return min(self._x, default=0.0)
+
     def estimate(self, lead_s: float = 0.0) -> float | None:
         """Velocity (m/s) at the newest sample + `lead_s`, or None with too few samples."""
         n = len(self._t)
@@ -226,8 +230,8 @@ class LegDetector:
     """
 
     # what `_touchdown` changed, for `dismiss_touchdown` to undo: (leg_index, _last_touchdown_s, _period_s,
-    # _touchdown_s, _touchdown_x_m, _confirmed); unset until the first touchdown
-    _before_touchdown: tuple[int, float | None, float | None, float, float, int] | None
+    # _touchdown_s, _touchdown_x_m, _confirmed, awaiting_clean_touchdown); unset until the first touchdown
+    _before_touchdown: tuple[int, float | None, float | None, float, float, int, bool] | None
 
     def __init__(self, params: DetectorParams, legs: list[int] | tuple[int, ...], *, start_index: int = 0) -> None:
         if not legs:
@@ -246,11 +250,59 @@ class LegDetector:
         return len(self.legs) > 1
 
     def resync(self, leg: int) -> None:
-        """The leg on the ground now is clutch `leg` (one of `legs`): back to WAIT, counting from it."""
+        """The leg on the ground at the last sample is clutch `leg` (one of `legs`): count from it, and lock nothing
+        before a clean touchdown, one whose compression began after that sample.
+
+        The samples seen so far are kept (velocity fit, mean position, noise), so a touchdown right after the
+        resync is seen as promptly as any other. A compression under way at the last sample (a touchdown being
+        confirmed, a compression or its rebound, or a position risen above the recent rest) began before the
+        resync: it is the named leg's own step, followed to its end as a step (its rebound explained, not doubted)
+        and never counted nor locked. The doubt test forgets what came before: the naming explains it."""
         if leg not in self.legs:
             raise ValueError(f"leg {leg} is not watched by this sensor (legs {self.legs})")
-        self.reset(self.legs.index(leg))
+        index = self.legs.index(leg)
+        if self._t0_ns is None or self._est.estimate() is None:
+            self.reset(index)  # nothing seen yet that could be under way
+        else:
+            self._recount(index)
         self.named = True
+        self.awaiting_clean_touchdown = True
+
+    def _recount(self, index: int) -> None:
+        """`resync` with samples seen: the count restarts at `legs[index]`, the phase follows the step under way."""
+        p = self.params
+        self.leg_index = index
+        self.synced = True
+        self.sync_detail = ""
+        self._last_touchdown_s = None
+        self._period_s = None
+        self._predicted_touchdown_s = None
+        self._lock_delay_min_s = None
+        self._confirmed = 0
+        self._before_touchdown = None
+        self._engaged = False  # whatever was locked on the old count is released by the controller
+        self._lock_count = 0
+        self._doubt_forget()
+        rest_m = self._est.lowest_m()
+        risen = self.position_m - rest_m > self.rest_band_m()
+        rising = self._touch_count > 0 or self.velocity_m_s > p.touch_velocity_m_s
+        if self.phase in (Phase.WAIT, Phase.CLUTCHED) and (rising or risen):
+            # The named leg's own step, its touchdown before the resync (being confirmed, or not seen).
+            self.phase = Phase.DOUBLE_SUPPORT
+            self._touchdown_s = self._t_last_s
+            self._touchdown_x_m = rest_m
+            self._peak_v = max(self.velocity_m_s, math.nextafter(p.touch_velocity_m_s, math.inf))
+            self._touchdown_unseen = True
+            self._need_quiet = False
+        self._touch_count = 0
+
+    def rest_band_m(self) -> float:
+        """How far (m) above the recent lowest position the leg must be to count as risen from rest: six standard
+        deviations of the measured position noise and three position quanta, else `touch_compression_m`."""
+        q = self.noise.quantum_m or 0.0
+        if self.noise.measured:
+            return max(6.0 * self.noise.sigma_m, 3.0 * q)
+        return max(self.params.touch_compression_m, 3.0 * q)
 
     def reset(self, start_index: int | None = None) -> None:
         """Back to WAIT and synchronised, with legs[start_index] on the ground."""
@@ -282,6 +334,9 @@ class LegDetector:
         self._rise = RiseWatch(self.params.doubt_smooth_s, self.params.max_compression_s)
         self._predicted_touchdown_s: float | None = None  # when the stance leg's touchdown was due (s)
         self._lock_delay_min_s: float | None = None  # shortest touchdown-to-zero-crossing time measured (s)
+        self._touchdown_unseen = False  # the step under way began before a resync: its touchdown time is not known
+        # no lock before a touchdown whose compression began after the last resync (`resync`)
+        self.awaiting_clean_touchdown = False
 
     def set_params(self, params: DetectorParams) -> None:
         """Apply new parameters (validated) without losing the phase."""
@@ -312,6 +367,7 @@ class LegDetector:
                 self._touchdown_s,
                 self._touchdown_x_m,
                 self._confirmed,
+                self.awaiting_clean_touchdown,
             ) = before
             self._before_touchdown = None
         self.phase = Phase.WAIT
@@ -365,6 +421,8 @@ class LegDetector:
         p = self.params
         if p.named_stance_required and not self.named:
             return False  # the start leg was configured, not named
+        if self.awaiting_clean_touchdown:
+            return False  # named, but the step under way began before: the next touchdown starts the count
         if p.doubt_noise_sigmas > 0 and not self.doubt_threshold_m() <= p.doubt_compression_m:
             return False  # noise not measured yet, or too large to see a missed step
         return self.synced and self._confirmed >= p.confirm_steps
@@ -473,8 +531,9 @@ class LegDetector:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
             self.lock_time_s = t
-            delay = t - self._touchdown_s
-            self._lock_delay_min_s = delay if self._lock_delay_min_s is None else min(self._lock_delay_min_s, delay)
+            if not self._touchdown_unseen:
+                delay = t - self._touchdown_s
+                self._lock_delay_min_s = delay if self._lock_delay_min_s is None else min(self._lock_delay_min_s, delay)
             self._doubt_forget()
             if not self.synced:
                 self._engaged = False
@@ -542,8 +601,11 @@ class LegDetector:
             self._touchdown_s,
             self._touchdown_x_m,
             self._confirmed,
+            self.awaiting_clean_touchdown,
         )
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
+        self.awaiting_clean_touchdown = False  # seen from rest after the last resync: the count starts here
+        self._touchdown_unseen = False
         self._engaged = False
         self._doubt_forget()
         self.leg_index = (self.leg_index + 1) % len(self.legs)
