@@ -174,6 +174,10 @@ class VelocityEstimator:
             self._t.popleft()
             self._x.popleft()
 
+    def samples(self) -> tuple[list[float], list[float]]:
+        """The window's times (s) and positions (m), oldest first."""
+        return list(self._t), list(self._x)
+
     def lowest_m(self) -> float:
         """The lowest position in the window (m); 0 when empty."""
         return min(self._x, default=0.0)
@@ -286,15 +290,63 @@ class LegDetector:
         rest_m = self._est.lowest_m()
         risen = self.position_m - rest_m > self.rest_band_m()
         rising = self._touch_count > 0 or self.velocity_m_s > p.touch_velocity_m_s
+        self._arm_s_rest_m: tuple[float, float] | None = None
         if self.phase in (Phase.WAIT, Phase.CLUTCHED) and (rising or risen):
-            # The named leg's own step, its touchdown before the resync (being confirmed, or not seen).
-            self.phase = Phase.DOUBLE_SUPPORT
-            self._touchdown_s = self._t_last_s
-            self._touchdown_x_m = rest_m
-            self._peak_v = max(self.velocity_m_s, math.nextafter(p.touch_velocity_m_s, math.inf))
-            self._touchdown_unseen = True
-            self._need_quiet = False
+            self._step_under_way(rest_m)
+        else:
+            self._arm_s_rest_m = (self._t_last_s, rest_m)  # the first touchdown is judged against it
         self._touch_count = 0
+
+    def _step_under_way(self, rest_m: float) -> None:
+        """The named leg's own step, its touchdown before the resync (being confirmed, or not seen): followed as a
+        step from now (its compression and rebound explained), never counted."""
+        self.phase = Phase.DOUBLE_SUPPORT
+        self._touchdown_s = self._t_last_s
+        self._touchdown_x_m = rest_m
+        self._peak_v = max(self.velocity_m_s, math.nextafter(self.params.touch_velocity_m_s, math.inf))
+        self._touchdown_unseen = True
+        self._need_quiet = False
+        self._touch_count = 0
+        self._lock_count = 0
+
+    def _touchdown_time_s(self, rest_m: float) -> float | None:
+        """When the compression being confirmed left `rest_m` (s): the earliest sample of the newest run of samples
+        risen above it by more than `rest_band_m`, extrapolated back along the line to the next sample (None when
+        the newest sample has not risen)."""
+        ts, xs = self._est.samples()
+        band = self.rest_band_m()
+        i = len(ts)
+        while i > 0 and xs[i - 1] - rest_m > band:
+            i -= 1
+        if i == len(ts):
+            return None
+        t, x = ts[i], xs[i]
+        if i + 1 < len(ts) and xs[i + 1] > x:
+            return t - (x - rest_m) * (ts[i + 1] - t) / (xs[i + 1] - x)
+        return t
+
+    def _judge_first_touchdown(self) -> Decision | None:
+        """The first touchdown after a resync at rest: one that began before the resync's sample is the named leg's
+        own step (not counted); one within the time its rise takes to cross `rest_band_m` of it cannot be placed:
+        the leg named is ambiguous, the count lost. None: after the resync, counted."""
+        assert self._arm_s_rest_m is not None
+        t_arm, rest_m = self._arm_s_rest_m
+        self._arm_s_rest_m = None
+        t0 = self._touchdown_time_s(rest_m)
+        if t0 is None:
+            return None
+        v = max(self.velocity_m_s, self.params.touch_velocity_m_s)
+        margin_s = max(self.rest_band_m() / v, 1e-4)
+        if t0 > t_arm + margin_s:
+            return None
+        if t0 < t_arm - margin_s:
+            self._step_under_way(rest_m)
+            return Decision(events=("touchdown_before_arm",))
+        return self._lose_sync(
+            f"ambiguous arm: a touchdown {abs(t0 - t_arm) * 1e3:.2f} ms {'before' if t0 < t_arm else 'after'} it "
+            f"(closer than {margin_s * 1e3:.2f} ms, the time its rise takes to show): which leg was on the ground is "
+            "not known; arm again naming the leg on the ground"
+        )
 
     def rest_band_m(self) -> float:
         """How far (m) above the recent lowest position the leg must be to count as risen from rest: six standard
@@ -335,6 +387,7 @@ class LegDetector:
         self._predicted_touchdown_s: float | None = None  # when the stance leg's touchdown was due (s)
         self._lock_delay_min_s: float | None = None  # shortest touchdown-to-zero-crossing time measured (s)
         self._touchdown_unseen = False  # the step under way began before a resync: its touchdown time is not known
+        self._arm_s_rest_m = None  # (the resync's sample time s, the rest position m) until its first touchdown
         # no lock before a touchdown whose compression began after the last resync (`resync`)
         self.awaiting_clean_touchdown = False
 
@@ -501,6 +554,10 @@ class LegDetector:
                     self._need_quiet = True
                     self._doubt_forget()
                     return Decision(events=("bounce_ignored",))
+                if self.awaiting_clean_touchdown and self._arm_s_rest_m is not None:
+                    judged = self._judge_first_touchdown()
+                    if judged is not None:
+                        return judged
                 return self._touchdown(t)
             return NOTHING
 
