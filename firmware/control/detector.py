@@ -33,10 +33,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from enum import Enum
-from typing import Any
 
+from rimless.firmware.control.detector_params import DetectorParams
 from rimless.firmware.control.rise_watch import NoiseMeter, RiseWatch
 
 
@@ -55,100 +55,6 @@ class Phase(str, Enum):
 
 
 _PHASE_CODES = {Phase.WAIT: 0, Phase.DOUBLE_SUPPORT: 1, Phase.FREE_COMPRESSION: 2, Phase.CLUTCHED: 3}
-
-
-@dataclass(frozen=True, slots=True)
-class DetectorParams:
-    """Detector parameters (SI, unit-suffixed). All may be changed at run time with `set`."""
-
-    velocity_window_s: float = 0.02  # span of the quadratic velocity fit
-    touch_velocity_m_s: float = 0.05  # compression velocity that means a leg touched down
-    touch_debounce_samples: int = 2  # consecutive samples above it
-    touch_compression_m: float = 0.0005  # and the leg must really have moved this much since onset
-    lock_velocity_m_s: float = 0.0  # lock when the predicted compression velocity is <= this
-    lock_debounce_samples: int = 1  # consecutive samples at or below it
-    lock_lead_s: float = 0.0  # extra prediction (e.g. the clutch's engage delay)
-    min_compression_m: float = 0.001  # compression needed before a lock may happen (hysteresis)
-    double_support_s: float = 0.02  # how long after touchdown the phase reads double support
-    min_step_s: float = 0.08  # refractory time between touchdowns (debounce)
-    max_compression_s: float = 0.5  # no zero crossing this long after touchdown: back to wait
-    max_step_s: float = 1.0  # no touchdown this long after the previous one: the count is lost
-    step_period_tolerance: float = 0.4  # a step outside (1 -/+ this) x the running period loses the count
-    # A counted sensor locks only after this many step intervals since (re)sync matched the measured period (the
-    # first interval measures it and confirms nothing; 0: lock from the first touchdown; the robot's default is 2).
-    confirm_steps: int = 0
-    # A counted sensor loses the count when the leg compresses by this much (m) and stops without a confirmed
-    # touchdown: a gentle step the touchdown test missed (0: off; the robot's default is 0.0003).
-    doubt_compression_m: float = 0.0
-    # A counted sensor's doubt threshold relative to the measured noise: this many standard deviations of the
-    # smoothed position's rise (noise measured at rest, in WAIT), at least two position quanta; it replaces
-    # doubt_compression_m as the threshold, which then bounds it: a sensor too noisy to see a rise of
-    # doubt_compression_m withholds every lock (0: off, the fixed doubt_compression_m; the robot's default is 6).
-    doubt_noise_sigmas: float = 0.0
-    doubt_smooth_s: float = 0.04  # the doubt test follows the mean position over this span (s)
-    # A counted sensor with a measured period accepts a touchdown no earlier than this fraction of the measured
-    # touchdown-to-lock time before the predicted one (a compression earlier in the step is a bounce: ignored, it
-    # does not move the count), and never locks before the predicted touchdown time (0: off, an early touchdown
-    # is an extra one, sync lost; the robot's default is 0.5).
-    touch_window_early_fraction: float = 0.0
-    # 1: a counted sensor locks only after `resync` (arm with stance_leg) named the leg on the ground: one sensor
-    # cannot tell the legs apart, so a configured start leg is never trusted (0: trusted; the robot's default is 1).
-    named_stance_required: int = 0
-
-    def validated(self) -> DetectorParams:
-        """Return self, or raise ValueError naming the bad field."""
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"{f.name} must be a finite number, got {value!r}")
-            if f.name.endswith("_samples"):
-                if not isinstance(value, int) or not 1 <= value <= 1000:
-                    raise ValueError(f"{f.name} must be an integer in 1..1000, got {value!r}")
-            elif f.name in ("lock_velocity_m_s",):
-                if not -1.0 <= value < self.touch_velocity_m_s:
-                    raise ValueError(f"{f.name} must be in [-1, touch_velocity_m_s), got {value!r}")
-            elif f.name in ("lock_lead_s", "double_support_s"):
-                if not 0.0 <= value <= 1.0:
-                    raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
-            elif f.name == "confirm_steps":
-                if not isinstance(value, int) or not 0 <= value <= 20:
-                    raise ValueError(f"{f.name} must be an integer in 0..20, got {value!r}")
-            elif f.name == "doubt_compression_m":
-                if not 0.0 <= value <= 0.1:
-                    raise ValueError(f"{f.name} must be in [0, 0.1] m, got {value!r}")
-            elif f.name == "doubt_noise_sigmas":
-                if not 0.0 <= value <= 100.0:
-                    raise ValueError(f"{f.name} must be in [0, 100], got {value!r}")
-            elif f.name == "named_stance_required":
-                if value not in (0, 1):
-                    raise ValueError(f"{f.name} must be 0 or 1, got {value!r}")
-            elif f.name == "touch_window_early_fraction":
-                if not 0.0 <= value <= 1.0:
-                    raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
-            elif f.name == "step_period_tolerance":
-                if not 0.05 <= value <= 0.9:
-                    raise ValueError(f"{f.name} must be in [0.05, 0.9], got {value!r}")
-            elif f.name == "max_step_s":
-                if not self.min_step_s < value <= 10.0:
-                    raise ValueError(f"{f.name} must be in (min_step_s, 10], got {value!r}")
-            elif not 0.0 < value <= 10.0:
-                raise ValueError(f"{f.name} must be in (0, 10], got {value!r}")
-        return self
-
-    def with_value(self, name: str, value: Any) -> DetectorParams:
-        """A copy with `name` set to `value` (validated); raises ValueError naming the parameter."""
-        names = {f.name: f for f in fields(self)}
-        if name not in names:
-            raise ValueError(f"unknown detector parameter {name!r}; known: {', '.join(sorted(names))}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-        if name.endswith("_samples") or name in ("confirm_steps", "named_stance_required"):
-            if float(value) != int(value):
-                raise ValueError(f"{name} must be an integer, got {value!r}")
-            value = int(value)
-        else:
-            value = float(value)
-        return replace(self, **{name: value}).validated()
 
 
 class VelocityEstimator:
@@ -236,6 +142,17 @@ class LegDetector:
     # what `_touchdown` changed, for `dismiss_touchdown` to undo: (leg_index, _last_touchdown_s, _period_s,
     # _touchdown_s, _touchdown_x_m, _confirmed, awaiting_clean_touchdown); unset until the first touchdown
     _before_touchdown: tuple[int, float | None, float | None, float, float, int, bool] | None
+    # set by `reset` (and `_recount`, defined before it)
+    _last_touchdown_s: float | None
+    _period_s: float | None
+    _t0_ns: int | None
+    _t_last_s: float
+    _touch_count: int
+    velocity_m_s: float
+    lock_time_s: float | None
+    _predicted_touchdown_s: float | None
+    _lock_delay_min_s: float | None
+    _arm_s_rest_m: tuple[float, float] | None
 
     def __init__(self, params: DetectorParams, legs: list[int] | tuple[int, ...], *, start_index: int = 0) -> None:
         if not legs:
@@ -290,7 +207,7 @@ class LegDetector:
         rest_m = self._est.lowest_m()
         risen = self.position_m - rest_m > self.rest_band_m()
         rising = self._touch_count > 0 or self.velocity_m_s > p.touch_velocity_m_s
-        self._arm_s_rest_m: tuple[float, float] | None = None
+        self._arm_s_rest_m = None
         if self.phase in (Phase.WAIT, Phase.CLUTCHED) and (rising or risen):
             self._step_under_way(rest_m)
         else:
@@ -364,14 +281,14 @@ class LegDetector:
         self.leg_index = self._start_index
         self.synced = True
         self.sync_detail = ""
-        self._last_touchdown_s: float | None = None
-        self._period_s: float | None = None
+        self._last_touchdown_s = None
+        self._period_s = None
         self._distrust_until_s = -math.inf
         self._need_quiet = True  # a compression already under way at (re)sync is not a touchdown
         self._est.reset()
         self.position_m = 0.0
         self.velocity_m_s = 0.0
-        self._t0_ns: int | None = None
+        self._t0_ns = None
         self._t_last_s = 0.0
         self._dt_s = 0.0
         self._touch_count = 0
@@ -380,12 +297,12 @@ class LegDetector:
         self._touchdown_s = -math.inf
         self._touchdown_x_m = 0.0
         self._peak_v = 0.0
-        self.lock_time_s: float | None = None
+        self.lock_time_s = None
         self._confirmed = 0  # step intervals since (re)sync that matched a measured period
         self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
         self._rise = RiseWatch(self.params.doubt_smooth_s, self.params.max_compression_s)
-        self._predicted_touchdown_s: float | None = None  # when the stance leg's touchdown was due (s)
-        self._lock_delay_min_s: float | None = None  # shortest touchdown-to-zero-crossing time measured (s)
+        self._predicted_touchdown_s = None  # when the stance leg's touchdown was due (s)
+        self._lock_delay_min_s = None  # shortest touchdown-to-zero-crossing time measured (s)
         self._touchdown_unseen = False  # the step under way began before a resync: its touchdown time is not known
         self._arm_s_rest_m = None  # (the resync's sample time s, the rest position m) until its first touchdown
         # no lock before a touchdown whose compression began after the last resync (`resync`)
