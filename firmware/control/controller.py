@@ -124,10 +124,11 @@ class Controller:
     def arm(self, stance_leg: int | None = None) -> dict[str, Any]:
         """Clear latched faults and let decisions reach the clutches.
 
-        `stance_leg` (a clutch index) names the leg on the ground now and re-synchronises the count of
-        the sensor watching it; without it the count carries on, which is refused (ValueError) when a
-        counting sensor has lost it. Each sensor's motion accumulators are cleared (Motion_Clear also
-        clears a latched overflow).
+        `stance_leg` (a clutch index) names the leg on the ground now (at the last sample) and re-synchronises
+        the count of the sensor watching it (`LegDetector.resync`): every clutch is released, a step under way
+        is that leg's own, and nothing locks before the next clean touchdown, wherever in a step the arm lands.
+        Without it the count carries on, which is refused (ValueError) when a counting sensor has lost it.
+        Each sensor's motion accumulators are cleared (Motion_Clear also clears a latched overflow).
         """
         if stance_leg is not None:
             owners = [ch for ch in self.channels if stance_leg in ch.detector.legs]
@@ -144,6 +145,8 @@ class Controller:
                 f"the stance leg is not known ({lost[0].sync_detail}); arm with stance_leg = the clutch index "
                 "of the leg on the ground now"
             )
+        if stance_leg is not None:
+            self._all_off()  # nothing stays locked on the old count
         for ch in self.channels:
             if stance_leg is not None and stance_leg in ch.detector.legs:
                 ch.detector.resync(stance_leg)
@@ -207,6 +210,7 @@ class Controller:
                     "velocity_m_s": ch.detector.velocity_m_s,
                     "compression_m": ch.detector.compression_m,
                     "synchronised": ch.detector.synced,
+                    "awaiting_touchdown": ch.detector.awaiting_clean_touchdown,
                     "sync_detail": ch.detector.sync_detail,
                 }
                 for ch in self.channels

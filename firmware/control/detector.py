@@ -33,10 +33,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from enum import Enum
-from typing import Any
 
+from rimless.firmware.control.detector_params import DetectorParams
 from rimless.firmware.control.rise_watch import NoiseMeter, RiseWatch
 
 
@@ -55,100 +55,6 @@ class Phase(str, Enum):
 
 
 _PHASE_CODES = {Phase.WAIT: 0, Phase.DOUBLE_SUPPORT: 1, Phase.FREE_COMPRESSION: 2, Phase.CLUTCHED: 3}
-
-
-@dataclass(frozen=True, slots=True)
-class DetectorParams:
-    """Detector parameters (SI, unit-suffixed). All may be changed at run time with `set`."""
-
-    velocity_window_s: float = 0.02  # span of the quadratic velocity fit
-    touch_velocity_m_s: float = 0.05  # compression velocity that means a leg touched down
-    touch_debounce_samples: int = 2  # consecutive samples above it
-    touch_compression_m: float = 0.0005  # and the leg must really have moved this much since onset
-    lock_velocity_m_s: float = 0.0  # lock when the predicted compression velocity is <= this
-    lock_debounce_samples: int = 1  # consecutive samples at or below it
-    lock_lead_s: float = 0.0  # extra prediction (e.g. the clutch's engage delay)
-    min_compression_m: float = 0.001  # compression needed before a lock may happen (hysteresis)
-    double_support_s: float = 0.02  # how long after touchdown the phase reads double support
-    min_step_s: float = 0.08  # refractory time between touchdowns (debounce)
-    max_compression_s: float = 0.5  # no zero crossing this long after touchdown: back to wait
-    max_step_s: float = 1.0  # no touchdown this long after the previous one: the count is lost
-    step_period_tolerance: float = 0.4  # a step outside (1 -/+ this) x the running period loses the count
-    # A counted sensor locks only after this many step intervals since (re)sync matched the measured period (the
-    # first interval measures it and confirms nothing; 0: lock from the first touchdown; the robot's default is 2).
-    confirm_steps: int = 0
-    # A counted sensor loses the count when the leg compresses by this much (m) and stops without a confirmed
-    # touchdown: a gentle step the touchdown test missed (0: off; the robot's default is 0.0003).
-    doubt_compression_m: float = 0.0
-    # A counted sensor's doubt threshold relative to the measured noise: this many standard deviations of the
-    # smoothed position's rise (noise measured at rest, in WAIT), at least two position quanta; it replaces
-    # doubt_compression_m as the threshold, which then bounds it: a sensor too noisy to see a rise of
-    # doubt_compression_m withholds every lock (0: off, the fixed doubt_compression_m; the robot's default is 6).
-    doubt_noise_sigmas: float = 0.0
-    doubt_smooth_s: float = 0.04  # the doubt test follows the mean position over this span (s)
-    # A counted sensor with a measured period accepts a touchdown no earlier than this fraction of the measured
-    # touchdown-to-lock time before the predicted one (a compression earlier in the step is a bounce: ignored, it
-    # does not move the count), and never locks before the predicted touchdown time (0: off, an early touchdown
-    # is an extra one, sync lost; the robot's default is 0.5).
-    touch_window_early_fraction: float = 0.0
-    # 1: a counted sensor locks only after `resync` (arm with stance_leg) named the leg on the ground: one sensor
-    # cannot tell the legs apart, so a configured start leg is never trusted (0: trusted; the robot's default is 1).
-    named_stance_required: int = 0
-
-    def validated(self) -> DetectorParams:
-        """Return self, or raise ValueError naming the bad field."""
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"{f.name} must be a finite number, got {value!r}")
-            if f.name.endswith("_samples"):
-                if not isinstance(value, int) or not 1 <= value <= 1000:
-                    raise ValueError(f"{f.name} must be an integer in 1..1000, got {value!r}")
-            elif f.name in ("lock_velocity_m_s",):
-                if not -1.0 <= value < self.touch_velocity_m_s:
-                    raise ValueError(f"{f.name} must be in [-1, touch_velocity_m_s), got {value!r}")
-            elif f.name in ("lock_lead_s", "double_support_s"):
-                if not 0.0 <= value <= 1.0:
-                    raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
-            elif f.name == "confirm_steps":
-                if not isinstance(value, int) or not 0 <= value <= 20:
-                    raise ValueError(f"{f.name} must be an integer in 0..20, got {value!r}")
-            elif f.name == "doubt_compression_m":
-                if not 0.0 <= value <= 0.1:
-                    raise ValueError(f"{f.name} must be in [0, 0.1] m, got {value!r}")
-            elif f.name == "doubt_noise_sigmas":
-                if not 0.0 <= value <= 100.0:
-                    raise ValueError(f"{f.name} must be in [0, 100], got {value!r}")
-            elif f.name == "named_stance_required":
-                if value not in (0, 1):
-                    raise ValueError(f"{f.name} must be 0 or 1, got {value!r}")
-            elif f.name == "touch_window_early_fraction":
-                if not 0.0 <= value <= 1.0:
-                    raise ValueError(f"{f.name} must be in [0, 1], got {value!r}")
-            elif f.name == "step_period_tolerance":
-                if not 0.05 <= value <= 0.9:
-                    raise ValueError(f"{f.name} must be in [0.05, 0.9], got {value!r}")
-            elif f.name == "max_step_s":
-                if not self.min_step_s < value <= 10.0:
-                    raise ValueError(f"{f.name} must be in (min_step_s, 10], got {value!r}")
-            elif not 0.0 < value <= 10.0:
-                raise ValueError(f"{f.name} must be in (0, 10], got {value!r}")
-        return self
-
-    def with_value(self, name: str, value: Any) -> DetectorParams:
-        """A copy with `name` set to `value` (validated); raises ValueError naming the parameter."""
-        names = {f.name: f for f in fields(self)}
-        if name not in names:
-            raise ValueError(f"unknown detector parameter {name!r}; known: {', '.join(sorted(names))}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-        if name.endswith("_samples") or name in ("confirm_steps", "named_stance_required"):
-            if float(value) != int(value):
-                raise ValueError(f"{name} must be an integer, got {value!r}")
-            value = int(value)
-        else:
-            value = float(value)
-        return replace(self, **{name: value}).validated()
 
 
 class VelocityEstimator:
@@ -173,6 +79,14 @@ class VelocityEstimator:
         while len(self._t) > self.MIN_SAMPLES and t_s - self._t[0] > self.window_s:
             self._t.popleft()
             self._x.popleft()
+
+    def samples(self) -> tuple[list[float], list[float]]:
+        """The window's times (s) and positions (m), oldest first."""
+        return list(self._t), list(self._x)
+
+    def lowest_m(self) -> float:
+        """The lowest position in the window (m); 0 when empty."""
+        return min(self._x, default=0.0)
 
     def estimate(self, lead_s: float = 0.0) -> float | None:
         """Velocity (m/s) at the newest sample + `lead_s`, or None with too few samples."""
@@ -226,8 +140,19 @@ class LegDetector:
     """
 
     # what `_touchdown` changed, for `dismiss_touchdown` to undo: (leg_index, _last_touchdown_s, _period_s,
-    # _touchdown_s, _touchdown_x_m, _confirmed); unset until the first touchdown
-    _before_touchdown: tuple[int, float | None, float | None, float, float, int] | None
+    # _touchdown_s, _touchdown_x_m, _confirmed, awaiting_clean_touchdown); unset until the first touchdown
+    _before_touchdown: tuple[int, float | None, float | None, float, float, int, bool] | None
+    # set by `reset` (and `_recount`, defined before it)
+    _last_touchdown_s: float | None
+    _period_s: float | None
+    _t0_ns: int | None
+    _t_last_s: float
+    _touch_count: int
+    velocity_m_s: float
+    lock_time_s: float | None
+    _predicted_touchdown_s: float | None
+    _lock_delay_min_s: float | None
+    _arm_s_rest_m: tuple[float, float] | None
 
     def __init__(self, params: DetectorParams, legs: list[int] | tuple[int, ...], *, start_index: int = 0) -> None:
         if not legs:
@@ -246,11 +171,107 @@ class LegDetector:
         return len(self.legs) > 1
 
     def resync(self, leg: int) -> None:
-        """The leg on the ground now is clutch `leg` (one of `legs`): back to WAIT, counting from it."""
+        """The leg on the ground at the last sample is clutch `leg` (one of `legs`): count from it, and lock nothing
+        before a clean touchdown, one whose compression began after that sample.
+
+        The samples seen so far are kept (velocity fit, mean position, noise), so a touchdown right after the
+        resync is seen as promptly as any other. A compression under way at the last sample (a touchdown being
+        confirmed, a compression or its rebound, or a position risen above the recent rest) began before the
+        resync: it is the named leg's own step, followed to its end as a step (its rebound explained, not doubted)
+        and never counted nor locked. The doubt test forgets what came before: the naming explains it."""
         if leg not in self.legs:
             raise ValueError(f"leg {leg} is not watched by this sensor (legs {self.legs})")
-        self.reset(self.legs.index(leg))
+        index = self.legs.index(leg)
+        if self._t0_ns is None or self._est.estimate() is None:
+            self.reset(index)  # nothing seen yet that could be under way
+        else:
+            self._recount(index)
         self.named = True
+        self.awaiting_clean_touchdown = True
+
+    def _recount(self, index: int) -> None:
+        """`resync` with samples seen: the count restarts at `legs[index]`, the phase follows the step under way."""
+        p = self.params
+        self.leg_index = index
+        self.synced = True
+        self.sync_detail = ""
+        self._last_touchdown_s = None
+        self._period_s = None
+        self._predicted_touchdown_s = None
+        self._lock_delay_min_s = None
+        self._confirmed = 0
+        self._before_touchdown = None
+        self._engaged = False  # whatever was locked on the old count is released by the controller
+        self._lock_count = 0
+        self._doubt_forget()
+        rest_m = self._est.lowest_m()
+        risen = self.position_m - rest_m > self.rest_band_m()
+        rising = self._touch_count > 0 or self.velocity_m_s > p.touch_velocity_m_s
+        self._arm_s_rest_m = None
+        if self.phase in (Phase.WAIT, Phase.CLUTCHED) and (rising or risen):
+            self._step_under_way(rest_m)
+        else:
+            self._arm_s_rest_m = (self._t_last_s, rest_m)  # the first touchdown is judged against it
+        self._touch_count = 0
+
+    def _step_under_way(self, rest_m: float) -> None:
+        """The named leg's own step, its touchdown before the resync (being confirmed, or not seen): followed as a
+        step from now (its compression and rebound explained), never counted."""
+        self.phase = Phase.DOUBLE_SUPPORT
+        self._touchdown_s = self._t_last_s
+        self._touchdown_x_m = rest_m
+        self._peak_v = max(self.velocity_m_s, math.nextafter(self.params.touch_velocity_m_s, math.inf))
+        self._touchdown_unseen = True
+        self._need_quiet = False
+        self._touch_count = 0
+        self._lock_count = 0
+
+    def _touchdown_time_s(self, rest_m: float) -> float | None:
+        """When the compression being confirmed left `rest_m` (s): the earliest sample of the newest run of samples
+        risen above it by more than `rest_band_m`, extrapolated back along the line to the next sample (None when
+        the newest sample has not risen)."""
+        ts, xs = self._est.samples()
+        band = self.rest_band_m()
+        i = len(ts)
+        while i > 0 and xs[i - 1] - rest_m > band:
+            i -= 1
+        if i == len(ts):
+            return None
+        t, x = ts[i], xs[i]
+        if i + 1 < len(ts) and xs[i + 1] > x:
+            return t - (x - rest_m) * (ts[i + 1] - t) / (xs[i + 1] - x)
+        return t
+
+    def _judge_first_touchdown(self) -> Decision | None:
+        """The first touchdown after a resync at rest: one that began before the resync's sample is the named leg's
+        own step (not counted); one within the time its rise takes to cross `rest_band_m` of it cannot be placed:
+        the leg named is ambiguous, the count lost. None: after the resync, counted."""
+        assert self._arm_s_rest_m is not None
+        t_arm, rest_m = self._arm_s_rest_m
+        self._arm_s_rest_m = None
+        t0 = self._touchdown_time_s(rest_m)
+        if t0 is None:
+            return None
+        v = max(self.velocity_m_s, self.params.touch_velocity_m_s)
+        margin_s = max(self.rest_band_m() / v, 1e-4)
+        if t0 > t_arm + margin_s:
+            return None
+        if t0 < t_arm - margin_s:
+            self._step_under_way(rest_m)
+            return Decision(events=("touchdown_before_arm",))
+        return self._lose_sync(
+            f"ambiguous arm: a touchdown {abs(t0 - t_arm) * 1e3:.2f} ms {'before' if t0 < t_arm else 'after'} it "
+            f"(closer than {margin_s * 1e3:.2f} ms, the time its rise takes to show): which leg was on the ground is "
+            "not known; arm again naming the leg on the ground"
+        )
+
+    def rest_band_m(self) -> float:
+        """How far (m) above the recent lowest position the leg must be to count as risen from rest: six standard
+        deviations of the measured position noise and three position quanta, else `touch_compression_m`."""
+        q = self.noise.quantum_m or 0.0
+        if self.noise.measured:
+            return max(6.0 * self.noise.sigma_m, 3.0 * q)
+        return max(self.params.touch_compression_m, 3.0 * q)
 
     def reset(self, start_index: int | None = None) -> None:
         """Back to WAIT and synchronised, with legs[start_index] on the ground."""
@@ -260,14 +281,14 @@ class LegDetector:
         self.leg_index = self._start_index
         self.synced = True
         self.sync_detail = ""
-        self._last_touchdown_s: float | None = None
-        self._period_s: float | None = None
+        self._last_touchdown_s = None
+        self._period_s = None
         self._distrust_until_s = -math.inf
         self._need_quiet = True  # a compression already under way at (re)sync is not a touchdown
         self._est.reset()
         self.position_m = 0.0
         self.velocity_m_s = 0.0
-        self._t0_ns: int | None = None
+        self._t0_ns = None
         self._t_last_s = 0.0
         self._dt_s = 0.0
         self._touch_count = 0
@@ -276,12 +297,16 @@ class LegDetector:
         self._touchdown_s = -math.inf
         self._touchdown_x_m = 0.0
         self._peak_v = 0.0
-        self.lock_time_s: float | None = None
+        self.lock_time_s = None
         self._confirmed = 0  # step intervals since (re)sync that matched a measured period
         self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
         self._rise = RiseWatch(self.params.doubt_smooth_s, self.params.max_compression_s)
-        self._predicted_touchdown_s: float | None = None  # when the stance leg's touchdown was due (s)
-        self._lock_delay_min_s: float | None = None  # shortest touchdown-to-zero-crossing time measured (s)
+        self._predicted_touchdown_s = None  # when the stance leg's touchdown was due (s)
+        self._lock_delay_min_s = None  # shortest touchdown-to-zero-crossing time measured (s)
+        self._touchdown_unseen = False  # the step under way began before a resync: its touchdown time is not known
+        self._arm_s_rest_m = None  # (the resync's sample time s, the rest position m) until its first touchdown
+        # no lock before a touchdown whose compression began after the last resync (`resync`)
+        self.awaiting_clean_touchdown = False
 
     def set_params(self, params: DetectorParams) -> None:
         """Apply new parameters (validated) without losing the phase."""
@@ -312,6 +337,7 @@ class LegDetector:
                 self._touchdown_s,
                 self._touchdown_x_m,
                 self._confirmed,
+                self.awaiting_clean_touchdown,
             ) = before
             self._before_touchdown = None
         self.phase = Phase.WAIT
@@ -365,6 +391,8 @@ class LegDetector:
         p = self.params
         if p.named_stance_required and not self.named:
             return False  # the start leg was configured, not named
+        if self.awaiting_clean_touchdown:
+            return False  # named, but the step under way began before: the next touchdown starts the count
         if p.doubt_noise_sigmas > 0 and not self.doubt_threshold_m() <= p.doubt_compression_m:
             return False  # noise not measured yet, or too large to see a missed step
         return self.synced and self._confirmed >= p.confirm_steps
@@ -443,6 +471,10 @@ class LegDetector:
                     self._need_quiet = True
                     self._doubt_forget()
                     return Decision(events=("bounce_ignored",))
+                if self.awaiting_clean_touchdown and self._arm_s_rest_m is not None:
+                    judged = self._judge_first_touchdown()
+                    if judged is not None:
+                        return judged
                 return self._touchdown(t)
             return NOTHING
 
@@ -473,8 +505,9 @@ class LegDetector:
             self.phase = Phase.CLUTCHED
             self._lock_count = 0
             self.lock_time_s = t
-            delay = t - self._touchdown_s
-            self._lock_delay_min_s = delay if self._lock_delay_min_s is None else min(self._lock_delay_min_s, delay)
+            if not self._touchdown_unseen:
+                delay = t - self._touchdown_s
+                self._lock_delay_min_s = delay if self._lock_delay_min_s is None else min(self._lock_delay_min_s, delay)
             self._doubt_forget()
             if not self.synced:
                 self._engaged = False
@@ -542,8 +575,11 @@ class LegDetector:
             self._touchdown_s,
             self._touchdown_x_m,
             self._confirmed,
+            self.awaiting_clean_touchdown,
         )
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
+        self.awaiting_clean_touchdown = False  # seen from rest after the last resync: the count starts here
+        self._touchdown_unseen = False
         self._engaged = False
         self._doubt_forget()
         self.leg_index = (self.leg_index + 1) % len(self.legs)

@@ -57,11 +57,11 @@ class NoiseMeter:
 
     def rise_threshold_m(self, sigmas: float, n_mean: int) -> float:
         """`sigmas` standard deviations of the difference of two means of `n_mean` positions, and at least two
-        quanta (m); +inf until measured."""
-        if not self.measured:
+        quanta (m); +inf until measured, and while no motion has shown the quantum (a sensor reading exactly 0 at
+        rest has no noise to measure: a threshold of 0 would doubt every sample)."""
+        if not self.measured or self.quantum_m is None:
             return math.inf
-        q = self.quantum_m if self.quantum_m is not None else 0.0
-        return max(sigmas * math.sqrt(2.0 / max(1, n_mean)) * self.sigma_m, 2.0 * q)
+        return max(sigmas * math.sqrt(2.0 / max(1, n_mean)) * self.sigma_m, 2.0 * self.quantum_m)
 
 
 class RiseWatch:
