@@ -134,6 +134,14 @@ def _turned(angle: np.ndarray, mask: np.ndarray) -> float:
     return float(np.nanmax(sel) - np.nanmin(sel)) if np.isfinite(sel).any() else 0.0
 
 
+def _after_first_step(angle: np.ndarray, mask: np.ndarray, alpha_rad: float) -> np.ndarray:
+    """The frames of ``mask`` after the wheel has turned one step (alpha) from its first angle there."""
+    sel = angle[mask]
+    if not np.isfinite(sel).any():
+        return mask
+    return mask & (np.nan_to_num(angle, nan=-np.inf) >= float(np.nanmin(sel)) + alpha_rad)
+
+
 def _xyz(v: np.ndarray) -> tuple[float, float, float]:
     """A (3,) vector as a tuple of floats."""
     x, y, z = (float(c) for c in v)
@@ -302,9 +310,14 @@ def build_trial(
             notes.append(f"the stance feet do not determine the hub (standard error {hub_c[1] * 1e3:.1f} mm)")
         # The centre of rotation from the height (all the frames of the walk, a turn or more) and the centre of
         # the stance feet (half-step windows, a short lever): the one with the smaller standard error is used.
+        # The first stance is left out when a half turn remains: a hand release is no step of the gait (the legs
+        # settle, a compliant one oscillates), and its height, read as once a turn, biased the offset 0.2-0.3 mm.
         height_fit = None
-        if hub_offset_m is None and _turned(angle, rough) >= MIN_ROTATION_FOR_OFFSET_RAD:
-            height_fit = fit_hub_offset(rot, trans, alpha_rad=alpha_rad, mask=rough, angle_axis=(angle, axis))
+        settled = _after_first_step(angle, rough, alpha_rad)
+        if _turned(angle, settled) < MIN_ROTATION_FOR_OFFSET_RAD:
+            settled = rough
+        if hub_offset_m is None and _turned(angle, settled) >= MIN_ROTATION_FOR_OFFSET_RAD:
+            height_fit = fit_hub_offset(rot, trans, alpha_rad=alpha_rad, mask=settled, angle_axis=(angle, axis))
         use_feet = feet is not None and (height_fit is None or feet[1] < height_fit.sd_m)
         given: np.ndarray | Sequence[float] | None = hub_offset_m
         if use_feet and feet is not None:

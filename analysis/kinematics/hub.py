@@ -46,6 +46,13 @@ OFFSET_TOL_M = 1e-9
 MAX_OFFSET_PASSES = 50
 #: Least and most Fourier terms of the per-step bump in the offset fit (a fifth of the frames per step between).
 BUMP_HARMONICS = (3, 6)
+#: The offset fit trims frames whose height residual exceeds this many robust sigmas (1.4826 MAD), at most
+#: `MAX_TRIMS` times.
+OUTLIER_SIGMAS = 5.0
+MAX_TRIMS = 5
+#: Frequencies (cycles per turn) beside the offset's once a turn at which the offset fit measures the residuals'
+#: power (`_near_turn_dispersion`).
+SIDEBANDS_PER_TURN = (0.5, 1.5, 2.0, 2.5, 3.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -430,6 +437,28 @@ def _bump_harmonics(ang: np.ndarray, alpha_rad: float) -> int:
     return int(np.clip(ang.size / steps // 5, lo, hi))
 
 
+def _near_turn_dispersion(a: np.ndarray, res: np.ndarray, ang: np.ndarray, s2: float) -> float:
+    """The residuals' power near once a turn over the white noise's, at least 1.
+
+    The offset's error is the residuals' once-a-turn part; the least-squares covariance assumes white residuals,
+    while what the height model misses (a compliant leg compressing more as the wheel speeds up) is slow. The
+    residuals are regressed on sin/cos of the wheel angle at `SIDEBANDS_PER_TURN` cycles per turn, each pair made
+    orthogonal to the design ``a``: under white noise each pair's explained sum of squares over ``s2`` is chi^2
+    with 2 degrees of freedom; their mean over 2 is the factor the covariance is scaled by."""
+    q, _ = np.linalg.qr(a)
+    ratios = []
+    turn = ang - ang.mean()
+    for f in SIDEBANDS_PER_TURN:
+        x = np.column_stack([np.cos(f * turn), np.sin(f * turn)])
+        x -= q @ (q.T @ x)
+        if np.linalg.norm(x) < 1e-9:
+            continue
+        coef, *_ = np.linalg.lstsq(x, res, rcond=None)
+        fitted = x @ coef
+        ratios.append(float(fitted @ fitted) / s2 / 2.0)
+    return max(1.0, float(np.mean(ratios))) if ratios else 1.0
+
+
 def fit_hub_offset(
     rot: np.ndarray | RotationStack,
     trans_m: np.ndarray,
@@ -492,25 +521,34 @@ def fit_hub_offset(
     # the prior: the tracked point lies within a few cm of the hub (rows g / sd * noise, noise 0.5 mm)
     prior = np.zeros((2, 4 + bumps.shape[1]))
     prior[0, 0] = prior[1, 1] = PRIOR_NOISE_M / HUB_PRIOR_SD_M
-    rhs = np.concatenate([-t[:, 2], np.zeros(2)])
     d = np.zeros(3)
     a = np.zeros((ang.size, prior.shape[1]))
     sol = np.zeros(prior.shape[1])
-    passes, converged = 0, False
-    while passes < MAX_OFFSET_PASSES and not converged:
+    use = np.ones(ang.size, bool)  # frames not trimmed as outliers
+    passes, trims, converged = 0, 0, False
+    while passes < MAX_OFFSET_PASSES:
         passes += 1
         path = t + r @ d
         xy = path[:, :2] - path[0, :2]
         _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
         s = xy @ vt[0]
         a = np.column_stack([in_plane, -np.ones(len(s)), -s, bumps])
-        ap = np.vstack([a, prior])
+        ap = np.vstack([a[use], prior])
         scale = np.maximum(np.abs(ap).max(axis=0), 1e-3)
-        sol, *_ = np.linalg.lstsq(ap / scale, rhs, rcond=None)
+        sol, *_ = np.linalg.lstsq(ap / scale, np.concatenate([-t[use, 2], np.zeros(2)]), rcond=None)
         sol = sol / scale
         d_new = plane @ sol[:2]
         converged = bool(np.linalg.norm(d_new - d) < OFFSET_TOL_M)
         d = d_new
+        if converged:
+            # frames the model does not describe (a hand at the release, a knock): trimmed, and the fit repeated
+            res = a @ sol + t[:, 2]
+            sigma = 1.4826 * float(np.median(np.abs(res[use])))
+            keep = np.abs(res) <= OUTLIER_SIGMAS * max(sigma, 1e-6)
+            if trims >= MAX_TRIMS or np.array_equal(keep, use) or keep.sum() < max(10, a.shape[1] + 2):
+                break
+            use, trims = keep, trims + 1
+    a, t = a[use], t[use]
     res = a @ sol + t[:, 2]
     dof = max(a.shape[0] - a.shape[1], 1)
     s2 = max(float(res @ res) / dof, 1e-18)
@@ -521,11 +559,9 @@ def fit_hub_offset(
         c2 = np.linalg.inv(info)[:2, :2]
     except np.linalg.LinAlgError:
         c2 = np.eye(2) * HUB_PRIOR_SD_M**2
-    c2 = 0.5 * (c2 + c2.T)
+    c2 = 0.5 * (c2 + c2.T) * _near_turn_dispersion(a, res, ang[use], s2)
     sd = float(np.sqrt(max(np.linalg.eigvalsh(c2).max(), 0.0)))
-    return HubOffsetFit(
-        d, plane @ c2 @ plane.T, sd, float(np.sqrt(np.mean(res**2))), total, n_harm, passes, converged
-    )
+    return HubOffsetFit(d, plane @ c2 @ plane.T, sd, float(np.sqrt(np.mean(res**2))), total, n_harm, passes, converged)
 
 
 def estimate_hub_offset(
