@@ -76,6 +76,11 @@ JUMP_M = 0.1
 #: Warn when the fitted centre of rotation lies this far (m) from the tracked point, or fits this badly (m).
 HUB_OFFSET_WARN_M = 0.01
 HUB_RESIDUAL_WARN_M = 0.002
+#: The centre of rotation fitted from the height is preferred to the stance feet's centre (when its standard error
+#: is smaller) only over at least this much rotation after the first stance, rad (three quarters of a turn: on a
+#: short stall of half a turn, 4 steps, the impact line through its hub read 0.91 deg on a 1.3 deg slope, against
+#: 1.25 deg through the feet's hub, and the slope's interval missed).
+HEIGHT_FIT_TRUSTED_RAD = 1.5 * math.pi
 #: Stance-foot pivots that scatter more than this (RMS, m) about the wheel's star of feet are not all stance feet
 #: (windows cut by occlusions fit spurious pivots): neither their hub nor their slope line is used.
 FEET_MAX_RESIDUAL_M = 0.005
@@ -318,7 +323,10 @@ def build_trial(
             settled = rough
         if hub_offset_m is None and _turned(angle, settled) >= MIN_ROTATION_FOR_OFFSET_RAD:
             height_fit = fit_hub_offset(rot, trans, alpha_rad=alpha_rad, mask=settled, angle_axis=(angle, axis))
-        use_feet = feet is not None and (height_fit is None or feet[1] < height_fit.sd_m)
+        # on a short stall the height's line, bumps and once-a-turn term are not told apart well enough for its
+        # standard error to be trusted: the feet's centre is used when they place the hub
+        short = height_fit is None or height_fit.rotation_rad < HEIGHT_FIT_TRUSTED_RAD
+        use_feet = feet is not None and (short or height_fit is None or feet[1] < height_fit.sd_m)
         given: np.ndarray | Sequence[float] | None = hub_offset_m
         if use_feet and feet is not None:
             given = feet[0]
