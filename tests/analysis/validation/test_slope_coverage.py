@@ -60,10 +60,9 @@ def test_cli_small_run_counts_what_its_draws_say() -> None:
     assert set(out["truths"]["rigid"]["evidence"]) == set(KINDS)
     for d in out["per_draw"]:  # imported again, told the wheel: rigid legs carry no drift, compliant ones do
         told = d["wheel_given"]
-        # the same evidences (each list is sorted by its half width, which the drift told changes)
         assert told["used"] is not None and sorted(r["kind"] for r in told["evidence"]) == sorted(
             r["kind"] for r in d["evidence"]
-        )
+        )  # (the same estimates; their order, narrowest first, may differ)
         for row in told["evidence"]:
             assert ("impact speed change" if d["truth"] == "rigid" else "rigid legs") not in row["method"]
     given = out["wheel_given"]["truths"]["er"]["evidence"]["used"]
