@@ -94,6 +94,9 @@ class TrialMeta:
     #: was found (from the data, or given with ``--up-axis``).
     up_axis: str = "z"
     up_axis_reason: str = ""
+    #: Standard error of the fitted hub offset along its worst axis in the wheel plane, m (None when given or not
+    #: fitted): an offset error e is a once-a-turn sinusoid of amplitude |e| in the CoM height.
+    hub_offset_sd_m: float | None = None
 
     def to_json(self) -> str:
         """JSON text of the metadata (NaN as null)."""
@@ -214,6 +217,7 @@ class Trial:
             "window_s": list(m.window_s) if m.window_s else None,
             "hub_offset_mm": None if m.hub_offset_m is None else [v * 1e3 for v in m.hub_offset_m],
             "hub_offset_residual_mm": None if m.hub_offset_residual_m is None else m.hub_offset_residual_m * 1e3,
+            "hub_offset_sd_mm": None if m.hub_offset_sd_m is None else m.hub_offset_sd_m * 1e3,
             "warnings": list(m.warnings),
             "up_axis": m.up_axis,
             "up_axis_reason": m.up_axis_reason,

@@ -23,8 +23,11 @@ from rimless.analysis.io.trial import ALPHA_RAD, Trial, TrialMeta, standard_seri
 from rimless.analysis.io.vicon_file import Section, ViconFile
 from rimless.analysis.kinematics.contacts import HUB_MAX_SE_M, fit_contacts, hub_from_contacts, slope_from_contacts
 from rimless.analysis.kinematics.hub import (
+    MIN_ROTATION_FOR_OFFSET_RAD,
     RotationStack,
     axis_in_body,
+    describe_offset_fit,
+    fit_hub_offset,
     hub_from_markers,
     hub_from_pose,
     wheel_angle_from_rotations,
@@ -73,6 +76,11 @@ JUMP_M = 0.1
 #: Warn when the fitted centre of rotation lies this far (m) from the tracked point, or fits this badly (m).
 HUB_OFFSET_WARN_M = 0.01
 HUB_RESIDUAL_WARN_M = 0.002
+#: The centre of rotation fitted from the height is preferred to the stance feet's centre (when its standard error
+#: is smaller) only over at least this much rotation after the first stance, rad (three quarters of a turn: on a
+#: short stall of half a turn, 4 steps, the impact line through its hub read 0.91 deg on a 1.3 deg slope, against
+#: 1.25 deg through the feet's hub, and the slope's interval missed).
+HEIGHT_FIT_TRUSTED_RAD = 1.5 * math.pi
 #: Stance-foot pivots that scatter more than this (RMS, m) about the wheel's star of feet are not all stance feet
 #: (windows cut by occlusions fit spurious pivots): neither their hub nor their slope line is used.
 FEET_MAX_RESIDUAL_M = 0.005
@@ -123,6 +131,20 @@ def _check_jumps(path: Path | str, sec: Section, time_s: np.ndarray, p: np.ndarr
             f"{where}: the wheel jumps {d[bad[0]]:.2f} m in {dt[bad[0]] * 1e3:.0f} ms "
             "here: a second take pasted after the first? split the file here"
         )
+
+
+def _turned(angle: np.ndarray, mask: np.ndarray) -> float:
+    """The wheel's total rotation over the frames of ``mask``, rad (0 when none is known)."""
+    sel = angle[mask]
+    return float(np.nanmax(sel) - np.nanmin(sel)) if np.isfinite(sel).any() else 0.0
+
+
+def _after_first_step(angle: np.ndarray, mask: np.ndarray, alpha_rad: float) -> np.ndarray:
+    """The frames of ``mask`` after the wheel has turned one step (alpha) from its first angle there."""
+    sel = angle[mask]
+    if not np.isfinite(sel).any():
+        return mask
+    return mask & (np.nan_to_num(angle, nan=-np.inf) >= float(np.nanmin(sel)) + alpha_rad)
 
 
 def _xyz(v: np.ndarray) -> tuple[float, float, float]:
@@ -263,7 +285,7 @@ def build_trial(
     rough = np.zeros(time_s.size, bool)
     rough[motion.release_index : motion.end_index + 1] = True
     contacts = None
-    hub_sd_m: float | None = None  # standard error of the hub the stance feet determine, m
+    hub_sd_m: float | None = None  # standard error of the fitted hub offset (feet or height), m
     if rot is not None and angle is not None and axis is not None:  # the axis comes with the angle
         ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
         # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
@@ -289,23 +311,43 @@ def build_trial(
             )
             hub_c = contacts = None
         feet = hub_c if hub_c is not None and hub_c[1] <= HUB_MAX_SE_M else None  # the hub the feet determine
-        hub_sd_m = None if feet is None else float(feet[1])
-        given: np.ndarray | Sequence[float] | None = hub_offset_m
-        if feet is not None:
-            given = feet[0]
-        elif hub_c is not None:
+        if feet is None and hub_c is not None:
             notes.append(f"the stance feet do not determine the hub (standard error {hub_c[1] * 1e3:.1f} mm)")
+        # The centre of rotation from the height (all the frames of the walk, a turn or more) and the centre of
+        # the stance feet (half-step windows, a short lever): the one with the smaller standard error is used.
+        # The first stance is left out when a half turn remains: a hand release is no step of the gait (the legs
+        # settle, a compliant one oscillates), and its height, read as once a turn, biased the offset 0.2-0.3 mm.
+        height_fit = None
+        settled = _after_first_step(angle, rough, alpha_rad)
+        if _turned(angle, settled) < MIN_ROTATION_FOR_OFFSET_RAD:
+            settled = rough
+        if hub_offset_m is None and _turned(angle, settled) >= MIN_ROTATION_FOR_OFFSET_RAD:
+            height_fit = fit_hub_offset(rot, trans, alpha_rad=alpha_rad, mask=settled, angle_axis=(angle, axis))
+        # on a short stall the height's line, bumps and once-a-turn term are not told apart well enough for its
+        # standard error to be trusted: the feet's centre is used when they place the hub
+        short = height_fit is None or height_fit.rotation_rad < HEIGHT_FIT_TRUSTED_RAD
+        use_feet = feet is not None and (short or height_fit is None or feet[1] < height_fit.sd_m)
+        given: np.ndarray | Sequence[float] | None = hub_offset_m
+        if use_feet and feet is not None:
+            given = feet[0]
+        elif height_fit is not None:
+            given = height_fit.offset_m
         est = hub_from_pose(rot, trans, hub_offset_m=given, mask=rough, what=what, angle_axis=(angle, axis))
-        hub_raw, offset, residual = est.hub_m, est.offset_m, est.offset_residual_m
+        hub_raw, offset, residual, hub_sd_m = est.hub_m, est.offset_m, est.offset_residual_m, est.offset_sd_m
         hub_source = est.source
-        if feet is not None and contacts is not None:  # (contacts: where the feet came from)
+        if use_feet and feet is not None and contacts is not None:  # (contacts: where the feet came from)
             d = np.asarray(feet[0])
-            residual = feet[2]
+            residual, hub_sd_m = feet[2], float(feet[1])
             hub_source = (
                 f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
                 f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
                 f"{feet[1] * 1e3:.2f} mm, feet residual {feet[2] * 1e3:.2f} mm)"
             )
+        elif height_fit is not None:
+            residual, hub_sd_m = height_fit.residual_m, height_fit.sd_m
+            hub_source = f"{what} + estimated offset {describe_offset_fit(height_fit)}"
+            if feet is not None:
+                hub_source += f"; the stance feet's centre, standard error {feet[1] * 1e3:.2f} mm, not used"
         del est
     else:
         hub_raw, offset, residual = trans, None, None
@@ -530,6 +572,7 @@ def build_trial(
         outcome_reason=ending.reason,
         window_s=window_s,
         hub_offset_residual_m=residual,
+        hub_offset_sd_m=hub_sd_m,
         impact_step=tuple(int(k) for k in (steps.impact_step if steps.impact_step is not None else ())),
         period_step=tuple(int(k) for k in (steps.period_step if steps.period_step is not None else ())),
         warnings=tuple(warnings),

@@ -20,7 +20,10 @@ __all__ = [
     "hub_from_object",
     "rotations_from_angles",
     "wheel_angle_from_rotations",
+    "HubOffsetFit",
+    "describe_offset_fit",
     "estimate_hub_offset",
+    "fit_hub_offset",
     "hub_from_pose",
 ]
 
@@ -38,6 +41,18 @@ HUB_PRIOR_SD_M = 0.04
 PRIOR_NOISE_M = 0.5e-3
 #: Least total rotation (rad) for a hub offset in the object frame to be observable.
 MIN_ROTATION_FOR_OFFSET_RAD = np.pi
+#: The offset fit's passes stop when the offset moves less than this, m, or after this many passes.
+OFFSET_TOL_M = 1e-9
+MAX_OFFSET_PASSES = 50
+#: Least and most Fourier terms of the per-step bump in the offset fit (a fifth of the frames per step between).
+BUMP_HARMONICS = (3, 6)
+#: The offset fit trims frames whose height residual exceeds this many robust sigmas (1.4826 MAD), at most
+#: `MAX_TRIMS` times.
+OUTLIER_SIGMAS = 5.0
+MAX_TRIMS = 5
+#: Frequencies (cycles per turn) beside the offset's once a turn at which the offset fit measures the residuals'
+#: power (`_near_turn_dispersion`).
+SIDEBANDS_PER_TURN = (0.5, 1.5, 2.0, 2.5, 3.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +80,7 @@ class HubEstimate:
     rotation: np.ndarray | RotationStack | None = None
     n_relabelled: int = 0  # frames whose marker labels were swapped and are repaired (marker sets)
     n_inconsistent: int = 0  # frames whose markers fit no rigid shape, made gaps (marker sets)
+    offset_sd_m: float | None = None  # standard error of a fitted offset, m (`HubOffsetFit.sd_m`), or None
 
 
 def rotations_from_angles(angles_rad: np.ndarray, convention: str = "helical") -> np.ndarray:
@@ -387,31 +403,89 @@ def _kabsch_frames(ref: np.ndarray, p: np.ndarray, vis: np.ndarray) -> tuple[np.
     return rot, hub, res
 
 
-def estimate_hub_offset(
+@dataclass(frozen=True, eq=False)
+class HubOffsetFit:
+    """The hub offset fitted by `fit_hub_offset` (object / marker reference frame, m).
+
+    Attributes
+    ----------
+    offset_m : (3,) the hub in the object frame, in the wheel plane (its component along the wheel axis is 0).
+    cov_m2 : (3, 3) its covariance, m^2 (from the height residuals' scatter; rank 2, in the wheel plane).
+    sd_m : its standard error along its worst axis in the wheel plane, m: an error e of the offset puts a
+        once-a-turn sinusoid of amplitude |e| in the CoM height and turns the hub's path with the wheel.
+    residual_m : RMS residual of the height model, m.
+    rotation_rad : total rotation seen in the frames used.
+    harmonics : Fourier terms of the per-step bump used.
+    passes : least-squares passes made; ``converged`` whether the last one moved the offset by under
+        `OFFSET_TOL_M` (else the offset is the last pass's).
+    """
+
+    offset_m: np.ndarray
+    cov_m2: np.ndarray
+    sd_m: float
+    residual_m: float
+    rotation_rad: float
+    harmonics: int
+    passes: int
+    converged: bool
+
+
+def _bump_harmonics(ang: np.ndarray, alpha_rad: float) -> int:
+    """Fourier terms for the per-step bump: a fifth of the frames per step, within `BUMP_HARMONICS`."""
+    steps = max(float(np.ptp(ang)) / alpha_rad, 1.0)
+    lo, hi = BUMP_HARMONICS
+    return int(np.clip(ang.size / steps // 5, lo, hi))
+
+
+def _near_turn_dispersion(a: np.ndarray, res: np.ndarray, ang: np.ndarray, s2: float) -> float:
+    """The residuals' power near once a turn over the white noise's, at least 1.
+
+    The offset's error is the residuals' once-a-turn part; the least-squares covariance assumes white residuals,
+    while what the height model misses (a compliant leg compressing more as the wheel speeds up) is slow. The
+    residuals are regressed on sin/cos of the wheel angle at `SIDEBANDS_PER_TURN` cycles per turn, each pair made
+    orthogonal to the design ``a``: under white noise each pair's explained sum of squares over ``s2`` is chi^2
+    with 2 degrees of freedom; their mean over 2 is the factor the covariance is scaled by."""
+    q, _ = np.linalg.qr(a)
+    ratios = []
+    turn = ang - ang.mean()
+    for f in SIDEBANDS_PER_TURN:
+        x = np.column_stack([np.cos(f * turn), np.sin(f * turn)])
+        x -= q @ (q.T @ x)
+        if np.linalg.norm(x) < 1e-9:
+            continue
+        coef, *_ = np.linalg.lstsq(x, res, rcond=None)
+        fitted = x @ coef
+        ratios.append(float(fitted @ fitted) / s2 / 2.0)
+    return max(1.0, float(np.mean(ratios))) if ratios else 1.0
+
+
+def fit_hub_offset(
     rot: np.ndarray | RotationStack,
     trans_m: np.ndarray,
     *,
     alpha_rad: float = np.pi / 4,
-    harmonics: int = 3,
+    harmonics: int | None = None,
     mask: np.ndarray | None = None,
     angle_axis: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[np.ndarray, float, float]:
-    """Hub offset in the object frame of a wheel rolling down a plane.
+) -> HubOffsetFit | None:
+    """Hub offset in the object frame of a wheel rolling down a plane, with its standard error.
 
     A body point off the hub by e rises and falls by e once per turn, the hub only by the per-step bumps
     (period alpha in the wheel angle), so the hub is the body point whose world height is best explained by
-    a straight line in the distance travelled plus a periodic function of period alpha in the wheel angle
-    (``harmonics`` Fourier terms, which keep the per-step bumps from leaking into the offset); only frames
-    where ``mask`` is True (the walking window) are used: minimise
-    sum_t (T_z + (R d)_z - a - b s - bumps)^2 over d, a, b and the bumps (linear least squares, two passes so
-    that s is measured along the hub path). d is sought in the wheel plane only: the component along the
-    wheel axis is not observable (the axis is horizontal) and is set to 0. Needs about a full turn.
+    a straight line in the horizontal distance s travelled along the hub's path plus a periodic function of
+    period alpha in the wheel angle (``harmonics`` Fourier terms, by default a fifth of the frames per step
+    within `BUMP_HARMONICS`, which keep the per-step bumps from leaking into the offset); only frames where
+    ``mask`` is True (the walking window) are used: minimise
+    sum_t (T_z + (R d)_z - a - b s - bumps)^2 over d, a, b and the bumps (linear least squares for a given s).
+    s is measured along the path of the hub being fitted, so the fit is repeated, each pass on the s of the
+    last, until the offset settles (`MAX_OFFSET_PASSES`, `OFFSET_TOL_M`): with s from the tracked point's own
+    path, its once-a-turn wobble times the slope b reads as an offset, and each pass leaves about tan(slope)
+    of the previous error (two passes left 0.3 % of the offset, 0.1 mm for a 36 mm offset). d is sought in the
+    wheel plane only: the component along the wheel axis is not observable (the axis is horizontal) and is set
+    to 0. Needs about a full turn; None with fewer than 10 frames.
 
-    Returns
-    -------
-    offset_m : (3,) in the object frame, m.
-    residual_m : RMS residual of the height fit, m.
-    rotation_rad : total rotation seen.
+    The covariance is the least-squares one, the residuals' variance (over n - p degrees of freedom) taken as
+    the noise's, with the prior of `HUB_PRIOR_SD_M` on each in-plane component.
     """
     ok = _valid_rows(rot) & ~np.isnan(trans_m).any(axis=1)
     if mask is not None:
@@ -423,15 +497,16 @@ def estimate_hub_offset(
     else:
         angle, axis = angle_axis
         angle = np.where(ok, angle, np.nan)
+    ok &= np.isfinite(angle)
     if ok.sum() > MAX_FIT_FRAMES:  # the fit needs turns, not every frame: an even subsample
         keep = np.flatnonzero(ok)
         sub = np.zeros_like(ok)
         sub[keep[:: int(np.ceil(keep.size / MAX_FIT_FRAMES))]] = True
         ok = sub
-    total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
     if ok.sum() < 10:
-        return np.zeros(3), float("nan"), total
+        return None
     r, t, ang = rot[ok], trans_m[ok], angle[ok]
+    total = float(np.ptp(ang))
     # The wheel axis in the object frame and two unit vectors spanning the wheel plane.
     a_body = np.einsum("nji,j->ni", r, axis).mean(axis=0)
     a_body /= np.linalg.norm(a_body)
@@ -439,28 +514,78 @@ def estimate_hub_offset(
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(a_body, e1)
     plane = np.column_stack([e1, e2])  # (3, 2)
-    k = np.arange(1, harmonics + 1) * (2 * np.pi / alpha_rad)
-    bumps = (
-        np.column_stack([np.cos(np.outer(ang, k)), np.sin(np.outer(ang, k))]) if harmonics else np.zeros((ang.size, 0))
-    )
+    n_harm = _bump_harmonics(ang, alpha_rad) if harmonics is None else int(harmonics)
+    k = np.arange(1, n_harm + 1) * (2 * np.pi / alpha_rad)
+    bumps = np.column_stack([np.cos(np.outer(ang, k)), np.sin(np.outer(ang, k))]) if n_harm else np.zeros((ang.size, 0))
+    in_plane = r[:, 2, :] @ plane  # (n, 2): the world height of the in-plane body axes
+    # the prior: the tracked point lies within a few cm of the hub (rows g / sd * noise, noise 0.5 mm)
+    prior = np.zeros((2, 4 + bumps.shape[1]))
+    prior[0, 0] = prior[1, 1] = PRIOR_NOISE_M / HUB_PRIOR_SD_M
     d = np.zeros(3)
-    res = np.zeros(1)
-    for _ in range(2):
+    a = np.zeros((ang.size, prior.shape[1]))
+    sol = np.zeros(prior.shape[1])
+    use = np.ones(ang.size, bool)  # frames not trimmed as outliers
+    passes, trims, converged = 0, 0, False
+    while passes < MAX_OFFSET_PASSES:
+        passes += 1
         path = t + r @ d
         xy = path[:, :2] - path[0, :2]
         _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
         s = xy @ vt[0]
-        a = np.column_stack([r[:, 2, :] @ plane, -np.ones(len(s)), -s, bumps])
-        # the prior: the tracked point lies within a few cm of the hub (rows g / sd * noise, noise 0.5 mm)
-        prior = np.zeros((2, a.shape[1]))
-        prior[0, 0] = prior[1, 1] = PRIOR_NOISE_M / HUB_PRIOR_SD_M
-        ap = np.vstack([a, prior])
+        a = np.column_stack([in_plane, -np.ones(len(s)), -s, bumps])
+        ap = np.vstack([a[use], prior])
         scale = np.maximum(np.abs(ap).max(axis=0), 1e-3)
-        sol, *_ = np.linalg.lstsq(ap / scale, np.concatenate([-t[:, 2], np.zeros(2)]), rcond=1e-6)
+        sol, *_ = np.linalg.lstsq(ap / scale, np.concatenate([-t[use, 2], np.zeros(2)]), rcond=None)
         sol = sol / scale
-        d = plane @ sol[:2]
-        res = a @ sol + t[:, 2]
-    return d, float(np.sqrt(np.mean(res**2))), total
+        d_new = plane @ sol[:2]
+        converged = bool(np.linalg.norm(d_new - d) < OFFSET_TOL_M)
+        d = d_new
+        if converged:
+            # frames the model does not describe (a hand at the release, a knock): trimmed, and the fit repeated
+            res = a @ sol + t[:, 2]
+            sigma = 1.4826 * float(np.median(np.abs(res[use])))
+            keep = np.abs(res) <= OUTLIER_SIGMAS * max(sigma, 1e-6)
+            if trims >= MAX_TRIMS or np.array_equal(keep, use) or keep.sum() < max(10, a.shape[1] + 2):
+                break
+            use, trims = keep, trims + 1
+    a, t = a[use], t[use]
+    res = a @ sol + t[:, 2]
+    dof = max(a.shape[0] - a.shape[1], 1)
+    s2 = max(float(res @ res) / dof, 1e-18)
+    info = a.T @ a / s2
+    info[0, 0] += 1.0 / HUB_PRIOR_SD_M**2
+    info[1, 1] += 1.0 / HUB_PRIOR_SD_M**2
+    try:
+        c2 = np.linalg.inv(info)[:2, :2]
+    except np.linalg.LinAlgError:
+        c2 = np.eye(2) * HUB_PRIOR_SD_M**2
+    c2 = 0.5 * (c2 + c2.T) * _near_turn_dispersion(a, res, ang[use], s2)
+    sd = float(np.sqrt(max(np.linalg.eigvalsh(c2).max(), 0.0)))
+    return HubOffsetFit(d, plane @ c2 @ plane.T, sd, float(np.sqrt(np.mean(res**2))), total, n_harm, passes, converged)
+
+
+def estimate_hub_offset(
+    rot: np.ndarray | RotationStack,
+    trans_m: np.ndarray,
+    *,
+    alpha_rad: float = np.pi / 4,
+    harmonics: int | None = None,
+    mask: np.ndarray | None = None,
+    angle_axis: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, float, float]:
+    """`fit_hub_offset` as (offset_m (3,) in the object frame, RMS residual of the height fit m, total rotation
+    seen rad); (0, NaN, rotation) with fewer than 10 frames."""
+    fit = fit_hub_offset(rot, trans_m, alpha_rad=alpha_rad, harmonics=harmonics, mask=mask, angle_axis=angle_axis)
+    if fit is not None:
+        return fit.offset_m, fit.residual_m, fit.rotation_rad
+    if angle_axis is None:
+        angle, _ = wheel_angle_from_rotations(rot)
+    else:
+        angle = angle_axis[0]
+    if mask is not None:
+        angle = np.where(mask, angle, np.nan)
+    total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
+    return np.zeros(3), float("nan"), total
 
 
 def hub_from_pose(
@@ -475,12 +600,12 @@ def hub_from_pose(
     """Hub = ``trans + rot @ offset``: the offset given, or fitted as the centre of rotation in the wheel plane.
 
     ``rot`` (n, 3, 3) world-from-body, ``trans`` (n, 3) m the path of the body point called ``what``; the fit
-    (`estimate_hub_offset`) uses the frames of ``mask`` and needs the body to turn more than 180 deg there.
+    (`fit_hub_offset`) uses the frames of ``mask`` and needs the body to turn more than 180 deg there.
     """
     angle, axis = wheel_angle_from_rotations(rot) if angle_axis is None else angle_axis
     sel = angle if mask is None else np.where(mask, angle, np.nan)
     total = float(np.nanmax(sel) - np.nanmin(sel)) if np.isfinite(sel).any() else 0.0
-    residual = None
+    residual = sd = None
     if hub_offset_m is not None:
         d = np.asarray(hub_offset_m, dtype=np.float64).reshape(3)
         source = (
@@ -495,13 +620,25 @@ def hub_from_pose(
             "no offset applied)"
         )
     else:
-        d, residual, _ = estimate_hub_offset(rot, trans, mask=mask, angle_axis=(angle, axis))
-        source = (
-            f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
-            f"(centre of rotation fitted on the walking window, residual {residual * 1e3:.2f} mm)"
-        )
+        fit = fit_hub_offset(rot, trans, mask=mask, angle_axis=(angle, axis))
+        if fit is None:
+            d = np.zeros(3)
+            source = f"{what} (fewer than 10 frames to fit the centre of rotation on: no offset applied)"
+        else:
+            d, residual, sd = fit.offset_m, fit.residual_m, fit.sd_m
+            source = f"{what} + estimated offset {describe_offset_fit(fit)}"
     hub = trans + apply_rotations(rot, d)
-    return HubEstimate(hub, angle, axis, source, d, residual, rot)
+    return HubEstimate(hub, angle, axis, source, d, residual, rot, offset_sd_m=sd)
+
+
+def describe_offset_fit(fit: HubOffsetFit) -> str:
+    """The offset and how it was fitted, in words (for a hub source)."""
+    d = fit.offset_m * 1e3
+    stop = "" if fit.converged else f", stopped on its budget of {fit.passes} passes"
+    return (
+        f"[{d[0]:.1f}, {d[1]:.1f}, {d[2]:.1f}] mm (centre of rotation fitted on the walking window from the height, "
+        f"standard error {fit.sd_m * 1e3:.3f} mm, residual {fit.residual_m * 1e3:.2f} mm{stop})"
+    )
 
 
 def hub_from_object(
@@ -516,7 +653,7 @@ def hub_from_object(
     Parameters
     ----------
     angles_rad, trans_m : (n, 3) each.
-    hub_offset_m : (3,) hub position in the object frame, m. None: estimate it by `estimate_hub_offset`
+    hub_offset_m : (3,) hub position in the object frame, m. None: estimate it by `fit_hub_offset`
         when the object turns more than 180 deg, else take the object origin as the hub. Give ``(0, 0, 0)``
         when the object's origin is the hub.
     convention : see `rotations_from_angles`.
@@ -525,7 +662,7 @@ def hub_from_object(
     trans = np.asarray(trans_m, dtype=np.float64)
     angle, axis = wheel_angle_from_rotations(rot)
     total = float(np.nanmax(angle) - np.nanmin(angle)) if np.isfinite(angle).any() else 0.0
-    residual = None
+    residual = sd = None
     if hub_offset_m is not None:
         d = np.asarray(hub_offset_m, dtype=np.float64).reshape(3)
         source = (
@@ -539,11 +676,12 @@ def hub_from_object(
             f"object origin (it turns only {np.degrees(total):.1f} deg: a hub offset is not observable, none applied)"
         )
     else:
-        d, residual, _ = estimate_hub_offset(rot, trans)
-        source = (
-            "object origin + estimated offset [{:.1f}, {:.1f}, {:.1f}] mm (hub height fit, residual {:.2f} mm)".format(
-                *(d * 1e3), residual * 1e3
-            )
-        )
+        fit = fit_hub_offset(rot, trans, angle_axis=(angle, axis))
+        if fit is None:
+            d = np.zeros(3)
+            source = "object origin (fewer than 10 frames to fit the centre of rotation on: no offset applied)"
+        else:
+            d, residual, sd = fit.offset_m, fit.residual_m, fit.sd_m
+            source = f"object origin + estimated offset {describe_offset_fit(fit)}"
     hub = trans + np.einsum("nij,j->ni", rot, d)
-    return HubEstimate(hub, angle, axis, source, d, residual, rot)
+    return HubEstimate(hub, angle, axis, source, d, residual, rot, offset_sd_m=sd)

@@ -431,6 +431,9 @@ def detect_steps(
                 f"(worst misfit {np.degrees(np.max(spread)) / 360 * np.degrees(alpha_rad):.1f} deg; "
                 f"{int(agree.sum())} of {res.size} agree)"
             )
+        # the median of the agreeing minima about their mean: a flat-bottomed compliant step whose minimum comes on
+        # its rebound (a tenth of a step late) no longer drags the phase past the kink search
+        mean = mean + float(np.median(np.angle(np.exp(1j * (res[agree] - mean)))))
         phase = float(np.mod(mean, 2 * np.pi) / (2 * np.pi) * alpha_rad)
         sel = ok_idx[inwin[ok_idx]]
         del ok_idx

@@ -1,0 +1,178 @@
+"""How much of a once-a-turn sinusoid the importer's hub offset leaves in the CoM height, against truths that know the hub.
+
+A body point off the hub by e rises and falls by e once a turn; the importer fits the offset
+(`rimless.analysis.kinematics.hub.fit_hub_offset`, or the centre of the stance feet when that is better determined)
+and takes it out. Each draw walks a truth wheel, writes it as a Vicon export in a drawn lab
+(`importer_coverage.draw_lab`: Z-up or Y-up, any heading, a Tracker object 36 mm off the hub or four uneven markers
+whose centroid is 14 mm off it; 0.3 mm and 1 mrad of noise, 100 Hz; `critical_truth.record`), imports it
+(`import_trial`, defaults) and compares with the truth:
+
+- ``sinusoid_mm``: the CoM height's error (the truth's hub height along the slope's normal minus the imported
+  ``com_height``, over the walking window) regressed on a constant, the distance down the slope and sin/cos of the
+  truth's wheel angle: the amplitude of the sin/cos part;
+- ``noise_share_mm``: what white noise of the residual's sigma gives such a coefficient, sigma sqrt(2 / n);
+- ``hub_error_mm``: the rotating part of the imported minus the true hub (the offset's in-plane error, |e|), and
+  ``hub_sd_mm`` the standard error the import states for it (``hub_offset_sd_m``); ``z`` = |e| / sd (for a 2-D
+  normal error of that sd on each axis, |e| < 2.45 sd 95 % of the time).
+
+Truths (`TRUTHS`): ``er``, the simulator's ER wheel (`floquet_truth.er_walk`: k 1500-4000 N/m, c 2-20 N s/m, released
+at its gait's speed times U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks) and ``rigid``, the rigid
+wheel of `critical_truth` (mass 1.6-3 kg, legs 0.21-0.26 m, inertia ratio 0.3-3, 2-4 deg, released at 1.2-2 times
+the speed that tops the first stance, 10 impacts). ``er`` at Table 1 is drawn with ``table1=True``.
+
+Run: ``python -m rimless.analysis.validation.hub_offset_study --draws 10 --seed 0``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rimless.analysis.validation.critical_truth import Y_UP_FROM_Z_UP, LossyWheel, record, walk
+from rimless.analysis.validation.floquet_truth import er_walk, slope_to_lab
+from rimless.analysis.validation.importer_coverage import draw_lab
+
+__all__ = ["TRUTHS", "hub_offset_draw", "run_hub_offset_study"]
+
+TRUTHS = ("er", "rigid")
+STEPS = 10
+#: 95 % of a 2-D normal error's length lies within this many sd (sqrt(-2 ln 0.05))
+RAYLEIGH_95 = math.sqrt(-2.0 * math.log(0.05))
+
+
+def _truth_walk(kind: str, rng: np.random.Generator, table1: bool) -> tuple[Any, str]:
+    if kind == "er":
+        from rimless.sim.model.params import WheelParams
+
+        k = 2700.0 if table1 else float(rng.uniform(1500.0, 4000.0))
+        c = 8.0 if table1 else float(rng.uniform(2.0, 20.0))
+        wk = er_walk(
+            WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c),
+            float(rng.uniform(2.0, 3.5)),
+            0.0,
+            STEPS,
+            rng,
+            release=float(rng.uniform(0.95, 1.08)),
+        )
+        return wk, f"ER k {k:.0f} N/m, c {c:.1f} N s/m" + (" (Table 1)" if table1 else "")
+    mass, leg = float(rng.uniform(1.6, 3.0)), float(rng.uniform(0.21, 0.26))
+    ratio = float(np.exp(rng.uniform(math.log(0.3), math.log(3.0))))
+    wheel = LossyWheel(mass_kg=mass, inertia_hub_kg_m2=ratio * mass * leg**2, leg_m=leg)
+    slope = float(rng.uniform(2.0, 4.0))
+    top = math.sqrt(wheel.top_threshold(math.radians(slope)))
+    return walk(
+        wheel, slope, top * float(rng.uniform(1.2, 2.0)), STEPS
+    ), f"rigid, inertia ratio {ratio:.2f}, L {leg:.3f} m"
+
+
+def hub_offset_draw(
+    kind: str, seed: int, folder: Path, *, table1: bool = False, importer: Any = None
+) -> dict[str, Any]:
+    """One draw (see the module doc): the truth, the lab, the import's hub source and the figures, in mm."""
+    rng = np.random.default_rng(seed)
+    wk, wheel = _truth_walk(kind, rng, table1)
+    lab = draw_lab(rng)
+    rec_seed = int(rng.integers(1 << 31))
+    path = folder / f"{kind}{seed}.csv"
+    record(wk, path, np.random.default_rng(rec_seed), lab)
+    # the frames `record` wrote: its hold, then the walk, from a sub-frame offset (its first draw)
+    hold_s = 0.4
+    t = np.concatenate([np.arange(0.0, hold_s, 1e-3), hold_s + wk.t])
+    n_hold = t.size - wk.t.size
+    x, h, b = (np.concatenate([np.full(n_hold, v[0]), v]) for v in (wk.x, wk.h, wk.body))
+    if wk.stalled:
+        tail = t[-1] + np.arange(1e-3, 1.5, 1e-3)
+        t = np.concatenate([t, tail])
+        x, h, b = (np.concatenate([v, np.full(tail.size, v[-1])]) for v in (x, h, b))
+    tf = np.arange(0.0, t[-1], 1.0 / lab.rate_hz) + float(np.random.default_rng(rec_seed).uniform(0, 1.0 / lab.rate_hz))
+    tf = tf[tf <= t[-1]]
+    xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
+    if importer is None:
+        from rimless.analysis.kinematics.build import import_trial as importer
+    trial = importer(path)
+    n = min(trial.time_s.size, tf.size)
+    com = np.asarray(trial.series.data["com_height"])[:n]
+    t0, t1 = trial.meta.window_s
+    sel = (trial.time_s[:n] >= t0) & (trial.time_s[:n] <= t1) & np.isfinite(com)
+    basis = np.column_stack(
+        [np.ones(sel.sum()), xs[:n][sel] - xs[:n][sel].mean(), np.sin(bs[:n][sel]), np.cos(bs[:n][sel])]
+    )
+    err = hs[:n][sel] - com[sel]
+    coef, *_ = np.linalg.lstsq(basis, err, rcond=None)
+    sigma = float(np.std(err - basis @ coef))
+    hub_t, _ = slope_to_lab(xs, hs, bs, wk.slope_deg, lab.heading_deg)
+    if lab.up == "y":
+        hub_t = hub_t @ Y_UP_FROM_Z_UP.T
+    dh = np.asarray(trial.series.data["hub"])[:n][sel] - hub_t[:n][sel]
+    hc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh, rcond=None)
+    hub_error = math.sqrt(float(np.sum(hc[1:] ** 2)) / 2.0)
+    sd = getattr(trial.meta, "hub_offset_sd_m", None)
+    return {
+        "truth": kind,
+        "seed": seed,
+        "wheel": wheel,
+        "lab": lab.describe(),
+        "hub_source": trial.meta.hub_source,
+        "sinusoid_mm": math.hypot(coef[2], coef[3]) * 1e3,
+        "noise_share_mm": sigma * math.sqrt(2.0 / sel.sum()) * 1e3,
+        "hub_error_mm": hub_error * 1e3,
+        "hub_sd_mm": None if sd is None else sd * 1e3,
+        "z": None if not sd else hub_error / sd,
+        "turns": float(np.ptp(bs[:n][sel])) / (2 * math.pi),
+    }
+
+
+def run_hub_offset_study(draws: int = 10, seed: int = 0, *, importer: Any = None) -> dict[str, Any]:
+    """``draws`` draws of each truth (and of the ER truth at Table 1), seeds ``seed`` up; the rows and per truth the
+    median and largest sinusoid, the median noise share, and how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2)
+    (1 for an honest sd of an isotropic error)."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind, table1 in (("er", False), ("er", True), ("rigid", False)):
+            for i in range(draws):
+                rows.append(hub_offset_draw(kind, seed + i, Path(tmp), table1=table1, importer=importer))
+                rows[-1]["table1"] = table1
+    summary = {}
+    for name in ("er", "er-table1", "rigid", "all"):
+        sub = [r for r in rows if name == "all" or (r["truth"], r["table1"]) == (name.split("-")[0], "table1" in name)]
+        amp = np.array([r["sinusoid_mm"] for r in sub])
+        zs = np.array([r["z"] for r in sub if r["z"] is not None])
+        summary[name] = {
+            "trials": len(sub),
+            "sinusoid_median_mm": float(np.median(amp)),
+            "sinusoid_max_mm": float(np.max(amp)),
+            "noise_share_median_mm": float(np.median([r["noise_share_mm"] for r in sub])),
+            "held_95": f"{int((zs < RAYLEIGH_95).sum())}/{zs.size}" if zs.size else None,
+            "rms_z": float(np.sqrt(np.mean(zs**2) / 2.0)) if zs.size else None,
+        }
+    return {"rows": rows, "summary": summary, "draws": draws, "seed": seed}
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=10)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    out = run_hub_offset_study(args.draws, args.seed)
+    if args.json:
+        print(json.dumps(out, indent=1))
+        return
+    for r in out["rows"]:
+        sd = "-" if r["hub_sd_mm"] is None else f"{r['hub_sd_mm']:.3f}"
+        print(
+            f"{r['truth']:5s} {r['seed']:3d} {r['lab']:34s} sinusoid {r['sinusoid_mm']:.3f} mm (noise share "
+            f"{r['noise_share_mm']:.3f}), hub error {r['hub_error_mm']:.3f} mm, sd {sd}"
+        )
+    for k, v in out["summary"].items():
+        print(k, v)
+
+
+if __name__ == "__main__":
+    main()
