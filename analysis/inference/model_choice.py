@@ -1,8 +1,9 @@
 """Model choice of a calibration: is an extra parameter (guide friction beside c) supported over the fit without it?
 
 The calibration (`rimless.analysis.inference.calibrate`) solves the fit again without the extra parameter (held at
-the wheel's value, 0 for friction; warm, the same residual sigmas) and hands over delta chi^2 = chi^2 without -
-chi^2 with, on its residuals scaled by the solution's sigmas. Against chi^2_1 that likelihood-ratio statistic
+the wheel's value, 0 for friction; the same residual sigmas; `refit_without` from the solution with it dropped
+and from the Gauss-Newton prediction of where the others go, `predicted_without`, on from where it stopped when
+it stops on its budget) and hands over delta chi^2 = chi^2 without - chi^2 with, on its residuals scaled by the solution's sigmas. Against chi^2_1 that likelihood-ratio statistic
 assumes the scaled residuals are independent with unit variance. They are not: each trial's residuals share the
 error of its measured slope (which shifts all its periods together, as a constant loss per step does) and the
 imported CoM height and impact times carry correlated errors, so delta chi^2 is larger than chi^2_1 on a wheel
@@ -27,7 +28,9 @@ Reference distribution: F(1, nu) with nu the degrees of freedom of the estimate 
 (chi^2_1) when it came from the stated slope or held-parameter uncertainties or the model, n_trials - 1 when the
 trial-clustered sandwich set it (a variance estimated from that many trials' scatter). On the bound (a force at
 0 under the simpler model) the null is half the point mass at 0 and half F(1, nu): p halved. The extra parameter
-is supported when p < `MODEL_CHOICE_P` and the simpler fit converged.
+is supported when p < `MODEL_CHOICE_P` and the simpler fit converged; when it stopped on its budget however it
+was started, delta chi^2 is only an upper bound and the choice is undecided (``decided`` False), never "not
+supported".
 
 Measured on the model's own truth (docs/trials.md, `rimless trials adequacy-coverage --scenario
 choice-null,choice-friction --series 30 --seed 0`): friction claimed on 0 of 30 frictionless series (the plain
