@@ -1547,17 +1547,29 @@ def _model_choice(
     estimates: Sequence[ParamEstimate],
 ) -> dict[str, Any] | None:
     """Per extra parameter fitted beside others (`EXTRA_PARAMETERS`): the fit solved again without it (held at
-    the wheel's value; warm, from the solution, the same sigmas: the CoM block's inflated for its correlation)
-    and `rimless.analysis.inference.model_choice`'s quasi-likelihood test of delta chi^2 = chi^2 without -
+    the wheel's value; the same sigmas: the CoM block's inflated for its correlation) and
+    `rimless.analysis.inference.model_choice`'s quasi-likelihood test of delta chi^2 = chi^2 without -
     chi^2 with, scaled by the dispersion the calibration carries in that parameter's direction (its ``se`` over
-    its ``se_model``, squared: slopes, trial scatter, held parameters). None when no extra parameter is fitted
-    beside another."""
-    from rimless.analysis.inference.model_choice import choice_row, dispersion
+    its ``se_model``, squared: slopes, trial scatter, held parameters). The fit without it starts from the
+    solution with the parameter dropped and from the Gauss-Newton prediction of where it goes
+    (`model_choice.predicted_without`: c and the releases make up the loss of a dropped friction), and goes on
+    from where it stopped when it stops on its budget (`model_choice.refit_without`): it converges or its row
+    says why not (``decided`` False, ``simpler_optimizer``). None when no extra parameter is fitted beside
+    another."""
+    from rimless.analysis.inference.model_choice import (
+        EXTRA_ROUNDS,
+        choice_row,
+        dispersion,
+        predicted_without,
+        refit_without,
+    )
 
     extras = [n for n in fit if n in EXTRA_PARAMETERS and len(fit) > 1]
     if not extras:
         return None
-    cost_full = obj.cost(u)
+    f_full = obj.fun(u)
+    cost_full = float(np.sum(f_full**2))
+    J = obj.jac(u)
     n_g = obj.n_g
     out: dict[str, Any] = {}
     for name in extras:
@@ -1568,18 +1580,34 @@ def _model_choice(
         obj2 = _Objective(obj.sim, glob2, obj.data, obj.tick)
         obj2.sig = dict(obj.sig)
         sel = np.concatenate([keep, np.arange(n_g, u.size)]).astype(int)
-        r = obj2.solve(u[sel], bounds[0][sel], bounds[1][sel], max_rounds)
+        held_at = float(getattr(obj.glob.base, FIT_FIELDS[name][0]))
+        u_held = (held_at - obj.glob.x0[j]) / obj.glob.scale[j]  # where it is held, in the optimiser's units
+        predicted = (u + predicted_without(J, f_full, j, u_held - u[j]))[sel]
+        lo, hi = _widened(obj2, (bounds[0][sel], bounds[1][sel]), obj2.unpack(predicted)[1])
+        starts = [
+            (f"the fit with {name}, {name} dropped", u[sel]),
+            ("the linear prediction", np.clip(predicted, lo, hi)),
+        ]
+        r, how = refit_without(
+            starts,
+            obj2.cost,
+            lambda x, rounds: obj2.solve(x, lo, hi, rounds),  # noqa: B023 (called within this iteration)
+            lambda x: _gauss_newton_gain(obj2.jac(x), obj2.fun(x)),  # noqa: B023
+            max_rounds,
+            EXTRA_ROUNDS,
+        )
         e = next(e for e in estimates if e.name == name)
         disp = dispersion(e.se_model, e.se_slope, e.se_sandwich, e.se_held, obj.n_t)
         out[name] = choice_row(
             name,
             simpler,
-            float(getattr(obj.glob.base, FIT_FIELDS[name][0])),
+            held_at,
             cost_full,
             obj2.cost(r.x),
             bool(r.status > 0),
             {n: float(v) for n, v in zip(simpler, obj2.unpack(r.x)[0])},
             disp,
+            how,
         )
     return out
 
