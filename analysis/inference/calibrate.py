@@ -373,11 +373,11 @@ class ParamEstimate:
             "value": self.value if self.identifiable else None,
             "estimate": self.value,
             "se": self.se,
-            "identifiable": self.identifiable,
+            "identifiable": bool(self.identifiable),
             "note": self.note,
             "se_model": self.se_model,
             "se_sandwich": self.se_sandwich,
-            "effective_only": self.effective_only,
+            "effective_only": bool(self.effective_only),
             "ci95": list(self.ci95) if math.isfinite(self.se) else None,
             "se_held": self.se_held,
             "se_with_held": self.se_with_held,
@@ -1023,7 +1023,7 @@ def _estimates(
         s_mod = math.hypot(float(se[j]), s_slope) if math.isfinite(s_slope) else float(se[j])
         s_use = max(s_mod, s_sand) if math.isfinite(s_sand) else s_mod
         rel = s_use / abs(xg[j]) if xg[j] != 0 else math.inf
-        ident = ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged
+        ident = bool(ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged)  # a numpy bool is not JSON
         note = notes[j]
         if ok[j] and rel > NOT_IDENTIFIABLE_REL_SE:
             note = f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it"

@@ -16,6 +16,7 @@ noise); the calibration against trials of wheels away from Table 1 (c 8 N s/m, k
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -168,6 +169,7 @@ def _consistent(summary: dict) -> None:
     """The output never contradicts itself: friction is never identifiable beside a statement that it is not told
     from damping, neither is on their ridge, no parameter is identifiable and effective only at once, nor
     identifiable in a model that does not fit, nor when the likelihood-ratio test does not support it."""
+    assert json.loads(json.dumps(summary)) is not None  # the API's summary is plain JSON (no numpy scalars)
     fvd = summary.get("friction_vs_damping")
     for p in summary["params"]:
         assert not (p["identifiable"] and p["effective_only"]), p
@@ -351,3 +353,20 @@ def test_one_parameter_needs_no_further_start_when_its_profile_has_one_valley():
     assert _one_valley({-0.5: 9.0, 0.0: 4.0, 1.0: 1.0})  # the minimum at an end
     assert not _one_valley({-0.5: 2.0, -0.3: 4.0, 0.0: 1.0, 0.4: 3.0, 1.0: 8.0})  # a second dip at -0.5
     assert _one_valley({-0.5: float("inf"), 0.0: 1.0, 0.4: 3.0})  # an invalid wheel is not a valley
+
+
+def test_an_estimate_with_numpy_inputs_is_plain_json():
+    """The estimates are built from numpy arrays; their verdicts must still be plain booleans (`json.dumps` of the
+    Python API's `summary()` failed on a numpy False for a parameter the data hardly constrain)."""
+    from types import SimpleNamespace
+
+    from rimless.analysis.inference.calibrate import _estimates
+    from rimless.sim.model.params import WheelParams
+
+    glob = SimpleNamespace(base=WheelParams())
+    xg, se = np.array([7.0, 0.01]), np.array([0.5, 0.4])  # F_c: 0.01 +- 0.4 N, relative 4000 %
+    est = _estimates(glob, ["c", "guide_friction_n"], xg, se, [True, True], ["", ""])
+    assert [e.identifiable for e in est] == [True, False]
+    for e in est:
+        d = json.loads(json.dumps(e.as_dict()))
+        assert type(d["identifiable"]) is bool and type(d["effective_only"]) is bool
