@@ -1,8 +1,16 @@
 """Calibrate the wheel model on trials: least squares on the step periods and the CoM height of all trials.
 
 Unknowns: the global model parameters asked for (default the leg damping c; any of ``c, k, m_H, m, I_c,
-L0``) and, per trial, the release speed theta' at the rigid-touchdown state theta = -alpha/2 one step before
-the first measured impact (as in `rimless.analysis.inference.compare`). Residuals, per trial:
+L0``) and, per trial, the release state one step before the first measured impact: a post-impact section state
+z = (theta, theta'), the stance leg at its free length and the trailing foot on the slope (model.md section 6;
+`rimless.sim.model.section.state_from_section`). Its speed theta' is fitted with the globals; its angle theta
+(`release_angle_rad`, within `RELEASE_ANGLE_RANGE_RAD` below the rigid touchdown -alpha/2, where the trailing leg
+is unloaded) is fitted on the periods at Table 1 and again at the start the profile chooses (`_start`), then held.
+The section is two-dimensional, so this family holds any release of the model one step before its first measured
+impact: a wheel held in its rigid pose and pushed (theta = -alpha/2, the convention of
+`rimless.analysis.inference.compare`) and one that enters its gait (theta+ 3-6 deg below -alpha/2 on ER wheels,
+the trailing leg compressed). Held at -alpha/2, the first simulated period missed an ER truth released into its
+gait by up to 4 ms (session 16), which the adequacy check had to excuse. Residuals, per trial:
 
 - step periods: simulated minus measured, for every consecutive measured period, divided by sigma_T;
 - CoM height: simulated minus measured at every valid frame between the first and last measured impact
@@ -81,6 +89,9 @@ GN_STOP_COST = 0.005
 GN_STOP_STATUS = 5  # the optimizer status reported then (scipy's own are 0 budget, 1-4 its tolerances)
 MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM curve
 _REL_STEP = 1e-5
+#: the release angle's range below the rigid touchdown -alpha/2 (rad): an ER wheel's post-impact angle lies
+#: 0.05-0.10 rad below it for k 1600-3900 N/m (`release_angle_rad`)
+RELEASE_ANGLE_RANGE_RAD = 0.2
 
 
 def parse_fit(text: str) -> list[str]:
@@ -100,6 +111,7 @@ class _TrialData:
     release_rad_s: float = math.nan
     refined_release_rad_s: float = math.nan
     slope_sd_deg: float = math.nan  # 1 sigma of the measured slope (`trial_slope_sigma_deg`)
+    release_angle_rad: float = -ALPHA_RAD / 2  # theta of the release state (`_ReleaseFit.fit_angle`)
 
 
 def _trial_data(trial: Any, name: str) -> _TrialData | str:
@@ -143,16 +155,18 @@ class _Sim:
     calls: int = 0
     cache: dict = field(default_factory=dict)
 
-    def frequencies(self, params: Any, slope_deg: float, w: float, n: int) -> np.ndarray:
-        """Step frequencies (1/s) of the n steps after the release step, on the compiled step map; 0 for steps
-        not reached (the wheel stalled or the step failed)."""
+    def frequencies(
+        self, params: Any, slope_deg: float, w: float, n: int, theta0: float = -ALPHA_RAD / 2
+    ) -> np.ndarray:
+        """Step frequencies (1/s) of the n steps after the release step from the section state (theta0, w), on
+        the compiled step map; 0 for steps not reached (the wheel stalled or the step failed)."""
         from rimless.sim.fast import fast_step
         from rimless.sim.model.failures import StepFailure
         from rimless.sim.step.fast_map import friction_step
 
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
-        z = np.array([-ALPHA_RAD / 2, w])
+        z = np.array([theta0, w])
         out = np.zeros(n)
         step = fast_step if p.guide_friction_n == 0.0 else friction_step  # guide friction: phase by phase
         try:
@@ -165,17 +179,19 @@ class _Sim:
             pass
         return out
 
-    def walk(self, params: Any, slope_deg: float, w: float, n: int, record: bool) -> Any:
-        """`simulate_steps` from the rigid-touchdown release; the last walks are cached (a change of the time
+    def walk(
+        self, params: Any, slope_deg: float, w: float, n: int, record: bool, theta0: float = -ALPHA_RAD / 2
+    ) -> Any:
+        """`simulate_steps` from the release state (theta0, w); the last walks are cached (a change of the time
         shift alone then costs no simulation)."""
         from rimless.sim.step.backend import make_integrator
 
-        key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record)
+        key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record, theta0)
         if key in self.cache:
             return self.cache[key]
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
-        z0 = np.array([-ALPHA_RAD / 2, w])
+        z0 = np.array([theta0, w])
         g = _com_walk(
             p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0
         )
@@ -238,12 +254,12 @@ def _residuals(
     Frequencies, not periods: a step the simulation does not reach (it stalled) has frequency 0, the limit of
     a period that grows without bound, so the cost stays continuous across the stall boundary."""
     n = d.periods_s.size
-    g = sim.walk(params, d.slope_deg, w, n + 2, with_com)
+    g = sim.walk(params, d.slope_deg, w, n + 2, with_com, d.release_angle_rad)
     if with_com and g.failure is None and len(g.steps) > 1 and d.t_s.size:
         covered = g.steps[-1].t_start_s + g.steps[-1].period_s - g.steps[1].t_start_s
         if covered < d.t_s[-1] + 0.06:  # the simulated walk is faster: simulate enough steps to cover the window
             extra = int(math.ceil((d.t_s[-1] + 0.06 - covered) / max(g.steps[-1].period_s, 1e-3))) + 1
-            g = sim.walk(params, d.slope_deg, w, n + 2 + min(extra, 3 * n + 4), with_com)
+            g = sim.walk(params, d.slope_deg, w, n + 2 + min(extra, 3 * n + 4), with_com, d.release_angle_rad)
     got = np.array([s.period_s for s in g.steps[1 : 1 + n]])
     f_sim = np.zeros(n)  # a step the simulation did not reach (stalled) has frequency 0: continuous at the stall
     f_sim[: got.size] = 1.0 / got
@@ -515,7 +531,7 @@ class _ReleaseFit:
 
     def freq_res(self, p: Any, d: _TrialData, w: float) -> np.ndarray:
         """Step-frequency residuals (Hz) from the compiled map alone."""
-        f = self.sim.frequencies(p, d.slope_deg, w, d.periods_s.size)
+        f = self.sim.frequencies(p, d.slope_deg, w, d.periods_s.size, d.release_angle_rad)
         self.tick()
         return f - 1.0 / d.periods_s
 
@@ -577,12 +593,43 @@ class _ReleaseFit:
             return self.fit(p, d, w0 if walks(r0) else None, coarse=True)
         return w, float(r @ r)
 
+    def fit_angle(self, p: Any, d: _TrialData, w0: float) -> tuple[float, float]:
+        """(release rad/s, cost) with the release angle fitted too (set on ``d.release_angle_rad``): least squares
+        on the periods in (theta, theta') from the current angle and from the middle of its range, the better
+        kept; the speed alone (`fit`) when neither walks. The angle shows mostly in the first period (the fast
+        multiplier of the section map is 0.05-0.12 on ER wheels), the speed in the approach to the gait."""
+        from scipy.optimize import least_squares
+
+        lo, hi = -ALPHA_RAD / 2 - RELEASE_ANGLE_RANGE_RAD, -ALPHA_RAD / 2
+        f_meas = 1.0 / d.periods_s
+
+        def res(q: np.ndarray) -> np.ndarray:
+            f = self.sim.frequencies(p, d.slope_deg, float(q[1]), d.periods_s.size, float(q[0]))
+            self.tick()
+            return f - f_meas
+
+        best: tuple[float, float, float] | None = None
+        for a0 in dict.fromkeys((min(max(d.release_angle_rad, lo), hi), 0.5 * (lo + hi))):
+            r0 = res(np.array([a0, w0]))
+            if not np.all(r0 + f_meas > 0):
+                continue  # the start does not walk: least squares would see a flat cost
+            r = least_squares(
+                res, [a0, w0], bounds=([lo, 0.05], [hi, 20.0]), method="trf", diff_step=[1e-5, 1e-5],
+                x_scale=[0.01, 0.01 * w0], xtol=1e-8, ftol=1e-10, max_nfev=40,
+            )  # fmt: skip
+            if best is None or 2 * r.cost < best[2]:
+                best = (float(r.x[0]), float(r.x[1]), float(2 * r.cost))
+        if best is None:
+            return self.fit(p, d, w0)
+        d.release_angle_rad = best[0]
+        return best[1], best[2]
+
     def first_period_release(self, p: Any, d: _TrialData) -> float:
         """The release whose first simulated step after the release step lasts the first measured period
         (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
         sim = self.sim
         grid = np.linspace(0.4, 6.0, 29)
-        f1 = np.array([sim.frequencies(p, d.slope_deg, w, 1)[0] for w in grid])
+        f1 = np.array([sim.frequencies(p, d.slope_deg, w, 1, d.release_angle_rad)[0] for w in grid])
         self.tick()
         target = 1.0 / d.periods_s[0]
         diff = f1 - target
@@ -591,7 +638,7 @@ class _ReleaseFit:
                 from scipy.optimize import brentq
 
                 def g1(w: float) -> float:
-                    f = sim.frequencies(p, d.slope_deg, w, 1)[0]
+                    f = sim.frequencies(p, d.slope_deg, w, 1, d.release_angle_rad)[0]
                     return (f - target) if f > 0 else -target  # a stall lies below the root
 
                 return float(brentq(g1, grid[i], grid[i + 1], xtol=1e-10, rtol=1e-12, maxiter=60))
@@ -612,7 +659,7 @@ def _start(
     table1 = {}
     best = 0.0
     for d in data:
-        w, c = releases.fit(p0, d, None)
+        w, c = releases.fit_angle(p0, d, releases.fit(p0, d, None)[0])
         d.release_rad_s = table1[d.name] = w
         best += c
     ug_best = np.zeros(glob.n)
@@ -646,10 +693,10 @@ def _start(
             ug[j] = factor - 1.0
             seen[j][factor - 1.0] = try_start(ug)
     ug_coarse = ug_best.copy()
-    if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
+    if ug_best.any():  # releases and their angles at the chosen start (from the profile's, on the same branch)
         pb = glob.at(ug_best)
         for d in data:
-            d.release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
+            d.release_rad_s = releases.fit_angle(pb, d, d.release_rad_s)[0]
     for d in data:
         d.refined_release_rad_s = d.release_rad_s
     coarse_releases = [d.release_rad_s for d in data]
@@ -1066,6 +1113,7 @@ def _residual_rows(
                 "n_com": d.t_s.size,
                 "table1_release_theta_dot_rad_s": float(w_t1),
                 "calibrated_release_theta_dot_rad_s": float(w),
+                "release_angle_deg": math.degrees(d.release_angle_rad),
                 "time_shift_ms": float(s_) * 1e3,
                 "table1_rms_period_ms": a[2] * 1e3,
                 "calibrated_rms_period_ms": b[2] * 1e3,
@@ -1301,7 +1349,7 @@ def _check_loss_separation(
     p = obj.glob.params(xg)
     v = []
     for d, w in zip(obj.data, ws):
-        g = obj.sim.walk(p, d.slope_deg, float(w), d.periods_s.size + 2, True)
+        g = obj.sim.walk(p, d.slope_deg, float(w), d.periods_s.size + 2, True, d.release_angle_rad)
         v.append(effective_leg_speed(g.table["t_s"], g.table["dL1_m_s"]) if "dL1_m_s" in g.table else math.nan)
     j_c = list(fit).index("c")
     e = estimates[j_c]
@@ -1629,6 +1677,14 @@ def _adequacy(obj: _Objective, u: np.ndarray, moved: _Moved) -> dict[str, Any]:
                 _residuals(obj.sim, p, d, float(w), float(s_) + 2e-3)[1]
                 - _residuals(obj.sim, p, d, float(w), float(s_) - 2e-3)[1]
             ) / 2.0
+        # the release angle (fitted on the periods, `_ReleaseFit.fit_angle`): central differences of 5 mrad
+        (rf_up, rh_up), (rf_down, rh_down) = (
+            _residuals(obj.sim, p, dataclasses.replace(d, release_angle_rad=d.release_angle_rad + k * 5e-3), float(w), float(s_))
+            for k in (1, -1)
+        )  # fmt: skip
+        if np.all(rf_up + 1.0 / d.periods_s > 0) and np.all(rf_down + 1.0 / d.periods_s > 0):
+            block["period_angle_s"] = (periods(d, rf_up) - periods(d, rf_down)) / 2.0
+            block["com_angle_m"] = (rh_up - rh_down) / 2.0
         blocks.append(block)
     return adequacy(blocks, obj.n_g, alpha_rad=ALPHA_RAD)
 
