@@ -4,12 +4,11 @@ Truth: the simulator's ER wheel walked by `floquet_truth.er_walk` (k = 1600 N/m,
 from Table 1's 2700 and 8), released into its gait (the gait's post-impact state, theta+ 5.4 deg below the rigid
 touchdown -alpha/2, with its speed times 1.06 and 0.97), written as Vicon Tracker exports (`critical_truth.record`)
 and imported; each trial is given its true slope, so what is left of the first period is the release's. The first
-simulated period is taken from the simulator itself (`rimless.sim.fast.fast_step`, one release step from the
-section state the calibration reports), not from the calibration's code, and compared with the truth's first
-period. With the release held at -alpha/2 (the calibration before this change) it missed by 1.9-2.6 ms, four to
-six times the import's noise on a period (measured on this series with seed 100). The release angle itself is
-weakly determined (one period carries it: -23.7 deg found for the truth's -27.9 on the first trial), so only the
-period is checked.
+simulated period is taken from the simulator itself (`rimless.sim.fast.fast_step`: one release step from the
+rigid touchdown at the reported speed, the post-impact angle moved by the reported offset, then the first
+measured step), not from the calibration's code, and compared with the truth's first period. With no offset (the
+calibration before this change) it missed by 1.9-2.6 ms, four to six times the import's noise on a period
+(measured on this series with seed 100).
 """
 
 from __future__ import annotations
@@ -44,10 +43,10 @@ def test_the_first_period_of_a_wheel_released_into_its_gait_fits_the_truth_withi
     assert 0.1e-3 < sigma_period_s < 0.6e-3  # the import's noise on objects (0.22 ms an impact, session 16)
     for row, wk, tr in zip(res.residuals, walks, trials):
         p = res.calibrated_params.replace(slope_rad=math.radians(tr.meta.slope_deg))
-        angle = math.radians(row.get("release_angle_deg", -22.5))  # -22.5 deg: the rigid touchdown, main's
-        first = fast_step(
-            p, "er", fast_step(p, "er", np.array([angle, row["calibrated_release_theta_dot_rad_s"]])).z_next
-        )
+        # the walk the calibration reports: released at the rigid touchdown one step before the first measured
+        # impact, whose post-impact angle is then moved by the fitted offset (0 on main: no such key)
+        z1 = fast_step(p, "er", np.array([-math.pi / 8, row["calibrated_release_theta_dot_rad_s"]])).z_next
+        first = fast_step(p, "er", z1 + np.array([math.radians(row.get("first_angle_offset_deg", 0.0)), 0.0]))
         true_first = float(np.diff(wk.impacts)[0])
         assert abs(first.period_s - true_first) < 3.0 * sigma_period_s, (row["trial"], first.period_s - true_first)
     assert res.adequacy["fits"], res.adequacy["statement"]
