@@ -31,7 +31,7 @@ cos of the wheel's angle and the angle itself (`importer_columns`; the angle fro
 The first period is not excused (session 16 allowed it at any amplitude, one degree of freedom per trial): the
 calibration then started each walk from a rigid touchdown one step before the first measured impact, a state a
 compliant wheel entering its gait does not pass through, and its first period missed by up to 4 ms on soft,
-damped wheels. It now fits the release state's angle as well as its speed
+damped wheels. It now fits the first measured impact's post-impact angle as well as the release speed
 (`rimless.analysis.inference.calibrate`), so the first period fits within the impact times' noise; the check
 moves that angle with the calibration's own shape (``period_angle_s``, ``com_angle_m``: one degree of freedom of
 the periods, the angle fitted), never the first period alone (``allowed["periods"]`` says so).
@@ -278,8 +278,9 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
     measured, steps reached) and, optionally, ``com_slope_m`` and ``period_slope_s`` (the residuals' change per
     1-sigma of the trial's slope: that uncertainty is then allowed) and ``period_release_s``, ``com_release_m``,
     ``com_shift_m`` (their change with the fitted release speed and time shift, any scale: the trial is then
-    judged as a whole, `joint_chi2`), ``period_angle_s`` and ``com_angle_m`` (their change with the release
-    angle the calibration fitted: one degree of freedom of the periods; nothing excuses the first period alone). ``alpha_rad``: the angle between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
+    judged as a whole, `joint_chi2`), ``period_angle_s`` and ``com_angle_m`` (their change with the first
+    impact's angle the calibration fitted: one degree of freedom of the periods; nothing excuses the first period
+    alone). ``alpha_rad``: the angle between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
     residuals may hold besides the noise), ``per_trial`` (each with ``com`` and ``periods`` figures and ``fits``),
     ``overall`` (``com``, ``periods``, ``total``) and ``fits`` with ``statement``."""
     sig_t, dof_t = timing_noise_sd([b["impacts_s"] for b in blocks])
@@ -303,7 +304,7 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             cov = (2.0 * np.eye(rp.size) - np.eye(rp.size, k=1) - np.eye(rp.size, k=-1)) * sig_t**2
             bpp, bhh = _sized(bp, rp.size), _sized(bh, rh.size)
             c2p, c2h, k = joint_chi2(rp, cov, rh, s_h**2, None if bpp is None or bhh is None else (bpp, bhh), joint)
-            n_angle = joint[0].shape[1] - 6  # the release angle's column, when given
+            n_angle = joint[0].shape[1] - 6  # the first impact's angle's column, when given
             dof_p -= n_angle
             dof_c -= max(k - 3 - n_angle, 0)  # release speed, time shift, offset and angle counted: the import's
         elif rh.size and s_h > 0:
@@ -314,7 +315,7 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             cov = (2.0 * np.eye(rp.size) - np.eye(rp.size, k=1) - np.eye(rp.size, k=-1)) * sig_t**2
             ap = _sized(b.get("period_angle_s"), rp.size)
             c2p, k_p = block_chi2(rp, cov, _sized(bp, rp.size), None if ap is None else ap[:, None])
-            dof_p -= k_p  # the release angle the calibration fitted
+            dof_p -= k_p  # the first impact's angle the calibration fitted
         fh, fp = _figure(c2h, dof_c, nd_h), _figure(c2p, dof_p, dof_t)
         for key, c2, dof in (("com", c2h, dof_c), ("periods", c2p, dof_p)):
             if math.isfinite(c2) and dof > 0:
@@ -361,9 +362,10 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             "com": "per trial, besides its time shift and height offset: at any amplitude an error of the importer's "
             "hub offset (sin, cos of the wheel's angle) and of its slope frame's tilt (a height proportional to the "
             "distance travelled): 3 degrees of freedom",
-            "periods": "per trial, its release state as the calibration fitted it (speed and angle), moved with the "
-            "calibration's shapes: 1 degree of freedom each. The first period is no longer excused at any amplitude "
-            "(not needed: the release angle is fitted, and the first period fits within the impact times' noise)",
+            "periods": "per trial, its release speed and first impact's angle as the calibration fitted them, moved "
+            "with the calibration's shapes: 1 degree of freedom each. The first period is no longer excused at any "
+            "amplitude (not needed: the first impact's angle is fitted, and the first period fits within the impact "
+            "times' noise)",
             "both": "each trial's slope within its stated uncertainty; with the calibration's shapes of the release "
             "speed and time shift, each trial judged as a whole: the slope, the release speed, the time shift and "
             "the import's errors moved together in both blocks",
@@ -379,7 +381,7 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
 def _joint_columns(b: dict[str, Any], n_p: int, n_h: int, alpha_rad: float) -> tuple[np.ndarray, np.ndarray] | None:
     """(Fp, Fh): the free columns of a trial judged as a whole (`joint_chi2`), or None without the calibration's
     shapes of the release speed (``period_release_s``, ``com_release_m``) and time shift (``com_shift_m``); with
-    the release angle's (``period_angle_s``, ``com_angle_m``) as a last column when given."""
+    the first impact's angle's (``period_angle_s``, ``com_angle_m``) as a last column when given."""
     wp, wh, th = (
         _sized(b.get("period_release_s"), n_p),
         _sized(b.get("com_release_m"), n_h),
@@ -391,7 +393,7 @@ def _joint_columns(b: dict[str, Any], n_p: int, n_h: int, alpha_rad: float) -> t
     fp = np.column_stack([wp, np.zeros((n_p, 1 + imp.shape[1]))])
     fh = np.column_stack([wh, th, imp])
     ap, ah = _sized(b.get("period_angle_s"), n_p), _sized(b.get("com_angle_m"), n_h)
-    if ap is not None and ah is not None:  # the release angle the calibration fitted, in both blocks
+    if ap is not None and ah is not None:  # the first impact's angle the calibration fitted, in both blocks
         fp, fh = np.column_stack([fp, ap]), np.column_stack([fh, ah])
     return fp, fh
 

@@ -3,8 +3,8 @@
 Found through the importer on the simulator's ER truth (`rimless trials adequacy-coverage`): against the truth the
 imported CoM height's error is white noise plus a once-a-turn sinusoid of the wheel's angle (an error of the hub's
 offset in the wheel, which the importer fits from the height) and a tilt (the slope frame's); and the calibrated
-model's first period after the release moves with the release angle the calibration fits (its stance angle, the
-trailing leg's compression), which the check moves with the calibration's shape, never excusing the first period
+model's first period after the release moves with the first impact's angle the calibration fits (the stance angle after the
+touchdown before, set by the leg's compression), which the check moves with the calibration's shape, never excusing the first period
 alone. Here the trials are generated apart from the code: the wheel's angle is a non-linear function of time
 within each step (the stance speeds up), not the check's linear-between-impacts estimate; the noise levels are the
 check's to find from the data. Expected (independent): with the model right, chi^2/dof near 1 and no alarm; a model
@@ -47,8 +47,8 @@ def _trial(
     measured = (height + error)[keep]
     model = (height + bump_error * BUMP_M * np.sin(np.pi * u))[keep]
     impacts = impacts_true + rng.normal(0.0, SIGMA_T, n_imp)
-    angle_shape = 1e-3 * 0.1 ** np.arange(period.size)  # per unit of the release angle: the fast multiplier 0.1
-    sim_periods = period + 2.5 * angle_shape  # the release angle off: its first period 2.5 ms
+    angle_shape = 1e-3 * 0.1 ** np.arange(period.size)  # per unit of the first impact's angle: the fast multiplier 0.1
+    sim_periods = period + 2.5 * angle_shape  # that angle off: its first period 2.5 ms
     sim_periods = sim_periods + period_error_s * (1.0 - 0.6 ** np.arange(1, period.size + 1))
     out = {
         "trial": name,
@@ -88,8 +88,8 @@ def test_the_model_s_own_truth_through_importer_like_errors_fits_with_chi_square
 
 
 @pytest.mark.parametrize("whole", [False, True], ids=["blocks", "whole-trial"])
-def test_a_first_period_off_is_not_excused_without_the_release_angle_s_shape(whole: bool):
-    """The same trials without the calibration's release-angle shape: the first period 2.5 ms off (six times the
+def test_a_first_period_off_is_not_excused_without_the_first_angle_s_shape(whole: bool):
+    """The same trials without the calibration's shape of that angle: the first period 2.5 ms off (six times the
     period's noise of 0.42 ms) is no longer allowed at any amplitude (session 16's check excused it: ratio near 1).
     Judged block by block it does not fit (periods' chi^2/dof 6.8-8.5 on seeds 0, 1, 13); judged as a whole the
     release speed takes part of it (2.5-2.8, p 0.003-0.007 on four trials: material, not significant at 1e-3)."""
