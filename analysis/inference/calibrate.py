@@ -1536,7 +1536,8 @@ def _first_angles(
     solution with them held (`first_angle_offset_rad` on the trial data); the new solution when its cost is lower,
     else the offsets back at 0 and ``best`` (returned). Fitted here, not at Table 1 or the profile's start: there
     the offset takes up the globals' error (2-4 deg at c 8 for a truth of 11) and, held, pulls the release speed
-    to the stall's edge."""
+    to the stall's edge. The other starts' minima (`_minima`) are then costed with these offsets, not solved again
+    with them."""
     xg, ws, _ = obj.unpack(best.x)
     p = obj.glob.params(xg)
     for d, w in zip(obj.data, ws):
