@@ -9,9 +9,10 @@ state of the model at the first measured impact: a wheel held in its rigid pose 
 released into its gait, whose stance leg was compressed at the touchdown before (its post-impact angle lies
 lower). The offset shows mostly in the first period (the fast multiplier of the section map is 0.05-0.12 on ER
 wheels); it is fitted with the speed on the periods at the solution (`_first_angles`), and the least squares are
-solved again from there with it held (kept when the cost is lower). With no offset the first simulated period missed an ER truth released into its gait by up
-to 4 ms (session 16), which the adequacy check had to excuse. (A release angle one step before, fitted instead,
-is degenerate with the speed: the step's fast contraction maps the two onto nearly one curve.) Residuals, per trial:
+solved again from there with it held (kept when the cost is lower). With no offset the first simulated period
+missed an ER truth released into its gait by up to 4 ms (session 16), which the adequacy check had to excuse. (A
+release angle one step before, fitted instead, is degenerate with the speed: the step's fast contraction maps the
+two onto nearly one curve.) Residuals, per trial:
 
 - step periods: simulated minus measured, for every consecutive measured period, divided by sigma_T;
 - CoM height: simulated minus measured at every valid frame between the first and last measured impact
@@ -112,7 +113,7 @@ class _TrialData:
     release_rad_s: float = math.nan
     refined_release_rad_s: float = math.nan
     slope_sd_deg: float = math.nan  # 1 sigma of the measured slope (`trial_slope_sigma_deg`)
-    first_angle_offset_rad: float = 0.0  # the first impact's theta+ offset (`_ReleaseFit.fit_first_angle`)
+    first_angle_offset_rad: float = 0.0  # the first impact's theta+ offset, rad (`_first_angles`)
 
 
 def _trial_data(trial: Any, name: str) -> _TrialData | str:
@@ -698,7 +699,7 @@ def _start(
             ug[j] = factor - 1.0
             seen[j][factor - 1.0] = try_start(ug)
     ug_coarse = ug_best.copy()
-    if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch) (from the profile's, on the same branch)
+    if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
         pb = glob.at(ug_best)
         for d in data:
             d.release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
