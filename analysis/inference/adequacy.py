@@ -10,7 +10,7 @@ trials. Against them, per trial and overall:
   height offset are fitted), less what the import's errors take (below);
 - step periods: chi^2 = r^T S^-1 r, r the period residuals (s) and S = sigma_t^2 D D^T their covariance (a
   period is the difference of two impact times: neighbours share one), with n - 1 degrees of freedom (the
-  release speed is fitted), less the release state's one (below).
+  release speed is fitted).
 
 Each trial is held at its measured slope, whose error is shared by all its residuals and is not noise the
 recording shows. A block's chi^2 therefore allows the trial's slope to lie anywhere within its stated
@@ -23,14 +23,18 @@ the simulator's ER truth through the Vicon writer and the importer, `rimless tri
 height's error is white noise plus a once-a-turn sinusoid of the wheel's angle, 0.05-0.43 mm (the hub's offset
 in the wheel is fitted from the height itself, `kinematics.hub.estimate_hub_offset`, and a body point off the
 hub rises and falls once a turn) and a tilt (the slope frame's, a height proportional to the distance
-travelled); once these are taken out what is left is white, of the third differences' sigma. And the calibrated
-model starts each trial from a rigid touchdown at the fitted speed, while a release has a stance angle and a
-leg compression of its own: the first period after it is off by up to 4 ms on soft, damped wheels. These are
-carried as shapes of any amplitude (`block_chi2`: generalised least squares, one degree of freedom each):
+travelled); once these are taken out what is left is white, of the third differences' sigma. These are
+carried as shapes of any amplitude (`block_chi2`: generalised least squares, one degree of freedom each): sin and
+cos of the wheel's angle and the angle itself (`importer_columns`; the angle from the impacts, alpha a step,
+`turn_angle`) beside the offset: n - 1 - 4 degrees of freedom (the time shift).
 
-- CoM height: sin and cos of the wheel's angle and the angle itself (`importer_columns`; the angle from the
-  impacts, alpha a step, `turn_angle`) beside the offset: n - 1 - 4 degrees of freedom (the time shift);
-- step periods: the first period (`release_column`): n - 2.
+The first period is not excused (session 16 allowed it at any amplitude, one degree of freedom per trial): the
+calibration then started each walk from a rigid touchdown one step before the first measured impact, a state a
+compliant wheel entering its gait does not pass through, and its first period missed by up to 4 ms on soft,
+damped wheels. It now fits the first measured impact's post-impact angle as well as the release speed
+(`rimless.analysis.inference.calibrate`), so the first period fits within the impact times' noise; the check
+moves that angle with the calibration's own shape (``period_angle_s``, ``com_angle_m``: one degree of freedom of
+the periods, the angle fitted), never the first period alone (``allowed["periods"]`` says so).
 
 Each trial is judged as a whole when the calibration gives its residuals' change with the release speed and the
 time shift (``period_release_s``, ``com_release_m``, ``com_shift_m``; `joint_chi2`): the slope (within its
@@ -251,15 +255,6 @@ def joint_chi2(
     return c2p, c2h, int(rank) - (prior is not None)
 
 
-def release_column(n: int) -> np.ndarray:
-    """(n, 1): the first period's residual alone: the release state beyond its speed (the stance angle and the
-    leg's compression and rate at the release, which the calibration does not fit) shows mostly there."""
-    e = np.zeros((n, 1))
-    if n:
-        e[0, 0] = 1.0
-    return e
-
-
 def _figure(chi2: float, dof: int, noise_dof: float) -> dict[str, Any]:
     """chi^2, dof, ratio chi^2/dof and its p-value: the F test of the residual variance against the noise's
     estimate (``noise_dof`` its degrees of freedom; the chi-square test when infinite), upper tail."""
@@ -283,7 +278,9 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
     measured, steps reached) and, optionally, ``com_slope_m`` and ``period_slope_s`` (the residuals' change per
     1-sigma of the trial's slope: that uncertainty is then allowed) and ``period_release_s``, ``com_release_m``,
     ``com_shift_m`` (their change with the fitted release speed and time shift, any scale: the trial is then
-    judged as a whole, `joint_chi2`). ``alpha_rad``: the angle between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
+    judged as a whole, `joint_chi2`), ``period_angle_s`` and ``com_angle_m`` (their change with the first
+    impact's angle the calibration fitted: one degree of freedom of the periods; nothing excuses the first period
+    alone). ``alpha_rad``: the angle between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
     residuals may hold besides the noise), ``per_trial`` (each with ``com`` and ``periods`` figures and ``fits``),
     ``overall`` (``com``, ``periods``, ``total``) and ``fits`` with ``statement``."""
     sig_t, dof_t = timing_noise_sd([b["impacts_s"] for b in blocks])
@@ -307,16 +304,18 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             cov = (2.0 * np.eye(rp.size) - np.eye(rp.size, k=1) - np.eye(rp.size, k=-1)) * sig_t**2
             bpp, bhh = _sized(bp, rp.size), _sized(bh, rh.size)
             c2p, c2h, k = joint_chi2(rp, cov, rh, s_h**2, None if bpp is None or bhh is None else (bpp, bhh), joint)
-            dof_p -= 1  # the release state
-            dof_c -= max(k - 4, 0)  # release speed, time shift, offset fitted already, the release state: the import's
+            n_angle = joint[0].shape[1] - 6  # the first impact's angle's column, when given
+            dof_p -= n_angle
+            dof_c -= max(k - 3 - n_angle, 0)  # release speed, time shift, offset and angle counted: the import's
         elif rh.size and s_h > 0:
             free_h = importer_columns(b["com_t_s"], b["impacts_s"], alpha_rad) if rh.size == len(b["com_t_s"]) else None
             c2h, k_h = block_chi2(rh, s_h**2, _sized(bh, rh.size), free_h)
             dof_c -= max(k_h - 1, 0)  # the offset's column was fitted already (or is the importer's plane's)
         if joint is None and rp.size and sig_t > 0:
             cov = (2.0 * np.eye(rp.size) - np.eye(rp.size, k=1) - np.eye(rp.size, k=-1)) * sig_t**2
-            c2p, k_p = block_chi2(rp, cov, _sized(bp, rp.size), release_column(rp.size))
-            dof_p -= k_p
+            ap = _sized(b.get("period_angle_s"), rp.size)
+            c2p, k_p = block_chi2(rp, cov, _sized(bp, rp.size), None if ap is None else ap[:, None])
+            dof_p -= k_p  # the first impact's angle the calibration fitted
         fh, fp = _figure(c2h, dof_c, nd_h), _figure(c2p, dof_p, dof_t)
         for key, c2, dof in (("com", c2h, dof_c), ("periods", c2p, dof_p)):
             if math.isfinite(c2) and dof > 0:
@@ -356,15 +355,17 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             "method": "from the recordings apart from the model: CoM height from its third differences on evenly "
             "spaced runs (median absolute deviation); impact times from each trial's periods about their own "
             "geometric trend, pooled; each trial's slope free within its stated uncertainty; the import's errors "
-            "that are not noise and the release state allowed (`allowed`); p-values by the F test against these "
+            "that are not noise allowed (`allowed`); p-values by the F test against these "
             "estimates",
         },
         "allowed": {
             "com": "per trial, besides its time shift and height offset: at any amplitude an error of the importer's "
             "hub offset (sin, cos of the wheel's angle) and of its slope frame's tilt (a height proportional to the "
             "distance travelled): 3 degrees of freedom",
-            "periods": "per trial, besides its release speed: the first period at any amplitude (the release state "
-            "beyond its speed): 1 degree of freedom",
+            "periods": "per trial, its release speed and first impact's angle as the calibration fitted them, moved "
+            "with the calibration's shapes: 1 degree of freedom each. The first period is no longer excused at any "
+            "amplitude (not needed: the first impact's angle is fitted, and the first period fits within the impact "
+            "times' noise)",
             "both": "each trial's slope within its stated uncertainty; with the calibration's shapes of the release "
             "speed and time shift, each trial judged as a whole: the slope, the release speed, the time shift and "
             "the import's errors moved together in both blocks",
@@ -379,7 +380,8 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
 
 def _joint_columns(b: dict[str, Any], n_p: int, n_h: int, alpha_rad: float) -> tuple[np.ndarray, np.ndarray] | None:
     """(Fp, Fh): the free columns of a trial judged as a whole (`joint_chi2`), or None without the calibration's
-    shapes of the release speed (``period_release_s``, ``com_release_m``) and time shift (``com_shift_m``)."""
+    shapes of the release speed (``period_release_s``, ``com_release_m``) and time shift (``com_shift_m``); with
+    the first impact's angle's (``period_angle_s``, ``com_angle_m``) as a last column when given."""
     wp, wh, th = (
         _sized(b.get("period_release_s"), n_p),
         _sized(b.get("com_release_m"), n_h),
@@ -388,8 +390,11 @@ def _joint_columns(b: dict[str, Any], n_p: int, n_h: int, alpha_rad: float) -> t
     imp = importer_columns(b["com_t_s"], b["impacts_s"], alpha_rad) if n_h == len(b["com_t_s"]) else None
     if wp is None or wh is None or th is None or imp is None or n_p < 2:
         return None
-    fp = np.column_stack([wp, np.zeros((n_p, 1 + imp.shape[1])), release_column(n_p)])
-    fh = np.column_stack([wh, th, imp, np.zeros(n_h)])
+    fp = np.column_stack([wp, np.zeros((n_p, 1 + imp.shape[1]))])
+    fh = np.column_stack([wh, th, imp])
+    ap, ah = _sized(b.get("period_angle_s"), n_p), _sized(b.get("com_angle_m"), n_h)
+    if ap is not None and ah is not None:  # the first impact's angle the calibration fitted, in both blocks
+        fp, fh = np.column_stack([fp, ap]), np.column_stack([fh, ah])
     return fp, fh
 
 
