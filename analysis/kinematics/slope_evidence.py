@@ -32,9 +32,10 @@ The allowance (1 sigma) over the trial is `MINIMA_DRIFT_PER_IMPULSE` (impact lin
 fit, would measure the compression itself, but it scatters 0.3-0.6 mm from stance to stance at 0.3 mm of marker
 noise, as much as the drift it would measure: not used.)
 
-The estimate used is the best conditioned (narrowest interval), combined by inverse variance with the others
-that agree with it (they come from different data: stance pivots, impact cusps; the drift they share,
-``common_half_rad``, is not averaged down). When two estimates disagree by
+The estimate used is the best conditioned (narrowest interval), combined with the others that agree with it by
+the least-variance weights under their covariance (they come from different data, stance pivots and impact
+cusps, so their own errors are independent; the drift, ``common_half_rad``, is counted as shared: it is not
+averaged down, and the weights favour the estimate it moves least; `_covariance`). When two estimates disagree by
 more than their combined uncertainty, one of them is wrong and the data cannot say which: the interval of the
 best conditioned is widened to span the other's, and a warning says so. Angles in rad, lengths in m.
 """
@@ -431,6 +432,46 @@ def _disagree(a: SlopeEvidence, b: SlopeEvidence) -> bool:
     return abs(a.slope_rad - b.slope_rad) > math.hypot(a.half_rad, b.half_rad)
 
 
+def _covariance(group: list[SlopeEvidence]) -> np.ndarray:
+    """The estimates' covariance in squared 95 % half widths (rad^2): each its own half width squared on the
+    diagonal; off it, the legs' drift (``common_half_rad``) counted as fully shared, the rest independent.
+
+    Measured (session 17, told the wheel, `rimless trials slope-coverage --series 40 --seed 0` and the tests'
+    compliant truth, `import_truth_study.py slope --draws 40 --seed 5 --wheel-given`): the contact and impact
+    lines' errors correlate -0.08 on the rigid truth (no drift: their own parts are independent), -0.06 on the
+    ER truth (sum of the products of their errors -0.05 urad^2 against 0.35 if the drift were shared) and share
+    about half the drift on the tests' compliant truth (1.68 against 3.29 urad^2; the mean product of their z
+    0.71). Counting the drift as shared is the reading that covers every truth; the hub's term (2-7 % of the
+    impact line's standard deviation with the converged hub fit) is in the impact line's own part."""
+    h = np.array([e.half_rad for e in group])
+    c = np.array([min(e.common_half_rad, e.half_rad) for e in group])
+    cov = np.outer(c, c)
+    np.fill_diagonal(cov, h**2)
+    return cov
+
+
+def _combination_weights(cov: np.ndarray) -> np.ndarray:
+    """Weights (summing to 1, none negative) of the least-variance combination of estimates with covariance
+    ``cov``: generalised least squares, an estimate whose weight would be negative dropped (a negative weight
+    extrapolates along the shared drift, trusting its sharing exactly; the data show it partly shared)."""
+    n = cov.shape[0]
+    active = list(range(n))
+    while True:
+        sub = cov[np.ix_(active, active)]
+        w = np.linalg.pinv(sub) @ np.ones(len(active))
+        total = float(w.sum())
+        if not (math.isfinite(total) and total > 0):  # (not expected: the narrowest alone)
+            out = np.zeros(n)
+            out[int(np.argmin(np.diag(cov)))] = 1.0
+            return out
+        w = w / total
+        if (w >= 0).all() or len(active) == 1:
+            out = np.zeros(n)
+            out[active] = np.clip(w, 0.0, None) / np.clip(w, 0.0, None).sum()
+            return out
+        del active[int(np.argmin(w))]
+
+
 def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], list[str], list[str]]:
     """(evidence with the one used first, warnings, notes): the first source is used (ramp, given, else the best
     conditioned estimate); an estimate used that disagrees with another estimate gets an interval spanning both;
@@ -477,25 +518,24 @@ def choose_slope(evidence: list[SlopeEvidence]) -> tuple[list[SlopeEvidence], li
             )
         agreeing = [e for e in evidence[1:] if e.source == "estimated" and not _disagree(used, e)]
         if agreeing and not others:
-            # consistent estimates from different data (stance pivots, impact cusps): inverse-variance combined
+            # consistent estimates from different data (stance pivots, impact cusps): the least-variance
+            # combination under their covariance (`_combination_weights`)
             group = [used] + agreeing
-            w = [1.0 / max(e.half_rad, 1e-12) ** 2 for e in group]
-            mean = sum(wi * e.slope_rad for wi, e in zip(w, group)) / sum(w)
-            # their own parts average down; the drift they share does not (it moves every estimate alike). Each
-            # keeps its own quantile (a Student t above the normal): combined, the estimates' errors are not
-            # independent enough to earn less (the rigid truth's contact and impact lines err together,
-            # correlation 0.7 on the slope-coverage study's walks; Welch-Satterthwaite's t lost it a walk)
-            own = sum(wi**2 * max(e.half_rad**2 - e.common_half_rad**2, 0.0) for wi, e in zip(w, group))
-            common = sum(wi * e.common_half_rad for wi, e in zip(w, group))
-            half = math.sqrt(own + common**2) / sum(w)
+            cov = _covariance(group)
+            w = _combination_weights(cov)
+            mean = float(w @ np.array([e.slope_rad for e in group]))
+            half = math.sqrt(max(float(w @ cov @ w), 0.0))
             used = SlopeEvidence(
                 "estimated",
                 mean,
                 _interval(mean, half),
-                "inverse-variance combination of the consistent estimates: "
+                "least-variance combination of the consistent estimates (their own errors independent, the legs' "
+                "drift counted as shared; weights "
+                + ", ".join(f"{wi:.2f}" for wi in w)
+                + "): "
                 + "; ".join(f"{e.method} -> {math.degrees(e.slope_rad):.3f} deg" for e in group),
                 "combined " + " and ".join(e.kind for e in group),
-                common / sum(w),
+                float(w @ np.array([e.common_half_rad for e in group])),
             )
         rest = [e for e in evidence[1:] if e.source == "estimated"]
         if rest:

@@ -120,13 +120,13 @@ def test_narrowest_used_and_disagreement_spanned_and_warned():
     assert lo == pytest.approx(b.ci_rad[0]) and hi == pytest.approx(a.ci_rad[1])  # spans the other estimate
     assert len(warnings) == 1 and "disagree" in warnings[0] and "impact line" in warnings[0]
     assert notes and "also estimated" in notes[0]
-    # estimates that agree: combined by inverse variance (by hand), no warning
+    # estimates that agree and share nothing: combined by inverse variance (by hand), no warning
     c = SlopeEvidence("estimated", math.radians(1.42), (math.radians(1.2), math.radians(1.64)), "c", "contacts")
     used, warnings, _ = choose_slope(sorted([c, b], key=lambda e: e.half_rad))
     wb, wc = 1 / math.radians(0.05) ** 2, 1 / math.radians(0.22) ** 2
     assert used[0].slope_rad == pytest.approx((wb * math.radians(1.4) + wc * math.radians(1.42)) / (wb + wc))
     assert used[0].half_rad == pytest.approx(1 / math.sqrt(wb + wc))
-    assert "combined" in used[0].kind and "inverse-variance" in used[0].method and not warnings
+    assert "combined" in used[0].kind and "least-variance" in used[0].method and not warnings
 
 
 def _line_frame(slope_rad: float, se_rad: float, n: int):
@@ -168,6 +168,41 @@ def test_a_drift_both_estimates_share_is_not_averaged_down():
     a0, b0 = (replace(e, common_half_rad=0.0) for e in (a, b))
     used, _, _ = choose_slope([a0, b0])
     assert used[0].half_rad == pytest.approx(h / math.sqrt(2), rel=1e-9)
+
+
+def _least_variance_by_scan(ha: float, hb: float, cov: float) -> tuple[float, float]:
+    """(weight of the first, half width) minimising w^2 ha^2 + 2 w (1 - w) cov + (1 - w)^2 hb^2 over w in [0, 1],
+    by a fine scan (independent of the code's generalised least squares)."""
+    w = np.linspace(0.0, 1.0, 200001)
+    var = w**2 * ha**2 + 2 * w * (1 - w) * cov + (1 - w) ** 2 * hb**2
+    i = int(np.argmin(var))
+    return float(w[i]), float(math.sqrt(var[i]))
+
+
+def test_a_shared_drift_is_weighted_as_a_covariance_not_by_the_widths_alone():
+    """Two estimates whose drifts are shared (counted as one error moving both) but of different sizes: the
+    least-variance combination leans on the one the drift moves least; its half width is the least variance
+    over all non-negative weights (by scan). Inverse-variance weights (before session 17) were wider here.
+    When the shared part exceeds the narrower one's own variance, no mix beats the narrower alone."""
+    deg = math.radians
+    a = SlopeEvidence("estimated", deg(2.00), (deg(1.97), deg(2.03)), "a", "contacts", deg(0.015))
+    b = SlopeEvidence("estimated", deg(2.02), (deg(1.96), deg(2.08)), "b", "impact line", deg(0.059))
+    used, warnings, _ = choose_slope([a, b])
+    w, half = _least_variance_by_scan(a.half_rad, b.half_rad, a.common_half_rad * b.common_half_rad)
+    assert not warnings and "combined" in used[0].kind
+    assert used[0].half_rad == pytest.approx(half, rel=1e-6)
+    assert used[0].slope_rad == pytest.approx(w * a.slope_rad + (1 - w) * b.slope_rad, abs=deg(1e-6))
+    wa, wb = 1 / a.half_rad**2, 1 / b.half_rad**2  # inverse-variance weights, shared drift counted once
+    own = wa**2 * (a.half_rad**2 - a.common_half_rad**2) + wb**2 * (b.half_rad**2 - b.common_half_rad**2)
+    ivw_half = math.sqrt(own + (wa * a.common_half_rad + wb * b.common_half_rad) ** 2) / (wa + wb)
+    assert used[0].half_rad < 0.97 * ivw_half
+    # the shared drift's covariance above the narrower's variance: the narrower alone, its own interval
+    c = replace(a, common_half_rad=deg(0.02))
+    d = b
+    used, _, _ = choose_slope([c, d])
+    assert _least_variance_by_scan(c.half_rad, d.half_rad, c.common_half_rad * d.common_half_rad)[0] == 1.0
+    assert used[0].half_rad == pytest.approx(c.half_rad, rel=1e-9)
+    assert used[0].slope_rad == pytest.approx(c.slope_rad, abs=1e-15)
 
 
 def test_contacts_on_a_clean_line_keep_a_contact_floor_each():
