@@ -161,7 +161,7 @@ def calibrate_in_passes(
     stable = False
     while not stop:
         legs, why = fitted_legs(res, wheel)
-        if legs is None:
+        if legs is None or reimport is None:
             stop = why
             break
         try:

@@ -408,7 +408,7 @@ def _summary(
         "fit": list(fit),
         "input": inputs[0],
         "series": len(rows),
-        **{k: first[k] for k in ("fitted", "converged", "parameters", "optimizer_status", "failed")},
+        **{k: first[k] for k in ("fitted", "converged", "parameters", "optimizer_status", "failed", "slope_passes")},
         "inputs": per,
         "draws": {
             "k_n_per_m": list(K_RANGE),
