@@ -5,8 +5,10 @@ Each series draws an ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m: 
 (`floquet_truth.er_walk`, which integrates guide friction phase by phase when F_c > 0; no slope wander) on
 ``trials`` slopes of 2-3.5 deg, each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon
 export in a lab drawn per series (`importer_coverage.draw_lab`, `critical_truth.record`: 0.3 mm, 1 mrad of
-noise, 100 Hz), imports it and calibrates it under one `SCENARIOS` entry, the held parameters exact
-(``uncertainty`` 0) except the one the scenario makes wrong:
+noise, 100 Hz), imports it (the refusals) and hands the exports to the calibration as a user would (it imports
+them told the held wheel's legs; k fitted: the importer's bound, then again told the fitted k,
+`rimless.analysis.api.slope_passes`), under one `SCENARIOS` entry, the held parameters exact (``uncertainty``
+0) except the one the scenario makes wrong:
 
 - ``adequate``: frictionless truth, ``--fit c,k``: the model is the truth, so "does not fit" is a false alarm
   (nominal: below ``ADEQUACY_P`` = 0.1 %, the ratio condition making it rarer still);

@@ -3,8 +3,10 @@
 Each series draws a compliant ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m; Table 1: 2700, 8), walks
 it with the simulator's ER model (`floquet_truth.er_walk`, no slope wander) on ``trials`` slopes of 2-3.5 deg,
 each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon export in a lab drawn per
-series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it and fits ``fit`` (default c and k)
-with each wheel input of ``inputs`` (`INPUTS`):
+series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it (the refusals) and hands the exports
+to the calibration as a user would: it imports them told the wheel input (k fitted: the importer's bound, then
+again told the fitted k, `rimless.analysis.api.slope_passes`; ``slope_passes`` counts the passes) and fits
+``fit`` (default c and k) with each wheel input of ``inputs`` (`INPUTS`):
 
 - ``exact`` (default): the held parameters at the truth's values, exact (``uncertainty`` 0: the intervals are
   the data's; the held parameters' part is not exercised). The truth's held parameters are Table 1's.
