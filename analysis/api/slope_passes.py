@@ -172,14 +172,16 @@ def calibrate_in_passes(
         new = _slopes(again, names)
         change = slope_change(slopes, new)
         calibrated = sum(h["calibrated"] for h in history)
-        row = {"pass": len(history) + 1, **_legs_source(legs), "change": change, "calibrated": False, "slopes": new}
+        finite = change if math.isfinite(change) else None  # (a trial that gained or lost its interval: JSON null)
+        row = {"pass": len(history) + 1, **_legs_source(legs), "change": finite, "calibrated": False, "slopes": new}
         history.append(row)
         if change <= SLOPE_PASS_RTOL:
             stable = True
             stop = f"the slopes' intervals stopped changing (at most {change:.1%} of a half width)"
             break
         if calibrated >= MAX_SLOPE_PASSES:
-            stop = f"at most {MAX_SLOPE_PASSES} calibrations; the slopes still moved {change:.1%} of a half width"
+            moved = f"moved {change:.1%} of a half width" if finite is not None else "gained or lost an interval"
+            stop = f"at most {MAX_SLOPE_PASSES} calibrations; the slopes still {moved}"
             break
         try:
             res = calibrate_once(again)
