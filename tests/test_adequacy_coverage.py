@@ -57,6 +57,11 @@ def test_a_held_stiffness_25_percent_off_is_a_misfit_the_check_finds_and_counts_
     assert held["right_verdict"] and held["does_not_fit"]["count"] == 1
     (a,) = adequate["per_series"]
     assert a["held_k_n_per_m"] == a["truth"]["k"]  # nothing held wrong: the model is the truth
+    # handed the exports, the calibration imports them as a user's: told the held k (held-k: one pass), or, k
+    # fitted (adequate), the importer's bound, then again told the fitted k
+    assert h["slope_passes"]["passes"] == 1 and not h["slope_passes"]["reimported_with_fitted_k"]
+    assert a["slope_passes"]["reimported_with_fitted_k"] and a["slope_passes"]["passes"] >= 2
+    assert adequate["slope_passes"]["reimported_with_fitted_k"] == 1
     for name in ("c", "k"):
         assert abs(a["estimates"][name]["value"] / a["truth"][name] - 1) < 0.05
         if not a["fits"]:  # a misfit makes every parameter effective only, never identifiable

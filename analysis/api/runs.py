@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rimless.analysis.api.trials import calibrate as calibrate_api
+from rimless.analysis.api.slope_passes import calibrate_in_passes
 from rimless.analysis.api.trials import critical_slope
 from rimless.analysis.inference.calibrate import CalibrationResult, NoTrialCalibrated, calibrate
 from rimless.analysis.inference.critical_slope import CriticalSlopeResult, run_critical_slope
@@ -26,6 +26,7 @@ from rimless.analysis.inference.runs import (
     prior_input,
     wheel_input,
 )
+from rimless.errors import RunFailure
 from rimless.progress import progress_bar
 
 __all__ = ["CriticalSlopeRun", "CalibrationRun", "critical_slope_run", "calibration_run"]
@@ -35,10 +36,7 @@ def _wheel(win: Any, model: str) -> Any:
     """The public API's `Wheel` for the user's wheel input (`win`: values, uncertainties, sources)."""
     from rimless.sim.api.wheel import Wheel
 
-    w = Wheel(win.params, model)  # type: ignore[arg-type]
-    w.input = win
-    w.uncertainty = {n: e.sd for n, e in win.entries.items()}
-    return w
+    return Wheel.from_input(win, model)  # type: ignore[arg-type]
 
 
 def import_wheel(params_path: Path | None, rigid_legs: bool) -> Any:
@@ -175,27 +173,40 @@ def calibration_run(
         wheel = prior.plan(wheel, [FIT_FIELDS[n][0] for n in fit])
         win = prior_input(win, prior)
     with progress_bar("importing") as bar:
-        # the importer's legs' drift: the wheel's k, or its own bound when k is fitted (not known)
+        # the importer's legs' drift: the wheel's k, or its own bound when k is fitted (not known); then, k
+        # fitted, the files imported again told the fitted k (`rimless.analysis.api.slope_passes`)
         legs = None if "k" in fit else _wheel(win, model)
-        run = CalibrationRun(
-            load_trials(files, {**import_kwargs, "wheel": legs}), prior=prior, fit=list(fit), wheel=win
-        )
+        kwargs = {**import_kwargs, "wheel": legs}
+        run = CalibrationRun(load_trials(files, kwargs), prior=prior, fit=list(fit), wheel=win)
         if not run.loaded.trials:
             return run
-        planned = _wheel(win, model)
-        planned.params = wheel  # the leg test's planned values (fixed or penalised), `win` their sources
-        try:  # the public API's function (the held parameters carried by refits; the parameters listed)
-            run.calibration = calibrate_api(
+        from rimless.sim.api.wheel import Wheel
+
+        # the leg test's planned values (fixed or penalised), `win` their sources
+        planned = Wheel.from_input(win, model, params=wheel)  # type: ignore[arg-type]
+
+        def reimport(told: Any) -> list[Any]:
+            again = load_trials(files, {**kwargs, "wheel": told})
+            if again.names != run.loaded.names:
+                raise RunFailure("the files imported differ from the first import's: " + "; ".join(again.refused))
+            return again.trials
+
+        try:  # the held parameters carried by refits; the parameters listed
+            run.calibration = calibrate_in_passes(
                 run.loaded.trials,
+                run.loaded.names,
                 fit,
                 planned,
+                first_legs=legs,
+                reimport=reimport,
                 prior=prior,
                 progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
-                names=run.loaded.names,
             )
         except NoTrialCalibrated as e:
             run.failure = str(e)
             return run
+        run.calibration.parameters = calibrated_input(win, run.calibration).parameters()
+        run.loaded.trials = run.calibration.trials  # the slopes the calibration used (re-imported or not)
         run.wheel = win = calibrated_input(win, run.calibration)
         if critical:
             run.critical = run_critical_slope(

@@ -100,24 +100,31 @@ def calibrate(
     command's JSON object (`converged`, estimates with intervals, what was held; ``parameters``: every
     parameter's value, uncertainty and source, the wheel's `Wheel.input`). `names`: the trials' names in the
     output (default the file names)."""
-    from rimless.analysis.inference.calibrate import calibrate as run_calibration
+    from rimless.analysis.api.slope_passes import IMPORTED, calibrate_in_passes
     from rimless.analysis.inference.calibrate import parse_fit
-    from rimless.analysis.inference.runs import calibrated_input
+    from rimless.analysis.io.trial import Trial
 
     w = _wheel(wheel)
+    w.compliant_model("calibrate()")
     fit_names = parse_fit(",".join(fit)) if not isinstance(fit, str) else parse_fit(fit)
-    # the importer bounds the legs' drift with the wheel's k, or (k to be fitted: not known) its own bound
-    loaded, file_names = load_trials(trials, wheel=None if "k" in fit_names else w)
-    res = run_calibration(
+    items = [trials] if isinstance(trials, (str, Path, Trial)) else list(trials)
+    # the importer bounds the legs' drift with the wheel's k, or (k to be fitted: not known) its own bound; then
+    # the trials are imported again with the fitted k (`calibrate_in_passes`) when they are Vicon exports
+    first = None if "k" in fit_names else w
+    loaded, file_names = load_trials(items, wheel=first)
+    exports = all(isinstance(i, (str, Path)) and Path(i).suffix.lower() != ".parquet" for i in items)
+    res = calibrate_in_passes(
         loaded,
         _named(names, file_names),
         fit_names,
-        params=w.params,
-        model=w.compliant_model("calibrate()"),
-        progress=progress,
+        w,
+        first_legs=first if exports else IMPORTED,
+        reimport=(lambda legs: load_trials(items, wheel=legs)[0]) if exports else None,
         prior=prior,
-        held=[(e.name, e.sd) for e in w.input.held()],
+        progress=progress,
     )
+    from rimless.analysis.inference.runs import calibrated_input
+
     res.parameters = calibrated_input(w.input, res).parameters()
     return res
 

@@ -354,6 +354,8 @@ def _print_calibration(out: dict[str, Any]) -> None:
         )
     for line in optimizer_lines(opt):
         con.print(line, markup=False, highlight=False)
+    if out.get("slope_passes"):
+        con.print("slopes: " + out["slope_passes"]["statement"], markup=False, highlight=False)
     for p in out["params"]:
         cih = p.get("ci95_with_held")
         if cih:

@@ -203,7 +203,12 @@ def run_report(
     with the first failure. ``argv``: the command's words for the report's provenance (None: a Python call of
     ``api``, by default `rimless.analysis.write_report`, whose implementation this is)."""
     check_inputs(files)
-    import_kwargs = {"wheel": _legs_wheel(model, params, wheel_input), **import_kwargs}
+    from rimless.sim.api.wheel import Wheel
+
+    # the importer's legs' drift (`import_trial(wheel=)`): the wheel the report compares with, with the wheel
+    # input's uncertainties (default Table 1's stated ones), so each slope is the one `compare` gets for it
+    legs = Wheel(params, model) if wheel_input is None else Wheel.from_input(wheel_input, model, params=params)  # type: ignore[arg-type]
+    import_kwargs = {"wheel": legs, **import_kwargs}
     out = Path(out)
     out_is_new = not out.exists()
     building, created = _report_draft(out)
@@ -240,19 +245,6 @@ def run_report(
         raise
     shutil.rmtree(building, ignore_errors=True)
     return res
-
-
-def _legs_wheel(model: str, params: Any, wheel_input: Any) -> Any:
-    """The wheel the importer is told for its legs' drift (`import_trial(wheel=)`): the one the report compares
-    with (``model`` at ``params``), with the wheel input's uncertainties (default: Table 1's stated ones), so
-    each trial's slope is the one `rimless.analysis.compare` gets for that wheel."""
-    from rimless.sim.api.wheel import Wheel
-
-    w = Wheel(params, model)  # type: ignore[arg-type]
-    if wheel_input is not None:
-        w.input = wheel_input
-        w.uncertainty = {n: e.sd for n, e in wheel_input.entries.items()}
-    return w
 
 
 def _report_draft(out: Path) -> tuple[Path, Path | None]:

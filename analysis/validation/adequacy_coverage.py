@@ -5,8 +5,10 @@ Each series draws an ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m: 
 (`floquet_truth.er_walk`, which integrates guide friction phase by phase when F_c > 0; no slope wander) on
 ``trials`` slopes of 2-3.5 deg, each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon
 export in a lab drawn per series (`importer_coverage.draw_lab`, `critical_truth.record`: 0.3 mm, 1 mrad of
-noise, 100 Hz), imports it and calibrates it under one `SCENARIOS` entry, the held parameters exact
-(``uncertainty`` 0) except the one the scenario makes wrong:
+noise, 100 Hz), imports it (the refusals) and hands the exports to the calibration as a user would (it imports
+them told the held wheel's legs; k fitted: the importer's bound, then again told the fitted k,
+`rimless.analysis.api.slope_passes`), under one `SCENARIOS` entry, the held parameters exact (``uncertainty``
+0) except the one the scenario makes wrong:
 
 - ``adequate``: frictionless truth, ``--fit c,k``: the model is the truth, so "does not fit" is a false alarm
   (nominal: below ``ADEQUACY_P`` = 0.1 %, the ratio condition making it rarer still);
@@ -193,19 +195,30 @@ def _series(
         slope_error_deg=[t.meta.slope_deg - slopes[n] for t, n in zip(loaded, names)],
         slope_ci_deg=[[math.degrees(v) for v in t.meta.slope_ci_rad] for t in loaded],
     )
+    # the exports, as a user hands them over: `calibrate` imports them with the held wheel's legs (k fitted: the
+    # importer's bound, then again with the fitted k); the diagnosis with the true slopes hands `Trial`s
+    given: list[Any] = list(series.imported)
     if sc.true_slope:
-        loaded = [replace(t, meta=replace(t.meta, slope_deg=slopes[n])) for t, n in zip(loaded, names)]
+        given = [replace(t, meta=replace(t.meta, slope_deg=slopes[n])) for t, n in zip(loaded, names)]
     cpu = time.process_time()
     try:
         if len(loaded) < 2:
             raise RimlessError(f"{len(loaded)} trial(s) imported")
         res = calibrate(
-            loaded, fit=sc.fit, wheel=Wheel(held, uncertainty={f: 0.0 for f in UNCERTAIN_FIELDS}), names=names
+            given, fit=sc.fit, wheel=Wheel(held, uncertainty={f: 0.0 for f in UNCERTAIN_FIELDS}), names=names
         )
     except RimlessError as err:
         row["failed"] = f"{type(err).__name__}: {str(err).splitlines()[0]}"
         return row
     row["calibrate_cpu_s"] = time.process_time() - cpu
+    passes = getattr(res, "slope_passes", None)
+    if passes and not sc.true_slope:  # the slopes the calibration held: those of the pass it kept
+        kept = [h for h in passes["history"] if h["calibrated"]][-1]["slopes"]
+        row.update(
+            slope_error_deg=[r["slope_deg"] - slopes[n] for r, n in zip(kept, names)],
+            slope_ci_deg=[r["ci95_deg"] for r in kept],
+            slope_passes={k: passes.get(k) for k in ("passes", "reimported_with_fitted_k", "stable", "legs", "legs_k")},
+        )
     row.update(_verdicts(res))
     return row
 
@@ -306,6 +319,12 @@ def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
             "p_below_0.01": _rate(sum(p < 0.01 for p in ps), len(ps)),
         }
     out["estimates"] = {name: _estimate_summary(done, name) for name in sc.fit}
+    sp = [r["slope_passes"] for r in done if r.get("slope_passes")]
+    out["slope_passes"] = {  # how the calibration's slopes were imported (`rimless.analysis.api.slope_passes`)
+        "reimported_with_fitted_k": sum(bool(p["reimported_with_fitted_k"]) for p in sp),
+        "passes": {str(n): sum(p["passes"] == n for p in sp) for n in sorted({p["passes"] for p in sp})},
+        "stable": sum(bool(p["stable"]) for p in sp),
+    }
     mc = [r["model_choice"] for r in done if r.get("model_choice")]
     if mc:
         out["model_choice_p"] = {

@@ -3,8 +3,10 @@
 Each series draws a compliant ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m; Table 1: 2700, 8), walks
 it with the simulator's ER model (`floquet_truth.er_walk`, no slope wander) on ``trials`` slopes of 2-3.5 deg,
 each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon export in a lab drawn per
-series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it and fits ``fit`` (default c and k)
-with each wheel input of ``inputs`` (`INPUTS`):
+series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it (the refusals) and hands the exports
+to the calibration as a user would: it imports them told the wheel input (k fitted: the importer's bound, then
+again told the fitted k, `rimless.analysis.api.slope_passes`; ``slope_passes`` counts the passes) and fits
+``fit`` (default c and k) with each wheel input of ``inputs`` (`INPUTS`):
 
 - ``exact`` (default): the held parameters at the truth's values, exact (``uncertainty`` 0: the intervals are
   the data's; the held parameters' part is not exercised). The truth's held parameters are Table 1's.
@@ -84,6 +86,13 @@ class WalkedSeries:
     refused: list[str] = field(default_factory=list)
     loaded: list[Any] = field(default_factory=list)
     names: list[str] = field(default_factory=list)
+
+    @property
+    def imported(self) -> list[Path]:
+        """The exports that imported, in the order of ``names`` (what a user hands `calibrate`: it imports them
+        with the wheel input's legs, and again with the fitted k when k is fitted)."""
+        by_name = {p.name: p for p in self.paths}
+        return [by_name[n] for n in self.names]
 
 
 def walk_and_import(
@@ -183,8 +192,10 @@ def _param_row(pe: Any, t: float) -> dict[str, Any]:
 
 def _fit_row(calibrate: Callable[..., Any], loaded: list[Any], names: list[str], fit: tuple[str, ...], wheel: Any,
              truth: dict[str, float]) -> dict[str, Any]:  # fmt: skip
-    """One calibration of a series' trials with the wheel input ``wheel``: its optimiser's end and, per fitted
-    parameter, `_param_row`; or ``failed`` with the reason."""
+    """One calibration of a series' trials (``loaded``: the exports' paths, imported by ``calibrate`` as a
+    user's would be, or `Trial`s) with the wheel input ``wheel``: its optimiser's end, the slope passes
+    (``slope_passes``: how many calibrations, whether the slopes were re-imported with the fitted k) and, per
+    fitted parameter, `_param_row`; or ``failed`` with the reason."""
     from rimless.errors import RimlessError
 
     try:
@@ -201,6 +212,9 @@ def _fit_row(calibrate: Callable[..., Any], loaded: list[Any], names: list[str],
         },
         "params": {},
     }
+    passes = getattr(res, "slope_passes", None)
+    if passes:
+        row["slope_passes"] = {k: passes.get(k) for k in ("passes", "reimported_with_fitted_k", "stable", "legs_k")}
     for pe in res.params:
         key = next((n for n, f in FIELDS.items() if f == pe.field), pe.name)
         if key in truth:
@@ -264,7 +278,7 @@ def run_calibrate_coverage(
                 if progress:
                     progress(i, f"calibrating, {name} wheel")
                 row["inputs"][name] = _fit_row(
-                    calibrate, series.loaded, series.names, tuple(fit), _user_wheel(name, truth), row["truth"]
+                    calibrate, series.imported, series.names, tuple(fit), _user_wheel(name, truth), row["truth"]
                 )
             row.update(row["inputs"][inputs[0]])  # the first input's fit at the row's top level (as before)
             rows.append(row)
@@ -350,6 +364,21 @@ def _per_input(rows: list[dict[str, Any]], name: str, fit: tuple[str, ...]) -> d
         "parameters": {n: _per_parameter(rows, fits, n) for n in fit},
         "optimizer_status": statuses,
         "failed": failed,
+        "slope_passes": _passes(fitted),
+    }
+
+
+def _passes(fitted: list[dict[str, Any]]) -> dict[str, Any]:
+    """How the fits' slopes were imported: how many fits re-imported them with the fitted k, how many passes
+    (calibrations) they ran, and how many ended with the slopes' intervals no longer changing."""
+    rows = [f["slope_passes"] for f in fitted if f.get("slope_passes")]
+    count: dict[str, int] = {}
+    for r in rows:
+        count[str(r["passes"])] = count.get(str(r["passes"]), 0) + 1
+    return {
+        "reimported_with_fitted_k": sum(bool(r["reimported_with_fitted_k"]) for r in rows),
+        "passes": count,
+        "stable": sum(bool(r["stable"]) for r in rows),
     }
 
 
@@ -381,7 +410,7 @@ def _summary(
         "fit": list(fit),
         "input": inputs[0],
         "series": len(rows),
-        **{k: first[k] for k in ("fitted", "converged", "parameters", "optimizer_status", "failed")},
+        **{k: first[k] for k in ("fitted", "converged", "parameters", "optimizer_status", "failed", "slope_passes")},
         "inputs": per,
         "draws": {
             "k_n_per_m": list(K_RANGE),

@@ -91,6 +91,25 @@ class Wheel:
         self._map: Any = None
 
     # -- construction
+    @classmethod
+    def from_input(
+        cls,
+        wheel_input: WheelInput,
+        model: Model = "er",
+        *,
+        params: WheelParams | None = None,
+        backend: Backend = "auto",
+        rtol: float = DEFAULT_RTOL,
+    ) -> Wheel:
+        """The wheel a wheel input describes (`rimless.sim.model.uncertain.WheelInput`: each parameter's value,
+        1-sigma uncertainty and source, and the fields to be fitted) as the input the trial analysis holds and
+        carries (`input`, `uncertainty`); simulated at ``params`` when given (e.g. a leg test's planned values),
+        else at the input's values."""
+        w = cls(wheel_input.params if params is None else params, model, backend=backend, rtol=rtol)
+        w.input = wheel_input
+        w.uncertainty = {n: e.sd for n, e in wheel_input.entries.items()}
+        return w
+
     def with_params(self, **changes: Any) -> Wheel:
         """A copy with some parameters changed (validated), e.g. ``wheel.with_params(slope_rad=0.03)``."""
         w = Wheel(self.params.replace(**changes), self.model, backend=self.backend, rtol=self.rtol)

@@ -35,6 +35,9 @@ def test_one_series_is_drawn_away_from_table1_imported_and_fitted() -> None:
         assert p["se_slope"] > 0 and p["se"] >= (p["se_model"] ** 2 + p["se_slope"] ** 2) ** 0.5 * (1 - 1e-12)
         assert d["rms_z"] == pytest.approx(abs(p["value"] - row["truth"][name]) / p["se"], rel=1e-9)
     assert sum(out["optimizer_status"].values()) == 1
+    # k fitted: the calibration imported the exports itself, then again with the fitted k (as a user's would)
+    assert row["slope_passes"]["reimported_with_fitted_k"] and row["slope_passes"]["passes"] >= 2
+    assert out["slope_passes"]["reimported_with_fitted_k"] == 1
     r = runner.invoke(app, ["trials", "coverage", "--of", "nothing"])
     assert r.exit_code == 2 and "--of" in r.output
 
