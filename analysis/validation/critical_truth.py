@@ -196,6 +196,25 @@ class Lab:
         return f"{self.up.upper()}-up, heading {self.heading_deg:.0f} deg, {'4 markers' if self.markers else 'object'}"
 
 
+def recorded_frames(
+    wk: Walk, rate_hz: float, offset_s: float, hold_s: float = 0.4, rest_s: float = 1.5
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The frames a recording of ``wk`` holds: their times (s from the hold's start; a hold of ``hold_s`` at the
+    release pose, the walk, a rest of ``rest_s`` after a stall; frames every 1 / ``rate_hz`` from ``offset_s``)
+    and the walk's x and h (m, slope frame) and body angle (rad) at them."""
+    t = np.concatenate([np.arange(0.0, hold_s, 1e-3), hold_s + wk.t])
+    n_hold = t.size - wk.t.size
+    x, h, b = (np.concatenate([np.full(n_hold, v[0]), v]) for v in (wk.x, wk.h, wk.body))
+    if wk.stalled:
+        tail = t[-1] + np.arange(1e-3, rest_s, 1e-3)
+        t = np.concatenate([t, tail])
+        x, h, b = (np.concatenate([v, np.full(tail.size, v[-1])]) for v in (x, h, b))
+    tf = np.arange(0.0, t[-1], 1.0 / rate_hz) + offset_s
+    tf = tf[tf <= t[-1]]
+    xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
+    return tf, xs, hs, bs
+
+
 def record(
     wk: Walk,
     path: str | Path,
@@ -207,16 +226,7 @@ def record(
     origin_body_m: tuple[float, float, float] = (0.03, -0.02, 0.01),
 ) -> str:
     """Write the walk as a Vicon export in ``lab``: a hold at the release pose, the walk, a rest after a stall."""
-    t = np.concatenate([np.arange(0.0, hold_s, 1e-3), hold_s + wk.t])
-    n_hold = t.size - wk.t.size
-    x, h, b = (np.concatenate([np.full(n_hold, v[0]), v]) for v in (wk.x, wk.h, wk.body))
-    if wk.stalled:
-        tail = t[-1] + np.arange(1e-3, rest_s, 1e-3)
-        t = np.concatenate([t, tail])
-        x, h, b = (np.concatenate([v, np.full(tail.size, v[-1])]) for v in (x, h, b))
-    tf = np.arange(0.0, t[-1], 1.0 / lab.rate_hz) + float(rng.uniform(0, 1.0 / lab.rate_hz))
-    tf = tf[tf <= t[-1]]
-    xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
+    tf, xs, hs, bs = recorded_frames(wk, lab.rate_hz, float(rng.uniform(0, 1.0 / lab.rate_hz)), hold_s, rest_s)
     hub, rot = slope_to_lab(xs, hs, bs, wk.slope_deg, lab.heading_deg)
     if lab.up == "y":
         m = Rotation.from_matrix(Y_UP_FROM_Z_UP)

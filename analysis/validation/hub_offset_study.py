@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from rimless.analysis.validation.critical_truth import Y_UP_FROM_Z_UP, LossyWheel, record, walk
+from rimless.analysis.validation.critical_truth import Y_UP_FROM_Z_UP, LossyWheel, record, recorded_frames, walk
 from rimless.analysis.validation.floquet_truth import er_walk, slope_to_lab
 from rimless.analysis.validation.importer_coverage import draw_lab
 
@@ -81,18 +81,10 @@ def hub_offset_draw(
     rec_seed = int(rng.integers(1 << 31))
     path = folder / f"{kind}{seed}.csv"
     record(wk, path, np.random.default_rng(rec_seed), lab)
-    # the frames `record` wrote: its hold, then the walk, from a sub-frame offset (its first draw)
-    hold_s = 0.4
-    t = np.concatenate([np.arange(0.0, hold_s, 1e-3), hold_s + wk.t])
-    n_hold = t.size - wk.t.size
-    x, h, b = (np.concatenate([np.full(n_hold, v[0]), v]) for v in (wk.x, wk.h, wk.body))
-    if wk.stalled:
-        tail = t[-1] + np.arange(1e-3, 1.5, 1e-3)
-        t = np.concatenate([t, tail])
-        x, h, b = (np.concatenate([v, np.full(tail.size, v[-1])]) for v in (x, h, b))
-    tf = np.arange(0.0, t[-1], 1.0 / lab.rate_hz) + float(np.random.default_rng(rec_seed).uniform(0, 1.0 / lab.rate_hz))
-    tf = tf[tf <= t[-1]]
-    xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
+    # the frames `record` wrote, from its sub-frame offset (its first draw)
+    tf, xs, hs, bs = recorded_frames(
+        wk, lab.rate_hz, float(np.random.default_rng(rec_seed).uniform(0, 1.0 / lab.rate_hz))
+    )
     if importer is None:
         from rimless.analysis.kinematics.build import import_trial as importer
     trial = importer(path)

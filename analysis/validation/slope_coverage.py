@@ -42,7 +42,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rimless.analysis.validation.coverage import wilson_interval
-from rimless.analysis.validation.critical_truth import MARKERS_BODY_M, Y_UP_FROM_Z_UP, Lab, walk
+from rimless.analysis.validation.critical_truth import MARKERS_BODY_M, Y_UP_FROM_Z_UP, Lab, recorded_frames, walk
 from rimless.analysis.validation.floquet_truth import Walk, er_walk, slope_to_lab
 from rimless.analysis.validation.importer_coverage import draw_lab, draw_wheel
 from rimless.analysis.validation.vicon_writer import markers_section, objects_section, write
@@ -145,19 +145,10 @@ def record(draw: SlopeDraw, path: Path, rng: np.random.Generator, *, hold_s: flo
     """Write the walk as a Vicon export in its lab: a hold at the release pose, the walk, a rest of 1.5 s after a
     stall; frames inside the hidden stance middles are empty (as `critical_truth.record`, plus the occlusions)."""
     wk, lab = draw.walk, draw.lab
-    t = np.concatenate([np.arange(0.0, hold_s, 1e-3), hold_s + wk.t])
-    n_hold = t.size - wk.t.size
-    x, h, b = (np.concatenate([np.full(n_hold, v[0]), v]) for v in (wk.x, wk.h, wk.body))
-    if wk.stalled:
-        tail = t[-1] + np.arange(1e-3, 1.5, 1e-3)
-        t = np.concatenate([t, tail])
-        x, h, b = (np.concatenate([v, np.full(tail.size, v[-1])]) for v in (x, h, b))
-    tf = np.arange(0.0, t[-1], 1.0 / lab.rate_hz) + float(rng.uniform(0, 1.0 / lab.rate_hz))
-    tf = tf[tf <= t[-1]]
+    tf, xs, hs, bs = recorded_frames(wk, lab.rate_hz, float(rng.uniform(0, 1.0 / lab.rate_hz)), hold_s)
     hidden = np.zeros(tf.size, bool)
     for a, c in draw.gaps:
         hidden |= (tf - hold_s >= a) & (tf - hold_s <= c)
-    xs, hs, bs = (np.interp(tf, t, v) for v in (x, h, b))
     hub, rot = slope_to_lab(xs, hs, bs, wk.slope_deg, lab.heading_deg)
     if lab.up == "y":
         m = Rotation.from_matrix(Y_UP_FROM_Z_UP)
