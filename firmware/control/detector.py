@@ -140,8 +140,9 @@ class LegDetector:
     """
 
     # what `_touchdown` changed, for `dismiss_touchdown` to undo: (leg_index, _last_touchdown_s, _period_s,
-    # _touchdown_s, _touchdown_x_m, _confirmed, awaiting_clean_touchdown); unset until the first touchdown
-    _before_touchdown: tuple[int, float | None, float | None, float, float, int, bool] | None
+    # _touchdown_s, _touchdown_x_m, _confirmed, _unconfirmed_touchdowns, awaiting_clean_touchdown); unset until the
+    # first touchdown
+    _before_touchdown: tuple[int, float | None, float | None, float, float, int, int, bool] | None
     # set by `reset` (and `_recount`, defined before it)
     _last_touchdown_s: float | None
     _period_s: float | None
@@ -200,6 +201,7 @@ class LegDetector:
         self._predicted_touchdown_s = None
         self._lock_delay_min_s = None
         self._confirmed = 0
+        self._unconfirmed_touchdowns = 0
         self._before_touchdown = None
         self._engaged = False  # whatever was locked on the old count is released by the controller
         self._lock_count = 0
@@ -299,6 +301,7 @@ class LegDetector:
         self._peak_v = 0.0
         self.lock_time_s = None
         self._confirmed = 0  # step intervals since (re)sync that matched a measured period
+        self._unconfirmed_touchdowns = 0  # touchdowns since (re)sync or a bounce without confirm_steps of them
         self._engaged = False  # the CLUTCHED phase engaged its leg (False: a lock withheld)
         self._rise = RiseWatch(self.params.doubt_smooth_s, self.params.max_compression_s)
         self._predicted_touchdown_s = None  # when the stance leg's touchdown was due (s)
@@ -337,6 +340,7 @@ class LegDetector:
                 self._touchdown_s,
                 self._touchdown_x_m,
                 self._confirmed,
+                self._unconfirmed_touchdowns,
                 self.awaiting_clean_touchdown,
             ) = before
             self._before_touchdown = None
@@ -567,6 +571,23 @@ class LegDetector:
             f"(threshold {threshold * 1e3:.3f} mm); a step may have been missed"
         )
 
+    def _confirmation_overdue(self) -> str:
+        """Count a touchdown that left the count unconfirmed; past `confirm_within_steps` of them, why the count is
+        lost ("" while within)."""
+        p = self.params
+        if self._confirmed >= p.confirm_steps:
+            self._unconfirmed_touchdowns = 0
+            return ""
+        self._unconfirmed_touchdowns += 1
+        if not p.confirm_within_steps or self._unconfirmed_touchdowns < p.confirm_within_steps:
+            return ""
+        return (
+            f"count not confirmed: {self._unconfirmed_touchdowns} touchdowns without {p.confirm_steps} step intervals "
+            f"matching the measured period ({self._period_s or 0.0:.3f} s; confirm_within_steps "
+            f"{p.confirm_within_steps}): a touchdown between every two accepted ones, as when a step unseen while "
+            "the period was measured makes it twice the real one; arm again naming the leg on the ground"
+        )
+
     def _touchdown(self, t: float) -> Decision:
         self._before_touchdown = (
             self.leg_index,
@@ -575,6 +596,7 @@ class LegDetector:
             self._touchdown_s,
             self._touchdown_x_m,
             self._confirmed,
+            self._unconfirmed_touchdowns,
             self.awaiting_clean_touchdown,
         )
         release = self.stance_leg if self.phase is Phase.CLUTCHED else None
@@ -602,6 +624,8 @@ class LegDetector:
             else:
                 self._period_s = 0.5 * (self._period_s + step)
                 self._confirmed += 1
+        if self.counted and self.synced and not lost:
+            lost = self._confirmation_overdue()
         self.phase = Phase.DOUBLE_SUPPORT
         self._touch_count = 0
         self._lock_count = 0

@@ -29,6 +29,11 @@ class DetectorParams:
     # A counted sensor locks only after this many step intervals since (re)sync matched the measured period (the
     # first interval measures it and confirms nothing; 0: lock from the first touchdown; the robot's default is 2).
     confirm_steps: int = 0
+    # A counted sensor loses the count when this many touchdowns since (re)sync, or since a bounce restarted the
+    # confirmation, have not brought `confirm_steps` matching intervals: a step unseen while the first interval
+    # measured the period makes it twice the real one and every other touchdown a bounce, and nothing would ever
+    # lock (0: off; at least confirm_steps + 2, the touchdowns a clean (re)sync needs; the robot's default is 5).
+    confirm_within_steps: int = 0
     # A counted sensor loses the count when the leg compresses by this much (m) and stops without a confirmed
     # touchdown: a gentle step the touchdown test missed (0: off; the robot's default is 0.0003).
     doubt_compression_m: float = 0.0
@@ -65,6 +70,12 @@ class DetectorParams:
             elif f.name == "confirm_steps":
                 if not isinstance(value, int) or not 0 <= value <= 20:
                     raise ValueError(f"{f.name} must be an integer in 0..20, got {value!r}")
+            elif f.name == "confirm_within_steps":
+                if not isinstance(value, int) or not (value == 0 or self.confirm_steps + 2 <= value <= 100):
+                    raise ValueError(
+                        f"{f.name} must be 0 (off) or an integer in confirm_steps + 2 ({self.confirm_steps + 2})..100, "
+                        f"got {value!r}"
+                    )
             elif f.name == "doubt_compression_m":
                 if not 0.0 <= value <= 0.1:
                     raise ValueError(f"{f.name} must be in [0, 0.1] m, got {value!r}")
@@ -94,7 +105,7 @@ class DetectorParams:
             raise ValueError(f"unknown detector parameter {name!r}; known: {', '.join(sorted(names))}")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{name} must be a number, got {value!r}")
-        if name.endswith("_samples") or name in ("confirm_steps", "named_stance_required"):
+        if name.endswith("_samples") or name in ("confirm_steps", "confirm_within_steps", "named_stance_required"):
             if float(value) != int(value):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             value = int(value)

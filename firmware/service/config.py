@@ -24,6 +24,7 @@ from rimless.firmware.errors import ConfigError, ConfigFileError
 # defaults unless it reads a robot.toml.
 ROBOT_DETECTOR_SAFETY: dict[str, Any] = {
     "confirm_steps": 2,
+    "confirm_within_steps": 5,
     "doubt_compression_m": 0.0003,
     "doubt_noise_sigmas": 6.0,
     "touch_window_early_fraction": 0.5,

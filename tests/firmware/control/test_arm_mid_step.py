@@ -278,11 +278,24 @@ def test_a_step_missed_after_an_arm_mid_step_still_faults_before_any_lock(phase_
     assert run.high_after_stop == []
 
 
-def test_a_step_unseen_before_the_period_is_measured_never_locks() -> None:
-    """The second touchdown after the arm unseen: the first interval measures twice the period, and every other
-    touchdown is then ignored as a bounce (`touch_window_early_fraction`). Not a fault (as on main, wherever the arm
-    lands), but nothing ever locks on that count."""
-    run = run_armed_at(WALK, WALK.touchdown_s(2) + 0.03, trajectory=without_step(WALK, 4), duration_s=5.0)
+@pytest.mark.parametrize(
+    ("t_arm_s", "unseen"), [(WALK.touchdown_s(2) + 0.03, 4), (WALK.touchdown_s(3) - 0.05, 4), (0.2, 1)]
+)
+def test_a_step_unseen_before_the_period_is_measured_faults_within_confirm_within_steps(t_arm_s, unseen) -> None:
+    """The second touchdown after the arm (step `unseen`) unseen, armed early or late in a step or at rest before
+    the walk: the first interval measures twice the period, and every other touchdown is then ignored as a bounce
+    (`touch_window_early_fraction`), so the count is never confirmed. It is lost (leg_sync_lost "count not
+    confirmed") at the `confirm_within_steps`-th accepted touchdown after the arm, before any lock, every clutch
+    off. On main (cc676ee) the run neither locked nor faulted: a robot armed and silently never locking."""
+    run = run_armed_at(WALK, t_arm_s, trajectory=without_step(WALK, unseen), duration_s=5.0)
+    assert WALK.steps_before(run.t_arm_s) == unseen - 1  # the first touchdown after the arm is the one before
+    # accepted after the arm: step unseen - 1, then unseen + 1, unseen + 3, ... (the period measured is two steps)
+    n = ROBOT_DETECTOR.confirm_within_steps
+    expected_s = WALK.touchdown_s(unseen + 1 + 2 * (n - 2))
+    assert [f for _t, f, _d in run.faults] == [Fault.LEG_SYNC_LOST.value], run.faults
+    t_fault, _f, detail = run.faults[0]
+    assert "count not confirmed" in detail
+    assert expected_s <= t_fault < expected_s + 0.1, (t_fault, expected_s)
     assert run.engages == [] and run.high_after_stop == []
 
 

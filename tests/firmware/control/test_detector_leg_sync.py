@@ -101,6 +101,19 @@ def test_step_bounds_follow_the_running_period() -> None:
         DetectorParams(max_step_s=0.05).validated()
 
 
+def test_confirm_within_steps_leaves_a_clean_resync_its_touchdowns() -> None:
+    """The bound on unconfirmed touchdowns is off (0) or leaves a clean (re)sync the confirm_steps + 2 touchdowns it
+    needs (the first, the one measuring the period, then confirm_steps agreeing ones); `set` names it."""
+    DetectorParams(confirm_steps=2, confirm_within_steps=4).validated()
+    DetectorParams(confirm_steps=2, confirm_within_steps=0).validated()
+    with pytest.raises(
+        ValueError, match=r"confirm_within_steps must be 0 \(off\) or an integer in confirm_steps \+ 2 \(4\)"
+    ):
+        DetectorParams(confirm_steps=2, confirm_within_steps=3).validated()
+    with pytest.raises(ValueError, match="confirm_within_steps must be an integer"):
+        DetectorParams().with_value("confirm_within_steps", 4.5)
+
+
 def test_a_slowing_gait_within_tolerance_keeps_sync(make_rig) -> None:
     # Step periods 0.40, 0.44, 0.48, ...: each within 40 % of the running period.
     starts = [0.1]
