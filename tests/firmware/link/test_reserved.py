@@ -45,21 +45,61 @@ def signed(reply: dict, token: str = TOKEN) -> bool:
     return hmac.compare_digest(reply["mac"], hmac.new(token.encode(), b"reply\n" + body.encode(), "sha256").hexdigest())
 
 
-def exchange(port: int, data: bytes, *, source: str = "127.0.0.1", timeout_s: float = 0.5) -> dict | None:
-    """Send `data` from `source`; the answer (asserted no larger than the request), or None after `timeout_s`
-    of silence (the ignored case). Loopback does not deliver on `sendto`: on a loaded machine an answer can come
-    late, so a call that expects one passes a hang guard (`REPLY_GUARD_S`) as its timeout; 0.5 s of silence is
-    only taken as "not answered" where no answer is expected."""
+def exchange(port: int, data: bytes, *, source: str = "127.0.0.1") -> dict | None:
+    """Send `data` from `source`; its answer (asserted no larger than the request), or None when the robot dropped it.
+
+    No fixed wait decides "not answered": after `data` the same socket sends a marker, a fresh first-contact
+    status request with a nonce of its own, which the robot always answers (with a challenge, no status, nothing
+    acted on). The robot handles datagrams one at a time in arrival order and loopback keeps the order of one
+    socket's datagrams, so an answer to `data` comes before the marker's: the marker's answer is the event that says
+    `data` was handled. `REPLY_GUARD_S` is only a hang guard."""
+    marker = secrets.token_hex(16)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind((source, 0))
-        s.settimeout(timeout_s)
+        s.settimeout(REPLY_GUARD_S)
         s.sendto(data, ("127.0.0.1", port))
-        try:
-            reply = s.recv(65536)
-        except TimeoutError:
-            return None
+        s.sendto(request("status", marker), ("127.0.0.1", port))
+        answers = []
+        while not answers or answers[-1][1].get("for") != marker:
+            raw = s.recv(65536)
+            answers.append((raw, json.loads(raw)))
+    *before, _marker_answer = answers
+    assert len(before) <= 1, before  # one answer at most to one datagram
+    if not before:
+        return None
+    reply, decoded = before[0]
     assert len(reply) <= len(data)
-    return json.loads(reply)
+    return decoded
+
+
+def test_exchange_takes_an_answer_however_late_it_comes() -> None:
+    """The helper above against a stand-in robot that answers the first datagram only once the next has arrived (as
+    late as an answer can come while the robot keeps order), then the marker: the late answer is returned, not taken
+    for silence; a datagram left unanswered is None. The helper's former fixed 0.5 s wait returned None for the
+    late one (the stand-in then saw no marker before its guard)."""
+    server = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    server.bind(("127.0.0.1", 0))
+    server.settimeout(REPLY_GUARD_S)
+
+    def stand_in() -> None:
+        for answer_first in (True, False):
+            data, client = server.recvfrom(65536)
+            marker, _ = server.recvfrom(65536)
+            nonce = marker.split(b" ")[2].decode()
+            if answer_first:
+                server.sendto(b'{"for": "late"}', client)
+            server.sendto(json.dumps({"for": nonce}).encode(), client)
+
+    thread = threading.Thread(target=stand_in, daemon=True)
+    thread.start()
+    try:
+        port = server.getsockname()[1]
+        late = exchange(port, request("status", "a" * 32))
+        dropped = exchange(port, request("status", "b" * 32))
+    finally:
+        thread.join(REPLY_GUARD_S)
+        server.close()
+    assert late == {"for": "late"} and dropped is None
 
 
 def _disarms(port: int, count: int) -> list[bool]:
@@ -104,11 +144,9 @@ def test_a_datagram_numbered_in_the_future_silences_no_later_disarm(tmp_path) ->
         app.controller.arm()
 
         def run():
-            old = exchange(app.command_port, v2_datagram("disarm", 2**63 - 1), timeout_s=REPLY_GUARD_S)
+            old = exchange(app.command_port, v2_datagram("disarm", 2**63 - 1))
             boot = getattr(app.server, "boot", "0" * 32)  # (main had no boot nonce)
-            future = exchange(
-                app.command_port, request("status", secrets.token_hex(16), boot, 10**12 - 1), timeout_s=REPLY_GUARD_S
-            )
+            future = exchange(app.command_port, request("status", secrets.token_hex(16), boot, 10**12 - 1))
             return old, future, _disarms(app.command_port, 5)
 
         return await asyncio.to_thread(run)
