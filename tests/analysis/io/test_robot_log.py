@@ -4,7 +4,9 @@ report's measured-beside-simulated clutched time (`trials report --robot-log`)."
 
 from __future__ import annotations
 
+import asyncio
 import json
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,8 @@ from typer.testing import CliRunner
 
 from rimless.analysis.io.robot_log import FORMAT, read_clutch_log
 from rimless.errors import InputFileError
+from rimless.firmware.drivers.fake_adns3080 import GaitTrajectory
+from tests.support.firmware_app import gait
 
 
 def write_log(
@@ -103,34 +107,75 @@ def test_a_bad_log_is_one_error_naming_file_and_line(tmp_path, text, where):
     assert str(p) + where in str(exc.value) and "\n" not in str(exc.value)
 
 
+class WheelOnTheRamp:
+    """The fake's trajectory (on its virtual clock): at rest until `release()`, then the walk of
+    `tests.support.firmware_app.gait`, its first touchdown 0.1 s after the first sample that saw the release."""
+
+    def __init__(self) -> None:
+        self.released = threading.Event()
+        self.walk: GaitTrajectory | None = None
+
+    def release(self) -> None:
+        self.released.set()
+
+    def __call__(self, t: float) -> float:
+        if self.walk is None:
+            if not self.released.is_set():
+                return 0.0
+            self.walk = gait(now_s=t)
+        return self.walk(t)
+
+
 @pytest.mark.slow
 def test_a_log_written_by_the_fake_robot(tmp_path):
-    """The fake walks steps of 0.4 s (tests.support.firmware_app.gait): each armed lock is released by the next
-    touchdown, so every clutched time is one and the same fraction of 0.4 s and locks follow each other by 0.4 s.
+    """The fake walks steps of 0.4 s: each armed lock is released by the next touchdown, so every clutched time is
+    one and the same fraction of 0.4 s and locks follow each other by 0.4 s.
 
-    The fake, its walk and the log's times are on a virtual clock (`scenario`): a loaded machine makes the run
-    slower, never different. The robot is armed at its start (`scenario(arm=True)`, naming the leg the walk
-    starts on), before the walk's first touchdown on that clock: an `arm` command landed wherever the machine's
-    speed put it in the walk, and one landed in a step's compression is a missed touchdown (leg_sync_lost, which
-    the test used to retry). Armed locally, no link-loss timer runs. The trial is started and stopped over the
-    command channel; the test ends on the event, four clutched times in the log (or a fault), not after a time."""
-    from tests.support.firmware_app import Client, config, scenario, wait_for
+    The operator's flow as docs/robot.md gives it: the app runs disarmed; with the wheel at rest on the ramp, the
+    operator arms over the signed command link naming the leg on the ground (`rimless robot arm --stance-leg K`,
+    the token's HMAC over the connection's nonce: nothing on the LAN without the token can arm), keeps a heartbeat
+    running while armed (`rimless robot heartbeat`, the same `Heartbeat`), starts a trial, lets the wheel go, and
+    stops the trial and disarms. The wheel is let go once the arm is answered, so the arm lands at rest as it does
+    on the ramp (before, the test armed in-process at the app's start, `scenario(arm=True)`, the local `run --arm`,
+    which no link-loss timer watches). The fake, its walk and the log's times are on a virtual clock: a loaded
+    machine makes the run slower, never different. The test ends on the event, four clutched times in the log (or
+    a fault), not after a time."""
+    from rimless.firmware.link.heartbeat import Heartbeat
+    from rimless.firmware.service.config import CommandsConfig
+    from tests.support.firmware_app import TOKEN, Client, config, scenario, wait_for
 
     def four_locks() -> bool:
         files = list((tmp_path / "trials").glob("*.jsonl"))
         return bool(files) and read_clutch_log(files[0]).complete().size >= 4
 
+    wheel = WheelOnTheRamp()
+    # the robot's link-loss timeout is 2 s; 10 s here, as the watchdogs' 1 s in `config`: a loaded test machine
+    # paused threads for 0.3-0.6 s (the heartbeat beats every 0.2 s)
+    cfg = config(tmp_path, commands=CommandsConfig(bind="127.0.0.1", port=0, token=TOKEN, link_timeout_s=10.0))
+
     async def script(app, hw):
         c = await Client.connect(app.command_port)
-        await c.cmd("trial_start", 1, name="clutch")
-        # a hang guard, not a bound: the log is read as it is flushed (every 0.05 s)
-        await wait_for(lambda: bool(app.controller.active_faults) or four_locks(), timeout_s=120.0, every_s=0.05)
-        r = await c.cmd("trial_stop", 2)
-        c.close()
-        return r
+        armed = await c.cmd("arm", 1, stance_leg=cfg.configured_stance_leg())  # at rest: the leg on the ground
+        beat = Heartbeat("127.0.0.1", token=TOKEN, port=app.command_port, period_s=0.2, echo=lambda _line: None)
+        beating = threading.Thread(target=beat.run, daemon=True)
+        beating.start()
+        try:
+            started = await c.cmd("trial_start", 2, name="clutch")
+            wheel.release()
+            # a hang guard, not a bound: the log is read as it is flushed (every 0.05 s)
+            await wait_for(lambda: bool(app.controller.active_faults) or four_locks(), timeout_s=120.0, every_s=0.05)
+            stopped = await c.cmd("trial_stop", 3)
+            disarmed = await c.cmd("disarm", 4)
+        finally:
+            beat.stop()
+            await asyncio.to_thread(beating.join, 5.0)
+            c.close()
+        return armed, started, stopped, disarmed, app.armed_remotely
 
-    _, summary, r, _ = scenario(config(tmp_path), script, arm=True, timeout_s=150.0)
+    _, summary, (armed, started, r, disarmed, remotely), _ = scenario(cfg, script, trajectory=wheel, timeout_s=150.0)
+    assert armed["ok"] and started["ok"] and r["ok"] and disarmed["ok"], (armed, started, r, disarmed)
     assert not summary.faults, summary.faults
+    assert remotely is False  # armed over the link, disarmed by the operator
     log = read_clutch_log(r["result"]["path"])
     held = log.complete()
     events = [json.loads(ln).get("event") for ln in Path(r["result"]["path"]).read_text().splitlines() if ln.strip()]
@@ -140,6 +185,10 @@ def test_a_log_written_by_the_fake_robot(tmp_path):
     # 20 ms still tells a constant hold from one that drifts by a step's fraction.
     assert np.ptp(held) < 0.02, held
     np.testing.assert_allclose(np.diff(log.lock_s[: held.size]), 0.4, atol=0.02)
+    # armed at rest and the trial started before the wheel was let go: the log holds every touchdown after the arm,
+    # and the first lock is in the step of the fourth (the robot's defaults: `confirm_steps` 2, docs/robot.md)
+    names = [e["name"] for e in events if e]
+    assert names.index("lock") > 0 and names[: names.index("lock")].count("touchdown") == 4, names[:40]
 
 
 @pytest.mark.slow
