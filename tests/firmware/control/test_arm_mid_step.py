@@ -27,22 +27,16 @@ import math
 from collections.abc import Callable
 
 import pytest
-from gpiozero.pins.mock import MockFactory
 from hypothesis import Phase, given, settings
 from hypothesis import strategies as st
 
-from rimless.firmware.clock import VirtualClock, seconds, sleeper
-from rimless.firmware.control.controller import Channel, Controller, EventRecord
-from rimless.firmware.control.detector import DetectorParams, LegDetector
-from rimless.firmware.control.faults import Fault, HealthLimits, HealthMonitor
-from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.drivers.clutch import ClutchBank
-from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
+from rimless.firmware.control.controller import EventRecord
+from rimless.firmware.control.detector import DetectorParams
+from rimless.firmware.control.faults import Fault
 from rimless.firmware.drivers.fake_walk import FakeWalk, airborne_locks
 from rimless.firmware.service.config import ROBOT_DETECTOR
+from tests.support.fake_walk_rig import LEGS, FakeWalkRig
 
-PINS = [17, 27, 22, 23, 24, 16, 20, 21]
-LEGS = list(range(8))
 WALK = FakeWalk(start_s=0.3)  # a touchdown every 0.4 s from 0.3 s, 8 mm compressions peaking 60 ms after it
 #: the robot's default counts step intervals before it locks: the first measures the period, then `confirm_steps`
 #: must agree, so the first lock comes in the step of the (confirm_steps + 2)-th touchdown after the arm
@@ -76,53 +70,28 @@ def run_armed_at(
     """Sample `trajectory` (default `walk`) at `rate_hz` on a virtual clock for `duration_s`, disarmed (or armed
     at t = 0 naming the true leg, `armed_from_start`); after the first sample at or past `t_arm_s`, arm naming the
     leg `walk` has on the ground then. Engages and faults are recorded with their times on the walk's clock."""
-    clock = VirtualClock(start_ns=0, paced=False)
-    fake = FakeAdns3080(
-        trajectory or walk, noise_counts=noise_counts, seed=seed, clock=seconds(clock), needs_reset=False
-    )
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, sleep=sleeper(clock), clock_ns=clock.now_ns)
-    drv.set_resolution(1600)
-    drv.set_frame_rate(None)
-    drv.mark_configured()
-    t0_ns = clock.now_ns()  # the walk's time starts after the configuration's waits
-    fake.clock = lambda: (clock.now_ns() - t0_ns) * 1e-9
-    factory = MockFactory()
-    bank = ClutchBank(PINS, pin_factory=factory)
-    ctl = Controller(
-        [Channel(drv, LegDetector(params, LEGS, start_index=0), HealthMonitor(HealthLimits()))],
-        bank,
-        clock_ns=clock.now_ns,
-        id_check_interval_s=0.0,
-    )
+    rig = FakeWalkRig(trajectory or walk, params, noise_counts=noise_counts, seed=seed)
+    ctl = rig.controller
     engages: list[tuple[float, int]] = []
     faults: list[tuple[float, str, str]] = []
     t_arm = math.nan
     named = -1
     high_after_arm: list[int] = []
-    try:
+    with rig:
         if armed_from_start:
             ctl.arm(stance_leg=walk.stance_leg(0.0, LEGS, 0))
-        period_ns = round(1e9 / rate_hz)
-        for k in range(1, int(duration_s * rate_hz)):
-            clock.sleep_until(t0_ns + k * period_ns)
-            t = (clock.now_ns() - t0_ns) * 1e-9
-            before = set(bank.engaged())
-            ctl.step()
-            engages += [(t, leg) for leg in sorted(set(bank.engaged()) - before)]
-            while ctl.outbox:
-                rec = ctl.outbox.popleft()
+        for t, engaged, records in rig.drive(rate_hz, duration_s):
+            engages += [(t, leg) for leg in engaged]
+            for rec in records:
                 if isinstance(rec, EventRecord) and rec.name == "fault":
                     faults.append((t, rec.fields["fault"], rec.fields["detail"]))
             if math.isnan(t_arm) and t >= t_arm_s:
                 # between two samples, as the sampler thread runs a command; the clock reads this sample's time
                 t_arm, named = t, walk.stance_leg(t, LEGS, 0)
                 ctl.arm(stance_leg=named)
-                high_after_arm = [i for i, pin in enumerate(PINS) if factory.pin(pin).state]
+                high_after_arm = rig.pins_high()
         ctl.safe_stop("end of run")
-        high_after_stop = [i for i, pin in enumerate(PINS) if factory.pin(pin).state]
-    finally:
-        bank.close()
-        factory.close()
+        high_after_stop = rig.pins_high()
     return ArmedRun(
         t_arm,
         duration_s,

@@ -10,22 +10,14 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from gpiozero.pins.mock import MockFactory
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rimless.firmware.clock import VirtualClock, seconds, sleeper
-from rimless.firmware.control.controller import Channel, Controller, EventRecord
-from rimless.firmware.control.detector import DetectorParams, LegDetector
-from rimless.firmware.control.faults import HealthLimits, HealthMonitor
-from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.drivers.clutch import ClutchBank
-from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
+from rimless.firmware.control.controller import EventRecord
+from rimless.firmware.control.detector import DetectorParams
 from rimless.firmware.drivers.fake_walk import FakeWalk, airborne_locks
 from rimless.firmware.service.config import ROBOT_DETECTOR
-
-PINS = [17, 27, 22, 23, 24, 16, 20, 21]
-LEGS = list(range(8))
+from tests.support.fake_walk_rig import LEGS, FakeWalkRig
 
 
 @dataclasses.dataclass
@@ -53,44 +45,17 @@ def run_walk(
 ) -> Run:
     """Arm at t = 0 (naming the true stance leg when `named`, else trusting `configured_start_index`), sample at
     `rate_hz` on a virtual clock for `duration_s`, stop; every engage judged against the walk's truth."""
-    clock = VirtualClock(start_ns=0, paced=False)
-    now_s = seconds(clock)
-    fake = FakeAdns3080(walk, noise_counts=noise_counts, seed=seed, clock=now_s, needs_reset=False)
-    drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, sleep=sleeper(clock), clock_ns=clock.now_ns)
-    drv.set_resolution(1600)
-    drv.set_frame_rate(None)
-    drv.mark_configured()
-    t0_ns = clock.now_ns()  # the walk's time starts after the configuration's waits
-    fake.clock = lambda: (clock.now_ns() - t0_ns) * 1e-9
     start = true_start_index if configured_start_index is None else configured_start_index
-    factory = MockFactory()
-    bank = ClutchBank(PINS, pin_factory=factory)
-    ctl = Controller(
-        [Channel(drv, LegDetector(params, LEGS, start_index=start), HealthMonitor(HealthLimits()))],
-        bank,
-        clock_ns=clock.now_ns,
-        id_check_interval_s=0.0,
-    )
     engages: list[tuple[float, int]] = []
     events: list[tuple[float, str, dict]] = []
-    try:
+    with FakeWalkRig(walk, params, start_index=start, noise_counts=noise_counts, seed=seed) as rig:
+        ctl = rig.controller
         ctl.arm(stance_leg=LEGS[true_start_index] if named else None)
-        period_ns = round(1e9 / rate_hz)
-        for k in range(1, int(duration_s * rate_hz)):
-            clock.sleep_until(t0_ns + k * period_ns)
-            t = (clock.now_ns() - t0_ns) * 1e-9
-            before = set(bank.engaged())
-            ctl.step()
-            engages += [(t, leg) for leg in sorted(set(bank.engaged()) - before)]
-            while ctl.outbox:
-                rec = ctl.outbox.popleft()
-                if isinstance(rec, EventRecord):
-                    events.append((t, rec.name, rec.fields))
+        for t, engaged, records in rig.drive(rate_hz, duration_s):
+            engages += [(t, leg) for leg in engaged]
+            events += [(t, rec.name, rec.fields) for rec in records if isinstance(rec, EventRecord)]
         ctl.safe_stop("end of run")
-        high = [i for i, pin in enumerate(PINS) if factory.pin(pin).state]
-    finally:
-        bank.close()
-        factory.close()
+        high = rig.pins_high()
     return Run(engages, events, airborne_locks(walk, engages, LEGS, true_start_index), high)
 
 
