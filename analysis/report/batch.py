@@ -167,7 +167,8 @@ def import_files(
     check_inputs(files)
     writable_dir(out, option="--out")
     rows: list[dict[str, Any]] = []
-    with progress_bar("importing", total=len(files), json_out=json_out or len(files) < 2) as bar:
+    # one file as several: a transient bar on a terminal (an import takes seconds), plain lines off one with --json
+    with progress_bar("importing", total=len(files), json_out=json_out) as bar:
         for f in files:
             bar.update(description=f"importing {f.name}")
             rows.append(_import_one(f, out, import_kwargs))
