@@ -572,13 +572,11 @@ class LegDetector:
         )
 
     def _confirmation_overdue(self) -> str:
-        """Count a touchdown that left the count unconfirmed; past `confirm_within_steps` of them, why the count is
+        """Count a touchdown that left the count unconfirmed; at the `confirm_within_steps`-th of them, why the count is
         lost ("" while within)."""
         p = self.params
-        if self._confirmed >= p.confirm_steps:
-            self._unconfirmed_touchdowns = 0
-            return ""
-        self._unconfirmed_touchdowns += 1
+        confirmed = self._confirmed >= p.confirm_steps
+        self._unconfirmed_touchdowns = 0 if confirmed else self._unconfirmed_touchdowns + 1
         if not p.confirm_within_steps or self._unconfirmed_touchdowns < p.confirm_within_steps:
             return ""
         return (
