@@ -331,6 +331,9 @@ def config_from_dict(data: dict[str, Any], source: str = "robot.toml") -> RobotC
     if "detector" in data:
         det = _build(DetectorParams, data["detector"], f"{source}: [detector]")
         det = replace(det, **{k: v for k, v in ROBOT_DETECTOR_SAFETY.items() if k not in data["detector"]})
+        if "confirm_within_steps" not in data["detector"] and det.confirm_within_steps:
+            # a longer confirmation keeps the default's room: the touchdowns it needs and one bounce more
+            det = replace(det, confirm_within_steps=max(det.confirm_within_steps, det.confirm_steps + 3))
         try:
             det.validated()
         except ValueError as err:

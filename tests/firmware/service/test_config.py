@@ -30,6 +30,10 @@ def test_example_config_loads_and_documents_every_section() -> None:
         ({"sensor": [{"resolution_cpi": 800}]}, r"resolution_cpi must be 400 or 1600"),
         ({"detector": {"touch_debounce_samples": 0}}, r"touch_debounce_samples"),
         ({"telemetry": {"port": "x"}}, r"telemetry\]\.port must be an integer"),
+        (
+            {"detector": {"confirm_steps": 4, "confirm_within_steps": 5}},
+            r"\[detector\] confirm_within_steps must be 0 \(off\) or an integer in confirm_steps \+ 2 \(6\)",
+        ),
     ],
 )
 def test_config_errors_name_the_field(data, match) -> None:
@@ -37,6 +41,16 @@ def test_config_errors_name_the_field(data, match) -> None:
         config_from_dict(data, "robot.toml")
     assert str(info.value).startswith("robot.toml")
     assert isinstance(info.value, ParameterError) and isinstance(info.value, UserError)
+
+
+def test_a_longer_confirmation_keeps_the_default_room_to_confirm_it() -> None:
+    """`confirm_within_steps` (robot default 5: the 4 touchdowns `confirm_steps` 2 needs and one bounce) follows a
+    robot.toml's larger `confirm_steps` unless set: confirm_steps + 3, never a config error for a field not written."""
+    assert config_from_dict({}, "robot.toml").detector.confirm_within_steps == 5
+    assert config_from_dict({"detector": {"confirm_steps": 1}}, "robot.toml").detector.confirm_within_steps == 5
+    assert config_from_dict({"detector": {"confirm_steps": 6}}, "robot.toml").detector.confirm_within_steps == 9
+    off = {"detector": {"confirm_steps": 6, "confirm_within_steps": 0}}
+    assert config_from_dict(off, "robot.toml").detector.confirm_within_steps == 0
 
 
 def test_config_file_syntax_error(tmp_path) -> None:
