@@ -3,9 +3,10 @@ as a Vicon Tracker object, the messy way.
 
 The dynamics come from the simulator (`rimless.sim`, ER model with other c and k); everything the analysis
 estimates is written here apart from ``rimless.analysis`` (it imports nothing from it): the slope frame, the
-world embedding, the object origin off the hub (up to 4 cm, plus an axial offset), the hold before the
-release (standing on its legs: `release_angle`), the stall (a rigid stance that rises, turns back and rests), the endings (caught with a little
-sideways motion, fell = tipped about the travel axis, walked = the data stop mid-step), noise and gaps.
+world embedding, the object origin off the hub (up to 4 cm, plus an axial offset), the hold before the release
+(standing on its legs: `release_angle`), the stall (a rigid stance that rises, turns back and rests), the
+endings (caught with a little sideways motion, fell = tipped about the travel axis, walked = the data stop
+mid-step), noise and gaps.
 
 Slope frame (model.md section 2): x down the slope, y the outward normal, z = x cross y; stance foot b at
 (x_b, y_b); hub = foot + L1 (sin theta, cos theta); the body turns by -beta about z with beta = theta + k alpha.
