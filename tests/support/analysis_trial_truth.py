@@ -3,9 +3,10 @@ as a Vicon Tracker object, the messy way.
 
 The dynamics come from the simulator (`rimless.sim`, ER model with other c and k); everything the analysis
 estimates is written here apart from ``rimless.analysis`` (it imports nothing from it): the slope frame, the
-world embedding, the object origin off the hub (up to 4 cm, plus an axial offset), the hold before the
-release, the stall (a rigid stance that rises, turns back and rests), the endings (caught with a little
-sideways motion, fell = tipped about the travel axis, walked = the data stop mid-step), noise and gaps.
+world embedding, the object origin off the hub (up to 4 cm, plus an axial offset), the hold before the release
+(standing on its legs: `release_angle`), the stall (a rigid stance that rises, turns back and rests), the
+endings (caught with a little sideways motion, fell = tipped about the travel axis, walked = the data stop
+mid-step), noise and gaps.
 
 Slope frame (model.md section 2): x down the slope, y the outward normal, z = x cross y; stance foot b at
 (x_b, y_b); hub = foot + L1 (sin theta, cos theta); the body turns by -beta about z with beta = theta + k alpha.
@@ -25,6 +26,12 @@ ALPHA = math.pi / 4
 #: Leg damping and stiffness of the truth wheel (Table 1: 8 N s/m, 2700 N/m).
 C_NS_PER_M = 14.0
 K_N_PER_M = 2000.0
+#: How the wheel stands before its release: ``static`` (standing on its legs: the trailing leg carries the weight,
+#: compressed by M g cos(slope) / k, the leading one touches; `release_angle`) or ``uncompressed`` (both legs at
+#: L0, the hub held 5-9 mm above where any step of the gait puts it: the truth until session 18; the first
+#: stance then drops the hub onto its legs and its impact lands up to 0.6 mm deeper than the later impacts'
+#: trend, which the importer's impact line read as slope: tests/analysis/kinematics/test_trial_truth_release.py).
+RELEASE_LEG = "static"
 
 
 @dataclass
@@ -47,6 +54,23 @@ def _params(slope_deg: float):
     from rimless.sim.model.params import WheelParams
 
     return WheelParams(damping_ns_per_m=C_NS_PER_M, stiffness_n_per_m=K_N_PER_M, slope_rad=math.radians(slope_deg))
+
+
+def release_angle(p, release_leg: str = "static") -> float:
+    """The stance angle theta (rad) of the pose the wheel is held in (both feet on the slope; model.md section 6:
+    L1 = L0, L2 from foot a on the slope): -alpha/2 with both legs uncompressed, or (``static``) the angle at
+    which the trailing leg is compressed by the wheel's weight, L2 = L0 - M g cos(slope) / k (M = hub + 8 legs)."""
+    from scipy.optimize import brentq
+
+    from rimless.sim.model.section import trailing_length
+
+    if release_leg == "uncompressed":
+        return -ALPHA / 2
+    if release_leg != "static":
+        raise ValueError(f"release_leg must be 'static' or 'uncompressed', got {release_leg!r}")
+    L0 = p.leg_length_m
+    squeeze = (p.hub_mass_kg + 8 * p.leg_mass_kg) * p.gravity_m_s2 * math.cos(p.slope_rad) / p.stiffness_n_per_m
+    return float(brentq(lambda th: trailing_length(th, L0) - (L0 - squeeze), -ALPHA / 2 - 0.5, -ALPHA / 2))
 
 
 def _rigid_stance(p, y_plus: np.ndarray, dt: float, *, t_max: float, stop_at_top: bool = False):
@@ -102,10 +126,12 @@ def simulate(
     gaps: tuple[tuple[float, float], ...] = (),
     seed: int = 0,
     name: str = "er",
+    release_leg: str | None = None,
 ) -> ErTruth:
-    """Hold, release at theta = -alpha/2 with theta' = release, walk up to ``max_steps`` (a stall ends the walk
-    with a rock back and a rest), then ``ending``: ``caught`` (lifted 8 cm with 15 mm of sideways motion),
-    ``walked`` (the data stop 40 % into the next step), ``fell`` (tips 60 deg about the travel axis)."""
+    """Hold (standing on its legs, `release_angle`; ``release_leg`` None: `RELEASE_LEG`), release with theta' =
+    release, walk up to ``max_steps`` (a stall ends the walk with a rock back and a rest), then ``ending``:
+    ``caught`` (lifted 8 cm with 15 mm of sideways motion), ``walked`` (the data stop 40 % into the next step),
+    ``fell`` (tips 60 deg about the travel axis)."""
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.mechanics import Mechanics
     from rimless.sim.model.section import state_from_section
@@ -115,10 +141,10 @@ def simulate(
     p = _params(slope_deg)
     mech = Mechanics.of(p)
     integ = make_integrator("auto", rtol=1e-9)
-    y = state_from_section(mech, np.array([-ALPHA / 2, release_rad_s]))
+    th_rel = release_angle(p, RELEASE_LEG if release_leg is None else release_leg)
+    y = state_from_section(mech, np.array([th_rel, release_rad_s]))
     dt = 1e-3
     t_list, x_list, h_list, b_list = [np.arange(0.0, hold_s, dt)], [], [], []
-    th_rel = -ALPHA / 2
     x_list.append(np.full(t_list[0].size, p.leg_length_m * math.sin(th_rel)))
     h_list.append(np.full(t_list[0].size, p.leg_length_m * math.cos(th_rel)))
     b_list.append(np.full(t_list[0].size, th_rel))

@@ -13,6 +13,7 @@ them.
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -26,6 +27,13 @@ CASES = ((2.2, 1.8), (2.8, 2.6))
 def _half_deg(trial) -> float:
     lo, hi = trial.meta.slope_ci_rad
     return math.degrees(hi - lo) / 2
+
+
+def _minima_drift_mm(trial) -> float:
+    """The drift of the minima depth the trial's impact line allowed, mm (from its method, in words)."""
+    found = re.findall(r"([0-9.]+) mm of drift of the minima depth allowed", trial.meta.slope_method)
+    assert found, trial.meta.slope_method
+    return float(found[0])
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +80,11 @@ def test_fit_c_k_sizes_the_slope_intervals_with_the_fitted_k(fitted, capsys):
         assert trial.meta.slope_ci_rad == pytest.approx(as_stated.meta.slope_ci_rad, rel=1e-12, abs=0)
         assert trial.meta.slope_deg == pytest.approx(as_stated.meta.slope_deg, rel=1e-12)
         not_told = import_trial(path)  # the first pass's: the importer's bound
-        assert _half_deg(trial) < _half_deg(not_told)
+        # narrower with the fitted k, unless the estimates that the bound's drift reconciled now disagree and the
+        # interval spans both (the 2.8 deg walk, since the truth's wheel stands on its legs before the release:
+        # its contact line is 2 standard errors low)
+        assert _half_deg(trial) < _half_deg(not_told) or "spans the disagreeing" in trial.meta.slope_method
+        assert _minima_drift_mm(trial) < _minima_drift_mm(not_told)  # the drift allowed, either way
         lo, hi = (math.degrees(v) for v in trial.meta.slope_ci_rad)
         assert lo <= slope <= hi, (slope, lo, hi)  # still holds the truth
     # the output says so, in the JSON and the text

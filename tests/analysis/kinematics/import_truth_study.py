@@ -3,12 +3,14 @@
 Run from the repository root (not collected by pytest; minutes of CPU):
 
     PYTHONPATH=. python tests/analysis/kinematics/import_truth_study.py slope --draws 40 --seed 5 [--wheel-given]
+        [--release-leg uncompressed]
     PYTHONPATH=. python tests/analysis/kinematics/import_truth_study.py impacts --draws 24
 
 ``slope``: marker-only walks of the compliant ER truth (`tests.support.analysis_trial_truth`) with c 2-20 N s/m,
 k 1500-4000 N/m, slope 1.2-2.5 deg, release 2-3 rad/s, any heading, Y-up or Z-up lab, even or uneven 4-marker
 sets, 60 % of them with the middle of most stances occluded (two kept); prints each draw and how often the 95 %
-interval held the truth. ``impacts``: the rigid truth (`rigid_walk`, 3-6 deg) and the ER truth (1.7-2.6 deg),
+interval held the truth, and the rms of (estimate - truth) / (half width / 1.96). ``--release-leg uncompressed``:
+the truth held on uncompressed legs before its release, as it was until session 18 (`analysis_trial_truth.RELEASE_LEG`). ``impacts``: the rigid truth (`rigid_walk`, 3-6 deg) and the ER truth (1.7-2.6 deg),
 8 steps each, recorded as Tracker objects; prints the impact-time errors (ms) against the truth's own times.
 """
 
@@ -27,17 +29,20 @@ from tests.support import analysis_trial_truth as truth
 from tests.support.analysis_truth_wheel import EVEN_MARKERS, UNEVEN_MARKERS
 
 
-def slope_study(draws: int, seed: int, folder: Path, wheel_given: bool = False) -> None:
+def slope_study(draws: int, seed: int, folder: Path, wheel_given: bool = False, release_leg: str = "static") -> None:
     """``wheel_given``: each import is told the wheel (its c and k, k with Table 1's stated 10 %), as a user who
     knows it would (`import_trial(wheel=...)`); else the importer bounds the legs' drift."""
     from rimless.sim import Wheel
 
     rng = np.random.default_rng(seed)
     covered = within = n = 0
+    z2: list[float] = []
     for i in range(draws):
         c, k = rng.uniform(2, 20), rng.uniform(1500, 4000)
         s, w, yaw = rng.uniform(1.2, 2.5), rng.uniform(2.0, 3.0), rng.uniform(0, 360)
-        kw = dict(c_ns_per_m=c, k_n_per_m=k, max_steps=11, ending="walked", seed=i, yaw_deg=yaw)
+        kw = dict(
+            c_ns_per_m=c, k_n_per_m=k, max_steps=11, ending="walked", seed=i, yaw_deg=yaw, release_leg=release_leg
+        )
         tr = truth.simulate_wheel(s, w, **kw)
         gaps: tuple = ()
         if rng.random() < 0.6 and tr.impact_time_s.size > 1:
@@ -56,6 +61,7 @@ def slope_study(draws: int, seed: int, folder: Path, wheel_given: bool = False) 
         lo, hi = (math.degrees(v) for v in m.slope_ci_rad)
         hit = lo <= s <= hi
         near = abs(m.slope_deg - s) <= 0.1
+        z2.append(((m.slope_deg - s) / max((hi - lo) / 2 / 1.959964, 1e-12)) ** 2)
         n += 1
         covered += hit
         within += hit or near
@@ -66,7 +72,8 @@ def slope_study(draws: int, seed: int, folder: Path, wheel_given: bool = False) 
             f"({how})",
             flush=True,
         )
-    print(f"coverage {covered}/{n}; within 0.1 deg or covered {within}/{n}")
+    rms = math.sqrt(sum(z2) / len(z2)) if z2 else float("nan")
+    print(f"coverage {covered}/{n}; within 0.1 deg or covered {within}/{n}; rms z {rms:.3f}")
 
 
 def _errors_ms(tr, path: Path) -> np.ndarray:
@@ -103,10 +110,16 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=40)
     ap.add_argument("--seed", type=int, default=5)
     ap.add_argument("--wheel-given", action="store_true", help="slope: tell the importer the wheel's c and k")
+    ap.add_argument(
+        "--release-leg",
+        choices=["static", "uncompressed"],
+        default="static",
+        help="slope: the truth stands on its legs before the release (static) or is held on uncompressed legs",
+    )
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         if a.study == "slope":
-            slope_study(a.draws, a.seed, Path(tmp), a.wheel_given)
+            slope_study(a.draws, a.seed, Path(tmp), a.wheel_given, a.release_leg)
         else:
             impact_study(a.draws, a.seed, Path(tmp))
 
