@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from rimless.analysis.inference import release
 from rimless.analysis.inference.identifiability import least_squares_report, sandwich_se
 from rimless.analysis.inference.model_choice import EXTRA_PARAMETERS, MODEL_CHOICE_P  # noqa: F401 (re-exported)
 from rimless.analysis.io.trial import ALPHA_RAD
@@ -93,7 +94,7 @@ MAX_SHIFT_MS = 50.0  # bound of the per-trial time shift of the simulated CoM cu
 _REL_STEP = 1e-5
 #: the range of the first measured impact's post-impact angle about the rigid-touchdown release's (rad,
 #: `first_angle_offset_rad`): an ER wheel's gait lies 0.05-0.10 rad below the rigid touchdown
-FIRST_ANGLE_RANGE_RAD = 0.1
+FIRST_ANGLE_RANGE_RAD = release.FIRST_ANGLE_RANGE_RAD
 
 
 def parse_fit(text: str) -> list[str]:
@@ -601,30 +602,18 @@ class _ReleaseFit:
     def fit_first_angle(self, p: Any, d: _TrialData, w0: float) -> tuple[float, float]:
         """(release rad/s, cost) with the first impact's angle offset fitted too (set on
         ``d.first_angle_offset_rad``): least squares on the periods in (offset, theta') from the current offset and
-        from 0, the better kept; the speed alone (`fit`) when neither walks. The offset shows mostly in the first
-        period (the fast multiplier of the section map is 0.05-0.12 on ER wheels), the speed in the approach to
-        the gait."""
-        from scipy.optimize import least_squares
+        from 0, the better kept (`rimless.analysis.inference.release.fit_first_angle`); the speed alone (`fit`)
+        when neither walks."""
+        from rimless.analysis.inference.release import fit_first_angle
 
-        lo, hi = -FIRST_ANGLE_RANGE_RAD, FIRST_ANGLE_RANGE_RAD
         f_meas = 1.0 / d.periods_s
 
-        def res(q: np.ndarray) -> np.ndarray:
-            f = self.sim.frequencies(p, d.slope_deg, float(q[1]), d.periods_s.size, float(q[0]))
+        def res(offset: float, w: float) -> np.ndarray:
+            f = self.sim.frequencies(p, d.slope_deg, w, d.periods_s.size, offset)
             self.tick()
             return f - f_meas
 
-        best: tuple[float, float, float] | None = None
-        for a0 in dict.fromkeys((min(max(d.first_angle_offset_rad, lo), hi), 0.0)):
-            r0 = res(np.array([a0, w0]))
-            if not np.all(r0 + f_meas > 0):
-                continue  # the start does not walk: least squares would see a flat cost
-            r = least_squares(
-                res, [a0, w0], bounds=([lo, 0.05], [hi, 20.0]), method="trf", diff_step=[1e-5, 1e-5],
-                x_scale=[0.01, 0.01 * w0], xtol=1e-8, ftol=1e-10, max_nfev=40,
-            )  # fmt: skip
-            if best is None or 2 * r.cost < best[2]:
-                best = (float(r.x[0]), float(r.x[1]), float(2 * r.cost))
+        best = fit_first_angle(res, f_meas, w0, (d.first_angle_offset_rad, 0.0))
         if best is None:
             return self.fit(p, d, w0)
         d.first_angle_offset_rad = best[0]
