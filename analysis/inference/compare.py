@@ -8,6 +8,17 @@ the measured first step period. The walk is then simulated on the trial's slope 
 as many steps as were measured; ``theta_dot_plus_rad_s`` is the simulated post-impact theta' at the first
 measured impact (model.md section 6 section point).
 
+Release (`rimless.analysis.inference.release`): a compliant wheel released into its gait reaches the first
+measured impact with its post-impact angle 0.05-0.10 rad below where the rigid touchdown puts it, which the
+speed alone cannot hold (the first periods then miss by milliseconds). So, with three or more measured periods,
+that angle's offset (``first_angle_offset_rad``, within +-0.1 rad) is fitted with the release speed by least
+squares on all the measured step frequencies (on the compiled step map), and kept only when the test against
+the rigid release (offset 0, the speed alone) supports it (p < `FIRST_ANGLE_P`, ``first_angle_offset_p``; the
+periods' noise at least the importer's, `PERIOD_NOISE_FLOOR_S`); otherwise the rigid release, whose speed matches
+the first period.
+``Simulator.fit_first_angle`` False keeps the rigid release. With an offset the first period is no longer matched
+by construction.
+
 Alignment: time zero is the first measured impact (and the simulated first impact). The importer places
 impacts from the CoM-height minima, which in the compliant wheel lag the touchdown by a few ms; so the
 simulated curve is then shifted in time by at most ``MAX_SHIFT_S`` (the lag minimising the CoM-height RMS,
@@ -38,13 +49,29 @@ import numpy as np
 
 from rimless.analysis.io.trial import ALPHA_RAD
 
-__all__ = ["TrialComparison", "SlopeGroup", "Simulator", "compare_trial", "step_period_trends", "fit_release_speed"]
+__all__ = [
+    "TrialComparison",
+    "SlopeGroup",
+    "Simulator",
+    "compare_trial",
+    "step_period_trends",
+    "fit_release_speed",
+    "fit_first_angle_offset",
+]
 
 MAX_SHIFT_S = 0.05
 RELEASE_GRID_RAD_S = (0.3, 8.0, 78)  # scan of the release speed: lo, hi, points
 #: a comparison is "suspect" unless: correlation >= min_correlation, RMS / amplitude <= max_relative_rms,
 #: the measured CoM swings by >= min_amplitude_m, and the time shift is inside the search
 PLAUSIBILITY = {"min_correlation": 0.8, "max_relative_rms": 0.35, "min_amplitude_m": 1e-3}
+#: the first impact's angle offset is kept when its test on the periods gives p below this (a wheel released at the
+#: rigid touchdown, the bundled example generator's, noise free, gave p = 0.02: the importer's bias on the first
+#: impacts; ER truths released into their gait, p below 1e-6)
+FIRST_ANGLE_P = 0.01
+#: the importer's noise on a measured period (s) the test of the offset takes at least: 0.22 ms an impact
+#: (measured on Tracker exports of the simulator's ER wheel, session 16; tests/analysis/inference/
+#: test_calibrate_release.py), times sqrt(2) for the two impacts of a period
+PERIOD_NOISE_FLOOR_S = 0.3e-3
 
 
 @dataclass
@@ -56,6 +83,8 @@ class Simulator:
     rtol: float = 1e-8
     record_dt_s: float = 2e-3
     integrator: Any = None
+    #: fit the first measured impact's post-impact angle offset (`fit_first_angle_offset`); False: the rigid release
+    fit_first_angle: bool = True
 
     def __post_init__(self) -> None:
         from rimless.sim.model.params import WheelParams
@@ -70,18 +99,21 @@ class Simulator:
         """Parameters with the slope replaced (raises `ParameterError` outside 0 <= phi < alpha/2)."""
         return self.params.replace(slope_rad=math.radians(slope_deg))
 
-    def walk(self, slope_deg: float, release_theta_dot_rad_s: float, n_steps: int, *, record: bool) -> Any:
-        """`simulate_steps` from the rigid-touchdown release (theta = -alpha/2, theta' given)."""
-        from rimless.sim.step.gait import simulate_steps
+    def walk(
+        self, slope_deg: float, release_theta_dot_rad_s: float, n_steps: int, *, record: bool, offset_rad: float = 0.0
+    ) -> Any:
+        """`simulate_steps` from the rigid-touchdown release (theta = -alpha/2, theta' given), the post-impact
+        angle at the first impact moved by ``offset_rad`` (`rimless.analysis.inference.release.walk_from_release`)."""
+        from rimless.analysis.inference.release import walk_from_release
 
-        z0 = np.array([-ALPHA_RAD / 2, release_theta_dot_rad_s])
-        return simulate_steps(
+        return walk_from_release(
             self.on_slope(slope_deg),
             self.model,
-            z0,
+            release_theta_dot_rad_s,
             n_steps,
             self.integrator,
-            record_dt=self.record_dt_s if record else 1.0,
+            self.record_dt_s if record else 1.0,
+            offset_rad,
         )
 
 
@@ -98,6 +130,10 @@ class TrialComparison:
     message: str | None = None
     warnings: list[str] = field(default_factory=list)
     release_theta_dot_rad_s: float = float("nan")
+    #: the first measured impact's post-impact angle, offset from where the rigid release puts it (rad; 0: not
+    #: fitted or not kept, `fit_first_angle_offset`)
+    first_angle_offset_rad: float = 0.0
+    first_angle_offset_p: float = float("nan")  # its F test's p-value on the periods (NaN: not tested)
     theta_dot_plus_rad_s: float = float("nan")
     time_shift_s: float = float("nan")
     height_offset_m: float = float("nan")
@@ -147,7 +183,8 @@ class TrialComparison:
 
     @property
     def mean_abs_period_error_s(self) -> float:
-        """Mean |simulated - measured| over steps 2..N (step 1 is fitted: its error is 0 by construction), s."""
+        """Mean |simulated - measured| over steps 2..N (step 1 fixes the release: its error is 0 by construction
+        with the rigid release, small with a fitted first-angle offset), s."""
         e = self.period_error_s[1:]
         e = e[np.isfinite(e)]
         return float(np.mean(np.abs(e))) if e.size else float("nan")
@@ -168,6 +205,8 @@ class TrialComparison:
             "com_correlation": self.com_correlation,
             "theta_dot_plus_rad_s": self.theta_dot_plus_rad_s,
             "release_theta_dot_rad_s": self.release_theta_dot_rad_s,
+            "first_angle_offset_deg": math.degrees(self.first_angle_offset_rad),
+            "first_angle_offset_p": self.first_angle_offset_p,
             "time_shift_ms": self.time_shift_s * 1e3,
             "height_offset_mm": self.height_offset_m * 1e3,
             "message": "; ".join(([self.message] if self.message else []) + self.warnings),
@@ -214,6 +253,53 @@ def fit_release_speed(sim: Simulator, slope_deg: float, first_period_s: float) -
         f"the measured first period {first_period_s:.3f} s is shorter than any the model gives for a release "
         f"up to {hi:g} rad/s (at least {first_period_s + float(np.min(fin)):.3f} s)"
     )
+
+
+def fit_first_angle_offset(
+    sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0: float
+) -> tuple[float, float, float]:
+    """(offset rad, release theta' rad/s, p-value): the first measured impact's post-impact angle offset and the
+    release speed fitted on all the measured periods (`rimless.analysis.inference.release.fit_first_angle`, on
+    the compiled step map, from offset 0 and -0.06 rad), kept only when it lowers the periods' sum of squares
+    significantly below the rigid release's (offset 0, the speed fitted alone, from ``w0``): the test of one extra
+    parameter on the n periods, with their noise the larger of the fit's residual variance (F test, n - 2 degrees
+    of freedom) and the importer's floor `PERIOD_NOISE_FLOOR_S` (chi-square test: the impacts the importer
+    places from the CoM minima carry a bias of a few tenths of a ms that a noise-free recording does not average
+    out), p < `FIRST_ANGLE_P`. Else (0, ``w0``, p); p NaN when not tested (fewer than three periods: two
+    unknowns, or no fit walks)."""
+    from scipy.optimize import least_squares
+    from scipy.stats import chi2, f
+
+    from rimless.analysis.inference.release import fit_first_angle, map_frequencies
+
+    periods = np.asarray(periods_s, float)
+    if periods.size < 3 or not np.all(np.isfinite(periods)):
+        return 0.0, w0, math.nan
+    p = sim.on_slope(slope_deg)
+    f_meas = 1.0 / periods
+
+    def freq_res(offset: float, w: float) -> np.ndarray:
+        return map_frequencies(p, sim.model, w, periods.size, offset, sim.rtol) - f_meas
+
+    def rss_s2(offset: float, w: float) -> float:  # the periods' sum of squares, s^2 (1 s for a step not reached)
+        f_sim = freq_res(offset, w) + f_meas
+        e = np.where(f_sim > 0, 1.0 / np.where(f_sim > 0, f_sim, 1.0) - periods, 1.0)
+        return float(e @ e)
+
+    got = fit_first_angle(freq_res, f_meas, w0, (0.0, -0.06))
+    if got is None:
+        return 0.0, w0, math.nan
+    rigid = least_squares(lambda q: freq_res(0.0, float(q[0])), [w0], bounds=([0.05], [20.0]), diff_step=[1e-5])
+    rss0 = min(rss_s2(0.0, float(rigid.x[0])), rss_s2(0.0, w0))
+    rss1, dof = rss_s2(got[0], got[1]), periods.size - 2
+    var = rss1 / dof
+    if var >= PERIOD_NOISE_FLOOR_S**2:
+        p_value = float(f.sf((rss0 - rss1) / var, 1, dof))
+    else:
+        p_value = float(chi2.sf((rss0 - rss1) / PERIOD_NOISE_FLOOR_S**2, 1))
+    if not rss1 < rss0 or not p_value < FIRST_ANGLE_P or abs(got[0]) < 1e-6:
+        return 0.0, w0, p_value
+    return got[0], got[1], p_value
 
 
 def _first_bracket(vals: np.ndarray) -> int | None:
@@ -279,7 +365,8 @@ def clean_curve(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None = None) -> TrialComparison:
-    """Fit the release speed to the first measured step, simulate, and align (see the module doc)."""
+    """Fit the release speed to the first measured step (and the first impact's angle offset to all of them, see
+    the module doc), simulate, and align."""
     sim = sim or Simulator()
     m = trial.meta
     res = TrialComparison(
@@ -304,13 +391,17 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
     if w0 is None:
         res.message = f"no initial condition matches: {why}"
         return res
+    if sim.fit_first_angle:
+        res.first_angle_offset_rad, w0, res.first_angle_offset_p = fit_first_angle_offset(
+            sim, res.slope_deg, periods, w0
+        )
     res.release_theta_dot_rad_s = w0
     # Measured period i is simulated step 1 + (its step count - the first period's): a period lost in a gap
     # keeps the count, so the periods after a gap meet the simulated steps they belong to.
     ends = np.asarray(getattr(trial, "period_step", np.zeros(0)), np.int64)
     offset = ends - ends[0] if ends.size == periods.size else np.arange(periods.size)
     n_sim = int(offset[-1]) + 1
-    gait = sim.walk(res.slope_deg, w0, n_sim + 2, record=True)
+    gait = sim.walk(res.slope_deg, w0, n_sim + 2, record=True, offset_rad=res.first_angle_offset_rad)
     steps = gait.steps
     res.theta_dot_plus_rad_s = float(steps[0].y_plus[7])
     sim_p = np.full(periods.size, np.nan)
