@@ -1,7 +1,7 @@
 """The robot's `Controller` on one register-level fake ADNS-3080 counting eight legs (`FakeAdns3080` under the
 `Adns3080` driver, configured as the app configures it), the clutches on gpiozero's `MockFactory` pins, every
 sample at its deadline on a `VirtualClock` (`rimless.firmware.clock`, unpaced): the rig of the arm-mid-step and
-leg-identity property tests, and its drive loop."""
+leg-identity tests, and its drive loop (`tests/support/firmware_walk.py` runs its walks on it)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,10 @@ LEGS = list(range(8))
 
 class FakeWalkRig:
     """`trajectory(t)` (m, t in s from the end of the sensor's configuration) seen by the fake sensor with
-    `noise_counts` of noise; the detector counts `LEGS` from `start_index` with `params`. Close it (or use `with`)."""
+    `noise_counts` of noise; the detector counts `LEGS` from `start_index` with `params`. The sensor is configured at
+    `cpi` counts per inch with the automatic frame rate, as the service does (`mark_configured` included); the
+    controller's `id_check_interval_s`, `verify_before_engage` and `readback_every_samples` are passed on. Close it
+    (or use `with`)."""
 
     def __init__(
         self,
@@ -33,13 +36,19 @@ class FakeWalkRig:
         start_index: int = 0,
         noise_counts: float = 0.3,
         seed: int = 0,
+        cpi: int = 1600,
+        id_check_interval_s: float = 0.0,
+        verify_before_engage: bool = True,
+        readback_every_samples: int = 1,
     ) -> None:
         self.clock = VirtualClock(start_ns=0, paced=False)
-        fake = FakeAdns3080(
+        self.fake = fake = FakeAdns3080(
             trajectory, noise_counts=noise_counts, seed=seed, clock=seconds(self.clock), needs_reset=False
         )
-        drv = Adns3080(fake, counts_per_m=DEFAULT_COUNTS_PER_M, sleep=sleeper(self.clock), clock_ns=self.clock.now_ns)
-        drv.set_resolution(1600)
+        drv = Adns3080(
+            fake, counts_per_m=DEFAULT_COUNTS_PER_M * cpi / 1600, sleep=sleeper(self.clock), clock_ns=self.clock.now_ns
+        )
+        drv.set_resolution(cpi)
         drv.set_frame_rate(None)
         drv.mark_configured()
         self.t0_ns = self.clock.now_ns()  # the walk's time starts after the configuration's waits
@@ -50,16 +59,21 @@ class FakeWalkRig:
             [Channel(drv, LegDetector(params, LEGS, start_index=start_index), HealthMonitor(HealthLimits()))],
             self.bank,
             clock_ns=self.clock.now_ns,
-            id_check_interval_s=0.0,
+            id_check_interval_s=id_check_interval_s,
+            verify_before_engage=verify_before_engage,
+            readback_every_samples=readback_every_samples,
         )
 
-    def drive(self, rate_hz: float, duration_s: float) -> Iterator[tuple[float, list[int], list[object]]]:
-        """Step the controller once at each deadline k / `rate_hz` (k = 1, 2, ... before `duration_s`); after each
-        sample yield its time on the walk's clock (s), the clutches it engaged (sorted) and the records it emitted.
-        The caller's code between two yields runs between two samples, as the sampler thread runs commands."""
+    def drive(
+        self, rate_hz: float, duration_s: float, *, first: int = 1
+    ) -> Iterator[tuple[float, list[int], list[object]]]:
+        """Step the controller once at each deadline k / `rate_hz` (k = `first`, `first` + 1, ... before
+        `duration_s`); after each sample yield its time on the walk's clock (s), the clutches it engaged (sorted) and
+        the records it emitted. The caller's code between two yields runs between two samples, as the sampler thread
+        runs commands."""
         period_ns = round(1e9 / rate_hz)
         ctl = self.controller
-        for k in range(1, int(duration_s * rate_hz)):
+        for k in range(first, int(duration_s * rate_hz)):
             self.clock.sleep_until(self.t0_ns + k * period_ns)
             t = (self.clock.now_ns() - self.t0_ns) * 1e-9
             before = set(self.bank.engaged())

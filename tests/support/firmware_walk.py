@@ -1,37 +1,16 @@
-"""A virtual-clock rig for the leg-identity tests: the robot's own `Controller` on one register-level fake
-ADNS-3080 counting eight legs, stepped at a fixed rate through a scripted `FakeWalk`, every engage recorded
-with its (virtual) time so that it can be judged against the walk's truth."""
+"""Walks for the leg-identity and listen tests on `tests.support.fake_walk_rig.FakeWalkRig` (the robot's own
+`Controller` on one register-level fake ADNS-3080 counting eight legs, on `rimless.firmware.clock.VirtualClock`),
+stepped at a fixed rate through a scripted `FakeWalk`, every engage recorded with its (virtual) time so that it can
+be judged against the walk's truth."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from gpiozero.pins.mock import MockFactory
-
-from rimless.firmware.control.controller import Channel, Controller, EventRecord
-from rimless.firmware.control.detector import DetectorParams, LegDetector
-from rimless.firmware.control.faults import HealthLimits, HealthMonitor
-from rimless.firmware.drivers.adns3080 import Adns3080
-from rimless.firmware.drivers.clutch import ClutchBank
-from rimless.firmware.drivers.fake_adns3080 import DEFAULT_COUNTS_PER_M, FakeAdns3080
+from rimless.firmware.control.controller import EventRecord
+from rimless.firmware.control.detector import DetectorParams
 from rimless.firmware.drivers.fake_walk import FakeWalk, airborne_locks
-
-PINS = [17, 27, 22, 23, 24, 16, 20, 21]
-LEGS = list(range(8))
-
-
-class VirtualClock:
-    def __init__(self) -> None:
-        self.t_s = 0.0
-
-    def seconds(self) -> float:
-        return self.t_s
-
-    def ns(self) -> int:
-        return int(round(self.t_s * 1e9))
-
-    def sleep(self, s: float) -> None:
-        self.t_s += s
+from tests.support.fake_walk_rig import LEGS, FakeWalkRig
 
 
 @dataclass
@@ -63,51 +42,35 @@ def walk_controller(
     records: list | None = None,
 ) -> WalkResult:
     """Arm at t = 0 naming the leg the walk starts on (`LEGS[start_index]`, as the operator does: the robot's
-    defaults lock nothing before) and step the controller at `rate_hz` for `duration_s` of virtual time; `fault_at` =
-    (t_s, action(fake)) injects a fault into the fake. The sensor is configured at `cpi` with the automatic
-    frame rate, as the service does (`mark_configured` included). Every controller record goes to `records`."""
-    clock = VirtualClock()
-    fake = FakeAdns3080(
-        walk, counts_per_m=DEFAULT_COUNTS_PER_M, noise_counts=0.3, seed=seed, clock=clock.seconds, needs_reset=False
-    )
-    drv = Adns3080(
-        fake,
-        counts_per_m=DEFAULT_COUNTS_PER_M * cpi / 1600,
-        sleep=clock.sleep,  # type: ignore[arg-type]
-        clock_ns=clock.ns,
-    )
-    drv.set_resolution(cpi)
-    drv.set_frame_rate(None)
-    drv.mark_configured()
-    clock.t_s = 0.0  # the configuration's waits are over before the walk's time starts
-    bank = ClutchBank(PINS, pin_factory=MockFactory())
-    ctl = Controller(
-        [Channel(drv, LegDetector(params, LEGS, start_index=start_index), HealthMonitor(HealthLimits()))],
-        bank,
-        clock_ns=clock.ns,
+    defaults lock nothing before) and step the controller at `rate_hz` for `duration_s` of virtual time (the first
+    sample at t = 0) on `FakeWalkRig`; `fault_at` = (t_s, action(fake)) injects a fault into the fake before the
+    first sample at or after t_s. The sensor is configured at `cpi` with the automatic frame rate, as the service
+    does. Every controller record goes to `records`."""
+    res = WalkResult()
+    period_s = round(1e9 / rate_hz) * 1e-9  # the rig's deadlines are whole nanoseconds
+    with FakeWalkRig(
+        walk,
+        params,
+        start_index=start_index,
+        seed=seed,
+        cpi=cpi,
         id_check_interval_s=id_check_interval_s,
         verify_before_engage=verify_before_engage,
         readback_every_samples=readback_every_samples,
-    )
-    res = WalkResult()
-    try:
-        ctl.arm(stance_leg=LEGS[start_index])
-        for k in range(int(duration_s * rate_hz)):
-            clock.t_s = k / rate_hz
-            if fault_at is not None and clock.t_s >= fault_at[0]:
-                fault_at[1](fake)  # type: ignore[operator]
-                fault_at = None
-            before = set(bank.engaged())
-            ctl.step()
-            for leg in sorted(set(bank.engaged()) - before):
-                res.engages.append((clock.t_s, leg))
-            while ctl.outbox:
-                rec = ctl.outbox.popleft()
+    ) as rig:
+        rig.controller.arm(stance_leg=LEGS[start_index])
+        if fault_at is not None and fault_at[0] <= 0.0:
+            fault_at[1](rig.fake)  # type: ignore[operator]
+            fault_at = None
+        for t, engaged, recs in rig.drive(rate_hz, duration_s, first=0):
+            res.engages.extend((t, leg) for leg in engaged)
+            for rec in recs:
                 if records is not None:
                     records.append(rec)
                 if isinstance(rec, EventRecord):
-                    res.events.append((clock.t_s, rec.name, rec.fields))
-    finally:
-        bank.close()
+                    res.events.append((t, rec.name, rec.fields))
+            if fault_at is not None and t + period_s >= fault_at[0] - 1e-12:
+                fault_at[1](rig.fake)  # type: ignore[operator]
+                fault_at = None
     res.airborne = airborne_locks(walk, res.engages, LEGS, start_index)
     return res
