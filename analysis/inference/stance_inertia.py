@@ -53,7 +53,8 @@ MIN_PAIRS = 6  # consecutive-period pairs needed for an estimate
 R_BOUNDS = (0.02, 50.0)  # the inertia ratios searched
 Z_DISAGREE = 2.0  # a stated inertia further than this many combined standard errors from the trials' is a warning
 #: above this reduced chi^2 the rigid return map does not describe the periods (a compliant wheel: measured 3-8 on
-#: the ER truth of tests/support/analysis_trial_truth.py, 0.1-0.6 on rigid truths): the ratio is effective only
+#: the ER truth of tests/support/analysis_trial_truth.py, on that truth before 88dc178 (uncompressed hold), 0.1-0.6
+#: on rigid truths): the ratio is effective only
 CHI2_ADEQUATE = 2.0
 #: the joint fit searches L0 within this factor of the held one
 L0_FACTOR = 2.0
