@@ -86,7 +86,8 @@ OFFSET_BOUND_M = 0.05
 TWO_CONTACT_SD_M = 0.5e-3
 #: Drift (1 sigma) of the CoM-minima depth from the first impact to the last, m, allowed when the trial shows no
 #: speed change (fewer than three impacts): the constant allowance sized before the drift followed the speed
-#: change (with `CONTACT_DRIFT_M`: the tests' compliant truth's slope interval held the truth in 77 of 80 walks).
+#: change (with `CONTACT_DRIFT_M`: the tests' compliant truth's slope interval held the truth in 77 of 80 walks,
+#: measured on that truth before 88dc178, its uncompressed hold).
 MINIMA_DRIFT_M = 0.4e-3
 #: Least factor on the contact heights' stated errors (squared) when they are scaled by their scatter about the
 #: line: none since session 17 (it was 0.25, "successive pivots share the rotation's errors, which the scatter
@@ -102,15 +103,16 @@ CONTACT_DRIFT_M = 0.35e-3
 #: gait's speed) drifts 0.09-0.13 times that (rms about 0.11); regressed on the signed speed change over the
 #: slope-coverage study's 38 ER walks (seed 0), the impact line's error is 0.108 times it (correlation 0.47);
 #: on the tests' compliant truth (released at 2-3 rad/s, k 1500-4000 N/m, told its k +- 10 %) the factor that
-#: gave rms z 1.00 was 0.10 on k's 95 % low end and the masses' high end, 0.11 on the stated values. (It was
-#: 0.12 on the low end until session 17: 0.135 here.)
+#: gave rms z 1.00 was 0.10 on k's 95 % low end and the masses' high end, 0.11 on the stated values (measured
+#: on that truth before 88dc178, its uncompressed hold). (It was 0.12 on the low end until session 17: 0.135 here.)
 MINIMA_DRIFT_PER_IMPULSE = 0.11
 #: The contact heights' drift (1 sigma) over the trial per dv_n sqrt(m / k): the pivot the importer finds moves
 #: with the compression within the stance. The two compliant truths differ: regressed on the signed speed
 #: change, the contact line's error on the slope-coverage study's 28 ER walks with contacts (seed 0) is 0.05
 #: times it (correlation 0.22), while on the tests' compliant truth (40 walks, seed 5, told the wheel) the
 #: contact and impact lines share a shallow error of 0.015 deg in the mean. 0.09 makes the contact line's rms z
-#: 1.00 over both (0.87 on the ER walks, 1.12 on the tests' truth; 0.055: 0.92 and 1.25; 0.11: 0.85 and 1.06).
+#: 1.00 over both (0.87 on the ER walks, 1.12 on the tests' truth; 0.055: 0.92 and 1.25; 0.11: 0.85 and 1.06;
+#: the tests' truth measured before 88dc178, its uncompressed hold, which biased both lines shallow).
 #: (It was 0.12, as the minima's, on k's 95 % low end until session 17.)
 CONTACT_DRIFT_PER_IMPULSE = 0.09
 #: sqrt(m / k) of a wheel the importer is not told about, s: the heaviest on the softest legs it is validated
@@ -441,7 +443,8 @@ def _covariance(group: list[SlopeEvidence]) -> np.ndarray:
     lines' errors correlate -0.08 on the rigid truth (no drift: their own parts are independent), -0.06 on the
     ER truth (sum of the products of their errors -0.05 urad^2 against 0.35 if the drift were shared) and share
     about half the drift on the tests' compliant truth (1.68 against 3.29 urad^2; the mean product of their z
-    0.71). Counting the drift as shared is the reading that covers every truth; the hub's term (2-7 % of the
+    0.71; measured on that truth before 88dc178, its uncompressed hold, which biased both lines shallow: after it
+    they correlate +0.28). Counting the drift as shared is the reading that covers every truth; the hub's term (2-7 % of the
     impact line's standard deviation with the converged hub fit) is in the impact line's own part."""
     h = np.array([e.half_rad for e in group])
     c = np.array([min(e.common_half_rad, e.half_rad) for e in group])
