@@ -375,6 +375,18 @@ class ParamEstimate:
     #: per trial, its part
     se_slope: float = math.nan
     slope_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
+    #: an extra parameter whose model choice could not be made (the fit without it stopped on its budget)
+    undecided: bool = False
+
+    @property
+    def status(self) -> str:
+        """One word for the verdict: "identifiable", "undecided" (an extra parameter whose model choice could
+        not be made), "effective only" or "not identifiable"."""
+        if self.identifiable:
+            return "identifiable"
+        if self.undecided:
+            return "undecided"
+        return "effective only" if self.effective_only else "not identifiable"
 
     @property
     def se_with_held(self) -> float | None:
@@ -395,6 +407,7 @@ class ParamEstimate:
             "estimate": self.value,
             "se": self.se,
             "identifiable": bool(self.identifiable),
+            "status": self.status,
             "note": self.note,
             "se_model": self.se_model,
             "se_sandwich": self.se_sandwich,
@@ -1313,7 +1326,7 @@ def calibrate(
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
     used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
     for row in (choice or {}).values():
-        if not row["supported"]:  # the simpler model is the calibrated one: its values of the others
+        if row["calibrated_model"] == "without":  # decided, not supported: the simpler fit's values of the others
             used.update({n: v for n, v in row["without"].items() if n in used})
     cal_params = glob.params(np.array([used[n] for n in fit]))
     result = CalibrationResult(
@@ -1761,8 +1774,10 @@ def _judge(
     """The verdicts that no single estimate's interval shows: a model that does not fit (`_adequacy`) makes every
     parameter effective only; an extra parameter the quasi-likelihood test (`_model_choice`) does not support is
     not identifiable (the reason given; the other parameters' values of the fit without it make the calibrated
-    model); c and guide friction on a ridge (`friction_vs_damping`) are effective only (their combination is
-    fitted, not each). None of these ever makes a parameter identifiable."""
+    model); one whose test could not be made (the fit without it stopped on its budget: ``decided`` False) is
+    "undecided" (`ParamEstimate.undecided`), never identifiable, and the calibrated model stays the converged fit
+    with it (nothing of the unfinished fit is used); c and guide friction on a ridge (`friction_vs_damping`) are
+    effective only (their combination is fitted, not each). None of these ever makes a parameter identifiable."""
     if not fits["fits"]:
         for e in estimates:
             if e.identifiable or e.effective_only:
@@ -1770,6 +1785,16 @@ def _judge(
                 e.note = "effective only: " + fits["statement"] + (f"; {e.note}" if e.note else "")
     for name, row in (choice or {}).items():
         if row["supported"]:
+            continue
+        if not row["decided"]:  # the fit without it stopped on its budget: the converged fit with it is kept
+            for e in estimates:
+                if e.name == name:  # used by the calibrated model when the fit determined it, never claimed
+                    e.effective_only = e.identifiable or e.effective_only
+                    e.identifiable, e.undecided = False, True
+                    e.note = row["statement"] + (f"; {e.note}" if e.note else "")
+                else:
+                    kept = f"the model choice of {name} is undecided: the calibrated model is the fit with it"
+                    e.note = f"{e.note}; {kept}" if e.note else kept
             continue
         for e in estimates:
             if e.name == name:
@@ -1782,4 +1807,5 @@ def _judge(
         for e in estimates:
             if e.name in ("c", "guide_friction_n") and e.identifiable:
                 e.identifiable, e.effective_only = False, True
-                e.note = "effective only: c and F_c are not told apart (" + fvd["statement"] + ")"
+                ridge = "effective only: c and F_c are not told apart (" + fvd["statement"] + ")"
+                e.note = ridge + (f"; {e.note}" if e.note else "")

@@ -184,7 +184,10 @@ def choice_row(
     plain chi^2_1 p), the quasi-likelihood test's (``dispersion``, ``dispersion_source``, ``dispersion_dof``,
     ``statistic``, ``p_value``, ``test``), ``supported``, ``decided`` (False when the fit without it stopped on
     its budget: then delta chi^2 is only an upper bound, and the statement says what the budget left,
-    ``simpler_optimizer`` from `refit_without`) and the ``statement`` naming the dispersion used."""
+    ``simpler_optimizer`` from `refit_without`), ``calibrated_model`` (which fit the calibrated model is: "with"
+    it when supported or undecided, "without" it when not supported) and the ``statement`` naming the dispersion
+    used. ``without`` holds the fit without it's values only when that fit converged: an undecided row's are
+    where it stopped, ``simpler_optimizer["stopped_at"]``, never a result."""
     from scipy.stats import chi2
 
     delta = max(chi2_without - chi2_with, 0.0)
@@ -203,8 +206,12 @@ def choice_row(
         why = f"not supported over the fit without it ({name} held at {held_at:g}): {test} >= {MODEL_CHOICE_P:g}"
     else:
         why = f"undecided: {_budget_statement(simpler_optimizer)}; " + (
-            f"delta chi^2 = {delta:.3g} is only an upper bound (the test on it: {test}), the test cannot be made"
+            f"delta chi^2 = {delta:.3g} is only an upper bound (the test on it: {test}), the test cannot be made; "
+            f"the calibrated model is the fit with {name} (converged), {name} not claimed"
         )
+    opt = dict(simpler_optimizer) if simpler_optimizer is not None else None
+    if not simpler_converged:  # where the unfinished fit stopped: a diagnosis, not a result
+        opt = {**(opt or {}), "stopped_at": dict(without)}
     return {
         "why_extra": EXTRA_PARAMETERS.get(name, ""),
         "simpler_fit": list(simpler_fit),
@@ -224,9 +231,10 @@ def choice_row(
         "boundary": boundary,
         "supported": supported,
         "threshold_p": MODEL_CHOICE_P,
-        "without": dict(without),
+        "without": dict(without) if simpler_converged else {},
         "decided": bool(simpler_converged),
-        "simpler_optimizer": dict(simpler_optimizer) if simpler_optimizer is not None else None,
+        "calibrated_model": "without" if simpler_converged and not supported else "with",
+        "simpler_optimizer": opt,
         "statement": why,
     }
 
