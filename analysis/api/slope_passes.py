@@ -148,6 +148,7 @@ def calibrate_in_passes(
             progress=tick,
             prior=prior,
             held=[(e.name, e.sd) for e in wheel.input.held()],
+            held_exact=[n for n, e in wheel.input.entries.items() if e.sd == 0 and e.source != "fitted"],
         )
 
     res = calibrate_once(trials)

@@ -256,6 +256,7 @@ def _verdicts(res: Any) -> dict[str, Any]:
         },
         "noise": {k: (adq.get("noise") or {}).get(k) for k in ("com_mm", "impact_time_ms")},
         "model_choice": None if choice is None else {k: choice[k] for k in CHOICE_KEYS if k in choice},
+        "held_exact_probe": _probe(res),
         "estimates": {
             e.name: {
                 "value": e.value,
@@ -265,6 +266,26 @@ def _verdicts(res: Any) -> dict[str, Any]:
             }
             for e in res.params
         },
+    }
+
+
+def _probe(res: Any) -> dict[str, Any] | None:
+    """The held-exact probe of guide friction (`calibrate._held_exact_probe`), when run: whether it refitted,
+    converged, what depends on the held value, F_c freed, the test's figures and its CPU time."""
+    row = (getattr(res, "held_exact_probe", None) or {}).get("guide_friction_n")
+    if row is None:
+        return None
+    test = row.get("test") or {}
+    return {
+        "refit": row["refit"],
+        "converged": row["converged"],
+        "depends": list(row["depends"]),
+        "shifts_se": row["shifts_se"],
+        "friction_freed_n": (row.get("values_freed") or {}).get("guide_friction_n"),
+        "delta_chi2": test.get("delta_chi2"),
+        "p_value": test.get("p_value"),
+        "supported": test.get("supported"),
+        "cpu_s": row["cpu_s"],
     }
 
 
@@ -325,6 +346,17 @@ def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "passes": {str(n): sum(p["passes"] == n for p in sp) for n in sorted({p["passes"] for p in sp})},
         "stable": sum(bool(p["stable"]) for p in sp),
     }
+    probes = [r["held_exact_probe"] for r in done if r.get("held_exact_probe")]
+    if probes:  # F_c held exactly while c is fitted: the probe's verdicts and cost
+        out["held_exact_probe"] = {
+            "probed": len(probes),
+            "refit": sum(bool(q["refit"]) for q in probes),
+            "converged": sum(bool(q["converged"]) for q in probes),
+            "c_depends": _rate(sum("c" in q["depends"] for q in probes), len(probes)),
+            "any_depends": _rate(sum(bool(q["depends"]) for q in probes), len(probes)),
+            "supported": sum(bool(q["supported"]) for q in probes),
+            "cpu_s": sum(q["cpu_s"] for q in probes),
+        }
     mc = [r["model_choice"] for r in done if r.get("model_choice")]
     if mc:
         out["model_choice_p"] = {
