@@ -237,6 +237,7 @@ CHOICE_KEYS = (
     "dispersion_dof",
     "dispersion_parts",
     "statistic",
+    "detectable_above",
 )
 
 
@@ -369,6 +370,17 @@ def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
             f"{a:g}-{b:g}": _rate(sum(s for f, s in fc if a <= f < b), sum(a <= f < b for f, _ in fc))
             for a, b in ((0.1, 0.3), (0.3, 0.6))
         }
+        limits = [
+            (r["truth"]["guide_friction_n"], (r.get("model_choice") or {}).get("detectable_above"), s)
+            for r, s in zip(done, said)
+        ]
+        known = [(f, lim, s) for f, lim, s in limits if lim is not None]
+        if known:  # found where the truth is above the model choice's stated detection limit, and below it
+            out["by_detectable_above"] = {
+                "above": _rate(sum(s for f, lim, s in known if f >= lim), sum(f >= lim for f, lim, _ in known)),
+                "below": _rate(sum(s for f, lim, s in known if f < lim), sum(f < lim for f, lim, _ in known)),
+                "median_limit_n": float(np.median([lim for _, lim, _ in known])),
+            }
     if sc.k_error:
         for label, sgn in (("k_held_high", 1.0), ("k_held_low", -1.0)):
             pick = [s for r, s in zip(done, said) if (r["held_k_n_per_m"] > r["truth"]["k"]) == (sgn > 0)]
