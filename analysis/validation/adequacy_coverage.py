@@ -16,11 +16,14 @@ them told the held wheel's legs; k fitted: the importer's bound, then again told
   diagnosis: the calibration holds the importer's slope exact, and the step periods resolve its error);
 - ``held-k``: frictionless truth, ``--fit c`` with k held 25 % off the truth (sign drawn): a misfit, counted
   as detected when the check says "does not fit" (the known gap: c may absorb it);
-- ``friction-misfit``: a truth with guide friction fitted as ``c,k`` with F_c held at 0: a misfit;
+- ``friction-misfit``: a truth with guide friction fitted as ``c,k`` with F_c held at 0: a misfit (held exactly,
+  so the calibration probes it by freeing it, `calibrate._held_exact_probe`: ``held_exact_probe`` per series and
+  per scenario, with what it flagged and its CPU time);
 - ``choice-null``: frictionless truth, ``--fit c,guide_friction_n`` (k exact): friction claimed (the
   likelihood-ratio test's p < ``MODEL_CHOICE_P``) is a false claim (nominal 1 %);
 - ``choice-friction``: a truth with friction, ``--fit c,guide_friction_n`` (k exact, F_c starting at 0):
-  friction found is the power.
+  friction found is the power (``by_detectable_above``: found where the truth lies above the model choice's
+  stated detection limit, ``detectable_above``, and below it).
 
 Reported per scenario: the rate of each verdict with its Wilson 95 % interval, the overall chi^2/dof ratios and
 p-values (how often p < 0.05 and 0.01: for the adequate and null scenarios these should be about 5 % and 1 %
