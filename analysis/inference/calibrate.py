@@ -1797,7 +1797,7 @@ def _judge(
     for name, row in (choice or {}).items():
         if row["supported"]:
             continue
-        if not row["decided"]:  # the fit without it stopped on its budget: the converged fit with it is kept
+        if not row.get("decided", True):  # the fit without it stopped on its budget: the converged fit with it kept
             for e in estimates:
                 if e.name == name:  # used by the calibrated model when the fit determined it, never claimed
                     e.effective_only = e.identifiable or e.effective_only
