@@ -127,9 +127,11 @@ def calibrate_in_passes(
     again told the wheel ``legs``, in the same order), the further passes of the module doc. ``progress(n)``:
     the simulations so far over every pass. Raises `NoTrialCalibrated` when the first pass calibrates
     nothing."""
+    from rimless.analysis.inference.calibrate import FIT_FIELDS
     from rimless.analysis.inference.calibrate import calibrate as run_calibration
 
     done = [0]
+    fitted = {FIT_FIELDS[n][0] for n in fit}  # held exactly: a stated value without uncertainty, not fitted
 
     def calibrate_once(loaded: Sequence[Any]) -> CalibrationResult:
         start = done[0]
@@ -148,6 +150,7 @@ def calibrate_in_passes(
             progress=tick,
             prior=prior,
             held=[(e.name, e.sd) for e in wheel.input.held()],
+            held_exact=[n for n, e in wheel.input.entries.items() if e.sd == 0 and n not in fitted],
         )
 
     res = calibrate_once(trials)

@@ -376,6 +376,18 @@ class ParamEstimate:
     #: per trial, its part
     se_slope: float = math.nan
     slope_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
+    #: an extra parameter whose model choice could not be made (the fit without it stopped on its budget)
+    undecided: bool = False
+
+    @property
+    def status(self) -> str:
+        """One word for the verdict: "identifiable", "undecided" (an extra parameter whose model choice could
+        not be made), "effective only" or "not identifiable"."""
+        if self.identifiable:
+            return "identifiable"
+        if self.undecided:
+            return "undecided"
+        return "effective only" if self.effective_only else "not identifiable"
 
     @property
     def se_with_held(self) -> float | None:
@@ -396,6 +408,7 @@ class ParamEstimate:
             "estimate": self.value,
             "se": self.se,
             "identifiable": bool(self.identifiable),
+            "status": self.status,
             "note": self.note,
             "se_model": self.se_model,
             "se_sandwich": self.se_sandwich,
@@ -441,6 +454,9 @@ class CalibrationResult:
     #: per extra parameter (`EXTRA_PARAMETERS`): the quasi-likelihood test against the fit without it
     #: (`rimless.analysis.inference.model_choice`)
     model_choice: dict[str, Any] | None = None
+    #: per extra parameter held exactly while c is fitted: the refit with it freed and what depends on it
+    #: (`_held_exact_probe`); None when none was probed
+    held_exact_probe: dict[str, Any] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -487,6 +503,7 @@ class CalibrationResult:
             **({"parameters": self.parameters} if self.parameters is not None else {}),
             **({"adequacy": self.adequacy} if self.adequacy is not None else {}),
             **({"model_choice": self.model_choice} if self.model_choice is not None else {}),
+            **({"held_exact_probe": self.held_exact_probe} if self.held_exact_probe is not None else {}),
         }
 
 
@@ -1173,6 +1190,7 @@ def calibrate(
     progress: Callable[[int], None] | None = None,
     prior: Any = None,
     held: Sequence[tuple[str, float]] = (),
+    held_exact: Sequence[str] = (),
 ) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
@@ -1194,7 +1212,10 @@ def calibrate(
     priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
     ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
     ``se_held`` (`held_response`: two warm refits per held parameter; a whole recalibration where one sticks,
-    with the ``"ridge"`` rule of starts)."""
+    with the ``"ridge"`` rule of starts). ``held_exact``: extra parameters (`EXTRA_PARAMETERS`) the caller holds
+    exactly (no stated uncertainty): with c fitted, each is probed by freeing it (`_held_exact_probe`: a fitted
+    parameter it moves by more than `PROBE_SHIFT_SE` is effective only, its interval spanning both fits'; JSON
+    ``held_exact_probe``)."""
     from rimless.sim.model.params import WheelParams
 
     data, failed = _usable(trials, names)
@@ -1298,11 +1319,13 @@ def calibrate(
     fits = _adequacy(obj, u, moved)
     choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds, estimates)
     _judge(estimates, fits, choice, fvd)
+    probes = [n for n in held_exact if n in EXTRA_PARAMETERS and n not in fit and "c" in fit and prior is None]
+    probe = {n: _held_exact_probe(obj, u, fit, (lo, hi), max_rounds, estimates, n) for n in probes} or None
     tick()  # the adequacy check's and the model choice's walks counted too: the last count is the total
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
     used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
     for row in (choice or {}).values():
-        if not row["supported"]:  # the simpler model is the calibrated one: its values of the others
+        if row["calibrated_model"] == "without":  # decided, not supported: the simpler fit's values of the others
             used.update({n: v for n, v in row["without"].items() if n in used})
     cal_params = glob.params(np.array([used[n] for n in fit]))
     result = CalibrationResult(
@@ -1324,6 +1347,7 @@ def calibrate(
         fvd,
         adequacy=fits,
         model_choice=choice,
+        held_exact_probe=probe,
     )
     return result
 
@@ -1832,8 +1856,10 @@ def _judge(
     """The verdicts that no single estimate's interval shows: a model that does not fit (`_adequacy`) makes every
     parameter effective only; an extra parameter the quasi-likelihood test (`_model_choice`) does not support is
     not identifiable (the reason given; the other parameters' values of the fit without it make the calibrated
-    model); c and guide friction on a ridge (`friction_vs_damping`) are effective only (their combination is
-    fitted, not each). None of these ever makes a parameter identifiable."""
+    model); one whose test could not be made (the fit without it stopped on its budget: ``decided`` False) is
+    "undecided" (`ParamEstimate.undecided`), never identifiable, and the calibrated model stays the converged fit
+    with it (nothing of the unfinished fit is used); c and guide friction on a ridge (`friction_vs_damping`) are
+    effective only (their combination is fitted, not each). None of these ever makes a parameter identifiable."""
     if not fits["fits"]:
         for e in estimates:
             if e.identifiable or e.effective_only:
@@ -1841,6 +1867,16 @@ def _judge(
                 e.note = "effective only: " + fits["statement"] + (f"; {e.note}" if e.note else "")
     for name, row in (choice or {}).items():
         if row["supported"]:
+            continue
+        if not row.get("decided", True):  # the fit without it stopped on its budget: the converged fit with it kept
+            for e in estimates:
+                if e.name == name:  # used by the calibrated model when the fit determined it, never claimed
+                    e.effective_only = e.identifiable or e.effective_only
+                    e.identifiable, e.undecided = False, True
+                    e.note = row["statement"] + (f"; {e.note}" if e.note else "")
+                else:
+                    kept = f"the model choice of {name} is undecided: the calibrated model is the fit with it"
+                    e.note = f"{e.note}; {kept}" if e.note else kept
             continue
         for e in estimates:
             if e.name == name:
@@ -1853,4 +1889,124 @@ def _judge(
         for e in estimates:
             if e.name in ("c", "guide_friction_n") and e.identifiable:
                 e.identifiable, e.effective_only = False, True
-                e.note = "effective only: c and F_c are not told apart (" + fvd["statement"] + ")"
+                ridge = "effective only: c and F_c are not told apart (" + fvd["statement"] + ")"
+                e.note = ridge + (f"; {e.note}" if e.note else "")
+
+
+#: a fitted parameter that freeing a held-exact extra parameter moves by more than this many of its standard errors
+#: depends on the held value (`_held_exact_probe`): effective only, its interval spanning both fits'
+PROBE_SHIFT_SE = 1.0
+
+
+def _held_exact_probe(
+    obj: _Objective,
+    u: np.ndarray,
+    fit: Sequence[str],
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_rounds: int,
+    estimates: list[ParamEstimate],
+    name: str,
+) -> dict[str, Any]:
+    """Probe an extra parameter (`EXTRA_PARAMETERS`) the caller holds exactly (no stated uncertainty) while c is
+    fitted: the fit solved again with it freed (from the Gauss-Newton prediction of the fit with it, the same
+    sigmas; `model_choice.refit_without`'s machinery), and the quasi-likelihood test of the two
+    (`model_choice.choice_row`: is the richer fit supported over the held value). A fitted parameter that the
+    richer fit moves by more than `PROBE_SHIFT_SE` of its standard error depends on the held value: it is
+    effective only (the note names the held parameter and the shift) and its 95 % interval grows to span both
+    fits' intervals (the data cannot tell the two models apart, or prefer the richer one). The held value
+    stays the calibrated model's (the caller's statement). Returns the JSON ``held_exact_probe`` row."""
+    import time
+
+    from rimless.analysis.inference.model_choice import EXTRA_ROUNDS, choice_row, dispersion, refit_without
+
+    cpu = time.process_time()
+    n_g, n_t = obj.n_g, obj.n_t
+    glob2 = _Globals.of(obj.glob.base, [*fit, name])
+    obj2 = _Objective(obj.sim, glob2, obj.data, obj.tick)
+    obj2.sig = dict(obj.sig)
+    held_at = float(getattr(obj.glob.base, FIT_FIELDS[name][0]))
+    u2 = np.concatenate([u[:n_g], [0.0], u[n_g:]])  # the held fit, the parameter at its held value (relative 0)
+    lo = np.insert(bounds[0], n_g, -np.inf)
+    hi = np.insert(bounds[1], n_g, np.inf)
+    if FIT_FIELDS[name][0] == "guide_friction_n":  # a friction force is >= 0
+        lo[n_g] = -glob2.x0[n_g] / glob2.scale[n_g]
+    f2 = obj2.fun(u2)
+    J2 = obj2.jac(u2)
+    step = np.linalg.lstsq(J2, -f2, rcond=None)[0]
+    chi2_held = float(np.sum(f2**2))
+    row: dict[str, Any] = {"held_at": held_at, "fit": [*fit, name], "reason": "held exactly (no stated uncertainty)"}
+    if u2[n_g] + step[n_g] <= lo[n_g]:  # the Gauss-Newton step points below its bound: the richer fit is the held
+        row.update(
+            refit=False, converged=True, chi2_held=chi2_held, chi2_freed=chi2_held, values_freed={},
+            shifts_se={}, depends=[], cpu_s=time.process_time() - cpu,
+            statement=f"{name} freed: the Gauss-Newton step points below its bound {held_at:g}; no fitted parameter "
+            "depends on the held value",
+        )  # fmt: skip
+        return row
+    r, how = refit_without(
+        [("the Gauss-Newton prediction", np.clip(u2 + step, lo, hi)), ("the held fit", np.clip(u2, lo, hi))],
+        obj2.cost,
+        lambda x, rounds: obj2.solve(x, lo, hi, rounds),
+        lambda x: _gauss_newton_gain(obj2.jac(x), obj2.fun(x)),
+        max_rounds,
+        EXTRA_ROUNDS,
+    )
+    x_rich = r.x if obj2.cost(r.x) < chi2_held else u2  # the held fit is a point of the richer model
+    converged = bool(r.status > 0)
+    J = obj2.jac(x_rich)
+    scale_all = np.concatenate([glob2.scale, np.ones(2 * n_t)])
+    se_m, _, _, _ = least_squares_report(J, n_g + 1, scale_all)
+    se_s = sandwich_se(J, obj2.fun(x_rich), obj2.offs, n_g + 1, scale_all)
+    se_sl, _ = _slope_part(obj2, J, scale_all, _slope_moved(obj2, x_rich))
+    se_rich = [
+        max(math.hypot(float(se_m[k]), float(se_sl[k])) if math.isfinite(se_sl[k]) else float(se_m[k]), float(se_s[k]))
+        for k in range(n_g + 1)
+    ]
+    xg_rich = obj2.unpack(x_rich)[0]
+    disp = dispersion(float(se_m[n_g]), float(se_sl[n_g]), float(se_s[n_g]), None, n_t)
+    test = choice_row(
+        name, list(fit), held_at, obj2.cost(x_rich), chi2_held, True, {e.name: e.value for e in estimates}, disp
+    )  # the held fit (the simpler) converged; the richer's optimizer is the probe's own
+    test["freed_optimizer"] = how
+    if not converged:  # the freed fit stopped on its budget: delta chi^2 only a lower bound
+        test.update(decided=False, supported=False)
+        test["statement"] = (
+            f"undecided: the fit with {name} freed stopped on its budget; delta chi^2 = {test['delta_chi2']:.3g} "
+            f"is only a lower bound ({test['test']})"
+        )
+    shifts, depends = {}, []
+    for k, e in enumerate(estimates):
+        shift = float(xg_rich[k] - e.value)
+        shifts[e.name] = shift / e.se if math.isfinite(e.se) and e.se > 0 else None
+        if not (math.isfinite(e.se) and abs(shift) > PROBE_SHIFT_SE * e.se):
+            continue
+        depends.append(e.name)
+        z = 1.959963984540054
+        s2 = se_rich[k] if converged and math.isfinite(se_rich[k]) else 0.0  # an unfinished fit: its point only
+        reach = max(abs(xg_rich[k] - z * s2 - e.value), abs(xg_rich[k] + z * s2 - e.value), z * e.se)
+        why = (
+            f"effective only: it depends on {name} held exactly at {held_at:g} (no stated uncertainty): freed, "
+            f"{name} = {xg_rich[n_g]:.3g} moves {e.name} from {e.value:.4g} to {xg_rich[k]:.4g} "
+            f"({shift / e.se:+.1f} se){'' if converged else ' before its refit stopped on its budget'}, and "
+            + ("the data support it" if test["supported"] else "the trials cannot tell the two apart")
+            + f" ({test['test']}: p = {test['p_value']:.2g}); the interval spans both fits' "
+            f"(se {e.se:.3g} -> {reach / z:.3g}); state {name}'s uncertainty to carry it"
+        )
+        e.se = max(e.se, reach / z)
+        e.identifiable, e.effective_only = False, True
+        e.note = why + (f"; {e.note}" if e.note else "")
+    row.update(
+        refit=True, converged=converged, chi2_held=chi2_held, chi2_freed=obj2.cost(x_rich),
+        values_freed={n: float(v) for n, v in zip([*fit, name], xg_rich)} if converged else {},
+        se_freed={n: s for n, s in zip([*fit, name], se_rich)} if converged else {},
+        shifts_se=shifts, depends=depends, test=test, cpu_s=time.process_time() - cpu,
+        statement=(
+            f"{name} freed ({'converged' if converged else 'stopped on its budget'}): "
+            + (f"{', '.join(depends)} depend(s) on its held value" if depends else "no fitted parameter moves by "
+               f"more than {PROBE_SHIFT_SE:g} se")
+            + f"; {test['statement']}"
+        ),
+    )  # fmt: skip
+    if not converged:
+        row["stopped_at"] = {n: float(v) for n, v in zip([*fit, name], xg_rich)}
+    return row

@@ -100,6 +100,47 @@ def quasi_likelihood_p(delta_chi2: float, phi: float, dof: int | None, boundary:
     return stat, p * (0.5 if boundary else 1.0)
 
 
+DETECTION_POWER = 0.8  # the power at which `detectable_above` states the smallest value the test would find
+
+
+def detectable_above(
+    se_model: float,
+    phi: float,
+    dof: int | None,
+    boundary: bool,
+    p: float = MODEL_CHOICE_P,
+    power: float = DETECTION_POWER,
+) -> float:
+    """The smallest departure of the extra parameter from its held value that the quasi-likelihood test would
+    find with probability ``power`` at p < ``p`` (same unit as ``se_model``): in the linear regime delta chi^2 /
+    phi is noncentral chi^2_1 (F(1, dof) noncentral when dof is given) with noncentrality
+    lambda = delta^2 J_j^T (I - P_others) J_j / phi = (delta / se_model)^2 / phi (se_model^2 the inverse of that
+    Schur complement, in the parameter's unit: the Jacobian's projection off the other unknowns); lambda solved
+    for the power (scipy.stats.ncx2 / ncf), on the bound against the halved p. NaN when se_model is not finite."""
+    from scipy.optimize import brentq
+    from scipy.stats import chi2, f, ncf, ncx2
+
+    if not (math.isfinite(se_model) and se_model > 0):
+        return math.nan
+    alpha = 2.0 * p if boundary else p  # p halved on the bound: the statistic's critical value is at 2p
+    if dof is None:
+        crit = float(chi2.isf(alpha, 1))
+
+        def gap(lam: float) -> float:
+            return float(ncx2.sf(crit, 1, lam)) - power
+    else:
+        crit = float(f.isf(alpha, 1, dof))
+
+        def gap(lam: float) -> float:
+            return float(ncf.sf(crit, 1, dof, lam)) - power
+
+    hi = 10.0
+    while gap(hi) < 0 and hi < 1e6:
+        hi *= 4.0
+    lam = float(brentq(gap, 1e-9, hi, xtol=1e-10))
+    return se_model * math.sqrt(lam * max(phi, 1.0))
+
+
 def predicted_without(J: np.ndarray, f: np.ndarray, j: int, step_j: float) -> np.ndarray:
     """The Gauss-Newton (linear) prediction of the fit without parameter j from the fit with it: the step d
     that minimises |f + J d|^2 with d_j = ``step_j`` (the parameter moved to where it is held), every other
@@ -184,7 +225,10 @@ def choice_row(
     plain chi^2_1 p), the quasi-likelihood test's (``dispersion``, ``dispersion_source``, ``dispersion_dof``,
     ``statistic``, ``p_value``, ``test``), ``supported``, ``decided`` (False when the fit without it stopped on
     its budget: then delta chi^2 is only an upper bound, and the statement says what the budget left,
-    ``simpler_optimizer`` from `refit_without`) and the ``statement`` naming the dispersion used."""
+    ``simpler_optimizer`` from `refit_without`), ``calibrated_model`` (which fit the calibrated model is: "with"
+    it when supported or undecided, "without" it when not supported) and the ``statement`` naming the dispersion
+    used. ``without`` holds the fit without it's values only when that fit converged: an undecided row's are
+    where it stopped, ``simpler_optimizer["stopped_at"]``, never a result."""
     from scipy.stats import chi2
 
     delta = max(chi2_without - chi2_with, 0.0)
@@ -193,6 +237,13 @@ def choice_row(
     stat, p = quasi_likelihood_p(delta, phi, dof, boundary)
     supported = bool(p < MODEL_CHOICE_P and simpler_converged)
     nu = "inf" if dof is None else str(dof)
+    limit = detectable_above(float(disp["parts"].get("se_model", math.nan)), phi, dof, boundary)
+    limit_text = (
+        f"; these trials would find {name} only {'above' if boundary else 'beyond'} {held_at:g} "
+        f"{'+' if boundary else '+-'} {limit:.3g} ({DETECTION_POWER:.0%} power at p < {MODEL_CHOICE_P:g})"
+        if math.isfinite(limit)
+        else ""
+    )
     test = (
         f"delta chi^2 = {delta:.3g} / dispersion {phi:.3g} (from the {disp['source']}) = {stat:.3g} against "
         f"F(1, {nu}){', p halved on the bound' if boundary else ''}: p = {p:.2g}"
@@ -200,11 +251,18 @@ def choice_row(
     if supported:
         why = f"supported over the fit without it: {test}"
     elif simpler_converged:
-        why = f"not supported over the fit without it ({name} held at {held_at:g}): {test} >= {MODEL_CHOICE_P:g}"
+        why = (
+            f"not supported over the fit without it ({name} held at {held_at:g}): {test} >= {MODEL_CHOICE_P:g}"
+            + limit_text
+        )
     else:
         why = f"undecided: {_budget_statement(simpler_optimizer)}; " + (
-            f"delta chi^2 = {delta:.3g} is only an upper bound (the test on it: {test}), the test cannot be made"
+            f"delta chi^2 = {delta:.3g} is only an upper bound (the test on it: {test}), the test cannot be made; "
+            f"the calibrated model is the fit with {name} (converged), {name} not claimed"
         )
+    opt = dict(simpler_optimizer) if simpler_optimizer is not None else None
+    if not simpler_converged:  # where the unfinished fit stopped: a diagnosis, not a result
+        opt = {**(opt or {}), "stopped_at": dict(without)}
     return {
         "why_extra": EXTRA_PARAMETERS.get(name, ""),
         "simpler_fit": list(simpler_fit),
@@ -224,9 +282,12 @@ def choice_row(
         "boundary": boundary,
         "supported": supported,
         "threshold_p": MODEL_CHOICE_P,
-        "without": dict(without),
+        "detectable_above": _finite(limit),
+        "detection_power": DETECTION_POWER,
+        "without": dict(without) if simpler_converged else {},
         "decided": bool(simpler_converged),
-        "simpler_optimizer": dict(simpler_optimizer) if simpler_optimizer is not None else None,
+        "calibrated_model": "without" if simpler_converged and not supported else "with",
+        "simpler_optimizer": opt,
         "statement": why,
     }
 

@@ -16,11 +16,14 @@ them told the held wheel's legs; k fitted: the importer's bound, then again told
   diagnosis: the calibration holds the importer's slope exact, and the step periods resolve its error);
 - ``held-k``: frictionless truth, ``--fit c`` with k held 25 % off the truth (sign drawn): a misfit, counted
   as detected when the check says "does not fit" (the known gap: c may absorb it);
-- ``friction-misfit``: a truth with guide friction fitted as ``c,k`` with F_c held at 0: a misfit;
+- ``friction-misfit``: a truth with guide friction fitted as ``c,k`` with F_c held at 0: a misfit (held exactly,
+  so the calibration probes it by freeing it, `calibrate._held_exact_probe`: ``held_exact_probe`` per series and
+  per scenario, with what it flagged and its CPU time);
 - ``choice-null``: frictionless truth, ``--fit c,guide_friction_n`` (k exact): friction claimed (the
   likelihood-ratio test's p < ``MODEL_CHOICE_P``) is a false claim (nominal 1 %);
 - ``choice-friction``: a truth with friction, ``--fit c,guide_friction_n`` (k exact, F_c starting at 0):
-  friction found is the power.
+  friction found is the power (``by_detectable_above``: found where the truth lies above the model choice's
+  stated detection limit, ``detectable_above``, and below it).
 
 Reported per scenario: the rate of each verdict with its Wilson 95 % interval, the overall chi^2/dof ratios and
 p-values (how often p < 0.05 and 0.01: for the adequate and null scenarios these should be about 5 % and 1 %
@@ -237,6 +240,7 @@ CHOICE_KEYS = (
     "dispersion_dof",
     "dispersion_parts",
     "statistic",
+    "detectable_above",
 )
 
 
@@ -256,6 +260,7 @@ def _verdicts(res: Any) -> dict[str, Any]:
         },
         "noise": {k: (adq.get("noise") or {}).get(k) for k in ("com_mm", "impact_time_ms")},
         "model_choice": None if choice is None else {k: choice[k] for k in CHOICE_KEYS if k in choice},
+        "held_exact_probe": _probe(res),
         "estimates": {
             e.name: {
                 "value": e.value,
@@ -265,6 +270,26 @@ def _verdicts(res: Any) -> dict[str, Any]:
             }
             for e in res.params
         },
+    }
+
+
+def _probe(res: Any) -> dict[str, Any] | None:
+    """The held-exact probe of guide friction (`calibrate._held_exact_probe`), when run: whether it refitted,
+    converged, what depends on the held value, F_c freed, the test's figures and its CPU time."""
+    row = (getattr(res, "held_exact_probe", None) or {}).get("guide_friction_n")
+    if row is None:
+        return None
+    test = row.get("test") or {}
+    return {
+        "refit": row["refit"],
+        "converged": row["converged"],
+        "depends": list(row["depends"]),
+        "shifts_se": row["shifts_se"],
+        "friction_freed_n": (row.get("values_freed") or {}).get("guide_friction_n"),
+        "delta_chi2": test.get("delta_chi2"),
+        "p_value": test.get("p_value"),
+        "supported": test.get("supported"),
+        "cpu_s": row["cpu_s"],
     }
 
 
@@ -325,6 +350,17 @@ def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "passes": {str(n): sum(p["passes"] == n for p in sp) for n in sorted({p["passes"] for p in sp})},
         "stable": sum(bool(p["stable"]) for p in sp),
     }
+    probes = [r["held_exact_probe"] for r in done if r.get("held_exact_probe")]
+    if probes:  # F_c held exactly while c is fitted: the probe's verdicts and cost
+        out["held_exact_probe"] = {
+            "probed": len(probes),
+            "refit": sum(bool(q["refit"]) for q in probes),
+            "converged": sum(bool(q["converged"]) for q in probes),
+            "c_depends": _rate(sum("c" in q["depends"] for q in probes), len(probes)),
+            "any_depends": _rate(sum(bool(q["depends"]) for q in probes), len(probes)),
+            "supported": sum(bool(q["supported"]) for q in probes),
+            "cpu_s": sum(q["cpu_s"] for q in probes),
+        }
     mc = [r["model_choice"] for r in done if r.get("model_choice")]
     if mc:
         out["model_choice_p"] = {
@@ -337,6 +373,17 @@ def _summary(sc: Scenario, rows: list[dict[str, Any]]) -> dict[str, Any]:
             f"{a:g}-{b:g}": _rate(sum(s for f, s in fc if a <= f < b), sum(a <= f < b for f, _ in fc))
             for a, b in ((0.1, 0.3), (0.3, 0.6))
         }
+        limits = [
+            (r["truth"]["guide_friction_n"], (r.get("model_choice") or {}).get("detectable_above"), s)
+            for r, s in zip(done, said)
+        ]
+        known = [(f, lim, s) for f, lim, s in limits if lim is not None]
+        if known:  # found where the truth is above the model choice's stated detection limit, and below it
+            out["by_detectable_above"] = {
+                "above": _rate(sum(s for f, lim, s in known if f >= lim), sum(f >= lim for f, lim, _ in known)),
+                "below": _rate(sum(s for f, lim, s in known if f < lim), sum(f < lim for f, lim, _ in known)),
+                "median_limit_n": float(np.median([lim for _, lim, _ in known])),
+            }
     if sc.k_error:
         for label, sgn in (("k_held_high", 1.0), ("k_held_low", -1.0)):
             pick = [s for r, s in zip(done, said) if (r["held_k_n_per_m"] > r["truth"]["k"]) == (sgn > 0)]
