@@ -335,7 +335,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
             _fmt(p["estimate"], ".4g"),
             _fmt(p["se"], ".2g"),
             f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–",
-            "yes" if p["identifiable"] else "[red]NO[/]",
+            "yes" if p["identifiable"] else ("conditional" if p.get("status") == "conditional" else "[red]NO[/]"),
         )
     con.print(t)
     opt = out.get("optimizer", {})
