@@ -364,6 +364,13 @@ def _print_calibration(out: dict[str, Any]) -> None:
                 f"  {p['name']}: ± {p['se_held']:.2g} {p['unit']} from the held parameters (refits with each at ± 1 "
                 f"sd, in quadrature; largest: "
                 + ", ".join(f"{SYMBOLS.get(n, n)} {v:.2g}" for n, v in parts)
+                + (
+                    f"; re-centred by {p['held_shift']:+.2g} {p['unit']}, their expected shift: "
+                    + ", ".join(SYMBOLS.get(n, n) for n in p.get("held_shifts", {}))
+                    + " held at its bound can only be above it"
+                    if p.get("held_shift")
+                    else ""
+                )
                 + f"); 95 % interval with them {cih[0]:.4g}-{cih[1]:.4g}",
                 markup=False,
                 highlight=False,

@@ -372,6 +372,11 @@ class ParamEstimate:
     #: the held parameters' contribution (`held_response`): None when not computed; per held field, its part
     se_held: float | None = None
     held_contributions: dict[str, float] = dataclasses.field(default_factory=dict)
+    #: the held parameters' expected shift of the value (a held parameter at its bound, e.g. F_c = 0 +- 0.2 N,
+    #: can only be above it: `held_response`), summed and per held field, and how each field was carried
+    held_shift: float = 0.0
+    held_shifts: dict[str, float] = dataclasses.field(default_factory=dict)
+    held_carried_as: dict[str, str] = dataclasses.field(default_factory=dict)
     #: the trials' measured slopes' part (`rimless.analysis.inference.trial_slopes`), in ``se`` with se_model;
     #: per trial, its part
     se_slope: float = math.nan
@@ -402,6 +407,11 @@ class ParamEstimate:
         return math.hypot(self.se, self.se_held) if self.se_held is not None and math.isfinite(self.se) else None
 
     @property
+    def value_with_held(self) -> float:
+        """The value with the held parameters' expected shift (the centre of ``ci95_with_held``)."""
+        return self.value + self.held_shift
+
+    @property
     def ci95(self) -> tuple[float, float]:
         return (self.value - 1.959963984540054 * self.se, self.value + 1.959963984540054 * self.se)
 
@@ -425,11 +435,15 @@ class ParamEstimate:
             "se_held": self.se_held,
             "se_with_held": self.se_with_held,
             "ci95_with_held": (
-                [self.value - 1.959963984540054 * s, self.value + 1.959963984540054 * s]
+                [self.value_with_held - 1.959963984540054 * s, self.value_with_held + 1.959963984540054 * s]
                 if (s := self.se_with_held) is not None
                 else None
             ),
             "held_contributions": self.held_contributions,
+            "value_with_held": self.value_with_held if self.se_held is not None else None,
+            "held_shift": self.held_shift,
+            "held_shifts": self.held_shifts,
+            "held_carried_as": self.held_carried_as,
             "se_slope": self.se_slope,
             "slope_contributions": self.slope_contributions,
         }
@@ -1019,19 +1033,29 @@ def held_response(
 ) -> None:
     """Carry held parameters' uncertainty into the fitted ones by refitting: for each held field h with 1-sigma
     s, the least squares is solved again from the solution u with h at h + s and at h - s (the same residual
-    sigmas; every unknown re-adjusts, release speeds and shifts too); each fitted value's part is half the
-    difference of the two refits (one-sided, |refit - value|, where h - s is not a valid wheel), ``se_held`` the
-    parts in quadrature. The Jacobian's linear response was tried first and missed the refits by a factor of 5
-    (the residuals are not linear in the release speeds over that range), hence the refits: two short solves
+    sigmas; every unknown re-adjusts, release speeds and shifts too); each fitted value's change per sd is half
+    the difference of the two refits (one-sided, refit - value, where h - s is not a valid wheel). h is taken as
+    its stated normal truncated at its physical bound (`rimless.analysis.inference.held.carry_bounded`): far from
+    the bound each fitted value's part is |change per sd| and it is not shifted, as for a normal; at it (F_c
+    held at 0 +- 0.2 N: the truth's F_c can only be above) the value's expected shift is ``held_shifts[h]``
+    (sqrt(2/pi) times the change) and its part sqrt(1 - 2/pi) times the change. ``se_held``: the parts in
+    quadrature; ``held_shift``: the shifts summed (``value_with_held`` = value + held_shift, the centre of
+    ``ci95_with_held``); ``held_carried_as[h]``: how h was carried. The Jacobian's linear response was tried
+    first and missed the refits by a factor of 5 (the residuals are not linear in the release speeds over that
+    range), hence the refits: two short solves
     (warm, a few evaluations each) per held parameter. A warm refit that ends far above the fit's own cost
     (more than `REFIT_COST_RATIO` times: it stuck on a local minimum, as with guide friction, where c and F_c
     trade along a ridge) is replaced by ``recalibrate(params)``, a whole calibration from scratch at the moved
     wheel (its fitted values, None when it fails: the parameter is then not carried and the note says so)."""
+    from rimless.analysis.inference.held import carry_bounded
+
     glob = obj.glob
     base = glob.base
     x0 = obj.unpack(u)[0]
     cost0 = obj.cost(u)
     parts: list[dict[str, float]] = [{} for _ in estimates]
+    shifts: list[dict[str, float]] = [{} for _ in estimates]
+    how: dict[str, str] = {}
     try:
         for name, sd in held:
             if not sd > 0 or name in glob.fields:
@@ -1051,19 +1075,21 @@ def held_response(
                 if whole is not None:
                     moved[sign] = whole
             glob.base = base
-            if len(moved) == 2:
-                dx = np.abs(moved[1.0] - moved[-1.0]) / 2.0
-            elif len(moved) == 1:
-                dx = np.abs(next(iter(moved.values())) - x0)
-            else:
+            if not moved:
                 continue
+            change = {sign: moved[sign] - x0 if sign in moved else None for sign in (1.0, -1.0)}
+            shift, dx, how[name] = carry_bounded(v, sd, change[1.0], change[-1.0])
             for k in range(len(estimates)):
                 parts[k][name] = float(dx[k])
+                shifts[k][name] = float(shift[k])
     finally:
         glob.base = base
-    for e, pk in zip(estimates, parts):
+    for e, pk, sk in zip(estimates, parts, shifts):
         e.held_contributions = pk
         e.se_held = math.sqrt(sum(x * x for x in pk.values()))
+        e.held_shifts = {n: x for n, x in sk.items() if x != 0.0}
+        e.held_shift = float(sum(sk.values()))
+        e.held_carried_as = dict(how)
 
 
 def _estimates(

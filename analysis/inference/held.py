@@ -43,6 +43,9 @@ __all__ = [
     "trial_estimate_at",
     "WarmCritical",
     "inertia_from_trials",
+    "LOWER_BOUND",
+    "truncated_moments",
+    "carry_bounded",
 ]
 
 #: the parameters the verdicts and the trial estimates depend on (the stance pendulum's)
@@ -108,6 +111,55 @@ def combine(rows: Sequence[dict[str, Any]]) -> tuple[float, bool]:
     """(quadrature sum of the contributions, complete: every held parameter propagated)."""
     c = [r["contribution_deg"] for r in rows]
     return math.sqrt(sum(x * x for x in c if x is not None)), all(x is not None for x in c)
+
+
+#: every wheel parameter that carries an uncertainty is >= 0 (masses, inertia, L0, k, g > 0; c, F_c >= 0,
+#: `rimless.sim.model.params.validate`): its stated normal N(value, sd) is carried truncated there
+LOWER_BOUND = 0.0
+#: a truncation that moves the mean by less than this many sd is not named (far from the bound)
+TRUNCATION_NAMED = 1e-3
+
+
+def truncated_moments(value: float, sd: float, lower: float = LOWER_BOUND) -> tuple[float, float]:
+    """(mean - value, sd of the truncated) / sd of the normal N(value, sd) truncated below at ``lower``: the
+    closed forms lambda = phi(a) / (1 - Phi(a)), a = (lower - value) / sd, mean offset lambda, variance
+    1 + a lambda - lambda^2 (Johnson, Kotz and Balakrishnan, *Continuous Univariate Distributions* 1, 1994,
+    section 10.1). At the bound (value = lower) the half-normal: sqrt(2/pi) = 0.798 and sqrt(1 - 2/pi) = 0.603;
+    far above it (0, 1). ``sd`` must be > 0 and ``value`` >= ``lower``."""
+    a = (lower - value) / sd
+    tail = 0.5 * math.erfc(a / math.sqrt(2.0))  # 1 - Phi(a), accurate for a <= 0
+    lam = math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi) / tail
+    return lam, math.sqrt(max(1.0 + a * lam - lam * lam, 0.0))
+
+
+def carry_bounded(
+    value: float, sd: float, plus: Any | None, minus: Any | None, lower: float = LOWER_BOUND
+) -> tuple[Any, Any, str]:
+    """One held parameter's part in the fitted values, from their signed changes ``plus`` and ``minus`` when it is
+    moved to value + sd and value - sd (None where that is not a valid wheel, e.g. F_c < 0). Linear in the
+    parameter over +-1 sd (the change per sd: the central difference, one-sided at the bound), with the parameter
+    distributed as its stated normal truncated at ``lower`` (`truncated_moments`): returns (the fitted values'
+    mean shift, their sd, how it was carried). Far from the bound: shift 0, sd the central half difference (or
+    the one-sided change), as before; at it (F_c = 0 +- 0.2 N): shift sqrt(2/pi) times the one-sided change, sd
+    sqrt(1 - 2/pi) times it (the truth's F_c can only be above the held value)."""
+    import numpy as np
+
+    if plus is not None and minus is not None:
+        per_sd, diff = (np.asarray(plus, float) - np.asarray(minus, float)) / 2.0, "central refits at +-1 sd"
+    elif plus is not None:
+        per_sd, diff = np.asarray(plus, float), "one refit at +1 sd (-1 sd is not a valid wheel)"
+    elif minus is not None:
+        per_sd, diff = -np.asarray(minus, float), "one refit at -1 sd (+1 sd is not a valid wheel)"
+    else:
+        raise ValueError("carry_bounded needs at least one of plus, minus")
+    m, s = truncated_moments(value, sd, lower)
+    if m < TRUNCATION_NAMED:
+        return np.zeros_like(per_sd), np.abs(per_sd), f"normal {value:.4g} +- {sd:.3g}: {diff}, linear"
+    how = (
+        f"normal {value:.4g} +- {sd:.3g} truncated at its bound {lower:g} (mean {value + m * sd:.3g}, sd "
+        f"{s * sd:.3g}): {diff}, linear; the interval is re-centred by the mean shift"
+    )
+    return m * per_sd, s * np.abs(per_sd), how
 
 
 def widen(value: float, ci: tuple[float, float], se_par: float) -> list[float]:

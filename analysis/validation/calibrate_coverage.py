@@ -22,7 +22,8 @@ With ``table1`` or ``truth`` among the inputs every series' truth has drawn held
 random stream, so k, c, the labs and the slopes are those of the ``exact`` run of the same seed). Reported per
 input and parameter: how often the 95 % interval holds the truth (Wilson interval) with the held part
 (``ci95_with_held``, where it was computed) and with the data's alone (``ci95``), the median relative error, the
-rms of (estimate - truth) / se (``rms_z``: 1 for an honest se; with ``se_with_held`` where computed), the median
+rms of (estimate - truth) / se (``rms_z``: 1 for an honest se; with ``se_with_held``, about ``value_with_held``,
+where computed), the median held shift (a held parameter at its bound: F_c), the median
 parts of the se (the data's, the trial-clustered sandwich's, the measured slopes',
 `rimless.analysis.inference.trial_slopes`, and the held parameters', per held parameter too), how often the
 parameter was called identifiable (or effective only), the optimiser's end states, and every refused import and
@@ -164,13 +165,18 @@ def _user_wheel(name: str, truth: Any) -> Any:
 
 def _param_row(pe: Any, t: float) -> dict[str, Any]:
     """What one estimate says about its truth ``t`` (JSON-ready): the interval with the held part (``ci95``
-    widened by ``se_held`` where computed) and the data's alone, z with each, and the se's parts."""
+    widened by ``se_held`` and moved by ``held_shift`` where computed: ``ci95_with_held``) and the data's alone, z
+    with each (the former about ``value_with_held``), and the se's parts."""
     lo, hi = pe.ci95
     finite = math.isfinite(pe.se)
     se_all = pe.se_with_held if pe.se_with_held is not None else pe.se
-    ci_all = [pe.value - Z95 * se_all, pe.value + Z95 * se_all] if finite else None
+    centre = pe.value_with_held if pe.se_held is not None else pe.value
+    ci_all = [centre - Z95 * se_all, centre + Z95 * se_all] if finite else None
     return {
         "value": pe.value,
+        "value_with_held": centre if pe.se_held is not None else None,
+        "held_shift": pe.held_shift,
+        "held_shifts": dict(pe.held_shifts),
         "se": pe.se if finite else None,
         "ci95": [lo, hi] if finite else None,
         "covered_data": bool(finite and lo <= t <= hi),
@@ -180,7 +186,7 @@ def _param_row(pe: Any, t: float) -> dict[str, Any]:
         "relative_error": pe.value / t - 1.0,
         "identifiable": bool(pe.identifiable),
         "effective_only": bool(pe.effective_only),
-        "z": (pe.value - t) / se_all if finite and se_all > 0 else None,
+        "z": (centre - t) / se_all if finite and se_all > 0 else None,
         "z_data": (pe.value - t) / pe.se if finite and pe.se > 0 else None,
         "se_model": pe.se_model,
         "se_sandwich": pe.se_sandwich,
@@ -335,6 +341,7 @@ def _per_parameter(rows: list[dict[str, Any]], fits: list[dict[str, Any]], name:
         "median_relative_se": {
             part: _median(_rel(got, truths, part)) for part in ("se_model", "se_sandwich", "se_slope", "se_held")
         },
+        "median_relative_held_shift": _median([g.get("held_shift", 0.0) / t for g, t in zip(got, truths)]),
         "median_relative_held_contributions": {
             h: _median([g["held_contributions"][h] / t for g, t in zip(got, truths) if h in g["held_contributions"]])
             for h in held_names

@@ -79,7 +79,7 @@ def test_table1_input_carries_the_held_part_into_each_interval() -> None:
     """One series with ``inputs=("exact", "table1")`` (the real calibration): the truth's held parameters are drawn
     (not Table 1's), the exact input is told them exactly and carries nothing, the table1 input is told Table 1
     with its stated sd and carries every held parameter with sd > 0 (not g: exact; not c, k: fitted) into an
-    interval value +- 1.96 hypot(se, se_held)."""
+    interval value + held_shift +- 1.96 hypot(se, se_held), the shift F_c's alone (held at its bound 0)."""
     import math
 
     from rimless.analysis import calibrate
@@ -111,9 +111,12 @@ def test_table1_input_carries_the_held_part_into_each_interval() -> None:
         assert p["se_held"] > 0
         assert p["se_held"] == pytest.approx(math.sqrt(sum(v * v for v in p["held_contributions"].values())))
         half = 1.959963984540054 * math.hypot(p["se"], p["se_held"])
-        assert p["ci95_with_held"] == pytest.approx([p["value"] - half, p["value"] + half])
+        assert set(p["held_shifts"]) == {"guide_friction_n"}  # the others are far from their bound 0
+        centre = p["value"] + p["held_shifts"]["guide_friction_n"]
+        assert p["value_with_held"] == pytest.approx(centre) and p["held_shift"] == p["held_shifts"]["guide_friction_n"]
+        assert p["ci95_with_held"] == pytest.approx([centre - half, centre + half])
         truth = row["truth"][name]
-        assert p["covered"] == (abs(p["value"] - truth) <= half)
+        assert p["covered"] == (abs(centre - truth) <= half)
         assert p["covered_data"] == (p["ci95"][0] <= truth <= p["ci95"][1])
         d = out["inputs"]["table1"]["parameters"][name]
         assert d["held_carried"] == 1 and d["covered"] == int(p["covered"])
