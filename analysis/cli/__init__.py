@@ -433,8 +433,8 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
         )
         for w in c["warnings"]:
             echo_text(f"warning: {w}", err=True)
-    for r in res.refused:
-        echo_text(f"refused: {r.reason}", err=True)
+    for r in res.refused:  # the `error:` line of a refused input, as `trials import` prints it (exit 2)
+        echo_text(f"error: {r.reason}", err=True)
     for c in res.comparisons:
         if c.status != "ok":
             echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True)
