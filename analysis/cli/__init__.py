@@ -498,11 +498,12 @@ def report_cmd(
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes, up_axis)
-    from rimless.analysis.inference.runs import wheel_input
+    from rimless.analysis.inference.runs import no_fit_here, wheel_input
     from rimless.analysis.report.batch import robot_log_pairs
 
     logs = robot_log_pairs(robot_log or [], trials)
     win = wheel_input(params)
+    no_fit_here(win, (), "trials report fits no parameter of a wheel file (it compares at the held values)")
     res = run_report(
         trials,
         out,
@@ -538,10 +539,11 @@ def demo_cmd(
     params: ParamsOpt = None,
 ) -> None:
     """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
-    from rimless.analysis.inference.runs import wheel_input
+    from rimless.analysis.inference.runs import no_fit_here, wheel_input
     from rimless.analysis.report.batch import run_demo
 
     win = wheel_input(params)
+    no_fit_here(win, (), "rimless demo fits no parameter of a wheel file (its calibration of c is shown beside)")
 
     def starting(n: int) -> None:
         if not json_out:
