@@ -412,6 +412,8 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
     """The table (or the JSON summary) of a `rimless.analysis.report.batch.run_report` result."""
     if json_out:
         print_json(res.summary())
+        for r in res.refused:  # stderr, as without --json: a refused input says why on the error stream too
+            echo_text(f"error: {r.reason}", err=True)
         return
     from rich.console import Console
 

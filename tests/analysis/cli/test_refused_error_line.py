@@ -45,7 +45,8 @@ def test_report_refused_input_prints_an_error_line(tmp_path, capsys):
     bad = _broken_copy(tmp_path)
     rep = build_report([good, bad], tmp_path / "rep", import_kwargs={"max_gap_s": 0.05}, critical=False)
     assert [Path(r.file).name for r in rep.refused] == [bad.name]
-    _print_report(rep, "er", json_out=False)
-    err = capsys.readouterr().err.splitlines()
-    refusals = [ln for ln in err if bad.name in ln]
-    assert len(refusals) == 1 and refusals[0].startswith("error: ") and "line 30" in refusals[0], err
+    for json_out in (False, True):  # with --json too: stdout the JSON, the refusal on stderr
+        _print_report(rep, "er", json_out=json_out)
+        err = capsys.readouterr().err.splitlines()
+        refusals = [ln for ln in err if bad.name in ln]
+        assert len(refusals) == 1 and refusals[0].startswith("error: ") and "line 30" in refusals[0], (json_out, err)
