@@ -412,6 +412,8 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
     """The table (or the JSON summary) of a `rimless.analysis.report.batch.run_report` result."""
     if json_out:
         print_json(res.summary())
+        for r in res.refused:  # stderr, as without --json: a refused input says why on the error stream too
+            echo_text(f"error: {r.reason}", err=True)
         return
     from rich.console import Console
 
@@ -433,8 +435,8 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
         )
         for w in c["warnings"]:
             echo_text(f"warning: {w}", err=True)
-    for r in res.refused:
-        echo_text(f"refused: {r.reason}", err=True)
+    for r in res.refused:  # the `error:` line of a refused input, as `trials import` prints it (exit 2)
+        echo_text(f"error: {r.reason}", err=True)
     for c in res.comparisons:
         if c.status != "ok":
             echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True)
@@ -498,11 +500,12 @@ def report_cmd(
     if model not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     kwargs = import_options(object_, markers, hub_offset_mm, slope_deg, leg_length_m, max_gap_ms, slopes, up_axis)
-    from rimless.analysis.inference.runs import wheel_input
+    from rimless.analysis.inference.runs import no_fit_here, wheel_input
     from rimless.analysis.report.batch import robot_log_pairs
 
     logs = robot_log_pairs(robot_log or [], trials)
     win = wheel_input(params)
+    no_fit_here(win, (), "trials report fits no parameter of a wheel file (it compares at the held values)")
     res = run_report(
         trials,
         out,
@@ -538,10 +541,11 @@ def demo_cmd(
     params: ParamsOpt = None,
 ) -> None:
     """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
-    from rimless.analysis.inference.runs import wheel_input
+    from rimless.analysis.inference.runs import no_fit_here, wheel_input
     from rimless.analysis.report.batch import run_demo
 
     win = wheel_input(params)
+    no_fit_here(win, (), "rimless demo fits no parameter of a wheel file (its calibration of c is shown beside)")
 
     def starting(n: int) -> None:
         if not json_out:

@@ -86,10 +86,11 @@ def floquet_cmd(
         legs = import_wheel(params, rigid_legs=False)
         opts = {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up, "wheel": legs}
         loaded = load_trials(trials, opts)
-        for r in loaded.refused:
-            typer.echo(f"refused: {r}", err=True)
-        if not loaded.trials:
-            typer.echo("error: no trial could be read (see the refusals above)", err=True)
+        for r in loaded.refused:  # the `error:` line of a refused input, as `trials import` prints it (exit 2)
+            typer.echo(f"error: {r}", err=True)
+        if not loaded.trials:  # every input refused: their `error:` lines above say why
+            if not loaded.refused:
+                typer.echo("error: no trial could be read", err=True)
             raise typer.Exit(EXIT_USER_ERROR if loaded.refused else EXIT_FAILURE)
         res = floquet(
             loaded.trials,

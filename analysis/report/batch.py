@@ -218,9 +218,16 @@ def run_report(
             sim = Simulator(model=model, params=params)
             bar.update(description="comparing")
 
-            def step(name: str) -> None:
-                bar.update(description=f"compared {name}")
-                bar.advance()
+            compared = 0
+
+            def step(name: str) -> None:  # one call per input, then one per later stage (critical slope, ...)
+                nonlocal compared
+                if compared < len(files):  # the bar counts the inputs: a later stage never takes it past them
+                    compared += 1
+                    bar.update(description=f"compared {name}")
+                    bar.advance()
+                else:
+                    bar.update(description=name)
 
             res = build_report(
                 files,

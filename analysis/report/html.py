@@ -595,7 +595,10 @@ def _html(
             from rimless.analysis.inference.runs import calibrated_input
 
             fitted = [q for q in calibrated_input(win, res.calibration).parameters() if q["source"] == "fitted"]
-        parts.append(parameters_html(res.parameters, fitted, text))
+        # what the critical slope from the trials took from them instead (the inertia): the page says it too
+        crit_params = (res.critical.parameters if res.critical is not None else None) or []
+        from_trials = [q for q in crit_params if q.get("source") == "trials"]
+        parts.append(parameters_html(res.parameters, fitted, text, from_trials))
     series = list(dict.fromkeys(getattr(g, "series", "") for g in res.groups))
     parts.append(
         '<h2 id="step-period">Step period</h2><figure>'

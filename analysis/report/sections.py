@@ -41,6 +41,7 @@ SOURCE_LABELS = {
     "wheel": "Wheel (Python API)",
     "leg_test_prior": "leg test",
     "fitted": "fitted",
+    "trials": "the trials' step periods",
 }
 
 
@@ -215,19 +216,31 @@ def trial_sections_html(sections: Sequence[TrialSection], text: Callable[[Any], 
 
 
 def parameters_html(
-    parameters: Sequence[dict[str, Any]], fitted: Sequence[dict[str, Any]], text: Callable[[Any], str]
+    parameters: Sequence[dict[str, Any]],
+    fitted: Sequence[dict[str, Any]],
+    text: Callable[[Any], str],
+    from_trials: Sequence[dict[str, Any]] = (),
 ) -> str:
     """Every model parameter with its value, 1-sigma uncertainty, unit, source and basis; ``fitted``: the
-    parameters fitted on these trials (the calibrated model), listed after the held ones."""
+    parameters fitted on these trials (the calibrated model), listed after the held ones; ``from_trials``: those
+    the critical slope from the trials took from the trials instead (source ``trials``: the inertia from the
+    step periods), listed last."""
     out = [
         '<h2 id="parameters-heading">Wheel parameters</h2><div class="wide"><table id="parameters"><thead><tr>'
         "<th>parameter</th><th>value</th><th>1 sigma</th><th>unit</th><th>source</th><th>basis</th></tr></thead>"
         "<tbody>"
     ]
-    for p, role in [(p, "held") for p in parameters] + [(p, "fitted") for p in fitted]:
+    roles = [(p, "held") for p in parameters] + [(p, "fitted") for p in fitted]
+    roles += [(p, "from-trials") for p in from_trials]
+    only = {
+        "held": "",
+        "fitted": " (the calibrated model only)",
+        "from-trials": " (the critical slope from the trials only)",
+    }
+    for p, role in roles:
         sd = "exact" if p["sd"] == 0 else format(p["sd"], ".3g")
         label = SOURCE_LABELS.get(p["source"], p["source"])
-        what = "" if role == "held" else " (the calibrated model only)"
+        what = only[role]
         out.append(
             f'<tr class="parameter {role}"><td>{text(p["symbol"])} <span class="small">{text(p["name"])}</span></td>'
             f'<td class="n">{num(p["value"], ".4g")}</td><td class="n">{sd}</td><td>{text(p["unit"])}</td>'
@@ -238,7 +251,7 @@ def parameters_html(
         "<p class=\"small\">The comparisons and the model's critical slope use the held values; the critical slopes' "
         'intervals carry their uncertainty (docs/trials.md, "What is held, is carried"). Sources: Table 1 (the '
         "paper's, with an assumed uncertainty), wheel file (--params), Wheel (Python API), leg test (--prior), "
-        "fitted (on these trials).</p>"
+        "fitted (on these trials), the trials' step periods (an inertia the wheel input does not state).</p>"
     )
     return "\n".join(out)
 
