@@ -17,7 +17,7 @@ from typing import Annotated, Any
 import typer
 
 from rimless.analysis.cli.adequacy import register as register_adequacy
-from rimless.analysis.cli.critical import ParamsOpt, critical_lines, held_lines
+from rimless.analysis.cli.critical import ParamsOpt, critical_lines, held_lines, print_refused
 from rimless.analysis.cli.critical import register as register_critical
 from rimless.analysis.cli.floquet import register as register_floquet
 from rimless.analysis.cli.leg import register as register_leg
@@ -412,8 +412,7 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
     """The table (or the JSON summary) of a `rimless.analysis.report.batch.run_report` result."""
     if json_out:
         print_json(res.summary())
-        for r in res.refused:  # stderr, as without --json: a refused input says why on the error stream too
-            echo_text(f"error: {r.reason}", err=True)
+        print_refused(r.reason for r in res.refused)  # stderr, as without --json
         return
     from rich.console import Console
 
@@ -435,8 +434,7 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
         )
         for w in c["warnings"]:
             echo_text(f"warning: {w}", err=True)
-    for r in res.refused:  # the `error:` line of a refused input, as `trials import` prints it (exit 2)
-        echo_text(f"error: {r.reason}", err=True)
+    print_refused(r.reason for r in res.refused)
     for c in res.comparisons:
         if c.status != "ok":
             echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True)

@@ -8,13 +8,14 @@ Only typer and the standard library at module level (``rimless --help`` stays fa
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn
 
 import typer
 
 from rimless.analysis.cli.names import names_shown
-from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
+from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, echo_text, print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.values import parse_list
 
@@ -117,10 +118,9 @@ def critical_slope_cmd(
         import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
         group_tol_deg=group_tol_deg,
     )
-    _print_refused(run.loaded.refused)
+    print_refused(run.loaded.refused)
     if run.result is None:
-        typer.echo("error: no trial could be read (see the refusals above)", err=True)
-        raise typer.Exit(EXIT_REFUSED if run.loaded.refused else EXIT_FAILURE)
+        exit_nothing_read(run.loaded.refused)
     if run.calibration_skipped is not None:
         typer.echo(f"calibration skipped: {run.calibration_skipped}", err=True)
     res, out = run.result, run.summary()
@@ -145,9 +145,19 @@ def _up(up_axis: str | None) -> str | None:
     return key
 
 
-def _print_refused(refused: list[str]) -> None:
-    for r in refused:
-        typer.echo(f"refused: {r}", err=True)
+def print_refused(reasons: Iterable[str]) -> None:
+    """One ``error:`` line on stderr per refused input (its reason names the file, line and column), as
+    `trials import` prints it, with or without ``--json``; the `trials` commands that read exports share it."""
+    for reason in reasons:
+        echo_text(f"error: {reason}", err=True)
+
+
+def exit_nothing_read(refused: list[str]) -> NoReturn:
+    """No trial could be read: every input refused exits 2, their `print_refused` lines saying why (no summary
+    line doubling them); no input at all says so and exits 1."""
+    if not refused:
+        typer.echo("error: no trial could be read", err=True)
+    raise typer.Exit(EXIT_REFUSED if refused else EXIT_FAILURE)
 
 
 def _print_critical(res: Any, out: dict[str, Any]) -> None:
@@ -301,10 +311,9 @@ def calibrate_cmd(
         import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
         prior_path=prior,
     )
-    _print_refused(run.loaded.refused)
+    print_refused(run.loaded.refused)
     if not run.loaded.trials:
-        typer.echo("error: no trial could be read (see the refusals above)", err=True)
-        raise typer.Exit(EXIT_REFUSED if run.loaded.refused else EXIT_FAILURE)
+        exit_nothing_read(run.loaded.refused)
     if run.failure is not None:
         typer.echo(f"error: {run.failure}", err=True)
         raise typer.Exit(EXIT_FAILURE)

@@ -12,7 +12,15 @@ from typing import Annotated, Any, Literal
 
 import typer
 
-from rimless.analysis.cli.critical import GapOpt, ParamsOpt, SlopeOpt, UpOpt, parameter_lines
+from rimless.analysis.cli.critical import (
+    GapOpt,
+    ParamsOpt,
+    SlopeOpt,
+    UpOpt,
+    exit_nothing_read,
+    parameter_lines,
+    print_refused,
+)
 from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
 from rimless.errors import ParameterError
 
@@ -86,12 +94,9 @@ def floquet_cmd(
         legs = import_wheel(params, rigid_legs=False)
         opts = {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up, "wheel": legs}
         loaded = load_trials(trials, opts)
-        for r in loaded.refused:  # the `error:` line of a refused input, as `trials import` prints it (exit 2)
-            typer.echo(f"error: {r}", err=True)
-        if not loaded.trials:  # every input refused: their `error:` lines above say why
-            if not loaded.refused:
-                typer.echo("error: no trial could be read", err=True)
-            raise typer.Exit(EXIT_USER_ERROR if loaded.refused else EXIT_FAILURE)
+        print_refused(loaded.refused)
+        if not loaded.trials:
+            exit_nothing_read(loaded.refused)
         res = floquet(
             loaded.trials,
             wheel,
