@@ -76,7 +76,12 @@ def critical_slope_run(
     """Verdicts and the critical slope from the trials beside the models'; with ``calibrate_c`` also c
     calibrated on the trials (first model) and that model's critical slope."""
     win = wheel_input(params_path)
-    no_fit_here(win, ("damping_ns_per_m",) if calibrate_c else (), "trials critical-slope fits only c (--calibrated)")
+    no_fit_here(
+        win,
+        ("damping_ns_per_m",) if calibrate_c else (),
+        '"fit" is taken only by `trials calibrate`; trials critical-slope fits c with --calibrated (no other)',
+        "otherwise give a value (and sd)",
+    )
     wheel = win.params
     with progress_bar("importing") as bar:
         legs = _wheel(win, "rigid" if models and all(m == "rigid" for m in models) else "er")

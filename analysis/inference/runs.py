@@ -82,16 +82,17 @@ def wheel_input(path: Path | None) -> Any:
     return read_wheel_input(path)
 
 
-def no_fit_here(win: Any, allowed: tuple[str, ...], what: str) -> None:
-    """A wheel file marking a parameter "fit" where the command cannot fit it: a `ParameterError` naming both."""
+def no_fit_here(
+    win: Any, allowed: tuple[str, ...], what: str, remedy: str = "give a value (and sd) or use `trials calibrate`"
+) -> None:
+    """A wheel file marking a parameter "fit" where the command cannot fit it: a `ParameterError` naming both,
+    and what to do instead (`remedy`)."""
     from rimless.sim.model.uncertain import SYMBOLS
 
     extra = [n for n in win.fit if n not in allowed]
     if extra:
         names = ", ".join(SYMBOLS[n] for n in extra)
-        raise ParameterError(
-            f'{win.path}: key {names} = "fit": {what}; give a value (and sd) or use `trials calibrate`'
-        )
+        raise ParameterError(f'{win.path}: key {names} = "fit": {what}; {remedy}')
 
 
 def calibrated_input(win: Any, cal: CalibrationResult) -> Any:

@@ -28,3 +28,34 @@ def test_a_fit_mark_is_refused_before_any_work(tmp_path, command, json_out):
     lines = stderr_lines(res.stderr)
     assert len(lines) == 1 and lines[0].startswith(f"error: {wheel}: key c"), lines
     assert res.stdout == "" and not out.exists()
+
+
+@pytest.mark.parametrize(("mark", "calibrated"), [("c", False), ("k", False), ("k", True)])
+def test_critical_slope_fit_mark_says_what_to_do(tmp_path, mark, calibrated):
+    """`trials critical-slope` refusing a "fit" mark says where "fit" is taken and that it fits c with
+    --calibrated; before, with ``c = "fit"`` it said "fits only c (--calibrated)" while refusing c."""
+    wheel = tmp_path / "wheel.toml"
+    wheel.write_text(f'[wheel]\n{mark} = "fit"\n', encoding="utf-8")
+    trial = tmp_path / "t.csv"
+    trial.write_bytes(b"")  # never read: the wheel file is refused first
+    extra = ["--calibrated"] if calibrated else []
+    res = runner.invoke(app, ["trials", "critical-slope", str(trial), "--params", str(wheel), *extra])
+    assert res.exit_code == 2, res.output
+    lines = stderr_lines(res.stderr)
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f'error: {wheel}: key {mark} = "fit": "fit" is taken only by `trials calibrate`; '), (
+        lines
+    )
+    assert "trials critical-slope fits c with --calibrated" in lines[0], lines
+    assert "fits only c" not in lines[0], lines
+
+
+def test_critical_slope_calibrated_takes_a_c_fit_mark(tmp_path):
+    """With --calibrated, ``c = "fit"`` is what the command does: the wheel file passes (the trial is read next)."""
+    wheel = tmp_path / "wheel.toml"
+    wheel.write_text('[wheel]\nc = "fit"\n', encoding="utf-8")
+    res = runner.invoke(
+        app, ["trials", "critical-slope", str(tmp_path / "none.csv"), "--params", str(wheel), "--calibrated"]
+    )
+    assert res.exit_code == 2, res.output
+    assert "fit" not in res.stderr and "none.csv" in res.stderr, res.stderr
