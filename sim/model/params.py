@@ -11,6 +11,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from rimless.errors import InputFileError, ParameterError
@@ -100,6 +101,7 @@ class WheelParams:
         return d
 
 
+_FIELDS = tuple(f.name for f in dataclasses.fields(WheelParams))
 _POSITIVE = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "stiffness_n_per_m", "gravity_m_s2")
 
 
@@ -118,20 +120,24 @@ OPTION_OF_FIELD = {
 }
 
 
-def _name(field: str) -> str:
-    return f"{field} [{OPTION_OF_FIELD[field]}]"
+def validate(p: Any, spelled: dict[str, str] | None = None) -> None:
+    """Raise ParameterError naming the first invalid parameter of `p` (a `WheelParams`, or any object with its
+    fields): by its field and command-line option, or with ``spelled`` (a parameter file's keys as written,
+    field -> key) by the file's key, since no option was given."""
 
+    def _name(field: str) -> str:
+        if spelled is not None:
+            return spelled.get(field, field)
+        return f"{field} [{OPTION_OF_FIELD[field]}]"
 
-def validate(p: WheelParams) -> None:
-    """Raise ParameterError naming the first invalid parameter."""
-    for f in dataclasses.fields(p):
-        if f.name == "mass_model":
+    for name in _FIELDS:
+        if name == "mass_model":
             continue
-        value = getattr(p, f.name)
+        value = getattr(p, name)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParameterError(f"parameter {_name(f.name)} must be a number, got {value!r}")
+            raise ParameterError(f"parameter {_name(name)} must be a number, got {value!r}")
         if not math.isfinite(value):
-            raise ParameterError(f"parameter {_name(f.name)} must be finite, got {value}")
+            raise ParameterError(f"parameter {_name(name)} must be finite, got {value}")
     for name in _POSITIVE:
         if getattr(p, name) <= 0.0:
             raise ParameterError(f"parameter {_name(name)} must be > 0, got {getattr(p, name)}")
@@ -178,24 +184,34 @@ _ALIASES = {
 PARAM_ALIASES = _ALIASES
 
 
-def params_from_mapping(values: dict[str, Any], *, base: WheelParams | None = None, source: str = "") -> WheelParams:
-    """Build parameters from a mapping of field names or paper symbols (`slope_deg` accepted)."""
+def params_from_mapping(
+    values: dict[str, Any], *, base: WheelParams | None = None, source: str = "", name_keys: bool = False
+) -> WheelParams:
+    """Build parameters from a mapping of field names or paper symbols (`slope_deg` accepted). An invalid value
+    is named by its field and `rimless sim` option, or with ``name_keys`` (a parameter file) by its key as the
+    mapping spells it."""
     where = f" in {source}" if source else ""
     changes: dict[str, Any] = {}
+    spelled: dict[str, str] = {}  # field -> the key as the mapping spells it (error messages name it)
     for key, value in values.items():
         if key == "slope_deg":
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ParameterError(f"parameter slope_deg{where} must be a number, got {value!r}")
             changes["slope_rad"] = math.radians(value)
+            spelled["slope_rad"] = key
         elif key in _ALIASES:
             changes[_ALIASES[key]] = value
+            spelled[_ALIASES[key]] = key
         else:
             known = ", ".join(sorted(set(_ALIASES) | {"slope_deg"}))
             raise ParameterError(f"unknown parameter {key!r}{where}; known: {known}")
     if "slope_deg" in values and ("slope_rad" in values or "phi" in values):
         raise ParameterError(f"give the slope once{where}: slope_deg or slope_rad, not both")
-    try:
-        return dataclasses.replace(base or WheelParams(), **changes)
+    base = base or WheelParams()
+    try:  # a file's values checked first with its keys as names (no `rimless sim` option was given)
+        if name_keys:
+            validate(SimpleNamespace(**{**{f: getattr(base, f) for f in _FIELDS}, **changes}), spelled)
+        return dataclasses.replace(base, **changes)
     except ParameterError as err:
         raise ParameterError(f"{err}{where}") from None
 
@@ -221,4 +237,4 @@ def load_params(path: str | Path, *, base: WheelParams | None = None) -> WheelPa
         for k, v in data.items()
         if not (v == "fit" or (isinstance(v, dict) and "value" not in v))
     }
-    return params_from_mapping(data, base=base, source=str(path))
+    return params_from_mapping(data, base=base, source=str(path), name_keys=True)

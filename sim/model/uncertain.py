@@ -238,7 +238,7 @@ def read_wheel_input(path: str | Path) -> WheelInput:
                 raise ParameterError(f'{where}: expected a number, {{value = ..., sd = ...}} or "fit", got {raw!r}')
             plain[key] = raw
     try:
-        params = params_from_mapping(plain, source=str(path))
+        params = params_from_mapping(plain, source=str(path), name_keys=True)
     except ParameterError as err:
         raise ParameterError(str(err).replace(f" in {path}", "") + f" (in {path})") from None
     win = default_wheel_input(params, source="wheel_file")
