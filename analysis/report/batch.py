@@ -153,10 +153,10 @@ def import_parameters(import_kwargs: dict[str, Any]) -> list[dict[str, Any]]:
     wheel = import_kwargs.get("wheel")
     legs = leg_compliance(wheel)
     rows: list[dict[str, Any]] = []
-    win = getattr(wheel, "input", None)
-    from_wheel = win is not None and legs.time_s > 0 and legs.time_s != UNKNOWN_LEG_TIME_S
-    if from_wheel:
-        rows += [win.entries[n].as_dict() for n in LEG_FIELDS]
+    entries = getattr(getattr(wheel, "input", wheel), "entries", None)  # a `Wheel` or a wheel input
+    from_wheel = isinstance(entries, dict) and 0 < legs.time_s != UNKNOWN_LEG_TIME_S
+    if isinstance(entries, dict) and from_wheel:
+        rows += [entries[n].as_dict() for n in LEG_FIELDS]
     source = "derived" if from_wheel else ("rigid_legs" if legs.time_s == 0 else "assumed_bound")
     rows.append(
         {
