@@ -134,7 +134,7 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
     return row
 
 
-#: The legs of `import_trial`'s wheel whose values set the slope interval's drift allowance (sqrt(M / k), M = m_H + 8 m).
+#: The wheel's parameters that set the slope interval's drift allowance sqrt(M / k), M = m_H + 8 m.
 LEG_FIELDS = ("hub_mass_kg", "leg_mass_kg", "stiffness_n_per_m")
 
 
@@ -145,8 +145,8 @@ def import_parameters(import_kwargs: dict[str, Any]) -> list[dict[str, Any]]:
     The legs' drift time sqrt(M / k) (M = m_H + 8 m, s) in the slope's interval (`slope_evidence.leg_compliance`,
     its own words in ``basis``): ``derived`` from the wheel's masses and k (listed with their sources) when the
     wheel gives them (``sd`` None: see theirs), else the importer's bound (``assumed_bound``, ``sd`` None: a bound,
-    not a measurement) or 0 for rigid legs (``rigid_legs``); and the leg length when
-    given (``leg_length_m``, held exact)."""
+    not a measurement) or 0 for rigid legs (``rigid_legs``); and the leg length when given (``leg_length_m``,
+    held exact)."""
     from rimless.analysis.kinematics.slope_evidence import UNKNOWN_LEG_TIME_S, leg_compliance
     from rimless.sim.model.uncertain import ParamInput
 
@@ -216,8 +216,8 @@ def import_files(
 ) -> list[dict[str, Any]]:
     """Import each export and write ``out/<name>.trial.parquet``; a refused file does not stop the others.
 
-    One `import_row` per file, each with ``parameters`` (`import_parameters`: what the import held); keys starting with ``_`` (the written path, the outcome's reason) are for the
-    table and are not part of the JSON contract. A folder or a missing input, or an ``out`` that cannot be
+    One `import_row` per file, each with ``parameters`` (`import_parameters`: what the import held); keys starting
+    with ``_`` (the written path, the outcome's reason) are for the table and are not part of the JSON contract. A folder or a missing input, or an ``out`` that cannot be
     written, stops before any work (`UserError`).
     """
     check_inputs(files)
