@@ -183,6 +183,10 @@ def import_cmd(
             )
         console = Console()
         console.print(table)
+        if any(r["status"] == "imported" for r in rows):  # what the slope intervals held
+            from rimless.analysis.report.batch import parameters_line
+
+            typer.echo(parameters_line(rows[0]["parameters"]))
         for r in rows:
             name = Path(r["file"]).name
             if r["status"] == "imported":

@@ -30,6 +30,8 @@ __all__ = [
     "check_inputs",
     "import_row",
     "import_files",
+    "import_parameters",
+    "parameters_line",
     "run_report",
     "run_demo",
     "demo_inputs",
@@ -132,6 +134,60 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
     return row
 
 
+#: The wheel's parameters that set the slope interval's drift allowance sqrt(M / k), M = m_H + 8 m.
+LEG_FIELDS = ("hub_mass_kg", "leg_mass_kg", "stiffness_n_per_m")
+
+
+def import_parameters(import_kwargs: dict[str, Any]) -> list[dict[str, Any]]:
+    """The ``parameters`` of ``trials import --json``: what the importer held, in the entry format of the other
+    commands (`rimless.sim.model.uncertain.ParamInput.as_dict`: name, symbol, value, sd, unit, source, basis).
+
+    The legs' drift time sqrt(M / k) (M = m_H + 8 m, s) in the slope's interval (`slope_evidence.leg_compliance`,
+    its own words in ``basis``): ``derived`` from the wheel's masses and k (listed with their sources) when the
+    wheel gives them (``sd`` None: see theirs), else the importer's bound (``assumed_bound``, ``sd`` None: a bound,
+    not a measurement) or 0 for rigid legs (``rigid_legs``); and the leg length when given (``leg_length_m``,
+    held exact)."""
+    from rimless.analysis.kinematics.slope_evidence import UNKNOWN_LEG_TIME_S, leg_compliance
+    from rimless.sim.model.uncertain import ParamInput
+
+    wheel = import_kwargs.get("wheel")
+    legs = leg_compliance(wheel)
+    rows: list[dict[str, Any]] = []
+    entries = getattr(getattr(wheel, "input", wheel), "entries", None)  # a `Wheel` or a wheel input
+    from_wheel = isinstance(entries, dict) and 0 < legs.time_s != UNKNOWN_LEG_TIME_S
+    if isinstance(entries, dict) and from_wheel:
+        rows += [entries[n].as_dict() for n in LEG_FIELDS]
+    source = "derived" if from_wheel else ("rigid_legs" if legs.time_s == 0 else "assumed_bound")
+    rows.append(
+        {
+            "name": "leg_drift_time_s",
+            "symbol": "sqrt(M/k)",
+            "value": legs.time_s,
+            "sd": 0.0 if legs.time_s == 0 else None,
+            "unit": "s",
+            "source": source,
+            "basis": f"the slope interval's allowance for the legs' compression drift: {legs.source}",
+        }
+    )
+    leg_length = import_kwargs.get("leg_length_m")
+    if leg_length is not None:
+        given = "given (--leg-length-m / leg_length_m=): CoM height from the slope plane, held exact"
+        rows.append(ParamInput("leg_length_m", float(leg_length), 0.0, "given", given).as_dict())
+    return rows
+
+
+def parameters_line(parameters: list[dict[str, Any]]) -> str:
+    """``parameters`` as one printed line: symbol = value (± sd or exact/bound) unit [source]."""
+    parts = []
+    for p in parameters:
+        if p["sd"] is None or p["sd"] == 0:
+            how = "exact" if p["sd"] == 0 else ("bound" if p["source"] == "assumed_bound" else "derived")
+            parts.append(f"{p['symbol']} = {p['value']:.4g} {p['unit']} ({how}) [{p['source']}]")
+        else:
+            parts.append(f"{p['symbol']} = {p['value']:.4g} ± {p['sd']:.3g} {p['unit']} [{p['source']}]")
+    return "held parameters (slope interval): " + "; ".join(parts)
+
+
 def _stem(path: Path) -> str:
     name = path.name
     for suffix in (".csv", ".c3d", ".txt"):
@@ -160,18 +216,19 @@ def import_files(
 ) -> list[dict[str, Any]]:
     """Import each export and write ``out/<name>.trial.parquet``; a refused file does not stop the others.
 
-    One `import_row` per file; keys starting with ``_`` (the written path, the outcome's reason) are for the
-    table and are not part of the JSON contract. A folder or a missing input, or an ``out`` that cannot be
+    One `import_row` per file, each with ``parameters`` (`import_parameters`: what the import held); keys starting
+    with ``_`` (the written path, the outcome's reason) are for the table and are not part of the JSON contract. A folder or a missing input, or an ``out`` that cannot be
     written, stops before any work (`UserError`).
     """
     check_inputs(files)
     writable_dir(out, option="--out")
+    held = import_parameters(import_kwargs)
     rows: list[dict[str, Any]] = []
     # one file as several: a transient bar on a terminal (an import takes seconds), plain lines off one with --json
     with progress_bar("importing", total=len(files), json_out=json_out) as bar:
         for f in files:
             bar.update(description=f"importing {f.name}")
-            rows.append(_import_one(f, out, import_kwargs))
+            rows.append({**_import_one(f, out, import_kwargs), "parameters": held})
             bar.advance()
     return rows
 

@@ -40,10 +40,11 @@ CONTRACT = {
     "slope_ci_deg",
     "up_axis",
     "hub_offset_sd_mm",
+    "parameters",
 }  # the issues' keys, plus the path of the trial written (None when
 # refused); slope_source (ramp | given | estimated) and slope_ci_deg ([low, high]) are issue 19's; up_axis (the lab
-# axis taken as up, found or given by --up-axis) and hub_offset_sd_mm (the fitted hub offset's standard error) issue
-# 31's
+# axis taken as up, found or given by --up-axis), hub_offset_sd_mm (the fitted hub offset's standard error) and
+# parameters (what the slope interval held) issue 31's
 
 
 @pytest.fixture()
