@@ -161,25 +161,10 @@ class _Sim:
     def frequencies(self, params: Any, slope_deg: float, w: float, n: int, offset: float = 0.0) -> np.ndarray:
         """Step frequencies (1/s) of the n steps after the release step from (-alpha/2, w), the post-impact
         angle after it moved by ``offset`` (rad), on the compiled step map; 0 for steps not reached (the wheel
-        stalled or the step failed)."""
-        from rimless.sim.fast import fast_step
-        from rimless.sim.model.failures import StepFailure
-        from rimless.sim.step.fast_map import friction_step
-
+        stalled or the step failed): `release.map_frequencies`."""
         self.calls += 1
         p = params.replace(slope_rad=math.radians(slope_deg))
-        z = np.array([-ALPHA_RAD / 2, w])
-        out = np.zeros(n)
-        step = fast_step if p.guide_friction_n == 0.0 else friction_step  # guide friction: phase by phase
-        try:
-            for k in range(n + 1):
-                r = step(p, self.model, z, rtol=self.rtol)
-                if k:
-                    out[k - 1] = 1.0 / r.period_s
-                z = r.z_next + np.array([offset if k == 0 else 0.0, 0.0])
-        except StepFailure:
-            pass
-        return out
+        return release.map_frequencies(p, self.model, w, n, offset, self.rtol)
 
     def walk(self, params: Any, slope_deg: float, w: float, n: int, record: bool, offset: float = 0.0) -> Any:
         """`simulate_steps` from the rigid-touchdown release, the first post-impact angle moved by ``offset``

@@ -23,6 +23,23 @@ def _wheel(sd_friction: float):
     return Wheel(uncertainty={f: (sd_friction if f == "guide_friction_n" else 0.0) for f in UNCERTAIN_FIELDS})
 
 
+def _calibrated_c_held_friction_zero(friction_n: float):
+    """The simulator's ER wheel with c = 6 N s/m and guide friction ``friction_n`` (N), three trials (seed 3)
+    whose slopes are known to 0.004 deg, calibrated as c alone with F_c held exactly at 0."""
+    from rimless.analysis.api.slope_passes import IMPORTED, calibrate_in_passes
+    from rimless.sim.model.params import WheelParams
+    from tests.support.analysis_sim_truth import sim_trial
+
+    truth = WheelParams(damping_ns_per_m=6.0, guide_friction_n=friction_n)
+    rng = np.random.default_rng(3)
+    runs = ((2.5, 2.0), (3.0, 2.6), (2.0, 2.3))
+    trials = [sim_trial(truth, s, w, rng, name=f"t{s}_{w}", n_steps=12, noise_m=0.1e-3) for s, w in runs]
+    for t, (s, _) in zip(trials, runs):
+        t.meta.slope_ci_rad = (math.radians(s - 0.004), math.radians(s + 0.004))
+    names = [t.meta.source_file for t in trials]
+    return calibrate_in_passes(trials, names, ["c"], _wheel(0.0), first_legs=IMPORTED, reimport=None)
+
+
 def test_the_wheel_input_hands_the_exactly_held_parameters_to_the_calibration(monkeypatch):
     """The wiring (no fit run): F_c with uncertainty 0 is handed over as held exactly (to be probed), F_c with the
     default 0 +- 0.2 N as held with its sd (carried, not probed); a fitted name is never "held exactly"."""
@@ -45,18 +62,7 @@ def test_the_wheel_input_hands_the_exactly_held_parameters_to_the_calibration(mo
 
 @pytest.mark.slow
 def test_friction_held_exactly_at_zero_makes_c_effective_only_and_its_interval_spans_the_truth():
-    from rimless.analysis.api.slope_passes import IMPORTED, calibrate_in_passes
-    from rimless.sim.model.params import WheelParams
-    from tests.support.analysis_sim_truth import sim_trial
-
-    truth = WheelParams(damping_ns_per_m=6.0, guide_friction_n=0.8)
-    rng = np.random.default_rng(3)
-    runs = ((2.5, 2.0), (3.0, 2.6), (2.0, 2.3))
-    trials = [sim_trial(truth, s, w, rng, name=f"t{s}_{w}", n_steps=12, noise_m=0.1e-3) for s, w in runs]
-    for t, (s, _) in zip(trials, runs):
-        t.meta.slope_ci_rad = (math.radians(s - 0.004), math.radians(s + 0.004))
-    names = [t.meta.source_file for t in trials]
-    res = calibrate_in_passes(trials, names, ["c"], _wheel(0.0), first_legs=IMPORTED, reimport=None)
+    res = _calibrated_c_held_friction_zero(0.8)
     (c,) = res.params
     assert c.value > 8.0  # the held fit: c makes up the friction (this is the misfit being flagged)
     lo, hi = c.ci95
@@ -78,18 +84,7 @@ def test_friction_held_exactly_and_truly_zero_leaves_c_conditional_with_its_own_
     (p about 0.26). c rests on the caller's statement: "conditional", not identifiable, its interval the held
     model's (not widened to span the freed fit: that made it 9-29 times wider on frictionless series), and it
     holds the truth because the statement is true."""
-    from rimless.analysis.api.slope_passes import IMPORTED, calibrate_in_passes
-    from rimless.sim.model.params import WheelParams
-    from tests.support.analysis_sim_truth import sim_trial
-
-    truth = WheelParams(damping_ns_per_m=6.0, guide_friction_n=0.0)
-    rng = np.random.default_rng(3)
-    runs = ((2.5, 2.0), (3.0, 2.6), (2.0, 2.3))
-    trials = [sim_trial(truth, s, w, rng, name=f"t{s}_{w}", n_steps=12, noise_m=0.1e-3) for s, w in runs]
-    for t, (s, _) in zip(trials, runs):
-        t.meta.slope_ci_rad = (math.radians(s - 0.004), math.radians(s + 0.004))
-    names = [t.meta.source_file for t in trials]
-    res = calibrate_in_passes(trials, names, ["c"], _wheel(0.0), first_legs=IMPORTED, reimport=None)
+    res = _calibrated_c_held_friction_zero(0.0)
     (c,) = res.params
     probe = res.summary()["held_exact_probe"]["guide_friction_n"]
     assert probe["refit"] and not probe["test"]["supported"] and probe["depends"] == ["c"]
