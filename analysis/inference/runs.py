@@ -96,12 +96,21 @@ def no_fit_here(
 
 
 def calibrated_input(win: Any, cal: CalibrationResult) -> Any:
-    """``win`` with the fitted parameters' values and standard errors (source ``fitted``)."""
+    """``win`` with the fitted parameters' values and standard errors (source ``fitted``): each value the
+    calibrated model's (``cal.calibrated_params``), which is the simpler fit's where the model choice did not
+    support an extra parameter (then the basis says so, and the sd is the fit's with it)."""
     for e in cal.params:
         if e.identifiable or e.effective_only:
             ok = math.isfinite(e.se)
             basis = "fitted on these trials" if ok else "fitted on these trials (no standard error: sd shown as 0)"
-            win = win.with_entry(e.field, e.value, e.se if ok else 0.0, "fitted", basis)
+            used = getattr(cal.calibrated_params, e.field, None)
+            value = e.value if used is None else float(used)
+            if value != e.value:
+                basis += (
+                    f" (the model without the extra parameter the model choice did not support; the fit with it "
+                    f"gave {e.value:.4g}, whose sd is shown)"
+                )
+            win = win.with_entry(e.field, value, e.se if ok else 0.0, "fitted", basis)
     return win
 
 
