@@ -77,13 +77,16 @@ def compare(trial: TrialLike, wheel: Wheel | None = None, *, rtol: float = 1e-8)
     fitted to the first measured step on the trial's slope, the CoM height and step periods compared.
 
     wheel : the simulated wheel (model and parameters; its slope is replaced by the trial's). Default Table 1, ER.
-    rtol : the comparison's integrator tolerance (the report's default)."""
+    rtol : the comparison's integrator tolerance (the report's default).
+    `to_dict()` adds ``parameters``: every parameter the simulation held, with its value and source (`Wheel.input`)."""
     from rimless.analysis.inference.compare import Simulator, compare_trial
 
     w = _wheel(wheel)
     (t,), (name,) = load_trials([trial], wheel=w)
     sim = Simulator(model=w.compliant_model("compare()"), params=w.params, rtol=rtol)
-    return compare_trial(t, sim, name=name)
+    res = compare_trial(t, sim, name=name)
+    res.parameters = w.input.parameters()  # what the simulation held, with its source
+    return res
 
 
 def calibrate(

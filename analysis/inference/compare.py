@@ -153,6 +153,9 @@ class TrialComparison:
     rms_com_error_m: float = float("nan")
     com_amplitude_m: float = float("nan")  # measured peak-to-peak (1st-99th percentile) in the RMS window
     com_correlation: float = float("nan")  # Pearson r, measured vs simulated, in the RMS window
+    #: the simulated wheel's parameters, one {name, symbol, value, sd, unit, source, basis} each (`Wheel.input`:
+    #: Table 1's or the wheel file's); None when the comparison was assembled without a wheel
+    parameters: list[dict[str, Any]] | None = None
 
     def __repr__(self) -> str:
         return (
@@ -161,8 +164,9 @@ class TrialComparison:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The trial's row of `rimless trials report --json` (`metrics()`)."""
-        return self.metrics()
+        """`metrics()` (the trial's row of metrics.csv and of `rimless trials report --json`) and ``parameters``:
+        the simulated wheel's parameters with their values and sources (the JSON of `rimless.analysis.compare`)."""
+        return self.metrics() | {"parameters": self.parameters}
 
     @property
     def rms_com_relative(self) -> float:
