@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rimless.analysis.io.trial import slope_ci_deg
 
 __all__ = [
@@ -143,7 +145,8 @@ def metrics_tables_html(sections: Sequence[TrialSection], rows: Sequence[dict[st
         "</tbody></table></div>"
         '<p class="small">Fitted per trial (table above): θ\'+, the simulated post-impact speed at the first '
         "measured impact; the release speed θ'; the time shift of the simulated curve; the height offset of the "
-        "measured one. Each trial's message, notes and warnings are in its section below. Also in "
+        "measured one (heights from the impact line: that line's height above the slope plane, about L0 cos(α/2) "
+        "less the legs' compression, see each trial's section). Each trial's message, notes and warnings are in its section below. Also in "
         f'<a href="{e(csv_name)}">{e(csv_name)}</a>.</p>'
     )
     return "\n".join(out)
@@ -180,7 +183,30 @@ def _facts(s: TrialSection, text: Callable[[Any], str]) -> list[tuple[str, str]]
     if c is not None:
         status = f'<span class="{_status_class(c.status)}">{text(c.status)}</span>'
         facts.append(("comparison", status + (f": {text(c.message)}" if c.message else "")))
+        offset = height_offset_text(c)
+        if offset:
+            facts.append(("height offset", text(offset)))
     return facts
+
+
+def height_offset_text(c: Any) -> str:
+    """What the fitted height offset is, when the trial's CoM heights are measured from the impact line (no leg
+    length at import): the height of that line above the slope plane, which the simulated hub stands at when its
+    legs touch down (about L0 cos(alpha/2), less the legs' compression), not an error of the recording's frame;
+    only a departure from it larger than the CoM swing would be one. Empty when no offset was fitted."""
+    off = float(getattr(c, "height_offset_m", float("nan")))
+    curve = np.asarray(getattr(c, "sim_curve_m", np.zeros(0)), float)
+    curve = curve[np.isfinite(curve)]
+    if not math.isfinite(off) or off == 0.0 or curve.size == 0:
+        return ""
+    low, high = float(curve.min()), float(curve.max())
+    return (
+        f"{off * 1e3:+.1f} mm: the measured CoM heights are from the line through the hub at the impacts (no leg "
+        f"length given at import), the simulated ones from the slope plane; the simulated hub stands "
+        f"{low * 1e3:.1f}-{high * 1e3:.1f} mm above the plane (lowest at touchdown: L0 cos(alpha/2) less the legs' "
+        f"compression), so an offset near {low * 1e3:.0f} mm is that height, not an error of the recording's frame "
+        f"(it differs by {abs(off - low) * 1e3:.1f} mm; give --leg-length-m to compare heights from the plane)"
+    )
 
 
 def trial_sections_html(sections: Sequence[TrialSection], text: Callable[[Any], str]) -> str:
