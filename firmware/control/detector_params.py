@@ -111,4 +111,13 @@ class DetectorParams:
             value = int(value)
         else:
             value = float(value)
-        return replace(self, **{name: value}).validated()
+        try:
+            return replace(self, **{name: value}).validated()
+        except ValueError as err:
+            other = str(err).split(" ", 1)[0]
+            if other == name or other not in names:
+                raise
+            # another parameter's rule refuses the new value: say which was set, and what to set first
+            raise ValueError(
+                f"{name} = {value!r} is refused with {other} = {getattr(self, other)!r}: {err} (set {other} first)"
+            ) from None

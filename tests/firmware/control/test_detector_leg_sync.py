@@ -114,6 +114,19 @@ def test_confirm_within_steps_leaves_a_clean_resync_its_touchdowns() -> None:
         DetectorParams().with_value("confirm_within_steps", 4.5)
 
 
+def test_set_confirm_steps_names_the_parameter_set_and_the_one_to_set_first() -> None:
+    """`set confirm_steps N` with N + 2 above the bound in force names confirm_steps (the one set) and says to set
+    confirm_within_steps first, instead of a message about confirm_within_steps alone."""
+    p = DetectorParams(confirm_steps=2, confirm_within_steps=5)
+    assert p.with_value("confirm_steps", 3).confirm_steps == 3  # 3 + 2 <= 5
+    with pytest.raises(ValueError) as err:
+        p.with_value("confirm_steps", 10)
+    msg = str(err.value)
+    assert msg.startswith("confirm_steps = 10 is refused with confirm_within_steps = 5:")
+    assert "confirm_steps + 2 (12)" in msg and msg.endswith("(set confirm_within_steps first)")
+    assert p.with_value("confirm_within_steps", 0).with_value("confirm_steps", 10).confirm_steps == 10
+
+
 def test_a_slowing_gait_within_tolerance_keeps_sync(make_rig) -> None:
     # Step periods 0.40, 0.44, 0.48, ...: each within 40 % of the running period.
     starts = [0.1]
