@@ -20,6 +20,7 @@ from rimless.analysis.inference.compare import Simulator
 from rimless.analysis.io.trial import slope_ci_deg
 from rimless.analysis.io.vicon_csv import ViconCsvError
 from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
+from rimless.analysis.kinematics.build import import_parameters as held_parameters
 from rimless.analysis.report.html import ReportResult, build_report
 from rimless.errors import OutputFileError, RunFailure, UserError
 from rimless.output import check_output_folder, ctrl_c_held, writable_dir
@@ -134,46 +135,10 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
     return row
 
 
-#: The wheel's parameters that set the slope interval's drift allowance sqrt(M / k), M = m_H + 8 m.
-LEG_FIELDS = ("hub_mass_kg", "leg_mass_kg", "stiffness_n_per_m")
-
-
 def import_parameters(import_kwargs: dict[str, Any]) -> list[dict[str, Any]]:
-    """The ``parameters`` of ``trials import --json``: what the importer held, in the entry format of the other
-    commands (`rimless.sim.model.uncertain.ParamInput.as_dict`: name, symbol, value, sd, unit, source, basis).
-
-    The legs' drift time sqrt(M / k) (M = m_H + 8 m, s) in the slope's interval (`slope_evidence.leg_compliance`,
-    its own words in ``basis``): ``derived`` from the wheel's masses and k (listed with their sources) when the
-    wheel gives them (``sd`` None: see theirs), else the importer's bound (``assumed_bound``, ``sd`` None: a bound,
-    not a measurement) or 0 for rigid legs (``rigid_legs``); and the leg length when given (``leg_length_m``,
-    held exact)."""
-    from rimless.analysis.kinematics.slope_evidence import UNKNOWN_LEG_TIME_S, leg_compliance
-    from rimless.sim.model.uncertain import ParamInput
-
-    wheel = import_kwargs.get("wheel")
-    legs = leg_compliance(wheel)
-    rows: list[dict[str, Any]] = []
-    entries = getattr(getattr(wheel, "input", wheel), "entries", None)  # a `Wheel` or a wheel input
-    from_wheel = isinstance(entries, dict) and 0 < legs.time_s != UNKNOWN_LEG_TIME_S
-    if isinstance(entries, dict) and from_wheel:
-        rows += [entries[n].as_dict() for n in LEG_FIELDS]
-    source = "derived" if from_wheel else ("rigid_legs" if legs.time_s == 0 else "assumed_bound")
-    rows.append(
-        {
-            "name": "leg_drift_time_s",
-            "symbol": "sqrt(M/k)",
-            "value": legs.time_s,
-            "sd": 0.0 if legs.time_s == 0 else None,
-            "unit": "s",
-            "source": source,
-            "basis": f"the slope interval's allowance for the legs' compression drift: {legs.source}",
-        }
-    )
-    leg_length = import_kwargs.get("leg_length_m")
-    if leg_length is not None:
-        given = "given (--leg-length-m / leg_length_m=): CoM height from the slope plane, held exact"
-        rows.append(ParamInput("leg_length_m", float(leg_length), 0.0, "given", given).as_dict())
-    return rows
+    """The ``parameters`` of ``trials import --json``: `rimless.analysis.kinematics.build.import_parameters` of the
+    keyword arguments of `import_trial` (``wheel``, ``leg_length_m``), the one place that lists them."""
+    return held_parameters(import_kwargs.get("wheel"), import_kwargs.get("leg_length_m"))
 
 
 def parameters_line(parameters: list[dict[str, Any]]) -> str:
