@@ -247,6 +247,8 @@ def build_report(
             scrub,
         )
     res.parameters = win.parameters()
+    for comp in res.comparisons:  # each comparison held them, as `rimless.analysis.compare` lists them
+        comp.parameters = [dict(p) for p in res.parameters]
     res.seconds = time.perf_counter() - t_start
     _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg, win, scrub))
     return res
