@@ -9,12 +9,14 @@ bundled SYNTHETIC trials.
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Callable, Sequence
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from rimless.analysis.examples.bundled import data_files
+from rimless.analysis.examples.bundled import DATA_DIR, data_files
 from rimless.analysis.examples.critical_series import data_files as critical_data_files
 from rimless.analysis.inference.compare import Simulator
 from rimless.analysis.io.trial import slope_ci_deg
@@ -36,6 +38,8 @@ __all__ = [
     "run_report",
     "run_demo",
     "demo_inputs",
+    "DemoReport",
+    "bundled_relative",
     "DEMO_NOTE",
 ]
 
@@ -373,6 +377,38 @@ def demo_inputs() -> list[Path]:
     return files
 
 
+def bundled_relative(obj: Any) -> Any:
+    """``obj`` (a text, or a JSON-ready object: its keys and texts) with the bundled data's paths named relative to
+    the data folder (``SYNTHETIC_er_...csv``, ``critical/SYNTHETIC_crit_...csv``), as the report and its
+    provenance name them: the install's absolute path (anywhere in a text) and the working folder's relative
+    path (at a text's start) to the data folder are dropped."""
+    if isinstance(obj, str):
+        out = obj.replace(f"{DATA_DIR}{os.sep}", "")
+        rel = shown_path(DATA_DIR)
+        if rel != str(DATA_DIR) and out.startswith(rel + os.sep):
+            out = out[len(rel) + 1 :]
+        return out
+    if isinstance(obj, dict):
+        return {bundled_relative(k): bundled_relative(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [bundled_relative(v) for v in obj]
+    return obj
+
+
+class DemoReport(ReportResult):
+    """The `ReportResult` of `run_demo`: its JSON (`summary`) and its printed names (`shown`) of the bundled
+    trials are relative to the data folder wherever the demo ran (`bundled_relative`)."""
+
+    def summary(self) -> dict[str, Any]:
+        """`ReportResult.summary` with the bundled trials named relative to the data folder."""
+        out: dict[str, Any] = bundled_relative(super().summary())
+        return out
+
+    def shown(self, path: str | Path) -> str:
+        """A trial's file as the demo prints it (relative to the data folder)."""
+        return str(bundled_relative(str(path)))
+
+
 def run_demo(
     out: Path,
     *,
@@ -380,8 +416,9 @@ def run_demo(
     starting: Callable[[int], None] | None = None,
     wheel_input: Any = None,
     argv: Sequence[str] | None = None,
-) -> ReportResult:
-    """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series).
+) -> DemoReport:
+    """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series),
+    the bundled trials named relative to the data folder in its JSON and printed lines (`DemoReport`).
 
     Checks ``out`` (``--out``) before any work; ``starting(n)`` is called with the number of trials just before
     the run; ``argv``: the command's words for the report's provenance (None: ``run_demo`` from Python)."""
@@ -389,7 +426,7 @@ def run_demo(
     check_output_folder(out, option="--out")
     if starting is not None:
         starting(len(files))
-    return run_report(
+    res = run_report(
         files,
         out,
         json_out=json_out,
@@ -405,3 +442,4 @@ def run_demo(
         argv=argv,
         api="rimless.analysis.report.batch.run_demo",
     )
+    return DemoReport(**{f.name: getattr(res, f.name) for f in fields(res)})
