@@ -13,15 +13,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rimless.analysis.inference.leg_fit import DEFAULT_MOVING_MASS_KG
 from rimless.errors import ParameterError
 
 if TYPE_CHECKING:
     from rimless.analysis.inference.leg_fit import LegFitResult, LegLog
 
 __all__ = ["leg_fit"]
-
-#: Table 1's leg mass m, kg: all of it moves with the foot in the wheel model (`leg_fit.DEFAULT_MOVING_MASS_KG`).
-DEFAULT_MOVING_MASS_KG = 0.0378
 
 
 def leg_fit(
