@@ -11,7 +11,9 @@ The public API (docs/api.md), imported lazily so that `import rimless.analysis` 
   whose `to_dict()` is the matching `rimless trials` command's `--json` object;
 - `floquet(trials, wheel=None)`: the trials' step-to-step multiplier (noise bias corrected, 95 % interval)
   beside the model's eigenvalue (`rimless trials floquet`);
-- `load_trials(trials)`: `Trial` objects or paths -> (trials, names).
+- `load_trials(trials)`: `Trial` objects or paths -> (trials, names);
+- `leg_fit(logs, moving_mass_kg=...)`: a leg's k, c and guide friction with 95 % intervals from its
+  `rimless robot leg-test` logs (`rimless trials leg-fit`), a `LegFitResult`; `read_leg_log(path)` reads one.
 """
 
 from __future__ import annotations
@@ -22,11 +24,13 @@ from rimless.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from rimless.analysis.api.floquet import floquet
+    from rimless.analysis.api.leg import leg_fit
     from rimless.analysis.api.trials import calibrate, compare, critical_slope, load_trials, write_report
     from rimless.analysis.inference.calibrate import CalibrationResult
     from rimless.analysis.inference.compare import TrialComparison
     from rimless.analysis.inference.critical_slope import CriticalSlopeResult
     from rimless.analysis.inference.floquet import FloquetResult
+    from rimless.analysis.inference.leg_fit import LegFitResult, LegLog, read_leg_log
     from rimless.analysis.io.recording import read_recording
     from rimless.analysis.io.trial import Trial, read_trial
     from rimless.analysis.io.vicon_file import ViconFile
@@ -46,6 +50,10 @@ _LAZY = {
     "critical_slope": "rimless.analysis.api.trials",
     "write_report": "rimless.analysis.api.trials",
     "floquet": "rimless.analysis.api.floquet",
+    "leg_fit": "rimless.analysis.api.leg",
+    "LegFitResult": "rimless.analysis.inference.leg_fit",
+    "LegLog": "rimless.analysis.inference.leg_fit",
+    "read_leg_log": "rimless.analysis.inference.leg_fit",
     "FloquetResult": "rimless.analysis.inference.floquet",
     "TrialComparison": "rimless.analysis.inference.compare",
     "CalibrationResult": "rimless.analysis.inference.calibrate",
@@ -57,6 +65,8 @@ __all__ = [
     "CalibrationResult",
     "CriticalSlopeResult",
     "FloquetResult",
+    "LegFitResult",
+    "LegLog",
     "ReportResult",
     "Trial",
     "TrialComparison",
@@ -67,7 +77,9 @@ __all__ = [
     "critical_slope",
     "floquet",
     "import_trial",
+    "leg_fit",
     "load_trials",
+    "read_leg_log",
     "read_recording",
     "read_trial",
     "write_report",

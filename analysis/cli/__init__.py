@@ -417,6 +417,8 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
     if json_out:
         print_json(res.summary())
         print_refused(r.reason for r in res.refused)  # stderr, as without --json
+        for w in res.warnings:
+            echo_text(f"warning: {w}", err=True)
         return
     from rich.console import Console
 
@@ -439,9 +441,13 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
         for w in c["warnings"]:
             echo_text(f"warning: {w}", err=True)
     print_refused(r.reason for r in res.refused)
+    for w in res.warnings:  # a slope bin pooling trials on slopes that differ beyond their intervals
+        echo_text(f"warning: {w}", err=True)
+    demo = getattr(res, "shown", None)  # the demo names its bundled trials relative to the data folder
     for c in res.comparisons:
         if c.status != "ok":
-            echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{shown_path(c.file)}: {c.message}", err=True)
+            name, message = (demo(c.file), demo(c.message)) if demo else (shown_path(c.file), c.message)
+            echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{name}: {message}", err=True)
     echo_text(f"report: {shown_path(res.report_html)}")
 
 

@@ -76,15 +76,12 @@ def leg_fit_cmd(
     k and c come from the natural frequency and the decay: they do not depend on the sensor's counts per
     metre. F_c does. Bad logs: one line naming the file, line and field (exit 2).
     """
-    from rimless.analysis.inference.leg_fit import fake_truth, run_leg_fit
+    from rimless.analysis import leg_fit
 
-    fit = run_leg_fit(
+    fit = leg_fit(
         logs, moving_mass_kg=moving_mass_kg, moving_mass_sd_kg=moving_mass_sd_kg, counts_per_m=counts_per_m, plot=plot
     )
-    out = fit.summary()
-    truth = fake_truth(fit)
-    if truth is not None:
-        out["fake_truth"] = truth
+    out = fit.to_dict()
     if json_out:
         print_json(out)
         return

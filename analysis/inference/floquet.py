@@ -282,6 +282,24 @@ class NotIdentifiable(ValueError):
     """The pairs do not determine the multiplier (the message says why)."""
 
 
+def _group_reason(members: list[SectionPoints], err: NotIdentifiable) -> str:
+    """Why a slope group gives no multiplier: too few pairs, and the trials flagged by kind (the start of each
+    one's reason: transient-only, too short, no impacts)."""
+    flagged = [p for p in members if p.status != "used"]
+    if not flagged:
+        return str(err)
+    kinds: dict[str, int] = {}
+    for p in flagged:
+        kind = p.reason.split(":", 1)[0]
+        kinds[kind] = kinds.get(kind, 0) + 1
+    what = ", ".join(f"{n} {k}" for k, n in kinds.items())
+    if len(flagged) < len(members):
+        return f"{err}; {len(flagged)} of {len(members)} trial(s) flagged ({what})"
+    if set(kinds) == {"transient-only"}:
+        return f"no trial reached steady walking (all {len(members)} transient-only: see each trial's reason)"
+    return f"no trial gives pairs of section points ({what}: see each trial's reason)"
+
+
 def estimate_multiplier(
     x: np.ndarray, y: np.ndarray, v: np.ndarray, triples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 ) -> MultiplierEstimate:
@@ -600,7 +618,7 @@ def run_floquet(
             est = estimate_multiplier(x, y, v, triples)
             g.update(status="estimated", reason="", **est.as_dict())
         except NotIdentifiable as err:
-            g.update(status="not_estimated", reason=str(err), pairs=int(x.size))
+            g.update(status="not_estimated", reason=_group_reason(members, err), pairs=int(x.size))
         if with_model:
             if progress:
                 progress(f"model at {s:.2f} deg")

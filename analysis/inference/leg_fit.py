@@ -415,8 +415,17 @@ class LegFitResult:
         out["passed"] = all(v["passed"] for v in out.values())
         return out
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of ``rimless trials leg-fit --json``: `summary()`, with ``fake_truth`` (the simulated
+        leg's parameters) for logs of ``leg-test --fake``."""
+        out = self.summary()
+        truth = fake_truth(self)
+        if truth is not None:
+            out["fake_truth"] = truth
+        return out
+
     def summary(self) -> dict[str, Any]:
-        """The JSON of `rimless trials leg-fit --json` (`k_n_per_m`, `c_n_s_per_m`, `guide_friction_n`, each
+        """The JSON of `rimless trials leg-fit --json` without ``fake_truth`` (`to_dict`) (`k_n_per_m`, `c_n_s_per_m`, `guide_friction_n`, each
         with `_ci`, the 95 % interval)."""
         out: dict[str, Any] = {"leg": self.leg, "files": self.files}
         for key, est in (

@@ -97,6 +97,10 @@ class TrialMeta:
     #: Standard error of the fitted hub offset along its worst axis in the wheel plane, m (None when given or not
     #: fitted): an offset error e is a once-a-turn sinusoid of amplitude |e| in the CoM height.
     hub_offset_sd_m: float | None = None
+    #: What the import held, with value, sd and source each (`rimless.analysis.kinematics.build.import_parameters`:
+    #: the legs' drift time from the wheel given, or the bound; the leg length when given); None for a trial
+    #: imported before they were recorded.
+    parameters: tuple[dict[str, Any], ...] | None = None
 
     def to_json(self) -> str:
         """JSON text of the metadata (NaN as null)."""
@@ -117,6 +121,8 @@ class TrialMeta:
         )
         if d.get("slope_residual_m") is None:
             d["slope_residual_m"] = float("nan")
+        if d.get("parameters") is not None:
+            d["parameters"] = tuple(d["parameters"])
         return cls(**d)
 
 
@@ -221,7 +227,13 @@ class Trial:
             "warnings": list(m.warnings),
             "up_axis": m.up_axis,
             "up_axis_reason": m.up_axis_reason,
+            "parameters": None if m.parameters is None else [dict(p) for p in m.parameters],
         }
+
+    def to_dict(self) -> dict[str, Any]:
+        """`summary()`: the JSON object of the trial, with ``parameters`` (what the import held, as the rows of
+        ``trials import --json``)."""
+        return self.summary()
 
     def __repr__(self) -> str:
         m = self.meta

@@ -58,7 +58,15 @@ from rimless.analysis.kinematics.vertical import (
 from rimless.analysis.kinematics.walk import classify_ending, find_motion
 from rimless.errors import UserError
 
-__all__ = ["TrialRefused", "build_trial", "import_trial", "fill_short_gaps", "DEFAULT_MAX_GAP_S", "TABLE1_LEG_LENGTH_M"]
+__all__ = [
+    "TrialRefused",
+    "build_trial",
+    "import_trial",
+    "import_parameters",
+    "fill_short_gaps",
+    "DEFAULT_MAX_GAP_S",
+    "TABLE1_LEG_LENGTH_M",
+]
 
 
 class TrialRefused(UserError):
@@ -191,6 +199,7 @@ def build_trial(
         from the data (`rimless.analysis.kinematics.vertical.find_up`). World outputs stay in the file's frame.
     wheel : the wheel (a `rimless.sim.Wheel` or wheel input), for its legs' spring only: how far their compression
         may drift as the speed changes (`slope_evidence.leg_compliance`); default: not told, a bound assumed.
+        What was held is listed in ``meta.parameters`` (`import_parameters`, ``parameters`` of `Trial.to_dict`).
 
     Raises
     ------
@@ -578,6 +587,7 @@ def build_trial(
         warnings=tuple(warnings),
         up_axis=up.name,
         up_axis_reason=up.reason,
+        parameters=tuple(import_parameters(wheel, leg_length_m)),
     )
     return Trial(ts, meta)
 
@@ -726,12 +736,63 @@ def fill_short_gaps(values: np.ndarray, max_gap_frames: int) -> tuple[np.ndarray
     return v, filled
 
 
+#: The wheel's parameters that set the slope interval's drift allowance sqrt(M / k), M = m_H + 8 m.
+LEG_FIELDS = ("hub_mass_kg", "leg_mass_kg", "stiffness_n_per_m")
+
+
+def import_parameters(wheel: Any = None, leg_length_m: float | None = None) -> list[dict[str, Any]]:
+    """What the importer held (``parameters`` of `Trial.to_dict` and of ``trials import --json``), in the entry
+    format of the other commands (`rimless.sim.model.uncertain.ParamInput.as_dict`: name, symbol, value, sd, unit,
+    source, basis).
+
+    The legs' drift time sqrt(M / k) (M = m_H + 8 m, s) in the slope's interval (`slope_evidence.leg_compliance`,
+    its own words in ``basis``): ``derived`` from the ``wheel``'s masses and k (listed with their sources) when it
+    gives them (``sd`` None: see theirs), else the importer's bound (``assumed_bound``, ``sd`` None: a bound, not
+    a measurement) or 0 for rigid legs (``rigid_legs``); and the leg length when given (``leg_length_m``, held
+    exact)."""
+    from rimless.analysis.kinematics.slope_evidence import UNKNOWN_LEG_TIME_S
+    from rimless.sim.model.uncertain import ParamInput
+
+    legs = leg_compliance(wheel)
+    rows: list[dict[str, Any]] = []
+    entries = getattr(getattr(wheel, "input", wheel), "entries", None)  # a `Wheel` or a wheel input
+    from_wheel = isinstance(entries, dict) and 0 < legs.time_s != UNKNOWN_LEG_TIME_S
+    if isinstance(entries, dict) and from_wheel:
+        rows += [entries[n].as_dict() for n in LEG_FIELDS]
+    source = "derived" if from_wheel else ("rigid_legs" if legs.time_s == 0 else "assumed_bound")
+    rows.append(
+        {
+            "name": "leg_drift_time_s",
+            "symbol": "sqrt(M/k)",
+            "value": legs.time_s,
+            "sd": 0.0 if legs.time_s == 0 else None,
+            "unit": "s",
+            "source": source,
+            "basis": f"the slope interval's allowance for the legs' compression drift: {legs.source}",
+        }
+    )
+    if leg_length_m is not None:
+        given = "given (--leg-length-m / leg_length_m=): CoM height from the slope plane, held exact"
+        rows.append(ParamInput("leg_length_m", float(leg_length_m), 0.0, "given", given).as_dict())
+    return rows
+
+
 def import_trial(path: str | Path, *, slopes: dict[str, tuple[float, str]] | None = None, **kwargs: Any) -> Trial:
     """`read_recording` (Vicon CSV or C3D) then `build_trial` (keyword arguments as there).
 
     ``slopes``: a slope manifest (`rimless.analysis.io.manifest.read_slope_manifest`); the row of this file, when
     there is one, gives ``slope_deg`` (a ``slope_deg`` keyword and a manifest together are refused).
+    ``wheel`` may also be a wheel file's path (as ``trials import --params``: its values with their sds).
+    The trial's ``meta.parameters`` (``parameters`` of `Trial.to_dict`) are what the import held
+    (`import_parameters`), the entries of ``trials import --json``.
     """
+    wheel = kwargs.get("wheel")
+    if isinstance(wheel, (str, Path)):
+        from rimless.sim.model.uncertain import read_wheel_input
+
+        if not Path(wheel).is_file():
+            raise UserError(f"wheel={wheel}: no such wheel file")
+        kwargs["wheel"] = read_wheel_input(Path(wheel))
     if slopes is not None:
         row = slope_for(slopes, path)
         if row is not None:

@@ -9,17 +9,20 @@ bundled SYNTHETIC trials.
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Callable, Sequence
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from rimless.analysis.examples.bundled import data_files
+from rimless.analysis.examples.bundled import DATA_DIR, data_files
 from rimless.analysis.examples.critical_series import data_files as critical_data_files
 from rimless.analysis.inference.compare import Simulator
 from rimless.analysis.io.trial import slope_ci_deg
 from rimless.analysis.io.vicon_csv import ViconCsvError
 from rimless.analysis.kinematics.build import DEFAULT_MAX_GAP_S, import_trial
+from rimless.analysis.kinematics.build import import_parameters as held_parameters
 from rimless.analysis.report.html import ReportResult, build_report
 from rimless.errors import OutputFileError, RunFailure, UserError
 from rimless.output import check_output_folder, ctrl_c_held, writable_dir
@@ -35,6 +38,8 @@ __all__ = [
     "run_report",
     "run_demo",
     "demo_inputs",
+    "DemoReport",
+    "bundled_relative",
     "DEMO_NOTE",
 ]
 
@@ -134,46 +139,10 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
     return row
 
 
-#: The wheel's parameters that set the slope interval's drift allowance sqrt(M / k), M = m_H + 8 m.
-LEG_FIELDS = ("hub_mass_kg", "leg_mass_kg", "stiffness_n_per_m")
-
-
 def import_parameters(import_kwargs: dict[str, Any]) -> list[dict[str, Any]]:
-    """The ``parameters`` of ``trials import --json``: what the importer held, in the entry format of the other
-    commands (`rimless.sim.model.uncertain.ParamInput.as_dict`: name, symbol, value, sd, unit, source, basis).
-
-    The legs' drift time sqrt(M / k) (M = m_H + 8 m, s) in the slope's interval (`slope_evidence.leg_compliance`,
-    its own words in ``basis``): ``derived`` from the wheel's masses and k (listed with their sources) when the
-    wheel gives them (``sd`` None: see theirs), else the importer's bound (``assumed_bound``, ``sd`` None: a bound,
-    not a measurement) or 0 for rigid legs (``rigid_legs``); and the leg length when given (``leg_length_m``,
-    held exact)."""
-    from rimless.analysis.kinematics.slope_evidence import UNKNOWN_LEG_TIME_S, leg_compliance
-    from rimless.sim.model.uncertain import ParamInput
-
-    wheel = import_kwargs.get("wheel")
-    legs = leg_compliance(wheel)
-    rows: list[dict[str, Any]] = []
-    entries = getattr(getattr(wheel, "input", wheel), "entries", None)  # a `Wheel` or a wheel input
-    from_wheel = isinstance(entries, dict) and 0 < legs.time_s != UNKNOWN_LEG_TIME_S
-    if isinstance(entries, dict) and from_wheel:
-        rows += [entries[n].as_dict() for n in LEG_FIELDS]
-    source = "derived" if from_wheel else ("rigid_legs" if legs.time_s == 0 else "assumed_bound")
-    rows.append(
-        {
-            "name": "leg_drift_time_s",
-            "symbol": "sqrt(M/k)",
-            "value": legs.time_s,
-            "sd": 0.0 if legs.time_s == 0 else None,
-            "unit": "s",
-            "source": source,
-            "basis": f"the slope interval's allowance for the legs' compression drift: {legs.source}",
-        }
-    )
-    leg_length = import_kwargs.get("leg_length_m")
-    if leg_length is not None:
-        given = "given (--leg-length-m / leg_length_m=): CoM height from the slope plane, held exact"
-        rows.append(ParamInput("leg_length_m", float(leg_length), 0.0, "given", given).as_dict())
-    return rows
+    """The ``parameters`` of ``trials import --json``: `rimless.analysis.kinematics.build.import_parameters` of the
+    keyword arguments of `import_trial` (``wheel``, ``leg_length_m``), the one place that lists them."""
+    return held_parameters(import_kwargs.get("wheel"), import_kwargs.get("leg_length_m"))
 
 
 def parameters_line(parameters: list[dict[str, Any]]) -> str:
@@ -408,6 +377,38 @@ def demo_inputs() -> list[Path]:
     return files
 
 
+def bundled_relative(obj: Any) -> Any:
+    """``obj`` (a text, or a JSON-ready object: its keys and texts) with the bundled data's paths named relative to
+    the data folder (``SYNTHETIC_er_...csv``, ``critical/SYNTHETIC_crit_...csv``), as the report and its
+    provenance name them: the install's absolute path (anywhere in a text) and the working folder's relative
+    path (at a text's start) to the data folder are dropped."""
+    if isinstance(obj, str):
+        out = obj.replace(f"{DATA_DIR}{os.sep}", "")
+        rel = shown_path(DATA_DIR)
+        if rel != str(DATA_DIR) and out.startswith(rel + os.sep):
+            out = out[len(rel) + 1 :]
+        return out
+    if isinstance(obj, dict):
+        return {bundled_relative(k): bundled_relative(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [bundled_relative(v) for v in obj]
+    return obj
+
+
+class DemoReport(ReportResult):
+    """The `ReportResult` of `run_demo`: its JSON (`summary`) and its printed names (`shown`) of the bundled
+    trials are relative to the data folder wherever the demo ran (`bundled_relative`)."""
+
+    def summary(self) -> dict[str, Any]:
+        """`ReportResult.summary` with the bundled trials named relative to the data folder."""
+        out: dict[str, Any] = bundled_relative(super().summary())
+        return out
+
+    def shown(self, path: str | Path) -> str:
+        """A trial's file as the demo prints it (relative to the data folder)."""
+        return str(bundled_relative(str(path)))
+
+
 def run_demo(
     out: Path,
     *,
@@ -415,8 +416,9 @@ def run_demo(
     starting: Callable[[int], None] | None = None,
     wheel_input: Any = None,
     argv: Sequence[str] | None = None,
-) -> ReportResult:
-    """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series).
+) -> DemoReport:
+    """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series),
+    the bundled trials named relative to the data folder in its JSON and printed lines (`DemoReport`).
 
     Checks ``out`` (``--out``) before any work; ``starting(n)`` is called with the number of trials just before
     the run; ``argv``: the command's words for the report's provenance (None: ``run_demo`` from Python)."""
@@ -424,7 +426,7 @@ def run_demo(
     check_output_folder(out, option="--out")
     if starting is not None:
         starting(len(files))
-    return run_report(
+    res = run_report(
         files,
         out,
         json_out=json_out,
@@ -440,3 +442,4 @@ def run_demo(
         argv=argv,
         api="rimless.analysis.report.batch.run_demo",
     )
+    return DemoReport(**{f.name: getattr(res, f.name) for f in fields(res)})

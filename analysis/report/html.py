@@ -38,6 +38,7 @@ import numpy as np
 from rimless.analysis.inference.background import Background, background_allowed
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, compare_trial
 from rimless.analysis.io.robot_log import read_clutch_log
+from rimless.analysis.io.trial import slope_ci_deg
 from rimless.analysis.kinematics.inputs import InputRow, load_input
 from rimless.analysis.report.calibration_beside import (
     calibration_args,
@@ -59,7 +60,7 @@ from rimless.analysis.report.sections import (
     provenance_html,
     trial_sections_html,
 )
-from rimless.analysis.report.series import file_stem, series_of, series_trends
+from rimless.analysis.report.series import file_stem, pooled_slope_warnings, series_of, series_trends
 from rimless.errors import InputFileError
 
 __all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES", "DPI"]
@@ -116,6 +117,9 @@ class ReportResult:
     #: one per input, in the order given: its anchor on the page, series, comparison and figure
     sections: list[TrialSection] = field(default_factory=list)
     provenance: Provenance | None = None
+    #: warnings about the report as a whole (`pooled_slope_warnings`: a slope bin pooling trials on slopes that
+    #: differ beyond their intervals)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def refused(self) -> list[InputRow]:
@@ -171,6 +175,7 @@ class ReportResult:
             "parameters": self.parameters,
             "sections": [{"trial": s.name, "anchor": s.anchor, "series": s.series} for s in self.sections],
             "provenance": self.provenance.to_dict() if self.provenance is not None else None,
+            "warnings": list(self.warnings),
         }
 
 
@@ -247,6 +252,8 @@ def build_report(
             scrub,
         )
     res.parameters = win.parameters()
+    for comp in res.comparisons:  # each comparison held them, as `rimless.analysis.compare` lists them
+        comp.parameters = [dict(p) for p in res.parameters]
     res.seconds = time.perf_counter() - t_start
     _write_text(res.report_html, _html(res, sim, title, note, slope_bin_deg, win, scrub))
     return res
@@ -329,6 +336,12 @@ def _rest_of_report(
     res.groups = list(
         series_trends([s.comparison for s in compared], [s.series for s in compared], sim, slope_bin_deg=slope_bin_deg)
     )
+    slopes = {
+        s.comparison.name: (s.comparison.slope_deg, slope_ci_deg(s.row.trial.meta.slope_ci_rad))
+        for s in compared
+        if s.row.trial is not None
+    }
+    res.warnings += pooled_slope_warnings(res.groups, slopes, slope_bin_deg)
     for name, log in (robot_logs or {}).items():
         comp = next((c for c in res.comparisons if c.name == name), None)
         res.clutch[name] = clutch_comparison(read_clutch_log(log), comp)
@@ -613,6 +626,7 @@ def _html(
         "</figure>"
     )
     parts.append(periods_html(res.groups, slope_bin_deg))
+    parts.extend(f'<p class="bad">warning: {text(w)}</p>' for w in res.warnings)  # a bin pooling other slopes
     parts.append(
         '<h2 id="com-height">CoM height</h2><figure>'
         f'<img src="{REPORT_FILES["com"]}" alt="CoM height, measured vs simulated">'

@@ -11,6 +11,7 @@ two series at the same rounded slope stay two groups (a wheel with another dampi
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -19,7 +20,7 @@ from typing import Any
 
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, step_period_trends
 
-__all__ = ["SeriesSlopeGroup", "series_name", "series_of", "series_trends", "file_stem"]
+__all__ = ["SeriesSlopeGroup", "series_name", "series_of", "series_trends", "file_stem", "pooled_slope_warnings"]
 
 _SUFFIXES = (".trial.parquet", ".parquet", ".csv", ".c3d", ".txt")
 #: tokens that vary from run to run within a series: a slope, a run/take/trial/release number, a bare counter
@@ -106,4 +107,42 @@ def series_trends(
     for name, comps in order.items():
         for g in step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg):
             out.append(SeriesSlopeGroup(**{f.name: getattr(g, f.name) for f in fields(g)}, series=name))
+    return out
+
+
+def pooled_slope_warnings(
+    groups: Sequence[SlopeGroup],
+    slopes: Mapping[str, tuple[float, Sequence[float] | None]],
+    slope_bin_deg: float,
+) -> list[str]:
+    """One warning per slope bin whose trials walked on slopes that differ beyond their 95 % intervals (two
+    disjoint intervals) while their step periods are pooled by the rounding to ``slope_bin_deg``.
+
+    ``slopes``: per trial name, its slope and 95 % interval, deg (None or NaN bounds: not judged). The two
+    trials named are the bin's farthest apart: the one whose interval ends lowest and the one whose interval
+    starts highest."""
+    out = []
+    for g in groups:
+        known: list[tuple[str, float, Sequence[float]]] = []
+        for n in g.trials:
+            slope, ci = slopes.get(n, (math.nan, None))
+            if ci is not None and len(ci) == 2 and all(math.isfinite(v) for v in ci):
+                known.append((n, slope, ci))
+        if len(known) < 2:
+            continue
+        low = min(known, key=lambda t: t[2][1])
+        high = max(known, key=lambda t: t[2][0])
+        if high[2][0] <= low[2][1]:
+            continue
+        series = getattr(g, "series", "")
+
+        def told(t: tuple[str, float, Sequence[float]]) -> str:
+            return f"{t[0]} ({t[1]:.3f} deg, 95 % {t[2][0]:.3f} to {t[2][1]:.3f})"
+
+        out.append(
+            f"{'series ' + repr(series) + ', ' if series else ''}slope bin {g.slope_deg:g} deg: the step periods "
+            f"of {len(g.trials)} trials are pooled, but {told(low)} and {told(high)} walked on slopes that differ "
+            f"beyond their intervals (--slope-bin-deg {slope_bin_deg:g} rounds them together): give a smaller "
+            "--slope-bin-deg (slope_bin_deg=) to keep them apart"
+        )
     return out

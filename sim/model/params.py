@@ -146,6 +146,11 @@ def validate(p: Any, spelled: dict[str, str] | None = None) -> None:
     if p.guide_friction_n < 0.0:
         raise ParameterError(f"parameter {_name('guide_friction_n')} must be >= 0, got {p.guide_friction_n}")
     if not 0.0 <= p.slope_rad < SPOKE_ANGLE_RAD / 2.0:
+        if spelled is not None and spelled.get("slope_rad") == "slope_deg":  # a file's slope_deg, in its unit
+            raise ParameterError(
+                f"parameter slope_deg must satisfy 0 <= slope < alpha/2 = {math.degrees(SPOKE_ANGLE_RAD / 2):.1f} "
+                f"deg, got {math.degrees(p.slope_rad):.10g} deg"
+            )
         raise ParameterError(
             f"parameter {_name('slope_rad')} must satisfy 0 <= slope < alpha/2 = {SPOKE_ANGLE_RAD / 2:.6f} rad "
             f"({math.degrees(SPOKE_ANGLE_RAD / 2):.1f} deg), got {p.slope_rad} rad"
@@ -184,13 +189,19 @@ _ALIASES = {
 PARAM_ALIASES = _ALIASES
 
 
+def in_source(source: str) -> str:
+    """Where a bad value was read, as every parameter error names it (a wheel file for `rimless sim --params` and
+    the trials commands alike): `` in <file>``, empty without a source."""
+    return f" in {source}" if source else ""
+
+
 def params_from_mapping(
     values: dict[str, Any], *, base: WheelParams | None = None, source: str = "", name_keys: bool = False
 ) -> WheelParams:
     """Build parameters from a mapping of field names or paper symbols (`slope_deg` accepted). An invalid value
     is named by its field and `rimless sim` option, or with ``name_keys`` (a parameter file) by its key as the
     mapping spells it."""
-    where = f" in {source}" if source else ""
+    where = in_source(source)
     changes: dict[str, Any] = {}
     spelled: dict[str, str] = {}  # field -> the key as the mapping spells it (error messages name it)
     for key, value in values.items():

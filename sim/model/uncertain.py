@@ -237,10 +237,7 @@ def read_wheel_input(path: str | Path) -> WheelInput:
             if isinstance(raw, str) and key != "mass_model":
                 raise ParameterError(f'{where}: expected a number, {{value = ..., sd = ...}} or "fit", got {raw!r}')
             plain[key] = raw
-    try:
-        params = params_from_mapping(plain, source=str(path), name_keys=True)
-    except ParameterError as err:
-        raise ParameterError(str(err).replace(f" in {path}", "") + f" (in {path})") from None
+    params = params_from_mapping(plain, source=str(path), name_keys=True)  # its errors name the file (in_source)
     win = default_wheel_input(params, source="wheel_file")
     given = {PARAM_ALIASES[k] for k in plain if k in PARAM_ALIASES}
     for name in UNCERTAIN_FIELDS:
