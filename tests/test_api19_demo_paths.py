@@ -6,6 +6,7 @@ stderr lines of suspect trials)."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -47,3 +48,19 @@ def test_bundled_relative_leaves_other_paths_alone(tmp_path, monkeypatch):
 def test_the_readme_demo_prints_no_absolute_data_path(demo_run):
     assert demo_run.returncode == 0, demo_run.stderr[-3000:]
     assert str(DATA_DIR) not in demo_run.stdout + demo_run.stderr
+
+
+@pytest.mark.xdist_group("demo")
+@pytest.mark.slow
+def test_every_option_the_demo_suggests_is_one_it_takes(demo_run):
+    """A warning or hint the demo prints (e.g. the pooled slope bins' "give a smaller --slope-bin-deg") names only
+    options `rimless demo` has: the demo has no options of `trials report` it does not take."""
+    from typer.testing import CliRunner
+
+    from rimless.cli import app
+
+    assert demo_run.returncode == 0, demo_run.stderr[-3000:]
+    suggested = set(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]+", demo_run.stdout + demo_run.stderr))
+    assert suggested, "the demo printed no option: nothing to check"
+    help_text = CliRunner().invoke(app, ["demo", "--help"], env={"COLUMNS": "200", "TERM": "dumb"}).output
+    assert {o for o in suggested if o not in help_text} == set(), help_text

@@ -547,6 +547,10 @@ def demo_cmd(
     out: Annotated[Path, typer.Option("--out", help="Folder for the demo report.")] = Path("rimless-demo"),
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary instead of the table.")] = False,
     params: ParamsOpt = None,
+    slope_bin_deg: Annotated[
+        float,
+        typer.Option("--slope-bin-deg", min=0.01, help="Group the step periods by slope rounded to this, deg."),
+    ] = 0.5,
 ) -> None:
     """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
     from rimless.analysis.inference.runs import no_fit_here, wheel_input
@@ -559,7 +563,9 @@ def demo_cmd(
         if not json_out:
             echo_text(f"{n} bundled SYNTHETIC trials -> {out}/ (a first run compiles the simulator)", err=True)
 
-    res = run_demo(out, json_out=json_out, starting=starting, wheel_input=win, argv=command_words(ctx))
+    res = run_demo(
+        out, json_out=json_out, starting=starting, wheel_input=win, argv=command_words(ctx), slope_bin_deg=slope_bin_deg
+    )
     _print_report(res, "er", json_out)
     if not json_out:
         echo_text(critical_lines(res))

@@ -416,12 +416,14 @@ def run_demo(
     starting: Callable[[int], None] | None = None,
     wheel_input: Any = None,
     argv: Sequence[str] | None = None,
+    slope_bin_deg: float = 0.5,
 ) -> DemoReport:
     """The ``rimless demo`` report on `demo_inputs` (ER model, critical slope and calibrated c on the series),
     the bundled trials named relative to the data folder in its JSON and printed lines (`DemoReport`).
 
     Checks ``out`` (``--out``) before any work; ``starting(n)`` is called with the number of trials just before
-    the run; ``argv``: the command's words for the report's provenance (None: ``run_demo`` from Python)."""
+    the run; ``argv``: the command's words for the report's provenance (None: ``run_demo`` from Python);
+    ``slope_bin_deg``: the step periods' slope bins (``--slope-bin-deg``), deg."""
     files = demo_inputs()
     check_output_folder(out, option="--out")
     if starting is not None:
@@ -432,7 +434,7 @@ def run_demo(
         json_out=json_out,
         import_kwargs={"max_gap_s": DEFAULT_MAX_GAP_S},
         model="er",
-        slope_bin_deg=0.5,
+        slope_bin_deg=slope_bin_deg,
         note=DEMO_NOTE,
         title="rimless demo: SYNTHETIC trials vs simulation",
         critical_files=critical_data_files(),
