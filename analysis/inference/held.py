@@ -121,10 +121,10 @@ def combine(rows: Sequence[dict[str, Any]]) -> tuple[float, bool]:
 
 
 #: every wheel parameter that carries an uncertainty is >= 0 (masses, inertia, L0, k, g > 0; c, F_c >= 0,
-#: `rimless.sim.model.params.validate`): its stated normal N(value, sd) is carried truncated there
-LOWER_BOUND = 0.0
-#: a truncation that moves the mean by less than this many sd is not named (far from the bound)
-TRUNCATION_NAMED = 1e-3
+#: `rimless.sim.model.params.validate`): its stated normal N(value, sd) is carried truncated there; a truncation
+#: that moves the mean by less than `TRUNCATION_NAMED` sd is not named (far from the bound). Defined with the
+#: parameters' ``carried_as`` (`rimless.sim.model.uncertain.ParamInput`), which says the same
+from rimless.sim.model.uncertain import LOWER_BOUND, TRUNCATION_NAMED  # noqa: E402
 
 
 def truncated_moments(value: float, sd: float, lower: float = LOWER_BOUND) -> tuple[float, float]:

@@ -93,3 +93,18 @@ def test_friction_near_its_bound_matches_scipys_truncated_normal(monkeypatch: py
     by = {r["symbol"]: r for r in d["contributions"]}
     assert by["F_c"]["shift_deg"] == pytest.approx(PER_N * (t.mean() - 0.1), rel=1e-6)
     assert by["F_c"]["contribution_deg"] == pytest.approx(PER_N * t.std(), rel=1e-6)
+
+
+def test_parameters_say_how_each_is_carried() -> None:
+    """The ``parameters`` entries name the truncation exactly where `carry_bounded` applies it: F_c = 0 +- 0.2 N
+    and c +- 50 % (0.055 sd) truncated at 0, m_H +- 2 % a plain normal, g exact, a fitted value fitted."""
+    win = wheel_input_from(WheelParams(), {"F_c": 0.2})
+    rows = {r["symbol"]: r for r in win.parameters()}
+    assert rows["F_c"]["carried_as"] == "normal truncated at 0"
+    assert rows["c"]["carried_as"] == "normal truncated at 0"
+    assert rows["m_H"]["carried_as"] == "normal" and rows["g"]["carried_as"] == "exact"
+    for e in win.held():
+        how = held.carry_bounded(e.value, e.sd, 1.0, None)[2]
+        assert ("truncated" in how) == (e.carried_as == "normal truncated at 0"), (e.name, how)
+    fitted = win.with_entry("damping_ns_per_m", 5.0, 0.3, "fitted", "fitted to the trials")
+    assert {r["symbol"]: r for r in fitted.parameters()}["c"]["carried_as"] == "fitted"
