@@ -2008,8 +2008,8 @@ def _held_exact_probe(
     for k, e in enumerate(estimates):
         shift = float(xg_rich[k] - e.value)
         shifts[e.name] = shift / e.se if math.isfinite(e.se) and e.se > 0 else None
-        far = reach_se.get(e.name)
-        if not (math.isfinite(e.se) and max(abs(shift), abs(far or 0.0) * e.se) > PROBE_SHIFT_SE * e.se):
+        far = reach_se.get(e.name) or 0.0
+        if not (math.isfinite(e.se) and max(abs(shift), abs(far) * e.se) > PROBE_SHIFT_SE * e.se):
             continue
         depends.append(e.name)
         moved = (
