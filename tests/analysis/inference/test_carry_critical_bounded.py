@@ -108,3 +108,18 @@ def test_parameters_say_how_each_is_carried() -> None:
         assert ("truncated" in how) == (e.carried_as == "normal truncated at 0"), (e.name, how)
     fitted = win.with_entry("damping_ns_per_m", 5.0, 0.3, "fitted", "fitted to the trials")
     assert {r["symbol"]: r for r in fitted.parameters()}["c"]["carried_as"] == "fitted"
+
+
+def test_the_floquet_models_eigenvalue_is_carried_the_same_way(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`trials floquet`'s model eigenvalue: F_c = 0 +- 0.2 N as the half-normal, the interval centred there."""
+    from rimless.analysis.inference import floquet
+
+    per_n = -0.3  # eigenvalue per N of guide friction (a closed form standing in for the model's map)
+    monkeypatch.setattr(floquet, "model_multiplier", lambda p, model: {"eigenvalue": 0.7 + per_n * p.guide_friction_n})
+    win = wheel_input_from(WheelParams(), {"F_c": 0.2, "m_H": 0, "m": 0, "I_c": 0, "L0": 0, "k": 0, "c": 0})
+    m = floquet._model_with_uncertainty(win, "er", 2.0, 0.0)
+    shift = per_n * 0.2 * math.sqrt(2.0 / math.pi)
+    se = abs(per_n) * 0.2 * math.sqrt(1.0 - 2.0 / math.pi)
+    assert m["eigenvalue"] == pytest.approx(0.7)
+    assert m["held_shift"] == pytest.approx(shift, rel=1e-9) and m["se_parameters"] == pytest.approx(se, rel=1e-9)
+    assert m["ci95"] == pytest.approx([0.7 + shift - Z95 * se, 0.7 + shift + Z95 * se], rel=1e-9)
