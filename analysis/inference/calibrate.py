@@ -1917,6 +1917,11 @@ def _judge(
 #: depends on the held value (`_held_exact_probe`): effective only, its interval spanning both fits' (the data
 #: support the freed fit), or conditional on the held value (they cannot tell the two apart)
 PROBE_SHIFT_SE = 1.0
+#: per probed extra parameter, the fitted ones that trade with it along their ridge (guide friction and c: both a
+#: loss per step), which its one-sided reach also tests (`_reach_one_sided`); the others are tested by their shift
+#: at the freed fit alone (by its reach k was called conditional on 5 of 10 frictionless series held truthfully,
+#: where its shift was 0.2-1.0 se: docs/trials.md)
+PROBE_REACH_FIELDS = {"guide_friction_n": ("c",)}
 
 
 def _held_exact_probe(
@@ -1932,9 +1937,10 @@ def _held_exact_probe(
     fitted: the fit solved again with it freed (from the Gauss-Newton prediction of the fit with it, the same
     sigmas; `model_choice.refit_without`'s machinery), and the quasi-likelihood test of the two
     (`model_choice.choice_row`: is the richer fit supported over the held value). A fitted parameter that the
-    richer fit moves by more than `PROBE_SHIFT_SE` of its standard error, or that it would move by more at 1 se
-    of the freed parameter above the freed fit when that fit came out above the held value (`_reach_one_sided`,
-    JSON ``reach_se``), depends on the held value (the note names the held parameter and the shift): when the data support the richer fit, the held model does not fit
+    richer fit moves by more than `PROBE_SHIFT_SE` of its standard error, or, for one that trades with it along
+    their ridge (`PROBE_REACH_FIELDS`: c for friction), that it would move by more at 1 se of the freed
+    parameter above the freed fit when that fit came out above the held value (`_reach_one_sided`, JSON
+    ``reach_se``, recorded for every fitted parameter), depends on the held value (the note names the held parameter and the shift): when the data support the richer fit, the held model does not fit
     and the parameter is effective only, its 95 % interval grown to span both fits'; when they cannot tell the
     two apart, it is "conditional" (`ParamEstimate.conditional_on`): not identifiable from the trials, its
     interval the held model's, holding only if the caller's statement does (widening it there made c's interval
@@ -2005,10 +2011,11 @@ def _held_exact_probe(
         )
     shifts, depends = {}, []
     reach_se = _reach_one_sided(xg_rich, se_m, corr_rich, se_rich, held_at, converged, estimates)
+    ridge = PROBE_REACH_FIELDS.get(FIT_FIELDS[name][0], ())
     for k, e in enumerate(estimates):
         shift = float(xg_rich[k] - e.value)
         shifts[e.name] = shift / e.se if math.isfinite(e.se) and e.se > 0 else None
-        far = reach_se.get(e.name) or 0.0
+        far = (reach_se.get(e.name) or 0.0) if e.name in ridge else 0.0  # recorded for all, tested for these
         if not (math.isfinite(e.se) and max(abs(shift), abs(far) * e.se) > PROBE_SHIFT_SE * e.se):
             continue
         depends.append(e.name)
