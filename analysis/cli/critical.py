@@ -223,6 +223,15 @@ def parameter_lines(parameters: list[dict[str, Any]] | None) -> list[str]:
     return out
 
 
+def _shift_text(d: dict[str, Any]) -> str:
+    """The interval's re-centring by the held parameters' mean shift (a parameter at its bound, F_c = 0 +- 0.2 N,
+    carried as its normal truncated there), when there is one."""
+    shift = d.get("held_shift_deg") or 0.0
+    if abs(shift) < 5e-4:
+        return ""
+    return f"; centred on {d['critical_slope_with_held_deg']:.3f} deg (held parameters at a bound: {shift:+.3f} deg)"
+
+
 def held_lines(out: dict[str, Any]) -> list[str]:
     """The parameters and the critical slopes' intervals with the held parameters' uncertainty."""
     lines = parameter_lines(out.get("parameters"))
@@ -239,6 +248,7 @@ def held_lines(out: dict[str, Any]) -> list[str]:
         lines.append(
             f"critical slope from the trials with the held parameters' uncertainty: {tr['critical_slope_deg']:.3f} "
             f"deg, 95 % interval {lo:.3f}-{hi:.3f} deg (parameters: ± {tr['se_parameters_deg']:.3f} deg 1 sigma)"
+            + _shift_text(tr)
             + ("" if tr["complete"] else "; NOT every parameter could be propagated")
         )
     for m, d in held.get("models", {}).items():
@@ -252,6 +262,7 @@ def held_lines(out: dict[str, Any]) -> list[str]:
             f"deg from the held parameters (largest: "
             + ", ".join(f"{r['symbol']} ± {r['contribution_deg']:.3f}" for r in big)
             + ")"
+            + _shift_text(d)
             + ("" if d["complete"] else "; NOT every parameter could be propagated")
         )
     lines.append(f"propagation: {held['method']}")

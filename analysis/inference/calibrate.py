@@ -1917,6 +1917,11 @@ def _judge(
 #: depends on the held value (`_held_exact_probe`): effective only, its interval spanning both fits' (the data
 #: support the freed fit), or conditional on the held value (they cannot tell the two apart)
 PROBE_SHIFT_SE = 1.0
+#: per probed extra parameter, the fitted ones that trade with it along their ridge (guide friction and c: both a
+#: loss per step), which its one-sided reach also tests (`_reach_one_sided`); the others are tested by their shift
+#: at the freed fit alone (by its reach k was called conditional on 5 of 10 frictionless series held truthfully,
+#: where its shift was 0.2-1.0 se: docs/trials.md)
+PROBE_REACH_FIELDS = {"guide_friction_n": ("c",)}
 
 
 def _held_exact_probe(
@@ -1932,13 +1937,18 @@ def _held_exact_probe(
     fitted: the fit solved again with it freed (from the Gauss-Newton prediction of the fit with it, the same
     sigmas; `model_choice.refit_without`'s machinery), and the quasi-likelihood test of the two
     (`model_choice.choice_row`: is the richer fit supported over the held value). A fitted parameter that the
-    richer fit moves by more than `PROBE_SHIFT_SE` of its standard error depends on the held value (the note
-    names the held parameter and the shift): when the data support the richer fit, the held model does not fit
+    richer fit moves by more than `PROBE_SHIFT_SE` of its standard error, or, for one that trades with it along
+    their ridge (`PROBE_REACH_FIELDS`: c for friction), that it would move by more at 1 se of the freed
+    parameter above the freed fit when that fit came out above the held value (`_reach_one_sided`, JSON
+    ``reach_se``, recorded for every fitted parameter), depends on the held value (the note names the held parameter and the shift): when the data support the richer fit, the held model does not fit
     and the parameter is effective only, its 95 % interval grown to span both fits'; when they cannot tell the
     two apart, it is "conditional" (`ParamEstimate.conditional_on`): not identifiable from the trials, its
     interval the held model's, holding only if the caller's statement does (widening it there made c's interval
     9-29 times wider on 6 of 10 frictionless series held truthfully at 0). The held value stays the calibrated
-    model's (the caller's statement). Returns the JSON ``held_exact_probe`` row."""
+    model's (the caller's statement). When the Gauss-Newton step points below the freed parameter's bound there
+    is no refit (a refit from the held fit's detection limit came back to the bound on the two series tried, at
+    3.5 s CPU each: docs/trials.md); ``reach_at_bound_se`` records the linear reach there (`_reach_at_bound`), not
+    used. Returns the JSON ``held_exact_probe`` row."""
     import time
 
     from rimless.analysis.inference.model_choice import EXTRA_ROUNDS, choice_row, dispersion, refit_without
@@ -1962,7 +1972,8 @@ def _held_exact_probe(
     if u2[n_g] + step[n_g] <= lo[n_g]:  # the Gauss-Newton step points below its bound: the richer fit is the held
         row.update(
             refit=False, converged=True, chi2_held=chi2_held, chi2_freed=chi2_held, values_freed={},
-            shifts_se={}, depends=[], cpu_s=time.process_time() - cpu,
+            shifts_se={}, depends=[], reach_at_bound_se=_reach_at_bound(obj2, u2, f2, J2, estimates),
+            cpu_s=time.process_time() - cpu,
             statement=f"{name} freed: the Gauss-Newton step points below its bound {held_at:g}; no fitted parameter "
             "depends on the held value",
         )  # fmt: skip
@@ -1979,7 +1990,7 @@ def _held_exact_probe(
     converged = bool(r.status > 0)
     J = obj2.jac(x_rich)
     scale_all = np.concatenate([glob2.scale, np.ones(2 * n_t)])
-    se_m, _, _, _ = least_squares_report(J, n_g + 1, scale_all)
+    se_m, corr_rich, _, _ = least_squares_report(J, n_g + 1, scale_all)
     se_s = sandwich_se(J, obj2.fun(x_rich), obj2.offs, n_g + 1, scale_all)
     se_sl, _ = _slope_part(obj2, J, scale_all, _slope_moved(obj2, x_rich))
     se_rich = [
@@ -1999,16 +2010,24 @@ def _held_exact_probe(
             f"is only a lower bound ({test['test']})"
         )
     shifts, depends = {}, []
+    reach_se = _reach_one_sided(xg_rich, se_m, corr_rich, se_rich, held_at, converged, estimates)
+    ridge = PROBE_REACH_FIELDS.get(FIT_FIELDS[name][0], ())
     for k, e in enumerate(estimates):
         shift = float(xg_rich[k] - e.value)
         shifts[e.name] = shift / e.se if math.isfinite(e.se) and e.se > 0 else None
-        if not (math.isfinite(e.se) and abs(shift) > PROBE_SHIFT_SE * e.se):
+        far = (reach_se.get(e.name) or 0.0) if e.name in ridge else 0.0  # recorded for all, tested for these
+        if not (math.isfinite(e.se) and max(abs(shift), abs(far) * e.se) > PROBE_SHIFT_SE * e.se):
             continue
         depends.append(e.name)
         moved = (
             f"freed, {name} = {xg_rich[n_g]:.3g} moves {e.name} from {e.value:.4g} to {xg_rich[k]:.4g} "
             f"({shift / e.se:+.1f} se){'' if converged else ' before its refit stopped on its budget'}"
         )
+        if abs(shift) <= PROBE_SHIFT_SE * e.se:  # only its one-sided reach does
+            moved += (
+                f", and to {e.value + far * e.se:.4g} ({far:+.1f} se) at {name} = "
+                f"{xg_rich[n_g] + se_rich[n_g]:.3g}, 1 se above the freed fit (one-sided: {name} >= {held_at:g})"
+            )
         if test["supported"]:  # the data contradict the held value: the held model does not fit
             z = 1.959963984540054
             s2 = se_rich[k] if converged and math.isfinite(se_rich[k]) else 0.0  # an unfinished fit: its point
@@ -2032,7 +2051,7 @@ def _held_exact_probe(
         refit=True, converged=converged, chi2_held=chi2_held, chi2_freed=obj2.cost(x_rich),
         values_freed={n: float(v) for n, v in zip([*fit, name], xg_rich)} if converged else {},
         se_freed={n: s for n, s in zip([*fit, name], se_rich)} if converged else {},
-        shifts_se=shifts, depends=depends, test=test, cpu_s=time.process_time() - cpu,
+        shifts_se=shifts, reach_se=reach_se, depends=depends, test=test, cpu_s=time.process_time() - cpu,
         statement=(
             f"{name} freed ({'converged' if converged else 'stopped on its budget'}): "
             + (f"{', '.join(depends)} depend(s) on its held value" if depends else "no fitted parameter moves by "
@@ -2043,3 +2062,54 @@ def _held_exact_probe(
     if not converged:
         row["stopped_at"] = {n: float(v) for n, v in zip([*fit, name], xg_rich)}
     return row
+
+
+def _reach_one_sided(
+    xg_rich: np.ndarray,
+    se_m: np.ndarray,
+    corr: np.ndarray,
+    se_rich: Sequence[float],
+    held_at: float,
+    converged: bool,
+    estimates: Sequence[ParamEstimate],
+) -> dict[str, float | None]:
+    """Where each fitted parameter goes (in its held fit's se, from its held value) when the probe's freed
+    parameter (the last of ``xg_rich``, the freed fit's globals) sits 1 se above the freed fit's value: its
+    change at the freed fit plus the regression slope of it on the freed parameter (the freed fit's model
+    covariance: corr * se_k / se_freed) times the freed parameter's carried se. One-sided: a friction freed from
+    0 is >= 0, and the data allow it up to there as much as at the freed fit; a freed fit that came out above
+    the held value is the trials leaning away from the statement, and a held value 1 se below what they allow
+    is not what they pin down (it caught a truth of 0.40 N whose freed fit stopped at 0.13 N, moving c by 0.7
+    se: docs/trials.md). Empty unless the freed fit converged above the held value with a finite se."""
+    j = len(xg_rich) - 1
+    up = float(xg_rich[j]) - held_at
+    se_f = float(se_rich[j])
+    if not (converged and up > 0 and math.isfinite(se_f) and se_f > 0 and math.isfinite(float(se_m[j]))):
+        return {}
+    out: dict[str, float | None] = {}
+    for k, e in enumerate(estimates):
+        slope = float(corr[k, j]) * float(se_m[k]) / float(se_m[j])
+        ok = math.isfinite(slope) and math.isfinite(e.se) and e.se > 0
+        out[e.name] = (float(xg_rich[k]) - e.value + slope * se_f) / e.se if ok else None
+    return out
+
+
+def _reach_at_bound(
+    obj2: _Objective, u2: np.ndarray, f2: np.ndarray, J2: np.ndarray, estimates: Sequence[ParamEstimate]
+) -> dict[str, float | None]:
+    """A diagnosis when the freed parameter's Gauss-Newton step points below its bound (no refit): each fitted
+    parameter's linear change (in its se) were the freed parameter 1 se (the larger of the model's and the
+    trial-clustered sandwich's at the held fit) above the held value. Recorded, not used: such a change is as
+    large on a truth whose held value is right (docs/trials.md)."""
+    n_g2, n_t = obj2.n_g, obj2.n_t
+    j = n_g2 - 1
+    scale_all = np.concatenate([obj2.glob.scale, np.ones(2 * n_t)])
+    se_m, corr, _, _ = least_squares_report(J2, n_g2, scale_all)
+    se_s = sandwich_se(J2, f2, obj2.offs, n_g2, scale_all)
+    se_f = max(float(se_m[j]), float(se_s[j]) if math.isfinite(se_s[j]) else 0.0)
+    out: dict[str, float | None] = {}
+    for k, e in enumerate(estimates):
+        slope = float(corr[k, j]) * float(se_m[k]) / float(se_m[j])
+        ok = math.isfinite(slope) and math.isfinite(se_f) and math.isfinite(e.se) and e.se > 0
+        out[e.name] = slope * se_f / e.se if ok else None
+    return out

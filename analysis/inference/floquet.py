@@ -31,8 +31,9 @@ than `MIN_PAIRS` pairs, or whose walk does not wander beyond the measurement noi
 
 **The model.** The dominant eigenvalue of the model's Poincaré map (dP/dz at its fixed point, z = (theta+,
 theta'+)) at the group's slope, with the held parameters' uncertainty carried by
-`rimless.analysis.inference.held.sensitivities` (finite differences at +-1 sd, in quadrature) and the slope's
-uncertainty added the same way. For the compliant wheel the other eigenvalue is small (about 0.1 for ER): the
+`rimless.analysis.inference.held.sensitivities` (finite differences at +-1 sd, in quadrature; a parameter at its
+bound, F_c = 0, as its normal truncated there, `held.carry_rows`: ``eigenvalue_with_held``, ``held_shift``, the
+interval centred there) and the slope's uncertainty added the same way. For the compliant wheel the other eigenvalue is small (about 0.1 for ER): the
 one-dimensional map of the measured speed follows the dominant one.
 """
 
@@ -416,7 +417,7 @@ def model_multiplier(params: Any, model: str, *, rtol: float = 1e-9) -> dict[str
 
 def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg: float) -> dict[str, Any]:
     """`model_multiplier` at the group's slope with the held parameters' and the slope's uncertainty."""
-    from rimless.analysis.inference.held import combine, sensitivities
+    from rimless.analysis.inference.held import carry_rows, combine, sensitivities
     from rimless.errors import ParameterError
 
     slope = math.radians(slope_deg)
@@ -428,6 +429,7 @@ def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg
         return model_multiplier(p.replace(slope_rad=slope), model)["eigenvalue"]
 
     _, rows = sensitivities(f, win, base=base["eigenvalue"])
+    shift = carry_rows(rows, win, base["eigenvalue"])  # a held parameter at its bound (F_c = 0): truncated normal
     contributions = [
         {
             "name": r["name"],
@@ -438,6 +440,8 @@ def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg
             "plus": r.get("plus_deg"),
             "contribution": r["contribution_deg"],
             "note": r.get("note", ""),
+            "shift": r["shift_deg"],
+            "carried_as": r.get("carried_as", ""),
         }
         for r in rows
     ]
@@ -490,7 +494,9 @@ def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg
     return {
         **base,
         "se_parameters": se,
-        "ci95": [e - Z95 * se, e + Z95 * se],
+        "eigenvalue_with_held": e + shift,
+        "held_shift": shift,
+        "ci95": [e + shift - Z95 * se, e + shift + Z95 * se],
         "complete": complete,
         "contributions": contributions,
     }

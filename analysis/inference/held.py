@@ -21,8 +21,13 @@ Linear propagation: it is exact for a quantity linear in the parameters over +-1
   the straightforward `model_critical_slope`. The two agree to the root location (about 1e-9 rad;
   tests/analysis/inference/test_warm_critical.py); ``warm=False`` gives the straightforward runs.
 
-The interval with the parameters is ``value -+ sqrt(half-width^2 + (1.96 se_parameters)^2)`` on each side (the
-data's interval may be asymmetric, as the bracket's is). The data-only intervals (``ci_deg``) keep their meaning.
+A parameter held at its physical bound (F_c = 0 +- 0.2 N: its truth can only be above) is carried as its stated
+normal truncated there (`carry_bounded`, as the calibration carries it): its part shifts the critical slope by
+sqrt(2/pi) = 0.80 times its one-sided change, with an sd of sqrt(1 - 2/pi) = 0.60 times it, instead of +-1 times
+it about the held value (`carry_rows`; ``held_shift_deg``, ``critical_slope_with_held_deg``).
+
+The interval with the parameters is ``value + shift -+ sqrt(half-width^2 + (1.96 se_parameters)^2)`` on each
+side (the data's interval may be asymmetric, as the bracket's is). The data-only intervals (``ci_deg``) keep their meaning.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ __all__ = [
     "LOWER_BOUND",
     "truncated_moments",
     "carry_bounded",
+    "carry_rows",
 ]
 
 #: the parameters the verdicts and the trial estimates depend on (the stance pendulum's)
@@ -56,7 +62,8 @@ RATIO_FIELDS = ("inertia_kg_m2", "leg_length_m", "gravity_m_s2")
 
 METHOD = (
     "finite-difference sensitivities at +-1 sd of each held parameter (one-sided at a bound), combined in "
-    "quadrature (linear propagation, parameters independent)"
+    "quadrature (linear propagation, parameters independent); a parameter at its bound (F_c = 0) carried as its "
+    "normal truncated there (mean shift and sd of the half-normal)"
 )
 
 
@@ -114,10 +121,10 @@ def combine(rows: Sequence[dict[str, Any]]) -> tuple[float, bool]:
 
 
 #: every wheel parameter that carries an uncertainty is >= 0 (masses, inertia, L0, k, g > 0; c, F_c >= 0,
-#: `rimless.sim.model.params.validate`): its stated normal N(value, sd) is carried truncated there
-LOWER_BOUND = 0.0
-#: a truncation that moves the mean by less than this many sd is not named (far from the bound)
-TRUNCATION_NAMED = 1e-3
+#: `rimless.sim.model.params.validate`): its stated normal N(value, sd) is carried truncated there; a truncation
+#: that moves the mean by less than `TRUNCATION_NAMED` sd is not named (far from the bound). Defined with the
+#: parameters' ``carried_as`` (`rimless.sim.model.uncertain.ParamInput`), which says the same
+from rimless.sim.model.uncertain import LOWER_BOUND, TRUNCATION_NAMED  # noqa: E402
 
 
 def truncated_moments(value: float, sd: float, lower: float = LOWER_BOUND) -> tuple[float, float]:
@@ -160,6 +167,30 @@ def carry_bounded(
         f"{s * sd:.3g}): {diff}, linear; the interval is re-centred by the mean shift"
     )
     return m * per_sd, s * np.abs(per_sd), how
+
+
+def carry_rows(rows: Sequence[dict[str, Any]], win: Any, base: float | None) -> float:
+    """Carry each held parameter of `sensitivities`' ``rows`` by its stated normal truncated at its bound
+    (`carry_bounded`, as the calibration carries it): sets each row's ``contribution_deg`` (the sd of its part),
+    ``shift_deg`` (its part's mean shift: 0 far from the bound; sqrt(2/pi) times the one-sided change for F_c
+    held at 0, whose truth can only be above) and ``carried_as``; returns the summed shift (deg) the intervals
+    are re-centred by. A row without a change (not propagated, or not entering) keeps its contribution, shift 0."""
+    total = 0.0
+    for r in rows:
+        r.setdefault("shift_deg", 0.0)
+        e = win.entries.get(r["name"])
+        if e is None or base is None or r.get("contribution_deg") is None or r.get("note") == "does not enter":
+            continue
+        plus = r["plus_deg"] - base if r.get("plus_deg") is not None else None
+        minus = r["minus_deg"] - base if r.get("minus_deg") is not None else None
+        if plus is None and minus is None:
+            continue
+        shift, sd, how = carry_bounded(e.value, e.sd, plus, minus)
+        if r.get("note") == "forward difference":  # -1 sd was not evaluated, not invalid
+            how = how.replace("one refit at +1 sd (-1 sd is not a valid wheel)", "a forward difference at +1 sd")
+        r["contribution_deg"], r["shift_deg"], r["carried_as"] = float(sd), float(shift), how
+        total += float(shift)
+    return total
 
 
 def widen(value: float, ci: tuple[float, float], se_par: float) -> list[float]:
@@ -325,13 +356,16 @@ def carry_critical(
             f_trials = _refitting(f_trials, trials, win.params)
             fields = RATIO_FIELDS
         _, rows = sensitivities(f_trials, win, fields, base=c.value_deg)
+        shift = carry_rows(rows, win, c.value_deg)
         se, complete = combine(rows)
         out["trials"] = {
             "method": c.method,
             "critical_slope_deg": c.value_deg,
+            "critical_slope_with_held_deg": c.value_deg + shift,
+            "held_shift_deg": shift,
             "ci_data_deg": list(c.ci_deg),
             "se_parameters_deg": se,
-            "ci_deg": widen(c.value_deg, c.ci_deg, se),
+            "ci_deg": widen(c.value_deg + shift, (c.ci_deg[0] + shift, c.ci_deg[1] + shift), se),
             "complete": complete,
             "contributions": rows,
         }
@@ -344,11 +378,14 @@ def carry_critical(
         if base is None:
             out["models"][m] = {"critical_slope_deg": None, "note": "no critical slope at the held values"}
             continue
+        shift = carry_rows(rows, win, base)
         se, complete = combine(rows)
         out["models"][m] = {
             "critical_slope_deg": base,
+            "critical_slope_with_held_deg": base + shift,
+            "held_shift_deg": shift,
             "se_parameters_deg": se,
-            "ci_deg": [base - Z95 * se, base + Z95 * se],
+            "ci_deg": [base + shift - Z95 * se, base + shift + Z95 * se],
             "complete": complete,
             "differences": "central" if central_models else "forward",
             "contributions": rows,

@@ -285,6 +285,8 @@ def _probe(res: Any) -> dict[str, Any] | None:
         "converged": row["converged"],
         "depends": list(row["depends"]),
         "shifts_se": row["shifts_se"],
+        "reach_se": row.get("reach_se"),  # one-sided, 1 se above the freed fit (`calibrate._reach_one_sided`)
+        "reach_at_bound_se": row.get("reach_at_bound_se"),  # no refit: a diagnosis (`calibrate._reach_at_bound`)
         "friction_freed_n": (row.get("values_freed") or {}).get("guide_friction_n"),
         "delta_chi2": test.get("delta_chi2"),
         "p_value": test.get("p_value"),

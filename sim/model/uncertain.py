@@ -84,6 +84,12 @@ DEFAULT_SD: dict[str, tuple[str, float, str]] = {
     "gravity_m_s2": ("abs", 0.0, "exact: standard gravity (local variation below 0.1 %, neglected)"),
 }
 
+#: every parameter's physical lower bound (masses, lengths, k, g > 0; c, F_c >= 0): a held one's stated normal is
+#: carried truncated there, named when that moves its mean by `TRUNCATION_NAMED` sd or more (the analysis's
+#: `rimless.analysis.inference.held.LOWER_BOUND` and `TRUNCATION_NAMED`, which must agree)
+LOWER_BOUND = 0.0
+TRUNCATION_NAMED = 1e-3
+
 #: What a parameter's value and sd came from (the ``source`` of each row of ``parameters``).
 SOURCES = ("table1", "wheel_file", "wheel", "leg_test_prior", "fitted")
 
@@ -111,6 +117,19 @@ class ParamInput:
     def symbol(self) -> str:
         return SYMBOLS[self.name]
 
+    @property
+    def carried_as(self) -> str:
+        """How an inference carries this parameter: "exact" (sd 0), "fitted" (its standard error), "normal",
+        or "normal truncated at 0" where the bound moves the mean by 1e-3 sd or more (value within about 3.1 sd
+        of 0: F_c = 0 +- 0.2 N, c +- 50 %), as `rimless.analysis.inference.held.carry_bounded` carries it."""
+        if self.source == "fitted":
+            return "fitted"
+        if self.sd == 0:
+            return "exact"
+        a = -self.value / self.sd  # the bound in sd from the value; the truncated normal's mean offset phi/(1-Phi)
+        offset = math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi) / (0.5 * math.erfc(a / math.sqrt(2.0)))
+        return f"normal truncated at {LOWER_BOUND:g}" if offset >= TRUNCATION_NAMED else "normal"
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,
@@ -120,6 +139,7 @@ class ParamInput:
             "unit": self.unit,
             "source": self.source,
             "basis": self.basis,
+            "carried_as": self.carried_as,
         }
 
 
@@ -144,7 +164,7 @@ class WheelInput:
         return WheelInput(self.params.replace(**{name: value}), entries, self.fit, self.path, self.held_note)
 
     def parameters(self) -> list[dict[str, Any]]:
-        """The JSON list ``parameters``: one {name, symbol, value, sd, unit, source, basis} per parameter."""
+        """The JSON list ``parameters``: one {name, symbol, value, sd, unit, source, basis, carried_as} per parameter."""
         return [self.entries[n].as_dict() for n in UNCERTAIN_FIELDS]
 
     def lines(self) -> list[str]:

@@ -20,7 +20,7 @@ from rimless.sim.model.params import WheelParams
 
 ROOT = Path(__file__).resolve().parents[3]
 TRIAL = ROOT / "analysis" / "data" / "SYNTHETIC_er_slope2.0deg_run1.csv"
-KEYS = {"name", "symbol", "value", "sd", "unit", "source", "basis"}
+KEYS = {"name", "symbol", "value", "sd", "unit", "source", "basis", "carried_as"}
 
 
 def _by_name(d: dict) -> dict[str, dict]:

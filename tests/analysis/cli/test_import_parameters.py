@@ -52,7 +52,7 @@ def test_with_a_wheel_file_the_rows_list_its_masses_and_k(tmp_path):
         for name, (value, sd) in expected.items():
             p = by_name[name]
             assert (p["value"], p["sd"], p["source"]) == (pytest.approx(value), pytest.approx(sd), "wheel_file")
-            assert set(p) == {"name", "symbol", "value", "sd", "unit", "source", "basis"}
+            assert set(p) == {"name", "symbol", "value", "sd", "unit", "source", "basis", "carried_as"}
         d = by_name["leg_drift_time_s"]
         assert d["value"] == pytest.approx(drift, rel=1e-9) and d["source"] == "derived"
 
