@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rimless.analysis.io.trial import read_trial
+from rimless.analysis.io.trial import read_trial, slope_ci_deg
 from rimless.analysis.kinematics.build import import_trial
 from rimless.errors import UserError
 
@@ -40,6 +40,9 @@ class InputRow:
                 rate_hz=m.rate_hz,
                 slope_deg=m.slope_deg,
                 slope_source=m.slope_source,
+                slope_ci_deg=slope_ci_deg(m.slope_ci_rad),
+                up_axis=m.up_axis,
+                parameters=None if m.parameters is None else [dict(p) for p in m.parameters],
                 hub_source=m.hub_source,
                 gap_frames=m.n_gap_frames,
                 interpolated_frames=m.n_interpolated_frames,
