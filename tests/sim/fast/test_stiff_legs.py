@@ -81,7 +81,8 @@ def test_light_leg_stall_is_classified_on_both_integrators() -> None:
     same time (to 1e-6 s)."""
     slow = np.array([-math.pi / 8, 0.3])
     runs = [
-        simulate_steps(LIGHT, "er", slow, 2, FastIntegrator(rtol=1e-10, atol=1e-12, stiff_legs=s)) for s in (True, False)
+        simulate_steps(LIGHT, "er", slow, 2, FastIntegrator(rtol=1e-10, atol=1e-12, stiff_legs=s))
+        for s in (True, False)
     ]
     for walk in runs:
         assert walk.failure is not None and walk.failure.reason is FailureReason.STALL
