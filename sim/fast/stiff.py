@@ -203,7 +203,7 @@ def ros_step(mi, phase, p, y, f0, Jm, h, with_diss, y_new, err, G, lam, ws):
 
 @_inner
 def _hermite(y, f0, y_new, f1, h, F):
-    """The cubic Hermite interpolant of a step in DOP853's dense form (rk._dense_eval reads it)."""
+    """The cubic Hermite interpolant of a step in DOP853's dense form (rk.dense_eval reads it)."""
     N = y.shape[0]
     for i in range(N):
         dy = y_new[i] - y[i]
@@ -226,9 +226,9 @@ def _guard_by_step(mi, phase, p, code, s, y, f0, Jm, with_diss, y_out, lam, ws):
         err = np.empty(N)
         ros_step(mi, phase, p, y, f0, Jm, s, with_diss, y_out, err, G, lam, ws)
     qdd = np.empty(5)
-    if rk._needs_lambda(code):
+    if rk.needs_lambda(code):
         fm.accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
-    return rk._guard_value(phase, code, y_out, lam, p)
+    return rk.guard_value(phase, code, y_out, lam, p)
 
 
 @_inner
@@ -333,7 +333,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
             ok = False
     if not ok:
         return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
-    rk._guards_at(phase, p, codes, y, lam, g)
+    rk.guards_at(phase, p, codes, y, lam, g)
     for e in range(ng):
         if not math.isfinite(g[e]):
             return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
@@ -381,7 +381,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
             rejected = True
             nreject += 1
         nsteps += 1
-        rk._guards_at(phase, p, codes, y_new, lam_new, g_new)
+        rk.guards_at(phase, p, codes, y_new, lam_new, g_new)
         for e in range(ng):
             if not math.isfinite(g_new[e]):
                 return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
@@ -400,31 +400,31 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
             down = g[e] >= 0.0 and g_new[e] <= 0.0
             root = np.inf
             if (up and directions[e] > 0) or (down and directions[e] < 0):
-                root, nf = rk._brent(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
-                nfev += nf if rk._needs_lambda(codes[e]) else 0
+                root, nf = rk.brent_on_dense(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
+                nfev += nf if rk.needs_lambda(codes[e]) else 0
             elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
                 if fm.swing_height_rate(y, L0) < 0.0 and fm.swing_height_rate(y_new, L0) > 0.0:  # a graze
-                    tmin, nf = rk._brent(mi, phase, p, fm.TOUCHDOWN, True, t, t_new, t, h, F, y)
+                    tmin, nf = rk.brent_on_dense(mi, phase, p, fm.TOUCHDOWN, True, t, t_new, t, h, F, y)
                     ybuf = np.empty(N)
-                    gmin = rk._guard_on_dense(
+                    gmin = rk.guard_on_dense(
                         mi, phase, p, fm.TOUCHDOWN, tmin, t, h, F, y, ybuf, np.empty(5), lam, False
                     )
                     if gmin <= 0.0:
-                        root, nf = rk._brent(mi, phase, p, fm.TOUCHDOWN, False, t, tmin, t, h, F, y)
+                        root, nf = rk.brent_on_dense(mi, phase, p, fm.TOUCHDOWN, False, t, tmin, t, h, F, y)
             elif fm.guard_needs_lambda(codes[e]) and g[e] > 0.0 and g_new[e] > 0.0:
                 # a normal force that may dip below zero between step ends (the engine's dip rule)
                 if have_prev and g_pp[e] > g[e] and g[e] < g_new[e] and g_pp[e] > 0.0:
-                    if rk._parabola_min(tp_old, g_pp[e], t, g[e], t_new, g_new[e]) <= DIP_MARGIN * g[e]:
-                        r_prev, nf = rk._first_dip(mi, phase, p, codes[e], tp_old, hp, Fp, yp_old, g_pp[e], g[e])
+                    if rk.parabola_min(tp_old, g_pp[e], t, g[e], t_new, g_new[e]) <= DIP_MARGIN * g[e]:
+                        r_prev, nf = rk.first_dip(mi, phase, p, codes[e], tp_old, hp, Fp, yp_old, g_pp[e], g[e])
                         nfev += nf
                         if r_prev < best_t:
                             best_t = r_prev
                             best_e = e
                             best_prev = True
-                        root, nf = rk._first_dip(mi, phase, p, codes[e], t, h, F, y, g[e], g_new[e])
+                        root, nf = rk.first_dip(mi, phase, p, codes[e], t, h, F, y, g[e], g_new[e])
                         nfev += nf
                 elif (not have_prev and g[e] < g_new[e]) or (g[e] > g_new[e] and (any_active or t_new == t_bound)):
-                    root, nf = rk._first_dip(mi, phase, p, codes[e], t, h, F, y, g[e], g_new[e])
+                    root, nf = rk.first_dip(mi, phase, p, codes[e], t, h, F, y, g[e], g_new[e])
                     nfev += nf
             if root < best_t:
                 best_t = root
@@ -437,14 +437,14 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
                 tg = t0 + next_grid * record_dt
                 if tg >= t_stop:
                     break
-                rec_t, rec_y = rk._room(rec_t, rec_y, nrec)
+                rec_t, rec_y = rk.grow_record(rec_t, rec_y, nrec)
                 rec_t[nrec] = tg
-                rk._dense_eval(F, y, (tg - t) / h, 10, ybuf)
+                rk.dense_eval(F, y, (tg - t) / h, 10, ybuf)
                 for i in range(10):
                     rec_y[nrec, i] = ybuf[i]
                 nrec += 1
                 next_grid += 1
-            rec_t, rec_y = rk._room(rec_t, rec_y, nrec)
+            rec_t, rec_y = rk.grow_record(rec_t, rec_y, nrec)
         if best_e >= 0:
             y_end = np.empty(N)
             if best_prev:  # the dip was in the previous step: refine there (its Jacobian again)
