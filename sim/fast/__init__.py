@@ -199,6 +199,7 @@ class FastStep:
     nsteps: int
     nstiff: int  # accepted steps flagged stiff by the h |lambda| > 6.1 test
     relabel_snap_J: float = 0.0  # energy the relabelling snap of the old trailing leg adds (J; < 0 removes)
+    # "fast-dop853", or "fast-dop853+rosenbrock": single support of near-massless legs by rimless.sim.fast.stiff
     method: str = "fast-dop853"
     contact: BilateralContact | None = None  # with bilateral=True only
     # per phase (dlsp, slsp_free, slsp_clutched): right-hand-side evaluations and accepted steps
@@ -305,6 +306,7 @@ def fast_step(
         nsteps=int(nsteps),
         nstiff=int(nstiff),
         relabel_snap_J=float(snap),
+        method="fast-dop853+rosenbrock" if stiff.leg_stiff(param_vector(params)) and not jacobian else "fast-dop853",
         contact=BilateralContact.of(c) if bilateral and len(c) else None,
         phase_nfev=(int(counts[0, 0]), int(counts[1, 0]), int(counts[2, 0])),
         phase_steps=(int(counts[0, 1]), int(counts[1, 1]), int(counts[2, 1])),

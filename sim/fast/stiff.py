@@ -292,8 +292,9 @@ def _refine(mi, phase, p, code, t, t_root, t_hi, y, f0, Jm, with_diss, y_end, la
 def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_diss, record_dt, max_steps):
     """Integrate one base phase from (t0, y0) until a guard in `codes` fires or t0 + t_max is reached, with the
     Rosenbrock method. Arguments and returns as rimless.sim.fast.rk.run_phase (without the variational
-    equations): (status, t_end, y_end, fired_index (-1: none), nfev, nsteps, nstiff (0), rec_t, rec_y); nfev
-    counts field evaluations, one per Jacobian included."""
+    equations): (status, t_end, y_end, fired_index (-1: none), nfev, nsteps, nstiff, rec_t, rec_y); nfev
+    counts field evaluations, one per Jacobian included; nstiff the steps with h |lambda_leg| > 6.1 (`leg_rate`),
+    those DOP853 could not have taken (its stiffness indicator's threshold)."""
     N = y0.shape[0]
     ng = codes.shape[0]
     L0 = p[3]
@@ -327,16 +328,18 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
     next_grid = 1
     nfev = 1
     nsteps = 0
+    nstiff = 0
+    rate = leg_rate(p)
     ok = rk.rhs_aug(mi, phase, p, y, False, with_diss, f, lam, ws)
     for i in range(N):
         if not (math.isfinite(y[i]) and math.isfinite(f[i])):
             ok = False
     if not ok:
-        return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+        return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
     rk.guards_at(phase, p, codes, y, lam, g)
     for e in range(ng):
         if not math.isfinite(g[e]):
-            return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+            return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
     h_abs = min(1e-4, t_max)  # the controller grows it by up to 5x a step
     tp_old = t0
     hp = 0.0
@@ -344,9 +347,9 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
     nreject = 0
     while True:
         if nsteps >= max_steps:
-            return rk.STATUS_TOO_MANY_STEPS, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+            return rk.STATUS_TOO_MANY_STEPS, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         if not _jacobian(mi, phase, p, y, with_diss, Jm):
-            return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+            return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         nfev += 1
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
         rejected = False
@@ -354,7 +357,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
         t_new = t
         while True:
             if not (h_abs >= min_step) or nreject > MAX_REJECTIONS:
-                return rk.STATUS_STEP_TOO_SMALL, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+                return rk.STATUS_STEP_TOO_SMALL, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
             t_new = min(t + h_abs, t_bound)
             h = t_new - t
             h_abs = h
@@ -381,10 +384,12 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
             rejected = True
             nreject += 1
         nsteps += 1
+        if h * rate > 6.1:  # a step the explicit method could not take (its stiffness indicator's threshold)
+            nstiff += 1
         rk.guards_at(phase, p, codes, y_new, lam_new, g_new)
         for e in range(ng):
             if not math.isfinite(g_new[e]):
-                return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+                return rk.STATUS_NOT_FINITE, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         _hermite(y, f, y_new, f_new, h, F)
         best_t = np.inf
         best_e = -1
@@ -465,7 +470,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
                 for i in range(10):
                     rec_y[nrec, i] = y_end[i]
                 nrec += 1
-            return rk.STATUS_OK, t_ev, y_end, best_e, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+            return rk.STATUS_OK, t_ev, y_end, best_e, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         if recording:
             rec_t[nrec] = t_new
             for i in range(10):
@@ -489,7 +494,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
         for e in range(ng):
             g[e] = g_new[e]
         if t == t_bound:
-            return rk.STATUS_OK, t, y, -1, nfev, nsteps, 0, rec_t[:nrec], rec_y[:nrec]
+            return rk.STATUS_OK, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
 
 
 # Per-mass-model entry points from Python (the index a compile-time constant, as rk.RUN_PHASE).

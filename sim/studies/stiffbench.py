@@ -9,7 +9,7 @@ FastIntegrator twice: single support by Rosenbrock (`stiff_legs=True`, the defau
 (`stiff_legs=False`, what every phase used before). Errors are against DOP853 at rtol 1e-12 (atol 1e-14):
 the largest step-period error (s) and the largest error of the post-impact section z = (theta+, theta'+)
 (rad, rad/s) over the walk. The compiled step map (`fast_step`, as the trial comparison's scans use it) is
-timed on the same steps. Times are CPU time of this thread (time.thread_time), median of `repeats`; every
+timed on the same steps, its error (largest of period s and z) against the same reference, step by step. Times are CPU time of this thread (time.thread_time), median of `repeats`; every
 ratio printed comes from them. Right-hand-side evaluations are counted by the integrators.
 
 Run: ``python -m rimless.sim.studies.stiffbench`` (some 20 s on a loaded 2-core machine, after compiling).
@@ -86,14 +86,14 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
         t_old, (walk_old, nfev_old) = _cpu(lambda r=rtol: _walk(params, r, False, n_steps), repeats)
 
         def maps(r: float = rtol) -> tuple[float, int]:
-            z, periods, nfev = RELEASE_Z, [], 0
-            for _ in range(n_steps):
+            z, nfev, err = RELEASE_Z, 0, 0.0
+            for ref_step in ref.steps:
                 step = fast_step(params, "er", z, rtol=r)
                 z, nfev = step.z_next, nfev + step.nfev
-                periods.append(step.period_s)
-            return periods[-1], nfev
+                err = max(err, abs(step.period_s - ref_step.period_s), *np.abs(z - ref_step.y_plus[[2, 7]]))
+            return err, nfev
 
-        t_map, (_, nfev_map) = _cpu(maps, repeats)
+        t_map, (err_map, nfev_map) = _cpu(maps, repeats)
         rows.append(
             {
                 "rtol": rtol,
@@ -106,6 +106,7 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
                 "dop853_errors": _errors(walk_old, ref),
                 "map_cpu_s": t_map,
                 "map_nfev": nfev_map,
+                "map_error": err_map,
             }
         )
     return {
@@ -125,14 +126,14 @@ def format_table(out: dict[str, Any]) -> str:
         f"c {p.damping_ns_per_m:g} N s/m: fastest leg root {out['leg_rate_per_s']:.3g} 1/s), slope {SLOPE_DEG:g} deg,"
         f" release z = ({RELEASE_Z[0]:.4f} rad, {RELEASE_Z[1]:g} rad/s); errors against DOP853 at rtol {REFERENCE_RTOL:g}",
         f"{'rtol':>7} {'Rosenbrock s':>12} {'DOP853 s':>9} {'ratio':>6} {'nfev R':>8} {'nfev D':>8} "
-        f"{'period err R':>12} {'period err D':>12} {'z err R':>9} {'z err D':>9} {'map s':>7} {'map nfev':>8}",
+        f"{'period err R':>12} {'period err D':>12} {'z err R':>9} {'z err D':>9} {'map s':>7} {'map nfev':>8} {'map err':>8}",
     ]
     for r in out["rows"]:
         (pr, zr), (pd, zd) = r["rosenbrock_errors"], r["dop853_errors"]
         lines.append(
             f"{r['rtol']:7.0e} {r['rosenbrock_cpu_s']:12.4f} {r['dop853_cpu_s']:9.4f} {r['cpu_ratio']:6.1f} "
             f"{r['rosenbrock_nfev']:8d} {r['dop853_nfev']:8d} {pr:12.2e} {pd:12.2e} {zr:9.2e} {zd:9.2e} "
-            f"{r['map_cpu_s']:7.4f} {r['map_nfev']:8d}"
+            f"{r['map_cpu_s']:7.4f} {r['map_nfev']:8d} {r['map_error']:8.1e}"
         )
     lines.append(
         f"CPU time of this thread, median of repeats; load average {out['load_before']:.1f} before, "
