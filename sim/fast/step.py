@@ -58,8 +58,9 @@ DLSP_RTOL_FLOOR = 1e-13
 # ... and, with near-massless legs (rimless.sim.fast.stiff.leg_stiff), not below DLSP_STIFF_FLOOR: the double-
 # support field then carries rounding noise (the leg's row of the KKT system is divided by m: relative errors of
 # some eps m_H / m and more near a stall), and a tolerance under that noise makes DOP853 take thousands of steps
-# for nothing (measured at m = 0.1 g, Table 1's k and c, 12 post-impact states: at most 5 steps at rtol 1e-8 and
-# typically 1-4 at 1e-10, but 1500-57 000 at 1e-12, the map's tightened tolerance at rtol 1e-8).
+# for nothing (measured at m = 0.1 g, Table 1's k and c, 12 post-impact states: at most 5 steps at rtol 1e-8; 1-4
+# at 1e-10 except where double support ends in a stall, 580-6 600; at 1e-12, the map's tightened tolerance at rtol
+# 1e-8, up to 57 000 or the step limit).
 DLSP_STIFF_FLOOR = 1e-10
 
 # the guards of each phase, with their directions from the one guard table (rimless.sim.model.guards)
