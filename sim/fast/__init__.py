@@ -7,6 +7,7 @@ steps, failure classes and guards (codes and directions of the one table rimless
 rules of the event engine rimless.sim.integrate.events). Modules:
 - rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
 - rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output (the engine's twin);
+- rimless.sim.fast.stiff: a compiled Rosenbrock method for single support of near-massless legs (`leg_stiff`);
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
 - rimless.sim.fast.compiling: calling a kernel on first use with a notice on stderr while it compiles;
 - rimless.sim.fast.ahead: on a cold cache, the step kernel's late callees compiled in a second process;
@@ -23,9 +24,11 @@ The Poincaré map on this path, `FastPoincareMap`, is a step-level object: rimle
 
 Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.model.section).
 
-Stiff legs: DOP853 is explicit. A phase needing more than `max_steps` steps is reported as such
-(StepFailure INTEGRATION with "too many steps", StiffnessLimit); FastPoincareMap(stiff_fallback=True) then
-recomputes that map with scipy's implicit Radau.
+Stiff legs: DOP853 is explicit. Single support of legs whose fastest root max(c/m, sqrt(k/m)) exceeds
+stiff.STIFF_LEG_RATE (near-massless legs; not Table 1's) is integrated by the compiled Rosenbrock method of
+rimless.sim.fast.stiff, on the step map without the Jacobian and in FastIntegrator walks (stiff_legs=True). A phase
+still needing more than `max_steps` steps is reported as such (StepFailure INTEGRATION with "too many steps",
+StiffnessLimit); FastPoincareMap(stiff_fallback=True) then recomputes that map with scipy's implicit Radau.
 
 May import: rimless.sim.model, rimless.sim.integrate (the Integrator protocol, the event engine's constants),
 numpy, scipy, numba, rimless.errors. Never step/, continuation/, studies/, in_the_loop/ or cli/.
