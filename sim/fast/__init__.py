@@ -7,6 +7,7 @@ steps, failure classes and guards (codes and directions of the one table rimless
 rules of the event engine rimless.sim.integrate.events). Modules:
 - rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
 - rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output (the engine's twin);
+- rimless.sim.fast.stiff: a compiled Rosenbrock method for single support of near-massless legs (`leg_stiff`);
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
 - rimless.sim.fast.compiling: calling a kernel on first use with a notice on stderr while it compiles;
 - rimless.sim.fast.ahead: on a cold cache, the step kernel's late callees compiled in a second process;
@@ -23,9 +24,11 @@ The Poincaré map on this path, `FastPoincareMap`, is a step-level object: rimle
 
 Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.model.section).
 
-Stiff legs: DOP853 is explicit. A phase needing more than `max_steps` steps is reported as such
-(StepFailure INTEGRATION with "too many steps", StiffnessLimit); FastPoincareMap(stiff_fallback=True) then
-recomputes that map with scipy's implicit Radau.
+Stiff legs: DOP853 is explicit. Single support of legs whose fastest root max(c/m, sqrt(k/m)) exceeds
+stiff.STIFF_LEG_RATE (near-massless legs; not Table 1's) is integrated by the compiled Rosenbrock method of
+rimless.sim.fast.stiff, on the step map without the Jacobian and in FastIntegrator walks (stiff_legs=True). A phase
+still needing more than `max_steps` steps is reported as such (StepFailure INTEGRATION with "too many steps",
+StiffnessLimit); FastPoincareMap(stiff_fallback=True) then recomputes that map with scipy's implicit Radau.
 
 May import: rimless.sim.model, rimless.sim.integrate (the Integrator protocol, the event engine's constants),
 numpy, scipy, numba, rimless.errors. Never step/, continuation/, studies/, in_the_loop/ or cli/.
@@ -73,7 +76,7 @@ def _compile_settings() -> None:
 _compile_settings()
 
 from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder is chosen)
-from rimless.sim.fast import rk  # noqa: E402
+from rimless.sim.fast import rk, stiff  # noqa: E402
 from rimless.sim.fast import step as fs  # noqa: E402
 from rimless.sim.fast.ahead import compiling_ahead  # noqa: E402
 from rimless.sim.fast.compiling import cache_folder as _cache_folder  # noqa: E402
@@ -99,7 +102,7 @@ def _invalidate_stale_cache() -> None:
     from rimless.sim.model.generated import active_feet, eight_leg, sliding_leg
 
     digest = hashlib.sha256()
-    for mod in (fm, rk, fs, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
+    for mod in (fm, rk, fs, stiff, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
         assert mod.__file__ is not None  # modules loaded from source files
         digest.update(Path(mod.__file__).read_bytes())
     stamp_value = digest.hexdigest()
@@ -108,7 +111,7 @@ def _invalidate_stale_cache() -> None:
         stamp = cache_dir / "rimless_fast_kernels.stamp"
         if stamp.exists() and stamp.read_text() == stamp_value:
             return
-        for pattern in ("model.*.nb[ic]", "rk.*.nb[ic]", "step.*.nb[ic]"):
+        for pattern in ("model.*.nb[ic]", "rk.*.nb[ic]", "step.*.nb[ic]", "stiff.*.nb[ic]"):
             for f in cache_dir.glob(pattern):
                 f.unlink(missing_ok=True)
         gen_dir = Path(fm._M0._cache._cache_path)
@@ -199,6 +202,7 @@ class FastStep:
     nsteps: int
     nstiff: int  # accepted steps flagged stiff by the h |lambda| > 6.1 test
     relabel_snap_J: float = 0.0  # energy the relabelling snap of the old trailing leg adds (J; < 0 removes)
+    # "fast-dop853", or "fast-dop853+rosenbrock": single support of near-massless legs by rimless.sim.fast.stiff
     method: str = "fast-dop853"
     contact: BilateralContact | None = None  # with bilateral=True only
     # per phase (dlsp, slsp_free, slsp_clutched): right-hand-side evaluations and accepted steps
@@ -305,6 +309,7 @@ def fast_step(
         nsteps=int(nsteps),
         nstiff=int(nstiff),
         relabel_snap_J=float(snap),
+        method="fast-dop853+rosenbrock" if stiff.leg_stiff(param_vector(params)) and not jacobian else "fast-dop853",
         contact=BilateralContact.of(c) if bilateral and len(c) else None,
         phase_nfev=(int(counts[0, 0]), int(counts[1, 0]), int(counts[2, 0])),
         phase_steps=(int(counts[0, 1]), int(counts[1, 1]), int(counts[2, 1])),
@@ -358,6 +363,9 @@ class FastIntegrator:
     rtol: float = 1e-10
     atol: float = 1e-12
     max_steps: int = MAX_STEPS
+    #: single support with near-massless legs (rimless.sim.fast.stiff.leg_stiff) by the compiled Rosenbrock
+    #: method; False keeps DOP853 everywhere (the reference the benchmark compares with)
+    stiff_legs: bool = True
     name: str = field(init=False)
 
     def __post_init__(self) -> None:
@@ -389,9 +397,14 @@ class FastIntegrator:
             record_dt,
             self.max_steps,
         )
-        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = _call_compiling(
-            rk.RUN_PHASE[fm.MASS_MODEL_INDEX[mech.params.mass_model]], *args
-        )
+        mi = fm.MASS_MODEL_INDEX[mech.params.mass_model]
+        if self.stiff_legs and phase in (fm.SLSP_FREE, fm.SLSP_CLUTCHED) and stiff.leg_stiff(mech.p):
+            # near-massless legs: single support by the Rosenbrock method (rimless.sim.fast.stiff)
+            args = args[:10] + args[11:]  # no variational equations
+            entry = stiff.RUN_PHASE_STIFF[mi]
+        else:
+            entry = rk.RUN_PHASE[mi]
+        st, t_end, y_end, fired, nfev, nsteps, _nstiff, rec_t, rec_y = _call_compiling(entry, *args)
         run = PhaseRun(
             t_end=float(t_end),
             y_end=np.array(y_end[:10]),

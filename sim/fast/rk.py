@@ -895,6 +895,19 @@ def run_phase(
             return STATUS_OK, t, y, -1, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
 
 
+# The event engine's pieces the Rosenbrock phase (rimless.sim.fast.stiff) shares: it writes its steps' dense
+# output in DOP853's form, so these read it unchanged.
+needs_lambda = _needs_lambda
+guard_value = _guard_value
+guards_at = _guards_at
+dense_eval = _dense_eval
+guard_on_dense = _guard_on_dense
+brent_on_dense = _brent
+parabola_min = _parabola_min
+first_dip = _first_dip
+grow_record = _room
+
+
 # Per-mass-model entry points (the index a compile-time constant: one mass model's generated code compiled).
 @_jit
 def run_phase_0(

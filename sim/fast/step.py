@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from rimless.sim.fast import model as fm
-from rimless.sim.fast import rk
+from rimless.sim.fast import rk, stiff
 from rimless.sim.fast.ahead import compiling_ahead
 from rimless.sim.fast.compiling import call_compiling, kernel
 from rimless.sim.model.guards import DIRECTION
@@ -55,6 +55,13 @@ IMPACT_PHASE = 3
 # a much looser rtol.
 DLSP_RTOL_SCALE = 1e-4
 DLSP_RTOL_FLOOR = 1e-13
+# ... and, with near-massless legs (rimless.sim.fast.stiff.leg_stiff), not below DLSP_STIFF_FLOOR: the double-
+# support field then carries rounding noise (the leg's row of the KKT system is divided by m: relative errors of
+# some eps m_H / m and more near a stall), and a tolerance under that noise makes DOP853 take thousands of steps
+# for nothing (measured at m = 0.1 g, Table 1's k and c, 12 post-impact states: at most 5 steps at rtol 1e-8; 1-4
+# at 1e-10 except where double support ends in a stall, 580-6 600; at 1e-12, the map's tightened tolerance at rtol
+# 1e-8, up to 57 000 or the step limit).
+DLSP_STIFF_FLOOR = 1e-10
 
 # the guards of each phase, with their directions from the one guard table (rimless.sim.model.guards)
 PHASE_DLSP_CODES = np.array([fm.LIFTOFF_A, fm.STALL, fm.TOUCHDOWN], dtype=np.int64)
@@ -179,9 +186,10 @@ def single_support_force(mi, phase, rec_t, rec_y, p, contact):
 
 
 @kernel(inline="always", python=False)  # one call site (two for _guards_at): no library of its own
-def dlsp_tolerances(rtol, atol):
-    """(rtol, atol) of the double-support phase for the map's (rtol, atol)."""
-    scale = min(1.0, max(rtol * DLSP_RTOL_SCALE, DLSP_RTOL_FLOOR) / rtol) if rtol > 0.0 else 1.0
+def dlsp_tolerances(rtol, atol, p):
+    """(rtol, atol) of the double-support phase for the map's (rtol, atol); p the parameter vector."""
+    floor = DLSP_STIFF_FLOOR if stiff.leg_stiff(p) else DLSP_RTOL_FLOOR
+    scale = min(1.0, max(rtol * DLSP_RTOL_SCALE, floor) / rtol) if rtol > 0.0 else 1.0
     return rtol * scale, atol * scale
 
 
@@ -211,9 +219,14 @@ def _run_phase(
     `ending`; else the failure: the integrator's (D_SOLVER), time_limit_status at the phase time limit,
     STALL / STANCE_LIFT_OFF at the stall / stance lift-off guards, touchdown_status at an early touchdown.
     rec_dt > 0 (bilateral contact with a record): the states every rec_dt s go into `contact`'s stance force."""
-    st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = rk.run_phase(
-        mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, want_jac, False, rec_dt, max_steps
-    )
+    if phase != fm.DLSP and not want_jac and stiff.leg_stiff(p):  # near-massless legs: Rosenbrock (stiff.py)
+        st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = stiff.run_phase_stiff(
+            mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, False, rec_dt, max_steps
+        )
+    else:
+        st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = rk.run_phase(
+            mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, want_jac, False, rec_dt, max_steps
+        )
     if rec_dt > 0.0:
         single_support_force(mi, phase, rec_t, rec_y, p, contact)
     counts[phase, 0] = nf
@@ -314,7 +327,7 @@ def step_kernel(mi, er, p, z, rtol, atol, want_jac, max_steps, counts, bilateral
     if not _finite(qdd, lam):
         return INTEGRATION, D_NOT_FINITE, 0, t, yp, J, times, nfev, nsteps, nstiff, snap
     if lam[3] > 0.0:
-        rtol_d, atol_d = dlsp_tolerances(rtol, atol)
+        rtol_d, atol_d = dlsp_tolerances(rtol, atol, p)
         st, detail, t_end, y_end, nf, ns, nst = _run_phase(
             mi,
             fm.DLSP,
