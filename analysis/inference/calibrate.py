@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -1508,15 +1509,15 @@ def _calibrate(
         row = _within(
             budget,
             f"held-exact probe of {n}",
-            lambda n=n: _held_exact_probe(obj, u, fit, (lo, hi), max_rounds, estimates, n),
+            functools.partial(_held_exact_probe, obj, u, fit, (lo, hi), max_rounds, estimates, n),
         )
         if row is None:
             _not_probed(estimates, n)
             row = {
-                "refit": False,
-                "skipped": "simulation budget",
-                "statement": f"{n} not probed: the simulation budget ran out",
-            }
+                "held_at": float(getattr(glob.base, FIT_FIELDS[n][0])), "fit": [*fit, n], "refit": False,
+                "converged": False, "depends": [], "shifts_se": {}, "cpu_s": 0.0, "skipped": "simulation budget",
+                "statement": f"{n} not probed: the simulation budget ran out; every estimate is conditional on it",
+            }  # fmt: skip
         probe[n] = row
     tick()  # the adequacy check's and the model choice's walks counted too: the last count is the total
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
