@@ -40,6 +40,11 @@ def _staged(two_trials, max_simulations):
     return res, budget, entries
 
 
+@pytest.fixture(scope="module")
+def unbounded(two_trials):
+    return _staged(two_trials, None)
+
+
 def _finite_json(obj) -> None:
     json.dumps(obj, allow_nan=False)  # NaN is never a result: not in the JSON either
 
@@ -81,10 +86,10 @@ def stage_bound(n_t: int, n_g: int = 1) -> int:
 
 
 @pytest.mark.slow
-def test_simulations_bounded_by_the_stage_structure(two_trials):
+def test_simulations_bounded_by_the_stage_structure(unbounded):
     """A fixed small problem (c on two trials) runs no more simulations than its stages allow; each stage's
     count within its own bound, and the budget's count is the simulations run."""
-    res, budget, entries = _staged(two_trials, None)
+    res, budget, entries = unbounded
     n_t, n_g = 2, 1
     assert budget.used <= stage_bound(n_t, n_g), (budget.used, stage_bound(n_t, n_g))
     assert budget.stopped_in is None and res.budget["stopped_in"] is None and res.budget["used"] == budget.used
@@ -101,10 +106,10 @@ def test_simulations_bounded_by_the_stage_structure(two_trials):
 
 
 @pytest.mark.slow
-def test_a_tiny_budget_stops_in_the_least_squares_and_says_so(two_trials):
+def test_a_tiny_budget_stops_in_the_least_squares_and_says_so(two_trials, unbounded):
     """With just enough for the start and a few evaluations, the least squares stop at their lowest point: not
     converged, no parameter identifiable, the budget says where; never more simulations than the budget."""
-    _, full, entries = _staged(two_trials, None)
+    _, full, entries = unbounded
     at_solve = dict(entries)["least squares from the profile's start"]
     limit = at_solve + closing_reserve(2, 1) + 6  # the start, the reserve, and three evaluations of two walks
     res, budget, _ = _staged(two_trials, limit)
@@ -122,10 +127,10 @@ def test_a_tiny_budget_stops_in_the_least_squares_and_says_so(two_trials):
 
 
 @pytest.mark.slow
-def test_every_budget_holds(two_trials):
+def test_every_budget_holds(two_trials, unbounded):
     """Whatever the budget, the simulations never exceed it: a result (stopped where it ran out) or, before a
     first solution, a classified failure naming the stage."""
-    _, full, entries = _staged(two_trials, None)
+    _, full, entries = unbounded
     at = dict(entries)
     for limit in (50, at["least squares from the profile's start"] + closing_reserve(2, 1) + 40, full.used - 30):
         try:
@@ -162,11 +167,33 @@ def test_cli_budget_exit_codes_and_report(exports):
     assert "error: the simulation budget ran out in start" in res.output and "Traceback" not in res.output
     res = runner.invoke(root_app, [*base, "--max-simulations", "0"])
     assert res.exit_code == 2 and "--max-simulations" in res.output
-    full = runner.invoke(root_app, [*base, "--json"])
-    assert full.exit_code == 0, full.output
-    out = json.loads(full.stdout)
-    assert out["budget"]["stopped_in"] is None and out["budget"]["used"] <= out["budget"]["max_simulations"]
-    limit = out["budget"]["used"] - 20  # the search's last simulations cut off
-    cut = runner.invoke(root_app, [*base, "--max-simulations", str(limit)], env={"COLUMNS": "300"})
+    # 600: past the start (about 250 on these two trials), short of the held parameters' refits' end (about 1500)
+    cut = runner.invoke(root_app, [*base, "--json", "--max-simulations", "600"])
     assert cut.exit_code == 0, cut.output
-    assert "SIMULATION BUDGET: the simulation budget ran out" in cut.output and f"of at most {limit}" in cut.output
+    b = json.loads(cut.stdout)["budget"]
+    assert b["stopped_in"] and b["used"] <= 600 and b["max_simulations"] == 600 and b["skipped"]
+    text = runner.invoke(root_app, [*base, "--max-simulations", "600"], env={"COLUMNS": "300"})
+    assert text.exit_code == 0, text.output
+    assert f"SIMULATION BUDGET: the simulation budget ran out: {b['used']} simulations of at most 600" in text.output
+
+
+@pytest.mark.slow
+def test_held_refits_cut_by_the_budget_make_the_estimate_effective_only(two_trials):
+    """k held at 2700 +- 270 N/m: its refits carry its uncertainty into c; stopped by the budget, c's interval
+    lacks that part, so c is not claimed identifiable (effective only), the note names k, the budget the stage."""
+    trials, names = two_trials
+    held = [("stiffness_n_per_m", 270.0)]
+    entries: list[tuple[str, int]] = []
+    whole = SimulationBudget(None)
+    whole.on_stage = lambda s: entries.append((s, whole.used))
+    res = cal.calibrate(trials, names, ["c"], held=held, budget=whole)
+    assert res.params[0].se_held is not None and res.params[0].se_held > 0  # carried when the budget allows
+    at_refits = dict(entries)["held parameters' refits"]
+    limit = at_refits + closing_reserve(2, 1) + 3
+    cut = cal.calibrate(trials, names, ["c"], held=held, max_simulations=limit)
+    (c,) = cut.params
+    b = cut.budget
+    assert b["used"] <= limit and b["stopped_in"] == "held parameters' refits"
+    assert c.se_held is None and not c.identifiable and c.status == "effective only"
+    assert "stiffness_n_per_m" in c.note and "budget" in c.note
+    _finite_json(cut.summary())
