@@ -197,3 +197,24 @@ def test_held_refits_cut_by_the_budget_make_the_estimate_effective_only(two_tria
     assert c.se_held is None and not c.identifiable and c.status == "effective only"
     assert "stiffness_n_per_m" in c.note and "budget" in c.note
     _finite_json(cut.summary())
+
+
+@pytest.mark.slow
+def test_a_recalibration_for_the_held_refits_stops_at_the_values_the_whole_one_reports(two_trials):
+    """A held parameter's whole recalibration (`held_response` when a warm refit sticks) needs only the fitted
+    values: run values-only it returns the values of the whole calibration at the same wheel to the last digit,
+    with fewer simulations (no minima re-solves, slopes' walks, adequacy check)."""
+    from rimless.sim.model.params import WheelParams
+
+    trials, names = two_trials
+    moved = WheelParams().replace(stiffness_n_per_m=2970.0)  # k at + 1 sd of its default 10 %
+    whole = SimulationBudget(None)
+    full = cal.calibrate(trials, names, ["c"], params=moved, multi_start="ridge", budget=whole)
+    data, failed = cal._usable(trials, names)
+    short = SimulationBudget(None)
+    values = cal._calibrate(
+        trials, names, ["c"], data, failed, moved, "er", 1e-7, 8e-3, cal.MAX_ROUNDS, "ridge", None, None, (), (),
+        short, values_only=True,
+    )  # fmt: skip
+    assert list(values) == [e.value for e in full.params]
+    assert short.used < whole.used
