@@ -1428,6 +1428,8 @@ def _calibrate(
     if budget.spent:
         budget.skip("polish", "not run: the solution not checked on the solution's sigmas")
         optimizer["polish"] = {"polished": False, "skipped": "simulation budget"}
+        with closing():  # the gain a step would still take (the walks at u are cached): how far from the minimum
+            optimizer["above_optimum_chi2"] = _gauss_newton_gain(J, obj.fun(u))
     else:
         try:
             u, J = _polish(obj, u, J, (lo, hi), max_rounds, optimizer)
