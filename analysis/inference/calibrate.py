@@ -1459,9 +1459,9 @@ def _calibrate(
         budget.enter("held parameters' refits")
 
         def recalibrate(moved: Any) -> np.ndarray | None:
-            budget.enter("held parameters' refits: a whole recalibration")
             fresh, _ = _usable(trials, names)  # as a calibration from scratch: no release or offset carried over
             stated = len(budget.skipped)  # the recalibration's own stages are not the result's: `_not_carried` says
+            budget.prefix = "held parameters' refits: a whole recalibration: "  # its stages named as its
             try:
                 return _calibrate(
                     trials, names, fit, fresh, failed, moved, model, rtol,
@@ -1474,6 +1474,7 @@ def _calibrate(
                 del budget.skipped[stated:]
                 raise
             finally:
+                budget.prefix = ""
                 budget.stage = "held parameters' refits"
 
         if budget.spent:

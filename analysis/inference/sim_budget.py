@@ -58,6 +58,8 @@ class SimulationBudget:
     #: the stages stopped or skipped for the budget, in order, each with what it means for the result
     skipped: list[dict[str, str]] = field(default_factory=list)
     on_stage: Callable[[str], None] | None = None
+    #: put before the stages' names (a held parameter's whole recalibration names its stages as its)
+    prefix: str = ""
     _closing: int = 0
 
     @property
@@ -80,9 +82,9 @@ class SimulationBudget:
 
     def enter(self, name: str) -> None:
         """The calibration reached stage ``name`` (progress shows it)."""
-        self.stage = name
+        self.stage = self.prefix + name
         if self.on_stage:
-            self.on_stage(name)
+            self.on_stage(self.stage)
 
     def skip(self, what: str, consequence: str) -> None:
         """Record that ``what`` was stopped or not run for the budget, and what that means for the result."""
