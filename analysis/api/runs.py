@@ -160,9 +160,13 @@ def calibration_run(
     params_path: Path | None,
     import_kwargs: dict[str, Any],
     prior_path: Path | None = None,
+    max_simulations: int | None = None,
 ) -> CalibrationRun:
     """Calibrate ``fit`` on the trials; with ``critical`` also the calibrated model's critical slope and the
-    trials'; with ``prior_path`` (a `trials leg-fit --json` output) the leg test's results as priors."""
+    trials'; with ``prior_path`` (a `trials leg-fit --json` output) the leg test's results as priors;
+    ``max_simulations`` the calibration's budget (None: the default, `DEFAULT_MAX_SIMULATIONS`)."""
+    from rimless.analysis.inference.sim_budget import DEFAULT_MAX_SIMULATIONS
+
     win = wheel_input(params_path)
     from rimless.analysis.inference.calibrate import FIT_FIELDS
 
@@ -196,6 +200,7 @@ def calibration_run(
                 raise RunFailure("the files imported differ from the first import's: " + "; ".join(again.refused))
             return again.trials
 
+        where = ["start"]  # the calibration's stage, shown with the count
         try:  # the held parameters carried by refits; the parameters listed
             run.calibration = calibrate_in_passes(
                 run.loaded.trials,
@@ -205,7 +210,9 @@ def calibration_run(
                 first_legs=legs,
                 reimport=reimport,
                 prior=prior,
-                progress=lambda n: bar.update(description=f"calibrating ({n} simulations)"),
+                progress=lambda n: bar.update(description=f"calibrating: {where[0]} ({n} simulations)"),
+                max_simulations=DEFAULT_MAX_SIMULATIONS if max_simulations is None else max_simulations,
+                on_stage=lambda s: where.__setitem__(0, s),
             )
         except NoTrialCalibrated as e:
             run.failure = str(e)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from rimless.analysis.inference.calibrate import CalibrationResult, NoTrialCalibrated
+from rimless.analysis.inference.sim_budget import DEFAULT_MAX_SIMULATIONS
 from rimless.errors import RimlessError
 
 __all__ = ["MAX_SLOPE_PASSES", "SLOPE_PASS_RTOL", "CalibrationInPasses", "calibrate_in_passes", "IMPORTED"]
@@ -120,24 +121,34 @@ def calibrate_in_passes(
     reimport: Callable[[Any], list[Any]] | None,
     prior: Any = None,
     progress: Callable[[int], None] | None = None,
+    max_simulations: int | None = DEFAULT_MAX_SIMULATIONS,
+    on_stage: Callable[[str], None] | None = None,
 ) -> CalibrationInPasses:
     """`rimless.analysis.inference.calibrate.calibrate` of ``fit`` on ``trials`` (imported told ``first_legs``:
     a `rimless.sim.Wheel`, None for the importer's bound, or `IMPORTED`) at ``wheel``'s parameters, holding and
     carrying the others (``wheel.input``); with k in ``fit`` and ``reimport(legs)`` (the same trials imported
     again told the wheel ``legs``, in the same order), the further passes of the module doc. ``progress(n)``:
-    the simulations so far over every pass. Raises `NoTrialCalibrated` when the first pass calibrates
-    nothing."""
+    the simulations so far over every pass. ``max_simulations``: the simulations of every pass together
+    (`rimless.analysis.inference.sim_budget`: one budget; a further pass is not started when it is spent, a
+    pass it stops is not kept); ``on_stage(name)``: the stage reached, its pass named. Raises `NoTrialCalibrated`
+    when the first pass calibrates nothing (`CalibrationBudgetSpent` when the budget ran out before)."""
     from rimless.analysis.inference.calibrate import FIT_FIELDS
     from rimless.analysis.inference.calibrate import calibrate as run_calibration
+    from rimless.analysis.inference.sim_budget import SimulationBudget
 
     done = [0]
+    this_pass = [1]
+
+    def staged(name: str) -> None:
+        if on_stage:
+            on_stage(name if this_pass[0] == 1 else f"pass {this_pass[0]}: {name}")
+
+    budget = SimulationBudget(max_simulations, on_stage=staged)
     fitted = {FIT_FIELDS[n][0] for n in fit}  # held exactly: a stated value without uncertainty, not fitted
 
     def calibrate_once(loaded: Sequence[Any]) -> CalibrationResult:
-        start = done[0]
-
         def tick(n: int) -> None:
-            done[0] = start + n
+            done[0] = budget.used  # every pass's simulations, the refits' recalibrations too
             if progress:
                 progress(done[0])
 
@@ -151,6 +162,7 @@ def calibrate_in_passes(
             prior=prior,
             held=[(e.name, e.sd) for e in wheel.input.held()],
             held_exact=[n for n, e in wheel.input.entries.items() if e.sd == 0 and n not in fitted],
+            budget=budget,
         )
 
     res = calibrate_once(trials)
@@ -184,11 +196,23 @@ def calibrate_in_passes(
             moved = f"moved {change:.1%} of a half width" if finite is not None else "gained or lost an interval"
             stop = f"at most {MAX_SLOPE_PASSES} calibrations; the slopes still {moved}"
             break
+        if budget.spent:
+            stop = "the simulation budget ran out: no further pass; the previous pass kept"
+            budget.skip(f"pass {len(history)}", "not run: the slopes as the previous pass imported them")
+            break
+        this_pass[0] = len(history)
+        stated = len(budget.skipped)
         try:
-            res = calibrate_once(again)
+            again_res = calibrate_once(again)
         except NoTrialCalibrated as err:
             stop = f"the calibration on the re-imported slopes failed ({err}): the previous pass kept"
             break
+        if budget.spent:  # this pass was cut short: the previous (whole) pass is the result
+            del budget.skipped[stated:]
+            budget.skip(f"pass {len(history)}", "stopped: the previous pass kept")
+            stop = "the simulation budget ran out in this pass: the previous pass kept"
+            break
+        res = again_res
         row["calibrated"], slopes, trials = True, new, again
     passes = sum(h["calibrated"] for h in history)
     used = max(i for i, h in enumerate(history) if h["calibrated"])
@@ -206,6 +230,7 @@ def calibrate_in_passes(
     out = CalibrationInPasses(
         **{f.name: getattr(res, f.name) for f in fields(res)}, slope_passes=info, trials=list(trials)
     )
+    out.budget = budget.as_dict()  # every pass's simulations, and what the budget stopped in any of them
     return out
 
 

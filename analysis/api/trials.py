@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rimless.analysis.inference.sim_budget import DEFAULT_MAX_SIMULATIONS
 from rimless.errors import ParameterError
 
 if TYPE_CHECKING:
@@ -97,12 +98,16 @@ def calibrate(
     prior: Any = None,
     progress: Callable[[int], None] | None = None,
     names: Sequence[str] | None = None,
+    max_simulations: int | None = DEFAULT_MAX_SIMULATIONS,
 ) -> CalibrationResult:
     """Fit model parameters (`fit`: names among c, k, guide_friction_n, ...) to the trials' step periods and CoM
     heights (`rimless trials calibrate`); the others are held at the wheel's values. `summary()` is the
     command's JSON object (`converged`, estimates with intervals, what was held; ``parameters``: every
     parameter's value, uncertainty and source, the wheel's `Wheel.input`). `names`: the trials' names in the
-    output (default the file names)."""
+    output (default the file names). `max_simulations`: at most this many simulations over the whole calibration
+    (None: no bound); when they run out the remaining stages are stopped or skipped, JSON ``budget`` says which
+    and the affected estimates' status says what it means (a budget spent before a first solution raises
+    `NoTrialCalibrated`)."""
     from rimless.analysis.api.slope_passes import IMPORTED, calibrate_in_passes
     from rimless.analysis.inference.calibrate import parse_fit
     from rimless.analysis.io.trial import Trial
@@ -125,6 +130,7 @@ def calibrate(
         reimport=(lambda legs: load_trials(items, wheel=legs)[0]) if exports else None,
         prior=prior,
         progress=progress,
+        max_simulations=max_simulations,
     )
     from rimless.analysis.inference.runs import calibrated_input
 

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any, NoReturn
 import typer
 
 from rimless.analysis.cli.names import names_shown
+from rimless.analysis.inference.sim_budget import DEFAULT_MAX_SIMULATIONS
 from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, echo_text, print_json, user_facing
 from rimless.errors import ParameterError
 from rimless.values import parse_list
@@ -299,6 +300,16 @@ def calibrate_cmd(
             show_default=False,
         ),
     ] = None,
+    max_simulations: Annotated[
+        int,
+        typer.Option(
+            "--max-simulations",
+            min=1,
+            metavar="N",
+            help="At most N simulations for the whole calibration; when spent, the remaining stages are stopped "
+            "or skipped and the output says which (JSON budget).",
+        ),
+    ] = DEFAULT_MAX_SIMULATIONS,
 ) -> None:
     """Calibrate the model (c, optionally k ...) on the trials' step periods and CoM height.
 
@@ -321,6 +332,7 @@ def calibrate_cmd(
         params_path=params,
         import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
         prior_path=prior,
+        max_simulations=max_simulations,
     )
     print_refused(run.loaded.refused)
     if not run.loaded.trials:
@@ -374,6 +386,9 @@ def _print_calibration(out: dict[str, Any]) -> None:
         )
     for line in optimizer_lines(opt):
         con.print(line, markup=False, highlight=False)
+    budget = out.get("budget")
+    if budget and budget.get("stopped_in"):
+        con.print("SIMULATION BUDGET: " + budget["statement"], markup=False, highlight=False)
     if out.get("slope_passes"):
         con.print("slopes: " + out["slope_passes"]["statement"], markup=False, highlight=False)
     for p in out["params"]:

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -51,6 +52,12 @@ import numpy as np
 from rimless.analysis.inference import release
 from rimless.analysis.inference.identifiability import least_squares_report, sandwich_se
 from rimless.analysis.inference.model_choice import EXTRA_PARAMETERS, MODEL_CHOICE_P  # noqa: F401 (re-exported)
+from rimless.analysis.inference.sim_budget import (
+    DEFAULT_MAX_SIMULATIONS,
+    BudgetSpent,
+    SimulationBudget,
+    closing_reserve,
+)
 from rimless.analysis.io.trial import ALPHA_RAD
 from rimless.errors import ParameterError, RimlessError
 from rimless.values import parse_list
@@ -157,12 +164,19 @@ class _Sim:
     record_dt_s: float
     calls: int = 0
     cache: dict = field(default_factory=dict)
+    #: the calibration's simulation budget (`rimless.analysis.inference.sim_budget`): None, no bound
+    budget: SimulationBudget | None = None
+
+    def _count(self) -> None:
+        if self.budget is not None:
+            self.budget.spend()  # raises BudgetSpent when the budget does not allow this simulation
+        self.calls += 1
 
     def frequencies(self, params: Any, slope_deg: float, w: float, n: int, offset: float = 0.0) -> np.ndarray:
         """Step frequencies (1/s) of the n steps after the release step from (-alpha/2, w), the post-impact
         angle after it moved by ``offset`` (rad), on the compiled step map; 0 for steps not reached (the wheel
         stalled or the step failed): `release.map_frequencies`."""
-        self.calls += 1
+        self._count()
         p = params.replace(slope_rad=math.radians(slope_deg))
         return release.map_frequencies(p, self.model, w, n, offset, self.rtol)
 
@@ -174,7 +188,7 @@ class _Sim:
         key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record, offset)
         if key in self.cache:
             return self.cache[key]
-        self.calls += 1
+        self._count()
         p = params.replace(slope_rad=math.radians(slope_deg))
         z0 = np.array([-ALPHA_RAD / 2, w])
         g = _com_walk(
@@ -464,6 +478,9 @@ class CalibrationResult:
     #: per extra parameter held exactly while c is fitted: the refit with it freed and what depends on it
     #: (`_held_exact_probe`); None when none was probed
     held_exact_probe: dict[str, Any] | None = None
+    #: the simulation budget: ``max_simulations``, ``used``, ``stopped_in`` (None when every stage ran), what was
+    #: stopped or skipped (`rimless.analysis.inference.sim_budget.SimulationBudget.as_dict`)
+    budget: dict[str, Any] | None = None
 
     @property
     def identifiable(self) -> bool:
@@ -511,6 +528,7 @@ class CalibrationResult:
             **({"adequacy": self.adequacy} if self.adequacy is not None else {}),
             **({"model_choice": self.model_choice} if self.model_choice is not None else {}),
             **({"held_exact_probe": self.held_exact_probe} if self.held_exact_probe is not None else {}),
+            **({"budget": self.budget} if self.budget is not None else {}),
         }
 
 
@@ -887,25 +905,46 @@ class _Objective:
         (`MAX_NFEV` evaluations a round, at most ``max_rounds`` rounds). The scipy result of the last round
         with ``rounds`` and the total ``nfev_total``; ``status == 0`` means the budget ran out (not converged),
         `GN_STOP_STATUS` that the Gauss-Newton step would gain less than `GN_STOP_COST` (converged)."""
-        from scipy.optimize import least_squares
+        from scipy.optimize import OptimizeResult, least_squares
 
         total = 0
+        seen: list[Any] = [None, math.inf, None, 0]  # the lowest-cost point evaluated: u, cost, residuals; count
+
+        def fun(x: np.ndarray) -> np.ndarray:
+            f = self.fun(x)
+            seen[3] += 1
+            c = float(np.sum(f**2))
+            if c < seen[1]:
+                seen[:3] = [np.array(x, dtype=float), c, f]
+            return f
+
         for k in range(max_rounds):  # noqa: B007
             # ftol 1e-6: a step that lowers the cost by less than 1e-6 of itself (about 0.002 in chi-square units
             # for the ~2000 residuals of a series, far below the 1 unit of a one-sigma change) ends the fit; the
             # finite-difference Jacobian of walks integrated at rtol 1e-7 cannot resolve 1e-10 (the bundled
             # critical series ran out of its budget at 1e-10 with c within 4e-5 N s/m of where 1e-6 stops)
-            r = least_squares(
-                self.fun,
-                np.clip(u, lo, hi),
-                jac=self.jac_kept,
-                bounds=(lo, hi),
-                method="trf",
-                xtol=1e-6,
-                ftol=1e-6,
-                max_nfev=MAX_NFEV,
-                callback=self.stop_near_minimum,
-            )
+            try:
+                r = least_squares(
+                    fun,
+                    np.clip(u, lo, hi),
+                    jac=self.jac_kept,
+                    bounds=(lo, hi),
+                    method="trf",
+                    xtol=1e-6,
+                    ftol=1e-6,
+                    max_nfev=MAX_NFEV,
+                    callback=self.stop_near_minimum,
+                )
+            except BudgetSpent:
+                if seen[0] is None:
+                    raise  # not one point evaluated: nothing to return
+                # stopped on the simulation budget: the lowest point it evaluated, not converged (status 0)
+                r = OptimizeResult(
+                    x=seen[0], fun=seen[2], cost=0.5 * seen[1], status=0, nfev=seen[3] - total, jac=None,
+                    message="stopped on the simulation budget (not converged)", budget_stopped=True,
+                )  # fmt: skip
+                total = seen[3]
+                break
             total += int(r.nfev)
             u = r.x
             if r.status == -2:  # stopped by near_minimum: converged to a tenth of a standard error
@@ -1053,6 +1092,8 @@ def held_response(
                 except ParameterError:
                     continue
                 r = obj.solve(u, bounds[0], bounds[1], max_rounds)
+                if r.get("budget_stopped"):
+                    raise BudgetSpent("held parameters' refits")  # a refit cut short carries nothing
                 if 2.0 * float(r.cost) <= REFIT_COST_RATIO * cost0 or recalibrate is None:
                     moved[sign] = obj.unpack(r.x)[0]
                     continue
@@ -1210,6 +1251,9 @@ def calibrate(
     prior: Any = None,
     held: Sequence[tuple[str, float]] = (),
     held_exact: Sequence[str] = (),
+    max_simulations: int | None = DEFAULT_MAX_SIMULATIONS,
+    budget: SimulationBudget | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> CalibrationResult:
     """Fit ``fit`` (names of FIT_FIELDS) and one release speed and time shift per trial; see the module doc.
 
@@ -1231,26 +1275,75 @@ def calibrate(
     priors (`rimless.analysis.inference.priors.LegPriors`, planned), Gaussian penalty rows on the fitted globals.
     ``held``: (WheelParams field, 1-sigma) of held parameters whose uncertainty is carried into each estimate's
     ``se_held`` (`held_response`: two warm refits per held parameter; a whole recalibration where one sticks,
-    with the ``"ridge"`` rule of starts). ``held_exact``: extra parameters (`EXTRA_PARAMETERS`) the caller holds
+    with the ``"ridge"`` rule of starts, only as far as its fitted values). ``held_exact``: extra parameters (`EXTRA_PARAMETERS`) the caller holds
     exactly (no stated uncertainty): with c fitted, each is probed by freeing it (`_held_exact_probe`: a fitted
     parameter it moves by more than `PROBE_SHIFT_SE` is effective only, its interval spanning both fits', when the
     data support the freed fit, and "conditional" on the held value when they cannot tell the two apart; JSON
-    ``held_exact_probe``)."""
-    from rimless.sim.model.params import WheelParams
+    ``held_exact_probe``).
 
+    ``max_simulations``: at most this many simulations (walks and step maps; None: no bound), a reserve of them
+    kept for the closing stages (`rimless.analysis.inference.sim_budget`); when the rest is spent the stage
+    running stops (a least squares keeps its lowest point, not converged) and the remaining search stages are
+    skipped, each affected estimate's status and note saying so, JSON ``budget`` what was stopped. ``budget``:
+    a `SimulationBudget` shared with other calibrations (the passes' and the refits'; ``max_simulations`` is then
+    ignored). ``on_stage(name)``: called when a stage begins. Raises `CalibrationBudgetSpent` (a
+    `NoTrialCalibrated`) when the budget runs out before a first solution."""
     data, failed = _usable(trials, names)
     if not data:
         raise NoTrialCalibrated("no trial could be calibrated: " + "; ".join(failed.values()))
     from rimless.progress import stage
 
     stage("calibration started")
-    sim = _Sim(model, rtol, record_dt_s)
+    if budget is None:
+        budget = SimulationBudget(max_simulations, on_stage=on_stage)
+    budget.reserve = max(budget.reserve, closing_reserve(len(data), len(fit)))
+    try:
+        return _calibrate(
+            trials, names, fit, data, failed, params, model, rtol, record_dt_s, max_rounds, multi_start, progress,
+            prior, held, held_exact, budget,
+        )  # fmt: skip
+    except BudgetSpent:
+        raise CalibrationBudgetSpent(
+            f"the simulation budget ran out in {budget.stopped_in} before a first solution: {budget.used} "
+            f"simulations of at most {budget.max_simulations} (raise --max-simulations)"
+        ) from None
+
+
+def _calibrate(
+    trials: Sequence[Any],
+    names: Sequence[str],
+    fit: Sequence[str],
+    data: list[_TrialData],
+    failed: dict[str, str],
+    params: Any,
+    model: str,
+    rtol: float,
+    record_dt_s: float,
+    max_rounds: int,
+    multi_start: bool | str,
+    progress: Callable[[int], None] | None,
+    prior: Any,
+    held: Sequence[tuple[str, float]],
+    held_exact: Sequence[str],
+    budget: SimulationBudget,
+    values_only: bool = False,
+) -> Any:
+    """`calibrate`'s stages; with ``values_only`` (a held parameter's whole recalibration, `held_response`) only
+    as far as the kept solution's fitted globals (returned as an array; `BudgetSpent` propagates)."""
+    from rimless.sim.model.params import WheelParams
+
+    sim = _Sim(model, rtol, record_dt_s, budget=budget)
+    # a recalibration runs within the search's part of the budget, never on the closing stages' reserve
+    closing = contextlib.nullcontext if values_only else budget.closing
+
+    first = budget.used
 
     def tick() -> None:
         if progress:
-            progress(sim.calls)
+            progress(budget.used - first)  # every simulation, the recalibrations' too
 
     glob = _Globals.of(params or WheelParams(), fit)
+    budget.enter("start (releases and profile)")
     table1_releases, ug_start, ug_refined, profile = _start(_ReleaseFit(sim, tick), glob, data)
 
     obj = _Objective(sim, glob, data, tick)
@@ -1266,29 +1359,55 @@ def calibrate(
     lo, hi = obj.bounds(ws_start)
     if np.any(ug_refined != ug_start):  # same objective (sigmas and bounds of the profile's start), nearer start
         u = obj.start(ug_refined, np.array([d.refined_release_rad_s for d in data]))
+    budget.enter("least squares from the profile's start")
     runs = [("profile", obj.solve(u, lo, hi, max_rounds))]
+    if runs[0][1].get("budget_stopped"):
+        budget.skip("least squares from the profile's start", "stopped at its lowest point: not converged")
     if multi_start == "ridge":  # the previous rule (the benchmark's): Table 1 only on a ridge or without convergence
         best = runs[0][1]
         if glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
-            runs.append(("Table 1", obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)))
+            if budget.spent:
+                budget.skip("start Table 1", "not run: the minimum may depend on the start")
+            else:
+                budget.enter("least squares from Table 1")
+                try:
+                    runs.append(("Table 1", obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)))
+                except BudgetSpent:
+                    budget.skip("start Table 1", "not run: the minimum may depend on the start")
     elif multi_start:
         for label, ug_s in _spread_starts(glob, ug_refined, profile):
-            r = _solve_from(obj, _ReleaseFit(sim, tick), ug_s, ws_start, (lo, hi), 1)
-            if r is not None and r.status == 0 and max_rounds > 1 and r.cost <= ABANDON_COST_RATIO * runs[0][1].cost:
-                again = obj.solve(r.x, *_widened(obj, (lo, hi), obj.unpack(r.x)[1]), max_rounds - 1)
-                again.rounds, again.nfev_total = again.rounds + 1, again.nfev_total + r.nfev_total
-                r = again
-            elif r is not None and r.status == 0:
-                r.abandoned = True  # far above the first start's cost after one round: not followed further
+            if budget.spent:
+                budget.skip(f"start {label}", "not run: the minimum may depend on the start")
+                continue
+            budget.enter(f"least squares from {label}")
+            try:
+                r = _solve_from(obj, _ReleaseFit(sim, tick), ug_s, ws_start, (lo, hi), 1)
+                if (
+                    r is not None and r.status == 0 and not r.get("budget_stopped") and max_rounds > 1
+                    and r.cost <= ABANDON_COST_RATIO * runs[0][1].cost
+                ):  # fmt: skip
+                    again = obj.solve(r.x, *_widened(obj, (lo, hi), obj.unpack(r.x)[1]), max_rounds - 1)
+                    again.rounds, again.nfev_total = again.rounds + 1, again.nfev_total + r.nfev_total
+                    r = again
+                elif r is not None and r.status == 0 and not r.get("budget_stopped"):
+                    r.abandoned = True  # far above the first start's cost after one round: not followed further
+            except BudgetSpent:
+                budget.skip(f"start {label}", "not run to its end: the minimum may depend on the start")
+                continue
+            if r is not None and r.get("budget_stopped"):
+                budget.skip(f"start {label}", "stopped at its lowest point: the minimum may depend on the start")
             runs.append((label, r))
     runs = [(label, r) for label, r in runs if r is not None]
     best_label, best = min(runs, key=lambda lr: float(lr[1].cost))
-    best = _first_angles(obj, _ReleaseFit(sim, tick), best, (lo, hi), max_rounds)
+    best = _first_angles_within(obj, _ReleaseFit(sim, tick), best, (lo, hi), max_rounds, budget)
     runs = [(label, best if label == best_label else r) for label, r in runs]
     u = best.x
     converged = bool(best.status > 0)
-    obj.set_sigmas(u)
-    obj.inflate_com_sigma(u)
+    budget.enter("closing: sigmas and minima")
+    with closing():
+        obj.set_sigmas(u)
+        obj.inflate_com_sigma(u)
+        minima = [] if values_only else _minima_within(obj, runs, fit, budget)
     optimizer = {
         "status": int(best.status),
         "message": str(best.message),
@@ -1297,50 +1416,112 @@ def calibrate(
         "starts": len(runs),
         "converged": converged,
         "best_start": best_label,
-        "minima": _minima(obj, runs, fit),
+        "minima": minima,
         #: one global: its profile on the periods (`PROFILE_FACTORS`) had one valley, so no further start was run
         "profile_one_valley": bool(glob.n == 1 and _one_valley(profile[0])) if multi_start is True else None,
     }
     # central differences for the globals: the curvature of the cost must not fake information
-    J = obj.jac(u, central=True)
-    u, J = _polish(obj, u, J, (lo, hi), max_rounds, optimizer)
-    cost_cal = obj.cost(u)
-    scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
-    se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
-    se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
-    xg, ws, sh = obj.unpack(u)
-    moved = _slope_moved(obj, u)
-    se_slope, slope_parts = _slope_part(obj, J, scale_all, moved)
+    budget.enter("closing: Jacobian")
+    with closing():
+        J = obj.jac(u, central=True)
+    budget.enter("polish")
+    if budget.spent:
+        budget.skip("polish", "not run: the solution not checked on the solution's sigmas")
+        optimizer["polish"] = {"polished": False, "skipped": "simulation budget"}
+        with closing():  # the gain a step would still take (the walks at u are cached): how far from the minimum
+            optimizer["above_optimum_chi2"] = _gauss_newton_gain(J, obj.fun(u))
+    else:
+        try:
+            u, J = _polish(obj, u, J, (lo, hi), max_rounds, optimizer)
+            if budget.spent:  # its least squares stopped at their lowest point (kept: a lower cost)
+                budget.skip("polish", "stopped at its lowest point")
+        except BudgetSpent:
+            budget.skip("polish", "stopped: the solution not polished on the solution's sigmas")
+            optimizer["polish"] = {"polished": False, "skipped": "simulation budget"}
+    if values_only:  # the values the whole calibration reports (the minima, the checks do not move them)
+        if budget.spent:
+            raise BudgetSpent(budget.stage)  # a recalibration cut short is no recalibration
+        return obj.unpack(u)[0]
+    budget.enter("closing: uncertainties")
+    with closing():
+        cost_cal = obj.cost(u)
+        scale_all = np.concatenate([glob.scale, np.ones(2 * obj.n_t)])
+        se, corr, ok, notes = least_squares_report(J, glob.n, scale_all)
+        se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
+        xg, ws, sh = obj.unpack(u)
+        moved = _slope_moved(obj, u)
+        se_slope, slope_parts = _slope_part(obj, J, scale_all, moved)
     estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged, se_slope)
     for j, e in enumerate(estimates):
         e.slope_contributions = {d.name: float(abs(pt[j])) for d, pt in zip(data, slope_parts)}
     _span_minima(optimizer, estimates)
     if held:
+        budget.enter("held parameters' refits")
 
         def recalibrate(moved: Any) -> np.ndarray | None:
+            fresh, _ = _usable(trials, names)  # as a calibration from scratch: no release or offset carried over
+            stated = len(budget.skipped)  # the recalibration's own stages are not the result's: `_not_carried` says
+            budget.prefix = "held parameters' refits: a whole recalibration: "  # its stages named as its
             try:
-                again = calibrate(
-                    trials, names, fit, params=moved, model=model, rtol=rtol, record_dt_s=record_dt_s,
-                    max_rounds=max_rounds, multi_start="ridge" if multi_start else False, prior=prior,
+                return _calibrate(
+                    trials, names, fit, fresh, failed, moved, model, rtol,
+                    record_dt_s, max_rounds, "ridge" if multi_start else False, lambda n: tick(), prior, (), (), budget,
+                    values_only=True,
                 )  # fmt: skip
             except NoTrialCalibrated:
                 return None
-            return np.array([e.value for e in again.params])
+            except BudgetSpent:
+                del budget.skipped[stated:]
+                raise
+            finally:
+                budget.prefix = ""
+                budget.stage = "held parameters' refits"
 
-        held_response(obj, u, (lo, hi), held, estimates, max_rounds, recalibrate)
+        if budget.spent:
+            _not_carried(estimates, [n for n, sd in held if sd > 0 and n not in glob.fields], budget)
+        else:
+            try:
+                held_response(obj, u, (lo, hi), held, estimates, max_rounds, recalibrate)
+            except BudgetSpent:
+                carried = set(estimates[0].held_carried_as) if estimates else set()
+                _not_carried(
+                    estimates, [n for n, sd in held if sd > 0 and n not in glob.fields and n not in carried], budget
+                )
     from_leg_test = {q.field for q in prior.priors if q.use in ("penalty", "fixed")} if prior is not None else set()
-    separation = (
-        None
-        if from_leg_test & {"damping_ns_per_m", "guide_friction_n"}
-        else _check_loss_separation(obj, u, J, fit, scale_all, estimates)
-    )  # a leg test measured c or F_c: no ridge to flag
-    residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
-    fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])
-    fits = _adequacy(obj, u, moved)
-    choice = None if prior is not None else _model_choice(obj, u, fit, (lo, hi), max_rounds, estimates)
+    budget.enter("closing: adequacy")
+    with closing():
+        separation = (
+            None
+            if from_leg_test & {"damping_ns_per_m", "guide_friction_n"}
+            else _check_loss_separation(obj, u, J, fit, scale_all, estimates)
+        )  # a leg test measured c or F_c: no ridge to flag
+        residuals = _residual_rows(data, rows_t1, obj.rms_rows(u), ws_t1, ws, sh)
+        fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])
+        fits = _adequacy(obj, u, moved)
+    choice = None
+    if prior is None and any(n in EXTRA_PARAMETERS for n in fit) and len(fit) > 1:  # else `_model_choice` is None
+        budget.enter("model choice")
+        choice = _within(budget, "model choice", lambda: _model_choice(obj, u, fit, (lo, hi), max_rounds, estimates))
     _judge(estimates, fits, choice, fvd)
+    if prior is None and choice is None and budget.spent:
+        _undecided(estimates, fit, budget)
     probes = [n for n in held_exact if n in EXTRA_PARAMETERS and n not in fit and "c" in fit and prior is None]
-    probe = {n: _held_exact_probe(obj, u, fit, (lo, hi), max_rounds, estimates, n) for n in probes} or None
+    probe = {}
+    for n in probes:
+        budget.enter(f"held-exact probe of {n}")
+        row = _within(
+            budget,
+            f"held-exact probe of {n}",
+            functools.partial(_held_exact_probe, obj, u, fit, (lo, hi), max_rounds, estimates, n),
+        )
+        if row is None:
+            _not_probed(estimates, n)
+            row = {
+                "held_at": float(getattr(glob.base, FIT_FIELDS[n][0])), "fit": [*fit, n], "refit": False,
+                "converged": False, "depends": [], "shifts_se": {}, "cpu_s": 0.0, "skipped": "simulation budget",
+                "statement": f"{n} not probed: the simulation budget ran out; every estimate is conditional on it",
+            }  # fmt: skip
+        probe[n] = row
     tick()  # the adequacy check's and the model choice's walks counted too: the last count is the total
     fvd = friction_vs_damping(estimates, corr, [d.release_rad_s for d in data])  # the statement after the verdicts
     used = {e.name: e.value if e.identifiable or e.effective_only else e.table1 for e in estimates}
@@ -1348,6 +1529,7 @@ def calibrate(
         if row["calibrated_model"] == "without":  # decided, not supported: the simpler fit's values of the others
             used.update({n: v for n, v in row["without"].items() if n in used})
     cal_params = glob.params(np.array([used[n] for n in fit]))
+    budget.enter("done")
     result = CalibrationResult(
         estimates,
         corr,
@@ -1367,9 +1549,119 @@ def calibrate(
         fvd,
         adequacy=fits,
         model_choice=choice,
-        held_exact_probe=probe,
+        held_exact_probe=probe or None,
+        budget=budget.as_dict(),
     )
     return result
+
+
+def _within(budget: SimulationBudget, what: str, run: Callable[[], Any]) -> Any:
+    """``run()``, or None when the budget is spent (not run) or runs out in it (stopped); either is recorded."""
+    if budget.spent:
+        budget.skip(what, "not run")
+        return None
+    try:
+        out = run()
+    except BudgetSpent:
+        budget.skip(what, "stopped")
+        return None
+    if budget.spent and not any(row["stage"] == what for row in budget.skipped):  # an optimiser in it stopped
+        budget.skip(what, "its least squares stopped on the simulation budget (its result says so)")
+    return out
+
+
+def _first_angles_within(
+    obj: _Objective,
+    releases: _ReleaseFit,
+    best: Any,
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_rounds: int,
+    budget: SimulationBudget,
+) -> Any:
+    """`_first_angles` within the budget: when it is spent before or in it, ``best`` without first-angle offsets
+    (as `_first_angles` keeps it when they do not lower the cost), the skip recorded."""
+    if not budget.spent:
+        budget.enter("first-angle offsets")
+        try:
+            r = _first_angles(obj, releases, best, bounds, max_rounds)
+            if not r.get("budget_stopped"):
+                return r
+        except BudgetSpent:
+            pass
+    budget.skip("first-angle offsets", "not fitted: the first impacts' angles held at the release's (offset 0)")
+    for d in obj.data:
+        d.first_angle_offset_rad = 0.0
+    best.held_release = _HeldRelease(releases, bounds, max_rounds, dict(obj.sig), 2.0 * float(best.cost), best)
+    best.first_angle_offsets_rad = np.zeros(len(obj.data))
+    return best
+
+
+def _minima_within(
+    obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str], budget: SimulationBudget
+) -> list[dict]:
+    """`_minima`, its re-solves of the other starts' minima (with their own first-angle offsets) within the
+    search's budget: when it is spent, each minimum keeps its value re-costed with the kept solution's offsets
+    (``first_angle_offsets_refit`` False; `_minima` does the same for those far above), which may miss a minimum
+    of similar cost: the skip is recorded and says so."""
+    skipped: list[str] = []
+
+    def within(o: _Objective, held: _HeldRelease, r: Any) -> Any:
+        if budget.spent:
+            skipped.append("not run")
+            return r
+        try:
+            with budget.searching():
+                again = _offsets_solved(o, held, r)
+        except BudgetSpent:
+            skipped.append("stopped")
+            return r
+        if again.get("budget_stopped"):
+            skipped.append("stopped")
+            return r
+        return again
+
+    out = _minima(obj, runs, fit, within)
+    if skipped:
+        budget.skip(
+            "minima's re-solves",
+            f"{len(skipped)} other start(s)' minimum not solved with its own first-angle offsets: the intervals may "
+            "not span a minimum of similar cost",
+        )
+    return out
+
+
+def _not_carried(estimates: list[ParamEstimate], names: Sequence[str], budget: SimulationBudget) -> None:
+    """The held parameters ``names`` whose refits the budget stopped: not carried, so no estimate built on the
+    data alone is identifiable (effective only: the interval lacks their part), the note names them."""
+    if not names:
+        return
+    budget.skip("held parameters' refits", "not carried: " + ", ".join(names))
+    why = "effective only: the simulation budget ran out before the held " + ", ".join(names) + " were carried"
+    for e in estimates:
+        if e.identifiable:
+            e.identifiable, e.effective_only = False, True
+        e.note = why + (f"; {e.note}" if e.note else "")
+
+
+def _undecided(estimates: list[ParamEstimate], fit: Sequence[str], budget: SimulationBudget) -> None:
+    """The model choice the budget stopped: each extra parameter fitted beside others is undecided (never
+    claimed), as when the fit without it stops on its own budget."""
+    for e in estimates:
+        if e.name in EXTRA_PARAMETERS and len(fit) > 1:
+            e.effective_only = e.identifiable or e.effective_only
+            e.identifiable, e.undecided = False, True
+            why = f"undecided: the simulation budget ran out before the model choice of {e.name}"
+            e.note = why + (f"; {e.note}" if e.note else "")
+
+
+def _not_probed(estimates: list[ParamEstimate], name: str) -> None:
+    """The held-exact probe of ``name`` the budget stopped: what it would have checked is not known, so no
+    estimate is identifiable; each is conditional on the held value."""
+    for e in estimates:
+        if e.identifiable:
+            e.identifiable, e.conditional_on = False, e.conditional_on or f"{name} as held (not probed)"
+        why = f"conditional: the simulation budget ran out before {name} held exactly was probed"
+        e.note = why + (f"; {e.note}" if e.note else "")
 
 
 #: fitted names that model a constant loss per step themselves (then c needs no separation check)
@@ -1457,6 +1749,10 @@ def _on_ridge(J: np.ndarray, n_global: int) -> bool:
 
 class NoTrialCalibrated(RimlessError):
     """Every trial failed before the fit (not a user mistake: exit 1)."""
+
+
+class CalibrationBudgetSpent(NoTrialCalibrated):
+    """The simulation budget ran out before a first solution (valid input, no result: exit 1)."""
 
 
 def calibrate_or_none(
@@ -1632,7 +1928,12 @@ SAME_MINIMUM_REL = 1e-4
 RESOLVE_MINIMA_WITHIN = 3.0
 
 
-def _minima(obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str]) -> list[dict]:
+def _minima(
+    obj: _Objective,
+    runs: Sequence[tuple[str, Any]],
+    fit: Sequence[str],
+    resolve: Callable[[_Objective, _HeldRelease, Any], Any] | None = None,
+) -> list[dict]:
     """Where each start ended, on the sigmas of the solution: its globals, its chi-square and its excess over
     the lowest of them (``delta_chi2``), whether it converged, and ``similar``: within the 95 % joint region of the
     globals (delta_chi2 below the chi-square quantile of as many degrees of freedom), which the noise cannot tell
@@ -1646,7 +1947,8 @@ def _minima(obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str]
     minimum that ended where the kept one did before its offsets (globals within `SAME_MINIMUM_REL` of their
     scale) is that minimum: it gets the kept solution (``same_as_kept``) without a solve; with two or more globals
     most starts end so, and solving each again cost half as much again as the whole calibration (c, k: 14.2 s
-    against 9.6 s of CPU on six trials)."""
+    against 9.6 s of CPU on six trials). ``resolve``: how a minimum is solved again (default `_offsets_solved`;
+    `_minima_within` bounds it by the simulation budget)."""
     limit = _CHI2_95.get(obj.n_g, 2.0 * obj.n_g + 2.0)
     kept_offsets = [d.first_angle_offset_rad for d in obj.data]
     costs = [obj.cost(r.x) for _, r in runs]  # with the kept solution's offsets
@@ -1673,7 +1975,7 @@ def _minima(obj: _Objective, runs: Sequence[tuple[str, Any]], fit: Sequence[str]
             obj.sig.update(held.sig)  # solved on the sigmas the kept one was solved on
             for d in obj.data:
                 d.first_angle_offset_rad = 0.0
-            again = _offsets_solved(obj, held, r)
+            again = (resolve or _offsets_solved)(obj, held, r)
             offsets = [d.first_angle_offset_rad for d in obj.data]
             obj.sig.clear()
             obj.sig.update(sig)
