@@ -1092,7 +1092,7 @@ def held_response(
                 except ParameterError:
                     continue
                 r = obj.solve(u, bounds[0], bounds[1], max_rounds)
-                if r.get("budget_stopped"):
+                if getattr(r, "budget_stopped", False):
                     raise BudgetSpent("held parameters' refits")  # a refit cut short carries nothing
                 if 2.0 * float(r.cost) <= REFIT_COST_RATIO * cost0 or recalibrate is None:
                     moved[sign] = obj.unpack(r.x)[0]
