@@ -15,6 +15,7 @@ import secrets
 import socket
 import threading
 import time
+from collections.abc import Callable
 
 import pytest
 
@@ -240,11 +241,19 @@ def test_captured_datagrams_replayed_after_a_restart_from_a_spoofed_source_get_n
     assert armed is False and all_off(hw)  # a captured disarm still disarms: releasing is always safe
 
 
-def _flood_during_disarms(port: int, sources: list[str], count: int) -> tuple[list[bool], bool, int]:
-    """Start a bounded flood (the bench's, another process, listening for answers) from `sources`; once it says it
-    floods, ten disarms from 127.0.0.1; returns their results, whether the flood still ran when they were done,
-    and how many of the flood's datagrams were answered."""
+def _flood_during_disarms(
+    port: int, sources: list[str], count: int, rejected: Callable[[], int]
+) -> tuple[list[bool], bool, int]:
+    """Start a bounded flood (the bench's, another process, listening for answers) from `sources`; once the robot
+    has rejected one of its datagrams (`rejected()` > 0: the flood has reached it), ten disarms from 127.0.0.1;
+    returns their results, whether the flood still ran when they were done, and how many of the flood's
+    datagrams were answered. Waiting for the flood's "flooding" line alone raced: on a loaded machine the flood
+    process was not scheduled before the ten disarms were done (CI, 2026-11-28: nothing of it rejected)."""
     with Flood(sources, port, count=count, listen=True) as flood:
+        guard = time.monotonic() + REPLY_GUARD_S  # a hang guard only: the wait ends on the event
+        while rejected() == 0:
+            assert time.monotonic() < guard, "the flood never reached the robot"
+            time.sleep(0.001)
         results = _disarms(port, 10)
         counted = flood.stop()
     return results, counted.stopped, counted.answered
@@ -258,7 +267,7 @@ def test_a_flood_spoofing_the_operators_address_leaves_every_disarm_answered(tmp
     async def script(app, hw):
         app.controller.arm()
         results, during, answered = await asyncio.to_thread(
-            _flood_during_disarms, app.command_port, ["127.0.0.1"], 400_000
+            _flood_during_disarms, app.command_port, ["127.0.0.1"], 400_000, lambda: app.server._udp.rejected
         )
         return results, during, answered, getattr(app.server._udp, "rejected", 1)  # (main did not count them)
 
@@ -277,7 +286,9 @@ def test_a_flood_from_900_addresses_leaves_every_disarm_answered(tmp_path) -> No
 
     async def script(app, hw):
         app.controller.arm()
-        results, during, answered = await asyncio.to_thread(_flood_during_disarms, app.command_port, sources, 400_000)
+        results, during, answered = await asyncio.to_thread(
+            _flood_during_disarms, app.command_port, sources, 400_000, lambda: app.server._udp.rejected
+        )
         return results, during, answered, getattr(app.server._udp, "rejected", 1)  # (main did not count them)
 
     app, summary, (results, during, answered, rejected), hw = scenario(config(tmp_path), script)
