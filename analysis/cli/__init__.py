@@ -447,6 +447,8 @@ def _print_report(res: Any, model: str, json_out: bool) -> None:
     for c in res.comparisons:
         if c.status != "ok":
             name, message = (demo(c.file), demo(c.message)) if demo else (shown_path(c.file), c.message)
+            if message and "(see above)" in message and c.warnings:  # the comparison's warnings are not printed
+                message = message.replace("(see above)", f"({'; '.join(c.warnings)})")
             echo_text(f"{'' if c.status == 'suspect' else 'not compared: '}{name}: {message}", err=True)
     echo_text(f"report: {shown_path(res.report_html)}")
 
@@ -548,13 +550,18 @@ def demo_cmd(
     json_out: Annotated[bool, typer.Option("--json", help="Print a JSON summary instead of the table.")] = False,
     params: ParamsOpt = None,
     slope_bin_deg: Annotated[
-        float,
-        typer.Option("--slope-bin-deg", min=0.01, help="Group the step periods by slope rounded to this, deg."),
-    ] = 0.5,
+        float | None,
+        typer.Option(
+            "--slope-bin-deg",
+            min=0.01,
+            help="Group the step periods by slope rounded to this, deg (default: per series, pool only trials "
+            "whose slope intervals overlap).",
+        ),
+    ] = None,
 ) -> None:
     """Import the bundled SYNTHETIC example trials, compare them with the simulation, write an HTML report."""
     from rimless.analysis.inference.runs import no_fit_here, wheel_input
-    from rimless.analysis.report.batch import run_demo
+    from rimless.analysis.report.batch import demo_verdicts, run_demo
 
     win = wheel_input(params)
     no_fit_here(win, (), "rimless demo fits no parameter of a wheel file (its calibration of c is shown beside)")
@@ -568,6 +575,8 @@ def demo_cmd(
     )
     _print_report(res, "er", json_out)
     if not json_out:
+        for verdict in demo_verdicts(res):  # what the verdicts say about each bundled series
+            echo_text(verdict["meaning"])
         echo_text(critical_lines(res))
         echo_text(f"open file://{res.report_html.resolve()}")
 

@@ -60,7 +60,13 @@ from rimless.analysis.report.sections import (
     provenance_html,
     trial_sections_html,
 )
-from rimless.analysis.report.series import file_stem, pooled_slope_warnings, series_of, series_trends
+from rimless.analysis.report.series import (
+    file_stem,
+    pooled_slope_warnings,
+    series_of,
+    series_trends,
+    slope_bin_words,
+)
 from rimless.errors import InputFileError
 
 __all__ = ["ReportResult", "InputRow", "build_report", "load_input", "REPORT_FILES", "DPI"]
@@ -185,7 +191,7 @@ def build_report(
     *,
     sim: Simulator | None = None,
     import_kwargs: dict[str, Any] | None = None,
-    slope_bin_deg: float = 0.5,
+    slope_bin_deg: float | None = 0.5,
     title: str = "Vicon trials vs simulation",
     note: str | None = None,
     progress: Callable[[str], None] | None = None,
@@ -211,7 +217,9 @@ def build_report(
     default ``sim.params`` with the default uncertainties), listed and carried into the critical slopes
     (`rimless.analysis.inference.held`); ``series``: input file name or path -> its series (default: from the
     file name, `rimless.analysis.report.series`); ``argv``: the command line that asked for the report (its
-    words after ``rimless``, shown with absolute paths shortened to names), None for a Python call of ``api``.
+    words after ``rimless``, shown with absolute paths shortened to names), None for a Python call of ``api``;
+    ``slope_bin_deg``: the step periods' slope bins within a series, deg (None: trials pooled only while their
+    slopes' 95 % intervals overlap, `rimless.analysis.report.series.interval_bins`).
     """
     t_start = time.perf_counter()
     files = [Path(p) for p in paths]
@@ -264,7 +272,7 @@ def _compare_and_report(
     out: Path,
     sim: Simulator,
     import_kwargs: dict[str, Any] | None,
-    slope_bin_deg: float,
+    slope_bin_deg: float | None,
     critical: bool,
     calibrate_c: bool,
     critical_files: Sequence[str | Path] | None,
@@ -323,7 +331,7 @@ def _rest_of_report(
     res: ReportResult,
     files: Sequence[Path],
     sim: Simulator,
-    slope_bin_deg: float,
+    slope_bin_deg: float | None,
     critical: bool,
     critical_files: Sequence[str | Path] | None,
     calibrating: Background | None,
@@ -333,14 +341,20 @@ def _rest_of_report(
 ) -> None:
     """The report after the comparisons: trends by series, clutch logs, figures, the critical slope."""
     compared = [s for s in res.sections if s.comparison is not None]
-    res.groups = list(
-        series_trends([s.comparison for s in compared], [s.series for s in compared], sim, slope_bin_deg=slope_bin_deg)
-    )
     slopes = {
         s.comparison.name: (s.comparison.slope_deg, slope_ci_deg(s.row.trial.meta.slope_ci_rad))
         for s in compared
         if s.row.trial is not None
     }
+    res.groups = list(
+        series_trends(
+            [s.comparison for s in compared],
+            [s.series for s in compared],
+            sim,
+            slope_bin_deg=slope_bin_deg,
+            slopes=slopes,
+        )
+    )
     res.warnings += pooled_slope_warnings(res.groups, slopes, slope_bin_deg)
     for name, log in (robot_logs or {}).items():
         comp = next((c for c in res.comparisons if c.name == name), None)
@@ -561,7 +575,7 @@ def _html(
     sim: Simulator,
     title: str,
     note: str | None,
-    slope_bin_deg: float,
+    slope_bin_deg: float | None,
     win: Any = None,
     scrub: Callable[[str], str] = str,
 ) -> str:
@@ -618,8 +632,8 @@ def _html(
         f'<img src="{REPORT_FILES["period"]}" alt="step period vs step number, one panel per series">'
         f"<figcaption>Figure 1. Step period vs step number, one panel per series ({len(series)}: "
         + text(", ".join(series) or "none")
-        + f"), mean ± std over the trials of each slope bin of that series (slopes rounded to {slope_bin_deg:g} "
-        "deg; trials of different series are never averaged together), with the simulation (dashed): each trial "
+        + f"), mean ± std over the trials of each slope bin of that series ({slope_bin_words(slope_bin_deg)}"
+        "; trials of different series are never averaged together), with the simulation (dashed): each trial "
         "simulated at its own slope from its own fitted release speed, averaged over the bin. Step 1 is fitted "
         "(the release speed is chosen to match it), so it agrees by construction and is left out of the period "
         "errors. A series is the file name without its slope and run tokens (see each trial's section).</figcaption>"

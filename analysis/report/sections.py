@@ -305,13 +305,15 @@ def provenance_html(prov: Any) -> str:
     )
 
 
-def periods_html(groups: Sequence[Any], slope_bin_deg: float) -> str:
-    """Step period per series, slope bin and step: trials, mean, std and the simulation."""
+def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
+    """Step period per series, slope bin and step: trials, mean, std and the simulation (``slope_bin_deg`` None:
+    bins of overlapping slope intervals, `rimless.analysis.report.series.interval_bins`)."""
     e = html.escape
     if not groups:
         return ""
+    bins = f"bins of {slope_bin_deg:g} deg" if slope_bin_deg is not None else "bins of overlapping slope intervals"
     out = [
-        f'<h2 id="periods-heading">Step period by series and slope (bins of {slope_bin_deg:g} deg)</h2>'
+        f'<h2 id="periods-heading">Step period by series and slope ({bins})</h2>'
         '<div class="wide"><table id="periods"><thead><tr><th>series</th><th>slope bin, deg</th><th>step</th>'
         "<th>trials</th><th>mean, ms</th><th>std, ms</th><th>simulated, ms</th></tr></thead><tbody>"
     ]

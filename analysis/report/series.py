@@ -7,6 +7,11 @@ run (a slope token such as ``slope2.0deg`` or ``1.5deg``, a run token such as ``
 to the series of its folder's name. A mapping given by the caller (file name or path -> series) overrides
 this. Within a series the trials are binned by slope (`rimless.analysis.inference.compare.step_period_trends`);
 two series at the same rounded slope stay two groups (a wheel with another damping walks at other periods).
+
+A slope bin of None (``rimless demo``'s default) bins by the slopes' own intervals instead of a width
+(`interval_bins`): within a series, trials are pooled only while their 95 % slope intervals share a common
+slope, so no bin pools trials whose slopes differ beyond their intervals (`pooled_slope_warnings` then has
+nothing to say); the bin is labelled with the mean slope of its trials.
 """
 
 from __future__ import annotations
@@ -20,7 +25,20 @@ from typing import Any
 
 from rimless.analysis.inference.compare import Simulator, SlopeGroup, TrialComparison, step_period_trends
 
-__all__ = ["SeriesSlopeGroup", "series_name", "series_of", "series_trends", "file_stem", "pooled_slope_warnings"]
+__all__ = [
+    "SeriesSlopeGroup",
+    "series_name",
+    "series_of",
+    "series_trends",
+    "file_stem",
+    "pooled_slope_warnings",
+    "interval_bins",
+    "slope_bin_words",
+]
+
+#: the slope bin `step_period_trends` is handed for one bin made by `interval_bins`: wide enough to round every
+#: slope the model takes (0 <= phi < alpha/2) to the same key, deg
+_ONE_BIN_DEG = 1e3
 
 _SUFFIXES = (".trial.parquet", ".parquet", ".csv", ".c3d", ".txt")
 #: tokens that vary from run to run within a series: a slope, a run/take/trial/release number, a bare counter
@@ -89,15 +107,52 @@ class SeriesSlopeGroup(SlopeGroup):
         return [{"series": self.series} | row for row in super().rows()]
 
 
+def slope_bin_words(slope_bin_deg: float | None) -> str:
+    """How the step periods were binned by slope, for captions and headings."""
+    if slope_bin_deg is None:
+        return "trials pooled only while their 95 % slope intervals overlap; a bin is labelled by its mean slope"
+    return f"slopes rounded to {slope_bin_deg:g} deg"
+
+
+def interval_bins(
+    comparisons: Sequence[TrialComparison], slopes: Mapping[str, tuple[float, Sequence[float] | None]]
+) -> list[list[TrialComparison]]:
+    """The comparisons with steps and a finite slope in bins of slopes that agree: in ascending slope, a trial
+    joins the current bin while every 95 % interval in it, its own included, shares a common slope, else it
+    starts the next bin. ``slopes``: per trial name, its slope and 95 % interval, deg (a trial without a finite
+    interval, e.g. a slope given with ``--slope-deg``, is taken as exactly its slope)."""
+
+    def interval(c: TrialComparison) -> tuple[float, float]:
+        _, ci = slopes.get(c.name, (c.slope_deg, None))
+        if ci is not None and len(ci) == 2 and all(math.isfinite(v) for v in ci):
+            return float(min(ci)), float(max(ci))
+        return c.slope_deg, c.slope_deg
+
+    bins: list[list[TrialComparison]] = []
+    lo, hi = math.inf, -math.inf
+    for c in sorted((c for c in comparisons if c.n_steps and math.isfinite(c.slope_deg)), key=lambda c: c.slope_deg):
+        a, b = interval(c)
+        if bins and max(lo, a) <= min(hi, b):
+            bins[-1].append(c)
+            lo, hi = max(lo, a), min(hi, b)
+        else:
+            bins.append([c])
+            lo, hi = a, b
+    return bins
+
+
 def series_trends(
     comparisons: Sequence[TrialComparison],
     series: Sequence[str],
     sim: Simulator | None = None,
     *,
-    slope_bin_deg: float = 0.5,
+    slope_bin_deg: float | None = 0.5,
+    slopes: Mapping[str, tuple[float, Sequence[float] | None]] | None = None,
 ) -> list[SeriesSlopeGroup]:
     """Step period against step number per series and slope bin (series in order of first appearance, slopes
-    ascending within each); ``series``: the series of each comparison (`series_of`), in the same order."""
+    ascending within each); ``series``: the series of each comparison (`series_of`), in the same order.
+    ``slope_bin_deg`` None: the bins of `interval_bins` on ``slopes`` (per trial name, its slope and 95 %
+    interval, deg), each labelled with its trials' mean slope (to 0.001 deg)."""
     if len(series) != len(comparisons):
         raise ValueError(f"{len(series)} series for {len(comparisons)} comparisons")
     order: dict[str, list[TrialComparison]] = {}
@@ -105,7 +160,15 @@ def series_trends(
         order.setdefault(s, []).append(c)
     out = []
     for name, comps in order.items():
-        for g in step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg):
+        if slope_bin_deg is None:
+            groups = []
+            for trials in interval_bins(comps, slopes or {}):
+                (g,) = step_period_trends(trials, sim, slope_bin_deg=_ONE_BIN_DEG)
+                g.slope_deg = round(sum(c.slope_deg for c in trials) / len(trials), 3)
+                groups.append(g)
+        else:
+            groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
+        for g in groups:
             out.append(SeriesSlopeGroup(**{f.name: getattr(g, f.name) for f in fields(g)}, series=name))
     return out
 
@@ -113,7 +176,7 @@ def series_trends(
 def pooled_slope_warnings(
     groups: Sequence[SlopeGroup],
     slopes: Mapping[str, tuple[float, Sequence[float] | None]],
-    slope_bin_deg: float,
+    slope_bin_deg: float | None,
 ) -> list[str]:
     """One warning per slope bin whose trials walked on slopes that differ beyond their 95 % intervals (two
     disjoint intervals) while their step periods are pooled by the rounding to ``slope_bin_deg``.
@@ -135,6 +198,11 @@ def pooled_slope_warnings(
         if high[2][0] <= low[2][1]:
             continue
         series = getattr(g, "series", "")
+        how = (
+            f"--slope-bin-deg {slope_bin_deg:g} rounds them together"
+            if slope_bin_deg is not None
+            else "binned by their slopes' intervals"
+        )
 
         def told(t: tuple[str, float, Sequence[float]]) -> str:
             return f"{t[0]} ({t[1]:.3f} deg, 95 % {t[2][0]:.3f} to {t[2][1]:.3f})"
@@ -142,7 +210,6 @@ def pooled_slope_warnings(
         out.append(
             f"{'series ' + repr(series) + ', ' if series else ''}slope bin {g.slope_deg:g} deg: the step periods "
             f"of {len(g.trials)} trials are pooled, but {told(low)} and {told(high)} walked on slopes that differ "
-            f"beyond their intervals (--slope-bin-deg {slope_bin_deg:g} rounds them together): give a smaller "
-            "--slope-bin-deg (slope_bin_deg=) to keep them apart"
+            f"beyond their intervals ({how}): give a smaller --slope-bin-deg (slope_bin_deg=) to keep them apart"
         )
     return out

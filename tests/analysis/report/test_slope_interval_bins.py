@@ -1,0 +1,61 @@
+"""Step periods binned by the slopes' own intervals (`slope_bin_deg=None`, `rimless demo`'s default): within a
+series, trials are pooled only while their 95 % slope intervals share a common slope, so the pooled-slope warning
+(kept for reports binned by a width) has nothing to say. Hand-made comparisons, bins worked out by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rimless.analysis.inference.compare import Simulator, TrialComparison
+from rimless.analysis.report.series import interval_bins, pooled_slope_warnings, series_trends, slope_bin_words
+
+
+def _tc(name: str, slope: float, periods: list[float]) -> TrialComparison:
+    p = np.asarray(periods)
+    return TrialComparison(
+        name, name, slope, "estimated", "er", "ok", measured_period_s=p, sim_period_s=p + 0.01,
+        release_theta_dot_rad_s=2.0,
+    )  # fmt: skip
+
+
+#: a at 1.30 [1.20, 1.45], b at 1.40 [1.35, 1.50], c at 1.42 given (no interval), d at 1.60 [1.55, 1.65]:
+#: a, b and c share [1.42, 1.42]; d's interval starts above a's end. Rounded to 0.5 deg, all four are bin 1.5.
+SLOPES = {"a": (1.30, (1.20, 1.45)), "b": (1.40, (1.35, 1.50)), "c": (1.42, None), "d": (1.60, (1.55, 1.65))}
+COMPS = [_tc("d", 1.60, [0.50, 0.48]), _tc("a", 1.30, [0.70]), _tc("b", 1.40, [0.60, 0.58]), _tc("c", 1.42, [0.62])]
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return Simulator()
+
+
+def test_interval_bins_pool_only_trials_whose_intervals_share_a_slope():
+    assert [[c.name for c in b] for b in interval_bins(COMPS, SLOPES)] == [["a", "b", "c"], ["d"]]
+    # a trial given outside the others' common part starts its own bin; no steps or no slope: left out
+    extra = [*COMPS, _tc("e", 1.48, [0.6]), _tc("f", 1.40, []), _tc("g", float("nan"), [0.6])]
+    slopes = SLOPES | {"e": (1.48, None)}
+    assert [[c.name for c in b] for b in interval_bins(extra, slopes)] == [["a", "b", "c"], ["e"], ["d"]]
+
+
+def test_series_trends_by_intervals_label_bins_by_their_mean_slope_and_raise_no_warning(sim):
+    series = ["s"] * len(COMPS)
+    by_width = series_trends(COMPS, series, sim, slope_bin_deg=0.5)
+    assert [g.slope_deg for g in by_width] == [1.5]  # all four rounded together
+    assert len(pooled_slope_warnings(by_width, SLOPES, 0.5)) == 1  # a and d differ beyond their intervals
+
+    groups = series_trends(COMPS, series, sim, slope_bin_deg=None, slopes=SLOPES)
+    assert [(g.series, g.slope_deg, sorted(g.trials)) for g in groups] == [
+        ("s", round((1.30 + 1.40 + 1.42) / 3, 3), ["a", "b", "c"]),
+        ("s", 1.60, ["d"]),
+    ]
+    np.testing.assert_allclose(groups[0].mean_period_s, [(0.70 + 0.60 + 0.62) / 3, 0.58])
+    np.testing.assert_allclose(groups[0].sim_period_s, [(0.70 + 0.60 + 0.62) / 3 + 0.01, 0.59])
+    assert list(groups[0].count) == [3, 1]
+    assert pooled_slope_warnings(groups, SLOPES, None) == []
+    assert "overlap" in slope_bin_words(None) and slope_bin_words(0.25) == "slopes rounded to 0.25 deg"
+
+
+def test_two_series_at_the_same_slopes_stay_two_groups(sim):
+    groups = series_trends(COMPS, ["s", "s", "t", "t"], sim, slope_bin_deg=None, slopes=SLOPES)
+    assert [(g.series, sorted(g.trials)) for g in groups] == [("s", ["a"]), ("s", ["d"]), ("t", ["b", "c"])]
