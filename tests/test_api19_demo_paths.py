@@ -118,7 +118,7 @@ def test_the_readme_demo_prints_no_absolute_data_path(demo_run):
 @pytest.mark.xdist_group("demo")
 @pytest.mark.slow
 def test_every_option_the_demo_suggests_is_one_it_takes(demo_run):
-    """A warning or hint the demo prints (e.g. the pooled slope bins' "give a smaller --slope-bin-deg") names only
+    """A warning or hint the demo prints (e.g. the SYNTHETIC_crit verdicts' "`rimless trials report` with `--params`") names only
     options `rimless demo` has: the demo has no options of `trials report` it does not take."""
     from typer.testing import CliRunner
 

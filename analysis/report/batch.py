@@ -434,7 +434,8 @@ def demo_verdicts(res: ReportResult) -> list[dict[str, Any]]:
             cal = res.calibration
             with_c = (
                 f"; the c calibrated on them ({cal.calibrated_params.damping_ns_per_m:.1f} N s/m, effective) stands in "
-                'for that loss: compare them with a wheel file of that c (docs/trials.md, "The demo\'s verdicts")'
+                "for that loss: compare them with it (`rimless trials report` with `--params`, a wheel file of that "
+                'c; docs/trials.md, "The demo\'s verdicts")'
                 if cal is not None
                 else ""
             )
