@@ -144,3 +144,33 @@ def test_a_printed_suspect_line_points_at_nothing_unprinted(demo_py, capsys):
     assert "(see above)" not in err
     line = next(ln for ln in err.splitlines() if DEMO_SUBSET[2] in ln)
     assert all(w in line for w in stalled.warnings), err
+
+
+def test_the_verdicts_claim_no_expectation_against_a_wheel_the_user_gave():
+    """Against a wheel file (`--params`) the verdicts are counted, never called expected; an SYNTHETIC_er trial
+    that does not agree with Table 1 is called a fault (it was made there)."""
+    from types import SimpleNamespace
+
+    from rimless.analysis.report.sections import TrialSection
+
+    def section(name: str, series: str, status: str | None) -> TrialSection:
+        comp = None if status is None else SimpleNamespace(status=status)
+        return TrialSection(name, name, series, None, comparison=comp)
+
+    sections = [
+        section("e1", "SYNTHETIC_er", "ok"),
+        section("e2", "SYNTHETIC_er", "suspect"),
+        section("c1", "SYNTHETIC_crit", "suspect"),
+        section("c2", "SYNTHETIC_crit", None),
+    ]
+    c = {"name": "damping_ns_per_m", "value": 8.0, "source": "table1"}
+    table1 = SimpleNamespace(sections=sections, parameters=[c], calibration=None)
+    er, crit = batch.demo_verdicts(table1)  # type: ignore[arg-type]
+    assert (er["ok"], er["suspect"], er["not_compared"]) == (1, 1, 0) and "a fault to report" in er["meaning"]
+    assert (crit["ok"], crit["suspect"], crit["not_compared"]) == (0, 1, 1) and "Expected" in crit["meaning"]
+    given = SimpleNamespace(
+        sections=sections, parameters=[c | {"value": 13.0, "source": "wheel_file"}], calibration=None
+    )
+    for v in batch.demo_verdicts(given):  # type: ignore[arg-type]
+        assert "against the wheel given (--params)" in v["meaning"]
+        assert "Expected" not in v["meaning"] and "as they should" not in v["meaning"] and "fault" not in v["meaning"]
