@@ -2197,11 +2197,12 @@ def _adequacy(obj: _Objective, u: np.ndarray, moved: _Moved) -> dict[str, Any]:
     for i, (d, w, s_) in enumerate(zip(obj.data, ws, sh)):
         rf, rh = _residuals(obj.sim, p, d, float(w), float(s_))
         rp = periods(d, rf)
+        stalled = not np.any(rf + 1.0 / d.periods_s > 0)  # no measured step reached: `_residuals`' CoM placeholder
         block = {
             "trial": d.name,
             "com_t_s": d.t_s,
             "com_m": d.com_m,
-            "com_res_m": rh,
+            "com_res_m": np.empty(0) if stalled else rh,  # no CoM curve: judged on its periods alone
             "impacts_s": np.concatenate([[0.0], np.cumsum(d.periods_s)]),
             "period_res_s": rp,
         }

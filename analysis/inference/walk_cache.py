@@ -3,9 +3,14 @@
 A walk the calibration records (`rimless.analysis.inference.calibrate._Sim.walk`) holds its CoM table at every
 integrator point: 40k-90k rows, 2-4 MB, on a light-legged wheel (m = 0.1 g, the audit's), and its steps' state
 segments as much again, which the calibration does not read once the table is made (they are dropped before
-caching). The cache serves the evaluations a few walks apart: a change of a trial's time shift alone (in each
-Jacobian), the RMS rows at the solution, the walk extended to cover the window. The previous cache (257 walks,
-first in first out, segments kept) held about 2.4 GB after 21 min of a 5000-simulation calibration.
+caching). A Table 1 wheel's walk of 12 steps holds 1.4k rows, 89 kB. The cache serves the evaluations a few
+walks apart: a change of a trial's time shift alone (each Jacobian's last columns, 2 n_t (1 + n_g) walks after
+the trial's first: two walks an evaluation, the release step's and the one extended to cover the window), the
+RMS rows at the solution. The previous cache (257 walks, first in first out, segments kept) held about 2.4 GB
+after 21 min of a 5000-simulation calibration of 4 light-legged trials; this one keeps at most
+`WALK_CACHE_BYTES` (about 110 light-leg walks, 5 Jacobians' worth of those 4 trials) and `WALK_CACHE_WALKS`
+(more than the 257 before, for small walks). A walk evicted and needed again is simulated again (it counts
+against the simulation budget).
 """
 
 from __future__ import annotations
@@ -18,10 +23,11 @@ import numpy as np
 
 __all__ = ["WALK_CACHE_WALKS", "WALK_CACHE_BYTES", "WalkCache", "walk_nbytes"]
 
-#: at most this many walks are kept (a Jacobian of 12 trials and 3 fitted parameters evaluates 48)
-WALK_CACHE_WALKS = 64
-#: and at most this many bytes of their arrays (about 60 light-leg walks of 4 MB)
-WALK_CACHE_BYTES = 256 * 2**20
+#: at most this many walks are kept (a central-difference Jacobian of 12 trials and 3 fitted parameters records
+#: 2 x 12 x 8 = 192 walks between a trial's first walk and its time shift's column)
+WALK_CACHE_WALKS = 512
+#: and at most this many bytes of their arrays (`walk_nbytes`: 5.8k Table 1 walks, about 110 light-leg walks)
+WALK_CACHE_BYTES = 512 * 2**20
 
 
 #: bytes per table row of the CoM curve's parts the calibration attaches to a walk when it first reads it

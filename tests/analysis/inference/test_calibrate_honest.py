@@ -229,3 +229,18 @@ def test_each_slope_pass_reports_its_own_held_exact_probe(monkeypatch) -> None:
     assert [h["held_exact_probe"]["guide_friction_n"]["call"] for h in rows] == [1, 2, 3] == calls
     assert out.held_exact_probe["pass"] == 3 == out.slope_passes["held_exact_probe_pass"]
     assert out.held_exact_probe["guide_friction_n"]["call"] == 3
+
+
+def test_a_stalled_trial_is_judged_on_its_periods_not_on_a_zero_com_residual() -> None:
+    """The model adequacy of a trial whose simulated walk stalls (released at 0.3 rad/s, its truth at 2.0): its
+    CoM chi^2/dof is none (no CoM curve), not the 0 of `_residuals`' placeholder, and its periods misfit."""
+    from tests.support.analysis_sim_truth import sim_trial
+
+    truth = WheelParams()
+    trial = sim_trial(truth, 2.5, 2.0, np.random.default_rng(3), name="t", n_steps=8, noise_m=0.1e-3)
+    data, _ = cal._usable([trial], ["t"])
+    obj = cal._Objective(cal._Sim("er", 1e-7, 8e-3), cal._Globals.of(truth, ["c"]), data, lambda: None)
+    u = np.concatenate([np.zeros(1), [0.3], [0.0]])
+    row = cal._adequacy(obj, u, cal._slope_moved(obj, u))["per_trial"][0]
+    assert row["com"]["ratio"] is None and row["com"]["chi2"] is None
+    assert row["periods"]["ratio"] > 100 and not row["fits"]
