@@ -244,3 +244,12 @@ def test_a_stalled_trial_is_judged_on_its_periods_not_on_a_zero_com_residual() -
     row = cal._adequacy(obj, u, cal._slope_moved(obj, u))["per_trial"][0]
     assert row["com"]["ratio"] is None and row["com"]["chi2"] is None
     assert row["periods"]["ratio"] > 100 and not row["fits"]
+
+
+def test_the_reports_calibration_line_shows_the_cut_interval() -> None:
+    """The report's misfit section printed ``F_c = 0.9597 ± 2.7 N`` (reaching -1.78 N); now the cut interval."""
+    from rimless.analysis.report.html import _misfit_html
+
+    res = SimpleNamespace(calibration=SimpleNamespace(params=[_audit_fc()], residuals=[], converged=True))
+    page = _misfit_html(res)
+    assert "0.9597 (95 % interval 0-3.704, cut at its bound 0)" in page and "±" not in page.split("Calibrated")[1]
