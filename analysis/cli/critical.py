@@ -233,6 +233,13 @@ def _shift_text(d: dict[str, Any]) -> str:
     return f"; centred on {d['critical_slope_with_held_deg']:.3f} deg (held parameters at a bound: {shift:+.3f} deg)"
 
 
+def _cut_text(d: dict[str, Any]) -> str:
+    """The interval's cut at 0 deg (a critical slope is a slope the wheel walks down), when there is one."""
+    if not d.get("ci_at_bound"):
+        return ""
+    return f"; cut at 0 deg (the linearised interval reached {d['ci_linear_deg'][0]:.3f} deg)"
+
+
 def held_lines(out: dict[str, Any]) -> list[str]:
     """The parameters and the critical slopes' intervals with the held parameters' uncertainty."""
     lines = parameter_lines(out.get("parameters"))
@@ -250,6 +257,7 @@ def held_lines(out: dict[str, Any]) -> list[str]:
             f"critical slope from the trials with the held parameters' uncertainty: {tr['critical_slope_deg']:.3f} "
             f"deg, 95 % interval {lo:.3f}-{hi:.3f} deg (parameters: ± {tr['se_parameters_deg']:.3f} deg 1 sigma)"
             + _shift_text(tr)
+            + _cut_text(tr)
             + ("" if tr["complete"] else "; NOT every parameter could be propagated")
         )
     for m, d in held.get("models", {}).items():
@@ -264,6 +272,7 @@ def held_lines(out: dict[str, Any]) -> list[str]:
             + ", ".join(f"{r['symbol']} ± {r['contribution_deg']:.3f}" for r in big)
             + ")"
             + _shift_text(d)
+            + _cut_text(d)
             + ("" if d["complete"] else "; NOT every parameter could be propagated")
         )
     lines.append(f"propagation: {held['method']}")

@@ -253,3 +253,12 @@ def test_the_reports_calibration_line_shows_the_cut_interval() -> None:
     res = SimpleNamespace(calibration=SimpleNamespace(params=[_audit_fc()], residuals=[], converged=True))
     page = _misfit_html(res)
     assert "0.9597 (95 % interval 0-3.704, cut at its bound 0)" in page and "±" not in page.split("Calibrated")[1]
+
+
+def test_the_critical_commands_held_lines_mark_a_cut_interval() -> None:
+    from rimless.analysis.cli.critical import held_lines
+
+    model = {"critical_slope_deg": 0.05, "contributions": [], "complete": True, **_slope_ci([-0.02, 0.12])}
+    lines = held_lines({"parameter_uncertainty": {"method": "m", "trials": None, "models": {"er": model}}})
+    line = next(ln for ln in lines if ln.startswith("model ER"))
+    assert "95 % interval 0.000-0.120 deg" in line and "cut at 0 deg (the linearised interval reached -0.020" in line
