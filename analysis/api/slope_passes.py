@@ -11,6 +11,10 @@ The passes stop when the re-imported slopes' intervals no longer change (`SLOPE_
 `MAX_SLOPE_PASSES` calibrations, when the fit did not determine k, or when a trial cannot be imported again.
 
 k comes from the same trials whose slopes it sizes: its spread, not only its value, is handed on. JSON ``slope_passes`` says what was done (`SlopePasses`).
+Each pass runs its own held-exact probe (`rimless.analysis.inference.calibrate._held_exact_probe`): each
+``history`` row carries its pass's (``held_exact_probe``, None when none ran, also on a pass the budget cut and
+that was not kept); the result's ``held_exact_probe`` is the kept pass's, its ``pass`` named there and in
+``slope_passes.held_exact_probe_pass``.
 """
 
 from __future__ import annotations
@@ -167,7 +171,9 @@ def calibrate_in_passes(
 
     res = calibrate_once(trials)
     slopes = _slopes(trials, names)
-    history: list[dict[str, Any]] = [{"pass": 1, **_legs_source(first_legs), "calibrated": True, "slopes": slopes}]
+    history: list[dict[str, Any]] = [
+        {"pass": 1, **_legs_source(first_legs), "calibrated": True, "slopes": slopes, **_probe(res)}
+    ]
     stop = "k is not fitted: the slopes were imported with the wheel's k" if "k" not in fit else ""
     if not stop and reimport is None:
         stop = "the trials were given imported (not Vicon exports): not imported again"
@@ -207,6 +213,7 @@ def calibrate_in_passes(
         except NoTrialCalibrated as err:
             stop = f"the calibration on the re-imported slopes failed ({err}): the previous pass kept"
             break
+        row.update(_probe(again_res))
         if budget.spent:  # this pass was cut short: the previous (whole) pass is the result
             del budget.skipped[stated:]
             budget.skip(f"pass {len(history)}", "stopped: the previous pass kept")
@@ -226,12 +233,21 @@ def calibrate_in_passes(
         "stopped": stop,
         "statement": _statement(passes, used > 0, history[used]["legs"], stop),
         "history": history,
+        # the pass whose held-exact probe is the result's ``held_exact_probe`` (each pass ran its own: ``history``)
+        "held_exact_probe_pass": history[used]["pass"] if res.held_exact_probe is not None else None,
     }
     out = CalibrationInPasses(
         **{f.name: getattr(res, f.name) for f in fields(res)}, slope_passes=info, trials=list(trials)
     )
+    if out.held_exact_probe is not None:
+        out.held_exact_probe = {**out.held_exact_probe, "pass": history[used]["pass"]}
     out.budget = budget.as_dict()  # every pass's simulations, and what the budget stopped in any of them
     return out
+
+
+def _probe(res: CalibrationResult) -> dict[str, Any]:
+    """A pass's row entry: its own held-exact probe (`calibrate._held_exact_probe`; None when none ran)."""
+    return {"held_exact_probe": res.held_exact_probe}
 
 
 def _statement(passes: int, reimported: bool, legs: str, stop: str) -> str:

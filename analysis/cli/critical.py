@@ -233,6 +233,13 @@ def _shift_text(d: dict[str, Any]) -> str:
     return f"; centred on {d['critical_slope_with_held_deg']:.3f} deg (held parameters at a bound: {shift:+.3f} deg)"
 
 
+def _cut_text(d: dict[str, Any]) -> str:
+    """The interval's cut at 0 deg (a critical slope is a slope the wheel walks down), when there is one."""
+    if not d.get("ci_at_bound"):
+        return ""
+    return f"; cut at 0 deg (the linearised interval reached {d['ci_linear_deg'][0]:.3f} deg)"
+
+
 def held_lines(out: dict[str, Any]) -> list[str]:
     """The parameters and the critical slopes' intervals with the held parameters' uncertainty."""
     lines = parameter_lines(out.get("parameters"))
@@ -250,6 +257,7 @@ def held_lines(out: dict[str, Any]) -> list[str]:
             f"critical slope from the trials with the held parameters' uncertainty: {tr['critical_slope_deg']:.3f} "
             f"deg, 95 % interval {lo:.3f}-{hi:.3f} deg (parameters: ± {tr['se_parameters_deg']:.3f} deg 1 sigma)"
             + _shift_text(tr)
+            + _cut_text(tr)
             + ("" if tr["complete"] else "; NOT every parameter could be propagated")
         )
     for m, d in held.get("models", {}).items():
@@ -264,6 +272,7 @@ def held_lines(out: dict[str, Any]) -> list[str]:
             + ", ".join(f"{r['symbol']} ± {r['contribution_deg']:.3f}" for r in big)
             + ")"
             + _shift_text(d)
+            + _cut_text(d)
             + ("" if d["complete"] else "; NOT every parameter could be propagated")
         )
     lines.append(f"propagation: {held['method']}")
@@ -366,10 +375,18 @@ def _print_calibration(out: dict[str, Any]) -> None:
             f"{p['table1']:.4g}",
             _fmt(p["estimate"], ".4g"),
             _fmt(p["se"], ".2g"),
-            f"{ci[0]:.4g}-{ci[1]:.4g}" if ci else "–",
+            (f"{ci[0]:.4g}{'*' if p.get('ci_at_bound') else ''}-{ci[1]:.4g}" if ci else "–"),
             "yes" if p["identifiable"] else ("conditional" if p.get("status") == "conditional" else "[red]NO[/]"),
         )
     con.print(t)
+    for p in out["params"]:
+        if p.get("ci_at_bound") and p.get("ci95_linear"):
+            con.print(
+                f"  * {p['name']}: its 95 % interval is cut at its bound, {p['lower_bound']:g} {p['unit']} "
+                f"(the linearised interval reached {p['ci95_linear'][0]:.4g}; no valid value lies below)",
+                markup=False,
+                highlight=False,
+            )
     opt = out.get("optimizer", {})
     if opt:
         con.print(
@@ -406,7 +423,8 @@ def _print_calibration(out: dict[str, Any]) -> None:
                     if p.get("held_shift")
                     else ""
                 )
-                + f"); 95 % interval with them {cih[0]:.4g}-{cih[1]:.4g}",
+                + f"); 95 % interval with them {cih[0]:.4g}-{cih[1]:.4g}"
+                + (f" (cut at its bound {p['lower_bound']:g})" if p.get("ci_with_held_at_bound") else ""),
                 markup=False,
                 highlight=False,
             )
@@ -457,10 +475,13 @@ def _print_calibration(out: dict[str, Any]) -> None:
     con.print(r)
     con.print(
         "dT: step period error over the steps the simulation reached; CoM: CoM height error; a release "
-        "speed and a time shift are fitted per trial in both.",
+        "speed and a time shift are fitted per trial in both; –: none (why below).",
         markup=False,
         highlight=False,
     )
+    for row, stem in zip(out["residuals"], shown):
+        for line in _residual_notes(row):
+            con.print(f"  {stem}: {line}", markup=False, highlight=False)
     if adequacy:
         noise = adequacy.get("noise", {})
         o = adequacy["overall"]
@@ -509,6 +530,14 @@ def _print_calibration(out: dict[str, Any]) -> None:
             markup=False,
             highlight=False,
         )
+
+
+def _residual_notes(row: dict[str, Any]) -> list[str]:
+    """Why a residual row shows "–": its Table 1 and calibrated notes (one line when they agree)."""
+    a, b = row.get("table1_note"), row.get("calibrated_note")
+    if a and a == b:
+        return [f"Table 1 and calibrated: {a}"]
+    return [f"{who}: {n}" for who, n in (("Table 1", a), ("calibrated", b)) if n]
 
 
 def _adequacy_cell(row: dict[str, Any] | None) -> str:

@@ -58,8 +58,10 @@ from rimless.analysis.inference.sim_budget import (
     SimulationBudget,
     closing_reserve,
 )
+from rimless.analysis.inference.walk_cache import WalkCache
 from rimless.analysis.io.trial import ALPHA_RAD
 from rimless.errors import ParameterError, RimlessError
+from rimless.sim.model.uncertain import LOWER_BOUND
 from rimless.values import parse_list
 
 #: Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s, steps reached).
@@ -163,7 +165,8 @@ class _Sim:
     rtol: float
     record_dt_s: float
     calls: int = 0
-    cache: dict = field(default_factory=dict)
+    #: the last walks, least recently used dropped first, bounded in count and bytes (`walk_cache`)
+    cache: WalkCache = field(default_factory=WalkCache)
     #: the calibration's simulation budget (`rimless.analysis.inference.sim_budget`): None, no bound
     budget: SimulationBudget | None = None
 
@@ -182,21 +185,22 @@ class _Sim:
 
     def walk(self, params: Any, slope_deg: float, w: float, n: int, record: bool, offset: float = 0.0) -> Any:
         """`simulate_steps` from the rigid-touchdown release, the first post-impact angle moved by ``offset``
-        (rad); the last walks are cached (a change of the time shift alone then costs no simulation)."""
+        (rad); the last walks are cached (`walk_cache.WalkCache`: a change of the time shift alone then costs no
+        simulation), without their steps' state segments (the table holds what the calibration reads)."""
         from rimless.sim.step.backend import make_integrator
 
         key = (params.as_vector(), params.mass_model, params.guide_friction_n, slope_deg, w, n, record, offset)
-        if key in self.cache:
-            return self.cache[key]
+        got = self.cache.get(key)
+        if got is not None:
+            return got
         self._count()
         p = params.replace(slope_rad=math.radians(slope_deg))
         z0 = np.array([-ALPHA_RAD / 2, w])
         g = _com_walk(
             p, self.model, z0, n, make_integrator("auto", rtol=self.rtol), self.record_dt_s if record else 1.0, offset
         )
-        if len(self.cache) > 256:
-            self.cache.pop(next(iter(self.cache)))
-        self.cache[key] = g
+        g.steps[:] = [dataclasses.replace(s, segments=None) for s in g.steps]  # read only to make the table
+        self.cache.put(key, g)
         return g
 
 
@@ -353,6 +357,11 @@ def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     return _hermite_curve(g, t0, tt)
 
 
+def _cut(ci: tuple[float, float], bound: float) -> tuple[float, float]:
+    """``ci`` with its ends raised to ``bound`` where below it (a NaN end stays NaN: max keeps its first)."""
+    return (max(ci[0], bound), max(ci[1], bound))
+
+
 @dataclass
 class ParamEstimate:
     name: str
@@ -386,6 +395,9 @@ class ParamEstimate:
     #: freed, it moves this one by more than `PROBE_SHIFT_SE`, and the data do not support it over the held
     #: value): the interval is conditional on the held value, as the caller stated it; "" when not
     conditional_on: str = ""
+    #: the parameter's physical lower bound (every fitted one is >= 0: c, F_c >= 0; k, masses, inertia, L0 > 0,
+    #: `rimless.sim.model.params.validate`); the intervals are cut there (`ci95`, `ci_at_bound`)
+    bound: float = LOWER_BOUND
 
     @property
     def status(self) -> str:
@@ -411,8 +423,39 @@ class ParamEstimate:
         return self.value + self.held_shift
 
     @property
-    def ci95(self) -> tuple[float, float]:
+    def ci95_linear(self) -> tuple[float, float]:
+        """The linearised 95 % interval value -+ 1.96 se, uncut (it may reach below `bound`)."""
         return (self.value - 1.959963984540054 * self.se, self.value + 1.959963984540054 * self.se)
+
+    @property
+    def ci95(self) -> tuple[float, float]:
+        """The 95 % interval, cut at the parameter's physical bound (`bound`): a linearised interval that
+        reaches below it (across a ridge, c against F_c) holds no valid value there (`ci_at_bound`)."""
+        return _cut(self.ci95_linear, self.bound)
+
+    @property
+    def ci_at_bound(self) -> bool:
+        """The linearised interval reached below `bound` and ``ci95`` is cut there."""
+        return math.isfinite(self.se) and self.ci95_linear[0] < self.bound
+
+    @property
+    def ci95_with_held_linear(self) -> tuple[float, float] | None:
+        """value_with_held -+ 1.96 se_with_held, uncut (None without `se_held`)."""
+        s = self.se_with_held
+        if s is None:
+            return None
+        return (self.value_with_held - 1.959963984540054 * s, self.value_with_held + 1.959963984540054 * s)
+
+    @property
+    def ci95_with_held(self) -> tuple[float, float] | None:
+        """The 95 % interval with the held parameters' part, cut at `bound` like ``ci95``."""
+        lin = self.ci95_with_held_linear
+        return None if lin is None else _cut(lin, self.bound)
+
+    @property
+    def ci_with_held_at_bound(self) -> bool:
+        lin = self.ci95_with_held_linear
+        return lin is not None and lin[0] < self.bound
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -431,13 +474,14 @@ class ParamEstimate:
             "se_sandwich": self.se_sandwich,
             "effective_only": bool(self.effective_only),
             "ci95": list(self.ci95) if math.isfinite(self.se) else None,
+            "ci95_linear": list(self.ci95_linear) if math.isfinite(self.se) else None,
+            "ci_at_bound": self.ci_at_bound,
+            "lower_bound": self.bound,
             "se_held": self.se_held,
             "se_with_held": self.se_with_held,
-            "ci95_with_held": (
-                [self.value_with_held - 1.959963984540054 * s, self.value_with_held + 1.959963984540054 * s]
-                if (s := self.se_with_held) is not None
-                else None
-            ),
+            "ci95_with_held": list(ci) if (ci := self.ci95_with_held) is not None else None,
+            "ci95_with_held_linear": list(ci) if (ci := self.ci95_with_held_linear) is not None else None,
+            "ci_with_held_at_bound": self.ci_with_held_at_bound,
             "held_contributions": self.held_contributions,
             "value_with_held": self.value_with_held if self.se_held is not None else None,
             "held_shift": self.held_shift,
@@ -488,7 +532,11 @@ class CalibrationResult:
 
     def __repr__(self) -> str:
         est = "; ".join(
-            f"{p.name} {p.value:.4g} +- {1.959963984540054 * p.se:.2g} {p.unit}"
+            (
+                f"{p.name} {p.value:.4g} in [{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] {p.unit} (cut at its bound)"
+                if p.ci_at_bound
+                else f"{p.name} {p.value:.4g} +- {1.959963984540054 * p.se:.2g} {p.unit}"
+            )
             + ("" if p.identifiable else " (not identifiable)")
             for p in self.params
         )
@@ -1174,7 +1222,9 @@ def _residual_rows(
     ws: np.ndarray,
     sh: np.ndarray,
 ) -> list[dict[str, Any]]:
-    """Per trial, Table 1 against calibrated: RMS period and CoM errors, steps reached, releases and shift."""
+    """Per trial, Table 1 against calibrated: RMS period and CoM errors, steps reached, releases and shift; an
+    error that cannot be computed is NaN (JSON null, never a 0 that means "none") and ``table1_note`` /
+    ``calibrated_note`` say why (None when every figure is there)."""
     residuals = []
     for d, a, b, w_t1, w, s_ in zip(data, rows_t1, rows_cal, ws_t1, ws, sh):
         residuals.append(
@@ -1193,9 +1243,23 @@ def _residual_rows(
                 "calibrated_steps_reached": b[3],
                 "table1_rms_com_mm": a[1] * 1e3,
                 "calibrated_rms_com_mm": b[1] * 1e3,
+                "table1_note": _row_note(d, a),
+                "calibrated_note": _row_note(d, b),
             }
         )
     return residuals
+
+
+def _row_note(d: _TrialData, row: _RmsRow) -> str | None:
+    """Why a residual row's period or CoM error is missing (NaN), or None."""
+    if row[3] == 0:
+        return (
+            f"the simulated walk stalled before the first of the {d.periods_s.size} measured steps: no simulated "
+            "step period or CoM curve to compare"
+        )
+    if not math.isfinite(row[1]):
+        return "no valid CoM sample in the window between the first and last measured impacts"
+    return None
 
 
 def _usable(trials: Sequence[Any], names: Sequence[str]) -> tuple[list[_TrialData], dict[str, str]]:
@@ -1768,7 +1832,9 @@ def calibrate_or_none(
 
 def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray, shifts: np.ndarray) -> list[_RmsRow]:
     """Per trial: (RMS step-frequency residual Hz, RMS CoM residual m, RMS period error s over the steps
-    the simulation reached, steps reached)."""
+    the simulation reached, steps reached). A walk that reached no measured step (it stalled in the release
+    step) has no simulated CoM curve over the window: its CoM residuals are `_residuals`' placeholder (0, or
+    the mean height), not errors, so its RMS CoM error is NaN ("none"; `_residual_rows` says why)."""
     out: list[_RmsRow] = []
     for d, w, sh in zip(data, ws, shifts):
         rp, rh = _residuals(sim, p, d, float(w), float(sh))
@@ -1778,7 +1844,7 @@ def _rms_rows(sim: _Sim, data: list[_TrialData], p: Any, ws: np.ndarray, shifts:
         out.append(
             (
                 float(np.sqrt(np.mean(rp**2))),
-                float(np.sqrt(np.mean(rh**2))) if rh.size else math.nan,
+                float(np.sqrt(np.mean(rh**2))) if rh.size and ok.any() else math.nan,
                 float(np.sqrt(np.mean(dt**2))) if dt.size else math.nan,
                 int(ok.sum()),
             )
@@ -2131,11 +2197,12 @@ def _adequacy(obj: _Objective, u: np.ndarray, moved: _Moved) -> dict[str, Any]:
     for i, (d, w, s_) in enumerate(zip(obj.data, ws, sh)):
         rf, rh = _residuals(obj.sim, p, d, float(w), float(s_))
         rp = periods(d, rf)
+        stalled = not np.any(rf + 1.0 / d.periods_s > 0)  # no measured step reached: `_residuals`' CoM placeholder
         block = {
             "trial": d.name,
             "com_t_s": d.t_s,
             "com_m": d.com_m,
-            "com_res_m": rh,
+            "com_res_m": np.empty(0) if stalled else rh,  # no CoM curve: judged on its periods alone
             "impacts_s": np.concatenate([[0.0], np.cumsum(d.periods_s)]),
             "period_res_s": rp,
         }

@@ -429,7 +429,8 @@ def _model_with_uncertainty(win: Any, model: str, slope_deg: float, slope_sd_deg
         return model_multiplier(p.replace(slope_rad=slope), model)["eigenvalue"]
 
     _, rows = sensitivities(f, win, base=base["eigenvalue"])
-    shift = carry_rows(rows, win, base["eigenvalue"])  # a held parameter at its bound (F_c = 0): truncated normal
+    # a held parameter at its bound (F_c = 0): truncated normal
+    shift = carry_rows(rows, win, base["eigenvalue"], "eigenvalue")
     contributions = [
         {
             "name": r["name"],

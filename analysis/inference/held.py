@@ -27,7 +27,9 @@ sqrt(2/pi) = 0.80 times its one-sided change, with an sd of sqrt(1 - 2/pi) = 0.6
 it about the held value (`carry_rows`; ``held_shift_deg``, ``critical_slope_with_held_deg``).
 
 The interval with the parameters is ``value + shift -+ sqrt(half-width^2 + (1.96 se_parameters)^2)`` on each
-side (the data's interval may be asymmetric, as the bracket's is). The data-only intervals (``ci_deg``) keep their meaning.
+side (the data's interval may be asymmetric, as the bracket's is), cut at 0 deg where it reaches below (a critical
+slope is a slope down which the wheel walks; ``ci_at_bound``, the uncut ``ci_linear_deg``). The data-only intervals
+(the estimates' ``ci_deg``; ``ci_data_deg`` here) keep their meaning.
 """
 
 from __future__ import annotations
@@ -139,8 +141,18 @@ def truncated_moments(value: float, sd: float, lower: float = LOWER_BOUND) -> tu
     return lam, math.sqrt(max(1.0 + a * lam - lam * lam, 0.0))
 
 
+#: what `carry_bounded` calls one evaluation at a moved parameter and several, by default (the calibration's)
+REFITS = ("refit", "refits")
+
+
 def carry_bounded(
-    value: float, sd: float, plus: Any | None, minus: Any | None, lower: float = LOWER_BOUND
+    value: float,
+    sd: float,
+    plus: Any | None,
+    minus: Any | None,
+    lower: float = LOWER_BOUND,
+    *,
+    evaluations: tuple[str, str] = REFITS,
 ) -> tuple[Any, Any, str]:
     """One held parameter's part in the fitted values, from their signed changes ``plus`` and ``minus`` when it is
     moved to value + sd and value - sd (None where that is not a valid wheel, e.g. F_c < 0). Linear in the
@@ -148,15 +160,18 @@ def carry_bounded(
     distributed as its stated normal truncated at ``lower`` (`truncated_moments`): returns (the fitted values'
     mean shift, their sd, how it was carried). Far from the bound: shift 0, sd the central half difference (or
     the one-sided change), as before; at it (F_c = 0 +- 0.2 N): shift sqrt(2/pi) times the one-sided change, sd
-    sqrt(1 - 2/pi) times it (the truth's F_c can only be above the held value)."""
+    sqrt(1 - 2/pi) times it (the truth's F_c can only be above the held value). ``evaluations``: the words for
+    one and several evaluations at a moved parameter in the returned text (the calibration refits; a critical
+    slope is recomputed, `carry_rows`)."""
     import numpy as np
 
+    one, many = evaluations
     if plus is not None and minus is not None:
-        per_sd, diff = (np.asarray(plus, float) - np.asarray(minus, float)) / 2.0, "central refits at +-1 sd"
+        per_sd, diff = (np.asarray(plus, float) - np.asarray(minus, float)) / 2.0, f"central {many} at +-1 sd"
     elif plus is not None:
-        per_sd, diff = np.asarray(plus, float), "one refit at +1 sd (-1 sd is not a valid wheel)"
+        per_sd, diff = np.asarray(plus, float), f"one {one} at +1 sd (-1 sd is not a valid wheel)"
     elif minus is not None:
-        per_sd, diff = -np.asarray(minus, float), "one refit at -1 sd (+1 sd is not a valid wheel)"
+        per_sd, diff = -np.asarray(minus, float), f"one {one} at -1 sd (+1 sd is not a valid wheel)"
     else:
         raise ValueError("carry_bounded needs at least one of plus, minus")
     m, s = truncated_moments(value, sd, lower)
@@ -169,12 +184,15 @@ def carry_bounded(
     return m * per_sd, s * np.abs(per_sd), how
 
 
-def carry_rows(rows: Sequence[dict[str, Any]], win: Any, base: float | None) -> float:
+def carry_rows(rows: Sequence[dict[str, Any]], win: Any, base: float | None, quantity: str = "") -> float:
     """Carry each held parameter of `sensitivities`' ``rows`` by its stated normal truncated at its bound
     (`carry_bounded`, as the calibration carries it): sets each row's ``contribution_deg`` (the sd of its part),
     ``shift_deg`` (its part's mean shift: 0 far from the bound; sqrt(2/pi) times the one-sided change for F_c
     held at 0, whose truth can only be above) and ``carried_as``; returns the summed shift (deg) the intervals
-    are re-centred by. A row without a change (not propagated, or not entering) keeps its contribution, shift 0."""
+    are re-centred by. A row without a change (not propagated, or not entering) keeps its contribution, shift 0.
+    ``quantity``: what was recomputed at each moved parameter ("critical slope"), named in ``carried_as``."""
+    of = f" of the {quantity}" if quantity else ""
+    words = (f"recomputation{of}", f"recomputations{of}")
     total = 0.0
     for r in rows:
         r.setdefault("shift_deg", 0.0)
@@ -185,9 +203,9 @@ def carry_rows(rows: Sequence[dict[str, Any]], win: Any, base: float | None) -> 
         minus = r["minus_deg"] - base if r.get("minus_deg") is not None else None
         if plus is None and minus is None:
             continue
-        shift, sd, how = carry_bounded(e.value, e.sd, plus, minus)
+        shift, sd, how = carry_bounded(e.value, e.sd, plus, minus, evaluations=words)
         if r.get("note") == "forward difference":  # -1 sd was not evaluated, not invalid
-            how = how.replace("one refit at +1 sd (-1 sd is not a valid wheel)", "a forward difference at +1 sd")
+            how = how.replace(f"one {words[0]} at +1 sd (-1 sd is not a valid wheel)", "a forward difference at +1 sd")
         r["contribution_deg"], r["shift_deg"], r["carried_as"] = float(sd), float(shift), how
         total += float(shift)
     return total
@@ -197,6 +215,21 @@ def widen(value: float, ci: tuple[float, float], se_par: float) -> list[float]:
     """The data's 95 % interval widened by the parameters' standard error, side by side in quadrature."""
     d = Z95 * se_par
     return [value - math.hypot(value - ci[0], d), value + math.hypot(ci[1] - value, d)]
+
+
+#: a critical slope is a slope the wheel walks down: >= 0 (the simulator's and the importer's domain)
+SLOPE_BOUND_DEG = 0.0
+
+
+def _slope_ci(ci: list[float]) -> dict[str, Any]:
+    """``ci_deg``: a critical slope's 95 % interval with the parameters, cut at `SLOPE_BOUND_DEG` where the
+    linearised one reaches below it (``ci_at_bound``; the uncut one ``ci_linear_deg``)."""
+    at = ci[0] < SLOPE_BOUND_DEG
+    return {
+        "ci_deg": [max(ci[0], SLOPE_BOUND_DEG), max(ci[1], SLOPE_BOUND_DEG)],
+        "ci_linear_deg": ci,
+        "ci_at_bound": at,
+    }
 
 
 def trial_estimate_at(
@@ -356,7 +389,7 @@ def carry_critical(
             f_trials = _refitting(f_trials, trials, win.params)
             fields = RATIO_FIELDS
         _, rows = sensitivities(f_trials, win, fields, base=c.value_deg)
-        shift = carry_rows(rows, win, c.value_deg)
+        shift = carry_rows(rows, win, c.value_deg, "critical slope")
         se, complete = combine(rows)
         out["trials"] = {
             "method": c.method,
@@ -365,7 +398,7 @@ def carry_critical(
             "held_shift_deg": shift,
             "ci_data_deg": list(c.ci_deg),
             "se_parameters_deg": se,
-            "ci_deg": widen(c.value_deg + shift, (c.ci_deg[0] + shift, c.ci_deg[1] + shift), se),
+            **_slope_ci(widen(c.value_deg + shift, (c.ci_deg[0] + shift, c.ci_deg[1] + shift), se)),
             "complete": complete,
             "contributions": rows,
         }
@@ -378,14 +411,14 @@ def carry_critical(
         if base is None:
             out["models"][m] = {"critical_slope_deg": None, "note": "no critical slope at the held values"}
             continue
-        shift = carry_rows(rows, win, base)
+        shift = carry_rows(rows, win, base, "critical slope")
         se, complete = combine(rows)
         out["models"][m] = {
             "critical_slope_deg": base,
             "critical_slope_with_held_deg": base + shift,
             "held_shift_deg": shift,
             "se_parameters_deg": se,
-            "ci_deg": [base + shift - Z95 * se, base + shift + Z95 * se],
+            **_slope_ci([base + shift - Z95 * se, base + shift + Z95 * se]),
             "complete": complete,
             "differences": "central" if central_models else "forward",
             "contributions": rows,

@@ -677,7 +677,13 @@ def _misfit_html(res: ReportResult, text: Callable[[Any], str] = html.escape) ->
         )
         return "\n".join(out)
     params = "; ".join(
-        f"{e(p.name)} = {p.value:.4g} ± {1.96 * p.se:.2g} {e(p.unit)} (Table 1: {p.table1:g}"
+        f"{e(p.name)} = {p.value:.4g} "
+        + (
+            f"(95 % interval {p.ci95[0]:.4g}-{p.ci95[1]:.4g}, cut at its bound {p.bound:g})"
+            if getattr(p, "ci_at_bound", False)  # a duck-typed estimate without it: not cut
+            else f"± {1.96 * p.se:.2g}"
+        )
+        + f" {e(p.unit)} (Table 1: {p.table1:g}"
         + (")" if p.identifiable else f"; NOT identifiable: {e(p.note)})")
         for p in cal.params
     )

@@ -36,7 +36,8 @@ def test_not_converged_is_never_identifiable():
     est = cal._estimates(glob, ["c"], np.array([11.0]), np.array([0.1]), [True], [""], np.array([8.0]))
     assert not est[0].identifiable and "hardly constrain" in est[0].note  # wide interval: not identifiable
     d = est[0].as_dict()
-    assert d["value"] is None and d["se_sandwich"] == 8.0 and d["ci95"][0] < 0 < d["ci95"][1]
+    assert d["value"] is None and d["se_sandwich"] == 8.0 and d["ci95_linear"][0] < 0 < d["ci95_linear"][1]
+    assert d["ci95"][0] == 0.0 < d["ci95"][1] and d["ci_at_bound"]  # c >= 0: the interval is cut there
 
 
 @pytest.fixture(scope="module")
