@@ -1193,7 +1193,7 @@ def _estimates(
         ident = bool(ok[j] and rel <= NOT_IDENTIFIABLE_REL_SE and converged)  # a numpy bool is not JSON
         note = notes[j]
         if ok[j] and rel > NOT_IDENTIFIABLE_REL_SE:
-            note = f"relative uncertainty {rel:.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}: the data hardly constrain it"
+            note = f"relative uncertainty {_over_limit(rel)}: the data hardly constrain it"
         elif ok[j] and not converged:
             note = "the fit did not converge (optimiser stopped on its budget): the value is where it stopped"
         estimates.append(
@@ -1212,6 +1212,17 @@ def _estimates(
             )  # fmt: skip
         )
     return estimates
+
+
+def _over_limit(rel: float) -> str:
+    """`rel` against `NOT_IDENTIFIABLE_REL_SE` as percentages, with the digits that tell them apart ("50.4% > 50%",
+    never "50% > 50%")."""
+    limit = f"{NOT_IDENTIFIABLE_REL_SE:.0%}"
+    for digits in range(4):
+        shown = f"{rel:.{digits}%}"
+        if float(shown.rstrip("%")) > NOT_IDENTIFIABLE_REL_SE * 100:
+            return f"{shown} > {limit}"
+    return f"{rel:.4%} > {limit}"
 
 
 def _residual_rows(
@@ -2101,7 +2112,7 @@ def _span_minima(optimizer: dict[str, Any], estimates: list[ParamEstimate]) -> N
             e.note = f"{e.note}; {extra}" if e.note else extra
             if e.identifiable and abs(e.value) > 0 and e.se / abs(e.value) > NOT_IDENTIFIABLE_REL_SE:
                 e.identifiable = False
-                e.note += f"; relative uncertainty {e.se / abs(e.value):.0%} > {NOT_IDENTIFIABLE_REL_SE:.0%}"
+                e.note += f"; relative uncertainty {_over_limit(e.se / abs(e.value))}"
 
 
 def _model_choice(

@@ -262,3 +262,15 @@ def test_the_critical_commands_held_lines_mark_a_cut_interval() -> None:
     lines = held_lines({"parameter_uncertainty": {"method": "m", "trials": None, "models": {"er": model}}})
     line = next(ln for ln in lines if ln.startswith("model ER"))
     assert "95 % interval 0.000-0.120 deg" in line and "cut at 0 deg (the linearised interval reached -0.020" in line
+
+
+def test_a_relative_uncertainty_just_over_the_limit_is_shown_over_it() -> None:
+    """The not-identifiable note shows the digits that put the figure over the 50 % limit (an end-to-end run
+    printed "relative uncertainty 50% > 50%")."""
+    from rimless.analysis.inference.calibrate import NOT_IDENTIFIABLE_REL_SE, _over_limit
+
+    for rel in (0.5004, 0.504, 0.52, 1.5):
+        shown, limit = _over_limit(rel).split(" > ")
+        assert limit == f"{NOT_IDENTIFIABLE_REL_SE:.0%}"
+        assert float(shown.rstrip("%")) > NOT_IDENTIFIABLE_REL_SE * 100
+        assert abs(float(shown.rstrip("%")) / 100 - rel) <= 0.005
