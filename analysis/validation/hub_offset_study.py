@@ -164,7 +164,7 @@ def run_hub_offset_study(
                 rows.append(hub_offset_draw(kind, seed + i, Path(tmp), table1=table1, importer=importer))
                 rows[-1]["table1"] = table1
                 rows[-1]["set"] = name
-    summary = {}
+    summary: dict[str, dict[str, Any]] = {}
     for name in (*sets, "all"):
         sub = [r for r in rows if name in ("all", r["set"])]
         amp = np.array([r["sinusoid_mm"] for r in sub])
