@@ -140,9 +140,6 @@ class TrialComparison:
     #: fitted or not kept, `fit_first_angle_offset`)
     first_angle_offset_rad: float = 0.0
     first_angle_offset_p: float = float("nan")  # its F test's p-value on the periods (NaN: not tested)
-    #: the test in full (`first_angle_test`): the offset fitted whether kept or not, the statistic, and how much
-    #: the choice moves the simulated periods; None when not run (``Simulator.fit_first_angle`` False)
-    first_angle: FirstAngleTest | None = None
     theta_dot_plus_rad_s: float = float("nan")
     time_shift_s: float = float("nan")
     height_offset_m: float = float("nan")
@@ -165,6 +162,9 @@ class TrialComparison:
     #: the simulated wheel's parameters, one {name, symbol, value, sd, unit, source, basis} each (`Wheel.input`:
     #: Table 1's or the wheel file's); None when the comparison was assembled without a wheel
     parameters: list[dict[str, Any]] | None = None
+    #: the test in full (`first_angle_test`): the offset fitted whether kept or not, the statistic, and how much
+    #: the choice moves the simulated periods; None when not run (``Simulator.fit_first_angle`` False)
+    first_angle: FirstAngleTest | None = None
 
     def __repr__(self) -> str:
         return (

@@ -452,45 +452,30 @@ def _step_speed(frame: np.ndarray, ang: np.ndarray, alpha_rad: float) -> np.ndar
     return (np.interp(hi, frame, ang) - np.interp(lo, frame, ang)) / np.maximum(hi - lo, 1e-9)
 
 
-def _misfit_variance(
-    a: np.ndarray, z: np.ndarray, s2: float, speed: np.ndarray, s: np.ndarray, prior_info: float
-) -> float:
+def _misfit_variance(a: np.ndarray, z: np.ndarray, s2: float, speed: np.ndarray, s: np.ndarray) -> float:
     """The offset's variance per in-plane axis from what the height model misses when the speed changes, m^2.
 
     The fit (design ``a``, its first two columns the offset, heights ``-z``, noise variance ``s2``) is repeated with
     `SPEED_TERMS` (the step-mean ``speed``, its square, the distance ``s`` squared; each centred and scaled) added.
     On a walk whose speed holds, the offset moves by its noise only, whose variance is the difference of the two
-    fits' covariances (the added terms only take precision away: a Hausman difference); what it moves beyond that
-    is a misfit the residuals do not show (it is read as once a turn), counted as a random error of that size
-    spread over the two axes. On the tests' compliant truth released 40-50 % above its gait's speed the offset
-    erred by 2-5 stated standard errors without it."""
+    fits' covariances (the added terms only take precision away: a Hausman difference); what it moves beyond
+    `MISFIT_NOISE_MULTIPLE` times that is a misfit the residuals do not show (it is read as once a turn), counted
+    as a random error of that size spread over the two axes. (The fit's weak prior is left out here.)"""
 
     def unit(x: np.ndarray) -> np.ndarray:
         x = x - x.mean()
         return x / max(float(np.abs(x).max()), 1e-12)
 
-    sn = unit(s)
-    extra = np.column_stack([unit(speed), unit(speed**2), unit(sn**2)])
-    big = np.column_stack([a, extra])
-
-    def solve(m: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        scale = np.maximum(np.abs(m).max(axis=0), 1e-12)
-        ms = m / scale
-        info = ms.T @ ms / s2
-        info[0, 0] += prior_info / scale[0] ** 2
-        info[1, 1] += prior_info / scale[1] ** 2
-        try:
-            cov = np.linalg.inv(info)
-        except np.linalg.LinAlgError:
-            return None
-        sol = cov @ (ms.T @ -z) / s2
-        return sol[:2] / scale[:2], cov[:2, :2] / np.outer(scale[:2], scale[:2])
-
-    base, ext = solve(a), solve(big)
-    if base is None or ext is None or big.shape[0] <= big.shape[1] + 2:
+    big = np.column_stack([a, unit(speed), unit(speed**2), unit(unit(s) ** 2)])
+    if big.shape[0] <= big.shape[1] + 2:
         return 0.0
-    move = ext[0] - base[0]
-    noise = max(float(np.trace(ext[1] - base[1])), 0.0)
+    fits = []
+    for m in (a, big):  # least squares on scaled columns; (m^T m)^-1 back in the columns' units
+        scale = np.maximum(np.abs(m).max(axis=0), 1e-12)
+        cov = np.linalg.pinv((m / scale).T @ (m / scale)) / np.outer(scale, scale)
+        fits.append(((cov @ (m.T @ -z))[:2], cov[:2, :2] * s2))
+    move = fits[1][0] - fits[0][0]
+    noise = max(float(np.trace(fits[1][1] - fits[0][1])), 0.0)
     return max(float(move @ move) - MISFIT_NOISE_MULTIPLE * noise, 0.0) / 2.0
 
 
@@ -549,7 +534,9 @@ def fit_hub_offset(
     to 0. Needs about a full turn; None with fewer than 10 frames.
 
     The covariance is the least-squares one, the residuals' variance (over n - p degrees of freedom) taken as
-    the noise's, with the prior of `HUB_PRIOR_SD_M` on each in-plane component.
+    the noise's, with the prior of `HUB_PRIOR_SD_M` on each in-plane component, scaled by the residuals' power
+    beside once a turn (`_near_turn_dispersion`), plus what the height model misses when the wheel's speed
+    changes (`_misfit_variance`, ``misfit_sd_m``).
     """
     ok = _valid_rows(rot) & ~np.isnan(trans_m).any(axis=1)
     if mask is not None:
@@ -614,7 +601,6 @@ def fit_hub_offset(
                 break
             use, trims = keep, trims + 1
     a, t = a[use], t[use]
-    s_used = s[use]
     res = a @ sol + t[:, 2]
     dof = max(a.shape[0] - a.shape[1], 1)
     s2 = max(float(res @ res) / dof, 1e-18)
@@ -627,13 +613,11 @@ def fit_hub_offset(
         c2 = np.eye(2) * HUB_PRIOR_SD_M**2
     c2 = 0.5 * (c2 + c2.T) * _near_turn_dispersion(a, res, ang[use], s2)
     speed = _step_speed(frame, ang, alpha_rad)[use]
-    misfit = _misfit_variance(a, t[:, 2], s2, speed, s_used, 1.0 / HUB_PRIOR_SD_M**2)
+    misfit = _misfit_variance(a, t[:, 2], s2, speed, s[use])
     c2 = c2 + np.eye(2) * misfit
     sd = float(np.sqrt(max(np.linalg.eigvalsh(c2).max(), 0.0)))
     rms = float(np.sqrt(np.mean(res**2)))
-    return HubOffsetFit(
-        d, plane @ c2 @ plane.T, sd, rms, total, n_harm, passes, converged, misfit_sd_m=float(np.sqrt(misfit))
-    )
+    return HubOffsetFit(d, plane @ c2 @ plane.T, sd, rms, total, n_harm, passes, converged, float(np.sqrt(misfit)))
 
 
 def estimate_hub_offset(
@@ -707,9 +691,14 @@ def describe_offset_fit(fit: HubOffsetFit) -> str:
     """The offset and how it was fitted, in words (for a hub source)."""
     d = fit.offset_m * 1e3
     stop = "" if fit.converged else f", stopped on its budget of {fit.passes} passes"
+    misfit = (
+        f" (with {fit.misfit_sd_m * 1e3:.3f} mm in quadrature: the misfit as the speed changes)"
+        if fit.misfit_sd_m
+        else ""
+    )
     return (
         f"[{d[0]:.1f}, {d[1]:.1f}, {d[2]:.1f}] mm (centre of rotation fitted on the walking window from the height, "
-        f"standard error {fit.sd_m * 1e3:.3f} mm, residual {fit.residual_m * 1e3:.2f} mm{stop})"
+        f"standard error {fit.sd_m * 1e3:.3f} mm{misfit}, residual {fit.residual_m * 1e3:.2f} mm{stop})"
     )
 
 
