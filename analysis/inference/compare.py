@@ -241,7 +241,9 @@ def _first_angle_keys(t: FirstAngleTest | None) -> dict[str, Any]:
         "first_angle_offset_statistic": t.statistic if tested and t is not None else None,
         "first_angle_offset_level": t.level if t is not None else FIRST_ANGLE_P,
         "first_angle_offset_fitted_deg": math.degrees(t.fitted_offset_rad) if tested and t is not None else None,
-        "first_angle_choice_period_change_ms": t.period_change_s * 1e3 if tested and t is not None else None,
+        "first_angle_choice_period_change_ms": (
+            t.period_change_s * 1e3 if tested and t is not None and math.isfinite(t.period_change_s) else None
+        ),
     }
 
 
@@ -305,9 +307,9 @@ class FirstAngleTest:
     statistic: float = math.nan
     test: str = ""
     p: float = math.nan
-    level: float = 0.01
+    level: float = FIRST_ANGLE_P
     kept: bool = False
-    period_change_s: float = math.nan
+    period_change_s: float = math.nan  # over the steps both reach; NaN: none
     #: the rigid release's speed fitted on all the periods (the test's null model), and the speed fitted with the
     #: offset (kept or not), rad/s; NaN: not tested
     rigid_fit_theta_dot_rad_s: float = math.nan
@@ -368,7 +370,9 @@ def first_angle_test(sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0
         stat, test = (rss0 - rss1) / PERIOD_NOISE_FLOOR_S**2, "chi2(1)"
         p_value = float(chi2.sf(stat, 1))
     kept = bool(rss1 < rss0 and p_value < FIRST_ANGLE_P and abs(got[0]) >= 1e-6)
-    change = np.abs(sim_periods(got[0], got[1]) - sim_periods(0.0, w0))[1:]
+    f1, f0 = freq_res(got[0], got[1]) + f_meas, freq_res(0.0, w0) + f_meas
+    both = (f1 > 0) & (f0 > 0)  # the steps both models reach
+    change = np.abs(1.0 / np.where(both, f1, 1.0) - 1.0 / np.where(both, f0, 1.0))[1:][both[1:]]
     return FirstAngleTest(
         got[0] if kept else 0.0,
         got[1] if kept else w0,
