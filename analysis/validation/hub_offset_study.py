@@ -11,16 +11,22 @@ whose centroid is 14 mm off it; 0.3 mm and 1 mrad of noise, 100 Hz; `critical_tr
   ``com_height``, over the walking window) regressed on a constant, the distance down the slope and sin/cos of the
   truth's wheel angle: the amplitude of the sin/cos part;
 - ``noise_share_mm``: what white noise of the residual's sigma gives such a coefficient, sigma sqrt(2 / n);
-- ``hub_error_mm``: the rotating part of the imported minus the true hub (the offset's in-plane error, |e|), and
-  ``hub_sd_mm`` the standard error the import states for it (``hub_offset_sd_m``); ``z`` = |e| / sd (for a 2-D
-  normal error of that sd on each axis, |e| < 2.45 sd 95 % of the time).
+- ``hub_error_mm``: the rotating part of the imported minus the true hub (the offset's in-plane error, |e|, plus
+  the tracked point's own noise's share of once a turn), and ``hub_sd_mm`` the standard error the import states
+  for the offset (``hub_offset_sd_m``); ``z`` = |e| / sd (for a 2-D normal error of that sd on each axis, |e| <
+  2.45 sd 95 % of the time);
+- ``offset_error_mm`` and ``offset_z``: the same with the tracked point's noise taken out (the noise the recording
+  added, drawn again from its seed: the object's translation noise, or the mean of the markers' noise, which is
+  the noise of the markers' centroid the importer carries), so the offset's own error against its stated sd.
 
 Truths (`TRUTHS`): ``er``, the simulator's ER wheel (`floquet_truth.er_walk`: k 1500-4000 N/m, c 2-20 N s/m, released
-at its gait's speed times U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks) and ``rigid``, the rigid
+at its gait's speed times U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks), ``er-speed``, the same
+wheels released at U(1.3, 1.6) times the gait's speed (they slow down by 20-45 % over the walk: the speed, and
+with it the legs' compression, changes a lot), and ``rigid``, the rigid
 wheel of `critical_truth` (mass 1.6-3 kg, legs 0.21-0.26 m, inertia ratio 0.3-3, 2-4 deg, released at 1.2-2 times
 the speed that tops the first stance, 10 impacts). ``er`` at Table 1 is drawn with ``table1=True``.
 
-Run: ``python -m rimless.analysis.validation.hub_offset_study --draws 10 --seed 0``.
+Run: ``python -m rimless.analysis.validation.hub_offset_study --draws 10 --seed 0 [--sets er,er-speed]``.
 """
 
 from __future__ import annotations
@@ -38,29 +44,33 @@ from rimless.analysis.validation.critical_truth import Y_UP_FROM_Z_UP, LossyWhee
 from rimless.analysis.validation.floquet_truth import er_walk, slope_to_lab
 from rimless.analysis.validation.importer_coverage import draw_lab
 
-__all__ = ["TRUTHS", "hub_offset_draw", "run_hub_offset_study"]
+__all__ = ["SETS", "TRUTHS", "hub_offset_draw", "run_hub_offset_study"]
 
-TRUTHS = ("er", "rigid")
+TRUTHS = ("er", "er-speed", "rigid")
+#: the release speed of ``er-speed`` walks, times the gait's
+FAST_RELEASE = (1.3, 1.6)
+#: the sets of draws `run_hub_offset_study` makes
+SETS = ("er", "er-table1", "er-speed", "rigid")
 STEPS = 10
 #: 95 % of a 2-D normal error's length lies within this many sd (sqrt(-2 ln 0.05))
 RAYLEIGH_95 = math.sqrt(-2.0 * math.log(0.05))
 
 
 def _truth_walk(kind: str, rng: np.random.Generator, table1: bool) -> tuple[Any, str]:
-    if kind == "er":
+    if kind in ("er", "er-speed"):
         from rimless.sim.model.params import WheelParams
 
         k = 2700.0 if table1 else float(rng.uniform(1500.0, 4000.0))
         c = 8.0 if table1 else float(rng.uniform(2.0, 20.0))
-        wk = er_walk(
-            WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c),
-            float(rng.uniform(2.0, 3.5)),
-            0.0,
-            STEPS,
-            rng,
-            release=float(rng.uniform(0.95, 1.08)),
+        slope = float(rng.uniform(2.0, 3.5))
+        release = float(rng.uniform(*((0.95, 1.08) if kind == "er" else FAST_RELEASE)))
+        wk = er_walk(WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c), slope, 0.0, STEPS, rng, release=release)
+        speeds = np.asarray(wk.post_impact_speed, float)
+        return wk, f"ER k {k:.0f} N/m, c {c:.1f} N s/m" + (" (Table 1)" if table1 else "") + (
+            f", released at {release:.2f} x the gait's speed (speed {speeds[0]:.2f} -> {speeds[-1]:.2f} rad/s)"
+            if kind == "er-speed"
+            else ""
         )
-        return wk, f"ER k {k:.0f} N/m, c {c:.1f} N s/m" + (" (Table 1)" if table1 else "")
     mass, leg = float(rng.uniform(1.6, 3.0)), float(rng.uniform(0.21, 0.26))
     ratio = float(np.exp(rng.uniform(math.log(0.3), math.log(3.0))))
     wheel = LossyWheel(mass_kg=mass, inertia_hub_kg_m2=ratio * mass * leg**2, leg_m=leg)
@@ -69,6 +79,20 @@ def _truth_walk(kind: str, rng: np.random.Generator, table1: bool) -> tuple[Any,
     return walk(
         wheel, slope, top * float(rng.uniform(1.2, 2.0)), STEPS
     ), f"rigid, inertia ratio {ratio:.2f}, L {leg:.3f} m"
+
+
+def _tracked_noise(rec_seed: int, lab: Any, frames: int) -> np.ndarray:
+    """(frames, 3) the noise `critical_truth.record` added to the tracked point (lab frame, m), drawn again from its
+    seed in its order: the sub-frame offset, then the object's rotation and translation noise, or the markers'
+    noise (the importer carries the markers' centroid: their mean)."""
+    from rimless.analysis.validation.critical_truth import MARKERS_BODY_M
+
+    rng = np.random.default_rng(rec_seed)
+    rng.uniform(0, 1.0 / lab.rate_hz)
+    if lab.markers:
+        return rng.normal(0.0, lab.noise_m, (frames, len(MARKERS_BODY_M), 3)).mean(axis=1)
+    rng.normal(0, lab.angle_noise_rad, (frames, 3))
+    return rng.normal(0, lab.noise_m, (frames, 3))
 
 
 def hub_offset_draw(
@@ -104,6 +128,8 @@ def hub_offset_draw(
     dh = np.asarray(trial.series.data["hub"])[:n][sel] - hub_t[:n][sel]
     hc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh, rcond=None)
     hub_error = math.sqrt(float(np.sum(hc[1:] ** 2)) / 2.0)
+    oc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh - _tracked_noise(rec_seed, lab, tf.size)[:n][sel], rcond=None)
+    offset_error = math.sqrt(float(np.sum(oc[1:] ** 2)) / 2.0)
     sd = getattr(trial.meta, "hub_offset_sd_m", None)
     return {
         "truth": kind,
@@ -116,33 +142,42 @@ def hub_offset_draw(
         "hub_error_mm": hub_error * 1e3,
         "hub_sd_mm": None if sd is None else sd * 1e3,
         "z": None if not sd else hub_error / sd,
+        "offset_error_mm": offset_error * 1e3,
+        "offset_z": None if not sd else offset_error / sd,
         "turns": float(np.ptp(bs[:n][sel])) / (2 * math.pi),
     }
 
 
-def run_hub_offset_study(draws: int = 10, seed: int = 0, *, importer: Any = None) -> dict[str, Any]:
-    """``draws`` draws of each truth (and of the ER truth at Table 1), seeds ``seed`` up; the rows and per truth the
-    median and largest sinusoid, the median noise share, and how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2)
-    (1 for an honest sd of an isotropic error)."""
+def run_hub_offset_study(
+    draws: int = 10, seed: int = 0, *, importer: Any = None, sets: tuple[str, ...] | None = None
+) -> dict[str, Any]:
+    """``draws`` draws of each truth (and of the ER truth at Table 1: ``er-table1``), seeds ``seed`` up, of the
+    ``sets`` named (default all of `SETS`); the rows and per set the median and largest sinusoid, the median noise
+    share, how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2) (1 for an honest sd of an isotropic error),
+    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``)."""
+    sets = SETS if sets is None else tuple(sets)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for kind, table1 in (("er", False), ("er", True), ("rigid", False)):
+        for name in sets:
+            kind, table1 = name.removesuffix("-table1"), name.endswith("-table1")
             for i in range(draws):
                 rows.append(hub_offset_draw(kind, seed + i, Path(tmp), table1=table1, importer=importer))
                 rows[-1]["table1"] = table1
-    summary = {}
-    for name in ("er", "er-table1", "rigid", "all"):
-        sub = [r for r in rows if name == "all" or (r["truth"], r["table1"]) == (name.split("-")[0], "table1" in name)]
+                rows[-1]["set"] = name
+    summary: dict[str, dict[str, Any]] = {}
+    for name in (*sets, "all"):
+        sub = [r for r in rows if name in ("all", r["set"])]
         amp = np.array([r["sinusoid_mm"] for r in sub])
-        zs = np.array([r["z"] for r in sub if r["z"] is not None])
         summary[name] = {
             "trials": len(sub),
             "sinusoid_median_mm": float(np.median(amp)),
             "sinusoid_max_mm": float(np.max(amp)),
             "noise_share_median_mm": float(np.median([r["noise_share_mm"] for r in sub])),
-            "held_95": f"{int((zs < RAYLEIGH_95).sum())}/{zs.size}" if zs.size else None,
-            "rms_z": float(np.sqrt(np.mean(zs**2) / 2.0)) if zs.size else None,
         }
+        for prefix, key in (("", "z"), ("offset_", "offset_z")):
+            zs = np.array([r[key] for r in sub if r[key] is not None])
+            summary[name][prefix + "held_95"] = f"{int((zs < RAYLEIGH_95).sum())}/{zs.size}" if zs.size else None
+            summary[name][prefix + "rms_z"] = float(np.sqrt(np.mean(zs**2) / 2.0)) if zs.size else None
     return {"rows": rows, "summary": summary, "draws": draws, "seed": seed}
 
 
@@ -150,9 +185,10 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--sets", default=",".join(SETS), help="comma-separated, of " + ", ".join(SETS))
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    out = run_hub_offset_study(args.draws, args.seed)
+    out = run_hub_offset_study(args.draws, args.seed, sets=tuple(args.sets.split(",")))
     if args.json:
         print(json.dumps(out, indent=1))
         return
@@ -160,7 +196,8 @@ def main(argv: list[str] | None = None) -> None:
         sd = "-" if r["hub_sd_mm"] is None else f"{r['hub_sd_mm']:.3f}"
         print(
             f"{r['truth']:5s} {r['seed']:3d} {r['lab']:34s} sinusoid {r['sinusoid_mm']:.3f} mm (noise share "
-            f"{r['noise_share_mm']:.3f}), hub error {r['hub_error_mm']:.3f} mm, sd {sd}"
+            f"{r['noise_share_mm']:.3f}), hub error {r['hub_error_mm']:.3f} mm (offset's own "
+            f"{r['offset_error_mm']:.3f}), sd {sd}"
         )
     for k, v in out["summary"].items():
         print(k, v)

@@ -17,6 +17,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from rimless.analysis.inference.compare import FIRST_ANGLE_P, Simulator, compare_trial
 from rimless.analysis.inference.release import FIRST_ANGLE_RANGE_RAD
@@ -52,3 +53,41 @@ def test_the_periods_after_the_first_follow_a_wheel_released_into_its_gait(tmp_p
     row = released.metrics()
     assert row["first_angle_offset_deg"] == math.degrees(released.first_angle_offset_rad)
     assert rigid.metrics()["first_angle_offset_deg"] == 0.0
+
+
+def test_a_dropped_offset_says_it_was_tested_with_its_statistic_and_what_the_choice_moves(tmp_path) -> None:
+    """A wheel released from the rigid pose (the tests' independent truth held on uncompressed legs: the model's
+    release itself, true offset 0; c, k away from Table 1): the offset is tested and not kept (p 0.67 when written),
+    and the output says so with the statistic (its p-value is the F or chi^2 tail of it, a closed form), the offset
+    the fit found, and how far keeping it would move a simulated period (checked on the walk simulated with it).
+    On main none of these keys existed: the row said offset 0 and a p-value only."""
+    from scipy.stats import chi2, f
+
+    from tests.support.analysis_trial_truth import simulate_wheel, write_csv
+
+    c_ns_per_m, k_n_per_m, slope = 13.25, 3743.0, 2.66
+    tr = simulate_wheel(
+        slope, 2.03, c_ns_per_m=c_ns_per_m, k_n_per_m=k_n_per_m, max_steps=10, ending="caught", seed=7000,
+        yaw_deg=108.0, release_leg="uncompressed",
+    )  # fmt: skip
+    trial = import_trial(write_csv(tmp_path / "t.csv", tr))
+    trial = dataclasses.replace(trial, meta=dataclasses.replace(trial.meta, slope_deg=slope))
+    sim = Simulator(model="er", params=WheelParams(stiffness_n_per_m=k_n_per_m, damping_ns_per_m=c_ns_per_m))
+    res = compare_trial(trial, sim)
+    row = res.to_dict()
+    assert res.status == "ok", res.message
+    assert row["first_angle_offset_tested"] is True and row["first_angle_offset_kept"] is False
+    assert row["first_angle_offset_deg"] == 0.0 and row["first_angle_offset_level"] == FIRST_ANGLE_P
+    p, stat, test = row["first_angle_offset_p"], row["first_angle_offset_statistic"], row["first_angle_offset_test"]
+    assert p >= FIRST_ANGLE_P
+    dof = res.n_steps - 2
+    assert test in (f"F(1, {dof})", "chi2(1)")
+    assert p == pytest.approx(f.sf(stat, 1, dof) if test.startswith("F") else chi2.sf(stat, 1), rel=1e-9)
+    fitted = math.radians(row["first_angle_offset_fitted_deg"])
+    assert 0.0 < abs(fitted) <= FIRST_ANGLE_RANGE_RAD
+    # keeping it would have simulated this walk: its periods after the first differ from the compared ones by
+    # what the row says
+    kept = sim.walk(slope, res.first_angle.fitted_theta_dot_rad_s, res.n_steps + 2, record=False, offset_rad=fitted)
+    moved = np.array([kept.steps[1 + i].period_s for i in range(res.n_steps)]) - res.sim_period_s
+    assert row["first_angle_choice_period_change_ms"] == pytest.approx(np.max(np.abs(moved[1:])) * 1e3, abs=0.01)
+    assert row["first_angle_choice_period_change_ms"] > 0.05
