@@ -244,6 +244,9 @@ def _derivs(mi, q, qd, p):
     return _derivs_of(mi, q, qd, p)
 
 
+derivs = _derivs  # the generated derivatives, for the friction phases' exact Jacobian (rimless.sim.fast.stiff)
+
+
 # ------------------------------------------------------------------------------------------------
 # Small dense LU with partial pivoting (the KKT systems are at most 9x9).
 

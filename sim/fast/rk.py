@@ -898,6 +898,9 @@ def run_phase(
 # The event engine's pieces the Rosenbrock phase (rimless.sim.fast.stiff) shares: it writes its steps' dense
 # output in DOP853's form, so these read it unchanged.
 needs_lambda = _needs_lambda
+friction_accel = _friction_accel
+base_phase = _base_phase
+leg_state = _leg_state
 guard_value = _guard_value
 guards_at = _guards_at
 dense_eval = _dense_eval

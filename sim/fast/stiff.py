@@ -20,8 +20,13 @@ dense-output form so that rk's Brent and dip search read it unchanged). The cros
 integrator itself: Brent's method (4 eps in t) on the guard of one Rosenbrock step from the step's start to t,
 so the event time and state carry the step's accuracy, not the interpolant's.
 
-Not for the variational equations (the map Jacobian with stiff legs is taken on DOP853) nor for guide
-friction's stick/slip phases (no exact Jacobian there): the callers keep DOP853 for those.
+Guide friction's stick/slip phases (codes >= FRICTION_PHASE0, rimless.sim.model.friction) are integrated the
+same way: their field is rk's, their exact Jacobian `_friction_accel_jacobian` (the slipping legs' forces -+F_c
+and the stuck legs' rows L' = 0 do not depend on y), and their guards cross strictly as on DOP853 (a guard at
+exactly 0 at a step's start, a leg that just stuck or just slips, does not fire at once).
+
+Not for the variational equations (the map Jacobian with stiff legs is taken on DOP853): the callers keep DOP853
+for those.
 
 Units: SI; y = [q, q'] (10,) plus the dissipated energy (J) as an 11th component when asked.
 """
@@ -36,6 +41,8 @@ from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
 from rimless.sim.fast.compiling import kernel
 from rimless.sim.integrate.events import DIP_MARGIN
+from rimless.sim.model.clutch import STUCK
+from rimless.sim.model.friction import FRICTION_PHASE0
 
 _jit = kernel
 _inner = kernel(python=False)
@@ -87,14 +94,89 @@ def leg_stiff(p):
 
 
 @_inner
+def _friction_accel_jacobian(mi, phase, p, q, qd, qdd, lam, Dqdd):
+    """q'', lambda and dq''/dy (5 x 10) of a guide-friction phase (rimless.sim.model.friction), exactly.
+
+    The phase's KKT system is rk's (the friction phase's constraint rows: foot b, foot a in double support, a
+    stuck leg's L' = 0) with the slipping legs' constant generalised forces -+F_c on L. Those forces and the
+    stuck rows do not depend on y, so differentiating M q'' + h = A^T lambda + f_c and A q'' + A' q' = 0 gives
+    the frictionless right-hand side of fm.accel_jacobian on the same KKT matrix. False if singular."""
+    if not rk.friction_accel(mi, phase, q, qd, p, qdd, lam):
+        return False
+    M, h, Ja, jd = fm.terms(mi, q, qd, p)
+    base = rk.base_phase(phase)
+    nc = 4 if base == fm.DLSP else 2
+    A = np.zeros((6, 5))
+    A[0, 0] = 1.0
+    A[1, 1] = 1.0
+    if base == fm.DLSP:
+        for r in range(2):
+            for c in range(5):
+                A[2 + r, c] = Ja[r, c]
+    if rk.leg_state(phase, 1) == STUCK:
+        A[nc, 3] = 1.0
+        nc += 1
+    if rk.leg_state(phase, 2) == STUCK:
+        A[nc, 4] = 1.0
+        nc += 1
+    n = 5 + nc
+    K = np.zeros((11, 11))
+    piv = np.empty(11, dtype=np.int64)
+    for i in range(5):
+        for j in range(5):
+            K[i, j] = M[i, j]
+    for r in range(nc):
+        for c in range(5):
+            K[c, 5 + r] = -A[r, c]
+            K[5 + r, c] = A[r, c]
+    if not fm.lu_factor(K, n, piv):
+        return False
+    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = fm.derivs(mi, q, qd, p)
+    rhs = np.empty(n)
+    for col in range(10):
+        for i in range(n):
+            rhs[i] = 0.0
+        if col < 5:
+            k = col
+            for i in range(5):
+                s = -dh_dq[i, k]
+                for j in range(5):
+                    s -= dM[k, i, j] * qdd[j]
+                rhs[i] = s
+            if base == fm.DLSP:  # foot a's rows 2..3 depend on q
+                for r in range(2):
+                    for i in range(5):
+                        rhs[i] += dJa[k, r, i] * lam[2 + r]
+                    s = -djd_dq[r, k]
+                    for j in range(5):
+                        s -= dJa[k, r, j] * qdd[j]
+                    rhs[5 + 2 + r] = s
+        else:
+            k = col - 5
+            for i in range(5):
+                rhs[i] = -dh_dqd[i, k]
+            if base == fm.DLSP:
+                for r in range(2):
+                    rhs[5 + 2 + r] = -djd_dqd[r, k]
+        fm.lu_solve(K, n, piv, rhs)
+        for i in range(5):
+            Dqdd[i, col] = rhs[i]
+    return True
+
+
+@_inner
 def _jacobian(mi, phase, p, y, with_diss, Jm):
-    """Jm = df/dy (N x N) of the phase's field; False if the KKT matrix is singular."""
+    """Jm = df/dy (N x N) of the phase's field (a guide-friction phase's too); False if the KKT matrix is
+    singular."""
     N = y.shape[0]
     qdd = np.empty(5)
-    lam = np.zeros(4)
+    lam = np.zeros(6)
     Dqdd = np.empty((5, 10))
-    Dlam = np.empty((4, 10))
-    ok = fm.accel_jacobian(mi, phase, y[0:5], y[5:10], p, qdd, lam, Dqdd, Dlam)
+    if phase >= FRICTION_PHASE0:
+        ok = _friction_accel_jacobian(mi, phase, p, y[0:5], y[5:10], qdd, lam, Dqdd)
+    else:
+        Dlam = np.empty((4, 10))
+        ok = fm.accel_jacobian(mi, phase, y[0:5], y[5:10], p, qdd, lam, Dqdd, Dlam)
     for i in range(N):
         for j in range(N):
             Jm[i, j] = 0.0
@@ -103,7 +185,7 @@ def _jacobian(mi, phase, p, y, with_diss, Jm):
         for j in range(10):
             Jm[5 + i, j] = Dqdd[i, j]
     if with_diss:  # d/dy of c (L1'^2 + L2'^2) (L1' locked in the clutched phase)
-        if phase != fm.SLSP_CLUTCHED:
+        if rk.base_phase(phase) != fm.SLSP_CLUTCHED:
             Jm[10, 8] = 2.0 * p[5] * y[8]
         Jm[10, 9] = 2.0 * p[5] * y[9]
     return ok
@@ -227,7 +309,10 @@ def _guard_by_step(mi, phase, p, code, s, y, f0, Jm, with_diss, y_out, lam, ws):
         ros_step(mi, phase, p, y, f0, Jm, s, with_diss, y_out, err, G, lam, ws)
     qdd = np.empty(5)
     if rk.needs_lambda(code):
-        fm.accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
+        if phase >= FRICTION_PHASE0:
+            rk.friction_accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
+        else:
+            fm.accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
     return rk.guard_value(phase, code, y_out, lam, p)
 
 
@@ -330,6 +415,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
     nsteps = 0
     nstiff = 0
     rate = leg_rate(p)
+    strict = phase >= FRICTION_PHASE0  # friction phases: a guard at exactly 0 at a step's start does not fire
     ok = rk.rhs_aug(mi, phase, p, y, False, with_diss, f, lam, ws)
     for i in range(N):
         if not (math.isfinite(y[i]) and math.isfinite(f[i])):
@@ -396,13 +482,13 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
         best_prev = False
         any_active = False
         for e in range(ng):
-            up = g[e] <= 0.0 and g_new[e] >= 0.0
-            down = g[e] >= 0.0 and g_new[e] <= 0.0
+            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
+            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             if (up and directions[e] > 0) or (down and directions[e] < 0):
                 any_active = True
         for e in range(ng):
-            up = g[e] <= 0.0 and g_new[e] >= 0.0
-            down = g[e] >= 0.0 and g_new[e] <= 0.0
+            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
+            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             root = np.inf
             if (up and directions[e] > 0) or (down and directions[e] < 0):
                 root, nf = rk.brent_on_dense(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
