@@ -26,7 +26,7 @@ Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.s
 
 Stiff legs: DOP853 is explicit. Single support of legs whose fastest root max(c/m, sqrt(k/m)) exceeds
 stiff.STIFF_LEG_RATE (near-massless legs; not Table 1's) is integrated by the compiled Rosenbrock method of
-rimless.sim.fast.stiff, on the step map without the Jacobian and in FastIntegrator walks (stiff_legs=True), the
+rimless.sim.fast.stiff, on the step map (with its exact Jacobian too) and in FastIntegrator walks (stiff_legs=True), the
 stick/slip phases of guide friction included (so friction_step and every walk with friction). A phase
 still needing more than `max_steps` steps is reported as such (StepFailure INTEGRATION with "too many steps",
 StiffnessLimit); FastPoincareMap(stiff_fallback=True) then recomputes that map with scipy's implicit Radau.
@@ -318,7 +318,7 @@ def fast_step(
         nsteps=int(nsteps),
         nstiff=int(nstiff),
         relabel_snap_J=float(snap),
-        method="fast-dop853+rosenbrock" if stiff.leg_stiff(param_vector(params)) and not jacobian else "fast-dop853",
+        method="fast-dop853+rosenbrock" if stiff.leg_stiff(param_vector(params)) else "fast-dop853",
         contact=BilateralContact.of(c) if bilateral and len(c) else None,
         phase_nfev=(int(counts[0, 0]), int(counts[1, 0]), int(counts[2, 0])),
         phase_steps=(int(counts[0, 1]), int(counts[1, 1]), int(counts[2, 1])),
