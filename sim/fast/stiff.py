@@ -44,7 +44,6 @@ from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
 from rimless.sim.fast.compiling import kernel
 from rimless.sim.integrate.events import DIP_MARGIN
-from rimless.sim.model.clutch import STUCK
 from rimless.sim.model.friction import FRICTION_PHASE0
 
 _jit = kernel
@@ -107,61 +106,18 @@ def _friction_accel_jacobian(mi, phase, p, q, qd, qdd, lam, Dqdd):
     the frictionless right-hand side of fm.accel_jacobian on the same KKT matrix. False if singular."""
     if not rk.friction_accel(mi, phase, q, qd, p, qdd, lam):
         return False
-    M, h, Ja, jd = fm.terms(mi, q, qd, p)
-    base = rk.base_phase(phase)
-    nc = 4 if base == fm.DLSP else 2
-    A = np.zeros((6, 5))
-    A[0, 0] = 1.0
-    A[1, 1] = 1.0
-    if base == fm.DLSP:
-        for r in range(2):
-            for c in range(5):
-                A[2 + r, c] = Ja[r, c]
-    if rk.leg_state(phase, 1) == STUCK:
-        A[nc, 3] = 1.0
-        nc += 1
-    if rk.leg_state(phase, 2) == STUCK:
-        A[nc, 4] = 1.0
-        nc += 1
-    n = 5 + nc
     K = np.zeros((11, 11))
     piv = np.empty(11, dtype=np.int64)
-    for i in range(5):
-        for j in range(5):
-            K[i, j] = M[i, j]
-    for r in range(nc):
-        for c in range(5):
-            K[c, 5 + r] = -A[r, c]
-            K[5 + r, c] = A[r, c]
-    if not fm.lu_factor(K, n, piv):
+    ok, n, _nc, _h, _adot = rk.friction_kkt(mi, phase, q, qd, p, K, piv)
+    if not ok:
         return False
     dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = fm.derivs(mi, q, qd, p)
+    dlsp = rk.base_phase(phase) == fm.DLSP
     rhs = np.empty(n)
     for col in range(10):
         for i in range(n):
             rhs[i] = 0.0
-        if col < 5:
-            k = col
-            for i in range(5):
-                s = -dh_dq[i, k]
-                for j in range(5):
-                    s -= dM[k, i, j] * qdd[j]
-                rhs[i] = s
-            if base == fm.DLSP:  # foot a's rows 2..3 depend on q
-                for r in range(2):
-                    for i in range(5):
-                        rhs[i] += dJa[k, r, i] * lam[2 + r]
-                    s = -djd_dq[r, k]
-                    for j in range(5):
-                        s -= dJa[k, r, j] * qdd[j]
-                    rhs[5 + 2 + r] = s
-        else:
-            k = col - 5
-            for i in range(5):
-                rhs[i] = -dh_dqd[i, k]
-            if base == fm.DLSP:
-                for r in range(2):
-                    rhs[5 + 2 + r] = -djd_dqd[r, k]
+        fm.jacobian_rhs(col, dlsp, qdd, lam, dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd, rhs)
         fm.lu_solve(K, n, piv, rhs)
         for i in range(5):
             Dqdd[i, col] = rhs[i]
