@@ -80,6 +80,23 @@ def _errors(walk: Any, ref: Any) -> tuple[float, float]:
     return dp, dz
 
 
+def _walk_row(params: Any, rtol: float, n_steps: int, repeats: int, ref: Any) -> tuple[dict[str, Any], Any, Any]:
+    """The walk columns of a row (CPU s, evaluations and errors against ref on each integrator) and the walks."""
+    t_new, (walk_new, nfev_new) = _cpu(lambda: _walk(params, rtol, True, n_steps), repeats)
+    t_old, (walk_old, nfev_old) = _cpu(lambda: _walk(params, rtol, False, n_steps), repeats)
+    row = {
+        "rtol": rtol,
+        "rosenbrock_cpu_s": t_new,
+        "dop853_cpu_s": t_old,
+        "cpu_ratio": t_old / t_new,
+        "rosenbrock_nfev": nfev_new,
+        "dop853_nfev": nfev_old,
+        "rosenbrock_errors": _errors(walk_new, ref),
+        "dop853_errors": _errors(walk_old, ref),
+    }
+    return row, walk_new, walk_old
+
+
 def _friction_errors(walk: Any, ref: Any) -> tuple[float, float]:
     """The largest differences of the steps' friction work (J) and stuck time (s, either leg) from ref's."""
     n = min(len(walk.steps), len(ref.steps))
@@ -97,18 +114,10 @@ def friction_rows(rtols: tuple[float, ...], n_steps: int, repeats: int) -> list[
     ref, _ = _walk(params, REFERENCE_RTOL, False, n_steps)
     rows = []
     for rtol in rtols:
-        t_new, (walk_new, nfev_new) = _cpu(lambda r=rtol: _walk(params, r, True, n_steps), repeats)
-        t_old, (walk_old, nfev_old) = _cpu(lambda r=rtol: _walk(params, r, False, n_steps), repeats)
+        row, walk_new, walk_old = _walk_row(params, rtol, n_steps, repeats, ref)
         rows.append(
-            {
-                "rtol": rtol,
-                "rosenbrock_cpu_s": t_new,
-                "dop853_cpu_s": t_old,
-                "cpu_ratio": t_old / t_new,
-                "rosenbrock_nfev": nfev_new,
-                "dop853_nfev": nfev_old,
-                "rosenbrock_errors": _errors(walk_new, ref),
-                "dop853_errors": _errors(walk_old, ref),
+            row
+            | {
                 "rosenbrock_friction_errors": _friction_errors(walk_new, ref),
                 "dop853_friction_errors": _friction_errors(walk_old, ref),
                 "steps": (len(walk_new.steps), len(walk_old.steps), len(ref.steps)),
@@ -130,8 +139,7 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
     ref, _ = _walk(params, REFERENCE_RTOL, False, n_steps)
     rows = []
     for rtol in rtols:
-        t_new, (walk_new, nfev_new) = _cpu(lambda r=rtol: _walk(params, r, True, n_steps), repeats)
-        t_old, (walk_old, nfev_old) = _cpu(lambda r=rtol: _walk(params, r, False, n_steps), repeats)
+        row, _, _ = _walk_row(params, rtol, n_steps, repeats, ref)
 
         def maps(r: float = rtol) -> tuple[float, int]:
             z, nfev, err = RELEASE_Z, 0, 0.0
@@ -173,15 +181,8 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
         t_jac, nfev_jac = _cpu(jacobians_timed, repeats)
         err_jac, _ = jacobians()
         rows.append(
-            {
-                "rtol": rtol,
-                "rosenbrock_cpu_s": t_new,
-                "dop853_cpu_s": t_old,
-                "cpu_ratio": t_old / t_new,
-                "rosenbrock_nfev": nfev_new,
-                "dop853_nfev": nfev_old,
-                "rosenbrock_errors": _errors(walk_new, ref),
-                "dop853_errors": _errors(walk_old, ref),
+            row
+            | {
                 "map_cpu_s": t_map,
                 "map_nfev": nfev_map,
                 "map_error": err_map,

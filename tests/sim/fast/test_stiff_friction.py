@@ -5,7 +5,6 @@ and the energy lost is the dampers' work plus the friction work."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
@@ -20,20 +19,13 @@ from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import state_from_section
 from rimless.sim.step.gait import simulate_steps
 from rimless.sim.step.hybrid import simulate_step
+from tests.sim.fast.test_stiff_legs import LIGHT as FRICTIONLESS
+from tests.sim.fast.test_stiff_legs import RELEASE
 
-# the rigid truth wheel of rimless.analysis.validation.critical_truth (M 2.6 kg, I_hub 0.05 kg m^2, L 0.21 m) as
-# its wheel_params() writes it: legs of 0.1 g, on a 4 deg ramp, with the audit truth's guide friction 0.3 N
-M_LEG = 1e-4
+# test_stiff_legs' 0.1 g-leg wheel (the rigid truth of rimless.analysis.validation.critical_truth as its
+# wheel_params() writes it, on a 4 deg ramp) with the audit truth's guide friction 0.3 N, released on two feet
 FRICTION_N = 0.3
-LIGHT = WheelParams(
-    hub_mass_kg=2.6 - 8 * M_LEG,
-    leg_mass_kg=M_LEG,
-    inertia_kg_m2=0.05 - 8 * M_LEG * 0.21**2,
-    leg_length_m=0.21,
-    slope_rad=math.radians(4.0),
-    guide_friction_n=FRICTION_N,
-)
-RELEASE = np.array([-math.pi / 8, 2.0])  # theta (rad), theta' (rad/s): released on two feet
+LIGHT = replace(FRICTIONLESS, guide_friction_n=FRICTION_N)
 N_STEPS = 3
 
 
