@@ -26,7 +26,8 @@ Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.s
 
 Stiff legs: DOP853 is explicit. Single support of legs whose fastest root max(c/m, sqrt(k/m)) exceeds
 stiff.STIFF_LEG_RATE (near-massless legs; not Table 1's) is integrated by the compiled Rosenbrock method of
-rimless.sim.fast.stiff, on the step map without the Jacobian and in FastIntegrator walks (stiff_legs=True). A phase
+rimless.sim.fast.stiff, on the step map (with its exact Jacobian too) and in FastIntegrator walks (stiff_legs=True), the
+stick/slip phases of guide friction included (so friction_step and every walk with friction). A phase
 still needing more than `max_steps` steps is reported as such (StepFailure INTEGRATION with "too many steps",
 StiffnessLimit); FastPoincareMap(stiff_fallback=True) then recomputes that map with scipy's implicit Radau.
 
@@ -83,6 +84,7 @@ from rimless.sim.fast.compiling import cache_folder as _cache_folder  # noqa: E4
 from rimless.sim.fast.compiling import call_compiling as _call_compiling  # noqa: E402
 from rimless.sim.integrate.reference import PhaseRun  # noqa: E402
 from rimless.sim.model.failures import FailureReason, StepFailure  # noqa: E402
+from rimless.sim.model.friction import FRICTION_PHASE0  # noqa: E402
 from rimless.sim.model.guards import DIRECTION  # noqa: E402
 from rimless.sim.model.mechanics import Mechanics  # noqa: E402
 from rimless.sim.model.params import WheelParams  # noqa: E402
@@ -161,6 +163,13 @@ _DETAIL = {
 
 class StiffnessLimit(StepFailure):
     """The explicit method needed more than `max_steps` steps in one phase (stiff or very oscillatory legs)."""
+
+
+def _single_support(phase: int) -> bool:
+    """Whether phase code `phase` (a base phase, or a guide-friction phase of rimless.sim.model.friction) is one
+    of single support, the phases the Rosenbrock method takes with near-massless legs."""
+    base = phase if phase < FRICTION_PHASE0 else (phase - FRICTION_PHASE0) // 16
+    return base in (fm.SLSP_FREE, fm.SLSP_CLUTCHED)
 
 
 def mass_model_index(params: WheelParams) -> int:
@@ -309,7 +318,7 @@ def fast_step(
         nsteps=int(nsteps),
         nstiff=int(nstiff),
         relabel_snap_J=float(snap),
-        method="fast-dop853+rosenbrock" if stiff.leg_stiff(param_vector(params)) and not jacobian else "fast-dop853",
+        method="fast-dop853+rosenbrock" if stiff.leg_stiff(param_vector(params)) else "fast-dop853",
         contact=BilateralContact.of(c) if bilateral and len(c) else None,
         phase_nfev=(int(counts[0, 0]), int(counts[1, 0]), int(counts[2, 0])),
         phase_steps=(int(counts[0, 1]), int(counts[1, 1]), int(counts[2, 1])),
@@ -398,8 +407,9 @@ class FastIntegrator:
             self.max_steps,
         )
         mi = fm.MASS_MODEL_INDEX[mech.params.mass_model]
-        if self.stiff_legs and phase in (fm.SLSP_FREE, fm.SLSP_CLUTCHED) and stiff.leg_stiff(mech.p):
-            # near-massless legs: single support by the Rosenbrock method (rimless.sim.fast.stiff)
+        if self.stiff_legs and _single_support(phase) and stiff.leg_stiff(mech.p):
+            # near-massless legs: single support (with guide friction too: its slip and stick phases) by the
+            # Rosenbrock method (rimless.sim.fast.stiff)
             args = args[:10] + args[11:]  # no variational equations
             entry = stiff.RUN_PHASE_STIFF[mi]
         else:

@@ -244,6 +244,9 @@ def _derivs(mi, q, qd, p):
     return _derivs_of(mi, q, qd, p)
 
 
+derivs = _derivs  # the generated derivatives, for the friction phases' exact Jacobian (rimless.sim.fast.stiff)
+
+
 # ------------------------------------------------------------------------------------------------
 # Small dense LU with partial pivoting (the KKT systems are at most 9x9).
 
@@ -399,6 +402,37 @@ def accel_kkt(mi, phase, q, qd, p, qdd, lam):
     return True
 
 
+@_inner
+def jacobian_rhs(col, dlsp, qdd, lam, dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd, rhs):
+    """The right-hand side of the differentiated KKT system for state direction `col` (0-4: q_k, 5-9: q'_k),
+    [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q''], added into rhs (zero on entry); dlsp: foot a's rows 2..3
+    (lambda rows 2..3) depend on the state. Constant constraint rows (a stuck leg's) and constant forces add
+    nothing (the guide-friction phases, rimless.sim.fast.stiff)."""
+    if col < 5:
+        k = col
+        for i in range(5):
+            s = -dh_dq[i, k]
+            for j in range(5):
+                s -= dM[k, i, j] * qdd[j]
+            rhs[i] = s
+        if dlsp:
+            # dA/dq_k: rows 2..3 are dJ_a/dq_k
+            for r in range(2):
+                for i in range(5):
+                    rhs[i] += dJa[k, r, i] * lam[2 + r]
+                s = -djd_dq[r, k]
+                for j in range(5):
+                    s -= dJa[k, r, j] * qdd[j]
+                rhs[5 + 2 + r] = s
+    else:
+        k = col - 5
+        for i in range(5):
+            rhs[i] = -dh_dqd[i, k]
+        if dlsp:
+            for r in range(2):
+                rhs[5 + 2 + r] = -djd_dqd[r, k]
+
+
 @_jit
 def accel_jacobian(mi, phase, q, qd, p, qdd, lam, Dqdd, Dlam):
     """q'', lambda and their exact derivatives with respect to y = [q, q'].
@@ -426,29 +460,7 @@ def accel_jacobian(mi, phase, q, qd, p, qdd, lam, Dqdd, Dlam):
     dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = _derivs(mi, q, qd, p)
     for col in range(10):
         rhs = np.zeros(n)
-        if col < 5:
-            k = col
-            for i in range(5):
-                s = -dh_dq[i, k]
-                for j in range(5):
-                    s -= dM[k, i, j] * qdd[j]
-                rhs[i] = s
-            if phase == DLSP:
-                # dA/dq_k: rows 2..3 are dJ_a/dq_k
-                for r in range(2):
-                    for i in range(5):
-                        rhs[i] += dJa[k, r, i] * lam[2 + r]
-                    s = -djd_dq[r, k]
-                    for j in range(5):
-                        s -= dJa[k, r, j] * qdd[j]
-                    rhs[5 + 2 + r] = s
-        else:
-            k = col - 5
-            for i in range(5):
-                rhs[i] = -dh_dqd[i, k]
-            if phase == DLSP:
-                for r in range(2):
-                    rhs[5 + 2 + r] = -djd_dqd[r, k]
+        jacobian_rhs(col, phase == DLSP, qdd, lam, dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd, rhs)
         lu_solve(K, n, piv, rhs)
         for i in range(5):
             Dqdd[i, col] = rhs[i]

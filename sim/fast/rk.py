@@ -138,14 +138,11 @@ def _stuck_row(phase, leg):
 
 
 @_inner
-def _friction_accel(mi, phase, q, qd, p, qdd, lam):
-    """q'' and lambda (rows: b_x, b_y, [a_x, a_y], [L1], [L2]) of a friction phase by the KKT solve of
-    [[M, -A^T], [A, 0]] [q''; lambda] = [-h + f_friction; -A' q'] (rimless.sim.model.clutch.accel)."""
+def _friction_kkt(mi, phase, q, qd, p, K, piv):
+    """Assemble and factor the KKT matrix [[M, -A^T], [A, 0]] of a friction phase into K (11 x 11 workspace):
+    A's rows foot b, [foot a], [L1' = 0 if stuck], [L2' = 0 if stuck]. Returns (ok, n, nc, h, A' q')."""
     M, h, Ja, jd = fm.terms(mi, q, qd, p)
     base = _base_phase(phase)
-    s1 = _leg_state(phase, 1)
-    s2 = _leg_state(phase, 2)
-    F = p[FRICTION_INDEX]
     A = np.zeros((6, 5))
     adot = np.zeros(6)
     A[0, 0] = 1.0
@@ -157,15 +154,13 @@ def _friction_accel(mi, phase, q, qd, p, qdd, lam):
             for c in range(5):
                 A[2 + r, c] = Ja[r, c]
         nc = 4
-    if s1 == STUCK:
+    if _leg_state(phase, 1) == STUCK:
         A[nc, 3] = 1.0
         nc += 1
-    if s2 == STUCK:
+    if _leg_state(phase, 2) == STUCK:
         A[nc, 4] = 1.0
         nc += 1
     n = 5 + nc
-    K = np.zeros((11, 11))
-    piv = np.empty(11, dtype=np.int64)
     for i in range(5):
         for j in range(5):
             K[i, j] = M[i, j]
@@ -173,7 +168,20 @@ def _friction_accel(mi, phase, q, qd, p, qdd, lam):
         for c in range(5):
             K[c, 5 + r] = -A[r, c]
             K[5 + r, c] = A[r, c]
-    if not fm.lu_factor(K, n, piv):
+    return fm.lu_factor(K, n, piv), n, nc, h, adot
+
+
+@_inner
+def _friction_accel(mi, phase, q, qd, p, qdd, lam):
+    """q'' and lambda (rows: b_x, b_y, [a_x, a_y], [L1], [L2]) of a friction phase by the KKT solve of
+    [[M, -A^T], [A, 0]] [q''; lambda] = [-h + f_friction; -A' q'] (rimless.sim.model.clutch.accel)."""
+    s1 = _leg_state(phase, 1)
+    s2 = _leg_state(phase, 2)
+    F = p[FRICTION_INDEX]
+    K = np.zeros((11, 11))
+    piv = np.empty(11, dtype=np.int64)
+    ok, n, nc, h, adot = _friction_kkt(mi, phase, q, qd, p, K, piv)
+    if not ok:
         return False
     b = np.empty(n)
     for i in range(5):
@@ -898,6 +906,10 @@ def run_phase(
 # The event engine's pieces the Rosenbrock phase (rimless.sim.fast.stiff) shares: it writes its steps' dense
 # output in DOP853's form, so these read it unchanged.
 needs_lambda = _needs_lambda
+friction_accel = _friction_accel
+friction_kkt = _friction_kkt
+base_phase = _base_phase
+leg_state = _leg_state
 guard_value = _guard_value
 guards_at = _guards_at
 dense_eval = _dense_eval

@@ -219,7 +219,7 @@ def _run_phase(
     `ending`; else the failure: the integrator's (D_SOLVER), time_limit_status at the phase time limit,
     STALL / STANCE_LIFT_OFF at the stall / stance lift-off guards, touchdown_status at an early touchdown.
     rec_dt > 0 (bilateral contact with a record): the states every rec_dt s go into `contact`'s stance force."""
-    if phase != fm.DLSP and not want_jac and stiff.leg_stiff(p):  # near-massless legs: Rosenbrock (stiff.py)
+    if phase != fm.DLSP and stiff.leg_stiff(p):  # near-massless legs: Rosenbrock (stiff.py), with V if want_jac
         st, t_end, y_end, fired, nf, ns, nst, rec_t, rec_y = stiff.run_phase_stiff(
             mi, phase, p, ya, t, codes, dirs, PHASE_TIME_LIMIT_S, rtol, atol, 10, False, rec_dt, max_steps
         )

@@ -20,10 +20,18 @@ dense-output form so that rk's Brent and dip search read it unchanged). The cros
 integrator itself: Brent's method (4 eps in t) on the guard of one Rosenbrock step from the step's start to t,
 so the event time and state carry the step's accuracy, not the interpolant's.
 
-Not for the variational equations (the map Jacobian with stiff legs is taken on DOP853) nor for guide
-friction's stick/slip phases (no exact Jacobian there): the callers keep DOP853 for those.
+Guide friction's stick/slip phases (codes >= FRICTION_PHASE0, rimless.sim.model.friction) are integrated the
+same way: their field is rk's, their exact Jacobian `_friction_accel_jacobian` (the slipping legs' forces -+F_c
+and the stuck legs' rows L' = 0 do not depend on y), and their guards cross strictly as on DOP853 (a guard at
+exactly 0 at a step's start, a leg that just stuck or just slips, does not fire at once).
 
-Units: SI; y = [q, q'] (10,) plus the dissipated energy (J) as an 11th component when asked.
+With the variational equations (the map's exact Jacobian; y of 30: the state and the tangents V, 10 x 2) the
+integrated vector's Jacobian is block lower triangular, [[J, 0], [B, J]] with B g = d/dy (J(y) V) g; the stage
+solves take B g by central differences of the variational field (`_stage_solve`). The step of y is the same as
+without V; that of V is then the derivative of the Rosenbrock step of y (up to those differences), as DOP853's V
+is of its own step. The step size is controlled on y only.
+
+Units: SI; y = [q, q'] (10,) plus the dissipated energy (J) as an 11th component when asked, or the tangents.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ from rimless.sim.fast import model as fm
 from rimless.sim.fast import rk
 from rimless.sim.fast.compiling import kernel
 from rimless.sim.integrate.events import DIP_MARGIN
+from rimless.sim.model.friction import FRICTION_PHASE0
 
 _jit = kernel
 _inner = kernel(python=False)
@@ -71,6 +80,7 @@ _MAX_FACTOR = 5.0
 _ERR_EXP = -0.25
 _EPS = np.finfo(float).eps
 MAX_REJECTIONS = 10_000
+_FD_STEP = 6e-6  # central differences of the variational field (B g): about eps^(1/3) relative to the state
 
 
 @_jit
@@ -87,14 +97,46 @@ def leg_stiff(p):
 
 
 @_inner
+def _friction_accel_jacobian(mi, phase, p, q, qd, qdd, lam, Dqdd):
+    """q'', lambda and dq''/dy (5 x 10) of a guide-friction phase (rimless.sim.model.friction), exactly.
+
+    The phase's KKT system is rk's (the friction phase's constraint rows: foot b, foot a in double support, a
+    stuck leg's L' = 0) with the slipping legs' constant generalised forces -+F_c on L. Those forces and the
+    stuck rows do not depend on y, so differentiating M q'' + h = A^T lambda + f_c and A q'' + A' q' = 0 gives
+    the frictionless right-hand side of fm.accel_jacobian on the same KKT matrix. False if singular."""
+    if not rk.friction_accel(mi, phase, q, qd, p, qdd, lam):
+        return False
+    K = np.zeros((11, 11))
+    piv = np.empty(11, dtype=np.int64)
+    ok, n, _nc, _h, _adot = rk.friction_kkt(mi, phase, q, qd, p, K, piv)
+    if not ok:
+        return False
+    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = fm.derivs(mi, q, qd, p)
+    dlsp = rk.base_phase(phase) == fm.DLSP
+    rhs = np.empty(n)
+    for col in range(10):
+        for i in range(n):
+            rhs[i] = 0.0
+        fm.jacobian_rhs(col, dlsp, qdd, lam, dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd, rhs)
+        fm.lu_solve(K, n, piv, rhs)
+        for i in range(5):
+            Dqdd[i, col] = rhs[i]
+    return True
+
+
+@_inner
 def _jacobian(mi, phase, p, y, with_diss, Jm):
-    """Jm = df/dy (N x N) of the phase's field; False if the KKT matrix is singular."""
-    N = y.shape[0]
+    """Jm = df/dy (N x N) of the phase's field (a guide-friction phase's too); False if the KKT matrix is
+    singular. With the variational equations (y of 30) Jm is the state's block (10 x 10)."""
+    N = Jm.shape[0]
     qdd = np.empty(5)
-    lam = np.zeros(4)
+    lam = np.zeros(6)
     Dqdd = np.empty((5, 10))
-    Dlam = np.empty((4, 10))
-    ok = fm.accel_jacobian(mi, phase, y[0:5], y[5:10], p, qdd, lam, Dqdd, Dlam)
+    if phase >= FRICTION_PHASE0:
+        ok = _friction_accel_jacobian(mi, phase, p, y[0:5], y[5:10], qdd, lam, Dqdd)
+    else:
+        Dlam = np.empty((4, 10))
+        ok = fm.accel_jacobian(mi, phase, y[0:5], y[5:10], p, qdd, lam, Dqdd, Dlam)
     for i in range(N):
         for j in range(N):
             Jm[i, j] = 0.0
@@ -103,7 +145,7 @@ def _jacobian(mi, phase, p, y, with_diss, Jm):
         for j in range(10):
             Jm[5 + i, j] = Dqdd[i, j]
     if with_diss:  # d/dy of c (L1'^2 + L2'^2) (L1' locked in the clutched phase)
-        if phase != fm.SLSP_CLUTCHED:
+        if rk.base_phase(phase) != fm.SLSP_CLUTCHED:
             Jm[10, 8] = 2.0 * p[5] * y[8]
         Jm[10, 9] = 2.0 * p[5] * y[9]
     return ok
@@ -160,39 +202,88 @@ def _solve(A, piv, b):
 
 
 @_inner
-def ros_step(mi, phase, p, y, f0, Jm, h, with_diss, y_new, err, G, lam, ws):
-    """One Rosenbrock step of size h from y (f0 = f(y), Jm = df/dy at y): y_new, err (the embedded estimate).
-    G (4 x N) receives the stages. False if a right-hand side or the linear system failed. 2 field evaluations."""
+def n_var(N):
+    """The tangent columns V carried in an integrated vector of N components: 2 with the variational equations
+    (y (10), V (10 x 2); without the dissipated energy), else 0."""
+    return 2 if N == rk.VAR_OFFSET + rk.VAR_SIZE else 0
+
+
+@_inner
+def _stage_solve(mi, phase, p, A, piv, y, g, nv, ytmp, fplus, fminus, lam, ws):
+    """g <- (I / (gamma h) - J_aug)^-1 g for the integrated vector's Jacobian J_aug at y. Without tangents
+    (nv = 0) J_aug = Jm (A its LU). With them J_aug = [[J, 0], [B, J]] (block lower triangular; B g =
+    d/dy (J(y) V) g, the field's second derivative in the directions V and g): the state's block is solved
+    first, then each tangent's with B g_y added, B g_y by central differences of the variational field (step
+    _FD_STEP relative to the state). Then the Rosenbrock step of y and V is the derivative of the Rosenbrock
+    step of y (the two second derivatives are the same symmetric form), as DOP853's is of its own."""
+    _solve(A, piv, g)
+    if nv == 0:
+        return True
     N = y.shape[0]
-    A = np.empty((N, N))
-    piv = np.empty(N, dtype=np.int64)
+    gn = 0.0
+    yn = 0.0
+    for i in range(10):
+        gn = max(gn, abs(g[i]))
+        yn = max(yn, abs(y[i]))
+    ok = True
+    if gn > 0.0:
+        e = _FD_STEP * (1.0 + yn) / gn
+        for i in range(N):
+            ytmp[i] = y[i]
+        for i in range(10):
+            ytmp[i] = y[i] + e * g[i]
+        ok = rk.rhs_aug(mi, phase, p, ytmp, True, False, fplus, lam, ws)
+        for i in range(10):
+            ytmp[i] = y[i] - e * g[i]
+        ok = rk.rhs_aug(mi, phase, p, ytmp, True, False, fminus, lam, ws) and ok
+        for i in range(10, N):
+            g[i] += (fplus[i] - fminus[i]) / (2.0 * e)
+    for c in range(nv):
+        _solve(A, piv, g[10 + 10 * c : 20 + 10 * c])
+    return ok
+
+
+@_inner
+def ros_step(mi, phase, p, y, f0, Jm, h, with_diss, y_new, err, G, lam, ws):
+    """One Rosenbrock step of size h from y (f0 = f(y), Jm = df/dy at y of the state's block): y_new, err (the
+    embedded estimate). G (4 x N) receives the stages. False if a right-hand side or the linear system failed.
+    2 field evaluations (and 8 more of the variational field when y carries tangents, `_stage_solve`)."""
+    N = y.shape[0]
+    Ny = Jm.shape[0]
+    nv = n_var(N)
+    wv = nv > 0
+    A = np.empty((Ny, Ny))
+    piv = np.empty(Ny, dtype=np.int64)
     d = 1.0 / (_GAM * h)
-    for i in range(N):
-        for j in range(N):
+    for i in range(Ny):
+        for j in range(Ny):
             A[i, j] = -Jm[i, j]
         A[i, i] += d
     if not _lu(A, piv):
         return False
     ytmp = np.empty(N)
     ftmp = np.empty(N)
+    yb = np.empty(N if wv else 0)
+    fp = np.empty(N if wv else 0)
+    fq = np.empty(N if wv else 0)
     for i in range(N):
         G[0, i] = f0[i]
-    _solve(A, piv, G[0])
+    ok = _stage_solve(mi, phase, p, A, piv, y, G[0], nv, yb, fp, fq, lam, ws)
     for i in range(N):
         ytmp[i] = y[i] + _A21 * G[0, i]
-    ok = rk.rhs_aug(mi, phase, p, ytmp, False, with_diss, ftmp, lam, ws)
+    ok = rk.rhs_aug(mi, phase, p, ytmp, wv, with_diss, ftmp, lam, ws) and ok
     for i in range(N):
         G[1, i] = ftmp[i] + _C21 * G[0, i] / h
-    _solve(A, piv, G[1])
+    ok = _stage_solve(mi, phase, p, A, piv, y, G[1], nv, yb, fp, fq, lam, ws) and ok
     for i in range(N):
         ytmp[i] = y[i] + _A31 * G[0, i] + _A32 * G[1, i]
-    ok = rk.rhs_aug(mi, phase, p, ytmp, False, with_diss, ftmp, lam, ws) and ok
+    ok = rk.rhs_aug(mi, phase, p, ytmp, wv, with_diss, ftmp, lam, ws) and ok
     for i in range(N):
         G[2, i] = ftmp[i] + (_C31 * G[0, i] + _C32 * G[1, i]) / h
-    _solve(A, piv, G[2])
+    ok = _stage_solve(mi, phase, p, A, piv, y, G[2], nv, yb, fp, fq, lam, ws) and ok
     for i in range(N):
         G[3, i] = ftmp[i] + (_C41 * G[0, i] + _C42 * G[1, i] + _C43 * G[2, i]) / h
-    _solve(A, piv, G[3])
+    ok = _stage_solve(mi, phase, p, A, piv, y, G[3], nv, yb, fp, fq, lam, ws) and ok
     for i in range(N):
         y_new[i] = y[i] + _B1 * G[0, i] + _B2 * G[1, i] + _B3 * G[2, i] + _B4 * G[3, i]
         err[i] = _E1 * G[0, i] + _E2 * G[1, i] + _E3 * G[2, i] + _E4 * G[3, i]
@@ -227,7 +318,10 @@ def _guard_by_step(mi, phase, p, code, s, y, f0, Jm, with_diss, y_out, lam, ws):
         ros_step(mi, phase, p, y, f0, Jm, s, with_diss, y_out, err, G, lam, ws)
     qdd = np.empty(5)
     if rk.needs_lambda(code):
-        fm.accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
+        if phase >= FRICTION_PHASE0:
+            rk.friction_accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
+        else:
+            fm.accel(mi, phase, y_out[0:5], y_out[5:10], p, qdd, lam)
     return rk.guard_value(phase, code, y_out, lam, p)
 
 
@@ -290,12 +384,14 @@ def _refine(mi, phase, p, code, t, t_root, t_hi, y, f0, Jm, with_diss, y_end, la
 
 @_jit
 def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_diss, record_dt, max_steps):
-    """Integrate one base phase from (t0, y0) until a guard in `codes` fires or t0 + t_max is reached, with the
-    Rosenbrock method. Arguments and returns as rimless.sim.fast.rk.run_phase (without the variational
-    equations): (status, t_end, y_end, fired_index (-1: none), nfev, nsteps, nstiff, rec_t, rec_y); nfev
-    counts field evaluations, one per Jacobian included; nstiff the steps with h |lambda_leg| > 6.1 (`leg_rate`),
+    """Integrate one phase from (t0, y0) until a guard in `codes` fires or t0 + t_max is reached, with the
+    Rosenbrock method. Arguments and returns as rimless.sim.fast.rk.run_phase (the variational equations carried
+    when y0 has their 30 components): (status, t_end, y_end, fired_index (-1: none), nfev, nsteps, nstiff, rec_t,
+    rec_y); nfev counts field evaluations, one per Jacobian and the stage solves' 8 differences included; nstiff the steps with h |lambda_leg| > 6.1 (`leg_rate`),
     those DOP853 could not have taken (its stiffness indicator's threshold)."""
     N = y0.shape[0]
+    nv = n_var(N)
+    wv = nv > 0
     ng = codes.shape[0]
     L0 = p[3]
     t = t0
@@ -306,7 +402,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
     f_new = np.empty(N)
     lam = np.zeros(6)
     lam_new = np.zeros(6)
-    Jm = np.empty((N, N))
+    Jm = np.empty((N - 10 * nv, N - 10 * nv))
     G = np.empty((4, N))
     err = np.empty(N)
     y_new = np.empty(N)
@@ -330,7 +426,8 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
     nsteps = 0
     nstiff = 0
     rate = leg_rate(p)
-    ok = rk.rhs_aug(mi, phase, p, y, False, with_diss, f, lam, ws)
+    strict = phase >= FRICTION_PHASE0  # friction phases: a guard at exactly 0 at a step's start does not fire
+    ok = rk.rhs_aug(mi, phase, p, y, wv, with_diss, f, lam, ws)
     for i in range(N):
         if not (math.isfinite(y[i]) and math.isfinite(f[i])):
             ok = False
@@ -362,8 +459,8 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
             h = t_new - t
             h_abs = h
             good = ros_step(mi, phase, p, y, f, Jm, h, with_diss, y_new, err, G, lam_new, ws)
-            good = rk.rhs_aug(mi, phase, p, y_new, False, with_diss, f_new, lam_new, ws) and good
-            nfev += 3
+            good = rk.rhs_aug(mi, phase, p, y_new, wv, with_diss, f_new, lam_new, ws) and good
+            nfev += 11 if wv else 3
             e2 = 0.0
             for i in range(n_err):
                 sc = atol + max(abs(y[i]), abs(y_new[i])) * rtol
@@ -396,13 +493,13 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
         best_prev = False
         any_active = False
         for e in range(ng):
-            up = g[e] <= 0.0 and g_new[e] >= 0.0
-            down = g[e] >= 0.0 and g_new[e] <= 0.0
+            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
+            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             if (up and directions[e] > 0) or (down and directions[e] < 0):
                 any_active = True
         for e in range(ng):
-            up = g[e] <= 0.0 and g_new[e] >= 0.0
-            down = g[e] >= 0.0 and g_new[e] <= 0.0
+            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
+            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             root = np.inf
             if (up and directions[e] > 0) or (down and directions[e] < 0):
                 root, nf = rk.brent_on_dense(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
@@ -454,7 +551,7 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
             y_end = np.empty(N)
             if best_prev:  # the dip was in the previous step: refine there (its Jacobian again)
                 fp = np.empty(N)
-                rk.rhs_aug(mi, phase, p, yp_old, False, with_diss, fp, lam, ws)
+                rk.rhs_aug(mi, phase, p, yp_old, wv, with_diss, fp, lam, ws)
                 _jacobian(mi, phase, p, yp_old, with_diss, Jm)
                 t_ev, nf = _refine(
                     mi, phase, p, codes[best_e], tp_old, best_t, t, yp_old, fp, Jm, with_diss, y_end, lam, ws

@@ -9,8 +9,16 @@ FastIntegrator twice: single support by Rosenbrock (`stiff_legs=True`, the defau
 (`stiff_legs=False`, what every phase used before). Errors are against DOP853 at rtol 1e-12 (atol 1e-14):
 the largest step-period error (s) and the largest error of the post-impact section z = (theta+, theta'+)
 (rad, rad/s) over the walk. The compiled step map (`fast_step`, as the trial comparison's scans use it) is
-timed on the same steps, its error (largest of period s and z) against the same reference, step by step. Times are CPU time of this thread (time.thread_time), median of `repeats`; every
+timed on the same steps, its error (largest of period s and z) against the same reference, step by step; and
+with its exact Jacobian (`fast_step(jacobian=True)`, "map+J": the variational equations through the Rosenbrock
+single support), its Jacobian's largest difference from central differences of the map at rtol 1e-12 (dz 1e-6,
+relative to the largest entry; their own error is some 1e-8 / 1e-6). Times are CPU time of this thread (time.thread_time), median of `repeats`; every
 ratio printed comes from them. Right-hand-side evaluations are counted by the integrators.
+
+With guide friction (`FRICTION_N`, 0.3 N, the audit's truth): the same wheel and walk with its stick/slip phases
+(rimless.sim.integrate.friction), single support by Rosenbrock and by DOP853 side by side, errors against DOP853 at
+rtol 1e-12 with the same friction, and the largest difference of the steps' friction work (J) and stuck time (s)
+from the reference's; no map column (the one-call compiled map has no guide friction).
 
 Run: ``python -m rimless.sim.studies.stiffbench`` (some 20 s on a loaded 2-core machine, after compiling).
 """
@@ -27,9 +35,10 @@ import numpy as np
 RELEASE_Z = np.array([-math.pi / 8, 2.0])  # theta (rad), theta' (rad/s): the rigid release on two feet
 SLOPE_DEG = 4.0
 REFERENCE_RTOL = 1e-12
+FRICTION_N = 0.3  # N: the audit's independent truth (rimless.analysis.validation), F_c of the friction table
 
 
-def light_wheel() -> Any:
+def light_wheel(friction_n: float = 0.0) -> Any:
     """The 0.1 g-leg wheel of the benchmark (WheelParams, slope SLOPE_DEG): what
     rimless.analysis.validation.critical_truth.LossyWheel().wheel_params() writes for its default rigid wheel
     (M = 2.6 kg, I_hub = 0.05 kg m^2, L = 0.21 m; m = 0.1 g, M = m_H + 8 m, I_hub = I_c + 8 m L^2)."""
@@ -42,6 +51,7 @@ def light_wheel() -> Any:
         inertia_kg_m2=inertia - 8 * m * leg**2,
         leg_length_m=leg,
         slope_rad=math.radians(SLOPE_DEG),
+        guide_friction_n=friction_n,
     )
 
 
@@ -70,6 +80,53 @@ def _errors(walk: Any, ref: Any) -> tuple[float, float]:
     return dp, dz
 
 
+def _walk_row(params: Any, rtol: float, n_steps: int, repeats: int, ref: Any) -> tuple[dict[str, Any], Any, Any]:
+    """The walk columns of a row (CPU s, evaluations and errors against ref on each integrator) and the walks."""
+    t_new, (walk_new, nfev_new) = _cpu(lambda: _walk(params, rtol, True, n_steps), repeats)
+    t_old, (walk_old, nfev_old) = _cpu(lambda: _walk(params, rtol, False, n_steps), repeats)
+    row = {
+        "rtol": rtol,
+        "rosenbrock_cpu_s": t_new,
+        "dop853_cpu_s": t_old,
+        "cpu_ratio": t_old / t_new,
+        "rosenbrock_nfev": nfev_new,
+        "dop853_nfev": nfev_old,
+        "rosenbrock_errors": _errors(walk_new, ref),
+        "dop853_errors": _errors(walk_old, ref),
+    }
+    return row, walk_new, walk_old
+
+
+def _friction_errors(walk: Any, ref: Any) -> tuple[float, float]:
+    """The largest differences of the steps' friction work (J) and stuck time (s, either leg) from ref's."""
+    n = min(len(walk.steps), len(ref.steps))
+    dw = max(abs(walk.steps[i].friction_work_J - ref.steps[i].friction_work_J) for i in range(n))
+    ds = max(float(np.max(np.abs(np.subtract(walk.steps[i].stick_s, ref.steps[i].stick_s)))) for i in range(n))
+    return dw, ds
+
+
+def friction_rows(rtols: tuple[float, ...], n_steps: int, repeats: int) -> list[dict[str, Any]]:
+    """Rows per rtol for the light wheel with guide friction FRICTION_N: as stiff_bench's walk columns, plus the
+    friction work and stuck time differences (J, s) of each integrator from the reference."""
+    params = light_wheel(FRICTION_N)
+    _walk(params, 1e-8, True, 1)  # compile (or load) the friction phases on both paths before timing
+    _walk(params, 1e-8, False, 1)
+    ref, _ = _walk(params, REFERENCE_RTOL, False, n_steps)
+    rows = []
+    for rtol in rtols:
+        row, walk_new, walk_old = _walk_row(params, rtol, n_steps, repeats, ref)
+        rows.append(
+            row
+            | {
+                "rosenbrock_friction_errors": _friction_errors(walk_new, ref),
+                "dop853_friction_errors": _friction_errors(walk_old, ref),
+                "steps": (len(walk_new.steps), len(walk_old.steps), len(ref.steps)),
+                "friction_work_J": float(sum(s.friction_work_J for s in ref.steps)),
+            }
+        )
+    return rows
+
+
 def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repeats: int = 3) -> dict[str, Any]:
     """Rows per rtol: CPU time (s) and evaluations of the walk on each integrator, their ratio, the errors."""
     from rimless.sim.fast import fast_step, stiff
@@ -82,8 +139,7 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
     ref, _ = _walk(params, REFERENCE_RTOL, False, n_steps)
     rows = []
     for rtol in rtols:
-        t_new, (walk_new, nfev_new) = _cpu(lambda r=rtol: _walk(params, r, True, n_steps), repeats)
-        t_old, (walk_old, nfev_old) = _cpu(lambda r=rtol: _walk(params, r, False, n_steps), repeats)
+        row, _, _ = _walk_row(params, rtol, n_steps, repeats, ref)
 
         def maps(r: float = rtol) -> tuple[float, int]:
             z, nfev, err = RELEASE_Z, 0, 0.0
@@ -94,23 +150,51 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
             return err, nfev
 
         t_map, (err_map, nfev_map) = _cpu(maps, repeats)
+
+        def jacobians(r: float = rtol) -> tuple[float, int]:
+            """The map with its exact Jacobian on the reference's steps: its largest difference (relative to the
+            largest entry) from central differences of the map at rtol 1e-12 (dz 1e-6), the evaluations."""
+            nfev, err = 0, 0.0
+            for z in [RELEASE_Z] + [s.y_plus[[2, 7]] for s in ref.steps[:-1]]:
+                step = fast_step(params, "er", z, rtol=r, jacobian=True)
+                nfev += step.nfev
+                fd = np.column_stack(
+                    [
+                        (
+                            fast_step(params, "er", z + dz, rtol=1e-12).z_next
+                            - fast_step(params, "er", z - dz, rtol=1e-12).z_next
+                        )
+                        / 2e-6
+                        for dz in (np.array([1e-6, 0.0]), np.array([0.0, 1e-6]))
+                    ]
+                )
+                err = max(err, float(np.max(np.abs(step.jacobian - fd)) / np.max(np.abs(fd))))
+            return err, nfev
+
+        def jacobians_timed(r: float = rtol) -> int:
+            z, nfev = RELEASE_Z, 0
+            for ref_step in ref.steps:
+                nfev += fast_step(params, "er", z, rtol=r, jacobian=True).nfev
+                z = ref_step.y_plus[[2, 7]]
+            return nfev
+
+        t_jac, nfev_jac = _cpu(jacobians_timed, repeats)
+        err_jac, _ = jacobians()
         rows.append(
-            {
-                "rtol": rtol,
-                "rosenbrock_cpu_s": t_new,
-                "dop853_cpu_s": t_old,
-                "cpu_ratio": t_old / t_new,
-                "rosenbrock_nfev": nfev_new,
-                "dop853_nfev": nfev_old,
-                "rosenbrock_errors": _errors(walk_new, ref),
-                "dop853_errors": _errors(walk_old, ref),
+            row
+            | {
                 "map_cpu_s": t_map,
                 "map_nfev": nfev_map,
                 "map_error": err_map,
+                "map_jacobian_cpu_s": t_jac,
+                "map_jacobian_nfev": nfev_jac,
+                "map_jacobian_error": err_jac,
             }
         )
+    fric = friction_rows(rtols, n_steps, repeats)
     return {
         "params": params,
+        "friction_rows": fric,
         "leg_rate_per_s": float(stiff.leg_rate(np.array(params.as_vector()))),
         "n_steps": n_steps,
         "load_before": load,
@@ -126,14 +210,36 @@ def format_table(out: dict[str, Any]) -> str:
         f"c {p.damping_ns_per_m:g} N s/m: fastest leg root {out['leg_rate_per_s']:.3g} 1/s), slope {SLOPE_DEG:g} deg,"
         f" release z = ({RELEASE_Z[0]:.4f} rad, {RELEASE_Z[1]:g} rad/s); errors against DOP853 at rtol {REFERENCE_RTOL:g}",
         f"{'rtol':>7} {'Rosenbrock s':>12} {'DOP853 s':>9} {'ratio':>6} {'nfev R':>8} {'nfev D':>8} "
-        f"{'period err R':>12} {'period err D':>12} {'z err R':>9} {'z err D':>9} {'map s':>7} {'map nfev':>8} {'map err':>8}",
+        f"{'period err R':>12} {'period err D':>12} {'z err R':>9} {'z err D':>9} {'map s':>7} {'map nfev':>8} {'map err':>8} "
+        f"{'map+J s':>8} {'J nfev':>7} {'J err':>8}",
     ]
     for r in out["rows"]:
         (pr, zr), (pd, zd) = r["rosenbrock_errors"], r["dop853_errors"]
         lines.append(
             f"{r['rtol']:7.0e} {r['rosenbrock_cpu_s']:12.4f} {r['dop853_cpu_s']:9.4f} {r['cpu_ratio']:6.1f} "
             f"{r['rosenbrock_nfev']:8d} {r['dop853_nfev']:8d} {pr:12.2e} {pd:12.2e} {zr:9.2e} {zd:9.2e} "
-            f"{r['map_cpu_s']:7.4f} {r['map_nfev']:8d} {r['map_error']:8.1e}"
+            f"{r['map_cpu_s']:7.4f} {r['map_nfev']:8d} {r['map_error']:8.1e} "
+            f"{r['map_jacobian_cpu_s']:8.4f} {r['map_jacobian_nfev']:7d} {r['map_jacobian_error']:8.1e}"
+        )
+    lines.append(f"The same walk with guide friction F_c = {FRICTION_N:g} N (stick/slip phases), reference with it:")
+    lines.append(
+        f"{'rtol':>7} {'Rosenbrock s':>12} {'DOP853 s':>9} {'ratio':>6} {'nfev R':>8} {'nfev D':>8} "
+        f"{'period err R':>12} {'period err D':>12} {'z err R':>9} {'z err D':>9} {'W_f err R':>9} {'W_f err D':>9} "
+        f"{'stuck err R':>11} {'stuck err D':>11}"
+    )
+    for r in out["friction_rows"]:
+        (pr, zr), (pd, zd) = r["rosenbrock_errors"], r["dop853_errors"]
+        (wr, sr), (wd, sd) = r["rosenbrock_friction_errors"], r["dop853_friction_errors"]
+        lines.append(
+            f"{r['rtol']:7.0e} {r['rosenbrock_cpu_s']:12.4f} {r['dop853_cpu_s']:9.4f} {r['cpu_ratio']:6.1f} "
+            f"{r['rosenbrock_nfev']:8d} {r['dop853_nfev']:8d} {pr:12.2e} {pd:12.2e} {zr:9.2e} {zd:9.2e} "
+            f"{wr:9.1e} {wd:9.1e} {sr:11.1e} {sd:11.1e}"
+        )
+    if out["friction_rows"]:
+        r = out["friction_rows"][0]
+        lines.append(
+            f"(steps walked R/D/reference: {'/'.join(str(n) for n in r['steps'])}; the reference's friction work over "
+            f"the walk {r['friction_work_J']:.4g} J)"
         )
     lines.append(
         f"CPU time of this thread, median of repeats; load average {out['load_before']:.1f} before, "

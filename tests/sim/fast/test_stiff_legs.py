@@ -106,3 +106,34 @@ def test_light_leg_step_energy_balance_with_the_dampers_work() -> None:
     assert res.dissipated_J > 0.01
     assert lost == pytest.approx(res.dissipated_J, abs=1e-9)
     assert res.nfev < 15_000
+
+
+def test_light_leg_exact_jacobian_on_rosenbrock_agrees_with_map_differences(reference) -> None:
+    """The map with its exact Jacobian (the variational equations carried through the Rosenbrock single support,
+    the field's second derivative by central differences inside the stage solves): on the Rosenbrock path
+    (today's main: DOP853 there, some 40 000-60 000 evaluations a step), under 12 000 field evaluations a step at
+    rtol 1e-8, the walk's periods (2e-8 s) and sections (5e-8), a Jacobian that moves by under 1e-8 from rtol 1e-8
+    to 1e-10 and agrees with central differences of the map (rtol 1e-12, dz 1e-6: their error some 1e-8 / 1e-6)
+    to 5e-4 of its largest entry, on the walk's three post-impact states."""
+    z = RELEASE
+    for ref in reference.steps:
+        loose = fast_step(LIGHT, "er", z, rtol=1e-8, jacobian=True)
+        assert loose.method == "fast-dop853+rosenbrock"
+        assert loose.nfev < 12_000
+        # the map itself to the light-leg map's accuracy (double support's floor: 2-4e-8 per step, as without the
+        # Jacobian; with V the field comes from the directional kernels, another rounding of the same noise)
+        assert loose.period_s == pytest.approx(ref.period_s, abs=2e-8)
+        np.testing.assert_allclose(loose.z_next, ref.y_plus[[2, 7]], atol=5e-8)
+        tight = fast_step(LIGHT, "er", z, rtol=1e-10, jacobian=True)
+        assert loose.jacobian is not None and tight.jacobian is not None
+        np.testing.assert_allclose(loose.jacobian, tight.jacobian, atol=1e-8)
+        d = 1e-6
+        fd = np.empty((2, 2))
+        for j in range(2):
+            e = np.zeros(2)
+            e[j] = d
+            up = fast_step(LIGHT, "er", z + e, rtol=1e-12).z_next
+            down = fast_step(LIGHT, "er", z - e, rtol=1e-12).z_next
+            fd[:, j] = (up - down) / (2 * d)
+        assert np.max(np.abs(tight.jacobian - fd)) < 5e-4 * np.max(np.abs(fd))
+        z = ref.y_plus[[2, 7]]
