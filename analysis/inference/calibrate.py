@@ -2090,6 +2090,14 @@ def _span_minima(optimizer: dict[str, Any], estimates: list[ParamEstimate]) -> N
     """Minima of similar cost away from the best (more than a tenth of a standard error): each estimate's
     standard error grows so that its 95 % interval spans them (``se_minima``, the note says so);
     ``optimizer["several_minima"]`` states it."""
+    kept = next((m for m in optimizer["minima"] if m["start"] == optimizer.get("best_start")), None)
+    #: starts whose minimum lies below the kept one on the solution's sigmas (the kept one was the lowest on the
+    #: start's sigmas, the ones the starts were compared on): start -> how much lower in chi-square
+    optimizer["lower_than_kept"] = {
+        m["start"]: float(kept["chi2"] - m["chi2"])
+        for m in optimizer["minima"]
+        if kept is not None and m is not kept and not m.get("same_as_kept") and m["chi2"] < kept["chi2"]
+    }
     similar = [m for m in optimizer["minima"] if m["similar"]]
     far = [
         m
@@ -2105,9 +2113,13 @@ def _span_minima(optimizer: dict[str, Any], estimates: list[ParamEstimate]) -> N
         if math.isfinite(e.se) and need > e.se:
             e.se = need
             others = ", ".join(f"{m['values'][e.name]:.4g}" for m in far)
+            lower = [m for m in far if m["start"] in optimizer["lower_than_kept"]]
             extra = (
                 f"{len(far) + 1} minima of similar cost from different starts: the interval spans them "
                 f"({others} besides {e.value:.4g})"
+                if not lower
+                else f"{len(far) + 1} minima from different starts, {len(lower)} of them lower than the kept one "
+                f"on the solution's sigmas: the interval spans them ({others} besides {e.value:.4g})"
             )
             e.note = f"{e.note}; {extra}" if e.note else extra
             if e.identifiable and abs(e.value) > 0 and e.se / abs(e.value) > NOT_IDENTIFIABLE_REL_SE:
