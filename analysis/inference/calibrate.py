@@ -98,7 +98,7 @@ WARM_ITERATIONS = 12  # Gauss-Newton iterations of `_ReleaseFit.fit_warm` before
 MISFIT_FREQUENCY_FRACTION = 0.25
 #: simulations the search may run once the start has stated that the model does not fit (then every estimate
 #: is effective only, whatever the search finds: `SimulationBudget.cap_search`)
-MISFIT_SEARCH_SIMULATIONS = 400
+MISFIT_SEARCH_SIMULATIONS = 150
 #: on such a wheel a round of the least squares (`MAX_NFEV` evaluations) that lowers the cost by less than this
 #: fraction of itself ends them as not converging (`_Objective.solve`)
 NOT_CONVERGING_FRACTION = 0.01
@@ -594,6 +594,8 @@ class _ReleaseFit:
         #: on a wheel the model does not fit at the start's values (`_start`): `fit_warm` keeps its best walking
         #: iterate instead of falling back on the grid, and the grid is coarse (`COARSE_RELEASE_GRID` points)
         self.cheap = cheap
+        #: the start's statement that the model does not fit these trials (`_start`, `_misfit_at_start`), or None
+        self.misfit: dict[str, Any] | None = None
 
     def freq_res(self, p: Any, d: _TrialData, w: float) -> np.ndarray:
         """Step-frequency residuals (Hz) from the compiled map alone."""
@@ -710,14 +712,14 @@ class _ReleaseFit:
 
 def _start(
     releases: _ReleaseFit, glob: _Globals, data: list[_TrialData]
-) -> tuple[dict[str, float], np.ndarray, np.ndarray, list[dict[float, float]], dict[str, Any] | None]:
+) -> tuple[dict[str, float], np.ndarray, np.ndarray, list[dict[float, float]]]:
     """Stage 1: the releases at Table 1 (returned by trial name), then the coarse profile of each global
     (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
     sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
     at it. Then that start refined (`_refine_start`, returned as well), where
     the least squares begin: every trial's ``refined_release_rad_s`` is set at it. Then the profile: per
     global, relative value -> the periods' cost. Last, the statement that the model does not fit these trials
-    (`_misfit_at_start`, at the profile's best), or None. When the model misses the periods at Table 1 already
+    (`_misfit_at_start`, at the profile's best), or None, set as ``releases.misfit``. When the model misses the periods at Table 1 already
     and a trial's release there ends on the grid's edge (`RELEASE_GRID_S`: no release walks at its pace), the
     profile's release fits are cheap (``releases.cheap``: no grid search after a warm start that walked, a
     coarse grid else); when it misses them at the profile's best, the start is not refined (the estimates are
@@ -766,7 +768,8 @@ def _start(
             seen[j][factor - 1.0] = try_start(ug)
     ug_coarse = ug_best.copy()
     misfit = _misfit_at_start(glob, data, ug_best, best_costs)
-    if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
+    if ug_best.any() and misfit is None:  # releases at the chosen start, to full precision (from the profile's,
+        # on the same branch); on a wheel the model does not fit the profile's (to 1e-6, or its best iterate) do
         pb = glob.at(ug_best)
         for d in data:
             d.release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
@@ -779,7 +782,8 @@ def _start(
         for d, w in zip(data, coarse_releases):
             d.refined_release_rad_s = d.release_rad_s
             d.release_rad_s = w
-    return table1, ug_coarse, ug_best, seen, misfit
+    releases.misfit = misfit
+    return table1, ug_coarse, ug_best, seen
 
 
 def _misfit_at_start(
@@ -1450,7 +1454,9 @@ def _calibrate(
 
     glob = _Globals.of(params or WheelParams(), fit)
     budget.enter("start (releases and profile)")
-    table1_releases, ug_start, ug_refined, profile, misfit = _start(_ReleaseFit(sim, tick), glob, data)
+    starting = _ReleaseFit(sim, tick)
+    table1_releases, ug_start, ug_refined, profile = _start(starting, glob, data)
+    misfit = starting.misfit
 
     obj = _Objective(sim, glob, data, tick)
     if misfit is not None:  # every estimate effective only: a short search settles what a long one would not change
