@@ -800,8 +800,9 @@ def _misfit_at_start(
     if not pooled > MISFIT_FREQUENCY_FRACTION:
         return None
     per_trial = {d.name: math.sqrt(float(ci / fi)) for d, ci, fi in zip(data, c, f2)}
-    at = {n: float(v) for n, v in zip(glob.fields, glob.x0 + ug * glob.scale)}
-    where = ", ".join(f"{n} {v:.4g}" for n, v in at.items())
+    named = {f: (n, unit) for n, (f, unit) in FIT_FIELDS.items()}  # the --fit names, as the estimates are named
+    at = {named[f][0]: float(v) for f, v in zip(glob.fields, glob.x0 + ug * glob.scale)}
+    where = ", ".join(f"{n} {v:.4g} {named[f][1]}" for (n, v), f in zip(at.items(), glob.fields))
     finite = [v for v in per_trial.values() if math.isfinite(v)]
     spread = f"{min(finite):.0%}-{max(finite):.0%}" if finite else "all"
     stalls = [n for n, v in per_trial.items() if not math.isfinite(v) or v >= 1.0]

@@ -35,7 +35,8 @@ def test_misfit_statement_is_the_relative_rms_frequency_miss():
     assert m is not None
     assert m["frequency_miss_per_trial"] == pytest.approx({"a": 0.3, "b": 1.2})
     assert m["frequency_miss_rms"] == pytest.approx(math.sqrt((costs[0] + costs[1]) / sum(f2)))
-    assert m["at"] == {"damping_ns_per_m": pytest.approx(12.0)}  # 8 x (1 + 0.5)
+    assert m["at"] == {"c": pytest.approx(12.0)}  # 8 x (1 + 0.5), by its --fit name
+    assert "(c 12 N s/m)" in m["statement"]
     s = m["statement"]
     assert s.startswith("the model does not fit these trials") and "effective only" in s and "stalls" in s
     assert ": b" in s and "a," not in s
