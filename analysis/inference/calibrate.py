@@ -1460,7 +1460,8 @@ def _calibrate(
     misfit = starting.misfit
 
     obj = _Objective(sim, glob, data, tick)
-    if misfit is not None:  # every estimate effective only: a short search settles what a long one would not change
+    if misfit is not None and not values_only:  # every estimate effective only: a short search settles what a long
+        # one would not change (not in a held parameter's recalibration: the calibration it serves fits)
         budget.cap_search(MISFIT_SEARCH_SIMULATIONS, misfit["statement"])
         obj.not_converging_fraction = NOT_CONVERGING_FRACTION
         stage("the model does not fit these trials")
