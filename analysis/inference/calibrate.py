@@ -1754,13 +1754,21 @@ def _minima_within(
     return out
 
 
+def _ran_out(budget: SimulationBudget) -> str:
+    """What stopped the search, for the estimates' notes: the budget, or its cap on a wheel the model does not fit
+    (`SimulationBudget.cap_search`)."""
+    if budget.stopped_by == "misfit cap":
+        return "the search reached its cap (the model does not fit these trials)"
+    return "the simulation budget ran out"
+
+
 def _not_carried(estimates: list[ParamEstimate], names: Sequence[str], budget: SimulationBudget) -> None:
     """The held parameters ``names`` whose refits the budget stopped: not carried, so no estimate built on the
     data alone is identifiable (effective only: the interval lacks their part), the note names them."""
     if not names:
         return
     budget.skip("held parameters' refits", "not carried: " + ", ".join(names))
-    why = "effective only: the simulation budget ran out before the held " + ", ".join(names) + " were carried"
+    why = f"effective only: {_ran_out(budget)} before the held " + ", ".join(names) + " were carried"
     for e in estimates:
         if e.identifiable:
             e.identifiable, e.effective_only = False, True
@@ -1774,7 +1782,7 @@ def _undecided(estimates: list[ParamEstimate], fit: Sequence[str], budget: Simul
         if e.name in EXTRA_PARAMETERS and len(fit) > 1:
             e.effective_only = e.identifiable or e.effective_only
             e.identifiable, e.undecided = False, True
-            why = f"undecided: the simulation budget ran out before the model choice of {e.name}"
+            why = f"undecided: {_ran_out(budget)} before the model choice of {e.name}"
             e.note = why + (f"; {e.note}" if e.note else "")
 
 

@@ -101,12 +101,13 @@ def test_trials_the_model_cannot_fit_are_classified_at_the_start_and_the_search_
     """Trials whose periods alternate short and long: the start states that the model does not fit them before
     the least squares (JSON ``optimizer.misfit``, ``budget.misfit``), no estimate is identifiable and each note
     begins with the statement, and the simulations after the start stay within the misfit's cap plus the closing
-    stages' reserve. Fails before the check: no ``misfit`` key, and the search ran its whole rounds."""
+    stages' reserve (k's refits are not run, and the notes say the cap stopped them). Fails before the check:
+    no ``misfit`` key, and the search ran its whole rounds."""
     trials, names = limping
     entries: list[tuple[str, int]] = []
     budget = SimulationBudget(None)
     budget.on_stage = lambda s: entries.append((s, budget.used))
-    res = cal.calibrate(trials, names, ["c"], budget=budget)
+    res = cal.calibrate(trials, names, ["c"], budget=budget, held=[("stiffness_n_per_m", 270.0)])
     s = res.summary()
     json.dumps(s, allow_nan=False)
     m = s["optimizer"]["misfit"]
@@ -120,4 +121,7 @@ def test_trials_the_model_cannot_fit_are_classified_at_the_start_and_the_search_
         # never identifiable: effective only, or not identifiable where the capped search did not converge
         assert not e.identifiable and e.status in ("effective only", "not identifiable")
         assert e.note.startswith("effective only: " + m["statement"])
+        # k's refits were not run: the cap stopped them, not the budget (unbounded here)
+        assert "simulation budget ran out" not in e.note and "the search reached its cap" in e.note
+        assert e.se_held is None
         assert math.isfinite(e.value)
