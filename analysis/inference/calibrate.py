@@ -720,9 +720,9 @@ def _start(
     at it. Then that start refined (`_refine_start`, returned as well), where
     the least squares begin: every trial's ``refined_release_rad_s`` is set at it. Then the profile: per
     global, relative value -> the periods' cost. Last, the statement that the model does not fit these trials
-    (`_misfit_at_start`, at the profile's best), or None, set as ``releases.misfit``. When the model misses the periods at Table 1 already
-    and a trial's release there ends on the grid's edge (`RELEASE_GRID_S`: no release walks at its pace), the
-    profile's release fits are cheap (``releases.cheap``: no grid search after a warm start that walked, a
+    (`_misfit_at_start`, at the profile's best), or None, set as ``releases.misfit``. When the model misses the
+    periods at Table 1 already and a trial's release there ends on the grid's edge (`RELEASE_GRID_S`: no release
+    walks at its pace), the profile's release fits are cheap (``releases.cheap``: no grid search after a warm start that walked, a
     coarse grid else); when it misses them at the profile's best, the start is not refined (the estimates are
     effective only: a nearer start buys nothing)."""
     p0 = glob.at(np.zeros(glob.n))
