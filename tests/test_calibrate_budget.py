@@ -69,9 +69,12 @@ def solve_bound(rounds: int, n_t: int, n_g: int) -> int:
     return 2 * rounds * cal.MAX_NFEV * n_t * (1 + (2 + n_g))
 
 
-def stage_bound(n_t: int, n_g: int = 1) -> int:
-    """The most simulations a calibration of one global (c) without held parameters can run, stage by stage."""
-    assert n_g == 1  # one global: at most one further start (Table 1), no model choice, no spread starts
+def stage_bound(n_t: int, n_g: int = 1, starts: int = 2) -> int:
+    """The most simulations a calibration of one global (c) without held parameters can run, stage by stage,
+    with ``starts`` least squares (the result's ``optimizer.starts``): a second (Table 1) is run only when the
+    profile has more than one valley, and only another start's minimum is re-solved (`_minima`), so with one
+    start neither term counts."""
+    assert n_g == 1 and starts in (1, 2)  # one global: at most one further start (Table 1), no spread starts
     f = release_fit_bounds()
     rounds = cal.MAX_ROUNDS
     start = n_t * (f["full"] + len(cal.PROFILE_FACTORS) * f["warm"] + f["from_w0"] + cal.REFINE_ROUNDS * f["warm"])
@@ -80,6 +83,8 @@ def stage_bound(n_t: int, n_g: int = 1) -> int:
     table1 = n_t * f["warm"] + solve_bound(1, n_t, n_g) + solve_bound(rounds - 1, n_t, n_g)
     first_angles = n_t * f["first_angle"] + solve_bound(rounds, n_t, n_g)
     minima_resolve = n_t * f["first_angle"] + solve_bound(rounds, n_t, n_g)
+    if starts == 1:
+        table1 = minima_resolve = 0
     polish = solve_bound(rounds, n_t, n_g) + 2 * (2 * n_t + n_t * (2 * n_g + 2))  # its costs, a central Jacobian
     closing = closing_reserve(n_t, n_g)
     return start + profile + table1 + first_angles + minima_resolve + polish + closing
@@ -91,7 +96,10 @@ def test_simulations_bounded_by_the_stage_structure(unbounded):
     count within its own bound, and the budget's count is the simulations run."""
     res, budget, entries = unbounded
     n_t, n_g = 2, 1
-    assert budget.used <= stage_bound(n_t, n_g), (budget.used, stage_bound(n_t, n_g))
+    starts = 1 + ("least squares from Table 1" in dict(entries))  # each start is a stage of its own
+    assert res.optimizer["starts"] <= starts
+    # 539 against 5732 with one start (8692 when a second start is allowed for)
+    assert budget.used <= stage_bound(n_t, n_g, starts), (budget.used, stage_bound(n_t, n_g, starts))
     assert budget.stopped_in is None and res.budget["stopped_in"] is None and res.budget["used"] == budget.used
     assert res.evaluations == budget.used  # no held parameters: no recalibration outside this one's count
     counts = dict(zip([s for s, _ in entries], np.diff([u for _, u in entries] + [budget.used])))

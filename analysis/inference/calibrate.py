@@ -92,6 +92,22 @@ NOT_IDENTIFIABLE_REL_SE = 0.5
 PROFILE_FACTORS = (0.5, 0.7, 1.4, 2.0)  # coarse start: each global times these (Table 1 = 1)
 REFINE_ROUNDS = 2  # parabolic refinements of each global's start between the profile's points (`_refine_start`)
 WARM_ITERATIONS = 12  # Gauss-Newton iterations of `_ReleaseFit.fit_warm` before it falls back on the grid
+#: the model does not fit the trials when, at the start's best values (and their best release per trial), the
+#: simulated step frequencies miss the measured by more than this fraction (RMS over all periods, relative to
+#: the measured frequencies' RMS; `_misfit_at_start`). A wheel the model fits misses by 0.1-2 % there (its
+#: period errors are 0.4-5 ms of 300-400 ms; 0.7 % on the budget tests' trials), one trial on a wrongly
+#: imported slope by up to about 20 % (63-69 ms, issue 31), left to the adequacy check; the audit's lossy rigid
+#: truth on 0.1 g legs by 38-42 % (28-62 % per trial)
+MISFIT_FREQUENCY_FRACTION = 0.25
+#: simulations the search may run once the start has stated that the model does not fit (then every estimate
+#: is effective only, whatever the search finds: `SimulationBudget.cap_search`)
+MISFIT_SEARCH_SIMULATIONS = 150
+#: on such a wheel a round of the least squares (`MAX_NFEV` evaluations) that lowers the cost by less than this
+#: fraction of itself ends them as not converging (`_Objective.solve`)
+NOT_CONVERGING_FRACTION = 0.01
+#: the coarse grid of release speeds (rad/s) tried first on such a wheel (`_ReleaseFit.first_period_release`)
+COARSE_RELEASE_GRID = 8
+RELEASE_GRID_S = (0.4, 6.0)  # rad/s: the range of `_ReleaseFit.first_period_release`'s grid
 CUSP_GUARD_S = 0.015  # CoM samples this close to a measured impact are not fitted
 MAX_NFEV = 20  # residual evaluations of one round of the full least squares
 MAX_ROUNDS = 3  # rounds of MAX_NFEV before the fit is reported as not converged
@@ -622,8 +638,13 @@ class _Globals:
 class _ReleaseFit:
     """Stage 1: per trial, the release speed from the step periods alone, on the compiled step map."""
 
-    def __init__(self, sim: _Sim, tick: Callable[[], None]) -> None:
+    def __init__(self, sim: _Sim, tick: Callable[[], None], cheap: bool = False) -> None:
         self.sim, self.tick = sim, tick
+        #: on a wheel the model does not fit at the start's values (`_start`): `fit_warm` keeps its best walking
+        #: iterate instead of falling back on the grid, and the grid is coarse (`COARSE_RELEASE_GRID` points)
+        self.cheap = cheap
+        #: the start's statement that the model does not fit these trials (`_start`, `_misfit_at_start`), or None
+        self.misfit: dict[str, Any] | None = None
 
     def freq_res(self, p: Any, d: _TrialData, w: float) -> np.ndarray:
         """Step-frequency residuals (Hz) from the compiled map alone."""
@@ -655,7 +676,8 @@ class _ReleaseFit:
         """`fit` (coarse, to 1e-6 relative) started from a release known to walk (e.g. the trial's release at
         Table 1) instead of the grid of `first_period_release`, by Gauss-Newton with a secant slope; the grid fit
         when that start ends off the walking branch (a step not reached, the release on its bound) or does not
-        converge in `WARM_ITERATIONS` iterations."""
+        converge in `WARM_ITERATIONS` iterations. ``cheap`` (a wheel the model does not fit): the best walking
+        iterate instead of that fallback, when one walked."""
 
         if not math.isfinite(w0):
             return self.fit(p, d, None, coarse=True)
@@ -669,6 +691,7 @@ class _ReleaseFit:
         w_prev, r_prev = w0, self.freq_res(p, d, w0)
         r0 = r_prev
         w, r = w0 * (1.0 + 1e-4), self.freq_res(p, d, w0 * (1.0 + 1e-4))
+        tried = [(w_prev, r_prev), (w, r)]
         converged = False
         for _ in range(WARM_ITERATIONS):
             if not (walks(r) and walks(r_prev)):
@@ -680,9 +703,14 @@ class _ReleaseFit:
             step = float(np.clip(-(g @ r) / gg, -0.2 * w, 0.2 * w))
             w_new = float(np.clip(w + step, 0.05, 20.0))
             w_prev, r_prev, w, r = w, r, w_new, self.freq_res(p, d, w_new)
+            tried.append((w, r))
             if abs(w - w_prev) <= 1e-6 * abs(w):
                 converged = True
                 break
+        walked = [(float(rt @ rt), wt) for wt, rt in tried if walks(rt)]
+        if self.cheap and walked and not (converged and walks(r) and 0.05 < w < 20.0):
+            cost, w = min(walked)
+            return w, cost
         if not converged or not walks(r) or not 0.05 < w < 20.0:
             # least squares from the warm start when it walks (a minimum on the stall edge, where Gauss-Newton
             # overshoots every step, needs no grid), else from the grid
@@ -713,7 +741,7 @@ class _ReleaseFit:
         """The release whose first simulated step after the release step lasts the first measured period
         (grid + bisection on the compiled map, on the walking branch); the grid's best when none does."""
         sim = self.sim
-        grid = np.linspace(0.4, 6.0, 29)
+        grid = np.linspace(*RELEASE_GRID_S, COARSE_RELEASE_GRID if self.cheap else 29)
         f1 = np.array([sim.frequencies(p, d.slope_deg, w, 1, d.first_angle_offset_rad)[0] for w in grid])
         self.tick()
         target = 1.0 / d.periods_s[0]
@@ -738,23 +766,33 @@ def _start(
     (`PROFILE_FACTORS`) on the periods alone, whose best point (relative globals, returned) is the start that
     sets the block sigmas and the release bounds of the least squares: every trial's ``release_rad_s`` is set
     at it. Then that start refined (`_refine_start`, returned as well), where
-    the least squares begin: every trial's ``refined_release_rad_s`` is set at it. Last, the profile: per
-    global, relative value -> the periods' cost."""
+    the least squares begin: every trial's ``refined_release_rad_s`` is set at it. Then the profile: per
+    global, relative value -> the periods' cost. Last, the statement that the model does not fit these trials
+    (`_misfit_at_start`, at the profile's best), or None, set as ``releases.misfit``. When the model misses the
+    periods at Table 1 already and a trial's release there ends on the grid's edge (`RELEASE_GRID_S`: no release
+    walks at its pace), the profile's release fits are cheap (``releases.cheap``: no grid search after a warm start that walked, a
+    coarse grid else); when it misses them at the profile's best, the start is not refined (the estimates are
+    effective only: a nearer start buys nothing)."""
     p0 = glob.at(np.zeros(glob.n))
     table1 = {}
     best = 0.0
+    best_costs = []
     for d in data:
         w, c = releases.fit(p0, d, None)
         d.release_rad_s = table1[d.name] = w
         best += c
+        best_costs.append(c)
     ug_best = np.zeros(glob.n)
+    on_edge = any(not RELEASE_GRID_S[0] * 1.001 < table1[d.name] < RELEASE_GRID_S[1] * 0.999 for d in data)
+    misfit_t1 = _misfit_at_start(glob, data, np.zeros(glob.n), best_costs)
+    releases.cheap = releases.cheap or (on_edge and misfit_t1 is not None)
 
     tried: dict[tuple[float, ...], list[float]] = {tuple(np.zeros(glob.n)): [table1[d.name] for d in data]}
 
     def try_start(ug: np.ndarray) -> float:
         """The periods' cost at relative globals ug (inf for an invalid wheel); the best start kept. Each
         trial's release is warm-started from its release at the nearest globals tried so far, where Gauss-Newton needs the fewest steps and seldom falls back on the grid."""
-        nonlocal best, ug_best
+        nonlocal best, ug_best, best_costs
         p = glob.at(ug)
         if p is None:
             return math.inf
@@ -765,7 +803,7 @@ def _start(
             tried[tuple(ug)] = [w for w, _ in fits]
         cost = sum(c for _, c in fits)
         if cost < best:
-            best, ug_best = cost, ug
+            best, ug_best, best_costs = cost, ug, [c for _, c in fits]
             for d, (w, _) in zip(data, fits):
                 d.release_rad_s = w
         return cost
@@ -778,20 +816,71 @@ def _start(
             ug[j] = factor - 1.0
             seen[j][factor - 1.0] = try_start(ug)
     ug_coarse = ug_best.copy()
-    if ug_best.any():  # releases at the chosen start, to full precision (from the profile's, on the same branch)
+    misfit = _misfit_at_start(glob, data, ug_best, best_costs)
+    if ug_best.any() and misfit is None:  # releases at the chosen start, to full precision (from the profile's,
+        # on the same branch); on a wheel the model does not fit the profile's (to 1e-6, or its best iterate) do
         pb = glob.at(ug_best)
         for d in data:
             d.release_rad_s = releases.fit(pb, d, d.release_rad_s)[0]
     for d in data:
         d.refined_release_rad_s = d.release_rad_s
     coarse_releases = [d.release_rad_s for d in data]
-    for j in range(glob.n):
+    for j in range(glob.n if misfit is None else 0):
         _refine_start(seen[j], lambda: ug_best, j, try_start)
     if np.any(ug_best != ug_coarse):  # where the least squares begin: the profile's releases (to 1e-6) suffice
         for d, w in zip(data, coarse_releases):
             d.refined_release_rad_s = d.release_rad_s
             d.release_rad_s = w
+    releases.misfit = misfit
     return table1, ug_coarse, ug_best, seen
+
+
+def _misfit_at_start(
+    glob: _Globals, data: list[_TrialData], ug: np.ndarray, costs: Sequence[float]
+) -> dict[str, Any] | None:
+    """The statement that the model does not fit these trials, from the start's release fits at the relative
+    globals ``ug`` (``costs``: per trial, the step-frequency residuals' sum of squares, Hz^2, at its best
+    release), or None: when the simulated step frequencies miss the measured by more than
+    `MISFIT_FREQUENCY_FRACTION` (RMS over all periods, relative to the measured frequencies' RMS; a step not
+    reached counts as missing its whole frequency). No simulation: the start has run them."""
+    f2 = np.array([float(np.sum(1.0 / d.periods_s**2)) for d in data])
+    c = np.array([float(x) if math.isfinite(x) else math.inf for x in costs])
+    pooled = math.sqrt(float(np.sum(c) / np.sum(f2)))
+    if not pooled > MISFIT_FREQUENCY_FRACTION:
+        return None
+    per_trial = {d.name: math.sqrt(float(ci / fi)) for d, ci, fi in zip(data, c, f2)}
+    named = {f: (n, unit) for n, (f, unit) in FIT_FIELDS.items()}  # the --fit names, as the estimates are named
+    at = {named[f][0]: float(v) for f, v in zip(glob.fields, glob.x0 + ug * glob.scale)}
+    where = ", ".join(f"{n} {v:.4g} {named[f][1]}" for (n, v), f in zip(at.items(), glob.fields))
+    finite = [v for v in per_trial.values() if math.isfinite(v)]
+    spread = f"{min(finite):.0%}-{max(finite):.0%}" if finite else "all"
+    stalls = [n for n, v in per_trial.items() if not math.isfinite(v) or v >= 1.0]
+    statement = (
+        f"the model does not fit these trials: at the start's best values ({where}) the simulated step "
+        f"frequencies miss the measured by {pooled:.0%} RMS (per trial {spread}"
+        + (f"; a walk stalls or never reaches the trials' pace: {', '.join(stalls)}" if stalls else "")
+        + f"; a fitting model misses by a few %, this check's limit is {MISFIT_FREQUENCY_FRACTION:.0%}), so every "
+        "estimate is effective only"
+    )
+    return {
+        "stage": "start",
+        "at": at,
+        "frequency_miss_rms": pooled if math.isfinite(pooled) else None,
+        "frequency_miss_per_trial": {n: (v if math.isfinite(v) else None) for n, v in per_trial.items()},
+        "limit": MISFIT_FREQUENCY_FRACTION,
+        "statement": statement,
+    }
+
+
+def _misfit_noted(estimates: list[ParamEstimate], misfit: dict[str, Any] | None) -> None:
+    """Every estimate effective only when the start stated that the model does not fit (`_misfit_at_start`), the
+    note saying so first."""
+    if misfit is None:
+        return
+    for e in estimates:
+        if e.identifiable:
+            e.identifiable, e.effective_only = False, True
+        e.note = "effective only: " + misfit["statement"] + (f"; {e.note}" if e.note else "")
 
 
 def _refine_start(
@@ -948,25 +1037,35 @@ class _Objective:
         hi[n_g : n_g + n_t] = np.minimum(hi[n_g : n_g + n_t], 1.25 * ws_start)
         return lo, hi
 
+    #: on a wheel the model does not fit (`_misfit_at_start`): the fraction of its cost a round must gain for the
+    #: next round to run (`NOT_CONVERGING_FRACTION`); None: every round runs
+    not_converging_fraction: float | None = None
+
     def solve(self, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, max_rounds: int = MAX_ROUNDS) -> Any:
         """Trust-region least squares from u, restarted from where it stopped while it stops on its budget
         (`MAX_NFEV` evaluations a round, at most ``max_rounds`` rounds). The scipy result of the last round
         with ``rounds`` and the total ``nfev_total``; ``status == 0`` means the budget ran out (not converged),
-        `GN_STOP_STATUS` that the Gauss-Newton step would gain less than `GN_STOP_COST` (converged)."""
+        `GN_STOP_STATUS` that the Gauss-Newton step would gain less than `GN_STOP_COST` (converged). With
+        ``not_converging_fraction`` set, a round that lowers the cost by less than that fraction of itself ends
+        them (``not_converging`` True, status 0: not converged)."""
         from scipy.optimize import OptimizeResult, least_squares
 
         total = 0
         seen: list[Any] = [None, math.inf, None, 0]  # the lowest-cost point evaluated: u, cost, residuals; count
+        round_start = [math.nan]  # the cost (|f|^2) at the round's first evaluation, its start
 
         def fun(x: np.ndarray) -> np.ndarray:
             f = self.fun(x)
             seen[3] += 1
             c = float(np.sum(f**2))
+            if math.isnan(round_start[0]):
+                round_start[0] = c
             if c < seen[1]:
                 seen[:3] = [np.array(x, dtype=float), c, f]
             return f
 
-        for k in range(max_rounds):  # noqa: B007
+        for k in range(max_rounds):
+            round_start[0] = math.nan
             # ftol 1e-6: a step that lowers the cost by less than 1e-6 of itself (about 0.002 in chi-square units
             # for the ~2000 residuals of a series, far below the 1 unit of a one-sigma change) ends the fit; the
             # finite-difference Jacobian of walks integrated at rtol 1e-7 cannot resolve 1e-10 (the bundled
@@ -987,9 +1086,12 @@ class _Objective:
                 if seen[0] is None:
                     raise  # not one point evaluated: nothing to return
                 # stopped on the simulation budget: the lowest point it evaluated, not converged (status 0)
+                capped = self.sim.budget is not None and self.sim.budget.stopped_by == "misfit cap"
                 r = OptimizeResult(
                     x=seen[0], fun=seen[2], cost=0.5 * seen[1], status=0, nfev=seen[3] - total, jac=None,
-                    message="stopped on the simulation budget (not converged)", budget_stopped=True,
+                    message="stopped on the search's cap on a wheel the model does not fit (not converged)"
+                    if capped else "stopped on the simulation budget (not converged)",
+                    budget_stopped=True,
                 )  # fmt: skip
                 total = seen[3]
                 break
@@ -1002,6 +1104,14 @@ class _Objective:
                     "(within about 0.1 standard error of the minimum)"
                 )
             if r.status != 0:
+                break
+            gained = 1.0 - 2.0 * float(r.cost) / round_start[0] if round_start[0] > 0 else 0.0
+            if self.not_converging_fraction is not None and not gained >= self.not_converging_fraction:
+                r.not_converging = True
+                r.message = (
+                    f"not converging: round {k + 1} of {MAX_NFEV} evaluations lowered the cost by {gained:.2%} of "
+                    f"itself (less than {self.not_converging_fraction:.0%}), on a wheel the model does not fit"
+                )
                 break
         r.rounds, r.nfev_total = k + 1, total
         return r
@@ -1381,6 +1491,7 @@ def calibrate(
         raise CalibrationBudgetSpent(
             f"the simulation budget ran out in {budget.stopped_in} before a first solution: {budget.used} "
             f"simulations of at most {budget.max_simulations} (raise --max-simulations)"
+            + (f"; {budget.misfit}" if budget.misfit else "")
         ) from None
 
 
@@ -1405,6 +1516,7 @@ def _calibrate(
 ) -> Any:
     """`calibrate`'s stages; with ``values_only`` (a held parameter's whole recalibration, `held_response`) only
     as far as the kept solution's fitted globals (returned as an array; `BudgetSpent` propagates)."""
+    from rimless.progress import stage
     from rimless.sim.model.params import WheelParams
 
     sim = _Sim(model, rtol, record_dt_s, budget=budget)
@@ -1419,9 +1531,16 @@ def _calibrate(
 
     glob = _Globals.of(params or WheelParams(), fit)
     budget.enter("start (releases and profile)")
-    table1_releases, ug_start, ug_refined, profile = _start(_ReleaseFit(sim, tick), glob, data)
+    starting = _ReleaseFit(sim, tick)
+    table1_releases, ug_start, ug_refined, profile = _start(starting, glob, data)
+    misfit = starting.misfit
 
     obj = _Objective(sim, glob, data, tick)
+    if misfit is not None and not values_only:  # every estimate effective only: a short search settles what a long
+        # one would not change (not in a held parameter's recalibration: the calibration it serves fits)
+        budget.cap_search(MISFIT_SEARCH_SIMULATIONS, misfit["statement"])
+        obj.not_converging_fraction = NOT_CONVERGING_FRACTION
+        stage("the model does not fit these trials")
     if prior is not None:
         prior.attach(obj, glob)  # leg-test priors: penalty rows on the residuals and the Jacobian
     ws_t1 = np.array([table1_releases[d.name] for d in data])
@@ -1494,6 +1613,10 @@ def _calibrate(
         "minima": minima,
         #: one global: its profile on the periods (`PROFILE_FACTORS`) had one valley, so no further start was run
         "profile_one_valley": bool(glob.n == 1 and _one_valley(profile[0])) if multi_start is True else None,
+        #: the start's statement that the model does not fit these trials (`_misfit_at_start`), or None
+        "misfit": misfit,
+        #: the kept least squares stopped as not converging (a round gained too little, on such a wheel)
+        "not_converging": bool(best.get("not_converging", False)),
     }
     # central differences for the globals: the curvature of the cost must not fake information
     budget.enter("closing: Jacobian")
@@ -1580,6 +1703,7 @@ def _calibrate(
     _judge(estimates, fits, choice, fvd)
     if prior is None and choice is None and budget.spent:
         _undecided(estimates, fit, budget)
+    _misfit_noted(estimates, misfit)
     probes = [n for n in held_exact if n in EXTRA_PARAMETERS and n not in fit and "c" in fit and prior is None]
     probe = {}
     for n in probes:
@@ -1605,6 +1729,7 @@ def _calibrate(
             used.update({n: v for n, v in row["without"].items() if n in used})
     cal_params = glob.params(np.array([used[n] for n in fit]))
     budget.enter("done")
+    budget.own = sim.calls
     result = CalibrationResult(
         estimates,
         corr,
@@ -1705,13 +1830,21 @@ def _minima_within(
     return out
 
 
+def _ran_out(budget: SimulationBudget) -> str:
+    """What stopped the search, for the estimates' notes: the budget, or its cap on a wheel the model does not fit
+    (`SimulationBudget.cap_search`)."""
+    if budget.stopped_by == "misfit cap":
+        return "the search reached its cap (the model does not fit these trials)"
+    return "the simulation budget ran out"
+
+
 def _not_carried(estimates: list[ParamEstimate], names: Sequence[str], budget: SimulationBudget) -> None:
     """The held parameters ``names`` whose refits the budget stopped: not carried, so no estimate built on the
     data alone is identifiable (effective only: the interval lacks their part), the note names them."""
     if not names:
         return
     budget.skip("held parameters' refits", "not carried: " + ", ".join(names))
-    why = "effective only: the simulation budget ran out before the held " + ", ".join(names) + " were carried"
+    why = f"effective only: {_ran_out(budget)} before the held " + ", ".join(names) + " were carried"
     for e in estimates:
         if e.identifiable:
             e.identifiable, e.effective_only = False, True
@@ -1725,7 +1858,7 @@ def _undecided(estimates: list[ParamEstimate], fit: Sequence[str], budget: Simul
         if e.name in EXTRA_PARAMETERS and len(fit) > 1:
             e.effective_only = e.identifiable or e.effective_only
             e.identifiable, e.undecided = False, True
-            why = f"undecided: the simulation budget ran out before the model choice of {e.name}"
+            why = f"undecided: {_ran_out(budget)} before the model choice of {e.name}"
             e.note = why + (f"; {e.note}" if e.note else "")
 
 

@@ -9,6 +9,14 @@ search stages (the least squares from each start, the first-angle offsets, the m
 the held parameters' refits, the model choice, the held-exact probe) stop or are skipped when the rest is spent.
 What was stopped is stated (`SimulationBudget.as_dict`, JSON ``budget``) and turned into the affected estimates'
 status by the caller: never a silent truncation.
+
+On a wheel the model cannot fit (stated by the calibration's start, `calibrate._misfit_at_start`), the search is
+capped further (`SimulationBudget.cap_search`): its estimates are effective only whatever it finds, so a few
+hundred simulations settle what hours would not change; the cap is stated beside the budget (``misfit``,
+``search_cap``, ``stopped_by``).
+
+``used`` counts every simulation of the command (all slope passes, the held parameters' whole recalibrations);
+the calibration result's ``simulations`` (JSON) counts the kept calibration's own (``own``), as before.
 """
 
 from __future__ import annotations
@@ -60,6 +68,14 @@ class SimulationBudget:
     on_stage: Callable[[str], None] | None = None
     #: put before the stages' names (a held parameter's whole recalibration names its stages as its)
     prefix: str = ""
+    #: the statement that the model does not fit these trials (None: not stated), and the count at which the
+    #: search stops for it (`cap_search`; the closing stages keep the reserve above it)
+    misfit: str | None = None
+    search_cap: int | None = None
+    #: what refused the first simulation: "budget" or "misfit cap" (None while neither did)
+    stopped_by: str | None = None
+    #: the kept calibration's own simulations (the result's ``simulations``), when the caller set it
+    own: int | None = None
     _closing: int = 0
 
     @property
@@ -67,9 +83,13 @@ class SimulationBudget:
         return self.stopped_in is not None
 
     def limit(self) -> int | None:
-        if self.max_simulations is None:
-            return None
-        return self.max_simulations if self._closing else self.max_simulations - self.reserve
+        whole = self.max_simulations
+        if self._closing:
+            return whole
+        search = None if whole is None else whole - self.reserve
+        if self.search_cap is not None and (search is None or self.search_cap < search):
+            return self.search_cap
+        return search
 
     def spend(self) -> None:
         """Count one simulation, or raise `BudgetSpent` (recording the stage) when the limit is reached."""
@@ -77,8 +97,17 @@ class SimulationBudget:
         if lim is not None and self.used >= lim:
             if self.stopped_in is None:
                 self.stopped_in = self.stage
+                capped = not self._closing and self.search_cap is not None and lim == self.search_cap
+                self.stopped_by = "misfit cap" if capped else "budget"
             raise BudgetSpent(self.stage)
         self.used += 1
+
+    def cap_search(self, simulations: int, misfit: str) -> None:
+        """The model does not fit these trials (``misfit``, the statement): the search may run ``simulations``
+        more (never beyond the budget's own limit); the closing stages keep their reserve."""
+        self.misfit = misfit
+        if self.search_cap is None:
+            self.search_cap = self.used + simulations
 
     def enter(self, name: str) -> None:
         """The calibration reached stage ``name`` (progress shows it)."""
@@ -90,6 +119,7 @@ class SimulationBudget:
         """Record that ``what`` was stopped or not run for the budget, and what that means for the result."""
         if self.stopped_in is None:
             self.stopped_in = self.stage
+            self.stopped_by = "budget"
         self.skipped.append({"stage": what, "consequence": consequence})
 
     @contextlib.contextmanager
@@ -111,22 +141,37 @@ class SimulationBudget:
             self._closing = closing
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON ``budget``: ``max_simulations`` (null: no bound), ``used``, ``reserve`` (kept for the closing
-        stages), ``stopped_in`` (null when nothing was stopped), ``skipped`` and a ``statement``."""
+        """JSON ``budget``: ``max_simulations`` (null: no bound), ``used`` (every simulation of the command: the
+        passes', the recalibrations'), ``reserve`` (kept for the closing stages), ``stopped_in`` (null when nothing
+        was stopped), ``stopped_by`` (``"budget"``, ``"misfit cap"`` or null), ``skipped``, ``misfit`` (the
+        statement that the model does not fit these trials, or null) with ``search_cap`` (the count the search
+        stopped at for it, or null), and a ``statement``."""
         return {
             "max_simulations": self.max_simulations,
             "used": self.used,
             "reserve": self.reserve,
             "stopped_in": self.stopped_in,
+            "stopped_by": self.stopped_by,
             "skipped": list(self.skipped),
+            "misfit": self.misfit,
+            "search_cap": self.search_cap,
             "statement": self.statement(),
         }
 
     def statement(self) -> str:
         bound = f"of at most {self.max_simulations}" if self.max_simulations is not None else "(no bound)"
+        own = (
+            f" (JSON simulations, {self.own}, counts the kept calibration's own)"
+            if self.own is not None and self.own != self.used
+            else ""
+        )
+        misfit = (
+            f"{self.misfit}; the search was capped at {self.search_cap} simulations for it: " if self.misfit else ""
+        )
         if not self.spent:
-            return f"{self.used} simulations {bound}; every stage ran"
+            return f"{misfit}{self.used} simulations {bound} in all{own}; every stage ran"
         parts = "; ".join(f"{s['stage']}: {s['consequence']}" for s in self.skipped)
-        return f"the simulation budget ran out: {self.used} simulations {bound}, stopped in {self.stopped_in}" + (
+        ran_out = "the search reached its cap" if self.stopped_by == "misfit cap" else "the simulation budget ran out"
+        return f"{misfit}{ran_out}: {self.used} simulations {bound} in all{own}, stopped in {self.stopped_in}" + (
             f"; {parts}" if parts else ""
         )
