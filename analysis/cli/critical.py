@@ -250,7 +250,8 @@ def _shift_text(d: dict[str, Any], parameters: list[dict[str, Any]] | None = Non
 def separation_is_new(sep: dict[str, Any] | None, notes: Iterable[str]) -> bool:
     """Whether the c-against-a-constant-loss note (``loss_separation``) is not already inside a parameter's note
     (the calibration puts it into c's note when c cannot be told from friction): printed once."""
-    return bool(sep and sep.get("note")) and not any(sep["note"] in (n or "") for n in notes)
+    note = str((sep or {}).get("note") or "")
+    return bool(note) and not any(note in (n or "") for n in notes)
 
 
 def held_model_text(d: dict[str, Any], parameters: list[dict[str, Any]] | None = None) -> str:
