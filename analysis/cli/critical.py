@@ -224,13 +224,27 @@ def parameter_lines(parameters: list[dict[str, Any]] | None) -> list[str]:
     return out
 
 
-def _shift_text(d: dict[str, Any]) -> str:
-    """The interval's re-centring by the held parameters' mean shift (a parameter at its bound, F_c = 0 +- 0.2 N,
-    carried as its normal truncated there), when there is one."""
+def _shift_text(d: dict[str, Any], parameters: list[dict[str, Any]] | None = None) -> str:
+    """The interval's re-centring by the held parameters' mean shift (a parameter carried as its normal truncated
+    at its bound 0: F_c = 0 +- 0.2 N, c = 8 +- 4 N s/m), when there is one: both numbers, why they differ, and
+    each parameter's part (JSON ``critical_slope_with_held_deg``, ``held_shift_deg``, the rows' ``shift_deg``)."""
     shift = d.get("held_shift_deg") or 0.0
     if abs(shift) < 5e-4:
         return ""
-    return f"; centred on {d['critical_slope_with_held_deg']:.3f} deg (held parameters at a bound: {shift:+.3f} deg)"
+    stated = {p["symbol"]: p for p in parameters or []}
+
+    def part(r: dict[str, Any]) -> str:
+        p = stated.get(r["symbol"])
+        held = f"{r['symbol']} = {p['value']:.3g} ± {p['sd']:.3g} {p['unit']}" if p else str(r["symbol"])
+        return f"{held} {r['shift_deg']:+.3f} deg"
+
+    parts = [part(r) for r in d.get("contributions", []) if abs(r.get("shift_deg") or 0.0) >= 5e-4]
+    return (
+        f"; the interval is centred on {d['critical_slope_with_held_deg']:.3f} deg, not on "
+        f"{d['critical_slope_deg']:.3f}: held parameters are carried as their normals truncated at their bound 0 "
+        f"(a negative value is no wheel), whose means lie above the held values and shift the slope by "
+        f"{shift:+.3f} deg" + (f" ({', '.join(parts)})" if parts else "")
+    )
 
 
 def _cut_text(d: dict[str, Any]) -> str:
@@ -240,8 +254,34 @@ def _cut_text(d: dict[str, Any]) -> str:
     return f"; cut at 0 deg (the linearised interval reached {d['ci_linear_deg'][0]:.3f} deg)"
 
 
-def held_lines(out: dict[str, Any]) -> list[str]:
-    """The parameters and the critical slopes' intervals with the held parameters' uncertainty."""
+def separation_is_new(sep: dict[str, Any] | None, notes: Iterable[str]) -> bool:
+    """Whether the c-against-a-constant-loss note (``loss_separation``) is not already inside a parameter's note
+    (the calibration puts it into c's note when c cannot be told from friction): printed once."""
+    note = str((sep or {}).get("note") or "")
+    return bool(note) and not any(note in (n or "") for n in notes)
+
+
+def held_model_text(d: dict[str, Any], parameters: list[dict[str, Any]] | None = None) -> str:
+    """A model's critical slope at the held values with its interval from the held parameters (one entry of
+    JSON ``parameter_uncertainty.models``), and why that interval's centre differs (`_shift_text`)."""
+    if d.get("critical_slope_deg") is None:
+        return str(d.get("note", "no critical slope"))
+    lo, hi = d["ci_deg"]
+    big = sorted((r for r in d["contributions"] if r["contribution_deg"]), key=lambda r: -r["contribution_deg"])[:3]
+    return (
+        f"{d['critical_slope_deg']:.3f} deg at the held values, 95 % interval {lo:.3f}-{hi:.3f} deg from the held "
+        "parameters (largest: "
+        + ", ".join(f"{r['symbol']} ± {r['contribution_deg']:.3f}" for r in big)
+        + ")"
+        + _shift_text(d, parameters)
+        + _cut_text(d)
+        + ("" if d["complete"] else "; NOT every parameter could be propagated")
+    )
+
+
+def held_lines(out: dict[str, Any], *, models: bool = True) -> list[str]:
+    """The parameters and the critical slopes' intervals with the held parameters' uncertainty (``models``
+    False: without the models' lines, given by the caller with `held_model_text`)."""
     lines = parameter_lines(out.get("parameters"))
     inertia = out.get("inertia_from_trials")
     if inertia and not (inertia.get("estimated") and inertia.get("rigid_map_fits")):  # else in I_c's basis
@@ -256,25 +296,14 @@ def held_lines(out: dict[str, Any]) -> list[str]:
         lines.append(
             f"critical slope from the trials with the held parameters' uncertainty: {tr['critical_slope_deg']:.3f} "
             f"deg, 95 % interval {lo:.3f}-{hi:.3f} deg (parameters: ± {tr['se_parameters_deg']:.3f} deg 1 sigma)"
-            + _shift_text(tr)
+            + _shift_text(tr, out.get("parameters"))
             + _cut_text(tr)
             + ("" if tr["complete"] else "; NOT every parameter could be propagated")
         )
-    for m, d in held.get("models", {}).items():
-        if d.get("critical_slope_deg") is None:
-            lines.append(f"model {m.upper()}: {d.get('note', 'no critical slope')}")
-            continue
-        lo, hi = d["ci_deg"]
-        big = sorted((r for r in d["contributions"] if r["contribution_deg"]), key=lambda r: -r["contribution_deg"])[:3]
-        lines.append(
-            f"model {m.upper()} critical slope {d['critical_slope_deg']:.3f} deg, 95 % interval {lo:.3f}-{hi:.3f} "
-            f"deg from the held parameters (largest: "
-            + ", ".join(f"{r['symbol']} ± {r['contribution_deg']:.3f}" for r in big)
-            + ")"
-            + _shift_text(d)
-            + _cut_text(d)
-            + ("" if d["complete"] else "; NOT every parameter could be propagated")
-        )
+    if models:
+        for m, d in held.get("models", {}).items():
+            sep = " critical slope " if d.get("critical_slope_deg") is not None else ": "
+            lines.append(f"model {m.upper()}{sep}{held_model_text(d, out.get('parameters'))}")
     lines.append(f"propagation: {held['method']}")
     return lines
 
@@ -432,7 +461,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
         if p["note"]:
             con.print(f"  {p['name']}: {p['note']}", markup=False, highlight=False)
     sep = out.get("loss_separation")
-    if sep and sep.get("note") and sep["note"] not in {p["note"] for p in out["params"]}:
+    if sep and separation_is_new(sep, (p["note"] for p in out["params"])):
         con.print(
             f"  c against a constant loss per step (guide friction): {sep['note']}", markup=False, highlight=False
         )
@@ -622,9 +651,12 @@ def critical_lines(res: Any) -> str:
         )
     else:
         lines.append(f"critical slope from the trials: none ({cr.why})")
+    summary = cr.held_summary()
+    carried = (summary.get("parameter_uncertainty") or {}).get("models", {})
     for m, v in cr.model.get("critical_slope_deg", {}).items():
         label = m.upper().replace("_CALIBRATED", " with c calibrated on these trials (fitted, not a prediction)")
-        lines.append(f"model critical slope, {label}: {_fmt(v, '.3f')} deg")
+        text = held_model_text(carried[m], summary.get("parameters")) if m in carried else f"{_fmt(v, '.3f')} deg"
+        lines.append(f"model critical slope, {label}: {text}")  # once, with its interval and centre
     if cal is not None:
         for p in cal.params:
             lines.append(
@@ -632,9 +664,14 @@ def critical_lines(res: Any) -> str:
                 + ("" if p.identifiable else f" NOT identifiable: {p.note}")
             )
         sep = getattr(cal, "loss_separation", None)
-        if sep and sep.get("note") and sep["note"] not in {p.note for p in cal.params}:
+        if sep and separation_is_new(sep, (p.note for p in cal.params)):
             lines.append(f"c against a constant loss per step (guide friction): {sep['note']}")
-    lines += held_lines(cr.held_summary())
+    lines += held_lines(summary, models=False)
+    lines += [
+        f"model critical slope, {m.upper()}: {held_model_text(d)}"
+        for m, d in carried.items()
+        if m not in cr.model.get("critical_slope_deg", {})
+    ]
     return "\n".join(lines)
 
 

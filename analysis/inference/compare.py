@@ -262,6 +262,32 @@ def fit_release_speed(sim: Simulator, slope_deg: float, first_period_s: float) -
             return math.inf  # too slow: never gets there
         return math.nan
 
+    def solve(i: int, a: float, b: float, vals: np.ndarray) -> tuple[float | None, str | None]:
+        """The root in [grid[i], grid[i + 1]]; from a stall at grid[i], first the stall's edge by bisection:
+        the walk's second period is longest just above it (finite: the first step then creeps over the top),
+        so a measured period longer than that one is refused with it, and the root is searched from the edge
+        (where the period is continuous) rather than across the jump to the stall."""
+        if not math.isinf(a):
+            return _root_in(period2, grid, i, b, first_period_s, vals)
+        w_stall, w_walk, t_walk = float(grid[i]), float(grid[i + 1]), b + first_period_s
+        while w_walk - w_stall > 1e-9:  # rad/s: the period there has converged to 1e-4 s
+            mid = 0.5 * (w_stall + w_walk)
+            t = period2(mid)
+            if math.isnan(t):  # another failure between: keep the grid's bracket
+                return _root_in(period2, grid, i, b, first_period_s, vals)
+            if math.isinf(t):
+                w_stall = mid
+            else:
+                w_walk, t_walk = mid, t
+        if t_walk < first_period_s:
+            return None, (
+                f"the measured first period {first_period_s:.3f} s is longer than any the model gives after a "
+                f"release one step earlier (at most {t_walk:.3f} s, just above the stall at a release of "
+                f"{w_walk:.4f} rad/s)"
+            )
+        edge = np.array([w_walk, float(grid[i + 1])])
+        return _root_in(period2, edge, 0, b, first_period_s, np.array([t_walk - first_period_s, b]))
+
     lo, hi, n = RELEASE_GRID_RAD_S
     grid = np.linspace(lo, hi, int(n))
     fast = _map_periods(sim, slope_deg, grid)
@@ -270,11 +296,11 @@ def fit_release_speed(sim: Simulator, slope_deg: float, first_period_s: float) -
         if i is not None:
             a, b = period2(float(grid[i])) - first_period_s, period2(float(grid[i + 1])) - first_period_s
             if a > 0 and b <= 0:  # the walk agrees: the same bracket as a scan on walks finds first
-                return _root_in(period2, grid, i, b, first_period_s, fast - first_period_s)
+                return solve(i, a, b, fast - first_period_s)
     vals = np.array([period2(w) for w in grid]) - first_period_s
     i = _first_bracket(vals)
     if i is not None:
-        return _root_in(period2, grid, i, vals[i + 1], first_period_s, vals)
+        return solve(i, vals[i], vals[i + 1], vals)
     fin = vals[np.isfinite(vals)]
     if fin.size == 0:
         return None, "the simulated wheel does not complete two steps from any release speed in the scanned range"

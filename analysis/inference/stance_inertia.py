@@ -27,8 +27,12 @@ truth's L0: 119), the joint fit's in 120 of 120 (rms z 0.3-0.5: wide, mostly fro
 with them a third, rms z 0.74 on 80); guide friction made no difference. That ratio at the held L0
 (``ratio_at_held_l0``, JSON ``inertia_ratio_at_held_leg_length``) is still the one I_c is given from: the
 verdicts' pendulum is made at the held L0. A compliant wheel's stance is not this pendulum: its r is then the
-effective one (the reduced chi^2 at the held L0 says how well it fits). The masses only set
-I_c = r M L0^2 - 8 m L0^2.
+effective one (the reduced chi^2 at the held L0 says how well it fits), and so is the joint fit's L0 (on
+the bundled compliant ER series the periods act as a rigid pendulum of L0 = 129-141 mm, reduced chi^2 0.4,
+against legs of 237 mm): the verdict (JSON ``rigid_map_verdict``) is "fits" only when the map at the held L0
+passes its test with r inside its range and I_c > 0, else "does not fit: effective only" (a fit exists, with
+L0 fitted) or "does not fit: not estimated" (none; r at its bound and a negative I_c are no values), with the
+reason. The masses only set I_c = r M L0^2 - 8 m L0^2.
 
 `trial_inertia_input` uses it: a wheel input whose inertia is not stated (source ``table1``) takes the trials'
 I_c (source ``trials``, its sd from the fit at the held L0); a stated one is compared with it, and a stated L0
@@ -64,6 +68,10 @@ ASSUMED_JOINT = (
     "rigid stance pendulum and impact; r, L0, a constant loss per step and each trial's slope error (within "
     "its sd) fitted together from the periods, g held: r's se includes L0's, the loss's and the slopes'"
 )
+VERDICT_FITS = "fits"
+VERDICT_EFFECTIVE = "does not fit: effective only"
+VERDICT_NO_FIT = "does not fit: not estimated"
+VERDICT_NOT_TRIED = "not estimated"
 NOT_JOINT = "the joint fit of r and L0 not made: only the ratio at the held L0 was asked for"
 ASSUMED_HELD_L0 = (
     "rigid stance pendulum and impact at the held L0 and g (a constant loss per step fitted beside r; L0's "
@@ -234,7 +242,9 @@ class InertiaEstimate:
     inertia_sd_kg_m2: float = math.nan
     reduced_chi2: float = math.nan
     at_bound: bool = False
-    adequate: bool = True  # the rigid return map fits (reduced chi^2 <= CHI2_ADEQUATE)
+    #: the rigid return map fits at the held L0 (reduced chi^2 <= CHI2_ADEQUATE and r inside `R_BOUNDS` with
+    #: I_c > 0); None: not tested (too few pairs)
+    adequate: bool | None = None
     loss_per_step: float = math.nan  # the constant loss per step fitted beside r, rad^2/s^2 (in e)
     comparison: dict[str, Any] = field(default_factory=dict)
     #: the ratio the pendulum needs at the held L0 (what I_c is given from; equal to ``ratio`` when L0 was not fitted)
@@ -246,8 +256,12 @@ class InertiaEstimate:
     leg_length_m: float = math.nan
     leg_length_sd_m: float = math.nan
     assumption: str = ""
-    #: the rigid map fits with L0 fitted beside r (reduced chi^2 <= CHI2_ADEQUATE)
-    fits_with_fitted_l0: bool = True
+    #: the rigid map fits with L0 fitted beside r (reduced chi^2 <= CHI2_ADEQUATE, inside the range searched);
+    #: None: not tested
+    fits_with_fitted_l0: bool | None = None
+    #: `VERDICT_FITS`, `VERDICT_EFFECTIVE`, `VERDICT_NO_FIT` or `VERDICT_NOT_TRIED`, and why
+    verdict: str = ""
+    verdict_reason: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         def num(x: float) -> float | None:
@@ -264,6 +278,10 @@ class InertiaEstimate:
             "reduced_chi2": num(self.reduced_chi2),
             "rigid_map_fits": self.adequate,
             "rigid_map_fits_with_fitted_leg_length": self.fits_with_fitted_l0,
+            "rigid_map_verdict": self.verdict,
+            "rigid_map_verdict_reason": self.verdict_reason,
+            # r and L0 describe the periods' pendulum, not the wheel's (the map does not fit at the held L0)
+            "effective_only": self.verdict == VERDICT_EFFECTIVE,
             "reduced_chi2_at_held_leg_length": num(self.reduced_chi2_at_held_l0),
             "loss_per_step_rad2_s2": num(self.loss_per_step),
             "leg_length_m": num(self.leg_length_m),
@@ -374,52 +392,51 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any, *, fit_leg_length
     and g of ``params`` (`WheelParams`). ``fit_leg_length`` False: the ratio at the held L0 only (what I_c is
     given from: ``ok``, ``inertia_kg_m2`` and ``ratio_at_held_l0`` are the same as with it), without the joint
     fit of r and L0 (``leg_length_m`` NaN, ``ratio`` the one at the held L0; for refits at perturbed held
-    parameters)."""
+    parameters).
+
+    The verdict (``verdict``, ``verdict_reason``): `VERDICT_FITS` only when the rigid map at the held L0 passes
+    its goodness-of-fit test (reduced chi^2 <= `CHI2_ADEQUATE`) with r inside `R_BOUNDS` and I_c > 0;
+    `VERDICT_EFFECTIVE` when a fit exists but not that one (r, and L0 when fitted, are then the periods'
+    effective pendulum, not the wheel's); `VERDICT_NO_FIT` when no fit does (r at the end of its range or
+    I_c <= 0, and no joint fit that fits: nothing is reported as a value); `VERDICT_NOT_TRIED` below `MIN_PAIRS`."""
     alpha, L, g = float(params.alpha), float(params.leg_length_m), float(params.gravity_m_s2)
     pairs = _pairs(trials, alpha)
     n = int(pairs.t0.size)
     if n < MIN_PAIRS:
+        why = f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS})"
         return InertiaEstimate(
-            False, f"{n} pair(s) of consecutive step periods (need {MIN_PAIRS}): the inertia is not estimated", n
+            False, why + ": the inertia is not estimated", n, verdict=VERDICT_NOT_TRIED, verdict_reason=why
         )
     x, se_log, chi2, at_bound = _fit_at_held_l0(pairs, alpha, L, g)
     r = math.exp(x)
     est = InertiaEstimate(True, "", n, r, r * se_log, reduced_chi2=chi2, at_bound=at_bound)
     est.ratio_at_held_l0, est.ratio_at_held_l0_se, est.reduced_chi2_at_held_l0 = r, r * se_log, chi2
-    m8 = 8.0 * params.leg_mass_kg
-    est.inertia_kg_m2 = inertia_for_ratio(params, r)
-    est.inertia_sd_kg_m2 = est.ratio_at_held_l0_se * (params.hub_mass_kg + m8) * L**2
     est.held_l0_m = L
-    if at_bound or not math.isfinite(se_log) or est.inertia_kg_m2 <= 0:
+    m8 = 8.0 * params.leg_mass_kg
+    i_c = inertia_for_ratio(params, r)
+    unusable = [  # the held-L0 fit gives no value: its r is no estimate, a negative I_c no inertia
+        *([f"r = {r:.3g} at the end of the range searched ({R_BOUNDS[0]:g}-{R_BOUNDS[1]:g})"] if at_bound else []),
+        *([] if math.isfinite(se_log) else ["r's standard error is not finite"]),
+        *([f"it gives I_c = {i_c:.3g} kg m^2 <= 0 at these masses: no inertia"] if i_c <= 0 else []),
+    ]
+    misfit = [] if chi2 <= CHI2_ADEQUATE else [f"reduced chi² {chi2:.2f} above {CHI2_ADEQUATE:g}"]
+    held_why = "; ".join(unusable + misfit)
+    est.adequate = not held_why
+    est.loss_per_step = _loss(x, pairs, alpha, L, g)
+    if unusable:
         est.ok = False
-        est.note = (
-            f"the step periods give no usable inertia ratio (r = {r:.3g}"
-            + (", at the end of the range searched" if at_bound else "")
-            + (", I_c <= 0 at these masses" if est.inertia_kg_m2 <= 0 else "")
-            + ")"
-        )
-        est.loss_per_step = _loss(x, pairs, alpha, L, g)
-        return est
-    est.adequate = chi2 <= CHI2_ADEQUATE
+        est.ratio = est.ratio_se = est.ratio_at_held_l0 = est.ratio_at_held_l0_se = math.nan
+    else:
+        est.inertia_kg_m2 = i_c
+        est.inertia_sd_kg_m2 = est.ratio_at_held_l0_se * (params.hub_mass_kg + m8) * L**2
     joint = (
         _fit_joint(pairs, alpha, L, g, x)
         if fit_leg_length
         else _Joint(np.full(2, math.nan), np.full((2, 2), math.nan), math.nan, False, NOT_JOINT)
     )
-    effective = (
-        ""
-        if est.adequate
-        else f"; EFFECTIVE ONLY: the rigid return map at the held L0 does not fit these periods (reduced chi² "
-        f"{chi2:.2f}, above {CHI2_ADEQUATE:g}"
-        + (
-            f"; it fits with L0 = {1000 * math.exp(float(joint.x[1])):.1f} mm: the held L0 is not the wheel's, or its "
-            "legs give (a compliant wheel's stance is a shorter pendulum), and r is then effective too)"
-            if joint.ok and joint.chi2 <= CHI2_ADEQUATE
-            else "; a compliant wheel?)"
-        )
-    )
+    est.fits_with_fitted_l0 = bool(joint.chi2 <= CHI2_ADEQUATE) if joint.ok else est.adequate
+    held_l0 = f"the rigid return map at the held L0 {1000 * L:.1f} mm"
     if joint.ok:
-        est.fits_with_fitted_l0 = joint.chi2 <= CHI2_ADEQUATE
         est.ratio = math.exp(float(joint.x[0]))
         est.ratio_se = est.ratio * math.sqrt(float(joint.cov[0, 0]))
         est.leg_length_m = math.exp(float(joint.x[1]))
@@ -427,26 +444,63 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any, *, fit_leg_length
         est.reduced_chi2 = joint.chi2
         est.assumption = ASSUMED_JOINT
         est.loss_per_step = _loss(float(joint.x[0]), pairs, alpha, est.leg_length_m, g)
-        z_l = abs(est.leg_length_m - L) / est.leg_length_sd_m if est.leg_length_sd_m > 0 else math.inf
-        est.note = (
+        joint_text = (
             f"inertia ratio I_hub/(M L0^2) = {est.ratio:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive "
             f"step periods (L0 = {1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm and a "
             f"constant loss per step fitted beside it; reduced chi² {joint.chi2:.2f})"
         )
-        if z_l > Z_DISAGREE:
-            est.note += (
-                f"; the held L0 {1000 * L:.1f} mm is {z_l:.1f} sd from the periods': at it the pendulum needs "
-                f"r = {r:.3f} +- {est.ratio_at_held_l0_se:.3f} (an effective ratio: the one I_c is given from)"
-            )
-        est.note += effective
     else:
-        est.fits_with_fitted_l0 = est.adequate
         est.assumption = ASSUMED_HELD_L0
-        est.loss_per_step = _loss(x, pairs, alpha, L, g)
-        est.note = (
-            f"inertia ratio I_hub/(M L0^2) = {r:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive step "
-            f"periods at the held L0 {1000 * L:.1f} mm (reduced chi² {chi2:.2f}; {joint.why})" + effective
+        joint_text = joint.why
+    at_held = f"at it the pendulum needs r = {r:.3f} +- {est.ratio_at_held_l0_se:.3f}"
+    if est.adequate:
+        est.verdict = VERDICT_FITS
+        est.verdict_reason = (
+            f"{held_l0} fits these periods (reduced chi² {chi2:.2f} <= {CHI2_ADEQUATE:g}, r inside the range "
+            "searched, I_c > 0)"
         )
+        if joint.ok:
+            z_l = abs(est.leg_length_m - L) / est.leg_length_sd_m if est.leg_length_sd_m > 0 else math.inf
+            est.note = joint_text
+            if z_l > Z_DISAGREE:
+                est.note += (
+                    f"; the held L0 {1000 * L:.1f} mm is {z_l:.1f} sd from the periods': {at_held} (an effective "
+                    "ratio: the one I_c is given from)"
+                )
+        else:
+            est.note = (
+                f"inertia ratio I_hub/(M L0^2) = {r:.3f} +- {est.ratio_se:.3f} from {n} pairs of consecutive step "
+                f"periods at the held L0 {1000 * L:.1f} mm (reduced chi² {chi2:.2f}; {joint.why})"
+            )
+        return est
+    if joint.ok and est.fits_with_fitted_l0:
+        est.verdict = VERDICT_EFFECTIVE
+        est.verdict_reason = (
+            f"{held_l0} does not fit ({held_why}); with L0 fitted beside r it fits (reduced chi² {joint.chi2:.2f}) "
+            f"at L0 = {1000 * est.leg_length_m:.1f} mm, r = {est.ratio:.3f}: an effective pendulum, not a "
+            "measurement of the wheel's legs or inertia (a compliant wheel's stance is a shorter pendulum; or the "
+            "held L0 is not the wheel's)"
+        )
+    elif not unusable:
+        est.verdict = VERDICT_EFFECTIVE
+        est.verdict_reason = f"{held_l0} does not fit ({held_why}; with L0 fitted: {joint_text}; a compliant wheel?)"
+    else:
+        est.verdict = VERDICT_NO_FIT
+        est.verdict_reason = f"{held_l0} gives no value ({held_why}) and no fit with L0 fitted ({joint_text})"
+        est.ratio = est.ratio_se = est.leg_length_m = est.leg_length_sd_m = math.nan
+        est.note = f"the step periods give no usable inertia ratio: {est.verdict_reason}"
+        return est
+    est.note = (
+        f"EFFECTIVE ONLY: {est.verdict_reason}; "
+        + (
+            f"at the held L0 the pendulum needs r = {r:.3f} +- {est.ratio_at_held_l0_se:.3f} (the ratio I_c is given from; "
+            if est.ok
+            else "no inertia at the held L0 ("
+        )
+        + f"{n} pairs of consecutive step periods)"
+    )
+    if not joint.ok:
+        est.ratio, est.ratio_se = r, r * se_log
     return est
 
 
@@ -474,10 +528,15 @@ def _leg_length_warning(win: Any, est: InertiaEstimate) -> list[str]:
     est.comparison["leg_length"] = {"stated_m": entry.value, "stated_sd_m": entry.sd, "source": entry.source, "z": z}
     if z <= Z_DISAGREE:
         return []
+    periods = (
+        "effective pendulum length (not a measurement of the legs: the map does not fit at the stated L0)"
+        if est.verdict == VERDICT_EFFECTIVE
+        else "L0"
+    )
     return [
         f"the wheel's L0 = {1000 * entry.value:.1f} +- {1000 * entry.sd:.1f} mm ({entry.source}) disagrees with the "
-        f"{1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm the step periods determine ({z:.1f} "
-        "combined standard errors): the stated value is used"
+        f"{1000 * est.leg_length_m:.1f} +- {1000 * est.leg_length_sd_m:.1f} mm {periods} the step periods give "
+        f"({z:.1f} combined standard errors): the stated value is used"
     ]
 
 
