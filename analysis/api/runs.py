@@ -146,6 +146,10 @@ class CalibrationRun:
                 "trials_method": crit.chosen.method if crit.chosen else None,
                 "trials_ci_deg": list(crit.chosen.ci_deg) if crit.chosen else None,
                 "trials_ci_with_parameters_deg": crit.held_summary().get("ci_with_parameters_deg"),
+                #: that interval cut at 0 deg (its linearised lower end was below): `held.carry_critical`
+                "trials_ci_with_parameters_at_bound": bool(
+                    ((crit.held or {}).get("trials") or {}).get("ci_at_bound", False)
+                ),
                 **{f"model_{k}": v for k, v in crit.model["critical_slope_deg"].items()},
             }
         return out

@@ -553,9 +553,10 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(line, markup=False, highlight=False)
     tc = out.get("critical_slope_deg", {}).get("trials_ci_with_parameters_deg")
     if tc:
+        cut = out["critical_slope_deg"].get("trials_ci_with_parameters_at_bound")
         con.print(
             f"critical slope from the trials, 95 % interval with the held parameters' uncertainty: "
-            f"{tc[0]:.3f}-{tc[1]:.3f} deg",
+            f"{tc[0]:.3f}-{tc[1]:.3f} deg" + (" (cut at 0 deg: its linearised lower end was below)" if cut else ""),
             markup=False,
             highlight=False,
         )
@@ -598,6 +599,17 @@ def optimizer_lines(opt: dict[str, Any]) -> list[str]:
             else ""
         )
     ]
+    lower = opt.get("lower_than_kept") or {}
+    if lower:
+        out[0] = out[0].replace("kept the lowest cost, from", "kept the lowest cost on the starts' sigmas, from")
+        out.append(
+            "  on the solution's sigmas lower than the kept one: "
+            + "; ".join(
+                f"{where(m)} (chi2 {lower[m['start']]:.3g} lower, from {m['start']})"
+                for m in minima
+                if m["start"] in lower
+            )
+        )
     if opt.get("several_minima"):
         similar = [m for m in minima if m["similar"]]
         out.append(

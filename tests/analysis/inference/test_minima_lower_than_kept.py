@@ -46,3 +46,17 @@ def test_when_the_kept_minimum_is_lowest_nothing_is_said_lower() -> None:
     _span_minima(optimizer, [e])
     assert optimizer["lower_than_kept"] == {}
     assert "similar cost" in e.note and "lower than the kept" not in e.note
+
+
+def test_the_text_says_the_kept_start_was_lowest_only_on_the_starts_sigmas() -> None:
+    from rimless.analysis.cli.critical import optimizer_lines
+
+    minima = [
+        _minimum("profile", 18.3, 82.7, 82.7),
+        _minimum("Table 1", 8.16, 92.3, 82.7),
+    ]
+    optimizer = {"best_start": "Table 1", "minima": minima}
+    _span_minima(optimizer, [_estimate(8.16, 1.0)])
+    lines = optimizer_lines(optimizer)
+    assert "kept the lowest cost on the starts' sigmas, from Table 1" in lines[0]
+    assert any("lower than the kept one" in ln and "c 18.3" in ln and "9.6 lower" in ln for ln in lines[1:])
