@@ -189,6 +189,7 @@ def _inertia_row(inertia: dict[str, Any] | None, wheel: LossyWheel) -> dict[str,
         "leg_length_m": inertia.get("leg_length_m"),
         "leg_length_sd_m": inertia.get("leg_length_sd_m"),
         "rigid_map_fits": inertia.get("rigid_map_fits"),
+        "effective_only": bool(inertia.get("effective_only", False)),
         "reduced_chi2": inertia.get("reduced_chi2"),
         "loss_per_step_rad2_s2": inertia.get("loss_per_step_rad2_s2"),
         "truth_loss_per_step_rad2_s2": 2 * wheel.loss_j / wheel.inertia_foot,
@@ -287,13 +288,15 @@ def _median(v: list[float]) -> float | None:
 def summarise_inertia(series: list[ImporterSeries], name: str) -> dict[str, Any]:
     """The row "inertia ratio from trials" of one input: how often r's 95 % interval holds the truth's r
     (Wilson interval), its median and largest errors (%), median se (%), the 95th percentile of |error| / se, and
-    the same coverage for the ratio at the held L0."""
+    the same coverage for the ratio at the held L0. Coverage counts the ratios the import claims
+    (``estimated``, not ``effective_only``: an effective pendulum's r is not the wheel's and is not claimed);
+    ``effective_only`` counts the others."""
     rows = [
         r["inertia_from_trials"]
         for s in series
         if name in s.results and "inertia_from_trials" in (r := s.results[name])
     ]
-    est = [r for r in rows if r["estimated"]]
+    est = [r for r in rows if r["estimated"] and not r.get("effective_only")]
     share = _share(sum(r["covered"] for r in est), len(est))
     held = [r for r in est if r["covered_at_held_leg_length"] is not None]
     held_share = _share(sum(r["covered_at_held_leg_length"] for r in held), len(held))
@@ -301,6 +304,7 @@ def summarise_inertia(series: list[ImporterSeries], name: str) -> dict[str, Any]
     return {
         "series": len(rows),
         "estimated": len(est),
+        "effective_only": sum(bool(r["estimated"] and r.get("effective_only")) for r in rows),
         **share,
         "median_error_pct": _median(err),
         "median_abs_error_pct": _median([abs(e) for e in err]),
