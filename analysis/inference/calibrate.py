@@ -1714,11 +1714,13 @@ def _calibrate(
             functools.partial(_held_exact_probe, obj, u, fit, (lo, hi), max_rounds, estimates, n),
         )
         if row is None:
-            _not_probed(estimates, n)
+            _not_probed(estimates, n, budget)
+            capped = budget.stopped_by == "misfit cap"
             row = {
                 "held_at": float(getattr(glob.base, FIT_FIELDS[n][0])), "fit": [*fit, n], "refit": False,
-                "converged": False, "depends": [], "shifts_se": {}, "cpu_s": 0.0, "skipped": "simulation budget",
-                "statement": f"{n} not probed: the simulation budget ran out; every estimate is conditional on it",
+                "converged": False, "depends": [], "shifts_se": {}, "cpu_s": 0.0,
+                "skipped": "search cap" if capped else "simulation budget",
+                "statement": f"{n} not probed: {_ran_out(budget)}; every estimate is conditional on it",
             }  # fmt: skip
         probe[n] = row
     tick()  # the adequacy check's and the model choice's walks counted too: the last count is the total
@@ -1862,13 +1864,13 @@ def _undecided(estimates: list[ParamEstimate], fit: Sequence[str], budget: Simul
             e.note = why + (f"; {e.note}" if e.note else "")
 
 
-def _not_probed(estimates: list[ParamEstimate], name: str) -> None:
-    """The held-exact probe of ``name`` the budget stopped: what it would have checked is not known, so no
-    estimate is identifiable; each is conditional on the held value."""
+def _not_probed(estimates: list[ParamEstimate], name: str, budget: SimulationBudget) -> None:
+    """The held-exact probe of ``name`` the budget (or its cap on a wheel the model does not fit) stopped: what
+    it would have checked is not known, so no estimate is identifiable; each is conditional on the held value."""
     for e in estimates:
         if e.identifiable:
             e.identifiable, e.conditional_on = False, e.conditional_on or f"{name} as held (not probed)"
-        why = f"conditional: the simulation budget ran out before {name} held exactly was probed"
+        why = f"conditional: {_ran_out(budget)} before {name} held exactly was probed"
         e.note = why + (f"; {e.note}" if e.note else "")
 
 

@@ -125,3 +125,17 @@ def test_trials_the_model_cannot_fit_are_classified_at_the_start_and_the_search_
         assert "simulation budget ran out" not in e.note and "the search reached its cap" in e.note
         assert e.se_held is None
         assert math.isfinite(e.value)
+
+
+def test_a_probe_the_cap_stopped_says_the_cap_not_the_budget() -> None:
+    """Under the misfit cap an estimate left conditional on an unprobed held parameter names the cap (it said "the
+    simulation budget ran out", which the user had not set or reached); under the budget, the budget."""
+    from types import SimpleNamespace
+
+    from rimless.analysis.inference.calibrate import ParamEstimate, _not_probed
+
+    for stopped_by, said in (("misfit cap", "the search reached its cap"), ("budget", "the simulation budget ran out")):
+        e = ParamEstimate("c", "damping_ns_per_m", "N s/m", 8.0, 9.0, 1.0, True)
+        _not_probed([e], "guide_friction_n", SimpleNamespace(stopped_by=stopped_by))  # type: ignore[arg-type]
+        assert e.note.startswith(f"conditional: {said}") and "before guide_friction_n held exactly" in e.note
+        assert not e.identifiable and e.conditional_on
