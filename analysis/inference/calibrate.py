@@ -859,8 +859,8 @@ def _misfit_at_start(
         f"the model does not fit these trials: at the start's best values ({where}) the simulated step "
         f"frequencies miss the measured by {pooled:.0%} RMS (per trial {spread}"
         + (f"; a walk stalls or never reaches the trials' pace: {', '.join(stalls)}" if stalls else "")
-        + f"; a fitting model misses by a few %, this check's limit is {MISFIT_FREQUENCY_FRACTION:.0%}), so every "
-        "estimate is effective only"
+        + f"; a fitting model misses by a few %, this check's limit is {MISFIT_FREQUENCY_FRACTION:.0%}), so no "
+        "estimate is identifiable: each is effective only at best"
     )
     return {
         "stage": "start",
@@ -880,7 +880,9 @@ def _misfit_noted(estimates: list[ParamEstimate], misfit: dict[str, Any] | None)
     for e in estimates:
         if e.identifiable:
             e.identifiable, e.effective_only = False, True
-        e.note = "effective only: " + misfit["statement"] + (f"; {e.note}" if e.note else "")
+        # an estimate the data do not constrain, or where the search did not converge, stays "not identifiable"
+        said = "effective only" if e.effective_only else "not identifiable"
+        e.note = f"{said}: " + misfit["statement"] + (f"; {e.note}" if e.note else "")
 
 
 def _refine_start(

@@ -120,7 +120,7 @@ def test_trials_the_model_cannot_fit_are_classified_at_the_start_and_the_search_
     for e in res.params:
         # never identifiable: effective only, or not identifiable where the capped search did not converge
         assert not e.identifiable and e.status in ("effective only", "not identifiable")
-        assert e.note.startswith("effective only: " + m["statement"])
+        assert e.note.startswith(f"{e.status}: " + m["statement"])  # the note's first words are its status
         # k's refits were not run: the cap stopped them, not the budget (unbounded here)
         assert "simulation budget ran out" not in e.note and "the search reached its cap" in e.note
         assert e.se_held is None
