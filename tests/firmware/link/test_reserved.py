@@ -15,7 +15,6 @@ import secrets
 import socket
 import threading
 import time
-from collections.abc import Callable
 
 import pytest
 
@@ -241,19 +240,30 @@ def test_captured_datagrams_replayed_after_a_restart_from_a_spoofed_source_get_n
     assert armed is False and all_off(hw)  # a captured disarm still disarms: releasing is always safe
 
 
+def _first_rejection(listener: ReservedListener) -> threading.Event:
+    """An event set when `listener` (the robot's reserved path) first rejects a datagram: its `on_rejected` hook,
+    wrapped (the hook is called from the listener's thread as it handles each datagram)."""
+    rejected = threading.Event()
+    logged = listener.on_rejected
+
+    def on_rejected(addr: str, why: str) -> None:
+        rejected.set()
+        logged(addr, why)
+
+    listener.on_rejected = on_rejected
+    return rejected
+
+
 def _flood_during_disarms(
-    port: int, sources: list[str], count: int, rejected: Callable[[], int]
+    port: int, sources: list[str], count: int, reached: threading.Event
 ) -> tuple[list[bool], bool, int]:
     """Start a bounded flood (the bench's, another process, listening for answers) from `sources`; once the robot
-    has rejected one of its datagrams (`rejected()` > 0: the flood has reached it), ten disarms from 127.0.0.1;
-    returns their results, whether the flood still ran when they were done, and how many of the flood's
-    datagrams were answered. Waiting for the flood's "flooding" line alone raced: on a loaded machine the flood
-    process was not scheduled before the ten disarms were done (CI, 2026-11-28: nothing of it rejected)."""
+    has rejected one of its datagrams (`reached`, from `_first_rejection`: the flood has reached it), ten disarms
+    from 127.0.0.1; returns their results, whether the flood still ran when they were done, and how many of the
+    flood's datagrams were answered. Waiting for the flood's "flooding" line alone raced: on a loaded machine the
+    flood process was not scheduled before the ten disarms were done (CI, 2026-11-28: nothing of it rejected)."""
     with Flood(sources, port, count=count, listen=True) as flood:
-        guard = time.monotonic() + REPLY_GUARD_S  # a hang guard only: the wait ends on the event
-        while rejected() == 0:
-            assert time.monotonic() < guard, "the flood never reached the robot"
-            time.sleep(0.001)
+        assert reached.wait(REPLY_GUARD_S), "the flood never reached the robot"  # the guard only bounds a hang
         results = _disarms(port, 10)
         counted = flood.stop()
     return results, counted.stopped, counted.answered
@@ -267,7 +277,7 @@ def test_a_flood_spoofing_the_operators_address_leaves_every_disarm_answered(tmp
     async def script(app, hw):
         app.controller.arm()
         results, during, answered = await asyncio.to_thread(
-            _flood_during_disarms, app.command_port, ["127.0.0.1"], 400_000, lambda: app.server._udp.rejected
+            _flood_during_disarms, app.command_port, ["127.0.0.1"], 400_000, _first_rejection(app.server._udp)
         )
         return results, during, answered, getattr(app.server._udp, "rejected", 1)  # (main did not count them)
 
@@ -287,7 +297,7 @@ def test_a_flood_from_900_addresses_leaves_every_disarm_answered(tmp_path) -> No
     async def script(app, hw):
         app.controller.arm()
         results, during, answered = await asyncio.to_thread(
-            _flood_during_disarms, app.command_port, sources, 400_000, lambda: app.server._udp.rejected
+            _flood_during_disarms, app.command_port, sources, 400_000, _first_rejection(app.server._udp)
         )
         return results, during, answered, getattr(app.server._udp, "rejected", 1)  # (main did not count them)
 
