@@ -419,7 +419,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
     opt = out.get("optimizer", {})
     if opt:
         con.print(
-            ("fit converged" if out.get("converged", True) else "fit did NOT converge (stopped on its budget)")
+            ("fit converged" if out.get("converged", True) else "fit did NOT converge")
             + f": {opt.get('message', '')} ({opt.get('nfev')} evaluations, {opt.get('starts')} start(s)); "
             "± 1 sigma is the larger of the model-based and the trial-clustered sandwich uncertainty"
             + (

@@ -1288,6 +1288,7 @@ def _estimates(
     se_sand: np.ndarray | None = None,
     converged: bool = True,
     se_slope: np.ndarray | None = None,
+    stopped: str = "optimiser stopped on its budget",
 ) -> list[ParamEstimate]:
     """One `ParamEstimate` per fitted name. Its standard error is the larger of the model-based one (with the
     trials' slopes' part ``se_slope`` in quadrature) and the trial-clustered sandwich (``se_sand``, which sees
@@ -1307,7 +1308,7 @@ def _estimates(
         if ok[j] and rel > NOT_IDENTIFIABLE_REL_SE:
             note = f"relative uncertainty {_over_limit(rel)}: the data hardly constrain it"
         elif ok[j] and not converged:
-            note = "the fit did not converge (optimiser stopped on its budget): the value is where it stopped"
+            note = f"the fit did not converge ({stopped}): the value is where it stopped"
         estimates.append(
             ParamEstimate(
                 n,
@@ -1651,7 +1652,14 @@ def _calibrate(
         xg, ws, sh = obj.unpack(u)
         moved = _slope_moved(obj, u)
         se_slope, slope_parts = _slope_part(obj, J, scale_all, moved)
-    estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged, se_slope)
+    stopped = (
+        "its least squares stopped gaining on a wheel the model does not fit"
+        if optimizer.get("not_converging")
+        else "the search reached its cap on a wheel the model does not fit"
+        if budget.stopped_by == "misfit cap"
+        else "optimiser stopped on its budget"
+    )
+    estimates = _estimates(glob, fit, xg, se, ok, notes, se_sand, converged, se_slope, stopped)
     for j, e in enumerate(estimates):
         e.slope_contributions = {d.name: float(abs(pt[j])) for d, pt in zip(data, slope_parts)}
     _span_minima(optimizer, estimates)
