@@ -437,8 +437,10 @@ def _add_critical(
         return
     res.critical = run_critical_slope(trials, names, sim.params, models=(sim.model,))
     # the held parameters' runs while the calibration goes on beside (they need only the model's critical slope);
-    # the models by forward differences: half the runs
-    carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress, central_models=False)
+    # the models by central differences, as `trials critical-slope` and `critical_slope()` take them, so the
+    # report, the demo and the command give one interval (forward ones: 2.3 against 3.4 s of CPU, warm, Table 1's
+    # input, `python -m rimless.analysis.bench.carry [--central]`)
+    carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress)
     if calibrating is not None:
         res.calibration = calibrating.result()
         if progress:
