@@ -1,10 +1,10 @@
 """Benchmark of the held parameters carried into a model's critical slope: ``python -m
 rimless.analysis.bench.carry``.
 
-Runs the carry of `rimless.analysis.inference.held.carry_critical` (the model's part, as ``rimless demo`` does it:
-forward differences, default Table 1 with its default uncertainties; ``--params`` a wheel file, ``--central``
-both sides) twice in one run: the straightforward runs (``warm=False``: `model_critical_slope` at each perturbed
-wheel) and the warm-started ones (`held.WarmCritical`). Prints the CPU and wall seconds of each, the ratio of the
+Runs the carry of `rimless.analysis.inference.held.carry_critical` (the model's part: forward differences by
+default, ``--central`` both sides as ``trials critical-slope``, the report and ``rimless demo`` take them; default
+Table 1 with its default uncertainties, ``--params`` a wheel file) twice in one run: the straightforward runs
+(``warm=False``: `model_critical_slope` at each perturbed wheel) and the warm-started ones (`held.WarmCritical`). Prints the CPU and wall seconds of each, the ratio of the
 CPU seconds, how many runs were warm, and the largest difference of a perturbed critical slope between the two
 against the root-location tolerance (`held.REFINE_TOL_RAD`).
 """
@@ -55,7 +55,9 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m rimless.analysis.bench.carry", description=__doc__)
     ap.add_argument("--params", type=Path, default=None, help="wheel file (default Table 1, default sds)")
     ap.add_argument("--model", default="er", choices=("er", "ve"))
-    ap.add_argument("--central", action="store_true", help="both sides (trials critical-slope), not forward")
+    ap.add_argument(
+        "--central", action="store_true", help="both sides (trials critical-slope, the report, the demo), not forward"
+    )
     a = ap.parse_args(argv)
     r = compare(wheel_input(a.params), a.model, central=a.central)
     start = "none (every run straightforward)" if r["warm_start_deg"] is None else f"{r['warm_start_deg']:.4f} deg"

@@ -262,6 +262,10 @@ class InertiaEstimate:
     #: `VERDICT_FITS`, `VERDICT_EFFECTIVE`, `VERDICT_NO_FIT` or `VERDICT_NOT_TRIED`, and why
     verdict: str = ""
     verdict_reason: str = ""
+    #: where the trials' slope sds (the fit's slope noise) came from: the importer's allowance for the legs'
+    #: drift per trial (`_slope_sd_from`); the same recordings imported told the wheel or not give other sds, so
+    #: another reduced chi^2
+    slope_sd_from: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         def num(x: float) -> float | None:
@@ -290,6 +294,7 @@ class InertiaEstimate:
             "inertia_ratio_at_held_leg_length": num(self.ratio_at_held_l0),
             "inertia_ratio_at_held_leg_length_se": num(self.ratio_at_held_l0_se),
             "assumption": self.assumption,
+            "slope_sd_from": self.slope_sd_from,
             "method": "weighted least squares of the rigid return map over consecutive step periods (log r"
             + (", log L0" if math.isfinite(self.leg_length_m) else "")
             + "; the constant loss per step profiled out)",
@@ -387,6 +392,26 @@ def _fit_joint(pairs: _Pairs, alpha: float, L: float, g: float, log_r0: float) -
     return _Joint(x, cov, chi2, True)
 
 
+#: `rimless.analysis.kinematics.build.import_parameters`' sources of the legs' drift time, in words
+_DRIFT_WORDS = {
+    "derived": "derived from the wheel the import was told (its masses and k)",
+    "assumed_bound": "the importer's bound (no wheel told: `wheel=`, `--params`)",
+    "rigid_legs": "none (rigid legs)",
+}
+
+
+def _slope_sd_from(trials: Sequence[Any]) -> str:
+    """Where the trials' slope sds came from, in words: each import's allowance for the legs' compression drift
+    (its ``meta.parameters`` entry ``leg_drift_time_s``), counted by source."""
+    counts: dict[str, int] = {}
+    for tr in trials:
+        rows = getattr(getattr(tr, "meta", None), "parameters", None) or ()
+        src = next((r.get("source") for r in rows if r.get("name") == "leg_drift_time_s"), None) or "not recorded"
+        counts[src] = counts.get(src, 0) + 1
+    parts = [f"{_DRIFT_WORDS.get(k, k)}: {n} trial(s)" for k, n in counts.items()]
+    return "each trial's slope sd as its import gives it; the legs' drift allowed in it: " + "; ".join(parts)
+
+
 def estimate_inertia_ratio(trials: Sequence[Any], params: Any, *, fit_leg_length: bool = True) -> InertiaEstimate:
     """The inertia ratio the trials' consecutive step periods determine (see the module doc), at the masses, L0
     and g of ``params`` (`WheelParams`). ``fit_leg_length`` False: the ratio at the held L0 only (what I_c is
@@ -412,6 +437,7 @@ def estimate_inertia_ratio(trials: Sequence[Any], params: Any, *, fit_leg_length
     est = InertiaEstimate(True, "", n, r, r * se_log, reduced_chi2=chi2, at_bound=at_bound)
     est.ratio_at_held_l0, est.ratio_at_held_l0_se, est.reduced_chi2_at_held_l0 = r, r * se_log, chi2
     est.held_l0_m = L
+    est.slope_sd_from = _slope_sd_from(trials)
     m8 = 8.0 * params.leg_mass_kg
     i_c = inertia_for_ratio(params, r)
     unusable = [  # the held-L0 fit gives no value: its r is no estimate, a negative I_c no inertia

@@ -189,16 +189,17 @@ def com_figure(comps: Sequence[TrialComparison], path: Path) -> Path:
 
 
 def period_figure(groups: Sequence[Any], path: Path, model: str = "er") -> Path:
-    """Step period against step number, mean +- std over the trials of each slope bin, one panel per series
-    (``groups``: `rimless.analysis.report.series.SeriesSlopeGroup`, in series order), with the simulation."""
-    series = list(dict.fromkeys(getattr(g, "series", "") for g in groups)) or [""]
-    fig = new_figure(7.0, 2.9 * len(series) + 0.5)
+    """Step period against step number, mean +- std over the trials of each slope bin, one panel per series and
+    release condition (``groups``: `rimless.analysis.report.series.SeriesSlopeGroup`, in series order), with the
+    simulation."""
+    panels = list(dict.fromkeys((getattr(g, "series", ""), getattr(g, "release", "")) for g in groups)) or [("", "")]
+    fig = new_figure(7.0, 2.9 * len(panels) + 0.5)
     fig.suptitle(f"Step period: mean ± std over a slope bin's trials; dashed: {model.upper()} simulation", fontsize=9)
-    axes = fig.subplots(len(series), 1, squeeze=False)[:, 0]
+    axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
     if not groups:
         axes[0].text(0.5, 0.5, "no trial with detected steps", ha="center", va="center", transform=axes[0].transAxes)
-    for ax, name in zip(axes, series):
-        mine = [g for g in groups if getattr(g, "series", "") == name]
+    for ax, (name, release) in zip(axes, panels):
+        mine = [g for g in groups if (getattr(g, "series", ""), getattr(g, "release", "")) == (name, release)]
         for j, g in enumerate(mine):
             col = COLORS[j % len(COLORS)]
             dx = (j - (len(mine) - 1) / 2) * 0.06
@@ -215,7 +216,8 @@ def period_figure(groups: Sequence[Any], path: Path, model: str = "er") -> Path:
             )
             if np.isfinite(g.sim_period_s).any():
                 ax.plot(g.step_number, g.sim_period_s * 1e3, "--", color=col, lw=1.2)
-        ax.set_title(f"series {name}" if name else "", fontsize=8, loc="left")
+        title = ", ".join([*([f"series {name}"] if name else []), *([release] if release else [])])
+        ax.set_title(title, fontsize=8, loc="left")
         ax.set_xlabel("step number (1 = first measured step)", fontsize=8)
         ax.set_ylabel("step period, ms", fontsize=8)
         ax.tick_params(labelsize=7)

@@ -437,8 +437,10 @@ def _add_critical(
         return
     res.critical = run_critical_slope(trials, names, sim.params, models=(sim.model,))
     # the held parameters' runs while the calibration goes on beside (they need only the model's critical slope);
-    # the models by forward differences: half the runs
-    carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress, central_models=False)
+    # the models by central differences, as `trials critical-slope` and `critical_slope()` take them, so the
+    # report, the demo and the command give one interval (forward ones: 2.3 against 3.4 s of CPU, warm, Table 1's
+    # input, `python -m rimless.analysis.bench.carry [--central]`)
+    carry_critical(res.critical, trials, names, win, models=(sim.model,), progress=progress)
     if calibrating is not None:
         res.calibration = calibrating.result()
         if progress:
@@ -632,8 +634,10 @@ def _html(
         f'<img src="{REPORT_FILES["period"]}" alt="step period vs step number, one panel per series">'
         f"<figcaption>Figure 1. Step period vs step number, one panel per series ({len(series)}: "
         + text(", ".join(series) or "none")
-        + f"), mean ± std over the trials of each slope bin of that series ({slope_bin_words(slope_bin_deg)}"
-        "; trials of different series are never averaged together), with the simulation (dashed): each trial "
+        + ") and release condition named in the file names (e.g. release1.9), mean ± std over the trials of each "
+        f"slope bin of that series and condition ({slope_bin_words(slope_bin_deg)}; trials of different series "
+        "or release conditions are never averaged together: runs of one condition are pooled as repeats), with "
+        "the simulation (dashed): each trial "
         "simulated at its own slope from its own fitted release speed, averaged over the bin. Step 1 is fitted "
         "(the release speed is chosen to match it), so it agrees by construction and is left out of the period "
         "errors. A series is the file name without its slope and run tokens (see each trial's section).</figcaption>"

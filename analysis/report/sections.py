@@ -314,13 +314,14 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
     bins = f"bins of {slope_bin_deg:g} deg" if slope_bin_deg is not None else "bins of overlapping slope intervals"
     out = [
         f'<h2 id="periods-heading">Step period by series and slope ({bins})</h2>'
-        '<div class="wide"><table id="periods"><thead><tr><th>series</th><th>slope bin, deg</th><th>step</th>'
+        '<div class="wide"><table id="periods"><thead><tr><th>series</th><th>release</th><th>slope bin, deg</th>'
+        "<th>step</th>"
         "<th>trials</th><th>mean, ms</th><th>std, ms</th><th>simulated, ms</th></tr></thead><tbody>"
     ]
     for g in groups:
         for row in g.rows():
             out.append(
-                f"<tr><td>{breakable(str(row.get('series', '')))}</td>"
+                f"<tr><td>{breakable(str(row.get('series', '')))}</td><td>{e(str(row.get('release', '')))}</td>"
                 f'<td class="n">{row["slope_deg"]:g}</td><td class="n">{row["step"]}</td>'
                 f'<td class="n">{row["trials"]}</td><td class="n">{num(row["mean_period_ms"], ".1f")}</td>'
                 f'<td class="n">{num(row["std_period_ms"], ".1f")}</td>'
@@ -329,7 +330,8 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
     out.append("</tbody></table></div>")
     for g in groups:
         if g.message:
-            out.append(f'<p class="bad">{e(str(getattr(g, "series", "")))} {g.slope_deg:g} deg: {e(g.message)}</p>')
+            where = " ".join(x for x in (str(getattr(g, "series", "")), str(getattr(g, "release", ""))) if x)
+            out.append(f'<p class="bad">{e(where)} {g.slope_deg:g} deg: {e(g.message)}</p>')
     return "\n".join(out)
 
 

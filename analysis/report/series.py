@@ -7,6 +7,10 @@ run (a slope token such as ``slope2.0deg`` or ``1.5deg``, a run token such as ``
 to the series of its folder's name. A mapping given by the caller (file name or path -> series) overrides
 this. Within a series the trials are binned by slope (`rimless.analysis.inference.compare.step_period_trends`);
 two series at the same rounded slope stay two groups (a wheel with another damping walks at other periods).
+A release condition the file name states (``release1.9``: `release_condition`) is a run token for the series,
+but trials of two release conditions are never pooled: each condition is binned on its own (a release at 1.9
+rad/s and one at 2.5 rad/s start different transients; pooled, their step periods' std is the difference of
+the two walks, not the scatter of repeats). Runs of one condition (``run1``, ``run2``) are pooled as repeats.
 
 A slope bin of None (``rimless demo``'s default) bins by the slopes' own intervals instead of a width
 (`interval_bins`): within a series, trials are pooled only while their 95 % slope intervals share a common
@@ -34,6 +38,7 @@ __all__ = [
     "pooled_slope_warnings",
     "interval_bins",
     "slope_bin_words",
+    "release_condition",
 ]
 
 #: the slope bin `step_period_trends` is handed for one bin made by `interval_bins`: wide enough to round every
@@ -50,6 +55,8 @@ _RUN_TOKEN = re.compile(
     re.IGNORECASE,
 )
 _SEPARATORS = re.compile(r"[_\-\s]+")
+#: a run token that names a release condition (never pooled with another: `release_condition`)
+_RELEASE_TOKEN = re.compile(r"^release[+-]?\d+(?:[.p]\d+)?$", re.IGNORECASE)
 
 
 def file_stem(name: str) -> str:
@@ -70,6 +77,13 @@ def series_name(path: str | Path) -> str:
         return sep.join(kept)
     folder = Path(path).parent.name
     return folder or stem
+
+
+def release_condition(path: str | Path) -> str:
+    """The release condition a trial file's name states (its ``release<number>`` token as written, e.g.
+    ``release1.9``), "" when none: trials of different conditions are binned apart within their series."""
+    stem = file_stem(str(path))
+    return next((t for t in _SEPARATORS.split(stem) if _RELEASE_TOKEN.match(t)), "")
 
 
 def series_of(files: Sequence[str | Path], given: Mapping[str, str] | None = None) -> list[str]:
@@ -101,10 +115,12 @@ class SeriesSlopeGroup(SlopeGroup):
     """A `SlopeGroup` of one series: the slope bin's trials are all of ``series``."""
 
     series: str = ""
+    #: the release condition its trials' file names state (`release_condition`), "" when none
+    release: str = ""
 
     def rows(self) -> list[dict[str, Any]]:
-        """`SlopeGroup.rows` with the series named in each row."""
-        return [{"series": self.series} | row for row in super().rows()]
+        """`SlopeGroup.rows` with the series and the release condition named in each row."""
+        return [{"series": self.series, "release": self.release} | row for row in super().rows()]
 
 
 def slope_bin_words(slope_bin_deg: float | None) -> str:
@@ -149,17 +165,18 @@ def series_trends(
     slope_bin_deg: float | None = 0.5,
     slopes: Mapping[str, tuple[float, Sequence[float] | None]] | None = None,
 ) -> list[SeriesSlopeGroup]:
-    """Step period against step number per series and slope bin (series in order of first appearance, slopes
-    ascending within each); ``series``: the series of each comparison (`series_of`), in the same order.
+    """Step period against step number per series, release condition and slope bin (series in order of first
+    appearance, then their release conditions (`release_condition` of each trial's file name) in that order,
+    slopes ascending within each); ``series``: the series of each comparison (`series_of`), in the same order.
     ``slope_bin_deg`` None: the bins of `interval_bins` on ``slopes`` (per trial name, its slope and 95 %
     interval, deg), each labelled with its trials' mean slope (to 0.001 deg)."""
     if len(series) != len(comparisons):
         raise ValueError(f"{len(series)} series for {len(comparisons)} comparisons")
-    order: dict[str, list[TrialComparison]] = {}
+    order: dict[str, dict[str, list[TrialComparison]]] = {}
     for c, s in zip(comparisons, series):
-        order.setdefault(s, []).append(c)
+        order.setdefault(s, {}).setdefault(release_condition(c.file or c.name), []).append(c)
     out = []
-    for name, comps in order.items():
+    for name, release, comps in ((n, r, cs) for n, conds in order.items() for r, cs in conds.items()):
         if slope_bin_deg is None:
             groups = []
             for trials in interval_bins(comps, slopes or {}):
@@ -169,7 +186,9 @@ def series_trends(
         else:
             groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
         for g in groups:
-            out.append(SeriesSlopeGroup(**{f.name: getattr(g, f.name) for f in fields(g)}, series=name))
+            out.append(
+                SeriesSlopeGroup(**{f.name: getattr(g, f.name) for f in fields(g)}, series=name, release=release)
+            )
     return out
 
 
@@ -198,6 +217,7 @@ def pooled_slope_warnings(
         if high[2][0] <= low[2][1]:
             continue
         series = getattr(g, "series", "")
+        release = getattr(g, "release", "")
         how = (
             f"--slope-bin-deg {slope_bin_deg:g} rounds them together"
             if slope_bin_deg is not None
@@ -208,7 +228,7 @@ def pooled_slope_warnings(
             return f"{t[0]} ({t[1]:.3f} deg, 95 % {t[2][0]:.3f} to {t[2][1]:.3f})"
 
         out.append(
-            f"{'series ' + repr(series) + ', ' if series else ''}slope bin {g.slope_deg:g} deg: the step periods "
+            f"{'series ' + repr(series) + ', ' if series else ''}{release + ', ' if release else ''}slope bin {g.slope_deg:g} deg: the step periods "
             f"of {len(g.trials)} trials are pooled, but {told(low)} and {told(high)} walked on slopes that differ "
             f"beyond their intervals ({how}): give a smaller --slope-bin-deg (slope_bin_deg=) to keep them apart"
         )

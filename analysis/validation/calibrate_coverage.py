@@ -166,22 +166,30 @@ def _user_wheel(name: str, truth: Any) -> Any:
 def _param_row(pe: Any, t: float) -> dict[str, Any]:
     """What one estimate says about its truth ``t`` (JSON-ready): the interval with the held part (``ci95``
     widened by ``se_held`` and moved by ``held_shift`` where computed: ``ci95_with_held``) and the data's alone, z
-    with each (the former about ``value_with_held``), and the se's parts."""
-    lo, hi = pe.ci95
+    with each (the former about ``value_with_held``), and the se's parts. Both intervals are the estimate's own,
+    cut at the parameter's bound as `trials calibrate` prints them (``ci_at_bound``, ``ci_with_held_at_bound``);
+    the linearised ones beside (``*_linear``). Coverage is the same either way: a truth is never below its
+    bound."""
     finite = math.isfinite(pe.se)
     se_all = pe.se_with_held if pe.se_with_held is not None else pe.se
     centre = pe.value_with_held if pe.se_held is not None else pe.value
-    ci_all = [centre - Z95 * se_all, centre + Z95 * se_all] if finite else None
+    ci = list(pe.ci95) if finite else None
+    ci_held = list(c) if finite and (c := pe.ci95_with_held) is not None else None
+    ci_all = ci_held if pe.se_held is not None else ci  # the interval the coverage counts
     return {
         "value": pe.value,
         "value_with_held": centre if pe.se_held is not None else None,
         "held_shift": pe.held_shift,
         "held_shifts": dict(pe.held_shifts),
         "se": pe.se if finite else None,
-        "ci95": [lo, hi] if finite else None,
-        "covered_data": bool(finite and lo <= t <= hi),
+        "ci95": ci,
+        "ci95_linear": list(pe.ci95_linear) if finite else None,
+        "ci_at_bound": bool(pe.ci_at_bound),
+        "covered_data": bool(ci is not None and ci[0] <= t <= ci[1]),
         "se_with_held": pe.se_with_held,
-        "ci95_with_held": ci_all if pe.se_held is not None else None,
+        "ci95_with_held": ci_held,
+        "ci95_with_held_linear": list(c) if finite and (c := pe.ci95_with_held_linear) is not None else None,
+        "ci_with_held_at_bound": bool(pe.ci_with_held_at_bound),
         "covered": bool(ci_all is not None and ci_all[0] <= t <= ci_all[1]),
         "relative_error": pe.value / t - 1.0,
         "identifiable": bool(pe.identifiable),
@@ -348,7 +356,12 @@ def _per_parameter(rows: list[dict[str, Any]], fits: list[dict[str, Any]], name:
         },
         "effective_only": sum(bool(g.get("effective_only")) for g in got),
         "median_relative_half_width": _median(
-            [((c := g["ci95_with_held"] or g["ci95"])[1] - c[0]) / 2 / g["value"] for g in got if g["ci95"]]
+            # of the linearised intervals (1.96 se): a precision figure, not shortened where an interval is cut
+            [
+                ((c := g["ci95_with_held_linear"] or g["ci95_linear"])[1] - c[0]) / 2 / g["value"]
+                for g in got
+                if g["ci95"]
+            ]
         ),
     }
 

@@ -157,3 +157,22 @@ def test_truth_input_states_the_truths_values_with_the_default_uncertainties() -
     assert w.uncertainty["leg_length_m"] == pytest.approx(1e-3)
     assert w.params.guide_friction_n == 0.3 and w.uncertainty["guide_friction_n"] == pytest.approx(FRICTION_SD_N)
     assert w.uncertainty["gravity_m_s2"] == 0.0
+
+
+def test_a_row_states_the_intervals_cut_at_the_bound_as_calibrate_prints_them() -> None:
+    """A friction-like estimate near its bound 0 (value 0.3, se 0.1, held part 0.3; by hand: 1.96 x hypot(0.1, 0.3)
+    = 0.6198, so the linearised interval with the held part is [-0.3198, 0.9198]): the study's row gives the cut
+    interval [0, 0.9198] as `trials calibrate` does (session 20's `ci_at_bound`), the linearised one beside, the
+    same coverage either way, and the half width of the linearised interval."""
+    from rimless.analysis.inference.calibrate import ParamEstimate
+    from rimless.analysis.validation.calibrate_coverage import _param_row, _per_parameter
+
+    pe = ParamEstimate("F_c", "guide_friction_n", "N", 0.0, 0.3, 0.1, True, se_held=0.3)
+    row = _param_row(pe, 0.05)
+    lo, hi = row["ci95_with_held"]
+    assert lo == 0.0 and hi == pytest.approx(0.9198, abs=1e-4)
+    assert row["ci95_with_held_linear"] == pytest.approx([-0.3198, 0.9198], abs=1e-4)
+    assert row["ci_with_held_at_bound"] is True and row["ci_at_bound"] is False  # data alone: 0.104-0.496
+    assert row["ci95"] == pytest.approx([0.104, 0.496], abs=1e-3) and row["covered"] and not row["covered_data"]
+    summary = _per_parameter([{"truth": {"F_c": 0.05}}], [{"params": {"F_c": row}}], "F_c")
+    assert summary["covered"] == 1 and summary["median_relative_half_width"] == pytest.approx(0.6198 / 0.3, abs=1e-3)
