@@ -86,3 +86,18 @@ def test_the_offsets_stated_covariance_matches_its_spread_over_noise_draws(kind:
     assert rms_z < 1.3, (rms_z, held)
     assert kind == "white" or rms_z > 0.7, (rms_z, held)
     assert held >= 0.9 * DRAWS, (rms_z, held)
+
+
+def test_the_study_reads_the_offsets_z_against_the_per_axis_sd(tmp_path) -> None:
+    """`hub_offset_study`'s row for one rigid walk (`critical_truth`, no compiled simulator): the per-axis sd (the
+    rms of the two axes' standard errors, from the importer's own fit) lies between the worst axis's sd / sqrt(2)
+    and that sd, and the two z's are the same error over each."""
+    from rimless.analysis.validation.hub_offset_study import hub_offset_draw
+
+    row = hub_offset_draw("rigid", 101, tmp_path)
+    sd, sd_axis = row["hub_sd_mm"], row["offset_sd_axis_mm"]
+    assert sd is not None and sd_axis is not None, row["hub_source"]
+    assert sd / math.sqrt(2.0) - 1e-12 <= sd_axis <= sd + 1e-12
+    assert row["offset_z"] * sd == pytest.approx(row["offset_error_mm"])
+    assert row["offset_z_axis"] * sd_axis == pytest.approx(row["offset_error_mm"])
+    assert "centre of the feet" in row["hub_source"] or 0.0 < row["noise_power"] <= 1e3
