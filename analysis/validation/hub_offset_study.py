@@ -32,6 +32,7 @@ Run: ``python -m rimless.analysis.validation.hub_offset_study --draws 10 --seed 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import tempfile
@@ -95,6 +96,26 @@ def _tracked_noise(rec_seed: int, lab: Any, frames: int) -> np.ndarray:
     return rng.normal(0, lab.noise_m, (frames, 3))
 
 
+@contextlib.contextmanager
+def _recording_height_fits(fits: list[Any]):
+    """Within: every hub offset height fit the importer makes (`kinematics.build`'s `fit_hub_offset`) is appended
+    to ``fits`` (read only; the import is unchanged)."""
+    from rimless.analysis.kinematics import build
+
+    inner = build.fit_hub_offset
+
+    def recorded(*args: Any, **kwargs: Any) -> Any:
+        fit = inner(*args, **kwargs)
+        fits.append(fit)
+        return fit
+
+    build.fit_hub_offset = recorded
+    try:
+        yield fits
+    finally:
+        build.fit_hub_offset = inner
+
+
 def hub_offset_draw(
     kind: str, seed: int, folder: Path, *, table1: bool = False, importer: Any = None
 ) -> dict[str, Any]:
@@ -111,7 +132,8 @@ def hub_offset_draw(
     )
     if importer is None:
         from rimless.analysis.kinematics.build import import_trial as importer
-    trial = importer(path)
+    with _recording_height_fits([]) as fits:
+        trial = importer(path)
     n = min(trial.time_s.size, tf.size)
     com = np.asarray(trial.series.data["com_height"])[:n]
     t0, t1 = trial.meta.window_s
@@ -131,6 +153,8 @@ def hub_offset_draw(
     oc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh - _tracked_noise(rec_seed, lab, tf.size)[:n][sel], rcond=None)
     offset_error = math.sqrt(float(np.sum(oc[1:] ** 2)) / 2.0)
     sd = getattr(trial.meta, "hub_offset_sd_m", None)
+    height = fits[-1] if fits and fits[-1] is not None and sd is not None and fits[-1].sd_m == sd else None
+    sd_axis = height.sd_per_axis_m if height is not None else sd  # the feet's sd: one for both axes
     return {
         "truth": kind,
         "seed": seed,
@@ -144,6 +168,9 @@ def hub_offset_draw(
         "z": None if not sd else hub_error / sd,
         "offset_error_mm": offset_error * 1e3,
         "offset_z": None if not sd else offset_error / sd,
+        "offset_sd_axis_mm": None if sd_axis is None else sd_axis * 1e3,
+        "offset_z_axis": None if not sd_axis else offset_error / sd_axis,
+        "noise_power": None if height is None else height.noise_power,
         "turns": float(np.ptp(bs[:n][sel])) / (2 * math.pi),
     }
 
@@ -154,7 +181,8 @@ def run_hub_offset_study(
     """``draws`` draws of each truth (and of the ER truth at Table 1: ``er-table1``), seeds ``seed`` up, of the
     ``sets`` named (default all of `SETS`); the rows and per set the median and largest sinusoid, the median noise
     share, how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2) (1 for an honest sd of an isotropic error),
-    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``)."""
+    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``) and against the per-axis sd
+    (``offset_axis_held_95``, ``offset_axis_rms_z``)."""
     sets = SETS if sets is None else tuple(sets)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -174,7 +202,7 @@ def run_hub_offset_study(
             "sinusoid_max_mm": float(np.max(amp)),
             "noise_share_median_mm": float(np.median([r["noise_share_mm"] for r in sub])),
         }
-        for prefix, key in (("", "z"), ("offset_", "offset_z")):
+        for prefix, key in (("", "z"), ("offset_", "offset_z"), ("offset_axis_", "offset_z_axis")):
             zs = np.array([r[key] for r in sub if r[key] is not None])
             summary[name][prefix + "held_95"] = f"{int((zs < RAYLEIGH_95).sum())}/{zs.size}" if zs.size else None
             summary[name][prefix + "rms_z"] = float(np.sqrt(np.mean(zs**2) / 2.0)) if zs.size else None

@@ -1,0 +1,103 @@
+"""The hub offset's stated covariance against its spread over noise draws, when the residuals are not white.
+
+Truth (written here, apart from the fit): a rigid rimless wheel (eight legs of 0.22 m) rolling 1.3 turns down a
+4 deg slope at a steady 2 rad/s, 100 Hz, tracked at a body point 36 mm off the hub; the tracked point's position carries noise drawn
+afresh in each of `DRAWS` draws on the same motion. The offset's error from the noise is the fit's offset less the
+noise-free fit's (which takes out the bump model's own bias, 1 um here), and its spread over the draws is compared
+with the covariance the fit states (`HubOffsetFit.cov_m2`): sqrt(mean |e|^2 / mean trace), the rms z per axis, is 1
+for an honest covariance (`DRAWS` chi^2_2 draws give it a relative sd of about 6 %, the fit's own estimate of its
+noise a little more), and |e| must lie within 2.45 times the worst axis's sd (``sd_m``, the 95 % radius of a 2-D
+normal error) in at least 90 % of the draws.
+
+- ``steps``: white noise of 0.15 mm plus, in the height, a shape that repeats every step (harmonics 7-12 of the
+  step frequency, 0.3 mm rms, drawn per recording: a bump finer than the fit's six terms, as an impact's ringing
+  at the same phase each step): the residuals' variance is about 8x the noise's level at once a turn. On main the
+  covariance took the residuals' variance as the noise's (scaled up only where the power beside once a turn was
+  larger): rms z per axis 0.44 (measured when written; fails), now 0.82. Asserted: 0.7-1.3.
+- ``white``: white noise of 0.3 mm alone (the residuals' variance is the noise's level, but for the bump model's
+  leftovers of 0.06 mm): the other side, the covariance must not fall below the spread (rms z below 1.3, and the
+  coverage). It is over-stated, on main as now (rms z 0.63 and 0.66 when written): the misfit part
+  (`hub_offset._misfit_variance`) adds the offset's move beyond its noise when the slow terms are added, which
+  white noise alone makes positive in a third of the draws (0.020 mm rms here, against an error of 0.022 mm).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from rimless.analysis.kinematics import hub as kin_hub
+
+DRAWS = 60
+ORIGIN_BODY_M = np.array([0.03, -0.02, 0.0])
+#: the fit's Fourier terms per step (the importer's default for 40 frames a step)
+HARMONICS = 6
+
+
+def _motion():
+    """(rotations (n, 3, 3), tracked point (n, 3) m, the wheel's turn (n,) rad): a rigid wheel rolling down a 4 deg
+    slope, 1.3 turns."""
+    phi, alpha, leg = math.radians(4.0), math.pi / 4, 0.22
+    t = np.arange(0.0, 4.0, 0.01)
+    beta = 2.0 * t  # the body's turn, rad (at a steady 2 rad/s)
+    theta = np.mod(beta, alpha) - alpha / 2  # the stance leg's angle from the slope's normal
+    step = np.floor(beta / alpha)
+    x = step * 2 * leg * math.sin(alpha / 2) + leg * np.sin(theta)  # hub down the slope, m
+    h = leg * np.cos(theta)  # hub along the slope's normal, m
+    down = np.array([math.cos(phi), 0.0, -math.sin(phi)])
+    nrm = np.array([math.sin(phi), 0.0, math.cos(phi)])
+    axis = np.cross(down, nrm)
+    hub = np.outer(x, down) + np.outer(h, nrm)
+    rot = Rotation.from_rotvec(np.outer(-beta, axis)) * Rotation.from_matrix(np.column_stack([down, nrm, axis]))
+    return rot.as_matrix(), hub + rot.apply(ORIGIN_BODY_M), beta
+
+
+def _noise(kind: str, rng: np.random.Generator, beta: np.ndarray) -> np.ndarray:
+    """(n, 3) noise of the tracked point, m (``beta`` the wheel's turn, rad)."""
+    n = beta.size
+    out = rng.normal(0.0, 0.15e-3, (n, 3))
+    if kind == "steps":
+        k = np.arange(7, 13) * 8.0  # harmonics 7-12 of the step frequency (eight steps a turn), cycles per rad
+        amp = rng.normal(0.0, 0.3e-3 / math.sqrt(k.size), (2, k.size))
+        out[:, 2] += np.cos(np.outer(beta, k)) @ amp[0] + np.sin(np.outer(beta, k)) @ amp[1]
+    else:
+        out *= 2.0
+    return out
+
+
+@pytest.mark.parametrize("kind", ["steps", "white"])
+def test_the_offsets_stated_covariance_matches_its_spread_over_noise_draws(kind: str) -> None:
+    rot, tracked, beta = _motion()
+    clean = kin_hub.fit_hub_offset(rot, tracked, harmonics=HARMONICS)
+    assert clean is not None
+    rng = np.random.default_rng(7 if kind == "steps" else 8)
+    e2, trace, held = [], [], 0
+    for _ in range(DRAWS):
+        fit = kin_hub.fit_hub_offset(rot, tracked + _noise(kind, rng, beta), harmonics=HARMONICS)
+        assert fit is not None and fit.converged
+        e = fit.offset_m - clean.offset_m
+        e2.append(float(e @ e))
+        trace.append(float(np.trace(fit.cov_m2)))
+        held += math.sqrt(e2[-1]) < 2.4477 * fit.sd_m
+    rms_z = math.sqrt(np.mean(e2) / np.mean(trace))
+    assert rms_z < 1.3, (rms_z, held)
+    assert kind == "white" or rms_z > 0.7, (rms_z, held)
+    assert held >= 0.9 * DRAWS, (rms_z, held)
+
+
+def test_the_study_reads_the_offsets_z_against_the_per_axis_sd(tmp_path) -> None:
+    """`hub_offset_study`'s row for one rigid walk (`critical_truth`, no compiled simulator): the per-axis sd (the
+    rms of the two axes' standard errors, from the importer's own fit) lies between the worst axis's sd / sqrt(2)
+    and that sd, and the two z's are the same error over each."""
+    from rimless.analysis.validation.hub_offset_study import hub_offset_draw
+
+    row = hub_offset_draw("rigid", 101, tmp_path)
+    sd, sd_axis = row["hub_sd_mm"], row["offset_sd_axis_mm"]
+    assert sd is not None and sd_axis is not None, row["hub_source"]
+    assert sd / math.sqrt(2.0) - 1e-12 <= sd_axis <= sd + 1e-12
+    assert row["offset_z"] * sd == pytest.approx(row["offset_error_mm"])
+    assert row["offset_z_axis"] * sd_axis == pytest.approx(row["offset_error_mm"])
+    assert "centre of the feet" in row["hub_source"] or 0.0 < row["noise_power"] <= 1e3
