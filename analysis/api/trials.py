@@ -183,12 +183,14 @@ def write_report(
     out: str | Path,
     wheel: Wheel | None = None,
     *,
-    slope_bin_deg: float = 0.5,
+    slope_bin_deg: float | None = 0.5,
     title: str = "Vicon trials vs simulation",
     **import_options: Any,
 ) -> ReportResult:
     """Compare Vicon exports (paths) with the simulation and write the HTML report, figures and metrics to the
-    folder `out` (`rimless trials report`). Returns the report (`summary()` is the command's JSON object)."""
+    folder `out` (`rimless trials report`). Returns the report (`summary()` is the command's JSON object).
+    ``slope_bin_deg``: the step periods' slope bins within a series, deg (``--slope-bin-deg``); None pools only
+    trials whose slope intervals overlap, as `rimless demo` does."""
     from rimless.analysis.report.batch import run_report
 
     w = _wheel(wheel)
