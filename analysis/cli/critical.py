@@ -71,6 +71,32 @@ UpOpt = Annotated[
 GapOpt = Annotated[
     float, typer.Option("--max-gap-ms", min=0.0, metavar="MS", help="CSV inputs: interpolate gaps up to this long, ms.")
 ]
+ObjectOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--object",
+        metavar="NAME",
+        help="Raw inputs: the tracked object, or the markers' subject (default: what moves like the wheel).",
+    ),
+]
+MarkersOpt = Annotated[
+    str | None,
+    typer.Option("--markers", metavar="A,B,C,D", help="Raw inputs: the wheel's marker names, comma-separated."),
+]
+
+
+def raw_import_options(
+    slope_deg: float | None, max_gap_ms: float, up_axis: str | None, object_: str | None, markers: str | None
+) -> dict[str, Any]:
+    """`import_trial`'s keyword arguments from the raw-input options these commands share with ``trials import``
+    (its refusals name ``--object``, ``--markers`` and ``--up-axis``: each command that imports takes them)."""
+    return {
+        "slope_deg": slope_deg,
+        "max_gap_s": max_gap_ms / 1000.0,
+        "up_axis": _up(up_axis),
+        "object": object_,
+        "markers": None if markers is None else parse_list(markers, "--markers"),
+    }
 
 
 def critical_slope_cmd(
@@ -93,6 +119,8 @@ def critical_slope_cmd(
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
     up_axis: UpOpt = None,
+    object_: ObjectOpt = None,
+    markers: MarkersOpt = None,
     group_tol_deg: Annotated[
         float,
         typer.Option(
@@ -116,7 +144,7 @@ def critical_slope_cmd(
         models=models,
         calibrate_c=calibrate_c,
         params_path=params,
-        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
+        import_kwargs=raw_import_options(slope_deg, max_gap_ms, up_axis, object_, markers),
         group_tol_deg=group_tol_deg,
     )
     print_refused(run.loaded.refused)
@@ -328,6 +356,8 @@ def calibrate_cmd(
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
     up_axis: UpOpt = None,
+    object_: ObjectOpt = None,
+    markers: MarkersOpt = None,
     prior: Annotated[
         Path | None,
         typer.Option(
@@ -368,7 +398,7 @@ def calibrate_cmd(
         model=models[0],
         critical=critical,
         params_path=params,
-        import_kwargs={"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": _up(up_axis)},
+        import_kwargs=raw_import_options(slope_deg, max_gap_ms, up_axis, object_, markers),
         prior_path=prior,
         max_simulations=max_simulations,
     )

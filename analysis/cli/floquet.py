@@ -14,12 +14,15 @@ import typer
 
 from rimless.analysis.cli.critical import (
     GapOpt,
+    MarkersOpt,
+    ObjectOpt,
     ParamsOpt,
     SlopeOpt,
     UpOpt,
     exit_nothing_read,
     parameter_lines,
     print_refused,
+    raw_import_options,
 )
 from rimless.cli_rules import EXIT_FAILURE, EXIT_USER_ERROR, print_json, user_facing
 from rimless.errors import ParameterError
@@ -54,6 +57,8 @@ def floquet_cmd(
     slope_deg: SlopeOpt = None,
     max_gap_ms: GapOpt = 50.0,
     up_axis: UpOpt = None,
+    object_: ObjectOpt = None,
+    markers: MarkersOpt = None,
     group_tol_deg: Annotated[
         float,
         typer.Option(
@@ -77,9 +82,7 @@ def floquet_cmd(
     key = model.strip().lower()
     if key not in MODELS:
         raise ParameterError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
-    up = None if up_axis is None else up_axis.strip().lower().lstrip("+")
-    if up is not None and up not in ("x", "y", "z", "-x", "-y", "-z"):
-        raise ParameterError(f"--up-axis must be one of x, y, z, -x, -y, -z, got {up_axis!r}")
+    raw = raw_import_options(slope_deg, max_gap_ms, up_axis, object_, markers)
     if params is not None and not params.is_file():
         raise ParameterError(f"--params {params}: no such file")
     which: Literal["er", "ve"] = "er" if key == "er" else "ve"
@@ -92,7 +95,7 @@ def floquet_cmd(
     with progress_bar("importing", json_out=json_out) as bar:
         # the importer gets the --params wheel (as `trials import --params`): its legs' k bounds the slope's drift
         legs = import_wheel(params, rigid_legs=False)
-        opts = {"slope_deg": slope_deg, "max_gap_s": max_gap_ms / 1000.0, "up_axis": up, "wheel": legs}
+        opts = {**raw, "wheel": legs}
         loaded = load_trials(trials, opts)
         print_refused(loaded.refused)
         if not loaded.trials:

@@ -106,3 +106,22 @@ def test_up_axis_option_on_import(walk, tmp_path):
     assert row["up_axis"] == "y" and abs(row["slope_deg"] - 2.0) <= 0.1 and len(row["impact_times_s"]) == 11
     res = CliRunner().invoke(app, ["trials", "import", p, "--out", str(tmp_path), "--up-axis", "w"])
     assert res.exit_code == 2 and "--up-axis" in res.output
+
+
+@pytest.mark.parametrize(
+    "command", [["critical-slope"], ["floquet"], ["calibrate", "--no-critical", "--max-simulations", "1"]]
+)
+def test_every_importing_command_takes_the_markers_its_refusal_names(walk, tmp_path, command):
+    """The refusal of unlabelled markers names ``--markers``: each command that imports raw files takes it (the
+    audit of session 21 found `critical-slope`, `calibrate` and `floquet` answering "no such option")."""
+    from rimless.cli import app
+
+    pts = walk.hub_world[:, None, :] + np.einsum("nij,kj->nki", walk.rot.as_matrix(), UNEVEN_MARKERS)
+    p = write(tmp_path / "u.csv", markers_section({f"*{i}": pts[:, i] for i in range(4)}))
+    runner = CliRunner()
+    refused = runner.invoke(app, ["trials", *command, p])
+    assert refused.exit_code == 2 and "--markers *0,*1,*2,*3" in refused.stderr
+    res = runner.invoke(app, ["trials", *command, p, "--markers", "*0,*1,*2,*3"])
+    assert "no such option" not in res.stderr and "u.csv:" not in res.stderr, res.stderr
+    assert res.exit_code in (0, 1), res.stderr  # imported; a single trial may give no estimate (exit 1)
+    assert "Traceback" not in res.output
