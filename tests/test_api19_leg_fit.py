@@ -61,3 +61,36 @@ def test_bad_inputs_are_named(tmp_path, logs):
         analysis.leg_fit(tmp_path / "missing.jsonl")
     with pytest.raises(ParameterError, match="counts_per_m"):
         analysis.leg_fit([analysis.read_leg_log(logs[1][0])], counts_per_m=1e5)
+
+
+def test_leg_fit_json_lists_what_it_held(logs):
+    """`parameters`, as every other command lists its wheel (issue 31; the audit of session 21 found none): the
+    moving mass with its source and how it was carried, each log's sensor scale from its header or the option."""
+    truth, paths = logs
+    rows = analysis.leg_fit(paths[:1], moving_mass_kg=truth.mass_kg).to_dict()["parameters"]
+    assert rows[0] | {"basis": None} == {
+        "name": "leg_mass_kg",
+        "symbol": "m",
+        "value": truth.mass_kg,
+        "sd": 0.0,
+        "unit": "kg",
+        "source": "given",
+        "basis": None,
+        "carried_as": "exact",
+    }
+    assert "not in the intervals" in rows[0]["basis"]
+    header = json.loads(paths[0].read_text().splitlines()[0])
+    assert [(r["name"], r["value"], r["source"]) for r in rows[1:]] == [("counts_per_m", header["counts_per_m"], "log")]
+    res = runner.invoke(
+        root_app,
+        ["trials", "leg-fit", str(paths[0]), "--moving-mass-sd-kg", "0.001", "--counts-per-m", "50000", "--json"],
+    )
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.stdout)["parameters"]
+    assert (rows[0]["source"], rows[0]["value"], rows[0]["sd"], rows[0]["carried_as"]) == (
+        "table1",
+        analysis.leg_fit.__kwdefaults__["moving_mass_kg"],
+        0.001,
+        "normal",
+    )
+    assert (rows[1]["value"], rows[1]["source"]) == (50000.0, "given")

@@ -415,6 +415,43 @@ class LegFitResult:
         out["passed"] = all(v["passed"] for v in out.values())
         return out
 
+    def parameters(self) -> list[dict[str, Any]]:
+        """The JSON list ``parameters``: what the fit held, as the other commands list a wheel's parameters (name,
+        symbol, value, sd, unit, source, basis, carried_as): the moving mass (k and c scale with it) and each log's
+        sensor scale (the friction scales with it)."""
+        m, sm = self.moving_mass_kg, self.moving_mass_sd_kg
+        table1 = m == DEFAULT_MOVING_MASS_KG
+        rows: list[dict[str, Any]] = [
+            {
+                "name": "leg_mass_kg",
+                "symbol": "m",
+                "value": m,
+                "sd": sm,
+                "unit": "kg",
+                "source": "table1" if table1 else "given",
+                "basis": ("Table 1's leg mass, all of it moving with the foot" if table1 else "--moving-mass-kg")
+                + ("" if sm > 0 else "; held exact: its uncertainty is not in the intervals (--moving-mass-sd-kg)"),
+                "carried_as": "normal" if sm > 0 else "exact",
+            }
+        ]
+        for log in {id(s.log): s.log for s in self.segments}.values():
+            header = log.header.get("counts_per_m")
+            rows.append(
+                {
+                    "name": "counts_per_m",
+                    "symbol": "counts/m",
+                    "value": log.counts_per_m,
+                    "sd": 0.0,
+                    "unit": "1/m",
+                    "source": "log" if header == log.counts_per_m else "given",
+                    "basis": f"{log.path.name}: the sensor's scale "
+                    + ("(its header)" if header == log.counts_per_m else "(--counts-per-m)")
+                    + "; only the friction depends on it",
+                    "carried_as": "exact",
+                }
+            )
+        return rows
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of ``rimless trials leg-fit --json``: `summary()`, with ``fake_truth`` (the simulated
         leg's parameters) for logs of ``leg-test --fake``."""
@@ -466,6 +503,7 @@ class LegFitResult:
                 "optimizer": self.optimizer,
             }
         )
+        out["parameters"] = self.parameters()
         out["goal"] = goal_check({k: out[k] for k in GOALS}, {k: Z95 * out[k + "_se"] for k in GOALS}, len(self.files))
         out["friction_resolved"] = self.friction_resolved
         if not self.friction_resolved:  # an upper bound, never a relative precision of about zero
