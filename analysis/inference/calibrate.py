@@ -926,6 +926,13 @@ def _misfit_at_start(
     }
 
 
+def _misfit_brief(misfit: dict[str, Any]) -> str:
+    """The short form of `_misfit_at_start`'s statement, for the progress line."""
+    miss = misfit["frequency_miss_rms"]
+    by = f"miss by {miss:.0%} RMS" if miss is not None else "are not reached"
+    return f"the model does not fit: step frequencies {by} (limit {misfit['limit']:.0%})"
+
+
 def _misfit_noted(estimates: list[ParamEstimate], misfit: dict[str, Any] | None) -> None:
     """Every estimate effective only when the start stated that the model does not fit (`_misfit_at_start`), the
     note saying so first."""
@@ -1607,7 +1614,7 @@ def _calibrate(
     obj = _Objective(sim, glob, data, tick)
     if misfit is not None and not values_only:  # every estimate effective only: a short search settles what a long
         # one would not change (not in a held parameter's recalibration: the calibration it serves fits)
-        budget.cap_search(MISFIT_SEARCH_SIMULATIONS, misfit["statement"])
+        budget.cap_search(MISFIT_SEARCH_SIMULATIONS, misfit["statement"], _misfit_brief(misfit))
         obj.not_converging_fraction = NOT_CONVERGING_FRACTION
         stage("the model does not fit these trials")
     if prior is not None:
