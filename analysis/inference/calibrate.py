@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from rimless.analysis.inference import release
+from rimless.analysis.inference.held import cut_at_bound
 from rimless.analysis.inference.identifiability import least_squares_report, sandwich_se
 from rimless.analysis.inference.model_choice import EXTRA_PARAMETERS, MODEL_CHOICE_P  # noqa: F401 (re-exported)
 from rimless.analysis.inference.sim_budget import (
@@ -427,11 +428,6 @@ def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     return _hermite_curve(g, t0, tt)
 
 
-def _cut(ci: tuple[float, float], bound: float) -> tuple[float, float]:
-    """``ci`` with its ends raised to ``bound`` where below it (a NaN end stays NaN: max keeps its first)."""
-    return (max(ci[0], bound), max(ci[1], bound))
-
-
 @dataclass
 class ParamEstimate:
     name: str
@@ -501,7 +497,7 @@ class ParamEstimate:
     def ci95(self) -> tuple[float, float]:
         """The 95 % interval, cut at the parameter's physical bound (`bound`): a linearised interval that
         reaches below it (across a ridge, c against F_c) holds no valid value there (`ci_at_bound`)."""
-        return _cut(self.ci95_linear, self.bound)
+        return cut_at_bound(self.ci95_linear, self.bound)
 
     @property
     def ci_at_bound(self) -> bool:
@@ -520,7 +516,7 @@ class ParamEstimate:
     def ci95_with_held(self) -> tuple[float, float] | None:
         """The 95 % interval with the held parameters' part, cut at `bound` like ``ci95``."""
         lin = self.ci95_with_held_linear
-        return None if lin is None else _cut(lin, self.bound)
+        return None if lin is None else cut_at_bound(lin, self.bound)
 
     @property
     def ci_with_held_at_bound(self) -> bool:
