@@ -1721,10 +1721,12 @@ def _calibrate(
         xg, ws, sh = obj.unpack(u)
         moved = _slope_moved(obj, u)
         se_slope, slope_parts = _slope_part(obj, J, scale_all, moved, u)
+    # what stopped a not-converged fit: the cap in `_ran_out`'s words; otherwise the least squares' own rounds
+    # (not the simulation budget, which `_ran_out` names: its notes are for stages the budget cut)
     stopped = (
         "its least squares stopped gaining on a wheel the model does not fit"
         if optimizer.get("not_converging")
-        else "the search reached its cap on a wheel the model does not fit"
+        else _ran_out(budget)
         if budget.stopped_by == "misfit cap"
         else "optimiser stopped on its budget"
     )
