@@ -142,8 +142,8 @@ class _TrialData:
     slope_sd_deg: float = math.nan  # 1 sigma of the measured slope (`trial_slope_sigma_deg`)
     first_angle_offset_rad: float = 0.0  # the first impact's theta+ offset, rad (`_first_angles`)
     #: a recording that stalled after its last measured period (the importer's outcome ``stalled``, the chain
-    #: reaching the last impact): the time (s) it was watched after that impact without a further one, so its
-    #: next step's frequency was below 1 / ``stalled_after_s`` (`_stall_residual`); NaN: no stall recorded
+    #: reaching the last impact): the time (s) it was watched after that impact, at rest or turning back, with no
+    #: further impact (its next step never ends: `_stall_residual`); NaN: no stall recorded
     stalled_after_s: float = math.nan
 
     @property
