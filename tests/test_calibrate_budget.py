@@ -113,6 +113,86 @@ def test_simulations_bounded_by_the_stage_structure(unbounded):
     assert res.params[0].identifiable and abs(res.params[0].value - C_TRUE) <= 1.96 * res.params[0].se
 
 
+@pytest.fixture(scope="module")
+def counted(two_trials):
+    """The unbounded calibration with each least squares' own counts recorded: scipy's ``nfev`` and ``njev``
+    per round (counted by scipy, not by the budget) and the budget's count before and after each solve."""
+    import scipy.optimize
+
+    rounds: list[tuple[int, int]] = []  # (nfev, njev) of each round of each solve, in order
+    solves: list[tuple[int, int, int]] = []  # (used before, used after, index of its first round)
+    real_ls, real_solve = scipy.optimize.least_squares, cal._Objective.solve
+    budget_box: list[SimulationBudget] = []
+
+    inside = [False]  # the release fits call least_squares too: only the solves' rounds are recorded
+
+    def ls(*a, **kw):
+        r = real_ls(*a, **kw)
+        if inside[0]:
+            rounds.append((int(r.nfev), int(r.njev or 0)))
+        return r
+
+    def solve(self, *a, **kw):
+        before, k = budget_box[0].used, len(rounds)
+        inside[0] = True
+        try:
+            r = real_solve(self, *a, **kw)
+        finally:
+            inside[0] = False
+        solves.append((before, budget_box[0].used, k))
+        return r
+
+    trials, names = two_trials
+    entries: list[tuple[str, int]] = []
+    budget = SimulationBudget(None)
+    budget_box.append(budget)
+    budget.on_stage = lambda st: entries.append((st, budget.used))
+    mp = pytest.MonkeyPatch()
+    mp.setattr(scipy.optimize, "least_squares", ls)
+    mp.setattr(cal._Objective, "solve", solve)
+    try:
+        res = cal.calibrate(trials, names, ["c"], budget=budget)
+    finally:
+        mp.undo()
+    return res, budget, entries, rounds, solves
+
+
+def measured_solve_bound(rounds: list[tuple[int, int]], n_t: int, n_g: int) -> int:
+    """`solve_bound` with scipy's own counts in place of `MAX_NFEV` a round: per residual evaluation one walk per
+    trial, per Jacobian (`_Objective.jac`) the trials at u, one per global and one per release speed; each walk
+    at most two (`_residuals` walks again, longer, when the simulated walk is faster than the measured window)."""
+    return sum(2 * n_t * (nfev + njev * (1 + n_g + 1)) for nfev, njev in rounds)
+
+
+@pytest.mark.slow
+def test_each_least_squares_stays_within_its_own_evaluations(counted):
+    """Tighter than the stage bound, on the same stage structure: each least squares (the profile's start, the
+    first-angle offsets' re-solve, the polish, ...) runs no more walks than scipy's own count of its evaluations
+    and Jacobians allows, and the whole calibration no more than the sum of those, the start's release fits at
+    their worst (`release_fit_bounds`), the first-angle fits and the closing reserve. Measured (regression
+    snapshot, session 21, c on the two trials): 539 simulations against 3012 (the stage bound: 5732, counting
+    60 evaluations a round); the three least squares ran 16, 30 and 6 walks against 48, 80 and 32 (scipy's
+    3, 5 and 2 evaluations and Jacobians); what is left is the start's release fits at their worst (1982 against
+    the 424 run)."""
+    res, budget, entries, rounds, solves = counted
+    n_t, n_g = 2, 1
+    assert solves and rounds
+    bounds = []
+    for i, (before, after, k) in enumerate(solves):
+        end = solves[i + 1][2] if i + 1 < len(solves) else len(rounds)
+        mine = rounds[k:end]
+        assert after - before <= measured_solve_bound(mine, n_t, n_g), (i, after - before, mine)
+        bounds.append(measured_solve_bound(mine, n_t, n_g))
+    f = release_fit_bounds()
+    start = n_t * (f["full"] + (len(cal.PROFILE_FACTORS) + cal.REFINE_ROUNDS) * f["warm"] + f["from_w0"]) + 6 * n_t
+    central = 2 * (2 * n_t + n_t * (2 * n_g + 2))  # the polish's costs and central Jacobian
+    total = start + sum(bounds) + n_t * f["first_angle"] + central + closing_reserve(n_t, n_g)
+    starts = 1 + ("least squares from Table 1" in dict(entries))
+    assert total < stage_bound(n_t, n_g, starts)  # never looser than the stage bound
+    assert budget.used <= total, (budget.used, total)
+    assert res.params[0].identifiable
+
+
 @pytest.mark.slow
 def test_a_tiny_budget_stops_in_the_least_squares_and_says_so(two_trials, unbounded):
     """With just enough for the start and a few evaluations, the least squares stop at their lowest point: not

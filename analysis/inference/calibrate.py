@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from rimless.analysis.inference import release
+from rimless.analysis.inference.held import cut_at_bound
 from rimless.analysis.inference.identifiability import least_squares_report, sandwich_se
 from rimless.analysis.inference.model_choice import EXTRA_PARAMETERS, MODEL_CHOICE_P  # noqa: F401 (re-exported)
 from rimless.analysis.inference.sim_budget import (
@@ -140,13 +141,30 @@ class _TrialData:
     refined_release_rad_s: float = math.nan
     slope_sd_deg: float = math.nan  # 1 sigma of the measured slope (`trial_slope_sigma_deg`)
     first_angle_offset_rad: float = 0.0  # the first impact's theta+ offset, rad (`_first_angles`)
+    #: a recording that stalled after its last measured period (the importer's outcome ``stalled``, the chain
+    #: reaching the last impact): the time (s) it was watched after that impact, at rest or turning back, with no
+    #: further impact (its next step never ends: `_stall_residual`); NaN: no stall recorded
+    stalled_after_s: float = math.nan
+
+    @property
+    def stall_rows(self) -> int:
+        """1 when the trial recorded a stall (one residual says the simulated walk must stall too), else 0."""
+        return int(math.isfinite(self.stalled_after_s))
 
 
 def _trial_data(trial: Any, name: str) -> _TrialData | str:
     from rimless.analysis.inference.sustained import consecutive_periods, trial_slope_sigma_deg
 
     chains = consecutive_periods(trial)
-    if not chains or chains[0].size < 2:
+    imp_all = np.asarray(getattr(trial, "impact_time_s", np.zeros(0)), float)
+    stalled_after = _stalled_after(trial, chains, imp_all)
+    need = 1 if math.isfinite(stalled_after) else 2  # a recorded stall is a second fact about the walk
+    if not chains or chains[0].size < need:
+        if str(getattr(trial.meta, "outcome", "")) == "stalled" and imp_all.size < 2:
+            return (
+                f"{name}: it stalled after {imp_all.size} impact(s): no step period to fit its release speed from "
+                "(the stall alone constrains only that release speed)"
+            )
         return f"{name}: fewer than two consecutive step periods"
     slope = float(trial.meta.slope_deg)
     if not 0.0 <= slope < math.degrees(ALPHA_RAD / 2):
@@ -171,8 +189,30 @@ def _trial_data(trial: Any, name: str) -> _TrialData | str:
     ref = str(getattr(trial.meta, "com_height_reference", ""))
     slope_sd = trial_slope_sigma_deg(trial.meta)[0]
     return _TrialData(
-        name, float(trial.meta.slope_deg), periods, t[win], y[win], ref.startswith("slope plane"), slope_sd_deg=slope_sd
+        name,
+        float(trial.meta.slope_deg),
+        periods,
+        t[win],
+        y[win],
+        ref.startswith("slope plane"),
+        slope_sd_deg=slope_sd,
+        stalled_after_s=stalled_after,
     )
+
+
+def _stalled_after(trial: Any, chains: list[np.ndarray], impacts: np.ndarray) -> float:
+    """The time (s) a recording that stalled was watched after its last impact (to its last valid CoM sample),
+    when the importer's outcome is ``stalled`` and the first chain of periods ends at that last impact; NaN
+    otherwise (a walk whose data stop, or a chain broken by a gap: no stall is known after the fitted steps)."""
+    if str(getattr(trial.meta, "outcome", "")) != "stalled" or not chains or impacts.size < 2:
+        return math.nan
+    if abs(float(np.sum(chains[0])) - float(impacts[-1] - impacts[0])) > 1e-6:
+        return math.nan
+    t = np.asarray(trial.time_s, float)
+    y = np.asarray(trial.series["com_height"], float)
+    seen = t[np.isfinite(y)]
+    after = float(seen[-1] - impacts[-1]) if seen.size else math.nan
+    return after if math.isfinite(after) and after > 0.0 else math.nan
 
 
 @dataclass
@@ -291,13 +331,28 @@ def _residuals(
     rp = f_sim - 1.0 / d.periods_s
     if not with_com or d.t_s.size == 0:
         return rp, np.zeros(0)
-    if len(g.steps) < 2:
-        return rp, np.full(d.t_s.size, float(np.mean(d.com_m)) if d.from_plane else 0.0)
+    if len(g.steps) < 2:  # stalled in the release step: no simulated CoM curve over the window. The wheel rests,
+        # so the curve is flat: a flat curve at the measured mean (the offset it would be fitted), never free
+        return rp, float(np.mean(d.com_m)) - d.com_m
     t0 = g.steps[1].t_start_s
     tt = d.t_s - shift_s
     s = _smooth_curve(g, t0, tt)
     off = 0.0 if d.from_plane else float(np.mean(s - d.com_m))
     return rp, s - (d.com_m + off)
+
+
+def _stall_residual(sim: _Sim, params: Any, d: _TrialData, w: float) -> np.ndarray:
+    """The residual (Hz) of a recorded stall (``d.stalled_after_s`` finite): after its last impact the wheel
+    turned back or came to rest (the importer's outcome ``stalled``, `rimless.analysis.kinematics.walk`), so its
+    next step never ended: frequency 0. The simulated walk's next step (after the measured ones) has frequency f,
+    0 when it stalls or fails, the limit of a period that grows without bound: the residual f is 0 when the
+    simulation stalls too and grows continuously as it walks on. Empty for a trial that recorded no stall."""
+    if not d.stall_rows:
+        return np.zeros(0)
+    n = d.periods_s.size
+    g = sim.walk(params, d.slope_deg, w, n + 2, True, d.first_angle_offset_rad)  # `_residuals`' walk (cached)
+    f_next = 1.0 / g.steps[1 + n].period_s if len(g.steps) > 1 + n else 0.0
+    return np.array([f_next])
 
 
 def _hermite_parts(g: Any, t0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -373,11 +428,6 @@ def _smooth_curve(g: Any, t0: float, tt: np.ndarray) -> np.ndarray:
     return _hermite_curve(g, t0, tt)
 
 
-def _cut(ci: tuple[float, float], bound: float) -> tuple[float, float]:
-    """``ci`` with its ends raised to ``bound`` where below it (a NaN end stays NaN: max keeps its first)."""
-    return (max(ci[0], bound), max(ci[1], bound))
-
-
 @dataclass
 class ParamEstimate:
     name: str
@@ -447,7 +497,7 @@ class ParamEstimate:
     def ci95(self) -> tuple[float, float]:
         """The 95 % interval, cut at the parameter's physical bound (`bound`): a linearised interval that
         reaches below it (across a ridge, c against F_c) holds no valid value there (`ci_at_bound`)."""
-        return _cut(self.ci95_linear, self.bound)
+        return cut_at_bound(self.ci95_linear, self.bound)
 
     @property
     def ci_at_bound(self) -> bool:
@@ -466,7 +516,7 @@ class ParamEstimate:
     def ci95_with_held(self) -> tuple[float, float] | None:
         """The 95 % interval with the held parameters' part, cut at `bound` like ``ci95``."""
         lin = self.ci95_with_held_linear
-        return None if lin is None else _cut(lin, self.bound)
+        return None if lin is None else cut_at_bound(lin, self.bound)
 
     @property
     def ci_with_held_at_bound(self) -> bool:
@@ -872,6 +922,13 @@ def _misfit_at_start(
     }
 
 
+def _misfit_brief(misfit: dict[str, Any]) -> str:
+    """The short form of `_misfit_at_start`'s statement, for the progress line."""
+    miss = misfit["frequency_miss_rms"]
+    by = f"miss by {miss:.0%} RMS" if miss is not None else "are not reached"
+    return f"the model does not fit: step frequencies {by} (limit {misfit['limit']:.0%})"
+
+
 def _misfit_noted(estimates: list[ParamEstimate], misfit: dict[str, Any] | None) -> None:
     """Every estimate effective only when the start stated that the model does not fit (`_misfit_at_start`), the
     note saying so first."""
@@ -925,16 +982,22 @@ class _Objective:
         self.sig = {"t": 0.02, "h": 0.5e-3}  # step frequency (Hz), CoM height (m)
         self.last_jac: tuple[np.ndarray, np.ndarray] | None = None  # (u, J) of the latest `jac_kept` call
         self.n_g, self.n_t = glob.n, len(data)
-        sizes = [d.periods_s.size + d.t_s.size for d in data]
+        sizes = [d.periods_s.size + d.stall_rows + d.t_s.size for d in data]
         self.offs = np.concatenate([[0], np.cumsum(sizes)])
 
     def trial_res(self, p: Any, i: int, w: float, shift: float) -> np.ndarray:
         d = self.data[i]
         if p is None:
-            return np.full(d.periods_s.size + d.t_s.size, 1e3)
+            return np.full(d.periods_s.size + d.stall_rows + d.t_s.size, 1e3)
         rp, rh = _residuals(self.sim, p, d, w, shift)
         self.tick()
-        return np.concatenate([rp / self.sig["t"], rh / self.sig["h"]])
+        return self.scaled(p, d, w, rp, rh)
+
+    def scaled(self, p: Any, d: _TrialData, w: float, rp: np.ndarray, rh: np.ndarray) -> np.ndarray:
+        """A trial's residual rows from `_residuals`' parts: periods, its recorded stall (`_stall_residual`,
+        on the period scale), CoM heights, each over its sigma."""
+        stall = _stall_residual(self.sim, p, d, w)
+        return np.concatenate([rp / self.sig["t"], stall / self.sig["t"], rh / self.sig["h"]])
 
     def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(globals, release speeds rad/s, time shifts s); u holds globals relative to Table 1, shifts in ms."""
@@ -1191,14 +1254,20 @@ def _slope_moved(obj: _Objective, u: np.ndarray) -> _Moved:
     return moved
 
 
-def _slope_part(obj: _Objective, J: np.ndarray, scale: np.ndarray, moved: _Moved) -> tuple[np.ndarray, list]:
-    """`rimless.analysis.inference.trial_slopes.slope_response` at the solution of ``moved`` (`_slope_moved`): the
-    globals' standard errors from the trials' measured slopes, and each trial's parts."""
+def _slope_part(
+    obj: _Objective, J: np.ndarray, scale: np.ndarray, moved: _Moved, u: np.ndarray
+) -> tuple[np.ndarray, list]:
+    """`rimless.analysis.inference.trial_slopes.slope_response` at the solution u of ``moved`` (`_slope_moved`):
+    the globals' standard errors from the trials' measured slopes, and each trial's parts."""
     from rimless.analysis.inference.trial_slopes import slope_response
+
+    xg, ws, _ = obj.unpack(u)
+    p = obj.glob.params(xg)
 
     def scaled(i: int, d_slope_deg: float) -> np.ndarray:
         rp, rh = moved(i, d_slope_deg)
-        return np.concatenate([rp / obj.sig["t"], rh / obj.sig["h"]])
+        d = dataclasses.replace(obj.data[i], slope_deg=obj.data[i].slope_deg + d_slope_deg)
+        return obj.scaled(p, d, float(ws[i]), rp, rh)
 
     return slope_response(J, obj.n_g, scale, [d.slope_sd_deg for d in obj.data], scaled, obj.offs)
 
@@ -1541,7 +1610,7 @@ def _calibrate(
     obj = _Objective(sim, glob, data, tick)
     if misfit is not None and not values_only:  # every estimate effective only: a short search settles what a long
         # one would not change (not in a held parameter's recalibration: the calibration it serves fits)
-        budget.cap_search(MISFIT_SEARCH_SIMULATIONS, misfit["statement"])
+        budget.cap_search(MISFIT_SEARCH_SIMULATIONS, misfit["statement"], _misfit_brief(misfit))
         obj.not_converging_fraction = NOT_CONVERGING_FRACTION
         stage("the model does not fit these trials")
     if prior is not None:
@@ -1651,11 +1720,13 @@ def _calibrate(
         se_sand = (prior.sandwich_se if prior is not None else sandwich_se)(J, obj.fun(u), obj.offs, glob.n, scale_all)
         xg, ws, sh = obj.unpack(u)
         moved = _slope_moved(obj, u)
-        se_slope, slope_parts = _slope_part(obj, J, scale_all, moved)
+        se_slope, slope_parts = _slope_part(obj, J, scale_all, moved, u)
+    # what stopped a not-converged fit: the cap in `_ran_out`'s words; otherwise the least squares' own rounds
+    # (not the simulation budget, which `_ran_out` names: its notes are for stages the budget cut)
     stopped = (
         "its least squares stopped gaining on a wheel the model does not fit"
         if optimizer.get("not_converging")
-        else "the search reached its cap on a wheel the model does not fit"
+        else _ran_out(budget)
         if budget.stopped_by == "misfit cap"
         else "optimiser stopped on its budget"
     )
@@ -2529,7 +2600,7 @@ def _held_exact_probe(
     scale_all = np.concatenate([glob2.scale, np.ones(2 * n_t)])
     se_m, corr_rich, _, _ = least_squares_report(J, n_g + 1, scale_all)
     se_s = sandwich_se(J, obj2.fun(x_rich), obj2.offs, n_g + 1, scale_all)
-    se_sl, _ = _slope_part(obj2, J, scale_all, _slope_moved(obj2, x_rich))
+    se_sl, _ = _slope_part(obj2, J, scale_all, _slope_moved(obj2, x_rich), x_rich)
     se_rich = [
         max(math.hypot(float(se_m[k]), float(se_sl[k])) if math.isfinite(se_sl[k]) else float(se_m[k]), float(se_s[k]))
         for k in range(n_g + 1)

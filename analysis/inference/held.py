@@ -221,14 +221,19 @@ def widen(value: float, ci: tuple[float, float], se_par: float) -> list[float]:
 SLOPE_BOUND_DEG = 0.0
 
 
+def cut_at_bound(ci: Sequence[float], bound: float) -> tuple[float, float]:
+    """An interval ``ci`` with its ends raised to ``bound`` where below it (no valid value lies below: a fitted
+    parameter's lower bound, a critical slope's 0 deg); a NaN end stays NaN (max keeps its first argument)."""
+    return (max(ci[0], bound), max(ci[1], bound))
+
+
 def _slope_ci(ci: list[float]) -> dict[str, Any]:
     """``ci_deg``: a critical slope's 95 % interval with the parameters, cut at `SLOPE_BOUND_DEG` where the
     linearised one reaches below it (``ci_at_bound``; the uncut one ``ci_linear_deg``)."""
-    at = ci[0] < SLOPE_BOUND_DEG
     return {
-        "ci_deg": [max(ci[0], SLOPE_BOUND_DEG), max(ci[1], SLOPE_BOUND_DEG)],
+        "ci_deg": list(cut_at_bound(ci, SLOPE_BOUND_DEG)),
         "ci_linear_deg": ci,
-        "ci_at_bound": at,
+        "ci_at_bound": ci[0] < SLOPE_BOUND_DEG,
     }
 
 

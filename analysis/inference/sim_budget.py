@@ -72,6 +72,8 @@ class SimulationBudget:
     #: search stops for it (`cap_search`; the closing stages keep the reserve above it)
     misfit: str | None = None
     search_cap: int | None = None
+    #: the misfit's short form, shown beside every stage on the progress line once stated (`shown`)
+    misfit_brief: str | None = None
     #: what refused the first simulation: "budget" or "misfit cap" (None while neither did)
     stopped_by: str | None = None
     #: the kept calibration's own simulations (the result's ``simulations``), when the caller set it
@@ -102,18 +104,29 @@ class SimulationBudget:
             raise BudgetSpent(self.stage)
         self.used += 1
 
-    def cap_search(self, simulations: int, misfit: str) -> None:
-        """The model does not fit these trials (``misfit``, the statement): the search may run ``simulations``
-        more (never beyond the budget's own limit); the closing stages keep their reserve."""
+    def cap_search(self, simulations: int, misfit: str, brief: str | None = None) -> None:
+        """The model does not fit these trials (``misfit``, the statement; ``brief``, its short form for the
+        progress line): the search may run ``simulations`` more (never beyond the budget's own limit); the
+        closing stages keep their reserve. The progress line says so from now on (`shown`)."""
         self.misfit = misfit
         if self.search_cap is None:
             self.search_cap = self.used + simulations
+        self.misfit_brief = (brief or "the model does not fit these trials") + (
+            f"; effective only, search capped at {self.search_cap} simulations"
+        )
+        if self.on_stage:
+            self.on_stage(self.shown())
+
+    def shown(self) -> str:
+        """The stage as ``on_stage`` (the progress line) gets it: its name, then the misfit's short form in
+        brackets once the start stated one (`cap_search`). ``stage``, ``stopped_in`` and the JSON keep the name."""
+        return self.stage + (f" [{self.misfit_brief}]" if self.misfit_brief else "")
 
     def enter(self, name: str) -> None:
-        """The calibration reached stage ``name`` (progress shows it)."""
+        """The calibration reached stage ``name`` (progress shows it, `shown`)."""
         self.stage = self.prefix + name
         if self.on_stage:
-            self.on_stage(self.stage)
+            self.on_stage(self.shown())
 
     def skip(self, what: str, consequence: str) -> None:
         """Record that ``what`` was stopped or not run for the budget, and what that means for the result."""

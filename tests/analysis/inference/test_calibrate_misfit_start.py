@@ -113,7 +113,11 @@ def test_trials_the_model_cannot_fit_are_classified_at_the_start_and_the_search_
     m = s["optimizer"]["misfit"]
     assert m is not None and m["stage"] == "start" and m["frequency_miss_rms"] > cal.MISFIT_FREQUENCY_FRACTION
     assert s["budget"]["misfit"] == m["statement"] and m["statement"] in s["budget"]["statement"]
-    after_start = dict(entries)["least squares from the profile's start"]
+    brief = f" [{budget.misfit_brief}]"  # the progress line says the misfit beside every stage from its statement
+    stated = next(i for i, (st, _) in enumerate(entries) if st.endswith(brief))
+    assert all(st.endswith(brief) for st, _ in entries[stated:]) and not any(brief in st for st, _ in entries[:stated])
+    assert f"miss by {m['frequency_miss_rms']:.0%} RMS" in brief and f"capped at {s['budget']['search_cap']}" in brief
+    after_start = {st.removesuffix(brief): n for st, n in entries}["least squares from the profile's start"]
     # stated before the least squares: the cap counts from then (the starts' shifts and sigmas are in it)
     assert s["budget"]["search_cap"] - cal.MISFIT_SEARCH_SIMULATIONS <= after_start
     assert budget.used <= after_start + cal.MISFIT_SEARCH_SIMULATIONS + closing_reserve(len(trials), 1)
@@ -126,6 +130,37 @@ def test_trials_the_model_cannot_fit_are_classified_at_the_start_and_the_search_
         assert "optimiser stopped on its budget" not in e.note  # the cap or the stalled gain stopped it
         assert e.se_held is None
         assert math.isfinite(e.value)
+
+
+def test_the_progress_line_shows_the_misfit_from_its_statement_on() -> None:
+    """`SimulationBudget.on_stage` (the progress line's stage) gets each stage's name, then, once the start stated
+    a misfit (`cap_search`), the same stage again and every later one with the misfit's short form in brackets;
+    ``stage`` and ``stopped_in`` (JSON) keep the bare names. Fails before: the line never said it."""
+    seen: list[str] = []
+    budget = SimulationBudget(5, on_stage=seen.append)
+    budget.enter("start (releases and profile)")
+    budget.spend()
+    budget.cap_search(3, "the model does not fit these trials: ... (long)", "the model does not fit: x")
+    budget.enter("least squares")
+    brief = "the model does not fit: x; effective only, search capped at 4 simulations"
+    assert seen == [
+        "start (releases and profile)",
+        f"start (releases and profile) [{brief}]",
+        f"least squares [{brief}]",
+    ]
+    for _ in range(3):
+        budget.spend()
+    with pytest.raises(cal.BudgetSpent):
+        budget.spend()
+    assert budget.stage == budget.stopped_in == "least squares" and budget.stopped_by == "misfit cap"
+    assert budget.as_dict()["misfit"] == "the model does not fit these trials: ... (long)"
+
+
+def test_the_misfit_brief_names_the_miss_and_the_limit() -> None:
+    m = {"frequency_miss_rms": 0.384, "limit": cal.MISFIT_FREQUENCY_FRACTION}
+    assert cal._misfit_brief(m) == "the model does not fit: step frequencies miss by 38% RMS (limit 25%)"
+    m["frequency_miss_rms"] = None  # every walk stalled: no finite miss
+    assert "are not reached" in cal._misfit_brief(m)
 
 
 def test_a_probe_the_cap_stopped_says_the_cap_not_the_budget() -> None:
