@@ -417,6 +417,19 @@ def calibrate_cmd(
         raise typer.Exit(EXIT_REFUSED)
 
 
+def start_name(params: Iterable[Any]) -> str:
+    """What the calibration started from and compares with: "Table 1" when every fitted parameter's start (JSON
+    ``table1``, the wheel's stated value) is Table 1's, else "wheel" (a wheel file stating c = 12 was shown under
+    "Table 1"). ``params``: the JSON ``params`` rows, or `ParamEstimate` objects."""
+    from rimless.analysis.inference.calibrate import FIT_FIELDS
+    from rimless.sim.model.params import WheelParams
+
+    table1 = WheelParams()
+    rows = [(p["name"], p["table1"]) if isinstance(p, dict) else (p.name, p.table1) for p in params]
+    same = all(n in FIT_FIELDS and v == getattr(table1, FIT_FIELDS[n][0]) for n, v in rows)
+    return "Table 1" if same else "wheel"
+
+
 def _print_calibration(out: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -424,8 +437,9 @@ def _print_calibration(out: dict[str, Any]) -> None:
     from rimless.sim.model.uncertain import SYMBOLS
 
     con = Console()
+    start = start_name(out["params"])
     t = Table(title=f"calibration of the {out['model'].upper()} model", show_edge=False)
-    for col in ("parameter", "Table 1", "fitted", "± 1 sigma", "95 % interval", "identifiable"):
+    for col in ("parameter", start, "fitted", "± 1 sigma", "95 % interval", "identifiable"):
         t.add_column(col, justify="left" if col == "parameter" else "right", no_wrap=True)
     for p in out["params"]:
         ci = p.get("ci95")
@@ -517,7 +531,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
         con.print(f"model choice, {name} ({row['why_extra']}): {row['statement']}", markup=False, highlight=False)
     adequacy = out.get("adequacy") or {}
     per_trial = {row["trial"]: row for row in adequacy.get("per_trial", [])}
-    r = Table(title="RMS residuals, Table 1 model -> calibrated", show_edge=False)
+    r = Table(title=f"RMS residuals, {start} model -> calibrated", show_edge=False)
     r.add_column("trial", overflow="fold", min_width=12)  # a long name wraps; the numbers are never cut
     for col, width in (("deg", 5), ("dT ms", 6), ("-> ms", 6), ("CoM mm", 6), ("-> mm", 6)):
         r.add_column(col, justify="right", no_wrap=True, min_width=width)
@@ -539,7 +553,7 @@ def _print_calibration(out: dict[str, Any]) -> None:
         highlight=False,
     )
     for row, stem in zip(out["residuals"], shown):
-        for line in _residual_notes(row):
+        for line in _residual_notes(row, start):
             con.print(f"  {stem}: {line}", markup=False, highlight=False)
     if adequacy:
         noise = adequacy.get("noise", {})
@@ -592,12 +606,13 @@ def _print_calibration(out: dict[str, Any]) -> None:
         )
 
 
-def _residual_notes(row: dict[str, Any]) -> list[str]:
-    """Why a residual row shows "–": its Table 1 and calibrated notes (one line when they agree)."""
+def _residual_notes(row: dict[str, Any], start: str = "Table 1") -> list[str]:
+    """Why a residual row shows "–": its notes at the start (`start_name`) and calibrated (one line when they
+    agree)."""
     a, b = row.get("table1_note"), row.get("calibrated_note")
     if a and a == b:
-        return [f"Table 1 and calibrated: {a}"]
-    return [f"{who}: {n}" for who, n in (("Table 1", a), ("calibrated", b)) if n]
+        return [f"{start} and calibrated: {a}"]
+    return [f"{who}: {n}" for who, n in ((start, a), ("calibrated", b)) if n]
 
 
 def _adequacy_cell(row: dict[str, Any] | None) -> str:
@@ -702,7 +717,7 @@ def critical_lines(res: Any) -> str:
     if cal is not None:
         for p in cal.params:
             lines.append(
-                f"calibrated {p.name}: {p.value:.3f} ± {p.se:.3f} {p.unit} (Table 1: {p.table1:g})"
+                f"calibrated {p.name}: {p.value:.3f} ± {p.se:.3f} {p.unit} ({start_name([p])}: {p.table1:g})"
                 + ("" if p.identifiable else f" NOT identifiable: {p.note}")
             )
         sep = getattr(cal, "loss_separation", None)

@@ -673,6 +673,17 @@ class _Globals:
     def n(self) -> int:
         return len(self.fields)
 
+    @property
+    def start_label(self) -> str:
+        """The name of the start at ``x0``: "Table 1" when the fitted parameters' values are Table 1's, else
+        "the wheel's values" (a wheel file that states c or k: session 21's audit found that start called
+        "Table 1" at c = 12, k = 2200)."""
+        from rimless.sim.model.params import WheelParams
+
+        table1 = WheelParams()
+        same = all(float(getattr(self.base, f)) == float(getattr(table1, f)) for f in self.fields)
+        return "Table 1" if same else "the wheel's values"
+
     def params(self, xg: np.ndarray) -> Any:
         """The wheel with these global values, or None when they are not a valid wheel."""
         try:
@@ -1396,10 +1407,16 @@ def _estimates(
     return estimates
 
 
+RELATIVE_SHOWN_UP_TO = 10.0  # a relative uncertainty above this (1000 %) is printed as "over 1000%"
+
+
 def _over_limit(rel: float) -> str:
     """`rel` against `NOT_IDENTIFIABLE_REL_SE` as percentages, with the digits that tell them apart ("50.4% > 50%",
-    never "50% > 50%")."""
+    never "50% > 50%"); above 1000 % "over 1000% > 50%" (a value near 0, as F_c on a frictionless wheel, gave
+    "120522766522%": the interval, not the ratio, says what the data allow)."""
     limit = f"{NOT_IDENTIFIABLE_REL_SE:.0%}"
+    if not rel < RELATIVE_SHOWN_UP_TO:
+        return f"over {RELATIVE_SHOWN_UP_TO:.0%} > {limit}"
     for digits in range(4):
         shown = f"{rel:.{digits}%}"
         if float(shown.rstrip("%")) > NOT_IDENTIFIABLE_REL_SE * 100:
@@ -1632,14 +1649,15 @@ def _calibrate(
     if multi_start == "ridge":  # the previous rule (the benchmark's): Table 1 only on a ridge or without convergence
         best = runs[0][1]
         if glob.n >= 2 and ug_start.any() and (best.status == 0 or _on_ridge(best.jac, glob.n)):
+            label = glob.start_label
             if budget.spent:
-                budget.skip("start Table 1", "not run: the minimum may depend on the start")
+                budget.skip(f"start {label}", "not run: the minimum may depend on the start")
             else:
-                budget.enter("least squares from Table 1")
+                budget.enter(f"least squares from {label}")
                 try:
-                    runs.append(("Table 1", obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)))
+                    runs.append((label, obj.solve(obj.start(np.zeros(glob.n), ws_t1), lo, hi, max_rounds)))
                 except BudgetSpent:
-                    budget.skip("start Table 1", "not run: the minimum may depend on the start")
+                    budget.skip(f"start {label}", "not run: the minimum may depend on the start")
     elif multi_start:
         for label, ug_s in _spread_starts(glob, ug_refined, profile):
             if budget.spent:
@@ -2108,7 +2126,7 @@ def _spread_starts(
     if glob.n == 1 and _one_valley(profile[0]):
         return out
     if np.any(ug_refined != 0):
-        out.append(("Table 1", np.zeros(glob.n)))
+        out.append((glob.start_label, np.zeros(glob.n)))
     if glob.n >= 2:
         for i in range(2):
             ug = np.array(

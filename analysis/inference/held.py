@@ -372,8 +372,9 @@ def carry_critical(
     """Propagate the held parameters of ``win`` (`rimless.sim.model.uncertain.WheelInput`) into the chosen
     estimate from the trials and the models' critical slopes of ``res``; sets ``res.parameters`` and
     ``res.held`` (the JSON's ``parameters`` and ``parameter_uncertainty``) and returns the latter.
-    ``central_models`` False: the models' sensitivities by forward differences (half the Algorithm 1 runs; the
-    report and the demo); ``warm`` False: each of them by the straightforward `model_critical_slope` (else
+    ``central_models`` False: the models' sensitivities by forward differences (half the Algorithm 1 runs; no
+    command uses it since session 21: the report and the demo take central ones as `trials critical-slope` does);
+    ``warm`` False: each of them by the straightforward `model_critical_slope` (else
     warm-started, `WarmCritical`). ``estimate_inertia`` (default): the inertia ratio the trials' step periods
     determine (`inertia_from_trials`) replaces an inertia the input does not state, or is compared with a stated
     one (``res.inertia``, ``res.warnings``)."""

@@ -274,3 +274,13 @@ def test_a_relative_uncertainty_just_over_the_limit_is_shown_over_it() -> None:
         assert limit == f"{NOT_IDENTIFIABLE_REL_SE:.0%}"
         assert float(shown.rstrip("%")) > NOT_IDENTIFIABLE_REL_SE * 100
         assert abs(float(shown.rstrip("%")) / 100 - rel) <= 0.005
+
+
+def test_a_relative_uncertainty_of_a_value_near_zero_is_not_printed_in_billions() -> None:
+    """F_c near 0 on a frictionless wheel printed "relative uncertainty 120522766522% > 50%" (session 21's audit):
+    above 1000 % the note says "over 1000%", and an infinite ratio (value 0) reads the same."""
+    from rimless.analysis.inference.calibrate import _over_limit
+
+    for rel in (1.205e9, 10.0, math.inf):
+        assert _over_limit(rel) == "over 1000% > 50%"
+    assert _over_limit(9.99) == "999% > 50%"
