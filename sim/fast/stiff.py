@@ -49,11 +49,8 @@ from rimless.sim.model.friction import FRICTION_PHASE0
 _jit = kernel
 _inner = kernel(python=False)
 
-#: a phase counts as stiff (single support integrated by `run_phase_stiff`) when the free leg's fastest root
-#: |lambda| = max(c / m, sqrt(k / m)) (1/s) exceeds this: DOP853's stability limit then allows steps below some
-#: 6 / 5000 = 1.2 ms, while the step's own motion (hub swing, ~15 rad/s) allows tens of ms at rtol 1e-8.
-#: Table 1 (|lambda| ~ 270 1/s) stays on DOP853 with a margin of 18.
-STIFF_LEG_RATE = 5000.0
+# the switch (rimless.sim.fast.model: single support by this method, double support's field by the pivoted KKT)
+STIFF_LEG_RATE = fm.STIFF_LEG_RATE
 
 # Kaps-Rentrop with Shampine's parameters (gamma = 1/2): stages g_i solve (I / (gamma h) - J) g_i = ...
 _GAM = 0.5
@@ -83,17 +80,8 @@ MAX_REJECTIONS = 10_000
 _FD_STEP = 6e-6  # central differences of the variational field (B g): about eps^(1/3) relative to the state
 
 
-@_jit
-def leg_rate(p):
-    """The free leg's fastest root |lambda| = max(c / m, sqrt(k / m)), 1/s (p: the parameter vector)."""
-    m, k, c = p[1], p[4], p[5]
-    return max(c / m, math.sqrt(k / m))
-
-
-@_jit
-def leg_stiff(p):
-    """Whether single support is integrated by the Rosenbrock method (`STIFF_LEG_RATE`)."""
-    return leg_rate(p) > STIFF_LEG_RATE
+leg_rate = fm.leg_rate  # max(c / m, sqrt(k / m)), 1/s
+leg_stiff = fm.leg_stiff  # leg_rate(p) > STIFF_LEG_RATE
 
 
 @_inner
