@@ -481,15 +481,11 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
         best_prev = False
         any_active = False
         for e in range(ng):
-            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
-            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
-            if (up and directions[e] > 0) or (down and directions[e] < 0):
+            if rk.crossing(g[e], g_new[e], directions[e], strict):
                 any_active = True
         for e in range(ng):
-            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
-            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             root = np.inf
-            if (up and directions[e] > 0) or (down and directions[e] < 0):
+            if rk.crossing(g[e], g_new[e], directions[e], strict):
                 root, nf = rk.brent_on_dense(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
                 nfev += nf if rk.needs_lambda(codes[e]) else 0
             elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
@@ -522,19 +518,9 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
                 best_prev = False
         t_stop = best_t if best_e >= 0 else t_new
         if recording:
-            ybuf = np.empty(N)
-            while True:
-                tg = t0 + next_grid * record_dt
-                if tg >= t_stop:
-                    break
-                rec_t, rec_y = rk.grow_record(rec_t, rec_y, nrec)
-                rec_t[nrec] = tg
-                rk.dense_eval(F, y, (tg - t) / h, 10, ybuf)
-                for i in range(10):
-                    rec_y[nrec, i] = ybuf[i]
-                nrec += 1
-                next_grid += 1
-            rec_t, rec_y = rk.grow_record(rec_t, rec_y, nrec)
+            rec_t, rec_y, nrec, next_grid = rk.record_grid(
+                rec_t, rec_y, nrec, next_grid, t0, record_dt, t_stop, F, y, t, h, np.empty(N)
+            )
         if best_e >= 0:
             y_end = np.empty(N)
             if best_prev:  # the dip was in the previous step: refine there (its Jacobian again)
@@ -551,16 +537,10 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
                 t_ev, nf = _refine(mi, phase, p, codes[best_e], t, best_t, t_new, y, f, Jm, with_diss, y_end, lam, ws)
                 nfev += nf
             if recording:
-                rec_t[nrec] = t_ev
-                for i in range(10):
-                    rec_y[nrec, i] = y_end[i]
-                nrec += 1
+                nrec = rk.record_point(rec_t, rec_y, nrec, t_ev, y_end)
             return rk.STATUS_OK, t_ev, y_end, best_e, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         if recording:
-            rec_t[nrec] = t_new
-            for i in range(10):
-                rec_y[nrec, i] = y_new[i]
-            nrec += 1
+            nrec = rk.record_point(rec_t, rec_y, nrec, t_new, y_new)
         for i in range(N):
             yp_old[i] = y[i]
             for k in range(7):
