@@ -30,7 +30,7 @@ order), its Jacobian against central differences of the map at rtol 1e-12 (dz 1e
 whole step exists there: DOP853 stops with "step size too small" in single support at rtol 1e-10 and 1e-12, and
 scipy's BDF on the Python right-hand side ran over 3.7 min of CPU at rtol 1e-10 without ending.
 
-Run: ``python -m rimless.sim.studies.stiffbench`` (some 20 s on a loaded 2-core machine, after compiling).
+Run: ``python -m rimless.sim.studies.stiffbench`` (25 s of CPU after compiling; 2 min wall at load 7 on 2 cores).
 """
 
 from __future__ import annotations
