@@ -533,11 +533,6 @@ NO_RESULT: dict[str, tuple[list[str], list[str], bool]] = {  # id: (args, words 
         ["no period-1 gait", "20.0000 deg"],
         True,
     ),
-    "sim gaits with legs too light to integrate": (
-        ["sim", "gaits", "--model", "ve", "--leg-mass-kg", "1e-6"],
-        ["integrator gives up", "1e-06 kg"],
-        True,
-    ),
     "paper with c = 60": (
         ["paper", "--c", "60", "--k", "2500:2750:250", "--scheduler", "sync", "--out", "p"],
         ["no period-1 gait", "c = 60"],

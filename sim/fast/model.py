@@ -356,12 +356,51 @@ def kkt_factor(mi, phase, q, qd, p, K, piv):
 WORKSPACE_SIZE = 40  # float64 workspace callers pass to accel_reduced / accel_directional (unused by them)
 
 
+#: a phase counts as stiff (single support integrated by rimless.sim.fast.stiff.run_phase_stiff, double support's
+#: field solved by the pivoted KKT system, `kkt_in_double_support`) when the free leg's fastest root
+#: |lambda| = max(c / m, sqrt(k / m)) (1/s) exceeds this: DOP853's stability limit then allows steps below some
+#: 6 / 5000 = 1.2 ms, while the step's own motion (hub swing, ~15 rad/s) allows tens of ms at rtol 1e-8.
+#: Table 1 (|lambda| ~ 270 1/s) stays on DOP853 and the generated equations with a margin of 18.
+STIFF_LEG_RATE = 5000.0
+
+
+@_jit
+def leg_rate(p):
+    """The free leg's fastest root |lambda| = max(c / m, sqrt(k / m)), 1/s (p: the parameter vector)."""
+    m, k, c = p[1], p[4], p[5]
+    return max(c / m, math.sqrt(k / m))
+
+
+@_jit
+def leg_stiff(p):
+    """Whether the legs are near-massless in the sense of `STIFF_LEG_RATE` (Table 1's are not)."""
+    return leg_rate(p) > STIFF_LEG_RATE
+
+
+@_inner
+def kkt_in_double_support(phase, p):
+    """Whether q'' and lambda of `phase` come from the pivoted KKT solve (accel_kkt, accel_jacobian) instead of
+    the generated reduced equations: in double support with near-massless legs (`leg_stiff`).
+
+    Why: the reduced equations eliminate foot a's constraints through the Cholesky factor of the free block of M
+    (theta, L1, L2), whose L2 row is the trailing foot's mass m alone; the constraint forces then cancel terms of
+    size k (L0 - L2) / m, and q'' carries a rounding error of some eps (m_H / m)^2 m/s^2 (measured against a
+    40-digit solve of the same KKT system: 1.7e-8 at m = 0.1 g, 6.6e-4 at 1 mg, where q'' is ~3). DOP853 then
+    rejects step after step on that noise (1 mg legs: more than 200 000 steps in double support). The pivoted
+    9 x 9 KKT solve (as the reference rimless.sim.model.dynamics.accel) has no such cancellation (1e-14 at
+    1e-4 to 1e-8 kg). Table 1's legs keep the generated equations (their results bit for bit)."""
+    return phase == DLSP and leg_stiff(p)
+
+
 @_jit
 def accel_reduced(mi, phase, q, qd, p, qdd, lam, ws):
     """q'' (5,) and lambda (n,) of a phase from the generated reduced equations (rimless.sim.model.generated.*
     dlsp_accel / slsp_free_accel / slsp_clutched_accel: the free block of M, the pinned rows, the bias and in
     double support foot a's constraint rows, common subexpressions shared). Same solution as the full KKT
-    solve (accel_kkt) for any state; False if singular. ws is not used (kept for the callers' signature)."""
+    solve (accel_kkt) for any state, which replaces them where they lose accuracy (`kkt_in_double_support`);
+    False if singular. ws is not used (kept for the callers' signature)."""
+    if kkt_in_double_support(phase, p):
+        return accel_kkt(mi, phase, q, qd, p, qdd, lam)
     return _reduced_of(mi, phase, q, qd, p, qdd, lam)
 
 
@@ -370,7 +409,20 @@ def accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws):
     """q'', lambda (as accel_reduced) and the directional derivatives dqdd[:, c] = (dq''/dy) V[:, c] for the
     columns of V (10 x ncol), exactly, from the generated reduced equations (*_dir): the differentiated KKT
     system [[M, -A^T], [A, 0]] [dq''; dlambda] = [-dh - dM q'' + dA^T lambda ; -d(A' q') - dA q''] in the
-    phase's free coordinates, for any state and tangent (the full form is accel_jacobian)."""
+    phase's free coordinates, for any state and tangent (the full form is accel_jacobian, used instead where
+    the reduced equations lose accuracy, `kkt_in_double_support`)."""
+    if kkt_in_double_support(phase, p):
+        D = np.empty((5, 10))
+        Dlam = np.empty((4, 10))
+        if not accel_jacobian(mi, phase, q, qd, p, qdd, lam, D, Dlam):
+            return False
+        for i in range(5):
+            for c in range(V.shape[1]):
+                acc = 0.0
+                for j in range(10):
+                    acc += D[i, j] * V[j, c]
+                dqdd[i, c] = acc
+        return True
     return _directional_of(mi, phase, q, qd, p, qdd, lam, V, dqdd)
 
 

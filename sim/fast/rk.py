@@ -216,6 +216,17 @@ def _accel_any(mi, phase, q, qd, p, qdd, lam, ws):
 
 
 @_inner
+def crossing(g_old, g_new, direction, strict):
+    """Whether a guard fires between two step ends (the engine's rule, rimless.sim.integrate.events): it crosses 0
+    in its direction, from < 0 to >= 0 (direction > 0) or from > 0 to <= 0 (direction < 0); a guard at exactly 0
+    at the step's start counts as on the near side unless `strict` (the guide-friction phases: a leg that just
+    stuck or just slips does not fire at once)."""
+    up = (g_old < 0.0 or (g_old == 0.0 and not strict)) and g_new >= 0.0
+    down = (g_old > 0.0 or (g_old == 0.0 and not strict)) and g_new <= 0.0
+    return (up and direction > 0) or (down and direction < 0)
+
+
+@_inner
 def _needs_lambda(code):
     return fm.guard_needs_lambda(code) or code == STICK_END_1 or code == STICK_END_2
 
@@ -620,6 +631,31 @@ def _room(rec_t, rec_y, nrec):
     return rt, ry
 
 
+@_inner
+def record_point(rec_t, rec_y, nrec, t, y):
+    """Record (t, y[:10]) at index nrec (room already made, `_room`); returns nrec + 1."""
+    rec_t[nrec] = t
+    for i in range(10):
+        rec_y[nrec, i] = y[i]
+    return nrec + 1
+
+
+@_inner
+def record_grid(rec_t, rec_y, nrec, next_grid, t0, record_dt, t_stop, F, y, t, h, ybuf):
+    """Record the grid times t0 + k record_dt (k from next_grid) before t_stop on the step's dense output (F, y
+    at t, size h), then make room for one more record; returns (rec_t, rec_y, nrec, next_grid)."""
+    while True:
+        tg = t0 + next_grid * record_dt
+        if tg >= t_stop:
+            break
+        rec_t, rec_y = _room(rec_t, rec_y, nrec)
+        _dense_eval(F, y, (tg - t) / h, 10, ybuf)
+        nrec = record_point(rec_t, rec_y, nrec, tg, ybuf)
+        next_grid += 1
+    rec_t, rec_y = _room(rec_t, rec_y, nrec)
+    return rec_t, rec_y, nrec, next_grid
+
+
 @_jit
 def run_phase(
     mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, n_err, with_var, with_diss, record_dt, max_steps
@@ -771,9 +807,7 @@ def run_phase(
         t_hi_graze = -1.0
         any_active = False
         for e in range(ng):
-            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
-            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
-            if (up and directions[e] > 0) or (down and directions[e] < 0):
+            if crossing(g[e], g_new[e], directions[e], strict):
                 any_active = True
             elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
                 if fm.swing_height_rate(y, L0) < 0.0 and fm.swing_height_rate(y_new, L0) > 0.0:
@@ -810,9 +844,7 @@ def run_phase(
                             best_e = e
         if any_active:
             for e in range(ng):
-                up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
-                down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
-                if (up and directions[e] > 0) or (down and directions[e] < 0):
+                if crossing(g[e], g_new[e], directions[e], strict):
                     root, nf = _brent(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
                     nfev += nf if _needs_lambda(codes[e]) else 0
                     if root < best_t:
@@ -840,18 +872,9 @@ def run_phase(
                     best_prev = False
         t_stop = best_t if best_e >= 0 else t_new
         if recording:
-            while True:
-                tg = t0 + next_grid * record_dt
-                if tg >= t_stop:
-                    break
-                rec_t, rec_y = _room(rec_t, rec_y, nrec)
-                rec_t[nrec] = tg
-                _dense_eval(F, y, (tg - t) / h, 10, ybuf)
-                for i in range(10):
-                    rec_y[nrec, i] = ybuf[i]
-                nrec += 1
-                next_grid += 1
-            rec_t, rec_y = _room(rec_t, rec_y, nrec)
+            rec_t, rec_y, nrec, next_grid = record_grid(
+                rec_t, rec_y, nrec, next_grid, t0, record_dt, t_stop, F, y, t, h, ybuf
+            )
         if best_e >= 0:
             # the state at the event: one DOP853 step from the start of the step holding it to the event time
             # located on the dense output (the interpolant is an order less accurate than the step)
@@ -874,16 +897,10 @@ def run_phase(
                 else:
                     _dense_eval(F, y, (best_t - t) / h, N, y_end)
             if recording:
-                rec_t[nrec] = best_t
-                for i in range(10):
-                    rec_y[nrec, i] = y_end[i]
-                nrec += 1
+                nrec = record_point(rec_t, rec_y, nrec, best_t, y_end)
             return STATUS_OK, best_t, y_end, best_e, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         if recording:
-            rec_t[nrec] = t_new
-            for i in range(10):
-                rec_y[nrec, i] = y_new[i]
-            nrec += 1
+            nrec = record_point(rec_t, rec_y, nrec, t_new, y_new)
         for i in range(N):
             yp_old[i] = y[i]
             for j in range(_NS + 1):
@@ -917,7 +934,6 @@ guard_on_dense = _guard_on_dense
 brent_on_dense = _brent
 parabola_min = _parabola_min
 first_dip = _first_dip
-grow_record = _room
 
 
 # Per-mass-model entry points (the index a compile-time constant: one mass model's generated code compiled).

@@ -55,12 +55,12 @@ IMPACT_PHASE = 3
 # a much looser rtol.
 DLSP_RTOL_SCALE = 1e-4
 DLSP_RTOL_FLOOR = 1e-13
-# ... and, with near-massless legs (rimless.sim.fast.stiff.leg_stiff), not below DLSP_STIFF_FLOOR: the double-
-# support field then carries rounding noise (the leg's row of the KKT system is divided by m: relative errors of
-# some eps m_H / m and more near a stall), and a tolerance under that noise makes DOP853 take thousands of steps
-# for nothing (measured at m = 0.1 g, Table 1's k and c, 12 post-impact states: at most 5 steps at rtol 1e-8; 1-4
-# at 1e-10 except where double support ends in a stall, 580-6 600; at 1e-12, the map's tightened tolerance at rtol
-# 1e-8, up to 57 000 or the step limit).
+# ... and, with near-massless legs (rimless.sim.fast.stiff.leg_stiff), not below DLSP_STIFF_FLOOR. Set when the
+# double-support field came from the generated reduced equations, whose rounding error grows as eps (m_H / m)^2
+# (measured at m = 0.1 g, Table 1's k and c, 12 post-impact states: at most 5 steps at rtol 1e-8; 1-4 at 1e-10
+# except where double support ends in a stall, 580-6 600; at 1e-12 up to 57 000 or the step limit; at m = 1 mg
+# no end within the step limit). That field now comes from the pivoted KKT solve (rimless.sim.fast.model.
+# kkt_in_double_support, 1e-14 at 1e-4 to 1e-8 kg); the floor is kept as it was (not re-measured without it).
 DLSP_STIFF_FLOOR = 1e-10
 
 # the guards of each phase, with their directions from the one guard table (rimless.sim.model.guards)

@@ -49,11 +49,8 @@ from rimless.sim.model.friction import FRICTION_PHASE0
 _jit = kernel
 _inner = kernel(python=False)
 
-#: a phase counts as stiff (single support integrated by `run_phase_stiff`) when the free leg's fastest root
-#: |lambda| = max(c / m, sqrt(k / m)) (1/s) exceeds this: DOP853's stability limit then allows steps below some
-#: 6 / 5000 = 1.2 ms, while the step's own motion (hub swing, ~15 rad/s) allows tens of ms at rtol 1e-8.
-#: Table 1 (|lambda| ~ 270 1/s) stays on DOP853 with a margin of 18.
-STIFF_LEG_RATE = 5000.0
+# the switch (rimless.sim.fast.model: single support by this method, double support's field by the pivoted KKT)
+STIFF_LEG_RATE = fm.STIFF_LEG_RATE
 
 # Kaps-Rentrop with Shampine's parameters (gamma = 1/2): stages g_i solve (I / (gamma h) - J) g_i = ...
 _GAM = 0.5
@@ -83,17 +80,8 @@ MAX_REJECTIONS = 10_000
 _FD_STEP = 6e-6  # central differences of the variational field (B g): about eps^(1/3) relative to the state
 
 
-@_jit
-def leg_rate(p):
-    """The free leg's fastest root |lambda| = max(c / m, sqrt(k / m)), 1/s (p: the parameter vector)."""
-    m, k, c = p[1], p[4], p[5]
-    return max(c / m, math.sqrt(k / m))
-
-
-@_jit
-def leg_stiff(p):
-    """Whether single support is integrated by the Rosenbrock method (`STIFF_LEG_RATE`)."""
-    return leg_rate(p) > STIFF_LEG_RATE
+leg_rate = fm.leg_rate  # max(c / m, sqrt(k / m)), 1/s
+leg_stiff = fm.leg_stiff  # leg_rate(p) > STIFF_LEG_RATE
 
 
 @_inner
@@ -493,15 +481,11 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
         best_prev = False
         any_active = False
         for e in range(ng):
-            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
-            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
-            if (up and directions[e] > 0) or (down and directions[e] < 0):
+            if rk.crossing(g[e], g_new[e], directions[e], strict):
                 any_active = True
         for e in range(ng):
-            up = (g[e] < 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] >= 0.0
-            down = (g[e] > 0.0 or (g[e] == 0.0 and not strict)) and g_new[e] <= 0.0
             root = np.inf
-            if (up and directions[e] > 0) or (down and directions[e] < 0):
+            if rk.crossing(g[e], g_new[e], directions[e], strict):
                 root, nf = rk.brent_on_dense(mi, phase, p, codes[e], False, t, t_new, t, h, F, y)
                 nfev += nf if rk.needs_lambda(codes[e]) else 0
             elif codes[e] == fm.TOUCHDOWN and g[e] > 0.0 and g_new[e] > 0.0:
@@ -534,19 +518,9 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
                 best_prev = False
         t_stop = best_t if best_e >= 0 else t_new
         if recording:
-            ybuf = np.empty(N)
-            while True:
-                tg = t0 + next_grid * record_dt
-                if tg >= t_stop:
-                    break
-                rec_t, rec_y = rk.grow_record(rec_t, rec_y, nrec)
-                rec_t[nrec] = tg
-                rk.dense_eval(F, y, (tg - t) / h, 10, ybuf)
-                for i in range(10):
-                    rec_y[nrec, i] = ybuf[i]
-                nrec += 1
-                next_grid += 1
-            rec_t, rec_y = rk.grow_record(rec_t, rec_y, nrec)
+            rec_t, rec_y, nrec, next_grid = rk.record_grid(
+                rec_t, rec_y, nrec, next_grid, t0, record_dt, t_stop, F, y, t, h, np.empty(N)
+            )
         if best_e >= 0:
             y_end = np.empty(N)
             if best_prev:  # the dip was in the previous step: refine there (its Jacobian again)
@@ -563,16 +537,10 @@ def run_phase_stiff(mi, phase, p, y0, t0, codes, directions, t_max, rtol, atol, 
                 t_ev, nf = _refine(mi, phase, p, codes[best_e], t, best_t, t_new, y, f, Jm, with_diss, y_end, lam, ws)
                 nfev += nf
             if recording:
-                rec_t[nrec] = t_ev
-                for i in range(10):
-                    rec_y[nrec, i] = y_end[i]
-                nrec += 1
+                nrec = rk.record_point(rec_t, rec_y, nrec, t_ev, y_end)
             return rk.STATUS_OK, t_ev, y_end, best_e, nfev, nsteps, nstiff, rec_t[:nrec], rec_y[:nrec]
         if recording:
-            rec_t[nrec] = t_new
-            for i in range(10):
-                rec_y[nrec, i] = y_new[i]
-            nrec += 1
+            nrec = rk.record_point(rec_t, rec_y, nrec, t_new, y_new)
         for i in range(N):
             yp_old[i] = y[i]
             for k in range(7):

@@ -20,7 +20,17 @@ With guide friction (`FRICTION_N`, 0.3 N, the audit's truth): the same wheel and
 rtol 1e-12 with the same friction, and the largest difference of the steps' friction work (J) and stuck time (s)
 from the reference's; no map column (the one-call compiled map has no guide friction).
 
-Run: ``python -m rimless.sim.studies.stiffbench`` (some 20 s on a loaded 2-core machine, after compiling).
+Legs of 1 mg (`ONE_MG`, m_H / m ~ 2.6e6; the same wheel otherwise): double support, whose field now comes from
+the pivoted KKT solve (rimless.sim.fast.model.kkt_in_double_support), is timed on the compiled DOP853
+(FastIntegrator) and on scipy's DOP853 with the reference model's Python right-hand side (LAPACK's KKT solve),
+side by side at each rtol, with the errors of the lift-off time (s) and state against scipy's DOP853 at rtol
+1e-12; and the compiled step map from the release (which failed in double support before), its error against the
+light-leg limit line through the maps of 0.1 g and 0.01 g legs at rtol 1e-12 (the map is smooth in m: first
+order), its Jacobian against central differences of the map at rtol 1e-12 (dz 1e-6). No explicit reference of the
+whole step exists there: DOP853 stops with "step size too small" in single support at rtol 1e-10 and 1e-12, and
+scipy's BDF on the Python right-hand side ran over 3.7 min of CPU at rtol 1e-10 without ending.
+
+Run: ``python -m rimless.sim.studies.stiffbench`` (25 s of CPU after compiling; 2 min wall at load 7 on 2 cores).
 """
 
 from __future__ import annotations
@@ -42,9 +52,14 @@ def light_wheel(friction_n: float = 0.0) -> Any:
     """The 0.1 g-leg wheel of the benchmark (WheelParams, slope SLOPE_DEG): what
     rimless.analysis.validation.critical_truth.LossyWheel().wheel_params() writes for its default rigid wheel
     (M = 2.6 kg, I_hub = 0.05 kg m^2, L = 0.21 m; m = 0.1 g, M = m_H + 8 m, I_hub = I_c + 8 m L^2)."""
+    return light_wheel_of(1e-4, friction_n)
+
+
+def light_wheel_of(leg_mass_kg: float, friction_n: float = 0.0) -> Any:
+    """`light_wheel` with legs of leg_mass_kg (kg), M and I_hub kept, guide friction friction_n (N)."""
     from rimless.sim.model.params import WheelParams
 
-    m, mass, inertia, leg = 1e-4, 2.6, 0.05, 0.21
+    m, mass, inertia, leg = leg_mass_kg, 2.6, 0.05, 0.21
     return WheelParams(
         hub_mass_kg=mass - 8 * m,
         leg_mass_kg=m,
@@ -127,6 +142,80 @@ def friction_rows(rtols: tuple[float, ...], n_steps: int, repeats: int) -> list[
     return rows
 
 
+ONE_MG = 1e-6  # kg: the leg mass of the double-support rows
+
+
+def double_support_rows(rtols: tuple[float, ...], repeats: int) -> list[dict[str, Any]]:
+    """Rows per rtol for 1 mg legs: the double-support phase from the release on the compiled DOP853 and on scipy's
+    DOP853 with the reference model (CPU s, evaluations, their ratio, each one's largest error of the lift-off
+    time s and state against scipy's DOP853 at rtol 1e-12); the compiled map from the release (CPU s a step,
+    evaluations, error against the light-leg limit line, s and rad or rad/s) and with its Jacobian (CPU s, its
+    largest difference from central differences relative to the largest entry)."""
+    from rimless.sim.fast import FastIntegrator, fast_step
+    from rimless.sim.integrate.reference import ScipyIntegrator
+    from rimless.sim.model.dynamics import DLSP
+    from rimless.sim.model.guards import LIFTOFF_A, STALL, TOUCHDOWN
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import state_from_section
+
+    params = light_wheel_of(ONE_MG)
+    mech = Mechanics.of(params)
+    y0 = state_from_section(mech, RELEASE_Z)
+    guards = (LIFTOFF_A, STALL, TOUCHDOWN)
+
+    def scipy_phase(r: float) -> Any:
+        return ScipyIntegrator("DOP853", rtol=r, atol=r * 1e-2).run_phase(mech, DLSP, y0, 0.0, guards, 5.0)
+
+    def fast_phase(r: float) -> Any:
+        return FastIntegrator(rtol=r, atol=r * 1e-2).run_phase(mech, DLSP, y0, 0.0, guards, 5.0)
+
+    fast_step(params, "er", RELEASE_Z, rtol=1e-8, jacobian=True)  # compile (or load) before timing
+    fast_phase(1e-8)
+    ref = scipy_phase(REFERENCE_RTOL)
+    ref_maps = {m: fast_step(light_wheel_of(m), "er", RELEASE_Z, rtol=REFERENCE_RTOL) for m in (1e-4, 1e-5)}
+    slope = (ONE_MG - 1e-5) / (1e-5 - 1e-4)
+    lim_t = ref_maps[1e-5].period_s + (ref_maps[1e-5].period_s - ref_maps[1e-4].period_s) * slope
+    lim_z = ref_maps[1e-5].z_next + (ref_maps[1e-5].z_next - ref_maps[1e-4].z_next) * slope
+    fd = np.column_stack(
+        [
+            (
+                fast_step(params, "er", RELEASE_Z + dz, rtol=REFERENCE_RTOL).z_next
+                - fast_step(params, "er", RELEASE_Z - dz, rtol=REFERENCE_RTOL).z_next
+            )
+            / 2e-6
+            for dz in (np.array([1e-6, 0.0]), np.array([0.0, 1e-6]))
+        ]
+    )
+    rows = []
+    for rtol in rtols:
+        t_fast, run_fast = _cpu(lambda r=rtol: fast_phase(r), repeats)
+        t_scipy, run_scipy = _cpu(lambda r=rtol: scipy_phase(r), repeats)
+        t_map, step = _cpu(lambda r=rtol: fast_step(params, "er", RELEASE_Z, rtol=r), repeats)
+        t_jac, with_j = _cpu(lambda r=rtol: fast_step(params, "er", RELEASE_Z, rtol=r, jacobian=True), repeats)
+
+        def err(run: Any) -> tuple[float, float]:
+            return abs(run.t_end - ref.t_end), float(np.max(np.abs(run.y_end - ref.y_end)))
+
+        rows.append(
+            {
+                "rtol": rtol,
+                "fast_cpu_s": t_fast,
+                "scipy_cpu_s": t_scipy,
+                "cpu_ratio": t_scipy / t_fast,
+                "fast_nfev": run_fast.nfev,
+                "scipy_nfev": run_scipy.nfev,
+                "fast_errors": err(run_fast),
+                "scipy_errors": err(run_scipy),
+                "map_cpu_s": t_map,
+                "map_nfev": step.nfev,
+                "map_limit_error": max(abs(step.period_s - lim_t), *np.abs(step.z_next - lim_z)),
+                "map_jacobian_cpu_s": t_jac,
+                "map_jacobian_error": float(np.max(np.abs(with_j.jacobian - fd)) / np.max(np.abs(fd))),
+            }
+        )
+    return rows
+
+
 def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repeats: int = 3) -> dict[str, Any]:
     """Rows per rtol: CPU time (s) and evaluations of the walk on each integrator, their ratio, the errors."""
     from rimless.sim.fast import fast_step, stiff
@@ -192,7 +281,9 @@ def stiff_bench(rtols: tuple[float, ...] = (1e-8, 1e-10), n_steps: int = 4, repe
             }
         )
     fric = friction_rows(rtols, n_steps, repeats)
+    dlsp = double_support_rows(rtols, repeats)
     return {
+        "double_support_rows": dlsp,
         "params": params,
         "friction_rows": fric,
         "leg_rate_per_s": float(stiff.leg_rate(np.array(params.as_vector()))),
@@ -240,6 +331,24 @@ def format_table(out: dict[str, Any]) -> str:
         lines.append(
             f"(steps walked R/D/reference: {'/'.join(str(n) for n in r['steps'])}; the reference's friction work over "
             f"the walk {r['friction_work_J']:.4g} J)"
+        )
+    lines.append(
+        f"Legs of {ONE_MG * 1e3:g} g: double support from the release, compiled DOP853 (F) and scipy's DOP853 on the "
+        f"reference model (S) side by side, errors (lift-off time s, state) against S at rtol {REFERENCE_RTOL:g}; the "
+        "compiled map, its error against the light-leg limit (maps of 0.1 g and 0.01 g legs), its Jacobian's against "
+        "central differences:"
+    )
+    lines.append(
+        f"{'rtol':>7} {'F s':>8} {'S s':>8} {'ratio':>6} {'nfev F':>6} {'nfev S':>6} {'t err F':>8} {'t err S':>8} "
+        f"{'y err F':>8} {'y err S':>8} {'map s':>8} {'map nfev':>8} {'map err':>8} {'map+J s':>8} {'J err':>8}"
+    )
+    for r in out.get("double_support_rows", []):
+        (tf, yf), (ts, ys) = r["fast_errors"], r["scipy_errors"]
+        lines.append(
+            f"{r['rtol']:7.0e} {r['fast_cpu_s']:8.5f} {r['scipy_cpu_s']:8.5f} {r['cpu_ratio']:6.1f} "
+            f"{r['fast_nfev']:6d} {r['scipy_nfev']:6d} {tf:8.1e} {ts:8.1e} {yf:8.1e} {ys:8.1e} "
+            f"{r['map_cpu_s']:8.5f} {r['map_nfev']:8d} {r['map_limit_error']:8.1e} {r['map_jacobian_cpu_s']:8.5f} "
+            f"{r['map_jacobian_error']:8.1e}"
         )
     lines.append(
         f"CPU time of this thread, median of repeats; load average {out['load_before']:.1f} before, "
