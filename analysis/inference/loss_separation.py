@@ -125,10 +125,12 @@ def loss_separation(
     speeds = f"the trials' effective leg speeds span {lo:.3f}-{hi:.3f} m/s"
     if not sep:
         rs = f"{rel:.0%}" if math.isfinite(rel) else "unbounded"
+        # no correlation when the two are not both determined (one trial: a NaN printed "+nan")
+        corr_txt = f" (correlation {rc:+.2f})" if math.isfinite(rc) else " (the two are not both determined)"
         out["note"] = (
             f"c cannot be told from a constant loss per step such as guide friction: {speeds}, and with a "
-            f"friction-like loss also free c's relative uncertainty would be {rs} (correlation "
-            f"{rc:+.2f}); the fitted c is an effective loss of these trials, not the leg's damping"
+            f"friction-like loss also free c's relative uncertainty would be {rs}{corr_txt}; the fitted c is "
+            "an effective loss of these trials, not the leg's damping"
         )
     elif out["absorbs_constant_loss"]:
         out["note"] = (

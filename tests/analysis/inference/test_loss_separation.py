@@ -72,3 +72,15 @@ def test_residuals_along_a_constant_loss_are_found():
     out = loss_separation(J * 50.0, r, offs, 1, 0, 10.0, 1.0, v, np.ones(J.shape[1]))
     assert out["absorbs_constant_loss"] and not out["damping_identified"]
     assert out["score_p"] < 0.01 and "absorbs it" in out["note"]
+
+
+def test_one_trial_prints_no_nan_correlation():
+    """One trial: c and the friction-like column are the same column, so their correlation is not determined;
+    the note said "(correlation +nan)" (seen by a session-21 helper on every single-trial calibration)."""
+    rng = np.random.default_rng(3)
+    v = np.array([0.2])
+    J, offs = _design(v, rng)
+    r = rng.normal(size=J.shape[0])
+    out = loss_separation(J * 50.0, r, offs, 1, 0, 10.0, 1.0, v, np.ones(J.shape[1]))
+    assert not out["separable"] and out["correlation"] is None
+    assert "nan" not in out["note"] and "not both determined" in out["note"]
