@@ -256,6 +256,8 @@ def _first_angle_keys(t: FirstAngleTest | None) -> dict[str, Any]:
         "first_angle_choice_period_change_ms": (
             t.period_change_s * 1e3 if tested and t is not None and math.isfinite(t.period_change_s) else None
         ),
+        "first_angle_offset_noise_ms": t.noise_s * 1e3 if tested and t is not None else None,
+        "first_angle_offset_noise_source": t.noise_source if tested and t is not None else None,
     }
 
 
@@ -352,6 +354,10 @@ class FirstAngleTest:
     #: offset (kept or not), rad/s; NaN: not tested
     rigid_fit_theta_dot_rad_s: float = math.nan
     fitted_theta_dot_rad_s: float = math.nan
+    #: the sd of a measured period the test took (s; NaN: not tested) and where it came from: the offset fit's
+    #: residuals (F test) or the importer's floor `PERIOD_NOISE_FLOOR_S` (chi-square test)
+    noise_s: float = math.nan
+    noise_source: str = ""
 
 
 def fit_first_angle_offset(
@@ -404,9 +410,11 @@ def first_angle_test(sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0
     if var >= PERIOD_NOISE_FLOOR_S**2:
         stat, test = (rss0 - rss1) / var, f"F(1, {dof})"
         p_value = float(f.sf(stat, 1, dof))
+        noise, source = math.sqrt(var), f"the offset fit's residuals ({dof} degrees of freedom)"
     else:
         stat, test = (rss0 - rss1) / PERIOD_NOISE_FLOOR_S**2, "chi2(1)"
         p_value = float(chi2.sf(stat, 1))
+        noise, source = PERIOD_NOISE_FLOOR_S, "the importer's floor (PERIOD_NOISE_FLOOR_S)"
     kept = bool(rss1 < rss0 and p_value < FIRST_ANGLE_P and abs(got[0]) >= 1e-6)
     f1, f0 = freq_res(got[0], got[1]) + f_meas, freq_res(0.0, w0) + f_meas
     both = (f1 > 0) & (f0 > 0)  # the steps both models reach
@@ -423,6 +431,8 @@ def first_angle_test(sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0
         period_change_s=float(np.max(change)) if change.size else math.nan,
         rigid_fit_theta_dot_rad_s=float(rigid.x[0]),
         fitted_theta_dot_rad_s=got[1],
+        noise_s=noise,
+        noise_source=source,
     )
 
 

@@ -82,7 +82,17 @@ def main() -> None:
     ap.add_argument("--truth", choices=["uncompressed", "static", "er_walk"], default="uncompressed")
     ap.add_argument("--draws", type=int, default=30)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument(
+        "--first-impact",
+        choices=["touchdown", "phase"],
+        default="touchdown",
+        help="the importer's first impact: at its own touchdown (now) or at the gait's phase (before session 21)",
+    )
     args = ap.parse_args()
+    if args.first_impact == "phase":
+        from rimless.analysis.kinematics import steps
+
+        steps._first_touchdown = lambda *a: (a[-1], 0.0)  # the impacts as the importer placed them before
     ps: list[float] = []
     rms: dict[str, list[float]] = {"rule": [], "always": [], "rigid, first period": [], "rigid, all periods": []}
     with tempfile.TemporaryDirectory() as tmp:
