@@ -17,9 +17,10 @@ the rigid release (offset 0, the speed alone) supports it (p < `FIRST_ANGLE_P`, 
 periods' noise at least the importer's, `PERIOD_NOISE_FLOOR_S`); otherwise the rigid release, whose speed matches
 the first period. The test is reported whole (`first_angle_test`, `FirstAngleTest`; keys ``first_angle_offset_tested``,
 ``_kept``, ``_test``, ``_statistic``, ``_level``, ``_fitted_deg`` and ``first_angle_choice_period_change_ms``, what
-the other choice would move a simulated period). Its size is wrong: on a truth released as the rigid release
-(true offset 0) it kept the offset in 17.5 % of 120 walks at the nominal 1 %, the importer's first-period error
-(about 0.9 ms) left out of its noise (docs/trials.md, "The offset's test, measured for its size").
+the other choice would move a simulated period, and ``_noise_ms`` / ``_noise_source``, the period noise it took).
+On a truth released as the rigid release (true offset 0) it kept the offset in 17.5 % of 120 walks at the nominal
+1 % while the importer's first period carried a bias of about 0.9 ms; with the first impact at its own touchdown
+(`rimless.analysis.kinematics.steps`) in 1 of 82 (docs/trials.md, "The first period's bias, found and removed").
 ``Simulator.fit_first_angle`` False keeps the rigid release. With an offset the first period is no longer matched
 by construction.
 
