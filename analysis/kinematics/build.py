@@ -489,6 +489,7 @@ def build_trial(
         min_advance_rad=0.1 * alpha_rad if motion.held else 0.0,
         # the hub's velocity turns by alpha at an impact (the wheel's angular velocity may barely change)
         kink_channels=[hub_slope[:, 0], hub_slope[:, 1]],
+        leg_length_m=wheel_leg_length_m,
     )
 
     # walking window and ending

@@ -36,6 +36,14 @@ MINIMA_PHASE_TOL = 2 * np.pi / 5
 MINIMA_AGREE_FRACTION = 0.6
 #: The kink is sought this far (frames) either side of the first placement of the impact.
 KINK_SEARCH_FRAMES = 1.5
+#: A stance's height before its touchdown (`_first_touchdown`) is taken over the frames this far before the
+#: placed impact, fractions of a step of rotation (the impact's own frame left out).
+TOUCHDOWN_WINDOW = (1 / 40, 1 / 3)
+#: ... from at least this many frames;
+TOUCHDOWN_MIN_FRAMES = 3
+#: ... and the first touchdown is not moved by more than this fraction of a step (a few mm of leg compression
+#: move it by well under a tenth).
+TOUCHDOWN_MAX_SHIFT = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -342,6 +350,79 @@ def _rotation_at_kinks(
     return out, float(phase + shift)
 
 
+def _stance_heights(
+    t: np.ndarray,
+    y: np.ndarray,
+    ang: np.ndarray,
+    use: np.ndarray,
+    targets: np.ndarray,
+    times: np.ndarray,
+    leg_m: float,
+    alpha_rad: float,
+) -> np.ndarray:
+    """Per impact, the hub's height in the stance that ends there, brought to its touchdown angle (m, up to a
+    constant; NaN: too few frames): ``mean(y - L0 (cos(alpha/2 - u) - cos(alpha/2)))`` over the frames of that
+    stance (after the previous impact) whose wheel angle is `TOUCHDOWN_WINDOW` of a step before ``targets``
+    (u, rad), i.e. ``c + L1 cos(alpha/2)`` for a stance leg of locked length L1 turning about its foot."""
+    out = np.full(targets.size, np.nan)
+    lo_u, hi_u = TOUCHDOWN_WINDOW[0] * alpha_rad, TOUCHDOWN_WINDOW[1] * alpha_rad
+    for j, (a_k, t_k) in enumerate(zip(targets, times)):
+        t_prev = times[j - 1] if j > 0 else -np.inf
+        u = a_k - ang
+        m = use & (t > t_prev) & (t < t_k) & (u > lo_u) & (u < hi_u)
+        if m.sum() >= TOUCHDOWN_MIN_FRAMES:
+            out[j] = float(np.mean(y[m] - leg_m * (np.cos(alpha_rad / 2 - u[m]) - math.cos(alpha_rad / 2))))
+    return out
+
+
+def _first_touchdown(
+    t: np.ndarray,
+    y: np.ndarray,
+    ang: np.ndarray,
+    use: np.ndarray,
+    tv: np.ndarray,
+    av: np.ndarray,
+    phase: float,
+    ks: np.ndarray,
+    alpha_rad: float,
+    leg_m: float,
+    times: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """The first impact moved to its own touchdown angle: (times s, its angle shift rad, 0 when not moved).
+
+    The impacts sit where the wheel has turned to ``phase + k alpha``: where a stance leg locked at the gait's
+    compression lets the next foot touch down (model.md section 4: touchdown at L1 cos(theta) = L0
+    cos(alpha - theta)). Every stance but the first begins with an impact; the first begins with the release (from
+    a hold, a hand), so its leg locks at another compression and its foot touches down at another angle: a leg
+    locked dL1 longer touches down dL1 / (2 L0 tan(alpha/2)) later in angle (first order). That change is
+    measured from the hub's height late in each stance (`_stance_heights`): the first stance's height against
+    the later stances' (their line over the step number, brought to the first step; their median with two) gives
+    the first touchdown's angle shift dh / (2 L0 sin(alpha/2)). Left in place with fewer than two later stances
+    measured, or a shift over `TOUCHDOWN_MAX_SHIFT` of a step (not a leg's compression)."""
+    targets = phase + alpha_rad * ks
+    h = _stance_heights(t, y, ang, use, targets, times, leg_m, alpha_rad)
+    later = np.isfinite(h[1:])
+    if not math.isfinite(h[0]) or later.sum() < 2:
+        return times, 0.0
+    k_later, h_later = ks[1:][later].astype(np.float64), h[1:][later]
+    if h_later.size >= 3:
+        ref = float(np.polyval(np.polyfit(k_later, h_later, 1), float(ks[0])))
+    else:
+        ref = float(np.median(h_later))
+    dbeta = (float(h[0]) - ref) / (2 * leg_m * math.sin(alpha_rad / 2))
+    if abs(dbeta) > TOUCHDOWN_MAX_SHIFT * alpha_rad:
+        return times, 0.0
+    target = float(targets[0]) + dbeta
+    j = int(np.clip(np.searchsorted(av, target, side="left"), 1, av.size - 1))
+    a0, a1 = av[j - 1], av[j]
+    frac = (target - a0) / (a1 - a0) if a1 > a0 else 0.0
+    out = times.copy()
+    out[0] = float(tv[j - 1] + frac * (tv[j] - tv[j - 1]))
+    if not np.all(np.diff(out) > 0):
+        return times, 0.0
+    return out, dbeta
+
+
 def detect_steps(
     time_s: np.ndarray,
     com_height_m: np.ndarray,
@@ -352,6 +433,7 @@ def detect_steps(
     window_s: tuple[float, float] | None = None,
     min_advance_rad: float = 0.0,
     kink_channels: list[np.ndarray] | None = None,
+    leg_length_m: float | None = None,
 ) -> StepResult:
     """Impacts and step periods of a trial, per observed segment.
 
@@ -368,6 +450,9 @@ def detect_steps(
     kink_channels : series (n,) whose rate jumps at an impact (the hub's slope-frame coordinates, m): with the
         rotation, the phase of the impacts is taken from where they kink (`refine_kinks`, the median over the
         impacts); without it, each CoM minimum is moved to its kink.
+    leg_length_m : the wheel's leg length L0, m: with the rotation, the first impact (after a release, not an
+        impact) is moved to its own touchdown angle from its stance's hub height (`_first_touchdown`); None: left
+        at the gait's phase.
 
     Returns
     -------
@@ -461,6 +546,8 @@ def detect_steps(
             )
         if kink_channels is not None:
             times, phase = _rotation_at_kinks(t, kink_channels, times, obs, tv, av, phase, ks, alpha_rad)
+        if leg_length_m is not None:
+            times, _ = _first_touchdown(t, y, ang, obs & inwin, tv, av, phase, ks, alpha_rad, leg_length_m, times)
         periods, pk = _periods(ks, times, t, unbridged)
         return StepResult(
             times,

@@ -30,9 +30,15 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     )
 
 
+#: a trial the comparison finds ok: the report exits 1 when none is (since session 21 the 1.45 deg trial is suspect,
+#: its second period 168 ms off, and the 2.05 deg one was already)
+OK_TRIAL = CRITICAL.parent / "SYNTHETIC_er_slope1.5deg_run1.csv"
+
+
 @pytest.mark.parametrize("command", ["import", "report"])
 def test_the_table_reads_at_80_columns(tmp_path: Path, command: str) -> None:
-    res = _run(["trials", command, *map(str, FILES), "--out", str(tmp_path / "out")], tmp_path)
+    files = FILES if command == "import" else [*FILES, OK_TRIAL]
+    res = _run(["trials", command, *map(str, files), "--out", str(tmp_path / "out")], tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
     table = [line for line in res.stdout.splitlines() if "│" in line or "┃" in line]
     assert table, res.stdout

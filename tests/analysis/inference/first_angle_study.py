@@ -4,6 +4,9 @@ Run from the repository root (not collected by pytest; about 0.5 s of CPU a walk
 
     PYTHONPATH=. python tests/analysis/inference/first_angle_study.py --truth uncompressed --draws 30 --seed 7
 
+``--first-impact phase`` measures with the importer as it was before session 21 (every impact at the gait's phase,
+the first one too); the default places the first impact at its own touchdown (`steps._first_touchdown`).
+
 ``--truth uncompressed``: the tests' compliant truth (`tests.support.analysis_trial_truth`, apart from the comparison's
 code) held on uncompressed legs at -alpha/2 and released at 1.8-2.8 rad/s: the comparison's own rigid release, true
 offset 0; ``static``: held standing on its compressed trailing leg; ``er_walk``: `floquet_truth.er_walk` released into
@@ -82,7 +85,17 @@ def main() -> None:
     ap.add_argument("--truth", choices=["uncompressed", "static", "er_walk"], default="uncompressed")
     ap.add_argument("--draws", type=int, default=30)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument(
+        "--first-impact",
+        choices=["touchdown", "phase"],
+        default="touchdown",
+        help="the importer's first impact: at its own touchdown (now) or at the gait's phase (before session 21)",
+    )
     args = ap.parse_args()
+    if args.first_impact == "phase":
+        from rimless.analysis.kinematics import steps
+
+        steps._first_touchdown = lambda *a: (a[-1], 0.0)  # the impacts as the importer placed them before
     ps: list[float] = []
     rms: dict[str, list[float]] = {"rule": [], "always": [], "rigid, first period": [], "rigid, all periods": []}
     with tempfile.TemporaryDirectory() as tmp:
