@@ -1,0 +1,69 @@
+"""The adequacy check's timing noise and a wheel that limps (issue 31, session 21).
+
+`adequacy.timing_noise_sd` takes the impact times' noise from what each trial's periods leave about their own
+trend p* + a lambda^i. Its negative multipliers were written sign(lambda) |lambda|^i, which never alternates: a
+period sequence approaching its fixed point with alternating sign (a negative multiplier), or alternating for
+good (a limp), went into the noise, and the check then called a limping wheel "fits" (session 21's study: limps
+of 5-20 % passed with periods chi^2/dof 0.76-0.84).
+
+Truths: closed-form period sequences with white impact-time noise of a known sd (the expected value is that sd);
+the simulator's ER wheel (`tests.support.analysis_sim_truth`, c = 11 N s/m, away from Table 1's 8) whose
+recorded impact times are then made to limp, periods alternating (1 -+ a) T: no ER wheel of the model walks so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rimless.analysis.inference.adequacy import timing_noise_sd
+
+NOISE_S = 0.5e-3
+
+
+def _impacts(periods: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(periods)]) + rng.normal(0.0, NOISE_S, periods.size + 1)
+
+
+def test_an_alternating_approach_to_the_fixed_point_is_trend_not_noise() -> None:
+    """Periods 0.3 s + 12 ms (-0.6)^i (a negative multiplier, a plain approach to the fixed point): the pooled
+    estimate over 40 trials of 10 periods is the impact noise's sd (0.5 ms), within 20 %. Main gave about 2 ms."""
+    rng = np.random.default_rng(11)
+    i = np.arange(10)
+    trials = [_impacts(0.3 + 0.012 * (-0.6) ** i, rng) for _ in range(40)]
+    sigma, dof = timing_noise_sd(trials)
+    assert dof == 40 * 7
+    assert 0.8 * NOISE_S < sigma < 1.2 * NOISE_S, sigma
+
+
+def test_a_monotone_approach_is_unchanged() -> None:
+    """The same with a positive multiplier (+0.6): the estimate was right before and stays right."""
+    rng = np.random.default_rng(12)
+    i = np.arange(10)
+    sigma, _ = timing_noise_sd([_impacts(0.3 + 0.012 * 0.6**i, rng) for _ in range(40)])
+    assert 0.8 * NOISE_S < sigma < 1.2 * NOISE_S, sigma
+
+
+@pytest.mark.slow
+def test_a_limping_wheel_is_not_called_a_fit() -> None:
+    """c fitted on three ER walks whose impact times limp by 5 % (periods alternating (1 -+ 0.05) T): the periods
+    miss by about 5 % of a period against 0.5 ms of noise, so the adequacy check must not say the model fits, and
+    c is not identifiable. Main said "fits" (periods chi^2/dof 0.84)."""
+    from rimless.analysis.inference.calibrate import calibrate
+    from rimless.sim.model.params import WheelParams
+    from tests.support.analysis_sim_truth import sim_trial
+
+    rng = np.random.default_rng(5)
+    truth = WheelParams(damping_ns_per_m=11.0)
+    trials = []
+    for s, w in ((2.4, 2.2), (3.0, 2.5), (3.6, 2.8)):
+        tr = sim_trial(truth, s, w, rng, name=f"er_{s}")
+        p = np.diff(tr.impact_time_s)
+        p = p * (1.0 + 0.05 * (-1.0) ** np.arange(p.size))
+        tr.impact_time_s = tr.impact_time_s[0] + np.concatenate([[0.0], np.cumsum(p)])
+        tr.step_period_s = p
+        trials.append(tr)
+    res = calibrate(trials, [t.meta.source_file for t in trials], ("c",))
+    assert res.adequacy is not None and res.adequacy["fits"] is False, res.adequacy.get("statement")
+    (c,) = res.params
+    assert not c.identifiable
