@@ -105,7 +105,9 @@ def timing_noise_sd(impacts_per_trial: Sequence[np.ndarray]) -> tuple[float, int
     lambda on `LAMBDA_GRID`, the best per trial). The periods' noise is sigma^2 D D^T (differences of impact
     times), so the residual sum of squares of the linear fit (hat matrix H) has expectation sigma^2 tr((I - H)
     D D^T): sigma^2 = sum RSS / sum tr (pooled over the trials; the choice of lambda costs one more degree of
-    freedom each, not counted in the trace: a slight underestimate). NaN when no trial has 5 periods."""
+    freedom each, not counted in the trace: a slight underestimate). A negative lambda alternates (lambda^i; it was
+    written sign(lambda) |lambda|^i until session 21, which never alternates, so an alternating approach or a limp
+    went into the noise). NaN when no trial has 5 periods."""
     rss, tr_sum, dof = 0.0, 0.0, 0
     for imp in impacts_per_trial:
         p = np.diff(np.asarray(imp, float))
@@ -116,7 +118,7 @@ def timing_noise_sd(impacts_per_trial: Sequence[np.ndarray]) -> tuple[float, int
         dd = 2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
         best = None
         for lam in LAMBDA_GRID:
-            X = np.column_stack([np.ones(n), np.sign(lam) * np.abs(lam) ** i if lam != 0 else (i == 0).astype(float)])
+            X = np.column_stack([np.ones(n), lam**i if lam != 0 else (i == 0).astype(float)])  # alternates for lam < 0
             coef, *_ = np.linalg.lstsq(X, p, rcond=None)
             r = p - X @ coef
             val = float(r @ r)
