@@ -7,6 +7,7 @@ steps, failure classes and guards (codes and directions of the one table rimless
 rules of the event engine rimless.sim.integrate.events). Modules:
 - rimless.sim.fast.model: compiled mechanics (phase dynamics, their exact derivatives, guards, impact);
 - rimless.sim.fast.rk: compiled DOP853 for one phase with guard location on the dense output (the engine's twin);
+- rimless.sim.fast.friction: the tangent maps at guide friction's events (the friction map's exact Jacobian);
 - rimless.sim.fast.stiff: a compiled Rosenbrock method for single support of near-massless legs (`leg_stiff`);
 - rimless.sim.fast.step: one whole step (phase sequence, pre-checks, saltation, impact) compiled;
 - rimless.sim.fast.compiling: calling a kernel on first use with a notice on stderr while it compiles;
@@ -19,7 +20,9 @@ rules of the event engine rimless.sim.integrate.events). Modules:
   (phases, guards, pre-checks, failure classes and impact identical to hybrid.simulate_step with the ideal
   clutch); nothing is recorded. Failures raise StepFailure with the same FailureReason as the reference.
 - `exact_jacobian(pmap_or_params, model, z)`: dP/dz (2x2) from the variational equations, saltation
-  matrices at lift-off and clutch lock, and the exact derivative of the relabel + impact reset.
+  matrices at lift-off and clutch lock, and the exact derivative of the relabel + impact reset. With guide
+  friction the step runs phase by phase (rimless.sim.step.fast_map.friction_step) and its exact Jacobian adds
+  the stick/slip sub-phases' variational equations and saltation matrices (rimless.sim.fast.friction).
 The Poincaré map on this path, `FastPoincareMap`, is a step-level object: rimless.sim.step.fast_map.
 
 Units: SI; z = (theta+ rad, theta'+ rad/s) on the post-impact section (rimless.sim.model.section).
@@ -76,6 +79,7 @@ def _compile_settings() -> None:
 
 _compile_settings()
 
+from rimless.sim.fast import friction as fj  # noqa: E402
 from rimless.sim.fast import model as fm  # noqa: E402 (after the cache folder is chosen)
 from rimless.sim.fast import rk, stiff  # noqa: E402
 from rimless.sim.fast import step as fs  # noqa: E402
@@ -104,7 +108,7 @@ def _invalidate_stale_cache() -> None:
     from rimless.sim.model.generated import active_feet, eight_leg, sliding_leg
 
     digest = hashlib.sha256()
-    for mod in (fm, rk, fs, stiff, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
+    for mod in (fm, rk, fs, stiff, fj, compiling, eight_leg, sliding_leg, active_feet, guards, dynamics, events):
         assert mod.__file__ is not None  # modules loaded from source files
         digest.update(Path(mod.__file__).read_bytes())
     stamp_value = digest.hexdigest()
@@ -113,7 +117,7 @@ def _invalidate_stale_cache() -> None:
         stamp = cache_dir / "rimless_fast_kernels.stamp"
         if stamp.exists() and stamp.read_text() == stamp_value:
             return
-        for pattern in ("model.*.nb[ic]", "rk.*.nb[ic]", "step.*.nb[ic]", "stiff.*.nb[ic]"):
+        for pattern in ("model.*.nb[ic]", "rk.*.nb[ic]", "step.*.nb[ic]", "stiff.*.nb[ic]", "friction.*.nb[ic]"):
             for f in cache_dir.glob(pattern):
                 f.unlink(missing_ok=True)
         gen_dir = Path(fm._M0._cache._cache_path)
@@ -346,16 +350,31 @@ def exact_jacobian(
     Call as exact_jacobian(params, model, z) or exact_jacobian(pmap, z=z) / exact_jacobian(pmap, z)
     where pmap is a (Fast)PoincareMap (its params and model are used, and its integrator's tolerances
     if it has them).
+
+    Guide friction (params.guide_friction_n > 0): the one-call step has none, so a FastPoincareMap with an exact
+    friction Jacobian (its `exact_jacobian`) answers with its own (rimless.sim.step.fast_map.friction_step(
+    jacobian=True)); params with friction, or a map without that Jacobian, raise ValueError (never the
+    frictionless map's Jacobian).
     """
     if isinstance(pmap_or_params, WheelParams):
         if model is None or z is None:
             raise TypeError("exact_jacobian(params, model, z)")
         params = pmap_or_params
+        if params.guide_friction_n > 0.0:
+            raise ValueError(
+                "exact_jacobian(params, ...) with guide friction: use FastPoincareMap(params, model).jacobian(z) "
+                "or rimless.sim.step.fast_map.friction_step(params, model, z, jacobian=True)"
+            )
     else:
         pm = pmap_or_params
         if z is None and model is not None and not isinstance(model, str):
             z, model = model, None
         params, model = pm.params, pm.model
+        if params.guide_friction_n > 0.0:
+            if not getattr(pm, "exact_jacobian", False):
+                raise ValueError("exact_jacobian: this map with guide friction has no exact Jacobian")
+            assert z is not None
+            return np.asarray(pm.jacobian(np.asarray(z, dtype=np.float64)))
         integ = getattr(pm, "integrator", None)
         if isinstance(integ, FastIntegrator):
             rtol, atol = integ.rtol, integ.atol

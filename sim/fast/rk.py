@@ -87,7 +87,10 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
     if with_var:
         V = y[VAR_OFFSET : VAR_OFFSET + VAR_SIZE].reshape((2, 10)).T
         dqdd = ws[0:10].reshape((5, 2))  # no allocation per evaluation
-        ok = fm.accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws)
+        if phase >= FRICTION_PHASE0:
+            ok = _friction_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd)
+        else:
+            ok = fm.accel_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd, ws)
         if not ok:
             return False
         for col in range(2):
@@ -110,8 +113,8 @@ def rhs_aug(mi, phase, p, y, with_var, with_diss, f, lam, ws):
 # ------------------------------------------------------------------------------------------------
 # Guide friction (rimless.sim.model.friction): phase codes >= FRICTION_PHASE0 are a base phase with each
 # friction leg slipping up/down (-/+ F_c on L) or stuck (L' = 0 a constraint); F_c = p[FRICTION_INDEX].
-# Without the variational equations (the map Jacobian with friction is taken by differences). The leg states
-# are rimless.sim.model.clutch's SLIP_UP, SLIP_DOWN and STUCK.
+# With the variational equations too (`_friction_directional`: the map Jacobian with friction, rimless.sim.fast.
+# friction). The leg states are rimless.sim.model.clutch's SLIP_UP, SLIP_DOWN and STUCK.
 
 
 @_inner
@@ -204,6 +207,53 @@ def _friction_accel(mi, phase, q, qd, p, qdd, lam):
     for i in range(5):
         if not math.isfinite(qdd[i]):
             return False
+    return True
+
+
+@_inner
+def _friction_accel_jacobian(mi, phase, p, q, qd, qdd, lam, Dqdd, Dlam):
+    """q'', lambda, dq''/dy (5 x 10) and dlambda/dy (nc x 10 in Dlam, 6 x 10) of a guide-friction phase
+    (rimless.sim.model.friction), exactly.
+
+    The phase's KKT system is `_friction_kkt`'s (the constraint rows: foot b, foot a in double support, a stuck
+    leg's L' = 0) with the slipping legs' constant generalised forces -+F_c on L. Those forces and the stuck rows
+    do not depend on y, so differentiating M q'' + h = A^T lambda + f_c and A q'' + A' q' = 0 gives the
+    frictionless right-hand side of fm.accel_jacobian on the same KKT matrix. False if singular."""
+    if not _friction_accel(mi, phase, q, qd, p, qdd, lam):
+        return False
+    K = np.zeros((11, 11))
+    piv = np.empty(11, dtype=np.int64)
+    ok, n, nc, _h, _adot = _friction_kkt(mi, phase, q, qd, p, K, piv)
+    if not ok:
+        return False
+    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = fm.derivs(mi, q, qd, p)
+    dlsp = _base_phase(phase) == fm.DLSP
+    rhs = np.empty(n)
+    for col in range(10):
+        for i in range(n):
+            rhs[i] = 0.0
+        fm.jacobian_rhs(col, dlsp, qdd, lam, dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd, rhs)
+        fm.lu_solve(K, n, piv, rhs)
+        for i in range(5):
+            Dqdd[i, col] = rhs[i]
+        for r in range(nc):
+            Dlam[r, col] = rhs[5 + r]
+    return True
+
+
+@_inner
+def _friction_directional(mi, phase, q, qd, p, qdd, lam, V, dqdd):
+    """q'', lambda of a friction phase and dqdd[:, c] = (dq''/dy) V[:, c] (the variational equations' field)."""
+    Dqdd = np.empty((5, 10))
+    Dlam = np.empty((6, 10))
+    if not _friction_accel_jacobian(mi, phase, p, q, qd, qdd, lam, Dqdd, Dlam):
+        return False
+    for i in range(5):
+        for c in range(V.shape[1]):
+            acc = 0.0
+            for j in range(10):
+                acc += Dqdd[i, j] * V[j, c]
+            dqdd[i, c] = acc
     return True
 
 
@@ -925,8 +975,10 @@ def run_phase(
 needs_lambda = _needs_lambda
 friction_accel = _friction_accel
 friction_kkt = _friction_kkt
+friction_accel_jacobian = _friction_accel_jacobian
 base_phase = _base_phase
 leg_state = _leg_state
+stuck_row = _stuck_row
 guard_value = _guard_value
 guards_at = _guards_at
 dense_eval = _dense_eval

@@ -21,7 +21,7 @@ integrator itself: Brent's method (4 eps in t) on the guard of one Rosenbrock st
 so the event time and state carry the step's accuracy, not the interpolant's.
 
 Guide friction's stick/slip phases (codes >= FRICTION_PHASE0, rimless.sim.model.friction) are integrated the
-same way: their field is rk's, their exact Jacobian `_friction_accel_jacobian` (the slipping legs' forces -+F_c
+same way: their field is rk's, their exact Jacobian `rk.friction_accel_jacobian` (the slipping legs' forces -+F_c
 and the stuck legs' rows L' = 0 do not depend on y), and their guards cross strictly as on DOP853 (a guard at
 exactly 0 at a step's start, a leg that just stuck or just slips, does not fire at once).
 
@@ -85,34 +85,6 @@ leg_stiff = fm.leg_stiff  # leg_rate(p) > STIFF_LEG_RATE
 
 
 @_inner
-def _friction_accel_jacobian(mi, phase, p, q, qd, qdd, lam, Dqdd):
-    """q'', lambda and dq''/dy (5 x 10) of a guide-friction phase (rimless.sim.model.friction), exactly.
-
-    The phase's KKT system is rk's (the friction phase's constraint rows: foot b, foot a in double support, a
-    stuck leg's L' = 0) with the slipping legs' constant generalised forces -+F_c on L. Those forces and the
-    stuck rows do not depend on y, so differentiating M q'' + h = A^T lambda + f_c and A q'' + A' q' = 0 gives
-    the frictionless right-hand side of fm.accel_jacobian on the same KKT matrix. False if singular."""
-    if not rk.friction_accel(mi, phase, q, qd, p, qdd, lam):
-        return False
-    K = np.zeros((11, 11))
-    piv = np.empty(11, dtype=np.int64)
-    ok, n, _nc, _h, _adot = rk.friction_kkt(mi, phase, q, qd, p, K, piv)
-    if not ok:
-        return False
-    dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd = fm.derivs(mi, q, qd, p)
-    dlsp = rk.base_phase(phase) == fm.DLSP
-    rhs = np.empty(n)
-    for col in range(10):
-        for i in range(n):
-            rhs[i] = 0.0
-        fm.jacobian_rhs(col, dlsp, qdd, lam, dM, dh_dq, dh_dqd, dJa, djd_dq, djd_dqd, rhs)
-        fm.lu_solve(K, n, piv, rhs)
-        for i in range(5):
-            Dqdd[i, col] = rhs[i]
-    return True
-
-
-@_inner
 def _jacobian(mi, phase, p, y, with_diss, Jm):
     """Jm = df/dy (N x N) of the phase's field (a guide-friction phase's too); False if the KKT matrix is
     singular. With the variational equations (y of 30) Jm is the state's block (10 x 10)."""
@@ -121,7 +93,7 @@ def _jacobian(mi, phase, p, y, with_diss, Jm):
     lam = np.zeros(6)
     Dqdd = np.empty((5, 10))
     if phase >= FRICTION_PHASE0:
-        ok = _friction_accel_jacobian(mi, phase, p, y[0:5], y[5:10], qdd, lam, Dqdd)
+        ok = rk.friction_accel_jacobian(mi, phase, p, y[0:5], y[5:10], qdd, lam, Dqdd, np.empty((6, 10)))
     else:
         Dlam = np.empty((4, 10))
         ok = fm.accel_jacobian(mi, phase, y[0:5], y[5:10], p, qdd, lam, Dqdd, Dlam)

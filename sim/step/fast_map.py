@@ -3,7 +3,10 @@ rimless.sim.step.poincare.PoincareMap (`__call__`, `step`, `jacobian`, `with_par
 integrator/clutch/evaluations), usable unchanged by solve_fixed_point and the continuation code.
 
 A map evaluation is one compiled step (rimless.sim.fast.fast_step's kernels); its `jacobian` is the exact
-variational Jacobian. `step` (the full StepResult with trajectories) and a non-ideal clutch policy go through
+variational Jacobian. With guide friction a map evaluation is `friction_step` (hybrid.simulate_step with the
+compiled phase integrator, phase by phase) and its `jacobian` the exact one of `friction_step(jacobian=True)`
+(variational equations through the stick/slip sub-phases, saltation at their events: rimless.sim.fast.friction),
+except with bilateral contact or a non-ideal clutch: central differences there (`exact_jacobian` False). `step` (the full StepResult with trajectories) and a non-ideal clutch policy go through
 the reference hybrid step (rimless.sim.step.hybrid.simulate_step) with the compiled phase integrator
 (rimless.sim.fast.FastIntegrator). Stiff legs: a step whose explicit DOP853 needs more than `max_steps`
 steps in one phase is recomputed with scipy's implicit Radau (stiff_fallback=True), recorded in
@@ -19,10 +22,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rimless.sim import fast
-from rimless.sim.fast import FastIntegrator, check_model, mass_model_index, param_vector, raise_failure
+from rimless.sim.fast import FastIntegrator, check_model, mass_model_index, param_vector, raise_failure, rk, stiff
+from rimless.sim.fast import friction as fj
 from rimless.sim.fast import step as fs
+from rimless.sim.fast.compiling import call_compiling
 from rimless.sim.integrate.reference import PhaseRun, ScipyIntegrator
-from rimless.sim.model.guards import LIFTOFF_B
+from rimless.sim.model.failures import FailureReason, StepFailure
+from rimless.sim.model.guards import DIRECTION, LIFTOFF_B, TOUCHDOWN
+from rimless.sim.model.guards import TABLE as GUARD_TABLE
 from rimless.sim.model.mechanics import Mechanics
 from rimless.sim.model.params import WheelParams
 from rimless.sim.model.section import section_from_state, state_from_section
@@ -113,10 +120,19 @@ class FastPoincareMap:
             )
         )
 
+    def _friction_exact(self) -> bool:
+        """With guide friction: is the exact Jacobian of `friction_step(jacobian=True)` available (the ideal clutch,
+        unilateral contact)?"""
+        return (
+            self.params.guide_friction_n > 0.0
+            and not self.bilateral
+            and (self.clutch is None or isinstance(self.clutch, IdealClutch))
+        )
+
     @property
     def exact_jacobian(self) -> bool:
         """Is `jacobian` the exact variational one (else central differences of the map)?"""
-        return self._compiled_ok()
+        return self._compiled_ok() or self._friction_exact()
 
     def _count(self, method: str) -> None:
         self.last_method = method
@@ -231,6 +247,19 @@ class FastPoincareMap:
             if J is not None:
                 return J
             h = 1e-5
+        if h is None and self._friction_exact():
+            r = friction_step(
+                self.params,
+                self.model,
+                z,
+                rtol=float(self.integrator.rtol),
+                atol=float(self.integrator.atol),
+                jacobian=True,
+                max_steps=int(self.integrator.max_steps),
+            )
+            self._count("hybrid+fast-dop853+variational")
+            assert r.jacobian is not None
+            return r.jacobian
         h = 1e-5 if h is None else h
         J = np.empty((2, 2))
         for i in range(2):
@@ -250,26 +279,143 @@ class FastPoincareMap:
 @dataclass(frozen=True)
 class FrictionStep:
     """One step with guide friction on the compiled phase integrator: next section point, period (s), the
-    guide-friction work (J) and the full StepResult."""
+    guide-friction work (J), the full StepResult and, with jacobian=True, dz'/dz (2 x 2, exact)."""
 
     z_next: np.ndarray
     period_s: float
     friction_work_J: float
     result: Any
+    jacobian: np.ndarray | None = None
+    #: with jacobian=True: the guards (names of rimless.sim.model.guards.TABLE) of the events the tangents went
+    #: through, in order, touchdown last ("lift-off-a", "slip-end-2", "stick-end-2", "clutch-lock", ...)
+    events: tuple[str, ...] = ()
+
+
+class _TangentIntegrator:
+    """The compiled phase integrators of FastIntegrator (DOP853; the Rosenbrock method in single support of
+    near-massless legs) with the variational equations: carries the tangents V = dy/dz (10 x 2) through each (friction) sub-phase hybrid.simulate_step
+    runs, and through the event between one sub-phase and the next by the saltation matrix
+    (rimless.sim.fast.friction.event_tangent). The state is integrated as without V (the error is controlled on
+    the state only), so the step is friction_step's to the last bit. No records, no dissipation tracking."""
+
+    def __init__(self, mech: Mechanics, rtol: float, atol: float, max_steps: int, V: np.ndarray) -> None:
+        self.rtol = rtol
+        self.atol = atol
+        self.max_steps = max_steps
+        self.name = "fast-dop853+variational"
+        self.p = np.asarray(mech.p, dtype=np.float64)
+        self.mi = fast.mass_model_index(mech.params)
+        self.stiff_legs = bool(stiff.leg_stiff(self.p))
+        self.V = np.ascontiguousarray(V, dtype=np.float64)
+        self.last: tuple[int, int, np.ndarray] | None = None  # (phase code, guard fired, end state)
+        self.events: list[int] = []  # the guards of the events carried through
+
+    def run_phase(
+        self,
+        mech: Mechanics,
+        phase: int,
+        y0: np.ndarray,
+        t0: float,
+        guards: tuple[int, ...],
+        t_max: float,
+        *,
+        record_dt: float | None = None,
+        track_dissipation: bool = False,
+    ) -> PhaseRun:
+        y0 = np.asarray(y0, dtype=np.float64)
+        if self.last is not None:
+            code, guard, y_end = self.last
+            ok, V = call_compiling(fj.EVENT_TANGENT[self.mi], code, guard, y_end, int(phase), y0, self.p, self.V)
+            if not ok:
+                raise StepFailure(
+                    FailureReason.INTEGRATION,
+                    "the saltation matrix at a guide-friction event is undefined (guard tangent to the flow "
+                    "or a singular KKT matrix; compiled map Jacobian)",
+                    time_s=t0,
+                )
+            self.V = V
+            self.events.append(guard)
+        args = list(
+            rk.phase_call_args(
+                phase,
+                self.p,
+                np.concatenate((y0, self.V.T.ravel())),
+                t0,
+                guards,
+                [DIRECTION[g] for g in guards],
+                t_max,
+                self.rtol,
+                self.atol,
+                False,
+                None,
+                self.max_steps,
+            )
+        )
+        if self.stiff_legs and fast._single_support(phase):
+            # near-massless legs: single support by the Rosenbrock method, as FastIntegrator; with y of 30 it
+            # carries V too (rimless.sim.fast.stiff), the step of y the same as without V
+            entry, args = stiff.RUN_PHASE_STIFF[self.mi], args[:10] + args[11:]
+        else:
+            entry = rk.RUN_PHASE[self.mi]
+            args[10] = True  # with the variational equations (error control on the state's 10 components)
+        st, t_end, y_end, fired, nfev, _nsteps, _nstiff, _rec_t, _rec_y = call_compiling(entry, *args)
+        run = PhaseRun(
+            t_end=float(t_end),
+            y_end=np.array(y_end[:10]),
+            guard=(guards[fired] if fired >= 0 else None),
+            nfev=int(nfev),
+        )
+        if st != rk.STATUS_OK:
+            run.failed = True
+            run.message = {
+                rk.STATUS_STEP_TOO_SMALL: "required step size is less than spacing between numbers",
+                rk.STATUS_NOT_FINITE: "non-finite state or singular KKT matrix",
+                rk.STATUS_TOO_MANY_STEPS: f"more than {self.max_steps} steps (stiff legs?)",
+            }[st]
+        self.V = np.array(y_end[10:30]).reshape(2, 10).T.copy()
+        self.last = (int(phase), -1 if run.guard is None else int(run.guard), run.y_end.copy())
+        return run
 
 
 def friction_step(
-    params: WheelParams, model: str, z: np.ndarray, *, rtol: float = 1e-10, atol: float | None = None
+    params: WheelParams,
+    model: str,
+    z: np.ndarray,
+    *,
+    rtol: float = 1e-10,
+    atol: float | None = None,
+    jacobian: bool = False,
+    max_steps: int = fast.MAX_STEPS,
 ) -> FrictionStep:
     """The step map where fast_step (one compiled call) has no guide friction: hybrid.simulate_step with the
     compiled phase integrator, each stick/slip phase compiled (rimless.sim.integrate.friction). Raises
-    StepFailure."""
+    StepFailure.
+
+    jacobian=True: also dz'/dz (2 x 2), exact: the variational equations through every stick/slip sub-phase,
+    the saltation matrices at their events (lift-off, the clutch's lock, a slip's end, a stick's end) and the
+    relabel + impact reset's derivative (rimless.sim.fast.friction); the step (z_next, period, records) is the
+    same to the last bit. Near-massless legs (rimless.sim.fast.stiff.leg_stiff): single support by the Rosenbrock
+    method with the tangents, as the frictionless map's Jacobian."""
     check_model(model)
     mech = Mechanics.of(params)
-    res = simulate_step(
-        mech,
-        model,
-        state_from_section(mech, np.asarray(z, dtype=float)),
-        FastIntegrator(rtol=rtol, atol=rtol * 1e-2 if atol is None else atol),
-    )
-    return FrictionStep(section_from_state(res.y_plus), res.period_s, res.friction_work_J, res)
+    atol = rtol * 1e-2 if atol is None else atol
+    y0 = state_from_section(mech, np.asarray(z, dtype=float))
+    if not jacobian:
+        res = simulate_step(mech, model, y0, FastIntegrator(rtol=rtol, atol=atol, max_steps=max_steps))
+        return FrictionStep(section_from_state(res.y_plus), res.period_s, res.friction_work_J, res)
+    mi = mass_model_index(params)
+    _y, T = call_compiling(fj.SECTION[mi], np.asarray(z, dtype=np.float64).reshape(2), np.asarray(mech.p, float))
+    integ = _TangentIntegrator(mech, float(rtol), float(atol), int(max_steps), T)
+    res = simulate_step(mech, model, y0, integ)
+    assert integ.last is not None and integ.last[1] == TOUCHDOWN  # simulate_step returns only at touchdown
+    code, _guard, y_minus = integ.last
+    ok, _yp, _impulse, J = call_compiling(fj.TOUCHDOWN_TANGENT[mi], code, y_minus, integ.p, integ.V)
+    if not ok:
+        raise StepFailure(
+            FailureReason.INTEGRATION,
+            "the touchdown's saltation or the impact's derivative is undefined (compiled map Jacobian)",
+            time_s=res.period_s,
+            phase="impact",
+        )
+    events = tuple(GUARD_TABLE[g].name for g in [*integ.events, TOUCHDOWN])
+    return FrictionStep(section_from_state(res.y_plus), res.period_s, res.friction_work_J, res, np.array(J), events)

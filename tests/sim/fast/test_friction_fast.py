@@ -88,7 +88,7 @@ def er_friction_fixed_point():
 def test_gravity_input_balances_losses_with_friction_at_the_fixed_point(er_friction_fixed_point):
     """On the periodic gait: gravity input = damper + friction + impact + relabelling losses."""
     pmap, fp = er_friction_fixed_point
-    assert fp.jacobian_method == "central-difference"  # no variational equations through stick/slip
+    assert fp.jacobian_method == "variational"  # variational equations through stick/slip (rimless.sim.fast.friction)
     p = pmap.params
     mech = Mechanics.of(p)
     y0 = state_from_section(mech, fp.z)
