@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-AWAY = {
+AWAY: dict[str, Any] = {
     "hub_mass_kg": 2.3,
     "leg_mass_kg": 0.05,
     "inertia_kg_m2": 0.06,
