@@ -288,7 +288,15 @@ def fast_step(
     bilateral: hold the stance foot (no stance lift-off, impulses of either sign accepted) and report what
     unilateral contact would forbid in `contact` (BilateralContact; record_contact=False skips that record,
     which costs about as much as the step): for finding and characterising gaits that are not contact-valid.
+
+    Guide friction is not in this one-call step: params with guide_friction_n > 0 raise ValueError (they were
+    stepped without their friction until session 22); `rimless.sim.step.fast_map.friction_step` steps them.
     """
+    if params.guide_friction_n > 0.0:
+        raise ValueError(
+            f"fast_step has no guide friction (guide_friction_n = {params.guide_friction_n} N): "
+            "use rimless.sim.step.fast_map.friction_step or FastPoincareMap"
+        )
     er = check_model(model)
     atol = rtol * 1e-2 if atol is None else atol
     zz = np.asarray(z, dtype=np.float64).reshape(2)
@@ -332,7 +340,8 @@ def fast_step(
 def fast_map(
     params: WheelParams, model: str, z: np.ndarray, rtol: float = 1e-10, atol: float | None = None
 ) -> tuple[np.ndarray, float]:
-    """(z_next, period_s) of the compiled Poincaré map; raises StepFailure."""
+    """(z_next, period_s) of the compiled Poincaré map; raises StepFailure (ValueError with guide friction:
+    `fast_step`)."""
     r = fast_step(params, model, z, rtol=rtol, atol=atol)
     return r.z_next, r.period_s
 

@@ -110,6 +110,21 @@ def test_no_exact_friction_jacobian_where_it_is_not_built():
         fast.exact_jacobian(WheelParams(guide_friction_n=0.3), "er", Z_TABLE1)
 
 
+def test_the_one_call_step_refuses_friction_it_would_ignore():
+    """fast_step / fast_map have no guide friction: given F_c > 0 they stepped the frictionless wheel silently
+    (until session 22; on main their z_next equalled the F_c = 0 map's); now they refuse, and friction_step
+    differs from the frictionless step (F_c takes energy)."""
+    p = WheelParams(guide_friction_n=0.3)
+    for call in (
+        lambda: fast.fast_step(p, "er", np.array(Z_TABLE1)),
+        lambda: fast.fast_map(p, "er", np.array(Z_TABLE1)),
+    ):
+        with pytest.raises(ValueError, match="guide friction"):
+            call()
+    frictionless = fast.fast_step(WheelParams(), "er", np.array(Z_TABLE1)).z_next
+    assert abs(friction_step(p, "er", np.array(Z_TABLE1)).z_next[1] - frictionless[1]) > 1e-4
+
+
 @pytest.mark.slow
 def test_light_legs_friction_jacobian_matches_central_differences():
     """Legs of 0.1 g (rimless.sim.studies.stiffbench.light_wheel): single support by the Rosenbrock method with
