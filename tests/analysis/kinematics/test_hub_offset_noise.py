@@ -27,9 +27,9 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from rimless.analysis.kinematics import hub as kin_hub
+from tests.support.rolling_wheel import rolling_wheel
 
 DRAWS = 60
 ORIGIN_BODY_M = np.array([0.03, -0.02, 0.0])
@@ -39,20 +39,10 @@ HARMONICS = 6
 
 def _motion():
     """(rotations (n, 3, 3), tracked point (n, 3) m, the wheel's turn (n,) rad): a rigid wheel rolling down a 4 deg
-    slope, 1.3 turns."""
-    phi, alpha, leg = math.radians(4.0), math.pi / 4, 0.22
-    t = np.arange(0.0, 4.0, 0.01)
-    beta = 2.0 * t  # the body's turn, rad (at a steady 2 rad/s)
-    theta = np.mod(beta, alpha) - alpha / 2  # the stance leg's angle from the slope's normal
-    step = np.floor(beta / alpha)
-    x = step * 2 * leg * math.sin(alpha / 2) + leg * np.sin(theta)  # hub down the slope, m
-    h = leg * np.cos(theta)  # hub along the slope's normal, m
-    down = np.array([math.cos(phi), 0.0, -math.sin(phi)])
-    nrm = np.array([math.sin(phi), 0.0, math.cos(phi)])
-    axis = np.cross(down, nrm)
-    hub = np.outer(x, down) + np.outer(h, nrm)
-    rot = Rotation.from_rotvec(np.outer(-beta, axis)) * Rotation.from_matrix(np.column_stack([down, nrm, axis]))
-    return rot.as_matrix(), hub + rot.apply(ORIGIN_BODY_M), beta
+    slope at a steady 2 rad/s, 1.3 turns."""
+    beta = 2.0 * np.arange(0.0, 4.0, 0.01)  # the body's turn, rad
+    rot, tracked = rolling_wheel(beta, ORIGIN_BODY_M)
+    return rot, tracked, beta
 
 
 def _noise(kind: str, rng: np.random.Generator, beta: np.ndarray) -> np.ndarray:
