@@ -101,7 +101,7 @@ def test_the_impact_lines_slope_carries_the_offsets_covariance_exactly() -> None
     common = {"travel_m": 1.0, "step_m": step, "impact_along_m": along}
     ev = slope_evidence(*args, **common, hub_sd_m=sds[0], hub_height_cov_m2=height_cov)
     without = slope_evidence(*args, **common)
-    assert ev[0].half_rad**2 - without[0].half_rad**2 == pytest.approx((Z95 * expected) ** 2, rel=1e-9)
+    assert ev[0].half_rad ** 2 - without[0].half_rad ** 2 == pytest.approx((Z95 * expected) ** 2, rel=1e-9)
 
 
 def test_the_import_carries_the_height_fits_covariance_to_the_slope(tmp_path, monkeypatch) -> None:
