@@ -17,7 +17,12 @@ whose centroid is 14 mm off it; 0.3 mm and 1 mrad of noise, 100 Hz; `critical_tr
   2.45 sd 95 % of the time);
 - ``offset_error_mm`` and ``offset_z``: the same with the tracked point's noise taken out (the noise the recording
   added, drawn again from its seed: the object's translation noise, or the mean of the markers' noise, which is
-  the noise of the markers' centroid the importer carries), so the offset's own error against its stated sd.
+  the noise of the markers' centroid the importer carries), so the offset's own error against its stated sd;
+- ``offset_z_cov``: that error against the offset's 2 x 2 covariance (`HubOffsetFit.cov_m2`, of the height fit the
+  import used), sqrt(e^T C^+ e) with e in the body frame (least squares of the hub difference, the noise taken out,
+  on the import's rotations plus a constant; in the import's Z-up lab): chi with 2 degrees of freedom for an honest
+  covariance; with the feet's sd, |e| / sd. ``offset_sd_axes_mm`` the covariance's two axes, ``misfit_sd_mm`` and
+  ``misfit_p_value`` its misfit part and that part's test.
 
 Truths (`TRUTHS`): ``er``, the simulator's ER wheel (`floquet_truth.er_walk`: k 1500-4000 N/m, c 2-20 N s/m, released
 at its gait's speed times U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks), ``er-speed``, the same
@@ -168,7 +173,7 @@ def hub_offset_draw(
     height = last if last is not None and sd is not None and last.sd_m == sd else None
     sd_axis = height.sd_per_axis_m if height is not None else sd  # the feet's sd: one for both axes
     z2 = None  # the offset's own error against the stated covariance: e^T C^+ e (chi^2 with 2 dof when honest)
-    if height is not None:
+    if height is not None and rot is not None:
         from rimless.analysis.kinematics.vertical import is_z_up, rotation_to_z_up, up_vector
 
         up = trial.meta.up_axis  # the import fits in its lab turned Z up (p' = Q p); dh is in the file's frame
@@ -207,8 +212,9 @@ def run_hub_offset_study(
     """``draws`` draws of each truth (and of the ER truth at Table 1: ``er-table1``), seeds ``seed`` up, of the
     ``sets`` named (default all of `SETS`); the rows and per set the median and largest sinusoid, the median noise
     share, how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2) (1 for an honest sd of an isotropic error),
-    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``) and against the per-axis sd
-    (``offset_axis_held_95``, ``offset_axis_rms_z``)."""
+    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``), against the per-axis sd
+    (``offset_axis_held_95``, ``offset_axis_rms_z``) and against the 2 x 2 covariance (``offset_cov_held_95``,
+    ``offset_cov_rms_z``: within the chi^2_2 95 % region, rms over 2 of e^T C^+ e)."""
     sets = SETS if sets is None else tuple(sets)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
