@@ -296,6 +296,7 @@ def build_trial(
     contacts = None
     hub_sd_m: float | None = None  # standard error of the fitted hub offset (feet or height), m
     offset_cov: np.ndarray | None = None  # the height fit's covariance (3, 3), m^2, when its offset is used
+    sd_axes: tuple[float, float] | None = None  # the offset's sds along its covariance's two axes, m
     if rot is not None and angle is not None and axis is not None:  # the axis comes with the angle
         ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
         # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
@@ -348,6 +349,7 @@ def build_trial(
         if use_feet and feet is not None and contacts is not None:  # (contacts: where the feet came from)
             d = np.asarray(feet[0])
             residual, hub_sd_m = feet[2], float(feet[1])
+            sd_axes = (hub_sd_m, hub_sd_m)
             hub_source = (
                 f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
                 f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
@@ -355,6 +357,7 @@ def build_trial(
             )
         elif height_fit is not None:
             residual, hub_sd_m, offset_cov = height_fit.residual_m, height_fit.sd_m, height_fit.cov_m2
+            sd_axes = height_fit.sd_axes_m
             hub_source = f"{what} + estimated offset {describe_offset_fit(height_fit)}"
             if feet is not None:
                 hub_source += f"; the stance feet's centre, standard error {feet[1] * 1e3:.2f} mm, not used"
@@ -589,6 +592,7 @@ def build_trial(
         window_s=window_s,
         hub_offset_residual_m=residual,
         hub_offset_sd_m=hub_sd_m,
+        hub_offset_sd_axes_m=sd_axes,
         impact_step=tuple(int(k) for k in (steps.impact_step if steps.impact_step is not None else ())),
         period_step=tuple(int(k) for k in (steps.period_step if steps.period_step is not None else ())),
         warnings=tuple(warnings),

@@ -142,3 +142,26 @@ def test_the_study_reads_the_offsets_error_against_its_covariance(tmp_path) -> N
     big, small = row["offset_sd_axes_mm"]
     z, err = row["offset_z_cov"], row["offset_error_mm"]
     assert 0.95 * err / big <= z <= 1.05 * err / small, (z, err, big, small)
+
+
+def test_the_trial_states_the_offsets_two_axes(tmp_path) -> None:
+    """The imported trial (draw 103, the height fit placed the hub) states both axes of the offset's covariance,
+    the worst first and equal to ``hub_offset_sd_m`` (to rounding; the contract's worst axis), in its JSON in mm, and reads them
+    back."""
+    from rimless.analysis.io.trial import TrialMeta
+    from rimless.analysis.kinematics.build import import_trial
+    from rimless.analysis.validation.hub_offset_study import hub_offset_draw
+
+    trials = []
+
+    def importer(path):
+        trials.append(import_trial(path))
+        return trials[-1]
+
+    row = hub_offset_draw("rigid", 103, tmp_path, importer=importer)
+    meta = trials[-1].meta
+    big, small = meta.hub_offset_sd_axes_m
+    assert big == pytest.approx(meta.hub_offset_sd_m, rel=1e-12) and 0.0 < small <= big
+    assert [v * 1e-3 for v in row["offset_sd_axes_mm"]] == pytest.approx([big, small], rel=1e-12)
+    assert trials[-1].summary()["hub_offset_sd_axes_mm"] == pytest.approx([big * 1e3, small * 1e3])
+    assert TrialMeta.from_json(meta.to_json()).hub_offset_sd_axes_m == (big, small)
