@@ -97,6 +97,9 @@ class TrialMeta:
     #: Standard error of the fitted hub offset along its worst axis in the wheel plane, m (None when given or not
     #: fitted): an offset error e is a once-a-turn sinusoid of amplitude |e| in the CoM height.
     hub_offset_sd_m: float | None = None
+    #: Standard errors of the fitted hub offset along the two axes of its covariance in the wheel plane, m (largest
+    #: first: the first is ``hub_offset_sd_m``; the stance feet's sd on both when they placed the hub), or None.
+    hub_offset_sd_axes_m: tuple[float, float] | None = None
     #: What the import held, with value, sd and source each (`rimless.analysis.kinematics.build.import_parameters`:
     #: the legs' drift time from the wheel given, or the bound; the leg length when given); None for a trial
     #: imported before they were recorded.
@@ -113,7 +116,14 @@ class TrialMeta:
         d = json.loads(text)
         for k in ("markers", "notes", "impact_step", "period_step", "warnings"):
             d[k] = tuple(d.get(k) or ())
-        for k in ("hub_offset_m", "travel_direction", "slope_origin_m", "window_s", "slope_estimated_ci_rad"):
+        for k in (
+            "hub_offset_m",
+            "travel_direction",
+            "slope_origin_m",
+            "window_s",
+            "slope_estimated_ci_rad",
+            "hub_offset_sd_axes_m",
+        ):
             if d.get(k) is not None:
                 d[k] = tuple(d[k])
         d["slope_ci_rad"] = tuple(
@@ -224,6 +234,9 @@ class Trial:
             "hub_offset_mm": None if m.hub_offset_m is None else [v * 1e3 for v in m.hub_offset_m],
             "hub_offset_residual_mm": None if m.hub_offset_residual_m is None else m.hub_offset_residual_m * 1e3,
             "hub_offset_sd_mm": None if m.hub_offset_sd_m is None else m.hub_offset_sd_m * 1e3,
+            "hub_offset_sd_axes_mm": None
+            if m.hub_offset_sd_axes_m is None
+            else [v * 1e3 for v in m.hub_offset_sd_axes_m],
             "warnings": list(m.warnings),
             "up_axis": m.up_axis,
             "up_axis_reason": m.up_axis_reason,

@@ -295,6 +295,8 @@ def build_trial(
     rough[motion.release_index : motion.end_index + 1] = True
     contacts = None
     hub_sd_m: float | None = None  # standard error of the fitted hub offset (feet or height), m
+    offset_cov: np.ndarray | None = None  # the height fit's covariance (3, 3), m^2, when its offset is used
+    sd_axes: tuple[float, float] | None = None  # the offset's sds along its covariance's two axes, m
     if rot is not None and angle is not None and axis is not None:  # the axis comes with the angle
         ok_t = np.flatnonzero(rough & ~np.isnan(trans).any(axis=1))
         # an even subsample of at most MAX_PATH_POINTS frames (no copy of the whole path)
@@ -347,13 +349,15 @@ def build_trial(
         if use_feet and feet is not None and contacts is not None:  # (contacts: where the feet came from)
             d = np.asarray(feet[0])
             residual, hub_sd_m = feet[2], float(feet[1])
+            sd_axes = (hub_sd_m, hub_sd_m)
             hub_source = (
                 f"{what} + estimated offset [{d[0] * 1e3:.1f}, {d[1] * 1e3:.1f}, {d[2] * 1e3:.1f}] mm "
                 f"(centre of the feet of {len(contacts.contacts)} stances, standard error "
                 f"{feet[1] * 1e3:.2f} mm, feet residual {feet[2] * 1e3:.2f} mm)"
             )
         elif height_fit is not None:
-            residual, hub_sd_m = height_fit.residual_m, height_fit.sd_m
+            residual, hub_sd_m, offset_cov = height_fit.residual_m, height_fit.sd_m, height_fit.cov_m2
+            sd_axes = height_fit.sd_axes_m
             hub_source = f"{what} + estimated offset {describe_offset_fit(height_fit)}"
             if feet is not None:
                 hub_source += f"; the stance feet's centre, standard error {feet[1] * 1e3:.2f} mm, not used"
@@ -379,6 +383,9 @@ def build_trial(
     # memory and makes it then; a matrix array (markers) is replaced by it now. float32: the tilt is compared
     # with 20 deg; the rounding (1e-7 rad) does not matter there.
     u = None
+    # the world's up in the body frame, R^T z (n, 3), when the offset's covariance is carried to the impact line's
+    # heights (z^T R e: the height of an offset error e)
+    up_body = None if offset_cov is None or rot is None else axis_in_body(rot, np.array([0.0, 0.0, 1.0]), np.float32)
     if rot is not None and axis is not None and not isinstance(rot, RotationStack):
         u = axis_in_body(rot, axis, np.float32)
         rot = None
@@ -442,7 +449,9 @@ def build_trial(
         alpha_rad=alpha_rad,
         impact_time_s=cusp_t,
         legs=leg_compliance(wheel),
+        hub_height_cov_m2=_height_cov_at(up_body, idx, offset_cov) if cusps is not None else None,
     )
+    del up_body
     if hub_unknown and evidence and evidence[0].source == "estimated":
         warnings.append(
             "the slope is not determined by this trial (the hub offset is unknown: fewer than two "
@@ -583,6 +592,7 @@ def build_trial(
         window_s=window_s,
         hub_offset_residual_m=residual,
         hub_offset_sd_m=hub_sd_m,
+        hub_offset_sd_axes_m=sd_axes,
         impact_step=tuple(int(k) for k in (steps.impact_step if steps.impact_step is not None else ())),
         period_step=tuple(int(k) for k in (steps.period_step if steps.period_step is not None else ())),
         warnings=tuple(warnings),
@@ -692,6 +702,16 @@ def _plausibility(
 def _hub_at_cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Hub at each CoM-height cusp: height from the V fit of Z, horizontal position interpolated."""
     return _cusps(time_s, hub, idx)[1]
+
+
+def _height_cov_at(up_body: np.ndarray | None, idx: np.ndarray, cov_m2: np.ndarray | None) -> np.ndarray | None:
+    """(k, k) covariance of the hub's heights at the frames ``idx`` from the offset's covariance ``cov_m2`` (3, 3,
+    body frame), m^2: an offset error e puts z^T R e in the height, ``up_body`` (n, 3) the rows z^T R; None when
+    either is missing or a row is unknown (then the offset's sd is carried on each axis)."""
+    if up_body is None or cov_m2 is None or idx.size == 0:
+        return None
+    g = np.asarray(up_body[idx], np.float64)
+    return None if not np.isfinite(g).all() else g @ cov_m2 @ g.T
 
 
 def _cusps(time_s: np.ndarray, hub: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

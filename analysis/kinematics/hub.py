@@ -18,6 +18,7 @@ from rimless.analysis.kinematics.hub_offset import (  # noqa: F401  (re-exported
     MAX_FIT_FRAMES,
     MAX_OFFSET_PASSES,
     MAX_TRIMS,
+    MISFIT_FALSE_ALARM,
     MISFIT_NOISE_MULTIPLE,
     OFFSET_TOL_M,
     OUTLIER_SIGMAS,
@@ -431,7 +432,8 @@ def fit_hub_offset(
     The fit on the chosen frames is `hub_offset.fit_offset`: its covariance takes the noise's level at once a turn
     as the noise's variance (`hub_offset.noise_level`: not what the bump model leaves at the steps, more where the
     residuals' power beside once a turn is larger), plus what the height model misses when the wheel's speed
-    changes (``misfit_sd_m``).
+    changes when an F test at `MISFIT_FALSE_ALARM` finds it (``misfit_sd_m``, ``misfit_p_value``). ``cov_m2`` is
+    the 2 x 2 covariance in the wheel plane (as a rank-2 3 x 3), ``sd_m`` its worst axis.
     """
     ok = _valid_rows(rot) & ~np.isnan(trans_m).any(axis=1)
     if mask is not None:

@@ -249,18 +249,30 @@ def _contact_chi2(cs) -> float:
     return float((w * r**2).sum()) / (len(cs) - 2)
 
 
-def _hub_offset_sd(along: np.ndarray, hub_sd_m: float | None, step_m: float, alpha_rad: float) -> float:
-    """1-sigma slope error (rad) of the line through the hub at the impacts from an error of the hub offset
-    (``hub_sd_m`` on each axis in the wheel plane): the error turns with the wheel, alpha a step, so the heights
-    at the impacts carry a sinusoid a line may read as slope. Its least-squares slope, propagated exactly."""
-    if hub_sd_m is None or not math.isfinite(hub_sd_m) or hub_sd_m <= 0 or along.size < 2:
+def _hub_offset_sd(
+    along: np.ndarray,
+    hub_sd_m: float | None,
+    step_m: float,
+    alpha_rad: float,
+    height_cov_m2: np.ndarray | None = None,
+) -> float:
+    """1-sigma slope error (rad) of the line through the hub at the impacts from an error of the hub offset: the
+    error turns with the wheel, so the heights at the impacts carry a sinusoid a line may read as slope. Its
+    least-squares slope, propagated exactly: through ``height_cov_m2`` (k, k), the heights' covariance at the
+    impacts from the offset's covariance and the body's rotations there, when given; else ``hub_sd_m`` on each axis
+    in the wheel plane, the error turning alpha a step."""
+    if along.size < 2:
         return 0.0
     s = along - along.mean()
     sxx = float(s @ s)
     if sxx <= 0:
         return 0.0
-    turn = alpha_rad * np.round((along - along[0]) / max(step_m, 1e-6))
     w = s / sxx
+    if height_cov_m2 is not None and np.shape(height_cov_m2) == (along.size, along.size):
+        return math.sqrt(max(float(w @ np.asarray(height_cov_m2, float) @ w), 0.0))
+    if hub_sd_m is None or not math.isfinite(hub_sd_m) or hub_sd_m <= 0:
+        return 0.0
+    turn = alpha_rad * np.round((along - along[0]) / max(step_m, 1e-6))
     return hub_sd_m * math.hypot(float(w @ np.cos(turn)), float(w @ np.sin(turn)))
 
 
@@ -335,12 +347,15 @@ def slope_evidence(
     alpha_rad: float = math.pi / 4,
     impact_time_s: np.ndarray | None = None,
     legs: LegCompliance | None = None,
+    hub_height_cov_m2: np.ndarray | None = None,
 ) -> list[SlopeEvidence]:
     """Every slope source of the trial: ramp, given, then the estimates (contacts, impact line, or the whole
     path when neither exists). ``hub_line`` and ``frame0`` are `slope.SlopeFrame` fits (the hub at the CoM
     minima, the whole path); ``travel_m`` the distance walked along the slope, ``step_m`` the hub's travel per step;
     ``impact_along_m`` the impacts' horizontal distances along the travel (the points of ``hub_line``), ``hub_sd_m``
-    the standard error of the hub the stance feet placed (None when the hub was given or found otherwise),
+    the standard error of the hub the stance feet or the height placed (None when the hub was given),
+    ``hub_height_cov_m2`` (k, k) the covariance of the hub's heights at those impacts from the offset's error, m^2
+    (the height fit's covariance carried through the body's rotations; replaces ``hub_sd_m``'s term when given),
     ``alpha_rad`` the angle between legs; ``impact_time_s`` the impacts' times (s, with ``impact_along_m``: the
     speed change, `speed_change_m_s`), ``legs`` the legs' spring (`leg_compliance`; None: the wheel not given)."""
     legs = leg_compliance(None) if legs is None else legs
@@ -380,7 +395,7 @@ def slope_evidence(
         span = float(np.ptp(along)) if along is not None and along.size > 1 else travel_m
         drift_m, drift_how = _drift_m(MINIMA_DRIFT_PER_IMPULSE, MINIMA_DRIFT_M, legs, dv)
         drift = Z95 * math.atan(drift_m / max(span, 1e-3))
-        hub_rad = _hub_offset_sd(along, hub_sd_m, step_m, alpha_rad) if along is not None else 0.0
+        hub_rad = _hub_offset_sd(along, hub_sd_m, step_m, alpha_rad, hub_height_cov_m2) if along is not None else 0.0
         half = max(math.hypot(_quantile(dof) * hub_line.se_rad, drift, Z95 * hub_rad), floor)
         how = (
             f"{hub_line.source} (walking window; scatter {hub_line.residual_m * 1e3:.2f} mm, Student t with {dof} "

@@ -17,7 +17,12 @@ whose centroid is 14 mm off it; 0.3 mm and 1 mrad of noise, 100 Hz; `critical_tr
   2.45 sd 95 % of the time);
 - ``offset_error_mm`` and ``offset_z``: the same with the tracked point's noise taken out (the noise the recording
   added, drawn again from its seed: the object's translation noise, or the mean of the markers' noise, which is
-  the noise of the markers' centroid the importer carries), so the offset's own error against its stated sd.
+  the noise of the markers' centroid the importer carries), so the offset's own error against its stated sd;
+- ``offset_z_cov``: that error against the offset's 2 x 2 covariance (`HubOffsetFit.cov_m2`, of the height fit the
+  import used), sqrt(e^T C^+ e) with e in the body frame (least squares of the hub difference, the noise taken out,
+  on the import's rotations plus a constant; in the import's Z-up lab): chi with 2 degrees of freedom for an honest
+  covariance; with the feet's sd, |e| / sd. ``offset_sd_axes_mm`` the covariance's two axes, ``misfit_sd_mm`` and
+  ``misfit_p_value`` its misfit part and that part's test.
 
 Truths (`TRUTHS`): ``er``, the simulator's ER wheel (`floquet_truth.er_walk`: k 1500-4000 N/m, c 2-20 N s/m, released
 at its gait's speed times U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks), ``er-speed``, the same
@@ -99,14 +104,14 @@ def _tracked_noise(rec_seed: int, lab: Any, frames: int) -> np.ndarray:
 @contextlib.contextmanager
 def _recording_height_fits(fits: list[Any]):
     """Within: every hub offset height fit the importer makes (`kinematics.build`'s `fit_hub_offset`) is appended
-    to ``fits`` (read only; the import is unchanged)."""
+    to ``fits`` with the rotations it was given, (fit, rotations) (read only; the import is unchanged)."""
     from rimless.analysis.kinematics import build
 
     inner = build.fit_hub_offset
 
     def recorded(*args: Any, **kwargs: Any) -> Any:
         fit = inner(*args, **kwargs)
-        fits.append(fit)
+        fits.append((fit, args[0]))
         return fit
 
     build.fit_hub_offset = recorded
@@ -114,6 +119,16 @@ def _recording_height_fits(fits: list[Any]):
         yield fits
     finally:
         build.fit_hub_offset = inner
+
+
+def _offset_error_in_body(rot: np.ndarray, dh_m: np.ndarray) -> np.ndarray:
+    """(3,) the offset's error in the body frame, m, from the imported minus the true hub with the tracked point's
+    noise taken out, ``dh_m`` (k, 3) lab frame, and the import's world-from-body rotations ``rot`` (k, 3, 3) on the
+    same frames: least squares of dh = R e + c (c a constant in the lab, e the same in the body)."""
+    k = rot.shape[0]
+    design = np.concatenate([rot, np.broadcast_to(np.eye(3), (k, 3, 3))], axis=2).reshape(3 * k, 6)
+    sol, *_ = np.linalg.lstsq(design, dh_m.reshape(3 * k), rcond=None)
+    return sol[:3]
 
 
 def hub_offset_draw(
@@ -150,11 +165,23 @@ def hub_offset_draw(
     dh = np.asarray(trial.series.data["hub"])[:n][sel] - hub_t[:n][sel]
     hc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh, rcond=None)
     hub_error = math.sqrt(float(np.sum(hc[1:] ** 2)) / 2.0)
-    oc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh - _tracked_noise(rec_seed, lab, tf.size)[:n][sel], rcond=None)
+    dh_own = dh - _tracked_noise(rec_seed, lab, tf.size)[:n][sel]
+    oc, *_ = np.linalg.lstsq(basis[:, [0, 2, 3]], dh_own, rcond=None)
     offset_error = math.sqrt(float(np.sum(oc[1:] ** 2)) / 2.0)
     sd = getattr(trial.meta, "hub_offset_sd_m", None)
-    height = fits[-1] if fits and fits[-1] is not None and sd is not None and fits[-1].sd_m == sd else None
+    last, rot = fits[-1] if fits else (None, None)
+    height = last if last is not None and sd is not None and last.sd_m == sd else None
     sd_axis = height.sd_per_axis_m if height is not None else sd  # the feet's sd: one for both axes
+    z2 = None  # the offset's own error against the stated covariance: e^T C^+ e (chi^2 with 2 dof when honest)
+    if height is not None and rot is not None:
+        from rimless.analysis.kinematics.vertical import is_z_up, rotation_to_z_up, up_vector
+
+        up = trial.meta.up_axis  # the import fits in its lab turned Z up (p' = Q p); dh is in the file's frame
+        q = np.eye(3) if is_z_up(up) else rotation_to_z_up(up_vector(up))
+        e = _offset_error_in_body(np.asarray(rot[np.flatnonzero(sel)]), dh_own @ q.T)
+        z2 = float(e @ np.linalg.pinv(height.cov_m2, rcond=1e-10) @ e)
+    elif sd:
+        z2 = (offset_error / sd) ** 2
     return {
         "truth": kind,
         "seed": seed,
@@ -171,6 +198,10 @@ def hub_offset_draw(
         "offset_sd_axis_mm": None if sd_axis is None else sd_axis * 1e3,
         "offset_z_axis": None if not sd_axis else offset_error / sd_axis,
         "noise_power": None if height is None else height.noise_power,
+        "offset_z_cov": None if z2 is None else math.sqrt(z2),
+        "offset_sd_axes_mm": None if height is None else [v * 1e3 for v in height.sd_axes_m],
+        "misfit_sd_mm": None if height is None else height.misfit_sd_m * 1e3,
+        "misfit_p_value": None if height is None else height.misfit_p_value,
         "turns": float(np.ptp(bs[:n][sel])) / (2 * math.pi),
     }
 
@@ -181,8 +212,9 @@ def run_hub_offset_study(
     """``draws`` draws of each truth (and of the ER truth at Table 1: ``er-table1``), seeds ``seed`` up, of the
     ``sets`` named (default all of `SETS`); the rows and per set the median and largest sinusoid, the median noise
     share, how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2) (1 for an honest sd of an isotropic error),
-    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``) and against the per-axis sd
-    (``offset_axis_held_95``, ``offset_axis_rms_z``)."""
+    and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``), against the per-axis sd
+    (``offset_axis_held_95``, ``offset_axis_rms_z``) and against the 2 x 2 covariance (``offset_cov_held_95``,
+    ``offset_cov_rms_z``: within the chi^2_2 95 % region, rms over 2 of e^T C^+ e)."""
     sets = SETS if sets is None else tuple(sets)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -202,7 +234,12 @@ def run_hub_offset_study(
             "sinusoid_max_mm": float(np.max(amp)),
             "noise_share_median_mm": float(np.median([r["noise_share_mm"] for r in sub])),
         }
-        for prefix, key in (("", "z"), ("offset_", "offset_z"), ("offset_axis_", "offset_z_axis")):
+        for prefix, key in (
+            ("", "z"),
+            ("offset_", "offset_z"),
+            ("offset_axis_", "offset_z_axis"),
+            ("offset_cov_", "offset_z_cov"),
+        ):
             zs = np.array([r[key] for r in sub if r[key] is not None])
             summary[name][prefix + "held_95"] = f"{int((zs < RAYLEIGH_95).sum())}/{zs.size}" if zs.size else None
             summary[name][prefix + "rms_z"] = float(np.sqrt(np.mean(zs**2) / 2.0)) if zs.size else None

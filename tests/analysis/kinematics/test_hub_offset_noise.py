@@ -15,10 +15,11 @@ normal error) in at least 90 % of the draws.
   covariance took the residuals' variance as the noise's (scaled up only where the power beside once a turn was
   larger): rms z per axis 0.44 (measured when written; fails), now 0.82. Asserted: 0.7-1.3.
 - ``white``: white noise of 0.3 mm alone (the residuals' variance is the noise's level, but for the bump model's
-  leftovers of 0.06 mm): the other side, the covariance must not fall below the spread (rms z below 1.3, and the
-  coverage). It is over-stated, on main as now (rms z 0.63 and 0.66 when written): the misfit part
-  (`hub_offset._misfit_variance`) adds the offset's move beyond its noise when the slow terms are added, which
-  white noise alone makes positive in a third of the draws (0.020 mm rms here, against an error of 0.022 mm).
+  leftovers of 0.06 mm): the covariance must neither fall below the spread (rms z below 1.3, and the coverage) nor
+  over-state it much (above 0.7). On main it was over-stated (rms z 0.66 when session 22 began; fails): the misfit
+  part (`hub_offset.misfit_covariance`) added the offset's move beyond its noise when the slow terms were added,
+  which white noise alone makes positive in a third of the draws. It now counts only when an F test finds the slow
+  structure (`MISFIT_FALSE_ALARM`, 5 %): 0.83 (session 22; ``steps`` 0.79 against 0.85 on main).
 """
 
 from __future__ import annotations
@@ -27,9 +28,9 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from rimless.analysis.kinematics import hub as kin_hub
+from tests.support.rolling_wheel import rolling_wheel
 
 DRAWS = 60
 ORIGIN_BODY_M = np.array([0.03, -0.02, 0.0])
@@ -39,20 +40,10 @@ HARMONICS = 6
 
 def _motion():
     """(rotations (n, 3, 3), tracked point (n, 3) m, the wheel's turn (n,) rad): a rigid wheel rolling down a 4 deg
-    slope, 1.3 turns."""
-    phi, alpha, leg = math.radians(4.0), math.pi / 4, 0.22
-    t = np.arange(0.0, 4.0, 0.01)
-    beta = 2.0 * t  # the body's turn, rad (at a steady 2 rad/s)
-    theta = np.mod(beta, alpha) - alpha / 2  # the stance leg's angle from the slope's normal
-    step = np.floor(beta / alpha)
-    x = step * 2 * leg * math.sin(alpha / 2) + leg * np.sin(theta)  # hub down the slope, m
-    h = leg * np.cos(theta)  # hub along the slope's normal, m
-    down = np.array([math.cos(phi), 0.0, -math.sin(phi)])
-    nrm = np.array([math.sin(phi), 0.0, math.cos(phi)])
-    axis = np.cross(down, nrm)
-    hub = np.outer(x, down) + np.outer(h, nrm)
-    rot = Rotation.from_rotvec(np.outer(-beta, axis)) * Rotation.from_matrix(np.column_stack([down, nrm, axis]))
-    return rot.as_matrix(), hub + rot.apply(ORIGIN_BODY_M), beta
+    slope at a steady 2 rad/s, 1.3 turns."""
+    beta = 2.0 * np.arange(0.0, 4.0, 0.01)  # the body's turn, rad
+    rot, tracked = rolling_wheel(beta, ORIGIN_BODY_M)
+    return rot, tracked, beta
 
 
 def _noise(kind: str, rng: np.random.Generator, beta: np.ndarray) -> np.ndarray:
@@ -83,8 +74,7 @@ def test_the_offsets_stated_covariance_matches_its_spread_over_noise_draws(kind:
         trace.append(float(np.trace(fit.cov_m2)))
         held += math.sqrt(e2[-1]) < 2.4477 * fit.sd_m
     rms_z = math.sqrt(np.mean(e2) / np.mean(trace))
-    assert rms_z < 1.3, (rms_z, held)
-    assert kind == "white" or rms_z > 0.7, (rms_z, held)
+    assert 0.7 < rms_z < 1.3, (rms_z, held)
     assert held >= 0.9 * DRAWS, (rms_z, held)
 
 

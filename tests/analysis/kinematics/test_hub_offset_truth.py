@@ -20,11 +20,11 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from rimless.analysis.kinematics.build import import_trial
 from tests.support.analysis_trial_truth import Y_UP_FROM_Z_UP, in_lab, simulate_wheel, write_csv, write_markers_csv
 from tests.support.analysis_truth_wheel import UNEVEN_MARKERS
+from tests.support.rolling_wheel import rolling_wheel
 
 SLOPE_DEG, YAW_DEG = 2.6, 20.0
 #: the truth's marker / object position noise, m (`simulate`'s and `write_markers_csv`'s default)
@@ -104,20 +104,11 @@ def test_the_offset_fit_converges_where_two_passes_did_not():
     within 5 um (two passes, as before, left tan(slope)^2 of it: 0.18 mm here), and says it converged."""
     from rimless.analysis.kinematics import hub as kin_hub
 
-    phi, alpha, leg = math.radians(4.0), math.pi / 4, 0.22
     t = np.arange(0.0, 4.0, 0.01)
     beta = 2.0 * t + 0.1 * np.sin(3.0 * t)  # the body's turn, rad: 1.3 turns
-    theta = np.mod(beta, alpha) - alpha / 2  # the stance leg's angle from the slope's normal
-    step = np.floor(beta / alpha)
-    x = step * 2 * leg * math.sin(alpha / 2) + leg * np.sin(theta)  # hub down the slope, m
-    h = leg * np.cos(theta)  # hub along the slope's normal, m
-    down = np.array([math.cos(phi), 0.0, -math.sin(phi)])
-    nrm = np.array([math.sin(phi), 0.0, math.cos(phi)])
-    axis = np.cross(down, nrm)
-    hub = np.outer(x, down) + np.outer(h, nrm)
-    rot = Rotation.from_rotvec(np.outer(-beta, axis)) * Rotation.from_matrix(np.column_stack([down, nrm, axis]))
     origin = np.array([0.03, -0.02, 0.0])
-    offset, _, _ = kin_hub.estimate_hub_offset(rot.as_matrix(), hub + rot.apply(origin), harmonics=12)
+    rot, tracked = rolling_wheel(beta, origin)
+    offset, _, _ = kin_hub.estimate_hub_offset(rot, tracked, harmonics=12)
     assert np.linalg.norm(offset + origin) < 5e-6, offset
-    fit = kin_hub.fit_hub_offset(rot.as_matrix(), hub + rot.apply(origin), harmonics=12)
+    fit = kin_hub.fit_hub_offset(rot, tracked, harmonics=12)
     assert fit is not None and fit.converged and fit.passes > 2
