@@ -240,7 +240,13 @@ class TrialComparison:
             "time_shift_ms": self.time_shift_s * 1e3,
             "height_offset_mm": self.height_offset_m * 1e3,
             "message": "; ".join(([self.message] if self.message else []) + self.warnings),
+            **_period_misfit_keys(self.period_fit()),
         }
+
+    def period_fit(self) -> PeriodMisfit | None:
+        """`period_misfit` of this comparison's periods after the first (the plausibility check's figures); None
+        when nothing was simulated or there is no period after the first."""
+        return period_misfit(self.measured_period_s, self.sim_period_s, self.measured_step)
 
 
 def _first_angle_keys(t: FirstAngleTest | None) -> dict[str, Any]:
@@ -259,6 +265,20 @@ def _first_angle_keys(t: FirstAngleTest | None) -> dict[str, Any]:
         ),
         "first_angle_offset_noise_ms": t.noise_s * 1e3 if tested and t is not None else None,
         "first_angle_offset_noise_source": t.noise_source if tested and t is not None else None,
+    }
+
+
+def _period_misfit_keys(pm: PeriodMisfit | None) -> dict[str, Any]:
+    """The periods' misfit row keys (`period_misfit`, edge units): the chi-square of periods 2..N against their
+    noise, its degrees of freedom and p, the rms miss relative to the median period, the impact noise taken and
+    where it came from; None each when not computed."""
+    return {
+        "period_misfit_chi2": pm.chi2 if pm is not None else None,
+        "period_misfit_dof": pm.dof if pm is not None else None,
+        "period_misfit_p": pm.p if pm is not None else None,
+        "period_misfit_relative_rms": pm.relative_rms if pm is not None else None,
+        "period_misfit_impact_sd_ms": pm.impact_sd_s * 1e3 if pm is not None else None,
+        "period_misfit_noise_source": pm.noise_source if pm is not None else None,
     }
 
 
@@ -668,7 +688,7 @@ def _plausibility(res: TrialComparison) -> None:
         why.append(
             f"RMS CoM error is {res.rms_com_relative:.0%} of the measured amplitude (> {lim['max_relative_rms']:.0%})"
         )
-    pm = period_misfit(res.measured_period_s, res.sim_period_s, res.measured_step)
+    pm = res.period_fit()
     if pm is not None and pm.p < lim["period_p"] and pm.relative_rms > lim["max_relative_period_rms"]:
         why.append(
             f"the simulated step periods after the first miss the measured ones by {pm.relative_rms:.0%} of a period "
@@ -695,12 +715,24 @@ class SlopeGroup:
     sim_period_s: np.ndarray  # mean over the bin's trials of each one simulated at its own slope and release
     release_theta_dot_rad_s: float
     message: str | None = None
+    #: the lowest and highest slope of the bin's trials, deg (NaN: not set)
+    slope_range_deg: tuple[float, float] = (math.nan, math.nan)
+    #: how the bin is named in figures and tables (`slope_label`); "" names it by ``slope_deg``
+    label: str = ""
+
+    @property
+    def slope_label(self) -> str:
+        """The bin's name, deg: ``label`` when set (e.g. the range of its trials' slopes), else ``slope_deg``."""
+        return self.label or f"{self.slope_deg:g}"
 
     def rows(self) -> list[dict[str, Any]]:
         """Flat rows (edge units) for tables and JSON."""
         return [
             {
                 "slope_deg": self.slope_deg,
+                "slope_bin_label_deg": self.slope_label,
+                "slope_min_deg": self.slope_range_deg[0],
+                "slope_max_deg": self.slope_range_deg[1],
                 "step": int(k),
                 "trials": int(c),
                 "mean_period_ms": mu * 1e3,
@@ -752,5 +784,8 @@ def step_period_trends(
         simp = np.full(n, np.nan)
         simp[have] = np.nanmean(simmat[:, have], axis=0)
         msg = "; ".join(msgs) or (None if ws else "no trial in this group has a fitted release speed: no simulation")
-        groups.append(SlopeGroup(key, [c.name for c in cs], np.arange(1, n + 1), mean, std, count, simp, w, msg))
+        slopes = [c.slope_deg for c in cs]
+        group = SlopeGroup(key, [c.name for c in cs], np.arange(1, n + 1), mean, std, count, simp, w, msg)
+        group.slope_range_deg = (min(slopes), max(slopes))
+        groups.append(group)
     return groups

@@ -397,9 +397,23 @@ def _first_touchdown(
     locked dL1 longer touches down dL1 / (2 L0 tan(alpha/2)) later in angle (first order). That change is
     measured from the hub's height late in each stance (`_stance_heights`): the first stance's height against
     the later stances' (their line over the step number, brought to the first step; their median with two) gives
-    the first touchdown's angle shift dh / (2 L0 sin(alpha/2)). Left in place with fewer than two later stances
-    measured, or a shift over `TOUCHDOWN_MAX_SHIFT` of a step (not a leg's compression)."""
+    the first touchdown's angle shift dh / (2 L0 sin(alpha/2)). Every stance's height is taken over the turn the
+    first one was seen in (a release less than a third of a step before the first impact leaves only the end of
+    the window; the heights brought to the touchdown angle are not flat over the window, e.g. 5 mm over it on a
+    compliant wheel whose stance leg touches down short of alpha/2, so means over different turns differ by
+    millimetres): when the first stance was not seen before its window (the release came inside it), the
+    window's frames of all stances whose turn before their impact lies within the first stance's, widened by half
+    a frame's turn each side; else the whole window. Left in place with fewer than two later stances measured, or a
+    shift over `TOUCHDOWN_MAX_SHIFT` of a step (not a leg's compression)."""
     targets = phase + alpha_rad * ks
+    ends = np.clip(np.searchsorted(times, t, side="left"), 0, times.size - 1)  # the impact ending each frame's stance
+    u_all = targets[ends] - ang  # each frame's turn before that impact, rad
+    lo_u, hi_u = TOUCHDOWN_WINDOW[0] * alpha_rad, TOUCHDOWN_WINDOW[1] * alpha_rad
+    first = use & (t < times[0])
+    u0 = np.sort(u_all[first & (u_all > lo_u) & (u_all < hi_u)])
+    if u0.size >= 2 and not np.any(first & (u_all >= hi_u)):  # released inside the window: the later stances
+        half = 0.5 * float(np.median(np.diff(u0)))  # over the first one's turn
+        use = use & (u_all >= u0[0] - half) & (u_all <= u0[-1] + half)
     h = _stance_heights(t, y, ang, use, targets, times, leg_m, alpha_rad)
     later = np.isfinite(h[1:])
     if not math.isfinite(h[0]) or later.sum() < 2:

@@ -212,7 +212,7 @@ def period_figure(groups: Sequence[Any], path: Path, model: str = "er") -> Path:
                 ms=4,
                 capsize=3,
                 color=col,
-                label=f"measured {g.slope_deg:g} deg (n = {len(g.trials)})",
+                label=f"measured {getattr(g, 'slope_label', f'{g.slope_deg:g}')} deg (n = {len(g.trials)})",
             )
             if np.isfinite(g.sim_period_s).any():
                 ax.plot(g.step_number, g.sim_period_s * 1e3, "--", color=col, lw=1.2)

@@ -96,6 +96,13 @@ METRIC_COLUMNS = [
     "height_offset_mm",
     "message",
     "series",
+    # the step periods after the first against their noise (`compare.period_misfit`, the plausibility check's)
+    "period_misfit_chi2",
+    "period_misfit_dof",
+    "period_misfit_p",
+    "period_misfit_relative_rms",
+    "period_misfit_impact_sd_ms",
+    "period_misfit_noise_source",
 ]
 #: what the provenance says made a report built by a call of `build_report`
 BUILD_REPORT_API = "rimless.analysis.report.html.build_report"

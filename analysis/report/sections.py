@@ -111,6 +111,15 @@ FITTED_COLUMNS = (
     ("time shift, ms", "time_shift_ms", "+.1f"),
     ("height offset, mm", "height_offset_mm", "+.1f"),
 )
+#: (header, metrics key, format) of the table of the step periods after the first against their noise
+#: (`rimless.analysis.inference.compare.period_misfit`, the plausibility check's figures)
+PERIOD_FIT_COLUMNS = (
+    ("periods χ²", "period_misfit_chi2", ".3g"),
+    ("dof", "period_misfit_dof", "d"),
+    ("p", "period_misfit_p", ".2g"),
+    ("rms miss / period", "period_misfit_relative_rms", ".1%"),
+    ("impact noise, ms", "period_misfit_impact_sd_ms", ".2f"),
+)
 
 
 def metrics_tables_html(sections: Sequence[TrialSection], rows: Sequence[dict[str, Any]], csv_name: str) -> str:
@@ -148,6 +157,26 @@ def metrics_tables_html(sections: Sequence[TrialSection], rows: Sequence[dict[st
         "measured one (heights from the impact line: that line's height above the slope plane, about L0 cos(α/2) "
         "less the legs' compression, see each trial's section). Each trial's message, notes and warnings are in its section below. Also in "
         f'<a href="{e(csv_name)}">{e(csv_name)}</a>.</p>'
+    )
+    from rimless.analysis.inference.compare import PLAUSIBILITY as lim
+
+    head = "".join(f"<th>{e(h)}</th>" for h, _, _ in PERIOD_FIT_COLUMNS)
+    out.append(f'<div class="wide"><table id="period-fit"><thead><tr><th>trial</th>{head}</tr></thead><tbody>')
+    for s, r in zip(sections, rows):
+        if r.get("status") not in ("ok", "suspect"):
+            continue
+        cells = "".join(f'<td class="n">{num(r.get(k), f)}</td>' for _, k, f in PERIOD_FIT_COLUMNS)
+        out.append(f"<tr><td>{_link(s)}</td>{cells}</tr>")
+    out.append(
+        "</tbody></table></div>"
+        '<p class="small">The simulated step periods after the first against the measured ones (table above; '
+        "the plausibility check's figures): periods χ², the chi-square of their misses against the periods' "
+        "noise, each period the difference of two impact times (so neighbours share one), on dof periods, with "
+        "its tail probability p; the rms miss relative to the median measured period; the impact-time noise taken "
+        "(from the measured periods' second differences, never below the importer's floor; the source is in "
+        f'<a href="{e(csv_name)}">{e(csv_name)}</a>, <code>period_misfit_noise_source</code>). A trial is '
+        f"suspect on its periods only when p is below {lim['period_p']:g} and the rms miss is over "
+        f"{lim['max_relative_period_rms']:.0%} of a period.</p>"
     )
     return "\n".join(out)
 
@@ -322,7 +351,8 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
         for row in g.rows():
             out.append(
                 f"<tr><td>{breakable(str(row.get('series', '')))}</td><td>{e(str(row.get('release', '')))}</td>"
-                f'<td class="n">{row["slope_deg"]:g}</td><td class="n">{row["step"]}</td>'
+                f'<td class="n">{e(str(row.get("slope_bin_label_deg", format(row["slope_deg"], "g"))))}</td>'
+                f'<td class="n">{row["step"]}</td>'
                 f'<td class="n">{row["trials"]}</td><td class="n">{num(row["mean_period_ms"], ".1f")}</td>'
                 f'<td class="n">{num(row["std_period_ms"], ".1f")}</td>'
                 f'<td class="n">{num(row["sim_period_ms"], ".1f")}</td></tr>'
@@ -331,7 +361,7 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
     for g in groups:
         if g.message:
             where = " ".join(x for x in (str(getattr(g, "series", "")), str(getattr(g, "release", ""))) if x)
-            out.append(f'<p class="bad">{e(where)} {g.slope_deg:g} deg: {e(g.message)}</p>')
+            out.append(f'<p class="bad">{e(where)} {e(g.slope_label)} deg: {e(g.message)}</p>')
     return "\n".join(out)
 
 

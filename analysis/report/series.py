@@ -15,7 +15,8 @@ the two walks, not the scatter of repeats). Runs of one condition (``run1``, ``r
 A slope bin of None (``rimless demo``'s default) bins by the slopes' own intervals instead of a width
 (`interval_bins`): within a series, trials are pooled only while their 95 % slope intervals share a common
 slope, so no bin pools trials whose slopes differ beyond their intervals (`pooled_slope_warnings` then has
-nothing to say); the bin is labelled with the mean slope of its trials.
+nothing to say); the bin is named by the range of its trials' slopes (`range_label`; its ``slope_deg`` is their
+mean, which may lie outside a member's own interval).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ __all__ = [
     "interval_bins",
     "slope_bin_words",
     "release_condition",
+    "range_label",
 ]
 
 #: the slope bin `step_period_trends` is handed for one bin made by `interval_bins`: wide enough to round every
@@ -126,8 +128,16 @@ class SeriesSlopeGroup(SlopeGroup):
 def slope_bin_words(slope_bin_deg: float | None) -> str:
     """How the step periods were binned by slope, for captions and headings."""
     if slope_bin_deg is None:
-        return "trials pooled only while their 95 % slope intervals overlap; a bin is labelled by its mean slope"
+        return "trials pooled only while their 95 % slope intervals overlap; a bin is labelled by its trials' slopes"
     return f"slopes rounded to {slope_bin_deg:g} deg"
+
+
+def range_label(slope_range_deg: tuple[float, float]) -> str:
+    """A bin of `interval_bins` named by the range of its trials' slopes, deg (``1.344-1.596``; one slope when
+    they agree to 0.001 deg): every trial's own slope lies in it, which its mean slope need not (a mean of
+    trials whose intervals overlap may fall outside one member's interval)."""
+    lo, hi = (round(v, 3) for v in slope_range_deg)
+    return f"{lo:.3f}" if lo == hi else f"{lo:.3f}-{hi:.3f}"
 
 
 def interval_bins(
@@ -169,7 +179,8 @@ def series_trends(
     appearance, then their release conditions (`release_condition` of each trial's file name) in that order,
     slopes ascending within each); ``series``: the series of each comparison (`series_of`), in the same order.
     ``slope_bin_deg`` None: the bins of `interval_bins` on ``slopes`` (per trial name, its slope and 95 %
-    interval, deg), each labelled with its trials' mean slope (to 0.001 deg)."""
+    interval, deg), each at its trials' mean slope (``slope_deg``, to 0.001 deg) and named by their range
+    (`range_label`)."""
     if len(series) != len(comparisons):
         raise ValueError(f"{len(series)} series for {len(comparisons)} comparisons")
     order: dict[str, dict[str, list[TrialComparison]]] = {}
@@ -182,6 +193,7 @@ def series_trends(
             for trials in interval_bins(comps, slopes or {}):
                 (g,) = step_period_trends(trials, sim, slope_bin_deg=_ONE_BIN_DEG)
                 g.slope_deg = round(sum(c.slope_deg for c in trials) / len(trials), 3)
+                g.label = range_label(g.slope_range_deg)
                 groups.append(g)
         else:
             groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
@@ -228,7 +240,7 @@ def pooled_slope_warnings(
             return f"{t[0]} ({t[1]:.3f} deg, 95 % {t[2][0]:.3f} to {t[2][1]:.3f})"
 
         out.append(
-            f"{'series ' + repr(series) + ', ' if series else ''}{release + ', ' if release else ''}slope bin {g.slope_deg:g} deg: the step periods "
+            f"{'series ' + repr(series) + ', ' if series else ''}{release + ', ' if release else ''}slope bin {g.slope_label} deg: the step periods "
             f"of {len(g.trials)} trials are pooled, but {told(low)} and {told(high)} walked on slopes that differ "
             f"beyond their intervals ({how}): give a smaller --slope-bin-deg (slope_bin_deg=) to keep them apart"
         )

@@ -15,7 +15,8 @@ k 1500-4000 N/m, slopes 1.5-3 deg (er_walk 2-3.5), 10 steps (er_walk 9), importe
 slope and wheel. Prints per walk the test (`compare.first_angle_test`) and the later periods' rms error against the
 truth's own when simulated with the rule, with the offset always, with the rigid release matched to the first period,
 and with the rigid release fitted on all periods; then how often p fell below 0.01, 0.05, 0.1 and each rms over the
-walks.
+walks. ``--save FILE.npz`` also writes each tested walk's measured and true periods (s, NaN-padded), slope (deg),
+k (N/m), c (N s/m) and the rigid release's speed (rad/s), so that other tests of the same walks need no re-import.
 """
 
 from __future__ import annotations
@@ -91,12 +92,21 @@ def main() -> None:
         default="touchdown",
         help="the importer's first impact: at its own touchdown (now) or at the gait's phase (before session 21)",
     )
+    ap.add_argument("--save", type=Path, help="write each tested walk's periods, truth and wheel to this .npz")
     args = ap.parse_args()
     if args.first_impact == "phase":
         from rimless.analysis.kinematics import steps
 
         steps._first_touchdown = lambda *a: (a[-1], 0.0)  # the impacts as the importer placed them before
     ps: list[float] = []
+    saved: dict[str, list] = {
+        "measured_s": [],
+        "true_s": [],
+        "slope_deg": [],
+        "k_n_per_m": [],
+        "c_ns_per_m": [],
+        "w0": [],
+    }
     rms: dict[str, list[float]] = {"rule": [], "always": [], "rigid, first period": [], "rigid, all periods": []}
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.draws):
@@ -116,6 +126,10 @@ def main() -> None:
             if not math.isfinite(test.p):
                 continue
             ps.append(test.p)
+            for key, v in zip(
+                saved, (per, true_p[: per.size], slope, params.stiffness_n_per_m, params.damping_ns_per_m, w0)
+            ):
+                saved[key].append(v)
             level, compare.FIRST_ANGLE_P = compare.FIRST_ANGLE_P, 1.1  # kept whenever the cost falls
             always = first_angle_test(sim, slope, per, w0)
             compare.FIRST_ANGLE_P = level
@@ -131,6 +145,13 @@ def main() -> None:
                 + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rms.items()),
                 flush=True,
             )
+    if args.save:
+        n = max((x.size for x in saved["measured_s"]), default=0)
+        pad = {
+            k: np.array([np.pad(x, (0, n - x.size), constant_values=np.nan) for x in saved[k]])
+            for k in ("measured_s", "true_s")
+        }
+        np.savez(args.save, **{**{k: np.array(v) for k, v in saved.items() if k not in pad}, **pad})
     p = np.array(ps)
     print(
         f"{args.truth}: {p.size} tested; p < 0.01 {(p < 0.01).sum()}, < 0.05 {(p < 0.05).sum()}, < 0.1 {(p < 0.1).sum()}"

@@ -335,3 +335,68 @@ def test_a_report_from_python_names_the_function(tmp_path):
     assert facts["command"] == "Python API: rimless.analysis.write_report"
     assert facts["wheel file"].startswith("none")  # Table 1, said so
     assert res.summary()["provenance"]["command"] == facts["command"]
+
+
+def _chi2_by_hand(measured: np.ndarray, simulated: np.ndarray, impact_sd_s: float) -> float:
+    """Periods 2..N's chi-square with impact-time errors of sd ``impact_sd_s`` (independent impacts; a period is the
+    difference of two, consecutive periods share one): written apart from `compare.period_misfit`, from the
+    impacts' covariance propagated through the differencing matrix."""
+    n = measured.size
+    diff = np.zeros((n - 1, n))  # periods 2..n from impacts 1..n (impact 0 only enters period 1)
+    for i in range(n - 1):
+        diff[i, i], diff[i, i + 1] = -1.0, 1.0
+    cov = impact_sd_s**2 * diff @ diff.T
+    r = simulated[1:] - measured[1:]
+    return float(r @ np.linalg.solve(cov, r))
+
+
+def test_the_metrics_row_has_the_period_misfit_figures(built):
+    """The plausibility check's figures on the step periods after the first (`compare.period_misfit`) in each compared
+    trial's row of metrics.csv, of the JSON and of the report's period-fit table; the columns that were there keep
+    their order in front (new columns are added at the end). Expected values: the chi-square recomputed here from the
+    row's own impact noise and the comparison's periods; p from scipy's chi-square tail."""
+    from scipy.stats import chi2
+
+    res, page = built["res"], built["page"]
+    old = [
+        "trial", "file", "status", "slope_deg", "slope_source", "model", "steps", "rms_com_error_mm",
+        "mean_abs_period_error_ms", "rms_com_relative", "com_correlation", "theta_dot_plus_rad_s",
+        "release_theta_dot_rad_s", "time_shift_ms", "height_offset_mm", "message", "series",
+    ]  # fmt: skip
+    new = [
+        "period_misfit_chi2", "period_misfit_dof", "period_misfit_p", "period_misfit_relative_rms",
+        "period_misfit_impact_sd_ms", "period_misfit_noise_source",
+    ]  # fmt: skip
+    with open(res.metrics_csv, newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert reader.fieldnames == old + new
+        rows = list(reader)
+    compared = [c for c in res.comparisons if c.status in ("ok", "suspect") and c.n_steps >= 2]
+    assert len(compared) >= 3
+    by_name = {r["trial"]: r for r in rows}
+    table = {r[0]["text"]: r for r in page.tables["period-fit"][1:]}
+    assert [c["text"] for c in page.tables["period-fit"][0]] == [
+        "trial", "periods χ²", "dof", "p", "rms miss / period", "impact noise, ms"
+    ]  # fmt: skip
+    for c in compared:
+        row = by_name[c.name]
+        sd_s = float(row["period_misfit_impact_sd_ms"]) * 1e-3
+        assert sd_s >= 0.3e-3 / np.sqrt(2) * (1 - 1e-5)  # never below the importer's floor (0.3 ms a period)
+        use = np.isfinite(c.sim_period_s)
+        assert use.all(), c.name  # these trials are simulated throughout (else the hand count below differs)
+        assert c.measured_step.size == 0 or list(c.measured_step) == list(range(1, c.n_steps + 1))  # no gap
+        expect = _chi2_by_hand(c.measured_period_s, c.sim_period_s, sd_s)
+        assert float(row["period_misfit_chi2"]) == pytest.approx(expect, rel=1e-4)
+        assert int(row["period_misfit_dof"]) == c.n_steps - 1
+        assert float(row["period_misfit_p"]) == pytest.approx(chi2.sf(expect, c.n_steps - 1), rel=1e-3, abs=1e-12)
+        rms = np.sqrt(np.mean((c.sim_period_s[1:] - c.measured_period_s[1:]) ** 2)) / np.median(c.measured_period_s)
+        assert float(row["period_misfit_relative_rms"]) == pytest.approx(rms, rel=1e-4)
+        assert row["period_misfit_noise_source"]
+        cells = table[c.name]
+        assert cells[2]["text"] == row["period_misfit_dof"] and "n" in cells[1]["class"].split()
+        js = c.metrics()
+        assert js["period_misfit_chi2"] == pytest.approx(expect, rel=1e-4)  # the CSV rounds the sd to 6 digits
+    # a refused input has its row, with the figures empty
+    assert all(rows[-1][k] == "" for k in new)
+    # the period-fit table fits a 1280 px window like the others
+    assert _narrowest_px(page.tables["period-fit"]) <= CONTENT_PX

@@ -45,7 +45,7 @@ def test_interval_bins_pool_only_trials_whose_intervals_share_a_slope():
     assert [[c.name for c in b] for b in interval_bins(extra, slopes)] == [["a", "b", "c"], ["e"], ["d"]]
 
 
-def test_series_trends_by_intervals_label_bins_by_their_mean_slope_and_raise_no_warning(sim):
+def test_series_trends_by_intervals_bin_at_their_mean_slope_and_raise_no_warning(sim):
     series = ["s"] * len(COMPS)
     by_width = series_trends(COMPS, series, sim, slope_bin_deg=0.5)
     assert [g.slope_deg for g in by_width] == [1.5]  # all four rounded together
@@ -86,3 +86,44 @@ def test_trials_of_two_release_conditions_are_never_pooled(sim):
         assert all(r["release"] == g.release for g in groups for r in g.rows())
     assert release_condition("a/w_slope1.6deg_Release2.5_run1.csv") == "Release2.5"
     assert release_condition("w_slope1.6deg_run1.csv") == "" and series_name(names[0]) == "w"
+
+
+def test_an_interval_bin_is_named_by_its_trials_slopes_not_a_mean_outside_a_members_interval(sim):
+    """The demo's ``release1.9`` panel (session 21, noticed): a bin of 1.344, 1.356 and 1.596 deg trials labelled
+    1.432 deg, outside the 1.596 trial's own interval. Here a, b, c share only the slope 1.42 (c given exactly): their
+    mean 1.373 lies outside c's interval, so the bin is named by the range of its trials' slopes, 1.300-1.420 (by
+    hand), which holds each trial's own slope; a bin of one trial by that slope. The mean stays ``slope_deg``."""
+    from rimless.analysis.report.sections import periods_html
+
+    groups = series_trends(COMPS, ["s"] * len(COMPS), sim, slope_bin_deg=None, slopes=SLOPES)
+    mean = round((1.30 + 1.40 + 1.42) / 3, 3)
+    assert not SLOPES["c"][0] - 1e-9 <= mean <= SLOPES["c"][0] + 1e-9  # the old label is outside c's interval
+    assert [(g.slope_deg, g.slope_label, g.slope_range_deg) for g in groups] == [
+        (mean, "1.300-1.420", (1.30, 1.42)),
+        (1.60, "1.600", (1.60, 1.60)),
+    ]
+    rows = groups[0].rows()
+    assert {(r["slope_bin_label_deg"], r["slope_min_deg"], r["slope_max_deg"], r["slope_deg"]) for r in rows} == {
+        ("1.300-1.420", 1.30, 1.42, mean)
+    }
+    page = periods_html(groups, None)
+    assert '<td class="n">1.300-1.420</td>' in page and f">{mean:g}<" not in page
+    # bins of a width keep their rounded centre as their name (the rounding is stated in the heading)
+    (wide,) = series_trends(COMPS, ["s"] * len(COMPS), sim, slope_bin_deg=0.5)
+    assert wide.slope_label == "1.5" and wide.slope_range_deg == (1.30, 1.60)
+
+
+def test_the_period_figure_legend_names_the_bin_by_its_range(sim, tmp_path, monkeypatch):
+    from rimless.analysis.report import figures
+
+    labels: list[str] = []
+    real = figures.save_png
+
+    def spy(fig, path):
+        labels.extend(t.get_text() for ax in fig.axes for t in (ax.get_legend().get_texts() if ax.get_legend() else []))
+        return real(fig, path)
+
+    monkeypatch.setattr(figures, "save_png", spy)
+    groups = series_trends(COMPS, ["s"] * len(COMPS), sim, slope_bin_deg=None, slopes=SLOPES)
+    figures.period_figure(groups, tmp_path / "p.png")
+    assert labels == ["measured 1.300-1.420 deg (n = 3)", "measured 1.600 deg (n = 1)"]
