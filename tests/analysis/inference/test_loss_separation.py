@@ -84,3 +84,63 @@ def test_one_trial_prints_no_nan_correlation():
     out = loss_separation(J * 50.0, r, offs, 1, 0, 10.0, 1.0, v, np.ones(J.shape[1]))
     assert not out["separable"] and out["correlation"] is None
     assert "nan" not in out["note"] and "not both determined" in out["note"]
+
+
+def test_rel_se_band_against_chi_square_table_values():
+    """The band of a relative se estimated with 5 degrees of freedom: rel * sqrt(5 / chi^2_5) at the 95 % and 5 %
+    quantiles, 11.0705 and 1.1455 (printed chi-square tables)."""
+    from rimless.analysis.inference.loss_separation import rel_se_band
+
+    lo, hi = rel_se_band(0.048, 5)
+    assert lo == pytest.approx(0.048 * math.sqrt(5 / 11.0705), rel=1e-4)
+    assert hi == pytest.approx(0.048 * math.sqrt(5 / 1.1455), rel=1e-4)
+    lo_big, hi_big = rel_se_band(0.048, 2000)  # many degrees of freedom: the band closes on the value
+    assert 0.046 < lo_big < 0.048 < hi_big < 0.050
+
+
+def _at_rel(target_rel, dof):
+    """loss_separation on separable trials with c's value chosen so that its relative se with a friction-like loss
+    free is ``target_rel`` (the se does not depend on c's value; residuals orthogonal, pure noise)."""
+    rng = np.random.default_rng(1)
+    v = np.array([0.05, 0.1, 0.2, 0.4, 0.8, 0.06, 0.3, 0.6])
+    J, offs = _design(v, rng, n_rows=400)
+    r = rng.normal(size=J.shape[0])
+    r -= J @ np.linalg.lstsq(J, r, rcond=None)[0]
+    args = (J * 50.0, r, offs, 1, 0)
+    rest = (1.0, v, np.ones(J.shape[1]))
+    rel10 = loss_separation(*args, 10.0, *rest)["c_rel_se_with_friction"]
+    return loss_separation(*args, 10.0 * rel10 / target_rel, *rest, se_dof=dof)
+
+
+@pytest.mark.parametrize(
+    ("rel", "dof", "separable", "borderline"),
+    [
+        (0.0476, 5, True, True),  # the audit's two draws (session 21): either side of 5 %, both borderline
+        (0.0512, 5, False, True),
+        (0.0490, 2000, True, True),  # a residual-set se: a narrow band (+-2.6 %), holding 5 % from 4.9 %
+        (0.0476, 2000, True, False),  # ... and clear of it from 4.76 %
+        (0.020, 5, True, False),  # clear on both sides with the trials' scatter's 5 dof
+        (0.120, 5, False, False),
+    ],
+)
+def test_a_verdict_near_the_limit_says_borderline_and_how_near(rel, dof, separable, borderline):
+    out = _at_rel(rel, dof)
+    assert out["c_rel_se_with_friction"] == pytest.approx(rel, rel=1e-9)
+    assert out["separable"] is separable and out["damping_identified"] is separable
+    assert out["borderline"] is borderline and out["c_rel_se_limit"] == 0.05 and out["c_rel_se_dof"] == dof
+    lo, hi = out["c_rel_se_with_friction_ci90"]
+    assert lo < rel < hi and (lo <= 0.05 <= hi) is borderline
+    shown = f"{rel:.1%}" if rel < 0.1 else f"{rel:.0%}"
+    assert shown in out["note"] and "limit 5.0%" in out["note"]  # how near, in the note
+    assert ("borderline" in out["note"]) is borderline
+    if borderline:
+        assert ("may not be told apart" if separable else "may be told apart") in out["note"]
+
+
+def test_no_dof_given_takes_the_residual_rows_less_the_columns():
+    rng = np.random.default_rng(1)
+    v = np.array([0.05, 0.1, 0.2, 0.4, 0.8, 0.06, 0.3, 0.6])
+    J, offs = _design(v, rng, n_rows=400)
+    r = rng.normal(size=J.shape[0])
+    out = loss_separation(J * 50.0, r, offs, 1, 0, 10.0, 1.0, v, np.ones(J.shape[1]))
+    assert out["c_rel_se_dof"] == J.shape[0] - (J.shape[1] + 1)  # the friction-like column added
