@@ -33,8 +33,8 @@ SEPARATION_REL_SE = 0.05
 #: the verdict is **borderline** when this two-sided confidence interval of c's relative standard error (with the
 #: friction-like loss free) holds `SEPARATION_REL_SE`: the standard error is itself estimated (from the trials'
 #: scatter, ``se_dof`` = trials - 1, or from the residuals' RMS), so another noise draw of the same wheel may land on
-#: the other side (session 21's audit: 4.76 % then 5.12 % on two draws). Interval: rel * sqrt(nu / chi^2_nu) at the
-#: level's quantiles (the se's square taken as chi^2_nu / nu distributed; c's own scatter, a factor 1 +- rel, left out)
+#: the other side (session 21's audit: 4.76 % then 5.12 % on two draws). Interval: `rel_se_band` (the se's
+#: chi-square scatter and c's own, a factor about 1 +- z rel, in quadrature in logarithms)
 SEPARATION_BAND_LEVEL = 0.90
 #: significance of the score test above which the residuals are said to show a constant loss per step
 SCORE_ALPHA = 0.01
@@ -173,12 +173,18 @@ def loss_separation(
 
 
 def rel_se_band(rel: float, dof: float, level: float = SEPARATION_BAND_LEVEL) -> tuple[float, float]:
-    """The two-sided ``level`` confidence interval of a relative standard error ``rel`` estimated with ``dof``
-    degrees of freedom: rel * sqrt(dof / chi^2_dof) at the upper and lower quantiles (dimensionless)."""
-    from scipy.stats import chi2
+    """The two-sided ``level`` interval (dimensionless) of a relative standard error ``rel`` = se / |c| on another
+    noise draw: in logarithms, the se's own half-widths, log sqrt(dof / chi^2_dof) at the level's quantiles (its
+    square taken as chi^2_dof / dof distributed), and c's scatter, z * rel (a normal z at the level; log |c| has sd
+    about rel), added in quadrature side by side."""
+    from scipy.stats import chi2, norm
 
     a = 0.5 * (1.0 - level)
-    return rel * math.sqrt(dof / float(chi2.ppf(1.0 - a, dof))), rel * math.sqrt(dof / float(chi2.ppf(a, dof)))
+    z = float(norm.ppf(1.0 - a))
+    down = math.log(math.sqrt(float(chi2.ppf(1.0 - a, dof)) / dof))
+    up = math.log(math.sqrt(dof / float(chi2.ppf(a, dof))))
+    c_part = z * rel
+    return rel * math.exp(-math.hypot(down, c_part)), rel * math.exp(math.hypot(up, c_part))
 
 
 def _pct(x: float) -> str:

@@ -86,16 +86,20 @@ def test_one_trial_prints_no_nan_correlation():
     assert "nan" not in out["note"] and "not both determined" in out["note"]
 
 
-def test_rel_se_band_against_chi_square_table_values():
-    """The band of a relative se estimated with 5 degrees of freedom: rel * sqrt(5 / chi^2_5) at the 95 % and 5 %
-    quantiles, 11.0705 and 1.1455 (printed chi-square tables)."""
+def test_rel_se_band_against_table_values():
+    """The band of a relative se of 4.8 % estimated with 5 degrees of freedom: in logarithms, the se's half-widths
+    log sqrt(11.0705 / 5) down and log sqrt(5 / 1.1455) up (chi^2_5's 95 % and 5 % quantiles) and c's scatter
+    1.6449 x 0.048 (the normal's 95 % quantile), added in quadrature (printed tables)."""
     from rimless.analysis.inference.loss_separation import rel_se_band
 
     lo, hi = rel_se_band(0.048, 5)
-    assert lo == pytest.approx(0.048 * math.sqrt(5 / 11.0705), rel=1e-4)
-    assert hi == pytest.approx(0.048 * math.sqrt(5 / 1.1455), rel=1e-4)
-    lo_big, hi_big = rel_se_band(0.048, 2000)  # many degrees of freedom: the band closes on the value
-    assert 0.046 < lo_big < 0.048 < hi_big < 0.050
+    c_part = 1.6449 * 0.048
+    assert lo == pytest.approx(0.048 * math.exp(-math.hypot(0.5 * math.log(11.0705 / 5), c_part)), rel=1e-4)
+    assert hi == pytest.approx(0.048 * math.exp(math.hypot(0.5 * math.log(5 / 1.1455), c_part)), rel=1e-4)
+    # many degrees of freedom: the se's part vanishes, c's stays (4.76 % reaches past 5 %: the audit's knife edge)
+    lo_big, hi_big = rel_se_band(0.0476, 10**7)
+    assert hi_big == pytest.approx(0.0476 * math.exp(1.6449 * 0.0476), rel=1e-3) and hi_big > 0.05
+    assert lo_big == pytest.approx(0.0476 * math.exp(-1.6449 * 0.0476), rel=1e-3)
 
 
 def _at_rel(target_rel, dof):
@@ -117,8 +121,8 @@ def _at_rel(target_rel, dof):
     [
         (0.0476, 5, True, True),  # the audit's two draws (session 21): either side of 5 %, both borderline
         (0.0512, 5, False, True),
-        (0.0490, 2000, True, True),  # a residual-set se: a narrow band (+-2.6 %), holding 5 % from 4.9 %
-        (0.0476, 2000, True, False),  # ... and clear of it from 4.76 %
+        (0.0476, 2000, True, True),  # a residual-set se: c's own scatter (+-8 %) still reaches 5 %
+        (0.040, 2000, True, False),  # ... and stays clear of it from 4 %
         (0.020, 5, True, False),  # clear on both sides with the trials' scatter's 5 dof
         (0.120, 5, False, False),
     ],
