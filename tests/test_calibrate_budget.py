@@ -124,13 +124,54 @@ def counted(two_trials):
     real_ls, real_solve = scipy.optimize.least_squares, cal._Objective.solve
     budget_box: list[SimulationBudget] = []
 
-    inside = [False]  # the release fits call least_squares too: only the solves' rounds are recorded
+    inside = [False]  # the release fits call least_squares too: the solves' rounds and theirs recorded apart
+    #: the release fits' own counts, outside the solves: per least squares (nfev, njev, unknowns) as scipy counts
+    #: them; per grid search (`first_period_release`) the bisection's function calls (None: no root, the costs
+    #: on the grid instead); the Gauss-Newton starts (`fit_warm`); the first-angle fits (`release.fit_first_angle`)
+    release: dict[str, list] = {"ls": [], "grid": [], "warm": [], "first_angle": []}
+    real_brentq = scipy.optimize.brentq
+    real_grid, real_warm = cal._ReleaseFit.first_period_release, cal._ReleaseFit.fit_warm
+    from rimless.analysis.inference import release as rel_mod
+
+    real_first_angle = rel_mod.fit_first_angle
 
     def ls(*a, **kw):
         r = real_ls(*a, **kw)
         if inside[0]:
             rounds.append((int(r.nfev), int(r.njev or 0)))
+        else:
+            release["ls"].append((int(r.nfev), int(r.njev or 0), int(np.size(a[1] if len(a) > 1 else kw["x0"]))))
         return r
+
+    def brentq(f, a, b, **kw):
+        calls = [0]
+
+        def counted_f(x):
+            calls[0] += 1
+            return f(x)
+
+        out = real_brentq(counted_f, a, b, **kw)
+        if in_grid[0]:
+            release["grid"][-1] = calls[0]
+        return out
+
+    in_grid = [False]  # a bisection inside a grid search (not another brentq of the calibration's)
+
+    def grid(self, *a, **kw):
+        release["grid"].append(None)
+        in_grid[0] = True
+        try:
+            return real_grid(self, *a, **kw)
+        finally:
+            in_grid[0] = False
+
+    def warm(self, *a, **kw):
+        release["warm"].append(1)
+        return real_warm(self, *a, **kw)
+
+    def first_angle(freq_res, f_meas, w0, offsets=(0.0,)):
+        release["first_angle"].append(len(offsets))
+        return real_first_angle(freq_res, f_meas, w0, offsets)
 
     def solve(self, *a, **kw):
         before, k = budget_box[0].used, len(rounds)
@@ -149,12 +190,27 @@ def counted(two_trials):
     budget.on_stage = lambda st: entries.append((st, budget.used))
     mp = pytest.MonkeyPatch()
     mp.setattr(scipy.optimize, "least_squares", ls)
+    mp.setattr(scipy.optimize, "brentq", brentq)
     mp.setattr(cal._Objective, "solve", solve)
+    mp.setattr(cal._ReleaseFit, "first_period_release", grid)
+    mp.setattr(cal._ReleaseFit, "fit_warm", warm)
+    mp.setattr(rel_mod, "fit_first_angle", first_angle)
     try:
         res = cal.calibrate(trials, names, ["c"], budget=budget)
     finally:
         mp.undo()
-    return res, budget, entries, rounds, solves
+    return res, budget, entries, rounds, solves, release
+
+
+def measured_release_bound(release: dict[str, list]) -> int:
+    """The release fits' simulations from their own counts (each a step map): per least squares scipy's nfev
+    plus njev times its unknowns (forward differences); per grid search 29 points and the bisection's function
+    calls, or 29 costs when it found no root; per Gauss-Newton start its two first points and `WARM_ITERATIONS`;
+    per first-angle fit one walk at each start offset (whether it walks)."""
+    ls = sum(nfev + njev * n for nfev, njev, n in release["ls"])
+    grid = sum(29 + (29 if calls is None else calls) for calls in release["grid"])
+    warm = len(release["warm"]) * (2 + cal.WARM_ITERATIONS)
+    return ls + grid + warm + sum(release["first_angle"])
 
 
 def measured_solve_bound(rounds: list[tuple[int, int]], n_t: int, n_g: int) -> int:
@@ -173,8 +229,11 @@ def test_each_least_squares_stays_within_its_own_evaluations(counted):
     snapshot, session 21, c on the two trials): 539 simulations against 3012 (the stage bound: 5732, counting
     60 evaluations a round); the three least squares ran 16, 30 and 6 walks against 48, 80 and 32 (scipy's
     3, 5 and 2 evaluations and Jacobians); what is left is the start's release fits at their worst (1982 against
-    the 424 run)."""
-    res, budget, entries, rounds, solves = counted
+    the 424 run). Then tighter again (session 22): the release fits from their own counts (scipy's nfev and njev of
+    each of their least squares, the bisections' function calls, the Gauss-Newton starts at their iteration cap,
+    `measured_release_bound`) in place of their worst case: 539 against 822 (the release fits' part 562; regression
+    snapshot, session 22, same problem)."""
+    res, budget, entries, rounds, solves, release = counted
     n_t, n_g = 2, 1
     assert solves and rounds
     bounds = []
@@ -191,6 +250,10 @@ def test_each_least_squares_stays_within_its_own_evaluations(counted):
     assert total < stage_bound(n_t, n_g, starts)  # never looser than the stage bound
     assert budget.used <= total, (budget.used, total)
     assert res.params[0].identifiable
+    # the release fits from their own counts in place of their worst case: the start's and the first angles'
+    assert release["ls"] and release["grid"] and release["warm"] and release["first_angle"]
+    tight = measured_release_bound(release) + sum(bounds) + 6 * n_t + central + closing_reserve(n_t, n_g)
+    assert budget.used <= tight < total, (budget.used, tight, total)
 
 
 @pytest.mark.slow

@@ -449,7 +449,8 @@ def _print_calibration(out: dict[str, Any]) -> None:
             _fmt(p["estimate"], ".4g"),
             _fmt(p["se"], ".2g"),
             (f"{ci[0]:.4g}{'*' if p.get('ci_at_bound') else ''}-{ci[1]:.4g}" if ci else "–"),
-            "yes" if p["identifiable"] else ("conditional" if p.get("status") == "conditional" else "[red]NO[/]"),
+            ("yes" if p["identifiable"] else ("conditional" if p.get("status") == "conditional" else "[red]NO[/]"))
+            + (" (borderline)" if p["name"] == "c" and (out.get("loss_separation") or {}).get("borderline") else ""),
         )
     con.print(t)
     for p in out["params"]:

@@ -2001,9 +2001,16 @@ def _check_loss_separation(
     data_se = math.sqrt(max(e.se**2 - s_slope**2, 0.0)) if math.isfinite(e.se) else math.nan
     floor = max(e.se_model, e.se_sandwich) if math.isfinite(e.se_sandwich) else e.se_model
     infl = max(data_se, floor) / e.se_model if e.se_model > 0 and math.isfinite(data_se) else 1.0
-    out = loss_separation(J, obj.fun(u), obj.offs, obj.n_g, j_c, e.value, infl, np.array(v), scale)
+    # the reported se's degrees of freedom, for the borderline band: the residuals' (None: rows less columns) only
+    # when the se is the model-based one; inflated (by the trials' scatter, the minima spanned, ...) the trials'
+    # count less one (as `model_choice.dispersion`): measured, six trials of one truth, four noise draws, the
+    # inflated relative se ranged 0.71-0.97 % where the residuals' 2108 dof would allow +-3 % (session 22)
+    dof = max(obj.n_t - 1, 1) if infl > 1.0 + 1e-9 else None
+    out = loss_separation(J, obj.fun(u), obj.offs, obj.n_g, j_c, e.value, infl, np.array(v), scale, se_dof=dof)
     if not out["damping_identified"] and e.identifiable:
         e.identifiable, e.effective_only, e.note = False, True, out["note"]
+    elif out["borderline"] and e.identifiable:  # identifiable on the point rule, by a margin a draw can undo
+        e.note = f"{e.note}; {out['note']}" if e.note else out["note"]  # printed once (`separation_is_new`)
     return out
 
 
