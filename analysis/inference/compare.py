@@ -658,7 +658,7 @@ def period_misfit(
         est = 1.4826 * float(np.median(np.abs(d2))) / math.sqrt(20.0)
         if est > floor:
             sd, source = est, f"the measured periods' second differences ({d2.size})"
-    if sim.size != meas.size:
+    if sim.size != meas.size or meas.size == 0:
         return None
     use = np.isfinite(sim) & np.isfinite(meas)
     use[0] = False  # the first period fixes the release

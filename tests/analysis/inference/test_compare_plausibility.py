@@ -96,3 +96,10 @@ def test_the_bundled_critical_trial_that_misses_its_period_is_suspect() -> None:
     res = compare.compare_trial(trial, compare.Simulator(model="er"))
     assert res.n_steps == 2 and abs(res.period_error_s[1]) > 0.1
     assert res.status == "suspect" and "step periods" in (res.message or "")
+
+
+def test_no_periods_no_misfit() -> None:
+    # a trial imported with fewer than two impacts has no periods: no misfit (session 22: the metrics row asked
+    # for it and raised IndexError, a traceback in place of `trials report`'s "no trial could be compared")
+    assert period_misfit(np.zeros(0), np.zeros(0)) is None
+    assert period_misfit(np.array([0.4]), np.array([0.41])) is None  # the first period alone fixes the release
