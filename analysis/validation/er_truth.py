@@ -415,16 +415,26 @@ def step_map(w: ERWheel, z: np.ndarray, *, rtol: float = 1e-10) -> np.ndarray:
 
 def fixed_point(w: ERWheel, guess: np.ndarray | None = None, *, rtol: float = 1e-10, tol: float = 1e-9) -> np.ndarray:
     """The period-1 gait's z = (theta+, theta'+) by Newton's method on P(z) - z (central-difference Jacobian,
-    steps 1e-6 rad and 1e-6 rad/s), from ``guess`` or the rigid wheel's gait (M = m_H + 8 m, I = I_c + 8 m L0^2)."""
+    steps 1e-6 rad and 1e-6 rad/s; a step into a failing map is halved), from ``guess`` or theta+ = -alpha/2 -
+    0.06 rad (the trailing leg compressed) and the rigid wheel's gait speed (M = m_H + 8 m, I = I_c + 8 m L0^2),
+    raised 15 % at a time while the map stalls from it."""
     if guess is None:
         m_all = w.hub_mass_kg + N_LEGS * w.leg_mass_kg
         i_foot = w.inertia_kg_m2 + N_LEGS * w.leg_mass_kg * w.leg_length_m**2 + m_all * w.leg_length_m**2
         beta = 1.0 - m_all * w.leg_length_m**2 * (1.0 - math.cos(ALPHA)) / i_foot
         gain = 4 * m_all * w.gravity_m_s2 * w.leg_length_m / i_foot * math.sin(w.slope_rad) * math.sin(ALPHA / 2)
-        guess = np.array([-ALPHA / 2 + 0.01, math.sqrt(max(beta**2 * gain / (1 - beta**2), 0.25))])
+        guess = np.array([-ALPHA / 2 - 0.06, math.sqrt(max(beta**2 * gain / (1 - beta**2), 0.25))])
     z = np.asarray(guess, float)
+    for _ in range(12):
+        try:
+            pz = step_map(w, z, rtol=rtol)
+            break
+        except TruthFailure:
+            z = z * np.array([1.0, 1.15])
+    else:
+        raise TruthFailure("no gait", f"the step map fails from {guess} and from faster starts")
     for _ in range(30):
-        res = step_map(w, z, rtol=rtol) - z
+        res = pz - z
         if np.max(np.abs(res)) < tol:
             return z
         jac = np.zeros((2, 2))
@@ -432,7 +442,16 @@ def fixed_point(w: ERWheel, guess: np.ndarray | None = None, *, rtol: float = 1e
             dz = np.zeros(2)
             dz[j] = h
             jac[:, j] = (step_map(w, z + dz, rtol=rtol) - step_map(w, z - dz, rtol=rtol)) / (2 * h)
-        z = z - np.linalg.solve(jac - np.eye(2), res)
+        dz = np.linalg.solve(jac - np.eye(2), res)
+        for _ in range(6):
+            try:
+                pz = step_map(w, z - dz, rtol=rtol)
+                z = z - dz
+                break
+            except TruthFailure:
+                dz = dz / 2
+        else:
+            break
     raise TruthFailure("no gait", f"no period-1 gait found from {guess} (last residual {np.max(np.abs(res)):.2e})")
 
 
