@@ -279,7 +279,9 @@ def run_calibrate_coverage(
 ) -> dict[str, Any]:
     """``n_series`` series; ``calibrate(trials, fit=..., wheel=..., names=...)`` is the fit (the public
     `rimless.analysis.calibrate`), called once per series and wheel input of ``inputs`` (`INPUTS`), on walks of
-    the truth model ``truth`` (`TRUTHS`; the same seed draws the same wheels, labs and slopes for each). With
+    the truth model ``truth`` (`TRUTHS`; for each the same seed draws the same first wheel, lab and slopes, but
+    the walks' releases and recordings draw from the same stream, so a recording one frame longer under one truth
+    moves every later draw: the two truths' series are paired only up to there). With
     ``friction_n`` (lo, hi) N each truth's guide friction is drawn U(lo, hi) from its own stream (unless the held
     parameters are drawn: their F_c then); the ``exact`` input states it exactly. Returns the JSON-ready summary:
     the first input's figures at the top level (the keys as before), each input's under ``inputs``, and

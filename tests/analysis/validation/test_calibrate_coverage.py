@@ -216,8 +216,8 @@ def test_truth_model_and_friction_reach_the_study_from_the_cli(monkeypatch: pyte
 
 def test_friction_draws_and_the_truth_named_in_the_summary(monkeypatch: pytest.MonkeyPatch) -> None:
     """With ``friction_n`` each truth's F_c is drawn in the range from its own stream (k, c and the lab the same
-    as without it, for either truth model), the exact input states it, and the JSON names the truth and the
-    range. Walks are stubbed (nothing imported: the fit fails, which the row records)."""
+    as without it, for either truth model, while the walks draw nothing), and the JSON
+    names the truth and the range. Walks are stubbed (nothing imported: the fit fails, which the row records)."""
     import rimless.analysis.validation.calibrate_coverage as cc
 
     def no_walk(truth, lab, rng, folder, prefix, trials, steps, *, importing=None, model):  # type: ignore[no-untyped-def]
