@@ -349,6 +349,7 @@ def run_calibrate_coverage(
     out["truth_model"] = TRUTH_MEANING[truth] + ": " + out["truth_model"]
     if friction_n is not None and not drawn:
         out["draws"]["guide_friction_n"] = list(friction_n)
+        out["draws"]["held"] = "Table 1's, exact; F_c drawn uniform in draws.guide_friction_n (N), stated exactly"
     return out
 
 

@@ -244,7 +244,7 @@ def test_friction_draws_and_the_truth_named_in_the_summary(monkeypatch: pytest.M
             assert fcs == [0.0, 0.0, 0.0] and "guide_friction_n" not in out["draws"]
         else:
             assert all(0.1 <= v <= 0.5 for v in fcs) and len(set(fcs)) == 3
-            assert out["draws"]["guide_friction_n"] == [0.1, 0.5]
+            assert out["draws"]["guide_friction_n"] == [0.1, 0.5] and "F_c drawn" in out["draws"]["held"]
         assert all(r["failed"] == "RimlessError: 0 trial(s) imported" for r in out["per_series"])
         same = runs[("independent", None)]["per_series"]
         assert [r["truth"] for r in out["per_series"]] == [r["truth"] for r in same]
