@@ -463,7 +463,7 @@ def er_truth_walk(
     its own gait at ``slope_deg`` with theta'+ times ``release``; each step's slope drawn N(slope, slope_sd^2).
     A `floquet_truth.Walk` (the hub in the slope frame, the body angle; the data stop 40 % into the last step,
     or at the last impact after a stall past the second impact), as `floquet_truth.er_walk` gives."""
-    from rimless.analysis.validation.floquet_truth import _walk
+    from rimless.analysis.validation.floquet_truth import assemble_walk
 
     w0 = ERWheel.of(params, slope_rad=math.radians(slope_deg))
     z = fixed_point(w0, rtol=rtol)
@@ -482,7 +482,7 @@ def er_truth_walk(
         except TruthFailure:
             if len(impacts) < 2:
                 raise
-            return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
+            return assemble_walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
         T.append(t0 + st.t)
         X.append(st.hub[:, 0])
         H.append(st.hub[:, 1])
@@ -492,4 +492,4 @@ def er_truth_walk(
         if k < steps:
             impacts.append(t0)
             speeds.append(float(y[7]))
-    return _walk(T, X, H, B, impacts, speeds, slope_deg)
+    return assemble_walk(T, X, H, B, impacts, speeds, slope_deg)
