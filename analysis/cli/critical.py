@@ -776,6 +776,26 @@ def coverage_cmd(
         ),
     ] = "critical-slope",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    truth_model: Annotated[
+        str | None,
+        typer.Option(
+            "--truth-model",
+            metavar="independent|simulator",
+            help="With --of calibrate: the ER wheel that walks the truth trials: independent (default; "
+            "er_truth, written apart from the simulator) or simulator (the calibration's own model).",
+            show_default=False,
+        ),
+    ] = None,
+    friction_n: Annotated[
+        str | None,
+        typer.Option(
+            "--friction-n",
+            metavar="LO,HI",
+            help="With --of calibrate --inputs exact: draw each truth's guide friction F_c uniform in LO-HI N "
+            "(default: none, F_c = 0); the exact input states it.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """How often the critical slope's 95 % interval contains the truth, on truth series.
 
@@ -800,10 +820,12 @@ def coverage_cmd(
     method = of.strip().lower()
     if method not in ("critical-slope", "calibrate"):
         raise ParameterError(f"--of must be critical-slope or calibrate, got {of!r}")
+    if method != "calibrate" and (truth_model is not None or friction_n is not None):
+        raise ParameterError("--truth-model and --friction-n go with --of calibrate")
     if method == "calibrate":
         if mode != "importer":
             raise ParameterError("--of calibrate runs through the importer only (not with --truth pendulum)")
-        _calibrate_coverage(n, seed, json_out, inputs)
+        _calibrate_coverage(n, seed, json_out, inputs, truth_model, friction_n)
         return
     if mode == "pendulum":
         from rimless.analysis.validation.coverage import run_coverage
@@ -894,19 +916,39 @@ def _print_coverage(out: dict[str, Any], seed: int) -> None:
         )
 
 
-def _calibrate_coverage(n: int, seed: int, json_out: bool, inputs: str | None = None) -> None:
+def _calibrate_coverage(
+    n: int,
+    seed: int,
+    json_out: bool,
+    inputs: str | None = None,
+    truth_model: str | None = None,
+    friction_n: str | None = None,
+) -> None:
     """``trials coverage --of calibrate``: run the study, print its per-parameter coverage per wheel input."""
     from rimless.analysis import calibrate
-    from rimless.analysis.validation.calibrate_coverage import INPUTS, run_calibrate_coverage
+    from rimless.analysis.validation.calibrate_coverage import INPUTS, TRUTHS, run_calibrate_coverage
     from rimless.progress import progress_bar
 
     chosen = parse_list(inputs or "exact", "--inputs", str, choices=INPUTS, unique=True, lower=True)
+    model = (truth_model or TRUTHS[0]).strip().lower()
+    if model not in TRUTHS:
+        raise ParameterError(f"--truth-model must be {' or '.join(TRUTHS)}, got {truth_model!r}")
+    fr: tuple[float, float] | None = None
+    if friction_n is not None:
+        lo_hi = parse_list(friction_n, "--friction-n", float, count=2)
+        if len(lo_hi) != 2 or not (0.0 <= lo_hi[0] <= lo_hi[1] <= 5.0):
+            raise ParameterError(f"--friction-n takes LO,HI with 0 <= LO <= HI <= 5 N, got {friction_n!r}")
+        if any(i != "exact" for i in chosen):
+            raise ParameterError("--friction-n goes with --inputs exact (table1 and truth draw F_c themselves)")
+        fr = (lo_hi[0], lo_hi[1])
     with progress_bar("coverage", total=n, json_out=json_out) as bar:
         out = run_calibrate_coverage(
             n,
             seed,
             calibrate,
             inputs=chosen,
+            truth=model,
+            friction_n=fr,
             progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
         )
     if json_out:

@@ -1,7 +1,8 @@
 """Coverage of `rimless.analysis.calibrate`'s per-parameter intervals through the importer.
 
-Each series draws a compliant ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m; Table 1: 2700, 8), walks
-it with the simulator's ER model (`floquet_truth.er_walk`, no slope wander) on ``trials`` slopes of 2-3.5 deg,
+Each series draws a compliant ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m; Table 1: 2700, 8; with
+``friction_n`` the guide friction F_c too, uniform in that range), walks it with the truth model ``truth``
+(`TRUTHS`; no slope wander) on ``trials`` slopes of 2-3.5 deg,
 each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon export in a lab drawn per
 series (`importer_coverage.draw_lab`, `critical_truth.record`), imports it (the refusals) and hands the exports
 to the calibration as a user would: it imports them told the wheel input (k fitted: the importer's bound, then
@@ -29,9 +30,17 @@ parts of the se (the data's, the trial-clustered sandwich's, the measured slopes
 parameter was called identifiable (or effective only), the optimiser's end states, and every refused import and
 failed fit with its reason.
 
-The truth's dynamics are the calibration's own model (the simulator's ER wheel, with the drawn guide friction):
-this checks the importer, the fit and its intervals, not the model's adequacy (`critical_truth` does that for
-the critical slope).
+The truth models (``truth``, the JSON's ``truth`` and ``truth_model``):
+
+- ``independent`` (default): `rimless.analysis.validation.er_truth`, the ER wheel of docs/model.md written apart
+  from `rimless.sim` (its own equations of motion, events and stick/slip friction; it meets the simulator only in
+  its test, where the step maps agree to 1e-8), each walk released from that truth's own gait
+  (`er_truth.er_truth_walk`).
+- ``simulator``: the calibration's own model (`floquet_truth.er_walk`, the simulator's ER wheel), as before.
+
+Both are the same physics (model.md's ER wheel), so this checks the importer, the fit and its intervals, not the
+model's adequacy (`critical_truth` does that for the critical slope); the independent truth guards against a
+defect shared by the simulator and the fit that calls it.
 """
 
 from __future__ import annotations
@@ -57,6 +66,7 @@ Z95 = 1.959963984540054
 __all__ = [
     "K_RANGE",
     "C_RANGE",
+    "TRUTHS",
     "INPUTS",
     "HELD_DRAWN",
     "WalkedSeries",
@@ -74,6 +84,16 @@ INPUTS = ("exact", "table1", "truth")
 HELD_DRAWN = ("hub_mass_kg", "leg_mass_kg", "inertia_kg_m2", "leg_length_m", "guide_friction_n")
 #: the stream of the held draws beside the seed (the other draws keep the ``exact`` run's stream)
 HELD_STREAM = 31
+#: the truth models (`walk_and_import`'s ``truth``); the first is the default
+TRUTHS = ("independent", "simulator")
+#: what each truth is (the JSON's ``truth_model`` starts with it)
+TRUTH_MEANING = {
+    "independent": "er_truth, the ER wheel of docs/model.md written apart from rimless.sim (hub coordinates, "
+    "Newton-Euler, scipy events; its step map meets the simulator's to 1e-8 in its test)",
+    "simulator": "the simulator's ER wheel (the calibration's own model)",
+}
+#: the stream of the guide-friction draws (``friction_n``) beside the seed
+FRICTION_STREAM = 32
 
 
 @dataclass
@@ -106,19 +126,26 @@ def walk_and_import(
     steps: int,
     *,
     importing: Callable[[], None] | None = None,
+    model: str = "simulator",
 ) -> WalkedSeries:
     """``trials`` walks of the ER wheel ``truth`` on sorted slopes U(2, 3.5) deg, each released at its gait's
-    speed times U(0.95, 1.08) (`floquet_truth.er_walk`), written as Vicon exports ``folder/{prefix}t{j}.csv`` in
-    ``lab`` (`critical_truth.record`), then imported (`import_trial`, defaults); ``importing`` is called between."""
+    speed times U(0.95, 1.08) by the truth model ``model`` (`TRUTHS`: ``simulator``, `floquet_truth.er_walk`, the
+    default here for the callers that check the simulator's own walks; ``independent``,
+    `er_truth.er_truth_walk`), written as Vicon exports ``folder/{prefix}t{j}.csv`` in ``lab``
+    (`critical_truth.record`), then imported (`import_trial`, defaults); ``importing`` is called between."""
     from rimless.analysis.kinematics.build import import_trial
+    from rimless.analysis.validation.er_truth import TruthFailure, er_truth_walk
     from rimless.errors import RimlessError
     from rimless.sim.model.failures import StepFailure
 
+    if model not in TRUTHS:
+        raise ValueError(f"model must be one of {', '.join(TRUTHS)}, got {model!r}")
+    walker = er_truth_walk if model == "independent" else er_walk
     out = WalkedSeries()
     for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
         try:
-            wk = er_walk(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
-        except StepFailure as err:
+            wk = walker(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
+        except (StepFailure, TruthFailure) as err:
             out.refused.append(f"truth walk failed: {err}")
             continue
         out.stalled += wk.stalled
@@ -191,7 +218,8 @@ def _param_row(pe: Any, t: float) -> dict[str, Any]:
         "ci95_with_held_linear": list(c) if finite and (c := pe.ci95_with_held_linear) is not None else None,
         "ci_with_held_at_bound": bool(pe.ci_with_held_at_bound),
         "covered": bool(ci_all is not None and ci_all[0] <= t <= ci_all[1]),
-        "relative_error": pe.value / t - 1.0,
+        # None where the truth is 0 (a held F_c at its bound; never c or k): no relative error exists there
+        "relative_error": pe.value / t - 1.0 if t != 0 else None,
         "identifiable": bool(pe.identifiable),
         "effective_only": bool(pe.effective_only),
         "z": (centre - t) / se_all if finite and se_all > 0 else None,
@@ -246,11 +274,18 @@ def run_calibrate_coverage(
     steps: int = 10,
     inputs: Sequence[str] = ("exact",),
     progress: Callable[[int, str], None] | None = None,
+    truth: str = "independent",
+    friction_n: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
     """``n_series`` series; ``calibrate(trials, fit=..., wheel=..., names=...)`` is the fit (the public
-    `rimless.analysis.calibrate`), called once per series and wheel input of ``inputs`` (`INPUTS`). Returns the
-    JSON-ready summary: the first input's figures at the top level (the keys as before), each input's under
-    ``inputs``, and ``per_series``."""
+    `rimless.analysis.calibrate`), called once per series and wheel input of ``inputs`` (`INPUTS`), on walks of
+    the truth model ``truth`` (`TRUTHS`; for each the same seed draws the same first wheel, lab and slopes, but
+    the walks' releases and recordings draw from the same stream, so a recording one frame longer under one truth
+    moves every later draw: the two truths' series are paired only up to there). With
+    ``friction_n`` (lo, hi) N each truth's guide friction is drawn U(lo, hi) from its own stream (unless the held
+    parameters are drawn: their F_c then); the ``exact`` input states it exactly. Returns the JSON-ready summary:
+    the first input's figures at the top level (the keys as before), each input's under ``inputs``, and
+    ``per_series``."""
     from rimless.sim.model.params import WheelParams
 
     bad = [f for f in fit if f not in FIELDS]
@@ -259,15 +294,22 @@ def run_calibrate_coverage(
     bad = [i for i in inputs if i not in INPUTS]
     if bad or not inputs or len(set(inputs)) != len(inputs):
         raise ValueError(f"inputs must be distinct among {', '.join(INPUTS)}, got {list(inputs)}")
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {', '.join(TRUTHS)}, got {truth!r}")
+    if friction_n is not None and not (0.0 <= friction_n[0] <= friction_n[1] and math.isfinite(friction_n[1])):
+        raise ValueError(f"friction_n must be a range 0 <= lo <= hi (N), got {friction_n}")
     drawn = any(i != "exact" for i in inputs)
     rng = np.random.default_rng(seed)
     held_rng = np.random.default_rng((seed, HELD_STREAM))
+    friction_rng = np.random.default_rng((seed, FRICTION_STREAM))
     cpu, wall = time.process_time(), time.perf_counter()
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix=f"rimless-calcov-{os.getpid()}-") as tmp:
         for i in range(n_series):
             held = draw_held(held_rng) if drawn else {}
-            truth = WheelParams(
+            if friction_n is not None and not drawn:
+                held["guide_friction_n"] = float(friction_rng.uniform(*friction_n))
+            wheel = WheelParams(
                 stiffness_n_per_m=float(rng.uniform(*K_RANGE)), damping_ns_per_m=float(rng.uniform(*C_RANGE))
             ).replace(**held)
             lab = draw_lab(rng)
@@ -278,10 +320,12 @@ def run_calibrate_coverage(
                 if progress:
                     progress(i, "importing")
 
-            series = walk_and_import(truth, lab, rng, Path(tmp), f"s{i}_", trials, steps, importing=importing)
+            series = walk_and_import(
+                wheel, lab, rng, Path(tmp), f"s{i}_", trials, steps, importing=importing, model=truth
+            )
             row: dict[str, Any] = {
-                "truth": {n: getattr(truth, FIELDS[n]) for n in fit},
-                "truth_held": {n: float(getattr(truth, n)) for n in HELD_DRAWN},
+                "truth": {n: getattr(wheel, FIELDS[n]) for n in fit},
+                "truth_held": {n: float(getattr(wheel, n)) for n in HELD_DRAWN},
                 "lab": {"up": lab.up, "heading_deg": lab.heading_deg, "markers": lab.markers},
                 "trials": len(series.paths),
                 "refused": series.refused,
@@ -292,15 +336,21 @@ def run_calibrate_coverage(
                 if progress:
                     progress(i, f"calibrating, {name} wheel")
                 row["inputs"][name] = _fit_row(
-                    calibrate, series.imported, series.names, tuple(fit), _user_wheel(name, truth), row["truth"]
+                    calibrate, series.imported, series.names, tuple(fit), _user_wheel(name, wheel), row["truth"]
                 )
             row.update(row["inputs"][inputs[0]])  # the first input's fit at the row's top level (as before)
             rows.append(row)
             if progress:
                 progress(i + 1, "done")
-    return _summary(
+    out = _summary(
         rows, tuple(fit), tuple(inputs), seed, trials, steps, time.process_time() - cpu, time.perf_counter() - wall
     )
+    out["truth"] = truth
+    out["truth_model"] = TRUTH_MEANING[truth] + ": " + out["truth_model"]
+    if friction_n is not None and not drawn:
+        out["draws"]["guide_friction_n"] = list(friction_n)
+        out["draws"]["held"] = "Table 1's, exact; F_c drawn uniform in draws.guide_friction_n (N), stated exactly"
+    return out
 
 
 def _rel(got: list[dict[str, Any]], truths: list[float], part: str) -> list[float]:
@@ -308,7 +358,7 @@ def _rel(got: list[dict[str, Any]], truths: list[float], part: str) -> list[floa
     out = []
     for g, t in zip(got, truths):
         v = g.get(part)
-        if v is not None and math.isfinite(v):
+        if v is not None and math.isfinite(v) and t != 0:
             out.append(v / t)
     return out
 
@@ -330,7 +380,7 @@ def _per_parameter(rows: list[dict[str, Any]], fits: list[dict[str, Any]], name:
     k_data = sum(g["covered_data"] for g in got)
     lo, hi = wilson_interval(k, len(got))
     lo_d, hi_d = wilson_interval(k_data, len(got))
-    errs = [g["relative_error"] for g in got]
+    errs = [g["relative_error"] for g in got if g["relative_error"] is not None]
     held_names = sorted({h for g in got for h in g["held_contributions"]})
     return {
         "fitted": len(got),
@@ -349,9 +399,11 @@ def _per_parameter(rows: list[dict[str, Any]], fits: list[dict[str, Any]], name:
         "median_relative_se": {
             part: _median(_rel(got, truths, part)) for part in ("se_model", "se_sandwich", "se_slope", "se_held")
         },
-        "median_relative_held_shift": _median([g.get("held_shift", 0.0) / t for g, t in zip(got, truths)]),
+        "median_relative_held_shift": _median([g.get("held_shift", 0.0) / t for g, t in zip(got, truths) if t != 0]),
         "median_relative_held_contributions": {
-            h: _median([g["held_contributions"][h] / t for g, t in zip(got, truths) if h in g["held_contributions"]])
+            h: _median(
+                [g["held_contributions"][h] / t for g, t in zip(got, truths) if h in g["held_contributions"] and t != 0]
+            )
             for h in held_names
         },
         "effective_only": sum(bool(g.get("effective_only")) for g in got),
@@ -360,7 +412,7 @@ def _per_parameter(rows: list[dict[str, Any]], fits: list[dict[str, Any]], name:
             [
                 ((c := g["ci95_with_held_linear"] or g["ci95_linear"])[1] - c[0]) / 2 / g["value"]
                 for g in got
-                if g["ci95"]
+                if g["ci95"] and g["value"] != 0
             ]
         ),
     }
@@ -424,7 +476,7 @@ def _summary(
     first = per[inputs[0]]
     drawn = any(i != "exact" for i in inputs)
     return {
-        "truth_model": "the simulator's ER wheel (k, c drawn"
+        "truth_model": "the ER wheel (k, c drawn"
         + ("; m_H, m, I_c, L0 and F_c drawn from Table 1's stated uncertainties" if drawn else "; the rest Table 1's")
         + "), recorded as Vicon exports in drawn labs and imported",
         "fit": list(fit),

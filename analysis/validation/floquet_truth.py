@@ -193,6 +193,13 @@ def er_walk(
     return _walk(T, X, H, B, impacts, speeds, slope_deg)
 
 
+def assemble_walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> Walk:
+    """A `Walk` from per-step pieces (times s, hub x and h m, body angle rad), the impacts (s) and the post-impact
+    speeds (rad/s): sorted, duplicates dropped, the data stopped 40 % into the step after the last impact (what
+    `er_walk` and `rimless.analysis.validation.er_truth.er_truth_walk` record)."""
+    return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=stalled)
+
+
 def _walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> Walk:
     t = np.concatenate(T)
     order = np.argsort(t, kind="stable")

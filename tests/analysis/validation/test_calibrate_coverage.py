@@ -20,6 +20,7 @@ def test_one_series_is_drawn_away_from_table1_imported_and_fitted() -> None:
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
     assert out["fit"] == ["c", "k"] and out["series"] == 1
+    assert out["truth"] == "independent" and out["truth_model"].startswith("er_truth")  # the default truth, named
     (row,) = out["per_series"]
     assert C_RANGE[0] <= row["truth"]["c"] <= C_RANGE[1] and K_RANGE[0] <= row["truth"]["k"] <= K_RANGE[1]
     assert abs(row["truth"]["k"] - 2700) > 1 and abs(row["truth"]["c"] - 8) > 1e-6  # not Table 1's wheel
@@ -28,7 +29,7 @@ def test_one_series_is_drawn_away_from_table1_imported_and_fitted() -> None:
         p = row["params"][name]
         lo, hi = p["ci95"]
         assert p["covered"] == (lo <= row["truth"][name] <= hi)
-        assert abs(p["value"] / row["truth"][name] - 1) < 0.1  # the simulator's own model: close to its truth
+        assert abs(p["value"] / row["truth"][name] - 1) < 0.1  # model.md's ER wheel, as the fit's: close to its truth
         d = out["parameters"][name]
         assert d["fitted"] == 1 and d["covered"] == int(p["covered"])
         # the se's parts: the imported slopes' (stated sd > 0) is carried, and the se is at least the data's with it
@@ -130,7 +131,7 @@ def test_inputs_reach_the_study_from_the_cli(monkeypatch: pytest.MonkeyPatch) ->
 
     seen: list[list[str]] = []
 
-    def fake(n, seed, calibrate, *, inputs, progress):  # type: ignore[no-untyped-def]
+    def fake(n, seed, calibrate, *, inputs, progress, **kw):  # type: ignore[no-untyped-def]
         seen.append(list(inputs))
         return {"inputs": {}, "n": n}
 
@@ -176,3 +177,99 @@ def test_a_row_states_the_intervals_cut_at_the_bound_as_calibrate_prints_them() 
     assert row["ci95"] == pytest.approx([0.104, 0.496], abs=1e-3) and row["covered"] and not row["covered_data"]
     summary = _per_parameter([{"truth": {"F_c": 0.05}}], [{"params": {"F_c": row}}], "F_c")
     assert summary["covered"] == 1 and summary["median_relative_half_width"] == pytest.approx(0.6198 / 0.3, abs=1e-3)
+
+
+def test_truth_model_and_friction_reach_the_study_from_the_cli(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--truth-model` (default independent) and `--friction-n LO,HI` are passed through; bad values, or either
+    without --of calibrate, or --friction-n beside a drawn-held input, are refused with exit 2."""
+    import rimless.analysis.validation.calibrate_coverage as cc
+    from rimless.cli import app
+
+    seen: list[dict[str, object]] = []
+
+    def fake(n, seed, calibrate, *, inputs, progress, truth, friction_n):  # type: ignore[no-untyped-def]
+        seen.append({"truth": truth, "friction_n": friction_n})
+        return {"inputs": {}, "n": n}
+
+    monkeypatch.setattr(cc, "run_calibrate_coverage", fake)
+    base = ["trials", "coverage", "--of", "calibrate", "--series", "1", "--json"]
+    for args, want in (
+        ([], {"truth": "independent", "friction_n": None}),
+        (["--truth-model", "simulator"], {"truth": "simulator", "friction_n": None}),
+        (["--friction-n", "0,0.6"], {"truth": "independent", "friction_n": (0.0, 0.6)}),
+    ):
+        r = runner.invoke(app, [*base, *args])
+        assert r.exit_code == 0, r.output
+        assert seen[-1] == want
+    for args in (
+        ["--truth-model", "sim"],
+        ["--friction-n", "0.6,0.1"],
+        ["--friction-n", "0.1"],
+        ["--friction-n", "nan,1"],
+        ["--friction-n", "0,0.6", "--inputs", "table1"],
+    ):
+        r = runner.invoke(app, [*base, *args])
+        assert r.exit_code == 2, (args, r.output)
+    r = runner.invoke(app, ["trials", "coverage", "--truth-model", "simulator"])
+    assert r.exit_code == 2 and "--of calibrate" in r.output
+
+
+def test_friction_draws_and_the_truth_named_in_the_summary(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With ``friction_n`` each truth's F_c is drawn in the range from its own stream (k, c and the lab the same
+    as without it, for either truth model, while the walks draw nothing), and the JSON
+    names the truth and the range. Walks are stubbed (nothing imported: the fit fails, which the row records)."""
+    import rimless.analysis.validation.calibrate_coverage as cc
+
+    def no_walk(truth, lab, rng, folder, prefix, trials, steps, *, importing=None, model):  # type: ignore[no-untyped-def]
+        assert model in cc.TRUTHS
+        return cc.WalkedSeries()
+
+    monkeypatch.setattr(cc, "walk_and_import", no_walk)
+    wheels: list[object] = []
+
+    def never(trials, *, fit, wheel, names):  # type: ignore[no-untyped-def]
+        wheels.append(wheel)
+        raise AssertionError("not called: fewer than 2 trials")
+
+    runs = {
+        (m, f): cc.run_calibrate_coverage(3, 11, never, truth=m, friction_n=f)
+        for m in cc.TRUTHS
+        for f in (None, (0.1, 0.5))
+    }
+    assert not wheels
+    for (m, f), out in runs.items():
+        assert out["truth"] == m and out["truth_model"].startswith(cc.TRUTH_MEANING[m])
+        fcs = [r["truth_held"]["guide_friction_n"] for r in out["per_series"]]
+        if f is None:
+            assert fcs == [0.0, 0.0, 0.0] and "guide_friction_n" not in out["draws"]
+        else:
+            assert all(0.1 <= v <= 0.5 for v in fcs) and len(set(fcs)) == 3
+            assert out["draws"]["guide_friction_n"] == [0.1, 0.5] and "F_c drawn" in out["draws"]["held"]
+        assert all(r["failed"] == "RimlessError: 0 trial(s) imported" for r in out["per_series"])
+        same = runs[("independent", None)]["per_series"]
+        assert [r["truth"] for r in out["per_series"]] == [r["truth"] for r in same]
+        assert [r["lab"] for r in out["per_series"]] == [r["lab"] for r in same]
+    with pytest.raises(ValueError, match="truth"):
+        cc.run_calibrate_coverage(1, 0, never, truth="sim")
+    with pytest.raises(ValueError, match="friction_n"):
+        cc.run_calibrate_coverage(1, 0, never, friction_n=(0.5, 0.1))
+
+
+def test_a_truth_at_zero_has_no_relative_error() -> None:
+    """A held F_c whose truth is 0 (its bound): the row's relative error is None (no division by the truth), and
+    the parameter's medians leave it out (main divided by the truth: ZeroDivisionError)."""
+    from rimless.analysis.inference.calibrate import ParamEstimate
+    from rimless.analysis.validation.calibrate_coverage import _param_row, _per_parameter
+
+    pe = ParamEstimate("F_c", "guide_friction_n", "N", 0.0, 0.02, 0.01, True, se_held=0.03)
+    row = _param_row(pe, 0.0)
+    assert row["relative_error"] is None and row["covered"]  # 0 lies in [0, 0.02 + 1.96 hypot(0.01, 0.03)]
+    other = _param_row(pe, 0.04)
+    assert other["relative_error"] == pytest.approx(0.02 / 0.04 - 1.0)
+    summary = _per_parameter(
+        [{"truth": {"F_c": 0.0}}, {"truth": {"F_c": 0.04}}],
+        [{"params": {"F_c": row}}, {"params": {"F_c": other}}],
+        "F_c",
+    )
+    assert summary["fitted"] == 2 and summary["median_relative_error"] == pytest.approx(-0.5)
+    assert summary["median_relative_se"]["se_held"] == pytest.approx(0.03 / 0.04)  # the zero truth left out
