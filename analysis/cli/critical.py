@@ -772,7 +772,7 @@ def coverage_cmd(
             "--of",
             metavar="critical-slope|calibrate",
             help="The method checked: the critical slope (default) or `trials calibrate --fit c,k` (per parameter; "
-            "through the importer, the simulator's ER wheel as truth, k and c drawn).",
+            "through the importer, an ER wheel truth (`--truth-model`), k and c drawn).",
         ),
     ] = "critical-slope",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
