@@ -33,7 +33,7 @@ def test_an_alternating_approach_to_the_fixed_point_is_trend_not_noise() -> None
     i = np.arange(10)
     trials = [_impacts(0.3 + 0.012 * (-0.6) ** i, rng) for _ in range(40)]
     sigma, dof = timing_noise_sd(trials)
-    assert dof == 40 * 7
+    assert dof == 40 * 6
     assert 0.8 * NOISE_S < sigma < 1.2 * NOISE_S, sigma
 
 
