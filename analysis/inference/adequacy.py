@@ -3,8 +3,9 @@
 The measurement noise is estimated from the recording, apart from the model: the CoM height's white-noise sigma
 from its third differences on runs of evenly spaced samples (the estimator of
 `rimless.analysis.kinematics.steps.noise_sigma`, run by run: smooth motion cancels, so what is left is the markers' noise), and the impact times' sigma from what each trial's periods
-leave about their own smooth trend (a geometric approach to the fixed point: `timing_noise_sd`), pooled over the
-trials. Against them, per trial and overall:
+leave about their own trend (a geometric approach to the fixed point and a persistent alternation:
+`timing_noise_sd`; a limp is a pattern, not noise), pooled over the trials and floored (`timing_noise`). Against
+them, per trial and overall:
 
 - CoM height: chi^2 = sum(residual^2) / sigma_h^2 with n - 2 degrees of freedom (the trial's time shift and
   height offset are fitted), less what the import's errors take (below);
@@ -97,42 +98,79 @@ def noise_sigma_from_d3(d3: np.ndarray) -> float:
 
 
 LAMBDA_GRID = np.linspace(-0.9, 1.3, 45)  # multipliers of the periods' trend p* + a lambda^i tried per trial
+#: fewest periods of a trial that enters the impact times' noise (its trend takes 4 degrees of freedom)
+TIMING_MIN_PERIODS = 6
+#: the impact times' noise is never taken below this fraction of the recording's frame interval (a sanity floor:
+#: the importer places an impact to about a fortieth of a frame on clean object exports, docs/trials.md)
+TIMING_FLOOR_FRAMES = 0.01
+#: the choice of lambda per trial, counted as one more fitted direction of the periods: the trace it takes is
+#: D D^T's mean eigenvalue, 2 (measured, 400 pure-noise trials of 6-12 periods with and without a transient: the
+#: pooled estimate 0.74-0.97 of the truth without it, 0.94-1.06 with it)
+LAMBDA_CHOICE_TRACE = 2.0
 
 
 def timing_noise_sd(impacts_per_trial: Sequence[np.ndarray]) -> tuple[float, int]:
     """(sigma s, degrees of freedom) of the impact times' noise, from what each trial's periods leave about their
-    own smooth trend: p_i = p* + a lambda^i (the step-to-step map's approach to its fixed point or away from it,
-    lambda on `LAMBDA_GRID`, the best per trial). The periods' noise is sigma^2 D D^T (differences of impact
-    times), so the residual sum of squares of the linear fit (hat matrix H) has expectation sigma^2 tr((I - H)
-    D D^T): sigma^2 = sum RSS / sum tr (pooled over the trials; the choice of lambda costs one more degree of
-    freedom each, not counted in the trace: a slight underestimate). A negative lambda alternates (lambda^i; it was
-    written sign(lambda) |lambda|^i until session 21, which never alternates, so an alternating approach or a limp
-    went into the noise). NaN when no trial has 5 periods."""
+    own trend p_i = p* + a lambda^i + b (-1)^i: the step-to-step map's approach to its fixed point (lambda on
+    `LAMBDA_GRID`, the best per trial) and a persistent alternation (b: a limp, unequal legs; session 22). A
+    pattern the trend can take is not noise: the alternation is not, so a wheel that limps is judged against the
+    recording's noise, not against its own limp (session 21: 5.7 ms estimated for 0.5 ms on c = 11 ER walks
+    limping by 5 %, and the check said "fits"). The periods' noise is sigma^2 D D^T (differences of impact times),
+    so the residual sum of squares of the linear fit (hat matrix H) has expectation sigma^2 tr((I - H) D D^T):
+    sigma^2 = sum RSS / sum (tr - `LAMBDA_CHOICE_TRACE`), pooled over the trials with at least `TIMING_MIN_PERIODS`
+    periods; n - 4 degrees of freedom each (the choice of lambda counted as one: without it the estimate was
+    low by 3-26 % on 6-12 periods). A negative lambda alternates (lambda^i). NaN when no trial has enough
+    periods."""
     rss, tr_sum, dof = 0.0, 0.0, 0
     for imp in impacts_per_trial:
         p = np.diff(np.asarray(imp, float))
         n = p.size
-        if n < 5:
+        if n < TIMING_MIN_PERIODS:
             continue
-        i = np.arange(n, dtype=float)
-        dd = 2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
-        best = None
-        for lam in LAMBDA_GRID:
-            X = np.column_stack([np.ones(n), lam**i if lam != 0 else (i == 0).astype(float)])  # alternates for lam < 0
-            coef, *_ = np.linalg.lstsq(X, p, rcond=None)
-            r = p - X @ coef
-            val = float(r @ r)
-            if best is None or val < best[0]:
-                best = (val, X)
-        assert best is not None
-        val, X = best
-        H = X @ np.linalg.pinv(X)
+        val, tr = _trend_residual(p)
         rss += val
-        tr_sum += float(np.trace((np.eye(n) - H) @ dd))
-        dof += n - 3
+        tr_sum += max(tr - LAMBDA_CHOICE_TRACE, 0.0)
+        dof += n - 4
     if dof <= 0 or tr_sum <= 0:
         return math.nan, 0
     return math.sqrt(rss / tr_sum), dof
+
+
+def _trend_residual(p: np.ndarray) -> tuple[float, float]:
+    """(RSS s^2, tr((I - H) D D^T)) of periods p (s) about their best trend p* + a lambda^i + b (-1)^i."""
+    n = p.size
+    i = np.arange(n, dtype=float)
+    alt = (-1.0) ** i
+    dd = 2.0 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1)
+    best = None
+    for lam in LAMBDA_GRID:
+        geo = lam**i if lam != 0 else (i == 0).astype(float)  # alternates for lam < 0
+        X = np.column_stack([np.ones(n), geo, alt])
+        coef, *_ = np.linalg.lstsq(X, p, rcond=None)
+        r = p - X @ coef
+        val = float(r @ r)
+        if best is None or val < best[0]:
+            best = (val, X)
+    assert best is not None
+    val, X = best
+    H = X @ np.linalg.pinv(X)
+    return val, float(np.trace((np.eye(n) - H) @ dd))
+
+
+def timing_noise(impacts_per_trial: Sequence[np.ndarray], frame_s: float = math.nan) -> dict[str, Any]:
+    """The impact times' noise the periods are judged against: `timing_noise_sd` (``sigma_s``, ``dof``), floored
+    at `TIMING_FLOOR_FRAMES` of the frame interval ``frame_s`` (s; the floor not applied when NaN); ``source``
+    says which was used ("periods about their trend" or "floor"), ``estimate_s`` the estimate before the floor,
+    ``trials_used`` how many trials entered it."""
+    sig, dof = timing_noise_sd(impacts_per_trial)
+    used = sum(np.asarray(imp).size - 1 >= TIMING_MIN_PERIODS for imp in impacts_per_trial)
+    floor = TIMING_FLOOR_FRAMES * frame_s if math.isfinite(frame_s) and frame_s > 0 else math.nan
+    out: dict[str, Any] = {"sigma_s": sig, "dof": dof, "estimate_s": sig, "floor_s": floor, "trials_used": used}
+    if math.isfinite(sig) and math.isfinite(floor) and sig < floor:
+        out.update(sigma_s=floor, source="floor")
+    else:
+        out["source"] = "periods about their trend" if math.isfinite(sig) else "none"
+    return out
 
 
 def period_chi2(
@@ -285,7 +323,9 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
     alone). ``alpha_rad``: the angle between legs. Returns ``noise`` (the sigmas with how they were measured), ``allowed`` (what each trial's
     residuals may hold besides the noise), ``per_trial`` (each with ``com`` and ``periods`` figures and ``fits``),
     ``overall`` (``com``, ``periods``, ``total``) and ``fits`` with ``statement``."""
-    sig_t, dof_t = timing_noise_sd([b["impacts_s"] for b in blocks])
+    frames = [float(np.median(np.diff(b["com_t_s"]))) for b in blocks if np.asarray(b["com_t_s"]).size > 1]
+    tn = timing_noise([b["impacts_s"] for b in blocks], float(np.median(frames)) if frames else math.nan)
+    sig_t, dof_t = tn["sigma_s"], tn["dof"]
     com_sd = [com_noise_sd(b["com_t_s"], b["com_m"]) for b in blocks]
     used = [(s, n) for s, n in com_sd if math.isfinite(s) and n > 0]
     sig_h = math.sqrt(sum(s * s * n for s, n in used) / sum(n for _, n in used)) if used else math.nan
@@ -354,9 +394,16 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             "impact_time_ms": sig_t * 1e3 if math.isfinite(sig_t) else None,
             "com_dof": dof_h,
             "impact_time_dof": dof_t,
+            "timing_noise_source": tn["source"],
+            "timing_noise_estimate_ms": tn["estimate_s"] * 1e3 if math.isfinite(tn["estimate_s"]) else None,
+            "timing_noise_floor_ms": tn["floor_s"] * 1e3 if math.isfinite(tn["floor_s"]) else None,
+            "timing_noise_trials": tn["trials_used"],
             "method": "from the recordings apart from the model: CoM height from its third differences on evenly "
             "spaced runs (median absolute deviation); impact times from each trial's periods about their own "
-            "geometric trend, pooled; each trial's slope free within its stated uncertainty; the import's errors "
+            "trend (a geometric approach to the fixed point and a persistent alternation, so a limp is not taken "
+            f"for noise; trials of {TIMING_MIN_PERIODS} periods or more), pooled, floored at "
+            f"{TIMING_FLOOR_FRAMES:g} of a frame (`timing_noise_source` says which was used); each trial's slope "
+            "free within its stated uncertainty; the import's errors "
             "that are not noise allowed (`allowed`); p-values by the F test against these "
             "estimates",
         },

@@ -258,7 +258,10 @@ def _verdicts(res: Any) -> dict[str, Any]:
         "overall": {
             k: {"ratio": ov[k]["ratio"], "p_value": ov[k]["p_value"]} for k in ("com", "periods", "total") if k in ov
         },
-        "noise": {k: (adq.get("noise") or {}).get(k) for k in ("com_mm", "impact_time_ms")},
+        "noise": {
+            k: (adq.get("noise") or {}).get(k)
+            for k in ("com_mm", "impact_time_ms", "timing_noise_source", "timing_noise_estimate_ms")
+        },
         "model_choice": None if choice is None else {k: choice[k] for k in CHOICE_KEYS if k in choice},
         "held_exact_probe": _probe(res),
         "estimates": {

@@ -49,7 +49,7 @@ def test_the_timing_noise_is_found_under_a_converging_walk():
         imp = np.concatenate([[0.0], np.cumsum(periods)]) + rng.normal(0.0, 0.5e-3, 9)
         trials.append(imp)
     sd, n = adq.timing_noise_sd(trials)
-    assert n == 12 * 5
+    assert n == 12 * 4
     assert sd == pytest.approx(0.5e-3, rel=0.2)
 
 
