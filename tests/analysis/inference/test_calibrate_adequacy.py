@@ -346,6 +346,23 @@ def test_the_text_output_names_the_minima_and_the_budget():
     assert "stopped on its budget" in lines[2] and "spread 1" in lines[2]
 
 
+def test_the_text_output_says_where_the_impact_noise_came_from():
+    # the JSON's adequacy.noise (adequacy.timing_noise's source) in the text line of `trials calibrate`
+    from rimless.analysis.cli.critical import _timing_source
+    from rimless.analysis.inference.adequacy import timing_noise
+
+    noisy = [0.3 * np.arange(9) + 1e-3 * np.random.default_rng(s).standard_normal(9) for s in range(3)]
+    tn = timing_noise(noisy, frame_s=0.01)
+    assert tn["source"] == "periods about their trend" and tn["trials_used"] == 3
+    line = _timing_source({"timing_noise_source": tn["source"], "timing_noise_trials": tn["trials_used"]})
+    assert line == "from the periods about their trend, 3 trials"
+    exact = [0.3 * np.arange(9)]  # noise-free periods: the estimate 0, below the floor
+    tn = timing_noise(exact, frame_s=0.01)
+    assert tn["source"] == "floor"
+    assert _timing_source({"timing_noise_source": "floor", "timing_noise_estimate_ms": 0.0}).startswith("the floor")
+    assert "no trial" in _timing_source({"timing_noise_source": "none"})
+
+
 def test_one_parameter_needs_no_further_start_when_its_profile_has_one_valley():
     from rimless.analysis.inference.calibrate import _one_valley
 
