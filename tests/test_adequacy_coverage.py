@@ -28,7 +28,8 @@ def test_the_command_offers_every_scenario_of_the_study() -> None:
 def test_a_held_stiffness_25_percent_off_is_a_misfit_the_check_finds_and_counts_add_up() -> None:
     """k held 25 % off the truth (fit c only): the stance's compression and the step periods cannot both follow
     (the leg's frequency scales with sqrt(k)), so an overall chi^2/dof is above 2 and the model does not fit; the adequate scenario on the same
-    seed calls c and k within a few % of the truth (the simulator's own model) and its verdict is the rule's."""
+    seed calls c and k within a few % of the truth (the independent `er_truth` walks them, the default since
+    session 22) and its verdict is the rule's."""
     from rimless.cli import app
 
     r = runner.invoke(
@@ -37,6 +38,7 @@ def test_a_held_stiffness_25_percent_off_is_a_misfit_the_check_finds_and_counts_
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
     assert list(out["scenarios"]) == ["held-k", "adequate"] and out["series_per_scenario"] == 1
+    assert out["truth"] == "independent" and out["truth_model"].startswith("er_truth")
     assert out["thresholds"]["adequacy_p"] == ADEQUACY_P and out["thresholds"]["adequacy_ratio"] == ADEQUACY_RATIO
     held, adequate = out["scenarios"]["held-k"], out["scenarios"]["adequate"]
     for s in (held, adequate):
@@ -78,3 +80,11 @@ def test_a_bad_scenario_is_one_error_line() -> None:
 
     r = runner.invoke(app, ["trials", "adequacy-coverage", "--scenario", "adequate,nothing"])
     assert r.exit_code == 2 and "--scenario" in r.output and "nothing" in r.output
+
+
+def test_a_bad_truth_model_is_one_error_line() -> None:
+    from rimless.cli import app
+
+    r = runner.invoke(app, ["trials", "adequacy-coverage", "--truth-model", "mine"])
+    assert r.exit_code == 2 and r.stderr.strip().startswith("error: --truth-model") and "mine" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

@@ -36,6 +36,15 @@ def adequacy_coverage_cmd(
         ),
     ] = "all",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    truth_model: Annotated[
+        str,
+        typer.Option(
+            "--truth-model",
+            metavar="independent|simulator",
+            help="The ER wheel that walks the truth trials: independent (er_truth, written apart from the "
+            "simulator) or simulator (the calibration's own model).",
+        ),
+    ] = "independent",
 ) -> None:
     """How often `trials calibrate` says "does not fit" or claims guide friction, on ER truths via the importer.
 
@@ -49,8 +58,13 @@ def adequacy_coverage_cmd(
     """
     from rimless.analysis import calibrate
     from rimless.analysis.validation.adequacy_coverage import run_adequacy_coverage
+    from rimless.analysis.validation.calibrate_coverage import TRUTHS
+    from rimless.errors import ParameterError
     from rimless.progress import progress_bar
 
+    model = truth_model.strip().lower()
+    if model not in TRUTHS:
+        raise ParameterError(f"--truth-model must be {' or '.join(TRUTHS)}, got {truth_model!r}")
     chosen = (
         list(SCENARIO_NAMES)
         if scenario.strip().lower() == "all"
@@ -64,6 +78,7 @@ def adequacy_coverage_cmd(
             calibrate,
             scenarios=chosen,
             progress=lambda i, what: bar.update(completed=i, description=what),
+            truth=model,
         )
     if json_out:
         print_json(out)

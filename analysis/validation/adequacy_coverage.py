@@ -1,8 +1,10 @@
 """How often `rimless.analysis.calibrate`'s adequacy check and model choice give the right verdict, by simulation.
 
 Each series draws an ER wheel away from Table 1 (k 1500-4000 N/m, c 2-20 N s/m: `calibrate_coverage.K_RANGE`,
-``C_RANGE``; guide friction F_c 0 or U(0.1, 0.6) N; the rest Table 1's), walks it with the simulator's ER model
-(`floquet_truth.er_walk`, which integrates guide friction phase by phase when F_c > 0; no slope wander) on
+``C_RANGE``; guide friction F_c 0 or U(0.1, 0.6) N; the rest Table 1's), walks it with a truth model
+(``truth``, `calibrate_coverage.TRUTHS`: ``independent``, `er_truth`, the ER wheel written apart from the
+simulator with exact stick/slip guide friction, the default since session 22; ``simulator``, the simulator's ER
+model, `floquet_truth.er_walk`, before; no slope wander) on
 ``trials`` slopes of 2-3.5 deg, each released at its gait's speed times U(0.95, 1.08), writes each walk as a Vicon
 export in a lab drawn per series (`importer_coverage.draw_lab`, `critical_truth.record`: 0.3 mm, 1 mrad of
 noise, 100 Hz), imports it (the refusals) and hands the exports to the calibration as a user would (it imports
@@ -31,8 +33,9 @@ if the noise estimate and the tests are calibrated), per fitted parameter (``est
 identifiable and how often its 95 % interval holds the truth, and every refused import and failed fit with its
 reason.
 
-The truth's dynamics are the calibration's own model (the simulator's ER wheel, with its guide friction): the
-null scenarios check the tests' calibration when the model is right, not the model's adequacy to a real wheel.
+Both truths are the model the calibration fits (model.md's ER wheel with its guide friction; `er_truth` is a
+second implementation of it, meeting the simulator's step map to 1e-8 in its test): the null scenarios check the
+tests' calibration when the model is right, not the model's adequacy to a real wheel.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from rimless.analysis.validation.calibrate_coverage import C_RANGE, K_RANGE, walk_and_import
+from rimless.analysis.validation.calibrate_coverage import C_RANGE, K_RANGE, TRUTH_MEANING, TRUTHS, walk_and_import
 from rimless.analysis.validation.coverage import wilson_interval
 from rimless.analysis.validation.importer_coverage import draw_lab
 
@@ -103,13 +106,18 @@ def run_adequacy_coverage(
     trials: int = 4,
     steps: int = 10,
     progress: Callable[[int, str], None] | None = None,
+    truth: str = "independent",
 ) -> dict[str, Any]:
     """``n_series`` series per scenario (the same seed draws the same wheels in every scenario that shares the
     truth's kind); ``calibrate(trials, fit=..., wheel=..., names=...)`` is the public `rimless.analysis.calibrate`.
-    ``progress(done, what)`` counts series over all scenarios. Returns the JSON-ready summary."""
+    ``progress(done, what)`` counts series over all scenarios. ``truth``: the ER wheel that walks the trials
+    (`calibrate_coverage.TRUTHS`: ``independent``, `er_truth`, written apart from the simulator, the default since
+    session 22; ``simulator``, the calibration's own model, as before). Returns the JSON-ready summary."""
     bad = [s for s in scenarios if s not in SCENARIOS]
     if bad or not scenarios:
         raise ValueError(f"scenario takes {', '.join(SCENARIOS)}, got {list(scenarios)}")
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {', '.join(TRUTHS)}, got {truth!r}")
     cpu, wall = time.process_time(), time.perf_counter()
     out: dict[str, Any] = {}
     done = 0
@@ -120,13 +128,16 @@ def run_adequacy_coverage(
             rows = []
             for i in range(n_series):
                 what = f"{name} {i + 1}/{n_series}"
-                rows.append(_series(sc, rng, Path(tmp) / f"{name}_{i}", calibrate, trials, steps, progress, what, done))
+                rows.append(
+                    _series(sc, rng, Path(tmp) / f"{name}_{i}", calibrate, trials, steps, progress, what, done, truth)
+                )
                 done += 1
                 if progress:
                     progress(done, f"{what}: done")
             out[name] = _summary(sc, rows)
     return {
-        "truth_model": "the simulator's ER wheel (k, c drawn; guide friction F_c drawn in the friction scenarios), "
+        "truth": truth,
+        "truth_model": TRUTH_MEANING[truth] + ": k, c drawn; guide friction F_c drawn in the friction scenarios; "
         "recorded as Vicon exports in drawn labs and imported (rimless.analysis.validation.adequacy_coverage)",
         "thresholds": _thresholds(),
         "scenarios": out,
@@ -156,8 +167,10 @@ def _series(
     progress: Callable[[int, str], None] | None,
     what: str,
     done: int,
+    truth_model: str = "independent",
 ) -> dict[str, Any]:
-    """One series: draw the wheel and lab, walk, write, import, calibrate; the verdicts and figures."""
+    """One series: draw the wheel and lab, walk (the truth model ``truth_model``), write, import, calibrate; the
+    verdicts and figures."""
     from rimless.errors import RimlessError
     from rimless.sim import Wheel
     from rimless.sim.model.params import WheelParams
@@ -190,6 +203,7 @@ def _series(
         trials,
         steps,
         importing=(lambda: progress(done, f"{what}: importing and calibrating")) if progress else None,
+        model=truth_model,
     )
     paths, refused, slopes, loaded, names = series.paths, series.refused, series.slopes_deg, series.loaded, series.names
     row.update(
