@@ -557,13 +557,15 @@ def _print_calibration(out: dict[str, Any]) -> None:
         for line in _residual_notes(row, start):
             con.print(f"  {stem}: {line}", markup=False, highlight=False)
     if adequacy:
+        from rimless.analysis.inference.adequacy import timing_noise_phrase
+
         noise = adequacy.get("noise", {})
         o = adequacy["overall"]
         con.print(
             f"model adequacy: {adequacy['statement']}; overall chi2/dof {_fmt(o['total']['ratio'], '.3g')} "
             f"(p = {_fmt(o['total']['p_value'], '.2g')}) against the noise measured from the recordings: CoM "
             f"{_fmt(noise.get('com_mm'), '.3f')} mm, impact times {_fmt(noise.get('impact_time_ms'), '.2f')} ms "
-            f"({_timing_source(noise)}; chi2/dof 1: residuals as large as the noise)",
+            f"({timing_noise_phrase(noise)}; chi2/dof 1: residuals as large as the noise)",
             markup=False,
             highlight=False,
         )
@@ -614,16 +616,6 @@ def _residual_notes(row: dict[str, Any], start: str = "Table 1") -> list[str]:
     if a and a == b:
         return [f"{start} and calibrated: {a}"]
     return [f"{who}: {n}" for who, n in ((start, a), ("calibrated", b)) if n]
-
-
-def _timing_source(noise: dict[str, Any]) -> str:
-    """Where the impact times' noise came from, for the text (`adequacy.timing_noise`'s source)."""
-    src = noise.get("timing_noise_source")
-    if src == "floor":
-        return f"the floor; the periods gave {_fmt(noise.get('timing_noise_estimate_ms'), '.3f')} ms"
-    if src == "periods about their trend":
-        return f"from the periods about their trend, {noise.get('timing_noise_trials')} trials"
-    return "no trial has enough periods to measure it" if src == "none" else "source not stated"
 
 
 def _adequacy_cell(row: dict[str, Any] | None) -> str:

@@ -173,6 +173,18 @@ def timing_noise(impacts_per_trial: Sequence[np.ndarray], frame_s: float = math.
     return out
 
 
+def timing_noise_phrase(noise: dict[str, Any]) -> str:
+    """Where the impact times' noise came from, in words, from `adequacy`'s ``noise`` (its ``timing_noise_*``
+    keys): for the text of `rimless trials calibrate`."""
+    src = noise.get("timing_noise_source")
+    if src == "floor":
+        est = noise.get("timing_noise_estimate_ms")
+        return f"the floor; the periods gave {est:.3f} ms" if est is not None else "the floor"
+    if src == "periods about their trend":
+        return f"from the periods about their trend, {noise.get('timing_noise_trials')} trials"
+    return "no trial has enough periods to measure it" if src == "none" else "source not stated"
+
+
 def period_chi2(
     residuals_s: np.ndarray,
     sigma_t: float,

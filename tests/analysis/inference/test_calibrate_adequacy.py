@@ -348,8 +348,8 @@ def test_the_text_output_names_the_minima_and_the_budget():
 
 def test_the_text_output_says_where_the_impact_noise_came_from():
     # the JSON's adequacy.noise (adequacy.timing_noise's source) in the text line of `trials calibrate`
-    from rimless.analysis.cli.critical import _timing_source
     from rimless.analysis.inference.adequacy import timing_noise
+    from rimless.analysis.inference.adequacy import timing_noise_phrase as _timing_source
 
     noisy = [0.3 * np.arange(9) + 1e-3 * np.random.default_rng(s).standard_normal(9) for s in range(3)]
     tn = timing_noise(noisy, frame_s=0.01)
