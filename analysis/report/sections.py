@@ -122,6 +122,23 @@ PERIOD_FIT_COLUMNS = (
 )
 
 
+def _compared_table(
+    table_id: str,
+    columns: Sequence[tuple[str, str, str]],
+    sections: Sequence[TrialSection],
+    rows: Sequence[dict[str, Any]],
+) -> list[str]:
+    """A table of the compared trials (status ok or suspect), one row each, its name linking to its section;
+    ``columns``: (header, row key, format). The HTML pieces up to the body's end (its caption follows)."""
+    head = "".join(f"<th>{html.escape(h)}</th>" for h, _, _ in columns)
+    out = [f'<div class="wide"><table id="{table_id}"><thead><tr><th>trial</th>{head}</tr></thead><tbody>']
+    for s, r in zip(sections, rows):
+        if r.get("status") in ("ok", "suspect"):
+            cells = "".join(f'<td class="n">{num(r.get(k), f)}</td>' for _, k, f in columns)
+            out.append(f"<tr><td>{_link(s)}</td>{cells}</tr>")
+    return out
+
+
 def metrics_tables_html(sections: Sequence[TrialSection], rows: Sequence[dict[str, Any]], csv_name: str) -> str:
     """The metrics (one row per input, its name linking to its section) and the values fitted per trial."""
     e = html.escape
@@ -143,13 +160,7 @@ def metrics_tables_html(sections: Sequence[TrialSection], rows: Sequence[dict[st
         "relative to the measured CoM amplitude; CoM r: the correlation of the two curves; mean |ΔT|: the mean "
         "|period error|, simulated minus measured, over steps 2..N (step 1 is fitted).</p>"
     )
-    head = "".join(f"<th>{e(h)}</th>" for h, _, _ in FITTED_COLUMNS)
-    out.append(f'<div class="wide"><table id="fitted"><thead><tr><th>trial</th>{head}</tr></thead><tbody>')
-    for s, r in zip(sections, rows):
-        if r.get("status") not in ("ok", "suspect"):
-            continue
-        cells = "".join(f'<td class="n">{num(r.get(k), f)}</td>' for _, k, f in FITTED_COLUMNS)
-        out.append(f"<tr><td>{_link(s)}</td>{cells}</tr>")
+    out.extend(_compared_table("fitted", FITTED_COLUMNS, sections, rows))
     out.append(
         "</tbody></table></div>"
         '<p class="small">Fitted per trial (table above): θ\'+, the simulated post-impact speed at the first '
@@ -160,13 +171,7 @@ def metrics_tables_html(sections: Sequence[TrialSection], rows: Sequence[dict[st
     )
     from rimless.analysis.inference.compare import PLAUSIBILITY as lim
 
-    head = "".join(f"<th>{e(h)}</th>" for h, _, _ in PERIOD_FIT_COLUMNS)
-    out.append(f'<div class="wide"><table id="period-fit"><thead><tr><th>trial</th>{head}</tr></thead><tbody>')
-    for s, r in zip(sections, rows):
-        if r.get("status") not in ("ok", "suspect"):
-            continue
-        cells = "".join(f'<td class="n">{num(r.get(k), f)}</td>' for _, k, f in PERIOD_FIT_COLUMNS)
-        out.append(f"<tr><td>{_link(s)}</td>{cells}</tr>")
+    out.extend(_compared_table("period-fit", PERIOD_FIT_COLUMNS, sections, rows))
     out.append(
         "</tbody></table></div>"
         '<p class="small">The simulated step periods after the first against the measured ones (table above; '
