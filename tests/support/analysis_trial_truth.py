@@ -395,3 +395,13 @@ def mid_stance_gaps(truth: ErTruth, keep: tuple[int, ...], fraction: float, hold
         for j, (a, b) in enumerate(zip(imp[:-1], imp[1:]))
         if j not in keep
     )
+
+
+#: the walks the first-touchdown tests import (hold, slope deg, release rad/s, c N s/m, k N/m): both holds, wheels
+#: away from Table 1 (tests/analysis/kinematics/test_steps_first_touchdown*.py)
+FIRST_TOUCHDOWN_WALKS = [
+    ("uncompressed", 2.2, 2.3, 9.0, 2200.0),
+    ("uncompressed", 2.8, 2.0, 16.0, 3500.0),
+    ("static", 1.8, 2.4, 5.0, 1800.0),
+    ("static", 2.5, 2.6, 12.0, 3000.0),
+]

@@ -16,17 +16,11 @@ import numpy as np
 import pytest
 
 from rimless.analysis.kinematics.build import import_trial
-from tests.support.analysis_trial_truth import simulate_wheel, write_csv
+from tests.support.analysis_trial_truth import FIRST_TOUCHDOWN_WALKS, simulate_wheel, write_csv
 
 pytestmark = pytest.mark.slow
 
-#: (hold, slope deg, release rad/s, c N s/m, k N/m)
-WALKS = [
-    ("uncompressed", 2.2, 2.3, 9.0, 2200.0),
-    ("uncompressed", 2.8, 2.0, 16.0, 3500.0),
-    ("static", 1.8, 2.4, 5.0, 1800.0),
-    ("static", 2.5, 2.6, 12.0, 3000.0),
-]
+WALKS = FIRST_TOUCHDOWN_WALKS  # (hold, slope deg, release rad/s, c N s/m, k N/m)
 
 
 def _impact_errors_s(tmp_path, i: int, hold: str, slope: float, w: float, c: float, k: float) -> np.ndarray:

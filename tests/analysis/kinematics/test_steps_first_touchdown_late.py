@@ -21,17 +21,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rimless.analysis.kinematics.build import import_trial
-from tests.support.analysis_trial_truth import simulate_wheel, write_csv
+from tests.support.analysis_trial_truth import FIRST_TOUCHDOWN_WALKS, simulate_wheel, write_csv
 
 pytestmark = pytest.mark.slow
 
-#: (hold, slope deg, release rad/s, c N s/m, k N/m): as test_steps_first_touchdown.py
-WALKS = [
-    ("uncompressed", 2.2, 2.3, 9.0, 2200.0),
-    ("uncompressed", 2.8, 2.0, 16.0, 3500.0),
-    ("static", 1.8, 2.4, 5.0, 1800.0),
-    ("static", 2.5, 2.6, 12.0, 3000.0),
-]
+WALKS = FIRST_TOUCHDOWN_WALKS  # (hold, slope deg, release rad/s, c N s/m, k N/m)
 HOLD_S = 0.4  # the truth's own hold before its release (`analysis_trial_truth.simulate`'s default)
 NOISE_M, ANGLE_NOISE_RAD = 0.05e-3, 0.2e-3
 
