@@ -104,6 +104,10 @@ class TrialMeta:
     #: the legs' drift time from the wheel given, or the bound; the leg length when given); None for a trial
     #: imported before they were recorded.
     parameters: tuple[dict[str, Any], ...] | None = None
+    #: Each impact's time sd, s, in the order of the impacts (NaN: not estimable; the importer's
+    #: `rimless.analysis.kinematics.steps.impact_time_sd` or its kink fit): the impact's own error, apart from a
+    #: shift common to all the trial's impacts; () for a trial imported before it was recorded.
+    impact_sd_s: tuple[float, ...] = field(default=())
 
     def to_json(self) -> str:
         """JSON text of the metadata (NaN as null)."""
@@ -133,6 +137,7 @@ class TrialMeta:
             d["slope_residual_m"] = float("nan")
         if d.get("parameters") is not None:
             d["parameters"] = tuple(d["parameters"])
+        d["impact_sd_s"] = tuple(float("nan") if v is None else float(v) for v in (d.get("impact_sd_s") or ()))
         return cls(**d)
 
 
@@ -159,6 +164,13 @@ class Trial:
         """Step count of each impact from the first observed one (impacts lost in gaps skip numbers)."""
         ks = self.meta.impact_step
         return np.asarray(ks, np.int64) if len(ks) == self.impact_time_s.size else np.arange(self.impact_time_s.size)
+
+    @property
+    def impact_sd_s(self) -> np.ndarray:
+        """Each impact's time sd, s (NaN: not estimable, or not recorded at import): ``meta.impact_sd_s``."""
+        sd = self.meta.impact_sd_s
+        n = self.impact_time_s.size
+        return np.asarray(sd, np.float64) if len(sd) == n else np.full(n, np.nan)
 
     @property
     def period_step(self) -> np.ndarray:
@@ -221,6 +233,7 @@ class Trial:
             "step_refused": m.step_refused,
             "steps": int(self.step_period_s.size),
             "impact_time_s": self.impact_time_s.tolist(),
+            "impact_sd_ms": [None if not math.isfinite(v) else v * 1e3 for v in self.impact_sd_s.tolist()],
             "step_period_s": self.step_period_s.tolist(),
             "period_step": self.period_step.tolist(),
             "impact_step": self.impact_step.tolist(),

@@ -599,6 +599,7 @@ def build_trial(
         up_axis=up.name,
         up_axis_reason=up.reason,
         parameters=tuple(import_parameters(wheel, leg_length_m)),
+        impact_sd_s=tuple(float(v) for v in (steps.impact_sd_s if steps.impact_sd_s is not None else ())),
     )
     return Trial(ts, meta)
 

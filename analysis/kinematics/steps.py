@@ -25,6 +25,7 @@ __all__ = [
     "refine_cusps",
     "refine_kinks",
     "detect_steps",
+    "impact_time_sd",
     "ALPHA_RAD",
 ]
 
@@ -44,6 +45,8 @@ TOUCHDOWN_MIN_FRAMES = 3
 #: ... and the first touchdown is not moved by more than this fraction of a step (a few mm of leg compression
 #: move it by well under a tenth).
 TOUCHDOWN_MAX_SHIFT = 0.1
+#: Half window (frames) of the angle's rate at an impact (`impact_time_sd`).
+RATE_HALF_FRAMES = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +69,9 @@ class StepResult:
     phase_rad: float | None = None
     impact_step: np.ndarray | None = None  # (m,) steps since the first observed impact (gaps skip numbers)
     period_step: np.ndarray | None = None  # (p,) impact_step of the impact ending each period
+    #: (m,) each impact's time sd, s (NaN: not estimable; `impact_time_sd`): its own error, apart from a shift
+    #: common to all the trial's impacts (the phase); None: not estimated
+    impact_sd_s: np.ndarray | None = None
 
     @property
     def step_number(self) -> np.ndarray:
@@ -77,7 +83,9 @@ class StepResult:
     @classmethod
     def refuse(cls, reason: str) -> StepResult:
         """A result carrying no steps and the reason."""
-        return cls(np.zeros(0), np.zeros(0), "none", reason, None, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        return cls(
+            np.zeros(0), np.zeros(0), "none", reason, None, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        )
 
 
 def noise_sigma(y: np.ndarray) -> float:
@@ -195,11 +203,26 @@ def refine_kinks(
     quadratic per channel (weighted by its noise, `noise_sigma`) whose join moves within `KINK_SEARCH_FRAMES`
     frames; the join with the least residual is the impact. A window with an unobserved frame, or whose best
     join sits on the edge of the search, keeps its time (not refined)."""
+    out, done, _ = _refine_kinks(time_s, channels, times, observed, half_frames)
+    return out, done
+
+
+def _refine_kinks(
+    time_s: np.ndarray,
+    channels: list[np.ndarray],
+    times: np.ndarray,
+    observed: np.ndarray,
+    half_frames: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`refine_kinks` with each refined time's sd (s, NaN where not refined): from the curvature of the fit's cost
+    (a chi-square: the channels are scaled by their noise) in the join's time, inflated by the residuals' rms per
+    degree of freedom when above 1."""
     t = np.asarray(time_s, dtype=np.float64)
     out = np.asarray(times, dtype=np.float64).copy()
     done = np.zeros(out.size, bool)
+    sd = np.full(out.size, np.nan)
     if out.size == 0 or t.size < 2 * half_frames + 1 or not channels:
-        return out, done
+        return out, done, sd
     dt = float(np.median(np.diff(t)))
     scaled = []
     for c in channels:
@@ -211,7 +234,7 @@ def refine_kinks(
         scale = max(sig, 1e-6 * max(float(np.nanmax(np.abs(c))), 1e-3))
         scaled.append(c / scale)
     if not scaled:
-        return out, done
+        return out, done, sd
     ys_all = np.column_stack(scaled)
     good = observed & ~np.isnan(ys_all).any(axis=1)
     grid = np.linspace(-KINK_SEARCH_FRAMES, KINK_SEARCH_FRAMES, int(round(KINK_SEARCH_FRAMES * 20)) * 2 + 1) * dt
@@ -231,7 +254,12 @@ def refine_kinks(
         shift = 0.5 * (c0 - c2) / den * step if den > 0 else 0.0
         out[j] = t0 + float(grid[k]) + float(np.clip(shift, -step, step))
         done[j] = True
-    return out, done
+        # the cost is a chi-square in the join's time: curvature den / step^2, so Delta chi^2 = 1 at
+        # sqrt(2 step^2 / den); times the residual's rms per degree of freedom when the fit is worse than the noise
+        dof = max(yw.size - 5 * yw.shape[1] - 1, 1)
+        if den > 0:
+            sd[j] = step * math.sqrt(2.0 / den) * math.sqrt(max(float(c1) / dof, 1.0))
+    return out, done, sd
 
 
 def find_com_minima(
@@ -301,14 +329,18 @@ def _periods(
     return np.diff(times)[keep], impact_k[1:][keep]
 
 
-def _at_kinks(t: np.ndarray, channels: list[np.ndarray] | None, times: np.ndarray, obs: np.ndarray) -> np.ndarray:
-    """`refine_kinks` with a window of a fifth of the median step (within `KINK_HALF_FRAMES`); sorted times."""
+def _at_kinks(
+    t: np.ndarray, channels: list[np.ndarray] | None, times: np.ndarray, obs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """`refine_kinks` with a window of a fifth of the median step (within `KINK_HALF_FRAMES`): (sorted times s,
+    each one's sd s from the kink fit, NaN where not refined)."""
+    nan = np.full(times.size, np.nan)
     if channels is None or times.size < 2:
-        return times
+        return times, nan
     frames = float(np.median(np.diff(times))) / float(np.median(np.diff(t)))
     half = int(np.clip(round(0.2 * frames), *KINK_HALF_FRAMES))
-    refined, _ = refine_kinks(t, channels, times, obs, half)
-    return refined if np.all(np.diff(refined) > 0) else times
+    refined, _, sd = _refine_kinks(t, channels, times, obs, half)
+    return (refined, sd) if np.all(np.diff(refined) > 0) else (times, nan)
 
 
 def _rotation_at_kinks(
@@ -375,6 +407,25 @@ def _stance_heights(
     return out
 
 
+def _touchdown_shift_sd(k_later: np.ndarray, h_later: np.ndarray, k0: float) -> float:
+    """The sd of the first stance's height less the later stances' reference at its step (m; `_first_touchdown`):
+    the later heights' scatter about their line (n - 2 degrees of freedom; with two, about their mean) taken as each
+    stance's, the first one's included, plus the line's extrapolation to step ``k0``; NaN with fewer than two."""
+    n = h_later.size
+    if n < 2:
+        return math.nan
+    if n >= 3:
+        kb = float(np.mean(k_later))
+        sxx = float(np.sum((k_later - kb) ** 2))
+        r = h_later - np.polyval(np.polyfit(k_later, h_later, 1), k_later)
+        s2 = float(r @ r) / (n - 2)
+        lever = 1.0 / n + (k0 - kb) ** 2 / sxx if sxx > 0 else 1.0
+    else:
+        s2 = float(np.var(h_later, ddof=1))
+        lever = 1.0 / n
+    return math.sqrt(s2 * (1.0 + lever))
+
+
 def _first_touchdown(
     t: np.ndarray,
     y: np.ndarray,
@@ -387,8 +438,9 @@ def _first_touchdown(
     alpha_rad: float,
     leg_m: float,
     times: np.ndarray,
-) -> tuple[np.ndarray, float]:
-    """The first impact moved to its own touchdown angle: (times s, its angle shift rad, 0 when not moved).
+) -> tuple[np.ndarray, float, float]:
+    """The first impact moved to its own touchdown angle: (times s, its angle shift rad, 0 when not moved, and that
+    shift's sd rad, `_touchdown_shift_sd`, NaN when not moved).
 
     The impacts sit where the wheel has turned to ``phase + k alpha``: where a stance leg locked at the gait's
     compression lets the next foot touch down (model.md section 4: touchdown at L1 cos(theta) = L0
@@ -417,15 +469,18 @@ def _first_touchdown(
     h = _stance_heights(t, y, ang, use, targets, times, leg_m, alpha_rad)
     later = np.isfinite(h[1:])
     if not math.isfinite(h[0]) or later.sum() < 2:
-        return times, 0.0
+        return times, 0.0, math.nan
     k_later, h_later = ks[1:][later].astype(np.float64), h[1:][later]
     if h_later.size >= 3:
-        ref = float(np.polyval(np.polyfit(k_later, h_later, 1), float(ks[0])))
+        line = np.polyfit(k_later, h_later, 1)
+        ref = float(np.polyval(line, float(ks[0])))
     else:
         ref = float(np.median(h_later))
-    dbeta = (float(h[0]) - ref) / (2 * leg_m * math.sin(alpha_rad / 2))
+    den = 2 * leg_m * math.sin(alpha_rad / 2)
+    dbeta = (float(h[0]) - ref) / den
+    sd = _touchdown_shift_sd(k_later, h_later, float(ks[0])) / den
     if abs(dbeta) > TOUCHDOWN_MAX_SHIFT * alpha_rad:
-        return times, 0.0
+        return times, 0.0, math.nan
     target = float(targets[0]) + dbeta
     j = int(np.clip(np.searchsorted(av, target, side="left"), 1, av.size - 1))
     a0, a1 = av[j - 1], av[j]
@@ -433,8 +488,48 @@ def _first_touchdown(
     out = times.copy()
     out[0] = float(tv[j - 1] + frac * (tv[j] - tv[j - 1]))
     if not np.all(np.diff(out) > 0):
-        return times, 0.0
-    return out, dbeta
+        return times, 0.0, math.nan
+    return out, dbeta, sd
+
+
+def impact_time_sd(
+    time_s: np.ndarray,
+    angle_rad: np.ndarray,
+    times: np.ndarray,
+    steps: np.ndarray,
+    angle_sd_rad: float,
+    alpha_rad: float,
+    first_shift_sd_rad: float = math.nan,
+) -> np.ndarray:
+    """Each impact's time sd (s) when impacts are placed where the wheel angle crosses ``phase + k alpha``.
+
+    The crossing is interpolated between the two frames bracketing it (``time_s``, s; ``angle_rad``, rad, the
+    angle's running maximum): their angle noise (``angle_sd_rad``, rad, `noise_sigma`, independent frame to
+    frame) moves it by ``angle_sd sqrt((1 - f)^2 + f^2) / omega`` (f: the crossing's fraction of the frame; omega:
+    the angle's rate there, rad/s, its line over `RATE_HALF_FRAMES` frames either side; where those are not all
+    there, alpha over the impact's two periods' mean, from ``times`` s and ``steps``, the impacts' step numbers).
+    The first impact's own touchdown shift (`_first_touchdown`) adds its sd ``first_shift_sd_rad`` (rad) over
+    omega; NaN there (not measured): the first impact's sd is NaN. The shift common to every impact (the phase) is
+    not included: it moves no period. NaN everywhere with fewer than two impacts or no angle noise estimate."""
+    n = times.size
+    if n < 2 or not math.isfinite(angle_sd_rad) or time_s.size < 2:
+        return np.full(n, np.nan)
+    j = np.clip(np.searchsorted(time_s, times, side="left"), 1, time_s.size - 1)
+    t0, t1 = time_s[j - 1], time_s[j]
+    f = np.clip((times - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
+    w = alpha_rad * np.diff(steps).astype(np.float64) / np.diff(times)  # rad/s over each gap between impacts
+    w_at = np.concatenate([[w[0]], 0.5 * (w[:-1] + w[1:]), [w[-1]]])
+    # the rate at the crossing itself (the wheel turns fastest about its impacts): the angle's line over the
+    # `RATE_HALF_FRAMES` frames either side, where they are there
+    for i, ji in enumerate(j):
+        lo, hi = ji - RATE_HALF_FRAMES, ji + RATE_HALF_FRAMES
+        if lo >= 0 and hi <= time_s.size:
+            slope = float(np.polyfit(time_s[lo:hi] - time_s[ji], angle_rad[lo:hi], 1)[0])
+            if slope > 0:
+                w_at[i] = slope
+    var = (angle_sd_rad**2 * ((1 - f) ** 2 + f**2)) / w_at**2
+    var[0] += first_shift_sd_rad**2 / w_at[0] ** 2  # NaN when not measured
+    return np.sqrt(var)
 
 
 def detect_steps(
@@ -560,8 +655,11 @@ def detect_steps(
             )
         if kink_channels is not None:
             times, phase = _rotation_at_kinks(t, kink_channels, times, obs, tv, av, phase, ks, alpha_rad)
+        first_sd = math.nan  # the first impact's own touchdown shift's sd, rad (NaN: not measured)
         if leg_length_m is not None:
-            times, _ = _first_touchdown(t, y, ang, obs & inwin, tv, av, phase, ks, alpha_rad, leg_length_m, times)
+            times, _, first_sd = _first_touchdown(
+                t, y, ang, obs & inwin, tv, av, phase, ks, alpha_rad, leg_length_m, times
+            )
         periods, pk = _periods(ks, times, t, unbridged)
         return StepResult(
             times,
@@ -571,6 +669,7 @@ def detect_steps(
             float(phase + alpha_rad * ks[0]),
             impact_step=ks - ks[0],
             period_step=pk - ks[0],
+            impact_sd_s=impact_time_sd(tv, av, times, ks, noise_sigma(ang[obs & inwin]), alpha_rad, first_sd),
         )
 
     idx, tmin, sigma = find_com_minima(t, yw)
@@ -588,6 +687,8 @@ def detect_steps(
     times, ks = tmin[seen], ks[seen]
     if times.size < 2:
         return StepResult.refuse("fewer than two observed CoM minima")
-    times = _at_kinks(t, kink_channels, times, obs)
+    times, sd = _at_kinks(t, kink_channels, times, obs)
     periods, pk = _periods(ks, times, t, unbridged)
-    return StepResult(times, periods, "com-minima", None, None, impact_step=ks - ks[0], period_step=pk - ks[0])
+    return StepResult(
+        times, periods, "com-minima", None, None, impact_step=ks - ks[0], period_step=pk - ks[0], impact_sd_s=sd
+    )

@@ -97,7 +97,7 @@ def main() -> None:
     if args.first_impact == "phase":
         from rimless.analysis.kinematics import steps
 
-        steps._first_touchdown = lambda *a: (a[-1], 0.0)  # the impacts as the importer placed them before
+        steps._first_touchdown = lambda *a: (a[-1], 0.0, math.nan)  # the impacts as the importer placed them before
     ps: list[float] = []
     saved: dict[str, list] = {
         "measured_s": [],
