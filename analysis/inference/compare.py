@@ -41,6 +41,9 @@ step periods after the first against their noise, `period_misfit`); otherwise
 ``suspect`` with the reasons in the warnings; ``failed`` when nothing could be compared (no steps, slope
 outside the model's range, a period the model cannot produce, a stalled walk), returned with a message,
 never raised.
+
+One concept: the comparison of one trial with the simulated wheel (its release, the first angle's test, whose
+weighted form on the importer's per-impact sds is `_weighted_first_angle_test`, the alignment and the metrics).
 """
 
 from __future__ import annotations
@@ -265,6 +268,7 @@ def _first_angle_keys(t: FirstAngleTest | None) -> dict[str, Any]:
         ),
         "first_angle_offset_noise_ms": t.noise_s * 1e3 if tested and t is not None else None,
         "first_angle_offset_noise_source": t.noise_source if tested and t is not None else None,
+        "first_angle_offset_weighted": bool(tested and t is not None and t.weighted),
     }
 
 
@@ -379,6 +383,31 @@ class FirstAngleTest:
     #: residuals (F test) or the importer's floor `PERIOD_NOISE_FLOOR_S` (chi-square test)
     noise_s: float = math.nan
     noise_source: str = ""
+    #: True when the test weighed the periods by the importer's per-impact sds (``impact_sd_s``: generalised least
+    #: squares; ``noise_s`` then their rms period sd and the statistic in units of them)
+    weighted: bool = False
+
+
+def period_covariance(impact_sd_s: np.ndarray) -> np.ndarray:
+    """(n, n) covariance of the n consecutive periods between n + 1 impacts of independent time errors with sds
+    ``impact_sd_s`` (s), s^2: var P_i = sd_(i-1)^2 + sd_i^2, cov(P_i, P_(i+1)) = -sd_i^2 (periods are differences)."""
+    v = np.asarray(impact_sd_s, float) ** 2
+    n = v.size - 1
+    c = np.diag(v[:-1] + v[1:])
+    if n > 1:
+        i = np.arange(n - 1)
+        c[i, i + 1] = c[i + 1, i] = -v[1:-1]
+    return c
+
+
+def _usable_sd(impact_sd_s: np.ndarray | None, n_periods: int) -> np.ndarray | None:
+    """The per-impact sds (s) when there is one per impact of the n periods, all finite and positive; else None."""
+    if impact_sd_s is None:
+        return None
+    sd = np.asarray(impact_sd_s, float)
+    if sd.size != n_periods + 1 or not np.all(np.isfinite(sd)) or not np.all(sd > 0):
+        return None
+    return sd
 
 
 def fit_first_angle_offset(
@@ -390,7 +419,9 @@ def fit_first_angle_offset(
     return t.offset_rad, t.release_theta_dot_rad_s, t.p
 
 
-def first_angle_test(sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0: float) -> FirstAngleTest:
+def first_angle_test(
+    sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0: float, impact_sd_s: np.ndarray | None = None
+) -> FirstAngleTest:
     """The first measured impact's post-impact angle offset and the release speed fitted on all the measured
     periods (`rimless.analysis.inference.release.fit_first_angle`, on the compiled step map, from offset 0 and
     -0.06 rad), kept only when it lowers the periods' sum of squares significantly below the rigid release's
@@ -398,7 +429,17 @@ def first_angle_test(sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0
     noise the larger of the fit's residual variance (F test, n - 2 degrees of freedom) and the importer's floor
     `PERIOD_NOISE_FLOOR_S` (chi-square test: the impacts the importer places from the CoM minima carry a bias of a
     few tenths of a ms that a noise-free recording does not average out), p < `FIRST_ANGLE_P`. Else offset 0 and
-    ``w0``; not tested (p NaN) with fewer than three periods (two unknowns) or when no fit walks."""
+    ``w0``; not tested (p NaN) with fewer than three periods (two unknowns) or when no fit walks.
+
+    ``impact_sd_s`` (s; the importer's ``impact_sd_s`` of the n + 1 impacts bounding the n consecutive periods):
+    the test weighs the periods by them instead (`_weighted_first_angle_test`: generalised least squares with the
+    periods' covariance, `period_covariance`; the first impact, placed from its own touchdown, carries more than the
+    later ones). Ignored (the test above) unless there is one finite sd per impact."""
+    sd = _usable_sd(impact_sd_s, np.asarray(periods_s).size)
+    if sd is not None:
+        got_w = _weighted_first_angle_test(sim, slope_deg, np.asarray(periods_s, float), w0, sd)
+        if got_w is not None:
+            return got_w
     from scipy.optimize import least_squares
     from scipy.stats import chi2, f
 
@@ -457,6 +498,88 @@ def first_angle_test(sim: Simulator, slope_deg: float, periods_s: np.ndarray, w0
     )
 
 
+def _weighted_first_angle_test(
+    sim: Simulator, slope_deg: float, periods: np.ndarray, w0: float, impact_sd_s: np.ndarray
+) -> FirstAngleTest | None:
+    """`first_angle_test` on the periods weighed by the impacts' sds: both models (the offset with the speed, from
+    offset 0 and -0.06 rad; the speed alone, from ``w0``) fitted by least squares on the whitened period residuals
+    (``L^-1 (simulated - measured)``, ``L L^T`` = `period_covariance`), their costs chi-squares in the stated sds.
+    The drop of the cost is chi2(1) when the offset fit's cost per degree of freedom is at most 1 (the sds explain
+    the residuals), else F(1, n - 2) with the residuals' own scale. None when no fit walks or too few periods."""
+    from scipy.optimize import least_squares
+    from scipy.stats import chi2, f
+
+    from rimless.analysis.inference.release import FIRST_ANGLE_RANGE_RAD, RELEASE_SPEED_BOUNDS_RAD_S, map_frequencies
+
+    n = periods.size
+    if n < 3 or not np.all(np.isfinite(periods)):
+        return None
+    p = sim.on_slope(slope_deg)
+    chol = np.linalg.cholesky(period_covariance(impact_sd_s))
+
+    def freqs(offset: float, w: float) -> np.ndarray:
+        return map_frequencies(p, sim.model, w, n, offset, sim.rtol)
+
+    def whitened(offset: float, w: float) -> np.ndarray:  # a step not reached: 1 s past the measured period
+        fs = freqs(offset, w)
+        sim_p = np.where(fs > 0, 1.0 / np.where(fs > 0, fs, 1.0), periods + 1.0)
+        return np.linalg.solve(chol, sim_p - periods)
+
+    def cost(offset: float, w: float) -> float:
+        r = whitened(offset, w)
+        return float(r @ r)
+
+    lo, hi = -FIRST_ANGLE_RANGE_RAD, FIRST_ANGLE_RANGE_RAD
+    w_lo, w_hi = RELEASE_SPEED_BOUNDS_RAD_S
+    best: tuple[float, float, float] | None = None
+    for a0 in (0.0, -0.06):
+        if not np.all(freqs(a0, w0) > 0):
+            continue  # the start does not walk
+        r = least_squares(
+            lambda q: whitened(float(q[0]), float(q[1])), [a0, w0], bounds=([lo, w_lo], [hi, w_hi]), method="trf",
+            diff_step=[1e-5, 1e-5], x_scale=[0.01, 0.01 * w0], xtol=1e-8, ftol=1e-10, max_nfev=40,
+        )  # fmt: skip
+        c = cost(float(r.x[0]), float(r.x[1]))
+        if best is None or c < best[2]:
+            best = (float(r.x[0]), float(r.x[1]), c)
+    if best is None:
+        return None
+    rigid = least_squares(lambda q: whitened(0.0, float(q[0])), [w0], bounds=([0.05], [20.0]), diff_step=[1e-5])
+    rss0 = min(cost(0.0, float(rigid.x[0])), cost(0.0, w0))
+    rss1, dof = best[2], n - 2
+    scale = rss1 / dof
+    period_sd = float(np.sqrt(np.mean(np.diag(period_covariance(impact_sd_s)))))
+    if scale > 1.0:
+        stat, test = (rss0 - rss1) / scale, f"F(1, {dof})"
+        p_value = float(f.sf(stat, 1, dof))
+        noise = period_sd * math.sqrt(scale)
+        source = f"the importer's per-impact sds, scaled by the offset fit's residuals ({dof} degrees of freedom)"
+    else:
+        stat, test = rss0 - rss1, "chi2(1)"
+        p_value = float(chi2.sf(stat, 1))
+        noise, source = period_sd, "the importer's per-impact sds (impact_sd_ms)"
+    kept = bool(rss1 < rss0 and p_value < FIRST_ANGLE_P and abs(best[0]) >= 1e-6)
+    f1, f0 = freqs(best[0], best[1]), freqs(0.0, w0)
+    both = (f1 > 0) & (f0 > 0)
+    change = np.abs(1.0 / np.where(both, f1, 1.0) - 1.0 / np.where(both, f0, 1.0))[1:][both[1:]]
+    return FirstAngleTest(
+        best[0] if kept else 0.0,
+        best[1] if kept else w0,
+        fitted_offset_rad=best[0],
+        statistic=float(stat),
+        test=test,
+        p=p_value,
+        level=FIRST_ANGLE_P,
+        kept=kept,
+        period_change_s=float(np.max(change)) if change.size else math.nan,
+        rigid_fit_theta_dot_rad_s=float(rigid.x[0]),
+        fitted_theta_dot_rad_s=best[1],
+        noise_s=noise,
+        noise_source=source,
+        weighted=True,
+    )
+
+
 def _first_bracket(vals: np.ndarray) -> int | None:
     """The first i with vals[i] > 0 >= vals[i + 1] (the period falls through the measured one), or None."""
     for i in range(vals.size - 1):
@@ -511,6 +634,16 @@ def _map_periods(sim: Simulator, slope_deg: float, grid: np.ndarray) -> np.ndarr
     return out
 
 
+def _consecutive_impact_sd(trial: Any) -> np.ndarray | None:
+    """The trial's per-impact sds (s) when its periods run between consecutive impacts with none lost; else None."""
+    sd = getattr(trial, "impact_sd_s", None)
+    ks = np.asarray(getattr(trial, "impact_step", np.zeros(0)), np.int64)
+    n = np.asarray(trial.step_period_s).size
+    if sd is None or ks.size != n + 1 or not np.all(np.diff(ks) == 1):
+        return None
+    return np.asarray(sd, float)
+
+
 def clean_curve(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A simulated curve sorted by time with repeated times dropped (the first kept), for interpolation."""
     order = np.argsort(t, kind="stable")
@@ -547,7 +680,7 @@ def compare_trial(trial: Any, sim: Simulator | None = None, *, name: str | None 
         res.message = f"no initial condition matches: {why}"
         return res
     if sim.fit_first_angle:
-        res.first_angle = first_angle_test(sim, res.slope_deg, periods, w0)
+        res.first_angle = first_angle_test(sim, res.slope_deg, periods, w0, _consecutive_impact_sd(trial))
         res.first_angle_offset_rad, w0 = res.first_angle.offset_rad, res.first_angle.release_theta_dot_rad_s
         res.first_angle_offset_p = res.first_angle.p
     res.release_theta_dot_rad_s = w0

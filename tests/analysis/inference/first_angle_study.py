@@ -12,7 +12,9 @@ code) held on uncompressed legs at -alpha/2 and released at 1.8-2.8 rad/s: the c
 offset 0; ``static``: held standing on its compressed trailing leg; ``er_walk``: `floquet_truth.er_walk` released into
 its gait at 0.95-1.08 times its speed (a true offset), recorded in a drawn lab (`critical_truth.record`). c 2-20 N s/m,
 k 1500-4000 N/m, slopes 1.5-3 deg (er_walk 2-3.5), 10 steps (er_walk 9), imported; the comparison is given the true
-slope and wheel. Prints per walk the test (`compare.first_angle_test`) and the later periods' rms error against the
+slope and wheel. Prints per walk the test (`compare.first_angle_test`, weighted by the importer's per-impact sds as
+`compare_trial` runs it; ``--unweighted``: without them; the summary also gives the unweighted test's counts on the
+same walks) and the later periods' rms error against the
 truth's own when simulated with the rule, with the offset always, with the rigid release matched to the first period,
 and with the rigid release fitted on all periods; then how often p fell below 0.01, 0.05, 0.1 and each rms over the
 walks. ``--save FILE.npz`` also writes each tested walk's measured and true periods (s, NaN-padded), slope (deg),
@@ -92,6 +94,11 @@ def main() -> None:
         default="touchdown",
         help="the importer's first impact: at its own touchdown (now) or at the gait's phase (before session 21)",
     )
+    ap.add_argument(
+        "--unweighted",
+        action="store_true",
+        help="the test without the importer's per-impact sds (as before session 23); default: weighted by them",
+    )
     ap.add_argument("--save", type=Path, help="write each tested walk's periods, truth and wheel to this .npz")
     args = ap.parse_args()
     if args.first_impact == "phase":
@@ -99,6 +106,8 @@ def main() -> None:
 
         steps._first_touchdown = lambda *a: (a[-1], 0.0, math.nan)  # the impacts as the importer placed them before
     ps: list[float] = []
+    p_plain: list[float] = []  # the unweighted test's p on the same walks
+    weighted = 0
     saved: dict[str, list] = {
         "measured_s": [],
         "true_s": [],
@@ -122,16 +131,23 @@ def main() -> None:
             w0, _ = fit_release_speed(sim, slope, float(per[0]))
             if w0 is None:
                 continue
-            test = first_angle_test(sim, slope, per, w0)
+            sd = None if args.unweighted else compare._consecutive_impact_sd(trial)
+            test = first_angle_test(sim, slope, per, w0, sd)
             if not math.isfinite(test.p):
                 continue
             ps.append(test.p)
+            if sd is not None and test.weighted:
+                plain = first_angle_test(sim, slope, per, w0)  # main's test on the same walk
+                p_plain.append(plain.p)
+                weighted += 1
+            else:
+                p_plain.append(test.p)
             for key, v in zip(
                 saved, (per, true_p[: per.size], slope, params.stiffness_n_per_m, params.damping_ns_per_m, w0)
             ):
                 saved[key].append(v)
             level, compare.FIRST_ANGLE_P = compare.FIRST_ANGLE_P, 1.1  # kept whenever the cost falls
-            always = first_angle_test(sim, slope, per, w0)
+            always = first_angle_test(sim, slope, per, w0, sd)
             compare.FIRST_ANGLE_P = level
             for name, (offset, w) in {
                 "rule": (test.offset_rad, test.release_theta_dot_rad_s),
@@ -141,7 +157,9 @@ def main() -> None:
             }.items():
                 rms[name].append(_later_rms_ms(sim, slope, w, offset, true_p[: per.size]))
             print(
-                f"{i:3d} p {test.p:.4f} {test.test} {test.statistic:.2f} kept {test.kept}; later periods rms (ms) "
+                f"{i:3d} p {test.p:.4f} {test.test} {test.statistic:.2f} kept {test.kept}"
+                + (f" (unweighted p {p_plain[-1]:.4f})" if sd is not None and test.weighted else "")
+                + "; later periods rms (ms) "
                 + ", ".join(f"{k} {v[-1]:.3f}" for k, v in rms.items()),
                 flush=True,
             )
@@ -156,6 +174,12 @@ def main() -> None:
     print(
         f"{args.truth}: {p.size} tested; p < 0.01 {(p < 0.01).sum()}, < 0.05 {(p < 0.05).sum()}, < 0.1 {(p < 0.1).sum()}"
     )
+    if p_plain:
+        q = np.array(p_plain)
+        print(
+            f"  weighted by the per-impact sds on {weighted} of them; the unweighted test on all {q.size}: "
+            f"p < 0.01 {(q < 0.01).sum()}, < 0.05 {(q < 0.05).sum()}, < 0.1 {(q < 0.1).sum()}"
+        )
     for name, v in rms.items():
         print(f"  later periods, {name}: rms over the walks {math.sqrt(np.mean(np.square(v))):.3f} ms")
 

@@ -105,8 +105,19 @@ def test_a_dropped_offset_says_it_was_tested_with_its_statistic_and_what_the_cho
     assert row["first_angle_choice_period_change_ms"] > 0.01
     # what the test assumed about the periods' noise, said: the floor for chi2, the fit's residuals (not below it)
     # for F
+    # for F; since session 23 the test is weighed by the importer's per-impact sds: chi2 at their rms period sd (the
+    # closed form of `period_covariance`'s diagonal), F at that scaled by the residuals
     noise = row["first_angle_offset_noise_ms"]
-    if test == "chi2(1)":
-        assert noise == pytest.approx(PERIOD_NOISE_FLOOR_S * 1e3) and "floor" in row["first_angle_offset_noise_source"]
+    source = row["first_angle_offset_noise_source"]
+    if row["first_angle_offset_weighted"]:
+        v = trial.impact_sd_s**2
+        period_sd_ms = float(np.sqrt(np.mean(v[:-1] + v[1:]))) * 1e3
+        assert "per-impact sds" in source
+        if test == "chi2(1)":
+            assert noise == pytest.approx(period_sd_ms, rel=1e-9)
+        else:
+            assert noise > period_sd_ms and "residuals" in source
+    elif test == "chi2(1)":
+        assert noise == pytest.approx(PERIOD_NOISE_FLOOR_S * 1e3) and "floor" in source
     else:
-        assert noise >= PERIOD_NOISE_FLOOR_S * 1e3 and "residuals" in row["first_angle_offset_noise_source"]
+        assert noise >= PERIOD_NOISE_FLOOR_S * 1e3 and "residuals" in source
