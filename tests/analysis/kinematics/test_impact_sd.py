@@ -71,6 +71,9 @@ def test_impact_sds_round_trip_through_the_trial_json(tmp_path) -> None:
     np.testing.assert_allclose(summary["impact_sd_ms"], sd * 1e3)
     back = TrialMeta.from_json(trial.meta.to_json())
     np.testing.assert_array_equal(np.asarray(back.impact_sd_s), sd)
+    from rimless.analysis.io.trial import read_trial
+
+    np.testing.assert_array_equal(read_trial(trial.to_parquet(tmp_path / "t.trial.parquet")).impact_sd_s, sd)
     # NaN (not estimable) is null in the JSON and NaN again after
     meta = dataclasses.replace(trial.meta, impact_sd_s=(math.nan,) + tuple(sd[1:]))
     assert '"impact_sd_s": [null, ' in meta.to_json()
