@@ -83,7 +83,7 @@ def slope_coverage_cmd(
     )
     typer.echo("z = error / sd, sd = half width / 1.96 (rms z 1 when honest); medians in deg")
     typer.echo(f"truth model: {out['truth_model']}")
-    er_name = "of the simulator" if model == "simulator" else "of er_truth (written apart from the simulator)"
+    er_name = "of the simulator" if model == "simulator" else "of er_truth"
     names = {"rigid": "rigid wheel with guide friction", "er": f"compliant ER wheel {er_name}"}
     for truth, d in out["truths"].items():
         told = out["wheel_given"]["truths"][truth]

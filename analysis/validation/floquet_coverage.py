@@ -19,10 +19,12 @@ and ``truth_model``):
   eigenvalue there (`rimless.analysis.inference.floquet.model_multiplier`), as before.
 
 The same seed draws the same releases and per-step slopes under both truths (each walk draws one normal a step
-and the recording the same noise) until a walk stalls on one truth and not on the other. The importer is told
+and the recording the same noise) until a walk stalls on one truth and not on the other, or a recording is
+one frame longer on one. The importer is told
 the wheel (`told_wheel`, for its legs' drift in the slope's interval), as a user would. ``rms_z``: the rms of
-(estimate - truth) / (half width / t) over the series, with t the 97.5 % point the interval used (1 when the
-interval is honest).
+(estimate - truth) / se over the series (the corrected and lagged estimates' se; the OLS interval's half width
+over its t point), 1 when the se is honest; ``coverage_wilson95``: the Wilson interval of the coverage beside
+``coverage_ci95`` (Clopper-Pearson, as before).
 """
 
 from __future__ import annotations
@@ -171,12 +173,11 @@ def run(
             rows.append(e)
     if progress is not None:
         progress(series)
-    truth = truth_value
     out: dict[str, Any] = {
         "kind": kind,
         "truth": model,
         "truth_model": RIGID_MEANING if kind == "rigid" else TRUTH_MEANING[model],
-        "truth_multiplier": truth,
+        "truth_multiplier": truth_value,
         "series": series,
         "trials_per_series": trials,
         "steps": steps,
@@ -204,10 +205,10 @@ def run(
             out[name] = {"covered": 0, "of": 0, "coverage": None, "coverage_ci95": None}
             continue
         a, c = np.array(est, float), np.array(ci, float)
-        hits = int(np.sum((c[:, 0] <= truth) & (truth <= c[:, 1])))
+        hits = int(np.sum((c[:, 0] <= truth_value) & (truth_value <= c[:, 1])))
         lo, hi = binomtest(hits, len(c)).proportion_ci(0.95)
         wlo, whi = wilson_interval(hits, len(c))
-        z = (a - truth) / np.array(se, float)
+        z = (a - truth_value) / np.array(se, float)
         out[name] = {
             "covered": hits,
             "of": len(c),
@@ -215,8 +216,8 @@ def run(
             "coverage_ci95": [lo, hi],
             "coverage_wilson95": [wlo, whi],
             "rms_z": float(np.sqrt(np.mean(z**2))),
-            "median_error": float(np.median(a - truth)),
-            "median_abs_error": float(np.median(np.abs(a - truth))),
+            "median_error": float(np.median(a - truth_value)),
+            "median_abs_error": float(np.median(np.abs(a - truth_value))),
             "median_ci_width": float(np.median(c[:, 1] - c[:, 0])),
         }
     return out
