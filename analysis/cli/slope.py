@@ -82,7 +82,8 @@ def slope_coverage_cmd(
         f"CPU {out['cpu_s']:.1f} s"
     )
     typer.echo("z = error / sd, sd = half width / 1.96 (rms z 1 when honest); medians in deg")
-    typer.echo(f"truth model: {out['truth_model']}")
+    said = {"independent": "er_truth, written apart from the simulator", "simulator": "the simulator's ER wheel"}
+    typer.echo(f"ER truth model: {model} ({said[model]})")
     er_name = "of the simulator" if model == "simulator" else "of er_truth"
     names = {"rigid": "rigid wheel with guide friction", "er": f"compliant ER wheel {er_name}"}
     for truth, d in out["truths"].items():
