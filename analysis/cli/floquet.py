@@ -248,7 +248,7 @@ def floquet_coverage_cmd(
     rigid: M 2.6 kg, I_hub 0.05 kg m^2, L 0.21 m at 4.5 deg; its multiplier beta^2 (closed form).
 
     er: an ER wheel, k = 2000 N/m, c = 14 N s/m at 2.5 deg, walked by --truth-model; that wheel's dominant
-    eigenvalue (independent: er_truth's own, about 15 s of CPU a series; simulator: the model's).
+    eigenvalue (independent: er_truth's own, about 12 s of CPU a series; simulator: the model's).
 
     Each step's slope is drawn; each trial is written as a Vicon export, imported and estimated as `trials floquet` does.
     """
