@@ -39,23 +39,39 @@ def slope_coverage_cmd(
     ] = 3,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (the same seed gives the same figures).")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    truth_model: Annotated[
+        str,
+        typer.Option(
+            "--truth-model",
+            metavar="independent|simulator",
+            help="The model that walks the ER truth: independent (er_truth, written apart from the simulator; "
+            "about 10 s of CPU a walk) or simulator (the simulator's own ER wheel).",
+        ),
+    ] = "independent",
 ) -> None:
     """How often the importer's 95 % slope interval holds the true slope, per evidence and per lab.
 
-    Each walk: a rigid wheel with guide friction or the simulator's compliant ER wheel, away from Table 1, on a
+    Each walk: a rigid wheel with guide friction or a compliant ER wheel (--truth-model), away from Table 1, on a
     drawn slope, recorded in a drawn lab (Z-up or Y-up, any heading, a Tracker object or 4 markers, some with the
     middle of most stances hidden) and imported with no slope given. Per evidence (contacts, impact line, path,
     and the slope used: slope_ci_rad): coverage with its binomial 95 % interval, rms of error / sd (1 when
     honest), median error and half width; each walk imported without the wheel (the importer bounds the legs'
     drift) and with it (wheel_given: rigid legs, or the ER wheel's k).
     """
-    from rimless.analysis.validation.slope_coverage import KINDS, TRUTHS, run_slope_coverage
+    from rimless.analysis.validation.slope_coverage import ER_TRUTH_MODELS, KINDS, TRUTHS, run_slope_coverage
+    from rimless.errors import ParameterError
     from rimless.progress import progress_bar
 
+    model = truth_model.strip().lower()
+    if model not in ER_TRUTH_MODELS:
+        raise ParameterError(f"--truth-model must be {' or '.join(ER_TRUTH_MODELS)}, got {truth_model!r}")
     total = series * len(TRUTHS)
     with progress_bar("slope coverage", total=total, json_out=json_out) as bar:
         res = run_slope_coverage(
-            series, seed, progress=lambda i, what: bar.update(completed=i, description=f"{what} ({i}/{total})")
+            series,
+            seed,
+            progress=lambda i, what: bar.update(completed=i, description=f"{what} ({i}/{total})"),
+            truth_model=model,
         )
     out = res.summary()
     if json_out:
@@ -66,7 +82,10 @@ def slope_coverage_cmd(
         f"CPU {out['cpu_s']:.1f} s"
     )
     typer.echo("z = error / sd, sd = half width / 1.96 (rms z 1 when honest); medians in deg")
-    names = {"rigid": "rigid wheel with guide friction", "er": "compliant ER wheel of the simulator"}
+    said = {"independent": "er_truth, written apart from the simulator", "simulator": "the simulator's ER wheel"}
+    typer.echo(f"ER truth model: {model} ({said[model]})")
+    er_name = "of the simulator" if model == "simulator" else "of er_truth"
+    names = {"rigid": "rigid wheel with guide friction", "er": f"compliant ER wheel {er_name}"}
     for truth, d in out["truths"].items():
         told = out["wheel_given"]["truths"][truth]
         typer.echo(f"{names[truth]}, the wheel not given:")

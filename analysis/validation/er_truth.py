@@ -44,6 +44,7 @@ slide. The step ends are events located by scipy's solve_ivp (DOP853).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -57,7 +58,17 @@ DLSP, SLSP_FREE, SLSP_CLUTCHED = "dlsp", "slsp-free", "slsp-clutched"
 #: the name the coverage outputs give this truth
 TRUTH_NAME = "er_truth: an ER wheel written apart from rimless.sim (Newton-Euler in hub coordinates, scipy events)"
 
-__all__ = ["ALPHA", "ERWheel", "TruthFailure", "TruthStep", "TRUTH_NAME", "er_truth_walk", "fixed_point", "step"]
+__all__ = [
+    "ALPHA",
+    "ERWheel",
+    "TruthFailure",
+    "TruthStep",
+    "TRUTH_NAME",
+    "er_truth_walk",
+    "fixed_point",
+    "multiplier",
+    "step",
+]
 
 
 class TruthFailure(RuntimeError):
@@ -455,18 +466,45 @@ def fixed_point(w: ERWheel, guess: np.ndarray | None = None, *, rtol: float = 1e
     raise TruthFailure("no gait", f"no period-1 gait found from {guess} (last residual {np.max(np.abs(res)):.2e})")
 
 
+@functools.lru_cache(maxsize=32)
+def _gait(w: ERWheel, rtol: float) -> tuple[float, float]:
+    """`fixed_point` from its default guess, kept per wheel (a walk's truth is released from it; the same wheel's
+    walks of a coverage study share it). A tuple: the cached value cannot be changed by a caller."""
+    z = fixed_point(w, rtol=rtol)
+    return float(z[0]), float(z[1])
+
+
+def multiplier(w: ERWheel, z: np.ndarray | None = None, *, rtol: float = 1e-11, h: float = 1e-5) -> float:
+    """The dominant Floquet multiplier of the period-1 gait (model.md section 6): the eigenvalue of largest modulus
+    of the step map's Jacobian at the fixed point ``z`` (default: `fixed_point` of ``w`` at ``rtol``), by central
+    differences of ``h`` rad and rad/s (the map's error rtol / h ~ 1e-6, the differences' h^2 ~ 1e-10). Real when
+    the dominant pair is real (the ER gait's), else its modulus (as `trials floquet` states a multiplier)."""
+    z = fixed_point(w, rtol=rtol) if z is None else np.asarray(z, float)
+    jac = np.zeros((2, 2))
+    for j in range(2):
+        dz = np.zeros(2)
+        dz[j] = h
+        jac[:, j] = (step_map(w, z + dz, rtol=rtol) - step_map(w, z - dz, rtol=rtol)) / (2 * h)
+    ev = np.linalg.eigvals(jac)
+    dom = ev[int(np.argmax(np.abs(ev)))]
+    return float(dom.real) if abs(dom.imag) < 1e-12 else float(abs(dom))
+
+
 def er_truth_walk(
     params: Any, slope_deg: float, slope_sd_deg: float, steps: int, rng: np.random.Generator, *, release: float = 1.0,
     rtol: float = 1e-9,
 ):  # fmt: skip
     """``steps`` impacts of this truth's ER wheel (``params``: any object with WheelParams' fields) released from
-    its own gait at ``slope_deg`` with theta'+ times ``release``; each step's slope drawn N(slope, slope_sd^2).
-    A `floquet_truth.Walk` (the hub in the slope frame, the body angle; the data stop 40 % into the last step,
-    or at the last impact after a stall past the second impact), as `floquet_truth.er_walk` gives."""
+    its own gait at ``slope_deg`` with theta'+ times ``release``; each step's slope drawn N(slope, slope_sd^2)
+    (one standard normal of ``rng`` a step, drawn as `floquet_truth.er_walk` draws: the same seed, the same
+    slopes), the gravity's direction per step (Byl and Tedrake's rough slope; the recorded geometry stays on the
+    nominal slope). A `floquet_truth.Walk` (the hub in the slope frame, the body angle; the data stop 40 % into
+    the last step, or at the last impact after a stall past the second impact; ``step_slope_deg``: the slope each
+    step walked, deg), as `floquet_truth.er_walk` gives."""
     from rimless.analysis.validation.floquet_truth import assemble_walk
 
     w0 = ERWheel.of(params, slope_rad=math.radians(slope_deg))
-    z = fixed_point(w0, rtol=rtol)
+    z = np.array(_gait(w0, rtol))
     y = state_from_section(w0, z * np.array([1.0, release]))
     t0 = 0.0
     T: list[np.ndarray] = []
@@ -475,14 +513,17 @@ def er_truth_walk(
     B: list[np.ndarray] = []
     impacts: list[float] = []
     speeds: list[float] = []
+    slopes: list[float] = []
     for k in range(steps + 1):
-        w = ERWheel.of(params, slope_rad=math.radians(slope_deg + slope_sd_deg * float(rng.standard_normal())))
+        slope_k = slope_deg + slope_sd_deg * float(rng.standard_normal())
+        w = ERWheel.of(params, slope_rad=math.radians(slope_k))
         try:
             st = step(w, y, rtol=rtol)
         except TruthFailure:
             if len(impacts) < 2:
                 raise
-            return assemble_walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
+            return assemble_walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True, step_slopes=slopes)
+        slopes.append(slope_k)
         T.append(t0 + st.t)
         X.append(st.hub[:, 0])
         H.append(st.hub[:, 1])
@@ -492,4 +533,4 @@ def er_truth_walk(
         if k < steps:
             impacts.append(t0)
             speeds.append(float(y[7]))
-    return assemble_walk(T, X, H, B, impacts, speeds, slope_deg)
+    return assemble_walk(T, X, H, B, impacts, speeds, slope_deg, step_slopes=slopes)

@@ -45,6 +45,8 @@ class Walk:
     post_impact_speed: np.ndarray  # true omega+ per impact, rad/s
     slope_deg: float
     stalled: bool = False  # the walk ended in a stall (the data stop at its last impact)
+    #: the slope each step walked (deg; the ER walks': one per step taken, the one after the last impact too)
+    step_slope_deg: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -171,14 +173,17 @@ def er_walk(
     B: list[np.ndarray] = []
     impacts: list[float] = []
     speeds: list[float] = []
+    slopes: list[float] = []
     for k in range(steps + 1):
-        p = params.replace(slope_rad=math.radians(slope_deg + slope_sd_deg * float(rng.standard_normal())))
+        slope_k = slope_deg + slope_sd_deg * float(rng.standard_normal())
+        p = params.replace(slope_rad=math.radians(slope_k))
         try:
             res = simulate_step(Mechanics.of(p), "er", y, integ, t0=0.0, record_dt=dt)
         except StepFailure:  # a stall (a slope drawn too shallow): the data stop at the last impact
             if len(impacts) < 2:
                 raise
-            return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True)
+            return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=True, step_slopes=slopes)
+        slopes.append(slope_k)
         for seg in res.segments or []:  # recorded: record_dt was given
             q = seg.y
             T.append(t0 + seg.t)
@@ -190,17 +195,18 @@ def er_walk(
         if k < steps:
             impacts.append(t0)
             speeds.append(float(y[7]))
-    return _walk(T, X, H, B, impacts, speeds, slope_deg)
+    return _walk(T, X, H, B, impacts, speeds, slope_deg, step_slopes=slopes)
 
 
-def assemble_walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> Walk:
+def assemble_walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False, step_slopes=None) -> Walk:
     """A `Walk` from per-step pieces (times s, hub x and h m, body angle rad), the impacts (s) and the post-impact
     speeds (rad/s): sorted, duplicates dropped, the data stopped 40 % into the step after the last impact (what
-    `er_walk` and `rimless.analysis.validation.er_truth.er_truth_walk` record)."""
-    return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=stalled)
+    `er_walk` and `rimless.analysis.validation.er_truth.er_truth_walk` record); ``step_slopes``: each step's
+    slope, deg."""
+    return _walk(T, X, H, B, impacts, speeds, slope_deg, stalled=stalled, step_slopes=step_slopes)
 
 
-def _walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> Walk:
+def _walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False, step_slopes=None) -> Walk:
     t = np.concatenate(T)
     order = np.argsort(t, kind="stable")
     t = t[order]
@@ -210,7 +216,8 @@ def _walk(T, X, H, B, impacts, speeds, slope_deg, *, stalled: bool = False) -> W
     last = impacts[-1]
     period = last - (impacts[-2] if len(impacts) > 1 else 0.0)
     stop = t <= last + 0.4 * period  # the data stop 40 % into the next step
-    return Walk(t[stop], x[stop], h[stop], b[stop], np.array(impacts), np.array(speeds), slope_deg, stalled)
+    slopes = None if step_slopes is None else np.array(step_slopes, float)
+    return Walk(t[stop], x[stop], h[stop], b[stop], np.array(impacts), np.array(speeds), slope_deg, stalled, slopes)
 
 
 def slope_to_lab(

@@ -10,8 +10,12 @@ Two truths, each with wheels away from Table 1:
 * ``rigid``: `critical_truth.LossyWheel` drawn as `importer_coverage.draw_wheel` (M 1.6-3.0 kg, L 0.21-0.26 m,
   inertia ratio 0.3-3, guide friction 0-0.6 N), a slope 0.3 deg below to 1.2 deg above its critical slope, a
   release over the top by 1.1-2.3 in speed, up to `STEPS` impacts (a stall below the critical slope ends the trial);
-* ``er``: the simulator's compliant ER wheel (`floquet_truth.er_walk`) with k 1500-4000 N/m, c 2-20 N s/m
-  (Table 1: 2700, 8), 1.3-3.0 deg, released at its gait's speed times 0.8-1.4, `STEPS` impacts.
+* ``er``: a compliant ER wheel with k 1500-4000 N/m, c 2-20 N s/m (Table 1: 2700, 8), 1.3-3.0 deg, released at
+  its gait's speed times 0.8-1.4, `STEPS` impacts, walked by the ER truth model (`ER_TRUTH_MODELS`, the JSON's
+  ``truth`` and ``truth_model``): ``independent`` (default), `er_truth.er_truth_walk` (the ER wheel of
+  docs/model.md written apart from `rimless.sim`), or ``simulator``, the simulator's own (`floquet_truth.er_walk`).
+  The same seed draws the same wheel, slope, release and lab under both (the walks draw alike) unless one finds no
+  gait where the other does.
 
 Labs (`importer_coverage.draw_lab`): Z-up or Y-up, any ramp heading, a Tracker object off the hub or four markers;
 100 Hz, 0.3 mm and 1 mrad of noise; in `HIDDEN_SHARE` of the trials the middle 20-60 % of every stance but two is
@@ -48,6 +52,7 @@ from rimless.analysis.validation.importer_coverage import draw_lab, draw_wheel
 from rimless.analysis.validation.vicon_writer import markers_section, objects_section, write
 
 __all__ = [
+    "ER_TRUTH_MODELS",
     "TRUTHS",
     "STEPS",
     "HIDDEN_SHARE",
@@ -61,6 +66,14 @@ __all__ = [
 ]
 
 TRUTHS = ("rigid", "er")
+#: the models that walk the ``er`` truth (``truth_model``); the first is the default
+ER_TRUTH_MODELS = ("independent", "simulator")
+#: what each is (the JSON's ``truth_model`` starts with it)
+ER_TRUTH_MEANING = {
+    "independent": "er_truth, the ER wheel of docs/model.md written apart from rimless.sim (hub coordinates, "
+    "Newton-Euler, scipy events)",
+    "simulator": "the simulator's ER wheel (floquet_truth.er_walk)",
+}
 STEPS = 11
 HIDDEN_SHARE = 0.4
 Z95 = 1.959964
@@ -78,22 +91,26 @@ class SlopeDraw:
     walk: Walk
     lab: Lab
     gaps: tuple[tuple[float, float], ...] = ()
+    truth_model: str | None = None  # the ER truth's model (`ER_TRUTH_MODELS`); None for the rigid truth
 
     @property
     def lab_kind(self) -> str:
         return f"{self.lab.up.upper()}-up, {'markers' if self.lab.markers else 'object'}"
 
 
-def _er_draw(rng: np.random.Generator) -> tuple[dict[str, float], Walk]:
+def _er_draw(rng: np.random.Generator, model: str = "independent") -> tuple[dict[str, float], Walk]:
+    from rimless.analysis.validation.er_truth import er_truth_walk
     from rimless.sim.model.failures import StepFailure
     from rimless.sim.model.params import WheelParams
 
+    walker = er_truth_walk if model == "independent" else er_walk
     while True:
         k, c = float(rng.uniform(1500.0, 4000.0)), float(rng.uniform(2.0, 20.0))
         slope, release = float(rng.uniform(1.3, 3.0)), float(rng.uniform(0.8, 1.4))
         try:
-            wk = er_walk(WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c), slope, 0.0, STEPS, rng, release=release)
-        except (StepFailure, RuntimeError, ValueError):  # no gait there (too shallow for this c): draw again
+            wk = walker(WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c), slope, 0.0, STEPS, rng, release=release)
+        except (StepFailure, RuntimeError, ValueError):  # no gait there (too shallow for this c; er_truth's
+            # TruthFailure is a RuntimeError): draw again
             continue
         if wk.impacts.size >= 4:
             return {"k_n_per_m": k, "c_ns_per_m": c, "release_factor": release}, wk
@@ -131,14 +148,21 @@ def _mid_stance_gaps(wk: Walk, rng: np.random.Generator) -> tuple[tuple[float, f
     )
 
 
-def draw_trial(rng: np.random.Generator, truth: str) -> SlopeDraw:
-    """One walk of ``truth`` (rigid | er) on a drawn wheel and slope, in a drawn lab, maybe with hidden stances."""
+def _check_model(truth_model: str) -> None:
+    if truth_model not in ER_TRUTH_MODELS:
+        raise ValueError(f"truth_model must be one of {', '.join(ER_TRUTH_MODELS)}, got {truth_model!r}")
+
+
+def draw_trial(rng: np.random.Generator, truth: str, *, truth_model: str = "independent") -> SlopeDraw:
+    """One walk of ``truth`` (rigid | er) on a drawn wheel and slope, in a drawn lab, maybe with hidden stances;
+    the er truth walked by ``truth_model`` (`ER_TRUTH_MODELS`)."""
     if truth not in TRUTHS:
         raise ValueError(f"truth must be one of {', '.join(TRUTHS)}, got {truth!r}")
-    wheel, wk = _rigid_draw(rng) if truth == "rigid" else _er_draw(rng)
+    _check_model(truth_model)
+    wheel, wk = _rigid_draw(rng) if truth == "rigid" else _er_draw(rng, truth_model)
     lab = draw_lab(rng)
     gaps = _mid_stance_gaps(wk, rng) if rng.random() < HIDDEN_SHARE else ()
-    return SlopeDraw(truth, wheel, wk, lab, gaps)
+    return SlopeDraw(truth, wheel, wk, lab, gaps, truth_model if truth == "er" else None)
 
 
 def record(draw: SlopeDraw, path: Path, rng: np.random.Generator, *, hold_s: float = 0.4) -> str:
@@ -240,6 +264,7 @@ def measure_draw(draw: SlopeDraw, folder: Path, rng: np.random.Generator) -> dic
     record(draw, path, rng)
     out: dict[str, Any] = {
         "truth": draw.truth,
+        **({"truth_model": draw.truth_model} if draw.truth_model else {}),
         "wheel": draw.wheel,
         "slope_deg": draw.walk.slope_deg,
         "impacts": int(draw.walk.impacts.size),
@@ -281,6 +306,7 @@ class SlopeCoverageResult:
     cpu_s: float
     wall_s: float
     truths: tuple[str, ...] = field(default=TRUTHS)
+    truth_model: str = "independent"  # the ER truth's model (`ER_TRUTH_MODELS`)
 
     def rows(self, kind: str, *, wheel_given: bool = False, **where: Any) -> list[dict[str, Any]]:
         """The comparison rows of one evidence ``kind`` (or ``used``) over the draws matching ``where``
@@ -328,6 +354,8 @@ class SlopeCoverageResult:
                 "used": _group(self.rows("used", wheel_given=True)),
                 "wheel": "told_wheel: rigid model for the rigid truth, the ER truth's k (sd 10 %) and c",
             },
+            "truth": self.truth_model,
+            "truth_model": f"er: {ER_TRUTH_MEANING[self.truth_model]}; rigid: critical_truth's rigid wheel",
             "draws": len(self.draws),
             "refused": len(refused),
             "refused_reasons": refused,
@@ -346,12 +374,15 @@ def run_slope_coverage(
     *,
     truths: tuple[str, ...] = TRUTHS,
     progress: Callable[[int, str], None] | None = None,
+    truth_model: str = "independent",
 ) -> SlopeCoverageResult:
     """``n_draws`` truth walks of each truth (draw i of truth j from the seed sequence (seed, j, i)), recorded,
-    imported and compared; ``progress(done, stage)`` as it goes."""
+    imported and compared; the er truth walked by ``truth_model`` (`ER_TRUTH_MODELS`); ``progress(done,
+    stage)`` as it goes."""
     bad = [t for t in truths if t not in TRUTHS]
     if bad or not truths:
         raise ValueError(f"truths must be among {', '.join(TRUTHS)}, got {list(truths)}")
+    _check_model(truth_model)
     cpu, wall = time.process_time(), time.perf_counter()
     draws: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix=f"rimless-slope-coverage-{os.getpid()}-") as tmp:
@@ -360,7 +391,9 @@ def run_slope_coverage(
                 rng = np.random.default_rng([seed, TRUTHS.index(truth), i])
                 if progress:
                     progress(len(draws), f"{truth} walk {i + 1}")
-                draws.append(measure_draw(draw_trial(rng, truth), Path(tmp), rng))
+                draws.append(measure_draw(draw_trial(rng, truth, truth_model=truth_model), Path(tmp), rng))
         if progress:
             progress(len(draws), "done")
-    return SlopeCoverageResult(draws, seed, time.process_time() - cpu, time.perf_counter() - wall, tuple(truths))
+    return SlopeCoverageResult(
+        draws, seed, time.process_time() - cpu, time.perf_counter() - wall, tuple(truths), truth_model
+    )

@@ -21,7 +21,8 @@ def test_draws_are_walks_away_from_table1_in_every_kind_of_lab() -> None:
     labs, hidden, er_k = set(), 0, []
     for i in range(12):
         for truth in ("rigid", "er"):
-            d = draw_trial(np.random.default_rng([7, 0 if truth == "rigid" else 1, i]), truth)
+            # the simulator's ER walks (fast): the draws are the same under er_truth (the walks draw alike)
+            d = draw_trial(np.random.default_rng([7, 0 if truth == "rigid" else 1, i]), truth, truth_model="simulator")
             assert d.walk.impacts.size >= 4 and d.walk.slope_deg > 0.2
             labs.add((d.lab.up, d.lab.markers))
             hidden += bool(d.gaps)
@@ -35,9 +36,11 @@ def test_draws_are_walks_away_from_table1_in_every_kind_of_lab() -> None:
 
 
 def test_cli_small_run_counts_what_its_draws_say() -> None:
-    r = runner.invoke(app, ["trials", "slope-coverage", "--series", "2", "--seed", "3", "--json"])
+    args = ["trials", "slope-coverage", "--series", "2", "--seed", "3", "--json", "--truth-model", "simulator"]
+    r = runner.invoke(app, args)
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
+    assert out["truth"] == "simulator" and "er: the simulator's ER wheel" in out["truth_model"]
     assert out["draws"] == 4 and out["refused"] == 0 and len(out["per_draw"]) == 4
     assert [d["truth"] for d in out["per_draw"]] == ["rigid", "er", "rigid", "er"]
     for d in out["per_draw"]:
@@ -69,9 +72,34 @@ def test_cli_small_run_counts_what_its_draws_say() -> None:
     assert given["n"] == 2 and given["covered"] == sum(
         d["wheel_given"]["used"]["covered"] for d in out["per_draw"][1::2]
     )
-    table = runner.invoke(app, ["trials", "slope-coverage", "--series", "1"])
+    table = runner.invoke(app, ["trials", "slope-coverage", "--series", "1", "--truth-model", "simulator"])
     assert table.exit_code == 0 and "slope used" in table.stdout and "hidden stances" in table.stdout
     assert max(len(line) for line in table.stdout.splitlines()) <= 80
+
+
+def test_the_er_truth_is_er_truths_walk_by_default_and_draws_as_the_simulators() -> None:
+    """One series from the command line with no --truth-model: the ER walk is er_truth's (named in the JSON and
+    per draw), on the same drawn wheel, slope and release as the simulator's walk of that draw (the two walkers
+    draw alike), and its impacts meet the simulator's walk's to 1e-6 s (the step-map test's agreement)."""
+    from rimless.analysis.validation.slope_coverage import TRUTHS, draw_trial
+
+    r = runner.invoke(app, ["trials", "slope-coverage", "--series", "1", "--seed", "3", "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["truth"] == "independent" and "er: er_truth" in out["truth_model"]
+    er = [d for d in out["per_draw"] if d["truth"] == "er"]
+    assert len(er) == 1 and er[0]["truth_model"] == "independent"
+    sim = draw_trial(np.random.default_rng([3, TRUTHS.index("er"), 0]), "er", truth_model="simulator")
+    assert er[0]["wheel"] == sim.wheel and er[0]["slope_deg"] == sim.walk.slope_deg
+    assert er[0]["impacts"] == sim.walk.impacts.size
+
+
+def test_a_bad_er_truth_model_is_one_error_line() -> None:
+    r = runner.invoke(app, ["trials", "slope-coverage", "--truth-model", "exact"])
+    assert r.exit_code == 2
+    assert [ln for ln in r.output.splitlines() if ln.strip()] == [
+        "error: --truth-model must be independent or simulator, got 'exact'"
+    ], r.output
 
 
 @pytest.mark.slow

@@ -39,7 +39,7 @@ def z_scores(tmp_path_factory) -> dict[str, list[float]]:
     out: dict[str, list[float]] = {"contacts": [], "impact line": [], "used": [], "held": []}
     for i in range(WALKS):
         rng = np.random.default_rng([SEED, TRUTHS.index("er"), i])
-        draw = draw_trial(rng, "er")
+        draw = draw_trial(rng, "er", truth_model="simulator")  # this file's truth: the simulator's walks
         truth = math.radians(draw.walk.slope_deg)
         path = folder / f"er{i}.csv"
         record(draw, path, rng)
