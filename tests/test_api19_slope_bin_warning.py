@@ -1,7 +1,8 @@
 """`trials report` pools step periods within a series by rounded slope (``--slope-bin-deg``): a bin holding trials
 whose slopes differ beyond their 95 % intervals is warned about (one stderr line, the JSON's ``warnings`` and the
-page), naming the trials and the option. Trials: two of the bundled SYNTHETIC critical series, simulated on 1.45
-and 1.60 deg (their truth, analysis/data/critical), one series and one 0.5-deg bin (both round to 1.5 deg)."""
+page), naming the trials and the option. Trials: two of the bundled SYNTHETIC critical series, simulated on 1.60
+and 1.75 deg (their truth, analysis/data/critical), one series and one 0.5-deg bin (both round to 1.5 deg), both
+walked (until session 23 1.45 and 1.60 deg: a stall and a walk, which the report no longer pools at all)."""
 
 from __future__ import annotations
 
@@ -15,8 +16,8 @@ from rimless.cli import app as root_app
 from tests.support.cli_lines import stderr_lines
 
 runner = CliRunner()
-A = DATA_DIR / "SYNTHETIC_crit_slope1.45deg_release2.5.csv"
-B = DATA_DIR / "SYNTHETIC_crit_slope1.60deg_release2.5.csv"
+A = DATA_DIR / "SYNTHETIC_crit_slope1.60deg_release2.5.csv"
+B = DATA_DIR / "SYNTHETIC_crit_slope1.75deg_release2.5.csv"
 
 
 def _report(tmp_path, *extra: str):

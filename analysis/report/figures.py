@@ -1,7 +1,7 @@
 """The report's figures (PNG at `DPI`, written through a temporary name): each trial's CoM height and step
 periods against its simulation (`trial_figure`), every trial's CoM height on one page (`com_figure`), the step
 period against step number per series and slope bin (`period_figure`, one panel per series: never pooled
-across series).
+across series; a bin's legend names how its trials ended when the report split them by it).
 
 matplotlib's object API on the Agg canvas (no pyplot state); the PNG metadata hold matplotlib's name and
 version only (no path, no title).
@@ -212,7 +212,9 @@ def period_figure(groups: Sequence[Any], path: Path, model: str = "er") -> Path:
                 ms=4,
                 capsize=3,
                 color=col,
-                label=f"measured {getattr(g, 'slope_label', f'{g.slope_deg:g}')} deg (n = {len(g.trials)})",
+                label=f"measured {getattr(g, 'slope_label', f'{g.slope_deg:g}')} deg"
+                + (f", {g.outcome}" if getattr(g, "outcome", "") else "")
+                + f" (n = {len(g.trials)})",
             )
             if np.isfinite(g.sim_period_s).any():
                 ax.plot(g.step_number, g.sim_period_s * 1e3, "--", color=col, lw=1.2)

@@ -360,6 +360,8 @@ def _rest_of_report(
             sim,
             slope_bin_deg=slope_bin_deg,
             slopes=slopes,
+            # a stalled trial and a walking one are never pooled (`series_trends`)
+            outcomes=[s.row.trial.meta.outcome if s.row.trial is not None else "" for s in compared],
         )
     )
     res.warnings += pooled_slope_warnings(res.groups, slopes, slope_bin_deg)

@@ -348,7 +348,8 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
     bins = f"bins of {slope_bin_deg:g} deg" if slope_bin_deg is not None else "bins of overlapping slope intervals"
     out = [
         f'<h2 id="periods-heading">Step period by series and slope ({bins})</h2>'
-        '<div class="wide"><table id="periods"><thead><tr><th>series</th><th>release</th><th>slope bin, deg</th>'
+        '<div class="wide"><table id="periods"><thead><tr><th>series</th><th>release</th><th>ended</th>'
+        "<th>slope bin, deg</th>"
         "<th>step</th>"
         "<th>trials</th><th>mean, ms</th><th>std, ms</th><th>simulated, ms</th></tr></thead><tbody>"
     ]
@@ -356,6 +357,7 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
         for row in g.rows():
             out.append(
                 f"<tr><td>{breakable(str(row.get('series', '')))}</td><td>{e(str(row.get('release', '')))}</td>"
+                f"<td>{e(str(row.get('outcome', '')))}</td>"
                 f'<td class="n">{e(str(row.get("slope_bin_label_deg", format(row["slope_deg"], "g"))))}</td>'
                 f'<td class="n">{row["step"]}</td>'
                 f'<td class="n">{row["trials"]}</td><td class="n">{num(row["mean_period_ms"], ".1f")}</td>'
@@ -365,7 +367,11 @@ def periods_html(groups: Sequence[Any], slope_bin_deg: float | None) -> str:
     out.append("</tbody></table></div>")
     for g in groups:
         if g.message:
-            where = " ".join(x for x in (str(getattr(g, "series", "")), str(getattr(g, "release", ""))) if x)
+            where = " ".join(
+                x
+                for x in (str(getattr(g, "series", "")), str(getattr(g, "release", "")), getattr(g, "outcome", ""))
+                if x
+            )
             out.append(f'<p class="bad">{e(where)} {e(g.slope_label)} deg: {e(g.message)}</p>')
     return "\n".join(out)
 

@@ -11,6 +11,10 @@ A release condition the file name states (``release1.9``: `release_condition`) i
 but trials of two release conditions are never pooled: each condition is binned on its own (a release at 1.9
 rad/s and one at 2.5 rad/s start different transients; pooled, their step periods' std is the difference of
 the two walks, not the scatter of repeats). Runs of one condition (``run1``, ``run2``) are pooled as repeats.
+Nor are trials that ended differently (their importer's outcome, `rimless.analysis.kinematics.walk.OUTCOMES`,
+when the caller gives it): a trial that stalled after two steps and one that walked on are binned apart and each
+bin is named by its outcome (pooled, the bin's mean after step 2 was the walker alone and its std the gap between
+a stall and a walk; the demo's ``release1.9`` panel, session 22).
 
 A slope bin of None (``rimless demo``'s default) bins by the slopes' own intervals instead of a width
 (`interval_bins`): within a series, trials are pooled only while their 95 % slope intervals share a common
@@ -119,10 +123,14 @@ class SeriesSlopeGroup(SlopeGroup):
     series: str = ""
     #: the release condition its trials' file names state (`release_condition`), "" when none
     release: str = ""
+    #: how its trials ended (the importer's outcome: "walked", "stalled", ...), "" when not given
+    outcome: str = ""
 
     def rows(self) -> list[dict[str, Any]]:
-        """`SlopeGroup.rows` with the series and the release condition named in each row."""
-        return [{"series": self.series, "release": self.release} | row for row in super().rows()]
+        """`SlopeGroup.rows` with the series, the release condition and the trials' outcome named in each row."""
+        return [
+            {"series": self.series, "release": self.release, "outcome": self.outcome} | row for row in super().rows()
+        ]
 
 
 def slope_bin_words(slope_bin_deg: float | None) -> str:
@@ -174,20 +182,26 @@ def series_trends(
     *,
     slope_bin_deg: float | None = 0.5,
     slopes: Mapping[str, tuple[float, Sequence[float] | None]] | None = None,
+    outcomes: Sequence[str] | None = None,
 ) -> list[SeriesSlopeGroup]:
-    """Step period against step number per series, release condition and slope bin (series in order of first
-    appearance, then their release conditions (`release_condition` of each trial's file name) in that order,
-    slopes ascending within each); ``series``: the series of each comparison (`series_of`), in the same order.
-    ``slope_bin_deg`` None: the bins of `interval_bins` on ``slopes`` (per trial name, its slope and 95 %
-    interval, deg), each at its trials' mean slope (``slope_deg``, to 0.001 deg) and named by their range
-    (`range_label`)."""
+    """Step period against step number per series, release condition, outcome and slope bin (series in order of
+    first appearance, then their release conditions (`release_condition` of each trial's file name) in that order,
+    then the outcomes in that order, slopes ascending within each); ``series``: the series of each comparison
+    (`series_of`), in the same order; ``outcomes``: how each trial ended (its importer's outcome), in the same
+    order (None: not split by outcome). ``slope_bin_deg`` None: the bins of `interval_bins` on ``slopes`` (per
+    trial name, its slope and 95 % interval, deg), each at its trials' mean slope (``slope_deg``, to 0.001 deg)
+    and named by their range (`range_label`)."""
     if len(series) != len(comparisons):
         raise ValueError(f"{len(series)} series for {len(comparisons)} comparisons")
-    order: dict[str, dict[str, list[TrialComparison]]] = {}
-    for c, s in zip(comparisons, series):
-        order.setdefault(s, {}).setdefault(release_condition(c.file or c.name), []).append(c)
+    ends = [""] * len(comparisons) if outcomes is None else [str(o) for o in outcomes]
+    if len(ends) != len(comparisons):
+        raise ValueError(f"{len(ends)} outcomes for {len(comparisons)} comparisons")
+    order: dict[str, dict[tuple[str, str], list[TrialComparison]]] = {}
+    for c, s, end in zip(comparisons, series, ends):
+        order.setdefault(s, {}).setdefault((release_condition(c.file or c.name), end), []).append(c)
     out = []
-    for name, release, comps in ((n, r, cs) for n, conds in order.items() for r, cs in conds.items()):
+    keyed = ((n, r, end, cs) for n, conds in order.items() for (r, end), cs in _conditions_in_order(conds))
+    for name, release, outcome, comps in keyed:
         if slope_bin_deg is None:
             groups = []
             for trials in interval_bins(comps, slopes or {}):
@@ -199,9 +213,20 @@ def series_trends(
             groups = step_period_trends(comps, sim, slope_bin_deg=slope_bin_deg)
         for g in groups:
             out.append(
-                SeriesSlopeGroup(**{f.name: getattr(g, f.name) for f in fields(g)}, series=name, release=release)
+                SeriesSlopeGroup(
+                    **{f.name: getattr(g, f.name) for f in fields(g)}, series=name, release=release, outcome=outcome
+                )
             )
     return out
+
+
+def _conditions_in_order(
+    conds: Mapping[tuple[str, str], list[TrialComparison]],
+) -> list[tuple[tuple[str, str], list[TrialComparison]]]:
+    """A series' (release condition, outcome) groups: release conditions in order of first appearance, each
+    one's outcomes after it in theirs."""
+    releases = list(dict.fromkeys(r for r, _ in conds))
+    return sorted(conds.items(), key=lambda kv: releases.index(kv[0][0]))
 
 
 def pooled_slope_warnings(

@@ -79,7 +79,8 @@ class Wheel:
             raise ParameterError(f"params must be a WheelParams or a TOML file's path, got {type(base).__name__}")
         self.params: WheelParams = base.replace(**changes) if changes else base
         #: every parameter's value, 1-sigma uncertainty and source (what the trial analysis holds and carries)
-        self.input: WheelInput = wheel_input_for(self.params, from_file, uncertainty)
+        #: (a value given in ``changes`` is the caller's: source "wheel" even at Table 1's value)
+        self.input: WheelInput = wheel_input_for(self.params, from_file, uncertainty, stated=tuple(changes))
         self.uncertainty: dict[str, float] = {n: e.sd for n, e in self.input.entries.items()}
         self.model: Model = _check_model(model)  # type: ignore[assignment]
         if backend not in get_args(Backend):
@@ -113,7 +114,8 @@ class Wheel:
     def with_params(self, **changes: Any) -> Wheel:
         """A copy with some parameters changed (validated), e.g. ``wheel.with_params(slope_rad=0.03)``."""
         w = Wheel(self.params.replace(**changes), self.model, backend=self.backend, rtol=self.rtol)
-        w.input = wheel_input_for(w.params, self.input)  # the unchanged parameters keep their uncertainty
+        # the unchanged parameters keep their uncertainty; the ones given are the caller's
+        w.input = wheel_input_for(w.params, self.input, stated=tuple(changes))
         w.uncertainty = {n: e.sd for n, e in w.input.entries.items()}
         return w
 

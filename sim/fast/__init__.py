@@ -464,7 +464,9 @@ class FastIntegrator:
 
 
 def warm_up(models: tuple[str, ...] = MODELS, params: WheelParams | None = None) -> float:
-    """Compile (or load from the on-disk cache) every kernel of ``params``' mass model (Table 1 by default);
+    """Compile (or load from the on-disk cache) every kernel of ``params``' mass model (Table 1 by default):
+    the step kernel with and without its Jacobian, the phase integrator's entry from Python (recorded steps and
+    guide friction's phases) and the exact friction Jacobian's entry points (`ahead.friction_tangent_calls`);
     returns the seconds it took."""
     import time
 
@@ -477,8 +479,13 @@ def warm_up(models: tuple[str, ...] = MODELS, params: WheelParams | None = None)
                 fast_step(p, model, z, jacobian=jacobian)
             except StepFailure:  # a step from Table 1's gait that fails at other parameters: compiled all the same
                 pass
-    from rimless.sim.fast.ahead import recorded_phase_call
+    from rimless.sim.fast.ahead import friction_tangent_calls, recorded_phase_call
 
     entry, args = recorded_phase_call(p)  # the integrator's entry from Python (recorded steps)
     _call_compiling(entry, *args)
+    for entry, args in friction_tangent_calls(p):  # friction_step(jacobian=True)'s own kernels
+        try:
+            _call_compiling(entry, *args)
+        except ZeroDivisionError:  # a tangent at a degenerate event: compiled all the same
+            pass
     return time.perf_counter() - t0

@@ -13,6 +13,11 @@ Then, while the step kernel's own code is generated, the second process compiles
 from Python (`rk.RUN_PHASE[mi]`, as `FastIntegrator.run_phase` calls it: the recorded step of a command that
 reports a gait), once `rk.run_phase` is in the cache (`compile_recorder`).
 
+Last, the second process compiles the exact friction Jacobian's entry points (`friction_tangent_calls`:
+rimless.sim.fast.friction's section, event and touchdown tangents, as
+rimless.sim.step.fast_map.friction_step(jacobian=True) calls them; about 7 s of one core, measured at load 10):
+without them a first `rimless sim gaits --guide-friction-n 0.3` compiled them itself (`warm_up` compiles them too).
+
 `compiling_ahead(mi)` is the context a cold step kernel compiles in. `PLAN` names each function and its argument types (a token per argument, see `_types`); a plan entry that no
 longer matches the code only costs the second core some work. Off with one core or ``RIMLESS_NO_BACKGROUND=1``.
 
@@ -116,12 +121,66 @@ def compile_recorder(mi: int, wait_s: float = 120.0) -> bool:
     return True
 
 
+#: guide friction (N) of the wheel whose friction Jacobian's entry points `friction_tangent_calls` calls (any
+#: F_c > 0: the kernels take it as a run-time value of p)
+WARM_FRICTION_N = 0.3
+
+
+def friction_tangent_calls(params: Any) -> list[tuple[Any, tuple[Any, ...]]]:
+    """The exact friction Jacobian's entry points of ``params``' mass model (rimless.sim.fast.friction's
+    SECTION, EVENT_TANGENT and TOUCHDOWN_TANGENT), each with arguments of the types
+    rimless.sim.step.fast_map.friction_step(jacobian=True) calls it with: Table 1's ER section point, its state in
+    the friction phase double support starts in (F_c `WARM_FRICTION_N` where ``params`` has none) as both ends
+    of a lift-off, unit tangents. Calling them compiles (or loads) the versions every such step uses; their
+    results mean nothing (an event tangent of a phase to itself)."""
+    import numpy as np
+
+    from rimless.sim.fast import friction as fj
+    from rimless.sim.fast.model import MASS_MODEL_INDEX
+    from rimless.sim.model.dynamics import DLSP
+    from rimless.sim.model.friction import initial_phase
+    from rimless.sim.model.guards import LIFTOFF_A
+    from rimless.sim.model.mechanics import Mechanics
+    from rimless.sim.model.section import state_from_section
+
+    if not params.guide_friction_n > 0.0:
+        params = params.replace(guide_friction_n=WARM_FRICTION_N)
+    mi = MASS_MODEL_INDEX[params.mass_model]
+    mech = Mechanics.of(params)
+    p = np.asarray(mech.p, dtype=np.float64)
+    z = np.array([-0.465155, 2.604441])
+    code, y = initial_phase(mech, DLSP, state_from_section(mech, z))
+    y = np.asarray(y, dtype=np.float64)
+    V = np.ascontiguousarray(np.eye(10)[:, [2, 7]])
+    return [
+        (fj.SECTION[mi], (z, p)),
+        (fj.EVENT_TANGENT[mi], (int(code), int(LIFTOFF_A), y.copy(), int(code), y.copy(), p, V)),
+        (fj.TOUCHDOWN_TANGENT[mi], (int(code), y.copy(), p, V)),
+    ]
+
+
+def compile_friction(mi: int) -> bool:
+    """Compile (or load) the friction Jacobian's entry points of mass model index ``mi`` (`friction_tangent_calls`
+    of Table 1's wheel with that mass model); False if a call fails."""
+    try:
+        from rimless.sim.fast.model import MASS_MODEL_INDEX
+        from rimless.sim.model.params import WheelParams
+
+        name = next(n for n, i in MASS_MODEL_INDEX.items() if i == mi)
+        for entry, args in friction_tangent_calls(WheelParams(mass_model=name)):
+            entry(*args)
+    except Exception:  # noqa: BLE001 (the first friction step compiles them itself)
+        return False
+    return True
+
+
 def compile_plan(mi: int) -> None:
     """Compile (or load) every PLAN entry for mass model index ``mi`` into numba's cache, then the recorder
-    entry (the second process)."""
+    entry, then the friction Jacobian's entry points (the second process)."""
     for module, name, spec in PLAN:
         compile_entry(module, name, spec, mi)
     compile_recorder(mi)
+    compile_friction(mi)
 
 
 def stale_entries(mi: int) -> list[str]:

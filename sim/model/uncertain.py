@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -197,7 +197,9 @@ def wheel_input_from(
     params: WheelParams | None = None, sd: Mapping[str, float] | None = None, *, source: str = "wheel"
 ) -> WheelInput:
     """``params`` (default Table 1) with the uncertainties ``sd`` (field names or the paper's symbols -> 1
-    sigma, 0 = exact) over the defaults; a `ParameterError` names a bad key or sd."""
+    sigma, 0 = exact) over the defaults; a `ParameterError` names a bad key or sd. A parameter given an sd is the
+    caller's statement: its source is ``source`` even at Table 1's value (as a wheel file's ``{sd = ...}``);
+    "table1" stays for the defaults."""
     win = default_wheel_input(params, source=source)
     for key, s in (sd or {}).items():
         name = PARAM_ALIASES.get(key)
@@ -206,7 +208,7 @@ def wheel_input_from(
         if not (_number(s) and s >= 0):
             raise ParameterError(f"uncertainty of {key!r} must be a number >= 0, got {s!r}")
         e = win.entries[name]
-        win.entries[name] = ParamInput(name, e.value, float(s), e.source, "given" if s > 0 else "exact: given")
+        win.entries[name] = ParamInput(name, e.value, float(s), source, "given" if s > 0 else "exact: given")
     return win
 
 
@@ -279,17 +281,26 @@ def read_wheel_input(path: str | Path) -> WheelInput:
 
 
 def wheel_input_for(
-    params: WheelParams, base: WheelInput | None = None, sd: Mapping[str, float] | None = None
+    params: WheelParams,
+    base: WheelInput | None = None,
+    sd: Mapping[str, float] | None = None,
+    *,
+    stated: Collection[str] = (),
 ) -> WheelInput:
     """The uncertain input of a wheel at ``params``: ``base``'s entries (a wheel file's) where its value is the
-    one used, else the default uncertainty (source ``wheel`` when the value differs from Table 1); then the
-    uncertainties ``sd`` (field names or symbols -> 1 sigma) over those."""
+    one used, else the default uncertainty (source ``wheel`` when the value differs from Table 1, or when its
+    field is in ``stated``: a value the caller gave, e.g. ``Wheel(guide_friction_n=0.0)``); then the
+    uncertainties ``sd`` (field names or symbols -> 1 sigma; source ``wheel``) over those."""
     win = wheel_input_from(params, sd=None, source="wheel")
     if base is not None:
         for n, e in base.entries.items():
             if getattr(params, n) == e.value:
                 win.entries[n] = e
         win.fit, win.path = base.fit, base.path
+    for n in stated:
+        own = win.entries.get(n)
+        if own is not None and own.source == "table1":
+            win.entries[n] = ParamInput(n, own.value, own.sd, "wheel", own.basis)
     if sd:
         over = wheel_input_from(params, sd, source="wheel")
         for key in sd:

@@ -136,6 +136,24 @@ def test_api_wheel_carries_uncertainty(tmp_path):
         Wheel(uncertainty={"q": 1.0})
 
 
+def test_a_value_the_caller_states_reads_as_the_callers_even_at_table1():
+    """F_c stated exactly 0 through the API (Table 1's value): its row read source "table1" (session 22); the
+    statement is the caller's, as a wheel file's ``{sd = ...}`` is the file's. Defaults keep "table1", and an
+    inertia the caller states is then kept and compared, not replaced by the trials' (stance_inertia)."""
+    from rimless.sim import Wheel
+
+    rows = {r["name"]: r for r in Wheel(WheelParams(), uncertainty={"F_c": 0}).input.parameters()}
+    assert (rows["guide_friction_n"]["source"], rows["guide_friction_n"]["sd"]) == ("wheel", 0.0)
+    assert rows["guide_friction_n"]["basis"] == "exact: given" and rows["guide_friction_n"]["carried_as"] == "exact"
+    assert {r["source"] for n, r in rows.items() if n != "guide_friction_n"} == {"table1"}
+    assert {r["source"] for r in Wheel().input.parameters()} == {"table1"}
+    # a value given as a change, at Table 1's value: the caller's, with the default sd (none was stated)
+    given = Wheel(inertia_kg_m2=WheelParams().inertia_kg_m2).input.entries["inertia_kg_m2"]
+    assert (given.source, given.sd) == ("wheel", pytest.approx(0.0036))
+    assert Wheel().with_params(guide_friction_n=0.0).input.entries["guide_friction_n"].source == "wheel"
+    assert wheel_input_from(None, {"I_c": 0.004}).entries["inertia_kg_m2"].source == "wheel"
+
+
 # ------------------------------------------------------------------------------------------- propagation
 
 

@@ -301,6 +301,29 @@ def test_demo(demo_run, tmp_path):
         _screenshot_has_content(out / "report.html", tmp_path / "shot.png")
 
 
+@pytest.mark.xdist_group("demo")  # one worker reads the demo; the other never waits on its lock
+@pytest.mark.slow
+def test_demo_step_periods_never_pool_a_stall_with_a_walk(demo_run):
+    """The demo's ``release1.9`` bin pooled two trials that stalled with one that walked (session 22: after step 2
+    only the walker was drawn). The periods table names how each bin's trials ended, and the critical series'
+    ``release1.9`` rows have stalled and walked bins apart."""
+    import re
+
+    from rimless.analysis.kinematics.walk import OUTCOMES
+
+    assert demo_run.returncode == 0, demo_run.stderr[-3000:]
+    page = (demo_run.out / "report.html").read_text()
+    table = page.split('<table id="periods">', 1)[1].split("</table>", 1)[0]
+    assert "<th>ended</th>" in table
+    rows = [
+        [re.sub(r"<[^>]+>", "", cell) for cell in re.findall(r"<td[^>]*>(.*?)</td>", row)]
+        for row in re.findall(r"<tr>(.*?)</tr>", table.split("<tbody>", 1)[1])
+    ]
+    assert rows and all(r[2] in OUTCOMES for r in rows), {r[2] for r in rows}
+    crit = {r[2] for r in rows if r[0].startswith("SYNTHETIC_crit") and r[1] == "release1.9"}
+    assert {"stalled", "walked"} <= crit, crit
+
+
 def _screenshot_has_content(page: Path, shot: Path) -> None:
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
     with tempfile.TemporaryDirectory() as profile:

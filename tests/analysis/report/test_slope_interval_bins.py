@@ -127,3 +127,45 @@ def test_the_period_figure_legend_names_the_bin_by_its_range(sim, tmp_path, monk
     groups = series_trends(COMPS, ["s"] * len(COMPS), sim, slope_bin_deg=None, slopes=SLOPES)
     figures.period_figure(groups, tmp_path / "p.png")
     assert labels == ["measured 1.300-1.420 deg (n = 3)", "measured 1.600 deg (n = 1)"]
+
+
+def test_trials_that_ended_differently_are_never_pooled(sim, tmp_path, monkeypatch):
+    """The demo's ``release1.9`` panel (session 22, noticed): two trials that stalled after two steps and one that
+    walked on, in one interval bin; after step 2 only the walker was drawn and the bin's std at steps 1-2 was the
+    gap between a stall and a walk. Given the trials' outcomes, each outcome is binned on its own and named in the
+    rows, the table and the legend; without them (None) the bins are as before (the tests above)."""
+    from rimless.analysis.report import figures
+    from rimless.analysis.report.sections import periods_html
+
+    names = ["w_slope1.34deg_release1.9.csv", "w_slope1.36deg_release1.9.csv", "w_slope1.40deg_release1.9.csv"]
+    periods = ([0.80, 0.90], [0.82, 0.93], [0.60, 0.58, 0.57, 0.57])
+    comps = [_tc(n, s, p) for n, s, p in zip(names, (1.34, 1.36, 1.40), periods)]
+    slopes = {n: (s, (1.30, 1.45)) for n, s in zip(names, (1.34, 1.36, 1.40))}  # one common slope: one bin
+    series = ["w"] * 3
+    (pooled,) = series_trends(comps, series, sim, slope_bin_deg=None, slopes=slopes)
+    assert list(pooled.count) == [3, 3, 1, 1]  # what main drew: steps 3-4 the walker alone
+    for bin_deg in (0.5, None):
+        groups = series_trends(
+            comps, series, sim, slope_bin_deg=bin_deg, slopes=slopes, outcomes=["stalled", "stalled", "walked"]
+        )
+        assert [(g.release, g.outcome, sorted(g.trials)) for g in groups] == [
+            ("release1.9", "stalled", names[:2]),
+            ("release1.9", "walked", names[2:]),
+        ]
+        np.testing.assert_allclose(groups[0].mean_period_s, [0.81, 0.915])  # the two stalls, by hand
+        np.testing.assert_allclose(groups[1].mean_period_s, periods[2])
+        assert {r["outcome"] for r in groups[0].rows()} == {"stalled"}
+    page = periods_html(groups, None)
+    assert "<th>ended</th>" in page and page.count("<td>stalled</td>") == 2 and page.count("<td>walked</td>") == 4
+    labels: list[str] = []
+    real = figures.save_png
+
+    def spy(fig, path):
+        labels.extend(t.get_text() for ax in fig.axes for t in (ax.get_legend().get_texts() if ax.get_legend() else []))
+        return real(fig, path)
+
+    monkeypatch.setattr(figures, "save_png", spy)
+    figures.period_figure(groups, tmp_path / "p.png")
+    assert labels == ["measured 1.340-1.360 deg, stalled (n = 2)", "measured 1.400 deg, walked (n = 1)"]
+    with pytest.raises(ValueError, match="2 outcomes for 3"):
+        series_trends(comps, series, sim, outcomes=["walked", "walked"])

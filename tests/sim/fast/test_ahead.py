@@ -37,6 +37,50 @@ def test_types_of_an_entry():
     )
 
 
+#: in a fresh process: warm_up, then the friction Jacobian's entry points' versions (compiled or loaded: numba's
+#: overloads), then one friction step with its Jacobian on another wheel and model, then the versions again
+_FRICTION_PROBE = """
+import numpy as np
+from rimless.sim import fast
+from rimless.sim.fast import ahead, friction as fj
+from rimless.sim.model.params import WheelParams
+from rimless.sim.step.fast_map import friction_step
+kernels = (fj.SECTION[0], fj.EVENT_TANGENT[0], fj.TOUCHDOWN_TANGENT[0])
+fast.warm_up(("er",))
+print(*(len(k.overloads) for k in kernels))
+away = dict(hub_mass_kg=2.3, leg_mass_kg=0.05, inertia_kg_m2=0.06, stiffness_n_per_m=1800.0, damping_ns_per_m=4.0)
+r = friction_step(WheelParams(guide_friction_n=0.1, **away), "ve", np.array([-0.42, 2.3]), jacobian=True)
+print(*(len(k.overloads) for k in kernels), len(r.events))
+print(ahead.compile_friction(0), *(len(k.overloads) for k in kernels))
+"""
+
+
+def test_warm_up_compiles_the_friction_jacobians_kernels_as_a_friction_step_calls_them():
+    """`warm_up` (and the second process, `compile_friction`) compile the exact friction Jacobian's entry points
+    with the argument types friction_step(jacobian=True) uses: after it, a friction step with its Jacobian (another
+    wheel, model and F_c) adds no version of them, i.e. compiles nothing on first use. On main warm_up left them
+    out (0 versions after it; the first such step compiled them: 6.7 s CPU at load 10, session 23)."""
+    res = subprocess.run(
+        [sys.executable, "-c", _FRICTION_PROBE], capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    warmed, stepped, again = (line.split() for line in res.stdout.splitlines()[-3:])
+    assert warmed == ["1", "1", "1"], res.stdout
+    assert stepped[:3] == warmed and int(stepped[3]) > 2, res.stdout  # events crossed: lift-off, slips, touchdown
+    assert again == ["True", *warmed], res.stdout
+
+
+def test_the_second_process_compiles_the_friction_jacobian_last(monkeypatch):
+    """compile_plan: the PLAN entries, the recorder, then the friction Jacobian's entry points (after the step
+    kernel's own callees: a cold step kernel waits on those, a friction step later on these)."""
+    calls: list[str] = []
+    monkeypatch.setattr(ahead, "compile_entry", lambda module, name, spec, mi: calls.append(f"{module}.{name}"))
+    monkeypatch.setattr(ahead, "compile_recorder", lambda mi: calls.append("recorder"))
+    monkeypatch.setattr(ahead, "compile_friction", lambda mi: calls.append(f"friction {mi}"))
+    ahead.compile_plan(1)
+    assert calls == [*(f"{m}.{n}" for m, n, _ in ahead.PLAN), "recorder", "friction 1"]
+
+
 def test_turned_off_it_starts_nothing(monkeypatch):
     monkeypatch.setenv("RIMLESS_NO_BACKGROUND", "1")
     assert ahead.start(0) is None
