@@ -4,7 +4,9 @@ The measurement noise is estimated from the recording, apart from the model: the
 from its third differences on runs of evenly spaced samples (the estimator of
 `rimless.analysis.kinematics.steps.noise_sigma`, run by run: smooth motion cancels, so what is left is the markers' noise), and the impact times' sigma from what each trial's periods
 leave about their own trend (a geometric approach to the fixed point and a persistent alternation:
-`timing_noise_sd`; a limp is a pattern, not noise), pooled over the trials and floored (`timing_noise`). Against
+`timing_noise_sd`; a limp is a pattern, not noise), pooled over the trials and floored (`timing_noise`; trials of
+6 periods or more, or when every trial is shorter those of 5 at 1 degree of freedom each, the F test carrying how
+few; with 4 or fewer the periods are not judged). Against
 them, per trial and overall:
 
 - CoM height: chi^2 = sum(residual^2) / sigma_h^2 with n - 2 degrees of freedom (the trial's time shift and
@@ -100,6 +102,12 @@ def noise_sigma_from_d3(d3: np.ndarray) -> float:
 LAMBDA_GRID = np.linspace(-0.9, 1.3, 45)  # multipliers of the periods' trend p* + a lambda^i tried per trial
 #: fewest periods of a trial that enters the impact times' noise (its trend takes 4 degrees of freedom)
 TIMING_MIN_PERIODS = 6
+#: when no trial has `TIMING_MIN_PERIODS`, trials of this many periods enter instead, 1 degree of freedom each (the
+#: F test then carries how few: measured on 2000 pure-noise trials of 5 periods, the pooled estimate 1.00 of the
+#: truth under a transient, 1.12 without one: high, so lenient, not a false alarm); 4 periods leave none
+TIMING_SHORT_MIN_PERIODS = 5
+#: `timing_noise`'s ``source`` when only short trials measured it
+TIMING_SHORT_SOURCE = "periods about their trend, short trials"
 #: the impact times' noise is never taken below this fraction of the recording's frame interval (a sanity floor:
 #: the importer places an impact to about a fortieth of a frame on clean object exports, docs/trials.md)
 TIMING_FLOOR_FRAMES = 0.01
@@ -109,7 +117,9 @@ TIMING_FLOOR_FRAMES = 0.01
 LAMBDA_CHOICE_TRACE = 2.0
 
 
-def timing_noise_sd(impacts_per_trial: Sequence[np.ndarray]) -> tuple[float, int]:
+def timing_noise_sd(
+    impacts_per_trial: Sequence[np.ndarray], min_periods: int = TIMING_MIN_PERIODS
+) -> tuple[float, int]:
     """(sigma s, degrees of freedom) of the impact times' noise, from what each trial's periods leave about their
     own trend p_i = p* + a lambda^i + b (-1)^i: the step-to-step map's approach to its fixed point (lambda on
     `LAMBDA_GRID`, the best per trial) and a persistent alternation (b: a limp, unequal legs; session 22). A
@@ -117,15 +127,16 @@ def timing_noise_sd(impacts_per_trial: Sequence[np.ndarray]) -> tuple[float, int
     recording's noise, not against its own limp (session 21: 5.7 ms estimated for 0.5 ms on c = 11 ER walks
     limping by 5 %, and the check said "fits"). The periods' noise is sigma^2 D D^T (differences of impact times),
     so the residual sum of squares of the linear fit (hat matrix H) has expectation sigma^2 tr((I - H) D D^T):
-    sigma^2 = sum RSS / sum (tr - `LAMBDA_CHOICE_TRACE`), pooled over the trials with at least `TIMING_MIN_PERIODS`
-    periods; n - 4 degrees of freedom each (the choice of lambda counted as one: without it the estimate was
+    sigma^2 = sum RSS / sum (tr - `LAMBDA_CHOICE_TRACE`), pooled over the trials with at least ``min_periods``
+    periods (`TIMING_MIN_PERIODS`; `timing_noise` falls back to `TIMING_SHORT_MIN_PERIODS`); n - 4 degrees of
+    freedom each (the choice of lambda counted as one: without it the estimate was
     low by 3-26 % on 6-12 periods). A negative lambda alternates (lambda^i). NaN when no trial has enough
     periods."""
     rss, tr_sum, dof = 0.0, 0.0, 0
     for imp in impacts_per_trial:
         p = np.diff(np.asarray(imp, float))
         n = p.size
-        if n < TIMING_MIN_PERIODS:
+        if n < max(min_periods, 5):  # the trend's 4 columns need a fifth period
             continue
         val, tr = _trend_residual(p)
         rss += val
@@ -160,16 +171,25 @@ def _trend_residual(p: np.ndarray) -> tuple[float, float]:
 def timing_noise(impacts_per_trial: Sequence[np.ndarray], frame_s: float = math.nan) -> dict[str, Any]:
     """The impact times' noise the periods are judged against: `timing_noise_sd` (``sigma_s``, ``dof``), floored
     at `TIMING_FLOOR_FRAMES` of the frame interval ``frame_s`` (s; the floor not applied when NaN); ``source``
-    says which was used ("periods about their trend" or "floor"), ``estimate_s`` the estimate before the floor,
-    ``trials_used`` how many trials entered it."""
-    sig, dof = timing_noise_sd(impacts_per_trial)
-    used = sum(np.asarray(imp).size - 1 >= TIMING_MIN_PERIODS for imp in impacts_per_trial)
+    says which was used ("periods about their trend"; `TIMING_SHORT_SOURCE` when no trial has `TIMING_MIN_PERIODS`
+    periods and those of `TIMING_SHORT_MIN_PERIODS` measured it, 1 degree of freedom each; "floor"; "none" when
+    no trial has `TIMING_SHORT_MIN_PERIODS`: the periods are then not judged), ``estimate_s`` the estimate before
+    the floor, ``trials_used`` how many trials entered it, ``min_periods`` the fewest periods that entered."""
+    min_periods = TIMING_MIN_PERIODS
+    sig, dof = timing_noise_sd(impacts_per_trial, min_periods)
+    if not math.isfinite(sig):
+        min_periods = TIMING_SHORT_MIN_PERIODS
+        sig, dof = timing_noise_sd(impacts_per_trial, min_periods)
+    used = sum(np.asarray(imp).size - 1 >= min_periods for imp in impacts_per_trial)
     floor = TIMING_FLOOR_FRAMES * frame_s if math.isfinite(frame_s) and frame_s > 0 else math.nan
     out: dict[str, Any] = {"sigma_s": sig, "dof": dof, "estimate_s": sig, "floor_s": floor, "trials_used": used}
+    out["min_periods"] = min_periods
     if math.isfinite(sig) and math.isfinite(floor) and sig < floor:
         out.update(sigma_s=floor, source="floor")
+    elif not math.isfinite(sig):
+        out.update(source="none", trials_used=0)
     else:
-        out["source"] = "periods about their trend" if math.isfinite(sig) else "none"
+        out["source"] = "periods about their trend" if min_periods == TIMING_MIN_PERIODS else TIMING_SHORT_SOURCE
     return out
 
 
@@ -182,7 +202,14 @@ def timing_noise_phrase(noise: dict[str, Any]) -> str:
         return f"the floor; the periods gave {est:.3f} ms" if est is not None else "the floor"
     if src == "periods about their trend":
         return f"from the periods about their trend, {noise.get('timing_noise_trials')} trials"
-    return "no trial has enough periods to measure it" if src == "none" else "source not stated"
+    if src == TIMING_SHORT_SOURCE:
+        return (
+            f"from the periods about their trend, {noise.get('timing_noise_trials')} short trials of "
+            f"{TIMING_SHORT_MIN_PERIODS} periods (1 degree of freedom each: a wide estimate)"
+        )
+    if src == "none":
+        return f"no trial has {TIMING_SHORT_MIN_PERIODS} periods to measure it: the periods are not judged"
+    return "source not stated"
 
 
 def period_chi2(
@@ -413,7 +440,8 @@ def adequacy(blocks: Sequence[dict[str, Any]], n_global: int, *, alpha_rad: floa
             "method": "from the recordings apart from the model: CoM height from its third differences on evenly "
             "spaced runs (median absolute deviation); impact times from each trial's periods about their own "
             "trend (a geometric approach to the fixed point and a persistent alternation, so a limp is not taken "
-            f"for noise; trials of {TIMING_MIN_PERIODS} periods or more), pooled, floored at "
+            f"for noise; trials of {TIMING_MIN_PERIODS} periods or more, or when there are none of "
+            f"{TIMING_SHORT_MIN_PERIODS} at 1 degree of freedom each), pooled, floored at "
             f"{TIMING_FLOOR_FRAMES:g} of a frame (`timing_noise_source` says which was used); each trial's slope "
             "free within its stated uncertainty; the import's errors "
             "that are not noise allowed (`allowed`); p-values by the F test against these "
