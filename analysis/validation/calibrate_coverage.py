@@ -28,8 +28,8 @@ draws each truth away from Table 1 as `importer_coverage.draw_wheel` draws the r
 M = m_H + 8 m U(1.6, 3.0) kg, leg (foot) mass m U(0.02, 0.05) kg (Table 1: 0.0378), L0 U(0.21, 0.26) m and the
 inertia ratio r = (I_c + 8 m L0^2) / (M L0^2) log-uniform in 0.3-3 (`stance_inertia.inertia_ratio`'s; Table 1:
 0.43), so I_c = r M L0^2 - 8 m L0^2 > 0. A drawn wheel is kept only if the truth model finds its period-1 gait
-at both ends of the slopes walked (2 and 3.5 deg, `gait_refusal`); else it is redrawn, the reason counted
-(the JSON's ``draws.redrawn``). ``friction_n`` (lo, hi) N draws every truth's F_c U(lo, hi) with any input and
+at both ends of the slopes walked (2 and 3.5 deg, `gait_refusal`); else it is redrawn, k, c (and F_c) with it,
+the reason counted (the JSON's ``draws.redrawn``; the kept wheels are the walkable part of the ranges). ``friction_n`` (lo, hi) N draws every truth's F_c U(lo, hi) with any input and
 wheels (``table1`` then states 0 +- 0.2 N, ``truth`` the drawn value +- 0.2 N, ``exact`` it exactly). Reported per
 input and parameter: how often the 95 % interval holds the truth (Wilson interval) with the held part
 (``ci95_with_held``, where it was computed) and with the data's alone (``ci95``), the median relative error, the
@@ -228,19 +228,26 @@ def gait_refusal(wheel: Any, model: str = "independent") -> str | None:
 
                 p = wheel.replace(slope_rad=math.radians(slope))
                 solve_fixed_point(make_map(p, "er", rtol=1e-9), default_guess(p, "er"), record=False)
-        except RimlessError as err:
+        except (RimlessError, np.linalg.LinAlgError) as err:
             return f"no gait at {slope:g} deg: {type(err).__name__}"
     return None
 
 
 def draw_away(
-    rng: np.random.Generator, refusal: Callable[[dict[str, float]], str | None] | None = None
+    rng: np.random.Generator,
+    refusal: Callable[[dict[str, float]], str | None] | None = None,
+    *,
+    friction_n: tuple[float, float] | None = None,
 ) -> tuple[dict[str, float], dict[str, int]]:
     """The truth's held parameters m_H, m, I_c, L0 (kg, kg, kg m^2, m) drawn away from Table 1 (`AWAY_RANGES`:
     M = m_H + 8 m and m uniform, L0 uniform, r = (I_c + 8 m L0^2) / (M L0^2) log-uniform), redrawn while
-    ``refusal(held)`` gives a reason (`gait_refusal` on the series' wheel). Returns (held, the redraws' reasons
-    counted); raises ValueError after `AWAY_TRIES` refusals."""
+    ``refusal(held)`` gives a reason (`gait_refusal` on the series' wheel). A redraw draws k and c too (`K_RANGE`,
+    `C_RANGE`, uniform) and, with ``friction_n`` (lo, hi) N, F_c U(lo, hi): a k, c, F_c without a gait at the
+    shallowest slope for any masses is not kept (the first try keeps the series' own k, c, F_c). Returns (held,
+    with the redrawn k, c, F_c where redrawn; the redraws' reasons counted); raises ValueError after `AWAY_TRIES`
+    refusals."""
     redrawn: dict[str, int] = {}
+    again: dict[str, float] = {}
     for _ in range(AWAY_TRIES):
         mass = float(rng.uniform(*AWAY_RANGES["total_mass_kg"]))
         leg_mass = float(rng.uniform(*AWAY_RANGES["leg_mass_kg"]))
@@ -252,11 +259,15 @@ def draw_away(
             "leg_mass_kg": leg_mass,
             "inertia_kg_m2": (ratio * mass - 8.0 * leg_mass) * length**2,
             "leg_length_m": length,
+            **again,
         }
         why = refusal(held) if refusal else None
         if why is None:
             return held, redrawn
         redrawn[why] = redrawn.get(why, 0) + 1
+        again = {"stiffness_n_per_m": float(rng.uniform(*K_RANGE)), "damping_ns_per_m": float(rng.uniform(*C_RANGE))}
+        if friction_n is not None:
+            again["guide_friction_n"] = float(rng.uniform(*friction_n))
     raise ValueError(f"no wheel drawn away from Table 1 walks in {AWAY_TRIES} tries: {redrawn}")
 
 
@@ -413,7 +424,7 @@ def run_calibrate_coverage(
                 def refusal(h: dict[str, float], base: Any = wheel) -> str | None:
                     return gait_refusal(base.replace(**h), truth)
 
-                away_held, redrawn = draw_away(away_rng, refusal)
+                away_held, redrawn = draw_away(away_rng, refusal, friction_n=friction_n)
                 wheel = wheel.replace(**away_held)
                 for why, k in redrawn.items():
                     redrawn_all[why] = redrawn_all.get(why, 0) + k
@@ -470,8 +481,8 @@ def run_calibrate_coverage(
         draws["held"] = (
             "away from Table 1 (draw_away): M = m_H + 8 m and m uniform in draws.total_mass_kg, draws.leg_mass_kg; "
             "L0 uniform in draws.leg_length_m; r = (I_c + 8 m L0^2) / (M L0^2) log-uniform in draws.inertia_ratio; "
-            f"g exact; {fc}; a wheel without a gait at {SLOPES_DEG[0]:g} or {SLOPES_DEG[1]:g} deg redrawn "
-            "(draws.redrawn)"
+            f"g exact; {fc}; a wheel without a gait at {SLOPES_DEG[0]:g} or {SLOPES_DEG[1]:g} deg redrawn, k, c "
+            "(and F_c) with it (draws.redrawn)"
         )
         draws["redrawn"] = redrawn_all
         out["truth_model"] = out["truth_model"].replace(
