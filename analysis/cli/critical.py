@@ -943,22 +943,18 @@ def _calibrate_coverage(
 ) -> None:
     """``trials coverage --of calibrate``: run the study, print its per-parameter coverage per wheel input."""
     from rimless.analysis import calibrate
-    from rimless.analysis.validation.calibrate_coverage import INPUTS, TRUTHS, WHEELS, run_calibrate_coverage
+    from rimless.analysis.validation.calibrate_coverage import INPUTS, TRUTHS, WHEELS, away_line, run_calibrate_coverage
     from rimless.progress import progress_bar
 
     chosen = parse_list(inputs or "exact", "--inputs", str, choices=INPUTS, unique=True, lower=True)
-    model = (truth_model or TRUTHS[0]).strip().lower()
-    if model not in TRUTHS:
-        raise ParameterError(f"--truth-model must be {' or '.join(TRUTHS)}, got {truth_model!r}")
+    model = parse_list(truth_model or TRUTHS[0], "--truth-model", choices=TRUTHS, count=1, lower=True)[0]
     fr: tuple[float, float] | None = None
     if friction_n is not None:
         lo_hi = parse_list(friction_n, "--friction-n", float, count=2)
         if len(lo_hi) != 2 or not (0.0 <= lo_hi[0] <= lo_hi[1] <= 5.0):
             raise ParameterError(f"--friction-n takes LO,HI with 0 <= LO <= HI <= 5 N, got {friction_n!r}")
         fr = (lo_hi[0], lo_hi[1])
-    drawn = (wheels or WHEELS[0]).strip().lower()
-    if drawn not in WHEELS:
-        raise ParameterError(f"--wheels must be {' or '.join(WHEELS)}, got {wheels!r}")
+    drawn = parse_list(wheels or WHEELS[0], "--wheels", choices=WHEELS, count=1, lower=True)[0]
     if drawn == "away" and "table1" in chosen:
         raise ParameterError("--wheels away goes with --inputs exact,truth (table1 states Table 1's wheel)")
     with progress_bar("coverage", total=n, json_out=json_out) as bar:
@@ -978,16 +974,8 @@ def _calibrate_coverage(
     typer.echo(f"truth: {out['truth_model']}")
     typer.echo(
         f"{out['series']} series, {out['imports']['trials']} trials, {out['imports']['refused']} refused; "
-        f"{out['wall_s']:.0f} s wall, {out['cpu_s']:.0f} s CPU"
+        f"{out['wall_s']:.0f} s wall, {out['cpu_s']:.0f} s CPU" + away_line(out.get("draws") or {})
     )
-    draws = out.get("draws") or {}
-    if draws.get("wheels") == "away":
-        typer.echo(
-            f"wheels away from Table 1: inertia ratio {draws['inertia_ratio'][0]:g}-{draws['inertia_ratio'][1]:g}, "
-            f"M {draws['total_mass_kg'][0]:g}-{draws['total_mass_kg'][1]:g} kg, L0 "
-            f"{draws['leg_length_m'][0]:g}-{draws['leg_length_m'][1]:g} m; redrawn: "
-            + (", ".join(f"{k} x{v}" for k, v in draws["redrawn"].items()) or "none")
-        )
     for name, res in out["inputs"].items():
         typer.echo(
             f"wheel input {name}: {res['wheel']}; {res['fitted']} of {out['series']} series fitted "

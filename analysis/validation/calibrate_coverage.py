@@ -83,6 +83,7 @@ __all__ = [
     "AWAY_RANGES",
     "WalkedSeries",
     "draw_away",
+    "away_line",
     "draw_held",
     "gait_refusal",
     "run_calibrate_coverage",
@@ -498,6 +499,15 @@ def run_calibrate_coverage(
                 "F_c half-normal, sd 0.2 N", "F_c uniform in draws.guide_friction_n (N), not the half-normal"
             )
     return out
+
+
+def away_line(draws: dict[str, Any]) -> str:
+    """The text's line for the JSON's ``draws`` of a ``wheels="away"`` run (with its leading newline), else ""."""
+    if draws.get("wheels") != "away":
+        return ""
+    r, m, L = draws["inertia_ratio"], draws["total_mass_kg"], draws["leg_length_m"]
+    redrawn = ", ".join(f"{k} x{v}" for k, v in draws["redrawn"].items()) or "none"
+    return f"\nwheels away from Table 1: inertia ratio {r[0]:g}-{r[1]:g}, M {m[0]:g}-{m[1]:g} kg, L0 {L[0]:g}-{L[1]:g} m; redrawn: {redrawn}"
 
 
 def _inertia_ratio(w: Any) -> float:
