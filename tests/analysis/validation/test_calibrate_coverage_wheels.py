@@ -273,7 +273,7 @@ def test_the_text_names_the_away_draw_and_its_redraws(monkeypatch: pytest.Monkey
 def test_one_series_away_from_table1_with_friction_walks_imports_and_covers() -> None:
     """One series on the independent truth, drawn away from Table 1 with F_c 0-0.6 N, the truth input (its held
     values +- the stated sd): it walks, imports and fits with the held part carried, and that interval holds c and
-    k (about 2 min CPU)."""
+    k (209 s wall at load 7-11, 2026-11-28)."""
     from rimless.analysis import calibrate
     from rimless.analysis.validation.calibrate_coverage import run_calibrate_coverage
 
