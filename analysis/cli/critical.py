@@ -793,8 +793,20 @@ def coverage_cmd(
         typer.Option(
             "--friction-n",
             metavar="LO,HI",
-            help="With --of calibrate --inputs exact: draw each truth's guide friction F_c uniform in LO-HI N "
-            "(default: none, F_c = 0); the exact input states it.",
+            help="With --of calibrate: draw each truth's guide friction F_c uniform in LO-HI N (default: none, "
+            "F_c = 0, or drawn half-normal with table1/truth); exact states it, truth states it +- 0.2 N, table1 "
+            "states 0 +- 0.2 N.",
+            show_default=False,
+        ),
+    ] = None,
+    wheels: Annotated[
+        str | None,
+        typer.Option(
+            "--wheels",
+            metavar="table1|away",
+            help="With --of calibrate: the truths' held parameters: table1 (default; Table 1's, or drawn from its "
+            "stated sd with --inputs table1/truth) or away (m_H, m, L0 and the inertia ratio 0.3-3 drawn away "
+            "from Table 1, redrawn where the truth has no gait; --inputs exact and truth only).",
             show_default=False,
         ),
     ] = None,
@@ -812,6 +824,8 @@ def coverage_cmd(
     --of calibrate: `trials calibrate --fit c,k` per parameter, on ER wheels with k and c drawn, through the importer.
 
     --of calibrate --inputs: exact (default), the held parameters the truth's; table1, drawn from Table 1's sd.
+
+    --of calibrate --wheels away: the truths' masses, L0 and inertia ratio (0.3-3) drawn away from Table 1.
     """
     from rimless.progress import progress_bar
 
@@ -822,12 +836,12 @@ def coverage_cmd(
     method = of.strip().lower()
     if method not in ("critical-slope", "calibrate"):
         raise ParameterError(f"--of must be critical-slope or calibrate, got {of!r}")
-    if method != "calibrate" and (truth_model is not None or friction_n is not None):
-        raise ParameterError("--truth-model and --friction-n go with --of calibrate")
+    if method != "calibrate" and (truth_model is not None or friction_n is not None or wheels is not None):
+        raise ParameterError("--truth-model, --friction-n and --wheels go with --of calibrate")
     if method == "calibrate":
         if mode != "importer":
             raise ParameterError("--of calibrate runs through the importer only (not with --truth pendulum)")
-        _calibrate_coverage(n, seed, json_out, inputs, truth_model, friction_n)
+        _calibrate_coverage(n, seed, json_out, inputs, truth_model, friction_n, wheels)
         return
     if mode == "pendulum":
         from rimless.analysis.validation.coverage import run_coverage
@@ -925,24 +939,24 @@ def _calibrate_coverage(
     inputs: str | None = None,
     truth_model: str | None = None,
     friction_n: str | None = None,
+    wheels: str | None = None,
 ) -> None:
     """``trials coverage --of calibrate``: run the study, print its per-parameter coverage per wheel input."""
     from rimless.analysis import calibrate
-    from rimless.analysis.validation.calibrate_coverage import INPUTS, TRUTHS, run_calibrate_coverage
+    from rimless.analysis.validation.calibrate_coverage import INPUTS, TRUTHS, WHEELS, away_line, run_calibrate_coverage
     from rimless.progress import progress_bar
 
     chosen = parse_list(inputs or "exact", "--inputs", str, choices=INPUTS, unique=True, lower=True)
-    model = (truth_model or TRUTHS[0]).strip().lower()
-    if model not in TRUTHS:
-        raise ParameterError(f"--truth-model must be {' or '.join(TRUTHS)}, got {truth_model!r}")
+    model = parse_list(truth_model or TRUTHS[0], "--truth-model", choices=TRUTHS, count=1, lower=True)[0]
     fr: tuple[float, float] | None = None
     if friction_n is not None:
         lo_hi = parse_list(friction_n, "--friction-n", float, count=2)
         if len(lo_hi) != 2 or not (0.0 <= lo_hi[0] <= lo_hi[1] <= 5.0):
             raise ParameterError(f"--friction-n takes LO,HI with 0 <= LO <= HI <= 5 N, got {friction_n!r}")
-        if any(i != "exact" for i in chosen):
-            raise ParameterError("--friction-n goes with --inputs exact (table1 and truth draw F_c themselves)")
         fr = (lo_hi[0], lo_hi[1])
+    drawn = parse_list(wheels or WHEELS[0], "--wheels", choices=WHEELS, count=1, lower=True)[0]
+    if drawn == "away" and "table1" in chosen:
+        raise ParameterError("--wheels away goes with --inputs exact,truth (table1 states Table 1's wheel)")
     with progress_bar("coverage", total=n, json_out=json_out) as bar:
         out = run_calibrate_coverage(
             n,
@@ -951,6 +965,7 @@ def _calibrate_coverage(
             inputs=chosen,
             truth=model,
             friction_n=fr,
+            wheels=drawn,
             progress=lambda i, what: bar.update(completed=i, description=f"series {min(i + 1, n)}/{n}: {what}"),
         )
     if json_out:
@@ -959,7 +974,7 @@ def _calibrate_coverage(
     typer.echo(f"truth: {out['truth_model']}")
     typer.echo(
         f"{out['series']} series, {out['imports']['trials']} trials, {out['imports']['refused']} refused; "
-        f"{out['wall_s']:.0f} s wall, {out['cpu_s']:.0f} s CPU"
+        f"{out['wall_s']:.0f} s wall, {out['cpu_s']:.0f} s CPU" + away_line(out.get("draws") or {})
     )
     for name, res in out["inputs"].items():
         typer.echo(

@@ -20,7 +20,17 @@ again told the fitted k, `rimless.analysis.api.slope_passes`; ``slope_passes`` c
   values (F_c +- 0.2 N): the held part is carried but the held values are right (it should over-cover).
 
 With ``table1`` or ``truth`` among the inputs every series' truth has drawn held parameters (from their own
-random stream, so k, c, the labs and the slopes are those of the ``exact`` run of the same seed). Reported per
+random stream, so k, c, the labs and the slopes are those of the ``exact`` run of the same seed).
+
+``wheels`` (`WHEELS`) says where the truth's held parameters come from: ``table1`` (default) as above (Table 1's,
+or drawn from its stated uncertainties); ``away`` (`draw_away`, with the ``exact`` and ``truth`` inputs only)
+draws each truth away from Table 1 as `importer_coverage.draw_wheel` draws the rigid wheel: total mass
+M = m_H + 8 m U(1.6, 3.0) kg, leg (foot) mass m U(0.02, 0.05) kg (Table 1: 0.0378), L0 U(0.21, 0.26) m and the
+inertia ratio r = (I_c + 8 m L0^2) / (M L0^2) log-uniform in 0.3-3 (`stance_inertia.inertia_ratio`'s; Table 1:
+0.43), so I_c = r M L0^2 - 8 m L0^2 > 0. A drawn wheel is kept only if the truth model finds its period-1 gait
+at both ends of the slopes walked (2 and 3.5 deg, `gait_refusal`); else it is redrawn, k, c (and F_c) with it,
+the reason counted (the JSON's ``draws.redrawn``; the kept wheels are the walkable part of the ranges). ``friction_n`` (lo, hi) N draws every truth's F_c U(lo, hi) with any input and
+wheels (``table1`` then states 0 +- 0.2 N, ``truth`` the drawn value +- 0.2 N, ``exact`` it exactly). Reported per
 input and parameter: how often the 95 % interval holds the truth (Wilson interval) with the held part
 (``ci95_with_held``, where it was computed) and with the data's alone (``ci95``), the median relative error, the
 rms of (estimate - truth) / se (``rms_z``: 1 for an honest se; with ``se_with_held``, about ``value_with_held``,
@@ -69,8 +79,13 @@ __all__ = [
     "TRUTHS",
     "INPUTS",
     "HELD_DRAWN",
+    "WHEELS",
+    "AWAY_RANGES",
     "WalkedSeries",
+    "draw_away",
+    "away_line",
     "draw_held",
+    "gait_refusal",
     "run_calibrate_coverage",
     "walk_and_import",
 ]
@@ -94,6 +109,21 @@ TRUTH_MEANING = {
 }
 #: the stream of the guide-friction draws (``friction_n``) beside the seed
 FRICTION_STREAM = 32
+#: where the truths' held parameters come from (``wheels``; see the module doc); ``table1`` is the default
+WHEELS = ("table1", "away")
+#: the ``away`` draw's ranges (`draw_away`): M = m_H + 8 m (kg) and m uniform, L0 (m) uniform, r log-uniform
+AWAY_RANGES = {
+    "total_mass_kg": (1.6, 3.0),
+    "leg_mass_kg": (0.02, 0.05),
+    "leg_length_m": (0.21, 0.26),
+    "inertia_ratio": (0.3, 3.0),
+}
+#: the stream of the ``away`` draws (and their redraws) beside the seed
+AWAY_STREAM = 33
+#: the slopes the walks are drawn on (deg, uniform); the ``away`` draw's gait check is made at both ends
+SLOPES_DEG = (2.0, 3.5)
+#: the ``away`` draw's tries before it gives up (a ValueError naming the reasons)
+AWAY_TRIES = 50
 
 
 @dataclass
@@ -142,7 +172,7 @@ def walk_and_import(
         raise ValueError(f"model must be one of {', '.join(TRUTHS)}, got {model!r}")
     walker = er_truth_walk if model == "independent" else er_walk
     out = WalkedSeries()
-    for j, slope in enumerate(np.sort(rng.uniform(2.0, 3.5, trials))):
+    for j, slope in enumerate(np.sort(rng.uniform(*SLOPES_DEG, trials))):
         try:
             wk = walker(truth, float(slope), 0.0, steps, rng, release=float(rng.uniform(0.95, 1.08)))
         except (StepFailure, TruthFailure) as err:
@@ -176,6 +206,70 @@ def draw_held(rng: np.random.Generator) -> dict[str, float]:
         d = float(rng.normal(0.0, default_sd(name, v)))
         out[name] = abs(d) if name == "guide_friction_n" else v + d
     return out
+
+
+def gait_refusal(wheel: Any, model: str = "independent") -> str | None:
+    """Why the truth model ``model`` (`TRUTHS`) cannot walk ``wheel`` (WheelParams) on the slopes drawn: the
+    first end of `SLOPES_DEG` at which it finds no period-1 gait, as ``"no gait at 2 deg: <reason>"``; else None.
+    The independent truth's own gait search (`er_truth.fixed_point`) or the simulator's (`solve_fixed_point`)."""
+    from rimless.errors import RimlessError
+
+    for slope in SLOPES_DEG:
+        try:
+            if model == "independent":
+                from rimless.analysis.validation.er_truth import ERWheel, TruthFailure, fixed_point
+
+                try:
+                    fixed_point(ERWheel.of(wheel, slope_rad=math.radians(slope)), rtol=1e-9)
+                except TruthFailure as err:
+                    return f"no gait at {slope:g} deg: {err.reason}"
+            else:
+                from rimless.sim.step.backend import make_map
+                from rimless.sim.step.poincare import default_guess, solve_fixed_point
+
+                p = wheel.replace(slope_rad=math.radians(slope))
+                solve_fixed_point(make_map(p, "er", rtol=1e-9), default_guess(p, "er"), record=False)
+        except (RimlessError, np.linalg.LinAlgError) as err:
+            return f"no gait at {slope:g} deg: {type(err).__name__}"
+    return None
+
+
+def draw_away(
+    rng: np.random.Generator,
+    refusal: Callable[[dict[str, float]], str | None] | None = None,
+    *,
+    friction_n: tuple[float, float] | None = None,
+) -> tuple[dict[str, float], dict[str, int]]:
+    """The truth's held parameters m_H, m, I_c, L0 (kg, kg, kg m^2, m) drawn away from Table 1 (`AWAY_RANGES`:
+    M = m_H + 8 m and m uniform, L0 uniform, r = (I_c + 8 m L0^2) / (M L0^2) log-uniform), redrawn while
+    ``refusal(held)`` gives a reason (`gait_refusal` on the series' wheel). A redraw draws k and c too (`K_RANGE`,
+    `C_RANGE`, uniform) and, with ``friction_n`` (lo, hi) N, F_c U(lo, hi): a k, c, F_c without a gait at the
+    shallowest slope for any masses is not kept (the first try keeps the series' own k, c, F_c). Returns (held,
+    with the redrawn k, c, F_c where redrawn; the redraws' reasons counted); raises ValueError after `AWAY_TRIES`
+    refusals."""
+    redrawn: dict[str, int] = {}
+    again: dict[str, float] = {}
+    for _ in range(AWAY_TRIES):
+        mass = float(rng.uniform(*AWAY_RANGES["total_mass_kg"]))
+        leg_mass = float(rng.uniform(*AWAY_RANGES["leg_mass_kg"]))
+        length = float(rng.uniform(*AWAY_RANGES["leg_length_m"]))
+        lo, hi = AWAY_RANGES["inertia_ratio"]
+        ratio = float(np.exp(rng.uniform(math.log(lo), math.log(hi))))
+        held = {
+            "hub_mass_kg": mass - 8.0 * leg_mass,
+            "leg_mass_kg": leg_mass,
+            "inertia_kg_m2": (ratio * mass - 8.0 * leg_mass) * length**2,
+            "leg_length_m": length,
+            **again,
+        }
+        why = refusal(held) if refusal else None
+        if why is None:
+            return held, redrawn
+        redrawn[why] = redrawn.get(why, 0) + 1
+        again = {"stiffness_n_per_m": float(rng.uniform(*K_RANGE)), "damping_ns_per_m": float(rng.uniform(*C_RANGE))}
+        if friction_n is not None:
+            again["guide_friction_n"] = float(rng.uniform(*friction_n))
+    raise ValueError(f"no wheel drawn away from Table 1 walks in {AWAY_TRIES} tries: {redrawn}")
 
 
 def _user_wheel(name: str, truth: Any) -> Any:
@@ -276,14 +370,18 @@ def run_calibrate_coverage(
     progress: Callable[[int, str], None] | None = None,
     truth: str = "independent",
     friction_n: tuple[float, float] | None = None,
+    wheels: str = "table1",
 ) -> dict[str, Any]:
     """``n_series`` series; ``calibrate(trials, fit=..., wheel=..., names=...)`` is the fit (the public
     `rimless.analysis.calibrate`), called once per series and wheel input of ``inputs`` (`INPUTS`), on walks of
     the truth model ``truth`` (`TRUTHS`; for each the same seed draws the same first wheel, lab and slopes, but
     the walks' releases and recordings draw from the same stream, so a recording one frame longer under one truth
     moves every later draw: the two truths' series are paired only up to there). With
-    ``friction_n`` (lo, hi) N each truth's guide friction is drawn U(lo, hi) from its own stream (unless the held
-    parameters are drawn: their F_c then); the ``exact`` input states it exactly. Returns the JSON-ready summary:
+    ``friction_n`` (lo, hi) N each truth's guide friction is drawn U(lo, hi) from its own stream (with any input:
+    it replaces the drawn held parameters' half-normal F_c); the ``exact`` input states it exactly, ``truth`` with
+    its default sd, ``table1`` as 0 +- 0.2 N. ``wheels`` (`WHEELS`): ``away`` draws each truth's m_H, m, I_c, L0
+    away from Table 1 (`draw_away`, from its own stream, redrawn while `gait_refusal` gives a reason; the
+    ``exact`` and ``truth`` inputs only). Returns the JSON-ready summary:
     the first input's figures at the top level (the keys as before), each input's under ``inputs``, and
     ``per_series``."""
     from rimless.sim.model.params import WheelParams
@@ -298,20 +396,39 @@ def run_calibrate_coverage(
         raise ValueError(f"truth must be one of {', '.join(TRUTHS)}, got {truth!r}")
     if friction_n is not None and not (0.0 <= friction_n[0] <= friction_n[1] and math.isfinite(friction_n[1])):
         raise ValueError(f"friction_n must be a range 0 <= lo <= hi (N), got {friction_n}")
-    drawn = any(i != "exact" for i in inputs)
+    if wheels not in WHEELS:
+        raise ValueError(f"wheels must be one of {', '.join(WHEELS)}, got {wheels!r}")
+    if wheels == "away" and "table1" in inputs:
+        raise ValueError("wheels away goes with the exact and truth inputs (table1 states Table 1's wheel)")
+    away = wheels == "away"
+    drawn = any(i != "exact" for i in inputs) and not away
     rng = np.random.default_rng(seed)
     held_rng = np.random.default_rng((seed, HELD_STREAM))
     friction_rng = np.random.default_rng((seed, FRICTION_STREAM))
+    away_rng = np.random.default_rng((seed, AWAY_STREAM))
+    redrawn_all: dict[str, int] = {}
     cpu, wall = time.process_time(), time.perf_counter()
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix=f"rimless-calcov-{os.getpid()}-") as tmp:
         for i in range(n_series):
             held = draw_held(held_rng) if drawn else {}
-            if friction_n is not None and not drawn:
+            if friction_n is not None:
                 held["guide_friction_n"] = float(friction_rng.uniform(*friction_n))
             wheel = WheelParams(
                 stiffness_n_per_m=float(rng.uniform(*K_RANGE)), damping_ns_per_m=float(rng.uniform(*C_RANGE))
             ).replace(**held)
+            redrawn: dict[str, int] = {}
+            if away:
+                if progress:
+                    progress(i, "drawing a wheel away from Table 1")
+
+                def refusal(h: dict[str, float], base: Any = wheel) -> str | None:
+                    return gait_refusal(base.replace(**h), truth)
+
+                away_held, redrawn = draw_away(away_rng, refusal, friction_n=friction_n)
+                wheel = wheel.replace(**away_held)
+                for why, k in redrawn.items():
+                    redrawn_all[why] = redrawn_all.get(why, 0) + k
             lab = draw_lab(rng)
             if progress:
                 progress(i, "walking and writing")
@@ -326,6 +443,8 @@ def run_calibrate_coverage(
             row: dict[str, Any] = {
                 "truth": {n: getattr(wheel, FIELDS[n]) for n in fit},
                 "truth_held": {n: float(getattr(wheel, n)) for n in HELD_DRAWN},
+                "truth_inertia_ratio": _inertia_ratio(wheel),
+                "redrawn": redrawn,
                 "lab": {"up": lab.up, "heading_deg": lab.heading_deg, "markers": lab.markers},
                 "trials": len(series.paths),
                 "refused": series.refused,
@@ -343,14 +462,58 @@ def run_calibrate_coverage(
             if progress:
                 progress(i + 1, "done")
     out = _summary(
-        rows, tuple(fit), tuple(inputs), seed, trials, steps, time.process_time() - cpu, time.perf_counter() - wall
+        rows,
+        tuple(fit),
+        tuple(inputs),
+        seed,
+        trials,
+        steps,
+        time.process_time() - cpu,
+        time.perf_counter() - wall,
+        drawn=drawn,
     )
     out["truth"] = truth
     out["truth_model"] = TRUTH_MEANING[truth] + ": " + out["truth_model"]
-    if friction_n is not None and not drawn:
-        out["draws"]["guide_friction_n"] = list(friction_n)
-        out["draws"]["held"] = "Table 1's, exact; F_c drawn uniform in draws.guide_friction_n (N), stated exactly"
+    draws = out["draws"]
+    draws["wheels"] = wheels
+    fc = "F_c drawn uniform in draws.guide_friction_n (N)" if friction_n is not None else "F_c 0"
+    if away:
+        draws.update({k: list(v) for k, v in AWAY_RANGES.items()})
+        draws["held"] = (
+            "away from Table 1 (draw_away): M = m_H + 8 m and m uniform in draws.total_mass_kg, draws.leg_mass_kg; "
+            "L0 uniform in draws.leg_length_m; r = (I_c + 8 m L0^2) / (M L0^2) log-uniform in draws.inertia_ratio; "
+            f"g exact; {fc}; a wheel without a gait at {SLOPES_DEG[0]:g} or {SLOPES_DEG[1]:g} deg redrawn, k, c "
+            "(and F_c) with it (draws.redrawn)"
+        )
+        draws["redrawn"] = redrawn_all
+        out["truth_model"] = out["truth_model"].replace(
+            "; the rest Table 1's",
+            "; m_H, m, I_c, L0 drawn away from Table 1" + ", F_c drawn" * (friction_n is not None),
+        )
+    if friction_n is not None:
+        draws["guide_friction_n"] = list(friction_n)
+        if not drawn and not away:
+            draws["held"] = "Table 1's, exact; F_c drawn uniform in draws.guide_friction_n (N), stated exactly"
+        elif drawn:
+            draws["held"] = draws["held"].replace(
+                "F_c half-normal, sd 0.2 N", "F_c uniform in draws.guide_friction_n (N), not the half-normal"
+            )
     return out
+
+
+def away_line(draws: dict[str, Any]) -> str:
+    """The text's line for the JSON's ``draws`` of a ``wheels="away"`` run (with its leading newline), else ""."""
+    if draws.get("wheels") != "away":
+        return ""
+    r, m, L = draws["inertia_ratio"], draws["total_mass_kg"], draws["leg_length_m"]
+    redrawn = ", ".join(f"{k} x{v}" for k, v in draws["redrawn"].items()) or "none"
+    return f"\nwheels away from Table 1: inertia ratio {r[0]:g}-{r[1]:g}, M {m[0]:g}-{m[1]:g} kg, L0 {L[0]:g}-{L[1]:g} m; redrawn: {redrawn}"
+
+
+def _inertia_ratio(w: Any) -> float:
+    """r = (I_c + 8 m L0^2) / ((m_H + 8 m) L0^2) of a WheelParams (`stance_inertia.inertia_ratio`'s, written here)."""
+    m8 = 8.0 * w.leg_mass_kg
+    return float((w.inertia_kg_m2 + m8 * w.leg_length_m**2) / ((w.hub_mass_kg + m8) * w.leg_length_m**2))
 
 
 def _rel(got: list[dict[str, Any]], truths: list[float], part: str) -> list[float]:
@@ -471,10 +634,11 @@ def _summary(
     steps: int,
     cpu_s: float,
     wall_s: float,
+    *,
+    drawn: bool,
 ) -> dict[str, Any]:
     per = {name: {"wheel": INPUT_MEANING[name], **_per_input(rows, name, fit)} for name in inputs}
     first = per[inputs[0]]
-    drawn = any(i != "exact" for i in inputs)
     return {
         "truth_model": "the ER wheel (k, c drawn"
         + ("; m_H, m, I_c, L0 and F_c drawn from Table 1's stated uncertainties" if drawn else "; the rest Table 1's")

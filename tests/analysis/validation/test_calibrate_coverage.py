@@ -181,13 +181,14 @@ def test_a_row_states_the_intervals_cut_at_the_bound_as_calibrate_prints_them() 
 
 def test_truth_model_and_friction_reach_the_study_from_the_cli(monkeypatch: pytest.MonkeyPatch) -> None:
     """`--truth-model` (default independent) and `--friction-n LO,HI` are passed through; bad values, or either
-    without --of calibrate, or --friction-n beside a drawn-held input, are refused with exit 2."""
+    without --of calibrate, are refused with exit 2 (--friction-n with the table1 and truth inputs:
+    test_calibrate_coverage_wheels.py)."""
     import rimless.analysis.validation.calibrate_coverage as cc
     from rimless.cli import app
 
     seen: list[dict[str, object]] = []
 
-    def fake(n, seed, calibrate, *, inputs, progress, truth, friction_n):  # type: ignore[no-untyped-def]
+    def fake(n, seed, calibrate, *, inputs, progress, truth, friction_n, wheels):  # type: ignore[no-untyped-def]
         seen.append({"truth": truth, "friction_n": friction_n})
         return {"inputs": {}, "n": n}
 
@@ -206,7 +207,6 @@ def test_truth_model_and_friction_reach_the_study_from_the_cli(monkeypatch: pyte
         ["--friction-n", "0.6,0.1"],
         ["--friction-n", "0.1"],
         ["--friction-n", "nan,1"],
-        ["--friction-n", "0,0.6", "--inputs", "table1"],
     ):
         r = runner.invoke(app, [*base, *args])
         assert r.exit_code == 2, (args, r.output)
