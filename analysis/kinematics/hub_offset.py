@@ -248,8 +248,14 @@ def white_level(a: np.ndarray, res: np.ndarray, ang: np.ndarray, s2: float, harm
 
 def _exp_smooth(b: np.ndarray, frame: np.ndarray, rho: float) -> np.ndarray:
     """R b for the AR(1) correlation R_ij = rho^|frame_i - frame_j| (``b`` (n, k), ``frame`` (n,) increasing frame
-    indices): a forward and a backward exponential filter, O(n k)."""
+    indices): a forward and a backward exponential filter, O(n k) (`scipy.signal.lfilter` when the frames are evenly
+    spaced, else a loop over the frames)."""
     decay = rho ** np.diff(frame)
+    if decay.size and np.ptp(decay) <= 1e-12 * max(float(decay[0]), 1e-300):
+        from scipy.signal import lfilter
+
+        den = [1.0, -float(decay[0])]
+        return lfilter([1.0], den, b, axis=0) + lfilter([1.0], den, b[::-1], axis=0)[::-1] - b
     fwd = np.empty_like(b)
     bwd = np.empty_like(b)
     acc = b[0].copy()
