@@ -52,10 +52,10 @@ MAX_TRIMS = 5
 #: power (`near_turn_power`).
 SIDEBANDS_PER_TURN = (0.5, 1.5, 2.0, 2.5, 3.0)
 #: Slow (red) noise is taken as found when the residuals' mean power at the sidebands exceeds their white level by
-#: an F test at this false-alarm rate (`red_noise_level`); its AR(1) coefficient per frame is sought among these.
+#: an F test at this false-alarm rate (`red_noise_level`); its AR(1) coefficient per frame is sought among these
+#: (a grid: its likelihood's average over them, the log-likelihood divided by `RED_TEMPER` first, is taken).
 RED_FALSE_ALARM = 0.05
 RED_RHOS = (0.5, 0.7, 0.8, 0.9, 0.94, 0.97, 0.985, 0.993, 0.997)
-#: the likelihood over the AR(1) coefficients is tempered by this before averaging (RED_TEMPER)
 RED_TEMPER = 4.0
 #: Frequencies (cycles per turn) at which `red_noise_level` reads the slow noise's spectrum to fit its AR(1)
 #: coefficient: half-integers up to 6 (two below the step frequency of eight legs, whose bump leftovers leak), once
@@ -279,12 +279,14 @@ def red_noise_level(
     (ratio, rho, p, cov); (0.0, 0.0, p, zeros) when not found.
 
     The noise is modelled as white (variance w) plus AR(1) (variance r, correlation rho^|frame lag|): the residuals
-    ``res`` of the fit (design ``a``) are read along the sidebands of `SIDEBANDS_PER_TURN` (sin/cos of the wheel
+    ``res`` of the fit (design ``a``) are read along the sidebands of `RED_SHAPE_PER_TURN` (sin/cos of the wheel
     angle ``ang``, made orthogonal to ``a``: the power there is w + r tr(U^T R U) / k) and in bulk (``white`` x
     ``s2``, the residuals' variance less the bump model's leftovers: w + r tr(M R) / (n - p), M the residual
     projector). Slow noise is taken as found when the sidebands' mean power exceeds the bulk's by an F test at
     `RED_FALSE_ALARM`; then for each rho of `RED_RHOS` w and r follow from the bulk and the sidebands' mean, the
-    rho whose sideband powers fit best is kept, and the noise's variance along the offset's columns (the rows of
+    rhos are averaged by the sidebands' likelihood (each power model x chi^2_k / k; tempered by `RED_TEMPER`: a
+    turn or two does not pin rho, and the best fit alone jumps between far rhos), and the noise's variance along
+    the offset's columns (the rows of
     a^+ for its two components, which over a turn or two reach lower frequencies than any sideband left
     orthogonal to the design) is w + r tr(W R W^T) / tr(W W^T); the covariance is W (w I + r R) W^T (a sandwich:
     the correlation shapes it too). On white noise the test keeps the white level."""
@@ -427,7 +429,8 @@ def fit_offset(
         c2 = np.eye(2) * HUB_PRIOR_SD_M**2
     c2 = 0.5 * (c2 + c2.T)
     if noise_model.startswith("white + AR(1)"):  # the sandwich under the fitted noise, the prior's share kept
-        c2 = np.linalg.inv(np.linalg.inv(red_cov) + np.eye(2) / HUB_PRIOR_SD_M**2)
+        c2 = red_cov @ np.linalg.pinv(np.eye(2) + red_cov / HUB_PRIOR_SD_M**2)  # (C^-1 + P^-1)^-1
+        c2 = 0.5 * (c2 + c2.T)
     speed = _step_speed(frame, ang, alpha_rad)[use]
     misfit, misfit_p = misfit_covariance(a, t[:, 2], noise2, speed, s[use])
     c2 = c2 + misfit
