@@ -4,8 +4,11 @@ A body point off the hub by e rises and falls by e once a turn; the hub only by 
 finds the offset in the body (object or marker reference) frame from the tracked point's path and the body's
 rotations on frames already chosen, with a covariance whose noise is the noise's level at once a turn
 (`noise_level`), not the residuals' overall variance, which also holds what the bump model leaves at the steps,
-plus a misfit part when an F test finds slow structure in the residuals (`misfit_covariance`). The covariance is
-a 2 x 2 in the wheel plane (``cov_m2``, its axes ``sd_axes_m``); ``sd_m`` is its worst axis.
+plus a misfit part when an F test finds slow structure in the residuals (`misfit_covariance`). When the residuals'
+power beside once a turn exceeds their white level by a test, the noise is modelled as white + AR(1) and the
+covariance is its sandwich (`red_noise_level`: slow, correlated marker noise, whose power below once a turn the
+offset soaks up); ``noise_model`` says which noise was assumed. The covariance is a 2 x 2 in the wheel plane
+(``cov_m2``, its axes ``sd_axes_m``); ``sd_m`` is its worst axis.
 `rimless.analysis.kinematics.hub.fit_hub_offset` (which chooses the frames and the wheel angle) is the public
 entry; the names here are re-exported there.
 
@@ -26,6 +29,7 @@ __all__ = [
     "misfit_covariance",
     "near_turn_power",
     "noise_level",
+    "red_noise_level",
     "white_level",
 ]
 
@@ -47,6 +51,16 @@ MAX_TRIMS = 5
 #: Frequencies (cycles per turn) beside the offset's once a turn at which the offset fit measures the residuals'
 #: power (`near_turn_power`).
 SIDEBANDS_PER_TURN = (0.5, 1.5, 2.0, 2.5, 3.0)
+#: Slow (red) noise is taken as found when the residuals' mean power at the sidebands exceeds their white level by
+#: an F test at this false-alarm rate (`red_noise_level`); its AR(1) coefficient per frame is sought among these
+#: (a grid: its likelihood's average over them, the log-likelihood divided by `RED_TEMPER` first, is taken).
+RED_FALSE_ALARM = 0.05
+RED_RHOS = (0.5, 0.7, 0.8, 0.9, 0.94, 0.97, 0.985, 0.993, 0.997)
+RED_TEMPER = 4.0
+#: Frequencies (cycles per turn) at which `red_noise_level` reads the slow noise's spectrum to fit its AR(1)
+#: coefficient: half-integers up to 6 (two below the step frequency of eight legs, whose bump leftovers leak), once
+#: a turn left out.
+RED_SHAPE_PER_TURN = tuple(0.5 * i for i in range(1, 13) if i != 2)
 #: `white_level`'s richer bump model has a Fourier term per this many frames of a step.
 RICH_FRAMES_PER_TERM = 3
 #: What the height model leaves out when the wheel's speed changes (a compliant leg compresses with the speed):
@@ -87,6 +101,9 @@ class HubOffsetFit:
     noise_power : the noise's variance at once a turn over the residuals' variance (`noise_level`), the factor on
         the least-squares covariance.
     misfit_p_value : the p-value of the misfit's test (`misfit_covariance`; 1.0 when it cannot be made).
+    noise_model : the noise the covariance assumed, in words: ``white`` (the residuals' level less the bump model's
+        leftovers, `white_level`), ``white, raised to the power beside once a turn`` (`near_turn_power`), or
+        ``white + AR(1) of R per frame`` (slow noise found by `red_noise_level`; the covariance its sandwich).
     """
 
     offset_m: np.ndarray
@@ -100,6 +117,7 @@ class HubOffsetFit:
     misfit_sd_m: float = 0.0
     noise_power: float = 1.0
     misfit_p_value: float = 1.0
+    noise_model: str = "white"
 
     @property
     def sd_axes_m(self) -> tuple[float, float]:
@@ -228,6 +246,97 @@ def white_level(a: np.ndarray, res: np.ndarray, ang: np.ndarray, s2: float, harm
     return min(max(float(res @ res - p @ p), 0.0) / dof / max(s2, 1e-300), 1.0)
 
 
+def _exp_smooth(b: np.ndarray, frame: np.ndarray, rho: float) -> np.ndarray:
+    """R b for the AR(1) correlation R_ij = rho^|frame_i - frame_j| (``b`` (n, k), ``frame`` (n,) increasing frame
+    indices): a forward and a backward exponential filter, O(n k) (`scipy.signal.lfilter` when the frames are evenly
+    spaced, else a loop over the frames)."""
+    decay = rho ** np.diff(frame)
+    if decay.size and np.ptp(decay) <= 1e-12 * max(float(decay[0]), 1e-300):
+        from scipy.signal import lfilter
+
+        den = [1.0, -float(decay[0])]
+        return lfilter([1.0], den, b, axis=0) + lfilter([1.0], den, b[::-1], axis=0)[::-1] - b
+    fwd = np.empty_like(b)
+    bwd = np.empty_like(b)
+    acc = b[0].copy()
+    fwd[0] = acc
+    for i in range(1, b.shape[0]):
+        acc = b[i] + decay[i - 1] * acc
+        fwd[i] = acc
+    acc = b[-1].copy()
+    bwd[-1] = acc
+    for i in range(b.shape[0] - 2, -1, -1):
+        acc = b[i] + decay[i] * acc
+        bwd[i] = acc
+    return fwd + bwd - b
+
+
+def red_noise_level(
+    a: np.ndarray, res: np.ndarray, ang: np.ndarray, frame: np.ndarray, s2: float, white: float
+) -> tuple[float, float, float, np.ndarray]:
+    """The noise's variance along the offset's own columns over ``s2`` when the residuals show slow (red) noise, the
+    AR(1) coefficient per frame fitted, the test's p-value and the offset's covariance (2, 2) under that noise, m^2:
+    (ratio, rho, p, cov); (0.0, 0.0, p, zeros) when not found.
+
+    The noise is modelled as white (variance w) plus AR(1) (variance r, correlation rho^|frame lag|): the residuals
+    ``res`` of the fit (design ``a``) are read along the sidebands of `RED_SHAPE_PER_TURN` (sin/cos of the wheel
+    angle ``ang``, made orthogonal to ``a``: the power there is w + r tr(U^T R U) / k) and in bulk (``white`` x
+    ``s2``, the residuals' variance less the bump model's leftovers: w + r tr(M R) / (n - p), M the residual
+    projector). Slow noise is taken as found when the sidebands' mean power exceeds the bulk's by an F test at
+    `RED_FALSE_ALARM`; then for each rho of `RED_RHOS` w and r follow from the bulk and the sidebands' mean, the
+    rhos are averaged by the sidebands' likelihood (each power model x chi^2_k / k; tempered by `RED_TEMPER`: a
+    turn or two does not pin rho, and the best fit alone jumps between far rhos), and the noise's variance along
+    the offset's columns (the rows of
+    a^+ for its two components, which over a turn or two reach lower frequencies than any sideband left
+    orthogonal to the design) is w + r tr(W R W^T) / tr(W W^T); the covariance is W (w I + r R) W^T (a sandwich:
+    the correlation shapes it too). On white noise the test keeps the white level."""
+    from scipy.stats import f as f_dist
+
+    q, _ = np.linalg.qr(a)
+    turn = ang - ang.mean()
+    bases, powers = [], []
+    for f in RED_SHAPE_PER_TURN:
+        x = np.column_stack([np.cos(f * turn), np.sin(f * turn)])
+        x -= q @ (q.T @ x)
+        u, sv, _ = np.linalg.svd(x, full_matrices=False)
+        u = u[:, sv > 1e-3 * np.sqrt(ang.size)]
+        if u.shape[1]:
+            bases.append(u)
+            powers.append(float(np.sum((u.T @ res) ** 2)) / u.shape[1])
+    k = sum(u.shape[1] for u in bases)
+    n, p_cols = a.shape
+    bulk = white * s2
+    none = np.zeros((2, 2))
+    if not bases or n - p_cols < 10 or bulk <= 0.0:
+        return 0.0, 0.0, 1.0, none
+    mean_power = float(np.dot(powers, [u.shape[1] for u in bases])) / k
+    p_value = float(f_dist.sf(mean_power / bulk, k, n - p_cols))
+    if p_value >= RED_FALSE_ALARM:
+        return 0.0, 0.0, p_value, none
+    w_rows = np.linalg.pinv(a)[:2].T  # (n, 2)
+    dofs = np.array([u.shape[1] for u in bases], float)
+    fits = []  # per rho: -log likelihood of the sideband powers, rho, the covariance
+    for rho in RED_RHOS:
+        c_bulk = (n - float(np.sum(q * _exp_smooth(q, frame, rho)))) / (n - p_cols)
+        c_sb = np.array([float(np.sum(u * _exp_smooth(u, frame, rho))) / u.shape[1] for u in bases])
+        c_mean = float(np.dot(c_sb, dofs)) / k
+        if c_mean <= c_bulk * (1.0 + 1e-9):
+            continue
+        r = (mean_power - bulk) / (c_mean - c_bulk)
+        w = max(bulk - r * c_bulk, 0.0)
+        model = np.maximum(w + r * c_sb, 1e-300)  # each sideband's power is model x chi^2_k / k
+        cov = w * w_rows.T @ w_rows + r * w_rows.T @ _exp_smooth(w_rows, frame, rho)
+        fits.append((0.5 * float(np.dot(dofs, np.log(model) + np.asarray(powers) / model)), rho, 0.5 * (cov + cov.T)))
+    if not fits:
+        return 0.0, 0.0, p_value, none
+    nll = np.array([f[0] for f in fits])
+    weight = np.exp(-(nll - nll.min()) / RED_TEMPER)
+    weight /= weight.sum()  # the rhos averaged by their likelihood (a flat prior on the grid)
+    cov = sum(wt * f[2] for wt, f in zip(weight, fits))
+    rho = float(np.dot(weight, [f[1] for f in fits]))
+    return float(np.trace(cov)) / float(np.sum(w_rows**2)) / s2, rho, p_value, cov
+
+
 def noise_level(a: np.ndarray, res: np.ndarray, ang: np.ndarray, s2: float, harmonics: int, alpha_rad: float) -> float:
     """The noise's variance at the offset's once a turn over the residuals' variance ``s2``: the white level
     (`white_level`), or the residuals' power beside once a turn (`near_turn_power`) where that is larger (a slow
@@ -303,8 +412,14 @@ def fit_offset(
     res = a @ sol + t[:, 2]
     dof = max(a.shape[0] - a.shape[1], 1)
     s2 = max(float(res @ res) / dof, 1e-18)
-    power = noise_level(a, res, ang[use], s2, n_harm, alpha_rad)
-    noise2 = max(s2 * power, 1e-18)  # the noise's variance at once a turn
+    white = white_level(a, res, ang[use], s2, n_harm, alpha_rad)
+    power = max(white, near_turn_power(a, res, ang[use], s2))  # `noise_level`
+    red, rho, _, red_cov = red_noise_level(a, res, ang[use], frame[use], s2, white)
+    noise_model = "white" if power <= white else "white, raised to the power beside once a turn"
+    if red > power:
+        power = red
+        noise_model = f"white + AR(1) of {rho:.3f} per frame"
+    noise2 = max(s2 * power, 1e-18)  # the noise's variance along the offset's columns
     info = a.T @ a / noise2
     info[0, 0] += 1.0 / HUB_PRIOR_SD_M**2
     info[1, 1] += 1.0 / HUB_PRIOR_SD_M**2
@@ -313,6 +428,9 @@ def fit_offset(
     except np.linalg.LinAlgError:
         c2 = np.eye(2) * HUB_PRIOR_SD_M**2
     c2 = 0.5 * (c2 + c2.T)
+    if noise_model.startswith("white + AR(1)"):  # the sandwich under the fitted noise, the prior's share kept
+        c2 = red_cov @ np.linalg.pinv(np.eye(2) + red_cov / HUB_PRIOR_SD_M**2)  # (C^-1 + P^-1)^-1
+        c2 = 0.5 * (c2 + c2.T)
     speed = _step_speed(frame, ang, alpha_rad)[use]
     misfit, misfit_p = misfit_covariance(a, t[:, 2], noise2, speed, s[use])
     c2 = c2 + misfit
@@ -330,6 +448,7 @@ def fit_offset(
         float(np.sqrt(max(float(np.trace(misfit)), 0.0) / 2.0)),
         power,
         misfit_p,
+        noise_model,
     )
 
 
@@ -345,5 +464,5 @@ def describe_offset_fit(fit: HubOffsetFit) -> str:
     return (
         f"[{d[0]:.1f}, {d[1]:.1f}, {d[2]:.1f}] mm (centre of rotation fitted on the walking window from the height, "
         f"standard error {fit.sd_m * 1e3:.3f} mm{misfit}, the noise near once a turn {fit.noise_power:.2f} x the "
-        f"residuals' variance, residual {fit.residual_m * 1e3:.2f} mm{stop})"
+        f"residuals' variance, noise model {fit.noise_model}, residual {fit.residual_m * 1e3:.2f} mm{stop})"
     )

@@ -108,6 +108,7 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
         "step_periods_s": [],
         "hub_offset_mm": None,
         "hub_offset_sd_mm": None,
+        "hub_offset_sd_axes_mm": None,
         "warnings": [],
         "errors": [],
         "trial": None,
@@ -138,6 +139,9 @@ def import_row(path: Path, trial: Any | None, error: Exception | None) -> dict[s
         step_periods_s=trial.step_period_s.tolist(),
         hub_offset_mm=None if m.hub_offset_m is None else [round(v * 1e3, 3) for v in m.hub_offset_m],
         hub_offset_sd_mm=None if m.hub_offset_sd_m is None else round(m.hub_offset_sd_m * 1e3, 4),
+        hub_offset_sd_axes_mm=None
+        if m.hub_offset_sd_axes_m is None
+        else [round(v * 1e3, 4) for v in m.hub_offset_sd_axes_m],
         warnings=list(m.warnings) + ([f"steps not detected: {m.step_refused}"] if m.step_refused else []),
         slope_source=m.slope_source,
         slope_ci_deg=slope_ci_deg(m.slope_ci_rad),

@@ -24,14 +24,18 @@ whose centroid is 14 mm off it; 0.3 mm and 1 mrad of noise, 100 Hz; `critical_tr
   covariance; with the feet's sd, |e| / sd. ``offset_sd_axes_mm`` the covariance's two axes, ``misfit_sd_mm`` and
   ``misfit_p_value`` its misfit part and that part's test.
 
-Truths (`TRUTHS`): ``er``, the simulator's ER wheel (`floquet_truth.er_walk`: k 1500-4000 N/m, c 2-20 N s/m, released
-at its gait's speed times U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks), ``er-speed``, the same
-wheels released at U(1.3, 1.6) times the gait's speed (they slow down by 20-45 % over the walk: the speed, and
-with it the legs' compression, changes a lot), and ``rigid``, the rigid
-wheel of `critical_truth` (mass 1.6-3 kg, legs 0.21-0.26 m, inertia ratio 0.3-3, 2-4 deg, released at 1.2-2 times
-the speed that tops the first stance, 10 impacts). ``er`` at Table 1 is drawn with ``table1=True``.
+Truths (`TRUTHS`): ``er``, the ER wheel (k 1500-4000 N/m, c 2-20 N s/m, released at its gait's speed times
+U(0.95, 1.08), 2-3.5 deg, 10 impacts: the adequacy study's walks), ``er-speed``, the same wheels released at U(1.3,
+1.6) times the gait's speed (they slow down by 20-45 % over the walk: the speed, and with it the legs'
+compression, changes a lot), and ``rigid``, the rigid wheel of `critical_truth` (mass 1.6-3 kg, legs 0.21-0.26 m,
+inertia ratio 0.3-3, 2-4 deg, released at 1.2-2 times the speed that tops the first stance, 10 impacts). ``er`` at
+Table 1 is drawn with ``table1=True``. The ER wheel is walked by the truth model ``truth_model`` (`TRUTH_MODELS`):
+``independent`` (the default), `er_truth.er_truth_walk`, written apart from the simulator; ``simulator``,
+`floquet_truth.er_walk` (the study's truth before session 23). The draws are the same for both (the same random
+numbers; the walks differ by what the two models differ, 1e-8 in the step map).
 
-Run: ``python -m rimless.analysis.validation.hub_offset_study --draws 10 --seed 0 [--sets er,er-speed]``.
+Run: ``python -m rimless.analysis.validation.hub_offset_study --draws 10 --seed 0 [--sets er,er-speed]
+[--truth-model simulator]``.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ import argparse
 import contextlib
 import json
 import math
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -50,9 +55,14 @@ from rimless.analysis.validation.critical_truth import Y_UP_FROM_Z_UP, LossyWhee
 from rimless.analysis.validation.floquet_truth import er_walk, slope_to_lab
 from rimless.analysis.validation.importer_coverage import draw_lab
 
-__all__ = ["SETS", "TRUTHS", "hub_offset_draw", "run_hub_offset_study"]
+__all__ = ["SETS", "TRUTHS", "TRUTH_MODELS", "hub_offset_draw", "run_hub_offset_study"]
 
 TRUTHS = ("er", "er-speed", "rigid")
+#: the models that walk the ER wheel (`hub_offset_draw`'s ``truth_model``), the default first, and what each is
+TRUTH_MODELS = {
+    "independent": "er_truth.er_truth_walk, the ER wheel of docs/model.md written apart from rimless.sim",
+    "simulator": "floquet_truth.er_walk, the simulator's ER wheel",
+}
 #: the release speed of ``er-speed`` walks, times the gait's
 FAST_RELEASE = (1.3, 1.6)
 #: the sets of draws `run_hub_offset_study` makes
@@ -62,15 +72,17 @@ STEPS = 10
 RAYLEIGH_95 = math.sqrt(-2.0 * math.log(0.05))
 
 
-def _truth_walk(kind: str, rng: np.random.Generator, table1: bool) -> tuple[Any, str]:
+def _truth_walk(kind: str, rng: np.random.Generator, table1: bool, truth_model: str = "independent") -> tuple[Any, str]:
     if kind in ("er", "er-speed"):
+        from rimless.analysis.validation.er_truth import er_truth_walk
         from rimless.sim.model.params import WheelParams
 
+        walker = er_truth_walk if truth_model == "independent" else er_walk
         k = 2700.0 if table1 else float(rng.uniform(1500.0, 4000.0))
         c = 8.0 if table1 else float(rng.uniform(2.0, 20.0))
         slope = float(rng.uniform(2.0, 3.5))
         release = float(rng.uniform(*((0.95, 1.08) if kind == "er" else FAST_RELEASE)))
-        wk = er_walk(WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c), slope, 0.0, STEPS, rng, release=release)
+        wk = walker(WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c), slope, 0.0, STEPS, rng, release=release)
         speeds = np.asarray(wk.post_impact_speed, float)
         return wk, f"ER k {k:.0f} N/m, c {c:.1f} N s/m" + (" (Table 1)" if table1 else "") + (
             f", released at {release:.2f} x the gait's speed (speed {speeds[0]:.2f} -> {speeds[-1]:.2f} rad/s)"
@@ -132,11 +144,20 @@ def _offset_error_in_body(rot: np.ndarray, dh_m: np.ndarray) -> np.ndarray:
 
 
 def hub_offset_draw(
-    kind: str, seed: int, folder: Path, *, table1: bool = False, importer: Any = None
+    kind: str,
+    seed: int,
+    folder: Path,
+    *,
+    table1: bool = False,
+    importer: Any = None,
+    truth_model: str = "independent",
 ) -> dict[str, Any]:
-    """One draw (see the module doc): the truth, the lab, the import's hub source and the figures, in mm."""
+    """One draw (see the module doc): the truth, the lab, the import's hub source and the figures, in mm; the ER
+    wheel walked by ``truth_model`` (`TRUTH_MODELS`)."""
+    if truth_model not in TRUTH_MODELS:
+        raise ValueError(f"truth_model must be one of {', '.join(TRUTH_MODELS)}, got {truth_model!r}")
     rng = np.random.default_rng(seed)
-    wk, wheel = _truth_walk(kind, rng, table1)
+    wk, wheel = _truth_walk(kind, rng, table1, truth_model)
     lab = draw_lab(rng)
     rec_seed = int(rng.integers(1 << 31))
     path = folder / f"{kind}{seed}.csv"
@@ -184,6 +205,7 @@ def hub_offset_draw(
         z2 = (offset_error / sd) ** 2
     return {
         "truth": kind,
+        "truth_model": truth_model if kind != "rigid" else "critical_truth",
         "seed": seed,
         "wheel": wheel,
         "lab": lab.describe(),
@@ -202,26 +224,37 @@ def hub_offset_draw(
         "offset_sd_axes_mm": None if height is None else [v * 1e3 for v in height.sd_axes_m],
         "misfit_sd_mm": None if height is None else height.misfit_sd_m * 1e3,
         "misfit_p_value": None if height is None else height.misfit_p_value,
+        "noise_model": None if height is None else getattr(height, "noise_model", None),
         "turns": float(np.ptp(bs[:n][sel])) / (2 * math.pi),
     }
 
 
 def run_hub_offset_study(
-    draws: int = 10, seed: int = 0, *, importer: Any = None, sets: tuple[str, ...] | None = None
+    draws: int = 10,
+    seed: int = 0,
+    *,
+    importer: Any = None,
+    sets: tuple[str, ...] | None = None,
+    truth_model: str = "independent",
 ) -> dict[str, Any]:
     """``draws`` draws of each truth (and of the ER truth at Table 1: ``er-table1``), seeds ``seed`` up, of the
     ``sets`` named (default all of `SETS`); the rows and per set the median and largest sinusoid, the median noise
     share, how often |e| < 2.45 sd with the rms of |e| / sd / sqrt(2) (1 for an honest sd of an isotropic error),
     and the same for the offset's own error (``offset_held_95``, ``offset_rms_z``), against the per-axis sd
     (``offset_axis_held_95``, ``offset_axis_rms_z``) and against the 2 x 2 covariance (``offset_cov_held_95``,
-    ``offset_cov_rms_z``: within the chi^2_2 95 % region, rms over 2 of e^T C^+ e)."""
+    ``offset_cov_rms_z``: within the chi^2_2 95 % region, rms over 2 of e^T C^+ e). The ER wheel is walked by
+    ``truth_model`` (`TRUTH_MODELS`; the output's ``truth_model`` says which)."""
     sets = SETS if sets is None else tuple(sets)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in sets:
             kind, table1 = name.removesuffix("-table1"), name.endswith("-table1")
             for i in range(draws):
-                rows.append(hub_offset_draw(kind, seed + i, Path(tmp), table1=table1, importer=importer))
+                rows.append(
+                    hub_offset_draw(
+                        kind, seed + i, Path(tmp), table1=table1, importer=importer, truth_model=truth_model
+                    )
+                )
                 rows[-1]["table1"] = table1
                 rows[-1]["set"] = name
     summary: dict[str, dict[str, Any]] = {}
@@ -243,7 +276,13 @@ def run_hub_offset_study(
             zs = np.array([r[key] for r in sub if r[key] is not None])
             summary[name][prefix + "held_95"] = f"{int((zs < RAYLEIGH_95).sum())}/{zs.size}" if zs.size else None
             summary[name][prefix + "rms_z"] = float(np.sqrt(np.mean(zs**2) / 2.0)) if zs.size else None
-    return {"rows": rows, "summary": summary, "draws": draws, "seed": seed}
+    return {
+        "rows": rows,
+        "summary": summary,
+        "draws": draws,
+        "seed": seed,
+        "truth_model": f"{truth_model}: {TRUTH_MODELS[truth_model]}",
+    }
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -251,9 +290,24 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--draws", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--sets", default=",".join(SETS), help="comma-separated, of " + ", ".join(SETS))
+    ap.add_argument(
+        "--truth-model",
+        default="independent",
+        help="the model that walks the ER wheel: " + "; ".join(f"{k} ({v})" for k, v in TRUTH_MODELS.items()),
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    out = run_hub_offset_study(args.draws, args.seed, sets=tuple(args.sets.split(",")))
+    sets = tuple(args.sets.split(","))
+    bad = [n for n in sets if n not in SETS]
+    if args.truth_model not in TRUTH_MODELS or bad:
+        what = (
+            f"--sets: unknown set {bad[0]!r}, of {', '.join(SETS)}"
+            if bad
+            else (f"--truth-model: {args.truth_model!r} is not one of {', '.join(TRUTH_MODELS)}")
+        )
+        print(f"error: {what}", file=sys.stderr)
+        raise SystemExit(2)
+    out = run_hub_offset_study(args.draws, args.seed, sets=sets, truth_model=args.truth_model)
     if args.json:
         print(json.dumps(out, indent=1))
         return
@@ -264,6 +318,7 @@ def main(argv: list[str] | None = None) -> None:
             f"{r['noise_share_mm']:.3f}), hub error {r['hub_error_mm']:.3f} mm (offset's own "
             f"{r['offset_error_mm']:.3f}), sd {sd}"
         )
+    print("truth model:", out["truth_model"])
     for k, v in out["summary"].items():
         print(k, v)
 

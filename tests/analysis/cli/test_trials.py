@@ -40,11 +40,13 @@ CONTRACT = {
     "slope_ci_deg",
     "up_axis",
     "hub_offset_sd_mm",
+    "hub_offset_sd_axes_mm",
     "parameters",
 }  # the issues' keys, plus the path of the trial written (None when
 # refused); slope_source (ramp | given | estimated) and slope_ci_deg ([low, high]) are issue 19's; up_axis (the lab
-# axis taken as up, found or given by --up-axis), hub_offset_sd_mm (the fitted hub offset's standard error) and
-# parameters (what the slope interval held) issue 31's
+# axis taken as up, found or given by --up-axis), hub_offset_sd_mm (the fitted hub offset's standard error, its
+# covariance's worst axis), hub_offset_sd_axes_mm (both axes, largest first: the trial JSON's key) and parameters
+# (what the slope interval held) issue 31's
 
 
 @pytest.fixture()
@@ -76,6 +78,11 @@ def test_import_json_mixed_good_and_bad(tmp_path, wheel_csv):
     trial = read_trial(out / "wheel.trial.parquet")
     assert trial.step_period_s.size == rows[1]["steps"]
     assert trial.meta.slope_deg == pytest.approx(2.0) and trial.meta.slope_source == "given"
+    assert rows[0]["hub_offset_sd_axes_mm"] is None  # refused
+    axes = rows[1]["hub_offset_sd_axes_mm"]  # the offset's sd per axis, as the trial written holds it
+    assert axes is not None and axes[0] >= axes[1] > 0.0
+    assert axes[0] == pytest.approx(rows[1]["hub_offset_sd_mm"], abs=1e-4)  # the worst axis
+    np.testing.assert_allclose(axes, [v * 1e3 for v in trial.meta.hub_offset_sd_axes_m], atol=1e-4)
 
 
 def test_import_all_good_exits_zero_and_show(tmp_path, wheel_csv):
