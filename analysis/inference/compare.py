@@ -477,24 +477,9 @@ def first_angle_test(
         stat, test = (rss0 - rss1) / PERIOD_NOISE_FLOOR_S**2, "chi2(1)"
         p_value = float(chi2.sf(stat, 1))
         noise, source = PERIOD_NOISE_FLOOR_S, "the importer's floor (PERIOD_NOISE_FLOOR_S)"
-    kept = bool(rss1 < rss0 and p_value < FIRST_ANGLE_P and abs(got[0]) >= 1e-6)
     f1, f0 = freq_res(got[0], got[1]) + f_meas, freq_res(0.0, w0) + f_meas
-    both = (f1 > 0) & (f0 > 0)  # the steps both models reach
-    change = np.abs(1.0 / np.where(both, f1, 1.0) - 1.0 / np.where(both, f0, 1.0))[1:][both[1:]]
-    return FirstAngleTest(
-        got[0] if kept else 0.0,
-        got[1] if kept else w0,
-        fitted_offset_rad=got[0],
-        statistic=float(stat),
-        test=test,
-        p=p_value,
-        level=FIRST_ANGLE_P,
-        kept=kept,
-        period_change_s=float(np.max(change)) if change.size else math.nan,
-        rigid_fit_theta_dot_rad_s=float(rigid.x[0]),
-        fitted_theta_dot_rad_s=got[1],
-        noise_s=noise,
-        noise_source=source,
+    return _first_angle_verdict(
+        (got[0], got[1]), w0, float(rigid.x[0]), (rss0, rss1), (float(stat), test, p_value), (noise, source), (f1, f0)
     )
 
 
@@ -558,25 +543,48 @@ def _weighted_first_angle_test(
         stat, test = rss0 - rss1, "chi2(1)"
         p_value = float(chi2.sf(stat, 1))
         noise, source = period_sd, "the importer's per-impact sds (impact_sd_ms)"
-    kept = bool(rss1 < rss0 and p_value < FIRST_ANGLE_P and abs(best[0]) >= 1e-6)
-    f1, f0 = freqs(best[0], best[1]), freqs(0.0, w0)
-    both = (f1 > 0) & (f0 > 0)
+    return _first_angle_verdict(
+        (best[0], best[1]), w0, float(rigid.x[0]), (rss0, rss1), (float(stat), test, p_value), (noise, source),
+        (freqs(best[0], best[1]), freqs(0.0, w0)), weighted=True,
+    )  # fmt: skip
+
+
+def _first_angle_verdict(
+    fitted: tuple[float, float],
+    w0: float,
+    rigid_w: float,
+    costs: tuple[float, float],
+    tested: tuple[float, str, float],
+    noise: tuple[float, str],
+    freqs: tuple[np.ndarray, np.ndarray],
+    *,
+    weighted: bool = False,
+) -> FirstAngleTest:
+    """The test's result: the offset and speed ``fitted`` (rad, rad/s) kept when the fit's cost is below the rigid
+    release's (``costs``: rigid, offset), p (``tested``: statistic, test, p) < `FIRST_ANGLE_P` and the offset not
+    zero; else offset 0 and ``w0``. ``freqs``: the step frequencies simulated with the offset and with the rigid
+    release (Hz; <= 0 a step not reached), for ``period_change_s``."""
+    rss0, rss1 = costs
+    stat, test, p_value = tested
+    kept = bool(rss1 < rss0 and p_value < FIRST_ANGLE_P and abs(fitted[0]) >= 1e-6)
+    f1, f0 = freqs
+    both = (f1 > 0) & (f0 > 0)  # the steps both models reach
     change = np.abs(1.0 / np.where(both, f1, 1.0) - 1.0 / np.where(both, f0, 1.0))[1:][both[1:]]
     return FirstAngleTest(
-        best[0] if kept else 0.0,
-        best[1] if kept else w0,
-        fitted_offset_rad=best[0],
-        statistic=float(stat),
+        fitted[0] if kept else 0.0,
+        fitted[1] if kept else w0,
+        fitted_offset_rad=fitted[0],
+        statistic=stat,
         test=test,
         p=p_value,
         level=FIRST_ANGLE_P,
         kept=kept,
         period_change_s=float(np.max(change)) if change.size else math.nan,
-        rigid_fit_theta_dot_rad_s=float(rigid.x[0]),
-        fitted_theta_dot_rad_s=best[1],
-        noise_s=noise,
-        noise_source=source,
-        weighted=True,
+        rigid_fit_theta_dot_rad_s=rigid_w,
+        fitted_theta_dot_rad_s=fitted[1],
+        noise_s=noise[0],
+        noise_source=noise[1],
+        weighted=weighted,
     )
 
 

@@ -75,6 +75,23 @@ def _walk(truth: str, i: int, seed: int, folder: Path):
     return trial, np.diff(tr.impact_time_s), s, WheelParams(stiffness_n_per_m=k, damping_ns_per_m=c)
 
 
+def no_offset_cases(folder: Path, n: int = 20, seed: int = 7):
+    """The first ``n`` walks of the tests' truth released from uncompressed legs (no first-angle offset), imported
+    and told their slope: (trial, its periods (s), slope (deg), a Simulator of the truth's wheel, the rigid
+    release's speed fitted on the first period (rad/s)) for each walk that imports (the size tests' draws)."""
+    for i in range(n):
+        got = _walk("uncompressed", i, seed, folder)
+        if got is None:
+            continue
+        trial, _, slope, params = got
+        per = np.asarray(trial.step_period_s, float)
+        trial = dataclasses.replace(trial, meta=dataclasses.replace(trial.meta, slope_deg=slope))
+        sim = Simulator(model="er", params=params)
+        w0, _ = fit_release_speed(sim, slope, float(per[0]))
+        assert w0 is not None
+        yield trial, per, slope, sim, w0
+
+
 def _later_rms_ms(sim: Simulator, slope: float, w: float, offset: float, true_p: np.ndarray) -> float:
     """The rms over periods 2.. of the simulated (release speed ``w``, first-angle ``offset``) minus ``true_p``, ms."""
     n = true_p.size

@@ -11,31 +11,21 @@ own touchdown, 0 and 1 (session 21)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rimless.analysis.inference.compare import Simulator, first_angle_test, fit_release_speed
-from tests.analysis.inference.first_angle_study import _walk
+from rimless.analysis.inference.compare import first_angle_test
+from tests.analysis.inference.first_angle_study import no_offset_cases
 
 pytestmark = [pytest.mark.slow, pytest.mark.full]
 
 
 def test_first_angle_test_keeps_no_more_than_its_level_on_a_truth_without_offset(tmp_path: Path) -> None:
     ps = []
-    for i in range(20):
-        got = _walk("uncompressed", i, 7, tmp_path)
-        if got is None:
-            continue
-        trial, _, slope, params = got
-        per = np.asarray(trial.step_period_s, float)
-        trial = dataclasses.replace(trial, meta=dataclasses.replace(trial.meta, slope_deg=slope))
-        sim = Simulator(model="er", params=params)
-        w0, _ = fit_release_speed(sim, slope, float(per[0]))
-        assert w0 is not None
+    for _trial, per, slope, sim, w0 in no_offset_cases(tmp_path):
         test = first_angle_test(sim, slope, per, w0)
         assert math.isfinite(test.p)
         ps.append(test.p)

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from rimless.analysis.inference import compare
-from rimless.analysis.inference.compare import Simulator, first_angle_test, fit_release_speed, period_covariance
+from rimless.analysis.inference.compare import Simulator, first_angle_test, period_covariance
 
 
 def test_the_periods_covariance_is_that_of_differences_of_independent_impact_errors() -> None:
@@ -33,19 +33,10 @@ def test_the_periods_covariance_is_that_of_differences_of_independent_impact_err
 @pytest.mark.slow
 @pytest.mark.full
 def test_the_weighted_test_keeps_no_more_than_its_level_on_a_truth_without_offset(tmp_path: Path) -> None:
-    from tests.analysis.inference.first_angle_study import _walk
+    from tests.analysis.inference.first_angle_study import no_offset_cases
 
     ps = []
-    for i in range(20):
-        got = _walk("uncompressed", i, 7, tmp_path)
-        if got is None:
-            continue
-        trial, _, slope, params = got
-        per = np.asarray(trial.step_period_s, float)
-        trial = dataclasses.replace(trial, meta=dataclasses.replace(trial.meta, slope_deg=slope))
-        sim = Simulator(model="er", params=params)
-        w0, _ = fit_release_speed(sim, slope, float(per[0]))
-        assert w0 is not None
+    for trial, per, slope, sim, w0 in no_offset_cases(tmp_path):
         sd = compare._consecutive_impact_sd(trial)
         assert sd is not None and sd.size == per.size + 1
         test = first_angle_test(sim, slope, per, w0, sd)

@@ -113,9 +113,8 @@ def test_an_interval_bin_is_named_by_its_trials_slopes_not_a_mean_outside_a_memb
     assert wide.slope_label == "1.5" and wide.slope_range_deg == (1.30, 1.60)
 
 
-def test_the_period_figure_legend_names_the_bin_by_its_range(sim, tmp_path, monkeypatch):
-    from rimless.analysis.report import figures
-
+def _legend_labels(figures, monkeypatch) -> list[str]:
+    """The legend texts of every figure the report saves from now on (``figures.save_png`` spied on)."""
     labels: list[str] = []
     real = figures.save_png
 
@@ -124,6 +123,13 @@ def test_the_period_figure_legend_names_the_bin_by_its_range(sim, tmp_path, monk
         return real(fig, path)
 
     monkeypatch.setattr(figures, "save_png", spy)
+    return labels
+
+
+def test_the_period_figure_legend_names_the_bin_by_its_range(sim, tmp_path, monkeypatch):
+    from rimless.analysis.report import figures
+
+    labels = _legend_labels(figures, monkeypatch)
     groups = series_trends(COMPS, ["s"] * len(COMPS), sim, slope_bin_deg=None, slopes=SLOPES)
     figures.period_figure(groups, tmp_path / "p.png")
     assert labels == ["measured 1.300-1.420 deg (n = 3)", "measured 1.600 deg (n = 1)"]
@@ -157,14 +163,7 @@ def test_trials_that_ended_differently_are_never_pooled(sim, tmp_path, monkeypat
         assert {r["outcome"] for r in groups[0].rows()} == {"stalled"}
     page = periods_html(groups, None)
     assert "<th>ended</th>" in page and page.count("<td>stalled</td>") == 2 and page.count("<td>walked</td>") == 4
-    labels: list[str] = []
-    real = figures.save_png
-
-    def spy(fig, path):
-        labels.extend(t.get_text() for ax in fig.axes for t in (ax.get_legend().get_texts() if ax.get_legend() else []))
-        return real(fig, path)
-
-    monkeypatch.setattr(figures, "save_png", spy)
+    labels = _legend_labels(figures, monkeypatch)
     figures.period_figure(groups, tmp_path / "p.png")
     assert labels == ["measured 1.340-1.360 deg, stalled (n = 2)", "measured 1.400 deg, walked (n = 1)"]
     with pytest.raises(ValueError, match="2 outcomes for 3"):
